@@ -1,0 +1,24 @@
+"""Scribe marks in camera images: detection, sub-pixel centres, line fit with uncertainty.
+
+Public API::
+
+    read_image(path) -> ndarray
+    detect_marks(image) -> [MarkCandidate]
+    measure_marks(image, camera=None) -> [MarkMeasurement | ImageInputError]
+    fit_line(points, sigma, extra=None) -> LineFit      (accepts extra model terms)
+    CameraModel, calibrate_chessboard, plumb_line
+"""
+
+from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
+from imaging.detect import MarkCandidate, detect_marks, line_frame, wrap_angle
+from imaging.errors import ImageInputError
+from imaging.io import read_image
+from imaging.linefit import LineFit, fit_line
+from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
+from imaging.profile import Centres, ProfileFit
+
+__all__ = [
+    "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
+    "ProfileFit", "calibrate_chessboard", "detect_marks", "find_chessboard", "fit_line",
+    "line_frame", "measure_candidate", "measure_marks", "read_image", "wrap_angle",
+]

@@ -1,0 +1,5 @@
+"""Errors the imaging package raises for bad input (the CLI turns them into exit status 2)."""
+
+
+class ImageInputError(ValueError):
+    """An image that cannot be measured: the message names the file/region and the reason."""

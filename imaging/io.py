@@ -1,0 +1,56 @@
+"""Reading images as float arrays with clear errors (8/16-bit PNG, TIFF, JPEG; colour -> gray)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from imaging.errors import ImageInputError
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read a grayscale image as float64 digital numbers (DN), keeping 16-bit depth.
+
+    Colour images are converted with OpenCV's luminance weights. Raises
+    :class:`ImageInputError` naming the file and the reason for anything unreadable.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ImageInputError(f"{p}: no such file")
+    if p.is_dir():
+        raise ImageInputError(f"{p}: is a folder, not an image")
+    img = None
+    if p.suffix.lower() in (".tif", ".tiff"):
+        try:
+            import tifffile
+
+            img = tifffile.imread(p)
+        except Exception as exc:  # tifffile raises many types for corrupt files
+            raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
+    else:
+        data = np.fromfile(p, dtype=np.uint8)
+        if data.size:
+            # IMREAD_UNCHANGED: the default flag silently turns 16-bit into 8-bit BGR.
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageInputError(f"{p}: not an image, or truncated/corrupt (OpenCV cannot decode it)")
+    img = np.asarray(img)
+    if img.ndim == 3:
+        if img.shape[2] == 4:
+            img = img[..., :3]
+        if img.shape[2] == 3:
+            img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.dtype != np.float64 else img.mean(2)
+        else:
+            img = img[..., 0]
+    if img.ndim != 2:
+        raise ImageInputError(f"{p}: unsupported image layout {img.shape}")
+    if min(img.shape) < 16:
+        raise ImageInputError(f"{p}: image is only {img.shape[1]}x{img.shape[0]} px, too small")
+    return img.astype(np.float64)
+
+
+def full_scale(image: np.ndarray) -> float:
+    """Full-scale DN guessed from the data range (255 for 8-bit data, 65535 for 16-bit)."""
+    return 255.0 if image.max() <= 255 else 65535.0

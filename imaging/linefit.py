@@ -1,0 +1,129 @@
+"""Weighted orthogonal line fit to points, with optional extra model terms.
+
+Residual of point k (perpendicular distance, px):
+
+    r_k = n(a) . q_k - d - sum_j beta_j F_kj
+
+with n(a) = (sin a, cos a) in (x right, y down) coordinates relative to the image centre.
+Extra columns F describe effects the residual loop adds (curvature, a periodic wiggle, ...).
+Solved by Gauss–Newton from the weighted total-least-squares line; the covariance of
+(a, d, beta) is (J^T W J)^-1 with the points' own standard uncertainties, i.e. propagated,
+not a residual RMS. Outliers (dust, scratches) are rejected at ``reject_sigma`` and the fit
+repeated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imaging.detect import line_frame, wrap_angle
+
+
+@dataclass(frozen=True)
+class LineFit:
+    """Result of :func:`fit_line`.
+
+    ``angle_rad``, ``offset_px``: line; ``cov``: covariance of (angle, offset, beta...);
+    ``beta``: coefficients of the extra columns; ``residuals_px``/``t_px``/``sigma_px``: per
+    used point (perpendicular residual, position along the line, standard uncertainty);
+    ``used``: mask over the input points; ``chi2``/``dof``.
+    """
+
+    angle_rad: float
+    offset_px: float
+    cov: np.ndarray
+    beta: np.ndarray
+    residuals_px: np.ndarray
+    t_px: np.ndarray
+    sigma_px: np.ndarray
+    used: np.ndarray
+    chi2: float
+    dof: int
+
+    @property
+    def angle_u_rad(self) -> float:
+        return float(np.sqrt(self.cov[0, 0]))
+
+    @property
+    def offset_u_px(self) -> float:
+        return float(np.sqrt(self.cov[1, 1]))
+
+    @property
+    def length_px(self) -> float:
+        return float(np.ptp(self.t_px)) if self.t_px.size else 0.0
+
+
+def _tls(q: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    m = (w[:, None] * q).sum(0) / w.sum()
+    c = ((q - m) * w[:, None]).T @ (q - m)
+    _, v = np.linalg.eigh(c)
+    u = v[:, 1]
+    a = wrap_angle(np.arctan2(-u[1], u[0]))
+    return a, float(m @ line_frame(a)[1])
+
+
+def _solve(q, sigma, F, a, d, iters=4):
+    w = 1.0 / sigma**2
+    m = F.shape[1]
+    beta = np.zeros(m)
+    for _ in range(iters):
+        u, n = line_frame(a)
+        r = q @ n - d - F @ beta
+        J = np.column_stack([q @ u, -np.ones(len(q)), -F])
+        N = J.T @ (J * w[:, None])
+        step = np.linalg.lstsq(N, -(J.T @ (w * r)), rcond=None)[0]
+        a, d, beta = a + step[0], d + step[1], beta + step[2:]
+    u, n = line_frame(a)
+    r = q @ n - d - F @ beta
+    J = np.column_stack([q @ u, -np.ones(len(q)), -F])
+    cov = np.linalg.pinv(J.T @ (J * w[:, None]))
+    return a, d, beta, r, cov
+
+
+def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = None,
+             reject_sigma: float | None = 4.5, max_rounds: int = 6) -> LineFit:
+    """Fit a line (plus extra columns) to points with perpendicular uncertainties.
+
+    Parameters
+    ----------
+    points : (N, 2) array
+        Points [px], relative to the image centre, x right, y down.
+    sigma : (N,) array
+        Standard uncertainty of each point across the line [px].
+    extra : (N, m) array, optional
+        Extra design columns (effects); their coefficients are returned in ``beta``.
+    reject_sigma : float or None
+        Reject points whose normalised residual exceeds this, then refit (None: keep all).
+    """
+    q = np.asarray(points, float)
+    sigma = np.asarray(sigma, float)
+    F = np.zeros((len(q), 0)) if extra is None else np.asarray(extra, float).reshape(len(q), -1)
+    used = np.isfinite(sigma) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(F), axis=1)
+    if used.sum() < 3 + F.shape[1]:
+        raise ValueError("too few points for a line fit")
+    for _ in range(max_rounds):
+        a, d = _tls(q[used], 1 / sigma[used] ** 2)
+        a, d, beta, r, cov = _solve(q[used], sigma[used], F[used], a, d)
+        if reject_sigma is None:
+            break
+        u, n = line_frame(a)
+        z_all = np.abs(q @ n - d - F @ beta) / sigma
+        # Reject at the threshold but never more than a third of the points.
+        limit = max(reject_sigma, np.quantile(z_all[used], 2 / 3))
+        new = used & (z_all <= limit) | (used & (z_all <= reject_sigma))
+        new &= np.isfinite(z_all)
+        if np.array_equal(new, used):
+            break
+        used = new
+    u, _ = line_frame(a)
+    if abs(wrap_angle(a) - a) > 1:
+        # The direction turned by pi on wrapping: the normal, hence d and the residuals, flip.
+        d, r, beta, u = -d, -r, -beta, -u
+        flip = np.diag([1.0, -1.0] + [-1.0] * len(beta))
+        cov = flip @ cov @ flip
+    return LineFit(angle_rad=wrap_angle(a), offset_px=float(d), cov=cov, beta=beta,
+                   residuals_px=r, t_px=q[used] @ u, sigma_px=sigma[used], used=used,
+                   chi2=float(np.sum((r / sigma[used]) ** 2)),
+                   dof=int(used.sum() - 2 - F.shape[1]))

@@ -1,0 +1,74 @@
+"""One mark, end to end: detection -> band profile fit -> per-segment centres -> line fit.
+
+This is the declared model only (a straight line in the undistorted image). The residual loop
+in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
+:class:`MarkMeasurement`, which carries the centres and their regressors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imaging.camera import CameraModel
+from imaging.detect import MarkCandidate, detect_marks
+from imaging.errors import ImageInputError
+from imaging.io import full_scale
+from imaging.linefit import LineFit, fit_line
+from imaging.profile import Centres, ProfileFit, fit_profile, sample_centres
+
+
+@dataclass(frozen=True)
+class MarkMeasurement:
+    """A measured mark: its centres (undistorted if a camera model was given) and line fit.
+
+    ``points``: (N, 2) centres [px] relative to the image centre; ``sigma``: (N,) [px];
+    ``regressors``: per-point arrays for the residual loop (``t`` along the line [px],
+    ``x``/``y`` [px], ``r2`` squared distance from the image centre [px^2], ``cross_slope``
+    local illumination slope / contrast [1/px]).
+    """
+
+    candidate: MarkCandidate
+    profile: ProfileFit
+    centres: Centres
+    points: np.ndarray
+    sigma: np.ndarray
+    regressors: dict[str, np.ndarray]
+    line: LineFit
+    image_shape: tuple[int, int]
+
+
+def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
+                      where: str = "image") -> MarkMeasurement:
+    """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
+    pf = fit_profile(image, cand, where, full_scale(image))
+    cen = sample_centres(image, pf)
+    if cen.ok.sum() < 10:
+        raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
+                              "usable segments along it (blurred away or covered)")
+    pts, sig = cen.xy[cen.ok], cen.sigma[cen.ok]
+    if camera is not None:
+        pts, sig = camera.undistort_centred(pts, sig, image.shape)
+    regs = {"t": cen.t[cen.ok], "x": pts[:, 0], "y": pts[:, 1],
+            "r2": (pts**2).sum(1), "cross_slope": cen.cross_slope[cen.ok]}
+    line = fit_line(pts, sig)
+    return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape)
+
+
+def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
+                  max_marks: int = 8, min_length_px: float | None = None
+                  ) -> list[MarkMeasurement | ImageInputError]:
+    """Detect and measure every mark in an image; per-mark failures are returned, not raised."""
+    if np.ptp(image) == 0:
+        raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
+    cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks)
+    if not cands:
+        raise ImageInputError(f"{where}: no mark found (no long straight line stands out)")
+    out: list[MarkMeasurement | ImageInputError] = []
+    for c in cands:
+        try:
+            out.append(measure_candidate(image, c, camera, where))
+        except ImageInputError as exc:
+            out.append(exc)
+    return out

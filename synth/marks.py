@@ -1,0 +1,434 @@
+"""Synthetic camera images of housing faces with engraved scribe marks, with known truth.
+
+The image is rendered as physics, not drawn: each mark is a finite straight groove with a
+depth profile (``box``, ``v`` or ``round``) that changes the surface reflectance; the optics
+blur the irradiance with an isotropic Gaussian point-spread function; each pixel integrates
+the irradiance over its area (supersampled); the sensor adds Poisson shot noise and Gaussian
+read noise and quantises to 8 or 16 bits, clipping at full scale (saturation). Optional
+clutter: machined-surface streaks, an illumination gradient and vignetting, dust specks and
+scratches. Optional camera effects: OpenCV radial distortion, camera roll, non-square pixels
+(see :mod:`synth.optics`).
+
+Every image comes with an :class:`ImageTruth` that records the marks and the Cramér–Rao bound
+on each mark's angle, computed from the noise-free render by numerical differentiation.
+
+Units: lengths in pixels, angles in radians, signal in electrons (e-) or digital numbers (DN).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.special import erf
+
+from synth.optics import CameraGeometry, wrap_half_turn
+
+PROFILES = ("box", "v", "round")
+
+
+@dataclass(frozen=True)
+class MarkSpec:
+    """One scribe mark in the scene plane (pixels of the ideal camera, relative to centre).
+
+    Attributes
+    ----------
+    angle_rad : float
+        Direction of the mark from +x towards -y (counter-clockwise as displayed) [rad].
+    offset_px : float
+        Signed distance of the mark's line from the image centre along the normal
+        (sin a, cos a) in (x right, y down) coordinates [px].
+    length_px : float
+        Length of the groove [px].
+    width_px : float
+        Width of the groove at the surface [px].
+    centre_t_px : float
+        Position of the mark's middle along its direction (cos a, -sin a), measured from the
+        foot of the perpendicular from the image centre [px].
+    profile : str
+        Depth profile across the groove: ``box``, ``v`` or ``round``.
+    contrast : float
+        Change of reflectance at full depth, relative to the surface (-0.6: a groove that
+        reflects 40 % of the surface's light; +1.0: a bright groove twice as bright).
+    """
+
+    angle_rad: float
+    offset_px: float
+    length_px: float
+    width_px: float = 4.0
+    centre_t_px: float = 0.0
+    profile: str = "round"
+    contrast: float = -0.6
+
+    def centre_xy(self) -> tuple[float, float]:
+        a = self.angle_rad
+        return (self.offset_px * np.sin(a) + self.centre_t_px * np.cos(a),
+                self.offset_px * np.cos(a) - self.centre_t_px * np.sin(a))
+
+
+@dataclass(frozen=True)
+class ImageSpec:
+    """Everything that makes one synthetic image (all randomness from ``seed``).
+
+    Signal: the bare surface at full illumination collects ``exposure * full_well_e``
+    electrons; ``bits`` sets the ADC (full scale = full well).
+    """
+
+    marks: tuple[MarkSpec, ...]
+    width: int = 1024
+    height: int = 768
+    blur_px: float = 1.2
+    exposure: float = 0.5
+    full_well_e: float = 20000.0
+    read_noise_e: float = 10.0
+    bits: int = 16
+    supersample: int = 6
+    texture: float = 0.0
+    texture_angle_rad: float = 0.3
+    texture_scale_px: float = 1.5
+    gradient: tuple[float, float] = (0.0, 0.0)
+    vignetting: float = 0.0
+    dust: int = 0
+    dust_on_mark: int = 0
+    scratches: int = 0
+    camera: CameraGeometry = field(default_factory=CameraGeometry)
+    seed: int = 0
+
+    def with_marks(self, *marks: MarkSpec) -> ImageSpec:
+        return replace(self, marks=tuple(marks))
+
+
+@dataclass(frozen=True)
+class MarkTruth:
+    """Truth of one mark as the camera sees it.
+
+    ``angle_rad``/``offset_px``: in the scene; ``image_angle_rad``/``image_offset_px``: the
+    same line in the ideal (undistorted) pinhole image, i.e. after roll and non-square pixels
+    (what a single image can reveal). ``crlb_angle_rad``: Cramér–Rao bound on the angle.
+    """
+
+    angle_rad: float
+    offset_px: float
+    image_angle_rad: float
+    image_offset_px: float
+    length_px: float
+    width_px: float
+    centre_xy_px: tuple[float, float]
+    profile: str
+    contrast: float
+    crlb_angle_rad: float
+    crlb_offset_px: float
+
+
+@dataclass(frozen=True)
+class ImageTruth:
+    width: int
+    height: int
+    blur_px: float
+    bits: int
+    noise_dn_background: float
+    contrast_dn: tuple[float, ...]
+    snr: tuple[float, ...]
+    marks: tuple[MarkTruth, ...]
+    camera: dict
+    seed: int
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2)
+
+
+@dataclass(frozen=True)
+class SynthImage:
+    image: np.ndarray
+    truth: ImageTruth
+    mean_e: np.ndarray
+
+
+# ----------------------------------------------------------------------------- profiles
+
+def _blurred_profile(profile: str, width: float, sigma: float):
+    """Depth profile across the groove convolved with the Gaussian PSF, as a function of e."""
+    if profile not in PROFILES:
+        raise ValueError(f"unknown groove profile {profile!r}; use one of {PROFILES}")
+    half = width / 2
+    if profile == "box" and sigma > 0:
+        s2 = np.sqrt(2) * sigma
+        return lambda e: 0.5 * (erf((e + half) / s2) - erf((e - half) / s2))
+
+    def depth(e: np.ndarray) -> np.ndarray:
+        z = np.clip(np.abs(e) / half, 0, 1)
+        inside = np.abs(e) <= half
+        if profile == "box":
+            d = np.ones_like(e)
+        elif profile == "v":
+            d = 1 - z
+        else:
+            d = np.sqrt(1 - z * z)
+        return np.where(inside, d, 0.0)
+
+    if sigma <= 0:
+        return depth
+    step = min(0.004, width / 400, sigma / 20)
+    reach = half + 7 * sigma
+    grid = np.arange(-reach, reach + step / 2, step)
+    kx = np.arange(-6 * sigma, 6 * sigma + step / 2, step)
+    kern = np.exp(-0.5 * (kx / sigma) ** 2)
+    kern /= kern.sum()
+    # depth() sampled at cell midpoints integrates the discontinuity of the box/round edge.
+    blurred = np.convolve(depth(grid), kern, mode="same")
+    return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
+
+
+def _along_profile(length: float, sigma: float):
+    half = length / 2
+    if sigma <= 0:
+        return lambda t: (np.abs(t) <= half).astype(float)
+    s2 = np.sqrt(2) * sigma
+    return lambda t: 0.5 * (erf((t + half) / s2) - erf((t - half) / s2))
+
+
+# ----------------------------------------------------------------------------- rendering
+
+def _pixel_grid(spec: ImageSpec) -> tuple[np.ndarray, np.ndarray]:
+    cx, cy = (spec.width - 1) / 2, (spec.height - 1) / 2
+    xs = np.arange(spec.width, dtype=float) - cx
+    ys = np.arange(spec.height, dtype=float) - cy
+    return xs, ys
+
+
+def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (rows, cols) of the pixels the mark can touch."""
+    xs, ys = _pixel_grid(spec)
+    X, Y = np.meshgrid(xs, ys)
+    sx, sy = spec.camera.sensor_to_scene(X, Y)
+    a = mark.angle_rad
+    e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
+    t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
+    # Distortion stretches the sensor by at most a few %; the margin covers it.
+    sel = (np.abs(e) < mark.width_px / 2 + margin) & (np.abs(t) < mark.length_px / 2 + margin)
+    return np.nonzero(sel)
+
+
+def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.ndarray
+                  ) -> np.ndarray:
+    """Area-integrated, blurred groove depth (0..1) at the given pixels."""
+    cx, cy = (spec.width - 1) / 2, (spec.height - 1) / 2
+    ss = spec.supersample
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    ox, oy = np.meshgrid(off, off)
+    px = (cols[:, None] - cx) + ox.ravel()[None, :]
+    py = (rows[:, None] - cy) + oy.ravel()[None, :]
+    sx, sy = spec.camera.sensor_to_scene(px, py)
+    a = mark.angle_rad
+    e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
+    t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
+    across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
+    along = _along_profile(mark.length_px, spec.blur_px)
+    return (across(e) * along(t)).mean(axis=1)
+
+
+def _illumination(spec: ImageSpec) -> np.ndarray:
+    xs, ys = _pixel_grid(spec)
+    X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
+    gx, gy = spec.gradient
+    r2 = (X**2 + Y**2) / 2
+    return (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
+
+
+def _texture(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
+    """Directional machining streaks: a random 1-D profile across the lay, stretched along it."""
+    xs, ys = _pixel_grid(spec)
+    X, Y = np.meshgrid(xs, ys)
+    phi = spec.texture_angle_rad
+    q = X * np.sin(phi) + Y * np.cos(phi)
+    step = 0.25
+    grid = np.arange(q.min() - 10, q.max() + 10, step)
+    from scipy.ndimage import gaussian_filter1d
+
+    fine = gaussian_filter1d(rng.standard_normal(grid.size), spec.texture_scale_px / step)
+    broad = gaussian_filter1d(rng.standard_normal(grid.size), 8 * spec.texture_scale_px / step)
+    prof = fine / fine.std() + 0.5 * broad / broad.std()
+    return spec.texture * np.interp(q, grid, prof / prof.std())
+
+
+def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
+    """Dust specks (blobs) and scratches (thin short lines), already blurred by the optics."""
+    h, w = spec.height, spec.width
+    out = np.zeros((h, w))
+    centres = [(rng.uniform(0, w - 1), rng.uniform(0, h - 1)) for _ in range(spec.dust)]
+    for k in range(spec.dust_on_mark):
+        m = spec.marks[k % len(spec.marks)]
+        t = rng.uniform(-0.4, 0.4) * m.length_px
+        a = m.angle_rad
+        x = m.offset_px * np.sin(a) + (m.centre_t_px + t) * np.cos(a)
+        y = m.offset_px * np.cos(a) - (m.centre_t_px + t) * np.sin(a)
+        xi, yi = spec.camera.distort(*spec.camera.scene_to_ideal(np.array(x), np.array(y)))
+        centres.append((float(xi) + (w - 1) / 2, float(yi) + (h - 1) / 2))
+    for x0, y0 in centres:
+        r = rng.uniform(1.0, 3.5)
+        amp = rng.choice([-1, 1]) * rng.uniform(0.3, 0.9)
+        s = np.hypot(r, spec.blur_px)
+        r0, r1 = int(max(0, y0 - 5 * s)), int(min(h, y0 + 5 * s + 1))
+        c0, c1 = int(max(0, x0 - 5 * s)), int(min(w, x0 + 5 * s + 1))
+        yy, xx = np.mgrid[r0:r1, c0:c1]
+        out[r0:r1, c0:c1] += amp * np.exp(-((xx - x0) ** 2 + (yy - y0) ** 2) / (2 * s * s))
+    for _ in range(spec.scratches):
+        x0, y0 = rng.uniform(0, w - 1), rng.uniform(0, h - 1)
+        ang = rng.uniform(0, np.pi)
+        length = rng.uniform(20, 0.3 * min(w, h))
+        amp = rng.choice([-1, 1]) * rng.uniform(0.1, 0.4)
+        s = np.hypot(rng.uniform(0.3, 0.8), spec.blur_px)
+        ux, uy = np.cos(ang), np.sin(ang)
+        pad = length / 2 + 5 * s
+        r0, r1 = int(max(0, y0 - pad)), int(min(h, y0 + pad + 1))
+        c0, c1 = int(max(0, x0 - pad)), int(min(w, x0 + pad + 1))
+        yy, xx = np.mgrid[r0:r1, c0:c1]
+        t = (xx - x0) * ux + (yy - y0) * uy
+        e = -(xx - x0) * uy + (yy - y0) * ux
+        inside = _along_profile(length, s)(t)
+        out[r0:r1, c0:c1] += amp * inside * np.exp(-e * e / (2 * s * s))
+    return out
+
+
+def _mean_electrons(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
+    refl = np.ones((spec.height, spec.width))
+    if spec.texture:
+        from scipy.ndimage import gaussian_filter
+
+        refl += gaussian_filter(_texture(spec, rng), spec.blur_px) if spec.blur_px else 0
+    margin = 7 * spec.blur_px + 3
+    for m in spec.marks:
+        r, c = _mark_band(spec, m, margin)
+        refl[r, c] += m.contrast * mark_coverage(spec, m, r, c)
+    refl += _clutter(spec, rng)
+    return np.clip(refl, 0, None) * _illumination(spec) * spec.exposure * spec.full_well_e
+
+
+def _digitise(spec: ImageSpec, mean_e: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    e = rng.poisson(mean_e).astype(float) + rng.normal(0.0, spec.read_noise_e, mean_e.shape)
+    full = 2**spec.bits - 1
+    dn = np.clip(np.round(e * full / spec.full_well_e), 0, full)
+    return dn.astype(np.uint16 if spec.bits > 8 else np.uint8)
+
+
+# ----------------------------------------------------------------------------- CRLB
+
+def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
+    """Cramér–Rao bounds (angle [rad], offset [px]) of mark ``index`` from the noise-free render.
+
+    Fisher information over pixels for (angle about the mark's middle, offset, contrast,
+    surface exposure, width, blur), with per-pixel variance shot + read + ADC quantisation.
+    Clutter (texture, dust, scratches) is left out: it is not noise.
+    """
+    m = spec.marks[index]
+    margin = 7 * spec.blur_px + 4
+    rows, cols = _mark_band(spec, m, margin)
+    gain = (2**spec.bits - 1) / spec.full_well_e
+    illum = _illumination(spec)[rows, cols] * spec.exposure * spec.full_well_e
+    cx, cy = m.centre_xy()
+
+    def mean(angle=m.angle_rad, offset=None, contrast=m.contrast, exposure=1.0,
+             width=m.width_px, blur=spec.blur_px):
+        # Rotating about the mark's middle keeps its centre fixed: recompute offset and t.
+        off = cx * np.sin(angle) + cy * np.cos(angle) if offset is None else offset
+        tc = cx * np.cos(angle) - cy * np.sin(angle)
+        mk = replace(m, angle_rad=angle, offset_px=off, centre_t_px=tc,
+                     contrast=contrast, width_px=width)
+        s = replace(spec, blur_px=blur)
+        return exposure * illum * (1 + contrast * mark_coverage(s, mk, rows, cols))
+
+    mu = mean()
+    off0 = m.offset_px
+    steps = {
+        "angle": 2e-5, "offset": 1e-3, "contrast": 1e-3, "exposure": 1e-4,
+        "width": 1e-3, "blur": 1e-3,
+    }
+    derivs = []
+    for name, h in steps.items():
+        if name == "offset":
+            # offset moves the line along its normal: shift with the angle fixed.
+            plus, minus = mean(offset=off0 + h), mean(offset=off0 - h)
+        elif name == "angle":
+            plus, minus = mean(angle=m.angle_rad + h), mean(angle=m.angle_rad - h)
+        elif name == "blur" and spec.blur_px <= 0:
+            continue
+        else:
+            base = {"contrast": m.contrast, "exposure": 1.0, "width": m.width_px,
+                    "blur": spec.blur_px}[name]
+            plus = mean(**{name: base + h})
+            minus = mean(**{name: base - h})
+        derivs.append((plus - minus) / (2 * h))
+    J = np.stack(derivs, axis=1)
+    var = mu + spec.read_noise_e**2 + 1 / (12 * gain**2)
+    fisher = J.T @ (J / var[:, None])
+    cov = np.linalg.inv(fisher)
+    return float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))
+
+
+# ----------------------------------------------------------------------------- public
+
+def render_marks(spec: ImageSpec, with_crlb: bool = True) -> SynthImage:
+    """Render a synthetic image and its truth."""
+    if spec.bits not in (8, 16):
+        raise ValueError("bits must be 8 or 16")
+    rng = np.random.default_rng(spec.seed)
+    mean_e = _mean_electrons(spec, rng)
+    img = _digitise(spec, mean_e, rng)
+    gain = (2**spec.bits - 1) / spec.full_well_e
+    bg_e = spec.exposure * spec.full_well_e
+    noise_dn = float(np.sqrt(bg_e + spec.read_noise_e**2) * gain)
+    truths = []
+    for i, m in enumerate(spec.marks):
+        ia = spec.camera.image_angle(m.angle_rad)
+        cx, cy = m.centre_xy()
+        ix, iy = spec.camera.scene_to_ideal(np.array(cx), np.array(cy))
+        ioff = float(ix * np.sin(ia) + iy * np.cos(ia))
+        cr = crlb(spec, i) if with_crlb else (float("nan"), float("nan"))
+        truths.append(MarkTruth(
+            angle_rad=wrap_half_turn(m.angle_rad), offset_px=m.offset_px,
+            image_angle_rad=ia, image_offset_px=ioff, length_px=m.length_px,
+            width_px=m.width_px, centre_xy_px=(cx, cy), profile=m.profile,
+            contrast=m.contrast, crlb_angle_rad=cr[0], crlb_offset_px=cr[1]))
+    contrast_dn = tuple(abs(m.contrast) * bg_e * gain for m in spec.marks)
+    truth = ImageTruth(
+        width=spec.width, height=spec.height, blur_px=spec.blur_px, bits=spec.bits,
+        noise_dn_background=noise_dn, contrast_dn=contrast_dn,
+        snr=tuple(c / noise_dn for c in contrast_dn), marks=tuple(truths),
+        camera=asdict(spec.camera), seed=spec.seed)
+    return SynthImage(image=img, truth=truth, mean_e=mean_e)
+
+
+def full_well_for_snr(snr: float, contrast: float, exposure: float = 0.5,
+                      read_noise_e: float = 10.0) -> float:
+    """Full well [e-] that gives a mark contrast / background noise ratio of ``snr``."""
+    # snr = |c| B / sqrt(B + r^2)  ->  solve the quadratic for B (background electrons).
+    k = (snr / abs(contrast)) ** 2
+    b = (k + np.sqrt(k * k + 4 * k * read_noise_e**2)) / 2
+    return float(b / exposure)
+
+
+def write_image(path: str | Path, image: np.ndarray) -> Path:
+    """Write an 8/16-bit grayscale image as PNG or TIFF (by suffix); never overwrite."""
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(f"{path}: exists; synth never overwrites files")
+    if path.suffix.lower() in (".tif", ".tiff"):
+        import tifffile
+
+        tifffile.imwrite(path, image)
+    else:
+        import cv2
+
+        if not cv2.imwrite(str(path), image):
+            raise OSError(f"{path}: could not write image")
+    return path
+
+
+def write_synth(sample: SynthImage, path: str | Path) -> tuple[Path, Path]:
+    """Write the image and ``<stem>.truth.json`` beside it."""
+    p = write_image(path, sample.image)
+    tp = p.with_suffix(".truth.json")
+    tp.write_text(sample.truth.to_json())
+    return p, tp
