@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
 from imaging.detect import MarkCandidate, detect_marks
@@ -37,6 +38,7 @@ class MarkMeasurement:
     regressors: dict[str, np.ndarray]
     line: LineFit
     image_shape: tuple[int, int]
+    n_rejected: int = 0
 
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
@@ -47,13 +49,43 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     if cen.ok.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
-    pts, sig = cen.xy[cen.ok], cen.sigma[cen.ok]
+    keep = cen.ok & (cen.chi2_red < 3.0)
+    if keep.sum() < 10:
+        raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
+                              "segments fit the groove model (covered, or not a groove)")
+    pts, sig = cen.xy[keep], cen.sigma[keep]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
-    regs = {"t": cen.t[cen.ok], "x": pts[:, 0], "y": pts[:, 1],
-            "r2": (pts**2).sum(1), "cross_slope": cen.cross_slope[cen.ok]}
-    line = fit_line(pts, sig)
-    return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape)
+    inl = local_inliers(pts, sig, cen.t[keep])
+    if inl.sum() < 10:
+        raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
+                              "consistent centres along it")
+    pts, sig, tt = pts[inl], sig[inl], cen.t[keep][inl]
+    regs = {"t": tt, "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
+            "cross_slope": cen.cross_slope[keep][inl]}
+    line = fit_line(pts, sig, reject_sigma=None)
+    return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
+                           int(cen.ok.sum() - inl.sum()))
+
+
+def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
+                  window: int = 15) -> np.ndarray:
+    """Points that agree with their neighbours along the mark (dust, scratch crossings out).
+
+    Compared with a running median of the straight-line residual, so a smooth bow
+    (distortion, a bent mark) is kept for the residual loop while local outliers go.
+    """
+    order = np.argsort(t)
+    base = fit_line(pts, sigma, reject_sigma=None)
+    r = np.empty(len(pts))
+    r[base.used] = base.residuals_px
+    rs = r[order]
+    med = median_filter(rs, size=min(window, len(rs) // 2 * 2 + 1), mode="nearest")
+    dev = rs - med
+    scale = np.maximum(sigma[order], 1.4826 * np.median(np.abs(dev)))
+    ok = np.empty(len(pts), bool)
+    ok[order] = np.abs(dev) <= k * scale
+    return ok
 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",

@@ -1,0 +1,19 @@
+"""The shared residual loop (design.md): structure tests, candidate effects, selection, report."""
+
+from align.loop.loop import (
+    Candidate,
+    EffectReport,
+    LoopReport,
+    Stage,
+    StageFit,
+    Term,
+    bic,
+    f_test,
+    run_loop,
+)
+from align.loop.structure import StructureReport, StructureTest, periodogram_test, test_structure
+
+__all__ = [
+    "Candidate", "EffectReport", "LoopReport", "Stage", "StageFit", "StructureReport",
+    "StructureTest", "Term", "bic", "f_test", "periodogram_test", "run_loop", "test_structure",
+]

@@ -1,0 +1,211 @@
+"""The residual loop: fit, test the residual, add the effect the data call for, repeat, report.
+
+A *stage* (a line fit along a mark, face angles over revolutions, an ellipsoid over poses, the
+fusion) implements ``fit(terms) -> StageFit``: it fits its declared model plus the given extra
+terms and returns residuals, their standard uncertainties (or None when unknown), regressors
+and the quantities of interest. *Candidates* build a :class:`Term` (design columns with a name,
+unit and physical meaning) from the current fit. The loop scores each candidate by refitting,
+adds the best one only if an F-test (corrected for searched parameters) and BIC both call for
+it, and stops when nothing more is significant. Structure that remains is reported, never
+hidden.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from scipy import stats
+
+from align.loop.structure import StructureReport, test_structure
+
+
+@dataclass(frozen=True)
+class Term:
+    """Extra design columns for one effect.
+
+    ``columns``: (N, m) regressors entering the stage's model linearly; ``searched``: number of
+    nonlinear parameters chosen by a search before fitting (e.g. a frequency), counted in
+    BIC; ``trials``: number of independent trials of that search (look-elsewhere factor);
+    ``meta``: what the stage needs to interpret the term (e.g. a period).
+    """
+
+    name: str
+    unit: str
+    columns: np.ndarray
+    searched: int = 0
+    trials: float = 1.0
+    meta: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def width(self) -> int:
+        return int(np.asarray(self.columns).reshape(len(self.columns), -1).shape[1])
+
+
+@dataclass(frozen=True)
+class StageFit:
+    """What a stage returns from one fit.
+
+    ``effects``: per term name, (estimate, standard uncertainty) in the term's unit;
+    ``quantities``: the stage's quantities of interest, name -> (value, u), SI/radians.
+    """
+
+    residuals: np.ndarray
+    sigma: np.ndarray | None
+    n_params: int
+    regressors: Mapping[str, np.ndarray]
+    order: str
+    effects: Mapping[str, tuple[float, float]]
+    quantities: Mapping[str, tuple[float, float]]
+
+    @property
+    def n(self) -> int:
+        return int(len(self.residuals))
+
+    @property
+    def dof(self) -> int:
+        return self.n - self.n_params
+
+    @property
+    def chi2(self) -> float:
+        if self.sigma is None:
+            return float(np.sum(self.residuals**2))
+        return float(np.sum((self.residuals / self.sigma) ** 2))
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(np.mean(self.residuals**2))) if self.n else float("nan")
+
+
+class Stage(Protocol):
+    def fit(self, terms: Sequence[Term]) -> StageFit: ...
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate effect: builds its Term from the current fit (None if it does not apply)."""
+
+    name: str
+    unit: str
+    description: str
+    build: Callable[[StageFit], Term | None]
+
+
+@dataclass(frozen=True)
+class EffectReport:
+    name: str
+    estimate: float
+    u: float
+    unit: str
+    rms_before: float
+    rms_after: float
+    delta_bic: float
+    p_value: float
+    description: str = ""
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "estimate": self.estimate, "u": self.u, "unit": self.unit,
+                "rms_before": self.rms_before, "rms_after": self.rms_after,
+                "delta_bic": self.delta_bic, "p_value": self.p_value}
+
+
+@dataclass(frozen=True)
+class LoopReport:
+    """Before/after of one stage's loop."""
+
+    effects: tuple[EffectReport, ...]
+    before: StageFit
+    after: StageFit
+    structure_before: StructureReport
+    structure_after: StructureReport
+    terms: tuple[Term, ...]
+
+    @property
+    def unexplained_structure(self) -> bool:
+        return self.structure_after.structured
+
+    def summary_lines(self, fmt: Callable[[str, float, float], str] | None = None) -> list[str]:
+        lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; "
+                 f"chi2/dof {self.before.chi2 / max(self.before.dof, 1):.3f} -> "
+                 f"{self.after.chi2 / max(self.after.dof, 1):.3f}"]
+        for e in self.effects:
+            lines.append(f"added {e.name}: {e.estimate:.4g} ± {e.u:.2g} {e.unit} "
+                         f"(dBIC {e.delta_bic:.1f}, p {e.p_value:.2g})")
+        if self.unexplained_structure:
+            w = self.structure_after.worst
+            lines.append(f"UNEXPLAINED STRUCTURE remains: {w.name} p={w.p_value:.2g} {w.detail}")
+        return lines
+
+
+def bic(fit: StageFit, extra_k: int = 0) -> float:
+    """BIC: chi2 + k ln N with known sigma; N ln(RSS/N) + k ln N otherwise (lmfit's form)."""
+    k = fit.n_params + extra_k
+    if fit.sigma is None:
+        return fit.n * np.log(max(fit.chi2, 1e-300) / fit.n) + k * np.log(fit.n)
+    return fit.chi2 + k * np.log(fit.n)
+
+
+def f_test(base: StageFit, ext: StageFit, m: int) -> float:
+    """p-value of the extra m columns (nested models), robust to a misstated sigma."""
+    if ext.dof <= 0 or m <= 0:
+        return 1.0
+    num = (base.chi2 - ext.chi2) / m
+    den = ext.chi2 / ext.dof
+    if num <= 0:
+        return 1.0
+    return float(stats.f.sf(num / max(den, 1e-300), m, ext.dof))
+
+
+def structure_of(fit: StageFit, alpha: float) -> StructureReport:
+    return test_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
+                          fit.regressors, fit.dof, alpha)
+
+
+def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
+             min_delta_bic: float = 6.0, max_effects: int = 4) -> LoopReport:
+    """Run the residual loop over ``stage`` with ``candidates``.
+
+    An effect is added when its (look-elsewhere corrected) F-test p-value is below ``alpha``
+    and it lowers BIC by at least ``min_delta_bic``; the best such effect is added first.
+    """
+    terms: list[Term] = []
+    current = stage.fit(terms)
+    before = current
+    s_before = structure_of(current, alpha)
+    effects: list[EffectReport] = []
+    searched = 0
+    while len(effects) < max_effects:
+        best = None
+        for cand in candidates:
+            if any(t.name == cand.name for t in terms):
+                continue
+            term = cand.build(current)
+            if term is None:
+                continue
+            try:
+                trial = stage.fit([*terms, term])
+            except (np.linalg.LinAlgError, ValueError):
+                continue
+            d_bic = (bic(trial, searched + term.searched)
+                     - bic(current, searched))
+            p = f_test(current, trial, term.width)
+            p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
+            if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
+                best = (d_bic, p_adj, term, trial, cand)
+        if best is None:
+            break
+        d_bic, p_adj, term, trial, cand = best
+        est, u = trial.effects.get(term.name, (float("nan"), float("nan")))
+        effects.append(EffectReport(term.name, est, u, term.unit, current.rms, trial.rms,
+                                    float(d_bic), p_adj, cand.description))
+        terms.append(term)
+        searched += term.searched
+        current = trial
+    # Re-read the estimates from the final fit (later terms can shift earlier ones).
+    effects = [EffectReport(e.name, *current.effects.get(e.name, (e.estimate, e.u)), e.unit,
+                            e.rms_before, e.rms_after, e.delta_bic, e.p_value, e.description)
+               for e in effects]
+    return LoopReport(tuple(effects), before, current, s_before, structure_of(current, alpha),
+                      tuple(terms))

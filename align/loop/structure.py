@@ -1,0 +1,133 @@
+"""Tests for structure left in fit residuals beyond noise.
+
+Each test returns a p-value under the hypothesis "the residuals are independent noise of the
+stated size". A report is *structured* when the smallest p-value is below ``alpha`` divided
+by the number of tests (Bonferroni), so a clean fit is flagged with probability <= alpha.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal, stats
+
+
+@dataclass(frozen=True)
+class StructureTest:
+    name: str
+    statistic: float
+    p_value: float
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class StructureReport:
+    tests: tuple[StructureTest, ...]
+    alpha: float
+
+    @property
+    def structured(self) -> bool:
+        return bool(self.tests) and min(t.p_value for t in self.tests) < self.alpha / len(
+            self.tests)
+
+    @property
+    def worst(self) -> StructureTest | None:
+        return min(self.tests, key=lambda t: t.p_value) if self.tests else None
+
+
+def chi2_test(z: np.ndarray, dof: int) -> StructureTest:
+    """Excess of sum(z^2) over its chi2(dof) distribution (z = residual / sigma)."""
+    c = float(np.sum(z**2))
+    return StructureTest("chi2", c / max(dof, 1), float(stats.chi2.sf(c, max(dof, 1))),
+                         f"chi2/dof = {c / max(dof, 1):.3f} (dof {dof})")
+
+
+def runs_test(z: np.ndarray) -> StructureTest:
+    """Wald–Wolfowitz runs of signs: too few runs means residuals come in stretches."""
+    s = z > np.median(z)
+    n1, n2 = int(s.sum()), int((~s).sum())
+    n = n1 + n2
+    if n1 == 0 or n2 == 0:
+        return StructureTest("runs", 0.0, 1.0)
+    runs = 1 + int(np.count_nonzero(s[1:] != s[:-1]))
+    mu = 2 * n1 * n2 / n + 1
+    var = 2 * n1 * n2 * (2 * n1 * n2 - n) / (n * n * (n - 1))
+    zz = (runs - mu) / np.sqrt(max(var, 1e-12))
+    return StructureTest("runs", float(zz), float(stats.norm.cdf(zz)),
+                         f"{runs} runs, {mu:.1f} expected")
+
+
+def ljung_box(z: np.ndarray, lags: int | None = None) -> StructureTest:
+    """Ljung–Box portmanteau test of autocorrelation up to ``lags``."""
+    n = len(z)
+    h = lags or max(1, min(10, n // 5))
+    x = z - z.mean()
+    den = float(x @ x)
+    if den == 0 or n < 4:
+        return StructureTest("autocorrelation", 0.0, 1.0)
+    rho = np.array([x[k:] @ x[:-k] / den for k in range(1, h + 1)])
+    q = n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, h + 1)))
+    return StructureTest("autocorrelation", float(q), float(stats.chi2.sf(q, h)),
+                         f"lag-1 r = {rho[0]:+.3f}, Ljung-Box over {h} lags")
+
+
+def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray]) -> list[StructureTest]:
+    """Linear and quadratic correlation of the residual with each regressor."""
+    out = []
+    for name, x in regressors.items():
+        x = np.asarray(x, float)
+        if len(x) != len(z) or np.ptp(x) == 0 or len(z) < 5:
+            continue
+        xc = (x - x.mean()) / x.std()
+        for label, col in ((name, xc), (f"{name}^2", xc**2 - np.mean(xc**2))):
+            if np.ptp(col) == 0:
+                continue
+            r, p = stats.pearsonr(col, z)
+            out.append(StructureTest(f"corr({label})", float(r), float(p)))
+    return out
+
+
+def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float]:
+    """Largest Lomb–Scargle peak against white noise, with the look-elsewhere correction.
+
+    Returns the test and the peak's angular frequency [rad per unit of x].
+    """
+    n = len(z)
+    span = float(np.ptp(x))
+    if n < 8 or span == 0:
+        return StructureTest("periodogram", 0.0, 1.0), float("nan")
+    spacing = span / (n - 1)
+    # From ~1.5 cycles over the span up to the Nyquist of the mean spacing.
+    freqs = 2 * np.pi * np.linspace(1.5 / span, 0.5 / spacing, 4 * n)
+    p = signal.lombscargle(x, z - z.mean(), freqs, normalize=True, floating_mean=True)
+    k = int(np.argmax(p))
+    power = float(np.clip(p[k], 0, 1 - 1e-15))
+    single = (1 - power) ** ((n - 3) / 2)
+    m_indep = max(1.0, (0.5 / spacing - 1.5 / span) * span)
+    fap = float(-np.expm1(m_indep * np.log1p(-min(single, 1 - 1e-16))))
+    return (StructureTest("periodogram", power, fap,
+                          f"peak period {2 * np.pi / freqs[k]:.3g}, power {power:.3f}"),
+            float(freqs[k]))
+
+
+def test_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.ndarray,
+                   regressors: Mapping[str, np.ndarray], dof: int,
+                   alpha: float = 1e-3) -> StructureReport:
+    """Run every structure test on residuals ordered by the regressor ``order``.
+
+    ``sigma`` None means the noise level is unknown: the chi2 test is skipped and the
+    residuals are scaled by their RMS.
+    """
+    r = np.asarray(residuals, float)
+    if sigma is None:
+        z = r / max(float(np.sqrt(np.mean(r**2))), 1e-300)
+    else:
+        z = r / np.asarray(sigma, float)
+    idx = np.argsort(order, kind="stable")
+    zs, xs = z[idx], np.asarray(order, float)[idx]
+    tests = [chi2_test(z, dof)] if sigma is not None else []
+    tests += [runs_test(zs), ljung_box(zs), periodogram_test(zs, xs)[0]]
+    tests += regressor_tests(z, regressors)
+    return StructureReport(tuple(tests), alpha)

@@ -1,0 +1,230 @@
+"""The residual loop over a scribe-mark line fit, and the per-image result.
+
+Declared model: the mark's centres lie on a straight line in the undistorted image.
+Candidate effects (each a few design columns with physical meaning):
+
+* ``radial_distortion`` — the plumb-line principle: a straight line at offset d from the
+  principal point (assumed at the image centre) imaged through x_d = x (1 + k1 (r/R)^2) is
+  bowed by k1 d (r/R)^2 across itself. R is the image half-diagonal, so k1 is dimensionless;
+  OpenCV's k1 = k1 (f/R)^2 for focal length f [px]. Once found, the centres are undistorted
+  exactly with the estimate and the line refitted (iterated). A bent mark bows the same way
+  in one image; only a camera model or several marks in one image can tell them apart.
+* ``periodic_wiggle`` — a sinusoid along the mark (vibration, rolling shutter); its period is
+  searched on the residual's periodogram (counted as a searched parameter).
+* ``illumination_gradient`` — a centre bias proportional to the local background slope across
+  the mark (per unit contrast): lighting that is not even across the groove.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from align.loop import Candidate, LoopReport, StageFit, Term, periodogram_test, run_loop
+from imaging import (
+    CameraModel,
+    ImageInputError,
+    MarkMeasurement,
+    fit_line,
+    measure_marks,
+    read_image,
+)
+
+RADIAL = "radial_distortion"
+WIGGLE = "periodic_wiggle"
+ILLUM = "illumination_gradient"
+
+
+def half_diagonal(shape: tuple[int, int]) -> float:
+    h, w = shape
+    return float(np.hypot(w - 1, h - 1) / 2)
+
+
+def undistort_radial(pts: np.ndarray, k1: float, scale: float) -> np.ndarray:
+    """Invert x_d = x (1 + k1 |x/scale|^2) (points relative to the principal point)."""
+    if k1 == 0:
+        return pts
+    rd = np.linalg.norm(pts, axis=1) / scale
+    ru = rd.copy()
+    for _ in range(20):
+        ru = ru - (ru * (1 + k1 * ru**2) - rd) / (1 + 3 * k1 * ru**2)
+    f = np.where(rd > 0, ru / np.where(rd > 0, rd, 1), 1.0)
+    return pts * f[:, None]
+
+
+class MarkStage:
+    """Line fit along one mark, with extra terms (the stage the loop drives)."""
+
+    def __init__(self, m: MarkMeasurement):
+        self.m = m
+        self.scale = half_diagonal(m.image_shape)
+
+    def fit(self, terms: Sequence[Term]) -> StageFit:
+        m = self.m
+        names = [t.name for t in terms]
+        pts = m.points
+        k1 = 0.0
+        rounds = 4 if RADIAL in names else 1
+        for _ in range(rounds):
+            q = undistort_radial(pts, k1, self.scale)
+            cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
+                    else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
+            F = np.hstack(cols) if cols else None
+            lf = fit_line(q, m.sigma, F, reject_sigma=None)
+            if RADIAL not in names:
+                break
+            j = self._col_index(terms, RADIAL)
+            k1 += lf.beta[j] / lf.offset_px if lf.offset_px else 0.0
+        effects: dict[str, tuple[float, float]] = {}
+        for t in terms:
+            j = self._col_index(terms, t.name)
+            cov = lf.cov[2 + j:2 + j + t.width, 2 + j:2 + j + t.width]
+            b = lf.beta[j:j + t.width]
+            if t.name == RADIAL:
+                d = lf.offset_px
+                effects[t.name] = (k1 + b[0] / d, float(np.sqrt(cov[0, 0])) / abs(d))
+            elif t.name == WIGGLE:
+                amp = float(np.hypot(*b))
+                g = b / max(amp, 1e-300)
+                effects[t.name] = (amp, float(np.sqrt(g @ cov @ g)))
+            else:
+                effects[t.name] = (float(b[0]), float(np.sqrt(cov[0, 0])))
+        return StageFit(
+            residuals=lf.residuals_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
+            regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
+                        "cross_slope": m.regressors["cross_slope"]},
+            order="t", effects=effects,
+            quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
+                        "offset_px": (lf.offset_px, lf.offset_u_px)})
+
+    @staticmethod
+    def _col_index(terms: Sequence[Term], name: str) -> int:
+        j = 0
+        for t in terms:
+            if t.name == name:
+                return j
+            j += t.width
+        raise KeyError(name)
+
+
+def _radial(fit: StageFit) -> Term:
+    return Term(RADIAL, "1 (k1 at the image half-diagonal)", np.zeros((fit.n, 1)))
+
+
+def _wiggle(fit: StageFit) -> Term | None:
+    t = np.asarray(fit.regressors["t"], float)
+    test, omega = periodogram_test(fit.residuals / fit.sigma, t)
+    if not np.isfinite(omega):
+        return None
+    m_indep = max(1.0, float(np.ptp(t)) * (0.5 * (len(t) - 1) / np.ptp(t)))
+    return Term(WIGGLE, "px", np.column_stack([np.sin(omega * t), np.cos(omega * t)]),
+                searched=1, trials=m_indep, meta={"period_px": 2 * np.pi / omega})
+
+
+def _illum(fit: StageFit) -> Term | None:
+    g = np.asarray(fit.regressors["cross_slope"], float)
+    if np.ptp(g) == 0:
+        return None
+    return Term(ILLUM, "px^2", (g - g.mean())[:, None])
+
+
+CANDIDATES: tuple[Candidate, ...] = (
+    Candidate(RADIAL, "1", "curvature across the mark growing with distance from the image "
+              "centre: lens radial distortion (plumb-line k1) or a bent mark", _radial),
+    Candidate(WIGGLE, "px", "periodic wiggle along the mark (vibration / rolling shutter)",
+              _wiggle),
+    Candidate(ILLUM, "px^2", "centre bias following the local illumination slope across the "
+              "mark", _illum),
+)
+
+
+@dataclass(frozen=True)
+class MarkResult:
+    """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
+
+    image: str
+    found: bool
+    error: str | None = None
+    index: int = 0
+    angle_rad: float = float("nan")
+    angle_u_rad: float = float("nan")
+    offset_px: float = float("nan")
+    offset_u_px: float = float("nan")
+    length_px: float = float("nan")
+    width_px: float = float("nan")
+    blur_px: float = float("nan")
+    dark: bool = True
+    n_points: int = 0
+    n_rejected: int = 0
+    angle_before_rad: float = float("nan")
+    loop: LoopReport | None = None
+    measurement: MarkMeasurement | None = None
+
+    @property
+    def unexplained_structure(self) -> bool:
+        return bool(self.loop and self.loop.unexplained_structure)
+
+    def to_json(self) -> dict:
+        d = {"image": self.image, "found": self.found, "error": self.error}
+        if not self.found:
+            return d
+        d.update({
+            "index": self.index, "angle_deg": float(np.rad2deg(self.angle_rad)),
+            "angle_u_deg": float(np.rad2deg(self.angle_u_rad)),
+            "angle_u_arcsec": float(np.rad2deg(self.angle_u_rad) * 3600),
+            "offset_px": self.offset_px, "offset_u_px": self.offset_u_px,
+            "length_px": self.length_px, "width_px": self.width_px, "blur_px": self.blur_px,
+            "polarity": "dark" if self.dark else "bright", "points": self.n_points,
+            "rejected_points": self.n_rejected,
+            "angle_before_loop_deg": float(np.rad2deg(self.angle_before_rad)),
+            "effects": [e.to_json() for e in self.loop.effects] if self.loop else [],
+            "unexplained_structure": self.unexplained_structure,
+        })
+        if self.loop:
+            d["residual_rms_px"] = {"before": self.loop.before.rms, "after": self.loop.after.rms}
+            d["chi2_dof"] = {"before": self.loop.before.chi2 / max(self.loop.before.dof, 1),
+                             "after": self.loop.after.chi2 / max(self.loop.after.dof, 1)}
+        return d
+
+
+def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
+              candidates: Sequence[Candidate] = CANDIDATES) -> MarkResult:
+    """Run the residual loop over one measured mark."""
+    rep = run_loop(MarkStage(m), candidates, alpha=alpha)
+    a, au = rep.after.quantities["angle_rad"]
+    d, du = rep.after.quantities["offset_px"]
+    return MarkResult(
+        image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
+        offset_u_px=du, length_px=m.line.length_px, width_px=m.profile.width_px,
+        blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
+        n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
+        loop=rep, measurement=m)
+
+
+def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
+                  alpha: float = 1e-3, max_marks: int = 8) -> list[MarkResult]:
+    """Every mark of an in-memory image, each through the loop; failures become entries."""
+    try:
+        found = measure_marks(image, camera, where=name, max_marks=max_marks)
+    except ImageInputError as exc:
+        return [MarkResult(image=name, found=False, error=str(exc))]
+    out = []
+    for i, m in enumerate(found):
+        if isinstance(m, ImageInputError):
+            out.append(MarkResult(image=name, found=False, error=str(m), index=i))
+        else:
+            out.append(loop_mark(m, name, i, alpha))
+    return out
+
+
+def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,
+                 max_marks: int = 8) -> list[MarkResult]:
+    """Every mark in an image file; an unreadable file is one failed entry."""
+    try:
+        img = read_image(path)
+    except ImageInputError as exc:
+        return [MarkResult(image=str(path), found=False, error=str(exc))]
+    return measure_image(img, str(path), camera, alpha, max_marks)
