@@ -162,6 +162,7 @@ class MarkResult:
     angle_before_rad: float = float("nan")
     loop: LoopReport | None = None
     measurement: MarkMeasurement | None = None
+    uncertainty_inflation: float = 1.0
 
     @property
     def unexplained_structure(self) -> bool:
@@ -182,6 +183,7 @@ class MarkResult:
             "angle_before_loop_deg": float(np.rad2deg(self.angle_before_rad)),
             "effects": [e.to_json() for e in self.loop.effects] if self.loop else [],
             "unexplained_structure": self.unexplained_structure,
+            "uncertainty_inflation": self.uncertainty_inflation,
         })
         if self.loop:
             d["residual_rms_px"] = {"before": self.loop.before.rms, "after": self.loop.after.rms}
@@ -196,12 +198,30 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     rep = run_loop(MarkStage(m), candidates, alpha=alpha)
     a, au = rep.after.quantities["angle_rad"]
     d, du = rep.after.quantities["offset_px"]
+    infl = structure_inflation(rep)
+    au, du = au * infl, du * infl
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.line.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
-        loop=rep, measurement=m)
+        loop=rep, measurement=m, uncertainty_inflation=infl)
+
+
+def structure_inflation(rep: LoopReport) -> float:
+    """Factor on the stated uncertainty when the residual keeps unexplained structure.
+
+    Correlated residuals carry less information than independent ones: with lag-1
+    correlation rho the variance of a fitted slope grows by about (1 + rho) / (1 - rho)
+    (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
+    """
+    if not rep.unexplained_structure:
+        return 1.0
+    f = rep.after
+    z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
+    zc = z - z.mean()
+    rho = float(np.clip(zc[1:] @ zc[:-1] / max(zc @ zc, 1e-300), 0.0, 0.9))
+    return float(np.sqrt(max(1.0, f.chi2 / max(f.dof, 1)) * (1 + rho) / (1 - rho)))
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,

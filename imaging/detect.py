@@ -99,7 +99,8 @@ def _pca_line(pts: np.ndarray, centre: np.ndarray) -> tuple[float, float, np.nda
 
 
 def detect_marks(image: np.ndarray, min_length_px: float | None = None,
-                 max_marks: int = 8, snr_threshold: float = 8.0) -> list[MarkCandidate]:
+                 max_marks: int = 8, snr_threshold: float = 8.0,
+                 relative_strength: float = 0.25) -> list[MarkCandidate]:
     """Find long straight dark or bright thin marks.
 
     Parameters
@@ -112,6 +113,9 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         At most this many candidates, strongest first.
     snr_threshold : float
         Ridge response threshold in units of its robust (MAD) noise.
+    relative_strength : float
+        Drop candidates weaker (contrast x length) than this fraction of the strongest:
+        scratches and machining marks are fainter and shorter than engraved scribe marks.
 
     Returns
     -------
@@ -141,7 +145,8 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                                  / mad * length)
                 best.append(_to_full(a, d, t, dark, thick, strength, f, centre_small,
                                      np.array([(w - 1) / 2, (h - 1) / 2])))
-    return _dedupe(sorted(best, key=lambda c: -c.strength))[:max_marks]
+    out = _dedupe(sorted(best, key=lambda c: -c.strength))
+    return [c for c in out if c.strength >= relative_strength * out[0].strength][:max_marks]
 
 
 def _to_full(a, d, t, dark, thick, strength, f, centre_small, centre) -> MarkCandidate:

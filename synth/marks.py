@@ -277,7 +277,7 @@ def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     for _ in range(spec.scratches):
         x0, y0 = rng.uniform(0, w - 1), rng.uniform(0, h - 1)
         ang = rng.uniform(0, np.pi)
-        length = rng.uniform(20, 0.3 * min(w, h))
+        length = rng.uniform(20, 0.15 * min(w, h))
         amp = rng.choice([-1, 1]) * rng.uniform(0.1, 0.4)
         s = np.hypot(rng.uniform(0.3, 0.8), spec.blur_px)
         ux, uy = np.cos(ang), np.sin(ang)

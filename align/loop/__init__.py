@@ -11,9 +11,9 @@ from align.loop.loop import (
     f_test,
     run_loop,
 )
-from align.loop.structure import StructureReport, StructureTest, periodogram_test, test_structure
+from align.loop.structure import StructureReport, StructureTest, periodogram_test, check_structure
 
 __all__ = [
     "Candidate", "EffectReport", "LoopReport", "Stage", "StageFit", "StructureReport",
-    "StructureTest", "Term", "bic", "f_test", "periodogram_test", "run_loop", "test_structure",
+    "StructureTest", "Term", "bic", "f_test", "periodogram_test", "run_loop", "check_structure",
 ]

@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 from scipy import stats
 
-from align.loop.structure import StructureReport, test_structure
+from align.loop.structure import StructureReport, check_structure
 
 
 @dataclass(frozen=True)
@@ -159,7 +159,7 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
 
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
-    return test_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
+    return check_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
                           fit.regressors, fit.dof, alpha)
 
 

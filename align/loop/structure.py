@@ -112,7 +112,7 @@ def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float
             float(freqs[k]))
 
 
-def test_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.ndarray,
+def check_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.ndarray,
                    regressors: Mapping[str, np.ndarray], dof: int,
                    alpha: float = 1e-3) -> StructureReport:
     """Run every structure test on residuals ordered by the regressor ``order``.

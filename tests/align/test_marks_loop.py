@@ -1,0 +1,54 @@
+"""The loop over mark line fits: undeclared distortion found and removed; clean images left."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from align.marks import RADIAL, half_diagonal, measure_image
+from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from tests.conftest import angle_error
+
+
+@pytest.mark.parametrize("k1,offset,seed", [(-0.10, 180.0, 1), (0.06, -220.0, 2),
+                                            (-0.05, 120.0, 3)])
+def test_undeclared_radial_distortion_is_found_and_removed(k1, offset, seed):
+    f = 1000.0
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(2.0 + seed), offset, 600, 4.0,
+                                     centre_t_px=90.0),), width=1024, height=768,
+                     full_well_e=full_well_for_snr(40, -0.6), seed=seed,
+                     camera=CameraGeometry(focal_px=f, k1=k1))
+    s = render_marks(spec, with_crlb=False)
+    r = measure_image(s.image.astype(float))[0]
+    t = s.truth.marks[0]
+    before = angle_error(r.angle_before_rad, t.image_angle_rad)
+    after = angle_error(r.angle_rad, t.image_angle_rad)
+    assert [e.name for e in r.loop.effects][:1] == [RADIAL]
+    # Error before the loop is far outside the noise; after it, at the noise floor.
+    assert abs(before) > 10 * r.angle_u_rad
+    assert abs(after) < 4.5 * r.angle_u_rad
+    # The plumb-line k1 is the lens's k1 rescaled to the half-diagonal.
+    k1n = k1 * (half_diagonal((768, 1024)) / f) ** 2
+    e = r.loop.effects[0]
+    assert abs(e.estimate - k1n) < max(5 * e.u, 0.03 * abs(k1n))
+    js = r.to_json()
+    assert js["effects"][0]["name"] == RADIAL and js["effects"][0]["rms_after"] < js[
+        "effects"][0]["rms_before"]
+
+
+def test_no_false_effects_on_fifty_clean_images():
+    rng = np.random.default_rng(2024)
+    false, flagged, z = 0, 0, []
+    for seed in range(50):
+        ang = rng.uniform(-90, 90)
+        spec = ImageSpec(marks=(MarkSpec(np.deg2rad(ang), rng.uniform(-80, 80), 400,
+                                         rng.uniform(2, 8)),), width=640, height=480,
+                         full_well_e=full_well_for_snr(rng.uniform(10, 100), -0.6), seed=seed)
+        s = render_marks(spec, with_crlb=False)
+        r = measure_image(s.image.astype(float))[0]
+        false += bool(r.loop.effects)
+        flagged += r.unexplained_structure
+        z.append(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad) / r.angle_u_rad)
+    assert false <= 1, f"{false} false effects in 50 clean images"
+    assert flagged <= 1
+    assert 0.75 < np.sqrt(np.mean(np.square(z))) < 1.3

@@ -1,0 +1,113 @@
+"""imaging: sub-pixel angle against synth truth, with tolerances from the stated noise."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imaging import ImageInputError, detect_marks, fit_line, measure_marks, read_image
+from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks, write_image
+from tests.conftest import angle_error, mark_image
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.2, 33.0, 89.8, 90.0, -61.0])
+def test_angle_within_stated_uncertainty_and_near_crlb(angle):
+    s = mark_image(angle, seed=int(abs(angle) * 10) + 1)
+    m = measure_marks(s.image.astype(float))[0]
+    t = s.truth.marks[0]
+    err = angle_error(m.line.angle_rad, t.image_angle_rad)
+    # 4.5 sigma: a failure here is a 1-in-150000 event for an honest uncertainty.
+    assert abs(err) < 4.5 * m.line.angle_u_rad
+    # The propagated uncertainty is a real one: close to the Cramér–Rao bound, not a
+    # residual RMS and not inflated.
+    assert 0.85 * t.crlb_angle_rad < m.line.angle_u_rad < 1.25 * t.crlb_angle_rad
+    assert abs(m.line.offset_px - t.image_offset_px) < 4.5 * m.line.offset_u_px + 1e-3
+
+
+def test_normalised_errors_are_standard_normal_over_seeds():
+    z = []
+    for seed in range(16):
+        s = mark_image(12.0 + 5 * seed, seed=seed, snr=20, with_crlb=False)
+        m = measure_marks(s.image.astype(float))[0]
+        z.append(angle_error(m.line.angle_rad, s.truth.marks[0].image_angle_rad)
+                 / m.line.angle_u_rad)
+    z = np.array(z)
+    # RMS of 16 N(0,1) draws lies in [0.6, 1.45] with probability > 0.999.
+    assert 0.6 < np.sqrt(np.mean(z**2)) < 1.45
+
+
+def test_finds_marks_in_clutter_and_several_per_image():
+    spec = ImageSpec(
+        marks=(MarkSpec(np.deg2rad(0.05), -150, 500, 4.0),
+               MarkSpec(np.deg2rad(89.95), 200, 450, 3.0, contrast=0.8)),
+        width=1024, height=768, full_well_e=full_well_for_snr(25, -0.6), texture=0.02,
+        dust=10, dust_on_mark=3, scratches=4, gradient=(0.1, -0.05), vignetting=0.2, seed=7)
+    s = render_marks(spec, with_crlb=False)
+    found = [m for m in measure_marks(s.image.astype(float)) if not isinstance(m, Exception)]
+    assert len(found) == 2
+    for t in s.truth.marks:
+        m = min(found, key=lambda m: abs(angle_error(m.line.angle_rad, t.image_angle_rad)))
+        err = angle_error(m.line.angle_rad, t.image_angle_rad)
+        assert abs(err) < np.deg2rad(15 / 3600)  # clutter-limited, still arc-seconds
+    assert {m.candidate.dark for m in found} == {True, False}
+
+
+def test_dust_on_the_mark_is_rejected():
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(20), 5, 500, 4.0),), width=800, height=600,
+                     full_well_e=full_well_for_snr(30, -0.6), dust_on_mark=6, seed=11)
+    s = render_marks(spec, with_crlb=False)
+    m = measure_marks(s.image.astype(float))[0]
+    assert m.n_rejected > 0
+    err = angle_error(m.line.angle_rad, s.truth.marks[0].image_angle_rad)
+    assert abs(err) < 4.5 * m.line.angle_u_rad
+
+
+def test_line_fit_with_extra_terms_recovers_coefficients():
+    rng = np.random.default_rng(0)
+    t = np.linspace(-300, 300, 200)
+    a, d = np.deg2rad(7.0), 12.0
+    u, n = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
+    bow = 2e-5 * t**2
+    sig = np.full(t.size, 0.05)
+    pts = t[:, None] * u + (d + bow + rng.normal(0, 0.05, t.size))[:, None] * n
+    lf = fit_line(pts, sig, extra=(t**2)[:, None], reject_sigma=None)
+    assert abs(lf.beta[0] - 2e-5) < 4 * np.sqrt(lf.cov[2, 2])
+    assert abs(lf.angle_rad - a) < 4 * lf.angle_u_rad
+    assert lf.chi2 / lf.dof == pytest.approx(1, abs=0.35)
+
+
+def test_bad_inputs_name_the_file_and_reason(tmp_path):
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"not an image at all")
+    with pytest.raises(ImageInputError, match="junk.png.*not an image"):
+        read_image(junk)
+    with pytest.raises(ImageInputError, match="no such file"):
+        read_image(tmp_path / "missing.png")
+    s = mark_image(10, 0, size=(400, 300), length_px=250, with_crlb=False)
+    good = write_image(tmp_path / "good.png", s.image)
+    trunc = tmp_path / "trunc.png"
+    trunc.write_bytes(good.read_bytes()[:200])
+    with pytest.raises(ImageInputError, match="trunc.png"):
+        read_image(trunc)
+    with pytest.raises(ImageInputError, match="uniform"):
+        measure_marks(np.full((100, 100), 7.0), where="flat.png")
+    noise = np.random.default_rng(1).normal(1000, 10, (300, 300))
+    with pytest.raises(ImageInputError, match="no mark"):
+        measure_marks(noise, where="noise.png")
+    tiny = tmp_path / "tiny.png"
+    write_image(tiny, np.zeros((8, 8), np.uint8))
+    with pytest.raises(ImageInputError, match="too small"):
+        read_image(tiny)
+
+
+def test_saturated_mark_is_reported():
+    spec = ImageSpec(marks=(MarkSpec(0.3, 0, 300, 4.0, contrast=2.5),), width=500, height=400,
+                     exposure=0.6, seed=2)
+    s = render_marks(spec, with_crlb=False)
+    res = measure_marks(s.image.astype(float), where="sat.png")
+    assert isinstance(res[0], ImageInputError) and "saturated" in str(res[0])
+
+
+def test_detection_reports_nothing_on_pure_noise():
+    img = np.random.default_rng(5).normal(2000, 30, (480, 640))
+    assert detect_marks(img) == []

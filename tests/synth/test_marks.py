@@ -1,0 +1,83 @@
+"""synth: physical rendering, truth and CRLB, independence from the pipeline."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from synth import CameraGeometry, ImageSpec, MarkSpec, crlb, render_marks, write_synth
+from tests.conftest import mark_image
+
+
+def test_synth_imports_nothing_from_the_pipeline():
+    pipeline = {"imaging", "goniometry", "align"}
+    for f in (Path(__file__).resolve().parents[2] / "synth").rglob("*.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                names = [node.module or ""]
+            else:
+                continue
+            assert not any(n.split(".")[0] in pipeline for n in names), f"{f}: {names}"
+
+
+def test_box_groove_area_integrates_to_its_width():
+    # Summed across the mark, the coverage of a box groove equals its width (area
+    # integration, not a raster line): check on the noise-free mean.
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(17.0), 3.3, 300, 5.0, profile="box",
+                                     contrast=-0.5),), width=400, height=400, read_noise_e=0)
+    s = render_marks(spec, with_crlb=False)
+    bg = spec.exposure * spec.full_well_e
+    deficit = (bg - s.mean_e) / (0.5 * bg)
+    # Integrated over area: width x length (blurred ends keep their integral).
+    assert deficit.sum() == pytest.approx(5.0 * 300, rel=2e-3)
+
+
+def test_noise_matches_shot_plus_read():
+    spec = ImageSpec(marks=(MarkSpec(0.3, 150, 50, 3.0),), width=256, height=256,
+                     full_well_e=20000, read_noise_e=20, bits=16, seed=3)
+    s = render_marks(spec, with_crlb=False)
+    patch = s.image[:100, :100].astype(float) * spec.full_well_e / 65535
+    expected = np.sqrt(spec.exposure * spec.full_well_e + 20**2)
+    assert patch.std() == pytest.approx(expected, rel=0.05)
+
+
+def test_crlb_scales_inversely_with_snr_and_length():
+    a = mark_image(10, 0, snr=20).truth.marks[0].crlb_angle_rad
+    b = mark_image(10, 0, snr=40).truth.marks[0].crlb_angle_rad
+    c = mark_image(10, 0, snr=20, length_px=250).truth.marks[0].crlb_angle_rad
+    assert b == pytest.approx(a / 2, rel=0.05)
+    # Angle information grows as length^3 (slope of a line): halving it costs 2^1.5.
+    assert c == pytest.approx(a * 2**1.5, rel=0.1)
+
+
+def test_truth_angle_follows_camera_roll():
+    roll = np.deg2rad(30 / 3600)
+    spec = ImageSpec(marks=(MarkSpec(0.2, 0, 300),), width=400, height=300,
+                     camera=CameraGeometry(roll_rad=roll))
+    t = render_marks(spec, with_crlb=False).truth.marks[0]
+    assert t.image_angle_rad - t.angle_rad == pytest.approx(roll, rel=1e-6)
+
+
+def test_eight_and_sixteen_bit_files_and_no_overwrite(tmp_path):
+    for bits, suffix in ((8, ".png"), (16, ".tif"), (16, ".png")):
+        spec = ImageSpec(marks=(MarkSpec(0.1, 0, 200),), width=300, height=200, bits=bits)
+        s = render_marks(spec, with_crlb=False)
+        p, truth = write_synth(s, tmp_path / f"m{bits}{suffix}")
+        assert p.exists() and truth.exists()
+        assert s.image.dtype == (np.uint8 if bits == 8 else np.uint16)
+        with pytest.raises(FileExistsError):
+            write_synth(s, p)
+
+
+def test_crlb_rejects_nothing_silently():
+    spec = ImageSpec(marks=(MarkSpec(0.1, 0, 200),), width=300, height=200)
+    a, d = crlb(spec)
+    assert 0 < a < 1e-3 and 0 < d < 0.1
+    with pytest.raises(ValueError):
+        render_marks(ImageSpec(marks=(MarkSpec(0.1, 0, 200, profile="zigzag"),), width=64,
+                               height=64))
