@@ -11,7 +11,7 @@ from align.loop.loop import (
     f_test,
     run_loop,
 )
-from align.loop.structure import StructureReport, StructureTest, periodogram_test, check_structure
+from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 
 __all__ = [
     "Candidate", "EffectReport", "LoopReport", "Stage", "StageFit", "StructureReport",

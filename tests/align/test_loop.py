@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from align.loop import Candidate, StageFit, Term, run_loop, check_structure
+from align.loop import Candidate, StageFit, Term, check_structure, run_loop
 
 
 class PolyStage:

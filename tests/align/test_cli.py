@@ -1,0 +1,73 @@
+"""The align command: JSON contract, exit codes, never overwriting, batch failures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from align.cli import main
+from synth import write_synth
+from tests.conftest import mark_image, real_folder
+
+
+@pytest.fixture
+def mark_file(tmp_path):
+    s = mark_image(25.0, seed=4, size=(640, 480), length_px=350)
+    p, _ = write_synth(s, tmp_path / "mark.png")
+    return p, s.truth
+
+
+def test_marks_json_contract(mark_file, tmp_path):
+    p, truth = mark_file
+    out = tmp_path / "out.json"
+    assert main(["marks", str(p), "--json", str(out), "--plot", str(tmp_path / "plots")]) == 0
+    js = json.loads(out.read_text())
+    m = js["marks"][0]
+    for key in ("image", "found", "error", "angle_deg", "angle_u_deg", "offset_px", "effects",
+                "unexplained_structure"):
+        assert key in m
+    assert m["found"] is True and m["error"] is None
+    err = m["angle_deg"] - np.rad2deg(truth.marks[0].image_angle_rad)
+    assert abs(err) < 4.5 * m["angle_u_deg"]
+    assert list((tmp_path / "plots").glob("*.png"))
+
+
+def test_batch_keeps_good_results_and_marks_failures(mark_file, tmp_path, capsys):
+    p, _ = mark_file
+    bad = tmp_path / "bad.png"
+    bad.write_text("hello")
+    out = tmp_path / "out.json"
+    assert main(["marks", str(bad), str(p), "--json", str(out)]) == 2
+    js = json.loads(out.read_text())["marks"]
+    assert js[0]["found"] is False and "bad.png" in js[0]["error"]
+    assert js[1]["found"] is True
+    assert "bad.png" in capsys.readouterr().err
+
+
+def test_never_overwrites(mark_file, tmp_path, capsys):
+    p, _ = mark_file
+    out = tmp_path / "exists.json"
+    out.write_text("keep me")
+    assert main(["marks", str(p), "--json", str(out)]) == 2
+    assert out.read_text() == "keep me"
+    assert main(["marks", str(p), "--json", str(p)]) == 2
+    assert "refusing" in capsys.readouterr().err
+
+
+def test_usage_errors_exit_2():
+    assert main(["marks"]) == 2
+    assert main(["camera", "x.png", "--pattern", "nine"]) == 2
+
+
+def test_camera_calibration_on_real_chessboards(tmp_path):
+    folder = real_folder("opencv-chessboard")
+    out = tmp_path / "cam.json"
+    imgs = sorted(str(p) for p in folder.glob("left0*.jpg"))
+    assert main(["camera", *imgs, "--pattern", "9x6", "--json", str(out)]) == 0
+    cam = json.loads(out.read_text())
+    # The folder's README: fx ~ 538-542 px, k1 ~ -0.28 (barrel), RMS ~ 0.49 px.
+    assert 520 < cam["camera_matrix"][0][0] < 560
+    assert -0.35 < cam["dist_coeffs"][0] < -0.2
+    assert cam["rms_px"] < 1.0
