@@ -15,10 +15,11 @@ from imaging.errors import ImageInputError
 from imaging.io import read_image
 from imaging.linefit import LineFit, fit_line
 from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
+from imaging.plumbline import PlumbLineFit, chessboard_lines, plumb_line
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
     "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
-    "ProfileFit", "calibrate_chessboard", "detect_marks", "find_chessboard", "fit_line",
+    "PlumbLineFit", "ProfileFit", "calibrate_chessboard", "chessboard_lines", "plumb_line", "detect_marks", "find_chessboard", "fit_line",
     "line_frame", "measure_candidate", "measure_marks", "read_image", "wrap_angle",
 ]

@@ -49,7 +49,10 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     if cen.ok.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
-    keep = cen.ok & (cen.chi2_red < 3.0)
+    # Segments whose pixels fit the groove much worse than the typical segment: dust or a
+    # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
+    typical = float(np.median(cen.chi2_red[cen.ok])) if cen.ok.any() else 1.0
+    keep = cen.ok & (cen.chi2_red < 3.0 * max(1.0, typical))
     if keep.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "segments fit the groove model (covered, or not a groove)")

@@ -1,0 +1,110 @@
+"""Plumb-line estimate of radial distortion from points that should lie on straight lines.
+
+Model: each set of points q (relative to the principal point, assumed at the image centre
+unless given) is the image of a straight line through x_d = x_u (1 + k1 (r_u/R)^2 +
+k2 (r_u/R)^4), R a length scale (default the image half-diagonal) so k1, k2 are
+dimensionless; OpenCV's coefficients are k1 (f/R)^2 and k2 (f/R)^4 for focal length f [px].
+Fitted jointly over all lines by scipy's least_squares: (k1[, k2]) and one (angle, offset)
+per line, residuals the perpendicular distances of the undistorted points.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from imaging.linefit import fit_line
+
+
+@dataclass(frozen=True)
+class PlumbLineFit:
+    """k (k1[, k2]) at scale R with standard uncertainties, and straightness before/after.
+
+    ``rms_before_px``/``rms_after_px``: RMS perpendicular residual of per-line straight-line
+    fits to the raw and to the undistorted points [px].
+    """
+
+    k: np.ndarray
+    k_u: np.ndarray
+    scale_px: float
+    rms_before_px: float
+    rms_after_px: float
+    n_lines: int
+    n_points: int
+
+    def opencv(self, focal_px: float) -> np.ndarray:
+        """The same coefficients in OpenCV's normalised convention for focal length f [px]."""
+        p = np.arange(1, len(self.k) + 1)
+        return self.k * (focal_px / self.scale_px) ** (2 * p)
+
+
+def undistort(q: np.ndarray, k: Sequence[float], scale: float) -> np.ndarray:
+    """Invert the radial model by Newton iteration on the radius."""
+    rd = np.linalg.norm(q, axis=1) / scale
+    ru = rd.copy()
+    for _ in range(25):
+        g = ru.copy()
+        dg = np.ones_like(ru)
+        for i, ki in enumerate(k, start=1):
+            g += ki * ru ** (2 * i + 1)
+            dg += (2 * i + 1) * ki * ru ** (2 * i)
+        ru = ru - (g - rd) / dg
+    f = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
+    return q * f[:, None]
+
+
+def _rms_straight(lines: Sequence[np.ndarray]) -> float:
+    r = [fit_line(q, np.ones(len(q)), reject_sigma=None).residuals_px for q in lines]
+    return float(np.sqrt(np.mean(np.concatenate(r) ** 2)))
+
+
+def plumb_line(lines: Sequence[np.ndarray], scale_px: float, n_coeffs: int = 1,
+               centre: np.ndarray | None = None) -> PlumbLineFit:
+    """Joint plumb-line fit.
+
+    Parameters
+    ----------
+    lines : sequence of (N_i, 2) arrays
+        Points of each straight feature [px], in image coordinates relative to ``centre``.
+    scale_px : float
+        R, the radius at which k is expressed [px].
+    n_coeffs : int
+        1 (k1) or 2 (k1, k2).
+    centre : (2,) array, optional
+        Principal point relative to the coordinates' origin [px] (default: origin).
+    """
+    c = np.zeros(2) if centre is None else np.asarray(centre, float)
+    lines = [np.asarray(q, float) - c for q in lines if len(q) >= 3]
+    if len(lines) < 2:
+        raise ValueError("plumb-line needs at least two lines of three or more points")
+    starts = [fit_line(q, np.ones(len(q)), reject_sigma=None) for q in lines]
+    x0 = np.concatenate([np.zeros(n_coeffs)]
+                        + [[s.angle_rad, s.offset_px] for s in starts])
+
+    def resid(p):
+        k = p[:n_coeffs]
+        out = []
+        for i, q in enumerate(lines):
+            a, d = p[n_coeffs + 2 * i: n_coeffs + 2 * i + 2]
+            u = undistort(q, k, scale_px)
+            out.append(u[:, 0] * np.sin(a) + u[:, 1] * np.cos(a) - d)
+        return np.concatenate(out)
+
+    res = least_squares(resid, x0, method="lm", x_scale="jac")
+    r = res.fun
+    dof = max(len(r) - len(x0), 1)
+    # Plain Jacobian at the solution (no robust loss here), scaled by the residual variance.
+    cov = np.linalg.pinv(res.jac.T @ res.jac) * (r @ r / dof)
+    k = res.x[:n_coeffs]
+    return PlumbLineFit(k, np.sqrt(np.diag(cov)[:n_coeffs]), scale_px, _rms_straight(lines),
+                        _rms_straight([undistort(q, k, scale_px) for q in lines]), len(lines),
+                        int(sum(len(q) for q in lines)))
+
+
+def chessboard_lines(corners: np.ndarray, pattern: tuple[int, int]) -> list[np.ndarray]:
+    """Rows and columns of chessboard inner corners (cols x rows) as point sets."""
+    grid = corners.reshape(pattern[1], pattern[0], 2)
+    return [grid[i] for i in range(pattern[1])] + [grid[:, j] for j in range(pattern[0])]
