@@ -20,6 +20,7 @@ from imaging.profile import Centres, ProfileFit
 
 __all__ = [
     "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
-    "PlumbLineFit", "ProfileFit", "calibrate_chessboard", "chessboard_lines", "plumb_line", "detect_marks", "find_chessboard", "fit_line",
-    "line_frame", "measure_candidate", "measure_marks", "read_image", "wrap_angle",
+    "PlumbLineFit", "ProfileFit", "calibrate_chessboard", "chessboard_lines", "detect_marks",
+    "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
+    "plumb_line", "read_image", "wrap_angle",
 ]

@@ -80,26 +80,24 @@ def plumb_line(lines: Sequence[np.ndarray], scale_px: float, n_coeffs: int = 1,
     lines = [np.asarray(q, float) - c for q in lines if len(q) >= 3]
     if len(lines) < 2:
         raise ValueError("plumb-line needs at least two lines of three or more points")
-    starts = [fit_line(q, np.ones(len(q)), reject_sigma=None) for q in lines]
-    x0 = np.concatenate([np.zeros(n_coeffs)]
-                        + [[s.angle_rad, s.offset_px] for s in starts])
-
-    def resid(p):
-        k = p[:n_coeffs]
+    # Variable projection: for given k every line is a closed-form TLS fit, so only k is
+    # searched; the reduced Jacobian gives k's covariance with the lines profiled out.
+    def resid(k):
         out = []
-        for i, q in enumerate(lines):
-            a, d = p[n_coeffs + 2 * i: n_coeffs + 2 * i + 2]
+        for q in lines:
             u = undistort(q, k, scale_px)
-            out.append(u[:, 0] * np.sin(a) + u[:, 1] * np.cos(a) - d)
+            m = u.mean(0)
+            _, v = np.linalg.eigh((u - m).T @ (u - m))
+            out.append((u - m) @ v[:, 0])
         return np.concatenate(out)
 
-    res = least_squares(resid, x0, method="lm", x_scale="jac")
+    res = least_squares(resid, np.zeros(n_coeffs), method="lm", x_scale=[0.1] * n_coeffs)
     r = res.fun
-    dof = max(len(r) - len(x0), 1)
+    dof = max(len(r) - n_coeffs - 2 * len(lines), 1)
     # Plain Jacobian at the solution (no robust loss here), scaled by the residual variance.
     cov = np.linalg.pinv(res.jac.T @ res.jac) * (r @ r / dof)
-    k = res.x[:n_coeffs]
-    return PlumbLineFit(k, np.sqrt(np.diag(cov)[:n_coeffs]), scale_px, _rms_straight(lines),
+    k = res.x
+    return PlumbLineFit(k, np.sqrt(np.diag(cov)), scale_px, _rms_straight(lines),
                         _rms_straight([undistort(q, k, scale_px) for q in lines]), len(lines),
                         int(sum(len(q) for q in lines)))
 
