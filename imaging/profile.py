@@ -25,18 +25,21 @@ from scipy.special import erf
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 
-_GL = np.array([-np.sqrt(0.6) / 2, 0.0, np.sqrt(0.6) / 2])
-_GW = np.array([5.0, 8.0, 5.0]) / 18
+# Gauss–Legendre nodes/weights on a pixel [-1/2, 1/2]: 2 points (exact to cubics) for the
+# shape fit, 3 points (exact to quintics) for the centres, where sub-pixel bias matters.
+_GAUSS = {2: (np.array([-0.5, 0.5]) / np.sqrt(3), np.array([0.5, 0.5])),
+          3: (np.array([-np.sqrt(0.6) / 2, 0.0, np.sqrt(0.6) / 2]), np.array([5.0, 8.0, 5.0]) / 18)}
 _SQ2 = np.sqrt(2.0)
 _SQ2PI = np.sqrt(2 * np.pi)
-_SHAPE_PIXELS = 6000
+_SHAPE_PIXELS = 4000
 
 
-def _quad_offsets(angle: float) -> tuple[np.ndarray, np.ndarray]:
-    """Offsets along the normal of the 9 quadrature points in a pixel, and their weights."""
+def _quad_offsets(angle: float, order: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Offsets along the normal of the order x order quadrature points in a pixel, weights."""
     _, n = line_frame(angle)
-    ox, oy = np.meshgrid(_GL, _GL)
-    return (ox * n[0] + oy * n[1]).ravel(), np.outer(_GW, _GW).ravel()
+    g, gw = _GAUSS[order]
+    ox, oy = np.meshgrid(g, g)
+    return (ox * n[0] + oy * n[1]).ravel(), np.outer(gw, gw).ravel()
 
 
 def profile_and_derivs(e: np.ndarray, w: float, s: float, shifts: np.ndarray,
@@ -92,23 +95,40 @@ class Centres:
 
 def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
           half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pixels within ``half`` of the line and between t0 and t1: (values, e, t, flat idx)."""
+    """Pixels within ``half`` of the line and between t0 and t1: (values, e, t, flat idx).
+
+    Rasterised along the line (one short run of pixels per column, or per row for steep
+    lines), so the cost follows the band's area, not its bounding box's.
+    """
     h, w = image.shape
     u, n = line_frame(angle)
     c = np.array([(w - 1) / 2, (h - 1) / 2])
-    ends = [c + offset * n + t * u + s * half * n for t in (t0, t1) for s in (-1, 1)]
-    xs = [p[0] for p in ends]
-    ys = [p[1] for p in ends]
-    x0, x1 = max(0, int(np.floor(min(xs)))), min(w - 1, int(np.ceil(max(xs))))
-    y0, y1 = max(0, int(np.floor(min(ys)))), min(h - 1, int(np.ceil(max(ys))))
-    if x1 <= x0 or y1 <= y0:
+    steep = abs(n[0]) > abs(n[1])  # the line runs more along y than x: walk the rows
+    ax, other = (1, 0) if steep else (0, 1)
+    size_ax, size_other = (h, w) if steep else (w, h)
+    ends = np.array([c + offset * n + t * u for t in (t0, t1)])
+    lo = max(0, int(np.floor(ends[:, ax].min() - half)))
+    hi = min(size_ax - 1, int(np.ceil(ends[:, ax].max() + half)))
+    if hi < lo:
         return (np.empty(0),) * 4
-    yy, xx = np.mgrid[y0:y1 + 1, x0:x1 + 1]
-    px, py = xx - c[0], yy - c[1]
+    k = np.arange(lo, hi + 1, dtype=float)
+    # Where the line crosses walk coordinate k, and how far the band reaches across it.
+    cross = c[other] + (offset - (k - c[ax]) * n[ax]) / n[other]
+    reach = half / abs(n[other])
+    m = int(np.ceil(2 * reach)) + 2
+    start = np.floor(cross - reach).astype(int)
+    oth = start[:, None] + np.arange(m)[None, :]
+    walk = np.broadcast_to(k.astype(int)[:, None], oth.shape)
+    oth, walk = oth.ravel(), walk.ravel()
+    inside = (oth >= 0) & (oth < size_other)
+    oth, walk = oth[inside], walk[inside]
+    ys, xs = (walk, oth) if steep else (oth, walk)
+    px, py = xs - c[0], ys - c[1]
     e = px * n[0] + py * n[1] - offset
     t = px * u[0] + py * u[1]
     sel = (np.abs(e) <= half) & (t >= t0) & (t <= t1)
-    return image[yy[sel], xx[sel]], e[sel], t[sel], (yy[sel] * w + xx[sel])
+    ys, xs = ys[sel], xs[sel]
+    return image[ys, xs], e[sel], t[sel], ys * w + xs
 
 
 def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
@@ -143,7 +163,7 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
 
     def model(p, want_jac=False):
         da, dd, amp, b, g_e, g_t, w, s = p
-        sh, wt = _quad_offsets(a_ref + da)
+        sh, wt = _quad_offsets(a_ref + da, order=2)
         # Small rotation about the band's middle, then shift: linearised line geometry.
         ee = e - dd - da * (t - tm)
         pp, pe, pw, ps = profile_and_derivs(ee, w, s, sh, wt)
@@ -158,9 +178,19 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     scale = max(abs(amp0) / 10, 1.0)
     lo = [-0.05, -half / 2, -np.inf, -np.inf, -np.inf, -np.inf, 0.05, 0.3]
     hi = [0.05, half / 2, np.inf, np.inf, np.inf, np.inf, 4 * half, half]
-    res = least_squares(lambda p: model(p) - vals, x0, jac=lambda p: model(p, True)[1],
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def both(p):
+        # least_squares asks for residuals and Jacobian at the same point: compute once.
+        key = p.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = model(p, True)
+        return cache[key]
+
+    res = least_squares(lambda p: both(p)[0] - vals, x0, jac=lambda p: both(p)[1],
                         bounds=(lo, hi), loss="soft_l1", f_scale=scale, x_scale="jac",
-                        max_nfev=60)
+                        max_nfev=40, ftol=1e-6, xtol=1e-8)
     da, dd, amp, b, g_e, _, w, s = res.x
     mu = model(res.x)
     var = _noise_model(mu, vals - mu)
@@ -192,7 +222,7 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
 
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
-                   iterations: int = 4) -> Centres:
+                   iterations: int = 3) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN)."""
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
