@@ -59,7 +59,8 @@ def cmd_marks(args: argparse.Namespace) -> int:
     results = []
     failed = 0
     for path in _progress(args.images, "marks"):
-        res = measure_file(path, camera, alpha=args.alpha, max_marks=args.max_marks)
+        res = measure_file(path, camera, alpha=args.alpha, max_marks=args.max_marks,
+                           expect_one=args.one)
         for r in res:
             results.append(r)
             if not r.found:
@@ -183,6 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
     m.add_argument("--alpha", type=float, default=1e-3, help="significance of the loop's tests")
     m.add_argument("--max-marks", type=int, default=8)
+    m.add_argument("--one", action="store_true",
+                   help="each image holds one mark: two competing marks are an error")
     m.add_argument("--force", action="store_true", help="allow overwriting the --json file")
     m.set_defaults(func=cmd_marks)
 

@@ -225,10 +225,12 @@ def structure_inflation(rep: LoopReport) -> float:
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
-                  alpha: float = 1e-3, max_marks: int = 8) -> list[MarkResult]:
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False
+                  ) -> list[MarkResult]:
     """Every mark of an in-memory image, each through the loop; failures become entries."""
     try:
-        found = measure_marks(image, camera, where=name, max_marks=max_marks)
+        found = measure_marks(image, camera, where=name, max_marks=max_marks,
+                              expect_one=expect_one)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
     out = []
@@ -241,10 +243,10 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,
-                 max_marks: int = 8) -> list[MarkResult]:
+                 max_marks: int = 8, expect_one: bool = False) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
         img = read_image(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks)
+    return measure_image(img, str(path), camera, alpha, max_marks, expect_one)

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
-from imaging.detect import MarkCandidate, detect_marks
+from imaging.detect import MarkCandidate, detect_marks, require_single
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
@@ -92,14 +92,19 @@ def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 
 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
-                  max_marks: int = 8, min_length_px: float | None = None
-                  ) -> list[MarkMeasurement | ImageInputError]:
-    """Detect and measure every mark in an image; per-mark failures are returned, not raised."""
+                  max_marks: int = 8, min_length_px: float | None = None,
+                  expect_one: bool = False) -> list[MarkMeasurement | ImageInputError]:
+    """Detect and measure every mark in an image; per-mark failures are returned, not raised.
+
+    With ``expect_one`` the image must hold a single mark: two of similar strength raise.
+    """
     if np.ptp(image) == 0:
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
     cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks)
     if not cands:
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out)")
+    if expect_one:
+        cands = [require_single(cands, where)]
     out: list[MarkMeasurement | ImageInputError] = []
     for c in cands:
         try:

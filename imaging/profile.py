@@ -31,7 +31,7 @@ _GAUSS = {2: (np.array([-0.5, 0.5]) / np.sqrt(3), np.array([0.5, 0.5])),
           3: (np.array([-np.sqrt(0.6) / 2, 0.0, np.sqrt(0.6) / 2]), np.array([5.0, 8.0, 5.0]) / 18)}
 _SQ2 = np.sqrt(2.0)
 _SQ2PI = np.sqrt(2 * np.pi)
-_SHAPE_PIXELS = 4000
+_SHAPE_PIXELS = 2500
 
 
 def _quad_offsets(angle: float, order: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -222,7 +222,7 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
 
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
-                   iterations: int = 3) -> Centres:
+                   iterations: int = 2) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN)."""
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)

@@ -71,3 +71,24 @@ def test_camera_calibration_on_real_chessboards(tmp_path):
     assert 520 < cam["camera_matrix"][0][0] < 560
     assert -0.35 < cam["dist_coeffs"][0] < -0.2
     assert cam["rms_px"] < 1.0
+
+
+def test_two_competing_marks_when_one_is_expected(tmp_path, capsys):
+    from synth import ImageSpec, MarkSpec, render_marks
+
+    spec = ImageSpec(marks=(MarkSpec(0.1, -100, 400, 4.0), MarkSpec(1.4, 120, 400, 4.0)),
+                     width=640, height=480, seed=3)
+    p, _ = write_synth(render_marks(spec, with_crlb=False), tmp_path / "two.png")
+    assert main(["marks", str(p)]) == 0  # several marks per image are normal...
+    assert main(["marks", str(p), "--one"]) == 2  # ...unless the user says there is one
+    assert "two competing marks" in capsys.readouterr().err
+
+
+def test_sixteen_bit_tiff_through_the_cli(tmp_path):
+    s = mark_image(-20.0, seed=9, size=(500, 400), length_px=300, bits=16)
+    p, _ = write_synth(s, tmp_path / "m16.tif")
+    out = tmp_path / "o.json"
+    assert main(["marks", str(p), "--json", str(out)]) == 0
+    m = json.loads(out.read_text())["marks"][0]
+    assert abs(m["angle_deg"] - np.rad2deg(s.truth.marks[0].image_angle_rad)) < (
+        4.5 * m["angle_u_deg"])
