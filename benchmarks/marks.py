@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import replace
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -143,6 +144,21 @@ def main() -> None:
         rms = np.sqrt(np.mean(e**2)) if e.size else float("nan")
         print(f"{name:>14s} {rms / ARCSEC:9.2f} {rms / best:19.1f} "
               f"{1e3 * np.median(alt_time[name]):9.1f}")
+
+    print("\n== dust on the mark (6 specks on it, 10 elsewhere; width 4 px, SNR 30, 37°) ==")
+    errs, crlb = [], None
+    for seed in range(args.seeds):
+        sp = replace(spec_for(37.0, 4.0, 30, seed), dust_on_mark=6, dust=10)
+        s = render_marks(sp, with_crlb=seed == 0)
+        crlb = crlb or s.truth.marks[0].crlb_angle_rad
+        m = measure_marks(s.image.astype(float))[0]
+        errs.append(wrap(m.line.angle_rad - s.truth.marks[0].image_angle_rad))
+        fl = wrap(alt_fitline(s.image) - s.truth.marks[0].image_angle_rad)
+        errs[-1] = (errs[-1], fl)
+    e = np.array(errs)
+    print(f"this tool RMS {np.sqrt(np.mean(e[:, 0]**2)) / ARCSEC:.3f}″ "
+          f"(CRLB without dust {crlb / ARCSEC:.3f}″), thresholded fitLine "
+          f"{np.sqrt(np.mean(e[:, 1]**2)) / ARCSEC:.2f}″")
 
     print("\n== time per 5-megapixel 16-bit image (2592x1944, 2000-px mark), one core ==")
     s = render_marks(spec_for(23.0, 4.0, 30, 1, size=(2592, 1944), length=2000.0),
