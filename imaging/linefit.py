@@ -112,11 +112,14 @@ def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = N
         z_all = np.abs(q @ n - d - F @ beta) / sigma
         # Reject at the threshold but never more than a third of the points.
         limit = max(reject_sigma, np.quantile(z_all[used], 2 / 3))
-        new = used & (z_all <= limit) | (used & (z_all <= reject_sigma))
-        new &= np.isfinite(z_all)
+        new = used & np.isfinite(z_all) & (z_all <= limit)
         if np.array_equal(new, used):
             break
         used = new
+    else:
+        # Rounds ran out while the set was still changing: solve once more on the final set.
+        a, d = _tls(q[used], 1 / sigma[used] ** 2)
+        a, d, beta, r, cov = _solve(q[used], sigma[used], F[used], a, d)
     u, _ = line_frame(a)
     if abs(wrap_angle(a) - a) > 1:
         # The direction turned by pi on wrapping: the normal, hence d and the residuals, flip.

@@ -7,7 +7,7 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -41,34 +41,48 @@ class MarkMeasurement:
     n_rejected: int = 0
 
 
-def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
-                      where: str = "image") -> MarkMeasurement:
-    """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
-    pf = fit_profile(image, cand, where, full_scale(image))
-    cen = sample_centres(image, pf)
+def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
+    """Segments that fit the groove and agree with their neighbours (dust/scratches out)."""
     if cen.ok.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
     # Segments whose pixels fit the groove much worse than the typical segment: dust or a
     # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
-    typical = float(np.median(cen.chi2_red[cen.ok])) if cen.ok.any() else 1.0
+    typical = float(np.median(cen.chi2_red[cen.ok]))
     keep = cen.ok & (cen.chi2_red < 3.0 * max(1.0, typical))
     if keep.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "segments fit the groove model (covered, or not a groove)")
-    pts, sig = cen.xy[keep], cen.sigma[keep]
-    if camera is not None:
-        pts, sig = camera.undistort_centred(pts, sig, image.shape)
-    inl = local_inliers(pts, sig, cen.t[keep])
+    idx = np.flatnonzero(keep)
+    inl = local_inliers(cen.xy[idx], cen.sigma[idx], cen.t[idx])
     if inl.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "consistent centres along it")
-    pts, sig, tt = pts[inl], sig[inl], cen.t[keep][inl]
-    regs = {"t": tt, "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
-            "cross_slope": cen.cross_slope[keep][inl]}
+    use = np.zeros_like(keep)
+    use[idx[inl]] = True
+    return use
+
+
+def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
+                      where: str = "image") -> MarkMeasurement:
+    """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
+    pf = fit_profile(image, cand, where, full_scale(image))
+    cen = sample_centres(image, pf)
+    use = _usable(cen, where, cand)
+    # Second pass about the line through the first centres: the final centres never depend
+    # on how well the band fit placed the line (cheap: the profile is tabulated).
+    first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
+    pf = replace(pf, angle_rad=first.angle_rad, offset_px=first.offset_px)
+    cen = sample_centres(image, pf)
+    use = _usable(cen, where, cand)
+    pts, sig = cen.xy[use], cen.sigma[use]
+    if camera is not None:
+        pts, sig = camera.undistort_centred(pts, sig, image.shape)
+    regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
+            "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - inl.sum()))
+                           int(cen.ok.sum() - use.sum()))
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,

