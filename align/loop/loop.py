@@ -49,7 +49,9 @@ class StageFit:
     """What a stage returns from one fit.
 
     ``effects``: per term name, (estimate, standard uncertainty) in the term's unit;
-    ``quantities``: the stage's quantities of interest, name -> (value, u), SI/radians.
+    ``quantities``: the stage's quantities of interest, name -> (value, u), SI/radians;
+    ``components``: for effects with several parameters, (label, estimate, u) of each (the
+    ``effects`` entry is the most significant one); ``payload``: the stage's own fitted model.
     """
 
     residuals: np.ndarray
@@ -59,6 +61,8 @@ class StageFit:
     order: str
     effects: Mapping[str, tuple[float, float]]
     quantities: Mapping[str, tuple[float, float]]
+    components: Mapping[str, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
+    payload: object = None
 
     @property
     def n(self) -> int:
@@ -104,11 +108,15 @@ class EffectReport:
     delta_bic: float
     p_value: float
     description: str = ""
+    components: tuple[tuple[str, float, float], ...] = ()
 
     def to_json(self) -> dict:
-        return {"name": self.name, "estimate": self.estimate, "u": self.u, "unit": self.unit,
-                "rms_before": self.rms_before, "rms_after": self.rms_after,
-                "delta_bic": self.delta_bic, "p_value": self.p_value}
+        d = {"name": self.name, "estimate": self.estimate, "u": self.u, "unit": self.unit,
+             "rms_before": self.rms_before, "rms_after": self.rms_after,
+             "delta_bic": self.delta_bic, "p_value": self.p_value}
+        if self.components:
+            d["components"] = [{"axis": c, "estimate": e, "u": u} for c, e, u in self.components]
+        return d
 
 
 @dataclass(frozen=True)
@@ -148,14 +156,23 @@ def bic(fit: StageFit, extra_k: int = 0) -> float:
 
 
 def f_test(base: StageFit, ext: StageFit, m: int) -> float:
-    """p-value of the extra m columns (nested models), robust to a misstated sigma."""
-    if ext.dof <= 0 or m <= 0:
+    """p-value of the extra m parameters (nested models).
+
+    With known sigma: the likelihood-ratio test, delta chi2 ~ chi2(m), with delta chi2
+    divided by the extended fit's chi2/dof when that exceeds 1 (so an understated sigma does
+    not manufacture effects). With unknown sigma: the F-test.
+    """
+    if ext.dof < 0 or m <= 0:
         return 1.0
-    num = (base.chi2 - ext.chi2) / m
-    den = ext.chi2 / ext.dof
-    if num <= 0:
+    drop = base.chi2 - ext.chi2
+    if drop <= 0:
         return 1.0
-    return float(stats.f.sf(num / max(den, 1e-300), m, ext.dof))
+    if base.sigma is not None:
+        excess = max(1.0, ext.chi2 / ext.dof) if ext.dof > 0 else 1.0
+        return float(stats.chi2.sf(drop / excess, m))
+    if ext.dof == 0:
+        return 1.0
+    return float(stats.f.sf((drop / m) / max(ext.chi2 / ext.dof, 1e-300), m, ext.dof))
 
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
@@ -205,7 +222,8 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
         current = trial
     # Re-read the estimates from the final fit (later terms can shift earlier ones).
     effects = [EffectReport(e.name, *current.effects.get(e.name, (e.estimate, e.u)), e.unit,
-                            e.rms_before, e.rms_after, e.delta_bic, e.p_value, e.description)
+                            e.rms_before, e.rms_after, e.delta_bic, e.p_value, e.description,
+                            tuple(current.components.get(e.name, ())))
                for e in effects]
     return LoopReport(tuple(effects), before, current, s_before, structure_of(current, alpha),
                       tuple(terms))

@@ -1,0 +1,22 @@
+"""Triad calibration by ellipsoid fitting (seed paper) with ML refinement and the loop."""
+
+from align.calibration.ellipsoid import Ellipsoid, extract, li_griffiths, r_matrix
+from align.calibration.model import (
+    CANDIDATES,
+    DRIFT,
+    NONLIN,
+    TEMP,
+    Calibration,
+    CalibrationStage,
+    Poses,
+    TriadModel,
+    algebraic,
+    calibrate,
+    delta_g,
+)
+
+__all__ = [
+    "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "Calibration", "CalibrationStage", "Ellipsoid",
+    "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
+    "r_matrix",
+]
