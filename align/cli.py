@@ -112,6 +112,146 @@ def cmd_camera(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- calibrate
+
+def _signs(text: str) -> tuple[float, float, float]:
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) == 1:
+        parts = parts * 3
+    try:
+        vals = tuple(float(p + "1") if p in "+-" else float(p) for p in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) != 3 or any(abs(v) != 1 for v in vals):
+        raise UsageError(f"--scale-sign {text!r}: give +, - or three of them, e.g. -,-,-")
+    return vals  # type: ignore[return-value]
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from align.calibration import (
+        StaticSettings,
+        calibrate,
+        delta_g,
+        model_to_dict,
+        read_poses,
+    )
+    from align.errors import InputError
+
+    out = _new_file(args.json, args.force, [args.static] + ([args.check] if args.check else []))
+    signs = _signs(args.scale_sign)
+    settings = StaticSettings(args.window, args.threshold, args.min_static, args.margin)
+    try:
+        poses, intervals = read_poses(args.static, settings)
+        check = read_poses(args.check, settings)[0] if args.check else None
+        cal = calibrate(poses, signs, alpha=args.alpha)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    if intervals is not None:
+        print(f"{len(intervals)} static intervals found:")
+        for iv in intervals:
+            print(f"  {iv.start_s:9.2f}-{iv.end_s:9.2f} s ({iv.duration_s:6.1f} s, "
+                  f"{iv.samples} samples), noise {' '.join(f'{v:.3g}' for v in iv.std)}")
+    m, a = cal.model, cal.algebraic
+    sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
+                 if all(s > 0 for s in signs) else "mixed")
+    print(f"{len(poses.u)} poses; scale-factor signs {signs} ({sign_note}: an ellipsoid cannot "
+          "tell them, --scale-sign sets them)")
+    print(f"{'':10s} {'algebraic (paper)':>22s} {'ML refined':>16s} {'u':>10s}")
+    for i, ax in enumerate("xyz"):
+        print(f"k_{ax} [V/g] {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
+    for i, ax in enumerate("xyz"):
+        print(f"beta_{ax} [µrad] {a.beta[i] * 1e6:18.3f} {m.beta[i] * 1e6:16.3f} "
+              f"{m.u_of(f'beta_{ax}') * 1e6:10.3g}")
+    for i, ax in enumerate("xyz"):
+        print(f"b_{ax} [µg] {a.bias[i] * 1e6:21.3f} {m.bias[i] * 1e6:16.3f} "
+              f"{m.u_of(f'bias_{ax}') * 1e6:10.3g}")
+    if not cal.noise_known:
+        print("noise unknown (per-pose means only): uncertainties from the residual scatter, "
+              "no chi2 test")
+    for line in cal.loop.summary_lines():
+        print("  " + line)
+    js = {
+        "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
+        "bias_g": m.bias.tolist(),
+        "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
+        "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
+        "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+        "scale_sign": list(signs), "residual_rms_g": cal.residual_rms_g,
+        "effects": [e.to_json() for e in cal.loop.effects],
+        "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
+        "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
+                      "bias_g": a.bias.tolist()},
+        "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
+                  zip(poses.labels, delta_g(m, poses), strict=True)],
+        "model": model_to_dict(m),
+    }
+    if intervals is not None:
+        js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
+                                   "samples": iv.samples, "std": iv.std.tolist()}
+                                  for iv in intervals]
+    if check is not None:
+        dg = delta_g(m, check)
+        js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in
+                       zip(check.labels, dg, strict=True)]
+        print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in dg))
+    if args.plot:
+        from align.plots import plot_calibration
+
+        print(f"plot: {plot_calibration(cal, poses, check, Path(args.plot))}")
+    _write_json(out, js)
+    return 0
+
+
+def _load_model(path: str):
+    from align.calibration import model_from_dict
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise UsageError(f"{path}: no such file") from None
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{path}: not JSON ({exc})") from None
+    try:
+        return model_from_dict(d.get("model", d), path)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def cmd_tilt(args: argparse.Namespace) -> int:
+    from align.calibration.static import _read_table
+    from align.errors import InputError
+    from align.tilt import roll_pitch
+
+    model = _load_model(args.calibration)
+    out_json = _new_file(args.json, args.force, [args.readings])
+    out_csv = _new_file(args.out, args.force, [args.readings])
+    try:
+        head, data, _, _ = _read_table(Path(args.readings))
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    col = {h: i for i, h in enumerate(head)}
+    u = data[:, [col["ux"], col["uy"], col["uz"]]]
+    t = data[:, col["t"]] if "t" in col else np.full(len(u), model.t_ref)
+    temp = data[:, col["temp"]] if "temp" in col else None
+    a = model.specific_force(u, t, temp)
+    roll, pitch = roll_pitch(a, method=args.method, mu=args.mu)
+    print(f"{len(a)} readings ({args.method} roll): roll {np.rad2deg(np.mean(roll)):+.6f}° "
+          f"(sd {np.rad2deg(np.std(roll)) * 3600:.1f}″), pitch {np.rad2deg(np.mean(pitch)):+.6f}°"
+          f" (sd {np.rad2deg(np.std(pitch)) * 3600:.1f}″), |a| - 1 mean "
+          f"{(np.linalg.norm(a, axis=1) - 1).mean() * 1e6:+.2f} µg")
+    if out_csv is not None:
+        np.savetxt(out_csv, np.column_stack([t, np.rad2deg(roll), np.rad2deg(pitch)]),
+                   delimiter=",", header="t,roll_deg,pitch_deg", comments="", fmt="%.9g")
+        print(f"wrote {out_csv}")
+    _write_json(out_json, {
+        "method": args.method, "mu": args.mu if args.method == "paper" else None,
+        "samples": len(a), "roll_deg_mean": float(np.rad2deg(np.mean(roll))),
+        "pitch_deg_mean": float(np.rad2deg(np.mean(pitch))),
+        "roll_deg_std": float(np.rad2deg(np.std(roll))),
+        "pitch_deg_std": float(np.rad2deg(np.std(pitch)))})
+    return 0
+
+
 # ----------------------------------------------------------------------------- demo
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -196,6 +336,31 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", help="write the camera model to this new JSON file")
     c.add_argument("--force", action="store_true")
     c.set_defaults(func=cmd_camera)
+
+    k = sub.add_parser("calibrate", help="ellipsoid calibration of the triad from static poses")
+    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz")
+    k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
+    k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file")
+    k.add_argument("--plot", help="folder for the dg-per-pose / residual figure")
+    k.add_argument("--scale-sign", default="+", help="signs of k: + (default), - or e.g. -,-,-")
+    k.add_argument("--alpha", type=float, default=1e-3)
+    k.add_argument("--window", type=float, default=1.0, help="static detection window [s]")
+    k.add_argument("--threshold", type=float, default=3.0,
+                   help="static if moving std < this x noise floor")
+    k.add_argument("--min-static", type=float, default=2.0, help="shortest static interval [s]")
+    k.add_argument("--margin", type=float, default=0.5, help="cut from each end [s]")
+    k.add_argument("--force", action="store_true")
+    k.set_defaults(func=cmd_calibrate)
+
+    tl = sub.add_parser("tilt", help="roll and pitch from readings through a calibration")
+    tl.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
+    tl.add_argument("--calibration", required=True, help="JSON written by 'align calibrate'")
+    tl.add_argument("--method", choices=["exact", "paper"], default="exact")
+    tl.add_argument("--mu", type=float, default=0.001, help="the paper's regulariser")
+    tl.add_argument("--json")
+    tl.add_argument("--out", help="per-reading CSV t,roll_deg,pitch_deg (a new file)")
+    tl.add_argument("--force", action="store_true")
+    tl.set_defaults(func=cmd_tilt)
 
     d = sub.add_parser("demo", help="synthesise data with known truth and measure it")
     d.add_argument("--out", help="folder for the synthetic files (default: a new temp folder)")

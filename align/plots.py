@@ -45,3 +45,44 @@ def plot_mark(r: MarkResult, folder: str | Path) -> Path:
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def plot_calibration(cal, poses, check, folder: Path) -> Path:
+    """Δg per pose (calibration and check poses) and the residual against orientation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from align.calibration import delta_g
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / "calibration.png"
+    k = 1
+    while out.exists():
+        out = folder / f"calibration_{k}.png"
+        k += 1
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    dg0 = delta_g(cal.algebraic, poses) * 1e6
+    dg1 = delta_g(cal.model, poses) * 1e6
+    x = np.arange(len(dg0))
+    ax[0].plot(x, dg0, "o", label="algebraic (paper)")
+    ax[0].plot(x, dg1, "s", label="after ML + loop")
+    if check is not None:
+        xc = np.arange(len(dg0), len(dg0) + len(check.u))
+        ax[0].plot(xc, delta_g(cal.model, check) * 1e6, "^", label="check poses")
+    ax[0].axhline(0, color="k", lw=0.5)
+    ax[0].set_xlabel("pose")
+    ax[0].set_ylabel("|a| - 1 [µg]")
+    ax[0].legend()
+    a = cal.model.specific_force(poses.u, poses.t, poses.temp)
+    d = a / np.linalg.norm(a, axis=1, keepdims=True)
+    for i, axn in enumerate("xyz"):
+        ax[1].plot(d[:, i], dg1, "o", label=f"vs a_{axn}")
+    ax[1].set_xlabel("gravity direction component")
+    ax[1].set_ylabel("residual |a| - 1 [µg]")
+    ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

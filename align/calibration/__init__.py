@@ -13,10 +13,14 @@ from align.calibration.model import (
     algebraic,
     calibrate,
     delta_g,
+    model_from_dict,
+    model_to_dict,
 )
+from align.calibration.static import StaticInterval, StaticSettings, find_static, read_poses
 
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "Calibration", "CalibrationStage", "Ellipsoid",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
-    "r_matrix",
+    "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
+    "find_static", "read_poses",
 ]

@@ -231,3 +231,29 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:
     """|a| - 1 per pose through the model [g] (the paper's check-pose figure)."""
     return np.linalg.norm(model.specific_force(poses.u, poses.t, poses.temp), axis=1) - 1.0
+
+
+def model_to_dict(m: TriadModel) -> dict:
+    """The model as JSON-ready numbers (SI/radians/g), covariance included."""
+    return {"k_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(), "bias_g": m.bias.tolist(),
+            "k2_per_g": m.k2.tolist(), "drift_g_per_s": m.drift.tolist(),
+            "temp_coeff_g_per_k": m.temp_coeff.tolist(), "t_ref_s": m.t_ref,
+            "temp_ref_k": m.temp_ref, "parameter_names": list(m.names),
+            "covariance": None if m.cov is None else m.cov.tolist()}
+
+
+def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
+    """Read :func:`model_to_dict`'s output back (clear error for anything else)."""
+    try:
+        cov = d.get("covariance")
+        return TriadModel(
+            np.array(d["k_v_per_g"], float), np.array(d["beta_rad"], float),
+            np.array(d["bias_g"], float), np.array(d.get("k2_per_g", [0, 0, 0]), float),
+            np.array(d.get("drift_g_per_s", [0, 0, 0]), float),
+            np.array(d.get("temp_coeff_g_per_k", [0, 0, 0]), float),
+            float(d.get("t_ref_s", 0.0)), float(d.get("temp_ref_k", 0.0)),
+            None if cov is None else np.array(cov, float),
+            tuple(d.get("parameter_names", ())))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{where}: not a calibration model ({exc!s}); expected the 'model' "
+                         "block that 'align calibrate --json' writes") from None
