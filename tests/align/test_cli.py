@@ -92,3 +92,29 @@ def test_sixteen_bit_tiff_through_the_cli(tmp_path):
     m = json.loads(out.read_text())["marks"][0]
     assert abs(m["angle_deg"] - np.rad2deg(s.truth.marks[0].image_angle_rad)) < (
         4.5 * m["angle_u_deg"])
+
+
+def test_calibrate_and_tilt_contract(tmp_path):
+    from synth.tumble import Triad, TumbleSpec, tumble, write_tumble_csv
+
+    tr = Triad(noise_v=4.8e-5)
+    d = tumble(TumbleSpec(triad=tr, seed=12))
+    st = write_tumble_csv(d, tmp_path / "static.csv")
+    ck = write_tumble_csv(d, tmp_path / "check.csv", check=True)
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(st), "--check", str(ck), "--scale-sign", "-", "--json",
+                 str(out)]) == 0
+    js = json.loads(out.read_text())
+    for key in ("scale_factors_v_per_g", "beta_rad", "bias_g", "residual_rms_g", "effects",
+                "check", "unexplained_structure"):
+        assert key in js
+    assert np.allclose(js["scale_factors_v_per_g"], tr.k, atol=2e-5)
+    assert max(abs(c["dg_g"]) for c in js["check"]) < 3e-5
+    tilt = tmp_path / "tilt.json"
+    assert main(["tilt", str(ck), "--calibration", str(out), "--json", str(tilt)]) == 0
+    assert json.loads(tilt.read_text())["samples"] > 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("pose,ux,uy\n1,2,3\n")
+    assert main(["calibrate", str(bad)]) == 2
+    assert main(["tilt", str(ck), "--calibration", str(bad)]) == 2
+    assert main(["calibrate", str(st), "--scale-sign", "x"]) == 2
