@@ -142,7 +142,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     settings = StaticSettings(args.window, args.threshold, args.min_static, args.margin)
     try:
         poses, intervals = read_poses(args.static, settings)
-        check = read_poses(args.check, settings)[0] if args.check else None
+        check = read_poses(args.check, settings, calibration=False)[0] if args.check else None
         cal = calibrate(poses, signs, alpha=args.alpha)
     except InputError as exc:
         raise UsageError(str(exc)) from None

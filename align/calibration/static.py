@@ -108,9 +108,13 @@ def _check_values(path: Path, u: np.ndarray, lines: list[int]) -> None:
                                  f"{v:g} in {len(hits)} samples: saturated or clipped")
 
 
-def read_poses(path: str | Path, settings: StaticSettings = StaticSettings()
-               ) -> tuple[Poses, list[StaticInterval] | None]:
-    """Per-pose means from a pose file, or from a continuous recording's static intervals."""
+def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
+               calibration: bool = True) -> tuple[Poses, list[StaticInterval] | None]:
+    """Per-pose means from a pose file, or from a continuous recording's static intervals.
+
+    ``calibration``: check that the poses can carry a calibration (units, 3-D spread); off
+    for check poses, which may be few.
+    """
     path = Path(path)
     head, data, lines, order = _read_table(path)
     col = {h: i for i, h in enumerate(head)}
@@ -151,7 +155,8 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings()
             tm = np.array([temp[(t >= iv.start_s) & (t <= iv.end_s)].mean() for iv in intervals])
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
-    _check_geometry(path, poses)
+    if calibration:
+        _check_geometry(path, poses)
     return poses, intervals
 
 
