@@ -26,13 +26,15 @@ REQUIRED = ("ux", "uy", "uz")
 
 @dataclass(frozen=True)
 class StaticInterval:
-    """A static interval of a recording: times [s], samples, mean and scatter of u."""
+    """A static interval of a recording: times [s], samples, mean, scatter and standard error
+    of the mean of u (same unit as u)."""
 
     start_s: float
     end_s: float
     samples: int
     mean: np.ndarray
     std: np.ndarray
+    sem: np.ndarray
 
     @property
     def duration_s(self) -> float:
@@ -148,7 +150,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                              f"{settings.min_duration_s} s)")
         mean = np.array([iv.mean for iv in intervals])
         count = np.array([iv.samples for iv in intervals])
-        sig = np.array([iv.std / np.sqrt(iv.samples) for iv in intervals])
+        sig = np.array([iv.sem for iv in intervals])
         tt = np.array([(iv.start_s + iv.end_s) / 2 for iv in intervals])
         tm = None
         if temp is not None:
@@ -194,5 +196,19 @@ def find_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings
             continue
         sel = (t >= ta) & (t <= tb)
         out.append(StaticInterval(float(ta), float(tb), int(sel.sum()), u[sel].mean(0),
-                                  u[sel].std(0, ddof=1)))
+                                  u[sel].std(0, ddof=1), _sem(u[sel], w)))
     return out
+
+
+def _sem(x: np.ndarray, block: int) -> np.ndarray:
+    """Standard error of the mean that survives correlated (non-white) noise.
+
+    From the scatter of block means (blocks of the detection window), never below the
+    white-noise value: real sensors' samples are filtered and wander at low frequency.
+    """
+    white = x.std(0, ddof=1) / np.sqrt(len(x))
+    nb = len(x) // block
+    if nb < 3:
+        return white
+    means = x[:nb * block].reshape(nb, block, -1).mean(1)
+    return np.maximum(white, means.std(0, ddof=1) / np.sqrt(nb))

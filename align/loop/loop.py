@@ -134,10 +134,14 @@ class LoopReport:
     def unexplained_structure(self) -> bool:
         return self.structure_after.structured
 
-    def summary_lines(self, fmt: Callable[[str, float, float], str] | None = None) -> list[str]:
-        lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; "
-                 f"chi2/dof {self.before.chi2 / max(self.before.dof, 1):.3f} -> "
-                 f"{self.after.chi2 / max(self.after.dof, 1):.3f}"]
+    def summary_lines(self) -> list[str]:
+        if self.before.sigma is None:
+            lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; noise "
+                     "unknown: no chi2 test, effects judged by F-test"]
+        else:
+            lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; "
+                     f"chi2/dof {self.before.chi2 / max(self.before.dof, 1):.3f} -> "
+                     f"{self.after.chi2 / max(self.after.dof, 1):.3f}"]
         for e in self.effects:
             lines.append(f"added {e.name}: {e.estimate:.4g} ± {e.u:.2g} {e.unit} "
                          f"(dBIC {e.delta_bic:.1f}, p {e.p_value:.2g})")
