@@ -6,6 +6,7 @@ from align.calibration.model import (
     DRIFT,
     NONLIN,
     TEMP,
+    WARMUP,
     Calibration,
     CalibrationStage,
     Poses,
@@ -19,7 +20,8 @@ from align.calibration.model import (
 from align.calibration.static import StaticInterval, StaticSettings, find_static, read_poses
 
 __all__ = [
-    "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "Calibration", "CalibrationStage", "Ellipsoid",
+    "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",
+    "Ellipsoid",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
     "find_static", "read_poses",

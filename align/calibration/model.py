@@ -3,7 +3,7 @@
 Inverse model (the forward one is u_i = k_i (x_i + K2_i x_i^2), x = R (a + b(t, T))):
 
     x_i = v_i - K2_i v_i^2,   v = u / k                 (first-order inverse of K2; K2 x ~ 1e-4)
-    a   = R^-1 x - b - bdot (t - t_ref) - c_T (T - T_ref)
+    a   = R^-1 x - b - bdot (t - t_ref) - bddot (t - t_ref)^2 - c_T (T - T_ref)
 
 The refinement minimises sum_p ((|a_p| - 1) / sigma_p)^2 over (k, beta, b) and whatever
 effects the loop added, with scipy's least_squares (plain loss), starting from the algebraic
@@ -27,7 +27,11 @@ from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 NONLIN = "nonlinearity_k2"
 DRIFT = "bias_drift"
 TEMP = "bias_temperature"
-EFFECT_UNITS = {NONLIN: "1/g", DRIFT: "g/s", TEMP: "g/K"}
+WARMUP = "bias_warmup"
+EFFECT_UNITS = {NONLIN: "1/g", DRIFT: "g/s", TEMP: "g/K", WARMUP: "g/s^2"}
+# Parameters each effect adds, and the TriadModel fields they fill.
+EFFECT_FIELDS = {NONLIN: ("k2",), DRIFT: ("drift",), TEMP: ("temp_coeff",),
+                 WARMUP: ("drift", "drift2")}
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,7 @@ class TriadModel:
     k2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     drift: np.ndarray = field(default_factory=lambda: np.zeros(3))
     temp_coeff: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    drift2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     t_ref: float = 0.0
     temp_ref: float = 0.0
     cov: np.ndarray | None = None
@@ -65,7 +70,8 @@ class TriadModel:
         x = v - self.k2 * v * v
         a = np.linalg.solve(r_matrix(self.beta), x.T).T
         dt = np.asarray(t, float) - self.t_ref
-        a = a - self.bias - np.multiply.outer(dt, self.drift)
+        a = (a - self.bias - np.multiply.outer(dt, self.drift)
+             - np.multiply.outer(dt * dt, self.drift2))
         if temp is not None:
             a = a - np.multiply.outer(np.asarray(temp, float) - self.temp_ref, self.temp_coeff)
         return a
@@ -80,15 +86,24 @@ class TriadModel:
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
     names = [f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz"]
     for e in effects:
-        names += [f"{e}_{ax}" for ax in "xyz"]
+        names += [f"{f}_{ax}" if len(EFFECT_FIELDS[e]) > 1 else f"{e}_{ax}"
+                  for f in EFFECT_FIELDS[e] for ax in "xyz"]
     return tuple(names)
+
+
+def _n_params(effects: Sequence[str]) -> int:
+    return 9 + sum(3 * len(EFFECT_FIELDS[e]) for e in effects)
 
 
 def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_ref: float,
                 cov: np.ndarray | None = None) -> TriadModel:
-    kw = {}
-    for i, e in enumerate(effects):
-        kw[{NONLIN: "k2", DRIFT: "drift", TEMP: "temp_coeff"}[e]] = theta[9 + 3 * i:12 + 3 * i]
+    kw: dict[str, np.ndarray] = {}
+    i = 9
+    for e in effects:
+        for f in EFFECT_FIELDS[e]:
+            # A later effect on the same field (warm-up after drift) adds to it.
+            kw[f] = kw.get(f, np.zeros(3)) + theta[i:i + 3]
+            i += 3
     return TriadModel(theta[:3], theta[3:6], theta[6:9], t_ref=t_ref, temp_ref=temp_ref,
                       cov=cov, names=_pack_names(effects), **kw)
 
@@ -128,7 +143,7 @@ class CalibrationStage:
         for e in effects:
             if e == TEMP and p.temp is None:
                 raise ValueError("no temperature column")
-        theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(3 * len(effects))])
+        theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(_n_params(effects) - 9)])
         w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
 
         def resid(theta):
@@ -163,15 +178,18 @@ class CalibrationStage:
         eff = {}
         comps = {}
         for e in effects:
-            vals = getattr(m, {NONLIN: "k2", DRIFT: "drift", TEMP: "temp_coeff"}[e])
-            us = np.array([m.u_of(f"{e}_{ax}") for ax in "xyz"])
+            # The effect's leading field (for warm-up: its curvature, the part drift lacks).
+            fld = EFFECT_FIELDS[e][-1]
+            vals = getattr(m, fld)
+            prefix = fld if len(EFFECT_FIELDS[e]) > 1 else e
+            us = np.array([m.u_of(f"{prefix}_{ax}") for ax in "xyz"])
             j = int(np.argmax(np.abs(vals) / np.where(us > 0, us, np.inf)))
             eff[e] = (float(vals[j]), float(us[j]))
             comps[e] = tuple((ax, float(v), float(uu)) for ax, v, uu in zip("xyz", vals, us,
                                                                              strict=True))
         q = {n: (float(v), m.u_of(n)) for n, v in zip(
             m.names[:9], np.concatenate([m.k, m.beta, m.bias]), strict=True)}
-        return StageFit(r, self.sigma, 9 + 3 * len(effects), regs, "t", eff, q,
+        return StageFit(r, self.sigma, _n_params(effects), regs, "t", eff, q,
                         components=comps, payload=m)
 
 
@@ -181,6 +199,8 @@ def _effect_scale(e: str, p: Poses) -> np.ndarray:
         return np.full(3, 1e-5)
     if e == DRIFT:
         return np.full(3, 1e-5 / span_t)
+    if e == WARMUP:
+        return np.concatenate([np.full(3, 1e-5 / span_t), np.full(3, 1e-5 / span_t**2)])
     span_T = max(float(np.ptp(p.temp)) if p.temp is not None else 1.0, 1e-3)
     return np.full(3, 1e-5 / span_T)
 
@@ -189,11 +209,12 @@ def _term(name: str):
     def build(fit: StageFit) -> Term | None:
         if name == TEMP and "temp" not in fit.regressors:
             return None
-        if name == DRIFT and np.ptp(fit.regressors["t"]) == 0:
+        if name in (DRIFT, WARMUP) and np.ptp(fit.regressors["t"]) == 0:
             return None
-        if fit.n - fit.n_params < 3 + 1:
+        width = 3 * len(EFFECT_FIELDS[name])
+        if fit.n - fit.n_params < width + 1:
             return None
-        return Term(name, EFFECT_UNITS[name], np.zeros((fit.n, 3)))
+        return Term(name, EFFECT_UNITS[name], np.zeros((fit.n, width)))
     return build
 
 
@@ -201,6 +222,8 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate(NONLIN, "1/g", "second-order scale-factor nonlinearity K2 per axis", _term(NONLIN)),
     Candidate(DRIFT, "g/s", "bias drifting linearly during the session", _term(DRIFT)),
     Candidate(TEMP, "g/K", "bias following the temperature", _term(TEMP)),
+    Candidate(WARMUP, "g/s^2", "bias warming up: drift that slows or turns (quadratic in "
+              "time)", _term(WARMUP)),
 )
 
 
@@ -237,6 +260,7 @@ def model_to_dict(m: TriadModel) -> dict:
     """The model as JSON-ready numbers (SI/radians/g), covariance included."""
     return {"k_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(), "bias_g": m.bias.tolist(),
             "k2_per_g": m.k2.tolist(), "drift_g_per_s": m.drift.tolist(),
+            "drift2_g_per_s2": m.drift2.tolist(),
             "temp_coeff_g_per_k": m.temp_coeff.tolist(), "t_ref_s": m.t_ref,
             "temp_ref_k": m.temp_ref, "parameter_names": list(m.names),
             "covariance": None if m.cov is None else m.cov.tolist()}
@@ -251,6 +275,7 @@ def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
             np.array(d["bias_g"], float), np.array(d.get("k2_per_g", [0, 0, 0]), float),
             np.array(d.get("drift_g_per_s", [0, 0, 0]), float),
             np.array(d.get("temp_coeff_g_per_k", [0, 0, 0]), float),
+            np.array(d.get("drift2_g_per_s2", [0, 0, 0]), float),
             float(d.get("t_ref_s", 0.0)), float(d.get("temp_ref_k", 0.0)),
             None if cov is None else np.array(cov, float),
             tuple(d.get("parameter_names", ())))
