@@ -165,6 +165,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     for i, ax in enumerate("xyz"):
         print(f"b_{ax} [µg] {a.bias[i] * 1e6:21.3f} {m.bias[i] * 1e6:16.3f} "
               f"{m.u_of(f'bias_{ax}') * 1e6:10.3g}")
+    dof = cal.loop.after.dof
+    if dof < 3:
+        print(f"WARNING: {len(poses.u)} poses leave {dof} degrees of freedom: the fit is (nearly) "
+              "exact, its residual proves nothing; add poses")
     if not cal.noise_known:
         print("noise unknown (per-pose means only): uncertainties from the residual scatter, "
               "no chi2 test")
@@ -176,7 +180,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
         "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
         "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
-        "scale_sign": list(signs), "residual_rms_g": cal.residual_rms_g,
+        "scale_sign": list(signs), "residual_rms_g": cal.residual_rms_g, "dof": dof,
         "effects": [e.to_json() for e in cal.loop.effects],
         "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
         "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
