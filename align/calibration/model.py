@@ -119,11 +119,17 @@ def pose_sigma_g(model: TriadModel, poses: Poses) -> np.ndarray | None:
     """Standard deviation of |a| for each pose mean, from its output scatter [g]."""
     if poses.sigma_u is None:
         return None
+    # One sensor, one noise: pool the per-pose estimates (each from a few hundred correlated
+    # samples, so +-10 % each) into one per axis, scaled by each pose's sample count. Noisy
+    # per-pose weights would cost the ML fit more than it gains.
+    n = poses.count.astype(float)
+    pooled = np.sqrt(np.sum((poses.sigma_u**2) * n[:, None] ** 2, 0) / np.sum(n))
+    sigma_u = pooled[None, :] / np.sqrt(n)[:, None]
     a = model.specific_force(poses.u, poses.t, poses.temp)
     n = a / np.linalg.norm(a, axis=1, keepdims=True)
     G = np.linalg.inv(model.k[:, None] * r_matrix(model.beta))
     g = n @ G  # d|a|/du per pose
-    return np.sqrt(np.sum((g * poses.sigma_u) ** 2, axis=1))
+    return np.sqrt(np.sum((g * sigma_u) ** 2, axis=1))
 
 
 class CalibrationStage:
