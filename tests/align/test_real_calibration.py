@@ -31,12 +31,16 @@ def test_xsens_scale_factors_and_warmup():
     cal = calibrate(p)
     # Datasheet gains 415, 413, 415 counts/(m/s^2).
     assert np.allclose(cal.model.k / G0, [415, 413, 415], rtol=0.01)
-    # The residual traces to a warming bias; adding it lowers chi2/dof from ~7 to ~3.4 ...
+    # The residual traces to a warming bias; adding it halves chi2/dof (4.1 -> 2.1) ...
     assert [e.name for e in cal.loop.effects] == [WARMUP]
-    assert cal.loop.after.chi2 / cal.loop.after.dof < 0.6 * cal.loop.before.chi2 / (
-        cal.loop.before.dof)
-    # ... and what remains (hand placement, settling) is reported, not hidden.
-    assert cal.loop.unexplained_structure
+    before = cal.loop.before.chi2 / cal.loop.before.dof
+    after = cal.loop.after.chi2 / cal.loop.after.dof
+    assert after < 0.6 * before
+    # ... and what remains is an excess of scatter with no pattern left in orientation or
+    # time (hand placement, settling): chi2/dof ~2 stays visible in the report.
+    assert 1.5 < after < 3.0
+    pattern = [t for t in cal.loop.structure_after.tests if t.name.startswith("corr")]
+    assert min(t.p_value for t in pattern) > 0.01
 
 
 @pytest.mark.parametrize("sensor,authors", [("ADXL355", (0.96276, 0.96732, 0.97079)),
