@@ -70,7 +70,11 @@ class CameraModel:
     def undistort_pixels(self, pix: np.ndarray) -> np.ndarray:
         src = np.ascontiguousarray(pix, dtype=np.float64).reshape(-1, 1, 2)
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-        und = cv2.undistortPointsIter(src, self.camera_matrix, self.dist_coeffs, None,
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
+            und = cv2.undistortPointsIter(src, self.camera_matrix, self.dist_coeffs, None,
+                                          self.camera_matrix, crit)
+        else:  # OpenCV 5 takes the criteria in undistortPoints itself
+            und = cv2.undistortPoints(src, self.camera_matrix, self.dist_coeffs, None, None,
                                       self.camera_matrix, crit)
         return und.reshape(-1, 2)
 

@@ -114,6 +114,10 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
     """
     if np.ptp(image) == 0:
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
+    if camera is not None and (image.shape[1], image.shape[0]) != tuple(camera.image_size):
+        raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
+                              f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
+                              f"{image.shape[0]}")
     cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks)
     if not cands:
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out)")

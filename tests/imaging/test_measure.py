@@ -116,3 +116,31 @@ def test_saturated_mark_is_reported():
 def test_detection_reports_nothing_on_pure_noise():
     img = np.random.default_rng(5).normal(2000, 30, (480, 640))
     assert detect_marks(img) == []
+
+
+def test_camera_model_gives_the_pinhole_angle(tmp_path):
+    import json
+
+    from imaging import CameraModel
+    from synth import CameraGeometry
+
+    f, k1 = 900.0, -0.15
+    w, h = 800, 600
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(4.0), 160.0, 450, 4.0, centre_t_px=60),),
+                     width=w, height=h, full_well_e=full_well_for_snr(40, -0.6), seed=21,
+                     camera=CameraGeometry(focal_px=f, k1=k1))
+    s = render_marks(spec, with_crlb=False)
+    cam_file = tmp_path / "cam.json"
+    cam_file.write_text(json.dumps({
+        "camera_matrix": [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]],
+        "dist_coeffs": [k1, 0, 0, 0, 0], "image_size": [w, h]}))
+    cam = CameraModel.load(cam_file)
+    with_cam = measure_marks(s.image.astype(float), camera=cam)[0]
+    without = measure_marks(s.image.astype(float))[0]
+    t = s.truth.marks[0]
+    err = angle_error(with_cam.line.angle_rad, t.image_angle_rad)
+    assert abs(err) < 4.5 * with_cam.line.angle_u_rad
+    assert abs(angle_error(without.line.angle_rad, t.image_angle_rad)) > 10 * (
+        without.line.angle_u_rad)
+    with pytest.raises(ImageInputError, match="camera model is for"):
+        measure_marks(s.image[:500].astype(float), camera=cam)
