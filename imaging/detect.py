@@ -24,7 +24,8 @@ from imaging.errors import ImageInputError
 
 @dataclass(frozen=True)
 class MarkCandidate:
-    """A coarse mark: line (angle [rad], offset [px]), extent along it [px], polarity."""
+    """A coarse mark: line (angle [rad], offset [px]), extent along it [px], polarity,
+    strength (contrast x length) and mean ridge contrast (in units of the response noise)."""
 
     angle_rad: float
     offset_px: float
@@ -33,6 +34,7 @@ class MarkCandidate:
     dark: bool
     thickness_px: float
     strength: float
+    contrast: float = float("inf")
 
     @property
     def length_px(self) -> float:
@@ -49,6 +51,18 @@ def wrap_angle(angle_rad: float) -> float:
     """Wrap a line direction to (-pi/2, pi/2]."""
     a = (angle_rad + np.pi / 2) % np.pi - np.pi / 2
     return float(np.pi / 2 if np.isclose(a, -np.pi / 2, atol=0) else a)
+
+
+def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
+              tol_offset: float) -> bool:
+    """Whether two lines (angle [rad], offset [px]) coincide within tolerances.
+
+    Across the +-90 deg wrap the normal flips, and with it the sign of the offset.
+    """
+    if abs(wrap_angle(a1 - a2)) >= tol_angle:
+        return False
+    flipped = abs(a1 - a2) > np.pi / 2
+    return abs(d1 - (-d2 if flipped else d2)) < tol_offset
 
 
 def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +154,8 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     h, w = image.shape
     if min_length_px is None:
         min_length_px = 0.2 * min(h, w)
-    f = max(1, int(max(h, w) // 700))
+    # The search only seeds the sub-pixel fit: ~500 px across is plenty.
+    f = max(1, int(max(h, w) // 500))
     small = cv2.resize(image.astype(np.float32), (w // f, h // f), interpolation=cv2.INTER_AREA)
     centre_small = np.array([(small.shape[1] - 1) / 2, (small.shape[0] - 1) / 2])
     noise = pixel_noise(small)
@@ -164,22 +179,30 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                 length = (t.max() - t.min()) * f
                 if length < min_length_px or thick * f > 0.25 * length:
                     continue
-                strength = float(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)].mean()
-                                 / mad * length)
-                best.append(_to_full(a, d, t, dark, thick, strength, f, centre_small,
-                                     np.array([(w - 1) / 2, (h - 1) / 2])))
+                contrast = float(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)].mean()
+                                 / mad)
+                best.append(_to_full(a, d, t, dark, thick, contrast * length, f,
+                                     centre_small, np.array([(w - 1) / 2, (h - 1) / 2]),
+                                     contrast))
     out = _dedupe(sorted(best, key=lambda c: -c.strength))
-    return [c for c in out if c.strength >= relative_strength * out[0].strength][:max_marks]
+    if not out:
+        return []
+    # Both the contrast x length and the contrast alone: machining streaks merged into long
+    # lines can be long, but their contrast is a small fraction of an engraved mark's.
+    top_c = max(c.contrast for c in out)
+    return [c for c in out if c.strength >= relative_strength * out[0].strength
+            and c.contrast >= relative_strength * top_c][:max_marks]
 
 
-def _to_full(a, d, t, dark, thick, strength, f, centre_small, centre) -> MarkCandidate:
+def _to_full(a, d, t, dark, thick, strength, f, centre_small, centre, contrast
+             ) -> MarkCandidate:
     # A downsampled pixel k covers full-res pixels k*f .. k*f+f-1: centre at k*f + (f-1)/2.
     uu, nn = line_frame(a)
     p_small = centre_small + d * nn
     p_full = p_small * f + (f - 1) / 2 - centre
     shift = p_full @ uu
     return MarkCandidate(a, float(p_full @ nn), float(t.min() * f + shift),
-                         float(t.max() * f + shift), dark, float(thick * f), strength)
+                         float(t.max() * f + shift), dark, float(thick * f), strength, contrast)
 
 
 def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
@@ -198,7 +221,7 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
                 continue
             aj, _, _, _ = lines[j][0]
             dang = abs(wrap_angle(aj - a))
-            dist = np.abs((lines[j][1] - centre) @ nn - d)
+            dist = np.abs((lines[j][1] - centre) @ nn - d)  # this piece's points, own normal
             if dang < np.deg2rad(3) and np.max(dist) < 3.0:
                 group.append(lines[j][1])
                 used[j] = True
@@ -210,12 +233,18 @@ def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     """The same mark found at two scales or twice: keep the strongest."""
     out: list[MarkCandidate] = []
     for c in cands:
-        if any(abs(wrap_angle(c.angle_rad - o.angle_rad)) < np.deg2rad(3)
-               and abs(c.offset_px - o.offset_px) < max(6.0, o.thickness_px)
-               and c.t_start_px < o.t_end_px and o.t_start_px < c.t_end_px for o in out):
+        if any(same_line(c.angle_rad, c.offset_px, o.angle_rad, o.offset_px, np.deg2rad(3),
+                         max(6.0, o.thickness_px)) and _overlap(c, o) for o in out):
             continue
         out.append(c)
     return out
+
+
+def _overlap(c: MarkCandidate, o: MarkCandidate) -> bool:
+    """Whether two nearly coincident candidates share part of their length."""
+    if abs(c.angle_rad - o.angle_rad) > np.pi / 2:  # directions opposite: t runs backwards
+        return -c.t_end_px < o.t_end_px and o.t_start_px < -c.t_start_px
+    return c.t_start_px < o.t_end_px and o.t_start_px < c.t_end_px
 
 
 def require_single(cands: list[MarkCandidate], where: str) -> MarkCandidate:

@@ -67,7 +67,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                       where: str = "image") -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
     pf = fit_profile(image, cand, where, full_scale(image))
-    cen = sample_centres(image, pf)
+    cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1)
     use = _usable(cen, where, cand)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
