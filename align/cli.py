@@ -256,6 +256,92 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- gonio
+
+def cmd_gonio(args: argparse.Namespace) -> int:
+    from align.gonio import latitude_from_earth_rate, loop_gonio
+    from goniometry import (
+        LogError,
+        earth_rate_counts,
+        face_angles,
+        kept_table,
+        read_revolutions,
+        vertical_earth_rate,
+    )
+
+    faces = [f.strip() for f in args.faces.split(",") if f.strip()]
+    if len(faces) < 2:
+        raise UsageError("--faces needs at least two names, e.g. ref,z,y,x")
+    nominal = None
+    if args.nominal:
+        try:
+            nominal = np.deg2rad([float(v) for v in args.nominal.split(",")])
+        except ValueError:
+            raise UsageError(f"--nominal {args.nominal!r}: numbers in degrees") from None
+        if len(nominal) != len(faces):
+            raise UsageError(f"--nominal has {len(nominal)} values for {len(faces)} faces")
+    out = _new_file(args.json, args.force, [args.log])
+    d = 1 if args.direction == "ccw" else -1
+    effects, loop = [], None
+    try:
+        summary = read_revolutions(args.log, len(faces))
+        if args.latitude is not None and summary.has_time:
+            rate = vertical_earth_rate(args.latitude, d)
+            summary = read_revolutions(args.log, len(faces),
+                                       correct=lambda c, dt: earth_rate_counts(c, dt, rate))
+        elif summary.has_time:
+            counts, dt, t_end = kept_table(summary)
+            loop = loop_gonio(counts, dt, t_end, alpha=args.alpha)
+            earth = [e for e in loop.effects if e.name == "earth_rate"]
+            if earth:
+                rate = earth[0].estimate
+                summary = read_revolutions(
+                    args.log, len(faces), correct=lambda c, dt: earth_rate_counts(c, dt, rate))
+            effects = [e.to_json() for e in loop.effects]
+        fa = face_angles(summary)
+    except (LogError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+    print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
+          f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
+    for reason, n in summary.exclusions.counts.items():
+        print(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
+              f"{', ...' if n > 10 else ''})")
+    if summary.incomplete_tail:
+        print(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
+              "incomplete revolution, not used")
+    if args.latitude is not None and not summary.has_time:
+        print("  no t column: the Earth-rate correction needs pulse times; not applied")
+    for i, name in enumerate(faces):
+        nxt = faces[(i + 1) % len(faces)]
+        dev = "" if nominal is None else (
+            f"  deviation {np.rad2deg(fa.angles_rad[i] - nominal[i]) * 3600:+9.3f}″")
+        lock = "  (quantisation locked: not averaged)" if fa.quantisation_locked[i] else ""
+        print(f"  {name:>6s} -> {nxt:<6s} {np.rad2deg(fa.angles_rad[i]):12.7f}° "
+              f"± {np.rad2deg(fa.u_rad[i]) * 3600:.3f}″{dev}{lock}")
+    if loop is not None:
+        for line in loop.summary_lines():
+            print("  " + line)
+        for e in loop.effects:
+            if e.name == "earth_rate":
+                lat, ulat = latitude_from_earth_rate(e.estimate, e.u, d)
+                print(f"  implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°")
+    js = {"faces": faces, "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
+          "angles_u_arcsec": (np.rad2deg(fa.u_rad) * 3600).tolist(),
+          "revolutions_used": fa.revolutions, "effects": effects,
+          "unexplained_structure": bool(loop and loop.unexplained_structure),
+          "covariance_arcsec2": (np.rad2deg(np.rad2deg(fa.cov)) * 3600**2).tolist(),
+          "type_a_arcsec": (np.rad2deg(fa.u_type_a_rad) * 3600).tolist(),
+          "type_b_arcsec": (np.rad2deg(fa.u_type_b_rad) * 3600).tolist(),
+          "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
+                         for k, v in summary.exclusions.counts.items()},
+          "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
+                    "adev_arcsec": (np.rad2deg(fa.allan_dev_rad) * 3600).tolist()}}
+    if nominal is not None:
+        js["deviation_arcsec"] = (np.rad2deg(fa.angles_rad - nominal) * 3600).tolist()
+    _write_json(out, js)
+    return 0
+
+
 # ----------------------------------------------------------------------------- demo
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -390,6 +476,17 @@ def build_parser() -> argparse.ArgumentParser:
     tl.add_argument("--out", help="per-reading CSV t,roll_deg,pitch_deg (a new file)")
     tl.add_argument("--force", action="store_true")
     tl.set_defaults(func=cmd_tilt)
+
+    g = sub.add_parser("gonio", help="face angles from a ring-laser counter log")
+    g.add_argument("log", help="CSV count,counter,ref[,t]")
+    g.add_argument("--faces", required=True, help="face names in passing order, e.g. ref,z,y,x")
+    g.add_argument("--nominal", help="nominal angles [deg], e.g. 90,90,90,90")
+    g.add_argument("--latitude", type=float, help="site latitude [deg] (Earth-rate correction)")
+    g.add_argument("--direction", choices=["ccw", "cw"], default="ccw")
+    g.add_argument("--alpha", type=float, default=1e-3)
+    g.add_argument("--json")
+    g.add_argument("--force", action="store_true")
+    g.set_defaults(func=cmd_gonio)
 
     d = sub.add_parser("demo", help="synthesise data with known truth and measure it")
     d.add_argument("--out", help="folder for the synthetic files (default: a new temp folder)")

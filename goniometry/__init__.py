@@ -1,0 +1,24 @@
+"""Laser goniometry: ring-laser counter logs -> angles between housing faces.
+
+Public API::
+
+    iter_log(path) -> chunks                     (streaming, validated)
+    read_revolutions(path, n_faces) -> LogSummary (repairs / exclusions recorded)
+    face_angles(summary) -> FaceAngles            (means, uncertainty, covariance, Allan)
+"""
+
+from goniometry.angles import (
+    FaceAngles,
+    earth_rate_counts,
+    face_angles,
+    kept_table,
+    vertical_earth_rate,
+)
+from goniometry.errors import LogError
+from goniometry.reader import Chunk, iter_log
+from goniometry.revolutions import Exclusions, LogSummary, read_revolutions
+
+__all__ = [
+    "Chunk", "Exclusions", "FaceAngles", "LogError", "LogSummary", "earth_rate_counts",
+    "face_angles", "iter_log", "kept_table", "read_revolutions", "vertical_earth_rate",
+]

@@ -1,0 +1,83 @@
+"""The residual loop over the goniometer log, at the level where the effects show.
+
+Observations: the counts of each whole revolution, N_r [ring-laser periods]. Declared model:
+a constant N (the closure normalisation assumes each revolution is exactly 360 deg of the
+table). Candidates (need pulse times):
+
+* ``earth_rate`` — the ring laser counts inertial rotation, so N_r = K (1 + Omega_v T_r / 2 pi)
+  with Omega_v = d Omega_E sin(latitude): when the table's period T_r wanders, N_r follows
+  it. Its estimate gives Omega_v [rad/s] (and the latitude); the counts are then corrected
+  interval by interval, which removes the bias an unsteady table leaves in the face angles.
+* ``scale_drift`` — the ring laser's scale factor drifting in time: N_r trends with t.
+
+Why not per interval: an interval's duration carries the autocollimator's timing jitter,
+which is also in its count, so any duration regressor there finds the jitter, not the Earth.
+A speed ripple locked to the table angle gives the same Earth-rate bias in every revolution:
+no residual shows it, which is why the latitude (``--latitude``) is the first-class input
+and this loop the fallback. A once-per-revolution error locked to the table is likewise
+absorbed by the face angles (only a reversal on the table separates it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
+
+EARTH = "earth_rate"
+SCALE = "scale_drift"
+OMEGA_EARTH = 7.2921150e-5
+
+
+class RevolutionStage:
+    """N_r = N0 + sum of effect columns, least squares (noise unknown: F-tests)."""
+
+    def __init__(self, counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray):
+        ok = np.all(np.isfinite(dt), axis=1)
+        self.N = counts[ok].sum(1)
+        self.T = dt[ok].sum(1)
+        self.t = t_end[ok] - self.T / 2
+        self.K = float(self.N.mean())
+        self.regs = {"t": self.t, "period": self.T}
+
+    def fit(self, terms: Sequence[Term]) -> StageFit:
+        y = self.N - self.K
+        cols = [np.ones_like(y)] + [np.asarray(t.columns, float).ravel() for t in terms]
+        A = np.column_stack(cols)
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ coef
+        dof = max(len(y) - A.shape[1], 1)
+        cov = np.linalg.pinv(A.T @ A) * (r @ r / dof)
+        eff = {}
+        for j, t in enumerate(terms, start=1):
+            # Slope of counts per revolution -> the physical rate (divide by K / 2 pi).
+            eff[t.name] = (float(coef[j] * 2 * np.pi / self.K),
+                           float(np.sqrt(cov[j, j]) * 2 * np.pi / self.K))
+        return StageFit(r, None, A.shape[1], self.regs, "t", eff,
+                        {"counts_per_rev": (float(self.K + coef[0]), float(np.sqrt(cov[0, 0])))})
+
+
+def candidates(stage: RevolutionStage) -> tuple[Candidate, ...]:
+    T = stage.T - stage.T.mean()
+    t = stage.t - stage.t.mean()
+    return (
+        Candidate(EARTH, "rad/s", "Earth's rotation: counts per revolution follow its period",
+                  lambda fit: Term(EARTH, "rad/s", T[:, None]) if np.ptp(T) > 0 else None),
+        Candidate(SCALE, "1/s", "ring-laser scale factor drifting in time",
+                  lambda fit: Term(SCALE, "1/s", t[:, None]) if np.ptp(t) > 0 else None),
+    )
+
+
+def loop_gonio(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray,
+               alpha: float = 1e-3) -> LoopReport:
+    stage = RevolutionStage(counts, dt, t_end)
+    return run_loop(stage, candidates(stage), alpha=alpha)
+
+
+def latitude_from_earth_rate(rate: float, u: float, direction: int) -> tuple[float, float]:
+    """Latitude [rad] and its u implied by a fitted vertical Earth rate [rad/s]."""
+    s = np.clip(rate / (direction * OMEGA_EARTH), -1, 1)
+    lat = float(np.arcsin(s))
+    return lat, float(u / OMEGA_EARTH / max(np.cos(lat), 1e-6))

@@ -1,0 +1,94 @@
+"""Face angles from revolution statistics: means, uncertainty, covariance, Allan deviation.
+
+Uncertainty per angle (GUM): Type A, the revolution-to-revolution scatter / sqrt(R); Type B,
+quantisation (+-1/2 count uniform at each end of an interval: q / sqrt(6) per angle per
+revolution, q = 2 pi / counts per revolution) / sqrt(R). The scatter already contains the
+quantisation when its phase randomises from revolution to revolution; when it does not (a
+table locked to the laser), the scatter underestimates it — so the stated standard
+uncertainty is the larger of the two. The closure (angles sum to 2 pi) makes the angles
+negatively correlated: the full covariance is reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from goniometry.revolutions import LogSummary
+
+OMEGA_EARTH = 7.2921150e-5  # rad/s
+
+
+@dataclass(frozen=True)
+class FaceAngles:
+    """Angles [rad] from face k to face k+1 in passing order (face 0: the reference)."""
+
+    angles_rad: np.ndarray
+    u_rad: np.ndarray
+    cov: np.ndarray
+    u_type_a_rad: np.ndarray
+    u_type_b_rad: np.ndarray
+    revolutions: int
+    counts_per_rev: float
+    allan_tau_rev: np.ndarray
+    allan_dev_rad: np.ndarray
+    quantisation_locked: np.ndarray
+
+    @property
+    def quantum_rad(self) -> float:
+        return 2 * np.pi / self.counts_per_rev
+
+
+def face_angles(summary: LogSummary) -> FaceAngles:
+    st = summary.stats
+    if st.n < 2:
+        raise ValueError(f"only {st.n} usable revolutions: need at least 2")
+    mean_d = st.s1 / st.n
+    cov_rev = (st.s2 - st.n * np.outer(mean_d, mean_d)) / (st.n - 1)
+    mean = st.shift + mean_d
+    n_per_rev = st.total_sum / st.n
+    ua = np.sqrt(np.diag(cov_rev) / st.n)
+    q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
+    # Averaging beats quantisation only if its phase dithers from one revolution to the
+    # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of
+    # counts per revolution and little jitter): then it does not average at all.
+    locked = np.sqrt(np.diag(cov_rev)) < 0.5 * q6
+    ub = np.where(locked, q6, q6 / np.sqrt(st.n))
+    u = np.maximum(ua, ub)
+    # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
+    # correlations of the measured scatter).
+    d = np.sqrt(np.diag(cov_rev) / st.n)
+    corr = cov_rev / st.n / np.outer(np.where(d > 0, d, 1), np.where(d > 0, d, 1))
+    cov = corr * np.outer(u, u)
+    taus, adev = st.allan.deviation()
+    return FaceAngles(mean, u, cov, ua, ub, st.n, n_per_rev, taus, adev, locked)
+
+
+def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """The kept revolutions: counts (R, n), interval durations (R, n) [s], end times [s]."""
+    st = summary.stats
+    if not st.kept_counts:
+        return np.zeros((0, st.n_faces)), None, None
+    c = np.vstack(st.kept_counts)
+    if summary.has_time:
+        return c, np.vstack(st.kept_dt), np.concatenate(st.kept_tend)
+    return c, None, None
+
+
+def vertical_earth_rate(latitude_deg: float, direction: int) -> float:
+    """The Earth's rotation about the table axis as the ring laser sees it [rad/s]
+    (direction +1: counter-clockwise seen from above)."""
+    return direction * OMEGA_EARTH * np.sin(np.deg2rad(latitude_deg))
+
+
+def earth_rate_counts(counts: np.ndarray, dt: np.ndarray, rate: float) -> np.ndarray:
+    """Counts with the Earth's rotation during each interval removed (needs durations).
+
+    The ring laser counts inertial rotation: table + ``rate`` [rad/s]. Revolutions whose first
+    duration is unknown (the log's first, armed by an unlogged pulse) are left as counted.
+    """
+    k = counts.sum(1, keepdims=True)  # ~ pulses per revolution (the 1e-5 Earth share is
+    # negligible in the scale)
+    corr = k * rate * np.nan_to_num(dt, nan=0.0) / (2 * np.pi)
+    return counts - corr

@@ -1,0 +1,155 @@
+"""Synthetic laser-goniometer counter logs (the patent's angle-measuring device), with truth.
+
+Physics, not the pipeline's model: a rotary table turns at a mean rate with a speed ripple
+locked to the table angle (once per revolution) and a slow random wander; four faces (a
+reference mirror and three housings) sit at azimuths a few arc-minutes off 90-degree steps;
+a photoelectric autocollimator fires when a face normal passes (latency, timing jitter); a
+ring laser on the table produces a continuous phase
+
+    Phi(t) = K (1 + kappa t) (theta(t) / 2 pi + d Omega_E sin(lat) t / 2 pi) + phi0
+
+(K pulses per revolution, d = +1 counter-clockwise seen from above, -1 clockwise: the Earth's
+rotation adds to a ccw table in the northern hemisphere); each counter holds
+floor(Phi(t_end)) - floor(Phi(t_start)), so quantisation does not accumulate. Missing and
+spurious autocollimator pulses and failed reference signals can be injected.
+
+The log (design.md): one row per pulse after the arming reference pulse: count, counter (1/2
+alternating), ref (1 if the binding signal marked this pulse as the first face), t [s].
+Angles in radians, times in seconds.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+OMEGA_EARTH = 7.2921150e-5  # rad/s
+K_DEFAULT = 764349.0  # pulses per revolution (0.40 m triangular He-Ne ring: 1.70" a pulse)
+ARCSEC = np.pi / 180 / 3600
+
+
+@dataclass(frozen=True)
+class GonioSpec:
+    """One run of the goniometer.
+
+    ``face_offsets_rad``: deviation of faces 1..3 from 90/180/270 deg (face 0 at 0);
+    ``ripple``: once-per-rev relative speed ripple; ``wander``: RMS of the slow random relative
+    speed variation; ``jitter_rad``: autocollimator timing jitter as an angle;
+    ``latency_s``: autocollimator delay; ``kappa_per_s``: ring-laser scale-factor drift;
+    ``p_missing``/``p_spurious``: per-pulse probabilities; ``failed_refs``: number of
+    reference signals that fail.
+    """
+
+    revolutions: int = 200
+    rev_per_s: float = 1.0
+    direction: int = 1
+    face_offsets_rad: tuple[float, float, float] = (150 * ARCSEC, -220 * ARCSEC, 95 * ARCSEC)
+    ripple: float = 0.0
+    ripple_phase: float = 0.3
+    wander: float = 0.0
+    wander_revs: float = 20.0
+    latitude_deg: float = 50.45
+    k_per_rev: float = K_DEFAULT
+    kappa_per_s: float = 0.0
+    jitter_rad: float = 0.1 * ARCSEC
+    latency_s: float = 5e-6
+    p_missing: float = 0.0
+    p_spurious: float = 0.0
+    failed_refs: int = 0
+    with_time: bool = True
+    seed: int = 0
+
+    @property
+    def azimuths(self) -> np.ndarray:
+        """Face azimuths in passing order [rad] (face 0 = the reference mirror at 0)."""
+        return np.array([0.0, *(np.pi / 2 * np.arange(1, 4) + np.array(self.face_offsets_rad))])
+
+    @property
+    def angles(self) -> np.ndarray:
+        """True table angles from face k to face k+1 (cyclic) [rad]; they sum to 2 pi."""
+        az = self.azimuths
+        return np.diff(np.append(az, 2 * np.pi))
+
+
+def _pulse_times(spec: GonioSpec, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Times [s] at which the table angle reaches each face, for every revolution, and the
+    fine (time, angle) grid of the table's motion (None at constant speed)."""
+    n_faces = 4
+    theta_targets = (np.arange(spec.revolutions + 1)[:, None] * 2 * np.pi
+                     + spec.azimuths[None, :]).ravel()[: spec.revolutions * n_faces + 1]
+    omega0 = 2 * np.pi * spec.rev_per_s
+    if spec.ripple == 0 and spec.wander == 0:
+        return theta_targets / omega0, None, None
+    # Speed as a function of table angle; time = integral of d theta / omega(theta).
+    per_rev = 4096
+    grid = np.linspace(0, theta_targets[-1] + 2 * np.pi, (spec.revolutions + 2) * per_rev)
+    rel = 1 + spec.ripple * np.sin(grid + spec.ripple_phase)
+    if spec.wander:
+        w = gaussian_filter1d(rng.standard_normal(grid.size), spec.wander_revs * per_rev / 4)
+        rel = rel + spec.wander * w / max(w.std(), 1e-300)
+    inv = 1 / (omega0 * rel)
+    t_grid = np.concatenate([[0.0], np.cumsum((inv[1:] + inv[:-1]) / 2 * np.diff(grid))])
+    return np.interp(theta_targets, grid, t_grid), t_grid, grid
+
+
+def simulate(spec: GonioSpec) -> dict:
+    """Simulate the run; returns the log columns and the truth."""
+    rng = np.random.default_rng(spec.seed)
+    t_face, t_grid, grid = _pulse_times(spec, rng)
+    n = t_face.size
+    face = np.arange(n) % 4
+    omega0 = 2 * np.pi * spec.rev_per_s
+    # Autocollimator: fires latency after the face passes, with timing jitter.
+    t_pulse = t_face + spec.latency_s + rng.normal(0, spec.jitter_rad / omega0, n)
+    keep = np.ones(n, bool)
+    if spec.p_missing:
+        keep[1:] = rng.random(n - 1) >= spec.p_missing
+    t_pulse, face = t_pulse[keep], face[keep]
+    is_ref = face == 0
+    if spec.p_spurious:
+        k = rng.random(t_pulse.size - 1) < spec.p_spurious
+        extra = t_pulse[:-1][k] + rng.random(k.sum()) * np.diff(t_pulse)[k]
+        t_pulse = np.concatenate([t_pulse, extra])
+        is_ref = np.concatenate([is_ref, np.zeros(extra.size, bool)])
+        face = np.concatenate([face, np.full(extra.size, -1)])
+        order = np.argsort(t_pulse, kind="stable")
+        t_pulse, is_ref, face = t_pulse[order], is_ref[order], face[order]
+    if spec.failed_refs:
+        refs = np.flatnonzero(is_ref[1:]) + 1
+        is_ref[rng.choice(refs, size=min(spec.failed_refs, refs.size), replace=False)] = False
+    theta = (omega0 * t_pulse if t_grid is None else np.interp(t_pulse, t_grid, grid))
+    earth = spec.direction * OMEGA_EARTH * np.sin(np.deg2rad(spec.latitude_deg)) * t_pulse
+    phi = (spec.k_per_rev * (1 + spec.kappa_per_s * t_pulse) * (theta + earth) / (2 * np.pi)
+           + rng.random())
+    cum = np.floor(phi)
+    counts = np.diff(cum).astype(np.int64)
+    rows = {"count": counts, "counter": (np.arange(counts.size) % 2 + 1).astype(np.int8),
+            "ref": is_ref[1:].astype(np.int8), "t": t_pulse[1:] - t_pulse[0]}
+    truth = {"angles_rad": spec.angles.tolist(),
+             "angles_deg": np.rad2deg(spec.angles).tolist(),
+             "azimuths_rad": spec.azimuths.tolist(), "spec": asdict(spec),
+             "faces_of_rows": face[1:].tolist() if n < 200000 else None}
+    return {"rows": rows, "truth": truth}
+
+
+def write_log(sim: dict, path: str | Path) -> Path:
+    """Write the counter log CSV (count,counter,ref[,t]) and <stem>.truth.json; never
+    overwrite."""
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(f"{path}: exists; synth never overwrites files")
+    r = sim["rows"]
+    with_t = sim["truth"]["spec"]["with_time"]
+    cols = [r["count"], r["counter"], r["ref"]] + ([r["t"]] if with_t else [])
+    fmt = ["%d", "%d", "%d"] + (["%.9f"] if with_t else [])
+    head = "count,counter,ref" + (",t" if with_t else "")
+    np.savetxt(path, np.column_stack(cols), fmt=fmt, delimiter=",", header=head, comments="")
+    truth = dict(sim["truth"])
+    truth.pop("faces_of_rows", None)
+    path.with_suffix(".truth.json").write_text(json.dumps(truth, indent=2))
+    return path
