@@ -1,11 +1,13 @@
 """Face angles from revolution statistics: means, uncertainty, covariance, Allan deviation.
 
-Uncertainty per angle (GUM): Type A, the revolution-to-revolution scatter / sqrt(R); Type B,
-quantisation (+-1/2 count uniform at each end of an interval: q / sqrt(6) per angle per
-revolution, q = 2 pi / counts per revolution) / sqrt(R). The scatter already contains the
-quantisation when its phase randomises from revolution to revolution; when it does not (a
-table locked to the laser), the scatter underestimates it — so the stated standard
-uncertainty is the larger of the two. The closure (angles sum to 2 pi) makes the angles
+Uncertainty per angle (GUM): Type A from the scatter of block means of the per-revolution
+angles (batch means: revolutions are not independent — the quantisation phase advances almost
+periodically and the speed wanders); Type B, quantisation (+-1/2 count uniform at each end of
+an interval: q / sqrt(6) per angle per revolution, q = 2 pi / counts per revolution), which
+averages as 1/sqrt(R) only while its phase dithers. When the per-revolution scatter is well
+below q/sqrt(6) the phase is locked (an integer count per revolution, a quiet autocollimator)
+and q/sqrt(6) itself is the uncertainty; otherwise the quantisation is already inside the
+measured scatter. The closure (angles sum to 2 pi) makes the angles
 negatively correlated: the full covariance is reported.
 """
 
@@ -49,19 +51,29 @@ def face_angles(summary: LogSummary) -> FaceAngles:
     mean = st.shift + mean_d
     n_per_rev = st.total_sum / st.n
     ua = np.sqrt(np.diag(cov_rev) / st.n)
+    taus, adev = st.allan.deviation()
+    blocks = st.n / taus
+    usable = blocks >= 8
+    if usable.any():
+        # Revolutions are not independent (the quantisation phase advances almost
+        # periodically; the speed wanders): the scatter of block means over the longest
+        # averaging with >= 8 blocks gives the uncertainty of the mean (batch means).
+        j = int(np.flatnonzero(usable)[-1])
+        ua = adev[j] * np.sqrt(taus[j] / st.n)
     q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
     # Averaging beats quantisation only if its phase dithers from one revolution to the
     # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of
     # counts per revolution and little jitter): then it does not average at all.
     locked = np.sqrt(np.diag(cov_rev)) < 0.5 * q6
     ub = np.where(locked, q6, q6 / np.sqrt(st.n))
-    u = np.maximum(ua, ub)
+    # Type B enters only when the quantisation is locked (then it is the whole story);
+    # otherwise it is already inside the measured scatter.
+    u = np.where(locked, np.maximum(ua, ub), ua)
     # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
     # correlations of the measured scatter).
     d = np.sqrt(np.diag(cov_rev) / st.n)
     corr = cov_rev / st.n / np.outer(np.where(d > 0, d, 1), np.where(d > 0, d, 1))
     cov = corr * np.outer(u, u)
-    taus, adev = st.allan.deviation()
     return FaceAngles(mean, u, cov, ua, ub, st.n, n_per_rev, taus, adev, locked)
 
 

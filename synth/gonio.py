@@ -90,8 +90,10 @@ def _pulse_times(spec: GonioSpec, rng: np.random.Generator
     grid = np.linspace(0, theta_targets[-1] + 2 * np.pi, (spec.revolutions + 2) * per_rev)
     rel = 1 + spec.ripple * np.sin(grid + spec.ripple_phase)
     if spec.wander:
-        w = gaussian_filter1d(rng.standard_normal(grid.size), spec.wander_revs * per_rev / 4)
-        rel = rel + spec.wander * w / max(w.std(), 1e-300)
+        # Slow: made on a grid of 8 points a revolution, then interpolated.
+        coarse = np.linspace(0, grid[-1], (spec.revolutions + 2) * 8)
+        w = gaussian_filter1d(rng.standard_normal(coarse.size), spec.wander_revs * 8 / 4)
+        rel = rel + spec.wander * np.interp(grid, coarse, w / max(w.std(), 1e-300))
     inv = 1 / (omega0 * rel)
     t_grid = np.concatenate([[0.0], np.cumsum((inv[1:] + inv[:-1]) / 2 * np.diff(grid))])
     return np.interp(theta_targets, grid, t_grid), t_grid, grid

@@ -1,0 +1,109 @@
+"""Goniometry against synth truth: angles, uncertainty, faults, Earth rate, bad logs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from align.cli import main
+from align.gonio import EARTH, loop_gonio
+from goniometry import (
+    LogError,
+    earth_rate_counts,
+    face_angles,
+    kept_table,
+    read_revolutions,
+    vertical_earth_rate,
+)
+from synth.gonio import GonioSpec, simulate, write_log
+
+
+def _log(tmp_path, name="log.csv", **kw):
+    sim = simulate(GonioSpec(**kw))
+    return write_log(sim, tmp_path / name), np.array(sim["truth"]["angles_rad"])
+
+
+def test_normalised_errors_over_seeded_logs(tmp_path):
+    z = []
+    for seed in range(12):
+        p, truth = _log(tmp_path, f"l{seed}.csv", revolutions=150, seed=seed)
+        fa = face_angles(read_revolutions(p, 4))
+        z.append((fa.angles_rad - truth) / fa.u_rad)
+        # The stated uncertainty is the quantisation limit averaged over the revolutions.
+        q = 2 * np.pi / fa.counts_per_rev
+        assert np.all(fa.u_rad < 1.2 * q / np.sqrt(6) / np.sqrt(150) * 1.5)
+    z = np.array(z).ravel()
+    assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
+
+
+def test_faults_are_repaired_or_excluded_and_reported(tmp_path):
+    p, truth = _log(tmp_path, revolutions=2000, seed=2, p_missing=1e-3, p_spurious=1e-3,
+                    failed_refs=3)
+    s = read_revolutions(p, 4)
+    reasons = " ".join(s.exclusions.counts)
+    assert "spurious" in reasons and "missing" in reasons and "reference signal failed" in reasons
+    fa = face_angles(s)
+    assert 1900 < fa.revolutions < 2000
+    assert np.all(np.abs(fa.angles_rad - truth) < 4.5 * fa.u_rad)
+
+
+def test_locked_quantisation_is_not_averaged(tmp_path):
+    # An integer count per revolution at the equator and a quiet autocollimator: the
+    # quantisation phase repeats every revolution and must not be divided by sqrt(R).
+    p, truth = _log(tmp_path, revolutions=300, latitude_deg=0.0, jitter_rad=0.0, seed=1)
+    fa = face_angles(read_revolutions(p, 4))
+    assert fa.quantisation_locked.all()
+    assert np.all(np.abs(fa.angles_rad - truth) < 3 * fa.u_rad)
+
+
+def test_earth_rate_with_unsteady_table(tmp_path):
+    lat = 50.45
+    p, truth = _log(tmp_path, revolutions=600, seed=3, ripple=0.02, wander=0.01,
+                    latitude_deg=lat, latency_s=0.0)
+    raw = face_angles(read_revolutions(p, 4))
+    rate = vertical_earth_rate(lat, 1)
+    fixed = face_angles(read_revolutions(p, 4, correct=lambda c, dt: earth_rate_counts(
+        c, dt, rate)))
+    assert np.max(np.abs(fixed.angles_rad - truth) / fixed.u_rad) < 4.5
+    assert np.max(np.abs(raw.angles_rad - truth)) > np.max(np.abs(fixed.angles_rad - truth))
+    # Latitude not given: the loop finds the rate from counts per revolution vs period.
+    rep = loop_gonio(*kept_table(read_revolutions(p, 4)))
+    e = {x.name: x for x in rep.effects}
+    assert EARTH in e and abs(e[EARTH].estimate - rate) < 4.5 * e[EARTH].u
+
+
+def test_bad_logs_name_the_line(tmp_path):
+    p, _ = _log(tmp_path, revolutions=20, seed=0)
+    lines = p.read_text().splitlines()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines[:6] + ["12a,1,0,0.5"] + lines[7:]) + "\n")
+    with pytest.raises(LogError, match="line 7"):
+        read_revolutions(bad, 4)
+    trunc = tmp_path / "trunc.csv"
+    trunc.write_text("\n".join(lines[:-1] + [lines[-1].split(",")[0]]) + "\n")
+    with pytest.raises(LogError, match="truncated"):
+        read_revolutions(trunc, 4)
+    noref = tmp_path / "noref.csv"
+    noref.write_text("count,counter,ref\n" + "\n".join(f"100,{1 + i % 2},0" for i in range(40)))
+    with pytest.raises(LogError, match="no reference pulse"):
+        read_revolutions(noref, 4)
+    same = tmp_path / "same.csv"
+    rows = [r.split(",") for r in lines[1:]]
+    rows[9][1] = rows[8][1]  # counter does not alternate: a row lost from the log
+    same.write_text(lines[0] + "\n" + "\n".join(",".join(r) for r in rows) + "\n")
+    s = read_revolutions(same, 4)
+    assert any("did not alternate" in k for k in s.exclusions.counts)
+
+
+def test_gonio_command_contract(tmp_path):
+    import json
+
+    p, truth = _log(tmp_path, revolutions=100, seed=5)
+    out = tmp_path / "g.json"
+    assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--nominal", "90,90,90,90",
+                 "--latitude", "50.45", "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    for key in ("faces", "angles_deg", "angles_u_arcsec", "revolutions_used", "effects"):
+        assert key in js
+    assert abs(sum(js["angles_deg"]) - 360) < 1e-9
+    assert main(["gonio", str(p), "--faces", "a"]) == 2
