@@ -46,44 +46,39 @@ class Exclusions:
 
 @dataclass
 class AllanAccumulator:
-    """Non-overlapping Allan variance of a vector series at octave averaging lengths,
-    accumulated with O(levels) memory."""
+    """Non-overlapping Allan variance of a vector series at octave averaging lengths
+    (1, 2, 4, ... 2^(levels-1) revolutions), accumulated batch by batch with bounded memory
+    (at most 2^levels pending rows)."""
 
     n: int
-    levels: int = 24
-    block_sum: np.ndarray = field(init=False)
-    block_len: np.ndarray = field(init=False)
-    prev: np.ndarray = field(init=False)
-    has_prev: np.ndarray = field(init=False)
+    levels: int = 16
+    pending: list = field(init=False)
+    prev: list = field(init=False)
     sq: np.ndarray = field(init=False)
     pairs: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        self.block_sum = np.zeros((self.levels, self.n))
-        self.block_len = np.zeros(self.levels, int)
-        self.prev = np.zeros((self.levels, self.n))
-        self.has_prev = np.zeros(self.levels, bool)
+        self.pending = [np.zeros((0, self.n)) for _ in range(self.levels)]
+        self.prev = [None] * self.levels
         self.sq = np.zeros((self.levels, self.n))
         self.pairs = np.zeros(self.levels, int)
 
     def add(self, x: np.ndarray) -> None:
-        for row in x:  # per revolution; levels complete rarely, so this stays cheap
-            self.block_sum[0] += row
-            self.block_len[0] += 1
-            lvl = 0
-            while lvl < self.levels and self.block_len[lvl] == 2**lvl:
-                mean = self.block_sum[lvl] / 2**lvl
-                if self.has_prev[lvl]:
-                    self.sq[lvl] += (mean - self.prev[lvl]) ** 2
-                    self.pairs[lvl] += 1
-                self.prev[lvl] = mean
-                self.has_prev[lvl] = True
-                if lvl + 1 < self.levels:
-                    self.block_sum[lvl + 1] += self.block_sum[lvl]
-                    self.block_len[lvl + 1] += 2**lvl
-                self.block_sum[lvl] = 0
-                self.block_len[lvl] = 0
-                lvl += 1
+        for m in range(self.levels):
+            size = 2**m
+            data = np.concatenate([self.pending[m], x]) if len(self.pending[m]) else x
+            nb = len(data) // size
+            if nb:
+                means = data[: nb * size].reshape(nb, size, self.n).mean(1)
+                if self.prev[m] is not None:
+                    means_p = np.vstack([self.prev[m][None], means])
+                else:
+                    means_p = means
+                d = np.diff(means_p, axis=0)
+                self.sq[m] += (d * d).sum(0)
+                self.pairs[m] += len(d)
+                self.prev[m] = means[-1]
+            self.pending[m] = data[nb * size:].copy()
 
     def deviation(self) -> tuple[np.ndarray, np.ndarray]:
         """Averaging lengths [revolutions] and Allan deviation per face (levels with >= 3

@@ -1,0 +1,100 @@
+"""Laser goniometry: accuracy against truth and the quantisation limit, and streaming speed.
+
+Run:  python3 benchmarks/gonio.py [--logs 50] [--pulses 1000000,10000000]
+
+1. Over seeded clean logs (200 revolutions, 1 rev/s, jitter 0.1"): normalised errors of every
+   face angle (RMS should be ~1) and the stated uncertainty against the quantisation limit
+   q/sqrt(6)/sqrt(R).
+2. Throughput (pulses/s) and peak memory (max RSS of a fresh process) of the streaming reader
+   for two log lengths: memory must not grow with the length.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ARCSEC = np.pi / 180 / 3600
+
+
+def accuracy(n_logs: int) -> None:
+    from goniometry import face_angles, read_revolutions
+    from synth.gonio import GonioSpec, simulate, write_log
+
+    z, ratio = [], []
+    with tempfile.TemporaryDirectory() as d:
+        for seed in range(n_logs):
+            sim = simulate(GonioSpec(revolutions=200, seed=seed))
+            p = write_log(sim, Path(d) / f"l{seed}.csv")
+            fa = face_angles(read_revolutions(p, 4))
+            truth = np.array(sim["truth"]["angles_rad"])
+            z.append((fa.angles_rad - truth) / fa.u_rad)
+            limit = 2 * np.pi / fa.counts_per_rev / np.sqrt(6) / np.sqrt(fa.revolutions)
+            ratio.append(fa.u_rad / limit)
+    z, ratio = np.array(z), np.array(ratio)
+    print(f"== {n_logs} clean logs, 200 revolutions each ==")
+    print(f"normalised errors: RMS {np.sqrt(np.mean(z**2)):.3f}, mean {z.mean():+.3f} "
+          f"({z.size} angles)")
+    limit = 1.696 / np.sqrt(6) / np.sqrt(200)
+    print(f"stated u / (q/sqrt6/sqrtR): median {np.median(ratio):.2f}, 95th percentile "
+          f"{np.percentile(ratio, 95):.2f} (q = 1.696\", limit {limit:.3f}\")")
+
+
+def _child(path: str) -> None:
+    import resource
+
+    from goniometry import face_angles, read_revolutions
+
+    t0 = time.perf_counter()
+    s = read_revolutions(path, 4)
+    fa = face_angles(s)
+    dt = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"rows": s.rows, "seconds": dt, "rss_mb": rss,
+                      "revolutions": fa.revolutions}))
+
+
+def throughput(lengths: list[int]) -> None:
+    print("\n== streaming: one core, constant-speed logs with timestamps ==")
+    with tempfile.TemporaryDirectory() as d:
+        for n in lengths:
+            p = Path(d) / f"log{n}.csv"
+            revs = n // 4
+            rng = np.random.default_rng(0)
+            counts = np.tile([191178, 190871, 191274, 191033], revs) + rng.integers(0, 2, n)
+            t = np.arange(1, n + 1) * 0.25
+            ref = (np.arange(n) % 4 == 3).astype(int)
+            with open(p, "w") as f:
+                f.write("count,counter,ref,t\n")
+                np.savetxt(f, np.column_stack([counts, np.arange(n) % 2 + 1, ref, t]),
+                           fmt=["%d", "%d", "%d", "%.6f"], delimiter=",")
+            out = subprocess.run([sys.executable, __file__, "--child", str(p)], check=True,
+                                 capture_output=True, text=True,
+                                 env={"OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"})
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            print(f"{r['rows']:>10d} pulses: {r['rows'] / r['seconds'] / 1e6:5.2f} M pulses/s, "
+                  f"{r['seconds']:6.2f} s, peak RSS {r['rss_mb']:6.1f} MB")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--logs", type=int, default=50)
+    ap.add_argument("--pulses", default="1000000,10000000")
+    ap.add_argument("--child")
+    args = ap.parse_args()
+    if args.child:
+        _child(args.child)
+        return
+    accuracy(args.logs)
+    throughput([int(v) for v in args.pulses.split(",")])
+
+
+if __name__ == "__main__":
+    main()
