@@ -259,7 +259,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- gonio
 
 def cmd_gonio(args: argparse.Namespace) -> int:
-    from align.gonio import latitude_from_earth_rate, loop_gonio
+    from align.gonio import latitude_from_earth_rate, loop_gonio, plausible_earth_rate
     from goniometry import (
         LogError,
         earth_rate_counts,
@@ -293,6 +293,10 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             counts, dt, t_end = kept_table(summary)
             loop = loop_gonio(counts, dt, t_end, alpha=args.alpha)
             earth = [e for e in loop.effects if e.name == "earth_rate"]
+            if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
+                print(f"  counts per revolution follow the period with a slope of "
+                      f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
+                earth = []
             if earth:
                 rate = earth[0].estimate
                 summary = read_revolutions(

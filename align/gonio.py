@@ -36,10 +36,15 @@ class RevolutionStage:
 
     def __init__(self, counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray):
         ok = np.all(np.isfinite(dt), axis=1)
-        self.N = counts[ok].sum(1)
-        self.T = dt[ok].sum(1)
-        self.t = t_end[ok] - self.T / 2
-        self.K = float(self.N.mean())
+        N = counts[ok].sum(1)
+        T = dt[ok].sum(1)
+        # The period regressor must not share a pulse with the revolution it explains: the
+        # reference pulses' jitter moves N_r and T_r together (slope omega, not the Earth's
+        # rate). Revolutions r-2 and r+2 share none; the wander is slow enough to follow.
+        self.N = N[2:-2]
+        self.T = (T[:-4] + T[4:]) / 2
+        self.t = (t_end[ok] - T / 2)[2:-2]
+        self.K = float(self.N.mean()) if len(self.N) else 0.0
         self.regs = {"t": self.t, "period": self.T}
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
@@ -74,6 +79,11 @@ def loop_gonio(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray,
                alpha: float = 1e-3) -> LoopReport:
     stage = RevolutionStage(counts, dt, t_end)
     return run_loop(stage, candidates(stage), alpha=alpha)
+
+
+def plausible_earth_rate(rate: float, u: float) -> bool:
+    """Whether a fitted vertical rate can be the Earth's (|rate| <= Omega_E within 3 u)."""
+    return abs(rate) <= OMEGA_EARTH + 3 * u
 
 
 def latitude_from_earth_rate(rate: float, u: float, direction: int) -> tuple[float, float]:

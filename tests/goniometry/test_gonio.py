@@ -107,3 +107,12 @@ def test_gonio_command_contract(tmp_path):
         assert key in js
     assert abs(sum(js["angles_deg"]) - 360) < 1e-9
     assert main(["gonio", str(p), "--faces", "a"]) == 2
+
+
+def test_loop_adds_nothing_to_fifty_clean_logs(tmp_path):
+    false = 0
+    for seed in range(50):
+        p, _ = _log(tmp_path, f"c{seed}.csv", revolutions=300, seed=100 + seed)
+        rep = loop_gonio(*kept_table(read_revolutions(p, 4)))
+        false += bool(rep.effects)
+    assert false <= 1
