@@ -342,6 +342,10 @@ def cmd_gonio(args: argparse.Namespace) -> int:
                     "adev_arcsec": (np.rad2deg(fa.allan_dev_rad) * 3600).tolist()}}
     if nominal is not None:
         js["deviation_arcsec"] = (np.rad2deg(fa.angles_rad - nominal) * 3600).tolist()
+    if args.plot:
+        from align.plots import plot_gonio
+
+        print(f"plot: {plot_gonio(kept_table(summary)[0], fa, faces, Path(args.plot))}")
     _write_json(out, js)
     return 0
 
@@ -488,6 +492,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--latitude", type=float, help="site latitude [deg] (Earth-rate correction)")
     g.add_argument("--direction", choices=["ccw", "cw"], default="ccw")
     g.add_argument("--alpha", type=float, default=1e-3)
+    g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
     g.add_argument("--json")
     g.add_argument("--force", action="store_true")
     g.set_defaults(func=cmd_gonio)

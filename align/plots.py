@@ -86,3 +86,46 @@ def plot_calibration(cal, poses, check, folder: Path) -> Path:
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def plot_gonio(counts: np.ndarray, fa, faces: list[str], folder: Path) -> Path:
+    """Per-face angle against revolution, their Allan deviation, and the residual spectrum."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import signal
+
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / "gonio.png"
+    k = 1
+    while out.exists():
+        out = folder / f"gonio_{k}.png"
+        k += 1
+    a = 2 * np.pi * counts / counts.sum(1, keepdims=True)
+    dev = np.rad2deg(a - fa.angles_rad) * 3600
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4))
+    n = len(faces)
+    for i in range(n):
+        ax[0].plot(dev[:, i], ".", ms=2, label=f"{faces[i]}→{faces[(i + 1) % n]}")
+    ax[0].set_xlabel("revolution")
+    ax[0].set_ylabel("angle − mean [″]")
+    ax[0].legend(fontsize=8)
+    if fa.allan_tau_rev.size:
+        for i in range(n):
+            ax[1].loglog(fa.allan_tau_rev, np.rad2deg(fa.allan_dev_rad[:, i]) * 3600, "o-",
+                         label=faces[i])
+        tau = fa.allan_tau_rev
+        ax[1].loglog(tau, np.rad2deg(fa.allan_dev_rad[0, 0]) * 3600 / np.sqrt(tau), "k:",
+                     label="white (1/√τ)")
+    ax[1].set_xlabel("averaging [revolutions]")
+    ax[1].set_ylabel("Allan deviation [″]")
+    ax[1].legend(fontsize=8)
+    f, p = signal.periodogram(dev - dev.mean(0), axis=0)
+    ax[2].semilogy(f[1:], p[1:], lw=0.7)
+    ax[2].set_xlabel("frequency [cycles per revolution]")
+    ax[2].set_ylabel("residual power [″² · rev]")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
