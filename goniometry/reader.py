@@ -64,8 +64,12 @@ def _locate(path: Path, ncols: int) -> str:
     return "unreadable row"
 
 
-def iter_log(path: str | Path, block_bytes: int = 1 << 22) -> Iterator[Chunk]:
-    """Yield the log in chunks (about ``block_bytes`` of text each)."""
+def iter_log(path: str | Path, block_bytes: int = 1 << 20) -> Iterator[Chunk]:
+    """Yield the log in chunks (about ``block_bytes`` of text each).
+
+    1 MiB blocks keep Arrow's pool flat (41 MB peak for 2e6 and 6e6 rows); with 4 MiB
+    blocks its read-ahead grew with the log (64 -> 161 MB).
+    """
     path = Path(path)
     cols = _header(path)
     types = {"count": pa.float64(), "counter": pa.float64(), "ref": pa.float64(),

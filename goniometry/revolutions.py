@@ -151,7 +151,7 @@ class LogSummary:
 
 
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
-                     block_bytes: int = 1 << 22, correct=None) -> LogSummary:
+                     block_bytes: int = 1 << 20, correct=None) -> LogSummary:
     """Stream a log into revolution statistics (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
