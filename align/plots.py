@@ -9,6 +9,17 @@ import numpy as np
 from align.marks import MarkResult
 
 
+def _new_png(folder: Path, stem: str) -> Path:
+    """A PNG path in ``folder`` that does not exist yet (nothing is overwritten)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / f"{stem}.png"
+    k = 1
+    while out.exists():
+        out = folder / f"{stem}_{k}.png"
+        k += 1
+    return out
+
+
 def plot_mark(r: MarkResult, folder: str | Path) -> Path:
     """The mark's centres with the fitted line (exaggerated) and the residuals along it."""
     import matplotlib
@@ -16,14 +27,7 @@ def plot_mark(r: MarkResult, folder: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    stem = Path(r.image).stem
-    out = folder / f"{stem}_mark{r.index}.png"
-    k = 1
-    while out.exists():
-        out = folder / f"{stem}_mark{r.index}_{k}.png"
-        k += 1
+    out = _new_png(Path(folder), f"{Path(r.image).stem}_mark{r.index}")
     before, after = r.loop.before, r.loop.after
     fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     t = np.asarray(before.regressors["t"])
@@ -56,12 +60,7 @@ def plot_calibration(cal, poses, check, folder: Path) -> Path:
 
     from align.calibration import delta_g
 
-    folder.mkdir(parents=True, exist_ok=True)
-    out = folder / "calibration.png"
-    k = 1
-    while out.exists():
-        out = folder / f"calibration_{k}.png"
-        k += 1
+    out = _new_png(folder, "calibration")
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     dg0 = delta_g(cal.algebraic, poses) * 1e6
     dg1 = delta_g(cal.model, poses) * 1e6
@@ -96,12 +95,7 @@ def plot_gonio(counts: np.ndarray, fa, faces: list[str], folder: Path) -> Path:
     import matplotlib.pyplot as plt
     from scipy import signal
 
-    folder.mkdir(parents=True, exist_ok=True)
-    out = folder / "gonio.png"
-    k = 1
-    while out.exists():
-        out = folder / f"gonio_{k}.png"
-        k += 1
+    out = _new_png(folder, "gonio")
     a = 2 * np.pi * counts / counts.sum(1, keepdims=True)
     dev = np.rad2deg(a - fa.angles_rad) * 3600
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))

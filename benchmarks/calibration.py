@@ -20,7 +20,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from align.calibration import CalibrationStage, Poses, algebraic, calibrate, delta_g
+from align.calibration import (
+    CalibrationStage,
+    Poses,
+    algebraic,
+    calibrate,
+    delta_g,
+    poses_from_samples,
+)
 from synth.tumble import Triad, TumbleSpec, fisher_crlb, tumble
 
 NOISE_V = 4.8e-5  # per sample (2e-5 g); 200 samples per pose
@@ -28,11 +35,9 @@ NAMES = [f"{p}_{a}" for p in ("k", "beta", "bias") for a in "xyz"]
 
 
 def poses_of(d, check=False) -> Poses:
-    lo, hi = (d.n_cal, len(d.up)) if check else (0, d.n_cal)
-    sel = [d.pose == i for i in range(lo, hi)]
-    return Poses(np.array([d.u[s].mean(0) for s in sel]), np.array([d.t[s].mean() for s in sel]),
-                 None, np.array([d.u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
-                 np.array([s.sum() for s in sel]), tuple(str(i) for i in range(lo, hi)))
+    """Calibration (or check) poses of a synthetic tumble as per-pose means."""
+    sel = (d.pose >= d.n_cal) if check else (d.pose < d.n_cal)
+    return poses_from_samples(d.pose[sel], d.u[sel], d.t[sel])
 
 
 def imu_tk_style(p: Poses, k_nominal: np.ndarray) -> tuple[np.ndarray, float]:

@@ -32,7 +32,11 @@ TABLE1_BIAS = (564.518583e-6, -288.4559e-6, 463.952349e-6)
 
 
 def r_matrix(beta: np.ndarray) -> np.ndarray:
-    """The paper's exact R (eq. 5) for beta = (bx, by, bz) [rad]."""
+    """The paper's exact R (eq. 5) for beta = (bx, by, bz) [rad].
+
+    Written here as well as in align.calibration on purpose: synth imports nothing from the
+    pipeline, so a mistake on one side cannot hide in both.
+    """
     bx, by, bz = beta
     return np.array([
         [1.0, np.sin(bz), np.cos(bz) * np.sin(by)],

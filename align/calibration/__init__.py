@@ -16,6 +16,7 @@ from align.calibration.model import (
     delta_g,
     model_from_dict,
     model_to_dict,
+    poses_from_samples,
 )
 from align.calibration.static import StaticInterval, StaticSettings, find_static, read_poses
 
@@ -24,5 +25,5 @@ __all__ = [
     "Ellipsoid",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
-    "find_static", "read_poses",
+    "find_static", "read_poses", "poses_from_samples",
 ]

@@ -47,6 +47,17 @@ class Poses:
     labels: tuple[str, ...]
 
 
+def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
+                       labels: Sequence[str] | None = None) -> Poses:
+    """Per-pose means (and their standard errors) from samples tagged with pose ids 0..N-1."""
+    ids = np.unique(pose)
+    sel = [pose == i for i in ids]
+    return Poses(np.array([u[s].mean(0) for s in sel]), np.array([t[s].mean() for s in sel]),
+                 None, np.array([u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
+                 np.array([s.sum() for s in sel]),
+                 tuple(labels) if labels is not None else tuple(str(i) for i in ids))
+
+
 @dataclass(frozen=True)
 class TriadModel:
     """A calibration: parameters and optional effects; ``cov`` is over ``names``."""

@@ -16,6 +16,7 @@ from align.calibration import (
     calibrate,
     delta_g,
     find_static,
+    poses_from_samples,
     read_poses,
 )
 from align.errors import InputError
@@ -25,11 +26,9 @@ NOISE_V = 4.8e-5  # per sample: 2e-5 g; 200 samples a pose -> 1.4 µg per pose m
 
 
 def poses_of(d, check=False) -> Poses:
-    lo, hi = (d.n_cal, len(d.up)) if check else (0, d.n_cal)
-    sel = [d.pose == i for i in range(lo, hi)]
-    return Poses(np.array([d.u[s].mean(0) for s in sel]), np.array([d.t[s].mean() for s in sel]),
-                 None, np.array([d.u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
-                 np.array([s.sum() for s in sel]), tuple(str(i) for i in range(lo, hi)))
+    """Calibration (or check) poses of a synthetic tumble as per-pose means."""
+    sel = (d.pose >= d.n_cal) if check else (d.pose < d.n_cal)
+    return poses_from_samples(d.pose[sel], d.u[sel], d.t[sel])
 
 
 def test_algebraic_fit_is_exact_on_noise_free_data():
