@@ -47,16 +47,23 @@ def accuracy(n_logs: int) -> None:
           f"{np.percentile(ratio, 95):.2f} (q = 1.696\", limit {limit:.3f}\")")
 
 
-def _child(path: str) -> None:
-    import resource
+def _peak_rss_mb() -> float:
+    """This process's own peak RSS. Not ru_maxrss: Linux carries that across fork+exec, so a
+    child would report the parent's peak (here: the parent that generated the log)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
 
+
+def _child(path: str) -> None:
     from goniometry import face_angles, read_revolutions
 
     t0 = time.perf_counter()
     s = read_revolutions(path, 4)
     fa = face_angles(s)
     dt = time.perf_counter() - t0
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    rss = _peak_rss_mb()
     print(json.dumps({"rows": s.rows, "seconds": dt, "rss_mb": rss,
                       "revolutions": fa.revolutions}))
 
