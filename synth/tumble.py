@@ -19,7 +19,7 @@ calibration that does not trust the fixture).
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -227,7 +227,6 @@ def fisher_crlb(triad: Triad, up: np.ndarray, sigma_mean_v: np.ndarray) -> np.nd
         d = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
         return tr.outputs(d, np.zeros(n), np.zeros(n), None)
 
-    base = model(theta0, az, el)
     cols = []
     for j in range(9):
         h = 1e-7 * max(1.0, abs(theta0[j]))
@@ -252,7 +251,6 @@ def fisher_crlb(triad: Triad, up: np.ndarray, sigma_mean_v: np.ndarray) -> np.nd
     Ftn = Jt.T @ (Jn * w[:, None])
     Fnn = Jn.T @ (Jn * w[:, None])
     schur = Ftt - Ftn @ np.linalg.solve(Fnn, Ftn.T)
-    _ = base
     return np.linalg.inv(schur)
 
 
@@ -285,6 +283,3 @@ def write_tumble_csv(data: TumbleData, path: str | Path, check: bool = False,
     path.with_suffix(".truth.json").write_text(json.dumps(data.truth(), indent=2))
     return path
 
-
-def spec_to_json(spec: TumbleSpec) -> str:
-    return json.dumps(asdict(spec), indent=2)
