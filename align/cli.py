@@ -92,7 +92,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
     imgs = {}
     for p in args.images:
         try:
-            imgs[p] = read_image(p).astype(np.uint8 if read_image(p).max() <= 255 else np.uint16)
+            img = read_image(p)
+            imgs[p] = img.astype(np.uint8 if img.max() <= 255 else np.uint16)
         except ImageInputError as exc:
             print(f"{p}: skipped: {exc}", file=sys.stderr)
     try:

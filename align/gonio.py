@@ -25,10 +25,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
+from goniometry.angles import OMEGA_EARTH
 
 EARTH = "earth_rate"
 SCALE = "scale_drift"
-OMEGA_EARTH = 7.2921150e-5
 
 
 class RevolutionStage:

@@ -31,6 +31,7 @@ from imaging import (
     fit_line,
     measure_marks,
     read_image,
+    undistort,
 )
 
 RADIAL = "radial_distortion"
@@ -41,18 +42,6 @@ ILLUM = "illumination_gradient"
 def half_diagonal(shape: tuple[int, int]) -> float:
     h, w = shape
     return float(np.hypot(w - 1, h - 1) / 2)
-
-
-def undistort_radial(pts: np.ndarray, k1: float, scale: float) -> np.ndarray:
-    """Invert x_d = x (1 + k1 |x/scale|^2) (points relative to the principal point)."""
-    if k1 == 0:
-        return pts
-    rd = np.linalg.norm(pts, axis=1) / scale
-    ru = rd.copy()
-    for _ in range(20):
-        ru = ru - (ru * (1 + k1 * ru**2) - rd) / (1 + 3 * k1 * ru**2)
-    f = np.where(rd > 0, ru / np.where(rd > 0, rd, 1), 1.0)
-    return pts * f[:, None]
 
 
 class MarkStage:
@@ -69,7 +58,7 @@ class MarkStage:
         k1 = 0.0
         rounds = 4 if RADIAL in names else 1
         for _ in range(rounds):
-            q = undistort_radial(pts, k1, self.scale)
+            q = undistort(pts, [k1], self.scale) if k1 else pts
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
             F = np.hstack(cols) if cols else None
@@ -119,7 +108,8 @@ def _wiggle(fit: StageFit) -> Term | None:
     test, omega = periodogram_test(fit.residuals / fit.sigma, t)
     if not np.isfinite(omega):
         return None
-    m_indep = max(1.0, float(np.ptp(t)) * (0.5 * (len(t) - 1) / np.ptp(t)))
+    # Independent frequencies searched (up to the Nyquist of the point spacing): ~ n / 2.
+    m_indep = max(1.0, 0.5 * (len(t) - 1))
     return Term(WIGGLE, "px", np.column_stack([np.sin(omega * t), np.cos(omega * t)]),
                 searched=1, trials=m_indep, meta={"period_px": 2 * np.pi / omega})
 

@@ -42,7 +42,8 @@ class PlumbLineFit:
 
 
 def undistort(q: np.ndarray, k: Sequence[float], scale: float) -> np.ndarray:
-    """Invert the radial model by Newton iteration on the radius."""
+    """Invert x_d = x_u (1 + k1 (r_u/R)^2 + k2 (r_u/R)^4 ...) by Newton iteration on the
+    radius (points relative to the principal point, R = ``scale``)."""
     rd = np.linalg.norm(q, axis=1) / scale
     ru = rd.copy()
     for _ in range(25):

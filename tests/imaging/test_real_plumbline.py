@@ -11,7 +11,14 @@ import cv2
 import numpy as np
 import pytest
 
-from imaging import chessboard_lines, find_chessboard, fit_line, plumb_line, read_image
+from imaging import (
+    chessboard_lines,
+    find_chessboard,
+    fit_line,
+    plumb_line,
+    read_image,
+    undistort,
+)
 from tests.conftest import real_folder
 
 PATTERN = (9, 6)
@@ -51,8 +58,6 @@ def test_plumb_line_k1_matches_calibrate_camera(side):
     assert k1_cv == pytest.approx(float(D.ravel()[0]), rel=0.10)
     # Angles of the lines change by up to a degree once the bow is removed.
     before = [fit_line(q, np.ones(len(q)), reject_sigma=None).angle_rad for q in lines]
-    from imaging.plumbline import undistort
-
     after = [fit_line(undistort(q, pl.k, R), np.ones(len(q)), reject_sigma=None).angle_rad
              for q in lines]
     assert np.max(np.abs(np.subtract(before, after))) > np.deg2rad(0.2)
