@@ -223,7 +223,7 @@ def _load_model(path: str):
 
 
 def cmd_tilt(args: argparse.Namespace) -> int:
-    from align.calibration.static import _read_table
+    from align.calibration import read_table
     from align.errors import InputError
     from align.tilt import roll_pitch
 
@@ -231,7 +231,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     out_json = _new_file(args.json, args.force, [args.readings])
     out_csv = _new_file(args.out, args.force, [args.readings])
     try:
-        head, data, _, _ = _read_table(Path(args.readings))
+        head, data, _, _ = read_table(Path(args.readings))
     except InputError as exc:
         raise UsageError(str(exc)) from None
     col = {h: i for i, h in enumerate(head)}
@@ -260,15 +260,8 @@ def cmd_tilt(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- gonio
 
 def cmd_gonio(args: argparse.Namespace) -> int:
-    from align.gonio import latitude_from_earth_rate, loop_gonio, plausible_earth_rate
-    from goniometry import (
-        LogError,
-        earth_rate_counts,
-        face_angles,
-        kept_table,
-        read_revolutions,
-        vertical_earth_rate,
-    )
+    from align.gonio import measure_log
+    from goniometry import LogError, kept_table
 
     faces = [f.strip() for f in args.faces.split(",") if f.strip()]
     if len(faces) < 2:
@@ -283,29 +276,12 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             raise UsageError(f"--nominal has {len(nominal)} values for {len(faces)} faces")
     out = _new_file(args.json, args.force, [args.log])
     d = 1 if args.direction == "ccw" else -1
-    effects, loop = [], None
     try:
-        summary = read_revolutions(args.log, len(faces))
-        if args.latitude is not None and summary.has_time:
-            rate = vertical_earth_rate(args.latitude, d)
-            summary = read_revolutions(args.log, len(faces),
-                                       correct=lambda c, dt: earth_rate_counts(c, dt, rate))
-        elif summary.has_time:
-            counts, dt, t_end = kept_table(summary)
-            loop = loop_gonio(counts, dt, t_end, alpha=args.alpha)
-            earth = [e for e in loop.effects if e.name == "earth_rate"]
-            if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
-                print(f"  counts per revolution follow the period with a slope of "
-                      f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
-                earth = []
-            if earth:
-                rate = earth[0].estimate
-                summary = read_revolutions(
-                    args.log, len(faces), correct=lambda c, dt: earth_rate_counts(c, dt, rate))
-            effects = [e.to_json() for e in loop.effects]
-        fa = face_angles(summary)
+        run = measure_log(args.log, len(faces), args.latitude, d, args.alpha)
     except (LogError, ValueError) as exc:
         raise UsageError(str(exc)) from None
+    summary, fa, loop = run.summary, run.angles, run.loop
+    effects = [e.to_json() for e in loop.effects] if loop is not None else []
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
           f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
@@ -314,8 +290,6 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     if summary.incomplete_tail:
         print(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
               "incomplete revolution, not used")
-    if args.latitude is not None and not summary.has_time:
-        print("  no t column: the Earth-rate correction needs pulse times; not applied")
     for i, name in enumerate(faces):
         nxt = faces[(i + 1) % len(faces)]
         dev = "" if nominal is None else (
@@ -326,10 +300,8 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     if loop is not None:
         for line in loop.summary_lines():
             print("  " + line)
-        for e in loop.effects:
-            if e.name == "earth_rate":
-                lat, ulat = latitude_from_earth_rate(e.estimate, e.u, d)
-                print(f"  implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°")
+    for note in run.notes:
+        print("  " + note)
     js = {"faces": faces, "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
           "angles_u_arcsec": (np.rad2deg(fa.u_rad) * 3600).tolist(),
           "revolutions_used": fa.revolutions, "effects": effects,
@@ -351,80 +323,236 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     return 0
 
 
-# ----------------------------------------------------------------------------- demo
+# ----------------------------------------------------------------------------- run
 
-def cmd_demo(args: argparse.Namespace) -> int:
-    """Synthesise images with known truth, measure them, print the errors."""
-    from align.marks import measure_file
-    from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
-    from synth.marks import write_synth
+def _print_result(res, out=None) -> None:
+    out = out or sys.stdout
+    f = res.fusion
+    for e in res.errors:
+        print(f"  stage {e.stage}: FAILED: {e.message}", file=out)
+    if f is None:
+        print("  no misalignment (the fusion did not run)", file=out)
+        return
+    print(f"  misalignment E [″] (row: accelerometer, column: platform X Y Z), sources: "
+          f"{', '.join(f.sources)}", file=out)
+    for i in range(3):
+        cells = ["0".rjust(17) if i == j else
+                 f"{f.E[i, j] / ARCSEC:+9.2f} ± {f.E_u[i, j] / ARCSEC:5.2f}" for j in range(3)]
+        print(f"    {'xyz'[i]}: " + "  ".join(cells), file=out)
+    state = "consistent" if f.consistent else "NOT consistent (uncertainty inflated " \
+        f"x{f.inflation:.2f})"
+    print(f"  chi2 {f.chi2:.2f} / {f.dof} dof (p {f.p_value:.3g}): instruments {state}",
+          file=out)
+    for e in f.loop.effects:
+        parts = (", ".join(f"{c} {v / ARCSEC:+.2f} ± {u / ARCSEC:.2f}″" for c, v, u in
+                           e.components) if e.components
+                 else f"{e.estimate / ARCSEC:+.2f} ± {e.u / ARCSEC:.2f}″")
+        print(f"  fusion loop added {e.name}: {parts} (p {e.p_value:.2g}, dBIC "
+              f"{e.delta_bic:.1f})", file=out)
+    if f.loop.unexplained_structure:
+        print("  " + f.loop.summary_lines()[-1], file=out)
 
-    folder = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="align-demo-"))
-    folder.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(args.seed)
-    # Two camera views of the platform, each with two housings' marks (1-5' off nominal),
-    # cluttered, one view through a lens with radial distortion nobody declared.
-    views = {
-        "view_Y.png": ((0.0, 90.0), CameraGeometry()),
-        "view_X.png": ((0.0, 90.0), CameraGeometry(focal_px=1200, k1=-0.12)),
-    }
-    print(f"demo: writing synthetic images to {folder}")
-    rows = []
-    for name, (nominals, cam) in views.items():
-        marks = tuple(
-            MarkSpec(np.deg2rad(nom + rng.uniform(1, 5) / 60 * rng.choice([-1, 1])),
-                     offset_px=off, length_px=500, width_px=4.0, centre_t_px=tc)
-            for nom, off, tc in zip(nominals, (-150.0, 250.0), (60.0, -40.0), strict=True))
-        spec = ImageSpec(marks=marks, width=1024, height=768, seed=int(rng.integers(1 << 30)),
-                         full_well_e=full_well_for_snr(40, -0.6), texture=0.01, dust=6,
-                         dust_on_mark=2, scratches=3, gradient=(0.05, -0.03), camera=cam)
-        s = render_marks(spec)
-        path = folder / name
-        if path.exists():
-            raise UsageError(f"{path}: exists; demo never overwrites (use another --out)")
-        write_synth(s, path)
-        for r in measure_file(path):
-            if not r.found:
-                print(f"{name}: {r.error}")
-                continue
-            truth = min(s.truth.marks, key=lambda t: abs(np.sin(t.image_angle_rad - r.angle_rad)))
-            err = (r.angle_rad - truth.image_angle_rad + np.pi / 2) % np.pi - np.pi / 2
-            eff = ", ".join(e.name for e in r.loop.effects) or "none"
-            rows.append((name, r, truth, err, eff))
-    print(f"\n{'image':12s} {'angle [deg]':>14s} {'u [″]':>7s} {'error [″]':>10s} "
-          f"{'CRLB [″]':>9s}  effects found")
-    for name, r, truth, err, eff in rows:
-        print(f"{name:12s} {np.rad2deg(r.angle_rad):+14.6f} {r.angle_u_rad / ARCSEC:7.2f} "
-              f"{err / ARCSEC:+10.2f} {truth.crlb_angle_rad / ARCSEC:9.2f}  {eff}"
-              + ("  (unexplained structure)" if r.unexplained_structure else ""))
-    _demo_calibration(folder, rng)
-    print("\nThe goniometer and the fusion into the misalignment matrix are not built yet; "
-          "this demo covers the scribe-mark and calibration stages.")
+
+def _run_one(folder: str, json_path: str | None, report_path: str | None,
+             cal_path: str | None, alpha: float, quiet: bool) -> dict:
+    """One session end to end (also the worker of a batch); returns a short summary."""
+    from align.errors import InputError
+    from align.session import load_session, platform_calibration, result_json, run_session
+    from align.session.report import write_report
+
+    try:
+        s = load_session(folder)
+        inputs = [str(p) for p in s.inputs]
+        outs = {k: _new_file(v, False, inputs) for k, v in
+                (("json", json_path), ("report", report_path), ("cal", cal_path))}
+    except (InputError, UsageError) as exc:
+        return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
+    say = (lambda m: None) if quiet else (lambda m: print(f"  [{s.name}] {m}", file=sys.stderr))
+    res = run_session(s, progress=say, alpha=alpha)
+    js = result_json(res)
+    if outs["json"] is not None:
+        outs["json"].parent.mkdir(parents=True, exist_ok=True)
+        outs["json"].write_text(json.dumps(js, indent=2, default=float))
+    if outs["report"] is not None:
+        write_report(res, outs["report"])
+    pc = platform_calibration(res)
+    if outs["cal"] is not None and pc is not None:
+        outs["cal"].parent.mkdir(parents=True, exist_ok=True)
+        outs["cal"].write_text(json.dumps(pc.to_dict(), indent=2))
+    return {"session": s.name, "folder": folder, "ok": res.ok, "bad_input": not res.ok,
+            "result": res if not quiet else None, "json": js,
+            "outputs": {k: str(v) for k, v in outs.items() if v is not None}}
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    if len(args.sessions) == 1:
+        out = _run_one(args.sessions[0], args.json, args.report, args.calibration,
+                       args.alpha, quiet=False)
+        if "error" in out:
+            raise UsageError(out["error"])
+        print(f"session {out['session']}:")
+        _print_result(out["result"])
+        for k, v in out["outputs"].items():
+            print(f"  wrote {k}: {v}")
+        return 0 if out["ok"] else 2
+    return _run_batch(args)
+
+
+def _run_batch(args: argparse.Namespace) -> int:
+    """Several sessions in parallel; --json/--report/--calibration name folders."""
+    import os
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    names = [Path(s).resolve().name for s in args.sessions]
+    if len(set(names)) != len(names):
+        raise UsageError("two sessions have the same folder name; outputs would collide")
+
+    def path_in(folder: str | None, name: str, ext: str) -> str | None:
+        return None if folder is None else str(Path(folder) / f"{name}{ext}")
+
+    jobs = args.jobs or os.cpu_count() or 1
+    results = []
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futs = {pool.submit(_run_one, s, path_in(args.json, n, ".json"),
+                            path_in(args.report, n, ".html"),
+                            path_in(args.calibration, n, ".cal.json"), args.alpha, True): s
+                for s, n in zip(args.sessions, names, strict=True)}
+        done = as_completed(futs)
+        if sys.stderr.isatty():
+            from tqdm import tqdm
+
+            done = tqdm(done, total=len(futs), desc="sessions")
+        for fut in done:
+            try:
+                results.append(fut.result())
+            except Exception as exc:  # one session's crash must not stop the others
+                results.append({"session": futs[fut], "ok": False, "bad_input": False,
+                                "error": f"internal error: {exc!r}"})
+    failed = [r for r in results if not r["ok"]]
+    for r in sorted(results, key=lambda r: r["session"]):
+        if r["ok"]:
+            js = r["json"]
+            E = np.array(js["misalignment_arcsec"])
+            U = np.array(js["misalignment_u_arcsec"])
+            worst = float(np.max(np.abs(E)))
+            print(f"{r['session']}: OK, |E| max {worst:.1f}″, u max {U.max():.2f}″, chi2/dof "
+                  f"{js['chi2']:.1f}/{js['dof']}"
+                  + ("" if not js["unexplained_structure"] else ", NOT consistent")
+                  + "".join(f", {k} {v}" for k, v in r["outputs"].items()))
+        else:
+            msg = r.get("error") or "; ".join(e["message"] for e in r["json"]["errors"])
+            print(f"{r['session']}: FAILED: {msg}", file=sys.stderr)
+    print(f"{len(results) - len(failed)} of {len(results)} sessions done"
+          + (f", {len(failed)} failed" if failed else ""))
+    if any(not r["ok"] and not r.get("bad_input", False) for r in results):
+        return 1
+    return 2 if failed else 0
+
+
+# ----------------------------------------------------------------------------- apply
+
+def cmd_apply(args: argparse.Namespace) -> int:
+    from align.apply import PlatformCalibration
+    from align.calibration import read_table
+    from align.errors import InputError
+    from align.tilt import roll_pitch
+
+    out = _new_file(args.out, args.force, [args.calibration_file, args.readings])
+    try:
+        pc = PlatformCalibration.load(args.calibration_file)
+        head, data, _, _ = read_table(Path(args.readings))
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    col = {h: i for i, h in enumerate(head)}
+    u = data[:, [col["ux"], col["uy"], col["uz"]]]
+    t = data[:, col["t"]] if "t" in col else np.full(len(u), pc.model.t_ref)
+    temp = data[:, col["temp"]] if "temp" in col else None
+    a = pc.specific_force(u, t, temp)
+    cols, names = [t, *a.T], ["t", "ax_g", "ay_g", "az_g"]
+    if args.tilt:
+        roll, pitch = roll_pitch(a, method=args.method)
+        cols += [np.rad2deg(roll), np.rad2deg(pitch)]
+        names += ["roll_deg", "pitch_deg"]
+    np.savetxt(out, np.column_stack(cols), delimiter=",", header=",".join(names),
+               comments="", fmt="%.10g")
+    print(f"{len(a)} readings -> platform frame; mean a = "
+          + " ".join(f"{v:+.7f}" for v in a.mean(0)) + " g")
+    print(f"wrote {out}")
     return 0
 
 
-def _demo_calibration(folder: Path, rng: np.random.Generator) -> None:
-    """The seed paper's tumble test (Table 1, 14 cube poses) with an undeclared K2."""
-    from align.calibration import calibrate, delta_g, read_poses
-    from synth.tumble import Triad, TumbleSpec, tumble, write_tumble_csv
+# ----------------------------------------------------------------------------- synth
 
-    k2 = (35e-6, 0.0, -25e-6)
-    d = tumble(TumbleSpec(triad=Triad(noise_v=4.8e-5, k2=k2), seed=int(rng.integers(1 << 30))))
-    static = write_tumble_csv(d, folder / "tumble.csv")
-    check = write_tumble_csv(d, folder / "tumble_check.csv", check=True)
-    poses, _ = read_poses(static)
-    cal = calibrate(poses, (-1, -1, -1))
-    tr = d.spec.triad
-    print(f"\ncalibration ({static.name}: Table 1 triad, 14 cube poses, K2 = "
-          f"{k2[0] * 1e6:.0f}/{k2[1] * 1e6:.0f}/{k2[2] * 1e6:.0f} µg/g² not declared):")
-    for label, m in (("paper's algebraic fit", cal.algebraic), ("after ML + loop", cal.model)):
-        err = np.abs(m.bias - tr.bias) * 1e6
-        dg = np.abs(delta_g(m, read_poses(check, calibration=False)[0])) * 1e6
-        print(f"  {label:22s} bias error {' '.join(f'{v:6.2f}' for v in err)} µg, "
-              f"check-pose |Δg| max {dg.max():6.2f} µg")
-    for e in cal.loop.effects:
-        print("  loop found " + e.name + ": " + ", ".join(
-            f"{c}: {v * 1e6:+.1f} ± {u * 1e6:.1f} µg/g²" for c, v, u in e.components))
+def cmd_synth(args: argparse.Namespace) -> int:
+    from synth.session import EFFECTS, SessionSpec, write_session
+
+    def parse(items: Sequence[str]) -> dict[str, float]:
+        out = {}
+        for it in items:
+            name, _, val = it.partition("=")
+            if name not in EFFECTS:
+                raise UsageError(f"effect {name!r}: unknown; known: " + ", ".join(
+                    f"{k} [{u or '-'}] ({d})" for k, (u, d) in EFFECTS.items()))
+            try:
+                out[name] = float(val)
+            except ValueError:
+                raise UsageError(f"effect {it!r}: expected NAME=NUMBER") from None
+        return out
+
+    declared = parse(args.effect)
+    undeclared = parse(args.undeclared)
+    spec = SessionSpec(seed=args.seed, effects={**declared, **undeclared},
+                       undeclared=frozenset(undeclared))
+    try:
+        write_session(args.out, spec)
+    except FileExistsError as exc:
+        raise UsageError(str(exc)) from None
+    print(f"wrote session {args.out} (seed {args.seed}; truth in {Path(args.out) / 'truth.json'})")
+    for k, v in {**declared, **undeclared}.items():
+        print(f"  effect {k} = {v} {EFFECTS[k][0]} "
+              f"({'undeclared' if k in undeclared else 'declared in session.toml'})")
+    return 0
+
+
+# ----------------------------------------------------------------------------- demo
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Synthesise a session with known truth, run it, print the matrix and its error."""
+    from synth.session import SessionSpec, write_session
+
+    folder = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="align-demo-"))
+    session = folder / "session"
+    roll = 30.0
+    print(f"demo: writing a synthetic session to {session} (seed {args.seed}): 8 mark images "
+          "from two cameras (each with a reversal), a ring-laser counter log, a 14-pose "
+          f"tumble and 8 platform poses; camera A rolled by {roll:.0f}″, NOT declared")
+    try:
+        truth = write_session(session, SessionSpec(seed=args.seed,
+                                                   effects={"camera_roll_A": roll},
+                                                   undeclared=frozenset({"camera_roll_A"})))
+    except FileExistsError as exc:
+        raise UsageError(str(exc)) from None
+    report = folder / "report.html"
+    out = _run_one(str(session), str(folder / "result.json"), str(report),
+                   str(folder / "platform_calibration.json"), 1e-3, quiet=False)
+    if "error" in out:
+        raise UsageError(out["error"])
+    res = out["result"]
+    print(f"\nsession {out['session']}:")
+    _print_result(res)
+    if res.fusion is not None:
+        err = (res.fusion.E - np.array(truth["misalignment_rad"])) / ARCSEC
+        z = err / np.where(res.fusion.E_u > 0, res.fusion.E_u / ARCSEC, 1)
+        print("  error against truth [″]:")
+        for i in range(3):
+            print("    " + "xyz"[i] + ": " + "  ".join(
+                "0".rjust(8) if i == j else f"{err[i, j]:+8.3f}" for j in range(3)))
+        off = [z[i, j] for i in range(3) for j in range(3) if i != j]
+        print(f"  normalised errors (error / u): RMS {np.sqrt(np.mean(np.square(off))):.2f}")
+    print(f"\nreport: {report}")
+    for k, v in out["outputs"].items():
+        print(f"{k}: {v}")
+    return 0 if out["ok"] else 2
 
 
 # ----------------------------------------------------------------------------- main
@@ -498,8 +626,38 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--force", action="store_true")
     g.set_defaults(func=cmd_gonio)
 
-    d = sub.add_parser("demo", help="synthesise data with known truth and measure it")
-    d.add_argument("--out", help="folder for the synthetic files (default: a new temp folder)")
+    r = sub.add_parser("run", help="run whole sessions: every stage, the loops, the fusion")
+    r.add_argument("sessions", nargs="+", help="session folder(s) holding session.toml")
+    r.add_argument("--json", help="result JSON (a folder when several sessions)")
+    r.add_argument("--report", help="HTML report (a folder when several sessions)")
+    r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
+                   "(a folder when several sessions)")
+    r.add_argument("--jobs", type=int, help="parallel sessions (default: all cores)")
+    r.add_argument("--alpha", type=float, default=1e-3)
+    r.set_defaults(func=cmd_run)
+
+    ap = sub.add_parser("apply", help="readings -> specific force in the platform frame")
+    ap.add_argument("calibration_file", help="JSON from 'align run --calibration' or --json")
+    ap.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
+    ap.add_argument("--out", required=True, help="new CSV t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]")
+    ap.add_argument("--tilt", action="store_true", help="add roll and pitch columns")
+    ap.add_argument("--method", choices=["exact", "paper"], default="exact")
+    ap.add_argument("--force", action="store_true")
+    ap.set_defaults(func=cmd_apply)
+
+    sy = sub.add_parser("synth", help="write synthetic data with known truth")
+    sy_sub = sy.add_subparsers(dest="what", required=True)
+    ss = sy_sub.add_parser("session", help="a complete synthetic session folder")
+    ss.add_argument("out", help="new folder")
+    ss.add_argument("--seed", type=int, default=0)
+    ss.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
+                    help="an effect put into the data and declared in session.toml")
+    ss.add_argument("--undeclared", action="append", default=[], metavar="NAME=VALUE",
+                    help="an effect put into the data but not declared")
+    ss.set_defaults(func=cmd_synth)
+
+    d = sub.add_parser("demo", help="synthesise a session with known truth and run it")
+    d.add_argument("--out", help="folder for the session and outputs (default: a new temp folder)")
     d.add_argument("--seed", type=int, default=1)
     d.set_defaults(func=cmd_demo)
     return p

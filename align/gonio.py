@@ -21,10 +21,21 @@ absorbed by the face angles (only a reversal on the table separates it).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
+from goniometry import (
+    FaceAngles,
+    LogSummary,
+    earth_rate_counts,
+    face_angles,
+    kept_table,
+    read_revolutions,
+    vertical_earth_rate,
+)
 from goniometry.angles import OMEGA_EARTH
 
 EARTH = "earth_rate"
@@ -94,3 +105,48 @@ def latitude_from_earth_rate(rate: float, u: float, direction: int) -> tuple[flo
     s = np.clip(rate / (direction * OMEGA_EARTH), -1, 1)
     lat = float(np.arcsin(s))
     return lat, float(u / OMEGA_EARTH / max(np.cos(lat), 1e-6))
+
+
+@dataclass(frozen=True)
+class GonioRun:
+    """A counter log through the goniometer pipeline: the revolution summary, the face angles,
+    the revolution-level loop (None when it did not run) and notes for the user."""
+
+    summary: LogSummary
+    angles: FaceAngles
+    loop: LoopReport | None
+    notes: tuple[str, ...]
+    earth_rate_applied: float | None
+
+
+def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
+                direction: int = 1, alpha: float = 1e-3) -> GonioRun:
+    """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
+    else by the loop when the data show it and it is physically possible.
+
+    Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
+    """
+    notes: list[str] = []
+    loop = None
+    rate_used = None
+    summary = read_revolutions(path, n_faces)
+    if latitude_deg is not None and summary.has_time:
+        rate_used = vertical_earth_rate(latitude_deg, direction)
+    elif latitude_deg is not None:
+        notes.append("no t column: the Earth-rate correction needs pulse times; not applied")
+    elif summary.has_time:
+        counts, dt, t_end = kept_table(summary)
+        loop = loop_gonio(counts, dt, t_end, alpha=alpha)
+        earth = [e for e in loop.effects if e.name == EARTH]
+        if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
+            notes.append(f"counts per revolution follow the period with a slope of "
+                         f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
+        elif earth:
+            rate_used = earth[0].estimate
+            lat, ulat = latitude_from_earth_rate(earth[0].estimate, earth[0].u, direction)
+            notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°")
+    if rate_used is not None:
+        rate = rate_used
+        summary = read_revolutions(path, n_faces,
+                                   correct=lambda c, dt: earth_rate_counts(c, dt, rate))
+    return GonioRun(summary, face_angles(summary), loop, tuple(notes), rate_used)

@@ -1,12 +1,37 @@
-"""Figures a metrologist looks at (matplotlib, written as PNG files)."""
+"""Figures a metrologist looks at (matplotlib): ``fig_*`` build them, ``plot_*`` write new PNG
+files, ``png_bytes`` gives the PNG for embedding in a report."""
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 
 from align.marks import MarkResult
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def png_bytes(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    _plt().close(fig)
+    return buf.getvalue()
+
+
+def _write(fig, folder: Path, stem: str) -> Path:
+    out = _new_png(Path(folder), stem)
+    fig.savefig(out, dpi=110)
+    _plt().close(fig)
+    return out
 
 
 def _new_png(folder: Path, stem: str) -> Path:
@@ -21,13 +46,12 @@ def _new_png(folder: Path, stem: str) -> Path:
 
 
 def plot_mark(r: MarkResult, folder: str | Path) -> Path:
-    """The mark's centres with the fitted line (exaggerated) and the residuals along it."""
-    import matplotlib
+    return _write(fig_mark(r), Path(folder), f"{Path(r.image).stem}_mark{r.index}")
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    out = _new_png(Path(folder), f"{Path(r.image).stem}_mark{r.index}")
+def fig_mark(r: MarkResult):
+    """The mark's residuals across the straight line, before and after the loop."""
+    plt = _plt()
     before, after = r.loop.before, r.loop.after
     fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     t = np.asarray(before.regressors["t"])
@@ -46,21 +70,18 @@ def plot_mark(r: MarkResult, folder: str | Path) -> Path:
     axes[1].set_ylabel("residual [px]")
     axes[1].legend(loc="upper right")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return fig
 
 
 def plot_calibration(cal, poses, check, folder: Path) -> Path:
+    return _write(fig_calibration(cal, poses, check), folder, "calibration")
+
+
+def fig_calibration(cal, poses, check):
     """Δg per pose (calibration and check poses) and the residual against orientation."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from align.calibration import delta_g
 
-    out = _new_png(folder, "calibration")
+    plt = _plt()
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))
     dg0 = delta_g(cal.algebraic, poses) * 1e6
     dg1 = delta_g(cal.model, poses) * 1e6
@@ -82,20 +103,18 @@ def plot_calibration(cal, poses, check, folder: Path) -> Path:
     ax[1].set_ylabel("residual |a| - 1 [µg]")
     ax[1].legend()
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return fig
 
 
 def plot_gonio(counts: np.ndarray, fa, faces: list[str], folder: Path) -> Path:
-    """Per-face angle against revolution, their Allan deviation, and the residual spectrum."""
-    import matplotlib
+    return _write(fig_gonio(counts, fa, faces), folder, "gonio")
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def fig_gonio(counts: np.ndarray, fa, faces: list[str]):
+    """Per-face angle against revolution, their Allan deviation, and the residual spectrum."""
     from scipy import signal
 
-    out = _new_png(folder, "gonio")
+    plt = _plt()
     a = 2 * np.pi * counts / counts.sum(1, keepdims=True)
     dev = np.rad2deg(a - fa.angles_rad) * 3600
     fig, ax = plt.subplots(1, 3, figsize=(15, 4))
@@ -120,6 +139,22 @@ def plot_gonio(counts: np.ndarray, fa, faces: list[str], folder: Path) -> Path:
     ax[2].set_xlabel("frequency [cycles per revolution]")
     ax[2].set_ylabel("residual power [″² · rev]")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return fig
+
+
+def fig_fusion(rows) -> object:
+    """Normalised residual of every fusion observation, coloured by source."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(11, 3.8))
+    sources = list(dict.fromkeys(r.source for r in rows))
+    for k, src in enumerate(sources):
+        idx = [i for i, r in enumerate(rows) if r.source == src]
+        ax.bar(idx, [rows[i].normalised for i in idx], color=f"C{k}", label=src)
+    ax.axhline(2, color="k", lw=0.5, ls=":")
+    ax.axhline(-2, color="k", lw=0.5, ls=":")
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels([r.label for r in rows], rotation=90, fontsize=6)
+    ax.set_ylabel("(observed − fitted) / u")
+    ax.legend(fontsize=8, ncol=len(sources))
+    fig.tight_layout()
+    return fig

@@ -58,13 +58,20 @@ class Triad:
     noise_v: float = 2.4e-5
     lsb_v: float = 0.0
     full_scale_v: float = 10.0
+    axes: tuple[tuple[float, float, float], ...] | None = None
+
+    def sensing(self) -> np.ndarray:
+        """Rows: the sensing axes in the frame of ``a`` — ``axes`` (unit vectors of a
+        mounted triad) when given, else the paper's R(beta) in its convenient frame."""
+        return np.asarray(self.axes, float) if self.axes is not None else r_matrix(
+            np.asarray(self.beta))
 
     def outputs(self, a: np.ndarray, t: np.ndarray, temp: np.ndarray,
                 rng: np.random.Generator | None) -> np.ndarray:
         """Outputs u (N, 3) [V] for specific forces a (N, 3) [g] at times t [s], temps [K]."""
         b = (np.asarray(self.bias) + np.outer(t, self.drift)
              + np.outer(temp, self.temp_coeff))
-        x = (a + b) @ r_matrix(np.asarray(self.beta)).T
+        x = (a + b) @ self.sensing().T
         u = np.asarray(self.k) * (x + np.asarray(self.k2) * x * x)
         if rng is not None and self.noise_v:
             u = u + rng.normal(0.0, self.noise_v, u.shape)

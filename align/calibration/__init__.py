@@ -18,12 +18,18 @@ from align.calibration.model import (
     model_to_dict,
     poses_from_samples,
 )
-from align.calibration.static import StaticInterval, StaticSettings, find_static, read_poses
+from align.calibration.static import (
+    StaticInterval,
+    StaticSettings,
+    find_static,
+    read_poses,
+    read_table,
+)
 
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",
     "Ellipsoid",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
-    "find_static", "read_poses", "poses_from_samples",
+    "find_static", "read_poses", "read_table", "poses_from_samples",
 ]

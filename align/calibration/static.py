@@ -53,7 +53,7 @@ class StaticSettings:
     margin_s: float = 0.5
 
 
-def _read_table(path: Path) -> tuple[list[str], np.ndarray, list[int], list[str] | None]:
+def read_table(path: Path) -> tuple[list[str], np.ndarray, list[int], list[str] | None]:
     """Header (lower case), numbers, source line numbers, pose labels in order of appearance."""
     try:
         text = path.read_text()
@@ -118,7 +118,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     for check poses, which may be few.
     """
     path = Path(path)
-    head, data, lines, order = _read_table(path)
+    head, data, lines, order = read_table(path)
     col = {h: i for i, h in enumerate(head)}
     u = data[:, [col["ux"], col["uy"], col["uz"]]]
     _check_values(path, u, lines)

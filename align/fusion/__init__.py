@@ -1,0 +1,32 @@
+"""Fusion of goniometer, camera, calibration and platform readings into the misalignment E.
+
+Public API::
+
+    Block, MarkObs, PlatformPose                      (observations of each instrument)
+    mark_block, gonio_block, ellipsoid_block, static_blocks
+    fuse(blocks) -> FusionResult                      (weighted LS + the residual loop)
+"""
+
+from align.fusion.observations import (
+    E_INDEX,
+    E_NAMES,
+    REF,
+    ROLL,
+    TILT,
+    Block,
+    MarkObs,
+    PlatformPose,
+    axes_from,
+    e_matrix,
+    ellipsoid_block,
+    gonio_block,
+    mark_block,
+    static_blocks,
+)
+from align.fusion.solve import FusionResult, FusionStage, ObservationRow, fuse
+
+__all__ = [
+    "E_INDEX", "E_NAMES", "REF", "ROLL", "TILT", "Block", "FusionResult", "FusionStage",
+    "MarkObs", "ObservationRow", "PlatformPose", "axes_from", "e_matrix", "ellipsoid_block",
+    "fuse", "gonio_block", "mark_block", "static_blocks",
+]

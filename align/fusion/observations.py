@@ -1,0 +1,237 @@
+"""Observation equations of every instrument for the misalignment E (exact, not first order).
+
+Frames (design.md): platform P with X, Y horizontal and Z up; accelerometer i's sensing axis
+s_i = normalise(e_i + sum_j E_ij e_j), E with zero diagonal [rad]. Every observation block holds
+measured values, their covariance and a ``predict(axes, nuis)`` giving the same quantities from
+the unit axes (rows of a 3x3 array) and the nuisance parameters (name -> array) the loop has
+added. Angles in radians, readings in g.
+
+* camera mark: the angle of s_i projected on a view's (right, up) plane,
+  atan2(s.up, s.right), minus its nominal (0 horizontal, pi/2 vertical), wrapped to a half turn,
+  plus the roll of the view's camera;
+* goniometer face: the azimuth of housing i's face normal (along +-s_i's horizontal projection)
+  relative to the reference face, minus nominal; the reference face's own azimuth offset is a
+  nuisance;
+* ellipsoid: cosines of the angles between the calibrated axes (the calibration's own frame
+  floats, angles between its axes do not);
+* platform static: a calibrated off-axis reading w_i = |r_i| s_i . g of a pose whose gravity
+  direction g in P is known (levelled at a table angle; the table axis's tilt turns with the
+  table angle), with the calibration's bias uncertainty as a nuisance with a prior.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+Nuisances = Mapping[str, np.ndarray]
+HOUSINGS = ("x", "y", "z")
+# E's six off-diagonal angles in parameter order: (row i, column j).
+E_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
+E_NAMES = tuple(f"E_{HOUSINGS[i]}{'XYZ'[j]}" for i, j in E_INDEX)
+ROLL = "camera_roll"
+REF = "reference_face_offset"
+TILT = "platform_tilt"
+
+
+def wrap_half(a: np.ndarray | float) -> np.ndarray:
+    """Wrap line directions to [-pi/2, pi/2)."""
+    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
+
+
+def axes_from(e6: np.ndarray) -> np.ndarray:
+    """Unit sensing axes (rows) from the six small angles in ``E_INDEX`` order."""
+    S = np.eye(3)
+    for v, (i, j) in zip(e6, E_INDEX, strict=True):
+        S[i, j] = v
+    return S / np.linalg.norm(S, axis=1, keepdims=True)
+
+
+def e_matrix(e6: np.ndarray) -> np.ndarray:
+    E = np.zeros((3, 3))
+    for v, (i, j) in zip(e6, E_INDEX, strict=True):
+        E[i, j] = v
+    return E
+
+
+@dataclass(frozen=True)
+class Block:
+    """Observations of one source: ``values`` (n,), ``cov`` (n, n), ``labels``, and
+    ``predict(axes, nuis) -> (n,)``. ``unit`` names what the values are (rad or g)."""
+
+    source: str
+    labels: tuple[str, ...]
+    values: np.ndarray
+    cov: np.ndarray
+    predict: Callable[[np.ndarray, Nuisances], np.ndarray]
+    unit: str = "rad"
+    # Which nuisance names this block can see (for identifiability messages).
+    sees: tuple[str, ...] = ()
+
+    @property
+    def u(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+
+# ----------------------------------------------------------------------------- camera marks
+
+@dataclass(frozen=True)
+class MarkObs:
+    """One mark: housing index, view's right/up unit vectors in P, camera id, nominal angle
+    [rad] (0 or pi/2), measured image angle [rad] (ccw as displayed) and its u."""
+
+    label: str
+    housing: int
+    right: np.ndarray
+    up: np.ndarray
+    camera: str
+    nominal: float
+    angle: float
+    u: float
+    declared_roll: float = 0.0
+
+
+def mark_block(marks: list[MarkObs]) -> Block:
+    values = np.array([wrap_half(m.angle - m.nominal - m.declared_roll) for m in marks])
+    h = np.array([m.housing for m in marks])
+    R = np.array([m.right for m in marks])
+    U = np.array([m.up for m in marks])
+    nom = np.array([m.nominal for m in marks])
+    cams = [m.camera for m in marks]
+
+    def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
+        s = axes[h]
+        ang = np.arctan2((s * U).sum(1), (s * R).sum(1))
+        roll = np.array([nuis[f"{ROLL}[{c}]"][0] if f"{ROLL}[{c}]" in nuis else 0.0
+                         for c in cams])
+        return wrap_half(ang - nom) + roll
+
+    return Block("camera", tuple(m.label for m in marks), values,
+                 np.diag([m.u**2 for m in marks]), predict,
+                 sees=tuple(sorted({f"{ROLL}[{c}]" for c in cams})))
+
+
+# ----------------------------------------------------------------------------- goniometer
+
+def gonio_block(faces: list[str], angles: np.ndarray, cov: np.ndarray, nominal: np.ndarray,
+                direction: int, declared_offset: float = 0.0) -> Block | None:
+    """Face-azimuth deviations of housings x and y relative to the reference face (face 0).
+
+    ``angles``/``nominal`` [rad]: table angle from face k to k+1 in passing order; ``cov``
+    their covariance. Counter-clockwise (direction +1) faces pass in order of decreasing
+    azimuth: psi_k - psi_0 = -sum_{m<k} A_m. A face of housing z carries no information on E
+    (its turn about its own axis); it is not used.
+    """
+    n = len(faces)
+    rows, labels, which = [], [], []
+    for k, f in enumerate(faces):
+        if k == 0 or f not in ("x", "y"):
+            continue
+        row = np.zeros(n)
+        row[:k] = -direction
+        rows.append(row)
+        labels.append(f"face {f}")
+        which.append(HOUSINGS.index(f))
+    if not rows:
+        return None
+    L = np.array(rows)
+    values = L @ (angles - nominal)
+    values = wrap_half(values)
+    C = L @ cov @ L.T
+    which_a = np.array(which)
+
+    def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
+        s = axes[which_a]
+        az = np.arctan2(s[:, 1], s[:, 0])
+        nom = np.where(which_a == 0, 0.0, np.pi / 2)
+        off = declared_offset + (nuis[REF][0] if REF in nuis else 0.0)
+        return wrap_half(az - nom) - off
+
+    return Block("goniometer", tuple(labels), values, C, predict, sees=(REF,))
+
+
+# ----------------------------------------------------------------------------- ellipsoid
+
+def _row_cosines(beta: np.ndarray) -> np.ndarray:
+    from align.calibration import r_matrix
+
+    R = r_matrix(beta)
+    R = R / np.linalg.norm(R, axis=1, keepdims=True)
+    return np.array([R[0] @ R[1], R[0] @ R[2], R[1] @ R[2]])
+
+
+def ellipsoid_block(beta: np.ndarray, cov_beta: np.ndarray) -> Block:
+    """Cosines of the angles x-y, x-z, y-z between the calibrated axes (from beta [rad])."""
+    c = _row_cosines(beta)
+    J = np.zeros((3, 3))
+    h = 1e-7
+    for j in range(3):
+        d = np.zeros(3)
+        d[j] = h
+        J[:, j] = (_row_cosines(beta + d) - _row_cosines(beta - d)) / (2 * h)
+    pairs = ((0, 1), (0, 2), (1, 2))
+
+    def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
+        return np.array([axes[i] @ axes[j] for i, j in pairs])
+
+    return Block("ellipsoid", ("cos(x,y)", "cos(x,z)", "cos(y,z)"), c, J @ cov_beta @ J.T,
+                 predict)
+
+
+# ----------------------------------------------------------------------------- platform static
+
+@dataclass(frozen=True)
+class PlatformPose:
+    """A static pose of the platform: ``up`` the nominal 'up' specific-force direction in P
+    (a signed axis), ``table`` the table angle [rad] (for levelled poses), ``w`` the calibrated
+    per-axis readings [g] (w_i = |r_i| s_i . g), ``u_w`` their standard errors [g]."""
+
+    label: str
+    up: np.ndarray
+    table: float
+    w: np.ndarray
+    u_w: np.ndarray
+
+
+def gravity_in_platform(up: np.ndarray, table: float, tilt: np.ndarray) -> np.ndarray:
+    """'Up' direction in P: levelled poses see the table axis's tilt (tx, ty) [rad], fixed in
+    the room, turned by the table angle; commanded side poses are taken as exact."""
+    if abs(up[2]) < 0.5:
+        return up
+    c, s = np.cos(table), np.sin(table)
+    g = np.array([c * tilt[0] + s * tilt[1], -s * tilt[0] + c * tilt[1], 1.0]) * np.sign(up[2])
+    return g / np.linalg.norm(g)
+
+
+def static_blocks(poses: list[PlatformPose], row_norms: np.ndarray, u_bias: np.ndarray,
+                  declared_tilt: np.ndarray) -> list[Block]:
+    """Off-axis readings (the on-axis one measures the scale factor, not E) and the bias
+    prior: every reading carries the same calibrated bias error per axis, a nuisance 'bias[i]'
+    with prior 0 +- u_bias[i]."""
+    vals, us, labels, which, pidx = [], [], [], [], []
+    for p, pose in enumerate(poses):
+        up_axis = int(np.argmax(np.abs(pose.up)))
+        for i in range(3):
+            if i == up_axis:
+                continue
+            vals.append(pose.w[i])
+            us.append(pose.u_w[i])
+            labels.append(f"{pose.label} {HOUSINGS[i]}")
+            which.append(i)
+            pidx.append(p)
+    which_a, pidx_a = np.array(which), np.array(pidx)
+
+    def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
+        tilt = declared_tilt + (nuis[TILT] if TILT in nuis else 0.0)
+        g = np.array([gravity_in_platform(poses[p].up, poses[p].table, tilt) for p in pidx_a])
+        return row_norms[which_a] * (axes[which_a] * g).sum(1) + nuis["bias"][which_a]
+
+    def predict_prior(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
+        return nuis["bias"]
+
+    return [Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
+                  predict, unit="g", sees=(TILT,)),
+            Block("bias prior", tuple(f"bias {h}" for h in HOUSINGS), np.zeros(3),
+                  np.diag(np.square(u_bias)), predict_prior, unit="g")]

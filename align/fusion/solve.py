@@ -1,0 +1,217 @@
+"""One weighted least-squares solve for the six small angles E, its loop, and the result.
+
+Each block is whitened by the Cholesky factor of its covariance, so the stacked residual is
+N(0, 1) per entry when the instruments agree; chi2 and the per-observation normalised residuals
+are the consistency check between instruments. Nuisances (camera roll per camera, the
+reference face's azimuth offset, the table-axis tilt) enter as loop terms, only when the data
+call for them; a term the data cannot separate from E (rank-deficient) is not offered.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import least_squares
+
+from align.errors import InputError
+from align.fusion.observations import (
+    E_NAMES,
+    REF,
+    ROLL,
+    TILT,
+    Block,
+    axes_from,
+    e_matrix,
+)
+from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
+
+TERM_WIDTH = {TILT: 2}
+TERM_UNIT = {TILT: "rad", REF: "rad"}
+
+
+def _width(name: str) -> int:
+    return TERM_WIDTH.get(name, 1)
+
+
+@dataclass(frozen=True)
+class Solution:
+    """What one fit gives: parameters, covariance, whitened residuals, names."""
+
+    params: np.ndarray
+    cov: np.ndarray
+    names: tuple[str, ...]
+    residuals: np.ndarray
+    predicted: tuple[np.ndarray, ...]
+
+
+class FusionStage:
+    """The fusion as a stage of the residual loop (``fit(terms) -> StageFit``)."""
+
+    def __init__(self, blocks: Sequence[Block]):
+        if not blocks:
+            raise InputError("fusion: no observations")
+        self.blocks = list(blocks)
+        self.whiten = [np.linalg.inv(np.linalg.cholesky(b.cov)) for b in self.blocks]
+        self.base_nuis = {"bias": 3} if any(b.source == "bias prior" for b in blocks) else {}
+        self.n = sum(len(b.values) for b in self.blocks)
+
+    def _layout(self, terms: Sequence[Term]) -> list[tuple[str, int]]:
+        return [*self.base_nuis.items(), *((t.name, _width(t.name)) for t in terms)]
+
+    def _unpack(self, p: np.ndarray, layout: list[tuple[str, int]]
+                ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        nuis, i = {}, 6
+        for name, w in layout:
+            nuis[name] = p[i:i + w]
+            i += w
+        return axes_from(p[:6]), nuis
+
+    def _residual(self, p: np.ndarray, layout: list[tuple[str, int]]) -> np.ndarray:
+        axes, nuis = self._unpack(p, layout)
+        return np.concatenate([W @ (b.values - b.predict(axes, nuis))
+                               for b, W in zip(self.blocks, self.whiten, strict=True)])
+
+    def solve(self, terms: Sequence[Term] = ()) -> Solution:
+        layout = self._layout(terms)
+        names = E_NAMES + tuple(f"{n}[{k}]" if w > 1 else n for n, w in layout
+                                for k in range(w))
+        x0 = np.zeros(len(names))
+        if self.n < len(x0):
+            raise np.linalg.LinAlgError("fewer observations than parameters")
+        res = least_squares(self._residual, x0, args=(layout,), method="lm", xtol=1e-14,
+                            ftol=1e-14, x_scale=1e-3)
+        J = res.jac
+        s = np.linalg.svd(J, compute_uv=False)
+        if s[-1] < 1e-9 * s[0]:
+            raise np.linalg.LinAlgError("parameters not separable by these observations")
+        cov = np.linalg.inv(J.T @ J)
+        axes, nuis = self._unpack(res.x, layout)
+        pred = tuple(b.predict(axes, nuis) for b in self.blocks)
+        return Solution(res.x, cov, names, res.fun, pred)
+
+    def fit(self, terms: Sequence[Term]) -> StageFit:
+        sol = self.solve(terms)
+        u = np.sqrt(np.diag(sol.cov))
+        effects, components = {}, {}
+        i = 6 + sum(self.base_nuis.values())
+        for t in terms:
+            w = _width(t.name)
+            vals, us = sol.params[i:i + w], u[i:i + w]
+            if w == 1:
+                effects[t.name] = (float(vals[0]), float(us[0]))
+            else:
+                k = int(np.argmax(np.abs(vals) / us))
+                effects[t.name] = (float(vals[k]), float(us[k]))
+                components[t.name] = tuple((lab, float(v), float(uu)) for lab, v, uu in
+                                           zip(("x", "y"), vals, us, strict=True))
+            i += w
+        quantities = {n: (float(sol.params[k]), float(u[k])) for k, n in enumerate(E_NAMES)}
+        idx = np.arange(self.n, dtype=float)
+        return StageFit(sol.residuals, np.ones(self.n), len(sol.params), {"index": idx},
+                        "index", effects, quantities, components, payload=sol)
+
+
+def candidates(stage: FusionStage) -> tuple[Candidate, ...]:
+    seen = {s for b in stage.blocks for s in b.sees}
+    out = []
+    for name in sorted(seen):
+        if name.startswith(ROLL):
+            desc = f"roll of camera {name[len(ROLL) + 1:-1]} about its optical axis"
+        elif name == REF:
+            desc = "azimuth offset of the goniometer's reference face"
+        elif name == TILT:
+            desc = "tilt of the table axis under the levelled platform (x, y)"
+        else:
+            continue
+        out.append(Candidate(
+            name, "rad", desc,
+            lambda fit, name=name: Term(name, "rad", np.zeros((fit.n, _width(name))))))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class ObservationRow:
+    source: str
+    label: str
+    value: float
+    predicted: float
+    u: float
+    unit: str
+
+    @property
+    def normalised(self) -> float:
+        return (self.value - self.predicted) / self.u
+
+
+@dataclass(frozen=True)
+class FusionResult:
+    """The misalignment E [rad] (3x3, row i accelerometer, column j platform axis, zero
+    diagonal), its standard uncertainties and the 6x6 covariance over ``E_NAMES``; the unit
+    axes (rows of M); chi2 of the final fit with its p-value; per-observation rows; the
+    loop's before/after; ``inflation`` (>1 when unexplained inconsistency remains and the
+    uncertainties were scaled by sqrt(chi2/dof))."""
+
+    E: np.ndarray
+    E_u: np.ndarray
+    cov: np.ndarray
+    axes: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+    rows: tuple[ObservationRow, ...]
+    loop: LoopReport
+    inflation: float
+    nuisances: dict[str, tuple[float, float]]
+    sources: tuple[str, ...]
+
+    @property
+    def consistent(self) -> bool:
+        return not self.loop.unexplained_structure
+
+
+def _check_determined(stage: FusionStage) -> None:
+    """Raise naming the angles no combination of the sources determines (linearised at 0)."""
+    layout = stage._layout(())
+    p0 = np.zeros(6 + sum(w for _, w in layout))
+    J = np.zeros((stage.n, len(p0)))
+    for k in range(len(p0)):
+        d = np.zeros_like(p0)
+        d[k] = 1e-6
+        J[:, k] = (stage._residual(p0 + d, layout) - stage._residual(p0 - d, layout)) / 2e-6
+    _, s, vt = np.linalg.svd(J)
+    s = np.concatenate([s, np.zeros(len(p0) - len(s))])
+    null = vt[s < 1e-9 * max(s[0], 1e-300)]
+    if not len(null):
+        return
+    weak = [E_NAMES[k] for k in range(6) if np.any(np.abs(null[:, k]) > 0.1)]
+    raise InputError("fusion: the sources given do not determine the misalignment "
+                     f"({', '.join(weak) or 'some combination'} undetermined); add a camera "
+                     "view, the goniometer log or platform static poses")
+
+
+def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
+    """Solve for E with the residual loop over the nuisance candidates."""
+    stage = FusionStage(blocks)
+    _check_determined(stage)
+    loop = run_loop(stage, candidates(stage), alpha=alpha)
+    fit = loop.after
+    sol: Solution = fit.payload
+    inflation = 1.0
+    p_value = float(stats.chi2.sf(fit.chi2, max(fit.dof, 1)))
+    if loop.unexplained_structure and fit.dof > 0:
+        inflation = float(max(1.0, np.sqrt(fit.chi2 / fit.dof)))
+    cov = sol.cov[:6, :6] * inflation**2
+    E = e_matrix(sol.params[:6])
+    E_u = e_matrix(np.sqrt(np.diag(cov)))
+    rows = []
+    for b, pred in zip(stage.blocks, sol.predicted, strict=True):
+        for lab, v, p, u in zip(b.labels, b.values, pred, b.u, strict=True):
+            rows.append(ObservationRow(b.source, lab, float(v), float(p), float(u), b.unit))
+    nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
+            for k, n in enumerate(sol.names) if k >= 6}
+    return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
+                        tuple(rows), loop, inflation, nuis,
+                        tuple(dict.fromkeys(b.source for b in stage.blocks)))

@@ -1,0 +1,15 @@
+"""Whole sessions: ``session.toml`` -> every stage -> fusion -> JSON and HTML report.
+
+Public API::
+
+    load_session(folder) -> Session          (checked; InputError names the key at fault)
+    run_session(session) -> SessionResult    (stage failures collected, not raised)
+    result_json(result) -> dict              (the JSON contract of 'align run')
+"""
+
+from align.session.config import Session, load_session
+from align.session.output import platform_calibration, result_json
+from align.session.run import SessionResult, StageError, run_session
+
+__all__ = ["Session", "SessionResult", "StageError", "load_session", "platform_calibration",
+           "result_json", "run_session"]

@@ -1,0 +1,284 @@
+"""``session.toml``: what a session holds, read and checked before anything runs.
+
+Every problem is reported with the key that causes it (``InputError``), e.g.
+``session.toml: [[images]] #3 housing = 'w': not one of x, y, z``. Paths are relative to the
+session folder. The format is documented with a complete example in README.md.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from align.errors import InputError
+
+ARCSEC = np.pi / 180 / 3600
+HOUSINGS = ("x", "y", "z")
+AXIS = {"X": 0, "Y": 1, "Z": 2}
+TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
+            "platform", "name"}
+
+
+def signed_axis(text: object, where: str) -> np.ndarray:
+    """'+X', '-Z', 'Y' -> unit vector in the platform frame."""
+    t = str(text).strip().upper()
+    sign = -1.0 if t.startswith("-") else 1.0
+    ax = t.lstrip("+-")
+    if ax not in AXIS:
+        raise InputError(f"{where} = {text!r}: expected a signed platform axis such as +X, -Y, +Z")
+    v = np.zeros(3)
+    v[AXIS[ax]] = sign
+    return v
+
+
+@dataclass(frozen=True)
+class ImageEntry:
+    file: Path
+    housing: str
+    view: str
+    nominal: str  # "horizontal" | "vertical"
+    key: str
+
+
+@dataclass(frozen=True)
+class View:
+    name: str
+    camera: str
+    right: np.ndarray
+    up: np.ndarray
+
+
+@dataclass(frozen=True)
+class Camera:
+    name: str
+    model: Path | None = None
+    roll_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class Goniometer:
+    log: Path
+    faces: tuple[str, ...]
+    nominal_rad: np.ndarray
+    direction: int
+    reference_offset_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class CalibrationInput:
+    static: Path
+    scale_sign: tuple[float, float, float]
+    check: Path | None = None
+
+
+@dataclass(frozen=True)
+class PlatformInput:
+    static: Path
+    poses: dict[str, tuple[np.ndarray, float]]  # label -> (up vector, table angle [rad])
+    table_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+
+@dataclass(frozen=True)
+class Session:
+    folder: Path
+    name: str
+    latitude_deg: float | None
+    calibration: CalibrationInput | None
+    goniometer: Goniometer | None
+    cameras: dict[str, Camera]
+    views: dict[str, View]
+    images: tuple[ImageEntry, ...]
+    platform: PlatformInput | None
+
+    @property
+    def inputs(self) -> list[Path]:
+        """Every file the session names (outputs must never be one of them)."""
+        out = [self.folder / "session.toml", *(i.file for i in self.images)]
+        if self.calibration:
+            out += [self.calibration.static] + ([self.calibration.check]
+                                                if self.calibration.check else [])
+        if self.goniometer:
+            out.append(self.goniometer.log)
+        if self.platform:
+            out.append(self.platform.static)
+        out += [c.model for c in self.cameras.values() if c.model is not None]
+        return out
+
+
+def _file(folder: Path, value: object, where: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise InputError(f"{where}: expected a file name")
+    p = folder / value
+    if not p.is_file():
+        raise InputError(f"{where} = {value!r}: no such file ({p})")
+    return p
+
+
+def _number(value: object, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{where} = {value!r}: expected a number")
+    return float(value)
+
+
+def _table(d: dict, key: str, where: str) -> dict:
+    v = d.get(key, {})
+    if not isinstance(v, dict):
+        raise InputError(f"{where}[{key}]: expected a table")
+    return v
+
+
+def load_session(folder: str | Path) -> Session:
+    """Read and check ``folder/session.toml`` (``InputError`` names the key at fault)."""
+    folder = Path(folder)
+    path = folder / "session.toml" if folder.is_dir() else folder
+    if folder.is_file():
+        folder = folder.parent
+    src = f"{path}"
+    if not path.is_file():
+        raise InputError(f"{src}: no such file (a session is a folder with a session.toml)")
+    try:
+        d = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{src}: not valid TOML ({exc})") from None
+    unknown = set(d) - TOP_KEYS
+    if unknown:
+        raise InputError(f"{src}: unknown key(s) {', '.join(sorted(unknown))}; known: "
+                         f"{', '.join(sorted(TOP_KEYS))}")
+    lat = d.get("latitude_deg")
+    if lat is not None:
+        lat = _number(lat, f"{src}: latitude_deg")
+        if not -90 <= lat <= 90:
+            raise InputError(f"{src}: latitude_deg = {lat}: outside [-90, 90]")
+
+    cal = None
+    if "calibration" in d:
+        c = _table(d, "calibration", src + ": ")
+        sign = str(c.get("scale_sign", "+"))
+        parts = [p.strip() for p in sign.split(",")] if "," in sign else [sign.strip()] * 3
+        if len(parts) != 3 or any(p not in ("+", "-") for p in parts):
+            raise InputError(f"{src}: [calibration] scale_sign = {sign!r}: use +, - or "
+                             "three of them, e.g. \"-,-,-\"")
+        cal = CalibrationInput(
+            _file(folder, c.get("static"), f"{src}: [calibration] static"),
+            tuple(-1.0 if p == "-" else 1.0 for p in parts),  # type: ignore[arg-type]
+            _file(folder, c["check"], f"{src}: [calibration] check") if "check" in c else None)
+
+    gon = None
+    if "goniometer" in d:
+        g = _table(d, "goniometer", src + ": ")
+        w = f"{src}: [goniometer]"
+        faces = g.get("faces")
+        if not isinstance(faces, list) or len(faces) < 2 or not all(
+                isinstance(f, str) for f in faces):
+            raise InputError(f"{w} faces: expected a list of face names in passing order, the "
+                             "first being the reference face, e.g. [\"ref\", \"y\", \"x\", \"z\"]")
+        if len(set(faces)) != len(faces):
+            raise InputError(f"{w} faces = {faces}: a face is named twice")
+        if faces[0] in HOUSINGS:
+            raise InputError(f"{w} faces: the first face is the reference face (marked by the "
+                             f"binding signal); {faces[0]!r} is a housing")
+        nom = g.get("nominal_deg", [360.0 / len(faces)] * len(faces))
+        if not isinstance(nom, list) or len(nom) != len(faces):
+            raise InputError(f"{w} nominal_deg: expected {len(faces)} angles, one per face")
+        nom_r = np.deg2rad([_number(v, f"{w} nominal_deg") for v in nom])
+        if abs(np.rad2deg(nom_r.sum()) - 360) > 1e-6:
+            raise InputError(f"{w} nominal_deg = {nom}: the angles of a full turn must sum to "
+                             "360")
+        direction = g.get("direction", "ccw")
+        if direction not in ("ccw", "cw"):
+            raise InputError(f"{w} direction = {direction!r}: ccw or cw")
+        dsign = 1 if direction == "ccw" else -1
+        rel = {f: -dsign * nom_r[:k].sum() for k, f in enumerate(faces)}
+        if "x" in rel and "y" in rel:
+            gap = (rel["y"] - rel["x"]) % np.pi
+            if abs(gap - np.pi / 2) > np.deg2rad(1):
+                raise InputError(f"{w} nominal_deg = {nom}: faces x and y would be "
+                                 f"{np.rad2deg(gap):.3f}° apart (mod 180°); the axes are "
+                                 "perpendicular — contradictory nominal orientation")
+        gon = Goniometer(_file(folder, g.get("log"), f"{w} log"), tuple(faces), nom_r, dsign,
+                         _number(g.get("reference_offset_arcsec", 0.0),
+                                 f"{w} reference_offset_arcsec") * ARCSEC)
+
+    cameras = {}
+    for name, c in _table(d, "cameras", src + ": ").items():
+        w = f"{src}: [cameras.{name}]"
+        if not isinstance(c, dict):
+            raise InputError(f"{w}: expected a table")
+        model = _file(folder, c["model"], f"{w} model") if "model" in c else None
+        cameras[name] = Camera(name, model,
+                               _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec") * ARCSEC)
+
+    views = {}
+    for name, v in _table(d, "views", src + ": ").items():
+        w = f"{src}: [views.{name}]"
+        if not isinstance(v, dict):
+            raise InputError(f"{w}: expected a table")
+        right = signed_axis(v.get("right"), f"{w} right")
+        up = signed_axis(v.get("up"), f"{w} up")
+        if abs(right @ up) > 0:
+            raise InputError(f"{w}: right = {v.get('right')!r} and up = {v.get('up')!r} are "
+                             "the same axis; they must be perpendicular")
+        cam = str(v.get("camera", name))
+        cameras.setdefault(cam, Camera(cam))
+        views[name] = View(name, cam, right, up)
+
+    imgs = []
+    raw = d.get("images", [])
+    if not isinstance(raw, list):
+        raise InputError(f"{src}: images: expected [[images]] entries")
+    for k, im in enumerate(raw, start=1):
+        w = f"{src}: [[images]] #{k}"
+        if not isinstance(im, dict):
+            raise InputError(f"{w}: expected a table")
+        housing = im.get("housing")
+        if housing not in HOUSINGS:
+            raise InputError(f"{w} housing = {housing!r}: not one of x, y, z")
+        view = im.get("view")
+        if view not in views:
+            raise InputError(f"{w} view = {view!r}: no [views.{view}] table (known: "
+                             f"{', '.join(views) or 'none'})")
+        nominal = im.get("nominal")
+        if nominal not in ("horizontal", "vertical"):
+            raise InputError(f"{w} nominal = {nominal!r}: horizontal or vertical")
+        e = np.eye(3)[HOUSINGS.index(housing)]
+        along = views[view].right if nominal == "horizontal" else views[view].up
+        if abs(e @ along) != 1:
+            axis = "XYZ"[HOUSINGS.index(housing)]
+            raise InputError(
+                f"{w}: housing {housing} is nominally along platform {axis}, but view {view} "
+                f"has {nominal} = {'XYZ'[int(np.argmax(np.abs(along)))]} — contradictory "
+                "nominal orientation")
+        imgs.append(ImageEntry(_file(folder, im.get("file"), f"{w} file"), housing, view,
+                               nominal, w))
+
+    plat = None
+    if "platform" in d:
+        p = _table(d, "platform", src + ": ")
+        w = f"{src}: [platform]"
+        poses = {}
+        for label, spec in _table(p, "poses", w).items():
+            if not isinstance(spec, dict) or "up" not in spec:
+                raise InputError(f"{w}.poses {label}: expected {{ up = \"+Z\", table_deg = 0 }}")
+            poses[str(label)] = (signed_axis(spec["up"], f"{w}.poses {label} up"),
+                                 np.deg2rad(_number(spec.get("table_deg", 0.0),
+                                                    f"{w}.poses {label} table_deg")))
+        if not poses:
+            raise InputError(f"{w}: no [platform.poses]: each pose label in the file needs its "
+                             "attitude (up = \"+Z\", table_deg = ...)")
+        tilt = p.get("table_tilt_arcsec", [0.0, 0.0])
+        if not isinstance(tilt, list) or len(tilt) != 2:
+            raise InputError(f"{w} table_tilt_arcsec: expected [tx, ty]")
+        plat = PlatformInput(_file(folder, p.get("static"), f"{w} static"), poses,
+                             np.array([_number(t, f"{w} table_tilt_arcsec") for t in tilt])
+                             * ARCSEC)
+        if cal is None:
+            raise InputError(f"{w}: platform static readings need the triad's calibration "
+                             "([calibration] static = ...) for scale factors and biases")
+
+    if not (imgs or gon or plat or cal):
+        raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
+    return Session(folder, str(d.get("name", folder.resolve().name)), lat, cal, gon, cameras,
+                   views, tuple(imgs), plat)

@@ -1,0 +1,154 @@
+"""One self-contained HTML report of a session (figures embedded as PNG data URIs)."""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+from pathlib import Path
+
+import numpy as np
+
+from align.loop import LoopReport
+from align.session.run import SessionResult
+
+ARCSEC = np.pi / 180 / 3600
+CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:0.6em 0}td,th{border:1px solid #bbb;padding:3px 8px;
+text-align:right}th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00;font-weight:bold}
+.ok{color:#070}img{max-width:100%}h2{border-bottom:2px solid #446;margin-top:1.6em}"""
+
+
+def _img(fig) -> str:
+    from align.plots import png_bytes
+
+    data = base64.b64encode(png_bytes(fig)).decode("ascii")
+    return f'<img alt="figure" src="data:image/png;base64,{data}">'
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text))
+
+
+def _table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
+    h = "".join(f'<th class="{"l" if i < left else ""}">{_e(c)}</th>'
+                for i, c in enumerate(head))
+    body = "".join("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(c)}</td>'
+                                    for i, c in enumerate(r)) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{body}</table>"
+
+
+def _loop(loop: LoopReport | None, scale: float = 1.0, unit: str = "") -> str:
+    if loop is None:
+        return "<p>The residual loop did not run for this stage.</p>"
+    b, a = loop.before, loop.after
+
+    def chi(f) -> str:
+        return "—" if f.sigma is None else f"{f.chi2 / max(f.dof, 1):.3f}"
+    rows = [["declared model", "", "", f"{b.rms:.4g}", chi(b)]]
+    for e in loop.effects:
+        rows.append([f"+ {e.name}", f"{e.estimate * scale:.4g} ± {e.u * scale:.2g} "
+                     f"{unit or e.unit}", f"{e.p_value:.2g}", f"{e.rms_after:.4g}", ""])
+    rows[-1][4] = chi(a)
+    out = _table(["model", "effect estimate", "p", "residual RMS", "chi2/dof"], rows)
+    if loop.unexplained_structure:
+        w = loop.structure_after.worst
+        out += (f'<p class="bad">Unexplained structure remains: {_e(w.name)} '
+                f"(p = {w.p_value:.2g}) {_e(w.detail)}</p>")
+    else:
+        out += '<p class="ok">No structure left in the residual.</p>'
+    return out
+
+
+def write_report(res: SessionResult, path: str | Path) -> Path:
+    """Write the report to ``path`` (a new file; the caller checks it does not exist)."""
+    from align.plots import fig_calibration, fig_fusion, fig_gonio, fig_mark
+
+    s = res.session
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>Alignment report "
+             f"{_e(s.name)}</title><style>{CSS}</style></head><body>",
+             f"<h1>Alignment report — {_e(s.name)}</h1>",
+             f"<p>Session folder {_e(s.folder)}; written "
+             f"{_dt.datetime.now().isoformat(timespec='seconds')}.</p>"]
+    if res.errors:
+        parts.append("<h2>Stage failures</h2>" + _table(
+            ["stage", "message"], [[e.stage, e.message] for e in res.errors], left=2))
+    f = res.fusion
+    parts.append("<h2>Misalignment matrix E (platform frame)</h2>")
+    if f is None:
+        parts.append('<p class="bad">No misalignment: the fusion did not run (see the stage '
+                     "failures).</p>")
+    else:
+        rows = [[f"accelerometer {'xyz'[i]}"] + [
+            "0" if i == j else f"{f.E[i, j] / ARCSEC:+.2f} ± {f.E_u[i, j] / ARCSEC:.2f}″"
+            for j in range(3)] for i in range(3)]
+        parts.append("<p>E<sub>ij</sub>: component of accelerometer i's sensing axis along "
+                     "platform axis j; u is the standard uncertainty"
+                     + (f", inflated ×{f.inflation:.2f} for the inconsistency that remains"
+                        if f.inflation > 1 else "") + ".</p>")
+        parts.append(_table(["", "X", "Y", "Z"], rows))
+        verdict = ('<span class="ok">consistent</span>' if f.consistent
+                   else '<span class="bad">NOT consistent</span>')
+        parts.append(f"<p>Sources: {_e(', '.join(f.sources))}. chi2 = {f.chi2:.2f} for "
+                     f"{f.dof} degrees of freedom (p = {f.p_value:.3g}): the instruments are "
+                     f"{verdict} with each other.</p>")
+        parts.append("<h3>Fusion loop (nuisances added when the data call for them)</h3>"
+                     + _loop(f.loop, 1 / ARCSEC, "″"))
+        parts.append("<h3>Normalised residual per observation</h3>" + _img(fig_fusion(f.rows)))
+        parts.append(_table(
+            ["source", "observation", "observed", "fitted", "u", "normalised"],
+            [[r.source, r.label] + ([f"{r.value / ARCSEC:+.3f}″", f"{r.predicted / ARCSEC:+.3f}″",
+                                     f"{r.u / ARCSEC:.3f}″"] if r.unit == "rad" else
+                                    [f"{r.value * 1e6:+.2f} µg", f"{r.predicted * 1e6:+.2f} µg",
+                                     f"{r.u * 1e6:.2f} µg"]) + [f"{r.normalised:+.2f}"]
+             for r in f.rows], left=2))
+    if res.calibration is not None:
+        from align.calibration import read_poses
+
+        c, m = res.calibration, res.calibration.model
+        parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
+        parts.append(_table(["axis", "k [V/g]", "β [µrad]", "bias [µg]"], [
+            [ax, f"{m.k[i]:.7f} ± {m.u_of(f'k_{ax}'):.2g}",
+             f"{m.beta[i] * 1e6:.2f} ± {m.u_of(f'beta_{ax}') * 1e6:.2g}",
+             f"{m.bias[i] * 1e6:.2f} ± {m.u_of(f'bias_{ax}') * 1e6:.2g}"]
+            for i, ax in enumerate("xyz")]))
+        parts.append(_loop(c.loop))
+        try:
+            poses, _ = read_poses(s.calibration.static)
+            parts.append("<h3>Δg per pose</h3>" + _img(fig_calibration(c, poses, None)))
+        except Exception as exc:  # a figure must not cost the report
+            parts.append(f"<p>(figure not drawn: {_e(exc)})</p>")
+    if res.gonio is not None:
+        from goniometry import kept_table
+
+        g, fa = res.gonio, res.gonio.angles
+        faces = list(s.goniometer.faces)
+        parts.append("<h2>Goniometer</h2>")
+        parts.append(f"<p>{fa.revolutions} revolutions used; "
+                     f"{np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count. "
+                     + " ".join(_e(n) for n in g.notes) + "</p>")
+        n = len(faces)
+        parts.append(_table(["faces", "angle [°]", "u [″]", "deviation from nominal [″]"], [
+            [f"{faces[i]} → {faces[(i + 1) % n]}", f"{np.rad2deg(fa.angles_rad[i]):.7f}",
+             f"{fa.u_rad[i] / ARCSEC:.3f}",
+             f"{(fa.angles_rad[i] - s.goniometer.nominal_rad[i]) / ARCSEC:+.3f}"]
+            for i in range(n)]))
+        if g.loop is not None:
+            parts.append(_loop(g.loop))
+        parts.append(_img(fig_gonio(kept_table(g.summary)[0], fa, faces)))
+        for reason, count in g.summary.exclusions.counts.items():
+            parts.append(f"<p>{count} × {_e(reason)}</p>")
+    if res.marks:
+        parts.append("<h2>Scribe marks</h2>")
+        parts.append(_table(["image", "housing", "view", "angle [°]", "u [″]", "effects"], [
+            [im.file.name, im.housing, im.view, f"{np.rad2deg(r.angle_rad):+.6f}",
+             f"{r.angle_u_rad / ARCSEC:.2f}", ", ".join(e.name for e in r.loop.effects)
+             or "none"] for im, r in res.marks], left=3))
+        for im, r in res.marks:
+            parts.append(f"<h3>{_e(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
+                         + _loop(r.loop) + _img(fig_mark(r)))
+    parts.append("</body></html>")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(parts), encoding="utf-8")
+    return path

@@ -1,0 +1,162 @@
+"""Run a whole session: calibration, goniometer, marks, platform static, fusion.
+
+Each stage's failure is recorded (``StageError``) and the others go on; the fusion uses
+whatever succeeded, and says so. Nothing is written here: outputs are the caller's business.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from align.calibration import Calibration, calibrate, r_matrix, read_poses
+from align.errors import InputError
+from align.fusion import (
+    Block,
+    FusionResult,
+    MarkObs,
+    PlatformPose,
+    ellipsoid_block,
+    fuse,
+    gonio_block,
+    mark_block,
+    static_blocks,
+)
+from align.gonio import GonioRun, measure_log
+from align.marks import MarkResult, measure_file
+from align.session.config import HOUSINGS, ImageEntry, Session
+from goniometry import LogError
+from imaging import CameraModel, ImageInputError
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class StageError:
+    stage: str
+    message: str
+
+
+@dataclass
+class SessionResult:
+    """Everything a session produced (stage results are None when the stage failed or was
+    not in the session)."""
+
+    session: Session
+    calibration: Calibration | None = None
+    gonio: GonioRun | None = None
+    marks: list[tuple[ImageEntry, MarkResult]] = field(default_factory=list)
+    platform: list[PlatformPose] = field(default_factory=list)
+    fusion: FusionResult | None = None
+    errors: list[StageError] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.fusion is not None
+
+
+def _try(res: SessionResult, stage: str, fn: Callable[[], object]) -> object | None:
+    try:
+        return fn()
+    except (InputError, LogError, ImageInputError, ValueError, np.linalg.LinAlgError) as exc:
+        res.errors.append(StageError(stage, str(exc)))
+        return None
+
+
+def run_session(s: Session, progress: Progress = lambda msg: None,
+                alpha: float = 1e-3) -> SessionResult:
+    """Run every stage of ``s`` and fuse; stage failures are collected, not raised."""
+    res = SessionResult(s)
+    if s.calibration is not None:
+        progress("calibration: ellipsoid fit over the static poses")
+        c = s.calibration
+
+        def _cal() -> Calibration:
+            poses, _ = read_poses(c.static)
+            return calibrate(poses, c.scale_sign, alpha=alpha)
+        res.calibration = _try(res, "calibration", _cal)
+    if s.goniometer is not None:
+        g = s.goniometer
+        progress(f"goniometer: {g.log.name}")
+        res.gonio = _try(res, "goniometer", lambda: measure_log(
+            g.log, len(g.faces), s.latitude_deg, g.direction, alpha))
+    cams: dict[str, CameraModel | None] = {}
+    for name, cam in s.cameras.items():
+        cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
+                      if cam.model is not None else None)
+    for k, im in enumerate(s.images, start=1):
+        progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
+        cam = cams.get(s.views[im.view].camera)
+        found = [r for r in measure_file(im.file, cam, alpha=alpha, expect_one=True)]
+        ok = [r for r in found if r.found]
+        if len(ok) != 1:
+            why = found[0].error if found and not ok else f"{len(ok)} marks found"
+            res.errors.append(StageError("marks", f"{im.key} ({im.file.name}): {why}"))
+            continue
+        res.marks.append((im, ok[0]))
+    if s.platform is not None and res.calibration is not None:
+        progress("platform static readings")
+        res.platform = _try(res, "platform static", lambda: _platform_poses(s, res.calibration)
+                            ) or []
+    elif s.platform is not None:
+        res.errors.append(StageError("platform static", "not used: the calibration failed"))
+    progress("fusion")
+    blocks = _blocks(s, res)
+    res.fusion = _try(res, "fusion", lambda: fuse(blocks, alpha=alpha)) if blocks else None
+    if not blocks:
+        res.errors.append(StageError("fusion", "no stage produced observations"))
+    return res
+
+
+def _platform_poses(s: Session, cal: Calibration) -> list[PlatformPose]:
+    p = s.platform
+    poses, _ = read_poses(p.static, calibration=False)
+    missing = [lab for lab in poses.labels if lab not in p.poses]
+    if missing:
+        raise InputError(f"{p.static}: pose(s) {', '.join(missing)} have no attitude in "
+                         "session.toml [platform.poses]")
+    if poses.sigma_u is None:
+        raise InputError(f"{p.static}: needs >= 3 samples per pose (their scatter is the "
+                         "readings' uncertainty)")
+    m = cal.model
+    R = r_matrix(m.beta)
+    # Calibrated per-axis readings w = R a_c = x - R b (see align.fusion.observations).
+    w = m.specific_force(poses.u, poses.t, poses.temp) @ R.T
+    u_w = poses.sigma_u / np.abs(m.k)
+    return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i])
+            for i, lab in enumerate(poses.labels)]
+
+
+def _blocks(s: Session, res: SessionResult) -> list[Block]:
+    blocks: list[Block] = []
+    if res.marks:
+        obs = []
+        for im, r in res.marks:
+            v = s.views[im.view]
+            obs.append(MarkObs(f"{im.housing} in {im.view} ({im.file.name})",
+                               HOUSINGS.index(im.housing), v.right, v.up, v.camera,
+                               0.0 if im.nominal == "horizontal" else np.pi / 2,
+                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad))
+        blocks.append(mark_block(obs))
+    if res.gonio is not None:
+        g = s.goniometer
+        fa = res.gonio.angles
+        b = gonio_block(list(g.faces), fa.angles_rad, fa.cov, g.nominal_rad, g.direction,
+                        g.reference_offset_rad)
+        if b is not None:
+            blocks.append(b)
+    if res.calibration is not None:
+        m = res.calibration.model
+        idx = [m.names.index(f"beta_{a}") for a in "xyz"]
+        blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)]))
+    if res.platform:
+        m = res.calibration.model
+        norms = np.linalg.norm(r_matrix(m.beta), axis=1)
+        R = r_matrix(m.beta)
+        ib = [m.names.index(f"bias_{a}") for a in "xyz"]
+        # u of the per-axis bias R b (R is within 1e-3 of I: its own u is negligible here).
+        u_bias = np.sqrt(np.diag(R @ m.cov[np.ix_(ib, ib)] @ R.T))
+        blocks += static_blocks(res.platform, norms, u_bias, s.platform.table_tilt_rad)
+    return blocks

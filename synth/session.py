@@ -1,0 +1,251 @@
+"""A complete synthetic alignment session with known truth: images, counter log, tumble and
+platform static data, ``session.toml`` and ``truth.json``.
+
+The physics, written here independently of the pipeline:
+
+* Mounting: accelerometer i's sensing axis in the platform frame P (X, Y horizontal, Z up) is
+  s_i = normalise(e_i + sum_j E_ij e_j), E_ij drawn 1-5 arc-minutes with random signs.
+* Scribe marks run along s_i. A camera view is given by the platform directions of image right
+  and image up; a mark's scene angle is atan2(s.up, s.right), wrapped to (-90, 90] deg, and the
+  camera's roll (the same physical camera for a view and its reversal) adds to it.
+* Goniometer: the table turns counter-clockwise seen from above; a face whose outward normal has
+  azimuth psi (from X towards Y) passes the fixed autocollimator at table angle alpha - psi.
+  Faces: the platform's reference mirror (normal -X, azimuth 180 deg, plus an optional offset),
+  housing y (normal along s_y), housing x (along s_x), housing z (normal -Y, its own mounting
+  rotation). Passing order ref, y, x, z.
+* Tumble: the triad in its cube fixture, 14 poses (seed paper); outputs
+  u_i = k_i (x_i + K2_i x_i^2), x = S (a + b), S the rows s_i.
+* Platform static readings: the same triad on the levelled platform at four table angles (a
+  tilt of the table axis, fixed in the room, turns with the table angle in P), and the platform
+  commanded to X up/down and Y up/down by its gimbals.
+
+Effects (``EFFECTS``) can be put into the data and declared in ``session.toml`` (the pipeline
+is told) or left undeclared (it is not).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from synth.gonio import GonioSpec, simulate, write_log
+from synth.marks import ImageSpec, MarkSpec, full_well_for_snr, render_marks, write_synth
+from synth.optics import CameraGeometry, wrap_half_turn
+from synth.tumble import TABLE1_BIAS, TABLE1_K, Triad, TumbleSpec, tumble, write_tumble_csv
+
+ARCSEC = np.pi / 180 / 3600
+AXES = {"X": np.array([1.0, 0, 0]), "Y": np.array([0, 1.0, 0]), "Z": np.array([0, 0, 1.0])}
+HOUSINGS = ("x", "y", "z")
+# Camera views: (camera, platform direction of image right, of image up). A is the camera
+# looking along +Y, B along -X; "r" views are the same camera after the platform is turned
+# 180 deg on the table (reversal: cancels what is fixed to the camera).
+VIEWS = {"A": ("A", "+X", "+Z"), "Ar": ("A", "-X", "+Z"),
+         "B": ("B", "+Y", "+Z"), "Br": ("B", "-Y", "+Z")}
+# Which housings each view shows, and their nominal orientation in that view.
+VIEW_MARKS = {"A": (("x", "horizontal"), ("z", "vertical")),
+              "Ar": (("x", "horizontal"), ("z", "vertical")),
+              "B": (("y", "horizontal"), ("z", "vertical")),
+              "Br": (("y", "horizontal"), ("z", "vertical"))}
+FACES = ("ref", "y", "x", "z")
+PLATFORM_POSES = (("L000", "+Z", 0.0), ("L090", "+Z", 90.0), ("L180", "+Z", 180.0),
+                  ("L270", "+Z", 270.0), ("Xup", "+X", 0.0), ("Xdn", "-X", 0.0),
+                  ("Yup", "+Y", 0.0), ("Ydn", "-Y", 0.0))
+# name -> (unit of the VALUE given on the command line, what it does)
+EFFECTS = {
+    "camera_roll_A": ("arcsec", "roll of camera A about its optical axis"),
+    "camera_roll_B": ("arcsec", "roll of camera B about its optical axis"),
+    "reference_offset": ("arcsec", "azimuth of the reference mirror's normal off nominal"),
+    "table_tilt_x": ("arcsec", "tilt of the table axis towards the room's x (platform X at 0)"),
+    "table_tilt_y": ("arcsec", "tilt of the table axis towards the room's y"),
+    "k2": ("ug/g^2", "second-order nonlinearity of every accelerometer"),
+    "lens_k1": ("", "OpenCV radial distortion k1 of both cameras"),
+}
+
+
+def parse_direction(text: str) -> np.ndarray:
+    """'+X', '-Z', ... -> unit vector in P."""
+    sign = -1.0 if text.strip().startswith("-") else 1.0
+    return sign * AXES[text.strip().lstrip("+-").upper()]
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    """What to synthesise. ``effects``: name -> value (units in ``EFFECTS``); ``undeclared``:
+    the names that go into the data but not into session.toml."""
+
+    seed: int = 0
+    effects: dict[str, float] = field(default_factory=dict)
+    undeclared: frozenset[str] = frozenset()
+    image_size: tuple[int, int] = (640, 480)
+    mark_length_px: float = 380.0
+    snr: float = 40.0
+    revolutions: int = 100
+    latitude_deg: float = 50.45
+    noise_v: float = 4.8e-5
+    samples_per_pose: int = 200
+    views: tuple[str, ...] = tuple(VIEWS)
+    platform_poses: tuple[str, ...] = tuple(p[0] for p in PLATFORM_POSES)
+
+
+def true_axes(E: np.ndarray) -> np.ndarray:
+    """Rows: unit sensing axes s_i in P from the 3x3 matrix of small angles (zero diagonal)."""
+    S = np.eye(3) + E
+    return S / np.linalg.norm(S, axis=1, keepdims=True)
+
+
+def _draw_E(rng: np.random.Generator) -> np.ndarray:
+    E = rng.uniform(1, 5, (3, 3)) * 60 * ARCSEC * rng.choice([-1, 1], (3, 3))
+    np.fill_diagonal(E, 0.0)
+    return E
+
+
+def _scene_angle(s: np.ndarray, right: np.ndarray, up: np.ndarray) -> float:
+    return float(wrap_half_turn(np.arctan2(s @ up, s @ right)))
+
+
+def _azimuth(v: np.ndarray) -> float:
+    return float(np.arctan2(v[1], v[0]))
+
+
+def write_session(out: str | Path, spec: SessionSpec) -> dict:
+    """Write a complete session folder ``out`` (must not exist or be empty) and its truth."""
+    out = Path(out)
+    if out.exists() and any(out.iterdir()):
+        raise FileExistsError(f"{out}: exists and is not empty; synth never overwrites")
+    for name in spec.effects:
+        if name not in EFFECTS:
+            raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(spec.seed)
+    eff = {k: float(v) for k, v in spec.effects.items()}
+    E = _draw_E(rng)
+    S = true_axes(E)
+    declared = {k: v for k, v in eff.items() if k not in spec.undeclared}
+
+    images = _images(out, spec, S, eff, rng)
+    gonio = _gonio(out, spec, S, eff, rng)
+    bias_p = np.asarray(TABLE1_BIAS) * rng.uniform(0.5, 1.5, 3)
+    k2 = eff.get("k2", 0.0) * 1e-6
+    triad = Triad(k=TABLE1_K, bias=tuple(bias_p), k2=(k2, k2, k2), noise_v=spec.noise_v,
+                  axes=tuple(map(tuple, S)))
+    td = tumble(TumbleSpec(triad=triad, seed=int(rng.integers(1 << 30)), check_poses=0))
+    write_tumble_csv(td, out / "tumble.csv")
+    platform = _platform(out, spec, triad, eff, rng)
+
+    toml = _session_toml(spec, declared, images, platform)
+    (out / "session.toml").write_text(toml)
+    truth = {
+        "misalignment_rad": E.tolist(), "axes": S.tolist(), "seed": spec.seed,
+        "effects": eff, "undeclared": sorted(spec.undeclared),
+        "scale_factors_v_per_g": list(TABLE1_K), "bias_platform_g": bias_p.tolist(),
+        "gonio_angles_deg": gonio, "images": images,
+    }
+    (out / "truth.json").write_text(json.dumps(truth, indent=2))
+    return truth
+
+
+def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
+            rng: np.random.Generator) -> list[dict]:
+    w, h = spec.image_size
+    rows = []
+    for view in spec.views:
+        cam, right, up = VIEWS[view]
+        geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get("lens_k1", 0.0),
+                              roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
+        for housing, nominal in VIEW_MARKS[view]:
+            s = S[HOUSINGS.index(housing)]
+            ang = _scene_angle(s, parse_direction(right), parse_direction(up))
+            mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
+                            length_px=spec.mark_length_px, width_px=4.0,
+                            centre_t_px=float(rng.uniform(-30, 30)))
+            img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
+                            full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
+                            dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
+            sample = render_marks(img, with_crlb=False)
+            name = f"{housing}_{view}.png"
+            write_synth(sample, out / name)
+            rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
+                         "image_angle_rad": sample.truth.marks[0].image_angle_rad,
+                         })
+    return rows
+
+
+def _gonio(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
+           rng: np.random.Generator) -> list[float]:
+    psi = {"ref": np.pi + eff.get("reference_offset", 0.0) * ARCSEC,
+           "y": _azimuth(S[1]), "x": _azimuth(S[0]),
+           "z": 1.5 * np.pi + rng.uniform(-300, 300) * ARCSEC}
+    # Counter-clockwise table: face k passes at alpha - psi_k; angles from the reference.
+    table = np.array([(psi["ref"] - psi[f]) % (2 * np.pi) for f in FACES])
+    offsets = table[1:] - np.pi / 2 * np.arange(1, 4)
+    gs = GonioSpec(revolutions=spec.revolutions, face_offsets_rad=tuple(offsets),
+                   latitude_deg=spec.latitude_deg, seed=int(rng.integers(1 << 30)))
+    sim = simulate(gs)
+    write_log(sim, out / "gonio.csv")
+    return sim["truth"]["angles_deg"]
+
+
+def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
+              rng: np.random.Generator) -> list[tuple[str, str, float]]:
+    tilt = np.array([eff.get("table_tilt_x", 0.0), eff.get("table_tilt_y", 0.0)]) * ARCSEC
+    rows = []
+    n = spec.samples_per_pose
+    t0 = 0.0
+    chosen = [p for p in PLATFORM_POSES if p[0] in spec.platform_poses]
+    for _label, up, table_deg in chosen:
+        g = parse_direction(up)
+        if up == "+Z":
+            # Gravity ("up" specific force) in the room tilted by the table axis, seen in P
+            # after the table has turned by table_deg.
+            c, s_ = np.cos(np.deg2rad(table_deg)), np.sin(np.deg2rad(table_deg))
+            room = np.array([tilt[0], tilt[1], 1.0])
+            g = np.array([c * room[0] + s_ * room[1], -s_ * room[0] + c * room[1], room[2]])
+            g = g / np.linalg.norm(g)
+        t = t0 + np.arange(n) / 20.0
+        u = triad.outputs(np.repeat(g[None], n, 0), np.zeros(n), np.zeros(n), rng)
+        rows.append(np.column_stack([np.full(n, len(rows)), u, t]))
+        t0 = t[-1] + 5.0
+    data = np.vstack(rows)
+    labels = [p[0] for p in chosen]
+    with open(out / "platform.csv", "x") as fh:
+        fh.write("pose,ux,uy,uz,t\n")
+        for r in data:
+            fh.write(f"{labels[int(r[0])]},{r[1]:.9e},{r[2]:.9e},{r[3]:.9e},{r[4]:.3f}\n")
+    return chosen
+
+
+def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[dict],
+                  platform: list[tuple[str, str, float]]) -> str:
+    lines = ["# Synthetic alignment session (align synth session)", "",
+             f"latitude_deg = {spec.latitude_deg}", "", "[calibration]",
+             'static = "tumble.csv"', 'scale_sign = "-"', "", "[goniometer]",
+             'log = "gonio.csv"', f"faces = {json.dumps(list(FACES))}",
+             "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"']
+    if "reference_offset" in declared:
+        lines.append(f"reference_offset_arcsec = {declared['reference_offset']}")
+    lines += ["", "[cameras.A]", "# looks along +Y"]
+    for cam in ("A", "B"):
+        if cam == "B":
+            lines += ["", "[cameras.B]", "# looks along -X"]
+        if f"camera_roll_{cam}" in declared:
+            lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
+        if "lens_k1" in declared:
+            lines.append(f"radial_k1 = {declared['lens_k1']}")
+    for view in spec.views:
+        cam, right, up = VIEWS[view]
+        lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',
+                  f'up = "{up}"']
+    for im in images:
+        lines += ["", "[[images]]", f'file = "{im["file"]}"', f'housing = "{im["housing"]}"',
+                  f'view = "{im["view"]}"', f'nominal = "{im["nominal"]}"']
+    lines += ["", "[platform]", 'static = "platform.csv"']
+    tilt = [declared.get("table_tilt_x"), declared.get("table_tilt_y")]
+    if any(v is not None for v in tilt):
+        lines.append(f"table_tilt_arcsec = [{tilt[0] or 0.0}, {tilt[1] or 0.0}]")
+    lines += ["", "[platform.poses]"]
+    for label, up, table_deg in platform:
+        lines.append(f'{label} = {{ up = "{up}", table_deg = {table_deg} }}')
+    return "\n".join(lines) + "\n"

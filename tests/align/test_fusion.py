@@ -1,0 +1,173 @@
+"""Fusion of every instrument into E against synth's truth, and the fusion loop.
+
+Tolerances: each estimate against truth within 4.5 of its own stated uncertainty (the
+uncertainty is propagated from every source's noise; 4.5 sigma keeps a correct estimator's
+false-failure rate per test below ~1e-4 over the six angles).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from align.fusion import E_INDEX, E_NAMES, REF, TILT
+from align.session import load_session, run_session
+from synth.session import SessionSpec, write_session
+from tests.conftest import ARCSEC
+
+TOL = 4.5
+
+
+def _session(root: Path, name: str, seed: int, undeclared: dict | None = None,
+             declared: dict | None = None, **spec):
+    eff = {**(declared or {}), **(undeclared or {})}
+    folder = root / name
+    truth = write_session(folder, SessionSpec(seed=seed, effects=eff,
+                                              undeclared=frozenset(undeclared or {}), **spec))
+    return run_session(load_session(folder)), np.array(truth["misalignment_rad"])
+
+
+def _z(E: np.ndarray, U: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    return np.array([(E[i, j] - truth[i, j]) / U[i, j] for i, j in E_INDEX])
+
+
+def _z_before(loop, truth: np.ndarray) -> np.ndarray:
+    q = loop.before.quantities
+    return np.array([(q[n][0] - truth[i, j]) / q[n][1] for n, (i, j) in
+                     zip(E_NAMES, E_INDEX, strict=True)])
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    return _session(tmp_path_factory.mktemp("fusion"), "clean", seed=11)
+
+
+def test_clean_session_recovers_E_within_its_uncertainty(clean):
+    res, truth = clean
+    f = res.fusion
+    assert not res.errors
+    assert set(f.sources) == {"camera", "goniometer", "ellipsoid", "platform static",
+                              "bias prior"}
+    z = _z(f.E, f.E_u, truth)
+    assert np.all(np.abs(z) < TOL), z
+    # The inputs allow sub-arc-second angles: every u is below 0.5" (E is 1-5 arc-minutes).
+    assert f.E_u[~np.eye(3, dtype=bool)].max() < 0.5 * ARCSEC
+    assert not f.loop.effects, [e.name for e in f.loop.effects]
+    assert f.consistent and f.inflation == 1.0
+    assert 0.001 < f.p_value
+
+
+# No reversal images, only levelled platform poses and a MEMS-grade triad (1 mV noise, ~400 ug
+# a sample): the cameras then weigh as much as the other sources for E_zx, E_zy, so a roll
+# biases E; the levelled readings (E_xz, E_yz) and the ellipsoid's non-orthogonality are the
+# redundancy that exposes it. (With a navigation-grade triad the ellipsoid and the platform
+# readings outweigh the cameras ~100:1 and a roll hardly moves E: see the reversal test.)
+NO_REVERSAL = dict(views=("A", "B"), platform_poses=("L000", "L090", "L180", "L270"),
+                   noise_v=1e-3)
+
+
+def test_reversal_makes_E_immune_to_camera_roll(tmp_path):
+    """With reversal images the roll cancels in E even before the loop names it."""
+    res, truth = _session(tmp_path, "roll_rev", seed=12, undeclared={"camera_roll_B": 60.0})
+    f = res.fusion
+    assert [e.name for e in f.loop.effects] == ["camera_roll[B]"]
+    assert np.all(np.abs(_z_before(f.loop, truth)) < TOL)
+    assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
+
+
+def test_undeclared_camera_roll_is_found_through_redundant_sources(tmp_path):
+    roll = 60.0
+    res, truth = _session(tmp_path, "roll", seed=12, undeclared={"camera_roll_B": roll},
+                          **NO_REVERSAL)
+    f = res.fusion
+    names = [e.name for e in f.loop.effects]
+    assert names == ["camera_roll[B]"], names
+    e = f.loop.effects[0]
+    assert abs(e.estimate / ARCSEC - roll) < TOL * e.u / ARCSEC
+    after = _z(f.E, f.E_u, truth)
+    before = _z_before(f.loop, truth)
+    assert np.all(np.abs(after) < TOL), after
+    assert np.max(np.abs(before)) > 2 * TOL, before
+    assert f.consistent
+
+
+def test_declared_camera_roll_is_applied_not_searched(tmp_path):
+    res, truth = _session(tmp_path, "roll_declared", seed=12, declared={"camera_roll_B": 40.0})
+    f = res.fusion
+    assert not f.loop.effects
+    assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
+
+
+def test_undeclared_reference_face_offset_is_found(tmp_path):
+    off = 25.0
+    res, truth = _session(tmp_path, "ref", seed=13, undeclared={"reference_offset": off})
+    f = res.fusion
+    assert [e.name for e in f.loop.effects] == [REF]
+    e = f.loop.effects[0]
+    assert abs(e.estimate / ARCSEC - off) < TOL * e.u / ARCSEC
+    assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
+    assert np.max(np.abs(_z_before(f.loop, truth))) > 3 * TOL
+
+
+def test_undeclared_table_tilt_is_found(tmp_path):
+    res, truth = _session(tmp_path, "tilt", seed=14,
+                          undeclared={"table_tilt_x": 15.0, "table_tilt_y": -10.0})
+    f = res.fusion
+    assert [e.name for e in f.loop.effects] == [TILT]
+    comp = dict((c, (v, u)) for c, v, u in f.loop.effects[0].components)
+    for axis, true in (("x", 15.0), ("y", -10.0)):
+        v, u = comp[axis]
+        assert abs(v / ARCSEC - true) < TOL * u / ARCSEC
+    assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
+
+
+def test_inconsistency_no_candidate_explains_is_reported(tmp_path):
+    """One mark scribed crooked on its housing (one image, one view, 15 of its u): no fusion
+    candidate explains a single observation, so the fusion must say so, inflate its
+    uncertainty and point at the observation."""
+    from dataclasses import replace
+
+    from align.fusion import fuse
+    from align.session.run import _blocks
+
+    folder = tmp_path / "crooked"
+    write_session(folder, SessionSpec(seed=15))
+    s = load_session(folder)
+    res = run_session(s)
+    assert res.fusion.consistent
+    k = int(np.argmin([r.angle_u_rad for _, r in res.marks]))
+    im, r = res.marks[k]
+    res.marks[k] = (im, replace(r, angle_rad=r.angle_rad + 15 * r.angle_u_rad))
+    f = fuse(_blocks(s, res))
+    assert not f.consistent
+    assert f.inflation > 1.5
+    worst = max(f.rows, key=lambda row: abs(row.normalised))
+    assert worst.source == "camera" and im.file.name in worst.label
+
+
+def test_platform_calibration_applied_to_readings(clean, tmp_path):
+    """Readings at known platform attitudes come back as those directions in P."""
+    from align.session import platform_calibration
+    from synth.session import TABLE1_K, Triad
+
+    res, truth = clean
+    pc = platform_calibration(res)
+    tj = json.loads((Path(res.session.folder) / "truth.json").read_text())
+    triad = Triad(k=TABLE1_K, bias=tuple(tj["bias_platform_g"]), noise_v=4.8e-5,
+                  axes=tuple(map(tuple, tj["axes"])))
+    rng = np.random.default_rng(5)
+    g = rng.normal(size=(6, 3))
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    n = 4000
+    for gp in g:
+        u = triad.outputs(np.repeat(gp[None], n, 0), np.zeros(n), np.zeros(n), rng)
+        a = pc.specific_force(u).mean(0)
+        # Noise of the mean (20 ug per sample), E's u (< 0.5" ~ 2.4 urad) and the
+        # calibration's bias and scale uncertainty (a few ug): 15 ug is > 4.5 sigma.
+        assert np.max(np.abs(a - gp)) < 15e-6, (a - gp) * 1e6
+    # Without the misalignment (the seed paper's floating frame) the error is arc-minutes.
+    a_c = pc.model.specific_force(u).mean(0)
+    assert np.max(np.abs(a_c - g[-1])) > 100e-6

@@ -1,0 +1,157 @@
+"""Sessions: session.toml checks naming the key, stage failures kept per stage, the run/apply/
+synth commands, batches in parallel, and never overwriting anything."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from align.cli import main
+from align.errors import InputError
+from align.session import load_session
+from synth.session import SessionSpec, write_session
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("sess") / "unit7"
+    write_session(folder, SessionSpec(seed=21))
+    return folder
+
+
+def _copy(session: Path, tmp_path: Path, name: str = "copy") -> Path:
+    dst = tmp_path / name
+    shutil.copytree(session, dst)
+    return dst
+
+
+def _edit(folder: Path, old: str, new: str) -> None:
+    p = folder / "session.toml"
+    text = p.read_text()
+    assert old in text
+    p.write_text(text.replace(old, new, 1))
+
+
+@pytest.mark.parametrize("old,new,message", [
+    ('log = "gonio.csv"', 'log = "nope.csv"', "[goniometer] log = 'nope.csv': no such file"),
+    ('housing = "x"', 'housing = "w"', "[[images]] #1 housing = 'w': not one of x, y, z"),
+    ('view = "A"', 'view = "Q"', "[[images]] #1 view = 'Q': no [views.Q] table"),
+    ('nominal = "horizontal"', 'nominal = "vertical"', "contradictory nominal orientation"),
+    ("nominal_deg = [90.0, 90.0, 90.0, 90.0]", "nominal_deg = [90.0, 180.0, 45.0, 45.0]",
+     "contradictory nominal orientation"),
+    ("nominal_deg = [90.0, 90.0, 90.0, 90.0]", "nominal_deg = [90.0, 90.0, 90.0, 80.0]",
+     "must sum to 360"),
+    ('right = "+X"', 'right = "+Z"', "[views.A]: right = '+Z' and up = '+Z' are the same axis"),
+    ("latitude_deg = 50.45", "latitude = 50.45", "unknown key(s) latitude"),
+    ('L000 = { up = "+Z", table_deg = 0.0 }', 'L000 = { up = "+W", table_deg = 0.0 }',
+     "[platform].poses L000 up = '+W'"),
+])
+def test_bad_session_names_the_key(session, tmp_path, old, new, message, capsys):
+    folder = _copy(session, tmp_path)
+    _edit(folder, old, new)
+    with pytest.raises(InputError, match=None) as exc:
+        load_session(folder)
+    assert message in str(exc.value)
+    assert main(["run", str(folder)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_too_few_sources_to_determine_E(session, tmp_path, capsys):
+    """The calibration alone sees only sums E_ij + E_ji: the run must say what is missing."""
+    folder = tmp_path / "cal_only"
+    folder.mkdir()
+    shutil.copy(session / "tumble.csv", folder)
+    (folder / "session.toml").write_text('[calibration]\nstatic = "tumble.csv"\n'
+                                         'scale_sign = "-"\n')
+    assert main(["run", str(folder)]) == 2
+    out = capsys.readouterr()
+    assert "do not determine the misalignment" in out.out + out.err
+    assert "E_xY" in out.out + out.err
+
+
+def test_run_writes_json_report_and_calibration_and_never_overwrites(session, tmp_path,
+                                                                     capsys):
+    js, rep, cal = tmp_path / "r.json", tmp_path / "r.html", tmp_path / "cal.json"
+    assert main(["run", str(session), "--json", str(js), "--report", str(rep),
+                 "--calibration", str(cal)]) == 0
+    d = json.loads(js.read_text())
+    E = np.array(d["misalignment_rad"])
+    U = np.array(d["misalignment_u_rad"])
+    assert E.shape == (3, 3) and U.shape == (3, 3)
+    assert np.all(np.diag(E) == 0) and np.all(U[~np.eye(3, dtype=bool)] > 0)
+    truth = np.array(json.loads((session / "truth.json").read_text())["misalignment_rad"])
+    off = ~np.eye(3, dtype=bool)
+    assert np.all(np.abs(E - truth)[off] < 4.5 * U[off])
+    for key in ("effects", "unexplained_structure", "observations", "stages", "chi2"):
+        assert key in d
+    html = rep.read_text()
+    assert html.count("data:image/png;base64") >= 10  # marks, gonio, calibration, fusion
+    assert "Misalignment matrix" in html and "Fusion loop" in html
+    before = js.read_text()
+    assert main(["run", str(session), "--json", str(js)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert js.read_text() == before
+    # Outputs may not be one of the session's inputs.
+    assert main(["run", str(session), "--json", str(session / "gonio.csv")]) == 2
+
+
+def test_a_stage_failure_is_reported_and_the_rest_still_fuse(session, tmp_path):
+    folder = _copy(session, tmp_path)
+    (folder / "z_B.png").write_bytes(b"not a png at all")
+    out = tmp_path / "r.json"
+    assert main(["run", str(folder), "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert any(e["stage"] == "marks" and "z_B.png" in e["message"] for e in d["errors"])
+    assert d["ok"] and len(d["stages"]["marks"]) == 7
+
+
+def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):
+    good2 = _copy(session, tmp_path, "unit8")
+    bad = _copy(session, tmp_path, "unit9")
+    _edit(bad, 'log = "gonio.csv"', 'log = "missing.csv"')
+    outdir = tmp_path / "results"
+    code = main(["run", str(session), str(good2), str(bad), "--json", str(outdir),
+                 "--jobs", "2"])
+    assert code == 2
+    cap = capsys.readouterr()
+    assert "2 of 3 sessions done, 1 failed" in cap.out
+    assert "unit9: FAILED" in cap.err and "missing.csv" in cap.err
+    assert sorted(p.name for p in outdir.iterdir()) == ["unit7.json", "unit8.json"]
+
+
+def test_apply_corrects_readings_into_the_platform_frame(session, tmp_path):
+    """Readings of the session's own platform poses come back as their nominal directions."""
+    cal = tmp_path / "cal.json"
+    assert main(["run", str(session), "--calibration", str(cal)]) == 0
+    readings = tmp_path / "readings.csv"
+    lines = (session / "platform.csv").read_text().splitlines()
+    readings.write_text("ux,uy,uz,t\n" + "\n".join(",".join(r.split(",")[1:])
+                                                   for r in lines[1:] if r.startswith("Xup")))
+    before = readings.read_text()
+    out = tmp_path / "corrected.csv"
+    assert main(["apply", str(cal), str(readings), "--out", str(out), "--tilt"]) == 0
+    assert readings.read_text() == before
+    a = np.genfromtxt(out, delimiter=",", names=True)
+    mean = np.array([a["ax_g"].mean(), a["ay_g"].mean(), a["az_g"].mean()])
+    # Xup: specific force along +X; 20 ug a sample over 200 samples plus calibration u.
+    assert abs(mean[0] - 1) < 50e-6 and np.all(np.abs(mean[1:]) < 15e-6), mean
+    assert "roll_deg" in a.dtype.names
+    assert main(["apply", str(cal), str(readings), "--out", str(out)]) == 2
+    assert main(["apply", str(readings), str(readings), "--out", str(tmp_path / "x.csv")]) == 2
+
+
+def test_synth_session_command_declares_only_what_it_is_told(tmp_path):
+    out = tmp_path / "s"
+    assert main(["synth", "session", str(out), "--seed", "3", "--effect",
+                 "camera_roll_A=20", "--undeclared", "reference_offset=15"]) == 0
+    toml = (out / "session.toml").read_text()
+    assert "roll_arcsec = 20.0" in toml and "reference_offset" not in toml
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["effects"] == {"camera_roll_A": 20.0, "reference_offset": 15.0}
+    assert main(["synth", "session", str(out)]) == 2  # never overwrites
+    assert main(["synth", "session", str(tmp_path / "t"), "--effect", "warp=3"]) == 2
