@@ -155,3 +155,14 @@ def test_synth_session_command_declares_only_what_it_is_told(tmp_path):
     assert truth["effects"] == {"camera_roll_A": 20.0, "reference_offset": 15.0}
     assert main(["synth", "session", str(out)]) == 2  # never overwrites
     assert main(["synth", "session", str(tmp_path / "t"), "--effect", "warp=3"]) == 2
+
+
+def test_demo_runs_a_session_and_reports_its_error(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "d"), "--seed", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "misalignment E" in out and "error against truth" in out
+    assert "camera_roll[A]" in out  # the undeclared roll is named
+    assert (tmp_path / "d" / "report.html").is_file()
+    z = float(out.split("normalised errors (error / u): RMS")[1].split()[0])
+    assert 0.2 < z < 2.5
+    assert main(["demo", "--out", str(tmp_path / "d")]) == 2  # never overwrites
