@@ -260,7 +260,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- gonio
 
 def cmd_gonio(args: argparse.Namespace) -> int:
-    from align.gonio import measure_log
+    from align.gonio import direction_effect, measure_log
     from goniometry import LogError, kept_table
 
     faces = [f.strip() for f in args.faces.split(",") if f.strip()]
@@ -274,14 +274,18 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             raise UsageError(f"--nominal {args.nominal!r}: numbers in degrees") from None
         if len(nominal) != len(faces):
             raise UsageError(f"--nominal has {len(nominal)} values for {len(faces)} faces")
-    out = _new_file(args.json, args.force, [args.log])
+    out = _new_file(args.json, args.force, [args.log] + ([args.reverse_log]
+                                                         if args.reverse_log else []))
     d = 1 if args.direction == "ccw" else -1
     try:
-        run = measure_log(args.log, len(faces), args.latitude, d, args.alpha)
+        run = measure_log(args.log, len(faces), args.latitude, d, args.alpha,
+                          reverse_log=args.reverse_log)
     except (LogError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
     effects = [e.to_json() for e in loop.effects] if loop is not None else []
+    if run.direction is not None:
+        effects.append(direction_effect(run.direction, faces))
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
           f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
@@ -620,6 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--nominal", help="nominal angles [deg], e.g. 90,90,90,90")
     g.add_argument("--latitude", type=float, help="site latitude [deg] (Earth-rate correction)")
     g.add_argument("--direction", choices=["ccw", "cw"], default="ccw")
+    g.add_argument("--reverse-log", help="a log of the same faces with the table turning the "
+                   "other way: the angles are then the mean of both directions")
     g.add_argument("--alpha", type=float, default=1e-3)
     g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
     g.add_argument("--json")

@@ -21,10 +21,11 @@ absorbed by the face angles (only a reversal on the table separates it).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 from goniometry import (
@@ -108,27 +109,93 @@ def latitude_from_earth_rate(rate: float, u: float, direction: int) -> tuple[flo
 
 
 @dataclass(frozen=True)
+class DirectionTerm:
+    """Half the difference between the counter-clockwise and clockwise estimates of each angle
+    [rad] (ccw order) with its covariance: what flips with the direction — autocollimator
+    latency times a speed change locked to the table, an Earth rate not removed — and which
+    the mean of the two directions cancels. chi2 over n - 1 dof (closure) and its p-value."""
+
+    half_difference_rad: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+
+    @property
+    def u_rad(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+
+@dataclass(frozen=True)
 class GonioRun:
     """A counter log through the goniometer pipeline: the revolution summary, the face angles,
-    the revolution-level loop (None when it did not run) and notes for the user."""
+    the revolution-level loop (None when it did not run) and notes for the user. With a log
+    of the other direction, ``angles`` is the mean of both, ``reverse`` that run and
+    ``direction`` the term the mean cancelled."""
 
     summary: LogSummary
     angles: FaceAngles
     loop: LoopReport | None
     notes: tuple[str, ...]
     earth_rate_applied: float | None
+    reverse: GonioRun | None = None
+    direction: DirectionTerm | None = None
+
+
+def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, DirectionTerm]:
+    """Mean of a run and a run in the other direction, angles in the first run's order.
+
+    The other direction brings the faces in reverse order (0, n-1, ..., 1): its angle m is the
+    first run's angle n-1-m. Equal weights on purpose: only the plain mean cancels what flips
+    sign with the direction.
+    """
+    n = len(fwd.angles_rad)
+    if len(rev.angles_rad) != n:
+        raise ValueError(f"the two directions have {n} and {len(rev.angles_rad)} faces")
+    P = np.eye(n)[::-1]
+    a_rev = P @ rev.angles_rad
+    c_rev = P @ rev.cov @ P.T
+    mean = (fwd.angles_rad + a_rev) / 2
+    cov = (fwd.cov + c_rev) / 4
+    half = (fwd.angles_rad - a_rev) / 2
+    chi2 = float(half @ np.linalg.pinv(cov, rcond=1e-10) @ half)
+    term = DirectionTerm(half, cov, chi2, n - 1, float(stats.chi2.sf(chi2, n - 1)))
+    comb = replace(
+        fwd, angles_rad=mean, u_rad=np.sqrt(np.diag(cov)), cov=cov,
+        u_type_a_rad=np.sqrt(fwd.u_type_a_rad**2 + (P @ rev.u_type_a_rad) ** 2) / 2,
+        u_type_b_rad=np.sqrt(fwd.u_type_b_rad**2 + (P @ rev.u_type_b_rad) ** 2) / 2,
+        revolutions=fwd.revolutions + rev.revolutions,
+        quantisation_locked=fwd.quantisation_locked & (P @ rev.quantisation_locked > 0))
+    return comb, term
 
 
 def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
-                direction: int = 1, alpha: float = 1e-3) -> GonioRun:
+                direction: int = 1, alpha: float = 1e-3,
+                reverse_log: str | Path | None = None, apply_loop: bool = True) -> GonioRun:
     """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
-    else by the loop when the data show it and it is physically possible.
+    else by the loop when the data show it and it is physically possible. ``reverse_log``: a
+    log of the same faces with the table turning the other way; the result is then the mean
+    of both directions (see :func:`combine_directions`).
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
     """
+    if reverse_log is not None:
+        # Without the latitude the mean of the two directions cancels the Earth rate itself
+        # (it flips sign with the direction): no loop estimate is applied to either run.
+        fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False)
+        rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
+                          apply_loop=False)
+        comb, term = combine_directions(fwd.angles, rev.angles)
+        notes = [*fwd.notes, *(f"reverse run: {n}" for n in rev.notes),
+                 f"both directions combined: the direction-dependent part is "
+                 f"{'significant' if term.p_value < alpha else 'not significant'} "
+                 f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
+        return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
+                        rev, term)
     notes: list[str] = []
     loop = None
     rate_used = None
+    rate_u = 0.0
     summary = read_revolutions(path, n_faces)
     if latitude_deg is not None and summary.has_time:
         rate_used = vertical_earth_rate(latitude_deg, direction)
@@ -141,12 +208,41 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
             notes.append(f"counts per revolution follow the period with a slope of "
                          f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
+        elif earth and not apply_loop:
+            notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
+                         "not applied: the other direction cancels it")
         elif earth:
-            rate_used = earth[0].estimate
+            rate_used, rate_u = earth[0].estimate, earth[0].u
             lat, ulat = latitude_from_earth_rate(earth[0].estimate, earth[0].u, direction)
-            notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°")
-    if rate_used is not None:
-        rate = rate_used
-        summary = read_revolutions(path, n_faces,
-                                   correct=lambda c, dt: earth_rate_counts(c, dt, rate))
-    return GonioRun(summary, face_angles(summary), loop, tuple(notes), rate_used)
+            notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
+                         "its uncertainty is carried into the angles")
+    if rate_used is None:
+        return GonioRun(summary, face_angles(summary), loop, tuple(notes), None)
+    rate = rate_used
+    summary = read_revolutions(path, n_faces,
+                               correct=lambda c, dt: earth_rate_counts(c, dt, rate))
+    fa = face_angles(summary)
+    if rate_u:
+        # A_k = 2 pi c_k / sum c with c_k - K rate dt_k / 2 pi: dA_k / d rate =
+        # -(dt_k - T A_k / 2 pi), averaged over the revolutions.
+        _, dt, _ = kept_table(summary)
+        ok = np.all(np.isfinite(dt), axis=1)
+        sens = -(dt[ok].mean(0) - dt[ok].sum(1).mean() * fa.angles_rad / (2 * np.pi))
+        cov = fa.cov + np.outer(sens, sens) * rate_u**2
+        fa = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)))
+    return GonioRun(summary, fa, loop, tuple(notes), rate_used)
+
+
+def direction_effect(term: DirectionTerm, faces: Sequence[str]) -> dict:
+    """The direction-dependent term as an entry of the JSON ``effects`` list: per angle the
+    half difference ccw - cw [rad]; the most significant one is the estimate; after the mean
+    of both directions it is cancelled (rms_after 0)."""
+    n = len(faces)
+    k = int(np.argmax(np.abs(term.half_difference_rad) / term.u_rad))
+    return {"name": "direction_dependent", "estimate": float(term.half_difference_rad[k]),
+            "u": float(term.u_rad[k]), "unit": "rad",
+            "rms_before": float(np.sqrt(np.mean(term.half_difference_rad**2))),
+            "rms_after": 0.0, "p_value": term.p_value, "chi2": term.chi2, "dof": term.dof,
+            "components": [{"axis": f"{faces[i]}->{faces[(i + 1) % n]}",
+                            "estimate": float(term.half_difference_rad[i]),
+                            "u": float(term.u_rad[i])} for i in range(n)]}

@@ -65,14 +65,29 @@ class GonioSpec:
 
     @property
     def azimuths(self) -> np.ndarray:
-        """Face azimuths in passing order [rad] (face 0 = the reference mirror at 0)."""
+        """Table angle of each face from face 0, counter-clockwise [rad] (the order in which a
+        ccw table brings faces 0, 1, 2, 3 to the autocollimator)."""
         return np.array([0.0, *(np.pi / 2 * np.arange(1, 4) + np.array(self.face_offsets_rad))])
 
     @property
     def angles(self) -> np.ndarray:
-        """True table angles from face k to face k+1 (cyclic) [rad]; they sum to 2 pi."""
+        """True table angles from face k to face k+1 (cyclic, ccw order) [rad]; sum 2 pi."""
         az = self.azimuths
         return np.diff(np.append(az, 2 * np.pi))
+
+    def passing(self) -> tuple[np.ndarray, np.ndarray]:
+        """Faces in the order this run's direction brings them past the autocollimator, and
+        their distances travelled from face 0 within a revolution [rad]. Clockwise, the same
+        faces come in reverse order: 0, 3, 2, 1."""
+        if self.direction > 0:
+            return np.arange(4), self.azimuths
+        ids = np.array([0, 3, 2, 1])
+        return ids, np.append(0.0, 2 * np.pi - self.azimuths[ids[1:]])
+
+    @property
+    def passing_angles(self) -> np.ndarray:
+        """True angles between consecutive faces in this run's passing order [rad]."""
+        return np.diff(np.append(self.passing()[1], 2 * np.pi))
 
 
 def _pulse_times(spec: GonioSpec, rng: np.random.Generator
@@ -81,14 +96,15 @@ def _pulse_times(spec: GonioSpec, rng: np.random.Generator
     fine (time, angle) grid of the table's motion (None at constant speed)."""
     n_faces = 4
     theta_targets = (np.arange(spec.revolutions + 1)[:, None] * 2 * np.pi
-                     + spec.azimuths[None, :]).ravel()[: spec.revolutions * n_faces + 1]
+                     + spec.passing()[1][None, :]).ravel()[: spec.revolutions * n_faces + 1]
     omega0 = 2 * np.pi * spec.rev_per_s
     if spec.ripple == 0 and spec.wander == 0:
         return theta_targets / omega0, None, None
     # Speed as a function of table angle; time = integral of d theta / omega(theta).
     per_rev = 4096
     grid = np.linspace(0, theta_targets[-1] + 2 * np.pi, (spec.revolutions + 2) * per_rev)
-    rel = 1 + spec.ripple * np.sin(grid + spec.ripple_phase)
+    # Distance travelled -> the table's own angle: the ripple is locked to the table.
+    rel = 1 + spec.ripple * np.sin(spec.direction * grid + spec.ripple_phase)
     if spec.wander:
         # Slow: made on a grid of 8 points a revolution, then interpolated.
         coarse = np.linspace(0, grid[-1], (spec.revolutions + 2) * 8)
@@ -104,7 +120,7 @@ def simulate(spec: GonioSpec) -> dict:
     rng = np.random.default_rng(spec.seed)
     t_face, t_grid, grid = _pulse_times(spec, rng)
     n = t_face.size
-    face = np.arange(n) % 4
+    face = spec.passing()[0][np.arange(n) % 4]
     omega0 = 2 * np.pi * spec.rev_per_s
     # Autocollimator: fires latency after the face passes, with timing jitter.
     t_pulse = t_face + spec.latency_s + rng.normal(0, spec.jitter_rad / omega0, n)
@@ -132,8 +148,10 @@ def simulate(spec: GonioSpec) -> dict:
     counts = np.diff(cum).astype(np.int64)
     rows = {"count": counts, "counter": (np.arange(counts.size) % 2 + 1).astype(np.int8),
             "ref": is_ref[1:].astype(np.int8), "t": t_pulse[1:] - t_pulse[0]}
-    truth = {"angles_rad": spec.angles.tolist(),
-             "angles_deg": np.rad2deg(spec.angles).tolist(),
+    truth = {"angles_rad": spec.passing_angles.tolist(),
+             "angles_deg": np.rad2deg(spec.passing_angles).tolist(),
+             "passing_faces": spec.passing()[0].tolist(),
+             "angles_ccw_order_rad": spec.angles.tolist(),
              "azimuths_rad": spec.azimuths.tolist(), "spec": asdict(spec),
              "faces_of_rows": face[1:].tolist() if n < 200000 else None}
     return {"rows": rows, "truth": truth}

@@ -65,6 +65,7 @@ class Goniometer:
     nominal_rad: np.ndarray
     direction: int
     reference_offset_rad: float = 0.0
+    reverse_log: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,8 @@ class Session:
                                                 if self.calibration.check else [])
         if self.goniometer:
             out.append(self.goniometer.log)
+            if self.goniometer.reverse_log:
+                out.append(self.goniometer.reverse_log)
         if self.platform:
             out.append(self.platform.static)
         out += [c.model for c in self.cameras.values() if c.model is not None]
@@ -200,7 +203,9 @@ def load_session(folder: str | Path) -> Session:
                                  "perpendicular — contradictory nominal orientation")
         gon = Goniometer(_file(folder, g.get("log"), f"{w} log"), tuple(faces), nom_r, dsign,
                          _number(g.get("reference_offset_arcsec", 0.0),
-                                 f"{w} reference_offset_arcsec") * ARCSEC)
+                                 f"{w} reference_offset_arcsec") * ARCSEC,
+                         _file(folder, g["reverse_log"], f"{w} reverse_log")
+                         if "reverse_log" in g else None)
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():

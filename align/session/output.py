@@ -6,6 +6,7 @@ import numpy as np
 
 from align.apply import PlatformCalibration
 from align.fusion import E_NAMES
+from align.gonio import direction_effect
 from align.session.run import SessionResult
 
 ARCSEC = np.pi / 180 / 3600
@@ -58,7 +59,9 @@ def result_json(res: SessionResult) -> dict:
             "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
             "angles_u_arcsec": (fa.u_rad / ARCSEC).tolist(),
             "revolutions_used": fa.revolutions,
-            "effects": [e.to_json() for e in g.loop.effects] if g.loop else [],
+            "effects": ([e.to_json() for e in g.loop.effects] if g.loop else [])
+            + ([direction_effect(g.direction, res.session.goniometer.faces)]
+               if g.direction is not None else []),
             "unexplained_structure": bool(g.loop and g.loop.unexplained_structure),
             "notes": list(g.notes)}
     if res.marks:
