@@ -279,7 +279,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     d = 1 if args.direction == "ccw" else -1
     try:
         run = measure_log(args.log, len(faces), args.latitude, d, args.alpha,
-                          reverse_log=args.reverse_log)
+                          reverse_log=args.reverse_log, steady_table=args.steady_table)
     except (LogError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
@@ -317,6 +317,15 @@ def cmd_gonio(args: argparse.Namespace) -> int:
                          for k, v in summary.exclusions.counts.items()},
           "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
                     "adev_arcsec": (np.rad2deg(fa.allan_dev_rad) * 3600).tolist()}}
+    js["angles_source"] = "pulse times (steady table)" if run.timing_used else "counts"
+    if run.timing is not None:
+        ta = run.timing
+        js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
+                        "angles_u_arcsec": (ta.u_rad / ARCSEC).tolist(),
+                        "counts_minus_timing_arcsec": (ta.diff_rad / ARCSEC).tolist(),
+                        "counts_minus_timing_u_arcsec": (ta.diff_u_rad / ARCSEC).tolist(),
+                        "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
+                        "used": run.timing_used}
     if nominal is not None:
         js["deviation_arcsec"] = (np.rad2deg(fa.angles_rad - nominal) * 3600).tolist()
     if args.plot:
@@ -626,6 +635,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--direction", choices=["ccw", "cw"], default="ccw")
     g.add_argument("--reverse-log", help="a log of the same faces with the table turning the "
                    "other way: the angles are then the mean of both directions")
+    g.add_argument("--steady-table", action="store_true",
+                   help="the table turns at constant speed: angles from the pulse times "
+                   "(below the count quantisation) when the counts confirm it")
     g.add_argument("--alpha", type=float, default=1e-3)
     g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
     g.add_argument("--json")

@@ -38,6 +38,7 @@ from goniometry import (
     vertical_earth_rate,
 )
 from goniometry.angles import OMEGA_EARTH
+from goniometry.timing import TimingAngles, timing_angles
 
 EARTH = "earth_rate"
 SCALE = "scale_drift"
@@ -140,6 +141,8 @@ class GonioRun:
     earth_rate_applied: float | None
     reverse: GonioRun | None = None
     direction: DirectionTerm | None = None
+    timing: TimingAngles | None = None
+    timing_used: bool = False
 
 
 def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, DirectionTerm]:
@@ -171,11 +174,15 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
 
 def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
-                reverse_log: str | Path | None = None, apply_loop: bool = True) -> GonioRun:
+                reverse_log: str | Path | None = None, apply_loop: bool = True,
+                steady_table: bool = False) -> GonioRun:
     """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
     else by the loop when the data show it and it is physically possible. ``reverse_log``: a
     log of the same faces with the table turning the other way; the result is then the mean
-    of both directions (see :func:`combine_directions`).
+    of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts the
+    table turns at constant speed within a revolution; the angles then come from the pulse
+    times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the timing
+    estimate is the more precise one; otherwise the counts are used and the reason is noted.
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
     """
@@ -217,7 +224,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
             notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
                          "its uncertainty is carried into the angles")
     if rate_used is None:
-        return GonioRun(summary, face_angles(summary), loop, tuple(notes), None)
+        return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
+                            steady_table, alpha)
     rate = rate_used
     summary = read_revolutions(path, n_faces,
                                correct=lambda c, dt: earth_rate_counts(c, dt, rate))
@@ -230,7 +238,34 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         sens = -(dt[ok].mean(0) - dt[ok].sum(1).mean() * fa.angles_rad / (2 * np.pi))
         cov = fa.cov + np.outer(sens, sens) * rate_u**2
         fa = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)))
-    return GonioRun(summary, fa, loop, tuple(notes), rate_used)
+    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), rate_used), steady_table,
+                        alpha)
+
+
+def _with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
+    """Replace the count angles by the timing angles when asked, confirmed and better."""
+    if not steady_table:
+        return run
+    if not run.summary.has_time:
+        return replace(run, notes=(*run.notes, "--steady-table needs pulse times (t): counts "
+                                   "used"))
+    ta = timing_angles(run.summary)
+    arcsec = np.rad2deg(1) * 3600
+    worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
+    if ta.p_value < alpha:
+        note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
+                f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — a "
+                "speed ripple locked to the table; counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    if np.all(ta.u_rad >= run.angles.u_rad):
+        note = ("steady table confirmed, but the pulse times are the noisier estimate (speed "
+                "wander within revolutions): counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    fa = replace(run.angles, angles_rad=ta.angles_rad, u_rad=ta.u_rad, cov=ta.cov)
+    note = (f"angles from pulse times (steady table, confirmed by the counts to "
+            f"±{float(np.max(ta.diff_u_rad)) * arcsec:.3f}″ per angle, chi2 {ta.chi2:.1f} / "
+            f"{ta.dof}); a locked ripple below that is not excluded")
+    return replace(run, angles=fa, timing=ta, timing_used=True, notes=(*run.notes, note))
 
 
 def direction_effect(term: DirectionTerm, faces: Sequence[str]) -> dict:

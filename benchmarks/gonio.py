@@ -5,6 +5,9 @@ Run:  python3 benchmarks/gonio.py [--logs 50] [--pulses 1000000,10000000]
 1. Over seeded clean logs (200 revolutions, 1 rev/s, jitter 0.1"): normalised errors of every
    face angle (RMS should be ~1) and the stated uncertainty against the quantisation limit
    q/sqrt(6)/sqrt(R).
+   With pulse times and a steady table, the same logs through the pulse-time estimator
+   (--steady-table): normalised errors, u against the jitter limit sqrt(2) sigma_j / sqrt(R),
+   and the gain over the counts.
 2. Throughput (pulses/s) and peak memory (max RSS of a fresh process) of the streaming reader
    for two log lengths: memory must not grow with the length.
 """
@@ -25,10 +28,11 @@ ARCSEC = np.pi / 180 / 3600
 
 
 def accuracy(n_logs: int) -> None:
+    from align.gonio import measure_log
     from goniometry import face_angles, read_revolutions
     from synth.gonio import GonioSpec, simulate, write_log
 
-    z, ratio = [], []
+    z, ratio, zt, rt, gain = [], [], [], [], []
     with tempfile.TemporaryDirectory() as d:
         for seed in range(n_logs):
             sim = simulate(GonioSpec(revolutions=200, seed=seed))
@@ -38,6 +42,12 @@ def accuracy(n_logs: int) -> None:
             z.append((fa.angles_rad - truth) / fa.u_rad)
             limit = 2 * np.pi / fa.counts_per_rev / np.sqrt(6) / np.sqrt(fa.revolutions)
             ratio.append(fa.u_rad / limit)
+            run = measure_log(p, 4, steady_table=True)
+            if run.timing_used:
+                zt.append((run.angles.angles_rad - truth) / run.angles.u_rad)
+                jit = GonioSpec().jitter_rad * np.sqrt(2) / np.sqrt(run.angles.revolutions)
+                rt.append(run.angles.u_rad / jit)
+                gain.append(fa.u_rad / run.angles.u_rad)
     z, ratio = np.array(z), np.array(ratio)
     print(f"== {n_logs} clean logs, 200 revolutions each ==")
     print(f"normalised errors: RMS {np.sqrt(np.mean(z**2)):.3f}, mean {z.mean():+.3f} "
@@ -45,6 +55,10 @@ def accuracy(n_logs: int) -> None:
     limit = 1.696 / np.sqrt(6) / np.sqrt(200)
     print(f"stated u / (q/sqrt6/sqrtR): median {np.median(ratio):.2f}, 95th percentile "
           f"{np.percentile(ratio, 95):.2f} (q = 1.696\", limit {limit:.3f}\")")
+    zt = np.array(zt)
+    print(f"pulse times (--steady-table): used on {len(zt)} of {n_logs} logs; normalised errors "
+          f"RMS {np.sqrt(np.mean(zt**2)):.3f}; u / jitter limit median {np.median(rt):.2f}; "
+          f"u(counts) / u(times) median {np.median(gain):.1f}")
 
 
 def _peak_rss_mb() -> float:

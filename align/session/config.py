@@ -66,6 +66,7 @@ class Goniometer:
     direction: int
     reference_offset_rad: float = 0.0
     reverse_log: Path | None = None
+    steady_table: bool = False
 
 
 @dataclass(frozen=True)
@@ -205,7 +206,7 @@ def load_session(folder: str | Path) -> Session:
                          _number(g.get("reference_offset_arcsec", 0.0),
                                  f"{w} reference_offset_arcsec") * ARCSEC,
                          _file(folder, g["reverse_log"], f"{w} reverse_log")
-                         if "reverse_log" in g else None)
+                         if "reverse_log" in g else None, bool(g.get("steady_table", False)))
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():

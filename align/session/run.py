@@ -81,7 +81,8 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         g = s.goniometer
         progress(f"goniometer: {g.log.name}")
         res.gonio = _try(res, "goniometer", lambda: measure_log(
-            g.log, len(g.faces), s.latitude_deg, g.direction, alpha, reverse_log=g.reverse_log))
+            g.log, len(g.faces), s.latitude_deg, g.direction, alpha, reverse_log=g.reverse_log,
+            steady_table=g.steady_table))
     cams: dict[str, CameraModel | None] = {}
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
