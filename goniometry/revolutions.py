@@ -48,7 +48,7 @@ class Exclusions:
 class AllanAccumulator:
     """Non-overlapping Allan variance of a vector series at octave averaging lengths
     (1, 2, 4, ... 2^(levels-1) revolutions), accumulated batch by batch with bounded memory
-    (at most 2^levels pending rows)."""
+    (at most one pending block mean per level)."""
 
     n: int
     levels: int = 16
@@ -64,21 +64,23 @@ class AllanAccumulator:
         self.pairs = np.zeros(self.levels, int)
 
     def add(self, x: np.ndarray) -> None:
+        # Level m's stream is the means of blocks of 2^m rows, aligned from the first row;
+        # level m+1's is the pairwise means of level m's (a cascade: the work halves per
+        # level, instead of re-averaging the raw rows at every level).
+        data = x
         for m in range(self.levels):
-            size = 2**m
-            data = np.concatenate([self.pending[m], x]) if len(self.pending[m]) else x
-            nb = len(data) // size
-            if nb:
-                means = data[: nb * size].reshape(nb, size, self.n).mean(1)
-                if self.prev[m] is not None:
-                    means_p = np.vstack([self.prev[m][None], means])
-                else:
-                    means_p = means
-                d = np.diff(means_p, axis=0)
-                self.sq[m] += (d * d).sum(0)
-                self.pairs[m] += len(d)
-                self.prev[m] = means[-1]
-            self.pending[m] = data[nb * size:].copy()
+            if not len(data):
+                break
+            seq = data if self.prev[m] is None else np.vstack([self.prev[m][None], data])
+            d = np.diff(seq, axis=0)
+            self.sq[m] += (d * d).sum(0)
+            self.pairs[m] += len(d)
+            self.prev[m] = data[-1]
+            if len(self.pending[m]):
+                data = np.concatenate([self.pending[m], data])
+            k = len(data) // 2
+            self.pending[m] = data[2 * k:].copy()
+            data = data[: 2 * k].reshape(k, 2, self.n).mean(1)
 
     def deviation(self) -> tuple[np.ndarray, np.ndarray]:
         """Averaging lengths [revolutions] and Allan deviation per face (levels with >= 3
