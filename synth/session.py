@@ -26,7 +26,7 @@ is told) or left undeclared (it is not).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +87,7 @@ class SessionSpec:
     noise_v: float = 4.8e-5
     samples_per_pose: int = 200
     views: tuple[str, ...] = tuple(VIEWS)
+    reverse_run: bool = False  # also a clockwise counter log (gonio_cw.csv)
     platform_poses: tuple[str, ...] = tuple(p[0] for p in PLATFORM_POSES)
 
 
@@ -185,6 +186,9 @@ def _gonio(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
                    latitude_deg=spec.latitude_deg, seed=int(rng.integers(1 << 30)))
     sim = simulate(gs)
     write_log(sim, out / "gonio.csv")
+    if spec.reverse_run:
+        write_log(simulate(replace(gs, direction=-1, seed=int(rng.integers(1 << 30)))),
+                  out / "gonio_cw.csv")
     return sim["truth"]["angles_deg"]
 
 
@@ -224,6 +228,8 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
              'static = "tumble.csv"', 'scale_sign = "-"', "", "[goniometer]",
              'log = "gonio.csv"', f"faces = {json.dumps(list(FACES))}",
              "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"']
+    if spec.reverse_run:
+        lines.append('reverse_log = "gonio_cw.csv"')
     if "reference_offset" in declared:
         lines.append(f"reference_offset_arcsec = {declared['reference_offset']}")
     lines += ["", "[cameras.A]", "# looks along +Y"]

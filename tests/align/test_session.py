@@ -166,3 +166,18 @@ def test_demo_runs_a_session_and_reports_its_error(tmp_path, capsys):
     z = float(out.split("normalised errors (error / u): RMS")[1].split()[0])
     assert 0.2 < z < 2.5
     assert main(["demo", "--out", str(tmp_path / "d")]) == 2  # never overwrites
+
+
+def test_session_with_both_table_directions(tmp_path):
+    from align.session import run_session
+
+    folder = tmp_path / "both"
+    truth = write_session(folder, SessionSpec(seed=22, reverse_run=True))
+    assert 'reverse_log = "gonio_cw.csv"' in (folder / "session.toml").read_text()
+    res = run_session(load_session(folder))
+    assert res.gonio.reverse is not None and res.gonio.direction is not None
+    assert res.gonio.angles.revolutions == 2 * res.gonio.reverse.angles.revolutions
+    f = res.fusion
+    off = ~np.eye(3, dtype=bool)
+    E0 = np.array(truth["misalignment_rad"])
+    assert np.all(np.abs(f.E - E0)[off] < 4.5 * f.E_u[off])
