@@ -20,7 +20,7 @@ import numpy as np
 
 from align.calibration import TriadModel, model_from_dict, model_to_dict, r_matrix
 from align.errors import InputError
-from align.fusion import E_NAMES, axes_from
+from align.fusion import E_NAMES, axes_from, e_matrix
 
 
 @dataclass(frozen=True)
@@ -37,8 +37,6 @@ class PlatformCalibration:
         return axes_from(self.e6)
 
     def to_dict(self) -> dict:
-        from align.fusion import e_matrix
-
         return {"frame": "platform: X, Y horizontal, Z up; row i = accelerometer i",
                 "model": model_to_dict(self.model),
                 "misalignment_rad": e_matrix(self.e6).tolist(),

@@ -518,7 +518,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
                        undeclared=frozenset(undeclared))
     try:
         write_session(args.out, spec)
-    except FileExistsError as exc:
+    except (FileExistsError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     print(f"wrote session {args.out} (seed {args.seed}; truth in {Path(args.out) / 'truth.json'})")
     for k, v in {**declared, **undeclared}.items():

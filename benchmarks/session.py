@@ -24,8 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from align.fusion import E_INDEX, E_NAMES, fuse
-from align.session import load_session, run_session
-from align.session.run import _blocks
+from align.session import load_session, observation_blocks, run_session
 from synth.session import SessionSpec, write_session
 
 ARCSEC = np.pi / 180 / 3600
@@ -56,7 +55,7 @@ def one(args: tuple[int, str, dict]) -> dict:
                "effects": [e.name for e in f.loop.effects], "time": dt,
                "errors": len(res.errors), "consistent": f.consistent}
         if kind == "clean":
-            patent = [b for b in _blocks(s, res) if b.source in ("camera", "goniometer")]
+            patent = [b for b in observation_blocks(s, res) if b.source in ("camera", "goniometer")]
             try:
                 fp = fuse(patent)
                 out["err_patent"] = np.array([fp.E[i, j] - E0[i, j] for i, j in E_INDEX])

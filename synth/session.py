@@ -119,6 +119,9 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
     for name in spec.effects:
         if name not in EFFECTS:
             raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
+    if "lens_k1" in spec.effects and "lens_k1" not in spec.undeclared:
+        raise ValueError("lens_k1 can only be undeclared: session.toml describes a lens by a "
+                         "camera model file, which synth does not write")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(spec.seed)
     eff = {k: float(v) for k, v in spec.effects.items()}
@@ -238,8 +241,6 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
             lines += ["", "[cameras.B]", "# looks along -X"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
-        if "lens_k1" in declared:
-            lines.append(f"radial_k1 = {declared['lens_k1']}")
     for view in spec.views:
         cam, right, up = VIEWS[view]
         lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',

@@ -127,6 +127,25 @@ def _number(value: object, where: str) -> float:
     return float(value)
 
 
+KEYS = {
+    "calibration": {"static", "scale_sign", "check"},
+    "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
+                   "reverse_log", "steady_table"},
+    "cameras": {"model", "roll_arcsec"},
+    "views": {"camera", "right", "up"},
+    "images": {"file", "housing", "view", "nominal"},
+    "platform": {"static", "table_tilt_arcsec", "poses"},
+}
+
+
+def _known(table: dict, kind: str, where: str) -> None:
+    """A misspelt key would be silently ignored: name it instead."""
+    unknown = set(table) - KEYS[kind]
+    if unknown:
+        raise InputError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; known: "
+                         f"{', '.join(sorted(KEYS[kind]))}")
+
+
 def _table(d: dict, key: str, where: str) -> dict:
     v = d.get(key, {})
     if not isinstance(v, dict):
@@ -160,6 +179,7 @@ def load_session(folder: str | Path) -> Session:
     cal = None
     if "calibration" in d:
         c = _table(d, "calibration", src + ": ")
+        _known(c, "calibration", f"{src}: [calibration]")
         sign = str(c.get("scale_sign", "+"))
         parts = [p.strip() for p in sign.split(",")] if "," in sign else [sign.strip()] * 3
         if len(parts) != 3 or any(p not in ("+", "-") for p in parts):
@@ -174,6 +194,7 @@ def load_session(folder: str | Path) -> Session:
     if "goniometer" in d:
         g = _table(d, "goniometer", src + ": ")
         w = f"{src}: [goniometer]"
+        _known(g, "goniometer", w)
         faces = g.get("faces")
         if not isinstance(faces, list) or len(faces) < 2 or not all(
                 isinstance(f, str) for f in faces):
@@ -213,6 +234,7 @@ def load_session(folder: str | Path) -> Session:
         w = f"{src}: [cameras.{name}]"
         if not isinstance(c, dict):
             raise InputError(f"{w}: expected a table")
+        _known(c, "cameras", w)
         model = _file(folder, c["model"], f"{w} model") if "model" in c else None
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec") * ARCSEC)
@@ -222,6 +244,7 @@ def load_session(folder: str | Path) -> Session:
         w = f"{src}: [views.{name}]"
         if not isinstance(v, dict):
             raise InputError(f"{w}: expected a table")
+        _known(v, "views", w)
         right = signed_axis(v.get("right"), f"{w} right")
         up = signed_axis(v.get("up"), f"{w} up")
         if abs(right @ up) > 0:
@@ -239,6 +262,7 @@ def load_session(folder: str | Path) -> Session:
         w = f"{src}: [[images]] #{k}"
         if not isinstance(im, dict):
             raise InputError(f"{w}: expected a table")
+        _known(im, "images", w)
         housing = im.get("housing")
         if housing not in HOUSINGS:
             raise InputError(f"{w} housing = {housing!r}: not one of x, y, z")
@@ -264,6 +288,7 @@ def load_session(folder: str | Path) -> Session:
     if "platform" in d:
         p = _table(d, "platform", src + ": ")
         w = f"{src}: [platform]"
+        _known(p, "platform", w)
         poses = {}
         for label, spec in _table(p, "poses", w).items():
             if not isinstance(spec, dict) or "up" not in spec:

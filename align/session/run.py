@@ -90,7 +90,7 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     for k, im in enumerate(s.images, start=1):
         progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
         cam = cams.get(s.views[im.view].camera)
-        found = [r for r in measure_file(im.file, cam, alpha=alpha, expect_one=True)]
+        found = measure_file(im.file, cam, alpha=alpha, expect_one=True)
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
@@ -104,7 +104,7 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     elif s.platform is not None:
         res.errors.append(StageError("platform static", "not used: the calibration failed"))
     progress("fusion")
-    blocks = _blocks(s, res)
+    blocks = observation_blocks(s, res)
     res.fusion = _try(res, "fusion", lambda: fuse(blocks, alpha=alpha)) if blocks else None
     if not blocks:
         res.errors.append(StageError("fusion", "no stage produced observations"))
@@ -130,7 +130,8 @@ def _platform_poses(s: Session, cal: Calibration) -> list[PlatformPose]:
             for i, lab in enumerate(poses.labels)]
 
 
-def _blocks(s: Session, res: SessionResult) -> list[Block]:
+def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
+    """The fusion's observation blocks from whatever stages of ``res`` succeeded."""
     blocks: list[Block] = []
     if res.marks:
         obs = []

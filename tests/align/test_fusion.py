@@ -131,7 +131,7 @@ def test_inconsistency_no_candidate_explains_is_reported(tmp_path):
     from dataclasses import replace
 
     from align.fusion import fuse
-    from align.session.run import _blocks
+    from align.session import observation_blocks
 
     folder = tmp_path / "crooked"
     write_session(folder, SessionSpec(seed=15))
@@ -141,7 +141,7 @@ def test_inconsistency_no_candidate_explains_is_reported(tmp_path):
     k = int(np.argmin([r.angle_u_rad for _, r in res.marks]))
     im, r = res.marks[k]
     res.marks[k] = (im, replace(r, angle_rad=r.angle_rad + 15 * r.angle_u_rad))
-    f = fuse(_blocks(s, res))
+    f = fuse(observation_blocks(s, res))
     assert not f.consistent
     assert f.inflation > 1.5
     worst = max(f.rows, key=lambda row: abs(row.normalised))

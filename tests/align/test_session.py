@@ -47,6 +47,7 @@ def _edit(folder: Path, old: str, new: str) -> None:
      "must sum to 360"),
     ('right = "+X"', 'right = "+Z"', "[views.A]: right = '+Z' and up = '+Z' are the same axis"),
     ("latitude_deg = 50.45", "latitude = 50.45", "unknown key(s) latitude"),
+    ('direction = "ccw"', 'directon = "ccw"', "[goniometer]: unknown key(s) directon"),
     ('L000 = { up = "+Z", table_deg = 0.0 }', 'L000 = { up = "+W", table_deg = 0.0 }',
      "[platform].poses L000 up = '+W'"),
 ])
