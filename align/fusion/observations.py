@@ -176,7 +176,9 @@ def ellipsoid_block(beta: np.ndarray, cov_beta: np.ndarray) -> Block:
     def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
         return np.array([axes[i] @ axes[j] for i, j in pairs])
 
-    return Block("ellipsoid", ("cos(x,y)", "cos(x,z)", "cos(y,z)"), c, J @ cov_beta @ J.T,
+    # cos of the angle between two axes = sin of its departure from 90 deg: shown as an angle.
+    return Block("ellipsoid", ("non-orthogonality x-y", "non-orthogonality x-z",
+                              "non-orthogonality y-z"), c, J @ cov_beta @ J.T,
                  predict)
 
 
