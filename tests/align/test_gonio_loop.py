@@ -91,7 +91,9 @@ def test_steady_table_timing_goes_below_the_count_quantisation(tmp_path):
     z = np.array(z)
     assert np.all(np.abs(z) < TOL) and 0.6 < np.sqrt(np.mean(z**2)) < 1.5
     assert 0.7 < np.median(ratio) < 1.3
-    assert np.median(gain) > 3
+    # Expected gain: counts ~0.76 q/sqrt6 (benchmark) over sqrt2 sigma_j = 0.76 x 0.69" / 0.14"
+    # = 3.7; each u is a batch-means estimate (~25 % scatter with ~37 blocks).
+    assert np.median(gain) > 2.5
     p, _ = _log(tmp_path, "ripple.csv", revolutions=300, rev_per_s=1.0, ripple=1e-4, seed=1)
     run = measure_log(p, 4, 50.45, steady_table=True)
     assert not run.timing_used and "NOT confirmed" in run.notes[-1]
