@@ -30,6 +30,12 @@ from goniometry.errors import LogError
 from goniometry.reader import iter_log
 
 
+def _rows(a: np.ndarray, idx: np.ndarray | None, end: int, n: int) -> np.ndarray:
+    """Revolutions as rows: a reshaped view when they are back to back (``idx`` None), else
+    gathered by ``idx``."""
+    return a[:end].reshape(-1, n) if idx is None else a[idx]
+
+
 def rowsum(a: np.ndarray) -> np.ndarray:
     """Sum over the (few) faces of each revolution: numpy's axis-1 reduction over 4 columns
     costs ~5x more per row than adding the columns."""
@@ -151,8 +157,9 @@ class RevolutionStats:
         if room > 0:
             m = min(room, len(a))
             self.kept_counts.append(counts[:m].astype(float))
-            self.kept_dt.append(None if dt is None else dt[:m])
-            self.kept_tend.append(None if t_end is None else t_end[:m])
+            # Copies: the rows may be views into a whole chunk.
+            self.kept_dt.append(None if dt is None else dt[:m].copy())
+            self.kept_tend.append(None if t_end is None else t_end[:m].copy())
             self.n_kept += m
 
 
@@ -216,8 +223,11 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
         normal = lengths == n_faces
         if normal.any():
             idx = starts[normal][:, None] + np.arange(n_faces)[None, :]
-            c = cur["count"][idx]
-            bad = rowany(cur["brk"][idx])
+            # The usual chunk has every revolution normal, back to back: views, no gathers.
+            sel = None if normal.all() else idx
+            end = int(refs[-1]) + 1
+            c = _rows(cur["count"], sel, end, n_faces)
+            bad = rowany(_rows(cur["brk"], sel, end, n_faces))
             if pattern is None:
                 good = c[~bad]
                 if len(good):
@@ -233,8 +243,12 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
             for i in np.flatnonzero(off & ~bad):
                 exc.add("counts do not match the face pattern: revolution excluded",
                         line0 + int(idx[i, 0]))
-            stats.add(c[use], None if dt is None else cur["dt"][idx][use],
-                      None if dt is None else cur["t"][idx[use, -1]], correct)
+            all_used = bool(use.all())
+            d_rev = None if dt is None else _rows(cur["dt"], sel, end, n_faces)
+            stats.add(c if all_used else c[use],
+                      None if d_rev is None else (d_rev if all_used else d_rev[use]),
+                      None if dt is None else _rows(cur["t"], sel, end, n_faces)[:, -1][use],
+                      correct)
         for s, L in zip(starts[~normal], lengths[~normal], strict=True):
             sl = slice(s, s + L)
             fixed = _repair(cur["count"][sl], cur["brk"][sl], n_faces, pattern,
