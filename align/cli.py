@@ -46,7 +46,7 @@ def _write_json(path: Path | None, data: dict) -> None:
 def cmd_marks(args: argparse.Namespace) -> int:
     from align.marks import measure_file
     from align.plots import plot_mark
-    from imaging import CameraModel, ImageInputError
+    from imaging import CameraModel, ImageInputError, read_image
 
     camera = None
     if args.camera:
@@ -73,7 +73,8 @@ def cmd_marks(args: argparse.Namespace) -> int:
             for line in r.loop.summary_lines():
                 print(f"    {line}")
             if plot_dir is not None:
-                print(f"    plot: {plot_mark(r, plot_dir)}")
+                img = read_image(path) if r.measurement is not None else None
+                print(f"    plot: {plot_mark(r, plot_dir, img)}")
     _write_json(out, {"marks": [r.to_json() for r in results]})
     return 2 if failed else 0
 

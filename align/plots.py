@@ -45,21 +45,30 @@ def _new_png(folder: Path, stem: str) -> Path:
     return out
 
 
-def plot_mark(r: MarkResult, folder: str | Path) -> Path:
-    return _write(fig_mark(r), Path(folder), f"{Path(r.image).stem}_mark{r.index}")
+def plot_mark(r: MarkResult, folder: str | Path, image: np.ndarray | None = None) -> Path:
+    return _write(fig_mark(r, image), Path(folder), f"{Path(r.image).stem}_mark{r.index}")
 
 
-def fig_mark(r: MarkResult):
-    """The mark's residuals across the straight line, before and after the loop."""
+def fig_mark(r: MarkResult, image: np.ndarray | None = None):
+    """The mark in its image with the measured centres and the fitted line (when ``image`` is
+    given), and its residuals across the straight line before and after the loop."""
     plt = _plt()
     before, after = r.loop.before, r.loop.after
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    if image is None:
+        fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    else:
+        fig = plt.figure(figsize=(9, 10))
+        gs = fig.add_gridspec(3, 1, height_ratios=(1.6, 1, 1))
+        ax_img = fig.add_subplot(gs[0])
+        axes = [fig.add_subplot(gs[1]), None]
+        axes[1] = fig.add_subplot(gs[2], sharex=axes[0])
+        _mark_on_image(ax_img, r, image)
     t = np.asarray(before.regressors["t"])
     axes[0].errorbar(t, before.residuals, yerr=before.sigma, fmt=".", ms=2, lw=0.5,
                      label=f"straight line: RMS {before.rms:.3f} px")
     axes[0].set_ylabel("residual across mark [px]")
-    axes[0].set_title(f"{r.image} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
-                      f"± {np.rad2deg(r.angle_u_rad) * 3600:.2f}″")
+    axes[0].set_title(f"{Path(r.image).name} mark {r.index}: angle "
+                      f"{np.rad2deg(r.angle_rad):+.6f}° ± {np.rad2deg(r.angle_u_rad) * 3600:.2f}″")
     axes[0].legend(loc="upper right")
     names = ", ".join(e.name for e in r.loop.effects) or "no effect added"
     axes[1].errorbar(np.asarray(after.regressors["t"]), after.residuals, yerr=after.sigma,
@@ -71,6 +80,35 @@ def fig_mark(r: MarkResult):
     axes[1].legend(loc="upper right")
     fig.tight_layout()
     return fig
+
+
+def _mark_on_image(ax, r: MarkResult, image: np.ndarray) -> None:
+    """Image (contrast-stretched) with the centres used and the fitted line drawn over it."""
+    img = np.asarray(image, float)
+    if img.ndim == 3:
+        img = img.mean(2)
+    h, w = img.shape
+    lo, hi = np.percentile(img, (1, 99))
+    ax.imshow(img, cmap="gray", vmin=lo, vmax=hi)
+    c = np.array([(w - 1) / 2, (h - 1) / 2])
+    a = r.angle_rad
+    n = np.array([np.sin(a), np.cos(a)])
+    d = np.array([np.cos(a), -np.sin(a)])
+    if r.measurement is not None:
+        pts = r.measurement.points + c
+        ax.plot(pts[:, 0], pts[:, 1], ".", ms=1.5, color="C1", label="centres used")
+        s = (r.measurement.points - r.offset_px * n) @ d
+        t0, t1 = float(s.min()), float(s.max())
+    else:
+        t0, t1 = -r.length_px / 2, r.length_px / 2
+    p0 = c + r.offset_px * n
+    ends = np.array([p0 + t0 * d, p0 + t1 * d])
+    ax.plot(ends[:, 0], ends[:, 1], "-", lw=0.8, color="C3", label="fitted line")
+    ax.set_xlim(0, w - 1)
+    ax.set_ylim(h - 1, 0)
+    ax.legend(loc="lower right", fontsize=7)
+    ax.set_xticks([])
+    ax.set_yticks([])
 
 
 def plot_calibration(cal, poses, check, folder: Path) -> Path:

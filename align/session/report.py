@@ -144,9 +144,15 @@ def write_report(res: SessionResult, path: str | Path) -> Path:
             [im.file.name, im.housing, im.view, f"{np.rad2deg(r.angle_rad):+.6f}",
              f"{r.angle_u_rad / ARCSEC:.2f}", ", ".join(e.name for e in r.loop.effects)
              or "none"] for im, r in res.marks], left=3))
+        from imaging import ImageInputError, read_image
+
         for im, r in res.marks:
+            try:
+                image = read_image(im.file)
+            except ImageInputError:
+                image = None
             parts.append(f"<h3>{_e(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
-                         + _loop(r.loop) + _img(fig_mark(r)))
+                         + _loop(r.loop) + _img(fig_mark(r, image)))
     parts.append("</body></html>")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
