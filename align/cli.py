@@ -432,11 +432,14 @@ def _run_batch(args: argparse.Namespace) -> int:
                             path_in(args.calibration, n, ".cal.json"), args.alpha, True): s
                 for s, n in zip(args.sessions, names, strict=True)}
         done = as_completed(futs)
-        if sys.stderr.isatty():
+        tty = sys.stderr.isatty()
+        if tty:
             from tqdm import tqdm
 
             done = tqdm(done, total=len(futs), desc="sessions")
-        for fut in done:
+        for k, fut in enumerate(done, start=1):
+            if not tty:  # a log file gets one line per finished session instead of a bar
+                print(f"  [{k}/{len(futs)}] {Path(futs[fut]).name} finished", file=sys.stderr)
             try:
                 results.append(fut.result())
             except Exception as exc:  # one session's crash must not stop the others
