@@ -253,16 +253,17 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
-        fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False)
+        fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False,
+                          steady_table=steady_table)
         rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
-                          apply_loop=False)
+                          apply_loop=False, steady_table=steady_table)
         comb, term = combine_directions(fwd.angles, rev.angles)
         notes = [*fwd.notes, *(f"reverse run: {n}" for n in rev.notes),
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
-                        rev, term)
+                        rev, term, fwd.timing, fwd.timing_used and rev.timing_used)
     notes: list[str] = []
     loop = None
     rate_used = None
