@@ -171,3 +171,20 @@ def test_platform_calibration_applied_to_readings(clean, tmp_path):
     # Without the misalignment (the seed paper's floating frame) the error is arc-minutes.
     a_c = pc.model.specific_force(u).mean(0)
     assert np.max(np.abs(a_c - g[-1])) > 100e-6
+
+
+@pytest.mark.slow
+def test_clean_sessions_normalised_errors_and_no_false_effects(tmp_path):
+    """12 clean sessions: the RMS of the 72 normalised errors is 1 within 3 of its sampling
+    sd (1/sqrt(2 x 72) = 0.083), and the loop adds nothing (~4 candidates at alpha 1e-3: 0.05
+    false additions expected over 12 sessions; one is tolerated)."""
+    z, added = [], 0
+    for seed in range(12):
+        res, truth = _session(tmp_path, f"c{seed}", seed=500 + seed)
+        f = res.fusion
+        z.append(_z(f.E, f.E_u, truth))
+        added += len(f.loop.effects)
+    z = np.concatenate(z)
+    assert 0.75 < np.sqrt(np.mean(z**2)) < 1.25, np.sqrt(np.mean(z**2))
+    assert abs(np.mean(z)) < 3 / np.sqrt(len(z))
+    assert added <= 1
