@@ -3,7 +3,7 @@
 Public API::
 
     Block, MarkObs, PlatformPose                      (observations of each instrument)
-    mark_block, gonio_block, ellipsoid_block, static_blocks
+    mark_block, gonio_block, ellipsoid_block, static_block
     fuse(blocks) -> FusionResult                      (weighted LS + the residual loop)
 """
 
@@ -21,12 +21,12 @@ from align.fusion.observations import (
     ellipsoid_block,
     gonio_block,
     mark_block,
-    static_blocks,
+    static_block,
 )
 from align.fusion.solve import FusionResult, FusionStage, ObservationRow, fuse
 
 __all__ = [
     "E_INDEX", "E_NAMES", "REF", "ROLL", "TILT", "Block", "FusionResult", "FusionStage",
     "MarkObs", "ObservationRow", "PlatformPose", "axes_from", "e_matrix", "ellipsoid_block",
-    "fuse", "gonio_block", "mark_block", "static_blocks",
+    "fuse", "gonio_block", "mark_block", "static_block",
 ]

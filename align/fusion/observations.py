@@ -16,7 +16,8 @@ added. Angles in radians, readings in g.
   floats, angles between its axes do not);
 * platform static: a calibrated off-axis reading w_i = |r_i| s_i . g of a pose whose gravity
   direction g in P is known (levelled at a table angle; the table axis's tilt turns with the
-  table angle), with the calibration's bias uncertainty as a nuisance with a prior.
+  table angle), with the calibration's bias error as a nuisance whose prior sits in the
+  ellipsoid block (jointly with beta: one fit gave both).
 """
 
 from __future__ import annotations
@@ -66,13 +67,18 @@ class Block:
     values: np.ndarray
     cov: np.ndarray
     predict: Callable[[np.ndarray, Nuisances], np.ndarray]
-    unit: str = "rad"
+    unit: str | tuple[str, str] = "rad"  # or (unit of the first 3, unit of the rest)
     # Which nuisance names this block can see (for identifiability messages).
     sees: tuple[str, ...] = ()
 
     @property
     def u(self) -> np.ndarray:
         return np.sqrt(np.diag(self.cov))
+
+    def unit_of(self, k: int) -> str:
+        if isinstance(self.unit, str):
+            return self.unit
+        return self.unit[0] if k < 3 else self.unit[1]
 
 
 # ----------------------------------------------------------------------------- camera marks
@@ -162,24 +168,44 @@ def _row_cosines(beta: np.ndarray) -> np.ndarray:
     return np.array([R[0] @ R[1], R[0] @ R[2], R[1] @ R[2]])
 
 
-def ellipsoid_block(beta: np.ndarray, cov_beta: np.ndarray) -> Block:
-    """Cosines of the angles x-y, x-z, y-z between the calibrated axes (from beta [rad])."""
-    c = _row_cosines(beta)
-    J = np.zeros((3, 3))
-    h = 1e-7
-    for j in range(3):
-        d = np.zeros(3)
+def _calibration_quantities(theta: np.ndarray, with_bias: bool) -> np.ndarray:
+    """(beta, bias) -> cosines between the axes and, with_bias, the per-axis bias R b [g]."""
+    from align.calibration import r_matrix
+
+    c = _row_cosines(theta[:3])
+    return np.concatenate([c, r_matrix(theta[:3]) @ theta[3:6]]) if with_bias else c
+
+
+def ellipsoid_block(beta: np.ndarray, cov: np.ndarray, bias: np.ndarray | None = None
+                    ) -> Block:
+    """What the ellipsoid calibration says about the axes: cosines of the angles x-y, x-z, y-z
+    between them (its frame floats, its angles do not) [-, i.e. rad from 90 deg]; with
+    ``bias`` [g] also the prior on the per-axis bias error of the platform readings (0, with
+    the calibration's uncertainty), jointly: beta and bias come from one fit and are
+    correlated. ``cov``: covariance of beta (3x3) or of (beta, bias) (6x6)."""
+    with_bias = bias is not None
+    theta = np.concatenate([beta, bias]) if with_bias else np.asarray(beta, float)
+    q0 = _calibration_quantities(theta, with_bias)
+    J = np.zeros((len(q0), len(theta)))
+    for j in range(len(theta)):
+        h = 1e-7
+        d = np.zeros(len(theta))
         d[j] = h
-        J[:, j] = (_row_cosines(beta + d) - _row_cosines(beta - d)) / (2 * h)
+        J[:, j] = (_calibration_quantities(theta + d, with_bias)
+                   - _calibration_quantities(theta - d, with_bias)) / (2 * h)
     pairs = ((0, 1), (0, 2), (1, 2))
+    values = np.concatenate([q0[:3], np.zeros(3)]) if with_bias else q0
 
     def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
-        return np.array([axes[i] @ axes[j] for i, j in pairs])
+        cos = np.array([axes[i] @ axes[j] for i, j in pairs])
+        return np.concatenate([cos, nuis["bias"]]) if with_bias else cos
 
     # cos of the angle between two axes = sin of its departure from 90 deg: shown as an angle.
-    return Block("ellipsoid", ("non-orthogonality x-y", "non-orthogonality x-z",
-                              "non-orthogonality y-z"), c, J @ cov_beta @ J.T,
-                 predict)
+    labels = ("non-orthogonality x-y", "non-orthogonality x-z", "non-orthogonality y-z")
+    if with_bias:
+        labels += tuple(f"bias error {h} (prior)" for h in HOUSINGS)
+    return Block("ellipsoid", labels, values, J @ cov @ J.T, predict,
+                 unit=("rad", "g") if with_bias else "rad")
 
 
 # ----------------------------------------------------------------------------- platform static
@@ -207,11 +233,11 @@ def gravity_in_platform(up: np.ndarray, table: float, tilt: np.ndarray) -> np.nd
     return g / np.linalg.norm(g)
 
 
-def static_blocks(poses: list[PlatformPose], row_norms: np.ndarray, u_bias: np.ndarray,
-                  declared_tilt: np.ndarray) -> list[Block]:
-    """Off-axis readings (the on-axis one measures the scale factor, not E) and the bias
-    prior: every reading carries the same calibrated bias error per axis, a nuisance 'bias[i]'
-    with prior 0 +- u_bias[i]."""
+def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
+                 declared_tilt: np.ndarray) -> Block:
+    """Off-axis readings (the on-axis one measures the scale factor, not E). Every reading
+    carries the same calibrated bias error per axis: the nuisance 'bias' (its prior is in the
+    ellipsoid block, correlated with beta)."""
     vals, us, labels, which, pidx = [], [], [], [], []
     for p, pose in enumerate(poses):
         up_axis = int(np.argmax(np.abs(pose.up)))
@@ -230,10 +256,5 @@ def static_blocks(poses: list[PlatformPose], row_norms: np.ndarray, u_bias: np.n
         g = np.array([gravity_in_platform(poses[p].up, poses[p].table, tilt) for p in pidx_a])
         return row_norms[which_a] * (axes[which_a] * g).sum(1) + nuis["bias"][which_a]
 
-    def predict_prior(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
-        return nuis["bias"]
-
-    return [Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
-                  predict, unit="g", sees=(TILT,)),
-            Block("bias prior", tuple(f"bias {h}" for h in HOUSINGS), np.zeros(3),
-                  np.diag(np.square(u_bias)), predict_prior, unit="g")]
+    return Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
+                 predict, unit="g", sees=(TILT,))

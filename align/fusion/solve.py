@@ -55,7 +55,8 @@ class FusionStage:
             raise InputError("fusion: no observations")
         self.blocks = list(blocks)
         self.whiten = [np.linalg.inv(np.linalg.cholesky(b.cov)) for b in self.blocks]
-        self.base_nuis = {"bias": 3} if any(b.source == "bias prior" for b in blocks) else {}
+        self.base_nuis = ({"bias": 3} if any(b.source == "platform static" for b in blocks)
+                          else {})
         self.n = sum(len(b.values) for b in self.blocks)
 
     def _layout(self, terms: Sequence[Term]) -> list[tuple[str, int]]:
@@ -208,8 +209,9 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
     E_u = e_matrix(np.sqrt(np.diag(cov)))
     rows = []
     for b, pred in zip(stage.blocks, sol.predicted, strict=True):
-        for lab, v, p, u in zip(b.labels, b.values, pred, b.u, strict=True):
-            rows.append(ObservationRow(b.source, lab, float(v), float(p), float(u), b.unit))
+        for k, (lab, v, p, u) in enumerate(zip(b.labels, b.values, pred, b.u, strict=True)):
+            rows.append(ObservationRow(b.source, lab, float(v), float(p), float(u),
+                                       b.unit_of(k)))
     nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
             for k, n in enumerate(sol.names) if k >= 6}
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,

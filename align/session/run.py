@@ -22,7 +22,7 @@ from align.fusion import (
     fuse,
     gonio_block,
     mark_block,
-    static_blocks,
+    static_block,
 )
 from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
@@ -151,14 +151,12 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
             blocks.append(b)
     if res.calibration is not None:
         m = res.calibration.model
-        idx = [m.names.index(f"beta_{a}") for a in "xyz"]
-        blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)]))
-    if res.platform:
-        m = res.calibration.model
-        norms = np.linalg.norm(r_matrix(m.beta), axis=1)
-        R = r_matrix(m.beta)
-        ib = [m.names.index(f"bias_{a}") for a in "xyz"]
-        # u of the per-axis bias R b (R is within 1e-3 of I: its own u is negligible here).
-        u_bias = np.sqrt(np.diag(R @ m.cov[np.ix_(ib, ib)] @ R.T))
-        blocks += static_blocks(res.platform, norms, u_bias, s.platform.table_tilt_rad)
+        if res.platform:
+            idx = [m.names.index(f"{p}_{a}") for p in ("beta", "bias") for a in "xyz"]
+            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)], m.bias))
+            blocks.append(static_block(res.platform, np.linalg.norm(r_matrix(m.beta), axis=1),
+                                       s.platform.table_tilt_rad))
+        else:
+            idx = [m.names.index(f"beta_{a}") for a in "xyz"]
+            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)]))
     return blocks

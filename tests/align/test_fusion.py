@@ -49,8 +49,7 @@ def test_clean_session_recovers_E_within_its_uncertainty(clean):
     res, truth = clean
     f = res.fusion
     assert not res.errors
-    assert set(f.sources) == {"camera", "goniometer", "ellipsoid", "platform static",
-                              "bias prior"}
+    assert set(f.sources) == {"camera", "goniometer", "ellipsoid", "platform static"}
     z = _z(f.E, f.E_u, truth)
     assert np.all(np.abs(z) < TOL), z
     # The inputs allow sub-arc-second angles: every u is below 0.5" (E is 1-5 arc-minutes).
