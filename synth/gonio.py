@@ -61,6 +61,8 @@ class GonioSpec:
     p_spurious: float = 0.0
     failed_refs: int = 0
     with_time: bool = True
+    pyramidal_rad: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    slit_tilt_rad: float = 0.0
     seed: int = 0
 
     @property
@@ -68,6 +70,21 @@ class GonioSpec:
         """Table angle of each face from face 0, counter-clockwise [rad] (the order in which a
         ccw table brings faces 0, 1, 2, 3 to the autocollimator)."""
         return np.array([0.0, *(np.pi / 2 * np.arange(1, 4) + np.array(self.face_offsets_rad))])
+
+    @property
+    def trigger_azimuths(self) -> np.ndarray:
+        """Table angles at which the autocollimator fires for each face [rad]: a face normal
+        tilted out of the horizontal plane by p (pyramidal error) returns the slit image
+        displaced vertically by 2p; with the detector slit tilted by e from vertical that is a
+        horizontal shift 2p tan e, i.e. the pulse comes p tan e of table angle late, in either
+        direction of rotation. An instrument error the angles between normals do not contain."""
+        return self.azimuths + np.asarray(self.pyramidal_rad) * np.tan(self.slit_tilt_rad)
+
+    def _passing(self, az: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.direction > 0:
+            return np.arange(4), az - az[0]
+        ids = np.array([0, 3, 2, 1])
+        return ids, np.append(0.0, 2 * np.pi - (az[ids[1:]] - az[0]))
 
     @property
     def angles(self) -> np.ndarray:
@@ -78,16 +95,13 @@ class GonioSpec:
     def passing(self) -> tuple[np.ndarray, np.ndarray]:
         """Faces in the order this run's direction brings them past the autocollimator, and
         their distances travelled from face 0 within a revolution [rad]. Clockwise, the same
-        faces come in reverse order: 0, 3, 2, 1."""
-        if self.direction > 0:
-            return np.arange(4), self.azimuths
-        ids = np.array([0, 3, 2, 1])
-        return ids, np.append(0.0, 2 * np.pi - self.azimuths[ids[1:]])
+        faces come in reverse order: 0, 3, 2, 1. (Where the pulses come: trigger azimuths.)"""
+        return self._passing(self.trigger_azimuths)
 
     @property
     def passing_angles(self) -> np.ndarray:
-        """True angles between consecutive faces in this run's passing order [rad]."""
-        return np.diff(np.append(self.passing()[1], 2 * np.pi))
+        """True angles between consecutive face normals in this run's passing order [rad]."""
+        return np.diff(np.append(self._passing(self.azimuths)[1], 2 * np.pi))
 
 
 def _pulse_times(spec: GonioSpec, rng: np.random.Generator
