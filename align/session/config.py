@@ -138,12 +138,15 @@ KEYS = {
 }
 
 
-def _known(table: dict, kind: str, where: str) -> None:
-    """A misspelt key would be silently ignored: name it instead."""
+def _known(table: object, kind: str, where: str) -> dict:
+    """The table, checked: a table at all, and no misspelt key (it would be silently ignored)."""
+    if not isinstance(table, dict):
+        raise InputError(f"{where}: expected a table")
     unknown = set(table) - KEYS[kind]
     if unknown:
         raise InputError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; known: "
                          f"{', '.join(sorted(KEYS[kind]))}")
+    return table
 
 
 def _table(d: dict, key: str, where: str) -> dict:
@@ -232,8 +235,6 @@ def load_session(folder: str | Path) -> Session:
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():
         w = f"{src}: [cameras.{name}]"
-        if not isinstance(c, dict):
-            raise InputError(f"{w}: expected a table")
         _known(c, "cameras", w)
         model = _file(folder, c["model"], f"{w} model") if "model" in c else None
         cameras[name] = Camera(name, model,
@@ -242,8 +243,6 @@ def load_session(folder: str | Path) -> Session:
     views = {}
     for name, v in _table(d, "views", src + ": ").items():
         w = f"{src}: [views.{name}]"
-        if not isinstance(v, dict):
-            raise InputError(f"{w}: expected a table")
         _known(v, "views", w)
         right = signed_axis(v.get("right"), f"{w} right")
         up = signed_axis(v.get("up"), f"{w} up")
@@ -260,8 +259,6 @@ def load_session(folder: str | Path) -> Session:
         raise InputError(f"{src}: images: expected [[images]] entries")
     for k, im in enumerate(raw, start=1):
         w = f"{src}: [[images]] #{k}"
-        if not isinstance(im, dict):
-            raise InputError(f"{w}: expected a table")
         _known(im, "images", w)
         housing = im.get("housing")
         if housing not in HOUSINGS:
