@@ -655,7 +655,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
                    "(a folder when several sessions)")
     r.add_argument("--jobs", type=int, help="parallel sessions (default: all cores)")
-    r.add_argument("--alpha", type=float, default=1e-3)
+    r.add_argument("--alpha", type=float, default=1e-3,
+                   help="significance of the residual loops' tests (default 1e-3)")
     r.set_defaults(func=cmd_run)
 
     ap = sub.add_parser("apply", help="readings -> specific force in the platform frame")
@@ -673,7 +674,8 @@ def build_parser() -> argparse.ArgumentParser:
     ss.add_argument("out", help="new folder")
     ss.add_argument("--seed", type=int, default=0)
     ss.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                    help="an effect put into the data and declared in session.toml")
+                    help="an effect put into the data and declared in session.toml (e.g. "
+                    "camera_roll_A=30 [arcsec]; an unknown name lists them all)")
     ss.add_argument("--undeclared", action="append", default=[], metavar="NAME=VALUE",
                     help="an effect put into the data but not declared")
     ss.set_defaults(func=cmd_synth)
