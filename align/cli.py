@@ -133,8 +133,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from align.calibration import (
         StaticSettings,
         calibrate,
+        calibration_json,
         delta_g,
-        model_to_dict,
         read_poses,
     )
     from align.errors import InputError
@@ -176,21 +176,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
               "no chi2 test")
     for line in cal.loop.summary_lines():
         print("  " + line)
-    js = {
-        "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
-        "bias_g": m.bias.tolist(),
-        "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
-        "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
-        "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
-        "scale_sign": list(signs), "residual_rms_g": cal.residual_rms_g, "dof": dof,
-        "effects": [e.to_json() for e in cal.loop.effects],
-        "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
-        "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
-                      "bias_g": a.bias.tolist()},
-        "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
-                  zip(poses.labels, delta_g(m, poses), strict=True)],
-        "model": model_to_dict(m),
-    }
+    js = calibration_json(cal, poses)
     if intervals is not None:
         js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
                                    "samples": iv.samples, "std": iv.std.tolist()}
@@ -261,7 +247,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- gonio
 
 def cmd_gonio(args: argparse.Namespace) -> int:
-    from align.gonio import direction_effect, measure_log
+    from align.gonio import measure_log, run_json
     from goniometry import LogError, kept_table
 
     faces = [f.strip() for f in args.faces.split(",") if f.strip()]
@@ -284,9 +270,6 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     except (LogError, ValueError) as exc:
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
-    effects = [e.to_json() for e in loop.effects] if loop is not None else []
-    if run.direction is not None:
-        effects.append(direction_effect(run.direction, faces))
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
           f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
@@ -307,28 +290,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             print("  " + line)
     for note in run.notes:
         print("  " + note)
-    js = {"faces": faces, "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
-          "angles_u_arcsec": (np.rad2deg(fa.u_rad) * 3600).tolist(),
-          "revolutions_used": fa.revolutions, "effects": effects,
-          "unexplained_structure": bool(loop and loop.unexplained_structure),
-          "covariance_arcsec2": (np.rad2deg(np.rad2deg(fa.cov)) * 3600**2).tolist(),
-          "type_a_arcsec": (np.rad2deg(fa.u_type_a_rad) * 3600).tolist(),
-          "type_b_arcsec": (np.rad2deg(fa.u_type_b_rad) * 3600).tolist(),
-          "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
-                         for k, v in summary.exclusions.counts.items()},
-          "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
-                    "adev_arcsec": (np.rad2deg(fa.allan_dev_rad) * 3600).tolist()}}
-    js["angles_source"] = "pulse times (steady table)" if run.timing_used else "counts"
-    if run.timing is not None:
-        ta = run.timing
-        js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
-                        "angles_u_arcsec": (ta.u_rad / ARCSEC).tolist(),
-                        "counts_minus_timing_arcsec": (ta.diff_rad / ARCSEC).tolist(),
-                        "counts_minus_timing_u_arcsec": (ta.diff_u_rad / ARCSEC).tolist(),
-                        "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
-                        "used": run.timing_used}
-    if nominal is not None:
-        js["deviation_arcsec"] = (np.rad2deg(fa.angles_rad - nominal) * 3600).tolist()
+    js = run_json(run, faces, nominal)
     if args.plot:
         from align.plots import plot_gonio
 

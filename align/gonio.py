@@ -346,3 +346,37 @@ def direction_effect(term: DirectionTerm, faces: Sequence[str]) -> dict:
             "components": [{"axis": f"{faces[i]}->{faces[(i + 1) % n]}",
                             "estimate": float(term.half_difference_rad[i]),
                             "u": float(term.u_rad[i])} for i in range(n)]}
+
+
+def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
+    """A goniometer run as JSON (the contract of ``align gonio``, also a session's stage);
+    angles in degrees, uncertainties in arc-seconds at this edge."""
+    fa, summary, loop = run.angles, run.summary, run.loop
+    arcsec = np.rad2deg(1.0) * 3600
+    effects = [e.to_json() for e in loop.effects] if loop is not None else []
+    if run.direction is not None:
+        effects.append(direction_effect(run.direction, faces))
+    js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
+          "angles_u_arcsec": (fa.u_rad * arcsec).tolist(),
+          "revolutions_used": fa.revolutions, "effects": effects,
+          "unexplained_structure": bool(loop and loop.unexplained_structure),
+          "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
+          "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
+          "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
+          "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
+                         for k, v in summary.exclusions.counts.items()},
+          "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
+                    "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
+          "angles_source": "pulse times (steady table)" if run.timing_used else "counts",
+          "notes": list(run.notes)}
+    if run.timing is not None:
+        ta = run.timing
+        js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
+                        "angles_u_arcsec": (ta.u_rad * arcsec).tolist(),
+                        "counts_minus_timing_arcsec": (ta.diff_rad * arcsec).tolist(),
+                        "counts_minus_timing_u_arcsec": (ta.diff_u_rad * arcsec).tolist(),
+                        "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
+                        "used": run.timing_used}
+    if nominal is not None:
+        js["deviation_arcsec"] = ((fa.angles_rad - nominal) * arcsec).tolist()
+    return js

@@ -235,10 +235,8 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
         lines.append('reverse_log = "gonio_cw.csv"')
     if "reference_offset" in declared:
         lines.append(f"reference_offset_arcsec = {declared['reference_offset']}")
-    lines += ["", "[cameras.A]", "# looks along +Y"]
-    for cam in ("A", "B"):
-        if cam == "B":
-            lines += ["", "[cameras.B]", "# looks along -X"]
+    for cam, looks in (("A", "+Y"), ("B", "-X")):
+        lines += ["", f"[cameras.{cam}]", f"# looks along {looks}"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
     for view in spec.views:

@@ -13,6 +13,7 @@ from align.calibration.model import (
     TriadModel,
     algebraic,
     calibrate,
+    calibration_json,
     delta_g,
     model_from_dict,
     model_to_dict,
@@ -28,7 +29,7 @@ from align.calibration.static import (
 
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",
-    "Ellipsoid",
+    "Ellipsoid", "calibration_json",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
     "find_static", "read_poses", "read_table", "poses_from_samples",

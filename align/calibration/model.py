@@ -299,3 +299,24 @@ def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{where}: not a calibration model ({exc!s}); expected the 'model' "
                          "block that 'align calibrate --json' writes") from None
+
+
+def calibration_json(cal: Calibration, poses: Poses) -> dict:
+    """The calibration's JSON (contract of ``align calibrate``, also a session's stage)."""
+    m, a = cal.model, cal.algebraic
+    return {
+        "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
+        "bias_g": m.bias.tolist(),
+        "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
+        "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
+        "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+        "scale_sign": list(cal.signs), "residual_rms_g": cal.residual_rms_g,
+        "dof": cal.loop.after.dof,
+        "effects": [e.to_json() for e in cal.loop.effects],
+        "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
+        "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
+                      "bias_g": a.bias.tolist()},
+        "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
+                  zip(poses.labels, delta_g(m, poses), strict=True)],
+        "model": model_to_dict(m),
+    }

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from align.calibration import r_matrix
+
 Nuisances = Mapping[str, np.ndarray]
 HOUSINGS = ("x", "y", "z")
 # E's six off-diagonal angles in parameter order: (row i, column j).
@@ -161,8 +163,6 @@ def gonio_block(faces: list[str], angles: np.ndarray, cov: np.ndarray, nominal: 
 # ----------------------------------------------------------------------------- ellipsoid
 
 def _row_cosines(beta: np.ndarray) -> np.ndarray:
-    from align.calibration import r_matrix
-
     R = r_matrix(beta)
     R = R / np.linalg.norm(R, axis=1, keepdims=True)
     return np.array([R[0] @ R[1], R[0] @ R[2], R[1] @ R[2]])
@@ -170,8 +170,6 @@ def _row_cosines(beta: np.ndarray) -> np.ndarray:
 
 def _calibration_quantities(theta: np.ndarray, with_bias: bool) -> np.ndarray:
     """(beta, bias) -> cosines between the axes and, with_bias, the per-axis bias R b [g]."""
-    from align.calibration import r_matrix
-
     c = _row_cosines(theta[:3])
     return np.concatenate([c, r_matrix(theta[:3]) @ theta[3:6]]) if with_bias else c
 

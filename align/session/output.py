@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from align.apply import PlatformCalibration
-from align.fusion import E_NAMES
-from align.gonio import direction_effect
+from align.calibration import calibration_json
+from align.fusion import E_INDEX, E_NAMES
+from align.gonio import run_json
 from align.session.run import SessionResult
 
 ARCSEC = np.pi / 180 / 3600
@@ -15,8 +16,7 @@ ARCSEC = np.pi / 180 / 3600
 def platform_calibration(res: SessionResult) -> PlatformCalibration | None:
     if res.fusion is None or res.calibration is None:
         return None
-    e6 = np.array([res.fusion.E[i, j] for i, j in
-                   ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))])
+    e6 = np.array([res.fusion.E[i, j] for i, j in E_INDEX])
     return PlatformCalibration(res.calibration.model, e6, res.fusion.cov)
 
 
@@ -45,25 +45,10 @@ def result_json(res: SessionResult) -> dict:
         d["platform_calibration"] = pc.to_dict()
     stages: dict = {}
     if res.calibration is not None:
-        c = res.calibration
-        m = c.model
-        stages["calibration"] = {
-            "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
-            "bias_g": m.bias.tolist(), "residual_rms_g": c.residual_rms_g,
-            "effects": [e.to_json() for e in c.loop.effects],
-            "unexplained_structure": c.loop.unexplained_structure}
+        stages["calibration"] = calibration_json(res.calibration, res.calibration_poses)
     if res.gonio is not None:
-        g, fa = res.gonio, res.gonio.angles
-        stages["goniometer"] = {
-            "faces": list(res.session.goniometer.faces),
-            "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
-            "angles_u_arcsec": (fa.u_rad / ARCSEC).tolist(),
-            "revolutions_used": fa.revolutions,
-            "effects": ([e.to_json() for e in g.loop.effects] if g.loop else [])
-            + ([direction_effect(g.direction, res.session.goniometer.faces)]
-               if g.direction is not None else []),
-            "unexplained_structure": bool(g.loop and g.loop.unexplained_structure),
-            "notes": list(g.notes)}
+        g = res.session.goniometer
+        stages["goniometer"] = run_json(res.gonio, g.faces, g.nominal_rad)
     if res.marks:
         stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
                                 nominal=im.nominal) for im, r in res.marks]

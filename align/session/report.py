@@ -103,8 +103,6 @@ def write_report(res: SessionResult, path: str | Path) -> Path:
                                      f"{r.u * 1e6:.2f} µg"]) + [f"{r.normalised:+.2f}"]
              for r in f.rows], left=2))
     if res.calibration is not None:
-        from align.calibration import read_poses
-
         c, m = res.calibration, res.calibration.model
         parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
         parts.append(_table(["axis", "k [V/g]", "β [µrad]", "bias [µg]"], [
@@ -113,11 +111,9 @@ def write_report(res: SessionResult, path: str | Path) -> Path:
              f"{m.bias[i] * 1e6:.2f} ± {m.u_of(f'bias_{ax}') * 1e6:.2g}"]
             for i, ax in enumerate("xyz")]))
         parts.append(_loop(c.loop))
-        try:
-            poses, _ = read_poses(s.calibration.static)
-            parts.append("<h3>Δg per pose</h3>" + _img(fig_calibration(c, poses, None)))
-        except Exception as exc:  # a figure must not cost the report
-            parts.append(f"<p>(figure not drawn: {_e(exc)})</p>")
+        if res.calibration_poses is not None:
+            parts.append("<h3>Δg per pose</h3>"
+                         + _img(fig_calibration(c, res.calibration_poses, None)))
     if res.gonio is not None:
         from goniometry import kept_table
 

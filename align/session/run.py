@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from align.calibration import Calibration, calibrate, r_matrix, read_poses
+from align.calibration import Calibration, Poses, calibrate, r_matrix, read_poses
 from align.errors import InputError
 from align.fusion import (
     Block,
@@ -46,6 +46,7 @@ class SessionResult:
 
     session: Session
     calibration: Calibration | None = None
+    calibration_poses: Poses | None = None
     gonio: GonioRun | None = None
     marks: list[tuple[ImageEntry, MarkResult]] = field(default_factory=list)
     platform: list[PlatformPose] = field(default_factory=list)
@@ -74,8 +75,8 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         c = s.calibration
 
         def _cal() -> Calibration:
-            poses, _ = read_poses(c.static)
-            return calibrate(poses, c.scale_sign, alpha=alpha)
+            res.calibration_poses, _ = read_poses(c.static)
+            return calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
         res.calibration = _try(res, "calibration", _cal)
     if s.goniometer is not None:
         g = s.goniometer
