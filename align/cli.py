@@ -210,7 +210,7 @@ def _load_model(path: str):
 
 
 def cmd_tilt(args: argparse.Namespace) -> int:
-    from align.calibration import read_table
+    from align.calibration import read_readings
     from align.errors import InputError
     from align.tilt import roll_pitch
 
@@ -218,13 +218,12 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     out_json = _new_file(args.json, args.force, [args.readings])
     out_csv = _new_file(args.out, args.force, [args.readings])
     try:
-        head, data, _, _ = read_table(Path(args.readings))
+        tab = read_readings(args.readings)
     except InputError as exc:
         raise UsageError(str(exc)) from None
-    col = {h: i for i, h in enumerate(head)}
-    u = data[:, [col["ux"], col["uy"], col["uz"]]]
-    t = data[:, col["t"]] if "t" in col else np.full(len(u), model.t_ref)
-    temp = data[:, col["temp"]] if "temp" in col else None
+    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
+    t = tab["t"] if "t" in tab else np.full(len(u), model.t_ref)
+    temp = tab.get("temp")
     a = model.specific_force(u, t, temp)
     roll, pitch = roll_pitch(a, method=args.method, mu=args.mu)
     print(f"{len(a)} readings ({args.method} roll): roll {np.rad2deg(np.mean(roll)):+.6f}° "
@@ -432,20 +431,19 @@ def _run_batch(args: argparse.Namespace) -> int:
 
 def cmd_apply(args: argparse.Namespace) -> int:
     from align.apply import PlatformCalibration
-    from align.calibration import read_table
+    from align.calibration import read_readings
     from align.errors import InputError
     from align.tilt import roll_pitch
 
     out = _new_file(args.out, args.force, [args.calibration_file, args.readings])
     try:
         pc = PlatformCalibration.load(args.calibration_file)
-        head, data, _, _ = read_table(Path(args.readings))
+        tab = read_readings(args.readings)
     except InputError as exc:
         raise UsageError(str(exc)) from None
-    col = {h: i for i, h in enumerate(head)}
-    u = data[:, [col["ux"], col["uy"], col["uz"]]]
-    t = data[:, col["t"]] if "t" in col else np.full(len(u), pc.model.t_ref)
-    temp = data[:, col["temp"]] if "temp" in col else None
+    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
+    t = tab["t"] if "t" in tab else np.full(len(u), pc.model.t_ref)
+    temp = tab.get("temp")
     a = pc.specific_force(u, t, temp)
     cols, names = [t, *a.T], ["t", "ax_g", "ay_g", "az_g"]
     if args.tilt:

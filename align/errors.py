@@ -1,5 +1,6 @@
-"""Errors for bad input in align (the CLI turns them into exit status 2)."""
+"""Errors for bad input in align (the CLI turns them into exit status 2): the tool's one
+hierarchy, from :mod:`axisbase.errors`."""
 
+from axisbase.errors import AxisAlignError, InputError, InternalError
 
-class InputError(ValueError):
-    """Input the user can fix: the message names the file/line/key and what is wrong."""
+__all__ = ["AxisAlignError", "InputError", "InternalError"]

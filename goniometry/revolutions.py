@@ -199,10 +199,8 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
         has_time = ch.t is not None
         dt = None
         if has_time:
+            # (the reader has checked that time increases, across chunks too)
             dt = np.diff(ch.t, prepend=prev_t)
-            if np.any(dt[1:] <= 0):
-                i = int(np.flatnonzero(dt[1:] <= 0)[0]) + 1
-                raise LogError(f"{path}, line {ch.first_line + i}: time does not increase")
             prev_t = ch.t[-1]
         brk = np.zeros(len(ch.count), bool)
         brk[1:] = ch.counter[1:] == ch.counter[:-1]

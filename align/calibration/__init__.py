@@ -20,11 +20,13 @@ from align.calibration.model import (
     poses_from_samples,
 )
 from align.calibration.static import (
+    READINGS,
+    STATIC,
     StaticInterval,
     StaticSettings,
     find_static,
     read_poses,
-    read_table,
+    read_readings,
 )
 
 __all__ = [
@@ -32,5 +34,5 @@ __all__ = [
     "Ellipsoid", "calibration_json",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
-    "find_static", "read_poses", "read_table", "poses_from_samples",
+    "find_static", "read_poses", "read_readings", "READINGS", "STATIC", "poses_from_samples",
 ]

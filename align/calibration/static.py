@@ -6,12 +6,13 @@ Formats (CSV with a header line):
 * ``t,ux,uy,uz[,temp]`` — a continuous recording; the static intervals are found by a
   moving standard deviation compared with the recording's own noise floor.
 
-Every problem is reported with the file, the line and what is wrong.
+Both are read by the tool's one table reader (:mod:`axisbase.table`); every problem is
+reported as ``file:line: column: what is wrong``.
 """
 
 from __future__ import annotations
 
-import csv
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,9 +20,8 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from align.calibration.model import Poses
-from align.errors import InputError
-
-REQUIRED = ("ux", "uy", "uz")
+from axisbase.errors import InputError
+from axisbase.table import Column, Table, TableSpec, read_table
 
 
 @dataclass(frozen=True)
@@ -53,80 +53,59 @@ class StaticSettings:
     margin_s: float = 0.5
 
 
-def read_table(path: Path) -> tuple[list[str], np.ndarray, list[int], list[str] | None]:
-    """Header (lower case), numbers, source line numbers, pose labels in order of appearance."""
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text CSV file") from None
-    rows = list(csv.reader(text.splitlines()))
-    lines = [i + 1 for i, r in enumerate(rows) if r and not r[0].startswith("#")]
-    rows = [r for r in rows if r and not r[0].startswith("#")]
-    if not rows:
-        raise InputError(f"{path}: empty file")
-    head = [h.strip().lower() for h in rows[0]]
-    missing = [c for c in REQUIRED if c not in head]
-    if missing:
-        raise InputError(f"{path}, line {lines[0]}: header {rows[0]} lacks {missing}; expected "
-                         "pose,ux,uy,uz[,t][,temp] or t,ux,uy,uz[,temp]")
-    data = np.empty((len(rows) - 1, len(head)))
-    for k, (r, ln) in enumerate(zip(rows[1:], lines[1:], strict=True)):
-        if len(r) != len(head):
-            raise InputError(f"{path}, line {ln}: {len(r)} fields, the header has {len(head)}"
-                             + (" (truncated last line?)" if k == len(rows) - 2 else ""))
-        for j, v in enumerate(r):
-            try:
-                data[k, j] = float(v)
-            except ValueError:
-                if head[j] == "pose":
-                    data[k, j] = np.nan  # labels handled below
-                else:
-                    raise InputError(f"{path}, line {ln}: {head[j]} = {v!r} is not a "
-                                     "number") from None
-            if head[j] != "pose" and not np.isfinite(data[k, j]):
-                raise InputError(f"{path}, line {ln}: {head[j]} is {v!r} (not finite)")
-    if "pose" in head:
-        j = head.index("pose")
-        labels = [r[j].strip() for r in rows[1:]]
-        # Keep the poses in the order they first appear.
-        first = {lab: i for i, lab in reversed(list(enumerate(labels)))}
-        order = sorted(set(labels), key=lambda lab: first[lab])
-        data[:, j] = [order.index(lab) for lab in labels]
-        head[j] = "pose"
-        return head, data, lines[1:], order
-    return head, data, lines[1:], None
+_AXES = {ax: (f"a{ax}", f"acc_{ax}", f"accel_{ax}", f"acc{ax}", f"u_{ax}") for ax in "xyz"}
+_T = Column("t", required=False, aliases=("time", "t_s", "time_s", "timestamp"))
+_TEMP = Column("temp", required=False, aliases=("temperature", "temp_c", "temperature_c"))
+_U = tuple(Column(f"u{ax}", aliases=_AXES[ax]) for ax in "xyz")
+STATIC = TableSpec("static-pose file", (
+    Column("pose", "label", required=False, aliases=("pose_id", "position", "label")),
+    *_U, _T, _TEMP), time="t")
+"""``pose,ux,uy,uz[,t][,temp]`` (samples or per-pose means) or ``t,ux,uy,uz[,temp]``."""
+READINGS = TableSpec("readings file", (*_U, _T, _TEMP), time="t")
+"""``ux,uy,uz[,t][,temp]``: readings to correct (``align apply``, ``align tilt``)."""
 
 
-def _check_values(path: Path, u: np.ndarray, lines: list[int]) -> None:
+def read_readings(path: str | Path, columns: Mapping[str, str] | None = None,
+                  rate_hz: float | None = None) -> Table:
+    """Readings ``ux,uy,uz[,t][,temp]`` (see :mod:`axisbase.table` for what is accepted)."""
+    return read_table(path, READINGS, columns, rate_hz)
+
+
+def _check_values(tab: Table, u: np.ndarray) -> None:
     for ax in range(3):
         col = u[:, ax]
         top, bottom = col.max(), col.min()
         for v in (top, bottom):
             hits = np.flatnonzero(col == v)
             if len(hits) >= max(5, 0.05 * len(col)) and np.ptp(col) > 0:
-                raise InputError(f"{path}, line {lines[hits[0]]}: u{'xyz'[ax]} sits at "
-                                 f"{v:g} in {len(hits)} samples: saturated or clipped")
+                raise tab.fail(int(hits[0]), f"u{'xyz'[ax]}", f"sits at {v:g} in {len(hits)} "
+                               "samples: saturated or clipped")
 
 
 def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
-               calibration: bool = True) -> tuple[Poses, list[StaticInterval] | None]:
+               calibration: bool = True, columns: Mapping[str, str] | None = None,
+               rate_hz: float | None = None) -> tuple[Poses, list[StaticInterval] | None]:
     """Per-pose means from a pose file, or from a continuous recording's static intervals.
 
     ``calibration``: check that the poses can carry a calibration (units, 3-D spread); off
-    for check poses, which may be few.
+    for check poses, which may be few. ``columns``, ``rate_hz``: see
+    :func:`axisbase.table.read_table`.
     """
     path = Path(path)
-    head, data, lines, order = read_table(path)
-    col = {h: i for i, h in enumerate(head)}
-    u = data[:, [col["ux"], col["uy"], col["uz"]]]
-    _check_values(path, u, lines)
-    t = data[:, col["t"]] if "t" in col else None
-    temp = data[:, col["temp"]] if "temp" in col else None
-    if "pose" in col:
-        ids = data[:, col["pose"]].astype(int)
-        n = ids.max() + 1
+    tab = read_table(path, STATIC, columns, rate_hz)
+    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
+    _check_values(tab, u)
+    t = tab.get("t")
+    temp = tab.get("temp")
+    if "pose" in tab:
+        labels = tab["pose"]
+        # Keep the poses in the order they first appear.
+        order, first, ids = np.unique(np.char.strip(labels.astype(str)), return_index=True,
+                                      return_inverse=True)
+        rank = np.argsort(np.argsort(first))
+        ids = rank[ids]
+        order = tuple(str(x) for x in order[np.argsort(first)])
+        n = len(order)
         count = np.bincount(ids, minlength=n)
         mean = np.array([u[ids == i].mean(0) for i in range(n)])
         sig = None
@@ -135,14 +114,12 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         tt = (np.array([t[ids == i].mean() for i in range(n)]) if t is not None
               else np.arange(n, dtype=float))
         tm = np.array([temp[ids == i].mean() for i in range(n)]) if temp is not None else None
-        poses = Poses(mean, tt, tm, sig, count, tuple(order))
+        poses = Poses(mean, tt, tm, sig, count, order)
         intervals = None
     else:
         if t is None:
-            raise InputError(f"{path}: neither a pose column nor a time column t")
-        if np.any(np.diff(t) <= 0):
-            k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-            raise InputError(f"{path}, line {lines[k + 1]}: time does not increase")
+            raise InputError(f"{path}: neither a pose column nor a time column t (give "
+                             "--rate HZ for a recording without time stamps)")
         intervals = find_static(t, u, settings)
         if not intervals:
             raise InputError(f"{path}: no static interval found (window {settings.window_s} s,"

@@ -123,7 +123,7 @@ def test_files_round_trip_and_bad_input(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("\n".join(lines[:5] + [lines[5].replace(lines[5].split(",")[1], "abc")]
                              + lines[6:]))
-    with pytest.raises(InputError, match=r"bad.csv, line 6: ux = 'abc' is not a number"):
+    with pytest.raises(InputError, match=r"bad.csv:6: ux: 'abc' is not a number"):
         read_poses(bad)
     trunc = tmp_path / "trunc.csv"
     trunc.write_text("\n".join(lines[:-1] + [lines[-1][:10]]))

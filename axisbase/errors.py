@@ -1,0 +1,24 @@
+"""The one exception hierarchy of the tool.
+
+* :class:`InputError` — input the user can fix (a file, a flag, a key); its message names
+  where (``file:line: column``, ``--flag``, ``session.toml: [key]``, an image region) and what
+  is wrong. The CLI prints it as one line and exits with status 2.
+* :class:`InternalError` — a state the code should never reach; the CLI reports it as a bug
+  (exit status 1).
+
+Each package derives its own input errors from :class:`InputError` (``LogError`` for counter
+logs, ``ImageInputError`` for images), so one ``except InputError`` catches them all.
+``InputError`` is also a ``ValueError`` for callers written against the older classes.
+"""
+
+
+class AxisAlignError(Exception):
+    """Base of every error this tool raises on purpose."""
+
+
+class InputError(AxisAlignError, ValueError):
+    """Input the user can fix: the message names the file/line/key and what is wrong."""
+
+
+class InternalError(AxisAlignError, RuntimeError):
+    """A state the code should never reach (a bug to report)."""

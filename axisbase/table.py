@@ -1,0 +1,419 @@
+"""The one reader for every table the tool takes in (counter logs, static poses, readings).
+
+A table is a delimited text file with one header line. Whatever program wrote it, the same
+data give the same numbers:
+
+* encoding UTF-8 with or without a byte-order mark (every Windows export has one); CRLF or LF;
+* delimiter ``,``, ``;`` or tab, taken from the header line;
+* header names compared case- and white-space-insensitively, with a unit in brackets allowed
+  (``Ux [V]``, ``t (s)``), each column under its canonical name or one of its aliases, or
+  under any name the user maps to it (``--columns ux=ax,uy=ay,uz=az``);
+* columns in any order; columns the format does not know are listed in ``Table.ignored``;
+* lines starting with ``#`` before the header are comments.
+
+Parsing is pyarrow's C++ CSV reader (whole file, or record batches of bounded size for logs
+of 10⁸ rows). When it rejects a row, the file is scanned once more by Python's csv module to
+name the line, the column and what is wrong: ``file:line: column: what``. Rows are checked
+after parsing: numbers finite, labels not blank, integer columns whole, a time column strictly
+increasing. A file without a time column can be given one from its sample rate (``rate_hz``).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+
+from axisbase.errors import InputError
+
+KINDS = ("float", "int", "label")
+_ARROW = {"float": pa.float64(), "int": pa.int64(), "label": pa.string()}
+_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of a format: canonical ``name``, ``kind`` ('float', 'int' or 'label'),
+    whether it is ``required``, and the other header spellings accepted for it."""
+
+    name: str
+    kind: str = "float"
+    required: bool = True
+    aliases: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """A table format: what it is called in messages (``what``) and its columns. ``time``
+    names the column that must increase strictly (and that ``rate_hz`` may supply)."""
+
+    what: str
+    columns: tuple[Column, ...]
+    time: str | None = None
+
+    def column(self, name: str) -> Column:
+        return next(c for c in self.columns if c.name == name)
+
+    @property
+    def layout(self) -> str:
+        """The header a user should write, e.g. ``pose,ux,uy,uz[,t][,temp]``."""
+        req = ",".join(c.name for c in self.columns if c.required)
+        return req + "".join(f"[,{c.name}]" for c in self.columns if not c.required)
+
+
+@dataclass(frozen=True)
+class Table:
+    """Parsed columns under their canonical names (float64 / int64 arrays, labels as an object
+    array of str), ``first_line``: the file line of the first row, ``ignored``: header names no
+    column of the format took, ``units``: units written in the header (``{'ux': 'V'}``),
+    ``time_from_rate``: the time column was made from the sample rate, ``row0``: the index in
+    the file of this table's first row (a chunk of a streamed file)."""
+
+    path: Path
+    spec: TableSpec
+    data: dict[str, np.ndarray]
+    first_line: int
+    ignored: tuple[str, ...] = ()
+    units: dict[str, str] = field(default_factory=dict)
+    time_from_rate: bool = False
+    row0: int = 0
+
+    def __len__(self) -> int:
+        return len(next(iter(self.data.values()))) if self.data else 0
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.data
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.data[name]
+
+    def get(self, name: str) -> np.ndarray | None:
+        return self.data.get(name)
+
+    def line(self, row: int) -> int:
+        """The file line of row ``row`` (0-based). Blank lines are skipped by the parser, so
+        they are counted by scanning the file — only called when reporting an error."""
+        return _row_lines(self.path, self.first_line, [self.row0 + row])[0]
+
+    def fail(self, row: int, column: str, what: str) -> InputError:
+        """The error for a bad value, in the house form ``file:line: column: what``."""
+        return InputError(f"{self.path}:{self.line(row)}: {column}: {what}")
+
+
+# ----------------------------------------------------------------------------- header
+
+@dataclass(frozen=True)
+class _Header:
+    names: list[str]           # canonical name, or '' for a column the format does not know
+    raw: list[str]             # as written
+    units: dict[str, str]
+    delimiter: str
+    skip: int                  # lines before the first data row (comments + header)
+    header_line: int
+
+
+def _norm(text: str) -> tuple[str, str]:
+    """'  Ux [V] ' -> ('ux', 'V'); quotes and surrounding white space dropped."""
+    t = text.strip().strip('"').strip("'").strip()
+    unit = ""
+    m = _UNIT.match(t)
+    if m:
+        t, unit = m.group(1), m.group(2)
+    return re.sub(r"\s+", "_", t.strip().lower()), unit
+
+
+def parse_column_map(text: str | None, flag: str = "--columns") -> dict[str, str]:
+    """``'ux=ax, uy=ay'`` -> ``{'ux': 'ax', 'uy': 'ay'}`` (canonical name = header name)."""
+    if not text:
+        return {}
+    out: dict[str, str] = {}
+    for item in text.split(","):
+        if "=" not in item:
+            raise InputError(f"{flag} {text!r}: {item.strip()!r} is not NAME=HEADER "
+                             "(e.g. ux=ax,uy=ay,uz=az)")
+        k, v = (s.strip() for s in item.split("=", 1))
+        if not k or not v:
+            raise InputError(f"{flag} {text!r}: {item.strip()!r} has an empty side")
+        if k.lower() in out:
+            raise InputError(f"{flag} {text!r}: {k} is mapped twice")
+        out[k.lower()] = _norm(v)[0]
+    return out
+
+
+def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _Header:
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            skip = 0
+            for line in f:
+                skip += 1
+                if line.strip() and not line.lstrip().startswith("#"):
+                    break
+            else:
+                raise InputError(f"{path}: empty file: expected a header line "
+                                 f"{spec.layout} ({spec.what})")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, not a {spec.what} file") from None
+    except PermissionError:
+        raise InputError(f"{path}: not readable (permission denied)") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a UTF-8 text file (a {spec.what} is CSV text)") from None
+    text = line.rstrip("\r\n")
+    delimiter = max(",;\t", key=text.count)
+    raw = next(csv.reader([text], delimiter=delimiter))
+    normed = [_norm(r) for r in raw]
+    where = f"{path}:{skip}: header"
+    known = {c.name for c in spec.columns}
+    unknown_map = sorted(set(mapping) - known)
+    if unknown_map:
+        raise InputError(f"--columns: {', '.join(unknown_map)} not a column of a {spec.what} "
+                         f"({', '.join(sorted(known))})")
+    names = [""] * len(raw)
+    for col in spec.columns:
+        wanted = [mapping[col.name]] if col.name in mapping else [col.name, *col.aliases]
+        hits = [i for i, (n, _) in enumerate(normed) if n in wanted]
+        if len(hits) > 1:
+            raise InputError(f"{where}: {col.name}: given {len(hits)} times "
+                             f"({', '.join(raw[i].strip() for i in hits)})")
+        if hits:
+            if names[hits[0]]:
+                raise InputError(f"{where}: {raw[hits[0]].strip()!r} would be both "
+                                 f"{names[hits[0]]} and {col.name}")
+            names[hits[0]] = col.name
+        elif col.name in mapping:
+            raise InputError(f"{where}: --columns {col.name}={mapping[col.name]}: no such "
+                             f"column in {raw}")
+    missing = [c.name for c in spec.columns if c.required and c.name not in names]
+    if missing:
+        raise InputError(f"{where}: {raw} lacks {', '.join(missing)}; a {spec.what} has "
+                         f"{spec.layout} (name other headers with --columns, e.g. "
+                         f"{missing[0]}=YOUR_NAME)")
+    units = {n: u for n, (_, u) in zip(names, normed, strict=True) if n and u}
+    return _Header(names, raw, units, delimiter, skip, skip)
+
+
+def _arrow_options(path: Path, spec: TableSpec, h: _Header, block_bytes: int | None,
+                   threads: bool) -> tuple:
+    kinds = {c.name: c.kind for c in spec.columns}
+    cols = [n if n else f"_ignored_{i}" for i, n in enumerate(h.names)]
+    ro = pacsv.ReadOptions(column_names=cols, skip_rows=h.skip, use_threads=threads,
+                           encoding="utf8", **({"block_size": block_bytes} if block_bytes
+                                               else {}))
+    po = pacsv.ParseOptions(delimiter=h.delimiter)
+    co = pacsv.ConvertOptions(column_types={n: _ARROW[kinds[n]] for n in h.names if n},
+                              include_columns=[n for n in h.names if n],
+                              null_values=[""], strings_can_be_null=True,
+                              quoted_strings_can_be_null=True)
+    return ro, po, co
+
+
+# ----------------------------------------------------------------------------- errors
+
+def _row_lines(path: Path, first_line: int, rows: list[int]) -> list[int]:
+    """File line numbers of data rows (blank lines are not rows)."""
+    want = sorted(set(rows))
+    found: dict[int, int] = {}
+    with open(path, encoding="utf-8-sig", newline="") as f:
+        for _ in range(first_line - 1):
+            next(f, None)
+        row = 0
+        for ln, line in enumerate(f, start=first_line):
+            if not line.strip():
+                continue
+            if row in want:
+                found[row] = ln
+                if len(found) == len(want):
+                    break
+            row += 1
+    return [found.get(r, -1) for r in rows]
+
+
+def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
+    """Slow path, only after pyarrow refused the file: the first row that is not valid."""
+    kinds = {c.name: c.kind for c in spec.columns}
+    n = len(h.names)
+    with open(path, encoding="utf-8-sig", newline="") as f:
+        for _ in range(h.skip):
+            next(f)
+        for ln, line in enumerate(f, start=h.skip + 1):
+            if not line.strip():
+                continue
+            row = next(csv.reader([line.rstrip("\r\n")], delimiter=h.delimiter))
+            if len(row) != n:
+                return InputError(f"{path}:{ln}: {len(row)} fields, the header has {n}"
+                                  " (truncated line or a stray delimiter?)")
+            for name, v in zip(h.names, row, strict=True):
+                if not name:
+                    continue
+                bad = _bad_value(v.strip(), kinds[name])
+                if bad:
+                    return InputError(f"{path}:{ln}: {name}: {v.strip()!r} {bad}")
+    return InputError(f"{path}: not a valid {spec.what} (pyarrow refused it, no line found)")
+
+
+def _bad_value(v: str, kind: str) -> str:
+    if kind == "label":
+        return "" if v else "is blank: every row needs a label"
+    try:
+        x = float(v)
+    except ValueError:
+        if "," in v:
+            return "is not a number (a decimal comma? write 1.5, not 1,5)"
+        return "is not a number" if v else "is empty"
+    if not np.isfinite(x):
+        return "is not a finite number"
+    if kind == "int" and x != int(x):
+        return "is not a whole number"
+    if kind == "int":
+        try:
+            int(v)
+        except ValueError:
+            return "is not written as a whole number"
+    return ""
+
+
+# ----------------------------------------------------------------------------- reading
+
+def _numpy(col: pa.Array | pa.ChunkedArray, kind: str) -> np.ndarray:
+    """Numbers as zero-copy views where possible (``to_numpy`` of a table imports pandas:
+    0.4 s of a run); labels as an object array of str."""
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks() if col.num_chunks != 1 else col.chunk(0)
+    if kind == "label":
+        return np.array(col.to_pylist(), dtype=object)
+    dtype = np.int64 if kind == "int" else np.float64
+    size = np.dtype(dtype).itemsize
+    return np.frombuffer(col.buffers()[1], dtype=dtype, count=len(col),
+                         offset=col.offset * size)
+
+
+def _check(table: Table, prev_t: float | None = None) -> None:
+    """Values every format needs: no blanks, finite numbers, a strictly increasing time."""
+    spec = table.spec
+    for c in spec.columns:
+        x = table.data.get(c.name)
+        if x is None or not len(x):
+            continue
+        if c.kind == "label":
+            blank = np.fromiter((v is None or not v.strip() for v in x), bool, len(x))
+            if blank.any():
+                raise table.fail(int(np.flatnonzero(blank)[0]), c.name,
+                                 "is blank: every row needs a label")
+        elif c.kind == "float" and not np.isfinite(x.sum()):
+            raise table.fail(int(np.flatnonzero(~np.isfinite(x))[0]), c.name,
+                             "is not a finite number")
+    if spec.time and spec.time in table.data and not table.time_from_rate:
+        t = table.data[spec.time]
+        d = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
+        if len(d) and d.min() <= 0:
+            k = int(np.flatnonzero(d <= 0)[0]) + (1 if prev_t is None else 0)
+            what = "repeats the previous row's time" if d.min() == 0 else "runs backwards"
+            raise table.fail(k, spec.time, f"{t[k]!r} {what} (duplicated or unsorted rows?)")
+
+
+def _table(path: Path, spec: TableSpec, h: _Header, columns: Mapping[str, pa.Array],
+           row0: int = 0) -> Table:
+    kinds = {c.name: c.kind for c in spec.columns}
+    data = {}
+    for n, col in columns.items():
+        if col.null_count:
+            rows = np.flatnonzero(np.asarray(col.is_null()))
+            t = Table(path, spec, {}, h.skip + 1, row0=row0)
+            what = ("is blank: every row needs a label" if kinds[n] == "label"
+                    else "is empty")
+            raise t.fail(int(rows[0]), n, what)
+        data[n] = _numpy(col, kinds[n])
+    ignored = tuple(r.strip() for r, n in zip(h.raw, h.names, strict=True) if not n)
+    return Table(path, spec, data, h.skip + 1, ignored, h.units, row0=row0)
+
+
+def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
+               rate_hz: float | None = None) -> Table:
+    """Read a whole table.
+
+    Parameters
+    ----------
+    path : the file.
+    spec : its format.
+    columns : canonical name -> header name, for headers the format does not know.
+    rate_hz : sample rate [Hz] for a file without the time column: row k gets t = k / rate.
+
+    Raises
+    ------
+    InputError
+        naming the file, the line, the column and what is wrong.
+    """
+    path = Path(path)
+    h = _read_header(path, spec, columns or {})
+    ro, po, co = _arrow_options(path, spec, h, None, threads=True)
+    try:
+        at = pacsv.read_csv(path, read_options=ro, parse_options=po, convert_options=co)
+    except pa.ArrowInvalid:
+        raise _locate(path, spec, h) from None
+    if at.num_rows == 0:
+        raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
+    table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
+    table = _with_rate(table, rate_hz)
+    _check(table)
+    return table
+
+
+def _with_rate(table: Table, rate_hz: float | None) -> Table:
+    spec = table.spec
+    if rate_hz is None:
+        return table
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise InputError(f"--rate {rate_hz:g}: must be a positive sample rate in Hz")
+    if spec.time is None:
+        raise InputError(f"--rate: a {spec.what} has no time column to make")
+    if spec.time in table.data:
+        raise InputError(f"--rate {rate_hz:g}: {table.path} has its own time column "
+                         f"{spec.time}; give one or the other")
+    data = dict(table.data)
+    data[spec.time] = np.arange(len(table), dtype=float) / rate_hz
+    return Table(table.path, spec, data, table.first_line, table.ignored, table.units, True,
+                 table.row0)
+
+
+def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
+               block_bytes: int = 1 << 20) -> Iterator[Table]:
+    """Read a table in chunks of about ``block_bytes`` of text, each a checked :class:`Table`
+    (a time column is checked across chunk boundaries too). Memory stays flat in the file's
+    length: 1 MiB blocks kept Arrow's pool at 41 MB for 2·10⁶ and 6·10⁶ rows."""
+    path = Path(path)
+    h = _read_header(path, spec, columns or {})
+    ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
+    try:
+        reader = pacsv.open_csv(path, read_options=ro, parse_options=po, convert_options=co)
+    except pa.ArrowInvalid:
+        raise _locate(path, spec, h) from None
+    row0 = 0
+    prev_t = None
+    empty = True
+    while True:
+        try:
+            batch = reader.read_next_batch()
+        except StopIteration:
+            break
+        except pa.ArrowInvalid:
+            raise _locate(path, spec, h) from None
+        if batch.num_rows == 0:
+            continue
+        empty = False
+        chunk = _table(path, spec, h, dict(zip(batch.schema.names, batch.columns, strict=True)),
+                       row0)
+        _check(chunk, prev_t)
+        if spec.time and spec.time in chunk.data:
+            prev_t = float(chunk.data[spec.time][-1])
+        row0 += len(chunk)
+        yield chunk
+    if empty:
+        raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
+

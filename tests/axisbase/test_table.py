@@ -1,0 +1,171 @@
+"""The one table reader: valid dialects give identical numbers; bad rows name file:line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from axisbase import Column, InputError, TableSpec, iter_table, parse_column_map, read_table
+
+SPEC = TableSpec("test table", (
+    Column("pose", "label", required=False, aliases=("label",)),
+    Column("ux", aliases=("ax",)), Column("uy", aliases=("ay",)), Column("uz", aliases=("az",)),
+    Column("n", "int", required=False),
+    Column("t", required=False, aliases=("time",))), time="t")
+
+
+def _rows(seed: int, n: int = 50):
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 3)) * 10 ** rng.uniform(-6, 3)
+    t = np.cumsum(rng.uniform(0.001, 0.1, n))
+    return [f"p{i // 10}" for i in range(n)], u, t, np.arange(n) + 7
+
+
+def _write(path, header, rows, *, bom=False, crlf=False, sep=",", order=None):
+    order = order or list(range(len(header)))
+    nl = "\r\n" if crlf else "\n"
+    lines = [sep.join(header[j] for j in order)]
+    lines += [sep.join(r[j] for j in order) for r in rows]
+    data = nl.join(lines) + nl
+    path.write_bytes((b"\xef\xbb\xbf" if bom else b"") + data.encode())
+    return path
+
+
+def _plain(seed):
+    labels, u, t, n = _rows(seed)
+    rows = [[labels[i], *(repr(float(v)) for v in u[i]), str(n[i]), repr(float(t[i]))]
+            for i in range(len(t))]
+    return ["pose", "ux", "uy", "uz", "n", "t"], rows
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("variant", ["bom", "crlf", "bom+crlf", "caps", "spaces", "semicolon",
+                                     "tab", "reordered", "aliases", "units", "comment"])
+def test_valid_variants_give_identical_numbers(tmp_path, seed, variant):
+    head, rows = _plain(seed)
+    ref = read_table(_write(tmp_path / "plain.csv", head, rows), SPEC)
+    kw = {}
+    h = list(head)
+    if "bom" in variant:
+        kw["bom"] = True
+    if "crlf" in variant:
+        kw["crlf"] = True
+    if variant == "caps":
+        h = [x.upper() for x in h]
+    if variant == "spaces":
+        h = [f"  {x} " for x in h]
+        rows = [[f" {v}" if k else v for k, v in enumerate(r)] for r in rows]
+    if variant == "semicolon":
+        kw["sep"] = ";"
+    if variant == "tab":
+        kw["sep"] = "\t"
+    if variant == "reordered":
+        kw["order"] = [5, 3, 0, 2, 4, 1]
+    if variant == "aliases":
+        h = ["Label", "AX", "ay", "Az", "n", "Time"]
+    if variant == "units":
+        h = ["pose", "ux [V]", "uy [V]", "uz (V)", "n", "t (s)"]
+    p = _write(tmp_path / "v.csv", h, rows, **kw)
+    if variant == "comment":
+        p.write_text("# exported by a logger\n# second comment\n" + p.read_text())
+    got = read_table(p, SPEC)
+    assert set(got.data) == set(ref.data)
+    for k in ref.data:
+        if ref[k].dtype == object:
+            assert [s.strip() for s in got[k]] == list(ref[k])
+        else:
+            assert np.array_equal(got[k], ref[k]), k
+    if variant == "units":
+        assert got.units == {"ux": "V", "uy": "V", "uz": "V", "t": "s"}
+
+
+def test_column_map_and_ignored_columns(tmp_path):
+    head, rows = _plain(1)
+    ref = read_table(_write(tmp_path / "a.csv", head, rows), SPEC)
+    h2 = ["pose", "acc1", "acc2", "acc3", "n", "t"]
+    p = _write(tmp_path / "b.csv", h2 + ["extra"], [r + ["9"] for r in rows])
+    with pytest.raises(InputError, match=r"b.csv:1: header: .* lacks ux, uy, uz.*--columns"):
+        read_table(p, SPEC)
+    got = read_table(p, SPEC, parse_column_map("ux=acc1, uy=ACC2,uz=acc3"))
+    assert np.array_equal(got["ux"], ref["ux"]) and got.ignored == ("extra",)
+    with pytest.raises(InputError, match="--columns.*not NAME=HEADER"):
+        parse_column_map("ux:acc1")
+    with pytest.raises(InputError, match="--columns: vx not a column"):
+        read_table(p, SPEC, {"vx": "acc1"})
+    with pytest.raises(InputError, match="no such column"):
+        read_table(p, SPEC, {"ux": "nope", "uy": "acc2", "uz": "acc3"})
+
+
+def test_streamed_chunks_equal_the_whole_table(tmp_path):
+    labels, u, t, n = _rows(4, n=20000)
+    p = tmp_path / "big.csv"
+    p.write_text("ux,uy,uz,n,t\n" + "\n".join(
+        f"{float(a)!r},{float(b)!r},{float(c)!r},{k},{float(s)!r}"
+        for (a, b, c), k, s in zip(u, n, t, strict=True)))
+    whole = read_table(p, SPEC)
+    chunks = list(iter_table(p, SPEC, block_bytes=1 << 16))
+    assert len(chunks) > 3
+    for k in whole.data:
+        assert np.array_equal(np.concatenate([c[k] for c in chunks]), whole[k])
+    # A time step backwards in a later chunk names its line.
+    lines = p.read_text().splitlines()
+    i = 15000
+    f = lines[i].split(",")
+    f[4] = lines[i - 2].split(",")[4]
+    lines[i] = ",".join(f)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=rf"big.csv:{i + 1}: t: .* runs backwards"):
+        for _ in iter_table(p, SPEC, block_bytes=1 << 16):
+            pass
+
+
+@pytest.mark.parametrize("text, match", [
+    ("", "empty file"),
+    ("# only a comment\n", "empty file"),
+    ("ux,uy,uz\n", "no rows under it"),
+    ("ux,uy,uz\n1,2,3\n1,2\n", r":3: 2 fields, the header has 3"),
+    ("ux,uy,uz\n1,2,3\n1,x,3\n", r":3: uy: 'x' is not a number"),
+    ("ux;uy;uz\n1;2,5;3\n", r":2: uy: '2,5' is not a number \(a decimal comma"),
+    ("ux,uy,uz\n1,2,3\n1,nan,3\n", r":3: uy: .* not a finite number"),
+    ("ux,uy,uz\n1,2,3\n1,inf,3\n", r":3: uy: .* not a finite number"),
+    ("ux,uy,uz\n1,2,3\n1,,3\n", r":3: uy: is empty"),
+    ("pose,ux,uy,uz\na,1,2,3\n,1,2,3\n", r":3: pose: is blank"),
+    ("pose,ux,uy,uz\na,1,2,3\n  ,1,2,3\n", r":3: pose: is blank"),
+    ("ux,uy,uz,n\n1,2,3,4\n1,2,3,4.5\n", r":3: n: '4.5' is not a whole number"),
+    ("ux,uy,uz,t\n1,2,3,0.1\n1,2,3,0.1\n", r":3: t: .* repeats the previous row's time"),
+    ("ux,uy,uz,t\n1,2,3,0.2\n\n1,2,3,0.1\n", r":4: t: .* runs backwards"),
+    ("ux,ux,uy,uz\n1,2,3,4\n", r":1: header: ux: given 2 times"),
+    ("ux,uy,uz,ax\n1,2,3,4\n", r"given 2 times"),
+    ("pose,uy,uz\n1,2,3\n", r"lacks ux"),
+])
+def test_bad_tables_name_file_line_column(tmp_path, text, match):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(InputError, match=match):
+        read_table(p, SPEC)
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(InputError, match="no such file"):
+        read_table(tmp_path / "nope.csv", SPEC)
+    with pytest.raises(InputError, match="is a folder"):
+        read_table(tmp_path, SPEC)
+    p = tmp_path / "bin.csv"
+    p.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xfe\x00")
+    with pytest.raises(InputError, match="not a UTF-8 text file"):
+        read_table(p, SPEC)
+
+
+def test_rate_makes_the_time_column(tmp_path):
+    p = tmp_path / "r.csv"
+    p.write_text("ux,uy,uz\n" + "\n".join(f"{k},{k},{k}" for k in range(10)))
+    tab = read_table(p, SPEC, rate_hz=50.0)
+    assert np.allclose(tab["t"], np.arange(10) / 50.0) and tab.time_from_rate
+    with pytest.raises(InputError, match="--rate -1: must be a positive"):
+        read_table(p, SPEC, rate_hz=-1.0)
+    with pytest.raises(InputError, match="--rate nan"):
+        read_table(p, SPEC, rate_hz=float("nan"))
+    q = tmp_path / "q.csv"
+    q.write_text("ux,uy,uz,t\n1,2,3,0\n")
+    with pytest.raises(InputError, match="has its own time column"):
+        read_table(q, SPEC, rate_hz=10.0)
