@@ -4,12 +4,24 @@ Public API::
 
     run_loop, Candidate, Term, StageFit, LoopReport   (align.loop: the shared residual loop)
     measure_file, measure_image, MarkResult           (scribe marks through the loop)
+
+Names are loaded on first use (PEP 562): ``python -m align --help`` must not import numpy,
+scipy or OpenCV.
 """
 
-from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
-from align.marks import MarkResult, MarkStage, loop_mark, measure_file, measure_image
+from importlib import import_module
 
-__all__ = [
-    "Candidate", "LoopReport", "MarkResult", "MarkStage", "StageFit", "Term", "loop_mark",
-    "measure_file", "measure_image", "run_loop",
-]
+_LAZY = {
+    "Candidate": "align.loop", "LoopReport": "align.loop", "StageFit": "align.loop",
+    "Term": "align.loop", "run_loop": "align.loop",
+    "MarkResult": "align.marks", "MarkStage": "align.marks", "loop_mark": "align.marks",
+    "measure_file": "align.marks", "measure_image": "align.marks",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'align' has no attribute {name!r}")

@@ -20,7 +20,7 @@ absorbed by the face angles (only a reversal on the table separates it).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -239,7 +239,8 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
 def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
                 reverse_log: str | Path | None = None, apply_loop: bool = True,
-                steady_table: bool = False) -> GonioRun:
+                steady_table: bool = False, columns: Mapping[str, str] | None = None
+                ) -> GonioRun:
     """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
     else by the loop when the data show it and it is physically possible. ``reverse_log``: a
     log of the same faces with the table turning the other way; the result is then the mean
@@ -247,6 +248,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     table turns at constant speed within a revolution; the angles then come from the pulse
     times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the timing
     estimate is the more precise one; otherwise the counts are used and the reason is noted.
+    ``columns``: header names of the log's columns (``--columns``), for both logs.
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
     """
@@ -254,9 +256,9 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
         fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False,
-                          steady_table=steady_table)
+                          steady_table=steady_table, columns=columns)
         rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
-                          apply_loop=False, steady_table=steady_table)
+                          apply_loop=False, steady_table=steady_table, columns=columns)
         comb, term = combine_directions(fwd.angles, rev.angles)
         notes = [*fwd.notes, *(f"reverse run: {n}" for n in rev.notes),
                  f"both directions combined: the direction-dependent part is "
@@ -268,7 +270,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     loop = None
     rate_used = None
     rate_u = 0.0
-    summary = read_revolutions(path, n_faces)
+    summary = read_revolutions(path, n_faces, columns=columns)
     if latitude_deg is not None and summary.has_time:
         rate_used = vertical_earth_rate(latitude_deg, direction)
     elif latitude_deg is not None:
@@ -293,7 +295,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                             steady_table, alpha)
     rate = rate_used
     summary = read_revolutions(path, n_faces,
-                               correct=lambda c, dt: earth_rate_counts(c, dt, rate))
+                               correct=lambda c, dt: earth_rate_counts(c, dt, rate),
+                               columns=columns)
     fa = face_angles(summary)
     if rate_u:
         # A_k = 2 pi c_k / sum c with c_k - K rate dt_k / 2 pi: dA_k / d rate =

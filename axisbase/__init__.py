@@ -1,16 +1,36 @@
 """The foundation every other package stands on: one exception hierarchy, one constant per
-unit, and one reader for every table (CSV) the tool takes in.
+unit, one reader for every table (CSV) the tool takes in, one writer for every output, and the
+provenance every result carries.
 
 ``imaging``, ``goniometry``, ``align`` and ``synth`` may import this package; it imports
-none of them.
+none of them. Names are loaded on first use (PEP 562), so ``import axisbase`` does not pull in
+numpy or pyarrow (``align --help`` must start fast).
 """
 
+from importlib import import_module
+
 from axisbase.errors import AxisAlignError, InputError, InternalError
-from axisbase.table import Column, Table, TableSpec, iter_table, parse_column_map, read_table
 from axisbase.units import ARCMIN, ARCSEC, DEG, G0, MICRO_G
+from axisbase.version import __version__
+
+_LAZY = {
+    "Column": "axisbase.table", "Table": "axisbase.table", "TableSpec": "axisbase.table",
+    "iter_table": "axisbase.table", "parse_column_map": "axisbase.table",
+    "read_table": "axisbase.table",
+    "OutputError": "axisbase.output", "OutputPlan": "axisbase.output",
+    "dumps": "axisbase.output", "write_atomic": "axisbase.output",
+    "write_json": "axisbase.output",
+    "envelope": "axisbase.provenance", "provenance": "axisbase.provenance",
+    "check_format": "axisbase.provenance",
+}
 
 __all__ = [
-    "ARCMIN", "ARCSEC", "DEG", "G0", "MICRO_G",
-    "AxisAlignError", "Column", "InputError", "InternalError", "Table", "TableSpec",
-    "iter_table", "parse_column_map", "read_table",
+    "ARCMIN", "ARCSEC", "DEG", "G0", "MICRO_G", "__version__",
+    "AxisAlignError", "InputError", "InternalError", *_LAZY,
 ]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'axisbase' has no attribute {name!r}")

@@ -51,11 +51,14 @@ class Column:
 @dataclass(frozen=True)
 class TableSpec:
     """A table format: what it is called in messages (``what``) and its columns. ``time``
-    names the column that must increase strictly (and that ``rate_hz`` may supply)."""
+    names the column that must increase strictly (and that ``rate_hz`` may supply).
+    ``distinct_rows``: a file whose rows are each written twice, or which holds the same block
+    of rows twice, is refused (see :func:`check_repeats`)."""
 
     what: str
     columns: tuple[Column, ...]
     time: str | None = None
+    distinct_rows: bool = False
 
     def column(self, name: str) -> Column:
         return next(c for c in self.columns if c.name == name)
@@ -128,6 +131,24 @@ def _norm(text: str) -> tuple[str, str]:
     return re.sub(r"\s+", "_", t.strip().lower()), unit
 
 
+_SAFE = re.compile(r"^[\w .,\[\]()%/°²µ^+-]{0,24}$")
+
+
+def _show_header(raw: list[str]) -> str:
+    """The header for a message — but never a file's contents: if a field does not look like
+    a column name (e.g. the first line of a file that is not a table at all), only the number
+    of fields is given."""
+    names = [r.strip() for r in raw]
+    if all(_SAFE.match(n) for n in names):
+        return "(" + ", ".join(names) + ")"
+    return f"({len(names)} field(s), not column names)"
+
+
+def _show_cell(v: str) -> str:
+    """A bad cell for a message: short ones quoted, longer ones only described."""
+    return repr(v) if _SAFE.match(v) and len(v) <= 16 else f"a {len(v)}-character text"
+
+
 def parse_column_map(text: str | None, flag: str = "--columns") -> dict[str, str]:
     """``'ux=ax, uy=ay'`` -> ``{'ux': 'ax', 'uy': 'ay'}`` (canonical name = header name)."""
     if not text:
@@ -181,7 +202,7 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
         hits = [i for i, (n, _) in enumerate(normed) if n in wanted]
         if len(hits) > 1:
             raise InputError(f"{where}: {col.name}: given {len(hits)} times "
-                             f"({', '.join(raw[i].strip() for i in hits)})")
+                             f"{_show_header([raw[i] for i in hits])}")
         if hits:
             if names[hits[0]]:
                 raise InputError(f"{where}: {raw[hits[0]].strip()!r} would be both "
@@ -189,10 +210,11 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
             names[hits[0]] = col.name
         elif col.name in mapping:
             raise InputError(f"{where}: --columns {col.name}={mapping[col.name]}: no such "
-                             f"column in {raw}")
+                             f"column in the header {_show_header(raw)}")
     missing = [c.name for c in spec.columns if c.required and c.name not in names]
     if missing:
-        raise InputError(f"{where}: {raw} lacks {', '.join(missing)}; a {spec.what} has "
+        raise InputError(f"{where}: {_show_header(raw)} lacks {', '.join(missing)}; a "
+                         f"{spec.what} has "
                          f"{spec.layout} (name other headers with --columns, e.g. "
                          f"{missing[0]}=YOUR_NAME)")
     units = {n: u for n, (_, u) in zip(names, normed, strict=True) if n and u}
@@ -254,7 +276,7 @@ def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
                     continue
                 bad = _bad_value(v.strip(), kinds[name])
                 if bad:
-                    return InputError(f"{path}:{ln}: {name}: {v.strip()!r} {bad}")
+                    return InputError(f"{path}:{ln}: {name}: {_show_cell(v.strip())} {bad}")
     return InputError(f"{path}: not a valid {spec.what} (pyarrow refused it, no line found)")
 
 
@@ -362,7 +384,97 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
     table = _with_rate(table, rate_hz)
     _check(table)
+    if spec.distinct_rows:
+        check_repeats(table)
     return table
+
+
+PAIR_ROWS = 20
+"""Fewest rows for the 'every row written twice' test: with quantised raw counts two
+successive rows can be equal by chance (p per row pair up to ~0.3 for a 1-count noise in
+three axes), but 10 pairs all equal by chance is p < 1e-5."""
+
+
+def check_repeats(table: Table) -> None:
+    """Refuse duplicated data: every row written twice in a row (``a a b b c c ...``), or the
+    whole file twice (``a b c a b c``). Both shrink the stated uncertainty by √2 without
+    adding information. Tests chosen so real data never trip them: a constant (stuck or
+    noise-free) file is not refused (its successive rows are all equal anyway), and the pair
+    test needs :data:`PAIR_ROWS` rows and repeats only in pairs (successive rows across pairs
+    equal in fewer than half the cases). A repeated time stamp is already refused by the time
+    check."""
+    n = len(table)
+    if n < 4 or n % 2:
+        return
+    cols = [table.data[c.name] for c in table.spec.columns if c.name in table.data]
+    if not cols:
+        return
+
+    def equal(a: slice, b: slice) -> np.ndarray:
+        out = np.ones(len(range(*a.indices(n))), bool)
+        for x in cols:
+            out &= x[a] == x[b]
+        return out
+
+    if bool(equal(slice(0, n - 1), slice(1, n)).all()):
+        return  # constant file: nothing to tell
+    h = n // 2
+    if bool(equal(slice(0, h), slice(h, n)).all()):
+        raise InputError(f"{table.path}:{table.line(h)}: rows {h + 1}-{n} repeat rows 1-{h} "
+                         f"exactly (lines {table.line(0)}-{table.line(h - 1)}): the data "
+                         "written twice? Each sample must appear once")
+    if n >= PAIR_ROWS and bool(equal(slice(0, n, 2), slice(1, n, 2)).all()):
+        across = equal(slice(1, n - 1, 2), slice(2, n, 2))
+        if across.mean() < 0.5:
+            raise InputError(f"{table.path}:{table.line(1)}: every row is written twice in "
+                             f"a row ({n // 2} pairs of identical rows): duplicated samples? "
+                             "Each sample must appear once")
+
+
+_UNIT_NAMES = {"g": "g", "m/s2": "m/s2", "m/s^2": "m/s2", "m/s²": "m/s2", "ms-2": "m/s2",
+               "counts": "counts", "count": "counts", "lsb": "counts", "adc": "counts",
+               "v": "V", "volt": "V", "volts": "V"}
+OUTPUT_UNITS = {"g": "g/g", "m/s2": "(m/s²)/g", "counts": "counts/g", "V": "V/g"}
+"""Output unit of an accelerometer -> the unit of its scale factor (per g of input)."""
+
+
+def header_units(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None,
+                 names: tuple[str, ...]) -> str | None:
+    """The output unit written in the header for ``names`` (e.g. ``ux [V]``), normalised to
+    a key of :data:`OUTPUT_UNITS`; None when none is written. Different units for different
+    axes, or a unit the tool does not know, are refused."""
+    h = _read_header(Path(path), spec, columns or {})
+    found = {n: h.units[n] for n in names if n in h.units}
+    if not found:
+        return None
+    keys = {n: _UNIT_NAMES.get(u.strip().lower().replace(" ", "")) for n, u in found.items()}
+    bad = [n for n, k in keys.items() if k is None]
+    if bad:
+        raise InputError(f"{path}:{h.header_line}: {bad[0]}: unit {found[bad[0]]!r} not "
+                         f"known; use one of {', '.join(OUTPUT_UNITS)}")
+    if len(set(keys.values())) > 1:
+        raise InputError(f"{path}:{h.header_line}: header: the axes are in different units "
+                         f"({', '.join(f'{n} [{u}]' for n, u in found.items())})")
+    return next(iter(keys.values()))
+
+
+def resolve_units(given: str | None, paths: list[str | Path], spec: TableSpec,
+                  columns: Mapping[str, str] | None, names: tuple[str, ...],
+                  flag: str = "--units", default: str = "V") -> str:
+    """The output unit of the data: ``given`` (the flag/key) checked against the units
+    written in the headers of ``paths``; else the header's; else ``default``."""
+    if given is not None and given not in OUTPUT_UNITS:
+        raise InputError(f"{flag} {given!r}: one of {', '.join(OUTPUT_UNITS)}")
+    unit = given
+    for p in paths:
+        hu = header_units(p, spec, columns, names)
+        if hu is None:
+            continue
+        if unit is not None and hu != unit:
+            src = flag if given is not None else "another file's header"
+            raise InputError(f"{p}: the header says {hu}, {src} says {unit}")
+        unit = hu
+    return unit or default
 
 
 def _with_rate(table: Table, rate_hz: float | None) -> Table:

@@ -21,6 +21,7 @@ revolutions are also kept whole for the residual loop and plots.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -179,7 +180,8 @@ class LogSummary:
 
 
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
-                     block_bytes: int = 1 << 20, correct=None) -> LogSummary:
+                     block_bytes: int = 1 << 20, correct=None,
+                     columns: Mapping[str, str] | None = None) -> LogSummary:
     """Stream a log into revolution statistics (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
@@ -194,7 +196,7 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     rows = 0
     seen_ref = False
     has_time = False
-    for ch in iter_log(path, block_bytes):
+    for ch in iter_log(path, block_bytes, columns):
         rows += len(ch.count)
         has_time = ch.t is not None
         dt = None

@@ -1,0 +1,53 @@
+"""The files ``align`` writes: their format names and versions, the envelope every one
+carries (:mod:`axisbase.provenance`) and the JSON Schema shipped for each.
+
+A format version is raised whenever a reader of the previous version would misread a file.
+Version 1 is every file written before versions existed (no ``format_version`` key); readers
+that accept it say so in ``READABLE``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from axisbase.provenance import check_format, envelope
+
+FORMATS = {
+    "marks": 2, "camera": 2, "calibration": 2, "tilt": 2, "gonio": 2, "session": 2,
+    "platform-calibration": 2,
+}
+"""kind -> the version this tool writes."""
+
+READABLE = {
+    "calibration": (1, 2),            # 'align tilt --calibration'
+    "platform-calibration": (1, 2),   # 'align apply'
+    "session": (1, 2),                # 'align apply' on a result JSON
+}
+"""kind -> versions this tool reads back."""
+
+
+def format_name(kind: str) -> str:
+    return f"axis-align/{kind}"
+
+
+def document(kind: str, body: Mapping[str, Any], settings: Mapping[str, Any] | None = None,
+             inputs: Iterable[str | Path] = ()) -> dict:
+    """``body`` wrapped with format, format_version and provenance (tool, version, UTC time,
+    command line, settings, SHA-256 of every input)."""
+    return envelope(format_name(kind), FORMATS[kind], body, settings, inputs)
+
+
+def check(d: Mapping[str, Any], kind: str, where: str) -> int:
+    """The format version of ``d`` if readable as ``kind`` (``InputError`` saying which
+    versions this tool reads otherwise)."""
+    return check_format(d, format_name(kind), READABLE.get(kind, (FORMATS[kind],)), where)
+
+
+def schema(kind: str) -> dict:
+    """The JSON Schema of ``kind`` (package data ``align/schemas/<kind>.schema.json``)."""
+    text = resources.files("align").joinpath("schemas", f"{kind}.schema.json").read_text()
+    return json.loads(text)

@@ -1,0 +1,191 @@
+"""Every file the tool writes goes through here: strict JSON and outputs that are never lost.
+
+* :func:`dumps` is the one JSON writer: numpy numbers and arrays become plain JSON, a
+  non-finite float (NaN, ±inf) becomes ``null`` — never the bare ``NaN`` token that other JSON
+  readers refuse (``allow_nan=False`` guards it).
+* :class:`OutputPlan` checks every output of a command *before* anything is computed: no two
+  outputs with the same path, none that is one of the inputs, none that exists already (unless
+  ``force``), and its folder writable (a file is actually created there and removed).
+* :func:`write_atomic` writes to a temporary name in the same folder and renames it into
+  place. Without ``force`` the rename is exclusive (a hard link, which fails if the name
+  appeared meanwhile, e.g. another run writing the same output): no run ever replaces a file
+  it did not check. ``-`` as a JSON output means standard output.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from axisbase.errors import InputError
+
+STDOUT = "-"
+
+
+class OutputError(InputError):
+    """An output cannot be written as asked (exists, collides, folder not writable)."""
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` as plain JSON types: numpy scalars/arrays unwrapped, non-finite floats -> None,
+    tuples -> lists, paths -> str."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, bool) or obj is None or isinstance(obj, str):
+        return obj
+    if isinstance(obj, int):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Path):
+        return str(obj)
+    tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars (no numpy import here)
+    if tolist is not None:
+        return jsonable(tolist())
+    if isinstance(obj, set | frozenset):
+        return [jsonable(v) for v in sorted(obj)]
+    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
+
+
+def dumps(data: Any) -> str:
+    """The tool's one JSON encoder (strict: no NaN/Infinity tokens; see :func:`jsonable`)."""
+    return json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+class OutputPlan:
+    """The outputs of one command, checked before the computation starts.
+
+    ``inputs``: files the command reads (an output may never be one of them); ``force``:
+    existing outputs may be replaced.
+    """
+
+    def __init__(self, inputs: Iterable[str | Path] = (), force: bool = False):
+        self.inputs = [Path(p) for p in inputs]
+        self.force = force
+        self.paths: dict[str, Path] = {}
+
+    def add(self, flag: str, path: str | Path | None, stdout_ok: bool = False,
+            folder: bool = False) -> Path | None:
+        """Check one output (``flag`` names it in messages); returns its path, None when not
+        asked for, or ``Path('-')`` for standard output. ``folder``: the output is a folder
+        of per-item files (a batch), created if missing."""
+        if path is None:
+            return None
+        if str(path) == STDOUT:
+            if not stdout_ok:
+                raise OutputError(f"{flag} -: standard output is only for --json")
+            if any(str(p) == STDOUT for p in self.paths.values()):
+                raise OutputError(f"{flag} -: another output already goes to standard output")
+            self.paths[flag] = Path(STDOUT)
+            return Path(STDOUT)
+        p = Path(path)
+        for other_flag, other in self.paths.items():
+            if str(other) != STDOUT and (_same(p, other) or (folder and p == other)):
+                raise OutputError(f"{flag} {p}: the same path as {other_flag}; each output "
+                                  "needs its own file")
+        for i in self.inputs:
+            if _same(p, i):
+                raise OutputError(f"{flag} {p}: is one of the inputs; refusing to write over it")
+        if folder:
+            if p.exists() and not p.is_dir():
+                raise OutputError(f"{flag} {p}: exists and is not a folder")
+            target_dir = p
+        else:
+            if p.is_dir():
+                raise OutputError(f"{flag} {p}: is a folder; give a file name")
+            if p.exists() and not self.force:
+                raise OutputError(f"{flag} {p}: exists; choose a new name or pass --force")
+            target_dir = p.parent
+        _check_folder(flag, p, target_dir)
+        self.paths[flag] = p
+        return p
+
+
+def _check_folder(flag: str, p: Path, folder: Path) -> None:
+    """Create the folder if missing and prove it writable by creating a file in it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputError(f"{flag} {p}: {folder} is a file, not a folder") from None
+    except OSError as exc:
+        raise OutputError(f"{flag} {p}: cannot create the folder {folder} "
+                          f"({exc.strerror})") from None
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise OutputError(f"{flag} {p}: the folder {folder} is not writable "
+                          f"({exc.strerror})") from None
+
+
+def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder.
+
+    Without ``force`` the file is created exclusively: if ``path`` exists (or appeared since
+    the outputs were checked) nothing is replaced and :class:`OutputError` is raised. ``path``
+    ``-`` writes text to standard output.
+    """
+    if str(path) == STDOUT:
+        text = data if isinstance(data, str) else data.decode("utf-8")
+        out = _real_stdout()
+        out.write(text)
+        out.flush()
+        return Path(STDOUT)
+    p = Path(path)
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(raw)
+            f.flush()
+            os.fsync(f.fileno())
+        if force:
+            os.replace(tmp, p)
+        else:
+            try:
+                os.link(tmp, p)  # atomic and exclusive: fails if p exists
+            except FileExistsError:
+                raise OutputError(f"{p}: appeared while this run was computing (another run "
+                                  "writing the same output?); not replaced — pass --force "
+                                  "to replace it") from None
+            except OSError:  # a file system without hard links: check, then rename
+                if p.exists():
+                    raise OutputError(f"{p}: appeared while this run was computing; not "
+                                      "replaced — pass --force to replace it") from None
+                os.replace(tmp, p)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return p
+
+
+def write_json(path: str | Path, data: Any, force: bool = False) -> Path:
+    """Strict JSON (:func:`dumps`) written by :func:`write_atomic`."""
+    return write_atomic(path, dumps(data), force)
+
+
+_STDOUT_STREAM: list = []
+
+
+def set_real_stdout(stream) -> None:
+    """Where ``-`` outputs go when the CLI has redirected its messages to stderr."""
+    _STDOUT_STREAM[:] = [stream]
+
+
+def _real_stdout():
+    return _STDOUT_STREAM[0] if _STDOUT_STREAM else sys.stdout
