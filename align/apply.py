@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from align.calibration import TriadModel, model_from_dict, model_to_dict, r_matrix
+from align.contract import check, document
 from align.errors import InputError
 from align.fusion import E_NAMES, axes_from, e_matrix
 
@@ -36,18 +37,40 @@ class PlatformCalibration:
     def axes(self) -> np.ndarray:
         return axes_from(self.e6)
 
-    def to_dict(self) -> dict:
+    def to_dict(self, units: str | None = None) -> dict:
+        """The calibration's body (``units``: the output unit of the readings it was made
+        from, checked by ``align apply``)."""
+        model = model_to_dict(self.model)
+        if units is not None:
+            model["output_unit"] = units
         return {"frame": "platform: X, Y horizontal, Z up; row i = accelerometer i",
-                "model": model_to_dict(self.model),
+                "model": model,
                 "misalignment_rad": e_matrix(self.e6).tolist(),
                 "misalignment_u_rad": e_matrix(np.sqrt(np.diag(self.cov))).tolist(),
                 "angle_names": list(E_NAMES), "angles_rad": self.e6.tolist(),
                 "angles_covariance_rad2": self.cov.tolist(),
                 "axes": self.axes.tolist()}
 
+    def document(self, units: str | None, settings: dict, inputs) -> dict:
+        """The file ``align run --calibration`` writes (format, version, provenance)."""
+        return document("platform-calibration", self.to_dict(units), settings, inputs)
+
     @classmethod
     def from_dict(cls, d: dict, where: str) -> PlatformCalibration:
-        d = d.get("platform_calibration", d)
+        """Read a platform calibration — the file itself or a session result holding one —
+        of any format version this tool reads (version 1: the files written before
+        versions existed); ``InputError`` says which versions it cannot."""
+        if "platform_calibration" in d:
+            check(d, "session", where)
+            d = d["platform_calibration"]
+            if not isinstance(d, dict):
+                raise InputError(f"{where}: platform_calibration is not a table")
+        elif d.get("format") == "axis-align/session" or "misalignment_rad" in d and \
+                "model" not in d:
+            raise InputError(f"{where}: a session result without a platform calibration "
+                             "(the session had no [calibration] or its fusion failed)")
+        else:
+            check(d, "platform-calibration", where)
         try:
             model = model_from_dict(d["model"], where)
             e6 = np.array(d["angles_rad"], float).reshape(6)
@@ -59,16 +82,16 @@ class PlatformCalibration:
 
     @classmethod
     def load(cls, path: str | Path) -> PlatformCalibration:
-        p = Path(path)
-        try:
-            d = json.loads(p.read_text())
-        except FileNotFoundError:
-            raise InputError(f"{p}: no such file") from None
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(f"{p}: not JSON ({exc})") from None
-        if not isinstance(d, dict):
-            raise InputError(f"{p}: not a platform calibration")
-        return cls.from_dict(d, str(p))
+        return cls.load_with_units(path)[0]
+
+    @classmethod
+    def load_with_units(cls, path: str | Path) -> tuple[PlatformCalibration, str | None]:
+        """The calibration and the output unit of the readings it was made from (None for
+        files that do not say)."""
+        d = read_json(path, "a platform calibration")
+        pc = cls.from_dict(d, str(path))
+        inner = d.get("platform_calibration", d)
+        return pc, inner.get("model", {}).get("output_unit")
 
     def specific_force(self, u: np.ndarray, t: np.ndarray | float = 0.0,
                        temp: np.ndarray | float | None = None) -> np.ndarray:
@@ -78,3 +101,78 @@ class PlatformCalibration:
         w = m.specific_force(u, t, temp) @ R.T
         w = w / np.linalg.norm(R, axis=1)
         return np.linalg.solve(self.axes, w.T).T
+
+
+def read_json(path: str | Path, what: str) -> dict:
+    """A JSON object from a file (``InputError`` naming the file otherwise)."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8-sig"))
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{p}: is a folder, not {what}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{p}: not JSON ({type(exc).__name__} at position "
+                         f"{getattr(exc, 'pos', getattr(exc, 'start', '?'))})") from None
+    if not isinstance(d, dict):
+        raise InputError(f"{p}: not {what} (a JSON object was expected)")
+    return d
+
+
+def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
+    """The triad model of a calibration file (``align calibrate --json``, any readable format
+    version, or a bare model block) and the output unit it was made from (None if unknown)."""
+    d = read_json(path, "a calibration")
+    if "model" in d:
+        check(d, "calibration", str(path))
+        block = d["model"]
+    else:
+        block = d
+    if not isinstance(block, dict):
+        raise InputError(f"{path}: 'model' is not a table")
+    return model_from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))
+
+
+@dataclass(frozen=True)
+class AppliedReadings:
+    """Readings through a platform calibration: times [s], specific force in the platform
+    frame (N, 3) [g], and roll/pitch [rad] when asked."""
+
+    t: np.ndarray
+    a: np.ndarray
+    roll: np.ndarray | None = None
+    pitch: np.ndarray | None = None
+
+    @property
+    def samples(self) -> int:
+        return len(self.a)
+
+    @property
+    def mean_g(self) -> np.ndarray:
+        return self.a.mean(0)
+
+    def csv_text(self) -> str:
+        """``t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]``."""
+        from axisbase.output import csv_text
+
+        cols, names = [self.t, *self.a.T], ["t", "ax_g", "ay_g", "az_g"]
+        if self.roll is not None:
+            cols += [np.rad2deg(self.roll), np.rad2deg(self.pitch)]
+            names += ["roll_deg", "pitch_deg"]
+        return csv_text(names, cols)
+
+
+def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,
+                      method: str = "exact") -> AppliedReadings:
+    """Readings ``tab`` (ux, uy, uz[, t][, temp]) -> specific force in the platform frame;
+    readings without times are taken at the model's reference time."""
+    from align.tilt import roll_pitch
+
+    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
+    t = tab["t"] if "t" in tab else np.full(len(u), pc.model.t_ref)
+    a = pc.specific_force(u, t, tab.get("temp"))
+    if not tilt:
+        return AppliedReadings(t, a)
+    roll, pitch = roll_pitch(a, method=method)
+    return AppliedReadings(t, a, roll, pitch)

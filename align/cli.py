@@ -1,61 +1,135 @@
-"""The ``align`` command. Exit status: 0 success, 2 bad input or usage, 1 internal error.
+"""The ``align`` command. Exit status: 0 success; 2 bad input or usage, or a result that cannot
+be trusted (a failed stage: the result is still written, with ``ok: false``); 1 internal
+error; 130 interrupted (Ctrl-C).
 
 Degrees, arc-seconds and pixels appear only here and in files; the library works in radians.
+This module parses arguments and prints; what it computes lives in the library. Heavy
+libraries (numpy, scipy, OpenCV, matplotlib, pyarrow) are imported inside the command
+functions, so ``align --help`` starts in a fraction of a second.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import codecs
+import logging
 import sys
-import tempfile
-import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
+from axisbase.errors import InputError
+from axisbase.units import ARCSEC
+from axisbase.version import __version__
 
-ARCSEC = np.pi / 180 / 3600
+log = logging.getLogger("align")
+
+UNITS = ("g", "m/s2", "counts", "V")
 
 
-class UsageError(Exception):
+class UsageError(InputError):
     """Bad input the user can fix (exit status 2)."""
 
 
-def _new_file(path: str | None, force: bool, inputs: Sequence[str] = ()) -> Path | None:
-    """An output path that will not overwrite anything the user gave."""
-    if path is None:
-        return None
-    p = Path(path)
-    if any(p.resolve() == Path(i).resolve() for i in inputs):
-        raise UsageError(f"{p}: is one of the inputs; refusing to write over it")
-    if p.exists() and not force:
-        raise UsageError(f"{p}: exists; choose a new name or pass --force")
-    return p
+# ----------------------------------------------------------------------------- value checks
+
+def _number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+            hi_open: bool = False, integer: bool = False, what: str = "") -> Callable:
+    """An argparse type: a finite number (or integer) in [lo, hi] (open ends as asked)."""
+
+    def parse(text: str) -> float | int:
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not {'a whole number' if integer else 'a number'}") from None
+        if v != v or v in (float("inf"), float("-inf")):
+            raise argparse.ArgumentTypeError(f"{text} is not a finite number")
+        low = lo is not None and (v <= lo if lo_open else v < lo)
+        high = hi is not None and (v >= hi if hi_open else v > hi)
+        if low or high:
+            rng = (("(" if lo_open else "[") + ("-inf" if lo is None else f"{lo:g}") + ", "
+                   + ("inf" if hi is None else f"{hi:g}") + (")" if hi_open else "]"))
+            raise argparse.ArgumentTypeError(f"{text} outside {rng}{what}")
+        return v
+
+    return parse
 
 
-def _write_json(path: Path | None, data: dict) -> None:
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(data, indent=2, default=float))
+ALPHA = _number(0, 1, lo_open=True, hi_open=True, what=": a significance level 0 < α < 1")
+POSITIVE = _number(0, None, lo_open=True)
+
+
+def _unique(items: Sequence[str], flag: str, what: str = "file") -> None:
+    """Refuse the same file (after resolving) or name given twice."""
+    seen: dict[str, str] = {}
+    for it in items:
+        key = str(Path(it).resolve()) if what == "file" else it
+        if key in seen:
+            raise UsageError(f"{flag}: {it} is given twice" + (
+                f" (as {seen[key]})" if seen[key] != it else ""))
+        seen[key] = it
+
+
+def _signs(text: str) -> tuple[float, float, float]:
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) == 1:
+        parts = parts * 3
+    if len(parts) != 3 or any(p not in ("+", "-") for p in parts):
+        raise UsageError(f"--scale-sign {text!r}: give +, - or three of them, e.g. -,-,-")
+    return tuple(-1.0 if p == "-" else 1.0 for p in parts)  # type: ignore[return-value]
+
+
+def _table_options(args: argparse.Namespace, paths: Sequence[str], spec) -> tuple[dict, str]:
+    """``--columns`` as a mapping and the data's output unit (``--units`` checked against
+    the units written in the files' headers)."""
+    from axisbase.table import parse_column_map, resolve_units
+
+    cols = parse_column_map(getattr(args, "columns", None))
+    units = resolve_units(getattr(args, "units", None), list(paths), spec, cols,
+                          ("ux", "uy", "uz"))
+    return cols, units
+
+
+def _settings(args: argparse.Namespace) -> dict:
+    """The command's settings for the provenance block (every flag, as given or defaulted)."""
+    skip = {"func", "quiet", "verbose"}
+    return {k: v for k, v in vars(args).items()
+            if k not in skip and (v is None or isinstance(v, str | int | float | bool | list))}
+
+
+def _plan(args: argparse.Namespace, inputs: Sequence[str | Path]):
+    from axisbase.output import OutputPlan
+
+    return OutputPlan(inputs, force=getattr(args, "force", False))
+
+
+def _warn(lines: Sequence[str]) -> None:
+    for w in lines:
+        log.warning("WARNING: %s", w)
+
+
+def _wrote(path: Path | None) -> None:
+    if path is not None and str(path) != "-":
         print(f"wrote {path}")
 
 
 # ----------------------------------------------------------------------------- marks
 
 def cmd_marks(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from align.contract import document
     from align.marks import measure_file
     from align.plots import plot_mark
-    from imaging import CameraModel, ImageInputError, read_image
+    from align.warnings import mark_warnings
+    from axisbase.output import write_json
+    from imaging import CameraModel, read_image
 
-    camera = None
-    if args.camera:
-        try:
-            camera = CameraModel.load(args.camera)
-        except ImageInputError as exc:
-            raise UsageError(str(exc)) from None
-    out = _new_file(args.json, args.force, args.images)
-    plot_dir = Path(args.plot) if args.plot else None
+    _unique(args.images, "images")
+    camera = CameraModel.load(args.camera) if args.camera else None
+    plan = _plan(args, [*args.images] + ([args.camera] if args.camera else []))
+    out = plan.add("--json", args.json, stdout_ok=True)
+    plot_dir = plan.add("--plot", args.plot, folder=True)
     results = []
     failed = 0
     for path in _progress(args.images, "marks"):
@@ -65,7 +139,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
             results.append(r)
             if not r.found:
                 failed += 1
-                print(f"{path}: FAILED: {r.error}", file=sys.stderr)
+                log.error("%s: FAILED: %s", path, r.error)
                 continue
             print(f"{path} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
                   f"± {r.angle_u_rad / ARCSEC:.2f}″, offset {r.offset_px:+.3f} px, "
@@ -75,198 +149,228 @@ def cmd_marks(args: argparse.Namespace) -> int:
             if plot_dir is not None:
                 img = read_image(path) if r.measurement is not None else None
                 print(f"    plot: {plot_mark(r, plot_dir, img)}")
-    _write_json(out, {"marks": [r.to_json() for r in results]})
+    warnings = mark_warnings(results)
+    _warn(warnings)
+    if out is not None:
+        doc = document("marks", {"ok": not failed, "warnings": warnings,
+                                 "marks": [r.to_json() for r in results]},
+                       _settings(args), [*args.images] + ([args.camera] if args.camera else []))
+        _wrote(write_json(out, doc, args.force))
     return 2 if failed else 0
 
 
 # ----------------------------------------------------------------------------- camera
 
+def _pattern(text: str) -> tuple[int, int]:
+    try:
+        cols, rows = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise UsageError(f"--pattern {text!r}: expected COLSxROWS inner corners, "
+                         "e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise UsageError(f"--pattern {text!r}: a chessboard has at least 2x2 inner corners")
+    return cols, rows
+
+
 def cmd_camera(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from align.contract import document
+    from axisbase.output import write_json
     from imaging import ImageInputError, calibrate_chessboard, read_image
 
-    try:
-        cols, rows = (int(v) for v in args.pattern.lower().split("x"))
-    except ValueError:
-        raise UsageError(f"--pattern {args.pattern!r}: expected COLSxROWS inner corners, "
-                         "e.g. 9x6") from None
-    out = _new_file(args.json, args.force, args.images)
+    cols, rows = _pattern(args.pattern)
+    _unique(args.images, "images")
+    plan = _plan(args, args.images)
+    out = plan.add("--json", args.json, stdout_ok=True)
     imgs = {}
     for p in args.images:
         try:
             img = read_image(p)
             imgs[p] = img.astype(np.uint8 if img.max() <= 255 else np.uint16)
         except ImageInputError as exc:
-            print(f"{p}: skipped: {exc}", file=sys.stderr)
-    try:
-        model, failed = calibrate_chessboard(imgs, (cols, rows), args.square)
-    except ImageInputError as exc:
-        raise UsageError(str(exc)) from None
+            log.warning("%s: skipped: %s", p, exc)
+    model, failed = calibrate_chessboard(imgs, (cols, rows), args.square)
     for k, v in failed.items():
-        print(f"{k}: skipped: {v}", file=sys.stderr)
+        log.warning("%s: skipped: %s", k, v)
     K, D = model.camera_matrix, model.dist_coeffs
     print(f"{model.views} views, RMS reprojection {model.rms_px:.3f} px")
     print(f"fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} px")
     print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{v:+.5f}" for v in D[:5]))
     if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(model.to_json())
-        print(f"wrote {out}")
+        doc = document("camera", json.loads(model.to_json()), _settings(args), args.images)
+        _wrote(write_json(out, doc, args.force))
     return 0
 
 
 # ----------------------------------------------------------------------------- calibrate
 
-def _signs(text: str) -> tuple[float, float, float]:
-    parts = [p.strip() for p in text.split(",")]
-    if len(parts) == 1:
-        parts = parts * 3
-    try:
-        vals = tuple(float(p + "1") if p in "+-" else float(p) for p in parts)
-    except ValueError:
-        vals = ()
-    if len(vals) != 3 or any(abs(v) != 1 for v in vals):
-        raise UsageError(f"--scale-sign {text!r}: give +, - or three of them, e.g. -,-,-")
-    return vals  # type: ignore[return-value]
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from align.calibration import (
-        StaticSettings,
-        calibrate,
-        calibration_json,
-        delta_g,
-        read_poses,
-    )
-    from align.errors import InputError
+    from align.calibration import STATIC, StaticSettings, calibrate, delta_g, read_poses
+    from align.calibration.output import calibration_document
+    from align.warnings import calibration_warnings
+    from axisbase.output import write_json
+    from axisbase.table import OUTPUT_UNITS
 
-    out = _new_file(args.json, args.force, [args.static] + ([args.check] if args.check else []))
+    inputs = [args.static] + ([args.check] if args.check else [])
+    _unique(inputs, "static/--check")
     signs = _signs(args.scale_sign)
+    cols, units = _table_options(args, inputs, STATIC)
+    plan = _plan(args, inputs)
+    out = plan.add("--json", args.json, stdout_ok=True)
+    plot = plan.add("--plot", args.plot, folder=True)
     settings = StaticSettings(args.window, args.threshold, args.min_static, args.margin)
-    try:
-        poses, intervals = read_poses(args.static, settings)
-        check = read_poses(args.check, settings, calibration=False)[0] if args.check else None
-        cal = calibrate(poses, signs, alpha=args.alpha)
-    except InputError as exc:
-        raise UsageError(str(exc)) from None
+    poses, intervals = read_poses(args.static, settings, columns=cols, rate_hz=args.rate)
+    check = (read_poses(args.check, settings, calibration=False, columns=cols,
+                        rate_hz=args.rate)[0] if args.check else None)
+    cal = calibrate(poses, signs, alpha=args.alpha)
     if intervals is not None:
         print(f"{len(intervals)} static intervals found:")
         for iv in intervals:
             print(f"  {iv.start_s:9.2f}-{iv.end_s:9.2f} s ({iv.duration_s:6.1f} s, "
                   f"{iv.samples} samples), noise {' '.join(f'{v:.3g}' for v in iv.std)}")
     m, a = cal.model, cal.algebraic
+    ku = OUTPUT_UNITS[units]
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
                  if all(s > 0 for s in signs) else "mixed")
-    print(f"{len(poses.u)} poses; scale-factor signs {signs} ({sign_note}: an ellipsoid cannot "
-          "tell them, --scale-sign sets them)")
-    print(f"{'':10s} {'algebraic (paper)':>22s} {'ML refined':>16s} {'u':>10s}")
+    print(f"{len(poses.u)} poses in {units}; scale-factor signs {signs} ({sign_note}: an "
+          "ellipsoid cannot tell them, --scale-sign sets them)")
+    print(f"{'':14s} {'algebraic (paper)':>22s} {'ML refined':>16s} {'u':>10s}")
     for i, ax in enumerate("xyz"):
-        print(f"k_{ax} [V/g] {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
+        print(f"{f'k_{ax} [{ku}]':14s} {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
     for i, ax in enumerate("xyz"):
-        print(f"beta_{ax} [µrad] {a.beta[i] * 1e6:18.3f} {m.beta[i] * 1e6:16.3f} "
+        print(f"{f'beta_{ax} [µrad]':14s} {a.beta[i] * 1e6:22.3f} {m.beta[i] * 1e6:16.3f} "
               f"{m.u_of(f'beta_{ax}') * 1e6:10.3g}")
     for i, ax in enumerate("xyz"):
-        print(f"b_{ax} [µg] {a.bias[i] * 1e6:21.3f} {m.bias[i] * 1e6:16.3f} "
+        print(f"{f'b_{ax} [µg]':14s} {a.bias[i] * 1e6:22.3f} {m.bias[i] * 1e6:16.3f} "
               f"{m.u_of(f'bias_{ax}') * 1e6:10.3g}")
-    dof = cal.loop.after.dof
-    if dof < 3:
-        print(f"WARNING: {len(poses.u)} poses leave {dof} degrees of freedom: the fit is (nearly) "
-              "exact, its residual proves nothing; add poses")
-    if not cal.noise_known:
-        print("noise unknown (per-pose means only): uncertainties from the residual scatter, "
-              "no chi2 test")
     for line in cal.loop.summary_lines():
         print("  " + line)
-    js = calibration_json(cal, poses)
-    if intervals is not None:
-        js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
-                                   "samples": iv.samples, "std": iv.std.tolist()}
-                                  for iv in intervals]
-    if check is not None:
-        dg = delta_g(m, check)
-        js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in
-                       zip(check.labels, dg, strict=True)]
+    dg = delta_g(m, check) if check is not None else None
+    if dg is not None:
         print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in dg))
-    if args.plot:
+    warnings = calibration_warnings(cal, poses)
+    _warn(warnings)
+    if plot is not None:
         from align.plots import plot_calibration
 
-        print(f"plot: {plot_calibration(cal, poses, check, Path(args.plot))}")
-    _write_json(out, js)
+        print(f"plot: {plot_calibration(cal, poses, check, plot)}")
+    if out is not None:
+        doc = calibration_document(cal, poses, units, intervals, check, warnings,
+                                   _settings(args), inputs)
+        _wrote(write_json(out, doc, args.force))
     return 0
-
-
-def _load_model(path: str):
-    from align.calibration import model_from_dict
-
-    try:
-        d = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise UsageError(f"{path}: no such file") from None
-    except json.JSONDecodeError as exc:
-        raise UsageError(f"{path}: not JSON ({exc})") from None
-    try:
-        return model_from_dict(d.get("model", d), path)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
 
 
 def cmd_tilt(args: argparse.Namespace) -> int:
-    from align.calibration import read_readings
-    from align.errors import InputError
-    from align.tilt import roll_pitch
+    from align.apply import load_triad_model
+    from align.calibration import READINGS, read_readings
+    from align.contract import document
+    from align.tilt import tilt_of_readings
+    from axisbase.output import write_atomic, write_json
 
-    model = _load_model(args.calibration)
-    out_json = _new_file(args.json, args.force, [args.readings])
-    out_csv = _new_file(args.out, args.force, [args.readings])
-    try:
-        tab = read_readings(args.readings)
-    except InputError as exc:
-        raise UsageError(str(exc)) from None
-    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t = tab["t"] if "t" in tab else np.full(len(u), model.t_ref)
-    temp = tab.get("temp")
-    a = model.specific_force(u, t, temp)
-    roll, pitch = roll_pitch(a, method=args.method, mu=args.mu)
-    print(f"{len(a)} readings ({args.method} roll): roll {np.rad2deg(np.mean(roll)):+.6f}° "
-          f"(sd {np.rad2deg(np.std(roll)) * 3600:.1f}″), pitch {np.rad2deg(np.mean(pitch)):+.6f}°"
-          f" (sd {np.rad2deg(np.std(pitch)) * 3600:.1f}″), |a| - 1 mean "
-          f"{(np.linalg.norm(a, axis=1) - 1).mean() * 1e6:+.2f} µg")
+    inputs = [args.readings, args.calibration]
+    _unique(inputs, "readings/--calibration")
+    cols, units = _table_options(args, [args.readings], READINGS)
+    model, cal_units = load_triad_model(args.calibration)
+    _same_units(units, cal_units, args.calibration)
+    plan = _plan(args, inputs)
+    out_json = plan.add("--json", args.json, stdout_ok=True)
+    out_csv = plan.add("--out", args.out)
+    tab = read_readings(args.readings, cols, args.rate)
+    res = tilt_of_readings(model, tab, args.method, args.mu)
+    s = res.summary()
+    print(f"{s['samples']} readings ({args.method} roll): roll {s['roll_deg_mean']:+.6f}° "
+          f"(sd {s['roll_deg_std'] * 3600:.1f}″), pitch {s['pitch_deg_mean']:+.6f}° "
+          f"(sd {s['pitch_deg_std'] * 3600:.1f}″), |a| - 1 mean {s['norm_minus_1_ug']:+.2f} µg")
     if out_csv is not None:
-        np.savetxt(out_csv, np.column_stack([t, np.rad2deg(roll), np.rad2deg(pitch)]),
-                   delimiter=",", header="t,roll_deg,pitch_deg", comments="", fmt="%.9g")
-        print(f"wrote {out_csv}")
-    _write_json(out_json, {
-        "method": args.method, "mu": args.mu if args.method == "paper" else None,
-        "samples": len(a), "roll_deg_mean": float(np.rad2deg(np.mean(roll))),
-        "pitch_deg_mean": float(np.rad2deg(np.mean(pitch))),
-        "roll_deg_std": float(np.rad2deg(np.std(roll))),
-        "pitch_deg_std": float(np.rad2deg(np.std(pitch)))})
+        _wrote(write_atomic(out_csv, res.csv_text(), args.force))
+    if out_json is not None:
+        _wrote(write_json(out_json, document("tilt", s, _settings(args), inputs), args.force))
     return 0
+
+
+def _same_units(units: str, cal_units: str | None, where: str) -> None:
+    if cal_units is not None and units != cal_units:
+        raise UsageError(f"the readings are in {units} but {where} was calibrated from "
+                         f"{cal_units} (--units, or the header's unit)")
 
 
 # ----------------------------------------------------------------------------- gonio
 
-def cmd_gonio(args: argparse.Namespace) -> int:
-    from align.gonio import measure_log, run_json
-    from goniometry import LogError, kept_table
-
-    faces = [f.strip() for f in args.faces.split(",") if f.strip()]
+def _faces(text: str) -> list[str]:
+    faces = [f.strip() for f in text.split(",")]
+    if any(not f for f in faces):
+        raise UsageError(f"--faces {text!r}: an empty face name")
     if len(faces) < 2:
         raise UsageError("--faces needs at least two names, e.g. ref,z,y,x")
-    nominal = None
-    if args.nominal:
-        try:
-            nominal = np.deg2rad([float(v) for v in args.nominal.split(",")])
-        except ValueError:
-            raise UsageError(f"--nominal {args.nominal!r}: numbers in degrees") from None
-        if len(nominal) != len(faces):
-            raise UsageError(f"--nominal has {len(nominal)} values for {len(faces)} faces")
-    out = _new_file(args.json, args.force, [args.log] + ([args.reverse_log]
-                                                         if args.reverse_log else []))
+    _unique(faces, "--faces", what="name")
+    return faces
+
+
+def _nominal(text: str | None, n: int) -> list[float] | None:
+    import math
+
+    if not text:
+        return None
+    try:
+        deg = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise UsageError(f"--nominal {text!r}: numbers in degrees") from None
+    if len(deg) != n:
+        raise UsageError(f"--nominal has {len(deg)} values for {n} faces")
+    if not all(math.isfinite(v) and 0 < v < 360 for v in deg):
+        raise UsageError(f"--nominal {text!r}: each angle must be in (0, 360) degrees")
+    if abs(sum(deg) - 360) > 1e-6:
+        raise UsageError(f"--nominal {text!r}: the angles of a full turn must sum to 360, "
+                         f"not {sum(deg):g}")
+    return deg
+
+
+def _distinct_files(a: str, b: str, flag_a: str, flag_b: str) -> None:
+    """Two inputs that must be different recordings: not the same file, not a copy."""
+    from axisbase.provenance import sha256_file
+
+    pa, pb = Path(a), Path(b)
+    if pa.resolve() == pb.resolve():
+        raise UsageError(f"{flag_b} {b}: is the same file as {flag_a}")
+    try:
+        same = (pa.stat().st_size == pb.stat().st_size and sha256_file(pa) == sha256_file(pb))
+    except OSError:
+        return  # the reader names the problem
+    if same:
+        raise UsageError(f"{flag_b} {b}: has the same contents as {flag_a} {a}; the other "
+                         "direction is a different recording")
+
+
+def cmd_gonio(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from align.contract import document
+    from align.gonio import measure_log, run_json
+    from align.warnings import gonio_warnings
+    from axisbase.output import write_json
+    from axisbase.table import parse_column_map
+    from goniometry import kept_table
+
+    faces = _faces(args.faces)
+    nominal_deg = _nominal(args.nominal, len(faces))
+    nominal = None if nominal_deg is None else np.deg2rad(nominal_deg)
+    inputs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
+    if args.reverse_log:
+        _distinct_files(args.log, args.reverse_log, "log", "--reverse-log")
+    cols = parse_column_map(args.columns)
+    plan = _plan(args, inputs)
+    out = plan.add("--json", args.json, stdout_ok=True)
+    plot = plan.add("--plot", args.plot, folder=True)
     d = 1 if args.direction == "ccw" else -1
     try:
         run = measure_log(args.log, len(faces), args.latitude, d, args.alpha,
-                          reverse_log=args.reverse_log, steady_table=args.steady_table)
-    except (LogError, ValueError) as exc:
+                          reverse_log=args.reverse_log, steady_table=args.steady_table,
+                          columns=cols)
+    except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
@@ -289,12 +393,15 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             print("  " + line)
     for note in run.notes:
         print("  " + note)
-    js = run_json(run, faces, nominal)
-    if args.plot:
+    warnings = gonio_warnings(run)
+    _warn(warnings)
+    if plot is not None:
         from align.plots import plot_gonio
 
-        print(f"plot: {plot_gonio(kept_table(summary)[0], fa, faces, Path(args.plot))}")
-    _write_json(out, js)
+        print(f"plot: {plot_gonio(kept_table(summary)[0], fa, faces, plot)}")
+    if out is not None:
+        body = {"ok": True, "warnings": warnings, **run_json(run, faces, nominal)}
+        _wrote(write_json(out, document("gonio", body, _settings(args), inputs), args.force))
     return 0
 
 
@@ -329,47 +436,52 @@ def _print_result(res, out=None) -> None:
 
 
 def _run_one(folder: str, json_path: str | None, report_path: str | None,
-             cal_path: str | None, alpha: float, quiet: bool) -> dict:
-    """One session end to end (also the worker of a batch); returns a short summary."""
-    from align.errors import InputError
-    from align.session import load_session, platform_calibration, result_json, run_session
-    from align.session.report import write_report
+             cal_path: str | None, alpha: float, quiet: bool, force: bool = False,
+             allow_outside: bool = False, settings: dict | None = None) -> dict:
+    """One session end to end (also the worker of a batch); returns a short summary.
+
+    Every output is checked before anything is computed and written atomically; a stage that
+    failed still gives the result (``ok: false``) and exit status 2."""
+    from align.session import load_session, run_session, session_outputs
+    from axisbase.output import OutputPlan
 
     try:
-        s = load_session(folder)
-        inputs = [str(p) for p in s.inputs]
-        outs = {k: _new_file(v, False, inputs) for k, v in
-                (("json", json_path), ("report", report_path), ("cal", cal_path))}
-    except (InputError, UsageError) as exc:
+        s = load_session(folder, allow_outside=allow_outside)
+        if cal_path is not None and s.calibration is None:
+            raise UsageError(f"--calibration {cal_path}: the session {s.folder} has no "
+                             "[calibration] section, so there is no platform calibration "
+                             "to write")
+        plan = OutputPlan(s.inputs, force=force)
+        outs = {"json": plan.add("--json", json_path, stdout_ok=True),
+                "report": plan.add("--report", report_path),
+                "cal": plan.add("--calibration", cal_path)}
+    except InputError as exc:
         return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
-    say = (lambda m: None) if quiet else (lambda m: print(f"  [{s.name}] {m}", file=sys.stderr))
+    say = ((lambda m: None) if quiet
+           else (lambda m: log.info("  [%s] %s", s.name, m)))
     res = run_session(s, progress=say, alpha=alpha)
-    js = result_json(res)
-    if outs["json"] is not None:
-        outs["json"].parent.mkdir(parents=True, exist_ok=True)
-        outs["json"].write_text(json.dumps(js, indent=2, default=float))
-    if outs["report"] is not None:
-        write_report(res, outs["report"])
-    pc = platform_calibration(res)
-    if outs["cal"] is not None and pc is not None:
-        outs["cal"].parent.mkdir(parents=True, exist_ok=True)
-        outs["cal"].write_text(json.dumps(pc.to_dict(), indent=2))
+    written, js = session_outputs(res, outs, force, settings or {"alpha": alpha})
     return {"session": s.name, "folder": folder, "ok": res.ok, "bad_input": not res.ok,
             "result": res if not quiet else None, "json": js,
-            "outputs": {k: str(v) for k, v in outs.items() if v is not None}}
+            "warnings": js["warnings"],
+            "outputs": {k: str(v) for k, v in written.items()}}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
     if len(args.sessions) == 1:
         out = _run_one(args.sessions[0], args.json, args.report, args.calibration,
-                       args.alpha, quiet=False)
+                       args.alpha, quiet=False, force=args.force,
+                       allow_outside=args.allow_outside, settings=_settings(args))
         if "error" in out:
             raise UsageError(out["error"])
         print(f"session {out['session']}:")
         _print_result(out["result"])
+        _warn(out["warnings"])
         for k, v in out["outputs"].items():
-            print(f"  wrote {k}: {v}")
+            if v != "-":
+                print(f"  wrote {k}: {v}")
         return 0 if out["ok"] else 2
+    _unique(args.sessions, "sessions")
     return _run_batch(args)
 
 
@@ -378,9 +490,21 @@ def _run_batch(args: argparse.Namespace) -> int:
     import os
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
+    import numpy as np
+
     names = [Path(s).resolve().name for s in args.sessions]
     if len(set(names)) != len(names):
         raise UsageError("two sessions have the same folder name; outputs would collide")
+    for flag, folder in (("--json", args.json), ("--report", args.report),
+                         ("--calibration", args.calibration)):
+        if folder == "-":
+            raise UsageError(f"{flag} -: standard output takes one session, not a batch")
+    from axisbase.output import OutputPlan
+
+    plan = OutputPlan(args.sessions, force=args.force)
+    for flag, folder in (("--json", args.json), ("--report", args.report),
+                         ("--calibration", args.calibration)):
+        plan.add(flag, folder, folder=True)
 
     def path_in(folder: str | None, name: str, ext: str) -> str | None:
         return None if folder is None else str(Path(folder) / f"{name}{ext}")
@@ -390,7 +514,8 @@ def _run_batch(args: argparse.Namespace) -> int:
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         futs = {pool.submit(_run_one, s, path_in(args.json, n, ".json"),
                             path_in(args.report, n, ".html"),
-                            path_in(args.calibration, n, ".cal.json"), args.alpha, True): s
+                            path_in(args.calibration, n, ".cal.json"), args.alpha, True,
+                            args.force, args.allow_outside, _settings(args)): s
                 for s, n in zip(args.sessions, names, strict=True)}
         done = as_completed(futs)
         tty = sys.stderr.isatty()
@@ -400,7 +525,7 @@ def _run_batch(args: argparse.Namespace) -> int:
             done = tqdm(done, total=len(futs), desc="sessions")
         for k, fut in enumerate(done, start=1):
             if not tty:  # a log file gets one line per finished session instead of a bar
-                print(f"  [{k}/{len(futs)}] {Path(futs[fut]).name} finished", file=sys.stderr)
+                log.info("  [%d/%d] %s finished", k, len(futs), Path(futs[fut]).name)
             try:
                 results.append(fut.result())
             except Exception as exc:  # one session's crash must not stop the others
@@ -408,18 +533,19 @@ def _run_batch(args: argparse.Namespace) -> int:
                                 "error": f"internal error: {exc!r}"})
     failed = [r for r in results if not r["ok"]]
     for r in sorted(results, key=lambda r: r["session"]):
-        if r["ok"]:
-            js = r["json"]
+        js = r.get("json")
+        if js is not None and js.get("misalignment_arcsec") is not None:
             E = np.array(js["misalignment_arcsec"])
             U = np.array(js["misalignment_u_arcsec"])
             worst = float(np.max(np.abs(E)))
-            print(f"{r['session']}: OK, |E| max {worst:.1f}″, u max {U.max():.2f}″, chi2/dof "
-                  f"{js['chi2']:.1f}/{js['dof']}"
+            print(f"{r['session']}: {'OK' if r['ok'] else 'FAILED stages'}, |E| max "
+                  f"{worst:.1f}″, u max {U.max():.2f}″, chi2/dof {js['chi2']:.1f}/{js['dof']}"
                   + ("" if not js["unexplained_structure"] else ", NOT consistent")
                   + "".join(f", {k} {v}" for k, v in r["outputs"].items()))
-        else:
-            msg = r.get("error") or "; ".join(e["message"] for e in r["json"]["errors"])
-            print(f"{r['session']}: FAILED: {msg}", file=sys.stderr)
+        if not r["ok"]:
+            msg = r.get("error") or "; ".join(f"{e['stage']}: {e['message']}"
+                                              for e in js["errors"])
+            log.error("%s: FAILED: %s", r["session"], msg)
     print(f"{len(results) - len(failed)} of {len(results)} sessions done"
           + (f", {len(failed)} failed" if failed else ""))
     if any(not r["ok"] and not r.get("bad_input", False) for r in results):
@@ -430,31 +556,22 @@ def _run_batch(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- apply
 
 def cmd_apply(args: argparse.Namespace) -> int:
-    from align.apply import PlatformCalibration
-    from align.calibration import read_readings
-    from align.errors import InputError
-    from align.tilt import roll_pitch
+    from align.apply import PlatformCalibration, apply_to_readings
+    from align.calibration import READINGS, read_readings
+    from axisbase.output import write_atomic
 
-    out = _new_file(args.out, args.force, [args.calibration_file, args.readings])
-    try:
-        pc = PlatformCalibration.load(args.calibration_file)
-        tab = read_readings(args.readings)
-    except InputError as exc:
-        raise UsageError(str(exc)) from None
-    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t = tab["t"] if "t" in tab else np.full(len(u), pc.model.t_ref)
-    temp = tab.get("temp")
-    a = pc.specific_force(u, t, temp)
-    cols, names = [t, *a.T], ["t", "ax_g", "ay_g", "az_g"]
-    if args.tilt:
-        roll, pitch = roll_pitch(a, method=args.method)
-        cols += [np.rad2deg(roll), np.rad2deg(pitch)]
-        names += ["roll_deg", "pitch_deg"]
-    np.savetxt(out, np.column_stack(cols), delimiter=",", header=",".join(names),
-               comments="", fmt="%.10g")
-    print(f"{len(a)} readings -> platform frame; mean a = "
-          + " ".join(f"{v:+.7f}" for v in a.mean(0)) + " g")
-    print(f"wrote {out}")
+    inputs = [args.calibration_file, args.readings]
+    _unique(inputs, "calibration_file/readings")
+    cols, units = _table_options(args, [args.readings], READINGS)
+    pc, cal_units = PlatformCalibration.load_with_units(args.calibration_file)
+    _same_units(units, cal_units, args.calibration_file)
+    plan = _plan(args, inputs)
+    out = plan.add("--out", args.out)
+    tab = read_readings(args.readings, cols, args.rate)
+    res = apply_to_readings(pc, tab, tilt=args.tilt, method=args.method)
+    print(f"{res.samples} readings -> platform frame; mean a = "
+          + " ".join(f"{v:+.7f}" for v in res.mean_g) + " g")
+    _wrote(write_atomic(out, res.csv_text(), args.force))
     return 0
 
 
@@ -463,26 +580,37 @@ def cmd_apply(args: argparse.Namespace) -> int:
 def cmd_synth(args: argparse.Namespace) -> int:
     from synth.session import EFFECTS, SessionSpec, write_session
 
-    def parse(items: Sequence[str]) -> dict[str, float]:
+    def parse(items: Sequence[str], flag: str) -> dict[str, float]:
+        import math
+
         out = {}
         for it in items:
             name, _, val = it.partition("=")
             if name not in EFFECTS:
-                raise UsageError(f"effect {name!r}: unknown; known: " + ", ".join(
+                raise UsageError(f"{flag} {name!r}: unknown effect; known: " + ", ".join(
                     f"{k} [{u or '-'}] ({d})" for k, (u, d) in EFFECTS.items()))
+            if name in out:
+                raise UsageError(f"{flag} {name}: given twice")
             try:
                 out[name] = float(val)
             except ValueError:
-                raise UsageError(f"effect {it!r}: expected NAME=NUMBER") from None
+                raise UsageError(f"{flag} {it!r}: expected NAME=NUMBER") from None
+            if not math.isfinite(out[name]):
+                raise UsageError(f"{flag} {it!r}: not a finite number")
         return out
 
-    declared = parse(args.effect)
-    undeclared = parse(args.undeclared)
+    declared = parse(args.effect, "--effect")
+    undeclared = parse(args.undeclared, "--undeclared")
+    both = set(declared) & set(undeclared)
+    if both:
+        raise UsageError(f"--effect and --undeclared both name {', '.join(sorted(both))}")
     spec = SessionSpec(seed=args.seed, effects={**declared, **undeclared},
                        undeclared=frozenset(undeclared))
     try:
         write_session(args.out, spec)
-    except (FileExistsError, ValueError) as exc:
+    except FileExistsError as exc:
+        raise UsageError(str(exc)) from None
+    except ValueError as exc:  # synth's refusal of an effect it cannot render
         raise UsageError(str(exc)) from None
     print(f"wrote session {args.out} (seed {args.seed}; truth in {Path(args.out) / 'truth.json'})")
     for k, v in {**declared, **undeclared}.items():
@@ -495,37 +623,44 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Synthesise a session with known truth, run it, print the matrix and its error."""
+    import shutil
+    import tempfile
+
+    from align.session import truth_errors
     from synth.session import SessionSpec, write_session
 
     folder = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="align-demo-"))
     session = folder / "session"
+    if args.out and folder.exists() and any(folder.iterdir()):
+        if not args.force:
+            raise UsageError(f"--out {folder}: exists and is not empty; choose a new folder "
+                             "or pass --force (its session/ and outputs are replaced)")
+        for name in ("session",):
+            shutil.rmtree(folder / name, ignore_errors=True)
     roll = 30.0
     print(f"demo: writing a synthetic session to {session} (seed {args.seed}): 8 mark images "
           "from two cameras (each with a reversal), a ring-laser counter log, a 14-pose "
           f"tumble and 8 platform poses; camera A rolled by {roll:.0f}″, NOT declared")
-    try:
-        truth = write_session(session, SessionSpec(seed=args.seed,
-                                                   effects={"camera_roll_A": roll},
-                                                   undeclared=frozenset({"camera_roll_A"})))
-    except FileExistsError as exc:
-        raise UsageError(str(exc)) from None
+    truth = write_session(session, SessionSpec(seed=args.seed,
+                                               effects={"camera_roll_A": roll},
+                                               undeclared=frozenset({"camera_roll_A"})))
     report = folder / "report.html"
     out = _run_one(str(session), str(folder / "result.json"), str(report),
-                   str(folder / "platform_calibration.json"), 1e-3, quiet=False)
+                   str(folder / "platform_calibration.json"), 1e-3, quiet=False,
+                   force=args.force, settings=_settings(args))
     if "error" in out:
         raise UsageError(out["error"])
     res = out["result"]
     print(f"\nsession {out['session']}:")
     _print_result(res)
+    _warn(out["warnings"])
     if res.fusion is not None:
-        err = (res.fusion.E - np.array(truth["misalignment_rad"])) / ARCSEC
-        z = err / np.where(res.fusion.E_u > 0, res.fusion.E_u / ARCSEC, 1)
+        err, z_rms = truth_errors(res.fusion, truth)
         print("  error against truth [″]:")
         for i in range(3):
             print("    " + "xyz"[i] + ": " + "  ".join(
-                "0".rjust(8) if i == j else f"{err[i, j]:+8.3f}" for j in range(3)))
-        off = [z[i, j] for i in range(3) for j in range(3) if i != j]
-        print(f"  normalised errors (error / u): RMS {np.sqrt(np.mean(np.square(off))):.2f}")
+                "0".rjust(8) if i == j else f"{err[i, j] / ARCSEC:+8.3f}" for j in range(3)))
+        print(f"  normalised errors (error / u): RMS {z_rms:.2f}")
     print(f"\nreport: {report}")
     for k, v in out["outputs"].items():
         print(f"{k}: {v}")
@@ -535,104 +670,162 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- main
 
 def _progress(items: Sequence[str], desc: str):
-    if len(items) < 4 or not sys.stderr.isatty():
+    if len(items) < 4 or not sys.stderr.isatty() or log.getEffectiveLevel() > logging.INFO:
         return items
     from tqdm import tqdm
 
     return tqdm(items, desc=desc)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="align", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="cmd", required=True)
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line naming the flag (not the whole usage block)."""
 
-    m = sub.add_parser("marks", help="measure scribe marks in images")
-    m.add_argument("images", nargs="+")
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
+_FMT = argparse.ArgumentDefaultsHelpFormatter
+
+
+def _common() -> argparse.ArgumentParser:
+    c = argparse.ArgumentParser(add_help=False)
+    g = c.add_mutually_exclusive_group()
+    g.add_argument("-q", "--quiet", action="store_true",
+                   help="only warnings and errors on stderr (no progress)")
+    g.add_argument("-v", "--verbose", action="store_true", help="debugging messages on stderr")
+    return c
+
+
+def _writes() -> argparse.ArgumentParser:
+    w = argparse.ArgumentParser(add_help=False)
+    w.add_argument("--force", action="store_true",
+                   help="replace output files that exist (inputs are never replaced)")
+    return w
+
+
+def _tables(rate: bool = True, units: bool = True,
+            example: str = "ux=ax,uy=ay,uz=az") -> argparse.ArgumentParser:
+    t = argparse.ArgumentParser(add_help=False)
+    t.add_argument("--columns", metavar="NAME=HEADER,...",
+                   help=f"header names for the format's columns, e.g. {example} "
+                   "(case, spaces and [unit] suffixes are ignored anyway)")
+    if units:
+        t.add_argument("--units", choices=UNITS,
+                       help="the readings' unit (scale factors are then per g in it); "
+                       "default: the header's [unit], else V")
+    if rate:
+        t.add_argument("--rate", type=POSITIVE, metavar="HZ",
+                       help="sample rate for a file without a time column (row k at k/HZ s)")
+    return t
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="align", description=__doc__.splitlines()[0], formatter_class=_FMT)
+    p.add_argument("--version", action="version", version=f"axis-align {__version__}")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND", parser_class=_Parser)
+    common, writes = _common(), _writes()
+
+    def add(name: str, help: str, *parents: argparse.ArgumentParser) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=help, description=help, formatter_class=_FMT,
+                              parents=[common, *parents])
+
+    m = add("marks", "measure scribe marks in images", writes)
+    m.add_argument("images", nargs="+", help="image files (PNG, TIFF, JPEG; 8 or 16 bit)")
     m.add_argument("--camera", help="camera model JSON written by 'align camera'")
-    m.add_argument("--json", help="write results to this new JSON file")
+    m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
-    m.add_argument("--alpha", type=float, default=1e-3, help="significance of the loop's tests")
-    m.add_argument("--max-marks", type=int, default=8)
+    m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
+    m.add_argument("--max-marks", type=_number(1, 1000, integer=True), default=8,
+                   help="most marks reported per image")
     m.add_argument("--one", action="store_true",
                    help="each image holds one mark: two competing marks are an error")
-    m.add_argument("--force", action="store_true", help="allow overwriting the --json file")
     m.set_defaults(func=cmd_marks)
 
-    c = sub.add_parser("camera", help="calibrate a camera from chessboard photographs")
-    c.add_argument("images", nargs="+")
-    c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
-    c.add_argument("--square", type=float, default=1.0, help="square size (any unit)")
-    c.add_argument("--json", help="write the camera model to this new JSON file")
-    c.add_argument("--force", action="store_true")
+    c = add("camera", "calibrate a camera from chessboard photographs", writes)
+    c.add_argument("images", nargs="+", help="chessboard photographs")
+    c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS")
+    c.add_argument("--square", type=POSITIVE, default=1.0, help="square size (any unit)")
+    c.add_argument("--json", help="write the camera model to this new JSON file ('-': stdout)")
     c.set_defaults(func=cmd_camera)
 
-    k = sub.add_parser("calibrate", help="ellipsoid calibration of the triad from static poses")
+    k = add("calibrate", "ellipsoid calibration of the triad from static poses", writes,
+            _tables())
     k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz")
     k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
-    k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file")
+    k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
+                   "('-': stdout)")
     k.add_argument("--plot", help="folder for the dg-per-pose / residual figure")
-    k.add_argument("--scale-sign", default="+", help="signs of k: + (default), - or e.g. -,-,-")
-    k.add_argument("--alpha", type=float, default=1e-3)
-    k.add_argument("--window", type=float, default=1.0, help="static detection window [s]")
-    k.add_argument("--threshold", type=float, default=3.0,
+    k.add_argument("--scale-sign", default="+", help="signs of k: +, - or e.g. -,-,-")
+    k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
+    k.add_argument("--window", type=POSITIVE, default=1.0, help="static detection window [s]")
+    k.add_argument("--threshold", type=_number(1, None, lo_open=True), default=3.0,
                    help="static if moving std < this x noise floor")
-    k.add_argument("--min-static", type=float, default=2.0, help="shortest static interval [s]")
-    k.add_argument("--margin", type=float, default=0.5, help="cut from each end [s]")
-    k.add_argument("--force", action="store_true")
+    k.add_argument("--min-static", type=POSITIVE, default=2.0,
+                   help="shortest static interval [s]")
+    k.add_argument("--margin", type=_number(0), default=0.5, help="cut from each end [s]")
     k.set_defaults(func=cmd_calibrate)
 
-    tl = sub.add_parser("tilt", help="roll and pitch from readings through a calibration")
+    tl = add("tilt", "roll and pitch from readings through a calibration", writes, _tables())
     tl.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     tl.add_argument("--calibration", required=True, help="JSON written by 'align calibrate'")
-    tl.add_argument("--method", choices=["exact", "paper"], default="exact")
-    tl.add_argument("--mu", type=float, default=0.001, help="the paper's regulariser")
-    tl.add_argument("--json")
+    tl.add_argument("--method", choices=["exact", "paper"], default="exact",
+                    help="exact atan2 roll, or the tilt paper's regularised one")
+    tl.add_argument("--mu", type=_number(0, 1, lo_open=True), default=0.001,
+                    help="the paper's regulariser (--method paper)")
+    tl.add_argument("--json", help="summary JSON ('-': stdout)")
     tl.add_argument("--out", help="per-reading CSV t,roll_deg,pitch_deg (a new file)")
-    tl.add_argument("--force", action="store_true")
     tl.set_defaults(func=cmd_tilt)
 
-    g = sub.add_parser("gonio", help="face angles from a ring-laser counter log")
+    g = add("gonio", "face angles from a ring-laser counter log", writes,
+            _tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"))
     g.add_argument("log", help="CSV count,counter,ref[,t]")
     g.add_argument("--faces", required=True, help="face names in passing order, e.g. ref,z,y,x")
-    g.add_argument("--nominal", help="nominal angles [deg], e.g. 90,90,90,90")
-    g.add_argument("--latitude", type=float, help="site latitude [deg] (Earth-rate correction)")
-    g.add_argument("--direction", choices=["ccw", "cw"], default="ccw")
+    g.add_argument("--nominal", help="nominal angles [deg] summing to 360, e.g. 90,90,90,90")
+    g.add_argument("--latitude", type=_number(-90, 90), metavar="DEG",
+                   help="site latitude [deg] (Earth-rate correction)")
+    g.add_argument("--direction", choices=["ccw", "cw"], default="ccw",
+                   help="table rotation seen from above")
     g.add_argument("--reverse-log", help="a log of the same faces with the table turning the "
                    "other way: the angles are then the mean of both directions")
     g.add_argument("--steady-table", action="store_true",
                    help="the table turns at constant speed: angles from the pulse times "
                    "(below the count quantisation) when the counts confirm it")
-    g.add_argument("--alpha", type=float, default=1e-3)
+    g.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
-    g.add_argument("--json")
-    g.add_argument("--force", action="store_true")
+    g.add_argument("--json", help="results JSON ('-': stdout)")
     g.set_defaults(func=cmd_gonio)
 
-    r = sub.add_parser("run", help="run whole sessions: every stage, the loops, the fusion")
+    r = add("run", "run whole sessions: every stage, the loops, the fusion", writes)
     r.add_argument("sessions", nargs="+", help="session folder(s) holding session.toml")
-    r.add_argument("--json", help="result JSON (a folder when several sessions)")
+    r.add_argument("--json", help="result JSON (a folder when several sessions; '-': stdout)")
     r.add_argument("--report", help="HTML report (a folder when several sessions)")
     r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
                    "(a folder when several sessions)")
-    r.add_argument("--jobs", type=int, help="parallel sessions (default: all cores)")
-    r.add_argument("--alpha", type=float, default=1e-3,
-                   help="significance of the residual loops' tests (default 1e-3)")
+    r.add_argument("--jobs", type=_number(1, 1024, integer=True),
+                   help="parallel sessions (default: all cores)")
+    r.add_argument("--alpha", type=ALPHA, default=1e-3,
+                   help="significance of the residual loops' tests")
+    r.add_argument("--allow-outside", action="store_true",
+                   help="let session.toml name files outside the session folder")
     r.set_defaults(func=cmd_run)
 
-    ap = sub.add_parser("apply", help="readings -> specific force in the platform frame")
+    ap = add("apply", "readings -> specific force in the platform frame", writes, _tables())
     ap.add_argument("calibration_file", help="JSON from 'align run --calibration' or --json")
     ap.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     ap.add_argument("--out", required=True, help="new CSV t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]")
     ap.add_argument("--tilt", action="store_true", help="add roll and pitch columns")
-    ap.add_argument("--method", choices=["exact", "paper"], default="exact")
-    ap.add_argument("--force", action="store_true")
+    ap.add_argument("--method", choices=["exact", "paper"], default="exact",
+                    help="roll formula for --tilt")
     ap.set_defaults(func=cmd_apply)
 
-    sy = sub.add_parser("synth", help="write synthetic data with known truth")
-    sy_sub = sy.add_subparsers(dest="what", required=True)
-    ss = sy_sub.add_parser("session", help="a complete synthetic session folder")
-    ss.add_argument("out", help="new folder")
-    ss.add_argument("--seed", type=int, default=0)
+    sy = sub.add_parser("synth", help="write synthetic data with known truth",
+                        formatter_class=_FMT)
+    sy_sub = sy.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    ss = sy_sub.add_parser("session", help="a complete synthetic session folder",
+                           formatter_class=_FMT, parents=[common])
+    ss.add_argument("out", help="new folder (must not exist or be empty)")
+    ss.add_argument("--seed", type=_number(0, 2**63 - 1, integer=True), default=0,
+                    help="random seed (the same seed gives the same session)")
     ss.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                     help="an effect put into the data and declared in session.toml (e.g. "
                     "camera_roll_A=30 [arcsec]; an unknown name lists them all)")
@@ -640,30 +833,132 @@ def build_parser() -> argparse.ArgumentParser:
                     help="an effect put into the data but not declared")
     ss.set_defaults(func=cmd_synth)
 
-    d = sub.add_parser("demo", help="synthesise a session with known truth and run it")
+    d = add("demo", "synthesise a session with known truth and run it", writes)
     d.add_argument("--out", help="folder for the session and outputs (default: a new temp folder)")
-    d.add_argument("--seed", type=int, default=1)
+    d.add_argument("--seed", type=_number(0, 2**63 - 1, integer=True), default=1,
+                   help="random seed")
     d.set_defaults(func=cmd_demo)
     return p
 
 
+# ----------------------------------------------------------------------------- console
+
+_ASCII = {"″": '"', "′": "'", "±": "+/-", "µ": "u", "°": " deg", "²": "^2", "³": "^3",
+          "χ": "chi", "α": "alpha", "β": "beta", "σ": "sigma", "Δ": "d", "×": "x", "→": "->",
+          "≤": "<=", "≥": ">=", "≈": "~", "−": "-", "—": "-", "–": "-", "√": "sqrt", "·": "*"}
+
+
+def _ascii_fallback(exc: UnicodeError) -> tuple[str, int]:
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    bad = exc.object[exc.start:exc.end]
+    return "".join(_ASCII.get(ch, "?") for ch in bad), exc.end
+
+
+codecs.register_error("align-ascii", _ascii_fallback)
+
+
+class _ClosedPipeSafe:
+    """A text stream that stops writing, quietly, once its reader has gone (``| head -1``):
+    the run goes on and its files are still written."""
+
+    def __init__(self, stream):
+        self._s = stream
+        self.closed_pipe = False
+
+    def write(self, text: str) -> int:
+        if not self.closed_pipe:
+            try:
+                return self._s.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.closed_pipe:
+            try:
+                self._s.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        import os
+
+        self.closed_pipe = True
+        try:  # no further flush at exit may raise either
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._s.fileno())
+        except (OSError, ValueError):
+            pass
+
+    def __getattr__(self, name: str):
+        return getattr(self._s, name)
+
+
+def _console(stream):
+    """``stream`` with an ASCII fallback for ″ ± µ ° when its encoding cannot show them
+    (LANG=C, PYTHONIOENCODING=ascii, a Windows code page) and a quiet end on a closed pipe."""
+    if isinstance(stream, _ClosedPipeSafe):
+        return stream
+    try:
+        "″±µ°".encode(stream.encoding or "ascii")
+    except (UnicodeEncodeError, LookupError):
+        try:
+            stream.reconfigure(errors="align-ascii")
+        except (AttributeError, ValueError):
+            pass
+    except AttributeError:
+        pass
+    return _ClosedPipeSafe(stream)
+
+
+def _logging(args: argparse.Namespace) -> None:
+    level = (logging.WARNING if getattr(args, "quiet", False) else
+             logging.DEBUG if getattr(args, "verbose", False) else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log.handlers[:] = [handler]
+    log.setLevel(level)
+    log.propagate = False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    from axisbase.output import set_real_stdout
+    from axisbase.provenance import set_command
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    sys.stdout, sys.stderr = _console(sys.stdout), _console(sys.stderr)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0) and 2
+    _logging(args)
+    set_command(["align", *argv])
+    real_stdout = sys.stdout
+    set_real_stdout(real_stdout)
+    if getattr(args, "json", None) == "-":
+        sys.stdout = sys.stderr  # the JSON owns standard output; messages go to stderr
     try:
         return int(args.func(args))
-    except UsageError as exc:
+    except InputError as exc:
         print(f"align {args.cmd}: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        return 1
+        print(f"align {args.cmd}: interrupted", file=sys.stderr)
+        return 130
     except Exception:
+        import traceback
+
         print(f"align {args.cmd}: internal error (please report):", file=sys.stderr)
         traceback.print_exc()
         return 1
+    finally:
+        sys.stdout = real_stdout
+        try:
+            sys.stdout.flush()
+        except (OSError, ValueError):
+            pass
 
 
 if __name__ == "__main__":

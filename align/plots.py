@@ -28,10 +28,14 @@ def png_bytes(fig) -> bytes:
 
 
 def _write(fig, folder: Path, stem: str) -> Path:
+    """A new PNG (temporary name, then an exclusive rename: nothing is overwritten)."""
+    from axisbase.output import write_atomic
+
     out = _new_png(Path(folder), stem)
-    fig.savefig(out, dpi=110)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
     _plt().close(fig)
-    return out
+    return write_atomic(out, buf.getvalue())
 
 
 def _new_png(folder: Path, stem: str) -> Path:

@@ -150,6 +150,7 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
     raw = data.encode("utf-8") if isinstance(data, str) else data
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
     try:
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 is for secrets, not results
         with os.fdopen(fd, "wb") as f:
             f.write(raw)
             f.flush()
@@ -174,6 +175,12 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
     return p
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def write_json(path: str | Path, data: Any, force: bool = False) -> Path:
     """Strict JSON (:func:`dumps`) written by :func:`write_atomic`."""
     return write_atomic(path, dumps(data), force)
@@ -189,3 +196,16 @@ def set_real_stdout(stream) -> None:
 
 def _real_stdout():
     return _STDOUT_STREAM[0] if _STDOUT_STREAM else sys.stdout
+
+
+def csv_text(names: Iterable[str], columns: Iterable, fmt: str = "%.10g") -> str:
+    """A CSV table (header line + rows) of equal-length numeric columns, for
+    :func:`write_atomic`."""
+    import io
+
+    import numpy as np
+
+    data = np.column_stack([np.asarray(c, float) for c in columns])
+    buf = io.StringIO()
+    np.savetxt(buf, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+    return buf.getvalue()

@@ -8,8 +8,15 @@ Public API::
 """
 
 from align.session.config import Session, load_session
-from align.session.output import platform_calibration, result_json
+from align.session.output import (
+    platform_calibration,
+    result_json,
+    session_document,
+    session_outputs,
+    truth_errors,
+)
 from align.session.run import SessionResult, StageError, observation_blocks, run_session
 
 __all__ = ["Session", "SessionResult", "StageError", "load_session", "observation_blocks",
-           "platform_calibration", "result_json", "run_session"]
+           "platform_calibration", "result_json", "run_session", "session_document",
+           "session_outputs", "truth_errors"]

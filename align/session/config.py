@@ -7,6 +7,7 @@ session folder. The format is documented with a complete example in README.md.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from align.errors import InputError
+from axisbase.table import OUTPUT_UNITS, parse_column_map
+from axisbase.units import ARCSEC
 
-ARCSEC = np.pi / 180 / 3600
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
 TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
@@ -67,6 +69,17 @@ class Goniometer:
     reference_offset_rad: float = 0.0
     reverse_log: Path | None = None
     steady_table: bool = False
+    columns: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TableKeys:
+    """How a table file is read (keys ``columns``, ``units``, ``rate_hz``; the CLI's
+    ``--columns``, ``--units``, ``--rate``)."""
+
+    columns: dict[str, str] = field(default_factory=dict)
+    units: str | None = None
+    rate_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -74,6 +87,7 @@ class CalibrationInput:
     static: Path
     scale_sign: tuple[float, float, float]
     check: Path | None = None
+    table: TableKeys = field(default_factory=TableKeys)
 
 
 @dataclass(frozen=True)
@@ -81,6 +95,7 @@ class PlatformInput:
     static: Path
     poses: dict[str, tuple[np.ndarray, float]]  # label -> (up vector, table angle [rad])
     table_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    table: TableKeys = field(default_factory=TableKeys)
 
 
 @dataclass(frozen=True)
@@ -112,29 +127,81 @@ class Session:
         return out
 
 
-def _file(folder: Path, value: object, where: str) -> Path:
-    if not isinstance(value, str) or not value:
-        raise InputError(f"{where}: expected a file name")
-    p = folder / value
-    if not p.is_file():
-        raise InputError(f"{where} = {value!r}: no such file ({p})")
-    return p
+class _Files:
+    """Every path session.toml names: it must exist and — symlinks followed — lie inside the
+    session folder unless ``allow_outside``; no file may be named twice."""
+
+    def __init__(self, folder: Path, allow_outside: bool):
+        self.folder = folder
+        self.root = folder.resolve()
+        self.allow_outside = allow_outside
+        self.seen: dict[Path, str] = {}
+
+    def __call__(self, value: object, where: str, unique: bool = True) -> Path:
+        if not isinstance(value, str) or not value.strip():
+            raise InputError(f"{where}: expected a file name")
+        p = self.folder / value
+        real = p.resolve()
+        if not self.allow_outside and not real.is_relative_to(self.root):
+            raise InputError(f"{where} = {value!r}: outside the session folder (a session "
+                             "names only its own files; 'align run --allow-outside' lifts "
+                             "this)")
+        if not p.is_file():
+            raise InputError(f"{where} = {value!r}: no such file" if not p.exists() else
+                             f"{where} = {value!r}: not a file")
+        if not unique:
+            return p
+        if real in self.seen:
+            raise InputError(f"{where} = {value!r}: the same file as {self.seen[real]}")
+        self.seen[real] = where.split(": ", 1)[-1]
+        return p
 
 
-def _number(value: object, where: str) -> float:
+def _number(value: object, where: str, lo: float | None = None, hi: float | None = None,
+            open_lo: bool = False) -> float:
+    """A finite number in [lo, hi] (lo excluded with ``open_lo``)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(f"{where} = {value!r}: expected a number")
-    return float(value)
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(f"{where} = {value!r}: not a finite number")
+    if (lo is not None and (v <= lo if open_lo else v < lo)) or (hi is not None and v > hi):
+        raise InputError(f"{where} = {value!r}: outside {'(' if open_lo else '['}"
+                         f"{'-inf' if lo is None else f'{lo:g}'}, "
+                         f"{'inf' if hi is None else f'{hi:g}'}]")
+    return v
+
+
+def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> TableKeys:
+    cols = t.get("columns")
+    if cols is not None and not isinstance(cols, str | dict):
+        raise InputError(f"{where} columns: expected \"ux=ax,uy=ay,uz=az\" or a table")
+    if isinstance(cols, dict):
+        cols = ",".join(f"{k}={v}" for k, v in cols.items())
+    mapping = parse_column_map(cols, f"{where} columns")
+    u = t.get("units")
+    if units and u is not None and u not in OUTPUT_UNITS:
+        raise InputError(f"{where} units = {u!r}: one of {', '.join(OUTPUT_UNITS)}")
+    r = (_number(t["rate_hz"], f"{where} rate_hz", 0, 1e7, open_lo=True)
+         if rate and "rate_hz" in t else None)
+    return TableKeys(mapping, u, r)
+
+
+# Physical ranges of the angles a session may declare: a known roll, offset or tilt is a
+# small correction; a value beyond these is a typing error (1e308), not a setting.
+MAX_ROLL_ARCSEC = 36000.0       # 10°
+MAX_OFFSET_ARCSEC = 36000.0     # 10°
+MAX_TILT_ARCSEC = 3600.0        # 1°
 
 
 KEYS = {
-    "calibration": {"static", "scale_sign", "check"},
+    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz"},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
-                   "reverse_log", "steady_table"},
+                   "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec"},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal"},
-    "platform": {"static", "table_tilt_arcsec", "poses"},
+    "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
 }
 
 
@@ -156,8 +223,11 @@ def _table(d: dict, key: str, where: str) -> dict:
     return v
 
 
-def load_session(folder: str | Path) -> Session:
-    """Read and check ``folder/session.toml`` (``InputError`` names the key at fault)."""
+def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
+    """Read and check ``folder/session.toml`` (``InputError`` names the key at fault).
+
+    Every file it names must lie inside the session folder (symlinks followed) unless
+    ``allow_outside``; no file may be named twice."""
     folder = Path(folder)
     path = folder / "session.toml" if folder.is_dir() else folder
     if folder.is_file():
@@ -166,18 +236,20 @@ def load_session(folder: str | Path) -> Session:
     if not path.is_file():
         raise InputError(f"{src}: no such file (a session is a folder with a session.toml)")
     try:
-        d = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        # utf-8-sig: a byte-order mark (Windows editors) is not part of the TOML.
+        d = tomllib.loads(path.read_text(encoding="utf-8-sig"))
+    except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{src}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{src}: not UTF-8 text (TOML is UTF-8)") from None
+    _file = _Files(folder, allow_outside)
     unknown = set(d) - TOP_KEYS
     if unknown:
         raise InputError(f"{src}: unknown key(s) {', '.join(sorted(unknown))}; known: "
                          f"{', '.join(sorted(TOP_KEYS))}")
     lat = d.get("latitude_deg")
     if lat is not None:
-        lat = _number(lat, f"{src}: latitude_deg")
-        if not -90 <= lat <= 90:
-            raise InputError(f"{src}: latitude_deg = {lat}: outside [-90, 90]")
+        lat = _number(lat, f"{src}: latitude_deg", -90, 90)
 
     cal = None
     if "calibration" in d:
@@ -189,9 +261,10 @@ def load_session(folder: str | Path) -> Session:
             raise InputError(f"{src}: [calibration] scale_sign = {sign!r}: use +, - or "
                              "three of them, e.g. \"-,-,-\"")
         cal = CalibrationInput(
-            _file(folder, c.get("static"), f"{src}: [calibration] static"),
+            _file(c.get("static"), f"{src}: [calibration] static"),
             tuple(-1.0 if p == "-" else 1.0 for p in parts),  # type: ignore[arg-type]
-            _file(folder, c["check"], f"{src}: [calibration] check") if "check" in c else None)
+            _file(c["check"], f"{src}: [calibration] check") if "check" in c else None,
+            _table_keys(c, f"{src}: [calibration]"))
 
     gon = None
     if "goniometer" in d:
@@ -203,6 +276,8 @@ def load_session(folder: str | Path) -> Session:
                 isinstance(f, str) for f in faces):
             raise InputError(f"{w} faces: expected a list of face names in passing order, the "
                              "first being the reference face, e.g. [\"ref\", \"y\", \"x\", \"z\"]")
+        if any(not f.strip() for f in faces):
+            raise InputError(f"{w} faces = {faces}: an empty face name")
         if len(set(faces)) != len(faces):
             raise InputError(f"{w} faces = {faces}: a face is named twice")
         if faces[0] in HOUSINGS:
@@ -211,7 +286,8 @@ def load_session(folder: str | Path) -> Session:
         nom = g.get("nominal_deg", [360.0 / len(faces)] * len(faces))
         if not isinstance(nom, list) or len(nom) != len(faces):
             raise InputError(f"{w} nominal_deg: expected {len(faces)} angles, one per face")
-        nom_r = np.deg2rad([_number(v, f"{w} nominal_deg") for v in nom])
+        nom_r = np.deg2rad([_number(v, f"{w} nominal_deg", 0, 360, open_lo=True)
+                            for v in nom])
         if abs(np.rad2deg(nom_r.sum()) - 360) > 1e-6:
             raise InputError(f"{w} nominal_deg = {nom}: the angles of a full turn must sum to "
                              "360")
@@ -226,19 +302,30 @@ def load_session(folder: str | Path) -> Session:
                 raise InputError(f"{w} nominal_deg = {nom}: faces x and y would be "
                                  f"{np.rad2deg(gap):.3f}° apart (mod 180°); the axes are "
                                  "perpendicular — contradictory nominal orientation")
-        gon = Goniometer(_file(folder, g.get("log"), f"{w} log"), tuple(faces), nom_r, dsign,
+        steady = g.get("steady_table", False)
+        if not isinstance(steady, bool):
+            raise InputError(f"{w} steady_table = {steady!r}: true or false")
+        log_path = _file(g.get("log"), f"{w} log")
+        rev_path = _file(g["reverse_log"], f"{w} reverse_log") if "reverse_log" in g else None
+        if rev_path is not None and rev_path.read_bytes() == log_path.read_bytes():
+            raise InputError(f"{w} reverse_log = {g['reverse_log']!r}: the same contents as "
+                             "log; the other direction is a different recording")
+        gon = Goniometer(log_path, tuple(faces), nom_r, dsign,
                          _number(g.get("reference_offset_arcsec", 0.0),
-                                 f"{w} reference_offset_arcsec") * ARCSEC,
-                         _file(folder, g["reverse_log"], f"{w} reverse_log")
-                         if "reverse_log" in g else None, bool(g.get("steady_table", False)))
+                                 f"{w} reference_offset_arcsec", -MAX_OFFSET_ARCSEC,
+                                 MAX_OFFSET_ARCSEC) * ARCSEC,
+                         rev_path, steady,
+                         _table_keys(g, w, rate=False, units=False).columns)
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():
         w = f"{src}: [cameras.{name}]"
         _known(c, "cameras", w)
-        model = _file(folder, c["model"], f"{w} model") if "model" in c else None
+        # Two cameras may share a model file (one calibration of a camera type).
+        model = _file(c["model"], f"{w} model", unique=False) if "model" in c else None
         cameras[name] = Camera(name, model,
-                               _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec") * ARCSEC)
+                               _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
+                                       -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC)
 
     views = {}
     for name, v in _table(d, "views", src + ": ").items():
@@ -278,7 +365,7 @@ def load_session(folder: str | Path) -> Session:
                 f"{w}: housing {housing} is nominally along platform {axis}, but view {view} "
                 f"has {nominal} = {'XYZ'[int(np.argmax(np.abs(along)))]} — contradictory "
                 "nominal orientation")
-        imgs.append(ImageEntry(_file(folder, im.get("file"), f"{w} file"), housing, view,
+        imgs.append(ImageEntry(_file(im.get("file"), f"{w} file"), housing, view,
                                nominal, w))
 
     plat = None
@@ -292,19 +379,24 @@ def load_session(folder: str | Path) -> Session:
                 raise InputError(f"{w}.poses {label}: expected {{ up = \"+Z\", table_deg = 0 }}")
             poses[str(label)] = (signed_axis(spec["up"], f"{w}.poses {label} up"),
                                  np.deg2rad(_number(spec.get("table_deg", 0.0),
-                                                    f"{w}.poses {label} table_deg")))
+                                                    f"{w}.poses {label} table_deg", -360, 360)))
         if not poses:
             raise InputError(f"{w}: no [platform.poses]: each pose label in the file needs its "
                              "attitude (up = \"+Z\", table_deg = ...)")
         tilt = p.get("table_tilt_arcsec", [0.0, 0.0])
         if not isinstance(tilt, list) or len(tilt) != 2:
             raise InputError(f"{w} table_tilt_arcsec: expected [tx, ty]")
-        plat = PlatformInput(_file(folder, p.get("static"), f"{w} static"), poses,
-                             np.array([_number(t, f"{w} table_tilt_arcsec") for t in tilt])
-                             * ARCSEC)
+        plat = PlatformInput(_file(p.get("static"), f"{w} static"), poses,
+                             np.array([_number(t, f"{w} table_tilt_arcsec", -MAX_TILT_ARCSEC,
+                                               MAX_TILT_ARCSEC) for t in tilt]) * ARCSEC,
+                             _table_keys(p, w))
         if cal is None:
             raise InputError(f"{w}: platform static readings need the triad's calibration "
                              "([calibration] static = ...) for scale factors and biases")
+        cu, pu = cal.table.units or "V", plat.table.units or "V"
+        if cu != pu:
+            raise InputError(f"{w} units = {pu!r}: the calibration's readings are in {cu!r}; "
+                             "one triad, one unit")
 
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import base64
-import datetime as _dt
 import html
 from pathlib import Path
 
@@ -11,8 +10,8 @@ import numpy as np
 
 from align.loop import LoopReport
 from align.session.run import SessionResult
+from axisbase.units import ARCSEC
 
-ARCSEC = np.pi / 180 / 3600
 CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.6em 0}td,th{border:1px solid #bbb;padding:3px 8px;
 text-align:right}th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00;font-weight:bold}
@@ -60,16 +59,38 @@ def _loop(loop: LoopReport | None, scale: float = 1.0, unit: str = "") -> str:
     return out
 
 
-def write_report(res: SessionResult, path: str | Path) -> Path:
-    """Write the report to ``path`` (a new file; the caller checks it does not exist)."""
+def _provenance(doc: dict | None) -> str:
+    if not doc:
+        return ""
+    p = doc["provenance"]
+    rows = [[i["path"], i["sha256"] or "unreadable"] for i in p["inputs"]]
+    return (f"<p>{_e(p['tool'])} {_e(p['version'])}, {_e(doc['format'])} format version "
+            f"{doc['format_version']}, written {_e(p['written_utc'])} (UTC) by "
+            f"<code>{_e(' '.join(p['command_line']))}</code>; settings "
+            f"<code>{_e(p['settings'])}</code>.</p>"
+            "<details><summary>Input files (SHA-256)</summary>"
+            + _table(["file", "SHA-256"], rows, left=2) + "</details>")
+
+
+def write_report(res: SessionResult, path: str | Path, force: bool = False,
+                 doc: dict | None = None) -> Path:
+    """Write the report to ``path`` (atomically; exclusively unless ``force``). ``doc``: the
+    result JSON, whose warnings and provenance head the report."""
     from align.plots import fig_calibration, fig_fusion, fig_gonio, fig_mark
+    from align.warnings import session_warnings
+    from axisbase.output import write_atomic
 
     s = res.session
+    warnings = doc["warnings"] if doc else session_warnings(res)
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>Alignment report "
              f"{_e(s.name)}</title><style>{CSS}</style></head><body>",
-             f"<h1>Alignment report — {_e(s.name)}</h1>",
-             f"<p>Session folder {_e(s.folder)}; written "
-             f"{_dt.datetime.now().isoformat(timespec='seconds')}.</p>"]
+             f"<h1>Alignment report — {_e(s.name)}</h1>"]
+    if warnings:
+        parts.append('<div class="bad"><h2>Warnings</h2><ul>'
+                     + "".join(f"<li>{_e(w)}</li>" for w in warnings) + "</ul></div>")
+    parts.append(f"<p>Session folder {_e(s.folder)}; result "
+                 + ('<span class="ok">ok</span>' if res.ok else
+                    '<span class="bad">NOT ok</span>') + ".</p>" + _provenance(doc))
     if res.errors:
         parts.append("<h2>Stage failures</h2>" + _table(
             ["stage", "message"], [[e.stage, e.message] for e in res.errors], left=2))
@@ -150,7 +171,4 @@ def write_report(res: SessionResult, path: str | Path) -> Path:
             parts.append(f"<h3>{_e(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
                          + _loop(r.loop) + _img(fig_mark(r, image)))
     parts.append("</body></html>")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(parts), encoding="utf-8")
-    return path
+    return write_atomic(path, "\n".join(parts), force)

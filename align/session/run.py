@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from align.calibration import Calibration, Poses, calibrate, r_matrix, read_poses
+from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.errors import InputError
 from align.fusion import (
     Block,
@@ -27,6 +27,7 @@ from align.fusion import (
 from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
 from align.session.config import HOUSINGS, ImageEntry, Session
+from axisbase.table import resolve_units
 from goniometry import LogError
 from imaging import CameraModel, ImageInputError
 
@@ -52,10 +53,18 @@ class SessionResult:
     platform: list[PlatformPose] = field(default_factory=list)
     fusion: FusionResult | None = None
     errors: list[StageError] = field(default_factory=list)
+    units: str = "V"
+
+    @property
+    def fused(self) -> bool:
+        """The fusion ran (a misalignment exists, perhaps from fewer sources than named)."""
+        return self.fusion is not None
 
     @property
     def ok(self) -> bool:
-        return self.fusion is not None
+        """Every stage the session names succeeded and the fusion ran. A result with a
+        failed stage is still written, but is not ok (exit status 2)."""
+        return self.fusion is not None and not self.errors
 
 
 def _try(res: SessionResult, stage: str, fn: Callable[[], object]) -> object | None:
@@ -75,7 +84,12 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         c = s.calibration
 
         def _cal() -> Calibration:
-            res.calibration_poses, _ = read_poses(c.static)
+            tk = c.table
+            res.units = resolve_units(tk.units, [c.static] + ([c.check] if c.check else []),
+                                      STATIC, tk.columns, ("ux", "uy", "uz"),
+                                      flag="[calibration] units")
+            res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
+                                                  rate_hz=tk.rate_hz)
             return calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
         res.calibration = _try(res, "calibration", _cal)
     if s.goniometer is not None:
@@ -83,7 +97,7 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         progress(f"goniometer: {g.log.name}")
         res.gonio = _try(res, "goniometer", lambda: measure_log(
             g.log, len(g.faces), s.latitude_deg, g.direction, alpha, reverse_log=g.reverse_log,
-            steady_table=g.steady_table))
+            steady_table=g.steady_table, columns=g.columns))
     cams: dict[str, CameraModel | None] = {}
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
@@ -114,7 +128,8 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
 
 def _platform_poses(s: Session, cal: Calibration) -> list[PlatformPose]:
     p = s.platform
-    poses, _ = read_poses(p.static, calibration=False)
+    poses, _ = read_poses(p.static, calibration=False, columns=p.table.columns,
+                          rate_hz=p.table.rate_hz)
     missing = [lab for lab in poses.labels if lab not in p.poses]
     if missing:
         raise InputError(f"{p.static}: pose(s) {', '.join(missing)} have no attitude in "

@@ -105,10 +105,12 @@ def test_a_stage_failure_is_reported_and_the_rest_still_fuse(session, tmp_path):
     folder = _copy(session, tmp_path)
     (folder / "z_B.png").write_bytes(b"not a png at all")
     out = tmp_path / "r.json"
-    assert main(["run", str(folder), "--json", str(out)]) == 0
+    # A failed stage: the result is still written, but it is not ok and the exit says so.
+    assert main(["run", str(folder), "--json", str(out)]) == 2
     d = json.loads(out.read_text())
     assert any(e["stage"] == "marks" and "z_B.png" in e["message"] for e in d["errors"])
-    assert d["ok"] and len(d["stages"]["marks"]) == 7
+    assert not d["ok"] and d["fused"] and len(d["stages"]["marks"]) == 7
+    assert any("z_B.png" in w and "FAILED" in w for w in d["warnings"])
 
 
 def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):

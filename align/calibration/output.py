@@ -1,0 +1,39 @@
+"""The document ``align calibrate --json`` writes: the calibration's JSON in its envelope
+(format, version, provenance), with the data's output unit, the static intervals found and
+the check poses."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from align.calibration.model import Calibration, Poses, calibration_json, delta_g
+from align.calibration.static import StaticInterval
+from align.contract import document
+from axisbase.table import OUTPUT_UNITS
+
+
+def with_units(js: dict, units: str) -> dict:
+    """Add the data's output unit to a calibration's JSON (and to its ``model`` block, which
+    ``align tilt``/``apply`` check readings against). The historical key names
+    ``scale_factors_v_per_g``/``k_v_per_g`` are kept; their unit is ``scale_factor_unit``."""
+    js = dict(js, output_unit=units, scale_factor_unit=OUTPUT_UNITS[units])
+    if "model" in js:
+        js["model"] = dict(js["model"], output_unit=units)
+    return js
+
+
+def calibration_document(cal: Calibration, poses: Poses, units: str,
+                         intervals: Sequence[StaticInterval] | None, check: Poses | None,
+                         warnings: Sequence[str], settings: dict,
+                         inputs: Iterable[str | Path]) -> dict:
+    js = with_units(calibration_json(cal, poses), units)
+    if intervals is not None:
+        js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
+                                   "samples": iv.samples, "std": iv.std.tolist()}
+                                  for iv in intervals]
+    if check is not None:
+        js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in
+                       zip(check.labels, delta_g(cal.model, check), strict=True)]
+    body = {"ok": True, "warnings": list(warnings), **js}
+    return document("calibration", body, settings, inputs)

@@ -1,0 +1,76 @@
+"""What a result must warn its reader about, one function per result type.
+
+The same lines go to the terminal (``WARNING: ...`` on stderr), into the JSON (``warnings``)
+and at the top of the HTML report: a reader of any one of them learns that the result is not
+to be taken at face value, and why.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from align.loop import LoopReport
+
+
+def loop_warnings(what: str, loop: LoopReport | None) -> list[str]:
+    """Unexplained structure left by a residual loop."""
+    if loop is None or not loop.unexplained_structure:
+        return []
+    w = loop.structure_after.worst
+    return [f"{what}: unexplained structure remains in the residual ({w.name}, p = "
+            f"{w.p_value:.2g}): the model does not describe the data fully"]
+
+
+def mark_warnings(results: Sequence) -> list[str]:
+    """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
+    out = []
+    for r in results:
+        what = f"{r.image} mark {r.index}"
+        if not r.found:
+            out.append(f"{r.image}: not measured: {r.error}")
+            continue
+        out += loop_warnings(what, r.loop)
+        if r.uncertainty_inflation > 1:
+            out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
+                       "structure no effect explains")
+    return out
+
+
+def calibration_warnings(cal, poses) -> list[str]:
+    """A triad calibration (``Calibration``) and its poses."""
+    out = loop_warnings("calibration", cal.loop)
+    dof = cal.loop.after.dof
+    if dof < 3:
+        out.append(f"calibration: {len(poses.u)} poses leave {dof} degrees of freedom: the fit "
+                   "is (nearly) exact, its residual proves nothing; add poses")
+    if not cal.noise_known:
+        out.append("calibration: noise unknown (per-pose means only): uncertainties from the "
+                   "residual scatter, no chi2 test")
+    return out
+
+
+def gonio_warnings(run) -> list[str]:
+    """A goniometer run (``GonioRun``)."""
+    out = loop_warnings("goniometer", run.loop)
+    ex = run.summary.exclusions.counts
+    if ex:
+        out.append("goniometer: revolutions excluded: "
+                   + ", ".join(f"{n} x {reason}" for reason, n in ex.items()))
+    return out
+
+
+def session_warnings(res) -> list[str]:
+    """A whole session (``SessionResult``): failed stages first, then every stage's own."""
+    out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
+    if res.calibration is not None and res.calibration_poses is not None:
+        out += calibration_warnings(res.calibration, res.calibration_poses)
+    if res.gonio is not None:
+        out += gonio_warnings(res.gonio)
+    out += mark_warnings([r for _, r in res.marks])
+    f = res.fusion
+    if f is not None:
+        out += loop_warnings("fusion", f.loop)
+        if f.inflation > 1:
+            out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
+                       f"uncertainty is inflated x{f.inflation:.2f}")
+    return out
