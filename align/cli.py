@@ -460,7 +460,10 @@ def _run_one(folder: str, json_path: str | None, report_path: str | None,
     say = ((lambda m: None) if quiet
            else (lambda m: log.info("  [%s] %s", s.name, m)))
     res = run_session(s, progress=say, alpha=alpha)
-    written, js = session_outputs(res, outs, force, settings or {"alpha": alpha})
+    try:
+        written, js = session_outputs(res, outs, force, settings or {"alpha": alpha})
+    except InputError as exc:  # an output that appeared while computing: not replaced
+        return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
     return {"session": s.name, "folder": folder, "ok": res.ok, "bad_input": not res.ok,
             "result": res if not quiet else None, "json": js,
             "warnings": js["warnings"],
@@ -923,11 +926,24 @@ def _logging(args: argparse.Namespace) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    given_out, given_err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _console(sys.stdout), _console(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        for s in (sys.stdout, sys.stderr):
+            try:
+                s.flush()
+            except (OSError, ValueError):
+                pass
+        sys.stdout, sys.stderr = given_out, given_err
+
+
+def _main(argv: list[str]) -> int:
     from axisbase.output import set_real_stdout
     from axisbase.provenance import set_command
 
-    argv = list(sys.argv[1:] if argv is None else argv)
-    sys.stdout, sys.stderr = _console(sys.stdout), _console(sys.stderr)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -955,10 +971,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     finally:
         sys.stdout = real_stdout
-        try:
-            sys.stdout.flush()
-        except (OSError, ValueError):
-            pass
 
 
 if __name__ == "__main__":

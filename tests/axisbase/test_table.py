@@ -169,3 +169,29 @@ def test_rate_makes_the_time_column(tmp_path):
     q.write_text("ux,uy,uz,t\n1,2,3,0\n")
     with pytest.raises(InputError, match="has its own time column"):
         read_table(q, SPEC, rate_hz=10.0)
+
+
+def test_quantised_counts_with_chance_repeats_are_not_duplicates(tmp_path):
+    """Raw ADC counts with a noise of about one count repeat row by row by chance; a file
+    that is constant has every row equal. Neither is refused as duplicated; a real
+    duplication (each row written twice, or the file twice) is."""
+    from axisbase.errors import InputError as Err
+
+    rng = np.random.default_rng(5)
+    n = 400
+    counts = np.round(rng.normal([1000, -20, 3], 0.4, (n, 3))).astype(int)
+    assert (counts[1:] == counts[:-1]).all(axis=1).mean() > 0.2  # many chance repeats
+    spec = TableSpec("readings file", tuple(Column(c) for c in ("ux", "uy", "uz")),
+                     distinct_rows=True)
+
+    def save(rows, name):
+        p = tmp_path / name
+        p.write_text("ux,uy,uz\n" + "".join(f"{a},{b},{c}\n" for a, b, c in rows))
+        return p
+
+    assert len(read_table(save(counts, "ok.csv"), spec)) == n
+    assert len(read_table(save(np.ones((50, 3), int), "const.csv"), spec)) == 50
+    with pytest.raises(Err, match="written twice"):
+        read_table(save(np.repeat(counts[:100], 2, axis=0), "pairs.csv"), spec)
+    with pytest.raises(Err, match="repeat rows"):
+        read_table(save(np.concatenate([counts[:100], counts[:100]]), "block.csv"), spec)
