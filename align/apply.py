@@ -124,11 +124,17 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     """The triad model of a calibration file (``align calibrate --json``, any readable format
     version, or a bare model block) and the output unit it was made from (None if unknown)."""
     d = read_json(path, "a calibration")
-    if "model" in d:
+    fmt = d.get("format")
+    if fmt == "axis-align/session" or "platform_calibration" in d:
+        check(d, "session", str(path))  # a session result: its triad model
+        d = d.get("platform_calibration") or {}
+        if not d:
+            raise InputError(f"{path}: a session result without a calibration")
+    elif fmt == "axis-align/platform-calibration":
+        check(d, "platform-calibration", str(path))
+    elif "model" in d:
         check(d, "calibration", str(path))
-        block = d["model"]
-    else:
-        block = d
+    block = d.get("model", d)
     if not isinstance(block, dict):
         raise InputError(f"{path}: 'model' is not a table")
     return model_from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))

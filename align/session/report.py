@@ -126,7 +126,10 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
     if res.calibration is not None:
         c, m = res.calibration, res.calibration.model
         parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
-        parts.append(_table(["axis", "k [V/g]", "β [µrad]", "bias [µg]"], [
+        from axisbase.table import OUTPUT_UNITS
+
+        parts.append(_table(["axis", f"k [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
+                             "bias [µg]"], [
             [ax, f"{m.k[i]:.7f} ± {m.u_of(f'k_{ax}'):.2g}",
              f"{m.beta[i] * 1e6:.2f} ± {m.u_of(f'beta_{ax}') * 1e6:.2g}",
              f"{m.bias[i] * 1e6:.2f} ± {m.u_of(f'bias_{ax}') * 1e6:.2g}"]

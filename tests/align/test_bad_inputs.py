@@ -833,3 +833,32 @@ def test_quiet_and_verbose(base, capsys):
     assert main(["run", str(base / "plain")]) == 0
     assert "[plain] fusion" in capsys.readouterr().err
     assert main(["gonio", log, "--faces", "ref,y,x,z", "-q", "-v"]) == 2
+
+
+def test_two_concurrent_runs_on_the_same_outputs(base, tmp_path):
+    """Both check their outputs before computing; the exclusive rename lets exactly one
+    write, the other says so (exit 2) — no result is silently lost."""
+    out = tmp_path / "r.json"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "align", "run", str(base / "plain"), "--json", str(out), "-q"]
+    procs = [subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for _ in range(2)]
+    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    codes = sorted(c for c, _ in results)
+    assert codes == [0, 2], results
+    loser = next(err for c, err in results if c == 2)
+    assert str(out) in loser and ("exists" in loser or "appeared" in loser)
+    assert _json(out)["ok"]
+    assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+def test_tilt_takes_the_triad_model_of_any_calibration_file(base, tmp_path):
+    outs = []
+    for cal in ("cal.json", "pc.json", "result.json"):
+        out = tmp_path / f"{cal}.tilt.json"
+        assert main(["tilt", str(base / "readings.csv"), "--calibration",
+                     str(base / "outputs" / cal), "--json", str(out), "-q"]) == 0
+        outs.append(_json(out))
+    # The session's model is the same ellipsoid fit of the same tumble as 'align calibrate'.
+    for o in outs[1:]:
+        assert abs(o["roll_deg_mean"] - outs[0]["roll_deg_mean"]) < 1e-9
