@@ -609,10 +609,16 @@ def cmd_synth(args: argparse.Namespace) -> int:
         raise UsageError(f"--effect and --undeclared both name {', '.join(sorted(both))}")
     spec = SessionSpec(seed=args.seed, effects={**declared, **undeclared},
                        undeclared=frozenset(undeclared))
+    out = Path(args.out)
+    if args.force and out.exists() and any(out.iterdir()):
+        import shutil
+
+        _replaceable_synth(out, "out")
+        shutil.rmtree(out)
     try:
-        write_session(args.out, spec)
+        write_session(out, spec)
     except FileExistsError as exc:
-        raise UsageError(str(exc)) from None
+        raise UsageError(f"{exc} (--force replaces a folder 'align synth' wrote)") from None
     except ValueError as exc:  # synth's refusal of an effect it cannot render
         raise UsageError(str(exc)) from None
     print(f"wrote session {args.out} (seed {args.seed}; truth in {Path(args.out) / 'truth.json'})")
@@ -620,6 +626,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(f"  effect {k} = {v} {EFFECTS[k][0]} "
               f"({'undeclared' if k in undeclared else 'declared in session.toml'})")
     return 0
+
+
+def _replaceable_synth(folder: Path, flag: str) -> None:
+    """--force replaces a synthetic session folder only if synth wrote it (it holds the
+    truth.json synth writes): a folder of the user's own is never deleted."""
+    if not (folder / "truth.json").is_file():
+        raise UsageError(f"{flag} {folder}: not a session written by 'align synth' (no "
+                         "truth.json); --force replaces only those — choose a new folder")
 
 
 # ----------------------------------------------------------------------------- demo
@@ -637,9 +651,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.out and folder.exists() and any(folder.iterdir()):
         if not args.force:
             raise UsageError(f"--out {folder}: exists and is not empty; choose a new folder "
-                             "or pass --force (its session/ and outputs are replaced)")
-        for name in ("session",):
-            shutil.rmtree(folder / name, ignore_errors=True)
+                             "or pass --force (a previous demo's session/ and outputs are "
+                             "replaced)")
+        if session.exists():
+            _replaceable_synth(session, "--out")
+            shutil.rmtree(session)
     roll = 30.0
     print(f"demo: writing a synthetic session to {session} (seed {args.seed}): 8 mark images "
           "from two cameras (each with a reversal), a ring-laser counter log, a 14-pose "
@@ -825,7 +841,7 @@ def build_parser() -> argparse.ArgumentParser:
                         formatter_class=_FMT)
     sy_sub = sy.add_subparsers(dest="what", required=True, parser_class=_Parser)
     ss = sy_sub.add_parser("session", help="a complete synthetic session folder",
-                           formatter_class=_FMT, parents=[common])
+                           formatter_class=_FMT, parents=[common, writes])
     ss.add_argument("out", help="new folder (must not exist or be empty)")
     ss.add_argument("--seed", type=_number(0, 2**63 - 1, integer=True), default=0,
                     help="random seed (the same seed gives the same session)")

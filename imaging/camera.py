@@ -39,7 +39,7 @@ class CameraModel:
     def load(cls, path: str | Path) -> CameraModel:
         p = Path(path)
         try:
-            d = json.loads(p.read_text())
+            d = json.loads(p.read_text(encoding="utf-8-sig"))  # a BOM is not JSON's
             K = np.array(d["camera_matrix"], float).reshape(3, 3)
             D = np.array(d["dist_coeffs"], float).ravel()
             size = tuple(int(v) for v in d["image_size"])

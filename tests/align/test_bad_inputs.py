@@ -862,3 +862,30 @@ def test_tilt_takes_the_triad_model_of_any_calibration_file(base, tmp_path):
     # The session's model is the same ellipsoid fit of the same tumble as 'align calibrate'.
     for o in outs[1:]:
         assert abs(o["roll_deg_mean"] - outs[0]["roll_deg_mean"]) < 1e-9
+
+
+def test_synth_force_replaces_only_what_synth_wrote(tmp_path, capsys):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("my notes")
+    assert main(["synth", "session", str(mine), "--force"]) == 2
+    _err_line(capsys, "not a session written by 'align synth'")
+    assert (mine / "notes.txt").read_text() == "my notes"
+
+
+def test_marks_output_validates_and_carries_warnings(tmp_path):
+    import jsonschema
+
+    from align.contract import schema
+    from synth import write_synth
+    from tests.conftest import mark_image
+
+    s = mark_image(25.0, seed=4, size=(480, 360), length_px=250)
+    p, _ = write_synth(s, tmp_path / "mark.png")
+    bad = tmp_path / "bad.png"
+    bad.write_text("not an image")
+    out = tmp_path / "m.json"
+    assert main(["marks", str(p), str(bad), "--json", str(out), "-q"]) == 2
+    d = _json(out)
+    jsonschema.validate(d, schema("marks"))
+    assert d["ok"] is False and any("bad.png" in w for w in d["warnings"])
