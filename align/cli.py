@@ -464,9 +464,13 @@ def _run_one(folder: str, json_path: str | None, report_path: str | None,
         written, js = session_outputs(res, outs, force, settings or {"alpha": alpha})
     except InputError as exc:  # an output that appeared while computing: not replaced
         return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
+    warnings = list(js["warnings"])
+    if outs["cal"] is not None and "cal" not in written:
+        warnings.append(f"--calibration {outs['cal']}: NOT written: no platform calibration "
+                        "(the calibration or the fusion failed)")
     return {"session": s.name, "folder": folder, "ok": res.ok, "bad_input": not res.ok,
             "result": res if not quiet else None, "json": js,
-            "warnings": js["warnings"],
+            "warnings": warnings,
             "outputs": {k: str(v) for k, v in written.items()}}
 
 

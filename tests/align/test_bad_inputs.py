@@ -706,6 +706,19 @@ def test_failed_stage_exit_2_result_written_not_ok(base, tmp_path, capsys):
     assert "WARNING: stage goniometer FAILED" in capsys.readouterr().err
     html = rep.read_text()
     assert html.index("Warnings") < html.index("Misalignment matrix")
+    import jsonschema
+
+    from align.contract import schema
+
+    jsonschema.validate(d, schema("session"))
+
+
+def test_run_json_to_stdout_and_not_for_a_batch(base, capsys):
+    assert main(["run", str(base / "plain"), "--json", "-", "-q"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["ok"] and "misalignment" in cap.err
+    assert main(["run", str(base / "plain"), str(base / "full"), "--json", "-"]) == 2
+    _err_line(capsys, "--json -", "batch")
 
 
 def test_ctrl_c_exits_130(monkeypatch, capsys):
@@ -889,3 +902,27 @@ def test_marks_output_validates_and_carries_warnings(tmp_path):
     d = _json(out)
     jsonschema.validate(d, schema("marks"))
     assert d["ok"] is False and any("bad.png" in w for w in d["warnings"])
+
+
+def test_rate_gives_a_recording_without_times_the_same_result(tmp_path, capsys):
+    """A continuous recording t,ux,uy,uz (t = k / 20 Hz) and the same without its time column
+    plus --rate 20: the same static intervals, the same calibration."""
+    from synth.tumble import Triad, TumbleSpec, recording
+
+    t, u, _ = recording(TumbleSpec(triad=Triad(noise_v=4.8e-5), seed=3, dwell_s=6.0))
+    k = np.round(t * 20).astype(int)
+    assert np.allclose(k / 20, t, atol=1e-9) and k[0] == 0
+    with_t = tmp_path / "rec_t.csv"
+    with_t.write_text("t,ux,uy,uz\n" + "".join(
+        f"{ki / 20:.2f},{a:.9e},{b:.9e},{c:.9e}\n" for ki, (a, b, c) in zip(k, u, strict=True)))
+    no_t = tmp_path / "rec.csv"
+    no_t.write_text("ux,uy,uz\n" + "".join(f"{a:.9e},{b:.9e},{c:.9e}\n" for a, b, c in u))
+    outs = []
+    for f, extra in ((with_t, []), (no_t, ["--rate", "20"])):
+        out = tmp_path / f"{f.stem}.json"
+        assert main(["calibrate", str(f), "--json", str(out), "-q", *extra]) == 0
+        outs.append(_json(out))
+    assert outs[0]["static_intervals"] == outs[1]["static_intervals"]
+    assert outs[0]["scale_factors_v_per_g"] == outs[1]["scale_factors_v_per_g"]
+    assert main(["calibrate", str(no_t)]) == 2
+    _err_line(capsys, "--rate")
