@@ -13,6 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from axisbase.errors import InputError
+from axisbase.provenance import check_format
 from imaging.errors import ImageInputError
 
 
@@ -45,9 +47,15 @@ class CameraModel:
             size = tuple(int(v) for v in d["image_size"])
         except FileNotFoundError:
             raise ImageInputError(f"{p}: camera file not found") from None
+        except IsADirectoryError:
+            raise ImageInputError(f"{p}: is a folder, not a camera file") from None
         except (ValueError, KeyError, TypeError) as exc:
             raise ImageInputError(f"{p}: not a camera file ({exc!s}); expected camera_matrix, "
                                   "dist_coeffs, image_size as written by 'align camera'") from None
+        try:  # version 1: files written before format versions existed
+            check_format(d, "axis-align/camera", (1, 2), str(p))
+        except InputError as exc:
+            raise ImageInputError(str(exc)) from None
         return cls(K, D, size, float(d.get("rms_px", np.nan)), int(d.get("views", 0)))
 
     def undistort_centred(self, pts: np.ndarray, sigma: np.ndarray, shape: tuple[int, int]

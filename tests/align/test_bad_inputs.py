@@ -926,3 +926,22 @@ def test_rate_gives_a_recording_without_times_the_same_result(tmp_path, capsys):
     assert outs[0]["scale_factors_v_per_g"] == outs[1]["scale_factors_v_per_g"]
     assert main(["calibrate", str(no_t)]) == 2
     _err_line(capsys, "--rate")
+
+
+@pytest.mark.parametrize("version", [None, 2, 99, "gonio"])
+def test_camera_model_format_versions(tmp_path, version):
+    from imaging import CameraModel, ImageInputError
+
+    d = {"camera_matrix": [[800, 0, 320], [0, 800, 240], [0, 0, 1]],
+         "dist_coeffs": [0.1, 0, 0, 0, 0], "image_size": [640, 480]}
+    if version == "gonio":
+        d.update(format="axis-align/gonio", format_version=2)
+    elif version is not None:
+        d.update(format="axis-align/camera", format_version=version)
+    f = tmp_path / "cam.json"
+    f.write_text("\ufeff" + json.dumps(d))  # a BOM, as a Windows editor saves it
+    if version in (None, 2):
+        assert CameraModel.load(f).image_size == (640, 480)
+    else:
+        with pytest.raises(ImageInputError, match="newer" if version == 99 else "gonio"):
+            CameraModel.load(f)
