@@ -1,0 +1,53 @@
+"""Reading a static-pose table of 10⁶ rows through the one table reader (what
+``align calibrate`` does), with the share of the duplicate-row check, against numpy's
+``loadtxt`` (the obvious alternative, which checks nothing).
+
+Usage: ``python3 benchmarks/tables.py [ROWS]`` (default 10⁶). Best of 3, fresh file in a
+temporary folder.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from align.calibration import STATIC  # noqa: E402
+from axisbase.table import check_repeats, read_table  # noqa: E402
+
+
+def best(fn, n: int = 3) -> float:
+    out = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return min(out)
+
+
+def main() -> None:
+    n = int(sys.argv[1]) if len(sys.argv) > 1 else 10**6
+    rng = np.random.default_rng(1)
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "static.csv"
+        with open(p, "w") as f:
+            f.write("pose,ux,uy,uz,t\n")
+            np.savetxt(f, np.column_stack([np.arange(n) // 1000, rng.normal(0, 1, (n, 3)),
+                                           np.arange(n) / 100]),
+                       delimiter=",", fmt=["%d", "%.9e", "%.9e", "%.9e", "%.2f"])
+        tab = read_table(p, STATIC)
+        t_read = best(lambda: read_table(p, STATIC))
+        t_rep = best(lambda: check_repeats(tab))
+        t_np = best(lambda: np.loadtxt(p, delimiter=",", skiprows=1), 1)
+    print(f"{n} rows: read_table {t_read:.3f} s (of which the duplicate check {t_rep:.3f} s, "
+          f"{100 * t_rep / t_read:.0f} %); np.loadtxt {t_np:.2f} s "
+          f"({t_np / t_read:.1f}x slower, no checks)")
+
+
+if __name__ == "__main__":
+    main()
