@@ -118,10 +118,9 @@ def _wrote(path: Path | None) -> None:
 def cmd_marks(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from align.contract import document
+    from align.documents import marks_document
     from align.marks import measure_file
     from align.plots import plot_mark
-    from align.warnings import mark_warnings
     from axisbase.output import write_json
     from imaging import CameraModel, read_image
 
@@ -149,12 +148,10 @@ def cmd_marks(args: argparse.Namespace) -> int:
             if plot_dir is not None:
                 img = read_image(path) if r.measurement is not None else None
                 print(f"    plot: {plot_mark(r, plot_dir, img)}")
-    warnings = mark_warnings(results)
-    _warn(warnings)
+    doc = marks_document(results, _settings(args),
+                         [*args.images] + ([args.camera] if args.camera else []))
+    _warn(doc["warnings"])
     if out is not None:
-        doc = document("marks", {"ok": not failed, "warnings": warnings,
-                                 "marks": [r.to_json() for r in results]},
-                       _settings(args), [*args.images] + ([args.camera] if args.camera else []))
         _wrote(write_json(out, doc, args.force))
     return 2 if failed else 0
 
@@ -173,11 +170,9 @@ def _pattern(text: str) -> tuple[int, int]:
 
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    import json
-
     import numpy as np
 
-    from align.contract import document
+    from align.documents import camera_document
     from axisbase.output import write_json
     from imaging import ImageInputError, calibrate_chessboard, read_image
 
@@ -200,8 +195,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
     print(f"fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} px")
     print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{v:+.5f}" for v in D[:5]))
     if out is not None:
-        doc = document("camera", json.loads(model.to_json()), _settings(args), args.images)
-        _wrote(write_json(out, doc, args.force))
+        _wrote(write_json(out, camera_document(model, _settings(args), args.images),
+                          args.force))
     return 0
 
 
@@ -267,7 +262,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def cmd_tilt(args: argparse.Namespace) -> int:
     from align.apply import load_triad_model
     from align.calibration import READINGS, read_readings
-    from align.contract import document
+    from align.documents import tilt_document
     from align.tilt import tilt_of_readings
     from axisbase.output import write_atomic, write_json
 
@@ -288,7 +283,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     if out_csv is not None:
         _wrote(write_atomic(out_csv, res.csv_text(), args.force))
     if out_json is not None:
-        _wrote(write_json(out_json, document("tilt", s, _settings(args), inputs), args.force))
+        _wrote(write_json(out_json, tilt_document(res, _settings(args), inputs), args.force))
     return 0
 
 
@@ -348,8 +343,8 @@ def _distinct_files(a: str, b: str, flag_a: str, flag_b: str) -> None:
 def cmd_gonio(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from align.contract import document
-    from align.gonio import measure_log, run_json
+    from align.documents import gonio_document
+    from align.gonio import measure_log
     from align.warnings import gonio_warnings
     from axisbase.output import write_json
     from axisbase.table import parse_column_map
@@ -393,15 +388,14 @@ def cmd_gonio(args: argparse.Namespace) -> int:
             print("  " + line)
     for note in run.notes:
         print("  " + note)
-    warnings = gonio_warnings(run)
-    _warn(warnings)
+    _warn(gonio_warnings(run))  # (the document hashes the logs: only when written)
     if plot is not None:
         from align.plots import plot_gonio
 
         print(f"plot: {plot_gonio(kept_table(summary)[0], fa, faces, plot)}")
     if out is not None:
-        body = {"ok": True, "warnings": warnings, **run_json(run, faces, nominal)}
-        _wrote(write_json(out, document("gonio", body, _settings(args), inputs), args.force))
+        _wrote(write_json(out, gonio_document(run, faces, nominal, _settings(args), inputs),
+                          args.force))
     return 0
 
 

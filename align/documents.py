@@ -1,0 +1,46 @@
+"""The document each command writes: a result's own JSON, its warnings and whether it is ok,
+in the envelope of :mod:`align.contract` (format, version, provenance). ``cli.py`` only
+chooses the file; what goes into it is decided here.
+
+The calibration's document is :func:`align.calibration.output.calibration_document`; a
+session's is :func:`align.session.output.session_document`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from align.contract import document
+from align.warnings import gonio_warnings, mark_warnings
+
+Inputs = Iterable[str | Path]
+
+
+def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
+    """``align marks --json``: every mark (found or not), ok when every image was measured."""
+    return document("marks", {"ok": all(r.found for r in results),
+                              "warnings": mark_warnings(results),
+                              "marks": [r.to_json() for r in results]}, settings, inputs)
+
+
+def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, settings: dict,
+                   inputs: Inputs) -> dict:
+    """``align gonio --json``."""
+    from align.gonio import run_json
+
+    body = {"ok": True, "warnings": gonio_warnings(run), **run_json(run, faces, nominal_rad)}
+    return document("gonio", body, settings, inputs)
+
+
+def tilt_document(res, settings: dict, inputs: Inputs) -> dict:
+    """``align tilt --json`` (``res``: :class:`align.tilt.TiltOfReadings`)."""
+    return document("tilt", res.summary(), settings, inputs)
+
+
+def camera_document(model, settings: dict, inputs: Inputs) -> dict:
+    """``align camera --json``: the camera model's own JSON (``imaging.CameraModel``)."""
+    return document("camera", json.loads(model.to_json()), settings, inputs)
