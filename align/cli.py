@@ -79,14 +79,15 @@ def _signs(text: str) -> tuple[float, float, float]:
     return tuple(-1.0 if p == "-" else 1.0 for p in parts)  # type: ignore[return-value]
 
 
-def _table_options(args: argparse.Namespace, paths: Sequence[str], spec) -> tuple[dict, str]:
+def _table_options(args: argparse.Namespace, paths: Sequence[str], spec,
+                   default: str | None = "V") -> tuple[dict, str | None]:
     """``--columns`` as a mapping and the data's output unit (``--units`` checked against
-    the units written in the files' headers)."""
+    the units written in the files' headers; ``default`` when neither says)."""
     from axisbase.table import parse_column_map, resolve_units
 
     cols = parse_column_map(getattr(args, "columns", None))
     units = resolve_units(getattr(args, "units", None), list(paths), spec, cols,
-                          ("ux", "uy", "uz"))
+                          ("ux", "uy", "uz"), default=default)
     return cols, units
 
 
@@ -268,7 +269,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
 
     inputs = [args.readings, args.calibration]
     _unique(inputs, "readings/--calibration")
-    cols, units = _table_options(args, [args.readings], READINGS)
+    cols, units = _table_options(args, [args.readings], READINGS, default=None)
     model, cal_units = load_triad_model(args.calibration)
     _same_units(units, cal_units, args.calibration)
     plan = _plan(args, inputs)
@@ -287,8 +288,10 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     return 0
 
 
-def _same_units(units: str, cal_units: str | None, where: str) -> None:
-    if cal_units is not None and units != cal_units:
+def _same_units(units: str | None, cal_units: str | None, where: str) -> None:
+    """Readings whose unit is stated (flag or header) must be in the calibration's unit; if
+    unstated they are taken to be."""
+    if units is not None and cal_units is not None and units != cal_units:
         raise UsageError(f"the readings are in {units} but {where} was calibrated from "
                          f"{cal_units} (--units, or the header's unit)")
 
@@ -563,7 +566,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
     inputs = [args.calibration_file, args.readings]
     _unique(inputs, "calibration_file/readings")
-    cols, units = _table_options(args, [args.readings], READINGS)
+    cols, units = _table_options(args, [args.readings], READINGS, default=None)
     pc, cal_units = PlatformCalibration.load_with_units(args.calibration_file)
     _same_units(units, cal_units, args.calibration_file)
     plan = _plan(args, inputs)

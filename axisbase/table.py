@@ -460,7 +460,7 @@ def header_units(path: str | Path, spec: TableSpec, columns: Mapping[str, str] |
 
 def resolve_units(given: str | None, paths: list[str | Path], spec: TableSpec,
                   columns: Mapping[str, str] | None, names: tuple[str, ...],
-                  flag: str = "--units", default: str = "V") -> str:
+                  flag: str = "--units", default: str | None = "V") -> str | None:
     """The output unit of the data: ``given`` (the flag/key) checked against the units
     written in the headers of ``paths``; else the header's; else ``default``."""
     if given is not None and given not in OUTPUT_UNITS:

@@ -114,8 +114,8 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         res.marks.append((im, ok[0]))
     if s.platform is not None and res.calibration is not None:
         progress("platform static readings")
-        res.platform = _try(res, "platform static", lambda: _platform_poses(s, res.calibration)
-                            ) or []
+        res.platform = _try(res, "platform static", lambda: _platform_poses(
+            s, res.calibration, res.units)) or []
     elif s.platform is not None:
         res.errors.append(StageError("platform static", "not used: the calibration failed"))
     progress("fusion")
@@ -126,8 +126,13 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     return res
 
 
-def _platform_poses(s: Session, cal: Calibration) -> list[PlatformPose]:
+def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPose]:
     p = s.platform
+    stated = resolve_units(p.table.units, [p.static], STATIC, p.table.columns,
+                           ("ux", "uy", "uz"), flag="[platform] units", default=None)
+    if stated is not None and stated != units:
+        raise InputError(f"{p.static}: readings in {stated}, but the triad was calibrated "
+                         f"from {units}: one triad, one unit")
     poses, _ = read_poses(p.static, calibration=False, columns=p.table.columns,
                           rate_hz=p.table.rate_hz)
     missing = [lab for lab in poses.labels if lab not in p.poses]

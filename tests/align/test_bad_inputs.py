@@ -945,3 +945,24 @@ def test_camera_model_format_versions(tmp_path, version):
     else:
         with pytest.raises(ImageInputError, match="newer" if version == 99 else "gonio"):
             CameraModel.load(f)
+
+
+def test_units_are_carried_and_checked(base, tmp_path, capsys):
+    """Scale factors labelled in the data's unit; readings stated in another unit refused,
+    unstated ones taken in the calibration's."""
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(base / "plain" / "tumble.csv"), "--scale-sign", "-",
+                 "--units", "counts", "--json", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "k_x [counts/g]" in cap.out and "V/g" not in cap.out
+    d = _json(out)
+    assert d["output_unit"] == "counts" and d["scale_factor_unit"] == "counts/g"
+    assert d["model"]["output_unit"] == "counts"
+    r = str(base / "readings.csv")
+    assert main(["tilt", r, "--calibration", str(out), "-q"]) == 0
+    assert main(["tilt", r, "--calibration", str(out), "--units", "m/s2"]) == 2
+    _err_line(capsys, "m/s2", "counts")
+    text, _ = variant((base / "readings.csv").read_text(), "units")  # header says [V]
+    f = _write(tmp_path / "r.csv", text)
+    assert main(["tilt", str(f), "--calibration", str(out)]) == 2
+    _err_line(capsys, "V", "counts")
