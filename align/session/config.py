@@ -393,8 +393,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         if cal is None:
             raise InputError(f"{w}: platform static readings need the triad's calibration "
                              "([calibration] static = ...) for scale factors and biases")
-        cu, pu = cal.table.units or "V", plat.table.units or "V"
-        if cu != pu:
+        cu, pu = cal.table.units, plat.table.units
+        if cu is not None and pu is not None and cu != pu:
             raise InputError(f"{w} units = {pu!r}: the calibration's readings are in {cu!r}; "
                              "one triad, one unit")
 

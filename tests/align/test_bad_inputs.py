@@ -487,8 +487,7 @@ def _session(base: Path, tmp_path: Path, edit=None, extra: str = "") -> Path:
     for name in ("tumble.csv", "gonio.csv", "platform.csv"):
         (s / name).write_bytes((base / "plain" / name).read_bytes())
     toml = (base / "plain" / "session.toml").read_text()
-    if edit:
-        old, new = edit
+    for old, new in ([] if not edit else edit if isinstance(edit, list) else [edit]):
         assert old in toml, old
         toml = toml.replace(old, new, 1)
     (s / "session.toml").write_text(toml + extra)
@@ -524,7 +523,8 @@ KEY_FAULTS = [
     ("table_deg_nan", ('L090 = { up = "+Z", table_deg = 90.0 }',
                        'L090 = { up = "+Z", table_deg = nan }'), "", "table_deg"),
     ("units_bad", ('scale_sign = "-"', 'scale_sign = "-"\nunits = "furlong"'), "", "units"),
-    ("units_mismatch", ('static = "platform.csv"', 'static = "platform.csv"\nunits = "g"'),
+    ("units_mismatch", [('scale_sign = "-"', 'scale_sign = "-"\nunits = "counts"'),
+                        ('static = "platform.csv"', 'static = "platform.csv"\nunits = "g"')],
      "", "units"),
     ("rate_zero", ('scale_sign = "-"', 'scale_sign = "-"\nrate_hz = 0'), "", "rate_hz"),
     ("columns_bad", ('scale_sign = "-"', 'scale_sign = "-"\ncolumns = "ux"'), "", "columns"),
