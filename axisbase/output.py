@@ -78,6 +78,7 @@ class OutputPlan:
         self.inputs = [Path(p) for p in inputs]
         self.force = force
         self.paths: dict[str, Path] = {}
+        self.folders: set[str] = set()
 
     def add(self, flag: str, path: str | Path | None, stdout_ok: bool = False,
             folder: bool = False) -> Path | None:
@@ -95,7 +96,10 @@ class OutputPlan:
             return Path(STDOUT)
         p = Path(path)
         for other_flag, other in self.paths.items():
-            if str(other) != STDOUT and (_same(p, other) or (folder and p == other)):
+            # Folders of per-item files may be shared (the files' names differ).
+            if folder and other_flag in self.folders:
+                continue
+            if str(other) != STDOUT and _same(p, other):
                 raise OutputError(f"{flag} {p}: the same path as {other_flag}; each output "
                                   "needs its own file")
         for i in self.inputs:
@@ -113,6 +117,8 @@ class OutputPlan:
             target_dir = p.parent
         _check_folder(flag, p, target_dir)
         self.paths[flag] = p
+        if folder:
+            self.folders.add(flag)
         return p
 
 

@@ -966,3 +966,17 @@ def test_units_are_carried_and_checked(base, tmp_path, capsys):
     f = _write(tmp_path / "r.csv", text)
     assert main(["tilt", str(f), "--calibration", str(out)]) == 2
     _err_line(capsys, "V", "counts")
+
+
+def test_batch_outputs_may_share_a_folder(base, tmp_path):
+    """Several sessions: --json and --report name folders, and may name the same one (the
+    files are <session>.json and <session>.html)."""
+    b = tmp_path / "unit2"
+    b.mkdir()
+    for f in (base / "plain").iterdir():
+        (b / f.name).write_bytes(f.read_bytes())
+    out = tmp_path / "results"
+    assert main(["run", str(base / "plain"), str(b), "--json", str(out), "--report", str(out),
+                 "--jobs", "1", "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["plain.html", "plain.json", "unit2.html",
+                                                     "unit2.json"]
