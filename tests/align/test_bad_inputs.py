@@ -969,14 +969,14 @@ def test_units_are_carried_and_checked(base, tmp_path, capsys):
 
 
 def test_batch_outputs_may_share_a_folder(base, tmp_path):
-    """Several sessions: --json and --report name folders, and may name the same one (the
-    files are <session>.json and <session>.html)."""
+    """Several sessions: --json and --calibration name folders, and may name the same one
+    (the files are <session>.json and <session>.cal.json)."""
     b = tmp_path / "unit2"
     b.mkdir()
     for f in (base / "plain").iterdir():
         (b / f.name).write_bytes(f.read_bytes())
     out = tmp_path / "results"
-    assert main(["run", str(base / "plain"), str(b), "--json", str(out), "--report", str(out),
-                 "--jobs", "1", "-q"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["plain.html", "plain.json", "unit2.html",
-                                                     "unit2.json"]
+    assert main(["run", str(base / "plain"), str(b), "--json", str(out), "--calibration",
+                 str(out), "--jobs", "1", "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["plain.cal.json", "plain.json",
+                                                     "unit2.cal.json", "unit2.json"]
