@@ -398,7 +398,10 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             raise InputError(f"{w} units = {pu!r}: the calibration's readings are in {cu!r}; "
                              "one triad, one unit")
 
+    name = d.get("name", folder.resolve().name)
+    if not isinstance(name, str) or not name.strip():
+        raise InputError(f"{src}: name = {name!r}: expected a non-empty text")
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
-    return Session(folder, str(d.get("name", folder.resolve().name)), lat, cal, gon, cameras,
+    return Session(folder, name, lat, cal, gon, cameras,
                    views, tuple(imgs), plat)

@@ -497,6 +497,8 @@ def _session(base: Path, tmp_path: Path, edit=None, extra: str = "") -> Path:
 KEY_FAULTS = [
     ("latitude_nan", ("latitude_deg = 50.45", "latitude_deg = nan"), "", "latitude_deg"),
     ("latitude_1000", ("latitude_deg = 50.45", "latitude_deg = 1000"), "", "latitude_deg"),
+    ("name_number", ("latitude_deg = 50.45", "name = 5\nlatitude_deg = 50.45"), "", "name"),
+    ("name_blank", ("latitude_deg = 50.45", 'name = " "\nlatitude_deg = 50.45'), "", "name"),
     ("latitude_text", ("latitude_deg = 50.45", 'latitude_deg = "N"'), "", "latitude_deg"),
     ("nominal_sum", ("nominal_deg = [90.0, 90.0, 90.0, 90.0]",
                      "nominal_deg = [100.0, 100.0, 100.0, 100.0]"), "", "nominal_deg"),
