@@ -395,6 +395,11 @@ successive rows can be equal by chance (p per row pair up to ~0.3 for a 1-count 
 three axes), but 10 pairs all equal by chance is p < 1e-5."""
 
 
+BLOCK_ROWS = 8
+"""Fewest rows for the 'file written twice' test: four raw-count rows a b a b by chance is
+p ~ 1e-3 with 1-count noise; eight (a b c d a b c d) is p ~ 1e-6."""
+
+
 def check_repeats(table: Table) -> None:
     """Refuse duplicated data: every row written twice in a row (``a a b b c c ...``), or the
     whole file twice (``a b c a b c``). Both shrink the stated uncertainty by √2 without
@@ -404,7 +409,7 @@ def check_repeats(table: Table) -> None:
     equal in fewer than half the cases). A repeated time stamp is already refused by the time
     check."""
     n = len(table)
-    if n < 4 or n % 2:
+    if n < BLOCK_ROWS or n % 2:
         return
     cols = [table.data[c.name] for c in table.spec.columns if c.name in table.data]
     if not cols:
