@@ -157,6 +157,13 @@ class _Files:
         return p
 
 
+def _same_contents(a: Path, b: Path) -> bool:
+    """Byte-identical files (size first, then streamed hashes: logs can be gigabytes)."""
+    from axisbase.provenance import sha256_file
+
+    return a.stat().st_size == b.stat().st_size and sha256_file(a) == sha256_file(b)
+
+
 def _number(value: object, where: str, lo: float | None = None, hi: float | None = None,
             open_lo: bool = False) -> float:
     """A finite number in [lo, hi] (lo excluded with ``open_lo``)."""
@@ -307,7 +314,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             raise InputError(f"{w} steady_table = {steady!r}: true or false")
         log_path = _file(g.get("log"), f"{w} log")
         rev_path = _file(g["reverse_log"], f"{w} reverse_log") if "reverse_log" in g else None
-        if rev_path is not None and rev_path.read_bytes() == log_path.read_bytes():
+        if rev_path is not None and _same_contents(rev_path, log_path):
             raise InputError(f"{w} reverse_log = {g['reverse_log']!r}: the same contents as "
                              "log; the other direction is a different recording")
         gon = Goniometer(log_path, tuple(faces), nom_r, dsign,
