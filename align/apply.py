@@ -51,9 +51,10 @@ class PlatformCalibration:
                 "angles_covariance_rad2": self.cov.tolist(),
                 "axes": self.axes.tolist()}
 
-    def document(self, units: str | None, settings: dict, inputs) -> dict:
+    def document(self, units: str | None, settings: dict, inputs,
+                 prov: dict | None = None) -> dict:
         """The file ``align run --calibration`` writes (format, version, provenance)."""
-        return document("platform-calibration", self.to_dict(units), settings, inputs)
+        return document("platform-calibration", self.to_dict(units), settings, inputs, prov)
 
     @classmethod
     def from_dict(cls, d: dict, where: str) -> PlatformCalibration:

@@ -35,10 +35,10 @@ def format_name(kind: str) -> str:
 
 
 def document(kind: str, body: Mapping[str, Any], settings: Mapping[str, Any] | None = None,
-             inputs: Iterable[str | Path] = ()) -> dict:
+             inputs: Iterable[str | Path] = (), prov: dict | None = None) -> dict:
     """``body`` wrapped with format, format_version and provenance (tool, version, UTC time,
-    command line, settings, SHA-256 of every input)."""
-    return envelope(format_name(kind), FORMATS[kind], body, settings, inputs)
+    command line, settings, SHA-256 of every input; ``prov`` reuses one already made)."""
+    return envelope(format_name(kind), FORMATS[kind], body, settings, inputs, prov)
 
 
 def check(d: Mapping[str, Any], kind: str, where: str) -> int:

@@ -61,10 +61,11 @@ def provenance(settings: Mapping[str, Any] | None = None,
 
 def envelope(fmt: str, version: int, body: Mapping[str, Any],
              settings: Mapping[str, Any] | None = None,
-             inputs: Iterable[str | Path] = ()) -> dict:
-    """``{format, format_version, provenance, **body}``: a result ready to write."""
+             inputs: Iterable[str | Path] = (), prov: dict | None = None) -> dict:
+    """``{format, format_version, provenance, **body}``: a result ready to write. ``prov``:
+    a provenance block already made for the same run (inputs are hashed once)."""
     return {"format": fmt, "format_version": version,
-            "provenance": provenance(settings, inputs), **body}
+            "provenance": prov if prov is not None else provenance(settings, inputs), **body}
 
 
 def check_format(d: Mapping[str, Any], fmt: str, readable: Iterable[int], where: str,

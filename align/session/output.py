@@ -84,8 +84,8 @@ def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: 
         written["report"] = write_report(res, outs["report"], force, js)
     pc = platform_calibration(res)
     if outs.get("cal") is not None and pc is not None:
-        written["cal"] = write_json(outs["cal"], pc.document(res.units, dict(settings),
-                                                             res.session.inputs), force)
+        written["cal"] = write_json(outs["cal"], pc.document(
+            res.units, dict(settings), res.session.inputs, js["provenance"]), force)
     return written, js
 
 
