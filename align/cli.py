@@ -44,7 +44,7 @@ def _write_json(path: Path | None, data: dict) -> None:
 # ----------------------------------------------------------------------------- marks
 
 def cmd_marks(args: argparse.Namespace) -> int:
-    from align.marks import measure_file
+    from align.marks import measure_files
     from align.plots import plot_mark
     from imaging import CameraModel, ImageInputError, read_image
 
@@ -57,14 +57,16 @@ def cmd_marks(args: argparse.Namespace) -> int:
     out = _new_file(args.json, args.force, args.images)
     plot_dir = Path(args.plot) if args.plot else None
     results = []
-    failed = 0
-    for path in _progress(args.images, "marks"):
-        res = measure_file(path, camera, alpha=args.alpha, max_marks=args.max_marks,
-                           expect_one=args.one)
+    failed = internal = 0
+    batch = measure_files(_progress(args.images, "marks"), camera, alpha=args.alpha,
+                          max_marks=args.max_marks, expect_one=args.one)
+    for res in batch:
         for r in res:
+            path = r.image
             results.append(r)
             if not r.found:
                 failed += 1
+                internal += r.internal_error
                 print(f"{path}: FAILED: {r.error}", file=sys.stderr)
                 continue
             print(f"{path} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
@@ -76,7 +78,10 @@ def cmd_marks(args: argparse.Namespace) -> int:
                 img = read_image(path) if r.measurement is not None else None
                 print(f"    plot: {plot_mark(r, plot_dir, img)}")
     _write_json(out, {"marks": [r.to_json() for r in results]})
-    return 2 if failed else 0
+    if internal:
+        print(f"align marks: {internal} image(s) hit an internal error (please report); the "
+              "others were measured", file=sys.stderr)
+    return 1 if internal else 2 if failed else 0
 
 
 # ----------------------------------------------------------------------------- camera

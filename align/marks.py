@@ -17,7 +17,7 @@ Candidate effects (each a few design columns with physical meaning):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,6 +153,7 @@ class MarkResult:
     loop: LoopReport | None = None
     measurement: MarkMeasurement | None = None
     uncertainty_inflation: float = 1.0
+    internal_error: bool = False
 
     @property
     def unexplained_structure(self) -> bool:
@@ -240,3 +241,20 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
     return measure_image(img, str(path), camera, alpha, max_marks, expect_one)
+
+
+def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False
+                  ) -> Iterator[list[MarkResult]]:
+    """:func:`measure_file` over a batch, one list per file; nothing escapes one image.
+
+    Bad input is already a failed entry; anything else raised inside one image is a bug, but
+    it must not cost the user the other images: it becomes that image's failed entry, marked
+    ``internal_error`` ("internal error: <type>: <message>"), and the batch goes on.
+    """
+    for path in paths:
+        try:
+            yield measure_file(path, camera, alpha, max_marks, expect_one)
+        except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
+            yield [MarkResult(image=str(path), found=False, internal_error=True,
+                              error=f"internal error: {type(exc).__name__}: {exc}")]

@@ -7,7 +7,7 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -67,13 +67,13 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                       where: str = "image") -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
     pf = fit_profile(image, cand, where, full_scale(image))
-    cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1)
+    cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
-    pf = replace(pf, angle_rad=first.angle_rad, offset_px=first.offset_px)
-    cen = sample_centres(image, pf)
+    pf = pf.with_line(first.angle_rad, first.offset_px)
+    cen = sample_centres(image, pf, where=where)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:

@@ -16,7 +16,7 @@ line fit downstream propagates a real uncertainty.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import erf
@@ -89,6 +89,28 @@ class ProfileFit:
     noise_var: tuple[float, float]
     t_start_px: float
     t_end_px: float
+
+    def with_line(self, angle_rad: float, offset_px: float) -> ProfileFit:
+        """The same stretch of mark about a refined line (angle [rad], offset [px]).
+
+        The extent along the line is carried over through its end points: when the refined
+        angle wraps across +-90 deg the direction u flips and t runs the other way (keeping the
+        old t range would sample a stretch of image beside the mark, or none at all).
+        """
+        return replace(self, angle_rad=angle_rad, offset_px=offset_px,
+                       **dict(zip(("t_start_px", "t_end_px"),
+                                  _carry_extent(self.angle_rad, self.offset_px,
+                                                (self.t_start_px, self.t_end_px), angle_rad),
+                                  strict=True)))
+
+
+def _carry_extent(angle_rad: float, offset_px: float, extent: tuple[float, float],
+                  new_angle_rad: float) -> tuple[float, float]:
+    """Extent (t0, t1) [px] of a stretch of line re-expressed along a nearby new direction."""
+    u, n = line_frame(angle_rad)
+    u2, _ = line_frame(new_angle_rad)
+    t = sorted(float((offset_px * n + tk * u) @ u2) for tk in extent)
+    return t[0], t[1]
 
 
 @dataclass(frozen=True)
@@ -206,8 +228,9 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     p_mid = (cand.offset_px + dd) * n + tm * u
     _, n2 = line_frame(ang)
     off = float(p_mid @ n2)
+    t0, t1 = _carry_extent(a_ref, cand.offset_px, (t0, t1), ang)
     return ProfileFit(ang, off, float(w), float(s), float(amp), float(b), float(g_e), var,
-                      float(t0), float(t1))
+                      t0, t1)
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -270,13 +293,16 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
 
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
-                   iterations: int = 2, every: int = 1) -> Centres:
+                   iterations: int = 2, every: int = 1, where: str = "image") -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
+                              "outside the image")
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
     if every > 1:
         keep = seg % every == 0
