@@ -46,8 +46,16 @@ def _write_json(path: Path | None, data: dict) -> None:
 def cmd_marks(args: argparse.Namespace) -> int:
     from align.marks import measure_files
     from align.plots import plot_mark
-    from imaging import CameraModel, ImageInputError, read_image
+    from imaging import CameraModel, ImageInputError, check_roi, read_image
 
+    roi = None
+    if args.roi is not None:
+        try:
+            roi = check_roi(args.roi.split(","), "--roi")
+        except ImageInputError as exc:
+            raise UsageError(str(exc)) from None
+    if args.min_length is not None and args.min_length <= 0:
+        raise UsageError(f"--min-length {args.min_length:g}: must be a positive length [px]")
     camera = None
     if args.camera:
         try:
@@ -59,7 +67,8 @@ def cmd_marks(args: argparse.Namespace) -> int:
     results = []
     failed = internal = 0
     batch = measure_files(_progress(args.images, "marks"), camera, alpha=args.alpha,
-                          max_marks=args.max_marks, expect_one=args.one)
+                          max_marks=args.max_marks, expect_one=args.one, roi=roi,
+                          min_length_px=args.min_length)
     for res in batch:
         for r in res:
             path = r.image
@@ -560,6 +569,10 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
     m.add_argument("--alpha", type=float, default=1e-3, help="significance of the loop's tests")
     m.add_argument("--max-marks", type=int, default=8)
+    m.add_argument("--roi", metavar="X,Y,W,H",
+                   help="search only this rectangle [px]: top-left column, row, width, height")
+    m.add_argument("--min-length", type=float, metavar="PX",
+                   help="shortest mark to report [px] (default 100)")
     m.add_argument("--one", action="store_true",
                    help="each image holds one mark: two competing marks are an error")
     m.add_argument("--force", action="store_true", help="allow overwriting the --json file")

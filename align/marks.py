@@ -28,6 +28,7 @@ from imaging import (
     CameraModel,
     ImageInputError,
     MarkMeasurement,
+    Roi,
     fit_line,
     measure_marks,
     read_image,
@@ -216,12 +217,16 @@ def structure_inflation(rep: LoopReport) -> float:
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
-                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
+                  roi: Roi | None = None, min_length_px: float | None = None
                   ) -> list[MarkResult]:
-    """Every mark of an in-memory image, each through the loop; failures become entries."""
+    """Every mark of an in-memory image, each through the loop; failures become entries.
+
+    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search.
+    """
     try:
         found = measure_marks(image, camera, where=name, max_marks=max_marks,
-                              expect_one=expect_one)
+                              expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
     out = []
@@ -234,17 +239,20 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,
-                 max_marks: int = 8, expect_one: bool = False) -> list[MarkResult]:
+                 max_marks: int = 8, expect_one: bool = False, roi: Roi | None = None,
+                 min_length_px: float | None = None) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
         img = read_image(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks, expect_one)
+    return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
+                         min_length_px)
 
 
 def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,
-                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
+                  roi: Roi | None = None, min_length_px: float | None = None
                   ) -> Iterator[list[MarkResult]]:
     """:func:`measure_file` over a batch, one list per file; nothing escapes one image.
 
@@ -254,7 +262,7 @@ def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None
     """
     for path in paths:
         try:
-            yield measure_file(path, camera, alpha, max_marks, expect_one)
+            yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px)
         except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
             yield [MarkResult(image=str(path), found=False, internal_error=True,
                               error=f"internal error: {type(exc).__name__}: {exc}")]

@@ -89,6 +89,7 @@ class ProfileFit:
     noise_var: tuple[float, float]
     t_start_px: float
     t_end_px: float
+    full_scale_dn: float = 65535.0
 
     def with_line(self, angle_rad: float, offset_px: float) -> ProfileFit:
         """The same stretch of mark about a refined line (angle [rad], offset [px]).
@@ -189,10 +190,19 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     if stride > 1:
         keep = (np.floor((t - t0) / 8).astype(int) % stride) == 0
         vals, e, t = vals[keep], e[keep], t[keep]
-    if np.mean(vals >= full_scale) > 0.02 or np.mean(vals <= 0) > 0.02:
+    # Clipped pixels (0 or full scale) say only "beyond the range": left out of the fit. The
+    # mark itself must not be clipped; clipped surroundings (a dark padded border, a
+    # saturated patch beside it) only cost the pixels they cover.
+    clipped = (vals >= full_scale) | (vals <= 0)
+    core = np.abs(e) <= max(2.0, cand.thickness_px / 2 + 1.5)
+    if np.mean(clipped[core]) > 0.02:
         raise ImageInputError(
             f"{where}: mark near ({cand.offset_px:.0f} px offset) is saturated or clipped "
-            f"({100 * np.mean((vals >= full_scale) | (vals <= 0)):.0f} % of its pixels)")
+            f"({100 * np.mean(clipped[core]):.0f} % of its pixels)")
+    vals, e, t = vals[~clipped], e[~clipped], t[~clipped]
+    if vals.size < 100:
+        raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
+                              "unclipped pixels around it")
     tm = 0.5 * (t0 + t1)
     inner = np.abs(e) < 2
     bg = float(np.median(vals[~inner])) if np.any(~inner) else float(np.median(vals))
@@ -230,7 +240,7 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     off = float(p_mid @ n2)
     t0, t1 = _carry_extent(a_ref, cand.offset_px, (t0, t1), ang)
     return ProfileFit(ang, off, float(w), float(s), float(amp), float(b), float(g_e), var,
-                      t0, t1)
+                      t0, t1, float(full_scale))
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -300,9 +310,11 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
+    unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
+    vals, e, t = vals[unclipped], e[unclipped], t[unclipped]
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
-                              "outside the image")
+                              "outside the image or is all clipped")
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
     if every > 1:
         keep = seg % every == 0

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from align.errors import InputError
+from imaging import ImageInputError, check_roi
 
 ARCSEC = np.pi / 180 / 3600
 HOUSINGS = ("x", "y", "z")
@@ -41,6 +42,7 @@ class ImageEntry:
     view: str
     nominal: str  # "horizontal" | "vertical"
     key: str
+    roi: tuple[int, int, int, int] | None = None  # (x, y, w, h) [px]: search only there
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,7 @@ KEYS = {
                    "reverse_log", "steady_table"},
     "cameras": {"model", "roll_arcsec"},
     "views": {"camera", "right", "up"},
-    "images": {"file", "housing", "view", "nominal"},
+    "images": {"file", "housing", "view", "nominal", "roi"},
     "platform": {"static", "table_tilt_arcsec", "poses"},
 }
 
@@ -278,8 +280,14 @@ def load_session(folder: str | Path) -> Session:
                 f"{w}: housing {housing} is nominally along platform {axis}, but view {view} "
                 f"has {nominal} = {'XYZ'[int(np.argmax(np.abs(along)))]} — contradictory "
                 "nominal orientation")
+        roi = None
+        if "roi" in im:
+            try:
+                roi = check_roi(im["roi"], f"{w} roi")
+            except ImageInputError as exc:
+                raise InputError(str(exc)) from None
         imgs.append(ImageEntry(_file(folder, im.get("file"), f"{w} file"), housing, view,
-                               nominal, w))
+                               nominal, w, roi))
 
     plat = None
     if "platform" in d:

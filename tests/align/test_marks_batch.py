@@ -56,3 +56,22 @@ def test_refined_line_wrapping_across_90_deg_keeps_the_mark():
         assert r.length_px > 150
         assert abs(err) < 4.5 * r.angle_u_rad
         assert r.angle_u_rad < 3 * t.crlb_angle_rad
+
+
+def test_cli_roi_and_min_length(tmp_path, capsys):
+    from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+
+    spec = ImageSpec(marks=(MarkSpec(0.2, -150, 500, 4.0), MarkSpec(1.3, 200, 180, 4.0)),
+                     width=1024, height=768, full_well_e=full_well_for_snr(30, -0.6), seed=6)
+    p, _ = write_synth(render_marks(spec, with_crlb=False), tmp_path / "two.png")
+    out = tmp_path / "a.json"
+    assert main(["marks", str(p), "--min-length", "300", "--json", str(out)]) == 0
+    assert len(json.loads(out.read_text())["marks"]) == 1
+    out = tmp_path / "b.json"
+    assert main(["marks", str(p), "--roi", "640,222,120,240", "--json", str(out)]) == 0
+    (m,) = json.loads(out.read_text())["marks"]
+    assert abs(m["angle_deg"] - np.rad2deg(1.3)) < 0.05
+    assert main(["marks", str(p), "--roi", "1,2,3"]) == 2
+    assert "--roi" in capsys.readouterr().err
+    assert main(["marks", str(p), "--roi", "1000,0,100,100"]) == 2
+    assert "reaches outside" in capsys.readouterr().err
