@@ -139,6 +139,8 @@ def _pca_line(pts: np.ndarray, centre: np.ndarray) -> tuple[float, float, np.nda
 
 MIN_LENGTH_PX = 100.0
 """Default shortest mark [px]: scratches, printed strokes and dust are shorter."""
+LENGTH_SLACK = 0.8
+"""A ridge this fraction of the shortest mark's length still counts (its ends fade)."""
 
 
 def _odd_pad(img: np.ndarray, pad: int) -> np.ndarray:
@@ -171,27 +173,37 @@ def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int
 
 
 def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float
-          ) -> tuple[float, float, float]:
-    """Median profile's extreme within ``search`` of the line: (position [px], contrast [DN],
-    background [DN])."""
+          ) -> tuple[float, float]:
+    """Median profile's extreme within ``search`` of the line: (position [px], contrast [DN]).
+
+    The contrast is against the background on each side separately (the median of up to 6 px
+    just beyond the flank), and the smaller of the two counts: a mark stands out from both
+    sides, whereas an edge, or the strip of background between a mark and a dark padded
+    border, stands out from one side only. No valid pixel beyond one flank: contrast 0.
+    """
     cols = np.isfinite(vals).any(axis=0)
     if cols.sum() < 5:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0
     prof = np.full(e.size, np.nan)
     prof[cols] = np.nanmedian(vals[:, cols], axis=0)
     sign = -1.0 if dark else 1.0
     score = np.where(np.abs(e) <= search, sign * prof, np.nan)
     if not np.isfinite(score).any():
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0
     k = int(np.nanargmax(score))
-    near = np.abs(e - e[k]) <= half
-    far = cols & (np.abs(e - e[k]) > half + 3)
-    if not far.any():
-        return float(e[k]), 0.0, float(prof[k])
-    bg = float(np.median(prof[far]))
-    wgt = np.clip(sign * (prof - bg), 0, None) * (near & cols)
+    sides = []
+    for side in (-1, 1):
+        d = side * (e - e[k])
+        pick = cols & (d > half + 1) & (d <= half + 7)
+        if pick.sum() < 2:
+            return float(e[k]), 0.0
+        sides.append(float(np.median(prof[pick])))
+    contrast = min(sign * (prof[k] - b) for b in sides)
+    bg = max(sides) if dark else min(sides)
+    near = (np.abs(e - e[k]) <= half) & cols
+    wgt = np.clip(sign * (prof - bg), 0, None) * near
     pos = float((wgt * e).sum() / wgt.sum()) if wgt.sum() > 0 else float(e[k])
-    return pos, float(sign * (prof[k] - bg)), bg
+    return pos, float(contrast)
 
 
 def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, n_along: int = 48
@@ -208,10 +220,10 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, n_along
     half = max(1.0, c.thickness_px / 2 + 1)
     vals, e, t = _across(image, c, reach, n_along)
     search = half + 1 + 2 * f
-    pos, contrast, _ = _peak(vals, e, c.dark, half, search)
+    pos, contrast = _peak(vals, e, c.dark, half, search)
     m = n_along // 2
-    p1, c1, _ = _peak(vals[:m], e, c.dark, half, search)
-    p2, c2, _ = _peak(vals[m:], e, c.dark, half, search)
+    p1, c1 = _peak(vals[:m], e, c.dark, half, search)
+    p2, c2 = _peak(vals[m:], e, c.dark, half, search)
     u, n = line_frame(c.angle_rad)
     if c1 > 0 and c2 > 0 and abs(p1 - pos) < half + 2 and abs(p2 - pos) < half + 2:
         q1 = c.offset_px * n + t[:m].mean() * u + p1 * n
@@ -249,7 +261,7 @@ def check_roi(values: object, where: str = "roi") -> Roi:
 def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                  max_marks: int = 8, snr_threshold: float = 8.0,
                  roi: Roi | None = None,
-                 min_fill: float = 0.5, min_pixel_snr: float = 3.5) -> list[MarkCandidate]:
+                 min_fill: float = 0.5, min_pixel_snr: float = 2.4) -> list[MarkCandidate]:
     """Find long straight dark or bright thin marks.
 
     Parameters
@@ -258,7 +270,7 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         Grayscale image [DN].
     min_length_px : float, optional
         Shortest mark to report [px] (default :data:`MIN_LENGTH_PX`, at most 80 % of the
-        smaller image side).
+        smaller image side); lines from LENGTH_SLACK of it are reported.
     max_marks : int
         At most this many candidates, strongest (contrast x length) first.
     snr_threshold : float
@@ -266,10 +278,12 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     roi : (x, y, w, h), optional
         Search only this rectangle [px, x = column, y = row of its top-left corner].
     min_pixel_snr : float
-        Least contrast of a mark over the pixel noise, in one full-resolution pixel (less than
-        half the SNR 8 down to which marks are promised, leaving room for the blur of a narrow
-        groove): machining streaks are long and straight but faint, and the ridge filter
-        integrates them along their length.
+        Least contrast of a mark over the pixel noise, in one full-resolution pixel, against
+        the background on either side. Blur and pixel area leave a 2 px groove at SNR 8
+        (full-depth contrast / noise) only ~2.5 in its best pixel; machining streaks of a
+        third of the noise per pixel, long and straight, reach ~2.2 (the ridge filter
+        integrates them along their length into a strong response). The two overlap: use
+        ``roi`` on heavily textured surfaces.
     min_fill : float
         Fraction of a candidate's length its ridge pixels must cover: pieces of machining
         streaks that happen to line up are mostly gaps; a mark broken by dust is mostly mark.
@@ -317,12 +331,16 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         for dark in (True, False):
             resp = r if dark else -r
             mask = (resp > snr_threshold * mad) & flat
-            for pts in _merge(_components(mask, min_length_px / f / 4), centre_small):
+            # Pieces down to an eighth of the shortest mark: a wide or dusty mark breaks up.
+            for pts in _merge(_components(mask, max(3.0, min_length_px / f / 8)),
+                              centre_small):
                 a, d, t, thick = _pca_line(pts, centre_small)
                 length = (t.max() - t.min()) * f
                 # The response fades below the threshold about a filter width before each
-                # end of a faint mark: judge the length with that back.
-                if length + 2 * sigma * f < min_length_px or thick * f > 0.25 * length:
+                # end of a faint, blurred mark: judge the length with that back, and with
+                # LENGTH_SLACK (a 100 px mark at SNR 8 keeps ~85 px of ridge).
+                if (length + 2 * sigma * f < LENGTH_SLACK * min_length_px
+                        or thick * f > 0.25 * length):
                     continue
                 fill = np.unique(np.floor(t)).size / (np.floor(t.max()) - np.floor(t.min()) + 1)
                 if fill < min_fill:
@@ -335,6 +353,8 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     noise_full = pixel_noise(_central(image, 1024))
     out = []
     for c in _dedupe(sorted(best, key=lambda c: -c.strength)):
+        # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
+        c, _ = _full_res(image, c, noise_full, f)
         c, snr = _full_res(image, c, noise_full, f)
         if snr >= min_pixel_snr:
             out.append(c)

@@ -176,7 +176,9 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
                 full_scale: float = 65535.0) -> ProfileFit:
     """Fit the groove model over the whole band of a detected mark (robust to dust)."""
     half = float(np.clip(2.5 * cand.thickness_px + 8, 10, 40))
-    trim = half
+    # Leave out the mark's blurred ends (the candidate's extent is already inside them),
+    # but not so much that a 100 px mark loses most of its length.
+    trim = min(half, max(4.0, 0.05 * cand.length_px))
     t0, t1 = cand.t_start_px + trim, cand.t_end_px - trim
     if t1 - t0 < 20:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px is too short "
