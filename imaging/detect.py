@@ -66,12 +66,12 @@ def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
     return abs(d1 - (-d2 if flipped else d2)) < tol_offset
 
 
-# Steger's condition |grad| < FLAT sigma |lambda|. Beside a strong step edge (a padded or
-# saturated band, a dark frame border) the filtered profile also curves, and at a distance d
-# from the step |grad| / (sigma |lambda|) = sigma / d: 0.5 let through a false ridge 2 sigma
-# from every such edge (reported as a "saturated" mark); 0.25 needs d > 4 sigma, where the
-# curvature of a step has decayed by e^-8.
-FLAT = 0.25
+# Steger's condition: the extremum across the line, |grad| / |lambda| px from the pixel centre,
+# lies within FLAT px of it (a little over half a pixel, so that a thin line running between
+# two rows of the block-averaged image still marks one of them). Beside a strong step edge (a
+# padded or saturated band) the profile also curves, at |grad| / |lambda| = sigma^2 / d from
+# the step: those false ridges are told apart later by the two-sided contrast (_peak).
+FLAT = 0.6
 
 
 def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -91,7 +91,7 @@ def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     lam1, lam2 = tr + disc, tr - disc
     # Keep the eigenvalue of larger magnitude, with its sign.
     lam = np.where(np.abs(lam1) >= np.abs(lam2), lam1, lam2)
-    flat = np.hypot(gx, gy) < FLAT * sigma * np.abs(lam)
+    flat = np.hypot(gx, gy) < FLAT * np.abs(lam)
     return (sigma**2) * lam, flat
 
 
@@ -422,13 +422,22 @@ def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     """
     out: list[MarkCandidate] = []
     for c in cands:
-        if any(c.dark == o.dark
-               and same_line(c.angle_rad, c.offset_px, o.angle_rad, o.offset_px,
-                             np.deg2rad(3), max(6.0, o.thickness_px))
+        if any(c.dark == o.dark and _near(c, o, np.deg2rad(3), max(6.0, o.thickness_px))
                and _overlap(c, o) for o in out):
             continue
         out.append(c)
     return out
+
+
+def _near(c: MarkCandidate, o: MarkCandidate, tol_angle: float, tol_px: float) -> bool:
+    """Whether c lies along o: directions within tol_angle, c's middle within tol_px of o's
+    line. (Comparing offsets instead would multiply a small angle difference by the lever
+    arm from the image centre.)"""
+    if abs(wrap_angle(c.angle_rad - o.angle_rad)) >= tol_angle:
+        return False
+    u, n = line_frame(c.angle_rad)
+    mid = c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+    return abs(float(mid @ line_frame(o.angle_rad)[1]) - o.offset_px) < tol_px
 
 
 def _overlap(c: MarkCandidate, o: MarkCandidate) -> bool:
