@@ -8,8 +8,9 @@ Model of a pixel near the mark (pixel-area integrated by 3x3 Gauss–Legendre qu
 a groove of width w seen through a Gaussian blur s, e the signed distance of the point from
 the reference line [px]. First one fit over the whole band gives the shape (w, s), the
 contrast and a refined line; then the mark is cut into short segments along its length and
-each segment's centre offset delta_k (with its own contrast A_k and level b_k) is fitted by
-Gauss–Newton with per-pixel weights from a shot + read noise model estimated from the data.
+each segment's centre offset delta_k (with its own contrast A_k, level b_k and background
+slope across the mark g_k) is fitted by Gauss–Newton with per-pixel weights from a shot +
+read noise model estimated from the data.
 The per-segment standard uncertainties come from each segment's Fisher information, so the
 line fit downstream propagates a real uncertainty.
 """
@@ -304,6 +305,32 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(np.median(r**2) / 0.4549), 0.0
 
 
+def _outside_slope(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float,
+                   every: int, nseg: int, ring: float = 6.0) -> np.ndarray:
+    """Background slope across the mark [DN/px] per segment, from a ring of pixels just
+    outside the band the centres are fitted on (half < |e| <= half + ring).
+
+    Outside the band on purpose: the slope fitted inside it shares its pixels' noise with
+    the centre (both odd in e), and would correlate with the centre's error by chance.
+    """
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                          half + ring)
+    sel = (np.abs(e) > half) & (vals < pf.full_scale_dn) & (vals > 0)
+    vals, e, t = vals[sel], e[sel], t[sel]
+    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
+    if every > 1:
+        keep = seg % every == 0
+        vals, e, seg = vals[keep], e[keep], seg[keep] // every
+    inside = seg < nseg
+    vals, e, seg = vals[inside], e[inside], seg[inside]
+    no = np.bincount(seg, minlength=nseg)
+    me = np.bincount(seg, e, minlength=nseg) / np.maximum(no, 1)
+    mr = np.bincount(seg, vals, minlength=nseg) / np.maximum(no, 1)
+    see = np.bincount(seg, (e - me[seg]) ** 2, minlength=nseg)
+    ser = np.bincount(seg, (e - me[seg]) * (vals - mr[seg]), minlength=nseg)
+    return np.where(see > 0, ser / np.maximum(see, 1e-12), 0.0)
+
+
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image") -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
@@ -327,6 +354,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     delta = np.zeros(nseg)
     amp = np.full(nseg, pf.contrast_dn)
     lev = np.full(nseg, pf.background_dn)
+    # Each segment has its own background slope across the mark: surface texture and uneven
+    # light tilt the background differently along the mark, and a slope left in the model
+    # moves the fitted centre (a false "illumination gradient"). Costs little precision: the
+    # slope is set by the pixels beside the groove, the centre by its flanks.
+    slp = np.full(nseg, pf.slope_across_dn_per_px)
+    k = 4
 
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
@@ -334,48 +367,41 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     for it in range(iterations + 1):
         ee = e - delta[seg]
         p, pe = table(ee)
-        mu = lev[seg] + pf.slope_across_dn_per_px * ee + amp[seg] * p
+        mu = lev[seg] + slp[seg] * ee + amp[seg] * p
         r = vals - mu
         if it == 1:
             # Noise model again, now from the segment model's residuals (local level and
             # contrast absorb illumination and texture that the band fit could not);
-            # each segment spends 3 of its pixels' degrees of freedom.
+            # each segment spends k of its pixels' degrees of freedom.
             npx = bc(np.ones_like(e))
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - 3, 1))[seg])
+            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
         wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
-        J = (-(amp[seg] * pe + pf.slope_across_dn_per_px), p, np.ones_like(p))
-        N = np.empty((nseg, 3, 3))
-        g = np.empty((nseg, 3))
-        for i in range(3):
+        J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
+        N = np.empty((nseg, k, k))
+        g = np.empty((nseg, k))
+        for i in range(k):
             g[:, i] = bc(wgt * J[i] * r)
-            for j in range(i, 3):
+            for j in range(i, k):
                 N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
         ok = np.linalg.det(N) > 0
         if it == iterations:
             break  # the last pass only refreshes weights and information at the solution
-        step = np.zeros((nseg, 3))
+        step = np.zeros((nseg, k))
         step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
         step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
         delta += step[:, 0]
         amp += step[:, 1]
         lev += step[:, 2]
-    cov = np.full((nseg, 3, 3), np.inf)
+        if k == 4:
+            slp += step[:, 3]
+    cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
     sigma = np.sqrt(cov[:, 0, 0])
     npx = bc(np.ones_like(e))
-    chi2_red = bc(wgt * r * r) / np.maximum(npx - 3, 1)
+    chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
-    # Local background slope across the mark, from the pixels outside the groove.
-    outer = np.abs(ee) > pf.width_px / 2 + 2.5 * pf.blur_px
-    so = seg[outer]
-    eo, ro = ee[outer], (vals - amp[seg] * p)[outer]
-    no = np.bincount(so, minlength=nseg)
-    me = np.bincount(so, eo, minlength=nseg) / np.maximum(no, 1)
-    mr = np.bincount(so, ro, minlength=nseg) / np.maximum(no, 1)
-    see = np.bincount(so, (eo - me[so]) ** 2, minlength=nseg)
-    ser = np.bincount(so, (eo - me[so]) * (ro - mr[so]), minlength=nseg)
-    slope = np.where(see > 0, ser / np.maximum(see, 1e-12), 0.0)
+    slope = _outside_slope(image, pf, half, segment_px, every, nseg)
     u, n = line_frame(pf.angle_rad)
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2)
