@@ -154,10 +154,10 @@ def _odd_pad(img: np.ndarray, pad: int) -> np.ndarray:
     return np.pad(img, pad, mode="reflect", reflect_type="odd")
 
 
-def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int
+def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Profiles across a candidate at ``n_along`` places, nearest-pixel sampled at 1 px steps
-    (NaN off the image): (values (n_along, E), e [px], t [px])."""
+    (NaN off the image and where clipped at 0 or ``top``): (values (n_along, E), e, t [px])."""
     h, w = image.shape
     u, n = line_frame(c.angle_rad)
     e = np.arange(-reach, reach + 1, dtype=float)
@@ -168,7 +168,7 @@ def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int
     inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
     vals = image[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
     # Off the image and clipped pixels (a padded border, a saturated patch) say nothing.
-    vals = np.where(inside & (vals > 0) & (vals < full_scale(image)), vals, np.nan)
+    vals = np.where(inside & (vals > 0) & (vals < top), vals, np.nan)
     return vals, e, t
 
 
@@ -206,8 +206,8 @@ def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: floa
     return pos, float(contrast)
 
 
-def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, n_along: int = 48
-              ) -> tuple[MarkCandidate, float]:
+def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: float,
+              n_along: int = 48) -> tuple[MarkCandidate, float]:
     """The candidate re-centred on the full-resolution image, and its contrast / pixel noise.
 
     The block-averaged search places a mark only to a block or so, and near the frame edge
@@ -218,7 +218,7 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, n_along
     """
     reach = int(np.ceil(c.thickness_px + 8 + 3 * f))
     half = max(1.0, c.thickness_px / 2 + 1)
-    vals, e, t = _across(image, c, reach, n_along)
+    vals, e, t = _across(image, c, reach, n_along, top)
     search = half + 1 + 2 * f
     pos, contrast = _peak(vals, e, c.dark, half, search)
     m = n_along // 2
@@ -311,7 +311,9 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     hs, ws = h // f, w // f
     small = image[:hs * f, :ws * f].astype(np.float32)
     if f > 1:
-        small = small.reshape(hs, f, ws, f).mean(axis=(1, 3))
+        # INTER_AREA with an integer factor on an exactly divisible crop is the f x f block
+        # mean (OpenCV's is ~10x faster than numpy's reshape-mean here).
+        small = cv2.resize(small, (ws, hs), interpolation=cv2.INTER_AREA)
     centre_small = np.array([(ws - 1) / 2, (hs - 1) / 2])
     noise = pixel_noise(small)
     best: list[MarkCandidate] = []
@@ -351,11 +353,12 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                                      centre_small, np.array([(w - 1) / 2, (h - 1) / 2]),
                                      contrast))
     noise_full = pixel_noise(_central(image, 1024))
+    top = full_scale(image)
     out = []
     for c in _dedupe(sorted(best, key=lambda c: -c.strength)):
         # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
-        c, _ = _full_res(image, c, noise_full, f)
-        c, snr = _full_res(image, c, noise_full, f)
+        c, _ = _full_res(image, c, noise_full, f, top)
+        c, snr = _full_res(image, c, noise_full, f, top)
         if snr >= min_pixel_snr:
             out.append(c)
     out = _dedupe(out)[:max_marks]
