@@ -18,10 +18,11 @@ Candidate effects (each a few design columns with physical meaning):
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import chi2
 
 from align.loop import Candidate, LoopReport, StageFit, Term, periodogram_test, run_loop
 from imaging import (
@@ -133,6 +134,84 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 
 @dataclass(frozen=True)
+class FrameDistortion:
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit).
+
+    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
+    ``applied``: whether it was significant and the marks were undistorted with it;
+    ``chi2_dof_before``/``after``: all lines' straightness; ``p_value`` of the k1 = 0 test.
+    """
+
+    k1: float
+    k1_u: float
+    applied: bool
+    n_lines: int
+    chi2_dof_before: float
+    chi2_dof_after: float
+    p_value: float
+
+    def to_json(self) -> dict:
+        return {"k1": self.k1, "k1_u": self.k1_u, "applied": self.applied,
+                "lines": self.n_lines, "chi2_dof_before": self.chi2_dof_before,
+                "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
+
+
+def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
+    out = 0.0
+    for m in ms:
+        q = undistort(m.points, [k1], scale) if k1 else m.points
+        out += fit_line(q, m.sigma, reject_sigma=None).chi2
+    return out
+
+
+def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> FrameDistortion:
+    """Joint plumb-line k1 over every mark of one frame, weighted by the centres' sigma.
+
+    Variable projection: for a given k1 each line is a weighted straight-line fit, so chi2 is
+    a function of k1 alone, minimised by Newton steps from finite differences; u(k1) =
+    sqrt(2 / chi2'') at the minimum.
+    Significance: chi2 drop against chi2(1) at ``alpha`` and a BIC gain (ln N).
+    """
+    scale = half_diagonal(ms[0].image_shape)
+    n = sum(len(m.points) for m in ms)
+    dof = max(n - 2 * len(ms), 1)
+    c0 = _chi2_lines(ms, 0.0, scale)
+    k1, c1, h, curv = 0.0, c0, 0.01, 0.0
+    for _ in range(8):  # Newton on chi2(k1): quadratic near the minimum, not far from it
+        cp, cm = _chi2_lines(ms, k1 + h, scale), _chi2_lines(ms, k1 - h, scale)
+        curv = (cp - 2 * c1 + cm) / h**2
+        if curv <= 0:
+            break
+        step = -(cp - cm) / (2 * h) / curv
+        k1 += step
+        c1 = _chi2_lines(ms, k1, scale)
+        h = max(min(h, 3 * np.sqrt(2 / curv)), 1e-6)
+        if abs(step) < 0.01 * np.sqrt(2 / curv):
+            break
+    drop = c0 - c1
+    p = float(chi2.sf(max(drop, 0.0), 1))
+    applied = bool(curv > 0 and p < alpha and drop > np.log(n))
+    return FrameDistortion(float(k1), float(np.sqrt(2 / curv)) if curv > 0 else float("inf"),
+                           applied, len(ms), c0 / dof, (c1 if applied else c0) / max(dof - 1, 1),
+                           p)
+
+
+def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
+    """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
+    q = undistort(m.points, [k1], half_diagonal(m.image_shape))
+    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
+    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None))
+
+
+def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
+    """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
+    scale = half_diagonal(m.image_shape)
+    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None).angle_rad
+         for k in (k1 - h, k1 + h)]
+    return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
+
+
+@dataclass(frozen=True)
 class MarkResult:
     """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
 
@@ -155,6 +234,7 @@ class MarkResult:
     measurement: MarkMeasurement | None = None
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
+    frame: FrameDistortion | None = None
 
     @property
     def unexplained_structure(self) -> bool:
@@ -177,6 +257,8 @@ class MarkResult:
             "unexplained_structure": self.unexplained_structure,
             "uncertainty_inflation": self.uncertainty_inflation,
         })
+        if self.frame is not None:
+            d["frame_radial_distortion"] = self.frame.to_json()
         if self.loop:
             d["residual_rms_px"] = {"before": self.loop.before.rms, "after": self.loop.after.rms}
             d["chi2_dof"] = {"before": self.loop.before.chi2 / max(self.loop.before.dof, 1),
@@ -229,12 +311,30 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
                               expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
+    ms = [m for m in found if isinstance(m, MarkMeasurement)]
+    frame = None
+    candidates: Sequence[Candidate] = CANDIDATES
+    if len(ms) >= 2 and camera is None:
+        # Several marks, one lens: distortion is a property of the frame, fitted jointly;
+        # each mark's own loop may then not invent a distortion of its own (a bent mark
+        # shows as unexplained structure instead, and its u is inflated).
+        frame = frame_distortion(ms, alpha)
+        candidates = tuple(c for c in CANDIDATES if c.name != RADIAL)
     out = []
     for i, m in enumerate(found):
         if isinstance(m, ImageInputError):
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
-        else:
+            continue
+        if frame is None:
             out.append(loop_mark(m, name, i, alpha))
+            continue
+        before = m.line.angle_rad
+        mu = _undistorted(m, frame.k1) if frame.applied else m
+        r = loop_mark(mu, name, i, alpha, candidates)
+        # The shared k1 is uncertain: carry it into every corrected angle.
+        extra = _angle_sensitivity(m, frame.k1 if frame.applied else 0.0) * frame.k1_u
+        out.append(replace(r, angle_before_rad=before, frame=frame,
+                           angle_u_rad=float(np.hypot(r.angle_u_rad, extra))))
     return out
 
 

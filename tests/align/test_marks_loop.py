@@ -93,3 +93,27 @@ def test_no_pixel_locking_normalised_errors_per_angle_band():
     false = sum(f for _, f in res.values())
     print(f"false effects: {false} of {3 * n}")
     assert false <= 0.01 * 3 * n
+
+
+@pytest.mark.parametrize("k1,seed", [(0.0, 1), (-0.08, 2)])
+def test_marks_of_one_frame_share_one_distortion(k1, seed):
+    """Issue 9 item 4: k1 fitted jointly over the frame's marks (never one per line), its
+    uncertainty carried into every corrected angle."""
+    rng = np.random.default_rng(seed)
+    marks = tuple(MarkSpec(np.deg2rad(rng.uniform(-3, 3) + (90 if j == 2 else 0)), off, 600, 4.0)
+                  for j, off in enumerate((-250.0, 200.0, 300.0)))
+    spec = ImageSpec(marks=marks, width=1024, height=768, full_well_e=full_well_for_snr(40, -0.6),
+                     seed=seed, camera=CameraGeometry(focal_px=1000.0, k1=k1))
+    s = render_marks(spec, with_crlb=False)
+    res = [r for r in measure_image(s.image.astype(float)) if r.found]
+    assert len(res) == 3
+    fr = res[0].frame
+    k1n = k1 * (half_diagonal((768, 1024)) / 1000.0) ** 2
+    assert fr.applied == (k1 != 0)
+    # 5 u, or 2 % of k1: the plumb-line model puts the principal point at the image centre.
+    assert abs(fr.k1 - k1n) < max(5 * fr.k1_u, 0.02 * abs(k1n))
+    for r in res:
+        assert not any(e.name == RADIAL for e in r.loop.effects)
+        assert r.to_json()["frame_radial_distortion"]["applied"] == fr.applied
+        t = min(s.truth.marks, key=lambda t: abs(angle_error(r.angle_rad, t.image_angle_rad)))
+        assert abs(angle_error(r.angle_rad, t.image_angle_rad)) < 4.5 * r.angle_u_rad
