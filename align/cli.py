@@ -83,6 +83,12 @@ def cmd_marks(args: argparse.Namespace) -> int:
                   f"length {r.length_px:.0f} px, {'dark' if r.dark else 'bright'}")
             for line in r.loop.summary_lines():
                 print(f"    {line}")
+            if r.frame is not None:
+                f = r.frame
+                state = ("applied" if f.applied else "not significant" if f.consistent else
+                         "LINES DISAGREE beyond one distortion: u inflated")
+                print(f"    frame ({f.n_lines} marks, one lens): k1 {f.k1:+.4g} ± {f.k1_u:.2g}, "
+                      f"{state}")
             if plot_dir is not None:
                 img = read_image(path) if r.measurement is not None else None
                 print(f"    plot: {plot_mark(r, plot_dir, img)}")

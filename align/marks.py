@@ -138,13 +138,18 @@ class FrameDistortion:
     """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit).
 
     ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
-    ``applied``: whether it was significant and the marks were undistorted with it;
-    ``chi2_dof_before``/``after``: all lines' straightness; ``p_value`` of the k1 = 0 test.
+    ``applied``: whether it was significant, explained the lines, and the marks were
+    undistorted with it; ``consistent``: whether the lines are straight within their
+    uncertainties once it is removed (False: the lines disagree in a way no single radial
+    distortion explains — bent marks, or lines that are not straight in the world — and every
+    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
+    straightness; ``p_value`` of the k1 = 0 test.
     """
 
     k1: float
     k1_u: float
     applied: bool
+    consistent: bool
     n_lines: int
     chi2_dof_before: float
     chi2_dof_after: float
@@ -152,7 +157,8 @@ class FrameDistortion:
 
     def to_json(self) -> dict:
         return {"k1": self.k1, "k1_u": self.k1_u, "applied": self.applied,
-                "lines": self.n_lines, "chi2_dof_before": self.chi2_dof_before,
+                "consistent": self.consistent, "lines": self.n_lines,
+                "chi2_dof_before": self.chi2_dof_before,
                 "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
 
 
@@ -190,10 +196,12 @@ def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> Fram
             break
     drop = c0 - c1
     p = float(chi2.sf(max(drop, 0.0), 1))
-    applied = bool(curv > 0 and p < alpha and drop > np.log(n))
+    significant = bool(curv > 0 and p < alpha and drop > np.log(n))
+    after = (c1 if significant else c0) / max(dof - significant, 1)
+    consistent = bool(chi2.sf(after * max(dof - significant, 1), max(dof - significant, 1))
+                      >= alpha)
     return FrameDistortion(float(k1), float(np.sqrt(2 / curv)) if curv > 0 else float("inf"),
-                           applied, len(ms), c0 / dof, (c1 if applied else c0) / max(dof - 1, 1),
-                           p)
+                           significant and consistent, consistent, len(ms), c0 / dof, after, p)
 
 
 def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
@@ -333,8 +341,10 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         r = loop_mark(mu, name, i, alpha, candidates)
         # The shared k1 is uncertain: carry it into every corrected angle.
         extra = _angle_sensitivity(m, frame.k1 if frame.applied else 0.0) * frame.k1_u
-        out.append(replace(r, angle_before_rad=before, frame=frame,
-                           angle_u_rad=float(np.hypot(r.angle_u_rad, extra))))
+        au = float(np.hypot(r.angle_u_rad, extra))
+        if not frame.consistent:
+            au *= max(1.0, np.sqrt(frame.chi2_dof_after) / r.uncertainty_inflation)
+        out.append(replace(r, angle_before_rad=before, frame=frame, angle_u_rad=au))
     return out
 
 
