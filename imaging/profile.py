@@ -396,7 +396,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             slp += step[:, 3]
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
-    sigma = np.sqrt(cov[:, 0, 0])
+    # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
+    sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     npx = bc(np.ones_like(e))
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
