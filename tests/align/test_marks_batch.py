@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 import align.marks
 from align.cli import main
@@ -75,3 +76,20 @@ def test_cli_roi_and_min_length(tmp_path, capsys):
     assert "--roi" in capsys.readouterr().err
     assert main(["marks", str(p), "--roi", "1000,0,100,100"]) == 2
     assert "reaches outside" in capsys.readouterr().err
+
+
+def test_session_roi_key(tmp_path):
+    from align.errors import InputError
+    from align.session.config import load_session
+
+    folder = tmp_path / "s"
+    assert main(["synth", "session", str(folder), "--seed", "3"]) == 0
+    toml = folder / "session.toml"
+    text = toml.read_text()
+    first = text.index("[[images]]") + len("[[images]]")
+    toml.write_text(text[:first] + "\nroi = [10, 20, 300, 200]" + text[first:])
+    s = load_session(folder)
+    assert s.images[0].roi == (10, 20, 300, 200) and s.images[1].roi is None
+    toml.write_text(text[:first] + "\nroi = [10, 20, 3]" + text[first:])
+    with pytest.raises(InputError, match=r"\[\[images\]\] #1 roi"):
+        load_session(folder)
