@@ -118,15 +118,22 @@ def cmd_camera(args: argparse.Namespace) -> int:
         except ImageInputError as exc:
             print(f"{p}: skipped: {exc}", file=sys.stderr)
     try:
-        model, failed = calibrate_chessboard(imgs, (cols, rows), args.square)
+        model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
+                                             fix_k3=args.fix_k3, fix_aspect=args.fix_aspect)
     except ImageInputError as exc:
         raise UsageError(str(exc)) from None
     for k, v in failed.items():
         print(f"{k}: skipped: {v}", file=sys.stderr)
-    K, D = model.camera_matrix, model.dist_coeffs
+    K, D, u = model.camera_matrix, model.dist_coeffs, model.u or {}
     print(f"{model.views} views, RMS reprojection {model.rms_px:.3f} px")
-    print(f"fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} px")
-    print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{v:+.5f}" for v in D[:5]))
+    for name, rms in (model.per_view_rms_px or {}).items():
+        print(f"    {name}: RMS {rms:.3f} px")
+    vals = dict(zip(("fx", "fy", "cx", "cy"), (K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+                    strict=True))
+    print(" ".join(f"{k} {v:.2f} ± {u.get(k, np.nan):.2f}" for k, v in vals.items()) + " px")
+    print("distortion " + " ".join(f"{k} {v:+.5f} ± {u.get(k, np.nan):.5f}"
+                                   for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5],
+                                                   strict=False)))
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(model.to_json())
@@ -589,6 +596,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     c.add_argument("--square", type=float, default=1.0, help="square size (any unit)")
     c.add_argument("--json", help="write the camera model to this new JSON file")
+    c.add_argument("--fix-k3", action="store_true", help="keep k3 at 0")
+    c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
     c.add_argument("--force", action="store_true")
     c.set_defaults(func=cmd_camera)
 
