@@ -162,6 +162,11 @@ class FrameDistortion:
                 "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
 
 
+K1_MAX = 0.3
+"""Largest |k1| at the half-diagonal taken as a lens (30 % at the corner; beyond ~1/3 the
+barrel model folds the image, so a larger fitted k1 means the lines do not constrain it)."""
+
+
 def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
     out = 0.0
     for m in ms:
@@ -183,6 +188,7 @@ def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> Fram
     dof = max(n - 2 * len(ms), 1)
     c0 = _chi2_lines(ms, 0.0, scale)
     k1, c1, h, curv = 0.0, c0, 0.01, 0.0
+    converged = False
     for _ in range(8):  # Newton on chi2(k1): quadratic near the minimum, not far from it
         cp, cm = _chi2_lines(ms, k1 + h, scale), _chi2_lines(ms, k1 - h, scale)
         curv = (cp - 2 * c1 + cm) / h**2
@@ -190,13 +196,18 @@ def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> Fram
             break
         step = -(cp - cm) / (2 * h) / curv
         k1 += step
+        if abs(k1) > K1_MAX:
+            break  # short or few lines leave k1 unconstrained: no lens bends that much
         c1 = _chi2_lines(ms, k1, scale)
         h = max(min(h, 3 * np.sqrt(2 / curv)), 1e-6)
         if abs(step) < 0.01 * np.sqrt(2 / curv):
+            converged = True
             break
+    if not converged:
+        k1, c1 = 0.0, c0
     drop = c0 - c1
     p = float(chi2.sf(max(drop, 0.0), 1))
-    significant = bool(curv > 0 and p < alpha and drop > np.log(n))
+    significant = bool(converged and curv > 0 and p < alpha and drop > np.log(n))
     after = (c1 if significant else c0) / max(dof - significant, 1)
     consistent = bool(chi2.sf(after * max(dof - significant, 1), max(dof - significant, 1))
                       >= alpha)
@@ -339,8 +350,9 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         before = m.line.angle_rad
         mu = _undistorted(m, frame.k1) if frame.applied else m
         r = loop_mark(mu, name, i, alpha, candidates)
-        # The shared k1 is uncertain: carry it into every corrected angle.
-        extra = _angle_sensitivity(m, frame.k1 if frame.applied else 0.0) * frame.k1_u
+        # The shared k1 is uncertain: carry it into every angle corrected with it. (Not
+        # applied, the declared model holds, as for a single mark: no lens distortion.)
+        extra = _angle_sensitivity(m, frame.k1) * frame.k1_u if frame.applied else 0.0
         au = float(np.hypot(r.angle_u_rad, extra))
         if not frame.consistent:
             au *= max(1.0, np.sqrt(frame.chi2_dof_after) / r.uncertainty_inflation)
