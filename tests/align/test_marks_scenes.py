@@ -54,9 +54,6 @@ def test_sixteen_small_random_scenes():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 9 criteria not yet met: over scenes 0-199 "
-                   "(2026-11-23) 98.9 % found, 3 extra, 0 gross; the misses are ~110 px "
-                   "long 7-8 px wide marks whose coarse direction is off by > 3 deg")
 def test_two_hundred_random_scenes():
     n_true, n_found, gross, extra, missed = _score(range(200))
     print(f"{n_found}/{n_true} found, gross {gross}, extra in {extra}, missed in {missed}")
