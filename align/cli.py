@@ -120,25 +120,29 @@ def cmd_marks(args: argparse.Namespace) -> int:
     import numpy as np
 
     from align.documents import marks_document
-    from align.marks import measure_file
+    from align.marks import measure_files
     from align.plots import plot_mark
     from axisbase.output import write_json
-    from imaging import CameraModel, read_image
+    from imaging import CameraModel, check_roi, read_image
 
     _unique(args.images, "images")
+    roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
     camera = CameraModel.load(args.camera) if args.camera else None
     plan = _plan(args, [*args.images] + ([args.camera] if args.camera else []))
     out = plan.add("--json", args.json, stdout_ok=True)
     plot_dir = plan.add("--plot", args.plot, folder=True)
     results = []
-    failed = 0
-    for path in _progress(args.images, "marks"):
-        res = measure_file(path, camera, alpha=args.alpha, max_marks=args.max_marks,
-                           expect_one=args.one)
+    failed = internal = 0
+    batch = measure_files(_progress(args.images, "marks"), camera, alpha=args.alpha,
+                          max_marks=args.max_marks, expect_one=args.one, roi=roi,
+                          min_length_px=args.min_length)
+    for res in batch:
         for r in res:
+            path = r.image
             results.append(r)
             if not r.found:
                 failed += 1
+                internal += r.internal_error
                 log.error("%s: FAILED: %s", path, r.error)
                 continue
             print(f"{path} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
@@ -146,6 +150,12 @@ def cmd_marks(args: argparse.Namespace) -> int:
                   f"length {r.length_px:.0f} px, {'dark' if r.dark else 'bright'}")
             for line in r.loop.summary_lines():
                 print(f"    {line}")
+            if r.frame is not None:
+                f = r.frame
+                state = ("applied" if f.applied else "not significant" if f.consistent else
+                         "LINES DISAGREE beyond one distortion: u inflated")
+                print(f"    frame ({f.n_lines} marks, one lens): k1 {f.k1:+.4g} ± {f.k1_u:.2g}, "
+                      f"{state}")
             if plot_dir is not None:
                 img = read_image(path) if r.measurement is not None else None
                 print(f"    plot: {plot_mark(r, plot_dir, img)}")
@@ -154,7 +164,10 @@ def cmd_marks(args: argparse.Namespace) -> int:
     _warn(doc["warnings"])
     if out is not None:
         _wrote(write_json(out, doc, args.force))
-    return 2 if failed else 0
+    if internal:
+        log.error("align marks: %d image(s) hit an internal error (please report); the "
+                  "others were measured", internal)
+    return 1 if internal else 2 if failed else 0
 
 
 # ----------------------------------------------------------------------------- camera
@@ -188,13 +201,20 @@ def cmd_camera(args: argparse.Namespace) -> int:
             imgs[p] = img.astype(np.uint8 if img.max() <= 255 else np.uint16)
         except ImageInputError as exc:
             log.warning("%s: skipped: %s", p, exc)
-    model, failed = calibrate_chessboard(imgs, (cols, rows), args.square)
+    model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
+                                         fix_k3=args.fix_k3, fix_aspect=args.fix_aspect)
     for k, v in failed.items():
         log.warning("%s: skipped: %s", k, v)
-    K, D = model.camera_matrix, model.dist_coeffs
+    K, D, u = model.camera_matrix, model.dist_coeffs, model.u or {}
     print(f"{model.views} views, RMS reprojection {model.rms_px:.3f} px")
-    print(f"fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f} px")
-    print("distortion k1 k2 p1 p2 k3: " + " ".join(f"{v:+.5f}" for v in D[:5]))
+    for name, rms in (model.per_view_rms_px or {}).items():
+        print(f"    {name}: RMS {rms:.3f} px")
+    vals = dict(zip(("fx", "fy", "cx", "cy"), (K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+                    strict=True))
+    print(" ".join(f"{k} {v:.2f} ± {u.get(k, np.nan):.2f}" for k, v in vals.items()) + " px")
+    print("distortion " + " ".join(f"{k} {v:+.5f} ± {u.get(k, np.nan):.5f}"
+                                   for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5],
+                                                   strict=False)))
     if out is not None:
         _wrote(write_json(out, camera_document(model, _settings(args), args.images),
                           args.force))
@@ -757,6 +777,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     m.add_argument("--max-marks", type=_number(1, 1000, integer=True), default=8,
                    help="most marks reported per image")
+    m.add_argument("--roi", metavar="X,Y,W,H",
+                   help="search only this rectangle [px]: top-left column, row, width, height")
+    m.add_argument("--min-length", type=POSITIVE, metavar="PX",
+                   help="shortest mark to report [px] (default 100, at most 80 %% of the "
+                   "image's smaller side)")
     m.add_argument("--one", action="store_true",
                    help="each image holds one mark: two competing marks are an error")
     m.set_defaults(func=cmd_marks)
@@ -766,6 +791,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS")
     c.add_argument("--square", type=POSITIVE, default=1.0, help="square size (any unit)")
     c.add_argument("--json", help="write the camera model to this new JSON file ('-': stdout)")
+    c.add_argument("--fix-k3", action="store_true", help="keep k3 at 0")
+    c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
     c.set_defaults(func=cmd_camera)
 
     k = add("calibrate", "ellipsoid calibration of the triad from static poses", writes,

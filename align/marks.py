@@ -17,17 +17,19 @@ Candidate effects (each a few design columns with physical meaning):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import chi2
 
 from align.loop import Candidate, LoopReport, StageFit, Term, periodogram_test, run_loop
 from imaging import (
     CameraModel,
     ImageInputError,
     MarkMeasurement,
+    Roi,
     fit_line,
     measure_marks,
     read_image,
@@ -132,6 +134,103 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 
 @dataclass(frozen=True)
+class FrameDistortion:
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit).
+
+    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
+    ``applied``: whether it was significant, explained the lines, and the marks were
+    undistorted with it; ``consistent``: whether the lines are straight within their
+    uncertainties once it is removed (False: the lines disagree in a way no single radial
+    distortion explains — bent marks, or lines that are not straight in the world — and every
+    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
+    straightness; ``p_value`` of the k1 = 0 test.
+    """
+
+    k1: float
+    k1_u: float
+    applied: bool
+    consistent: bool
+    n_lines: int
+    chi2_dof_before: float
+    chi2_dof_after: float
+    p_value: float
+
+    def to_json(self) -> dict:
+        return {"k1": self.k1, "k1_u": self.k1_u, "applied": self.applied,
+                "consistent": self.consistent, "lines": self.n_lines,
+                "chi2_dof_before": self.chi2_dof_before,
+                "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
+
+
+K1_MAX = 0.3
+"""Largest |k1| at the half-diagonal taken as a lens (30 % at the corner; beyond ~1/3 the
+barrel model folds the image, so a larger fitted k1 means the lines do not constrain it)."""
+
+
+def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
+    out = 0.0
+    for m in ms:
+        q = undistort(m.points, [k1], scale) if k1 else m.points
+        out += fit_line(q, m.sigma, reject_sigma=None).chi2
+    return out
+
+
+def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> FrameDistortion:
+    """Joint plumb-line k1 over every mark of one frame, weighted by the centres' sigma.
+
+    Variable projection: for a given k1 each line is a weighted straight-line fit, so chi2 is
+    a function of k1 alone, minimised by Newton steps from finite differences; u(k1) =
+    sqrt(2 / chi2'') at the minimum.
+    Significance: chi2 drop against chi2(1) at ``alpha`` and a BIC gain (ln N).
+    """
+    scale = half_diagonal(ms[0].image_shape)
+    n = sum(len(m.points) for m in ms)
+    dof = max(n - 2 * len(ms), 1)
+    c0 = _chi2_lines(ms, 0.0, scale)
+    k1, c1, h, curv = 0.0, c0, 0.01, 0.0
+    converged = False
+    for _ in range(8):  # Newton on chi2(k1): quadratic near the minimum, not far from it
+        cp, cm = _chi2_lines(ms, k1 + h, scale), _chi2_lines(ms, k1 - h, scale)
+        curv = (cp - 2 * c1 + cm) / h**2
+        if curv <= 0:
+            break
+        step = -(cp - cm) / (2 * h) / curv
+        k1 += step
+        if abs(k1) > K1_MAX:
+            break  # short or few lines leave k1 unconstrained: no lens bends that much
+        c1 = _chi2_lines(ms, k1, scale)
+        h = max(min(h, 3 * np.sqrt(2 / curv)), 1e-6)
+        if abs(step) < 0.01 * np.sqrt(2 / curv):
+            converged = True
+            break
+    if not converged:
+        k1, c1 = 0.0, c0
+    drop = c0 - c1
+    p = float(chi2.sf(max(drop, 0.0), 1))
+    significant = bool(converged and curv > 0 and p < alpha and drop > np.log(n))
+    after = (c1 if significant else c0) / max(dof - significant, 1)
+    consistent = bool(chi2.sf(after * max(dof - significant, 1), max(dof - significant, 1))
+                      >= alpha)
+    return FrameDistortion(float(k1), float(np.sqrt(2 / curv)) if curv > 0 else float("inf"),
+                           significant and consistent, consistent, len(ms), c0 / dof, after, p)
+
+
+def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
+    """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
+    q = undistort(m.points, [k1], half_diagonal(m.image_shape))
+    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
+    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None))
+
+
+def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
+    """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
+    scale = half_diagonal(m.image_shape)
+    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None).angle_rad
+         for k in (k1 - h, k1 + h)]
+    return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
+
+
+@dataclass(frozen=True)
 class MarkResult:
     """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
 
@@ -153,6 +252,8 @@ class MarkResult:
     loop: LoopReport | None = None
     measurement: MarkMeasurement | None = None
     uncertainty_inflation: float = 1.0
+    internal_error: bool = False
+    frame: FrameDistortion | None = None
 
     @property
     def unexplained_structure(self) -> bool:
@@ -175,6 +276,8 @@ class MarkResult:
             "unexplained_structure": self.unexplained_structure,
             "uncertainty_inflation": self.uncertainty_inflation,
         })
+        if self.frame is not None:
+            d["frame_radial_distortion"] = self.frame.to_json()
         if self.loop:
             d["residual_rms_px"] = {"before": self.loop.before.rms, "after": self.loop.after.rms}
             d["chi2_dof"] = {"before": self.loop.before.chi2 / max(self.loop.before.dof, 1),
@@ -215,28 +318,73 @@ def structure_inflation(rep: LoopReport) -> float:
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
-                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
+                  roi: Roi | None = None, min_length_px: float | None = None
                   ) -> list[MarkResult]:
-    """Every mark of an in-memory image, each through the loop; failures become entries."""
+    """Every mark of an in-memory image, each through the loop; failures become entries.
+
+    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search.
+    """
     try:
         found = measure_marks(image, camera, where=name, max_marks=max_marks,
-                              expect_one=expect_one)
+                              expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
+    ms = [m for m in found if isinstance(m, MarkMeasurement)]
+    frame = None
+    candidates: Sequence[Candidate] = CANDIDATES
+    if len(ms) >= 2 and camera is None:
+        # Several marks, one lens: distortion is a property of the frame, fitted jointly;
+        # each mark's own loop may then not invent a distortion of its own (a bent mark
+        # shows as unexplained structure instead, and its u is inflated).
+        frame = frame_distortion(ms, alpha)
+        candidates = tuple(c for c in CANDIDATES if c.name != RADIAL)
     out = []
     for i, m in enumerate(found):
         if isinstance(m, ImageInputError):
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
-        else:
+            continue
+        if frame is None:
             out.append(loop_mark(m, name, i, alpha))
+            continue
+        before = m.line.angle_rad
+        mu = _undistorted(m, frame.k1) if frame.applied else m
+        r = loop_mark(mu, name, i, alpha, candidates)
+        # The shared k1 is uncertain: carry it into every angle corrected with it. (Not
+        # applied, the declared model holds, as for a single mark: no lens distortion.)
+        extra = _angle_sensitivity(m, frame.k1) * frame.k1_u if frame.applied else 0.0
+        au = float(np.hypot(r.angle_u_rad, extra))
+        if not frame.consistent:
+            au *= max(1.0, np.sqrt(frame.chi2_dof_after) / r.uncertainty_inflation)
+        out.append(replace(r, angle_before_rad=before, frame=frame, angle_u_rad=au))
     return out
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,
-                 max_marks: int = 8, expect_one: bool = False) -> list[MarkResult]:
+                 max_marks: int = 8, expect_one: bool = False, roi: Roi | None = None,
+                 min_length_px: float | None = None) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
         img = read_image(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks, expect_one)
+    return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
+                         min_length_px)
+
+
+def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,
+                  alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
+                  roi: Roi | None = None, min_length_px: float | None = None
+                  ) -> Iterator[list[MarkResult]]:
+    """:func:`measure_file` over a batch, one list per file; nothing escapes one image.
+
+    Bad input is already a failed entry; anything else raised inside one image is a bug, but
+    it must not cost the user the other images: it becomes that image's failed entry, marked
+    ``internal_error`` ("internal error: <type>: <message>"), and the batch goes on.
+    """
+    for path in paths:
+        try:
+            yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px)
+        except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
+            yield [MarkResult(image=str(path), found=False, internal_error=True,
+                              error=f"internal error: {type(exc).__name__}: {exc}")]

@@ -3,14 +3,14 @@
 Public API::
 
     read_image(path) -> ndarray
-    detect_marks(image) -> [MarkCandidate]
+    detect_marks(image, min_length_px=None, roi=None) -> [MarkCandidate]
     measure_marks(image, camera=None) -> [MarkMeasurement | ImageInputError]
     fit_line(points, sigma, extra=None) -> LineFit      (accepts extra model terms)
     CameraModel, calibrate_chessboard, plumb_line
 """
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
-from imaging.detect import MarkCandidate, detect_marks, line_frame, wrap_angle
+from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.io import read_image
 from imaging.linefit import LineFit, fit_line
@@ -20,7 +20,8 @@ from imaging.profile import Centres, ProfileFit
 
 __all__ = [
     "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
-    "PlumbLineFit", "ProfileFit", "calibrate_chessboard", "chessboard_lines", "detect_marks",
+    "PlumbLineFit", "ProfileFit", "Roi", "calibrate_chessboard", "check_roi",
+    "chessboard_lines", "detect_marks",
     "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
     "plumb_line", "read_image", "undistort", "wrap_angle",
 ]

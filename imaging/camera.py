@@ -1,7 +1,9 @@
 """Camera model (OpenCV intrinsics + distortion): chessboard calibration, load/save, undistortion.
 
 The JSON file holds ``camera_matrix`` (3x3), ``dist_coeffs`` (OpenCV order k1 k2 p1 p2 k3 ...),
-``image_size`` [width, height] and the calibration's RMS reprojection error [px].
+``image_size`` [width, height], the calibration's RMS reprojection error [px], and (from
+OpenCV's extended calibration) ``u``: standard uncertainty of each intrinsic parameter
+(fx fy cx cy [px], k1 k2 p1 p2 k3) and ``per_view_rms_px``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ class CameraModel:
     image_size: tuple[int, int]
     rms_px: float = float("nan")
     views: int = 0
+    u: dict[str, float] | None = None
+    per_view_rms_px: dict[str, float] | None = None
 
     @property
     def focal_px(self) -> float:
@@ -35,6 +39,7 @@ class CameraModel:
             "camera_matrix": self.camera_matrix.tolist(),
             "dist_coeffs": self.dist_coeffs.ravel().tolist(),
             "image_size": list(self.image_size), "rms_px": self.rms_px, "views": self.views,
+            "u": self.u or {}, "per_view_rms_px": self.per_view_rms_px or {},
         }, indent=2)
 
     @classmethod
@@ -56,7 +61,9 @@ class CameraModel:
             check_format(d, "axis-align/camera", (1, 2), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
-        return cls(K, D, size, float(d.get("rms_px", np.nan)), int(d.get("views", 0)))
+        return cls(K, D, size, float(d.get("rms_px", np.nan)), int(d.get("views", 0)),
+                   {k: float(v) for k, v in d.get("u", {}).items()} or None,
+                   {k: float(v) for k, v in d.get("per_view_rms_px", {}).items()} or None)
 
     def undistort_centred(self, pts: np.ndarray, sigma: np.ndarray, shape: tuple[int, int]
                           ) -> tuple[np.ndarray, np.ndarray]:
@@ -98,11 +105,18 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray |
     return cv2.cornerSubPix(img8, corners, (5, 5), (-1, -1), crit).reshape(-1, 2)
 
 
+INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+
+
 def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int],
-                         square: float = 1.0) -> tuple[CameraModel, dict[str, str]]:
+                         square: float = 1.0, fix_k3: bool = False, fix_aspect: bool = False
+                         ) -> tuple[CameraModel, dict[str, str]]:
     """Calibrate intrinsics + 5-coefficient distortion from chessboard views.
 
-    Returns the model and, per file that could not be used, the reason.
+    OpenCV's extended calibration: also the standard uncertainty of each intrinsic parameter
+    (``u``; 0 for a fixed one) and each view's RMS reprojection error. ``fix_k3`` keeps k3 at
+    0, ``fix_aspect`` keeps fx / fy at 1. Returns the model and, per file that could not be
+    used, the reason.
     """
     obj = np.zeros((pattern[0] * pattern[1], 3), np.float32)
     obj[:, :2] = np.mgrid[0:pattern[0], 0:pattern[1]].T.reshape(-1, 2) * square
@@ -123,5 +137,13 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     if len(objpts) < 3:
         raise ImageInputError(f"only {len(objpts)} usable chessboard views; need at least 3 "
                               f"({'; '.join(f'{k}: {v}' for k, v in failed.items())})")
-    rms, K, D, _, _ = cv2.calibrateCamera(objpts, imgpts, size, None, None)
-    return CameraModel(K, D.ravel(), size, float(rms), len(objpts)), failed
+    flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
+                                                    else 0)
+    K0 = np.eye(3) if fix_aspect else None
+    rms, K, D, _, _, sd, _, per_view = cv2.calibrateCameraExtended(
+        objpts, imgpts, size, K0, None, flags=flags)
+    names = [n for n in images if n not in failed]
+    u = {k: float(v) for k, v in zip(INTRINSICS, np.ravel(sd), strict=False)}
+    return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
+                       {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)}
+                       ), failed

@@ -14,12 +14,13 @@ offset d = n . p, position along it t = u . p.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
 
 from imaging.errors import ImageInputError
+from imaging.io import full_scale
 
 
 @dataclass(frozen=True)
@@ -65,11 +66,19 @@ def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
     return abs(d1 - (-d2 if flipped else d2)) < tol_offset
 
 
+# Steger's condition: the extremum across the line, |grad| / |lambda| px from the pixel centre,
+# lies within FLAT px of it (a little over half a pixel, so that a thin line running between
+# two rows of the block-averaged image still marks one of them). Beside a strong step edge (a
+# padded or saturated band) the profile also curves, at |grad| / |lambda| = sigma^2 / d from
+# the step: those false ridges are told apart later by the two-sided contrast (_peak).
+FLAT = 0.6
+
+
 def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """Largest Hessian eigenvalue (scale-normalised): > 0 on dark lines, < 0 on bright ones.
 
     Also returns where the gradient is not steep compared with the curvature: the flanks of a line
-    (and edges) curve too, but only the line's centre is flat (Steger's condition).
+    (and edges) curve too, but only the line's centre is flat (Steger's condition, see FLAT).
     """
     g = cv2.GaussianBlur(img, (0, 0), sigma)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8
@@ -82,7 +91,7 @@ def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     lam1, lam2 = tr + disc, tr - disc
     # Keep the eigenvalue of larger magnitude, with its sign.
     lam = np.where(np.abs(lam1) >= np.abs(lam2), lam1, lam2)
-    flat = np.hypot(gx, gy) < 0.5 * sigma * np.abs(lam)
+    flat = np.hypot(gx, gy) < FLAT * np.abs(lam)
     return (sigma**2) * lam, flat
 
 
@@ -128,9 +137,131 @@ def _pca_line(pts: np.ndarray, centre: np.ndarray) -> tuple[float, float, np.nda
     return a, float((m - centre) @ nn), t, float(thick)
 
 
+MIN_LENGTH_PX = 100.0
+"""Default shortest mark [px]: scratches, printed strokes and dust are shorter."""
+LENGTH_SLACK = 0.8
+"""A ridge this fraction of the shortest mark's length still counts (its ends fade)."""
+
+
+def _odd_pad(img: np.ndarray, pad: int) -> np.ndarray:
+    """Pad by point reflection about the edge pixels (2 v0 - v_k).
+
+    The filters then see a ramp (vignetting, border darkening) continue straight through the
+    frame edge, and a dark or saturated band touching the edge as a step: neither is a ridge.
+    Even reflection (OpenCV's default) folds a ramp into a V at the edge, i.e. a line.
+    """
+    pad = int(min(pad, min(img.shape) - 1))
+    return np.pad(img, pad, mode="reflect", reflect_type="odd")
+
+
+def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Profiles across a candidate at ``n_along`` places, nearest-pixel sampled at 1 px steps
+    (NaN off the image and where clipped at 0 or ``top``): (values (n_along, E), e, t [px])."""
+    h, w = image.shape
+    u, n = line_frame(c.angle_rad)
+    e = np.arange(-reach, reach + 1, dtype=float)
+    t = np.linspace(c.t_start_px, c.t_end_px, n_along + 2)[1:-1]
+    p = (np.array([(w - 1) / 2, (h - 1) / 2]) + c.offset_px * n)[None, None, :] + \
+        t[:, None, None] * u + e[None, :, None] * n
+    xi, yi = np.rint(p[..., 0]).astype(int), np.rint(p[..., 1]).astype(int)
+    inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+    vals = image[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
+    # Off the image and clipped pixels (a padded border, a saturated patch) say nothing.
+    vals = np.where(inside & (vals > 0) & (vals < top), vals, np.nan)
+    return vals, e, t
+
+
+def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float
+          ) -> tuple[float, float]:
+    """Median profile's extreme within ``search`` of the line: (position [px], contrast [DN]).
+
+    The contrast is against the background on each side separately (the median of up to 6 px
+    just beyond the flank), and the smaller of the two counts: a mark stands out from both
+    sides, whereas an edge, or the strip of background between a mark and a dark padded
+    border, stands out from one side only. No valid pixel beyond one flank: contrast 0.
+    """
+    cols = np.isfinite(vals).any(axis=0)
+    if cols.sum() < 5:
+        return 0.0, 0.0
+    prof = np.full(e.size, np.nan)
+    prof[cols] = np.nanmedian(vals[:, cols], axis=0)
+    sign = -1.0 if dark else 1.0
+    score = np.where(np.abs(e) <= search, sign * prof, np.nan)
+    if not np.isfinite(score).any():
+        return 0.0, 0.0
+    k = int(np.nanargmax(score))
+    sides = []
+    for side in (-1, 1):
+        d = side * (e - e[k])
+        pick = cols & (d > half + 1) & (d <= half + 7)
+        if pick.sum() < 2:
+            return float(e[k]), 0.0
+        sides.append(float(np.median(prof[pick])))
+    contrast = min(sign * (prof[k] - b) for b in sides)
+    bg = max(sides) if dark else min(sides)
+    near = (np.abs(e - e[k]) <= half) & cols
+    wgt = np.clip(sign * (prof - bg), 0, None) * near
+    pos = float((wgt * e).sum() / wgt.sum()) if wgt.sum() > 0 else float(e[k])
+    return pos, float(contrast)
+
+
+def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: float,
+              n_along: int = 48) -> tuple[MarkCandidate, float]:
+    """The candidate re-centred on the full-resolution image, and its contrast / pixel noise.
+
+    The block-averaged search places a mark only to a block or so, and near the frame edge
+    the padding pulls its ridge inwards; profiles across the mark (the median over places is
+    robust to dust) put it back, each half of its length separately to correct the angle.
+    The contrast is what one pixel shows: a line-shaped filter integrates a long faint
+    streak into a strong response, a mark stands out pixel by pixel.
+    """
+    reach = int(np.ceil(c.thickness_px + 8 + 3 * f))
+    half = max(1.0, c.thickness_px / 2 + 1)
+    vals, e, t = _across(image, c, reach, n_along, top)
+    search = half + 1 + 2 * f
+    pos, contrast = _peak(vals, e, c.dark, half, search)
+    m = n_along // 2
+    p1, c1 = _peak(vals[:m], e, c.dark, half, search)
+    p2, c2 = _peak(vals[m:], e, c.dark, half, search)
+    u, n = line_frame(c.angle_rad)
+    if c1 > 0 and c2 > 0 and abs(p1 - pos) < half + 2 and abs(p2 - pos) < half + 2:
+        q1 = c.offset_px * n + t[:m].mean() * u + p1 * n
+        q2 = c.offset_px * n + t[m:].mean() * u + p2 * n
+        v = q2 - q1
+        a = wrap_angle(float(np.arctan2(-v[1], v[0])))
+        if abs(wrap_angle(a - c.angle_rad)) < np.deg2rad(3):
+            u2, n2 = line_frame(a)
+            ends = sorted(float((c.offset_px * n + tk * u) @ u2)
+                          for tk in (c.t_start_px, c.t_end_px))
+            return replace(c, angle_rad=a, offset_px=float(q1 @ n2), t_start_px=ends[0],
+                           t_end_px=ends[1]), contrast / max(noise, 1e-12)
+    return replace(c, offset_px=c.offset_px + pos), contrast / max(noise, 1e-12)
+
+
+Roi = tuple[int, int, int, int]
+
+
+def check_roi(values: object, where: str = "roi") -> Roi:
+    """A region of interest (x, y, w, h) [px] from 4 numbers, or an ImageInputError naming
+    ``where``: x = column and y = row of the top-left corner, w x h at least 16 x 16 px."""
+    try:
+        parts = [float(v) for v in values]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        parts = []
+    if len(parts) != 4 or any(v != int(v) for v in parts) or min(parts[:2]) < 0 or \
+            min(parts[2:]) < 16:
+        text = ",".join(map(str, values)) if isinstance(values, list | tuple) else values
+        raise ImageInputError(f"{where} = {text!r}: expected four whole numbers X,Y,W,H "
+                              "(top-left column and row, width and height >= 16 px)")
+    x, y, w, h = (int(v) for v in parts)
+    return x, y, w, h
+
+
 def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                  max_marks: int = 8, snr_threshold: float = 8.0,
-                 relative_strength: float = 0.25) -> list[MarkCandidate]:
+                 roi: Roi | None = None,
+                 min_fill: float = 0.5, min_pixel_snr: float = 2.4) -> list[MarkCandidate]:
     """Find long straight dark or bright thin marks.
 
     Parameters
@@ -138,30 +269,58 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     image : ndarray
         Grayscale image [DN].
     min_length_px : float, optional
-        Shortest mark to report [px]; default 20 % of the smaller image side.
+        Shortest mark to report [px] (default :data:`MIN_LENGTH_PX`, at most 80 % of the
+        smaller image side); lines from LENGTH_SLACK of it are reported.
     max_marks : int
-        At most this many candidates, strongest first.
+        At most this many candidates, strongest (contrast x length) first.
     snr_threshold : float
-        Ridge response threshold in units of its robust (MAD) noise.
-    relative_strength : float
-        Drop candidates weaker (contrast x length) than this fraction of the strongest:
-        scratches and machining marks are fainter and shorter than engraved scribe marks.
+        Ridge response threshold in units of the pixel noise carried through the filter.
+    roi : (x, y, w, h), optional
+        Search only this rectangle [px, x = column, y = row of its top-left corner].
+    min_pixel_snr : float
+        Least contrast of a mark over the pixel noise, in one full-resolution pixel, against
+        the background on either side. Blur and pixel area leave a 2 px groove at SNR 8
+        (full-depth contrast / noise) only ~2.5 in its best pixel; machining streaks of a
+        third of the noise per pixel, long and straight, reach ~2.2 (the ridge filter
+        integrates them along their length into a strong response). The two overlap: use
+        ``roi`` on heavily textured surfaces.
+    min_fill : float
+        Fraction of a candidate's length its ridge pixels must cover: pieces of machining
+        streaks that happen to line up are mostly gaps; a mark broken by dust is mostly mark.
 
     Returns
     -------
-    list of MarkCandidate, strongest first (empty when nothing qualifies).
+    list of MarkCandidate (coordinates of the whole image), strongest first; empty when
+    nothing qualifies. Every mark that is long and significant enough is reported, whatever
+    the others' strength: a short faint mark beside a long strong one is still a mark.
     """
+    h_full, w_full = image.shape
+    x0 = y0 = 0
+    if roi is not None:
+        x0, y0, rw, rh = check_roi(roi)
+        if x0 + rw > w_full or y0 + rh > h_full:
+            raise ImageInputError(f"roi {x0},{y0},{rw},{rh}: reaches outside the "
+                                  f"{w_full}x{h_full} image")
+        image = image[y0:y0 + rh, x0:x0 + rw]
     h, w = image.shape
     if min_length_px is None:
-        min_length_px = 0.2 * min(h, w)
-    # The search only seeds the sub-pixel fit: ~500 px across is plenty.
-    f = max(1, int(max(h, w) // 500))
-    small = cv2.resize(image.astype(np.float32), (w // f, h // f), interpolation=cv2.INTER_AREA)
-    centre_small = np.array([(small.shape[1] - 1) / 2, (small.shape[0] - 1) / 2])
+        min_length_px = min(MIN_LENGTH_PX, 0.8 * min(h, w))
+    # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
+    # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
+    f = max(1, min(int(max(h, w) // 500), int(min_length_px // 25)))
+    hs, ws = h // f, w // f
+    small = image[:hs * f, :ws * f].astype(np.float32)
+    if f > 1:
+        # INTER_AREA with an integer factor on an exactly divisible crop is the f x f block
+        # mean (OpenCV's is ~10x faster than numpy's reshape-mean here).
+        small = cv2.resize(small, (ws, hs), interpolation=cv2.INTER_AREA)
+    centre_small = np.array([(ws - 1) / 2, (hs - 1) / 2])
     noise = pixel_noise(small)
     best: list[MarkCandidate] = []
     for sigma in (1.5, 3.0):
-        r, flat = _ridge(small, sigma)
+        pad = int(np.ceil(4 * sigma)) + 2
+        r, flat = _ridge(_odd_pad(small, pad), sigma)
+        r, flat = r[pad:pad + hs, pad:pad + ws], flat[pad:pad + hs, pad:pad + ws]
         # Threshold against the pixel noise carried through the filter, not the spread of
         # the response (which clutter dominates in a busy scene); the MAD is the fallback
         # and a floor relative to the strongest response keeps noise-free images workable.
@@ -174,24 +333,53 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         for dark in (True, False):
             resp = r if dark else -r
             mask = (resp > snr_threshold * mad) & flat
-            for pts in _merge(_components(mask, min_length_px / f / 4), centre_small):
+            # Pieces down to an eighth of the shortest mark: a wide or dusty mark breaks up.
+            for pts in _merge(_components(mask, max(3.0, min_length_px / f / 8)),
+                              centre_small):
                 a, d, t, thick = _pca_line(pts, centre_small)
                 length = (t.max() - t.min()) * f
-                if length < min_length_px or thick * f > 0.25 * length:
+                # The response fades below the threshold about a filter width before each
+                # end of a faint, blurred mark: judge the length with that back, and with
+                # LENGTH_SLACK (a 100 px mark at SNR 8 keeps ~85 px of ridge).
+                if (length + 2 * sigma * f < LENGTH_SLACK * min_length_px
+                        or thick * f > 0.25 * length):
+                    continue
+                fill = np.unique(np.floor(t)).size / (np.floor(t.max()) - np.floor(t.min()) + 1)
+                if fill < min_fill:
                     continue
                 contrast = float(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)].mean()
                                  / mad)
                 best.append(_to_full(a, d, t, dark, thick, contrast * length, f,
                                      centre_small, np.array([(w - 1) / 2, (h - 1) / 2]),
                                      contrast))
-    out = _dedupe(sorted(best, key=lambda c: -c.strength))
-    if not out:
-        return []
-    # Both the contrast x length and the contrast alone: machining streaks merged into long
-    # lines can be long, but their contrast is a small fraction of an engraved mark's.
-    top_c = max(c.contrast for c in out)
-    return [c for c in out if c.strength >= relative_strength * out[0].strength
-            and c.contrast >= relative_strength * top_c][:max_marks]
+    noise_full = pixel_noise(_central(image, 1024))
+    top = full_scale(image)
+    out = []
+    for c in _dedupe(sorted(best, key=lambda c: -c.strength)):
+        # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
+        c, _ = _full_res(image, c, noise_full, f, top)
+        c, snr = _full_res(image, c, noise_full, f, top)
+        if snr >= min_pixel_snr:
+            out.append(c)
+    out = _dedupe(out)[:max_marks]
+    if roi is not None:
+        out = [_shift(c, np.array([x0 + (w - 1) / 2 - (w_full - 1) / 2,
+                                   y0 + (h - 1) / 2 - (h_full - 1) / 2])) for c in out]
+    return out
+
+
+def _central(image: np.ndarray, size: int) -> np.ndarray:
+    """The central size x size part of an image (all of it if smaller)."""
+    h, w = image.shape
+    y0, x0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
+    return image[y0:y0 + size, x0:x0 + size]
+
+
+def _shift(c: MarkCandidate, s: np.ndarray) -> MarkCandidate:
+    """The candidate in a frame whose centre lies at -s from the current one [px]."""
+    u, n = line_frame(c.angle_rad)
+    return replace(c, offset_px=float(c.offset_px + s @ n), t_start_px=float(c.t_start_px + s @ u),
+                   t_end_px=float(c.t_end_px + s @ u))
 
 
 def _to_full(a, d, t, dark, thick, strength, f, centre_small, centre, contrast
@@ -230,14 +418,29 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
 
 
 def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:
-    """The same mark found at two scales or twice: keep the strongest."""
+    """The same mark found at two scales or twice: keep the strongest.
+
+    Only of one polarity: a dark mark and the bright strip of background beside it (between
+    it and a padded border, say) are two things, and the strip must not replace the mark.
+    """
     out: list[MarkCandidate] = []
     for c in cands:
-        if any(same_line(c.angle_rad, c.offset_px, o.angle_rad, o.offset_px, np.deg2rad(3),
-                         max(6.0, o.thickness_px)) and _overlap(c, o) for o in out):
+        if any(c.dark == o.dark and _near(c, o, np.deg2rad(3), max(6.0, o.thickness_px))
+               and _overlap(c, o) for o in out):
             continue
         out.append(c)
     return out
+
+
+def _near(c: MarkCandidate, o: MarkCandidate, tol_angle: float, tol_px: float) -> bool:
+    """Whether c lies along o: directions within tol_angle, c's middle within tol_px of o's
+    line. (Comparing offsets instead would multiply a small angle difference by the lever
+    arm from the image centre.)"""
+    if abs(wrap_angle(c.angle_rad - o.angle_rad)) >= tol_angle:
+        return False
+    u, n = line_frame(c.angle_rad)
+    mid = c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+    return abs(float(mid @ line_frame(o.angle_rad)[1]) - o.offset_px) < tol_px
 
 
 def _overlap(c: MarkCandidate, o: MarkCandidate) -> bool:

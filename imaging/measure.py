@@ -7,13 +7,13 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
-from imaging.detect import MarkCandidate, detect_marks, require_single
+from imaging.detect import MarkCandidate, Roi, detect_marks, require_single
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
@@ -67,13 +67,13 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                       where: str = "image") -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line)."""
     pf = fit_profile(image, cand, where, full_scale(image))
-    cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1)
+    cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
-    pf = replace(pf, angle_rad=first.angle_rad, offset_px=first.offset_px)
-    cen = sample_centres(image, pf)
+    pf = pf.with_line(first.angle_rad, first.offset_px)
+    cen = sample_centres(image, pf, where=where)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -107,10 +107,12 @@ def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
                   max_marks: int = 8, min_length_px: float | None = None,
-                  expect_one: bool = False) -> list[MarkMeasurement | ImageInputError]:
+                  expect_one: bool = False, roi: Roi | None = None
+                  ) -> list[MarkMeasurement | ImageInputError]:
     """Detect and measure every mark in an image; per-mark failures are returned, not raised.
 
     With ``expect_one`` the image must hold a single mark: two of similar strength raise.
+    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search (see detect_marks).
     """
     if np.ptp(image) == 0:
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
@@ -118,9 +120,13 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
         raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
                               f"{image.shape[0]}")
-    cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks)
+    try:
+        cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi)
+    except ImageInputError as exc:
+        raise ImageInputError(f"{where}: {exc}") from None
     if not cands:
-        raise ImageInputError(f"{where}: no mark found (no long straight line stands out)")
+        raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
+                              + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
     if expect_one:
         cands = [require_single(cands, where)]
     out: list[MarkMeasurement | ImageInputError] = []

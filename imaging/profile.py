@@ -8,15 +8,16 @@ Model of a pixel near the mark (pixel-area integrated by 3x3 Gauss–Legendre qu
 a groove of width w seen through a Gaussian blur s, e the signed distance of the point from
 the reference line [px]. First one fit over the whole band gives the shape (w, s), the
 contrast and a refined line; then the mark is cut into short segments along its length and
-each segment's centre offset delta_k (with its own contrast A_k and level b_k) is fitted by
-Gauss–Newton with per-pixel weights from a shot + read noise model estimated from the data.
+each segment's centre offset delta_k (with its own contrast A_k, level b_k and background
+slope across the mark g_k) is fitted by Gauss–Newton with per-pixel weights from a shot +
+read noise model estimated from the data.
 The per-segment standard uncertainties come from each segment's Fisher information, so the
 line fit downstream propagates a real uncertainty.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import erf
@@ -89,6 +90,29 @@ class ProfileFit:
     noise_var: tuple[float, float]
     t_start_px: float
     t_end_px: float
+    full_scale_dn: float = 65535.0
+
+    def with_line(self, angle_rad: float, offset_px: float) -> ProfileFit:
+        """The same stretch of mark about a refined line (angle [rad], offset [px]).
+
+        The extent along the line is carried over through its end points: when the refined
+        angle wraps across +-90 deg the direction u flips and t runs the other way (keeping the
+        old t range would sample a stretch of image beside the mark, or none at all).
+        """
+        return replace(self, angle_rad=angle_rad, offset_px=offset_px,
+                       **dict(zip(("t_start_px", "t_end_px"),
+                                  _carry_extent(self.angle_rad, self.offset_px,
+                                                (self.t_start_px, self.t_end_px), angle_rad),
+                                  strict=True)))
+
+
+def _carry_extent(angle_rad: float, offset_px: float, extent: tuple[float, float],
+                  new_angle_rad: float) -> tuple[float, float]:
+    """Extent (t0, t1) [px] of a stretch of line re-expressed along a nearby new direction."""
+    u, n = line_frame(angle_rad)
+    u2, _ = line_frame(new_angle_rad)
+    t = sorted(float((offset_px * n + tk * u) @ u2) for tk in extent)
+    return t[0], t[1]
 
 
 @dataclass(frozen=True)
@@ -153,7 +177,9 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
                 full_scale: float = 65535.0) -> ProfileFit:
     """Fit the groove model over the whole band of a detected mark (robust to dust)."""
     half = float(np.clip(2.5 * cand.thickness_px + 8, 10, 40))
-    trim = half
+    # Leave out the mark's blurred ends (the candidate's extent is already inside them),
+    # but not so much that a 100 px mark loses most of its length.
+    trim = min(half, max(4.0, 0.05 * cand.length_px))
     t0, t1 = cand.t_start_px + trim, cand.t_end_px - trim
     if t1 - t0 < 20:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px is too short "
@@ -167,10 +193,19 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     if stride > 1:
         keep = (np.floor((t - t0) / 8).astype(int) % stride) == 0
         vals, e, t = vals[keep], e[keep], t[keep]
-    if np.mean(vals >= full_scale) > 0.02 or np.mean(vals <= 0) > 0.02:
+    # Clipped pixels (0 or full scale) say only "beyond the range": left out of the fit. The
+    # mark itself must not be clipped; clipped surroundings (a dark padded border, a
+    # saturated patch beside it) only cost the pixels they cover.
+    clipped = (vals >= full_scale) | (vals <= 0)
+    core = np.abs(e) <= max(2.0, cand.thickness_px / 2 + 1.5)
+    if np.mean(clipped[core]) > 0.02:
         raise ImageInputError(
             f"{where}: mark near ({cand.offset_px:.0f} px offset) is saturated or clipped "
-            f"({100 * np.mean((vals >= full_scale) | (vals <= 0)):.0f} % of its pixels)")
+            f"({100 * np.mean(clipped[core]):.0f} % of its pixels)")
+    vals, e, t = vals[~clipped], e[~clipped], t[~clipped]
+    if vals.size < 100:
+        raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
+                              "unclipped pixels around it")
     tm = 0.5 * (t0 + t1)
     inner = np.abs(e) < 2
     bg = float(np.median(vals[~inner])) if np.any(~inner) else float(np.median(vals))
@@ -206,8 +241,9 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     p_mid = (cand.offset_px + dd) * n + tm * u
     _, n2 = line_frame(ang)
     off = float(p_mid @ n2)
+    t0, t1 = _carry_extent(a_ref, cand.offset_px, (t0, t1), ang)
     return ProfileFit(ang, off, float(w), float(s), float(amp), float(b), float(g_e), var,
-                      float(t0), float(t1))
+                      t0, t1, float(full_scale))
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -269,14 +305,45 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(np.median(r**2) / 0.4549), 0.0
 
 
+def _outside_slope(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float,
+                   every: int, nseg: int, ring: float = 6.0) -> np.ndarray:
+    """Background slope across the mark [DN/px] per segment, from a ring of pixels just
+    outside the band the centres are fitted on (half < |e| <= half + ring).
+
+    Outside the band on purpose: the slope fitted inside it shares its pixels' noise with
+    the centre (both odd in e), and would correlate with the centre's error by chance.
+    """
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                          half + ring)
+    sel = (np.abs(e) > half) & (vals < pf.full_scale_dn) & (vals > 0)
+    vals, e, t = vals[sel], e[sel], t[sel]
+    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
+    if every > 1:
+        keep = seg % every == 0
+        vals, e, seg = vals[keep], e[keep], seg[keep] // every
+    inside = seg < nseg
+    vals, e, seg = vals[inside], e[inside], seg[inside]
+    no = np.bincount(seg, minlength=nseg)
+    me = np.bincount(seg, e, minlength=nseg) / np.maximum(no, 1)
+    mr = np.bincount(seg, vals, minlength=nseg) / np.maximum(no, 1)
+    see = np.bincount(seg, (e - me[seg]) ** 2, minlength=nseg)
+    ser = np.bincount(seg, (e - me[seg]) * (vals - mr[seg]), minlength=nseg)
+    return np.where(see > 0, ser / np.maximum(see, 1e-12), 0.0)
+
+
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
-                   iterations: int = 2, every: int = 1) -> Centres:
+                   iterations: int = 2, every: int = 1, where: str = "image") -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
+    unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
+    vals, e, t = vals[unclipped], e[unclipped], t[unclipped]
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
+                              "outside the image or is all clipped")
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
     if every > 1:
         keep = seg % every == 0
@@ -287,6 +354,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     delta = np.zeros(nseg)
     amp = np.full(nseg, pf.contrast_dn)
     lev = np.full(nseg, pf.background_dn)
+    # Each segment has its own background slope across the mark: surface texture and uneven
+    # light tilt the background differently along the mark, and a slope left in the model
+    # moves the fitted centre (a false "illumination gradient"). Costs little precision: the
+    # slope is set by the pixels beside the groove, the centre by its flanks.
+    slp = np.full(nseg, pf.slope_across_dn_per_px)
+    k = 4
 
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
@@ -294,48 +367,42 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     for it in range(iterations + 1):
         ee = e - delta[seg]
         p, pe = table(ee)
-        mu = lev[seg] + pf.slope_across_dn_per_px * ee + amp[seg] * p
+        mu = lev[seg] + slp[seg] * ee + amp[seg] * p
         r = vals - mu
         if it == 1:
             # Noise model again, now from the segment model's residuals (local level and
             # contrast absorb illumination and texture that the band fit could not);
-            # each segment spends 3 of its pixels' degrees of freedom.
+            # each segment spends k of its pixels' degrees of freedom.
             npx = bc(np.ones_like(e))
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - 3, 1))[seg])
+            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
         wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
-        J = (-(amp[seg] * pe + pf.slope_across_dn_per_px), p, np.ones_like(p))
-        N = np.empty((nseg, 3, 3))
-        g = np.empty((nseg, 3))
-        for i in range(3):
+        J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
+        N = np.empty((nseg, k, k))
+        g = np.empty((nseg, k))
+        for i in range(k):
             g[:, i] = bc(wgt * J[i] * r)
-            for j in range(i, 3):
+            for j in range(i, k):
                 N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
         ok = np.linalg.det(N) > 0
         if it == iterations:
             break  # the last pass only refreshes weights and information at the solution
-        step = np.zeros((nseg, 3))
+        step = np.zeros((nseg, k))
         step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
         step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
         delta += step[:, 0]
         amp += step[:, 1]
         lev += step[:, 2]
-    cov = np.full((nseg, 3, 3), np.inf)
+        if k == 4:
+            slp += step[:, 3]
+    cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
-    sigma = np.sqrt(cov[:, 0, 0])
+    # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
+    sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     npx = bc(np.ones_like(e))
-    chi2_red = bc(wgt * r * r) / np.maximum(npx - 3, 1)
+    chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
-    # Local background slope across the mark, from the pixels outside the groove.
-    outer = np.abs(ee) > pf.width_px / 2 + 2.5 * pf.blur_px
-    so = seg[outer]
-    eo, ro = ee[outer], (vals - amp[seg] * p)[outer]
-    no = np.bincount(so, minlength=nseg)
-    me = np.bincount(so, eo, minlength=nseg) / np.maximum(no, 1)
-    mr = np.bincount(so, ro, minlength=nseg) / np.maximum(no, 1)
-    see = np.bincount(so, (eo - me[so]) ** 2, minlength=nseg)
-    ser = np.bincount(so, (eo - me[so]) * (ro - mr[so]), minlength=nseg)
-    slope = np.where(see > 0, ser / np.maximum(see, 1e-12), 0.0)
+    slope = _outside_slope(image, pf, half, segment_px, every, nseg)
     u, n = line_frame(pf.angle_rad)
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2)

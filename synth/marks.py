@@ -4,10 +4,10 @@ The image is rendered as physics, not drawn: each mark is a finite straight groo
 depth profile (``box``, ``v`` or ``round``) that changes the surface reflectance; the optics
 blur the irradiance with an isotropic Gaussian point-spread function; each pixel integrates
 the irradiance over its area (supersampled); the sensor adds Poisson shot noise and Gaussian
-read noise and quantises to 8 or 16 bits, clipping at full scale (saturation). Optional
-clutter: machined-surface streaks, an illumination gradient and vignetting, dust specks and
-scratches. Optional camera effects: OpenCV radial distortion, camera roll, non-square pixels
-(see :mod:`synth.optics`).
+read noise and quantises to 8, 12 or 16 bits, clipping at full scale (saturation). Optional
+clutter: machined-surface streaks, an illumination gradient and vignetting, dust specks,
+scratches, printed labels, zero padding along the edges. Optional camera effects: OpenCV
+radial distortion, camera roll, non-square pixels (see :mod:`synth.optics`).
 
 Every image comes with an :class:`ImageTruth` that records the marks and the Cramér–Rao bound
 on each mark's angle, computed from the noise-free render by numerical differentiation.
@@ -73,7 +73,10 @@ class ImageSpec:
     """Everything that makes one synthetic image (all randomness from ``seed``).
 
     Signal: the bare surface at full illumination collects ``exposure * full_well_e``
-    electrons; ``bits`` sets the ADC (full scale = full well).
+    electrons; ``bits`` (8, 12 or 16; 12-bit data in 16-bit words) sets the ADC (full scale
+    = full well). Clutter: ``dust`` specks, ``scratches`` (thin, up to ``scratch_max_px`` long;
+    0: 15 % of the smaller side), ``text`` printed labels of 2-4 numeral-like glyphs, and
+    ``padding_px`` rows/columns of zeros along the frame edges (a driver's padding).
     """
 
     marks: tuple[MarkSpec, ...]
@@ -93,6 +96,9 @@ class ImageSpec:
     dust: int = 0
     dust_on_mark: int = 0
     scratches: int = 0
+    scratch_max_px: float = 0.0
+    text: int = 0
+    padding_px: int = 0
     camera: CameraGeometry = field(default_factory=CameraGeometry)
     seed: int = 0
 
@@ -199,16 +205,39 @@ def _pixel_grid(spec: ImageSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Indices (rows, cols) of the pixels the mark can touch."""
+    """Indices (rows, cols) of the pixels the mark can touch.
+
+    Only the mark's bounding box (mapped to the sensor, with room for distortion) is examined,
+    in strips of rows, so a 12 MP frame never needs full-frame coordinate arrays.
+    """
     xs, ys = _pixel_grid(spec)
-    X, Y = np.meshgrid(xs, ys)
-    sx, sy = spec.camera.sensor_to_scene(X, Y)
     a = mark.angle_rad
-    e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
-    t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
-    # Distortion stretches the sensor by at most a few %; the margin covers it.
-    sel = (np.abs(e) < mark.width_px / 2 + margin) & (np.abs(t) < mark.length_px / 2 + margin)
-    return np.nonzero(sel)
+    u = np.array([np.cos(a), -np.sin(a)])
+    n = np.array([np.sin(a), np.cos(a)])
+    mid = np.array(mark.centre_xy())
+    ends = [mid + su * (mark.length_px / 2 + margin) * u + sn * (mark.width_px / 2 + margin) * n
+            for su in (-1, 1) for sn in (-1, 1)]
+    ex, ey = spec.camera.distort(*spec.camera.scene_to_ideal(
+        np.array([p[0] for p in ends]), np.array([p[1] for p in ends])))
+    # Distortion bends straight edges by at most a few % of the frame: widen the box by that.
+    slack = 0.05 * max(spec.width, spec.height) if not spec.camera.is_identity else 2.0
+    cols = np.flatnonzero((xs >= np.min(ex) - slack) & (xs <= np.max(ex) + slack))
+    rows_all = np.flatnonzero((ys >= np.min(ey) - slack) & (ys <= np.max(ey) + slack))
+    out_r, out_c = [], []
+    for k in range(0, rows_all.size, 256):
+        rows = rows_all[k:k + 256]
+        X, Y = np.meshgrid(xs[cols], ys[rows])
+        sx, sy = spec.camera.sensor_to_scene(X, Y)
+        e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
+        t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
+        # Distortion stretches the sensor by at most a few %; the margin covers it.
+        r, c = np.nonzero((np.abs(e) < mark.width_px / 2 + margin)
+                          & (np.abs(t) < mark.length_px / 2 + margin))
+        out_r.append(rows[r])
+        out_c.append(cols[c])
+    if not out_r:
+        return np.empty(0, int), np.empty(0, int)
+    return np.concatenate(out_r), np.concatenate(out_c)
 
 
 def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.ndarray
@@ -277,7 +306,7 @@ def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     for _ in range(spec.scratches):
         x0, y0 = rng.uniform(0, w - 1), rng.uniform(0, h - 1)
         ang = rng.uniform(0, np.pi)
-        length = rng.uniform(20, 0.15 * min(w, h))
+        length = rng.uniform(20, spec.scratch_max_px or 0.15 * min(w, h))
         amp = rng.choice([-1, 1]) * rng.uniform(0.1, 0.4)
         s = np.hypot(rng.uniform(0.3, 0.8), spec.blur_px)
         ux, uy = np.cos(ang), np.sin(ang)
@@ -289,7 +318,50 @@ def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
         e = -(xx - x0) * uy + (yy - y0) * ux
         inside = _along_profile(length, s)(t)
         out[r0:r1, c0:c1] += amp * inside * np.exp(-e * e / (2 * s * s))
+    for _ in range(spec.text):
+        _label(out, spec, rng)
     return out
+
+
+def _stroke(out: np.ndarray, p0: np.ndarray, p1: np.ndarray, width: float, amp: float,
+            blur: float) -> None:
+    """Add a straight printed stroke (box profile of ``width`` [px] seen through the blur)."""
+    h, w = out.shape
+    d = p1 - p0
+    length = float(np.hypot(*d))
+    if length == 0:
+        return
+    ux, uy = d / length
+    mid = (p0 + p1) / 2
+    s = max(blur, 0.3)
+    pad = length / 2 + width + 5 * s
+    r0, r1 = int(max(0, mid[1] - pad)), int(min(h, mid[1] + pad + 1))
+    c0, c1 = int(max(0, mid[0] - pad)), int(min(w, mid[0] + pad + 1))
+    if r1 <= r0 or c1 <= c0:
+        return
+    yy, xx = np.mgrid[r0:r1, c0:c1]
+    t = (xx - mid[0]) * ux + (yy - mid[1]) * uy
+    e = -(xx - mid[0]) * uy + (yy - mid[1]) * ux
+    out[r0:r1, c0:c1] += amp * _along_profile(length, s)(t) * _blurred_profile(
+        "box", width, s)(e)
+
+
+def _label(out: np.ndarray, spec: ImageSpec, rng: np.random.Generator) -> None:
+    """A printed label: 2-4 numeral-like glyphs of 2-4 short strokes each (text clutter)."""
+    h, w = out.shape
+    size = rng.uniform(10, 30)  # glyph height [px]
+    n = int(rng.integers(2, 5))
+    x0 = rng.uniform(0, max(1.0, w - n * 0.8 * size))
+    y0 = rng.uniform(0, max(1.0, h - size))
+    amp = rng.choice([-1, 1]) * rng.uniform(0.2, 0.8)
+    width = rng.uniform(0.08, 0.15) * size
+    # Strokes of a seven-segment-like glyph: corners of a size/2 x size box.
+    corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0, 2], [1, 2]]) * size / 2
+    for k in range(n):
+        org = np.array([x0 + k * 0.8 * size, y0])
+        for _ in range(int(rng.integers(2, 5))):
+            i, j = rng.choice(6, 2, replace=False)
+            _stroke(out, org + corners[i], org + corners[j], width, amp, spec.blur_px)
 
 
 def _mean_electrons(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
@@ -310,6 +382,10 @@ def _digitise(spec: ImageSpec, mean_e: np.ndarray, rng: np.random.Generator) -> 
     e = rng.poisson(mean_e).astype(float) + rng.normal(0.0, spec.read_noise_e, mean_e.shape)
     full = 2**spec.bits - 1
     dn = np.clip(np.round(e * full / spec.full_well_e), 0, full)
+    p = spec.padding_px
+    if p:
+        # A driver's padding: whole rows/columns of zeros after read-out, not light.
+        dn[:p], dn[-p:], dn[:, :p], dn[:, -p:] = 0, 0, 0, 0
     return dn.astype(np.uint16 if spec.bits > 8 else np.uint8)
 
 
@@ -371,8 +447,8 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
 
 def render_marks(spec: ImageSpec, with_crlb: bool = True) -> SynthImage:
     """Render a synthetic image and its truth."""
-    if spec.bits not in (8, 16):
-        raise ValueError("bits must be 8 or 16")
+    if spec.bits not in (8, 12, 16):
+        raise ValueError("bits must be 8, 12 or 16")
     rng = np.random.default_rng(spec.seed)
     mean_e = _mean_electrons(spec, rng)
     img = _digitise(spec, mean_e, rng)

@@ -17,6 +17,7 @@ import numpy as np
 from align.errors import InputError
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
+from imaging import ImageInputError, check_roi
 
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
@@ -43,6 +44,7 @@ class ImageEntry:
     view: str
     nominal: str  # "horizontal" | "vertical"
     key: str
+    roi: tuple[int, int, int, int] | None = None  # (x, y, w, h) [px]: search only there
 
 
 @dataclass(frozen=True)
@@ -207,7 +209,7 @@ KEYS = {
                    "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec"},
     "views": {"camera", "right", "up"},
-    "images": {"file", "housing", "view", "nominal"},
+    "images": {"file", "housing", "view", "nominal", "roi"},
     "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
 }
 
@@ -372,8 +374,14 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                 f"{w}: housing {housing} is nominally along platform {axis}, but view {view} "
                 f"has {nominal} = {'XYZ'[int(np.argmax(np.abs(along)))]} — contradictory "
                 "nominal orientation")
+        roi = None
+        if "roi" in im:
+            try:
+                roi = check_roi(im["roi"], f"{w} roi")
+            except ImageInputError as exc:
+                raise InputError(str(exc)) from None
         imgs.append(ImageEntry(_file(im.get("file"), f"{w} file"), housing, view,
-                               nominal, w))
+                               nominal, w, roi))
 
     plat = None
     if "platform" in d:

@@ -105,7 +105,7 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     for k, im in enumerate(s.images, start=1):
         progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
         cam = cams.get(s.views[im.view].camera)
-        found = measure_file(im.file, cam, alpha=alpha, expect_one=True)
+        found = measure_file(im.file, cam, alpha=alpha, expect_one=True, roi=im.roi)
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"

@@ -41,7 +41,8 @@ def test_finds_marks_in_clutter_and_several_per_image():
         marks=(MarkSpec(np.deg2rad(0.05), -150, 500, 4.0),
                MarkSpec(np.deg2rad(89.95), 200, 450, 3.0, contrast=0.8)),
         width=1024, height=768, full_well_e=full_well_for_snr(25, -0.6), texture=0.02,
-        dust=10, dust_on_mark=3, scratches=4, gradient=(0.1, -0.05), vignetting=0.2, seed=7)
+        dust=10, dust_on_mark=3, scratches=4, scratch_max_px=60, gradient=(0.1, -0.05),
+        vignetting=0.2, seed=7)
     s = render_marks(spec, with_crlb=False)
     found = [m for m in measure_marks(s.image.astype(float)) if not isinstance(m, Exception)]
     assert len(found) == 2
