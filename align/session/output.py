@@ -17,6 +17,7 @@ from align.gonio import run_json
 from align.session.run import SessionResult
 from align.warnings import session_warnings
 from axisbase.output import write_json
+from axisbase.provenance import Provenance
 from axisbase.units import ARCSEC
 
 
@@ -85,7 +86,7 @@ def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: 
     pc = platform_calibration(res)
     if outs.get("cal") is not None and pc is not None:
         written["cal"] = write_json(outs["cal"], pc.document(
-            res.units, dict(settings), res.session.inputs, js["provenance"]), force)
+            res.units, dict(settings), res.session.inputs, Provenance.from_dict(js)), force)
     return written, js
 
 

@@ -62,12 +62,14 @@ def _loop(loop: LoopReport | None, scale: float = 1.0, unit: str = "") -> str:
 def _provenance(doc: dict | None) -> str:
     if not doc:
         return ""
-    p = doc["provenance"]
-    rows = [[i["path"], i["sha256"] or "unreadable"] for i in p["inputs"]]
-    return (f"<p>{_e(p['tool'])} {_e(p['version'])}, {_e(doc['format'])} format version "
-            f"{doc['format_version']}, written {_e(p['written_utc'])} (UTC) by "
-            f"<code>{_e(' '.join(p['command_line']))}</code>; settings "
-            f"<code>{_e(p['settings'])}</code>.</p>"
+    from axisbase.provenance import Provenance
+
+    p = Provenance.from_dict(doc)
+    rows = [[i.path, i.sha256 or "unreadable"] for i in p.inputs]
+    return (f"<p>{_e(p.tool)} {_e(p.tool_version)}, {_e(doc['format'])} format version "
+            f"{doc['format_version']}, written {_e(p.created_utc)} (UTC) by "
+            f"<code>{_e(' '.join(p.command))}</code>; settings "
+            f"<code>{_e(dict(p.settings))}</code>.</p>"
             "<details><summary>Input files (SHA-256)</summary>"
             + _table(["file", "SHA-256"], rows, left=2) + "</details>")
 
