@@ -33,6 +33,8 @@ import pyarrow.csv as pacsv
 from axisbase.errors import InputError
 
 KINDS = ("float", "int", "label")
+MAX_MAGNITUDE = 1e100
+"""Largest |value| a float column takes (see :func:`_check`)."""
 _ARROW = {"float": pa.float64(), "int": pa.int64(), "label": pa.string()}
 _UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
 
@@ -181,7 +183,7 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, not a {spec.what} file") from None
+        raise InputError(f"{path}: is a folder, not a {spec.what}") from None
     except PermissionError:
         raise InputError(f"{path}: not readable (permission denied)") from None
     except UnicodeDecodeError:
@@ -328,16 +330,24 @@ def _check(table: Table, prev_t: float | None = None) -> None:
             if blank.any():
                 raise table.fail(int(np.flatnonzero(blank)[0]), c.name,
                                  "is blank: every row needs a label")
-        elif c.kind == "float" and not np.isfinite(x.sum()):
-            raise table.fail(int(np.flatnonzero(~np.isfinite(x))[0]), c.name,
-                             "is not a finite number")
+        elif c.kind == "float":
+            # |x| <= MAX_MAGNITUDE keeps sums of squares finite: a value beyond it is no
+            # measurement in any unit, and would overflow later with no line to name.
+            with np.errstate(invalid="ignore"):
+                bad = ~(np.abs(x) <= MAX_MAGNITUDE)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise table.fail(k, c.name, "is not a finite number" if not np.isfinite(x[k])
+                                 else f"{float(x[k]):g} is beyond any measurement "
+                                 f"(|value| > {MAX_MAGNITUDE:g})")
     if spec.time and spec.time in table.data and not table.time_from_rate:
         t = table.data[spec.time]
         d = np.diff(t) if prev_t is None else np.diff(t, prepend=prev_t)
         if len(d) and d.min() <= 0:
             k = int(np.flatnonzero(d <= 0)[0]) + (1 if prev_t is None else 0)
             what = "repeats the previous row's time" if d.min() == 0 else "runs backwards"
-            raise table.fail(k, spec.time, f"{t[k]!r} {what} (duplicated or unsorted rows?)")
+            raise table.fail(k, spec.time, f"{float(t[k]):g} {what} (duplicated or unsorted "
+                             "rows?)")
 
 
 def _table(path: Path, spec: TableSpec, h: _Header, columns: Mapping[str, pa.Array],

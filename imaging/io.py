@@ -23,12 +23,7 @@ def read_image(path: str | Path) -> np.ndarray:
         raise ImageInputError(f"{p}: is a folder, not an image")
     img = None
     if p.suffix.lower() in (".tif", ".tiff"):
-        try:
-            import tifffile
-
-            img = tifffile.imread(p)
-        except Exception as exc:  # tifffile raises many types for corrupt files
-            raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
+        img = _read_tiff(p)
     else:
         data = np.fromfile(p, dtype=np.uint8)
         if data.size:
@@ -49,6 +44,24 @@ def read_image(path: str | Path) -> np.ndarray:
     if min(img.shape) < 16:
         raise ImageInputError(f"{p}: image is only {img.shape[1]}x{img.shape[0]} px, too small")
     return img.astype(np.float64)
+
+
+def _read_tiff(p: Path) -> np.ndarray:
+    """The single image of a TIFF file (compressed ones through imagecodecs); a stack of
+    several pages is refused rather than read as one odd-shaped image."""
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(p) as tf:
+            pages = len(tf.pages)
+            if pages != 1:
+                raise ImageInputError(f"{p}: a TIFF with {pages} pages; give one image per "
+                                      "file (e.g. split the stack)")
+            return tf.pages[0].asarray()
+    except ImageInputError:
+        raise
+    except Exception as exc:  # tifffile raises many types for corrupt or exotic files
+        raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
 
 
 def full_scale(image: np.ndarray) -> float:
