@@ -31,7 +31,6 @@ from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 from goniometry import (
     FaceAngles,
     LogSummary,
-    earth_rate_counts,
     face_angles,
     kept_table,
     read_revolutions,
@@ -236,19 +235,35 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
     return comb, term
 
 
+def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
+                     direction: int) -> tuple[float, float]:
+    """Mid-point and half-range [rad/s] of the vertical Earth rate over a latitude range
+    [deg] (all latitudes when None)."""
+    lo, hi = latitude_range_deg if latitude_range_deg is not None else (-90.0, 90.0)
+    r1, r2 = vertical_earth_rate(lo, direction), vertical_earth_rate(hi, direction)
+    return (r1 + r2) / 2, abs(r2 - r1) / 2
+
+
+EARTH_BOUND = "earth_rate (latitude not given: bound over {})"
+
+
 def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
                 reverse_log: str | Path | None = None, apply_loop: bool = True,
-                steady_table: bool = False, columns: Mapping[str, str] | None = None
-                ) -> GonioRun:
-    """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
-    else by the loop when the data show it and it is physically possible. ``reverse_log``: a
+                steady_table: bool = False, columns: Mapping[str, str] | None = None,
+                latitude_range_deg: tuple[float, float] | None = None) -> GonioRun:
+    """Face angles of a log, from one pass over it.
+
+    With times, the Earth rate is removed from the latitude when given, else by the loop
+    when the data show it and it is physically possible; when neither determines it, the
+    range of its effect over all latitudes (or ``latitude_range_deg``) is carried in u as a
+    named Type B term (an unsteady table makes the angles depend on it). ``reverse_log``: a
     log of the same faces with the table turning the other way; the result is then the mean
-    of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts the
-    table turns at constant speed within a revolution; the angles then come from the pulse
-    times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the timing
-    estimate is the more precise one; otherwise the counts are used and the reason is noted.
-    ``columns``: header names of the log's columns (``--columns``), for both logs.
+    of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts
+    the table turns at constant speed within a revolution; the angles then come from the
+    pulse times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the
+    timing estimate is the more precise one; otherwise the counts are used and the reason is
+    noted. ``columns``: header names of the log's columns (``--columns``), for both logs.
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
     """
@@ -268,45 +283,57 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used)
     notes: list[str] = []
     loop = None
-    rate_used = None
-    rate_u = 0.0
     summary = read_revolutions(path, n_faces, columns=columns)
+    if summary.armed_face:
+        notes.append(f"log armed on face {summary.armed_face}: the first "
+                     f"{summary.incomplete_head} rows are a partial revolution, not used")
+    elif summary.incomplete_head:
+        notes.append(f"the first {summary.incomplete_head} rows before the first complete "
+                     "revolution are not used")
     if latitude_deg is not None and summary.has_time:
-        rate_used = vertical_earth_rate(latitude_deg, direction)
-    elif latitude_deg is not None:
+        rate = vertical_earth_rate(latitude_deg, direction)
+        return _with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
+                                     rate), steady_table, alpha)
+    if latitude_deg is not None:
         notes.append("no t column: the Earth-rate correction needs pulse times; not applied")
-    elif summary.has_time:
-        counts, dt, t_end = kept_table(summary)
-        loop = loop_gonio(counts, dt, t_end, alpha=alpha)
-        earth = [e for e in loop.effects if e.name == EARTH]
-        if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
-            notes.append(f"counts per revolution follow the period with a slope of "
-                         f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
-        elif earth and not apply_loop:
-            notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
-                         "not applied: the other direction cancels it")
-        elif earth:
-            rate_used, rate_u = earth[0].estimate, earth[0].u
-            lat, ulat = latitude_from_earth_rate(earth[0].estimate, earth[0].u, direction)
-            notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
-                         "its uncertainty is carried into the angles")
-    if rate_used is None:
+        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+                            steady_table, alpha)
+    if not summary.has_time:
+        notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
+                     "nor bounded without pulse times; the angles assume a steady table")
+        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+                            steady_table, alpha)
+    counts, dt, t_end = kept_table(summary)
+    loop = loop_gonio(counts, dt, t_end, alpha=alpha)
+    earth = [e for e in loop.effects if e.name == EARTH]
+    if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
+        notes.append(f"counts per revolution follow the period with a slope of "
+                     f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
+    elif earth and not apply_loop:
+        notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
+                     "not applied: the other direction cancels it")
         return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
-    rate = rate_used
-    summary = read_revolutions(path, n_faces,
-                               correct=lambda c, dt: earth_rate_counts(c, dt, rate),
-                               columns=columns)
-    fa = face_angles(summary)
-    if rate_u:
-        # A_k = 2 pi c_k / sum c with c_k - K rate dt_k / 2 pi: dA_k / d rate =
-        # -(dt_k - T A_k / 2 pi), averaged over the revolutions.
-        _, dt, _ = kept_table(summary)
-        ok = np.all(np.isfinite(dt), axis=1)
-        sens = -(dt[ok].mean(0) - dt[ok].sum(1).mean() * fa.angles_rad / (2 * np.pi))
-        cov = fa.cov + np.outer(sens, sens) * rate_u**2
-        fa = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)))
-    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), rate_used), steady_table,
+    elif earth:
+        rate, rate_u = earth[0].estimate, earth[0].u
+        lat, ulat = latitude_from_earth_rate(rate, rate_u, direction)
+        notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
+                     "its uncertainty is carried into the angles")
+        return _with_timing(GonioRun(summary, face_angles(summary, rate, rate_u), loop,
+                                     tuple(notes), rate), steady_table, alpha)
+    if not apply_loop:
+        return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
+                            steady_table, alpha)
+    # Not determined by the log: its bound over the latitudes enters u (Type B), named.
+    mid, half = earth_rate_range(latitude_range_deg, direction)
+    where = ("all latitudes" if latitude_range_deg is None else
+             f"latitudes {latitude_range_deg[0]:g}..{latitude_range_deg[1]:g}°")
+    name = EARTH_BOUND.format(where)
+    fa = face_angles(summary, mid, type_b={name: half})
+    worst = float(np.max(fa.type_b_terms[name])) * np.rad2deg(1) * 3600
+    notes.append(f"Earth rate not determined by this log and no --latitude: its effect over "
+                 f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
+    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
 
 
@@ -371,6 +398,14 @@ def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = N
           "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
                     "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
           "angles_source": "pulse times (steady table)" if run.timing_used else "counts",
+          "type_b_terms_arcsec": {k: (v * arcsec).tolist()
+                                  for k, v in fa.type_b_terms.items()},
+          "faults": {"sigma_counts": summary.sigma_counts,
+                     "tolerance_counts": summary.tolerance_counts,
+                     "revolutions_excluded": summary.excluded_revolutions,
+                     "armed_face": summary.armed_face,
+                     "rows_before_first_revolution": summary.incomplete_head,
+                     "rows_after_last_revolution": summary.incomplete_tail},
           "notes": list(run.notes)}
     if run.timing is not None:
         ta = run.timing
