@@ -314,6 +314,10 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                      "not applied: the other direction cancels it")
         return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
+    elif earth and loop.unexplained_structure:
+        notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s) but "
+                     "structure remains that the loop does not explain: not taken as "
+                     "determined")
     elif earth:
         rate, rate_u = earth[0].estimate, earth[0].u
         lat, ulat = latitude_from_earth_rate(rate, rate_u, direction)

@@ -51,6 +51,38 @@ class FaceAngles:
         return 2 * np.pi / self.counts_per_rev
 
 
+def quantisation_of_mean(frac_per_rev: float, revolutions: int, block: int = 512,
+                         grid: int = 256) -> float:
+    """Standard deviation [counts] of the quantisation error of one interval's mean count
+    over ``revolutions`` revolutions of a steady table whose counts per revolution have the
+    fractional part ``frac_per_rev`` (the phase of each floor advances by it every revolution).
+
+    Each interval is floor(b) - floor(a): its error is saw(a) - saw(b) with saw the
+    fractional part, the two ends' phases unknown (uniform, independent). Averaged over R
+    revolutions, M(phi) = mean_r saw(phi + r f): dithered when f is far from a fraction with
+    a small denominator (~1/R), not averaged at all when f ~ 0 (locked), and anything in
+    between — which batch means of a short log cannot see (the beat is longer than the
+    blocks). Returns sqrt(2) std_phi M. Hand-written: no library computes this; blocks of
+    ``block`` revolutions reuse one table of M on a phase grid, so the cost does not grow
+    with R.
+    """
+    f = frac_per_rev % 1.0
+    R = int(revolutions)
+    B = min(block, R)
+    psi = (np.arange(grid) + 0.5) / grid
+    m_block = ((psi[:, None] + np.arange(B)[None, :] * f) % 1.0).mean(1)  # M_B(psi)
+    nb = R // B
+    phis = (np.arange(64) + 0.5) / 64
+    starts = (phis[:, None] + np.arange(nb)[None, :] * B * f) % 1.0
+    idx = np.minimum((starts * grid).astype(int), grid - 1)
+    tot = m_block[idx].sum(1) * B
+    rest = R - nb * B
+    if rest:
+        last = (phis + nb * B * f) % 1.0
+        tot += ((last[:, None] + np.arange(rest)[None, :] * f) % 1.0).sum(1)
+    return float(np.sqrt(2) * np.std(tot / R))
+
+
 def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: float = 0.0,
                 type_b: dict[str, float] | None = None) -> FaceAngles:
     """Face angles of a log's revolutions.
@@ -94,8 +126,17 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
     locked = np.sqrt(np.diag(cov_rev)) < 0.5 * q6
     ub = np.where(locked, q6, q6 / np.sqrt(st.n))
     # Type B enters only when the quantisation is locked (then it is the whole story);
-    # otherwise it is already inside the measured scatter.
-    u = np.where(locked, np.maximum(ua, ub), ua)
+    # otherwise it is inside the measured scatter — unless the phase beats more slowly than
+    # the batch-means blocks can see (nearly locked): its deterministic floor for this log's
+    # counts per revolution and length is then the larger.
+    # The log knows its counts per revolution only to ~1/R (the quantisation of its ends; a
+    # period-2 beat at f = 0.5000 reads as 0.4958 over 119 revolutions): f uniform over that
+    # range, the RMS (the spikes at fractions p/q are ~1/(qR) wide).
+    fs = n_per_rev + np.linspace(-1, 1, 33) / st.n
+    uq = 2 * np.pi / n_per_rev * float(np.sqrt(np.mean(
+        [quantisation_of_mean(f, st.n) ** 2 for f in fs])))
+    ub = np.where(locked, ub, np.maximum(ub, uq))
+    u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
     # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
     # correlations of the measured scatter).
     d = np.sqrt(np.diag(cov_rev) / st.n)
