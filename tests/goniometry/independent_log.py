@@ -7,9 +7,8 @@ time), autocollimator jitter on each pulse, time stamps of a 10 MHz clock, a ccw
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +36,8 @@ def independent_log(path: Path, revs: int, rev_per_s: float, ripple: float, wand
     t = np.arange(0, T, dt)
     theta = np.empty_like(t)
     th, ph_r = 0.0, 0.7
-    slow = (1 + (amp[:, None] * np.sin(2 * np.pi * t[None, :] / per[:, None] + ph[:, None])).sum(0)).tolist()
+    arg = 2 * np.pi * t[None, :] / per[:, None] + ph[:, None]
+    slow = (1 + (amp[:, None] * np.sin(arg)).sum(0)).tolist()
     # Midpoint steps: d theta / dt = w0 (1 + ripple sin(theta + ph_r)) * slow(t).
     for i in range(len(t)):
         theta[i] = th
