@@ -72,7 +72,7 @@ def quantisation_of_mean(frac_per_rev: float, revolutions: int, block: int = 512
     psi = (np.arange(grid) + 0.5) / grid
     m_block = ((psi[:, None] + np.arange(B)[None, :] * f) % 1.0).mean(1)  # M_B(psi)
     nb = R // B
-    phis = (np.arange(64) + 0.5) / 64
+    phis = (np.arange(32) + 0.5) / 32
     starts = (phis[:, None] + np.arange(nb)[None, :] * B * f) % 1.0
     idx = np.minimum((starts * grid).astype(int), grid - 1)
     tot = m_block[idx].sum(1) * B
@@ -132,7 +132,7 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
     # The log knows its counts per revolution only to ~1/R (the quantisation of its ends; a
     # period-2 beat at f = 0.5000 reads as 0.4958 over 119 revolutions): f uniform over that
     # range, the RMS (the spikes at fractions p/q are ~1/(qR) wide).
-    fs = n_per_rev + np.linspace(-1, 1, 33) / st.n
+    fs = n_per_rev + np.linspace(-1, 1, 17) / st.n
     uq = 2 * np.pi / n_per_rev * float(np.sqrt(np.mean(
         [quantisation_of_mean(f, st.n) ** 2 for f in fs])))
     ub = np.where(locked, ub, np.maximum(ub, uq))
