@@ -500,14 +500,13 @@ def _with_rate(table: Table, rate_hz: float | None) -> Table:
 
 
 def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
-               block_bytes: int = 1 << 20, threads: bool = False) -> Iterator[Table]:
+               block_bytes: int = 1 << 20) -> Iterator[Table]:
     """Read a table in chunks of about ``block_bytes`` of text, each a checked :class:`Table`
     (a time column is checked across chunk boundaries too). Memory stays flat in the file's
-    length: 1 MiB blocks kept Arrow's pool at 41 MB for 2·10⁶ and 6·10⁶ rows. ``threads``:
-    Arrow parses the next blocks on its threads while the caller works on this one."""
+    length: 1 MiB blocks kept Arrow's pool at 41 MB for 2·10⁶ and 6·10⁶ rows."""
     path = Path(path)
     h = _read_header(path, spec, columns or {})
-    ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=threads)
+    ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
     try:
         reader = pacsv.open_csv(path, read_options=ro, parse_options=po, convert_options=co)
     except pa.ArrowInvalid:
