@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from align.loop import Candidate, LoopReport, StageFit, Term
 
 EARTH = "earth_rate"
+LOOP_REVOLUTIONS = 20000
 SCALE = "scale_drift"
 
 
@@ -298,6 +299,12 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used)
     notes: list[str] = []
     loop = None
+    if latitude_deg is None:
+        # The loop's modules (scipy.special: ~0.3 s) load while the pass waits on the parser.
+        import threading
+        from importlib import import_module
+
+        threading.Thread(target=import_module, args=("align.loop",), daemon=True).start()
     summary = read_revolutions(path, n_faces, columns=columns)
     if summary.armed_face:
         notes.append(f"log armed on face {summary.armed_face}: the first "
@@ -319,7 +326,10 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
                             steady_table, alpha)
     counts, dt, t_end = kept_table(summary)
-    loop = loop_gonio(counts, dt, t_end, alpha=alpha)
+    # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
+    # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time).
+    m = LOOP_REVOLUTIONS
+    loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
     earth = [e for e in loop.effects if e.name == EARTH]
     if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
         notes.append(f"counts per revolution follow the period with a slope of "

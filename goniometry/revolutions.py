@@ -36,7 +36,7 @@ from goniometry.reader import iter_log
 SCREEN_SIGMA = 5.0
 NEIGHBOURS = 16
 LINES_KEPT = 1000
-FLUSH_ROWS = 1 << 16
+FLUSH_ROWS = 1 << 14
 
 R_SPURIOUS = "spurious pulse (fits no face of the pattern): dropped, its intervals merged"
 R_AMBIGUOUS = ("double trigger: two pulses within the match tolerance of one face (which is "
