@@ -108,7 +108,7 @@ def walk(x: np.ndarray, is_ref: np.ndarray, brk: np.ndarray, inc: np.ndarray,
     return out
 
 
-def revolutions_of(w: Walk, n: int, n_pulses: int) -> tuple[list, list]:
+def revolutions_of(w: Walk, n: int) -> tuple[list, list]:
     """Complete revolutions of a walk: a list of (r, pulse indices of faces r n .. (r+1) n,
     with -1 for the anchor) and the incomplete ones as (r, reason)."""
     pulse_of = {0: -1}

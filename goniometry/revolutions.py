@@ -418,7 +418,7 @@ class _Pass:
             self.excluded += max(1, round(len(rows) / self.n))
             return []
         w = walk(X[rows] - X[anchor], cur["ref"][rows] > 0, brk[rows], inc, self.tol)
-        good, bad = revolutions_of(w, self.n, len(rows))
+        good, bad = revolutions_of(w, self.n)
         pulse_rows = np.append(rows, anchor)  # index -1 -> the anchor row
         out = self._report(w, good, bad, rows, cur, brk, line0, tail)
         for _, pulses in good:
@@ -445,7 +445,7 @@ class _Pass:
         # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
         bk = np.append(brk[rows[:-1] + 1], False)
         w = walk(x, isref, bk, inc[::-1].copy(), self.tol)
-        good, bad = revolutions_of(w, self.n, len(rows))
+        good, bad = revolutions_of(w, self.n)
         arm = w.face[-1]
         self.armed = int((-arm) % self.n) if arm > 0 else None
         out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True)

@@ -141,6 +141,8 @@ def test_undetermined_earth_rate_is_carried_as_type_b(tmp_path):
     js = json.loads(out.read_text())
     assert any(k.startswith("earth_rate") for k in js["type_b_terms_arcsec"])
     assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--latitude-range", "60,40"]) == 2
+    assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--latitude-range", "40,60",
+                 "--latitude", "50"]) == 2
 
 
 @pytest.mark.slow
