@@ -155,3 +155,16 @@ def test_type_b_normalised_errors_over_seeds(tmp_path):
     zs = np.array(zs)
     print(f"Type B case: max |z| {np.max(np.abs(zs)):.2f}, RMS {np.sqrt(np.mean(zs**2)):.2f}")
     assert np.max(np.abs(zs)) < 1.5
+
+
+def test_session_latitude_range_key(tmp_path):
+    from align.session.config import load_session
+    from axisbase.errors import InputError
+
+    p, _ = _log(tmp_path, "gonio.csv", revolutions=50)
+    toml = '[goniometer]\nlog = "gonio.csv"\nfaces = ["ref", "z", "y", "x"]\n'
+    (tmp_path / "session.toml").write_text("latitude_range_deg = [40, 60]\n" + toml)
+    assert load_session(tmp_path).latitude_range_deg == (40.0, 60.0)
+    (tmp_path / "session.toml").write_text("latitude_range_deg = [60, 40]\n" + toml)
+    with pytest.raises(InputError, match="latitude_range_deg"):
+        load_session(tmp_path)

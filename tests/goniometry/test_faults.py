@@ -138,3 +138,22 @@ def test_clean_logs_report_nothing(tmp_path):
         s = read_revolutions(write_log(sim, tmp_path / f"c{seed}.csv"), N_FACES)
         assert not s.exclusions.counts, dict(s.exclusions.counts)
         assert s.excluded_revolutions == 0
+
+
+def test_a_double_trigger_too_close_to_tell_excludes_its_revolution(tmp_path):
+    """A second pulse 1 µs after a face (0.8 count at 1 rev/s) and a glint ~1 count before
+    another: which pulse is the face cannot be known from the counts (nor from the times,
+    which read the same instants): those revolutions are excluded and said so, not guessed."""
+    from goniometry.revolutions import R_AMBIGUOUS
+
+    faults = (("double", 101, 1e-6), ("glint", 202, 1 - 5e-6))
+    sim = simulate(GonioSpec(revolutions=150, faults=faults, seed=3))
+    run = measure_log(write_log(sim, tmp_path / "close.csv"), N_FACES, 50.45)
+    ex = run.summary.exclusions
+    assert ex.counts[R_AMBIGUOUS] == 2
+    rows = [line - 2 for line in ex.lines[R_AMBIGUOUS]]
+    for f, r in zip(sim["truth"]["faults"], sorted(rows), strict=True):
+        assert abs(f["row"] - r) <= 1
+    assert run.summary.excluded_revolutions == 2
+    truth = np.array(sim["truth"]["angles_rad"])
+    assert np.all(np.abs(run.angles.angles_rad - truth) < 4 * run.angles.u_rad)
