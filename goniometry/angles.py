@@ -118,7 +118,11 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         # periodically; the speed wanders): the scatter of block means over the longest
         # averaging with >= 8 blocks gives the uncertainty of the mean (batch means).
         j = int(np.flatnonzero(usable)[-1])
-        ua = adev[j] * np.sqrt(taus[j] / st.n)
+        # Estimated from nu = blocks - 1 degrees of freedom (8-16 blocks): an error over it
+        # follows Student's t, whose variance is nu / (nu - 2); scaled so the normalised
+        # errors have unit variance (x1.07-1.18 here; -> 1 for long logs).
+        nu = blocks[j] - 1
+        ua = adev[j] * np.sqrt(taus[j] / st.n) * np.sqrt(nu / (nu - 2))
     q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
     # Averaging beats quantisation only if its phase dithers from one revolution to the
     # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of

@@ -112,8 +112,11 @@ def _validate(tab: Table) -> None:
 
     count, counter, ref = tab["count"], tab["counter"], tab["ref"]
     # Cheap range checks first; the masks (line numbers) only when something is wrong.
-    if count.min() <= 0:
-        fail(count <= 0, "count", "must be positive (ring-laser periods between two pulses)")
+    # 0 is a count: two pulses within one ring-laser period (a double trigger), which the
+    # face pattern then resolves; a negative count is not.
+    if count.min() < 0:
+        fail(count < 0, "count", "must not be negative (ring-laser periods between two "
+             "pulses)")
     if counter.min() < 1 or counter.max() > 2:
         fail((counter < 1) | (counter > 2), "counter", "must be 1 or 2")
     if ref.min() < 0 or ref.max() > 1:
