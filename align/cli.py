@@ -363,6 +363,19 @@ def _distinct_files(a: str, b: str, flag_a: str, flag_b: str) -> None:
                          "direction is a different recording")
 
 
+def _latitude_range(text: str) -> list[float]:
+    """argparse type of ``--latitude-range LO,HI`` [deg]."""
+    import math
+
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: two latitudes LO,HI in degrees") from None
+    if not all(math.isfinite(v) and -90 <= v <= 90 for v in (lo, hi)) or lo > hi:
+        raise argparse.ArgumentTypeError(f"{text}: need -90 <= LO <= HI <= 90")
+    return [lo, hi]
+
+
 def cmd_gonio(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -384,10 +397,12 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     out = plan.add("--json", args.json, stdout_ok=True)
     plot = plan.add("--plot", args.plot, folder=True)
     d = 1 if args.direction == "ccw" else -1
+    if args.latitude is not None and args.latitude_range is not None:
+        raise UsageError("--latitude-range: give it or --latitude, not both")
     try:
         run = measure_log(args.log, len(faces), args.latitude, d, args.alpha,
                           reverse_log=args.reverse_log, steady_table=args.steady_table,
-                          columns=cols)
+                          columns=cols, latitude_range_deg=args.latitude_range)
     except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
@@ -830,6 +845,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--nominal", help="nominal angles [deg] summing to 360, e.g. 90,90,90,90")
     g.add_argument("--latitude", type=_number(-90, 90), metavar="DEG",
                    help="site latitude [deg] (Earth-rate correction)")
+    g.add_argument("--latitude-range", type=_latitude_range, metavar="LO,HI",
+                   help="without --latitude: the latitudes the site may have [deg]; bounds "
+                   "the Earth-rate term carried in u (default: all latitudes)")
     g.add_argument("--direction", choices=["ccw", "cw"], default="ccw",
                    help="table rotation seen from above")
     g.add_argument("--reverse-log", help="a log of the same faces with the table turning the "

@@ -23,15 +23,13 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import stats
 
-from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 from goniometry import (
     FaceAngles,
     LogSummary,
-    earth_rate_counts,
     face_angles,
     kept_table,
     read_revolutions,
@@ -40,7 +38,11 @@ from goniometry import (
 from goniometry.angles import OMEGA_EARTH
 from goniometry.timing import TimingAngles, timing_angles
 
+if TYPE_CHECKING:
+    from align.loop import Candidate, LoopReport, StageFit, Term
+
 EARTH = "earth_rate"
+LOOP_REVOLUTIONS = 20000
 SCALE = "scale_drift"
 
 
@@ -74,10 +76,13 @@ def quantisation_pattern(N: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, floa
             pred = (phis[:, None] + x[None, :] * f) % 1.0 >= 1.0 - (f % 1.0)
             score[i] = (pred == (y[None, :] >= 1)).sum(1)
         i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        best = (phis[j], fs[i])
+        best = (phis[j] % 1.0, fs[i])
         if n_use == len(b):
             break
         lo, hi = fs[i] - 3 * step, fs[i] + 3 * step
+        # The phase is known to ~1/n_use after a stage: the next searches only near it
+        # (the whole 200-point grid at every stage cost 5 s at 25000 revolutions).
+        phis = phis[j] + np.arange(-6, 7) * 0.005
         n_use *= 4
     phi, f = best
     a, b_ = phi + rr * f, phi + (rr + 1) * f
@@ -85,10 +90,12 @@ def quantisation_pattern(N: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, floa
     # The autocollimator's jitter (sigma, in counts) blurs each floor near its step: the
     # expected floor(x + e) is floor(x) + Phi((frac x - 1) / sigma) - Phi(-frac x / sigma).
     # sigma by a 1-D search on the residual.
+    from scipy.special import ndtr  # (the normal CDF; scipy.stats costs 0.8 s to import)
+
     def soft(sig: float) -> np.ndarray:
         def h(x: np.ndarray) -> np.ndarray:
             fr = x % 1.0
-            return stats.norm.cdf((fr - 1) / sig) - stats.norm.cdf(-fr / sig)
+            return ndtr((fr - 1) / sig) - ndtr(-fr / sig)
         return hard + h(b_) - h(a)
 
     sigmas = np.geomspace(0.005, 0.5, 24)
@@ -127,6 +134,8 @@ class RevolutionStage:
                 self.pattern, self.pattern_agreement = pred - pred.mean(), agree
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
+        from align.loop import StageFit
+
         y = self.N - self.K
         base = [np.ones_like(y)] + ([self.pattern] if self.pattern is not None else [])
         cols = base + [np.asarray(t.columns, float).ravel() for t in terms]
@@ -145,6 +154,8 @@ class RevolutionStage:
 
 
 def candidates(stage: RevolutionStage) -> tuple[Candidate, ...]:
+    from align.loop import Candidate, Term
+
     T = stage.T - stage.T.mean()
     t = stage.t - stage.t.mean()
     return (
@@ -157,6 +168,8 @@ def candidates(stage: RevolutionStage) -> tuple[Candidate, ...]:
 
 def loop_gonio(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray,
                alpha: float = 1e-3) -> LoopReport:
+    from align.loop import run_loop
+
     stage = RevolutionStage(counts, dt, t_end)
     return run_loop(stage, candidates(stage), alpha=alpha)
 
@@ -226,7 +239,9 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
     cov = (fwd.cov + c_rev) / 4
     half = (fwd.angles_rad - a_rev) / 2
     chi2 = float(half @ np.linalg.pinv(cov, rcond=1e-10) @ half)
-    term = DirectionTerm(half, cov, chi2, n - 1, float(stats.chi2.sf(chi2, n - 1)))
+    from scipy.special import chdtrc  # (the chi2 survival function)
+
+    term = DirectionTerm(half, cov, chi2, n - 1, float(chdtrc(n - 1, chi2)))
     comb = replace(
         fwd, angles_rad=mean, u_rad=np.sqrt(np.diag(cov)), cov=cov,
         u_type_a_rad=np.sqrt(fwd.u_type_a_rad**2 + (P @ rev.u_type_a_rad) ** 2) / 2,
@@ -236,19 +251,35 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
     return comb, term
 
 
+def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
+                     direction: int) -> tuple[float, float]:
+    """Mid-point and half-range [rad/s] of the vertical Earth rate over a latitude range
+    [deg] (all latitudes when None)."""
+    lo, hi = latitude_range_deg if latitude_range_deg is not None else (-90.0, 90.0)
+    r1, r2 = vertical_earth_rate(lo, direction), vertical_earth_rate(hi, direction)
+    return (r1 + r2) / 2, abs(r2 - r1) / 2
+
+
+EARTH_BOUND = "earth_rate (latitude not given: bound over {})"
+
+
 def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
                 reverse_log: str | Path | None = None, apply_loop: bool = True,
-                steady_table: bool = False, columns: Mapping[str, str] | None = None
-                ) -> GonioRun:
-    """Face angles of a log; with times, the Earth rate is removed from the latitude when given,
-    else by the loop when the data show it and it is physically possible. ``reverse_log``: a
+                steady_table: bool = False, columns: Mapping[str, str] | None = None,
+                latitude_range_deg: tuple[float, float] | None = None) -> GonioRun:
+    """Face angles of a log, from one pass over it.
+
+    With times, the Earth rate is removed from the latitude when given, else by the loop
+    when the data show it and it is physically possible; when neither determines it, the
+    range of its effect over all latitudes (or ``latitude_range_deg``) is carried in u as a
+    named Type B term (an unsteady table makes the angles depend on it). ``reverse_log``: a
     log of the same faces with the table turning the other way; the result is then the mean
-    of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts the
-    table turns at constant speed within a revolution; the angles then come from the pulse
-    times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the timing
-    estimate is the more precise one; otherwise the counts are used and the reason is noted.
-    ``columns``: header names of the log's columns (``--columns``), for both logs.
+    of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts
+    the table turns at constant speed within a revolution; the angles then come from the
+    pulse times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the
+    timing estimate is the more precise one; otherwise the counts are used and the reason is
+    noted. ``columns``: header names of the log's columns (``--columns``), for both logs.
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
     """
@@ -268,45 +299,70 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used)
     notes: list[str] = []
     loop = None
-    rate_used = None
-    rate_u = 0.0
+    if latitude_deg is None:
+        # The loop's modules (scipy.special: ~0.3 s) load while the pass waits on the parser.
+        import threading
+        from importlib import import_module
+
+        threading.Thread(target=import_module, args=("align.loop",), daemon=True).start()
     summary = read_revolutions(path, n_faces, columns=columns)
+    if summary.armed_face:
+        notes.append(f"log armed on face {summary.armed_face}: the first "
+                     f"{summary.incomplete_head} rows are a partial revolution, not used")
+    elif summary.incomplete_head:
+        notes.append(f"the first {summary.incomplete_head} rows before the first complete "
+                     "revolution are not used")
     if latitude_deg is not None and summary.has_time:
-        rate_used = vertical_earth_rate(latitude_deg, direction)
-    elif latitude_deg is not None:
+        rate = vertical_earth_rate(latitude_deg, direction)
+        return _with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
+                                     rate), steady_table, alpha)
+    if latitude_deg is not None:
         notes.append("no t column: the Earth-rate correction needs pulse times; not applied")
-    elif summary.has_time:
-        counts, dt, t_end = kept_table(summary)
-        loop = loop_gonio(counts, dt, t_end, alpha=alpha)
-        earth = [e for e in loop.effects if e.name == EARTH]
-        if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
-            notes.append(f"counts per revolution follow the period with a slope of "
-                         f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
-        elif earth and not apply_loop:
-            notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
-                         "not applied: the other direction cancels it")
-        elif earth:
-            rate_used, rate_u = earth[0].estimate, earth[0].u
-            lat, ulat = latitude_from_earth_rate(earth[0].estimate, earth[0].u, direction)
-            notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
-                         "its uncertainty is carried into the angles")
-    if rate_used is None:
+        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+                            steady_table, alpha)
+    if not summary.has_time:
+        notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
+                     "nor bounded without pulse times; the angles assume a steady table")
+        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+                            steady_table, alpha)
+    counts, dt, t_end = kept_table(summary)
+    # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
+    # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time).
+    m = LOOP_REVOLUTIONS
+    loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
+    earth = [e for e in loop.effects if e.name == EARTH]
+    if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
+        notes.append(f"counts per revolution follow the period with a slope of "
+                     f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")
+    elif earth and not apply_loop:
+        notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
+                     "not applied: the other direction cancels it")
         return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
-    rate = rate_used
-    summary = read_revolutions(path, n_faces,
-                               correct=lambda c, dt: earth_rate_counts(c, dt, rate),
-                               columns=columns)
-    fa = face_angles(summary)
-    if rate_u:
-        # A_k = 2 pi c_k / sum c with c_k - K rate dt_k / 2 pi: dA_k / d rate =
-        # -(dt_k - T A_k / 2 pi), averaged over the revolutions.
-        _, dt, _ = kept_table(summary)
-        ok = np.all(np.isfinite(dt), axis=1)
-        sens = -(dt[ok].mean(0) - dt[ok].sum(1).mean() * fa.angles_rad / (2 * np.pi))
-        cov = fa.cov + np.outer(sens, sens) * rate_u**2
-        fa = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)))
-    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), rate_used), steady_table,
+    elif earth and loop.unexplained_structure:
+        notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s) but "
+                     "structure remains that the loop does not explain: not taken as "
+                     "determined")
+    elif earth:
+        rate, rate_u = earth[0].estimate, earth[0].u
+        lat, ulat = latitude_from_earth_rate(rate, rate_u, direction)
+        notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
+                     "its uncertainty is carried into the angles")
+        return _with_timing(GonioRun(summary, face_angles(summary, rate, rate_u), loop,
+                                     tuple(notes), rate), steady_table, alpha)
+    if not apply_loop:
+        return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
+                            steady_table, alpha)
+    # Not determined by the log: its bound over the latitudes enters u (Type B), named.
+    mid, half = earth_rate_range(latitude_range_deg, direction)
+    where = ("all latitudes" if latitude_range_deg is None else
+             f"latitudes {latitude_range_deg[0]:g}..{latitude_range_deg[1]:g}°")
+    name = EARTH_BOUND.format(where)
+    fa = face_angles(summary, mid, type_b={name: half})
+    worst = float(np.max(fa.type_b_terms[name])) * np.rad2deg(1) * 3600
+    notes.append(f"Earth rate not determined by this log and no --latitude: its effect over "
+                 f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
+    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
 
 
@@ -371,6 +427,14 @@ def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = N
           "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
                     "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
           "angles_source": "pulse times (steady table)" if run.timing_used else "counts",
+          "type_b_terms_arcsec": {k: (v * arcsec).tolist()
+                                  for k, v in fa.type_b_terms.items()},
+          "faults": {"sigma_counts": summary.sigma_counts,
+                     "tolerance_counts": summary.tolerance_counts,
+                     "revolutions_excluded": summary.excluded_revolutions,
+                     "armed_face": summary.armed_face,
+                     "rows_before_first_revolution": summary.incomplete_head,
+                     "rows_after_last_revolution": summary.incomplete_tail},
           "notes": list(run.notes)}
     if run.timing is not None:
         ta = run.timing

@@ -8,8 +8,11 @@ Run:  python3 benchmarks/gonio.py [--logs 50] [--pulses 1000000,10000000]
    With pulse times and a steady table, the same logs through the pulse-time estimator
    (--steady-table): normalised errors, u against the jitter limit sqrt(2) sigma_j / sqrt(R),
    and the gain over the counts.
-2. Throughput (pulses/s) and peak memory (max RSS of a fresh process) of the streaming reader
-   for two log lengths: memory must not grow with the length.
+2. End to end, what the user runs: ``align gonio LOG --faces ref,z,y,x`` (no latitude: the
+   loop runs) against ``pyarrow.csv.read_csv`` of the same file, each in fresh processes
+   (imports included, interpreter start-up excluded), paired and interleaved; the ratio of
+   the two and the peak RSS, for log lengths that show whether memory grows.
+   ``--logs 0 --pulses 1e7,3e7`` runs only this part, ``--pulses 0`` only the first.
 """
 
 from __future__ import annotations
@@ -70,55 +73,85 @@ def _peak_rss_mb() -> float:
     return float("nan")
 
 
-def _child(path: str) -> None:
-    from goniometry import face_angles, read_revolutions
-
+def _child(what: str, path: str) -> None:
+    """One timed run in a fresh process, from before its imports (the interpreter's own
+    start-up excluded): ``cli`` is exactly what ``align gonio LOG --faces ...`` runs;
+    ``read_csv`` is pyarrow's whole-file reader on the same file."""
     t0 = time.perf_counter()
-    s = read_revolutions(path, 4)
-    fa = face_angles(s)
-    dt = time.perf_counter() - t0
-    rss = _peak_rss_mb()
-    print(json.dumps({"rows": s.rows, "seconds": dt, "rss_mb": rss,
-                      "revolutions": fa.revolutions}))
+    if what == "cli":
+        import contextlib
+        import io
+
+        from align.cli import main
+
+        with contextlib.redirect_stdout(io.StringIO()):
+            code = main(["gonio", path, "--faces", "ref,z,y,x"])
+        assert code == 0, code
+    else:
+        import pyarrow.csv as pacsv
+
+        pacsv.read_csv(path)
+    print(json.dumps({"seconds": time.perf_counter() - t0, "rss_mb": _peak_rss_mb()}))
 
 
-def throughput(lengths: list[int]) -> None:
-    print("\n== streaming: one core, constant-speed logs with timestamps ==")
+def write_big_log(path: Path, n: int) -> None:
+    """A steady-table log of n pulses with 10 MHz time stamps, written in blocks by pyarrow
+    (numpy.savetxt takes minutes at 1e8 rows)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    rng = np.random.default_rng(0)
+    pattern = np.array([191178, 190871, 191274, 191033])
+    with pacsv.CSVWriter(path, pa.schema([("count", pa.int64()), ("counter", pa.int8()),
+                                          ("ref", pa.int8()), ("t", pa.float64())])) as w:
+        for s in range(0, n, 1 << 20):
+            i = np.arange(s, min(n, s + (1 << 20)))
+            t = np.round((i + 1) * 0.25 + rng.normal(0, 1e-7, i.size), 7)
+            w.write(pa.table({"count": pattern[i % 4] + rng.integers(0, 2, i.size),
+                              "counter": (i % 2 + 1).astype(np.int8),
+                              "ref": (i % 4 == 3).astype(np.int8), "t": t}))
+
+
+def throughput(lengths: list[int], repeats: int = 3) -> None:
+    print("\n== one pass at parse speed: 'align gonio LOG --faces ref,z,y,x' vs "
+          "pyarrow.csv.read_csv, fresh processes, imports included, interpreter start-up "
+          "excluded ==")
     with tempfile.TemporaryDirectory() as d:
         for n in lengths:
             p = Path(d) / f"log{n}.csv"
-            revs = n // 4
-            rng = np.random.default_rng(0)
-            counts = np.tile([191178, 190871, 191274, 191033], revs) + rng.integers(0, 2, n)
-            t = np.arange(1, n + 1) * 0.25
-            ref = (np.arange(n) % 4 == 3).astype(int)
-            with open(p, "w") as f:
-                f.write("count,counter,ref,t\n")
-                np.savetxt(f, np.column_stack([counts, np.arange(n) % 2 + 1, ref, t]),
-                           fmt=["%d", "%d", "%d", "%.6f"], delimiter=",")
-            # Three fresh processes each: this machine's speed varies by 2x from run to run.
-            runs = []
-            for _ in range(3):
-                out = subprocess.run([sys.executable, __file__, "--child", str(p)], check=True,
-                                     capture_output=True, text=True,
-                                     env={"OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"})
-                runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
-            rate = sorted(r["rows"] / r["seconds"] / 1e6 for r in runs)
-            print(f"{runs[0]['rows']:>10d} pulses: {rate[1]:5.2f} M pulses/s median of 3 "
-                  f"(best {rate[-1]:.2f}), peak RSS {max(r['rss_mb'] for r in runs):6.1f} MB")
+            write_big_log(p, n)
+            runs: dict[str, list] = {"cli": [], "read_csv": []}
+            for _ in range(repeats):  # interleaved: this shared machine's speed varies
+                for what in runs:
+                    out = subprocess.run([sys.executable, __file__, "--child", what, str(p)],
+                                         check=True, capture_output=True, text=True)
+                    runs[what].append(json.loads(out.stdout.strip().splitlines()[-1]))
+            cli = float(np.median([r["seconds"] for r in runs["cli"]]))
+            rc = float(np.median([r["seconds"] for r in runs["read_csv"]]))
+            ratio = np.median([a["seconds"] / b["seconds"]
+                               for a, b in zip(runs["cli"], runs["read_csv"], strict=True)])
+            print(f"{n:>10d} rows ({p.stat().st_size / 1e6:.0f} MB): align gonio {cli:6.2f} s "
+                  f"({n / cli / 1e6:.2f} M rows/s), read_csv {rc:6.2f} s; ratio {ratio:.2f} "
+                  f"(median of {repeats} paired runs); peak RSS align gonio "
+                  f"{max(r['rss_mb'] for r in runs['cli']):.0f} MB, read_csv "
+                  f"{max(r['rss_mb'] for r in runs['read_csv']):.0f} MB")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", type=int, default=50)
     ap.add_argument("--pulses", default="1000000,10000000")
-    ap.add_argument("--child")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--child", nargs=2, metavar=("WHAT", "LOG"))
     args = ap.parse_args()
     if args.child:
-        _child(args.child)
+        _child(*args.child)
         return
-    accuracy(args.logs)
-    throughput([int(v) for v in args.pulses.split(",")])
+    if args.logs:
+        accuracy(args.logs)
+    lengths = [int(float(v)) for v in args.pulses.split(",") if float(v) > 0]
+    if lengths:
+        throughput(lengths, args.repeats)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ negatively correlated: the full covariance is reported.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,7 +24,15 @@ OMEGA_EARTH = 7.2921150e-5  # rad/s
 
 @dataclass(frozen=True)
 class FaceAngles:
-    """Angles [rad] from face k to face k+1 in passing order (face 0: the reference)."""
+    """Angles [rad] from face k to face k+1 in passing order (face 0: the reference).
+
+    ``angles_rad`` (n,): means over the revolutions; ``u_rad``: standard uncertainties [rad]
+    (Type A batch means, with the Type B terms in quadrature); ``cov`` (n, n) [rad^2] in the
+    same order; ``u_type_a_rad`` / ``u_type_b_rad``: the two parts; ``revolutions``: used;
+    ``counts_per_rev``: mean counts of a revolution; ``allan_tau_rev`` / ``allan_dev_rad``:
+    Allan deviation per angle; ``quantisation_locked`` (n,) bool; ``type_b_terms``: name ->
+    (n,) [rad], each effect the log cannot determine (or determines only to +-u) whose bound
+    enters u."""
 
     angles_rad: np.ndarray
     u_rad: np.ndarray
@@ -36,22 +44,73 @@ class FaceAngles:
     allan_tau_rev: np.ndarray
     allan_dev_rad: np.ndarray
     quantisation_locked: np.ndarray
+    type_b_terms: dict = field(default_factory=dict)
 
     @property
     def quantum_rad(self) -> float:
         return 2 * np.pi / self.counts_per_rev
 
 
-def face_angles(summary: LogSummary) -> FaceAngles:
+def quantisation_of_mean(frac_per_rev: float, revolutions: int, block: int = 512,
+                         grid: int = 256) -> float:
+    """Standard deviation [counts] of the quantisation error of one interval's mean count
+    over ``revolutions`` revolutions of a steady table whose counts per revolution have the
+    fractional part ``frac_per_rev`` (the phase of each floor advances by it every revolution).
+
+    Each interval is floor(b) - floor(a): its error is saw(a) - saw(b) with saw the
+    fractional part, the two ends' phases unknown (uniform, independent). Averaged over R
+    revolutions, M(phi) = mean_r saw(phi + r f): dithered when f is far from a fraction with
+    a small denominator (~1/R), not averaged at all when f ~ 0 (locked), and anything in
+    between — which batch means of a short log cannot see (the beat is longer than the
+    blocks). Returns sqrt(2) std_phi M. Hand-written: no library computes this; blocks of
+    ``block`` revolutions reuse one table of M on a phase grid, so the cost does not grow
+    with R.
+    """
+    f = frac_per_rev % 1.0
+    R = int(revolutions)
+    B = min(block, R)
+    psi = (np.arange(grid) + 0.5) / grid
+    m_block = ((psi[:, None] + np.arange(B)[None, :] * f) % 1.0).mean(1)  # M_B(psi)
+    nb = R // B
+    phis = (np.arange(32) + 0.5) / 32
+    starts = (phis[:, None] + np.arange(nb)[None, :] * B * f) % 1.0
+    idx = np.minimum((starts * grid).astype(int), grid - 1)
+    tot = m_block[idx].sum(1) * B
+    rest = R - nb * B
+    if rest:
+        last = (phis + nb * B * f) % 1.0
+        tot += ((last[:, None] + np.arange(rest)[None, :] * f) % 1.0).sum(1)
+    return float(np.sqrt(2) * np.std(tot / R))
+
+
+def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: float = 0.0,
+                type_b: dict[str, float] | None = None) -> FaceAngles:
+    """Face angles of a log's revolutions.
+
+    Parameters
+    ----------
+    summary : the one pass over the log.
+    earth_rate : vertical rate [rad/s] removed from the counts (the Earth's, signed as the
+        ring laser sees it), applied through the accumulated sensitivities g (exact to 1e-9).
+    earth_rate_u : its standard uncertainty [rad/s], carried into the angles.
+    type_b : further rate terms not determined by the log, name -> half-range [rad/s] of the
+        rate (e.g. the Earth rate over all latitudes): each enters u as |mean g| times it,
+        fully correlated between the angles.
+    """
     st = summary.stats
     if st.n < 2:
         raise ValueError(f"only {st.n} usable revolutions: need at least 2")
-    mean_d = st.s1 / st.n
-    cov_rev = (st.s2 - st.n * np.outer(mean_d, mean_d)) / (st.n - 1)
-    mean = st.shift + mean_d
+    n = st.n_faces
+    # y = [a, g]: the corrected angles are a - rate g (linear), so their mean, covariance and
+    # Allan variance follow from the sums of y for any rate.
+    w = np.concatenate([np.eye(n), -earth_rate * np.eye(n)], axis=1)  # (n, 2n)
+    mean_y = st.s1 / st.n
+    cov_y = (st.s2 - st.n * np.outer(mean_y, mean_y)) / (st.n - 1)
+    mean = w @ (st.shift + mean_y)
+    cov_rev = w @ cov_y @ w.T
     n_per_rev = st.total_sum / st.n
     ua = np.sqrt(np.diag(cov_rev) / st.n)
-    taus, adev = st.allan.deviation()
+    taus, adev = st.allan.deviation(earth_rate)
     blocks = st.n / taus
     usable = blocks >= 8
     if usable.any():
@@ -59,7 +118,11 @@ def face_angles(summary: LogSummary) -> FaceAngles:
         # periodically; the speed wanders): the scatter of block means over the longest
         # averaging with >= 8 blocks gives the uncertainty of the mean (batch means).
         j = int(np.flatnonzero(usable)[-1])
-        ua = adev[j] * np.sqrt(taus[j] / st.n)
+        # Estimated from nu = blocks - 1 degrees of freedom (8-16 blocks): an error over it
+        # follows Student's t, whose variance is nu / (nu - 2); scaled so the normalised
+        # errors have unit variance (x1.07-1.18 here; -> 1 for long logs).
+        nu = blocks[j] - 1
+        ua = adev[j] * np.sqrt(taus[j] / st.n) * np.sqrt(nu / (nu - 2))
     q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
     # Averaging beats quantisation only if its phase dithers from one revolution to the
     # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of
@@ -67,14 +130,36 @@ def face_angles(summary: LogSummary) -> FaceAngles:
     locked = np.sqrt(np.diag(cov_rev)) < 0.5 * q6
     ub = np.where(locked, q6, q6 / np.sqrt(st.n))
     # Type B enters only when the quantisation is locked (then it is the whole story);
-    # otherwise it is already inside the measured scatter.
-    u = np.where(locked, np.maximum(ua, ub), ua)
+    # otherwise it is inside the measured scatter — unless the phase beats more slowly than
+    # the batch-means blocks can see (nearly locked): its deterministic floor for this log's
+    # counts per revolution and length is then the larger.
+    # The log knows its counts per revolution only to ~1/R (the quantisation of its ends; a
+    # period-2 beat at f = 0.5000 reads as 0.4958 over 119 revolutions): f uniform over that
+    # range, the RMS (the spikes at fractions p/q are ~1/(qR) wide).
+    fs = n_per_rev + np.linspace(-1, 1, 17) / st.n
+    uq = 2 * np.pi / n_per_rev * float(np.sqrt(np.mean(
+        [quantisation_of_mean(f, st.n) ** 2 for f in fs])))
+    ub = np.where(locked, ub, np.maximum(ub, uq))
+    u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
     # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
     # correlations of the measured scatter).
     d = np.sqrt(np.diag(cov_rev) / st.n)
     corr = cov_rev / st.n / np.outer(np.where(d > 0, d, 1), np.where(d > 0, d, 1))
+    corr[np.diag_indices(n)] = 1.0  # (also where the scatter is zero: locked quantisation)
     cov = corr * np.outer(u, u)
-    return FaceAngles(mean, u, cov, ua, ub, st.n, n_per_rev, taus, adev, locked)
+    # dA_k / d rate = -mean g_k [s]: a rate known to +-u moves the angles together.
+    sens = -(st.shift + mean_y)[n:]
+    terms = {}
+    if earth_rate_u:
+        terms["earth_rate (estimated)"] = earth_rate_u
+    terms.update(type_b or {})
+    extra = {}
+    for name, half in terms.items():
+        cov = cov + np.outer(sens, sens) * half**2
+        extra[name] = np.abs(sens) * half
+    ub_all = np.sqrt(ub**2 + sum(v**2 for v in extra.values())) if extra else ub
+    return FaceAngles(mean, np.sqrt(np.diag(cov)), cov, ua, ub_all, st.n, n_per_rev, taus,
+                      adev, locked, extra)
 
 
 def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

@@ -1,21 +1,23 @@
-"""Counter log -> revolutions -> face angles, streaming, with missing/spurious pulse handling.
+"""Counter log -> revolutions -> face-angle statistics, in one streaming pass.
 
-Each revolution is the run of rows from the one after a reference pulse up to and including
-the next reference pulse: n_faces intervals, face k -> k+1, the last one closing on the
-reference face. Normal revolutions are handled vectorised; the rare abnormal ones go through
-a slow path that repairs with evidence or excludes, and every decision is recorded:
+Each revolution runs from a face-0 pulse to the next: n_faces intervals, face k -> k+1, the
+last closing on face 0. A stretch of rows between two reference marks that has n_faces rows,
+alternating counters and face angles within 5 sigma of the log's face pattern (the median of
+the chunk's revolutions; sigma the counts' quantisation and jitter, measured) is a clean
+revolution, handled vectorised. Every other stretch goes to :mod:`goniometry.faults`, which
+decides pulse by pulse from the ring-laser counts (predicted from the neighbouring clean
+revolutions) which pulses are faces, which are spurious and which faces are missing; the
+revolutions it completes are screened again (5 sigma) and every decision is listed with its
+line. The rows before the first reference mark (the log may be armed on any face) and after
+the last one are matched the same way (backwards / forwards) and not used unless complete.
 
-* n_faces + 1 intervals whose two neighbours add up to the expected pattern: a spurious
-  pulse split one interval; counts add exactly, so the merge is a repair;
-* 2 n_faces intervals matching the pattern twice: the reference signal failed once; split;
-* n_faces - 1 intervals: a missing pulse; where it was cannot be known: excluded;
-* a counter that does not alternate: a row is missing from the log itself: excluded;
-* anything else, or counts off the pattern: excluded.
-
-Per revolution the angles are closure-normalised: a_k = 2 pi c_k / sum(c) (the counts of a
-whole revolution are 360 deg, whatever the ring laser's scale factor). Statistics are
-accumulated as sums (memory independent of the log's length); the first ``keep``
-revolutions are also kept whole for the residual loop and plots.
+Per revolution the angles are closure-normalised, a_k = 2 pi c_k / sum(c) (a whole revolution
+is 360 deg whatever the ring laser's scale factor). With pulse times, the per-revolution
+sensitivity to a vertical rate is accumulated too, g_k = dt_k - a_k T / 2 pi [s]: removing a
+rate rho (the Earth's) from the counts changes a_k by -rho g_k (to 1e-9 relative), so the
+Earth rate — from the latitude, or found by the residual loop after the pass — is applied
+without reading the log again. Statistics are sums (memory independent of the log's
+length); the first ``keep`` revolutions are also kept whole for the loop and the plots.
 """
 
 from __future__ import annotations
@@ -28,13 +30,27 @@ from pathlib import Path
 import numpy as np
 
 from goniometry.errors import LogError
+from goniometry.faults import SPURIOUS, revolutions_of, walk
 from goniometry.reader import iter_log
 
+SCREEN_SIGMA = 5.0
+NEIGHBOURS = 16
+LINES_KEPT = 1000
+FLUSH_ROWS = 1 << 14
 
-def _rows(a: np.ndarray, idx: np.ndarray | None, end: int, n: int) -> np.ndarray:
-    """Revolutions as rows: a reshaped view when they are back to back (``idx`` None), else
-    gathered by ``idx``."""
-    return a[:end].reshape(-1, n) if idx is None else a[idx]
+R_SPURIOUS = "spurious pulse (fits no face of the pattern): dropped, its intervals merged"
+R_AMBIGUOUS = ("double trigger: two pulses within the match tolerance of one face (which is "
+               "the face cannot be known): revolution excluded")
+R_MISSING = "missing autocollimator pulse: revolution excluded"
+R_REF_FAILED = "reference signal failed (face 0 found by the count pattern): repaired"
+R_REF_WRONG = "reference mark on a pulse that is not face 0: mark ignored"
+R_LOST = ("a row is missing from the log (counter did not alternate, the counts do not fit): "
+          "revolution excluded")
+R_LABEL = ("counter id did not alternate but no row is missing (the counts fit the face "
+           "pattern): mislabelled, revolution kept")
+R_REANCHOR = "face pattern lost: restarted at the next reference mark"
+R_SCREEN = "face angles off the pattern by more than 5 sigma: revolution excluded"
+R_NOPATTERN = "no clean revolution nearby to predict the face pattern: stretch excluded"
 
 
 def rowsum(a: np.ndarray) -> np.ndarray:
@@ -55,52 +71,56 @@ def rowany(a: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Exclusions:
-    """What was excluded or repaired, by reason (with the first few line numbers)."""
+    """What was excluded or repaired, by reason, with line numbers (the first 1000)."""
 
     counts: Counter = field(default_factory=Counter)
     lines: dict = field(default_factory=dict)
 
     def add(self, reason: str, line: int) -> None:
         self.counts[reason] += 1
-        self.lines.setdefault(reason, [])
-        if len(self.lines[reason]) < 10:
-            self.lines[reason].append(line)
+        got = self.lines.setdefault(reason, [])
+        if len(got) < LINES_KEPT:
+            got.append(int(line))
 
 
 @dataclass
 class AllanAccumulator:
     """Non-overlapping Allan variance of a vector series at octave averaging lengths
     (1, 2, 4, ... 2^(levels-1) revolutions), accumulated batch by batch with bounded memory
-    (at most one pending block mean per level)."""
+    (at most one pending block mean per level). Columns are [a (n), g (n)]: the cross sums
+    a_k g_k give the Allan variance of a - rho g for any rho afterwards."""
 
     n: int
     levels: int = 16
     pending: list = field(init=False)
     prev: list = field(init=False)
     sq: np.ndarray = field(init=False)
+    cross: np.ndarray = field(init=False)
     pairs: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        self.pending = [np.zeros((0, self.n)) for _ in range(self.levels)]
+        self.pending = [np.zeros((0, 2 * self.n)) for _ in range(self.levels)]
         self.prev = [None] * self.levels
-        self.sq = np.zeros((self.levels, self.n))
+        self.sq = np.zeros((self.levels, 2 * self.n))
+        self.cross = np.zeros((self.levels, self.n))
         self.pairs = np.zeros(self.levels, int)
 
     def add(self, x: np.ndarray) -> None:
         # Level m's stream is the means of blocks of 2^m rows, aligned from the first row;
         # level m+1's is the pairwise means of level m's (a cascade: the work halves per
         # level, instead of re-averaging the raw rows at every level).
+        n = self.n
         data = x
         for m in range(self.levels):
             if not len(data):
                 break
-            d = data[1:] - data[:-1]
-            self.sq[m] += np.einsum("ij,ij->j", d, d)
-            self.pairs[m] += len(d)
             if self.prev[m] is not None:  # the pair across the batch boundary
-                e = data[0] - self.prev[m]
-                self.sq[m] += e * e
-                self.pairs[m] += 1
+                d = np.diff(np.concatenate([self.prev[m][None], data]), axis=0)
+            else:
+                d = np.diff(data, axis=0)
+            self.sq[m] += np.einsum("ij,ij->j", d, d)
+            self.cross[m] += np.einsum("ij,ij->j", d[:, :n], d[:, n:])
+            self.pairs[m] += len(d)
             self.prev[m] = data[-1]
             if len(self.pending[m]):
                 data = np.concatenate([self.pending[m], data])
@@ -108,17 +128,31 @@ class AllanAccumulator:
             self.pending[m] = data[2 * k:].copy()
             data = (data[0:2 * k:2] + data[1:2 * k:2]) * 0.5
 
-    def deviation(self) -> tuple[np.ndarray, np.ndarray]:
-        """Averaging lengths [revolutions] and Allan deviation per face (levels with >= 3
-        pairs)."""
+    def deviation(self, rate: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Averaging lengths [revolutions] and Allan deviation per face of a - rate g
+        (levels with >= 3 pairs)."""
         ok = self.pairs >= 3
+        n = self.n
         taus = 2.0 ** np.arange(self.levels)[ok]
-        return taus, np.sqrt(self.sq[ok] / (2 * self.pairs[ok, None]))
+        var = (self.sq[ok, :n] - 2 * rate * self.cross[ok] + rate**2 * self.sq[ok, n:])
+        return taus, np.sqrt(np.maximum(var, 0) / (2 * self.pairs[ok, None]))
+
+
+def fill_first_interval(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Durations with the unknown ones (the log's first interval, started by the unlogged
+    arming pulse) taken from the revolution's own count rate."""
+    miss = ~np.isfinite(dt)
+    if not miss.any():
+        return dt
+    known_c = np.where(miss, 0.0, counts).sum(1, keepdims=True)
+    known_t = np.where(miss, 0.0, dt).sum(1, keepdims=True)
+    return np.where(miss, counts * known_t / np.maximum(known_c, 1.0), dt)
 
 
 @dataclass
 class RevolutionStats:
-    """Streaming sums over the usable revolutions (angles [rad], counts, durations [s])."""
+    """Streaming sums over the usable revolutions of y = [a (n), g (n)]: angles a [rad] and
+    rate sensitivities g [s] (zero without times); counts; the first ``keep`` kept whole."""
 
     n_faces: int
     keep: int = 50000
@@ -132,169 +166,367 @@ class RevolutionStats:
     kept_tend: list = field(default_factory=list)
     n_kept: int = 0
     shift: np.ndarray | None = None
+    pending: list = field(default_factory=list)
+    n_pending: int = 0
 
     def __post_init__(self) -> None:
-        self.s1 = np.zeros(self.n_faces)
-        self.s2 = np.zeros((self.n_faces, self.n_faces))
+        self.s1 = np.zeros(2 * self.n_faces)
+        self.s2 = np.zeros((2 * self.n_faces, 2 * self.n_faces))
         self.allan = AllanAccumulator(self.n_faces)
+
+    def flush(self) -> None:
+        """Fold the pending revolutions into the sums (batched: the per-call cost of the
+        Allan cascade's 16 levels dominated at one call per parsed block)."""
+        if not self.pending:
+            return
+        y = self.pending[0] if len(self.pending) == 1 else np.concatenate(self.pending)
+        self.pending, self.n_pending = [], 0
+        if self.shift is None:
+            self.shift = y[0].copy()  # sums about a first value keep the variance accurate
+        d = y - self.shift
+        self.n += len(y)
+        self.s1 += d.sum(0)
+        self.s2 += d.T @ d
+        self.allan.add(y)
 
     def add(self, counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
             correct=None) -> None:
         if len(counts) == 0:
             return
+        counts = counts.astype(float)
         if correct is not None and dt is not None:
             counts = correct(counts, dt)
         tot = rowsum(counts)
         a = counts * (2 * np.pi / tot)[:, None]
-        if self.shift is None:
-            self.shift = a[0].copy()  # sums about a first value keep the variance accurate
-        d = a - self.shift
-        self.n += len(a)
-        self.s1 += d.sum(0)
-        self.s2 += d.T @ d
+        y = np.empty((len(a), 2 * self.n_faces))
+        y[:, :self.n_faces] = a
+        if dt is None:
+            y[:, self.n_faces:] = 0.0
+        else:
+            d = fill_first_interval(counts, dt)
+            y[:, self.n_faces:] = d - a * (rowsum(d) / (2 * np.pi))[:, None]
         self.total_sum += float(tot.sum())
-        self.allan.add(a)
+        self.pending.append(y)
+        self.n_pending += len(y)
+        if self.n_pending >= FLUSH_ROWS:
+            self.flush()
         room = self.keep - self.n_kept
         if room > 0:
             m = min(room, len(a))
-            self.kept_counts.append(counts[:m].astype(float))
+            self.kept_counts.append(counts[:m].copy())
             # Copies: the rows may be views into a whole chunk.
-            self.kept_dt.append(None if dt is None else dt[:m].copy())
-            self.kept_tend.append(None if t_end is None else t_end[:m].copy())
+            self.kept_dt.append(None if dt is None else np.array(dt[:m], float))
+            self.kept_tend.append(None if t_end is None else np.array(t_end[:m], float))
             self.n_kept += m
-
-
-def _pattern_ok(c: np.ndarray, pattern: np.ndarray | None, rel: float = 2e-3) -> bool:
-    if pattern is None:
-        return True
-    return bool(np.all(np.abs(c / c.sum() - pattern) < rel))
 
 
 @dataclass(frozen=True)
 class LogSummary:
+    """One pass over a log: ``stats`` (sums over the revolutions used), ``exclusions``
+    (every fault and decision, with lines), ``rows``; ``incomplete_head``: rows before the
+    first complete revolution (the log armed on face ``armed_face``, None when unknown);
+    ``incomplete_tail``: rows after the last; ``sigma_counts``: the per-interval scatter of
+    the clean revolutions [counts] (quantisation and jitter) that the 5-sigma screen uses;
+    ``tolerance_counts``: the pulse-to-face match tolerance; ``excluded_revolutions``."""
+
     stats: RevolutionStats
     exclusions: Exclusions
     has_time: bool
     rows: int
     incomplete_tail: int
+    incomplete_head: int = 0
+    armed_face: int | None = 0
+    sigma_counts: float = float("nan")
+    tolerance_counts: float = float("nan")
+    excluded_revolutions: int = 0
+
+
+class _Pass:
+    """State of the streaming pass (see the module docstring)."""
+
+    def __init__(self, n: int, keep: int, correct) -> None:
+        self.n = n
+        self.stats = RevolutionStats(n, keep)
+        self.correct = correct
+        self.exc = Exclusions()
+        self.carry: dict | None = None
+        self.carry_line0 = 0
+        self.prev_t = np.nan
+        self.started = False  # the first reference mark has been seen (head handled)
+        self.pattern: np.ndarray | None = None
+        self.sigma: float | None = None
+        self.neigh = np.zeros((0, n))
+        self.rows = 0
+        self.has_time = False
+        self.head = 0
+        self.armed: int | None = 0
+        self.excluded = 0
+        self.tail = 0
+        self.chunks = 0
+
+    # ------------------------------------------------------------------ thresholds
+    @property
+    def tol(self) -> float:
+        """Pulse-to-face tolerance [counts]: +-1 of quantisation at each end, the neighbours'
+        mean, and 5 sigma of the measured scatter."""
+        return 2.0 + SCREEN_SIGMA * (self.sigma or np.sqrt(1 / 6))
+
+    def _learn(self, frac: np.ndarray, N: np.ndarray) -> None:
+        """Face pattern (median fractions) and sigma from this chunk's candidate revolutions."""
+        if len(frac) < 8:
+            return
+        self.pattern = np.median(frac, axis=0)
+        if self.sigma is None:
+            dev = ((frac - self.pattern) * N[:, None]).ravel()
+            s = np.sqrt(1 / 6)
+            for _ in range(3):
+                w = np.abs(dev) < max(8.0, 6 * s)
+                if w.sum() < 8:
+                    break
+                s = max(np.sqrt(1 / 6), float(np.std(dev[w])))
+            self.sigma = s
+
+    def _screen(self, C: np.ndarray) -> np.ndarray:
+        """Revolutions (rows of counts) within 5 sigma of the face pattern."""
+        if self.pattern is None:
+            return np.ones(len(C), bool)
+        N = rowsum(C)
+        dev = np.abs(C - self.pattern[None, :] * N[:, None])
+        thr = SCREEN_SIGMA * (self.sigma or np.sqrt(1 / 6))
+        out = dev[:, 0] <= thr
+        for j in range(1, self.n):
+            out &= dev[:, j] <= thr
+        return out
+
+    # ------------------------------------------------------------------ streaming
+    def feed(self, ch) -> None:
+        n = self.n
+        self.rows += len(ch.count)
+        self.has_time = ch.t is not None
+        dt = None
+        if self.has_time:
+            # (the reader has checked that time increases, across chunks too)
+            dt = np.diff(ch.t, prepend=self.prev_t)
+            self.prev_t = ch.t[-1]
+        cur = {"count": ch.count, "counter": ch.counter, "ref": ch.ref, "t": ch.t, "dt": dt}
+        line0 = ch.first_line
+        if self.carry is not None:
+            cur = {k: (None if v is None else np.concatenate([self.carry[k], v]))
+                   for k, v in cur.items()}
+            line0 = self.carry_line0
+        refs = np.flatnonzero(cur["ref"])
+        if not refs.size:
+            self.carry, self.carry_line0 = cur, line0
+            return
+        X = np.cumsum(cur["count"])
+        counter = cur["counter"]
+        brk = np.zeros(len(counter), bool)
+        brk[1:] = counter[1:] == counter[:-1]
+        a0 = int(refs[0])  # anchor: the first reference mark (row 0 after the first chunk)
+        starts, ends = refs[:-1] + 1, refs[1:]
+        lengths = ends - starts + 1
+        normal = lengths == n
+        used: list[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None]] = []
+        seg_used = np.zeros(0, int)
+        C_used = np.zeros((0, n))
+        if normal.any():
+            if normal.all():
+                sl = slice(a0 + 1, int(refs[-1]) + 1)  # back to back: views, no gathers
+                C = cur["count"][sl].reshape(-1, n)
+                B = rowany(brk[sl].reshape(-1, n))
+                D = None if dt is None else cur["dt"][sl].reshape(-1, n)
+            else:
+                idx = starts[normal][:, None] + np.arange(n)[None, :]
+                C, B = cur["count"][idx], rowany(brk[idx])
+                D = None if dt is None else cur["dt"][idx]
+            Nr = rowsum(C)
+            # The pattern (fractions of a revolution) is constant: learnt from the first
+            # chunk, refreshed every 16th (a median per chunk cost 0.3 s at 1e7 rows).
+            self.chunks += 1
+            if self.pattern is None or self.sigma is None or self.chunks % 16 == 0:
+                good = ~B
+                self._learn(C[good] / Nr[good, None], Nr[good])
+            ok = ~B & self._screen(C)
+            seg_used = np.flatnonzero(normal)[ok]
+            C_used = C[ok]
+            all_ok = bool(ok.all())
+            ends_used = ends[seg_used]
+            used.append((int(ends_used[-1]) if len(ends_used) else -1,
+                         C if all_ok else C_used,
+                         None if D is None else (D if all_ok else D[ok]),
+                         None if dt is None else cur["t"][ends_used]))
+            if len(C_used):
+                self.neigh = C_used[-NEIGHBOURS:].astype(float)
+        is_bad = np.ones(len(starts), bool)
+        is_bad[seg_used] = False
+        bad = np.flatnonzero(is_bad)
+        if bad.size:
+            # Consecutive bad segments form one stretch from the anchor before them.
+            groups = np.split(bad, np.flatnonzero(np.diff(bad) > 1) + 1)
+            for g in groups:
+                s0, s1 = int(g[0]), int(g[-1])
+                nb = np.concatenate([C_used[seg_used < s0][-NEIGHBOURS:],
+                                     C_used[seg_used > s1][:NEIGHBOURS]])
+                used += self._stretch(cur, X, brk, int(starts[s0]) - 1, int(ends[s1]), nb,
+                                      line0)
+        if not self.started:
+            self.started = True
+            nb = C_used[:NEIGHBOURS] if len(C_used) else self.neigh
+            used += self._head(cur, X, brk, a0, nb, line0)
+        if len(used) > 1:
+            used.sort(key=lambda u: u[0])
+        for _, c, d, te in used:
+            self.stats.add(c, d, te, self.correct)
+        last = int(refs[-1])
+        self.carry = {k: (None if v is None else v[last:]) for k, v in cur.items()}
+        self.carry_line0 = line0 + last
+
+    def finish(self, path) -> LogSummary:
+        if not self.started:
+            raise LogError(f"{path}: no reference pulse at all (ref column never 1): faces "
+                           "cannot be identified")
+        cur = self.carry
+        L = len(cur["count"]) - 1  # rows after the last reference mark
+        if L > 0:
+            X = np.cumsum(cur["count"])
+            brk = np.zeros(L + 1, bool)
+            brk[1:] = cur["counter"][1:] == cur["counter"][:-1]
+            got = self._stretch(cur, X, brk, 0, L, self.neigh, self.carry_line0, tail=True)
+            for _, c, d, te in got:
+                self.stats.add(c, d, te, self.correct)
+        self.stats.flush()
+        return LogSummary(self.stats, self.exc, self.has_time, self.rows, self.tail, self.head,
+                          self.armed, float(self.sigma or np.sqrt(1 / 6)), self.tol,
+                          self.excluded)
+
+    # ------------------------------------------------------------------ slow path
+    def _inc(self, nb: np.ndarray) -> np.ndarray | None:
+        """Predicted face-to-face counts: the mean of the neighbouring clean revolutions."""
+        if len(nb) < 4:
+            nb = np.concatenate([nb, self.neigh])
+        if not len(nb):
+            return None
+        return np.asarray(nb, float).mean(0)
+
+    def _stretch(self, cur: dict, X: np.ndarray, brk: np.ndarray, anchor: int, end: int,
+                 nb: np.ndarray, line0: int, tail: bool = False) -> list:
+        """Rows anchor+1 .. end, walked forward from the face-0 pulse of row ``anchor``."""
+        rows = np.arange(anchor + 1, end + 1)
+        inc = self._inc(nb)
+        if inc is None:
+            self.exc.add(R_NOPATTERN, line0 + int(rows[0]))
+            self.excluded += max(1, round(len(rows) / self.n))
+            return []
+        w = walk(X[rows] - X[anchor], cur["ref"][rows] > 0, brk[rows], inc, self.tol)
+        good, bad = revolutions_of(w, self.n)
+        pulse_rows = np.append(rows, anchor)  # index -1 -> the anchor row
+        out = self._report(w, good, bad, rows, cur, brk, line0, tail)
+        for _, pulses in good:
+            r = pulse_rows[pulses]
+            out.append(self._revolution(cur, X, r, line0))
+        if tail:
+            done = max((p[-1] for _, p in good), default=-1)
+            self.tail = len(rows) - (done + 1)
+        return [u for u in out if u is not None]
+
+    def _head(self, cur: dict, X: np.ndarray, brk: np.ndarray, a0: int, nb: np.ndarray,
+              line0: int) -> list:
+        """Rows 0..a0 (before the first reference mark), walked backwards from it: the log
+        may be armed on any face; the arming pulse (row -1, position 0) closes the head."""
+        inc = self._inc(nb)
+        if inc is None:
+            self.head = a0 + 1
+            self.armed = None
+            return []
+        Xe = np.concatenate([[0], X])  # Xe[r + 1]: position of the pulse ending row r
+        rows = np.arange(a0 - 1, -2, -1)  # pulses before the anchor, the arming one last
+        x = Xe[a0 + 1] - Xe[rows + 1]
+        isref = np.append(cur["ref"][rows[:-1]] > 0, False)
+        # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
+        bk = np.append(brk[rows[:-1] + 1], False)
+        w = walk(x, isref, bk, inc[::-1].copy(), self.tol)
+        good, bad = revolutions_of(w, self.n)
+        arm = w.face[-1]
+        self.armed = int((-arm) % self.n) if arm > 0 else None
+        out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True)
+        pulse_rows = np.append(rows, a0)
+        for _, pulses in good:
+            r = pulse_rows[pulses][::-1]
+            out.append(self._revolution(cur, X, r, line0))
+        # Rows up to the earliest face pulse of a complete revolution are not used.
+        q = max((p[-1] for _, p in good), default=None)
+        self.head = a0 + 1 if q is None else int(pulse_rows[q]) + 1
+        return [u for u in out if u is not None]
+
+    def _revolution(self, cur: dict, X: np.ndarray, r: np.ndarray, line0: int):
+        """One revolution from the rows of its n+1 face pulses (row -1: the arming pulse),
+        screened against the pattern."""
+        Xe = np.concatenate([[0], X])
+        c = np.diff(Xe[r + 1]).astype(float)[None]
+        if not self._screen(c)[0]:
+            self.exc.add(R_SCREEN, line0 + int(r[-1]))
+            self.excluded += 1
+            return None
+        d = te = None
+        if cur["t"] is not None:
+            te_all = np.concatenate([[np.nan], cur["t"]])
+            tr = te_all[r + 1]
+            d = np.diff(tr)[None]
+            te = tr[-1:]
+        return (int(r[-1]), c, d, te)
+
+    def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False) -> list:
+        """List every fault of a walk with its line (row -1: the arming pulse, line0 - 1)."""
+        n = self.n
+        line = (lambda i: line0 + int(rows[i])) if not backward else (
+            lambda i: line0 + max(int(rows[i]), 0))
+        in_good = set()
+        for _, pulses in good:
+            in_good.update(p for p in pulses if p >= 0)
+        for i, f in enumerate(w.face):
+            r = int(rows[i])
+            isref = r >= 0 and cur["ref"][r] > 0
+            if f == SPURIOUS:
+                self.exc.add(R_SPURIOUS, line(i))
+                if isref:
+                    self.exc.add(R_REF_WRONG, line(i))
+            elif f > 0 and f % n == 0 and not isref and not (backward and i == len(rows) - 1):
+                self.exc.add(R_REF_FAILED, line(i))
+            elif f > 0 and f % n and isref:
+                self.exc.add(R_REF_WRONG, line(i))
+        for _, idx in w.ambiguous:
+            self.exc.add(R_AMBIGUOUS, line(idx[-1]))
+        for _, i in w.missing:
+            self.exc.add(R_MISSING, line(i))
+        for i in w.reanchored:
+            self.exc.add(R_REANCHOR, line(i))
+        # Counter breaks: a mislabelled row when its revolution is complete, else a lost row.
+        for i in range(len(rows)):
+            r = int(rows[i])
+            if r < 0:
+                continue
+            if (brk[r] if not backward else (r + 1 < len(brk) and brk[r + 1])):
+                if i in in_good:
+                    self.exc.add(R_LABEL, line(i))
+                else:
+                    self.exc.add(R_LOST, line(i))
+        if not tail:
+            self.excluded += len(bad)
+        else:
+            self.excluded += sum(1 for _, why in bad if why)
+        return []
 
 
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
-                     block_bytes: int = 1 << 20, correct=None,
+                     block_bytes: int = 1 << 19, correct=None,
                      columns: Mapping[str, str] | None = None) -> LogSummary:
-    """Stream a log into revolution statistics (see module docstring).
+    """Stream a log into revolution statistics in one pass (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
-    (e.g. removing the Earth's rotation when the latitude and times are known).
+    (e.g. removing the Earth's rotation when the latitude and times are known; the pipeline
+    uses the accumulated sensitivities instead, see :func:`goniometry.face_angles`).
     """
-    stats = RevolutionStats(n_faces, keep)
-    exc = Exclusions()
-    pattern: np.ndarray | None = None
-    carry = None  # rows after the last reference pulse of the previous chunk
-    prev_counter = None
-    prev_t = np.nan
-    rows = 0
-    seen_ref = False
-    has_time = False
+    p = _Pass(n_faces, keep, correct)
     for ch in iter_log(path, block_bytes, columns):
-        rows += len(ch.count)
-        has_time = ch.t is not None
-        dt = None
-        if has_time:
-            # (the reader has checked that time increases, across chunks too)
-            dt = np.diff(ch.t, prepend=prev_t)
-            prev_t = ch.t[-1]
-        brk = np.zeros(len(ch.count), bool)
-        brk[1:] = ch.counter[1:] == ch.counter[:-1]
-        if prev_counter is not None:
-            brk[0] = ch.counter[0] == prev_counter
-        prev_counter = ch.counter[-1]
-        cur = {"count": ch.count, "brk": brk, "dt": dt, "t": ch.t, "ref": ch.ref}
-        if carry is not None:
-            cur = {k: (None if v is None else np.concatenate([carry[k], v]))
-                   for k, v in cur.items()}
-        # File line of row i of ``cur``: rows are consecutive lines.
-        line0 = ch.first_line - (0 if carry is None else len(carry["count"]))
-        refs = np.flatnonzero(cur["ref"])
-        if refs.size:
-            seen_ref = True
-        starts = np.concatenate([[0], refs[:-1] + 1]) if refs.size else np.array([], int)
-        lengths = refs - starts + 1 if refs.size else np.array([], int)
-        normal = lengths == n_faces
-        if normal.any():
-            idx = starts[normal][:, None] + np.arange(n_faces)[None, :]
-            # The usual chunk has every revolution normal, back to back: views, no gathers.
-            sel = None if normal.all() else idx
-            end = int(refs[-1]) + 1
-            c = _rows(cur["count"], sel, end, n_faces)
-            bad = rowany(_rows(cur["brk"], sel, end, n_faces))
-            if pattern is None:
-                good = c[~bad]
-                if len(good):
-                    frac = good / rowsum(good)[:, None]
-                    pattern = np.median(frac, axis=0)
-            frac = c * (1.0 / rowsum(c))[:, None]
-            off = (rowany(np.abs(frac - pattern) >= 2e-3) if pattern is not None
-                   else np.zeros_like(bad))
-            use = ~bad & ~off
-            for i in np.flatnonzero(bad):
-                exc.add("a row is missing from the log (counter did not alternate): "
-                        "revolution excluded", line0 + int(idx[i, 0]))
-            for i in np.flatnonzero(off & ~bad):
-                exc.add("counts do not match the face pattern: revolution excluded",
-                        line0 + int(idx[i, 0]))
-            all_used = bool(use.all())
-            d_rev = None if dt is None else _rows(cur["dt"], sel, end, n_faces)
-            stats.add(c if all_used else c[use],
-                      None if d_rev is None else (d_rev if all_used else d_rev[use]),
-                      None if dt is None else _rows(cur["t"], sel, end, n_faces)[:, -1][use],
-                      correct)
-        for s, L in zip(starts[~normal], lengths[~normal], strict=True):
-            sl = slice(s, s + L)
-            fixed = _repair(cur["count"][sl], cur["brk"][sl], n_faces, pattern,
-                            line0 + int(s), exc)
-            if fixed is not None:
-                for c_rev, parts in fixed:
-                    d = None
-                    if dt is not None:
-                        dd = cur["dt"][sl]
-                        d = np.array([dd[p].sum() for p in parts])[None]
-                    stats.add(c_rev[None], d, None if dt is None else cur["t"][sl][-1:],
-                              correct)
-        last = refs[-1] + 1 if refs.size else 0
-        carry = {k: (None if v is None else v[last:]) for k, v in cur.items()}
-    if not seen_ref:
-        raise LogError(f"{path}: no reference pulse at all (ref column never 1): faces cannot "
-                       "be identified")
-    tail = 0 if carry is None else len(carry["count"])
-    return LogSummary(stats, exc, has_time, rows, tail)
-
-
-def _repair(c: np.ndarray, brk: np.ndarray, n: int, pattern: np.ndarray | None, line: int,
-            exc: Exclusions) -> list[tuple[np.ndarray, list]] | None:
-    """Slow path for one abnormal revolution: repaired revolutions or None (excluded)."""
-    L = len(c)
-    if brk.any():
-        exc.add("a row is missing from the log (counter did not alternate): revolution "
-                "excluded", line)
-        return None
-    if L == n + 1 and pattern is not None:
-        for j in range(L - 1):
-            merged = np.concatenate([c[:j], [c[j] + c[j + 1]], c[j + 2:]])
-            if _pattern_ok(merged, pattern):
-                exc.add("spurious pulse: the two intervals it split were merged (repaired)",
-                        line)
-                parts = [[i] for i in range(j)] + [[j, j + 1]] + [[i] for i in range(j + 2, L)]
-                return [(merged, parts)]
-    if L == 2 * n and pattern is not None and _pattern_ok(c[:n], pattern) and _pattern_ok(
-            c[n:], pattern):
-        exc.add("reference signal failed once: split by the face pattern (repaired)", line)
-        return [(c[:n], [[i] for i in range(n)]), (c[n:], [[i] for i in range(n, 2 * n)])]
-    if L == n - 1:
-        exc.add("missing autocollimator pulse: revolution excluded", line)
-    elif L == n + 1:
-        exc.add("extra pulse that no merge explains: revolution excluded", line)
-    else:
-        exc.add(f"{L} intervals between reference pulses (expected {n}): revolution excluded",
-                line)
-    return None
+        p.feed(ch)
+    return p.finish(path)

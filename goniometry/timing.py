@@ -19,7 +19,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from goniometry.angles import kept_table
 from goniometry.revolutions import LogSummary
@@ -70,5 +69,7 @@ def timing_angles(summary: LogSummary) -> TimingAngles:
     mean_d = d.mean(0)
     n = dt.shape[1]
     chi2 = float(mean_d @ np.linalg.pinv(cd, rcond=1e-10) @ mean_d)
+    from scipy.special import chdtrc  # (the chi2 survival function, without scipy.stats)
+
     return TimingAngles(a_t.mean(0), np.sqrt(np.diag(cov)), cov, len(dt), mean_d,
-                        np.sqrt(np.diag(cd)), chi2, n - 1, float(stats.chi2.sf(chi2, n - 1)))
+                        np.sqrt(np.diag(cd)), chi2, n - 1, float(chdtrc(n - 1, chi2)))

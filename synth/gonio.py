@@ -41,7 +41,21 @@ class GonioSpec:
     speed variation; ``jitter_rad``: autocollimator timing jitter as an angle;
     ``latency_s``: autocollimator delay; ``kappa_per_s``: ring-laser scale-factor drift;
     ``p_missing``/``p_spurious``: per-pulse probabilities; ``failed_refs``: number of
-    reference signals that fail.
+    reference signals that fail. ``faults``: explicit instrument faults, each
+    ``(kind, pulse, value)`` with ``pulse`` the index of a face pulse counted from the first:
+
+    * ``("double", i, dt)``: the autocollimator fires again ``dt`` seconds after (dt > 0) or
+      before (dt < 0) face pulse i (the binding signal marks only the face pulse);
+    * ``("double_ref", i, dt)``: the same, the binding window marking both pulses;
+    * ``("glint", i, f)``: a stray pulse at fraction f of the time from pulse i to i+1;
+    * ``("missing", i, 0)``: face pulse i not fired (a reference pulse too, if face 0);
+    * ``("ref_fail", i, 0)``: the binding signal misses face pulse i (a face-0 pulse);
+    * ``("lost_row", i, 0)``: the interface drops the row of pulse i from the log;
+    * ``("counter_swap", i, 0)``: the row of pulse i carries the other counter's id.
+
+    ``arm_face``: the face whose pulse arms the counters (the log's rows start after it);
+    ``stop_pulses``: drop this many pulses from the end (a log that stops anywhere);
+    ``time_resolution_s``: the time stamps are floored to this (e.g. 1e-7 for 10 MHz).
     """
 
     revolutions: int = 200
@@ -63,6 +77,10 @@ class GonioSpec:
     with_time: bool = True
     pyramidal_rad: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     slit_tilt_rad: float = 0.0
+    faults: tuple = ()
+    arm_face: int = 0
+    stop_pulses: int = 0
+    time_resolution_s: float = 0.0
     seed: int = 0
 
     @property
@@ -154,20 +172,91 @@ def simulate(spec: GonioSpec) -> dict:
     if spec.failed_refs:
         refs = np.flatnonzero(is_ref[1:]) + 1
         is_ref[rng.choice(refs, size=min(spec.failed_refs, refs.size), replace=False)] = False
+    tag = np.full(t_pulse.size, -1)
+    lost: list[int] = []
+    swapped: list[int] = []
+    missing_t: list[tuple[int, float]] = []
+    if spec.faults:
+        drop = np.zeros(t_pulse.size, bool)
+        ex_t, ex_ref, ex_tag = [], [], []
+        for k, (kind, i, v) in enumerate(spec.faults):
+            if kind in ("double", "double_ref"):
+                ex_t.append(t_pulse[i] + v)
+                ex_ref.append(kind == "double_ref" and is_ref[i])
+                ex_tag.append(k)
+            elif kind == "glint":
+                ex_t.append(t_pulse[i] + v * (t_pulse[i + 1] - t_pulse[i]))
+                ex_ref.append(False)
+                ex_tag.append(k)
+            elif kind == "missing":
+                drop[i] = True
+                missing_t.append((k, t_pulse[i]))
+            elif kind == "ref_fail":
+                is_ref[i] = False
+                tag[i] = k
+            elif kind == "lost_row":
+                lost.append(k)
+                tag[i] = k
+            elif kind == "counter_swap":
+                swapped.append(k)
+                tag[i] = k
+            else:
+                raise ValueError(f"unknown fault kind {kind!r}")
+        keep = ~drop
+        t_pulse = np.concatenate([t_pulse[keep], ex_t])
+        is_ref = np.concatenate([is_ref[keep], np.asarray(ex_ref, bool)])
+        face = np.concatenate([face[keep], np.full(len(ex_t), -1)])
+        tag = np.concatenate([tag[keep], np.asarray(ex_tag, int)])
+        order = np.argsort(t_pulse, kind="stable")
+        t_pulse, is_ref, face, tag = t_pulse[order], is_ref[order], face[order], tag[order]
+    # Armed on the first pulse of ``arm_face`` (a face pulse, in the first revolution).
+    a = int(np.flatnonzero(face == spec.arm_face)[0]) if spec.arm_face else 0
+    end = t_pulse.size - spec.stop_pulses
+    t_pulse, is_ref, face, tag = (x[a:end] for x in (t_pulse, is_ref, face, tag))
     theta = (omega0 * t_pulse if t_grid is None else np.interp(t_pulse, t_grid, grid))
     earth = spec.direction * OMEGA_EARTH * np.sin(np.deg2rad(spec.latitude_deg)) * t_pulse
     phi = (spec.k_per_rev * (1 + spec.kappa_per_s * t_pulse) * (theta + earth) / (2 * np.pi)
            + rng.random())
     cum = np.floor(phi)
     counts = np.diff(cum).astype(np.int64)
-    rows = {"count": counts, "counter": (np.arange(counts.size) % 2 + 1).astype(np.int8),
-            "ref": is_ref[1:].astype(np.int8), "t": t_pulse[1:] - t_pulse[0]}
+    t_log = t_pulse[1:] - t_pulse[0]
+    if spec.time_resolution_s:
+        t_log = np.floor(t_log / spec.time_resolution_s) * spec.time_resolution_s
+    counter = (np.arange(counts.size) % 2 + 1).astype(np.int8)
+    ref = is_ref[1:].astype(np.int8)
+    rtag = tag[1:]
+    # Where each fault shows in the log: the row of the pulse (extra pulses, marks, swaps),
+    # the row whose interval spans a missing pulse, the row after a lost one.
+    fault_rows = {int(k): int(r) for r, k in enumerate(rtag) if k >= 0}
+    for k, tm in missing_t:
+        r = int(np.searchsorted(t_pulse[1:], tm))
+        if 0 <= r < counts.size and t_pulse[0] < tm:
+            fault_rows[k] = r
+    for k in swapped:
+        r = fault_rows.get(k)
+        if r is not None:
+            counter[r] = 3 - counter[r]
+    keep_rows = np.ones(counts.size, bool)
+    for k in lost:
+        r = fault_rows.get(k)
+        if r is not None:
+            keep_rows[r] = False
+    shift = np.cumsum(~keep_rows)
+    for k in list(fault_rows):
+        r = fault_rows[k]
+        fault_rows[k] = int(r - shift[r] + (0 if keep_rows[r] else 1))
+    counts, counter, ref, t_log, face_rows = (x[keep_rows] for x in (
+        counts, counter, ref, t_log, face[1:]))
+    rows = {"count": counts, "counter": counter, "ref": ref, "t": t_log}
+    faults = [{"kind": spec.faults[k][0], "row": r} for k, r in sorted(fault_rows.items())
+              if r < counts.size]
     truth = {"angles_rad": spec.passing_angles.tolist(),
              "angles_deg": np.rad2deg(spec.passing_angles).tolist(),
              "passing_faces": spec.passing()[0].tolist(),
              "angles_ccw_order_rad": spec.angles.tolist(),
              "azimuths_rad": spec.azimuths.tolist(), "spec": asdict(spec),
-             "faces_of_rows": face[1:].tolist() if n < 200000 else None}
+             "faults": faults,
+             "faces_of_rows": face_rows.tolist() if n < 200000 else None}
     return {"rows": rows, "truth": truth}
 
 

@@ -22,7 +22,7 @@ from imaging import ImageInputError, check_roi
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
 TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
-            "platform", "name"}
+            "platform", "name", "latitude_range_deg"}
 
 
 def signed_axis(text: object, where: str) -> np.ndarray:
@@ -111,6 +111,7 @@ class Session:
     views: dict[str, View]
     images: tuple[ImageEntry, ...]
     platform: PlatformInput | None
+    latitude_range_deg: tuple[float, float] | None = None
 
     @property
     def inputs(self) -> list[Path]:
@@ -259,6 +260,14 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
     lat = d.get("latitude_deg")
     if lat is not None:
         lat = _number(lat, f"{src}: latitude_deg", -90, 90)
+    lat_range = d.get("latitude_range_deg")
+    if lat_range is not None:
+        w = f"{src}: latitude_range_deg"
+        if not isinstance(lat_range, list) or len(lat_range) != 2:
+            raise InputError(f"{w} = {lat_range!r}: expected [LO, HI] in degrees")
+        lat_range = tuple(_number(v, w, -90, 90) for v in lat_range)
+        if lat_range[0] > lat_range[1] or lat is not None:
+            raise InputError(f"{w} = {list(lat_range)}: need LO <= HI, and no latitude_deg")
 
     cal = None
     if "calibration" in d:
@@ -419,4 +428,4 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
     return Session(folder, name, lat, cal, gon, cameras,
-                   views, tuple(imgs), plat)
+                   views, tuple(imgs), plat, lat_range)
