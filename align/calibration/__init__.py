@@ -22,8 +22,10 @@ from align.calibration.model import (
 from align.calibration.static import (
     READINGS,
     STATIC,
+    StaticDetection,
     StaticInterval,
     StaticSettings,
+    detect_static,
     find_static,
     read_poses,
     read_readings,
@@ -34,5 +36,5 @@ __all__ = [
     "Ellipsoid", "calibration_json",
     "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
     "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
-    "find_static", "read_poses", "read_readings", "READINGS", "STATIC", "poses_from_samples",
+    "StaticDetection", "detect_static", "find_static", "read_poses", "read_readings", "READINGS", "STATIC", "poses_from_samples",
 ]
