@@ -14,7 +14,7 @@ the loop works without a chi2 test.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,6 +151,7 @@ class CalibrationStage:
             raise InputError(f"only {len(poses.u)} usable poses; the model needs at least 9 "
                              "(the paper's cube gives 14)")
         self.poses = poses
+        self.condition: dict[tuple[str, ...], float] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
 
@@ -176,6 +177,11 @@ class CalibrationStage:
                             ftol=1e-14, gtol=1e-14, max_nfev=2000)
         r = res.fun / w
         J = res.jac
+        # Separability: condition number of the Jacobian with unit-norm columns (scale-free).
+        norms = np.linalg.norm(J, axis=0)
+        self.condition[tuple(effects)] = (float(np.linalg.cond(J / np.where(norms > 0, norms,
+                                                                          1.0)))
+                                          if np.all(norms > 0) else float("inf"))
         dof = len(r) - len(theta0)
         cov = np.linalg.pinv(J.T @ J)
         if self.sigma is None:
@@ -259,11 +265,72 @@ class Calibration:
         return self.loop.after.rms
 
 
+PRIOR_SCALE = 0.10
+"""An effect may not move a scale factor by more than this fraction (physical prior)."""
+PRIOR_ANGLE_RAD = 0.1
+"""... nor a non-orthogonality angle by more than this [rad] ..."""
+PRIOR_BIAS_G = 0.1
+"""... nor a bias by more than this [g]."""
+OVERFIT_CHI2 = 0.2
+"""chi2/dof below this after adding an effect is an over-fit when the effect also moves a
+quantity of interest by more than :data:`OVERFIT_SIGMA` of its own standard uncertainty."""
+OVERFIT_SIGMA = 10.0
+MAX_CONDITION = 1e7
+"""Largest condition number of the (column-normalised) Jacobian: above it the data cannot
+separate the effect from the model."""
+
+
+def admissible(stage: CalibrationStage) -> Callable[[StageFit, StageFit, Term], str | None]:
+    """The calibration's guard against a run-away loop: the reason to refuse an effect that
+    the significance tests call for, or None (design: physical priors, over-fit, rank)."""
+
+    def check(base: StageFit, trial: StageFit, term: Term) -> str | None:
+        mb, mt = base.payload, trial.payload
+        cond = stage.condition.get(tuple(t.name for t in [*_terms_of(base), term]),
+                                   float("nan"))
+        if not np.isfinite(cond) or cond > MAX_CONDITION:
+            return (f"the poses cannot separate it from the model (condition number "
+                    f"{cond:.3g} > {MAX_CONDITION:.0e})")
+        rel = np.abs(mt.k / mb.k - 1)
+        if rel.max() > PRIOR_SCALE:
+            i = int(np.argmax(rel))
+            return (f"it moves k_{'xyz'[i]} from {mb.k[i]:.6g} to {mt.k[i]:.6g} "
+                    f"({rel[i]:.0%} > {PRIOR_SCALE:.0%}): outside the physical prior")
+        db = np.abs(mt.beta - mb.beta)
+        if db.max() > PRIOR_ANGLE_RAD:
+            i = int(np.argmax(db))
+            return (f"it moves beta_{'xyz'[i]} from {mb.beta[i]:.4g} to {mt.beta[i]:.4g} rad "
+                    f"(> {PRIOR_ANGLE_RAD} rad): outside the physical prior")
+        dbias = np.abs(mt.bias - mb.bias)
+        if dbias.max() > PRIOR_BIAS_G:
+            i = int(np.argmax(dbias))
+            return (f"it moves bias_{'xyz'[i]} by {dbias[i]:.3g} g (> {PRIOR_BIAS_G} g): "
+                    "outside the physical prior")
+        if trial.sigma is not None and trial.dof > 0:
+            red = trial.chi2 / trial.dof
+            u = np.array([base.quantities[n][1] for n in mb.names[:9]])
+            shift = np.abs(np.concatenate([mt.k - mb.k, mt.beta - mb.beta, mt.bias - mb.bias]))
+            z = shift / np.where(u > 0, u, np.inf)
+            if red < OVERFIT_CHI2 and z.max() > OVERFIT_SIGMA:
+                i = int(np.argmax(z))
+                return (f"over-fit: chi2/dof falls to {red:.3g} while {mb.names[i]} moves by "
+                        f"{z[i]:.0f} of its standard uncertainty")
+        return None
+
+    return check
+
+
+def _terms_of(fit: StageFit) -> list[Term]:
+    """The effect terms a calibration fit carries (the names are all the guard needs)."""
+    return [Term(n, "", np.zeros((0, 0))) for n in fit.effects]
+
+
 def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES) -> Calibration:
-    """Algebraic fit, ML refinement, residual loop over the calibration effects."""
+    """Algebraic fit, ML refinement, residual loop over the calibration effects (each one
+    guarded by :func:`admissible`)."""
     stage = CalibrationStage(poses, signs)
-    rep = run_loop(stage, candidates, alpha=alpha)
+    rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
     return Calibration(stage.start, rep.after.payload, rep, tuple(float(s) for s in signs),
                        stage.sigma is not None)
 

@@ -120,8 +120,23 @@ class EffectReport:
 
 
 @dataclass(frozen=True)
+class RefusedEffect:
+    """A candidate the tests called for but the stage's ``admissible`` check refused: why,
+    and its significance (it was *not* added)."""
+
+    name: str
+    reason: str
+    p_value: float
+    delta_bic: float
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "reason": self.reason, "p_value": self.p_value,
+                "delta_bic": self.delta_bic}
+
+
+@dataclass(frozen=True)
 class LoopReport:
-    """Before/after of one stage's loop."""
+    """Before/after of one stage's loop; ``refused``: significant candidates not added."""
 
     effects: tuple[EffectReport, ...]
     before: StageFit
@@ -129,6 +144,7 @@ class LoopReport:
     structure_before: StructureReport
     structure_after: StructureReport
     terms: tuple[Term, ...]
+    refused: tuple[RefusedEffect, ...] = ()
 
     @property
     def unexplained_structure(self) -> bool:
@@ -145,6 +161,8 @@ class LoopReport:
         for e in self.effects:
             lines.append(f"added {e.name}: {e.estimate:.4g} ± {e.u:.2g} {e.unit} "
                          f"(dBIC {e.delta_bic:.1f}, p {e.p_value:.2g})")
+        for r in self.refused:
+            lines.append(f"REFUSED {r.name} (p {r.p_value:.2g}): {r.reason}")
         if self.unexplained_structure:
             w = self.structure_after.worst
             lines.append(f"UNEXPLAINED STRUCTURE remains: {w.name} p={w.p_value:.2g} {w.detail}")
@@ -185,12 +203,17 @@ def structure_of(fit: StageFit, alpha: float) -> StructureReport:
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
-             min_delta_bic: float = 6.0, max_effects: int = 4) -> LoopReport:
+             min_delta_bic: float = 6.0, max_effects: int = 4,
+             admissible: Callable[[StageFit, StageFit, Term], str | None] | None = None
+             ) -> LoopReport:
     """Run the residual loop over ``stage`` with ``candidates``.
 
     An effect is added when its (look-elsewhere corrected) F-test p-value is below ``alpha``
     and it lowers BIC by at least ``min_delta_bic``; the best such effect is added first.
+    ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
+    else None): the refusal is reported in ``LoopReport.refused``, never silent.
     """
+    refused: dict[str, RefusedEffect] = {}
     terms: list[Term] = []
     current = stage.fit(terms)
     before = current
@@ -214,6 +237,10 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
             p = f_test(current, trial, term.width)
             p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
             if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
+                why = admissible(current, trial, term) if admissible is not None else None
+                if why is not None:
+                    refused[cand.name] = RefusedEffect(cand.name, why, p_adj, float(d_bic))
+                    continue
                 best = (d_bic, p_adj, term, trial, cand)
         if best is None:
             break
@@ -230,4 +257,5 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                             tuple(current.components.get(e.name, ())))
                for e in effects]
     return LoopReport(tuple(effects), before, current, s_before, structure_of(current, alpha),
-                      tuple(terms))
+                      tuple(terms), tuple(r for n, r in refused.items()
+                                          if not any(t.name == n for t in terms)))
