@@ -259,10 +259,25 @@ class Calibration:
     loop: LoopReport
     signs: tuple[float, float, float]
     noise_known: bool
+    method: str = "ellipsoid"
+    known: object = None
+    cross_check: dict | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def residual_rms_g(self) -> float:
         return self.loop.after.rms
+
+    def effect_lines(self, unit: str = "") -> list[str]:
+        """The loop's summary with every effect's components by axis (one line each)."""
+        out = []
+        for line in self.loop.summary_lines():
+            out.append(line)
+            if line.startswith("added "):
+                e = next(x for x in self.loop.effects if line.startswith(f"added {x.name}:"))
+                out += [f"    {e.name}_{ax}: {v:+.4g} ± {u:.2g} {e.unit}"
+                        for ax, v, u in e.components]
+        return out
 
 
 PRIOR_SCALE = 0.10
@@ -326,13 +341,52 @@ def _terms_of(fit: StageFit) -> list[Term]:
 
 
 def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1e-3,
-              candidates: Sequence[Candidate] = CANDIDATES) -> Calibration:
-    """Algebraic fit, ML refinement, residual loop over the calibration effects (each one
-    guarded by :func:`admissible`)."""
+              candidates: Sequence[Candidate] = CANDIDATES,
+              fixture_error_rad: float | None = None) -> Calibration:
+    """Calibrate the triad from its poses.
+
+    * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled ``+x,-x,...``/imucal's ``x_p,x_a,...``,
+      or recognised from the means): the known-pose (six-position) fit alone.
+    * 9 or more: algebraic ellipsoid fit, ML refinement, the residual loop over the effects
+      (each guarded by :func:`admissible`); when the six faces are among the poses, the
+      known-pose fit runs too and the two are cross-checked (``cross_check``, ``notes``).
+
+    ``fixture_error_rad``: declared placement error of the faces (default
+    :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    """
+    from align.calibration.known import (
+        FIXTURE_ERROR_RAD,
+        KnownPoseStage,
+        cross_check,
+        faces_of,
+        fit_known,
+        has_six_faces,
+    )
+
+    fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
+    signs_t = tuple(float(s) for s in signs)
+    faces = faces_of(poses)
+    six = has_six_faces(faces)
+    # Poses that are all faces (however many) span six directions: the ellipsoid's nine
+    # parameters are not determined by them, the known-pose fit is.
+    if len(poses.u) < 9 or (six and all(f is not None for f in faces)):
+        if not six:
+            raise InputError(f"only {len(poses.u)} usable poses; the ellipsoid needs at least 9 "
+                             "(the paper's cube gives 14), or the six faces labelled "
+                             "+x,-x,+y,-y,+z,-z for the known-pose (six-position) method")
+        kf = fit_known(poses, faces, signs, fe)
+        rep = run_loop(KnownPoseStage(kf, poses), ())
+        return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
+                           "known-pose", kf)
     stage = CalibrationStage(poses, signs)
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
-    return Calibration(stage.start, rep.after.payload, rep, tuple(float(s) for s in signs),
-                       stage.sigma is not None)
+    kf, cc, notes = None, None, ()
+    if six:
+        kf = fit_known(poses, faces, signs, fe)
+        cc, w = cross_check(rep.after.payload, kf.model)
+        notes = tuple(w)
+    return Calibration(stage.start, rep.after.payload, rep, signs_t, stage.sigma is not None,
+                       "ellipsoid", kf, cc, notes)
 
 
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:
@@ -386,4 +440,8 @@ def calibration_json(cal: Calibration, poses: Poses) -> dict:
         "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
                   zip(poses.labels, delta_g(m, poses), strict=True)],
         "model": model_to_dict(m),
+        "method": cal.method,
+        "refused_effects": [r.to_json() for r in cal.loop.refused],
+        "known_pose": cal.known.to_dict() if cal.known is not None else None,
+        "cross_check": cal.cross_check,
     }

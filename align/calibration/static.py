@@ -12,6 +12,7 @@ reported as ``file:line: column: what is wrong``.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,11 +127,14 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         if t is None:
             raise InputError(f"{path}: neither a pose column nor a time column t (give "
                              "--rate HZ for a recording without time stamps)")
-        intervals = find_static(t, u, settings)
+        det = detect_static(t, u, settings)
+        for note in det.notes:
+            logging.getLogger("align").warning("WARNING: %s: %s", path, note)
+        intervals = list(det.intervals)
         if not intervals:
             raise InputError(f"{path}: no static interval found (window {settings.window_s} s,"
-                             f" threshold {settings.threshold} x noise floor, at least "
-                             f"{settings.min_duration_s} s)")
+                             f" threshold {settings.threshold} x the recording's noise, at "
+                             f"least {settings.min_duration_s} s){_notes(det)}")
         mean = np.array([iv.mean for iv in intervals])
         count = np.array([iv.samples for iv in intervals])
         sig = np.array([iv.sem for iv in intervals])
@@ -141,8 +145,33 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
     if calibration:
-        _check_geometry(path, poses)
+        try:
+            _check_geometry(path, poses)
+        except InputError as exc:
+            if intervals is None:
+                raise
+            raise InputError(f"{exc}\n{_listing(intervals)}") from None
+        if intervals is not None and len(intervals) < 9:
+            from align.calibration.known import faces_of, has_six_faces
+
+            if not has_six_faces(faces_of(poses)):
+                raise InputError(f"{path}: too few poses: {len(intervals)} static intervals "
+                                 "found, the ellipsoid needs 9 (or the six faces for the "
+                                 "known-pose method); the detection settings may be too strict"
+                                 f" (--window, --threshold, --min-static, --margin)"
+                                 f"{_notes(det)}\n{_listing(intervals)}")
     return poses, intervals
+
+
+def _notes(det: StaticDetection) -> str:
+    return "".join(f"; {n}" for n in det.notes)
+
+
+def _listing(intervals) -> str:
+    """Every interval found (start, end, mean) for a refusal message."""
+    return "\n".join(f"  interval {i + 1}: {iv.start_s:.2f}-{iv.end_s:.2f} s, mean "
+                     + " ".join(f"{v:.6g}" for v in iv.mean)
+                     for i, iv in enumerate(intervals)) or "  (none)"
 
 
 def _check_geometry(path: Path, poses: Poses) -> None:
@@ -156,8 +185,8 @@ def _check_geometry(path: Path, poses: Poses) -> None:
     if len(u) >= 3:
         s = np.linalg.svd(u - u.mean(0), compute_uv=False)
         if s[-1] < 1e-3 * s[0]:
-            raise InputError(f"{path}: the {len(u)} poses lie in a plane (degenerate "
-                             "geometry): tilt the unit out of that plane")
+            raise InputError(f"{path}: geometry: the {len(u)} poses lie in a plane "
+                             "(degenerate): tilt the unit out of that plane")
 
 
 @dataclass(frozen=True)
