@@ -11,8 +11,9 @@ M = (K R) C is split by an RQ decomposition into the triad's upper-triangular K 
 factor the ellipsoid fit finds: it is frame-free) and the rotation C of the triad in the
 fixture; K, beta, b then follow exactly as in :func:`align.calibration.ellipsoid.extract`.
 Weights: each pose's mean has its output noise plus the fixture's placement error sigma_f
-[rad] about the two axes perpendicular to d_p, propagated through M (a declared, Type B
-uncertainty): Sigma_p = diag(sem^2) + sigma_f^2 M (I - d d^T) M^T. Generalised least
+[rad] about each of the two axes perpendicular to d_p, propagated through M (a declared,
+Type B uncertainty): Sigma_p = diag(sem^2) + sigma_f^2 M (I - d d^T) M^T + sigma_f^4 M d d^T
+M^T, and the tilt's second-order mean shortens d to (1 - sigma_f^2) d. Generalised least
 squares, two passes (the weights need M).
 """
 
@@ -146,6 +147,9 @@ def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] 
         raise InputError(f"known-pose calibration needs all six faces; missing "
                          f"{', '.join(missing)}")
     d = np.array([direction(f) for f in used])
+    # A face tilted by (e1, e2) [rad] sees cos|e| ~ 1 - (e1^2 + e2^2)/2 of g along d: on
+    # average 1 - sigma_f^2 (second order, but 1e-5 of g at a 3 mrad fixture error).
+    d = d * (1 - fixture_error_rad**2)
     u = poses.u[use]
     n = len(use)
     sem = poses.sigma_u[use] if poses.sigma_u is not None else np.zeros((n, 3))
@@ -160,10 +164,15 @@ def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] 
         M = theta[:9].reshape(3, 3)
         W = np.zeros((3 * n, 3 * n))
         for p in range(n):
-            P = np.eye(3) - np.outer(d[p], d[p])
-            S = np.diag(sem[p] ** 2) + fixture_error_rad**2 * M @ P @ M.T
-            if not np.all(np.linalg.eigvalsh(S) > 0):
-                S = S + np.eye(3) * 1e-12 * np.trace(M @ M.T)
+            dn = d[p] / np.linalg.norm(d[p])
+            P = np.eye(3) - np.outer(dn, dn)
+            Md = M @ dn
+            # tilt: first order across d; its second order along d (variance sigma_f^4)
+            S = (np.diag(sem[p] ** 2) + fixture_error_rad**2 * M @ P @ M.T
+                 + fixture_error_rad**4 * np.outer(Md, Md))
+            # Noise-free means (synthetic data) leave S singular: a floor far below any
+            # real noise (1e-12 of |M|^2) keeps the weights finite.
+            S = S + np.eye(3) * 1e-12 * np.trace(M @ M.T) / 3
             W[3 * p:3 * p + 3, 3 * p:3 * p + 3] = np.linalg.inv(S)
         N = A.T @ W @ A
         theta = np.linalg.solve(N, A.T @ W @ y)

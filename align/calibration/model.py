@@ -345,8 +345,9 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
               fixture_error_rad: float | None = None) -> Calibration:
     """Calibrate the triad from its poses.
 
-    * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled ``+x,-x,...``/imucal's ``x_p,x_a,...``,
-      or recognised from the means): the known-pose (six-position) fit alone.
+    * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
+      ``+x,-x,...`` or imucal's ``x_p,x_a,...``, or recognised from the means): the
+      known-pose (six-position) fit alone.
     * 9 or more: algebraic ellipsoid fit, ML refinement, the residual loop over the effects
       (each guarded by :func:`admissible`); when the six faces are among the poses, the
       known-pose fit runs too and the two are cross-checked (``cross_check``, ``notes``).

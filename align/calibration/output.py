@@ -12,7 +12,6 @@ from align.calibration.static import StaticInterval
 from align.contract import document
 from axisbase.table import OUTPUT_UNITS
 
-
 SCALE_KEYS = {"V": "scale_factors_v_per_g", "counts": "scale_factors_counts_per_g",
               "m/s2": "scale_factors_m_s2_per_g", "g": "scale_factors_g_per_g"}
 """The JSON key of the scale factors for each output unit."""

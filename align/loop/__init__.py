@@ -15,6 +15,7 @@ from align.loop.loop import (
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 
 __all__ = [
-    "Candidate", "EffectReport", "LoopReport", "RefusedEffect", "Stage", "StageFit", "StructureReport",
-    "StructureTest", "Term", "bic", "f_test", "periodogram_test", "run_loop", "check_structure",
+    "Candidate", "EffectReport", "LoopReport", "RefusedEffect", "Stage", "StageFit",
+    "StructureReport", "StructureTest", "Term", "bic", "f_test", "periodogram_test",
+    "run_loop", "check_structure",
 ]
