@@ -233,7 +233,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     inputs = [args.static] + ([args.check] if args.check else [])
     _unique(inputs, "static/--check")
     signs = _signs(args.scale_sign)
-    cols, units = _table_options(args, inputs, STATIC)
+    # .mat/.npz arrays have no header to carry a unit: --units (else V) says it.
+    cols, units = _table_options(args, [p for p in inputs if Path(p).suffix.lower()
+                                        not in (".mat", ".npz")], STATIC)
     plan = _plan(args, inputs)
     out = plan.add("--json", args.json, stdout_ok=True)
     plot = plan.add("--plot", args.plot, folder=True)
@@ -817,7 +819,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     k = add("calibrate", "ellipsoid calibration of the triad from static poses", writes,
             _tables())
-    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz")
+    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz (CSV), "
+                   "or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
     k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
     k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
                    "('-': stdout)")

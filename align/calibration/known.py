@@ -70,6 +70,29 @@ def recognise(u: np.ndarray, tol_deg: float = RECOGNISE_DEG) -> list[str | None]
     return out
 
 
+RECOGNISE_FIT_DEG = 2.0
+"""After an ellipsoid fit, a pose is taken as a face (for the cross-check) only when its
+calibrated direction is within this of an axis: hand-placed poses near an axis are not."""
+
+
+def recognise_directions(a: np.ndarray, tol_deg: float = RECOGNISE_FIT_DEG
+                         ) -> list[str | None]:
+    """Faces of calibrated specific forces a (N, 3): within ``tol_deg`` of +-axis i."""
+    v = np.asarray(a, float)
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    out: list[str | None] = []
+    for row in v:
+        i = int(np.argmax(np.abs(row)))
+        ok = np.abs(row[i]) >= np.cos(np.deg2rad(tol_deg))
+        out.append(("+" if row[i] > 0 else "-") + "xyz"[i] if ok else None)
+    return out
+
+
+def labelled(poses: Poses) -> bool:
+    """True when the pose labels name faces (+x, x_p, ...)."""
+    return any(face_of(lab) is not None for lab in poses.labels)
+
+
 def faces_of(poses: Poses) -> list[str | None]:
     """Each pose's face: from its label when the labels name faces, else recognised."""
     named = [face_of(lab) for lab in poses.labels]

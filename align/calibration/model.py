@@ -183,7 +183,11 @@ class CalibrationStage:
                                                                           1.0)))
                                           if np.all(norms > 0) else float("inf"))
         dof = len(r) - len(theta0)
-        cov = np.linalg.pinv(J.T @ J)
+        # Columns scaled to unit norm first: the effects' columns (t^2 ~ 1e5 s^2) next to
+        # k's made J^T J so ill-conditioned that its pseudo-inverse dropped k's directions
+        # (u(k) came out 1e-6 counts/g after a warm-up term was added).
+        d = 1.0 / np.where(norms > 0, norms, 1.0)
+        cov = d[:, None] * np.linalg.pinv((J * d).T @ (J * d)) * d[None, :]
         if self.sigma is None:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))
@@ -362,6 +366,8 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
         faces_of,
         fit_known,
         has_six_faces,
+        labelled,
+        recognise_directions,
     )
 
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
@@ -382,7 +388,11 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
     stage = CalibrationStage(poses, signs)
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
     kf, cc, notes = None, None, ()
-    if six:
+    if not labelled(poses):
+        # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
+        a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
+        faces = recognise_directions(a)
+    if has_six_faces(faces):
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = tuple(w)

@@ -99,7 +99,14 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     :func:`axisbase.table.read_table`.
     """
     path = Path(path)
-    tab = read_table(path, STATIC, columns, rate_hz)
+    from align.calibration.arrays import SUFFIXES, read_arrays
+
+    if path.suffix.lower() in SUFFIXES:
+        tab, notes = read_arrays(path, STATIC, columns, rate_hz)
+        for note in notes:
+            logging.getLogger("align").warning("%s", note)
+    else:
+        tab = read_table(path, STATIC, columns, rate_hz)
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     _check_values(tab, u)
     t = tab.get("t")
@@ -323,7 +330,7 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
                            shortest):
             sel = slice(s, e)
             out.append(StaticInterval(float(t[s]), float(t[e - 1]), e - s, u[sel].mean(0),
-                                      u[sel].std(0, ddof=1), _sem(u[sel], n)))
+                                      u[sel].std(0, ddof=1), _sem(u[sel], max(n, (e - s) // 8))))
     return StaticDetection(tuple(out), noise, noise_mean, n, limit, rate, ratio, tuple(notes))
 
 
@@ -382,8 +389,9 @@ def find_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = StaticS
 def _sem(x: np.ndarray, block: int) -> np.ndarray:
     """Standard error of the mean that survives correlated (non-white) noise.
 
-    From the scatter of block means (blocks of the detection window), never below the
-    white-noise value: real sensors' samples are filtered and wander at low frequency.
+    From the scatter of block means (blocks of the detection window or an eighth of the
+    interval, the longer), never below the white-noise value: real sensors' samples are
+    filtered and wander at low frequency, which short blocks would not see.
     """
     white = x.std(0, ddof=1) / np.sqrt(len(x))
     nb = len(x) // block
