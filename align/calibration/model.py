@@ -91,7 +91,8 @@ class TriadModel:
         if self.cov is None or name not in self.names:
             return float("nan")
         i = self.names.index(name)
-        return float(np.sqrt(self.cov[i, i]))
+        v = float(self.cov[i, i])
+        return float(np.sqrt(v)) if v >= 0 else float("nan")  # nan: not determined
 
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:

@@ -42,7 +42,8 @@ def faces_and_turn_chunks(seed: int, chunk_s: float = 1.0):
     return tr, poses_from_samples(np.array(ids), u, np.arange(len(u)) / RATE)
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", [0, *(pytest.param(s, marks=pytest.mark.slow)
+                                       for s in range(1, 6))])
 def test_turn_chunks_do_not_make_k2_run_away(seed):
     tr, p = faces_and_turn_chunks(seed)
     # Unguarded, the loop takes K2 and the scale factor leaves every physical bound ...
