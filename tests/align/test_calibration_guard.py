@@ -93,3 +93,28 @@ def test_underdetermined_effect_refused_as_inseparable():
     # Here the base fit is itself ill-determined (condition ~1e5, k_x off by 30 %), and the
     # effect would move it by a quarter: refused, whichever check sees it first.
     assert why is not None
+
+
+def test_overfit_rule():
+    """chi2/dof falling far below 1 while a parameter jumps by many of its own sigma (inside
+    the physical prior) is an over-fit: refused; the same jump with chi2/dof ~ 1 is not."""
+    from dataclasses import replace
+
+    from align.calibration import admissible
+
+    tr, p = faces_and_turn_chunks(0, chunk_s=0.5)
+    stage = CalibrationStage(p, (1, 1, 1))
+    base = stage.fit([])
+    m = base.payload
+    term = next(c for c in CANDIDATES if c.name == NONLIN).build(base)
+    stage.condition[(NONLIN,)] = 10.0  # separable, so only the over-fit rule can speak
+    moved = replace(m, k=m.k * (1 + 0.05))  # 5 %: inside the prior, many sigma of k
+    assert base.quantities["k_x"][1] < 0.05 * m.k[0] / 10
+    sig = base.sigma
+    low = replace(base, payload=moved, residuals=base.residuals * 0 + 0.1 * sig,
+                  n_params=base.n_params + 3)
+    fair = replace(low, residuals=sig.copy())
+    check = admissible(stage)
+    why = check(base, low, term)
+    assert why is not None and why.startswith("over-fit")
+    assert check(base, fair, term) is None
