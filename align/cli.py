@@ -263,12 +263,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from collections import Counter
 
         used = Counter(kf.faces)
-        print(f"known-pose (six-position) method on faces "
-              f"{', '.join(f'{f} x{c}' if c > 1 else f for f, c in sorted(used.items()))}: fixture "
-              f"error {args.fixture_error:g}° declared; chi2 {kf.chi2:.3g} on {kf.dof} dof")
+        faces = ", ".join(f"{f} x{c}" if c > 1 else f for f, c in sorted(used.items()))
+        print(f"known-pose (six-position) method on faces {faces}: fixture error "
+              f"{args.fixture_error:g}° declared; chi2 {kf.chi2:.3g} on {kf.dof} dof")
     elif cal.known is not None:
         print("the six faces are among the poses: known-pose fit run too, cross-check below")
-    print(f"{'':14s} {'algebraic (paper)':>22s} {'ML refined':>16s} {'u':>10s}")
+    heads = (("algebraic (paper)", "ML refined") if cal.method == "ellipsoid"
+             else ("known-pose (GLS)", "(the same)"))
+    print(f"{'':14s} {heads[0]:>22s} {heads[1]:>16s} {'u':>10s}")
     for i, ax in enumerate("xyz"):
         print(f"{f'k_{ax} [{ku}]':14s} {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
     for i, ax in enumerate("xyz"):
