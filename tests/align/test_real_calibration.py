@@ -108,3 +108,24 @@ def test_effects_do_not_depend_on_detection_settings(name, expected):
     for st in SETTINGS:
         cal = calibrate(_poses(t, u, st))
         assert tuple(e.name for e in cal.loop.effects) == expected, st
+
+
+def test_mat_files_read_by_the_cli_as_by_hand(tmp_path):
+    """The .mat files as a user gives them to 'align calibrate' (Hassan's MATLAB v5 means,
+    imu_tk's text '.mat'): the same numbers as the hand-written loaders."""
+    import json
+
+    from align.calibration import read_poses
+    from align.cli import main
+
+    hassan = real_folder("poses-49-hassan") / "CalibrationOfLowCostTriaxialInertialSensors50.mat"
+    p, iv = read_poses(hassan)
+    assert iv is None and np.array_equal(p.u, F.mat_pose_means(hassan))
+    out = tmp_path / "h.json"
+    assert main(["calibrate", str(hassan), "--units", "g", "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["scale_factor_unit"] == "g/g" and len(js["poses"]) == 49
+    xsens = real_folder("imu_tk-xsens") / "xsens_acc.mat"
+    p, iv = read_poses(xsens)
+    t, u = F.xsens_text(xsens)
+    assert len(iv) == len(find_static(t, u)) and np.array_equal(p.u[0], iv[0].mean)
