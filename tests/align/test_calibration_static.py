@@ -36,7 +36,7 @@ def score(rec: HandheldRecording, det: StaticDetection) -> dict:
             i = int(hit[0])
             found.add(i)
             clean = rec.spec.triad.outputs(rec.up[i][None], np.zeros(1), np.zeros(1), None)[0]
-            z.append(float(np.max(np.abs(iv.mean - clean) / iv.sem)))
+            z.append(float(np.max(np.abs(iv.mean - clean) / np.maximum(iv.sem, 1e-300))))
     return {"found": len(found), "poses": len(P), "span": span, "extra": extra,
             "z": np.array(z)}
 
@@ -88,6 +88,16 @@ def test_phone_like_recording_without_time_column(tmp_path):
     cal = calibrate(poses)
     assert np.allclose(cal.model.k, 9.80665, rtol=2e-3)
     assert not cal.loop.effects
+
+
+@pytest.mark.parametrize("lsb", [0.0383, 0.153])
+def test_quantised_phone_output(lsb):
+    """A phone's coarse output quantum (m/s²) at or above its noise: the noise floor is
+    never below quantum/sqrt(12), so the poses are still found."""
+    tr = Triad(k=(9.80665,) * 3, noise_v=0.0, lsb_v=lsb, full_scale_v=1e6)
+    rec = handheld(HandheldSpec(triad=tr, rate_hz=50.0, noise_g=1e-3, seed=21))
+    s = score(rec, detect_static(rec.t, rec.u))
+    assert s["found"] == 30 and s["span"] == 0
 
 
 def test_row_index_as_time_says_so():
