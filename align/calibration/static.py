@@ -99,7 +99,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     :func:`axisbase.table.read_table`.
     """
     path = Path(path)
-    from align.calibration.arrays import SUFFIXES, read_arrays
+    from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
 
     if path.suffix.lower() in SUFFIXES:
         tab, notes = read_arrays(path, STATIC, columns, rate_hz)
@@ -107,6 +107,15 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
             logging.getLogger("align").warning("%s", note)
     else:
         tab = read_table(path, STATIC, columns, rate_hz)
+        if "pose" not in tab and "t" not in tab and len(tab) <= MEANS_ROWS:
+            # ux,uy,uz without pose or time, a few rows: per-pose means (as for arrays).
+            from dataclasses import replace
+
+            labels = np.array([str(i + 1) for i in range(len(tab))], dtype=object)
+            tab = replace(tab, data={**tab.data, "pose": labels})
+            logging.getLogger("align").warning(
+                "%s: %d rows, no pose or time column: each row read as one pose's mean "
+                "(a recording needs --rate HZ)", path, len(tab))
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     _check_values(tab, u)
     t = tab.get("t")
@@ -132,8 +141,8 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         intervals = None
     else:
         if t is None:
-            raise InputError(f"{path}: neither a pose column nor a time column t (give "
-                             "--rate HZ for a recording without time stamps)")
+            raise InputError(f"{path}: {len(u)} rows and neither a pose column nor a time "
+                             "column t (give --rate HZ for a recording without time stamps)")
         det = detect_static(t, u, settings)
         for note in det.notes:
             logging.getLogger("align").warning("WARNING: %s: %s", path, note)

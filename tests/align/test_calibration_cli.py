@@ -129,3 +129,26 @@ def test_help_shows_every_detection_default():
                           ("--fixture-error", "0.5")):
         i = text.index(f"\n  {flag}")  # the option's entry, not the usage line
         assert f"default: {default}" in " ".join(text[i:i + 400].split()), flag
+
+
+def test_pose_means_without_pose_column(tmp_path, capsys):
+    """A short ux,uy,uz file (160 poses in g, no time) is per-pose means; a long one is a
+    recording that needs --rate."""
+    from synth.tumble import pose_directions
+
+    up = pose_directions("random", 160, np.random.default_rng(3))
+    tr = Triad(k=(1.01, 0.99, 1.0), noise_v=0.0)
+    u = tr.outputs(up, np.zeros(160), np.zeros(160), None)
+    u = u + np.random.default_rng(4).normal(0, 1e-4, u.shape)
+    p = tmp_path / "means.csv"
+    np.savetxt(p, u, delimiter=",", header="ux,uy,uz", comments="")
+    out = tmp_path / "m.json"
+    assert main(["calibrate", str(p), "--units", "g", "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert len(js["poses"]) == 160 and js["noise_known"] is False
+    assert np.allclose(js["scale_factors_g_per_g"], tr.k, rtol=1e-3)
+    long = tmp_path / "long.csv"
+    np.savetxt(long, np.repeat(u, 5, axis=0) + 1e-6 * np.arange(800)[:, None],
+               delimiter=",", header="ux,uy,uz", comments="")
+    assert main(["calibrate", str(long)]) == 2
+    assert "800 rows and neither a pose column nor a time column" in capsys.readouterr().err
