@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from axisbase.errors import InputError
-from axisbase.units import ARCSEC
+from axisbase.units import ARCSEC, DEG
 from axisbase.version import __version__
 
 log = logging.getLogger("align")
@@ -233,27 +233,44 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     inputs = [args.static] + ([args.check] if args.check else [])
     _unique(inputs, "static/--check")
     signs = _signs(args.scale_sign)
-    cols, units = _table_options(args, inputs, STATIC)
+    # .mat/.npz arrays have no header to carry a unit: --units (else V) says it.
+    cols, units = _table_options(args, [p for p in inputs if Path(p).suffix.lower()
+                                        not in (".mat", ".npz")], STATIC)
     plan = _plan(args, inputs)
     out = plan.add("--json", args.json, stdout_ok=True)
     plot = plan.add("--plot", args.plot, folder=True)
-    settings = StaticSettings(args.window, args.threshold, args.min_static, args.margin)
+    settings = StaticSettings(args.window, args.threshold, args.min_static, args.margin,
+                              args.split_sigma, args.split_deg)
     poses, intervals = read_poses(args.static, settings, columns=cols, rate_hz=args.rate)
     check = (read_poses(args.check, settings, calibration=False, columns=cols,
                         rate_hz=args.rate)[0] if args.check else None)
-    cal = calibrate(poses, signs, alpha=args.alpha)
     if intervals is not None:
         print(f"{len(intervals)} static intervals found:")
         for iv in intervals:
             print(f"  {iv.start_s:9.2f}-{iv.end_s:9.2f} s ({iv.duration_s:6.1f} s, "
-                  f"{iv.samples} samples), noise {' '.join(f'{v:.3g}' for v in iv.std)}")
+                  f"{iv.samples} samples), mean {' '.join(f'{v:.6g}' for v in iv.mean)}, "
+                  f"noise {' '.join(f'{v:.3g}' for v in iv.std)}")
+    cal = calibrate(poses, signs, alpha=args.alpha,
+                    fixture_error_rad=args.fixture_error * DEG)
     m, a = cal.model, cal.algebraic
     ku = OUTPUT_UNITS[units]
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
                  if all(s > 0 for s in signs) else "mixed")
     print(f"{len(poses.u)} poses in {units}; scale-factor signs {signs} ({sign_note}: an "
           "ellipsoid cannot tell them, --scale-sign sets them)")
-    print(f"{'':14s} {'algebraic (paper)':>22s} {'ML refined':>16s} {'u':>10s}")
+    if cal.method == "known-pose":
+        kf = cal.known
+        from collections import Counter
+
+        used = Counter(kf.faces)
+        faces = ", ".join(f"{f} x{c}" if c > 1 else f for f, c in sorted(used.items()))
+        print(f"known-pose (six-position) method on faces {faces}: fixture error "
+              f"{args.fixture_error:g}° declared; chi2 {kf.chi2:.3g} on {kf.dof} dof")
+    elif cal.known is not None:
+        print("the six faces are among the poses: known-pose fit run too, cross-check below")
+    heads = (("algebraic (paper)", "ML refined") if cal.method == "ellipsoid"
+             else ("known-pose (GLS)", "(the same)"))
+    print(f"{'':14s} {heads[0]:>22s} {heads[1]:>16s} {'u':>10s}")
     for i, ax in enumerate("xyz"):
         print(f"{f'k_{ax} [{ku}]':14s} {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
     for i, ax in enumerate("xyz"):
@@ -262,8 +279,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     for i, ax in enumerate("xyz"):
         print(f"{f'b_{ax} [µg]':14s} {a.bias[i] * 1e6:22.3f} {m.bias[i] * 1e6:16.3f} "
               f"{m.u_of(f'bias_{ax}') * 1e6:10.3g}")
-    for line in cal.loop.summary_lines():
+    for line in cal.effect_lines():
         print("  " + line)
+    if cal.cross_check:
+        print("cross-check ellipsoid vs known-pose (difference / combined u): "
+              + ", ".join(f"{n} {v['z']:+.1f}" for n, v in cal.cross_check.items()))
     dg = delta_g(m, check) if check is not None else None
     if dg is not None:
         print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in dg))
@@ -273,6 +293,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from align.plots import plot_calibration
 
         print(f"plot: {plot_calibration(cal, poses, check, plot)}")
+        if intervals is not None:
+            from align.calibration.plots import plot_static
+
+            print(f"plot: {plot_static(args.static, settings, cols, args.rate, plot)}")
     if out is not None:
         doc = calibration_document(cal, poses, units, intervals, check, warnings,
                                    _settings(args), inputs)
@@ -812,19 +836,29 @@ def build_parser() -> argparse.ArgumentParser:
 
     k = add("calibrate", "ellipsoid calibration of the triad from static poses", writes,
             _tables())
-    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz")
+    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz (CSV), "
+                   "or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
     k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
     k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
                    "('-': stdout)")
     k.add_argument("--plot", help="folder for the dg-per-pose / residual figure")
     k.add_argument("--scale-sign", default="+", help="signs of k: +, - or e.g. -,-,-")
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
-    k.add_argument("--window", type=POSITIVE, default=1.0, help="static detection window [s]")
+    k.add_argument("--window", type=POSITIVE, default=0.25,
+                   help="static detection window [s] (at least 5 samples)")
     k.add_argument("--threshold", type=_number(1, None, lo_open=True), default=3.0,
-                   help="static if moving std < this x noise floor")
-    k.add_argument("--min-static", type=POSITIVE, default=2.0,
-                   help="shortest static interval [s]")
-    k.add_argument("--margin", type=_number(0), default=0.5, help="cut from each end [s]")
+                   help="static if the moving std < this x the recording's own noise "
+                   "(estimated from its quietest windows)")
+    k.add_argument("--min-static", type=POSITIVE, default=0.5,
+                   help="shortest static interval kept [s]")
+    k.add_argument("--margin", type=_number(0), default=0.1, help="cut from each end [s]")
+    k.add_argument("--split-sigma", type=POSITIVE, default=8.0,
+                   help="split an interval whose mean moves by more than this many standard "
+                   "errors ...")
+    k.add_argument("--split-deg", type=_number(0), default=1.0,
+                   help="... and by more than this tilt [deg] (a slow turn, not settling)")
+    k.add_argument("--fixture-error", type=_number(0, 90), default=0.5, metavar="DEG",
+                   help="placement error of the faces +x,-x,... (known-pose method) [deg]")
     k.set_defaults(func=cmd_calibrate)
 
     tl = add("tilt", "roll and pitch from readings through a calibration", writes, _tables())

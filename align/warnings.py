@@ -39,6 +39,8 @@ def mark_warnings(results: Sequence) -> list[str]:
 def calibration_warnings(cal, poses) -> list[str]:
     """A triad calibration (``Calibration``) and its poses."""
     out = loop_warnings("calibration", cal.loop)
+    out += [f"calibration: effect {r.name} REFUSED: {r.reason}" for r in cal.loop.refused]
+    out += list(getattr(cal, "notes", ()))
     dof = cal.loop.after.dof
     if dof < 3:
         out.append(f"calibration: {len(poses.u)} poses leave {dof} degrees of freedom: the fit "

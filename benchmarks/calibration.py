@@ -1,6 +1,6 @@
 """Triad calibration: the seed paper reproduced, ML vs algebraic vs the CRLB, and peers.
 
-Run:  python3 benchmarks/calibration.py [--datasets 200]
+Run:  python3 benchmarks/calibration.py [--datasets 200] [--only paper|detection|known|runaway]
 
 1. The paper's setting (Table 1, 14 cube poses, per-pose noise ~1e-6 g): parameters against
    their stated uncertainties, check-pose Δg.
@@ -10,6 +10,12 @@ Run:  python3 benchmarks/calibration.py [--datasets 200]
    matrix + bias from a nominal start), and imucal's Ferraris six-position method (needs
    exactly known orientations; optional dependency: `pip install imucal`) under fixture
    placement errors of 0-500 µrad, Δg on random check poses.
+4. Static detection: synthetic hand-held recordings (10-1000 Hz, 1-3 s poses, 10 µg-10 mg)
+   and the real recordings, poses found by the default detector against the previous one
+   (fixed 1 s window, 10th-percentile floor, 2 s minimum, 0.5 s margins), with timings.
+5. Six-position: the known-pose fit against imucal's FerrarisCalibration, synthetic (Δg on
+   check poses under fixture error) and on imucal's own session (matrix K R, offsets).
+6. The run-away loop: six faces + chunks of turns as poses, 20 seeds, guard off and on.
 """
 
 from __future__ import annotations
@@ -98,10 +104,214 @@ def imucal_dg(d, check: Poses) -> np.ndarray | None:
     return np.linalg.norm(a, axis=1) - 1
 
 
+def old_find_static(t: np.ndarray, u: np.ndarray) -> list[tuple[float, float]]:
+    """The previous detector at its defaults (the alternative section 4 compares with)."""
+    from scipy.ndimage import uniform_filter1d
+
+    dt = float(np.median(np.diff(t)))
+    w = max(3, int(round(1.0 / dt)))
+    m = uniform_filter1d(u, w, axis=0, mode="nearest")
+    m2 = uniform_filter1d(u * u, w, axis=0, mode="nearest")
+    sd = np.sqrt(np.maximum(m2 - m * m, 0)).max(axis=1)
+    quiet = sd <= 3.0 * max(float(np.percentile(sd, 10)), 1e-12)
+    edges = np.diff(np.concatenate([[0], quiet.astype(int), [0]]))
+    out = []
+    for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1, strict=True):
+        ta, tb = t[a] + 0.5 + dt * w / 2, t[b] - 0.5 - dt * w / 2
+        if tb - ta >= 2.0:
+            out.append((float(ta), float(tb)))
+    return out
+
+
+def _found(rec, intervals) -> tuple[int, int]:
+    """(poses found, intervals spanning two poses) of a hand-held recording."""
+    dt = 1 / rec.spec.rate_hz
+    hit, span = set(), 0
+    for a, b in intervals:
+        inside = [min(b, pb) - max(a, pa) + dt for pa, pb in rec.poses]
+        over = [i for i, x in enumerate(inside) if x > dt / 2]
+        if len(over) > 1:
+            span += 1
+        elif over and inside[over[0]] >= 0.5 * (b - a + dt):
+            hit.add(over[0])
+    return len(hit), span
+
+
+def detection() -> None:
+    from align.calibration import detect_static, find_static
+    from align.calibration import formats as F
+    from synth.handheld import HandheldSpec, handheld
+
+    print("== 4. static detection: poses found / true (intervals spanning two poses) ==")
+    print("  synthetic hand-held, 30 poses x 3 seeds each, slow min-jerk handling between")
+    print(f"  {'rate':>6s} {'noise':>7s} {'default (this)':>16s} {'previous':>12s} "
+          f"{'t this':>8s} {'t prev':>8s}")
+    for rate in (10.0, 50.0, 200.0, 1000.0):
+        for noise in (1e-5, 1e-4, 1e-3, 1e-2):
+            f_new = f_old = s_new = s_old = n = 0
+            tn, to = [], []
+            for seed in range(3):
+                rec = handheld(HandheldSpec(rate_hz=rate, noise_g=noise, seed=seed))
+                t0 = time.perf_counter()
+                det = detect_static(rec.t, rec.u)
+                tn.append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                old = old_find_static(rec.t, rec.u)
+                to.append(time.perf_counter() - t0)
+                a, b = _found(rec, [(x.start_s, x.end_s) for x in det.intervals])
+                c, d = _found(rec, old)
+                f_new, s_new, f_old, s_old = f_new + a, s_new + b, f_old + c, s_old + d
+                n += len(rec.poses)
+            print(f"  {rate:6.0f} {noise:7.0e} {f'{f_new}/{n} ({s_new})':>16s} "
+                  f"{f'{f_old}/{n} ({s_old})':>12s} {1e3 * np.median(tn):6.1f}ms "
+                  f"{1e3 * np.median(to):6.1f}ms")
+    import json
+    from pathlib import Path
+
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    if not real.is_dir():
+        print("  (real recordings absent)")
+        return
+    print("  real recordings (true counts from each folder's README)")
+    fer = np.genfromtxt(real / "imucal-ferraris" / "example_ferraris_session.csv",
+                        delimiter=",", names=True)
+    sec = json.loads((real / "imucal-ferraris" / "example_ferraris_session_list.json")
+                     .read_text())
+    rows = [
+        ("imu_tk-xsens", *F.xsens_text(real / "imu_tk-xsens" / "xsens_acc.mat"),
+         "1 + 37 poses"),
+        ("openaxes ADXL355", *F.openaxes(real / "openaxes-imu9"
+                                         / "log_imu9_2022-06-22_22-13-55.csv", "ADXL355"),
+         "1 + ~38 placements"),
+        ("openaxes BMI160", *F.openaxes(real / "openaxes-imu9"
+                                        / "log_imu9_2022-06-22_22-13-55.csv", "BMI160"),
+         "1 + ~38 placements"),
+        ("mpu6050", *F.mpu6050(real / "mpu6050-tomisuarez" / "example_data_calibration.csv"),
+         "1 + ~10 poses"),
+        ("imucal-ferraris", np.arange(len(fer)) / 102.4,
+         np.column_stack([fer["acc_x"], fer["acc_y"], fer["acc_z"]]),
+         "6 faces + 7 rests between turns"),
+    ]
+    for name, t, u, truth in rows:
+        new = find_static(t, u)
+        old = old_find_static(t, u)
+        extra = ""
+        if name == "imucal-ferraris":
+            faces = 0
+            for k in ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a"):
+                a, b = sec[k]["start"] / 102.4, sec[k]["end"] / 102.4
+                faces += any(min(x.end_s, b) - max(x.start_s, a) > 0.7 * (b - a) for x in new)
+            turns = sum(any(x.start_s < sec[k]["end"] / 102.4 and x.end_s > sec[k]["start"]
+                            / 102.4 for x in new) for k in ("x_rot", "y_rot", "z_rot"))
+            extra = f"; annotated faces covered {faces}/6, intervals inside a turn {turns}"
+        print(f"  {name:17s} this {len(new):3d}, previous {len(old):3d}  (README: {truth})"
+              f"{extra}")
+
+
+def known_pose() -> None:
+    from align.calibration.known import fit_known
+
+    tr = Triad(noise_v=NOISE_V)
+    print("== 5a. six faces: known-pose fit vs imucal Ferraris (Δg RMS, 5 check poses, µg; "
+          "50 seeds) ==")
+    for err in (0.0, 50e-6, 200e-6, 500e-6):
+        ours, theirs = [], []
+        for s in range(50):
+            d = tumble(TumbleSpec(triad=tr, poses="six", seed=3000 + s, fixture_error_rad=err))
+            sel = d.pose < 6
+            p = poses_from_samples(d.pose[sel], d.u[sel], d.t[sel],
+                                   ("+x", "+y", "+z", "-x", "-y", "-z"))
+            c = poses_of(d, True)
+            kf = fit_known(p, p.labels, np.sign(tr.k), err / np.sqrt(2))
+            ours.append(delta_g(kf.model, c))
+            dgi = imucal_dg(d, c)
+            if dgi is not None:
+                theirs.append(dgi)
+        r = [f"{np.sqrt(np.mean(np.square(x))) * 1e6:.2f}" if x else "not installed"
+             for x in (ours, theirs)]
+        print(f"  fixture {err * 1e6:5.0f} µrad: this tool {r[0]:>8s}   imucal {r[1]:>8s}")
+    import json
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "imucal-ferraris"
+    try:
+        import imucal
+        import pandas as pd
+    except ImportError:
+        print("  imucal not installed: pip install '.[bench]'")
+        return
+    if not folder.is_dir():
+        return
+    d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)
+    u = np.column_stack([d["acc_x"], d["acc_y"], d["acc_z"]])
+    sec = json.loads((folder / "example_ferraris_session_list.json").read_text())
+    names = ["x_p", "x_a", "y_p", "y_a", "z_p", "z_a"]
+    ids = np.full(len(u), -1)
+    for i, n in enumerate(names):
+        ids[sec[n]["start"]:sec[n]["end"]] = i
+    sel = ids >= 0
+    p = poses_from_samples(ids[sel], u[sel], np.arange(len(u))[sel] / 102.4, names)
+    t0 = time.perf_counter()
+    cal = calibrate(p)
+    t_ours = time.perf_counter() - t0
+    df = pd.DataFrame({"acc_x": u[:, 0], "acc_y": u[:, 1], "acc_z": u[:, 2],
+                       "gyr_x": d["gyr_x"], "gyr_y": d["gyr_y"], "gyr_z": d["gyr_z"]})
+    parts = []
+    for k, v in sec.items():
+        x = df.iloc[v["start"]:v["end"]].copy()
+        x["part"] = k
+        parts.append(x)
+    regions = imucal.ferraris_regions_from_df(pd.concat(parts).set_index("part"))
+    fc = imucal.FerrarisCalibration()
+    t0 = time.perf_counter()
+    info = fc.compute(regions, 102.4, "m/s^2", "deg/s")
+    t_im = time.perf_counter() - t0
+    ours = cal.known.M / fc.grav
+    um = np.sqrt(np.diag(cal.known.cov_mo))[:9].reshape(3, 3) / fc.grav
+    theirs = info.K_a @ info.R_a
+    uo = np.sqrt(np.diag(cal.known.cov_mo))[9:]
+    print("== 5b. imucal's own Ferraris session (accelerometer; the turns are not used) ==")
+    print(f"  K R: max |this - imucal| {np.abs(ours - theirs).max():.2e} (max "
+          f"{np.max(np.abs(ours - theirs) / um):.2f} of our u); row norms this "
+          f"{np.round(np.linalg.norm(ours, axis=1), 5)} imucal {np.round(np.diag(info.K_a), 5)}")
+    print(f"  offsets [m/s²] this {np.round(cal.known.offset, 5)} ± {np.round(uo, 5)}, "
+          f"imucal {np.round(info.b_a, 5)}")
+    print(f"  k [(m/s²)/g] this {np.round(cal.model.k, 4)} ± "
+          f"{np.round([cal.model.u_of(f'k_{a}') for a in 'xyz'], 4)}; chi2 "
+          f"{cal.known.chi2:.2f} on {cal.known.dof} dof; time this {1e3 * t_ours:.1f} ms, "
+          f"imucal (acc + gyro) {1e3 * t_im:.1f} ms")
+
+
+def runaway() -> None:
+    from align.calibration import CANDIDATES, NONLIN
+    from align.loop import run_loop
+    from tests.align.test_calibration_guard import faces_and_turn_chunks
+
+    print("== 6. six faces + 1 s chunks of three turns as poses (20 seeds) ==")
+    wild, refused, kept = [], 0, 0
+    for s in range(20):
+        _, p = faces_and_turn_chunks(s)
+        rep = run_loop(CalibrationStage(p, (1, 1, 1)), CANDIDATES)
+        if NONLIN in [e.name for e in rep.effects]:
+            wild.append(np.max(rep.after.payload.k / rep.before.payload.k))
+        cal = calibrate(p)
+        refused += NONLIN in [r.name for r in cal.loop.refused]
+        kept += NONLIN in [e.name for e in cal.loop.effects]
+    print(f"  guard off: K2 accepted in {len(wild)}/20, k moved by up to x{max(wild):.0f}")
+    print(f"  guard on : K2 refused in {refused}/20, accepted in {kept}/20")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--datasets", type=int, default=200)
+    ap.add_argument("--only", choices=["paper", "detection", "known", "runaway"])
     args = ap.parse_args()
+    if args.only == "detection":
+        return detection()
+    if args.only == "known":
+        return known_pose()
+    if args.only == "runaway":
+        return runaway()
     tr = Triad(noise_v=NOISE_V)
     truth = np.concatenate([tr.k, tr.beta, tr.bias])
 
@@ -173,6 +383,10 @@ def main() -> None:
               f"{rms(rows['imucal']):>26s}")
     print("  (this tool and the imu_tk-style fit use only |a| = 1: placement does not matter;"
           " the six-position method takes the fixture's orientation as truth)")
+    if args.only is None:
+        detection()
+        known_pose()
+        runaway()
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from align.calibration.model import (
     CalibrationStage,
     Poses,
     TriadModel,
+    admissible,
     algebraic,
     calibrate,
     calibration_json,
@@ -22,8 +23,10 @@ from align.calibration.model import (
 from align.calibration.static import (
     READINGS,
     STATIC,
+    StaticDetection,
     StaticInterval,
     StaticSettings,
+    detect_static,
     find_static,
     read_poses,
     read_readings,
@@ -32,7 +35,8 @@ from align.calibration.static import (
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",
     "Ellipsoid", "calibration_json",
-    "Poses", "TriadModel", "algebraic", "calibrate", "delta_g", "extract", "li_griffiths",
-    "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval", "StaticSettings",
-    "find_static", "read_poses", "read_readings", "READINGS", "STATIC", "poses_from_samples",
+    "Poses", "TriadModel", "admissible", "algebraic", "calibrate", "delta_g", "extract",
+    "li_griffiths", "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval",
+    "StaticSettings", "StaticDetection", "detect_static", "find_static", "read_poses",
+    "read_readings", "READINGS", "STATIC", "poses_from_samples",
 ]

@@ -14,7 +14,7 @@ the loop works without a chi2 test.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,7 +91,8 @@ class TriadModel:
         if self.cov is None or name not in self.names:
             return float("nan")
         i = self.names.index(name)
-        return float(np.sqrt(self.cov[i, i]))
+        v = float(self.cov[i, i])
+        return float(np.sqrt(v)) if v >= 0 else float("nan")  # nan: not determined
 
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
@@ -151,6 +152,7 @@ class CalibrationStage:
             raise InputError(f"only {len(poses.u)} usable poses; the model needs at least 9 "
                              "(the paper's cube gives 14)")
         self.poses = poses
+        self.condition: dict[tuple[str, ...], float] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
 
@@ -176,8 +178,17 @@ class CalibrationStage:
                             ftol=1e-14, gtol=1e-14, max_nfev=2000)
         r = res.fun / w
         J = res.jac
+        # Separability: condition number of the Jacobian with unit-norm columns (scale-free).
+        norms = np.linalg.norm(J, axis=0)
+        self.condition[tuple(effects)] = (float(np.linalg.cond(J / np.where(norms > 0, norms,
+                                                                          1.0)))
+                                          if np.all(norms > 0) else float("inf"))
         dof = len(r) - len(theta0)
-        cov = np.linalg.pinv(J.T @ J)
+        # Columns scaled to unit norm first: the effects' columns (t^2 ~ 1e5 s^2) next to
+        # k's made J^T J so ill-conditioned that its pseudo-inverse dropped k's directions
+        # (u(k) came out 1e-6 counts/g after a warm-up term was added).
+        d = 1.0 / np.where(norms > 0, norms, 1.0)
+        cov = d[:, None] * np.linalg.pinv((J * d).T @ (J * d)) * d[None, :]
         if self.sigma is None:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))
@@ -253,19 +264,141 @@ class Calibration:
     loop: LoopReport
     signs: tuple[float, float, float]
     noise_known: bool
+    method: str = "ellipsoid"
+    known: object = None
+    cross_check: dict | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def residual_rms_g(self) -> float:
         return self.loop.after.rms
 
+    def effect_lines(self, unit: str = "") -> list[str]:
+        """The loop's summary with every effect's components by axis (one line each)."""
+        out = []
+        for line in self.loop.summary_lines():
+            out.append(line)
+            if line.startswith("added "):
+                e = next(x for x in self.loop.effects if line.startswith(f"added {x.name}:"))
+                out += [f"    {e.name}_{ax}: {v:+.4g} ± {u:.2g} {e.unit}"
+                        for ax, v, u in e.components]
+        return out
+
+
+PRIOR_SCALE = 0.10
+"""An effect may not move a scale factor by more than this fraction (physical prior)."""
+PRIOR_ANGLE_RAD = 0.1
+"""... nor a non-orthogonality angle by more than this [rad] ..."""
+PRIOR_BIAS_G = 0.1
+"""... nor a bias by more than this [g]."""
+OVERFIT_CHI2 = 0.2
+"""chi2/dof below this after adding an effect is an over-fit when the effect also moves a
+quantity of interest by more than :data:`OVERFIT_SIGMA` of its own standard uncertainty."""
+OVERFIT_SIGMA = 10.0
+MAX_CONDITION = 1e7
+"""Largest condition number of the (column-normalised) Jacobian: above it the data cannot
+separate the effect from the model."""
+
+
+def admissible(stage: CalibrationStage) -> Callable[[StageFit, StageFit, Term], str | None]:
+    """The calibration's guard against a run-away loop: the reason to refuse an effect that
+    the significance tests call for, or None (design: physical priors, over-fit, rank)."""
+
+    def check(base: StageFit, trial: StageFit, term: Term) -> str | None:
+        mb, mt = base.payload, trial.payload
+        cond = stage.condition.get(tuple(t.name for t in [*_terms_of(base), term]),
+                                   float("nan"))
+        if not np.isfinite(cond) or cond > MAX_CONDITION:
+            return (f"the poses cannot separate it from the model (condition number "
+                    f"{cond:.3g} > {MAX_CONDITION:.0e})")
+        rel = np.abs(mt.k / mb.k - 1)
+        if rel.max() > PRIOR_SCALE:
+            i = int(np.argmax(rel))
+            return (f"it moves k_{'xyz'[i]} from {mb.k[i]:.6g} to {mt.k[i]:.6g} "
+                    f"({rel[i]:.0%} > {PRIOR_SCALE:.0%}): outside the physical prior")
+        db = np.abs(mt.beta - mb.beta)
+        if db.max() > PRIOR_ANGLE_RAD:
+            i = int(np.argmax(db))
+            return (f"it moves beta_{'xyz'[i]} from {mb.beta[i]:.4g} to {mt.beta[i]:.4g} rad "
+                    f"(> {PRIOR_ANGLE_RAD} rad): outside the physical prior")
+        dbias = np.abs(mt.bias - mb.bias)
+        if dbias.max() > PRIOR_BIAS_G:
+            i = int(np.argmax(dbias))
+            return (f"it moves bias_{'xyz'[i]} by {dbias[i]:.3g} g (> {PRIOR_BIAS_G} g): "
+                    "outside the physical prior")
+        if trial.sigma is not None and trial.dof > 0:
+            red = trial.chi2 / trial.dof
+            u = np.array([base.quantities[n][1] for n in mb.names[:9]])
+            shift = np.abs(np.concatenate([mt.k - mb.k, mt.beta - mb.beta, mt.bias - mb.bias]))
+            z = shift / np.where(u > 0, u, np.inf)
+            if red < OVERFIT_CHI2 and z.max() > OVERFIT_SIGMA:
+                i = int(np.argmax(z))
+                return (f"over-fit: chi2/dof falls to {red:.3g} while {mb.names[i]} moves by "
+                        f"{z[i]:.0f} of its standard uncertainty")
+        return None
+
+    return check
+
+
+def _terms_of(fit: StageFit) -> list[Term]:
+    """The effect terms a calibration fit carries (the names are all the guard needs)."""
+    return [Term(n, "", np.zeros((0, 0))) for n in fit.effects]
+
 
 def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1e-3,
-              candidates: Sequence[Candidate] = CANDIDATES) -> Calibration:
-    """Algebraic fit, ML refinement, residual loop over the calibration effects."""
+              candidates: Sequence[Candidate] = CANDIDATES,
+              fixture_error_rad: float | None = None) -> Calibration:
+    """Calibrate the triad from its poses.
+
+    * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
+      ``+x,-x,...`` or imucal's ``x_p,x_a,...``, or recognised from the means): the
+      known-pose (six-position) fit alone.
+    * 9 or more: algebraic ellipsoid fit, ML refinement, the residual loop over the effects
+      (each guarded by :func:`admissible`); when the six faces are among the poses, the
+      known-pose fit runs too and the two are cross-checked (``cross_check``, ``notes``).
+
+    ``fixture_error_rad``: declared placement error of the faces (default
+    :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    """
+    from align.calibration.known import (
+        FIXTURE_ERROR_RAD,
+        KnownPoseStage,
+        cross_check,
+        faces_of,
+        fit_known,
+        has_six_faces,
+        labelled,
+        recognise_directions,
+    )
+
+    fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
+    signs_t = tuple(float(s) for s in signs)
+    faces = faces_of(poses)
+    six = has_six_faces(faces)
+    # Poses that are all faces (however many) span six directions: the ellipsoid's nine
+    # parameters are not determined by them, the known-pose fit is.
+    if len(poses.u) < 9 or (six and all(f is not None for f in faces)):
+        if not six:
+            raise InputError(f"only {len(poses.u)} usable poses; the ellipsoid needs at least 9 "
+                             "(the paper's cube gives 14), or the six faces labelled "
+                             "+x,-x,+y,-y,+z,-z for the known-pose (six-position) method")
+        kf = fit_known(poses, faces, signs, fe)
+        rep = run_loop(KnownPoseStage(kf, poses), ())
+        return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
+                           "known-pose", kf)
     stage = CalibrationStage(poses, signs)
-    rep = run_loop(stage, candidates, alpha=alpha)
-    return Calibration(stage.start, rep.after.payload, rep, tuple(float(s) for s in signs),
-                       stage.sigma is not None)
+    rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
+    kf, cc, notes = None, None, ()
+    if not labelled(poses):
+        # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
+        a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
+        faces = recognise_directions(a)
+    if has_six_faces(faces):
+        kf = fit_known(poses, faces, signs, fe)
+        cc, w = cross_check(rep.after.payload, kf.model)
+        notes = tuple(w)
+    return Calibration(stage.start, rep.after.payload, rep, signs_t, stage.sigma is not None,
+                       "ellipsoid", kf, cc, notes)
 
 
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:
@@ -319,4 +452,8 @@ def calibration_json(cal: Calibration, poses: Poses) -> dict:
         "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
                   zip(poses.labels, delta_g(m, poses), strict=True)],
         "model": model_to_dict(m),
+        "method": cal.method,
+        "refused_effects": [r.to_dict() for r in cal.loop.refused],
+        "known_pose": cal.known.to_dict() if cal.known is not None else None,
+        "cross_check": cal.cross_check,
     }

@@ -12,12 +12,21 @@ from align.calibration.static import StaticInterval
 from align.contract import document
 from axisbase.table import OUTPUT_UNITS
 
+SCALE_KEYS = {"V": "scale_factors_v_per_g", "counts": "scale_factors_counts_per_g",
+              "m/s2": "scale_factors_m_s2_per_g", "g": "scale_factors_g_per_g"}
+"""The JSON key of the scale factors for each output unit."""
+
 
 def with_units(js: dict, units: str) -> dict:
     """Add the data's output unit to a calibration's JSON (and to its ``model`` block, which
     ``align tilt``/``apply`` check readings against). The historical key names
     ``scale_factors_v_per_g``/``k_v_per_g`` are kept; their unit is ``scale_factor_unit``."""
     js = dict(js, output_unit=units, scale_factor_unit=OUTPUT_UNITS[units])
+    # The scale factors also under a key named after their unit (volts keep the old key).
+    key = SCALE_KEYS[units]
+    if key not in js and "scale_factors_v_per_g" in js:
+        js[key] = js["scale_factors_v_per_g"]
+        js[key.replace("_per_g", "_u_per_g")] = js.get("scale_factors_u_v_per_g")
     if "model" in js:
         js["model"] = dict(js["model"], output_unit=units)
     return js
@@ -30,7 +39,8 @@ def calibration_document(cal: Calibration, poses: Poses, units: str,
     js = with_units(calibration_json(cal, poses), units)
     if intervals is not None:
         js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
-                                   "samples": iv.samples, "std": iv.std.tolist()}
+                                   "samples": iv.samples, "mean": iv.mean.tolist(),
+                                   "std": iv.std.tolist()}
                                   for iv in intervals]
     if check is not None:
         js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in

@@ -12,6 +12,7 @@ reported as ``file:line: column: what is wrong``.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,14 +44,20 @@ class StaticInterval:
 
 @dataclass(frozen=True)
 class StaticSettings:
-    """Detection settings: moving window [s], threshold as a multiple of the noise floor
-    (the 10th percentile of the moving standard deviation), shortest interval [s], and the
-    margin cut from each end of an interval [s] (settling)."""
+    """Detection settings (see :func:`detect_static`): moving window [s] (at least
+    :data:`MIN_WINDOW` samples); ``threshold``: a window is static while its standard
+    deviation stays below this multiple of the recording's own noise; ``min_duration_s``:
+    shortest interval kept [s] (1 s poses pass); ``margin_s``: cut from each end [s]
+    (settling); ``split_sigma``, ``split_deg``: an interval whose mean moves by more than
+    this many of its own standard errors and by more than this tilt [deg] is split (a slow
+    turn the moving window cannot see; smaller moves are settling, not a new pose)."""
 
-    window_s: float = 1.0
+    window_s: float = 0.25
     threshold: float = 3.0
-    min_duration_s: float = 2.0
-    margin_s: float = 0.5
+    min_duration_s: float = 0.5
+    margin_s: float = 0.1
+    split_sigma: float = 8.0
+    split_deg: float = 1.0
 
 
 _AXES = {ax: (f"a{ax}", f"acc_{ax}", f"accel_{ax}", f"acc{ax}", f"u_{ax}") for ax in "xyz"}
@@ -92,7 +99,23 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     :func:`axisbase.table.read_table`.
     """
     path = Path(path)
-    tab = read_table(path, STATIC, columns, rate_hz)
+    from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
+
+    if path.suffix.lower() in SUFFIXES:
+        tab, notes = read_arrays(path, STATIC, columns, rate_hz)
+        for note in notes:
+            logging.getLogger("align").warning("%s", note)
+    else:
+        tab = read_table(path, STATIC, columns, rate_hz)
+        if "pose" not in tab and "t" not in tab and len(tab) <= MEANS_ROWS:
+            # ux,uy,uz without pose or time, a few rows: per-pose means (as for arrays).
+            from dataclasses import replace
+
+            labels = np.array([str(i + 1) for i in range(len(tab))], dtype=object)
+            tab = replace(tab, data={**tab.data, "pose": labels})
+            logging.getLogger("align").warning(
+                "%s: %d rows, no pose or time column: each row read as one pose's mean "
+                "(a recording needs --rate HZ)", path, len(tab))
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     _check_values(tab, u)
     t = tab.get("t")
@@ -118,13 +141,16 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         intervals = None
     else:
         if t is None:
-            raise InputError(f"{path}: neither a pose column nor a time column t (give "
-                             "--rate HZ for a recording without time stamps)")
-        intervals = find_static(t, u, settings)
+            raise InputError(f"{path}: {len(u)} rows and neither a pose column nor a time "
+                             "column t (give --rate HZ for a recording without time stamps)")
+        det = detect_static(t, u, settings)
+        for note in det.notes:
+            logging.getLogger("align").warning("WARNING: %s: %s", path, note)
+        intervals = list(det.intervals)
         if not intervals:
             raise InputError(f"{path}: no static interval found (window {settings.window_s} s,"
-                             f" threshold {settings.threshold} x noise floor, at least "
-                             f"{settings.min_duration_s} s)")
+                             f" threshold {settings.threshold} x the recording's noise, at "
+                             f"least {settings.min_duration_s} s){_notes(det)}")
         mean = np.array([iv.mean for iv in intervals])
         count = np.array([iv.samples for iv in intervals])
         sig = np.array([iv.sem for iv in intervals])
@@ -135,8 +161,33 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
     if calibration:
-        _check_geometry(path, poses)
+        try:
+            _check_geometry(path, poses)
+        except InputError as exc:
+            if intervals is None:
+                raise
+            raise InputError(f"{exc}\n{_listing(intervals)}") from None
+        if intervals is not None and len(intervals) < 9:
+            from align.calibration.known import faces_of, has_six_faces
+
+            if not has_six_faces(faces_of(poses)):
+                raise InputError(f"{path}: too few poses: {len(intervals)} static intervals "
+                                 "found, the ellipsoid needs 9 (or the six faces for the "
+                                 "known-pose method); the detection settings may be too strict"
+                                 f" (--window, --threshold, --min-static, --margin)"
+                                 f"{_notes(det)}\n{_listing(intervals)}")
     return poses, intervals
+
+
+def _notes(det: StaticDetection) -> str:
+    return "".join(f"; {n}" for n in det.notes)
+
+
+def _listing(intervals) -> str:
+    """Every interval found (start, end, mean) for a refusal message."""
+    return "\n".join(f"  interval {i + 1}: {iv.start_s:.2f}-{iv.end_s:.2f} s, mean "
+                     + " ".join(f"{v:.6g}" for v in iv.mean)
+                     for i, iv in enumerate(intervals)) or "  (none)"
 
 
 def _check_geometry(path: Path, poses: Poses) -> None:
@@ -150,38 +201,206 @@ def _check_geometry(path: Path, poses: Poses) -> None:
     if len(u) >= 3:
         s = np.linalg.svd(u - u.mean(0), compute_uv=False)
         if s[-1] < 1e-3 * s[0]:
-            raise InputError(f"{path}: the {len(u)} poses lie in a plane (degenerate "
-                             "geometry): tilt the unit out of that plane")
+            raise InputError(f"{path}: geometry: the {len(u)} poses lie in a plane "
+                             "(degenerate): tilt the unit out of that plane")
 
 
-def find_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings
-                ) -> list[StaticInterval]:
-    """Static intervals: moving std of every axis below threshold x the noise floor."""
-    dt = float(np.median(np.diff(t)))
-    w = max(3, int(round(settings.window_s / dt)))
-    m = uniform_filter1d(u, w, axis=0, mode="nearest")
-    m2 = uniform_filter1d(u * u, w, axis=0, mode="nearest")
-    sd = np.sqrt(np.maximum(m2 - m * m, 0)).max(axis=1)
-    floor = float(np.percentile(sd, 10))
-    quiet = sd <= settings.threshold * max(floor, 1e-12)
+@dataclass(frozen=True)
+class StaticDetection:
+    """What the detector saw: the intervals, and the numbers it decided with.
+
+    ``noise``: per-channel noise of the samples [output units] (from the quietest windows);
+    ``noise_mean``: standard deviation of a window mean per channel (the Allan deviation at
+    the window length, never below the white-noise value); ``window``: samples per window;
+    ``limit``: the moving-std ratio below which a window is static; ``rate_hz`` the sample
+    rate from the time stamps; ``ratio``: the moving-std ratio of every sample (for plots);
+    ``notes``: what the user should know (e.g. a time column that looks like a row index).
+    """
+
+    intervals: tuple[StaticInterval, ...]
+    noise: np.ndarray
+    noise_mean: np.ndarray
+    window: int
+    limit: float
+    rate_hz: float
+    ratio: np.ndarray
+    notes: tuple[str, ...] = ()
+
+
+MIN_WINDOW = 5
+"""Fewest samples in a detection window (a standard deviation of fewer means nothing)."""
+
+
+def _quantum(x: np.ndarray) -> float:
+    """The output quantum of one channel (0 for unquantised data): the smallest step between
+    distinct values, when the values sit on a grid of it."""
+    v = np.unique(x[: 200_000])
+    if len(v) < 2 or len(v) > len(x) // 4 + 2:
+        return 0.0
+    q = float(np.min(np.diff(v)))
+    return q if np.allclose(np.diff(v) / q, np.round(np.diff(v) / q), atol=0.02) else 0.0
+
+
+def noise_levels(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel sample noise and window-mean noise from the quietest windows.
+
+    Non-overlapping windows of ``n`` samples; a window's total normalised scatter ranks it,
+    and the quietest fifth of the windows gives the noise (its standard deviation, corrected
+    for taking the quietest by the chi-square quantile). The mean's noise is the Allan
+    deviation at ``n`` samples over adjacent pairs of quiet windows (median form, robust to a
+    pair that straddles a small move), never below the white value noise / sqrt(n).
+    """
+    from scipy import stats
+
+    nb = len(u) // n
+    m = u.shape[1]
+    if nb < 4:
+        sd = u.std(0, ddof=1)
+        return np.maximum(sd, 1e-300), np.maximum(sd / np.sqrt(n), 1e-300)
+    blocks = u[: nb * n].reshape(nb, n, m)
+    sd = blocks.std(1, ddof=1)
+    means = blocks.mean(1)
+    q = np.array([_quantum(u[:, i]) for i in range(m)])
+    # Rank by scatter relative to each channel's median scatter (channels differ in units).
+    med = np.maximum(np.median(sd, 0), q / np.sqrt(12) + 1e-300)
+    score = np.sqrt(np.mean((sd / med) ** 2, 1))
+    quiet = score <= np.percentile(score, 20)
+    # The quietest fifth of windows of pure noise sits below the mean scatter: with d = m(n-1)
+    # degrees of freedom, E[X | X < q] = d F_{d+2}(q) / F_d(q) for X ~ chi2(d) (white noise;
+    # exact enough for a threshold).
+    d = m * (n - 1)
+    corr = np.sqrt(stats.chi2.cdf(stats.chi2.ppf(0.2, d), d + 2) / 0.2)
+    noise = np.sqrt(np.mean(sd[quiet] ** 2, 0)) / corr
+    noise = np.maximum(noise, q / np.sqrt(12))
+    noise = np.maximum(noise, 1e-12 * np.maximum(np.abs(u).max(0), 1e-300))
+    pairs = quiet[:-1] & quiet[1:]
+    white = noise / np.sqrt(n)
+    if pairs.sum() >= 5:
+        d2 = (means[1:][pairs] - means[:-1][pairs]) ** 2
+        allan = np.sqrt(np.median(d2, 0) / stats.chi2.ppf(0.5, 1) / 2)
+        return noise, np.maximum(allan, white)
+    return noise, white
+
+
+def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = StaticSettings()
+                  ) -> StaticDetection:
+    """Static intervals of a continuous recording, with thresholds from its own noise.
+
+    1. Noise of each channel from the quietest windows (:func:`noise_levels`).
+    2. A sample is *quiet* when the centred moving standard deviation over ``window_s``,
+       normalised channel by channel by that noise, stays below ``threshold`` (and never
+       below the 1e-4 upper quantile of a static window's chi-square spread).
+    3. Every sample of a quiet window belongs to the interval; ``margin_s`` is cut from each
+       end (settling), and intervals shorter than ``min_duration_s`` are dropped.
+    4. An interval whose mean changes inside it (a slow turn the moving std cannot see) is
+       split where the change is largest while the two sides' means differ by more than
+       ``split_sigma`` of their noise (binary segmentation), the Allan deviation setting the
+       noise of a mean.
+    """
+    from scipy import stats
+
+    t = np.asarray(t, float)
+    u = np.asarray(u, float)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    rate = 1.0 / dt
+    notes = []
+    if dt == 1.0 and np.all(t == np.round(t)):
+        notes.append("the time column steps by exactly 1: if it is a row index, give the "
+                     "sample rate with --rate HZ (durations are read in seconds)")
+    n = max(MIN_WINDOW, int(round(settings.window_s * rate)))
+    if len(u) < 2 * n:
+        return StaticDetection((), np.full(u.shape[1], np.nan), np.full(u.shape[1], np.nan),
+                               n, float("nan"), rate, np.zeros(len(u)), tuple(notes))
+    noise, noise_mean = noise_levels(u, n)
+    # One g in output units per channel, from the spread of window means (half their range):
+    # a tilt of split_deg moves a channel by at most sin(split_deg) of it.
+    nb = len(u) // n
+    wm = u[: nb * n].reshape(nb, n, -1).mean(1)
+    g_out = (np.percentile(wm, 99, 0) - np.percentile(wm, 1, 0)) / 2
+    floor = np.sin(np.deg2rad(settings.split_deg)) * g_out
+    m = uniform_filter1d(u, n, axis=0, mode="nearest")
+    m2 = uniform_filter1d(u * u, n, axis=0, mode="nearest")
+    var = np.maximum(m2 - m * m, 0) * (n / (n - 1))
+    ratio = np.sqrt(np.mean(var / noise**2, axis=1))
+    k = u.shape[1] * (n - 1)
+    limit = max(settings.threshold, float(np.sqrt(stats.chi2.ppf(1 - 1e-4, k) / k)))
+    quiet = ratio <= limit
     edges = np.diff(np.concatenate([[0], quiet.astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-    out = []
+    # uniform_filter1d's window for centre j covers j - n//2 .. j - n//2 + n - 1.
+    lo_ext, hi_ext = n // 2, n - 1 - n // 2
+    cut = int(round(settings.margin_s * rate))
+    shortest = max(n, int(round(settings.min_duration_s * rate)))
+    out: list[StaticInterval] = []
     for a, b in zip(starts, ends, strict=True):
-        ta, tb = t[a] + settings.margin_s + dt * w / 2, t[b] - settings.margin_s - dt * w / 2
-        if tb - ta < settings.min_duration_s:
-            continue
-        sel = (t >= ta) & (t <= tb)
-        out.append(StaticInterval(float(ta), float(tb), int(sel.sum()), u[sel].mean(0),
-                                  u[sel].std(0, ddof=1), _sem(u[sel], w)))
-    return out
+        a2 = max(0, a - lo_ext) + cut
+        b2 = min(len(u) - 1, b + hi_ext) - cut
+        for s, e in _split(u, a2, b2 + 1, noise_mean, floor, n, settings.split_sigma,
+                           shortest):
+            sel = slice(s, e)
+            out.append(StaticInterval(float(t[s]), float(t[e - 1]), e - s, u[sel].mean(0),
+                                      u[sel].std(0, ddof=1), _sem(u[sel], max(n, (e - s) // 8))))
+    return StaticDetection(tuple(out), noise, noise_mean, n, limit, rate, ratio, tuple(notes))
+
+
+def _split(u: np.ndarray, s: int, e: int, noise_mean: np.ndarray, floor: np.ndarray, n: int,
+           z: float, shortest: int) -> list[tuple[int, int]]:
+    """Binary segmentation of samples s..e-1 on a change of mean (see detect_static, 4).
+
+    Hand-written: a two-segment mean-shift search is a few lines of cumulative sums, and
+    the change-point libraries (ruptures) would be a dependency for this alone.
+    """
+    if e - s < shortest:
+        return []
+    if e - s < 2 * n:
+        return [(s, e)]
+    L, step, se = _steps(u, s, e, n, noise_mean)
+    stat = np.max(np.where(step > floor[None, :], step / se, 0.0), axis=1)
+    j = int(np.argmax(stat))
+    if stat[j] > z:
+        k = s + int(L[j])
+        return (_split(u, s, k, noise_mean, floor, n, z, shortest)
+                + _split(u, k, e, noise_mean, floor, n, z, shortest))
+    # One pose. An end shorter than the shortest interval that differs from the rest is
+    # motion or settling at the edge: cut it, however small the move.
+    while e - s >= 2 * n:
+        edge = (L < shortest) | (e - s - L < shortest)
+        zs = np.max(step / se, axis=1)
+        if not edge.any() or zs[edge].max() <= z:
+            break
+        j = int(np.flatnonzero(edge)[np.argmax(zs[edge])])
+        s, e = (s + int(L[j]), e) if L[j] < e - s - L[j] else (s, s + int(L[j]))
+        if e - s >= 2 * n:
+            L, step, se = _steps(u, s, e, n, noise_mean)
+    return [(s, e)] if e - s >= shortest else []
+
+
+def _steps(u: np.ndarray, s: int, e: int, n: int, noise_mean: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every split of samples s..e-1 with both sides at least a window: the left
+    length, |mean left - mean right| per channel and its standard error."""
+    c = np.cumsum(u[s:e], axis=0)
+    total = c[-1]
+    L = np.arange(n, e - s - n + 1)
+    left = c[L - 1] / L[:, None]
+    right = (total - c[L - 1]) / (e - s - L)[:, None]
+    # Noise of a mean of L samples from the window-mean noise (white beyond a window).
+    se = noise_mean[None, :] * np.sqrt(n / L[:, None] + n / (e - s - L)[:, None])
+    return L, np.abs(left - right), se
+
+
+def find_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = StaticSettings()
+                ) -> list[StaticInterval]:
+    """Static intervals of a recording (see :func:`detect_static`)."""
+    return list(detect_static(t, u, settings).intervals)
 
 
 def _sem(x: np.ndarray, block: int) -> np.ndarray:
     """Standard error of the mean that survives correlated (non-white) noise.
 
-    From the scatter of block means (blocks of the detection window), never below the
-    white-noise value: real sensors' samples are filtered and wander at low frequency.
+    From the scatter of block means (blocks of the detection window or an eighth of the
+    interval, the longer), never below the white-noise value: real sensors' samples are
+    filtered and wander at low frequency, which short blocks would not see.
     """
     white = x.std(0, ddof=1) / np.sqrt(len(x))
     nb = len(x) // block

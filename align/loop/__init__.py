@@ -1,10 +1,11 @@
-"""The shared residual loop (design.md): structure tests, candidate effects, selection, report."""
+"""The shared residual loop: structure tests, candidate effects, selection, report."""
 
 from align.loop.loop import (
     Candidate,
     EffectReport,
     LoopReport,
     LoopSummary,
+    RefusedEffect,
     Stage,
     StageFit,
     Term,
@@ -15,7 +16,8 @@ from align.loop.loop import (
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 
 __all__ = [
-    "Candidate", "EffectReport", "LoopReport", "LoopSummary", "Stage", "StageFit",
+    "Candidate", "EffectReport", "LoopReport", "LoopSummary", "RefusedEffect", "Stage",
+    "StageFit",
     "StructureReport", "StructureTest", "Term", "bic", "f_test", "periodogram_test",
     "run_loop", "check_structure",
 ]

@@ -135,8 +135,28 @@ class EffectReport:
 
 
 @dataclass(frozen=True)
+class RefusedEffect:
+    """A candidate the tests called for but the stage's ``admissible`` check refused: why,
+    and its significance (it was *not* added)."""
+
+    name: str
+    reason: str
+    p_value: float
+    delta_bic: float
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "reason": self.reason, "p_value": self.p_value,
+                "delta_bic": self.delta_bic}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> RefusedEffect:
+        return cls(str(d["name"]), str(d["reason"]), float(d["p_value"]),
+                   float(d["delta_bic"]))
+
+
+@dataclass(frozen=True)
 class LoopReport:
-    """Before/after of one stage's loop."""
+    """Before/after of one stage's loop; ``refused``: significant candidates not added."""
 
     effects: tuple[EffectReport, ...]
     before: StageFit
@@ -144,6 +164,7 @@ class LoopReport:
     structure_before: StructureReport
     structure_after: StructureReport
     terms: tuple[Term, ...]
+    refused: tuple[RefusedEffect, ...] = ()
 
     @property
     def unexplained_structure(self) -> bool:
@@ -162,7 +183,7 @@ class LoopReport:
                            chi2_dof(self.before), chi2_dof(self.after),
                            self.unexplained_structure,
                            None if w is None else w.name, None if w is None else w.p_value,
-                           "" if w is None else w.detail)
+                           "" if w is None else w.detail, self.refused)
 
 
 @dataclass(frozen=True)
@@ -178,6 +199,7 @@ class LoopSummary:
     unexplained_structure : whether structure no candidate explains remains.
     structure_test, structure_p, structure_detail : the test that found it, its p-value and
         what it saw (None, None, "" if none).
+    refused : significant candidates the stage's physical checks refused, with why.
     """
 
     effects: tuple[EffectReport, ...]
@@ -189,6 +211,7 @@ class LoopSummary:
     structure_test: str | None = None
     structure_p: float | None = None
     structure_detail: str = ""
+    refused: tuple[RefusedEffect, ...] = ()
 
     def summary(self) -> LoopSummary:
         """Itself (a loaded result's loop is already a summary)."""
@@ -205,6 +228,8 @@ class LoopSummary:
         for e in self.effects:
             lines.append(f"added {e.name}: {e.estimate:.4g} ± {e.u:.2g} {e.unit} "
                          f"(dBIC {e.delta_bic:.1f}, p {e.p_value:.2g})")
+        for r in self.refused:
+            lines.append(f"REFUSED {r.name} (p {r.p_value:.2g}): {r.reason}")
         if self.unexplained_structure:
             lines.append(f"UNEXPLAINED STRUCTURE remains: {self.structure_test} "
                          f"p={self.structure_p:.2g} {self.structure_detail}")
@@ -215,6 +240,7 @@ class LoopSummary:
         and the loop's before/after under ``loop``."""
         return {"effects": [e.to_dict() for e in self.effects],
                 "unexplained_structure": self.unexplained_structure,
+                "refused_effects": [r.to_dict() for r in self.refused],
                 "loop": {"rms_before": self.rms_before, "rms_after": self.rms_after,
                          "chi2_dof_before": self.chi2_dof_before,
                          "chi2_dof_after": self.chi2_dof_after,
@@ -236,7 +262,8 @@ class LoopSummary:
                    nan if rb is None else rb, nan if ra is None else ra,
                    num("chi2_dof_before"), num("chi2_dof_after"),
                    bool(d.get("unexplained_structure", False)), lp.get("structure_test"),
-                   num("structure_p"), str(lp.get("structure_detail", "")))
+                   num("structure_p"), str(lp.get("structure_detail", "")),
+                   tuple(RefusedEffect.from_dict(r) for r in d.get("refused_effects", ())))
 
 
 def bic(fit: StageFit, extra_k: int = 0) -> float:
@@ -273,12 +300,17 @@ def structure_of(fit: StageFit, alpha: float) -> StructureReport:
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
-             min_delta_bic: float = 6.0, max_effects: int = 4) -> LoopReport:
+             min_delta_bic: float = 6.0, max_effects: int = 4,
+             admissible: Callable[[StageFit, StageFit, Term], str | None] | None = None
+             ) -> LoopReport:
     """Run the residual loop over ``stage`` with ``candidates``.
 
     An effect is added when its (look-elsewhere corrected) F-test p-value is below ``alpha``
     and it lowers BIC by at least ``min_delta_bic``; the best such effect is added first.
+    ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
+    else None): the refusal is reported in ``LoopReport.refused``, never silent.
     """
+    refused: dict[str, RefusedEffect] = {}
     terms: list[Term] = []
     current = stage.fit(terms)
     before = current
@@ -302,6 +334,10 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
             p = f_test(current, trial, term.width)
             p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
             if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
+                why = admissible(current, trial, term) if admissible is not None else None
+                if why is not None:
+                    refused[cand.name] = RefusedEffect(cand.name, why, p_adj, float(d_bic))
+                    continue
                 best = (d_bic, p_adj, term, trial, cand)
         if best is None:
             break
@@ -318,4 +354,5 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                             tuple(current.components.get(e.name, ())))
                for e in effects]
     return LoopReport(tuple(effects), before, current, s_before, structure_of(current, alpha),
-                      tuple(terms))
+                      tuple(terms), tuple(r for n, r in refused.items()
+                                          if not any(t.name == n for t in terms)))

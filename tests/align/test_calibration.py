@@ -132,8 +132,16 @@ def test_files_round_trip_and_bad_input(tmp_path):
     few = tmp_path / "few.csv"
     d6 = tumble(TumbleSpec(triad=tr, poses="six", seed=1))
     write_tumble_csv(d6, few)
+    # Six faces (recognised from the means): the known-pose method, not a refusal ...
+    cal6 = calibrate(read_poses(few)[0])
+    # (unlabelled: the faces are recognised from the outputs, so the sign of k is --scale-sign)
+    assert cal6.method == "known-pose" and np.allclose(cal6.model.k, np.abs(tr.k), rtol=1e-3)
+    # ... but five poses are too few for any method.
+    five = tmp_path / "five.csv"
+    five.write_text("\n".join(ln for ln in few.read_text().splitlines()
+                              if not ln.startswith("5,")))
     with pytest.raises(InputError, match="at least 9"):
-        calibrate(read_poses(few)[0])
+        calibrate(read_poses(five)[0])
     flat = tmp_path / "flat.csv"
     up = d.up[:d.n_cal].copy()
     up[:, 2] = 0

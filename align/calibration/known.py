@@ -1,0 +1,259 @@
+"""The known-pose (six-position) calibration: IEEE Std 1293's six-position test, Ferraris'
+method, what imucal implements — but with a covariance and a declared fixture error.
+
+Each pose's up direction d_p is known in the fixture's frame (the faces +x, -x, +y, -y, +z,
+-z: the triad axis that points up). The output is linear in the parameters:
+
+    u_p = M d_p + o,      M = K R C    [output/g],  o = K R b  [output]
+
+12 unknowns (M, o) from 3 equations per pose, so six faces leave 6 degrees of freedom.
+M = (K R) C is split by an RQ decomposition into the triad's upper-triangular K R (the same
+factor the ellipsoid fit finds: it is frame-free) and the rotation C of the triad in the
+fixture; K, beta, b then follow exactly as in :func:`align.calibration.ellipsoid.extract`.
+Weights: each pose's mean has its output noise plus the fixture's placement error sigma_f
+[rad] about each of the two axes perpendicular to d_p, propagated through M (a declared,
+Type B uncertainty): Sigma_p = diag(sem^2) + sigma_f^2 M (I - d d^T) M^T + sigma_f^4 M d d^T
+M^T, and the tilt's second-order mean shortens d to (1 - sigma_f^2) d. Generalised least
+squares, two passes (the weights need M).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import rq
+
+from align.calibration.ellipsoid import r_matrix
+from align.calibration.model import Poses, TriadModel
+from align.errors import InputError
+from align.loop import StageFit, Term
+
+FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
+_ALIASES = {"x+": "+x", "x-": "-x", "y+": "+y", "y-": "-y", "z+": "+z", "z-": "-z",
+            "x_p": "+x", "x_a": "-x", "y_p": "+y", "y_a": "-y", "z_p": "+z", "z_a": "-z",
+            "xp": "+x", "xn": "-x", "yp": "+y", "yn": "-y", "zp": "+z", "zn": "-z"}
+FIXTURE_ERROR_RAD = np.deg2rad(0.5)
+"""Default placement error of a face on its support (a hand against a box edge) [rad]."""
+RECOGNISE_DEG = 15.0
+"""An unlabelled pose is taken as a face when its direction is within this of an axis."""
+
+
+def face_of(label: str) -> str | None:
+    """'+x', 'x+', 'x_p' (imucal), ... -> '+x'; None when the label is not a face."""
+    s = str(label).strip().lower()
+    return s if s in FACES else _ALIASES.get(s)
+
+
+def direction(face: str) -> np.ndarray:
+    d = np.zeros(3)
+    d["xyz".index(face[1])] = 1.0 if face[0] == "+" else -1.0
+    return d
+
+
+def recognise(u: np.ndarray, tol_deg: float = RECOGNISE_DEG) -> list[str | None]:
+    """Faces of unlabelled pose means: centred on the mid-range and scaled by the half-range
+    of each axis, a pose within ``tol_deg`` of +-axis i is that face; else None."""
+    u = np.asarray(u, float)
+    lo, hi = u.min(0), u.max(0)
+    half = (hi - lo) / 2
+    if np.any(half <= 0):
+        return [None] * len(u)
+    v = (u - (hi + lo) / 2) / half
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    out: list[str | None] = []
+    for row in v:
+        i = int(np.argmax(np.abs(row)))
+        ok = np.abs(row[i]) >= np.cos(np.deg2rad(tol_deg))
+        out.append(("+" if row[i] > 0 else "-") + "xyz"[i] if ok else None)
+    return out
+
+
+RECOGNISE_FIT_DEG = 2.0
+"""After an ellipsoid fit, a pose is taken as a face (for the cross-check) only when its
+calibrated direction is within this of an axis: hand-placed poses near an axis are not."""
+
+
+def recognise_directions(a: np.ndarray, tol_deg: float = RECOGNISE_FIT_DEG
+                         ) -> list[str | None]:
+    """Faces of calibrated specific forces a (N, 3): within ``tol_deg`` of +-axis i."""
+    v = np.asarray(a, float)
+    v = v / np.linalg.norm(v, axis=1, keepdims=True)
+    out: list[str | None] = []
+    for row in v:
+        i = int(np.argmax(np.abs(row)))
+        ok = np.abs(row[i]) >= np.cos(np.deg2rad(tol_deg))
+        out.append(("+" if row[i] > 0 else "-") + "xyz"[i] if ok else None)
+    return out
+
+
+def labelled(poses: Poses) -> bool:
+    """True when the pose labels name faces (+x, x_p, ...)."""
+    return any(face_of(lab) is not None for lab in poses.labels)
+
+
+def faces_of(poses: Poses) -> list[str | None]:
+    """Each pose's face: from its label when the labels name faces, else recognised."""
+    named = [face_of(lab) for lab in poses.labels]
+    if any(f is not None for f in named):
+        return named
+    return recognise(poses.u)
+
+
+def has_six_faces(faces: Sequence[str | None]) -> bool:
+    return set(FACES) <= {f for f in faces if f is not None}
+
+
+@dataclass(frozen=True)
+class KnownPoseFit:
+    """Known-pose calibration. ``M`` (3, 3) [output/g] and ``offset`` (3,) [output] with
+    ``cov_mo`` (12, 12) over (M row by row, offset); ``model`` the triad (k, beta, bias) with
+    its covariance over ``model.names``; ``mounting`` C, the triad's rotation in the fixture
+    frame; ``chi2``, ``dof``; ``faces`` used; ``fixture_error_rad`` declared;
+    ``noise_known``: False when only means were given (uncertainty from the residual)."""
+
+    M: np.ndarray
+    offset: np.ndarray
+    cov_mo: np.ndarray
+    model: TriadModel
+    mounting: np.ndarray
+    chi2: float
+    dof: int
+    faces: tuple[str, ...]
+    fixture_error_rad: float
+    noise_known: bool
+    residuals: np.ndarray
+    sigma: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"method": "known-pose (six-position)", "faces": list(self.faces),
+                "fixture_error_rad": self.fixture_error_rad,
+                "matrix_per_g": self.M.tolist(), "offset": self.offset.tolist(),
+                "scale_factors": self.model.k.tolist(),
+                "scale_factors_u": [self.model.u_of(f"k_{a}") for a in "xyz"],
+                "beta_rad": self.model.beta.tolist(),
+                "beta_u_rad": [self.model.u_of(f"beta_{a}") for a in "xyz"],
+                "bias_g": self.model.bias.tolist(),
+                "bias_u_g": [self.model.u_of(f"bias_{a}") for a in "xyz"],
+                "mounting_rotation": self.mounting.tolist(), "chi2": self.chi2,
+                "dof": self.dof, "noise_known": self.noise_known}
+
+
+def _triad(theta: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, beta, b) as one vector (9,), and C, from (M row-major, o)."""
+    M = theta[:9].reshape(3, 3)
+    o = theta[9:]
+    T, C = rq(M)
+    # Signs: diag(T) takes the scale-factor signs; C absorbs the flips (C stays orthogonal).
+    s = np.sign(np.diag(T)) * signs
+    T, C = T * s[None, :], C * s[:, None]
+    kx = T[0, 0]
+    bz = np.arcsin(T[0, 1] / kx)
+    by = np.arcsin(T[0, 2] / (kx * np.cos(bz)))
+    ky = T[1, 1] / np.cos(bz)
+    bx = np.arcsin(T[1, 2] / (ky * np.cos(by)))
+    kz = T[2, 2] / (np.cos(bx) * np.cos(by))
+    k = np.array([kx, ky, kz])
+    beta = np.array([bx, by, bz])
+    b = np.linalg.solve(k[:, None] * r_matrix(beta), o)
+    return np.concatenate([k, beta, b]), C
+
+
+def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] = (1, 1, 1),
+              fixture_error_rad: float = FIXTURE_ERROR_RAD) -> KnownPoseFit:
+    """Known-pose fit over the poses that are faces (the others are ignored here)."""
+    use = [i for i, f in enumerate(faces) if f is not None]
+    used = [faces[i] for i in use]
+    if not has_six_faces(used):
+        missing = sorted(set(FACES) - set(used))
+        raise InputError(f"known-pose calibration needs all six faces; missing "
+                         f"{', '.join(missing)}")
+    d = np.array([direction(f) for f in used])
+    # A face tilted by (e1, e2) [rad] sees cos|e| ~ 1 - (e1^2 + e2^2)/2 of g along d: on
+    # average 1 - sigma_f^2 (second order, but 1e-5 of g at a 3 mrad fixture error).
+    d = d * (1 - fixture_error_rad**2)
+    u = poses.u[use]
+    n = len(use)
+    sem = poses.sigma_u[use] if poses.sigma_u is not None else np.zeros((n, 3))
+    A = np.zeros((3 * n, 12))
+    for p in range(n):
+        for i in range(3):
+            A[3 * p + i, 3 * i:3 * i + 3] = d[p]
+            A[3 * p + i, 9 + i] = 1.0
+    y = u.ravel()
+    theta = np.linalg.lstsq(A, y, rcond=None)[0]
+    for _ in range(2):
+        M = theta[:9].reshape(3, 3)
+        W = np.zeros((3 * n, 3 * n))
+        for p in range(n):
+            dn = d[p] / np.linalg.norm(d[p])
+            P = np.eye(3) - np.outer(dn, dn)
+            Md = M @ dn
+            # tilt: first order across d; its second order along d (variance sigma_f^4)
+            S = (np.diag(sem[p] ** 2) + fixture_error_rad**2 * M @ P @ M.T
+                 + fixture_error_rad**4 * np.outer(Md, Md))
+            # Noise-free means (synthetic data) leave S singular: a floor far below any
+            # real noise (1e-12 of |M|^2) keeps the weights finite.
+            S = S + np.eye(3) * 1e-12 * np.trace(M @ M.T) / 3
+            W[3 * p:3 * p + 3, 3 * p:3 * p + 3] = np.linalg.inv(S)
+        N = A.T @ W @ A
+        theta = np.linalg.solve(N, A.T @ W @ y)
+    cov = np.linalg.inv(N)
+    r = y - A @ theta
+    chi2 = float(r @ W @ r)
+    dof = 3 * n - 12
+    known = poses.sigma_u is not None or fixture_error_rad > 0
+    if not known and dof > 0:
+        cov = cov * float(r @ r) / dof
+    sig = np.sqrt(1 / np.diag(W))
+    s = np.asarray(signs, float)
+    q, C = _triad(theta, s)
+    # Propagate (M, o) -> (k, beta, b) by central differences (the map is smooth).
+    J = np.zeros((9, 12))
+    for j in range(12):
+        h = 1e-7 * max(1.0, abs(theta[j]))
+        tp, tm = theta.copy(), theta.copy()
+        tp[j] += h
+        tm[j] -= h
+        J[:, j] = (_triad(tp, s)[0] - _triad(tm, s)[0]) / (2 * h)
+    names = tuple(f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz")
+    model = TriadModel(q[:3], q[3:6], q[6:9], t_ref=float(np.mean(poses.t[use])),
+                       cov=J @ cov @ J.T, names=names)
+    return KnownPoseFit(theta[:9].reshape(3, 3), theta[9:], cov, model, C, chi2, dof,
+                        tuple(used), fixture_error_rad, known, r, sig)
+
+
+class KnownPoseStage:
+    """The known-pose fit as a loop stage (no candidate effects: six faces leave no room)."""
+
+    def __init__(self, fit: KnownPoseFit, poses: Poses):
+        self.result = fit
+        self.poses = poses
+
+    def fit(self, terms: Sequence[Term]) -> StageFit:
+        if terms:
+            raise ValueError("the known-pose fit takes no effects")
+        f = self.result
+        m = f.model
+        t = np.repeat(np.arange(len(f.faces), dtype=float), 3)
+        q = {n: (float(v), m.u_of(n)) for n, v in zip(
+            m.names, np.concatenate([m.k, m.beta, m.bias]), strict=True)}
+        return StageFit(f.residuals, f.sigma, 12, {"t": t}, "t", {}, q, payload=m)
+
+
+def cross_check(ellipsoid: TriadModel, known: TriadModel, limit: float = 5.0
+                ) -> tuple[dict, list[str]]:
+    """Ellipsoid vs known-pose (k, beta, b): differences in units of their combined
+    uncertainty; warnings for those beyond ``limit``."""
+    out, warn = {}, []
+    for name, a, b in zip(ellipsoid.names[:9], np.concatenate(
+            [ellipsoid.k, ellipsoid.beta, ellipsoid.bias]), np.concatenate(
+            [known.k, known.beta, known.bias]), strict=True):
+        u = float(np.hypot(ellipsoid.u_of(name), known.u_of(name)))
+        z = float((a - b) / u) if u > 0 else float("nan")
+        out[name] = {"ellipsoid": float(a), "known_pose": float(b), "z": z}
+        if not abs(z) <= limit:
+            warn.append(f"calibration: ellipsoid and known-pose fits disagree on {name}: "
+                        f"{a:.6g} vs {b:.6g} ({z:+.1f} sigma)")
+    return out, warn

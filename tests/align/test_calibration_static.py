@@ -1,0 +1,177 @@
+"""Static detection on continuous recordings: synthetic hand-held sessions (10-1000 Hz, 1-3 s
+poses, slow handling, 10 µg-10 mg noise) scored against their true poses, and the real
+recordings of ../shared/data/real (skipped when absent)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from align.calibration import StaticSettings, calibrate, detect_static, find_static, read_poses
+from align.calibration import formats as F
+from align.calibration.static import StaticDetection
+from synth.handheld import HandheldRecording, HandheldSpec, handheld
+from synth.tumble import Triad
+from tests.conftest import real_folder
+
+
+def score(rec: HandheldRecording, det: StaticDetection) -> dict:
+    """Found poses (an interval with most of its samples in that pose and none in another),
+    intervals spanning two poses, intervals outside every pose, and each found interval's
+    mean error against the noise-free output in units of its standard error."""
+    dt = 1 / rec.spec.rate_hz
+    P = np.array(rec.poses)
+    found, span, extra, z = set(), 0, 0, []
+    for iv in det.intervals:
+        tt = rec.t[(rec.t >= iv.start_s - dt / 4) & (rec.t <= iv.end_s + dt / 4)]
+        inside = np.array([np.sum((tt >= a - dt / 4) & (tt <= b + dt / 4)) for a, b in P])
+        hit = np.flatnonzero(inside)
+        if len(hit) > 1:
+            span += 1
+        elif len(hit) == 0 or inside[hit[0]] < 0.5 * len(tt):
+            extra += 1
+        else:
+            i = int(hit[0])
+            found.add(i)
+            clean = rec.spec.triad.outputs(rec.up[i][None], np.zeros(1), np.zeros(1), None)[0]
+            z.append(float(np.max(np.abs(iv.mean - clean) / np.maximum(iv.sem, 1e-300))))
+    return {"found": len(found), "poses": len(P), "span": span, "extra": extra,
+            "z": np.array(z)}
+
+
+GRID = [(rate, noise) for rate in (10.0, 50.0, 1000.0) for noise in (1e-5, 1e-3, 1e-2)]
+
+
+@pytest.mark.parametrize("rate,noise", GRID)
+def test_handheld_poses_found_by_default(rate, noise):
+    rec = handheld(HandheldSpec(rate_hz=rate, noise_g=noise, n_poses=20, seed=int(rate)))
+    s = score(rec, detect_static(rec.t, rec.u))
+    assert s["span"] == 0
+    assert s["found"] >= 0.95 * s["poses"]
+    # The found means are unbiased: max over 3 axes of |error| / sem stays Gaussian-sized.
+    assert np.percentile(s["z"], 90) < 4.0 and s["z"].max() < 8.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rate,noise", [(r, n) for r in (10.0, 25.0, 50.0, 100.0, 400.0, 1000.0)
+                                        for n in (1e-5, 1e-4, 1e-3, 3e-3, 1e-2)])
+def test_handheld_poses_found_many_seeds(rate, noise):
+    tot = {"found": 0, "poses": 0, "span": 0}
+    for seed in range(5):
+        rec = handheld(HandheldSpec(rate_hz=rate, noise_g=noise, seed=seed))
+        s = score(rec, detect_static(rec.t, rec.u))
+        for k in tot:
+            tot[k] += s[k]
+    assert tot["span"] == 0 and tot["found"] >= 0.95 * tot["poses"]
+
+
+def test_noise_estimated_from_the_recording():
+    for noise in (1e-5, 1e-3):
+        rec = handheld(HandheldSpec(rate_hz=100.0, noise_g=noise, seed=3))
+        det = detect_static(rec.t, rec.u)
+        assert np.all(np.abs(det.noise / noise - 1) < 0.15)
+        # white noise: the Allan deviation at the window is the white value
+        assert np.all(np.abs(det.noise_mean * np.sqrt(det.window) / det.noise - 1) < 0.25)
+
+
+def test_phone_like_recording_without_time_column(tmp_path):
+    """The reported case: 30 orientations, ~50 Hz, m/s², no time column, given --rate."""
+    rec = handheld(HandheldSpec(triad=Triad(k=(9.80665,) * 3, bias=(0.01, -0.02, 0.03),
+                                            beta=(0.002, -0.001, 0.003), noise_v=0.0),
+                                rate_hz=50.0, noise_g=2e-3, seed=11))
+    p = rec.write_csv(tmp_path / "phone.csv")
+    poses, intervals = read_poses(p, rate_hz=50.0)
+    s = score(rec, StaticDetection(tuple(intervals), *([None] * 6)))
+    assert s["found"] >= 29 and s["span"] == 0
+    cal = calibrate(poses)
+    assert np.allclose(cal.model.k, 9.80665, rtol=2e-3)
+    assert not cal.loop.effects
+
+
+@pytest.mark.parametrize("lsb", [0.0383, 0.153])
+def test_quantised_phone_output(lsb):
+    """A phone's coarse output quantum (m/s²) at or above its noise: the noise floor is
+    never below quantum/sqrt(12), so the poses are still found."""
+    tr = Triad(k=(9.80665,) * 3, noise_v=0.0, lsb_v=lsb, full_scale_v=1e6)
+    rec = handheld(HandheldSpec(triad=tr, rate_hz=50.0, noise_g=1e-3, seed=21))
+    s = score(rec, detect_static(rec.t, rec.u))
+    assert s["found"] == 30 and s["span"] == 0
+
+
+def test_row_index_as_time_says_so():
+    """Durations are in seconds: a row index as time shrinks every duration setting 50x
+    (the reported 148 intervals). The detector says so; with --rate the poses are found."""
+    rec = handheld(HandheldSpec(rate_hz=50.0, noise_g=1e-3, n_poses=12, seed=2))
+    det = detect_static(np.arange(len(rec.t), dtype=float), rec.u)
+    assert any("--rate" in n for n in det.notes)
+    good = detect_static(rec.t, rec.u)
+    assert not good.notes and score(rec, good)["found"] == 12
+
+
+SETTINGS = [StaticSettings(), StaticSettings(window_s=0.15), StaticSettings(window_s=0.5),
+            StaticSettings(threshold=2.5), StaticSettings(threshold=4.0),
+            StaticSettings(margin_s=0.0), StaticSettings(margin_s=0.3),
+            StaticSettings(min_duration_s=1.0)]
+
+
+def _poses(t, u, settings):
+    from align.calibration import Poses
+
+    iv = find_static(t, u, settings)
+    return Poses(np.array([x.mean for x in iv]), np.array([(x.start_s + x.end_s) / 2 for x in iv]),
+                 None, np.array([x.sem for x in iv]), np.array([x.samples for x in iv]),
+                 tuple(f"{x.start_s:.1f}s" for x in iv))
+
+
+@pytest.mark.parametrize("drift", [0.0, 2e-5])
+def test_effects_do_not_depend_on_the_detector_settings(drift):
+    """A clean hand-held session gives no effect with any settings; a real drift is found
+    with every setting."""
+    tr = Triad(k=(1.0, 1.0, 1.0), noise_v=0.0, drift=(drift, -drift, drift))
+    rec = handheld(HandheldSpec(triad=tr, rate_hz=100.0, noise_g=1e-3, seed=5))
+    names = set()
+    for st in SETTINGS:
+        cal = calibrate(_poses(rec.t, rec.u, st))
+        names.add(tuple(e.name for e in cal.loop.effects))
+    assert names == ({()} if drift == 0 else {("bias_drift",)})
+
+
+# ----------------------------------------------------------------------------- real data
+
+def _ferraris():
+    folder = real_folder("imucal-ferraris")
+    d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)
+    u = np.column_stack([d["acc_x"], d["acc_y"], d["acc_z"]])
+    sec = json.loads((folder / "example_ferraris_session_list.json").read_text())
+    return np.arange(len(u)) / 102.4, u, sec
+
+
+def test_real_ferraris_six_faces_found():
+    t, u, sec = _ferraris()
+    iv = find_static(t, u)
+    for face in ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a"):
+        a, b = sec[face]["start"] / 102.4, sec[face]["end"] / 102.4
+        # one interval covers most of the annotated face and nothing of a turn
+        best = max(iv, key=lambda x: min(x.end_s, b) - max(x.start_s, a))
+        assert min(best.end_s, b) - max(best.start_s, a) > 0.7 * (b - a)
+    for turn in ("x_rot", "y_rot", "z_rot"):
+        a, b = sec[turn]["start"] / 102.4, sec[turn]["end"] / 102.4
+        assert not any(x.start_s < b and x.end_s > a for x in iv)
+
+
+@pytest.mark.parametrize("name,loader,lo,hi", [
+    ("xsens", lambda: F.xsens_text(real_folder("imu_tk-xsens") / "xsens_acc.mat"), 37, 40),
+    ("adxl355", lambda: F.openaxes(real_folder("openaxes-imu9")
+                                   / "log_imu9_2022-06-22_22-13-55.csv", "ADXL355"), 36, 45),
+    ("bmi160", lambda: F.openaxes(real_folder("openaxes-imu9")
+                                  / "log_imu9_2022-06-22_22-13-55.csv", "BMI160"), 37, 41),
+    ("mpu6050", lambda: F.mpu6050(real_folder("mpu6050-tomisuarez")
+                                  / "example_data_calibration.csv"), 10, 12),
+])
+def test_real_recordings_poses_found_by_default(name, loader, lo, hi):
+    """READMEs: xsens 1 + 37 poses, openaxes 1 + ~38 placements (36-39 by threshold),
+    mpu6050 1 + ~10 poses."""
+    t, u = loader()
+    assert lo <= len(find_static(t, u)) <= hi
