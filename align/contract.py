@@ -18,7 +18,7 @@ from axisbase.provenance import check_format, envelope
 
 FORMATS = {
     "marks": 2, "camera": 2, "calibration": 2, "tilt": 2, "gonio": 2, "session": 2,
-    "platform-calibration": 2,
+    "platform-calibration": 2, "lot": 1,
 }
 """kind -> the version this tool writes."""
 
