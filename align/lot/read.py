@@ -110,6 +110,10 @@ class UnitResult:
         meta = d.get("metadata") or {}
         if not isinstance(meta, Mapping):
             raise InputError(f"{where}: metadata: expected an object")
+        for k, v in meta.items():
+            if not isinstance(v, str | int | float | bool):  # what session.toml allows
+                raise InputError(f"{where}: metadata {k}: expected a text, number or "
+                                 "true/false")
         label = next((str(meta[k]) for k in _ID_KEYS if meta.get(k) not in (None, "")),
                      str(d["session"]))
         errs = d.get("errors") or []
