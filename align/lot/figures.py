@@ -53,7 +53,7 @@ def fig_distributions(lot: Lot):
             for v in (-lot.tolerance, lot.tolerance):
                 ax.axvline(v / ARCSEC, color="#c00000", lw=1.2)
         ax.set_title(f"{a.name} (n = {a.n})", fontsize=10)
-        ax.set_xlabel("″")
+        ax.set_xlabel("arc-seconds")
     return fig
 
 
@@ -129,7 +129,7 @@ def fig_metadata(m: MetadataEffect, lot: Lot):
                            [n if i % max(1, len(names) // 12) == 0 else ""
                             for i, n in enumerate(names)], rotation=30, fontsize=7,
                            ha="right")
-        ax.set_ylabel("″")
+        ax.set_ylabel("arc-seconds")
     fig.suptitle(f"each angle against {m.key}" + (" (by day)" if m.by_day else ""),
                  fontsize=11)
     return fig
