@@ -21,6 +21,8 @@ import numpy as np
 ARCSEC_RAD = np.pi / 180 / 3600
 INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
 """The six angles E_ij in the order of a result's ``angle_names``."""
+SMALL_DROPS = {"observations", "stages", "platform_calibration", "nuisances", "axes"}
+"""Blocks of a result left out of a small one (``stages`` is kept, empty)."""
 
 
 def lot_results(template: Mapping[str, Any], n: int, seed: int,
@@ -28,7 +30,8 @@ def lot_results(template: Mapping[str, Any], n: int, seed: int,
                 sigma_rad: Sequence[float] | float = 2 * ARCSEC_RAD,
                 shifts: Mapping[int, tuple[int, float]] | None = None,
                 metadata: Mapping[str, Sequence[Any]] | None = None,
-                start: _dt.datetime | None = None) -> tuple[list[dict], np.ndarray]:
+                start: _dt.datetime | None = None, small: bool = False
+                ) -> tuple[list[dict], np.ndarray]:
     """``n`` results and the true angles [rad] (n × 6, shifts included).
 
     Parameters
@@ -38,6 +41,8 @@ def lot_results(template: Mapping[str, Any], n: int, seed: int,
     shifts : unit index -> (angle index 0..5, shift in units of sigma).
     metadata : key -> values cycled over the units (e.g. ``{"camera": ["A", "B"]}``).
     start : if given, unit k gets ``date`` start + k hours (ISO text), in run order.
+    small : leave out the per-observation and per-stage blocks (still a valid result; what
+        a lot reads is all kept).
     """
     rng = np.random.default_rng(seed)
     mean = np.broadcast_to(np.asarray(mean_rad, float), (6,))
@@ -46,8 +51,12 @@ def lot_results(template: Mapping[str, Any], n: int, seed: int,
     for k, (a, s) in (shifts or {}).items():
         truth[k, a] += s * sigma[a]
     out = []
-    base = {k: v for k, v in template.items() if k not in ("misalignment_rad",
-                                                           "misalignment_arcsec")}
+    drop = {"misalignment_rad", "misalignment_arcsec"}
+    if small:
+        drop |= SMALL_DROPS
+    base = {k: v for k, v in template.items() if k not in drop}
+    if small:
+        base["stages"] = {}
     for k in range(n):
         d = copy.copy(base)  # shallow: the large blocks are shared, never modified
         e = np.zeros((3, 3))

@@ -138,6 +138,17 @@ def test_a_clean_lot_of_30_has_the_expected_false_flags():
     assert abs(flags - expected) <= 4 * math.sqrt(expected)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_kruskal_matches_scipy(seed):
+    from scipy.stats import kruskal
+
+    from align.lot.stats import kruskal_p
+
+    rng = np.random.default_rng(seed)
+    groups = [np.round(rng.normal(0.3 * k, 1, 5 + 7 * k), 1) for k in range(3 + seed % 2)]
+    assert kruskal_p(groups) == pytest.approx(kruskal(*groups).pvalue, rel=1e-9)
+
+
 def test_metadata_breakdown_finds_the_camera_and_not_the_operator():
     rng = np.random.default_rng(1303)
     units = []
