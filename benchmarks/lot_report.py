@@ -17,6 +17,7 @@ import argparse
 import datetime as dt
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -68,7 +69,7 @@ def main() -> int:
         print(f"{len(files)} result files, {size / 1e6:.0f} MB ({size / len(files) / 1e3:.0f} "
               "kB each)")
         env = dict(os.environ, PYTHONPATH=str(ROOT))
-        t_lot, t_json = [], []
+        t_lot, t_json, cpu_lot = [], [], []
         for k in range(args.repeat):
             t0 = time.perf_counter()
             loaded = []
@@ -81,9 +82,12 @@ def main() -> int:
             cmd = [sys.executable, "-m", "align", "lot", str(folder), "--report",
                    f"{out}.html", "--csv", f"{out}.csv", "--json", f"{out}.json",
                    "--tolerance-arcsec", "8", "-q"]
+            c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
             t0 = time.perf_counter()
             r = subprocess.run(cmd, env=env, capture_output=True, text=True)
             t_lot.append(time.perf_counter() - t0)
+            c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu_lot.append(c1.ru_utime - c0.ru_utime + c1.ru_stime - c0.ru_stime)
             if r.returncode not in (0, 2) or not Path(f"{out}.html").is_file():
                 print(r.stderr[-2000:])
                 return 1
@@ -91,6 +95,9 @@ def main() -> int:
         flagged = sorted({u for a in doc["angles"] for u in a["outside_limits"]})
         print(f"align lot (JSON + CSV + HTML, end to end): median {statistics.median(t_lot):.2f} s "
               f"(runs {', '.join(f'{t:.2f}' for t in t_lot)})")
+        print(f"  its CPU time (user + sys):                median "
+              f"{statistics.median(cpu_lot):.2f} s (runs {', '.join(f'{t:.2f}' for t in cpu_lot)})"
+              f"; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         print(f"plain json.load loop:                       median "
               f"{statistics.median(t_json):.2f} s (runs {', '.join(f'{t:.2f}' for t in t_json)})")
         print(f"ratio align lot / json.load loop: "
@@ -101,8 +108,9 @@ def main() -> int:
               f"(the 6σ unit SN{args.n // 3:05d} among them: "
               f"{f'SN{args.n // 3:05d}' in flagged})")
         if args.n == 10_000:
-            print("target ≤ 10 s for 10⁴ results: "
-                  + ("met" if statistics.median(t_lot) <= 10 else "NOT met"))
+            print("target ≤ 10 s for 10⁴ results: wall "
+                  + ("met" if statistics.median(t_lot) <= 10 else "NOT met") + ", CPU time "
+                  + ("met" if statistics.median(cpu_lot) <= 10 else "NOT met"))
     return 0
 
 
