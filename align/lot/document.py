@@ -39,10 +39,10 @@ def lot_warnings(lot: Lot) -> list[str]:
     statistics, units outside the control limits or the tolerance, capability below
     1.33, angles that differ with the metadata, provisional limits."""
     out = _capped([f"{r.file}: not read: {r.reason}" for r in lot.rejected], "files not read")
-    out += _capped([f"unit {u.label} ({u.file}): result NOT ok ("
+    out += _capped([f"unit {u.label} ({u.file}): result NOT ok or not fused ("
                     + ("; ".join(f"stage {s} failed: {m}" for s, m in u.failed_stages)
                        or ("not fused" if not u.fused else "see its warnings"))
-                    + "): not in the statistics" for u in lot.units if not u.ok],
+                    + "): not in the statistics" for u in (lot.units[k] for k in lot.not_ok)],
                    "units not ok")
     if not lot.in_stats:
         out.append("no unit is ok and fused: no statistics")

@@ -203,7 +203,7 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
             ["unit", "file", "fused", "failed stages"],
             [[u.label, u.file, "yes" if u.fused else "no",
               "; ".join(f"{s}: {m}" for s, m in u.failed_stages) or "—"]
-             for u in lot.units if not u.ok], left=4))
+             for u in (lot.units[k] for k in lot.not_ok)], left=4))
     if n_stats:
         parts.append("<h2>Per angle</h2>" + _summary(lot))
         parts.append("<h2>Flagged units</h2>" + _flagged(lot))

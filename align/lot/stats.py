@@ -161,8 +161,9 @@ class Lot:
 
     @property
     def not_ok(self) -> tuple[int, ...]:
-        """Units whose result is not ok (failed stages, or no fusion)."""
-        return tuple(k for k, u in enumerate(self.units) if not u.ok)
+        """Units not in the statistics: result not ok (failed stages) or not fused."""
+        used = set(self.in_stats)
+        return tuple(k for k in range(len(self.units)) if k not in used)
 
     @property
     def ok(self) -> bool:

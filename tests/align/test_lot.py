@@ -203,6 +203,41 @@ def test_units_not_ok_are_listed_not_used():
     w = lot_warnings(lot)
     assert any("unit u2" in x and "stage marks failed: x.png: bad" in x
                and "not in the statistics" in x for x in w)
+    # ok but not fused (a result no run writes): still listed, never silently left out
+    odd = UnitResult("r9.json", "s9", "u9", True, False, None, None, None, None, None)
+    lot = analyse([*units, odd])
+    assert lot.not_ok == (2, 5) and not lot.ok
+    assert any("unit u9" in x and "not fused" in x for x in lot_warnings(lot))
+
+
+def test_lots_too_small_for_statistics(real_result, tmp_path, capsys):
+    """No unit ok: no statistics, but every output written and the exit says so; one unit:
+    no chart, no capability, and the JSON still valid against its schema."""
+    import jsonschema
+
+    from align.contract import schema
+
+    results, _ = lot_results(real_result, 2, seed=3)
+    results[0] = dict(results[0], ok=False, errors=[{"stage": "platform", "message": "bad"}])
+    results[1] = dict(results[1], ok=False, fused=False, errors=[
+        {"stage": "fusion", "message": "undetermined"}])
+    for k in ("misalignment_rad", "misalignment_u_rad"):
+        results[1].pop(k)
+    paths = _write(results, tmp_path / "r")
+    out = tmp_path / "none"
+    assert main(["lot", *map(str, paths), "--report", f"{out}.html", "--json", f"{out}.json",
+                 "--csv", f"{out}.csv", "--tolerance-arcsec", "5"]) == 2
+    assert "no unit is ok and fused: no statistics" in capsys.readouterr().err
+    d = json.loads(Path(f"{out}.json").read_text())
+    jsonschema.validate(d, schema("lot"))
+    assert d["n_in_statistics"] == 0 and "Units not ok" in Path(f"{out}.html").read_text()
+    one = _write(lot_results(real_result, 1, seed=4)[0], tmp_path / "one")
+    assert main(["lot", *map(str, one), "--json", f"{out}1.json", "--report", f"{out}1.html",
+                 "--tolerance-arcsec", "5"]) == 0
+    d = json.loads(Path(f"{out}1.json").read_text())
+    jsonschema.validate(d, schema("lot"))
+    assert d["angles"][0]["control_chart"] is None and d["angles"][0]["capability"] is None
+    assert "Fewer than 2 units: no chart" in Path(f"{out}1.html").read_text()
 
 
 # ----------------------------------------------------------------------------- session metadata
