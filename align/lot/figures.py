@@ -15,6 +15,9 @@ from align.lot.read import ANGLE_NAMES
 from align.lot.stats import AngleStats, Lot, MetadataEffect
 from axisbase.units import ARCSEC
 
+DENSE = 2000
+"""Above this many units a control chart shows pixels, not joined markers (a line through
+10⁴ points is a smear, and drawing it is most of the chart's cost)."""
 SCATTER_MAX = 5000
 """Points drawn one by one in the metadata figures up to this many units."""
 
@@ -69,8 +72,10 @@ def fig_control_chart(a: AngleStats, lot: Lot):
     fig.subplots_adjust(left=0.07, right=0.99, bottom=0.11, top=0.98, hspace=0.08)
     x = np.asarray(a.values) / ARCSEC
     k = np.arange(x.size)
-    top.plot(k, x, "-", color="#9ab", lw=0.6, zorder=1)
-    top.plot(k, x, ".", color="#246", ms=4 if x.size < 2000 else 1.5, zorder=2)
+    dense = x.size > DENSE
+    if not dense:
+        top.plot(k, x, "-", color="#9ab", lw=0.6, zorder=1)
+    top.plot(k, x, "," if dense else ".", color="#246", ms=4, zorder=2)
     bad = np.isin(a.units, a.outside_limits + a.outside_tolerance)
     if bad.any():
         top.plot(k[bad], x[bad], "o", mfc="none", mec="#d00000", ms=8, zorder=3,
@@ -82,7 +87,7 @@ def fig_control_chart(a: AngleStats, lot: Lot):
                     label=f"x̄ ± 2.66·MR̄ ({c.lcl / ARCSEC:+.2f}, {c.ucl / ARCSEC:+.2f}″)")
         top.axhline(c.lcl / ARCSEC, color="#d08000", ls="--", lw=1)
         mr = np.abs(np.diff(x))
-        bottom.plot(k[1:], mr, ".-", color="#246", lw=0.5, ms=3 if x.size < 2000 else 1)
+        bottom.plot(k[1:], mr, "," if dense else ".-", color="#246", lw=0.5, ms=3)
         bottom.axhline(c.mr_bar / ARCSEC, color="k", lw=1)
         bottom.axhline(c.mr_ucl / ARCSEC, color="#d08000", ls="--", lw=1)
     if lot.tolerance is not None:

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from align.lot.read import ANGLE_NAMES
-from align.lot.stats import GUARD, Lot
+from align.lot.stats import FALSE_RATE, GUARD, Lot
 from axisbase.units import ARCSEC
 
 CSS = """body{font-family:sans-serif;max-width:1150px;margin:2em auto;color:#222}
@@ -67,7 +67,7 @@ def _provenance(doc: dict) -> str:
 
 def _summary(lot: Lot) -> str:
     head = ["angle", "n", "mean [″]", "std [″]", "σ_w = MR̄/1.128 [″]", "median u [″]",
-            "LCL [″]", "UCL [″]", "outside limits"]
+            "LCL [″]", "UCL [″]", "outside limits", "by chance"]
     if lot.tolerance is not None:
         head += ["outside ±T", f"marginal (< {GUARD:g}u)", "Cp ± u", "Cpk ± u", "Pp", "Ppk"]
     rows = []
@@ -76,7 +76,7 @@ def _summary(lot: Lot) -> str:
         r = [a.name, a.n, _a(a.mean), _a(a.std, "{:.2f}"),
              _a(None if c is None else c.sigma_within, "{:.2f}"), _a(a.median_u, "{:.2f}"),
              _a(None if c is None else c.lcl), _a(None if c is None else c.ucl),
-             len(a.outside_limits)]
+             len(a.outside_limits), f"{FALSE_RATE * a.n:.1f}"]
         if lot.tolerance is not None:
             cap = a.capability
             r += [len(a.outside_tolerance), len(a.marginal),
@@ -87,7 +87,9 @@ def _summary(lot: Lot) -> str:
     out = _table(head, rows)
     out += ("<p>Control limits x̄ ± 2.66·MR̄ from the average moving range of consecutive "
             "units (individuals chart): a drift or a step inflates them less than the overall "
-            "standard deviation would. ")
+            "standard deviation would. 'By chance': the number expected outside them in a "
+            f"process in control ({FALSE_RATE:.2%} of the units, normal values): a few flags in "
+            "a large lot are expected, and each is a unit to look at, not proof of a fault. ")
     if lot.tolerance is not None:
         n = len(lot.in_stats)
         out += (f"Capability against ±{lot.tolerance / ARCSEC:g}″ (nominal 0): Cp, Cpk from "

@@ -33,6 +33,9 @@ MR_DOF = 0.62
 """Effective degrees of freedom of σ_w = MR̄/d2, per unit, as a fraction of n − 1 (the
 average moving range of n normal values carries about 0.62(n − 1) of the n − 1 dof of s:
 Wheeler, *Advanced Topics in SPC*, table of effective dof)."""
+FALSE_RATE = 0.0027
+"""Probability that a normal value falls outside ±3σ: the chart's false-flag rate when the
+process is in control."""
 GUARD = 2.0
 """Coverage factor of the guard band: a unit within tolerance by less than GUARD·u is
 'marginal' (conformance cannot be stated at ~95 % confidence, ISO 14253-1)."""

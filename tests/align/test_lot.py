@@ -134,7 +134,9 @@ def test_a_clean_lot_of_30_has_the_expected_false_flags():
         x = 3 + 0.5 * rng.standard_normal((30, 6))
         lot = analyse([_unit(k, x[k]) for k in range(30)])
         flags += sum(len(a.outside_limits) for a in lot.angles)
-    expected = 0.0027 * 54000
+    from align.lot.stats import FALSE_RATE
+
+    expected = FALSE_RATE * 54000
     assert abs(flags - expected) <= 4 * math.sqrt(expected)
 
 
