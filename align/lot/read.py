@@ -186,14 +186,18 @@ def when_of(meta: Mapping[str, Any]) -> _dt.datetime | None:
 
 def result_files(paths: Sequence[str | Path]) -> list[Path]:
     """The result files named: files as given, folders as their ``*.json`` files (sorted by
-    name, not descending into sub-folders). ``InputError`` for a path that does not exist,
-    an empty folder, or the same file reached twice."""
+    name, not descending into sub-folders; ``*.cal.json`` platform calibrations left out).
+    ``InputError`` for a path that does not exist, an empty folder, or the same file reached
+    twice."""
     out: list[Path] = []
     seen: dict[Path, str] = {}
     for given in paths:
         p = Path(given)
         if p.is_dir():
+            # 'align run --calibration FOLDER' writes NAME.cal.json, possibly beside the
+            # results: platform calibrations, not results.
             found = sorted((q for q in p.iterdir() if q.suffix.lower() == ".json"
+                            and not q.name.lower().endswith(".cal.json")
                             and q.is_file() and not q.name.startswith(".")),
                            key=lambda q: q.name)
             if not found:
