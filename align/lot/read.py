@@ -9,14 +9,16 @@ uncertainties [rad], the fusion's χ², its warnings, its failed stages and the 
 
 from __future__ import annotations
 
+import codecs
 import datetime as _dt
 import hashlib
-import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import orjson
 
 from align.contract import check
 from align.errors import InputError
@@ -238,12 +240,13 @@ def read_result(path: str | Path) -> ReadFile:
                         None)
     digest, size = hashlib.sha256(raw).hexdigest(), len(raw)
     try:
-        d = json.loads(raw)
-    except UnicodeDecodeError:
-        return ReadFile(p, None, Rejected(where, "not UTF-8 text"), digest, size)
-    except json.JSONDecodeError as exc:
-        return ReadFile(p, None, Rejected(where, f"not valid JSON (line {exc.lineno}: "
-                                                 f"{exc.msg})"), digest, size)
+        # orjson parses a 40 kB result 3× faster than json: reading 10⁴ real results is
+        # most of a lot's time. It is strict (no NaN tokens: this tool never writes them).
+        d = orjson.loads(raw.removeprefix(codecs.BOM_UTF8))
+    except orjson.JSONDecodeError as exc:
+        why = ("not UTF-8 text" if "UTF-8" in exc.msg else
+               f"not valid JSON (line {exc.lineno}: {exc.msg})")
+        return ReadFile(p, None, Rejected(where, why), digest, size)
     try:
         unit = UnitResult.from_dict(d, where)
     except InputError as exc:

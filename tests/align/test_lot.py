@@ -362,6 +362,24 @@ def test_lot_command_refuses_missing_paths_and_files_twice(real_result, tmp_path
     assert "--tolerance-arcsec" in capsys.readouterr().err
 
 
+def test_a_result_saved_differently_reads_the_same(real_result, tmp_path):
+    """A byte-order mark or compact JSON change nothing; a NaN token (never written by this
+    tool: its JSON is strict) is refused, naming the line."""
+    from align.lot import read_results
+
+    d = lot_results(real_result, 1, seed=5)[0][0]
+    text = json.dumps(d, indent=2)
+    files = {"plain": text.encode(), "bom": b"\xef\xbb\xbf" + text.encode(),
+             "compact": json.dumps(d, separators=(",", ":")).encode(),
+             "nan": text.replace('"chi2": ', '"chi2": NaN, "x": ', 1).encode()}
+    for name, raw in files.items():
+        (tmp_path / f"{name}.json").write_bytes(raw)
+    got = {r.path.stem: r for r in read_results(sorted(tmp_path.iterdir()))}
+    assert got["plain"].unit.e_rad == got["bom"].unit.e_rad == got["compact"].unit.e_rad
+    assert got["plain"].unit.e_rad is not None
+    assert got["nan"].unit is None and "not valid JSON (line" in got["nan"].rejected.reason
+
+
 def test_lot_json_to_stdout(real_result, tmp_path, capsys):
     paths = _write(lot_results(real_result, 5, seed=2)[0], tmp_path / "r")
     assert main(["lot", *map(str, paths), "--json", "-"]) == 0
