@@ -638,6 +638,40 @@ def cmd_apply(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- lot
+
+def cmd_lot(args: argparse.Namespace) -> int:
+    from align.lot import analyse, lot_outputs, read_results, result_files
+
+    files = result_files(args.results)
+    plan = _plan(args, files)
+    outs = {"json": plan.add("--json", args.json, stdout_ok=True),
+            "csv": plan.add("--csv", args.csv), "report": plan.add("--report", args.report)}
+    read = read_results(files)
+    lot = analyse([r.unit for r in read if r.unit is not None],
+                  [r.rejected for r in read if r.rejected is not None],
+                  None if args.tolerance_arcsec is None else args.tolerance_arcsec * ARCSEC)
+    written, doc = lot_outputs(lot, read, outs, args.force, _settings(args))
+    print(f"lot: {len(lot.units)} session results ({len(lot.in_stats)} ok, in the "
+          f"statistics), {len(lot.rejected)} files not read; run order {lot.run_order_note}")
+    for a in doc["angles"]:
+        c, cap = a["control_chart"], a["capability"]
+        line = f"  {a['name']}: n {a['n']}"
+        if c is not None:
+            line += (f", mean {a['mean_arcsec']:+.2f}″, σ_w {c['sigma_within_arcsec']:.2f}″, "
+                     f"limits {c['lcl_arcsec']:+.2f} … {c['ucl_arcsec']:+.2f}″, "
+                     f"{len(a['outside_limits'])} outside")
+        if cap is not None:
+            line += (f"; Cpk {cap['cpk']:.2f} ± {cap['cpk_u']:.2f}, "
+                     f"{len(a['outside_tolerance'])} outside ±{args.tolerance_arcsec:g}″")
+        print(line)
+    _warn(doc["warnings"])
+    for k, v in written.items():
+        if str(v) != "-":
+            print(f"  wrote {k}: {v}")
+    return 0 if lot.ok else 2
+
+
 # ----------------------------------------------------------------------------- synth
 
 def cmd_synth(args: argparse.Namespace) -> int:
@@ -916,6 +950,17 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--method", choices=["exact", "paper"], default="exact",
                     help="roll formula for --tilt")
     ap.set_defaults(func=cmd_apply)
+
+    lt = add("lot", "a production lot: control charts, outliers, capability, metadata",
+             writes)
+    lt.add_argument("results", nargs="+",
+                    help="session results ('align run --json') or folders of them (*.json)")
+    lt.add_argument("--report", help="HTML report of the lot (a new file)")
+    lt.add_argument("--csv", help="CSV with one row per unit (a new file)")
+    lt.add_argument("--json", help="lot JSON ('-': stdout)")
+    lt.add_argument("--tolerance-arcsec", type=POSITIVE, metavar="T",
+                    help="tolerance ±T [″] on every angle: flags and process capability")
+    lt.set_defaults(func=cmd_lot)
 
     sy = sub.add_parser("synth", help="write synthetic data with known truth",
                         formatter_class=_FMT)

@@ -7,6 +7,7 @@ session folder. The format is documented with a complete example in README.md.
 
 from __future__ import annotations
 
+import datetime as _dt
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -22,7 +23,7 @@ from imaging import ImageInputError, check_roi
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
 TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
-            "platform", "name", "latitude_range_deg"}
+            "platform", "name", "latitude_range_deg", "metadata"}
 
 
 def signed_axis(text: object, where: str) -> np.ndarray:
@@ -112,6 +113,9 @@ class Session:
     images: tuple[ImageEntry, ...]
     platform: PlatformInput | None
     latitude_range_deg: tuple[float, float] | None = None
+    metadata: dict[str, str | int | float | bool] = field(default_factory=dict)
+    """``[metadata]``: free keys about the unit and the set-up (unit, serial, operator,
+    camera, table, date, ...), carried into the result for 'align lot'."""
 
     @property
     def inputs(self) -> list[Path]:
@@ -231,6 +235,25 @@ def _table(d: dict, key: str, where: str) -> dict:
     if not isinstance(v, dict):
         raise InputError(f"{where}[{key}]: expected a table")
     return v
+
+
+def _metadata(d: dict, src: str) -> dict[str, str | int | float | bool]:
+    """``[metadata]``: free keys whose values are texts, numbers, true/false or TOML dates
+    (kept as ISO 8601 text, so the result JSON can carry them)."""
+    m = d.get("metadata", {})
+    if not isinstance(m, dict):
+        raise InputError(f"{src}: metadata: expected a [metadata] table of key = value")
+    out: dict[str, str | int | float | bool] = {}
+    for k, v in m.items():
+        if isinstance(v, _dt.date | _dt.time):  # datetime is a date
+            v = v.isoformat()
+        elif isinstance(v, float) and not math.isfinite(v):
+            raise InputError(f"{src}: [metadata] {k} = {v!r}: not a finite number")
+        elif not isinstance(v, str | int | float | bool):
+            raise InputError(f"{src}: [metadata] {k}: expected a text, number, true/false or "
+                             "date, not a table or a list")
+        out[str(k)] = v
+    return out
 
 
 def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
@@ -428,4 +451,4 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
     return Session(folder, name, lat, cal, gon, cameras,
-                   views, tuple(imgs), plat, lat_range)
+                   views, tuple(imgs), plat, lat_range, _metadata(d, src))

@@ -30,7 +30,8 @@ def platform_calibration(res: SessionResult) -> PlatformCalibration | None:
 def result_json(res: SessionResult) -> dict:
     d: dict = {"session": res.session.name, "folder": str(res.session.folder),
                "ok": res.ok, "fused": res.fused, "warnings": session_warnings(res),
-               "errors": [{"stage": e.stage, "message": e.message} for e in res.errors]}
+               "errors": [{"stage": e.stage, "message": e.message} for e in res.errors],
+               "metadata": dict(res.session.metadata)}
     if res.fusion is not None:
         d.update(res.fusion.to_dict())
     pc = platform_calibration(res)

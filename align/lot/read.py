@@ -1,0 +1,262 @@
+"""Reading a lot: session results (``align run --json``, format ``axis-align/session``) from
+files and folders, each checked by the format machinery of :mod:`align.contract`.
+
+One unit is one session result: its six misalignment angles E_ij with their standard
+uncertainties [rad], the fusion's χ², its warnings, its failed stages and the session's
+``[metadata]``. A file that cannot be read as a session result is never fatal: it becomes a
+:class:`Rejected` entry with one line saying why, and the lot goes on.
+"""
+
+from __future__ import annotations
+
+import codecs
+import datetime as _dt
+import hashlib
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from align.contract import check
+from align.errors import InputError
+
+ANGLE_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
+"""The six angles in the order of ``angle_names`` of a session result (``align.fusion``'s
+``E_NAMES``, repeated here so reading a lot does not import the fusion)."""
+_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
+_ID_KEYS = ("unit", "serial")
+"""Metadata keys naming the unit (in this order of preference; else the session name)."""
+_WHEN_KEYS = ("datetime", "date")
+"""Metadata keys giving when the session was measured (``date`` may come with ``time``)."""
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """A file given as a session result that could not be read as one."""
+
+    file: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"file": self.file, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class UnitResult:
+    """One unit of the lot: what the lot report needs of one session result.
+
+    Attributes
+    ----------
+    file : the result file read.
+    session : the session's name; ``label``: the unit (metadata ``unit`` or ``serial``, else
+        the session name).
+    ok, fused : as in the result (every stage succeeded and fused / a matrix exists).
+    e_rad, u_rad : the six angles E_ij [rad] in :data:`ANGLE_NAMES` order and their standard
+        uncertainties [rad] (None when not fused).
+    chi2, dof, p_value : the fusion's consistency (None when not fused).
+    warnings : the result's warnings; ``failed_stages``: (stage, message) of each failure.
+    metadata : the session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text).
+    format_version : the result's format version.
+    """
+
+    file: str
+    session: str
+    label: str
+    ok: bool
+    fused: bool
+    e_rad: tuple[float, ...] | None
+    u_rad: tuple[float, ...] | None
+    chi2: float | None
+    dof: int | None
+    p_value: float | None
+    warnings: tuple[str, ...] = ()
+    failed_stages: tuple[tuple[str, str], ...] = ()
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+    format_version: int = 3
+
+    @property
+    def when(self) -> _dt.datetime | None:
+        """When the session was measured (metadata ``datetime``, or ``date`` [+ ``time``]);
+        None when the metadata do not say or cannot be read as ISO 8601."""
+        return when_of(self.metadata)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], where: str) -> UnitResult:
+        """A unit from a session result's JSON (``InputError`` naming ``where`` and the key
+        when it is not a readable session result)."""
+        if not isinstance(d, Mapping):
+            raise InputError(f"{where}: not a JSON object (a session result is one)")
+        version = check(d, "session", where)
+        for key in ("session", "ok", "fused"):
+            if key not in d:
+                raise InputError(f"{where}: no {key!r}: not a session result")
+        ok, fused = d["ok"], d["fused"]
+        if not isinstance(ok, bool) or not isinstance(fused, bool):
+            raise InputError(f"{where}: 'ok' and 'fused' must be true or false")
+        e = u = None
+        chi2 = p = None
+        dof = None
+        if fused:
+            names = d.get("angle_names", list(ANGLE_NAMES))
+            if list(names) != list(ANGLE_NAMES):
+                raise InputError(f"{where}: angle_names {names!r}: expected "
+                                 f"{list(ANGLE_NAMES)}")
+            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad")
+            u = _angles(d.get("misalignment_u_rad"), f"{where}: misalignment_u_rad")
+            if any(v < 0 for v in u):
+                raise InputError(f"{where}: misalignment_u_rad: a negative uncertainty")
+            chi2, dof, p = d.get("chi2"), d.get("dof"), d.get("p_value")
+        meta = d.get("metadata") or {}
+        if not isinstance(meta, Mapping):
+            raise InputError(f"{where}: metadata: expected an object")
+        for k, v in meta.items():
+            if not isinstance(v, str | int | float | bool):  # what session.toml allows
+                raise InputError(f"{where}: metadata {k}: expected a text, number or "
+                                 "true/false")
+        label = next((str(meta[k]) for k in _ID_KEYS if meta.get(k) not in (None, "")),
+                     str(d["session"]))
+        errs = d.get("errors") or []
+        warns = d.get("warnings") or []
+        if not isinstance(errs, list) or not isinstance(warns, list):
+            raise InputError(f"{where}: 'errors' and 'warnings' must be lists")
+        failed = tuple((str(x.get("stage", "?")), str(x.get("message", "")))
+                       if isinstance(x, Mapping) else ("?", str(x)) for x in errs)
+        return cls(where, str(d["session"]), label, ok, fused, e, u,
+                   _finite_or_none(chi2), dof if isinstance(dof, int) else None,
+                   _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
+                   version)
+
+    def to_dict(self) -> dict:
+        """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
+        from axisbase.units import ARCSEC
+
+        return {"file": self.file, "session": self.session, "unit": self.label,
+                "ok": self.ok, "fused": self.fused,
+                "misalignment_arcsec": None if self.e_rad is None else dict(
+                    zip(ANGLE_NAMES, (v / ARCSEC for v in self.e_rad), strict=True)),
+                "misalignment_u_arcsec": None if self.u_rad is None else dict(
+                    zip(ANGLE_NAMES, (v / ARCSEC for v in self.u_rad), strict=True)),
+                "chi2": self.chi2, "dof": self.dof, "p_value": self.p_value,
+                "warnings": list(self.warnings),
+                "failed_stages": [{"stage": s, "message": m} for s, m in self.failed_stages],
+                "metadata": dict(self.metadata)}
+
+
+def _finite_or_none(v: object) -> float | None:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        return None
+    return float(v)
+
+
+def _angles(m: object, where: str) -> tuple[float, ...]:
+    """The six off-diagonal elements of a 3×3 list, each a finite number."""
+    if not (isinstance(m, list) and len(m) == 3
+            and all(isinstance(r, list) and len(r) == 3 for r in m)):
+        raise InputError(f"{where}: expected a 3×3 matrix")
+    out = []
+    for i, j in _INDEX:
+        v = m[i][j]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise InputError(f"{where}[{i}][{j}] = {v!r}: not a finite number")
+        out.append(float(v))
+    return tuple(out)
+
+
+def when_of(meta: Mapping[str, Any]) -> _dt.datetime | None:
+    """The session's date and time from its metadata (naive times are taken as they are;
+    aware ones are converted to UTC and made naive, so both sort together)."""
+    for key in _WHEN_KEYS:
+        v = meta.get(key)
+        if not isinstance(v, str) or not v.strip():
+            continue
+        text = v.strip()
+        t = meta.get("time") if key == "date" else None
+        if isinstance(t, str) and t.strip() and "T" not in text:
+            text = f"{text}T{t.strip()}"
+        try:
+            w = _dt.datetime.fromisoformat(text.replace("Z", "+00:00"))
+        except ValueError:
+            return None
+        if w.tzinfo is not None:
+            w = w.astimezone(_dt.UTC).replace(tzinfo=None)
+        return w
+    return None
+
+
+def result_files(paths: Sequence[str | Path]) -> list[Path]:
+    """The result files named: files as given, folders as their ``*.json`` files (sorted by
+    name, not descending into sub-folders; ``*.cal.json`` platform calibrations left out).
+    ``InputError`` for a path that does not exist, an empty folder, or the same file reached
+    twice."""
+    out: list[Path] = []
+    seen: dict[Path, str] = {}
+    for given in paths:
+        p = Path(given)
+        if p.is_dir():
+            # 'align run --calibration FOLDER' writes NAME.cal.json, possibly beside the
+            # results: platform calibrations, not results.
+            found = sorted((q for q in p.iterdir() if q.suffix.lower() == ".json"
+                            and not q.name.lower().endswith(".cal.json")
+                            and q.is_file() and not q.name.startswith(".")),
+                           key=lambda q: q.name)
+            if not found:
+                raise InputError(f"{p}: a folder with no .json files (session results)")
+        elif p.exists():
+            found = [p]
+        else:
+            raise InputError(f"{p}: no such file or folder")
+        for q in found:
+            real = q.resolve()
+            if real in seen:
+                raise InputError(f"{q}: given twice (also as {seen[real]})")
+            seen[real] = str(q)
+            out.append(q)
+    return out
+
+
+@dataclass(frozen=True)
+class ReadFile:
+    """One input as read: the unit or why it was rejected, and the file's SHA-256 and size
+    (for the provenance, so each file is read once)."""
+
+    path: Path
+    unit: UnitResult | None
+    rejected: Rejected | None
+    sha256: str | None
+    size: int | None
+
+
+def read_result(path: str | Path) -> ReadFile:
+    """Read one session result; never raises for a bad file (it becomes ``rejected``)."""
+    p = Path(path)
+    where = str(p)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        return ReadFile(p, None, Rejected(where, f"cannot be read ({exc.strerror})"), None,
+                        None)
+    digest, size = hashlib.sha256(raw).hexdigest(), len(raw)
+    try:
+        # orjson parses a 40 kB result 3× faster than json: reading 10⁴ real results is
+        # most of a lot's time. It is strict (no NaN tokens: this tool never writes them).
+        d = orjson.loads(raw.removeprefix(codecs.BOM_UTF8))
+    except orjson.JSONDecodeError as exc:
+        why = ("not UTF-8 text" if "UTF-8" in exc.msg else
+               f"not valid JSON (line {exc.lineno}: {exc.msg})")
+        return ReadFile(p, None, Rejected(where, why), digest, size)
+    try:
+        unit = UnitResult.from_dict(d, where)
+    except InputError as exc:
+        reason = str(exc)
+        if reason.startswith(where + ": "):
+            reason = reason[len(where) + 2:]
+        return ReadFile(p, None, Rejected(where, reason), digest, size)
+    return ReadFile(p, unit, None, digest, size)
+
+
+def read_results(files: Iterable[str | Path]) -> list[ReadFile]:
+    """:func:`read_result` of every file, in the order given."""
+    return [read_result(f) for f in files]
