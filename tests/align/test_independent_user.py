@@ -302,6 +302,29 @@ def test_marks_running_off_the_frame_and_beside_a_padded_border(tmp_path, capsys
             "angle_u_arcsec"]
 
 
+def test_marks_two_marks_in_one_frame_both_measured_and_one_refuses(tmp_path, capsys):
+    """A long near-horizontal mark and a short oblique one (150 px, the README's 'short mark
+    beside a long strong one'): both found, each within its u.  --one refuses a frame with
+    two comparable marks."""
+    import cv2
+
+    img, tr = ui.render_mark((1024, 1280), 0.2, (640.0, 300.0), 900, seed=22, snr=60,
+                             extra_marks=[(45.0, (900.0, 750.0), 150)])
+    cv2.imwrite(str(tmp_path / "two.png"), ui.quantise(img, 16))
+    rc, doc, se = _marks(capsys, tmp_path, ["two.png"])
+    assert rc == 0, se
+    ms = sorted(doc["marks"], key=lambda m: m["length_px"], reverse=True)
+    assert len(ms) == 2 and all(m["found"] for m in ms)
+    for m, a in zip(ms, (0.2, 45.0), strict=True):
+        assert abs(ui.wrap_angle(m["angle_deg"] - a)) * 3600 < 4.5 * m["angle_u_arcsec"], m
+    # two marks of comparable strength (900 px and 500 px) where --one says one is expected
+    img, tr = ui.render_mark((1024, 1280), 0.2, (640.0, 300.0), 900, seed=21, snr=60,
+                             extra_marks=[(90.3, (300.0, 600.0), 500)])
+    cv2.imwrite(str(tmp_path / "two2.png"), ui.quantise(img, 16))
+    rc, doc, se = _marks(capsys, tmp_path, ["two2.png"], "--one")
+    assert rc == 2 and doc["marks"][0]["found"] is False and "two" in doc["marks"][0]["error"]
+
+
 def _random_scenes(n, seed, sizes=((480, 640),)):
     rng = np.random.default_rng(seed)
     scenes = []
@@ -468,6 +491,71 @@ def test_calibrate_against_the_generators_truth(triad, cal_plain):
     # frame term |beta| * |b| (< 1 µg here)
     assert np.all(np.abs(b - triad.bias_g) < 4.5 * bu + 1e-6)
     assert cal_plain["ok"] is True and cal_plain["noise_known"] is True
+
+
+def test_calibrate_same_tumble_in_m_per_s2_scales_exactly(tumble, cal_plain, capsys):
+    d, rows = tumble
+    g0 = 9.80665
+    ui.write_csv(d / "ms2.csv", ["pose", "ux [m/s2]", "uy [m/s2]", "uz [m/s2]", "t"],
+                 [[r[0], r[1] * g0, r[2] * g0, r[3] * g0, r[4]] for r in rows])
+    rc, doc, se = _cal_doc(d, capsys, "ms2.csv")
+    assert rc == 0, se
+    assert doc["output_unit"] != cal_plain["output_unit"]
+    assert "m/s" in doc["scale_factor_unit"]
+    np.testing.assert_allclose(doc["scale_factors_v_per_g"],
+                               np.array(cal_plain["scale_factors_v_per_g"]) * g0, rtol=1e-9)
+    np.testing.assert_allclose(doc["bias_g"], cal_plain["bias_g"], rtol=1e-7)
+    np.testing.assert_allclose(doc["beta_rad"], cal_plain["beta_rad"], rtol=1e-7)
+    rc, so, se = cli(["calibrate", "ms2.csv", "--units", "g"], d, capsys)
+    assert_one_line_refusal(rc, se, "ms2.csv", "--units")
+
+
+def _continuous_recording(tri, seed=5, fs=100.0):
+    """t,ux,uy,uz: 6 s static per pose, 1.5 s smooth turns with vibration between."""
+    rng = np.random.default_rng(seed)
+    dirs = [np.array(v, float) for v in
+            [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]]
+    rr = np.random.default_rng(3)
+    while len(dirs) < 18:
+        v = rr.normal(size=3)
+        dirs.append(v / np.linalg.norm(v))
+
+    def slerp(a, b, s):
+        om = np.arccos(np.clip(a @ b, -1, 1))
+        return a if om < 1e-6 else (np.sin((1 - s) * om) * a + np.sin(s * om) * b) / np.sin(om)
+
+    out, t = [], 0.0
+    for i, f in enumerate(dirs):
+        for _ in range(int(6 * fs)):
+            out.append([round(t, 3), *(ui.read_triad(tri, f)[0] + rng.normal(0, 2e-5, 3))])
+            t += 1 / fs
+        if i + 1 == len(dirs):
+            break
+        g = dirs[i + 1]
+        legs = [(f, g)]
+        if f @ g < -0.99:  # opposite: turn through a perpendicular direction
+            mid = np.cross(f, [0.3, 0.5, 0.8])
+            mid /= np.linalg.norm(mid)
+            legs = [(f, mid), (mid, g)]
+        for a, b in legs:
+            n = int(1.5 * fs)
+            for k in range(n):
+                v = slerp(a, b, 0.5 - 0.5 * np.cos(np.pi * k / n))
+                out.append([round(t, 3), *(ui.read_triad(tri, v)[0] + rng.normal(0, 3e-3, 3))])
+                t += 1 / fs
+    return [[r[0], *(round(float(x), 9) for x in r[1:])] for r in out]
+
+
+def test_calibrate_continuous_recording_finds_every_pose(tumble, triad, capsys):
+    d, _ = tumble
+    ui.write_csv(d / "cont.csv", ["t", "ux", "uy", "uz"], _continuous_recording(triad))
+    rc, doc, se = _cal_doc(d, capsys, "cont.csv")
+    assert rc == 0, se
+    assert len(doc["poses"]) == 18
+    k, ku = np.array(doc["scale_factors_v_per_g"]), np.array(doc["scale_factors_u_v_per_g"])
+    b, bu = np.array(doc["bias_g"]), np.array(doc["bias_u_g"])
+    assert np.all(np.abs(k - triad.k) < 4.5 * ku)
+    assert np.all(np.abs(b - triad.bias_g) < 4.5 * bu + 1e-6)
 
 
 @pytest.mark.slow
@@ -715,6 +803,12 @@ def test_gonio_lost_row_excludes_one_revolution_and_says_where(gonio_log, gonio_
     assert np.all(np.abs(err) < 4.5 * np.array(doc["angles_u_arcsec"]))
 
 
+@pytest.mark.xfail(strict=True, reason="gonio: the lead-in from the arming pulse to the first "
+                   "reference pulse is reported as an excluded revolution (WARNING) on every log")
+def test_gonio_clean_log_has_no_warning(gonio_log, gonio_plain):
+    assert gonio_plain["warnings"] == []
+
+
 def _bad_logs(rows):
     h = ",".join(LOG_HEADER)
     lines = [",".join(map(str, r)) for r in rows]
@@ -818,9 +912,9 @@ def test_gonio_bad_flags_refused_in_one_line(gonio_log, capsys, flags, name):
     assert not (d / "o.json").exists()
 
 
-def test_gonio_json_to_stdout_and_closed_pipe(gonio_log):
+def test_gonio_json_to_stdout_and_closed_pipe(gonio_log, capsys):
     d, _, _ = gonio_log
-    rc, so, se = cli_proc(["gonio", "log.csv", "--faces", "ref,y,x,z", "--json", "-", "-q"], d)
+    rc, so, se = cli(["gonio", "log.csv", "--faces", "ref,y,x,z", "--json", "-", "-q"], d, capsys)
     assert rc == 0 and json.loads(so)["format"] == "axis-align/gonio"
     out = d / "piped.json"
     if out.exists():
