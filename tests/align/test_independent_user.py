@@ -1139,6 +1139,33 @@ def test_run_never_writes_over_inputs_even_with_force(session_dir, capsys, flags
     assert before == {p.name: p.read_bytes() for p in s.iterdir()}
 
 
+def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path, capsys):
+    """Cameras (two, each with its reversal view) + tumble + platform poses, camera A rolled
+    by 30 arcsec and nobody told: the fusion loop names camera A's roll within its u, and E
+    stays within 4.5 u of the generator's axes.  Without the platform poses nothing fixes
+    the azimuths: the run says which angles are undetermined, exit 2."""
+    tri = ui.make_triad(7, mis_rad=3e-4)
+    d = tmp_path / "cams"
+    toml = ui.image_session(d, tri, seed=7, roll_a_arcsec=30.0)
+    rc, so, se = cli(["run", "cams", "--json", "cams.json", "-q"], tmp_path, capsys)
+    assert rc == 0, se
+    doc = json.loads((tmp_path / "cams.json").read_text())
+    E, U = np.array(doc["misalignment_rad"]), np.array(doc["misalignment_u_rad"])
+    off = ~np.eye(3, dtype=bool)
+    assert np.all(np.abs((E - tri.axes)[off] / U[off]) < 4.5)
+    rolls = [e for e in doc["effects"] if "camera_roll" in e["name"]]
+    assert len(rolls) == 1 and "A" in rolls[0]["name"], doc["effects"]
+    est = np.degrees(rolls[0]["estimate"]) * 3600
+    u = np.degrees(rolls[0]["u"]) * 3600
+    assert abs(est - 30.0) < 4.5 * u, (est, u)
+    (d / "session.toml").write_text(toml.split("[platform]")[0])
+    rc, so, se = cli(["run", "cams", "--json", "cams2.json", "-q"], tmp_path, capsys)
+    assert rc == 2
+    doc = json.loads((tmp_path / "cams2.json").read_text())
+    assert doc["ok"] is False and doc["fused"] is False
+    assert any("E_xY" in e["message"] and "E_yX" in e["message"] for e in doc["errors"])
+
+
 def test_apply_variants_identical_and_near_truth(session_dir, session_result, capsys):
     d, _ = session_dir
     _, cal = session_result

@@ -279,3 +279,51 @@ def write_csv(
         data = b"\xef\xbb\xbf" + data
     path.write_bytes(data)
     return path
+
+
+# --------------------------------------------------------------------------- a session with cameras
+
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+VIEWS = {"A": ("+X", "+Z"), "Ar": ("-X", "+Z"), "B": ("+Y", "+Z"), "Br": ("-Y", "+Z")}
+IMAGES = [("x", "A", "horizontal"), ("z", "A", "vertical"), ("x", "Ar", "horizontal"),
+          ("z", "Ar", "vertical"), ("y", "B", "horizontal"), ("z", "B", "vertical"),
+          ("y", "Br", "horizontal"), ("z", "Br", "vertical")]
+
+
+def _signed_axis(s: str) -> np.ndarray:
+    v = np.zeros(3)
+    v[_AXIS[s[1]]] = 1.0 if s[0] == "+" else -1.0
+    return v
+
+
+def image_session(d: Path, tri: Triad, *, seed: int = 3, roll_a_arcsec: float = 0.0,
+                  shape: tuple[int, int] = (480, 640), length: float = 400.0,
+                  platform: bool = True) -> str:
+    """Write a session: tumble, two cameras with reversal views (README's example) and,
+    optionally, the platform poses.  A mark's image angle is atan2(s.up, s.right) of the
+    housing's axis s, plus the undeclared roll of camera A.  Returns session.toml's text."""
+
+    rng = np.random.default_rng(seed)
+    d.mkdir(parents=True, exist_ok=True)
+    write_csv(d / "tumble.csv", ["pose", "ux", "uy", "uz", "t"], tumble_rows(tri, seed=seed))
+    toml = f'name = "cams{seed}"\n[calibration]\nstatic = "tumble.csv"\n[cameras.A]\n[cameras.B]\n'
+    for v, (r, u) in VIEWS.items():
+        toml += f'[views.{v}]\ncamera = "{v[0]}"\nright = "{r}"\nup = "{u}"\n'
+    h, w = shape
+    for k, (housing, v, nominal) in enumerate(IMAGES):
+        s = tri.axes["xyz".index(housing)]
+        r, u = VIEWS[v]
+        a = np.degrees(np.arctan2(s @ _signed_axis(u), s @ _signed_axis(r)))
+        a = wrap_angle(a + (roll_a_arcsec / 3600.0 if v[0] == "A" else 0.0))
+        centre = ((w - 1) / 2 + rng.uniform(-60, 60), (h - 1) / 2 + rng.uniform(-60, 60))
+        img, _ = render_mark(shape, a, centre, length, snr=40, seed=seed * 100 + k)
+        f = f"{housing}_{v}.png"
+        write_image(d / f, quantise(img, 16))
+        toml += (f'[[images]]\nfile = "{f}"\nhousing = "{housing}"\nview = "{v}"\n'
+                 f'nominal = "{nominal}"\n')
+    if platform:
+        write_csv(d / "platform.csv", ["pose", "ux", "uy", "uz", "t"],
+                  platform_rows(tri, seed=seed + 1))
+        toml += '[platform]\nstatic = "platform.csv"\n' + PLATFORM_POSES_TOML
+    (d / "session.toml").write_text(toml)
+    return toml
