@@ -689,6 +689,20 @@ def test_calibrate_bad_flags_refused_in_one_line(tumble, capsys, flags, name):
     assert (d / "tumble.csv").read_bytes() == before
 
 
+@pytest.mark.xfail(strict=True, reason="-q ('only warnings and errors on stderr'): with --json - "
+                   "the result table / mark lines still go to stderr")
+@pytest.mark.parametrize("cmd", ["calibrate", "gonio"])
+def test_quiet_with_json_to_stdout_leaves_stderr_to_warnings(tumble, gonio_log, capsys, cmd):
+    if cmd == "calibrate":
+        d, args = tumble[0], ["calibrate", "tumble.csv"]
+    else:
+        d, args = gonio_log[0], ["gonio", "log.csv", "--faces", "ref,y,x,z"]
+    rc, so, se = cli([*args, "--json", "-", "-q"], d, capsys)
+    assert rc == 0 and json.loads(so)
+    noise = [ln for ln in err_lines(se) if not ln.startswith("WARNING")]
+    assert noise == [], noise
+
+
 @pytest.mark.xfail(strict=True, reason="calibrate: '--scale-sign -,-,-' (the help's own example)"
                    " is refused by argparse: 'expected one argument'")
 def test_calibrate_scale_sign_three_signs_as_documented(tumble, capsys):
@@ -1164,6 +1178,44 @@ def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path, capsys):
     doc = json.loads((tmp_path / "cams2.json").read_text())
     assert doc["ok"] is False and doc["fused"] is False
     assert any("E_xY" in e["message"] and "E_yX" in e["message"] for e in doc["errors"])
+
+
+def test_run_folder_with_spaces_and_umlauts_report_and_provenance(session_dir, capsys):
+    """A session folder named like a real one; a failed stage is at the top of the report,
+    and the JSON's provenance carries the true SHA-256 of every input."""
+    import hashlib
+
+    d, _ = session_dir
+    s = copy_session(d, "Prüfung März 1")
+    p = s / "platform.csv"
+    p.write_text(p.read_text() + "Ydn,abc,1,2,9999\n")
+    rc, so, se = cli(["run", s.name, "--json", "pm.json", "--report", "pm.html", "-q"], s.parent,
+                     capsys)
+    assert rc == 2 and "Traceback" not in se
+    doc = json.loads((s.parent / "pm.json").read_text())
+    inputs = {Path(i["path"]).name: i["sha256"] for i in doc["provenance"]["inputs"]}
+    assert set(inputs) >= {"session.toml", "tumble.csv", "platform.csv"}
+    for name, sha in inputs.items():
+        assert sha == hashlib.sha256((s / name).read_bytes()).hexdigest()
+    html = (s.parent / "pm.html").read_text(encoding="utf-8")
+    body = html[html.find("<body"):]
+    assert 0 <= body.find("platform.csv:") < body.find("<table"), "failure not at the top"
+
+
+def test_run_image_without_a_mark_fails_its_stage_but_fuses_the_rest(tmp_path, capsys):
+    tri = ui.make_triad(8, mis_rad=3e-4)
+    d = tmp_path / "noimg"
+    ui.image_session(d, tri, seed=8)
+    noise = np.random.default_rng(0).normal(30000, 300, (480, 640))
+    ui.write_image(d / "x_A.png", np.clip(noise, 0, 65535).astype(np.uint16))
+    rc, so, se = cli(["run", "noimg", "--json", "noimg.json", "-q"], tmp_path, capsys)
+    assert rc == 2
+    doc = json.loads((tmp_path / "noimg.json").read_text())
+    assert doc["ok"] is False and doc["fused"] is True
+    assert any("x_A.png" in e["message"] and "no mark" in e["message"] for e in doc["errors"])
+    E, U = np.array(doc["misalignment_rad"]), np.array(doc["misalignment_u_rad"])
+    off = ~np.eye(3, dtype=bool)
+    assert np.all(np.abs((E - tri.axes)[off] / U[off]) < 4.5)
 
 
 def test_apply_variants_identical_and_near_truth(session_dir, session_result, capsys):
