@@ -862,6 +862,18 @@ def test_gonio_reverse_log_mean_of_both_directions_against_truth(gonio_log, caps
         cw["angles_u_arcsec"]) / 3600)
 
 
+@pytest.mark.xfail(strict=True, reason="gonio: --latitude / --steady-table on a log without "
+                   "times are not honoured, said only in a note on stdout: no WARNING, exit 0")
+@pytest.mark.parametrize("flags, word", [(["--latitude", "50"], "earth"),
+                                         (["--steady-table"], "steady")])
+def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, capsys, flags, word):
+    d, rows, _ = gonio_log
+    ui.write_csv(d / "notime.csv", LOG_HEADER[:3], [r[:3] for r in rows])
+    rc, doc, se = _gonio_doc(d, capsys, "notime.csv", *flags)
+    assert doc["notes"], "the tool knows it did not do it"
+    assert rc == 2 or any(word in w.lower() for w in doc["warnings"]), doc["warnings"]
+
+
 def _bad_logs(rows):
     h = ",".join(LOG_HEADER)
     lines = [",".join(map(str, r)) for r in rows]
