@@ -992,6 +992,34 @@ def test_gonio_json_to_stdout_and_closed_pipe(gonio_log, capsys):
     assert json.loads(out.read_text())["angles_deg"]
 
 
+def test_gonio_two_concurrent_runs_on_one_output_one_wins_one_refuses(gonio_log):
+    d, _, _ = gonio_log
+    out = d / "race.json"
+    if out.exists():
+        out.unlink()
+    shutil.copy(d / "log.csv", d / "copy_for_race.csv")
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    procs = [subprocess.Popen([sys.executable, "-m", "align", "gonio", name, "--faces",
+                               "ref,y,x,z", "--json", "race.json", "-q"], cwd=d, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for name in ("log.csv", "copy_for_race.csv")]
+    results = [(p.wait(timeout=300), p.stderr.read()) for p in procs]
+    assert sorted(rc for rc, _ in results) == [0, 2], results
+    loser = next(err for rc, err in results if rc == 2)
+    assert "race.json" in loser and "Traceback" not in loser
+    assert json.loads(out.read_text())["format"] == "axis-align/gonio"
+
+
+def test_ascii_console_gets_ascii_symbols(gonio_log):
+    d, _, _ = gonio_log
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONIOENCODING="ascii")
+    r = subprocess.run([sys.executable, "-m", "align", "gonio", "log.csv", "--faces",
+                        "ref,y,x,z"], cwd=d, env=env, capture_output=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    out = r.stdout.decode("ascii")  # raises if anything else came out
+    assert "+/-" in out and '"' in out
+
+
 # =========================================================================== tilt / apply
 
 @pytest.fixture(scope="module")
