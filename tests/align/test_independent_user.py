@@ -650,7 +650,11 @@ def test_calibrate_huge_value_one_line_with_line_number(tumble, capsys):
     r[2] = "1e308"
     lines[70] = ",".join(r)
     (d / "huge.csv").write_text("\n".join([",".join(TUMBLE_HEADER), *lines]) + "\n")
-    rc, so, se = cli_proc(["calibrate", "huge.csv"], d)  # warnings show only in a process
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # an overflow would surface as rc 1
+        rc, so, se = cli(["calibrate", "huge.csv"], d, capsys)
     assert_one_line_refusal(rc, se, "huge.csv:72")
 
 
@@ -707,20 +711,22 @@ def test_calibrate_scale_sign_three_signs_as_documented(tumble, capsys):
 
 
 @pytest.mark.xfail(strict=True, reason="calibrate: one stray single-sample pose switches the "
-                   "whole file to 'per-pose means only' (noise unknown): u x9, bias moves "
-                   "10 sigma, exit 0")
-def test_calibrate_one_stray_sample_does_not_silently_change_the_result(tumble, cal_plain,
-                                                                         capsys):
-    d, rows = tumble
-    stray = ["PX", *rows[5][1:4], 9999.0]
-    ui.write_csv(d / "stray.csv", TUMBLE_HEADER, [*rows, stray])
-    rc, doc, se = _cal_doc(d, capsys, "stray.csv")
+                   "whole file to 'per-pose means only' (noise unknown, no chi2 test, u x2-9, "
+                   "bias moved), exit 0")
+def test_calibrate_one_stray_sample_does_not_silently_change_the_result(tmp_path, triad, capsys):
+    rows = ui.tumble_rows(triad, seed=3, samples=20, poses=14)
+    ui.write_csv(tmp_path / "clean.csv", TUMBLE_HEADER, rows)
+    ui.write_csv(tmp_path / "stray.csv", TUMBLE_HEADER, [*rows, ["PX", *rows[5][1:4], 9999.0]])
+    rc, clean, se = _cal_doc(tmp_path, capsys, "clean.csv")
+    assert rc == 0 and clean["noise_known"] is True, se
+    rc, doc, se = _cal_doc(tmp_path, capsys, "stray.csv")
     if rc == 2:  # refused, naming the pose: fine
         assert "PX" in se
         return
     assert doc["noise_known"] is True
-    b0, bu0 = np.array(cal_plain["bias_g"]), np.array(cal_plain["bias_u_g"])
-    assert np.all(np.abs(np.array(doc["bias_g"]) - b0) < 3 * bu0)
+    b0, bu0 = np.array(clean["bias_g"]), np.array(clean["bias_u_g"])
+    assert np.all(np.abs(np.array(doc["bias_g"]) - b0) < bu0)
+    assert np.all(np.array(doc["bias_u_g"]) < 1.5 * bu0)
 
 
 # =========================================================================== gonio
@@ -864,14 +870,14 @@ def test_gonio_reverse_log_mean_of_both_directions_against_truth(gonio_log, caps
 
 @pytest.mark.xfail(strict=True, reason="gonio: --latitude / --steady-table on a log without "
                    "times are not honoured, said only in a note on stdout: no WARNING, exit 0")
-@pytest.mark.parametrize("flags, word", [(["--latitude", "50"], "earth"),
-                                         (["--steady-table"], "steady")])
-def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, capsys, flags, word):
+@pytest.mark.parametrize("flags, words", [(["--latitude", "50"], ("earth", "latitude")),
+                                          (["--steady-table"], ("steady",))])
+def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, capsys, flags, words):
     d, rows, _ = gonio_log
     ui.write_csv(d / "notime.csv", LOG_HEADER[:3], [r[:3] for r in rows])
     rc, doc, se = _gonio_doc(d, capsys, "notime.csv", *flags)
     assert doc["notes"], "the tool knows it did not do it"
-    assert rc == 2 or any(word in w.lower() for w in doc["warnings"]), doc["warnings"]
+    assert rc == 2 or any(k in w.lower() for w in doc["warnings"] for k in words), doc["warnings"]
 
 
 def _bad_logs(rows):
@@ -932,7 +938,7 @@ def test_gonio_log_shorter_than_a_revolution(gonio_log, capsys):
 def test_gonio_log_of_a_few_revolutions(gonio_log, capsys):
     d, rows, _ = gonio_log
     ui.write_csv(d / "short9.csv", LOG_HEADER, rows[:9])
-    rc, so, se = cli_proc(["gonio", "short9.csv", "--faces", "ref,y,x,z"], d)
+    rc, so, se = cli(["gonio", "short9.csv", "--faces", "ref,y,x,z"], d, capsys)
     line = assert_one_line_refusal(rc, se, "short9.csv")
     assert "zero-size" not in line
 
@@ -992,6 +998,7 @@ def test_gonio_json_to_stdout_and_closed_pipe(gonio_log, capsys):
     assert json.loads(out.read_text())["angles_deg"]
 
 
+@pytest.mark.slow
 def test_gonio_two_concurrent_runs_on_one_output_one_wins_one_refuses(gonio_log):
     d, _, _ = gonio_log
     out = d / "race.json"
