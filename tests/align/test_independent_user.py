@@ -1381,6 +1381,20 @@ def test_apply_bad_inputs_refused_in_one_line(session_dir, session_result, tumbl
     assert not (w / "o.csv").exists()
 
 
+def test_demo_force_never_replaces_the_users_own_folder(tmp_path, capsys):
+    d = tmp_path / "mine"
+    (d / "session").mkdir(parents=True)
+    (d / "notes.txt").write_text("mine")
+    (d / "session" / "important.csv").write_text("my data")
+    rc, so, se = cli(["demo", "--out", "mine", "-q"], tmp_path, capsys)
+    assert_one_line_refusal(rc, se, "mine")
+    rc, so, se = cli(["demo", "--out", "mine", "--force", "-q"], tmp_path, capsys)
+    assert_one_line_refusal(rc, se, "session")
+    assert (d / "notes.txt").read_text() == "mine"
+    assert (d / "session" / "important.csv").read_text() == "my data"
+    assert sorted(p.name for p in d.rglob("*")) == ["important.csv", "notes.txt", "session"]
+
+
 def test_every_command_has_version_and_help_without_traceback(tmp_path):
     rc, so, se = cli_proc(["--version"], tmp_path)
     assert rc == 0 and re.search(r"\d+\.\d+", so + se)
