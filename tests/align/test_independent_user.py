@@ -1225,6 +1225,28 @@ def test_run_session_faults_refused_in_one_line_naming_the_key(session_dir, caps
     assert "root:" not in se + so  # nothing of /etc/passwd is echoed
 
 
+def test_run_allow_outside_lifts_confinement_but_never_echoes_contents(session_dir,
+                                                                       session_result, capsys):
+    d, _ = session_dir
+    doc, _ = session_result
+    s = copy_session(d, "outside_ok")
+    shutil.copy(s / "platform.csv", s.parent / "outside_ok_platform.csv")
+    t = (s / "session.toml").read_text()
+    (s / "session.toml").write_text(
+        t.replace('static = "platform.csv"', 'static = "../outside_ok_platform.csv"'))
+    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "oo.json", "-q"], s.parent,
+                     capsys)
+    assert rc == 0, se
+    assert json.loads((s.parent / "oo.json").read_text())["misalignment_rad"] == doc[
+        "misalignment_rad"]
+    (s / "session.toml").write_text(t.replace('static = "platform.csv"', 'static = "/etc/passwd"'))
+    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "op.json", "-q"], s.parent,
+                     capsys)
+    assert rc == 2
+    written = (s.parent / "op.json").read_text()
+    assert "root:" not in se + so + written and "/etc/passwd" in se
+
+
 def test_run_failed_stage_exit_2_result_written_ok_false(session_dir, capsys):
     d, _ = session_dir
     s = copy_session(d, "broken_stage")
