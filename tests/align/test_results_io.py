@@ -1,0 +1,75 @@
+"""Results save and load themselves: to_dict -> strict JSON -> from_dict gives the same result
+(the same dict again, the same arrays to the bit), and what is loaded prints and warns as what
+was run."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from align.loop import EffectReport, LoopSummary, RefusedEffect
+from axisbase.output import dumps
+
+
+@pytest.fixture(scope="module")
+def session_result(tmp_path_factory):
+    """A seeded synthetic session without images, run once: its result and its JSON."""
+    from align.session import load_session, result_json, run_session
+    from synth.session import SessionSpec, write_session
+    from tests.align.test_bad_inputs import _strip_images
+
+    root = tmp_path_factory.mktemp("io")
+    full = root / "full"
+    write_session(full, SessionSpec(seed=8, effects={"reference_offset": 20.0},
+                                    undeclared=frozenset({"reference_offset"})))
+    s = root / "s"
+    s.mkdir()
+    for name in ("tumble.csv", "gonio.csv", "platform.csv"):
+        (s / name).write_bytes((full / name).read_bytes())
+    (s / "session.toml").write_text(_strip_images((full / "session.toml").read_text()))
+    res = run_session(load_session(s))
+    assert res.fusion is not None
+    return res, json.loads(dumps(result_json(res)))
+
+
+def test_fusion_result_round_trip(session_result):
+    from align.fusion.solve import FusionResult
+
+    res, js = session_result
+    f = FusionResult.from_dict(js)
+    assert np.array_equal(f.E, res.fusion.E) and np.array_equal(f.cov, res.fusion.cov)
+    assert np.array_equal(f.axes, res.fusion.axes)
+    assert f.to_dict() == {k: js[k] for k in f.to_dict()}
+    # a loaded fusion prints and reports its loop like the one just run
+    assert f.loop.summary_lines() == res.fusion.loop.summary_lines()
+    assert f.consistent == res.fusion.consistent
+    assert [e.name for e in f.loop.effects] == ["reference_face_offset"]
+
+
+def test_loop_summary_round_trip_keeps_every_field(session_result):
+    res, _ = session_result
+    s = res.calibration.loop.summary()
+    back = LoopSummary.from_dict(json.loads(dumps(s.to_dict())))
+    assert back.to_dict() == json.loads(dumps(s.to_dict()))
+    assert back.summary_lines() == s.summary_lines()
+
+
+def test_effect_and_refusal_round_trip_with_non_finite_values():
+    e = EffectReport("nonlinearity_k2", 2.5e-5, float("nan"), "1/g", 1e-5, 8e-6, -12.0, 1e-9,
+                     "K2", (("x", 1e-5, 2e-6), ("y", -3e-6, 2e-6)))
+    back = EffectReport.from_dict(json.loads(dumps(e.to_dict())))  # NaN is saved as null
+    assert np.isnan(back.u) and back.components == e.components
+    assert back.to_dict().keys() == e.to_dict().keys()
+    r = RefusedEffect("nonlinearity_k2", "moves k_z by 4681 %", 1e-99, -400.0)
+    assert RefusedEffect.from_dict(r.to_dict()) == r
+
+
+def test_from_dict_refuses_what_is_not_its_own():
+    from align.fusion.solve import FusionResult
+
+    with pytest.raises(KeyError):
+        FusionResult.from_dict({"chi2": 1.0})
+    with pytest.raises(ValueError, match="angle_names"):
+        FusionResult.from_dict({"angle_names": ["a"] * 6})
