@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -39,12 +38,15 @@ def jsonable(obj: Any) -> Any:
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [jsonable(v) for v in obj]
-    if isinstance(obj, bool) or obj is None or isinstance(obj, str):
-        return obj
+    # exact built-in types out (subclasses such as numpy.float64 are not JSON to orjson)
+    if obj is None or isinstance(obj, bool):
+        return None if obj is None else bool(obj)
+    if isinstance(obj, str):
+        return str(obj)
     if isinstance(obj, int):
-        return obj
+        return int(obj)
     if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
+        return float(obj) if math.isfinite(obj) else None
     if isinstance(obj, Path):
         return str(obj)
     tolist = getattr(obj, "tolist", None)  # numpy arrays and scalars (no numpy import here)
@@ -56,8 +58,12 @@ def jsonable(obj: Any) -> Any:
 
 
 def dumps(data: Any) -> str:
-    """The tool's one JSON encoder (strict: no NaN/Infinity tokens; see :func:`jsonable`)."""
-    return json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n"
+    """The tool's one JSON encoder (strict: no NaN/Infinity tokens; see :func:`jsonable`),
+    indented, UTF-8 text. orjson, not the standard library: with ``indent`` the stdlib falls
+    back to its pure-Python encoder, ~15x slower on a lot's or a session's result."""
+    import orjson
+
+    return orjson.dumps(jsonable(data), option=orjson.OPT_INDENT_2).decode() + "\n"
 
 
 def _resolved(p: Path) -> Path | None:
@@ -160,10 +166,17 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
     ``-`` writes text to standard output.
     """
     if str(path) == STDOUT:
-        text = data if isinstance(data, str) else data.decode("utf-8")
+        # A file format's bytes (UTF-8), whatever the console's encoding: through the
+        # stream's binary buffer when it has one.
         out = _real_stdout()
-        out.write(text)
         out.flush()
+        buf = getattr(out, "buffer", None)
+        if buf is not None:
+            buf.write(data.encode("utf-8") if isinstance(data, str) else data)
+            buf.flush()
+        else:
+            out.write(data if isinstance(data, str) else data.decode("utf-8"))
+            out.flush()
         return Path(STDOUT)
     p = Path(path)
     raw = data.encode("utf-8") if isinstance(data, str) else data
