@@ -64,7 +64,7 @@ class MarkStage:
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
             F = np.hstack(cols) if cols else None
-            lf = fit_line(q, m.sigma, F, reject_sigma=None)
+            lf = fit_line(q, m.sigma, F, reject_sigma=None, chol=m.chol)
             if RADIAL not in names:
                 break
             j = self._col_index(terms, RADIAL)
@@ -83,8 +83,11 @@ class MarkStage:
                 effects[t.name] = (amp, float(np.sqrt(g @ cov @ g)))
             else:
                 effects[t.name] = (float(b[0]), float(np.sqrt(cov[0, 0])))
+        # Residuals as the loop's tests need them, independent under the model: whitened by
+        # the centres' correlation when texture correlates them (z * sigma; the raw
+        # residuals when the centres are independent).
         return StageFit(
-            residuals=lf.residuals_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
+            residuals=lf.z * lf.sigma_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
@@ -171,7 +174,7 @@ def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float
     out = 0.0
     for m in ms:
         q = undistort(m.points, [k1], scale) if k1 else m.points
-        out += fit_line(q, m.sigma, reject_sigma=None).chi2
+        out += fit_line(q, m.sigma, reject_sigma=None, chol=m.chol).chi2
     return out
 
 
@@ -219,13 +222,15 @@ def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
     """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
     q = undistort(m.points, [k1], half_diagonal(m.image_shape))
     regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None))
+    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None,
+                                                                      chol=m.chol))
 
 
 def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
     """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
     scale = half_diagonal(m.image_shape)
-    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None).angle_rad
+    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None,
+                  chol=m.chol).angle_rad
          for k in (k1 - h, k1 + h)]
     return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
 
