@@ -306,16 +306,24 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         loop=rep, measurement=m, uncertainty_inflation=infl)
 
 
-def structure_inflation(rep: LoopReport) -> float:
+def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     """Factor on the stated uncertainty when the residual keeps unexplained structure.
+
+    Below 1 when chi2 is improbably small (lower tail below ``alpha_low``): the stated
+    sigma overstates the centres' scatter, and u is scaled down to it.
 
     Correlated residuals carry less information than independent ones: with lag-1
     correlation rho the variance of a fitted slope grows by about (1 + rho) / (1 - rho)
     (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
     """
+    f = rep.after
+    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < alpha_low:
+        # The centres scatter far less than their stated sigma: the groove model's shape
+        # (hence its Fisher information) does not describe this groove. Never return that
+        # u as is (it was 10^5 arcsec once): scale it to the scatter (Birge ratio < 1).
+        return float(np.sqrt(f.chi2 / f.dof))
     if not rep.unexplained_structure:
         return 1.0
-    f = rep.after
     z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
     zc = z - z.mean()
     rho = float(np.clip(zc[1:] @ zc[:-1] / max(zc @ zc, 1e-300), 0.0, 0.9))

@@ -59,9 +59,7 @@ def _replica(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, dx: int, dy: int
 
 
 def _demean(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Remove the mean over the valid entries, zero elsewhere. Not the trend: the texture's
-    slow undulations are what moves a fitted angle, and detrending each replica would take
-    exactly that power out of the autocovariance (u came out ~30 % too small)."""
+    """Remove the mean over the valid entries, zero elsewhere."""
     out = np.where(valid, z, 0.0)
     out[valid] -= out[valid].mean()
     return out
@@ -125,7 +123,12 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
             x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale)
-            reps.append((_demean(d / s, valid), _demean(x / contrast / s, valid), s, valid))
+            # The centres' series keeps its mean: the texture's slow undulations are what moves a
+            # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
+            # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
+            # regressor is centred, as the loop's illumination column is.
+            reps.append((np.where(valid, d / s, 0.0), _demean(x / contrast / s, valid), s,
+                         valid))
     if not reps:
         return None
     # Dust, a scratch or another mark in a replica: robust outlier cut per replica, and a
