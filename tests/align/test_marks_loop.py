@@ -119,7 +119,7 @@ def test_marks_of_one_frame_share_one_distortion(k1, seed):
         assert abs(angle_error(r.angle_rad, t.image_angle_rad)) < 4.5 * r.angle_u_rad
 
 
-def _session_like_marks(n: int, seed: int, horizontal_only: bool = False):
+def _session_like_marks(n: int, seed: int, horizontal_only: bool = False, k1: float = 0.0):
     """Marks as `align synth session` renders them (machining texture at 17 deg, dust,
     scratches, an illumination gradient), within 0.1 deg of 0 or 90 deg."""
     rng = np.random.default_rng(seed)
@@ -131,7 +131,7 @@ def _session_like_marks(n: int, seed: int, horizontal_only: bool = False):
         spec = ImageSpec(marks=(mark,), width=640, height=480, seed=int(rng.integers(1 << 30)),
                          full_well_e=full_well_for_snr(40, -0.6), texture=0.01, dust=4,
                          scratches=2, gradient=(0.04, -0.02),
-                         camera=CameraGeometry(focal_px=1.6 * 640))
+                         camera=CameraGeometry(focal_px=1.6 * 640, k1=k1))
         s = render_marks(spec, with_crlb=False)
         r = [r for r in measure_image(s.image.astype(float)) if r.found][0]
         false += bool(r.loop.effects) or r.unexplained_structure
@@ -164,3 +164,16 @@ def test_session_images_normalised_errors_and_false_effects():
         assert abs(rms - 1) < 3.3 / np.sqrt(2 * zb.size)
     print(f"false effects or unexplained structure: {false} of {n}")
     assert false <= 0.01 * n
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k1,seed", [(-0.3, 7), (0.2, 8)])
+def test_undeclared_distortion_on_session_images_normalised_errors(k1, seed):
+    """Issue 9 item 4: one camera with undeclared radial distortion (session-like textured
+    images, one mark each): the loop's corrected angles have normalised errors ~N(0, 1)."""
+    n = 40
+    z, _, _ = _session_like_marks(n, seed, k1=k1)
+    rms = float(np.sqrt(np.mean(z**2)))
+    print(f"k1 {k1}: normalised-error RMS {rms:.2f}, max |z| {np.max(np.abs(z)):.2f}")
+    assert abs(rms - 1) < 3.3 / np.sqrt(2 * n)
+    assert np.max(np.abs(z)) < 4.5
