@@ -52,6 +52,7 @@ class MarkStage:
     def __init__(self, m: MarkMeasurement):
         self.m = m
         self.scale = half_diagonal(m.image_shape)
+        self.sigma = m.sigma * np.sqrt(texture_scale(m))
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
@@ -64,7 +65,7 @@ class MarkStage:
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
             F = np.hstack(cols) if cols else None
-            lf = fit_line(q, m.sigma, F, reject_sigma=None, chol=m.chol)
+            lf = fit_line(q, self.sigma, F, reject_sigma=None, chol=m.chol)
             if RADIAL not in names:
                 break
             j = self._col_index(terms, RADIAL)
@@ -102,6 +103,23 @@ class MarkStage:
                 return j
             j += t.width
         raise KeyError(name)
+
+
+def texture_scale(m: MarkMeasurement) -> float:
+    """Variance factor on a textured mark's centres from its own residuals (>= 1; 1 when the
+    centres are independent).
+
+    The replicas beside the mark give the shape of the texture's correlation, but a
+    machining lay is a 1-D random profile: over the few hundred px of one mark its realised
+    amplitude differs from the replicas' neighbouring stretches (chi2/dof up to ~1.9 on
+    session images). The amplitude is re-read from the mark itself, on differences of
+    neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
+    touches: var(z[i+1] - z[i]) = 2 for white z.
+    """
+    if m.chol is None:
+        return 1.0
+    z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
+    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
 
 
 def _radial(fit: StageFit) -> Term:
