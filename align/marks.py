@@ -52,6 +52,7 @@ class MarkStage:
     def __init__(self, m: MarkMeasurement):
         self.m = m
         self.scale = half_diagonal(m.image_shape)
+        self.sigma = m.sigma * np.sqrt(texture_scale(m))
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
@@ -64,7 +65,7 @@ class MarkStage:
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
             F = np.hstack(cols) if cols else None
-            lf = fit_line(q, m.sigma, F, reject_sigma=None)
+            lf = fit_line(q, self.sigma, F, reject_sigma=None, chol=m.chol)
             if RADIAL not in names:
                 break
             j = self._col_index(terms, RADIAL)
@@ -83,8 +84,11 @@ class MarkStage:
                 effects[t.name] = (amp, float(np.sqrt(g @ cov @ g)))
             else:
                 effects[t.name] = (float(b[0]), float(np.sqrt(cov[0, 0])))
+        # Residuals as the loop's tests need them, independent under the model: whitened by
+        # the centres' correlation when texture correlates them (z * sigma; the raw
+        # residuals when the centres are independent).
         return StageFit(
-            residuals=lf.residuals_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
+            residuals=lf.z * lf.sigma_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
@@ -99,6 +103,23 @@ class MarkStage:
                 return j
             j += t.width
         raise KeyError(name)
+
+
+def texture_scale(m: MarkMeasurement) -> float:
+    """Variance factor on a textured mark's centres from its own residuals (>= 1; 1 when the
+    centres are independent).
+
+    The replicas beside the mark give the shape of the texture's correlation, but a
+    machining lay is a 1-D random profile: over the few hundred px of one mark its realised
+    amplitude differs from the replicas' neighbouring stretches (chi2/dof up to ~1.9 on
+    session images). The amplitude is re-read from the mark itself, on differences of
+    neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
+    touches: var(z[i+1] - z[i]) = 2 for white z.
+    """
+    if m.chol is None:
+        return 1.0
+    z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
+    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
 
 
 def _radial(fit: StageFit) -> Term:
@@ -171,7 +192,7 @@ def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float
     out = 0.0
     for m in ms:
         q = undistort(m.points, [k1], scale) if k1 else m.points
-        out += fit_line(q, m.sigma, reject_sigma=None).chi2
+        out += fit_line(q, m.sigma, reject_sigma=None, chol=m.chol).chi2
     return out
 
 
@@ -219,13 +240,15 @@ def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
     """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
     q = undistort(m.points, [k1], half_diagonal(m.image_shape))
     regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None))
+    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None,
+                                                                      chol=m.chol))
 
 
 def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
     """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
     scale = half_diagonal(m.image_shape)
-    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None).angle_rad
+    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None,
+                  chol=m.chol).angle_rad
          for k in (k1 - h, k1 + h)]
     return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
 
@@ -301,16 +324,24 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         loop=rep, measurement=m, uncertainty_inflation=infl)
 
 
-def structure_inflation(rep: LoopReport) -> float:
+def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     """Factor on the stated uncertainty when the residual keeps unexplained structure.
+
+    Below 1 when chi2 is improbably small (lower tail below ``alpha_low``): the stated
+    sigma overstates the centres' scatter, and u is scaled down to it.
 
     Correlated residuals carry less information than independent ones: with lag-1
     correlation rho the variance of a fitted slope grows by about (1 + rho) / (1 - rho)
     (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
     """
+    f = rep.after
+    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < alpha_low:
+        # The centres scatter far less than their stated sigma: the groove model's shape
+        # (hence its Fisher information) does not describe this groove. Never return that
+        # u as is (it was 10^5 arcsec once): scale it to the scatter (Birge ratio < 1).
+        return float(np.sqrt(f.chi2 / f.dof))
     if not rep.unexplained_structure:
         return 1.0
-    f = rep.after
     z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
     zc = z - z.mean()
     rho = float(np.clip(zc[1:] @ zc[:-1] / max(zc @ zc, 1e-300), 0.0, 0.9))

@@ -33,6 +33,9 @@ def mark_warnings(results: Sequence) -> list[str]:
         if r.uncertainty_inflation > 1:
             out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
                        "structure no effect explains")
+        elif r.uncertainty_inflation < 1:
+            out.append(f"{what}: uncertainty scaled x{r.uncertainty_inflation:.2f} to the "
+                       "centres' scatter: the groove model's shape does not fit this groove")
     return out
 
 

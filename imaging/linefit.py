@@ -9,7 +9,10 @@ Extra columns F describe effects the residual loop adds (curvature, a periodic w
 Solved by Gauss–Newton from the weighted total-least-squares line; the covariance of
 (a, d, beta) is (J^T W J)^-1 with the points' own standard uncertainties, i.e. propagated,
 not a residual RMS. Outliers (dust, scratches) are rejected at ``reject_sigma`` and the fit
-repeated.
+repeated. When the points' errors are correlated (surface texture along a mark), the fit is
+generalised least squares with their correlation matrix R = L L^T: every column and the
+residual are whitened by L^-1 (so the covariance is (J^T C^-1 J)^-1 and the whitened
+residuals are independent unit-variance noise under the model).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
 from imaging.detect import line_frame, wrap_angle
 
@@ -28,7 +32,9 @@ class LineFit:
     ``angle_rad``, ``offset_px``: line; ``cov``: covariance of (angle, offset, beta...);
     ``beta``: coefficients of the extra columns; ``residuals_px``/``t_px``/``sigma_px``: per
     used point (perpendicular residual, position along the line, standard uncertainty);
-    ``used``: mask over the input points; ``chi2``/``dof``.
+    ``used``: mask over the input points; ``chi2``/``dof``; ``z``: the residuals whitened
+    by the points' correlation and divided by their sigma (independent N(0, 1) under the
+    model; residual / sigma when the points are independent).
     """
 
     angle_rad: float
@@ -41,6 +47,7 @@ class LineFit:
     used: np.ndarray
     chi2: float
     dof: int
+    z: np.ndarray | None = None
 
     @property
     def angle_u_rad(self) -> float:
@@ -64,26 +71,30 @@ def _tls(q: np.ndarray, w: np.ndarray) -> tuple[float, float]:
     return a, float(m @ line_frame(a)[1])
 
 
-def _solve(q, sigma, F, a, d, iters=4):
-    w = 1.0 / sigma**2
+def _solve(q, sigma, F, a, d, iters=4, chol=None):
+    """Gauss–Newton for (a, d, beta). Every column is linear in the points, so it is
+    whitened once: W(X) = L^-1 (X / sigma) (L = identity for independent points)."""
     m = F.shape[1]
+    X = np.column_stack([q, np.ones(len(q)), F]) / sigma[:, None]
+    if chol is not None:
+        X = solve_triangular(chol, X, lower=True, check_finite=False)
+    qw, one, Fw = X[:, :2], X[:, 2], X[:, 3:]
     beta = np.zeros(m)
     for _ in range(iters):
         u, n = line_frame(a)
-        r = q @ n - d - F @ beta
-        J = np.column_stack([q @ u, -np.ones(len(q)), -F])
-        N = J.T @ (J * w[:, None])
-        step = np.linalg.lstsq(N, -(J.T @ (w * r)), rcond=None)[0]
+        r = qw @ n - d * one - Fw @ beta
+        J = np.column_stack([qw @ u, -one, -Fw])
+        step = np.linalg.lstsq(J.T @ J, -(J.T @ r), rcond=None)[0]
         a, d, beta = a + step[0], d + step[1], beta + step[2:]
     u, n = line_frame(a)
-    r = q @ n - d - F @ beta
-    J = np.column_stack([q @ u, -np.ones(len(q)), -F])
-    cov = np.linalg.pinv(J.T @ (J * w[:, None]))
-    return a, d, beta, r, cov
+    J = np.column_stack([qw @ u, -one, -Fw])
+    cov = np.linalg.pinv(J.T @ J)
+    return a, d, beta, q @ n - d - F @ beta, cov, qw @ n - d * one - Fw @ beta
 
 
 def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = None,
-             reject_sigma: float | None = 4.5, max_rounds: int = 6) -> LineFit:
+             reject_sigma: float | None = 4.5, max_rounds: int = 6,
+             chol: np.ndarray | None = None) -> LineFit:
     """Fit a line (plus extra columns) to points with perpendicular uncertainties.
 
     Parameters
@@ -96,6 +107,9 @@ def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = N
         Extra design columns (effects); their coefficients are returned in ``beta``.
     reject_sigma : float or None
         Reject points whose normalised residual exceeds this, then refit (None: keep all).
+    chol : (N, N) array, optional
+        Lower Cholesky factor of the points' correlation matrix (generalised least squares);
+        every point is then kept (``reject_sigma`` must be None).
     """
     q = np.asarray(points, float)
     sigma = np.asarray(sigma, float)
@@ -103,9 +117,11 @@ def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = N
     used = np.isfinite(sigma) & np.all(np.isfinite(q), axis=1) & np.all(np.isfinite(F), axis=1)
     if used.sum() < 3 + F.shape[1]:
         raise ValueError("too few points for a line fit")
+    if chol is not None and (reject_sigma is not None or not used.all()):
+        raise ValueError("correlated points: all must be finite and none rejected")
     for _ in range(max_rounds):
         a, d = _tls(q[used], 1 / sigma[used] ** 2)
-        a, d, beta, r, cov = _solve(q[used], sigma[used], F[used], a, d)
+        a, d, beta, r, cov, z = _solve(q[used], sigma[used], F[used], a, d, chol=chol)
         if reject_sigma is None:
             break
         u, n = line_frame(a)
@@ -119,14 +135,13 @@ def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = N
     else:
         # Rounds ran out while the set was still changing: solve once more on the final set.
         a, d = _tls(q[used], 1 / sigma[used] ** 2)
-        a, d, beta, r, cov = _solve(q[used], sigma[used], F[used], a, d)
+        a, d, beta, r, cov, z = _solve(q[used], sigma[used], F[used], a, d)
     u, _ = line_frame(a)
     if abs(wrap_angle(a) - a) > 1:
         # The direction turned by pi on wrapping: the normal, hence d and the residuals, flip.
-        d, r, beta, u = -d, -r, -beta, -u
+        d, r, beta, u, z = -d, -r, -beta, -u, -z
         flip = np.diag([1.0, -1.0] + [-1.0] * len(beta))
         cov = flip @ cov @ flip
     return LineFit(angle_rad=wrap_angle(a), offset_px=float(d), cov=cov, beta=beta,
                    residuals_px=r, t_px=q[used] @ u, sigma_px=sigma[used], used=used,
-                   chi2=float(np.sum((r / sigma[used]) ** 2)),
-                   dof=int(used.sum() - 2 - F.shape[1]))
+                   chi2=float(np.sum(z**2)), dof=int(used.sum() - 2 - F.shape[1]), z=z)

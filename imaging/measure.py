@@ -18,6 +18,7 @@ from imaging.errors import ImageInputError
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
 from imaging.profile import Centres, ProfileFit, fit_profile, sample_centres
+from imaging.texture import correlation_cholesky
 
 
 @dataclass(frozen=True)
@@ -27,7 +28,10 @@ class MarkMeasurement:
     ``points``: (N, 2) centres [px] relative to the image centre; ``sigma``: (N,) [px];
     ``regressors``: per-point arrays for the residual loop (``t`` along the line [px],
     ``x``/``y`` [px], ``r2`` squared distance from the image centre [px^2], ``cross_slope``
-    local illumination slope / contrast [1/px]).
+    local illumination slope / contrast [1/px]); ``chol``: lower Cholesky factor of the
+    centres' correlation matrix when surface texture correlates their errors along the mark
+    (None: independent), for generalised least squares; ``sigma`` then includes the
+    texture's share of the variance.
     """
 
     candidate: MarkCandidate
@@ -39,6 +43,7 @@ class MarkMeasurement:
     line: LineFit
     image_shape: tuple[int, int]
     n_rejected: int = 0
+    chol: np.ndarray | None = None
 
 
 def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
@@ -50,6 +55,15 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
     # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
     typical = float(np.median(cen.chi2_red[cen.ok]))
     keep = cen.ok & (cen.chi2_red < 3.0 * max(1.0, typical))
+    # Segments whose background just beside the groove is disturbed (a dust speck or a
+    # scratch in the ring where the illumination slope is read): their centre and their
+    # slope regressor are moved by the same speck, which the loop would read as an effect.
+    # Uneven light changes the slope smoothly, never by 6 robust deviations at one segment.
+    g = cen.cross_slope
+    med = float(np.median(g[keep])) if keep.any() else 0.0
+    mad = 1.4826 * float(np.median(np.abs(g[keep] - med))) if keep.any() else 0.0
+    if mad > 0:
+        keep &= np.abs(g - med) <= 6 * mad
     if keep.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "segments fit the groove model (covered, or not a groove)")
@@ -73,16 +87,20 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
-    cen = sample_centres(image, pf, where=where)
+    cen = sample_centres(image, pf, where=where, texture=True)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
+    chol = None
+    if cen.texture is not None and cen.texture.acf is not None:
+        scale, chol = correlation_cholesky(cen.texture.acf, np.flatnonzero(use))
+        sig = sig * scale
     regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
             "cross_slope": cen.cross_slope[use]}
-    line = fit_line(pts, sig, reject_sigma=None)
+    line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()))
+                           int(cen.ok.sum() - use.sum()), chol)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,

@@ -24,6 +24,7 @@ from scipy.special import erf
 
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
+from imaging.texture import TextureModel, texture_model
 
 # Gauss–Legendre nodes/weights on a pixel [-1/2, 1/2]: 2 points (exact to cubics) for the
 # shape fit, 3 points (exact to quintics) for the centres, where sub-pixel bias matters.
@@ -123,7 +124,9 @@ class Centres:
     line [px]; ``t``: position along the reference line [px]; ``contrast``: A_k [DN];
     ``cross_slope``: local background slope across the mark divided by the contrast [1/px]
     (regressor for illumination-gradient bias); ``chi2_red``: each segment's pixel chi2/dof;
-    ``ok``: segments usable for the line fit.
+    ``ok``: segments usable for the line fit; ``texture``: how the background's texture
+    correlates the centres' errors along the mark and with ``cross_slope`` (None: it does
+    not; see :mod:`imaging.texture`).
     """
 
     xy: np.ndarray
@@ -133,6 +136,7 @@ class Centres:
     cross_slope: np.ndarray
     chi2_red: np.ndarray
     ok: np.ndarray
+    texture: TextureModel | None = None
 
 
 def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
@@ -210,7 +214,7 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     inner = np.abs(e) < 2
     bg = float(np.median(vals[~inner])) if np.any(~inner) else float(np.median(vals))
     amp0 = float(np.median(vals[inner]) - bg) if np.any(inner) else 0.0
-    w0 = max(cand.thickness_px, 1.5)
+    w0 = max(cand.thickness_px, _half_depth_width(e, vals, bg, amp0), 1.5)
     x0 = np.array([0.0, 0.0, amp0, bg, 0.0, 0.0, w0, 1.0])
     a_ref = cand.angle_rad
 
@@ -244,6 +248,31 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     t0, t1 = _carry_extent(a_ref, cand.offset_px, (t0, t1), ang)
     return ProfileFit(ang, off, float(w), float(s), float(amp), float(b), float(g_e), var,
                       t0, t1, float(full_scale))
+
+
+def _half_depth_width(e: np.ndarray, vals: np.ndarray, bg: float, amp: float) -> float:
+    """Width [px] over which the median profile across the mark is beyond half its depth.
+
+    The start for the band fit's groove width. The detector's thickness comes from a
+    block-averaged copy and can be half a wide flat-bottomed groove's width; started there,
+    the fit settles on a narrow, over-blurred groove (w 3.2, s 3.1 for a 7.8 px box seen
+    through s 1.9), whose gentle flanks carry less information than the real ones: every
+    centre's stated sigma was then ~2x its scatter (chi2/dof 0.23) and the angle's u absurd.
+    """
+    if amp == 0:
+        return 0.0
+    bins = np.round(e * 2).astype(int)
+    lo = bins.min()
+    idx = bins - lo
+    cnt = np.bincount(idx)
+    med = np.full(cnt.size, np.nan)
+    order = np.argsort(idx, kind="stable")
+    splits = np.split(vals[order], np.cumsum(cnt)[:-1])
+    for i, v in enumerate(splits):
+        if v.size >= 5:
+            med[i] = np.median(v)
+    deep = (med - bg) / amp > 0.5
+    return 0.5 * float(np.count_nonzero(deep))
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -305,24 +334,32 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(np.median(r**2) / 0.4549), 0.0
 
 
-def _outside_slope(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float,
-                   every: int, nseg: int, ring: float = 6.0) -> np.ndarray:
-    """Background slope across the mark [DN/px] per segment, from a ring of pixels just
-    outside the band the centres are fitted on (half < |e| <= half + ring).
+def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, every: int,
+          nseg: int, ring: float = 6.0) -> tuple[np.ndarray, ...]:
+    """Pixels of a ring just outside the band the centres are fitted on (half < |e| <=
+    half + ring): (rows, columns, e, segment), for the background slope across the mark.
 
     Outside the band on purpose: the slope fitted inside it shares its pixels' noise with
     the centre (both odd in e), and would correlate with the centre's error by chance.
     """
-    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
-                          half + ring)
-    sel = (np.abs(e) > half) & (vals < pf.full_scale_dn) & (vals > 0)
-    vals, e, t = vals[sel], e[sel], t[sel]
+    _, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                         half + ring)
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
+    sel = np.abs(e) > half
     if every > 1:
-        keep = seg % every == 0
-        vals, e, seg = vals[keep], e[keep], seg[keep] // every
-    inside = seg < nseg
-    vals, e, seg = vals[inside], e[inside], seg[inside]
+        sel &= seg % every == 0
+        seg = seg // every
+    sel &= seg < nseg
+    idx, e, seg = idx[sel], e[sel], seg[sel]
+    return idx // image.shape[1], idx % image.shape[1], e, seg
+
+
+def ring_slope(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, nseg: int,
+               full_scale: float) -> np.ndarray:
+    """Background slope across the mark [DN/px] per segment from its ring pixels (clipped
+    pixels left out; 0 where a segment has too few)."""
+    sel = (vals < full_scale) & (vals > 0)
+    vals, e, seg = vals[sel], e[sel], seg[sel]
     no = np.bincount(seg, minlength=nseg)
     me = np.bincount(seg, e, minlength=nseg) / np.maximum(no, 1)
     mr = np.bincount(seg, vals, minlength=nseg) / np.maximum(no, 1)
@@ -332,22 +369,26 @@ def _outside_slope(image: np.ndarray, pf: ProfileFit, half: float, segment_px: f
 
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
-                   iterations: int = 2, every: int = 1, where: str = "image") -> Centres:
+                   iterations: int = 2, every: int = 1, where: str = "image",
+                   texture: bool = False) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
+    ``texture``: also measure how the background's texture correlates the centres' errors
+    (replicas of the band beside the mark, :mod:`imaging.texture`).
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
-    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px, half)
+    vals, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                            half)
     unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
-    vals, e, t = vals[unclipped], e[unclipped], t[unclipped]
+    vals, e, t, idx = vals[unclipped], e[unclipped], t[unclipped], idx[unclipped]
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
                               "outside the image or is all clipped")
     seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
     if every > 1:
         keep = seg % every == 0
-        vals, e, t, seg = vals[keep], e[keep], t[keep], seg[keep] // every
+        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep] // every, idx[keep]
     nseg = int(seg.max()) + 1
     table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var
@@ -402,9 +443,24 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
-    slope = _outside_slope(image, pf, half, segment_px, every, nseg)
+    ring = _ring(image, pf, half, segment_px, every, nseg)
+    slope = ring_slope(image[ring[0], ring[1]], ring[2], ring[3], nseg, pf.full_scale_dn)
     u, n = line_frame(pf.angle_rad)
-    xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2)
-    return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp,
-                   cross_slope=slope / np.where(amp != 0, amp, 1.0), chi2_red=chi2_red, ok=good)
+    amp_safe = np.where(amp != 0, amp, 1.0)
+    tex = None
+    if texture:
+        # Replicas just clear of the band and of its illumination ring, and further out:
+        # 8 series (4 distances, both sides) make the autocovariance precise enough that
+        # the loop's tests see white residuals (4 left ~10 % of textured marks flagged).
+        shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
+        tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
+                            wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
+                            pf.full_scale_dn)
+    if tex is not None:
+        # Control variate: the part of the centre's error that the ring's texture slope
+        # predicts is taken out (what stays is independent of the regressor).
+        delta = delta - tex.coupling_px2 * slope / amp_safe
+    xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
+    return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
+                   chi2_red=chi2_red, ok=good, texture=tex)

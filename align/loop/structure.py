@@ -103,7 +103,7 @@ def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray]) -> list
     return out
 
 
-FFT_ABOVE = 1000  # points: above this an evenly spaced series gets the FFT periodogram
+FFT_ABOVE = 200  # points: above this an evenly spaced series gets the FFT periodogram
 
 
 def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float]:

@@ -117,3 +117,62 @@ def test_marks_of_one_frame_share_one_distortion(k1, seed):
         assert r.to_json()["frame_radial_distortion"]["applied"] == fr.applied
         t = min(s.truth.marks, key=lambda t: abs(angle_error(r.angle_rad, t.image_angle_rad)))
         assert abs(angle_error(r.angle_rad, t.image_angle_rad)) < 4.5 * r.angle_u_rad
+
+
+def _session_like_marks(n: int, seed: int, horizontal_only: bool = False, k1: float = 0.0):
+    """Marks as `align synth session` renders them (machining texture at 17 deg, dust,
+    scratches, an illumination gradient), within 0.1 deg of 0 or 90 deg."""
+    rng = np.random.default_rng(seed)
+    z, base, false = [], [], 0
+    for _ in range(n):
+        b = 0.0 if horizontal_only else float(rng.choice([0.0, 90.0]))
+        mark = MarkSpec(np.deg2rad(b + rng.uniform(-0.1, 0.1)), float(rng.uniform(-40, 40)),
+                        380.0, 4.0, centre_t_px=float(rng.uniform(-30, 30)))
+        spec = ImageSpec(marks=(mark,), width=640, height=480, seed=int(rng.integers(1 << 30)),
+                         full_well_e=full_well_for_snr(40, -0.6), texture=0.01, dust=4,
+                         scratches=2, gradient=(0.04, -0.02),
+                         camera=CameraGeometry(focal_px=1.6 * 640, k1=k1))
+        s = render_marks(spec, with_crlb=False)
+        r = [r for r in measure_image(s.image.astype(float)) if r.found][0]
+        false += bool(r.loop.effects) or r.unexplained_structure
+        z.append(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad) / r.angle_u_rad)
+        base.append(b)
+    return np.array(z), np.array(base), false
+
+
+def test_textured_horizontal_marks_get_no_false_effects():
+    """Machining streaks crossing a horizontal mark at a shallow angle correlate its centres
+    over tens of px; measured on replicas of the band, that correlation is in the fit and in
+    u, not a periodic_wiggle or unexplained structure (before: 6 of 6 flagged here)."""
+    z, _, false = _session_like_marks(6, 11, horizontal_only=True)
+    assert false <= 1
+    assert np.all(np.abs(z) < 4)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="measured over these 200 marks: RMS 1.04 (0 deg), 0.99 "
+                   "(90 deg), 3 of 200 flagged (target <= 2)")
+def test_session_images_normalised_errors_and_false_effects():
+    """Issue 9 item 3 on the images of `align synth session` (200 marks)."""
+    n = 200
+    z, base, false = _session_like_marks(n, 5)
+    for b in (0.0, 90.0):
+        zb = z[base == b]
+        rms = float(np.sqrt(np.mean(zb**2)))
+        print(f"{b:.0f} deg: normalised-error RMS {rms:.2f} over {zb.size}")
+        assert abs(rms - 1) < 3.3 / np.sqrt(2 * zb.size)
+    print(f"false effects or unexplained structure: {false} of {n}")
+    assert false <= 0.01 * n
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k1,seed", [(-0.3, 7), (0.2, 8)])
+def test_undeclared_distortion_on_session_images_normalised_errors(k1, seed):
+    """Issue 9 item 4: one camera with undeclared radial distortion (session-like textured
+    images, one mark each): the loop's corrected angles have normalised errors ~N(0, 1)."""
+    n = 40
+    z, _, _ = _session_like_marks(n, seed, k1=k1)
+    rms = float(np.sqrt(np.mean(z**2)))
+    print(f"k1 {k1}: normalised-error RMS {rms:.2f}, max |z| {np.max(np.abs(z)):.2f}")
+    assert abs(rms - 1) < 3.3 / np.sqrt(2 * n)
+    assert np.max(np.abs(z)) < 4.5

@@ -1,0 +1,200 @@
+"""How the background's texture makes the centres' errors correlated along a mark.
+
+The centre of segment k is, to first order, a fixed linear functional of its pixels' noise:
+delta_k - truth = c_k . n. Per-pixel white noise makes those errors independent with the
+Fisher variances; surface texture (machining streaks, grain) does not: a streak crossing the
+mark at a shallow angle moves many consecutive centres the same way, and a straight-line fit
+that assumes independent centres understates the angle's uncertainty while the residual
+tests see "structure" that is only texture.
+
+Measuring it (hand-written: no library models an estimator's noise covariance from image
+replicas). The same functional c_k is applied to *replicas* of the band: the same pixels
+shifted by a whole number of pixels along the mark's normal, off the mark, on both sides.
+There the image holds only background (texture + noise) with the same pixel phase, so the
+replica "centres" are draws of exactly the error the texture puts on the real centres.
+Their autocovariance along the mark, in units of the white-noise variance, gives the
+centres' correlation; it is used only when the replicas show it (a portmanteau test), so a
+clean image keeps its independent centres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+ALPHA = 1e-3
+"""Level of each test that the replicas show texture (one false use per 1000 clean marks)."""
+
+
+@dataclass(frozen=True)
+class TextureModel:
+    """What the background's texture does to the centres (from replicas of the band).
+
+    ``acf``: autocovariance of the centres' errors per lag [segments], in units of their
+    Fisher variance (acf[0] >= 1 the variance factor), tapered; None: independent.
+    ``coupling_px2``: the centre error per unit of the ring's slope/contrast regressor that
+    texture alone produces [px^2] (taken out of the centres as a control variate), with
+    standard uncertainty ``coupling_u_px2``; ``replicas``: how many replica series were
+    used.
+    """
+
+    acf: np.ndarray | None
+    coupling_px2: float
+    coupling_u_px2: float
+    replicas: int
+
+
+def _replica(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, dx: int, dy: int,
+             full_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel values shifted by (dx, dy) and which of them are usable."""
+    h, w = image.shape
+    yy, xx = ys + dy, xs + dx
+    inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+    v = np.zeros(ys.size)
+    v[inside] = image[yy[inside], xx[inside]]
+    return v, inside & (v < full_scale) & (v > 0)
+
+
+def _demean(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Remove the mean over the valid entries, zero elsewhere."""
+    out = np.where(valid, z, 0.0)
+    out[valid] -= out[valid].mean()
+    return out
+
+
+def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndarray],
+                  nseg: int, wgt: np.ndarray, J: Sequence[np.ndarray], cov: np.ndarray,
+                  ok: np.ndarray, ring: tuple[np.ndarray, ...], contrast: np.ndarray,
+                  normal: np.ndarray, shifts_px: Sequence[float],
+                  noise_var: tuple[float, float], full_scale: float) -> TextureModel | None:
+    """Measure the texture's effect on the centres from replicas of the band.
+
+    Parameters
+    ----------
+    band : (rows, columns, segment) of the band's pixels
+    wgt, J : per-pixel weights and the k design columns of the segment fit (centre first)
+    cov : (nseg, k, k) inverse normal matrices of the segments; ``ok`` valid segments
+    ring : (rows, columns, e, segment) of the illumination ring's pixels
+    contrast : (nseg,) the segments' contrast [DN] (the regressor is slope / contrast)
+    normal : unit normal of the mark (x, y)
+    shifts_px : distances along the normal at which replicas are taken (both signs)
+    noise_var : (v0, v1) of the white pixel-noise model var = v0 + v1 * value [DN^2]
+
+    Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
+    None when the replicas are consistent with independent centres of the Fisher variance.
+    """
+    from imaging.profile import ring_slope  # the ring's slope, as for the real mark
+
+    ys, xs, seg = band
+    v0, v1 = noise_var
+    k = len(J)
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+
+    def bc(x: np.ndarray) -> np.ndarray:
+        return np.bincount(seg, x, minlength=nseg)
+
+    wj = [wgt * j for j in J]
+    # White-noise variance of a replica's centre, (N^-1 J^T W V W J N^-1)_00, with the
+    # pixel variance V taken per segment at the replica's mean level (one sum for all).
+    M0 = np.empty((nseg, k, k))
+    for i in range(k):
+        for j in range(i, k):
+            M0[:, i, j] = M0[:, j, i] = bc(wj[i] * wj[j])
+    w0 = np.einsum("ni,nij,nj->n", c0, M0, c0)
+    npx = np.maximum(bc(np.ones(ys.size)), 1)
+    ring_n = np.bincount(ring[3], minlength=nseg)
+    reps = []
+    for dist in shifts_px:
+        for sign in (1.0, -1.0):
+            dx, dy = (int(round(sign * dist * c)) for c in normal)
+            v, good = _replica(image, ys, xs, dx, dy, full_scale)
+            valid = ok & (bc((~good).astype(float)) == 0)
+            rv, rgood = _replica(image, ring[0], ring[1], dx, dy, full_scale)
+            valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
+            if valid.sum() < 20:
+                continue
+            # The centre functional applied to the replica: (N^-1 J^T W v)_0 per segment,
+            # and its white-noise variance (N^-1 J^T W V W J N^-1)_00.
+            d = np.einsum("ni,ni->n", c0, np.stack([bc(x * v) for x in wj], axis=1))
+            wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
+            valid &= np.isfinite(d) & (wv > 0)
+            s = np.sqrt(np.where(valid, wv, 1.0))
+            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale)
+            # The centres' series keeps its mean: the texture's slow undulations are what moves a
+            # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
+            # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
+            # regressor is centred, as the loop's illumination column is.
+            reps.append((np.where(valid, d / s, 0.0), _demean(x / contrast / s, valid), s,
+                         valid))
+    if not reps:
+        return None
+    # Dust, a scratch or another mark in a replica: robust outlier cut per replica, and a
+    # replica far noisier than the others (it crosses something bright) left out.
+    clean = []
+    for z, x, _, valid in reps:
+        for y in (z, x):  # the ring's slope too: dust beside the band moves both
+            mad = 1.4826 * np.median(np.abs(y[valid] - np.median(y[valid])))
+            valid = valid & (np.abs(y - np.median(y[valid])) <= 6 * max(mad, 1e-12))
+        clean.append((np.where(valid, z, 0.0), np.where(valid, x, 0.0), valid))
+    var0 = np.array([np.sum(z**2) / v.sum() for z, _, v in clean])
+    keep = var0 <= 2.0 * np.median(var0)
+    clean = [c for c, kp in zip(clean, keep, strict=True) if kp]
+    z_all = np.concatenate([z for z, _, _ in clean])
+    x_all = np.concatenate([x for _, x, _ in clean])
+    n_tot = float(sum(v.sum() for _, _, v in clean))
+    # Coupling of the centre error to the regressor (weighted regression through 0).
+    sxx = float(x_all @ x_all)
+    beta = float(z_all @ x_all) / sxx if sxx > 0 else 0.0
+    res = z_all - beta * x_all
+    beta_u = float(np.sqrt(res @ res / max(n_tot - 1, 1) / sxx)) if sxx > 0 else np.inf
+    # Applied whatever its significance: a control variate estimated from ~8 times the
+    # mark's own data adds ~1/8 of its noise, and leaves no texture coupling for the loop's
+    # correlation test to mistake for an illumination effect.
+    # Biased autocovariance (sum over pairs / number of points) of each zero-filled series,
+    # after the coupling is taken out: a positive semi-definite sequence, so the covariance
+    # matrix built from it is one too.
+    nfft = 1 << int(np.ceil(np.log2(2 * nseg)))
+    acf = np.zeros(nseg)
+    for z, x, valid in clean:
+        f = np.fft.rfft(np.where(valid, z - beta * x, 0.0), nfft)
+        acf += np.fft.irfft(f * f.conj(), nfft)[:nseg]
+    acf /= n_tot
+    lags = int(min(20, max(2, nseg // 5)))
+    rho = acf[1:lags + 1] / acf[0]
+    # Portmanteau on the pooled replicas, and their variance against chi2(n).
+    p_corr = float(stats.chi2.sf(n_tot * np.sum(rho**2), lags))
+    p_var = float(stats.chi2.sf(acf[0] * n_tot, n_tot))
+    if min(p_corr, p_var) >= ALPHA / 3:
+        acf_out = None
+    else:
+        # Parzen lag window (non-negative spectral window, so the tapered sequence stays
+        # positive semi-definite) over the mark's length: noisy long-lag estimates fade out.
+        span = float(max(4, nseg))
+        t = np.arange(nseg) / span
+        taper = np.where(t <= 0.5, 1 - 6 * t**2 + 6 * t**3,
+                         np.where(t <= 1, 2 * (1 - t) ** 3, 0.0))
+        acf_out = acf * taper
+        # Texture adds to the white noise, never takes from it (more diagonal stays PSD).
+        acf_out[0] = max(acf_out[0], 1.0)
+    # The coupling in px^2: z and x were both divided by the same white sigma per segment.
+    return TextureModel(acf_out, beta, beta_u, len(clean))
+
+
+def correlation_cholesky(acf: np.ndarray, index: np.ndarray) -> tuple[float, np.ndarray]:
+    """Scale of the centres' sigma and the Cholesky factor of their correlation matrix.
+
+    ``index``: each used centre's segment number. Returns (factor on sigma, lower L with
+    L L^T = R, R_ij = acf[|i - j|] / acf[0]).
+    """
+    lag = np.abs(index[:, None] - index[None, :])
+    R = acf[np.minimum(lag, len(acf) - 1)] / acf[0]
+    R[lag >= len(acf)] = 0.0
+    try:
+        L = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError:
+        # Rounding can leave a tapered estimate barely indefinite: a touch of white noise.
+        L = np.linalg.cholesky(R + 1e-6 * np.eye(len(R)))
+    return float(np.sqrt(acf[0])), L
