@@ -91,7 +91,14 @@ def extract(ell: Ellipsoid, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     """
     L = np.linalg.cholesky(ell.H)
     A = L.T
-    M = np.linalg.inv(A) * np.asarray(signs, float)[None, :]
+    return triad_from_upper(np.linalg.inv(A) * np.asarray(signs, float)[None, :], ell.centre)
+
+
+def triad_from_upper(M: np.ndarray, offset: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact (k, beta, b) of K R = M (upper triangular, R of eq. (5) solved row by row, no
+    small-angle forms) and the bias b with K R b = ``offset`` (the ellipsoid's centre, or a
+    known-pose fit's output offset)."""
     kx = M[0, 0]
     bz = np.arcsin(M[0, 1] / kx)
     by = np.arcsin(M[0, 2] / (kx * np.cos(bz)))
@@ -100,5 +107,5 @@ def extract(ell: Ellipsoid, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     kz = M[2, 2] / (np.cos(bx) * np.cos(by))
     k = np.array([kx, ky, kz])
     beta = np.array([bx, by, bz])
-    b = np.linalg.solve(k[:, None] * r_matrix(beta), ell.centre)
+    b = np.linalg.solve(k[:, None] * r_matrix(beta), offset)
     return k, beta, b

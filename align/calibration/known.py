@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import rq
 
-from align.calibration.ellipsoid import r_matrix
+from align.calibration.ellipsoid import triad_from_upper
 from align.calibration.model import Poses, TriadModel
 from align.errors import InputError
 from align.loop import StageFit, Term
@@ -60,7 +60,12 @@ def recognise(u: np.ndarray, tol_deg: float = RECOGNISE_DEG) -> list[str | None]
     half = (hi - lo) / 2
     if np.any(half <= 0):
         return [None] * len(u)
-    v = (u - (hi + lo) / 2) / half
+    return _nearest_faces((u - (hi + lo) / 2) / half, tol_deg)
+
+
+def _nearest_faces(v: np.ndarray, tol_deg: float) -> list[str | None]:
+    """Per row of v (N, 3): the face '+x' ... '-z' whose axis is within ``tol_deg`` of the
+    row's direction, else None."""
     v = v / np.linalg.norm(v, axis=1, keepdims=True)
     out: list[str | None] = []
     for row in v:
@@ -78,14 +83,7 @@ calibrated direction is within this of an axis: hand-placed poses near an axis a
 def recognise_directions(a: np.ndarray, tol_deg: float = RECOGNISE_FIT_DEG
                          ) -> list[str | None]:
     """Faces of calibrated specific forces a (N, 3): within ``tol_deg`` of +-axis i."""
-    v = np.asarray(a, float)
-    v = v / np.linalg.norm(v, axis=1, keepdims=True)
-    out: list[str | None] = []
-    for row in v:
-        i = int(np.argmax(np.abs(row)))
-        ok = np.abs(row[i]) >= np.cos(np.deg2rad(tol_deg))
-        out.append(("+" if row[i] > 0 else "-") + "xyz"[i] if ok else None)
-    return out
+    return _nearest_faces(np.asarray(a, float), tol_deg)
 
 
 def labelled(poses: Poses) -> bool:
@@ -148,15 +146,7 @@ def _triad(theta: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray
     # Signs: diag(T) takes the scale-factor signs; C absorbs the flips (C stays orthogonal).
     s = np.sign(np.diag(T)) * signs
     T, C = T * s[None, :], C * s[:, None]
-    kx = T[0, 0]
-    bz = np.arcsin(T[0, 1] / kx)
-    by = np.arcsin(T[0, 2] / (kx * np.cos(bz)))
-    ky = T[1, 1] / np.cos(bz)
-    bx = np.arcsin(T[1, 2] / (ky * np.cos(by)))
-    kz = T[2, 2] / (np.cos(bx) * np.cos(by))
-    k = np.array([kx, ky, kz])
-    beta = np.array([bx, by, bz])
-    b = np.linalg.solve(k[:, None] * r_matrix(beta), o)
+    k, beta, b = triad_from_upper(T, o)
     return np.concatenate([k, beta, b]), C
 
 

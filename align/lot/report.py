@@ -9,11 +9,10 @@ results must be reported in a few seconds.
 
 from __future__ import annotations
 
-import base64
-import html
 import math
 from pathlib import Path
 
+from align.html import esc, png_img, table
 from align.lot.read import ANGLE_NAMES
 from align.lot.stats import FALSE_RATE, GUARD, Lot
 from axisbase.units import ARCSEC
@@ -28,23 +27,10 @@ UNIT_ROWS_MAX = 20000
 """Units listed one by one in the page (the CSV and JSON always list them all)."""
 
 
-def _e(text: object) -> str:
-    return html.escape(str(text))
-
-
 def _img(fig, alt: str) -> str:
     from align.lot.figures import png
 
-    data = base64.b64encode(png(fig)).decode("ascii")
-    return f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">'
-
-
-def _table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
-    h = "".join(f'<th class="{"l" if i < left else ""}">{_e(c)}</th>'
-                for i, c in enumerate(head))
-    body = "".join("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(c)}</td>'
-                                    for i, c in enumerate(r)) + "</tr>" for r in rows)
-    return f"<table><tr>{h}</tr>{body}</table>"
+    return png_img(png(fig), alt)
 
 
 def _a(v: float | None, fmt: str = "{:+.2f}") -> str:
@@ -59,9 +45,9 @@ def _provenance(doc: dict) -> str:
     from axisbase.provenance import Provenance
 
     p = Provenance.from_dict(doc)
-    return (f"<p>{_e(p.tool)} {_e(p.tool_version)}, {_e(doc['format'])} format version "
-            f"{doc['format_version']}, written {_e(p.created_utc)} (UTC) by "
-            f"<code>{_e(' '.join(p.command[:12]))}"
+    return (f"<p>{esc(p.tool)} {esc(p.tool_version)}, {esc(doc['format'])} format version "
+            f"{doc['format_version']}, written {esc(p.created_utc)} (UTC) by "
+            f"<code>{esc(' '.join(p.command[:12]))}"
             f"{' …' if len(p.command) > 12 else ''}</code>; {len(p.inputs)} input files "
             "(their SHA-256 are in the JSON's inputs).</p>")
 
@@ -85,7 +71,7 @@ def _summary(lot: Lot) -> str:
                   "—" if cap is None else f"{_n(cap.cpk)} ± {_n(cap.cpk_u)}",
                   "—" if cap is None else _n(cap.pp), "—" if cap is None else _n(cap.ppk)]
         rows.append(r)
-    out = _table(head, rows)
+    out = table(head, rows)
     out += ("<p>Control limits x̄ ± 2.66·MR̄ from the average moving range of consecutive "
             "units (individuals chart): a drift or a step inflates them less than the overall "
             "standard deviation would. 'By chance': the number expected outside them in a "
@@ -107,7 +93,7 @@ def _summary(lot: Lot) -> str:
     big = [f"{n} ({r:.2f})" for n, r in ratios if r > 1 / 3]
     if big:
         out += ("<p>The units' own uncertainty is a large part of the lot's spread "
-                "(median u / σ_w above 1/3) for " + _e(", ".join(big))
+                "(median u / σ_w above 1/3) for " + esc(", ".join(big))
                 + ": part of what the charts show is measurement, not process.</p>")
     return out
 
@@ -122,7 +108,7 @@ def _flagged(lot: Lot) -> str:
     for k in sorted(flagged, key=lambda k: idx.get(k, -1)):
         u = lot.units[k]
         rows.append([u.label, idx.get(k, "—"), u.file, "; ".join(flagged[k])])
-    return _table(["unit", "run index", "file", "why"], rows, left=4)
+    return table(["unit", "run index", "file", "why"], rows, left=4)
 
 
 def _metadata(lot: Lot) -> str:
@@ -134,18 +120,18 @@ def _metadata(lot: Lot) -> str:
                      "compared" + ("" if lot.metadata_skipped else
                                    " (the results carry no [metadata])") + ".</p>")
     for m in lot.metadata:
-        parts.append(f"<h3>{_e(m.key)}" + (" (by day)" if m.by_day else "") + "</h3>")
+        parts.append(f"<h3>{esc(m.key)}" + (" (by day)" if m.by_day else "") + "</h3>")
         head = ["value", "n"] + [f"{n} mean [″]" for n in ANGLE_NAMES]
         rows = [[g.value, g.n] + [_a(v) for v in g.mean] for g in m.groups]
         rows.append(["Kruskal–Wallis p", ""] + [
             "—" if p is None else (f"{p:.2g} DIFFERS" if d else f"{p:.2g}")
             for p, d in zip(m.p_values, m.differs, strict=True)])
-        parts.append(_table(head, rows))
+        parts.append(table(head, rows))
         parts.append(f"<p>A difference is reported when p &lt; {m.threshold:.2g} (α = 0.01 "
                      "shared by every angle and key compared).</p>")
         parts.append(_img(fig_metadata(m, lot), f"angles against {m.key}"))
     if lot.metadata_skipped:
-        parts.append("<p>Not compared: " + "; ".join(f"{_e(k)} ({_e(w)})"
+        parts.append("<p>Not compared: " + "; ".join(f"{esc(k)} ({esc(w)})"
                                                      for k, w in lot.metadata_skipped)
                      + ".</p>")
     return "".join(parts)
@@ -167,7 +153,7 @@ def _units(lot: Lot) -> str:
                      "; ".join(flagged.get(k, [])) or "—"])
     more = len(lot.units) - UNIT_ROWS_MAX
     return (f"<details><summary>All {len(lot.units)} units (E ± u per angle)</summary>"
-            + _table(head, rows) + (f"<p>… and {more} more (in the CSV and the JSON).</p>"
+            + table(head, rows) + (f"<p>… and {more} more (in the CSV and the JSON).</p>"
                                     if more > 0 else "") + "</details>")
 
 
@@ -183,7 +169,7 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
              f"<h1>Lot report — {n_units} units</h1>"]
     if doc["warnings"]:
         parts.append('<div class="warn bad"><h2>Warnings</h2><ul>'
-                     + "".join(f"<li>{_e(w)}</li>" for w in doc["warnings"]) + "</ul></div>")
+                     + "".join(f"<li>{esc(w)}</li>" for w in doc["warnings"]) + "</ul></div>")
 
     def verdict(good: bool | None, yes: str, no: str) -> str:
         if good is None:
@@ -193,16 +179,16 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
     parts.append(
         f"<p>{n_units + len(lot.rejected)} files: {n_units} session results, "
         f"{len(lot.rejected)} not read; {n_stats} units ok and in the statistics, "
-        f"{len(lot.not_ok)} not ok. Run order: {_e(lot.run_order_note)}. "
+        f"{len(lot.not_ok)} not ok. Run order: {esc(lot.run_order_note)}. "
         + verdict(lot.ok, "Every result read and ok.", "NOT every result read and ok.") + " "
         + (verdict(lot.in_control, "In control.", "NOT in control.") if n_stats else "") + " "
         + verdict(lot.within_tolerance, "Every unit within tolerance.",
                   "NOT every unit within tolerance.") + "</p>" + _provenance(doc))
     if lot.rejected:
-        parts.append("<h2>Files not read</h2>" + _table(
+        parts.append("<h2>Files not read</h2>" + table(
             ["file", "why"], [[r.file, r.reason] for r in lot.rejected], left=2))
     if lot.not_ok:
-        parts.append("<h2>Units not ok (not in the statistics)</h2>" + _table(
+        parts.append("<h2>Units not ok (not in the statistics)</h2>" + table(
             ["unit", "file", "fused", "failed stages"],
             [[u.label, u.file, "yes" if u.fused else "no",
               "; ".join(f"{s}: {m}" for s, m in u.failed_stages) or "—"]
@@ -215,7 +201,7 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
                      + "<p>Black: mean; orange dashed: control limits; red: tolerance.</p>")
         parts.append("<h2>Control charts (individuals and moving range, run order)</h2>")
         for a in lot.angles:
-            parts.append(f"<h3>{_e(a.name)}</h3>")
+            parts.append(f"<h3>{esc(a.name)}</h3>")
             if a.chart is None:
                 parts.append("<p>Fewer than 2 units: no chart.</p>")
                 continue

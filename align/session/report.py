@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import base64
-import html
 from pathlib import Path
 
 import numpy as np
 
+from align.html import esc, png_img, table
 from align.loop import LoopReport, LoopSummary
 from align.session.run import SessionResult
 from axisbase.units import ARCSEC
@@ -21,20 +20,7 @@ text-align:right}th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00;fo
 def _img(fig) -> str:
     from align.plots import png_bytes
 
-    data = base64.b64encode(png_bytes(fig)).decode("ascii")
-    return f'<img alt="figure" src="data:image/png;base64,{data}">'
-
-
-def _e(text: object) -> str:
-    return html.escape(str(text))
-
-
-def _table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
-    h = "".join(f'<th class="{"l" if i < left else ""}">{_e(c)}</th>'
-                for i, c in enumerate(head))
-    body = "".join("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{_e(c)}</td>'
-                                    for i, c in enumerate(r)) + "</tr>" for r in rows)
-    return f"<table><tr>{h}</tr>{body}</table>"
+    return png_img(png_bytes(fig))
 
 
 def _loop(loop: LoopReport | LoopSummary | None, scale: float = 1.0, unit: str = "") -> str:
@@ -49,10 +35,10 @@ def _loop(loop: LoopReport | LoopSummary | None, scale: float = 1.0, unit: str =
         rows.append([f"+ {e.name}", f"{e.estimate * scale:.4g} ± {e.u * scale:.2g} "
                      f"{unit or e.unit}", f"{e.p_value:.2g}", f"{e.rms_after:.4g}", ""])
     rows[-1][4] = chi(s.chi2_dof_after)
-    out = _table(["model", "effect estimate", "p", "residual RMS", "chi2/dof"], rows)
+    out = table(["model", "effect estimate", "p", "residual RMS", "chi2/dof"], rows)
     if s.unexplained_structure:
-        out += (f'<p class="bad">Unexplained structure remains: {_e(s.structure_test)} '
-                f"(p = {s.structure_p:.2g}) {_e(s.structure_detail)}</p>")
+        out += (f'<p class="bad">Unexplained structure remains: {esc(s.structure_test)} '
+                f"(p = {s.structure_p:.2g}) {esc(s.structure_detail)}</p>")
     else:
         out += '<p class="ok">No structure left in the residual.</p>'
     return out
@@ -65,12 +51,12 @@ def _provenance(doc: dict | None) -> str:
 
     p = Provenance.from_dict(doc)
     rows = [[i.path, i.sha256 or "unreadable"] for i in p.inputs]
-    return (f"<p>{_e(p.tool)} {_e(p.tool_version)}, {_e(doc['format'])} format version "
-            f"{doc['format_version']}, written {_e(p.created_utc)} (UTC) by "
-            f"<code>{_e(' '.join(p.command))}</code>; settings "
-            f"<code>{_e(dict(p.settings))}</code>.</p>"
+    return (f"<p>{esc(p.tool)} {esc(p.tool_version)}, {esc(doc['format'])} format version "
+            f"{doc['format_version']}, written {esc(p.created_utc)} (UTC) by "
+            f"<code>{esc(' '.join(p.command))}</code>; settings "
+            f"<code>{esc(dict(p.settings))}</code>.</p>"
             "<details><summary>Input files (SHA-256)</summary>"
-            + _table(["file", "SHA-256"], rows, left=2) + "</details>")
+            + table(["file", "SHA-256"], rows, left=2) + "</details>")
 
 
 def write_report(res: SessionResult, path: str | Path, force: bool = False,
@@ -84,16 +70,16 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
     s = res.session
     warnings = doc["warnings"] if doc else session_warnings(res)
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>Alignment report "
-             f"{_e(s.name)}</title><style>{CSS}</style></head><body>",
-             f"<h1>Alignment report — {_e(s.name)}</h1>"]
+             f"{esc(s.name)}</title><style>{CSS}</style></head><body>",
+             f"<h1>Alignment report — {esc(s.name)}</h1>"]
     if warnings:
         parts.append('<div class="bad"><h2>Warnings</h2><ul>'
-                     + "".join(f"<li>{_e(w)}</li>" for w in warnings) + "</ul></div>")
-    parts.append(f"<p>Session folder {_e(s.folder)}; result "
+                     + "".join(f"<li>{esc(w)}</li>" for w in warnings) + "</ul></div>")
+    parts.append(f"<p>Session folder {esc(s.folder)}; result "
                  + ('<span class="ok">ok</span>' if res.ok else
                     '<span class="bad">NOT ok</span>') + ".</p>" + _provenance(doc))
     if res.errors:
-        parts.append("<h2>Stage failures</h2>" + _table(
+        parts.append("<h2>Stage failures</h2>" + table(
             ["stage", "message"], [[e.stage, e.message] for e in res.errors], left=2))
     f = res.fusion
     parts.append("<h2>Misalignment matrix E (platform frame)</h2>")
@@ -108,16 +94,16 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
                      "platform axis j; u is the standard uncertainty"
                      + (f", inflated ×{f.inflation:.2f} for the inconsistency that remains"
                         if f.inflation > 1 else "") + ".</p>")
-        parts.append(_table(["", "X", "Y", "Z"], rows))
+        parts.append(table(["", "X", "Y", "Z"], rows))
         verdict = ('<span class="ok">consistent</span>' if f.consistent
                    else '<span class="bad">NOT consistent</span>')
-        parts.append(f"<p>Sources: {_e(', '.join(f.sources))}. chi2 = {f.chi2:.2f} for "
+        parts.append(f"<p>Sources: {esc(', '.join(f.sources))}. chi2 = {f.chi2:.2f} for "
                      f"{f.dof} degrees of freedom (p = {f.p_value:.3g}): the instruments are "
                      f"{verdict} with each other.</p>")
         parts.append("<h3>Fusion loop (nuisances added when the data call for them)</h3>"
                      + _loop(f.loop, 1 / ARCSEC, "″"))
         parts.append("<h3>Normalised residual per observation</h3>" + _img(fig_fusion(f.rows)))
-        parts.append(_table(
+        parts.append(table(
             ["source", "observation", "observed", "fitted", "u", "normalised"],
             [[r.source, r.label] + ([f"{r.value / ARCSEC:+.3f}″", f"{r.predicted / ARCSEC:+.3f}″",
                                      f"{r.u / ARCSEC:.3f}″"] if r.unit == "rad" else
@@ -129,7 +115,7 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
         parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
         from axisbase.table import OUTPUT_UNITS
 
-        parts.append(_table(["axis", f"k [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
+        parts.append(table(["axis", f"k [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
                              "bias [µg]"], [
             [ax, f"{m.k[i]:.7f} ± {m.u_of(f'k_{ax}'):.2g}",
              f"{m.beta[i] * 1e6:.2f} ± {m.u_of(f'beta_{ax}') * 1e6:.2g}",
@@ -140,16 +126,15 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
             parts.append("<h3>Δg per pose</h3>"
                          + _img(fig_calibration(c, res.calibration_poses, None)))
     if res.gonio is not None:
-        from goniometry import kept_table
 
         g, fa = res.gonio, res.gonio.angles
         faces = list(s.goniometer.faces)
         parts.append("<h2>Goniometer</h2>")
         parts.append(f"<p>{fa.revolutions} revolutions used; "
                      f"{np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count. "
-                     + " ".join(_e(n) for n in g.notes) + "</p>")
+                     + " ".join(esc(n) for n in g.notes) + "</p>")
         n = len(faces)
-        parts.append(_table(["faces", "angle [°]", "u [″]", "deviation from nominal [″]"], [
+        parts.append(table(["faces", "angle [°]", "u [″]", "deviation from nominal [″]"], [
             [f"{faces[i]} → {faces[(i + 1) % n]}", f"{np.rad2deg(fa.angles_rad[i]):.7f}",
              f"{fa.u_rad[i] / ARCSEC:.3f}",
              f"{(fa.angles_rad[i] - s.goniometer.nominal_rad[i]) / ARCSEC:+.3f}"]
@@ -158,10 +143,10 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
             parts.append(_loop(g.loop))
         parts.append(_img(fig_gonio(kept_table(g.summary)[0], fa, faces)))
         for reason, count in g.summary.exclusions.counts.items():
-            parts.append(f"<p>{count} × {_e(reason)}</p>")
+            parts.append(f"<p>{count} × {esc(reason)}</p>")
     if res.marks:
         parts.append("<h2>Scribe marks</h2>")
-        parts.append(_table(["image", "housing", "view", "angle [°]", "u [″]", "effects"], [
+        parts.append(table(["image", "housing", "view", "angle [°]", "u [″]", "effects"], [
             [im.file.name, im.housing, im.view, f"{np.rad2deg(r.angle_rad):+.6f}",
              f"{r.angle_u_rad / ARCSEC:.2f}", ", ".join(e.name for e in r.loop.effects)
              or "none"] for im, r in res.marks], left=3))
@@ -172,7 +157,7 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
                 image = read_image(im.file)
             except ImageInputError:
                 image = None
-            parts.append(f"<h3>{_e(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
+            parts.append(f"<h3>{esc(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
                          + _loop(r.loop) + _img(fig_mark(r, image)))
     parts.append("</body></html>")
     return write_atomic(path, "\n".join(parts), force)
