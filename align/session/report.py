@@ -126,6 +126,7 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
             parts.append("<h3>Δg per pose</h3>"
                          + _img(fig_calibration(c, res.calibration_poses, None)))
     if res.gonio is not None:
+        from goniometry import kept_table
 
         g, fa = res.gonio, res.gonio.angles
         faces = list(s.goniometer.faces)
