@@ -22,6 +22,7 @@ from align.calibration import TriadModel, model_from_dict, model_to_dict, r_matr
 from align.contract import check, document
 from align.errors import InputError
 from align.fusion import E_NAMES, axes_from, e_matrix
+from axisbase.provenance import Provenance
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,7 @@ class PlatformCalibration:
                 "axes": self.axes.tolist()}
 
     def document(self, units: str | None, settings: dict, inputs,
-                 prov: dict | None = None) -> dict:
+                 prov: Provenance | None = None) -> dict:
         """The file ``align run --calibration`` writes (format, version, provenance)."""
         return document("platform-calibration", self.to_dict(units), settings, inputs, prov)
 

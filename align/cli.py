@@ -706,7 +706,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             print("    " + "xyz"[i] + ": " + "  ".join(
                 "0".rjust(8) if i == j else f"{err[i, j] / ARCSEC:+8.3f}" for j in range(3)))
         print(f"  normalised errors (error / u): RMS {z_rms:.2f}")
-    print(f"\nreport: {report}")
+    print()
     for k, v in out["outputs"].items():
         print(f"{k}: {v}")
     return 0 if out["ok"] else 2

@@ -14,20 +14,22 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from axisbase.provenance import check_format, envelope
+from axisbase.provenance import Provenance, check_format, envelope
 
 FORMATS = {
-    "marks": 2, "camera": 2, "calibration": 2, "tilt": 2, "gonio": 2, "session": 2,
-    "platform-calibration": 2,
+    "marks": 3, "camera": 3, "calibration": 3, "tilt": 3, "gonio": 3, "session": 3,
+    "platform-calibration": 3,
 }
 """kind -> the version this tool writes."""
 
 READABLE = {
-    "calibration": (1, 2),            # 'align tilt --calibration'
-    "platform-calibration": (1, 2),   # 'align apply'
-    "session": (1, 2),                # 'align apply' on a result JSON
+    "calibration": (1, 2, 3),            # 'align tilt --calibration'
+    "platform-calibration": (1, 2, 3),   # 'align apply'
+    "session": (1, 2, 3),                # 'align apply' on a result JSON
 }
-"""kind -> versions this tool reads back."""
+"""kind -> versions this tool reads back. Version 3 moved the provenance from a nested
+``provenance`` block to the top level (``tool_version``, ``created_utc``, ``command``,
+``inputs``); nothing a reader uses changed."""
 
 
 def format_name(kind: str) -> str:
@@ -35,7 +37,7 @@ def format_name(kind: str) -> str:
 
 
 def document(kind: str, body: Mapping[str, Any], settings: Mapping[str, Any] | None = None,
-             inputs: Iterable[str | Path] = (), prov: dict | None = None) -> dict:
+             inputs: Iterable[str | Path] = (), prov: Provenance | None = None) -> dict:
     """``body`` wrapped with format, format_version and provenance (tool, version, UTC time,
     command line, settings, SHA-256 of every input; ``prov`` reuses one already made)."""
     return envelope(format_name(kind), FORMATS[kind], body, settings, inputs, prov)
@@ -48,6 +50,19 @@ def check(d: Mapping[str, Any], kind: str, where: str) -> int:
 
 
 def schema(kind: str) -> dict:
-    """The JSON Schema of ``kind`` (package data ``align/schemas/<kind>.schema.json``)."""
+    """The JSON Schema of ``kind`` (package data ``align/schemas/<kind>.schema.json``). Every
+    one refers to ``envelope.schema.json`` (format and provenance keys) by ``$ref``."""
     text = resources.files("align").joinpath("schemas", f"{kind}.schema.json").read_text()
     return json.loads(text)
+
+
+def validate(d: Mapping[str, Any], kind: str) -> None:
+    """Validate ``d`` against the shipped schema of ``kind`` (with the envelope it refers to);
+    raises ``jsonschema.ValidationError``. Needs the ``jsonschema`` package (the ``test``
+    extra), which the tool itself does not."""
+    import jsonschema
+    from referencing import Registry, Resource
+
+    env = schema("envelope")
+    registry = Registry().with_resource(env["$id"], Resource.from_contents(env))
+    jsonschema.Draft202012Validator(schema(kind), registry=registry).validate(d)

@@ -356,7 +356,7 @@ def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = N
     angles in degrees, uncertainties in arc-seconds at this edge."""
     fa, summary, loop = run.angles, run.summary, run.loop
     arcsec = np.rad2deg(1.0) * 3600
-    effects = [e.to_json() for e in loop.effects] if loop is not None else []
+    effects = [e.to_dict() for e in loop.effects] if loop is not None else []
     if run.direction is not None:
         effects.append(direction_effect(run.direction, faces))
     js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),

@@ -272,7 +272,7 @@ class MarkResult:
             "polarity": "dark" if self.dark else "bright", "points": self.n_points,
             "rejected_points": self.n_rejected,
             "angle_before_loop_deg": float(np.rad2deg(self.angle_before_rad)),
-            "effects": [e.to_json() for e in self.loop.effects] if self.loop else [],
+            "effects": [e.to_dict() for e in self.loop.effects] if self.loop else [],
             "unexplained_structure": self.unexplained_structure,
             "uncertainty_inflation": self.uncertainty_inflation,
         })

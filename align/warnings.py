@@ -9,16 +9,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from align.loop import LoopReport
+from align.loop import LoopReport, LoopSummary
 
 
-def loop_warnings(what: str, loop: LoopReport | None) -> list[str]:
-    """Unexplained structure left by a residual loop."""
+def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
+    """Unexplained structure left by a residual loop (run now, or loaded)."""
     if loop is None or not loop.unexplained_structure:
         return []
-    w = loop.structure_after.worst
-    return [f"{what}: unexplained structure remains in the residual ({w.name}, p = "
-            f"{w.p_value:.2g}): the model does not describe the data fully"]
+    s = loop.summary()
+    return [f"{what}: unexplained structure remains in the residual ({s.structure_test}, "
+            f"p = {s.structure_p:.2g}): the model does not describe the data fully"]
 
 
 def mark_warnings(results: Sequence) -> list[str]:

@@ -21,7 +21,7 @@ _LAZY = {
     "dumps": "axisbase.output", "write_atomic": "axisbase.output",
     "write_json": "axisbase.output",
     "envelope": "axisbase.provenance", "provenance": "axisbase.provenance",
-    "check_format": "axisbase.provenance",
+    "check_format": "axisbase.provenance", "Provenance": "axisbase.provenance",
 }
 
 __all__ = [

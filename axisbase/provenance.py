@@ -3,8 +3,10 @@ reading one back.
 
 A written result has, at the top level, ``format`` (what kind of file it is, e.g.
 ``axis-align/calibration``), ``format_version`` (an integer raised whenever a reader of the
-previous version would misread the file) and ``provenance``: the tool and its version, the UTC
-time, the command line, the settings and the SHA-256 of every input file.
+previous version would misread the file) and the provenance keys of :class:`Provenance`:
+``tool``, ``tool_version``, ``created_utc``, ``command``, ``settings`` and ``inputs`` (path,
+SHA-256 and size of every input file). Format versions 1 and 2 (before this layout) nested
+the same facts in a ``provenance`` block; :meth:`Provenance.from_dict` reads both.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import datetime as _dt
 import hashlib
 import sys
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +23,9 @@ from axisbase.errors import InputError
 from axisbase.version import TOOL, __version__
 
 _COMMAND: list[list[str]] = []
+
+PROVENANCE_KEYS = ("tool", "tool_version", "created_utc", "command", "settings", "inputs")
+"""The top-level keys :meth:`Provenance.to_dict` writes (format version 3 and later)."""
 
 
 def set_command(argv: Iterable[str]) -> None:
@@ -44,28 +50,91 @@ def utc_now() -> str:
         "+00:00", "Z")
 
 
-def provenance(settings: Mapping[str, Any] | None = None,
-               inputs: Iterable[str | Path] = ()) -> dict:
-    """The ``provenance`` block: tool, version, UTC time, command line, settings, inputs."""
-    files = []
-    for p in inputs:
-        p = Path(p)
+@dataclass(frozen=True)
+class InputFile:
+    """One input of a run: its path as given, SHA-256 (hex) and size [bytes]; both None when
+    the file could not be read when the result was written."""
+
+    path: str
+    sha256: str | None
+    bytes: int | None
+
+    @classmethod
+    def of(cls, path: str | Path) -> InputFile:
+        p = Path(path)
         try:
-            files.append({"path": str(p), "sha256": sha256_file(p), "bytes": p.stat().st_size})
+            return cls(str(p), sha256_file(p), p.stat().st_size)
         except OSError:
-            files.append({"path": str(p), "sha256": None, "bytes": None})
-    return {"tool": TOOL, "version": __version__, "written_utc": utc_now(),
-            "command_line": command_line(), "settings": dict(settings or {}),
-            "inputs": files}
+            return cls(str(p), None, None)
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """How a result was made.
+
+    Attributes
+    ----------
+    tool, tool_version : the program and its version.
+    created_utc : when the result was made, ISO 8601 UTC to the second (``...Z``).
+    command : the command line, one string per argument.
+    settings : the settings that shaped the result (α, seeds, flags), JSON values.
+    inputs : every input file with its SHA-256.
+    """
+
+    tool: str = TOOL
+    tool_version: str = __version__
+    created_utc: str = field(default_factory=utc_now)
+    command: tuple[str, ...] = field(default_factory=lambda: tuple(command_line()))
+    settings: Mapping[str, Any] = field(default_factory=dict)
+    inputs: tuple[InputFile, ...] = ()
+
+    @classmethod
+    def now(cls, settings: Mapping[str, Any] | None = None,
+            inputs: Iterable[str | Path] = ()) -> Provenance:
+        """This run's provenance (hashes every input once)."""
+        return cls(settings=dict(settings or {}), inputs=tuple(InputFile.of(p) for p in inputs))
+
+    def to_dict(self) -> dict:
+        return {"tool": self.tool, "tool_version": self.tool_version,
+                "created_utc": self.created_utc, "command": list(self.command),
+                "settings": dict(self.settings),
+                "inputs": [{"path": i.path, "sha256": i.sha256, "bytes": i.bytes}
+                           for i in self.inputs]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Provenance:
+        """From a result's top level (version ≥ 3) or its ``provenance`` block (1–2; files
+        of version 1 without one give an empty provenance)."""
+        old = d.get("provenance")
+        if isinstance(old, Mapping):
+            d = {"tool": old.get("tool", TOOL), "tool_version": old.get("version", ""),
+                 "created_utc": old.get("written_utc", ""),
+                 "command": old.get("command_line", []), "settings": old.get("settings", {}),
+                 "inputs": old.get("inputs", [])}
+        return cls(tool=str(d.get("tool", TOOL)), tool_version=str(d.get("tool_version", "")),
+                   created_utc=str(d.get("created_utc", "")),
+                   command=tuple(str(a) for a in d.get("command", ())),
+                   settings=dict(d.get("settings", {})),
+                   inputs=tuple(InputFile(str(i["path"]), i.get("sha256"), i.get("bytes"))
+                                for i in d.get("inputs", ())))
+
+
+def provenance(settings: Mapping[str, Any] | None = None,
+               inputs: Iterable[str | Path] = ()) -> Provenance:
+    """This run's :class:`Provenance` (tool, version, UTC time, command, settings, inputs)."""
+    return Provenance.now(settings, inputs)
 
 
 def envelope(fmt: str, version: int, body: Mapping[str, Any],
              settings: Mapping[str, Any] | None = None,
-             inputs: Iterable[str | Path] = (), prov: dict | None = None) -> dict:
-    """``{format, format_version, provenance, **body}``: a result ready to write. ``prov``:
-    a provenance block already made for the same run (inputs are hashed once)."""
-    return {"format": fmt, "format_version": version,
-            "provenance": prov if prov is not None else provenance(settings, inputs), **body}
+             inputs: Iterable[str | Path] = (), prov: Provenance | None = None) -> dict:
+    """``{format, format_version, <provenance keys>, **body}``: a result ready to write.
+    ``prov``: a provenance already made for the same run (inputs are hashed once)."""
+    p = prov if prov is not None else Provenance.now(settings, inputs)
+    clash = set(PROVENANCE_KEYS).intersection(body)
+    if clash:   # a body key would silently replace a provenance fact
+        raise ValueError(f"result keys {sorted(clash)} are reserved for provenance")
+    return {"format": fmt, "format_version": version, **p.to_dict(), **body}
 
 
 def check_format(d: Mapping[str, Any], fmt: str, readable: Iterable[int], where: str,

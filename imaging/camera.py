@@ -58,7 +58,7 @@ class CameraModel:
             raise ImageInputError(f"{p}: not a camera file ({exc!s}); expected camera_matrix, "
                                   "dist_coeffs, image_size as written by 'align camera'") from None
         try:  # version 1: files written before format versions existed
-            check_format(d, "axis-align/camera", (1, 2), str(p))
+            check_format(d, "axis-align/camera", (1, 2, 3), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
         return cls(K, D, size, float(d.get("rms_px", np.nan)), int(d.get("views", 0)),

@@ -312,7 +312,7 @@ def calibration_json(cal: Calibration, poses: Poses) -> dict:
         "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
         "scale_sign": list(cal.signs), "residual_rms_g": cal.residual_rms_g,
         "dof": cal.loop.after.dof,
-        "effects": [e.to_json() for e in cal.loop.effects],
+        "effects": [e.to_dict() for e in cal.loop.effects],
         "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
         "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
                       "bias_g": a.bias.tolist()},

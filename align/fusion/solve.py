@@ -9,7 +9,7 @@ call for them; a term the data cannot separate from E (rank-deficient) is not of
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +26,8 @@ from align.fusion.observations import (
     axes_from,
     e_matrix,
 )
-from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
+from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
+from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2}
 TERM_UNIT = {TILT: "rad", REF: "rad"}
@@ -146,6 +147,16 @@ class ObservationRow:
     def normalised(self) -> float:
         return (self.value - self.predicted) / self.u
 
+    def to_dict(self) -> dict:
+        return {"source": self.source, "label": self.label, "value": self.value,
+                "predicted": self.predicted, "u": self.u, "unit": self.unit,
+                "normalised_residual": self.normalised}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ObservationRow:
+        return cls(str(d["source"]), str(d["label"]), float(d["value"]),
+                   float(d["predicted"]), float(d["u"]), str(d["unit"]))
+
 
 @dataclass(frozen=True)
 class FusionResult:
@@ -163,7 +174,7 @@ class FusionResult:
     dof: int
     p_value: float
     rows: tuple[ObservationRow, ...]
-    loop: LoopReport
+    loop: LoopReport | LoopSummary
     inflation: float
     nuisances: dict[str, tuple[float, float]]
     sources: tuple[str, ...]
@@ -171,6 +182,36 @@ class FusionResult:
     @property
     def consistent(self) -> bool:
         return not self.loop.unexplained_structure
+
+    def to_dict(self) -> dict:
+        """The fusion's part of a session result: E [rad] and [″] with u, the 6×6 covariance
+        over ``angle_names`` [rad²], the axes, χ², the loop's effects and every observation
+        with its normalised residual."""
+        return {
+            "misalignment_rad": self.E.tolist(), "misalignment_u_rad": self.E_u.tolist(),
+            "misalignment_arcsec": (self.E / ARCSEC).tolist(),
+            "misalignment_u_arcsec": (self.E_u / ARCSEC).tolist(),
+            "angle_names": list(E_NAMES), "covariance_rad2": self.cov.tolist(),
+            "axes": self.axes.tolist(), "chi2": self.chi2, "dof": self.dof,
+            "p_value": self.p_value, "uncertainty_inflation": self.inflation,
+            "sources": list(self.sources), **self.loop.summary().to_dict(),
+            "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in self.nuisances.items()},
+            "observations": [r.to_dict() for r in self.rows]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> FusionResult:
+        """From :meth:`to_dict`'s keys (a session result JSON); the loop comes back as its
+        :class:`~align.loop.LoopSummary`."""
+        if list(d.get("angle_names", E_NAMES)) != list(E_NAMES):
+            raise ValueError(f"angle_names {d.get('angle_names')} are not {list(E_NAMES)}")
+        return cls(np.array(d["misalignment_rad"], float), np.array(d["misalignment_u_rad"], float),
+                   np.array(d["covariance_rad2"], float), np.array(d["axes"], float),
+                   float(d["chi2"]), int(d["dof"]), float(d["p_value"]),
+                   tuple(ObservationRow.from_dict(r) for r in d.get("observations", ())),
+                   LoopSummary.from_dict(d), float(d.get("uncertainty_inflation", 1.0)),
+                   {k: (float(v["estimate"]), float(v["u"]))
+                    for k, v in d.get("nuisances", {}).items()},
+                   tuple(d.get("sources", ())))
 
 
 def _check_determined(stage: FusionStage) -> None:

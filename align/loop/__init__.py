@@ -4,6 +4,7 @@ from align.loop.loop import (
     Candidate,
     EffectReport,
     LoopReport,
+    LoopSummary,
     Stage,
     StageFit,
     Term,
@@ -14,6 +15,7 @@ from align.loop.loop import (
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 
 __all__ = [
-    "Candidate", "EffectReport", "LoopReport", "Stage", "StageFit", "StructureReport",
-    "StructureTest", "Term", "bic", "f_test", "periodogram_test", "run_loop", "check_structure",
+    "Candidate", "EffectReport", "LoopReport", "LoopSummary", "Stage", "StageFit",
+    "StructureReport", "StructureTest", "Term", "bic", "f_test", "periodogram_test",
+    "run_loop", "check_structure",
 ]

@@ -110,13 +110,28 @@ class EffectReport:
     description: str = ""
     components: tuple[tuple[str, float, float], ...] = ()
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         d = {"name": self.name, "estimate": self.estimate, "u": self.u, "unit": self.unit,
              "rms_before": self.rms_before, "rms_after": self.rms_after,
              "delta_bic": self.delta_bic, "p_value": self.p_value}
+        if self.description:
+            d["description"] = self.description
         if self.components:
             d["components"] = [{"axis": c, "estimate": e, "u": u} for c, e, u in self.components]
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> EffectReport:
+        """From :meth:`to_dict`'s output (a non-finite number saved as null reads as NaN)."""
+        def num(k: str) -> float:
+            v = d.get(k)
+            return float("nan") if v is None else float(v)
+
+        return cls(str(d["name"]), num("estimate"), num("u"), str(d.get("unit", "")),
+                   num("rms_before"), num("rms_after"), num("delta_bic"), num("p_value"),
+                   str(d.get("description", "")),
+                   tuple((str(c["axis"]), float(c["estimate"]), float(c["u"]))
+                         for c in d.get("components", ())))
 
 
 @dataclass(frozen=True)
@@ -135,20 +150,93 @@ class LoopReport:
         return self.structure_after.structured
 
     def summary_lines(self) -> list[str]:
-        if self.before.sigma is None:
-            lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; noise "
+        return self.summary().summary_lines()
+
+    def summary(self) -> LoopSummary:
+        """What of this loop a saved result keeps."""
+        def chi2_dof(f: StageFit) -> float | None:
+            return None if f.sigma is None else f.chi2 / max(f.dof, 1)
+
+        w = self.structure_after.worst if self.unexplained_structure else None
+        return LoopSummary(self.effects, self.before.rms, self.after.rms,
+                           chi2_dof(self.before), chi2_dof(self.after),
+                           self.unexplained_structure,
+                           None if w is None else w.name, None if w is None else w.p_value,
+                           "" if w is None else w.detail)
+
+
+@dataclass(frozen=True)
+class LoopSummary:
+    """A loop's outcome as a result saves it.
+
+    Attributes
+    ----------
+    effects : the effects added, in order.
+    rms_before, rms_after : residual RMS of the declared model and of the final one [the
+        stage's residual unit].
+    chi2_dof_before, chi2_dof_after : χ²/dof against the stated noise (None: noise unknown).
+    unexplained_structure : whether structure no candidate explains remains.
+    structure_test, structure_p, structure_detail : the test that found it, its p-value and
+        what it saw (None, None, "" if none).
+    """
+
+    effects: tuple[EffectReport, ...]
+    rms_before: float
+    rms_after: float
+    chi2_dof_before: float | None
+    chi2_dof_after: float | None
+    unexplained_structure: bool
+    structure_test: str | None = None
+    structure_p: float | None = None
+    structure_detail: str = ""
+
+    def summary(self) -> LoopSummary:
+        """Itself (a loaded result's loop is already a summary)."""
+        return self
+
+    def summary_lines(self) -> list[str]:
+        """The loop's before/after for the terminal, one line each."""
+        if self.chi2_dof_before is None:
+            lines = [f"residual RMS {self.rms_before:.4g} -> {self.rms_after:.4g}; noise "
                      "unknown: no chi2 test, effects judged by F-test"]
         else:
-            lines = [f"residual RMS {self.before.rms:.4g} -> {self.after.rms:.4g}; "
-                     f"chi2/dof {self.before.chi2 / max(self.before.dof, 1):.3f} -> "
-                     f"{self.after.chi2 / max(self.after.dof, 1):.3f}"]
+            lines = [f"residual RMS {self.rms_before:.4g} -> {self.rms_after:.4g}; "
+                     f"chi2/dof {self.chi2_dof_before:.3f} -> {self.chi2_dof_after:.3f}"]
         for e in self.effects:
             lines.append(f"added {e.name}: {e.estimate:.4g} ± {e.u:.2g} {e.unit} "
                          f"(dBIC {e.delta_bic:.1f}, p {e.p_value:.2g})")
         if self.unexplained_structure:
-            w = self.structure_after.worst
-            lines.append(f"UNEXPLAINED STRUCTURE remains: {w.name} p={w.p_value:.2g} {w.detail}")
+            lines.append(f"UNEXPLAINED STRUCTURE remains: {self.structure_test} "
+                         f"p={self.structure_p:.2g} {self.structure_detail}")
         return lines
+
+    def to_dict(self) -> dict:
+        """The result-level keys of the JSON contract (``effects``, ``unexplained_structure``)
+        and the loop's before/after under ``loop``."""
+        return {"effects": [e.to_dict() for e in self.effects],
+                "unexplained_structure": self.unexplained_structure,
+                "loop": {"rms_before": self.rms_before, "rms_after": self.rms_after,
+                         "chi2_dof_before": self.chi2_dof_before,
+                         "chi2_dof_after": self.chi2_dof_after,
+                         "structure_test": self.structure_test,
+                         "structure_p": self.structure_p,
+                         "structure_detail": self.structure_detail}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> LoopSummary:
+        lp = d.get("loop") or {}
+
+        def num(k: str) -> float | None:
+            v = lp.get(k)
+            return None if v is None else float(v)
+
+        nan = float("nan")
+        rb, ra = num("rms_before"), num("rms_after")
+        return cls(tuple(EffectReport.from_dict(e) for e in d.get("effects", ())),
+                   nan if rb is None else rb, nan if ra is None else ra,
+                   num("chi2_dof_before"), num("chi2_dof_after"),
+                   bool(d.get("unexplained_structure", False)), lp.get("structure_test"),
+                   num("structure_p"), str(lp.get("structure_detail", "")))
 
 
 def bic(fit: StageFit, extra_k: int = 0) -> float:

@@ -12,11 +12,11 @@ from align.apply import PlatformCalibration
 from align.calibration import calibration_json
 from align.calibration.output import with_units
 from align.contract import document
-from align.fusion import E_INDEX, E_NAMES
+from align.fusion import E_INDEX
 from align.gonio import run_json
 from align.session.run import SessionResult
 from align.warnings import session_warnings
-from axisbase.units import ARCSEC
+from axisbase.provenance import Provenance
 
 
 def platform_calibration(res: SessionResult) -> PlatformCalibration | None:
@@ -30,22 +30,8 @@ def result_json(res: SessionResult) -> dict:
     d: dict = {"session": res.session.name, "folder": str(res.session.folder),
                "ok": res.ok, "fused": res.fused, "warnings": session_warnings(res),
                "errors": [{"stage": e.stage, "message": e.message} for e in res.errors]}
-    f = res.fusion
-    if f is not None:
-        d.update({
-            "misalignment_rad": f.E.tolist(), "misalignment_u_rad": f.E_u.tolist(),
-            "misalignment_arcsec": (f.E / ARCSEC).tolist(),
-            "misalignment_u_arcsec": (f.E_u / ARCSEC).tolist(),
-            "angle_names": list(E_NAMES), "covariance_rad2": f.cov.tolist(),
-            "axes": f.axes.tolist(), "chi2": f.chi2, "dof": f.dof, "p_value": f.p_value,
-            "uncertainty_inflation": f.inflation, "sources": list(f.sources),
-            "effects": [e.to_json() for e in f.loop.effects],
-            "unexplained_structure": f.loop.unexplained_structure,
-            "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in f.nuisances.items()},
-            "observations": [{"source": r.source, "label": r.label, "value": r.value,
-                              "predicted": r.predicted, "u": r.u, "unit": r.unit,
-                              "normalised_residual": r.normalised} for r in f.rows],
-        })
+    if res.fusion is not None:
+        d.update(res.fusion.to_dict())
     pc = platform_calibration(res)
     if pc is not None:
         d["platform_calibration"] = pc.to_dict(res.units)
@@ -85,7 +71,7 @@ def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: 
     files: dict[str, tuple[Path, str]] = {}
     if outs.get("cal") is not None and pc is not None:
         files["cal"] = (outs["cal"], dumps(pc.document(
-            res.units, dict(settings), res.session.inputs, js["provenance"])))
+            res.units, dict(settings), res.session.inputs, Provenance.from_dict(js))))
     if outs.get("report") is not None:
         files["report"] = (outs["report"], report_html(res, js))
     to_stdout = outs.get("json") is not None and str(outs["json"]) == "-"

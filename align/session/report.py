@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from align.loop import LoopReport
+from align.loop import LoopReport, LoopSummary
 from align.session.run import SessionResult
 from axisbase.units import ARCSEC
 
@@ -37,23 +37,22 @@ def _table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
     return f"<table><tr>{h}</tr>{body}</table>"
 
 
-def _loop(loop: LoopReport | None, scale: float = 1.0, unit: str = "") -> str:
+def _loop(loop: LoopReport | LoopSummary | None, scale: float = 1.0, unit: str = "") -> str:
     if loop is None:
         return "<p>The residual loop did not run for this stage.</p>"
-    b, a = loop.before, loop.after
+    s = loop.summary()
 
-    def chi(f) -> str:
-        return "—" if f.sigma is None else f"{f.chi2 / max(f.dof, 1):.3f}"
-    rows = [["declared model", "", "", f"{b.rms:.4g}", chi(b)]]
-    for e in loop.effects:
+    def chi(v: float | None) -> str:
+        return "—" if v is None else f"{v:.3f}"
+    rows = [["declared model", "", "", f"{s.rms_before:.4g}", chi(s.chi2_dof_before)]]
+    for e in s.effects:
         rows.append([f"+ {e.name}", f"{e.estimate * scale:.4g} ± {e.u * scale:.2g} "
                      f"{unit or e.unit}", f"{e.p_value:.2g}", f"{e.rms_after:.4g}", ""])
-    rows[-1][4] = chi(a)
+    rows[-1][4] = chi(s.chi2_dof_after)
     out = _table(["model", "effect estimate", "p", "residual RMS", "chi2/dof"], rows)
-    if loop.unexplained_structure:
-        w = loop.structure_after.worst
-        out += (f'<p class="bad">Unexplained structure remains: {_e(w.name)} '
-                f"(p = {w.p_value:.2g}) {_e(w.detail)}</p>")
+    if s.unexplained_structure:
+        out += (f'<p class="bad">Unexplained structure remains: {_e(s.structure_test)} '
+                f"(p = {s.structure_p:.2g}) {_e(s.structure_detail)}</p>")
     else:
         out += '<p class="ok">No structure left in the residual.</p>'
     return out
@@ -62,12 +61,14 @@ def _loop(loop: LoopReport | None, scale: float = 1.0, unit: str = "") -> str:
 def _provenance(doc: dict | None) -> str:
     if not doc:
         return ""
-    p = doc["provenance"]
-    rows = [[i["path"], i["sha256"] or "unreadable"] for i in p["inputs"]]
-    return (f"<p>{_e(p['tool'])} {_e(p['version'])}, {_e(doc['format'])} format version "
-            f"{doc['format_version']}, written {_e(p['written_utc'])} (UTC) by "
-            f"<code>{_e(' '.join(p['command_line']))}</code>; settings "
-            f"<code>{_e(p['settings'])}</code>.</p>"
+    from axisbase.provenance import Provenance
+
+    p = Provenance.from_dict(doc)
+    rows = [[i.path, i.sha256 or "unreadable"] for i in p.inputs]
+    return (f"<p>{_e(p.tool)} {_e(p.tool_version)}, {_e(doc['format'])} format version "
+            f"{doc['format_version']}, written {_e(p.created_utc)} (UTC) by "
+            f"<code>{_e(' '.join(p.command))}</code>; settings "
+            f"<code>{_e(dict(p.settings))}</code>.</p>"
             "<details><summary>Input files (SHA-256)</summary>"
             + _table(["file", "SHA-256"], rows, left=2) + "</details>")
 

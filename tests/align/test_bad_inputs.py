@@ -708,11 +708,9 @@ def test_failed_stage_exit_2_result_written_not_ok(base, tmp_path, capsys):
     assert "WARNING: stage goniometer FAILED" in capsys.readouterr().err
     html = rep.read_text()
     assert html.index("Warnings") < html.index("Misalignment matrix")
-    import jsonschema
+    from align.contract import validate
 
-    from align.contract import schema
-
-    jsonschema.validate(d, schema("session"))
+    validate(d, "session")
 
 
 def test_run_json_to_stdout_and_not_for_a_batch(base, capsys):
@@ -740,32 +738,58 @@ def test_ctrl_c_exits_130(monkeypatch, capsys):
     ("session", "outputs/result.json"), ("platform-calibration", "outputs/pc.json"),
     ("calibration", "outputs/cal.json")])
 def test_outputs_validate_against_shipped_schemas(base, kind, path):
-    import jsonschema
-
-    from align.contract import schema
-
-    d = _json(base / path)
-    jsonschema.validate(d, schema(kind))
-    p = d["provenance"]
-    assert p["version"] == _pyproject_version() and p["command_line"][0] == "align"
     import hashlib
 
-    for i in p["inputs"]:
+    from align.contract import validate
+
+    d = _json(base / path)
+    validate(d, kind)
+    # the contract's provenance keys, at the top level
+    assert d["tool_version"] == _pyproject_version() and d["command"][0] == "align"
+    assert d["format_version"] == 3 and d["created_utc"].endswith("Z")
+    assert d["inputs"]
+    for i in d["inputs"]:
         assert i["sha256"] == hashlib.sha256(Path(i["path"]).read_bytes()).hexdigest()
+
+
+def test_a_schema_refuses_what_it_should(base):
+    """The shipped schemas are not vacuous: a file without its provenance, with a NaN-like
+    string for a number or with a wrong format version fails validation."""
+    import jsonschema
+
+    from align.contract import validate
+
+    d = _json(base / "outputs" / "cal.json")
+    for bad in ({k: v for k, v in d.items() if k != "created_utc"},
+                dict(d, format_version=2), dict(d, inputs=[{"path": "x"}])):
+        with pytest.raises(jsonschema.ValidationError):
+            validate(bad, "calibration")
+
+
+def test_provenance_round_trip_and_earlier_layout(base):
+    from axisbase.provenance import Provenance
+
+    d = _json(base / "outputs" / "result.json")
+    p = Provenance.from_dict(d)
+    assert p.to_dict() == {k: d[k] for k in p.to_dict()}
+    old = {"provenance": {"tool": "axis-align", "version": "0.0.9", "written_utc": "x",
+                          "command_line": ["align", "run"], "settings": {"a": 1},
+                          "inputs": [{"path": "p", "sha256": None, "bytes": None}]}}
+    q = Provenance.from_dict(old)
+    assert (q.tool_version, q.command, q.settings, q.inputs[0].path) == (
+        "0.0.9", ("align", "run"), {"a": 1}, "p")
 
 
 @pytest.mark.parametrize("cmd", ["gonio", "tilt"])
 def test_other_outputs_validate(base, tmp_path, cmd):
-    import jsonschema
-
-    from align.contract import schema
+    from align.contract import validate
 
     out = tmp_path / "o.json"
     args = {"gonio": ["gonio", str(base / "plain" / "gonio.csv"), "--faces", "ref,y,x,z"],
             "tilt": ["tilt", str(base / "readings.csv"), "--calibration",
                      str(base / "outputs" / "cal.json")]}[cmd]
     assert main([*args, "--json", str(out), "-q"]) == 0
-    jsonschema.validate(_json(out), schema(cmd))
+    validate(_json(out), cmd)
 
 
 def _pyproject_version() -> str:
@@ -783,20 +807,34 @@ def test_version(capsys):
 
 def _old_format(d: dict) -> dict:
     """A file as format version 1 wrote it: no envelope, no units."""
-    d = {k: v for k, v in d.items() if k not in ("format", "format_version", "provenance")}
+    d = {k: v for k, v in d.items() if k not in ("format", "format_version", *PROV)}
     d["model"] = {k: v for k, v in d["model"].items() if k != "output_unit"}
     return d
 
 
-@pytest.mark.parametrize("version", ["v1_platform", "v1_session", "v2_session", "v99",
-                                     "wrong_format", "no_platform_calibration"])
+PROV = ("tool", "tool_version", "created_utc", "command", "settings", "inputs")
+
+
+def _v2(d: dict) -> dict:
+    """A file as format version 2 wrote it: provenance nested in a block of its own."""
+    out = {k: v for k, v in d.items() if k not in PROV}
+    out["format_version"] = 2
+    out["provenance"] = {"tool": d["tool"], "version": d["tool_version"],
+                         "written_utc": d["created_utc"], "command_line": d["command"],
+                         "settings": d["settings"], "inputs": d["inputs"]}
+    return out
+
+
+@pytest.mark.parametrize("version", ["v1_platform", "v1_session", "v2_session", "v2_platform",
+                                     "v3_session", "v99", "wrong_format",
+                                     "no_platform_calibration"])
 def test_apply_reads_earlier_formats_or_says_which_it_cannot(base, tmp_path, capsys, version):
     pc = _json(base / "outputs" / "pc.json")
     res = _json(base / "outputs" / "result.json")
     d = {"v1_platform": _old_format(pc),
          "v1_session": {k: v for k, v in res.items()
-                        if k not in ("format", "format_version", "provenance")},
-         "v2_session": res,
+                        if k not in ("format", "format_version", *PROV)},
+         "v2_session": _v2(res), "v2_platform": _v2(pc), "v3_session": res,
          "v99": dict(pc, format_version=99),
          "wrong_format": dict(pc, format="axis-align/gonio"),
          "no_platform_calibration": {k: v for k, v in res.items()
@@ -805,7 +843,7 @@ def test_apply_reads_earlier_formats_or_says_which_it_cannot(base, tmp_path, cap
     f.write_text(json.dumps(d))
     out = tmp_path / "a.csv"
     code = main(["apply", str(f), str(base / "readings.csv"), "--out", str(out), "-q"])
-    if version.startswith("v1") or version == "v2_session":
+    if version[:2] in ("v1", "v2", "v3"):
         assert code == 0
         ref = tmp_path / "ref.csv"
         assert main(["apply", str(base / "outputs" / "pc.json"), str(base / "readings.csv"),
@@ -889,9 +927,7 @@ def test_synth_force_replaces_only_what_synth_wrote(tmp_path, capsys):
 
 
 def test_marks_output_validates_and_carries_warnings(tmp_path):
-    import jsonschema
-
-    from align.contract import schema
+    from align.contract import validate
     from synth import write_synth
     from tests.conftest import mark_image
 
@@ -902,7 +938,7 @@ def test_marks_output_validates_and_carries_warnings(tmp_path):
     out = tmp_path / "m.json"
     assert main(["marks", str(p), str(bad), "--json", str(out), "-q"]) == 2
     d = _json(out)
-    jsonschema.validate(d, schema("marks"))
+    validate(d, "marks")
     assert d["ok"] is False and any("bad.png" in w for w in d["warnings"])
 
 
@@ -930,7 +966,7 @@ def test_rate_gives_a_recording_without_times_the_same_result(tmp_path, capsys):
     _err_line(capsys, "--rate")
 
 
-@pytest.mark.parametrize("version", [None, 2, 99, "gonio"])
+@pytest.mark.parametrize("version", [None, 2, 3, 99, "gonio"])
 def test_camera_model_format_versions(tmp_path, version):
     from imaging import CameraModel, ImageInputError
 
@@ -942,7 +978,7 @@ def test_camera_model_format_versions(tmp_path, version):
         d.update(format="axis-align/camera", format_version=version)
     f = tmp_path / "cam.json"
     f.write_text("\ufeff" + json.dumps(d))  # a BOM, as a Windows editor saves it
-    if version in (None, 2):
+    if version in (None, 2, 3):
         assert CameraModel.load(f).image_size == (640, 480)
     else:
         with pytest.raises(ImageInputError, match="newer" if version == 99 else "gonio"):

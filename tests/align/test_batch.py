@@ -190,11 +190,10 @@ def _comparable(d: dict) -> dict:
     """A result without what must differ between two runs: times, command line and the
     output folders named in the settings."""
     d = json.loads(json.dumps(d))
-    prov = d["provenance"]
-    for k in ("written_utc", "command_line"):
-        prov.pop(k)
+    for k in ("created_utc", "command"):
+        d.pop(k)
     for k in ("json", "report", "calibration"):
-        prov["settings"].pop(k, None)
+        d["settings"].pop(k, None)
     return d
 
 
