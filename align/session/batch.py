@@ -366,6 +366,7 @@ class DaskCluster:
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"--scheduler {self.address}: cannot reach a Dask scheduler "
                              f"there ({exc})") from None
+        jobs = [_absolute(j) for j in jobs]  # a worker's working folder is not ours
         tag = uuid.uuid4().hex[:8]
         futs = {}
         try:
@@ -384,3 +385,14 @@ class DaskCluster:
             raise
         finally:
             client.close()
+
+
+def _absolute(job: SessionJob) -> SessionJob:
+    """``job`` with absolute paths (from this process's working folder; symlinks kept)."""
+    from dataclasses import replace
+
+    def a(p: str | None) -> str | None:
+        return None if p is None or p == "-" else str(Path(p).absolute())
+
+    return replace(job, folder=a(job.folder), json=a(job.json), report=a(job.report),
+                   cal=a(job.cal))
