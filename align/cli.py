@@ -475,6 +475,8 @@ def _run_settings(args: argparse.Namespace) -> dict:
 
 def cmd_run(args: argparse.Namespace) -> int:
     if len(args.sessions) == 1:  # in this process (--scheduler is for batches)
+        if args.scheduler:
+            log.info("one session: it runs here (--scheduler is for batches)")
         from align.session.batch import SessionJob, is_complete
 
         if args.resume and is_complete(SessionJob(args.sessions[0], args.json, args.report,

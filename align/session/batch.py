@@ -247,17 +247,30 @@ PARENT_POLL_S = 0.2
 
 
 def _watch_parent(parent: int) -> None:
-    """Stop this worker when its parent has gone (even by SIGKILL, which nobody can catch):
-    the parent's id is then no longer this process's parent id. Portable (no prctl)."""
+    """Stop this worker when ``parent`` (the ``align`` process) has gone, even by SIGKILL,
+    which nobody can catch: this process's parent id then changes. Portable (no prctl)."""
     import _thread
     import signal
     import time
 
-    while os.getppid() == parent:
+    # With the 'fork' start method the pool's process is the parent; with 'forkserver' or
+    # 'spawn' it is a helper: watch both (a dead, reaped process no longer exists).
+    mine = os.getppid()
+    while os.getppid() == mine and _exists(parent):
         time.sleep(PARENT_POLL_S)
     _thread.interrupt_main(signal.SIGTERM)  # unwinds the session (temporary files removed)
     time.sleep(30)
     os._exit(128 + signal.SIGTERM)  # the main thread was stuck in a long C call
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _pool_job(job: SessionJob) -> Summary:
