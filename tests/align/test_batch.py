@@ -267,3 +267,13 @@ def test_a_dask_worker_killed_mid_batch_loses_no_session(sessions, tmp_path, clu
     assert code == 0
     assert _outputs_all_or_nothing(out, [s.name for s in sessions]) == [
         s.name for s in sessions]
+
+
+def test_an_unreachable_scheduler_is_one_line(sessions):
+    pytest.importorskip("distributed")
+    from align.errors import InputError
+    from align.session.batch import DaskCluster
+
+    with pytest.raises(InputError, match=r"--scheduler tcp://127\.0\.0\.1:9: cannot reach"):
+        DaskCluster("tcp://127.0.0.1:9", connect_timeout_s=1).run(
+            [SessionJob(str(sessions[0]))], lambda r: None)
