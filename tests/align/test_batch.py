@@ -120,6 +120,22 @@ def test_a_stopped_batch_stops_its_workers_and_leaves_nothing_half_written(
     assert {n: (out / f"{n}.json").stat().st_mtime_ns for n in done} == before  # skipped
 
 
+def test_a_stopped_single_session_writes_nothing(sessions, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = _start(["run", str(sessions[0]), "--json", str(out / "r.json"), "--report",
+                   str(out / "r.html"), "--calibration", str(out / "c.json")])
+    try:
+        time.sleep(2.5)  # computing (the report alone takes seconds)
+        assert proc.poll() is None, "finished before it could be stopped"
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+        assert "stopped (SIGTERM)" in proc.stderr.read()
+    finally:
+        proc.kill()
+    assert list(out.iterdir()) == []
+
+
 def test_killing_the_batch_ends_its_workers(sessions, tmp_path):
     """SIGKILL cannot be caught: the workers notice their parent has gone and stop, leaving
     no orphan and no half-written output."""
