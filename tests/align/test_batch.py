@@ -53,8 +53,10 @@ def bad_session(sessions) -> Path:
 
 
 def _start(argv: list[str]) -> subprocess.Popen:
+    """``align`` in a process group of its own (as a shell job: Ctrl-C reaches the group)."""
     return subprocess.Popen([sys.executable, "-m", "align", *argv], env=ENV,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
 
 
 def _wait_for(cond, timeout: float, what: str) -> None:
@@ -104,7 +106,10 @@ def test_a_stopped_batch_stops_its_workers_and_leaves_nothing_half_written(
         workers = _workers(proc)
         _wait_for(lambda: out.is_dir() and any(out.glob("*.cal.json")), 60,
                   "a first session finished")
-        proc.send_signal(sig)
+        if sig == signal.SIGINT:  # Ctrl-C in a terminal: the whole group gets it
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
         assert proc.wait(timeout=30) == status
         assert "--resume" in proc.stderr.read()
         assert _gone(workers, 10), "orphaned workers"
