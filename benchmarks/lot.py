@@ -1,7 +1,8 @@
 """A production lot: ``align run`` over 200 synthetic sessions, on 1 and 2 local worker
 processes and on a 2-worker Dask ``LocalCluster``.
 
-Run:  python3 benchmarks/lot.py [--sessions 200] [--distinct 20] [--bad 2] [--report]
+Run:  python3 benchmarks/lot.py [--sessions 200] [--distinct 20] [--bad 2] [--repeat 1]
+      [--report]
 
 Each configuration is the command a user runs, end to end in a fresh process
 (``align run S1 … S200 --json OUT --calibration OUT [--jobs N | --scheduler ADDRESS]``),
@@ -10,7 +11,8 @@ and its start-up is printed apart. ``--distinct`` seeded sessions are synthesise
 (``synth.session``) and copied to make up the lot (each copy costs a full run: nothing is
 cached); ``--bad`` of them have their counter log removed, so they fail (a failing session
 must not stop the others). Printed per configuration: wall time, seconds per session, the
-speed-up over one local process, and the sessions done / failed as the command reports them.
+speed-up over one local process, and the sessions done / failed as the command reports them
+(``--repeat``: the configurations run in turn, the median wall time is printed).
 The per-session cost on one core is the 1-process wall time over the lot size (it includes
 the command's start-up, spread over the lot).
 """
@@ -21,6 +23,7 @@ import argparse
 import os
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -84,6 +87,8 @@ def main() -> None:
     ap.add_argument("--sessions", type=int, default=200)
     ap.add_argument("--distinct", type=int, default=20)
     ap.add_argument("--bad", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=1, help="runs of each configuration "
+                    "(interleaved; the median is printed)")
     ap.add_argument("--report", action="store_true", help="also write an HTML report each")
     ap.add_argument("--workdir", help="keep the synthetic sessions here (default: temp)")
     a = ap.parse_args()
@@ -94,22 +99,23 @@ def main() -> None:
     print(f"{len(sessions)} sessions ({a.distinct} distinct seeds, {a.bad} made to fail) in "
           f"{work} ({time.perf_counter() - t0:.0f} s to make); outputs: JSON + calibration"
           + (" + report" if a.report else "") + f"; {os.cpu_count()} cores")
-    rows = {}
-    for name, extra in (("local, 1 process", ["--jobs", "1"]),
-                        ("local, 2 processes", ["--jobs", "2"])):
-        rows[name] = run(sessions, work / "out", extra, a.report)
-        print(f"  {name}: {rows[name]['wall']:.0f} s", flush=True)
     from distributed import LocalCluster
 
     t0 = time.perf_counter()
+    runs: dict[str, list[dict]] = {}
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster:
-        start = time.perf_counter() - t0
-        name = "Dask LocalCluster, 2 workers"
-        rows[name] = run(sessions, work / "out", ["--scheduler", cluster.scheduler_address],
-                         a.report)
-        print(f"  {name}: {rows[name]['wall']:.0f} s (cluster start-up {start:.1f} s, not "
-              "included)", flush=True)
+        print(f"Dask LocalCluster up in {time.perf_counter() - t0:.1f} s (not included)")
+        configs = (("local, 1 process", ["--jobs", "1"]),
+                   ("local, 2 processes", ["--jobs", "2"]),
+                   ("Dask LocalCluster, 2 workers", ["--scheduler", cluster.scheduler_address]))
+        for rep in range(a.repeat):  # interleaved: a change of load hits every configuration
+            for name, extra in configs:
+                r = run(sessions, work / "out", extra, a.report)
+                runs.setdefault(name, []).append(r)
+                print(f"  [{rep + 1}/{a.repeat}] {name}: {r['wall']:.0f} s", flush=True)
+    rows = {name: dict(rs[0], wall=statistics.median(r["wall"] for r in rs),
+                       walls=[r["wall"] for r in rs]) for name, rs in runs.items()}
     base = rows["local, 1 process"]["wall"]
     print(f"load average (1, 5, 15 min) at the end: {os.getloadavg()}")
     print(f"\n{'configuration':32s} {'wall [s]':>9s} {'s/session':>10s} {'speed-up':>9s} "
@@ -117,7 +123,8 @@ def main() -> None:
     for name, r in rows.items():
         print(f"{name:32s} {r['wall']:9.1f} {r['wall'] / r['total']:10.2f} "
               f"{base / r['wall']:9.2f} {r['done']:5d} {r['failed']:7d} {r['exit']:5d} "
-              f"{r['files']:6d}")
+              f"{r['files']:6d}" + (f"   runs: {', '.join(f'{w:.0f}' for w in r['walls'])}"
+                                    if len(r["walls"]) > 1 else ""))
     if not a.workdir:
         shutil.rmtree(work, ignore_errors=True)
 
