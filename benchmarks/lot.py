@@ -104,7 +104,7 @@ def main() -> None:
     t0 = time.perf_counter()
     runs: dict[str, list[dict]] = {}
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster:
+                      dashboard_address=":0") as cluster:
         print(f"Dask LocalCluster up in {time.perf_counter() - t0:.1f} s (not included)")
         configs = (("local, 1 process", ["--jobs", "1"]),
                    ("local, 2 processes", ["--jobs", "2"]),
