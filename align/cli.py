@@ -1,6 +1,6 @@
 """The ``align`` command. Exit status: 0 success; 2 bad input or usage, or a result that cannot
 be trusted (a failed stage: the result is still written, with ``ok: false``); 1 internal
-error; 130 interrupted (Ctrl-C).
+error; 130 interrupted (Ctrl-C, SIGINT); 143 stopped (SIGTERM).
 
 Degrees, arc-seconds and pixels appear only here and in files; the library works in radians.
 This module parses arguments and prints; what it computes lives in the library. Heavy
@@ -494,47 +494,37 @@ def _print_result(res, out=None) -> None:
 def _run_one(folder: str, json_path: str | None, report_path: str | None,
              cal_path: str | None, alpha: float, quiet: bool, force: bool = False,
              allow_outside: bool = False, settings: dict | None = None) -> dict:
-    """One session end to end (also the worker of a batch); returns a short summary.
+    """One session end to end, in this process (``align.session.batch.run_job``)."""
+    from align.session.batch import SessionJob, run_job
 
-    Every output is checked before anything is computed and written atomically; a stage that
-    failed still gives the result (``ok: false``) and exit status 2."""
-    from align.session import load_session, run_session, session_outputs
-    from axisbase.output import OutputPlan
+    job = SessionJob(folder, json_path, report_path, cal_path, alpha, force, allow_outside,
+                     settings or {"alpha": alpha}, keep_result=True)
+    return run_job(job, progress=None if quiet else (
+        lambda m: log.info("  [%s] %s", Path(folder).resolve().name, m)))
 
-    try:
-        s = load_session(folder, allow_outside=allow_outside)
-        if cal_path is not None and s.calibration is None:
-            raise UsageError(f"--calibration {cal_path}: the session {s.folder} has no "
-                             "[calibration] section, so there is no platform calibration "
-                             "to write")
-        plan = OutputPlan(s.inputs, force=force)
-        outs = {"json": plan.add("--json", json_path, stdout_ok=True),
-                "report": plan.add("--report", report_path),
-                "cal": plan.add("--calibration", cal_path)}
-    except InputError as exc:
-        return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
-    say = ((lambda m: None) if quiet
-           else (lambda m: log.info("  [%s] %s", s.name, m)))
-    res = run_session(s, progress=say, alpha=alpha)
-    try:
-        written, js = session_outputs(res, outs, force, settings or {"alpha": alpha})
-    except InputError as exc:  # an output that appeared while computing: not replaced
-        return {"session": folder, "ok": False, "bad_input": True, "error": str(exc)}
-    warnings = list(js["warnings"])
-    if outs["cal"] is not None and "cal" not in written:
-        warnings.append(f"--calibration {outs['cal']}: NOT written: no platform calibration "
-                        "(the calibration or the fusion failed)")
-    return {"session": s.name, "folder": folder, "ok": res.ok, "bad_input": not res.ok,
-            "result": res if not quiet else None, "json": js,
-            "warnings": warnings,
-            "outputs": {k: str(v) for k, v in written.items()}}
+
+# Flags that say how a batch runs, not what it computes: left out of the results' settings,
+# so a batch gives the same JSON however it is run.
+_EXECUTION = ("jobs", "scheduler", "resume")
+
+
+def _run_settings(args: argparse.Namespace) -> dict:
+    return {k: v for k, v in _settings(args).items() if k not in _EXECUTION}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    if len(args.sessions) == 1:
+    if len(args.sessions) == 1:  # in this process (--scheduler is for batches)
+        if args.scheduler:
+            log.info("one session: it runs here (--scheduler is for batches)")
+        from align.session.batch import SessionJob, is_complete
+
+        if args.resume and is_complete(SessionJob(args.sessions[0], args.json, args.report,
+                                                  args.calibration)):
+            print(f"session {args.sessions[0]}: outputs complete, skipped (--resume)")
+            return 0
         out = _run_one(args.sessions[0], args.json, args.report, args.calibration,
                        args.alpha, quiet=False, force=args.force,
-                       allow_outside=args.allow_outside, settings=_settings(args))
+                       allow_outside=args.allow_outside, settings=_run_settings(args))
         if "error" in out:
             raise UsageError(out["error"])
         print(f"session {out['session']}:")
@@ -549,51 +539,64 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_batch(args: argparse.Namespace) -> int:
-    """Several sessions in parallel; --json/--report/--calibration name folders."""
+    """Several sessions in parallel (local processes, or a Dask cluster with --scheduler);
+    --json/--report/--calibration name folders."""
     import os
-    from concurrent.futures import ProcessPoolExecutor, as_completed
 
     import numpy as np
 
-    names = [Path(s).resolve().name for s in args.sessions]
-    if len(set(names)) != len(names):
-        raise UsageError("two sessions have the same folder name; outputs would collide")
-    for flag, folder in (("--json", args.json), ("--report", args.report),
-                         ("--calibration", args.calibration)):
-        if folder == "-":
-            raise UsageError(f"{flag} -: standard output takes one session, not a batch")
-    from axisbase.output import OutputPlan
+    from align.session.batch import (
+        batch_jobs,
+        executor_for,
+        is_complete,
+        run_batch,
+        skipped,
+    )
+    from axisbase.provenance import command_line
+    from axisbase.stop import Stopped
 
-    plan = OutputPlan(args.sessions, force=args.force)
-    for flag, folder in (("--json", args.json), ("--report", args.report),
-                         ("--calibration", args.calibration)):
-        plan.add(flag, folder, folder=True)
-
-    def path_in(folder: str | None, name: str, ext: str) -> str | None:
-        return None if folder is None else str(Path(folder) / f"{name}{ext}")
-
-    jobs = args.jobs or os.cpu_count() or 1
+    jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
+                      alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
+                      settings=_run_settings(args), command=tuple(command_line()))
     results = []
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futs = {pool.submit(_run_one, s, path_in(args.json, n, ".json"),
-                            path_in(args.report, n, ".html"),
-                            path_in(args.calibration, n, ".cal.json"), args.alpha, True,
-                            args.force, args.allow_outside, _settings(args)): s
-                for s, n in zip(args.sessions, names, strict=True)}
-        done = as_completed(futs)
-        tty = sys.stderr.isatty()
-        if tty:
-            from tqdm import tqdm
+    if args.resume:
+        results = [skipped(j) for j in jobs if is_complete(j)]
+        jobs = [j for j in jobs if not is_complete(j)]
+        if results:
+            log.info("--resume: %d of %d sessions already complete, skipped", len(results),
+                     len(results) + len(jobs))
+    scheduler = args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    executor = executor_for(scheduler, args.jobs)
+    if scheduler:
+        log.info("running %d sessions on the Dask cluster at %s", len(jobs), scheduler)
+    bar = None
+    if sys.stderr.isatty() and log.getEffectiveLevel() <= logging.INFO and jobs:
+        from tqdm import tqdm
 
-            done = tqdm(done, total=len(futs), desc="sessions")
-        for k, fut in enumerate(done, start=1):
-            if not tty:  # a log file gets one line per finished session instead of a bar
-                log.info("  [%d/%d] %s finished", k, len(futs), Path(futs[fut]).name)
-            try:
-                results.append(fut.result())
-            except Exception as exc:  # one session's crash must not stop the others
-                results.append({"session": futs[fut], "ok": False, "bad_input": False,
-                                "error": f"internal error: {exc!r}"})
+        bar = tqdm(total=len(jobs), desc="sessions")
+
+    done: list = []
+
+    def on_done(r: dict) -> None:
+        done.append(r)
+        if bar is not None:
+            bar.update()
+        else:  # a log file gets one line per finished session instead of a bar
+            log.info("  [%d/%d] %s finished", len(done), len(jobs), r["session"])
+
+    try:
+        run_batch(jobs, executor, on_done)
+    except Stopped:
+        if bar is not None:
+            bar.close()
+        print(f"stopped: {len(done)} of {len(jobs)} sessions finished (their outputs are "
+              "complete; no other session left any); 'align run ... --resume' does the rest",
+              file=sys.stderr)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    results += done
     failed = [r for r in results if not r["ok"]]
     for r in sorted(results, key=lambda r: r["session"]):
         js = r.get("json")
@@ -604,10 +607,14 @@ def _run_batch(args: argparse.Namespace) -> int:
             print(f"{r['session']}: {'OK' if r['ok'] else 'FAILED stages'}, |E| max "
                   f"{worst:.1f}″, u max {U.max():.2f}″, chi2/dof {js['chi2']:.1f}/{js['dof']}"
                   + ("" if not js["unexplained_structure"] else ", NOT consistent")
+                  + (" (complete before, skipped)" if r.get("skipped") else "")
+                  + "".join(f", {k} {v}" for k, v in r["outputs"].items()))
+        elif r.get("skipped"):
+            print(f"{r['session']}: complete before, skipped"
                   + "".join(f", {k} {v}" for k, v in r["outputs"].items()))
         if not r["ok"]:
             msg = r.get("error") or "; ".join(f"{e['stage']}: {e['message']}"
-                                              for e in js["errors"])
+                                              for e in (js or {}).get("errors", []))
             log.error("%s: FAILED: %s", r["session"], msg)
     print(f"{len(results) - len(failed)} of {len(results)} sessions done"
           + (f", {len(failed)} failed" if failed else ""))
@@ -940,6 +947,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="significance of the residual loops' tests")
     r.add_argument("--allow-outside", action="store_true",
                    help="let session.toml name files outside the session folder")
+    r.add_argument("--resume", action="store_true",
+                   help="skip sessions whose outputs are all in place (an interrupted batch) "
+                   "and run the rest")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the sessions of a batch on this Dask scheduler, e.g. "
+                   "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")
     r.set_defaults(func=cmd_run)
 
     ap = add("apply", "readings -> specific force in the platform frame", writes, _tables())
@@ -1084,6 +1097,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main(argv: list[str]) -> int:
     from axisbase.output import set_real_stdout
     from axisbase.provenance import set_command
+    from axisbase.stop import Stopped, raise_on_signals, restore
 
     parser = build_parser()
     try:
@@ -1094,6 +1108,7 @@ def _main(argv: list[str]) -> int:
     set_command(["align", *argv])
     real_stdout = sys.stdout
     set_real_stdout(real_stdout)
+    handlers = raise_on_signals()  # SIGTERM unwinds like Ctrl-C: no half-written outputs
     if getattr(args, "json", None) == "-":
         sys.stdout = sys.stderr  # the JSON owns standard output; messages go to stderr
     try:
@@ -1101,6 +1116,9 @@ def _main(argv: list[str]) -> int:
     except InputError as exc:
         print(f"align {args.cmd}: {exc}", file=sys.stderr)
         return 2
+    except Stopped as stop:
+        print(f"align {args.cmd}: stopped ({stop})", file=sys.stderr)
+        return stop.exit_status
     except KeyboardInterrupt:
         print(f"align {args.cmd}: interrupted", file=sys.stderr)
         return 130
@@ -1112,6 +1130,7 @@ def _main(argv: list[str]) -> int:
         return 1
     finally:
         sys.stdout = real_stdout
+        restore(handlers)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ _LAZY = {
     "iter_table": "axisbase.table", "parse_column_map": "axisbase.table",
     "read_table": "axisbase.table",
     "OutputError": "axisbase.output", "OutputPlan": "axisbase.output",
+    "OutputSet": "axisbase.output", "Stopped": "axisbase.stop",
     "dumps": "axisbase.output", "write_atomic": "axisbase.output",
     "write_json": "axisbase.output",
     "envelope": "axisbase.provenance", "provenance": "axisbase.provenance",

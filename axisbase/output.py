@@ -207,6 +207,87 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
     return p
 
 
+class OutputSet:
+    """Files that appear all together or not at all (a session's JSON, report and
+    calibration).
+
+    :meth:`stage` writes each file to a temporary name in its own folder; :meth:`commit` then
+    renames them into place in the order staged — exclusively unless ``force``, as
+    :func:`write_atomic` — and, should one of them fail (it appeared meanwhile), removes the
+    ones it had already put in place. A stop (SIGINT/SIGTERM, :mod:`axisbase.stop`) is held
+    back during the commit. Temporary files are removed by :meth:`discard` (``with`` does it),
+    so a run that is stopped or fails leaves nothing behind.
+    """
+
+    def __init__(self, force: bool = False):
+        self.force = force
+        self._staged: list[tuple[Path, str]] = []
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.discard()
+
+    def stage(self, path: str | Path, data: str | bytes) -> None:
+        p = Path(path)
+        raw = data.encode("utf-8") if isinstance(data, str) else data
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+        self._staged.append((p, tmp))
+        os.chmod(tmp, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as f:
+            f.write(raw)
+            f.flush()
+            os.fsync(f.fileno())
+
+    def commit(self) -> list[Path]:
+        """Put every staged file in place; returns their paths (:class:`OutputError` and
+        nothing in place if one of them cannot be)."""
+        from axisbase.stop import commit_window
+
+        done: list[Path] = []
+        with commit_window():
+            try:
+                for p, tmp in self._staged:
+                    if self.force:
+                        os.replace(tmp, p)
+                    else:
+                        _link_exclusive(tmp, p)
+                    done.append(p)
+            except BaseException:
+                if not self.force:
+                    for p in done:
+                        p.unlink(missing_ok=True)
+                raise
+            finally:
+                self.discard()
+        return done
+
+    def discard(self) -> None:
+        """Remove the temporary files (those not committed)."""
+        for _, tmp in self._staged:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        self._staged = []
+
+
+def _link_exclusive(tmp: str, p: Path) -> None:
+    """Rename ``tmp`` to ``p`` only if ``p`` does not exist (a hard link is atomic and
+    exclusive; on a file system without them, check then rename)."""
+    try:
+        os.link(tmp, p)
+    except FileExistsError:
+        raise OutputError(f"{p}: appeared while this run was computing (another run writing "
+                          "the same output?); not replaced — pass --force to replace it") from None
+    except OSError:
+        if p.exists():
+            raise OutputError(f"{p}: appeared while this run was computing; not replaced — "
+                              "pass --force to replace it") from None
+        os.replace(tmp, p)
+        return
+    os.unlink(tmp)
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)

@@ -16,7 +16,6 @@ from align.fusion import E_INDEX
 from align.gonio import run_json
 from align.session.run import SessionResult
 from align.warnings import session_warnings
-from axisbase.output import write_json
 from axisbase.provenance import Provenance
 
 
@@ -59,20 +58,33 @@ def session_document(res: SessionResult, settings: Mapping) -> dict:
 def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: bool,
                     settings: Mapping) -> tuple[dict[str, Path], dict]:
     """Write the outputs asked for (``json``, ``report``, ``cal``: checked paths or None);
-    returns what was written and the result JSON. Each file is written to a temporary name
-    and renamed into place, exclusively unless ``force``."""
-    from align.session.report import write_report
+    returns what was written and the result JSON.
+
+    The files appear all together or not at all (:class:`axisbase.output.OutputSet`: each is
+    written to a temporary name, then all are renamed into place, exclusively unless
+    ``force``); the JSON is put in place last, so an existing JSON means a complete set. A JSON
+    to standard output (``-``) is written after the files."""
+    from align.session.report import report_html
+    from axisbase.output import OutputSet, dumps, write_atomic
 
     js = session_document(res, settings)
-    written: dict[str, Path] = {}
-    if outs.get("json") is not None:
-        written["json"] = write_json(outs["json"], js, force)
-    if outs.get("report") is not None:
-        written["report"] = write_report(res, outs["report"], force, js)
     pc = platform_calibration(res)
+    files: dict[str, tuple[Path, str]] = {}
     if outs.get("cal") is not None and pc is not None:
-        written["cal"] = write_json(outs["cal"], pc.document(
-            res.units, dict(settings), res.session.inputs, Provenance.from_dict(js)), force)
+        files["cal"] = (outs["cal"], dumps(pc.document(
+            res.units, dict(settings), res.session.inputs, Provenance.from_dict(js))))
+    if outs.get("report") is not None:
+        files["report"] = (outs["report"], report_html(res, js))
+    to_stdout = outs.get("json") is not None and str(outs["json"]) == "-"
+    if outs.get("json") is not None and not to_stdout:
+        files["json"] = (outs["json"], dumps(js))
+    with OutputSet(force) as out:
+        for path, text in files.values():
+            out.stage(path, text)
+        out.commit()
+    written = {k: files[k][0] for k in ("json", "report", "cal") if k in files}
+    if to_stdout:
+        written["json"] = write_atomic(outs["json"], dumps(js))
     return written, js
 
 

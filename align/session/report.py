@@ -63,9 +63,15 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
                  doc: dict | None = None) -> Path:
     """Write the report to ``path`` (atomically; exclusively unless ``force``). ``doc``: the
     result JSON, whose warnings and provenance head the report."""
+    from axisbase.output import write_atomic
+
+    return write_atomic(path, report_html(res, doc), force)
+
+
+def report_html(res: SessionResult, doc: dict | None = None) -> str:
+    """The report as one self-contained HTML page (see :func:`write_report`)."""
     from align.plots import fig_calibration, fig_fusion, fig_gonio, fig_mark
     from align.warnings import session_warnings
-    from axisbase.output import write_atomic
 
     s = res.session
     warnings = doc["warnings"] if doc else session_warnings(res)
@@ -161,4 +167,4 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
             parts.append(f"<h3>{esc(im.file.name)} — housing {im.housing}, view {im.view}</h3>"
                          + _loop(r.loop) + _img(fig_mark(r, image)))
     parts.append("</body></html>")
-    return write_atomic(path, "\n".join(parts), force)
+    return "\n".join(parts)

@@ -1,0 +1,411 @@
+"""Batches of sessions: one job per session folder, run by an executor.
+
+A :class:`SessionJob` says everything one session needs (folder, output paths, settings) and
+:func:`run_job` runs it end to end and writes its outputs — all together or not at all
+(:func:`align.session.output.session_outputs`). Executors run jobs and hand back one summary
+per job as each finishes:
+
+* :class:`LocalPool` (the default): worker processes on this machine. They end with their
+  parent — they watch its process id and stop if it disappears (SIGKILL included), and the
+  parent stops them when it is told to stop (SIGINT/SIGTERM). A worker that dies takes none of
+  the other sessions with it: the pool is rebuilt and the unfinished sessions run again.
+* :class:`DaskCluster`: the sessions run on an existing ``dask.distributed`` cluster; the
+  scheduler reruns a session whose worker died (up to its ``allowed-failures``), and a session
+  it gives up on is reported, not lost. The workers must see the session folders and the
+  output folders at the same paths as this machine.
+
+One failing session never stops the others: it comes back as a summary with ``ok`` false and
+its ``error``. :func:`is_complete` tells which sessions a previous, interrupted batch has
+already finished (``align run --resume``).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+from align.errors import InputError
+
+Summary = dict
+OnDone = Callable[[Summary], None]
+
+
+@dataclass(frozen=True)
+class SessionJob:
+    """One session of a batch.
+
+    ``json``/``report``/``cal``: output paths (None: not asked for; ``json`` may be ``-``
+    for standard output); ``settings``: the settings recorded in the provenance; ``command``:
+    the command line recorded there (a worker on another machine does not know it);
+    ``keep_result``: return the :class:`~align.session.SessionResult` itself (one session in
+    this process, to print it)."""
+
+    folder: str
+    json: str | None = None
+    report: str | None = None
+    cal: str | None = None
+    alpha: float = 1e-3
+    force: bool = False
+    allow_outside: bool = False
+    settings: dict = field(default_factory=dict)
+    command: tuple[str, ...] = ()
+    keep_result: bool = False
+
+    @property
+    def name(self) -> str:
+        return Path(self.folder).resolve().name
+
+
+# Reports are drawn with matplotlib's pyplot, which is not thread-safe: a Dask worker may run
+# several sessions in threads of one process.
+_PLOT_LOCK = threading.Lock()
+
+
+def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> Summary:
+    """One session end to end; returns its summary (never raises for bad input or a failed
+    stage: ``ok`` false, ``bad_input`` true and ``error`` say what).
+
+    Every output is checked before anything is computed; a stage that failed still gives
+    the result (``ok: false``)."""
+    from align.session import load_session, run_session, session_outputs
+    from axisbase.output import OutputPlan
+    from axisbase.provenance import set_command
+
+    if job.command:
+        set_command(job.command)
+    try:
+        s = load_session(job.folder, allow_outside=job.allow_outside)
+        if job.cal is not None and s.calibration is None:
+            raise InputError(f"--calibration {job.cal}: the session {s.folder} has no "
+                             "[calibration] section, so there is no platform calibration "
+                             "to write")
+        plan = OutputPlan(s.inputs, force=job.force)
+        outs = {"json": plan.add("--json", job.json, stdout_ok=True),
+                "report": plan.add("--report", job.report),
+                "cal": plan.add("--calibration", job.cal)}
+    except InputError as exc:
+        return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
+                "error": str(exc)}
+    res = run_session(s, progress=progress or (lambda m: None), alpha=job.alpha)
+    settings = job.settings or {"alpha": job.alpha}
+    try:
+        if outs["report"] is not None:
+            with _PLOT_LOCK:
+                written, js = session_outputs(res, outs, job.force, settings)
+        else:
+            written, js = session_outputs(res, outs, job.force, settings)
+    except InputError as exc:  # an output that appeared while computing: not replaced
+        return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
+                "error": str(exc)}
+    warnings = list(js["warnings"])
+    if outs["cal"] is not None and "cal" not in written:
+        warnings.append(f"--calibration {outs['cal']}: NOT written: no platform calibration "
+                        "(the calibration or the fusion failed)")
+    return {"session": s.name, "folder": job.folder, "ok": res.ok, "bad_input": not res.ok,
+            "result": res if job.keep_result else None, "json": js, "warnings": warnings,
+            "outputs": {k: str(v) for k, v in written.items()}}
+
+
+def crashed(job: SessionJob, why: str) -> Summary:
+    """The summary of a session whose job did not return (an internal error, a dead worker)."""
+    return {"session": job.name, "folder": job.folder, "ok": False, "bad_input": False,
+            "error": why}
+
+
+# ----------------------------------------------------------------------------- planning
+
+def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | None = None,
+               cal: str | None = None, **common) -> list[SessionJob]:
+    """The jobs of a batch whose ``json``/``report``/``cal`` name folders (one
+    ``<session>.json``, ``<session>.html``, ``<session>.cal.json`` each, named after the
+    session's folder). The folders are created and checked writable now; ``common``: the
+    other :class:`SessionJob` fields."""
+    from axisbase.output import OutputPlan
+
+    names = [Path(s).resolve().name for s in sessions]
+    if len(set(names)) != len(names):
+        raise InputError("two sessions have the same folder name; outputs would collide")
+    flags = (("--json", json), ("--report", report), ("--calibration", cal))
+    for flag, folder in flags:
+        if folder == "-":
+            raise InputError(f"{flag} -: standard output takes one session, not a batch")
+    plan = OutputPlan(sessions, force=common.get("force", False))
+    for flag, folder in flags:
+        plan.add(flag, folder, folder=True)
+
+    def path_in(folder: str | None, name: str, ext: str) -> str | None:
+        return None if folder is None else str(Path(folder) / f"{name}{ext}")
+
+    return [SessionJob(s, path_in(json, n, ".json"), path_in(report, n, ".html"),
+                       path_in(cal, n, ".cal.json"), **common)
+            for s, n in zip(sessions, names, strict=True)]
+
+
+def is_complete(job: SessionJob) -> bool:
+    """Every output ``job`` asks for is in place: a session result JSON, the report, and the
+    calibration (unless the JSON says the session gave none). Outputs appear all together or
+    not at all, so this is what an interrupted batch finished."""
+    from axisbase.output import STDOUT
+
+    if job.json == STDOUT or not (job.json or job.report or job.cal):
+        return False
+    doc = None
+    if job.json is not None:
+        doc = _session_json(job.json)
+        if doc is None:
+            return False
+    if job.report is not None and not Path(job.report).is_file():
+        return False
+    if job.cal is not None and not Path(job.cal).is_file():
+        return doc is not None and doc.get("platform_calibration") is None
+    return True
+
+
+def _session_json(path: str) -> dict | None:
+    import json
+
+    try:
+        d = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) and d.get("format") == "axis-align/session" else None
+
+
+def skipped(job: SessionJob) -> Summary:
+    """The summary of a session a previous batch finished (``--resume``)."""
+    doc = _session_json(job.json) if job.json else None
+    ok = bool(doc.get("ok")) if doc is not None else True
+    return {"session": job.name, "folder": job.folder, "ok": ok, "bad_input": not ok,
+            "skipped": True, "json": doc, "warnings": [],
+            "outputs": {k: v for k, v in (("json", job.json), ("report", job.report),
+                                          ("cal", job.cal)) if v and Path(v).is_file()}}
+
+
+# ----------------------------------------------------------------------------- executors
+
+class Executor(Protocol):
+    def run(self, jobs: Sequence[SessionJob], on_done: OnDone) -> None:
+        """Run every job; call ``on_done`` with each summary as it finishes (in this
+        process's main thread). Raises :class:`axisbase.stop.Stopped` when told to stop,
+        after stopping its workers."""
+
+
+def run_batch(jobs: Iterable[SessionJob], executor: Executor,
+              on_done: OnDone | None = None) -> list[Summary]:
+    """Run ``jobs`` on ``executor``; returns one summary per job (in the order they
+    finished)."""
+    out: list[Summary] = []
+
+    def done(r: Summary) -> None:
+        out.append(r)
+        if on_done is not None:
+            on_done(r)
+
+    executor.run(list(jobs), done)
+    return out
+
+
+def executor_for(scheduler: str | None, jobs: int | None) -> Executor:
+    """A :class:`DaskCluster` on ``scheduler`` if given, else a :class:`LocalPool` of
+    ``jobs`` processes (default: every core)."""
+    if scheduler:
+        return DaskCluster(scheduler)
+    return LocalPool(jobs or os.cpu_count() or 1)
+
+
+# --- local processes
+
+_IN_JOB = [False]
+
+
+def _worker_init(parent: int) -> None:
+    """Each pool worker: Ctrl-C (sent to the whole process group) is the parent's to handle;
+    SIGTERM stops the session in hand cleanly; the worker ends when its parent does."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _worker_signal)
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                     name="watch-parent").start()
+
+
+def _worker_signal(signum: int, frame: object) -> None:
+    from axisbase.stop import on_signal
+
+    if not _IN_JOB[0]:
+        os._exit(128 + signum)
+    on_signal(signum, frame)  # raises Stopped in the job (held back during a commit)
+
+
+# How often a worker looks for its parent [s]: the longest an orphan lives before it starts
+# to stop.
+PARENT_POLL_S = 0.2
+
+
+def _watch_parent(parent: int) -> None:
+    """Stop this worker when ``parent`` (the ``align`` process) has gone, even by SIGKILL,
+    which nobody can catch: this process's parent id then changes. Portable (no prctl)."""
+    import _thread
+    import signal
+    import time
+
+    # With the 'fork' start method the pool's process is the parent; with 'forkserver' or
+    # 'spawn' it is a helper: watch both (a dead, reaped process no longer exists).
+    mine = os.getppid()
+    while os.getppid() == mine and _exists(parent):
+        time.sleep(PARENT_POLL_S)
+    _thread.interrupt_main(signal.SIGTERM)  # unwinds the session (temporary files removed)
+    time.sleep(30)
+    os._exit(128 + signal.SIGTERM)  # the main thread was stuck in a long C call
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _pool_job(job: SessionJob) -> Summary:
+    from axisbase.stop import Stopped
+
+    try:
+        _IN_JOB[0] = True
+        return run_job(job)
+    except Stopped as stop:  # its finally blocks have run: no temporary file is left
+        os._exit(stop.exit_status)
+    finally:
+        _IN_JOB[0] = False
+
+
+class LocalPool:
+    """Worker processes on this machine (``processes`` of them).
+
+    A worker that dies (killed, out of memory) breaks the pool: it is rebuilt and every
+    session that had not finished runs again, each at most ``retries`` more times before it
+    is reported as lost to dead workers."""
+
+    def __init__(self, processes: int, retries: int = 2):
+        self.processes = int(processes)
+        self.retries = retries
+
+    def run(self, jobs: Sequence[SessionJob], on_done: OnDone) -> None:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures.process import BrokenProcessPool
+
+        pending = list(jobs)
+        tries = dict.fromkeys(range(len(pending)), 0)
+        index = {id(j): k for k, j in enumerate(pending)}
+        while pending:
+            broken: list[SessionJob] = []
+            pool = ProcessPoolExecutor(min(self.processes, len(pending)),
+                                       initializer=_worker_init, initargs=(os.getpid(),))
+            try:
+                futs = {pool.submit(_pool_job, j): j for j in pending}
+                for fut in as_completed(futs):
+                    job = futs[fut]
+                    try:
+                        r = fut.result()
+                    except BrokenProcessPool:
+                        broken.append(job)
+                        continue
+                    except Exception as exc:  # a bug in one session must not stop the rest
+                        r = crashed(job, f"internal error: {exc!r}")
+                    on_done(r)
+            except BaseException:
+                _stop_pool(pool)
+                raise
+            pool.shutdown(wait=True)
+            pending = []
+            for job in broken:
+                k = index[id(job)]
+                tries[k] += 1
+                if tries[k] > self.retries:
+                    on_done(crashed(job, f"its worker process died {tries[k]} times "
+                                         "(killed, or out of memory?)"))
+                else:
+                    pending.append(job)
+
+
+def _stop_pool(pool) -> None:
+    """Stop every worker now: SIGTERM (each unwinds its session: nothing half-written),
+    then SIGKILL for one that does not end within 10 s."""
+    import multiprocessing
+
+    pool.shutdown(wait=False, cancel_futures=True)
+    children = multiprocessing.active_children()
+    for p in children:
+        p.terminate()
+    for p in children:
+        p.join(10)
+        if p.is_alive():
+            p.kill()
+            p.join(1)
+
+
+# --- a Dask cluster
+
+class DaskCluster:
+    """Sessions on an existing ``dask.distributed`` cluster (scheduler ``address``, e.g.
+    ``tcp://10.0.0.5:8786``).
+
+    The workers import this same package and read/write the same paths: the session folders
+    and the output folders must be visible to every worker at the paths given here (a shared
+    file system). A worker that dies mid-session: the scheduler runs the session again
+    elsewhere; one that keeps killing workers is reported (``KilledWorker``)."""
+
+    def __init__(self, address: str, connect_timeout_s: float = 20.0):
+        self.address = address
+        self.connect_timeout_s = connect_timeout_s
+
+    def run(self, jobs: Sequence[SessionJob], on_done: OnDone) -> None:
+        import uuid
+
+        try:
+            from distributed import Client, as_completed
+        except ImportError:  # pragma: no cover - a declared dependency
+            raise InputError("--scheduler: the 'distributed' package is not installed "
+                             "(pip install 'dask[distributed]')") from None
+        try:
+            client = Client(self.address, timeout=self.connect_timeout_s,
+                            set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"--scheduler {self.address}: cannot reach a Dask scheduler "
+                             f"there ({exc})") from None
+        jobs = [_absolute(j) for j in jobs]  # a worker's working folder is not ours
+        tag = uuid.uuid4().hex[:8]
+        futs = {}
+        try:
+            for k, j in enumerate(jobs):
+                f = client.submit(run_job, j, key=f"align-run-{tag}-{k}-{j.name}", pure=False)
+                futs[f] = j
+            for fut in as_completed(list(futs), loop=client.loop):
+                job = futs[fut]
+                try:
+                    r = fut.result()
+                except Exception as exc:  # KilledWorker, a bug: reported, never lost
+                    r = crashed(job, f"{type(exc).__name__}: {exc}")
+                on_done(r)
+        except BaseException:
+            client.cancel(list(futs))
+            raise
+        finally:
+            client.close()
+
+
+def _absolute(job: SessionJob) -> SessionJob:
+    """``job`` with absolute paths (from this process's working folder; symlinks kept)."""
+    from dataclasses import replace
+
+    def a(p: str | None) -> str | None:
+        return None if p is None or p == "-" else str(Path(p).absolute())
+
+    return replace(job, folder=a(job.folder), json=a(job.json), report=a(job.report),
+                   cal=a(job.cal))

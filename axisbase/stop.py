@@ -1,0 +1,75 @@
+"""Stopping cleanly: SIGTERM and SIGINT as an exception, never in the middle of a commit.
+
+A run told to stop (Ctrl-C, ``kill``, the end of a batch's parent) unwinds like any exception,
+so every ``finally`` removes its temporary files. The one moment that must not be cut is the
+*commit* — the few renames that put a session's files into place (see
+:class:`axisbase.output.OutputSet`): a stop that arrives then is held back and raised as soon as
+the commit has finished, so the files appear all together or not at all.
+
+Exit statuses follow the shell's convention, 128 + the signal number: 130 for SIGINT, 143 for
+SIGTERM.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class Stopped(KeyboardInterrupt):
+    """The run was told to stop by signal ``signum`` (a KeyboardInterrupt, so that only code
+    that means to catch an interruption catches it)."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+
+    @property
+    def exit_status(self) -> int:
+        return 128 + self.signum
+
+
+class _State(threading.local):
+    committing = False
+    pending: Stopped | None = None
+
+
+_STATE = _State()
+
+
+def on_signal(signum: int, frame: object) -> None:
+    """The signal handler: raise :class:`Stopped`, or hold it back during a commit."""
+    stop = Stopped(signum)
+    if _STATE.committing:  # the renames finish first; commit_window raises it after
+        _STATE.pending = stop
+        return
+    raise stop
+
+
+def raise_on_signals() -> dict:
+    """From now on SIGINT and SIGTERM raise :class:`Stopped` in the main thread; returns the
+    previous handlers (for :func:`restore`). Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def restore(previous: dict) -> None:
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+
+
+@contextmanager
+def commit_window() -> Iterator[None]:
+    """A block during which a stop is held back and raised when the block ends."""
+    outer = _STATE.committing
+    _STATE.committing = True
+    try:
+        yield
+    finally:
+        _STATE.committing = outer
+        if not outer and _STATE.pending is not None:
+            stop, _STATE.pending = _STATE.pending, None
+            raise stop
