@@ -4,7 +4,7 @@ Public API::
 
     load_session(folder) -> Session          (checked; InputError names the key at fault)
     run_session(session) -> SessionResult    (stage failures collected, not raised)
-    result_json(result) -> dict              (the JSON contract of 'align run')
+    result.to_dict() -> dict                 (the JSON contract of 'align run')
     run_batch(jobs, LocalPool(n) | DaskCluster(address)) -> summaries   (align run S1 S2 ...)
 """
 
@@ -19,8 +19,6 @@ from align.session.batch import (
 )
 from align.session.config import Session, load_session
 from align.session.output import (
-    platform_calibration,
-    result_json,
     session_document,
     session_outputs,
     truth_errors,
@@ -30,5 +28,5 @@ from align.session.run import SessionResult, StageError, observation_blocks, run
 __all__ = ["DaskCluster", "LocalPool", "SessionJob", "batch_jobs", "is_complete", "run_batch",
            "run_job",
            "Session", "SessionResult", "StageError", "load_session", "observation_blocks",
-           "platform_calibration", "result_json", "run_session", "session_document",
+           "run_session", "session_document",
            "session_outputs", "truth_errors"]

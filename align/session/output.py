@@ -8,51 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from align.apply import PlatformCalibration
-from align.calibration import calibration_json
-from align.calibration.output import with_units
 from align.contract import document
 from align.fusion import E_INDEX
-from align.gonio import run_json
 from align.session.run import SessionResult
-from align.warnings import session_warnings
 from axisbase.provenance import Provenance
 
 
-def platform_calibration(res: SessionResult) -> PlatformCalibration | None:
-    if res.fusion is None or res.calibration is None:
-        return None
-    e6 = np.array([res.fusion.E[i, j] for i, j in E_INDEX])
-    return PlatformCalibration(res.calibration.model, e6, res.fusion.cov)
-
-
-def result_json(res: SessionResult) -> dict:
-    d: dict = {"session": res.session.name, "folder": str(res.session.folder),
-               "ok": res.ok, "fused": res.fused, "warnings": session_warnings(res),
-               "errors": [{"stage": e.stage, "message": e.message} for e in res.errors],
-               "metadata": dict(res.session.metadata)}
-    if res.fusion is not None:
-        d.update(res.fusion.to_dict())
-    pc = platform_calibration(res)
-    if pc is not None:
-        d["platform_calibration"] = pc.to_dict(res.units)
-    stages: dict = {}
-    if res.calibration is not None:
-        stages["calibration"] = with_units(
-            calibration_json(res.calibration, res.calibration_poses), res.units)
-    if res.gonio is not None:
-        g = res.session.goniometer
-        stages["goniometer"] = run_json(res.gonio, g.faces, g.nominal_rad)
-    if res.marks:
-        stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
-                                nominal=im.nominal) for im, r in res.marks]
-    d["stages"] = stages
-    return d
-
-
 def session_document(res: SessionResult, settings: Mapping) -> dict:
-    """:func:`result_json` in its envelope (format, version, provenance)."""
-    return document("session", result_json(res), settings, res.session.inputs)
+    """:meth:`SessionResult.to_dict` in its envelope (format, version, provenance)."""
+    return document("session", res.to_dict(), settings, res.session.inputs)
 
 
 def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: bool,
@@ -68,7 +32,7 @@ def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: 
     from axisbase.output import OutputSet, dumps, write_atomic
 
     js = session_document(res, settings)
-    pc = platform_calibration(res)
+    pc = res.platform_calibration()
     files: dict[str, tuple[Path, str]] = {}
     if outs.get("cal") is not None and pc is not None:
         files["cal"] = (outs["cal"], dumps(pc.document(

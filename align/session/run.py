@@ -11,9 +11,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.errors import InputError
 from align.fusion import (
+    E_INDEX,
     Block,
     FusionResult,
     MarkObs,
@@ -66,13 +68,60 @@ class SessionResult:
         failed stage is still written, but is not ok (exit status 2)."""
         return self.fusion is not None and not self.errors
 
+    def platform_calibration(self) -> PlatformCalibration | None:
+        """The triad model and the misalignment in one (what 'align apply' needs), when both
+        the calibration and the fusion ran."""
+        if self.fusion is None or self.calibration is None:
+            return None
+        e6 = np.array([self.fusion.E[i, j] for i, j in E_INDEX])
+        return PlatformCalibration(self.calibration.model, e6, self.fusion.cov)
+
+    def to_dict(self) -> dict:
+        """The JSON contract of 'align run' (without its envelope): ok/fused, warnings,
+        errors, metadata, the fusion's E with its covariance, observations and loop, the
+        platform calibration, and each stage's own result. A session result is not loaded
+        back whole (it needs the session's files); its parts are:
+        :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
+        from align.calibration import calibration_json
+        from align.calibration.output import with_units
+        from align.gonio import run_json
+        from align.warnings import session_warnings
+
+        d: dict = {"session": self.session.name, "folder": str(self.session.folder),
+                   "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
+                   "errors": [{"stage": e.stage, "message": e.message} for e in self.errors],
+                   "metadata": dict(self.session.metadata)}
+        if self.fusion is not None:
+            d.update(self.fusion.to_dict())
+        pc = self.platform_calibration()
+        if pc is not None:
+            d["platform_calibration"] = pc.to_dict(self.units)
+        stages: dict = {}
+        if self.calibration is not None:
+            stages["calibration"] = with_units(
+                calibration_json(self.calibration, self.calibration_poses), self.units)
+        if self.gonio is not None:
+            g = self.session.goniometer
+            stages["goniometer"] = run_json(self.gonio, g.faces, g.nominal_rad)
+        if self.marks:
+            stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
+                                    nominal=im.nominal) for im, r in self.marks]
+        d["stages"] = stages
+        return d
+
 
 def _try(res: SessionResult, stage: str, fn: Callable[[], object]) -> object | None:
+    """``fn()``, or None with the stage's failure recorded. Bad input is the user's to fix;
+    a numerical failure inside a stage is a defect of the tool and is named as one (the other
+    stages still run, so nothing else is lost)."""
     try:
         return fn()
-    except (InputError, LogError, ImageInputError, ValueError, np.linalg.LinAlgError) as exc:
+    except (InputError, LogError, ImageInputError) as exc:
         res.errors.append(StageError(stage, str(exc)))
-        return None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        res.errors.append(StageError(stage, f"internal error ({type(exc).__name__}: {exc}); "
+                                            "please report it with the session's files"))
+    return None
 
 
 def run_session(s: Session, progress: Progress = lambda msg: None,

@@ -149,11 +149,10 @@ def test_inconsistency_no_candidate_explains_is_reported(tmp_path):
 
 def test_platform_calibration_applied_to_readings(clean, tmp_path):
     """Readings at known platform attitudes come back as those directions in P."""
-    from align.session import platform_calibration
     from synth.session import TABLE1_K, Triad
 
     res, truth = clean
-    pc = platform_calibration(res)
+    pc = res.platform_calibration()
     tj = json.loads((Path(res.session.folder) / "truth.json").read_text())
     triad = Triad(k=TABLE1_K, bias=tuple(tj["bias_platform_g"]), noise_v=4.8e-5,
                   axes=tuple(map(tuple, tj["axes"])))

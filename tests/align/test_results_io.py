@@ -16,7 +16,7 @@ from axisbase.output import dumps
 @pytest.fixture(scope="module")
 def session_result(tmp_path_factory):
     """A seeded synthetic session without images, run once: its result and its JSON."""
-    from align.session import load_session, result_json, run_session
+    from align.session import load_session, run_session
     from synth.session import SessionSpec, write_session
     from tests.align.test_bad_inputs import _strip_images
 
@@ -31,7 +31,7 @@ def session_result(tmp_path_factory):
     (s / "session.toml").write_text(_strip_images((full / "session.toml").read_text()))
     res = run_session(load_session(s))
     assert res.fusion is not None
-    return res, json.loads(dumps(result_json(res)))
+    return res, json.loads(dumps(res.to_dict()))
 
 
 def test_fusion_result_round_trip(session_result):
