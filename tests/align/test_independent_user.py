@@ -798,8 +798,6 @@ def test_gonio_against_the_generators_truth(gonio_log, gonio_plain):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="gonio: with autocollimator jitter comparable to the count"
-                   " quantum (2 us at 0.5 rev/s) the stated u is ~25-30 % too small (RMS z 1.3)")
 def test_gonio_uncertainty_is_honest_with_jitter(tmp_path, capsys):
     rng = np.random.default_rng(0)
     z = []
