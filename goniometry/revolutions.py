@@ -412,6 +412,9 @@ class _Pass:
             raise FaceCountError(path, mode, self.n, share, m)
 
     def finish(self, path) -> LogSummary:
+        one = f"{self.n} rows from one reference pulse to the next"
+        if self.rows <= self.n:
+            raise LogError(f"{path}: {self.rows} rows, fewer than one revolution ({one})")
         if not self.started:
             raise LogError(f"{path}: no reference pulse at all (ref column never 1): faces "
                            "cannot be identified")
@@ -428,10 +431,6 @@ class _Pass:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
         if self.stats.n < MIN_REVOLUTIONS:
-            one = f"{self.n} rows from one reference pulse to the next"
-            if self.rows <= self.n:
-                raise LogError(f"{path}: {self.rows} rows, fewer than one revolution "
-                               f"({one})")
             raise LogError(f"{path}: only {self.stats.n} usable revolutions in {self.rows} "
                            f"rows ({self.excluded} excluded): at least {MIN_REVOLUTIONS} "
                            "are needed (to learn the face pattern that screens pulse faults, "

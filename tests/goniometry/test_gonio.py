@@ -116,3 +116,42 @@ def test_loop_adds_nothing_to_fifty_clean_logs(tmp_path):
         rep = loop_gonio(*kept_table(read_revolutions(p, 4)))
         false += bool(rep.effects)
     assert false <= 1
+
+
+def test_too_short_logs_and_wrong_face_count_are_refused(tmp_path):
+    """A log shorter than one revolution, one with fewer than 8 usable revolutions, and faces
+    named in another number than the reference marks are apart: one LogError naming the file
+    (never a traceback from deeper in the pipeline)."""
+    from goniometry import FaceCountError
+
+    p, _ = _log(tmp_path, revolutions=40, seed=0)
+    lines = p.read_text().splitlines()
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(lines[:4]) + "\n")  # header + 3 rows
+    with pytest.raises(LogError, match=r"short.csv: 3 rows, fewer than one revolution"):
+        read_revolutions(short, 4)
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join(lines[:1 + 4 * 5]) + "\n")  # ~5 revolutions
+    with pytest.raises(LogError, match=r"few.csv: only \d usable revolutions .* at least 8"):
+        read_revolutions(few, 4)
+    for n in (3, 5):
+        with pytest.raises(FaceCountError, match=rf"has 4 pulses per revolution.*{n} faces"):
+            read_revolutions(p, n)
+    assert read_revolutions(p, 4).stats.n >= 38
+
+
+def test_arming_between_faces_is_a_lead_in_not_a_fault(tmp_path):
+    """The counters armed by a pulse that is no face (the first row's count ends on face 0
+    but starts elsewhere): that lead-in is not a revolution and not a listed fault."""
+    p, _ = _log(tmp_path, revolutions=60, seed=4)
+    lines = p.read_text().splitlines()
+    cut = tmp_path / "lead_in.csv"
+    # Drop the first revolution's rows up to (not including) its reference-marked row, and
+    # shorten that row's count to 40 % of it: the arming pulse lies between two faces.
+    first_ref = next(i for i, ln in enumerate(lines[1:], 1) if ln.split(",")[2] == "1")
+    row = lines[first_ref].split(",")
+    row[0] = str(int(int(row[0]) * 0.4))
+    cut.write_text("\n".join([lines[0], ",".join(row), *lines[first_ref + 1:]]) + "\n")
+    s = read_revolutions(cut, 4)
+    assert not s.exclusions.counts, dict(s.exclusions.counts)
+    assert s.incomplete_head == 1 and s.armed_face is None
