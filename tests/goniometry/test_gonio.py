@@ -36,6 +36,26 @@ def test_normalised_errors_over_seeded_logs(tmp_path):
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
 
 
+def test_uncertainty_with_dithering_jitter_is_the_exact_one(tmp_path):
+    """Jitter of 1 count dithers the quantisation: the pulse errors are independent, so the
+    exact u of a mean is q sqrt(2 (sigma_j^2 + 1/12) / R) (the reference pulses' share
+    telescopes). Batch means alone put u anywhere in 0.4-2.2 x it (8-16 blocks); the lag-1
+    variance has ~R/3 degrees of freedom (u to ~10 %): no u below 0.7 x the exact one."""
+    arcsec = np.pi / 180 / 3600
+    z, r = [], []
+    for seed in range(12):
+        p, truth = _log(tmp_path, f"j{seed}.csv", revolutions=150, seed=seed,
+                        jitter_rad=1.7 * arcsec)
+        fa = face_angles(read_revolutions(p, 4))
+        q = 2 * np.pi / fa.counts_per_rev
+        exact = q * np.sqrt(2 * ((1.7 * arcsec / q) ** 2 + 1 / 12) / fa.revolutions)
+        z.append((fa.angles_rad - truth) / fa.u_rad)
+        r.append(fa.u_rad / exact)
+    z, r = np.ravel(z), np.ravel(r)
+    assert 0.7 < np.sqrt(np.mean(z**2)) < 1.3, z
+    assert 0.85 < np.median(r) < 1.2 and r.min() > 0.7, r
+
+
 def test_faults_are_repaired_or_excluded_and_reported(tmp_path):
     p, truth = _log(tmp_path, revolutions=2000, seed=2, p_missing=1e-3, p_spurious=1e-3,
                     failed_refs=3)
