@@ -407,8 +407,11 @@ class _Pass:
         vals, cnt = np.unique(self.seg_lengths, return_counts=True)
         k = int(np.argmax(cnt))
         mode, share = int(vals[k]), int(cnt[k])
-        # A majority: faults (missing, spurious pulses) change a few lengths, never most.
-        if mode != self.n and 2 * share > m:
+        # A majority: faults (missing, spurious pulses) change a few lengths, never most; a
+        # multiple of n is a reference signal that fails often (repaired by the walk) — if
+        # some revolutions do have n rows.
+        whole = mode % self.n == 0 and bool(np.any(self.seg_lengths == self.n))
+        if mode != self.n and not whole and 2 * share > m:
             raise FaceCountError(path, mode, self.n, share, m)
 
     def finish(self, path) -> LogSummary:
