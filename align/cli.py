@@ -109,6 +109,13 @@ def _warn(lines: Sequence[str]) -> None:
         log.warning("WARNING: %s", w)
 
 
+def _say(text: str) -> None:
+    """A line of a command's result summary: on standard output (standard error when the JSON
+    owns standard output), nothing with -q (only warnings and errors)."""
+    if log.isEnabledFor(logging.INFO):
+        print(text)
+
+
 def _wrote(path: Path | None) -> None:
     if path is not None and str(path) != "-":
         print(f"wrote {path}")
@@ -408,7 +415,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     from align.warnings import gonio_warnings
     from axisbase.output import write_json
     from axisbase.table import parse_column_map
-    from goniometry import kept_table
+    from goniometry import FaceCountError, kept_table
 
     faces = _faces(args.faces)
     nominal_deg = _nominal(args.nominal, len(faces))
@@ -427,30 +434,34 @@ def cmd_gonio(args: argparse.Namespace) -> int:
         run = measure_log(args.log, len(faces), args.latitude, d, args.alpha,
                           reverse_log=args.reverse_log, steady_table=args.steady_table,
                           columns=cols, latitude_range_deg=args.latitude_range)
+    except FaceCountError as exc:
+        raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} has "
+                         f"{exc.found} pulses per revolution") from None
     except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
-    print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
-          f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
+    _say(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
+         f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
-        print(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
-              f"{', ...' if n > 10 else ''})")
+        _say(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
+             f"{', ...' if n > 10 else ''})")
     if summary.incomplete_tail:
-        print(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
-              "incomplete revolution, not used")
+        _say(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
+             "incomplete revolution, not used")
     for i, name in enumerate(faces):
         nxt = faces[(i + 1) % len(faces)]
         dev = "" if nominal is None else (
             f"  deviation {np.rad2deg(fa.angles_rad[i] - nominal[i]) * 3600:+9.3f}″")
         lock = "  (quantisation locked: not averaged)" if fa.quantisation_locked[i] else ""
-        print(f"  {name:>6s} -> {nxt:<6s} {np.rad2deg(fa.angles_rad[i]):12.7f}° "
-              f"± {np.rad2deg(fa.u_rad[i]) * 3600:.3f}″{dev}{lock}")
+        _say(f"  {name:>6s} -> {nxt:<6s} {np.rad2deg(fa.angles_rad[i]):12.7f}° "
+             f"± {np.rad2deg(fa.u_rad[i]) * 3600:.3f}″{dev}{lock}")
     if loop is not None:
         for line in loop.summary_lines():
-            print("  " + line)
+            _say("  " + line)
     for note in run.notes:
-        print("  " + note)
-    _warn(gonio_warnings(run))  # (the document hashes the logs: only when written)
+        _say("  " + note)
+    # (the document hashes the logs: only when written)
+    _warn(gonio_warnings(run, faces, nominal))
     if plot is not None:
         from align.plots import plot_gonio
 

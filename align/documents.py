@@ -32,7 +32,8 @@ def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, se
     """``align gonio --json``."""
     from align.gonio import run_json
 
-    body = {"ok": True, "warnings": gonio_warnings(run), **run_json(run, faces, nominal_rad)}
+    body = {"ok": True, "warnings": gonio_warnings(run, faces, nominal_rad),
+            **run_json(run, faces, nominal_rad)}
     return document("gonio", body, settings, inputs)
 
 

@@ -220,6 +220,7 @@ class GonioRun:
     direction: DirectionTerm | None = None
     timing: TimingAngles | None = None
     timing_used: bool = False
+    warnings: tuple[str, ...] = ()  # options given that this log cannot honour
 
 
 def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, DirectionTerm]:
@@ -295,8 +296,10 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
+        warns = (*fwd.warnings, *(f"reverse run: {w}" for w in rev.warnings))
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
-                        rev, term, fwd.timing, fwd.timing_used and rev.timing_used)
+                        rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
+                        tuple(warns))
     notes: list[str] = []
     loop = None
     if latitude_deg is None:
@@ -310,16 +313,19 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         notes.append(f"log armed on face {summary.armed_face}: the first "
                      f"{summary.incomplete_head} rows are a partial revolution, not used")
     elif summary.incomplete_head:
-        notes.append(f"the first {summary.incomplete_head} rows before the first complete "
-                     "revolution are not used")
+        # Not a fault: the arming pulse fits no face (armed between faces).
+        notes.append(f"lead-in: the first {summary.incomplete_head} rows, from the arming "
+                     "pulse to the first complete revolution, are not used")
     if latitude_deg is not None and summary.has_time:
         rate = vertical_earth_rate(latitude_deg, direction)
         return _with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
                                      rate), steady_table, alpha)
     if latitude_deg is not None:
-        notes.append("no t column: the Earth-rate correction needs pulse times; not applied")
-        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
-                            steady_table, alpha)
+        why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
+               "pulse times; NOT applied")
+        notes.append(why)
+        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None,
+                                     warnings=(why,)), steady_table, alpha)
     if not summary.has_time:
         notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
                      "nor bounded without pulse times; the angles assume a steady table")
@@ -371,8 +377,9 @@ def _with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
     if not steady_table:
         return run
     if not run.summary.has_time:
-        return replace(run, notes=(*run.notes, "--steady-table needs pulse times (t): counts "
-                                   "used"))
+        why = ("steady table asked, but the log has no t column (pulse times): the angles are "
+               "from the counts")
+        return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
     ta = timing_angles(run.summary)
     arcsec = np.rad2deg(1) * 3600
     worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
@@ -405,6 +412,29 @@ def direction_effect(term: DirectionTerm, faces: Sequence[str]) -> dict:
             "components": [{"axis": f"{faces[i]}->{faces[(i + 1) % n]}",
                             "estimate": float(term.half_difference_rad[i]),
                             "u": float(term.u_rad[i])} for i in range(n)]}
+
+
+# A housing's faces are made to arc-seconds or arc-minutes of their nominal angles; a
+# deviation beyond a degree is no face error but a nominal that does not describe these
+# faces (a typo, names or nominal in another order, the wrong --direction). An absolute
+# limit, not one in u: u is ~0.1″ here, so real face errors of tens of arc-seconds are
+# hundreds of u and must not be flagged.
+NOMINAL_LIMIT_RAD = np.deg2rad(1.0)
+
+
+def nominal_mismatch(angles_rad: np.ndarray, nominal_rad: np.ndarray,
+                     faces: Sequence[str]) -> list[str]:
+    """Warnings for the angles [rad] farther than NOMINAL_LIMIT_RAD from their nominal."""
+    n = len(faces)
+    dev = np.asarray(angles_rad) - np.asarray(nominal_rad)
+    bad = np.flatnonzero(np.abs(dev) > NOMINAL_LIMIT_RAD)
+    if not bad.size:
+        return []
+    what = ", ".join(f"{faces[i]}->{faces[(i + 1) % n]} {np.rad2deg(angles_rad[i]):.4f}° vs "
+                     f"{np.rad2deg(nominal_rad[i]):g}°" for i in bad)
+    return [f"the nominal angles do not describe these faces (measured vs nominal: {what}; "
+            f"more than {np.rad2deg(NOMINAL_LIMIT_RAD):g}° off, far beyond any face error): "
+            "check the order of the faces and of the nominal, and --direction"]
 
 
 def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:

@@ -54,13 +54,20 @@ def calibration_warnings(cal, poses) -> list[str]:
     return out
 
 
-def gonio_warnings(run) -> list[str]:
-    """A goniometer run (``GonioRun``)."""
+def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) -> list[str]:
+    """A goniometer run (``GonioRun``); with the faces' names and nominal angles [rad], a
+    nominal that does not describe the measured faces too."""
+    from align.gonio import nominal_mismatch
+
     out = loop_warnings("goniometer", run.loop)
+    out += [f"goniometer: {w}" for w in run.warnings]
     ex = run.summary.exclusions.counts
     if ex:
         out.append("goniometer: revolutions excluded: "
                    + ", ".join(f"{n} x {reason}" for reason, n in ex.items()))
+    if nominal_rad is not None and faces is not None:
+        out += [f"goniometer: {w}" for w in nominal_mismatch(run.angles.angles_rad,
+                                                             nominal_rad, faces)]
     return out
 
 

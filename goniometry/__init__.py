@@ -14,11 +14,12 @@ from goniometry.angles import (
     kept_table,
     vertical_earth_rate,
 )
-from goniometry.errors import LogError
+from goniometry.errors import FaceCountError, LogError
 from goniometry.reader import Chunk, iter_log
 from goniometry.revolutions import Exclusions, LogSummary, read_revolutions
 
 __all__ = [
-    "Chunk", "Exclusions", "FaceAngles", "LogError", "LogSummary", "earth_rate_counts",
-    "face_angles", "iter_log", "kept_table", "read_revolutions", "vertical_earth_rate",
+    "Chunk", "Exclusions", "FaceAngles", "FaceCountError", "LogError", "LogSummary",
+    "earth_rate_counts", "face_angles", "iter_log", "kept_table", "read_revolutions",
+    "vertical_earth_rate",
 ]

@@ -5,3 +5,13 @@ from axisbase.errors import InputError
 
 class LogError(InputError):
     """A log that cannot be used: the message names the file, the line and the problem."""
+
+
+class FaceCountError(LogError):
+    """The log's reference marks are ``found`` rows apart, not the ``named`` faces given."""
+
+    def __init__(self, path, found: int, named: int, share: int, revolutions: int) -> None:
+        self.path, self.found, self.named = path, found, named
+        super().__init__(f"{path}: the log has {found} pulses per revolution (its reference "
+                         f"marks are {found} rows apart in {share} of {revolutions} "
+                         f"revolutions), but {named} faces are named")

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from goniometry.errors import LogError
+from goniometry.errors import FaceCountError, LogError
 from goniometry.faults import SPURIOUS, revolutions_of, walk
 from goniometry.reader import iter_log
 
@@ -37,6 +37,13 @@ SCREEN_SIGMA = 5.0
 NEIGHBOURS = 16
 LINES_KEPT = 1000
 FLUSH_ROWS = 1 << 14
+# Fewest usable revolutions: the face pattern that screens pulse faults is learnt from >= 8
+# clean revolutions (below that nothing is screened), and the uncertainty's batch means
+# need >= 8 blocks (below that u rests on a handful of values and is not a standard
+# uncertainty anyone can rely on).
+MIN_REVOLUTIONS = 8
+# Reference marks this many revolutions apart decide the log's faces per revolution early.
+FACE_COUNT_SEGMENTS = 16
 
 R_SPURIOUS = "spurious pulse (fits no face of the pattern): dropped, its intervals merged"
 R_AMBIGUOUS = ("double trigger: two pulses within the match tolerance of one face (which is "
@@ -244,8 +251,9 @@ class LogSummary:
 class _Pass:
     """State of the streaming pass (see the module docstring)."""
 
-    def __init__(self, n: int, keep: int, correct) -> None:
+    def __init__(self, n: int, keep: int, correct, path=None) -> None:
         self.n = n
+        self.path = path
         self.stats = RevolutionStats(n, keep)
         self.correct = correct
         self.exc = Exclusions()
@@ -263,6 +271,8 @@ class _Pass:
         self.excluded = 0
         self.tail = 0
         self.chunks = 0
+        self.seg_lengths = np.zeros(0, np.int64)  # rows between reference marks: how many
+        self.faces_checked = False
 
     # ------------------------------------------------------------------ thresholds
     @property
@@ -325,6 +335,8 @@ class _Pass:
         a0 = int(refs[0])  # anchor: the first reference mark (row 0 after the first chunk)
         starts, ends = refs[:-1] + 1, refs[1:]
         lengths = ends - starts + 1
+        if not self.faces_checked:
+            self._check_faces(lengths, self.path)
         normal = lengths == n
         used: list[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None]] = []
         seg_used = np.zeros(0, int)
@@ -381,10 +393,36 @@ class _Pass:
         self.carry = {k: (None if v is None else v[last:]) for k, v in cur.items()}
         self.carry_line0 = line0 + last
 
+    def _check_faces(self, lengths: np.ndarray, path, final: bool = False) -> None:
+        """Refuse a log whose reference marks are mostly some other number of rows apart
+        than the faces named: every revolution would be walked as a fault (slowly) and
+        none completed. Decided once, from the first FACE_COUNT_SEGMENTS revolutions (or
+        the whole log when shorter)."""
+        if len(lengths):
+            self.seg_lengths = np.concatenate([self.seg_lengths, lengths])
+        m = len(self.seg_lengths)
+        if not m or (m < FACE_COUNT_SEGMENTS and not final):
+            return
+        self.faces_checked = True
+        vals, cnt = np.unique(self.seg_lengths, return_counts=True)
+        k = int(np.argmax(cnt))
+        mode, share = int(vals[k]), int(cnt[k])
+        # A majority: faults (missing, spurious pulses) change a few lengths, never most; a
+        # multiple of n is a reference signal that fails often (repaired by the walk) — if
+        # some revolutions do have n rows.
+        whole = mode % self.n == 0 and bool(np.any(self.seg_lengths == self.n))
+        if mode != self.n and not whole and 2 * share > m:
+            raise FaceCountError(path, mode, self.n, share, m)
+
     def finish(self, path) -> LogSummary:
+        one = f"{self.n} rows from one reference pulse to the next"
+        if self.rows <= self.n:
+            raise LogError(f"{path}: {self.rows} rows, fewer than one revolution ({one})")
         if not self.started:
             raise LogError(f"{path}: no reference pulse at all (ref column never 1): faces "
                            "cannot be identified")
+        if not self.faces_checked:
+            self._check_faces(np.zeros(0, np.int64), path, final=True)
         cur = self.carry
         L = len(cur["count"]) - 1  # rows after the last reference mark
         if L > 0:
@@ -395,6 +433,11 @@ class _Pass:
             for _, c, d, te in got:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
+        if self.stats.n < MIN_REVOLUTIONS:
+            raise LogError(f"{path}: only {self.stats.n} usable revolutions in {self.rows} "
+                           f"rows ({self.excluded} excluded): at least {MIN_REVOLUTIONS} "
+                           "are needed (to learn the face pattern that screens pulse faults, "
+                           "and to estimate the uncertainty)")
         return LogSummary(self.stats, self.exc, self.has_time, self.rows, self.tail, self.head,
                           self.armed, float(self.sigma or np.sqrt(1 / 6)), self.tol,
                           self.excluded)
@@ -486,6 +529,10 @@ class _Pass:
         for i, f in enumerate(w.face):
             r = int(rows[i])
             isref = r >= 0 and cur["ref"][r] > 0
+            if f == SPURIOUS and backward and i == len(rows) - 1:
+                # The arming pulse fits no face: the log was armed between faces (the lead-in
+                # to the first face is not a revolution, and not a fault: incomplete_head).
+                continue
             if f == SPURIOUS:
                 self.exc.add(R_SPURIOUS, line(i))
                 if isref:
@@ -526,7 +573,7 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     (e.g. removing the Earth's rotation when the latitude and times are known; the pipeline
     uses the accumulated sensitivities instead, see :func:`goniometry.face_angles`).
     """
-    p = _Pass(n_faces, keep, correct)
+    p = _Pass(n_faces, keep, correct, path)
     for ch in iter_log(path, block_bytes, columns):
         p.feed(ch)
     return p.finish(path)

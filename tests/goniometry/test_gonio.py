@@ -36,6 +36,26 @@ def test_normalised_errors_over_seeded_logs(tmp_path):
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
 
 
+def test_uncertainty_with_dithering_jitter_is_the_exact_one(tmp_path):
+    """Jitter of 1 count dithers the quantisation: the pulse errors are independent, so the
+    exact u of a mean is q sqrt(2 (sigma_j^2 + 1/12) / R) (the reference pulses' share
+    telescopes). Batch means alone put u anywhere in 0.4-2.2 x it (8-16 blocks); the lag-1
+    variance has ~R/3 degrees of freedom (u to ~10 %): no u below 0.7 x the exact one."""
+    arcsec = np.pi / 180 / 3600
+    z, r = [], []
+    for seed in range(12):
+        p, truth = _log(tmp_path, f"j{seed}.csv", revolutions=150, seed=seed,
+                        jitter_rad=1.7 * arcsec)
+        fa = face_angles(read_revolutions(p, 4))
+        q = 2 * np.pi / fa.counts_per_rev
+        exact = q * np.sqrt(2 * ((1.7 * arcsec / q) ** 2 + 1 / 12) / fa.revolutions)
+        z.append((fa.angles_rad - truth) / fa.u_rad)
+        r.append(fa.u_rad / exact)
+    z, r = np.ravel(z), np.ravel(r)
+    assert 0.7 < np.sqrt(np.mean(z**2)) < 1.3, z
+    assert 0.85 < np.median(r) < 1.2 and r.min() > 0.7, r
+
+
 def test_faults_are_repaired_or_excluded_and_reported(tmp_path):
     p, truth = _log(tmp_path, revolutions=2000, seed=2, p_missing=1e-3, p_spurious=1e-3,
                     failed_refs=3)
@@ -116,3 +136,42 @@ def test_loop_adds_nothing_to_fifty_clean_logs(tmp_path):
         rep = loop_gonio(*kept_table(read_revolutions(p, 4)))
         false += bool(rep.effects)
     assert false <= 1
+
+
+def test_too_short_logs_and_wrong_face_count_are_refused(tmp_path):
+    """A log shorter than one revolution, one with fewer than 8 usable revolutions, and faces
+    named in another number than the reference marks are apart: one LogError naming the file
+    (never a traceback from deeper in the pipeline)."""
+    from goniometry import FaceCountError
+
+    p, _ = _log(tmp_path, revolutions=40, seed=0)
+    lines = p.read_text().splitlines()
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(lines[:4]) + "\n")  # header + 3 rows
+    with pytest.raises(LogError, match=r"short.csv: 3 rows, fewer than one revolution"):
+        read_revolutions(short, 4)
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join(lines[:1 + 4 * 5]) + "\n")  # ~5 revolutions
+    with pytest.raises(LogError, match=r"few.csv: only \d usable revolutions .* at least 8"):
+        read_revolutions(few, 4)
+    for n in (3, 5):
+        with pytest.raises(FaceCountError, match=rf"has 4 pulses per revolution.*{n} faces"):
+            read_revolutions(p, n)
+    assert read_revolutions(p, 4).stats.n >= 38
+
+
+def test_arming_between_faces_is_a_lead_in_not_a_fault(tmp_path):
+    """The counters armed by a pulse that is no face (the first row's count ends on face 0
+    but starts elsewhere): that lead-in is not a revolution and not a listed fault."""
+    p, _ = _log(tmp_path, revolutions=60, seed=4)
+    lines = p.read_text().splitlines()
+    cut = tmp_path / "lead_in.csv"
+    # Drop the first revolution's rows up to (not including) its reference-marked row, and
+    # shorten that row's count to 40 % of it: the arming pulse lies between two faces.
+    first_ref = next(i for i, ln in enumerate(lines[1:], 1) if ln.split(",")[2] == "1")
+    row = lines[first_ref].split(",")
+    row[0] = str(int(int(row[0]) * 0.4))
+    cut.write_text("\n".join([lines[0], ",".join(row), *lines[first_ref + 1:]]) + "\n")
+    s = read_revolutions(cut, 4)
+    assert not s.exclusions.counts, dict(s.exclusions.counts)
+    assert s.incomplete_head == 1 and s.armed_face is None
