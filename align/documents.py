@@ -30,10 +30,9 @@ def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
 def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, settings: dict,
                    inputs: Inputs) -> dict:
     """``align gonio --json``."""
-    from align.gonio import run_json
 
     body = {"ok": True, "warnings": gonio_warnings(run, faces, nominal_rad),
-            **run_json(run, faces, nominal_rad)}
+            **run.to_dict(faces, nominal_rad)}
     return document("gonio", body, settings, inputs)
 
 

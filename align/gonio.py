@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from axisbase.units import ARCSEC
 from goniometry import (
     FaceAngles,
     LogSummary,
@@ -221,6 +222,48 @@ class GonioRun:
     timing: TimingAngles | None = None
     timing_used: bool = False
     warnings: tuple[str, ...] = ()  # options given that this log cannot honour
+
+    def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
+        """The run as JSON (the contract of ``align gonio``, also a session's stage);
+        angles in degrees, uncertainties in arc-seconds at this edge. ``faces``: their
+        names in passing order; ``nominal``: nominal angles [rad] for the deviations."""
+        fa, summary, loop = self.angles, self.summary, self.loop
+        arcsec = 1.0 / ARCSEC
+        effects = [e.to_dict() for e in loop.effects] if loop is not None else []
+        if self.direction is not None:
+            effects.append(direction_effect(self.direction, faces))
+        js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
+              "angles_u_arcsec": (fa.u_rad * arcsec).tolist(),
+              "revolutions_used": fa.revolutions, "effects": effects,
+              "unexplained_structure": bool(loop and loop.unexplained_structure),
+              "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
+              "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
+              "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
+              "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
+                             for k, v in summary.exclusions.counts.items()},
+              "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
+                        "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
+              "angles_source": "pulse times (steady table)" if self.timing_used else "counts",
+              "type_b_terms_arcsec": {k: (v * arcsec).tolist()
+                                      for k, v in fa.type_b_terms.items()},
+              "faults": {"sigma_counts": summary.sigma_counts,
+                         "tolerance_counts": summary.tolerance_counts,
+                         "revolutions_excluded": summary.excluded_revolutions,
+                         "armed_face": summary.armed_face,
+                         "rows_before_first_revolution": summary.incomplete_head,
+                         "rows_after_last_revolution": summary.incomplete_tail},
+              "notes": list(self.notes)}
+        if self.timing is not None:
+            ta = self.timing
+            js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
+                            "angles_u_arcsec": (ta.u_rad * arcsec).tolist(),
+                            "counts_minus_timing_arcsec": (ta.diff_rad * arcsec).tolist(),
+                            "counts_minus_timing_u_arcsec": (ta.diff_u_rad * arcsec).tolist(),
+                            "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
+                            "used": self.timing_used}
+        if nominal is not None:
+            js["deviation_arcsec"] = ((fa.angles_rad - nominal) * arcsec).tolist()
+        return js
 
 
 def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, DirectionTerm]:
@@ -435,45 +478,3 @@ def nominal_mismatch(angles_rad: np.ndarray, nominal_rad: np.ndarray,
     return [f"the nominal angles do not describe these faces (measured vs nominal: {what}; "
             f"more than {np.rad2deg(NOMINAL_LIMIT_RAD):g}° off, far beyond any face error): "
             "check the order of the faces and of the nominal, and --direction"]
-
-
-def run_json(run: GonioRun, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
-    """A goniometer run as JSON (the contract of ``align gonio``, also a session's stage);
-    angles in degrees, uncertainties in arc-seconds at this edge."""
-    fa, summary, loop = run.angles, run.summary, run.loop
-    arcsec = np.rad2deg(1.0) * 3600
-    effects = [e.to_dict() for e in loop.effects] if loop is not None else []
-    if run.direction is not None:
-        effects.append(direction_effect(run.direction, faces))
-    js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
-          "angles_u_arcsec": (fa.u_rad * arcsec).tolist(),
-          "revolutions_used": fa.revolutions, "effects": effects,
-          "unexplained_structure": bool(loop and loop.unexplained_structure),
-          "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
-          "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
-          "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
-          "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
-                         for k, v in summary.exclusions.counts.items()},
-          "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
-                    "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
-          "angles_source": "pulse times (steady table)" if run.timing_used else "counts",
-          "type_b_terms_arcsec": {k: (v * arcsec).tolist()
-                                  for k, v in fa.type_b_terms.items()},
-          "faults": {"sigma_counts": summary.sigma_counts,
-                     "tolerance_counts": summary.tolerance_counts,
-                     "revolutions_excluded": summary.excluded_revolutions,
-                     "armed_face": summary.armed_face,
-                     "rows_before_first_revolution": summary.incomplete_head,
-                     "rows_after_last_revolution": summary.incomplete_tail},
-          "notes": list(run.notes)}
-    if run.timing is not None:
-        ta = run.timing
-        js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
-                        "angles_u_arcsec": (ta.u_rad * arcsec).tolist(),
-                        "counts_minus_timing_arcsec": (ta.diff_rad * arcsec).tolist(),
-                        "counts_minus_timing_u_arcsec": (ta.diff_u_rad * arcsec).tolist(),
-                        "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
-                        "used": run.timing_used}
-    if nominal is not None:
-        js["deviation_arcsec"] = ((fa.angles_rad - nominal) * arcsec).tolist()
-    return js

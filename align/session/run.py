@@ -84,7 +84,6 @@ class SessionResult:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
         from align.calibration import calibration_json
         from align.calibration.output import with_units
-        from align.gonio import run_json
         from align.warnings import session_warnings
 
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
@@ -102,7 +101,7 @@ class SessionResult:
                 calibration_json(self.calibration, self.calibration_poses), self.units)
         if self.gonio is not None:
             g = self.session.goniometer
-            stages["goniometer"] = run_json(self.gonio, g.faces, g.nominal_rad)
+            stages["goniometer"] = self.gonio.to_dict(g.faces, g.nominal_rad)
         if self.marks:
             stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
                                     nominal=im.nominal) for im, r in self.marks]
