@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import codecs
 import logging
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -77,6 +78,25 @@ def _signs(text: str) -> tuple[float, float, float]:
     if len(parts) != 3 or any(p not in ("+", "-") for p in parts):
         raise UsageError(f"--scale-sign {text!r}: give +, - or three of them, e.g. -,-,-")
     return tuple(-1.0 if p == "-" else 1.0 for p in parts)  # type: ignore[return-value]
+
+
+_SIGNS = re.compile(r"^[+-](,[+-])+$")
+
+
+def _attach_signs(argv: list[str]) -> list[str]:
+    """``--scale-sign -,-,-`` (the documented form) as ``--scale-sign=-,-,-``: argparse takes
+    any value starting with '-' that is not a negative number for an option, and has no
+    setting to accept it as a value (only the ``=`` form)."""
+    out, i = [], 0
+    while i < len(argv):
+        if (argv[i] == "--scale-sign" and i + 1 < len(argv)
+                and _SIGNS.match(argv[i + 1].replace(" ", ""))):
+            out.append(f"--scale-sign={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
 
 
 def _table_options(args: argparse.Namespace, paths: Sequence[str], spec,
@@ -223,7 +243,23 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------- calibrate
 
+def _silenced(args: argparse.Namespace):
+    """With -q and the JSON on stdout the messages (which then go to stderr) are dropped:
+    -q leaves stderr to warnings and errors."""
+    import contextlib
+    import io
+
+    if getattr(args, "quiet", False) and getattr(args, "json", None) == "-":
+        return contextlib.redirect_stdout(io.StringIO())
+    return contextlib.nullcontext()
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    with _silenced(args):
+        return _calibrate(args)
+
+
+def _calibrate(args: argparse.Namespace) -> int:
     from align.calibration import STATIC, StaticSettings, calibrate, delta_g, read_poses
     from align.calibration.output import calibration_document
     from align.warnings import calibration_warnings
@@ -1087,7 +1123,7 @@ def _main(argv: list[str]) -> int:
 
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_attach_signs(argv))
     except SystemExit as exc:
         return int(exc.code or 0) and 2
     _logging(args)
