@@ -361,6 +361,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     print(f"{s['samples']} readings ({args.method} roll): roll {s['roll_deg_mean']:+.6f}° "
           f"(sd {s['roll_deg_std'] * 3600:.1f}″), pitch {s['pitch_deg_mean']:+.6f}° "
           f"(sd {s['pitch_deg_std'] * 3600:.1f}″), |a| - 1 mean {s['norm_minus_1_ug']:+.2f} µg")
+    _warn(res.warnings)
     if out_csv is not None:
         _wrote(write_atomic(out_csv, res.csv_text(), args.force))
     if out_json is not None:
