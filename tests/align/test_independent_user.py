@@ -708,9 +708,6 @@ def test_calibrate_scale_sign_three_signs_as_documented(tumble, capsys):
     assert doc["scale_sign"] == [-1.0, -1.0, -1.0]
 
 
-@pytest.mark.xfail(strict=True, reason="calibrate: one stray single-sample pose switches the "
-                   "whole file to 'per-pose means only' (noise unknown, no chi2 test, u x2-9, "
-                   "bias moved), exit 0")
 def test_calibrate_one_stray_sample_does_not_silently_change_the_result(tmp_path, triad, capsys):
     rows = ui.tumble_rows(triad, seed=3, samples=20, poses=14)
     ui.write_csv(tmp_path / "clean.csv", TUMBLE_HEADER, rows)
