@@ -825,8 +825,6 @@ def test_gonio_clean_log_has_no_warning(gonio_log, gonio_plain):
     assert gonio_plain["warnings"] == []
 
 
-@pytest.mark.xfail(strict=True, reason="tables: a '#' comment line after the header (mid-file or "
-                   "at the end) is refused as '1 fields, the header has 4'; README accepts them")
 @pytest.mark.parametrize("where", ["middle", "end"])
 def test_gonio_comment_lines_anywhere_are_ignored(gonio_log, gonio_plain, capsys, where):
     d, rows, _ = gonio_log
