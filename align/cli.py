@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 import codecs
+import io
 import logging
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -79,6 +81,25 @@ def _signs(text: str) -> tuple[float, float, float]:
     return tuple(-1.0 if p == "-" else 1.0 for p in parts)  # type: ignore[return-value]
 
 
+_SIGNS = re.compile(r"^[+-](,[+-])+$")
+
+
+def _attach_signs(argv: list[str]) -> list[str]:
+    """``--scale-sign -,-,-`` (the documented form) as ``--scale-sign=-,-,-``: argparse takes
+    any value starting with '-' that is not a negative number for an option, and has no
+    setting to accept it as a value (only the ``=`` form)."""
+    out, i = [], 0
+    while i < len(argv):
+        if (argv[i] == "--scale-sign" and i + 1 < len(argv)
+                and _SIGNS.match(argv[i + 1].replace(" ", ""))):
+            out.append(f"--scale-sign={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def _table_options(args: argparse.Namespace, paths: Sequence[str], spec,
                    default: str | None = "V") -> tuple[dict, str | None]:
     """``--columns`` as a mapping and the data's output unit (``--units`` checked against
@@ -107,13 +128,6 @@ def _plan(args: argparse.Namespace, inputs: Sequence[str | Path]):
 def _warn(lines: Sequence[str]) -> None:
     for w in lines:
         log.warning("WARNING: %s", w)
-
-
-def _say(text: str) -> None:
-    """A line of a command's result summary: on standard output (standard error when the JSON
-    owns standard output), nothing with -q (only warnings and errors)."""
-    if log.isEnabledFor(logging.INFO):
-        print(text)
 
 
 def _wrote(path: Path | None) -> None:
@@ -332,6 +346,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     print(f"{s['samples']} readings ({args.method} roll): roll {s['roll_deg_mean']:+.6f}° "
           f"(sd {s['roll_deg_std'] * 3600:.1f}″), pitch {s['pitch_deg_mean']:+.6f}° "
           f"(sd {s['pitch_deg_std'] * 3600:.1f}″), |a| - 1 mean {s['norm_minus_1_ug']:+.2f} µg")
+    _warn(res.warnings)
     if out_csv is not None:
         _wrote(write_atomic(out_csv, res.csv_text(), args.force))
     if out_json is not None:
@@ -440,26 +455,26 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
         raise UsageError(str(exc)) from None
     summary, fa, loop = run.summary, run.angles, run.loop
-    _say(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
+    print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
          f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
-        _say(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
+        print(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
              f"{', ...' if n > 10 else ''})")
     if summary.incomplete_tail:
-        _say(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
+        print(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
              "incomplete revolution, not used")
     for i, name in enumerate(faces):
         nxt = faces[(i + 1) % len(faces)]
         dev = "" if nominal is None else (
             f"  deviation {np.rad2deg(fa.angles_rad[i] - nominal[i]) * 3600:+9.3f}″")
         lock = "  (quantisation locked: not averaged)" if fa.quantisation_locked[i] else ""
-        _say(f"  {name:>6s} -> {nxt:<6s} {np.rad2deg(fa.angles_rad[i]):12.7f}° "
+        print(f"  {name:>6s} -> {nxt:<6s} {np.rad2deg(fa.angles_rad[i]):12.7f}° "
              f"± {np.rad2deg(fa.u_rad[i]) * 3600:.3f}″{dev}{lock}")
     if loop is not None:
         for line in loop.summary_lines():
-            _say("  " + line)
+            print("  " + line)
     for note in run.notes:
-        _say("  " + note)
+        print("  " + note)
     # (the document hashes the logs: only when written)
     _warn(gonio_warnings(run, faces, nominal))
     if plot is not None:
@@ -1112,7 +1127,7 @@ def _main(argv: list[str]) -> int:
 
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args = parser.parse_args(_attach_signs(argv))
     except SystemExit as exc:
         return int(exc.code or 0) and 2
     _logging(args)
@@ -1121,7 +1136,9 @@ def _main(argv: list[str]) -> int:
     set_real_stdout(real_stdout)
     handlers = raise_on_signals()  # SIGTERM unwinds like Ctrl-C: no half-written outputs
     if getattr(args, "json", None) == "-":
-        sys.stdout = sys.stderr  # the JSON owns standard output; messages go to stderr
+        # The JSON owns standard output: messages go to stderr, or nowhere with -q (which
+        # leaves stderr to warnings and errors).
+        sys.stdout = io.StringIO() if getattr(args, "quiet", False) else sys.stderr
     try:
         return int(args.func(args))
     except InputError as exc:

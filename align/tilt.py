@@ -41,41 +41,82 @@ def gravity_from_angles(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
                             np.cos(pitch) * np.cos(roll)])
 
 
+FAR_FROM_1G = 0.1
+"""|1 - |a|| [g] beyond which a reading is flagged: tilt assumes the specific force is
+gravity alone. A calibrated static triad reads 1 g within ~1e-3 g (calibration residuals of
+micro-g, local gravity within ±0.3 % of the calibration's), so no static reading trips it, while
+free fall, a shock, the wrong unit or the wrong calibration (|a| off by far more) do."""
+
+
 @dataclass(frozen=True)
 class TiltOfReadings:
-    """Roll and pitch [rad] of every reading (times ``t`` [s]) through a calibration, and
-    the calibrated specific force ``a`` (N, 3) [g]."""
+    """Roll and pitch [rad] of every reading (times ``t`` [s], None when the readings have
+    none) through a calibration, the calibrated specific force ``a`` (N, 3) [g], and what
+    the user must know about the result (``warnings``)."""
 
-    t: np.ndarray
+    t: np.ndarray | None
     a: np.ndarray
     roll: np.ndarray
     pitch: np.ndarray
     method: str
     mu: float
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def far_from_1g(self) -> int:
+        """Readings with |1 - |a|| > :data:`FAR_FROM_1G`."""
+        return int(np.count_nonzero(~(np.abs(np.linalg.norm(self.a, axis=1) - 1)
+                                      <= FAR_FROM_1G)))
 
     def summary(self) -> dict:
         """The summary ``align tilt --json`` writes (degrees at this edge)."""
-        return {"method": self.method, "mu": self.mu if self.method == "paper" else None,
+        return {"warnings": list(self.warnings), "method": self.method,
+                "mu": self.mu if self.method == "paper" else None,
                 "samples": len(self.a),
                 "roll_deg_mean": float(np.rad2deg(np.mean(self.roll))),
                 "pitch_deg_mean": float(np.rad2deg(np.mean(self.pitch))),
                 "roll_deg_std": float(np.rad2deg(np.std(self.roll))),
                 "pitch_deg_std": float(np.rad2deg(np.std(self.pitch))),
-                "norm_minus_1_ug": float((np.linalg.norm(self.a, axis=1) - 1).mean() * 1e6)}
+                "norm_minus_1_ug": float((np.linalg.norm(self.a, axis=1) - 1).mean() * 1e6),
+                "far_from_1g": self.far_from_1g}
 
     def csv_text(self) -> str:
+        """``t,roll_deg,pitch_deg``; t blank on every row when the readings had no time."""
         from axisbase.output import csv_text
 
-        return csv_text(["t", "roll_deg", "pitch_deg"],
-                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+        if self.t is not None:
+            return csv_text(["t", "roll_deg", "pitch_deg"],
+                            [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+        body = csv_text(["roll_deg", "pitch_deg"],
+                        [np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+        head, *rows = body.splitlines()
+        return "\n".join(["t," + head, *("," + r for r in rows)]) + "\n"
 
 
 def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> TiltOfReadings:
     """Roll and pitch of readings ``tab`` (a table with ux, uy, uz[, t][, temp]) through a
-    triad ``model`` (``TriadModel``); readings without times are taken at the model's
-    reference time."""
+    triad ``model`` (``TriadModel``). Readings without times get none; if the model drifts,
+    its drift is taken at the reference time and a warning says so (likewise a temperature
+    model without temperatures). Readings far from 1 g are counted in a warning."""
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t = tab["t"] if "t" in tab else np.full(len(u), model.t_ref)
-    a = model.specific_force(u, t, tab.get("temp"))
+    t = tab["t"] if "t" in tab else None
+    temp = tab.get("temp")
+    warnings = []
+    if t is None and (np.any(model.drift != 0) or np.any(model.drift2 != 0)):
+        warnings.append(f"the readings have no time but the calibration models a drift: it is "
+                        f"taken at the calibration's reference time {model.t_ref:g} s (give a "
+                        "t column or --rate)")
+    if temp is None and np.any(model.temp_coeff != 0):
+        warnings.append("the readings have no temperature but the calibration models one: "
+                        f"taken at its reference {model.temp_ref:g} (give a temp column)")
+    a = model.specific_force(u, model.t_ref if t is None else t, temp)
     roll, pitch = roll_pitch(a, method=method, mu=mu)
-    return TiltOfReadings(t, a, roll, pitch, method, mu)
+    res = TiltOfReadings(t, a, roll, pitch, method, mu)
+    far = res.far_from_1g
+    if far:
+        norm = np.linalg.norm(a, axis=1)
+        warnings.append(f"{far} of {len(a)} readings have |a| more than {FAR_FROM_1G:g} g from "
+                        f"1 g (|a| {np.nanmin(norm):.3g} to {np.nanmax(norm):.3g} g): not "
+                        "static, free fall, a shock, the wrong unit or the wrong calibration; "
+                        "their roll and pitch are not a tilt")
+    return TiltOfReadings(t, a, roll, pitch, method, mu, tuple(warnings))

@@ -9,18 +9,23 @@ data give the same numbers:
   (``Ux [V]``, ``t (s)``), each column under its canonical name or one of its aliases, or
   under any name the user maps to it (``--columns ux=ax,uy=ay,uz=az``);
 * columns in any order; columns the format does not know are listed in ``Table.ignored``;
-* lines starting with ``#`` before the header are comments.
+* lines starting with ``#`` are comments, before the header and anywhere after it.
 
 Parsing is pyarrow's C++ CSV reader (whole file, or record batches of bounded size for logs
-of 10⁸ rows). When it rejects a row, the file is scanned once more by Python's csv module to
-name the line, the column and what is wrong: ``file:line: column: what``. Rows are checked
-after parsing: numbers finite, labels not blank, integer columns whole, a time column strictly
+of 10⁸ rows). It has no comment character: a comment line after the header has (almost
+always) the wrong number of fields, and its ``invalid_row_handler`` skips it at no cost; a
+comment the parser cannot tell from a row (as many fields as the header, or a label column's
+value) makes the file be read once more without its comment lines (Python-filtered, rare).
+When pyarrow rejects a row, the file is scanned once more by Python's csv module to name the
+line, the column and what is wrong: ``file:line: column: what``. Rows are checked after
+parsing: numbers finite, labels not blank, integer columns whole, a time column strictly
 increasing. A file without a time column can be given one from its sample rate (``rate_hz``).
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -223,6 +228,74 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
     return _Header(names, raw, units, delimiter, skip, skip)
 
 
+def _is_comment(line: str | bytes) -> bool:
+    return line.lstrip().startswith("#" if isinstance(line, str) else b"#")
+
+
+def _skip_comment(row) -> str:
+    """pyarrow's handler of a row with the wrong number of fields: a comment line is skipped,
+    anything else is an error (named by :func:`_locate`). A 'row' spanning lines (a quote
+    opened in a comment) is an error too: skipping it would drop the data rows inside."""
+    text = row.text or ""
+    return "skip" if _is_comment(text) and "\n" not in text else "error"
+
+
+class _Uncommented(io.RawIOBase):
+    """The file without the comment lines after its header, for pyarrow (the fallback when
+    its own parse cannot skip them; see the module's docstring). The lines up to the header
+    stay as they are, so ``skip_rows`` and every line number still hold."""
+
+    def __init__(self, path: Path, keep: int) -> None:
+        self._f = open(path, "rb")  # noqa: SIM115 - closed by close()
+        self._buf = b"".join(self._f.readline() for _ in range(keep))
+        self._pos = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        while self._pos >= len(self._buf):
+            lines = self._f.readlines(1 << 20)
+            if not lines:
+                return 0
+            self._buf = b"".join(ln for ln in lines if not _is_comment(ln))
+            self._pos = 0
+        n = min(len(b), len(self._buf) - self._pos)
+        b[:n] = self._buf[self._pos:self._pos + n]
+        self._pos += n
+        return n
+
+    def close(self) -> None:
+        self._f.close()
+        super().close()
+
+
+def _may_have_comments(path: Path, h: _Header) -> bool:
+    """Whether a '#' follows the header anywhere (a byte search, memchr speed): if not, a
+    file pyarrow refused has a bad row, not a comment, and is not read again."""
+    with open(path, "rb") as f:
+        for _ in range(h.skip):
+            f.readline()
+        while block := f.read(1 << 22):
+            if b"#" in block:
+                return True
+    return False
+
+
+def _commented_labels(h: _Header, spec: TableSpec, columns: Mapping[str, pa.Array]) -> bool:
+    """A comment line with the header's number of fields whose first column is a label
+    parses as a row: its label starts with '#'."""
+    first = h.names[0]
+    if not first or spec.column(first).kind != "label" or first not in columns:
+        return False
+    import pyarrow.compute as pc  # here: 0.1 s of import, and only label columns need it
+
+    col = columns[first]
+    # a plain substring search first (4x faster than the regex on 10⁶ labels)
+    return (bool(pc.any(pc.match_substring(col, "#")).as_py())
+            and bool(pc.any(pc.match_substring_regex(col, r"^\s*#")).as_py()))
+
+
 def _arrow_options(path: Path, spec: TableSpec, h: _Header, block_bytes: int | None,
                    threads: bool) -> tuple:
     kinds = {c.name: c.kind for c in spec.columns}
@@ -230,7 +303,7 @@ def _arrow_options(path: Path, spec: TableSpec, h: _Header, block_bytes: int | N
     ro = pacsv.ReadOptions(column_names=cols, skip_rows=h.skip, use_threads=threads,
                            encoding="utf8", **({"block_size": block_bytes} if block_bytes
                                                else {}))
-    po = pacsv.ParseOptions(delimiter=h.delimiter)
+    po = pacsv.ParseOptions(delimiter=h.delimiter, invalid_row_handler=_skip_comment)
     co = pacsv.ConvertOptions(column_types={n: _ARROW[kinds[n]] for n in h.names if n},
                               include_columns=[n for n in h.names if n],
                               null_values=[""], strings_can_be_null=True,
@@ -249,7 +322,7 @@ def _row_lines(path: Path, first_line: int, rows: list[int]) -> list[int]:
             next(f, None)
         row = 0
         for ln, line in enumerate(f, start=first_line):
-            if not line.strip():
+            if not line.strip() or _is_comment(line):
                 continue
             if row in want:
                 found[row] = ln
@@ -267,7 +340,7 @@ def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
         for _ in range(h.skip):
             next(f)
         for ln, line in enumerate(f, start=h.skip + 1):
-            if not line.strip():
+            if not line.strip() or _is_comment(line):
                 continue
             row = next(csv.reader([line.rstrip("\r\n")], delimiter=h.delimiter))
             if len(row) != n:
@@ -387,8 +460,18 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     ro, po, co = _arrow_options(path, spec, h, None, threads=True)
     try:
         at = pacsv.read_csv(path, read_options=ro, parse_options=po, convert_options=co)
+        again = _commented_labels(h, spec, dict(zip(at.column_names, at.columns, strict=True)))
     except pa.ArrowInvalid:
-        raise _locate(path, spec, h) from None
+        if not _may_have_comments(path, h):
+            raise _locate(path, spec, h) from None
+        again = True
+    if again:
+        try:
+            with _Uncommented(path, h.skip) as src:
+                at = pacsv.read_csv(io.BufferedReader(src), read_options=ro, parse_options=po,
+                                    convert_options=co)
+        except pa.ArrowInvalid:
+            raise _locate(path, spec, h) from None
     if at.num_rows == 0:
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
     table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
@@ -517,30 +600,49 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     path = Path(path)
     h = _read_header(path, spec, columns or {})
     ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
-    try:
-        reader = pacsv.open_csv(path, read_options=ro, parse_options=po, convert_options=co)
-    except pa.ArrowInvalid:
-        raise _locate(path, spec, h) from None
     row0 = 0
     prev_t = None
     empty = True
-    while True:
+    for filtered in (False, True):
+        # The file as it is; then, only if pyarrow met a comment it could not skip, the file
+        # without its comment lines, from the top, past the rows already given.
+        done = row0
         try:
-            batch = reader.read_next_batch()
-        except StopIteration:
+            source = io.BufferedReader(_Uncommented(path, h.skip)) if filtered else path
+            for cols in _batches(source, ro, po, co):
+                if not filtered and _commented_labels(h, spec, cols):
+                    raise _Commented
+                n = len(next(iter(cols.values()))) if cols else 0
+                if done:
+                    cut = min(done, n)
+                    cols = {k: v.slice(cut) for k, v in cols.items()}
+                    done, n = done - cut, n - cut
+                if n == 0:
+                    continue
+                empty = False
+                chunk = _table(path, spec, h, cols, row0)
+                _check(chunk, prev_t)
+                if spec.time and spec.time in chunk.data:
+                    prev_t = float(chunk.data[spec.time][-1])
+                row0 += len(chunk)
+                yield chunk
             break
-        except pa.ArrowInvalid:
-            raise _locate(path, spec, h) from None
-        if batch.num_rows == 0:
-            continue
-        empty = False
-        chunk = _table(path, spec, h, dict(zip(batch.schema.names, batch.columns, strict=True)),
-                       row0)
-        _check(chunk, prev_t)
-        if spec.time and spec.time in chunk.data:
-            prev_t = float(chunk.data[spec.time][-1])
-        row0 += len(chunk)
-        yield chunk
+        except (pa.ArrowInvalid, _Commented):
+            if filtered or not _may_have_comments(path, h):
+                raise _locate(path, spec, h) from None
     if empty:
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
 
+
+class _Commented(Exception):
+    """A comment line parsed as a row (see :func:`_commented_labels`): read again."""
+
+
+def _batches(source, ro, po, co) -> Iterator[dict[str, pa.Array]]:
+    reader = pacsv.open_csv(source, read_options=ro, parse_options=po, convert_options=co)
+    try:
+        for batch in reader:
+            yield dict(zip(batch.schema.names, batch.columns, strict=True))
+    finally:
+        if not isinstance(source, str | Path):
+            source.close()

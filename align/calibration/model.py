@@ -416,11 +416,46 @@ def model_to_dict(m: TriadModel) -> dict:
             "covariance": None if m.cov is None else m.cov.tolist()}
 
 
+MAX_BETA_RAD = np.pi / 4
+"""Largest non-orthogonality a model file may hold: R (eq. 5) is singular at pi/2, and an
+axis 45 deg off its place is no triad (real ones are within a degree)."""
+
+
+def _checked(m: TriadModel, where: str) -> TriadModel:
+    """Refuse a model that cannot be applied: a non-finite value anywhere, a zero scale
+    factor, a non-orthogonality beyond :data:`MAX_BETA_RAD` (one line naming the key)."""
+    keys = {"k_v_per_g": m.k, "beta_rad": m.beta, "bias_g": m.bias, "k2_per_g": m.k2,
+            "drift_g_per_s": m.drift, "temp_coeff_g_per_k": m.temp_coeff,
+            "drift2_g_per_s2": m.drift2, "t_ref_s": np.atleast_1d(m.t_ref),
+            "temp_ref_k": np.atleast_1d(m.temp_ref)}
+    for key, v in keys.items():
+        if key not in ("t_ref_s", "temp_ref_k") and v.shape != (3,):
+            raise InputError(f"{where}: model.{key}: {v.size} values, a triad has 3")
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            at = f"[{bad[0]}]" if v.size > 1 else ""
+            raise InputError(f"{where}: model.{key}{at} = {v[bad[0]]}: not a finite number")
+    zero = np.flatnonzero(m.k == 0)
+    if zero.size:
+        raise InputError(f"{where}: model.k_v_per_g[{zero[0]}] = 0: a scale factor cannot be "
+                         "zero")
+    wide = np.flatnonzero(np.abs(m.beta) >= MAX_BETA_RAD)
+    if wide.size:
+        raise InputError(f"{where}: model.beta_rad[{wide[0]}] = {m.beta[wide[0]]:.4g} rad: "
+                         f"beyond any triad's non-orthogonality (< {MAX_BETA_RAD:.4g} rad)")
+    if m.cov is not None and (m.cov.ndim != 2 or m.cov.shape[0] != m.cov.shape[1]
+                              or (m.names and m.cov.shape[0] != len(m.names))):
+        raise InputError(f"{where}: model.covariance: shape {m.cov.shape} does not match "
+                         f"its {len(m.names)} parameter_names")
+    return m
+
+
 def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
-    """Read :func:`model_to_dict`'s output back (clear error for anything else)."""
+    """Read :func:`model_to_dict`'s output back (clear error for anything else, or for a
+    model that cannot be applied: see :func:`_checked`)."""
     try:
         cov = d.get("covariance")
-        return TriadModel(
+        m = TriadModel(
             np.array(d["k_v_per_g"], float), np.array(d["beta_rad"], float),
             np.array(d["bias_g"], float), np.array(d.get("k2_per_g", [0, 0, 0]), float),
             np.array(d.get("drift_g_per_s", [0, 0, 0]), float),
@@ -432,6 +467,7 @@ def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{where}: not a calibration model ({exc!s}); expected the 'model' "
                          "block that 'align calibrate --json' writes") from None
+    return _checked(m, where)
 
 
 def calibration_json(cal: Calibration, poses: Poses) -> dict:

@@ -130,9 +130,12 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         order = tuple(str(x) for x in order[np.argsort(first)])
         n = len(order)
         count = np.bincount(ids, minlength=n)
+        if calibration:  # check poses use only their means
+            _check_counts(path, tab, order, count, first[np.argsort(first)],
+                          path.suffix.lower() in SUFFIXES)
         mean = np.array([u[ids == i].mean(0) for i in range(n)])
         sig = None
-        if count.min() >= 3:
+        if count.min() >= MIN_SAMPLES:
             sig = np.array([u[ids == i].std(0, ddof=1) / np.sqrt(count[i]) for i in range(n)])
         tt = (np.array([t[ids == i].mean() for i in range(n)]) if t is not None
               else np.arange(n, dtype=float))
@@ -177,6 +180,33 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                                  f" (--window, --threshold, --min-static, --margin)"
                                  f"{_notes(det)}\n{_listing(intervals)}")
     return poses, intervals
+
+
+MIN_SAMPLES = 3
+"""Fewest samples of a pose whose own scatter gives its noise (ddof = 1 leaves 2 dof)."""
+
+
+def _check_counts(path: Path, tab: Table, labels: tuple[str, ...], count: np.ndarray,
+                  first_row: np.ndarray, arrays: bool) -> None:
+    """Refuse a pose of one or two samples among poses of samples. Its noise cannot come from
+    its own scatter, so the file would drop to 'per-pose means only' (noise unknown, no chi2
+    test, a different fit); taking it with the others' noise or leaving it out would both
+    guess what the row is — a stray row, a mistyped label, a pose cut short. Only the user
+    knows: the file, line and label are named."""
+    few = np.flatnonzero(count < MIN_SAMPLES)
+    if not few.size or count.max() < MIN_SAMPLES:
+        return  # all poses of samples, or per-pose means (one or two rows per pose)
+    i = int(few[np.argmin(first_row[few])])
+    many = count[count >= MIN_SAMPLES]
+    what = (f"{labels[i]!r} has {count[i]} sample{'s' if count[i] > 1 else ''} while "
+            f"{len(many)} other poses have {many.min()}" + (f"-{many.max()}" if many.max()
+                                                            > many.min() else "")
+            + f"{f' (and {few.size - 1} more such poses)' if few.size > 1 else ''}: a stray "
+            f"row or a mistyped label? A pose needs {MIN_SAMPLES} samples or more for its "
+            "noise (or give one row per pose: per-pose means, noise unknown)")
+    if arrays:
+        raise InputError(f"{path}: pose {what}")
+    raise tab.fail(int(first_row[i]), "pose", what)
 
 
 def _notes(det: StaticDetection) -> str:

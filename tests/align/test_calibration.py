@@ -157,3 +157,28 @@ def test_files_round_trip_and_bad_input(tmp_path):
     write_tumble_csv(ds, sat)
     with pytest.raises(InputError, match="saturated"):
         read_poses(sat)
+
+
+@pytest.mark.parametrize("key, index, value, words", [
+    ("k_v_per_g", 0, float("nan"), "k_v_per_g[0] = nan"),
+    ("k_v_per_g", 2, 0.0, "k_v_per_g[2] = 0"),
+    ("bias_g", 1, float("inf"), "bias_g[1] = inf"),
+    ("drift_g_per_s", 0, float("nan"), "drift_g_per_s[0]"),
+    ("beta_rad", 2, 1.0, "beta_rad[2] = 1 rad"),
+    ("t_ref_s", None, float("nan"), "t_ref_s = nan"),
+    ("k2_per_g", None, [0.0, 0.0], "k2_per_g: 2 values"),
+])
+def test_model_from_dict_refuses_what_cannot_be_applied(key, index, value, words):
+    from align.calibration import TriadModel, model_from_dict, model_to_dict
+    from align.errors import InputError
+
+    d = model_to_dict(TriadModel(np.array([1.0, 2.0, 3.0]), np.zeros(3), np.zeros(3)))
+    assert model_from_dict(d, "cal.json").k.tolist() == [1.0, 2.0, 3.0]
+    if index is None:
+        d[key] = value
+    else:
+        d[key][index] = value
+    with pytest.raises(InputError) as exc:
+        model_from_dict(d, "cal.json")
+    msg = str(exc.value)
+    assert msg.startswith("cal.json: model.") and words in msg and "\n" not in msg

@@ -152,3 +152,20 @@ def test_pose_means_without_pose_column(tmp_path, capsys):
                delimiter=",", header="ux,uy,uz", comments="")
     assert main(["calibrate", str(long)]) == 2
     assert "800 rows and neither a pose column nor a time column" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("given, signs", [("-", (-1.0,) * 3), ("+", (1.0,) * 3),
+                                          ("-,-,-", (-1.0,) * 3), ("-,+,-", (-1.0, 1.0, -1.0)),
+                                          ("+,-,+", (1.0, -1.0, 1.0))])
+def test_scale_sign_as_the_help_writes_it(given, signs):
+    from align.cli import _attach_signs, _signs
+
+    args = build_parser().parse_args(_attach_signs(["calibrate", "s.csv", "--scale-sign",
+                                                    given]))
+    assert _signs(args.scale_sign) == signs
+
+
+def test_scale_sign_of_two_axes_is_refused_naming_the_flag(tmp_path, capsys):
+    assert main(["calibrate", str(tmp_path / "s.csv"), "--scale-sign", "-,+"]) == 2
+    err = capsys.readouterr().err
+    assert "--scale-sign '-,+'" in err and len(err.strip().splitlines()) == 1

@@ -175,3 +175,39 @@ def test_real_recordings_poses_found_by_default(name, loader, lo, hi):
     mpu6050 1 + ~10 poses."""
     t, u = loader()
     assert lo <= len(find_static(t, u)) <= hi
+
+
+def _pose_file(path, counts, seed=0):
+    """A pose file: pose i has counts[i] samples around a random direction (noise 1e-4)."""
+    rng = np.random.default_rng(seed)
+    lines = ["pose,ux,uy,uz"]
+    for i, c in enumerate(counts):
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        lines += [f"P{i},{','.join(f'{v:.9f}' for v in d + rng.normal(0, 1e-4, 3))}"
+                  for _ in range(c)]
+    path.write_text("\n".join(lines) + "\n")
+    return lines
+
+
+@pytest.mark.parametrize("short", [1, 2])
+def test_a_pose_of_one_or_two_samples_among_sampled_poses_is_refused_by_name(tmp_path, short):
+    from align.errors import InputError
+
+    counts = [20] * 12
+    counts[7] = short
+    lines = _pose_file(tmp_path / "p.csv", counts)
+    with pytest.raises(InputError) as exc:
+        read_poses(tmp_path / "p.csv")
+    line = next(i for i, ln in enumerate(lines, start=1) if ln.startswith("P7,"))
+    assert str(exc.value).startswith(f"{tmp_path / 'p.csv'}:{line}: pose: 'P7' has {short} ")
+    # as check poses (means only) the file is read
+    assert read_poses(tmp_path / "p.csv", calibration=False)[0].count[7] == short
+
+
+@pytest.mark.parametrize("counts, noise_known", [([20] * 12, True), ([3] * 12, True),
+                                                 ([1] * 12, False), ([1, 2] * 6, False)])
+def test_sampled_poses_or_per_pose_means_are_read(tmp_path, counts, noise_known):
+    _pose_file(tmp_path / "p.csv", counts)
+    poses, _ = read_poses(tmp_path / "p.csv")
+    assert poses.count.tolist() == counts and (poses.sigma_u is not None) == noise_known

@@ -35,3 +35,64 @@ def test_x_axis_vertical_is_defined():
     assert np.isfinite(r2).all()
     with pytest.raises(ValueError):
         roll_pitch(np.ones((1, 3)), method="guess")
+
+
+# --------------------------------------------------------------- readings through a model
+
+def _model(**kw):
+    from align.calibration import TriadModel
+
+    base = dict(k=np.array([2.0, -1.5, 1.8]), beta=np.array([1e-4, -2e-4, 3e-4]),
+                bias=np.array([1e-3, -2e-3, 5e-4]), t_ref=40.0)
+    return TriadModel(**{**base, **kw})
+
+
+def _readings(model, a, t=None):
+    """Outputs u that ``model`` maps back to specific force ``a`` (N, 3) [g] (its forward
+    model: u = k * R (a + bias + drift dt), no k2)."""
+    from align.calibration import r_matrix
+    from axisbase.table import Table
+
+    dt = 0.0 if t is None else (t - model.t_ref)[:, None]
+    u = ((a + model.bias + dt * model.drift) @ r_matrix(model.beta).T) * model.k
+    data = {"ux": u[:, 0], "uy": u[:, 1], "uz": u[:, 2], **({} if t is None else {"t": t})}
+    return Table(None, None, data, 2)
+
+
+def test_readings_without_time_get_none_and_a_drift_model_says_what_it_used():
+    from align.tilt import tilt_of_readings
+
+    rng = np.random.default_rng(5)
+    roll, pitch = rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50)
+    a = gravity_from_angles(roll, pitch)
+    m = _model()
+    res = tilt_of_readings(m, _readings(m, a))
+    assert res.t is None and res.warnings == ()
+    assert np.allclose(res.roll, roll, atol=1e-12) and np.allclose(res.pitch, pitch, atol=1e-12)
+    rows = res.csv_text().splitlines()
+    assert rows[0] == "t,roll_deg,pitch_deg" and all(r.startswith(",") for r in rows[1:])
+    assert np.allclose(np.loadtxt(rows[1:], delimiter=",", usecols=(1, 2)),
+                       np.rad2deg(np.column_stack([roll, pitch])), atol=1e-6)
+    drifting = _model(drift=np.array([1e-6, 0, 0]))
+    res = tilt_of_readings(drifting, _readings(drifting, a))
+    assert len(res.warnings) == 1 and "reference time 40 s" in res.warnings[0]
+    # with times, the drift is applied and nothing is said
+    t = np.linspace(0, 100, 50)
+    res = tilt_of_readings(drifting, _readings(drifting, a, t))
+    assert res.warnings == () and np.array_equal(res.t, t)
+    assert np.allclose(res.roll, roll, atol=1e-9)
+
+
+@pytest.mark.parametrize("scale, far", [(1.0, 0), (1.09, 0), (1.11, 50), (0.0, 50)])
+def test_readings_far_from_one_g_are_counted_in_a_warning(scale, far):
+    from align.tilt import tilt_of_readings
+
+    rng = np.random.default_rng(6)
+    a = gravity_from_angles(rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50)) * scale
+    m = _model()
+    res = tilt_of_readings(m, _readings(m, a))
+    assert res.far_from_1g == far and res.summary()["far_from_1g"] == far
+    assert len(res.warnings) == (1 if far else 0)
+    if far:
+        assert res.warnings[0].startswith(f"{far} of 50 readings")
+        assert res.summary()["warnings"] == list(res.warnings)

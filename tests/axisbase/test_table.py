@@ -195,3 +195,47 @@ def test_quantised_counts_with_chance_repeats_are_not_duplicates(tmp_path):
         read_table(save(np.repeat(counts[:100], 2, axis=0), "pairs.csv"), spec)
     with pytest.raises(Err, match="repeat rows"):
         read_table(save(np.concatenate([counts[:100], counts[:100]]), "block.csv"), spec)
+
+
+@pytest.mark.parametrize("comment", ["# paused", "#", "  # indented", "# a, b, c", "# 1,2,3,4,5",
+                                     "# gain,2,3,4,5,6", "# x,y,z,w,v,u",
+                                     '#a,"open quote', "# x,y,z,w,v,u,t,s"])
+def test_comment_lines_anywhere_are_ignored(tmp_path, comment):
+    """Whatever the comment holds (no delimiter, fewer, as many or more fields than the
+    header, a quote it never closes), whole and streamed reads give the plain file's rows,
+    and a bad row after the comments is still named by its own line."""
+    head, rows = _plain(5)
+    lines = [",".join(r) for r in rows]
+    plain = read_table(_write(tmp_path / "plain.csv", head, rows), SPEC)
+    text = [",".join(head), comment, *lines[:20], comment, comment, *lines[20:], comment]
+    p = tmp_path / "c.csv"
+    p.write_text("\n".join(text) + "\n")
+    chunks = list(iter_table(p, SPEC, block_bytes=1 << 10))
+    assert len(chunks) > 1
+    whole = read_table(p, SPEC)
+    for k in plain.data:
+        assert np.array_equal(whole[k], plain[k]), (comment, k)
+        assert np.array_equal(np.concatenate([c[k] for c in chunks]), plain[k]), (comment, k)
+    bad = list(text)
+    bad[40] = "p9,1,x,3,4,5"
+    p.write_text("\n".join(bad) + "\n")
+    for read in (lambda: read_table(p, SPEC),
+                 lambda: list(iter_table(p, SPEC, block_bytes=1 << 10))):
+        with pytest.raises(InputError, match=r"c\.csv:41: uy: 'x' is not a number"):
+            read()
+    short = list(text)
+    short[45] = "p9,1,2"
+    p.write_text("\n".join(short) + "\n")
+    with pytest.raises(InputError, match=r"c\.csv:46: 3 fields, the header has 6"):
+        read_table(p, SPEC)
+
+
+def test_a_comment_never_swallows_rows(tmp_path):
+    """A comment opening a quote the parser would carry over the next lines is not skipped
+    with them: those rows are read (or named if bad)."""
+    p = tmp_path / "q.csv"
+    p.write_text('ux,uy,uz\n1,2,3\n#"a\n4,5,6\n7,8,9\n')
+    assert read_table(p, SPEC)["ux"].tolist() == [1.0, 4.0, 7.0]
+    p.write_text('ux,uy,uz\n1,2,3\n#"a\n4,5,6\n7,8"\n')
+    with pytest.raises(InputError, match=r"q\.csv:5: 2 fields"):
+        read_table(p, SPEC)
