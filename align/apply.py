@@ -144,13 +144,15 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
 
 @dataclass(frozen=True)
 class AppliedReadings:
-    """Readings through a platform calibration: times [s], specific force in the platform
-    frame (N, 3) [g], and roll/pitch [rad] when asked."""
+    """Readings through a platform calibration: times [s] (None when the readings had none),
+    specific force in the platform frame (N, 3) [g], roll/pitch [rad] when asked, and what
+    the reader must know (a drift model taken at its reference time)."""
 
-    t: np.ndarray
+    t: np.ndarray | None
     a: np.ndarray
     roll: np.ndarray | None = None
     pitch: np.ndarray | None = None
+    warnings: tuple[str, ...] = ()
 
     @property
     def samples(self) -> int:
@@ -161,7 +163,7 @@ class AppliedReadings:
         return self.a.mean(0)
 
     def csv_text(self) -> str:
-        """``t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]``."""
+        """``t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]``; t blank when the readings had none."""
         from axisbase.output import csv_text
 
         cols, names = [self.t, *self.a.T], ["t", "ax_g", "ay_g", "az_g"]
@@ -173,14 +175,16 @@ class AppliedReadings:
 
 def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,
                       method: str = "exact") -> AppliedReadings:
-    """Readings ``tab`` (ux, uy, uz[, t][, temp]) -> specific force in the platform frame;
-    readings without times are taken at the model's reference time."""
-    from align.tilt import roll_pitch
+    """Readings ``tab`` (ux, uy, uz[, t][, temp]) -> specific force in the platform frame.
+    Readings without times keep none; a drift of the model is then taken at its reference
+    time, and a warning says so (likewise a temperature)."""
+    from align.tilt import model_time_warnings, roll_pitch
 
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t = tab["t"] if "t" in tab else np.full(len(u), pc.model.t_ref)
-    a = pc.specific_force(u, t, tab.get("temp"))
+    t, temp = tab.get("t"), tab.get("temp")
+    warnings = tuple(model_time_warnings(pc.model, t, temp))
+    a = pc.specific_force(u, pc.model.t_ref if t is None else t, temp)
     if not tilt:
-        return AppliedReadings(t, a)
+        return AppliedReadings(t, a, warnings=warnings)
     roll, pitch = roll_pitch(a, method=method)
-    return AppliedReadings(t, a, roll, pitch)
+    return AppliedReadings(t, a, roll, pitch, warnings)

@@ -667,6 +667,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
     res = apply_to_readings(pc, tab, tilt=args.tilt, method=args.method)
     print(f"{res.samples} readings -> platform frame; mean a = "
           + " ".join(f"{v:+.7f}" for v in res.mean_g) + " g")
+    _warn(res.warnings)
     _wrote(write_atomic(out, res.csv_text(), args.force))
     return 0
 

@@ -84,13 +84,22 @@ class TiltOfReadings:
         """``t,roll_deg,pitch_deg``; t blank on every row when the readings had no time."""
         from axisbase.output import csv_text
 
-        if self.t is not None:
-            return csv_text(["t", "roll_deg", "pitch_deg"],
-                            [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
-        body = csv_text(["roll_deg", "pitch_deg"],
-                        [np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
-        head, *rows = body.splitlines()
-        return "\n".join(["t," + head, *("," + r for r in rows)]) + "\n"
+        return csv_text(["t", "roll_deg", "pitch_deg"],
+                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+
+
+def model_time_warnings(model, t, temp) -> list[str]:
+    """What a reader of readings without times (or temperatures) must know when the model
+    has a drift (or a temperature term): it is taken at the model's reference value."""
+    out = []
+    if t is None and (np.any(model.drift != 0) or np.any(model.drift2 != 0)):
+        out.append(f"the readings have no time but the calibration models a drift: it is "
+                   f"taken at the calibration's reference time {model.t_ref:g} s (give a "
+                   "t column or --rate)")
+    if temp is None and np.any(model.temp_coeff != 0):
+        out.append("the readings have no temperature but the calibration models one: "
+                   f"taken at its reference {model.temp_ref:g} (give a temp column)")
+    return out
 
 
 def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> TiltOfReadings:
@@ -101,14 +110,7 @@ def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> Ti
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     t = tab["t"] if "t" in tab else None
     temp = tab.get("temp")
-    warnings = []
-    if t is None and (np.any(model.drift != 0) or np.any(model.drift2 != 0)):
-        warnings.append(f"the readings have no time but the calibration models a drift: it is "
-                        f"taken at the calibration's reference time {model.t_ref:g} s (give a "
-                        "t column or --rate)")
-    if temp is None and np.any(model.temp_coeff != 0):
-        warnings.append("the readings have no temperature but the calibration models one: "
-                        f"taken at its reference {model.temp_ref:g} (give a temp column)")
+    warnings = model_time_warnings(model, t, temp)
     a = model.specific_force(u, model.t_ref if t is None else t, temp)
     roll, pitch = roll_pitch(a, method=method, mu=mu)
     res = TiltOfReadings(t, a, roll, pitch, method, mu)

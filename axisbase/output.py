@@ -313,12 +313,23 @@ def _real_stdout():
 
 def csv_text(names: Iterable[str], columns: Iterable, fmt: str = "%.10g") -> str:
     """A CSV table (header line + rows) of equal-length numeric columns, for
-    :func:`write_atomic`."""
+    :func:`write_atomic`; a column given as None is left blank on every row (a quantity the
+    input did not have, e.g. times: never invented)."""
     import io
 
     import numpy as np
 
-    data = np.column_stack([np.asarray(c, float) for c in columns])
+    names, columns = list(names), list(columns)
+    given = [c for c in columns if c is not None]
+    data = np.column_stack([np.asarray(c, float) for c in given])
     buf = io.StringIO()
-    np.savetxt(buf, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
-    return buf.getvalue()
+    np.savetxt(buf, data, delimiter=",", fmt=fmt)
+    rows = buf.getvalue().splitlines()
+    if len(given) < len(columns):
+        blanks = [c is None for c in columns]
+        out = []
+        for r in rows:
+            vals = iter(r.split(","))
+            out.append(",".join("" if b else next(vals) for b in blanks))
+        rows = out
+    return "\n".join([",".join(names), *rows]) + "\n"

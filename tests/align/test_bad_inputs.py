@@ -1021,3 +1021,26 @@ def test_batch_outputs_may_share_a_folder(base, tmp_path):
                  str(out), "--jobs", "1", "-q"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["plain.cal.json", "plain.json",
                                                      "unit2.cal.json", "unit2.json"]
+
+
+def test_apply_never_invents_times(base, tmp_path):
+    """Readings without a time column keep none in the output (t blank), and the specific
+    force is the same as with their times when the model has no drift."""
+    src = (base / "readings.csv").read_text().splitlines()
+    head = src[0].split(",")
+    if "t" not in head:
+        pytest.skip("the readings of this fixture have no time column")
+    k = head.index("t")
+    drop = [",".join(v for i, v in enumerate(r.split(",")) if i != k) for r in src]
+    (tmp_path / "no_t.csv").write_text("\n".join(drop) + "\n")
+    cal = str(base / "outputs" / "pc.json")
+    for name, out in (("no_t.csv", "a.csv"), (str(base / "readings.csv"), "b.csv")):
+        assert main(["apply", cal, str(tmp_path / name), "--out", str(tmp_path / out),
+                     "-q"]) == 0
+    a = (tmp_path / "a.csv").read_text().splitlines()
+    b = (tmp_path / "b.csv").read_text().splitlines()
+    assert a[0] == b[0] == "t,ax_g,ay_g,az_g"
+    assert all(r.startswith(",") for r in a[1:])
+    model = json.loads((base / "outputs" / "pc.json").read_text())["model"]
+    assert not any(model["drift_g_per_s"]) and not any(model["drift2_g_per_s2"])
+    assert [r[1:] for r in a[1:]] == [r.split(",", 1)[1] for r in b[1:]]
