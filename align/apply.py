@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from align.calibration import TriadModel, model_from_dict, model_to_dict, r_matrix
+from align.calibration import TriadModel, r_matrix
 from align.contract import check, document
 from align.errors import InputError
 from align.fusion import E_NAMES, axes_from, e_matrix
@@ -41,7 +41,7 @@ class PlatformCalibration:
     def to_dict(self, units: str | None = None) -> dict:
         """The calibration's body (``units``: the output unit of the readings it was made
         from, checked by ``align apply``)."""
-        model = model_to_dict(self.model)
+        model = self.model.to_dict()
         if units is not None:
             model["output_unit"] = units
         return {"frame": "platform: X, Y horizontal, Z up; row i = accelerometer i",
@@ -74,7 +74,7 @@ class PlatformCalibration:
         else:
             check(d, "platform-calibration", where)
         try:
-            model = model_from_dict(d["model"], where)
+            model = TriadModel.from_dict(d["model"], where)
             e6 = np.array(d["angles_rad"], float).reshape(6)
             cov = np.array(d["angles_covariance_rad2"], float).reshape(6, 6)
         except (KeyError, TypeError, ValueError) as exc:
@@ -139,7 +139,7 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     block = d.get("model", d)
     if not isinstance(block, dict):
         raise InputError(f"{path}: 'model' is not a table")
-    return model_from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))
+    return TriadModel.from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))
 
 
 @dataclass(frozen=True)

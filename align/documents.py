@@ -38,7 +38,7 @@ def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, se
 
 def tilt_document(res, settings: dict, inputs: Inputs) -> dict:
     """``align tilt --json`` (``res``: :class:`align.tilt.TiltOfReadings`)."""
-    return document("tilt", res.summary(), settings, inputs)
+    return document("tilt", res.to_dict(), settings, inputs)
 
 
 def camera_document(model, settings: dict, inputs: Inputs) -> dict:

@@ -68,7 +68,7 @@ class TiltOfReadings:
         return int(np.count_nonzero(~(np.abs(np.linalg.norm(self.a, axis=1) - 1)
                                       <= FAR_FROM_1G)))
 
-    def summary(self) -> dict:
+    def to_dict(self) -> dict:
         """The summary ``align tilt --json`` writes (degrees at this edge)."""
         return {"warnings": list(self.warnings), "method": self.method,
                 "mu": self.mu if self.method == "paper" else None,

@@ -14,10 +14,7 @@ from align.calibration.model import (
     admissible,
     algebraic,
     calibrate,
-    calibration_json,
     delta_g,
-    model_from_dict,
-    model_to_dict,
     poses_from_samples,
 )
 from align.calibration.static import (
@@ -34,9 +31,9 @@ from align.calibration.static import (
 
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",
-    "Ellipsoid", "calibration_json",
+    "Ellipsoid",
     "Poses", "TriadModel", "admissible", "algebraic", "calibrate", "delta_g", "extract",
-    "li_griffiths", "r_matrix", "model_from_dict", "model_to_dict", "StaticInterval",
+    "li_griffiths", "r_matrix", "StaticInterval",
     "StaticSettings", "StaticDetection", "detect_static", "find_static", "read_poses",
     "read_readings", "READINGS", "STATIC", "poses_from_samples",
 ]

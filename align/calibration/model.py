@@ -94,6 +94,35 @@ class TriadModel:
         v = float(self.cov[i, i])
         return float(np.sqrt(v)) if v >= 0 else float("nan")  # nan: not determined
 
+    def to_dict(self) -> dict:
+        """The model as JSON-ready numbers (SI/radians/g), covariance included."""
+        return {"k_v_per_g": self.k.tolist(), "beta_rad": self.beta.tolist(),
+                "bias_g": self.bias.tolist(), "k2_per_g": self.k2.tolist(),
+                "drift_g_per_s": self.drift.tolist(), "drift2_g_per_s2": self.drift2.tolist(),
+                "temp_coeff_g_per_k": self.temp_coeff.tolist(), "t_ref_s": self.t_ref,
+                "temp_ref_k": self.temp_ref, "parameter_names": list(self.names),
+                "covariance": None if self.cov is None else self.cov.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "calibration") -> TriadModel:
+        """Read :meth:`to_dict`'s output back (clear error for anything else, or for a
+        model that cannot be applied: see :func:`_checked`)."""
+        try:
+            cov = d.get("covariance")
+            m = cls(
+                np.array(d["k_v_per_g"], float), np.array(d["beta_rad"], float),
+                np.array(d["bias_g"], float), np.array(d.get("k2_per_g", [0, 0, 0]), float),
+                np.array(d.get("drift_g_per_s", [0, 0, 0]), float),
+                np.array(d.get("temp_coeff_g_per_k", [0, 0, 0]), float),
+                np.array(d.get("drift2_g_per_s2", [0, 0, 0]), float),
+                float(d.get("t_ref_s", 0.0)), float(d.get("temp_ref_k", 0.0)),
+                None if cov is None else np.array(cov, float),
+                tuple(d.get("parameter_names", ())))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{where}: not a calibration model ({exc!s}); expected the "
+                             "'model' block that 'align calibrate --json' writes") from None
+        return _checked(m, where)
+
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
     names = [f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz"]
@@ -284,6 +313,30 @@ class Calibration:
                         for ax, v, u in e.components]
         return out
 
+    def to_dict(self, poses: Poses) -> dict:
+        m, a = self.model, self.algebraic
+        return {
+            "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
+            "bias_g": m.bias.tolist(),
+            "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
+            "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
+            "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+            "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
+            "dof": self.loop.after.dof,
+            "effects": [e.to_dict() for e in self.loop.effects],
+            "unexplained_structure": self.loop.unexplained_structure,
+            "noise_known": self.noise_known,
+            "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
+                          "bias_g": a.bias.tolist()},
+            "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
+                      zip(poses.labels, delta_g(m, poses), strict=True)],
+            "model": m.to_dict(),
+            "method": self.method,
+            "refused_effects": [r.to_dict() for r in self.loop.refused],
+            "known_pose": self.known.to_dict() if self.known is not None else None,
+            "cross_check": self.cross_check,
+        }
+
 
 PRIOR_SCALE = 0.10
 """An effect may not move a scale factor by more than this fraction (physical prior)."""
@@ -406,16 +459,6 @@ def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:
     return np.linalg.norm(model.specific_force(poses.u, poses.t, poses.temp), axis=1) - 1.0
 
 
-def model_to_dict(m: TriadModel) -> dict:
-    """The model as JSON-ready numbers (SI/radians/g), covariance included."""
-    return {"k_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(), "bias_g": m.bias.tolist(),
-            "k2_per_g": m.k2.tolist(), "drift_g_per_s": m.drift.tolist(),
-            "drift2_g_per_s2": m.drift2.tolist(),
-            "temp_coeff_g_per_k": m.temp_coeff.tolist(), "t_ref_s": m.t_ref,
-            "temp_ref_k": m.temp_ref, "parameter_names": list(m.names),
-            "covariance": None if m.cov is None else m.cov.tolist()}
-
-
 MAX_BETA_RAD = np.pi / 4
 """Largest non-orthogonality a model file may hold: R (eq. 5) is singular at pi/2, and an
 axis 45 deg off its place is no triad (real ones are within a degree)."""
@@ -448,48 +491,3 @@ def _checked(m: TriadModel, where: str) -> TriadModel:
         raise InputError(f"{where}: model.covariance: shape {m.cov.shape} does not match "
                          f"its {len(m.names)} parameter_names")
     return m
-
-
-def model_from_dict(d: dict, where: str = "calibration") -> TriadModel:
-    """Read :func:`model_to_dict`'s output back (clear error for anything else, or for a
-    model that cannot be applied: see :func:`_checked`)."""
-    try:
-        cov = d.get("covariance")
-        m = TriadModel(
-            np.array(d["k_v_per_g"], float), np.array(d["beta_rad"], float),
-            np.array(d["bias_g"], float), np.array(d.get("k2_per_g", [0, 0, 0]), float),
-            np.array(d.get("drift_g_per_s", [0, 0, 0]), float),
-            np.array(d.get("temp_coeff_g_per_k", [0, 0, 0]), float),
-            np.array(d.get("drift2_g_per_s2", [0, 0, 0]), float),
-            float(d.get("t_ref_s", 0.0)), float(d.get("temp_ref_k", 0.0)),
-            None if cov is None else np.array(cov, float),
-            tuple(d.get("parameter_names", ())))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"{where}: not a calibration model ({exc!s}); expected the 'model' "
-                         "block that 'align calibrate --json' writes") from None
-    return _checked(m, where)
-
-
-def calibration_json(cal: Calibration, poses: Poses) -> dict:
-    """The calibration's JSON (contract of ``align calibrate``, also a session's stage)."""
-    m, a = cal.model, cal.algebraic
-    return {
-        "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
-        "bias_g": m.bias.tolist(),
-        "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
-        "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
-        "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
-        "scale_sign": list(cal.signs), "residual_rms_g": cal.residual_rms_g,
-        "dof": cal.loop.after.dof,
-        "effects": [e.to_dict() for e in cal.loop.effects],
-        "unexplained_structure": cal.loop.unexplained_structure, "noise_known": cal.noise_known,
-        "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
-                      "bias_g": a.bias.tolist()},
-        "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
-                  zip(poses.labels, delta_g(m, poses), strict=True)],
-        "model": model_to_dict(m),
-        "method": cal.method,
-        "refused_effects": [r.to_dict() for r in cal.loop.refused],
-        "known_pose": cal.known.to_dict() if cal.known is not None else None,
-        "cross_check": cal.cross_check,
-    }

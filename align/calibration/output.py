@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from align.calibration.model import Calibration, Poses, calibration_json, delta_g
+from align.calibration.model import Calibration, Poses, delta_g
 from align.calibration.static import StaticInterval
 from align.contract import document
 from axisbase.table import OUTPUT_UNITS
@@ -36,7 +36,7 @@ def calibration_document(cal: Calibration, poses: Poses, units: str,
                          intervals: Sequence[StaticInterval] | None, check: Poses | None,
                          warnings: Sequence[str], settings: dict,
                          inputs: Iterable[str | Path]) -> dict:
-    js = with_units(calibration_json(cal, poses), units)
+    js = with_units(cal.to_dict(poses), units)
     if intervals is not None:
         js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
                                    "samples": iv.samples, "mean": iv.mean.tolist(),

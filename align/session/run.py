@@ -82,7 +82,6 @@ class SessionResult:
         platform calibration, and each stage's own result. A session result is not loaded
         back whole (it needs the session's files); its parts are:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
-        from align.calibration import calibration_json
         from align.calibration.output import with_units
         from align.warnings import session_warnings
 
@@ -98,7 +97,7 @@ class SessionResult:
         stages: dict = {}
         if self.calibration is not None:
             stages["calibration"] = with_units(
-                calibration_json(self.calibration, self.calibration_poses), self.units)
+                self.calibration.to_dict(self.calibration_poses), self.units)
         if self.gonio is not None:
             g = self.session.goniometer
             stages["goniometer"] = self.gonio.to_dict(g.faces, g.nominal_rad)

@@ -169,16 +169,16 @@ def test_files_round_trip_and_bad_input(tmp_path):
     ("k2_per_g", None, [0.0, 0.0], "k2_per_g: 2 values"),
 ])
 def test_model_from_dict_refuses_what_cannot_be_applied(key, index, value, words):
-    from align.calibration import TriadModel, model_from_dict, model_to_dict
+    from align.calibration import TriadModel
     from align.errors import InputError
 
-    d = model_to_dict(TriadModel(np.array([1.0, 2.0, 3.0]), np.zeros(3), np.zeros(3)))
-    assert model_from_dict(d, "cal.json").k.tolist() == [1.0, 2.0, 3.0]
+    d = TriadModel(np.array([1.0, 2.0, 3.0]), np.zeros(3), np.zeros(3)).to_dict()
+    assert TriadModel.from_dict(d, "cal.json").k.tolist() == [1.0, 2.0, 3.0]
     if index is None:
         d[key] = value
     else:
         d[key][index] = value
     with pytest.raises(InputError) as exc:
-        model_from_dict(d, "cal.json")
+        TriadModel.from_dict(d, "cal.json")
     msg = str(exc.value)
     assert msg.startswith("cal.json: model.") and words in msg and "\n" not in msg

@@ -73,3 +73,18 @@ def test_from_dict_refuses_what_is_not_its_own():
         FusionResult.from_dict({"chi2": 1.0})
     with pytest.raises(ValueError, match="angle_names"):
         FusionResult.from_dict({"angle_names": ["a"] * 6})
+
+
+def test_triad_model_and_platform_calibration_round_trip(session_result):
+    from align.apply import PlatformCalibration
+    from align.calibration import TriadModel
+
+    res, js = session_result
+    m = res.calibration.model
+    back = TriadModel.from_dict(json.loads(dumps(m.to_dict())))
+    for f in ("k", "beta", "bias", "k2", "drift", "cov"):
+        assert np.array_equal(getattr(back, f), getattr(m, f)), f
+    pc = PlatformCalibration.from_dict(js["platform_calibration"], "result.json")
+    u = np.array([[0.01, -0.02, -2.4]])
+    assert np.array_equal(pc.specific_force(u, m.t_ref),
+                          res.platform_calibration().specific_force(u, m.t_ref))

@@ -91,8 +91,8 @@ def test_readings_far_from_one_g_are_counted_in_a_warning(scale, far):
     a = gravity_from_angles(rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50)) * scale
     m = _model()
     res = tilt_of_readings(m, _readings(m, a))
-    assert res.far_from_1g == far and res.summary()["far_from_1g"] == far
+    assert res.far_from_1g == far and res.to_dict()["far_from_1g"] == far
     assert len(res.warnings) == (1 if far else 0)
     if far:
         assert res.warnings[0].startswith(f"{far} of 50 readings")
-        assert res.summary()["warnings"] == list(res.warnings)
+        assert res.to_dict()["warnings"] == list(res.warnings)
