@@ -45,7 +45,7 @@ def result_json(res: SessionResult) -> dict:
         g = res.session.goniometer
         stages["goniometer"] = run_json(res.gonio, g.faces, g.nominal_rad)
     if res.marks:
-        stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
+        stages["marks"] = [dict(r.to_dict(), housing=im.housing, view=im.view,
                                 nominal=im.nominal) for im, r in res.marks]
     d["stages"] = stages
     return d
