@@ -60,7 +60,9 @@ class MarkStage:
     def __init__(self, m: MarkMeasurement):
         self.m = m
         self.scale = half_diagonal(m.image_shape)
-        self.sigma = m.sigma * np.sqrt(texture_scale(m))
+        ts = texture_scale(m)
+        self.sigma = m.sigma * np.sqrt(ts)
+        self.noise_dof = noise_dof(m, ts)
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
@@ -101,7 +103,8 @@ class MarkStage:
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
-                        "offset_px": (lf.offset_px, lf.offset_u_px)})
+                        "offset_px": (lf.offset_px, lf.offset_u_px)},
+            noise_dof=self.noise_dof)
 
     @staticmethod
     def _col_index(terms: Sequence[Term], name: str) -> int:
@@ -128,6 +131,23 @@ def texture_scale(m: MarkMeasurement) -> float:
         return 1.0
     z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
     return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
+
+
+def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
+    """Degrees of freedom of a textured mark's estimated centre covariance (None: the
+    centres are independent with their Fisher sigma, nothing estimated).
+
+    The correlation comes from the replicas (their spectrum estimate's equivalent dof); when
+    :func:`texture_scale` re-read the amplitude from the mark (``scale`` > 1), that estimate
+    adds its own relative variance: mean of squared neighbour differences of n white z has
+    variance 3 / n relative, i.e. 2 n / 3 dof, and relative variances add (2/nu each).
+    """
+    tex = m.centres.texture
+    if m.chol is None or tex is None or not np.isfinite(tex.dof):
+        return None
+    if scale <= 1.0:
+        return float(tex.dof)
+    return float(1.0 / (1.0 / tex.dof + 1.5 / max(len(m.points) - 1, 1)))
 
 
 def _radial(fit: StageFit) -> Term:
