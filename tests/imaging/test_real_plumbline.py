@@ -126,8 +126,8 @@ def test_plumb_line_k_agrees_within_combined_uncertainty(side):
                    "and its Type B term: k1 -0.2655 +- 0.0015 vs -0.2588 +- 0.0011 (left, 3.6 u), "
                    "-0.2530 vs -0.2471 (right, 2.7 u, passes): k1-only is not this lens's "
                    "model (k2 = 0.12 at > 10 u), and each route's k1 absorbs the missing k2 "
-                   "with its own radial weighting (plumb-line: straightness along lines; calibrateCamera: "
-                   "reprojection)")
+                   "with its own radial weighting (plumb-line: straightness along lines; "
+                   "calibrateCamera: reprojection)")
 @pytest.mark.parametrize("side", ["left"])
 def test_plumb_line_k1_only_agrees_within_combined_uncertainty(side):
     k_pl, u_pl, k_cal, u_cal = _like_for_like(side, 1)
