@@ -8,7 +8,6 @@ session's is :func:`align.session.output.session_document`.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -24,7 +23,7 @@ def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
     """``align marks --json``: every mark (found or not), ok when every image was measured."""
     return document("marks", {"ok": all(r.found for r in results),
                               "warnings": mark_warnings(results),
-                              "marks": [r.to_json() for r in results]}, settings, inputs)
+                              "marks": [r.to_dict() for r in results]}, settings, inputs)
 
 
 def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, settings: dict,
@@ -42,5 +41,5 @@ def tilt_document(res, settings: dict, inputs: Inputs) -> dict:
 
 
 def camera_document(model, settings: dict, inputs: Inputs) -> dict:
-    """``align camera --json``: the camera model's own JSON (``imaging.CameraModel``)."""
-    return document("camera", json.loads(model.to_json()), settings, inputs)
+    """``align camera --json``: the camera model's own dict (``imaging.CameraModel``)."""
+    return document("camera", model.to_dict(), settings, inputs)

@@ -17,14 +17,22 @@ Candidate effects (each a few design columns with physical meaning):
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
-from align.loop import Candidate, LoopReport, StageFit, Term, periodogram_test, run_loop
+from align.loop import (
+    Candidate,
+    LoopReport,
+    LoopSummary,
+    StageFit,
+    Term,
+    periodogram_test,
+    run_loop,
+)
 from imaging import (
     CameraModel,
     ImageInputError,
@@ -52,7 +60,9 @@ class MarkStage:
     def __init__(self, m: MarkMeasurement):
         self.m = m
         self.scale = half_diagonal(m.image_shape)
-        self.sigma = m.sigma * np.sqrt(texture_scale(m))
+        ts = texture_scale(m)
+        self.sigma = m.sigma * np.sqrt(ts)
+        self.noise_dof = noise_dof(m, ts)
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
@@ -93,7 +103,8 @@ class MarkStage:
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
-                        "offset_px": (lf.offset_px, lf.offset_u_px)})
+                        "offset_px": (lf.offset_px, lf.offset_u_px)},
+            noise_dof=self.noise_dof)
 
     @staticmethod
     def _col_index(terms: Sequence[Term], name: str) -> int:
@@ -120,6 +131,23 @@ def texture_scale(m: MarkMeasurement) -> float:
         return 1.0
     z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
     return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
+
+
+def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
+    """Degrees of freedom of a textured mark's estimated centre covariance (None: the
+    centres are independent with their Fisher sigma, nothing estimated).
+
+    The correlation comes from the replicas (their spectrum estimate's equivalent dof); when
+    :func:`texture_scale` re-read the amplitude from the mark (``scale`` > 1), that estimate
+    adds its own relative variance: mean of squared neighbour differences of n white z has
+    variance 3 / n relative, i.e. 2 n / 3 dof, and relative variances add (2/nu each).
+    """
+    tex = m.centres.texture
+    if m.chol is None or tex is None or not np.isfinite(tex.dof):
+        return None
+    if scale <= 1.0:
+        return float(tex.dof)
+    return float(1.0 / (1.0 / tex.dof + 1.5 / max(len(m.points) - 1, 1)))
 
 
 def _radial(fit: StageFit) -> Term:
@@ -176,11 +204,23 @@ class FrameDistortion:
     chi2_dof_after: float
     p_value: float
 
-    def to_json(self) -> dict:
+    def to_dict(self) -> dict:
         return {"k1": self.k1, "k1_u": self.k1_u, "applied": self.applied,
                 "consistent": self.consistent, "lines": self.n_lines,
                 "chi2_dof_before": self.chi2_dof_before,
                 "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> FrameDistortion:
+        """From :meth:`to_dict`'s keys (a non-finite number is saved as null)."""
+        return cls(_num(d["k1"]), _num(d["k1_u"]), bool(d["applied"]), bool(d["consistent"]),
+                   int(d["lines"]), _num(d["chi2_dof_before"]), _num(d["chi2_dof_after"]),
+                   _num(d["p_value"]))
+
+
+def _num(v: object) -> float:
+    """A saved float: strict JSON writes NaN and ±inf as null, read back as NaN."""
+    return float("nan") if v is None else float(v)  # type: ignore[arg-type]
 
 
 K1_MAX = 0.3
@@ -272,7 +312,7 @@ class MarkResult:
     n_points: int = 0
     n_rejected: int = 0
     angle_before_rad: float = float("nan")
-    loop: LoopReport | None = None
+    loop: LoopReport | LoopSummary | None = None
     measurement: MarkMeasurement | None = None
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
@@ -282,30 +322,64 @@ class MarkResult:
     def unexplained_structure(self) -> bool:
         return bool(self.loop and self.loop.unexplained_structure)
 
-    def to_json(self) -> dict:
-        d = {"image": self.image, "found": self.found, "error": self.error}
+    def to_dict(self) -> dict:
+        """The mark as ``align marks --json`` and a session's ``stages.marks`` save it:
+        angles in degrees (and radians, exact), the loop's summary
+        (:meth:`align.loop.LoopSummary.to_dict`), the frame's shared distortion."""
+        d: dict = {"image": self.image, "found": self.found, "error": self.error}
+        if self.internal_error:
+            d["internal_error"] = True
         if not self.found:
             return d
         d.update({
             "index": self.index, "angle_deg": float(np.rad2deg(self.angle_rad)),
             "angle_u_deg": float(np.rad2deg(self.angle_u_rad)),
             "angle_u_arcsec": float(np.rad2deg(self.angle_u_rad) * 3600),
+            "angle_rad": self.angle_rad, "angle_u_rad": self.angle_u_rad,
             "offset_px": self.offset_px, "offset_u_px": self.offset_u_px,
             "length_px": self.length_px, "width_px": self.width_px, "blur_px": self.blur_px,
             "polarity": "dark" if self.dark else "bright", "points": self.n_points,
             "rejected_points": self.n_rejected,
             "angle_before_loop_deg": float(np.rad2deg(self.angle_before_rad)),
-            "effects": [e.to_dict() for e in self.loop.effects] if self.loop else [],
-            "unexplained_structure": self.unexplained_structure,
+            "angle_before_loop_rad": self.angle_before_rad,
+            "effects": [], "unexplained_structure": self.unexplained_structure,
             "uncertainty_inflation": self.uncertainty_inflation,
         })
         if self.frame is not None:
-            d["frame_radial_distortion"] = self.frame.to_json()
+            d["frame_radial_distortion"] = self.frame.to_dict()
         if self.loop:
-            d["residual_rms_px"] = {"before": self.loop.before.rms, "after": self.loop.after.rms}
-            d["chi2_dof"] = {"before": self.loop.before.chi2 / max(self.loop.before.dof, 1),
-                             "after": self.loop.after.chi2 / max(self.loop.after.dof, 1)}
+            s = self.loop.summary()
+            d.update(s.to_dict())
+            d["residual_rms_px"] = {"before": s.rms_before, "after": s.rms_after}
+            d["chi2_dof"] = {"before": s.chi2_dof_before, "after": s.chi2_dof_after}
         return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> MarkResult:
+        """From :meth:`to_dict`'s keys. What is not saved comes back None: the measurement,
+        and the full loop (its saved part is an :class:`align.loop.LoopSummary`, which
+        answers ``effects``, ``unexplained_structure`` and ``summary_lines()`` alike)."""
+        base = {"image": str(d["image"]), "found": bool(d["found"]),
+                "error": None if d.get("error") is None else str(d["error"]),
+                "internal_error": bool(d.get("internal_error", False))}
+        if not base["found"]:
+            return cls(**base)
+
+        def rad(key: str) -> float:  # radians saved exactly; degrees from older files
+            return _num(d[key + "_rad"]) if key + "_rad" in d else np.deg2rad(
+                _num(d[key + "_deg"]))
+
+        fr = d.get("frame_radial_distortion")
+        return cls(**base, index=int(d["index"]), angle_rad=rad("angle"),
+                   angle_u_rad=rad("angle_u"), offset_px=_num(d["offset_px"]),
+                   offset_u_px=_num(d["offset_u_px"]), length_px=_num(d["length_px"]),
+                   width_px=_num(d["width_px"]), blur_px=_num(d["blur_px"]),
+                   dark=d.get("polarity", "dark") == "dark", n_points=int(d["points"]),
+                   n_rejected=int(d.get("rejected_points", 0)),
+                   angle_before_rad=rad("angle_before_loop"),
+                   loop=LoopSummary.from_dict(d) if "loop" in d else None,
+                   uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
+                   frame=None if fr is None else FrameDistortion.from_dict(fr))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,

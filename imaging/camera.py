@@ -9,6 +9,7 @@ OpenCV's extended calibration) ``u``: standard uncertainty of each intrinsic par
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,36 +35,47 @@ class CameraModel:
     def focal_px(self) -> float:
         return float(np.sqrt(self.camera_matrix[0, 0] * self.camera_matrix[1, 1]))
 
-    def to_json(self) -> str:
-        return json.dumps({
+    def to_dict(self) -> dict:
+        """The model as ``align camera --json`` saves it (OpenCV's order and units: [px])."""
+        return {
             "camera_matrix": self.camera_matrix.tolist(),
             "dist_coeffs": self.dist_coeffs.ravel().tolist(),
             "image_size": list(self.image_size), "rms_px": self.rms_px, "views": self.views,
-            "u": self.u or {}, "per_view_rms_px": self.per_view_rms_px or {},
-        }, indent=2)
+            "u": dict(self.u or {}), "per_view_rms_px": dict(self.per_view_rms_px or {}),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> CameraModel:
+        """From :meth:`to_dict`'s keys; raises KeyError, ValueError or TypeError on a dict
+        that is not a camera model (:meth:`load` turns them into one line naming the file)."""
+        def num(v: object) -> float:  # strict JSON saves NaN as null
+            return float("nan") if v is None else float(v)  # type: ignore[arg-type]
+
+        K = np.array(d["camera_matrix"], float).reshape(3, 3)
+        D = np.array(d["dist_coeffs"], float).ravel()
+        w, h = (int(v) for v in d["image_size"])
+        return cls(K, D, (w, h), num(d.get("rms_px")), int(d.get("views", 0)),
+                   {k: num(v) for k, v in (d.get("u") or {}).items()} or None,
+                   {k: num(v) for k, v in (d.get("per_view_rms_px") or {}).items()} or None)
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
         p = Path(path)
         try:
             d = json.loads(p.read_text(encoding="utf-8-sig"))  # a BOM is not JSON's
-            K = np.array(d["camera_matrix"], float).reshape(3, 3)
-            D = np.array(d["dist_coeffs"], float).ravel()
-            size = tuple(int(v) for v in d["image_size"])
+            model = cls.from_dict(d)
         except FileNotFoundError:
             raise ImageInputError(f"{p}: camera file not found") from None
         except IsADirectoryError:
             raise ImageInputError(f"{p}: is a folder, not a camera file") from None
-        except (ValueError, KeyError, TypeError) as exc:
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ImageInputError(f"{p}: not a camera file ({exc!s}); expected camera_matrix, "
                                   "dist_coeffs, image_size as written by 'align camera'") from None
         try:  # version 1: files written before format versions existed
             check_format(d, "axis-align/camera", (1, 2, 3), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
-        return cls(K, D, size, float(d.get("rms_px", np.nan)), int(d.get("views", 0)),
-                   {k: float(v) for k, v in d.get("u", {}).items()} or None,
-                   {k: float(v) for k, v in d.get("per_view_rms_px", {}).items()} or None)
+        return model
 
     def undistort_centred(self, pts: np.ndarray, sigma: np.ndarray, shape: tuple[int, int]
                           ) -> tuple[np.ndarray, np.ndarray]:

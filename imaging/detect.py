@@ -81,17 +81,18 @@ def _ridge(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     (and edges) curve too, but only the line's centre is flat (Steger's condition, see FLAT).
     """
     g = cv2.GaussianBlur(img, (0, 0), sigma)
-    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8
-    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8
-    dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3) / 4
-    dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3) / 4
-    dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3) / 16
-    tr = (dxx + dyy) / 2
-    disc = np.sqrt(((dxx - dyy) / 2) ** 2 + dxy**2)
-    lam1, lam2 = tr + disc, tr - disc
-    # Keep the eigenvalue of larger magnitude, with its sign.
-    lam = np.where(np.abs(lam1) >= np.abs(lam2), lam1, lam2)
-    flat = np.hypot(gx, gy) < FLAT * np.abs(lam)
+    # Derivative scales folded into the filters (each array pass counts at 5 MP).
+    gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=1 / 8)
+    gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=1 / 8)
+    dxx = cv2.Sobel(g, cv2.CV_32F, 2, 0, ksize=3, scale=1 / 4)
+    dyy = cv2.Sobel(g, cv2.CV_32F, 0, 2, ksize=3, scale=1 / 4)
+    dxy = cv2.Sobel(g, cv2.CV_32F, 1, 1, ksize=3, scale=1 / 16)
+    tr = (dxx + dyy) * 0.5
+    disc = cv2.magnitude((dxx - dyy) * 0.5, dxy)
+    # The eigenvalue of larger magnitude is tr + sign(tr) disc (disc >= 0), and its magnitude
+    # |tr| + disc; Steger's test on squares (no square root of the gradient).
+    lam = np.where(tr >= 0, tr + disc, tr - disc)
+    flat = gx * gx + gy * gy < (FLAT * FLAT) * (lam * lam)
     return (sigma**2) * lam, flat
 
 
@@ -261,7 +262,8 @@ def check_roi(values: object, where: str = "roi") -> Roi:
 def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                  max_marks: int = 8, snr_threshold: float = 8.0,
                  roi: Roi | None = None,
-                 min_fill: float = 0.5, min_pixel_snr: float = 2.4) -> list[MarkCandidate]:
+                 min_fill: float = 0.5, min_pixel_snr: float = 2.4,
+                 top: float | None = None) -> list[MarkCandidate]:
     """Find long straight dark or bright thin marks.
 
     Parameters
@@ -287,6 +289,8 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     min_fill : float
         Fraction of a candidate's length its ridge pixels must cover: pieces of machining
         streaks that happen to line up are mostly gaps; a mark broken by dust is mostly mark.
+    top : float, optional
+        The image's full-scale DN when the caller already knows it (else from the image).
 
     Returns
     -------
@@ -353,7 +357,7 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
                                      centre_small, np.array([(w - 1) / 2, (h - 1) / 2]),
                                      contrast))
     noise_full = pixel_noise(_central(image, 1024))
-    top = full_scale(image)
+    top = full_scale(image) if top is None else top
     out = []
     for c in _dedupe(sorted(best, key=lambda c: -c.strength)):
         # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).

@@ -62,7 +62,10 @@ EFFECTS = {
     "table_tilt_y": ("arcsec", "tilt of the table axis towards the room's y"),
     "k2": ("ug/g^2", "second-order nonlinearity of every accelerometer"),
     "lens_k1": ("", "OpenCV radial distortion k1 of both cameras"),
+    "lens_k1_A": ("", "OpenCV radial distortion k1 of camera A only (overrides lens_k1)"),
+    "lens_k1_B": ("", "OpenCV radial distortion k1 of camera B only (overrides lens_k1)"),
 }
+LENSES = ("lens_k1", "lens_k1_A", "lens_k1_B")
 
 
 def parse_direction(text: str) -> np.ndarray:
@@ -119,9 +122,10 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
     for name in spec.effects:
         if name not in EFFECTS:
             raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
-    if "lens_k1" in spec.effects and "lens_k1" not in spec.undeclared:
-        raise ValueError("lens_k1 can only be undeclared: session.toml describes a lens by a "
-                         "camera model file, which synth does not write")
+    for lens in LENSES:
+        if lens in spec.effects and lens not in spec.undeclared:
+            raise ValueError(f"{lens} can only be undeclared: session.toml describes a lens by "
+                             "a camera model file, which synth does not write")
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(spec.seed)
     eff = {k: float(v) for k, v in spec.effects.items()}
@@ -157,7 +161,8 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
     rows = []
     for view in spec.views:
         cam, right, up = VIEWS[view]
-        geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get("lens_k1", 0.0),
+        geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get(f"lens_k1_{cam}",
+                                                           eff.get("lens_k1", 0.0)),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
         for housing, nominal in VIEW_MARKS[view]:
             s = S[HOUSINGS.index(housing)]

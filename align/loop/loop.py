@@ -52,6 +52,9 @@ class StageFit:
     ``quantities``: the stage's quantities of interest, name -> (value, u), SI/radians;
     ``components``: for effects with several parameters, (label, estimate, u) of each (the
     ``effects`` entry is the most significant one); ``payload``: the stage's own fitted model.
+    ``noise_dof``: degrees of freedom of an *estimated* noise covariance behind ``sigma``
+    (None: sigma known); the effect and structure tests then use their null distributions
+    with an estimated covariance (F- and t-type instead of chi2 and normal).
     """
 
     residuals: np.ndarray
@@ -63,6 +66,7 @@ class StageFit:
     quantities: Mapping[str, tuple[float, float]]
     components: Mapping[str, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
     payload: object = None
+    noise_dof: float | None = None
 
     @property
     def n(self) -> int:
@@ -288,6 +292,11 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
         return 1.0
     if base.sigma is not None:
         excess = max(1.0, ext.chi2 / ext.dof) if ext.dof > 0 else 1.0
+        if ext.noise_dof is not None and np.isfinite(ext.noise_dof):
+            # The weights come from a covariance estimated on noise_dof degrees of freedom:
+            # the extra terms' quadratic form is Hotelling's T^2, i.e. F(m, nu) for the
+            # statistic drop / m (nu large: chi2(m) / m again).
+            return float(special.fdtrc(m, ext.noise_dof, drop / excess / m))
         return float(special.chdtrc(m, drop / excess))
     if ext.dof == 0:
         return 1.0
@@ -296,7 +305,7 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
     return check_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
-                          fit.regressors, fit.dof, alpha)
+                          fit.regressors, fit.dof, alpha, fit.noise_dof)
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,

@@ -3,6 +3,20 @@
 Each test returns a p-value under the hypothesis "the residuals are independent noise of the
 stated size". A report is *structured* when the smallest p-value is below ``alpha`` divided
 by the number of tests (Bonferroni), so a clean fit is flagged with probability <= alpha.
+
+When the residuals were whitened with a noise covariance *estimated* on ``nu`` degrees of
+freedom (textured marks: from replicas of the band), they are independent only up to that
+estimate's error, and each test takes it into its null distribution:
+
+* chi2/dof against F(dof, nu) (the ratio of the residual's and the estimate's variances);
+* a regressor correlation's t against Student t with min(n - 2, nu) dof (the residual's
+  variance along a smooth regressor is the estimated spectrum's at low frequency, off by a
+  chi2_nu / nu factor);
+* a periodogram ordinate over the estimated spectrum: exp(-s) becomes (1 + 2 s / nu)^(-nu/2)
+  (exponential over chi2_nu / nu);
+* autocorrelations (Ljung–Box, runs): the whitening error adds to each residual
+  autocorrelation a variance ~ (2 / nu) x the lag window's bandwidth (1.86 / M for a Parzen
+  window of span M ~ n), i.e. their variance grows by 1 + 1.86 / nu (a Bartlett-type factor).
 """
 
 from __future__ import annotations
@@ -37,14 +51,26 @@ class StructureReport:
         return min(self.tests, key=lambda t: t.p_value) if self.tests else None
 
 
-def chi2_test(z: np.ndarray, dof: int) -> StructureTest:
-    """Excess of sum(z^2) over its chi2(dof) distribution (z = residual / sigma)."""
+def _finite(nu: float | None) -> bool:
+    return nu is not None and bool(np.isfinite(nu))
+
+
+def chi2_test(z: np.ndarray, dof: int, nu: float | None = None) -> StructureTest:
+    """Excess of sum(z^2) over its chi2(dof) distribution (z = residual / sigma); F(dof, nu)
+    for chi2/dof when sigma was estimated on ``nu`` dof."""
     c = float(np.sum(z**2))
-    return StructureTest("chi2", c / max(dof, 1), float(special.chdtrc(max(dof, 1), c)),
-                         f"chi2/dof = {c / max(dof, 1):.3f} (dof {dof})")
+    k = max(dof, 1)
+    p = special.fdtrc(k, nu, c / k) if _finite(nu) else special.chdtrc(k, c)
+    return StructureTest("chi2", c / k, float(p), f"chi2/dof = {c / k:.3f} (dof {dof})")
 
 
-def runs_test(z: np.ndarray) -> StructureTest:
+def autocorrelation_inflation(nu: float | None) -> float:
+    """Variance factor of residual autocorrelations whitened with a covariance estimated on
+    ``nu`` dof (1 when the covariance is known; see the module's notes)."""
+    return 1.0 + 1.86 / nu if _finite(nu) else 1.0
+
+
+def runs_test(z: np.ndarray, inflation: float = 1.0) -> StructureTest:
     """Wald–Wolfowitz runs of signs: too few runs means residuals come in stretches."""
     s = z > np.median(z)
     n1, n2 = int(s.sum()), int((~s).sum())
@@ -54,12 +80,13 @@ def runs_test(z: np.ndarray) -> StructureTest:
     runs = 1 + int(np.count_nonzero(s[1:] != s[:-1]))
     mu = 2 * n1 * n2 / n + 1
     var = 2 * n1 * n2 * (2 * n1 * n2 - n) / (n * n * (n - 1))
-    zz = (runs - mu) / np.sqrt(max(var, 1e-12))
+    zz = (runs - mu) / np.sqrt(max(var * inflation, 1e-12))
     return StructureTest("runs", float(zz), float(special.ndtr(zz)),
                          f"{runs} runs, {mu:.1f} expected")
 
 
-def ljung_box(z: np.ndarray, lags: int | None = None) -> StructureTest:
+def ljung_box(z: np.ndarray, lags: int | None = None, inflation: float = 1.0
+              ) -> StructureTest:
     """Ljung–Box portmanteau test of autocorrelation up to ``lags``."""
     n = len(z)
     h = lags or max(1, min(10, n // 5))
@@ -68,13 +95,14 @@ def ljung_box(z: np.ndarray, lags: int | None = None) -> StructureTest:
     if den == 0 or n < 4:
         return StructureTest("autocorrelation", 0.0, 1.0)
     rho = np.array([x[k:] @ x[:-k] / den for k in range(1, h + 1)])
-    q = n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, h + 1)))
+    q = n * (n + 2) * np.sum(rho**2 / (n - np.arange(1, h + 1))) / inflation
     return StructureTest("autocorrelation", float(q), float(special.chdtrc(h, q)),
                          f"lag-1 r = {rho[0]:+.3f}, Ljung-Box over {h} lags")
 
 
-def _pearson(x: np.ndarray, z: np.ndarray) -> tuple[float, float]:
-    """Pearson's r and its two-sided p-value (t with n - 2 dof: scipy.stats.pearsonr's)."""
+def _pearson(x: np.ndarray, z: np.ndarray, nu: float | None = None) -> tuple[float, float]:
+    """Pearson's r and its two-sided p-value (t with n - 2 dof: scipy.stats.pearsonr's;
+    min(n - 2, nu) when the residual was whitened with a covariance estimated on nu dof)."""
     xc, zc = x - x.mean(), z - z.mean()
     den = float(np.sqrt((xc @ xc) * (zc @ zc)))
     if den == 0:
@@ -84,10 +112,11 @@ def _pearson(x: np.ndarray, z: np.ndarray) -> tuple[float, float]:
     if abs(r) == 1:
         return r, 0.0
     t = r * np.sqrt((n - 2) / (1 - r * r))
-    return r, float(2 * special.stdtr(n - 2, -abs(t)))
+    return r, float(2 * special.stdtr(min(n - 2, nu) if _finite(nu) else n - 2, -abs(t)))
 
 
-def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray]) -> list[StructureTest]:
+def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray],
+                    nu: float | None = None) -> list[StructureTest]:
     """Linear and quadratic correlation of the residual with each regressor."""
     out = []
     for name, x in regressors.items():
@@ -98,7 +127,7 @@ def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray]) -> list
         for label, col in ((name, xc), (f"{name}^2", xc**2 - np.mean(xc**2))):
             if np.ptp(col) == 0:
                 continue
-            r, p = _pearson(col, z)
+            r, p = _pearson(col, z, nu)
             out.append(StructureTest(f"corr({label})", float(r), float(p)))
     return out
 
@@ -106,8 +135,10 @@ def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray]) -> list
 FFT_ABOVE = 200  # points: above this an evenly spaced series gets the FFT periodogram
 
 
-def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float]:
-    """Largest Lomb–Scargle peak against white noise, with the look-elsewhere correction.
+def periodogram_test(z: np.ndarray, x: np.ndarray, nu: float | None = None
+                     ) -> tuple[StructureTest, float]:
+    """Largest Lomb–Scargle peak against white noise, with the look-elsewhere correction
+    (``nu``: dof of an estimated whitening covariance, see the module's notes).
 
     Returns the test and the peak's angular frequency [rad per unit of x].
     """
@@ -140,7 +171,9 @@ def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float
         k = int(np.argmax(p))
         power = float(np.clip(p[k], 0, 1 - 1e-15))
         freq = float(freqs[k])
-    single = (1 - power) ** ((n - 3) / 2)
+    s_exp = -0.5 * (n - 3) * np.log1p(-power)  # single-frequency tail exp(-s_exp)
+    single = float(np.exp(-s_exp) if not _finite(nu) else
+                   np.exp(-0.5 * nu * np.log1p(2 * s_exp / nu)))
     m_indep = max(1.0, (0.5 / spacing - 1.5 / span) * span)
     fap = float(-np.expm1(m_indep * np.log1p(-min(single, 1 - 1e-16))))
     return (StructureTest("periodogram", power, fap,
@@ -150,11 +183,12 @@ def periodogram_test(z: np.ndarray, x: np.ndarray) -> tuple[StructureTest, float
 
 def check_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.ndarray,
                    regressors: Mapping[str, np.ndarray], dof: int,
-                   alpha: float = 1e-3) -> StructureReport:
+                   alpha: float = 1e-3, noise_dof: float | None = None) -> StructureReport:
     """Run every structure test on residuals ordered by the regressor ``order``.
 
     ``sigma`` None means the noise level is unknown: the chi2 test is skipped and the
-    residuals are scaled by their RMS.
+    residuals are scaled by their RMS. ``noise_dof``: dof of an estimated whitening
+    covariance (None: known).
     """
     r = np.asarray(residuals, float)
     if sigma is None:
@@ -163,7 +197,9 @@ def check_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.n
         z = r / np.asarray(sigma, float)
     idx = np.argsort(order, kind="stable")
     zs, xs = z[idx], np.asarray(order, float)[idx]
-    tests = [chi2_test(z, dof)] if sigma is not None else []
-    tests += [runs_test(zs), ljung_box(zs), periodogram_test(zs, xs)[0]]
-    tests += regressor_tests(z, regressors)
+    nu = noise_dof
+    infl = autocorrelation_inflation(nu)
+    tests = [chi2_test(z, dof, nu)] if sigma is not None else []
+    tests += [runs_test(zs, infl), ljung_box(zs, inflation=infl), periodogram_test(zs, xs, nu)[0]]
+    tests += regressor_tests(z, regressors, nu)
     return StructureReport(tuple(tests), alpha)

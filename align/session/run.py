@@ -102,7 +102,7 @@ class SessionResult:
             g = self.session.goniometer
             stages["goniometer"] = self.gonio.to_dict(g.faces, g.nominal_rad)
         if self.marks:
-            stages["marks"] = [dict(r.to_json(), housing=im.housing, view=im.view,
+            stages["marks"] = [dict(r.to_dict(), housing=im.housing, view=im.view,
                                     nominal=im.nominal) for im, r in self.marks]
         d["stages"] = stages
         return d

@@ -31,7 +31,7 @@ def test_undeclared_radial_distortion_is_found_and_removed(k1, offset, seed):
     k1n = k1 * (half_diagonal((768, 1024)) / f) ** 2
     e = r.loop.effects[0]
     assert abs(e.estimate - k1n) < max(5 * e.u, 0.03 * abs(k1n))
-    js = r.to_json()
+    js = r.to_dict()
     assert js["effects"][0]["name"] == RADIAL and js["effects"][0]["rms_after"] < js[
         "effects"][0]["rms_before"]
 
@@ -114,7 +114,7 @@ def test_marks_of_one_frame_share_one_distortion(k1, seed):
     assert abs(fr.k1 - k1n) < max(5 * fr.k1_u, 0.02 * abs(k1n))
     for r in res:
         assert not any(e.name == RADIAL for e in r.loop.effects)
-        assert r.to_json()["frame_radial_distortion"]["applied"] == fr.applied
+        assert r.to_dict()["frame_radial_distortion"]["applied"] == fr.applied
         t = min(s.truth.marks, key=lambda t: abs(angle_error(r.angle_rad, t.image_angle_rad)))
         assert abs(angle_error(r.angle_rad, t.image_angle_rad)) < 4.5 * r.angle_u_rad
 
@@ -150,10 +150,11 @@ def test_textured_horizontal_marks_get_no_false_effects():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured over these 200 marks: RMS 1.04 (0 deg), 0.99 "
-                   "(90 deg), 3 of 200 flagged (target <= 2)")
 def test_session_images_normalised_errors_and_false_effects():
-    """Issue 9 item 3 on the images of `align synth session` (200 marks)."""
+    """Issue 9 item 3 on the images of `align synth session` (200 marks). The texture's
+    covariance is estimated (replicas): the effect and structure tests use their null
+    distributions with an estimated covariance (before: 3 of 200 flagged, two of them
+    effects at p ~ 1e-3 under chi2 that are F-type p ~ 3e-3 and 6e-3)."""
     n = 200
     z, base, false = _session_like_marks(n, 5)
     for b in (0.0, 90.0):

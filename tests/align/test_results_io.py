@@ -88,3 +88,53 @@ def test_triad_model_and_platform_calibration_round_trip(session_result):
     u = np.array([[0.01, -0.02, -2.4]])
     assert np.array_equal(pc.specific_force(u, m.t_ref),
                           res.platform_calibration().specific_force(u, m.t_ref))
+
+
+def test_mark_results_round_trip():
+    """Marks of one frame (shared distortion, loop summary) and a failed image: to_dict ->
+    strict JSON -> from_dict -> to_dict is the same dict; what is not saved comes back None."""
+    from align.marks import FrameDistortion, MarkResult, measure_image
+    from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
+
+    marks = tuple(MarkSpec(np.deg2rad(a), off, 500, 4.0)
+                  for a, off in ((1.0, -200.0), (-2.0, 150.0), (91.0, 250.0)))
+    spec = ImageSpec(marks=marks, width=800, height=600, full_well_e=full_well_for_snr(40, -0.6),
+                     seed=3, camera=CameraGeometry(focal_px=800.0, k1=-0.08))
+    res = measure_image(render_marks(spec, with_crlb=False).image.astype(float), "a.png")
+    res.append(MarkResult(image="b.png", found=False, error="internal error: X", index=0,
+                          internal_error=True))
+    assert sum(r.found for r in res) == 3 and res[0].frame is not None
+    for r in res:
+        d = json.loads(dumps(r.to_dict()))
+        back = MarkResult.from_dict(d)
+        assert back.to_dict() == d
+        assert back.measurement is None
+        if r.found:
+            assert back.angle_rad == r.angle_rad and back.angle_u_rad == r.angle_u_rad
+            assert back.frame == r.frame and isinstance(back.frame, FrameDistortion)
+            assert back.loop.summary_lines() == r.loop.summary_lines()
+            assert back.unexplained_structure == r.unexplained_structure
+            assert [e.name for e in back.loop.effects] == [e.name for e in r.loop.effects]
+        else:
+            assert back == r
+
+
+def test_frame_distortion_with_unbounded_u_round_trips():
+    from align.marks import FrameDistortion
+
+    f = FrameDistortion(0.0, float("inf"), False, True, 2, 1.1, 1.1, 1.0)
+    back = FrameDistortion.from_dict(json.loads(dumps(f.to_dict())))  # inf saved as null
+    assert np.isnan(back.k1_u)
+    assert json.loads(dumps(back.to_dict())) == json.loads(dumps(f.to_dict()))
+
+
+def test_camera_model_round_trip():
+    from imaging import CameraModel
+
+    K = np.array([[812.25, 0, 319.5], [0, 811.75, 239.25], [0, 0, 1]])
+    m = CameraModel(K, np.array([-0.25, 0.08, 1e-4, -2e-4, 0.0]), (640, 480), 0.31, 13,
+                    {"fx": 1.5, "k1": 0.002}, {"left01.jpg": 0.2})
+    d = json.loads(dumps(m.to_dict()))
+    back = CameraModel.from_dict(d)
+    assert np.array_equal(back.camera_matrix, K) and back.to_dict() == d
+    assert back.image_size == (640, 480) and back.u == m.u

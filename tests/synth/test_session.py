@@ -1,0 +1,36 @@
+"""synth.session: a lens on one camera only bows that camera's images and no other."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from synth.session import SessionSpec, write_session
+
+FAST = dict(views=("A", "B"), platform_poses=("L000",), revolutions=3, samples_per_pose=20)
+
+
+def _pixels(folder, name):
+    return np.asarray(Image.open(folder / name), float)
+
+
+def test_lens_on_camera_a_only(tmp_path):
+    plain = write_session(tmp_path / "plain", SessionSpec(seed=4, **FAST))
+    lens = write_session(tmp_path / "lens", SessionSpec(
+        seed=4, effects={"lens_k1_A": -0.3}, undeclared=frozenset({"lens_k1_A"}), **FAST))
+    assert lens["effects"] == {"lens_k1_A": -0.3}
+    for im in lens["images"]:
+        a, b = _pixels(tmp_path / "plain", im["file"]), _pixels(tmp_path / "lens", im["file"])
+        if im["view"] == "B":  # camera B: the same scene, pixel for pixel
+            assert np.array_equal(a, b), im["file"]
+        else:  # camera A: the same scene seen through a barrel lens
+            assert np.mean(np.abs(a - b)) > 0.5, im["file"]
+    # The lens moves no true angle (only the image of it).
+    assert [i["image_angle_rad"] for i in lens["images"]] == [
+        i["image_angle_rad"] for i in plain["images"]]
+
+
+def test_a_lens_can_only_be_undeclared(tmp_path):
+    with pytest.raises(ValueError, match="lens_k1_B can only be undeclared"):
+        write_session(tmp_path / "s", SessionSpec(effects={"lens_k1_B": 0.1}, **FAST))
