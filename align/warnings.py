@@ -77,7 +77,8 @@ def session_warnings(res) -> list[str]:
     if res.calibration is not None and res.calibration_poses is not None:
         out += calibration_warnings(res.calibration, res.calibration_poses)
     if res.gonio is not None:
-        out += gonio_warnings(res.gonio)
+        g = res.session.goniometer
+        out += gonio_warnings(res.gonio, g.faces, g.nominal_rad)
     out += mark_warnings([r for _, r in res.marks])
     f = res.fusion
     if f is not None:

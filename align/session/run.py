@@ -187,6 +187,10 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
     if missing:
         raise InputError(f"{p.static}: pose(s) {', '.join(missing)} have no attitude in "
                          "session.toml [platform.poses]")
+    absent = [lab for lab in p.poses if lab not in poses.labels]
+    if absent:  # a declared attitude without data is a typo or a lost pose, never nothing
+        raise InputError(f"session.toml [platform.poses]: {', '.join(absent)} not in "
+                         f"{p.static} (its poses: {', '.join(poses.labels)})")
     if poses.sigma_u is None:
         raise InputError(f"{p.static}: needs >= 3 samples per pose (their scatter is the "
                          "readings' uncertainty)")

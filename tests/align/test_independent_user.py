@@ -1263,6 +1263,21 @@ def test_run_undeclared_pose_label_fails_the_stage_naming_it(session_dir, capsys
     assert doc["ok"] is False and any("Ydn" in e["message"] for e in doc["errors"])
 
 
+def test_run_declared_pose_absent_from_the_data_fails_the_stage_naming_it(session_dir, capsys):
+    """The mirror case (noticed by the independent user, fixed after): an attitude declared in
+    [platform.poses] whose pose is not in the platform file is a typo or a lost pose."""
+    d, _ = session_dir
+    s = copy_session(d, "absent")
+    t = (s / "session.toml").read_text()
+    assert 'Ydn = { up = "-Y" }' in t
+    (s / "session.toml").write_text(t.replace('Ydn = { up = "-Y" }',
+                                              'Ydn = { up = "-Y" }\nZdn = { up = "-Z" }'))
+    rc, so, se = cli(["run", s.name, "--json", "abs.json", "-q"], s.parent, capsys)
+    assert rc == 2
+    doc = json.loads((s.parent / "abs.json").read_text())
+    assert doc["ok"] is False and any("Zdn" in e["message"] for e in doc["errors"])
+
+
 @pytest.mark.parametrize("flags", [["--json", "{s}/tumble.csv"], ["--report", "{s}/session.toml"],
                                    ["--calibration", "{s}/platform.csv"],
                                    ["--json", "x.out", "--report", "x.out"]])
