@@ -179,8 +179,15 @@ def skipped(job: SessionJob) -> Summary:
     """The summary of a session a previous batch finished (``--resume``)."""
     doc = _session_json(job.json) if job.json else None
     ok = bool(doc.get("ok")) if doc is not None else True
+    warnings = []
+    made = (doc or {}).get("settings", {}).get("alpha")
+    if made is not None and made != job.alpha:
+        # a lot of results made with different significance levels is not one lot
+        ok = False
+        warnings.append(f"{job.json}: made with alpha = {made:g}, this batch asks {job.alpha:g}"
+                        ": not resumed (redo it with --force)")
     return {"session": job.name, "folder": job.folder, "ok": ok, "bad_input": not ok,
-            "skipped": True, "json": doc, "warnings": [],
+            "skipped": True, "json": doc, "warnings": warnings,
             "outputs": {k: v for k, v in (("json", job.json), ("report", job.report),
                                           ("cal", job.cal)) if v and Path(v).is_file()}}
 

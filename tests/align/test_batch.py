@@ -205,6 +205,22 @@ def test_complete_means_every_output_asked_for(sessions, tmp_path):
     assert not is_complete(job)
 
 
+def test_resume_does_not_pass_off_a_result_made_with_another_alpha(sessions, tmp_path):
+    from dataclasses import replace
+
+    from align.session.batch import skipped
+
+    out = tmp_path / "o"
+    out.mkdir()
+    job, = batch_jobs([str(sessions[0])], json=str(out), report=None, cal=None)
+    (out / "unit1.json").write_text(json.dumps({"format": "axis-align/session", "ok": True,
+                                                "settings": {"alpha": job.alpha}}))
+    same = skipped(job)
+    assert same["ok"] and not same["warnings"]
+    other = skipped(replace(job, alpha=0.01))
+    assert not other["ok"] and "alpha" in other["warnings"][0]
+
+
 # ----------------------------------------------------------------------------- Dask
 
 def _comparable(d: dict) -> dict:
