@@ -37,6 +37,32 @@ def mark_image(angle_deg: float, seed: int, snr: float = 30.0, width_px: float =
     return render_marks(spec, with_crlb=with_crlb)
 
 
+def _strip_images(text: str) -> str:
+    """session.toml without cameras, views and images (a fast session)."""
+    out, skip = [], False
+    for line in text.splitlines():
+        if line.startswith("["):
+            skip = line.startswith(("[cameras", "[views", "[[images"))
+        if not skip:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def imageless_session(root: Path, spec) -> Path:
+    """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
+    copy without images under ``root/plain`` (calibration, goniometer, platform: ~1 s to run);
+    returns the copy."""
+    from synth.session import write_session
+
+    full, plain = root / "full", root / "plain"
+    write_session(full, spec)
+    plain.mkdir()
+    for name in ("tumble.csv", "gonio.csv", "platform.csv"):
+        (plain / name).write_bytes((full / name).read_bytes())
+    (plain / "session.toml").write_text(_strip_images((full / "session.toml").read_text()))
+    return plain
+
+
 @pytest.fixture
 def tmp_out(tmp_path: Path) -> Path:
     return tmp_path

@@ -26,36 +26,20 @@ import numpy as np
 import pytest
 
 from align.cli import build_parser, main
+from tests.conftest import imageless_session
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 # ----------------------------------------------------------------------------- fixtures
 
-def _strip_images(text: str) -> str:
-    """session.toml without cameras, views and images (a fast session)."""
-    out, skip = [], False
-    for line in text.splitlines():
-        if line.startswith("["):
-            skip = line.startswith(("[cameras", "[views", "[[images"))
-        if not skip:
-            out.append(line)
-    return "\n".join(out) + "\n"
-
-
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     """A seeded synthetic session (no images), its result and platform calibration."""
-    from synth.session import SessionSpec, write_session
+    from synth.session import SessionSpec
 
     root = tmp_path_factory.mktemp("contract")
-    full = root / "full"
-    write_session(full, SessionSpec(seed=21))
-    s = root / "plain"
-    s.mkdir()
-    for name in ("tumble.csv", "gonio.csv", "platform.csv"):
-        (s / name).write_bytes((full / name).read_bytes())
-    (s / "session.toml").write_text(_strip_images((full / "session.toml").read_text()))
+    s = imageless_session(root, SessionSpec(seed=21))
     # The readings for tilt/apply: the platform file without its pose labels.
     rows = (s / "platform.csv").read_text().splitlines()
     (root / "readings.csv").write_text(

@@ -17,18 +17,11 @@ from axisbase.output import dumps
 def session_result(tmp_path_factory):
     """A seeded synthetic session without images, run once: its result and its JSON."""
     from align.session import load_session, run_session
-    from synth.session import SessionSpec, write_session
-    from tests.align.test_bad_inputs import _strip_images
+    from synth.session import SessionSpec
+    from tests.conftest import imageless_session
 
-    root = tmp_path_factory.mktemp("io")
-    full = root / "full"
-    write_session(full, SessionSpec(seed=8, effects={"reference_offset": 20.0},
-                                    undeclared=frozenset({"reference_offset"})))
-    s = root / "s"
-    s.mkdir()
-    for name in ("tumble.csv", "gonio.csv", "platform.csv"):
-        (s / name).write_bytes((full / name).read_bytes())
-    (s / "session.toml").write_text(_strip_images((full / "session.toml").read_text()))
+    s = imageless_session(tmp_path_factory.mktemp("io"), SessionSpec(
+        seed=8, effects={"reference_offset": 20.0}, undeclared=frozenset({"reference_offset"})))
     res = run_session(load_session(s))
     assert res.fusion is not None
     return res, json.loads(dumps(res.to_dict()))

@@ -190,16 +190,11 @@ def test_session_nominal_far_from_the_measured_faces_is_warned(tmp_path):
     """As for 'align gonio --nominal': a session's nominal_deg more than 1° from what the log
     measures (a wrong face order, say) is a warning in the result, not silent deviations."""
     from align.session import load_session, run_session
-    from synth.session import SessionSpec, write_session
-    from tests.align.test_bad_inputs import _strip_images
+    from synth.session import SessionSpec
+    from tests.conftest import imageless_session
 
-    full = tmp_path / "full"
-    write_session(full, SessionSpec(seed=4))
-    s = tmp_path / "s"
-    s.mkdir()
-    for name in ("tumble.csv", "gonio.csv", "platform.csv"):
-        (s / name).write_bytes((full / name).read_bytes())
-    toml = _strip_images((full / "session.toml").read_text())
+    s = imageless_session(tmp_path, SessionSpec(seed=4))
+    toml = (s / "session.toml").read_text()
     assert "nominal_deg = [90.0, 90.0, 90.0, 90.0]" in toml
     (s / "session.toml").write_text(toml)
     clean = run_session(load_session(s)).to_dict()
