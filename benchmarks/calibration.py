@@ -230,44 +230,28 @@ def known_pose() -> None:
         r = [f"{np.sqrt(np.mean(np.square(x))) * 1e6:.2f}" if x else "not installed"
              for x in (ours, theirs)]
         print(f"  fixture {err * 1e6:5.0f} µrad: this tool {r[0]:>8s}   imucal {r[1]:>8s}")
-    import json
     from pathlib import Path
+
+    from align.calibration.formats import ferraris_session, imucal_ferraris
 
     folder = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "imucal-ferraris"
     try:
-        import imucal
-        import pandas as pd
+        import imucal  # noqa: F401
+        import pandas  # noqa: F401
     except ImportError:
         print("  imucal not installed: pip install '.[bench]'")
         return
     if not folder.is_dir():
         return
-    d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)
-    u = np.column_stack([d["acc_x"], d["acc_y"], d["acc_z"]])
-    sec = json.loads((folder / "example_ferraris_session_list.json").read_text())
-    names = ["x_p", "x_a", "y_p", "y_a", "z_p", "z_a"]
-    ids = np.full(len(u), -1)
-    for i, n in enumerate(names):
-        ids[sec[n]["start"]:sec[n]["end"]] = i
-    sel = ids >= 0
-    p = poses_from_samples(ids[sel], u[sel], np.arange(len(u))[sel] / 102.4, names)
+    p, d, sec = ferraris_session(folder)
     t0 = time.perf_counter()
     cal = calibrate(p)
     t_ours = time.perf_counter() - t0
-    df = pd.DataFrame({"acc_x": u[:, 0], "acc_y": u[:, 1], "acc_z": u[:, 2],
-                       "gyr_x": d["gyr_x"], "gyr_y": d["gyr_y"], "gyr_z": d["gyr_z"]})
-    parts = []
-    for k, v in sec.items():
-        x = df.iloc[v["start"]:v["end"]].copy()
-        x["part"] = k
-        parts.append(x)
-    regions = imucal.ferraris_regions_from_df(pd.concat(parts).set_index("part"))
-    fc = imucal.FerrarisCalibration()
     t0 = time.perf_counter()
-    info = fc.compute(regions, 102.4, "m/s^2", "deg/s")
+    info, grav = imucal_ferraris(d, sec)
     t_im = time.perf_counter() - t0
-    ours = cal.known.M / fc.grav
-    um = np.sqrt(np.diag(cal.known.cov_mo))[:9].reshape(3, 3) / fc.grav
+    ours = cal.known.M / grav
+    um = np.sqrt(np.diag(cal.known.cov_mo))[:9].reshape(3, 3) / grav
     theirs = info.K_a @ info.R_a
     uo = np.sqrt(np.diag(cal.known.cov_mo))[9:]
     print("== 5b. imucal's own Ferraris session (accelerometer; the turns are not used) ==")

@@ -45,3 +45,47 @@ def mat_pose_means(path: str | Path) -> np.ndarray:
     d = sio.loadmat(path)
     v = d[[k for k in d if not k.startswith("__")][0]]
     return v.T if v.shape[0] == 3 else v
+
+
+FERRARIS_FACES = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
+"""imucal's names of the six faces (+x, -x, ... up) in a Ferraris session list."""
+
+
+def ferraris_session(folder: str | Path, rate_hz: float = 102.4):
+    """imucal's example Ferraris session (``example_ferraris_session.csv`` and its
+    ``_list.json`` of sections): the six faces as :class:`Poses` (accelerometer, m/s²; the
+    turns are for the gyroscope and are left out), the raw columns and the sections."""
+    import json
+
+    from align.calibration.model import poses_from_samples
+
+    folder = Path(folder)
+    d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)
+    u = np.column_stack([d["acc_x"], d["acc_y"], d["acc_z"]])
+    sec = json.loads((folder / "example_ferraris_session_list.json").read_text())
+    ids = np.full(len(u), -1)
+    for i, n in enumerate(FERRARIS_FACES):
+        ids[sec[n]["start"]:sec[n]["end"]] = i
+    sel = ids >= 0
+    poses = poses_from_samples(ids[sel], u[sel], np.arange(len(u))[sel] / rate_hz,
+                               list(FERRARIS_FACES))
+    return poses, d, sec
+
+
+def imucal_ferraris(d: np.ndarray, sec: dict, rate_hz: float = 102.4):
+    """imucal's own ``FerrarisCalibration`` of that session (the peer the tests and
+    benchmarks compare with; needs the optional ``bench`` extra): (its CalibrationInfo, its g
+    [m/s²])."""
+    import imucal
+    import pandas as pd
+
+    df = pd.DataFrame({k: d[k] for k in ("acc_x", "acc_y", "acc_z", "gyr_x", "gyr_y",
+                                         "gyr_z")})
+    parts = []
+    for k, v in sec.items():
+        x = df.iloc[v["start"]:v["end"]].copy()
+        x["part"] = k
+        parts.append(x)
+    regions = imucal.ferraris_regions_from_df(pd.concat(parts).set_index("part"))
+    fc = imucal.FerrarisCalibration()
+    return fc.compute(regions, rate_hz, "m/s^2", "deg/s"), fc.grav

@@ -3,8 +3,6 @@ with the ellipsoid, and against imucal's FerrarisCalibration on imucal's own ses
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -115,36 +113,20 @@ def test_cross_check_flags_a_wrong_model():
 def test_real_ferraris_matches_imucal():
     """imucal's FerrarisCalibration on its own example session, accelerometer part: the
     matrix K R and the offsets. The turns are not used (gyroscope only)."""
-    imucal = pytest.importorskip("imucal", reason="imucal is the optional 'bench' extra")
-    pd = pytest.importorskip("pandas", reason="imucal's input is a DataFrame")
-    folder = real_folder("imucal-ferraris")
-    d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)
-    u = np.column_stack([d["acc_x"], d["acc_y"], d["acc_z"]])
-    sec = json.loads((folder / "example_ferraris_session_list.json").read_text())
-    names = ["x_p", "x_a", "y_p", "y_a", "z_p", "z_a"]
-    ids = np.full(len(u), -1)
-    for i, n in enumerate(names):
-        ids[sec[n]["start"]:sec[n]["end"]] = i
-    sel = ids >= 0
-    p = poses_from_samples(ids[sel], u[sel], np.arange(len(u))[sel] / 102.4, names)
+    pytest.importorskip("imucal", reason="imucal is the optional 'bench' extra")
+    pytest.importorskip("pandas", reason="imucal's input is a DataFrame")
+    from align.calibration.formats import ferraris_session, imucal_ferraris
+
+    p, d, sec = ferraris_session(real_folder("imucal-ferraris"))
     cal = calibrate(p)
     assert cal.method == "known-pose"
-    df = pd.DataFrame({"acc_x": u[:, 0], "acc_y": u[:, 1], "acc_z": u[:, 2],
-                       "gyr_x": d["gyr_x"], "gyr_y": d["gyr_y"], "gyr_z": d["gyr_z"]})
-    parts = []
-    for k, v in sec.items():
-        x = df.iloc[v["start"]:v["end"]].copy()
-        x["part"] = k
-        parts.append(x)
-    regions = imucal.ferraris_regions_from_df(pd.concat(parts).set_index("part"))
-    ferraris = imucal.FerrarisCalibration()
-    info = ferraris.compute(regions, 102.4, "m/s^2", "deg/s")
-    # imucal: u = K_a R_a a + b_a with a in m/s^2 (its g = ferraris.grav); ours per g.
+    info, grav = imucal_ferraris(d, sec)
+    # imucal: u = K_a R_a a + b_a with a in m/s^2 (its g = grav); ours per g.
     # Ferraris' closed form is the unweighted solution with each axis's +-pair only; ours
     # weights each face by its noise and the declared fixture error: the same matrix within
     # our stated uncertainty (6e-5 relative here), element by element.
-    ours = cal.known.M / ferraris.grav
-    u_m = np.sqrt(np.diag(cal.known.cov_mo))[:9].reshape(3, 3) / ferraris.grav
+    ours = cal.known.M / grav
+    u_m = np.sqrt(np.diag(cal.known.cov_mo))[:9].reshape(3, 3) / grav
     theirs = info.K_a @ info.R_a
     assert np.all(np.abs(ours - theirs) < 2 * u_m)
     assert np.allclose(ours, theirs, atol=2e-4)
