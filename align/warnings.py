@@ -63,7 +63,7 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
     out += [f"goniometer: {w}" for w in run.warnings]
     ex = run.summary.exclusions.counts
     if ex:
-        out.append("goniometer: revolutions excluded: "
+        out.append("goniometer: pulse faults (each repaired or its revolution excluded, as said): "
                    + ", ".join(f"{n} x {reason}" for reason, n in ex.items()))
     if nominal_rad is not None and faces is not None:
         out += [f"goniometer: {w}" for w in nominal_mismatch(run.angles.angles_rad,
