@@ -425,10 +425,9 @@ def _latitude_range(text: str) -> list[float]:
 def cmd_gonio(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from align.documents import gonio_document
+    # (align.documents and align.warnings import the loop, i.e. scipy: after the pass, which
+    # imports it on a thread while it waits on the parser)
     from align.gonio import measure_log
-    from align.warnings import gonio_warnings
-    from axisbase.output import write_json
     from axisbase.table import parse_column_map
     from goniometry import FaceCountError, kept_table
 
@@ -454,6 +453,10 @@ def cmd_gonio(args: argparse.Namespace) -> int:
                          f"{exc.found} pulses per revolution") from None
     except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
         raise UsageError(str(exc)) from None
+    from align.documents import gonio_document
+    from align.warnings import gonio_warnings
+    from axisbase.output import write_json
+
     summary, fa, loop = run.summary, run.angles, run.loop
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
          f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")

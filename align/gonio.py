@@ -20,6 +20,7 @@ absorbed by the face angles (only a reversal on the table separates it).
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -345,8 +346,9 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                         tuple(warns))
     notes: list[str] = []
     loop = None
-    if latitude_deg is None:
-        # The loop's modules (scipy.special: ~0.3 s) load while the pass waits on the parser.
+    if "align.loop" not in sys.modules:
+        # The loop's modules (scipy.special: ~0.3 s; the loop, the warnings and the report
+        # need them) load during the pass, whose parser threads release the GIL.
         import threading
         from importlib import import_module
 

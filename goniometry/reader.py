@@ -7,8 +7,6 @@ log; every problem is reported as ``file:line: column: what is wrong``.
 
 from __future__ import annotations
 
-import queue
-import threading
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,15 +43,13 @@ class Chunk:
 def iter_log(path: str | Path, block_bytes: int = 1 << 19,
              columns: Mapping[str, str] | None = None, threads: bool = True) -> Iterator[Chunk]:
     """Yield the log in chunks (about ``block_bytes`` of text each), parsed ahead on a
-    thread (``threads``).
+    pool of threads (``threads``; see :func:`axisbase.table.iter_table`).
 
-    Small blocks keep Arrow's pool flat (1 MiB: 41 MB peak for 2e6 and 6e6 rows; 0.5 MiB:
-    20 MB, no slower with the read-ahead thread); with 4 MiB blocks its read-ahead grew with
-    the log (64 -> 161 MB).
+    Small chunks keep the pass's numpy temporaries cache-sized; the parse itself works on
+    larger blocks, a bounded number in flight, so memory does not grow with the log.
     """
     try:
-        tables = iter_table(path, COUNTER_LOG, columns, block_bytes)
-        for tab in (_ahead(tables) if threads else tables):
+        for tab in iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads):
             _validate(tab)
             yield Chunk(tab["count"], tab["counter"], tab["ref"], tab.get("t"),
                         tab.first_line + tab.row0)
@@ -61,49 +57,6 @@ def iter_log(path: str | Path, block_bytes: int = 1 << 19,
         raise
     except InputError as exc:
         raise LogError(str(exc)) from None
-
-
-_END = object()
-
-
-def _ahead(it: Iterator, depth: int = 3) -> Iterator:
-    """Items of ``it`` produced on a thread, up to ``depth`` ahead of the consumer.
-
-    Arrow's CSV parsing releases the GIL: parsing the next blocks while this thread works on
-    the current one makes the pass cost about the larger of the two instead of their sum
-    (the streaming reader's own ``use_threads`` did not overlap them). Errors are re-raised
-    here, in order; a consumer that stops early stops the producer.
-    """
-    q: queue.Queue = queue.Queue(depth)
-    stop = threading.Event()
-
-    def produce() -> None:
-        try:
-            for item in it:
-                while not stop.is_set():
-                    try:
-                        q.put(item, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            q.put(_END)
-        except BaseException as exc:  # handed to the consumer, which raises it
-            q.put(exc)
-
-    th = threading.Thread(target=produce, daemon=True)
-    th.start()
-    try:
-        while True:
-            item = q.get()
-            if item is _END:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-    finally:
-        stop.set()
 
 
 def _validate(tab: Table) -> None:

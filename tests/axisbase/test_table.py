@@ -239,3 +239,95 @@ def test_a_comment_never_swallows_rows(tmp_path):
     p.write_text('ux,uy,uz\n1,2,3\n#"a\n4,5,6\n7,8"\n')
     with pytest.raises(InputError, match=r"q\.csv:5: 2 fields"):
         read_table(p, SPEC)
+
+
+# ----------------------------------------------------------------------------- parallel parse
+
+NUM_SPEC = TableSpec("number table", (
+    Column("ux"), Column("uy"), Column("n", "int"), Column("t", required=False)), time="t")
+
+
+def _numbers(seed: int, n: int = 400) -> tuple[list[str], list[list[str]]]:
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 2)) * 10 ** rng.uniform(-6, 3)
+    t = np.cumsum(rng.uniform(0.001, 0.1, n))
+    return ["ux", "uy", "n", "t"], [[repr(float(a)), repr(float(b)), str(k), repr(float(s))]
+                                    for (a, b), k, s in zip(u, rng.integers(-9, 9, n), t,
+                                                            strict=True)]
+
+
+def _dialect(path, head, rows, variant: str):
+    sep = {"semicolon": ";", "tab": "\t"}.get(variant, ",")
+    nl = {"crlf": "\r\n", "cr": "\r"}.get(variant, "\n")
+    lines = [sep.join(head)] + [sep.join(r) for r in rows]
+    if variant == "comments":  # comments and blank lines between rows, anywhere
+        for i in (3, 50, 51, 200, 399):
+            lines.insert(i, "# paused" if i % 2 else "")
+    text = nl.join(lines) + ("" if variant == "no-final-newline" else nl)
+    path.write_bytes((b"\xef\xbb\xbf" if variant == "bom" else b"") + text.encode())
+    return path
+
+
+@pytest.mark.parametrize("block", [64, 700, 1 << 20])
+@pytest.mark.parametrize("variant", ["plain", "crlf", "cr", "bom", "semicolon", "tab",
+                                     "comments", "no-final-newline"])
+def test_parallel_parse_gives_the_serial_numbers_and_lines(tmp_path, monkeypatch, block,
+                                                           variant):
+    """Blocks cut anywhere (64 bytes: every few rows; 1 MiB: one block), in every dialect:
+    the same numbers as the serial reader, in the same order, and the same line for a row."""
+    import axisbase.table as table
+
+    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    head, rows = _numbers(7)
+    p = _dialect(tmp_path / f"{variant}.csv", head, rows, variant)
+    serial = list(iter_table(p, NUM_SPEC, block_bytes=1 << 10))
+    par = list(iter_table(p, NUM_SPEC, block_bytes=1 << 10, parallel=True))
+    for k in ("ux", "uy", "n", "t"):
+        a = np.concatenate([c[k] for c in serial])
+        assert np.array_equal(a, np.concatenate([c[k] for c in par])), k
+        assert len(a) == len(rows)
+    # the row -> line mapping of a chunk deep in the file
+    c = par[len(par) // 2]
+    s = next(s for s in serial if s.row0 <= c.row0 < s.row0 + len(s))
+    assert c.line(0) == s.line(c.row0 - s.row0)
+
+
+@pytest.mark.parametrize("block", [64, 700])
+@pytest.mark.parametrize("edit, match", [
+    (lambda f: f.__setitem__(1, "x"), r":{line}: uy: 'x' is not a number"),
+    (lambda f: f.__setitem__(2, "4.5"), r":{line}: n: '4.5' is not a whole number"),
+    (lambda f: f.__setitem__(3, "0.0001"), r":{line}: t: .* runs backwards"),
+    (lambda f: f.pop(), r":{line}: 3 fields, the header has 4"),
+    (lambda f: f.__setitem__(0, "1,5"), r":{line}: 5 fields, the header has 4"),
+])
+def test_parallel_parse_names_the_same_bad_line(tmp_path, monkeypatch, block, edit, match):
+    """A bad row in a later block is named by its own line, as the serial reader names it."""
+    import axisbase.table as table
+
+    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    head, rows = _numbers(3)
+    i = 317
+    f = list(rows[i])
+    edit(f)
+    rows[i] = f
+    p = _dialect(tmp_path / "bad.csv", head, rows, "plain")
+    for parallel in (False, True):
+        with pytest.raises(InputError, match=match.format(line=i + 2)):
+            list(iter_table(p, NUM_SPEC, block_bytes=1 << 10, parallel=parallel))
+
+
+def test_parallel_reader_stopped_early_leaves_no_thread(tmp_path, monkeypatch):
+    import threading
+
+    import axisbase.table as table
+
+    monkeypatch.setattr(table, "PARALLEL_BLOCK", 256)
+    head, rows = _numbers(2, n=3000)
+    p = _dialect(tmp_path / "long.csv", head, rows, "plain")
+    before = threading.active_count()
+    it = iter_table(p, NUM_SPEC, block_bytes=512, parallel=True)
+    assert len(next(it)) > 0
+    it.close()
+    assert threading.active_count() == before
+    with pytest.raises(ValueError, match="numbers only"):
+        next(iter_table(p, SPEC, parallel=True))

@@ -175,3 +175,28 @@ def test_arming_between_faces_is_a_lead_in_not_a_fault(tmp_path):
     s = read_revolutions(cut, 4)
     assert not s.exclusions.counts, dict(s.exclusions.counts)
     assert s.incomplete_head == 1 and s.armed_face is None
+
+
+@pytest.mark.parametrize("block, chunk", [(2 << 10, 1 << 10), (37 << 10, 5 << 10),
+                                          (64 << 20, 1 << 19)])
+def test_where_the_log_is_cut_changes_nothing(tmp_path, monkeypatch, block, chunk):
+    """The parse blocks (parallel) and the pass's chunks fall anywhere — inside a revolution,
+    on a fault, on a reference pulse: the same revolutions, faults with their lines, angles
+    (to rounding) and u as one block read in one chunk."""
+    import axisbase.table as table
+
+    p, _ = _log(tmp_path, revolutions=1500, seed=5, p_missing=2e-3, p_spurious=2e-3,
+                failed_refs=3, arm_face=2, stop_pulses=1)
+    monkeypatch.setattr(table, "PARALLEL_BLOCK", 1 << 26)
+    ref = read_revolutions(p, 4, block_bytes=1 << 26)
+    fa_ref = face_angles(ref)
+    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    got = read_revolutions(p, 4, block_bytes=chunk)
+    fa = face_angles(got)
+    assert got.exclusions.counts == ref.exclusions.counts and got.exclusions.counts
+    assert got.exclusions.lines == ref.exclusions.lines
+    assert (got.rows, got.incomplete_head, got.incomplete_tail, got.armed_face) == (
+        ref.rows, ref.incomplete_head, ref.incomplete_tail, ref.armed_face)
+    assert fa.revolutions == fa_ref.revolutions
+    assert np.allclose(fa.angles_rad, fa_ref.angles_rad, rtol=0, atol=1e-14)
+    assert np.allclose(fa.u_rad, fa_ref.u_rad, rtol=1e-9, atol=0)
