@@ -91,7 +91,11 @@ def _child(what: str, path: str) -> None:
         import pyarrow.csv as pacsv
 
         pacsv.read_csv(path)
-    print(json.dumps({"seconds": time.perf_counter() - t0, "rss_mb": _peak_rss_mb()}))
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_SELF)  # all threads (interpreter start-up too)
+    print(json.dumps({"seconds": time.perf_counter() - t0, "rss_mb": _peak_rss_mb(),
+                      "cpu_s": ru.ru_utime + ru.ru_stime}))
 
 
 def write_big_log(path: Path, n: int) -> None:
@@ -130,9 +134,11 @@ def throughput(lengths: list[int], repeats: int = 3) -> None:
             rc = float(np.median([r["seconds"] for r in runs["read_csv"]]))
             ratio = np.median([a["seconds"] / b["seconds"]
                                for a, b in zip(runs["cli"], runs["read_csv"], strict=True)])
+            cpu = {k: float(np.median([r["cpu_s"] for r in v])) for k, v in runs.items()}
             print(f"{n:>10d} rows ({p.stat().st_size / 1e6:.0f} MB): align gonio {cli:6.2f} s "
                   f"({n / cli / 1e6:.2f} M rows/s), read_csv {rc:6.2f} s; ratio {ratio:.2f} "
-                  f"(median of {repeats} paired runs); peak RSS align gonio "
+                  f"(median of {repeats} paired runs); CPU (all threads) align gonio "
+                  f"{cpu['cli']:.2f} s, read_csv {cpu['read_csv']:.2f} s; peak RSS align gonio "
                   f"{max(r['rss_mb'] for r in runs['cli']):.0f} MB, read_csv "
                   f"{max(r['rss_mb'] for r in runs['read_csv']):.0f} MB")
 
