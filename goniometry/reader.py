@@ -40,7 +40,7 @@ class Chunk:
     first_line: int
 
 
-def iter_log(path: str | Path, block_bytes: int = 1 << 19,
+def iter_log(path: str | Path, block_bytes: int = 1 << 20,
              columns: Mapping[str, str] | None = None, threads: bool = True) -> Iterator[Chunk]:
     """Yield the log in chunks (about ``block_bytes`` of text each), parsed ahead on a
     pool of threads (``threads``; see :func:`axisbase.table.iter_table`).

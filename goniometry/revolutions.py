@@ -601,7 +601,7 @@ class _Pass:
 
 
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
-                     block_bytes: int = 1 << 19, correct=None,
+                     block_bytes: int = 1 << 20, correct=None,
                      columns: Mapping[str, str] | None = None) -> LogSummary:
     """Stream a log into revolution statistics in one pass (see module docstring).
 
