@@ -693,24 +693,15 @@ def _parallel_batches(path: Path, h: _Header, ro, po, co) -> Iterator[dict[str, 
     if head.count(b"\r") != head.count(b"\r\n"):
         yield from _batches(path, ro, po, co)
         return
-    blocks = _text_blocks(path, h.skip, PARALLEL_BLOCK)
-    first = next(blocks, None)
-    if first is None:
-        return
 
     def parse(text: bytes) -> tuple[pa.Table, int]:
         return pacsv.read_csv(pa.py_buffer(text), read_options=ro1, parse_options=po,
                               convert_options=co), len(text)
 
-    def texts() -> Iterator[bytes]:
-        yield first
-        yield from blocks
-
     pool = ThreadPoolExecutor(PARALLEL_WORKERS, thread_name_prefix="csv")
     pending: list = []
     try:
-        source = texts()
-        for text in source:
+        for text in _text_blocks(path, h.skip, PARALLEL_BLOCK):
             pending.append(pool.submit(parse, text))
             if len(pending) < PARALLEL_AHEAD:
                 continue
