@@ -23,7 +23,9 @@ OMEGA_EARTH = 7.2921150e-5  # rad/s
 # Jitter [counts] from which the count quantisation is dithered (independent pulse to pulse).
 DITHERED_COUNTS = 0.5
 # Up to this many revolutions (all kept whole) u comes from the phase-path model.
-PATH_MODEL_REVOLUTIONS = 4096
+PATH_MODEL_REVOLUTIONS = 2048
+# The floors' pattern (the jitter) is fitted on at most this many revolutions.
+FIT_REVOLUTIONS = 512
 
 
 @dataclass(frozen=True)
@@ -234,13 +236,27 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     if len(counts) < 16:
         return None
     theta, turn = beat.phase_path(counts, dt, t_end, rate)
-    dk, _, sigmas = beat.fit_pattern(counts, theta, turn)
+    m = FIT_REVOLUTIONS
+    dk, _, sigmas = beat.fit_pattern(counts[:m], theta[:m], turn[:m])
+    if len(counts) > m:
+        # The jitter from the first revolutions (the fit's cost grows with R); the counts per
+        # revolution then only to +-1/R (the model averages over that range).
+        dk = None
+    # A jitter of a quarter count or more blurs the floors' steps beyond the fit's reach
+    # (pulses crossing two floors) but shows in the scatter of the intervals' counts about
+    # the path, 1/6 + 2 sigma^2 (to ~10 % at 120 revolutions; below ~0.15 count it cannot
+    # be told from none).
+    scatter = float(np.mean(np.var(counts - np.diff(theta, axis=1), axis=0, ddof=1)))
+    sig_scatter = np.sqrt(max((scatter - 1 / 6) / 2, 0.0))
+    if sig_scatter >= 0.25:
+        sigmas = (sig_scatter,) * 3
     sigma = sigmas[1]
     q = 2 * np.pi / n_per_rev
-    # The largest over the jitters the pulses allow: a locked phase whose pulses never come
-    # near a step says little about the jitter, which decides whether it dithers.
+    # The larger at the two ends of the jitters the pulses allow: a locked phase whose
+    # pulses never come near a step says little about the jitter, which decides whether it
+    # dithers.
     var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk)
-                  for sg in sorted(set(sigmas))], axis=0)
+                  for sg in sorted({sigmas[0], sigmas[2]})], axis=0)
     consistent = np.ones(len(var), bool)
     if usable.any():
         j = int(np.flatnonzero(usable)[-1])

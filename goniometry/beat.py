@@ -29,7 +29,7 @@ import numpy as np
 # Harmonics of the sawtooth summed explicitly; the rest (1 % of its variance) is white.
 HARMONICS = 48
 # Values of the counts per revolution tried over its +-1/R uncertainty.
-K_STEPS = 9
+K_STEPS = 5
 
 
 def phase_path(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
@@ -124,6 +124,29 @@ def _variance(w: np.ndarray, theta: np.ndarray, turn: np.ndarray, sigma: float,
     return tot.reshape(lead)
 
 
+def _chains(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray
+            ) -> tuple[np.ndarray, ...]:
+    """The pulses in time order along each run of consecutive revolutions (the closing
+    reference is the next revolution's face 0): v = count from the run's start less the
+    path's phase advance, the path's phase, the face, the run and the revolution number of
+    each pulse."""
+    R, n = counts.shape
+    col = np.arange(n + 1)
+    face = np.where(col == n, 0, col)
+    seg = np.concatenate([[0], np.cumsum(np.diff(turn) != 1)])
+    vs, ths, fs, ss, rs = [], [], [], [], []
+    for s_ in np.unique(seg):
+        rows = np.flatnonzero(seg == s_)
+        cum = np.concatenate([[0.0], np.cumsum(counts[rows].ravel())])
+        ph = np.concatenate([theta[rows, :n].ravel(), theta[rows[-1:], n]])
+        vs.append(cum - (ph - ph[0]))
+        ths.append(ph)
+        fs.append(np.concatenate([np.tile(face[:n], len(rows)), [0]]))
+        ss.append(np.full(len(ph), s_))
+        rs.append(np.append(np.repeat(turn[rows], n), turn[rows[-1]] + 1))
+    return tuple(np.concatenate(a) for a in (vs, ths, fs, ss, rs))
+
+
 def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
                 sigmas: np.ndarray | None = None
                 ) -> tuple[float, np.ndarray, tuple[float, float, float]]:
@@ -131,81 +154,84 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
     (within +-1/R), each face's phase offset, and the autocollimator's jitter [counts]:
     (lowest, most likely, highest) the pulses allow.
 
-    Each interval's count is floor(end) - floor(start): its excess over the path's phase
-    advance is c_k + frac(start + phi_k) - frac(end + phi_k+1). (dk, phi) by grid search
-    (least squares, c_k free; coordinate descent over the faces); then the jitter sigma,
-    which blurs each floor near its step (E frac(x + e) = frac x - Phi((frac x - 1) / sigma)
-    + Phi(-frac x / sigma)), by a 1-D search on the residual — from the few pulses near a
-    step, but from every revolution (a 20 % estimate where the per-interval scatter, 1/6 +
-    2 sigma^2, cannot tell 0.06 counts from none).
+    Along a run of consecutive revolutions a pulse's count from the run's start less the
+    path's phase advance is v = c_f - frac(theta + phi_f) + delta: a constant per face, the
+    floor's sawtooth, and the jitter's step delta in {-1, 0, 1} where the pulse crossed its
+    floor (P(+1) = Phi((y - 1) / sigma), P(-1) = Phi(-y / sigma), y = frac(theta + phi_f)).
+    (dk, phi_f) by grid search (least squares, each face alone); then sigma by maximum
+    likelihood of the steps — from the few pulses near a step, but from every revolution (a
+    20 % estimate where the per-interval scatter, 1/6 + 2 sigma^2, cannot tell 0.06 counts
+    from none).
     """
     from scipy.special import ndtr  # (the normal CDF; scipy.stats costs 0.8 s to import)
 
-    R, n = counts.shape
-    col = np.arange(n + 1)
-    face = np.where(col == n, 0, col)
-    span = turn[-1] + 1
-    base = counts - np.diff(theta, axis=1)  # (R, n)
-    grid = (np.arange(128) + 0.5) / 128
+    n = counts.shape[1]
+    v, ph, fc, sg, rev = _chains(counts, theta, turn)
+    # Index of each pulse's (run, face) group: its constant c_f.
+    grp = sg * n + fc
+    ng = int(grp.max()) + 1
+    size = np.maximum(np.bincount(grp, minlength=ng), 1)
+    grid = (np.arange(64) + 0.5) / 64
 
-    def rss_of(fr_s: np.ndarray, fr_e: np.ndarray) -> np.ndarray:
-        r = base[..., :] - fr_s + fr_e
-        r = r - r.mean(-2, keepdims=True)
-        return (r**2).sum(-2)
+    # Per face: its pulses and where each (run, face) group starts among them (runs are
+    # consecutive in time order), for the group sums by reduceat.
+    parts = []
+    for f in range(n):
+        m = np.flatnonzero(fc == f)
+        starts = np.flatnonzero(np.diff(grp[m], prepend=-1))
+        parts.append((m, starts, np.diff(np.append(starts, len(m)))))
 
-    best = (np.inf, 0.0, np.zeros(n))
-    for dk in np.linspace(-1, 1, 41) / span:
-        th = (theta + dk * (turn[:, None] + (col == n)[None, :])) % 1.0
-        phi = np.zeros(n)
-        for _ in range(2):
-            for f in range(n):
-                tot = np.zeros(len(grid))
-                for k in range(n):
-                    s, e = face[k], face[k + 1]
-                    if f not in (s, e):
-                        continue
-                    ps = grid[:, None] if s == f else phi[s]
-                    pe = grid[:, None] if e == f else phi[e]
-                    fs = (th[None, :, k] + ps) % 1.0 if s == f else \
-                        np.broadcast_to((th[:, k] + ps) % 1.0, (len(grid), R))
-                    fe = (th[None, :, k + 1] + pe) % 1.0 if e == f else \
-                        np.broadcast_to((th[:, k + 1] + pe) % 1.0, (len(grid), R))
-                    r = base[None, :, k] - fs + fe
-                    tot += ((r - r.mean(1, keepdims=True)) ** 2).sum(1)
-                phi[f] = grid[int(np.argmin(tot))]
-        fr = (th + phi[face][None, :]) % 1.0
-        total = float(rss_of(fr[:, :n], fr[:, 1:]).sum())
-        if total < best[0]:
-            best = (total, float(dk), phi.copy())
-    _, dk, phi = best
-    # Each pulse's floor along the chain of consecutive revolutions (the closing reference
-    # is the next revolution's face 0): its count from the chain's start less the path's
-    # phase is a per-face constant less frac(phase) — plus the jitter's step, delta in
-    # {-1, 0, 1}, where the pulse crossed its floor: P(+1) = Phi((y - 1) / sigma),
-    # P(-1) = Phi(-y / sigma), y the pulse's fractional phase.
-    th = theta + dk * (turn[:, None] + (col == n)[None, :])
-    y = (th + phi[face][None, :]) % 1.0
-    seg = np.concatenate([[0], np.cumsum(np.diff(turn) != 1)])
-    deltas, ys = [], []
-    for s_ in np.unique(seg):
-        rows = np.flatnonzero(seg == s_)
-        cum = np.concatenate([[0.0], np.cumsum(counts[rows].ravel())])
-        ph = np.concatenate([th[rows, :n].ravel(), th[rows[-1:], n]])
-        yy = np.concatenate([y[rows, :n].ravel(), y[rows[-1:], n]])
-        ff = np.concatenate([np.tile(face[:n], len(rows)), [0]])
-        v = cum - (ph - ph[0]) + yy
-        for f in range(n):
-            m = ff == f
-            d = np.round(v[m] - v[m][0])  # delta less the first pulse's
-            deltas.append(d - np.median(d))  # (most pulses do not cross)
-            ys.append(yy[m])
-    delta, yv = np.concatenate(deltas), np.concatenate(ys)
+    def score(dk: float) -> tuple[float, float, np.ndarray]:
+        x = (ph + dk * rev) % 1.0
+        total, phi = 0.0, np.zeros(n)
+        for f, (m, starts, cnt) in enumerate(parts):
+            w = v[m][None, :] + (x[m][None, :] + grid[:, None]) % 1.0  # (grid, pulses)
+            rss = (w**2).sum(1) - (np.add.reduceat(w, starts, axis=1) ** 2 / cnt).sum(1)
+            i = int(np.argmin(rss))
+            total += float(rss[i])
+            phi[f] = grid[i]
+        return total, dk, phi
+
+    # dk coarse (a phase error of 1/20 count at the ends), then fine around the best.
+    step = 1 / 10 / (turn[-1] + 1)
+    best = min((score(dk) for dk in np.arange(-10, 11) * step), key=lambda b: b[0])
+    best = min((score(best[1] + dk) for dk in np.arange(-5, 6) * step / 5),
+               key=lambda b: b[0])
+    _, dk0, phi0 = best
+    # A coarse grid of jitters while the pattern is refined, a fine one for the profile.
+    s_ = np.geomspace(0.004, 0.5, 12)[:, None]
+
+    def loglik(dk: float, phi: np.ndarray) -> np.ndarray:
+        """Log-likelihood (faces, sigmas) of the steps."""
+        y = (ph + dk * rev + phi[fc]) % 1.0
+        w = v + y
+        d = np.round(w - (np.bincount(grp, w, ng) / size)[grp])
+        # The constant by the most common step (zero: most pulses do not cross).
+        for k in np.unique(grp):
+            m = grp == k
+            d[m] -= np.median(d[m])
+        p_up, p_dn = ndtr((y - 1) / s_), ndtr(-y / s_)
+        like = np.where(d > 0, p_up, np.where(d < 0, p_dn, 1 - p_up - p_dn))
+        lg = np.log(np.maximum(like, 1e-300))
+        return np.stack([lg[:, fc == f].sum(1) for f in range(n)])
+
+    # Least squares counts a step as a misfit of 1 and so places the sawtooth a little off
+    # (an apparent jitter 15 % high): refined by the likelihood itself, dk about the
+    # centre of the log (the phases there held), each face's phase by +-2/128.
+    mid = float(np.mean(rev))
+    best_ll, dk, phi, ll = -np.inf, dk0, phi0, None
+    shifts = np.arange(-2, 3) / 128
+    for ddk in np.arange(-3, 4) * step / 10:
+        lf = np.stack([loglik(dk0 + ddk, (phi0 - ddk * mid + sh) % 1.0) for sh in shifts])
+        tot = lf.max(0).sum(0)  # (shifts, faces, sigmas) -> sigmas
+        if tot.max() > best_ll:
+            best_ll, dk, ll = float(tot.max()), dk0 + ddk, tot
+            phi = (phi0 - ddk * mid + shifts[lf[:, :, int(np.argmax(tot))].argmax(0)]) % 1.0
+    # The profile on a fine grid of jitters at the best pattern.
     if sigmas is None:
-        sigmas = np.geomspace(0.004, 0.5, 48)
+        sigmas = np.geomspace(0.004, 0.5, 96)
     s_ = sigmas[:, None]
-    p_up, p_dn = ndtr((yv - 1) / s_), ndtr(-yv / s_)
-    like = np.where(delta > 0, p_up, np.where(delta < 0, p_dn, 1 - p_up - p_dn))
-    ll = np.log(np.maximum(like, 1e-300)).sum(1)
+    ll = loglik(dk, phi).sum(0)
     # The jitters the pulses allow (log-likelihood within 2 of its maximum, ~95 %): wide
     # where few pulses come near a step (a locked phase).
     ok = np.flatnonzero(ll >= ll.max() - 2)
@@ -241,10 +267,12 @@ def allan_expected(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray 
     nb = R // tau
     w1 = _weights(counts)  # (n, R, n + 1)
     tot = np.zeros(n)
-    dks = _dks(dk, turn[-1] + 1)
-    sign = np.where(np.arange(2 * tau) < tau, -1.0, 1.0) / tau
+    # One weight set per pair of consecutive blocks (zero outside it): (pairs, n, R, n + 1).
+    w = np.zeros((nb - 1, *w1.shape))
     for i in range(nb - 1):
         sl = slice(i * tau, (i + 2) * tau)
-        w = w1[:, sl] * sign[None, :, None]
-        tot += np.mean([_variance(w, theta[sl], turn[sl], sigma, d) for d in dks], axis=0)
+        sign = np.where(np.arange(2 * tau) < tau, -1.0, 1.0) / tau
+        w[i, :, sl] = w1[:, sl] * sign[None, :, None]
+    tot = np.mean([_variance(w, theta, turn, sigma, d) for d in _dks(dk, turn[-1] + 1)],
+                  axis=0).sum(0)
     return tot / (2 * (nb - 1))
