@@ -227,14 +227,14 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     """u [rad] of each angle from the quantisation and jitter along the kept revolutions'
     phase path (:mod:`goniometry.beat`), whether the batch means agree with it (one-sided
     chi-square at 1 %), and the fitted jitter [counts]. None when the log has too few
-    revolutions for the pattern."""
+    revolutions for the pattern, or its pattern does not follow the path."""
     from scipy.special import chdtrc  # (the chi-square survival function)
 
     from goniometry import beat
 
     counts, dt, t_end = kept_table(summary)
-    if len(counts) < 16:
-        return None
+    if len(counts) < 16 or (dt is None and summary.excluded_revolutions):
+        return None  # (without times a gap of excluded revolutions breaks the path)
     theta, turn = beat.phase_path(counts, dt, t_end, rate)
     m = FIT_REVOLUTIONS
     dk, _, sigmas = beat.fit_pattern(counts[:m], theta[:m], turn[:m])
@@ -250,6 +250,11 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     sig_scatter = np.sqrt(max((scatter - 1 / 6) / 2, 0.0))
     if sig_scatter >= 0.25:
         sigmas = (sig_scatter,) * 3
+    elif sigmas[1] >= 0.25:
+        # Steps everywhere but intervals as sharp as quantisation alone: the path is wrong,
+        # not the jitter large (an unsteady table whose Earth rate is not removed: its share
+        # of the wandering period walks the phase by counts) — no model then.
+        return None
     sigma = sigmas[1]
     q = 2 * np.pi / n_per_rev
     # The larger at the two ends of the jitters the pulses allow: a locked phase whose

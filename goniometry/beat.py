@@ -16,9 +16,10 @@ g_m = exp(-4 pi^2 m^2 sigma^2) is the blur of a pair of pulses by the autocollim
 sigma [counts], which also adds sigma^2 per pulse. This is the whole per-revolution noise of
 a clean log (quantisation and jitter) with no degrees of freedom to estimate: batch means of a
 short log (5-10 degrees of freedom) state u with Student-t tails, and cannot see a beat longer
-than their blocks; the model does both. Faces are given independent phase offsets (the
-fraction of each interval's count is what is being measured, known only to ~u), K only to
-+-1/R (the floors of the log's ends): the variance is averaged over that range.
+than their blocks; the model does neither. Faces are given independent phase offsets (the
+fraction of each interval's count is what is being measured, known only to ~u). The log's
+mean counts per revolution give K to +-1/R; the floors' own pattern (:func:`fit_pattern`)
+pins it to ~1/(20 R) and measures the jitter: the variance is averaged over what remains.
 Hand-written: no library evaluates quantisation along a measured phase path.
 """
 
@@ -47,7 +48,7 @@ def phase_path(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | No
     if dt is None or t_end is None:
         turn = np.arange(R, dtype=float)
         K = float(N.mean())
-        theta = (turn[:, None] + np.arange(n + 1)[None, :] * 0.0) * K
+        theta = np.repeat(turn[:, None] * K, n + 1, axis=1)
         theta[:, n] += K
         return theta, turn
     from goniometry.revolutions import fill_first_interval
@@ -84,17 +85,16 @@ def _weights(counts: np.ndarray) -> np.ndarray:
     return w
 
 
-def _merge(w: np.ndarray, turn: np.ndarray) -> np.ndarray:
+def _merge(w: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fold each closing reference into the next revolution's face 0 where they are the same
-    pulse (consecutive revolutions): (..., R, n + 1) -> (..., R + 1, n) pulses by face (the
-    last row holds the closing references; zero where merged)."""
+    pulse (consecutive revolutions): (..., R, n + 1) -> (..., R + 1, n) weights of the pulses
+    by face, and (..., R) those of the closing references not shared."""
     *lead, R, n1 = w.shape
     n = n1 - 1
     out = np.zeros((*lead, R + 1, n))
     out[..., :R, :] = w[..., :n]
     nxt = np.concatenate([np.diff(turn) == 1, [False]])
     out[..., 1:, 0] += np.where(nxt, w[..., n], 0.0)
-    out[..., R, 0] = 0.0
     sep = w[..., n] * ~nxt  # closing references not shared
     return out, sep
 
