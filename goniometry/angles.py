@@ -236,11 +236,22 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     if len(counts) < 16 or (dt is None and summary.excluded_revolutions):
         return None  # (without times a gap of excluded revolutions breaks the path)
     theta, turn = beat.phase_path(counts, dt, t_end, rate)
-    m = FIT_REVOLUTIONS
-    dk, _, sigmas = beat.fit_pattern(counts[:m], theta[:m], turn[:m])
-    if len(counts) > m:
-        # The jitter from the first revolutions (the fit's cost grows with R); the counts per
-        # revolution then only to +-1/R (the model averages over that range).
+    # The pattern from the longest run of consecutive revolutions (at most FIT_REVOLUTIONS:
+    # the fit's cost grows with R). Where excluded revolutions cut the log, the runs'
+    # patterns did not join up to a common counts per revolution (a lost row, seed 256 of
+    # the fault plan): the jitter is the run's, and the counts per revolution only known to
+    # +-1/R (the model averages over that range).
+    cut = np.flatnonzero(np.diff(turn) != 1) + 1
+    edges = np.concatenate([[0], cut, [len(turn)]])
+    i = int(np.argmax(np.diff(edges)))
+    a, b = int(edges[i]), min(int(edges[i + 1]), int(edges[i]) + FIT_REVOLUTIONS)
+    if b - a < 16:
+        return None
+    # (the log's mean counts per revolution, which the path uses, is off by up to 1/R per
+    # run)
+    dk, _, sigmas = beat.fit_pattern(counts[a:b], theta[a:b], turn[a:b],
+                                     dk_range=(len(edges) - 1) / len(counts))
+    if b - a < len(counts):
         dk = None
     # A jitter of a quarter count or more blurs the floors' steps beyond the fit's reach
     # (pulses crossing two floors) but shows in the scatter of the intervals' counts about

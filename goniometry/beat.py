@@ -148,7 +148,7 @@ def _chains(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray
 
 
 def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
-                sigmas: np.ndarray | None = None
+                sigmas: np.ndarray | None = None, dk_range: float | None = None
                 ) -> tuple[float, np.ndarray, tuple[float, float, float]]:
     """The floors' pattern along the phase path: the counts per revolution's correction dk
     (within +-1/R), each face's phase offset, and the autocollimator's jitter [counts]:
@@ -158,7 +158,9 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
     path's phase advance is v = c_f - frac(theta + phi_f) + delta: a constant per face, the
     floor's sawtooth, and the jitter's step delta in {-1, 0, 1} where the pulse crossed its
     floor (P(+1) = Phi((y - 1) / sigma), P(-1) = Phi(-y / sigma), y = frac(theta + phi_f)).
-    (dk, phi_f) by grid search (least squares, each face alone); then sigma by maximum
+    (dk within +-``dk_range``, by default 1/R per run of consecutive revolutions — the
+    error of a mean of floors — and phi_f) by grid search (least squares, each face alone;
+    the phase's offset per run free); then sigma by maximum
     likelihood of the steps — from the few pulses near a step, but from every revolution (a
     20 % estimate where the per-interval scatter, 1/6 + 2 sigma^2, cannot tell 0.06 counts
     from none).
@@ -192,9 +194,14 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
             phi[f] = grid[i]
         return total, dk, phi
 
-    # dk coarse (a phase error of 1/20 count at the ends), then fine around the best.
-    step = 1 / 10 / (turn[-1] + 1)
-    best = min((score(dk) for dk in np.arange(-10, 11) * step), key=lambda b: b[0])
+    # dk coarse (a phase error of 1/20 count at the ends), then fine around the best. The
+    # mean counts per revolution is off by up to 1/R for each run of consecutive
+    # revolutions (the floors at its ends; excluded revolutions cut the log into runs).
+    step = 1 / 10 / (turn[-1] - turn[0] + 1)
+    if dk_range is None:
+        dk_range = (int(sg.max()) + 1) / (turn[-1] - turn[0] + 1)
+    k = int(np.ceil(dk_range / step))
+    best = min((score(dk) for dk in np.arange(-k, k + 1) * step), key=lambda b: b[0])
     best = min((score(best[1] + dk) for dk in np.arange(-5, 6) * step / 5),
                key=lambda b: b[0])
     _, dk0, phi0 = best
