@@ -251,8 +251,9 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     # run)
     dk, _, sigmas = beat.fit_pattern(counts[a:b], theta[a:b], turn[a:b],
                                      dk_range=(len(edges) - 1) / len(counts))
+    spread = None
     if b - a < len(counts):
-        dk = None
+        dk, spread = None, (len(edges) - 1) / len(counts)
     # A jitter of a quarter count or more blurs the floors' steps beyond the fit's reach
     # (pulses crossing two floors) but shows in the scatter of the intervals' counts about
     # the path, 1/6 + 2 sigma^2 (to ~10 % at 120 revolutions; below ~0.15 count it cannot
@@ -271,14 +272,15 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     # The larger at the two ends of the jitters the pulses allow: a locked phase whose
     # pulses never come near a step says little about the jitter, which decides whether it
     # dithers.
-    var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk)
+    var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk, spread)
                   for sg in sorted({sigmas[0], sigmas[2]})], axis=0)
     consistent = np.ones(len(var), bool)
     if usable.any():
         j = int(np.flatnonzero(usable)[-1])
         nb = len(counts) // int(taus[j])
         nu = 2 * (nb - 1) ** 2 / (3 * nb - 4)
-        expect = beat.allan_expected(counts, dt, t_end, rate, sigma, int(taus[j]), dk)
+        expect = beat.allan_expected(counts, dt, t_end, rate, sigma, int(taus[j]), dk,
+                                     spread)
         ratio = (adev[j] / q) ** 2 / np.maximum(expect, np.finfo(float).tiny)
         consistent = chdtrc(nu, nu * ratio) >= 0.01
     return q * np.sqrt(var), consistent, sigma

@@ -151,7 +151,7 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
                 sigmas: np.ndarray | None = None, dk_range: float | None = None
                 ) -> tuple[float, np.ndarray, tuple[float, float, float]]:
     """The floors' pattern along the phase path: the counts per revolution's correction dk
-    (within +-1/R), each face's phase offset, and the autocollimator's jitter [counts]:
+    [counts], each face's phase offset [counts], and the autocollimator's jitter [counts]:
     (lowest, most likely, highest) the pulses allow.
 
     Along a run of consecutive revolutions a pulse's count from the run's start less the
@@ -214,8 +214,8 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
         w = v + y
         d = np.round(w - (np.bincount(grp, w, ng) / size)[grp])
         # The constant by the most common step (zero: most pulses do not cross).
-        for k in np.unique(grp):
-            m = grp == k
+        for g in np.unique(grp):
+            m = grp == g
             d[m] -= np.median(d[m])
         p_up, p_dn = ndtr((y - 1) / s_), ndtr(-y / s_)
         like = np.where(d > 0, p_up, np.where(d < 0, p_dn, 1 - p_up - p_dn))
@@ -246,27 +246,30 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
                      float(sigmas[ok[-1]]))
 
 
-def _dks(dk: float, span: float) -> np.ndarray:
+def _dks(dk: float | None, span: float, spread: float | None) -> np.ndarray:
     """Counts-per-revolution corrections averaged over: the fitted one +-1/(8 R) (the
-    pattern's resolution), or +-1/R without a fit."""
-    half = 1 / 8 if dk is not None else 1.0
-    return (dk or 0.0) + np.linspace(-half, half, K_STEPS) / span
+    pattern's resolution), or +-1/R without a fit (``spread`` [counts] when given)."""
+    if spread is None:
+        spread = (1 / 8 if dk is not None else 1.0) / span
+    return (dk or 0.0) + np.linspace(-spread, spread, K_STEPS)
 
 
 def variance_of_mean(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
-                     rate: float, sigma: float, dk: float | None = None) -> np.ndarray:
+                     rate: float, sigma: float, dk: float | None = None,
+                     spread: float | None = None) -> np.ndarray:
     """Variance [counts^2] of each mean face angle's error from quantisation and jitter
-    (sigma [counts] per pulse), averaged over the counts per revolution's uncertainty."""
+    (sigma [counts] per pulse), averaged over the counts per revolution's uncertainty (dk
+    +- ``spread``, see :func:`_dks`)."""
     theta, turn = phase_path(counts, dt, t_end, rate)
     R = len(counts)
     w = _weights(counts) / R
     return np.mean([_variance(w, theta, turn, sigma, d)
-                    for d in _dks(dk, turn[-1] + 1)], axis=0)
+                    for d in _dks(dk, turn[-1] + 1, spread)], axis=0)
 
 
 def allan_expected(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
-                   rate: float, sigma: float, tau: int, dk: float | None = None
-                   ) -> np.ndarray:
+                   rate: float, sigma: float, tau: int, dk: float | None = None,
+                   spread: float | None = None) -> np.ndarray:
     """Expected non-overlapping Allan variance [counts^2] of the per-revolution angles at
     averaging ``tau`` revolutions (blocks aligned from the first), under the same model."""
     theta, turn = phase_path(counts, dt, t_end, rate)
@@ -280,6 +283,6 @@ def allan_expected(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray 
         sl = slice(i * tau, (i + 2) * tau)
         sign = np.where(np.arange(2 * tau) < tau, -1.0, 1.0) / tau
         w[i, :, sl] = w1[:, sl] * sign[None, :, None]
-    tot = np.mean([_variance(w, theta, turn, sigma, d) for d in _dks(dk, turn[-1] + 1)],
-                  axis=0).sum(0)
+    tot = np.mean([_variance(w, theta, turn, sigma, d)
+                   for d in _dks(dk, turn[-1] + 1, spread)], axis=0).sum(0)
     return tot / (2 * (nb - 1))
