@@ -239,6 +239,7 @@ class GonioRun:
               "unexplained_structure": bool(loop and loop.unexplained_structure),
               "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
               "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
+              "type_a_method": fa.type_a_method, "jitter_counts": fa.jitter_counts,
               "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
               "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
                              for k, v in summary.exclusions.counts.items()},

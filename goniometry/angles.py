@@ -22,6 +22,10 @@ from goniometry.revolutions import LogSummary
 OMEGA_EARTH = 7.2921150e-5  # rad/s
 # Jitter [counts] from which the count quantisation is dithered (independent pulse to pulse).
 DITHERED_COUNTS = 0.5
+# Up to this many revolutions (all kept whole) u comes from the phase-path model.
+PATH_MODEL_REVOLUTIONS = 2048
+# The floors' pattern (the jitter) is fitted on at most this many revolutions.
+FIT_REVOLUTIONS = 512
 
 
 @dataclass(frozen=True)
@@ -34,7 +38,9 @@ class FaceAngles:
     ``counts_per_rev``: mean counts of a revolution; ``allan_tau_rev`` / ``allan_dev_rad``:
     Allan deviation per angle; ``quantisation_locked`` (n,) bool; ``type_b_terms``: name ->
     (n,) [rad], each effect the log cannot determine (or determines only to +-u) whose bound
-    enters u."""
+    enters u; ``type_a_method``: how the scatter part was evaluated ("phase path": the
+    quantisation and jitter along the log's own phase path, :mod:`goniometry.beat`; "batch
+    means"; "lag 1"); ``jitter_counts``: the autocollimator's jitter [counts] it used."""
 
     angles_rad: np.ndarray
     u_rad: np.ndarray
@@ -47,6 +53,8 @@ class FaceAngles:
     allan_dev_rad: np.ndarray
     quantisation_locked: np.ndarray
     type_b_terms: dict = field(default_factory=dict)
+    type_a_method: str = "batch means"
+    jitter_counts: float = float("nan")
 
     @property
     def quantum_rad(self) -> float:
@@ -152,6 +160,16 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         # An error over a variance estimated from nu degrees of freedom follows Student's t,
         # whose variance is nu / (nu - 2): scaled so the normalised errors have unit variance.
         ua = np.sqrt(v * nu / np.maximum(nu - 2, 1.0))
+    method = "batch means" if usable.any() else "scatter"
+    if usable.any() and jitter >= DITHERED_COUNTS and taus[0] == 1:
+        method = "lag 1" if np.all(lag1) else "batch means"
+    model = None
+    if st.n_kept == st.n and st.n <= PATH_MODEL_REVOLUTIONS:
+        # Short logs (all revolutions kept whole): the quantisation and jitter along the
+        # log's own phase path give the variance of each mean with no degrees of freedom
+        # to estimate (batch means: 5-10, so Student tails — 3 angles beyond 4 u in 2400 —
+        # and blind to a beat longer than their blocks). Longer logs keep batch means.
+        model = _path_model(summary, earth_rate, n_per_rev, taus, adev, usable)
     q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
     # Averaging beats quantisation only if its phase dithers from one revolution to the
     # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of
@@ -170,6 +188,18 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         [quantisation_of_mean(f, st.n) ** 2 for f in fs])))
     ub = np.where(locked, ub, np.maximum(ub, uq))
     u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
+    if model is not None:
+        u_path, consistent, jitter = model
+        # The model is the whole per-revolution noise of a clean log; where the scatter of
+        # block means is significantly larger than the model says it should be, something
+        # else varies (e.g. the Earth rate not removed on an unsteady table): batch means
+        # then still bound it.
+        ua = np.where(consistent, u_path, np.maximum(ua, u_path))
+        # A (nearly) locked phase: its pattern cannot pin the jitter nor the counts per
+        # revolution (they trade off), so the steady table's deterministic floor stays a
+        # floor (seed 420 of the fault plan: f = 0.000, 0.65 count off, 2.9 u with it).
+        u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
+        method = "phase path" if np.all(consistent) else "phase path + batch means"
     # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
     # correlations of the measured scatter).
     d = np.sqrt(np.diag(cov_rev) / st.n)
@@ -188,7 +218,72 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         extra[name] = np.abs(sens) * half
     ub_all = np.sqrt(ub**2 + sum(v**2 for v in extra.values())) if extra else ub
     return FaceAngles(mean, np.sqrt(np.diag(cov)), cov, ua, ub_all, st.n, n_per_rev, taus,
-                      adev, locked, extra)
+                      adev, locked, extra, method, float(jitter))
+
+
+def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.ndarray,
+                adev: np.ndarray, usable: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """u [rad] of each angle from the quantisation and jitter along the kept revolutions'
+    phase path (:mod:`goniometry.beat`), whether the batch means agree with it (one-sided
+    chi-square at 1 %), and the fitted jitter [counts]. None when the log has too few
+    revolutions for the pattern, or its pattern does not follow the path."""
+    from scipy.special import chdtrc  # (the chi-square survival function)
+
+    from goniometry import beat
+
+    counts, dt, t_end = kept_table(summary)
+    if len(counts) < 16 or (dt is None and summary.excluded_revolutions):
+        return None  # (without times a gap of excluded revolutions breaks the path)
+    theta, turn = beat.phase_path(counts, dt, t_end, rate)
+    # The pattern from the longest run of consecutive revolutions (at most FIT_REVOLUTIONS:
+    # the fit's cost grows with R). Where excluded revolutions cut the log, the runs'
+    # patterns did not join up to a common counts per revolution (a lost row, seed 256 of
+    # the fault plan): the jitter is the run's, and the counts per revolution only known to
+    # +-1/R (the model averages over that range).
+    cut = np.flatnonzero(np.diff(turn) != 1) + 1
+    edges = np.concatenate([[0], cut, [len(turn)]])
+    i = int(np.argmax(np.diff(edges)))
+    a, b = int(edges[i]), min(int(edges[i + 1]), int(edges[i]) + FIT_REVOLUTIONS)
+    if b - a < 16:
+        return None
+    # (the log's mean counts per revolution, which the path uses, is off by up to 1/R per
+    # run)
+    dk, _, sigmas = beat.fit_pattern(counts[a:b], theta[a:b], turn[a:b],
+                                     dk_range=(len(edges) - 1) / len(counts))
+    spread = None
+    if b - a < len(counts):
+        dk, spread = None, (len(edges) - 1) / len(counts)
+    # A jitter of a quarter count or more blurs the floors' steps beyond the fit's reach
+    # (pulses crossing two floors) but shows in the scatter of the intervals' counts about
+    # the path, 1/6 + 2 sigma^2 (to ~10 % at 120 revolutions; below ~0.15 count it cannot
+    # be told from none).
+    scatter = float(np.mean(np.var(counts - np.diff(theta, axis=1), axis=0, ddof=1)))
+    sig_scatter = np.sqrt(max((scatter - 1 / 6) / 2, 0.0))
+    if sig_scatter >= 0.25:
+        sigmas = (sig_scatter,) * 3
+    elif sigmas[1] >= 0.25:
+        # Steps everywhere but intervals as sharp as quantisation alone: the path is wrong,
+        # not the jitter large (an unsteady table whose Earth rate is not removed: its share
+        # of the wandering period walks the phase by counts) — no model then.
+        return None
+    sigma = sigmas[1]
+    q = 2 * np.pi / n_per_rev
+    # The larger at the two ends of the jitters the pulses allow: a locked phase whose
+    # pulses never come near a step says little about the jitter, which decides whether it
+    # dithers.
+    var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk, spread)
+                  for sg in sorted({sigmas[0], sigmas[2]})], axis=0)
+    consistent = np.ones(len(var), bool)
+    if usable.any():
+        j = int(np.flatnonzero(usable)[-1])
+        nb = len(counts) // int(taus[j])
+        nu = 2 * (nb - 1) ** 2 / (3 * nb - 4)
+        expect = beat.allan_expected(counts, dt, t_end, rate, sigma, int(taus[j]), dk,
+                                     spread)
+        ratio = (adev[j] / q) ** 2 / np.maximum(expect, np.finfo(float).tiny)
+        consistent = chdtrc(nu, nu * ratio) >= 0.01
+    return q * np.sqrt(var), consistent, sigma
 
 
 def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

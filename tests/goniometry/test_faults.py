@@ -100,9 +100,8 @@ def test_faults_never_bias_and_are_all_listed(seed, tmp_path):
     assert listed == injected, unlisted
 
 
-def clean_twin(seed: int, tmp_path) -> float:
-    """The same log without its faults (same table, ring laser, jitter): its worst
-    |error|/u."""
+def twin_errors(seed: int, tmp_path) -> np.ndarray:
+    """The same log without its faults (same table, ring laser, jitter): its errors / u."""
     from dataclasses import replace
 
     spec = replace(fault_plan(seed), faults=())
@@ -110,35 +109,73 @@ def clean_twin(seed: int, tmp_path) -> float:
     p = write_log(sim, tmp_path / f"c{seed}.csv")
     run = measure_log(p, N_FACES, spec.latitude_deg, direction=spec.direction)
     truth = np.array(sim["truth"]["angles_rad"])
-    return float(np.max(np.abs(run.angles.angles_rad - truth) / run.angles.u_rad))
+    return (run.angles.angles_rad - truth) / run.angles.u_rad
 
 
 @pytest.mark.slow
 def test_faults_over_six_hundred_logs(tmp_path):
-    """Every fault listed, and no angle off by more than 4 u — on every log whose fault-free
-    twin (same table, ring laser and jitter) is itself within 4 u. Where the twin is not, the
-    uncertainty estimator fails without any fault; that is the xfail below, not the faults'."""
-    worst, twins, injected, listed = [], [], 0, 0
+    """Every fault listed, and no angle of any of the 600 logs off by more than 4 u."""
+    worst, injected, listed = [], 0, 0
     for seed in range(600):
         w, i, li, *_ = run_plan(seed, tmp_path)
         worst.append(w)
-        twins.append(clean_twin(seed, tmp_path) if w >= 4.0 else float("nan"))
         injected += i
         listed += li
-    judged = [w for w, t in zip(worst, twins, strict=True) if not t >= 4.0]
-    print(f"worst |error|/u {max(worst):.2f}; over the {len(judged)} logs whose fault-free "
-          f"twin is within 4 u: {max(judged):.2f}; faults listed {listed} / {injected}")
+    print(f"worst |error|/u {max(worst):.2f}; faults listed {listed} / {injected}")
     assert listed == injected
-    assert max(judged) < 4.0
-    assert len(judged) >= 595
+    assert max(worst) < 4.0
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 11, open: on short (120-revolution) logs the "
-                   "batch-means u is understated in the tail — the fault-free twins of seeds "
-                   "130 and 150 of this plan reach 4.83 u and 4.64 u")
 def test_fault_free_twins_within_four_u(tmp_path):
-    assert max(clean_twin(seed, tmp_path) for seed in (130, 150)) < 4.0
+    """The fault-free twins of all 600 logs: no angle beyond 4 u (the batch-means u of these
+    120-revolution logs put seeds 130 and 150 at 4.83 u and 4.64 u: 5-10 degrees of freedom),
+    and the normalised errors' RMS within chi-square bounds (3 free angles a log)."""
+    from scipy.stats import chi2
+
+    z = np.array([twin_errors(seed, tmp_path) for seed in range(600)])
+    dof = 3 * len(z)
+    lo, hi = (np.sqrt(chi2.ppf(p, dof) / dof) for p in (5e-4, 1 - 5e-4))
+    rms = float(np.sqrt(np.mean(z**2)))
+    print(f"worst |z| {np.max(np.abs(z)):.2f}, RMS {rms:.3f} (bounds {lo:.3f}-{hi:.3f})")
+    assert np.max(np.abs(z)) < 4.0
+    # u may be conservative (the quantisation floor of a nearly locked phase), not small.
+    assert 0.8 < rms < hi
+
+
+@pytest.mark.parametrize("seed", [130, 150])
+def test_the_twins_batch_means_put_beyond_four_u(seed, tmp_path):
+    """The two fault-free logs of the plan whose batch-means u (5-10 degrees of freedom)
+    left an angle at 4.83 u and 4.64 u."""
+    z = twin_errors(seed, tmp_path)
+    assert np.max(np.abs(z)) < 4.0, z
+
+
+def test_slow_unsteady_short_logs_normalised_errors(tmp_path):
+    """The regime where batch means failed: 120 revolutions of a slow (0.2-0.5 rev/s)
+    unsteady table (ripple 2 % locked to the angle, wander 1 %), both directions. Over 24
+    seeded clean logs the normalised errors' RMS lies within the chi-square bounds of its
+    72 free angles (0.1 %, two-sided) and none is beyond 4 u."""
+    from scipy.stats import chi2
+
+    z = []
+    for seed in range(24):
+        rng = np.random.default_rng(7000 + seed)
+        spec = GonioSpec(revolutions=REVS, rev_per_s=float(rng.uniform(0.2, 0.5)),
+                         direction=int(rng.choice([-1, 1])), ripple=0.02, wander=0.01,
+                         latency_s=0.0, arm_face=int(rng.integers(0, N_FACES)),
+                         stop_pulses=int(rng.integers(0, 4)), seed=7000 + seed)
+        sim = simulate(spec)
+        run = measure_log(write_log(sim, tmp_path / f"s{seed}.csv"), N_FACES,
+                          spec.latitude_deg, direction=spec.direction)
+        truth = np.array(sim["truth"]["angles_rad"])
+        z.append((run.angles.angles_rad - truth) / run.angles.u_rad)
+    z = np.array(z)
+    dof = 3 * len(z)  # the closure: 3 free angles a log
+    lo, hi = (np.sqrt(chi2.ppf(p, dof) / dof) for p in (5e-4, 1 - 5e-4))
+    rms = float(np.sqrt(np.mean(z**2)))
+    assert lo < rms < hi, (rms, lo, hi)
+    assert np.max(np.abs(z)) < 4.0
 
 
 def test_the_reported_double_trigger(tmp_path):
