@@ -609,13 +609,8 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     (e.g. removing the Earth's rotation when the latitude and times are known; the pipeline
     uses the accumulated sensitivities instead, see :func:`goniometry.face_angles`).
     """
-    from threadpoolctl import threadpool_limits
-
     reuse_freed_memory()  # the pass frees and reallocates MB-sized temporaries per chunk
     p = _Pass(n_faces, keep, correct, path)
-    # The pass's matrix products have 8 columns: BLAS threads gain nothing on them and spin
-    # between calls on the cores the parser threads need (0.3 s of CPU at 10⁷ rows).
-    with threadpool_limits(1, "blas"):
-        for ch in iter_log(path, block_bytes, columns):
-            p.feed(ch)
-        return p.finish(path)
+    for ch in iter_log(path, block_bytes, columns):
+        p.feed(ch)
+    return p.finish(path)
