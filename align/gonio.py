@@ -33,7 +33,6 @@ from goniometry import (
     FaceAngles,
     LogSummary,
     face_angles,
-    kept_table,
     read_revolutions,
     vertical_earth_rate,
 )
@@ -354,7 +353,20 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         from importlib import import_module
 
         threading.Thread(target=import_module, args=("align.loop",), daemon=True).start()
-    summary = read_revolutions(path, n_faces, columns=columns)
+    early = {}
+    hook = None
+    if latitude_deg is None:
+        def hook(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None) -> None:
+            # The loop sees only the head of the log: it runs while the rest is read. (A
+            # shorter log hands over at its end, not yet checked: the loop runs after.)
+            if dt is not None and len(counts) >= LOOP_REVOLUTIONS:
+                from concurrent.futures import ThreadPoolExecutor
+
+                pool = ThreadPoolExecutor(1, thread_name_prefix="loop")
+                early["loop"] = pool.submit(loop_gonio, counts, dt, t_end, alpha)
+                pool.shutdown(wait=False)
+    summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
+                               on_kept_at=LOOP_REVOLUTIONS)
     if summary.armed_face:
         notes.append(f"log armed on face {summary.armed_face}: the first "
                      f"{summary.incomplete_head} rows are a partial revolution, not used")
@@ -377,11 +389,15 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                      "nor bounded without pulse times; the angles assume a steady table")
         return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
                             steady_table, alpha)
-    counts, dt, t_end = kept_table(summary)
     # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
-    # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time).
-    m = LOOP_REVOLUTIONS
-    loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
+    # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time), started by
+    # the pass as soon as it had them.
+    if "loop" in early:
+        loop = early["loop"].result()
+    else:
+        counts, dt, t_end = summary.stats.kept()
+        m = LOOP_REVOLUTIONS
+        loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
     earth = [e for e in loop.effects if e.name == EARTH]
     if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
         notes.append(f"counts per revolution follow the period with a slope of "

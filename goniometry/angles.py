@@ -288,13 +288,7 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
 
 def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """The kept revolutions: counts (R, n), interval durations (R, n) [s], end times [s]."""
-    st = summary.stats
-    if not st.kept_counts:
-        return np.zeros((0, st.n_faces)), None, None
-    c = np.vstack(st.kept_counts)
-    if summary.has_time:
-        return c, np.vstack(st.kept_dt), np.concatenate(st.kept_tend)
-    return c, None, None
+    return summary.stats.kept()
 
 
 def vertical_earth_rate(latitude_deg: float, direction: int) -> float:

@@ -23,7 +23,7 @@ length); the first ``keep`` revolutions are also kept whole for the loop and the
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -193,6 +193,9 @@ class RevolutionStats:
     shift: np.ndarray | None = None
     pending: list = field(default_factory=list)
     n_pending: int = 0
+    # Called once with the first ``on_kept_at`` kept revolutions (see read_revolutions).
+    on_kept: Callable | None = None
+    on_kept_at: int = 0
 
     def __post_init__(self) -> None:
         self.s1 = np.zeros(2 * self.n_faces)
@@ -247,6 +250,27 @@ class RevolutionStats:
             self.kept_dt.append(None if dt is None else np.array(dt[:m], float))
             self.kept_tend.append(None if t_end is None else np.array(t_end[:m], float))
             self.n_kept += m
+            if self.on_kept is not None and self.n_kept >= self.on_kept_at:
+                self.hand_over()
+
+    def kept(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """The kept revolutions: counts (R, n), interval durations (R, n) [s] and end times
+        [s] (None without times)."""
+        if not self.kept_counts:
+            return np.zeros((0, self.n_faces)), None, None
+        c = np.vstack(self.kept_counts)
+        if self.kept_dt[0] is None:
+            return c, None, None
+        return c, np.vstack(self.kept_dt), np.concatenate(self.kept_tend)
+
+    def hand_over(self) -> None:
+        """Give the first ``on_kept_at`` kept revolutions to ``on_kept``, once."""
+        if self.on_kept is None:
+            return
+        hook, self.on_kept = self.on_kept, None
+        m = self.on_kept_at
+        c, d, te = self.kept()
+        hook(c[:m], None if d is None else d[:m], None if te is None else te[:m])
 
 
 @dataclass(frozen=True)
@@ -469,6 +493,7 @@ class _Pass:
             for _, c, d, te in got:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
+        self.stats.hand_over()  # (a log shorter than on_kept_at: what there is)
         if self.stats.n < MIN_REVOLUTIONS:
             raise LogError(f"{path}: only {self.stats.n} usable revolutions in {self.rows} "
                            f"rows ({self.excluded} excluded): at least {MIN_REVOLUTIONS} "
@@ -602,15 +627,22 @@ class _Pass:
 
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
                      block_bytes: int = 1 << 20, correct=None,
-                     columns: Mapping[str, str] | None = None) -> LogSummary:
+                     columns: Mapping[str, str] | None = None,
+                     on_kept: Callable | None = None, on_kept_at: int = 0) -> LogSummary:
     """Stream a log into revolution statistics in one pass (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
     (e.g. removing the Earth's rotation when the latitude and times are known; the pipeline
     uses the accumulated sensitivities instead, see :func:`goniometry.face_angles`).
+    ``on_kept(counts, dt, t_end)``: called once, during the pass, as soon as the first
+    ``on_kept_at`` (<= ``keep``) revolutions are kept (at the end for a shorter log), with
+    them — work on the head of a log (the loop) can then run while the rest is read.
     """
     reuse_freed_memory()  # the pass frees and reallocates MB-sized temporaries per chunk
+    if on_kept is not None and not 0 < on_kept_at <= keep:
+        raise ValueError(f"on_kept_at {on_kept_at}: must be in 1..keep ({keep})")
     p = _Pass(n_faces, keep, correct, path)
+    p.stats.on_kept, p.stats.on_kept_at = on_kept, on_kept_at
     for ch in iter_log(path, block_bytes, columns):
         p.feed(ch)
     return p.finish(path)

@@ -200,3 +200,28 @@ def test_where_the_log_is_cut_changes_nothing(tmp_path, monkeypatch, block, chun
     assert fa.revolutions == fa_ref.revolutions
     assert np.allclose(fa.angles_rad, fa_ref.angles_rad, rtol=0, atol=1e-14)
     assert np.allclose(fa.u_rad, fa_ref.u_rad, rtol=1e-9, atol=0)
+
+
+def test_the_loop_started_during_the_pass_is_the_loop_after_it(tmp_path, monkeypatch):
+    """On a log longer than the loop's head (no latitude, with times), the loop runs on a
+    thread while the rest is read: the same report as run on the kept head afterwards."""
+    import threading
+
+    import align.gonio as gonio
+    from align.gonio import LOOP_REVOLUTIONS, measure_log
+
+    where = []
+
+    def recorded(*a, **k):
+        where.append(threading.current_thread().name)
+        return loop_gonio(*a, **k)
+
+    monkeypatch.setattr(gonio, "loop_gonio", recorded)
+    p, _ = _log(tmp_path, revolutions=LOOP_REVOLUTIONS + 300, seed=4)
+    run = measure_log(p, 4)
+    assert len(where) == 1 and where[0].startswith("loop"), where
+    counts, dt, t_end = run.summary.stats.kept()
+    m = LOOP_REVOLUTIONS
+    after = loop_gonio(counts[:m], dt[:m], t_end[:m])
+    assert run.loop.summary_lines() == after.summary_lines()
+    assert run.loop.summary().to_dict() == after.summary().to_dict()
