@@ -27,6 +27,7 @@ from __future__ import annotations
 import csv
 import io
 import re
+import sys
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -192,8 +193,12 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
     except PermissionError:
         raise InputError(f"{path}: not readable (permission denied)") from None
     except UnicodeDecodeError:
-        raise InputError(f"{path}: not a UTF-8 text file (a {spec.what} is CSV text)") from None
+        raise (_not_utf8(path, spec) or InputError(
+            f"{path}: not a UTF-8 text file (a {spec.what} is CSV text)")) from None
     text = line.rstrip("\r\n")
+    if "\x00" in text:
+        raise InputError(f"{path}:{skip}: NUL bytes in the header: UTF-16 text or a binary "
+                         f"file? a {spec.what} is UTF-8 CSV text")
     delimiter = max(",;\t", key=text.count)
     raw = next(csv.reader([text], delimiter=delimiter))
     normed = [_norm(r) for r in raw]
@@ -228,6 +233,21 @@ def _read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> _He
     return _Header(names, raw, units, delimiter, skip, skip)
 
 
+def _quiet_undecodable_rows(unraisable) -> None:
+    """pyarrow decodes an invalid row's text (e.g. a comment line) before it calls the
+    handler; a line that is not UTF-8 fails there and pyarrow prints it as 'Exception
+    ignored' with a traceback. The file is refused anyway, naming that line (_not_utf8):
+    the traceback is not the user's to read. Anything else goes to the previous hook."""
+    if (isinstance(unraisable.exc_value, UnicodeDecodeError)
+            and unraisable.object is _skip_comment):
+        return
+    _previous_unraisablehook(unraisable)
+
+
+_previous_unraisablehook = sys.unraisablehook
+sys.unraisablehook = _quiet_undecodable_rows
+
+
 def _is_comment(line: str | bytes) -> bool:
     return line.lstrip().startswith("#" if isinstance(line, str) else b"#")
 
@@ -236,7 +256,10 @@ def _skip_comment(row) -> str:
     """pyarrow's handler of a row with the wrong number of fields: a comment line is skipped,
     anything else is an error (named by :func:`_locate`). A 'row' spanning lines (a quote
     opened in a comment) is an error too: skipping it would drop the data rows inside."""
-    text = row.text or ""
+    try:
+        text = row.text or ""
+    except UnicodeDecodeError:  # not UTF-8: refused, with its line (see _not_utf8)
+        return "error"
     return "skip" if _is_comment(text) and "\n" not in text else "error"
 
 
@@ -317,7 +340,7 @@ def _row_lines(path: Path, first_line: int, rows: list[int]) -> list[int]:
     """File line numbers of data rows (blank lines are not rows)."""
     want = sorted(set(rows))
     found: dict[int, int] = {}
-    with open(path, encoding="utf-8-sig", newline="") as f:
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
         for _ in range(first_line - 1):
             next(f, None)
         row = 0
@@ -332,8 +355,27 @@ def _row_lines(path: Path, first_line: int, rows: list[int]) -> list[int]:
     return [found.get(r, -1) for r in rows]
 
 
+def _not_utf8(path: Path, spec: TableSpec) -> InputError | None:
+    """The first line that is not UTF-8 text, as the error naming it (None if there is none).
+    Only on the error paths: the parser itself does not check the bytes of lines it skips
+    (comments) and names no line for a cell it cannot decode."""
+    with open(path, "rb") as f:
+        for ln, raw in enumerate(f, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                byte = raw[exc.start]
+                return InputError(f"{path}:{ln}: not a UTF-8 text file (byte 0x{byte:02X} at "
+                                  f"column {exc.start + 1}): a {spec.what} is UTF-8 CSV; save "
+                                  "it as UTF-8")
+    return None
+
+
 def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
     """Slow path, only after pyarrow refused the file: the first row that is not valid."""
+    bad = _not_utf8(path, spec)
+    if bad is not None:
+        return bad
     kinds = {c.name: c.kind for c in spec.columns}
     n = len(h.names)
     with open(path, encoding="utf-8-sig", newline="") as f:
@@ -370,9 +412,11 @@ def _bad_value(v: str, kind: str) -> str:
         return "is not a whole number"
     if kind == "int":
         try:
-            int(v)
+            k = int(v)
         except ValueError:
             return "is not written as a whole number"
+        if not -(1 << 63) <= k < 1 << 63:
+            return "is beyond a 64-bit integer"
     return ""
 
 
@@ -462,7 +506,7 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         at = pacsv.read_csv(path, read_options=ro, parse_options=po, convert_options=co)
         again = _commented_labels(h, spec, dict(zip(at.column_names, at.columns, strict=True)))
     except pa.ArrowInvalid:
-        if not _may_have_comments(path, h):
+        if not _may_have_comments(path, h) or _not_utf8(path, spec) is not None:
             raise _locate(path, spec, h) from None
         again = True
     if again:
@@ -636,7 +680,7 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                 yield chunk
             break
         except (pa.ArrowInvalid, _Commented):
-            if filtered or not _may_have_comments(path, h):
+            if filtered or not _may_have_comments(path, h) or _not_utf8(path, spec):
                 raise _locate(path, spec, h) from None
     if empty:
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")

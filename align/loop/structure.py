@@ -144,7 +144,7 @@ def periodogram_test(z: np.ndarray, x: np.ndarray, nu: float | None = None
     """
     n = len(z)
     span = float(np.ptp(x))
-    if n < 8 or span == 0:
+    if n < 8 or span == 0 or not np.ptp(z) > 0:  # (a constant residual has no spectrum)
         return StructureTest("periodogram", 0.0, 1.0), float("nan")
     spacing = span / (n - 1)
     dx = np.diff(x)
