@@ -84,15 +84,24 @@ def _signs(text: str) -> tuple[float, float, float]:
 _SIGNS = re.compile(r"^[+-](,[+-])+$")
 
 
+# Options whose value may start with '-' (signs; lists of numbers: a southern latitude range,
+# a region of interest or nominal angles written with a negative first number).
+_DASH_VALUES = {"--scale-sign": _SIGNS,
+                "--latitude-range": re.compile(r"^-\d"), "--roi": re.compile(r"^-\d"),
+                "--nominal": re.compile(r"^-\d")}
+
+
 def _attach_signs(argv: list[str]) -> list[str]:
-    """``--scale-sign -,-,-`` (the documented form) as ``--scale-sign=-,-,-``: argparse takes
-    any value starting with '-' that is not a negative number for an option, and has no
-    setting to accept it as a value (only the ``=`` form)."""
+    """``--scale-sign -,-,-`` (the documented form) as ``--scale-sign=-,-,-``, and
+    ``--latitude-range -40,-30`` as ``--latitude-range=-40,-30``: argparse takes any value
+    starting with '-' that is not a single negative number for an option, and has no setting
+    to accept it as a value (only the ``=`` form)."""
     out, i = [], 0
     while i < len(argv):
-        if (argv[i] == "--scale-sign" and i + 1 < len(argv)
-                and _SIGNS.match(argv[i + 1].replace(" ", ""))):
-            out.append(f"--scale-sign={argv[i + 1]}")
+        pattern = _DASH_VALUES.get(argv[i])
+        if (pattern is not None and i + 1 < len(argv)
+                and pattern.match(argv[i + 1].replace(" ", ""))):
+            out.append(f"{argv[i]}={argv[i + 1]}")
             i += 2
         else:
             out.append(argv[i])
