@@ -199,6 +199,10 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         # revolution (they trade off), so the steady table's deterministic floor stays a
         # floor (seed 420 of the fault plan: f = 0.000, 0.65 count off, 2.9 u with it).
         u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
+        # The quantisation is inside the model: its white-noise share q/sqrt(6)/sqrt(R) is
+        # no floor (a beat averages faster than that), only the deterministic floor uq is —
+        # so the Type B part reported never exceeds u.
+        ub = np.where(locked, ub, uq)
         method = "phase path" if np.all(consistent) else "phase path + batch means"
     # Scale the scatter covariance so its diagonal is the stated variance (keeps the closure
     # correlations of the measured scatter).
