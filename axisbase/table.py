@@ -260,6 +260,8 @@ def _skip_comment(row) -> str:
         text = row.text or ""
     except UnicodeDecodeError:  # not UTF-8: refused, with its line (see _not_utf8)
         return "error"
+    if not text.strip():  # spaces or a tab only: a blank line to any editor (and to _locate)
+        return "skip"
     return "skip" if _is_comment(text) and "\n" not in text else "error"
 
 

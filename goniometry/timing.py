@@ -52,9 +52,27 @@ def _batch_cov(x: np.ndarray, block: int = 8) -> np.ndarray:
     return d.T @ d / (nb - 1) / nb
 
 
+def stamp_resolution(t: np.ndarray) -> float:
+    """The resolution [s] of time stamps: the coarsest decimal grid (1 s ... 1e-12 s) they
+    all lie on (a 10 MHz clock: 1e-7 s), but never finer than float64 holds them at their
+    magnitude (0.24 µs for Unix epoch seconds). A grid finer than 100 float64 steps is not
+    told apart: the float64 step is then returned."""
+    t = np.asarray(t, float)
+    ulp = float(np.spacing(np.max(np.abs(t))))
+    for k in range(13):
+        step = 10.0 ** -k
+        if step < 100 * ulp:  # (finer grids cannot be told from the binary rounding of t)
+            break
+        x = t / step
+        # (on the grid: off it by no more than the decimal-to-binary rounding of t)
+        if np.all(np.abs(x - np.round(x)) <= 8 * ulp / step + 8 * np.spacing(np.abs(x))):
+            return step
+    return ulp
+
+
 def timing_angles(summary: LogSummary) -> TimingAngles:
     """Timing angles of a log with pulse times, and their check against the counts."""
-    counts, dt, _ = kept_table(summary)
+    counts, dt, t_end = kept_table(summary)
     if dt is None:
         raise ValueError("the log has no t column: timing angles need pulse times")
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
@@ -64,6 +82,15 @@ def timing_angles(summary: LogSummary) -> TimingAngles:
     a_t = 2 * np.pi * dt / dt.sum(1, keepdims=True)
     a_c = 2 * np.pi * counts / counts.sum(1, keepdims=True)
     cov = _batch_cov(a_t)
+    # The stamps' own quantisation (+-res/2 at each end of an interval): averaged like the
+    # counts' only while the jitter dithers it; when the fractions barely scatter it is
+    # locked (a steady table, stamps coarser than the jitter — e.g. epoch seconds in float64)
+    # and does not average at all: the floor then stands for good.
+    floor = 2 * np.pi * stamp_resolution(t_end[ok]) / np.sqrt(6) / float(dt.sum(1).mean())
+    locked = a_t.std(0) < 0.5 * floor
+    u_floor = np.where(locked, floor, floor / np.sqrt(len(dt)))
+    scale = np.maximum(u_floor / np.sqrt(np.maximum(np.diag(cov), 1e-300)), 1.0)
+    cov = cov * np.outer(scale, scale)
     d = a_c - a_t
     cd = _batch_cov(d)
     mean_d = d.mean(0)
