@@ -556,3 +556,68 @@ def test_southern_latitude_range_as_documented(ulog):
     assert q.returncode == 0, q.stderr
     assert p.returncode == 0, p.stderr
     assert p.stdout == q.stdout
+
+
+# ------------------------------------------- 3b. nearly locked beats (Earth rate near 0) ------
+
+def _near_locked(seed):
+    """A quiet log whose quantisation phase drifts through 0.3-40 counts over the log.
+
+    The Earth's vertical rate at a latitude within ~1° of the equator moves the count per
+    revolution off 2**20 by a few hundredths of a count: the beat is long but not locked.
+    Returns the log's parameters and ``cycles``, the counts the phase drifts through.
+    """
+    rng = np.random.default_rng(9000 + seed)
+    revs = int(np.exp(rng.uniform(np.log(100), np.log(2000))))
+    rev_s = float(np.exp(rng.uniform(np.log(0.5), np.log(5))))
+    jitter = float(np.exp(rng.uniform(np.log(0.005), np.log(0.05))))
+    cycles = float(np.exp(rng.uniform(np.log(0.3), np.log(40))))
+    s = cycles / revs * 2 * np.pi / N_RL * rev_s / OMEGA_EARTH
+    lat = float(np.degrees(np.arcsin(s))) * (1 if seed % 2 else -1)
+    faces = 90 + rng.normal(0, 0.005, 3)
+    return dict(seed=seed, revs=revs, rev_s=rev_s, jitter_arcsec=jitter, faces_deg=faces,
+                latitude=lat), cycles
+
+
+def _run_near_locked(seed, tmp):
+    kw, cycles = _near_locked(seed)
+    c, k, r, t, truth = make_log(**kw)
+    path = write(tmp / f"near{seed}.csv", "\n".join([HEADER, *rows_of(c, k, r, t)]) + "\n")
+    p, res, _ = gonio(path, latitude=repr(kw["latitude"]))
+    assert p.returncode == 0, p.stderr
+    z = (np.array(res["angles_deg"]) - truth) * 3600 / np.array(res["angles_u_arcsec"])
+    return res, z, cycles
+
+
+@pytest.mark.slow
+def test_u_is_honest_over_40_nearly_locked_logs(tmp_path):
+    """Measured: RMS 0.96, worst 3.3 u of 160 angles (see the two defects below)."""
+    with ThreadPoolExecutor(2) as pool:
+        z = np.concatenate([x[1] for x in pool.map(lambda s: _run_near_locked(s, tmp_path),
+                                                   range(40))])
+    assert np.abs(z).max() < 4.0, z
+    assert 0.75 < np.sqrt(np.mean(z**2)) < 1.2
+
+
+@pytest.mark.xfail(strict=True, reason="defect: on a log whose quantisation phase drifts "
+                   "through 16 and 36 whole counts (Earth rate at |latitude| < 0.5°, quiet "
+                   "autocollimator) one or two angles are called 'quantisation locked: not "
+                   "averaged' (u = q/√6 = 0.505″) while the others get 0.006-0.02″; 6 of 40 "
+                   "such logs")
+@pytest.mark.parametrize("seed", [29, 39])
+def test_a_drifting_beat_is_not_called_locked(tmp_path, seed):
+    res, _, cycles = _run_near_locked(seed, tmp_path)
+    assert cycles > 10
+    q = 360 * 3600 / N_RL
+    assert max(res["angles_u_arcsec"]) < 0.5 * q / np.sqrt(6), res["angles_u_arcsec"]
+    assert not any("locked" in n for n in res["notes"])
+
+
+@pytest.mark.xfail(strict=True, reason="defect: on nearly locked logs the JSON's "
+                   "angles_u_arcsec is below its own type_b_arcsec (0.0057″ against 0.0157″; "
+                   "18 of 40 logs), and seed 29's z->y angle is 3.3 u off")
+def test_u_is_not_below_its_type_b_part(tmp_path):
+    res, z, _ = _run_near_locked(29, tmp_path)
+    u = np.array(res["angles_u_arcsec"])
+    assert np.all(u >= np.array(res["type_b_arcsec"]) * (1 - 1e-9)), res["type_b_arcsec"]
+    assert np.all(u >= np.array(res["type_a_arcsec"]) * (1 - 1e-9))
