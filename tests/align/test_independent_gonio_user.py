@@ -62,8 +62,10 @@ def make_log(seed, revs=200, rev_s=1.0, jitter_arcsec=0.3,
     return count, counter, ref, t, truth
 
 
-def rows_of(count, counter, ref, t):
-    return [f"{a},{b},{r},{x:.7f}" for a, b, r, x in zip(count, counter, ref, t, strict=True)]
+def rows_of(count, counter, ref, t, t0=0.0):
+    """CSV rows; ``t0`` [s] is added to the times (e.g. Unix epoch seconds)."""
+    return [f"{a},{b},{r},{x + t0:.7f}"
+            for a, b, r, x in zip(count, counter, ref, t, strict=True)]
 
 
 def write(path: Path, data) -> Path:
@@ -650,7 +652,7 @@ def test_a_whitespace_only_line_is_a_blank_line_or_named(tmp_path, small_rows, b
 def test_epoch_time_stamps_with_steady_table_are_honest_or_flagged(tmp_path):
     c, k, r, t, truth = make_log(3, revs=300, jitter_arcsec=0.05, latitude=45.0)
     path = write(tmp_path / "epoch.csv", "\n".join(
-        [HEADER, *[f"{a},{b},{x},{y + 1.7e9:.7f}" for a, b, x, y in zip(c, k, r, t)]]) + "\n")
+        [HEADER, *rows_of(c, k, r, t, t0=1.7e9)]) + "\n")
     p, res, _ = gonio(path, "--steady-table", latitude="45")
     z = (np.array(res["angles_deg"]) - truth) * 3600 / np.array(res["angles_u_arcsec"])
     flagged = p.returncode != 0 or bool(res["warnings"]) or res["ok"] is False
@@ -663,7 +665,7 @@ def test_epoch_time_stamps_do_not_change_the_counts_angles(tmp_path):
     res = []
     for off in (0.0, 1.7e9):
         path = write(tmp_path / f"e{off:.0f}.csv", "\n".join(
-            [HEADER, *[f"{a},{b},{x},{y + off:.7f}" for a, b, x, y in zip(c, k, r, t)]]) + "\n")
+            [HEADER, *rows_of(c, k, r, t, t0=off)]) + "\n")
         p, d, _ = gonio(path, latitude="45")
         assert p.returncode == 0, p.stderr
         res.append(d)
