@@ -22,6 +22,9 @@ from goniometry.revolutions import LogSummary
 OMEGA_EARTH = 7.2921150e-5  # rad/s
 # Jitter [counts] from which the count quantisation is dithered (independent pulse to pulse).
 DITHERED_COUNTS = 0.5
+# A phase path drifting through at least this many whole counts over the log is not locked
+# (the counts per revolution known to +-1/R move the drift by up to one count).
+UNLOCK_COUNTS = 4.0
 # Up to this many revolutions (all kept whole) u comes from the phase-path model.
 PATH_MODEL_REVOLUTIONS = 2048
 # The floors' pattern (the jitter) is fitted on at most this many revolutions.
@@ -189,7 +192,12 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
     ub = np.where(locked, ub, np.maximum(ub, uq))
     u = np.where(locked, np.maximum(ua, ub), np.maximum(ua, uq))
     if model is not None:
-        u_path, consistent, jitter = model
+        u_path, consistent, jitter, sweep = model
+        # Not locked after all where the phase path drifts through whole counts (the Earth's
+        # share of the period near the equator, a slow beat): the per-revolution scatter is
+        # small, but the quantisation averages along the drift, which the model follows.
+        # UNLOCK_COUNTS: beyond the drift the counts per revolution's +-1/R leaves unknown.
+        locked = locked & ~(sweep >= UNLOCK_COUNTS)
         # The model is the whole per-revolution noise of a clean log; where the scatter of
         # block means is significantly larger than the model says it should be, something
         # else varies (e.g. the Earth rate not removed on an unsteady table): batch means
@@ -227,7 +235,7 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
 
 def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.ndarray,
                 adev: np.ndarray, usable: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, float] | None:
+                ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray] | None:
     """u [rad] of each angle from the quantisation and jitter along the kept revolutions'
     phase path (:mod:`goniometry.beat`), whether the batch means agree with it (one-sided
     chi-square at 1 %), and the fitted jitter [counts]. None when the log has too few
@@ -287,7 +295,14 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
                                      spread)
         ratio = (adev[j] / q) ** 2 / np.maximum(expect, np.finfo(float).tiny)
         consistent = chdtrc(nu, nu * ratio) >= 0.01
-    return q * np.sqrt(var), consistent, sigma
+    # How far each pulse's fractional phase drifts over the log [counts] (the net of its
+    # per-revolution advances taken modulo one count): an angle whose ends drift through
+    # several whole counts has its quantisation averaged, however little the counts of
+    # successive revolutions scatter.
+    step = np.diff(theta, axis=0)
+    drift = np.abs((step - np.round(step)).sum(0))
+    sweep = np.minimum(drift[:-1], drift[1:])
+    return q * np.sqrt(var), consistent, sigma, sweep
 
 
 def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

@@ -348,10 +348,6 @@ def test_a_folder_a_missing_file_and_a_wrong_face_count_are_refused(tmp_path, sm
 # Defects: written as the tool should behave (README: "a folder or a non-UTF-8 file" refused
 # as one line `file:line: column: what is wrong`, never a traceback).
 
-@pytest.mark.xfail(strict=True, reason="defect: a Latin-1 byte in a comment line after the "
-                   "first ones is accepted (exit 0, JSON written) and pyarrow's "
-                   "UnicodeDecodeError traceback is printed ('Exception ignored in "
-                   "_skip_comment')")
 @pytest.mark.parametrize("where", [3001, pytest.param(180001, marks=pytest.mark.slow)])
 def test_latin1_comment_line_is_refused_at_its_line(tmp_path, where):
     c, k, r, t, _ = make_log(7, revs=45000 if where > 4000 else 1000)
@@ -363,9 +359,6 @@ def test_latin1_comment_line_is_refused_at_its_line(tmp_path, where):
     assert_refused(p, res, path, where, ("utf-8",))
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a Latin-1 byte in a data cell deep in a log "
-                   "gives \"'utf-8' codec can't decode byte 0xb5 in position 7407\": no file "
-                   "name, no line")
 def test_latin1_byte_in_a_deep_cell_names_file_and_line(big):
     d, rows, _ = big
     L = [HEADER, *rows]
@@ -375,9 +368,6 @@ def test_latin1_byte_in_a_deep_cell_names_file_and_line(big):
     assert_refused(p, res, path, 180001)
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a count too large for an integer "
-                   "(99999999999999999999999) gives 'not a valid counter log (pyarrow refused "
-                   "it, no line found)': neither the line nor the column is named")
 def test_an_out_of_range_count_names_its_line(tmp_path, small_rows):
     bad = "99999999999999999999999," + small_rows[999].split(",", 1)[1]
     path = write(tmp_path / "huge.csv",
@@ -386,9 +376,6 @@ def test_an_out_of_range_count_names_its_line(tmp_path, small_rows):
     assert_refused(p, res, path, 1001, ("count",))
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a UTF-16 log without a byte-order mark (the "
-                   "NUL-interleaved bytes pass as UTF-8) is refused as 'header: (4 field(s), "
-                   "not column names) lacks count, counter, ref' instead of naming the encoding")
 def test_utf16_without_bom_is_named_as_such(tmp_path, small_rows):
     text = "\n".join([HEADER, *small_rows]) + "\n"
     path = write(tmp_path / "u16le.csv", text.encode("utf-16-le"))
@@ -549,9 +536,6 @@ def test_flag_values_are_refused_in_one_line(ulog):
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, args
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a southern latitude range as the README "
-                   "writes it, '--latitude-range -40,-30', is taken by argparse for an option: "
-                   "'expected one argument' (only '--latitude-range=-40,-30' works)")
 def test_southern_latitude_range_as_documented(ulog):
     p = _cli(ulog, "--faces", FACES, "--latitude-range", "-40,-30")
     q = _cli(ulog, "--faces", FACES, "--latitude-range=-40,-30")
@@ -601,11 +585,6 @@ def test_u_is_honest_over_40_nearly_locked_logs(tmp_path):
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.2
 
 
-@pytest.mark.xfail(strict=True, reason="defect: on a log whose quantisation phase drifts "
-                   "through 16 and 36 whole counts (Earth rate at |latitude| < 0.5°, quiet "
-                   "autocollimator) one or two angles are called 'quantisation locked: not "
-                   "averaged' (u = q/√6 = 0.505″) while the others get 0.006-0.02″; 6 of 40 "
-                   "such logs")
 @pytest.mark.parametrize("seed", [29, pytest.param(39, marks=pytest.mark.slow)])
 def test_a_drifting_beat_is_not_called_locked(tmp_path, seed):
     res, _, cycles = _run_near_locked(seed, tmp_path)
@@ -615,9 +594,6 @@ def test_a_drifting_beat_is_not_called_locked(tmp_path, seed):
     assert not any("locked" in n for n in res["notes"])
 
 
-@pytest.mark.xfail(strict=True, reason="defect: on nearly locked logs the JSON's "
-                   "angles_u_arcsec is below its own type_b_arcsec (0.0057″ against 0.0157″; "
-                   "18 of 40 logs), and seed 29's z->y angle is 3.3 u off")
 def test_u_is_not_below_its_type_b_part(tmp_path):
     res, z, _ = _run_near_locked(29, tmp_path)
     u = np.array(res["angles_u_arcsec"])
@@ -625,10 +601,6 @@ def test_u_is_not_below_its_type_b_part(tmp_path):
     assert np.all(u >= np.array(res["type_a_arcsec"]) * (1 - 1e-9))
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a line of only spaces or a tab (a 'blank' line "
-                   "to any editor) anywhere in a log gives 'not a valid counter log (pyarrow "
-                   "refused it, no line found)': it should be skipped as a blank line, or at "
-                   "least be named by its line")
 @pytest.mark.parametrize("blank", ["   ", pytest.param("\t", marks=pytest.mark.slow)])
 def test_a_whitespace_only_line_is_a_blank_line_or_named(tmp_path, small_rows, blank):
     plain = write(tmp_path / "plain.csv", "\n".join([HEADER, *small_rows]) + "\n")
@@ -645,10 +617,6 @@ def test_a_whitespace_only_line_is_a_blank_line_or_named(tmp_path, small_rows, b
         assert_refused(p, res, path, 1001)
 
 
-@pytest.mark.xfail(strict=True, reason="defect: time stamps as Unix epoch seconds (1.7e9 s, "
-                   "written to 0.1 µs, held in float64 to 0.24 µs) with --steady-table: the "
-                   "timing angles are used with u = 1.8e-10″ on z->y while it is 0.045″ off "
-                   "(2.5e8 u), exit 0, ok true, no warning")
 def test_epoch_time_stamps_with_steady_table_are_honest_or_flagged(tmp_path):
     c, k, r, t, truth = make_log(3, revs=300, jitter_arcsec=0.05, latitude=45.0)
     path = write(tmp_path / "epoch.csv", "\n".join(
