@@ -446,9 +446,17 @@ def _with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
     arcsec = np.rad2deg(1) * 3600
     worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
     if ta.p_value < alpha:
+        why = ("a speed ripple locked to the table" if not ta.stamp_limited else
+               f"time stamps too coarse ({ta.stamp_resolution_s:.2g} s, locked to the table's "
+               "period) or a speed ripple locked to the table")
         note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
-                f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — a "
-                "speed ripple locked to the table; counts used")
+                f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — "
+                f"{why}; counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    if np.all(ta.u_rad >= run.angles.u_rad) and ta.stamp_limited:
+        note = (f"steady table confirmed, but the time stamps' resolution "
+                f"({ta.stamp_resolution_s:.2g} s) limits the pulse-time angles to "
+                f"±{float(np.max(ta.u_rad)) * arcsec:.3f}″: counts used")
         return replace(run, timing=ta, notes=(*run.notes, note))
     if np.all(ta.u_rad >= run.angles.u_rad):
         note = ("steady table confirmed, but the pulse times are the noisier estimate (speed "

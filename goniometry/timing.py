@@ -27,7 +27,9 @@ from goniometry.revolutions import LogSummary
 @dataclass(frozen=True)
 class TimingAngles:
     """Angles from time fractions [rad] with u and covariance (batch means); the per-angle
-    mean difference counts - timing [rad] with its u, chi2 over ``dof`` and p-value."""
+    mean difference counts - timing [rad] with its u, chi2 over ``dof`` and p-value;
+    ``stamp_limited``: u is the time stamps' resolution floor (``stamp_resolution_s`` [s]),
+    not their scatter."""
 
     angles_rad: np.ndarray
     u_rad: np.ndarray
@@ -38,6 +40,8 @@ class TimingAngles:
     chi2: float
     dof: int
     p_value: float
+    stamp_limited: bool = False
+    stamp_resolution_s: float = float("nan")
 
 
 def _batch_cov(x: np.ndarray, block: int = 8) -> np.ndarray:
@@ -53,10 +57,10 @@ def _batch_cov(x: np.ndarray, block: int = 8) -> np.ndarray:
 
 
 def stamp_resolution(t: np.ndarray) -> float:
-    """The resolution [s] of time stamps: the coarsest decimal grid (1 s ... 1e-12 s) they
-    all lie on (a 10 MHz clock: 1e-7 s), but never finer than float64 holds them at their
-    magnitude (0.24 µs for Unix epoch seconds). A grid finer than 100 float64 steps is not
-    told apart: the float64 step is then returned."""
+    """The resolution [s] of time stamps (and of differences of them): the coarsest decimal
+    grid (1 s ... 1e-12 s) they all lie on (a 10 MHz clock: 1e-7 s), but never finer than
+    float64 holds them at their magnitude (0.24 µs for Unix epoch seconds). A grid finer than
+    100 float64 steps is not told apart: the float64 step is then returned."""
     t = np.asarray(t, float)
     ulp = float(np.spacing(np.max(np.abs(t))))
     for k in range(13):
@@ -86,17 +90,23 @@ def timing_angles(summary: LogSummary) -> TimingAngles:
     # counts' only while the jitter dithers it; when the fractions barely scatter it is
     # locked (a steady table, stamps coarser than the jitter — e.g. epoch seconds in float64)
     # and does not average at all: the floor then stands for good.
-    floor = 2 * np.pi * stamp_resolution(t_end[ok]) / np.sqrt(6) / float(dt.sum(1).mean())
+    # (the intervals too: at a whole number of revolutions a second, the reference pulses
+    # alone all fall near whole seconds)
+    res = stamp_resolution(np.concatenate([t_end[ok], dt.ravel()]))
+    floor = 2 * np.pi * res / np.sqrt(6) / float(dt.sum(1).mean())
     locked = a_t.std(0) < 0.5 * floor
     u_floor = np.where(locked, floor, floor / np.sqrt(len(dt)))
     scale = np.maximum(u_floor / np.sqrt(np.maximum(np.diag(cov), 1e-300)), 1.0)
     cov = cov * np.outer(scale, scale)
     d = a_c - a_t
     cd = _batch_cov(d)
+    # (the difference carries the stamps' error too: the check must not take it for a ripple)
+    cd = cd + np.diag(np.maximum(u_floor**2 - np.diag(cd), 0.0))
     mean_d = d.mean(0)
     n = dt.shape[1]
     chi2 = float(mean_d @ np.linalg.pinv(cd, rcond=1e-10) @ mean_d)
     from scipy.special import chdtrc  # (the chi2 survival function, without scipy.stats)
 
     return TimingAngles(a_t.mean(0), np.sqrt(np.diag(cov)), cov, len(dt), mean_d,
-                        np.sqrt(np.diag(cd)), chi2, n - 1, float(chdtrc(n - 1, chi2)))
+                        np.sqrt(np.diag(cd)), chi2, n - 1, float(chdtrc(n - 1, chi2)),
+                        bool(np.any(scale > 1.0)), res)
