@@ -225,3 +225,17 @@ def test_the_loop_started_during_the_pass_is_the_loop_after_it(tmp_path, monkeyp
     after = loop_gonio(counts[:m], dt[:m], t_end[:m])
     assert run.loop.summary_lines() == after.summary_lines()
     assert run.loop.summary().to_dict() == after.summary().to_dict()
+
+
+def test_stamp_resolution_is_the_grid_or_the_float_step():
+    from goniometry.timing import stamp_resolution
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.2, 0.3, 500))
+    assert stamp_resolution(np.round(t, 7)) == 1e-7  # a 10 MHz clock
+    assert stamp_resolution(np.round(t, 3)) == 1e-3
+    # Unix epoch seconds: float64 holds them to 2^-22 s, whatever was written
+    assert stamp_resolution(np.round(1.7e9 + t, 7)) == np.spacing(1.7e9 + t.max())
+    assert stamp_resolution(t) == np.spacing(t.max())  # full-precision stamps
+    # near-whole seconds (reference pulses at 1 rev/s) are no 1 s grid
+    assert stamp_resolution(np.round(np.arange(1, 300) + rng.normal(0, 1e-7, 299), 9)) == 1e-9
