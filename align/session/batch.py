@@ -265,7 +265,13 @@ def _watch_parent(parent: int) -> None:
     mine = os.getppid()
     while os.getppid() == mine and _exists(parent):
         time.sleep(PARENT_POLL_S)
-    _thread.interrupt_main(signal.SIGTERM)  # unwinds the session (temporary files removed)
+    # Unwinds the session (temporary files removed). A real signal to the main thread, not
+    # only interrupt_main's flag: a main thread blocked in a system call (waiting on a lock,
+    # or writing a result into a pipe the dead parent no longer reads) is woken by it.
+    if hasattr(signal, "pthread_kill"):
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+    else:
+        _thread.interrupt_main(signal.SIGTERM)
     time.sleep(30)
     os._exit(128 + signal.SIGTERM)  # the main thread was stuck in a long C call
 
