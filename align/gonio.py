@@ -336,11 +336,14 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
                           apply_loop=False, steady_table=steady_table, columns=columns)
         comb, term = combine_directions(fwd.angles, rev.angles)
-        notes = [*fwd.notes, *(f"reverse run: {n}" for n in rev.notes),
+        notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
+                 *(f"reverse run: {n}" for n in rev.notes if not n.startswith(LATENCY)),
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
-        warns = (*fwd.warnings, *(f"reverse run: {w}" for w in rev.warnings))
+        # (both directions: the latency bias cancels, its one-direction warning does not hold)
+        warns = (*(w for w in fwd.warnings if not w.startswith(LATENCY)),
+                 *(f"reverse run: {w}" for w in rev.warnings if not w.startswith(LATENCY)))
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
@@ -434,8 +437,50 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                         alpha)
 
 
+LATENCY = "one direction only, on a table whose speed varies with its angle"
+
+
+def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Change of each angle [rad] per second of autocollimator latency, from the table's mean
+    speed at each face (the mean of the intervals either side of it, angle over duration):
+    a pulse late by L reads the face L * speed further on, so angle k moves by
+    L * (speed at face k+1 - speed at face k)."""
+    a = counts / counts.sum(1, keepdims=True) * 2 * np.pi
+    w = np.mean(a / dt, axis=0)  # mean speed over each interval [rad/s]
+    at_face = (np.roll(w, 1) + w) / 2  # face k: between interval k-1 and interval k
+    return np.roll(at_face, -1) - at_face
+
+
+def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
+    """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
+    from the count fractions): then any latency of the autocollimator biases one direction's
+    angles, which only the other direction cancels (--reverse-log); the log cannot tell the
+    latency. Stated per microsecond of it."""
+    if not run.summary.has_time or run.timing_used:
+        return run
+    counts, dt, _ = run.summary.stats.kept()
+    ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
+    if ok.sum() < 16:
+        return run
+    ta = run.timing if run.timing is not None else timing_angles(run.summary)
+    if ta.p_value >= alpha or ta.stamp_limited:
+        return run
+    per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
+    arcsec = np.rad2deg(1) * 3600
+    why = (f"{LATENCY} (pulse-time and count fractions differ, p {ta.p_value:.2g}): each µs "
+           f"of autocollimator latency biases an angle by up to {per_us * arcsec:.3g}″ (u is "
+           f"{float(np.max(run.angles.u_rad)) * arcsec:.3g}″), and the log cannot tell the "
+           "latency; measure the other direction too (--reverse-log) to cancel it")
+    return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
+
+
 def _with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
-    """Replace the count angles by the timing angles when asked, confirmed and better."""
+    """Replace the count angles by the timing angles when asked, confirmed and better; warn
+    of a latency bias the log cannot determine (see _latency_check)."""
+    return _latency_check(_timing_choice(run, steady_table, alpha), alpha)
+
+
+def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
     if not steady_table:
         return run
     if not run.summary.has_time:
