@@ -33,6 +33,7 @@ from goniometry import (
     FaceAngles,
     LogSummary,
     face_angles,
+    kept_table,
     read_revolutions,
     vertical_earth_rate,
 )
@@ -398,7 +399,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     if "loop" in early:
         loop = early["loop"].result()
     else:
-        counts, dt, t_end = summary.stats.kept()
+        counts, dt, t_end = kept_table(summary)
         m = LOOP_REVOLUTIONS
         loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
     earth = [e for e in loop.effects if e.name == EARTH]
@@ -458,7 +459,7 @@ def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
     latency. Stated per microsecond of it."""
     if not run.summary.has_time or run.timing_used:
         return run
-    counts, dt, _ = run.summary.stats.kept()
+    counts, dt, _ = kept_table(run.summary)
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     if ok.sum() < 16:
         return run

@@ -373,11 +373,22 @@ def _not_utf8(path: Path, spec: TableSpec) -> InputError | None:
     return None
 
 
-def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
-    """Slow path, only after pyarrow refused the file: the first row that is not valid."""
+def _refused(path: Path, spec: TableSpec, h: _Header, retry_without_comments: bool
+             ) -> InputError | None:
+    """After pyarrow refused the file: the error naming the first line that is not valid, or
+    None when a read without the comment lines may still succeed (``retry_without_comments``
+    and the file has '#' after its header and is UTF-8 throughout)."""
     bad = _not_utf8(path, spec)
     if bad is not None:
         return bad
+    if retry_without_comments and _may_have_comments(path, h):
+        return None
+    return _locate(path, spec, h)
+
+
+def _locate(path: Path, spec: TableSpec, h: _Header) -> InputError:
+    """Slow path, only after pyarrow refused a UTF-8 file: the first row that is not
+    valid."""
     kinds = {c.name: c.kind for c in spec.columns}
     n = len(h.names)
     with open(path, encoding="utf-8-sig", newline="") as f:
@@ -508,8 +519,9 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         at = pacsv.read_csv(path, read_options=ro, parse_options=po, convert_options=co)
         again = _commented_labels(h, spec, dict(zip(at.column_names, at.columns, strict=True)))
     except pa.ArrowInvalid:
-        if not _may_have_comments(path, h) or _not_utf8(path, spec) is not None:
-            raise _locate(path, spec, h) from None
+        err = _refused(path, spec, h, retry_without_comments=True)
+        if err is not None:
+            raise err from None
         again = True
     if again:
         try:
@@ -517,7 +529,7 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                 at = pacsv.read_csv(io.BufferedReader(src), read_options=ro, parse_options=po,
                                     convert_options=co)
         except pa.ArrowInvalid:
-            raise _locate(path, spec, h) from None
+            raise _refused(path, spec, h, retry_without_comments=False) from None
     if at.num_rows == 0:
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
     table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
@@ -682,8 +694,9 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                 yield chunk
             break
         except (pa.ArrowInvalid, _Commented):
-            if filtered or not _may_have_comments(path, h) or _not_utf8(path, spec):
-                raise _locate(path, spec, h) from None
+            err = _refused(path, spec, h, retry_without_comments=not filtered)
+            if err is not None:
+                raise err from None
     if empty:
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
 
