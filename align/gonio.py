@@ -384,7 +384,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                                      rate), steady_table, alpha)
     if latitude_deg is not None:
         why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
-               "pulse times; NOT applied")
+               "pulse times; NOT applied (nor can a table speed that follows its angle be "
+               "seen, which with autocollimator latency biases one direction: measure both)")
         notes.append(why)
         return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None,
                                      warnings=(why,)), steady_table, alpha)
