@@ -178,33 +178,9 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
             out.write(data if isinstance(data, str) else data.decode("utf-8"))
             out.flush()
         return Path(STDOUT)
-    p = Path(path)
-    raw = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
-    try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 is for secrets, not results
-        with os.fdopen(fd, "wb") as f:
-            f.write(raw)
-            f.flush()
-            os.fsync(f.fileno())
-        if force:
-            os.replace(tmp, p)
-        else:
-            try:
-                os.link(tmp, p)  # atomic and exclusive: fails if p exists
-            except FileExistsError:
-                raise OutputError(f"{p}: appeared while this run was computing (another run "
-                                  "writing the same output?); not replaced — pass --force "
-                                  "to replace it") from None
-            except OSError:  # a file system without hard links: check, then rename
-                if p.exists():
-                    raise OutputError(f"{p}: appeared while this run was computing; not "
-                                      "replaced — pass --force to replace it") from None
-                os.replace(tmp, p)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return p
+    with OutputSet(force) as out:
+        out.stage(path, data)
+        return out.commit()[0]
 
 
 class OutputSet:
@@ -215,7 +191,8 @@ class OutputSet:
     renames them into place in the order staged — exclusively unless ``force``, as
     :func:`write_atomic` — and, should one of them fail (it appeared meanwhile), removes the
     ones it had already put in place. A stop (SIGINT/SIGTERM, :mod:`axisbase.stop`) is held
-    back during the commit. Temporary files are removed by :meth:`discard` (``with`` does it),
+    back during the commit, while a temporary file is created and recorded, and while the
+    temporary files are removed. Temporary files are removed by :meth:`discard` (``with`` does it),
     so a run that is stopped or fails leaves nothing behind.
     """
 
@@ -230,12 +207,16 @@ class OutputSet:
         self.discard()
 
     def stage(self, path: str | Path, data: str | bytes) -> None:
+        from axisbase.stop import stops_held
+
         p = Path(path)
         raw = data.encode("utf-8") if isinstance(data, str) else data
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
-        self._staged.append((p, tmp))
-        os.chmod(tmp, 0o666 & ~_umask())
+        # A stop between the file's creation and its record here would leave it behind.
+        with stops_held():
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+            self._staged.append((p, tmp))
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), 0o666 & ~_umask())  # mkstemp's 0600 is for secrets
             f.write(raw)
             f.flush()
             os.fsync(f.fileno())
@@ -243,10 +224,10 @@ class OutputSet:
     def commit(self) -> list[Path]:
         """Put every staged file in place; returns their paths (:class:`OutputError` and
         nothing in place if one of them cannot be)."""
-        from axisbase.stop import commit_window
+        from axisbase.stop import stops_held
 
         done: list[Path] = []
-        with commit_window():
+        with stops_held():
             try:
                 for p, tmp in self._staged:
                     if self.force:
@@ -265,10 +246,13 @@ class OutputSet:
 
     def discard(self) -> None:
         """Remove the temporary files (those not committed)."""
-        for _, tmp in self._staged:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        self._staged = []
+        from axisbase.stop import stops_held
+
+        with stops_held():  # a second stop (the parent's end, say) must not cut this short
+            for _, tmp in self._staged:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+            self._staged = []
 
 
 def _link_exclusive(tmp: str, p: Path) -> None:

@@ -1,10 +1,11 @@
 """Stopping cleanly: SIGTERM and SIGINT as an exception, never in the middle of a commit.
 
 A run told to stop (Ctrl-C, ``kill``, the end of a batch's parent) unwinds like any exception,
-so every ``finally`` removes its temporary files. The one moment that must not be cut is the
-*commit* — the few renames that put a session's files into place (see
-:class:`axisbase.output.OutputSet`): a stop that arrives then is held back and raised as soon as
-the commit has finished, so the files appear all together or not at all.
+so every ``finally`` removes its temporary files. The moments that must not be cut are held
+(:func:`stops_held`): the *commit* — the few renames that put a session's files into place (see
+:class:`axisbase.output.OutputSet`), so the files appear all together or not at all — and the
+few steps between a temporary file's creation and its record for removal, and that removal. A
+stop that arrives then is raised as soon as the block has finished.
 
 Exit statuses follow the shell's convention, 128 + the signal number: 130 for SIGINT, 143 for
 SIGTERM.
@@ -32,7 +33,7 @@ class Stopped(KeyboardInterrupt):
 
 
 class _State(threading.local):
-    committing = False
+    holding = False
     pending: Stopped | None = None
 
 
@@ -42,7 +43,7 @@ _STATE = _State()
 def on_signal(signum: int, frame: object) -> None:
     """The signal handler: raise :class:`Stopped`, or hold it back during a commit."""
     stop = Stopped(signum)
-    if _STATE.committing:  # the renames finish first; commit_window raises it after
+    if _STATE.holding:  # the renames finish first; stops_held raises it after
         _STATE.pending = stop
         return
     raise stop
@@ -62,14 +63,15 @@ def restore(previous: dict) -> None:
 
 
 @contextmanager
-def commit_window() -> Iterator[None]:
-    """A block during which a stop is held back and raised when the block ends."""
-    outer = _STATE.committing
-    _STATE.committing = True
+def stops_held() -> Iterator[None]:
+    """A block during which a stop is held back and raised when the block ends (a commit; the
+    creation of a temporary file until it is recorded for removal; that removal)."""
+    outer = _STATE.holding
+    _STATE.holding = True
     try:
         yield
     finally:
-        _STATE.committing = outer
+        _STATE.holding = outer
         if not outer and _STATE.pending is not None:
             stop, _STATE.pending = _STATE.pending, None
             raise stop
