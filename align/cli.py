@@ -460,8 +460,6 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     except FaceCountError as exc:
         raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} has "
                          f"{exc.found} pulses per revolution") from None
-    except ValueError as exc:  # the pipeline's own refusals (too few revolutions, ...)
-        raise UsageError(str(exc)) from None
     from align.documents import gonio_document
     from align.warnings import gonio_warnings
     from axisbase.output import write_json
@@ -470,8 +468,8 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     print(f"{summary.rows} rows, {fa.revolutions} revolutions used, {fa.counts_per_rev:.2f} "
          f"counts per revolution ({np.rad2deg(fa.quantum_rad) * 3600:.3f}″ a count)")
     for reason, n in summary.exclusions.counts.items():
-        print(f"  {n} x {reason} (lines {', '.join(map(str, summary.exclusions.lines[reason]))}"
-             f"{', ...' if n > 10 else ''})")
+        lines = ", ".join(map(str, summary.exclusions.lines[reason][:10]))
+        print(f"  {n} x {reason} (lines {lines}{', ...' if n > 10 else ''})")
     if summary.incomplete_tail:
         print(f"  last {summary.incomplete_tail} rows after the final reference pulse: an "
              "incomplete revolution, not used")

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from align.errors import InputError
 from axisbase.units import ARCSEC
 from goniometry import (
     FaceAngles,
@@ -277,7 +278,7 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
     """
     n = len(fwd.angles_rad)
     if len(rev.angles_rad) != n:
-        raise ValueError(f"the two directions have {n} and {len(rev.angles_rad)} faces")
+        raise InputError(f"the two directions have {n} and {len(rev.angles_rad)} faces")
     P = np.eye(n)[::-1]
     a_rev = P @ rev.angles_rad
     c_rev = P @ rev.cov @ P.T

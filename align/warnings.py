@@ -61,7 +61,10 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
 
     out = loop_warnings("goniometer", run.loop)
     out += [f"goniometer: {w}" for w in run.warnings]
-    ex = run.summary.exclusions.counts
+    from goniometry.revolutions import R_TAIL
+
+    # Noise's own tail in a long log is listed in the JSON's exclusions, not warned of.
+    ex = {why: k for why, k in run.summary.exclusions.counts.items() if why != R_TAIL}
     if ex:
         out.append("goniometer: pulse faults (each repaired or its revolution excluded, as said): "
                    + ", ".join(f"{n} x {reason}" for reason, n in ex.items()))

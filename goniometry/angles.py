@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from goniometry.errors import LogError
 from goniometry.revolutions import LogSummary
 
 OMEGA_EARTH = 7.2921150e-5  # rad/s
@@ -112,7 +113,7 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
     """
     st = summary.stats
     if st.n < 2:
-        raise ValueError(f"only {st.n} usable revolutions: need at least 2")
+        raise LogError(f"only {st.n} usable revolutions: need at least 2")
     n = st.n_faces
     # y = [a, g]: the corrected angles are a - rate g (linear), so their mean, covariance and
     # Allan variance follow from the sums of y for any rate.

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from goniometry.angles import kept_table
+from goniometry.errors import LogError
 from goniometry.revolutions import LogSummary
 
 
@@ -78,11 +79,11 @@ def timing_angles(summary: LogSummary) -> TimingAngles:
     """Timing angles of a log with pulse times, and their check against the counts."""
     counts, dt, t_end = kept_table(summary)
     if dt is None:
-        raise ValueError("the log has no t column: timing angles need pulse times")
+        raise LogError("the log has no t column: timing angles need pulse times")
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     counts, dt = counts[ok], dt[ok]
     if len(dt) < 16:
-        raise ValueError(f"only {len(dt)} revolutions with times: need at least 16")
+        raise LogError(f"only {len(dt)} revolutions with times: need at least 16")
     a_t = 2 * np.pi * dt / dt.sum(1, keepdims=True)
     a_c = 2 * np.pi * counts / counts.sum(1, keepdims=True)
     cov = _batch_cov(a_t)
