@@ -424,6 +424,10 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         for label, spec in _table(p, "poses", w).items():
             if not isinstance(spec, dict) or "up" not in spec:
                 raise InputError(f"{w}.poses {label}: expected {{ up = \"+Z\", table_deg = 0 }}")
+            unknown = set(spec) - {"up", "table_deg"}
+            if unknown:  # a misspelt table_deg would silently leave the pose at 0°
+                raise InputError(f"{w}.poses {label}: unknown key(s) "
+                                 f"{', '.join(sorted(unknown))}; known: table_deg, up")
             poses[str(label)] = (signed_axis(spec["up"], f"{w}.poses {label} up"),
                                  np.deg2rad(_number(spec.get("table_deg", 0.0),
                                                     f"{w}.poses {label} table_deg", -360, 360)))
