@@ -30,6 +30,17 @@ from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_l
 from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2}
+
+U_MISJUDGED_MAX = 10.0
+"""The most by which every stated uncertainty of a fusion may be too small together and the
+result still be a measurement (a larger disagreement is gross: ``FusionResult.gross``). The
+uncertainties come from the instruments' own scatter (a pose's sample standard deviation, a
+line fit's residual, counter statistics); misjudged noise makes them too small by a few
+times at most: samples correlated over the whole of a 50-sample pose — the worst case of
+treating coloured noise as white — understate a mean's u by sqrt(50) ~ 7. Beyond ten times,
+in all observations at once, the data do not describe one set-up: a sign, a label, a unit or
+a file is wrong, and no inflation of u makes E trustworthy (a sign error moves E by
+hundreds of arc-seconds, many times even the inflated u)."""
 TERM_UNIT = {TILT: "rad", REF: "rad"}
 
 
@@ -182,6 +193,32 @@ class FusionResult:
     @property
     def consistent(self) -> bool:
         return not self.loop.unexplained_structure
+
+    @property
+    def gross_bound(self) -> float:
+        """The chi2 beyond which the disagreement is gross: even with every uncertainty
+        :data:`U_MISJUDGED_MAX` times larger, chi2 would exceed its upper 1e-3 quantile."""
+        return float(U_MISJUDGED_MAX**2 * stats.chi2.isf(1e-3, max(self.dof, 1)))
+
+    @property
+    def gross(self) -> bool:
+        """The instruments disagree beyond any misjudgement of their noise (see
+        :data:`U_MISJUDGED_MAX`): E is not a measurement, whatever its inflated u says."""
+        return self.dof > 0 and self.chi2 > self.gross_bound
+
+    def worst_rows(self, n: int = 3) -> list[ObservationRow]:
+        """The ``n`` observations with the largest normalised residuals."""
+        return sorted(self.rows, key=lambda r: -abs(r.normalised))[:n]
+
+    def gross_message(self) -> str:
+        """One line for a gross disagreement: chi2 against its bound, the worst observations."""
+        worst = "; ".join(f"{r.source} {r.label} ({r.normalised:+.3g} u)"
+                          for r in self.worst_rows())
+        return (f"the instruments grossly disagree: chi2 {self.chi2:.4g} / {self.dof} dof, "
+                f"beyond {self.gross_bound:.3g} (what even uncertainties "
+                f"{U_MISJUDGED_MAX:g} times too small would give): a sign, a pose label, a "
+                f"unit or a file is wrong, E is not a measurement; worst observations: "
+                f"{worst}")
 
     def to_dict(self) -> dict:
         """The fusion's part of a session result: E [rad] and [″] with u, the 6×6 covariance

@@ -26,9 +26,11 @@ from align.fusion import (
     mark_block,
     static_block,
 )
+from align.fusion.observations import wrap_half
 from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
 from align.session.config import HOUSINGS, ImageEntry, Session
+from align.tilt import FAR_FROM_1G
 from axisbase.table import resolve_units
 from goniometry import LogError
 from imaging import CameraModel, ImageInputError
@@ -71,8 +73,8 @@ class SessionResult:
     def platform_calibration(self) -> PlatformCalibration | None:
         """The triad model and the misalignment in one (what 'align apply' needs), when both
         the calibration and the fusion ran."""
-        if self.fusion is None or self.calibration is None:
-            return None
+        if self.fusion is None or self.calibration is None or self.fusion.gross:
+            return None  # a gross disagreement's E is not a measurement: nothing to apply
         e6 = np.array([self.fusion.E[i, j] for i, j in E_INDEX])
         return PlatformCalibration(self.calibration.model, e6, self.fusion.cov)
 
@@ -159,6 +161,10 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
             res.errors.append(StageError("marks", f"{im.key} ({im.file.name}): {why}"))
             continue
+        off = _off_nominal(s, im, ok[0])
+        if off is not None:
+            res.errors.append(StageError("marks", off))
+            continue
         res.marks.append((im, ok[0]))
     if s.platform is not None and res.calibration is not None:
         progress("platform static readings")
@@ -167,11 +173,84 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     elif s.platform is not None:
         res.errors.append(StageError("platform static", "not used: the calibration failed"))
     progress("fusion")
+    failed = list(dict.fromkeys(e.stage for e in res.errors))
     blocks = observation_blocks(s, res)
     res.fusion = _try(res, "fusion", lambda: fuse(blocks, alpha=alpha)) if blocks else None
+    if res.fusion is None and blocks and failed:  # say why a source is missing
+        e = res.errors[-1]
+        res.errors[-1] = StageError(e.stage, f"{e.message} (without the failed stage(s): "
+                                             f"{', '.join(failed)})")
     if not blocks:
         res.errors.append(StageError("fusion", "no stage produced observations"))
+    elif res.fusion is not None and res.fusion.gross:
+        res.errors.append(StageError("fusion", res.fusion.gross_message()))
     return res
+
+
+NOMINAL_LIMIT_DEG = 10.0
+"""How far a mark or a platform pose may lie from its declared nominal direction [deg]. The
+fusion measures small angles: misalignments of arc-minutes, a table tilt and camera rolls
+under a degree (session.toml caps a declared roll at 10°). A direction further off is not
+a misalignment but a wrong declaration — images swapped, a pose label, a column or a scale
+sign — and is refused naming it rather than fused (a 90° or 180° error would move E by
+degrees)."""
+
+
+def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:
+    """The refusal of a mark far from its entry's nominal direction, or None."""
+    nominal = 0.0 if im.nominal == "horizontal" else np.pi / 2
+    dev = float(wrap_half(r.angle_rad - nominal - s.cameras[s.views[im.view].camera].roll_rad))
+    if abs(dev) <= np.deg2rad(NOMINAL_LIMIT_DEG):
+        return None
+    return (f"{im.key} file = {im.file.name!r}: the mark is at {np.rad2deg(r.angle_rad):.2f}°, "
+            f"{np.rad2deg(dev):+.1f}° from its declared nominal ({im.nominal}; a misalignment "
+            "is arc-minutes): images swapped, or the entry's housing, view or nominal wrong")
+
+
+def _axis_name(v: np.ndarray) -> str:
+    i = int(np.argmax(np.abs(v)))
+    return f"{'+' if v[i] > 0 else '-'}{'XYZ'[i]}"
+
+
+def _check_attitudes(path, poses: Poses, ups: list[np.ndarray], a: np.ndarray,
+                     units: str) -> None:
+    """Refuse platform readings that are not 1 g after the calibration (another unit, another
+    triad) or that point far from their pose's declared 'up' (a scale sign, a column, a pose's
+    attitude), naming the poses."""
+    norm = np.linalg.norm(a, axis=1)
+    far = np.flatnonzero(np.abs(norm - 1) > FAR_FROM_1G)
+    if far.size:
+        i = int(far[0])
+        raise InputError(
+            f"{path}: pose {poses.labels[i]} reads |a| = {norm[i]:.4g} g after the calibration "
+            f"(a static pose reads 1 g within ~1e-3){_more(poses, far)}: not in the "
+            f"calibration's unit ({units})? check [platform] units, or the file is of another "
+            "triad")
+    cosang = np.array([a[k] @ ups[k] / norm[k] for k in range(len(a))])
+    bad = np.flatnonzero(cosang < np.cos(np.deg2rad(NOMINAL_LIMIT_DEG)))
+    if not bad.size:
+        return
+    i = int(bad[0])
+    up = ups[i]
+    ax = int(np.argmax(np.abs(up)))
+    reads = ", ".join(f"{v:+.2f}" for v in a[i])
+    if a[i][ax] * up[ax] < -0.5 * norm[i]:
+        hint = (f"reads {a[i][ax]:+.2f} g on {'xyz'[ax]}: check [calibration] scale_sign (the "
+                f"ellipsoid cannot tell a sign, the poses can), the sign of column "
+                f"u{'xyz'[ax]}, or the pose's declared up")
+    else:
+        hint = (f"reads along {_axis_name(a[i]).lower()}: check the columns (ux, uy, uz) or "
+                "the pose's declared up")
+    raise InputError(
+        f"{path}: platform pose {poses.labels[i]} declared up {_axis_name(up)} reads "
+        f"({reads}) g, {np.degrees(np.arccos(np.clip(cosang[i], -1, 1))):.0f}° from its "
+        f"declared attitude{_more(poses, bad)}; it {hint}")
+
+
+def _more(poses: Poses, idx: np.ndarray) -> str:
+    if len(idx) < 2:
+        return ""
+    return f" (so do {len(idx) - 1} more: {', '.join(poses.labels[k] for k in idx[1:])})"
 
 
 def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPose]:
@@ -196,8 +275,10 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
                          "readings' uncertainty)")
     m = cal.model
     R = r_matrix(m.beta)
+    a = m.specific_force(poses.u, poses.t, poses.temp)
+    _check_attitudes(p.static, poses, [p.poses[lab][0] for lab in poses.labels], a, units)
     # Calibrated per-axis readings w = R a_c = x - R b (see align.fusion.observations).
-    w = m.specific_force(poses.u, poses.t, poses.temp) @ R.T
+    w = a @ R.T
     u_w = poses.sigma_u / np.abs(m.k)
     return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i])
             for i, lab in enumerate(poses.labels)]
