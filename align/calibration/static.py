@@ -136,7 +136,9 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         mean = np.array([u[ids == i].mean(0) for i in range(n)])
         sig = None
         if count.min() >= MIN_SAMPLES:
-            sig = np.array([u[ids == i].std(0, ddof=1) / np.sqrt(count[i]) for i in range(n)])
+            sd = np.array([u[ids == i].std(0, ddof=1) for i in range(n)])
+            _check_one_pose(path, tab, order, ids, mean, sd, path.suffix.lower() in SUFFIXES)
+            sig = sd / np.sqrt(count)[:, None]
         tt = (np.array([t[ids == i].mean() for i in range(n)]) if t is not None
               else np.arange(n, dtype=float))
         tm = np.array([temp[ids == i].mean() for i in range(n)]) if temp is not None else None
@@ -207,6 +209,45 @@ def _check_counts(path: Path, tab: Table, labels: tuple[str, ...], count: np.nda
     if arrays:
         raise InputError(f"{path}: pose {what}")
     raise tab.fail(int(first_row[i]), "pose", what)
+
+
+MIXED_NOISE_RATIO = 10.0
+"""A pose's sample scatter beyond this many times the typical pose's (per channel) is not
+noise: the poses of one file share one sensor and one sampling, and a sample standard
+deviation of >= 3 samples exceeds ten times its sigma with probability < exp(-50)."""
+
+
+def _check_one_pose(path: Path, tab: Table, labels: tuple[str, ...], ids: np.ndarray,
+                    mean: np.ndarray, sd: np.ndarray, arrays: bool) -> None:
+    """Refuse a pose whose samples are not one static pose — a mistyped label joining two
+    orientations, or a pose that moved. Both of: its scatter is far beyond the others' noise
+    (:data:`MIXED_NOISE_RATIO`) and it is a change of attitude, more than the 1° tilt (of the
+    file's full scale, half its poses' widest range) by which the static-interval detector
+    splits one interval into two poses (``StaticSettings.split_deg``). Its mean would be a
+    direction no pose had; the file, the label and its line ranges are named."""
+    if len(labels) < 3:
+        return  # no typical noise to compare with
+    typical = np.median(sd, axis=0)
+    scale = np.max(np.ptp(mean, axis=0)) / 2
+    ratio = np.max(sd / np.where(typical > 0, typical, np.inf), axis=1)
+    moved = np.linalg.norm(sd, axis=1) > np.sin(np.deg2rad(StaticSettings.split_deg)) * scale
+    bad = np.flatnonzero((ratio > MIXED_NOISE_RATIO) & moved)
+    if not bad.size:
+        return
+    i = int(bad[0])
+    j = int(np.argmax(sd[i] / np.where(typical > 0, typical, np.inf)))
+    rows = np.flatnonzero(ids == i)
+    cut = np.flatnonzero(np.diff(rows) > 1)
+    runs = list(zip(rows[np.r_[0, cut + 1]], rows[np.r_[cut, len(rows) - 1]], strict=True))
+    where = ("rows " if arrays else "lines ") + ", ".join(
+        (f"{a + 1}-{b + 1}" if arrays else f"{tab.line(int(a))}-{tab.line(int(b))}")
+        for a, b in runs[:4])
+    more = f" (and {len(bad) - 1} more such poses)" if len(bad) > 1 else ""
+    raise InputError(
+        f"{path}: pose {labels[i]}: its samples are not one static pose (scatter "
+        f"{sd[i, j]:.3g} on u{'xyz'[j]} against a typical {typical[j]:.3g} of the other poses; "
+        f"{where}{', ...' if len(runs) > 4 else ''}){more}: two poses under one label (a "
+        "mistyped label) or a pose that moved")
 
 
 def _notes(det: StaticDetection) -> str:

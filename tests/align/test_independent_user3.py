@@ -373,8 +373,6 @@ def test_run_refuses_a_mark_far_from_its_nominal(tmp_path):
     assert not out.exists() or load(out)["ok"] is False
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a mistyped pose label joining two orientations "
-                   "(scatter 0.7 g against 2e-5 g noise) is accepted, ok: true, exit 0")
 @pytest.mark.parametrize("where", ["tumble", "platform"])
 def test_run_refuses_a_pose_label_that_joins_two_orientations(tmp_path, where):
     t = Triad(7)
