@@ -31,6 +31,14 @@ from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2}
 
+NOMINAL_LIMIT_DEG = 10.0
+"""How far an axis, a mark or a platform pose may lie from its declared nominal direction
+[deg]. The fusion measures small angles: misalignments of arc-minutes, a table tilt and
+camera rolls under a degree (session.toml caps a declared roll at 10°). A direction further
+off is not a misalignment but a wrong declaration — images swapped, a pose label, a column
+or a scale sign — and is refused naming it rather than fused (a 90° or 180° error would move
+E by degrees)."""
+
 U_MISJUDGED_MAX = 10.0
 """The most by which every stated uncertainty of a fusion may be too small together and the
 result still be a measurement (a larger disagreement is gross: ``FusionResult.gross``). The
@@ -96,6 +104,11 @@ class FusionStage:
             raise np.linalg.LinAlgError("fewer observations than parameters")
         res = least_squares(self._residual, x0, args=(layout,), method="lm", xtol=1e-14,
                             ftol=1e-14, x_scale=1e-3)
+        off = np.arccos(np.clip(np.diag(axes_from(res.x[:6])), -1.0, 1.0))
+        if off.max() > np.deg2rad(NOMINAL_LIMIT_DEG):
+            if terms:  # a candidate that runs away is not this data's effect
+                raise np.linalg.LinAlgError("the fit left the small angles")
+            raise InputError(self._far_message(off))
         J = res.jac
         s = np.linalg.svd(J, compute_uv=False)
         if s[-1] < 1e-9 * s[0]:
@@ -104,6 +117,21 @@ class FusionStage:
         axes, nuis = self._unpack(res.x, layout)
         pred = tuple(b.predict(axes, nuis) for b in self.blocks)
         return Solution(res.x, cov, names, res.fun, pred)
+
+    def _far_message(self, off: np.ndarray) -> str:
+        """The refusal of observations that only an axis far from nominal would fit (``off``:
+        each axis's angle from its nominal [rad]), naming those furthest from the nominal
+        set-up (E = 0)."""
+        k = int(np.argmax(off))
+        layout = self._layout(())
+        r0 = self._residual(np.zeros(6 + sum(w for _, w in layout)), layout)
+        labels = [f"{b.source} {lab}" for b in self.blocks for lab in b.labels]
+        worst = "; ".join(f"{labels[i]} ({r0[i]:+.3g} u)" for i in np.argsort(-np.abs(r0))[:3])
+        return (f"fusion: the observations fit only with axis {'xyz'[k]} "
+                f"{np.rad2deg(off[k]):.1f}° from its nominal (a misalignment is arc-minutes): "
+                "they disagree "
+                "with the declared set-up — a swapped column, a sign, a pose label or a file; "
+                f"furthest from the nominal set-up: {worst}")
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         sol = self.solve(terms)

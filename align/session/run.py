@@ -27,6 +27,7 @@ from align.fusion import (
     static_block,
 )
 from align.fusion.observations import wrap_half
+from align.fusion.solve import NOMINAL_LIMIT_DEG
 from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
 from align.session.config import HOUSINGS, ImageEntry, Session
@@ -185,15 +186,6 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     elif res.fusion is not None and res.fusion.gross:
         res.errors.append(StageError("fusion", res.fusion.gross_message()))
     return res
-
-
-NOMINAL_LIMIT_DEG = 10.0
-"""How far a mark or a platform pose may lie from its declared nominal direction [deg]. The
-fusion measures small angles: misalignments of arc-minutes, a table tilt and camera rolls
-under a degree (session.toml caps a declared roll at 10°). A direction further off is not
-a misalignment but a wrong declaration — images swapped, a pose label, a column or a scale
-sign — and is refused naming it rather than fused (a 90° or 180° error would move E by
-degrees)."""
 
 
 def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:

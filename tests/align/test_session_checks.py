@@ -180,3 +180,26 @@ def test_clean_sessions_are_never_refused(tmp_path):
         res = run_session(load_session(folder))
         assert res.ok, [e.message for e in res.errors]
         assert res.fusion.chi2 < res.fusion.gross_bound / 20
+
+
+def test_fusion_refuses_a_fit_far_from_the_small_angles(session, tmp_path, monkeypatch):
+    """ux and uy swapped in platform.csv, with the platform's own check out of the way: the
+    fusion's guard (an axis fitted > 10° from nominal) names the observations, never an
+    'internal error'."""
+    import align.session.run as run
+
+    folder = _copy(session, tmp_path)
+    p = folder / "platform.csv"
+    lines = p.read_text().splitlines()
+    out = [lines[0]]
+    for ln in lines[1:]:
+        c = ln.split(",")
+        out.append(",".join([c[0], c[2], c[1], *c[3:]]))
+    p.write_text("\n".join(out) + "\n")
+    res = _platform_only(folder)
+    assert "reads along" in _messages(res, "platform static")
+    monkeypatch.setattr(run, "_check_attitudes", lambda *a, **k: None)
+    res = _platform_only(folder)
+    msg = _messages(res, "fusion")
+    assert "from its nominal" in msg and "platform static X" in msg, msg
+    assert "internal error" not in msg
