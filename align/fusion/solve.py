@@ -46,9 +46,11 @@ uncertainties come from the instruments' own scatter (a pose's sample standard d
 line fit's residual, counter statistics); misjudged noise makes them too small by a few
 times at most: samples correlated over the whole of a 50-sample pose — the worst case of
 treating coloured noise as white — understate a mean's u by sqrt(50) ~ 7. Beyond ten times,
-in all observations at once, the data do not describe one set-up: a sign, a label, a unit or
-a file is wrong, and no inflation of u makes E trustworthy (a sign error moves E by
-hundreds of arc-seconds, many times even the inflated u)."""
+in all observations at once, the data do not describe one set-up — a sign, a label, a unit or
+a file is wrong (a sign error moves E by hundreds of arc-seconds, many times even the
+inflated u), or an effect no model here describes dominates (an undeclared K2 of 50 ug/g^2
+that a 14-pose tumble cannot separate gives chi2/dof ~ 250) — and an inflated u is no longer
+an uncertainty but a guess."""
 TERM_UNIT = {TILT: "rad", REF: "rad"}
 
 
@@ -244,9 +246,10 @@ class FusionResult:
                           for r in self.worst_rows())
         return (f"the instruments grossly disagree: chi2 {self.chi2:.4g} / {self.dof} dof, "
                 f"beyond {self.gross_bound:.3g} (what even uncertainties "
-                f"{U_MISJUDGED_MAX:g} times too small would give): a sign, a pose label, a "
-                f"unit or a file is wrong, E is not a measurement; worst observations: "
-                f"{worst}")
+                f"{U_MISJUDGED_MAX:g} times too small would give): E is not a measurement — "
+                "a wrong input (a sign, a pose label, a unit, a mirrored or swapped image) or "
+                "an effect no model here describes (see the other warnings); worst "
+                f"observations: {worst}")
 
     def to_dict(self) -> dict:
         """The fusion's part of a session result: E [rad] and [″] with u, the 6×6 covariance
