@@ -82,7 +82,7 @@ def tumble_dirs(rng, n=18):
                        float) / np.sqrt(3)
     d = np.vstack([faces, corners, random_dirs(rng, max(0, n - 14))])
     # a little placement error: nobody puts a housing exactly on a face
-    d = d + rng.normal(0, 0.01, d.shape)
+    d = d + rng.normal(0, 0.004, d.shape)  # 0.2 deg: within the default 0.5 deg
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
@@ -102,13 +102,13 @@ def pose_table(labels, means, rng, n=50, sigma=2e-5, with_t=False, dt=0.01):
 def write_pose_csv(path, rows, header="pose,ux,uy,uz", with_t=False, newline="\n",
                    bom=False, sep=",", comment=None, order=None, fmt="%.9f"):
     """Write pose rows; ``order`` permutes the columns (names from the header)."""
-    names = header.split(sep if sep != "," else ",")
     names = [h.strip() for h in header.split(",")]
     if with_t:
         names = [*names, "t"]
     cols = list(range(len(names)))
-    if order is not None:
-        cols = [names.index(o) for o in order]
+    if order is not None:  # canonical names, whatever the header spells
+        canon = ["pose", "ux", "uy", "uz", "t"][: len(names)]
+        cols = [canon.index(o) for o in order]
     lines = []
     if comment:
         lines.append("# " + comment)
@@ -189,3 +189,165 @@ def make_session(folder, triad, name="unit", tumble="tumble.csv", platform="plat
     text = (toml or SESSION_TOML).format(name=name, tumble=tumble, platform=platform)
     (folder / "session.toml").write_text(text, encoding="utf-8")
     return folder
+
+
+def off_diag(A):
+    return np.asarray(A, float)[~np.eye(3, dtype=bool)]
+
+
+def load(p):
+    return json.loads(Path(p).read_text(encoding="utf-8"))
+
+
+def numbers(d):
+    """The numbers a user compares between two runs of the same data."""
+    return json.dumps([d["misalignment_rad"], d["misalignment_u_rad"], d["covariance_rad2"],
+                       d["chi2"], d["dof"]])
+
+
+# ============================================================ 1. align run on hand-built sessions
+def test_run_matches_my_truth_over_20_sessions(tmp_path):
+    """|E - truth| / u over 20 random sessions (E ~ 300" per angle, k errors 1e-3)."""
+    truth = []
+    folders = []
+    for s in range(20):
+        t = Triad(100 + s)
+        folders.append(make_session(tmp_path / f"s{s:02d}", t, name=f"s{s:02d}"))
+        truth.append(t.S)
+    rc, out, err = align("run", *folders, "--json", tmp_path / "res", "-q", "--jobs", "2")
+    assert rc == 0, err[-2000:]
+    z = []
+    for s in range(20):
+        d = load(tmp_path / "res" / f"s{s:02d}.json")
+        assert d["ok"] and d["fused"] and not d["warnings"], d["warnings"]
+        z.append((off_diag(d["misalignment_rad"]) - off_diag(truth[s]))
+                 / off_diag(d["misalignment_u_rad"]))
+    z = np.array(z)
+    rms = float(np.sqrt(np.mean(z ** 2)))
+    # 120 values: the RMS of unit normals has a sampling sd of ~0.065
+    assert 0.75 < rms < 1.3, rms
+    assert np.abs(z).max() < 4.5, np.abs(z).max()
+
+
+def _dialect_sessions(tmp_path):
+    """The same data written as README allows it to be written, all in one batch."""
+    t = Triad(7)
+    TR, PR = t.tumble_rows(), t.platform_rows()
+
+    def sess(name, toml=SESSION_TOML, tumble="tumble.csv", platform="platform.csv", **kw):
+        f = tmp_path / name
+        for rel, rows in ((tumble, TR), (platform, PR)):
+            (f / rel).parent.mkdir(parents=True, exist_ok=True)
+            write_pose_csv(f / rel, rows, **kw)
+        text = toml.format(name="unit", tumble=tumble, platform=platform)
+        (f / "session.toml").write_bytes(text.encode("utf-8"))
+        return f
+
+    T = SESSION_TOML
+    variants = [
+        sess("ref"),
+        sess("crlf_bom_comment", newline="\r\n", bom=True, comment="by hand"),
+        sess("order_case", order=["ux", "pose", "uz", "uy"], header="POSE, UX ,Uy,uZ"),
+        sess("semicolon", sep=";"),
+        sess("tab_units", sep="\t", header="pose,ux [V],uy [V],uz [V]"),
+        sess("paths", tumble="data dir/tümble ü.csv", platform="plät form.csv"),
+        sess("toml_dialect", toml="\ufeff# mine\r\n" + T.split("\n", 1)[1].replace("\n", "\r\n")
+             .replace('static = "{tumble}"', 'static = "./{tumble}"\r\nunits = "V"')
+             .replace("table_deg = 90.0", "table_deg = 90")),
+    ]
+    return variants
+
+
+def test_run_same_session_in_every_dialect_is_bit_identical(tmp_path):
+    folders = _dialect_sessions(tmp_path)
+    rc, out, err = align("run", *folders, "--json", tmp_path / "res", "-q", "--jobs", "2")
+    assert rc == 0, err[-2000:]
+    ref = numbers(load(tmp_path / "res" / "ref.json"))
+    for f in folders[1:]:
+        assert numbers(load(tmp_path / "res" / f"{f.name}.json")) == ref, f.name
+
+
+BAD_TOML = {
+    # name: (edit of the session file, words the one-line message must hold)
+    "misspelt_key": (("static = \"{tumble}\"", "statc = \"{tumble}\""), ["statc"]),
+    "key_case": (("static = \"{tumble}\"", "Static = \"{tumble}\""), ["Static"]),
+    "wrong_type": (("static = \"{tumble}\"", "static = 5"), ["static"]),
+    "deg_nan": (("table_deg = 90.0", "table_deg = nan"), ["L090", "table_deg"]),
+    "deg_string": (("table_deg = 90.0", "table_deg = \"90\""), ["L090", "table_deg"]),
+    "duplicate_pose": (("Xdn = {{ up = \"-X\" }}",
+                        "Xdn = {{ up = \"-X\" }}\nXdn = {{ up = \"-X\" }}"), ["line 15"]),
+    "same_file": (("static = \"{platform}\"", "static = \"./{tumble}\""), ["same file"]),
+    "outside": (("static = \"{tumble}\"", "static = \"../x/tumble.csv\""), ["outside"]),
+    "units": (("static = \"{tumble}\"", "static = \"{tumble}\"\nunits = \"mg\""), ["units"]),
+    "up": (("Xup = {{ up = \"+X\" }}", "Xup = {{ up = \"+W\" }}"), ["Xup", "up"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_TOML))
+def test_run_refuses_a_bad_session_key_in_one_line(tmp_path, case):
+    (old, new), needles = BAD_TOML[case]
+    toml = SESSION_TOML.replace(old, new)
+    assert toml != SESSION_TOML
+    f = make_session(tmp_path / "s", Triad(3), toml=toml)
+    out = tmp_path / "out.json"
+    rc, o, e = align("run", f, "--json", out)
+    assert_clean_refusal(rc, o, e, "session.toml", *needles)
+    assert len(e.strip().splitlines()) == 1, e
+    assert not out.exists()
+
+
+@pytest.mark.xfail(strict=True, reason="defect: an unknown key inside a [platform.poses] entry "
+                   "(tabel_deg) is silently ignored")
+def test_run_refuses_misspelt_key_inside_a_pose(tmp_path):
+    toml = SESSION_TOML.replace('L090 = {{ up = "+Z", table_deg = 90.0 }}',
+                                'L090 = {{ up = "+Z", tabel_deg = 90.0 }}')
+    f = make_session(tmp_path / "s", Triad(3), toml=toml)
+    rc, o, e = align("run", f, "--json", tmp_path / "out.json")
+    assert_clean_refusal(rc, o, e, "L090", "tabel_deg")
+
+
+def _gross(tmp_path, triad, toml=SESSION_TOML, platform_rows=None):
+    f = tmp_path / "s"
+    f.mkdir()
+    write_pose_csv(f / "tumble.csv", triad.tumble_rows())
+    write_pose_csv(f / "platform.csv", platform_rows or triad.platform_rows())
+    (f / "session.toml").write_text(toml.format(name="u", tumble="tumble.csv",
+                                                platform="platform.csv"))
+    out = tmp_path / "out.json"
+    rc, o, e = align("run", f, "--json", out)
+    return rc, o, e, (load(out) if out.exists() else None)
+
+
+GROSS = ["scale_sign_undeclared", "platform_z_flipped", "xup_xdn_swapped", "platform_in_mV"]
+
+
+@pytest.mark.xfail(strict=True, reason="defect: a grossly inconsistent session (wrong scale "
+                   "sign, a flipped axis, swapped pose labels, readings in mV) gives ok: true, "
+                   "exit 0 and E 400-10^7 arcsec off, only u inflated")
+@pytest.mark.parametrize("case", GROSS)
+def test_run_never_calls_a_grossly_inconsistent_session_ok(tmp_path, case):
+    t = Triad(11)
+    toml, rows = SESSION_TOML, None
+    if case == "scale_sign_undeclared":
+        t.k = -t.k
+    elif case == "platform_z_flipped":
+        rows = [(r[0], r[1], r[2], 2 * t.u0[2] - r[3], r[4]) for r in t.platform_rows()]
+    elif case == "xup_xdn_swapped":
+        toml = (toml.replace('Xup = {{ up = "+X" }}', 'Xup = {{ up = "-X" }}')
+                .replace('Xdn = {{ up = "-X" }}', 'Xdn = {{ up = "+X" }}'))
+    elif case == "platform_in_mV":
+        rows = [(r[0], *(1000 * np.array(r[1:4])), r[4]) for r in t.platform_rows()]
+    rc, o, e, d = _gross(tmp_path, t, toml, rows)
+    assert "Traceback" not in e
+    # chi2/dof of 10^4-10^6: no inflation of u makes that a trustworthy result
+    assert rc == 2 and (d is None or d["ok"] is False), (rc, d and d["ok"])
+
+
+@pytest.mark.xfail(strict=True, reason="defect: platform.csv with ux/uy swapped ends in "
+                   "'internal error (LinAlgError ...)'")
+def test_run_swapped_platform_axes_is_a_clear_message(tmp_path):
+    t = Triad(7)
+    rows = [(r[0], r[2], r[1], r[3], r[4]) for r in t.platform_rows()]
+    rc, o, e, d = _gross(tmp_path, t, platform_rows=rows)
+    assert rc == 2
+    assert "internal error" not in (o + e).lower()
