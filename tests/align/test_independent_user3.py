@@ -621,3 +621,83 @@ def test_run_refuses_a_mark_far_from_its_nominal(tmp_path):
     rc, o, e = align("run", f, "--json", out)
     assert rc == 2 and "x_A.png" in e
     assert not out.exists() or load(out)["ok"] is False
+
+
+# ============================================================ 4. lots and batches
+@pytest.fixture(scope="module")
+def lot_results(tmp_path_factory):
+    """Six ok session results and one failed, from my own sessions."""
+    root = tmp_path_factory.mktemp("lot")
+    folders = [make_session(root / f"u{s}", Triad(500 + s), name=f"u{s}") for s in range(6)]
+    bad = SESSION_TOML.replace('Ydn = {{ up = "-Y" }}\n', "")  # a pose without attitude
+    folders.append(make_session(root / "u9", Triad(509), name="u9", toml=bad))
+    rc, o, e = align("run", *folders, "--json", root / "res", "-q", "--jobs", "2")
+    assert rc == 2, e[-2000:]  # one failed
+    return root / "res"
+
+
+def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_results):
+    import shutil
+
+    res = tmp_path / "res"
+    shutil.copytree(lot_results, res)
+    (res / "trunc.json").write_text('{"format": "axis')
+    d = load(res / "u1.json")
+    d["format_version"] = 99
+    (res / "newer.json").write_text(json.dumps(d))
+    rc, o, e = align("lot", res, "--json", tmp_path / "lot.json")
+    assert rc == 2 and "Traceback" not in e
+    assert "trunc.json: not read" in e and "newer.json: not read" in e
+    lot = load(tmp_path / "lot.json")
+    assert lot["n_in_statistics"] == 6
+    E = np.array([[load(res / f"u{s}.json")["misalignment_arcsec"][i][j] for s in range(6)]
+                  for i, j in [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]])
+    for row, a in zip(E, lot["angles"], strict=True):
+        assert a["n"] == 6
+        assert np.isclose(a["mean_arcsec"], row.mean(), rtol=1e-12, atol=1e-9)
+        assert np.isclose(a["std_arcsec"], row.std(ddof=1), rtol=1e-9)
+        assert np.isclose(a["control_chart"]["mr_bar_arcsec"], np.abs(np.diff(row)).mean())
+    failed = [u for u in lot["units"] if not u["ok"]]
+    assert [u["unit"] for u in failed] == ["u9"] and not failed[0]["in_statistics"]
+
+
+@pytest.mark.xfail(strict=True, reason="defect: the same unit's result twice (an identical copy) "
+                   "is counted twice in the lot's statistics without a word")
+def test_lot_says_when_a_unit_is_counted_twice(tmp_path, lot_results):
+    import shutil
+
+    res = tmp_path / "res"
+    shutil.copytree(lot_results, res)
+    shutil.copy(res / "u2.json", res / "u2_rerun.json")
+    rc, o, e = align("lot", res, "--json", tmp_path / "lot.json")
+    lot = load(tmp_path / "lot.json")
+    assert lot["n_in_statistics"] == 6 or "u2" in " ".join(lot["warnings"]), lot["warnings"]
+
+
+@pytest.mark.slow
+def test_batch_ctrl_c_then_resume_gives_the_same_numbers(tmp_path):
+    import signal
+    import time
+
+    folders = [camera_session(tmp_path / f"c{s:02d}", Triad(400 + s), s) for s in range(8)]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    args = [sys.executable, "-m", "align", "run", *map(str, folders), "--json",
+            str(tmp_path / "res"), "--calibration", str(tmp_path / "cal"), "--jobs", "2"]
+    p = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(8)
+    p.send_signal(signal.SIGINT)
+    o, e = p.communicate(timeout=300)
+    assert p.returncode == 130, e[-1000:]
+    done = sorted(x.name for x in (tmp_path / "res").glob("*"))
+    cals = sorted(x.name for x in (tmp_path / "cal").glob("*"))
+    assert all(not n.startswith(".") for n in done + cals), (done, cals)   # no .part left
+    assert [n.replace(".json", "") for n in done] == [n.replace(".cal.json", "") for n in cals]
+    assert len(done) < 8
+    rc, o, e = align("run", *folders, "--json", tmp_path / "res", "--calibration",
+                     tmp_path / "cal", "--jobs", "2", "--resume")
+    assert rc == 0, e[-1000:]
+    rc, o, e = align("run", *folders, "--json", tmp_path / "fresh", "--jobs", "1", "-q")
+    assert rc == 0
+    for f in folders:
+        assert numbers(load(tmp_path / "res" / f"{f.name}.json")) == numbers(
+            load(tmp_path / "fresh" / f"{f.name}.json")), f.name
