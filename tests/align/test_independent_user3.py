@@ -786,3 +786,57 @@ def test_apply_puts_readings_in_the_platform_frame_with_and_without_times(tmp_pa
     assert np.array_equal(outs[0], outs[1])
     # calibration u: ~2e-6 in k, ~1.2 ug bias, ~0.35" (1.7 urad) per angle, at up to 1.5 g
     assert np.abs(outs[0] - a).max() < 15e-6, np.abs(outs[0] - a).max()
+
+
+@pytest.mark.xfail(strict=True, reason="defect: a mistyped pose label joining two orientations "
+                   "(scatter 0.7 g against 2e-5 g noise) is accepted, ok: true, exit 0")
+@pytest.mark.parametrize("where", ["tumble", "platform"])
+def test_run_refuses_a_pose_label_that_joins_two_orientations(tmp_path, where):
+    t = Triad(7)
+    f = tmp_path / "s"
+    f.mkdir()
+    TR, PR = t.tumble_rows(), t.platform_rows()
+    toml = SESSION_TOML
+    if where == "tumble":
+        TR = [("T05" if r[0] == "T06" else r[0], *r[1:]) for r in TR]
+    else:
+        PR = [("Xup" if r[0] == "Yup" else r[0], *r[1:]) for r in PR]
+        toml = toml.replace('Yup = {{ up = "+Y" }}\n', "")
+    write_pose_csv(f / "tumble.csv", TR)
+    write_pose_csv(f / "platform.csv", PR)
+    (f / "session.toml").write_text(toml.format(name="u", tumble="tumble.csv",
+                                                platform="platform.csv"))
+    out = tmp_path / "out.json"
+    rc, o, e = align("run", f, "--json", out)
+    assert rc == 2 and ("T05" in e if where == "tumble" else "Xup" in e), e[-1500:]
+
+
+def test_calibrate_continuous_recording_with_time_or_rate_is_identical(tmp_path):
+    """A 100 Hz recording (18 poses of 2 s, smooth 1.5 s turns): with a t column or with
+    --rate 100 and no t column, the same poses and bit-identical numbers."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    t = Triad(77)
+    d = tumble_dirs(t.rng, 18)
+    a = []
+    for i in range(len(d)):
+        a += [d[i]] * 200
+        if i + 1 < len(d):
+            r = Rotation.concatenate([Rotation.align_vectors([d[j]], [[0, 0, 1]])[0]
+                                      for j in (i, i + 1)])
+            s = np.linspace(0, 1, 150)[1:-1]
+            a += list(Slerp([0, 1], r)(s * s * (3 - 2 * s)).apply([0, 0, 1]))
+    u = readings(t.S, t.k, t.u0, np.array(a)) + t.rng.normal(0, t.sigma, (len(a), 3))
+    body = [",".join(f"{v:.9f}" for v in r) for r in u]
+    (tmp_path / "t.csv").write_text("t,ux,uy,uz\n" + "".join(
+        f"{i / 100:.2f},{b}\n" for i, b in enumerate(body)))
+    (tmp_path / "n.csv").write_text("ux,uy,uz\n" + "\n".join(body) + "\n")
+    res = []
+    for name, extra in (("t", ()), ("n", ("--rate", "100"))):
+        rc, o, e = align("calibrate", tmp_path / f"{name}.csv", "--json",
+                         tmp_path / f"{name}.json", *extra)
+        assert rc == 0, e
+        res.append(load(tmp_path / f"{name}.json"))
+    assert len(res[0]["poses"]) == 18
+    keys = ("scale_factors_v_per_g", "scale_factors_u_v_per_g", "beta_rad", "bias_g")
+    assert [res[0][k] for k in keys] == [res[1][k] for k in keys]
