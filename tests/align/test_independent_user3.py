@@ -283,7 +283,11 @@ BAD_TOML = {
 }
 
 
-@pytest.mark.parametrize("case", sorted(BAD_TOML))
+FAST_BAD = {"misspelt_key", "deg_nan", "duplicate_pose", "same_file", "outside"}
+
+
+@pytest.mark.parametrize("case", [c if c in FAST_BAD else pytest.param(c, marks=pytest.mark.slow)
+                                  for c in sorted(BAD_TOML)])
 def test_run_refuses_a_bad_session_key_in_one_line(tmp_path, case):
     (old, new), needles = BAD_TOML[case]
     toml = SESSION_TOML.replace(old, new)
@@ -324,7 +328,8 @@ GROSS = ["scale_sign_undeclared", "platform_z_flipped", "xup_xdn_swapped", "plat
 @pytest.mark.xfail(strict=True, reason="defect: a grossly inconsistent session (wrong scale "
                    "sign, a flipped axis, swapped pose labels, readings in mV) gives ok: true, "
                    "exit 0 and E 400-10^7 arcsec off, only u inflated")
-@pytest.mark.parametrize("case", GROSS)
+@pytest.mark.parametrize("case", [c if c in ("scale_sign_undeclared", "platform_in_mV") else
+                                  pytest.param(c, marks=pytest.mark.slow) for c in GROSS])
 def test_run_never_calls_a_grossly_inconsistent_session_ok(tmp_path, case):
     t = Triad(11)
     toml, rows = SESSION_TOML, None
@@ -503,7 +508,7 @@ def test_marks_says_no_mark_on_texture_border_and_vignetting(tmp_path):
 def test_marks_never_measures_a_machining_lay(tmp_path, amp):
     from scipy.ndimage import gaussian_filter
 
-    img = render_mark(shape=(480, 640), mark=False, seed=5).astype(float)
+    img = render_mark(shape=(480, 640), mark=False, seed=5)[0].astype(float)
     lay = gaussian_filter(np.random.default_rng(1).normal(size=img.shape), (0.7, 25))
     img = np.clip(img + amp * 65535 * lay / lay.std(), 0, 65535).astype(np.uint16)
     p = save_image(tmp_path / "lay.png", img)
@@ -532,7 +537,7 @@ def test_marks_same_pixels_in_png_tiff_8_16_bit(tmp_path):
 
 @pytest.mark.xfail(strict=True, reason="defect: the same pixels rotated by 180 deg / mirrored "
                    "left-right give an angle 1.8\" (0.11 u) different")
-@pytest.mark.parametrize("how", ["rot180", "fliplr"])
+@pytest.mark.parametrize("how", ["rot180", pytest.param("fliplr", marks=pytest.mark.slow)])
 def test_marks_angle_follows_a_rotation_or_mirror_exactly(tmp_path, how):
     img, tr = render_mark(shape=(480, 640), angle_deg=23.0, offset_px=40, length_px=350, seed=3)
     moved = np.rot90(img, 2) if how == "rot180" else np.fliplr(img)
@@ -549,14 +554,14 @@ def test_marks_angle_follows_a_rotation_or_mirror_exactly(tmp_path, how):
 def test_marks_no_false_distortion_on_a_mark_through_the_centre(tmp_path):
     rng = np.random.default_rng(4)
     paths = []
-    for i in range(20):
+    for i in range(12):
         img, _ = render_mark(shape=(480, 640), angle_deg=rng.uniform(-89, 90), length_px=300,
                              offset_px=rng.uniform(-0.5, 0.5), along_px=rng.uniform(-40, 40),
                              snr=rng.uniform(15, 80), width_px=rng.uniform(2, 7), seed=1000 + i)
         paths.append(save_image(tmp_path / f"i{i:02d}.png", img))
     rc, o, e, d = measure(tmp_path, paths)
     flagged = [p.name for p in paths if only_mark(d, p)["effects"]]
-    # alpha = 1e-3 per test: more than one false effect in 20 clean marks is not chance
+    # alpha = 1e-3 per test: more than one false effect in 12 clean marks is not chance
     assert len(flagged) <= 1, flagged
 
 
@@ -744,6 +749,7 @@ def test_calibrate_scale_factors_are_the_sensitivities(tmp_path):
     assert np.abs(z).max() < 4, z
 
 
+@pytest.mark.slow
 def test_calibrate_scale_factors_right_at_five_arcmin(tmp_path):
     """The brief's triad (E ~ 5', k errors 1e-3): k and |a| through apply within u."""
     zs = []
@@ -790,7 +796,7 @@ def test_apply_puts_readings_in_the_platform_frame_with_and_without_times(tmp_pa
 
 @pytest.mark.xfail(strict=True, reason="defect: a mistyped pose label joining two orientations "
                    "(scatter 0.7 g against 2e-5 g noise) is accepted, ok: true, exit 0")
-@pytest.mark.parametrize("where", ["tumble", "platform"])
+@pytest.mark.parametrize("where", ["tumble", pytest.param("platform", marks=pytest.mark.slow)])
 def test_run_refuses_a_pose_label_that_joins_two_orientations(tmp_path, where):
     t = Triad(7)
     f = tmp_path / "s"
