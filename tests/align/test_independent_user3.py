@@ -846,3 +846,78 @@ def test_calibrate_continuous_recording_with_time_or_rate_is_identical(tmp_path)
     assert len(res[0]["poses"]) == 18
     keys = ("scale_factors_v_per_g", "scale_factors_u_v_per_g", "beta_rad", "bias_g")
     assert [res[0][k] for k in keys] == [res[1][k] for k in keys]
+
+
+def tilted_platform_rows(t, tau, n=50):
+    """Platform poses with the table axis tilted: the lab vertical seen in P turns with the
+    table angle theta (the platform turns with the table about its own Z)."""
+    labels, a = list(PLATFORM_POSES), []
+    for p in labels:
+        up, deg = PLATFORM_POSES[p]
+        if deg is None:
+            a.append(up_vector(up))
+            continue
+        v = np.array([tau[0], tau[1], 1.0]) / np.linalg.norm([tau[0], tau[1], 1.0])
+        c, s = np.cos(-np.radians(deg)), np.sin(-np.radians(deg))
+        a.append(np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]))
+    return pose_table(labels, readings(t.S, t.k, t.u0, np.array(a)), t.rng, n, t.sigma)
+
+
+@pytest.mark.slow
+def test_run_finds_an_undeclared_table_tilt_and_keeps_E_right(tmp_path):
+    folders, truth = [], []
+    for s in range(6):
+        t = Triad(700 + s)
+        f = tmp_path / f"t{s}"
+        f.mkdir()
+        write_pose_csv(f / "tumble.csv", t.tumble_rows())
+        write_pose_csv(f / "platform.csv", tilted_platform_rows(t, (30 * ARCSEC, -20 * ARCSEC)))
+        (f / "session.toml").write_text(SESSION_TOML.format(name=f.name, tumble="tumble.csv",
+                                                            platform="platform.csv"))
+        folders.append(f)
+        truth.append(t.S)
+    rc, o, e = align("run", *folders, "--json", tmp_path / "res", "-q", "--jobs", "2")
+    assert rc == 0, e[-1500:]
+    z = []
+    for f, S in zip(folders, truth, strict=True):
+        d = load(tmp_path / "res" / f"{f.name}.json")
+        assert [x["name"] for x in d["effects"]] == ["platform_tilt"], d["effects"]
+        z.append((off_diag(d["misalignment_rad"]) - off_diag(S)) / off_diag(
+            d["misalignment_u_rad"]))
+    assert np.abs(z).max() < 4 and 0.6 < np.sqrt(np.mean(np.square(z))) < 1.4, z
+
+
+@pytest.mark.slow
+def test_marks_at_pixel_locking_angles_8_and_16_bit(tmp_path):
+    rng = np.random.default_rng(1)
+    paths, truth = [], []
+    for i in range(24):
+        a = float(rng.choice([0.0, 0.01, 0.1, 89.99, 90.0, -0.05]))
+        img, _ = render_mark(shape=(480, 640), angle_deg=a, offset_px=rng.uniform(-150, 150),
+                             length_px=rng.uniform(150, 400), width_px=rng.uniform(1.5, 6),
+                             blur_px=rng.uniform(0.6, 2), bits=int(rng.choice([8, 16])),
+                             snr=rng.uniform(10, 60), seed=i, texture=rng.choice([0, 0.01]))
+        paths.append(save_image(tmp_path / f"l{i:02d}.png", img))
+        truth.append(a)
+    rc, o, e, d = measure(tmp_path, paths)
+    assert rc == 0, e[-1500:]
+    z = np.array([angle_z(only_mark(d, p), a) for p, a in zip(paths, truth, strict=True)])
+    assert np.abs(z).max() < 4 and 0.6 < np.sqrt(np.mean(z ** 2)) < 1.4, z
+
+
+def test_lot_tolerance_marginal_and_capability_as_readme_says(tmp_path, lot_results):
+    d0 = load(lot_results / "u0.json")
+    E, U = d0["misalignment_arcsec"][0][1], d0["misalignment_u_arcsec"][0][1]
+    T = abs(E) + U   # inside the tolerance by less than 2 u: marginal
+    rc, o, e = align("lot", lot_results, "--json", tmp_path / "lot.json",
+                     "--tolerance-arcsec", T)
+    lot = load(tmp_path / "lot.json")
+    a = lot["angles"][0]
+    assert "u0" in a["marginal"]
+    xs = np.array([u["misalignment_arcsec"]["E_xY"] for u in lot["units"] if u["in_statistics"]])
+    assert sorted(a["outside_tolerance"]) == sorted(
+        u["unit"] for u in lot["units"] if u["in_statistics"]
+        and abs(u["misalignment_arcsec"]["E_xY"]) > T)
+    sw = np.abs(np.diff(xs)).mean() / 1.128
+    assert np.isclose(a["capability"]["cp"], 2 * T / (6 * sw))
+    assert np.isclose(a["capability"]["cpk"], min(T - xs.mean(), xs.mean() + T) / (3 * sw))
