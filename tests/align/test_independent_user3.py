@@ -952,3 +952,20 @@ def test_calibrate_check_poses_far_from_1g_are_flagged(tmp_path):
     res = load(tmp_path / "c.json") if (tmp_path / "c.json").exists() else None
     assert rc == 2 or (res is not None and any("check" in w for w in res["warnings"])), (
         rc, res and res["warnings"])
+
+
+def test_run_E_is_the_unit_diagonal_row_at_degree_misalignments(tmp_path):
+    """At 1-3 deg the two README phrasings differ: the tool's E is s_ij / s_ii exactly (rows of
+    I + E are the axes up to scale), which `apply` uses consistently; README's "component of s_i
+    along j" holds to first order only (55 u apart here). See the findings."""
+    folders, truth = [], []
+    for s in range(4):
+        t = Triad(900 + s, E_arcsec=3600.0, k_err=0.02)
+        folders.append(make_session(tmp_path / f"b{s}", t, name=f"b{s}"))
+        truth.append(t.S / np.diag(t.S)[:, None])
+    rc, o, e = align("run", *folders, "--json", tmp_path / "res", "-q", "--jobs", "2")
+    assert rc == 0, e[-1500:]
+    z = np.array([(off_diag(d["misalignment_rad"]) - off_diag(T)) / off_diag(
+        d["misalignment_u_rad"]) for d, T in ((load(tmp_path / "res" / f"{f.name}.json"), T)
+                                              for f, T in zip(folders, truth, strict=True))])
+    assert np.abs(z).max() < 4.5 and np.sqrt(np.mean(z ** 2)) < 1.4, z
