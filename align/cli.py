@@ -301,8 +301,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     heads = (("algebraic (paper)", "ML refined") if cal.method == "ellipsoid"
              else ("known-pose (GLS)", "(the same)"))
     print(f"{'':14s} {heads[0]:>22s} {heads[1]:>16s} {'u':>10s}")
-    for i, ax in enumerate("xyz"):
-        print(f"{f'k_{ax} [{ku}]':14s} {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
+    sa, sm, su = a.sensitivity(), m.sensitivity(), m.sensitivity_u()
+    for i, ax in enumerate("xyz"):  # per g along each sensitive axis (k_i |r_i|)
+        print(f"{f'k_{ax} [{ku}]':14s} {sa[i]:22.7f} {sm[i]:16.7f} {su[i]:10.2g}")
     for i, ax in enumerate("xyz"):
         print(f"{f'beta_{ax} [µrad]':14s} {a.beta[i] * 1e6:22.3f} {m.beta[i] * 1e6:16.3f} "
               f"{m.u_of(f'beta_{ax}') * 1e6:10.3g}")

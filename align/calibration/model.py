@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
+from align.calibration.ellipsoid import extract, li_griffiths, r_matrix, row_norms
 from align.errors import InputError
 from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 
@@ -86,6 +86,27 @@ class TriadModel:
         if temp is not None:
             a = a - np.multiply.outer(np.asarray(temp, float) - self.temp_ref, self.temp_coeff)
         return a
+
+    def sensitivity(self) -> np.ndarray:
+        """Scale factor along each sensitive axis: output per g along s_i [output/g].
+
+        The model's ``k`` is the paper's K of u = K R (a + b), whose R (eq. 5) has rows of
+        length 1 + O(beta^2): k_i |r_i| is what the axis reads per g along itself (what a
+        metrology user calls the scale factor; differs from k_i by ~beta^2/2, ~1e-5 at 15').
+        """
+        return self.k * row_norms(self.beta)[0]
+
+    def sensitivity_u(self) -> np.ndarray:
+        """Standard uncertainty of :meth:`sensitivity`, propagated from the covariance of
+        (k, beta) (nan where not determined or without a covariance)."""
+        names = [f"{p}_{ax}" for p in ("k", "beta") for ax in "xyz"]
+        if self.cov is None or any(n not in self.names for n in names):
+            return np.full(3, np.nan)
+        idx = [self.names.index(n) for n in names]
+        n, dn = row_norms(self.beta)
+        J = np.hstack([np.diag(n), self.k[:, None] * dn])
+        var = np.einsum("ij,jk,ik->i", J, self.cov[np.ix_(idx, idx)], J)
+        return np.where(var >= 0, np.sqrt(np.abs(var)), np.nan)
 
     def u_of(self, name: str) -> float:
         if self.cov is None or name not in self.names:
@@ -284,6 +305,13 @@ CANDIDATES: tuple[Candidate, ...] = (
 )
 
 
+SCALE_FACTOR_DEFINITION = (
+    "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
+    "from (k, beta); model.k_v_per_g is the model's K of u = K R(beta) (a + b), whose R has "
+    "rows of length 1 + O(beta^2)")
+"""What the reported scale factors are (in the JSON next to them)."""
+
+
 @dataclass(frozen=True)
 class Calibration:
     """Result of :func:`calibrate`: algebraic start, final model, loop report."""
@@ -316,9 +344,10 @@ class Calibration:
     def to_dict(self, poses: Poses) -> dict:
         m, a = self.model, self.algebraic
         return {
-            "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
+            "scale_factors_v_per_g": m.sensitivity().tolist(), "beta_rad": m.beta.tolist(),
             "bias_g": m.bias.tolist(),
-            "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
+            "scale_factors_u_v_per_g": m.sensitivity_u().tolist(),
+            "scale_factor_definition": SCALE_FACTOR_DEFINITION,
             "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
             "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
             "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
@@ -326,8 +355,8 @@ class Calibration:
             "effects": [e.to_dict() for e in self.loop.effects],
             "unexplained_structure": self.loop.unexplained_structure,
             "noise_known": self.noise_known,
-            "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
-                          "bias_g": a.bias.tolist()},
+            "algebraic": {"scale_factors_v_per_g": a.sensitivity().tolist(),
+                          "beta_rad": a.beta.tolist(), "bias_g": a.bias.tolist()},
             "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
                       zip(poses.labels, delta_g(m, poses), strict=True)],
             "model": m.to_dict(),
