@@ -282,6 +282,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   f"noise {' '.join(f'{v:.3g}' for v in iv.std)}")
     cal = calibrate(poses, signs, alpha=args.alpha,
                     fixture_error_rad=args.fixture_error * DEG)
+    from align.calibration.units import unit_scale_check
+
+    unit_warnings = unit_scale_check(cal.model, units, f"--units {units}" if args.units else
+                                     f"{args.static}: header unit [{units}]")
     m, a = cal.model, cal.algebraic
     ku = OUTPUT_UNITS[units]
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
@@ -318,7 +322,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     dg = delta_g(m, check) if check is not None else None
     if dg is not None:
         print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in dg))
-    warnings = calibration_warnings(cal, poses)
+    warnings = calibration_warnings(cal, poses) + unit_warnings
     _warn(warnings)
     if plot is not None:
         from align.plots import plot_calibration
