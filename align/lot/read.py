@@ -14,7 +14,7 @@ import datetime as _dt
 import hashlib
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,9 @@ class UnitResult:
     warnings : the result's warnings; ``failed_stages``: (stage, message) of each failure.
     metadata : the session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text).
     format_version : the result's format version.
+    sha256 : the file's SHA-256 (None when built in memory); ``created_utc``: when the
+        result was written (its envelope); ``inputs_sha256``: the SHA-256 of every input
+        file of the session, sorted (the same data give the same tuple).
     """
 
     file: str
@@ -76,6 +79,9 @@ class UnitResult:
     failed_stages: tuple[tuple[str, str], ...] = ()
     metadata: Mapping[str, Any] = field(default_factory=dict)
     format_version: int = 3
+    sha256: str | None = None
+    created_utc: str | None = None
+    inputs_sha256: tuple[str, ...] = ()
 
     @property
     def when(self) -> _dt.datetime | None:
@@ -124,10 +130,16 @@ class UnitResult:
             raise InputError(f"{where}: 'errors' and 'warnings' must be lists")
         failed = tuple((str(x.get("stage", "?")), str(x.get("message", "")))
                        if isinstance(x, Mapping) else ("?", str(x)) for x in errs)
+        created = d.get("created_utc")
+        inputs = d.get("inputs")
+        digests = tuple(sorted(str(x["sha256"]) for x in inputs
+                               if isinstance(x, Mapping) and isinstance(x.get("sha256"), str))
+                        ) if isinstance(inputs, list) else ()
         return cls(where, str(d["session"]), label, ok, fused, e, u,
                    _finite_or_none(chi2), dof if isinstance(dof, int) else None,
                    _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
-                   version)
+                   version, created_utc=created if isinstance(created, str) else None,
+                   inputs_sha256=digests)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
@@ -254,7 +266,7 @@ def read_result(path: str | Path) -> ReadFile:
         if reason.startswith(where + ": "):
             reason = reason[len(where) + 2:]
         return ReadFile(p, None, Rejected(where, reason), digest, size)
-    return ReadFile(p, unit, None, digest, size)
+    return ReadFile(p, replace(unit, sha256=digest), None, digest, size)
 
 
 def read_results(files: Iterable[str | Path]) -> list[ReadFile]:
