@@ -468,9 +468,18 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
         rep = run_loop(KnownPoseStage(kf, poses), ())
         return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
                            "known-pose", kf)
-    stage = CalibrationStage(poses, signs)
+    try:
+        stage = CalibrationStage(poses, signs)
+    except InputError as exc:
+        from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg
+
+        cone = cone_estimate_deg(poses.u)
+        if cone < SURROUND_DEG:  # the fit failed on poses clustered in a cone: say so
+            raise InputError(f"geometry: the {len(poses.u)} poses span only a cone of "
+                             f"~{cone:.0f}° about one direction ({exc}): {TUMBLE}") from None
+        raise
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
-    kf, cc, notes = None, None, ()
+    kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
@@ -478,9 +487,44 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
     if has_six_faces(faces):
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
-        notes = tuple(w)
+        notes = (*notes, *w)
     return Calibration(stage.start, rep.after.payload, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes)
+
+
+TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
+
+
+def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
+    """Poses within one hemisphere: a warning with the cone and the largest uncertainties;
+    an :class:`InputError` (geometry) when a parameter is not determined by them — its
+    3u covers the physical range the loop's guard allows (:data:`PRIOR_SCALE`,
+    :data:`PRIOR_ANGLE_RAD`, :data:`PRIOR_BIAS_G`): the data then say nothing about it
+    beyond what any triad is, and the linear uncertainty itself no longer holds."""
+    from align.calibration.geometry import HEMISPHERE_DEG, cone_deg
+
+    cone = cone_deg(m.specific_force(poses.u, poses.t, poses.temp))
+    if cone >= HEMISPHERE_DEG:
+        return ()
+    rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
+           zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
+    ang = {f"beta_{ax}": (m.u_of(f"beta_{ax}"), PRIOR_ANGLE_RAD,
+                          f"{m.u_of(f'beta_{ax}'):.3g} rad") for ax in "xyz"}
+    bias = {f"bias_{ax}": (m.u_of(f"bias_{ax}"), PRIOR_BIAS_G,
+                           f"{m.u_of(f'bias_{ax}'):.3g} g") for ax in "xyz"}
+    q = {**rel, **ang, **bias}
+    bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
+    where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "
+             "direction (no axis seen both up and down)")
+    if bad:
+        raise InputError(f"{where}: {', '.join(bad)} not determined by them (u "
+                         + ", ".join(q[n][2] for n in bad) + f": 3u beyond the physical range "
+                         f"{PRIOR_SCALE:.0%}, {PRIOR_ANGLE_RAD} rad, {PRIOR_BIAS_G} g): "
+                         f"{TUMBLE}")
+    worst_k = max(rel, key=lambda n: rel[n][0])
+    worst_b = max(bias, key=lambda n: bias[n][0])
+    return (f"calibration: {where}: its uncertainties are large for it (u({worst_k}) "
+            f"{rel[worst_k][2]}, u({worst_b}) {bias[worst_b][2]}); {TUMBLE}",)
 
 
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:
