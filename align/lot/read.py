@@ -110,7 +110,7 @@ class UnitResult:
             if list(names) != list(ANGLE_NAMES):
                 raise InputError(f"{where}: angle_names {names!r}: expected "
                                  f"{list(ANGLE_NAMES)}")
-            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad")
+            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad", diagonal=True)
             u = _angles(d.get("misalignment_u_rad"), f"{where}: misalignment_u_rad")
             if any(v < 0 for v in u):
                 raise InputError(f"{where}: misalignment_u_rad: a negative uncertainty")
@@ -163,11 +163,17 @@ def _finite_or_none(v: object) -> float | None:
     return float(v)
 
 
-def _angles(m: object, where: str) -> tuple[float, ...]:
-    """The six off-diagonal elements of a 3×3 list, each a finite number."""
+def _angles(m: object, where: str, diagonal: bool = False) -> tuple[float, ...]:
+    """The six off-diagonal elements of a 3×3 list, each a finite number; ``diagonal``: the
+    diagonal must be zero too (E has none: a non-zero one is a corrupt or edited file)."""
     if not (isinstance(m, list) and len(m) == 3
             and all(isinstance(r, list) and len(r) == 3 for r in m)):
         raise InputError(f"{where}: expected a 3×3 matrix")
+    if diagonal:
+        for i in range(3):
+            if m[i][i] != 0:
+                raise InputError(f"{where}[{i}][{i}] = {m[i][i]!r}: the diagonal of E is zero "
+                                 "(a corrupt or edited result?)")
     out = []
     for i, j in _INDEX:
         v = m[i][j]
