@@ -309,3 +309,19 @@ def test_calibrate_warns_on_an_impossible_unit(tmp_path):
     rc, o, e, d = _calibrate(tmp_path, tumble_dirs(t.rng, 18), t, "--units", "m/s2")
     assert rc == 2 or any("unit" in w for w in d["warnings"]), (rc, d and d["warnings"])
 
+
+
+def test_calibrate_check_poses_far_from_1g_are_flagged(tmp_path):
+    t = Triad(9)
+    write_pose_csv(tmp_path / "tum.csv", t.tumble_rows())
+    d = random_dirs(np.random.default_rng(2), 6)
+    rows = pose_table([f"C{i}" for i in range(6)], readings(t.S, t.k, t.u0, d), t.rng, 50,
+                      t.sigma)
+    write_pose_csv(tmp_path / "chk.csv", [(r[0], *(1000 * np.array(r[1:4])), r[4])
+                                          for r in rows])
+    rc, o, e = align("calibrate", tmp_path / "tum.csv", "--check", tmp_path / "chk.csv",
+                     "--json", tmp_path / "c.json")
+    res = load(tmp_path / "c.json") if (tmp_path / "c.json").exists() else None
+    assert rc == 2 or (res is not None and any("check" in w for w in res["warnings"])), (
+        rc, res and res["warnings"])
+
