@@ -254,7 +254,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------------- calibrate
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from align.calibration import STATIC, StaticSettings, calibrate, delta_g, read_poses
+    from align.calibration import STATIC, StaticSettings, calibrate, read_poses
     from align.calibration.output import calibration_document
     from align.warnings import calibration_warnings
     from axisbase.output import write_json
@@ -263,9 +263,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     inputs = [args.static] + ([args.check] if args.check else [])
     _unique(inputs, "static/--check")
     signs = _signs(args.scale_sign)
-    # .mat/.npz arrays have no header to carry a unit: --units (else V) says it.
-    cols, units = _table_options(args, [p for p in inputs if Path(p).suffix.lower()
-                                        not in (".mat", ".npz")], STATIC)
+    # .mat/.npz arrays have no header to carry a unit: --units (else V) says it. The static
+    # file sets the unit; a check file's header must agree with it (not set it).
+    tables = [p for p in inputs if Path(p).suffix.lower() not in (".mat", ".npz")]
+    cols, units = _table_options(args, [p for p in tables if p == args.static], STATIC)
+    if args.check in tables:
+        from axisbase.table import header_units, resolve_units
+
+        said = f"--units {units}"
+        if not args.units:
+            known = args.static in tables and header_units(args.static, STATIC, cols,
+                                                            ("ux", "uy", "uz"))
+            said = f"{args.static} ({units}{'' if known else ', no unit in its header'})"
+        resolve_units(units, [args.check], STATIC, cols, ("ux", "uy", "uz"), flag=said)
     plan = _plan(args, inputs)
     out = plan.add("--json", args.json, stdout_ok=True)
     plot = plan.add("--plot", args.plot, folder=True)
@@ -282,6 +292,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   f"noise {' '.join(f'{v:.3g}' for v in iv.std)}")
     cal = calibrate(poses, signs, alpha=args.alpha,
                     fixture_error_rad=args.fixture_error * DEG)
+    from align.calibration.units import unit_scale_check
+
+    unit_warnings = unit_scale_check(cal.model, units, f"--units {units}" if args.units else
+                                     f"{args.static}: header unit [{units}]")
     m, a = cal.model, cal.algebraic
     ku = OUTPUT_UNITS[units]
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
@@ -301,8 +315,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     heads = (("algebraic (paper)", "ML refined") if cal.method == "ellipsoid"
              else ("known-pose (GLS)", "(the same)"))
     print(f"{'':14s} {heads[0]:>22s} {heads[1]:>16s} {'u':>10s}")
-    for i, ax in enumerate("xyz"):
-        print(f"{f'k_{ax} [{ku}]':14s} {a.k[i]:22.7f} {m.k[i]:16.7f} {m.u_of(f'k_{ax}'):10.2g}")
+    sa, sm, su = a.sensitivity(), m.sensitivity(), m.sensitivity_u()
+    for i, ax in enumerate("xyz"):  # per g along each sensitive axis (k_i |r_i|)
+        print(f"{f'k_{ax} [{ku}]':14s} {sa[i]:22.7f} {sm[i]:16.7f} {su[i]:10.2g}")
     for i, ax in enumerate("xyz"):
         print(f"{f'beta_{ax} [µrad]':14s} {a.beta[i] * 1e6:22.3f} {m.beta[i] * 1e6:16.3f} "
               f"{m.u_of(f'beta_{ax}') * 1e6:10.3g}")
@@ -314,10 +329,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if cal.cross_check:
         print("cross-check ellipsoid vs known-pose (difference / combined u): "
               + ", ".join(f"{n} {v['z']:+.1f}" for n, v in cal.cross_check.items()))
-    dg = delta_g(m, check) if check is not None else None
-    if dg is not None:
-        print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in dg))
-    warnings = calibration_warnings(cal, poses)
+    checked = None
+    if check is not None:
+        from align.calibration.check import check_poses
+
+        checked = check_poses(cal, poses, check, args.alpha, f"{args.check}")
+        print("check poses |a| - 1 [µg]: " + " ".join(f"{d * 1e6:+.2f}" for d in checked.dg))
+        print("              z (/ u): " + " ".join(f"{z:+.2f}" for z in checked.z))
+    warnings = (calibration_warnings(cal, poses) + unit_warnings
+                + (list(checked.warnings) if checked is not None else []))
     _warn(warnings)
     if plot is not None:
         from align.plots import plot_calibration
@@ -329,9 +349,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             print(f"plot: {plot_static(args.static, settings, cols, args.rate, plot)}")
     if out is not None:
         doc = calibration_document(cal, poses, units, intervals, check, warnings,
-                                   _settings(args), inputs)
+                                   _settings(args), inputs, checked)
         _wrote(write_json(out, doc, args.force))
-    return 0
+    return 0 if checked is None or checked.ok else 2
 
 
 def cmd_tilt(args: argparse.Namespace) -> int:

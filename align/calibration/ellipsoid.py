@@ -31,6 +31,27 @@ def r_matrix(beta: np.ndarray) -> np.ndarray:
     ])
 
 
+def row_norms(beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """|r_i| of R(beta)'s rows and their Jacobian d|r_i|/d(beta_j) (3, 3).
+
+    R's rows are not unit vectors (|r_x| > 1, |r_z| < 1 by ~beta^2/2): the triad's
+    sensitivity along its sensitive axis i (output per g along it) is k_i |r_i|, not k_i.
+    """
+    bx, by, bz = beta
+    sx, cx, sy, cy, sz, cz = (np.sin(bx), np.cos(bx), np.sin(by), np.cos(by), np.sin(bz),
+                              np.cos(bz))
+    n2 = np.array([1 + sz * sz + cz * cz * sy * sy, cz * cz + cy * cy * sx * sx,
+                   cx * cx * cy * cy])
+    # d(n^2)/d(beta): rows i, columns (bx, by, bz); sin(2b) = 2 sin b cos b.
+    d2 = np.array([
+        [0.0, 2 * cz * cz * sy * cy, 2 * sz * cz * cy * cy],
+        [2 * cy * cy * sx * cx, -2 * sy * cy * sx * sx, -2 * sz * cz],
+        [-2 * sx * cx * cy * cy, -2 * sy * cy * cx * cx, 0.0],
+    ])
+    n = np.sqrt(n2)
+    return n, d2 / (2 * n[:, None])
+
+
 @dataclass(frozen=True)
 class Ellipsoid:
     """Fitted ellipsoid (u - centre)^T H (u - centre) = 1 in output units."""

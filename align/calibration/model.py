@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
+from align.calibration.ellipsoid import extract, li_griffiths, r_matrix, row_norms
 from align.errors import InputError
 from align.loop import Candidate, LoopReport, StageFit, Term, run_loop
 
@@ -86,6 +86,27 @@ class TriadModel:
         if temp is not None:
             a = a - np.multiply.outer(np.asarray(temp, float) - self.temp_ref, self.temp_coeff)
         return a
+
+    def sensitivity(self) -> np.ndarray:
+        """Scale factor along each sensitive axis: output per g along s_i [output/g].
+
+        The model's ``k`` is the paper's K of u = K R (a + b), whose R (eq. 5) has rows of
+        length 1 + O(beta^2): k_i |r_i| is what the axis reads per g along itself (what a
+        metrology user calls the scale factor; differs from k_i by ~beta^2/2, ~1e-5 at 15').
+        """
+        return self.k * row_norms(self.beta)[0]
+
+    def sensitivity_u(self) -> np.ndarray:
+        """Standard uncertainty of :meth:`sensitivity`, propagated from the covariance of
+        (k, beta) (nan where not determined or without a covariance)."""
+        names = [f"{p}_{ax}" for p in ("k", "beta") for ax in "xyz"]
+        if self.cov is None or any(n not in self.names for n in names):
+            return np.full(3, np.nan)
+        idx = [self.names.index(n) for n in names]
+        n, dn = row_norms(self.beta)
+        J = np.hstack([np.diag(n), self.k[:, None] * dn])
+        var = np.einsum("ij,jk,ik->i", J, self.cov[np.ix_(idx, idx)], J)
+        return np.where(var >= 0, np.sqrt(np.abs(var)), np.nan)
 
     def u_of(self, name: str) -> float:
         if self.cov is None or name not in self.names:
@@ -284,6 +305,13 @@ CANDIDATES: tuple[Candidate, ...] = (
 )
 
 
+SCALE_FACTOR_DEFINITION = (
+    "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
+    "from (k, beta); model.k_v_per_g is the model's K of u = K R(beta) (a + b), whose R has "
+    "rows of length 1 + O(beta^2)")
+"""What the reported scale factors are (in the JSON next to them)."""
+
+
 @dataclass(frozen=True)
 class Calibration:
     """Result of :func:`calibrate`: algebraic start, final model, loop report."""
@@ -316,9 +344,10 @@ class Calibration:
     def to_dict(self, poses: Poses) -> dict:
         m, a = self.model, self.algebraic
         return {
-            "scale_factors_v_per_g": m.k.tolist(), "beta_rad": m.beta.tolist(),
+            "scale_factors_v_per_g": m.sensitivity().tolist(), "beta_rad": m.beta.tolist(),
             "bias_g": m.bias.tolist(),
-            "scale_factors_u_v_per_g": [m.u_of(f"k_{ax}") for ax in "xyz"],
+            "scale_factors_u_v_per_g": m.sensitivity_u().tolist(),
+            "scale_factor_definition": SCALE_FACTOR_DEFINITION,
             "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
             "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
             "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
@@ -326,8 +355,8 @@ class Calibration:
             "effects": [e.to_dict() for e in self.loop.effects],
             "unexplained_structure": self.loop.unexplained_structure,
             "noise_known": self.noise_known,
-            "algebraic": {"scale_factors_v_per_g": a.k.tolist(), "beta_rad": a.beta.tolist(),
-                          "bias_g": a.bias.tolist()},
+            "algebraic": {"scale_factors_v_per_g": a.sensitivity().tolist(),
+                          "beta_rad": a.beta.tolist(), "bias_g": a.bias.tolist()},
             "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
                       zip(poses.labels, delta_g(m, poses), strict=True)],
             "model": m.to_dict(),
@@ -439,9 +468,18 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
         rep = run_loop(KnownPoseStage(kf, poses), ())
         return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
                            "known-pose", kf)
-    stage = CalibrationStage(poses, signs)
+    try:
+        stage = CalibrationStage(poses, signs)
+    except InputError as exc:
+        from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg
+
+        cone = cone_estimate_deg(poses.u)
+        if cone < SURROUND_DEG:  # the fit failed on poses clustered in a cone: say so
+            raise InputError(f"geometry: the {len(poses.u)} poses span only a cone of "
+                             f"~{cone:.0f}° about one direction ({exc}): {TUMBLE}") from None
+        raise
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
-    kf, cc, notes = None, None, ()
+    kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
@@ -449,9 +487,44 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
     if has_six_faces(faces):
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
-        notes = tuple(w)
+        notes = (*notes, *w)
     return Calibration(stage.start, rep.after.payload, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes)
+
+
+TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
+
+
+def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
+    """Poses within one hemisphere: a warning with the cone and the largest uncertainties;
+    an :class:`InputError` (geometry) when a parameter is not determined by them — its
+    3u covers the physical range the loop's guard allows (:data:`PRIOR_SCALE`,
+    :data:`PRIOR_ANGLE_RAD`, :data:`PRIOR_BIAS_G`): the data then say nothing about it
+    beyond what any triad is, and the linear uncertainty itself no longer holds."""
+    from align.calibration.geometry import HEMISPHERE_DEG, cone_deg
+
+    cone = cone_deg(m.specific_force(poses.u, poses.t, poses.temp))
+    if cone >= HEMISPHERE_DEG:
+        return ()
+    rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
+           zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
+    ang = {f"beta_{ax}": (m.u_of(f"beta_{ax}"), PRIOR_ANGLE_RAD,
+                          f"{m.u_of(f'beta_{ax}'):.3g} rad") for ax in "xyz"}
+    bias = {f"bias_{ax}": (m.u_of(f"bias_{ax}"), PRIOR_BIAS_G,
+                           f"{m.u_of(f'bias_{ax}'):.3g} g") for ax in "xyz"}
+    q = {**rel, **ang, **bias}
+    bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
+    where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "
+             "direction (no axis seen both up and down)")
+    if bad:
+        raise InputError(f"{where}: {', '.join(bad)} not determined by them (u "
+                         + ", ".join(q[n][2] for n in bad) + f": 3u beyond the physical range "
+                         f"{PRIOR_SCALE:.0%}, {PRIOR_ANGLE_RAD} rad, {PRIOR_BIAS_G} g): "
+                         f"{TUMBLE}")
+    worst_k = max(rel, key=lambda n: rel[n][0])
+    worst_b = max(bias, key=lambda n: bias[n][0])
+    return (f"calibration: {where}: its uncertainties are large for it (u({worst_k}) "
+            f"{rel[worst_k][2]}, u({worst_b}) {bias[worst_b][2]}); {TUMBLE}",)
 
 
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from align.calibration.check import CheckResult
 from align.calibration.model import Calibration, Poses, delta_g
 from align.calibration.static import StaticInterval
 from align.contract import document
@@ -35,15 +36,21 @@ def with_units(js: dict, units: str) -> dict:
 def calibration_document(cal: Calibration, poses: Poses, units: str,
                          intervals: Sequence[StaticInterval] | None, check: Poses | None,
                          warnings: Sequence[str], settings: dict,
-                         inputs: Iterable[str | Path]) -> dict:
+                         inputs: Iterable[str | Path], checked: CheckResult | None = None
+                         ) -> dict:
+    """The document; ``checked``: the check poses judged (:mod:`align.calibration.check`):
+    their dg, u, z, and ``ok: false`` when they disagree with 1 g."""
     js = with_units(cal.to_dict(poses), units)
     if intervals is not None:
         js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
                                    "samples": iv.samples, "mean": iv.mean.tolist(),
                                    "std": iv.std.tolist()}
                                   for iv in intervals]
-    if check is not None:
+    if checked is not None:
+        js["check"] = checked.to_list()
+    elif check is not None:
         js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in
                        zip(check.labels, delta_g(cal.model, check), strict=True)]
-    body = {"ok": True, "warnings": list(warnings), **js}
+    ok = checked is None or checked.ok
+    body = {"ok": ok, "warnings": list(warnings), **js}
     return document("calibration", body, settings, inputs)

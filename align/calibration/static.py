@@ -262,18 +262,24 @@ def _listing(intervals) -> str:
 
 
 def _check_geometry(path: Path, poses: Poses) -> None:
+    from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
+
     u = poses.u
-    norms = np.linalg.norm(u - np.median(u, 0), axis=1)
-    med = np.median(norms)
-    odd = np.flatnonzero((norms > 3 * med) | (norms < med / 3))
-    if odd.size and len(u) > 3:
-        raise InputError(f"{path}: pose {poses.labels[odd[0]]} has |u - median| = "
-                         f"{norms[odd[0]]:.4g} against a typical {med:.4g}: mixed units?")
     if len(u) >= 3:
         s = np.linalg.svd(u - u.mean(0), compute_uv=False)
         if s[-1] < 1e-3 * s[0]:
             raise InputError(f"{path}: geometry: the {len(u)} poses lie in a plane "
                              "(degenerate): tilt the unit out of that plane")
+    # A pose in another unit is far off the sphere through the others (geometry.odd_pose);
+    # that sphere is determined only when the poses surround its centre: poses clustered
+    # in a narrow cone are judged after the fit (model._cone_notes), not called mixed units.
+    odd = odd_pose(u) if len(u) > 3 else None
+    if odd is not None:
+        i, rho = odd
+        if not cone_estimate_deg(np.delete(u, i, 0)) < SURROUND_DEG:
+            raise InputError(f"{path}: pose {poses.labels[i]} is {rho:.3g} radii from the "
+                             "centre of the sphere through the other poses (one sensor in "
+                             "one unit: 1 within a few %): mixed units?")
 
 
 @dataclass(frozen=True)

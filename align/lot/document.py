@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from align.contract import document
+from align.lot.duplicates import Duplicate
 from align.lot.read import ANGLE_NAMES, ReadFile
 from align.lot.stats import GUARD, PROVISIONAL, AngleStats, Lot
 from axisbase.output import write_atomic, write_json
@@ -39,6 +40,7 @@ def lot_warnings(lot: Lot) -> list[str]:
     statistics, units outside the control limits or the tolerance, capability below
     1.33, angles that differ with the metadata, provisional limits."""
     out = _capped([f"{r.file}: not read: {r.reason}" for r in lot.rejected], "files not read")
+    out += _capped([duplicate_line(d, lot) for d in lot.duplicates], "units in several results")
     out += _capped([f"unit {u.label} ({u.file}): result NOT ok or not fused ("
                     + ("; ".join(f"stage {s} failed: {m}" for s, m in u.failed_stages)
                        or ("not fused" if not u.fused else "see its warnings"))
@@ -78,6 +80,15 @@ def lot_warnings(lot: Lot) -> list[str]:
     return out
 
 
+def duplicate_line(d: Duplicate, lot: Lot) -> str:
+    """One line for a unit found in several results: which is counted, which are not."""
+    used = lot.units[d.used]
+    others = "; ".join(f"{lot.units[k].file} left out ({r})"
+                       for k, r in zip(d.left_out, d.relations, strict=True))
+    return (f"unit {d.label} is in {len(d.left_out) + 1} results: counted once, {used.file} "
+            f"used ({d.why}); {others}")
+
+
 def _angle_dict(a: AngleStats, lot: Lot) -> dict:
     def arc(v: float) -> float:
         return v / ARCSEC
@@ -108,11 +119,13 @@ def lot_body(lot: Lot) -> dict:
     flagged = lot.flagged
     in_stats = set(lot.in_stats)
     run_index = {k: i for i, k in enumerate(lot.in_stats)}
+    left_out = lot.left_out
     units = []
     for k, u in enumerate(lot.units):
         d = u.to_dict()
         d.update({"in_statistics": k in in_stats, "run_index": run_index.get(k),
-                  "flags": flagged.get(k, [])})
+                  "flags": flagged.get(k, []),
+                  "counted_as": lot.units[left_out[k]].file if k in left_out else None})
         units.append(d)
     return {
         "ok": lot.ok, "in_control": lot.in_control, "within_tolerance": lot.within_tolerance,
@@ -131,6 +144,7 @@ def lot_body(lot: Lot) -> dict:
                      for m in lot.metadata],
         "metadata_not_compared": [{"key": k, "why": w} for k, w in lot.metadata_skipped],
         "units": units,
+        "duplicates": [d.to_dict(lot.units) for d in lot.duplicates],
         "rejected": [r.to_dict() for r in lot.rejected],
     }
 
@@ -147,12 +161,14 @@ def lot_csv(lot: Lot) -> str:
     """One row per unit in run order: identity, ok, E ± u per angle [″], χ², flags,
     failed stages, metadata (one column per key)."""
     keys = sorted({k for u in lot.units for k in u.metadata})
-    head = (["run_index", "unit", "session", "file", "ok", "fused", "in_statistics"]
+    head = (["run_index", "unit", "session", "file", "ok", "fused", "in_statistics",
+             "counted_as"]
             + [c for n in ANGLE_NAMES for c in (f"{n}_arcsec", f"{n}_u_arcsec")]
             + ["chi2", "dof", "p_value", "n_warnings", "flags", "failed_stages"]
             + [f"meta_{k}" for k in keys])
     flagged = lot.flagged
     run_index = {k: i for i, k in enumerate(lot.in_stats)}
+    left_out = lot.left_out
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
@@ -167,7 +183,8 @@ def lot_csv(lot: Lot) -> str:
                for c in (num(None if v is None else v / ARCSEC),
                          num(None if uu is None else uu / ARCSEC))]
         w.writerow([run_index.get(k, ""), u.label, u.session, u.file, u.ok, u.fused,
-                    k in run_index] + ang
+                    k in run_index, lot.units[left_out[k]].file if k in left_out else ""]
+                   + ang
                    + [num(u.chi2, "{:.3f}"), "" if u.dof is None else u.dof,
                       num(u.p_value, "{:.3g}"), len(u.warnings), "; ".join(flagged.get(k, [])),
                       "; ".join(f"{st}: {m}" for st, m in u.failed_stages)]

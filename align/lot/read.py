@@ -14,7 +14,7 @@ import datetime as _dt
 import hashlib
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +60,9 @@ class UnitResult:
     warnings : the result's warnings; ``failed_stages``: (stage, message) of each failure.
     metadata : the session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text).
     format_version : the result's format version.
+    sha256 : the file's SHA-256 (None when built in memory); ``created_utc``: when the
+        result was written (its envelope); ``inputs_sha256``: the SHA-256 of every input
+        file of the session, sorted (the same data give the same tuple).
     """
 
     file: str
@@ -76,6 +79,9 @@ class UnitResult:
     failed_stages: tuple[tuple[str, str], ...] = ()
     metadata: Mapping[str, Any] = field(default_factory=dict)
     format_version: int = 3
+    sha256: str | None = None
+    created_utc: str | None = None
+    inputs_sha256: tuple[str, ...] = ()
 
     @property
     def when(self) -> _dt.datetime | None:
@@ -104,7 +110,7 @@ class UnitResult:
             if list(names) != list(ANGLE_NAMES):
                 raise InputError(f"{where}: angle_names {names!r}: expected "
                                  f"{list(ANGLE_NAMES)}")
-            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad")
+            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad", diagonal=True)
             u = _angles(d.get("misalignment_u_rad"), f"{where}: misalignment_u_rad")
             if any(v < 0 for v in u):
                 raise InputError(f"{where}: misalignment_u_rad: a negative uncertainty")
@@ -124,10 +130,16 @@ class UnitResult:
             raise InputError(f"{where}: 'errors' and 'warnings' must be lists")
         failed = tuple((str(x.get("stage", "?")), str(x.get("message", "")))
                        if isinstance(x, Mapping) else ("?", str(x)) for x in errs)
+        created = d.get("created_utc")
+        inputs = d.get("inputs")
+        digests = tuple(sorted(str(x["sha256"]) for x in inputs
+                               if isinstance(x, Mapping) and isinstance(x.get("sha256"), str))
+                        ) if isinstance(inputs, list) else ()
         return cls(where, str(d["session"]), label, ok, fused, e, u,
                    _finite_or_none(chi2), dof if isinstance(dof, int) else None,
                    _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
-                   version)
+                   version, created_utc=created if isinstance(created, str) else None,
+                   inputs_sha256=digests)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
@@ -151,11 +163,17 @@ def _finite_or_none(v: object) -> float | None:
     return float(v)
 
 
-def _angles(m: object, where: str) -> tuple[float, ...]:
-    """The six off-diagonal elements of a 3×3 list, each a finite number."""
+def _angles(m: object, where: str, diagonal: bool = False) -> tuple[float, ...]:
+    """The six off-diagonal elements of a 3×3 list, each a finite number; ``diagonal``: the
+    diagonal must be zero too (E has none: a non-zero one is a corrupt or edited file)."""
     if not (isinstance(m, list) and len(m) == 3
             and all(isinstance(r, list) and len(r) == 3 for r in m)):
         raise InputError(f"{where}: expected a 3×3 matrix")
+    if diagonal:
+        for i in range(3):
+            if m[i][i] != 0:
+                raise InputError(f"{where}[{i}][{i}] = {m[i][i]!r}: the diagonal of E is zero "
+                                 "(a corrupt or edited result?)")
     out = []
     for i, j in _INDEX:
         v = m[i][j]
@@ -254,7 +272,7 @@ def read_result(path: str | Path) -> ReadFile:
         if reason.startswith(where + ": "):
             reason = reason[len(where) + 2:]
         return ReadFile(p, None, Rejected(where, reason), digest, size)
-    return ReadFile(p, unit, None, digest, size)
+    return ReadFile(p, replace(unit, sha256=digest), None, digest, size)
 
 
 def read_results(files: Iterable[str | Path]) -> list[ReadFile]:

@@ -179,7 +179,9 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
     parts.append(
         f"<p>{n_units + len(lot.rejected)} files: {n_units} session results, "
         f"{len(lot.rejected)} not read; {n_stats} units ok and in the statistics, "
-        f"{len(lot.not_ok)} not ok. Run order: {esc(lot.run_order_note)}. "
+        f"{len(lot.not_ok)} not ok"
+        + (f", {len(lot.left_out)} left out as another result of a unit counted once"
+           if lot.duplicates else "") + f". Run order: {esc(lot.run_order_note)}. "
         + verdict(lot.ok, "Every result read and ok.", "NOT every result read and ok.") + " "
         + (verdict(lot.in_control, "In control.", "NOT in control.") if n_stats else "") + " "
         + verdict(lot.within_tolerance, "Every unit within tolerance.",
@@ -187,6 +189,13 @@ def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False)
     if lot.rejected:
         parts.append("<h2>Files not read</h2>" + table(
             ["file", "why"], [[r.file, r.reason] for r in lot.rejected], left=2))
+    if lot.duplicates:
+        parts.append("<h2>Units in several results (each counted once)</h2>" + table(
+            ["unit", "used", "why", "left out"],
+            [[d.label, lot.units[d.used].file, d.why,
+              "; ".join(f"{lot.units[k].file} ({r})" for k, r in
+                        zip(d.left_out, d.relations, strict=True))]
+             for d in lot.duplicates], left=4))
     if lot.not_ok:
         parts.append("<h2>Units not ok (not in the statistics)</h2>" + table(
             ["unit", "file", "fused", "failed stages"],

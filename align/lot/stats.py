@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from align.lot.duplicates import Duplicate, find_duplicates
 from align.lot.read import ANGLE_NAMES, Rejected, UnitResult
 
 D2 = 1.128
@@ -161,11 +162,19 @@ class Lot:
     angles: tuple[AngleStats, ...]
     metadata: tuple[MetadataEffect, ...]
     metadata_skipped: tuple[tuple[str, str], ...]
+    duplicates: tuple[Duplicate, ...] = ()
+
+    @property
+    def left_out(self) -> dict[int, int]:
+        """Results of a unit counted in another result: index -> index of the one used."""
+        return {k: d.used for d in self.duplicates for k in d.left_out}
 
     @property
     def not_ok(self) -> tuple[int, ...]:
-        """Units not in the statistics: result not ok (failed stages) or not fused."""
-        used = set(self.in_stats)
+        """Units not in the statistics: result not ok (failed stages) or not fused (a unit's
+        result left out for another of the same unit is not among them: see
+        ``duplicates``)."""
+        used = set(self.in_stats) | set(self.left_out)
         return tuple(k for k in range(len(self.units)) if k not in used)
 
     @property
@@ -379,13 +388,17 @@ def analyse(units: Sequence[UnitResult], rejected: Sequence[Rejected] = (),
             tolerance: float | None = None) -> Lot:
     """The lot's statistics. ``units`` in the order given; ``tolerance`` ±T [rad] or None.
 
-    Only units whose result is ok enter the statistics; the others are kept in
-    ``Lot.units`` (and listed by the report) with their failed stages."""
+    Only units whose result is ok enter the statistics, each unit once (a unit in several
+    results: :mod:`align.lot.duplicates` chooses one, ``Lot.duplicates`` says which); the
+    others are kept in ``Lot.units`` (and listed by the report) with their failed stages."""
     if tolerance is not None and not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance {tolerance!r}: expected a positive number [rad]")
     order, how, note = _run_order(units)
     ordered = tuple(units[k] for k in order)
-    in_stats = tuple(k for k, u in enumerate(ordered) if u.ok and u.fused
+    # One unit, one value: a unit in several results is counted once (align.lot.duplicates).
+    dups = find_duplicates(ordered)
+    left = {k for d in dups for k in d.left_out}
+    in_stats = tuple(k for k, u in enumerate(ordered) if u.ok and u.fused and k not in left
                      and u.e_rad is not None and u.u_rad is not None)
     e = np.array([ordered[k].e_rad for k in in_stats], float).reshape(-1, len(ANGLE_NAMES))
     u = np.array([ordered[k].u_rad for k in in_stats], float).reshape(-1, len(ANGLE_NAMES))
@@ -393,4 +406,4 @@ def analyse(units: Sequence[UnitResult], rejected: Sequence[Rejected] = (),
                    for a, name in enumerate(ANGLE_NAMES))
     effects, skipped = metadata_effects(ordered, in_stats) if in_stats else ([], [])
     return Lot(ordered, tuple(rejected), how, note, tolerance, in_stats, angles,
-               tuple(effects), tuple(skipped))
+               tuple(effects), tuple(skipped), dups)

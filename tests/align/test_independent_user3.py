@@ -659,8 +659,6 @@ def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_re
     assert [u["unit"] for u in failed] == ["u9"] and not failed[0]["in_statistics"]
 
 
-@pytest.mark.xfail(strict=True, reason="defect: the same unit's result twice (an identical copy) "
-                   "is counted twice in the lot's statistics without a word")
 def test_lot_says_when_a_unit_is_counted_twice(tmp_path, lot_results):
     import shutil
 
@@ -723,8 +721,6 @@ def test_calibrate_refuses_poses_in_a_plane_and_too_few(tmp_path):
     assert d is None
 
 
-@pytest.mark.xfail(strict=True, reason="defect: 14 poses within 10 deg of +z are refused as "
-                   "'mixed units?', not as geometry")
 def test_calibrate_poses_near_one_axis_is_a_geometry_refusal(tmp_path):
     rng = np.random.default_rng(1)
     d = np.array([0, 0, 1.0]) + rng.normal(0, 0.1, (14, 3))
@@ -732,8 +728,6 @@ def test_calibrate_poses_near_one_axis_is_a_geometry_refusal(tmp_path):
     assert_clean_refusal(rc, o, e, "geometry")
 
 
-@pytest.mark.xfail(strict=True, reason="defect: the reported k is the paper's K of a non-unit-row "
-                   "R, not the sensitivity along the axis: 6-10 u off at ~16' non-orthogonality")
 def test_calibrate_scale_factors_are_the_sensitivities(tmp_path):
     t = Triad(21)   # non-orthogonality 2.7-4.6 mrad
     rc, o, e, d = _calibrate(tmp_path, tumble_dirs(t.rng, 18), t)
@@ -755,8 +749,6 @@ def test_calibrate_scale_factors_right_at_five_arcmin(tmp_path):
     assert np.abs(zs).max() < 4.5, zs
 
 
-@pytest.mark.xfail(strict=True, reason="defect: --units m/s2 on readings in g (|u| ~ 1) is "
-                   "accepted: 1.0 (m/s2)/g written as the scale factor")
 def test_calibrate_warns_on_an_impossible_unit(tmp_path):
     t = Triad(4)
     rc, o, e, d = _calibrate(tmp_path, tumble_dirs(t.rng, 18), t, "--units", "m/s2")
@@ -930,8 +922,6 @@ def test_run_refuses_a_view_of_an_undeclared_camera(tmp_path):
     assert not out.exists()
 
 
-@pytest.mark.xfail(strict=True, reason="defect: --check poses 1000 g off (mV against a V "
-                   "calibration) pass without a warning, ok: true")
 def test_calibrate_check_poses_far_from_1g_are_flagged(tmp_path):
     t = Triad(9)
     write_pose_csv(tmp_path / "tum.csv", t.tumble_rows())

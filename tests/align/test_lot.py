@@ -422,3 +422,14 @@ def test_report_renders_in_headless_chromium(real_result, tmp_path):
     img = np.asarray(Image.open(shot).convert("L"), float)
     assert img.shape[0] >= 2000 and img.std() > 20  # text, tables and figures, not blank
     assert (img < 128).mean() > 0.01
+
+
+def test_a_result_whose_E_has_a_diagonal_is_not_read(real_result, tmp_path):
+    """E has a zero diagonal: a result with E_xx = 0.01 (corrupt or edited) is one line."""
+    from align.lot import read_results
+
+    d = json.loads(json.dumps(lot_results(real_result, 1, seed=6)[0][0]))
+    d["misalignment_rad"][1][1] = 0.01
+    (tmp_path / "diag.json").write_text(json.dumps(d))
+    (r,) = read_results([tmp_path / "diag.json"])
+    assert r.unit is None and "misalignment_rad[1][1] = 0.01: the diagonal" in r.rejected.reason

@@ -1,0 +1,58 @@
+"""Does the declared output unit fit the measured scale factors?
+
+Readings declared in an acceleration unit (``g``, ``m/s2``) must change by about one g of
+that unit per g: 1 g/g, resp. g0 = 9.80665 (m/s²)/g. Volts and counts carry no such
+expectation. A triad's scale-factor tolerance is a few per cent (datasheets: 1–3 %) and local
+gravity is within 0.3 % of g0, so:
+
+* a scale factor further than a factor sqrt(g0) ≈ 3.13 from the expected one is closer (on a
+  log scale) to another unit than to the declared one — readings in g declared m/s², or in
+  m/s² declared g, or in mg/counts — and is refused, naming the unit's source and the measured
+  magnitude (a calibration in a wrong unit would be written silently otherwise);
+* one further than :data:`UNIT_SCALE_WARN` (10 %, over three times the worst tolerance) is
+  warned of: a conversion with the wrong range or a wrong factor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from align.calibration.model import TriadModel
+from axisbase.errors import InputError
+from axisbase.units import G0
+
+EXPECTED_PER_G = {"g": 1.0, "m/s2": G0}
+"""Scale factor [unit/g] of readings already in an acceleration unit."""
+UNIT_SCALE_REFUSE = float(np.sqrt(G0))
+"""Ratio to the expected scale factor beyond which the readings are nearer another unit."""
+UNIT_SCALE_WARN = 0.10
+"""Relative departure from the expected scale factor that is warned of."""
+_NAMES = {"g": "g", "m/s2": "m/s²"}
+
+
+def unit_scale_check(model: TriadModel, units: str, source: str) -> list[str]:
+    """Warnings about the declared unit ``units`` (from ``source``, e.g. ``--units m/s2``)
+    given the calibrated sensitivities; :class:`InputError` when they contradict it."""
+    expected = EXPECTED_PER_G.get(units)
+    if expected is None:
+        return []
+    s = np.abs(model.sensitivity())
+    ratio = s / expected
+    nm = _NAMES[units]
+    mags = ", ".join(f"{v:.4g}" for v in s)
+    if np.any((ratio > UNIT_SCALE_REFUSE) | (ratio < 1 / UNIT_SCALE_REFUSE)):
+        mean = float(np.exp(np.mean(np.log(s))))
+        nearest = min(EXPECTED_PER_G, key=lambda u: abs(np.log(mean / EXPECTED_PER_G[u])))
+        hint = (f"; they look like {_NAMES[nearest]} (give --units {nearest})"
+                if abs(np.log(mean / EXPECTED_PER_G[nearest])) < np.log(UNIT_SCALE_REFUSE)
+                else "; if they are volts or counts, say so (--units V or counts)")
+        raise InputError(f"{source}: readings in {nm} change by {expected:.5g} {nm} per g, "
+                         f"these change by {mags} per g (scale factors): not {nm}{hint}")
+    far = np.flatnonzero(np.abs(ratio - 1) > UNIT_SCALE_WARN)
+    if far.size:
+        i = int(far[np.argmax(np.abs(ratio[far] - 1))])
+        return [f"calibration: scale factor k_{'xyz'[i]} = {s[i]:.5g} {nm}/g is "
+                f"{ratio[i] - 1:+.0%} from {expected:.5g} {nm}/g, what readings in {nm} "
+                f"({source}) have within a triad's tolerance of a few %: converted with the "
+                "wrong range or factor?"]
+    return []
