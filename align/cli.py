@@ -533,8 +533,9 @@ def _print_result(res, out=None) -> None:
         cells = ["0".rjust(17) if i == j else
                  f"{f.E[i, j] / ARCSEC:+9.2f} ± {f.E_u[i, j] / ARCSEC:5.2f}" for j in range(3)]
         print(f"    {'xyz'[i]}: " + "  ".join(cells), file=out)
-    state = "consistent" if f.consistent else "NOT consistent (uncertainty inflated " \
-        f"x{f.inflation:.2f})"
+    state = ("consistent" if f.consistent else
+             f"NOT consistent (uncertainty inflated x{f.inflation:.2f})" if f.inflation > 1 else
+             "NOT consistent (structure left in the residual: see the fusion loop)")
     print(f"  chi2 {f.chi2:.2f} / {f.dof} dof (p {f.p_value:.3g}): instruments {state}",
           file=out)
     for e in f.loop.effects:

@@ -121,9 +121,10 @@ def report_html(res: SessionResult, doc: dict | None = None) -> str:
         parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
         from axisbase.table import OUTPUT_UNITS
 
-        parts.append(table(["axis", f"k [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
+        k, k_u = m.sensitivity(), m.sensitivity_u()  # output per g along each axis
+        parts.append(table(["axis", f"scale factor [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
                              "bias [µg]"], [
-            [ax, f"{m.k[i]:.7f} ± {m.u_of(f'k_{ax}'):.2g}",
+            [ax, f"{k[i]:.7f} ± {k_u[i]:.2g}",
              f"{m.beta[i] * 1e6:.2f} ± {m.u_of(f'beta_{ax}') * 1e6:.2g}",
              f"{m.bias[i] * 1e6:.2f} ± {m.u_of(f'bias_{ax}') * 1e6:.2g}"]
             for i, ax in enumerate("xyz")]))
