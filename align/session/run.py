@@ -7,12 +7,13 @@ whatever succeeded, and says so. Nothing is written here: outputs are the caller
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
+from align.calibration.units import unit_scale_check
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
@@ -140,7 +141,13 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
                                       flag="[calibration] units")
             res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
                                                   rate_hz=tk.rate_hz)
-            return calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            # Readings declared in g or m/s² must read ~1 g of that unit per g (as
+            # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
+            source = ("[calibration] units" if tk.units else
+                      f"{c.static}: header unit [{res.units}]")
+            w = unit_scale_check(cal.model, res.units, source)
+            return replace(cal, notes=(*cal.notes, *w)) if w else cal
         res.calibration = _try(res, "calibration", _cal)
     if s.goniometer is not None:
         g = s.goniometer

@@ -113,6 +113,24 @@ def test_a_stage_failure_is_reported_and_the_rest_still_fuse(session, tmp_path):
     assert any("z_B.png" in w and "FAILED" in w for w in d["warnings"])
 
 
+@pytest.mark.parametrize("units,fails", [("m/s2", True), ("g", False)])
+def test_a_calibration_unit_the_readings_contradict_is_caught(session, tmp_path, units, fails):
+    """The synthetic triad reads ~2.4 V per g: declared m/s² (9.81 per g expected, 4x off:
+    nearer another unit) the calibration stage fails naming the key; declared g (2.4x off:
+    not nearer another unit, but far beyond a triad's tolerance) it is warned of."""
+    folder = _copy(session, tmp_path)
+    _edit(folder, 'static = "tumble.csv"', f'static = "tumble.csv"\nunits = "{units}"')
+    out = tmp_path / "r.json"
+    main(["run", str(folder), "--json", str(out)])
+    d = json.loads(out.read_text())
+    failed = [e for e in d["errors"] if e["stage"] == "calibration"]
+    if fails:
+        assert not d["ok"] and failed and "[calibration] units" in failed[0]["message"]
+    else:
+        assert not failed
+        assert any("scale factor" in w and "[calibration] units" in w for w in d["warnings"])
+
+
 def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):
     good2 = _copy(session, tmp_path, "unit8")
     bad = _copy(session, tmp_path, "unit9")
