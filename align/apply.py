@@ -170,7 +170,7 @@ class AppliedReadings:
         if self.roll is not None:
             cols += [np.rad2deg(self.roll), np.rad2deg(self.pitch)]
             names += ["roll_deg", "pitch_deg"]
-        return csv_text(names, cols)
+        return csv_text(names, cols, exact=("t",))
 
 
 def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,

@@ -85,7 +85,8 @@ class TiltOfReadings:
         from axisbase.output import csv_text
 
         return csv_text(["t", "roll_deg", "pitch_deg"],
-                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g",
+                        exact=("t",))
 
 
 def model_time_warnings(model, t, temp) -> list[str]:

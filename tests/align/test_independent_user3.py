@@ -992,8 +992,6 @@ def test_tilt_with_a_platform_calibration_gives_platform_roll_and_pitch(tmp_path
     assert np.abs(T["pitch_deg"] - np.degrees(pitch)).max() * 3600 < 5
 
 
-@pytest.mark.xfail(strict=True, reason="defect: apply/tilt rewrite t with 10 / 6 significant "
-                   "digits: epoch times collapse to one instant")
 @pytest.mark.parametrize("cmd", ["apply", pytest.param("tilt", marks=pytest.mark.slow)])
 def test_apply_and_tilt_carry_the_time_column_through(tmp_path, cmd):
     t = Triad(33)
