@@ -963,8 +963,6 @@ def test_run_E_is_the_unit_diagonal_row_at_degree_misalignments(tmp_path):
     assert np.abs(z).max() < 4.5 and np.sqrt(np.mean(z ** 2)) < 1.4, z
 
 
-@pytest.mark.xfail(strict=True, reason="defect: align tilt with a platform calibration ignores "
-                   "its misalignment (roll/pitch 487\" off at E ~ 5'); apply --tilt is right")
 def test_tilt_with_a_platform_calibration_gives_platform_roll_and_pitch(tmp_path):
     t = Triad(61)
     f = make_session(tmp_path / "s", t)
