@@ -352,7 +352,8 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     tab = read_readings(args.readings, cols, args.rate)
     res = tilt_of_readings(model, tab, args.method, args.mu)
     s = res.to_dict()
-    print(f"{s['samples']} readings ({args.method} roll, {s['frame']} frame): roll {s['roll_deg_mean']:+.6f}° "
+    print(f"{s['samples']} readings ({args.method} roll, {s['frame']} frame): "
+          f"roll {s['roll_deg_mean']:+.6f}° "
           f"(sd {s['roll_deg_std'] * 3600:.1f}″), pitch {s['pitch_deg_mean']:+.6f}° "
           f"(sd {s['pitch_deg_std'] * 3600:.1f}″), |a| - 1 mean {s['norm_minus_1_ug']:+.2f} µg")
     _warn(res.warnings)

@@ -51,8 +51,8 @@ free fall, a shock, the wrong unit or the wrong calibration (|a| off by far more
 @dataclass(frozen=True)
 class TiltOfReadings:
     """Roll and pitch [rad] of every reading (times ``t`` [s], None when the readings have
-    none) through a calibration (in ``frame``), the calibrated specific force ``a`` (N, 3) [g], and what
-    the user must know about the result (``warnings``)."""
+    none) through a calibration (in ``frame``), the calibrated specific force ``a`` (N, 3)
+    [g], and what the user must know about the result (``warnings``)."""
 
     t: np.ndarray | None
     a: np.ndarray
