@@ -903,6 +903,10 @@ def test_tilt_takes_any_calibration_file_and_says_its_frame(base, tmp_path):
                      str(tmp_path / f"{cal}.csv"), "-q"]) == 0
         outs.append(_json(out))
     assert [o["frame"] for o in outs] == ["triad", "platform", "platform"]
+    from align.contract import validate
+
+    for o in outs:
+        validate(o, "tilt")
     assert outs[1]["roll_deg_mean"] == outs[2]["roll_deg_mean"]
     ap = tmp_path / "ap.csv"
     assert main(["apply", str(base / "outputs" / "pc.json"), str(base / "readings.csv"),
