@@ -142,6 +142,23 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     return TriadModel.from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))
 
 
+def load_tilt_calibration(path: str | Path) -> tuple[TriadModel | PlatformCalibration,
+                                                      str | None]:
+    """What ``align tilt --calibration`` reads: a platform calibration or a session result
+    holding one -> that ``PlatformCalibration`` (roll and pitch of the platform, its
+    misalignment applied, exactly as ``align apply --tilt``); a triad calibration (``align
+    calibrate --json``) -> its ``TriadModel`` (the triad's own frame: no misalignment known).
+    With the output unit of the readings it was made from (None if the file does not say)."""
+    d = read_json(path, "a calibration")
+    if ("platform_calibration" in d or d.get("format") in ("axis-align/session",
+                                                           "axis-align/platform-calibration")
+            or "misalignment_rad" in d):
+        pc = PlatformCalibration.from_dict(d, str(path))
+        inner = d.get("platform_calibration", d)
+        return pc, inner.get("model", {}).get("output_unit")
+    return load_triad_model(path)
+
+
 @dataclass(frozen=True)
 class AppliedReadings:
     """Readings through a platform calibration: times [s] (None when the readings had none),
@@ -170,7 +187,7 @@ class AppliedReadings:
         if self.roll is not None:
             cols += [np.rad2deg(self.roll), np.rad2deg(self.pitch)]
             names += ["roll_deg", "pitch_deg"]
-        return csv_text(names, cols)
+        return csv_text(names, cols, exact=("t",))
 
 
 def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,
@@ -178,12 +195,10 @@ def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,
     """Readings ``tab`` (ux, uy, uz[, t][, temp]) -> specific force in the platform frame.
     Readings without times keep none; a drift of the model is then taken at its reference
     time, and a warning says so (likewise a temperature)."""
-    from align.tilt import model_time_warnings, roll_pitch
+    from align.tilt import calibrated_force, roll_pitch
 
-    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t, temp = tab.get("t"), tab.get("temp")
-    warnings = tuple(model_time_warnings(pc.model, t, temp))
-    a = pc.specific_force(u, pc.model.t_ref if t is None else t, temp)
+    t, a, warnings = calibrated_force(pc, tab)
+    warnings = tuple(warnings)
     if not tilt:
         return AppliedReadings(t, a, warnings=warnings)
     roll, pitch = roll_pitch(a, method=method)

@@ -355,7 +355,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_tilt(args: argparse.Namespace) -> int:
-    from align.apply import load_triad_model
+    from align.apply import load_tilt_calibration
     from align.calibration import READINGS, read_readings
     from align.documents import tilt_document
     from align.tilt import tilt_of_readings
@@ -364,7 +364,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     inputs = [args.readings, args.calibration]
     _unique(inputs, "readings/--calibration")
     cols, units = _table_options(args, [args.readings], READINGS, default=None)
-    model, cal_units = load_triad_model(args.calibration)
+    model, cal_units = load_tilt_calibration(args.calibration)
     _same_units(units, cal_units, args.calibration)
     plan = _plan(args, inputs)
     out_json = plan.add("--json", args.json, stdout_ok=True)
@@ -372,7 +372,8 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     tab = read_readings(args.readings, cols, args.rate)
     res = tilt_of_readings(model, tab, args.method, args.mu)
     s = res.to_dict()
-    print(f"{s['samples']} readings ({args.method} roll): roll {s['roll_deg_mean']:+.6f}° "
+    print(f"{s['samples']} readings ({args.method} roll, {s['frame']} frame): "
+          f"roll {s['roll_deg_mean']:+.6f}° "
           f"(sd {s['roll_deg_std'] * 3600:.1f}″), pitch {s['pitch_deg_mean']:+.6f}° "
           f"(sd {s['pitch_deg_std'] * 3600:.1f}″), |a| - 1 mean {s['norm_minus_1_ug']:+.2f} µg")
     _warn(res.warnings)
@@ -962,7 +963,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     tl = add("tilt", "roll and pitch from readings through a calibration", writes, _tables())
     tl.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
-    tl.add_argument("--calibration", required=True, help="JSON written by 'align calibrate'")
+    tl.add_argument("--calibration", required=True,
+                    help="JSON written by 'align calibrate' (roll/pitch of the triad's own "
+                    "frame) or a platform calibration / session result from 'align run' "
+                    "(roll/pitch of the platform, as 'align apply --tilt')")
     tl.add_argument("--method", choices=["exact", "paper"], default="exact",
                     help="exact atan2 roll, or the tilt paper's regularised one")
     tl.add_argument("--mu", type=_number(0, 1, lo_open=True), default=0.001,

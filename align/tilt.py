@@ -51,8 +51,8 @@ free fall, a shock, the wrong unit or the wrong calibration (|a| off by far more
 @dataclass(frozen=True)
 class TiltOfReadings:
     """Roll and pitch [rad] of every reading (times ``t`` [s], None when the readings have
-    none) through a calibration, the calibrated specific force ``a`` (N, 3) [g], and what
-    the user must know about the result (``warnings``)."""
+    none) through a calibration (in ``frame``), the calibrated specific force ``a`` (N, 3)
+    [g], and what the user must know about the result (``warnings``)."""
 
     t: np.ndarray | None
     a: np.ndarray
@@ -61,6 +61,9 @@ class TiltOfReadings:
     method: str
     mu: float
     warnings: tuple[str, ...] = ()
+    frame: str = "triad"
+    """``platform`` (a platform calibration: its misalignment applied) or ``triad`` (a triad
+    calibration alone: the triad's own calibration frame)."""
 
     @property
     def far_from_1g(self) -> int:
@@ -70,7 +73,7 @@ class TiltOfReadings:
 
     def to_dict(self) -> dict:
         """The summary ``align tilt --json`` writes (degrees at this edge)."""
-        return {"warnings": list(self.warnings), "method": self.method,
+        return {"warnings": list(self.warnings), "frame": self.frame, "method": self.method,
                 "mu": self.mu if self.method == "paper" else None,
                 "samples": len(self.a),
                 "roll_deg_mean": float(np.rad2deg(np.mean(self.roll))),
@@ -85,7 +88,8 @@ class TiltOfReadings:
         from axisbase.output import csv_text
 
         return csv_text(["t", "roll_deg", "pitch_deg"],
-                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g")
+                        [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g",
+                        exact=("t",))
 
 
 def model_time_warnings(model, t, temp) -> list[str]:
@@ -102,18 +106,32 @@ def model_time_warnings(model, t, temp) -> list[str]:
     return out
 
 
-def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> TiltOfReadings:
-    """Roll and pitch of readings ``tab`` (a table with ux, uy, uz[, t][, temp]) through a
-    triad ``model`` (``TriadModel``). Readings without times get none; if the model drifts,
-    its drift is taken at the reference time and a warning says so (likewise a temperature
-    model without temperatures). Readings far from 1 g are counted in a warning."""
+def calibrated_force(cal, tab) -> tuple[np.ndarray | None, np.ndarray, list[str]]:
+    """The one path from readings to specific force, shared by ``align tilt`` and ``align
+    apply``: times (None when ``tab`` has none), the specific force (N, 3) [g] of readings
+    ``tab`` (ux, uy, uz[, t][, temp]) through ``cal`` — a ``TriadModel`` (the triad's own
+    calibration frame) or a ``PlatformCalibration`` (the platform frame: its misalignment
+    applied) — and the warnings of :func:`model_time_warnings`."""
+    model = getattr(cal, "model", cal)
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    t = tab["t"] if "t" in tab else None
-    temp = tab.get("temp")
+    t, temp = tab.get("t"), tab.get("temp")
     warnings = model_time_warnings(model, t, temp)
-    a = model.specific_force(u, model.t_ref if t is None else t, temp)
+    a = cal.specific_force(u, model.t_ref if t is None else t, temp)
+    return t, a, warnings
+
+
+def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> TiltOfReadings:
+    """Roll and pitch of readings ``tab`` (a table with ux, uy, uz[, t][, temp]) through
+    ``model``: a triad model (``TriadModel``: roll and pitch of its own calibration frame) or a
+    platform calibration (``PlatformCalibration``: the platform's roll and pitch, as ``align
+    apply --tilt`` gives them, through :func:`calibrated_force`). Readings without times get
+    none; if the model drifts, its drift is taken at the reference time and a warning says so
+    (likewise a temperature model without temperatures). Readings far from 1 g are counted in
+    a warning."""
+    t, a, warnings = calibrated_force(model, tab)
+    frame = "platform" if hasattr(model, "model") else "triad"
     roll, pitch = roll_pitch(a, method=method, mu=mu)
-    res = TiltOfReadings(t, a, roll, pitch, method, mu)
+    res = TiltOfReadings(t, a, roll, pitch, method, mu, frame=frame)
     far = res.far_from_1g
     if far:
         norm = np.linalg.norm(a, axis=1)
@@ -121,4 +139,4 @@ def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> Ti
                         f"1 g (|a| {np.nanmin(norm):.3g} to {np.nanmax(norm):.3g} g): not "
                         "static, free fall, a shock, the wrong unit or the wrong calibration; "
                         "their roll and pitch are not a tilt")
-    return TiltOfReadings(t, a, roll, pitch, method, mu, tuple(warnings))
+    return TiltOfReadings(t, a, roll, pitch, method, mu, tuple(warnings), frame)

@@ -295,25 +295,32 @@ def _real_stdout():
     return _STDOUT_STREAM[0] if _STDOUT_STREAM else sys.stdout
 
 
-def csv_text(names: Iterable[str], columns: Iterable, fmt: str = "%.10g") -> str:
+def csv_text(names: Iterable[str], columns: Iterable, fmt: str = "%.10g",
+             exact: Iterable[str] = ()) -> str:
     """A CSV table (header line + rows) of equal-length numeric columns, for
     :func:`write_atomic`; a column given as None is left blank on every row (a quantity the
-    input did not have, e.g. times: never invented)."""
-    import io
-
+    input did not have, e.g. times: never invented). Columns named in ``exact`` (times) are
+    written as the shortest text that reads back to the very same float64 (``repr``), not with
+    ``fmt``: a carried-through input value is never rounded (Unix-epoch times need 16 digits
+    to keep microseconds; ``%.10g`` would merge 10 s of readings into one instant)."""
     import numpy as np
 
-    names, columns = list(names), list(columns)
-    given = [c for c in columns if c is not None]
-    data = np.column_stack([np.asarray(c, float) for c in given])
-    buf = io.StringIO()
-    np.savetxt(buf, data, delimiter=",", fmt=fmt)
-    rows = buf.getvalue().splitlines()
-    if len(given) < len(columns):
-        blanks = [c is None for c in columns]
-        out = []
-        for r in rows:
-            vals = iter(r.split(","))
-            out.append(",".join("" if b else next(vals) for b in blanks))
-        rows = out
-    return "\n".join([",".join(names), *rows]) + "\n"
+    names, columns, exact = list(names), list(columns), set(exact)
+    if len(names) != len(columns):
+        raise ValueError(f"{len(names)} names for {len(columns)} columns")
+    texts: list = []
+    n = None
+    for name, c in zip(names, columns, strict=True):
+        if c is None:
+            texts.append(None)
+            continue
+        v = np.asarray(c, float).ravel()
+        n = len(v) if n is None else n
+        if len(v) != n:
+            raise ValueError(f"column {name}: {len(v)} values, expected {n}")
+        # float(x) first: repr of a numpy scalar is 'np.float64(...)' in numpy 2
+        texts.append([repr(x) for x in map(float, v.tolist())] if name in exact else
+                     [fmt % x for x in v.tolist()])
+    blank = [""] * (n or 0)
+    rows = zip(*(blank if t is None else t for t in texts), strict=True)
+    return "\n".join([",".join(names), *(",".join(r) for r in rows)]) + "\n"

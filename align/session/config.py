@@ -377,8 +377,14 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         if abs(right @ up) > 0:
             raise InputError(f"{w}: right = {v.get('right')!r} and up = {v.get('up')!r} are "
                              "the same axis; they must be perpendicular")
-        cam = str(v.get("camera", name))
-        cameras.setdefault(cam, Camera(cam))
+        cam = v.get("camera", name)
+        # A view naming no declared camera is refused, never given a camera of its own: a
+        # typo (camera = "C" for "A") would split a view from its reversal, and the roll of
+        # the real camera would silently not reach it.
+        if not isinstance(cam, str) or cam not in cameras:
+            said = f"camera = {cam!r}" if "camera" in v else f"no camera key (default {cam!r})"
+            raise InputError(f"{w} {said}: no [cameras.{cam}] table (known: "
+                             f"{', '.join(cameras) or 'none'})")
         views[name] = View(name, cam, right, up)
 
     imgs = []

@@ -892,16 +892,31 @@ def test_two_concurrent_runs_on_the_same_outputs(base, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
 
 
-def test_tilt_takes_the_triad_model_of_any_calibration_file(base, tmp_path):
+def test_tilt_takes_any_calibration_file_and_says_its_frame(base, tmp_path):
+    """A triad calibration gives the triad frame's roll/pitch; a platform calibration and the
+    session result holding it give the platform's, exactly as 'align apply --tilt'."""
     outs = []
     for cal in ("cal.json", "pc.json", "result.json"):
         out = tmp_path / f"{cal}.tilt.json"
         assert main(["tilt", str(base / "readings.csv"), "--calibration",
-                     str(base / "outputs" / cal), "--json", str(out), "-q"]) == 0
+                     str(base / "outputs" / cal), "--json", str(out), "--out",
+                     str(tmp_path / f"{cal}.csv"), "-q"]) == 0
         outs.append(_json(out))
-    # The session's model is the same ellipsoid fit of the same tumble as 'align calibrate'.
-    for o in outs[1:]:
-        assert abs(o["roll_deg_mean"] - outs[0]["roll_deg_mean"]) < 1e-9
+    assert [o["frame"] for o in outs] == ["triad", "platform", "platform"]
+    from align.contract import validate
+
+    for o in outs:
+        validate(o, "tilt")
+    assert outs[1]["roll_deg_mean"] == outs[2]["roll_deg_mean"]
+    ap = tmp_path / "ap.csv"
+    assert main(["apply", str(base / "outputs" / "pc.json"), str(base / "readings.csv"),
+                 "--out", str(ap), "--tilt", "-q"]) == 0
+    A = np.genfromtxt(ap, delimiter=",", names=True)
+    T = np.genfromtxt(tmp_path / "pc.json.csv", delimiter=",", names=True)
+    # the same numbers, printed with 9 (tilt) and 10 (apply) significant digits: half a unit
+    # of the 9th digit plus of the 10th is at most 5.5e-9 relative
+    assert np.allclose(T["roll_deg"], A["roll_deg"], rtol=5.5e-9, atol=1e-12)
+    assert np.allclose(T["pitch_deg"], A["pitch_deg"], rtol=5.5e-9, atol=1e-12)
 
 
 def test_synth_force_replaces_only_what_synth_wrote(tmp_path, capsys):

@@ -96,3 +96,32 @@ def test_readings_far_from_one_g_are_counted_in_a_warning(scale, far):
     if far:
         assert res.warnings[0].startswith(f"{far} of 50 readings")
         assert res.to_dict()["warnings"] == list(res.warnings)
+
+
+def test_a_platform_calibration_gives_the_platform_roll_and_pitch():
+    """Readings of a triad misaligned by ~5' on a platform at known roll/pitch: through the
+    platform calibration tilt gives the platform's angles (as apply --tilt does, the same
+    numbers); through the triad model alone they are off by about the misalignment."""
+    from align.apply import PlatformCalibration, apply_to_readings
+    from align.calibration import r_matrix
+    from align.fusion import axes_from
+    from align.tilt import tilt_of_readings
+
+    rng = np.random.default_rng(7)
+    roll, pitch = rng.uniform(-0.5, 0.5, (2, 60))
+    a_p = gravity_from_angles(roll, pitch)
+    m = _model()
+    e6 = rng.normal(0, 300 / 206264.8, 6)                    # ~5' misalignment
+    pc = PlatformCalibration(m, e6, np.eye(6) * 1e-12)
+    R = r_matrix(m.beta)
+    # w = R a_c = |r_i| s_i . a_P  (the model apply inverts)
+    a_c = np.linalg.solve(R, (np.linalg.norm(R, axis=1) * (a_p @ axes_from(e6).T)).T).T
+    tab = _readings(m, a_c)
+    res = tilt_of_readings(pc, tab)
+    assert res.frame == "platform" and res.to_dict()["frame"] == "platform"
+    assert np.allclose(res.roll, roll, atol=1e-12) and np.allclose(res.pitch, pitch, atol=1e-12)
+    ap = apply_to_readings(pc, tab, tilt=True)
+    assert np.array_equal(ap.roll, res.roll) and np.array_equal(ap.pitch, res.pitch)
+    triad = tilt_of_readings(m, tab)
+    assert triad.frame == "triad"
+    assert np.abs(triad.roll - roll).max() > 100 / 206264.8   # the misalignment, not noise
