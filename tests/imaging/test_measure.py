@@ -145,3 +145,25 @@ def test_camera_model_gives_the_pinhole_angle(tmp_path):
         without.line.angle_u_rad)
     with pytest.raises(ImageInputError, match="camera model is for"):
         measure_marks(s.image[:500].astype(float), camera=cam)
+
+
+def test_undistortion_carries_sigma_across_the_line():
+    """Undistorting points of a line through the centre only slides them along it: their
+    perpendicular residuals and sigma scale alike, so chi2 does not change with k1."""
+    from imaging import cross_magnification, fit_line, undistort
+
+    rng = np.random.default_rng(3)
+    a = np.deg2rad(31.0)
+    u, n = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
+    t = np.linspace(-20, 180, 200)
+    sig = np.full(t.size, 0.05)
+    pts = t[:, None] * u + rng.normal(size=t.size)[:, None] * sig[:, None] * n
+    c0 = fit_line(pts, sig, reject_sigma=None).chi2
+    for k1 in (-0.2, 0.1, 50.0):
+        g = cross_magnification(pts, [k1], 400.0, n)
+        c = fit_line(undistort(pts, [k1], 400.0), sig * g, reject_sigma=None).chi2
+        assert abs(c - c0) < 1e-3 * c0, (k1, c, c0)
+    # Off the centre, a displacement along the normal of a point on the normal is radial.
+    g = cross_magnification(np.array([[0.0, 100.0]]), [0.1], 400.0, np.array([0.0, 1.0]))
+    ru = undistort(np.array([[0.0, 100.0]]), [0.1], 400.0)[0, 1] / 400
+    assert abs(g[0] - 1 / (1 + 0.3 * ru**2)) < 1e-12
