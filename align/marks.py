@@ -152,10 +152,17 @@ def texture_scale(m: MarkMeasurement) -> float:
     neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
     touches: var(z[i+1] - z[i]) = 2 for white z.
     """
-    if m.chol is None:
+    if m.chol is None or len(m.points) <= 10:
         return 1.0
+    # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
+    # (each residual given the ones before it), so from the other end the whitened series
+    # differs, and u would depend on which end the line starts from (the same pixels
+    # rotated by 180 deg). The reversed series' correlation matrix is P R P (P the
+    # reversal), factored again.
     z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
-    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
+    rev = np.linalg.cholesky((m.chol @ m.chol.T)[::-1, ::-1])
+    zr = fit_line(m.points[::-1], m.sigma[::-1], reject_sigma=None, chol=rev).z
+    return float(max(1.0, (np.mean(np.diff(z) ** 2) + np.mean(np.diff(zr) ** 2)) / 4))
 
 
 def noise_dof(m: MarkMeasurement, scale: float) -> float | None:

@@ -195,7 +195,8 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     # (the line itself is refined from every pixel in sample_centres).
     stride = max(1, int(np.ceil(vals.size / _SHAPE_PIXELS)))
     if stride > 1:
-        keep = (np.floor((t - t0) / 8).astype(int) % stride) == 0
+        # Blocks counted from the middle, so the same from either end (see segment_index).
+        keep = (np.abs(np.round((t - 0.5 * (t0 + t1)) / 8)).astype(int) % stride) == 0
         vals, e, t = vals[keep], e[keep], t[keep]
     # Clipped pixels (0 or full scale) say only "beyond the range": left out of the fit. The
     # mark itself must not be clipped; clipped surroundings (a dark padded border, a
@@ -334,6 +335,23 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(np.median(r**2) / 0.4549), 0.0
 
 
+def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Segment of each pixel at ``t`` along the mark, and which pixels ``every`` keeps.
+
+    The segments are laid out from the middle of the measured stretch, one centred on it,
+    so that the grid is the same from either end: the same pixels rotated by 180 deg or
+    mirrored (t runs the other way) fall in the same segments. (Counted from t_start, the
+    two ends' part segments differed, and the angle by 0.1 u.) Indices run from 0 along t;
+    with ``every`` > 1 only segments a multiple of ``every`` from the middle one are kept.
+    """
+    mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+    j = np.round((t - mid) / segment_px).astype(int)
+    reach = int(np.round(0.5 * (pf.t_end_px - pf.t_start_px) / segment_px)) + 1
+    keep = np.abs(j) % every == 0 if every > 1 else np.ones(t.shape, bool)
+    return (j + reach) // every if every > 1 else j + reach, keep
+
+
 def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, every: int,
           nseg: int, ring: float = 6.0) -> tuple[np.ndarray, ...]:
     """Pixels of a ring just outside the band the centres are fitted on (half < |e| <=
@@ -344,11 +362,8 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
     """
     _, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
                          half + ring)
-    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
-    sel = np.abs(e) > half
-    if every > 1:
-        sel &= seg % every == 0
-        seg = seg // every
+    seg, keep = segment_index(t, pf, segment_px, every)
+    sel = (np.abs(e) > half) & keep
     sel &= seg < nseg
     idx, e, seg = idx[sel], e[sel], seg[sel]
     return idx // image.shape[1], idx % image.shape[1], e, seg
@@ -385,10 +400,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
                               "outside the image or is all clipped")
-    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
-    if every > 1:
-        keep = seg % every == 0
-        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep] // every, idx[keep]
+    seg, keep = segment_index(t, pf, segment_px, every)
+    if not keep.all():
+        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep], idx[keep]
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
+                              "its segments")
     nseg = int(seg.max()) + 1
     table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var

@@ -223,3 +223,17 @@ def test_mark_through_the_centre_gets_no_distortion():
     # 80 px off the centre the same bow is read as k1 (bow / (d (r/R)^2) ~ 0.03).
     r = measure_image(_bowed_groove(80.0, 0.3, 7))[0]
     assert [e.name for e in r.loop.effects] == [RADIAL]
+
+
+def test_loop_u_of_a_textured_mark_same_from_either_end():
+    """The texture's amplitude re-read from the mark (whitened residuals' neighbour
+    differences) is taken both ways along it: a causal whitening alone gave the same pixels
+    rotated by 180 deg a u a few % different."""
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(2.6), 40.0, 370, 4.0),), width=640,
+                     height=480, full_well_e=full_well_for_snr(40, -0.6), seed=5, texture=0.01)
+    img = render_marks(spec, with_crlb=False).image
+    a = measure_image(img)[0]
+    b = measure_image(np.ascontiguousarray(np.rot90(img, 2)))[0]
+    assert a.measurement.chol is not None and a.frame is None  # one mark, textured
+    assert abs(a.angle_u_rad - b.angle_u_rad) < 1e-5 * a.angle_u_rad
+    assert abs(a.angle_rad - b.angle_rad) < 1e-5 * a.angle_u_rad

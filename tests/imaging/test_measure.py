@@ -167,3 +167,27 @@ def test_undistortion_carries_sigma_across_the_line():
     g = cross_magnification(np.array([[0.0, 100.0]]), [0.1], 400.0, np.array([0.0, 1.0]))
     ru = undistort(np.array([[0.0, 100.0]]), [0.1], 400.0)[0, 1] / 400
     assert abs(g[0] - 1 / (1 + 0.3 * ru**2)) < 1e-12
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_angle_and_u_follow_a_rotation_or_mirror_exactly(seed):
+    """The same pixels rotated by 90/180/270 deg or mirrored give the transformed angle and
+    the same u: nothing may depend on which end of the mark the measurement starts from
+    (segments, shape-fit blocks, the texture's whitening). Several marks, textured or not,
+    short and long (a long one is first sampled on every 4th segment)."""
+    rng = np.random.default_rng(100 + seed)
+    for k in range(3):
+        ang = rng.uniform(-89, 89)
+        img = mark_image(ang, 10 * seed + k, length_px=rng.uniform(150, 560),
+                         offset_px=rng.uniform(-120, 120), with_crlb=False,
+                         texture=0.02 if k != 1 else 0.0).image
+        ref = measure_marks(img)[0]
+        a0, u0 = ref.line.angle_rad, ref.line.angle_u_rad
+        for moved, sign, turn in ((np.rot90(img, 2), 1, 0), (np.fliplr(img), -1, 0),
+                                  (np.flipud(img), -1, 0), (np.rot90(img, 1), 1, 90),
+                                  (np.rot90(img, 3), 1, -90)):
+            m = measure_marks(np.ascontiguousarray(moved))[0].line
+            back = sign * (m.angle_rad - np.deg2rad(turn))
+            err = (back - a0 + np.pi / 2) % np.pi - np.pi / 2
+            assert abs(err) < 1e-4 * u0, (ang, turn, sign, err / u0)
+            assert abs(m.angle_u_rad - u0) < 1e-4 * u0
