@@ -454,7 +454,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     au, du = au * infl, du * infl
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
-        offset_u_px=du, length_px=m.line.length_px, width_px=m.profile.width_px,
+        offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
         loop=rep, measurement=m, uncertainty_inflation=infl)

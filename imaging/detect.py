@@ -145,6 +145,12 @@ LENGTH_SLACK = 0.8
 """A ridge this fraction of the shortest mark's length still counts (its ends fade)."""
 
 
+def default_min_length(shape: tuple[int, int]) -> float:
+    """The shortest mark searched for in an image (or roi) of this shape [px]:
+    :data:`MIN_LENGTH_PX`, at most 80 % of the smaller side."""
+    return min(MIN_LENGTH_PX, 0.8 * min(shape))
+
+
 def _odd_pad(img: np.ndarray, pad: int) -> np.ndarray:
     """Pad by point reflection about the edge pixels (2 v0 - v_k).
 
@@ -354,7 +360,7 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         image = image[y0:y0 + rh, x0:x0 + rw]
     h, w = image.shape
     if min_length_px is None:
-        min_length_px = min(MIN_LENGTH_PX, 0.8 * min(h, w))
+        min_length_px = default_min_length((h, w))
     # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
     # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
     f = max(1, min(int(max(h, w) // 500), int(min_length_px // 25)))

@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy.special import erf
 
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
@@ -481,3 +482,60 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex)
+
+
+def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
+                  ) -> tuple[float, float]:
+    """Where the groove ends along its line: the outermost positions t [px], either side of
+    the measured stretch, at which its contrast is still half its median (the half-depth
+    points of its blurred ends, like the width's).
+
+    The centres are sampled on a stretch trimmed inside the detected ridge, which itself
+    fades a filter width before each end, so their span is ~20 px short of a 100 px mark;
+    this is the mark's own length. The groove's contrast is fitted per 1-px step along the
+    line (level + contrast x the fitted profile), beyond the measured stretch by
+    ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
+    """
+    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
+    ok = (vals < pf.full_scale_dn) & (vals > 0)
+    vals, e, t = vals[ok], e[ok], t[ok]
+    mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+    if vals.size == 0:
+        return pf.t_start_px, pf.t_end_px
+    j = np.round(t - mid).astype(int)
+    j -= j.min()
+    nb = int(j.max()) + 1
+    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    cnt = np.bincount(j, minlength=nb)
+    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
+    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
+    det = cnt * spp - sp * sp
+    amp = np.where(det > 1e-9 * np.maximum(cnt * spp, 1e-300),
+                   (cnt * spv - sp * sv) / np.where(det > 0, det, 1.0), np.nan)
+    amp[cnt < 4] = np.nan
+    tb = np.bincount(j, t, nb) / np.maximum(cnt, 1)  # each bin's mean position
+    good = np.isfinite(amp)
+    if good.sum() < 10:
+        return pf.t_start_px, pf.t_end_px
+    sm = np.full(nb, np.nan)
+    sm[good] = median_filter(amp[good], size=5, mode="nearest")
+    inside = (tb >= pf.t_start_px) & (tb <= pf.t_end_px) & good
+    ref = float(np.median(sm[inside])) if inside.any() else float(pf.contrast_dn)
+    if ref == 0:
+        return pf.t_start_px, pf.t_end_px
+    deep = np.flatnonzero(good & (sm / ref >= 0.5))
+    if deep.size == 0:
+        return pf.t_start_px, pf.t_end_px
+    # The outermost deep bins: a stretch covered by dust in between does not shorten it.
+    lo, hi = int(deep[0]), int(deep[-1])
+
+    def cross(k: int, k_out: int) -> float:
+        """Half-depth crossing between the last deep bin and the next (linear)."""
+        if not (0 <= k_out < nb) or not good[k_out]:
+            return float(tb[k])
+        a, b = sm[k] / ref - 0.5, sm[k_out] / ref - 0.5
+        return float(tb[k] + (tb[k_out] - tb[k]) * a / (a - b)) if a != b else float(tb[k])
+
+    return cross(lo, lo - 1), cross(hi, hi + 1)
