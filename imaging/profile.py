@@ -207,7 +207,8 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     if np.mean(clipped[core]) > 0.02:
         raise ImageInputError(
             f"{where}: mark near ({cand.offset_px:.0f} px offset) is saturated or clipped "
-            f"({100 * np.mean(clipped[core]):.0f} % of its pixels)")
+            f"({100 * np.mean(clipped[core]):.0f} % of its pixels at 0 or {full_scale:.0f}, "
+            f"the {int(np.log2(full_scale + 1))}-bit full scale)")
     vals, e, t = vals[~clipped], e[~clipped], t[~clipped]
     if vals.size < 100:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "

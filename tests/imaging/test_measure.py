@@ -208,3 +208,18 @@ def test_length_is_the_groove_between_its_half_depth_ends_and_honours_min_length
     assert len(measure_marks(s.image, min_length_px=150)) == 1  # 130 >= 0.8 x 150
     with pytest.raises(ImageInputError, match="no mark found"):
         measure_marks(s.image, min_length_px=200)
+
+
+def test_clipped_groove_refused_alike_in_16_and_12_bit_data():
+    """Full scale is the data's bit depth's (4095 for 12-bit data in a 16-bit file): a
+    bright groove clipped there is refused as clipped, as the same groove in 16-bit is."""
+    s = mark_image(12.0, 4, snr=60.0, length_px=300.0, size=(640, 480), with_crlb=False)
+    inv = 65535.0 - s.image.astype(float)  # a bright groove on a dark surface
+    lo, hi = np.percentile(inv, [50, 99.9])
+    bright = (inv - lo) / (hi - lo)  # background ~0, groove ~1
+    for top in (65535.0, 4095.0):
+        img = np.clip(np.round((0.3 + 1.5 * bright) * 0.6 * top), 0, top).astype(np.uint16)
+        (r,) = measure_marks(img)  # a failed mark is an entry, not raised
+        assert isinstance(r, ImageInputError) and f"0 or {top:.0f}, the" in str(r), r
+        ok = np.round((0.3 + 0.5 * bright) * 0.6 * top).astype(np.uint16)  # below full scale
+        assert len(measure_marks(ok)) == 1
