@@ -17,6 +17,7 @@ Candidate effects (each a few design columns with physical meaning):
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -38,7 +39,9 @@ from imaging import (
     ImageInputError,
     MarkMeasurement,
     Roi,
+    cross_magnification,
     fit_line,
+    line_frame,
     measure_marks,
     read_image,
     undistort,
@@ -54,6 +57,11 @@ def half_diagonal(shape: tuple[int, int]) -> float:
     return float(np.hypot(w - 1, h - 1) / 2)
 
 
+K1_MAX = 0.3
+"""Largest |k1| at the half-diagonal taken as a lens (30 % at the corner; beyond ~1/3 the
+barrel model folds the image, so a larger fitted k1 means the lines do not constrain it)."""
+
+
 class MarkStage:
     """Line fit along one mark, with extra terms (the stage the loop drives)."""
 
@@ -64,22 +72,39 @@ class MarkStage:
         self.sigma = m.sigma * np.sqrt(ts)
         self.noise_dof = noise_dof(m, ts)
 
+    def undistorted(self, k1: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
+        """The centres undistorted by k1 and their sigma across the line carried with them
+        (:func:`imaging.cross_magnification` about the line at ``angle_rad``)."""
+        if not k1:
+            return self.m.points, self.sigma
+        q = undistort(self.m.points, [k1], self.scale)
+        g = cross_magnification(self.m.points, [k1], self.scale, line_frame(angle_rad)[1])
+        if not np.all(np.isfinite(q)) or not np.all(g > 0):
+            raise ValueError("k1 folds the image along this mark")
+        return q, self.sigma * g
+
     def fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
         names = [t.name for t in terms]
-        pts = m.points
-        k1 = 0.0
+        k1, angle = 0.0, m.line.angle_rad
         rounds = 4 if RADIAL in names else 1
         for _ in range(rounds):
-            q = undistort(pts, [k1], self.scale) if k1 else pts
+            q, sig = self.undistorted(k1, angle)
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
-                    else np.asarray(t.columns, float).reshape(len(pts), -1) for t in terms]
+                    else np.asarray(t.columns, float).reshape(len(q), -1) for t in terms]
             F = np.hstack(cols) if cols else None
-            lf = fit_line(q, self.sigma, F, reject_sigma=None, chol=m.chol)
+            lf = fit_line(q, sig, F, reject_sigma=None, chol=m.chol)
+            angle = lf.angle_rad
             if RADIAL not in names:
                 break
             j = self._col_index(terms, RADIAL)
-            k1 += lf.beta[j] / lf.offset_px if lf.offset_px else 0.0
+            step = lf.beta[j] / lf.offset_px if lf.offset_px else np.inf
+            if not np.isfinite(step) or abs(k1 + step) > K1_MAX:
+                # No lens bends that much (and near the image centre k1 = bow / d runs away):
+                # the fit stays where it is, and the estimate k1 + bow / d it reports is
+                # refused by :func:`radial_admissible`.
+                break
+            k1 += step
         effects: dict[str, tuple[float, float]] = {}
         for t in terms:
             j = self._col_index(terms, t.name)
@@ -101,7 +126,7 @@ class MarkStage:
             residuals=lf.z * lf.sigma_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
-            order="t", effects=effects,
+            order="t", effects=effects, payload={"offset_px": lf.offset_px},
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
                         "offset_px": (lf.offset_px, lf.offset_u_px)},
             noise_dof=self.noise_dof)
@@ -127,10 +152,17 @@ def texture_scale(m: MarkMeasurement) -> float:
     neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
     touches: var(z[i+1] - z[i]) = 2 for white z.
     """
-    if m.chol is None:
+    if m.chol is None or len(m.points) <= 10:
         return 1.0
+    # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
+    # (each residual given the ones before it), so from the other end the whitened series
+    # differs, and u would depend on which end the line starts from (the same pixels
+    # rotated by 180 deg). The reversed series' correlation matrix is P R P (P the
+    # reversal), factored again.
     z = fit_line(m.points, m.sigma, reject_sigma=None, chol=m.chol).z
-    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2)) if len(z) > 10 else 1.0
+    rev = np.linalg.cholesky((m.chol @ m.chol.T)[::-1, ::-1])
+    zr = fit_line(m.points[::-1], m.sigma[::-1], reject_sigma=None, chol=rev).z
+    return float(max(1.0, (np.mean(np.diff(z) ** 2) + np.mean(np.diff(zr) ** 2)) / 4))
 
 
 def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
@@ -170,6 +202,32 @@ def _illum(fit: StageFit) -> Term | None:
     if np.ptp(g) == 0:
         return None
     return Term(ILLUM, "px^2", (g - g.mean())[:, None])
+
+
+def radial_admissible(current: StageFit, trial: StageFit, term: Term, alpha: float = 1e-3
+                      ) -> str | None:
+    """Why a significant ``radial_distortion`` cannot be a lens here (None: it can).
+
+    A radial distortion bows a line by k1 d (r/R)^2: a mark through the principal point
+    (d ~ 0) is imaged straight whatever k1, so its bow says nothing about k1 (u(k1) =
+    u(bow) / |d|). The line identifies k1 only if the largest lens k1 (:data:`K1_MAX`) would
+    stand out of u(k1) at the loop's level alpha (two-sided normal quantile); otherwise a
+    significant bow is something else (a bent mark), never a distortion. Likewise an
+    estimate beyond K1_MAX is no lens.
+    """
+    if term.name != RADIAL:
+        return None
+    k1, u = trial.effects.get(RADIAL, (float("nan"), float("inf")))
+    d = float(trial.payload["offset_px"]) if isinstance(trial.payload, dict) else float("nan")
+    z = float(np.sqrt(chi2.isf(alpha, 1)))
+    if not u * z <= K1_MAX:
+        return (f"k1 not identifiable on this mark: it passes {abs(d):.2g} px from the image "
+                f"centre, where a radial distortion leaves a line straight (u(k1) = {u:.2g}; "
+                f"even the largest lens k1 {K1_MAX} would not stand out of it)")
+    if not abs(k1) <= K1_MAX:
+        return (f"k1 = {k1:.3g} is beyond any lens (|k1| <= {K1_MAX} at the half-diagonal): "
+                "a bow that large is a bent mark, not distortion")
+    return None
 
 
 CANDIDATES: tuple[Candidate, ...] = (
@@ -223,16 +281,21 @@ def _num(v: object) -> float:
     return float("nan") if v is None else float(v)  # type: ignore[arg-type]
 
 
-K1_MAX = 0.3
-"""Largest |k1| at the half-diagonal taken as a lens (30 % at the corner; beyond ~1/3 the
-barrel model folds the image, so a larger fitted k1 means the lines do not constrain it)."""
+def _undistort_mark(m: MarkMeasurement, k1: float) -> tuple[np.ndarray, np.ndarray]:
+    """A mark's centres undistorted by k1 (at the half-diagonal) and their sigma carried
+    through the undistortion (see :func:`imaging.cross_magnification`)."""
+    if not k1:
+        return m.points, m.sigma
+    scale = half_diagonal(m.image_shape)
+    g = cross_magnification(m.points, [k1], scale, line_frame(m.line.angle_rad)[1])
+    return undistort(m.points, [k1], scale), m.sigma * np.abs(g)
 
 
 def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
     out = 0.0
     for m in ms:
-        q = undistort(m.points, [k1], scale) if k1 else m.points
-        out += fit_line(q, m.sigma, reject_sigma=None, chol=m.chol).chi2
+        q, s = _undistort_mark(m, k1)
+        out += fit_line(q, s, reject_sigma=None, chol=m.chol).chi2
     return out
 
 
@@ -278,17 +341,15 @@ def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> Fram
 
 def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
     """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
-    q = undistort(m.points, [k1], half_diagonal(m.image_shape))
+    q, s = _undistort_mark(m, k1)
     regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, regressors=regs, line=fit_line(q, m.sigma, reject_sigma=None,
-                                                                      chol=m.chol))
+    return replace(m, points=q, sigma=s, regressors=regs,
+                   line=fit_line(q, s, reject_sigma=None, chol=m.chol))
 
 
 def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
     """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
-    scale = half_diagonal(m.image_shape)
-    a = [fit_line(undistort(m.points, [k], scale), m.sigma, reject_sigma=None,
-                  chol=m.chol).angle_rad
+    a = [fit_line(*_undistort_mark(m, k), reject_sigma=None, chol=m.chol).angle_rad
          for k in (k1 - h, k1 + h)]
     return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
 
@@ -385,14 +446,15 @@ class MarkResult:
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES) -> MarkResult:
     """Run the residual loop over one measured mark."""
-    rep = run_loop(MarkStage(m), candidates, alpha=alpha)
+    rep = run_loop(MarkStage(m), candidates, alpha=alpha,
+                   admissible=functools.partial(radial_admissible, alpha=alpha))
     a, au = rep.after.quantities["angle_rad"]
     d, du = rep.after.quantities["offset_px"]
     infl = structure_inflation(rep)
     au, du = au * infl, du * infl
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
-        offset_u_px=du, length_px=m.line.length_px, width_px=m.profile.width_px,
+        offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
         loop=rep, measurement=m, uncertainty_inflation=infl)

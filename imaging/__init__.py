@@ -15,13 +15,19 @@ from imaging.errors import ImageInputError
 from imaging.io import read_image
 from imaging.linefit import LineFit, fit_line
 from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
-from imaging.plumbline import PlumbLineFit, chessboard_lines, plumb_line, undistort
+from imaging.plumbline import (
+    PlumbLineFit,
+    chessboard_lines,
+    cross_magnification,
+    plumb_line,
+    undistort,
+)
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
     "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
     "PlumbLineFit", "ProfileFit", "Roi", "calibrate_chessboard", "check_roi",
-    "chessboard_lines", "detect_marks",
+    "chessboard_lines", "cross_magnification", "detect_marks",
     "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
     "plumb_line", "read_image", "undistort", "wrap_angle",
 ]

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
+from scipy import special
 
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
@@ -144,6 +145,12 @@ LENGTH_SLACK = 0.8
 """A ridge this fraction of the shortest mark's length still counts (its ends fade)."""
 
 
+def default_min_length(shape: tuple[int, int]) -> float:
+    """The shortest mark searched for in an image (or roi) of this shape [px]:
+    :data:`MIN_LENGTH_PX`, at most 80 % of the smaller side."""
+    return min(MIN_LENGTH_PX, 0.8 * min(shape))
+
+
 def _odd_pad(img: np.ndarray, pad: int) -> np.ndarray:
     """Pad by point reflection about the edge pixels (2 v0 - v_k).
 
@@ -240,6 +247,49 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: fl
     return replace(c, offset_px=c.offset_px + pos), contrast / max(noise, 1e-12)
 
 
+def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 60.0,
+                 alpha: float = 1e-3) -> tuple[float, float]:
+    """How far a candidate stands out of the background's own relief across it, averaged
+    along it, and how far the relief alone could reach by chance: (contrast / spread, limit).
+
+    The median along the candidate's length averages pixel noise and isotropic texture away,
+    but not a machining lay running the same way: there the profile beside the candidate is
+    as rough as the candidate itself (one of many similar ridges), whereas a mark is one
+    deep groove on a background that averages flat. ``spread`` is the robust (MAD) spread of
+    that profile beside the candidate (up to ``reach`` px each side), a quadratic trend
+    (vignetting, a gradient) removed.
+
+    ``limit``: the relief's largest value in the search at level ``alpha``: the normal
+    quantile at alpha / (2 M), M ~ the image diagonal in px (the across positions searched,
+    one per px, both polarities), widened by 3 standard errors of the MAD spread (relative
+    1.16 / sqrt(n_eff); n_eff from the profile's lag-1 correlation r, n (1 - r) / (1 + r)).
+    (inf, 0): too little background beside it to judge; left to the other tests.
+    """
+    half = max(1.0, c.thickness_px / 2 + 1)
+    n_along = int(np.clip(c.length_px, 16, 2000))
+    vals, e, _ = _across(image, c, int(np.ceil(reach + half)), n_along, top)
+    cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
+    prof = np.full(e.size, np.nan)
+    prof[cols] = np.nanmedian(vals[:, cols], axis=0)
+    bg = cols & (np.abs(e) > 2 * half + 2)
+    if bg.sum() < 20:
+        return float("inf"), 0.0
+    _, contrast = _peak(vals, e, c.dark, half, half + 1)
+    x, y = e[bg], prof[bg]
+    res = y - np.polyval(np.polyfit(x, y, 2), x)
+    spread = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+    if spread <= 0:
+        return float("inf"), 0.0
+    adjacent = np.diff(x) == 1
+    rc = res - res.mean()
+    r1 = float(np.clip((rc[1:] * rc[:-1])[adjacent].mean() / max(np.mean(rc * rc), 1e-300),
+                       0.0, 0.95)) if adjacent.any() else 0.0
+    n_eff = max(len(res) * (1 - r1) / (1 + r1), 4.0)
+    m = 2 * np.hypot(*image.shape)
+    limit = float(-special.ndtri(alpha / (2 * m)) * (1 + 3 * 1.16 / np.sqrt(n_eff)))
+    return float(contrast / spread), limit
+
+
 Roi = tuple[int, int, int, int]
 
 
@@ -289,6 +339,8 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     min_fill : float
         Fraction of a candidate's length its ridge pixels must cover: pieces of machining
         streaks that happen to line up are mostly gaps; a mark broken by dust is mostly mark.
+        A candidate must also stand out of the background's relief averaged along it
+        (:func:`distinctness`): a machining lay's streak is one of many alike.
     top : float, optional
         The image's full-scale DN when the caller already knows it (else from the image).
 
@@ -308,7 +360,7 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         image = image[y0:y0 + rh, x0:x0 + rw]
     h, w = image.shape
     if min_length_px is None:
-        min_length_px = min(MIN_LENGTH_PX, 0.8 * min(h, w))
+        min_length_px = default_min_length((h, w))
     # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
     # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
     f = max(1, min(int(max(h, w) // 500), int(min_length_px // 25)))
@@ -363,7 +415,12 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
         c, _ = _full_res(image, c, noise_full, f, top)
         c, snr = _full_res(image, c, noise_full, f, top)
-        if snr >= min_pixel_snr:
+        if snr < min_pixel_snr:
+            continue
+        # A machining lay running along the candidate: each streak is long, and the ridge
+        # filter integrates it into a strong response, but beside it lie many like it.
+        ratio, limit = distinctness(image, c, top)
+        if ratio >= limit:
             out.append(c)
     out = _dedupe(out)[:max_marks]
     if roi is not None:

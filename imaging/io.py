@@ -64,7 +64,18 @@ def _read_tiff(p: Path) -> np.ndarray:
         raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
 
 
+BIT_DEPTHS = (8, 10, 12, 14, 16)
+"""Sensor bit depths: 10-, 12- and 14-bit data usually come in a 16-bit file."""
+
+
 def full_scale(image: np.ndarray | float) -> float:
-    """Full-scale DN guessed from the data range (255 for 8-bit data, 65535 for 16-bit);
-    ``image`` may also be its maximum already taken (a pass over 5 MP costs ~4 ms)."""
-    return 255.0 if np.max(image) <= 255 else 65535.0
+    """Full-scale DN guessed from the data range: the smallest 2^b - 1 of :data:`BIT_DEPTHS`
+    that holds the maximum (255 for 8-bit data, 4095 for 12-bit data in a 16-bit file,
+    65535 for 16-bit), so clipped pixels are recognised at any of these depths alike.
+    ``image`` may also be its maximum already taken (a pass over 5 MP costs ~4 ms).
+
+    (A 16-bit image that happens to peak exactly at 4095 loses only its pixels at that
+    value, as if clipped: they say "at least this" either way.)
+    """
+    mx = float(np.max(image))
+    return next((2.0**b - 1 for b in BIT_DEPTHS if mx <= 2**b - 1), 2.0**BIT_DEPTHS[-1] - 1)

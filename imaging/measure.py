@@ -13,11 +13,18 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
-from imaging.detect import MarkCandidate, Roi, detect_marks, require_single
+from imaging.detect import (
+    LENGTH_SLACK,
+    MarkCandidate,
+    Roi,
+    default_min_length,
+    detect_marks,
+    require_single,
+)
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
-from imaging.profile import Centres, ProfileFit, fit_profile, sample_centres
+from imaging.profile import Centres, ProfileFit, fit_profile, groove_extent, sample_centres
 from imaging.texture import correlation_cholesky
 
 
@@ -44,6 +51,12 @@ class MarkMeasurement:
     image_shape: tuple[int, int]
     n_rejected: int = 0
     chol: np.ndarray | None = None
+    extent_px: tuple[float, float] = (float("nan"), float("nan"))
+
+    @property
+    def length_px(self) -> float:
+        """The groove's length between its half-depth ends [px] (:func:`groove_extent`)."""
+        return float(self.extent_px[1] - self.extent_px[0])
 
 
 def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
@@ -102,7 +115,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()), chol)
+                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf))
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
@@ -152,10 +165,21 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
     if expect_one:
         cands = [require_single(cands, where)]
+    # The detector judges a ridge's length; the measured groove (half-depth ends) must be
+    # as long: a faint streak's ridge can reach the length where the streak itself is
+    # shorter (its length_px would then be below --min-length).
+    shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
+                               default_min_length(image.shape if roi is None else roi[:1:-1]))
     out: list[MarkMeasurement | ImageInputError] = []
     for c in cands:
         try:
-            out.append(measure_candidate(image, c, camera, where, top))
+            m = measure_candidate(image, c, camera, where, top)
         except ImageInputError as exc:
             out.append(exc)
+            continue
+        if m.length_px >= shortest:
+            out.append(m)
+    if not out:
+        raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
+                              f"{shortest:.0f} px once measured)")
     return out

@@ -57,6 +57,30 @@ def undistort(q: np.ndarray, k: Sequence[float], scale: float) -> np.ndarray:
     return q * f[:, None]
 
 
+def cross_magnification(q: np.ndarray, k: Sequence[float], scale: float,
+                        normal: np.ndarray) -> np.ndarray:
+    """How much :func:`undistort` magnifies a small displacement of each point along
+    ``normal`` (a line's unit normal), measured along that normal: n . J n with J the
+    undistortion's Jacobian at the point (radial gain dr_u/dr_d, tangential r_u/r_d).
+
+    A centre's standard uncertainty across its line is multiplied by this when the centres
+    are undistorted: leaving it as it was would read points pulled together by a strong
+    fitted k1 as points that fit better, and make the fit prefer k1 for that alone.
+    """
+    q = np.asarray(q, float)
+    qu = undistort(q, k, scale)
+    rd = np.linalg.norm(q, axis=1)
+    ru = np.linalg.norm(qu, axis=1) / scale
+    tang = np.where(rd > 0, ru * scale / np.where(rd > 0, rd, 1.0), 1.0)
+    dg = np.ones_like(ru)
+    for i, ki in enumerate(k, start=1):
+        dg += (2 * i + 1) * ki * ru ** (2 * i)
+    radial = 1.0 / dg
+    c2 = np.where(rd > 0, (q @ np.asarray(normal, float)) ** 2 / np.where(rd > 0, rd, 1.0) ** 2,
+                  0.0)
+    return radial * c2 + tang * (1.0 - c2)
+
+
 def _rms_straight(lines: Sequence[np.ndarray]) -> float:
     r = [fit_line(q, np.ones(len(q)), reject_sigma=None).residuals_px for q in lines]
     return float(np.sqrt(np.mean(np.concatenate(r) ** 2)))

@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy.special import erf
 
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
@@ -195,7 +196,8 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     # (the line itself is refined from every pixel in sample_centres).
     stride = max(1, int(np.ceil(vals.size / _SHAPE_PIXELS)))
     if stride > 1:
-        keep = (np.floor((t - t0) / 8).astype(int) % stride) == 0
+        # Blocks counted from the middle, so the same from either end (see segment_index).
+        keep = (np.abs(np.round((t - 0.5 * (t0 + t1)) / 8)).astype(int) % stride) == 0
         vals, e, t = vals[keep], e[keep], t[keep]
     # Clipped pixels (0 or full scale) say only "beyond the range": left out of the fit. The
     # mark itself must not be clipped; clipped surroundings (a dark padded border, a
@@ -205,7 +207,8 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     if np.mean(clipped[core]) > 0.02:
         raise ImageInputError(
             f"{where}: mark near ({cand.offset_px:.0f} px offset) is saturated or clipped "
-            f"({100 * np.mean(clipped[core]):.0f} % of its pixels)")
+            f"({100 * np.mean(clipped[core]):.0f} % of its pixels at 0 or {full_scale:.0f}, "
+            f"the {int(np.log2(full_scale + 1))}-bit full scale)")
     vals, e, t = vals[~clipped], e[~clipped], t[~clipped]
     if vals.size < 100:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
@@ -334,6 +337,23 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     return float(np.median(r**2) / 0.4549), 0.0
 
 
+def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Segment of each pixel at ``t`` along the mark, and which pixels ``every`` keeps.
+
+    The segments are laid out from the middle of the measured stretch, one centred on it,
+    so that the grid is the same from either end: the same pixels rotated by 180 deg or
+    mirrored (t runs the other way) fall in the same segments. (Counted from t_start, the
+    two ends' part segments differed, and the angle by 0.1 u.) Indices run from 0 along t;
+    with ``every`` > 1 only segments a multiple of ``every`` from the middle one are kept.
+    """
+    mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+    j = np.round((t - mid) / segment_px).astype(int)
+    reach = int(np.round(0.5 * (pf.t_end_px - pf.t_start_px) / segment_px)) + 1
+    keep = np.abs(j) % every == 0 if every > 1 else np.ones(t.shape, bool)
+    return (j + reach) // every if every > 1 else j + reach, keep
+
+
 def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, every: int,
           nseg: int, ring: float = 6.0) -> tuple[np.ndarray, ...]:
     """Pixels of a ring just outside the band the centres are fitted on (half < |e| <=
@@ -344,11 +364,8 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
     """
     _, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
                          half + ring)
-    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
-    sel = np.abs(e) > half
-    if every > 1:
-        sel &= seg % every == 0
-        seg = seg // every
+    seg, keep = segment_index(t, pf, segment_px, every)
+    sel = (np.abs(e) > half) & keep
     sel &= seg < nseg
     idx, e, seg = idx[sel], e[sel], seg[sel]
     return idx // image.shape[1], idx % image.shape[1], e, seg
@@ -385,10 +402,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
                               "outside the image or is all clipped")
-    seg = np.floor((t - pf.t_start_px) / segment_px).astype(int)
-    if every > 1:
-        keep = seg % every == 0
-        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep] // every, idx[keep]
+    seg, keep = segment_index(t, pf, segment_px, every)
+    if not keep.all():
+        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep], idx[keep]
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
+                              "its segments")
     nseg = int(seg.max()) + 1
     table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var
@@ -464,3 +483,60 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex)
+
+
+def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
+                  ) -> tuple[float, float]:
+    """Where the groove ends along its line: the outermost positions t [px], either side of
+    the measured stretch, at which its contrast is still half its median (the half-depth
+    points of its blurred ends, like the width's).
+
+    The centres are sampled on a stretch trimmed inside the detected ridge, which itself
+    fades a filter width before each end, so their span is ~20 px short of a 100 px mark;
+    this is the mark's own length. The groove's contrast is fitted per 1-px step along the
+    line (level + contrast x the fitted profile), beyond the measured stretch by
+    ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
+    """
+    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
+    ok = (vals < pf.full_scale_dn) & (vals > 0)
+    vals, e, t = vals[ok], e[ok], t[ok]
+    mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+    if vals.size == 0:
+        return pf.t_start_px, pf.t_end_px
+    j = np.round(t - mid).astype(int)
+    j -= j.min()
+    nb = int(j.max()) + 1
+    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    cnt = np.bincount(j, minlength=nb)
+    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
+    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
+    det = cnt * spp - sp * sp
+    amp = np.where(det > 1e-9 * np.maximum(cnt * spp, 1e-300),
+                   (cnt * spv - sp * sv) / np.where(det > 0, det, 1.0), np.nan)
+    amp[cnt < 4] = np.nan
+    tb = np.bincount(j, t, nb) / np.maximum(cnt, 1)  # each bin's mean position
+    good = np.isfinite(amp)
+    if good.sum() < 10:
+        return pf.t_start_px, pf.t_end_px
+    sm = np.full(nb, np.nan)
+    sm[good] = median_filter(amp[good], size=5, mode="nearest")
+    inside = (tb >= pf.t_start_px) & (tb <= pf.t_end_px) & good
+    ref = float(np.median(sm[inside])) if inside.any() else float(pf.contrast_dn)
+    if ref == 0:
+        return pf.t_start_px, pf.t_end_px
+    deep = np.flatnonzero(good & (sm / ref >= 0.5))
+    if deep.size == 0:
+        return pf.t_start_px, pf.t_end_px
+    # The outermost deep bins: a stretch covered by dust in between does not shorten it.
+    lo, hi = int(deep[0]), int(deep[-1])
+
+    def cross(k: int, k_out: int) -> float:
+        """Half-depth crossing between the last deep bin and the next (linear)."""
+        if not (0 <= k_out < nb) or not good[k_out]:
+            return float(tb[k])
+        a, b = sm[k] / ref - 0.5, sm[k_out] / ref - 0.5
+        return float(tb[k] + (tb[k_out] - tb[k]) * a / (a - b)) if a != b else float(tb[k])
+
+    return cross(lo, lo - 1), cross(hi, hi + 1)
