@@ -674,7 +674,12 @@ def test_batch_ctrl_c_then_resume_gives_the_same_numbers(tmp_path):
     args = [sys.executable, "-m", "align", "run", *map(str, folders), "--json",
             str(tmp_path / "res"), "--calibration", str(tmp_path / "cal"), "--jobs", "2"]
     p = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(8)
+    # Stopped once the first session is written (a fixed sleep let a fast machine finish all
+    # eight first): six or more are then still to run on the two workers.
+    t0 = time.monotonic()
+    while not [x for x in (tmp_path / "res").glob("*.json") if not x.name.startswith(".")]:
+        assert p.poll() is None and time.monotonic() - t0 < 300, "no session finished"
+        time.sleep(0.05)
     p.send_signal(signal.SIGINT)
     o, e = p.communicate(timeout=300)
     assert p.returncode == 130, e[-1000:]
