@@ -131,8 +131,10 @@ def test_a_stopped_single_session_writes_nothing(sessions, tmp_path):
     proc = _start(["run", str(sessions[0]), "--json", str(out / "r.json"), "--report",
                    str(out / "r.html"), "--calibration", str(out / "c.json")])
     try:
-        time.sleep(2.5)  # computing (the report alone takes seconds)
-        assert proc.poll() is None, "finished before it could be stopped"
+        # Stopped at its first mark (progress on stderr): the marks, the fusion and the
+        # report (seconds) are still to come. A fixed sleep raced a fast machine.
+        while "marks:" not in (line := proc.stderr.readline()):
+            assert line, "finished before it could be stopped"
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=30) == 143
         assert "stopped (SIGTERM)" in proc.stderr.read()
