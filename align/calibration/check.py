@@ -17,10 +17,7 @@ import numpy as np
 from scipy import stats
 
 from align.calibration.model import Calibration, Poses, delta_g, pose_sigma_g
-
-UNIT_RATIO = 3.0
-"""|a| further than this factor from 1 g: the check poses are in another unit than the
-static file (mV vs V is 1000x, g vs m/s² 9.8x)."""
+from align.calibration.units import UNIT_SCALE_REFUSE
 
 
 @dataclass(frozen=True)
@@ -93,7 +90,7 @@ def check_poses(cal: Calibration, poses: Poses, check: Poses, alpha: float = 1e-
                 f"{dg[worst]:+.4g} g, {z[worst]:+.3g} u; |z| > {limit:.2f} at alpha "
                 f"{alpha:g}): the check or the calibration cannot be trusted")
         ratio = float(np.median(dg + 1.0))
-        if ratio > UNIT_RATIO or ratio < 1 / UNIT_RATIO:
+        if ratio > UNIT_SCALE_REFUSE or ratio < 1 / UNIT_SCALE_REFUSE:
             text += (f"; the check poses read {ratio:.4g} g: in another unit than the static "
                      "file?")
         warnings.append(text)

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from align.calibration.units import UNIT_SCALE_REFUSE
+
 HEMISPHERE_DEG = 90.0
 """Poses within a cone of this half-angle [deg] or less see no axis both up and down."""
 SURROUND_DEG = 60.0
@@ -52,16 +54,10 @@ def cone_deg(a: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(d @ m, -1.0, 1.0)).max()))
 
 
-UNIT_FACTOR = 3.0
-"""A pose whose distance from the centre is more than this factor from the radius (or less
-than its inverse) is in another unit: the nearest unit mix-ups differ by g0 = 9.81 (g vs
-m/s²) or 1000 (g vs mg); a triad's axes differ in scale by a few per cent, so ~sqrt(9.81)
-separates the two cases with a wide margin either side."""
-
-
 def odd_pose(u: np.ndarray) -> tuple[int, float] | None:
     """A pose in another unit than the others: (index, its distance from the centre in
-    radii), or None. Each pose is measured against the sphere fitted to the others
+    radii; beyond :data:`UNIT_SCALE_REFUSE` either way), or None. Each pose is measured
+    against the sphere fitted to the others
     (algebraic, |u|^2 = 2 c.u + d: the offset and a common scale, which is all a unit
     mix-up changes), so one bad pose cannot hide by dragging the fit. Meaningful only for
     poses that surround the centre (see :data:`SURROUND_DEG`)."""
@@ -84,6 +80,6 @@ def odd_pose(u: np.ndarray) -> tuple[int, float] | None:
             continue
         rho = float(np.linalg.norm(x[i] - sol[:3]) / np.sqrt(r2))
         off = max(rho, 1 / rho) if rho > 0 else np.inf
-        if off > UNIT_FACTOR and (worst is None or off > max(worst[1], 1 / worst[1])):
+        if off > UNIT_SCALE_REFUSE and (worst is None or off > max(worst[1], 1 / worst[1])):
             worst = (i, rho)
     return worst

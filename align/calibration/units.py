@@ -24,7 +24,11 @@ from axisbase.units import G0
 EXPECTED_PER_G = {"g": 1.0, "m/s2": G0}
 """Scale factor [unit/g] of readings already in an acceleration unit."""
 UNIT_SCALE_REFUSE = float(np.sqrt(G0))
-"""Ratio to the expected scale factor beyond which the readings are nearer another unit."""
+"""Ratio beyond which a magnitude is nearer another unit than the expected one (on a log scale
+between the closest mix-up, g against m/s²: a factor g0; a triad's axes and local gravity
+differ by a few per cent). The one such limit: the declared unit against the scale factors
+here, a pose against the others (:func:`align.calibration.geometry.odd_pose`), check poses
+against 1 g (:mod:`align.calibration.check`)."""
 UNIT_SCALE_WARN = 0.10
 """Relative departure from the expected scale factor that is warned of."""
 _NAMES = {"g": "g", "m/s2": "m/s²"}
