@@ -173,7 +173,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
             if not r.found:
                 failed += 1
                 internal += r.internal_error
-                log.error("%s: FAILED: %s", path, r.error)
+                log.error("%s: FAILED: %s", path, str(r.error).removeprefix(f"{path}: "))
                 continue
             print(f"{path} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
                   f"± {r.angle_u_rad / ARCSEC:.2f}″, offset {r.offset_px:+.3f} px, "

@@ -27,7 +27,7 @@ def mark_warnings(results: Sequence) -> list[str]:
     for r in results:
         what = f"{r.image} mark {r.index}"
         if not r.found:
-            out.append(f"{r.image}: not measured: {r.error}")
+            out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue
         out += loop_warnings(what, r.loop)
         if r.uncertainty_inflation > 1:
