@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg import rq
 
 from align.calibration.ellipsoid import triad_from_upper
-from align.calibration.model import Poses, TriadModel
+from align.calibration.triad import Poses, TriadModel
 from align.errors import InputError
 from align.loop import StageFit, Term
 

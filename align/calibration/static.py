@@ -20,7 +20,10 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from align.calibration.model import Poses
+from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
+from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
+from align.calibration.known import faces_of, has_six_faces
+from align.calibration.triad import Poses
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
 
@@ -99,8 +102,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     :func:`axisbase.table.read_table`.
     """
     path = Path(path)
-    from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
-
     if path.suffix.lower() in SUFFIXES:
         tab, notes = read_arrays(path, STATIC, columns, rate_hz)
         for note in notes:
@@ -173,8 +174,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                 raise
             raise InputError(f"{exc}\n{_listing(intervals)}") from None
         if intervals is not None and len(intervals) < 9:
-            from align.calibration.known import faces_of, has_six_faces
-
             if not has_six_faces(faces_of(poses)):
                 raise InputError(f"{path}: too few poses: {len(intervals)} static intervals "
                                  "found, the ellipsoid needs 9 (or the six faces for the "
@@ -262,8 +261,6 @@ def _listing(intervals) -> str:
 
 
 def _check_geometry(path: Path, poses: Poses) -> None:
-    from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
-
     u = poses.u
     if len(u) >= 3:
         s = np.linalg.svd(u - u.mean(0), compute_uv=False)
@@ -272,7 +269,7 @@ def _check_geometry(path: Path, poses: Poses) -> None:
                              "(degenerate): tilt the unit out of that plane")
     # A pose in another unit is far off the sphere through the others (geometry.odd_pose);
     # that sphere is determined only when the poses surround its centre: poses clustered
-    # in a narrow cone are judged after the fit (model._cone_notes), not called mixed units.
+    # in a narrow cone are judged after the fit (pipeline._cone_notes), not called mixed units.
     odd = odd_pose(u) if len(u) > 3 else None
     if odd is not None:
         i, rho = odd
