@@ -72,6 +72,10 @@ class CalibrationStage:
                              "(the paper's cube gives 14)")
         self.poses = poses
         self.condition: dict[tuple[str, ...], float] = {}
+        # Per fitted effect list: the map from the weighted pose residuals to the parameters
+        # (A = cov_unit J^T W^1/2, dtheta = A dr_w) and the weighted residuals, for the
+        # widening of u when structure remains (align.calibration.widen).
+        self.projection: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
 
@@ -108,6 +112,7 @@ class CalibrationStage:
         # (u(k) came out 1e-6 counts/g after a warm-up term was added).
         d = 1.0 / np.where(norms > 0, norms, 1.0)
         cov = d[:, None] * np.linalg.pinv((J * d).T @ (J * d)) * d[None, :]
+        self.projection[tuple(effects)] = (cov @ J.T, np.asarray(res.fun, float))
         if self.sigma is None:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))

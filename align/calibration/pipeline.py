@@ -32,6 +32,7 @@ from align.calibration.model import (
     admissible,
 )
 from align.calibration.triad import Poses, TriadModel, delta_g
+from align.calibration.widen import Widening, widen
 from align.errors import InputError
 from align.loop import Candidate, LoopReport, run_loop
 
@@ -55,6 +56,7 @@ class Calibration:
     known: object = None
     cross_check: dict | None = None
     notes: tuple[str, ...] = ()
+    widening: Widening | None = None
 
     @property
     def residual_rms_g(self) -> float:
@@ -94,6 +96,7 @@ class Calibration:
             "refused_effects": [r.to_dict() for r in self.loop.refused],
             "known_pose": self.known.to_dict() if self.known is not None else None,
             "cross_check": self.cross_check,
+            "u_widening": None if self.widening is None else self.widening.to_dict(),
         }
 
 
@@ -138,6 +141,14 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
         raise
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
+    model, widening = rep.after.payload, None
+    if rep.unexplained_structure and rep.after.dof > 0:
+        # Structure remains: u must cover it (widen), never the clean-data u.
+        w = rep.structure_after.worst
+        A, r_w = stage.projection[tuple(t.name for t in rep.terms)]
+        model, widening = widen(model, A, r_w, rep.after.dof, stage.sigma is not None,
+                                f"{w.name} p = {w.p_value:.2g}")
+        notes = (*notes, widening.warning())
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
@@ -146,8 +157,8 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
-    return Calibration(stage.start, rep.after.payload, rep, signs_t, stage.sigma is not None,
-                       "ellipsoid", kf, cc, notes)
+    return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
+                       "ellipsoid", kf, cc, notes, widening)
 
 
 TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
