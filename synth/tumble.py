@@ -211,12 +211,23 @@ def tumble(spec: TumbleSpec) -> TumbleData:
     return TumbleData(pose, t, u, temp, up, n_cal, spec)
 
 
+HYSTERESIS_MOVE_G = 0.02
+"""Smallest change of an axis's input [g] that carries its pendulum to the other side of its
+hysteresis loop; a smaller one (a fixture's wobble) leaves it on the side it was."""
+
+
 def hysteresis(triad: Triad, up: np.ndarray) -> np.ndarray:
     """Bias offset (N, 3) [g] of each pose held in the order given: ``hysteresis_g`` x the sign
-    of the change of each sensing axis's input in the turn into it (0 for the first pose)."""
+    of the last change of each sensing axis's input larger than :data:`HYSTERESIS_MOVE_G`
+    (0 before any: the first pose was not turned into)."""
     x = up @ triad.sensing().T
-    step = np.vstack([np.zeros((1, 3)), np.sign(np.diff(x, axis=0))])
-    return step * np.asarray(triad.hysteresis_g, float)
+    state = np.zeros(3)
+    out = np.zeros_like(x)
+    for p in range(1, len(x)):
+        d = x[p] - x[p - 1]
+        state = np.where(np.abs(d) > HYSTERESIS_MOVE_G, np.sign(d), state)
+        out[p] = state
+    return out * np.asarray(triad.hysteresis_g, float)
 
 
 def recording(spec: TumbleSpec, vibration_g: float = 0.05) -> tuple[np.ndarray, np.ndarray,

@@ -12,11 +12,12 @@ the loop works without a chi2 test.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from align.calibration.ellipsoid import extract, li_griffiths
+from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import Poses, TriadModel, pose_sigma_g
 from align.errors import InputError
 from align.loop import Candidate, StageFit, Term
@@ -25,35 +26,101 @@ NONLIN = "nonlinearity_k2"
 DRIFT = "bias_drift"
 TEMP = "bias_temperature"
 WARMUP = "bias_warmup"
-EFFECT_UNITS = {NONLIN: "1/g", DRIFT: "g/s", TEMP: "g/K", WARMUP: "g/s^2"}
-# Parameters each effect adds, and the TriadModel fields they fill.
-EFFECT_FIELDS = {NONLIN: ("k2",), DRIFT: ("drift",), TEMP: ("temp_coeff",),
-                 WARMUP: ("drift", "drift2")}
+SCALE_DRIFT = "scale_drift"
+SCALE_TEMP = "scale_temperature"
+SCALE_WARMUP = "scale_warmup"
+HYSTERESIS = "bias_hysteresis"
+PAIRS = ("xy", "xz", "yz")
+CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
+"""One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
+would leave the paper's 14 poses no degrees of freedom; the loop picks the one the data call
+for, its search over nine counted as nine trials."""
+
+
+@dataclass(frozen=True)
+class Effect:
+    """An effect's parameters: (TriadModel field, index in it, parameter name) each;
+    ``report``: the slots whose values the loop reports (warm-up: its curvature, the part a
+    drift lacks); ``size``: the regressor's largest magnitude over the poses' span (for the
+    physical bound on the ``report`` slots, :data:`EFFECT_PRIOR_G`) given (time span [s],
+    temperature span [K])."""
+
+    unit: str
+    slots: tuple[tuple[str, tuple[int, ...], str], ...]
+    report: tuple[int, ...]
+    size: Callable[[float, float], float]
+
+
+def _per_axis(fld: str, prefix: str) -> tuple[tuple[str, tuple[int, ...], str], ...]:
+    return tuple((fld, (i,), f"{prefix}_{ax}") for i, ax in enumerate("xyz"))
+
+
+EFFECTS: dict[str, Effect] = {
+    NONLIN: Effect("1/g", _per_axis("k2", NONLIN), (0, 1, 2), lambda t, T: 1.0),
+    DRIFT: Effect("g/s", _per_axis("drift", DRIFT), (0, 1, 2), lambda t, T: t),
+    TEMP: Effect("g/K", _per_axis("temp_coeff", TEMP), (0, 1, 2), lambda t, T: T),
+    WARMUP: Effect("g/s^2", _per_axis("drift", "drift") + _per_axis("drift2", "drift2"),
+                   (3, 4, 5), lambda t, T: t * t),
+    SCALE_DRIFT: Effect("1/s", _per_axis("scale_drift", SCALE_DRIFT), (0, 1, 2),
+                        lambda t, T: t),
+    SCALE_TEMP: Effect("1/K", _per_axis("scale_temp", SCALE_TEMP), (0, 1, 2),
+                       lambda t, T: T),
+    SCALE_WARMUP: Effect("1", _per_axis("scale_warmup", SCALE_WARMUP), (0, 1, 2),
+                         lambda t, T: 1.0),
+    HYSTERESIS: Effect("g", _per_axis("hysteresis", HYSTERESIS), (0, 1, 2),
+                       lambda t, T: 1.0),
+    **{name: Effect("1/g", (("cross", (i // 3, i % 3), name),), (0,), lambda t, T: 1.0)
+       for i, name in enumerate(CROSS)},
+}
+EFFECT_UNITS = {n: e.unit for n, e in EFFECTS.items()}
+WARMUP_TAUS = (0.05, 0.1, 0.2, 0.4)
+"""Scale warm-up time constants tried, as fractions of the poses' time span (the best is
+kept; one searched parameter in BIC)."""
 
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
     names = [f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz"]
     for e in effects:
-        names += [f"{f}_{ax}" if len(EFFECT_FIELDS[e]) > 1 else f"{e}_{ax}"
-                  for f in EFFECT_FIELDS[e] for ax in "xyz"]
+        names += [n for _, _, n in EFFECTS[e].slots]
     return tuple(names)
 
 
 def _n_params(effects: Sequence[str]) -> int:
-    return 9 + sum(3 * len(EFFECT_FIELDS[e]) for e in effects)
+    return 9 + sum(len(EFFECTS[e].slots) for e in effects)
 
 
 def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_ref: float,
-                cov: np.ndarray | None = None) -> TriadModel:
-    kw: dict[str, np.ndarray] = {}
+                cov: np.ndarray | None = None, tau_s: float = 0.0) -> TriadModel:
+    kw: dict[str, np.ndarray] = {"cross": np.zeros((3, 3))}
     i = 9
     for e in effects:
-        for f in EFFECT_FIELDS[e]:
+        for fld, idx, _ in EFFECTS[e].slots:
             # A later effect on the same field (warm-up after drift) adds to it.
-            kw[f] = kw.get(f, np.zeros(3)) + theta[i:i + 3]
-            i += 3
+            v = kw.setdefault(fld, np.zeros(3))
+            v[idx] += theta[i]
+            i += 1
     return TriadModel(theta[:3], theta[3:6], theta[6:9], t_ref=t_ref, temp_ref=temp_ref,
-                      cov=cov, names=_pack_names(effects), **kw)
+                      cov=cov, names=_pack_names(effects),
+                      warmup_tau_s=tau_s if SCALE_WARMUP in effects else 0.0, **kw)
+
+
+TURN_G = 0.1
+"""Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
+fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
+
+
+def turn_signs(x: np.ndarray, t: np.ndarray, turn_g: float = TURN_G) -> np.ndarray:
+    """Side (N, 3) of each axis's hysteresis loop at each pose, the poses held in the order of
+    ``t``: the sign of the last change of the axis's input ``x`` [g] larger than ``turn_g``
+    (0 before any). Hand-written: a running state of a few poses."""
+    order = np.argsort(t, kind="stable")
+    out = np.zeros_like(x)
+    state = np.zeros(x.shape[1])
+    for prev, p in zip(order[:-1], order[1:], strict=True):
+        d = x[p] - x[prev]
+        state = np.where(np.abs(d) > turn_g, np.sign(d), state)
+        out[p] = state
+    return out
 
 
 def algebraic(poses: Poses, signs: Sequence[float]) -> TriadModel:
@@ -76,29 +143,75 @@ class CalibrationStage:
         # (A = cov_unit J^T W^1/2, dtheta = A dr_w) and the weighted residuals, for the
         # widening of u when structure remains (align.calibration.widen).
         self.projection: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self.solutions: dict[tuple[str, ...], np.ndarray] = {}
+        # Every fit made (the loop's trials too), for the alternatives that widen u.
+        self.fits: dict[tuple[str, ...], tuple[StageFit, tuple[Term, ...]]] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
+        # The input along each sensing axis (u / k; its bias cancels in the changes).
+        self.turns = turn_signs(poses.u / self.start.k, poses.t)
 
     def refine(self, effects: Sequence[str]) -> tuple[TriadModel, np.ndarray, np.ndarray]:
         p = self.poses
         s0 = self.start
         for e in effects:
-            if e == TEMP and p.temp is None:
+            if e in (TEMP, SCALE_TEMP) and p.temp is None:
                 raise ValueError("no temperature column")
+            if e == HYSTERESIS and not p.ordered:
+                raise ValueError("the pose order is not known (no time column)")
         theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(_n_params(effects) - 9)])
+        prev = self.solutions.get(tuple(effects[:-1]))
+        if prev is not None:  # start a trial from the fit it extends (a few iterations)
+            theta0[:len(prev)] = prev
         w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
+        hyst = HYSTERESIS in effects
 
-        def resid(theta):
-            m = _model_from(theta, effects, s0.t_ref, s0.temp_ref)
-            return (np.linalg.norm(m.specific_force(p.u, p.t, p.temp), axis=1) - 1.0) * w
+        # The inverse model of TriadModel.specific_force written out on the poses' arrays:
+        # the loop fits ~50 models of ~100 evaluations each, and building a TriadModel per
+        # evaluation was 2/3 of the calibration's time. test_stage_residual_is_the_model's
+        # checks the two agree.
+        slots = [(fld, idx) for e in effects for fld, idx, _ in EFFECTS[e].slots]
+        dt = p.t - s0.t_ref
+        dT = p.temp - s0.temp_ref if p.temp is not None else np.zeros(len(p.t))
+        uu = p.u
+
+        def resid(theta, tau):
+            f = {"k2": np.zeros(3), "drift": np.zeros(3), "drift2": np.zeros(3),
+                 "temp_coeff": np.zeros(3), "cross": np.zeros((3, 3)),
+                 "scale_drift": np.zeros(3), "scale_temp": np.zeros(3),
+                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3)}
+            for (fld, idx), v in zip(slots, theta[9:], strict=True):
+                f[fld][idx] += v
+            v = uu / theta[:3]
+            if len(slots):
+                sc = (1.0 + dt[:, None] * f["scale_drift"] + dT[:, None] * f["scale_temp"])
+                if tau > 0:
+                    sc = sc + np.expm1(-dt / tau)[:, None] * f["scale_warmup"]
+                v = v / sc
+                x = v - f["k2"] * v * v - np.stack(
+                    [v[:, 0] * v[:, 1], v[:, 0] * v[:, 2], v[:, 1] * v[:, 2]], 1) @ f["cross"].T
+            else:
+                x = v
+            a = x @ np.linalg.inv(r_matrix(theta[3:6])).T - theta[6:9]
+            if len(slots):
+                a = (a - dt[:, None] * f["drift"] - (dt * dt)[:, None] * f["drift2"]
+                     - dT[:, None] * f["temp_coeff"])
+                if hyst:
+                    a = a - self.turns * f["hysteresis"]
+            return (np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0) * w
 
         if len(p.u) < len(theta0):
             raise ValueError("more parameters than poses")
         scale = np.concatenate([np.abs(s0.k) * 1e-3, np.full(3, 1e-4), np.full(3, 1e-4),
                                 np.concatenate([_effect_scale(e, p) for e in effects])
                                 if effects else []])
-        res = least_squares(resid, theta0, x_scale=scale, method="lm", xtol=1e-14,
-                            ftol=1e-14, gtol=1e-14, max_nfev=2000)
+        span = max(float(np.ptp(p.t)), 1.0)
+        taus = [f * span for f in WARMUP_TAUS] if SCALE_WARMUP in effects else [0.0]
+        fits = [(least_squares(resid, theta0, x_scale=scale, method="lm", xtol=1e-10,
+                               ftol=1e-12, gtol=1e-12, max_nfev=300, args=(tau,)), tau)
+                for tau in taus]
+        res, tau = min(fits, key=lambda f: f[0].cost)
+        self.solutions[tuple(effects)] = res.x
         r = res.fun / w
         J = res.jac
         # Separability: condition number of the Jacobian with unit-norm columns (scale-free).
@@ -116,7 +229,7 @@ class CalibrationStage:
         if self.sigma is None:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))
-        return _model_from(res.x, effects, s0.t_ref, s0.temp_ref, cov), r, res.x
+        return _model_from(res.x, effects, s0.t_ref, s0.temp_ref, cov, tau), r, res.x
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         effects = [t.name for t in terms]
@@ -130,43 +243,50 @@ class CalibrationStage:
         eff = {}
         comps = {}
         for e in effects:
-            # The effect's leading field (for warm-up: its curvature, the part drift lacks).
-            fld = EFFECT_FIELDS[e][-1]
-            vals = getattr(m, fld)
-            prefix = fld if len(EFFECT_FIELDS[e]) > 1 else e
-            us = np.array([m.u_of(f"{prefix}_{ax}") for ax in "xyz"])
+            slots = [EFFECTS[e].slots[j] for j in EFFECTS[e].report]
+            vals = np.array([getattr(m, fld)[idx] for fld, idx, _ in slots])
+            us = np.array([m.u_of(n) for _, _, n in slots])
             j = int(np.argmax(np.abs(vals) / np.where(us > 0, us, np.inf)))
             eff[e] = (float(vals[j]), float(us[j]))
-            comps[e] = tuple((ax, float(v), float(uu)) for ax, v, uu in zip("xyz", vals, us,
-                                                                             strict=True))
+            comps[e] = tuple((n.rsplit("_", 1)[-1] if len(slots) > 1 else n, float(v),
+                              float(uu)) for (_, _, n), v, uu in zip(slots, vals, us,
+                                                                     strict=True))
         q = {n: (float(v), m.u_of(n)) for n, v in zip(
             m.names[:9], np.concatenate([m.k, m.beta, m.bias]), strict=True)}
-        return StageFit(r, self.sigma, _n_params(effects), regs, "t", eff, q,
-                        components=comps, payload=m)
+        fit = StageFit(r, self.sigma, _n_params(effects), regs, "t", eff, q,
+                       components=comps, payload=m)
+        self.fits[tuple(effects)] = (fit, tuple(terms))
+        return fit
+
+
+def _spans(p: Poses) -> tuple[float, float]:
+    """Time span [s] and temperature span [K] of the poses (at least 1 s, 1 mK)."""
+    return (max(float(np.ptp(p.t)), 1.0),
+            max(float(np.ptp(p.temp)) if p.temp is not None else 1.0, 1e-3))
 
 
 def _effect_scale(e: str, p: Poses) -> np.ndarray:
-    span_t = max(float(np.ptp(p.t)), 1.0)
-    if e == NONLIN:
-        return np.full(3, 1e-5)
-    if e == DRIFT:
-        return np.full(3, 1e-5 / span_t)
-    if e == WARMUP:
-        return np.concatenate([np.full(3, 1e-5 / span_t), np.full(3, 1e-5 / span_t**2)])
-    span_T = max(float(np.ptp(p.temp)) if p.temp is not None else 1.0, 1e-3)
-    return np.full(3, 1e-5 / span_T)
+    """Typical size of each parameter of ``e`` (least_squares' x_scale): 10 µg at 1 g."""
+    size = EFFECTS[e].size(*_spans(p))
+    if e == WARMUP:  # its drift slots are per second, its curvature per second squared
+        t = _spans(p)[0]
+        return np.concatenate([np.full(3, 1e-5 / t), np.full(3, 1e-5 / size)])
+    return np.full(len(EFFECTS[e].slots), 1e-5 / size)
 
 
 def _term(name: str):
     def build(fit: StageFit) -> Term | None:
-        if name == TEMP and "temp" not in fit.regressors:
+        if name in (TEMP, SCALE_TEMP) and "temp" not in fit.regressors:
             return None
-        if name in (DRIFT, WARMUP) and np.ptp(fit.regressors["t"]) == 0:
+        if name in (DRIFT, WARMUP, SCALE_DRIFT, SCALE_WARMUP) and np.ptp(
+                fit.regressors["t"]) == 0:
             return None
-        width = 3 * len(EFFECT_FIELDS[name])
+        width = len(EFFECTS[name].slots)
         if fit.n - fit.n_params < width + 1:
             return None
-        return Term(name, EFFECT_UNITS[name], np.zeros((fit.n, width)))
+        return Term(name, EFFECT_UNITS[name], np.zeros((fit.n, width)),
+                    searched=1 if name == SCALE_WARMUP else 0,
+                    trials=len(CROSS) if name in CROSS else 1.0)
     return build
 
 
@@ -176,6 +296,16 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate(TEMP, "g/K", "bias following the temperature", _term(TEMP)),
     Candidate(WARMUP, "g/s^2", "bias warming up: drift that slows or turns (quadratic in "
               "time)", _term(WARMUP)),
+    *(Candidate(c, "1/g", f"cross-axis second-order term: axis {c[6]} output from the product "
+                f"a_{c[8]} a_{c[9]} (IEEE Std 1293 K_ip/K_io)", _term(c)) for c in CROSS),
+    Candidate(SCALE_DRIFT, "1/s", "scale factor drifting linearly in time (relative)",
+              _term(SCALE_DRIFT)),
+    Candidate(SCALE_TEMP, "1/K", "scale factor following the temperature (relative)",
+              _term(SCALE_TEMP)),
+    Candidate(SCALE_WARMUP, "1", "scale factor warming up: exp(-t/tau) settling (relative "
+              "amplitude; tau searched)", _term(SCALE_WARMUP)),
+    Candidate(HYSTERESIS, "g", "bias hysteresis: offset by the sign of the previous turn on "
+              "each axis (pose order known)", _term(HYSTERESIS)),
 )
 
 
@@ -189,14 +319,21 @@ OVERFIT_CHI2 = 0.2
 """chi2/dof below this after adding an effect is an over-fit when the effect also moves a
 quantity of interest by more than :data:`OVERFIT_SIGMA` of its own standard uncertainty."""
 OVERFIT_SIGMA = 10.0
+EFFECT_PRIOR_G = 0.01
+"""... nor an effect reach more than this [g] at 1 g over the poses' time and temperature
+spans (real triads: K2 and K_ij below 1e-3 /g, scale drift below 1e-3 over a run, hysteresis
+below 1 mg: ten times that is a sign the effect is aliasing something else)."""
 MAX_CONDITION = 1e7
 """Largest condition number of the (column-normalised) Jacobian: above it the data cannot
 separate the effect from the model."""
 
 
-def admissible(stage: CalibrationStage) -> Callable[[StageFit, StageFit, Term], str | None]:
+def admissible(stage: CalibrationStage, overfit: bool = True
+               ) -> Callable[[StageFit, StageFit, Term], str | None]:
     """The calibration's guard against a run-away loop: the reason to refuse an effect that
-    the significance tests call for, or None (design: physical priors, over-fit, rank)."""
+    the significance tests call for, or None (design: physical priors, over-fit, rank).
+    ``overfit=False``: the physical checks alone (for the alternatives whose shifts widen u,
+    where a fit that is too good is a reason to count it, not to refuse it)."""
 
     def check(base: StageFit, trial: StageFit, term: Term) -> str | None:
         mb, mt = base.payload, trial.payload
@@ -205,6 +342,12 @@ def admissible(stage: CalibrationStage) -> Callable[[StageFit, StageFit, Term], 
         if not np.isfinite(cond) or cond > MAX_CONDITION:
             return (f"the poses cannot separate it from the model (condition number "
                     f"{cond:.3g} > {MAX_CONDITION:.0e})")
+        e = EFFECTS[term.name]
+        vals = np.array([getattr(mt, e.slots[j][0])[e.slots[j][1]] for j in e.report])
+        reach = float(np.max(np.abs(vals))) * e.size(*_spans(stage.poses))
+        if reach > EFFECT_PRIOR_G:
+            return (f"it reaches {reach:.3g} g at 1 g over the run (> {EFFECT_PRIOR_G} g): "
+                    "outside the physical prior")
         rel = np.abs(mt.k / mb.k - 1)
         if rel.max() > PRIOR_SCALE:
             i = int(np.argmax(rel))
@@ -220,7 +363,7 @@ def admissible(stage: CalibrationStage) -> Callable[[StageFit, StageFit, Term], 
             i = int(np.argmax(dbias))
             return (f"it moves bias_{'xyz'[i]} by {dbias[i]:.3g} g (> {PRIOR_BIAS_G} g): "
                     "outside the physical prior")
-        if trial.sigma is not None and trial.dof > 0:
+        if overfit and trial.sigma is not None and trial.dof > 0:
             red = trial.chi2 / trial.dof
             u = np.array([base.quantities[n][1] for n in mb.names[:9]])
             shift = np.abs(np.concatenate([mt.k - mb.k, mt.beta - mb.beta, mt.bias - mb.bias]))

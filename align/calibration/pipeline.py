@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from align.calibration.geometry import (
     HEMISPHERE_DEG,
     SURROUND_DEG,
@@ -32,9 +34,17 @@ from align.calibration.model import (
     admissible,
 )
 from align.calibration.triad import Poses, TriadModel, delta_g
-from align.calibration.widen import Widening, widen
+from align.calibration.widen import (
+    AMBIGUITY,
+    AMBIGUOUS_BIC,
+    STRUCTURE,
+    Widening,
+    ambiguity_term,
+    structure_term,
+    widen,
+)
 from align.errors import InputError
-from align.loop import Candidate, LoopReport, run_loop
+from align.loop import Candidate, LoopReport, bic, run_loop
 
 SCALE_FACTOR_DEFINITION = (
     "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
@@ -142,12 +152,25 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     model, widening = rep.after.payload, None
+    increments = []
     if rep.unexplained_structure and rep.after.dof > 0:
         # Structure remains: u must cover it (widen), never the clean-data u.
         w = rep.structure_after.worst
         A, r_w = stage.projection[tuple(t.name for t in rep.terms)]
-        model, widening = widen(model, A, r_w, rep.after.dof, stage.sigma is not None,
-                                f"{w.name} p = {w.p_value:.2g}")
+        cov, m = structure_term(A, r_w, rep.after.dof, stage.sigma is not None)
+        size = f"{m:.3g} sigma" if stage.sigma is not None else f"{m * 1e6:.3g} µg"
+        increments.append((STRUCTURE, f"unexplained structure ({w.name} p = {w.p_value:.2g}):"
+                           f" a systematic error of {size} per pose", cov))
+    alts = alternatives(stage, rep, candidates, admissible(stage, overfit=False))
+    if alts:
+        shifts = np.array([d for _, d in alts])
+        increments.append((AMBIGUITY, "the data cannot tell the effects added ("
+                           + (" + ".join(t.name for t in rep.terms) or "none") + ") from "
+                           + ", ".join(n for n, _ in alts) + f" (within {AMBIGUOUS_BIC:g} of "
+                           "BIC): the parameters' shifts between them", ambiguity_term(
+                               shifts, len(model.names))))
+    if increments:
+        model, widening = widen(model, increments)
         notes = (*notes, widening.warning())
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
@@ -193,4 +216,43 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
     return (f"calibration: {where}: its uncertainties are large for it (u({worst_k}) "
             f"{rel[worst_k][2]}, u({worst_b}) {bias[worst_b][2]}); {TUMBLE}",)
 
+
+
+
+def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[Candidate],
+                 guard) -> list[tuple[str, np.ndarray]]:
+    """Sets of effects that explain the data as well as the loop's: every fit the loop tried
+    and, for each effect added, that effect replaced by each other candidate; those within
+    :data:`AMBIGUOUS_BIC` of the final fit that the physical guard admits, as (their effects,
+    shift of the nine core parameters from the final fit)."""
+    final = rep.after
+    names = tuple(t.name for t in rep.terms)
+    for k in range(len(rep.terms)):
+        rest = [*rep.terms[:k], *rep.terms[k + 1:]]
+        base = stage.fit(rest)
+        for cand in candidates:
+            alt = cand.build(base) if cand.name not in names else None
+            if alt is None:
+                continue
+            try:
+                stage.fit([*rest[:k], alt, *rest[k:]])
+            except (np.linalg.LinAlgError, ValueError):
+                continue  # not applicable to these poses (as in the loop)
+    b_final = bic(final, sum(t.searched for t in rep.terms))
+    core = _core(final.payload)
+    out = []
+    for effects, (fit, terms) in stage.fits.items():
+        if not names or not terms or set(names) <= set(effects):
+            # No effect added or the no-effect fit (the loop's choice stands), or the final
+            # set itself or one extended by an effect the tests did not call for.
+            continue
+        d_bic = bic(fit, sum(t.searched for t in terms)) - b_final
+        base = stage.fits.get(effects[:-1], (rep.before,))[0]
+        if d_bic < AMBIGUOUS_BIC and (not terms or guard(base, fit, terms[-1]) is None):
+            out.append((" + ".join(effects), _core(fit.payload) - core))
+    return out
+
+
+def _core(m: TriadModel) -> np.ndarray:
+    return np.concatenate([m.k, m.beta, m.bias])
 

@@ -143,7 +143,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         tt = (np.array([t[ids == i].mean() for i in range(n)]) if t is not None
               else np.arange(n, dtype=float))
         tm = np.array([temp[ids == i].mean() for i in range(n)]) if temp is not None else None
-        poses = Poses(mean, tt, tm, sig, count, order)
+        poses = Poses(mean, tt, tm, sig, count, order, ordered=t is not None)
         intervals = None
     else:
         if t is None:

@@ -31,6 +31,9 @@ class Poses:
     sigma_u: np.ndarray | None
     count: np.ndarray
     labels: tuple[str, ...]
+    ordered: bool = True
+    """Whether the poses were held in the order of ``t`` (times given, or a recording): only
+    then is the turn into each pose known (bias hysteresis)."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -59,12 +62,47 @@ class TriadModel:
     temp_ref: float = 0.0
     cov: np.ndarray | None = None
     names: tuple[str, ...] = ()
+    cross: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    """Cross-axis second-order terms [1/g]: row i (output axis), columns the products
+    x_x x_y, x_x x_z, x_y x_z of the inputs (IEEE Std 1293's K_ip, K_io)."""
+    scale_drift: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Relative scale-factor change per second [1/s] about ``t_ref``."""
+    scale_temp: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Relative scale-factor change per kelvin [1/K] about ``temp_ref``."""
+    scale_warmup: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Relative scale-factor warm-up amplitude: s = 1 + w (exp(-(t - t_ref)/tau) - 1) [1]."""
+    warmup_tau_s: float = 0.0
+    """Time constant of the scale-factor warm-up [s] (0: none)."""
+    hysteresis: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Bias hysteresis [g]: each pose's bias is offset by this x the sign of the change of its
+    axis's input in the turn into the pose. Readings without their turns cannot be corrected
+    for it: ``bias`` is the middle of the two branches."""
+
+    def scale_of(self, t: np.ndarray | float = 0.0,
+                 temp: np.ndarray | float | None = None) -> np.ndarray:
+        """Relative scale factor s (N, 3) at times t [s] and temperatures [K] (1 at the
+        references)."""
+        dt = np.atleast_1d(np.asarray(t, float)) - self.t_ref
+        s = 1.0 + np.multiply.outer(dt, self.scale_drift)
+        if self.warmup_tau_s > 0:
+            s = s + np.multiply.outer(np.expm1(-dt / self.warmup_tau_s), self.scale_warmup)
+        if temp is not None:
+            s = s + np.multiply.outer(np.atleast_1d(np.asarray(temp, float)) - self.temp_ref,
+                                      self.scale_temp)
+        return s
 
     def specific_force(self, u: np.ndarray, t: np.ndarray | float = 0.0,
                        temp: np.ndarray | float | None = None) -> np.ndarray:
         """Specific force a (N, 3) [g] in the unit's convenient frame from outputs u."""
         v = np.asarray(u, float) / self.k
+        if np.any(self.scale_drift) or np.any(self.scale_warmup) or np.any(self.scale_temp):
+            s = self.scale_of(t, temp)
+            v = v / (s if v.ndim == 2 else s[0])
         x = v - self.k2 * v * v
+        if np.any(self.cross):
+            vv = np.atleast_2d(v)
+            prod = np.stack([vv[:, 0] * vv[:, 1], vv[:, 0] * vv[:, 2], vv[:, 1] * vv[:, 2]], 1)
+            x = x - (prod @ self.cross.T).reshape(x.shape)
         a = np.linalg.solve(r_matrix(self.beta), x.T).T
         dt = np.asarray(t, float) - self.t_ref
         a = (a - self.bias - np.multiply.outer(dt, self.drift)
@@ -107,7 +145,11 @@ class TriadModel:
                 "bias_g": self.bias.tolist(), "k2_per_g": self.k2.tolist(),
                 "drift_g_per_s": self.drift.tolist(), "drift2_g_per_s2": self.drift2.tolist(),
                 "temp_coeff_g_per_k": self.temp_coeff.tolist(), "t_ref_s": self.t_ref,
-                "temp_ref_k": self.temp_ref, "parameter_names": list(self.names),
+                "temp_ref_k": self.temp_ref, "cross_per_g": self.cross.tolist(),
+                "scale_drift_per_s": self.scale_drift.tolist(),
+                "scale_temp_per_k": self.scale_temp.tolist(),
+                "scale_warmup": self.scale_warmup.tolist(), "warmup_tau_s": self.warmup_tau_s,
+                "hysteresis_g": self.hysteresis.tolist(), "parameter_names": list(self.names),
                 "covariance": None if self.cov is None else self.cov.tolist()}
 
     @classmethod
@@ -124,7 +166,13 @@ class TriadModel:
                 np.array(d.get("drift2_g_per_s2", [0, 0, 0]), float),
                 float(d.get("t_ref_s", 0.0)), float(d.get("temp_ref_k", 0.0)),
                 None if cov is None else np.array(cov, float),
-                tuple(d.get("parameter_names", ())))
+                tuple(d.get("parameter_names", ())),
+                np.array(d.get("cross_per_g", np.zeros((3, 3))), float),
+                np.array(d.get("scale_drift_per_s", [0, 0, 0]), float),
+                np.array(d.get("scale_temp_per_k", [0, 0, 0]), float),
+                np.array(d.get("scale_warmup", [0, 0, 0]), float),
+                float(d.get("warmup_tau_s", 0.0)),
+                np.array(d.get("hysteresis_g", [0, 0, 0]), float))
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"{where}: not a calibration model ({exc!s}); expected the "
                              "'model' block that 'align calibrate --json' writes") from None
@@ -164,9 +212,15 @@ def _checked(m: TriadModel, where: str) -> TriadModel:
     keys = {"k_v_per_g": m.k, "beta_rad": m.beta, "bias_g": m.bias, "k2_per_g": m.k2,
             "drift_g_per_s": m.drift, "temp_coeff_g_per_k": m.temp_coeff,
             "drift2_g_per_s2": m.drift2, "t_ref_s": np.atleast_1d(m.t_ref),
-            "temp_ref_k": np.atleast_1d(m.temp_ref)}
+            "temp_ref_k": np.atleast_1d(m.temp_ref), "cross_per_g": m.cross.ravel(),
+            "scale_drift_per_s": m.scale_drift, "scale_temp_per_k": m.scale_temp,
+            "scale_warmup": m.scale_warmup, "warmup_tau_s": np.atleast_1d(m.warmup_tau_s),
+            "hysteresis_g": m.hysteresis}
+    if m.cross.shape != (3, 3):
+        raise InputError(f"{where}: model.cross_per_g: shape {m.cross.shape}, a triad has 3x3")
     for key, v in keys.items():
-        if key not in ("t_ref_s", "temp_ref_k") and v.shape != (3,):
+        if key not in ("t_ref_s", "temp_ref_k", "warmup_tau_s", "cross_per_g") and (
+                v.shape != (3,)):
             raise InputError(f"{where}: model.{key}: {v.size} values, a triad has 3")
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:

@@ -15,10 +15,13 @@ u_B,j = a_j / sqrt(3); it enters the covariance with the correlations of A A^T:
 
     cov = cov_noise + D_B C D_B,   C = corr(A A^T),  D_B = diag(u_B)
 
-so ``align apply`` and the fusion, which read the covariance, use the widened u. Measured on
-the effects of issue 19 (cross-axis products, bias hysteresis, scale-factor drift and warm-up,
-none of them in the model): |err| / u <= 2.5 for every parameter over seeds
-(docs/calibration-effects.md).
+so ``align apply`` and the fusion, which read the covariance, use the widened u.
+
+When the loop chose an effect but another candidate explains the data within
+:data:`AMBIGUOUS_BIC` (the 14 cube poses cannot tell a cross-axis product from K2), the
+shifts of the parameters between the two fits enter the same way (:func:`ambiguity_term`).
+Measured on the effects of issue 19 (cross-axis products, bias hysteresis, scale-factor drift
+and warm-up): docs/calibration-effects.md.
 """
 
 from __future__ import annotations
@@ -31,30 +34,31 @@ from align.calibration.triad import TriadModel
 
 RECTANGULAR = np.sqrt(3.0)
 """Half-width of a rectangular distribution over its standard deviation (GUM 4.3.7)."""
+AMBIGUOUS_BIC = 10.0
+"""An alternative effect within this BIC of the one the loop chose is as plausible (Kass and
+Raftery's 'strong' evidence starts at 6-10): the data cannot tell the two apart."""
+STRUCTURE = "unexplained_structure"
+AMBIGUITY = "effect_ambiguity"
 
 
 @dataclass(frozen=True)
 class Widening:
-    """How the calibration's u was widened for unexplained structure.
+    """How the calibration's u was widened.
 
     Attributes
     ----------
-    reason : the structure test that called for it and what it saw.
-    misfit : m, the systematic error assumed on each pose [its sigma; with the noise unknown,
-        g].
-    noise_known : whether ``misfit`` is in sigma (True) or in g (False).
+    reasons : per term, why (the structure test and what it saw; the alternatives).
     names : parameters, in the covariance's order (then ``scale_factor_x..z``).
     u_noise : u from the noise alone, per name [the parameter's unit].
-    u_unexplained : the Type B term u_B, per name [the parameter's unit].
-    u : the widened u, sqrt(u_noise^2 + u_B^2), per name [the parameter's unit].
+    terms : per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
+        unit] (what it adds in quadrature).
+    u : the widened u per name [the parameter's unit].
     """
 
-    reason: str
-    misfit: float
-    noise_known: bool
+    reasons: tuple[tuple[str, str], ...]
     names: tuple[str, ...]
     u_noise: np.ndarray
-    u_unexplained: np.ndarray
+    terms: tuple[tuple[str, np.ndarray], ...]
     u: np.ndarray
 
     @property
@@ -63,14 +67,11 @@ class Widening:
         return self.u / np.where(self.u_noise > 0, self.u_noise, np.nan)
 
     def to_dict(self) -> dict:
-        return {"reason": self.reason, "term": "type B: unexplained systematic error per "
-                "pose, worst case over the poses, rectangular", "misfit_per_pose": self.misfit,
-                "misfit_unit": "sigma" if self.noise_known else "g",
-                "parameters": {n: {"u_noise": float(a), "u_unexplained": float(b),
-                                   "u": float(c), "factor": float(f)}
-                               for n, a, b, c, f in zip(self.names, self.u_noise,
-                                                        self.u_unexplained, self.u,
-                                                        self.factor, strict=True)}}
+        return {"terms": {t: why for t, why in self.reasons},
+                "parameters": {n: {"u_noise": float(self.u_noise[i]), "u": float(self.u[i]),
+                                   "factor": float(self.factor[i]),
+                                   **{t: float(v[i]) for t, v in self.terms}}
+                               for i, n in enumerate(self.names)}}
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
@@ -78,38 +79,54 @@ class Widening:
         worst = int(np.nanargmax(f))
         k = [i for i, n in enumerate(self.names) if n.startswith("scale_factor_")]
         b = [i for i, n in enumerate(self.names) if n.startswith("bias_")]
-        size = (f"{self.misfit:.3g} sigma" if self.noise_known
-                else f"{self.misfit * 1e6:.3g} µg")
-        return (f"calibration: u widened for the unexplained structure ({self.reason}): a "
-                f"Type B term for a systematic error of {size} per pose; "
+        return (f"calibration: u widened ({'; '.join(why for _, why in self.reasons)}): "
                 f"scale factors x{np.nanmin(f[k]):.3g}-{np.nanmax(f[k]):.3g}, biases "
                 f"x{np.nanmin(f[b]):.3g}-{np.nanmax(f[b]):.3g}, most {self.names[worst]} "
-                f"x{f[worst]:.3g} (the JSON's u_widening has each)")
+                f"x{f[worst]:.3g} (the JSON's u_widening has each term)")
 
 
-def widen(model: TriadModel, projection: np.ndarray, residuals_w: np.ndarray, dof: int,
-          noise_known: bool, reason: str) -> tuple[TriadModel, Widening]:
-    """The model with its covariance widened by the Type B term (see the module).
+def structure_term(projection: np.ndarray, residuals_w: np.ndarray, dof: int,
+                   noise_known: bool) -> tuple[np.ndarray, float]:
+    """The Type B covariance for unexplained structure (see the module) and m.
 
     Parameters
     ----------
-    model : the final fit, its ``cov`` from the noise.
     projection : A (n_params, n_poses), parameters per weighted pose residual.
     residuals_w : the final fit's weighted residuals (noise unknown: residuals [g]).
     dof : degrees of freedom of the final fit (> 0).
     noise_known : whether the weights are 1/sigma of each pose (else 1).
-    reason : what the structure test saw (for the warning).
     """
     chi2_dof = float(np.sum(residuals_w**2)) / dof
     m = np.sqrt(max(chi2_dof, 1.0)) if noise_known else np.sqrt(chi2_dof)
     u_b = m * np.sum(np.abs(projection), axis=1) / RECTANGULAR
     aat = projection @ projection.T
     s = np.sqrt(np.clip(np.diag(aat), 1e-300, None))
-    corr = aat / np.outer(s, s)
-    cov = model.cov + u_b[:, None] * corr * u_b[None, :]
-    wide = replace(model, cov=cov)
+    return u_b[:, None] * (aat / np.outer(s, s)) * u_b[None, :], float(m)
+
+
+def ambiguity_term(shifts: np.ndarray, n_params: int) -> np.ndarray:
+    """The covariance for effects the data cannot tell apart: each alternative's shift of the
+    nine core parameters (rows of ``shifts``) taken as the half-width of a rectangular
+    distribution, summed over the alternatives (sum of d d^T / 3: its diagonal is at least
+    the largest shift's square / 3)."""
+    cov = np.zeros((n_params, n_params))
+    cov[:9, :9] = shifts.T @ shifts / RECTANGULAR**2
+    return cov
+
+
+def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]]
+          ) -> tuple[TriadModel, Widening]:
+    """The model with ``increments`` (term, why, covariance) added to its covariance."""
     names = (*model.names, *(f"scale_factor_{ax}" for ax in "xyz"))
-    u0 = np.concatenate([[model.u_of(n) for n in model.names], model.sensitivity_u()])
-    u1 = np.concatenate([[wide.u_of(n) for n in model.names], wide.sensitivity_u()])
-    ub = np.sqrt(np.clip(u1**2 - u0**2, 0, None))
-    return wide, Widening(reason, float(m), noise_known, names, u0, ub, u1)
+
+    def us(m: TriadModel) -> np.ndarray:
+        return np.concatenate([[m.u_of(n) for n in m.names], m.sensitivity_u()])
+
+    u0 = us(model)
+    terms = []
+    for term, _, cov in increments:
+        alone = us(replace(model, cov=model.cov + cov))
+        terms.append((term, np.sqrt(np.clip(alone**2 - u0**2, 0, None))))
+    wide = replace(model, cov=model.cov + sum(c for _, _, c in increments))
+    return wide, Widening(tuple((t, why) for t, why, _ in increments), names, u0,
+                          tuple(terms), us(wide))

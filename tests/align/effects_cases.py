@@ -75,7 +75,7 @@ def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "
     u = np.concatenate([m.sensitivity_u(), [m.u_of(f"{p}_{a}") for p in ("beta", "bias")
                                             for a in "xyz"]])
     z = (est - truth_at(tr, m.t_ref)) / u
-    widened = bool(getattr(cal, "widening", None))
+    widened = cal.widening is not None
     return Outcome(z, tuple(e.name for e in cal.loop.effects), cal.loop.unexplained_structure,
                    widened)
 
