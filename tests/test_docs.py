@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import subprocess
@@ -195,3 +196,12 @@ def test_example_runs(page, line, code):
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                        timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert r.returncode == 0, f"{page}:{line}: the example fails:\n{r.stderr}"
+
+
+def test_the_schema_tables_are_current():
+    # docs/generated/schemas.md is included by docs/formats.md; it must list today's schemas.
+    spec = importlib.util.spec_from_file_location("gen", DOCS / "gen_schema_tables.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    current = (DOCS / "generated" / "schemas.md").read_text(encoding="utf-8")
+    assert current == gen.render(), "run: python3 docs/gen_schema_tables.py"
