@@ -63,7 +63,7 @@ def main() -> None:
         stamp = time.strftime("%Y-%m-%d", time.gmtime())
         args.markdown.write_text(
             "\n".join(rows) + f"\n\nEager / deferred (median): {ratio:.1f}×. Measured {stamp}, "
-            f"{n} fresh processes each, by `python3 benchmarks/cli_startup.py --markdown "
+            f"{n} fresh processes each, by `python3 benchmarks/cli_startup.py {n} --markdown "
             f"docs/generated/cli_startup.md`; {os.cpu_count()} cores, load average "
             f"{os.getloadavg()[0]:.1f}.\n")
 
