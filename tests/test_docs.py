@@ -5,7 +5,8 @@
   lives);
 * every relative link resolves (to a file, and to a heading when it names an anchor);
 * README.md stays a first page (≤ 200 lines);
-* the Python blocks marked ``<!-- example -->`` run.
+* the Python blocks marked ``<!-- example -->`` run;
+* the `session.toml` examples load and the generated schema tables are current.
 """
 
 from __future__ import annotations
@@ -205,3 +206,20 @@ def test_the_schema_tables_are_current():
     spec.loader.exec_module(gen)
     current = (DOCS / "generated" / "schemas.md").read_text(encoding="utf-8")
     assert current == gen.render(), "run: python3 docs/gen_schema_tables.py"
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/formats.md"])
+def test_the_session_toml_examples_load(page, tmp_path):
+    # The README's sketch and the complete example (its commented keys switched on) are
+    # accepted by the session loader, with an empty file wherever they name one.
+    from align.session import load_session
+
+    text = (ROOT / page).read_text(encoding="utf-8")
+    toml = re.search(r"```toml\n(.*?)^```", text, flags=re.S | re.M).group(1)
+    toml = re.sub(r"^# (\w+ = )", r"\1", toml, flags=re.M)
+    (tmp_path / "session.toml").write_text(toml, encoding="utf-8")
+    named = re.findall(r'^(?:static|log|file|model|check) = "([^"]+)"', toml, flags=re.M)
+    assert len(named) >= 4
+    for name in named:
+        (tmp_path / name).write_text("x\n", encoding="utf-8")
+    load_session(tmp_path)
