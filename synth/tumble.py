@@ -150,6 +150,8 @@ class TumbleSpec:
     temp_rate_k_per_s: float = 0.0
     g_ratio: float = 1.0
     seed: int = 0
+    up: tuple[tuple[float, float, float], ...] | None = None
+    """Up directions of the poses in the order held (overrides ``poses``): a planned order."""
 
 
 @dataclass(frozen=True)
@@ -197,7 +199,9 @@ def _placed(up: np.ndarray, err: float, rng: np.random.Generator) -> np.ndarray:
 def tumble(spec: TumbleSpec) -> TumbleData:
     """Simulate the static poses (samples only while the unit is at rest)."""
     rng = np.random.default_rng(spec.seed)
-    up = _placed(pose_directions(spec.poses, spec.n_random, rng), spec.fixture_error_rad, rng)
+    dirs = (np.asarray(spec.up, float) if spec.up is not None
+            else pose_directions(spec.poses, spec.n_random, rng))
+    up = _placed(dirs, spec.fixture_error_rad, rng)
     n_cal = len(up)
     if spec.check_poses:
         up = np.vstack([up, pose_directions("random", spec.check_poses, rng)])

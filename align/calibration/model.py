@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import Poses, TriadModel, pose_sigma_g
@@ -73,9 +73,9 @@ EFFECTS: dict[str, Effect] = {
        for i, name in enumerate(CROSS)},
 }
 EFFECT_UNITS = {n: e.unit for n, e in EFFECTS.items()}
-WARMUP_TAUS = (0.05, 0.1, 0.2, 0.4)
-"""Scale warm-up time constants tried, as fractions of the poses' time span (the best is
-kept; one searched parameter in BIC)."""
+WARMUP_TAUS = (0.03, 0.07, 0.15, 0.35, 0.8)
+"""Scale warm-up time constants first tried, as fractions of the poses' time span (the best
+is then refined; one searched parameter in BIC)."""
 
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
@@ -206,11 +206,24 @@ class CalibrationStage:
                                 np.concatenate([_effect_scale(e, p) for e in effects])
                                 if effects else []])
         span = max(float(np.ptp(p.t)), 1.0)
-        taus = [f * span for f in WARMUP_TAUS] if SCALE_WARMUP in effects else [0.0]
-        fits = [(least_squares(resid, theta0, x_scale=scale, method="lm", xtol=1e-10,
-                               ftol=1e-12, gtol=1e-12, max_nfev=300, args=(tau,)), tau)
-                for tau in taus]
-        res, tau = min(fits, key=lambda f: f[0].cost)
+
+        def solve(tau: float):
+            return least_squares(resid, theta0, x_scale=scale, method="lm", xtol=1e-10,
+                                 ftol=1e-12, gtol=1e-12, max_nfev=300, args=(tau,))
+
+        if SCALE_WARMUP in effects:
+            # tau: the best of a log grid, then refined between its neighbours (bounded
+            # scalar search on log tau; one searched parameter in BIC).
+            grid = np.log(np.asarray(WARMUP_TAUS) * span)
+            costs = [solve(float(np.exp(g))).cost for g in grid]
+            j = int(np.argmin(costs))
+            lo, hi = grid[max(j - 1, 0)], grid[min(j + 1, len(grid) - 1)]
+            best = minimize_scalar(lambda g: solve(float(np.exp(g))).cost, bounds=(lo, hi),
+                                   method="bounded", options={"xatol": 0.02})
+            tau = float(np.exp(best.x))
+        else:
+            tau = 0.0
+        res = solve(tau)
         self.solutions[tuple(effects)] = res.x
         r = res.fun / w
         J = res.jac
