@@ -203,3 +203,26 @@ def identifiability(up: np.ndarray, sigma_g: float = 1e-6) -> dict[str, dict[str
                     out[e]["pair_condition"] = cond
                     out[e]["worst_pair"] = e2 if e == e1 else e1
     return out
+
+
+def plan_report(n: int, seed: int = 0) -> list[str]:
+    """What ``align calibrate --plan N`` prints: the plan, then each effect's identifiability
+    on it against the seed paper's 14 poses (u per 1 µg of pose noise as its reach at 1 g
+    [µg], the condition number with the worst other effect beside it)."""
+    p = plan(n, seed)
+    mine, paper = identifiability(p.up), identifiability(paper14())
+    out = [f"pose plan of {n} poses (hold each still, in this order; note the time of "
+           "each, or record t):", *p.lines(), "",
+           "identifiability by simulation (u of the effect per 1 µg pose noise, as µg at 1 g "
+           "over the run; condition number with the worst other effect beside it):",
+           f"  {'effect':18s} {'this plan':>22s} {'paper 14 poses':>26s}"]
+    for e in EFFECTS_CHECKED:
+        a, b = mine.get(e, {}), paper.get(e, {})
+
+        def cell(d):
+            if not d:
+                return "not applicable"
+            return (f"{d['u_reach_g'] * 1e6:6.2f} µg, cond {d.get('pair_condition', 0):8.2g}")
+
+        out.append(f"  {e:18s} {cell(a):>22s} {cell(b):>26s}")
+    return out

@@ -24,6 +24,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from align.calibration.files import calibrate_files, calibration_units
     from axisbase.table import parse_column_map
 
+    if args.plan is not None or args.static is None:
+        return _plan_poses(args)
     inputs = [args.static] + ([args.check] if args.check else [])
     unique(inputs, "static/--check")
     sign, cols = signs(args.scale_sign), parse_column_map(args.columns)
@@ -38,6 +40,17 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if out is not None:
         _write_calibration(args, run, out, inputs)
     return 0 if run.checked is None or run.checked.ok else 2
+
+
+def _plan_poses(args: argparse.Namespace) -> int:
+    from align.calibration.plan import plan_report
+    from align.commands.args import UsageError
+
+    if args.plan is None:
+        raise UsageError("give the static-pose file (or --plan N for a pose "
+                         "sequence to record)")
+    say(plan_report(args.plan))
+    return 0
 
 
 def _static_settings(args: argparse.Namespace):
@@ -128,8 +141,11 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
     k = add("calibrate", "ellipsoid calibration of the triad from static poses", tables())
-    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz (CSV), "
-                   "or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
+    k.add_argument("static", nargs="?", help="pose,ux,uy,uz[,t][,temp] or a recording "
+                   "t,ux,uy,uz (CSV), or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
+    k.add_argument("--plan", type=int, metavar="N", help="print an N-pose order (N >= 28) "
+                   "that makes the effects identifiable, with its check by simulation, and "
+                   "exit")
     k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
     k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
                    "('-': stdout)")
