@@ -78,7 +78,7 @@ def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "
     u = np.concatenate([m.sensitivity_u(), [m.u_of(f"{p}_{a}") for p in ("beta", "bias")
                                             for a in "xyz"]])
     z = (est - truth_at(tr, m.t_ref)) / u
-    widened = cal.widening is not None
+    widened = getattr(cal, "widening", None) is not None
     return Outcome(z, tuple(e.name for e in cal.loop.effects), cal.loop.unexplained_structure,
                    widened)
 
