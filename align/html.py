@@ -22,7 +22,7 @@ def table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
                 for i, c in enumerate(head))
     body = "".join("<tr>" + "".join(f'<td class="{"l" if i < left else ""}">{esc(c)}</td>'
                                     for i, c in enumerate(r)) + "</tr>" for r in rows)
-    return Markup(f"<table><tr>{h}</tr>{body}</table>")
+    return f"<table><tr>{h}</tr>{body}</table>"
 
 
 def png_img(png: bytes, alt: str = "figure", cls: str = "", mime: str = "image/png") -> Markup:

@@ -82,6 +82,8 @@ class UnitResult:
     sha256: str | None = None
     created_utc: str | None = None
     inputs_sha256: tuple[str, ...] = ()
+    disposition: Mapping[str, Any] | None = None
+    """The result's own ``disposition`` (verdict against its tolerance), when it has one."""
 
     @property
     def when(self) -> _dt.datetime | None:
@@ -135,11 +137,15 @@ class UnitResult:
         digests = tuple(sorted(str(x["sha256"]) for x in inputs
                                if isinstance(x, Mapping) and isinstance(x.get("sha256"), str))
                         ) if isinstance(inputs, list) else ()
+        disp = d.get("disposition")
+        if disp is not None and not (isinstance(disp, Mapping)
+                                     and isinstance(disp.get("verdict"), str)):
+            raise InputError(f"{where}: disposition: expected an object with a verdict")
         return cls(where, str(d["session"]), label, ok, fused, e, u,
                    _finite_or_none(chi2), dof if isinstance(dof, int) else None,
                    _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
                    version, created_utc=created if isinstance(created, str) else None,
-                   inputs_sha256=digests)
+                   inputs_sha256=digests, disposition=disp)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
