@@ -93,6 +93,10 @@ ACT_PATTERNS = ("not read", "NOT ok", "outside the tolerance", "not capable",
 _SHAPE = re.compile(r"E_[xyz][XYZ]|[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?|unit \S+|\([^)]*\)")
 
 
+_WHO = re.compile(r"unit ([^\s:(),;]+)|E_[xyz][XYZ]")
+"""What tells apart messages of one shape: the unit and the angle they name."""
+
+
 def shape(line: str) -> str:
     """The message with its numbers, angle names, units and parenthesised details taken out:
     messages of one shape say the same thing of different angles or units."""
@@ -118,8 +122,8 @@ def rank_warnings(lines: list[str]) -> tuple[list[RankedLine], list[RankedLine]]
         groups.setdefault((act, shape(line)), []).append(line)
     act, note = [], []
     for (is_act, _), same in groups.items():
-        names = tuple(dict.fromkeys(m.group(0) for x in same
-                                    for m in re.finditer(r"E_[xyz][XYZ]|unit \S+", x)))
+        names = tuple(dict.fromkeys(" ".join(m.group(1) or m.group(0) for m in _WHO.finditer(x))
+                                    for x in same)) if len(same) > 1 else ()
         (act if is_act else note).append(RankedLine(same[0], len(same), names))
     return act, note
 
