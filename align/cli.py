@@ -796,6 +796,34 @@ def _replaceable_synth(folder: Path, flag: str) -> None:
                          "truth.json); --force replaces only those — choose a new folder")
 
 
+# ----------------------------------------------------------------------------- init, check
+
+def cmd_init(args: argparse.Namespace) -> int:
+    from align.session.template import session_template
+    from axisbase.output import write_atomic
+
+    cams = [c.strip() for c in args.cameras.split(",")] if args.cameras else []
+    text = session_template(cams, args.gonio, args.tumble, args.static)
+    Path(args.folder).mkdir(parents=True, exist_ok=True)
+    out = write_atomic(Path(args.folder) / "session.toml", text, args.force)
+    print(f"wrote {out}: fill in the values marked FILL IN, put the files beside it, then "
+          f"'align check {args.folder}'")
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from align.session.check import check_session
+
+    bad = 0
+    for folder in args.sessions:
+        problems = check_session(folder)
+        bad += bool(problems)
+        for line in problems:
+            print(line)
+        print(f"{folder}: " + (f"{len(problems)} problem(s)" if problems else "ready to run"))
+    return 2 if bad else 0
+
+
 # ----------------------------------------------------------------------------- demo
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -1051,6 +1079,20 @@ def build_parser() -> argparse.ArgumentParser:
     ss.add_argument("--undeclared", action="append", default=[], metavar="NAME=VALUE",
                     help="an effect put into the data but not declared")
     ss.set_defaults(func=cmd_synth)
+
+    ini = add("init", "write a commented session.toml for the instruments named")
+    ini.add_argument("folder", help="the session folder (made if absent)")
+    ini.add_argument("--cameras", metavar="A,B", help="camera names (standard layout: the "
+                     "first looks along +Y, the second along -X)")
+    ini.add_argument("--gonio", action="store_true", help="a ring-laser goniometer log")
+    ini.add_argument("--tumble", action="store_true", help="static tumble poses (calibration)")
+    ini.add_argument("--static", action="store_true", help="static readings on the platform")
+    ini.add_argument("--force", action="store_true", help="replace a session.toml that exists")
+    ini.set_defaults(func=cmd_init)
+
+    ck = add("check", "check sessions without computing: keys, files, headers, images")
+    ck.add_argument("sessions", nargs="+", metavar="FOLDER", help="session folders")
+    ck.set_defaults(func=cmd_check)
 
     d = add("demo", "synthesise a session with known truth and run it", writes)
     d.add_argument("--out", help="folder for the session and outputs (default: a new temp folder)")
