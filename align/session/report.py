@@ -309,22 +309,32 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
     return write_atomic(path, report_html(res, doc), force)
 
 
-def report_html(res: SessionResult, doc: dict | None = None) -> str:
-    """The report as one self-contained HTML page (see :func:`write_report`)."""
+def stage_views(res: SessionResult) -> dict:
+    """What the page shows of each stage, figures drawn (the costly part: seconds); a page
+    re-rendered with another ``doc`` (a disposition, a budget) can reuse it."""
+    return {"fusion": _fusion(res), "calibration": _calibration(res), "gonio": _gonio(res),
+            "marks": _marks(res)}
+
+
+def report_html(res: SessionResult, doc: dict | None = None,
+                views: dict | None = None) -> str:
+    """The report as one self-contained HTML page (see :func:`write_report`); ``views``:
+    :func:`stage_views` of ``res`` when already drawn."""
     from align.warnings import session_warnings, setup_notices
 
     d = doc if doc is not None else res.to_dict()
+    v = views if views is not None else stage_views(res)
     warnings = list(d.get("warnings", session_warnings(res)))
     disposition = d.get("disposition")
     ident = identity(res)
-    unit_label = next((v for k, v in ident if k in ("serial", "unit")
-                       and not v.startswith("not given")), res.session.name)
-    fusion = _fusion(res)
+    unit_label = next((val for k, val in ident if k in ("serial", "unit")
+                       and not val.startswith("not given")), res.session.name)
+    fusion = v["fusion"]
     angle_head, angle_rows = _angles(res, disposition) if fusion else ([], [])
     sections = [("misalignment", "Misalignment E"), ("budget", "Budget")]
     if fusion:
         sections.append(("fusion", "Fusion"))
-    cal, gon, marks = _calibration(res), _gonio(res), _marks(res)
+    cal, gon, marks = v["calibration"], v["gonio"], v["marks"]
     for key, name, present in (("calibration", "Calibration", cal), ("goniometer",
                                "Goniometer", gon), ("marks", "Scribe marks", marks)):
         if present:
