@@ -804,8 +804,11 @@ def cmd_init(args: argparse.Namespace) -> int:
 
     cams = [c.strip() for c in args.cameras.split(",")] if args.cameras else []
     text = session_template(cams, args.gonio, args.tumble, args.static)
-    Path(args.folder).mkdir(parents=True, exist_ok=True)
-    out = write_atomic(Path(args.folder) / "session.toml", text, args.force)
+    path = Path(args.folder) / "session.toml"
+    if path.exists() and not args.force:
+        raise UsageError(f"{path}: exists; pass --force to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    out = write_atomic(path, text, args.force)
     print(f"wrote {out}: fill in the values marked FILL IN, put the files beside it, then "
           f"'align check {args.folder}'")
     return 0
