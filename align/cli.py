@@ -854,6 +854,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     truth = write_session(session, SessionSpec(seed=args.seed,
                                                effects={"camera_roll_A": roll},
                                                undeclared=frozenset({"camera_roll_A"})))
+    with open(session / "session.toml", "a", encoding="utf-8") as f:  # the unit's identity
+        f.write(f'\n[metadata]\nserial = "DEMO-{args.seed:04d}"\noperator = "align demo"\n')
     report = folder / "report.html"
     out = _run_one(str(session), str(folder / "result.json"), str(report),
                    str(folder / "platform_calibration.json"), 1e-3, quiet=False,
