@@ -95,8 +95,9 @@ def stage_strip(res: SessionResult, warnings: list[str]) -> list[Stage]:
         out.append(Stage("goniometer", st, {"ok": "ok", "warn": "warned",
                                             "fail": "FAILED"}[st], "goniometer", why))
     if s.images:
-        names = {im.file.name for im in s.images}
-        st, why = status("marks", tuple(names))
+        # a mark's warnings start with its image's path (MarkResult.image)
+        st, why = status("marks", tuple({str(im.file) for im in s.images}
+                                        | {im.file.name for im in s.images}))
         out.append(Stage("marks", st, f"{len(res.marks)}/{len(s.images)}", "marks", why))
     if s.platform is not None:
         st, why = status("platform static", ("platform",))

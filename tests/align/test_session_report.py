@@ -99,6 +99,20 @@ def test_the_page_opens_with_identity_no_tolerance_and_the_stages(run):
     assert "χ²" in dict((n, lab) for _, n, lab in strip)["fusion"]
 
 
+def test_each_stage_is_warned_by_its_own_warnings(run):
+    from align.session.report import stage_strip
+
+    res = run[0]
+    image = res.session.images[2].file
+    lines = [f"{image} mark 1: uncertainty inflated x1.50 for the structure no effect explains",
+             "calibration: noise unknown (per-pose means only)"]
+    got = {st.name: st.status for st in stage_strip(res, lines)}
+    assert got == {"calibration": "warn", "goniometer": "ok", "marks": "warn", "static": "ok",
+                   "fusion": "ok"}
+    marks = next(st for st in stage_strip(res, lines) if st.name == "marks")
+    assert image.name in marks.title
+
+
 @pytest.mark.parametrize("verdict,cls", [("PASS", "v-pass"), ("FAIL", "v-fail"),
                                          ("INCONCLUSIVE", "v-inconclusive"),
                                          ("NOT MEASURED", "v-notmeasured")])
