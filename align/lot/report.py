@@ -167,14 +167,19 @@ VERDICT_CELL = {"PASS": "ok", "FAIL": "bad", "INCONCLUSIVE": "warnc", "NOT MEASU
                 "NO TOLERANCE": ""}
 
 
-def _dispositions(lot: Lot, page: Path | None) -> tuple[list[dict], list[dict], int]:
+DISPOSITION_ROWS_MAX = 1000
+"""Units listed one by one in the disposition table (all needing a decision come first;
+every unit is in the unit table below, the CSV and the JSON)."""
+
+
+def _dispositions(lot: Lot, disps: list, page: Path | None
+                  ) -> tuple[list[dict], list[dict], int]:
     """The units needing a decision (FAIL, INCONCLUSIVE, NOT MEASURED), the others, and how
-    many are left out of the page (beyond :data:`UNIT_ROWS_MAX`)."""
-    from align.lot.disposition import relative_link, session_report_of, unit_dispositions
+    many are left out of the table (beyond :data:`DISPOSITION_ROWS_MAX`)."""
+    from align.lot.disposition import relative_link, session_report_of
 
     decide, rest = [], []
-    disps = unit_dispositions(lot)
-    for d in disps[:UNIT_ROWS_MAX]:
+    for d in disps[:DISPOSITION_ROWS_MAX]:
         u = lot.units[d.index]
         rep = session_report_of(u.file) if page is not None else None
         w = u.when
@@ -184,7 +189,7 @@ def _dispositions(lot: Lot, page: Path | None) -> tuple[list[dict], list[dict], 
                "margin": "—" if d.margin_arcsec is None else f"{d.margin_arcsec:+.2f}",
                "link": None if rep is None else relative_link(rep, page)}
         (rest if d.verdict in ("PASS", "NO TOLERANCE") else decide).append(row)
-    return decide, rest, max(0, len(disps) - UNIT_ROWS_MAX)
+    return decide, rest, max(0, len(disps) - DISPOSITION_ROWS_MAX)
 
 
 def _banner(lot: Lot, counts: dict[str, int]) -> dict:
@@ -214,9 +219,10 @@ def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
 
     n_units, n_stats = len(lot.units), len(lot.in_stats)
     counts: dict[str, int] = {}
-    for d in unit_dispositions(lot):
+    disps = unit_dispositions(lot)
+    for d in disps:
         counts[d.verdict] = counts.get(d.verdict, 0) + 1
-    decide, rest, more = _dispositions(lot, page)
+    decide, rest, more = _dispositions(lot, disps, page)
     act, note = rank_warnings(list(doc["warnings"]))
 
     def verdict(good: bool | None, yes: str, no: str) -> str:
