@@ -143,3 +143,15 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
             "# decision = \"guarded\"        # simple or guarded (default guarded)",
             "# k = 2.0                     # guard band w = k·u (default 2)", ""]
     return "\n".join(out)
+
+
+def write_template(folder: str | Path, text: str, force: bool = False) -> Path:
+    """``folder/session.toml`` (the folder made if absent); an existing one is replaced only
+    with ``force`` (``InputError`` otherwise)."""
+    from axisbase.output import write_atomic
+
+    path = Path(folder) / "session.toml"
+    if path.exists() and not force:
+        raise InputError(f"{path}: exists; pass --force to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return write_atomic(path, text, force)
