@@ -111,16 +111,21 @@ def fig_mark_thumb(r: MarkResult, image: np.ndarray):
 
 def fig_mark_residuals(r: MarkResult):
     """The residuals across the mark in one panel: the straight line's (grey) and the loop's
-    final model's (colour) — one plot per mark, the image being in its thumbnail."""
+    final model's (colour) with its ±1σ band — one plot per mark, the image being in its
+    thumbnail. (A band, not an error bar per point: drawn in a tenth of the time.)"""
     plt = _plt()
     before, after = r.loop.before, r.loop.after
     fig, ax = plt.subplots(figsize=(8, 2.6))
+    fig.subplots_adjust(left=0.09, right=0.99, bottom=0.18, top=0.9)  # tight_layout: 2x slower
     ax.plot(np.asarray(before.regressors["t"]), before.residuals, ".", ms=2, color="0.6",
             label=f"straight line: RMS {before.rms:.3f} px")
+    t = np.asarray(after.regressors["t"])
+    order = np.argsort(t)
+    sigma = np.broadcast_to(np.asarray(after.sigma, float), t.shape)[order]
+    ax.fill_between(t[order], -sigma, sigma, color="C1", alpha=0.2, lw=0, label="±1σ")
     names = ", ".join(e.name for e in r.loop.effects) or "no effect added"
-    ax.errorbar(np.asarray(after.regressors["t"]), after.residuals, yerr=after.sigma,
-                fmt=".", ms=2, lw=0.5, color="C1",
-                label=f"after loop ({names}): RMS {after.rms:.3f} px")
+    ax.plot(t, after.residuals, ".", ms=2, color="C1",
+            label=f"after loop ({names}): RMS {after.rms:.3f} px")
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlabel("position along the mark t [px]")
     ax.set_ylabel("residual across mark [px]")
@@ -128,7 +133,6 @@ def fig_mark_residuals(r: MarkResult):
                  f"{np.rad2deg(r.angle_rad):+.6f}° ± {np.rad2deg(r.angle_u_rad) * 3600:.2f}″",
                  fontsize=9)
     ax.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
     return fig
 
 
