@@ -1,7 +1,8 @@
 """What the lot decides about each unit, and its warnings ranked for the reader.
 
-A unit's verdict is its own result's ``disposition`` when the result has one (the session's
-tolerance and decision rule); otherwise, with the lot's tolerance ±T, the lot's rule: FAIL
+A unit's verdict is the one ``align lot`` reached itself when it judged the units (the lot
+JSON's ``dispositions``), else its own result's ``disposition`` when the result has one (the
+session's tolerance and decision rule); otherwise, with the lot's tolerance ±T, the lot's rule: FAIL
 when an angle is outside ±T, INCONCLUSIVE when one is inside by less than GUARD·u (its
 conformance cannot be stated), PASS otherwise; NOT MEASURED when the result is not ok or not
 fused (never a verdict on its numbers); NO TOLERANCE without any tolerance.
@@ -14,11 +15,12 @@ repeated with other numbers or angles is one line with a count.
 
 from __future__ import annotations
 
-import math
 import os
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from align.lot.read import ANGLE_NAMES
 from align.lot.stats import Lot
@@ -42,18 +44,30 @@ class UnitDisposition:
     source: str
 
 
-def unit_dispositions(lot: Lot) -> list[UnitDisposition]:
-    """Every unit's verdict, most severe first (then in the lot's order)."""
+def _from_disposition(k: int, d: Mapping[str, Any], source: str) -> UnitDisposition:
+    """A unit's verdict from a disposition document (the session result's ``disposition``,
+    or an entry of the lot JSON's ``dispositions``)."""
+    worst = d.get("worst")
+    margin = next((a.get("margin_arcsec") for a in d.get("angles") or []
+                   if a.get("name") == worst), None)
+    return UnitDisposition(k, str(d["verdict"]), worst, margin, source)
+
+
+def unit_dispositions(lot: Lot, decided: Sequence[Mapping[str, Any]] | None = None
+                      ) -> list[UnitDisposition]:
+    """Every unit's verdict, most severe first (then in the lot's order). ``decided``: the
+    lot JSON's ``dispositions`` (one per unit, in the lot's order) when ``align lot``
+    judged the units itself — taken as they are."""
+    if decided is not None and len(decided) == len(lot.units):
+        out = [_from_disposition(k, d, "lot") for k, d in enumerate(decided)]
+        return sorted(out, key=lambda x: (SEVERITY.get(x.verdict, 5), x.index))
     marginal = {k for a in lot.angles for k in a.marginal}
     outside = {k for a in lot.angles for k in a.outside_tolerance}
     out = []
     for k, u in enumerate(lot.units):
         d = u.disposition
         if d is not None and (d.get("verdict") != "NO TOLERANCE" or lot.tolerance is None):
-            worst = d.get("worst")
-            margin = next((a.get("margin_arcsec") for a in d.get("angles", [])
-                           if a.get("name") == worst), None)
-            out.append(UnitDisposition(k, str(d["verdict"]), worst, margin, "result"))
+            out.append(_from_disposition(k, d, "result"))
         elif not (u.ok and u.fused) or u.e_rad is None:
             out.append(UnitDisposition(k, "NOT MEASURED", None, None, "lot"))
         elif lot.tolerance is None:
@@ -141,7 +155,3 @@ def lot_name(lot: Lot, files: list[str] | None = None) -> str:
         if common.name:
             return common.name
     return "unnamed"
-
-
-def finite(v: float | None) -> bool:
-    return v is not None and math.isfinite(v)

@@ -219,7 +219,7 @@ def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
 
     n_units, n_stats = len(lot.units), len(lot.in_stats)
     counts: dict[str, int] = {}
-    disps = unit_dispositions(lot)
+    disps = unit_dispositions(lot, doc.get("dispositions"))
     for d in disps:
         counts[d.verdict] = counts.get(d.verdict, 0) + 1
     decide, rest, more = _dispositions(lot, disps, page)
@@ -280,12 +280,19 @@ def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
                 ("metadata", "Metadata")]
     parts.append("<h2 id='units'>Units</h2>" + _units(lot))
     toc += [("units", "Units"), ("provenance", "Provenance")]
-    rule = ("Each unit's verdict is its own result's disposition when it has one; otherwise "
-            + (f"against the lot's tolerance ±{lot.tolerance / ARCSEC:g}″: FAIL outside it, "
-               f"INCONCLUSIVE inside by less than {GUARD:g}·u, PASS otherwise"
-               if lot.tolerance is not None else "no tolerance was given (--tolerance-arcsec)")
-            + "; NOT MEASURED when the result is not ok. The margin is the worst angle's "
-            "distance inside the tolerance (negative: outside).")
+    if disps and disps[0].source == "lot" and doc.get("dispositions"):
+        rule = ("Each unit judged by align lot against the tolerance and decision rule it was "
+                "given (the JSON's dispositions: rule, k, each angle's margin and probability "
+                "of conformance).")
+    else:
+        rule = ("Each unit's verdict is its own result's disposition when it has one; "
+                "otherwise " + (
+                    f"against the lot's tolerance ±{lot.tolerance / ARCSEC:g}″: FAIL outside "
+                    f"it, INCONCLUSIVE inside by less than {GUARD:g}·u, PASS otherwise"
+                    if lot.tolerance is not None else
+                    "no tolerance was given (--tolerance-arcsec)") + ".")
+    rule += (" NOT MEASURED: the result is not ok. The margin is the worst angle's distance "
+             "inside the tolerance (negative: outside).")
     order = sorted(counts, key=lambda v: SEVERITY.get(v, 9))
     return render(
         "lot.html.j2", name=lot_name(lot), n_units=n_units, banner=_banner(lot, counts),

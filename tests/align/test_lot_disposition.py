@@ -70,6 +70,24 @@ def test_a_units_own_disposition_is_kept_and_no_tolerance_is_said(tmp_path):
     assert d[0].verdict == "NO TOLERANCE" and d[5].verdict == "NOT MEASURED"
 
 
+def test_the_lots_own_decisions_are_taken_as_they_are(tmp_path):
+    """When 'align lot' judged the units itself (the lot JSON's ``dispositions``, one per
+    unit in the lot's order), those verdicts are the page's, whatever the lot's flags say."""
+    lot = analyse(_lot_units(tmp_path, n=5), tolerance=T * ARCSEC)
+    decided = [{"unit": u.label, "verdict": "PASS", "worst": "E_xY",
+                "angles": [{"name": "E_xY", "margin_arcsec": 3.0}]} for u in lot.units]
+    decided[3] = dict(decided[3], verdict="INCONCLUSIVE", worst="E_zY",
+                      angles=[{"name": "E_zY", "margin_arcsec": 0.1}])
+    d = unit_dispositions(lot, decided)
+    assert [(x.index, x.verdict, x.margin_arcsec) for x in d[:2]] == [
+        (3, "INCONCLUSIVE", 0.1), (0, "PASS", 3.0)]
+    # not one per unit: not the lot's decisions; each unit from its values against ±T
+    own = unit_dispositions(lot, decided[:4])
+    assert {x.verdict for x in own} == {"PASS"}
+    assert all(x.margin_arcsec == pytest.approx(T - max(abs(v) for v in lot.units[
+        x.index].e_rad) / ARCSEC) for x in own)
+
+
 def test_warnings_ranked_act_and_note_one_line_per_repeat():
     lines = ["unit SN1: E_xZ = +34.81″ outside the tolerance ±30″",
              "unit SN2: E_zX = -32.10″ outside the tolerance ±30″",
