@@ -134,6 +134,8 @@ def banner(res: SessionResult, disposition: dict | None) -> dict:
         text = str(disposition.get("reason", ""))
         if disposition.get("worst"):
             text += f" (worst angle: {disposition['worst']})"
+        if disposition.get("p_conform_all") is not None:
+            text += f"; P(every angle conforms) = {disposition['p_conform_all']:.3f}"
         return {"verdict": v, "cls": VERDICT_CLASS.get(v, "v-none"), "text": text}
     if not res.ok:
         return {"verdict": "NOT ok", "cls": "v-notmeasured",

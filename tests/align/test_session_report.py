@@ -70,7 +70,7 @@ def _disposition(verdict: str, worst: str | None = "E_xZ") -> dict:
                "lower_arcsec": -30.0, "upper_arcsec": 30.0, "guard_arcsec": 1.0,
                "margin_arcsec": 20.0 - k, "p_conform": 0.999, "verdict": "PASS"}
               for k, n in enumerate(ANGLES)]
-    return {"verdict": verdict, "rule": "guarded", "k": 2.0,
+    return {"verdict": verdict, "rule": "guarded", "k": 2.0, "p_conform_all": 0.9871,
             "reason": f"constructed {verdict.lower()} case", "worst": worst, "angles": angles}
 
 
@@ -123,7 +123,7 @@ def test_the_disposition_heads_the_page_with_its_margins(run, verdict, cls):
     banner = re.search(r'<div class="banner ([\w-]+)" id="verdict"><span class="verdict">'
                        r'([^<]+)</span>([^<]*)</div>', text)
     assert banner is not None and banner.groups()[:2] == (cls, verdict)
-    assert "worst angle: E_xZ" in banner.group(3)
+    assert "worst angle: E_xZ" in banner.group(3) and "0.987" in banner.group(3)
     assert "No tolerance given" not in text
     # each angle's margin and probability in the E table (margins 20, 19, ... from above)
     for k, name in enumerate(ANGLES):
