@@ -549,14 +549,31 @@ def _print_result(res, out=None) -> None:
         print("  " + f.loop.summary_lines()[-1], file=out)
 
 
+def _print_decision(js: dict, budget: bool = False, plan: bool = False) -> None:
+    """The verdict line, and with ``budget`` / ``plan`` the budget table and the advice."""
+    from align.decision import Disposition
+
+    print("  " + Disposition.from_dict(js["disposition"]).line())
+    if budget and js.get("budget") is not None:
+        from align.budget import Budget
+
+        print("\n".join("  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()))
+    if plan:
+        from align.plan import plan_from_result
+
+        print("\n".join("  " + ln for ln in plan_from_result(js).lines()))
+
+
 def _run_one(folder: str, json_path: str | None, report_path: str | None,
              cal_path: str | None, alpha: float, quiet: bool, force: bool = False,
-             allow_outside: bool = False, settings: dict | None = None) -> dict:
+             allow_outside: bool = False, settings: dict | None = None,
+             decision: dict | None = None) -> dict:
     """One session end to end, in this process (``align.session.batch.run_job``)."""
     from align.session.batch import SessionJob, run_job
 
     job = SessionJob(folder, json_path, report_path, cal_path, alpha, force, allow_outside,
-                     settings or {"alpha": alpha}, keep_result=True)
+                     settings or {"alpha": alpha}, keep_result=True,
+                     decision=decision or {})
     return run_job(job, progress=None if quiet else (
         lambda m: log.info("  [%s] %s", Path(folder).resolve().name, m)))
 
@@ -568,6 +585,38 @@ _EXECUTION = ("jobs", "scheduler", "resume")
 
 def _run_settings(args: argparse.Namespace) -> dict:
     return {k: v for k, v in _settings(args).items() if k not in _EXECUTION}
+
+
+def _tolerance_flag(text: str) -> list[float]:
+    from align.decision import limits_arcsec
+
+    try:
+        return list(limits_arcsec(text, "--tolerance-arcsec", text=True))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _decision_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--tolerance-arcsec", type=_tolerance_flag, metavar="T|LO,HI",
+                   help="tolerance on every angle [″]: ±T, or LO,HI relative to the nominal "
+                   "(overrides session.toml [tolerance])")
+    p.add_argument("--decision", choices=["simple", "guarded"],
+                   help="decision rule: simple acceptance, or guarded with w = k·u (default: "
+                   "session.toml's, else guarded)")
+    p.add_argument("--guard-k", type=_number(0, 10), metavar="K",
+                   help="guard-band factor k of the guarded rule (default 2)")
+    p.add_argument("--fail-on-reject", action="store_true",
+                   help="exit status 3 when a verdict is FAIL or INCONCLUSIVE")
+
+
+def _decision_args(args: argparse.Namespace) -> dict:
+    """The decision flags given, as :func:`align.decision.resolve`'s keywords."""
+    out = {"tolerance": args.tolerance_arcsec, "rule": args.decision, "k": args.guard_k}
+    return {k: v for k, v in out.items() if v is not None}
+
+
+def _rejected(verdicts: Sequence[str]) -> bool:
+    return any(v in ("FAIL", "INCONCLUSIVE") for v in verdicts)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -582,16 +631,22 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 0
         out = _run_one(args.sessions[0], args.json, args.report, args.calibration,
                        args.alpha, quiet=False, force=args.force,
-                       allow_outside=args.allow_outside, settings=_run_settings(args))
+                       allow_outside=args.allow_outside, settings=_run_settings(args),
+                       decision=_decision_args(args))
         if "error" in out:
             raise UsageError(out["error"])
         print(f"session {out['session']}:")
         _print_result(out["result"])
+        _print_decision(out["json"], args.budget, args.plan)
         _warn(out["warnings"])
         for k, v in out["outputs"].items():
             if v != "-":
                 print(f"  wrote {k}: {v}")
-        return 0 if out["ok"] else 2
+        status = 0 if out["ok"] else 2
+        if status == 0 and args.fail_on_reject and _rejected(
+                [out["json"]["disposition"]["verdict"]]):
+            return 3
+        return status
     _unique(args.sessions, "sessions")
     return _run_batch(args)
 
@@ -615,7 +670,8 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
                       alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
-                      settings=_run_settings(args), command=tuple(command_line()))
+                      settings=_run_settings(args), command=tuple(command_line()),
+                      decision=_decision_args(args))
     results = []
     if args.resume:
         results = [skipped(j) for j in jobs if is_complete(j)]
@@ -662,7 +718,8 @@ def _run_batch(args: argparse.Namespace) -> int:
             E = np.array(js["misalignment_arcsec"])
             U = np.array(js["misalignment_u_arcsec"])
             worst = float(np.max(np.abs(E)))
-            print(f"{r['session']}: {'OK' if r['ok'] else 'FAILED stages'}, |E| max "
+            print(f"{r['session']}: {js['disposition']['verdict']}, "
+                  f"{'OK' if r['ok'] else 'FAILED stages'}, |E| max "
                   f"{worst:.1f}″, u max {U.max():.2f}″, chi2/dof {js['chi2']:.1f}/{js['dof']}"
                   + ("" if not js["unexplained_structure"] else ", NOT consistent")
                   + (" (complete before, skipped)" if r.get("skipped") else "")
@@ -678,7 +735,10 @@ def _run_batch(args: argparse.Namespace) -> int:
           + (f", {len(failed)} failed" if failed else ""))
     if any(not r["ok"] and not r.get("bad_input", False) for r in results):
         return 1
-    return 2 if failed else 0
+    if failed:
+        return 2
+    return 3 if args.fail_on_reject and _rejected(
+        [r["json"]["disposition"]["verdict"] for r in results if r.get("json")]) else 0
 
 
 # ----------------------------------------------------------------------------- apply
@@ -713,11 +773,20 @@ def cmd_lot(args: argparse.Namespace) -> int:
     plan = _plan(args, files)
     outs = {"json": plan.add("--json", args.json, stdout_ok=True),
             "csv": plan.add("--csv", args.csv), "report": plan.add("--report", args.report)}
+    from align.decision import resolve
+
     read = read_results(files)
+    tol = args.tolerance_arcsec
+    # Capability (Cp, Cpk) is against a symmetric ±T about a zero nominal.
+    sym = tol is not None and tol[0] == -tol[1]
+    if tol is not None and not sym:
+        log.warning("--tolerance-arcsec %g,%g: asymmetric: per-unit verdicts only, no "
+                    "capability (Cpk is computed against a symmetric ±T)", *tol)
     lot = analyse([r.unit for r in read if r.unit is not None],
                   [r.rejected for r in read if r.rejected is not None],
-                  None if args.tolerance_arcsec is None else args.tolerance_arcsec * ARCSEC)
-    written, doc = lot_outputs(lot, read, outs, args.force, _settings(args))
+                  tol[1] * ARCSEC if sym else None)
+    spec = resolve(None, **_decision_args(args))
+    written, doc = lot_outputs(lot, read, outs, args.force, _settings(args), spec)
     print(f"lot: {len(lot.units)} session results ({len(lot.in_stats)} ok, in the "
           f"statistics), {len(lot.rejected)} files not read; run order {lot.run_order_note}")
     for a in doc["angles"]:
@@ -729,13 +798,21 @@ def cmd_lot(args: argparse.Namespace) -> int:
                      f"{len(a['outside_limits'])} outside")
         if cap is not None:
             line += (f"; Cpk {cap['cpk']:.2f} ± {cap['cpk_u']:.2f}, "
-                     f"{len(a['outside_tolerance'])} outside ±{args.tolerance_arcsec:g}″")
+                     f"{len(a['outside_tolerance'])} outside ±{tol[1]:g}″")
         print(line)
+    verdicts = [d["verdict"] for d in doc["dispositions"]]
+    counts = ", ".join(f"{verdicts.count(v)} {v}" for v in dict.fromkeys(verdicts))
+    print(f"  verdicts ({spec.rule if spec else 'each unit its own'} rule): {counts}")
+    for d in doc["dispositions"]:
+        if d["verdict"] != "PASS":
+            print(f"    {d['unit']}: {d['verdict']}: {d['reason']}")
     _warn(doc["warnings"])
     for k, v in written.items():
         if str(v) != "-":
             print(f"  wrote {k}: {v}")
-    return 0 if lot.ok else 2
+    if not lot.ok:
+        return 2
+    return 3 if args.fail_on_reject and _rejected(verdicts) else 0
 
 
 # ----------------------------------------------------------------------------- synth
@@ -1015,6 +1092,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the sessions of a batch on this Dask scheduler, e.g. "
                    "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")
+    _decision_flags(r)
+    r.add_argument("--budget", action="store_true",
+                   help="print the uncertainty budget of every angle (largest first)")
+    r.add_argument("--plan", action="store_true",
+                   help="print what to measure next (as 'align plan' on the result)")
     r.set_defaults(func=cmd_run)
 
     ap = add("apply", "readings -> specific force in the platform frame", writes, _tables())
@@ -1033,8 +1115,7 @@ def build_parser() -> argparse.ArgumentParser:
     lt.add_argument("--report", help="HTML report of the lot (a new file)")
     lt.add_argument("--csv", help="CSV with one row per unit (a new file)")
     lt.add_argument("--json", help="lot JSON ('-': stdout)")
-    lt.add_argument("--tolerance-arcsec", type=POSITIVE, metavar="T",
-                    help="tolerance ±T [″] on every angle: flags and process capability")
+    _decision_flags(lt)
     lt.set_defaults(func=cmd_lot)
 
     sy = sub.add_parser("synth", help="write synthetic data with known truth",

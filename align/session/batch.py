@@ -41,6 +41,7 @@ class SessionJob:
     ``json``/``report``/``cal``: output paths (None: not asked for; ``json`` may be ``-``
     for standard output); ``settings``: the settings recorded in the provenance; ``command``:
     the command line recorded there (a worker on another machine does not know it);
+    ``decision``: see the field;
     ``keep_result``: return the :class:`~align.session.SessionResult` itself (one session in
     this process, to print it)."""
 
@@ -54,6 +55,10 @@ class SessionJob:
     settings: dict = field(default_factory=dict)
     command: tuple[str, ...] = ()
     keep_result: bool = False
+    decision: dict = field(default_factory=dict)
+    """The command line's decision flags, :func:`align.decision.resolve`'s keywords
+    (``tolerance`` (lower, upper) [″], ``rule``, ``k``): they override session.toml's
+    ``[tolerance]``."""
 
     @property
     def name(self) -> str:
@@ -71,6 +76,7 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
 
     Every output is checked before anything is computed; a stage that failed still gives
     the result (``ok: false``)."""
+    from align.decision import resolve
     from align.session import load_session, run_session, session_outputs
     from axisbase.output import OutputPlan
     from axisbase.provenance import set_command
@@ -91,6 +97,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
     res = run_session(s, progress=progress or (lambda m: None), alpha=job.alpha)
+    if job.decision:
+        res.tolerance = resolve(s.tolerance, **job.decision)
     settings = job.settings or {"alpha": job.alpha}
     try:
         if outs["report"] is not None:

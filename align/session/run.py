@@ -14,6 +14,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.units import unit_scale_check
+from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
@@ -60,6 +61,18 @@ class SessionResult:
     fusion: FusionResult | None = None
     errors: list[StageError] = field(default_factory=list)
     units: str = "V"
+    tolerance: ToleranceSpec | None = None
+    """The specification the disposition is judged against (session.toml's ``[tolerance]``
+    unless the command line overrides it)."""
+
+    def __post_init__(self) -> None:
+        if self.tolerance is None:
+            self.tolerance = self.session.tolerance
+
+    def disposition(self, d: dict | None = None) -> Disposition:
+        """PASS / FAIL / INCONCLUSIVE / NOT MEASURED / NO TOLERANCE (:mod:`align.decision`);
+        ``d``: :meth:`to_dict` when already at hand."""
+        return decide(d if d is not None else self._core_dict(), self.tolerance)
 
     @property
     def fused(self) -> bool:
@@ -86,6 +99,11 @@ class SessionResult:
         platform calibration, and each stage's own result. A session result is not loaded
         back whole (it needs the session's files); its parts are:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
+        d = self._core_dict()
+        d["disposition"] = self.disposition(d).to_dict()
+        return d
+
+    def _core_dict(self) -> dict:
         from align.calibration.output import with_units
         from align.warnings import session_warnings
 
