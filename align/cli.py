@@ -555,7 +555,7 @@ def _print_decision(js: dict, budget: bool = False, plan: bool = False) -> None:
 
     print("  " + Disposition.from_dict(js["disposition"]).line())
     if budget and js.get("budget") is not None:
-        from align.budget import Budget
+        from align.fusion.budget import Budget
 
         print("\n".join("  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()))
     if plan:

@@ -311,13 +311,18 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
             obs.append(MarkObs(f"{im.housing} in {im.view} ({im.file.name})",
                                HOUSINGS.index(im.housing), v.right, v.up, v.camera,
                                0.0 if im.nominal == "horizontal" else np.pi / 2,
-                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad))
+                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad,
+                               im.file.name, im.view))
         blocks.append(mark_block(obs))
     if res.gonio is not None:
         g = s.goniometer
         fa = res.gonio.angles
+        # The Type B terms are kept apart for the budget; a two-direction mean mixes both
+        # logs' terms, so they stay inside the log's share there.
+        tb = fa.type_b_terms if g.reverse_log is None else {}
         b = gonio_block(list(g.faces), fa.angles_rad, fa.cov, g.nominal_rad, g.direction,
-                        g.reference_offset_rad)
+                        g.reference_offset_rad, type_b=tb,
+                        name=f"goniometer {g.log.name}")
         if b is not None:
             blocks.append(b)
     if res.calibration is not None:

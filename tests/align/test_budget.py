@@ -1,0 +1,70 @@
+"""The uncertainty budget: shares add up to u², and leaving a source out of the solve moves u
+as the linearisation predicts."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from align.fusion import E_INDEX, E_NAMES, fuse
+from align.fusion.budget import Budget
+from align.session import load_session, observation_blocks, run_session
+from synth.session import SessionSpec, write_session
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("budget") / "s"
+    write_session(folder, SessionSpec(seed=5, effects={"camera_roll_A": 40.0},
+                                      undeclared=frozenset({"camera_roll_A"})))
+    s = load_session(folder)
+    res = run_session(s)
+    assert res.ok
+    return s, res
+
+
+def test_shares_add_up_to_u2_and_name_every_input(run):
+    s, res = run
+    f = res.fusion
+    b = f.budget
+    assert any(e.name.startswith("camera_roll") for e in f.loop.effects)  # a nuisance to split
+    for n, (i, j) in zip(E_NAMES, E_INDEX, strict=True):
+        u, cs = b.angles[n]
+        total = sum(c.u2 for c in cs)
+        assert total == pytest.approx(u**2, rel=0.01), n
+        assert u == pytest.approx(f.E_u[i, j], rel=0.01), n  # the solve's own u
+        assert sum(c.fraction for c in cs) == pytest.approx(1.0, rel=0.01)
+        assert [c.u2 for c in cs] == sorted((c.u2 for c in cs), reverse=True)
+        assert min(c.u2 for c in cs) > -1e-6 * u**2  # no negative share beyond rounding
+    sources = {c.source for c in b.angles["E_xY"][1]}
+    assert {f"image {im.file.name}" for im in s.images} <= sources
+    assert {"goniometer gonio.csv", "calibration", "static poses"} <= sources
+    assert "nuisance: camera roll A" in sources
+    back = Budget.from_dict(b.to_dict())
+    assert back.angles["E_xZ"][0] == pytest.approx(b.angles["E_xZ"][0])
+
+
+def _u(f):
+    return np.array([f.E_u[i, j] for i, j in E_INDEX])
+
+
+@pytest.mark.parametrize("drop", ["image x_A.png", "image z_B.png", "goniometer gonio.csv",
+                                  "static poses"])
+def test_leaving_a_source_out_matches_its_predicted_effect(run, drop):
+    s, res = run
+    lin = res.fusion.budget.model
+    predicted = lin.u_with(drop=[drop])
+    if drop.startswith("image "):
+        r2 = replace(res, marks=[(im, m) for im, m in res.marks
+                                 if f"image {im.file.name}" != drop])
+        blocks = observation_blocks(s, r2)
+    elif drop == "static poses":  # (the calibration's bias prior goes with them)
+        blocks = observation_blocks(s, replace(res, platform=[]))
+    else:
+        blocks = [b for b in observation_blocks(s, res) if b.source != "goniometer"]
+    refit = fuse(blocks)
+    assert [e.name for e in refit.loop.effects] == [e.name for e in res.fusion.loop.effects]
+    before = _u(res.fusion)
+    obtained = _u(refit)
+    assert np.max(obtained / before) > 1.0 + 1e-6 or drop.startswith("image ")
+    np.testing.assert_allclose(predicted, obtained, rtol=0.02)
