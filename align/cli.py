@@ -764,6 +764,25 @@ def cmd_apply(args: argparse.Namespace) -> int:
     return 0
 
 
+# ----------------------------------------------------------------------------- plan
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from align.apply import read_json
+    from align.contract import check, document
+    from align.plan import plan_from_result
+    from axisbase.output import dumps, write_atomic
+
+    js = read_json(args.result, "a session result")
+    check(js, "session", args.result)
+    p = plan_from_result(js, args.result)
+    out = _plan(args, [args.result]).add("--json", args.json, stdout_ok=True)
+    print("\n".join(p.lines()))
+    if out is not None:
+        doc = document("plan", p.to_dict(), _settings(args), [args.result])
+        _wrote(write_atomic(out, dumps(doc), args.force))
+    return 0
+
+
 # ----------------------------------------------------------------------------- lot
 
 def cmd_lot(args: argparse.Namespace) -> int:
@@ -1107,6 +1126,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--method", choices=["exact", "paper"], default="exact",
                     help="roll formula for --tilt")
     ap.set_defaults(func=cmd_apply)
+
+    pl = add("plan", "what to measure next: the measurement that lowers u of the critical "
+             "angle most per minute", writes)
+    pl.add_argument("result", help="session result JSON ('align run --json')")
+    pl.add_argument("--json", help="the plan as JSON ('-': stdout)")
+    pl.set_defaults(func=cmd_plan)
 
     lt = add("lot", "a production lot: control charts, outliers, capability, metadata",
              writes)

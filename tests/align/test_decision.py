@@ -148,3 +148,89 @@ def test_flag_text():
     assert limits_arcsec("-30,90", "--t", text=True) == (-30, 90)
     with pytest.raises(InputError, match="--t = 'a,b'"):
         limits_arcsec("a,b", "--t", text=True)
+
+
+# ----------------------------------------------------------------------------- end to end
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    from synth.session import SessionSpec, write_session
+
+    folder = tmp_path_factory.mktemp("dec") / "s"
+    write_session(folder, SessionSpec(seed=8, views=("A", "B")))
+    return folder
+
+
+def test_run_writes_the_disposition_and_fail_on_reject_exits_3(session, tmp_path, capsys):
+    import json
+
+    from align.cli import main
+    from align.contract import validate
+
+    (session / "session.toml").write_text((session / "session.toml").read_text()
+                                          + "\n[tolerance]\narcsec = 1000\nE_xZ = [-30, 90]\n"
+                                          "nominal_arcsec = { E_xZ = 5.0 }\n")
+    js = tmp_path / "r.json"
+    code = main(["run", str(session), "--json", str(js), "--fail-on-reject", "-q"])
+    d = json.loads(js.read_text())
+    validate(d, "session")
+    disp = d["disposition"]
+    e_xz = d["misalignment_arcsec"][0][2]
+    expected = FAIL if not -25 - 1 <= e_xz <= 95 + 1 else None  # synth E: 60-300″, signed
+    assert disp["rule"] == "guarded" and disp["k"] == 2.0
+    a = {x["name"]: x for x in disp["angles"]}["E_xZ"]
+    assert (a["lower_arcsec"], a["upper_arcsec"]) == pytest.approx((-25, 95))
+    if expected:
+        assert disp["verdict"] == FAIL and code == 3
+    assert "VERDICT: " + disp["verdict"] in capsys.readouterr().out
+
+
+def test_flags_override_and_the_lot_judges_each_unit(session, tmp_path):
+    import json
+
+    from align.cli import main
+    from align.contract import validate
+
+    # The command line overrides session.toml: a wide tolerance passes, exit 0.
+    js2 = tmp_path / "r2.json"
+    assert main(["run", str(session), "--json", str(js2), "--tolerance-arcsec", "2000",
+                 "--decision", "simple", "--fail-on-reject", "-q"]) == 0
+    d2 = json.loads(js2.read_text())
+    assert d2["disposition"]["verdict"] == PASS and d2["disposition"]["rule"] == "simple"
+    assert set(d2["budget"]["angles"]) == set(E_NAMES)
+
+    # A lot judges every unit by its flags: one unit shifted far out FAILs.
+    from synth.lot import lot_results
+
+    results, truth = lot_results(d2, 8, seed=1, mean_rad=0.0, sigma_rad=2 * A,
+                                 shifts={3: (1, 40.0)})
+    files = []
+    for k, r in enumerate(results):
+        f = tmp_path / f"u{k}.json"
+        f.write_text(json.dumps(r))
+        files.append(str(f))
+    lot_js = tmp_path / "lot.json"
+    assert main(["lot", *files, "--json", str(lot_js), "--tolerance-arcsec", "40",
+                 "--fail-on-reject", "-q"]) == 3
+    lot = json.loads(lot_js.read_text())
+    validate(lot, "lot")
+    verdicts = [u["verdict"] for u in lot["dispositions"]]
+    assert verdicts[3] == FAIL and lot["dispositions"][3]["worst"] == "E_xZ"
+    assert [u["unit"] for u in lot["dispositions"]] == [f"SN{k:05d}" for k in range(8)]
+
+
+def test_a_failed_session_is_not_measured_even_with_a_tolerance(session, tmp_path):
+    import json
+    import shutil
+
+    from align.cli import main
+
+    broken = tmp_path / "b"
+    shutil.copytree(session, broken)
+    (broken / "x_A.png").write_bytes(b"not a png")
+    js = tmp_path / "r.json"
+    assert main(["run", str(broken), "--json", str(js), "--tolerance-arcsec", "2000",
+                 "--fail-on-reject", "-q"]) == 2  # the documented status of a failed stage
+    d = json.loads(js.read_text())
+    assert d["disposition"]["verdict"] == NOT_MEASURED and d["disposition"]["angles"] == []
+    assert "x_A.png" in d["disposition"]["reason"]
