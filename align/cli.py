@@ -718,7 +718,8 @@ def _run_batch(args: argparse.Namespace) -> int:
             E = np.array(js["misalignment_arcsec"])
             U = np.array(js["misalignment_u_arcsec"])
             worst = float(np.max(np.abs(E)))
-            print(f"{r['session']}: {js['disposition']['verdict']}, "
+            verdict = (js.get("disposition") or {}).get("verdict", "no verdict")
+            print(f"{r['session']}: {verdict}, "
                   f"{'OK' if r['ok'] else 'FAILED stages'}, |E| max "
                   f"{worst:.1f}″, u max {U.max():.2f}″, chi2/dof {js['chi2']:.1f}/{js['dof']}"
                   + ("" if not js["unexplained_structure"] else ", NOT consistent")
@@ -738,7 +739,8 @@ def _run_batch(args: argparse.Namespace) -> int:
     if failed:
         return 2
     return 3 if args.fail_on_reject and _rejected(
-        [r["json"]["disposition"]["verdict"] for r in results if r.get("json")]) else 0
+        [(r["json"].get("disposition") or {}).get("verdict") for r in results
+         if r.get("json")]) else 0
 
 
 # ----------------------------------------------------------------------------- apply

@@ -25,7 +25,7 @@ the nuisances the loop chose; a new view may let the loop choose differently.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -59,9 +59,13 @@ class Option:
     minutes: float
     u_after: float
     u_after_all: tuple[float, ...]
+    detail: Mapping[str, str] = field(default_factory=dict)
+    """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
+    camera's ``camera``, a replaced input's ``source``."""
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
+                "detail": dict(self.detail),
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
                                                strict=True)),
@@ -121,9 +125,9 @@ def _halved(g: Group) -> Group:
 
 
 def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
-            ) -> list[tuple[str, str, float, list[Group], list[str]]]:
+            ) -> list[tuple[str, str, float, list[Group], list[str], dict[str, str]]]:
     """The hypothetical measurements: (action, kind, minutes, groups to add, sources to
-    drop)."""
+    drop, detail)."""
     out = []
     images = [g for g in lin.groups if g.kind == "image"]
     seen = set()
@@ -134,7 +138,8 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
         seen.add(key)
         out.append((f"another image of housing {key[0]} in view {key[1]} (like "
                     f"{g.source[len('image '):]})", "image", minutes["image"],
-                    [Group(g.source + " (again)", "image", g.A, g.C, (), g.meta)], []))
+                    [Group(g.source + " (again)", "image", g.A, g.C, (), g.meta)], [],
+                    {"housing": str(key[0]), "view": str(key[1])}))
     views: dict[str, list[Group]] = {}
     for g in images:
         views.setdefault(g.meta.get("view", "?"), []).append(g)
@@ -149,17 +154,18 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
         if not exists:
             out.append((f"a reversed view of {view} (the platform turned 180° on the table, "
                         f"the same camera; {len(gs)} images)", "reversed view",
-                        minutes["reversed view"] + len(gs) * minutes["image"], flipped, []))
+                        minutes["reversed view"] + len(gs) * minutes["image"], flipped, [],
+                        {"view": view}))
     for g in lin.groups:
         if g.kind == "gonio":
             out.append((f"a log twice as long ({g.source})", "gonio", minutes["gonio"],
-                        [_halved(g)], [g.source]))
+                        [_halved(g)], [g.source], {"source": g.source}))
         elif g.kind == "calibration":
             out.append(("a second tumble (as many poses again)", "tumble", minutes["tumble"],
-                        [_halved(g)], [g.source]))
+                        [_halved(g)], [g.source], {"source": g.source}))
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
-                        [_halved(g)], [g.source]))
+                        [_halved(g)], [g.source], {"source": g.source}))
     for label, idx in lin.nuisances:
         if label.startswith("camera roll "):
             A = np.zeros((1, len(lin.params)))
@@ -168,7 +174,8 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
             out.append((f"calibrate camera {cam}'s roll (to ±{CAMERA_ROLL_U_ARCSEC:g}″)",
                         "camera", minutes["camera"],
                         [Group(f"camera {cam} roll calibration", "calibration", A,
-                               np.array([[(CAMERA_ROLL_U_ARCSEC * ARCSEC) ** 2]]))], []))
+                               np.array([[(CAMERA_ROLL_U_ARCSEC * ARCSEC) ** 2]]))], [],
+                        {"camera": cam}))
     return out
 
 
@@ -180,10 +187,11 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     k = E_NAMES.index(target)
     u0 = lin.u_with()
     ranked = []
-    for action, kind, mins, add, drop in options(lin, minutes):
+    for action, kind, mins, add, drop, detail in options(lin, minutes):
         u = lin.u_with(add=add, drop=drop)
         if u[k] < u0[k] * (1 - 1e-6):
-            ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u))))
+            ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)),
+                                 detail))
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     return Plan(target, why, float(u0[k]), tuple(ranked))
 

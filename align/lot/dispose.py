@@ -6,7 +6,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from align.decision import Disposition, ToleranceSpec, decide_values
+from align.decision import (
+    DEFAULT_K,
+    DEFAULT_RULE,
+    NO_TOLERANCE,
+    Disposition,
+    ToleranceSpec,
+    decide_values,
+)
+from align.errors import InputError
 from align.lot.read import UnitResult
 
 
@@ -14,7 +22,12 @@ def unit_disposition(unit: UnitResult, spec: ToleranceSpec | None) -> Dispositio
     """One unit's disposition: judged anew against ``spec`` (the lot's flags), or the one
     its result carries when ``spec`` is None."""
     if spec is None and unit.disposition is not None:
-        return Disposition.from_dict(unit.disposition)
+        try:
+            return Disposition.from_dict(unit.disposition)
+        except (KeyError, TypeError, ValueError, InputError) as exc:  # an edited or odd file
+            return Disposition(NO_TOLERANCE, DEFAULT_RULE, DEFAULT_K,
+                               f"{unit.file}: its disposition cannot be read ({exc!r}); "
+                               "give the lot a tolerance to judge it")
     return decide_values(unit.ok and unit.fused, unit.e_rad, unit.u_rad, unit.covariance,
                          spec, unit.failed_stages)
 
