@@ -15,8 +15,9 @@ from synth.session import SessionSpec, write_session
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("budget") / "s"
-    write_session(folder, SessionSpec(seed=5, effects={"camera_roll_A": 40.0},
-                                      undeclared=frozenset({"camera_roll_A"})))
+    write_session(folder, SessionSpec(
+        seed=5, effects={"camera_roll_A": 40.0}, undeclared=frozenset({"camera_roll_A"}),
+        views=("A", "Ar", "B"), image_size=(400, 300), mark_length_px=240.0))
     s = load_session(folder)
     res = run_session(s)
     assert res.ok
@@ -48,7 +49,7 @@ def _u(f):
     return np.array([f.E_u[i, j] for i, j in E_INDEX])
 
 
-@pytest.mark.parametrize("drop", ["image x_A.png", "image z_B.png", "goniometer gonio.csv",
+@pytest.mark.parametrize("drop", ["image x_A.png", "image z_Ar.png", "goniometer gonio.csv",
                                   "static poses"])
 def test_leaving_a_source_out_matches_its_predicted_effect(run, drop):
     s, res = run
@@ -68,3 +69,24 @@ def test_leaving_a_source_out_matches_its_predicted_effect(run, drop):
     obtained = _u(refit)
     assert np.max(obtained / before) > 1.0 + 1e-6 or drop.startswith("image ")
     np.testing.assert_allclose(predicted, obtained, rtol=0.02)
+
+
+def test_a_type_b_term_of_the_log_is_its_own_share(tmp_path):
+    """Without a latitude the goniometer carries the Earth-rate bound as a Type B term: it is
+    named in the budget, and the shares still add up to u²."""
+    import re
+
+    folder = tmp_path / "s"
+    write_session(folder, SessionSpec(seed=4, views=("A",), image_size=(400, 300),
+                                      mark_length_px=240.0))
+    toml = folder / "session.toml"
+    toml.write_text(re.sub(r"latitude_deg = [0-9.]+", "latitude_range_deg = [40.0, 60.0]",
+                           toml.read_text()))
+    res = run_session(load_session(folder))
+    assert res.ok
+    (name,) = res.gonio.angles.type_b_terms
+    for n in ("E_xY", "E_yX"):
+        u, cs = res.fusion.budget.angles[n]
+        tb = [c for c in cs if c.kind == "typeB"]
+        assert [c.source for c in tb] == [f"Type B: {name}"]
+        assert sum(c.u2 for c in cs) == pytest.approx(u**2, rel=0.01)
