@@ -273,7 +273,9 @@ def _joint_p(angles: Sequence[AngleDisposition], cov: np.ndarray | None) -> floa
     hi = np.array([(a.upper - a.value) / si for a, si in zip(angles, s, strict=True)])
     if len(angles) == 1:
         return angles[0].p_conform
-    mvn = stats.multivariate_normal(mean=np.zeros(len(mean)), cov=corr, allow_singular=True)
+    # Genz's quasi-Monte Carlo integration: seeded, so the same result gives the same JSON.
+    mvn = stats.multivariate_normal(mean=np.zeros(len(mean)), cov=corr, allow_singular=True,
+                                    seed=0)
     return float(np.clip(mvn.cdf(hi, lower_limit=lo), 0.0, 1.0))
 
 
