@@ -40,6 +40,20 @@ NUISANCE_LABEL = {"bias": "calibration bias error", "camera_roll": "camera roll"
                   "platform_tilt": "table-axis tilt"}
 
 
+def inverse(info: np.ndarray) -> np.ndarray:
+    """The covariance from an information matrix, inverted in its correlation form (the
+    parameters mix radians and g, and a prior may be far stronger than the data): LinAlgError
+    when the observations do not determine every parameter."""
+    d = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if np.any(d == 0):
+        raise np.linalg.LinAlgError("the observations do not determine every parameter")
+    scaled = info / np.outer(d, d)
+    s = np.linalg.svd(scaled, compute_uv=False)
+    if s[-1] <= 1e-12 * s[0]:
+        raise np.linalg.LinAlgError("the observations do not determine every parameter")
+    return np.linalg.inv(scaled) / np.outer(d, d)
+
+
 @dataclass(frozen=True)
 class Group:
     """One named input of the fusion: ``source`` ("image x_A.png", "goniometer gonio.csv",
@@ -90,22 +104,18 @@ class Linearisation:
 
     def cov_e(self, groups: Sequence[Group] | None = None) -> np.ndarray:
         """cov(E) [rad²] (6×6, inflated) from these groups (default: the session's)."""
-        return np.linalg.inv(self.information(groups))[:6, :6] * self.inflation**2
+        return inverse(self.information(groups))[:6, :6] * self.inflation**2
 
     def u_with(self, add: Sequence[Group] = (), drop: Sequence[str] = ()) -> np.ndarray:
         """u of the six angles [rad] with the groups named in ``drop`` left out and ``add``
         added (LinAlgError when the rest no longer determine the parameters)."""
         gs = [g for g in self.groups if g.source not in drop] + list(add)
-        I = self.information(gs)  # noqa: E741 (the information matrix)
-        s = np.linalg.svd(I, compute_uv=False)
-        if s[-1] <= 1e-12 * s[0]:
-            raise np.linalg.LinAlgError("the remaining observations do not determine E")
-        return np.sqrt(np.diag(np.linalg.inv(I))[:6]) * self.inflation
+        return np.sqrt(np.diag(inverse(self.information(gs)))[:6]) * self.inflation
 
     def budget(self) -> Budget:
         """Every angle's u² split into the groups', Type B terms' and nuisances' shares."""
-        I = self.information()  # noqa: E741
-        V0 = np.linalg.inv(I[:6, :6])
+        I = self.information()  # noqa: E741 (the information matrix)
+        V0 = inverse(I[:6, :6])
         shares: list[tuple[str, str, np.ndarray]] = []
         for g in self.groups:
             K = V0 @ g.A[:, :6].T @ np.linalg.inv(g.C)  # the gain of this group's values
@@ -116,7 +126,7 @@ class Linearisation:
         prev = np.diag(V0)
         for label, idx in self.nuisances:
             free += list(idx)
-            now = np.diag(np.linalg.inv(I[np.ix_(free, free)]))[:6]
+            now = np.diag(inverse(I[np.ix_(free, free)]))[:6]
             shares.append((f"nuisance: {label}", "nuisance", now - prev))
             prev = now
         f2 = self.inflation**2

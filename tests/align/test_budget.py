@@ -90,3 +90,24 @@ def test_a_type_b_term_of_the_log_is_its_own_share(tmp_path):
         tb = [c for c in cs if c.kind == "typeB"]
         assert [c.source for c in tb] == [f"Type B: {name}"]
         assert sum(c.u2 for c in cs) == pytest.approx(u**2, rel=0.01)
+
+
+def test_a_known_roll_removes_exactly_its_nuisance_share(run):
+    """The plan's algebra and the budget's agree: the camera roll known (a prior of ~0 u)
+    lowers u² by the roll's share (the last nuisance freed), for every angle."""
+    from align.fusion.budget import Group
+    from align.fusion.observations import ROLL
+
+    _, res = run
+    b = res.fusion.budget
+    lin = b.model
+    label, idx = lin.nuisances[-1]
+    assert label == "camera roll A" and lin.params[idx[0]] == f"{ROLL}[A]"
+    A = np.zeros((1, len(lin.params)))
+    A[0, idx[0]] = 1.0
+    known = Group("roll known", "calibration", A, np.array([[1e-30]]))
+    u_known = lin.u_with(add=[known])
+    for k, n in enumerate(E_NAMES):
+        u, cs = b.angles[n]
+        share = next(c.u2 for c in cs if c.source == "nuisance: camera roll A")
+        assert u_known[k] ** 2 == pytest.approx(u**2 - share, rel=1e-6, abs=1e-9 * u**2)
