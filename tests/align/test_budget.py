@@ -111,3 +111,18 @@ def test_a_known_roll_removes_exactly_its_nuisance_share(run):
         u, cs = b.angles[n]
         share = next(c.u2 for c in cs if c.source == "nuisance: camera roll A")
         assert u_known[k] ** 2 == pytest.approx(u**2 - share, rel=1e-6, abs=1e-9 * u**2)
+
+
+@pytest.mark.parametrize("drop", ["image x_A.png", "image z_Ar.png", "image y_B.png"])
+def test_leaving_an_image_out_where_images_matter(run, drop):
+    """Without the platform static poses the images carry the tilts of the axes: leaving
+    one out raises u, by what the linearisation predicts."""
+    s, res = run
+    nostatic = replace(res, platform=[])
+    base = fuse(observation_blocks(s, nostatic))
+    predicted = base.budget.model.u_with(drop=[drop])
+    refit = fuse(observation_blocks(s, replace(nostatic, marks=[
+        (im, m) for im, m in res.marks if f"image {im.file.name}" != drop])))
+    assert [e.name for e in refit.loop.effects] == [e.name for e in base.loop.effects]
+    assert np.max(_u(refit) / _u(base)) > 1.05  # the image mattered
+    np.testing.assert_allclose(predicted, _u(refit), rtol=0.02)
