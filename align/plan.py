@@ -44,6 +44,8 @@ MINUTES = {
     "camera": 30.0,         # a roll calibration of one camera (plumb line or level target)
 }
 """Work per option [min], defaults."""
+MIN_GAIN = 1e-3
+"""An option lowering u by less than this fraction is not listed (it does not matter)."""
 CAMERA_ROLL_U_ARCSEC = 2.0
 """Standard uncertainty [″] of a camera roll after its calibration (a plumb-line image: the
 roll to ~1–3″)."""
@@ -96,7 +98,7 @@ class Plan:
                f"{self.u_before / ARCSEC:.3f}″):"]
         for k, o in enumerate(self.options):
             out.append(f"  {'->' if k == 0 else '  '} {o.action}: u {o.u_after / ARCSEC:.3f}″ "
-                       f"({100 * (1 - o.u_after / self.u_before):.0f} % lower) in "
+                       f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
                        f"{o.minutes:g} min")
         if not self.options:
             out.append("  no measurement of the kinds known here lowers it")
@@ -189,7 +191,7 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     ranked = []
     for action, kind, mins, add, drop, detail in options(lin, minutes):
         u = lin.u_with(add=add, drop=drop)
-        if u[k] < u0[k] * (1 - 1e-6):
+        if u[k] < u0[k] * (1 - MIN_GAIN):
             ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)),
                                  detail))
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)

@@ -10,7 +10,7 @@ import pytest
 from align.cli import main
 from align.fusion import E_INDEX, E_NAMES
 from align.fusion.budget import Linearisation
-from align.plan import plan, plan_from_result
+from align.plan import options, plan, plan_from_result
 from align.session import load_session, run_session
 from axisbase.units import ARCSEC
 from synth.session import SessionSpec, write_session
@@ -43,7 +43,9 @@ def test_plan_ranks_by_gain_per_minute_and_targets_the_critical_angle(tmp_path, 
     assert p.target == E_NAMES[int(np.argmax(u))]
     rates = [(p.u_before - o.u_after) / o.minutes for o in p.options]
     assert rates == sorted(rates, reverse=True) and all(r > 0 for r in rates)
-    assert any(o.kind == "reversed view" for o in p.options)  # A and B have no reversal yet
+    kinds = [o[1] for o in options(lin)]  # every candidate, before ranking
+    assert kinds.count("reversed view") == 2  # A and B have no reversal yet
+    assert all(o.kind != "image" for o in p.options)  # < 0.1 % on the target: not listed
     # A disposition makes the angle nearest its acceptance limit the target.
     disp = {"verdict": "INCONCLUSIVE", "angles": [
         {"name": "E_xY", "margin_arcsec": 0.1, "guard_arcsec": 0.2, "verdict": "INCONCLUSIVE"},
