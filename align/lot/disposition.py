@@ -66,7 +66,8 @@ def unit_dispositions(lot: Lot, decided: Sequence[Mapping[str, Any]] | None = No
     out = []
     for k, u in enumerate(lot.units):
         d = u.disposition
-        if d is not None and (d.get("verdict") != "NO TOLERANCE" or lot.tolerance is None):
+        if (d is not None and isinstance(d.get("verdict"), str)
+                and (d["verdict"] != "NO TOLERANCE" or lot.tolerance is None)):
             out.append(_from_disposition(k, d, "result"))
         elif not (u.ok and u.fused) or u.e_rad is None:
             out.append(UnitDisposition(k, "NOT MEASURED", None, None, "lot"))
