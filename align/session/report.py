@@ -129,6 +129,8 @@ def banner(res: SessionResult, disposition: dict | None) -> dict:
     """The verdict: the result's disposition, or 'no tolerance given' (NOT ok when a stage
     failed: a failed session is never shown as if measured)."""
     failed = ", ".join(dict.fromkeys(e.stage for e in res.errors))
+    if disposition and disposition.get("verdict") == "NO TOLERANCE":
+        disposition = None  # said below as "No tolerance given" (or NOT ok)
     if disposition:
         v = str(disposition["verdict"])
         text = str(disposition.get("reason", ""))
@@ -329,6 +331,8 @@ def report_html(res: SessionResult, doc: dict | None = None,
     v = views if views is not None else stage_views(res)
     warnings = list(d.get("warnings", session_warnings(res)))
     disposition = d.get("disposition")
+    if disposition and disposition.get("verdict") == "NO TOLERANCE":
+        disposition = None  # no rule, no margins: the banner says "No tolerance given"
     ident = identity(res)
     unit_label = next((val for k, val in ident if k in ("serial", "unit")
                        and not val.startswith("not given")), res.session.name)

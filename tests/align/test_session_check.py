@@ -5,6 +5,7 @@ second; and the round trip 'align init' -> fill in -> 'align check' -> 'align ru
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import time
 from pathlib import Path
@@ -53,13 +54,21 @@ def test_init_fill_in_check_run(synthetic, tmp_path, capsys):
                      ("# latitude_deg = 50.45", "latitude_deg = 50.45")]:
         assert old in text
         text = text.replace(old, new, 1)
+    # and switches the template's [tolerance] on, as written there
+    tol = text[text.index("# [tolerance]"):]
+    text = text.replace(tol, re.sub(r"^# ", "", tol, flags=re.M))
     toml.write_text(text)
     assert main(["check", str(folder)]) == 0
     assert capsys.readouterr().out.strip() == f"{folder}: ready to run"
-    res = tmp_path / "r.json"
-    assert main(["run", str(folder), "--json", str(res), "-q"]) == 0
+    res, page = tmp_path / "r.json", tmp_path / "r.html"
+    assert main(["run", str(folder), "--json", str(res), "--report", str(page), "-q"]) == 0
     d = json.loads(res.read_text())
     assert d["ok"] and d["metadata"]["serial"] == "SN-RT-1"
+    # the verdict against the template's tolerance heads the report, as the JSON has it
+    verdict = d["disposition"]["verdict"]
+    assert verdict in ("PASS", "FAIL", "INCONCLUSIVE") and d["disposition"]["rule"] == "guarded"
+    html = page.read_text()
+    assert f'<span class="verdict">{verdict}</span>' in html and "SN-RT-1" in html
     truth = np.array(json.loads((synthetic / "truth.json").read_text())["misalignment_rad"])
     E, U = np.array(d["misalignment_rad"]), np.array(d["misalignment_u_rad"])
     off = ~np.eye(3, dtype=bool)

@@ -88,7 +88,8 @@ def test_the_page_opens_with_identity_no_tolerance_and_the_stages(run):
     text = page.read_text()
     head = text[:text.index('id="toc"')]
     assert SERIAL in head and "kim" in head and "L-47" in head and "2026-11-20" in head
-    assert "No tolerance given" in head
+    assert "No tolerance given" in head and doc["disposition"]["verdict"] == "NO TOLERANCE"
+    assert "Tolerance rule" not in text and "margin [″]" not in text
     strip = re.findall(r'<li class="s-(\w+)"[^>]*><a href="#\w+">(\w+)</a>: ([^<]+)</li>',
                        head)
     names = [n for _, n, _ in strip]
@@ -141,7 +142,17 @@ def test_the_budget_is_listed_largest_first(run):
     sec = text[text.index('id="budget"'):text.index('id="fusion"')]
     assert "No budget" not in sec and sec.index("gonio.csv") < sec.index("x_A.png")
     assert "90.0%" in sec
-    assert "No budget in this result" in report_html(res, doc, views)
+    bare = {k: v for k, v in doc.items() if k != "budget"}
+    assert "No budget in this result" in report_html(res, bare, views)
+    # the result's own budget (align.fusion.budget): every angle, largest share first
+    sec = report_html(res, doc, views)
+    sec = sec[sec.index('id="budget"'):sec.index('id="fusion"')]
+    assert all(f'id="budget-{n}"' in sec for n in ANGLES)
+    for n in ANGLES:
+        shares = [float(x) for x in re.findall(
+            r"<td[^>]*>([\d.e+-]+)</td><td[^>]*>[\d.]+%</td>",
+            sec[sec.index(f'id="budget-{n}"'):].split("<h3", 1)[0])]
+        assert shares == sorted(shares, reverse=True) and shares, n
 
 
 def test_a_failed_session_never_shows_a_consistent_matrix(run):
