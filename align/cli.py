@@ -157,7 +157,10 @@ def cmd_marks(args: argparse.Namespace) -> int:
 
     _unique(args.images, "images")
     roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
+    from align.lens import LensRanges
+
     camera = CameraModel.load(args.camera) if args.camera else None
+    ranges = LensRanges.parse(args.lens) if args.lens is not None else None
     plan = _plan(args, [*args.images] + ([args.camera] if args.camera else []))
     out = plan.add("--json", args.json, stdout_ok=True)
     plot_dir = plan.add("--plot", args.plot, folder=True)
@@ -165,7 +168,8 @@ def cmd_marks(args: argparse.Namespace) -> int:
     failed = internal = 0
     batch = measure_files(_progress(args.images, "marks"), camera, alpha=args.alpha,
                           max_marks=args.max_marks, expect_one=args.one, roi=roi,
-                          min_length_px=args.min_length)
+                          min_length_px=args.min_length, ranges=ranges)
+    limited = 0
     for res in batch:
         for r in res:
             path = r.image
@@ -180,6 +184,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
                   f"length {r.length_px:.0f} px, {'dark' if r.dark else 'bright'}")
             for line in r.loop.summary_lines():
                 print(f"    {line}")
+            limited += r.lens_limited
             if r.frame is not None:
                 f = r.frame
                 state = ("applied" if f.applied else "not significant" if f.consistent else
@@ -197,7 +202,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
     if internal:
         log.error("align marks: %d image(s) hit an internal error (please report); the "
                   "others were measured", internal)
-    return 1 if internal else 2 if failed else 0
+    return 1 if internal else 2 if failed or limited else 0
 
 
 # ----------------------------------------------------------------------------- camera
@@ -910,7 +915,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     m = add("marks", "measure scribe marks in images", writes)
     m.add_argument("images", nargs="+", help="image files (PNG, TIFF, JPEG; 8 or 16 bit)")
-    m.add_argument("--camera", help="camera model JSON written by 'align camera'")
+    m.add_argument("--camera", help="camera model JSON written by 'align camera' (trusted: "
+                   "applied, its u propagated, no distortion fitted on top)")
+    m.add_argument("--lens", metavar="KEY=V,...",
+                   help="plausible lens without --camera (Type B ranges; keys k1, k2, p at the "
+                   "image half-diagonal, aspect, pp_px [px], max_u_arcsec; defaults k1=0.3,"
+                   "k2=0.05,p=0.001,aspect=0.005,pp_px=20,max_u_arcsec=60; all 0: declared "
+                   "distortion-free)")
     m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
     m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")

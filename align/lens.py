@@ -32,12 +32,13 @@ and the lines only test it (see :func:`check_camera`).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.stats import chi2, norm
 
+from axisbase.errors import InputError
 from imaging import fit_line, line_frame
 from imaging.lens import PARAMS, undistort_points, undistortion_jacobian
 
@@ -79,6 +80,27 @@ class LensRanges:
     def from_dict(cls, d: Mapping) -> LensRanges:
         return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
 
+    @classmethod
+    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
+        """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
+        defaults); one line naming the flag and the bad item on error."""
+        vals: dict[str, float] = {}
+        for item in filter(None, (x.strip() for x in text.split(","))):
+            key, eq, val = item.partition("=")
+            key = key.strip()
+            if not eq or key not in cls.__dataclass_fields__:
+                raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
+                                 f"{', '.join(cls.__dataclass_fields__)}")
+            try:
+                v = float(val)
+            except ValueError:
+                raise InputError(f"{where}: {item!r}: {val.strip()!r} is not a number") from None
+            if not np.isfinite(v) or v < 0 or (key == "max_u_arcsec" and v == 0):
+                raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
+                                 + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
+            vals[key] = v
+        return cls(**vals)
+
 
 @dataclass(frozen=True)
 class LineGeometry:
@@ -97,6 +119,7 @@ class _Design:
     G: np.ndarray            # whitened bow columns (straight-line part projected out)
     z: np.ndarray            # whitened residual of the straight-line fit
     w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
+    s_probe: np.ndarray | None = None  # max |s| over the principal point's range
 
     @property
     def bow_z(self) -> float:
@@ -231,17 +254,26 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         if det:
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
+        spread = _pp_spread(lines, lam, applied, det, rng, scale)
+        # Applied only with its sign determined under every principal point the lines allow
+        # (a radial term's bow scales with the line's distance from the principal point).
         keep = [j for j in applied
-                if abs(lam[j]) > z * u_lines[j] and abs(lam[j]) <= rng[j]]
+                if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= rng[j]]
         est[applied] = lam[applied]
         if keep == applied:
             break
         applied = keep
     lam_out = np.zeros(P)
     lam_out[applied] = lam[applied]
+    spread = _pp_spread(lines, lam_out, applied, det, rng, scale) if applied else np.zeros(P)
     designs = [_design(ln, lam_out, scale) for ln in lines]
     F = sum(d.G.T @ d.G for d in designs)
     cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
+    if applied:  # the principal point's range moves the estimate: uniform, as Type B
+        cov = cov + np.diag(spread[applied] ** 2 / 3)
+        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread / np.sqrt(3)),
+                           u_lines)
+    s_probe = _pp_probe_s(lines, lam_out, det, rng, scale)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
@@ -279,7 +311,59 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
-    return sol, designs
+    return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+
+
+def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
+    """The lens at the corners of the principal point's range (where the lines leave it
+    undetermined): radial terms act about the principal point, so their effect on a line
+    near the image centre depends on where it is, a second-order effect a derivative at the
+    image centre misses."""
+    free = [j for j in (5, 6) if j not in det and rng[j] > 0]
+    if not free:
+        return []
+    out = []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            p = lam.copy()
+            for j, sg in zip((5, 6), (sx, sy), strict=True):
+                if j in free:
+                    p[j] = sg * rng[j]
+            out.append(p)
+    return out
+
+
+def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int],
+               det: list[int], rng: np.ndarray, scale: float) -> np.ndarray:
+    """How far the applied estimates move when the principal point is put at the corners of
+    its range (one linearised step from ``lam`` each; inf where the lens then folds)."""
+    out = np.zeros(len(PARAMS))
+    if not applied:
+        return out
+    A = np.ix_(applied, applied)
+    for p in _pp_probes(lam, det, rng):
+        try:
+            ds = [_design(ln, p, scale) for ln in lines]
+        except ValueError:
+            out[applied] = np.inf
+            continue
+        F = sum(d.G.T @ d.G for d in ds)
+        b = sum(d.G.T @ d.z for d in ds)
+        out[applied] = np.maximum(out[applied], np.abs(np.linalg.solve(F[A], b[applied])))
+    return out
+
+
+def _pp_probe_s(lines: Sequence[LineGeometry], lam: np.ndarray, det: list[int],
+                rng: np.ndarray, scale: float) -> list[np.ndarray]:
+    """Each line's largest |d angle / d lam| over the principal point's range [rad/unit]."""
+    out = [np.zeros(len(PARAMS)) for _ in lines]
+    for p in _pp_probes(lam, det, rng):
+        for k, ln in enumerate(lines):
+            try:
+                out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale).s))
+            except ValueError:
+                out[k][:] = np.inf
+    return out
 
 
 def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
@@ -300,7 +384,9 @@ def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
             continue
         # What the applied parameters absorb of parameter j's bow changes their estimates,
         # hence the angle: the angle's net sensitivity to j.
-        seff = s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0)
+        seff = abs(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
+        if design.s_probe is not None and not sol.determined[j]:
+            seff = max(seff, float(design.s_probe[j]))
         if sol.determined[j]:
             e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
             out[f"lens_{PARAMS[j]}_small"] = float(abs(seff) * np.hypot(e, sol.u_lines[j]))

@@ -18,7 +18,7 @@ Candidate effects (each a few design columns with physical meaning):
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -709,6 +709,45 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             continue
         out.append(finish_mark(m, lens, k, name, i, alpha))
         k += 1
+    return out
+
+
+def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
+                   camera: CameraModel | None = None, alpha: float = 1e-3,
+                   expect_one: bool = False, ranges: LensRanges | None = None,
+                   label: str = "", on_image: Callable[[int], None] | None = None
+                   ) -> list[list[MarkResult]]:
+    """All images of one camera with one lens (issue 18): every mark of every image enters
+    one plumb-line fit (:func:`camera_lens`), then each goes through its loop. ``images``:
+    (path, roi) pairs; one list of results per image, in order; an unreadable image or one
+    without a mark is its failed entry, as in :func:`measure_file`."""
+    found_all: list[list[MarkMeasurement | ImageInputError]] = []
+    for j, (path, roi) in enumerate(images):
+        if on_image is not None:
+            on_image(j)
+        try:
+            img = read_image(path)
+            found_all.append(list(measure_marks(img, camera, where=str(path),
+                                                expect_one=expect_one, roi=roi)))
+        except ImageInputError as exc:
+            found_all.append([exc])
+    ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]
+    shapes = {m.image_shape for m in ms}
+    lens = camera_lens(ms, camera, ranges, alpha, label) if len(shapes) <= 1 else None
+    out, k = [], 0
+    for (path, _), found in zip(images, found_all, strict=True):
+        res = []
+        for i, m in enumerate(found):
+            if isinstance(m, ImageInputError):
+                res.append(MarkResult(image=str(path), found=False, error=str(m), index=i))
+                continue
+            if lens is None:  # images of different sizes: one lens each
+                one = camera_lens([m], camera, ranges, alpha, label)
+                res.append(finish_mark(m, one, 0, str(path), i, alpha))
+            else:
+                res.append(finish_mark(m, lens, k, str(path), i, alpha))
+            k += 1
+        out.append(res)
     return out
 
 
