@@ -76,7 +76,12 @@ def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.nd
             break
     out = np.column_stack([x, y]) * scale
     fx, fy = _distort_norm(x, y, lam)
-    bad = (np.hypot(fx - xn, fy - yn) > 1e-9) | ~np.isfinite(det)
+    # A root on the far branch (the lens folded: the point came back through the centre, or
+    # the map's Jacobian changed sign) is no undistortion.
+    r2 = x * x + y * y
+    g = 1.0 + k1 * r2 + k2 * r2 * r2
+    bad = (np.hypot(fx - xn, fy - yn) > 1e-9) | ~np.isfinite(det) | (g <= 0) | (
+        1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2 <= 0)
     out[bad] = np.nan
     return out
 
