@@ -188,3 +188,46 @@ def test_lens_grid():
           f"lens-limited {sum(c.limited for c in cases)}")
     assert ws == 0
     assert not over, over
+
+
+def test_cli_says_calibrate_the_camera_and_exits_2(tmp_path, capsys):
+    from align.cli import main
+    from synth import write_synth
+
+    p, _ = write_synth(_render([_vertical(-150.0, -160.0)], CHESSBOARD), tmp_path / "top.png")
+    assert main(["marks", str(p), "--json", str(tmp_path / "o.json")]) == 2
+    assert "calibrate the camera" in capsys.readouterr().err
+    import json
+
+    doc = json.loads((tmp_path / "o.json").read_text())
+    assert doc["ok"] is False and doc["marks"][0]["lens_limited"] is True
+
+
+def _lens_session(tmp_path, seed, **kw):
+    from tests.align.test_fusion import _session, _z
+
+    res, truth = _session(tmp_path, f"s{seed}", seed=seed, **kw)
+    return res, _z(res.fusion.E, res.fusion.E_u, truth)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(3))
+def test_session_with_an_undeclared_lens_on_one_camera_names_no_roll(tmp_path, seed):
+    """Cameras + goniometer + calibration, camera B with an undeclared k1 = -0.25 lens (one
+    lens fitted over its four images, the rest in u): no camera roll named, |err/u| <= 3."""
+    res, z = _lens_session(tmp_path, seed, undeclared={"lens_k1_B": -0.25})
+    names = [e.name for e in res.fusion.loop.effects]
+    print(f"seed {seed}: effects {names}, z {np.round(z, 2)}")
+    assert not any(n.startswith("camera_roll") for n in names)
+    assert np.max(np.abs(z)) <= 3
+
+
+@pytest.mark.slow
+def test_a_real_30_arcsec_roll_is_still_found(tmp_path):
+    """Positive control: camera B rolled by 30" (lens-free cameras, declared so): named."""
+    from tests.align.test_fusion import NO_REVERSAL
+
+    res, z = _lens_session(tmp_path, 12, undeclared={"camera_roll_B": 30.0}, **NO_REVERSAL)
+    e = [e for e in res.fusion.loop.effects if e.name == "camera_roll[B]"]
+    print(f"roll {[(x.estimate / 4.848e-6, x.u / 4.848e-6) for x in e]}, z {np.round(z, 2)}")
+    assert e and abs(e[0].estimate / 4.8481368e-6 - 30.0) < 3 * e[0].u / 4.8481368e-6
