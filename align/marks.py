@@ -625,6 +625,11 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
     R = half_diagonal(shape)
     lines = lens_lines(ms)
     who = f"camera {label}" if label else "camera"
+    if camera is None and not np.any(ranges.vector()):
+        # Declared distortion-free: nothing to determine, nothing to carry.
+        return CameraLens(None, tuple({} for _ in ms), (),
+                          {"source": "declared distortion-free", "lines": len(ms),
+                           "ranges": ranges.to_dict()}, max_u)
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
         terms = tuple(lens_angle_terms(sol, d) for d in designs)
