@@ -127,8 +127,9 @@ class _Design:
         return float(self.w @ self.z)
 
 
-def _design(line: LineGeometry, lam: np.ndarray, scale: float) -> _Design:
-    q, jac = undistortion_jacobian(line.points, lam, scale)
+def _design(line: LineGeometry, lam: np.ndarray, scale: float,
+            only: Sequence[int] | None = None) -> _Design:
+    q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise ValueError("the lens folds the image along this mark")
     lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
@@ -223,6 +224,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     est = np.full(P, np.nan)
     u_lines = np.full(P, np.inf)
     applied = list(det)
+    spread, spread_for = np.zeros(P), list(applied)
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
         lam = np.zeros(P)
         for _ in range(iters):
@@ -255,6 +257,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
         spread = _pp_spread(lines, lam, applied, det, rng, scale)
+        spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
         keep = [j for j in applied
@@ -265,7 +268,10 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         applied = keep
     lam_out = np.zeros(P)
     lam_out[applied] = lam[applied]
-    spread = _pp_spread(lines, lam_out, applied, det, rng, scale) if applied else np.zeros(P)
+    if not applied:
+        spread = np.zeros(P)
+    elif spread_for != applied:  # the applied set changed after its last spread
+        spread = _pp_spread(lines, lam_out, applied, det, rng, scale)
     designs = [_design(ln, lam_out, scale) for ln in lines]
     F = sum(d.G.T @ d.G for d in designs)
     cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
@@ -359,8 +365,8 @@ def _pp_probe_s(lines: Sequence[LineGeometry], lam: np.ndarray, det: list[int],
     out = [np.zeros(len(PARAMS)) for _ in lines]
     for p in _pp_probes(lam, det, rng):
         for k, ln in enumerate(lines):
-            try:
-                out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale).s))
+            try:  # only the radial terms act about the principal point
+                out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale, (0, 1)).s))
             except ValueError:
                 out[k][:] = np.inf
     return out

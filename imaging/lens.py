@@ -86,14 +86,17 @@ def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.nd
     return out
 
 
-def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float
-                          ) -> tuple[np.ndarray, np.ndarray]:
+def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
+                          only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The undistorted points at ``lam`` and d(undistorted point)/d(lam_j) for every entry
-    (central differences; shape (N, 2, len(PARAMS))) [px per unit]."""
+    (central differences; shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just
+    these entries (the others are zero)."""
     lam = np.asarray(lam, float)
     base = undistort_points(q, lam, scale)
-    jac = np.empty((len(q), 2, len(PARAMS)))
+    jac = np.zeros((len(q), 2, len(PARAMS)))
     for j, h in enumerate(STEPS):
+        if only is not None and j not in only:
+            continue
         e = np.zeros(len(PARAMS))
         e[j] = h
         jac[:, :, j] = (undistort_points(q, lam + e, scale)
