@@ -1,18 +1,21 @@
 """The residual loop over a scribe-mark line fit, and the per-image result.
 
-Declared model: the mark's centres lie on a straight line in the undistorted image.
-Candidate effects (each a few design columns with physical meaning):
+Declared model: the mark's centres lie on a straight line in the undistorted image. The lens
+is a property of the camera, handled before the loop (:func:`camera_lens`, :mod:`align.lens`,
+docs/camera.md): one lens for all marks of a frame (or of a camera's images in a session),
+with identifiability first; what the lines do not determine is carried in u as named terms.
+Candidate effects of the loop (each a few design columns with physical meaning):
 
-* ``radial_distortion`` — the plumb-line principle: a straight line at offset d from the
-  principal point (assumed at the image centre) imaged through x_d = x (1 + k1 (r/R)^2) is
-  bowed by k1 d (r/R)^2 across itself. R is the image half-diagonal, so k1 is dimensionless;
-  OpenCV's k1 = k1 (f/R)^2 for focal length f [px]. Once found, the centres are undistorted
-  exactly with the estimate and the line refitted (iterated). A bent mark bows the same way
-  in one image; only a camera model or several marks in one image can tell them apart.
-* ``periodic_wiggle`` — a sinusoid along the mark (vibration, rolling shutter); its period is
-  searched on the residual's periodogram (counted as a searched parameter).
+* ``bent_mark`` — a bow across the mark the lens does not explain: named, and u widened to
+  cover the straight fit vs the chord.
+* ``periodic_wiggle`` — a sinusoid along the mark (vibration, rolling shutter) with at least
+  2 periods along it; its period is searched on the residual's periodogram (counted as a
+  searched parameter).
 * ``illumination_gradient`` — a centre bias proportional to the local background slope across
   the mark (per unit contrast): lighting that is not even across the groove.
+
+``radial_distortion`` (the old per-mark plumb-line k1) remains a :class:`MarkStage` term for
+callers that pass it; :func:`measure_image` no longer offers it.
 """
 
 from __future__ import annotations
@@ -294,7 +297,8 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
+    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
     ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
     ``applied``: whether it was significant, explained the lines, and the marks were
@@ -331,79 +335,6 @@ class FrameDistortion:
 def _num(v: object) -> float:
     """A saved float: strict JSON writes NaN and ±inf as null, read back as NaN."""
     return float("nan") if v is None else float(v)  # type: ignore[arg-type]
-
-
-def _undistort_mark(m: MarkMeasurement, k1: float) -> tuple[np.ndarray, np.ndarray]:
-    """A mark's centres undistorted by k1 (at the half-diagonal) and their sigma carried
-    through the undistortion (see :func:`imaging.cross_magnification`)."""
-    if not k1:
-        return m.points, m.sigma
-    scale = half_diagonal(m.image_shape)
-    g = cross_magnification(m.points, [k1], scale, line_frame(m.line.angle_rad)[1])
-    return undistort(m.points, [k1], scale), m.sigma * np.abs(g)
-
-
-def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
-    out = 0.0
-    for m in ms:
-        q, s = _undistort_mark(m, k1)
-        out += fit_line(q, s, reject_sigma=None, chol=m.chol).chi2
-    return out
-
-
-def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> FrameDistortion:
-    """Joint plumb-line k1 over every mark of one frame, weighted by the centres' sigma.
-
-    Variable projection: for a given k1 each line is a weighted straight-line fit, so chi2 is
-    a function of k1 alone, minimised by Newton steps from finite differences; u(k1) =
-    sqrt(2 / chi2'') at the minimum.
-    Significance: chi2 drop against chi2(1) at ``alpha`` and a BIC gain (ln N).
-    """
-    scale = half_diagonal(ms[0].image_shape)
-    n = sum(len(m.points) for m in ms)
-    dof = max(n - 2 * len(ms), 1)
-    c0 = _chi2_lines(ms, 0.0, scale)
-    k1, c1, h, curv = 0.0, c0, 0.01, 0.0
-    converged = False
-    for _ in range(8):  # Newton on chi2(k1): quadratic near the minimum, not far from it
-        cp, cm = _chi2_lines(ms, k1 + h, scale), _chi2_lines(ms, k1 - h, scale)
-        curv = (cp - 2 * c1 + cm) / h**2
-        if curv <= 0:
-            break
-        step = -(cp - cm) / (2 * h) / curv
-        k1 += step
-        if abs(k1) > K1_MAX:
-            break  # short or few lines leave k1 unconstrained: no lens bends that much
-        c1 = _chi2_lines(ms, k1, scale)
-        h = max(min(h, 3 * np.sqrt(2 / curv)), 1e-6)
-        if abs(step) < 0.01 * np.sqrt(2 / curv):
-            converged = True
-            break
-    if not converged:
-        k1, c1 = 0.0, c0
-    drop = c0 - c1
-    p = float(chi2.sf(max(drop, 0.0), 1))
-    significant = bool(converged and curv > 0 and p < alpha and drop > np.log(n))
-    after = (c1 if significant else c0) / max(dof - significant, 1)
-    consistent = bool(chi2.sf(after * max(dof - significant, 1), max(dof - significant, 1))
-                      >= alpha)
-    return FrameDistortion(float(k1), float(np.sqrt(2 / curv)) if curv > 0 else float("inf"),
-                           significant and consistent, consistent, len(ms), c0 / dof, after, p)
-
-
-def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
-    """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
-    q, s = _undistort_mark(m, k1)
-    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, sigma=s, regressors=regs,
-                   line=fit_line(q, s, reject_sigma=None, chol=m.chol))
-
-
-def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
-    """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
-    a = [fit_line(*_undistort_mark(m, k), reject_sigma=None, chol=m.chol).angle_rad
-         for k in (k1 - h, k1 + h)]
-    return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
 
 
 @dataclass(frozen=True)
@@ -522,6 +453,11 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     au, du = au * infl, du * infl
     terms: dict[str, float] = {}
     notes: list[str] = []
+    f = rep.after
+    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+        notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
+                     f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
+                     "this groove; u kept as stated (a misfit never narrows it)")
     bend = next((e for e in rep.effects if e.name == BEND), None)
     if bend is not None:
         # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
