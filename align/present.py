@@ -30,6 +30,18 @@ def mark_lines(r) -> list[str]:
                  "LINES DISAGREE beyond one distortion: u inflated")
         lines.append(f"    frame ({f.n_lines} marks, one lens): k1 {f.k1:+.4g} ± "
                      f"{f.k1_u:.2g}, {state}")
+    if r.lens and "parameters" in r.lens:
+        par = r.lens["parameters"]
+        fitted = [f"{k} {v['value']:+.4g}" for k, v in par.items() if v["applied"]]
+        lines.append(f"    lens ({r.lens['lines']} marks, one lens): "
+                     f"{', '.join(fitted) or 'nothing applied'}; not determined: "
+                     f"{', '.join(k for k, v in par.items() if not v['determined']) or 'none'}")
+    if r.u_terms:
+        big = sorted(r.u_terms.items(), key=lambda kv: -kv[1])[:3]
+        lines.append("    largest u terms: " + ", ".join(f"{k} {v / ARCSEC:.2f}″"
+                                                       for k, v in big))
+    if r.lens_limited:
+        lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     return lines
 
 

@@ -254,6 +254,13 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
         lines += ["", f"[cameras.{cam}]", f"# looks along {looks}"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
+        if not any(k in spec.effects for k in ("lens_k1", f"lens_k1_{cam}")):
+            # The rendered camera has no lens distortion and square pixels, and the file
+            # says so (a corrected optic); an undeclared lens leaves the keys out, and the
+            # pipeline carries its default plausible lens.
+            lines += ["# distortion-free optics, square pixels, principal point at the centre",
+                      "lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
+                      "lens_pp_px = 0.0"]
     for view in spec.views:
         cam, right, up = VIEWS[view]
         lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',

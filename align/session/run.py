@@ -31,7 +31,7 @@ from align.fusion import (
 from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
 from align.gonio import GonioRun, measure_log
-from align.marks import MarkResult, measure_file
+from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
 from axisbase.table import resolve_units
@@ -178,10 +178,25 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
                       if cam.model is not None else None)
-    for k, im in enumerate(s.images, start=1):
-        progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
-        cam = cams.get(s.views[im.view].camera)
-        found = measure_file(im.file, cam, alpha=alpha, expect_one=True, roi=im.roi)
+    # One lens per camera: every image of a camera enters one plumb-line fit (issue 18).
+    by_cam: dict[str, list[int]] = {}
+    for k, im in enumerate(s.images):
+        by_cam.setdefault(s.views[im.view].camera, []).append(k)
+    found_of: dict[int, list[MarkResult]] = {}
+    done = 0
+    for cname, idx in by_cam.items():
+        def tick(j: int, idx=idx, done=done) -> None:
+            progress(f"marks: {s.images[idx[j]].file.name} ({done + j + 1}/{len(s.images)})")
+
+        cam_cfg = s.cameras.get(cname)
+        got = measure_camera([(s.images[k].file, s.images[k].roi) for k in idx],
+                             cams.get(cname), alpha=alpha, expect_one=True,
+                             ranges=cam_cfg.lens if cam_cfg is not None else None,
+                             label=cname, on_image=tick)
+        found_of.update(zip(idx, got, strict=True))
+        done += len(idx)
+    for k, im in enumerate(s.images):
+        found = found_of[k]
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
