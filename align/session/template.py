@@ -22,12 +22,24 @@ POSES = (("L000", "+Z", 0), ("L090", "+Z", 90), ("L180", "+Z", 180), ("L270", "+
 """The platform poses of the template: four table angles level, then each axis up and down."""
 
 
+LENS = ("# without a model, the lens's plausible ranges (Type B, carried in u; all 0: a "
+        "distortion-free camera)\n"
+        "# lens_k1 = 0.3                 # |k1| at the image half-diagonal (default 0.3)\n"
+        "# lens_k2 = 0.05                # |k2| at the half-diagonal (default 0.05)\n"
+        "# lens_p = 0.001                # |p1|, |p2| at the half-diagonal (default 0.001)\n"
+        "# lens_aspect = 0.005           # |fy/fx - 1| (default 0.005)\n"
+        "# lens_pp_px = 20.0             # [px] principal point from the centre (default 20)\n"
+        "# lens_max_u_arcsec = 60.0      # [″] above this lens-limited u an angle is not ok "
+        "(default 60)\n")
+"""The lens keys of a camera without a model (:class:`align.lens.LensRanges`)."""
+
+
 def _camera_block(name: str, k: int) -> str:
     if k >= len(LAYOUT):
         return (f"\n[cameras.{name}]\n# model = \"{name}.camera.json\"   # lens model from "
-                "'align camera' (default: none, an ideal lens)\n"
+                "'align camera' (default: none; then the ranges below)\n"
                 "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-                "(default 0)\n"
+                "(default 0)\n" + LENS +
                 f"# FILL IN its views and [[images]] as for the cameras above: [views.{name}] "
                 "camera, right, up\n")
     right, housing = LAYOUT[k]
@@ -36,9 +48,9 @@ def _camera_block(name: str, k: int) -> str:
     out = (f"\n[cameras.{name}]\n# looks along {looks} (standard layout; change the views if "
            "yours differs)\n"
            f"# model = \"{name}.camera.json\"   # lens model from 'align camera' (default: "
-           "none, an ideal lens)\n"
+           "none; then the ranges below)\n"
            "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-           "(default 0)\n")
+           "(default 0)\n" + LENS)
     for view, r in ((name, right), (f"{name}r", rev)):
         out += (f"\n[views.{view}]\ncamera = \"{name}\"\nright = \"{r}\"      # platform axis "
                 "pointing right in the image (+X, -X, +Y, -Y, +Z, -Z)\n"

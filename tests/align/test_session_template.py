@@ -4,6 +4,7 @@ knows every key the loader knows (and refuses what the loader refuses)."""
 
 from __future__ import annotations
 
+import re
 import tomllib
 
 import jsonschema
@@ -40,6 +41,16 @@ def test_the_template_is_valid_against_the_schema(kw):
         if ("_deg" in code or "_arcsec =" in code) and "up =" not in code:  # poses: in
             # their table's header comment
             assert "[°]" in line or "[″]" in line or "faces" in line, line
+
+
+def test_the_template_names_every_key_of_its_sections():
+    """Every key the loader knows in the sections written (set or commented out), and every
+    top-level key: a user sees the whole vocabulary with its unit and default."""
+    text = session_template(["A", "B"], gonio=True, tumble=True, static=True)
+    keys = set(TOP_KEYS) | {k for keys in KEYS.values() for k in keys}
+    missing = sorted(k for k in keys if not re.search(rf"^#? ?\[*{k}\b|[\s.]{k} =|\.{k}\]", text,
+                                                      flags=re.M))
+    assert missing == [], missing
 
 
 def test_the_synthetic_sessions_are_valid_against_the_schema(tmp_path):
