@@ -92,9 +92,11 @@ def test_undeclared_bias_drift_found():
     assert np.all(np.abs(cal.model.bias - bias_mid) < 4.5 * ub)
 
 
-def test_no_false_effects_over_fifty_clean_datasets():
+@pytest.mark.parametrize("n", [10, pytest.param(50, marks=pytest.mark.slow)])
+def test_no_false_effects_over_fifty_clean_datasets(n):
+    # (17 candidates since issue 19: ~0.3 s a calibration, the 50 datasets are a slow test)
     false = 0
-    for seed in range(50):
+    for seed in range(n):
         tr = Triad(noise_v=NOISE_V)
         d = tumble(TumbleSpec(triad=tr, seed=100 + seed))
         cal = calibrate(poses_of(d), np.sign(tr.k))
