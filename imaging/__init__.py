@@ -12,7 +12,7 @@ Public API::
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
-from imaging.io import read_image
+from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.linefit import LineFit, fit_line
 from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
 from imaging.plumbline import (
@@ -30,4 +30,5 @@ __all__ = [
     "chessboard_lines", "cross_magnification", "detect_marks",
     "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
     "plumb_line", "read_image", "undistort", "wrap_angle",
+    "ImageRead", "read_image_notes", "set_max_pixels",
 ]

@@ -8,7 +8,7 @@ import os
 import sys
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, UsageError, number, unique
+from align.commands.args import ALPHA, UsageError, add_max_pixels, number, unique
 from align.commands.common import log, say, settings, warn
 
 # Flags that say how a batch runs, not what it computes: left out of the results' settings,
@@ -146,6 +146,7 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
     r.add_argument("--resume", action="store_true",
                    help="skip sessions whose outputs are all in place (an interrupted batch) "
                    "and run the rest")
+    add_max_pixels(r)
     r.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the sessions of a batch on this Dask scheduler, e.g. "
                    "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")

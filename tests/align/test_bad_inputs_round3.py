@@ -1,0 +1,236 @@
+"""The contract, third round (issue 22), end to end through the CLI: write errors, an
+unreachable scheduler, decompression bombs and bad camera models (class 7); valid images and
+tables that were refused (class 8); orientation and units declared in files (class 3).
+
+Each case: exit status 2 and one line naming the file / flag / key, never a traceback; or
+the valid variant read to the same numbers as the plain file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from align.cli import main
+from tests.conftest import imageless_session, mark_image
+from tests.imaging.bad_images import png_bomb
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    """A seeded synthetic session without images (~1 s to run)."""
+    from synth.session import SessionSpec
+
+    return imageless_session(tmp_path_factory.mktemp("round3"), SessionSpec(seed=22))
+
+
+def _one_line(stderr: str, *needles: str) -> str:
+    assert "Traceback" not in stderr, stderr
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("align")]
+    assert len(lines) == 1, stderr
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+    return lines[0]
+
+
+def _cli(argv: list[str], stdout=subprocess.PIPE,
+         timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "align", *argv], stdout=stdout,
+                          stderr=subprocess.PIPE, text=True, env=ENV, timeout=timeout)
+
+
+# ----------------------------------------------------------------------------- class 7
+
+def _commands(session: Path, lot: Path, image: Path) -> dict[str, list[str]]:
+    return {
+        "gonio": ["gonio", str(session / "gonio.csv"), "--faces", "ref,y,x,z"],
+        "calibrate": ["calibrate", str(session / "tumble.csv"), "--scale-sign", "-"],
+        "run": ["run", str(session)],
+        "lot": ["lot", str(lot)],
+        "marks": ["marks", str(image)],
+    }
+
+
+@pytest.fixture(scope="module")
+def lot_and_image(session, tmp_path_factory):
+    root = tmp_path_factory.mktemp("lot")
+    (root / "lot").mkdir()
+    assert main(["run", str(session), "--json", str(root / "lot" / "a.json"), "-q"]) == 0
+    import cv2
+
+    cv2.imwrite(str(root / "mark.png"), mark_image(3.0, seed=5, with_crlb=False).image)
+    return root / "lot", root / "mark.png"
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
+@pytest.mark.parametrize("cmd", ["gonio", "calibrate", "run", "lot", "marks"])
+@pytest.mark.parametrize("json_out", [True, False], ids=["json-", "text"])
+def test_full_disk_on_stdout_is_one_line_exit_2(session, lot_and_image, capsys, monkeypatch,
+                                                cmd, json_out):
+    """``> /dev/full`` (ENOSPC): the JSON or the result text cannot be written — one line
+    naming standard output, exit 2 (before: a traceback, exit 1)."""
+    argv = _commands(session, *lot_and_image)[cmd] + (["--json", "-"] if json_out else [])
+    with open("/dev/full", "w") as full:
+        monkeypatch.setattr(sys, "stdout", full)
+        status = main(argv)
+    assert status == 2
+    _one_line(capsys.readouterr().err, "standard output", "No space left on device")
+
+
+def test_a_full_disk_shell_redirect_end_to_end(session):
+    """The same through a real process (what the user types: ``align gonio ... > /dev/full``)."""
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full on this system")
+    with open("/dev/full", "w") as full:
+        r = _cli(_commands(session, Path("."), Path("."))["gonio"], stdout=full)
+    assert r.returncode == 2, r.stderr
+    _one_line(r.stderr, "standard output", "No space left on device")
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full on this system")
+def test_full_disk_as_the_json_file_is_one_line_with_the_path(session, capsys):
+    assert main(["calibrate", str(session / "tumble.csv"), "--scale-sign", "-",
+                 "--json", "/dev/full", "-q"]) == 2
+    cap = capsys.readouterr()
+    _one_line(cap.err, "/dev/full", "No space left on device")
+
+
+@pytest.mark.parametrize("errno_name", ["ENOSPC", "EACCES", "EIO"])
+def test_a_refused_file_write_is_one_line_with_the_path(session, tmp_path, capsys,
+                                                        monkeypatch, errno_name):
+    """The disk fills (or permission goes, or the device fails) while the result is being
+    written: one line with the path, exit 2, nothing left behind (before: a traceback)."""
+    import errno
+
+    def refuse(fd):
+        raise OSError(getattr(errno, errno_name), os.strerror(getattr(errno, errno_name)))
+
+    monkeypatch.setattr(os, "fsync", refuse)
+    out = tmp_path / "g.json"
+    assert main(["gonio", str(session / "gonio.csv"), "--faces", "ref,y,x,z", "--json",
+                 str(out), "-q"]) == 2
+    _one_line(capsys.readouterr().err, str(out), os.strerror(getattr(errno, errno_name)))
+    assert list(tmp_path.iterdir()) == []
+
+
+class _GonePipe:
+    """A standard output whose reader has left (every write: EPIPE)."""
+
+    encoding = "utf-8"
+
+    def write(self, text):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def flush(self):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    @property
+    def buffer(self):
+        return self
+
+    def fileno(self):
+        raise OSError("no file descriptor")
+
+
+def test_json_into_a_closed_pipe_is_one_line(session, capsys, monkeypatch):
+    """``--json - | head -c 1`` with a JSON larger than the pipe: the JSON is incomplete —
+    one line, exit 2 (a closed pipe for the text messages stays quiet)."""
+    monkeypatch.setattr(sys, "stdout", _GonePipe())
+    status = main(_commands(session, Path("."), Path("."))["calibrate"] + ["--json", "-"])
+    assert status == 2
+    _one_line(capsys.readouterr().err, "standard output", "closed the pipe")
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:1", "nonsense", "http://127.0.0.1:8786",
+                                     "tcp://127.0.0.1:notaport"])
+def test_unreachable_scheduler_fails_fast_once(session, tmp_path, capsys, address):
+    """Before: the right error after 20 s, then 40 s more and a traceback from the client's
+    finaliser. Now: one line within a few seconds, nothing computed."""
+    t0 = time.monotonic()
+    other = tmp_path / "s2"
+    import shutil
+
+    shutil.copytree(session, other)
+    status = main(["run", str(session), str(other), "--json", str(tmp_path / "out"),
+                   "--scheduler", address, "-q"])
+    dt = time.monotonic() - t0
+    assert status == 2
+    _one_line(capsys.readouterr().err, "--scheduler", address)
+    assert dt < 5.0, dt
+    assert not any((tmp_path / "out").glob("*.json"))
+
+
+def test_decompression_bomb_refused_from_its_header(tmp_path, capsys):
+    """A 390 kB PNG declaring 20000 x 20000 px: refused at once, by name (before: minutes at
+    5 GB). Raising the budget is the user's decision (--max-pixels)."""
+    bomb = png_bomb(tmp_path / "bomb.png")
+    assert bomb.stat().st_size < 700_000
+    t0 = time.monotonic()
+    status = main(["marks", str(bomb), "--json", str(tmp_path / "m.json")])
+    assert time.monotonic() - t0 < 3.0
+    assert status == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "20000x20000 px" in err and "--max-pixels" in err
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert doc["marks"][0]["found"] is False and "pixel budget" in doc["marks"][0]["error"]
+
+
+def test_pixel_budget_is_settable(tmp_path, capsys):
+    import cv2
+
+    p = tmp_path / "m.png"
+    cv2.imwrite(str(p), mark_image(3.0, seed=6, with_crlb=False).image)
+    assert main(["marks", str(p), "--max-pixels", "1000", "-q"]) == 2
+    assert "pixel budget of 0.001 MP" in capsys.readouterr().err
+    assert os.environ.get("ALIGN_MAX_PIXELS") is None  # the flag did not outlive the call
+    assert main(["marks", str(p), "-q"]) == 0
+
+
+_CAM = {"camera_matrix": [[1000, 0, 400], [0, 1000, 300], [0, 0, 1]],
+        "dist_coeffs": [0, 0, 0, 0, 0], "image_size": [800, 600],
+        "format": "axis-align/camera", "format_version": 3}
+
+
+@pytest.mark.parametrize("key,value,needle", [
+    ("camera_matrix", [[0, 0, 400], [0, 0, 300], [0, 0, 1]], "focal lengths"),
+    ("camera_matrix", [[-1000, 0, 400], [0, 1000, 300], [0, 0, 1]], "focal lengths"),
+    ("camera_matrix", [[1000, 0, 400], [0, 1000, None], [0, 0, 1]], "non-finite"),
+    ("camera_matrix", [1000, 1000, 400], "shape"),
+    ("camera_matrix", [[1000, 0, 4000], [0, 1000, 300], [0, 0, 1]], "principal point"),
+    ("camera_matrix", [[1000, 0, 400], [0, 1000, 300], [0, 0, 0]], "camera_matrix"),
+    ("dist_coeffs", [0, 0, 0], "dist_coeffs"),
+    ("dist_coeffs", "none", "dist_coeffs"),
+    ("image_size", [800], "image_size"),
+    ("image_size", [800.5, 600], "image_size"),
+    ("image_size", [0, 600], "image_size"),
+])
+def test_camera_model_validated_like_any_input(tmp_path, capsys, key, value, needle):
+    """Before: focal length 0 was an 'internal error', exit 1; others passed silently."""
+    import cv2
+
+    img = tmp_path / "m.png"
+    cv2.imwrite(str(img), mark_image(3.0, seed=7, size=(800, 600), with_crlb=False).image)
+    cam = tmp_path / "cam.json"
+    cam.write_text(json.dumps({**_CAM, key: value}))
+    assert main(["marks", str(img), "--camera", str(cam), "-q"]) == 2
+    line = _one_line(capsys.readouterr().err, str(cam), needle)
+    assert key in line
+
+
+def test_a_sound_camera_model_is_accepted(tmp_path):
+    import cv2
+
+    img = tmp_path / "m.png"
+    cv2.imwrite(str(img), mark_image(3.0, seed=7, size=(800, 600), with_crlb=False).image)
+    cam = tmp_path / "cam.json"
+    cam.write_text(json.dumps(_CAM))
+    assert main(["marks", str(img), "--camera", str(cam), "-q"]) == 0
