@@ -43,7 +43,7 @@ from imaging import (
     fit_line,
     line_frame,
     measure_marks,
-    read_image,
+    read_image_notes,
     undistort,
 )
 
@@ -378,6 +378,8 @@ class MarkResult:
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
     frame: FrameDistortion | None = None
+    image_notes: tuple[str, ...] = ()
+    """What the reader did to the stored image (orientation applied, signed data offset)."""
 
     @property
     def unexplained_structure(self) -> bool:
@@ -390,6 +392,8 @@ class MarkResult:
         d: dict = {"image": self.image, "found": self.found, "error": self.error}
         if self.internal_error:
             d["internal_error"] = True
+        if self.image_notes:
+            d["image_notes"] = list(self.image_notes)
         if not self.found:
             return d
         d.update({
@@ -532,11 +536,12 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
                  min_length_px: float | None = None) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
-        img = read_image(path)
+        got = read_image_notes(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
-                         min_length_px)
+    results = measure_image(got.pixels, str(path), camera, alpha, max_marks, expect_one, roi,
+                            min_length_px)
+    return [replace(r, image_notes=got.notes) for r in results] if got.notes else results
 
 
 def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,

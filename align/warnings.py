@@ -24,8 +24,12 @@ def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]
 def mark_warnings(results: Sequence) -> list[str]:
     """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
     out = []
+    noted: set[str] = set()
     for r in results:
         what = f"{r.image} mark {r.index}"
+        if getattr(r, "image_notes", ()) and r.image not in noted:  # once per image
+            noted.add(r.image)
+            out += [f"{r.image}: {n}" for n in r.image_notes]
         if not r.found:
             out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue

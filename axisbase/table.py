@@ -265,10 +265,17 @@ def _skip_comment(row) -> str:
     return "skip" if _is_comment(text) and "\n" not in text else "error"
 
 
+_PLUS = re.compile(rb"(?:(?<=^)|(?<=[,;\t| ]))\+(?=[0-9.])")
+"""A '+' that opens a number in a field (``+190972``): pyarrow's integer parser refuses it
+(its float parser takes it); the fallback reader drops it. Not the '+' of an exponent
+(``1e+05``: preceded by 'e')."""
+
+
 class _Uncommented(io.RawIOBase):
-    """The file without the comment lines after its header, for pyarrow (the fallback when
-    its own parse cannot skip them; see the module's docstring). The lines up to the header
-    stay as they are, so ``skip_rows`` and every line number still hold."""
+    """The file without the comment lines after its header, and without the '+' that opens
+    a number (:data:`_PLUS`), for pyarrow (the fallback when its own parse cannot skip them;
+    see the module's docstring). The lines up to the header stay as they are, so
+    ``skip_rows`` and every line number still hold."""
 
     def __init__(self, path: Path, keep: int) -> None:
         self._f = open(path, "rb")  # noqa: SIM115 - closed by close()
@@ -283,7 +290,7 @@ class _Uncommented(io.RawIOBase):
             lines = self._f.readlines(1 << 20)
             if not lines:
                 return 0
-            self._buf = b"".join(ln for ln in lines if not _is_comment(ln))
+            self._buf = b"".join(_PLUS.sub(b"", ln) for ln in lines if not _is_comment(ln))
             self._pos = 0
         n = min(len(b), len(self._buf) - self._pos)
         b[:n] = self._buf[self._pos:self._pos + n]
@@ -296,13 +303,14 @@ class _Uncommented(io.RawIOBase):
 
 
 def _may_have_comments(path: Path, h: _Header) -> bool:
-    """Whether a '#' follows the header anywhere (a byte search, memchr speed): if not, a
-    file pyarrow refused has a bad row, not a comment, and is not read again."""
+    """Whether a '#' (a comment) or a '+' (a signed number) follows the header anywhere (a
+    byte search, memchr speed): if not, a file pyarrow refused has a bad row, not a comment,
+    and is not read again."""
     with open(path, "rb") as f:
         for _ in range(h.skip):
             f.readline()
         while block := f.read(1 << 22):
-            if b"#" in block:
+            if b"#" in block or b"+" in block:
                 return True
     return False
 

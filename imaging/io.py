@@ -125,7 +125,7 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
 def _orient(img: np.ndarray, code: int) -> np.ndarray:
     """``img`` as a viewer shows a file whose Orientation is ``code`` (TIFF 6.0 tag 274)."""
     return {2: lambda a: a[:, ::-1], 3: lambda a: a[::-1, ::-1], 4: lambda a: a[::-1, :],
-            5: lambda a: a.T, 6: lambda a: np.rot90(a, -1), 7: lambda a: np.rot90(a, 1)[::-1, :],
+            5: lambda a: a.T, 6: lambda a: np.rot90(a, -1), 7: lambda a: a[::-1, ::-1].T,
             8: lambda a: np.rot90(a, 1)}[code](img).copy()
 
 

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from align.cli import main
@@ -234,3 +235,127 @@ def test_a_sound_camera_model_is_accepted(tmp_path):
     cam = tmp_path / "cam.json"
     cam.write_text(json.dumps(_CAM))
     assert main(["marks", str(img), "--camera", str(cam), "-q"]) == 0
+
+
+# ----------------------------------------------------------------------------- class 8, 3
+
+@pytest.fixture(scope="module")
+def mark16(tmp_path_factory):
+    """A 16-bit mark image at +3° (seeded) and its angle read from a plain PNG."""
+    import cv2
+
+    root = tmp_path_factory.mktemp("images")
+    img = mark_image(3.0, seed=8, with_crlb=False).image
+    assert img.dtype == np.uint16
+    cv2.imwrite(str(root / "plain.png"), img)
+    return root, img, _angles(root / "plain.png")
+
+
+def _angles(path: Path, *extra: str) -> tuple[list[float], list[float], dict]:
+    out = path.with_suffix(".json")
+    out.unlink(missing_ok=True)
+    assert main(["marks", str(path), "--json", str(out), "-q", *extra]) == 0
+    doc = json.loads(out.read_text())
+    marks = [m for m in doc["marks"] if m["found"]]
+    return [m["angle_deg"] for m in marks], [m["angle_u_deg"] for m in marks], doc
+
+
+def test_planar_rgb_tiff_is_one_colour_image(mark16):
+    """Before: 'image is only 480x3 px'. Three equal planes: the gray image is the plain one."""
+    import tifffile
+
+    root, img, (a0, _, _) = mark16
+    p = root / "planar.tif"
+    tifffile.imwrite(p, np.stack([img] * 3), planarconfig="separate", photometric="rgb")
+    a, _, _ = _angles(p)
+    assert a == pytest.approx(a0, abs=1e-9)
+
+
+def test_signed_16_bit_tiff_is_offset_and_said(mark16):
+    """Before: 'no mark found' (negative DN). Offset by +32768: the same angle, and the
+    JSON says what was done."""
+    import tifffile
+
+    root, img, (a0, _, _) = mark16
+    p = root / "signed.tif"
+    tifffile.imwrite(p, (img.astype(np.int32) - 32768).astype(np.int16))
+    a, _, doc = _angles(p)
+    assert a == pytest.approx(a0, abs=1e-9)
+    assert any("offset by +32768" in n for n in doc["marks"][0]["image_notes"])
+    assert any("offset by +32768" in w for w in doc["warnings"])
+
+
+@pytest.mark.parametrize("code,stored", [
+    (6, lambda a: np.rot90(a, 1)),       # shown turned 90° clockwise
+    (8, lambda a: np.rot90(a, -1)),      # shown turned 90° counter-clockwise
+    (3, lambda a: a[::-1, ::-1]),        # turned 180°
+    (2, lambda a: a[:, ::-1]),           # mirrored left-right
+    (4, lambda a: a[::-1, :]),           # mirrored top-bottom
+    (5, lambda a: a.T),                  # transposed
+    (7, lambda a: a[::-1, ::-1].T),      # transversed (about the anti-diagonal)
+])
+def test_tiff_orientation_tag_is_applied_and_said(mark16, code, stored):
+    """The stored pixels turned/mirrored and the Orientation tag saying how to show them:
+    the angle is the plain image's (before: +89.93° or the mirrored angle, no warning)."""
+    import tifffile
+
+    root, img, (a0, _, _) = mark16
+    p = root / f"orient{code}.tif"
+    tifffile.imwrite(p, np.ascontiguousarray(stored(img)), extratags=[(274, "H", 1, code, True)])
+    a, _, doc = _angles(p)
+    assert a == pytest.approx(a0, abs=1e-9)
+    assert any(f"orientation tag {code} applied" in n for n in doc["marks"][0]["image_notes"])
+
+
+def test_jpeg_exif_orientation_is_applied(mark16):
+    """A JPEG whose EXIF says 'turn 90° clockwise to show': the angle of the shown image
+    (lossy: within the JPEG's own scatter, 3 u), and said."""
+    from PIL import Image
+
+    root, img, _ = mark16
+    gray8 = (img / 257).round().astype(np.uint8)
+    Image.fromarray(gray8).save(root / "plain.jpg", quality=100)
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(np.ascontiguousarray(np.rot90(gray8, 1))).save(
+        root / "turned.jpg", quality=100, exif=exif)
+    (a0, u0, _), (a, u, doc) = _angles(root / "plain.jpg"), _angles(root / "turned.jpg")
+    assert abs(a[0] - a0[0]) < 3 * np.hypot(u[0], u0[0]), (a, a0, u)
+    assert "orientation tag 6 applied" in doc["marks"][0]["image_notes"][0]
+
+
+def test_plus_signed_counts_are_read(session, tmp_path, capsys):
+    """A counter log with every count written '+191041': before 'pyarrow refused it, no line
+    found'; now the same angles as the plain log."""
+    lines = (session / "gonio.csv").read_text().splitlines()
+    plus = [lines[0]] + ["+" + ln for ln in lines[1:]]
+    p = tmp_path / "plus.csv"
+    p.write_text("\n".join(plus) + "\n")
+    res = []
+    for f in (session / "gonio.csv", p):
+        out = tmp_path / f"{f.stem}.json"
+        assert main(["gonio", str(f), "--faces", "ref,y,x,z", "--json", str(out), "-q"]) == 0
+        res.append(json.loads(out.read_text()))
+    assert res[0]["angles_deg"] == res[1]["angles_deg"]
+    assert res[0]["angles_u_arcsec"] == res[1]["angles_u_arcsec"]
+
+
+def test_npz_pose_variable_is_used(session, tmp_path):
+    """An .npz with u, t and pose: the poses are the labelled ones, as from the CSV
+    (before: 'pose' silently ignored, poses found from the time series instead)."""
+    import csv
+
+    rows = list(csv.reader((session / "tumble.csv").open()))
+    head, rows = rows[0], rows[1:]
+    assert head[:4] == ["pose", "ux", "uy", "uz"]
+    u = np.array([[float(x) for x in r[1:4]] for r in rows])
+    npz = tmp_path / "tumble.npz"
+    np.savez(npz, u=u, t=np.array([float(r[4]) for r in rows]), pose=np.array([r[0] for r in rows]))
+    docs = []
+    for f in (session / "tumble.csv", npz):
+        out = tmp_path / f"{f.name}.json"
+        assert main(["calibrate", str(f), "--scale-sign", "-", "--json", str(out), "-q"]) == 0
+        docs.append(json.loads(out.read_text()))
+    assert [p["pose"] for p in docs[1]["poses"]] == [p["pose"] for p in docs[0]["poses"]]
+    assert docs[0]["scale_factors_v_per_g"] == pytest.approx(docs[1]["scale_factors_v_per_g"],
+                                                             rel=1e-12)
