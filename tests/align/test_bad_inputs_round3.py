@@ -359,3 +359,75 @@ def test_npz_pose_variable_is_used(session, tmp_path):
     assert [p["pose"] for p in docs[1]["poses"]] == [p["pose"] for p in docs[0]["poses"]]
     assert docs[0]["scale_factors_v_per_g"] == pytest.approx(docs[1]["scale_factors_v_per_g"],
                                                              rel=1e-12)
+
+
+def _rewrite(src: Path, dst: Path, header: list[str], row) -> Path:
+    lines = src.read_text().splitlines()
+    dst.write_text(",".join(header) + "\n"
+                   + "\n".join(",".join(row(ln.split(","))) for ln in lines[1:]) + "\n")
+    return dst
+
+
+def _cal(path: Path, tmp_path: Path, capsys) -> tuple[dict, str]:
+    out = tmp_path / f"{path.name}.json"
+    assert main(["calibrate", str(path), "--scale-sign", "-", "--json", str(out)]) == 0
+    return json.loads(out.read_text()), capsys.readouterr().err
+
+
+@pytest.mark.parametrize("unit,factor", [("ms", 1e3), ("us", 1e6), ("min", 1 / 60)])
+def test_time_unit_in_the_header_is_converted(session, tmp_path, capsys, unit, factor):
+    """``t [ms]``: before, the unit was ignored (a drift 1000x too small); now the times are
+    seconds inside and the result is the one from the file in seconds."""
+    src = session / "tumble.csv"
+    assert src.read_text().split("\n", 1)[0] == "pose,ux,uy,uz,t"
+    scaled = _rewrite(src, tmp_path / f"t_{unit}.csv", ["pose", "ux", "uy", "uz", f"t [{unit}]"],
+                      lambda r: [*r[:4], repr(float(r[4]) * factor)])
+    (a, _), (b, err) = _cal(src, tmp_path, capsys), _cal(scaled, tmp_path, capsys)
+    assert "implausible" not in err
+    for key in ("scale_factors_v_per_g", "bias_g", "beta_rad"):
+        assert b[key] == pytest.approx(a[key], rel=1e-9, abs=1e-15), key
+
+
+def test_counter_log_time_in_ms_gives_the_same_angles(session, tmp_path):
+    src = session / "gonio.csv"
+    assert src.read_text().split("\n", 1)[0] == "count,counter,ref,t"
+    ms = _rewrite(src, tmp_path / "g_ms.csv", ["count", "counter", "ref", "t [ms]"],
+                  lambda r: [*r[:3], repr(float(r[3]) * 1e3)])
+    res = []
+    for f in (src, ms):
+        out = tmp_path / f"{f.name}.json"
+        assert main(["gonio", str(f), "--faces", "ref,y,x,z", "--json", str(out), "-q"]) == 0
+        res.append(json.loads(out.read_text()))
+    assert res[1]["angles_deg"] == pytest.approx(res[0]["angles_deg"], abs=1e-12)
+    assert res[1]["angles_u_arcsec"] == pytest.approx(res[0]["angles_u_arcsec"], rel=1e-6)
+
+
+def test_unknown_time_unit_is_refused_by_name(session, tmp_path, capsys):
+    bad = _rewrite(session / "tumble.csv", tmp_path / "t_fortnight.csv",
+                   ["pose", "ux", "uy", "uz", "t [fortnights]"], lambda r: r)
+    assert main(["calibrate", str(bad), "--scale-sign", "-", "-q"]) == 2
+    _one_line(capsys.readouterr().err, str(bad), "t: time unit 'fortnights' not known")
+
+
+def test_value_units_mg_and_g_agree(session, tmp_path, capsys):
+    """The same readings in g and in mg (declared): the same calibration, in g/g (before:
+    'unit mg not known')."""
+    src = session / "tumble.csv"
+    in_g = _rewrite(src, tmp_path / "u_g.csv", ["pose", "ux [g]", "uy [g]", "uz [g]", "t"],
+                    lambda r: [r[0], *(repr(float(v) / -2.4) for v in r[1:4]), r[4]])
+    in_mg = _rewrite(src, tmp_path / "u_mg.csv", ["pose", "ux [mg]", "uy [mg]", "uz [mg]", "t"],
+                     lambda r: [r[0], *(repr(float(v) / -2.4e-3) for v in r[1:4]), r[4]])
+    (a, _), (b, _) = _cal(in_g, tmp_path, capsys), _cal(in_mg, tmp_path, capsys)
+    assert a["scale_factor_unit"] == b["scale_factor_unit"]
+    assert b["scale_factors_v_per_g"] == pytest.approx(a["scale_factors_v_per_g"], rel=1e-9)
+    assert b["bias_g"] == pytest.approx(a["bias_g"], rel=1e-9, abs=1e-15)
+
+
+def test_times_in_ms_under_a_plain_t_are_a_warning_naming_ms(session, tmp_path, capsys):
+    """A 20 Hz recording whose times are ms under a plain ``t`` (0.02 Hz as read): a warning
+    that names ms and the header to write."""
+    bad = _rewrite(session / "tumble.csv", tmp_path / "t_plain_ms.csv",
+                   ["pose", "ux", "uy", "uz", "t"],
+                   lambda r: [*r[:4], repr(float(r[4]) * 1e3)])
+    _, err = _cal(bad, tmp_path, capsys)
+    assert "implausible" in err and "t [ms]" in err
