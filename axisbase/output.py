@@ -125,6 +125,9 @@ class OutputPlan:
                 raise OutputError(f"{flag} -: another output already goes to standard output")
             self.paths[flag] = Path(STDOUT)
             return Path(STDOUT)
+        if not folder and str(path).endswith(("/", os.sep)):
+            raise OutputError(f"{flag} {path}: ends with '/', so it names a folder; give a "
+                              "file name")
         p = Path(path)
         for other_flag, other in self.paths.items():
             # Folders of per-item files may be shared (the files' names differ).

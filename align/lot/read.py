@@ -13,6 +13,7 @@ import codecs
 import datetime as _dt
 import hashlib
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -204,6 +205,24 @@ def when_of(meta: Mapping[str, Any]) -> _dt.datetime | None:
     return None
 
 
+NOT_RESULTS = ("axis-align/platform-calibration",)
+"""Formats a results folder may also hold that are not session results (left out of a
+folder's files, by their ``format`` field)."""
+
+_FORMAT_KEY = re.compile(rb'"format"\s*:\s*"([^"]{1,80})"')
+
+
+def _declared_format(path: Path) -> str | None:
+    """The ``format`` a JSON file declares in its first 4 kB (where this tool writes it: the
+    first key), without reading the whole file; None if it does not say."""
+    try:
+        with open(path, "rb") as f:
+            m = _FORMAT_KEY.search(f.read(4096))
+    except OSError:
+        return None
+    return m.group(1).decode("utf-8", "replace") if m else None
+
+
 def result_files(paths: Sequence[str | Path]) -> list[Path]:
     """The result files named: files as given, folders as their ``*.json`` files (sorted by
     name, not descending into sub-folders; ``*.cal.json`` platform calibrations left out).
@@ -215,10 +234,11 @@ def result_files(paths: Sequence[str | Path]) -> list[Path]:
         p = Path(given)
         if p.is_dir():
             # 'align run --calibration FOLDER' writes NAME.cal.json, possibly beside the
-            # results: platform calibrations, not results.
+            # results: platform calibrations, not results — told by their format field, not
+            # by their name (a session folder named 'u2.cal' has the result u2.cal.json).
             found = sorted((q for q in p.iterdir() if q.suffix.lower() == ".json"
-                            and not q.name.lower().endswith(".cal.json")
-                            and q.is_file() and not q.name.startswith(".")),
+                            and q.is_file() and not q.name.startswith(".")
+                            and _declared_format(q) not in NOT_RESULTS),
                            key=lambda q: q.name)
             if not found:
                 raise InputError(f"{p}: a folder with no .json files (session results)")

@@ -431,3 +431,119 @@ def test_times_in_ms_under_a_plain_t_are_a_warning_naming_ms(session, tmp_path, 
                    lambda r: [*r[:4], repr(float(r[4]) * 1e3)])
     _, err = _cal(bad, tmp_path, capsys)
     assert "implausible" in err and "t [ms]" in err
+
+
+# ----------------------------------------------------------------------------- class 1
+
+def _copy(session: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(session, dst)
+    return dst
+
+
+def _resume(folder: Path, out: Path, *extra: str) -> int:
+    return main(["run", str(folder), "--json", str(out), "-q", "--resume", *extra])
+
+
+def test_resume_reuses_only_a_trusted_result(session, tmp_path, capsys):
+    """Same inputs, folder, version and settings, ok: reused, the file untouched."""
+    s = _copy(session, tmp_path / "u1")
+    out = tmp_path / "u1.json"
+    assert main(["run", str(s), "--json", str(out), "-q"]) == 0
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert _resume(s, out) == 0
+    assert "trusted, skipped" in capsys.readouterr().out
+    assert out.read_bytes() == before
+
+
+@pytest.mark.parametrize("spoil,reason", [
+    (lambda out, s: out.write_text(out.read_text()[:500]), "unreadable"),
+    (lambda out, s: out.write_text(out.read_text().replace('"ok": true', '"ok": false', 1)),
+     "was not ok"),
+    (lambda out, s: (s / "session.toml").write_text((s / "session.toml").read_text()
+                                                    + "\n# edited\n"), "changed since"),
+    (lambda out, s: out.write_text(out.read_text().replace('"tool_version": "',
+                                                           '"tool_version": "0.0.0-', 1)),
+     "made by version"),
+], ids=["truncated", "not-ok", "input-changed", "other-version"])
+def test_resume_redoes_an_untrusted_result_and_says_why(session, tmp_path, capsys, spoil,
+                                                        reason):
+    """Before: reused by its name (exit 0 over a not-ok result), or 'exists' for a truncated
+    one. Now: redone, replacing it, with the reason on stderr."""
+    s = _copy(session, tmp_path / "u1")
+    out = tmp_path / "u1.json"
+    assert main(["run", str(s), "--json", str(out), "-q"]) == 0
+    spoil(out, s)
+    capsys.readouterr()
+    assert _resume(s, out) == 0
+    err = capsys.readouterr().err
+    assert "redone" in err and reason in err, err
+    doc = json.loads(out.read_text())
+    assert doc["ok"] is True
+    from axisbase.provenance import sha256_file
+
+    assert all(sha256_file(r["path"]) == r["sha256"] for r in doc["inputs"])
+
+
+def test_resume_with_another_alpha_is_redone(session, tmp_path, capsys):
+    s = _copy(session, tmp_path / "u1")
+    out = tmp_path / "u1.json"
+    assert main(["run", str(s), "--json", str(out), "-q"]) == 0
+    assert _resume(s, out, "--alpha", "0.01") == 0
+    assert "alpha" in capsys.readouterr().err
+    assert json.loads(out.read_text())["settings"]["alpha"] == 0.01
+
+
+def test_resume_never_takes_another_session_folders_result(session, tmp_path, capsys):
+    """Two lots each with a session folder 'unit7', one output folder: before, the second
+    batch said '2 of 2 sessions done' and kept the other unit's result, exit 0."""
+    a = _copy(session, tmp_path / "lotA" / "unit7")
+    b = _copy(session, tmp_path / "lotB" / "unit7")
+    c = _copy(session, tmp_path / "lotB" / "unit8")
+    out = tmp_path / "results"
+    assert main(["run", str(a), str(_copy(session, tmp_path / "lotA" / "unit8")), "--json",
+                 str(out), "-q"]) == 0
+    before = (out / "unit7.json").read_bytes()
+    capsys.readouterr()
+    assert main(["run", str(b), str(c), "--json", str(out), "-q", "--resume"]) == 2
+    cap = capsys.readouterr()
+    assert "another session folder" in cap.out + cap.err
+    assert (out / "unit7.json").read_bytes() == before
+
+
+def test_a_session_named_cal_cannot_collide_with_a_calibration(session, tmp_path, capsys):
+    """'u2' and 'u2.cal' with --json D --calibration D: both would write D/u2.cal.json
+    (before: one session's output lost). Refused before computing."""
+    u2 = _copy(session, tmp_path / "u2")
+    u2cal = _copy(session, tmp_path / "u2.cal")
+    d = tmp_path / "D"
+    assert main(["run", str(u2), str(u2cal), "--json", str(d), "--calibration", str(d),
+                 "-q"]) == 2
+    _one_line(capsys.readouterr().err, "u2.cal.json", "--calibration", "--json")
+    assert not list(d.glob("*.json"))
+
+
+def test_lot_tells_results_from_calibrations_by_format(session, tmp_path, capsys):
+    """A session folder named 'u2.cal' has the result u2.cal.json: before, 'align lot'
+    dropped it as a calibration by its name; a platform calibration beside it is left out
+    by its format field whatever its name."""
+    d = tmp_path / "D"
+    u2cal = _copy(session, tmp_path / "u2.cal")
+    assert main(["run", str(u2cal), "--json", str(d / "u2.cal.json"), "--calibration",
+                 str(d / "platform-u2.json"), "-q"]) == 0
+    from align.lot.read import result_files
+
+    assert [p.name for p in result_files([d])] == ["u2.cal.json"]
+
+
+def test_json_folder_with_trailing_slash(session, tmp_path, capsys):
+    """``--json out/`` for one session: a folder holding <session>.json (before: a file named
+    'out'); for a command writing one file it is refused by name."""
+    s = _copy(session, tmp_path / "u1")
+    assert main(["run", str(s), "--json", f"{tmp_path / 'out'}/", "-q"]) == 0
+    assert (tmp_path / "out" / "u1.json").is_file()
+    assert main(["gonio", str(session / "gonio.csv"), "--faces", "ref,y,x,z", "--json",
+                 f"{tmp_path / 'g'}/", "-q"]) == 2
+    _one_line(capsys.readouterr().err, "--json", "ends with '/'")
