@@ -547,3 +547,69 @@ def test_json_folder_with_trailing_slash(session, tmp_path, capsys):
     assert main(["gonio", str(session / "gonio.csv"), "--faces", "ref,y,x,z", "--json",
                  f"{tmp_path / 'g'}/", "-q"]) == 2
     _one_line(capsys.readouterr().err, "--json", "ends with '/'")
+
+
+# ----------------------------------------------------------------------------- class 6
+
+@pytest.fixture(scope="module")
+def result_doc(session, tmp_path_factory) -> dict:
+    out = tmp_path_factory.mktemp("res") / "r.json"
+    assert main(["run", str(session), "--json", str(out), "-q"]) == 0
+    return json.loads(out.read_text())
+
+
+def _edit_arcsec(d):
+    d["misalignment_arcsec"][0][1] += 1.0
+
+
+def _zero_u(d):
+    d["misalignment_u_rad"][1][2] = 0.0
+    d["misalignment_u_arcsec"][1][2] = 0.0
+
+
+def _failed_but_ok(d):
+    d["errors"] = [{"stage": "goniometer", "message": "no revolution found"}]
+
+
+def _e57(d):
+    d["misalignment_rad"][2][0] = 1.0
+    d["misalignment_arcsec"][2][0] = 1.0 / (np.pi / 180 / 3600)
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (_edit_arcsec, "disagree"), (_zero_u, "must be > 0"),
+    (_failed_but_ok, "'ok' is true but stage goniometer failed"), (_e57, "beyond 5°"),
+], ids=["units-disagree", "zero-u", "ok-with-failed-stage", "E-57deg"])
+def test_lot_refuses_a_result_that_cannot_be_right(result_doc, tmp_path, capsys, edit, needle):
+    """Before: each was taken into the lot's statistics. Now the file is 'not read' with the
+    reason, and the lot says so (exit 2: a file was not read)."""
+    d = json.loads(json.dumps(result_doc))
+    edit(d)
+    folder = tmp_path / "lot"
+    folder.mkdir()
+    (folder / "good.json").write_text(json.dumps(result_doc))
+    (folder / "bad.json").write_text(json.dumps(d))
+    out = tmp_path / "lot.json"
+    main(["lot", str(folder), "--json", str(out), "-q"])
+    lot = json.loads(out.read_text())
+    assert [r["file"] for r in lot["rejected"]] == [str(folder / "bad.json")]
+    assert needle in lot["rejected"][0]["reason"]
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_lot_serials_are_trimmed_and_case_folded_with_a_warning(result_doc, tmp_path, capsys):
+    """'SN-4' and 'SN-4 ' (and 'sn-4'): before, two units; now one, counted once, and a
+    warning names the spellings."""
+    folder = tmp_path / "lot"
+    folder.mkdir()
+    for k, serial in enumerate(["SN-4", "SN-4 ", "sn-4", "SN-5"]):
+        d = json.loads(json.dumps(result_doc))
+        d["metadata"] = {**(d.get("metadata") or {}), "serial": serial}
+        d["session"] = f"s{k}"
+        (folder / f"s{k}.json").write_text(json.dumps(d))
+    out = tmp_path / "lot.json"
+    main(["lot", str(folder), "--json", str(out), "-q"])
+    lot = json.loads(out.read_text())
+    assert lot["n_in_statistics"] == 2
+    spelled = [w for w in lot["warnings"] if "written 3 ways" in w]
+    assert len(spelled) == 1 and "'SN-4 '" in spelled[0] and "'sn-4'" in spelled[0]
