@@ -17,13 +17,7 @@ EXECUTION = ("jobs", "scheduler", "resume")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from align.session.batch import (
-        SessionJob,
-        check_distinct_outputs,
-        exit_status,
-        in_folder,
-        resume,
-    )
+    from align.session.batch import SessionJob, exit_status, in_folder, resume
 
     if len(args.sessions) > 1:
         unique(args.sessions, "sessions")
@@ -36,7 +30,6 @@ def cmd_run(args: argparse.Namespace) -> int:
                      in_folder(args.calibration, one, ".cal.json"), args.alpha,
                      args.force, args.allow_outside, settings(args, EXECUTION),
                      keep_result=True)
-    check_distinct_outputs([job])
     if args.resume:
         done, todo = resume([job], say=log.warning)
         if not todo:
