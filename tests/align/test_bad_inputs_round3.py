@@ -281,7 +281,7 @@ def test_signed_16_bit_tiff_is_offset_and_said(mark16):
     tifffile.imwrite(p, (img.astype(np.int32) - 32768).astype(np.int16))
     a, _, doc = _angles(p)
     assert a == pytest.approx(a0, abs=1e-9)
-    assert any("offset by +32768" in n for n in doc["marks"][0]["image_notes"])
+    assert any("offset by +32768" in n for n in doc["marks"][0]["notes"])
     assert any("offset by +32768" in w for w in doc["warnings"])
 
 
@@ -304,7 +304,7 @@ def test_tiff_orientation_tag_is_applied_and_said(mark16, code, stored):
     tifffile.imwrite(p, np.ascontiguousarray(stored(img)), extratags=[(274, "H", 1, code, True)])
     a, _, doc = _angles(p)
     assert a == pytest.approx(a0, abs=1e-9)
-    assert any(f"orientation tag {code} applied" in n for n in doc["marks"][0]["image_notes"])
+    assert any(f"orientation tag {code} applied" in n for n in doc["marks"][0]["notes"])
 
 
 def test_jpeg_exif_orientation_is_applied(mark16):
@@ -321,7 +321,7 @@ def test_jpeg_exif_orientation_is_applied(mark16):
         root / "turned.jpg", quality=100, exif=exif)
     (a0, u0, _), (a, u, doc) = _angles(root / "plain.jpg"), _angles(root / "turned.jpg")
     assert abs(a[0] - a0[0]) < 3 * np.hypot(u[0], u0[0]), (a, a0, u)
-    assert "orientation tag 6 applied" in doc["marks"][0]["image_notes"][0]
+    assert "orientation tag 6 applied" in doc["marks"][0]["notes"][0]
 
 
 def test_plus_signed_counts_are_read(session, tmp_path, capsys):
