@@ -382,6 +382,11 @@ def test_time_unit_in_the_header_is_converted(session, tmp_path, capsys, unit, f
     assert src.read_text().split("\n", 1)[0] == "pose,ux,uy,uz,t"
     scaled = _rewrite(src, tmp_path / f"t_{unit}.csv", ["pose", "ux", "uy", "uz", f"t [{unit}]"],
                       lambda r: [*r[:4], repr(float(r[4]) * factor)])
+    from align.calibration.static import STATIC
+    from axisbase.table import read_table
+
+    t_s, t_read = read_table(src, STATIC)["t"], read_table(scaled, STATIC)["t"]
+    assert np.allclose(t_read, t_s, rtol=1e-12, atol=1e-9)  # before: factor x too large
     (a, _), (b, err) = _cal(src, tmp_path, capsys), _cal(scaled, tmp_path, capsys)
     assert "implausible" not in err
     for key in ("scale_factors_v_per_g", "bias_g", "beta_rad"):
