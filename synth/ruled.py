@@ -174,12 +174,14 @@ def _text(out: np.ndarray, text: str, org: np.ndarray, size: float, ux: np.ndarr
             _stroke(out, p0, p1, 0.12 * size, amp, blur)
 
 
-def _logo(out: np.ndarray, spec: RuledSpec, rng: np.random.Generator) -> None:
+def _logo(out: np.ndarray, spec: RuledSpec, grads: list) -> None:
     """A maker's logo in a corner: a printed ring with a bar and a short word of strokes."""
     h, w = out.shape
     r = 0.04 * min(w, h)
-    cx = rng.choice([0.12, 0.88]) * w
-    cy = rng.choice([0.12, 0.88]) * h
+    # In the corner farthest from the graduations (a maker prints it clear of the scale).
+    mids = np.array([m.centre_xy() for m, _, _ in grads]) + [(w - 1) / 2, (h - 1) / 2]
+    corners = [(fx * w, fy * h) for fx in (0.12, 0.88) for fy in (0.12, 0.88)]
+    cx, cy = max(corners, key=lambda p: np.min(np.hypot(*(mids - p).T)))
     s = max(spec.blur_px, 0.3)
     r0, c0 = int(max(0, cy - r - 6 * s)), int(max(0, cx - r - 6 * s))
     yy, xx = np.mgrid[r0:int(min(h, cy + r + 6 * s + 1)), c0:int(min(w, cx + r + 6 * s + 1))]
@@ -268,7 +270,7 @@ def render_ruled(spec: RuledSpec) -> RuledImage:
             # Glyphs read across the graduations, their foot towards the line's end.
             _text(refl, text, start, size, nrm, -u, -0.55, spec.blur_px)
     if spec.logo:
-        _logo(refl, spec, rng)
+        _logo(refl, spec, grads)
     mean_e = np.clip(refl, 0, None) * _illumination(base) * base.exposure * full_well
     img = _digitise(base, mean_e, rng)
     gain = (2**spec.bits - 1) / full_well

@@ -1,0 +1,160 @@
+"""Families of lines: dense sets of short parallel lines (a ruled scale, a grating).
+
+A *family* is at least :data:`MIN_MEMBERS` lines found in one image that run the same way
+(directions within :data:`FAMILY_ANGLE`) and lie side by side: each one's middle within
+:data:`MAX_GAP` typical gaps of its neighbour across the lines. Once a family is seen, the
+image is searched again for lines of that direction down to half the family's typical length
+(:data:`MEMBER_FRACTION`) — lines the default ``min_length`` would drop or the block-averaged
+search cut short (at a numeral, a dust speck) — and those that fall on the family's ruling
+(within :data:`GRID_TOLERANCE` pitch of a multiple of the pitch from its members) join it.
+Every family member is reported, whatever ``max_marks`` says; other lines keep that cap, and
+what the cap leaves out is counted in :attr:`Detection.unreported`, never dropped silently.
+
+Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imaging.detect import (
+    MarkCandidate,
+    Roi,
+    _dedupe,
+    _near,
+    _overlap,
+    detect_lines_once,
+    line_frame,
+    wrap_angle,
+)
+
+MIN_MEMBERS = 3
+"""Fewest parallel lines side by side that make a family."""
+FAMILY_ANGLE = np.deg2rad(2.0)
+"""Largest direction difference within a family at detection (the search's angles are good
+to ~0.5 deg on short lines); the measured angles are then tested by their chi2."""
+MAX_GAP = 3.0
+"""Largest gap between neighbouring members, in units of the family's median gap."""
+MEMBER_FRACTION = 0.5
+"""A line joins a family from this fraction of the family's median length."""
+GRID_TOLERANCE = 0.3
+"""A joining line lies within this fraction of the pitch of the members' ruling."""
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Lines found in one image.
+
+    ``marks``: reported lines (every family member, then the other lines strongest first up
+    to ``max_marks``); ``families``: index tuples into ``marks``, one per family, ordered
+    across the lines; ``unreported``: lines found but left out by ``max_marks``.
+    """
+
+    marks: list[MarkCandidate]
+    families: tuple[tuple[int, ...], ...] = ()
+    unreported: tuple[MarkCandidate, ...] = ()
+
+
+def _middle(c: MarkCandidate) -> np.ndarray:
+    u, n = line_frame(c.angle_rad)
+    return c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+
+
+def _position(c: MarkCandidate, ref: float) -> float:
+    """Where a line's middle lies across the direction ``ref`` [px]."""
+    return float(_middle(c) @ line_frame(ref)[1])
+
+
+def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
+    """Families among candidates (indices, ordered across the lines; see the module doc)."""
+    left = list(range(len(cands)))
+    out = []
+    while left:
+        seed = max(left, key=lambda i: cands[i].strength)
+        ref = cands[seed].angle_rad
+        same = [i for i in left if cands[i].dark == cands[seed].dark
+                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        left = [i for i in left if i != seed]
+        if len(same) < MIN_MEMBERS:
+            continue
+        same.sort(key=lambda i: _position(cands[i], ref))
+        pos = np.array([_position(cands[i], ref) for i in same])
+        gaps = np.diff(pos)
+        med = float(np.median(gaps))
+        # Runs of lines with no gap wider than MAX_GAP median gaps: the seed's run.
+        cuts = np.flatnonzero(gaps > MAX_GAP * med) + 1
+        for run in np.split(np.array(same), cuts):
+            if seed in run and len(run) >= MIN_MEMBERS:
+                out.append([int(i) for i in run])
+                left = [i for i in left if i not in run]
+    return out
+
+
+def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
+            ) -> tuple[float, float]:
+    """(origin, pitch) [px] of the members' ruling: positions = origin + pitch k."""
+    pos = np.array([_position(cands[i], ref) for i in members])
+    g0 = float(np.min(np.diff(pos)))
+    k = np.rint((pos - pos[0]) / g0)
+    pitch, origin = np.polyfit(k, pos, 1)
+    return float(origin), float(pitch)
+
+
+def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_marks: int = 8,
+                 roi: Roi | None = None, top: float | None = None,
+                 families: bool = True) -> Detection:
+    """Every line of :func:`imaging.detect.detect_marks`, with families completed.
+
+    Parameters as :func:`~imaging.detect.detect_marks`; ``families``: False finds lines one
+    by one only (no second pass; every line under the ``max_marks`` cap).
+    """
+    search = detect_lines_once(image, min_length_px, roi=roi, top=top)
+    found = list(search.marks)
+    groups = group_families(found) if families else []
+    for g in groups:
+        ref = found[g[0]].angle_rad
+        typical = float(np.median([found[i].length_px for i in g]))
+        origin, pitch = _ruling(found, g, ref)
+        lo = min(_position(found[i], ref) for i in g) - pitch * (GRID_TOLERANCE + 0.5)
+        hi = max(_position(found[i], ref) for i in g) + pitch * (GRID_TOLERANCE + 0.5)
+        shift = search.shift
+        members = [found[i] for i in g]
+
+        def on_ruling(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
+                      members=members, shift=shift) -> bool:
+            # Coarse candidates are in the search's (roi) frame: compare in the image's.
+            u, n = line_frame(c.angle_rad)
+            p = _middle(c) + shift
+            q = float(p @ line_frame(ref)[1])
+            k = (q - origin) / pitch
+            return (c.dark == members[0].dark
+                    and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
+                    and abs(k - np.rint(k)) < GRID_TOLERANCE
+                    and q > lo - pitch * MAX_GAP and q < hi + pitch * MAX_GAP)
+
+        extra = search.candidates(MEMBER_FRACTION * typical, on_ruling)
+        # The relief beside a member is judged between it and its neighbours: the next
+        # graduation is no machining streak.
+        reach = float(np.clip(abs(pitch) - max(o.thickness_px for o in members) - 6, 20, 60))
+        for c in search.confirm(extra, reach):
+            # A piece of a member (the first search joined it differently) is that member:
+            # the longer one stays.
+            twin = next((j for j, o in enumerate(found) if o.dark == c.dark
+                         and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
+                         and _overlap(c, o)), None)
+            if twin is None:
+                found.append(c)
+            elif c.length_px > found[twin].length_px:
+                found[twin] = c
+    if groups:
+        found = _dedupe(sorted(found, key=lambda c: -c.strength))
+        groups = group_families(found)
+    in_family = {i for g in groups for i in g}
+    others = [i for i in range(len(found)) if i not in in_family]
+    keep = [i for g in groups for i in g] + others[:max_marks]
+    index = {old: new for new, old in enumerate(keep)}
+    return Detection([found[i] for i in keep],
+                     tuple(tuple(index[i] for i in g) for g in groups),
+                     tuple(found[i] for i in others[max_marks:]))
