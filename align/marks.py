@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from align.family import LineFamily, line_family
 from align.loop import (
     Candidate,
     LoopReport,
@@ -43,6 +44,7 @@ from imaging import (
     fit_line,
     line_frame,
     measure_marks,
+    measure_frame,
     read_image,
     undistort,
 )
@@ -378,6 +380,8 @@ class MarkResult:
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
     frame: FrameDistortion | None = None
+    family: LineFamily | None = None
+    unreported: int = 0
 
     @property
     def unexplained_structure(self) -> bool:
@@ -390,6 +394,8 @@ class MarkResult:
         d: dict = {"image": self.image, "found": self.found, "error": self.error}
         if self.internal_error:
             d["internal_error"] = True
+        if self.unreported:
+            d["lines_not_reported"] = self.unreported
         if not self.found:
             return d
         d.update({
@@ -408,6 +414,8 @@ class MarkResult:
         })
         if self.frame is not None:
             d["frame_radial_distortion"] = self.frame.to_dict()
+        if self.family is not None:
+            d["family"] = self.family.to_dict()
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -422,7 +430,8 @@ class MarkResult:
         answers ``effects``, ``unexplained_structure`` and ``summary_lines()`` alike)."""
         base = {"image": str(d["image"]), "found": bool(d["found"]),
                 "error": None if d.get("error") is None else str(d["error"]),
-                "internal_error": bool(d.get("internal_error", False))}
+                "internal_error": bool(d.get("internal_error", False)),
+                "unreported": int(d.get("lines_not_reported", 0))}
         if not base["found"]:
             return cls(**base)
 
@@ -440,7 +449,8 @@ class MarkResult:
                    angle_before_rad=rad("angle_before_loop"),
                    loop=LoopSummary.from_dict(d) if "loop" in d else None,
                    uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
-                   frame=None if fr is None else FrameDistortion.from_dict(fr))
+                   frame=None if fr is None else FrameDistortion.from_dict(fr),
+                   family=LineFamily.from_dict(d["family"]) if "family" in d else None)
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -493,10 +503,11 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search.
     """
     try:
-        found = measure_marks(image, camera, where=name, max_marks=max_marks,
-                              expect_one=expect_one, roi=roi, min_length_px=min_length_px)
+        measured = measure_frame(image, camera, where=name, max_marks=max_marks,
+                                 expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
+    found = measured.items
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     frame = None
     candidates: Sequence[Candidate] = CANDIDATES
@@ -524,6 +535,31 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         if not frame.consistent:
             au *= max(1.0, np.sqrt(frame.chi2_dof_after) / r.uncertainty_inflation)
         out.append(replace(r, angle_before_rad=before, frame=frame, angle_u_rad=au))
+    return with_families(out, measured.families, measured.unreported,
+                         "camera model" if camera is not None else
+                         "frame k1" if frame is not None and frame.applied else "none", alpha)
+
+
+def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
+                  unreported: int, lens: str, alpha: float = 1e-3) -> list[MarkResult]:
+    """The image's results with each family's :class:`align.family.LineFamily` on its
+    measured members, and the count of lines found but not reported on every entry."""
+    out = [replace(r, unreported=unreported) for r in results]
+    for g in families:
+        ok = [i for i in g if out[i].found]
+        if len(ok) < 2:
+            continue
+        ms = [out[i] for i in ok]
+        mids = []
+        for r in ms:
+            u, n = line_frame(r.angle_rad)
+            t0, t1 = r.measurement.extent_px if r.measurement is not None else (0.0, 0.0)
+            mids.append(r.offset_px * n + 0.5 * (t0 + t1) * u)
+        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]),
+                          np.array([r.angle_u_rad for r in ms]), np.array(mids),
+                          np.array([r.offset_u_px for r in ms]), lens, len(g) - len(ok), alpha)
+        for i in ok:
+            out[i] = replace(out[i], family=fam)
     return out
 
 

@@ -4,6 +4,7 @@ Public API::
 
     read_image(path) -> ndarray
     detect_marks(image, min_length_px=None, roi=None) -> [MarkCandidate]
+    detect_lines(image, ...) -> Detection               (with families of parallel lines)
     measure_marks(image, camera=None) -> [MarkMeasurement | ImageInputError]
     fit_line(points, sigma, extra=None) -> LineFit      (accepts extra model terms)
     CameraModel, calibrate_chessboard, plumb_line
@@ -14,7 +15,14 @@ from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_fra
 from imaging.errors import ImageInputError
 from imaging.io import read_image
 from imaging.linefit import LineFit, fit_line
-from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
+from imaging.families import Detection, detect_lines
+from imaging.measure import (
+    MarkMeasurement,
+    MeasuredFrame,
+    measure_candidate,
+    measure_frame,
+    measure_marks,
+)
 from imaging.plumbline import (
     PlumbLineFit,
     chessboard_lines,
@@ -25,9 +33,9 @@ from imaging.plumbline import (
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
-    "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
+    "CameraModel", "Centres", "Detection", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
     "PlumbLineFit", "ProfileFit", "Roi", "calibrate_chessboard", "check_roi",
-    "chessboard_lines", "cross_magnification", "detect_marks",
-    "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
+    "chessboard_lines", "cross_magnification", "detect_lines", "detect_marks",
+    "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_frame", "measure_marks", "MeasuredFrame",
     "plumb_line", "read_image", "undistort", "wrap_angle",
 ]

@@ -18,10 +18,10 @@ from imaging.detect import (
     MarkCandidate,
     Roi,
     default_min_length,
-    detect_marks,
     require_single,
 )
 from imaging.errors import ImageInputError
+from imaging.families import detect_lines
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
 from imaging.profile import Centres, ProfileFit, fit_profile, groove_extent, sample_centres
@@ -138,6 +138,19 @@ def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 
     return ok
 
 
+@dataclass(frozen=True)
+class MeasuredFrame:
+    """Every line of one image measured: ``items`` (a measurement or the error that stopped
+    it, per reported line), ``families`` (index tuples into ``items``, see
+    :mod:`imaging.families`), ``unreported`` (lines found but not reported: beyond
+    ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
+    and not counted)."""
+
+    items: list[MarkMeasurement | ImageInputError]
+    families: tuple[tuple[int, ...], ...] = ()
+    unreported: int = 0
+
+
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
                   max_marks: int = 8, min_length_px: float | None = None,
                   expect_one: bool = False, roi: Roi | None = None
@@ -146,6 +159,18 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     With ``expect_one`` the image must hold a single mark: two of similar strength raise.
     ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search (see detect_marks).
+    """
+    return measure_frame(image, camera, where, max_marks, min_length_px, expect_one,
+                         roi).items
+
+
+def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
+                  max_marks: int = 8, min_length_px: float | None = None,
+                  expect_one: bool = False, roi: Roi | None = None) -> MeasuredFrame:
+    """:func:`measure_marks` with the families of lines and the count of lines not reported.
+
+    Every member of a family is measured (whatever ``max_marks``), and kept whatever its
+    length: the family, not ``min_length_px``, says it is a line.
     """
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):
@@ -156,10 +181,11 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
                               f"{image.shape[0]}")
     try:
-        cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
-                             top=top)
+        det = detect_lines(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
+                           top=top, families=not expect_one)
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
+    cands = det.marks
     if not cands:
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
@@ -170,16 +196,21 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
     # shorter (its length_px would then be below --min-length).
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
+    member = {i for g in det.families for i in g}
     out: list[MarkMeasurement | ImageInputError] = []
-    for c in cands:
+    index: dict[int, int] = {}
+    for i, c in enumerate(cands):
         try:
             m = measure_candidate(image, c, camera, where, top)
         except ImageInputError as exc:
+            index[i] = len(out)
             out.append(exc)
             continue
-        if m.length_px >= shortest:
+        if m.length_px >= shortest or i in member:
+            index[i] = len(out)
             out.append(m)
     if not out:
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
-    return out
+    fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
+    return MeasuredFrame(out, fams, len(det.unreported))
