@@ -43,7 +43,6 @@ from imaging import (
     cross_magnification,
     fit_line,
     line_frame,
-    measure_marks,
     measure_frame,
     read_image,
     undistort,

@@ -13,9 +13,9 @@ Public API::
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
+from imaging.families import Detection, detect_lines
 from imaging.io import read_image
 from imaging.linefit import LineFit, fit_line
-from imaging.families import Detection, detect_lines
 from imaging.measure import (
     MarkMeasurement,
     MeasuredFrame,
@@ -33,9 +33,10 @@ from imaging.plumbline import (
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
-    "CameraModel", "Centres", "Detection", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
-    "PlumbLineFit", "ProfileFit", "Roi", "calibrate_chessboard", "check_roi",
-    "chessboard_lines", "cross_magnification", "detect_lines", "detect_marks",
-    "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_frame", "measure_marks", "MeasuredFrame",
-    "plumb_line", "read_image", "undistort", "wrap_angle",
+    "CameraModel", "Centres", "Detection", "ImageInputError", "LineFit", "MarkCandidate",
+    "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
+    "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
+    "detect_lines", "detect_marks", "find_chessboard", "fit_line", "line_frame",
+    "measure_candidate", "measure_frame", "measure_marks", "plumb_line", "read_image",
+    "undistort", "wrap_angle",
 ]

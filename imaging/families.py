@@ -123,9 +123,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         members = [found[i] for i in g]
 
         def on_ruling(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
-                      members=members, shift=shift) -> bool:
+                      members=members, shift=shift, lo=lo, hi=hi) -> bool:
             # Coarse candidates are in the search's (roi) frame: compare in the image's.
-            u, n = line_frame(c.angle_rad)
             p = _middle(c) + shift
             q = float(p @ line_frame(ref)[1])
             k = (q - origin) / pitch
