@@ -407,7 +407,10 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
         min_length_px = default_min_length((h, w))
     # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
     # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
-    f = max(1, min(int(max(h, w) // 500), int(min_length_px // 25)))
+    # Frames under 1000 px are averaged 2 x 2 from 640 px on (a 640 x 480 frame searched
+    # at full resolution cost more than a 5 MP one at f = 5).
+    side = max(h, w)
+    f = max(1, min(int(side // 500 if side >= 1000 else side // 320), int(min_length_px // 25)))
     hs, ws = h // f, w // f
     small = image[:hs * f, :ws * f].astype(np.float32)
     if f > 1:
