@@ -1,0 +1,86 @@
+"""Families of lines on synthetic ruled scales (synth.ruled): every graduation found, no
+extras, the family's angles consistent (chi2/dof) and normalised errors ~N(0, 1), a tilted
+member flagged."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from align.marks import measure_image
+from align.warnings import mark_warnings
+from imaging import line_frame
+from synth.ruled import RuledSpec, random_ruled, render_ruled
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
+
+
+def _match(res, truth):
+    """Each measured line's truth (nearest middle, within 20 px), and the unmatched ones."""
+    got, extra = {}, 0
+    for r in res:
+        u, n = line_frame(r.angle_rad)
+        t0, t1 = r.measurement.extent_px
+        mid = r.offset_px * n + 0.5 * (t0 + t1) * u
+        d = [np.hypot(*(np.array(g.centre_xy_px) - mid)) for g in truth.lines]
+        k = int(np.argmin(d))
+        if d[k] < 20 and k not in got:
+            got[k] = r
+        else:
+            extra += 1
+    return got, extra
+
+
+def _check(spec):
+    s = render_ruled(spec)
+    res = measure_image(s.image)
+    assert all(r.found for r in res), [r.error for r in res if not r.found]
+    got, extra = _match(res, s.truth)
+    assert extra == 0 and len(got) == len(s.truth.lines)
+    fam = res[0].family
+    assert fam is not None and len(fam.members) == len(res)
+    z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / r.angle_u_rad
+         for k, r in got.items()]
+    # Every line as long as the truth's (not cut by numerals or dust): within 5 %.
+    for k, r in got.items():
+        assert abs(r.length_px - s.truth.lines[k].length_px) < 0.05 * s.truth.lines[k].length_px
+    assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
+    return fam, np.array(z)
+
+
+def test_ruled_scale_every_line_found_quick():
+    fam, z = _check(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
+                              lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    assert fam.dof == len(z) - 1 and np.isfinite(fam.chi2_dof)
+    assert np.max(np.abs(z)) < 4.5
+
+
+def test_tilted_member_flagged():
+    spec = RuledSpec(width=800, height=600, pitch_px=80.0, lengths_px=(120.0, 150.0, 180.0),
+                     tilt=(1, np.deg2rad(0.3)), seed=3)
+    s = render_ruled(spec)
+    res = measure_image(s.image)
+    fam = res[0].family
+    assert fam is not None and len(fam.deviant) == 1
+    bad = next(r for r in res if r.index == fam.deviant[0])
+    assert abs(_wrap(bad.angle_rad - s.truth.line_angle_rad)) > np.deg2rad(0.2)
+    assert not fam.consistent()
+    assert any("not parallel" in w for w in mark_warnings(res))
+
+
+@pytest.mark.slow
+def test_ruled_scale_over_seeds():
+    """Random scales (pitch 80-140 px, any direction, 8-16 bits, 800 x 600): every line
+    found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
+    chis, zs = [], []
+    for seed in range(12):
+        spec = random_ruled(seed, width=800, height=600)
+        spec = RuledSpec(**{**spec.__dict__, "pitch_px": 80 + 5 * seed})
+        fam, z = _check(spec)
+        chis.append(fam.chi2_dof)
+        zs.append(z)
+    z = np.concatenate(zs)
+    assert 0.7 < np.mean(chis) < 1.4, chis
+    assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
