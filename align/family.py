@@ -7,8 +7,9 @@ k1 when applied — whatever :func:`align.marks.measure_image` used for every ma
 Parallelism: the weighted mean angle a_bar = sum(w_i a_i) / sum(w_i), w_i = 1 / u_i^2, and
 chi2 = sum(w_i (a_i - a_bar)^2) on n - 1 degrees of freedom: ~1 per dof when the members
 are parallel and their u right. A member whose z_i = (a_i - a_bar) / sqrt(u_i^2 - u_bar^2)
-exceeds the two-sided normal quantile at alpha / n (Bonferroni over the members) is named:
-a tilted or bent graduation. When chi2 is significant, u(a_bar) is widened by
+exceeds the two-sided normal quantile at alpha / n (Bonferroni over the members) is named
+deviant (a tilted or bent graduation), the worst first, and left out of a_bar and chi2
+(which then run over the n' - 1 others). When chi2 is significant, u(a_bar) is widened by
 sqrt(chi2 / dof) (Birge ratio): the stated u then covers the scatter.
 
 Ruling: each member's middle projected on the mean normal, q_i [px]; the ruling steps k_i
@@ -139,16 +140,25 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
-    w = 1 / np.asarray(angle_u, float) ** 2
-    mean_d = float(np.sum(w * d) / w.sum())
-    u_mean = float(1 / np.sqrt(w.sum()))
+    u_all = np.asarray(angle_u, float)
     n = len(angles)
-    dof = n - 1
-    chi2 = float(np.sum(w * (d - mean_d) ** 2))
-    p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else 1.0
-    z = (d - mean_d) / np.sqrt(np.maximum(np.asarray(angle_u) ** 2 - u_mean**2, 1e-300))
     limit = float(-ndtri(alpha / (2 * n)))
-    deviant = tuple(int(indices[i]) for i in np.flatnonzero(np.abs(z) > limit))
+    keep = np.ones(n, bool)
+    while True:
+        # The mean of the members not (yet) named deviant; the worst beyond the limit goes
+        # (one at a time: a tilted member pulls the mean towards itself).
+        w = 1 / u_all[keep] ** 2
+        mean_d = float(np.sum(w * d[keep]) / w.sum())
+        u_mean = float(1 / np.sqrt(w.sum()))
+        z = (d - mean_d) / np.sqrt(np.maximum(u_all**2 - np.where(keep, u_mean**2, 0), 1e-300))
+        worst = int(np.argmax(np.where(keep, np.abs(z), -1)))
+        if abs(z[worst]) <= limit or keep.sum() <= 2:
+            break
+        keep[worst] = False
+    dof = int(keep.sum()) - 1
+    chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
+    p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else 1.0
+    deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
         u_mean *= np.sqrt(chi2 / dof)
     mean = float(_wrap(ref + mean_d))

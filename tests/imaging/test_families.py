@@ -43,9 +43,10 @@ def _check(spec):
     assert fam is not None and len(fam.members) == len(res)
     z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / r.angle_u_rad
          for k, r in got.items()]
-    # Every line as long as the truth's (not cut by numerals or dust): within 5 %.
-    for k, r in got.items():
-        assert abs(r.length_px - s.truth.lines[k].length_px) < 0.05 * s.truth.lines[k].length_px
+    # Every line as long as the truth's (not cut by numerals or dust in its middle); a
+    # speck over one end hides that end (up to its ~10 px radius).
+    err = np.array([r.length_px - s.truth.lines[k].length_px for k, r in got.items()])
+    assert np.median(np.abs(err)) < 2.0 and np.all(err > -15.0), err
     assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
     return fam, np.array(z)
 
@@ -63,9 +64,9 @@ def test_tilted_member_flagged():
     s = render_ruled(spec)
     res = measure_image(s.image)
     fam = res[0].family
-    assert fam is not None and len(fam.deviant) == 1
-    bad = next(r for r in res if r.index == fam.deviant[0])
-    assert abs(_wrap(bad.angle_rad - s.truth.line_angle_rad)) > np.deg2rad(0.2)
+    got, _ = _match(res, s.truth)
+    tilted = [r.index for k, r in got.items() if s.truth.lines[k].index == s.truth.tilted]
+    assert fam is not None and fam.deviant == tuple(tilted) and len(tilted) == 1
     assert not fam.consistent()
     assert any("not parallel" in w for w in mark_warnings(res))
 
