@@ -4,6 +4,8 @@ member flagged."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -85,3 +87,18 @@ def test_ruled_scale_over_seeds():
     z = np.concatenate(zs)
     assert 0.7 < np.mean(chis) < 1.4, chis
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
+
+
+def test_family_block_saved_validated_and_read_back():
+    from align.contract import validate
+    from align.documents import marks_document
+    from align.marks import MarkResult
+    from axisbase.output import dumps
+
+    s = render_ruled(RuledSpec(width=640, height=480, pitch_px=60.0, seed=2,
+                               lengths_px=(110.0, 140.0, 170.0)))
+    res = measure_image(s.image, max_marks=2)
+    doc = json.loads(dumps(marks_document(res, {}, [])))  # as the file holds it
+    validate(doc, "marks")
+    back = [MarkResult.from_dict(d) for d in doc["marks"]]
+    assert back[0].family == res[0].family
