@@ -86,7 +86,12 @@ def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
         # Runs of lines with no gap wider than MAX_GAP median gaps: the seed's run.
         cuts = np.flatnonzero(gaps > MAX_GAP * med) + 1
         for run in np.split(np.array(same), cuts):
-            if seed in run and len(run) >= MIN_MEMBERS:
+            rp = np.array([_position(cands[i], ref) for i in run])
+            # Lines closer than two widths are the two edges of one thing (or one line found
+            # twice), not a ruling.
+            close = rp.size > 1 and np.min(np.diff(rp)) < max(
+                8.0, 2 * max(cands[i].thickness_px for i in run))
+            if seed in run and len(run) >= MIN_MEMBERS and not close:
                 out.append([int(i) for i in run])
                 left = [i for i in left if i not in run]
     return out
