@@ -226,9 +226,12 @@ def graduations(spec: RuledSpec, rng: np.random.Generator) -> list[tuple[MarkSpe
         # All graduations start on the baseline and run along +u; a tilt turns one about its
         # middle.
         mid = pos * nrm + (spec.baseline_px + length / 2) * u
+        # Offset and position along it in the frame of the wrapped angle (the one stored):
+        # across +-90 deg the normal flips, and with it their signs.
+        ang = wrap_half_turn(float(ang))
         off = float(mid @ np.array([np.sin(ang), np.cos(ang)]))
         ct = float(mid @ np.array([np.cos(ang), -np.sin(ang)]))
-        out.append((MarkSpec(wrap_half_turn(float(ang)), off, length, spec.line_width_px, ct,
+        out.append((MarkSpec(ang, off, length, spec.line_width_px, ct,
                              "round", spec.contrast), kind, j))
     out.sort(key=lambda g: g[2])
     return out

@@ -69,6 +69,9 @@ def test_tilted_member_flagged():
     got, _ = _match(res, s.truth)
     tilted = [r.index for k, r in got.items() if s.truth.lines[k].index == s.truth.tilted]
     assert fam is not None and fam.deviant == tuple(tilted) and len(tilted) == 1
+    # The tilted line itself is measured right (it is the family that is not parallel).
+    for k, r in got.items():
+        assert abs(_wrap(r.angle_rad - s.truth.lines[k].angle_rad)) < 4 * r.angle_u_rad
     assert not fam.consistent()
     assert any("not parallel" in w for w in mark_warnings(res))
 

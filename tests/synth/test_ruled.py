@@ -39,3 +39,13 @@ def test_ruled_reproducible_and_tilt_recorded():
     t = render_ruled(RuledSpec(width=640, height=480, pitch_px=60, tilt=(0, 0.01), seed=1))
     tilted = [g for g in t.truth.lines if g.index == t.truth.tilted]
     assert len(tilted) == 1 and np.isclose(tilted[0].angle_rad, np.pi / 2 + 0.01 - np.pi)
+
+
+def test_tilted_graduation_in_its_own_place_across_the_wrap():
+    """A graduation near 90 deg tilted past it (angle wrapped to near -90 deg) stays where it
+    was (the wrap flips the normal: offset and position along it flip with it)."""
+    spec = RuledSpec(width=640, height=480, pitch_px=80.0, tilt=(1, np.deg2rad(1.0)),
+                     dust=0, dust_on_lines=0, numerals=False, logo=False, seed=3)
+    t = render_ruled(spec).truth
+    xs = sorted(g.centre_xy_px[0] for g in t.lines)
+    assert np.allclose(np.diff(xs), 80.0)
