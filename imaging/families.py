@@ -16,6 +16,7 @@ Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angle
 from __future__ import annotations
 
 from dataclasses import dataclass
+from dataclasses import replace as dc_replace
 
 import numpy as np
 
@@ -25,6 +26,7 @@ from imaging.detect import (
     _dedupe,
     _near,
     _overlap,
+    _shift,
     detect_lines_once,
     line_frame,
     wrap_angle,
@@ -39,6 +41,11 @@ MAX_GAP = 3.0
 """Largest gap between neighbouring members, in units of the family's median gap."""
 MEMBER_FRACTION = 0.5
 """A line joins a family from this fraction of the family's median length."""
+PIECE_FRACTION = 0.15
+"""Pieces of a member cut short (at a numeral, a dust speck) are looked for from this
+fraction of the family's median length."""
+PIECE_ANGLE = np.deg2rad(10.0)
+"""Largest direction difference of such a piece from its member."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -65,6 +72,11 @@ def _middle(c: MarkCandidate) -> np.ndarray:
 def _position(c: MarkCandidate, ref: float) -> float:
     """Where a line's middle lies across the direction ``ref`` [px]."""
     return float(_middle(c) @ line_frame(ref)[1])
+
+
+def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
+    """A coarse candidate of a roi search in the whole image's frame."""
+    return _shift(c, shift) if shift.any() else c
 
 
 def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
@@ -121,6 +133,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     for g in groups:
         ref = found[g[0]].angle_rad
         typical = float(np.median([found[i].length_px for i in g]))
+        longest = max(found[i].length_px for i in g)
         origin, pitch = _ruling(found, g, ref)
         lo = min(_position(found[i], ref) for i in g) - pitch * (GRID_TOLERANCE + 0.5)
         hi = max(_position(found[i], ref) for i in g) + pitch * (GRID_TOLERANCE + 0.5)
@@ -138,7 +151,27 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                     and abs(k - np.rint(k)) < GRID_TOLERANCE
                     and q > lo - pitch * MAX_GAP and q < hi + pitch * MAX_GAP)
 
-        extra = search.candidates(MEMBER_FRACTION * typical, on_ruling)
+        pieces = search.candidates(PIECE_FRACTION * typical)
+        extra = [c for c in pieces if c.length_px >= MEMBER_FRACTION * typical
+                 and on_ruling(c)]
+        # Pieces along a member (it was cut at a numeral or a dust speck) extend it, across
+        # a gap under half the typical length, to at most the longest member's length (the
+        # ridge fades over a speck's halo): its measurement then spans the whole graduation
+        # (the segments under the speck fail the groove model and are left out there).
+        for c in pieces:
+            c = replace_shift(c, shift)
+            for j, o in enumerate(found):
+                # A short piece's direction is poor (a 20 px piece: several degrees); its
+                # middle on the member's line is what counts.
+                if not (o.dark == c.dark and _near(c, o, PIECE_ANGLE, 3.0)):
+                    continue
+                u = line_frame(o.angle_rad)[0]
+                cu = float(_middle(c) @ u)
+                lo_c, hi_c = cu - c.length_px / 2, cu + c.length_px / 2
+                gap = max(lo_c - o.t_end_px, o.t_start_px - hi_c)
+                t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
+                if gap < MEMBER_FRACTION * typical and t1 - t0 <= 1.1 * longest:
+                    found[j] = dc_replace(o, t_start_px=t0, t_end_px=t1)
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         reach = float(np.clip(abs(pitch) - max(o.thickness_px for o in members) - 6, 20, 60))

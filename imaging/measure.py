@@ -7,6 +7,7 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +19,9 @@ from imaging.detect import (
     MarkCandidate,
     Roi,
     default_min_length,
+    line_frame,
     require_single,
+    wrap_angle,
 )
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
@@ -91,10 +94,13 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
-                      where: str = "image", top: float | None = None) -> MarkMeasurement:
+                      where: str = "image", top: float | None = None,
+                      neighbours_px: Sequence[float] = ()) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
-    ``top``: the image's full-scale DN when already known (else from the image)."""
+    ``top``: the image's full-scale DN when already known (else from the image);
+    ``neighbours_px``: signed distances of other lines beside it [px] (see
+    :func:`neighbours`), kept out of the texture's replicas."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
@@ -102,7 +108,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
-    cen = sample_centres(image, pf, where=where, texture=True)
+    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -116,6 +122,26 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf))
+
+
+def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
+               ) -> tuple[float, ...]:
+    """Signed distances along candidate i's normal of the other candidates that run beside it
+    (directions within ``tol_angle``, overlapping it along its length) [px]."""
+    c = cands[i]
+    u, n = line_frame(c.angle_rad)
+    out = []
+    for j, o in enumerate(cands):
+        if j == i or abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
+            continue
+        uo, no = line_frame(o.angle_rad)
+        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
+        ts = sorted(float(p @ u) for p in ends)
+        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
+            continue
+        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
+        out.append(float(mid @ n) - c.offset_px)
+    return tuple(out)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
@@ -201,7 +227,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top)
+            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i))
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)
