@@ -30,7 +30,8 @@ def mark_warnings(results: Sequence) -> list[str]:
         if r.unreported and (r.image, -1) not in seen:
             seen.add((r.image, -1))
             out.append(f"{r.image}: {r.unreported} more line(s) found and not reported "
-                       "(--max-marks; the strongest are reported)")
+                       "(beyond --max-marks, the strongest reported; or lines of a family "
+                       "shorter than --min-length)")
         fam = getattr(r, "family", None)
         if fam is not None and (r.image, fam.members[0]) not in seen:
             seen.add((r.image, fam.members[0]))

@@ -9,6 +9,8 @@ search cut short (at a numeral, a dust speck) — and those that fall on the fam
 (within :data:`GRID_TOLERANCE` pitch of a multiple of the pitch from its members) join it.
 Every family member is reported, whatever ``max_marks`` says; other lines keep that cap, and
 what the cap leaves out is counted in :attr:`Detection.unreported`, never dropped silently.
+With an explicit ``min_length_px`` (the user's), two parallel lines side by side already seed
+the second search, and a family's lines shorter than that are counted as unreported.
 
 Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
 """
@@ -21,6 +23,7 @@ from dataclasses import replace as dc_replace
 import numpy as np
 
 from imaging.detect import (
+    LENGTH_SLACK,
     MarkCandidate,
     Roi,
     _dedupe,
@@ -56,7 +59,8 @@ class Detection:
 
     ``marks``: reported lines (every family member, then the other lines strongest first up
     to ``max_marks``); ``families``: index tuples into ``marks``, one per family, ordered
-    across the lines; ``unreported``: lines found but left out by ``max_marks``.
+    across the lines; ``unreported``: lines found but left out (beyond ``max_marks``, or a
+    family's lines shorter than an explicit ``min_length_px``).
     """
 
     marks: list[MarkCandidate]
@@ -79,7 +83,8 @@ def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
     return _shift(c, shift) if shift.any() else c
 
 
-def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
+def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
+                   ) -> list[list[int]]:
     """Families among candidates (indices, ordered across the lines; see the module doc)."""
     left = list(range(len(cands)))
     out = []
@@ -89,7 +94,7 @@ def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
         same = [i for i in left if cands[i].dark == cands[seed].dark
                 and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
         left = [i for i in left if i != seed]
-        if len(same) < MIN_MEMBERS:
+        if len(same) < min_members:
             continue
         same.sort(key=lambda i: _position(cands[i], ref))
         pos = np.array([_position(cands[i], ref) for i in same])
@@ -103,7 +108,7 @@ def group_families(cands: list[MarkCandidate]) -> list[list[int]]:
             # twice), not a ruling.
             close = rp.size > 1 and np.min(np.diff(rp)) < max(
                 8.0, 2 * max(cands[i].thickness_px for i in run))
-            if seed in run and len(run) >= MIN_MEMBERS and not close:
+            if seed in run and len(run) >= min_members and not close:
                 out.append([int(i) for i in run])
                 left = [i for i in left if i not in run]
     return out
@@ -129,7 +134,11 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     """
     search = detect_lines_once(image, min_length_px, roi=roi, top=top)
     found = list(search.marks)
-    groups = group_families(found) if families else []
+    # A --min-length above the short lines of a scale leaves only its long ones: two of
+    # them side by side seed the search too, and the family's lines below that length are
+    # then counted as found but not reported (never dropped unsaid).
+    groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
+        if families else []
     for g in groups:
         ref = found[g[0]].angle_rad
         typical = float(np.median([found[i].length_px for i in g]))
@@ -148,7 +157,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             k = (q - origin) / pitch
             return (c.dark == members[0].dark
                     and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
-                    and abs(k - np.rint(k)) < GRID_TOLERANCE
+                    # Two lines fix no ruling (their gap may be any multiple of the pitch).
+                    and (len(members) < 3 or abs(k - np.rint(k)) < GRID_TOLERANCE)
                     and q > lo - pitch * MAX_GAP and q < hi + pitch * MAX_GAP)
 
         pieces = search.candidates(PIECE_FRACTION * typical)
@@ -188,10 +198,17 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
+    short: list[int] = []
+    if min_length_px is not None:
+        # The user's shortest line holds for families too: their shorter members are said.
+        short = [i for g in groups for i in g
+                 if found[i].length_px < LENGTH_SLACK * min_length_px]
+        groups = [[i for i in g if i not in short] for g in groups]
+        groups = [g for g in groups if len(g) >= 2]
     in_family = {i for g in groups for i in g}
-    others = [i for i in range(len(found)) if i not in in_family]
+    others = [i for i in range(len(found)) if i not in in_family and i not in short]
     keep = [i for g in groups for i in g] + others[:max_marks]
     index = {old: new for new, old in enumerate(keep)}
     return Detection([found[i] for i in keep],
                      tuple(tuple(index[i] for i in g) for g in groups),
-                     tuple(found[i] for i in others[max_marks:]))
+                     tuple(found[i] for i in others[max_marks:] + short))

@@ -105,3 +105,15 @@ def test_family_block_saved_validated_and_read_back():
     validate(doc, "marks")
     back = [MarkResult.from_dict(d) for d in doc["marks"]]
     assert back[0].family == res[0].family
+
+
+def test_min_length_above_the_short_lines_says_how_many_it_left_out():
+    """--min-length between the short and the medium graduations: the longer ones reported,
+    the short ones of their family counted as found and not reported, and warned."""
+    s = render_ruled(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
+                               lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    res = measure_image(s.image, min_length_px=150.0)
+    kinds = [g.kind for g in s.truth.lines]
+    assert len(res) == len(kinds) - kinds.count("short")
+    assert res[0].unreported == kinds.count("short")
+    assert any("not reported" in w for w in mark_warnings(res))
