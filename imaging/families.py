@@ -157,9 +157,10 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             k = (q - origin) / pitch
             return (c.dark == members[0].dark
                     and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
-                    # Two lines fix no ruling (their gap may be any multiple of the pitch).
-                    and (len(members) < 3 or abs(k - np.rint(k)) < GRID_TOLERANCE)
-                    and q > lo - pitch * MAX_GAP and q < hi + pitch * MAX_GAP)
+                    # A ruling of 3 or more extends over the frame; two lines fix none
+                    # (their gap may be any multiple of the pitch): lines near them only.
+                    and (abs(k - np.rint(k)) < GRID_TOLERANCE if len(members) >= 3
+                         else lo - pitch * MAX_GAP < q < hi + pitch * MAX_GAP))
 
         pieces = search.candidates(PIECE_FRACTION * typical)
         extra = [c for c in pieces if c.length_px >= MEMBER_FRACTION * typical

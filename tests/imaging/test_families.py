@@ -46,9 +46,11 @@ def _check(spec):
     z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / r.angle_u_rad
          for k, r in got.items()]
     # Every line as long as the truth's (not cut by numerals or dust in its middle); a
-    # speck over one end hides that end (up to its ~10 px radius).
-    err = np.array([r.length_px - s.truth.lines[k].length_px for k, r in got.items()])
-    assert np.median(np.abs(err)) < 2.0 and np.all(err > -15.0), err
+    # speck near one end hides the stretch beyond it when that is shorter than the pieces
+    # looked for (PIECE_FRACTION of the typical length): at most a fifth of the line.
+    true_len = np.array([s.truth.lines[k].length_px for k in got])
+    err = np.array([r.length_px for r in got.values()]) - true_len
+    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.2 * true_len), err
     assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
     return fam, np.array(z)
 
@@ -78,13 +80,11 @@ def test_tilted_member_flagged():
 
 @pytest.mark.slow
 def test_ruled_scale_over_seeds():
-    """Random scales (pitch 80-140 px, any direction, 8-16 bits, 800 x 600): every line
+    """Random scales (pitch 40-140 px, any direction, 8-16 bits, 800 x 600): every line
     found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
     chis, zs = [], []
     for seed in range(12):
-        spec = random_ruled(seed, width=800, height=600)
-        spec = RuledSpec(**{**spec.__dict__, "pitch_px": 80 + 5 * seed})
-        fam, z = _check(spec)
+        fam, z = _check(random_ruled(seed, width=800, height=600))
         chis.append(fam.chi2_dof)
         zs.append(z)
     z = np.concatenate(zs)
