@@ -437,7 +437,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             # each segment spends k of its pixels' degrees of freedom.
             npx = bc(np.ones_like(e))
             v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
-        wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
+        # The linear noise model is fitted over the band's levels; below them (a segment's
+        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+        # of a groove is quieter than a quarter of the band's typical variance.
+        floor = max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
+        wgt = 1.0 / np.maximum(v0 + v1 * mu, floor)
         J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
         N = np.empty((nseg, k, k))
         g = np.empty((nseg, k))
