@@ -551,9 +551,15 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
         ms = [out[i] for i in ok]
         mids = []
         for r in ms:
-            u, n = line_frame(r.angle_rad)
-            t0, t1 = r.measurement.extent_px if r.measurement is not None else (0.0, 0.0)
-            mids.append(r.offset_px * n + 0.5 * (t0 + t1) * u)
+            if r.measurement is None:
+                mids.append(r.offset_px * line_frame(r.angle_rad)[1])
+                continue
+            # The extent is along the profile's own line (whose angle may sit across
+            # +-90 deg from the result's).
+            pf = r.measurement.profile
+            u, n = line_frame(pf.angle_rad)
+            t0, t1 = r.measurement.extent_px
+            mids.append(pf.offset_px * n + 0.5 * (t0 + t1) * u)
         fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]),
                           np.array([r.angle_u_rad for r in ms]), np.array(mids),
                           np.array([r.offset_u_px for r in ms]), lens, len(g) - len(ok), alpha)
