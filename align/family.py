@@ -61,7 +61,8 @@ class LineFamily:
     pitch_spread_px : float
         RMS of ``pitch_residuals_px`` [px] (the ruling's non-uniformity, as imaged).
     lens : str
-        What corrected the members for the lens: ``camera model``, ``frame k1``, ``none``.
+        What corrected the members for the lens: ``camera model``, ``frame lens`` (fitted
+        from the frame's lines), ``none``.
     failed : int
         Lines of the family found but not measured (each is its own failed entry).
     """

@@ -40,6 +40,7 @@ def mark_warnings(results: Sequence) -> list[str]:
             out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue
         out += loop_warnings(what, r.loop)
+        out += [n for n in getattr(r, "notes", ()) if n not in out]
         if r.uncertainty_inflation > 1:
             out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
                        "structure no effect explains")

@@ -15,6 +15,8 @@ from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_fra
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
 from imaging.io import read_image
+from imaging.lens import PARAMS as LENS_PARAMS
+from imaging.lens import distort_points, opencv_to_lens, undistort_points
 from imaging.linefit import LineFit, fit_line
 from imaging.measure import (
     MarkMeasurement,
@@ -33,10 +35,10 @@ from imaging.plumbline import (
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
-    "CameraModel", "Centres", "Detection", "ImageInputError", "LineFit", "MarkCandidate",
-    "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
+    "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
+    "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
-    "detect_lines", "detect_marks", "find_chessboard", "fit_line", "line_frame",
-    "measure_candidate", "measure_frame", "measure_marks", "plumb_line", "read_image",
-    "undistort", "wrap_angle",
+    "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
+    "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
+    "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
 ]
