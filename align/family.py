@@ -10,7 +10,10 @@ are parallel and their u right. A member whose z_i = (a_i - a_bar) / sqrt(u_i^2 
 exceeds the two-sided normal quantile at alpha / n (Bonferroni over the members) is named
 deviant (a tilted or bent graduation), the worst first, and left out of a_bar and chi2
 (which then run over the n' - 1 others). When chi2 is significant, u(a_bar) is widened by
-sqrt(chi2 / dof) (Birge ratio): the stated u then covers the scatter.
+sqrt(chi2 / dof) (Birge ratio): the stated u then covers the scatter. The lens the frame
+shares (its named u terms, :func:`align.marks.finish_mark`) is left out of the members' u for
+chi2 — one lens moves them together — and added to the mean's u: per term, the members'
+terms averaged with the mean's weights.
 
 Ruling: each member's middle projected on the mean normal, q_i [px]; the ruling steps k_i
 = round((q_i - q_0) / g_min) (g_min the smallest gap, so missing graduations are skipped);
@@ -45,7 +48,10 @@ class LineFamily:
         The members' mark indices in the image, ordered across the lines.
     angle_rad, angle_u_rad : float
         Weighted mean angle of the members [rad] and its standard uncertainty [rad]
-        (widened by sqrt(chi2/dof) when the members disagree).
+        (widened by sqrt(chi2/dof) when the members disagree), the lens's share included.
+    angle_u_lens_rad : float
+        The lens's share of ``angle_u_rad`` [rad]: per lens term, the members' terms
+        averaged with the mean's weights (added linearly: one lens moves them together).
     chi2, dof, p_value : float, int, float
         Members' angles about the weighted mean: chi2, n - 1, upper-tail probability.
     z : tuple of float
@@ -82,6 +88,7 @@ class LineFamily:
     pitch_spread_px: float
     lens: str = "none"
     failed: int = 0
+    angle_u_lens_rad: float = 0.0
 
     @property
     def chi2_dof(self) -> float:
@@ -103,7 +110,8 @@ class LineFamily:
                 "pitch_px": self.pitch_px, "pitch_u_px": self.pitch_u_px,
                 "steps": list(self.steps), "pitch_residuals_px": list(self.pitch_residuals_px),
                 "pitch_spread_px": self.pitch_spread_px, "lens": self.lens,
-                "failed": self.failed}
+                "failed": self.failed, "angle_u_lens_rad": self.angle_u_lens_rad,
+                "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600)}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineFamily:
@@ -120,7 +128,8 @@ class LineFamily:
                    tuple(num(v) for v in d["z"]), tuple(int(i) for i in d["deviant"]),
                    num(d["pitch_px"]), num(d["pitch_u_px"]), tuple(int(k) for k in d["steps"]),
                    tuple(num(v) for v in d["pitch_residuals_px"]), num(d["pitch_spread_px"]),
-                   str(d.get("lens", "none")), int(d.get("failed", 0)))
+                   str(d.get("lens", "none")), int(d.get("failed", 0)),
+                   num(d.get("angle_u_lens_rad", 0.0)))
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -135,9 +144,12 @@ class LineFamily:
 
 def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 middles: np.ndarray, offset_u: np.ndarray, lens: str = "none",
-                failed: int = 0, alpha: float = 1e-3) -> LineFamily:
-    """The family of lines with these angles [rad] (u [rad]), middles (N, 2) [px, relative
-    to the image centre] (offset u [px]); see the module docstring for the formulas."""
+                failed: int = 0, alpha: float = 1e-3,
+                lens_terms: Sequence[Mapping[str, float]] = ()) -> LineFamily:
+    """The family of lines with these angles [rad] (``angle_u``: each one's own u without
+    the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
+    [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
+    mean's u, not the members' chi2); see the module docstring for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
@@ -162,6 +174,14 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
         u_mean *= np.sqrt(chi2 / dof)
+    u_lens = 0.0
+    if lens_terms:
+        wk = np.where(keep, 1 / u_all**2, 0.0)
+        wk = wk / wk.sum()
+        names = sorted({k for t in lens_terms for k in t})
+        u_lens = float(np.sqrt(sum(sum(wk[i] * abs(lens_terms[i].get(k, 0.0))
+                                       for i in range(n)) ** 2 for k in names)))
+        u_mean = float(np.hypot(u_mean, u_lens))
     mean = float(_wrap(ref + mean_d))
     normal = np.array([np.sin(mean), np.cos(mean)])
     q = np.asarray(middles, float) @ normal
@@ -181,4 +201,4 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     return LineFamily(idx, mean, u_mean, chi2, dof, p, tuple(float(v) for v in z[order]),
                       deviant, float(pitch), float(pitch_u), tuple(int(v) for v in k),
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
-                      failed)
+                      failed, u_lens)

@@ -688,9 +688,14 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
             u, n = line_frame(pf.angle_rad)
             t0, t1 = r.measurement.extent_px
             mids.append(pf.offset_px * n + 0.5 * (t0 + t1) * u)
-        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]),
-                          np.array([r.angle_u_rad for r in ms]), np.array(mids),
-                          np.array([r.offset_u_px for r in ms]), lens, len(g) - len(ok), alpha)
+        # The lens's terms are shared by the members: out of their u for the chi2 of their
+        # angles, into the family mean's u (align.family).
+        shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
+        own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
+                                  for r, t in zip(ms, shared, strict=True)], 1e-30))
+        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
+                          np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
+                          len(g) - len(ok), alpha, shared)
         for i in ok:
             out[i] = replace(out[i], family=fam)
     return out
