@@ -80,7 +80,73 @@ def noise_reach(samples: int) -> float:
     if samples <= 0:
         return SCREEN_SIGMA
     return max(SCREEN_SIGMA, -NormalDist().inv_cdf(TAIL_ALPHA / (2 * samples)))
+R_DROPOUT = ("communication drop-out: rows missing from the log (the time of a row spans more "
+             "than its counts' face interval, or the sequence of faces jumps): the revolutions "
+             "it spans excluded, not stitched")
+# A row's interval is a drop-out when its duration exceeds this many times what its counts
+# take at the log's speed (seconds per count, the chunk's median): the counts of the lost
+# rows are lost with them, so the row after a gap of k rows holds one face interval's counts
+# and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse has both doubled
+# (ratio 1) and a glint both split; a table whose speed changed by a third within one face
+# interval is no table a goniometer runs on.
+DROPOUT_RATIO = 1.5
 R_NOPATTERN = "no clean revolution nearby to predict the face pattern: stretch excluded"
+
+
+def dropouts(count: np.ndarray, dt: np.ndarray | None) -> np.ndarray:
+    """Rows whose interval spans a communication drop-out (see ``DROPOUT_RATIO``): their
+    duration [s] beyond DROPOUT_RATIO times their counts at the median seconds per count.
+    All False without times (then only the count pattern tells, see :mod:`goniometry.faults`).
+    """
+    gap = np.zeros(len(count), bool)
+    if dt is None or len(count) < 2:
+        return gap
+    c = np.asarray(count, float)
+    ok = np.isfinite(dt) & (c > 0)
+    if ok.sum() < 2:
+        return gap
+    per_count = float(np.median(dt[ok] / c[ok]))
+    gap[ok] = dt[ok] > DROPOUT_RATIO * per_count * c[ok]
+    return gap
+
+
+def phase_break(count: np.ndarray, inc: np.ndarray, tol: float,
+                ends_at_ref: bool) -> int | None:
+    """Without times, a drop-out from the count pattern: the first row (index into
+    ``count``, the rows after a face-0 anchor) where the sequence of faces jumps.
+
+    The lost rows take their counts with them, so every logged interval is still one genuine
+    face interval — before the gap they follow the faces 0, 1, 2, ... from the anchor, after
+    it at another phase. A missing autocollimator pulse (two intervals merged) or a spurious
+    one (an interval split) fits no single face, and is left to the walk. Needs faces whose
+    intervals differ by more than ``tol`` (else the phase cannot be seen: None); a whole
+    number of revolutions lost keeps the phase, and then the stitched revolution's intervals
+    are the genuine ones (without times no Earth-rate correction carries the gap).
+    """
+    n = len(inc)
+    d = np.abs(inc[:, None] - inc[None, :])
+    if n < 2 or np.min(d[~np.eye(n, dtype=bool)]) <= 2 * tol:
+        return None
+    fits = np.abs(count[:, None] - inc[None, :]) <= tol
+    one = fits.sum(1) == 1
+    face = np.argmax(fits, 1)
+    expect = 0  # the face interval the next row should be: 0 -> 1 first
+    for i in range(len(count)):
+        if not one[i]:
+            return None  # a pulse fault first: the walk decides
+        if face[i] != expect:
+            # Lost rows (their number mod n: the phase jump), if the next rows go on at the
+            # new phase; else it is something the walk handles.
+            # (or the stretch ends there: at the reference mark the new phase predicts, or at
+            # the end of the log).
+            after = range(1, min(3, len(count) - i))
+            if all(one[i + m] and face[i + m] == (face[i] + m) % n for m in after) and (
+                    len(after) == 2 or not ends_at_ref
+                    or (face[i] + len(after) + 1) % n == 0):
+                return i
+            return None
+        expect = (expect + 1) % n
+    return None
 
 
 def rowsum(a: np.ndarray) -> np.ndarray:
@@ -391,6 +457,7 @@ class _Pass:
             cur = {k: (None if v is None else np.concatenate([self.carry[k], v]))
                    for k, v in cur.items()}
             line0 = self.carry_line0
+        cur["gap"] = dropouts(cur["count"], cur["dt"])
         refs = np.flatnonzero(cur["ref"])
         if not refs.size:
             self.carry, self.carry_line0 = cur, line0
@@ -412,11 +479,11 @@ class _Pass:
             if normal.all():
                 sl = slice(a0 + 1, int(refs[-1]) + 1)  # back to back: views, no gathers
                 C = cur["count"][sl].reshape(-1, n)
-                B = rowany(brk[sl].reshape(-1, n))
+                B = rowany((brk[sl] | cur["gap"][sl]).reshape(-1, n))
                 D = None if dt is None else cur["dt"][sl].reshape(-1, n)
             else:
                 idx = starts[normal][:, None] + np.arange(n)[None, :]
-                C, B = cur["count"][idx], rowany(brk[idx])
+                C, B = cur["count"][idx], rowany(brk[idx] | cur["gap"][idx])
                 D = None if dt is None else cur["dt"][idx]
             Nr = rowsum(C)
             # The pattern (fractions of a revolution) is constant: learnt from the first
@@ -555,13 +622,44 @@ class _Pass:
 
     def _stretch(self, cur: dict, X: np.ndarray, brk: np.ndarray, anchor: int, end: int,
                  nb: np.ndarray, line0: int, tail: bool = False) -> list:
-        """Rows anchor+1 .. end, walked forward from the face-0 pulse of row ``anchor``."""
+        """Rows anchor+1 .. end, walked forward from the face-0 pulse of row ``anchor``.
+
+        A drop-out (a row whose time spans lost rows, see ``dropouts``) cuts the stretch:
+        the revolutions before it are walked, the rows from it to the next reference mark
+        (the revolution it broke) are excluded and listed, and the walk starts again there.
+        Stitched, the revolution's counts would fit the pattern (whole revolutions lost) but
+        its time would carry the gap into the Earth-rate sensitivity.
+        """
+        gap = cur.get("gap")
+        cut = (np.flatnonzero(gap[anchor + 1:end + 1]) + anchor + 1 if gap is not None
+               else np.zeros(0, int))
+        if cut.size:
+            g = int(cut[0])
+            out = []
+            if g - 1 > anchor:
+                out += self._stretch(cur, X, brk, anchor, g - 1, nb, line0, tail)
+            elif tail:
+                self.tail = 0
+            self.exc.add(R_DROPOUT, line0 + g)
+            self.excluded += 1
+            later = np.flatnonzero(cur["ref"][g:end + 1]) + g
+            if later.size and int(later[0]) < end:
+                return out + self._stretch(cur, X, brk, int(later[0]), end, nb, line0, tail)
+            if tail:
+                self.tail += end - g + 1
+            return out
         rows = np.arange(anchor + 1, end + 1)
         inc = self._inc(nb)
         if inc is None:
             self.exc.add(R_NOPATTERN, line0 + int(rows[0]))
             self.excluded += max(1, round(len(rows) / self.n))
             return []
+        if gap is not None and cur["dt"] is None:
+            g = phase_break(np.asarray(cur["count"][anchor + 1:end + 1], float), inc,
+                            self.tol, not tail)
+            if g is not None:
+                gap[anchor + 1 + g] = True  # (cur is this chunk's: the mark stays with it)
+                return self._stretch(cur, X, brk, anchor, end, nb, line0, tail)
         w = walk(X[rows] - X[anchor], cur["ref"][rows] > 0, brk[rows], inc, self.tol)
         good, bad = revolutions_of(w, self.n)
         pulse_rows = np.append(rows, anchor)  # index -1 -> the anchor row
@@ -584,16 +682,38 @@ class _Pass:
             self.armed = None
             return []
         Xe = np.concatenate([[0], X])  # Xe[r + 1]: position of the pulse ending row r
-        rows = np.arange(a0 - 1, -2, -1)  # pulses before the anchor, the arming one last
+        gap = cur.get("gap")
+        if gap is not None and cur["dt"] is None and a0 > 0:
+            # Backwards from the anchor: the first row off the faces' sequence is the one
+            # before the gap.
+            i = phase_break(np.asarray(cur["count"][a0::-1], float), inc[::-1].copy(),
+                            self.tol, False)
+            if i is not None:
+                gap[a0 - i + 1] = True
+        cut = np.flatnonzero(gap[:a0 + 1]) if gap is not None else np.zeros(0, int)
+        if cut.size:
+            # A drop-out in the head: the pulses before its row are at unknown positions
+            # (the lost rows took their counts); walk back to the drop-out's row only.
+            g = int(cut[-1])
+            self.exc.add(R_DROPOUT, line0 + g)
+            rows = np.arange(a0 - 1, g - 1, -1)
+            if not rows.size:
+                self.head, self.armed = a0 + 1, None
+                return []
+            isref = cur["ref"][rows] > 0
+            bk = brk[rows + 1]
+        else:
+            rows = np.arange(a0 - 1, -2, -1)  # pulses before the anchor, the arming one last
+            isref = np.append(cur["ref"][rows[:-1]] > 0, False)
+            # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
+            bk = np.append(brk[rows[:-1] + 1], False)
         x = Xe[a0 + 1] - Xe[rows + 1]
-        isref = np.append(cur["ref"][rows[:-1]] > 0, False)
-        # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
-        bk = np.append(brk[rows[:-1] + 1], False)
         w = walk(x, isref, bk, inc[::-1].copy(), self.tol)
         good, bad = revolutions_of(w, self.n)
         arm = w.face[-1]
-        self.armed = int((-arm) % self.n) if arm > 0 else None
-        out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True)
+        self.armed = int((-arm) % self.n) if arm > 0 and not cut.size else None
+        out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True,
+                           armed=not cut.size)
         pulse_rows = np.append(rows, a0)
         for _, pulses in good:
             r = pulse_rows[pulses][::-1]
@@ -624,7 +744,8 @@ class _Pass:
             te = tr[-1:]
         return (int(r[-1]), c, d, te)
 
-    def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False) -> list:
+    def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False,
+                armed=True) -> list:
         """List every fault of a walk with its line (row -1: the arming pulse, line0 - 1)."""
         n = self.n
         line = (lambda i: line0 + int(rows[i])) if not backward else (
@@ -635,7 +756,7 @@ class _Pass:
         for i, f in enumerate(w.face):
             r = int(rows[i])
             isref = r >= 0 and cur["ref"][r] > 0
-            if f == SPURIOUS and backward and i == len(rows) - 1:
+            if f == SPURIOUS and backward and armed and i == len(rows) - 1:
                 # The arming pulse fits no face: the log was armed between faces (the lead-in
                 # to the first face is not a revolution, and not a fault: incomplete_head).
                 continue
@@ -643,7 +764,8 @@ class _Pass:
                 self.exc.add(R_SPURIOUS, line(i))
                 if isref:
                     self.exc.add(R_REF_WRONG, line(i))
-            elif f > 0 and f % n == 0 and not isref and not (backward and i == len(rows) - 1):
+            elif (f > 0 and f % n == 0 and not isref
+                  and not (backward and armed and i == len(rows) - 1)):
                 self.exc.add(R_REF_FAILED, line(i))
             elif f > 0 and f % n and isref:
                 self.exc.add(R_REF_WRONG, line(i))
