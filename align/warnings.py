@@ -89,4 +89,6 @@ def session_warnings(res) -> list[str]:
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")
+        if f.disagreement is not None and not f.gross:  # (gross: in the stage's error)
+            out.append(f"fusion: {f.disagreement.message()}")
     return out

@@ -17,8 +17,15 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from align.errors import InputError
+from align.fusion.diagnosis import (
+    SourceDisagreement,
+    disagreement_from_dict,
+    leave_one_source_out,
+    name_disagreement,
+)
 from align.fusion.observations import (
     E_NAMES,
+    LEVEL,
     REF,
     ROLL,
     TILT,
@@ -29,7 +36,7 @@ from align.fusion.observations import (
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
 from axisbase.units import ARCSEC
 
-TERM_WIDTH = {TILT: 2}
+TERM_WIDTH = {TILT: 2, LEVEL: 2}
 
 NOMINAL_LIMIT_DEG = 10.0
 """How far an axis, a mark or a platform pose may lie from its declared nominal direction
@@ -51,7 +58,7 @@ a file is wrong (a sign error moves E by hundreds of arc-seconds, many times eve
 inflated u), or an effect no model here describes dominates (an undeclared K2 of 50 ug/g^2
 that a 14-pose tumble cannot separate gives chi2/dof ~ 250) — and an inflated u is no longer
 an uncertainty but a guess."""
-TERM_UNIT = {TILT: "rad", REF: "rad"}
+TERM_UNIT = {TILT: "rad", REF: "rad", LEVEL: "rad"}
 
 
 def _width(name: str) -> int:
@@ -167,6 +174,11 @@ def candidates(stage: FusionStage) -> tuple[Candidate, ...]:
             desc = "azimuth offset of the goniometer's reference face"
         elif name == TILT:
             desc = "tilt of the table axis under the levelled platform (x, y)"
+        elif name == LEVEL:
+            # Separable from E_xZ, E_yZ only where the cameras see those angles (else the
+            # solve finds it rank-deficient and the loop passes it by).
+            desc = ("platform not level: the levelled poses' up direction off the platform's "
+                    "Z (x, y), fixed on the platform")
         else:
             continue
         out.append(Candidate(
@@ -219,6 +231,9 @@ class FusionResult:
     inflation: float
     nuisances: dict[str, tuple[float, float]]
     sources: tuple[str, ...]
+    # When inconsistent: the source that sees another E, and in which angles (None: none
+    # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
+    disagreement: SourceDisagreement | None = None
 
     @property
     def consistent(self) -> bool:
@@ -249,7 +264,8 @@ class FusionResult:
                 f"{U_MISJUDGED_MAX:g} times too small would give): E is not a measurement — "
                 "a wrong input (a sign, a pose label, a unit, a mirrored or swapped image) or "
                 "an effect no model here describes (see the other warnings); worst "
-                f"observations: {worst}")
+                f"observations: {worst}"
+                + (f"; {self.disagreement.message()}" if self.disagreement else ""))
 
     def to_dict(self) -> dict:
         """The fusion's part of a session result: E [rad] and [″] with u, the 6×6 covariance
@@ -264,7 +280,9 @@ class FusionResult:
             "p_value": self.p_value, "uncertainty_inflation": self.inflation,
             "sources": list(self.sources), **self.loop.summary().to_dict(),
             "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in self.nuisances.items()},
-            "observations": [r.to_dict() for r in self.rows]}
+            "observations": [r.to_dict() for r in self.rows],
+            "source_disagreement": (None if self.disagreement is None
+                                    else self.disagreement.to_dict())}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> FusionResult:
@@ -279,7 +297,9 @@ class FusionResult:
                    LoopSummary.from_dict(d), float(d.get("uncertainty_inflation", 1.0)),
                    {k: (float(v["estimate"]), float(v["u"]))
                     for k, v in d.get("nuisances", {}).items()},
-                   tuple(d.get("sources", ())))
+                   tuple(d.get("sources", ())),
+                   (None if not d.get("source_disagreement")
+                    else disagreement_from_dict(d["source_disagreement"])))
 
 
 def _check_determined(stage: FusionStage) -> None:
@@ -323,6 +343,15 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
                                        b.unit_of(k)))
     nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
             for k, n in enumerate(sol.names) if k >= 6}
+    sources = tuple(dict.fromkeys(b.source for b in stage.blocks))
+    named = None
+    if loop.unexplained_structure and len(sources) > 1:
+        layout = stage._layout(loop.terms)
+        starts = np.cumsum([0, *(len(b.values) for b in stage.blocks)])
+        rows_of = [(src, np.concatenate([np.arange(starts[k], starts[k + 1])
+                                         for k, b in enumerate(stage.blocks)
+                                         if b.source == src])) for src in sources]
+        named = name_disagreement(leave_one_source_out(
+            lambda p: stage._residual(p, layout), sol.params, rows_of), alpha)
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
-                        tuple(rows), loop, inflation, nuis,
-                        tuple(dict.fromkeys(b.source for b in stage.blocks)))
+                        tuple(rows), loop, inflation, nuis, sources, named)
