@@ -25,37 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from scipy.stats import beta  # noqa: E402
 
 from align.session import load_session, run_session  # noqa: E402
+from align.session.decisions import STAGES, decisions  # noqa: E402
 from synth.session import SessionSpec, write_session  # noqa: E402
-
-STAGES = ("calibration", "goniometer", "marks", "fusion")
-
-
-def decisions(res) -> dict[str, dict[str, bool]]:
-    """Per stage: structure flagged, effect added, refused (and, fusion, a source named)."""
-    failed = {e.stage for e in res.errors}
-    marks = [r for _, r in res.marks]
-    out = {
-        "calibration": {
-            "structure": bool(res.calibration and res.calibration.loop.unexplained_structure),
-            "effect": bool(res.calibration and res.calibration.loop.effects),
-            "refused": "calibration" in failed},
-        "goniometer": {
-            "structure": bool(res.gonio and res.gonio.loop
-                              and res.gonio.loop.unexplained_structure),
-            "effect": bool(res.gonio and res.gonio.loop and res.gonio.loop.effects),
-            "refused": "goniometer" in failed},
-        "marks": {
-            "structure": any(r.loop is not None and r.loop.unexplained_structure
-                             for r in marks),
-            "effect": any(r.loop is not None and r.loop.effects for r in marks),
-            "refused": any(s.startswith("mark") for s in failed)},
-        "fusion": {
-            "structure": bool(res.fusion and res.fusion.loop.unexplained_structure),
-            "effect": bool(res.fusion and res.fusion.loop.effects),
-            "refused": "fusion" in failed or res.fusion is None,
-            "source named": bool(res.fusion and res.fusion.disagreement is not None)},
-    }
-    return out
 
 
 def upper95(k: int, n: int) -> float:

@@ -43,6 +43,8 @@ FLUSH_ROWS = 1 << 15
 # need >= 8 blocks (below that u rests on a handful of values and is not a standard
 # uncertainty anyone can rely on).
 MIN_REVOLUTIONS = 8
+# Revolutions on each side of a face-pattern change (see _Pass._pattern_change).
+PATTERN_WINDOW = 8
 # Reference marks this many revolutions apart decide the log's faces per revolution early.
 FACE_COUNT_SEGMENTS = 16
 
@@ -147,6 +149,57 @@ def phase_break(count: np.ndarray, inc: np.ndarray, tol: float,
             return None
         expect = (expect + 1) % n
     return None
+
+
+def revolution_hash(counts: np.ndarray) -> np.ndarray:
+    """A 64-bit hash of each row of counts (polynomial, wrapping: numpy's uint64 arithmetic
+    wraps without a word)."""
+    c = np.asarray(counts).astype(np.int64).astype(np.uint64)
+    h = np.zeros(len(c), np.uint64)
+    for j in range(c.shape[1]):
+        h = h * np.uint64(1000003) + c[:, j]
+    return h
+
+
+def repeated_block(h: np.ndarray, window: int = 16) -> tuple[int, int, int] | None:
+    """The longest block of revolutions repeated count for count elsewhere in the log, when
+    it spans at least a quarter of the log (and ``window`` revolutions) and lies beside its
+    copy: (first revolution, first of its repeat, length), else None.
+
+    Counts are quantised (+-1) with the autocollimator's jitter on top, so two stretches of
+    a real log agree count for count over a few revolutions at most by chance, never over a
+    quarter of a log of many revolutions; a log written twice, or a block of it pasted
+    again, does. Candidate offsets come from equal windows of ``window`` revolution hashes.
+    """
+    R = len(h)
+    need = max(window, R // 4)
+    if R < window + need:
+        return None
+    key = np.zeros(R - window + 1, np.uint64)
+    for k in range(window):
+        key = key * np.uint64(0x9E3779B97F4A7C15) + h[k:R - window + 1 + k]
+    order = np.argsort(key, kind="stable")  # (ties in position order)
+    ks = key[order]
+    same = ks[1:] == ks[:-1]
+    if not same.any():
+        return None
+    offsets = (order[1:] - order[:-1])[same]
+    vals, cnt = np.unique(offsets[offsets > 0], return_counts=True)
+    if not len(vals):
+        return None
+    d = int(vals[np.argmax(cnt)])
+    eq = np.concatenate([[False], h[:-d] == h[d:], [False]])
+    edges = np.flatnonzero(np.diff(eq.astype(np.int8)))
+    starts, ends = edges[::2], edges[1::2]
+    k = int(np.argmax(ends - starts))
+    run = int(ends[k] - starts[k])
+    # A copy lies beside its block (d >= run); a log whose revolutions repeat with a short
+    # period (a steady table, a whole number of counts a revolution, no jitter: every
+    # revolution alike) matches itself at that period over nearly all of it (d < run) —
+    # no sign of a copy, and nothing a copy could be told apart from.
+    if run < need or d < run:
+        return None
+    return int(starts[k]), int(starts[k]) + d, run
 
 
 def rowsum(a: np.ndarray) -> np.ndarray:
@@ -284,6 +337,9 @@ class RevolutionStats:
     # Called once with the first ``on_kept_at`` kept revolutions (see read_revolutions).
     on_kept: Callable | None = None
     on_kept_at: int = 0
+    # One 64-bit hash of each revolution's counts, in order (8 bytes a revolution): a block
+    # of the log repeated (see ``repeated_block``).
+    hashes: list = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.s1 = np.zeros(2 * self.n_faces)
@@ -308,6 +364,7 @@ class RevolutionStats:
             correct=None) -> None:
         if len(counts) == 0:
             return
+        self.hashes.append(revolution_hash(counts))
         counts = counts.astype(float)
         if correct is not None and dt is not None:
             counts = correct(counts, dt)
@@ -408,6 +465,9 @@ class _Pass:
         self.chunks = 0
         self.seg_lengths = np.zeros(0, np.int64)  # rows between reference marks: how many
         self.faces_checked = False
+        # The last PATTERN_WINDOW revolutions' face fractions and first lines (a pattern
+        # change at a chunk boundary).
+        self.last_fracs: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ thresholds
     @property
@@ -440,6 +500,36 @@ class _Pass:
         dev = np.abs(C - self.pattern[None, :] * N[:, None])
         thr = SCREEN_SIGMA * (self.sigma or np.sqrt(1 / 6))
         return rowall(dev <= thr)
+
+    def _pattern_change(self, frac: np.ndarray, N: np.ndarray, lines: np.ndarray) -> None:
+        """Refuse a log whose face pattern changes (two tables' logs concatenated): the
+        median fractions of PATTERN_WINDOW consecutive revolutions before and after some
+        revolution differ by more than the match tolerance on some face. A median of 8 is
+        the pattern within 0.6 sigma and ignores up to 3 faulty revolutions; the faces of
+        one table do not move by ``tol`` counts (several arc-seconds) within a run."""
+        from numpy.lib.stride_tricks import sliding_window_view
+
+        w = PATTERN_WINDOW
+        if self.last_fracs is not None:
+            frac = np.concatenate([self.last_fracs[0], frac])
+            lines = np.concatenate([self.last_fracs[1], lines])
+            N = np.concatenate([np.full(len(self.last_fracs[0]), np.median(N)), N])
+        if len(frac) < 2 * w:
+            return
+        med = np.median(sliding_window_view(frac, (w, frac.shape[1]))[:, 0], axis=1)
+        step = np.abs(med[w:] - med[:-w]) * np.median(N)  # window ending at m vs starting there
+        k = int(np.argmax(step.max(1)))
+        face = int(np.argmax(step[k]))
+        if step[k, face] <= self.tol:
+            return
+        # The first revolution of the window after the change; say where and by how much.
+        m = k + w
+        counts = float((med[m, face] - med[k, face]) * np.median(N))
+        arcsec = float((med[m, face] - med[k, face]) * 360 * 3600)
+        raise LogError(f"{self.path}:{int(lines[m])}: the face pattern changes here (the "
+                       f"interval after face {face} by {counts:+.0f} counts, {arcsec:+.1f}″; "
+                       f"one table's faces stay within {self.tol:.1f} counts): two tables' "
+                       "logs concatenated? Measure each log alone")
 
     # ------------------------------------------------------------------ streaming
     def feed(self, ch) -> None:
@@ -493,6 +583,12 @@ class _Pass:
                 good = ~B
                 self._learn(C[good] / Nr[good, None], Nr[good])
             ok = ~B & self._screen(C, Nr)
+            if int((~ok & ~B).sum()) >= PATTERN_WINDOW:  # (cheap gate: a change fails the screen)
+                self._pattern_change(C[~B] / Nr[~B, None], Nr[~B],
+                                     line0 + starts[normal][~B])
+            if np.any(~B):
+                keep = np.flatnonzero(~B)[-PATTERN_WINDOW:]
+                self.last_fracs = (C[keep] / Nr[keep, None], line0 + starts[normal][keep])
             seg_used = np.flatnonzero(normal)[ok]
             C_used = C[ok]
             all_ok = bool(ok.all())
@@ -583,6 +679,16 @@ class _Pass:
             for _, c, d, te in got:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
+        if self.stats.hashes:
+            rep = repeated_block(np.concatenate(self.stats.hashes))
+            if rep is not None:
+                a, b, m = rep
+                line = 2 + self.head + b * self.n  # (exact when nothing was excluded before)
+                raise LogError(
+                    f"{path}:{line}: usable revolutions {b + 1}-{b + m} repeat revolutions "
+                    f"{a + 1}-{a + m} count for count ({m} revolutions; chance never does "
+                    "that): the log written twice, or a block of it pasted again? Remove "
+                    "the copy")
         self.stats.hand_over()  # (a log shorter than on_kept_at: what there is)
         self._tails()
         if self.stats.n < MIN_REVOLUTIONS:
