@@ -106,9 +106,11 @@ def test_clean_logs_name_no_dropout(tmp_path):
 def test_dropouts_over_many_logs_normalised_errors(tmp_path):
     """400 logs (100 per combination of times and latitude), a drop-out anywhere in each:
     every visible drop-out named, the normalised errors' RMS within the chi-square bounds
-    (3 free angles a log; 0.1 % two-sided) and no log's worst |error|/u beyond 4.5 or, where
-    its drop-out-free twin is already beyond (the batch-means u of a 120-revolution unsteady
-    log has 5-10 degrees of freedom: twins reach 6.4), beyond the twin's + 1."""
+    (3 free angles a log; 0.1 % two-sided), and no log's worst |error|/u beyond 4.5 unless
+    its drop-out-free twin is off by as much: a slow unsteady table without times carries the
+    Earth rate's unbounded bias (README: "without times it can be neither removed nor
+    bounded") and its batch-means u has 5-10 degrees of freedom — the twins reach 6.4 u. There
+    the drop-out must not move the angles from the twin's by more than 4 of their u."""
     from scipy.stats import chi2
 
     zs, missed, worse = [], [], []
@@ -120,9 +122,10 @@ def test_dropouts_over_many_logs_normalised_errors(tmp_path):
         zs.append(z)
         worst = float(np.max(np.abs(z)))
         if worst > 4.5:
-            _, zc = measure(spec, simulate(spec), lat, tmp_path / f"c{seed}.csv")
-            if worst > max(4.5, float(np.max(np.abs(zc))) + 1.0):
-                worse.append((seed, worst))
+            twin, _ = measure(spec, simulate(spec), lat, tmp_path / f"c{seed}.csv")
+            moved = np.abs(run.angles.angles_rad - twin.angles.angles_rad) / run.angles.u_rad
+            if moved.max() > 4.0:
+                worse.append((seed, worst, float(moved.max())))
         if (wt or k % N_FACES) and not named(run, r0):
             missed.append((seed, k, r0))
     zs = np.array(zs)
