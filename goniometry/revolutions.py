@@ -161,18 +161,23 @@ def revolution_hash(counts: np.ndarray) -> np.ndarray:
     return h
 
 
-def repeated_block(h: np.ndarray, window: int = 16) -> tuple[int, int, int] | None:
-    """The longest block of revolutions repeated count for count elsewhere in the log, when
-    it spans at least a quarter of the log (and ``window`` revolutions) and lies beside its
-    copy: (first revolution, first of its repeat, length), else None.
+def repeated_block(h: np.ndarray, window: int = 16, least: int = 32
+                   ) -> tuple[int, int, int] | None:
+    """A log written twice: a block of half its revolutions (and at least ``least``)
+    repeated count for count beside itself: (first revolution, first of its repeat,
+    length), else None.
 
-    Counts are quantised (+-1) with the autocollimator's jitter on top, so two stretches of
-    a real log agree count for count over a few revolutions at most by chance, never over a
-    quarter of a log of many revolutions; a log written twice, or a block of it pasted
-    again, does. Candidate offsets come from equal windows of ``window`` revolution hashes.
+    Why half and not any block: a steady table turns a nearly constant fraction of a count
+    further each revolution, so its counts (quantised, with the autocollimator's jitter on
+    top, ~0.1 count) come back count for count after some near-period — over tens of
+    revolutions by chance (29 of a 120-revolution log was seen). Jitter makes each
+    revolution differ with probability ~0.1 at such a return, so a match over half a log
+    of >= 64 revolutions (0.9^32 ~ 3 %, times the few-percent chance of a near-period that
+    close) is no chance. A shorter block pasted again is not detected. Candidate offsets
+    come from equal windows of ``window`` revolution hashes.
     """
     R = len(h)
-    need = max(window, R // 4)
+    need = max(least, window, (R - 1) // 2)
     if R < window + need:
         return None
     key = np.zeros(R - window + 1, np.uint64)
@@ -679,7 +684,7 @@ class _Pass:
             for _, c, d, te in got:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
-        if self.stats.hashes:
+        if self.stats.hashes and not self.has_time:  # (with times the reader refuses a copy)
             rep = repeated_block(np.concatenate(self.stats.hashes))
             if rep is not None:
                 a, b, m = rep

@@ -93,3 +93,21 @@ def test_long_clean_logs_without_times_are_not_taken_for_copies(tmp_path, jitter
                  jitter_rad=jitter * ARCSEC, latitude_deg=lat)
         run = measure_log(p, N_FACES)
         assert run.summary.stats.n > 19000
+
+
+def _short_steady_logs_measured(tmp_path, logs: int) -> None:
+    for seed in range(logs):
+        p = _log(tmp_path, f"c{seed}", revolutions=120, seed=100 + seed, with_time=False,
+                 rev_per_s=float(np.random.default_rng(seed).uniform(0.2, 5.0)))
+        assert measure_log(p, N_FACES).summary.stats.n >= 110
+
+
+def test_short_steady_logs_without_times_repeating_by_chance_are_measured(tmp_path):
+    """A steady table's counts come back count for count after a near-period (29 of 120
+    revolutions was seen): such 120-revolution logs without times are measured."""
+    _short_steady_logs_measured(tmp_path, 10)
+
+
+@pytest.mark.slow
+def test_many_short_steady_logs_without_times_are_measured(tmp_path):
+    _short_steady_logs_measured(tmp_path, 300)
