@@ -12,6 +12,17 @@ logs, ``ImageInputError`` for images), so one ``except InputError`` catches them
 """
 
 
+EXIT_OK = 0
+"""Exit status: success."""
+EXIT_INTERNAL = 1
+"""Exit status: an internal error (a bug to report)."""
+EXIT_INPUT = 2
+"""Exit status: bad input or usage, or a result that cannot be trusted (written, ``ok``
+false)."""
+EXIT_INTERRUPTED = 130
+"""Exit status: interrupted (Ctrl-C, SIGINT); a SIGTERM gives 143."""
+
+
 class AxisAlignError(Exception):
     """Base of every error this tool raises on purpose."""
 

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Protocol
 
 from align.errors import InputError
+from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK
 
 Summary = dict
 OnDone = Callable[[Summary], None]
@@ -190,6 +191,60 @@ def skipped(job: SessionJob) -> Summary:
             "skipped": True, "json": doc, "warnings": warnings,
             "outputs": {k: v for k, v in (("json", job.json), ("report", job.report),
                                           ("cal", job.cal)) if v and Path(v).is_file()}}
+
+
+def resume(jobs: Sequence[SessionJob]) -> tuple[list[Summary], list[SessionJob]]:
+    """``--resume``: the summaries of the jobs a previous batch finished (:func:`skipped`)
+    and the jobs still to run."""
+    done = [j for j in jobs if is_complete(j)]
+    return [skipped(j) for j in done], [j for j in jobs if j not in done]
+
+
+@dataclass(frozen=True)
+class BatchRow:
+    """What a batch says of one session: the verdict, the largest |E| and u [″], the
+    fusion's chi2 on its degrees of freedom (None when no result JSON), the outputs in place
+    and, for a session not ok, why."""
+
+    session: str
+    ok: bool
+    skipped: bool
+    outputs: dict
+    e_max_arcsec: float | None = None
+    u_max_arcsec: float | None = None
+    chi2: float | None = None
+    dof: int | None = None
+    consistent: bool = True
+    error: str | None = None
+
+
+def batch_row(summary: Summary) -> BatchRow:
+    """The :class:`BatchRow` of a session's summary (:func:`run_job`, :func:`skipped`,
+    :func:`crashed`)."""
+    js = summary.get("json")
+    error = None
+    if not summary["ok"]:
+        error = summary.get("error") or "; ".join(
+            f"{e['stage']}: {e['message']}" for e in (js or {}).get("errors", []))
+    common = {"session": summary["session"], "ok": summary["ok"],
+              "skipped": bool(summary.get("skipped")),
+              "outputs": dict(summary.get("outputs", {})), "error": error}
+    if js is None or js.get("misalignment_arcsec") is None:
+        return BatchRow(**common)
+    E = [abs(v) for row in js["misalignment_arcsec"] for v in row]
+    U = [v for row in js["misalignment_u_arcsec"] for v in row]
+    return BatchRow(**common, e_max_arcsec=float(max(E)), u_max_arcsec=float(max(U)),
+                    chi2=js["chi2"], dof=js["dof"],
+                    consistent=not js["unexplained_structure"])
+
+
+def exit_status(summaries: Sequence[Summary]) -> int:
+    """The exit status of ``align run`` (one session or a batch): 1 if a session hit an
+    internal error, else 2 if a session failed (bad input, or a failed stage: its result is
+    written with ``ok: false``), else 0."""
+    if any(not r["ok"] and not r.get("bad_input", False) for r in summaries):
+        return EXIT_INTERNAL
+    return EXIT_INPUT if any(not r["ok"] for r in summaries) else EXIT_OK
 
 
 # ----------------------------------------------------------------------------- executors

@@ -709,13 +709,13 @@ def test_run_json_to_stdout_and_not_for_a_batch(base, capsys):
 
 
 def test_ctrl_c_exits_130(monkeypatch, capsys):
-    import align.cli as cli
+    import align.commands.gonio
 
     def interrupted(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli, "cmd_gonio", interrupted)
-    assert cli.main(["gonio", "x.csv", "--faces", "a,b"]) == 130
+    monkeypatch.setattr(align.commands.gonio, "cmd_gonio", interrupted)
+    assert main(["gonio", "x.csv", "--faces", "a,b"]) == 130
     assert "interrupted" in capsys.readouterr().err
 
 

@@ -158,11 +158,12 @@ def test_pose_means_without_pose_column(tmp_path, capsys):
                                           ("-,-,-", (-1.0,) * 3), ("-,+,-", (-1.0, 1.0, -1.0)),
                                           ("+,-,+", (1.0, -1.0, 1.0))])
 def test_scale_sign_as_the_help_writes_it(given, signs):
-    from align.cli import _attach_signs, _signs
+    from align.commands.args import attach_signs
+    from align.commands.args import signs as parse_signs
 
-    args = build_parser().parse_args(_attach_signs(["calibrate", "s.csv", "--scale-sign",
-                                                    given]))
-    assert _signs(args.scale_sign) == signs
+    args = build_parser().parse_args(attach_signs(["calibrate", "s.csv", "--scale-sign",
+                                                   given]))
+    assert parse_signs(args.scale_sign) == signs
 
 
 def test_scale_sign_of_two_axes_is_refused_naming_the_flag(tmp_path, capsys):

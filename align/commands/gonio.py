@@ -1,0 +1,107 @@
+"""``align gonio``: face angles from a ring-laser counter log."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+from align.commands.args import (
+    ALPHA,
+    UsageError,
+    distinct_files,
+    faces,
+    latitude_range,
+    nominal,
+    number,
+)
+from align.commands.common import plan, say, settings, warn, wrote
+from align.commands.parents import tables
+
+
+def cmd_gonio(args: argparse.Namespace) -> int:
+    # (align.documents, align.warnings and align.present import the loop, i.e. scipy: after
+    # the pass, which imports it on a thread while it waits on the parser)
+    from align.gonio import measure_log
+    from axisbase.table import parse_column_map
+
+    names = faces(args.faces)
+    nominal_deg = nominal(args.nominal, len(names))
+    inputs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
+    if args.reverse_log:
+        distinct_files(args.log, args.reverse_log, "log", "--reverse-log")
+    cols = parse_column_map(args.columns)
+    outs = plan(args, inputs)
+    out, plot = (outs.add("--json", args.json, stdout_ok=True),
+                 outs.add("--plot", args.plot, folder=True))
+    run = _measure(measure_log, args, names, cols)
+    _show_gonio(run, names, nominal_deg, plot)
+    if out is not None:
+        _write_gonio(args, run, names, nominal_deg, out, inputs)
+    return 0
+
+
+def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], cols: dict):
+    from goniometry import FaceCountError
+
+    if args.latitude is not None and args.latitude_range is not None:
+        raise UsageError("--latitude-range: give it or --latitude, not both")
+    try:
+        return measure_log(args.log, len(names), args.latitude,
+                           1 if args.direction == "ccw" else -1, args.alpha,
+                           reverse_log=args.reverse_log, steady_table=args.steady_table,
+                           columns=cols, latitude_range_deg=args.latitude_range)
+    except FaceCountError as exc:
+        raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} has "
+                         f"{exc.found} pulses per revolution") from None
+
+
+def _nominal_rad(nominal_deg: list[float] | None):
+    import numpy as np
+
+    return None if nominal_deg is None else np.deg2rad(nominal_deg)
+
+
+def _show_gonio(run, names: list[str], nominal_deg: list[float] | None, plot) -> None:
+    from align.present import gonio_lines
+    from align.warnings import gonio_warnings
+
+    say(gonio_lines(run, names, _nominal_rad(nominal_deg)))
+    warn(gonio_warnings(run, names, _nominal_rad(nominal_deg)))
+    if plot is not None:
+        from align.plots import plot_gonio
+        from goniometry import kept_table
+
+        print(f"plot: {plot_gonio(kept_table(run.summary)[0], run.angles, names, plot)}")
+
+
+def _write_gonio(args, run, names, nominal_deg, out, inputs) -> None:
+    # (the document hashes the logs: only when written)
+    from align.documents import gonio_document
+    from axisbase.output import write_json
+
+    doc = gonio_document(run, names, _nominal_rad(nominal_deg), settings(args), inputs)
+    wrote(write_json(out, doc, args.force))
+
+
+def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
+    g = add("gonio", "face angles from a ring-laser counter log",
+            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"))
+    g.add_argument("log", help="CSV count,counter,ref[,t]")
+    g.add_argument("--faces", required=True, help="face names in passing order, e.g. ref,z,y,x")
+    g.add_argument("--nominal", help="nominal angles [deg] summing to 360, e.g. 90,90,90,90")
+    g.add_argument("--latitude", type=number(-90, 90), metavar="DEG",
+                   help="site latitude [deg] (Earth-rate correction)")
+    g.add_argument("--latitude-range", type=latitude_range, metavar="LO,HI",
+                   help="without --latitude: the latitudes the site may have [deg]; bounds "
+                   "the Earth-rate term carried in u (default: all latitudes)")
+    g.add_argument("--direction", choices=["ccw", "cw"], default="ccw",
+                   help="table rotation seen from above")
+    g.add_argument("--reverse-log", help="a log of the same faces with the table turning the "
+                   "other way: the angles are then the mean of both directions")
+    g.add_argument("--steady-table", action="store_true",
+                   help="the table turns at constant speed: angles from the pulse times "
+                   "(below the count quantisation) when the counts confirm it")
+    g.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
+    g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
+    g.add_argument("--json", help="results JSON ('-': stdout)")
+    g.set_defaults(func=cmd_gonio)

@@ -1,0 +1,75 @@
+"""The ``align`` command. Exit status: 0 success; 2 bad input or usage, or a result that cannot
+be trusted (a failed stage: the result is still written, with ``ok: false``); 1 internal
+error; 130 interrupted (Ctrl-C, SIGINT); 143 stopped (SIGTERM).
+
+The commands parse arguments and print; what they compute lives in the library, and how a
+result reads on the terminal in :mod:`align.present`. Heavy libraries (numpy, scipy, OpenCV,
+matplotlib, pyarrow) are imported inside the command functions, so ``align --help`` starts in
+a fraction of a second.
+"""
+
+from __future__ import annotations
+
+import io
+import sys
+import traceback
+from collections.abc import Sequence
+
+from align.commands.args import attach_signs
+from align.commands.parser import build_parser
+from axisbase.console import console, setup_logging
+from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, InputError
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``align`` with ``argv`` (default: the command line); returns the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    given_out, given_err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = console(sys.stdout), console(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        for s in (sys.stdout, sys.stderr):
+            try:
+                s.flush()
+            except (OSError, ValueError):
+                pass
+        sys.stdout, sys.stderr = given_out, given_err
+
+
+def _main(argv: list[str]) -> int:
+    from axisbase.output import set_real_stdout
+    from axisbase.provenance import set_command
+    from axisbase.stop import Stopped, raise_on_signals, restore
+
+    try:
+        args = build_parser().parse_args(attach_signs(argv))
+    except SystemExit as exc:
+        return int(exc.code or 0) and EXIT_INPUT
+    setup_logging("align", getattr(args, "quiet", False), getattr(args, "verbose", False))
+    set_command(["align", *argv])
+    real_stdout = sys.stdout
+    set_real_stdout(real_stdout)
+    handlers = raise_on_signals()  # SIGTERM unwinds like Ctrl-C: no half-written outputs
+    if getattr(args, "json", None) == "-":
+        # The JSON owns standard output: messages go to stderr, or nowhere with -q (which
+        # leaves stderr to warnings and errors).
+        sys.stdout = io.StringIO() if getattr(args, "quiet", False) else sys.stderr
+    try:
+        return int(args.func(args))
+    except InputError as exc:
+        print(f"align {args.cmd}: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except Stopped as stop:
+        print(f"align {args.cmd}: stopped ({stop})", file=sys.stderr)
+        return stop.exit_status
+    except KeyboardInterrupt:
+        print(f"align {args.cmd}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception:
+        print(f"align {args.cmd}: internal error (please report):", file=sys.stderr)
+        traceback.print_exc()
+        return EXIT_INTERNAL
+    finally:
+        sys.stdout = real_stdout
+        restore(handlers)

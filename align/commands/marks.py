@@ -1,0 +1,136 @@
+"""``align marks`` (scribe marks in images) and ``align camera`` (a camera from chessboard
+photographs)."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+from align.commands.args import ALPHA, POSITIVE, number, pattern, unique
+from align.commands.common import log, plan, progress, say, settings, warn, wrote
+
+
+def cmd_marks(args: argparse.Namespace) -> int:
+    from align.marks import measure_files
+    from imaging import CameraModel, check_roi
+
+    unique(args.images, "images")
+    roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
+    camera = CameraModel.load(args.camera) if args.camera else None
+    inputs = [*args.images] + ([args.camera] if args.camera else [])
+    outs = plan(args, inputs)
+    out, plot_dir = (outs.add("--json", args.json, stdout_ok=True),
+                     outs.add("--plot", args.plot, folder=True))
+    batch = measure_files(progress(args.images, "marks"), camera, alpha=args.alpha,
+                          max_marks=args.max_marks, expect_one=args.one, roi=roi,
+                          min_length_px=args.min_length)
+    results, failed, internal = _show_marks(batch, plot_dir)
+    _write_marks(args, results, inputs, out)
+    return _marks_status(failed, internal)
+
+
+def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:
+    from align.documents import marks_document
+    from axisbase.output import write_json
+
+    doc = marks_document(results, settings(args), inputs)
+    warn(doc["warnings"])
+    if out is not None:
+        wrote(write_json(out, doc, args.force))
+
+
+def _show_marks(batch, plot_dir) -> tuple[list, int, int]:
+    """Print each image's marks as they are measured (and plot them); the results, the
+    count of images that failed and of those that hit an internal error."""
+    from align.plots import plot_mark
+    from align.present import mark_lines
+    from imaging import read_image
+
+    results, failed, internal = [], 0, 0
+    for res in batch:
+        for r in res:
+            results.append(r)
+            if not r.found:
+                failed += 1
+                internal += r.internal_error
+                log.error("%s: FAILED: %s", r.image, str(r.error).removeprefix(f"{r.image}: "))
+                continue
+            say(mark_lines(r))
+            if plot_dir is not None:
+                img = read_image(r.image) if r.measurement is not None else None
+                print(f"    plot: {plot_mark(r, plot_dir, img)}")
+    return results, failed, internal
+
+
+def _marks_status(failed: int, internal: int) -> int:
+    if internal:
+        log.error("align marks: %d image(s) hit an internal error (please report); the "
+                  "others were measured", internal)
+    return 1 if internal else 2 if failed else 0
+
+
+def cmd_camera(args: argparse.Namespace) -> int:
+    from align.documents import camera_document
+    from align.present import camera_lines
+    from axisbase.output import write_json
+    from imaging import calibrate_chessboard
+
+    cols, rows = pattern(args.pattern)
+    unique(args.images, "images")
+    out = plan(args, args.images).add("--json", args.json, stdout_ok=True)
+    imgs = _read_boards(args.images)
+    model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
+                                         fix_k3=args.fix_k3, fix_aspect=args.fix_aspect)
+    for k, v in failed.items():
+        log.warning("%s: skipped: %s", k, v)
+    say(camera_lines(model))
+    if out is not None:
+        wrote(write_json(out, camera_document(model, settings(args), args.images), args.force))
+    return 0
+
+
+def _read_boards(paths: list[str]) -> dict:
+    """The photographs that can be read, as 8- or 16-bit arrays (the others skipped, with a
+    warning naming them)."""
+    import numpy as np
+
+    from imaging import ImageInputError, read_image
+
+    imgs = {}
+    for p in paths:
+        try:
+            img = read_image(p)
+            imgs[p] = img.astype(np.uint8 if img.max() <= 255 else np.uint16)
+        except ImageInputError as exc:
+            log.warning("%s: skipped: %s", p, exc)
+    return imgs
+
+
+def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
+    m = add("marks", "measure scribe marks in images")
+    m.add_argument("images", nargs="+", help="image files (PNG, TIFF, JPEG; 8 or 16 bit)")
+    m.add_argument("--camera", help="camera model JSON written by 'align camera'")
+    m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
+    m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
+    m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
+    m.add_argument("--max-marks", type=number(1, 1000, integer=True), default=8,
+                   help="most marks reported per image")
+    m.add_argument("--roi", metavar="X,Y,W,H",
+                   help="search only this rectangle [px]: top-left column, row, width, height")
+    m.add_argument("--min-length", type=POSITIVE, metavar="PX",
+                   help="shortest mark to report [px] (default 100, at most 80 %% of the "
+                   "image's smaller side)")
+    m.add_argument("--one", action="store_true",
+                   help="each image holds one mark: two competing marks are an error")
+    m.set_defaults(func=cmd_marks)
+
+
+def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
+    c = add("camera", "calibrate a camera from chessboard photographs")
+    c.add_argument("images", nargs="+", help="chessboard photographs")
+    c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS")
+    c.add_argument("--square", type=POSITIVE, default=1.0, help="square size (any unit)")
+    c.add_argument("--json", help="write the camera model to this new JSON file ('-': stdout)")
+    c.add_argument("--fix-k3", action="store_true", help="keep k3 at 0")
+    c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
+    c.set_defaults(func=cmd_camera)

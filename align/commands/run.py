@@ -1,0 +1,153 @@
+"""``align run``: whole sessions (one here, several in parallel: a batch)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections.abc import Callable
+
+from align.commands.args import ALPHA, UsageError, number, unique
+from align.commands.common import log, say, settings, warn
+
+# Flags that say how a batch runs, not what it computes: left out of the results' settings,
+# so a batch gives the same JSON however it is run.
+EXECUTION = ("jobs", "scheduler", "resume")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from align.session.batch import SessionJob, exit_status, resume
+
+    if len(args.sessions) > 1:
+        unique(args.sessions, "sessions")
+        return _run_batch(args)
+    if args.scheduler:  # one session runs in this process (--scheduler is for batches)
+        log.info("one session: it runs here (--scheduler is for batches)")
+    job = SessionJob(args.sessions[0], args.json, args.report, args.calibration, args.alpha,
+                     args.force, args.allow_outside, settings(args, EXECUTION),
+                     keep_result=True)
+    if args.resume and not resume([job])[1]:
+        print(f"session {args.sessions[0]}: outputs complete, skipped (--resume)")
+        return 0
+    out = run_here(job)
+    show_session(out)
+    return exit_status([out])
+
+
+def run_here(job) -> dict:
+    """One session end to end in this process, its progress on the log; bad input raised."""
+    from align.session.batch import run_job
+
+    out = run_job(job, progress=lambda m: log.info("  [%s] %s", job.name, m))
+    if "error" in out:
+        raise UsageError(out["error"])
+    return out
+
+
+def show_session(out: dict) -> None:
+    """A session's result, warnings and outputs on the terminal."""
+    from align.present import session_lines
+
+    print(f"session {out['session']}:")
+    say(session_lines(out["result"]))
+    warn(out["warnings"])
+    for k, v in out["outputs"].items():
+        if v != "-":
+            print(f"  wrote {k}: {v}")
+
+
+def _run_batch(args: argparse.Namespace) -> int:
+    """Several sessions in parallel (local processes, or a Dask cluster with --scheduler);
+    --json/--report/--calibration name folders."""
+    from align.session.batch import batch_jobs, executor_for, exit_status, resume
+    from axisbase.provenance import command_line
+
+    jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
+                      alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
+                      settings=settings(args, EXECUTION), command=tuple(command_line()))
+    results = []
+    if args.resume:
+        results, jobs = resume(jobs)
+        if results:
+            log.info("--resume: %d of %d sessions already complete, skipped", len(results),
+                     len(results) + len(jobs))
+    scheduler = args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
+    if scheduler:
+        log.info("running %d sessions on the Dask cluster at %s", len(jobs), scheduler)
+    results += _run_jobs(jobs, executor_for(scheduler, args.jobs))
+    _show_batch(results)
+    return exit_status(results)
+
+
+def _run_jobs(jobs: list, executor) -> list[dict]:
+    """Run the jobs with a progress bar on a terminal (a line per session in a log file)."""
+    from align.session.batch import run_batch
+    from axisbase.stop import Stopped
+
+    bar = None
+    if sys.stderr.isatty() and log.getEffectiveLevel() <= logging.INFO and jobs:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs), desc="sessions")
+    done: list = []
+
+    def on_done(r: dict) -> None:
+        done.append(r)
+        if bar is not None:
+            bar.update()
+        else:  # a log file gets one line per finished session instead of a bar
+            log.info("  [%d/%d] %s finished", len(done), len(jobs), r["session"])
+
+    try:
+        run_batch(jobs, executor, on_done)
+    except Stopped:
+        if bar is not None:
+            bar.close()
+        print(f"stopped: {len(done)} of {len(jobs)} sessions finished (their outputs are "
+              "complete; no other session left any); 'align run ... --resume' does the rest",
+              file=sys.stderr)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    return done
+
+
+def _show_batch(results: list[dict]) -> None:
+    from align.present import batch_row_line
+    from align.session.batch import batch_row
+
+    rows = sorted((batch_row(r) for r in results), key=lambda row: row.session)
+    for row in rows:
+        line = batch_row_line(row)
+        if line is not None:
+            print(line)
+        if not row.ok:
+            log.error("%s: FAILED: %s", row.session, row.error)
+    failed = sum(not row.ok for row in rows)
+    print(f"{len(rows) - failed} of {len(rows)} sessions done"
+          + (f", {failed} failed" if failed else ""))
+
+
+def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
+    r = add("run", "run whole sessions: every stage, the loops, the fusion")
+    r.add_argument("sessions", nargs="+", help="session folder(s) holding session.toml")
+    r.add_argument("--json", help="result JSON (a folder when several sessions; '-': stdout)")
+    r.add_argument("--report", help="HTML report (a folder when several sessions)")
+    r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
+                   "(a folder when several sessions)")
+    r.add_argument("--jobs", type=number(1, 1024, integer=True),
+                   help="parallel sessions (default: all cores)")
+    r.add_argument("--alpha", type=ALPHA, default=1e-3,
+                   help="significance of the residual loops' tests")
+    r.add_argument("--allow-outside", action="store_true",
+                   help="let session.toml name files outside the session folder")
+    r.add_argument("--resume", action="store_true",
+                   help="skip sessions whose outputs are all in place (an interrupted batch) "
+                   "and run the rest")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run the sessions of a batch on this Dask scheduler, e.g. "
+                   "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")
+    r.set_defaults(func=cmd_run)
+

@@ -1,0 +1,94 @@
+"""The terminal: an ASCII fallback for ″ ± µ ° on consoles that cannot show them, a quiet end
+on a closed pipe (``align ... | head -1``) and the one logging set-up of the command line.
+
+Imports nothing heavy: ``align --help`` starts with it.
+"""
+
+from __future__ import annotations
+
+import codecs
+import logging
+import os
+import sys
+from typing import TextIO
+
+_ASCII = {"″": '"', "′": "'", "±": "+/-", "µ": "u", "°": " deg", "²": "^2", "³": "^3",
+          "χ": "chi", "α": "alpha", "β": "beta", "σ": "sigma", "Δ": "d", "×": "x", "→": "->",
+          "≤": "<=", "≥": ">=", "≈": "~", "−": "-", "—": "-", "–": "-", "√": "sqrt", "·": "*"}
+
+
+def ascii_fallback(exc: UnicodeError) -> tuple[str, int]:
+    """A codec error handler (``align-ascii``): each symbol the console cannot show becomes
+    its ASCII spelling (″ -> ", ± -> +/-, µ -> u, ° -> deg), else ``?``."""
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    bad = exc.object[exc.start:exc.end]
+    return "".join(_ASCII.get(ch, "?") for ch in bad), exc.end
+
+
+codecs.register_error("align-ascii", ascii_fallback)
+
+
+class ClosedPipeSafe:
+    """A text stream that stops writing, quietly, once its reader has gone (``| head -1``):
+    the run goes on and its files are still written."""
+
+    def __init__(self, stream: TextIO):
+        self._s = stream
+        self.closed_pipe = False
+
+    def write(self, text: str) -> int:
+        if not self.closed_pipe:
+            try:
+                return self._s.write(text)
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.closed_pipe:
+            try:
+                self._s.flush()
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        self.closed_pipe = True
+        try:  # no further flush at exit may raise either
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._s.fileno())
+        except (OSError, ValueError):
+            pass
+
+    def __getattr__(self, name: str):
+        return getattr(self._s, name)
+
+
+def console(stream: TextIO) -> ClosedPipeSafe:
+    """``stream`` with an ASCII fallback for ″ ± µ ° when its encoding cannot show them
+    (LANG=C, PYTHONIOENCODING=ascii, a Windows code page) and a quiet end on a closed pipe."""
+    if isinstance(stream, ClosedPipeSafe):
+        return stream
+    try:
+        "″±µ°".encode(stream.encoding or "ascii")
+    except (UnicodeEncodeError, LookupError):
+        try:
+            stream.reconfigure(errors="align-ascii")  # type: ignore[attr-defined]
+        except (AttributeError, ValueError):
+            pass
+    except AttributeError:
+        pass
+    return ClosedPipeSafe(stream)
+
+
+def setup_logging(name: str, quiet: bool = False, verbose: bool = False) -> logging.Logger:
+    """The logger ``name`` (and its children, the library's loggers) to stderr, message only:
+    WARNING with ``quiet``, DEBUG with ``verbose``, else INFO."""
+    level = logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log = logging.getLogger(name)
+    log.handlers[:] = [handler]
+    log.setLevel(level)
+    log.propagate = False
+    return log
