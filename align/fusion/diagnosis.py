@@ -16,7 +16,7 @@ between the measurements, or a platform that was not level, leaves.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -48,6 +48,10 @@ class SourceDisagreement:
     p_value: float
     chi2_rest: float
     dof_rest: int
+    # Other sources that, given their own E, make the rest agree as well: which one of them
+    # moved, the data cannot tell (a creep between the cameras' and the static readings is
+    # seen as either the cameras' or the static poses' own E).
+    also: tuple[str, ...] = ()
 
     @property
     def angles(self) -> list[tuple[str, float, float]]:
@@ -66,14 +70,21 @@ class SourceDisagreement:
         ang = self.angles
         names = ", ".join(n for n, _, _ in ang)
         by = ", ".join(f"{d / ARCSEC:+.1f}″ (u {u / ARCSEC:.1f}″)" for _, d, u in ang)
-        hint = ("platform not level? (a levelling offset shows in E_xZ, E_yZ only)"
-                if self.source == "platform static" and {n for n, _, _ in ang} <= {"E_xZ",
-                                                                                    "E_yZ"}
-                else "the triad moved between the measurements (creep), or this source's "
-                     "set-up is not the others'")
+        level = ("platform static" in (self.source, *self.also)
+                 and {n for n, _, _ in ang} <= {"E_xZ", "E_yZ"})
+        hint = ("platform not level? (a levelling offset shows in E_xZ, E_yZ only)" if level
+                else "the triad moved between the measurements (creep), or a source's set-up "
+                     "is not the others'")
         rest = ("the rest then agree" if self.rest_consistent else
                 f"the rest still disagree (chi2 {self.chi2_rest:.1f} / {self.dof_rest})")
-        return (f"sources see different E: the {SAYS.get(self.source, self.source)} "
+        me = SAYS.get(self.source, self.source)
+        if self.also:
+            pair = " and the ".join([me, *(SAYS.get(o, o) for o in self.also)])
+            return (f"sources see different E: the {pair} disagree in {names} by {by} (the "
+                    f"{me} given their own E: chi2 falls by {self.chi2_drop:.1f} with "
+                    f"{self.dof} angles; {rest}; either given its own E makes the rest agree "
+                    f"— which one moved, the data cannot tell) — {hint}")
+        return (f"sources see different E: the {me} "
                 f"disagree with {', '.join(SAYS.get(o, o) for o in self.others)} in {names} "
                 f"by {by} (chi2 falls by "
                 f"{self.chi2_drop:.1f} with {self.dof} angles of its own; {rest}) — {hint}")
@@ -87,7 +98,7 @@ class SourceDisagreement:
                              if np.isfinite(u)},
                 "angles": [n for n, _, _ in self.angles], "chi2_drop": self.chi2_drop,
                 "dof": self.dof, "p_value": self.p_value, "chi2_rest": self.chi2_rest,
-                "dof_rest": self.dof_rest, "message": self.message()}
+                "dof_rest": self.dof_rest, "also": list(self.also), "message": self.message()}
 
 
 def disagreement_from_dict(d: dict) -> SourceDisagreement:
@@ -96,7 +107,8 @@ def disagreement_from_dict(d: dict) -> SourceDisagreement:
     u = np.array([d["u_arcsec"].get(n, np.nan) for n in E_NAMES]) * ARCSEC
     return SourceDisagreement(str(d["source"]), tuple(d["others"]), delta, u,
                               float(d["chi2_drop"]), int(d["dof"]), float(d["p_value"]),
-                              float(d["chi2_rest"]), int(d["dof_rest"]))
+                              float(d["chi2_rest"]), int(d["dof_rest"]),
+                              tuple(d.get("also", ())))
 
 
 def jacobian(residual, p: np.ndarray, step: float = 1e-7) -> np.ndarray:
@@ -156,8 +168,14 @@ def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[s
 def name_disagreement(found: Sequence[SourceDisagreement], alpha: float
                       ) -> SourceDisagreement | None:
     """The source whose own E lowers chi2 most, if significantly (``alpha``, Bonferroni over
-    the sources) and with at least one angle of its own beyond ``NAME_SIGMA`` u."""
+    the sources) and with at least one angle of its own beyond ``NAME_SIGMA`` u; with
+    ``also`` the other sources whose own E makes the rest agree as well (two sources that
+    see different E, and nothing else tells which of them moved)."""
     cand = [f for f in found if f.p_value < alpha / max(len(found), 1) and f.angles]
     if not cand:
         return None
-    return max(cand, key=lambda f: f.chi2_drop)
+    best = max(cand, key=lambda f: f.chi2_drop)
+    if not best.rest_consistent:
+        return best
+    also = tuple(f.source for f in cand if f is not best and f.rest_consistent)
+    return replace(best, also=also) if also else best
