@@ -90,5 +90,7 @@ def session_warnings(res) -> list[str]:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")
         if f.disagreement is not None and not f.gross:  # (gross: in the stage's error)
-            out.append(f"fusion: {f.disagreement.message()}")
+            widened = ", ".join(n for n, _, _ in f.disagreement.angles)
+            out.append(f"fusion: {f.disagreement.message()}; the uncertainty of {widened} "
+                       "is widened by the whole disagreement")
     return out

@@ -353,5 +353,15 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
                                          if b.source == src])) for src in sources]
         named = name_disagreement(leave_one_source_out(
             lambda p: stage._residual(p, layout), sol.params, rows_of), alpha)
+    if named is not None:
+        # Where two sources see different E, E in those angles is the one or the other (or
+        # in between): the fused value sits with the more precise source, so u is widened
+        # by the whole disagreement (a Type B term, uncorrelated) — the inflation by
+        # sqrt(chi2/dof) spreads it over all six angles and covers a 30″ creep by a third.
+        widen = np.zeros(6)
+        for n, d, _ in named.angles:
+            widen[E_NAMES.index(n)] = d**2
+        cov = cov + np.diag(widen)
+        E_u = e_matrix(np.sqrt(np.diag(cov)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
                         tuple(rows), loop, inflation, nuis, sources, named)

@@ -64,7 +64,7 @@ def test_an_out_of_level_platform_is_found_as_levelling(tmp_path):
 def test_creep_between_images_and_static_readings_names_the_sources(tmp_path, seed, creep):
     """Only the cameras and the static poses see E_xZ, E_zX absolutely: the two are named
     (either, given its own E, makes the rest agree), in those two angles, by the creep."""
-    _, res, _ = _run(tmp_path, seed, {"creep_y": creep})
+    _, res, truth = _run(tmp_path, seed, {"creep_y": creep})
     f = res.fusion
     assert not f.consistent
     d = f.disagreement
