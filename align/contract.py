@@ -18,9 +18,14 @@ from axisbase.provenance import Provenance, check_format, envelope
 
 FORMATS = {
     "marks": 3, "camera": 3, "calibration": 3, "tilt": 3, "gonio": 3, "session": 3,
-    "platform-calibration": 3, "lot": 1,
+    "platform-calibration": 3, "lot": 1, "plan": 1,
 }
 """kind -> the version this tool writes."""
+
+INPUT_SCHEMAS = {"session-toml": "session.toml"}
+"""Schemas of files the tool reads (not writes; no envelope): ``align check`` validates a
+session.toml against ``session-toml.schema.json``, and an editor can complete it from there
+(the ``#:schema`` line 'align init' writes)."""
 
 READABLE = {
     "calibration": (1, 2, 3),            # 'align tilt --calibration'

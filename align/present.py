@@ -30,6 +30,18 @@ def mark_lines(r) -> list[str]:
                  "LINES DISAGREE beyond one distortion: u inflated")
         lines.append(f"    frame ({f.n_lines} marks, one lens): k1 {f.k1:+.4g} ± "
                      f"{f.k1_u:.2g}, {state}")
+    if r.lens and "parameters" in r.lens:
+        par = r.lens["parameters"]
+        fitted = [f"{k} {v['value']:+.4g}" for k, v in par.items() if v["applied"]]
+        lines.append(f"    lens ({r.lens['lines']} marks, one lens): "
+                     f"{', '.join(fitted) or 'nothing applied'}; not determined: "
+                     f"{', '.join(k for k, v in par.items() if not v['determined']) or 'none'}")
+    if r.u_terms:
+        big = sorted(r.u_terms.items(), key=lambda kv: -kv[1])[:3]
+        lines.append("    largest u terms: " + ", ".join(f"{k} {v / ARCSEC:.2f}″"
+                                                       for k, v in big))
+    if r.lens_limited:
+        lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     return lines
 
 
@@ -191,13 +203,31 @@ def batch_row_line(row) -> str | None:
     |E| and u [″], chi2/dof, outputs; None when there is nothing to show."""
     outs = "".join(f", {k} {v}" for k, v in row.outputs.items())
     if row.e_max_arcsec is not None:
-        return (f"{row.session}: {'OK' if row.ok else 'FAILED stages'}, |E| max "
+        return (f"{row.session}: {row.verdict or 'no verdict'}, "
+                f"{'OK' if row.ok else 'FAILED stages'}, |E| max "
                 f"{row.e_max_arcsec:.1f}″, u max {row.u_max_arcsec:.2f}″, chi2/dof "
                 f"{row.chi2:.1f}/{row.dof}" + ("" if row.consistent else ", NOT consistent")
                 + (" (complete before, skipped)" if row.skipped else "") + outs)
     if row.skipped:
         return f"{row.session}: complete before, skipped" + outs
     return None
+
+
+def decision_lines(js: dict, budget: bool = False, plan: bool = False) -> list[str]:
+    """A session result's verdict line (:mod:`align.decision`), and with ``budget`` its
+    uncertainty budget, with ``plan`` what to measure next (:mod:`align.plan`)."""
+    from align.decision import Disposition
+
+    lines = ["  " + Disposition.from_dict(js["disposition"]).line()]
+    if budget and js.get("budget"):
+        from align.fusion.budget import Budget
+
+        lines += ["  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()]
+    if plan and js.get("budget"):
+        from align.plan import plan_from_result
+
+        lines += ["  " + ln for ln in plan_from_result(js).lines()]
+    return lines
 
 
 # ----------------------------------------------------------------------------- lot
@@ -218,3 +248,12 @@ def lot_lines(lot, doc: dict, tolerance_arcsec: float | None) -> list[str]:
                      f"{len(a['outside_tolerance'])} outside ±{tolerance_arcsec:g}″")
         lines.append(line)
     return lines
+
+
+def verdict_lines(dispositions: Sequence[dict], rule: str | None) -> list[str]:
+    """A lot's verdicts: the count of each, then one line per unit that did not pass."""
+    verdicts = [d["verdict"] for d in dispositions]
+    counts = ", ".join(f"{verdicts.count(v)} {v}" for v in dict.fromkeys(verdicts))
+    lines = [f"  verdicts ({f'{rule} rule' if rule else 'each unit its own'}): {counts}"]
+    return lines + [f"    {d['unit']}: {d['verdict']}: {d['reason']}" for d in dispositions
+                    if d["verdict"] != "PASS"]

@@ -13,6 +13,8 @@ from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.io import read_image
+from imaging.lens import PARAMS as LENS_PARAMS
+from imaging.lens import distort_points, opencv_to_lens, undistort_points
 from imaging.linefit import LineFit, fit_line
 from imaging.measure import MarkMeasurement, measure_candidate, measure_marks
 from imaging.plumbline import (
@@ -25,9 +27,11 @@ from imaging.plumbline import (
 from imaging.profile import Centres, ProfileFit
 
 __all__ = [
-    "CameraModel", "Centres", "ImageInputError", "LineFit", "MarkCandidate", "MarkMeasurement",
+    "CameraModel", "Centres", "ImageInputError", "LENS_PARAMS", "LineFit", "MarkCandidate",
+    "MarkMeasurement",
     "PlumbLineFit", "ProfileFit", "Roi", "calibrate_chessboard", "check_roi",
     "chessboard_lines", "cross_magnification", "detect_marks",
     "find_chessboard", "fit_line", "line_frame", "measure_candidate", "measure_marks",
-    "plumb_line", "read_image", "undistort", "wrap_angle",
+    "plumb_line", "read_image", "undistort", "wrap_angle", "distort_points",
+    "opencv_to_lens", "undistort_points",
 ]

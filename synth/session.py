@@ -99,6 +99,10 @@ class SessionSpec:
     views: tuple[str, ...] = tuple(VIEWS)
     reverse_run: bool = False  # also a clockwise counter log (gonio_cw.csv)
     platform_poses: tuple[str, ...] = tuple(p[0] for p in PLATFORM_POSES)
+    # (housing, view) pairs photographed once more (a new exposure of the same mark: new
+    # placement in the frame, new noise), as <housing>_<view>_2.png, _3.png, ...
+    repeat_images: tuple[tuple[str, str], ...] = ()
+    platform_static: bool = True  # False: no platform static readings at all
 
 
 def true_axes(E: np.ndarray) -> np.ndarray:
@@ -157,7 +161,8 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
         k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / th
         R = np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k
     triad_p = replace(triad, axes=tuple(map(tuple, S @ R.T)))
-    platform = _platform(out, spec, triad_p, eff, rng)
+    platform = (_platform(out, spec, triad_p, eff, rng) if spec.platform_static
+                else None)
 
     toml = _session_toml(spec, declared, images, platform)
     (out / "session.toml").write_text(toml)
@@ -175,26 +180,32 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
             rng: np.random.Generator) -> list[dict]:
     w, h = spec.image_size
     rows = []
-    for view in spec.views:
+    shots = [(view, housing, nominal, "") for view in spec.views
+             for housing, nominal in VIEW_MARKS[view]]
+    for k, (housing, view) in enumerate(spec.repeat_images):
+        if view not in spec.views or housing not in dict(VIEW_MARKS[view]):
+            raise ValueError(f"repeat_images: housing {housing} is not in view {view}")
+        n = sum(1 for hv in spec.repeat_images[:k + 1] if hv == (housing, view)) + 1
+        shots.append((view, housing, dict(VIEW_MARKS[view])[housing], f"_{n}"))
+    for view, housing, nominal, suffix in shots:
         cam, right, up = VIEWS[view]
         geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get(f"lens_k1_{cam}",
                                                            eff.get("lens_k1", 0.0)),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
-        for housing, nominal in VIEW_MARKS[view]:
-            s = S[HOUSINGS.index(housing)]
-            ang = _scene_angle(s, parse_direction(right), parse_direction(up))
-            mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
-                            length_px=spec.mark_length_px, width_px=4.0,
-                            centre_t_px=float(rng.uniform(-30, 30)))
-            img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
-                            full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
-                            dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
-            sample = render_marks(img, with_crlb=False)
-            name = f"{housing}_{view}.png"
-            write_synth(sample, out / name)
-            rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
-                         "image_angle_rad": sample.truth.marks[0].image_angle_rad,
-                         })
+        s = S[HOUSINGS.index(housing)]
+        ang = _scene_angle(s, parse_direction(right), parse_direction(up))
+        mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
+                        length_px=spec.mark_length_px, width_px=4.0,
+                        centre_t_px=float(rng.uniform(-30, 30)))
+        img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
+                        full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
+                        dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
+        sample = render_marks(img, with_crlb=False)
+        name = f"{housing}_{view}{suffix}.png"
+        write_synth(sample, out / name)
+        rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
+                     "image_angle_rad": sample.truth.marks[0].image_angle_rad,
+                     })
     return rows
 
 
@@ -249,7 +260,7 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
 
 
 def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[dict],
-                  platform: list[tuple[str, str, float]]) -> str:
+                  platform: list[tuple[str, str, float]] | None) -> str:
     lines = ["# Synthetic alignment session (align synth session)", "",
              f"latitude_deg = {spec.latitude_deg}", "", "[calibration]",
              'static = "tumble.csv"', 'scale_sign = "-"', "", "[goniometer]",
@@ -263,6 +274,13 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
         lines += ["", f"[cameras.{cam}]", f"# looks along {looks}"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
+        if not any(k in spec.effects for k in ("lens_k1", f"lens_k1_{cam}")):
+            # The rendered camera has no lens distortion and square pixels, and the file
+            # says so (a corrected optic); an undeclared lens leaves the keys out, and the
+            # pipeline carries its default plausible lens.
+            lines += ["# distortion-free optics, square pixels, principal point at the centre",
+                      "lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
+                      "lens_pp_px = 0.0"]
     for view in spec.views:
         cam, right, up = VIEWS[view]
         lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',
@@ -270,6 +288,8 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
     for im in images:
         lines += ["", "[[images]]", f'file = "{im["file"]}"', f'housing = "{im["housing"]}"',
                   f'view = "{im["view"]}"', f'nominal = "{im["nominal"]}"']
+    if platform is None:
+        return "\n".join(lines) + "\n"
     lines += ["", "[platform]", 'static = "platform.csv"']
     tilt = [declared.get("table_tilt_x"), declared.get("table_tilt_y")]
     if any(v is not None for v in tilt):

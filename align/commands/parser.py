@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from align.commands import calibrate, gonio, lot, marks, run, synth
+from align.commands import calibrate, gonio, lot, marks, plan, run, session, synth
 from align.commands.parents import FMT, Parser, common, writes
 from axisbase.version import __version__
 
@@ -31,6 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_run(add)
     calibrate.add_apply(add)
     lot.add_lot(add)
+    plan.add_plan(add)
     synth.add_synth(sub, parents)
     synth.add_demo(add)
+    session.add_init(add)
+    session.add_check(add)
     return p

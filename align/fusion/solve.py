@@ -17,11 +17,13 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from align.errors import InputError
+from align.fusion.budget import Budget, linearise
 from align.fusion.diagnosis import (
     SourceDisagreement,
     disagreement_from_dict,
     leave_one_source_out,
     name_disagreement,
+    with_disagreement,
 )
 from align.fusion.observations import (
     E_NAMES,
@@ -74,6 +76,7 @@ class Solution:
     names: tuple[str, ...]
     residuals: np.ndarray
     predicted: tuple[np.ndarray, ...]
+    layout: tuple[tuple[str, int], ...] = ()
 
 
 class FusionStage:
@@ -125,7 +128,7 @@ class FusionStage:
         cov = np.linalg.inv(J.T @ J)
         axes, nuis = self._unpack(res.x, layout)
         pred = tuple(b.predict(axes, nuis) for b in self.blocks)
-        return Solution(res.x, cov, names, res.fun, pred)
+        return Solution(res.x, cov, names, res.fun, pred, tuple(layout))
 
     def _far_message(self, off: np.ndarray) -> str:
         """The refusal of observations that only an axis far from nominal would fit (``off``:
@@ -231,6 +234,8 @@ class FusionResult:
     inflation: float
     nuisances: dict[str, tuple[float, float]]
     sources: tuple[str, ...]
+    budget: Budget | None = None
+    """Each input's share of u² of every angle (:mod:`align.fusion.budget`)."""
     # When inconsistent: the source that sees another E, and in which angles (None: none
     # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
     disagreement: SourceDisagreement | None = None
@@ -281,6 +286,7 @@ class FusionResult:
             "sources": list(self.sources), **self.loop.summary().to_dict(),
             "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in self.nuisances.items()},
             "observations": [r.to_dict() for r in self.rows],
+            "budget": None if self.budget is None else self.budget.to_dict(),
             "source_disagreement": (None if self.disagreement is None
                                     else self.disagreement.to_dict())}
 
@@ -298,6 +304,7 @@ class FusionResult:
                    {k: (float(v["estimate"]), float(v["u"]))
                     for k, v in d.get("nuisances", {}).items()},
                    tuple(d.get("sources", ())),
+                   Budget.from_dict(d["budget"]) if d.get("budget") else None,
                    (None if not d.get("source_disagreement")
                     else disagreement_from_dict(d["source_disagreement"])))
 
@@ -363,5 +370,15 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
             widen[E_NAMES.index(n)] = d**2
         cov = cov + np.diag(widen)
         E_u = e_matrix(np.sqrt(np.diag(cov)))
+    layout = list(sol.layout)
+
+    def predict_all(p: np.ndarray) -> list[np.ndarray]:
+        axes, nu = stage._unpack(p, layout)
+        return [b.predict(axes, nu) for b in stage.blocks]
+
+    budget = linearise(stage.blocks, predict_all, sol.params, sol.names, layout,
+                       inflation).budget()
+    if named is not None:
+        budget = with_disagreement(budget, named)
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
-                        tuple(rows), loop, inflation, nuis, sources, named)
+                        tuple(rows), loop, inflation, nuis, sources, budget, named)

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Protocol
 
 from align.errors import InputError
-from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK
+from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_REJECTED
 
 Summary = dict
 OnDone = Callable[[Summary], None]
@@ -42,6 +42,7 @@ class SessionJob:
     ``json``/``report``/``cal``: output paths (None: not asked for; ``json`` may be ``-``
     for standard output); ``settings``: the settings recorded in the provenance; ``command``:
     the command line recorded there (a worker on another machine does not know it);
+    ``decision``: see the field;
     ``keep_result``: return the :class:`~align.session.SessionResult` itself (one session in
     this process, to print it)."""
 
@@ -55,6 +56,10 @@ class SessionJob:
     settings: dict = field(default_factory=dict)
     command: tuple[str, ...] = ()
     keep_result: bool = False
+    decision: dict = field(default_factory=dict)
+    """The command line's decision flags, :func:`align.decision.resolve`'s keywords
+    (``tolerance`` (lower, upper) [″], ``rule``, ``k``): they override session.toml's
+    ``[tolerance]``."""
 
     @property
     def name(self) -> str:
@@ -72,6 +77,7 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
 
     Every output is checked before anything is computed; a stage that failed still gives
     the result (``ok: false``)."""
+    from align.decision import resolve
     from align.session import load_session, run_session, session_outputs
     from axisbase.output import OutputPlan
     from axisbase.provenance import set_command
@@ -92,6 +98,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
     res = run_session(s, progress=progress or (lambda m: None), alpha=job.alpha)
+    if job.decision:
+        res.tolerance = resolve(s.tolerance, **job.decision)
     settings = job.settings or {"alpha": job.alpha}
     try:
         if outs["report"] is not None:
@@ -216,6 +224,7 @@ class BatchRow:
     dof: int | None = None
     consistent: bool = True
     error: str | None = None
+    verdict: str | None = None
 
 
 def batch_row(summary: Summary) -> BatchRow:
@@ -228,7 +237,8 @@ def batch_row(summary: Summary) -> BatchRow:
             f"{e['stage']}: {e['message']}" for e in (js or {}).get("errors", []))
     common = {"session": summary["session"], "ok": summary["ok"],
               "skipped": bool(summary.get("skipped")),
-              "outputs": dict(summary.get("outputs", {})), "error": error}
+              "outputs": dict(summary.get("outputs", {})), "error": error,
+              "verdict": ((js or {}).get("disposition") or {}).get("verdict")}
     if js is None or js.get("misalignment_arcsec") is None:
         return BatchRow(**common)
     E = [abs(v) for row in js["misalignment_arcsec"] for v in row]
@@ -238,13 +248,23 @@ def batch_row(summary: Summary) -> BatchRow:
                     consistent=not js["unexplained_structure"])
 
 
-def exit_status(summaries: Sequence[Summary]) -> int:
+def exit_status(summaries: Sequence[Summary], fail_on_reject: bool = False) -> int:
     """The exit status of ``align run`` (one session or a batch): 1 if a session hit an
     internal error, else 2 if a session failed (bad input, or a failed stage: its result is
-    written with ``ok: false``), else 0."""
+    written with ``ok: false``), else with ``fail_on_reject`` 3 if a verdict is FAIL or
+    INCONCLUSIVE, else 0."""
     if any(not r["ok"] and not r.get("bad_input", False) for r in summaries):
         return EXIT_INTERNAL
-    return EXIT_INPUT if any(not r["ok"] for r in summaries) else EXIT_OK
+    if any(not r["ok"] for r in summaries):
+        return EXIT_INPUT
+    if fail_on_reject and rejected(batch_row(r).verdict for r in summaries):
+        return EXIT_REJECTED
+    return EXIT_OK
+
+
+def rejected(verdicts: Iterable[str | None]) -> bool:
+    """Whether any verdict is FAIL or INCONCLUSIVE (what ``--fail-on-reject`` exits 3 on)."""
+    return any(v in ("FAIL", "INCONCLUSIVE") for v in verdicts)
 
 
 # ----------------------------------------------------------------------------- executors

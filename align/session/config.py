@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from align.decision import ToleranceSpec
 from align.errors import InputError
+from align.lens import LensRanges
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
@@ -23,7 +25,7 @@ from imaging import ImageInputError, check_roi
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
 TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
-            "platform", "name", "latitude_range_deg", "metadata"}
+            "platform", "name", "latitude_range_deg", "metadata", "tolerance"}
 
 
 def signed_axis(text: object, where: str) -> np.ndarray:
@@ -61,6 +63,7 @@ class Camera:
     name: str
     model: Path | None = None
     roll_rad: float = 0.0
+    lens: LensRanges | None = None
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,9 @@ class Session:
     metadata: dict[str, str | int | float | bool] = field(default_factory=dict)
     """``[metadata]``: free keys about the unit and the set-up (unit, serial, operator,
     camera, table, date, ...), carried into the result for 'align lot'."""
+    tolerance: ToleranceSpec | None = None
+    """``[tolerance]``: the specification of E and the decision rule (:mod:`align.decision`);
+    None when the session gives none."""
 
     @property
     def inputs(self) -> list[Path]:
@@ -212,7 +218,8 @@ KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz"},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
-    "cameras": {"model", "roll_arcsec"},
+    "cameras": {"model", "roll_arcsec",
+                *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
     "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
@@ -364,9 +371,15 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         _known(c, "cameras", w)
         # Two cameras may share a model file (one calibration of a camera type).
         model = _file(c["model"], f"{w} model", unique=False) if "model" in c else None
+        # The plausible lens when no model is given (Type B ranges, issue 18).
+        lens = {k: _number(c[f"lens_{k}"], f"{w} lens_{k}", 0.0,
+                           None) for k in LensRanges.__dataclass_fields__ if f"lens_{k}" in c}
+        if lens.get("max_u_arcsec") == 0:
+            raise InputError(f"{w} lens_max_u_arcsec = 0: must be > 0")
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
-                                       -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC)
+                                       -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC,
+                               LensRanges(**lens) if lens else None)
 
     views = {}
     for name, v in _table(d, "views", src + ": ").items():
@@ -460,5 +473,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         raise InputError(f"{src}: name = {name!r}: expected a non-empty text")
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
+    tol = (ToleranceSpec.from_table(_table(d, "tolerance", src + ": "), f"{src}: [tolerance]")
+           if "tolerance" in d else None)
     return Session(folder, name, lat, cal, gon, cameras,
-                   views, tuple(imgs), plat, lat_range, _metadata(d, src))
+                   views, tuple(imgs), plat, lat_range, _metadata(d, src), tol)

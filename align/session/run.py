@@ -14,6 +14,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.units import unit_scale_check
+from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
@@ -30,7 +31,7 @@ from align.fusion import (
 from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
 from align.gonio import GonioRun, measure_log
-from align.marks import MarkResult, measure_file
+from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
 from axisbase.table import resolve_units
@@ -60,6 +61,18 @@ class SessionResult:
     fusion: FusionResult | None = None
     errors: list[StageError] = field(default_factory=list)
     units: str = "V"
+    tolerance: ToleranceSpec | None = None
+    """The specification the disposition is judged against (session.toml's ``[tolerance]``
+    unless the command line overrides it)."""
+
+    def __post_init__(self) -> None:
+        if self.tolerance is None:
+            self.tolerance = self.session.tolerance
+
+    def disposition(self, d: dict | None = None) -> Disposition:
+        """PASS / FAIL / INCONCLUSIVE / NOT MEASURED / NO TOLERANCE (:mod:`align.decision`);
+        ``d``: :meth:`to_dict` when already at hand."""
+        return decide(d if d is not None else self._core_dict(), self.tolerance)
 
     @property
     def fused(self) -> bool:
@@ -86,6 +99,11 @@ class SessionResult:
         platform calibration, and each stage's own result. A session result is not loaded
         back whole (it needs the session's files); its parts are:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
+        d = self._core_dict()
+        d["disposition"] = self.disposition(d).to_dict()
+        return d
+
+    def _core_dict(self) -> dict:
         from align.calibration.output import with_units
         from align.warnings import session_warnings
 
@@ -160,10 +178,25 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
                       if cam.model is not None else None)
-    for k, im in enumerate(s.images, start=1):
-        progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
-        cam = cams.get(s.views[im.view].camera)
-        found = measure_file(im.file, cam, alpha=alpha, expect_one=True, roi=im.roi)
+    # One lens per camera: every image of a camera enters one plumb-line fit (issue 18).
+    by_cam: dict[str, list[int]] = {}
+    for k, im in enumerate(s.images):
+        by_cam.setdefault(s.views[im.view].camera, []).append(k)
+    found_of: dict[int, list[MarkResult]] = {}
+    done = 0
+    for cname, idx in by_cam.items():
+        def tick(j: int, idx=idx, done=done) -> None:
+            progress(f"marks: {s.images[idx[j]].file.name} ({done + j + 1}/{len(s.images)})")
+
+        cam_cfg = s.cameras.get(cname)
+        got = measure_camera([(s.images[k].file, s.images[k].roi) for k in idx],
+                             cams.get(cname), alpha=alpha, expect_one=True,
+                             ranges=cam_cfg.lens if cam_cfg is not None else None,
+                             label=cname, on_image=tick)
+        found_of.update(zip(idx, got, strict=True))
+        done += len(idx)
+    for k, im in enumerate(s.images):
+        found = found_of[k]
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
@@ -293,13 +326,18 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
             obs.append(MarkObs(f"{im.housing} in {im.view} ({im.file.name})",
                                HOUSINGS.index(im.housing), v.right, v.up, v.camera,
                                0.0 if im.nominal == "horizontal" else np.pi / 2,
-                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad))
+                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad,
+                               im.file.name, im.view))
         blocks.append(mark_block(obs))
     if res.gonio is not None:
         g = s.goniometer
         fa = res.gonio.angles
+        # The Type B terms are kept apart for the budget; a two-direction mean mixes both
+        # logs' terms, so they stay inside the log's share there.
+        tb = fa.type_b_terms if g.reverse_log is None else {}
         b = gonio_block(list(g.faces), fa.angles_rad, fa.cov, g.nominal_rad, g.direction,
-                        g.reference_offset_rad)
+                        g.reference_offset_rad, type_b=tb,
+                        name=f"goniometer {g.log.name}")
         if b is not None:
             blocks.append(b)
     if res.calibration is not None:
