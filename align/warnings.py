@@ -100,6 +100,35 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
     return out
 
 
+SETUP_HINT = {
+    "camera_roll": "declare it ([cameras.{name}] roll_arcsec) or re-level the camera",
+    "reference_face_offset": "declare it ([goniometer] reference_offset_arcsec) or re-set the "
+                        "reference face",
+    "platform_tilt": "declare it ([platform] table_tilt_arcsec) or re-level the table",
+}
+"""What to do about each kind of set-up effect the fusion found (by the effect's name)."""
+
+
+def setup_notices(fusion) -> list[str]:
+    """Set-up effects the fusion's loop found and corrected for (a camera's roll, the
+    reference face's offset, the table's tilt): E is corrected, but the set-up is not what
+    session.toml declares, and the reader must know (``FusionResult``, run or loaded)."""
+    from axisbase.units import ARCSEC
+
+    out = []
+    for e in fusion.loop.summary().effects:
+        what = e.description or e.name
+        value = (f"{e.estimate / ARCSEC:+.1f} ± {e.u / ARCSEC:.1f}″" if e.unit == "rad"
+                 else f"{e.estimate:+.3g} ± {e.u:.2g} {e.unit}")
+        hint = next((h for k, h in SETUP_HINT.items() if e.name.startswith(k)),
+                    "check the set-up against session.toml")
+        # camera_roll[A] -> A: the camera to name in the hint
+        hint = hint.replace("{name}", e.name.partition("[")[2].rstrip("]") or "NAME")
+        out.append(f"set-up: the fusion found a {what} of {value} (p = {e.p_value:.2g}) and "
+                   f"corrected E for it; {hint}")
+    return out
+
+
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
     out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
@@ -111,8 +140,13 @@ def session_warnings(res) -> list[str]:
     out += mark_warnings([r for _, r in res.marks])
     f = res.fusion
     if f is not None:
+        out += setup_notices(f)
         out += loop_warnings("fusion", f.loop)
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")
+        if f.disagreement is not None and not f.gross:  # (gross: in the stage's error)
+            widened = ", ".join(n for n, _, _ in f.disagreement.angles)
+            out.append(f"fusion: {f.disagreement.message()}; the uncertainty of {widened} "
+                       "is widened by the whole disagreement")
     return out
