@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from align.family import LineFamily, line_family
 from align.lens import (
     LensRanges,
     LineGeometry,
@@ -58,8 +59,9 @@ from imaging import (
     cross_magnification,
     fit_line,
     line_frame,
+    measure_frame,
     measure_marks,
-    read_image,
+    read_image_notes,
     undistort,
 )
 
@@ -361,6 +363,8 @@ class MarkResult:
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
     frame: FrameDistortion | None = None
+    family: LineFamily | None = None
+    unreported: int = 0
     lens: Mapping | None = None
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -377,6 +381,8 @@ class MarkResult:
         d: dict = {"image": self.image, "found": self.found, "error": self.error}
         if self.internal_error:
             d["internal_error"] = True
+        if self.unreported:
+            d["lines_not_reported"] = self.unreported
         if not self.found:
             return d
         d.update({
@@ -395,6 +401,8 @@ class MarkResult:
         })
         if self.frame is not None:
             d["frame_radial_distortion"] = self.frame.to_dict()
+        if self.family is not None:
+            d["family"] = self.family.to_dict()
         if self.lens is not None:
             d["lens"] = dict(self.lens)
         d["angle_u_terms_arcsec"] = {k: float(np.rad2deg(v) * 3600)
@@ -416,7 +424,8 @@ class MarkResult:
         answers ``effects``, ``unexplained_structure`` and ``summary_lines()`` alike)."""
         base = {"image": str(d["image"]), "found": bool(d["found"]),
                 "error": None if d.get("error") is None else str(d["error"]),
-                "internal_error": bool(d.get("internal_error", False))}
+                "internal_error": bool(d.get("internal_error", False)),
+                "unreported": int(d.get("lines_not_reported", 0))}
         if not base["found"]:
             return cls(**base)
 
@@ -435,6 +444,7 @@ class MarkResult:
                    loop=LoopSummary.from_dict(d) if "loop" in d else None,
                    uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
                    frame=None if fr is None else FrameDistortion.from_dict(fr),
+                   family=LineFamily.from_dict(d["family"]) if "family" in d else None,
                    lens=d.get("lens"),
                    u_terms={str(k): _num(v)
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
@@ -635,10 +645,11 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     plausible lens (Type B) when no camera model is given.
     """
     try:
-        found = measure_marks(image, camera, where=name, max_marks=max_marks,
-                              expect_one=expect_one, roi=roi, min_length_px=min_length_px)
+        measured = measure_frame(image, camera, where=name, max_marks=max_marks,
+                                 expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
+    found = measured.items
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     # One lens for the frame, all its marks together (identifiability first).
     lens = camera_lens(ms, camera, ranges, alpha)
@@ -650,6 +661,43 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             continue
         out.append(finish_mark(m, lens, k, name, i, alpha))
         k += 1
+    return with_families(out, measured.families, measured.unreported,
+                         "camera model" if camera is not None else
+                         "frame lens" if lens.lam is not None else "none", alpha)
+
+
+
+def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
+                  unreported: int, lens: str, alpha: float = 1e-3) -> list[MarkResult]:
+    """The image's results with each family's :class:`align.family.LineFamily` on its
+    measured members, and the count of lines found but not reported on every entry."""
+    out = [replace(r, unreported=unreported) for r in results]
+    for g in families:
+        ok = [i for i in g if out[i].found]
+        if len(ok) < 2:
+            continue
+        ms = [out[i] for i in ok]
+        mids = []
+        for r in ms:
+            if r.measurement is None:
+                mids.append(r.offset_px * line_frame(r.angle_rad)[1])
+                continue
+            # The extent is along the profile's own line (whose angle may sit across
+            # +-90 deg from the result's).
+            pf = r.measurement.profile
+            u, n = line_frame(pf.angle_rad)
+            t0, t1 = r.measurement.extent_px
+            mids.append(pf.offset_px * n + 0.5 * (t0 + t1) * u)
+        # The lens's terms are shared by the members: out of their u for the chi2 of their
+        # angles, into the family mean's u (align.family).
+        shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
+        own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
+                                  for r, t in zip(ms, shared, strict=True)], 1e-30))
+        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
+                          np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
+                          len(g) - len(ok), alpha, shared)
+        for i in ok:
+            out[i] = replace(out[i], family=fam)
     return out
 
 
@@ -663,12 +711,14 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     (path, roi) pairs; one list of results per image, in order; an unreadable image or one
     without a mark is its failed entry, as in :func:`measure_file`."""
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
+    said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
     for j, (path, roi) in enumerate(images):
         if on_image is not None:
             on_image(j)
         try:
-            img = read_image(path)
-            found_all.append(list(measure_marks(img, camera, where=str(path),
+            got = read_image_notes(path)
+            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes)
+            found_all.append(list(measure_marks(got.pixels, camera, where=str(path),
                                                 expect_one=expect_one, roi=roi)))
         except ImageInputError as exc:
             found_all.append([exc])
@@ -688,7 +738,8 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             else:
                 res.append(finish_mark(m, lens, k, str(path), i, alpha))
             k += 1
-        out.append(res)
+        notes = said.get(str(path), ())
+        out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
     return out
 
 
@@ -698,11 +749,17 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
                  ) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
-        img = read_image(path)
+        got = read_image_notes(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
-                         min_length_px, ranges)
+    results = measure_image(got.pixels, str(path), camera, alpha, max_marks, expect_one, roi,
+                            min_length_px, ranges)
+    if not got.notes:
+        return results
+    # What the reader did to the stored image (orientation applied, signed data offset):
+    # in each mark's notes, hence in the JSON and the warnings.
+    said = tuple(f"{path}: {n}" for n in got.notes)
+    return [replace(r, notes=said + tuple(r.notes)) for r in results]
 
 
 def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,

@@ -24,8 +24,18 @@ def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]
 def mark_warnings(results: Sequence) -> list[str]:
     """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
     out = []
+    seen: set[tuple[str, int]] = set()
     for r in results:
         what = f"{r.image} mark {r.index}"
+        if r.unreported and (r.image, -1) not in seen:
+            seen.add((r.image, -1))
+            out.append(f"{r.image}: {r.unreported} more line(s) found and not reported "
+                       "(beyond --max-marks, the strongest reported; or lines of a family "
+                       "shorter than --min-length)")
+        fam = getattr(r, "family", None)
+        if fam is not None and (r.image, fam.members[0]) not in seen:
+            seen.add((r.image, fam.members[0]))
+            out += family_warnings(r.image, fam)
         if not r.found:
             out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue
@@ -37,6 +47,21 @@ def mark_warnings(results: Sequence) -> list[str]:
         elif r.uncertainty_inflation < 1:
             out.append(f"{what}: uncertainty scaled x{r.uncertainty_inflation:.2f} to the "
                        "centres' scatter: the groove model's shape does not fit this groove")
+    return out
+
+
+def family_warnings(image: str, fam) -> list[str]:
+    """A family of lines (``align.family.LineFamily``): members not parallel, failed ones."""
+    out = []
+    what = f"{image}: family of {len(fam.members)} lines (marks {fam.members[0]}..)"
+    if fam.deviant:
+        out.append(f"{what}: mark(s) {', '.join(map(str, fam.deviant))} not parallel to the "
+                   "others beyond their u (a tilted or bent line)")
+    if not fam.consistent():
+        out.append(f"{what}: angles disagree (chi2/dof {fam.chi2_dof:.2f}, p {fam.p_value:.2g})"
+                   "; the family's angle u is widened by sqrt(chi2/dof)")
+    if fam.failed:
+        out.append(f"{what}: {fam.failed} member(s) found but not measured")
     return out
 
 
@@ -120,4 +145,8 @@ def session_warnings(res) -> list[str]:
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")
+        if f.disagreement is not None and not f.gross:  # (gross: in the stage's error)
+            widened = ", ".join(n for n, _, _ in f.disagreement.angles)
+            out.append(f"fusion: {f.disagreement.message()}; the uncertainty of {widened} "
+                       "is widened by the whole disagreement")
     return out

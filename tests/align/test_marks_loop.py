@@ -230,4 +230,6 @@ def test_loop_u_of_a_textured_mark_same_from_either_end():
     b = measure_image(np.ascontiguousarray(np.rot90(img, 2)))[0]
     assert a.measurement.chol is not None and a.lens["lines"] == 1  # one mark, textured
     assert abs(a.angle_u_rad - b.angle_u_rad) < 1e-5 * a.angle_u_rad
-    assert abs(a.angle_rad - b.angle_rad) < 1e-5 * a.angle_u_rad
+    # The angle to the rounding of the sampling grid along the mark (nearest-pixel ties
+    # fall differently in the rotated frame: ~1e-5 u once the search runs on 2 x 2 blocks).
+    assert abs(a.angle_rad - b.angle_rad) < 1e-4 * a.angle_u_rad
