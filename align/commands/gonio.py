@@ -15,7 +15,7 @@ from align.commands.args import (
     number,
 )
 from align.commands.common import plan, say, settings, warn, wrote
-from align.commands.parents import tables
+from align.commands.parents import examples, tables
 
 
 def cmd_gonio(args: argparse.Namespace) -> int:
@@ -85,7 +85,11 @@ def _write_gonio(args, run, names, nominal_deg, out, inputs) -> None:
 
 def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
     g = add("gonio", "face angles from a ring-laser counter log",
-            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"))
+            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"),
+            epilog=examples("align gonio log.csv --faces ref,z,y,x --nominal 90,90,90,90 "
+                            "--latitude 48.1 --json gonio.json",
+                            "align gonio ccw.csv --faces ref,z,y,x --reverse-log cw.csv "
+                            "--latitude-range 40,55 --plot figs/"))
     g.add_argument("log", help="CSV count,counter,ref[,t]")
     g.add_argument("--faces", required=True, help="face names in passing order, e.g. ref,z,y,x")
     g.add_argument("--nominal", help="nominal angles [deg] summing to 360, e.g. 90,90,90,90")

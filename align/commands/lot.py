@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 from align.commands.args import POSITIVE
 from align.commands.common import plan, say, settings, warn
+from align.commands.parents import examples
 
 
 def cmd_lot(args: argparse.Namespace) -> int:
@@ -32,7 +33,9 @@ def cmd_lot(args: argparse.Namespace) -> int:
 
 
 def add_lot(add: Callable[..., argparse.ArgumentParser]) -> None:
-    lt = add("lot", "a production lot: control charts, outliers, capability, metadata")
+    lt = add("lot", "a production lot: control charts, outliers, capability, metadata",
+             epilog=examples("align lot results/ --report lot.html --csv lot.csv "
+                             "--tolerance-arcsec 20"))
     lt.add_argument("results", nargs="+",
                     help="session results ('align run --json') or folders of them (*.json)")
     lt.add_argument("--report", help="HTML report of the lot (a new file)")

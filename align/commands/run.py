@@ -10,6 +10,7 @@ from collections.abc import Callable
 
 from align.commands.args import ALPHA, UsageError, number, unique
 from align.commands.common import log, say, settings, warn
+from align.commands.parents import examples
 
 # Flags that say how a batch runs, not what it computes: left out of the results' settings,
 # so a batch gives the same JSON however it is run.
@@ -131,12 +132,18 @@ def _show_batch(results: list[dict]) -> None:
 
 
 def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
-    r = add("run", "run whole sessions: every stage, the loops, the fusion")
+    r = add("run", "run whole sessions: every stage, the loops, the fusion", epilog=examples(
+        "align run SESSION --json result.json --report report.html --platform-calibration "
+        "pc.json",
+        "# a production batch, then the rest of it after a stop",
+        "align run S1 S2 S3 --json results/ --report reports/ --jobs 4",
+        "align run S1 S2 S3 --json results/ --report reports/ --resume"))
     r.add_argument("sessions", nargs="+", help="session folder(s) holding session.toml")
     r.add_argument("--json", help="result JSON (a folder when several sessions; '-': stdout)")
     r.add_argument("--report", help="HTML report (a folder when several sessions)")
-    r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
-                   "(a folder when several sessions)")
+    r.add_argument("--platform-calibration", "--calibration", dest="calibration",
+                   metavar="OUT", help="write the platform calibration JSON for 'align apply' "
+                   "(a folder when several sessions; --calibration: the older name)")
     r.add_argument("--jobs", type=number(1, 1024, integer=True),
                    help="parallel sessions (default: all cores)")
     r.add_argument("--alpha", type=ALPHA, default=1e-3,

@@ -81,13 +81,13 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
     try:
         s = load_session(job.folder, allow_outside=job.allow_outside)
         if job.cal is not None and s.calibration is None:
-            raise InputError(f"--calibration {job.cal}: the session {s.folder} has no "
+            raise InputError(f"--platform-calibration {job.cal}: the session {s.folder} has no "
                              "[calibration] section, so there is no platform calibration "
                              "to write")
         plan = OutputPlan(s.inputs, force=job.force)
         outs = {"json": plan.add("--json", job.json, stdout_ok=True),
                 "report": plan.add("--report", job.report),
-                "cal": plan.add("--calibration", job.cal)}
+                "cal": plan.add("--platform-calibration", job.cal)}
     except InputError as exc:
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
@@ -104,7 +104,7 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
                 "error": str(exc)}
     warnings = list(js["warnings"])
     if outs["cal"] is not None and "cal" not in written:
-        warnings.append(f"--calibration {outs['cal']}: NOT written: no platform calibration "
+        warnings.append(f"--platform-calibration {outs['cal']}: NOT written: no platform calibration "
                         "(the calibration or the fusion failed)")
     return {"session": s.name, "folder": job.folder, "ok": res.ok, "bad_input": not res.ok,
             "result": res if job.keep_result else None, "json": js, "warnings": warnings,
@@ -130,7 +130,7 @@ def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | N
     names = [Path(s).resolve().name for s in sessions]
     if len(set(names)) != len(names):
         raise InputError("two sessions have the same folder name; outputs would collide")
-    flags = (("--json", json), ("--report", report), ("--calibration", cal))
+    flags = (("--json", json), ("--report", report), ("--platform-calibration", cal))
     for flag, folder in flags:
         if folder == "-":
             raise InputError(f"{flag} -: standard output takes one session, not a batch")
