@@ -104,8 +104,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
                 "error": str(exc)}
     warnings = list(js["warnings"])
     if outs["cal"] is not None and "cal" not in written:
-        warnings.append(f"--platform-calibration {outs['cal']}: NOT written: no platform calibration "
-                        "(the calibration or the fusion failed)")
+        warnings.append(f"--platform-calibration {outs['cal']}: NOT written: no platform "
+                        "calibration (the calibration or the fusion failed)")
     return {"session": s.name, "folder": job.folder, "ok": res.ok, "bad_input": not res.ok,
             "result": res if job.keep_result else None, "json": js, "warnings": warnings,
             "outputs": {k: str(v) for k, v in written.items()}}
