@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from align.errors import NotApplicable
 from align.loop import (
     Candidate,
     LoopReport,
@@ -80,7 +81,7 @@ class MarkStage:
         q = undistort(self.m.points, [k1], self.scale)
         g = cross_magnification(self.m.points, [k1], self.scale, line_frame(angle_rad)[1])
         if not np.all(np.isfinite(q)) or not np.all(g > 0):
-            raise ValueError("k1 folds the image along this mark")
+            raise NotApplicable("k1 folds the image along this mark")
         return q, self.sigma * g
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
