@@ -18,6 +18,7 @@ Candidate effects (each a few design columns with physical meaning):
 from __future__ import annotations
 
 import functools
+import logging
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -35,6 +36,7 @@ from align.loop import (
     periodogram_test,
     run_loop,
 )
+from axisbase.errors import internal_error
 from imaging import (
     CameraModel,
     ImageInputError,
@@ -51,6 +53,8 @@ from imaging import (
 RADIAL = "radial_distortion"
 WIGGLE = "periodic_wiggle"
 ILLUM = "illumination_gradient"
+
+log = logging.getLogger("align.marks")
 
 
 def half_diagonal(shape: tuple[int, int]) -> float:
@@ -548,11 +552,14 @@ def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None
 
     Bad input is already a failed entry; anything else raised inside one image is a bug, but
     it must not cost the user the other images: it becomes that image's failed entry, marked
-    ``internal_error`` ("internal error: <type>: <message>"), and the batch goes on.
+    ``internal_error`` ("internal error — please report (<type>: <message>)", the traceback
+    in the log), and the batch goes on.
     """
     for path in paths:
         try:
             yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px)
         except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
+            bug = internal_error(exc)
+            log.error("%s: %s", path, bug, exc_info=exc)
             yield [MarkResult(image=str(path), found=False, internal_error=True,
-                              error=f"internal error: {type(exc).__name__}: {exc}")]
+                              error=str(bug))]

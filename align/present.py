@@ -177,6 +177,11 @@ def session_lines(res) -> list[str]:
     return lines
 
 
+def timing_lines(timings: dict[str, float]) -> list[str]:
+    """One short line per stage: its wall-clock time [s]."""
+    return [f"  {stage}: {dt:.2f} s" for stage, dt in timings.items()]
+
+
 def truth_lines(err: np.ndarray, z_rms: float) -> list[str]:
     """A synthetic session's error against its truth [″] and the RMS of error / u."""
     lines = ["  error against truth [″]:"]

@@ -77,6 +77,7 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
     out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
+    out += res.log_warnings
     if res.calibration is not None and res.calibration_poses is not None:
         out += calibration_warnings(res.calibration, res.calibration_poses)
     if res.gonio is not None:

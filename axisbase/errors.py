@@ -42,3 +42,12 @@ class NotApplicable(AxisAlignError):
     term, more parameters than observations, a distortion that folds the image): a candidate
     of the residual loop that is skipped, with this message as the reason. Not a
     ``ValueError``: a defect raising one is not mistaken for a skipped effect."""
+
+
+def internal_error(exc: BaseException) -> InternalError:
+    """The :class:`InternalError` a defect ``exc`` becomes where one item (an image, a
+    session's stage) is isolated so that the others go on: "internal error — please report
+    (<type>: <message>)", caused by ``exc`` (its traceback goes to the log)."""
+    bug = InternalError(f"internal error — please report ({type(exc).__name__}: {exc})")
+    bug.__cause__ = exc
+    return bug

@@ -48,10 +48,11 @@ def run_here(job) -> dict:
 
 def show_session(out: dict) -> None:
     """A session's result, warnings and outputs on the terminal."""
-    from align.present import session_lines
+    from align.present import session_lines, timing_lines
 
     print(f"session {out['session']}:")
     say(session_lines(out["result"]))
+    say(timing_lines(out["result"].timings))
     warn(out["warnings"])
     for k, v in out["outputs"].items():
         if v != "-":

@@ -106,7 +106,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
     if outs["cal"] is not None and "cal" not in written:
         warnings.append(f"--platform-calibration {outs['cal']}: NOT written: no platform "
                         "calibration (the calibration or the fusion failed)")
-    return {"session": s.name, "folder": job.folder, "ok": res.ok, "bad_input": not res.ok,
+    return {"session": s.name, "folder": job.folder, "ok": res.ok,
+            "bad_input": not res.ok and not res.internal_error,
             "result": res if job.keep_result else None, "json": js, "warnings": warnings,
             "outputs": {k: str(v) for k, v in written.items()}}
 
@@ -240,8 +241,9 @@ def batch_row(summary: Summary) -> BatchRow:
 
 def exit_status(summaries: Sequence[Summary]) -> int:
     """The exit status of ``align run`` (one session or a batch): 1 if a session hit an
-    internal error, else 2 if a session failed (bad input, or a failed stage: its result is
-    written with ``ok: false``), else 0."""
+    internal error (in one of its stages, or its job crashed), else 2 if a session failed
+    (bad input, or a failed stage: its result is written with ``ok: false``), else 0 — as
+    ``align marks`` for its images."""
     if any(not r["ok"] and not r.get("bad_input", False) for r in summaries):
         return EXIT_INTERNAL
     return EXIT_INPUT if any(not r["ok"] for r in summaries) else EXIT_OK

@@ -1,11 +1,23 @@
 """Run a whole session: calibration, goniometer, marks, platform static, fusion.
 
 Each stage's failure is recorded (``StageError``) and the others go on; the fusion uses
-whatever succeeded, and says so. Nothing is written here: outputs are the caller's business.
+whatever succeeded, and says so. A stage fails in one of two ways, the same for every stage:
+
+* bad input (an :class:`~axisbase.errors.InputError`: a file, a key, an image) — the stage's
+  error is its message, for the user to fix;
+* anything else is a defect of the tool: an :class:`~axisbase.errors.InternalError` "internal
+  error — please report" is recorded for that stage (``StageError.internal``), its traceback
+  goes to the log, and the other stages still run.
+
+``align run`` exits 1 when a stage hit an internal error, else 2 when one failed, else 0 —
+as ``align marks`` does for its images. Nothing is written here: outputs are the caller's
+business.
 """
 
 from __future__ import annotations
 
+import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -33,17 +45,23 @@ from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
+from axisbase.console import captured_warnings
+from axisbase.errors import internal_error
 from axisbase.table import resolve_units
-from goniometry import LogError
-from imaging import CameraModel, ImageInputError
+from imaging import CameraModel
 
 Progress = Callable[[str], None]
+log = logging.getLogger("align.session")
 
 
 @dataclass(frozen=True)
 class StageError:
+    """A stage that failed: its name, the message, and whether it was a defect of the tool
+    (``internal``: "internal error — please report") rather than bad input."""
+
     stage: str
     message: str
+    internal: bool = False
 
 
 @dataclass
@@ -60,6 +78,15 @@ class SessionResult:
     fusion: FusionResult | None = None
     errors: list[StageError] = field(default_factory=list)
     units: str = "V"
+    timings: dict[str, float] = field(default_factory=dict)
+    """Wall-clock time of each stage [s] (in the order they ran)."""
+    log_warnings: list[str] = field(default_factory=list)
+    """Warnings the stages logged (e.g. how a file was read): they reach the JSON too."""
+
+    @property
+    def internal_error(self) -> bool:
+        """A stage hit a defect of the tool (exit status 1), not bad input."""
+        return any(e.internal for e in self.errors)
 
     @property
     def fused(self) -> bool:
@@ -91,7 +118,9 @@ class SessionResult:
 
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
                    "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
-                   "errors": [{"stage": e.stage, "message": e.message} for e in self.errors],
+                   "errors": [{"stage": e.stage, "message": e.message,
+                               **({"internal": True} if e.internal else {})}
+                              for e in self.errors],
                    "metadata": dict(self.session.metadata)}
         if self.fusion is not None:
             d.update(self.fusion.to_dict())
@@ -112,17 +141,25 @@ class SessionResult:
         return d
 
 
-def _try(res: SessionResult, stage: str, fn: Callable[[], object]) -> object | None:
+def _try(res: SessionResult, stage: str, fn: Callable[[], object],
+         where: str = "") -> object | None:
     """``fn()``, or None with the stage's failure recorded. Bad input is the user's to fix;
-    a numerical failure inside a stage is a defect of the tool and is named as one (the other
-    stages still run, so nothing else is lost)."""
+    anything else is a defect of the tool and is named as one, with its traceback in the log
+    (the other stages still run, so nothing else is lost). An interruption (Ctrl-C, a stop
+    signal) is not a stage's failure: it propagates."""
+    start = time.perf_counter()
     try:
         return fn()
-    except (InputError, LogError, ImageInputError) as exc:
-        res.errors.append(StageError(stage, str(exc)))
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        res.errors.append(StageError(stage, f"internal error ({type(exc).__name__}: {exc}); "
-                                            "please report it with the session's files"))
+    except InputError as exc:
+        res.errors.append(StageError(stage, f"{where}{exc}"))
+    except Exception as exc:  # noqa: BLE001 - deliberate: one stage's defect, not the session's
+        bug = internal_error(exc)
+        log.error("stage %s: %s%s", stage, where, bug, exc_info=exc)
+        res.errors.append(StageError(stage, f"{where}{bug}", internal=True))
+    finally:
+        dt = time.perf_counter() - start
+        res.timings[stage] = res.timings.get(stage, 0.0) + dt
+        log.debug("stage %s: %s%.3f s", stage, where, dt)
     return None
 
 
@@ -130,6 +167,13 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
                 alpha: float = 1e-3) -> SessionResult:
     """Run every stage of ``s`` and fuse; stage failures are collected, not raised."""
     res = SessionResult(s)
+    with captured_warnings() as logged:
+        _run_stages(s, res, progress, alpha)
+    res.log_warnings.extend(dict.fromkeys(logged))
+    return res
+
+
+def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float) -> None:
     if s.calibration is not None:
         progress("calibration: ellipsoid fit over the static poses")
         c = s.calibration
@@ -163,7 +207,11 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
     for k, im in enumerate(s.images, start=1):
         progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
         cam = cams.get(s.views[im.view].camera)
-        found = measure_file(im.file, cam, alpha=alpha, expect_one=True, roi=im.roi)
+        found = _try(res, "marks", lambda im=im, cam=cam: measure_file(
+            im.file, cam, alpha=alpha, expect_one=True, roi=im.roi),
+            where=f"{im.key} ({im.file.name}): ")
+        if found is None:
+            continue
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
@@ -192,7 +240,6 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         res.errors.append(StageError("fusion", "no stage produced observations"))
     elif res.fusion is not None and res.fusion.gross:
         res.errors.append(StageError("fusion", res.fusion.gross_message()))
-    return res
 
 
 def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:
