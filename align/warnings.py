@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
+from goniometry.revolutions import R_TAIL
 
 
 def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
@@ -57,11 +59,9 @@ def calibration_warnings(cal, poses) -> list[str]:
 def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) -> list[str]:
     """A goniometer run (``GonioRun``); with the faces' names and nominal angles [rad], a
     nominal that does not describe the measured faces too."""
-    from align.gonio import nominal_mismatch
 
     out = loop_warnings("goniometer", run.loop)
     out += [f"goniometer: {w}" for w in run.warnings]
-    from goniometry.revolutions import R_TAIL
 
     # Noise's own tail in a long log is listed in the JSON's exclusions, not warned of.
     ex = {why: k for why, k in run.summary.exclusions.counts.items() if why != R_TAIL}

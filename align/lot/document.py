@@ -13,6 +13,7 @@ from pathlib import Path
 from align.contract import document
 from align.lot.duplicates import Duplicate
 from align.lot.read import ANGLE_NAMES, ReadFile
+from align.lot.report import write_lot_report
 from align.lot.stats import GUARD, PROVISIONAL, AngleStats, Lot
 from axisbase.output import write_atomic, write_json
 from axisbase.provenance import InputFile, Provenance
@@ -203,7 +204,6 @@ def lot_outputs(lot: Lot, read: Sequence[ReadFile], outs: Mapping[str, Path | No
     if outs.get("csv") is not None:
         written["csv"] = write_atomic(outs["csv"], lot_csv(lot), force)
     if outs.get("report") is not None:
-        from align.lot.report import write_lot_report
 
         written["report"] = write_lot_report(lot, outs["report"], doc, force)
     return written, doc

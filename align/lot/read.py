@@ -22,6 +22,7 @@ import orjson
 
 from align.contract import check
 from align.errors import InputError
+from axisbase.units import ARCSEC
 
 ANGLE_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
 """The six angles in the order of ``angle_names`` of a session result (``align.fusion``'s
@@ -143,7 +144,6 @@ class UnitResult:
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
-        from axisbase.units import ARCSEC
 
         return {"file": self.file, "session": self.session, "unit": self.label,
                 "ok": self.ok, "fused": self.fused,

@@ -13,8 +13,11 @@ import math
 from pathlib import Path
 
 from align.html import esc, png_img, table
+from align.lot.figures import fig_control_chart, fig_distributions, fig_metadata, png
 from align.lot.read import ANGLE_NAMES
 from align.lot.stats import FALSE_RATE, GUARD, Lot
+from axisbase.output import write_atomic
+from axisbase.provenance import Provenance
 from axisbase.units import ARCSEC
 
 CSS = """body{font-family:sans-serif;max-width:1150px;margin:2em auto;color:#222}
@@ -28,8 +31,6 @@ UNIT_ROWS_MAX = 20000
 
 
 def _img(fig, alt: str) -> str:
-    from align.lot.figures import png
-
     return png_img(png(fig), alt)
 
 
@@ -42,8 +43,6 @@ def _n(v: float | None, fmt: str = "{:.2f}") -> str:
 
 
 def _provenance(doc: dict) -> str:
-    from axisbase.provenance import Provenance
-
     p = Provenance.from_dict(doc)
     return (f"<p>{esc(p.tool)} {esc(p.tool_version)}, {esc(doc['format'])} format version "
             f"{doc['format_version']}, written {esc(p.created_utc)} (UTC) by "
@@ -112,8 +111,6 @@ def _flagged(lot: Lot) -> str:
 
 
 def _metadata(lot: Lot) -> str:
-    from align.lot.figures import fig_metadata
-
     parts = ["<h2>Each angle against the session metadata</h2>"]
     if not lot.metadata:
         parts.append("<p>No metadata key varies over the units in groups that can be "
@@ -160,8 +157,6 @@ def _units(lot: Lot) -> str:
 def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False) -> Path:
     """Write the lot's report to ``path`` (atomically; exclusively unless ``force``).
     ``doc``: the lot JSON, whose warnings and provenance head the page."""
-    from align.lot.figures import fig_control_chart, fig_distributions
-    from axisbase.output import write_atomic
 
     n_units, n_stats = len(lot.units), len(lot.in_stats)
     parts = ["<!doctype html><html><head><meta charset='utf-8'>"

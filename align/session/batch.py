@@ -29,7 +29,13 @@ from pathlib import Path
 from typing import Protocol
 
 from align.errors import InputError
+from align.session.config import load_session
+from align.session.output import session_outputs
+from align.session.run import run_session
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK
+from axisbase.output import STDOUT, OutputPlan
+from axisbase.provenance import set_command
+from axisbase.stop import Stopped, on_signal
 
 Summary = dict
 OnDone = Callable[[Summary], None]
@@ -72,9 +78,6 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
 
     Every output is checked before anything is computed; a stage that failed still gives
     the result (``ok: false``)."""
-    from align.session import load_session, run_session, session_outputs
-    from axisbase.output import OutputPlan
-    from axisbase.provenance import set_command
 
     if job.command:
         set_command(job.command)
@@ -126,7 +129,6 @@ def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | N
     ``<session>.json``, ``<session>.html``, ``<session>.cal.json`` each, named after the
     session's folder). The folders are created and checked writable now; ``common``: the
     other :class:`SessionJob` fields."""
-    from axisbase.output import OutputPlan
 
     names = [Path(s).resolve().name for s in sessions]
     if len(set(names)) != len(names):
@@ -151,7 +153,6 @@ def is_complete(job: SessionJob) -> bool:
     """Every output ``job`` asks for is in place: a session result JSON, the report, and the
     calibration (unless the JSON says the session gave none). Outputs appear all together or
     not at all, so this is what an interrupted batch finished."""
-    from axisbase.output import STDOUT
 
     if job.json == STDOUT or not (job.json or job.report or job.cal):
         return False
@@ -298,8 +299,6 @@ def _worker_init(parent: int) -> None:
 
 
 def _worker_signal(signum: int, frame: object) -> None:
-    from axisbase.stop import on_signal
-
     if not _IN_JOB[0]:
         os._exit(128 + signum)
     on_signal(signum, frame)  # raises Stopped in the job (held back during a commit)
@@ -344,8 +343,6 @@ def _exists(pid: int) -> bool:
 
 
 def _pool_job(job: SessionJob) -> Summary:
-    from axisbase.stop import Stopped
-
     try:
         _IN_JOB[0] = True
         return run_job(job)

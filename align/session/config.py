@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from align.errors import InputError
+from axisbase.provenance import sha256_file
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
@@ -166,7 +167,6 @@ class _Files:
 
 def _same_contents(a: Path, b: Path) -> bool:
     """Byte-identical files (size first, then streamed hashes: logs can be gigabytes)."""
-    from axisbase.provenance import sha256_file
 
     return a.stat().st_size == b.stat().st_size and sha256_file(a) == sha256_file(b)
 

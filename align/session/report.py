@@ -8,8 +8,15 @@ import numpy as np
 
 from align.html import esc, png_img, table
 from align.loop import LoopReport, LoopSummary
+from align.plots import fig_calibration, fig_fusion, fig_gonio, fig_mark, png_bytes
 from align.session.run import SessionResult
+from align.warnings import session_warnings
+from axisbase.output import write_atomic
+from axisbase.provenance import Provenance
+from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
+from goniometry import kept_table
+from imaging import ImageInputError, read_image
 
 CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:0.6em 0}td,th{border:1px solid #bbb;padding:3px 8px;
@@ -18,8 +25,6 @@ text-align:right}th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00;fo
 
 
 def _img(fig) -> str:
-    from align.plots import png_bytes
-
     return png_img(png_bytes(fig))
 
 
@@ -47,7 +52,6 @@ def _loop(loop: LoopReport | LoopSummary | None, scale: float = 1.0, unit: str =
 def _provenance(doc: dict | None) -> str:
     if not doc:
         return ""
-    from axisbase.provenance import Provenance
 
     p = Provenance.from_dict(doc)
     rows = [[i.path, i.sha256 or "unreadable"] for i in p.inputs]
@@ -63,15 +67,12 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
                  doc: dict | None = None) -> Path:
     """Write the report to ``path`` (atomically; exclusively unless ``force``). ``doc``: the
     result JSON, whose warnings and provenance head the report."""
-    from axisbase.output import write_atomic
 
     return write_atomic(path, report_html(res, doc), force)
 
 
 def report_html(res: SessionResult, doc: dict | None = None) -> str:
     """The report as one self-contained HTML page (see :func:`write_report`)."""
-    from align.plots import fig_calibration, fig_fusion, fig_gonio, fig_mark
-    from align.warnings import session_warnings
 
     s = res.session
     warnings = doc["warnings"] if doc else session_warnings(res)
@@ -119,7 +120,6 @@ def report_html(res: SessionResult, doc: dict | None = None) -> str:
     if res.calibration is not None:
         c, m = res.calibration, res.calibration.model
         parts.append("<h2>Triad calibration (ellipsoid, seed paper's model)</h2>")
-        from axisbase.table import OUTPUT_UNITS
 
         k, k_u = m.sensitivity(), m.sensitivity_u()  # output per g along each axis
         parts.append(table(["axis", f"scale factor [{OUTPUT_UNITS[res.units]}]", "β [µrad]",
@@ -133,7 +133,6 @@ def report_html(res: SessionResult, doc: dict | None = None) -> str:
             parts.append("<h3>Δg per pose</h3>"
                          + _img(fig_calibration(c, res.calibration_poses, None)))
     if res.gonio is not None:
-        from goniometry import kept_table
 
         g, fa = res.gonio, res.gonio.angles
         faces = list(s.goniometer.faces)
@@ -158,7 +157,6 @@ def report_html(res: SessionResult, doc: dict | None = None) -> str:
             [im.file.name, im.housing, im.view, f"{np.rad2deg(r.angle_rad):+.6f}",
              f"{r.angle_u_rad / ARCSEC:.2f}", ", ".join(e.name for e in r.loop.effects)
              or "none"] for im, r in res.marks], left=3))
-        from imaging import ImageInputError, read_image
 
         for im, r in res.marks:
             try:

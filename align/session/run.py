@@ -25,6 +25,7 @@ import numpy as np
 
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
+from align.calibration.output import with_units
 from align.calibration.units import unit_scale_check
 from align.errors import InputError
 from align.fusion import (
@@ -45,6 +46,7 @@ from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_file
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
+from align.warnings import session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
 from axisbase.table import resolve_units
@@ -113,8 +115,6 @@ class SessionResult:
         platform calibration, and each stage's own result. A session result is not loaded
         back whole (it needs the session's files); its parts are:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
-        from align.calibration.output import with_units
-        from align.warnings import session_warnings
 
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
                    "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
