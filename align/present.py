@@ -12,6 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from align.decision import Disposition
+from align.fusion.budget import Budget
+from align.plan import plan_from_result
 from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
@@ -196,13 +199,25 @@ def batch_row_line(row) -> str | None:
     |E| and u [″], chi2/dof, outputs; None when there is nothing to show."""
     outs = "".join(f", {k} {v}" for k, v in row.outputs.items())
     if row.e_max_arcsec is not None:
-        return (f"{row.session}: {'OK' if row.ok else 'FAILED stages'}, |E| max "
+        return (f"{row.session}: {row.verdict or 'no verdict'}, "
+                f"{'OK' if row.ok else 'FAILED stages'}, |E| max "
                 f"{row.e_max_arcsec:.1f}″, u max {row.u_max_arcsec:.2f}″, chi2/dof "
                 f"{row.chi2:.1f}/{row.dof}" + ("" if row.consistent else ", NOT consistent")
                 + (" (complete before, skipped)" if row.skipped else "") + outs)
     if row.skipped:
         return f"{row.session}: complete before, skipped" + outs
     return None
+
+
+def decision_lines(js: dict, budget: bool = False, plan: bool = False) -> list[str]:
+    """A session result's verdict line (:mod:`align.decision`), and with ``budget`` its
+    uncertainty budget, with ``plan`` what to measure next (:mod:`align.plan`)."""
+    lines = ["  " + Disposition.from_dict(js["disposition"]).line()]
+    if budget and js.get("budget"):
+        lines += ["  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()]
+    if plan and js.get("budget"):
+        lines += ["  " + ln for ln in plan_from_result(js).lines()]
+    return lines
 
 
 # ----------------------------------------------------------------------------- lot
@@ -223,3 +238,12 @@ def lot_lines(lot, doc: dict, tolerance_arcsec: float | None) -> list[str]:
                      f"{len(a['outside_tolerance'])} outside ±{tolerance_arcsec:g}″")
         lines.append(line)
     return lines
+
+
+def verdict_lines(dispositions: Sequence[dict], rule: str | None) -> list[str]:
+    """A lot's verdicts: the count of each, then one line per unit that did not pass."""
+    verdicts = [d["verdict"] for d in dispositions]
+    counts = ", ".join(f"{verdicts.count(v)} {v}" for v in dict.fromkeys(verdicts))
+    lines = [f"  verdicts ({f'{rule} rule' if rule else 'each unit its own'}): {counts}"]
+    return lines + [f"    {d['unit']}: {d['verdict']}: {d['reason']}" for d in dispositions
+                    if d["verdict"] != "PASS"]

@@ -21,6 +21,9 @@ EXIT_INTERNAL = 1
 EXIT_INPUT = 2
 """Exit status: bad input or usage, or a result that cannot be trusted (written, ``ok``
 false)."""
+EXIT_REJECTED = 3
+"""Exit status with ``--fail-on-reject``: a verdict FAIL or INCONCLUSIVE (the result is
+written and trustworthy; the unit does not conform, or cannot be shown to)."""
 EXIT_INTERRUPTED = 130
 """Exit status: interrupted (Ctrl-C, SIGINT); a SIGTERM gives 143."""
 

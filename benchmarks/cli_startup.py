@@ -7,12 +7,15 @@ Fresh processes, median (and best) of N runs each:
 * the obvious alternative: the same help after importing the pipeline eagerly, as the CLI did
   before (numpy, scipy, pyarrow, OpenCV, matplotlib through align.session/marks/plots).
 
-Usage: ``python3 benchmarks/cli_startup.py [N]`` (default 7). On a loaded host the figures
-vary; the ratio within one run is the figure to quote.
+Usage: ``python3 benchmarks/cli_startup.py [N] [--markdown PATH]`` (default 7). On a loaded
+host the figures vary; the ratio within one run is the figure to quote. ``--markdown`` also
+writes them as a Markdown table (``docs/generated/cli_startup.md`` is included by the
+performance page of the docs).
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import statistics
 import subprocess
@@ -37,7 +40,11 @@ def timed(cmd: list[str], n: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 7
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("n", nargs="?", type=int, default=7, help="runs of each command")
+    ap.add_argument("--markdown", type=Path, help="also write the table to this Markdown file")
+    args = ap.parse_args()
+    n = args.n
     py = sys.executable
     rows = [("align --help", [py, "-m", "align", "--help"]),
             ("align gonio --help", [py, "-m", "align", "gonio", "--help"]),
@@ -49,6 +56,16 @@ def main() -> None:
         print(f"{name:40s} median {med * 1000:7.0f} ms   best {best * 1000:7.0f} ms")
     ratio = res["eager imports + --help (the old way)"][0] / res["align --help"][0]
     print(f"eager / deferred (median): {ratio:.1f}x; target: align --help < 500 ms")
+    if args.markdown:
+        rows = ["| command | median [ms] | best [ms] |", "|---|---|---|"]
+        rows += [f"| `{name}` | {med * 1000:.0f} | {best * 1000:.0f} |"
+                 for name, (med, best) in res.items()]
+        stamp = time.strftime("%Y-%m-%d", time.gmtime())
+        args.markdown.write_text(
+            "\n".join(rows) + f"\n\nEager / deferred (median): {ratio:.1f}×. Measured {stamp}, "
+            f"{n} fresh processes each, by `python3 benchmarks/cli_startup.py {n} --markdown "
+            f"docs/generated/cli_startup.md`; {os.cpu_count()} cores, load average "
+            f"{os.getloadavg()[0]:.1f}.\n")
 
 
 if __name__ == "__main__":

@@ -51,7 +51,7 @@ def lot_results(template: Mapping[str, Any], n: int, seed: int,
     for k, (a, s) in (shifts or {}).items():
         truth[k, a] += s * sigma[a]
     out = []
-    drop = {"misalignment_rad", "misalignment_arcsec"}
+    drop = {"misalignment_rad", "misalignment_arcsec", "disposition", "budget"}  # (of E)
     if small:
         drop |= SMALL_DROPS
     base = {k: v for k, v in template.items() if k not in drop}

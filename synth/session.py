@@ -92,6 +92,10 @@ class SessionSpec:
     views: tuple[str, ...] = tuple(VIEWS)
     reverse_run: bool = False  # also a clockwise counter log (gonio_cw.csv)
     platform_poses: tuple[str, ...] = tuple(p[0] for p in PLATFORM_POSES)
+    # (housing, view) pairs photographed once more (a new exposure of the same mark: new
+    # placement in the frame, new noise), as <housing>_<view>_2.png, _3.png, ...
+    repeat_images: tuple[tuple[str, str], ...] = ()
+    platform_static: bool = True  # False: no platform static readings at all
 
 
 def true_axes(E: np.ndarray) -> np.ndarray:
@@ -141,7 +145,7 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
                   axes=tuple(map(tuple, S)))
     td = tumble(TumbleSpec(triad=triad, seed=int(rng.integers(1 << 30)), check_poses=0))
     write_tumble_csv(td, out / "tumble.csv")
-    platform = _platform(out, spec, triad, eff, rng)
+    platform = _platform(out, spec, triad, eff, rng) if spec.platform_static else None
 
     toml = _session_toml(spec, declared, images, platform)
     (out / "session.toml").write_text(toml)
@@ -159,26 +163,32 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
             rng: np.random.Generator) -> list[dict]:
     w, h = spec.image_size
     rows = []
-    for view in spec.views:
+    shots = [(view, housing, nominal, "") for view in spec.views
+             for housing, nominal in VIEW_MARKS[view]]
+    for k, (housing, view) in enumerate(spec.repeat_images):
+        if view not in spec.views or housing not in dict(VIEW_MARKS[view]):
+            raise ValueError(f"repeat_images: housing {housing} is not in view {view}")
+        n = sum(1 for hv in spec.repeat_images[:k + 1] if hv == (housing, view)) + 1
+        shots.append((view, housing, dict(VIEW_MARKS[view])[housing], f"_{n}"))
+    for view, housing, nominal, suffix in shots:
         cam, right, up = VIEWS[view]
         geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get(f"lens_k1_{cam}",
                                                            eff.get("lens_k1", 0.0)),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
-        for housing, nominal in VIEW_MARKS[view]:
-            s = S[HOUSINGS.index(housing)]
-            ang = _scene_angle(s, parse_direction(right), parse_direction(up))
-            mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
-                            length_px=spec.mark_length_px, width_px=4.0,
-                            centre_t_px=float(rng.uniform(-30, 30)))
-            img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
-                            full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
-                            dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
-            sample = render_marks(img, with_crlb=False)
-            name = f"{housing}_{view}.png"
-            write_synth(sample, out / name)
-            rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
-                         "image_angle_rad": sample.truth.marks[0].image_angle_rad,
-                         })
+        s = S[HOUSINGS.index(housing)]
+        ang = _scene_angle(s, parse_direction(right), parse_direction(up))
+        mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
+                        length_px=spec.mark_length_px, width_px=4.0,
+                        centre_t_px=float(rng.uniform(-30, 30)))
+        img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
+                        full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
+                        dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
+        sample = render_marks(img, with_crlb=False)
+        name = f"{housing}_{view}{suffix}.png"
+        write_synth(sample, out / name)
+        rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
+                     "image_angle_rad": sample.truth.marks[0].image_angle_rad,
+                     })
     return rows
 
 
@@ -230,7 +240,7 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
 
 
 def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[dict],
-                  platform: list[tuple[str, str, float]]) -> str:
+                  platform: list[tuple[str, str, float]] | None) -> str:
     lines = ["# Synthetic alignment session (align synth session)", "",
              f"latitude_deg = {spec.latitude_deg}", "", "[calibration]",
              'static = "tumble.csv"', 'scale_sign = "-"', "", "[goniometer]",
@@ -251,6 +261,8 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
     for im in images:
         lines += ["", "[[images]]", f'file = "{im["file"]}"', f'housing = "{im["housing"]}"',
                   f'view = "{im["view"]}"', f'nominal = "{im["nominal"]}"']
+    if platform is None:
+        return "\n".join(lines) + "\n"
     lines += ["", "[platform]", 'static = "platform.csv"']
     tilt = [declared.get("table_tilt_x"), declared.get("table_tilt_y")]
     if any(v is not None for v in tilt):

@@ -18,6 +18,36 @@ from axisbase.errors import InputError
 UNITS = ("g", "m/s2", "counts", "V")
 
 
+def tolerance_limits(text: str) -> list[float]:
+    """``--tolerance-arcsec``: "T" (±T) or "LO,HI" [″] relative to the nominal."""
+    from align.decision import limits_arcsec
+
+    try:
+        return list(limits_arcsec(text, "--tolerance-arcsec", text=True))
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_decision_flags(p: argparse.ArgumentParser) -> None:
+    """The tolerance and decision-rule flags of 'align run' and 'align lot'."""
+    p.add_argument("--tolerance-arcsec", type=tolerance_limits, metavar="T|LO,HI",
+                   help="tolerance on every angle [″]: ±T, or LO,HI relative to the nominal "
+                   "(overrides session.toml [tolerance])")
+    p.add_argument("--decision", choices=["simple", "guarded"],
+                   help="decision rule: simple acceptance, or guarded with w = k·u (default: "
+                   "session.toml's, else guarded)")
+    p.add_argument("--guard-k", type=number(0, 10), metavar="K",
+                   help="guard-band factor k of the guarded rule (default 2)")
+    p.add_argument("--fail-on-reject", action="store_true",
+                   help="exit status 3 when a verdict is FAIL or INCONCLUSIVE")
+
+
+def decision_keywords(args: argparse.Namespace) -> dict:
+    """The decision flags given, as :func:`align.decision.resolve`'s keywords."""
+    out = {"tolerance": args.tolerance_arcsec, "rule": args.decision, "k": args.guard_k}
+    return {k: v for k, v in out.items() if v is not None}
+
+
 class UsageError(InputError):
     """Bad input the user can fix (exit status 2)."""
 

@@ -5,14 +5,17 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import POSITIVE
-from align.commands.common import plan, say, settings, warn
+from align.commands.args import add_decision_flags, decision_keywords
+from align.commands.common import log, plan, say, settings, warn
 from align.commands.parents import examples
 
 
 def cmd_lot(args: argparse.Namespace) -> int:
+    from align.decision import resolve
     from align.lot import analyse, lot_outputs, read_results, result_files
-    from align.present import lot_lines
+    from align.present import lot_lines, verdict_lines
+    from align.session.batch import rejected
+    from axisbase.errors import EXIT_INPUT, EXIT_OK, EXIT_REJECTED
     from axisbase.units import ARCSEC
 
     files = result_files(args.results)
@@ -20,16 +23,27 @@ def cmd_lot(args: argparse.Namespace) -> int:
     paths = {"json": outs.add("--json", args.json, stdout_ok=True),
              "csv": outs.add("--csv", args.csv), "report": outs.add("--report", args.report)}
     read = read_results(files)
+    tol = args.tolerance_arcsec
+    # Capability (Cp, Cpk) is against a symmetric ±T about a zero nominal.
+    half = tol[1] if tol is not None and tol[0] == -tol[1] else None
+    if tol is not None and half is None:
+        log.warning("--tolerance-arcsec %g,%g: asymmetric: per-unit verdicts only, no "
+                    "capability (Cpk is computed against a symmetric ±T)", *tol)
     lot = analyse([r.unit for r in read if r.unit is not None],
                   [r.rejected for r in read if r.rejected is not None],
-                  None if args.tolerance_arcsec is None else args.tolerance_arcsec * ARCSEC)
-    written, doc = lot_outputs(lot, read, paths, args.force, settings(args))
-    say(lot_lines(lot, doc, args.tolerance_arcsec))
+                  None if half is None else half * ARCSEC)
+    spec = resolve(None, **decision_keywords(args))
+    written, doc = lot_outputs(lot, read, paths, args.force, settings(args), spec)
+    say(lot_lines(lot, doc, half))
+    say(verdict_lines(doc["dispositions"], spec.rule if spec else None))
     warn(doc["warnings"])
     for k, v in written.items():
         if str(v) != "-":
             print(f"  wrote {k}: {v}")
-    return 0 if lot.ok else 2
+    if not lot.ok:
+        return EXIT_INPUT
+    return EXIT_REJECTED if args.fail_on_reject and rejected(
+        d["verdict"] for d in doc["dispositions"]) else EXIT_OK
 
 
 def add_lot(add: Callable[..., argparse.ArgumentParser]) -> None:
@@ -41,6 +55,5 @@ def add_lot(add: Callable[..., argparse.ArgumentParser]) -> None:
     lt.add_argument("--report", help="HTML report of the lot (a new file)")
     lt.add_argument("--csv", help="CSV with one row per unit (a new file)")
     lt.add_argument("--json", help="lot JSON ('-': stdout)")
-    lt.add_argument("--tolerance-arcsec", type=POSITIVE, metavar="T",
-                    help="tolerance ±T [″] on every angle: flags and process capability")
+    add_decision_flags(lt)
     lt.set_defaults(func=cmd_lot)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from align.commands import calibrate, gonio, lot, marks, run, synth
+from align.commands import calibrate, gonio, lot, marks, plan, run, synth
 from align.commands.parents import FMT, Parser, common, examples, writes
 from axisbase.version import __version__
 
@@ -38,6 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_run(add)
     calibrate.add_apply(add)
     lot.add_lot(add)
+    plan.add_plan(add)
     synth.add_synth(sub, parents)
     synth.add_demo(add)
     return p

@@ -8,7 +8,14 @@ import os
 import sys
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, UsageError, number, unique
+from align.commands.args import (
+    ALPHA,
+    UsageError,
+    add_decision_flags,
+    decision_keywords,
+    number,
+    unique,
+)
 from align.commands.common import log, say, settings, warn
 from align.commands.parents import examples
 
@@ -27,13 +34,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         log.info("one session: it runs here (--scheduler is for batches)")
     job = SessionJob(args.sessions[0], args.json, args.report, args.calibration, args.alpha,
                      args.force, args.allow_outside, settings(args, EXECUTION),
-                     keep_result=True)
+                     keep_result=True, decision=decision_keywords(args))
     if args.resume and not resume([job])[1]:
         print(f"session {args.sessions[0]}: outputs complete, skipped (--resume)")
         return 0
     out = run_here(job)
-    show_session(out)
-    return exit_status([out])
+    show_session(out, args.budget, args.plan)
+    return exit_status([out], args.fail_on_reject)
 
 
 def run_here(job) -> dict:
@@ -46,12 +53,14 @@ def run_here(job) -> dict:
     return out
 
 
-def show_session(out: dict) -> None:
-    """A session's result, warnings and outputs on the terminal."""
-    from align.present import session_lines, timing_lines
+def show_session(out: dict, budget: bool = False, plan: bool = False) -> None:
+    """A session's result, its verdict (with ``budget``/``plan`` the budget and what to
+    measure next), stage timings, warnings and outputs on the terminal."""
+    from align.present import decision_lines, session_lines, timing_lines
 
     print(f"session {out['session']}:")
     say(session_lines(out["result"]))
+    say(decision_lines(out["json"], budget, plan))
     say(timing_lines(out["result"].timings))
     warn(out["warnings"])
     for k, v in out["outputs"].items():
@@ -67,7 +76,8 @@ def _run_batch(args: argparse.Namespace) -> int:
 
     jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
                       alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
-                      settings=settings(args, EXECUTION), command=tuple(command_line()))
+                      settings=settings(args, EXECUTION), command=tuple(command_line()),
+                      decision=decision_keywords(args))
     results = []
     if args.resume:
         results, jobs = resume(jobs)
@@ -79,7 +89,7 @@ def _run_batch(args: argparse.Namespace) -> int:
         log.info("running %d sessions on the Dask cluster at %s", len(jobs), scheduler)
     results += _run_jobs(jobs, executor_for(scheduler, args.jobs))
     _show_batch(results)
-    return exit_status(results)
+    return exit_status(results, args.fail_on_reject)
 
 
 def _run_jobs(jobs: list, executor) -> list[dict]:
@@ -157,5 +167,10 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
     r.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the sessions of a batch on this Dask scheduler, e.g. "
                    "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")
+    add_decision_flags(r)
+    r.add_argument("--budget", action="store_true",
+                   help="print the uncertainty budget of every angle (largest first)")
+    r.add_argument("--plan", action="store_true",
+                   help="print what to measure next (as 'align plan' on the result)")
     r.set_defaults(func=cmd_run)
 

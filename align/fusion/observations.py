@@ -72,6 +72,14 @@ class Block:
     unit: str | tuple[str, str] = "rad"  # or (unit of the first 3, unit of the rest)
     # Which nuisance names this block can see (for identifiability messages).
     sees: tuple[str, ...] = ()
+    # For the uncertainty budget (align.fusion.budget): what the block is called there
+    # ("goniometer gonio.csv"; default: ``source``); for blocks of independent rows (a
+    # diagonal cov), one name per row ("image x_A.png") and what each row is (housing, view,
+    # camera); the Type B parts of ``cov`` (name, (n, n) covariance), each included in it.
+    budget_source: str = ""
+    row_sources: tuple[str, ...] = ()
+    row_meta: tuple[Mapping[str, str], ...] = ()
+    type_b: tuple[tuple[str, np.ndarray], ...] = ()
 
     @property
     def u(self) -> np.ndarray:
@@ -99,6 +107,8 @@ class MarkObs:
     angle: float
     u: float
     declared_roll: float = 0.0
+    file: str = ""
+    view: str = ""
 
 
 def mark_block(marks: list[MarkObs]) -> Block:
@@ -118,13 +128,17 @@ def mark_block(marks: list[MarkObs]) -> Block:
 
     return Block("camera", tuple(m.label for m in marks), values,
                  np.diag([m.u**2 for m in marks]), predict,
-                 sees=tuple(sorted({f"{ROLL}[{c}]" for c in cams})))
+                 sees=tuple(sorted({f"{ROLL}[{c}]" for c in cams})),
+                 row_sources=tuple(f"image {m.file or m.label}" for m in marks),
+                 row_meta=tuple({"housing": HOUSINGS[m.housing], "view": m.view,
+                                 "camera": m.camera, "label": m.label} for m in marks))
 
 
 # ----------------------------------------------------------------------------- goniometer
 
 def gonio_block(faces: list[str], angles: np.ndarray, cov: np.ndarray, nominal: np.ndarray,
-                direction: int, declared_offset: float = 0.0) -> Block | None:
+                direction: int, declared_offset: float = 0.0,
+                type_b: Mapping[str, np.ndarray] | None = None, name: str = "") -> Block | None:
     """Face-azimuth deviations of housings x and y relative to the reference face (face 0).
 
     ``angles``/``nominal`` [rad]: table angle from face k to k+1 in passing order; ``cov``
@@ -157,7 +171,9 @@ def gonio_block(faces: list[str], angles: np.ndarray, cov: np.ndarray, nominal: 
         off = declared_offset + (nuis[REF][0] if REF in nuis else 0.0)
         return wrap_half(az - nom) - off
 
-    return Block("goniometer", tuple(labels), values, C, predict, sees=(REF,))
+    parts = tuple((f"Type B: {k}", L @ np.outer(v, v) @ L.T) for k, v in (type_b or {}).items())
+    return Block("goniometer", tuple(labels), values, C, predict, sees=(REF,),
+                 budget_source=name, type_b=parts)
 
 
 # ----------------------------------------------------------------------------- ellipsoid
@@ -203,7 +219,7 @@ def ellipsoid_block(beta: np.ndarray, cov: np.ndarray, bias: np.ndarray | None =
     if with_bias:
         labels += tuple(f"bias error {h} (prior)" for h in HOUSINGS)
     return Block("ellipsoid", labels, values, J @ cov @ J.T, predict,
-                 unit=("rad", "g") if with_bias else "rad")
+                 unit=("rad", "g") if with_bias else "rad", budget_source="calibration")
 
 
 # ----------------------------------------------------------------------------- platform static
@@ -255,4 +271,4 @@ def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
         return row_norms[which_a] * (axes[which_a] * g).sum(1) + nuis["bias"][which_a]
 
     return Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
-                 predict, unit="g", sees=(TILT,))
+                 predict, unit="g", sees=(TILT,), budget_source="static poses")

@@ -17,6 +17,7 @@ from scipy import stats
 from scipy.optimize import least_squares
 
 from align.errors import InputError
+from align.fusion.budget import Budget, linearise
 from align.fusion.observations import (
     E_NAMES,
     REF,
@@ -67,6 +68,7 @@ class Solution:
     names: tuple[str, ...]
     residuals: np.ndarray
     predicted: tuple[np.ndarray, ...]
+    layout: tuple[tuple[str, int], ...] = ()
 
 
 class FusionStage:
@@ -118,7 +120,7 @@ class FusionStage:
         cov = np.linalg.inv(J.T @ J)
         axes, nuis = self._unpack(res.x, layout)
         pred = tuple(b.predict(axes, nuis) for b in self.blocks)
-        return Solution(res.x, cov, names, res.fun, pred)
+        return Solution(res.x, cov, names, res.fun, pred, tuple(layout))
 
     def _far_message(self, off: np.ndarray) -> str:
         """The refusal of observations that only an axis far from nominal would fit (``off``:
@@ -219,6 +221,8 @@ class FusionResult:
     inflation: float
     nuisances: dict[str, tuple[float, float]]
     sources: tuple[str, ...]
+    budget: Budget | None = None
+    """Each input's share of u² of every angle (:mod:`align.fusion.budget`)."""
 
     @property
     def consistent(self) -> bool:
@@ -264,7 +268,8 @@ class FusionResult:
             "p_value": self.p_value, "uncertainty_inflation": self.inflation,
             "sources": list(self.sources), **self.loop.summary().to_dict(),
             "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in self.nuisances.items()},
-            "observations": [r.to_dict() for r in self.rows]}
+            "observations": [r.to_dict() for r in self.rows],
+            "budget": None if self.budget is None else self.budget.to_dict()}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> FusionResult:
@@ -279,7 +284,8 @@ class FusionResult:
                    LoopSummary.from_dict(d), float(d.get("uncertainty_inflation", 1.0)),
                    {k: (float(v["estimate"]), float(v["u"]))
                     for k, v in d.get("nuisances", {}).items()},
-                   tuple(d.get("sources", ())))
+                   tuple(d.get("sources", ())),
+                   Budget.from_dict(d["budget"]) if d.get("budget") else None)
 
 
 def _check_determined(stage: FusionStage) -> None:
@@ -323,6 +329,14 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
                                        b.unit_of(k)))
     nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
             for k, n in enumerate(sol.names) if k >= 6}
+    layout = list(sol.layout)
+
+    def predict_all(p: np.ndarray) -> list[np.ndarray]:
+        axes, nu = stage._unpack(p, layout)
+        return [b.predict(axes, nu) for b in stage.blocks]
+
+    budget = linearise(stage.blocks, predict_all, sol.params, sol.names, layout,
+                       inflation).budget()
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
                         tuple(rows), loop, inflation, nuis,
-                        tuple(dict.fromkeys(b.source for b in stage.blocks)))
+                        tuple(dict.fromkeys(b.source for b in stage.blocks)), budget)

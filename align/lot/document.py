@@ -11,6 +11,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from align.contract import document
+from align.decision import ToleranceSpec
+from align.lot.dispose import dispositions
 from align.lot.duplicates import Duplicate
 from align.lot.read import ANGLE_NAMES, ReadFile
 from align.lot.report import write_lot_report
@@ -194,10 +196,13 @@ def lot_csv(lot: Lot) -> str:
 
 
 def lot_outputs(lot: Lot, read: Sequence[ReadFile], outs: Mapping[str, Path | None],
-                force: bool, settings: Mapping) -> tuple[dict[str, Path], dict]:
+                force: bool, settings: Mapping, spec: ToleranceSpec | None = None
+                ) -> tuple[dict[str, Path], dict]:
     """Write the outputs asked for (``json``, ``csv``, ``report``: checked paths or None);
-    returns what was written and the lot JSON."""
+    returns what was written and the lot JSON. ``spec``: the tolerance and decision rule
+    every unit is judged against (None: each unit's own, :mod:`align.lot.dispose`)."""
     doc = lot_document(lot, read, settings)
+    doc["dispositions"] = dispositions(lot.units, spec)
     written: dict[str, Path] = {}
     if outs.get("json") is not None:
         written["json"] = write_json(outs["json"], doc, force)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import orjson
 
 from align.contract import check
@@ -83,6 +84,8 @@ class UnitResult:
     sha256: str | None = None
     created_utc: str | None = None
     inputs_sha256: tuple[str, ...] = ()
+    covariance: tuple[tuple[float, ...], ...] | None = None
+    disposition: Mapping[str, Any] | None = None
 
     @property
     def when(self) -> _dt.datetime | None:
@@ -136,11 +139,19 @@ class UnitResult:
         digests = tuple(sorted(str(x["sha256"]) for x in inputs
                                if isinstance(x, Mapping) and isinstance(x.get("sha256"), str))
                         ) if isinstance(inputs, list) else ()
+        cov = d.get("covariance_rad2") if fused else None
+        if cov is not None:
+            a = np.asarray(cov, float) if isinstance(cov, list) else None
+            if a is None or a.shape != (6, 6) or not np.all(np.isfinite(a)):
+                raise InputError(f"{where}: covariance_rad2: expected a 6×6 matrix of numbers")
+            cov = tuple(map(tuple, a.tolist()))
+        disp = d.get("disposition")
         return cls(where, str(d["session"]), label, ok, fused, e, u,
                    _finite_or_none(chi2), dof if isinstance(dof, int) else None,
                    _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
                    version, created_utc=created if isinstance(created, str) else None,
-                   inputs_sha256=digests)
+                   inputs_sha256=digests, covariance=cov,
+                   disposition=disp if isinstance(disp, Mapping) else None)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""

@@ -28,11 +28,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from align.decision import resolve
 from align.errors import InputError
 from align.session.config import load_session
 from align.session.output import session_outputs
 from align.session.run import run_session
-from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK
+from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_REJECTED
 from axisbase.output import STDOUT, OutputPlan
 from axisbase.provenance import set_command
 from axisbase.stop import Stopped, on_signal
@@ -48,6 +49,7 @@ class SessionJob:
     ``json``/``report``/``cal``: output paths (None: not asked for; ``json`` may be ``-``
     for standard output); ``settings``: the settings recorded in the provenance; ``command``:
     the command line recorded there (a worker on another machine does not know it);
+    ``decision``: see the field;
     ``keep_result``: return the :class:`~align.session.SessionResult` itself (one session in
     this process, to print it)."""
 
@@ -61,6 +63,10 @@ class SessionJob:
     settings: dict = field(default_factory=dict)
     command: tuple[str, ...] = ()
     keep_result: bool = False
+    decision: dict = field(default_factory=dict)
+    """The command line's decision flags, :func:`align.decision.resolve`'s keywords
+    (``tolerance`` (lower, upper) [″], ``rule``, ``k``): they override session.toml's
+    ``[tolerance]``."""
 
     @property
     def name(self) -> str:
@@ -95,6 +101,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
     res = run_session(s, progress=progress or (lambda m: None), alpha=job.alpha)
+    if job.decision:
+        res.tolerance = resolve(s.tolerance, **job.decision)
     settings = job.settings or {"alpha": job.alpha}
     try:
         if outs["report"] is not None:
@@ -218,6 +226,7 @@ class BatchRow:
     dof: int | None = None
     consistent: bool = True
     error: str | None = None
+    verdict: str | None = None
 
 
 def batch_row(summary: Summary) -> BatchRow:
@@ -230,7 +239,8 @@ def batch_row(summary: Summary) -> BatchRow:
             f"{e['stage']}: {e['message']}" for e in (js or {}).get("errors", []))
     common = {"session": summary["session"], "ok": summary["ok"],
               "skipped": bool(summary.get("skipped")),
-              "outputs": dict(summary.get("outputs", {})), "error": error}
+              "outputs": dict(summary.get("outputs", {})), "error": error,
+              "verdict": ((js or {}).get("disposition") or {}).get("verdict")}
     if js is None or js.get("misalignment_arcsec") is None:
         return BatchRow(**common)
     E = [abs(v) for row in js["misalignment_arcsec"] for v in row]
@@ -240,14 +250,24 @@ def batch_row(summary: Summary) -> BatchRow:
                     consistent=not js["unexplained_structure"])
 
 
-def exit_status(summaries: Sequence[Summary]) -> int:
+def exit_status(summaries: Sequence[Summary], fail_on_reject: bool = False) -> int:
     """The exit status of ``align run`` (one session or a batch): 1 if a session hit an
     internal error (in one of its stages, or its job crashed), else 2 if a session failed
-    (bad input, or a failed stage: its result is written with ``ok: false``), else 0 — as
-    ``align marks`` for its images."""
+    (bad input, or a failed stage: its result is written with ``ok: false``), else with
+    ``fail_on_reject`` 3 if a verdict is FAIL or INCONCLUSIVE, else 0 — as ``align marks``
+    for its images."""
     if any(not r["ok"] and not r.get("bad_input", False) for r in summaries):
         return EXIT_INTERNAL
-    return EXIT_INPUT if any(not r["ok"] for r in summaries) else EXIT_OK
+    if any(not r["ok"] for r in summaries):
+        return EXIT_INPUT
+    if fail_on_reject and rejected(batch_row(r).verdict for r in summaries):
+        return EXIT_REJECTED
+    return EXIT_OK
+
+
+def rejected(verdicts: Iterable[str | None]) -> bool:
+    """Whether any verdict is FAIL or INCONCLUSIVE (what ``--fail-on-reject`` exits 3 on)."""
+    return any(v in ("FAIL", "INCONCLUSIVE") for v in verdicts)
 
 
 # ----------------------------------------------------------------------------- executors

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from align.decision import ToleranceSpec
 from align.errors import InputError
 from axisbase.provenance import sha256_file
 from axisbase.table import OUTPUT_UNITS, parse_column_map
@@ -24,7 +25,7 @@ from imaging import ImageInputError, check_roi
 HOUSINGS = ("x", "y", "z")
 AXIS = {"X": 0, "Y": 1, "Z": 2}
 TOP_KEYS = {"latitude_deg", "calibration", "goniometer", "cameras", "views", "images",
-            "platform", "name", "latitude_range_deg", "metadata"}
+            "platform", "name", "latitude_range_deg", "metadata", "tolerance"}
 
 
 def signed_axis(text: object, where: str) -> np.ndarray:
@@ -117,6 +118,9 @@ class Session:
     metadata: dict[str, str | int | float | bool] = field(default_factory=dict)
     """``[metadata]``: free keys about the unit and the set-up (unit, serial, operator,
     camera, table, date, ...), carried into the result for 'align lot'."""
+    tolerance: ToleranceSpec | None = None
+    """``[tolerance]``: the specification of E and the decision rule (:mod:`align.decision`);
+    None when the session gives none."""
 
     @property
     def inputs(self) -> list[Path]:
@@ -460,5 +464,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         raise InputError(f"{src}: name = {name!r}: expected a non-empty text")
     if not (imgs or gon or plat or cal):
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
+    tol = (ToleranceSpec.from_table(_table(d, "tolerance", src + ": "), f"{src}: [tolerance]")
+           if "tolerance" in d else None)
     return Session(folder, name, lat, cal, gon, cameras,
-                   views, tuple(imgs), plat, lat_range, _metadata(d, src))
+                   views, tuple(imgs), plat, lat_range, _metadata(d, src), tol)

@@ -27,6 +27,7 @@ from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
 from align.calibration.units import unit_scale_check
+from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
@@ -84,11 +85,23 @@ class SessionResult:
     """Wall-clock time of each stage [s] (in the order they ran)."""
     log_warnings: list[str] = field(default_factory=list)
     """Warnings the stages logged (e.g. how a file was read): they reach the JSON too."""
+    tolerance: ToleranceSpec | None = None
+    """The specification the disposition is judged against (session.toml's ``[tolerance]``
+    unless the command line overrides it)."""
+
+    def __post_init__(self) -> None:
+        if self.tolerance is None:
+            self.tolerance = self.session.tolerance
 
     @property
     def internal_error(self) -> bool:
         """A stage hit a defect of the tool (exit status 1), not bad input."""
         return any(e.internal for e in self.errors)
+
+    def disposition(self, d: dict | None = None) -> Disposition:
+        """PASS / FAIL / INCONCLUSIVE / NOT MEASURED / NO TOLERANCE (:mod:`align.decision`);
+        ``d``: :meth:`to_dict` when already at hand."""
+        return decide(d if d is not None else self._core_dict(), self.tolerance)
 
     @property
     def fused(self) -> bool:
@@ -115,7 +128,11 @@ class SessionResult:
         platform calibration, and each stage's own result. A session result is not loaded
         back whole (it needs the session's files); its parts are:
         :meth:`FusionResult.from_dict`, :meth:`PlatformCalibration.from_dict`."""
+        d = self._core_dict()
+        d["disposition"] = self.disposition(d).to_dict()
+        return d
 
+    def _core_dict(self) -> dict:
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
                    "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
                    "errors": [{"stage": e.stage, "message": e.message,
@@ -340,13 +357,18 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
             obs.append(MarkObs(f"{im.housing} in {im.view} ({im.file.name})",
                                HOUSINGS.index(im.housing), v.right, v.up, v.camera,
                                0.0 if im.nominal == "horizontal" else np.pi / 2,
-                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad))
+                               r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad,
+                               im.file.name, im.view))
         blocks.append(mark_block(obs))
     if res.gonio is not None:
         g = s.goniometer
         fa = res.gonio.angles
+        # The Type B terms are kept apart for the budget; a two-direction mean mixes both
+        # logs' terms, so they stay inside the log's share there.
+        tb = fa.type_b_terms if g.reverse_log is None else {}
         b = gonio_block(list(g.faces), fa.angles_rad, fa.cov, g.nominal_rad, g.direction,
-                        g.reference_offset_rad)
+                        g.reference_offset_rad, type_b=tb,
+                        name=f"goniometer {g.log.name}")
         if b is not None:
             blocks.append(b)
     if res.calibration is not None:

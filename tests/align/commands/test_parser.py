@@ -34,7 +34,7 @@ def _help(p: argparse.ArgumentParser) -> str:
 
 def test_every_command_is_listed():
     names = {" ".join(path) for path, _ in COMMANDS}
-    assert names == {"marks", "camera", "calibrate", "tilt", "gonio", "run", "apply", "lot",
+    assert names == {"marks", "camera", "calibrate", "tilt", "gonio", "run", "apply", "lot", "plan",
                      "synth session", "demo"}
 
 

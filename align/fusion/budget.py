@@ -1,0 +1,240 @@
+"""The uncertainty budget of E from the fused solve's linearisation (JCGM 100 §5.1.3).
+
+At the solution the weighted least squares is linear: with A_g = d(prediction of group g)/dp
+(n_g × P, p = the six angles then the nuisances) and C_g its covariance, the information is
+I = Σ_g A_gᵀ C_g⁻¹ A_g and cov(p) = I⁻¹. A *group* is what the budget names: each image (a
+row of the camera block: its rows are independent), the goniometer log, the calibration, the
+static poses.
+
+The budget splits u²(E_ij) into parts that add up exactly:
+
+* **data** — with the nuisances held at their values the estimate is E = G·y with the gain
+  G_g = V₀ A_{g,E}ᵀ C_g⁻¹, V₀ = (I_EE)⁻¹, so V₀ = Σ_g G_g C_g G_gᵀ: each group's share is
+  G_g C_g G_gᵀ; a Type B term inside C_g (C_g = C_g,A + Σ_b B_b) is its own share G_g B_b G_gᵀ;
+* **nuisances** — estimating the nuisances widens V₀ to the marginal cov(E) = (I⁻¹)_EE; each
+  nuisance's share is the increase when it is freed, in the order the model holds them (the
+  calibration's bias error first, then the loop's terms in the order it added them);
+* when the loop left unexplained scatter and inflated u by the factor f = √(χ²/dof), every
+  share is multiplied by f² (``inflation``).
+
+The same algebra predicts u for changed data (:meth:`Linearisation.u_with`): remove a group
+(leave-one-out) or add a hypothetical one, and invert the new information.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from align.fusion.observations import E_NAMES
+from axisbase.units import ARCSEC
+
+FORMAT_VERSION = 1
+KINDS = ("image", "gonio", "calibration", "static", "typeB", "nuisance")
+_BLOCK_KIND = {"camera": "image", "goniometer": "gonio", "ellipsoid": "calibration",
+               "platform static": "static"}
+NUISANCE_LABEL = {"bias": "calibration bias error", "camera_roll": "camera roll",
+                  "reference_face_offset": "reference face offset",
+                  "platform_tilt": "table-axis tilt"}
+
+
+def inverse(info: np.ndarray) -> np.ndarray:
+    """The covariance from an information matrix, inverted in its correlation form (the
+    parameters mix radians and g, and a prior may be far stronger than the data): LinAlgError
+    when the observations do not determine every parameter."""
+    d = np.sqrt(np.clip(np.diag(info), 0.0, None))
+    if np.any(d == 0):
+        raise np.linalg.LinAlgError("the observations do not determine every parameter")
+    scaled = info / np.outer(d, d)
+    s = np.linalg.svd(scaled, compute_uv=False)
+    if s[-1] <= 1e-12 * s[0]:
+        raise np.linalg.LinAlgError("the observations do not determine every parameter")
+    return np.linalg.inv(scaled) / np.outer(d, d)
+
+
+@dataclass(frozen=True)
+class Group:
+    """One named input of the fusion: ``source`` ("image x_A.png", "goniometer gonio.csv",
+    "calibration", "static poses"), ``kind`` (``KINDS``), the Jacobian ``A`` (n, P) of its
+    predicted values over the parameters [value unit / parameter unit], their covariance
+    ``C`` (n, n) [value unit²], its Type B parts (name, (n, n)) included in ``C``, and
+    ``meta`` (an image's housing, view, camera)."""
+
+    source: str
+    kind: str
+    A: np.ndarray
+    C: np.ndarray
+    type_b: tuple[tuple[str, np.ndarray], ...] = ()
+    meta: Mapping[str, str] = field(default_factory=dict)
+
+    def information(self) -> np.ndarray:
+        Ci = np.linalg.inv(self.C)
+        return self.A.T @ Ci @ self.A
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "kind": self.kind, "A": self.A.tolist(),
+                "C": self.C.tolist(), "meta": dict(self.meta),
+                "type_b": [{"name": n, "C": c.tolist()} for n, c in self.type_b]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Group:
+        return cls(str(d["source"]), str(d["kind"]), np.array(d["A"], float),
+                   np.array(d["C"], float),
+                   tuple((str(t["name"]), np.array(t["C"], float)) for t in d.get("type_b", ())),
+                   dict(d.get("meta", {})))
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """The fused solve linearised at its solution: parameter names (the six E_NAMES first,
+    then the nuisances, each nuisance named once per component), the groups, the nuisance
+    groups (label, parameter indices) in the order they are freed, and the inflation factor
+    f [-] applied to cov(E)."""
+
+    params: tuple[str, ...]
+    groups: tuple[Group, ...]
+    nuisances: tuple[tuple[str, tuple[int, ...]], ...]
+    inflation: float = 1.0
+
+    def information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
+        gs = self.groups if groups is None else groups
+        return sum((g.information() for g in gs), np.zeros((len(self.params),) * 2))
+
+    def cov_e(self, groups: Sequence[Group] | None = None) -> np.ndarray:
+        """cov(E) [rad²] (6×6, inflated) from these groups (default: the session's)."""
+        return inverse(self.information(groups))[:6, :6] * self.inflation**2
+
+    def u_with(self, add: Sequence[Group] = (), drop: Sequence[str] = ()) -> np.ndarray:
+        """u of the six angles [rad] with the groups named in ``drop`` left out and ``add``
+        added (LinAlgError when the rest no longer determine the parameters)."""
+        gs = [g for g in self.groups if g.source not in drop] + list(add)
+        return np.sqrt(np.diag(inverse(self.information(gs)))[:6]) * self.inflation
+
+    def budget(self) -> Budget:
+        """Every angle's u² split into the groups', Type B terms' and nuisances' shares."""
+        I = self.information()  # noqa: E741 (the information matrix)
+        V0 = inverse(I[:6, :6])
+        shares: list[tuple[str, str, np.ndarray]] = []
+        for g in self.groups:
+            K = V0 @ g.A[:, :6].T @ np.linalg.inv(g.C)  # the gain of this group's values
+            CA = g.C - sum((c for _, c in g.type_b), np.zeros_like(g.C))
+            shares.append((g.source, g.kind, np.diag(K @ CA @ K.T)))
+            shares += [(n, "typeB", np.diag(K @ c @ K.T)) for n, c in g.type_b]
+        free = list(range(6))
+        prev = np.diag(V0)
+        for label, idx in self.nuisances:
+            free += list(idx)
+            now = np.diag(inverse(I[np.ix_(free, free)]))[:6]
+            shares.append((f"nuisance: {label}", "nuisance", now - prev))
+            prev = now
+        f2 = self.inflation**2
+        angles = {}
+        for k, name in enumerate(E_NAMES):
+            u2 = prev[k] * f2
+            rows = sorted(((s, kd, float(v[k] * f2)) for s, kd, v in shares),
+                          key=lambda r: -r[2])
+            angles[name] = (float(np.sqrt(u2)), tuple(
+                Contribution(s, kd, v, v / u2 if u2 > 0 else 0.0) for s, kd, v in rows))
+        return Budget(angles, self.inflation, self)
+
+    def to_dict(self) -> dict:
+        return {"parameters": list(self.params), "inflation": self.inflation,
+                "nuisances": [{"label": n, "index": list(i)} for n, i in self.nuisances],
+                "groups": [g.to_dict() for g in self.groups]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Linearisation:
+        return cls(tuple(d["parameters"]), tuple(Group.from_dict(g) for g in d["groups"]),
+                   tuple((str(n["label"]), tuple(int(i) for i in n["index"]))
+                         for n in d["nuisances"]), float(d.get("inflation", 1.0)))
+
+
+@dataclass(frozen=True)
+class Contribution:
+    """One input's share of an angle's variance: ``u2`` [rad²] and its ``fraction`` of u²."""
+
+    source: str
+    kind: str
+    u2: float
+    fraction: float
+
+
+@dataclass(frozen=True)
+class Budget:
+    """Per angle name: (u [rad], contributions largest first, summing to u²); the inflation
+    applied; the linearisation it came from (what 'align plan' works on)."""
+
+    angles: Mapping[str, tuple[float, tuple[Contribution, ...]]]
+    inflation: float = 1.0
+    model: Linearisation | None = None
+
+    def to_dict(self) -> dict:
+        a2 = ARCSEC**2
+        return {"format_version": FORMAT_VERSION, "inflation": self.inflation,
+                "angles": {n: {"u_arcsec": u / ARCSEC, "contributions": [
+                    {"source": c.source, "kind": c.kind, "u2_arcsec2": c.u2 / a2,
+                     "fraction": c.fraction} for c in cs]}
+                    for n, (u, cs) in self.angles.items()},
+                "model": None if self.model is None else self.model.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Budget:
+        a2 = ARCSEC**2
+        angles = {n: (float(v["u_arcsec"]) * ARCSEC, tuple(
+            Contribution(str(c["source"]), str(c["kind"]), float(c["u2_arcsec2"]) * a2,
+                         float(c["fraction"])) for c in v["contributions"]))
+            for n, v in d["angles"].items()}
+        m = d.get("model")
+        return cls(angles, float(d.get("inflation", 1.0)),
+                   None if m is None else Linearisation.from_dict(m))
+
+    def table_lines(self, top: int = 6) -> list[str]:
+        """The terminal's budget: per angle, u and its ``top`` largest shares."""
+        out = ["uncertainty budget (share of u², largest first"
+               + (f"; every share × {self.inflation:.2f}² for the unexplained scatter"
+                  if self.inflation > 1 else "") + "):"]
+        for n, (u, cs) in self.angles.items():
+            out.append(f"  {n}: u = {u / ARCSEC:.3f}″")
+            for c in cs[:top]:
+                out.append(f"    {100 * c.fraction:5.1f} %  {np.sqrt(max(c.u2, 0)) / ARCSEC:7.3f}″"
+                           f"  {c.source} ({c.kind})")
+            if len(cs) > top:
+                rest = sum(c.fraction for c in cs[top:])
+                out.append(f"    {100 * rest:5.1f} %  (the other {len(cs) - top})")
+        return out
+
+
+def linearise(blocks: Sequence, predict_all, params: np.ndarray, names: Sequence[str],
+              layout: Sequence[tuple[str, int]], inflation: float) -> Linearisation:
+    """The linearisation at ``params``: ``predict_all(p) -> [prediction of each block]``;
+    ``layout`` the nuisance groups (name, width) after the six angles."""
+    P = len(params)
+    step = 1e-7  # [rad, or g for the bias]: well inside the linear range, far above rounding
+    jac = [np.zeros((len(b.values), P)) for b in blocks]
+    for k in range(P):
+        d = np.zeros(P)
+        d[k] = step
+        plus, minus = predict_all(params + d), predict_all(params - d)
+        for J, a, b in zip(jac, plus, minus, strict=True):
+            J[:, k] = (a - b) / (2 * step)
+    groups: list[Group] = []
+    for b, J in zip(blocks, jac, strict=True):
+        kind = _BLOCK_KIND.get(b.source, b.source)
+        if b.row_sources:
+            for r, src in enumerate(b.row_sources):
+                meta = b.row_meta[r] if b.row_meta else {}
+                groups.append(Group(src, kind, J[r:r + 1], b.cov[r:r + 1, r:r + 1], (), meta))
+        else:
+            groups.append(Group(b.budget_source or b.source, kind, J, b.cov, b.type_b))
+    nuis, i = [], 6
+    for name, w in layout:
+        base = name.split("[")[0]
+        label = NUISANCE_LABEL.get(base, base)
+        if "[" in name:  # camera_roll[A]
+            label += " " + name[name.index("[") + 1:-1]
+        nuis.append((label, tuple(range(i, i + w))))
+        i += w
+    return Linearisation(tuple(names), tuple(groups), tuple(nuis), inflation)
+

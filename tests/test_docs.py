@@ -1,0 +1,225 @@
+"""The documentation says only what the tool does: README.md and docs/ against the code.
+
+* every ``align COMMAND … --flag`` written in them is an option of that command's parser (read
+  from ``python3 -m align COMMAND --help``, so the test does not depend on where the parser
+  lives);
+* every relative link resolves (to a file, and to a heading when it names an anchor);
+* README.md stays a first page (≤ 200 lines);
+* the Python blocks marked ``<!-- example -->`` run;
+* the `session.toml` examples load and the generated schema tables are current.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md")])
+COMMANDS = ("demo", "run", "marks", "camera", "calibrate", "tilt", "gonio", "apply", "lot",
+            "synth")
+# `align synth` has one subcommand; its flags are those of `align synth session`.
+HELP_ARGS = {"synth": ("synth", "session")}
+# Flags on a command's page that belong to another program.
+NOT_OURS = {("run", "--nthreads")}  # `dask worker --nthreads 1`
+
+
+def _rel(p: Path) -> str:
+    return str(p.relative_to(ROOT))
+
+
+def _code_spans_and_blocks(text: str) -> list[str]:
+    """The text of every fenced block and every inline code span (where commands are written)."""
+    blocks = re.findall(r"^```[^\n]*\n(.*?)^```", text, flags=re.S | re.M)
+    prose = re.sub(r"^```[^\n]*\n.*?^```", "", text, flags=re.S | re.M)
+    return blocks + re.findall(r"`([^`\n]+)`", prose)
+
+
+def mentioned_flags() -> dict[str, set[tuple[str, str]]]:
+    """command -> {(flag, page)} for every ``align COMMAND ... --flag`` in the docs.
+
+    A command line runs from ``align COMMAND`` to the end of its line (a continuation line of a
+    fenced block, indented, belongs to the line above); a ``#`` comment ends it."""
+    found: dict[str, set[tuple[str, str]]] = {c: set() for c in COMMANDS}
+    for page in PAGES:
+        for chunk in _code_spans_and_blocks(page.read_text(encoding="utf-8")):
+            lines: list[str] = []
+            for line in chunk.splitlines():
+                if lines and line.startswith(" ") and not line.lstrip().startswith("align "):
+                    lines[-1] += " " + line
+                else:
+                    lines.append(line)
+            for line in lines:
+                for m in re.finditer(r"\balign (\w+)\b(.*)", line):
+                    cmd, rest = m.group(1), m.group(2).split(" # ")[0]
+                    rest = re.split(r"\balign \w+", rest)[0]
+                    if cmd not in found:
+                        continue
+                    for flag in re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", rest):
+                        found[cmd].add((flag, _rel(page)))
+    # On a command's own page a flag written alone (`--roi`) is that command's.
+    for cmd in COMMANDS:
+        page = DOCS / "commands" / f"{cmd}.md"
+        for chunk in _code_spans_and_blocks(page.read_text(encoding="utf-8")):
+            if re.search(r"\balign \w|\bdask ", chunk):
+                continue
+            for flag in re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", chunk):
+                if (cmd, flag) not in NOT_OURS:
+                    found[cmd].add((flag, _rel(page)))
+    return found
+
+
+# One interpreter prints every command's --help through the module entry point, as
+# `python3 -m align COMMAND --help` would (one start-up instead of ten).
+_HELPS = """
+import runpy, sys
+for args in ARGS:
+    sys.argv = ["align", *args, "--help"]
+    print("\\0" + args[0])
+    try:
+        runpy.run_module("align", run_name="__main__", alter_sys=True)
+    except SystemExit:
+        pass
+"""
+
+
+@cache
+def _help_texts() -> dict[str, str]:
+    args = [HELP_ARGS.get(c, (c,)) for c in COMMANDS]
+    out = subprocess.run([sys.executable, "-c", _HELPS.replace("ARGS", repr(args))], cwd=ROOT,
+                         capture_output=True, text=True, timeout=120, check=True).stdout
+    texts = dict(part.split("\n", 1) for part in out.split("\0")[1:])
+    assert sorted(texts) == sorted(COMMANDS), out[:500]
+    return texts
+
+
+def parser_flags(cmd: str) -> frozenset[str]:
+    return frozenset(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", _help_texts()[cmd]))
+
+
+def test_the_docs_mention_every_command():
+    text = "\n".join(p.read_text(encoding="utf-8") for p in PAGES)
+    assert not [c for c in COMMANDS if f"align {c}" not in text]
+
+
+@pytest.mark.parametrize("cmd", COMMANDS)
+def test_every_flag_the_docs_mention_exists(cmd):
+    mentioned = mentioned_flags()[cmd]
+    unknown = sorted(f"{page}: align {cmd} {flag}" for flag, page in mentioned
+                     if flag not in parser_flags(cmd))
+    assert not unknown, "flags the docs mention that the parser does not have:\n" + "\n".join(
+        unknown)
+
+
+def test_the_flag_scan_finds_flags():
+    # The check above must not pass because the scan finds nothing.
+    found = mentioned_flags()
+    assert ("--json", "README.md") in found["run"]
+    assert ("--roi", "docs/commands/marks.md") in found["marks"]
+    assert ("--fix-k3", "docs/commands/camera.md") in found["camera"]
+
+
+def _anchors(page: Path) -> set[str]:
+    """Heading anchors as MkDocs' toc extension makes them (lower case, punctuation dropped,
+    spaces to hyphens); README headings as GitHub makes them (the same for these headings)."""
+    out = set()
+    text = re.sub(r"^```[^\n]*\n.*?^```", "", page.read_text(encoding="utf-8"),
+                  flags=re.S | re.M)
+    for line in text.splitlines():
+        m = re.match(r"#{1,6} (.+)", line)
+        if m:
+            slug = re.sub(r"[^\w\- ]", "", m.group(1).strip().lower())
+            out.add(re.sub(r"[ ]+", "-", slug.strip()))
+    return out
+
+
+def relative_links(page: Path) -> list[tuple[str, str]]:
+    """(target, anchor) of every Markdown link or image that is not absolute or mail, outside
+    code."""
+    text = page.read_text(encoding="utf-8")
+    text = re.sub(r"^```[^\n]*\n.*?^```", "", text, flags=re.S | re.M)
+    text = re.sub(r"`[^`\n]+`", "", text)
+    out = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        out.append((path, anchor))
+    return out
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_rel)
+def test_every_relative_link_resolves(page):
+    broken = []
+    for path, anchor in relative_links(page):
+        dest = (page.parent / path).resolve() if path else page
+        if not dest.exists():
+            broken.append(f"{path}: no such file")
+        elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+            broken.append(f"{path}#{anchor}: no such heading")
+    assert not broken, f"{_rel(page)}: " + "; ".join(broken)
+
+
+def test_the_link_check_sees_links():
+    assert ("docs/formats.md", "sessiontoml") in relative_links(ROOT / "README.md")
+
+
+def test_readme_is_a_first_page():
+    n = len((ROOT / "README.md").read_text(encoding="utf-8").splitlines())
+    assert n <= 200, f"README.md has {n} lines (at most 200: the rest belongs in docs/)"
+
+
+def examples() -> list[tuple[str, int, str]]:
+    """(page, line, code) of every ```python block directly after a ``<!-- example -->`` line."""
+    out = []
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for m in re.finditer(r"<!-- example -->\n```python\n(.*?)^```", text, flags=re.S | re.M):
+            out.append((_rel(page), text[:m.start()].count("\n") + 2, m.group(1)))
+    return out
+
+
+def test_there_are_examples():
+    assert len(examples()) >= 3
+
+
+@pytest.mark.parametrize("page,line,code", examples(), ids=lambda v: str(v)[:40])
+def test_example_runs(page, line, code):
+    # In a fresh interpreter from the root (as a reader would paste it), not in this process.
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, f"{page}:{line}: the example fails:\n{r.stderr}"
+
+
+def test_the_schema_tables_are_current():
+    # docs/generated/schemas.md is included by docs/formats.md; it must list today's schemas.
+    spec = importlib.util.spec_from_file_location("gen", DOCS / "gen_schema_tables.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    current = (DOCS / "generated" / "schemas.md").read_text(encoding="utf-8")
+    assert current == gen.render(), "run: python3 docs/gen_schema_tables.py"
+
+
+@pytest.mark.parametrize("page", ["README.md", "docs/formats.md"])
+def test_the_session_toml_examples_load(page, tmp_path):
+    # The README's sketch and the complete example (its commented keys switched on) are
+    # accepted by the session loader, with an empty file wherever they name one.
+    from align.session import load_session
+
+    text = (ROOT / page).read_text(encoding="utf-8")
+    toml = re.search(r"```toml\n(.*?)^```", text, flags=re.S | re.M).group(1)
+    toml = re.sub(r"^# (\w+ = )", r"\1", toml, flags=re.M)
+    (tmp_path / "session.toml").write_text(toml, encoding="utf-8")
+    named = re.findall(r'^(?:static|log|file|model|check) = "([^"]+)"', toml, flags=re.M)
+    assert len(named) >= 4
+    for name in named:
+        (tmp_path / name).write_text("x\n", encoding="utf-8")
+    load_session(tmp_path)
