@@ -21,7 +21,7 @@ from align.commands.parents import examples
 
 # Flags that say how a batch runs, not what it computes: left out of the results' settings,
 # so a batch gives the same JSON however it is run.
-EXECUTION = ("jobs", "scheduler", "resume")
+EXECUTION = ("jobs", "scheduler", "resume", "calibration_flag")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -34,7 +34,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         log.info("one session: it runs here (--scheduler is for batches)")
     job = SessionJob(args.sessions[0], args.json, args.report, args.calibration, args.alpha,
                      args.force, args.allow_outside, settings(args, EXECUTION),
-                     keep_result=True, decision=decision_keywords(args))
+                     keep_result=True, cal_flag=args.calibration_flag,
+                     decision=decision_keywords(args))
     if args.resume and not resume([job])[1]:
         print(f"session {args.sessions[0]}: outputs complete, skipped (--resume)")
         return 0
@@ -77,7 +78,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
                       alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
                       settings=settings(args, EXECUTION), command=tuple(command_line()),
-                      decision=decision_keywords(args))
+                      cal_flag=args.calibration_flag, decision=decision_keywords(args))
     results = []
     if args.resume:
         results, jobs = resume(jobs)
@@ -142,6 +143,15 @@ def _show_batch(results: list[dict]) -> None:
           + (f", {failed} failed" if failed else ""))
 
 
+class NamedBy(argparse.Action):
+    """Stores the value, and in ``<dest>_flag`` which of the option's names the user typed
+    (its messages then name that one)."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        setattr(namespace, self.dest, values)
+        setattr(namespace, f"{self.dest}_flag", option_string)
+
+
 def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
     r = add("run", "run whole sessions: every stage, the loops, the fusion", epilog=examples(
         "align run SESSION --json result.json --report report.html --platform-calibration "
@@ -153,6 +163,7 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
     r.add_argument("--json", help="result JSON (a folder when several sessions; '-': stdout)")
     r.add_argument("--report", help="HTML report (a folder when several sessions)")
     r.add_argument("--platform-calibration", "--calibration", dest="calibration",
+                   action=NamedBy,
                    metavar="OUT", help="write the platform calibration JSON for 'align apply' "
                    "(a folder when several sessions; --calibration: the older name)")
     r.add_argument("--jobs", type=number(1, 1024, integer=True),
@@ -172,5 +183,5 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="print the uncertainty budget of every angle (largest first)")
     r.add_argument("--plan", action="store_true",
                    help="print what to measure next (as 'align plan' on the result)")
-    r.set_defaults(func=cmd_run)
+    r.set_defaults(func=cmd_run, calibration_flag="--platform-calibration")
 

@@ -63,6 +63,8 @@ class SessionJob:
     settings: dict = field(default_factory=dict)
     command: tuple[str, ...] = ()
     keep_result: bool = False
+    cal_flag: str = "--platform-calibration"
+    """How the user named ``cal`` (the older ``--calibration`` is an alias): messages say it."""
     decision: dict = field(default_factory=dict)
     """The command line's decision flags, :func:`align.decision.resolve`'s keywords
     (``tolerance`` (lower, upper) [″], ``rule``, ``k``): they override session.toml's
@@ -90,13 +92,13 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
     try:
         s = load_session(job.folder, allow_outside=job.allow_outside)
         if job.cal is not None and s.calibration is None:
-            raise InputError(f"--platform-calibration {job.cal}: the session {s.folder} has no "
+            raise InputError(f"{job.cal_flag} {job.cal}: the session {s.folder} has no "
                              "[calibration] section, so there is no platform calibration "
                              "to write")
         plan = OutputPlan(s.inputs, force=job.force)
         outs = {"json": plan.add("--json", job.json, stdout_ok=True),
                 "report": plan.add("--report", job.report),
-                "cal": plan.add("--platform-calibration", job.cal)}
+                "cal": plan.add(job.cal_flag, job.cal)}
     except InputError as exc:
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
@@ -115,7 +117,7 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
                 "error": str(exc)}
     warnings = list(js["warnings"])
     if outs["cal"] is not None and "cal" not in written:
-        warnings.append(f"--platform-calibration {outs['cal']}: NOT written: no platform "
+        warnings.append(f"{job.cal_flag} {outs['cal']}: NOT written: no platform "
                         "calibration (the calibration or the fusion failed)")
     return {"session": s.name, "folder": job.folder, "ok": res.ok,
             "bad_input": not res.ok and not res.internal_error,
@@ -141,7 +143,8 @@ def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | N
     names = [Path(s).resolve().name for s in sessions]
     if len(set(names)) != len(names):
         raise InputError("two sessions have the same folder name; outputs would collide")
-    flags = (("--json", json), ("--report", report), ("--platform-calibration", cal))
+    flags = (("--json", json), ("--report", report),
+             (common.get("cal_flag", "--platform-calibration"), cal))
     for flag, folder in flags:
         if folder == "-":
             raise InputError(f"{flag} -: standard output takes one session, not a batch")

@@ -575,7 +575,7 @@ def test_calibration_output_without_a_calibration_section(base, tmp_path, capsys
     (s / "session.toml").write_text(toml[:start] + toml[end:plat])
     cal = tmp_path / "C.json"
     assert main(["run", str(s), "--calibration", str(cal)]) == 2
-    _err_line(capsys, "--platform-calibration", "no [calibration]")
+    _err_line(capsys, "--calibration", "no [calibration]")
     assert not cal.exists()
 
 

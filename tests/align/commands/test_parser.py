@@ -76,3 +76,6 @@ def test_run_platform_calibration_keeps_the_older_name():
     new = p.parse_args(["run", "S", "--platform-calibration", "pc.json"])
     old = p.parse_args(["run", "S", "--calibration", "pc.json"])
     assert new.calibration == old.calibration == "pc.json"
+    # messages name the spelling the user typed
+    assert (new.calibration_flag, old.calibration_flag) == ("--platform-calibration",
+                                                            "--calibration")
