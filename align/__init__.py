@@ -4,6 +4,7 @@ Public API::
 
     run_loop, Candidate, Term, StageFit, LoopReport   (align.loop: the shared residual loop)
     measure_file, measure_image, MarkResult           (scribe marks through the loop)
+    measure_camera, LensRanges, solve_lens            (one lens per camera, docs/camera.md)
 
 Names are loaded on first use (PEP 562): ``python -m align --help`` must not import numpy,
 scipy or OpenCV.
@@ -16,6 +17,7 @@ _LAZY = {
     "Term": "align.loop", "run_loop": "align.loop",
     "MarkResult": "align.marks", "MarkStage": "align.marks", "loop_mark": "align.marks",
     "measure_file": "align.marks", "measure_image": "align.marks",
+    "measure_camera": "align.marks", "LensRanges": "align.lens", "solve_lens": "align.lens",
 }
 
 __all__ = sorted(_LAZY)

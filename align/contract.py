@@ -22,6 +22,11 @@ FORMATS = {
 }
 """kind -> the version this tool writes."""
 
+INPUT_SCHEMAS = {"session-toml": "session.toml"}
+"""Schemas of files the tool reads (not writes; no envelope): ``align check`` validates a
+session.toml against ``session-toml.schema.json``, and an editor can complete it from there
+(the ``#:schema`` line 'align init' writes)."""
+
 READABLE = {
     "calibration": (1, 2, 3),            # 'align tilt --calibration'
     "platform-calibration": (1, 2, 3),   # 'align apply'

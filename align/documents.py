@@ -20,8 +20,9 @@ Inputs = Iterable[str | Path]
 
 
 def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
-    """``align marks --json``: every mark (found or not), ok when every image was measured."""
-    return document("marks", {"ok": all(r.found for r in results),
+    """``align marks --json``: every mark (found or not), ok when every image was measured
+    and no angle is lens-limited (``lens_limited``: calibrate the camera)."""
+    return document("marks", {"ok": all(r.found and not r.lens_limited for r in results),
                               "warnings": mark_warnings(results),
                               "marks": [r.to_dict() for r in results]}, settings, inputs)
 

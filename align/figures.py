@@ -24,9 +24,18 @@ def pyplot():
 PNG = {"compress_level": 3}
 
 
-def png_bytes(fig) -> bytes:
+def png_bytes(fig, dpi: int = 90) -> bytes:
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, pil_kwargs=PNG)
+    fig.savefig(buf, format="png", dpi=dpi, pil_kwargs=PNG)
+    pyplot().close(fig)
+    return buf.getvalue()
+
+
+def jpeg_bytes(fig, dpi: int = 90, quality: int = 75) -> bytes:
+    """A photograph-like figure (an image's thumbnail) as JPEG: its sensor noise does not
+    compress in a PNG (30 kB a thumbnail against 6 kB)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="jpeg", dpi=dpi, pil_kwargs={"quality": quality})
     pyplot().close(fig)
     return buf.getvalue()
 

@@ -302,6 +302,36 @@ def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, Di
     return comb, term
 
 
+DIRECTION_LIMIT_ARCSEC = 10.0
+"""The largest direction-dependent part of a face angle a real reversal leaves [″]. What
+flips with the direction — the autocollimator's latency times the change of the table's
+speed between faces (5 µs x a 2 % ripple at 1 rev/s: 0.13″), a tilted detector slit over
+pyramidal errors (10″ x tan 1°: 0.17″) — stays under a second of arc; a 'reverse' log whose
+reversed angles differ from the forward run's by more is not the other direction of the same
+faces (the same direction read reversed differs by the faces' deviations from equal spacing:
+arc-minutes)."""
+
+
+def check_reversed(fwd: FaceAngles, rev: FaceAngles, term: DirectionTerm, path,
+                   reverse_log, alpha: float) -> None:
+    """Refuse a reverse log that is not the forward run's faces turning the other way (its
+    direction-dependent part far beyond what a reversal leaves: see
+    ``DIRECTION_LIMIT_ARCSEC``), saying whether it matches the forward run unreversed."""
+    worst = float(np.max(np.abs(term.half_difference_rad))) / ARCSEC
+    if worst <= DIRECTION_LIMIT_ARCSEC or term.p_value >= alpha:
+        return
+    same = float(np.max(np.abs(fwd.angles_rad - rev.angles_rad))) / ARCSEC
+    why = (f"its angles read unreversed match {Path(path).name}'s within {same:.2g}″: the "
+           "table turned the same way in both runs" if same <= DIRECTION_LIMIT_ARCSEC else
+           "nor do they match it unreversed (another table, or other faces)")
+    raise InputError(
+        f"--reverse-log {reverse_log}: reversed, its face angles differ from {path}'s by up to "
+        f"{2 * worst:.3g}″ (direction-dependent part {worst:.3g}″, beyond the "
+        f"{DIRECTION_LIMIT_ARCSEC:g}″ a latency or a slit tilt leaves) — it is not a run in "
+        f"the other direction; {why}. Measure each log alone, or give a log of the table "
+        "turning the other way")
+
+
 def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
                      direction: int) -> tuple[float, float]:
     """Mid-point and half-range [rad/s] of the vertical Earth rate over a latitude range
@@ -344,6 +374,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                           apply_loop=False, steady_table=steady_table, columns=columns,
                           on_bytes=on_bytes)
         comb, term = combine_directions(fwd.angles, rev.angles)
+        check_reversed(fwd.angles, rev.angles, term, path, reverse_log, alpha)
         notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
                  *(f"reverse run: {n}" for n in rev.notes if not n.startswith(LATENCY)),
                  f"both directions combined: the direction-dependent part is "

@@ -1,10 +1,14 @@
 """The pieces every self-contained HTML page of the tool is built from (session report, lot
-report): escaping, a table, a figure as an inline PNG (a data URI: the page is one file)."""
+report): the Jinja2 templates (package data in ``align/templates``, autoescaped), escaping,
+a table, a figure as an inline PNG (a data URI: the page is one file)."""
 
 from __future__ import annotations
 
 import base64
+import functools
 import html
+
+from markupsafe import Markup
 
 
 def esc(text: object) -> str:
@@ -21,6 +25,25 @@ def table(head: list[str], rows: list[list[object]], left: int = 1) -> str:
     return f"<table><tr>{h}</tr>{body}</table>"
 
 
-def png_img(png: bytes, alt: str = "figure") -> str:
-    """An ``<img>`` holding PNG bytes inline."""
-    return f'<img alt="{esc(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode()}">'
+def png_img(png: bytes, alt: str = "figure", cls: str = "", mime: str = "image/png") -> Markup:
+    """An ``<img>`` holding the image's bytes inline (PNG unless ``mime`` says otherwise;
+    safe to put into a template as it is)."""
+    c = f' class="{esc(cls)}"' if cls else ""
+    return Markup(f'<img alt="{esc(alt)}"{c} '
+                  f'src="data:{mime};base64,{base64.b64encode(png).decode()}">')
+
+
+@functools.cache
+def _environment():
+    import jinja2
+
+    # StrictUndefined: a name the page needs and the caller did not give is an error, not an
+    # empty cell.
+    return jinja2.Environment(loader=jinja2.PackageLoader("align", "templates"),
+                              autoescape=True, trim_blocks=True, lstrip_blocks=True,
+                              undefined=jinja2.StrictUndefined)
+
+
+def render(template: str, **context: object) -> str:
+    """The page ``align/templates/<template>`` rendered with ``context``."""
+    return _environment().get_template(template).render(**context)

@@ -1,32 +1,49 @@
 """The residual loop over a scribe-mark line fit, and the per-image result.
 
-Declared model: the mark's centres lie on a straight line in the undistorted image.
-Candidate effects (each a few design columns with physical meaning):
+Declared model: the mark's centres lie on a straight line in the undistorted image. The lens
+is a property of the camera, handled before the loop (:func:`camera_lens`, :mod:`align.lens`,
+docs/camera.md): one lens for all marks of a frame (or of a camera's images in a session),
+with identifiability first; what the lines do not determine is carried in u as named terms.
+Candidate effects of the loop (each a few design columns with physical meaning):
 
-* ``radial_distortion`` — the plumb-line principle: a straight line at offset d from the
-  principal point (assumed at the image centre) imaged through x_d = x (1 + k1 (r/R)^2) is
-  bowed by k1 d (r/R)^2 across itself. R is the image half-diagonal, so k1 is dimensionless;
-  OpenCV's k1 = k1 (f/R)^2 for focal length f [px]. Once found, the centres are undistorted
-  exactly with the estimate and the line refitted (iterated). A bent mark bows the same way
-  in one image; only a camera model or several marks in one image can tell them apart.
-* ``periodic_wiggle`` — a sinusoid along the mark (vibration, rolling shutter); its period is
-  searched on the residual's periodogram (counted as a searched parameter).
+* ``bent_mark`` — a bow across the mark the lens does not explain: named, and u widened to
+  cover the straight fit vs the chord.
+* ``periodic_wiggle`` — a sinusoid along the mark (vibration, rolling shutter) with at least
+  2 periods along it; its period is searched on the residual's periodogram (counted as a
+  searched parameter).
 * ``illumination_gradient`` — a centre bias proportional to the local background slope across
   the mark (per unit contrast): lighting that is not even across the groove.
+
+``radial_distortion`` (the old per-mark plumb-line k1) remains a :class:`MarkStage` term for
+callers that pass it; :func:`measure_image` no longer offers it.
 """
 
 from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
 from align.errors import NotApplicable
+from align.family import LineFamily, line_family
+from align.lens import (
+    LensRanges,
+    LineGeometry,
+    camera_terms,
+    check_camera,
+    solve_lens,
+)
+from align.lens import (
+    angle_terms as lens_angle_terms,
+)
+from align.lens import (
+    undistorted as lens_undistorted,
+)
 from align.loop import (
     Candidate,
     LoopReport,
@@ -45,14 +62,17 @@ from imaging import (
     cross_magnification,
     fit_line,
     line_frame,
+    measure_frame,
     measure_marks,
     read_image,
     undistort,
 )
+from imaging.lens import PARAMS
 
 RADIAL = "radial_distortion"
 WIGGLE = "periodic_wiggle"
 ILLUM = "illumination_gradient"
+BEND = "bent_mark"
 
 log = logging.getLogger("align.marks")
 
@@ -96,6 +116,7 @@ class MarkStage:
         for _ in range(rounds):
             q, sig = self.undistorted(k1, angle)
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
+                    else _bend_column(q, angle) if t.name == BEND
                     else np.asarray(t.columns, float).reshape(len(q), -1) for t in terms]
             F = np.hstack(cols) if cols else None
             lf = fit_line(q, sig, F, reject_sigma=None, chol=m.chol)
@@ -118,6 +139,10 @@ class MarkStage:
             if t.name == RADIAL:
                 d = lf.offset_px
                 effects[t.name] = (k1 + b[0] / d, float(np.sqrt(cov[0, 0])) / abs(d))
+            elif t.name == BEND:
+                # Sagitta of the fitted bow over the mark [px].
+                half = np.ptp(q @ line_frame(angle)[0]) / 2
+                effects[t.name] = (float(b[0]) * half**2, float(np.sqrt(cov[0, 0])) * half**2)
             elif t.name == WIGGLE:
                 amp = float(np.hypot(*b))
                 g = b / max(amp, 1e-300)
@@ -131,7 +156,8 @@ class MarkStage:
             residuals=lf.z * lf.sigma_px, sigma=lf.sigma_px, n_params=2 + lf.beta.size,
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
-            order="t", effects=effects, payload={"offset_px": lf.offset_px},
+            order="t", effects=effects,
+            payload={"offset_px": lf.offset_px, "chord_rad": _chord_angle(q, lf, terms)},
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
                         "offset_px": (lf.offset_px, lf.offset_u_px)},
             noise_dof=self.noise_dof)
@@ -187,6 +213,30 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     return float(1.0 / (1.0 / tex.dof + 1.5 / max(len(m.points) - 1, 1)))
 
 
+def _bend_column(q: np.ndarray, angle: float) -> np.ndarray:
+    """A bow across the mark: (t - t_mid)^2 along it [px^2] (t_mid the middle of the
+    span, so the column leaves the line through the chord's middle)."""
+    t = q @ line_frame(angle)[0]
+    return ((t - (t.min() + t.max()) / 2) ** 2)[:, None]
+
+
+def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term]) -> float:
+    """Angle of the chord between the fitted curve's ends (the straight fit's angle when no
+    bow is fitted): how a bent mark's direction is read end to end [rad]."""
+    if not any(t.name == BEND for t in terms):
+        return float(lf.angle_rad)
+    j = MarkStage._col_index(terms, BEND)
+    u, n = line_frame(lf.angle_rad)
+    t = q @ u
+    tm = (t.min() + t.max()) / 2
+    ends = [(lf.offset_px + lf.beta[j] * (te - tm) ** 2) for te in (t.min(), t.max())]
+    return float(lf.angle_rad - (ends[1] - ends[0]) / (t.max() - t.min()))
+
+
+def _bend(fit: StageFit) -> Term:
+    return Term(BEND, "px (sagitta)", np.zeros((fit.n, 1)))
+
+
 def _radial(fit: StageFit) -> Term:
     return Term(RADIAL, "1 (k1 at the image half-diagonal)", np.zeros((fit.n, 1)))
 
@@ -194,7 +244,9 @@ def _radial(fit: StageFit) -> Term:
 def _wiggle(fit: StageFit) -> Term | None:
     t = np.asarray(fit.regressors["t"], float)
     test, omega = periodogram_test(fit.residuals / fit.sigma, t)
-    if not np.isfinite(omega):
+    if not np.isfinite(omega) or 2 * np.pi / omega > np.ptp(t) / 2:
+        # Fewer than 2 periods along the mark: a slow bow is no wiggle (it is a bend or a
+        # lens, told apart elsewhere).
         return None
     # Independent frequencies searched (up to the Nyquist of the point spacing): ~ n / 2.
     m_indep = max(1.0, 0.5 * (len(t) - 1))
@@ -235,9 +287,15 @@ def radial_admissible(current: StageFit, trial: StageFit, term: Term, alpha: flo
     return None
 
 
+RADIAL_CANDIDATE = Candidate(
+    RADIAL, "1", "curvature across the mark growing with distance from the image centre: "
+    "lens radial distortion (plumb-line k1) or a bent mark", _radial)
+"""The old per-mark k1 (kept for :class:`MarkStage` users; :func:`measure_image` handles the
+lens per camera before the loop, :mod:`align.lens`)."""
+
 CANDIDATES: tuple[Candidate, ...] = (
-    Candidate(RADIAL, "1", "curvature across the mark growing with distance from the image "
-              "centre: lens radial distortion (plumb-line k1) or a bent mark", _radial),
+    Candidate(BEND, "px", "a bow across the mark the camera's lens does not explain: a bent "
+              "mark (or a lens the model lacks)", _bend),
     Candidate(WIGGLE, "px", "periodic wiggle along the mark (vibration / rolling shutter)",
               _wiggle),
     Candidate(ILLUM, "px^2", "centre bias following the local illumination slope across the "
@@ -247,7 +305,8 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
+    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
     ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
     ``applied``: whether it was significant, explained the lines, and the marks were
@@ -286,79 +345,6 @@ def _num(v: object) -> float:
     return float("nan") if v is None else float(v)  # type: ignore[arg-type]
 
 
-def _undistort_mark(m: MarkMeasurement, k1: float) -> tuple[np.ndarray, np.ndarray]:
-    """A mark's centres undistorted by k1 (at the half-diagonal) and their sigma carried
-    through the undistortion (see :func:`imaging.cross_magnification`)."""
-    if not k1:
-        return m.points, m.sigma
-    scale = half_diagonal(m.image_shape)
-    g = cross_magnification(m.points, [k1], scale, line_frame(m.line.angle_rad)[1])
-    return undistort(m.points, [k1], scale), m.sigma * np.abs(g)
-
-
-def _chi2_lines(ms: Sequence[MarkMeasurement], k1: float, scale: float) -> float:
-    out = 0.0
-    for m in ms:
-        q, s = _undistort_mark(m, k1)
-        out += fit_line(q, s, reject_sigma=None, chol=m.chol).chi2
-    return out
-
-
-def frame_distortion(ms: Sequence[MarkMeasurement], alpha: float = 1e-3) -> FrameDistortion:
-    """Joint plumb-line k1 over every mark of one frame, weighted by the centres' sigma.
-
-    Variable projection: for a given k1 each line is a weighted straight-line fit, so chi2 is
-    a function of k1 alone, minimised by Newton steps from finite differences; u(k1) =
-    sqrt(2 / chi2'') at the minimum.
-    Significance: chi2 drop against chi2(1) at ``alpha`` and a BIC gain (ln N).
-    """
-    scale = half_diagonal(ms[0].image_shape)
-    n = sum(len(m.points) for m in ms)
-    dof = max(n - 2 * len(ms), 1)
-    c0 = _chi2_lines(ms, 0.0, scale)
-    k1, c1, h, curv = 0.0, c0, 0.01, 0.0
-    converged = False
-    for _ in range(8):  # Newton on chi2(k1): quadratic near the minimum, not far from it
-        cp, cm = _chi2_lines(ms, k1 + h, scale), _chi2_lines(ms, k1 - h, scale)
-        curv = (cp - 2 * c1 + cm) / h**2
-        if curv <= 0:
-            break
-        step = -(cp - cm) / (2 * h) / curv
-        k1 += step
-        if abs(k1) > K1_MAX:
-            break  # short or few lines leave k1 unconstrained: no lens bends that much
-        c1 = _chi2_lines(ms, k1, scale)
-        h = max(min(h, 3 * np.sqrt(2 / curv)), 1e-6)
-        if abs(step) < 0.01 * np.sqrt(2 / curv):
-            converged = True
-            break
-    if not converged:
-        k1, c1 = 0.0, c0
-    drop = c0 - c1
-    p = float(chi2.sf(max(drop, 0.0), 1))
-    significant = bool(converged and curv > 0 and p < alpha and drop > np.log(n))
-    after = (c1 if significant else c0) / max(dof - significant, 1)
-    consistent = bool(chi2.sf(after * max(dof - significant, 1), max(dof - significant, 1))
-                      >= alpha)
-    return FrameDistortion(float(k1), float(np.sqrt(2 / curv)) if curv > 0 else float("inf"),
-                           significant and consistent, consistent, len(ms), c0 / dof, after, p)
-
-
-def _undistorted(m: MarkMeasurement, k1: float) -> MarkMeasurement:
-    """The measurement with its centres undistorted by k1 (at the half-diagonal)."""
-    q, s = _undistort_mark(m, k1)
-    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, sigma=s, regressors=regs,
-                   line=fit_line(q, s, reject_sigma=None, chol=m.chol))
-
-
-def _angle_sensitivity(m: MarkMeasurement, k1: float, h: float = 1e-3) -> float:
-    """d(angle)/d(k1) of the mark's straight-line fit [rad per unit k1]."""
-    a = [fit_line(*_undistort_mark(m, k), reject_sigma=None, chol=m.chol).angle_rad
-         for k in (k1 - h, k1 + h)]
-    return float(np.arctan2(np.sin(2 * (a[1] - a[0])), np.cos(2 * (a[1] - a[0]))) / 2 / (2 * h))
-
-
 @dataclass(frozen=True)
 class MarkResult:
     """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
@@ -383,6 +369,12 @@ class MarkResult:
     uncertainty_inflation: float = 1.0
     internal_error: bool = False
     frame: FrameDistortion | None = None
+    family: LineFamily | None = None
+    unreported: int = 0
+    lens: Mapping | None = None
+    u_terms: Mapping[str, float] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    lens_limited: bool = False
 
     @property
     def unexplained_structure(self) -> bool:
@@ -395,6 +387,8 @@ class MarkResult:
         d: dict = {"image": self.image, "found": self.found, "error": self.error}
         if self.internal_error:
             d["internal_error"] = True
+        if self.unreported:
+            d["lines_not_reported"] = self.unreported
         if not self.found:
             return d
         d.update({
@@ -413,6 +407,15 @@ class MarkResult:
         })
         if self.frame is not None:
             d["frame_radial_distortion"] = self.frame.to_dict()
+        if self.family is not None:
+            d["family"] = self.family.to_dict()
+        if self.lens is not None:
+            d["lens"] = dict(self.lens)
+        d["angle_u_terms_arcsec"] = {k: float(np.rad2deg(v) * 3600)
+                                     for k, v in self.u_terms.items()}
+        d["angle_u_terms_rad"] = {k: float(v) for k, v in self.u_terms.items()}
+        d["notes"] = list(self.notes)
+        d["lens_limited"] = self.lens_limited
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -427,7 +430,8 @@ class MarkResult:
         answers ``effects``, ``unexplained_structure`` and ``summary_lines()`` alike)."""
         base = {"image": str(d["image"]), "found": bool(d["found"]),
                 "error": None if d.get("error") is None else str(d["error"]),
-                "internal_error": bool(d.get("internal_error", False))}
+                "internal_error": bool(d.get("internal_error", False)),
+                "unreported": int(d.get("lines_not_reported", 0))}
         if not base["found"]:
             return cls(**base)
 
@@ -445,7 +449,13 @@ class MarkResult:
                    angle_before_rad=rad("angle_before_loop"),
                    loop=LoopSummary.from_dict(d) if "loop" in d else None,
                    uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
-                   frame=None if fr is None else FrameDistortion.from_dict(fr))
+                   frame=None if fr is None else FrameDistortion.from_dict(fr),
+                   family=LineFamily.from_dict(d["family"]) if "family" in d else None,
+                   lens=d.get("lens"),
+                   u_terms={str(k): _num(v)
+                            for k, v in (d.get("angle_u_terms_rad") or {}).items()},
+                   notes=tuple(str(n) for n in d.get("notes", ())),
+                   lens_limited=bool(d.get("lens_limited", False)))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -457,19 +467,43 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     d, du = rep.after.quantities["offset_px"]
     infl = structure_inflation(rep)
     au, du = au * infl, du * infl
+    terms: dict[str, float] = {}
+    notes: list[str] = []
+    f = rep.after
+    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+        notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
+                     f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
+                     "this groove; u kept as stated (a misfit never narrows it)")
+    bend = next((e for e in rep.effects if e.name == BEND), None)
+    if bend is not None:
+        # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
+        # and which one the user means is not in the image. Cover both: the difference
+        # (and the angle without the bow term) enter u.
+        chord = float(rep.after.payload["chord_rad"])
+        a0 = rep.before.quantities["angle_rad"][0]
+        terms["bent_mark_chord_vs_fit"] = float(max(abs(_wrap(chord - a)), abs(_wrap(a0 - a))))
+        notes.append(f"{image} mark {index}: the mark is bent (sagitta {bend.estimate:+.3g} ± "
+                     f"{bend.u:.2g} px) and the lens does not explain the bow: its direction "
+                     "is ambiguous (straight fit vs chord), u widened to cover both")
+        au = float(np.hypot(au, terms["bent_mark_chord_vs_fit"]))
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
-        loop=rep, measurement=m, uncertainty_inflation=infl)
+        loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
+        notes=tuple(notes))
+
+
+def _wrap(a: float) -> float:
+    return float((a + np.pi / 2) % np.pi - np.pi / 2)
 
 
 def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     """Factor on the stated uncertainty when the residual keeps unexplained structure.
 
-    Below 1 when chi2 is improbably small (lower tail below ``alpha_low``): the stated
-    sigma overstates the centres' scatter, and u is scaled down to it.
+    Never below 1: an improbably small chi2 (lower tail below ``alpha_low``) is a groove
+    model that does not fit, not a licence to shrink u.
 
     Correlated residuals carry less information than independent ones: with lag-1
     correlation rho the variance of a fitted slope grows by about (1 + rho) / (1 - rho)
@@ -478,9 +512,10 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     f = rep.after
     if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < alpha_low:
         # The centres scatter far less than their stated sigma: the groove model's shape
-        # (hence its Fisher information) does not describe this groove. Never return that
-        # u as is (it was 10^5 arcsec once): scale it to the scatter (Birge ratio < 1).
-        return float(np.sqrt(f.chi2 / f.dof))
+        # does not describe this groove. A model misfit never narrows u (a defocus gradient
+        # once got x0.4 here and scattered at twice its u): u stays as stated, and the
+        # misfit is reported (warnings).
+        return 1.0
     if not rep.unexplained_structure:
         return 1.0
     z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
@@ -489,65 +524,244 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     return float(np.sqrt(max(1.0, f.chi2 / max(f.dof, 1)) * (1 + rho) / (1 - rho)))
 
 
+def lens_lines(ms: Sequence[MarkMeasurement]) -> list[LineGeometry]:
+    """The marks as the lens solver sees them (sigma with the texture's re-read scale)."""
+    return [LineGeometry(m.points, m.sigma * np.sqrt(texture_scale(m)), m.chol) for m in ms]
+
+
+def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
+    """A calibration's standard uncertainties (``align camera``'s ``u``) as the lens vector's
+    (:data:`imaging.lens.PARAMS`: k1, k2, p at the half-diagonal, aspect, principal point)."""
+    u = camera.u or {}
+    R = half_diagonal(shape)
+    fx, fy = float(camera.camera_matrix[0, 0]), float(camera.camera_matrix[1, 1])
+    a = R / fx
+
+    def g(k: str) -> float:
+        v = float(u.get(k, 0.0))
+        return v if np.isfinite(v) else 0.0
+
+    return np.array([g("k1") * a**2, g("k2") * a**4, g("p1") * a, g("p2") * a,
+                     np.hypot(g("fx") / fx, g("fy") / fy) * fy / fx, g("cx"), g("cy")])
+
+
+@dataclass(frozen=True)
+class CameraLens:
+    """What the lens of one camera adds to each of its marks: the lens vector applied to the
+    centres before the loop (None: nothing; a camera model already undistorted them), the
+    named angle-u terms per mark [rad], the notes, the saved dict."""
+
+    lam: np.ndarray | None
+    terms: tuple[dict[str, float], ...]
+    notes: tuple[str, ...]
+    record: Mapping
+    max_u_rad: float
+
+
+def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                ) -> CameraLens:
+    """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
+
+    Without a camera model: identifiability, then the determined parameters fitted jointly
+    and the rest carried in u (:func:`align.lens.solve_lens`). With one: the model *is* the
+    lens (the centres are already undistorted by it); its u is propagated into every angle,
+    nothing is fitted on top, and marks that disagree with it beyond their u are a warning
+    naming the camera, the disagreement added to u.
+    """
+    ranges = ranges or LensRanges()
+    max_u = ranges.max_u_arcsec * np.pi / 180 / 3600
+    if not ms:
+        return CameraLens(None, (), (), {}, max_u)
+    shape = ms[0].image_shape
+    R = half_diagonal(shape)
+    lines = lens_lines(ms)
+    who = f"camera {label}" if label else "camera"
+    if camera is None and not np.any(ranges.vector()):
+        # Declared distortion-free: nothing to determine, nothing to carry.
+        return CameraLens(None, tuple({} for _ in ms), (),
+                          {"source": "declared distortion-free", "lines": len(ms),
+                           "ranges": ranges.to_dict()}, max_u)
+    if camera is None:
+        sol, designs = solve_lens(lines, R, ranges, alpha)
+        terms = tuple(lens_angle_terms(sol, d) for d in designs)
+        notes = tuple(f"{who}: {n}" for n in sol.notes)
+        return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
+                          {"source": "marks", **sol.to_dict()}, max_u)
+    lam_u = camera_lens_u(camera, shape)
+    zero = np.zeros_like(lam_u)
+    terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
+    p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
+    notes = []
+    if p < alpha:
+        what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
+        notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
+                     f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
+                     "recalibrate the camera (`align camera`)")
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_disagreement"] = float(abs(d.s @ dlam))
+    return CameraLens(None, tuple(terms_l), tuple(notes),
+                      {"source": "camera model", "p_marks_agree": p,
+                       "u_lens_vector": lam_u.tolist()}, max_u)
+
+
+def _lens_undistorted(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
+    q, s = lens_undistorted(LineGeometry(m.points, m.sigma, m.chol), lam,
+                            half_diagonal(m.image_shape))
+    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
+    return replace(m, points=q, sigma=s, regressors=regs,
+                   line=fit_line(q, s, reject_sigma=None, chol=m.chol))
+
+
+LENS_TERMS = ("lens_", "camera_")
+
+
+def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: int,
+                alpha: float = 1e-3) -> MarkResult:
+    """One mark of a camera whose lens is known (:func:`camera_lens`, ``k`` the mark's place
+    in it): undistorted by it, through the loop, the lens's u terms added to the angle."""
+    before = m.line.angle_rad
+    mu = _lens_undistorted(m, lens.lam) if lens.lam is not None else m
+    r = loop_mark(mu, name, index, alpha)
+    terms = dict(r.u_terms)
+    terms.update(lens.terms[k] if k < len(lens.terms) else {})
+    au = float(np.sqrt(r.angle_u_rad**2 + sum(v**2 for k_, v in terms.items()
+                                              if k_ not in r.u_terms)))
+    lens_u = float(np.sqrt(sum(v**2 for k_, v in terms.items() if k_.startswith(LENS_TERMS))))
+    limited = bool(lens_u > lens.max_u_rad)
+    notes = list(lens.notes) + list(r.notes)
+    if limited:
+        worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
+        notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
+                     f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
+                     f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
+                     "(`align camera`) and pass it with --camera")
+    return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
+                   lens=lens.record, notes=tuple(notes), lens_limited=limited)
+
+
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
                   alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
-                  roi: Roi | None = None, min_length_px: float | None = None
-                  ) -> list[MarkResult]:
+                  roi: Roi | None = None, min_length_px: float | None = None,
+                  ranges: LensRanges | None = None) -> list[MarkResult]:
     """Every mark of an in-memory image, each through the loop; failures become entries.
 
-    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search.
+    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search; ``ranges``: the
+    plausible lens (Type B) when no camera model is given.
     """
     try:
-        found = measure_marks(image, camera, where=name, max_marks=max_marks,
-                              expect_one=expect_one, roi=roi, min_length_px=min_length_px)
+        measured = measure_frame(image, camera, where=name, max_marks=max_marks,
+                                 expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
+    found = measured.items
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
-    frame = None
-    candidates: Sequence[Candidate] = CANDIDATES
-    if len(ms) >= 2 and camera is None:
-        # Several marks, one lens: distortion is a property of the frame, fitted jointly;
-        # each mark's own loop may then not invent a distortion of its own (a bent mark
-        # shows as unexplained structure instead, and its u is inflated).
-        frame = frame_distortion(ms, alpha)
-        candidates = tuple(c for c in CANDIDATES if c.name != RADIAL)
+    # One lens for the frame, all its marks together (identifiability first).
+    lens = camera_lens(ms, camera, ranges, alpha)
     out = []
+    k = 0
     for i, m in enumerate(found):
         if isinstance(m, ImageInputError):
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
             continue
-        if frame is None:
-            out.append(loop_mark(m, name, i, alpha))
+        out.append(finish_mark(m, lens, k, name, i, alpha))
+        k += 1
+    return with_families(out, measured.families, measured.unreported,
+                         "camera model" if camera is not None else
+                         "frame lens" if lens.lam is not None else "none", alpha)
+
+
+
+def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
+                  unreported: int, lens: str, alpha: float = 1e-3) -> list[MarkResult]:
+    """The image's results with each family's :class:`align.family.LineFamily` on its
+    measured members, and the count of lines found but not reported on every entry."""
+    out = [replace(r, unreported=unreported) for r in results]
+    for g in families:
+        ok = [i for i in g if out[i].found]
+        if len(ok) < 2:
             continue
-        before = m.line.angle_rad
-        mu = _undistorted(m, frame.k1) if frame.applied else m
-        r = loop_mark(mu, name, i, alpha, candidates)
-        # The shared k1 is uncertain: carry it into every angle corrected with it. (Not
-        # applied, the declared model holds, as for a single mark: no lens distortion.)
-        extra = _angle_sensitivity(m, frame.k1) * frame.k1_u if frame.applied else 0.0
-        au = float(np.hypot(r.angle_u_rad, extra))
-        if not frame.consistent:
-            au *= max(1.0, np.sqrt(frame.chi2_dof_after) / r.uncertainty_inflation)
-        out.append(replace(r, angle_before_rad=before, frame=frame, angle_u_rad=au))
+        ms = [out[i] for i in ok]
+        mids = []
+        for r in ms:
+            if r.measurement is None:
+                mids.append(r.offset_px * line_frame(r.angle_rad)[1])
+                continue
+            # The extent is along the profile's own line (whose angle may sit across
+            # +-90 deg from the result's).
+            pf = r.measurement.profile
+            u, n = line_frame(pf.angle_rad)
+            t0, t1 = r.measurement.extent_px
+            mids.append(pf.offset_px * n + 0.5 * (t0 + t1) * u)
+        # The lens's terms are shared by the members: out of their u for the chi2 of their
+        # angles, into the family mean's u (align.family).
+        shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
+        own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
+                                  for r, t in zip(ms, shared, strict=True)], 1e-30))
+        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
+                          np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
+                          len(g) - len(ok), alpha, shared)
+        for i in ok:
+            out[i] = replace(out[i], family=fam)
+    return out
+
+
+def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
+                   camera: CameraModel | None = None, alpha: float = 1e-3,
+                   expect_one: bool = False, ranges: LensRanges | None = None,
+                   label: str = "", on_image: Callable[[int], None] | None = None
+                   ) -> list[list[MarkResult]]:
+    """All images of one camera with one lens (issue 18): every mark of every image enters
+    one plumb-line fit (:func:`camera_lens`), then each goes through its loop. ``images``:
+    (path, roi) pairs; one list of results per image, in order; an unreadable image or one
+    without a mark is its failed entry, as in :func:`measure_file`."""
+    found_all: list[list[MarkMeasurement | ImageInputError]] = []
+    for j, (path, roi) in enumerate(images):
+        if on_image is not None:
+            on_image(j)
+        try:
+            img = read_image(path)
+            found_all.append(list(measure_marks(img, camera, where=str(path),
+                                                expect_one=expect_one, roi=roi)))
+        except ImageInputError as exc:
+            found_all.append([exc])
+    ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]
+    shapes = {m.image_shape for m in ms}
+    lens = camera_lens(ms, camera, ranges, alpha, label) if len(shapes) <= 1 else None
+    out, k = [], 0
+    for (path, _), found in zip(images, found_all, strict=True):
+        res = []
+        for i, m in enumerate(found):
+            if isinstance(m, ImageInputError):
+                res.append(MarkResult(image=str(path), found=False, error=str(m), index=i))
+                continue
+            if lens is None:  # images of different sizes: one lens each
+                one = camera_lens([m], camera, ranges, alpha, label)
+                res.append(finish_mark(m, one, 0, str(path), i, alpha))
+            else:
+                res.append(finish_mark(m, lens, k, str(path), i, alpha))
+            k += 1
+        out.append(res)
     return out
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,
                  max_marks: int = 8, expect_one: bool = False, roi: Roi | None = None,
-                 min_length_px: float | None = None) -> list[MarkResult]:
+                 min_length_px: float | None = None, ranges: LensRanges | None = None
+                 ) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
         img = read_image(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
     return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
-                         min_length_px)
+                         min_length_px, ranges)
 
 
 def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,
                   alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
-                  roi: Roi | None = None, min_length_px: float | None = None
-                  ) -> Iterator[list[MarkResult]]:
+                  roi: Roi | None = None, min_length_px: float | None = None,
+                  ranges: LensRanges | None = None) -> Iterator[list[MarkResult]]:
     """:func:`measure_file` over a batch, one list per file; nothing escapes one image.
 
     Bad input is already a failed entry; anything else raised inside one image is a bug, but
@@ -557,7 +771,8 @@ def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None
     """
     for path in paths:
         try:
-            yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px)
+            yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px,
+                               ranges)
         except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
             bug = internal_error(exc)
             log.error("%s: %s", path, bug, exc_info=exc)

@@ -22,7 +22,8 @@ from axisbase.units import ARCSEC
 
 def mark_lines(r) -> list[str]:
     """One measured mark (:class:`align.marks.MarkResult` with ``found``): angle, offset,
-    length, then its loop and its image frame's distortion check, indented."""
+    length, then its loop and its image frame's distortion check, indented; after the last
+    member of a family of lines, the family's line (:meth:`align.family.LineFamily.summary`)."""
     lines = [f"{r.image} mark {r.index}: angle {np.rad2deg(r.angle_rad):+.6f}° "
              f"± {r.angle_u_rad / ARCSEC:.2f}″, offset {r.offset_px:+.3f} px, "
              f"length {r.length_px:.0f} px, {'dark' if r.dark else 'bright'}"]
@@ -33,6 +34,21 @@ def mark_lines(r) -> list[str]:
                  "LINES DISAGREE beyond one distortion: u inflated")
         lines.append(f"    frame ({f.n_lines} marks, one lens): k1 {f.k1:+.4g} ± "
                      f"{f.k1_u:.2g}, {state}")
+    fam = getattr(r, "family", None)
+    if fam is not None and r.index == max(fam.members):  # once, after its last member
+        lines.append(f"    {fam.summary()} (marks {', '.join(map(str, fam.members))})")
+    if r.lens and "parameters" in r.lens:
+        par = r.lens["parameters"]
+        fitted = [f"{k} {v['value']:+.4g}" for k, v in par.items() if v["applied"]]
+        lines.append(f"    lens ({r.lens['lines']} marks, one lens): "
+                     f"{', '.join(fitted) or 'nothing applied'}; not determined: "
+                     f"{', '.join(k for k, v in par.items() if not v['determined']) or 'none'}")
+    if r.u_terms:
+        big = sorted(r.u_terms.items(), key=lambda kv: -kv[1])[:3]
+        lines.append("    largest u terms: " + ", ".join(f"{k} {v / ARCSEC:.2f}″"
+                                                       for k, v in big))
+    if r.lens_limited:
+        lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     return lines
 
 

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
+from axisbase.units import ARCSEC
 from goniometry.revolutions import R_TAIL
 
 
@@ -26,18 +27,44 @@ def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]
 def mark_warnings(results: Sequence) -> list[str]:
     """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
     out = []
+    seen: set[tuple[str, int]] = set()
     for r in results:
         what = f"{r.image} mark {r.index}"
+        if r.unreported and (r.image, -1) not in seen:
+            seen.add((r.image, -1))
+            out.append(f"{r.image}: {r.unreported} more line(s) found and not reported "
+                       "(beyond --max-marks, the strongest reported; or lines of a family "
+                       "shorter than --min-length)")
+        fam = getattr(r, "family", None)
+        if fam is not None and (r.image, fam.members[0]) not in seen:
+            seen.add((r.image, fam.members[0]))
+            out += family_warnings(r.image, fam)
         if not r.found:
             out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue
         out += loop_warnings(what, r.loop)
+        out += [n for n in getattr(r, "notes", ()) if n not in out]
         if r.uncertainty_inflation > 1:
             out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
                        "structure no effect explains")
         elif r.uncertainty_inflation < 1:
             out.append(f"{what}: uncertainty scaled x{r.uncertainty_inflation:.2f} to the "
                        "centres' scatter: the groove model's shape does not fit this groove")
+    return out
+
+
+def family_warnings(image: str, fam) -> list[str]:
+    """A family of lines (``align.family.LineFamily``): members not parallel, failed ones."""
+    out = []
+    what = f"{image}: family of {len(fam.members)} lines (marks {fam.members[0]}..)"
+    if fam.deviant:
+        out.append(f"{what}: mark(s) {', '.join(map(str, fam.deviant))} not parallel to the "
+                   "others beyond their u (a tilted or bent line)")
+    if not fam.consistent():
+        out.append(f"{what}: angles disagree (chi2/dof {fam.chi2_dof:.2f}, p {fam.p_value:.2g})"
+                   "; the family's angle u is widened by sqrt(chi2/dof)")
+    if fam.failed:
+        out.append(f"{what}: {fam.failed} member(s) found but not measured")
     return out
 
 
@@ -74,6 +101,34 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
     return out
 
 
+SETUP_HINT = {
+    "camera_roll": "declare it ([cameras.{name}] roll_arcsec) or re-level the camera",
+    "reference_face_offset": "declare it ([goniometer] reference_offset_arcsec) or re-set the "
+                        "reference face",
+    "platform_tilt": "declare it ([platform] table_tilt_arcsec) or re-level the table",
+}
+"""What to do about each kind of set-up effect the fusion found (by the effect's name)."""
+
+
+def setup_notices(fusion) -> list[str]:
+    """Set-up effects the fusion's loop found and corrected for (a camera's roll, the
+    reference face's offset, the table's tilt): E is corrected, but the set-up is not what
+    session.toml declares, and the reader must know (``FusionResult``, run or loaded)."""
+
+    out = []
+    for e in fusion.loop.summary().effects:
+        what = e.description or e.name
+        value = (f"{e.estimate / ARCSEC:+.1f} ± {e.u / ARCSEC:.1f}″" if e.unit == "rad"
+                 else f"{e.estimate:+.3g} ± {e.u:.2g} {e.unit}")
+        hint = next((h for k, h in SETUP_HINT.items() if e.name.startswith(k)),
+                    "check the set-up against session.toml")
+        # camera_roll[A] -> A: the camera to name in the hint
+        hint = hint.replace("{name}", e.name.partition("[")[2].rstrip("]") or "NAME")
+        out.append(f"set-up: the fusion found a {what} of {value} (p = {e.p_value:.2g}) and "
+                   f"corrected E for it; {hint}")
+    return out
+
+
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
     out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
@@ -86,8 +141,13 @@ def session_warnings(res) -> list[str]:
     out += mark_warnings([r for _, r in res.marks])
     f = res.fusion
     if f is not None:
+        out += setup_notices(f)
         out += loop_warnings("fusion", f.loop)
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")
+        if f.disagreement is not None and not f.gross:  # (gross: in the stage's error)
+            widened = ", ".join(n for n, _, _ in f.disagreement.angles)
+            out.append(f"fusion: {f.disagreement.message()}; the uncertainty of {widened} "
+                       "is widened by the whole disagreement")
     return out

@@ -14,6 +14,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMAS = ROOT / "align" / "schemas"
 OUT = ROOT / "docs" / "generated" / "schemas.md"
+INPUTS = ("session-toml",)
+"""Schemas of files the tool reads (session.toml: docs/getting-started-own-data.md), not outputs."""
 ORDER = ("marks", "camera", "calibration", "tilt", "gonio", "session", "platform-calibration",
          "lot")
 
@@ -47,7 +49,7 @@ def kinds() -> list[str]:
     """The known outputs in reading order, then any schema added since, by name."""
     on_disk = sorted(p.name.removesuffix(".schema.json") for p in SCHEMAS.glob("*.schema.json"))
     return [k for k in ORDER if k in on_disk] + [
-        k for k in on_disk if k not in ORDER and k != "envelope"]
+        k for k in on_disk if k not in ORDER and k not in ("envelope", *INPUTS)]
 
 
 def render() -> str:

@@ -43,6 +43,8 @@ FLUSH_ROWS = 1 << 15
 # need >= 8 blocks (below that u rests on a handful of values and is not a standard
 # uncertainty anyone can rely on).
 MIN_REVOLUTIONS = 8
+# Revolutions on each side of a face-pattern change (see _Pass._pattern_change).
+PATTERN_WINDOW = 8
 # Reference marks this many revolutions apart decide the log's faces per revolution early.
 FACE_COUNT_SEGMENTS = 16
 
@@ -80,7 +82,130 @@ def noise_reach(samples: int) -> float:
     if samples <= 0:
         return SCREEN_SIGMA
     return max(SCREEN_SIGMA, -NormalDist().inv_cdf(TAIL_ALPHA / (2 * samples)))
+R_DROPOUT = ("communication drop-out: rows missing from the log (the time of a row spans more "
+             "than its counts' face interval, or the sequence of faces jumps): the revolutions "
+             "it spans excluded, not stitched")
+# A row's interval is a drop-out when its duration exceeds this many times what its counts
+# take at the log's speed (seconds per count, the chunk's median): the counts of the lost
+# rows are lost with them, so the row after a gap of k rows holds one face interval's counts
+# and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse has both doubled
+# (ratio 1) and a glint both split; a table whose speed changed by a third within one face
+# interval is no table a goniometer runs on.
+DROPOUT_RATIO = 1.5
 R_NOPATTERN = "no clean revolution nearby to predict the face pattern: stretch excluded"
+
+
+def dropouts(count: np.ndarray, dt: np.ndarray | None) -> np.ndarray:
+    """Rows whose interval spans a communication drop-out (see ``DROPOUT_RATIO``): their
+    duration [s] beyond DROPOUT_RATIO times their counts at the median seconds per count
+    (of every 16th row: the speed, not each row, is what the median needs; a full median
+    per block cost a quarter of the pass). All False without times (then only the count
+    pattern tells, see :func:`phase_break`)."""
+    if dt is None or len(count) < 2:
+        return np.zeros(len(count), bool)
+    step = 16 if len(count) >= 256 else 1
+    ratio = dt[::step] / count[::step]
+    ratio = ratio[np.isfinite(ratio)]
+    if len(ratio) < 2:
+        return np.zeros(len(count), bool)
+    limit = DROPOUT_RATIO * float(np.median(ratio))
+    with np.errstate(invalid="ignore"):  # (the first row's unknown duration: NaN, no gap)
+        return dt > limit * count
+
+
+def phase_break(count: np.ndarray, inc: np.ndarray, tol: float,
+                ends_at_ref: bool) -> int | None:
+    """Without times, a drop-out from the count pattern: the first row (index into
+    ``count``, the rows after a face-0 anchor) where the sequence of faces jumps.
+
+    The lost rows take their counts with them, so every logged interval is still one genuine
+    face interval — before the gap they follow the faces 0, 1, 2, ... from the anchor, after
+    it at another phase. A missing autocollimator pulse (two intervals merged) or a spurious
+    one (an interval split) fits no single face, and is left to the walk. Needs faces whose
+    intervals differ by more than ``tol`` (else the phase cannot be seen: None); a whole
+    number of revolutions lost keeps the phase, and then the stitched revolution's intervals
+    are the genuine ones (without times no Earth-rate correction carries the gap).
+    """
+    n = len(inc)
+    d = np.abs(inc[:, None] - inc[None, :])
+    if n < 2 or np.min(d[~np.eye(n, dtype=bool)]) <= 2 * tol:
+        return None
+    fits = np.abs(count[:, None] - inc[None, :]) <= tol
+    one = fits.sum(1) == 1
+    face = np.argmax(fits, 1)
+    expect = 0  # the face interval the next row should be: 0 -> 1 first
+    for i in range(len(count)):
+        if not one[i]:
+            return None  # a pulse fault first: the walk decides
+        if face[i] != expect:
+            # Lost rows (their number mod n: the phase jump), if the next rows go on at the
+            # new phase; else it is something the walk handles.
+            # (or the stretch ends there: at the reference mark the new phase predicts, or at
+            # the end of the log).
+            after = range(1, min(3, len(count) - i))
+            if all(one[i + m] and face[i + m] == (face[i] + m) % n for m in after) and (
+                    len(after) == 2 or not ends_at_ref
+                    or (face[i] + len(after) + 1) % n == 0):
+                return i
+            return None
+        expect = (expect + 1) % n
+    return None
+
+
+def revolution_hash(counts: np.ndarray) -> np.ndarray:
+    """A 64-bit hash of each row of counts (polynomial, wrapping: numpy's uint64 arithmetic
+    wraps without a word)."""
+    c = np.asarray(counts).astype(np.int64).astype(np.uint64)
+    h = np.zeros(len(c), np.uint64)
+    for j in range(c.shape[1]):
+        h = h * np.uint64(1000003) + c[:, j]
+    return h
+
+
+def repeated_block(h: np.ndarray, window: int = 16, least: int = 32
+                   ) -> tuple[int, int, int] | None:
+    """A log written twice: a block of half its revolutions (and at least ``least``)
+    repeated count for count beside itself: (first revolution, first of its repeat,
+    length), else None.
+
+    Why half and not any block: a steady table turns a nearly constant fraction of a count
+    further each revolution, so its counts (quantised, with the autocollimator's jitter on
+    top, ~0.1 count) come back count for count after some near-period — over tens of
+    revolutions by chance (29 of a 120-revolution log was seen). Jitter makes each
+    revolution differ with probability ~0.1 at such a return, so a match over half a log
+    of >= 64 revolutions (0.9^32 ~ 3 %, times the few-percent chance of a near-period that
+    close) is no chance. A shorter block pasted again is not detected. Candidate offsets
+    come from equal windows of ``window`` revolution hashes.
+    """
+    R = len(h)
+    need = max(least, window, (R - 1) // 2)
+    if R < window + need:
+        return None
+    key = np.zeros(R - window + 1, np.uint64)
+    for k in range(window):
+        key = key * np.uint64(0x9E3779B97F4A7C15) + h[k:R - window + 1 + k]
+    order = np.argsort(key, kind="stable")  # (ties in position order)
+    ks = key[order]
+    same = ks[1:] == ks[:-1]
+    if not same.any():
+        return None
+    offsets = (order[1:] - order[:-1])[same]
+    vals, cnt = np.unique(offsets[offsets > 0], return_counts=True)
+    if not len(vals):
+        return None
+    d = int(vals[np.argmax(cnt)])
+    eq = np.concatenate([[False], h[:-d] == h[d:], [False]])
+    edges = np.flatnonzero(np.diff(eq.astype(np.int8)))
+    starts, ends = edges[::2], edges[1::2]
+    k = int(np.argmax(ends - starts))
+    run = int(ends[k] - starts[k])
+    # A copy lies beside its block (d >= run); a log whose revolutions repeat with a short
+    # period (a steady table, a whole number of counts a revolution, no jitter: every
+    # revolution alike) matches itself at that period over nearly all of it (d < run) —
+    # no sign of a copy, and nothing a copy could be told apart from.
+    if run < need or d < run:
+        return None
+    return int(starts[k]), int(starts[k]) + d, run
 
 
 def rowsum(a: np.ndarray) -> np.ndarray:
@@ -218,6 +343,9 @@ class RevolutionStats:
     # Called once with the first ``on_kept_at`` kept revolutions (see read_revolutions).
     on_kept: Callable | None = None
     on_kept_at: int = 0
+    # One 64-bit hash of each revolution's counts, in order (8 bytes a revolution; logs
+    # without times only): a log written twice (see ``repeated_block``).
+    hashes: list = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.s1 = np.zeros(2 * self.n_faces)
@@ -242,6 +370,8 @@ class RevolutionStats:
             correct=None) -> None:
         if len(counts) == 0:
             return
+        if dt is None:  # (with times the reader refuses a copy: no hash needed)
+            self.hashes.append(revolution_hash(counts))
         counts = counts.astype(float)
         if correct is not None and dt is not None:
             counts = correct(counts, dt)
@@ -342,6 +472,9 @@ class _Pass:
         self.chunks = 0
         self.seg_lengths = np.zeros(0, np.int64)  # rows between reference marks: how many
         self.faces_checked = False
+        # The last PATTERN_WINDOW revolutions' face fractions and first lines (a pattern
+        # change at a chunk boundary).
+        self.last_fracs: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ thresholds
     @property
@@ -375,6 +508,36 @@ class _Pass:
         thr = SCREEN_SIGMA * (self.sigma or np.sqrt(1 / 6))
         return rowall(dev <= thr)
 
+    def _pattern_change(self, frac: np.ndarray, N: np.ndarray, lines: np.ndarray) -> None:
+        """Refuse a log whose face pattern changes (two tables' logs concatenated): the
+        median fractions of PATTERN_WINDOW consecutive revolutions before and after some
+        revolution differ by more than the match tolerance on some face. A median of 8 is
+        the pattern within 0.6 sigma and ignores up to 3 faulty revolutions; the faces of
+        one table do not move by ``tol`` counts (several arc-seconds) within a run."""
+        from numpy.lib.stride_tricks import sliding_window_view
+
+        w = PATTERN_WINDOW
+        if self.last_fracs is not None:
+            frac = np.concatenate([self.last_fracs[0], frac])
+            lines = np.concatenate([self.last_fracs[1], lines])
+            N = np.concatenate([np.full(len(self.last_fracs[0]), np.median(N)), N])
+        if len(frac) < 2 * w:
+            return
+        med = np.median(sliding_window_view(frac, (w, frac.shape[1]))[:, 0], axis=1)
+        step = np.abs(med[w:] - med[:-w]) * np.median(N)  # window ending at m vs starting there
+        k = int(np.argmax(step.max(1)))
+        face = int(np.argmax(step[k]))
+        if step[k, face] <= self.tol:
+            return
+        # The first revolution of the window after the change; say where and by how much.
+        m = k + w
+        counts = float((med[m, face] - med[k, face]) * np.median(N))
+        arcsec = float((med[m, face] - med[k, face]) * 360 * 3600)
+        raise LogError(f"{self.path}:{int(lines[m])}: the face pattern changes here (the "
+                       f"interval after face {face} by {counts:+.0f} counts, {arcsec:+.1f}″; "
+                       f"one table's faces stay within {self.tol:.1f} counts): two tables' "
+                       "logs concatenated? Measure each log alone")
+
     # ------------------------------------------------------------------ streaming
     def feed(self, ch) -> None:
         n = self.n
@@ -391,6 +554,7 @@ class _Pass:
             cur = {k: (None if v is None else np.concatenate([self.carry[k], v]))
                    for k, v in cur.items()}
             line0 = self.carry_line0
+        cur["gap"] = dropouts(cur["count"], cur["dt"])
         refs = np.flatnonzero(cur["ref"])
         if not refs.size:
             self.carry, self.carry_line0 = cur, line0
@@ -412,11 +576,11 @@ class _Pass:
             if normal.all():
                 sl = slice(a0 + 1, int(refs[-1]) + 1)  # back to back: views, no gathers
                 C = cur["count"][sl].reshape(-1, n)
-                B = rowany(brk[sl].reshape(-1, n))
+                B = rowany((brk[sl] | cur["gap"][sl]).reshape(-1, n))
                 D = None if dt is None else cur["dt"][sl].reshape(-1, n)
             else:
                 idx = starts[normal][:, None] + np.arange(n)[None, :]
-                C, B = cur["count"][idx], rowany(brk[idx])
+                C, B = cur["count"][idx], rowany(brk[idx] | cur["gap"][idx])
                 D = None if dt is None else cur["dt"][idx]
             Nr = rowsum(C)
             # The pattern (fractions of a revolution) is constant: learnt from the first
@@ -426,6 +590,12 @@ class _Pass:
                 good = ~B
                 self._learn(C[good] / Nr[good, None], Nr[good])
             ok = ~B & self._screen(C, Nr)
+            if int((~ok & ~B).sum()) >= PATTERN_WINDOW:  # (cheap gate: a change fails the screen)
+                self._pattern_change(C[~B] / Nr[~B, None], Nr[~B],
+                                     line0 + starts[normal][~B])
+            if np.any(~B):
+                keep = np.flatnonzero(~B)[-PATTERN_WINDOW:]
+                self.last_fracs = (C[keep] / Nr[keep, None], line0 + starts[normal][keep])
             seg_used = np.flatnonzero(normal)[ok]
             C_used = C[ok]
             all_ok = bool(ok.all())
@@ -516,6 +686,16 @@ class _Pass:
             for _, c, d, te in got:
                 self.stats.add(c, d, te, self.correct)
         self.stats.flush()
+        if self.stats.hashes and not self.has_time:  # (with times the reader refuses a copy)
+            rep = repeated_block(np.concatenate(self.stats.hashes))
+            if rep is not None:
+                a, b, m = rep
+                line = 2 + self.head + b * self.n  # (exact when nothing was excluded before)
+                raise LogError(
+                    f"{path}:{line}: usable revolutions {b + 1}-{b + m} repeat revolutions "
+                    f"{a + 1}-{a + m} count for count ({m} revolutions; chance never does "
+                    "that): the log written twice, or a block of it pasted again? Remove "
+                    "the copy")
         self.stats.hand_over()  # (a log shorter than on_kept_at: what there is)
         self._tails()
         if self.stats.n < MIN_REVOLUTIONS:
@@ -555,13 +735,44 @@ class _Pass:
 
     def _stretch(self, cur: dict, X: np.ndarray, brk: np.ndarray, anchor: int, end: int,
                  nb: np.ndarray, line0: int, tail: bool = False) -> list:
-        """Rows anchor+1 .. end, walked forward from the face-0 pulse of row ``anchor``."""
+        """Rows anchor+1 .. end, walked forward from the face-0 pulse of row ``anchor``.
+
+        A drop-out (a row whose time spans lost rows, see ``dropouts``) cuts the stretch:
+        the revolutions before it are walked, the rows from it to the next reference mark
+        (the revolution it broke) are excluded and listed, and the walk starts again there.
+        Stitched, the revolution's counts would fit the pattern (whole revolutions lost) but
+        its time would carry the gap into the Earth-rate sensitivity.
+        """
+        gap = cur.get("gap")
+        cut = (np.flatnonzero(gap[anchor + 1:end + 1]) + anchor + 1 if gap is not None
+               else np.zeros(0, int))
+        if cut.size:
+            g = int(cut[0])
+            out = []
+            if g - 1 > anchor:
+                out += self._stretch(cur, X, brk, anchor, g - 1, nb, line0, tail)
+            elif tail:
+                self.tail = 0
+            self.exc.add(R_DROPOUT, line0 + g)
+            self.excluded += 1
+            later = np.flatnonzero(cur["ref"][g:end + 1]) + g
+            if later.size and int(later[0]) < end:
+                return out + self._stretch(cur, X, brk, int(later[0]), end, nb, line0, tail)
+            if tail:
+                self.tail += end - g + 1
+            return out
         rows = np.arange(anchor + 1, end + 1)
         inc = self._inc(nb)
         if inc is None:
             self.exc.add(R_NOPATTERN, line0 + int(rows[0]))
             self.excluded += max(1, round(len(rows) / self.n))
             return []
+        if gap is not None and cur["dt"] is None:
+            g = phase_break(np.asarray(cur["count"][anchor + 1:end + 1], float), inc,
+                            self.tol, not tail)
+            if g is not None:
+                gap[anchor + 1 + g] = True  # (cur is this chunk's: the mark stays with it)
+                return self._stretch(cur, X, brk, anchor, end, nb, line0, tail)
         w = walk(X[rows] - X[anchor], cur["ref"][rows] > 0, brk[rows], inc, self.tol)
         good, bad = revolutions_of(w, self.n)
         pulse_rows = np.append(rows, anchor)  # index -1 -> the anchor row
@@ -584,16 +795,38 @@ class _Pass:
             self.armed = None
             return []
         Xe = np.concatenate([[0], X])  # Xe[r + 1]: position of the pulse ending row r
-        rows = np.arange(a0 - 1, -2, -1)  # pulses before the anchor, the arming one last
+        gap = cur.get("gap")
+        if gap is not None and cur["dt"] is None and a0 > 0:
+            # Backwards from the anchor: the first row off the faces' sequence is the one
+            # before the gap.
+            i = phase_break(np.asarray(cur["count"][a0::-1], float), inc[::-1].copy(),
+                            self.tol, False)
+            if i is not None:
+                gap[a0 - i + 1] = True
+        cut = np.flatnonzero(gap[:a0 + 1]) if gap is not None else np.zeros(0, int)
+        if cut.size:
+            # A drop-out in the head: the pulses before its row are at unknown positions
+            # (the lost rows took their counts); walk back to the drop-out's row only.
+            g = int(cut[-1])
+            self.exc.add(R_DROPOUT, line0 + g)
+            rows = np.arange(a0 - 1, g - 1, -1)
+            if not rows.size:
+                self.head, self.armed = a0 + 1, None
+                return []
+            isref = cur["ref"][rows] > 0
+            bk = brk[rows + 1]
+        else:
+            rows = np.arange(a0 - 1, -2, -1)  # pulses before the anchor, the arming one last
+            isref = np.append(cur["ref"][rows[:-1]] > 0, False)
+            # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
+            bk = np.append(brk[rows[:-1] + 1], False)
         x = Xe[a0 + 1] - Xe[rows + 1]
-        isref = np.append(cur["ref"][rows[:-1]] > 0, False)
-        # Going backwards, the counter break between rows r and r+1 belongs to pulse r.
-        bk = np.append(brk[rows[:-1] + 1], False)
         w = walk(x, isref, bk, inc[::-1].copy(), self.tol)
         good, bad = revolutions_of(w, self.n)
         arm = w.face[-1]
-        self.armed = int((-arm) % self.n) if arm > 0 else None
-        out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True)
+        self.armed = int((-arm) % self.n) if arm > 0 and not cut.size else None
+        out = self._report(w, good, bad, rows, cur, brk, line0, tail=True, backward=True,
+                           armed=not cut.size)
         pulse_rows = np.append(rows, a0)
         for _, pulses in good:
             r = pulse_rows[pulses][::-1]
@@ -624,7 +857,8 @@ class _Pass:
             te = tr[-1:]
         return (int(r[-1]), c, d, te)
 
-    def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False) -> list:
+    def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False,
+                armed=True) -> list:
         """List every fault of a walk with its line (row -1: the arming pulse, line0 - 1)."""
         n = self.n
         line = (lambda i: line0 + int(rows[i])) if not backward else (
@@ -635,7 +869,7 @@ class _Pass:
         for i, f in enumerate(w.face):
             r = int(rows[i])
             isref = r >= 0 and cur["ref"][r] > 0
-            if f == SPURIOUS and backward and i == len(rows) - 1:
+            if f == SPURIOUS and backward and armed and i == len(rows) - 1:
                 # The arming pulse fits no face: the log was armed between faces (the lead-in
                 # to the first face is not a revolution, and not a fault: incomplete_head).
                 continue
@@ -643,7 +877,8 @@ class _Pass:
                 self.exc.add(R_SPURIOUS, line(i))
                 if isref:
                     self.exc.add(R_REF_WRONG, line(i))
-            elif f > 0 and f % n == 0 and not isref and not (backward and i == len(rows) - 1):
+            elif (f > 0 and f % n == 0 and not isref
+                  and not (backward and armed and i == len(rows) - 1)):
                 self.exc.add(R_REF_FAILED, line(i))
             elif f > 0 and f % n and isref:
                 self.exc.add(R_REF_WRONG, line(i))

@@ -350,6 +350,50 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
     nothing qualifies. Every mark that is long and significant enough is reported, whatever
     the others' strength: a short faint mark beside a long strong one is still a mark.
     """
+    return detect_lines_once(image, min_length_px, snr_threshold, roi, min_fill, min_pixel_snr,
+                             top).marks[:max_marks]
+
+
+@dataclass(frozen=True)
+class Search:
+    """One coarse search of an image (or roi), kept so that a second pass for shorter lines
+    of a known direction (:mod:`imaging.families`) reuses its ridge masks.
+
+    ``marks``: confirmed candidates in whole-image coordinates, strongest first (deduplicated,
+    not capped); the rest is the search's state (block factor ``f``, thresholded ridge masks
+    per scale and polarity, the noise and full scale used to confirm).
+    """
+
+    marks: list[MarkCandidate]
+    image: np.ndarray
+    shift: np.ndarray
+    f: int
+    layers: list[tuple[float, bool, np.ndarray, np.ndarray, float]]
+    centre_small: np.ndarray
+    noise_full: float
+    top: float
+    min_fill: float
+    min_pixel_snr: float
+
+    def candidates(self, min_length_px: float, keep=None) -> list[MarkCandidate]:
+        """Coarse candidates at least ``min_length_px`` long (whole-image coordinates are
+        applied by :meth:`confirm`), those ``keep(c)`` accepts, strongest first."""
+        return _candidates(self.layers, min_length_px, self.f, self.centre_small,
+                           self.image.shape, self.min_fill, keep)
+
+    def confirm(self, cands: list[MarkCandidate], reach: float = 60.0) -> list[MarkCandidate]:
+        """Full-resolution checks (pixel SNR, distinctness within ``reach`` px beside each
+        candidate), in whole-image coordinates."""
+        out = _confirm(self.image, cands, self.noise_full, self.f, self.top,
+                       self.min_pixel_snr, reach)
+        return [_shift(c, self.shift) for c in out] if self.shift.any() else out
+
+
+def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
+                      snr_threshold: float = 8.0, roi: Roi | None = None,
+                      min_fill: float = 0.5, min_pixel_snr: float = 2.4,
+                      top: float | None = None) -> Search:
+    """The search of :func:`detect_marks` (same parameters), every confirmed line kept."""
     h_full, w_full = image.shape
     x0 = y0 = 0
     if roi is not None:
@@ -363,7 +407,10 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         min_length_px = default_min_length((h, w))
     # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
     # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
-    f = max(1, min(int(max(h, w) // 500), int(min_length_px // 25)))
+    # Frames under 1000 px are averaged 2 x 2 from 640 px on (a 640 x 480 frame searched
+    # at full resolution cost more than a 5 MP one at f = 5).
+    side = max(h, w)
+    f = max(1, min(int(side // 500 if side >= 1000 else side // 320), int(min_length_px // 25)))
     hs, ws = h // f, w // f
     small = image[:hs * f, :ws * f].astype(np.float32)
     if f > 1:
@@ -372,7 +419,7 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
         small = cv2.resize(small, (ws, hs), interpolation=cv2.INTER_AREA)
     centre_small = np.array([(ws - 1) / 2, (hs - 1) / 2])
     noise = pixel_noise(small)
-    best: list[MarkCandidate] = []
+    layers = []
     for sigma in (1.5, 3.0):
         pad = int(np.ceil(4 * sigma)) + 2
         r, flat = _ridge(_odd_pad(small, pad), sigma)
@@ -388,30 +435,50 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
             continue
         for dark in (True, False):
             resp = r if dark else -r
-            mask = (resp > snr_threshold * mad) & flat
-            # Pieces down to an eighth of the shortest mark: a wide or dusty mark breaks up.
-            for pts in _merge(_components(mask, max(3.0, min_length_px / f / 8)),
-                              centre_small):
-                a, d, t, thick = _pca_line(pts, centre_small)
-                length = (t.max() - t.min()) * f
-                # The response fades below the threshold about a filter width before each
-                # end of a faint, blurred mark: judge the length with that back, and with
-                # LENGTH_SLACK (a 100 px mark at SNR 8 keeps ~85 px of ridge).
-                if (length + 2 * sigma * f < LENGTH_SLACK * min_length_px
-                        or thick * f > 0.25 * length):
-                    continue
-                fill = np.unique(np.floor(t)).size / (np.floor(t.max()) - np.floor(t.min()) + 1)
-                if fill < min_fill:
-                    continue
-                contrast = float(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)].mean()
-                                 / mad)
-                best.append(_to_full(a, d, t, dark, thick, contrast * length, f,
-                                     centre_small, np.array([(w - 1) / 2, (h - 1) / 2]),
-                                     contrast))
+            layers.append((sigma, dark, resp, (resp > snr_threshold * mad) & flat, mad))
     noise_full = pixel_noise(_central(image, 1024))
     top = full_scale(image) if top is None else top
+    shift = np.zeros(2)
+    if roi is not None:
+        shift = np.array([x0 + (w - 1) / 2 - (w_full - 1) / 2, y0 + (h - 1) / 2 - (h_full - 1) / 2])
+    search = Search([], image, shift, f, layers, centre_small, noise_full, top, min_fill,
+                    min_pixel_snr)
+    return replace(search, marks=search.confirm(search.candidates(min_length_px)))
+
+
+def _candidates(layers, min_length_px: float, f: int, centre_small: np.ndarray,
+                shape: tuple[int, int], min_fill: float, keep=None) -> list[MarkCandidate]:
+    """Long thin components of the ridge masks, as coarse candidates, strongest first."""
+    h, w = shape
+    best: list[MarkCandidate] = []
+    for sigma, dark, resp, mask, mad in layers:
+        # Pieces down to an eighth of the shortest mark: a wide or dusty mark breaks up.
+        for pts in _merge(_components(mask, max(3.0, min_length_px / f / 8)), centre_small):
+            a, d, t, thick = _pca_line(pts, centre_small)
+            length = (t.max() - t.min()) * f
+            # The response fades below the threshold about a filter width before each
+            # end of a faint, blurred mark: judge the length with that back, and with
+            # LENGTH_SLACK (a 100 px mark at SNR 8 keeps ~85 px of ridge).
+            if (length + 2 * sigma * f < LENGTH_SLACK * min_length_px
+                    or thick * f > 0.25 * length):
+                continue
+            fill = np.unique(np.floor(t)).size / (np.floor(t.max()) - np.floor(t.min()) + 1)
+            if fill < min_fill:
+                continue
+            contrast = float(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)].mean() / mad)
+            c = _to_full(a, d, t, dark, thick, contrast * length, f, centre_small,
+                         np.array([(w - 1) / 2, (h - 1) / 2]), contrast)
+            if keep is None or keep(c):
+                best.append(c)
+    return _dedupe(sorted(best, key=lambda c: -c.strength))
+
+
+def _confirm(image: np.ndarray, cands: list[MarkCandidate], noise_full: float, f: int,
+             top: float, min_pixel_snr: float, reach: float = 60.0) -> list[MarkCandidate]:
+    """Candidates re-centred on the full-resolution image that stand out pixel by pixel and
+    from the background's relief."""
     out = []
-    for c in _dedupe(sorted(best, key=lambda c: -c.strength)):
+    for c in cands:
         # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
         c, _ = _full_res(image, c, noise_full, f, top)
         c, snr = _full_res(image, c, noise_full, f, top)
@@ -419,14 +486,10 @@ def detect_marks(image: np.ndarray, min_length_px: float | None = None,
             continue
         # A machining lay running along the candidate: each streak is long, and the ridge
         # filter integrates it into a strong response, but beside it lie many like it.
-        ratio, limit = distinctness(image, c, top)
+        ratio, limit = distinctness(image, c, top, reach)
         if ratio >= limit:
             out.append(c)
-    out = _dedupe(out)[:max_marks]
-    if roi is not None:
-        out = [_shift(c, np.array([x0 + (w - 1) / 2 - (w_full - 1) / 2,
-                                   y0 + (h - 1) / 2 - (h_full - 1) / 2])) for c in out]
-    return out
+    return _dedupe(out)
 
 
 def _central(image: np.ndarray, size: int) -> np.ndarray:
@@ -471,7 +534,12 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
             aj, _, _, _ = lines[j][0]
             dang = abs(wrap_angle(aj - a))
             dist = np.abs((lines[j][1] - centre) @ nn - d)  # this piece's points, own normal
-            if dang < np.deg2rad(3) and np.max(dist) < 3.0:
+            # Dust or a dropout leaves a gap shorter than the mark's pieces; a collinear
+            # stroke far along the line (a logo, the next mark of a row) is another thing.
+            tg = np.vstack(group) @ uu
+            tj = lines[j][1] @ uu
+            gap = max(tj.min() - tg.max(), tg.min() - tj.max())
+            if dang < np.deg2rad(3) and np.max(dist) < 3.0 and gap <= max(np.ptp(tg), np.ptp(tj)):
                 group.append(lines[j][1])
                 used[j] = True
         out.append(np.vstack(group))

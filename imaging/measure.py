@@ -7,6 +7,7 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,10 +19,12 @@ from imaging.detect import (
     MarkCandidate,
     Roi,
     default_min_length,
-    detect_marks,
+    line_frame,
     require_single,
+    wrap_angle,
 )
 from imaging.errors import ImageInputError
+from imaging.families import detect_lines
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
 from imaging.profile import Centres, ProfileFit, fit_profile, groove_extent, sample_centres
@@ -91,10 +94,13 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
-                      where: str = "image", top: float | None = None) -> MarkMeasurement:
+                      where: str = "image", top: float | None = None,
+                      neighbours_px: Sequence[float] = ()) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
-    ``top``: the image's full-scale DN when already known (else from the image)."""
+    ``top``: the image's full-scale DN when already known (else from the image);
+    ``neighbours_px``: signed distances of other lines beside it [px] (see
+    :func:`neighbours`), kept out of the texture's replicas."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
@@ -102,7 +108,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
-    cen = sample_centres(image, pf, where=where, texture=True)
+    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -116,6 +122,26 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf))
+
+
+def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
+               ) -> tuple[float, ...]:
+    """Signed distances along candidate i's normal of the other candidates that run beside it
+    (directions within ``tol_angle``, overlapping it along its length) [px]."""
+    c = cands[i]
+    u, n = line_frame(c.angle_rad)
+    out = []
+    for j, o in enumerate(cands):
+        if j == i or abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
+            continue
+        uo, no = line_frame(o.angle_rad)
+        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
+        ts = sorted(float(p @ u) for p in ends)
+        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
+            continue
+        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
+        out.append(float(mid @ n) - c.offset_px)
+    return tuple(out)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
@@ -138,6 +164,19 @@ def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 
     return ok
 
 
+@dataclass(frozen=True)
+class MeasuredFrame:
+    """Every line of one image measured: ``items`` (a measurement or the error that stopped
+    it, per reported line), ``families`` (index tuples into ``items``, see
+    :mod:`imaging.families`), ``unreported`` (lines found but not reported: beyond
+    ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
+    and not counted)."""
+
+    items: list[MarkMeasurement | ImageInputError]
+    families: tuple[tuple[int, ...], ...] = ()
+    unreported: int = 0
+
+
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
                   max_marks: int = 8, min_length_px: float | None = None,
                   expect_one: bool = False, roi: Roi | None = None
@@ -146,6 +185,18 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     With ``expect_one`` the image must hold a single mark: two of similar strength raise.
     ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search (see detect_marks).
+    """
+    return measure_frame(image, camera, where, max_marks, min_length_px, expect_one,
+                         roi).items
+
+
+def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
+                  max_marks: int = 8, min_length_px: float | None = None,
+                  expect_one: bool = False, roi: Roi | None = None) -> MeasuredFrame:
+    """:func:`measure_marks` with the families of lines and the count of lines not reported.
+
+    Every member of a family is measured (whatever ``max_marks``), and kept whatever its
+    length: the family, not ``min_length_px``, says it is a line.
     """
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):
@@ -156,10 +207,11 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
                               f"{image.shape[0]}")
     try:
-        cands = detect_marks(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
-                             top=top)
+        det = detect_lines(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
+                           top=top, families=not expect_one)
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
+    cands = det.marks
     if not cands:
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
@@ -170,16 +222,21 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
     # shorter (its length_px would then be below --min-length).
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
+    member = {i for g in det.families for i in g}
     out: list[MarkMeasurement | ImageInputError] = []
-    for c in cands:
+    index: dict[int, int] = {}
+    for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top)
+            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i))
         except ImageInputError as exc:
+            index[i] = len(out)
             out.append(exc)
             continue
-        if m.length_px >= shortest:
+        if m.length_px >= shortest or i in member:
+            index[i] = len(out)
             out.append(m)
     if not out:
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
-    return out
+    fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
+    return MeasuredFrame(out, fams, len(det.unreported))

@@ -17,6 +17,7 @@ line fit downstream propagates a real uncertainty.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -374,12 +375,13 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image",
-                   texture: bool = False) -> Centres:
+                   texture: bool = False, avoid_px: Sequence[float] = ()) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
     ``texture``: also measure how the background's texture correlates the centres' errors
-    (replicas of the band beside the mark, :mod:`imaging.texture`).
+    (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
+    a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
@@ -422,7 +424,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             # each segment spends k of its pixels' degrees of freedom.
             npx = bc(np.ones_like(e))
             v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
-        wgt = 1.0 / np.maximum(v0 + v1 * mu, 1e-9)
+        # The linear noise model is fitted over the band's levels; below them (a segment's
+        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+        # of a groove is quieter than a quarter of the band's typical variance.
+        floor = max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
+        wgt = 1.0 / np.maximum(v0 + v1 * mu, floor)
         J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
         N = np.empty((nseg, k, k))
         g = np.empty((nseg, k))
@@ -462,7 +469,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
         tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
                             wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
-                            pf.full_scale_dn)
+                            pf.full_scale_dn, avoid_px, 2 * (half + 4))
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).

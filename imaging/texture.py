@@ -75,7 +75,9 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                   nseg: int, wgt: np.ndarray, J: Sequence[np.ndarray], cov: np.ndarray,
                   ok: np.ndarray, ring: tuple[np.ndarray, ...], contrast: np.ndarray,
                   normal: np.ndarray, shifts_px: Sequence[float],
-                  noise_var: tuple[float, float], full_scale: float) -> TextureModel | None:
+                  noise_var: tuple[float, float], full_scale: float,
+                  avoid_px: Sequence[float] = (), clear_px: float = 0.0
+                  ) -> TextureModel | None:
     """Measure the texture's effect on the centres from replicas of the band.
 
     Parameters
@@ -88,6 +90,9 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     normal : unit normal of the mark (x, y)
     shifts_px : distances along the normal at which replicas are taken (both signs)
     noise_var : (v0, v1) of the white pixel-noise model var = v0 + v1 * value [DN^2]
+    avoid_px, clear_px : signed distances along ``normal`` of other lines beside the mark
+        (a ruled scale's neighbours) [px]: no replica is taken within ``clear_px`` of one —
+        there the replica holds a line, not background.
 
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance.
@@ -114,6 +119,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     reps = []
     for dist in shifts_px:
         for sign in (1.0, -1.0):
+            if any(abs(sign * dist - a) < clear_px for a in avoid_px):
+                continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
             v, good = _replica(image, ys, xs, dx, dy, full_scale)
             valid = ok & (bc((~good).astype(float)) == 0)

@@ -276,3 +276,22 @@ def write_log(sim: dict, path: str | Path) -> Path:
     truth.pop("faces_of_rows", None)
     path.with_suffix(".truth.json").write_text(json.dumps(truth, indent=2))
     return path
+
+
+def drop_out(sim: dict, row: int, rows: int) -> dict:
+    """The log of ``sim`` with a communication drop-out: ``rows`` consecutive rows from
+    ``row`` never reached the log. The interface loses the rows whole — their counts, counter
+    ids and times — so the counters' ids do not alternate across an odd number of lost rows,
+    and the row after the gap holds one face interval's counts with the time of all of them.
+    The truth's ``faults`` gains ``{"kind": "dropout", "row": row, "rows": rows}`` (``row``:
+    the first row after the gap, in the new log)."""
+    r = sim["rows"]
+    if not 0 <= row < row + rows <= len(r["count"]):
+        raise ValueError(f"drop-out rows {row}..{row + rows - 1}: outside the log")
+    keep = np.ones(len(r["count"]), bool)
+    keep[row:row + rows] = False
+    truth = dict(sim["truth"])
+    truth["faults"] = [*truth["faults"], {"kind": "dropout", "row": row, "rows": rows}]
+    if truth.get("faces_of_rows") is not None:
+        truth["faces_of_rows"] = np.asarray(truth["faces_of_rows"])[keep].tolist()
+    return {"rows": {k: v[keep] for k, v in r.items()}, "truth": truth}

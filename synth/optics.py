@@ -6,10 +6,13 @@ ideal square-pixel, unrolled camera, relative to the principal point.
 
 The mapping (scene -> sensor) is
 
-    p_img  = S . Rot(roll) . p_scene            (S = diag(1, aspect): non-square pixels)
+    p_img  = Rot(roll) . p_scene
     x_n    = p_img / f                           (normalised, OpenCV convention)
-    x_d    = x_n (1 + k1 r^2 + k2 r^4)           (OpenCV's radial model)
-    p_sens = f x_d + c
+    x_d    = x_n (1 + k1 r^2 + k2 r^4) + tangential(p1, p2)   (Brown-Conrady, OpenCV's)
+    p_sens = S f x_d + c + pp_offset             (S = diag(1, aspect): non-square pixels)
+
+Non-square pixels scale the sensor's rows after the lens (fy = aspect fx, as OpenCV's camera
+matrix); the principal point may sit ``pp_offset_px`` from the image centre.
 
 This module is independent of the measurement packages on purpose: it is the "truth" side.
 """
@@ -36,6 +39,10 @@ class CameraGeometry:
         counter-clockwise as displayed.
     aspect : float
         Pixel aspect ratio: image y scale / image x scale (1 = square pixels).
+    p1, p2 : float
+        OpenCV tangential (decentring) distortion coefficients.
+    pp_offset_px : (float, float)
+        Principal point minus image centre (x, y) [px].
     """
 
     focal_px: float = 2000.0
@@ -43,10 +50,18 @@ class CameraGeometry:
     k2: float = 0.0
     roll_rad: float = 0.0
     aspect: float = 1.0
+    p1: float = 0.0
+    p2: float = 0.0
+    pp_offset_px: tuple[float, float] = (0.0, 0.0)
 
     @property
     def is_identity(self) -> bool:
-        return self.k1 == 0 and self.k2 == 0 and self.roll_rad == 0 and self.aspect == 1
+        return (self.k1 == 0 and self.k2 == 0 and self.roll_rad == 0 and self.aspect == 1
+                and self.p1 == 0 and self.p2 == 0 and tuple(self.pp_offset_px) == (0.0, 0.0))
+
+    @property
+    def _lens_free(self) -> bool:
+        return self.k1 == 0 and self.k2 == 0 and self.p1 == 0 and self.p2 == 0
 
     def scene_to_ideal(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scene plane -> undistorted (pinhole) pixel coordinates, both relative to centre."""
@@ -54,35 +69,60 @@ class CameraGeometry:
         c, s = np.cos(self.roll_rad), np.sin(self.roll_rad)
         xi = c * x + s * y
         yi = -s * x + c * y
-        return xi, yi * self.aspect
+        return xi, yi
 
     def ideal_to_scene(self, xi: np.ndarray, yi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         c, s = np.cos(self.roll_rad), np.sin(self.roll_rad)
-        yi = yi / self.aspect
         return c * xi - s * yi, s * xi + c * yi
 
-    def distort(self, xi: np.ndarray, yi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Ideal pixel -> sensor pixel (relative to centre)."""
-        f = self.focal_px
-        r2 = (xi * xi + yi * yi) / (f * f)
+    def _lens(self, xn: np.ndarray, yn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Brown-Conrady in normalised coordinates (OpenCV's k1, k2, p1, p2)."""
+        r2 = xn * xn + yn * yn
         g = 1.0 + self.k1 * r2 + self.k2 * r2 * r2
-        return xi * g, yi * g
+        return (xn * g + 2 * self.p1 * xn * yn + self.p2 * (r2 + 2 * xn * xn),
+                yn * g + self.p1 * (r2 + 2 * yn * yn) + 2 * self.p2 * xn * yn)
+
+    def distort(self, xi: np.ndarray, yi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ideal pixel (relative to the principal point) -> sensor pixel (relative to the
+        image centre)."""
+        f = self.focal_px
+        xd, yd = self._lens(xi / f, yi / f)
+        ox, oy = self.pp_offset_px
+        return f * xd + ox, f * self.aspect * yd + oy
 
     def undistort(self, xd: np.ndarray, yd: np.ndarray, iters: int = 12
                   ) -> tuple[np.ndarray, np.ndarray]:
-        """Sensor pixel -> ideal pixel by Newton iteration on the radius (exact to 1e-12 px)."""
-        if self.k1 == 0 and self.k2 == 0:
-            return xd, yd
+        """Sensor pixel -> ideal pixel: exact to 1e-12 px (Newton on the radius for a radial
+        lens; with tangential terms, Newton on both coordinates with the analytic Jacobian,
+        as the inverse has no closed form)."""
         f = self.focal_px
-        rd = np.hypot(xd, yd) / f
-        ru = rd.copy()
-        for _ in range(iters):
-            r2 = ru * ru
-            g = ru * (1 + self.k1 * r2 + self.k2 * r2 * r2) - rd
-            dg = 1 + 3 * self.k1 * r2 + 5 * self.k2 * r2 * r2
-            ru = ru - g / dg
-        scale = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
-        return xd * scale, yd * scale
+        ox, oy = self.pp_offset_px
+        xn, yn = (xd - ox) / f, (yd - oy) / (f * self.aspect)
+        if self._lens_free:
+            return f * xn, f * yn
+        if self.p1 == 0 and self.p2 == 0:
+            rd = np.hypot(xn, yn)
+            ru = rd.copy()
+            for _ in range(iters):
+                r2 = ru * ru
+                g = ru * (1 + self.k1 * r2 + self.k2 * r2 * r2) - rd
+                dg = 1 + 3 * self.k1 * r2 + 5 * self.k2 * r2 * r2
+                ru = ru - g / dg
+            scale = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
+            return f * xn * scale, f * yn * scale
+        x, y = xn.copy(), yn.copy()
+        h = 1e-7
+        for _ in range(iters + 8):
+            fx, fy = self._lens(x, y)
+            ex, ey = fx - xn, fy - yn
+            ax, ay = self._lens(x + h, y)
+            bx, by = self._lens(x, y + h)
+            j11, j21 = (ax - fx) / h, (ay - fy) / h
+            j12, j22 = (bx - fx) / h, (by - fy) / h
+            det = j11 * j22 - j12 * j21
+            x = x - (j22 * ex - j12 * ey) / det
+            y = y - (-j21 * ex + j11 * ey) / det
+        return f * x, f * y
 
     def sensor_to_scene(self, xd: np.ndarray, yd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return self.ideal_to_scene(*self.undistort(xd, yd))
@@ -94,7 +134,7 @@ class CameraGeometry:
         """
         ux, uy = np.cos(scene_angle_rad), -np.sin(scene_angle_rad)
         xi, yi = self.scene_to_ideal(np.array(ux), np.array(uy))
-        return wrap_half_turn(float(np.arctan2(-yi, xi)))
+        return wrap_half_turn(float(np.arctan2(-yi * self.aspect, xi)))
 
 
 def wrap_half_turn(angle_rad: float) -> float:

@@ -61,6 +61,13 @@ EFFECTS = {
     "table_tilt_x": ("arcsec", "tilt of the table axis towards the room's x (platform X at 0)"),
     "table_tilt_y": ("arcsec", "tilt of the table axis towards the room's y"),
     "k2": ("ug/g^2", "second-order nonlinearity of every accelerometer"),
+    "platform_level_x": ("arcsec", "the platform out of level: its levelled poses' 'up' "
+                         "tilted towards platform X (fixed on the platform, turns with it)"),
+    "platform_level_y": ("arcsec", "the platform out of level towards platform Y"),
+    "creep_x": ("arcsec", "the triad turned about platform X between the camera images and "
+                "goniometer log and the platform static readings (creep)"),
+    "creep_y": ("arcsec", "creep about platform Y (see creep_x)"),
+    "creep_z": ("arcsec", "creep about platform Z (see creep_x)"),
     "lens_k1": ("", "OpenCV radial distortion k1 of both cameras"),
     "lens_k1_A": ("", "OpenCV radial distortion k1 of camera A only (overrides lens_k1)"),
     "lens_k1_B": ("", "OpenCV radial distortion k1 of camera B only (overrides lens_k1)"),
@@ -145,7 +152,17 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
                   axes=tuple(map(tuple, S)))
     td = tumble(TumbleSpec(triad=triad, seed=int(rng.integers(1 << 30)), check_poses=0))
     write_tumble_csv(td, out / "tumble.csv")
-    platform = _platform(out, spec, triad, eff, rng) if spec.platform_static else None
+    # Creep: the static readings see the triad turned by a small rotation (Rodrigues) after
+    # the images and the log were taken; the tumble (angles between axes) cannot see it.
+    w = np.array([eff.get(f"creep_{a}", 0.0) for a in "xyz"]) * ARCSEC
+    th = float(np.linalg.norm(w))
+    R = np.eye(3)
+    if th > 0:
+        k = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]) / th
+        R = np.eye(3) + np.sin(th) * k + (1 - np.cos(th)) * k @ k
+    triad_p = replace(triad, axes=tuple(map(tuple, S @ R.T)))
+    platform = (_platform(out, spec, triad_p, eff, rng) if spec.platform_static
+                else None)
 
     toml = _session_toml(spec, declared, images, platform)
     (out / "session.toml").write_text(toml)
@@ -213,6 +230,8 @@ def _gonio(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
 def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
               rng: np.random.Generator) -> list[tuple[str, str, float]]:
     tilt = np.array([eff.get("table_tilt_x", 0.0), eff.get("table_tilt_y", 0.0)]) * ARCSEC
+    level = np.array([eff.get("platform_level_x", 0.0), eff.get("platform_level_y", 0.0),
+                      0.0]) * ARCSEC
     rows = []
     n = spec.samples_per_pose
     t0 = 0.0
@@ -225,6 +244,7 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
             c, s_ = np.cos(np.deg2rad(table_deg)), np.sin(np.deg2rad(table_deg))
             room = np.array([tilt[0], tilt[1], 1.0])
             g = np.array([c * room[0] + s_ * room[1], -s_ * room[0] + c * room[1], room[2]])
+            g = g / np.linalg.norm(g) + level  # (the platform's own tilt turns with it)
             g = g / np.linalg.norm(g)
         t = t0 + np.arange(n) / 20.0
         u = triad.outputs(np.repeat(g[None], n, 0), np.zeros(n), np.zeros(n), rng)
@@ -254,6 +274,13 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
         lines += ["", f"[cameras.{cam}]", f"# looks along {looks}"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
+        if not any(k in spec.effects for k in ("lens_k1", f"lens_k1_{cam}")):
+            # The rendered camera has no lens distortion and square pixels, and the file
+            # says so (a corrected optic); an undeclared lens leaves the keys out, and the
+            # pipeline carries its default plausible lens.
+            lines += ["# distortion-free optics, square pixels, principal point at the centre",
+                      "lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
+                      "lens_pp_px = 0.0"]
     for view in spec.views:
         cam, right, up = VIEWS[view]
         lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',

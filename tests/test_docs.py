@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 PAGES = sorted([ROOT / "README.md", *DOCS.rglob("*.md")])
 COMMANDS = ("demo", "run", "marks", "camera", "calibrate", "tilt", "gonio", "apply", "lot",
-            "synth")
+            "synth", "init", "check")
 # `align synth` has one subcommand; its flags are those of `align synth session`.
 HELP_ARGS = {"synth": ("synth", "session")}
 # Flags on a command's page that belong to another program.

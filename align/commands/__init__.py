@@ -6,6 +6,7 @@
 * :mod:`~align.commands.run` — ``run`` (one session or a batch)
 * :mod:`~align.commands.lot` — ``lot``
 * :mod:`~align.commands.synth` — ``synth session``, ``demo``
+* :mod:`~align.commands.session` — ``init``, ``check``
 
 :mod:`~align.commands.parser` builds the parser, :mod:`~align.commands.main` runs it;
 :mod:`~align.commands.args` holds the shared argument types. Commands parse arguments, call

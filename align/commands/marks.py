@@ -12,22 +12,25 @@ from align.commands.parents import examples
 
 
 def cmd_marks(args: argparse.Namespace) -> int:
+    from align.lens import LensRanges
     from align.marks import measure_files
     from imaging import CameraModel, check_roi
 
     unique(args.images, "images")
     roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
     camera = CameraModel.load(args.camera) if args.camera else None
+    ranges = LensRanges.parse(args.lens) if args.lens is not None else None
     inputs = [*args.images] + ([args.camera] if args.camera else [])
     outs = plan(args, inputs)
     out, plot_dir = (outs.add("--json", args.json, stdout_ok=True),
                      outs.add("--plot", args.plot, folder=True))
     batch = measure_files(progress(args.images, "marks"), camera, alpha=args.alpha,
                           max_marks=args.max_marks, expect_one=args.one, roi=roi,
-                          min_length_px=args.min_length)
+                          min_length_px=args.min_length, ranges=ranges)
     results, failed, internal = _show_marks(batch, plot_dir)
     _write_marks(args, results, inputs, out)
-    return _marks_status(failed, internal)
+    # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
+    return _marks_status(failed + sum(r.lens_limited for r in results), internal)
 
 
 def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:
@@ -112,7 +115,13 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
         "align marks mark1.png mark2.tif --json marks.json",
         "align marks photo.tif --camera camera.json --roi 100,200,800,600 --one --plot figs/"))
     m.add_argument("images", nargs="+", help="image files (PNG, TIFF, JPEG; 8 or 16 bit)")
-    m.add_argument("--camera", help="camera model JSON written by 'align camera'")
+    m.add_argument("--camera", help="camera model JSON written by 'align camera' (trusted: "
+                   "applied, its u propagated, no distortion fitted on top)")
+    m.add_argument("--lens", metavar="KEY=V,...",
+                   help="plausible lens without --camera (Type B ranges; keys k1, k2, p at the "
+                   "image half-diagonal, aspect, pp_px [px], max_u_arcsec; defaults k1=0.3,"
+                   "k2=0.05,p=0.001,aspect=0.005,pp_px=20,max_u_arcsec=60; all 0: declared "
+                   "distortion-free; docs/camera.md)")
     m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
     m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from align.commands import calibrate, gonio, lot, marks, plan, run, synth
+from align.commands import calibrate, gonio, lot, marks, plan, run, session, synth
 from align.commands.parents import FMT, Parser, common, examples, writes
 from axisbase.version import __version__
 
@@ -41,4 +41,6 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_plan(add)
     synth.add_synth(sub, parents)
     synth.add_demo(add)
+    session.add_init(add)
+    session.add_check(add)
     return p

@@ -101,8 +101,12 @@ def _write_demo(session: Path, seed: int):
     print(f"demo: writing a synthetic session to {session} (seed {seed}): 8 mark images "
           "from two cameras (each with a reversal), a ring-laser counter log, a 14-pose "
           f"tumble and 8 platform poses; camera A rolled by {ROLL_ARCSEC:.0f}″, NOT declared")
-    return write_session(session, SessionSpec(seed=seed, effects={"camera_roll_A": ROLL_ARCSEC},
-                                              undeclared=frozenset({"camera_roll_A"})))
+    truth = write_session(session, SessionSpec(seed=seed,
+                                               effects={"camera_roll_A": ROLL_ARCSEC},
+                                               undeclared=frozenset({"camera_roll_A"})))
+    with open(session / "session.toml", "a", encoding="utf-8") as f:  # the unit's identity
+        f.write(f'\n[metadata]\nserial = "DEMO-{seed:04d}"\noperator = "align demo"\n')
+    return truth
 
 
 def add_synth(sub, parents: list[argparse.ArgumentParser]) -> None:

@@ -37,7 +37,7 @@ _BLOCK_KIND = {"camera": "image", "goniometer": "gonio", "ellipsoid": "calibrati
                "platform static": "static"}
 NUISANCE_LABEL = {"bias": "calibration bias error", "camera_roll": "camera roll",
                   "reference_face_offset": "reference face offset",
-                  "platform_tilt": "table-axis tilt"}
+                  "platform_tilt": "table-axis tilt", "platform_level": "platform levelling offset"}
 
 
 def inverse(info: np.ndarray) -> np.ndarray:

@@ -37,6 +37,7 @@ E_NAMES = tuple(f"E_{HOUSINGS[i]}{'XYZ'[j]}" for i, j in E_INDEX)
 ROLL = "camera_roll"
 REF = "reference_face_offset"
 TILT = "platform_tilt"
+LEVEL = "platform_level"
 
 
 def wrap_half(a: np.ndarray | float) -> np.ndarray:
@@ -237,14 +238,21 @@ class PlatformPose:
     u_w: np.ndarray
 
 
-def gravity_in_platform(up: np.ndarray, table: float, tilt: np.ndarray) -> np.ndarray:
+def gravity_in_platform(up: np.ndarray, table: float, tilt: np.ndarray,
+                        level: np.ndarray | None = None) -> np.ndarray:
     """'Up' direction in P: levelled poses see the table axis's tilt (tx, ty) [rad], fixed in
-    the room, turned by the table angle; commanded side poses are taken as exact."""
+    the room, turned by the table angle, and the platform's own levelling offset ``level``
+    (lx, ly) [rad] — the up direction's X, Y components in P, fixed on the platform (it turns
+    with the table); commanded side poses are taken as exact."""
     if abs(up[2]) < 0.5:
         return up
     c, s = np.cos(table), np.sin(table)
     g = np.array([c * tilt[0] + s * tilt[1], -s * tilt[0] + c * tilt[1], 1.0]) * np.sign(up[2])
-    return g / np.linalg.norm(g)
+    g = g / np.linalg.norm(g)
+    if level is not None:
+        g = g + np.array([level[0], level[1], 0.0])
+        g = g / np.linalg.norm(g)
+    return g
 
 
 def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
@@ -267,8 +275,12 @@ def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
 
     def predict(axes: np.ndarray, nuis: Nuisances) -> np.ndarray:
         tilt = declared_tilt + (nuis[TILT] if TILT in nuis else 0.0)
-        g = np.array([gravity_in_platform(poses[p].up, poses[p].table, tilt) for p in pidx_a])
+        level = nuis.get(LEVEL)
+        g = np.array([gravity_in_platform(poses[p].up, poses[p].table, tilt, level)
+                      for p in pidx_a])
         return row_norms[which_a] * (axes[which_a] * g).sum(1) + nuis["bias"][which_a]
 
+    levelled = any(abs(p.up[2]) > 0.5 for p in poses)
     return Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
-                 predict, unit="g", sees=(TILT,), budget_source="static poses")
+                 predict, unit="g", sees=(TILT, LEVEL) if levelled else (TILT,),
+                 budget_source="static poses")

@@ -18,8 +18,16 @@ from scipy.optimize import least_squares
 
 from align.errors import InputError
 from align.fusion.budget import Budget, linearise
+from align.fusion.diagnosis import (
+    SourceDisagreement,
+    disagreement_from_dict,
+    leave_one_source_out,
+    name_disagreement,
+    with_disagreement,
+)
 from align.fusion.observations import (
     E_NAMES,
+    LEVEL,
     REF,
     ROLL,
     TILT,
@@ -30,7 +38,7 @@ from align.fusion.observations import (
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
 from axisbase.units import ARCSEC
 
-TERM_WIDTH = {TILT: 2}
+TERM_WIDTH = {TILT: 2, LEVEL: 2}
 
 NOMINAL_LIMIT_DEG = 10.0
 """How far an axis, a mark or a platform pose may lie from its declared nominal direction
@@ -52,7 +60,7 @@ a file is wrong (a sign error moves E by hundreds of arc-seconds, many times eve
 inflated u), or an effect no model here describes dominates (an undeclared K2 of 50 ug/g^2
 that a 14-pose tumble cannot separate gives chi2/dof ~ 250) — and an inflated u is no longer
 an uncertainty but a guess."""
-TERM_UNIT = {TILT: "rad", REF: "rad"}
+TERM_UNIT = {TILT: "rad", REF: "rad", LEVEL: "rad"}
 
 
 def _width(name: str) -> int:
@@ -169,6 +177,11 @@ def candidates(stage: FusionStage) -> tuple[Candidate, ...]:
             desc = "azimuth offset of the goniometer's reference face"
         elif name == TILT:
             desc = "tilt of the table axis under the levelled platform (x, y)"
+        elif name == LEVEL:
+            # Separable from E_xZ, E_yZ only where the cameras see those angles (else the
+            # solve finds it rank-deficient and the loop passes it by).
+            desc = ("platform not level: the levelled poses' up direction off the platform's "
+                    "Z (x, y), fixed on the platform")
         else:
             continue
         out.append(Candidate(
@@ -223,6 +236,9 @@ class FusionResult:
     sources: tuple[str, ...]
     budget: Budget | None = None
     """Each input's share of u² of every angle (:mod:`align.fusion.budget`)."""
+    # When inconsistent: the source that sees another E, and in which angles (None: none
+    # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
+    disagreement: SourceDisagreement | None = None
 
     @property
     def consistent(self) -> bool:
@@ -253,7 +269,8 @@ class FusionResult:
                 f"{U_MISJUDGED_MAX:g} times too small would give): E is not a measurement — "
                 "a wrong input (a sign, a pose label, a unit, a mirrored or swapped image) or "
                 "an effect no model here describes (see the other warnings); worst "
-                f"observations: {worst}")
+                f"observations: {worst}"
+                + (f"; {self.disagreement.message()}" if self.disagreement else ""))
 
     def to_dict(self) -> dict:
         """The fusion's part of a session result: E [rad] and [″] with u, the 6×6 covariance
@@ -269,7 +286,9 @@ class FusionResult:
             "sources": list(self.sources), **self.loop.summary().to_dict(),
             "nuisances": {k: {"estimate": v[0], "u": v[1]} for k, v in self.nuisances.items()},
             "observations": [r.to_dict() for r in self.rows],
-            "budget": None if self.budget is None else self.budget.to_dict()}
+            "budget": None if self.budget is None else self.budget.to_dict(),
+            "source_disagreement": (None if self.disagreement is None
+                                    else self.disagreement.to_dict())}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> FusionResult:
@@ -285,7 +304,9 @@ class FusionResult:
                    {k: (float(v["estimate"]), float(v["u"]))
                     for k, v in d.get("nuisances", {}).items()},
                    tuple(d.get("sources", ())),
-                   Budget.from_dict(d["budget"]) if d.get("budget") else None)
+                   Budget.from_dict(d["budget"]) if d.get("budget") else None,
+                   (None if not d.get("source_disagreement")
+                    else disagreement_from_dict(d["source_disagreement"])))
 
 
 def _check_determined(stage: FusionStage) -> None:
@@ -329,6 +350,26 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
                                        b.unit_of(k)))
     nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
             for k, n in enumerate(sol.names) if k >= 6}
+    sources = tuple(dict.fromkeys(b.source for b in stage.blocks))
+    named = None
+    if loop.unexplained_structure and len(sources) > 1:
+        layout = stage._layout(loop.terms)
+        starts = np.cumsum([0, *(len(b.values) for b in stage.blocks)])
+        rows_of = [(src, np.concatenate([np.arange(starts[k], starts[k + 1])
+                                         for k, b in enumerate(stage.blocks)
+                                         if b.source == src])) for src in sources]
+        named = name_disagreement(leave_one_source_out(
+            lambda p: stage._residual(p, layout), sol.params, rows_of), alpha)
+    if named is not None:
+        # Where two sources see different E, E in those angles is the one or the other (or
+        # in between): the fused value sits with the more precise source, so u is widened
+        # by the whole disagreement (a Type B term, uncorrelated) — the inflation by
+        # sqrt(chi2/dof) spreads it over all six angles and covers a 30″ creep by a third.
+        widen = np.zeros(6)
+        for n, d, _ in named.angles:
+            widen[E_NAMES.index(n)] = d**2
+        cov = cov + np.diag(widen)
+        E_u = e_matrix(np.sqrt(np.diag(cov)))
     layout = list(sol.layout)
 
     def predict_all(p: np.ndarray) -> list[np.ndarray]:
@@ -337,6 +378,7 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
 
     budget = linearise(stage.blocks, predict_all, sol.params, sol.names, layout,
                        inflation).budget()
+    if named is not None:
+        budget = with_disagreement(budget, named)
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
-                        tuple(rows), loop, inflation, nuis,
-                        tuple(dict.fromkeys(b.source for b in stage.blocks)), budget)
+                        tuple(rows), loop, inflation, nuis, sources, budget, named)

@@ -67,9 +67,10 @@ def fig_distributions(lot: Lot):
 def fig_control_chart(a: AngleStats, lot: Lot):
     """Individuals and moving-range charts of one angle in run order; points outside the
     limits or the tolerance in red."""
-    fig = _figure(11, 4.6)
+    fig = _figure(11, 5.6)
     top, bottom = fig.subplots(2, 1, sharex=True, height_ratios=[2.2, 1])
-    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.11, top=0.98, hspace=0.08)
+    # room under the axis for the units' names (serial and date, vertical)
+    fig.subplots_adjust(left=0.07, right=0.99, bottom=0.27, top=0.98, hspace=0.08)
     x = np.asarray(a.values) / ARCSEC
     k = np.arange(x.size)
     dense = x.size > DENSE
@@ -98,7 +99,25 @@ def fig_control_chart(a: AngleStats, lot: Lot):
     top.legend(fontsize=8, loc="upper left", ncols=4)
     bottom.set_ylabel("MR [″]")
     bottom.set_xlabel(f"unit in run order ({lot.run_order_note})")
+    _unit_ticks(bottom, [lot.units[j] for j in a.units])
     return fig
+
+
+UNIT_TICKS = 40
+"""Units named under a control chart at most (every n-th beyond)."""
+
+
+def _unit_ticks(ax, units) -> None:
+    """Name the units on the run-order axis: serial (and date), not 0…n−1."""
+    if not units:
+        return
+    step = max(1, math.ceil(len(units) / UNIT_TICKS))
+    idx = list(range(0, len(units), step))
+
+    def name(u) -> str:
+        w = u.when
+        return u.label if w is None else f"{u.label} {w.date().isoformat()}"
+    ax.set_xticks(idx, [name(units[i]) for i in idx], rotation=90, fontsize=6)
 
 
 def fig_metadata(m: MetadataEffect, lot: Lot):

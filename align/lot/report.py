@@ -1,10 +1,12 @@
 """One self-contained HTML page of a lot (figures embedded as PNG data URIs, no scripts, no
-external resources): warnings first, then per angle the summary, distribution, control chart
-and capability, the metadata breakdown, and every unit.
+external resources), rendered from ``align/templates/lot.html.j2``: the lot's name and
+verdict first, a disposition per unit (linking each unit's session report when it is at
+hand), the warnings ranked into "act" and "note", then per angle the summary, distribution,
+control chart (units named by serial and date) and capability, the metadata breakdown, and
+every unit.
 
-The small HTML helpers are repeated from :mod:`align.session.report` rather than imported:
-that module imports the whole session pipeline (seconds of start-up), and a lot of 10⁴
-results must be reported in a few seconds.
+It imports nothing of the session pipeline (seconds of start-up): a lot of 10⁴ results must
+be reported in a few seconds.
 """
 
 from __future__ import annotations
@@ -12,7 +14,17 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from align.html import esc, png_img, table
+from markupsafe import Markup
+
+from align.html import esc, png_img, render, table
+from align.lot.disposition import (
+    SEVERITY,
+    lot_name,
+    rank_warnings,
+    relative_link,
+    session_report_of,
+    unit_dispositions,
+)
 from align.lot.figures import fig_control_chart, fig_distributions, fig_metadata, png
 from align.lot.read import ANGLE_NAMES
 from align.lot.stats import FALSE_RATE, GUARD, Lot
@@ -20,18 +32,12 @@ from axisbase.output import write_atomic
 from axisbase.provenance import Provenance
 from axisbase.units import ARCSEC
 
-CSS = """body{font-family:sans-serif;max-width:1150px;margin:2em auto;color:#222}
-table{border-collapse:collapse;margin:0.6em 0}td,th{border:1px solid #bbb;padding:3px 8px;
-text-align:right}th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00;font-weight:bold}
-.ok{color:#070}img{max-width:100%}h2{border-bottom:2px solid #446;margin-top:1.6em}
-div.warn{border:2px solid #b00;padding:0 1em;background:#fff4f4}"""
-
 UNIT_ROWS_MAX = 20000
 """Units listed one by one in the page (the CSV and JSON always list them all)."""
 
 
 def _img(fig, alt: str) -> str:
-    return png_img(png(fig), alt)
+    return str(png_img(png(fig), alt))  # a str: these pages are joined as text
 
 
 def _a(v: float | None, fmt: str = "{:+.2f}") -> str:
@@ -111,7 +117,7 @@ def _flagged(lot: Lot) -> str:
 
 
 def _metadata(lot: Lot) -> str:
-    parts = ["<h2>Each angle against the session metadata</h2>"]
+    parts = ["<h2 id='metadata'>Each angle against the session metadata</h2>"]
     if not lot.metadata:
         parts.append("<p>No metadata key varies over the units in groups that can be "
                      "compared" + ("" if lot.metadata_skipped else
@@ -156,61 +162,145 @@ def _units(lot: Lot) -> str:
 
 def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False) -> Path:
     """Write the lot's report to ``path`` (atomically; exclusively unless ``force``).
-    ``doc``: the lot JSON, whose warnings and provenance head the page."""
+    ``doc``: the lot JSON, whose warnings and provenance the page shows."""
+
+    return write_atomic(path, lot_html(lot, doc, Path(path)), force)
+
+
+VERDICT_CELL = {"PASS": "ok", "FAIL": "bad", "INCONCLUSIVE": "warnc", "NOT MEASURED": "bad",
+                "NO TOLERANCE": ""}
+
+
+DISPOSITION_ROWS_MAX = 1000
+"""Units listed one by one in the disposition table (all needing a decision come first;
+every unit is in the unit table below, the CSV and the JSON)."""
+
+
+def _dispositions(lot: Lot, disps: list, page: Path | None
+                  ) -> tuple[list[dict], list[dict], int]:
+    """The units needing a decision (FAIL, INCONCLUSIVE, NOT MEASURED), the others, and how
+    many are left out of the table (beyond :data:`DISPOSITION_ROWS_MAX`)."""
+
+    decide, rest = [], []
+    for d in disps[:DISPOSITION_ROWS_MAX]:
+        u = lot.units[d.index]
+        rep = session_report_of(u.file) if page is not None else None
+        w = u.when
+        row = {"unit": u.label, "date": "—" if w is None else w.date().isoformat(),
+               "verdict": d.verdict, "cls": VERDICT_CELL.get(d.verdict, ""),
+               "worst": d.worst or "—",
+               "margin": "—" if d.margin_arcsec is None else f"{d.margin_arcsec:+.2f}",
+               "link": None if rep is None else relative_link(rep, page)}
+        (rest if d.verdict in ("PASS", "NO TOLERANCE") else decide).append(row)
+    return decide, rest, max(0, len(disps) - DISPOSITION_ROWS_MAX)
+
+
+def _banner(lot: Lot, counts: dict[str, int]) -> dict:
+    n = len(lot.units)
+    if counts.get("FAIL") or counts.get("NOT MEASURED") or lot.rejected:
+        bad = [f"{counts[v]} {v}" for v in ("FAIL", "INCONCLUSIVE", "NOT MEASURED")
+               if counts.get(v)] + ([f"{len(lot.rejected)} files not read"]
+                                    if lot.rejected else [])
+        return {"verdict": "ACTION NEEDED", "cls": "v-fail",
+                "text": f"{', '.join(bad)} of {n} units"}
+    if counts.get("INCONCLUSIVE"):
+        return {"verdict": "INCONCLUSIVE UNITS", "cls": "v-inconclusive",
+                "text": f"{counts['INCONCLUSIVE']} of {n} units cannot be stated in or out"}
+    if counts.get("PASS") == n:
+        return {"verdict": "ALL PASS", "cls": "v-pass", "text": f"{n} units"}
+    return {"verdict": "No tolerance given", "cls": "v-none",
+            "text": f"{n} units measured; --tolerance-arcsec (or each session's "
+                    "[tolerance]) gives a verdict per unit"}
+
+
+def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
+    """The lot's report as one self-contained HTML page; ``page``: where it will be written
+    (links to the units' session reports are relative to it; None: no links)."""
 
     n_units, n_stats = len(lot.units), len(lot.in_stats)
-    parts = ["<!doctype html><html><head><meta charset='utf-8'>"
-             f"<title>Lot report ({n_units} units)</title><style>{CSS}</style></head><body>",
-             f"<h1>Lot report — {n_units} units</h1>"]
-    if doc["warnings"]:
-        parts.append('<div class="warn bad"><h2>Warnings</h2><ul>'
-                     + "".join(f"<li>{esc(w)}</li>" for w in doc["warnings"]) + "</ul></div>")
+    counts: dict[str, int] = {}
+    disps = unit_dispositions(lot, doc.get("dispositions"))
+    for d in disps:
+        counts[d.verdict] = counts.get(d.verdict, 0) + 1
+    decide, rest, more = _dispositions(lot, disps, page)
+    act, note = rank_warnings(list(doc["warnings"]))
 
     def verdict(good: bool | None, yes: str, no: str) -> str:
         if good is None:
             return ""
         return f'<span class="ok">{yes}</span>' if good else f'<span class="bad">{no}</span>'
 
-    parts.append(
-        f"<p>{n_units + len(lot.rejected)} files: {n_units} session results, "
-        f"{len(lot.rejected)} not read; {n_stats} units ok and in the statistics, "
+    parts = [
+        f"<h2 id='summary'>Summary</h2><p>{n_units + len(lot.rejected)} files: {n_units} session "
+        f"results, {len(lot.rejected)} not read; {n_stats} units ok and in the statistics, "
         f"{len(lot.not_ok)} not ok"
         + (f", {len(lot.left_out)} left out as another result of a unit counted once"
            if lot.duplicates else "") + f". Run order: {esc(lot.run_order_note)}. "
         + verdict(lot.ok, "Every result read and ok.", "NOT every result read and ok.") + " "
         + (verdict(lot.in_control, "In control.", "NOT in control.") if n_stats else "") + " "
         + verdict(lot.within_tolerance, "Every unit within tolerance.",
-                  "NOT every unit within tolerance.") + "</p>" + _provenance(doc))
+                  "NOT every unit within tolerance.") + "</p>"]
+    toc = [("dispositions", "Dispositions"), ("warnings", "Warnings"), ("summary", "Summary")]
     if lot.rejected:
-        parts.append("<h2>Files not read</h2>" + table(
+        parts.append("<h2 id='rejected'>Files not read</h2>" + table(
             ["file", "why"], [[r.file, r.reason] for r in lot.rejected], left=2))
+        toc.append(("rejected", "Files not read"))
     if lot.duplicates:
-        parts.append("<h2>Units in several results (each counted once)</h2>" + table(
-            ["unit", "used", "why", "left out"],
-            [[d.label, lot.units[d.used].file, d.why,
-              "; ".join(f"{lot.units[k].file} ({r})" for k, r in
-                        zip(d.left_out, d.relations, strict=True))]
-             for d in lot.duplicates], left=4))
+        parts.append("<h2 id='duplicates'>Units in several results (each counted once)</h2>"
+                     + table(["unit", "used", "why", "left out"],
+                             [[d.label, lot.units[d.used].file, d.why,
+                               "; ".join(f"{lot.units[k].file} ({r})" for k, r in
+                                         zip(d.left_out, d.relations, strict=True))]
+                              for d in lot.duplicates], left=4))
+        toc.append(("duplicates", "Duplicates"))
     if lot.not_ok:
-        parts.append("<h2>Units not ok (not in the statistics)</h2>" + table(
+        parts.append("<h2 id='not-ok'>Units not ok (not in the statistics)</h2>" + table(
             ["unit", "file", "fused", "failed stages"],
             [[u.label, u.file, "yes" if u.fused else "no",
               "; ".join(f"{s}: {m}" for s, m in u.failed_stages) or "—"]
              for u in (lot.units[k] for k in lot.not_ok)], left=4))
+        toc.append(("not-ok", "Units not ok"))
     if n_stats:
-        parts.append("<h2>Per angle</h2>" + _summary(lot))
-        parts.append("<h2>Flagged units</h2>" + _flagged(lot))
-        parts.append("<h2>Distribution over the units</h2>"
+        parts.append("<h2 id='per-angle'>Per angle</h2>" + _summary(lot))
+        parts.append("<h2 id='flagged'>Flagged units</h2>" + _flagged(lot))
+        parts.append("<h2 id='distribution'>Distribution over the units</h2>"
                      + _img(fig_distributions(lot), "distributions")
                      + "<p>Black: mean; orange dashed: control limits; red: tolerance.</p>")
-        parts.append("<h2>Control charts (individuals and moving range, run order)</h2>")
+        parts.append("<h2 id='charts'>Control charts (individuals and moving range, run "
+                     "order; units named by serial and date)</h2>")
         for a in lot.angles:
-            parts.append(f"<h3>{esc(a.name)}</h3>")
+            parts.append(f"<h3 id='chart-{esc(a.name)}'>{esc(a.name)}</h3>")
             if a.chart is None:
                 parts.append("<p>Fewer than 2 units: no chart.</p>")
                 continue
             parts.append(_img(fig_control_chart(a, lot), f"control chart {a.name}"))
         parts.append(_metadata(lot))
-    parts.append("<h2>Units</h2>" + _units(lot))
-    parts.append("</body></html>")
-    return write_atomic(path, "\n".join(parts), force)
+        toc += [("per-angle", "Per angle"), ("flagged", "Flagged"),
+                ("distribution", "Distribution"), ("charts", "Control charts"),
+                ("metadata", "Metadata")]
+    parts.append("<h2 id='units'>Units</h2>" + _units(lot))
+    toc += [("units", "Units"), ("provenance", "Provenance")]
+    if disps and disps[0].source == "lot" and doc.get("dispositions"):
+        rule = ("Each unit judged by align lot against the tolerance and decision rule it was "
+                "given (the JSON's dispositions: rule, k, each angle's margin and probability "
+                "of conformance).")
+    else:
+        rule = ("Each unit's verdict is its own result's disposition when it has one; "
+                "otherwise " + (
+                    f"against the lot's tolerance ±{lot.tolerance / ARCSEC:g}″: FAIL outside "
+                    f"it, INCONCLUSIVE inside by less than {GUARD:g}·u, PASS otherwise"
+                    if lot.tolerance is not None else
+                    "no tolerance was given (--tolerance-arcsec)") + ".")
+    rule += (" NOT MEASURED: the result is not ok. The margin is the worst angle's distance "
+             "inside the tolerance (negative: outside).")
+    order = sorted(counts, key=lambda v: SEVERITY.get(v, 9))
+    return render(
+        "lot.html.j2", name=lot_name(lot), n_units=n_units, banner=_banner(lot, counts),
+        counts=[(v, counts[v], "s-" + {"PASS": "ok", "INCONCLUSIVE": "warn",
+                                       "NO TOLERANCE": "absent"}.get(v, "fail"))
+                for v in order],
+        toc=toc, rule=rule, decide=decide, passed=rest,
+        passed_label="PASS" if lot.tolerance is not None or any(
+            r["verdict"] == "PASS" for r in rest) else "without a tolerance",
+        more=more, act=act, note=note, body=Markup("\n".join(parts)),
+        provenance=Markup(_provenance(doc)))

@@ -17,6 +17,7 @@ import numpy as np
 
 from align.decision import ToleranceSpec
 from align.errors import InputError
+from align.lens import LensRanges
 from axisbase.provenance import sha256_file
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
@@ -63,6 +64,7 @@ class Camera:
     name: str
     model: Path | None = None
     roll_rad: float = 0.0
+    lens: LensRanges | None = None
 
 
 @dataclass(frozen=True)
@@ -216,7 +218,8 @@ KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz"},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
-    "cameras": {"model", "roll_arcsec"},
+    "cameras": {"model", "roll_arcsec",
+                *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
     "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
@@ -368,9 +371,15 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         _known(c, "cameras", w)
         # Two cameras may share a model file (one calibration of a camera type).
         model = _file(c["model"], f"{w} model", unique=False) if "model" in c else None
+        # The plausible lens when no model is given (Type B ranges, issue 18).
+        lens = {k: _number(c[f"lens_{k}"], f"{w} lens_{k}", 0.0,
+                           None) for k in LensRanges.__dataclass_fields__ if f"lens_{k}" in c}
+        if lens.get("max_u_arcsec") == 0:
+            raise InputError(f"{w} lens_max_u_arcsec = 0: must be > 0")
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
-                                       -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC)
+                                       -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC,
+                               LensRanges(**lens) if lens else None)
 
     views = {}
     for name, v in _table(d, "views", src + ": ").items():

@@ -44,7 +44,7 @@ from align.fusion import (
 from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
 from align.gonio import GonioRun, measure_log
-from align.marks import MarkResult, measure_file
+from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
 from align.warnings import session_warnings
@@ -221,13 +221,29 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
                       if cam.model is not None else None)
-    for k, im in enumerate(s.images, start=1):
-        progress(f"marks: {im.file.name} ({k}/{len(s.images)})")
-        cam = cams.get(s.views[im.view].camera)
-        found = _try(res, "marks", lambda im=im, cam=cam: measure_file(
-            im.file, cam, alpha=alpha, expect_one=True, roi=im.roi),
-            where=f"{im.key} ({im.file.name}): ")
-        if found is None:
+    # One lens per camera: every image of a camera enters one plumb-line fit (issue 18).
+    by_cam: dict[str, list[int]] = {}
+    for k, im in enumerate(s.images):
+        by_cam.setdefault(s.views[im.view].camera, []).append(k)
+    found_of: dict[int, list[MarkResult]] = {}
+    done = 0
+    for cname, idx in by_cam.items():
+        def tick(j: int, idx=idx, done=done) -> None:
+            progress(f"marks: {s.images[idx[j]].file.name} ({done + j + 1}/{len(s.images)})")
+
+        cam_cfg = s.cameras.get(cname)
+        got = _try(res, "marks", lambda idx=idx, cname=cname, cam_cfg=cam_cfg, tick=tick:
+                   measure_camera([(s.images[k].file, s.images[k].roi) for k in idx],
+                                  cams.get(cname), alpha=alpha, expect_one=True,
+                                  ranges=cam_cfg.lens if cam_cfg is not None else None,
+                                  label=cname, on_image=tick),
+                   where=f"camera {cname}: ")
+        if got is not None:
+            found_of.update(zip(idx, got, strict=True))
+        done += len(idx)
+    for k, im in enumerate(s.images):
+        found = found_of.get(k)
+        if found is None:  # its camera's stage error says why
             continue
         ok = [r for r in found if r.found]
         if len(ok) != 1:

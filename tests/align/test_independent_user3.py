@@ -419,9 +419,17 @@ def save_image(path, img):
     return path
 
 
+FLAT_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
+"""These renders have no lens, and say so (an undeclared lens is carried in u; see
+docs/camera.md)."""
+FLAT_LENS_TOML = ["lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
+                  "lens_pp_px = 0.0"]
+
+
 def measure(tmp_path, paths, *extra, name="m.json"):
     out = tmp_path / name
-    rc, o, e = align("marks", *paths, "--json", out, *extra)
+    lens = () if any(x in extra for x in ("--lens", "--camera")) else FLAT_LENS
+    rc, o, e = align("marks", *paths, "--json", out, *extra, *lens)
     return rc, o, e, (load(out) if out.exists() else None)
 
 
@@ -570,7 +578,7 @@ def camera_session(folder, t, seed, poses=("Yup", "Ydn")):
     toml = ['name = "cam"', "[calibration]", 'static = "tumble.csv"', "[platform]",
             'static = "platform.csv"', "[platform.poses]"]
     toml += [f'{p} = {{ up = "{P[p][0]}" }}' for p in poses]
-    toml += ["[cameras.A]", "[cameras.B]"]
+    toml += ["[cameras.A]", *FLAT_LENS_TOML, "[cameras.B]", *FLAT_LENS_TOML]
     for v, (r, u) in VIEWS.items():
         toml += [f"[views.{v}]", f'camera = "{v[0]}"', f'right = "{r}"', f'up = "{u}"']
     rng = np.random.default_rng(seed)

@@ -86,7 +86,7 @@ def test_triad_model_and_platform_calibration_round_trip(session_result):
 def test_mark_results_round_trip():
     """Marks of one frame (shared distortion, loop summary) and a failed image: to_dict ->
     strict JSON -> from_dict -> to_dict is the same dict; what is not saved comes back None."""
-    from align.marks import FrameDistortion, MarkResult, measure_image
+    from align.marks import MarkResult, measure_image
     from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 
     marks = tuple(MarkSpec(np.deg2rad(a), off, 500, 4.0)
@@ -96,7 +96,7 @@ def test_mark_results_round_trip():
     res = measure_image(render_marks(spec, with_crlb=False).image.astype(float), "a.png")
     res.append(MarkResult(image="b.png", found=False, error="internal error: X", index=0,
                           internal_error=True))
-    assert sum(r.found for r in res) == 3 and res[0].frame is not None
+    assert sum(r.found for r in res) == 3 and res[0].lens is not None and res[0].u_terms
     for r in res:
         d = json.loads(dumps(r.to_dict()))
         back = MarkResult.from_dict(d)
@@ -104,7 +104,8 @@ def test_mark_results_round_trip():
         assert back.measurement is None
         if r.found:
             assert back.angle_rad == r.angle_rad and back.angle_u_rad == r.angle_u_rad
-            assert back.frame == r.frame and isinstance(back.frame, FrameDistortion)
+            assert back.lens == r.lens and back.u_terms.keys() == r.u_terms.keys()
+            assert back.notes == r.notes and back.lens_limited == r.lens_limited
             assert back.loop.summary_lines() == r.loop.summary_lines()
             assert back.unexplained_structure == r.unexplained_structure
             assert [e.name for e in back.loop.effects] == [e.name for e in r.loop.effects]

@@ -306,7 +306,11 @@ def image_session(d: Path, tri: Triad, *, seed: int = 3, roll_a_arcsec: float = 
     rng = np.random.default_rng(seed)
     d.mkdir(parents=True, exist_ok=True)
     write_csv(d / "tumble.csv", ["pose", "ux", "uy", "uz", "t"], tumble_rows(tri, seed=seed))
-    toml = f'name = "cams{seed}"\n[calibration]\nstatic = "tumble.csv"\n[cameras.A]\n[cameras.B]\n'
+    # The renders have no lens, and the file says so (docs/camera.md: an undeclared lens is
+    # carried in u).
+    flat = "lens_k1 = 0.0\nlens_k2 = 0.0\nlens_p = 0.0\nlens_aspect = 0.0\nlens_pp_px = 0.0\n"
+    toml = (f'name = "cams{seed}"\n[calibration]\nstatic = "tumble.csv"\n[cameras.A]\n{flat}'
+            f'[cameras.B]\n{flat}')
     for v, (r, u) in VIEWS.items():
         toml += f'[views.{v}]\ncamera = "{v[0]}"\nright = "{r}"\nup = "{u}"\n'
     h, w = shape

@@ -1,0 +1,200 @@
+"""Which source disagrees, in which angles: leave-one-source-out on the fused solve.
+
+When the fused solve is inconsistent (chi2 beyond its bound after the loop), each source s is
+given its own copy of the six angles, E + d_s, the others keeping E. Linearised at the fused
+solution (the angles are arc-minutes, the disagreements arc-seconds), the whitened residual
+r and its Jacobian J over every fitted parameter give d_s in closed form: with B_s the part of
+dr/dE on s's rows that the other parameters cannot absorb (projected off the columns of J),
+d_s = -pinv(B_s) r, the fall in chi2 is |B_s d_s|^2 with rank(B_s) degrees of freedom, and
+cov(d_s) = pinv(B_s' B_s). Only the angles s itself determines (in the row space of B_s) are
+named. The source whose own E lowers chi2 most — and after which the rest agree — is the one
+that disagrees: "the platform static poses disagree with camera, goniometer and ellipsoid in
+E_xZ, E_yZ by +22.0″, −19.8″". Two sources seeing different E is what a triad that crept
+between the measurements, or a platform that was not level, leaves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+
+from align.fusion.budget import Budget, Contribution
+from align.fusion.observations import E_NAMES
+from axisbase.units import ARCSEC
+
+# An angle of a disagreeing source is named when its own d is this many u from zero.
+NAME_SIGMA = 3.0
+# How a message names each source.
+SAYS = {"camera": "camera images", "goniometer": "goniometer log",
+        "ellipsoid": "tumble calibration's angles between axes",
+        "platform static": "platform static poses"}
+
+
+@dataclass(frozen=True)
+class SourceDisagreement:
+    """Source ``source`` given its own E: ``delta`` [rad] and ``u`` [rad] per angle of
+    ``E_NAMES`` (nan where the source does not determine the angle), the fall in chi2
+    ``chi2_drop`` with ``dof`` degrees of freedom and its p-value, and the chi2 that
+    remains (``chi2_rest`` over ``dof_rest``)."""
+
+    source: str
+    others: tuple[str, ...]
+    delta: np.ndarray
+    u: np.ndarray
+    chi2_drop: float
+    dof: int
+    p_value: float
+    chi2_rest: float
+    dof_rest: int
+    # Other sources that, given their own E, make the rest agree as well: which one of them
+    # moved, the data cannot tell (a creep between the cameras' and the static readings is
+    # seen as either the cameras' or the static poses' own E).
+    also: tuple[str, ...] = ()
+
+    @property
+    def angles(self) -> list[tuple[str, float, float]]:
+        """(name, d [rad], u [rad]) of the angles beyond ``NAME_SIGMA`` u, largest first."""
+        out = [(n, float(d), float(u)) for n, d, u in zip(E_NAMES, self.delta, self.u,
+                                                          strict=True)
+               if np.isfinite(u) and u > 0 and abs(d) > NAME_SIGMA * u]
+        return sorted(out, key=lambda a: -abs(a[1]) / a[2])
+
+    @property
+    def rest_consistent(self) -> bool:
+        return self.dof_rest <= 0 or stats.chi2.sf(self.chi2_rest, self.dof_rest) > 1e-3
+
+    def message(self) -> str:
+        """One line: the source, the angles and by how much, and the likely cause."""
+        ang = self.angles
+        names = ", ".join(n for n, _, _ in ang)
+        by = ", ".join(f"{d / ARCSEC:+.1f}″ (u {u / ARCSEC:.1f}″)" for _, d, u in ang)
+        level = ("platform static" in (self.source, *self.also)
+                 and {n for n, _, _ in ang} <= {"E_xZ", "E_yZ"})
+        hint = ("platform not level? (a levelling offset shows in E_xZ, E_yZ only)" if level
+                else "the triad moved between the measurements (creep), or a source's set-up "
+                     "is not the others'")
+        rest = ("the rest then agree" if self.rest_consistent else
+                f"the rest still disagree (chi2 {self.chi2_rest:.1f} / {self.dof_rest})")
+        me = SAYS.get(self.source, self.source)
+        if self.also:
+            pair = " and the ".join([me, *(SAYS.get(o, o) for o in self.also)])
+            return (f"sources see different E: the {pair} disagree in {names} by {by} (the "
+                    f"{me} given their own E: chi2 falls by {self.chi2_drop:.1f} with "
+                    f"{self.dof} angles; {rest}; either given its own E makes the rest agree "
+                    f"— which one moved, the data cannot tell) — {hint}")
+        return (f"sources see different E: the {me} "
+                f"disagree with {', '.join(SAYS.get(o, o) for o in self.others)} in {names} "
+                f"by {by} (chi2 falls by "
+                f"{self.chi2_drop:.1f} with {self.dof} angles of its own; {rest}) — {hint}")
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "others": list(self.others),
+                "delta_arcsec": {n: float(d / ARCSEC) for n, d in zip(E_NAMES, self.delta,
+                                                                      strict=True)
+                                 if np.isfinite(d)},
+                "u_arcsec": {n: float(u / ARCSEC) for n, u in zip(E_NAMES, self.u, strict=True)
+                             if np.isfinite(u)},
+                "angles": [n for n, _, _ in self.angles], "chi2_drop": self.chi2_drop,
+                "dof": self.dof, "p_value": self.p_value, "chi2_rest": self.chi2_rest,
+                "dof_rest": self.dof_rest, "also": list(self.also), "message": self.message()}
+
+
+def disagreement_from_dict(d: dict) -> SourceDisagreement:
+    """Back from :meth:`SourceDisagreement.to_dict` (a session result JSON)."""
+    delta = np.array([d["delta_arcsec"].get(n, np.nan) for n in E_NAMES]) * ARCSEC
+    u = np.array([d["u_arcsec"].get(n, np.nan) for n in E_NAMES]) * ARCSEC
+    return SourceDisagreement(str(d["source"]), tuple(d["others"]), delta, u,
+                              float(d["chi2_drop"]), int(d["dof"]), float(d["p_value"]),
+                              float(d["chi2_rest"]), int(d["dof_rest"]),
+                              tuple(d.get("also", ())))
+
+
+def with_disagreement(budget: Budget, named: SourceDisagreement) -> Budget:
+    """The budget with the disagreement's Type B share (d² in each angle named, the whole
+    disagreement: see ``fuse``) added, the fractions and u recomputed."""
+    widen = {n: d**2 for n, d, _ in named.angles}
+    label = "sources disagree: " + " vs ".join(
+        SAYS.get(s, s) for s in (named.source, *(named.also or named.others)))
+    angles = {}
+    for n, (u, cs) in budget.angles.items():
+        if n not in widen:
+            angles[n] = (u, cs)
+            continue
+        u2 = u**2 + widen[n]
+        parts = [Contribution(c.source, c.kind, c.u2, c.u2 / u2) for c in cs]
+        parts.append(Contribution(label, "typeB", widen[n], widen[n] / u2))
+        angles[n] = (float(np.sqrt(u2)), tuple(sorted(parts, key=lambda c: -c.u2)))
+    return replace(budget, angles=angles)
+
+
+def jacobian(residual, p: np.ndarray, step: float = 1e-7) -> np.ndarray:
+    """Central differences of ``residual(p)`` (the fusion's is a few hundred rows by ~15
+    parameters: 30 evaluations)."""
+    cols = []
+    for k in range(len(p)):
+        d = np.zeros_like(p)
+        d[k] = step
+        cols.append((residual(p + d) - residual(p - d)) / (2 * step))
+    return np.column_stack(cols)
+
+
+def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[str, np.ndarray]]
+                         ) -> list[SourceDisagreement]:
+    """Each source given its own six angles (see the module docstring).
+
+    Parameters
+    ----------
+    residual : whitened residual of the fused solve as a function of all its parameters
+        (the six angles first, in ``E_NAMES`` order, [rad]).
+    params : the fused solution.
+    rows_of : (source name, indices of its rows in the residual), one per source.
+    """
+    r = residual(params)
+    J = jacobian(residual, params)
+    U, s, _ = np.linalg.svd(J, full_matrices=False)
+    Q = U[:, s > 1e-10 * s[0]]
+    chi2 = float(r @ r)
+    dof = len(r) - Q.shape[1]
+    names = [n for n, _ in rows_of]
+    out = []
+    for name, idx in rows_of:
+        A = np.zeros((len(r), 6))
+        A[idx] = J[idx, :6]
+        B = A - Q @ (Q.T @ A)
+        Ub, sb, Vt = np.linalg.svd(B, full_matrices=False)
+        keep = sb > 1e-8 * max(float(np.abs(J[:, :6]).max()), 1e-300)
+        k = int(keep.sum())
+        if k == 0:
+            continue
+        Ub, sb, Vt = Ub[:, keep], sb[keep], Vt[keep]
+        coef = -(Ub.T @ r) / sb
+        delta = Vt.T @ coef
+        cov = Vt.T @ np.diag(1 / sb**2) @ Vt
+        drop = float(np.sum((Ub.T @ r) ** 2))
+        # An angle is the source's own when it lies in the row space of B.
+        own = np.sum(Vt**2, axis=0) > 0.99
+        u = np.where(own, np.sqrt(np.maximum(np.diag(cov), 0)), np.nan)
+        d = np.where(own, delta, np.nan)
+        out.append(SourceDisagreement(
+            name, tuple(n for n in names if n != name), d, u, drop, k,
+            float(stats.chi2.sf(drop, k)), chi2 - drop, dof - k))
+    return out
+
+
+def name_disagreement(found: Sequence[SourceDisagreement], alpha: float
+                      ) -> SourceDisagreement | None:
+    """The source whose own E lowers chi2 most, if significantly (``alpha``, Bonferroni over
+    the sources) and with at least one angle of its own beyond ``NAME_SIGMA`` u; with
+    ``also`` the other sources whose own E makes the rest agree as well (two sources that
+    see different E, and nothing else tells which of them moved)."""
+    cand = [f for f in found if f.p_value < alpha / max(len(found), 1) and f.angles]
+    if not cand:
+        return None
+    best = max(cand, key=lambda f: f.chi2_drop)
+    if not best.rest_consistent:
+        return best
+    also = tuple(f.source for f in cand if f is not best and f.rest_consistent)
+    return replace(best, also=also) if also else best

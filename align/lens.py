@@ -1,0 +1,458 @@
+"""One camera's lens from its marks: what the lines determine, what is fitted, what is carried.
+
+The marks of one camera (one frame, or every image of a camera in a session) are straight
+grooves, so their centres, undistorted by the right lens, lie on straight lines (the
+plumb-line principle). The lens vector is :data:`imaging.lens.PARAMS` (k1, k2, p1, p2 at the
+image half-diagonal, pixel aspect - 1, principal-point offset [px]).
+
+Identifiability comes before estimation. For each mark the perpendicular displacement each
+lens parameter causes along the mark is computed at the mark's own position (its length, its
+distance from the centre, where the foot of the perpendicular from the centre lies); the part
+a straight line can absorb (offset and tilt) is projected out, and what remains is the bow the
+parameter leaves, whitened by the centres' noise. Summed over the camera's marks this is the
+Fisher information F of the lens from the lines. A parameter is *determined* when its
+marginal u from F is small enough that the largest plausible value (its Type B range) would
+stand out of it at the loop's level (z u < range); only determined parameters are fitted,
+jointly (Gauss-Newton from zero). A fitted value is applied only when its sign is determined
+(|value| > z u) and it lies within the plausible range; the rest are set to zero.
+
+The angle of each mark then carries, as named terms:
+
+* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A);
+* ``lens_<p>_small``: a determined parameter not applied (its sign undetermined): its
+  estimate and u as an rms bound (Type A);
+* ``lens_<p>_range``: an undetermined parameter: uniform over its plausible range, range/sqrt 3,
+  times the angle's sensitivity to it *after* the fitted parameters absorbed what they can of
+  it (Type B, the way the goniometer carries an undetermined Earth rate).
+
+A given camera model replaces all this: its covariance is propagated instead (``camera_<p>``),
+and the lines only test it (see :func:`check_camera`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.stats import chi2, norm
+
+from axisbase.errors import InputError
+from imaging import fit_line, line_frame
+from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
+
+ARCSEC = np.pi / 180 / 3600
+
+
+@dataclass(frozen=True)
+class LensRanges:
+    """Plausible range of each lens parameter (Type B, uniform over +- the value).
+
+    k1, k2, p at the image half-diagonal (dimensionless; OpenCV's k1 = k1 (f/R)^2, p = p f/R),
+    ``aspect``: |fy/fx - 1|, ``pp_px``: principal point from the image centre [px].
+    ``max_u_arcsec``: an angle whose lens-limited u exceeds this is not ok ("calibrate the
+    camera").
+    """
+
+    k1: float = 0.3
+    k2: float = 0.05
+    p: float = 1e-3
+    aspect: float = 0.005
+    pp_px: float = 20.0
+    max_u_arcsec: float = 60.0
+
+    @classmethod
+    def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
+        """A camera declared free of distortion (a telecentric or already-corrected optic):
+        nothing fitted, nothing carried."""
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0, max_u_arcsec)
+
+    def vector(self) -> np.ndarray:
+        return np.array([self.k1, self.k2, self.p, self.p, self.aspect, self.pp_px,
+                         self.pp_px])
+
+    def to_dict(self) -> dict:
+        return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
+                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> LensRanges:
+        return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
+
+    @classmethod
+    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
+        """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
+        defaults); one line naming the flag and the bad item on error."""
+        vals: dict[str, float] = {}
+        for item in filter(None, (x.strip() for x in text.split(","))):
+            key, eq, val = item.partition("=")
+            key = key.strip()
+            if not eq or key not in cls.__dataclass_fields__:
+                raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
+                                 f"{', '.join(cls.__dataclass_fields__)}")
+            try:
+                v = float(val)
+            except ValueError:
+                raise InputError(f"{where}: {item!r}: {val.strip()!r} is not a number") from None
+            if not np.isfinite(v) or v < 0 or (key == "max_u_arcsec" and v == 0):
+                raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
+                                 + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
+            vals[key] = v
+        return cls(**vals)
+
+
+@dataclass(frozen=True)
+class LineGeometry:
+    """One mark as the lens solver sees it: raw centres relative to the image centre [px],
+    their sigma across the line [px] and correlation factor (None: independent)."""
+
+    points: np.ndarray
+    sigma: np.ndarray
+    chol: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Design:
+    angle: float
+    s: np.ndarray            # d angle / d lam [rad per unit], per parameter
+    G: np.ndarray            # whitened bow columns (straight-line part projected out)
+    z: np.ndarray            # whitened residual of the straight-line fit
+    w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
+    s_probe: np.ndarray | None = None  # max |s| over the principal point's range
+
+    @property
+    def bow_z(self) -> float:
+        """The residual's bow in units of its standard uncertainty (N(0, 1) when straight)."""
+        return float(self.w @ self.z)
+
+
+def _design(line: LineGeometry, lam: np.ndarray, scale: float,
+            only: Sequence[int] | None = None) -> _Design:
+    q, jac = undistortion_jacobian(line.points, lam, scale, only)
+    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
+        raise ValueError("the lens folds the image along this mark")
+    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
+    u, n = line_frame(lf.angle_rad)
+    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
+    J = np.column_stack([q @ u, -np.ones(len(q))])
+    r = q @ n - lf.offset_px
+    t = q @ u
+    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
+    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
+    if line.chol is not None:
+        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
+    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
+    G = Ew - Jw @ coef[:, :-1]
+    w = bw - Jw @ coef[:, -1]
+    # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
+    return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
+
+
+@dataclass(frozen=True)
+class LensSolution:
+    """The lens of one camera from its marks (see the module docstring).
+
+    ``lam``: the applied lens vector (zeros where not applied); ``determined``, ``applied``:
+    per parameter; ``u_lines``: each parameter's marginal u from the lines (inf: not
+    determined); ``estimate``: the fitted value of each determined parameter (nan
+    otherwise); ``notes``: what the reader must know (one line each).
+    """
+
+    lam: np.ndarray
+    determined: tuple[bool, ...]
+    applied: tuple[bool, ...]
+    u_lines: np.ndarray
+    estimate: np.ndarray
+    cov_applied: np.ndarray
+    ranges: LensRanges
+    n_lines: int
+    chi2_dof: float
+    notes: tuple[str, ...] = ()
+    info: np.ndarray = field(default_factory=lambda: np.zeros((len(PARAMS), len(PARAMS))))
+    confirmed: bool = True
+    bow_chi2: float = 0.0
+    bow_dof: int = 0
+
+    def to_dict(self) -> dict:
+        def num(v: float) -> float | None:
+            return float(v) if np.isfinite(v) else None
+
+        return {"model": "brown-conrady at the half-diagonal", "lines": self.n_lines,
+                "confirmed_by_other_lines": self.confirmed,
+                "bow_chi2": float(self.bow_chi2), "bow_dof": self.bow_dof,
+                "chi2_dof": num(self.chi2_dof), "ranges": self.ranges.to_dict(),
+                "parameters": {p: {"determined": self.determined[j],
+                                   "applied": self.applied[j], "value": float(self.lam[j]),
+                                   "estimate": num(self.estimate[j]),
+                                   "u_from_lines": num(self.u_lines[j])}
+                               for j, p in enumerate(PARAMS)},
+                "notes": list(self.notes)}
+
+
+def _marginal_u(F: np.ndarray, idx: list[int], rng: np.ndarray) -> np.ndarray:
+    """Marginal u of the parameters ``idx`` from information F (range-normalised inversion
+    with a tiny ridge, so a null direction reads as u far beyond the range)."""
+    Fs = F[np.ix_(idx, idx)] * np.outer(rng[idx], rng[idx])
+    C = np.linalg.inv(Fs + 1e-10 * np.eye(len(idx)))
+    return np.sqrt(np.clip(np.diag(C), 0, None)) * rng[idx]
+
+
+def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges = LensRanges(),
+               alpha: float = 1e-3, iters: int = 5) -> tuple[LensSolution, list[_Design]]:
+    """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
+
+    Returns the solution and each mark's design at the applied lens (angle sensitivities).
+    """
+    z = float(norm.isf(alpha / 2))
+    rng = ranges.vector()
+    P = len(PARAMS)
+    lam = np.zeros(P)
+    designs = [_design(ln, lam, scale) for ln in lines]
+    F0 = sum(d.G.T @ d.G for d in designs)
+    # Which parameters the lines determine: drop the worst-determined until every one left
+    # would tell its largest plausible value from zero at level alpha.
+    det = [j for j in range(P) if rng[j] > 0]
+    while det:
+        u = _marginal_u(F0, det, rng)
+        worst = int(np.argmax(u / rng[det]))
+        if z * u[worst] < rng[det[worst]]:
+            break
+        det.pop(worst)
+    notes: list[str] = []
+    est = np.full(P, np.nan)
+    u_lines = np.full(P, np.inf)
+    applied = list(det)
+    spread, spread_for = np.zeros(P), list(applied)
+    for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
+        lam = np.zeros(P)
+        for _ in range(iters):
+            if not applied:
+                break
+            try:
+                designs = [_design(ln, lam, scale) for ln in lines]
+            except ValueError:
+                break  # folds: refused below
+            F = sum(d.G.T @ d.G for d in designs)
+            b = sum(d.G.T @ d.z for d in designs)
+            A = np.ix_(applied, applied)
+            step = -np.linalg.solve(F[A], b[applied])
+            trial = lam.copy()
+            trial[applied] += step
+            if np.any(np.abs(trial[applied]) > 2 * rng[applied]):
+                lam = trial  # beyond any lens: refused below
+                break
+            lam = trial
+            if np.all(np.abs(step) < 1e-3 * rng[applied]):
+                break
+        try:
+            designs = [_design(ln, lam, scale) for ln in lines]
+        except ValueError:  # the estimate folds the image: no lens, refused below
+            lam[applied] = np.where(np.abs(lam[applied]) > rng[applied], lam[applied],
+                                    2 * rng[applied])
+            designs = [_design(ln, np.zeros(P), scale) for ln in lines]
+        F = sum(d.G.T @ d.G for d in designs)
+        if det:
+            u = _marginal_u(F, det, rng)
+            u_lines[det] = u
+        spread = _pp_spread(lines, lam, applied, det, rng, scale)
+        spread_for = list(applied)
+        # Applied only with its sign determined under every principal point the lines allow
+        # (a radial term's bow scales with the line's distance from the principal point).
+        keep = [j for j in applied
+                if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= rng[j]]
+        est[applied] = lam[applied]
+        if keep == applied:
+            break
+        applied = keep
+    lam_out = np.zeros(P)
+    lam_out[applied] = lam[applied]
+    if not applied:
+        spread = np.zeros(P)
+    elif spread_for != applied:  # the applied set changed after its last spread
+        spread = _pp_spread(lines, lam_out, applied, det, rng, scale)
+    designs = [_design(ln, lam_out, scale) for ln in lines]
+    F = sum(d.G.T @ d.G for d in designs)
+    cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
+    if applied:  # the principal point's range moves the estimate: uniform, as Type B
+        cov = cov + np.diag(spread[applied] ** 2 / 3)
+        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread / np.sqrt(3)),
+                           u_lines)
+    s_probe = _pp_probe_s(lines, lam_out, det, rng, scale)
+    n_pts = sum(len(ln.points) for ln in lines)
+    c2 = float(sum(d.z @ d.z for d in designs))
+    dof = max(n_pts - 2 * len(lines) - len(applied), 1)
+    for j in det:
+        if j not in applied:
+            e = est[j]
+            why = (f"beyond any lens (|{PARAMS[j]}| <= {rng[j]:g}): not a lens"
+                   if np.isfinite(e) and abs(e) > rng[j] else "sign not determined")
+            notes.append(f"lens {PARAMS[j]} = {e:.3g} ± {u_lines[j]:.2g} from the lines: {why}; "
+                         "not applied, carried in u")
+    # A bow is a lens only if the camera's other lines agree: the lines' bows left after the
+    # lens must be noise (chi2 over lines - fitted parameters). With no line to spare (one
+    # mark, or as many marks as parameters) a lens and a bent mark are the same bow.
+    bz = np.array([d.bow_z for d in designs])
+    bow_dof = len(lines) - len(applied)
+    bow_chi2 = float(bz @ bz)
+    confirmed = True
+    if applied:
+        confirmed = bow_dof > 0 and chi2.sf(bow_chi2, bow_dof) >= alpha
+        if bow_dof <= 0:
+            notes.append(f"the bow of {len(lines)} line(s) fits {len(applied)} lens "
+                         "parameter(s) with no line to spare: a lens and a bent mark are the "
+                         "same bow here; u covers both (add marks elsewhere in the frame, or "
+                         "calibrate the camera)")
+        elif not confirmed:
+            worst = int(np.argmax(np.abs(bz)))
+            notes.append(f"the lines' bows disagree with one lens (chi2 {bow_chi2:.1f} on "
+                         f"{bow_dof} dof; mark {worst} worst, {bz[worst]:+.1f} u): a bent mark; "
+                         "u covers the lens and no lens")
+    und = [PARAMS[j] for j in range(P) if j not in det and rng[j] > 0]
+    if und:
+        notes.append(f"lens {', '.join(und)} not determined by these {len(lines)} line(s): "
+                     "carried in u over their plausible range")
+    sol = LensSolution(lam_out, tuple(j in det for j in range(P)),
+                       tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
+                       len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
+                       bow_dof)
+    return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+
+
+def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
+    """The lens at the corners of the principal point's range (where the lines leave it
+    undetermined): radial terms act about the principal point, so their effect on a line
+    near the image centre depends on where it is, a second-order effect a derivative at the
+    image centre misses."""
+    free = [j for j in (5, 6) if j not in det and rng[j] > 0]
+    if not free:
+        return []
+    out = []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            p = lam.copy()
+            for j, sg in zip((5, 6), (sx, sy), strict=True):
+                if j in free:
+                    p[j] = sg * rng[j]
+            out.append(p)
+    return out
+
+
+def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int],
+               det: list[int], rng: np.ndarray, scale: float) -> np.ndarray:
+    """How far the applied estimates move when the principal point is put at the corners of
+    its range (one linearised step from ``lam`` each; inf where the lens then folds)."""
+    out = np.zeros(len(PARAMS))
+    if not applied:
+        return out
+    A = np.ix_(applied, applied)
+    for p in _pp_probes(lam, det, rng):
+        try:
+            ds = [_design(ln, p, scale) for ln in lines]
+        except ValueError:
+            out[applied] = np.inf
+            continue
+        F = sum(d.G.T @ d.G for d in ds)
+        b = sum(d.G.T @ d.z for d in ds)
+        out[applied] = np.maximum(out[applied], np.abs(np.linalg.solve(F[A], b[applied])))
+    return out
+
+
+def _pp_probe_s(lines: Sequence[LineGeometry], lam: np.ndarray, det: list[int],
+                rng: np.ndarray, scale: float) -> list[np.ndarray]:
+    """Each line's largest |d angle / d lam| over the principal point's range [rad/unit]."""
+    out = [np.zeros(len(PARAMS)) for _ in lines]
+    for p in _pp_probes(lam, det, rng):
+        for k, ln in enumerate(lines):
+            try:  # only the radial terms act about the principal point
+                out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale, (0, 1)).s))
+            except ValueError:
+                out[k][:] = np.inf
+    return out
+
+
+def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
+    """Named standard uncertainties [rad] the lens adds to one mark's angle."""
+    P = len(PARAMS)
+    A = [j for j in range(P) if sol.applied[j]]
+    rng = sol.ranges.vector()
+    out: dict[str, float] = {}
+    s = design.s
+    if A:
+        out["lens_fit"] = float(np.sqrt(s[A] @ sol.cov_applied @ s[A]))
+        if not sol.confirmed:
+            # Lens or bend: the angle with the lens applied and without it both stand.
+            out["lens_or_bend"] = float(abs(s[A] @ sol.lam[A]))
+    FA = sol.info[np.ix_(A, A)] if A else None
+    for j in range(P):
+        if sol.applied[j] or rng[j] <= 0:
+            continue
+        # What the applied parameters absorb of parameter j's bow changes their estimates,
+        # hence the angle: the angle's net sensitivity to j.
+        seff = abs(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
+        if design.s_probe is not None and not sol.determined[j]:
+            seff = max(seff, float(design.s_probe[j]))
+        if sol.determined[j]:
+            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
+            out[f"lens_{PARAMS[j]}_small"] = float(abs(seff) * np.hypot(e, sol.u_lines[j]))
+        else:
+            out[f"lens_{PARAMS[j]}_range"] = float(abs(seff) * rng[j] / np.sqrt(3))
+    return out
+
+
+def camera_terms(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
+                 lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
+    """Named standard uncertainties [rad] a calibrated camera's own u adds to a mark's angle.
+
+    ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
+    the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
+
+    raw = distort_points(points_ideal, lam, scale)
+    d = _design(LineGeometry(raw, sigma, chol), lam, scale)
+    return {f"camera_{p}": float(abs(d.s[j]) * lam_u[j])
+            for j, p in enumerate(PARAMS) if lam_u[j] > 0}
+
+
+def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarray,
+                 scale: float, ranges: LensRanges = LensRanges(), alpha: float = 1e-3
+                 ) -> tuple[float, np.ndarray, list[_Design]]:
+    """Whether the marks agree with a calibrated lens: the determined correction to the
+    camera's lens from the lines, and its chi2 probability against the lines' u plus the
+    camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
+    z = float(norm.isf(alpha / 2))
+    rng = ranges.vector()
+    P = len(PARAMS)
+    designs = [_design(ln, lam, scale) for ln in lines]
+    F = sum(d.G.T @ d.G for d in designs)
+    b = sum(d.G.T @ d.z for d in designs)
+    det = [j for j in range(P) if rng[j] > 0]
+    while det:
+        u = _marginal_u(F, det, rng)
+        worst = int(np.argmax(u / rng[det]))
+        if z * u[worst] < rng[det[worst]]:
+            break
+        det.pop(worst)
+    dlam = np.zeros(P)
+    if not det:
+        return 1.0, dlam, designs
+    D = np.ix_(det, det)
+    dlam[det] = -np.linalg.solve(F[D], b[det])
+    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
+    return float(chi2.sf(stat, len(det))), dlam, designs
+
+
+def undistorted(line: LineGeometry, lam: np.ndarray, scale: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """A mark's centres undistorted by ``lam`` and their sigma scaled by the undistortion's
+    magnification across the line (a centre moved 1 px across the raw line moves this much
+    across the undistorted one)."""
+    q = undistort_points(line.points, lam, scale)
+    if not np.any(lam):
+        return q, line.sigma
+    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
+    n = line_frame(lf.angle_rad)[1]
+    q2 = undistort_points(line.points + 0.5 * n, lam, scale)
+    g = np.abs((q2 - q) @ n) / 0.5
+    return q, line.sigma * g

@@ -1,0 +1,215 @@
+"""Families of lines: dense sets of short parallel lines (a ruled scale, a grating).
+
+A *family* is at least :data:`MIN_MEMBERS` lines found in one image that run the same way
+(directions within :data:`FAMILY_ANGLE`) and lie side by side: each one's middle within
+:data:`MAX_GAP` typical gaps of its neighbour across the lines. Once a family is seen, the
+image is searched again for lines of that direction down to half the family's typical length
+(:data:`MEMBER_FRACTION`) — lines the default ``min_length`` would drop or the block-averaged
+search cut short (at a numeral, a dust speck) — and those that fall on the family's ruling
+(within :data:`GRID_TOLERANCE` pitch of a multiple of the pitch from its members) join it.
+Every family member is reported, whatever ``max_marks`` says; other lines keep that cap, and
+what the cap leaves out is counted in :attr:`Detection.unreported`, never dropped silently.
+With an explicit ``min_length_px`` (the user's), two parallel lines side by side already seed
+the second search, and a family's lines shorter than that are counted as unreported.
+
+Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from dataclasses import replace as dc_replace
+
+import numpy as np
+
+from imaging.detect import (
+    LENGTH_SLACK,
+    MarkCandidate,
+    Roi,
+    _dedupe,
+    _near,
+    _overlap,
+    _shift,
+    detect_lines_once,
+    line_frame,
+    wrap_angle,
+)
+
+MIN_MEMBERS = 3
+"""Fewest parallel lines side by side that make a family."""
+FAMILY_ANGLE = np.deg2rad(2.0)
+"""Largest direction difference within a family at detection (the search's angles are good
+to ~0.5 deg on short lines); the measured angles are then tested by their chi2."""
+MAX_GAP = 3.0
+"""Largest gap between neighbouring members, in units of the family's median gap."""
+MEMBER_FRACTION = 0.5
+"""A line joins a family from this fraction of the family's median length."""
+PIECE_FRACTION = 0.15
+"""Pieces of a member cut short (at a numeral, a dust speck) are looked for from this
+fraction of the family's median length."""
+PIECE_ANGLE = np.deg2rad(10.0)
+"""Largest direction difference of such a piece from its member."""
+GRID_TOLERANCE = 0.3
+"""A joining line lies within this fraction of the pitch of the members' ruling."""
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Lines found in one image.
+
+    ``marks``: reported lines (every family member, then the other lines strongest first up
+    to ``max_marks``); ``families``: index tuples into ``marks``, one per family, ordered
+    across the lines; ``unreported``: lines found but left out (beyond ``max_marks``, or a
+    family's lines shorter than an explicit ``min_length_px``).
+    """
+
+    marks: list[MarkCandidate]
+    families: tuple[tuple[int, ...], ...] = ()
+    unreported: tuple[MarkCandidate, ...] = ()
+
+
+def _middle(c: MarkCandidate) -> np.ndarray:
+    u, n = line_frame(c.angle_rad)
+    return c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+
+
+def _position(c: MarkCandidate, ref: float) -> float:
+    """Where a line's middle lies across the direction ``ref`` [px]."""
+    return float(_middle(c) @ line_frame(ref)[1])
+
+
+def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
+    """A coarse candidate of a roi search in the whole image's frame."""
+    return _shift(c, shift) if shift.any() else c
+
+
+def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
+                   ) -> list[list[int]]:
+    """Families among candidates (indices, ordered across the lines; see the module doc)."""
+    left = list(range(len(cands)))
+    out = []
+    while left:
+        seed = max(left, key=lambda i: cands[i].strength)
+        ref = cands[seed].angle_rad
+        same = [i for i in left if cands[i].dark == cands[seed].dark
+                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        left = [i for i in left if i != seed]
+        if len(same) < min_members:
+            continue
+        same.sort(key=lambda i: _position(cands[i], ref))
+        pos = np.array([_position(cands[i], ref) for i in same])
+        gaps = np.diff(pos)
+        med = float(np.median(gaps))
+        # Runs of lines with no gap wider than MAX_GAP median gaps: the seed's run.
+        cuts = np.flatnonzero(gaps > MAX_GAP * med) + 1
+        for run in np.split(np.array(same), cuts):
+            rp = np.array([_position(cands[i], ref) for i in run])
+            # Lines closer than two widths are the two edges of one thing (or one line found
+            # twice), not a ruling.
+            close = rp.size > 1 and np.min(np.diff(rp)) < max(
+                8.0, 2 * max(cands[i].thickness_px for i in run))
+            if seed in run and len(run) >= min_members and not close:
+                out.append([int(i) for i in run])
+                left = [i for i in left if i not in run]
+    return out
+
+
+def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
+            ) -> tuple[float, float]:
+    """(origin, pitch) [px] of the members' ruling: positions = origin + pitch k."""
+    pos = np.array([_position(cands[i], ref) for i in members])
+    g0 = float(np.min(np.diff(pos)))
+    k = np.rint((pos - pos[0]) / g0)
+    pitch, origin = np.polyfit(k, pos, 1)
+    return float(origin), float(pitch)
+
+
+def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_marks: int = 8,
+                 roi: Roi | None = None, top: float | None = None,
+                 families: bool = True) -> Detection:
+    """Every line of :func:`imaging.detect.detect_marks`, with families completed.
+
+    Parameters as :func:`~imaging.detect.detect_marks`; ``families``: False finds lines one
+    by one only (no second pass; every line under the ``max_marks`` cap).
+    """
+    search = detect_lines_once(image, min_length_px, roi=roi, top=top)
+    found = list(search.marks)
+    # A --min-length above the short lines of a scale leaves only its long ones: two of
+    # them side by side seed the search too, and the family's lines below that length are
+    # then counted as found but not reported (never dropped unsaid).
+    groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
+        if families else []
+    for g in groups:
+        ref = found[g[0]].angle_rad
+        typical = float(np.median([found[i].length_px for i in g]))
+        longest = max(found[i].length_px for i in g)
+        origin, pitch = _ruling(found, g, ref)
+        lo = min(_position(found[i], ref) for i in g) - pitch * (GRID_TOLERANCE + 0.5)
+        hi = max(_position(found[i], ref) for i in g) + pitch * (GRID_TOLERANCE + 0.5)
+        shift = search.shift
+        members = [found[i] for i in g]
+
+        def on_ruling(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
+                      members=members, shift=shift, lo=lo, hi=hi) -> bool:
+            # Coarse candidates are in the search's (roi) frame: compare in the image's.
+            p = _middle(c) + shift
+            q = float(p @ line_frame(ref)[1])
+            k = (q - origin) / pitch
+            return (c.dark == members[0].dark
+                    and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
+                    # A ruling of 3 or more extends over the frame; two lines fix none
+                    # (their gap may be any multiple of the pitch): lines near them only.
+                    and (abs(k - np.rint(k)) < GRID_TOLERANCE if len(members) >= 3
+                         else lo - pitch * MAX_GAP < q < hi + pitch * MAX_GAP))
+
+        pieces = search.candidates(PIECE_FRACTION * typical)
+        extra = [c for c in pieces if c.length_px >= MEMBER_FRACTION * typical
+                 and on_ruling(c)]
+        # Pieces along a member (it was cut at a numeral or a dust speck) extend it, across
+        # a gap under half the typical length, to at most the longest member's length (the
+        # ridge fades over a speck's halo): its measurement then spans the whole graduation
+        # (the segments under the speck fail the groove model and are left out there).
+        for c in pieces:
+            c = replace_shift(c, shift)
+            for j, o in enumerate(found):
+                # A short piece's direction is poor (a 20 px piece: several degrees); its
+                # middle on the member's line is what counts.
+                if not (o.dark == c.dark and _near(c, o, PIECE_ANGLE, 3.0)):
+                    continue
+                u = line_frame(o.angle_rad)[0]
+                cu = float(_middle(c) @ u)
+                lo_c, hi_c = cu - c.length_px / 2, cu + c.length_px / 2
+                gap = max(lo_c - o.t_end_px, o.t_start_px - hi_c)
+                t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
+                if gap < MEMBER_FRACTION * typical and t1 - t0 <= 1.1 * longest:
+                    found[j] = dc_replace(o, t_start_px=t0, t_end_px=t1)
+        # The relief beside a member is judged between it and its neighbours: the next
+        # graduation is no machining streak.
+        reach = float(np.clip(abs(pitch) - max(o.thickness_px for o in members) - 6, 20, 60))
+        for c in search.confirm(extra, reach):
+            # A piece of a member (the first search joined it differently) is that member:
+            # the longer one stays.
+            twin = next((j for j, o in enumerate(found) if o.dark == c.dark
+                         and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
+                         and _overlap(c, o)), None)
+            if twin is None:
+                found.append(c)
+            elif c.length_px > found[twin].length_px:
+                found[twin] = c
+    if groups:
+        found = _dedupe(sorted(found, key=lambda c: -c.strength))
+        groups = group_families(found)
+    short: list[int] = []
+    if min_length_px is not None:
+        # The user's shortest line holds for families too: their shorter members are said.
+        short = [i for g in groups for i in g
+                 if found[i].length_px < LENGTH_SLACK * min_length_px]
+        groups = [[i for i in g if i not in short] for g in groups]
+        groups = [g for g in groups if len(g) >= 2]
+    in_family = {i for g in groups for i in g}
+    others = [i for i in range(len(found)) if i not in in_family and i not in short]
+    keep = [i for g in groups for i in g] + others[:max_marks]
+    index = {old: new for new, old in enumerate(keep)}
+    return Detection([found[i] for i in keep],
+                     tuple(tuple(index[i] for i in g) for g in groups),
+                     tuple(found[i] for i in others[max_marks:] + short))

@@ -1,0 +1,118 @@
+"""The lens model the mark stage fits or carries: Brown-Conrady at the image half-diagonal.
+
+A point of the ideal (pinhole, square-pixel) image at (X, Y) [px] from the principal point is
+imaged at
+
+    x = X / R, y = Y / R, r^2 = x^2 + y^2                     (R: the image half-diagonal)
+    x_d = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y + p2 (r^2 + 2 x^2)
+    y_d = y (1 + k1 r^2 + k2 r^4) + p1 (r^2 + 2 y^2) + 2 p2 x y
+    sensor = (R x_d + cx, (1 + aspect) R y_d + cy)             (relative to the image centre)
+
+so every coefficient is dimensionless and means "displacement at the half-diagonal / R".
+OpenCV's coefficients for focal length f [px] convert as k1 = k1_cv (R/f)^2, k2 = k2_cv
+(R/f)^4, p = p_cv R/f; ``aspect`` = fy/fx - 1; (cx, cy) [px] is the principal point's offset
+from the image centre. :data:`PARAMS` names the vector's entries in this order.
+
+Written by hand (not cv2.undistortPoints): the stage needs the model in the half-diagonal
+normalisation without a focal length, and its derivatives with respect to each coefficient.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+PARAMS = ("k1", "k2", "p1", "p2", "aspect", "cx", "cy")
+"""The lens vector's entries, in order (see the module docstring for their units)."""
+
+STEPS = np.array([1e-3, 1e-3, 1e-5, 1e-5, 1e-4, 0.05, 0.05])
+"""Finite-difference steps for each entry (derivatives of the undistortion)."""
+
+
+def _distort_norm(x: np.ndarray, y: np.ndarray, lam: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    k1, k2, p1, p2 = lam[:4]
+    r2 = x * x + y * y
+    g = 1.0 + k1 * r2 + k2 * r2 * r2
+    return (x * g + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+            y * g + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+
+
+def distort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
+    """Ideal points (relative to the principal point) -> sensor points (relative to the image
+    centre) [px]; ``lam`` ordered as :data:`PARAMS`, ``scale`` = R [px]."""
+    lam = np.asarray(lam, float)
+    xd, yd = _distort_norm(q[:, 0] / scale, q[:, 1] / scale, lam)
+    return np.column_stack([scale * xd + lam[5], (1 + lam[4]) * scale * yd + lam[6]])
+
+
+def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
+    """Sensor points (relative to the image centre) -> ideal points (relative to the principal
+    point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
+    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
+    lam = np.asarray(lam, float)
+    q = np.asarray(q, float)
+    xn = (q[:, 0] - lam[5]) / scale
+    yn = (q[:, 1] - lam[6]) / ((1 + lam[4]) * scale)
+    if not np.any(lam[:4]):
+        return np.column_stack([xn, yn]) * scale
+    k1, k2, p1, p2 = lam[:4]
+    x, y = xn.copy(), yn.copy()
+    for _ in range(30):
+        fx, fy = _distort_norm(x, y, lam)
+        ex, ey = fx - xn, fy - yn
+        r2 = x * x + y * y
+        g = 1.0 + k1 * r2 + k2 * r2 * r2
+        dg = k1 + 2 * k2 * r2  # d g / d (r^2)
+        j11 = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x
+        j12 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+        j21 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+        j22 = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x
+        det = j11 * j22 - j12 * j21
+        x = x - (j22 * ex - j12 * ey) / det
+        y = y - (-j21 * ex + j11 * ey) / det
+        if max(np.max(np.abs(ex), initial=0), np.max(np.abs(ey), initial=0)) < 1e-14:
+            break
+    out = np.column_stack([x, y]) * scale
+    fx, fy = _distort_norm(x, y, lam)
+    # A root on the far branch (the lens folded: the point came back through the centre, or
+    # the map's Jacobian changed sign) is no undistortion.
+    r2 = x * x + y * y
+    g = 1.0 + k1 * r2 + k2 * r2 * r2
+    bad = (np.hypot(fx - xn, fy - yn) > 1e-9) | ~np.isfinite(det) | (g <= 0) | (
+        1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2 <= 0)
+    out[bad] = np.nan
+    return out
+
+
+def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
+                          only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The undistorted points at ``lam`` and d(undistorted point)/d(lam_j) for every entry
+    (central differences; shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just
+    these entries (the others are zero)."""
+    lam = np.asarray(lam, float)
+    base = undistort_points(q, lam, scale)
+    jac = np.zeros((len(q), 2, len(PARAMS)))
+    for j, h in enumerate(STEPS):
+        if only is not None and j not in only:
+            continue
+        e = np.zeros(len(PARAMS))
+        e[j] = h
+        jac[:, :, j] = (undistort_points(q, lam + e, scale)
+                        - undistort_points(q, lam - e, scale)) / (2 * h)
+    return base, jac
+
+
+def opencv_to_lens(camera_matrix: np.ndarray, dist: Sequence[float],
+                   image_size: tuple[int, int]) -> np.ndarray:
+    """An OpenCV camera (K, k1 k2 p1 p2 [k3]) as this module's lens vector (k3 dropped: the
+    caller adds its effect if it matters). ``image_size`` (width, height) [px]."""
+    w, h = image_size
+    scale = float(np.hypot(w - 1, h - 1) / 2)
+    fx, fy = float(camera_matrix[0, 0]), float(camera_matrix[1, 1])
+    d = np.zeros(5)
+    d[:min(5, len(dist))] = np.asarray(dist, float)[:5]
+    a = scale / fx
+    return np.array([d[0] * a**2, d[1] * a**4, d[2] * a, d[3] * a, fy / fx - 1,
+                     camera_matrix[0, 2] - (w - 1) / 2, camera_matrix[1, 2] - (h - 1) / 2])

@@ -1,0 +1,129 @@
+"""The lens test grid of issue 18: marks rendered through a physical lens (synth's
+Brown-Conrady camera: every pixel integrates the scene where the lens maps it from), measured
+by ``align.marks.measure_image`` without being told the lens.
+
+Lens classes: OpenCV k1 in {-0.3, -0.15, 0, +0.1} at f = 1.325 R (the chessboard camera's
+f / half-diagonal), each draw with |k2|, |p1|, |p2| <= 1e-3, the principal point up to 20 px
+from the image centre and pixel aspect in 0.995-1.005; and the real chessboard lens
+(calibrated from ../shared/data/real/opencv-chessboard by the caller). Mark positions: through
+the centre, off-centre along the mark (the foot of the perpendicular from the centre far from
+the mark's middle), off-centre across it, in a corner; lengths 100 px to most of the frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
+
+POSITIONS = ("centre", "along", "across", "corner")
+K1_CLASSES = (-0.3, -0.15, 0.0, 0.1)
+F_OVER_R = 530.0 / 400.0
+
+
+@dataclass(frozen=True)
+class Case:
+    lens: str
+    position: str
+    z: float
+    err_arcsec: float
+    u_arcsec: float
+    k1_true: float          # at the half-diagonal
+    k1_applied: float       # 0 when not applied
+    limited: bool
+    flagged: bool           # any note / bent / limited
+
+
+def draw_lens(k1: float, size: tuple[int, int], rng: np.random.Generator) -> CameraGeometry:
+    w, h = size
+    R = np.hypot(w - 1, h - 1) / 2
+    return CameraGeometry(focal_px=F_OVER_R * R, k1=k1, k2=float(rng.uniform(-1e-3, 1e-3)),
+                          p1=float(rng.uniform(-1e-3, 1e-3)), p2=float(rng.uniform(-1e-3, 1e-3)),
+                          aspect=float(rng.uniform(0.995, 1.005)),
+                          pp_offset_px=(float(rng.uniform(-20, 20)), float(rng.uniform(-20, 20))))
+
+
+def scaled_lens(camera_matrix: np.ndarray, dist: np.ndarray, size: tuple[int, int]
+                ) -> CameraGeometry:
+    """A calibrated OpenCV camera (640x480) as synth's camera for an image of ``size``
+    (focal length and principal-point offset scaled with the frame)."""
+    s = size[0] / 640.0
+    fx, fy = camera_matrix[0, 0], camera_matrix[1, 1]
+    d = np.zeros(5)
+    d[:len(dist[:5])] = dist[:5]
+    return CameraGeometry(focal_px=float(fx * s), k1=float(d[0]), k2=float(d[1]),
+                          p1=float(d[2]), p2=float(d[3]), aspect=float(fy / fx),
+                          pp_offset_px=(float((camera_matrix[0, 2] - 319.5) * s),
+                                        float((camera_matrix[1, 2] - 239.5) * s)))
+
+
+def draw_mark(position: str, size: tuple[int, int], rng: np.random.Generator) -> MarkSpec:
+    w, h = size
+    ang = float(rng.uniform(-90, 90))
+    a = np.deg2rad(ang)
+    # The longest mark that stays in the frame is bounded by the smaller side.
+    full = 0.9 * min(w, h)
+    length = float(rng.uniform(100, full))
+    if position == "centre":
+        off, t = rng.uniform(-10, 10), rng.uniform(-10, 10)
+    elif position == "along":
+        length = float(rng.uniform(100, 0.45 * min(w, h)))
+        off, t = rng.uniform(-15, 15), rng.choice([-1, 1]) * (0.2 * min(w, h) + length / 2)
+    elif position == "across":
+        off, t = rng.choice([-1, 1]) * rng.uniform(0.2, 0.35) * min(w, h), rng.uniform(-10, 10)
+    else:  # corner: the mark's middle near a corner, inside the frame
+        length = float(rng.uniform(100, 0.3 * min(w, h)))
+        cx = rng.choice([-1, 1]) * (w / 2 - length / 2 - 30)
+        cy = rng.choice([-1, 1]) * (h / 2 - length / 2 - 30)
+        off, t = cx * np.sin(a) + cy * np.cos(a), cx * np.cos(a) - cy * np.sin(a)
+    return MarkSpec(a, float(off), length, 4.0, centre_t_px=float(t))
+
+
+def run_case(lens_name: str, camera: CameraGeometry, position: str, size: tuple[int, int],
+             seed: int, n_marks: int = 1) -> list[Case]:
+    from align.marks import measure_image
+    from tests.conftest import angle_error
+
+    rng = np.random.default_rng(seed)
+    marks = []
+    while len(marks) < n_marks:
+        m = draw_mark(position if not marks else str(rng.choice(POSITIONS[1:])), size, rng)
+        if all(abs(np.rad2deg(angle_error(m.angle_rad, o.angle_rad))) > 20 for o in marks):
+            marks.append(m)
+    spec = ImageSpec(marks=tuple(marks), width=size[0], height=size[1], camera=camera,
+                     full_well_e=full_well_for_snr(40, -0.6), seed=seed, supersample=4)
+    s = render_marks(spec, with_crlb=False)
+    res = [r for r in measure_image(s.image, f"{lens_name}/{position}/{seed}",
+                                    max_marks=n_marks) if r.found]
+    R = np.hypot(size[0] - 1, size[1] - 1) / 2
+    k1t = camera.k1 * (R / camera.focal_px) ** 2
+    out = []
+    for r in res:
+        t = min(s.truth.marks, key=lambda t: abs(angle_error(r.angle_rad, t.angle_rad)))
+        err = angle_error(r.angle_rad, t.angle_rad)
+        if abs(err) > np.deg2rad(5):
+            continue  # not this mark (a spurious detection is another test's business)
+        k1 = r.lens["parameters"]["k1"]
+        out.append(Case(lens_name, position, float(err / r.angle_u_rad),
+                        float(np.rad2deg(err) * 3600), float(np.rad2deg(r.angle_u_rad) * 3600),
+                        float(k1t), float(k1["value"]) if k1["applied"] else 0.0,
+                        r.lens_limited, bool(r.notes)))
+    return out
+
+
+def summarise(cases: list[Case]) -> dict[tuple[str, str], tuple[int, float, float]]:
+    """(lens, position) -> (n, RMS z, max |z|)."""
+    out = {}
+    for key in sorted({(c.lens, c.position) for c in cases}):
+        z = np.array([c.z for c in cases if (c.lens, c.position) == key])
+        out[key] = (len(z), float(np.sqrt(np.mean(z**2))), float(np.max(np.abs(z))))
+    return out
+
+
+def wrong_sign(cases: list[Case]) -> int:
+    """Applied k1 of the wrong sign (or any k1 applied to a lens without one beyond 3 u is
+    counted by the caller from the errors)."""
+    return sum(1 for c in cases if c.k1_applied and c.k1_true
+               and np.sign(c.k1_applied) != np.sign(c.k1_true))

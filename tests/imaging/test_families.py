@@ -1,0 +1,132 @@
+"""Families of lines on synthetic ruled scales (synth.ruled): every graduation found, no
+extras, the family's angles consistent (chi2/dof) and normalised errors ~N(0, 1), a tilted
+member flagged."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from align.marks import LENS_TERMS, measure_image
+from align.warnings import mark_warnings
+from imaging import line_frame
+from synth.ruled import RuledSpec, random_ruled, render_ruled
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
+
+
+def _match(res, truth):
+    """Each measured line's truth (nearest middle, within 20 px), and the unmatched ones."""
+    got, extra = {}, 0
+    for r in res:
+        # The middle of the groove's extent, along the measured line (its own frame: the
+        # result's angle may sit across +-90 deg from it).
+        line = r.measurement.profile
+        u, n = line_frame(line.angle_rad)
+        t0, t1 = r.measurement.extent_px
+        mid = line.offset_px * n + 0.5 * (t0 + t1) * u
+        d = [np.hypot(*(np.array(g.centre_xy_px) - mid)) for g in truth.lines]
+        k = int(np.argmin(d))
+        if d[k] < 20 and k not in got:
+            got[k] = r
+        else:
+            extra += 1
+    return got, extra
+
+
+def _own_u(r):
+    """A line's own u [rad]: its angle u without the lens's Type B terms (the lens the frame
+    shares is not in these renders; it moves all members together)."""
+    lens = sum(v**2 for k, v in r.u_terms.items() if k.startswith(LENS_TERMS))
+    return float(np.sqrt(r.angle_u_rad**2 - lens))
+
+
+def _check(spec):
+    s = render_ruled(spec)
+    res = measure_image(s.image)
+    assert all(r.found for r in res), [r.error for r in res if not r.found]
+    got, extra = _match(res, s.truth)
+    assert extra == 0 and len(got) == len(s.truth.lines)
+    fam = res[0].family
+    assert fam is not None and len(fam.members) == len(res)
+    z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / _own_u(r) for k, r in got.items()]
+    # Lines as long as the truth's (not cut by numerals, nor by dust in their middle). A
+    # speck within ~30 px of an end still hides that end (a known limit: 16 % of the lines
+    # over the slow sweep's 12 seeds, with 4 specks on ~10 lines per image): most lines
+    # within 5 %, and none cut below half.
+    true_len = np.array([s.truth.lines[k].length_px for k in got])
+    err = np.array([r.length_px for r in got.values()]) - true_len
+    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len), err
+    assert np.mean(np.abs(err) < 0.05 * true_len) >= 0.5, err
+    assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
+    return fam, np.array(z), np.abs(err) >= 0.05 * true_len
+
+
+def test_ruled_scale_every_line_found_quick():
+    fam, z, _ = _check(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
+                              lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    assert fam.dof == len(z) - 1 and np.isfinite(fam.chi2_dof)
+    assert np.max(np.abs(z)) < 4.5
+
+
+def test_tilted_member_flagged():
+    spec = RuledSpec(width=800, height=600, pitch_px=80.0, lengths_px=(120.0, 150.0, 180.0),
+                     tilt=(1, np.deg2rad(0.3)), seed=3)
+    s = render_ruled(spec)
+    res = measure_image(s.image)
+    fam = res[0].family
+    got, _ = _match(res, s.truth)
+    tilted = [r.index for k, r in got.items() if s.truth.lines[k].index == s.truth.tilted]
+    assert fam is not None and fam.deviant == tuple(tilted) and len(tilted) == 1
+    # The tilted line itself is measured right (it is the family that is not parallel).
+    for k, r in got.items():
+        assert abs(_wrap(r.angle_rad - s.truth.lines[k].angle_rad)) < 4 * _own_u(r)
+    assert not fam.consistent()
+    assert any("not parallel" in w for w in mark_warnings(res))
+
+
+@pytest.mark.slow
+def test_ruled_scale_over_seeds():
+    """Random scales (pitch 40-140 px, any direction, 8-16 bits, 800 x 600): every line
+    found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
+    chis, zs, shorts = [], [], []
+    for seed in range(12):
+        fam, z, short = _check(random_ruled(seed, width=800, height=600))
+        chis.append(fam.chi2_dof)
+        zs.append(z)
+        shorts.append(short)
+    z = np.concatenate(zs)
+    assert np.mean(np.concatenate(shorts)) < 0.25  # lines with an end hidden by a speck
+    assert 0.7 < np.mean(chis) < 1.4, chis
+    assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
+
+
+def test_family_block_saved_validated_and_read_back():
+    from align.contract import validate
+    from align.documents import marks_document
+    from align.marks import MarkResult
+    from axisbase.output import dumps
+
+    s = render_ruled(RuledSpec(width=640, height=480, pitch_px=60.0, seed=2,
+                               lengths_px=(110.0, 140.0, 170.0)))
+    res = measure_image(s.image, max_marks=2)
+    doc = json.loads(dumps(marks_document(res, {}, [])))  # as the file holds it
+    validate(doc, "marks")
+    back = [MarkResult.from_dict(d) for d in doc["marks"]]
+    assert back[0].family == res[0].family
+
+
+def test_min_length_above_the_short_lines_says_how_many_it_left_out():
+    """--min-length between the short and the medium graduations: the longer ones reported,
+    the short ones of their family counted as found and not reported, and warned."""
+    s = render_ruled(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
+                               lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    res = measure_image(s.image, min_length_px=150.0)
+    kinds = [g.kind for g in s.truth.lines]
+    assert len(res) == len(kinds) - kinds.count("short")
+    assert res[0].unreported == kinds.count("short")
+    assert any("not reported" in w for w in mark_warnings(res))
