@@ -34,8 +34,8 @@ def _help(p: argparse.ArgumentParser) -> str:
 
 def test_every_command_is_listed():
     names = {" ".join(path) for path, _ in COMMANDS}
-    assert names == {"marks", "camera", "calibrate", "tilt", "gonio", "run", "apply", "lot", "plan",
-                     "synth session", "demo"}
+    assert names == {"marks", "camera", "calibrate", "tilt", "gonio", "run", "apply", "lot",
+                     "plan", "init", "check", "synth session", "demo"}
 
 
 @pytest.mark.parametrize("path,p", COMMANDS, ids=[" ".join(c) for c, _ in COMMANDS])
