@@ -40,7 +40,7 @@ from scipy.stats import chi2, norm
 
 from axisbase.errors import InputError
 from imaging import fit_line, line_frame
-from imaging.lens import PARAMS, undistort_points, undistortion_jacobian
+from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
 
 ARCSEC = np.pi / 180 / 3600
 
@@ -407,7 +407,6 @@ def camera_terms(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray |
 
     ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
     the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-    from imaging.lens import distort_points
 
     raw = distort_points(points_ideal, lam, scale)
     d = _design(LineGeometry(raw, sigma, chol), lam, scale)

@@ -12,6 +12,7 @@ from align.calibration import STATIC, StaticSettings, calibrate, read_poses
 from align.calibration.check import CheckResult, check_poses
 from align.calibration.units import unit_scale_check
 from align.warnings import calibration_warnings
+from axisbase.console import captured_warnings
 from axisbase.table import header_units, resolve_units
 from axisbase.units import DEG
 
@@ -91,13 +92,14 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
     alpha : significance of the residual loop's tests and of the check.
     fixture_error_rad : placement error of the faces (known-pose method) [rad].
     """
-    poses, intervals = read_poses(static, settings, columns=columns, rate_hz=rate_hz)
-    chk = (read_poses(check, settings, calibration=False, columns=columns,
-                      rate_hz=rate_hz)[0] if check else None)
+    with captured_warnings() as logged:  # (how the files were read: into the JSON too)
+        poses, intervals = read_poses(static, settings, columns=columns, rate_hz=rate_hz)
+        chk = (read_poses(check, settings, calibration=False, columns=columns,
+                          rate_hz=rate_hz)[0] if check else None)
     cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad)
     warnings = unit_scale_check(cal.model, units,
                                 unit_source or f"{static}: header unit [{units}]")
     checked = check_poses(cal, poses, chk, alpha, f"{check}") if chk is not None else None
-    warnings = (calibration_warnings(cal, poses) + warnings
+    warnings = (list(dict.fromkeys(logged)) + calibration_warnings(cal, poses) + warnings
                 + (list(checked.warnings) if checked is not None else []))
     return CalibrationRun(cal, poses, intervals, chk, checked, units, tuple(warnings))

@@ -16,7 +16,7 @@ from align.commands.common import (
     warn,
     wrote,
 )
-from align.commands.parents import tables
+from align.commands.parents import examples, tables
 from axisbase.units import DEG
 
 
@@ -140,7 +140,11 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 
 def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
-    k = add("calibrate", "ellipsoid calibration of the triad from static poses", tables())
+    k = add("calibrate", "ellipsoid calibration of the triad from static poses", tables(),
+            epilog=examples("align calibrate static.csv --json cal.json",
+                            "align calibrate recording.csv --check check.csv --scale-sign -,-,- "
+                            "--plot figs/",
+                            "align calibrate --plan 28"))
     k.add_argument("static", nargs="?", help="pose,ux,uy,uz[,t][,temp] or a recording "
                    "t,ux,uy,uz (CSV), or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
     k.add_argument("--plan", type=int, metavar="N", help="print an N-pose order (N >= 28) "
@@ -171,7 +175,10 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_tilt(add: Callable[..., argparse.ArgumentParser]) -> None:
-    tl = add("tilt", "roll and pitch from readings through a calibration", tables())
+    tl = add("tilt", "roll and pitch from readings through a calibration", tables(),
+             epilog=examples("align tilt readings.csv --calibration cal.json --out tilt.csv",
+                             "align tilt readings.csv --calibration pc.json --method paper "
+                             "--json tilt.json"))
     tl.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     tl.add_argument("--calibration", required=True,
                     help="JSON written by 'align calibrate' (roll/pitch of the triad's own "
@@ -187,7 +194,8 @@ def add_tilt(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_apply(add: Callable[..., argparse.ArgumentParser]) -> None:
-    ap = add("apply", "readings -> specific force in the platform frame", tables())
+    ap = add("apply", "readings -> specific force in the platform frame", tables(),
+             epilog=examples("align apply pc.json readings.csv --out platform.csv --tilt"))
     ap.add_argument("calibration_file", help="JSON from 'align run --calibration' or --json")
     ap.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     ap.add_argument("--out", required=True, help="new CSV t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]")

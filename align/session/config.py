@@ -18,6 +18,7 @@ import numpy as np
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
+from axisbase.provenance import sha256_file
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
@@ -172,7 +173,6 @@ class _Files:
 
 def _same_contents(a: Path, b: Path) -> bool:
     """Byte-identical files (size first, then streamed hashes: logs can be gigabytes)."""
-    from axisbase.provenance import sha256_file
 
     return a.stat().st_size == b.stat().st_size and sha256_file(a) == sha256_file(b)
 

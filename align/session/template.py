@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from align.errors import InputError
+from axisbase.output import write_atomic
 
 LAYOUT = (("+X", "x"), ("+Y", "y"))
 """Camera k of the standard layout: the platform axis pointing right in its image and the
@@ -160,7 +161,6 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
 def write_template(folder: str | Path, text: str, force: bool = False) -> Path:
     """``folder/session.toml`` (the folder made if absent); an existing one is replaced only
     with ``force`` (``InputError`` otherwise)."""
-    from axisbase.output import write_atomic
 
     path = Path(folder) / "session.toml"
     if path.exists() and not force:
