@@ -20,15 +20,8 @@ LAZY_OK = ("align.commands",)
 # Deliberate: align.gonio imports the loop (scipy, 1 s) on a thread during the log's pass
 # and inside the functions that use it, so the import overlaps the parsing.
 LAZY_EDGES_OK = {("align.gonio", "align.loop")}
-# cut on branch calib (the lead removes these at merge)
-KNOWN_CYCLE = {"align.calibration.geometry", "align.calibration.known",
-               "align.calibration.model", "align.calibration.units"}
-KNOWN_LAZY = {("align.calibration.formats", "align.calibration.model"),
-              ("align.calibration.model", "align.calibration.geometry"),
-              ("align.calibration.model", "align.calibration.known"),
-              ("align.calibration.static", "align.calibration.arrays"),
-              ("align.calibration.static", "align.calibration.geometry"),
-              ("align.calibration.static", "align.calibration.known")}
+KNOWN_CYCLE: set[str] = set()
+KNOWN_LAZY: set[tuple[str, str]] = set()
 
 
 def _modules() -> dict[str, Path]:
