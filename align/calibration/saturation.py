@@ -10,8 +10,9 @@ A pose's axis is saturated when
 * a declared rail (``adc_range`` LO, HI) is reached by at least :data:`RAIL_FRACTION` of
   its samples (at least one sample); or, without a declared rail,
 * its extreme value (top or bottom) holds at least :data:`PILE_FRACTION` of its samples (at
-  least :data:`PILE_MIN`) and more samples than the next value inward: quantised noise has
-  a tail that thins towards its end; a rail makes it rise. Judged only when the pose shows
+  least :data:`PILE_MIN`) and significantly more than the next value inward (one-sided
+  binomial test of the two counts at :data:`PILE_ALPHA`): quantised noise has a tail that
+  thins towards its end; a rail makes it rise. Judged only when the pose shows
   at least :data:`MIN_LEVELS` distinct values (coarser data have no tail to read); or
 * all its samples are one value while the file's typical pose shows at least
   :data:`MIN_LEVELS` distinct values on that axis (stuck, or clipped for the whole pose).
@@ -23,11 +24,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import binomtest
 
 PILE_FRACTION = 0.05
 """Least share of a pose's samples at its extreme value to call it a pile-up."""
 PILE_MIN = 5
 """... and least count."""
+PILE_ALPHA = 1e-4
+"""Significance of 'more at the extreme than next to it' (a tail's counts are small: a
+plain 'more than' calls 10 against 7 a pile-up)."""
 RAIL_FRACTION = 0.01
 """Least share of a pose's samples at a declared rail to call the pose clipped."""
 MIN_LEVELS = 4
@@ -101,6 +106,7 @@ def _piled(x: np.ndarray, typical_levels: float) -> tuple[float, int, str] | Non
         return None
     need = max(PILE_MIN, PILE_FRACTION * len(x))
     for end, inner in ((-1, -2), (0, 1)):
-        if counts[end] >= need and counts[end] > counts[inner]:
-            return float(values[end]), int(counts[end]), "piled at its extreme"
+        c, ci = int(counts[end]), int(counts[inner])
+        if c >= need and binomtest(c, c + ci, 0.5, alternative="greater").pvalue < PILE_ALPHA:
+            return float(values[end]), c, "piled at its extreme"
     return None
