@@ -118,3 +118,19 @@ def test_cli_json_warnings_and_flag(tmp_path, capsys):
     assert any(f"pose 3: uz piled at its extreme ({n} of" in w for w in doc["warnings"])
     assert main(["calibrate", str(path), "--adc-range", "3,1"]) == 2
     assert "LO < HI" in capsys.readouterr().err
+
+
+def test_session_key_adc_range(tmp_path):
+    """[calibration] adc_range reaches the reader; a malformed one is refused naming the key;
+    without scale_sign the signs are left to the labels (None)."""
+    from align.session.config import load_session
+
+    tumble_csv(tmp_path / "tumble.csv", 9)
+    toml = tmp_path / "session.toml"
+    toml.write_text('[calibration]\nstatic = "tumble.csv"\nadc_range = [-5.0, 5.0]\n')
+    c = load_session(tmp_path).calibration
+    assert c.adc_range == (-5.0, 5.0) and c.scale_sign is None
+    toml.write_text('[calibration]\nstatic = "tumble.csv"\nadc_range = [5.0, -5.0]\n')
+    with pytest.raises(InputError, match=r"\[calibration\] adc_range = \[5.0, -5.0\]: need LO "
+                       "< HI"):
+        load_session(tmp_path)
