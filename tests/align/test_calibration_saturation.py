@@ -134,3 +134,25 @@ def test_session_key_adc_range(tmp_path):
     with pytest.raises(InputError, match=r"\[calibration\] adc_range = \[5.0, -5.0\]: need LO "
                        "< HI"):
         load_session(tmp_path)
+
+
+def test_recording_interval_clipped(tmp_path):
+    """A continuous recording: the static interval of the +z pose clipped on uz in half its
+    samples is judged on its own (0.6 % of the file) and left out, named by its time."""
+    from synth.tumble import recording
+
+    t, u, iv = recording(TumbleSpec(triad=Triad(noise_v=NOISE_V, lsb_v=LSB_V), check_poses=0,
+                                    seed=10))
+    means = np.array([u[(t >= a) & (t <= b)].mean(0) for a, b in iv])
+    a, b = iv[int(np.argmin(means[:, 2]))]  # the pose reading the most negative uz: +z
+    sel = (t >= a) & (t <= b)
+    rail = float(np.median(u[sel, 2]))
+    u[sel, 2] = np.maximum(u[sel, 2], rail)
+    path = tmp_path / "rec.csv"
+    path.write_text("t,ux,uy,uz\n" + "".join(
+        f"{x:.2f},{p:.5f},{q:.5f},{r:.5f}\n" for x, (p, q, r) in zip(t, u, strict=True)))
+    got: list[str] = []
+    poses = read_poses(path, warnings=got)[0]
+    assert len(got) == 1 and ": uz piled at its extreme (" in got[0], got
+    assert got[0].split(": pose ")[1].startswith("static@")
+    assert len(poses.u) == len(iv) - 1
