@@ -85,8 +85,8 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
     m, a = cal.model, cal.algebraic
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
                  if all(s > 0 for s in signs) else "mixed")
-    lines = [f"{n_poses} poses in {units}; scale-factor signs {tuple(signs)} ({sign_note}: an "
-             "ellipsoid cannot tell them, --scale-sign sets them)"]
+    lines = [f"{n_poses} poses in {units}; scale-factor signs {tuple(signs)} ({sign_note}: "
+             "from the face labels +x,-x,... when the poses carry them, else --scale-sign)"]
     if cal.method == "known-pose":
         kf = cal.known
         used = Counter(kf.faces)

@@ -24,6 +24,7 @@ from align.calibration.known import (
     has_six_faces,
     labelled,
     recognise_directions,
+    resolve_signs,
 )
 from align.calibration.model import (
     CANDIDATES,
@@ -111,7 +112,7 @@ class Calibration:
 
 
 
-def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1e-3,
+def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES,
               fixture_error_rad: float | None = None) -> Calibration:
     """Calibrate the triad from its poses.
@@ -123,12 +124,14 @@ def calibrate(poses: Poses, signs: Sequence[float] = (1, 1, 1), alpha: float = 1
       (each guarded by :func:`admissible`); when the six faces are among the poses, the
       known-pose fit runs too and the two are cross-checked (``cross_check``, ``notes``).
 
-    ``fixture_error_rad``: declared placement error of the faces (default
-    :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    ``signs``: the scale factors' signs; None: from labelled faces when the poses carry
+    them, else +,+,+ (an explicit one that contradicts the labels is refused:
+    :func:`align.calibration.known.resolve_signs`). ``fixture_error_rad``: declared placement
+    error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
-    signs_t = tuple(float(s) for s in signs)
     faces = faces_of(poses)
+    signs = signs_t = resolve_signs(poses, faces, signs)
     six = has_six_faces(faces)
     # Poses that are all faces (however many) span six directions: the ellipsoid's nine
     # parameters are not determined by them, the known-pose fit is.

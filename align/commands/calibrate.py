@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, POSITIVE, number, signs, unique
+from align.commands.args import ALPHA, POSITIVE, adc_range, number, signs, unique
 from align.commands.common import (
     plan,
     same_units,
@@ -28,15 +28,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         return _plan_poses(args)
     inputs = [args.static] + ([args.check] if args.check else [])
     unique(inputs, "static/--check")
-    sign, cols = signs(args.scale_sign), parse_column_map(args.columns)
+    sign = signs(args.scale_sign) if args.scale_sign is not None else None
+    cols = parse_column_map(args.columns)
     units = calibration_units(args.static, args.check, args.units, cols)
     outs = plan(args, inputs)
     out, plot = (outs.add("--json", args.json, stdout_ok=True),
                  outs.add("--plot", args.plot, folder=True))
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
-                          f"--units {units}" if args.units else None)
-    _show_calibration(args, run, sign, cols, plot)
+                          f"--units {units}" if args.units else None, args.adc_range)
+    _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
     return 0 if run.checked is None or run.checked.ok else 2
@@ -154,7 +155,12 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
     k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
                    "('-': stdout)")
     k.add_argument("--plot", help="folder for the dg-per-pose / residual figure")
-    k.add_argument("--scale-sign", default="+", help="signs of k: +, - or e.g. -,-,-")
+    k.add_argument("--scale-sign", default=None,
+                   help="signs of k: +, - or e.g. -,-,- (default: from the face labels "
+                   "+x,-x,... when the poses carry them, else +)")
+    k.add_argument("--adc-range", type=adc_range, metavar="LO,HI",
+                   help="the ADC's rails in the readings' unit: a pose reaching one is left "
+                   "out (warned) or refused (default: a pile-up at a pose's extreme value)")
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     k.add_argument("--window", type=POSITIVE, default=0.25,
                    help="static detection window [s] (at least 5 samples)")

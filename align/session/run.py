@@ -200,9 +200,13 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
             res.units = resolve_units(tk.units, [c.static] + ([c.check] if c.check else []),
                                       STATIC, tk.columns, ("ux", "uy", "uz"),
                                       flag="[calibration] units")
+            left_out: list[str] = []
             res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
-                                                  rate_hz=tk.rate_hz)
+                                                  rate_hz=tk.rate_hz, adc_range=c.adc_range,
+                                                  warnings=left_out)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            if left_out:
+                cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
             # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
             source = ("[calibration] units" if tk.units else
