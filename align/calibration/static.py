@@ -23,6 +23,7 @@ from scipy.ndimage import uniform_filter1d
 from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
 from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
 from align.calibration.known import faces_of, has_six_faces
+from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
@@ -202,9 +203,6 @@ def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
     """The poses without those saturated on an axis; refused (naming them) when the rest no
     longer determine the calibration: the six faces when all poses are faces, else nine
     poses or the six faces."""
-    from align.calibration.known import faces_of, has_six_faces
-    from align.calibration.saturation import find_saturated
-
     sat = find_saturated(samples, poses.labels, adc_range)
     if not sat:
         return poses
