@@ -38,11 +38,17 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.stats import chi2, norm
 
-from axisbase.errors import InputError
+from axisbase.errors import InputError, NotApplicable
 from imaging import fit_line, line_frame
 from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
 
-ARCSEC = np.pi / 180 / 3600
+
+class LensFolds(NotApplicable):
+    """The lens (as estimated or probed) folds the image along a mark: no undistortion exists
+    there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
+    one is not mistaken for a folding lens)."""
+
+
 
 
 @dataclass(frozen=True)
@@ -131,7 +137,7 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
             only: Sequence[int] | None = None) -> _Design:
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
-        raise ValueError("the lens folds the image along this mark")
+        raise LensFolds("the lens folds the image along this mark")
     lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
     u, n = line_frame(lf.angle_rad)
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
@@ -232,7 +238,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                 break
             try:
                 designs = [_design(ln, lam, scale) for ln in lines]
-            except ValueError:
+            except LensFolds:
                 break  # folds: refused below
             F = sum(d.G.T @ d.G for d in designs)
             b = sum(d.G.T @ d.z for d in designs)
@@ -248,7 +254,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                 break
         try:
             designs = [_design(ln, lam, scale) for ln in lines]
-        except ValueError:  # the estimate folds the image: no lens, refused below
+        except LensFolds:  # the estimate folds the image: no lens, refused below
             lam[applied] = np.where(np.abs(lam[applied]) > rng[applied], lam[applied],
                                     2 * rng[applied])
             designs = [_design(ln, np.zeros(P), scale) for ln in lines]
@@ -350,7 +356,7 @@ def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int
     for p in _pp_probes(lam, det, rng):
         try:
             ds = [_design(ln, p, scale) for ln in lines]
-        except ValueError:
+        except LensFolds:
             out[applied] = np.inf
             continue
         F = sum(d.G.T @ d.G for d in ds)
@@ -367,7 +373,7 @@ def _pp_probe_s(lines: Sequence[LineGeometry], lam: np.ndarray, det: list[int],
         for k, ln in enumerate(lines):
             try:  # only the radial terms act about the principal point
                 out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale, (0, 1)).s))
-            except ValueError:
+            except LensFolds:
                 out[k][:] = np.inf
     return out
 

@@ -19,7 +19,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import Poses, TriadModel, pose_sigma_g
-from align.errors import InputError
+from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
 NONLIN = "nonlinearity_k2"
@@ -157,9 +157,9 @@ class CalibrationStage:
         s0 = self.start
         for e in effects:
             if e in (TEMP, SCALE_TEMP) and p.temp is None:
-                raise ValueError("no temperature column")
+                raise NotApplicable("no temperature column")
             if e == HYSTERESIS and not p.ordered:
-                raise ValueError("the pose order is not known (no time column)")
+                raise NotApplicable("the pose order is not known (no time column)")
         theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(_n_params(effects) - 9)])
         prev = self.solutions.get(tuple(effects[:-1]))
         if prev is not None:  # start a trial from the fit it extends (a few iterations)
@@ -202,7 +202,7 @@ class CalibrationStage:
             return (np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0) * w
 
         if len(p.u) < len(theta0):
-            raise ValueError("more parameters than poses")
+            raise NotApplicable("more parameters than poses")
         scale = np.concatenate([np.abs(s0.k) * 1e-3, np.full(3, 1e-4), np.full(3, 1e-4),
                                 np.concatenate([_effect_scale(e, p) for e in effects])
                                 if effects else []])

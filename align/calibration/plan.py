@@ -36,7 +36,7 @@ from align.calibration.model import (
     _spans,
 )
 from align.calibration.triad import Poses
-from axisbase.errors import InputError
+from axisbase.errors import InputError, NotApplicable
 
 MIN_POSES = 28
 """Fewest poses of a plan: 14 attitudes each held twice. An attitude effect is a function of
@@ -186,7 +186,7 @@ def identifiability(up: np.ndarray, sigma_g: float = 1e-6) -> dict[str, dict[str
     for e in EFFECTS_CHECKED:
         try:
             m, _, _ = stage.refine([e])
-        except ValueError:
+        except NotApplicable:
             continue
         us = np.array([m.u_of(name) for _, _, name in EFFECTS[e].slots])
         reach = float(np.max(us)) * EFFECTS[e].size(*_spans(poses))
@@ -196,7 +196,7 @@ def identifiability(up: np.ndarray, sigma_g: float = 1e-6) -> dict[str, dict[str
             try:
                 stage.refine([e1, e2])
                 cond = stage.condition[(e1, e2)]
-            except ValueError:  # more parameters than poses
+            except NotApplicable:  # more parameters than poses
                 cond = float("inf")
             for e in (e1, e2):
                 if e in out and cond > out[e].get("pair_condition", 0.0):
