@@ -368,21 +368,21 @@ def test_run_tolerance_in_toml_with_nominal(session, tmp_path):
     _, _, doc = session
     exy = doc["misalignment_arcsec"][0][1]
     # nominal = the value + 5", zone +-20": PASS
-    set_tolerance(s, f"arcsec = 100000\nE_xY = 20\nnominal_arcsec = {{ E_xY = {exy + 5:.3f} }}")
+    set_tolerance(s, f"arcsec = 30000\nE_xY = 20\nnominal_arcsec = {{ E_xY = {exy + 5:.3f} }}")
     r = align("run", s, "--json", tmp_path / "a.json", "-q", "--fail-on-reject")
     assert r.returncode == 0, r.stderr
     d = json.loads((tmp_path / "a.json").read_text())["disposition"]
     a = {x["name"]: x for x in d["angles"]}["E_xY"]
     assert d["verdict"] == "PASS"
-    assert a["lower_arcsec"] == pytest.approx(exy + 5 - 20, abs=1e-6)
+    assert a["lower_arcsec"] == pytest.approx(exy + 5 - 20, abs=2e-3)
     # nominal off by 50": FAIL, exit 3 with --fail-on-reject
-    set_tolerance(s, f"arcsec = 100000\nE_xY = 20\nnominal_arcsec = {{ E_xY = {exy + 50:.3f} }}")
+    set_tolerance(s, f"arcsec = 30000\nE_xY = 20\nnominal_arcsec = {{ E_xY = {exy + 50:.3f} }}")
     r = align("run", s, "--json", tmp_path / "b.json", "-q", "--fail-on-reject")
     assert r.returncode == 3, r.stderr
     d = json.loads((tmp_path / "b.json").read_text())["disposition"]
     assert d["verdict"] == "FAIL" and d["worst"] == "E_xY"
-    # the command line overrides the limits, nominals stay: +-100000 around it -> PASS
-    r = align("run", s, "--json", tmp_path / "c.json", "-q", "--tolerance-arcsec", "100000",
+    # the command line overrides the limits, nominals stay: +-30000 around it -> PASS
+    r = align("run", s, "--json", tmp_path / "c.json", "-q", "--tolerance-arcsec", "30000",
               "--fail-on-reject")
     assert r.returncode == 0, r.stderr
 
@@ -436,7 +436,7 @@ def test_resume_with_changed_tolerance_flag_is_not_stale(session, tmp_path):
     _, _, doc = session
     res = tmp_path / "res"
     res.mkdir()
-    r = align("run", s, "--json", f"{res}/", "-q", "--tolerance-arcsec", "100000")
+    r = align("run", s, "--json", f"{res}/", "-q", "--tolerance-arcsec", "30000")
     assert r.returncode == 0
     tight = worst_abs(doc) - 30            # the largest angle is 30" outside: FAIL
     r = align("run", s, "--json", f"{res}/", "-q", "--resume", "--tolerance-arcsec",
@@ -552,3 +552,43 @@ def test_ruled_scale_through_lens_with_camera_pitch(tmp_path):
     fam = ms[0]["family"]
     assert sorted(fam["steps"]) == list(range(9))
     assert abs(fam["pitch_px"] - 70.0) <= 3 * fam["pitch_u_px"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="'align check' says 'ready to run' for a [cameras.A] "
+                   "model whose principal point is outside the image; 'align run' then refuses it")
+def test_check_validates_camera_model_named_in_session(tmp_path):
+    s = tmp_path / "syn"
+    assert align("synth", "session", s, "--seed", "5", "-q").returncode == 0
+    import cv2
+    img = cv2.imread(str(s / "x_A.png"), cv2.IMREAD_UNCHANGED)
+    h, w = img.shape[:2]
+    cam = write_camera_json(s / "camA.json", w, h, 1000.0, (0.0, 0.0, 0.0, 0.0))
+    doc = json.loads(cam.read_text())
+    doc["camera_matrix"][0][2] = 5000.0                  # principal point off the image
+    cam.write_text(json.dumps(doc))
+    toml = (s / "session.toml").read_text()
+    toml = toml.replace("[cameras.A]\n", '[cameras.A]\nmodel = "camA.json"\n', 1)
+    (s / "session.toml").write_text(toml)
+    r = align("check", s)
+    assert r.returncode == 2 and "camA.json" in r.stdout + r.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="'align lot --tolerance-arcsec' drops the session's "
+                   "[tolerance] nominal_arcsec (run keeps it, docs: nominals stay): PASS -> FAIL")
+def test_lot_tolerance_flag_keeps_session_nominals(session, tmp_path):
+    s = copy_session(session, tmp_path)
+    _, _, doc = session
+    E = by_name(doc, "misalignment_arcsec")
+    noms = ", ".join(f"{n} = {E[n]:.4f}" for n in E)
+    set_tolerance(s, f"arcsec = 30000\nnominal_arcsec = {{ {noms} }}")
+    out = tmp_path / "r.json"
+    r = align("run", s, "--json", out, "-q", "--tolerance-arcsec", "10")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(out.read_text())["disposition"]["verdict"] == "PASS"   # run: nominals stay
+    r, lot = _lot(out, "--tolerance-arcsec", "10")
+    d = lot["dispositions"][0]
+    assert {a["name"]: a["nominal_arcsec"] for a in d["angles"]} == pytest.approx(
+        {n: round(E[n], 4) for n in E}, abs=1e-3)
+    assert d["verdict"] == "PASS"
