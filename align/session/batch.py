@@ -236,9 +236,10 @@ def skipped(job: SessionJob) -> Summary:
                                           ("cal", job.cal)) if v and Path(v).is_file()}}
 
 
-NUMBER_SETTINGS = ("alpha",)
-"""The run settings that change a session's numbers (everything else that does is in
-session.toml, an input checked by its sha256)."""
+NUMBER_SETTINGS = ("alpha", "tolerance_arcsec", "decision", "guard_k")
+"""The run settings that change a session's result: its numbers (``alpha``) or its verdict
+(the decision flags); everything else that does is in session.toml, an input checked by its
+sha256."""
 
 
 def reuse_verdict(job: SessionJob) -> tuple[str, str | None]:

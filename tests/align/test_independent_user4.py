@@ -429,8 +429,6 @@ def test_resume_redoes_changed_input(session, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="--resume reuses a result made under another "
-                   "--tolerance-arcsec: stale PASS, exit 0 despite --fail-on-reject")
 def test_resume_with_changed_tolerance_flag_is_not_stale(session, tmp_path):
     s = copy_session(session, tmp_path)
     _, _, doc = session
