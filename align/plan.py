@@ -200,6 +200,13 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
 
 def plan_from_result(js: Mapping, where: str = "the result") -> Plan:
     """:func:`plan` from a session result JSON ('align run --json')."""
+    verdict = (js.get("disposition") or {}).get("verdict")
+    if js.get("ok") is False or verdict == "NOT MEASURED":
+        failed = [e.get("stage", "?") for e in js.get("errors") or [] if isinstance(e, Mapping)]
+        raise InputError(f"{where}: the session was NOT MEASURED (not ok"
+                         + (f": {', '.join(failed)} failed" if failed else "")
+                         + "): its u are not a basis for planning; fix what failed (its "
+                         "warnings and errors say what) and run it again")
     b = js.get("budget")
     if not js.get("fused") or not b or not b.get("model"):
         raise InputError(f"{where}: no fused misalignment with its budget (a failed session, "
