@@ -26,9 +26,6 @@ import numpy as np
 PARAMS = ("k1", "k2", "p1", "p2", "aspect", "cx", "cy")
 """The lens vector's entries, in order (see the module docstring for their units)."""
 
-STEPS = np.array([1e-3, 1e-3, 1e-5, 1e-5, 1e-4, 0.05, 0.05])
-"""Finite-difference steps for each entry (derivatives of the undistortion)."""
-
 
 def _distort_norm(x: np.ndarray, y: np.ndarray, lam: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -89,18 +86,42 @@ def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.nd
 def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
                           only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The undistorted points at ``lam`` and d(undistorted point)/d(lam_j) for every entry
-    (central differences; shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just
-    these entries (the others are zero)."""
+    (shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just these entries (the
+    others are zero).
+
+    Analytic, by the implicit-function theorem on D(x, y; lam) = (xn, yn)(lam): one
+    undistortion, then d(x, y)/d lam = J^-1 (d(xn, yn)/d lam - dD/d lam) with J the map's
+    2x2 Jacobian at the root, for all points and entries at once (it replaced central
+    differences through 14 iterative undistortions; the two agree to their truncation error,
+    ~1e-6 relative). Non-finite where the lens folds.
+    """
     lam = np.asarray(lam, float)
+    q = np.asarray(q, float)
     base = undistort_points(q, lam, scale)
-    jac = np.zeros((len(q), 2, len(PARAMS)))
-    for j, h in enumerate(STEPS):
-        if only is not None and j not in only:
-            continue
-        e = np.zeros(len(PARAMS))
-        e[j] = h
-        jac[:, :, j] = (undistort_points(q, lam + e, scale)
-                        - undistort_points(q, lam - e, scale)) / (2 * h)
+    k1, k2, p1, p2, a = lam[:5]
+    x, y = base[:, 0] / scale, base[:, 1] / scale
+    r2 = x * x + y * y
+    g = 1.0 + k1 * r2 + k2 * r2 * r2
+    dg = k1 + 2 * k2 * r2  # d g / d (r^2)
+    xy2 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+    j11 = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x
+    j22 = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x
+    det = j11 * j22 - xy2 * xy2
+    # b[:, :, j] = d(xn, yn)/d lam_j - dD/d lam_j (normalised units per unit of lam_j).
+    b = np.zeros((len(q), 2, len(PARAMS)))
+    b[:, 0, 0], b[:, 1, 0] = -x * r2, -y * r2
+    b[:, 0, 1], b[:, 1, 1] = -x * r2 * r2, -y * r2 * r2
+    b[:, 0, 2], b[:, 1, 2] = -2 * x * y, -(r2 + 2 * y * y)
+    b[:, 0, 3], b[:, 1, 3] = -(r2 + 2 * x * x), -2 * x * y
+    b[:, 1, 4] = -(q[:, 1] - lam[6]) / ((1 + a) ** 2 * scale)
+    b[:, 0, 5] = -1.0 / scale
+    b[:, 1, 6] = -1.0 / ((1 + a) * scale)
+    if only is not None:
+        b[:, :, [j for j in range(len(PARAMS)) if j not in only]] = 0.0
+    jac = np.empty_like(b)
+    f = (scale / det)[:, None]
+    jac[:, 0, :] = f * (j22[:, None] * b[:, 0, :] - xy2[:, None] * b[:, 1, :])
+    jac[:, 1, :] = f * (j11[:, None] * b[:, 1, :] - xy2[:, None] * b[:, 0, :])
     return base, jac
 
 
