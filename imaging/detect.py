@@ -51,8 +51,10 @@ def line_frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
 
 def wrap_angle(angle_rad: float) -> float:
     """Wrap a line direction to (-pi/2, pi/2]."""
-    a = (angle_rad + np.pi / 2) % np.pi - np.pi / 2
-    return float(np.pi / 2 if np.isclose(a, -np.pi / 2, atol=0) else a)
+    a = float((angle_rad + np.pi / 2) % np.pi - np.pi / 2)
+    # np.isclose(a, -pi/2, atol=0) written out: the scalar test is ~50x cheaper, and this
+    # runs in every line fit.
+    return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
 
 
 def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,

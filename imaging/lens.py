@@ -44,34 +44,31 @@ def distort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndar
     return np.column_stack([scale * xd + lam[5], (1 + lam[4]) * scale * yd + lam[6]])
 
 
-def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
-    """Sensor points (relative to the image centre) -> ideal points (relative to the principal
-    point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
-    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
-    lam = np.asarray(lam, float)
-    q = np.asarray(q, float)
+def _undistort_norm(q: np.ndarray, lam: np.ndarray, scale: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`undistort_points` in the normalised coordinates (x, y) = ideal point / R."""
     xn = (q[:, 0] - lam[5]) / scale
     yn = (q[:, 1] - lam[6]) / ((1 + lam[4]) * scale)
     if not np.any(lam[:4]):
-        return np.column_stack([xn, yn]) * scale
-    k1, k2, p1, p2 = lam[:4]
+        return xn, yn
+    k1, k2, p1, p2 = (float(v) for v in lam[:4])
     x, y = xn.copy(), yn.copy()
     for _ in range(30):
-        fx, fy = _distort_norm(x, y, lam)
-        ex, ey = fx - xn, fy - yn
+        # _distort_norm and its Jacobian sharing r^2 and g (same expressions, so the same
+        # bits as calling it: this loop is the lens stage's inner cost).
         r2 = x * x + y * y
         g = 1.0 + k1 * r2 + k2 * r2 * r2
+        ex = x * g + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) - xn
+        ey = y * g + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y - yn
         dg = k1 + 2 * k2 * r2  # d g / d (r^2)
         j11 = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x
-        j12 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
-        j21 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+        j12 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y  # = j21
         j22 = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x
-        det = j11 * j22 - j12 * j21
+        det = j11 * j22 - j12 * j12
         x = x - (j22 * ex - j12 * ey) / det
-        y = y - (-j21 * ex + j11 * ey) / det
-        if max(np.max(np.abs(ex), initial=0), np.max(np.abs(ey), initial=0)) < 1e-14:
+        y = y - (-j12 * ex + j11 * ey) / det
+        if max(np.abs(ex).max(initial=0), np.abs(ey).max(initial=0)) < 1e-14:
             break
-    out = np.column_stack([x, y]) * scale
     fx, fy = _distort_norm(x, y, lam)
     # A root on the far branch (the lens folded: the point came back through the centre, or
     # the map's Jacobian changed sign) is no undistortion.
@@ -79,8 +76,17 @@ def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.nd
     g = 1.0 + k1 * r2 + k2 * r2 * r2
     bad = (np.hypot(fx - xn, fy - yn) > 1e-9) | ~np.isfinite(det) | (g <= 0) | (
         1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2 <= 0)
-    out[bad] = np.nan
-    return out
+    x[bad] = np.nan
+    y[bad] = np.nan
+    return x, y
+
+
+def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
+    """Sensor points (relative to the image centre) -> ideal points (relative to the principal
+    point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
+    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
+    x, y = _undistort_norm(np.asarray(q, float), np.asarray(lam, float), scale)
+    return np.column_stack([x, y]) * scale
 
 
 def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
@@ -97,9 +103,9 @@ def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
     """
     lam = np.asarray(lam, float)
     q = np.asarray(q, float)
-    base = undistort_points(q, lam, scale)
+    x, y = _undistort_norm(q, lam, scale)
+    base = np.column_stack([x, y]) * scale
     k1, k2, p1, p2, a = lam[:5]
-    x, y = base[:, 0] / scale, base[:, 1] / scale
     r2 = x * x + y * y
     g = 1.0 + k1 * r2 + k2 * r2 * r2
     dg = k1 + 2 * k2 * r2  # d g / d (r^2)
