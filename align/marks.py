@@ -61,7 +61,7 @@ from imaging import (
     line_frame,
     measure_frame,
     measure_marks,
-    read_image,
+    read_image_notes,
     undistort,
 )
 
@@ -711,12 +711,14 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     (path, roi) pairs; one list of results per image, in order; an unreadable image or one
     without a mark is its failed entry, as in :func:`measure_file`."""
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
+    said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
     for j, (path, roi) in enumerate(images):
         if on_image is not None:
             on_image(j)
         try:
-            img = read_image(path)
-            found_all.append(list(measure_marks(img, camera, where=str(path),
+            got = read_image_notes(path)
+            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes)
+            found_all.append(list(measure_marks(got.pixels, camera, where=str(path),
                                                 expect_one=expect_one, roi=roi)))
         except ImageInputError as exc:
             found_all.append([exc])
@@ -736,7 +738,8 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             else:
                 res.append(finish_mark(m, lens, k, str(path), i, alpha))
             k += 1
-        out.append(res)
+        notes = said.get(str(path), ())
+        out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
     return out
 
 
@@ -746,11 +749,17 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
                  ) -> list[MarkResult]:
     """Every mark in an image file; an unreadable file is one failed entry."""
     try:
-        img = read_image(path)
+        got = read_image_notes(path)
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
-    return measure_image(img, str(path), camera, alpha, max_marks, expect_one, roi,
-                         min_length_px, ranges)
+    results = measure_image(got.pixels, str(path), camera, alpha, max_marks, expect_one, roi,
+                            min_length_px, ranges)
+    if not got.notes:
+        return results
+    # What the reader did to the stored image (orientation applied, signed data offset):
+    # in each mark's notes, hence in the JSON and the warnings.
+    said = tuple(f"{path}: {n}" for n in got.notes)
+    return [replace(r, notes=said + tuple(r.notes)) for r in results]
 
 
 def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None,

@@ -12,6 +12,8 @@ import os
 import sys
 from typing import TextIO
 
+from axisbase.errors import InputError
+
 _ASCII = {"″": '"', "′": "'", "±": "+/-", "µ": "u", "°": " deg", "²": "^2", "³": "^3",
           "χ": "chi", "α": "alpha", "β": "beta", "σ": "sigma", "Δ": "d", "×": "x", "→": "->",
           "≤": "<=", "≥": ">=", "≈": "~", "−": "-", "—": "-", "–": "-", "√": "sqrt", "·": "*"}
@@ -29,13 +31,22 @@ def ascii_fallback(exc: UnicodeError) -> tuple[str, int]:
 codecs.register_error("align-ascii", ascii_fallback)
 
 
+class ConsoleWriteError(InputError):
+    """The terminal's stream cannot be written (a full disk behind ``> file``, an I/O error):
+    one line and exit status 2, never a traceback."""
+
+
 class ClosedPipeSafe:
     """A text stream that stops writing, quietly, once its reader has gone (``| head -1``):
-    the run goes on and its files are still written."""
+    the run goes on and its files are still written. Any other write error (ENOSPC on
+    ``> /dev/full``, EIO) is raised once as :class:`ConsoleWriteError` naming the stream; later
+    writes are dropped."""
 
-    def __init__(self, stream: TextIO):
+    def __init__(self, stream: TextIO, name: str = "standard output"):
         self._s = stream
+        self._name = name
         self.closed_pipe = False
+        self.failed: str | None = None
 
     def write(self, text: str) -> int:
         if not self.closed_pipe:
@@ -43,6 +54,8 @@ class ClosedPipeSafe:
                 return self._s.write(text)
             except BrokenPipeError:
                 self._gone()
+            except OSError as exc:
+                self._fail(exc)
         return len(text)
 
     def flush(self) -> None:
@@ -51,6 +64,13 @@ class ClosedPipeSafe:
                 self._s.flush()
             except BrokenPipeError:
                 self._gone()
+            except OSError as exc:
+                self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        self._gone()
+        self.failed = f"{self._name}: cannot be written ({exc.strerror or exc})"
+        raise ConsoleWriteError(self.failed) from None
 
     def _gone(self) -> None:
         self.closed_pipe = True
@@ -64,7 +84,7 @@ class ClosedPipeSafe:
         return getattr(self._s, name)
 
 
-def console(stream: TextIO) -> ClosedPipeSafe:
+def console(stream: TextIO, name: str = "standard output") -> ClosedPipeSafe:
     """``stream`` with an ASCII fallback for ″ ± µ ° when its encoding cannot show them
     (LANG=C, PYTHONIOENCODING=ascii, a Windows code page) and a quiet end on a closed pipe."""
     if isinstance(stream, ClosedPipeSafe):
@@ -78,7 +98,7 @@ def console(stream: TextIO) -> ClosedPipeSafe:
             pass
     except AttributeError:
         pass
-    return ClosedPipeSafe(stream)
+    return ClosedPipeSafe(stream, name)
 
 
 def setup_logging(name: str, quiet: bool = False, verbose: bool = False) -> logging.Logger:

@@ -28,7 +28,18 @@ STDOUT = "-"
 
 
 class OutputError(InputError):
-    """An output cannot be written as asked (exists, collides, folder not writable)."""
+    """An output cannot be written as asked (exists, collides, folder not writable, the disk
+    full, the reader of a pipe gone)."""
+
+
+def write_failed(where: str | Path, exc: OSError) -> OutputError:
+    """The one-line error of a write that the system refused (ENOSPC, EPIPE, EACCES, EIO...):
+    the path and the system's reason, for the CLI's exit status 2."""
+    name = "standard output" if str(where) == STDOUT else str(where)
+    reason = exc.strerror or type(exc).__name__
+    if isinstance(exc, BrokenPipeError):
+        reason = "its reader closed the pipe before the end"
+    return OutputError(f"{name}: cannot be written ({reason}); the output is incomplete")
 
 
 def jsonable(obj: Any) -> Any:
@@ -114,6 +125,9 @@ class OutputPlan:
                 raise OutputError(f"{flag} -: another output already goes to standard output")
             self.paths[flag] = Path(STDOUT)
             return Path(STDOUT)
+        if not folder and str(path).endswith(("/", os.sep)):
+            raise OutputError(f"{flag} {path}: ends with '/', so it names a folder; give a "
+                              "file name")
         p = Path(path)
         for other_flag, other in self.paths.items():
             # Folders of per-item files may be shared (the files' names differ).
@@ -131,6 +145,9 @@ class OutputPlan:
         else:
             if p.is_dir():
                 raise OutputError(f"{flag} {p}: is a folder; give a file name")
+            if _is_special(p):  # /dev/stdout, a FIFO: written straight through
+                self.paths[flag] = p
+                return p
             if p.exists() and not self.force:
                 raise OutputError(f"{flag} {p}: exists; choose a new name or pass --force")
             target_dir = p.parent
@@ -169,15 +186,28 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
         # A file format's bytes (UTF-8), whatever the console's encoding: through the
         # stream's binary buffer when it has one.
         out = _real_stdout()
-        out.flush()
-        buf = getattr(out, "buffer", None)
-        if buf is not None:
-            buf.write(data.encode("utf-8") if isinstance(data, str) else data)
-            buf.flush()
-        else:
-            out.write(data if isinstance(data, str) else data.decode("utf-8"))
+        try:
             out.flush()
+            buf = getattr(out, "buffer", None)
+            if buf is not None:
+                buf.write(data.encode("utf-8") if isinstance(data, str) else data)
+                buf.flush()
+            else:
+                out.write(data if isinstance(data, str) else data.decode("utf-8"))
+                out.flush()
+        except OSError as exc:
+            _silence(out)
+            raise write_failed(STDOUT, exc) from None
         return Path(STDOUT)
+    if _is_special(path):
+        # A device or a named pipe (/dev/stdout, a FIFO): written straight through, never
+        # replaced by a temporary file renamed over it.
+        try:
+            with open(path, "wb") as f:
+                f.write(data.encode("utf-8") if isinstance(data, str) else data)
+        except OSError as exc:
+            raise write_failed(path, exc) from None
+        return Path(path)
     with OutputSet(force) as out:
         out.stage(path, data)
         return out.commit()[0]
@@ -212,14 +242,17 @@ class OutputSet:
         p = Path(path)
         raw = data.encode("utf-8") if isinstance(data, str) else data
         # A stop between the file's creation and its record here would leave it behind.
-        with stops_held():
-            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
-            self._staged.append((p, tmp))
-        with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), 0o666 & ~_umask())  # mkstemp's 0600 is for secrets
-            f.write(raw)
-            f.flush()
-            os.fsync(f.fileno())
+        try:
+            with stops_held():
+                fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part", dir=p.parent)
+                self._staged.append((p, tmp))
+            with os.fdopen(fd, "wb") as f:
+                os.fchmod(f.fileno(), 0o666 & ~_umask())  # mkstemp's 0600 is for secrets
+                f.write(raw)
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise write_failed(p, exc) from None
 
     def commit(self) -> list[Path]:
         """Put every staged file in place; returns their paths (:class:`OutputError` and
@@ -235,6 +268,11 @@ class OutputSet:
                     else:
                         _link_exclusive(tmp, p)
                     done.append(p)
+            except OSError as exc:
+                if not self.force:
+                    for p in done:
+                        p.unlink(missing_ok=True)
+                raise write_failed(self._staged[len(done)][0], exc) from None
             except BaseException:
                 if not self.force:
                     for p in done:
@@ -270,6 +308,26 @@ def _link_exclusive(tmp: str, p: Path) -> None:
         os.replace(tmp, p)
         return
     os.unlink(tmp)
+
+
+def _is_special(path: str | Path) -> bool:
+    """An existing output that is not a regular file (a character device, a FIFO)."""
+    import stat
+
+    try:
+        return not stat.S_ISREG(os.stat(path).st_mode) and not os.path.isdir(path)
+    except OSError:
+        return False
+
+
+def _silence(stream) -> None:
+    """Send whatever ``stream`` still holds, and any later write, to the null device (a full
+    or closed standard output must not fail again at exit)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stream.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
 
 
 def _umask() -> int:

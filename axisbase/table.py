@@ -37,6 +37,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 
 from axisbase.errors import InputError
+from axisbase.units import time_scale, value_unit
 
 KINDS = ("float", "int", "label")
 MAX_MAGNITUDE = 1e100
@@ -67,6 +68,9 @@ class TableSpec:
     columns: tuple[Column, ...]
     time: str | None = None
     distinct_rows: bool = False
+    rate_hz_range: tuple[float, float] | None = None
+    """Plausible sample rates of the sensor [Hz]: a median interval outside is a warning
+    naming the likely time unit (see :func:`rate_warning`)."""
 
     def column(self, name: str) -> Column:
         return next(c for c in self.columns if c.name == name)
@@ -265,10 +269,17 @@ def _skip_comment(row) -> str:
     return "skip" if _is_comment(text) and "\n" not in text else "error"
 
 
+_PLUS = re.compile(rb"(?:(?<=^)|(?<=[,;\t| ]))\+(?=[0-9.])")
+"""A '+' that opens a number in a field (``+190972``): pyarrow's integer parser refuses it
+(its float parser takes it); the fallback reader drops it. Not the '+' of an exponent
+(``1e+05``: preceded by 'e')."""
+
+
 class _Uncommented(io.RawIOBase):
-    """The file without the comment lines after its header, for pyarrow (the fallback when
-    its own parse cannot skip them; see the module's docstring). The lines up to the header
-    stay as they are, so ``skip_rows`` and every line number still hold."""
+    """The file without the comment lines after its header, and without the '+' that opens
+    a number (:data:`_PLUS`), for pyarrow (the fallback when its own parse cannot skip them;
+    see the module's docstring). The lines up to the header stay as they are, so
+    ``skip_rows`` and every line number still hold."""
 
     def __init__(self, path: Path, keep: int) -> None:
         self._f = open(path, "rb")  # noqa: SIM115 - closed by close()
@@ -283,7 +294,7 @@ class _Uncommented(io.RawIOBase):
             lines = self._f.readlines(1 << 20)
             if not lines:
                 return 0
-            self._buf = b"".join(ln for ln in lines if not _is_comment(ln))
+            self._buf = b"".join(_PLUS.sub(b"", ln) for ln in lines if not _is_comment(ln))
             self._pos = 0
         n = min(len(b), len(self._buf) - self._pos)
         b[:n] = self._buf[self._pos:self._pos + n]
@@ -296,13 +307,14 @@ class _Uncommented(io.RawIOBase):
 
 
 def _may_have_comments(path: Path, h: _Header) -> bool:
-    """Whether a '#' follows the header anywhere (a byte search, memchr speed): if not, a
-    file pyarrow refused has a bad row, not a comment, and is not read again."""
+    """Whether a '#' (a comment) or a '+' (a signed number) follows the header anywhere (a
+    byte search, memchr speed): if not, a file pyarrow refused has a bad row, not a comment,
+    and is not read again."""
     with open(path, "rb") as f:
         for _ in range(h.skip):
             f.readline()
         while block := f.read(1 << 22):
-            if b"#" in block:
+            if b"#" in block or b"+" in block:
                 return True
     return False
 
@@ -493,7 +505,34 @@ def _table(path: Path, spec: TableSpec, h: _Header, columns: Mapping[str, pa.Arr
             raise t.fail(int(rows[0]), n, what)
         data[n] = _numpy(col, kinds[n])
     ignored = tuple(r.strip() for r, n in zip(h.raw, h.names, strict=True) if not n)
-    return Table(path, spec, data, h.skip + 1, ignored, h.units, row0=row0)
+    data, units = _in_own_units(path, spec, h, data)
+    return Table(path, spec, data, h.skip + 1, ignored, units, row0=row0)
+
+
+def _in_own_units(path: Path, spec: TableSpec, h: _Header, data: dict[str, np.ndarray]
+                  ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The columns whose header declares a unit (``t [ms]``, ``ux [mg]``) converted to the
+    tool's own (seconds; g, m/s², V, counts) by the one table in :mod:`axisbase.units`; the
+    units as they now are. A time in a unit that is not one is refused by name."""
+    units = dict(h.units)
+    for n, u in h.units.items():
+        if n not in data or data[n].dtype.kind != "f" or not u.strip():
+            continue
+        if n == spec.time:
+            scale = time_scale(u)
+            if scale is None:
+                raise InputError(f"{path}:{h.header_line}: {n}: time unit {u!r} not known; "
+                                 f"use one of s, ms, us, ns, min, h")
+            unit = "s"
+        else:
+            vu = value_unit(u)
+            if vu is None:
+                continue  # temperature [°C] and the like: carried, not converted
+            unit, scale = vu
+        if scale != 1.0:
+            data[n] = data[n] * scale
+        units[n] = unit
+    return data, units
 
 
 def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
@@ -537,7 +576,42 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     _check(table)
     if spec.distinct_rows:
         check_repeats(table)
+    warning = rate_warning(table)
+    if warning:
+        import logging
+
+        logging.getLogger("align").warning("WARNING: %s", warning)
     return table
+
+
+def rate_warning(table: Table) -> str | None:
+    """A sentence when the table's median sample interval (within a pose, if labelled) is
+    implausible for its sensor (``spec.rate_hz_range``), naming the time unit that would make
+    it plausible (times in ms under a plain ``t``: a 20 Hz recording read as 0.02 Hz)."""
+    spec = table.spec
+    if spec.rate_hz_range is None or spec.time not in table.data or table.time_from_rate:
+        return None
+    t = table.data[spec.time]
+    d = np.diff(t)
+    if "pose" in table.data:
+        labels = table.data["pose"]
+        d = d[labels[1:] == labels[:-1]]
+    if len(d) < 2:
+        return None
+    dt = float(np.median(d))
+    lo, hi = spec.rate_hz_range
+    if lo <= 1.0 / dt <= hi:
+        return None
+    from axisbase.units import TIME_UNITS
+
+    fits = [u for u in ("ms", "us", "ns", "min", "h")
+            if lo <= 1.0 / (dt * TIME_UNITS[u]) <= hi]
+    unit = table.units.get(spec.time) or "s"
+    likely = (f"; were the times in {fits[0]}? say so in the header: {spec.time} [{fits[0]}]"
+              if fits else "")
+    return (f"{table.path}: {spec.time}: median sample interval {dt:g} {unit} "
+            f"({1.0 / dt:.3g} Hz) is implausible for a {spec.what} ({lo:g} Hz to {hi:g} Hz)"
+            f"{likely}")
 
 
 PAIR_ROWS = 20
@@ -587,9 +661,6 @@ def check_repeats(table: Table) -> None:
                              "Each sample must appear once")
 
 
-_UNIT_NAMES = {"g": "g", "m/s2": "m/s2", "m/s^2": "m/s2", "m/s²": "m/s2", "ms-2": "m/s2",
-               "counts": "counts", "count": "counts", "lsb": "counts", "adc": "counts",
-               "v": "V", "volt": "V", "volts": "V"}
 OUTPUT_UNITS = {"g": "g/g", "m/s2": "(m/s²)/g", "counts": "counts/g", "V": "V/g"}
 """Output unit of an accelerometer -> the unit of its scale factor (per g of input)."""
 
@@ -603,11 +674,12 @@ def header_units(path: str | Path, spec: TableSpec, columns: Mapping[str, str] |
     found = {n: h.units[n] for n in names if n in h.units}
     if not found:
         return None
-    keys = {n: _UNIT_NAMES.get(u.strip().lower().replace(" ", "")) for n, u in found.items()}
+    keys = {n: (value_unit(u) or (None,))[0] for n, u in found.items()}
     bad = [n for n, k in keys.items() if k is None]
     if bad:
         raise InputError(f"{path}:{h.header_line}: {bad[0]}: unit {found[bad[0]]!r} not "
-                         f"known; use one of {', '.join(OUTPUT_UNITS)}")
+                         f"known; use one of {', '.join(OUTPUT_UNITS)} (or mg, µg, mm/s2, "
+                         "mV: converted)")
     if len(set(keys.values())) > 1:
         raise InputError(f"{path}:{h.header_line}: header: the axes are in different units "
                          f"({', '.join(f'{n} [{u}]' for n, u in found.items())})")

@@ -13,3 +13,36 @@ G0 = 9.80665
 """Standard gravity [m/s²] (the conventional value, used to convert g <-> m/s²)."""
 MICRO_G = 1e-6
 """One micro-g [g]."""
+
+
+# The one table of units that a file's header may declare (``t [ms]``, ``ux [mg]``): what a
+# value in that unit is in the tool's own unit. Keys are lower case, without spaces.
+TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
+              "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "usec": 1e-6, "ns": 1e-9, "min": 60.0,
+              "h": 3600.0, "hour": 3600.0}
+"""A time unit -> seconds per unit."""
+
+VALUE_UNITS = {"g": ("g", 1.0), "mg": ("g", 1e-3), "ug": ("g", MICRO_G), "µg": ("g", MICRO_G),
+               "μg": ("g", MICRO_G),
+               "m/s2": ("m/s2", 1.0), "m/s^2": ("m/s2", 1.0), "m/s²": ("m/s2", 1.0),
+               "ms-2": ("m/s2", 1.0), "mm/s2": ("m/s2", 1e-3), "mm/s^2": ("m/s2", 1e-3),
+               "mm/s²": ("m/s2", 1e-3),
+               "v": ("V", 1.0), "volt": ("V", 1.0), "volts": ("V", 1.0), "mv": ("V", 1e-3),
+               "counts": ("counts", 1.0), "count": ("counts", 1.0), "lsb": ("counts", 1.0),
+               "adc": ("counts", 1.0)}
+"""An accelerometer output unit -> (the unit the tool computes in, its size in that unit)."""
+
+
+def unit_key(text: str) -> str:
+    """A header's unit as a key of the tables above: lower case, no spaces."""
+    return text.strip().lower().replace(" ", "")
+
+
+def time_scale(text: str) -> float | None:
+    """Seconds per ``text`` (a time unit), None if it is not one."""
+    return TIME_UNITS.get(unit_key(text))
+
+
+def value_unit(text: str) -> tuple[str, float] | None:
+    """``text`` (an output unit) as (the tool's unit, the size of one ``text`` in it)."""
+    return VALUE_UNITS.get(unit_key(text))

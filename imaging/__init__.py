@@ -14,7 +14,7 @@ from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
-from imaging.io import read_image
+from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
 from imaging.linefit import LineFit, fit_line
@@ -41,4 +41,5 @@ __all__ = [
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
+    "ImageRead", "read_image_notes", "set_max_pixels",
 ]

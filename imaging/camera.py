@@ -20,6 +20,54 @@ from axisbase.errors import InputError
 from axisbase.provenance import check_format
 from imaging.errors import ImageInputError
 
+DIST_LENGTHS = (4, 5, 8, 12, 14)
+"""The lengths of an OpenCV distortion vector (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [tx ty]]]])."""
+
+
+def _matrix(d: Mapping, key: str, shape: tuple[int, ...] | None) -> np.ndarray:
+    """``d[key]`` as a finite float array of ``shape`` (None: any 1-D length), or
+    ValueError naming the key."""
+    try:
+        a = np.array(d[key], dtype=float)
+    except KeyError:
+        raise KeyError(f"no '{key}'") from None
+    except (TypeError, ValueError):
+        raise ValueError(f"'{key}' is not an array of numbers") from None
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"'{key}' has shape {list(a.shape)}, expected {list(shape)}")
+    if shape is None and a.ndim != 1:
+        raise ValueError(f"'{key}' has shape {list(a.shape)}, expected a flat list")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"'{key}' holds a non-finite value (NaN, inf or null)")
+    return a
+
+
+def checked_intrinsics(d: Mapping) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """The camera matrix, distortion and image size of a camera file, each checked as any
+    other input is: shapes, finite values, focal lengths > 0, the principal point inside the
+    image, the matrix's fixed entries. ValueError/KeyError naming the key (:meth:`CameraModel.load`
+    adds the file)."""
+    K = _matrix(d, "camera_matrix", (3, 3))
+    D = _matrix(d, "dist_coeffs", None)
+    size = _matrix(d, "image_size", (2,))
+    if np.any(size != np.round(size)) or np.any(size < 16):
+        raise ValueError(f"'image_size' {size.tolist()} is not two whole numbers of pixels "
+                         "(width, height) of at least 16")
+    w, h = (int(v) for v in size)
+    if len(D) not in DIST_LENGTHS:
+        raise ValueError(f"'dist_coeffs' has {len(D)} values; OpenCV's have "
+                         f"{', '.join(map(str, DIST_LENGTHS))}")
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    if fx <= 0 or fy <= 0:
+        raise ValueError(f"'camera_matrix' focal lengths fx {fx:g}, fy {fy:g} px: both must "
+                         "be > 0")
+    if not (0 <= cx <= w and 0 <= cy <= h):
+        raise ValueError(f"'camera_matrix' principal point ({cx:g}, {cy:g}) px lies outside "
+                         f"the {w}x{h} px image")
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        raise ValueError("'camera_matrix' is not [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
+    return K, D, (w, h)
+
 
 @dataclass(frozen=True)
 class CameraModel:
@@ -51,9 +99,7 @@ class CameraModel:
         def num(v: object) -> float:  # strict JSON saves NaN as null
             return float("nan") if v is None else float(v)  # type: ignore[arg-type]
 
-        K = np.array(d["camera_matrix"], float).reshape(3, 3)
-        D = np.array(d["dist_coeffs"], float).ravel()
-        w, h = (int(v) for v in d["image_size"])
+        K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px")), int(d.get("views", 0)),
                    {k: num(v) for k, v in (d.get("u") or {}).items()} or None,
                    {k: num(v) for k, v in (d.get("per_view_rms_px") or {}).items()} or None)
@@ -69,8 +115,10 @@ class CameraModel:
         except IsADirectoryError:
             raise ImageInputError(f"{p}: is a folder, not a camera file") from None
         except (ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise ImageInputError(f"{p}: not a camera file ({exc!s}); expected camera_matrix, "
-                                  "dist_coeffs, image_size as written by 'align camera'") from None
+            why = exc.args[0] if exc.args else type(exc).__name__
+            raise ImageInputError(f"{p}: not a usable camera file: {why} (expected "
+                                  "camera_matrix, dist_coeffs, image_size as written by "
+                                  "'align camera')") from None
         try:  # version 1: files written before format versions existed
             check_format(d, "axis-align/camera", (1, 2, 3), str(p))
         except InputError as exc:

@@ -1,7 +1,18 @@
-"""Reading images as float arrays with clear errors (8/16-bit PNG, TIFF, JPEG; colour -> gray)."""
+"""Reading images as float arrays with clear errors (8/16-bit PNG, TIFF, JPEG; colour -> gray).
+
+Before any pixel is decoded the header is read (Pillow for PNG/JPEG/BMP, tifffile for TIFF)
+and the image's size checked against a pixel budget (:data:`DEFAULT_MAX_PIXELS`, settable with
+``--max-pixels`` or the environment variable ``ALIGN_MAX_PIXELS``): a small file that declares
+a huge image (a decompression bomb) is refused at once. The orientation a file declares (EXIF
+in a JPEG, the TIFF Orientation tag) is applied, so the pixels are as the file shows them;
+a planar-configuration TIFF is read as one colour image; signed integer data are offset to
+unsigned. Whatever was done is said in :attr:`ImageRead.notes`.
+"""
 
 from __future__ import annotations
 
+import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -9,25 +20,80 @@ import numpy as np
 
 from imaging.errors import ImageInputError
 
+DEFAULT_MAX_PIXELS = 100_000_000
+"""Largest image read by default [pixels] (100 MP: any machine-vision sensor; 800 MB as
+float64). A larger one is refused before decoding unless the budget is raised."""
+
+MAX_PIXELS_ENV = "ALIGN_MAX_PIXELS"
+"""Environment variable that sets the budget for this process and the processes it starts
+(``--max-pixels`` sets it)."""
+
+ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "turned 180°",
+                4: "mirrored top-bottom", 5: "transposed", 6: "turned 90° clockwise",
+                7: "transversed", 8: "turned 90° counter-clockwise"}
+"""The EXIF/TIFF Orientation values (TIFF 6.0 tag 274) and what applying them does."""
+
+
+@dataclass(frozen=True)
+class ImageRead:
+    """An image as read: ``pixels`` [DN] (float64, 2-D) and ``notes``, one sentence per
+    thing the reader did to the stored data (orientation applied, signed data offset)."""
+
+    pixels: np.ndarray
+    notes: tuple[str, ...] = ()
+
+
+def max_pixels() -> int:
+    """The pixel budget in force: ``ALIGN_MAX_PIXELS`` if set, else :data:`DEFAULT_MAX_PIXELS`."""
+    raw = os.environ.get(MAX_PIXELS_ENV, "").strip()
+    if not raw:
+        return DEFAULT_MAX_PIXELS
+    try:
+        n = int(float(raw))
+    except ValueError:
+        raise ImageInputError(f"{MAX_PIXELS_ENV}={raw!r}: not a number of pixels") from None
+    if n < 256:
+        raise ImageInputError(f"{MAX_PIXELS_ENV}={raw!r}: at least 256 pixels")
+    return n
+
+
+def set_max_pixels(n: int | None) -> None:
+    """Set the pixel budget for this process and the ones it starts (None: the default)."""
+    if n is None:
+        os.environ.pop(MAX_PIXELS_ENV, None)
+    else:
+        os.environ[MAX_PIXELS_ENV] = str(int(n))
+
 
 def read_image(path: str | Path) -> np.ndarray:
     """Read a grayscale image as float64 digital numbers (DN), keeping 16-bit depth.
 
     Colour images are converted with OpenCV's luminance weights. Raises
-    :class:`ImageInputError` naming the file and the reason for anything unreadable.
+    :class:`ImageInputError` naming the file and the reason for anything unreadable. See
+    :func:`read_image_notes` for what was done to the stored data.
     """
+    return read_image_notes(path).pixels
+
+
+def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
+    """:func:`read_image` with the notes of what was done (orientation, signed offset).
+    ``budget``: largest image [pixels] (default :func:`max_pixels`)."""
     p = Path(path)
     if not p.exists():
         raise ImageInputError(f"{p}: no such file")
     if p.is_dir():
         raise ImageInputError(f"{p}: is a folder, not an image")
-    img = None
+    budget = max_pixels() if budget is None else budget
+    notes: list[str] = []
     if p.suffix.lower() in (".tif", ".tiff"):
-        img = _read_tiff(p)
+        img, orientation = _read_tiff(p, budget)
     else:
+        orientation = _check_header(p, budget)
         data = np.fromfile(p, dtype=np.uint8)
+        img = None
         if data.size:
-            # IMREAD_UNCHANGED: the default flag silently turns 16-bit into 8-bit BGR.
+            # IMREAD_UNCHANGED: the default flag silently turns 16-bit into 8-bit BGR (and it
+            # ignores EXIF orientation, which is applied below, once, and said).
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if img is None:
         raise ImageInputError(f"{p}: not an image, or truncated/corrupt (OpenCV cannot decode it)")
@@ -36,19 +102,69 @@ def read_image(path: str | Path) -> np.ndarray:
         if img.shape[2] == 4:
             img = img[..., :3]
         if img.shape[2] == 3:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.dtype != np.float64 else img.mean(2)
+            img = (cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.dtype in (np.uint8, np.uint16)
+                   else img.astype(np.float64) @ np.array([0.114, 0.587, 0.299]))
         else:
             img = img[..., 0]
     if img.ndim != 2:
         raise ImageInputError(f"{p}: unsupported image layout {img.shape}")
     if min(img.shape) < 16:
         raise ImageInputError(f"{p}: image is only {img.shape[1]}x{img.shape[0]} px, too small")
-    return img.astype(np.float64)
+    out = img.astype(np.float64)
+    if np.issubdtype(img.dtype, np.signedinteger):
+        offset = float(-np.iinfo(img.dtype).min)
+        out += offset
+        notes.append(f"signed {img.dtype.itemsize * 8}-bit data offset by +{offset:.0f} DN "
+                     "to unsigned")
+    if orientation not in (None, 1):
+        out = _orient(out, orientation)
+        notes.append(f"orientation tag {orientation} applied ({ORIENTATIONS[orientation]})")
+    return ImageRead(out, tuple(notes))
 
 
-def _read_tiff(p: Path) -> np.ndarray:
-    """The single image of a TIFF file (compressed ones through imagecodecs); a stack of
-    several pages is refused rather than read as one odd-shaped image."""
+def _orient(img: np.ndarray, code: int) -> np.ndarray:
+    """``img`` as a viewer shows a file whose Orientation is ``code`` (TIFF 6.0 tag 274)."""
+    return {2: lambda a: a[:, ::-1], 3: lambda a: a[::-1, ::-1], 4: lambda a: a[::-1, :],
+            5: lambda a: a.T, 6: lambda a: np.rot90(a, -1), 7: lambda a: a[::-1, ::-1].T,
+            8: lambda a: np.rot90(a, 1)}[code](img).copy()
+
+
+def _budget(p: Path, w: int, h: int, budget: int) -> None:
+    if w * h > budget:
+        raise ImageInputError(
+            f"{p}: declares {w}x{h} px ({w * h / 1e6:.3g} MP), over the pixel budget of "
+            f"{budget / 1e6:g} MP; refused before decoding (raise it with --max-pixels if "
+            "the image is genuine)")
+
+
+def _check_header(p: Path, budget: int) -> int | None:
+    """Read only the header (Pillow opens lazily): size against ``budget``, and the EXIF
+    orientation; None when Pillow does not know the format (OpenCV then tries)."""
+    from PIL import Image, UnidentifiedImageError
+
+    # Pillow's own bomb guard (a warning, an error over twice 89 MP) gives way to ours,
+    # which is settable and says so in one line.
+    Image.MAX_IMAGE_PIXELS = None
+    try:
+        with Image.open(p) as im:
+            w, h = im.size
+            _budget(p, w, h, budget)
+            code = im.getexif().get(0x0112)
+    except UnidentifiedImageError:
+        return None
+    except OSError as exc:
+        raise ImageInputError(f"{p}: unreadable image header ({exc})") from None
+    if code is None:
+        return None
+    if code not in ORIENTATIONS:
+        raise ImageInputError(f"{p}: EXIF orientation {code} is not one of 1-8")
+    return int(code)
+
+
+def _read_tiff(p: Path, budget: int) -> tuple[np.ndarray, int | None]:
+    """The single image of a TIFF file (compressed ones through imagecodecs) as rows x
+    columns [x samples], and its Orientation tag; a stack of several pages is refused rather
+    than read as one odd-shaped image."""
     import tifffile
 
     try:
@@ -57,11 +173,25 @@ def _read_tiff(p: Path) -> np.ndarray:
             if pages != 1:
                 raise ImageInputError(f"{p}: a TIFF with {pages} pages; give one image per "
                                       "file (e.g. split the stack)")
-            return tf.pages[0].asarray()
+            page = tf.pages[0]
+            axes, shape = page.axes, page.shape
+            if "Y" in axes and "X" in axes:
+                _budget(p, shape[axes.index("X")], shape[axes.index("Y")], budget)
+            tag = page.tags.get(274)
+            code = int(tag.value) if tag is not None else None
+            img = page.asarray()
     except ImageInputError:
         raise
     except Exception as exc:  # tifffile raises many types for corrupt or exotic files
         raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
+    if axes == "SYX":  # planar configuration: one plane per sample -> rows x cols x samples
+        img = np.moveaxis(img, 0, -1)
+        axes = "YXS"
+    if img.ndim == 3 and axes == "YXS" and img.shape[2] >= 3:
+        img = img[..., 2::-1] if img.shape[2] == 3 else img[..., [2, 1, 0]]  # RGB -> OpenCV's BGR
+    if code is not None and code not in ORIENTATIONS:
+        raise ImageInputError(f"{p}: TIFF Orientation {code} is not one of 1-8")
+    return img, code
 
 
 BIT_DEPTHS = (8, 10, 12, 14, 16)

@@ -27,6 +27,9 @@ MEANS_ROWS = 500
 """Without time stamps or a rate, an array of at most this many rows is read as per-pose
 means (one row a pose); a longer one needs ``--rate``."""
 _TIME = ("t", "time", "timestamp", "t_s", "time_s")
+_BY_NAME = {"t": _TIME, "pose": ("pose", "poses", "label", "labels"),
+            "temp": ("temp", "temperature", "temp_c")}
+"""The variable names found without ``--columns`` (case-insensitive), as the CSV headers'."""
 
 
 def _load(path: Path) -> tuple[dict[str, np.ndarray], str]:
@@ -106,10 +109,19 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
         if canon in cols:
             v = get(cols.pop(canon), canon).ravel()
             data[canon] = v if canon == "pose" else v.astype(float)
-        elif canon == "t" and "t" not in data:
-            hits = [k for k, v in arrays.items() if k.lower() in _TIME and v.size == n]
-            if len(hits) == 1:
-                data["t"] = arrays[hits[0]].ravel().astype(float)
+        elif canon not in data:
+            hits = [k for k, v in arrays.items() if k.lower() in _BY_NAME[canon]]
+            if len(hits) > 1:
+                raise InputError(f"{path}: variables {', '.join(sorted(hits))} could each be "
+                                 f"{canon}: name one with --columns {canon}=NAME")
+            if hits:
+                v = np.asarray(arrays[hits[0]]).ravel()
+                if v.size != n:
+                    raise InputError(f"{path}: variable {hits[0]!r} ({canon}) has {v.size} "
+                                     f"values, the outputs {n}")
+                data[canon] = v if canon == "pose" else v.astype(float)
+                if canon != "t":
+                    notes.append(f"{path}: {canon} from variable {hits[0]!r}")
     if cols:
         raise InputError(f"--columns: {', '.join(sorted(cols))} not a column of a {spec.what}")
     for k, v in data.items():

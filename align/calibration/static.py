@@ -61,14 +61,18 @@ class StaticSettings:
 
 
 _AXES = {ax: (f"a{ax}", f"acc_{ax}", f"accel_{ax}", f"acc{ax}", f"u_{ax}") for ax in "xyz"}
+ACCELEROMETER_RATES_HZ = (1.0, 1e5)
+"""Plausible sample rates of an accelerometer recording [Hz] (outside: a warning naming the
+likely time unit, :func:`axisbase.table.rate_warning`)."""
 _T = Column("t", required=False, aliases=("time", "t_s", "time_s", "timestamp"))
 _TEMP = Column("temp", required=False, aliases=("temperature", "temp_c", "temperature_c"))
 _U = tuple(Column(f"u{ax}", aliases=_AXES[ax]) for ax in "xyz")
 STATIC = TableSpec("static-pose file", (
     Column("pose", "label", required=False, aliases=("pose_id", "position", "label")),
-    *_U, _T, _TEMP), time="t", distinct_rows=True)
+    *_U, _T, _TEMP), time="t", distinct_rows=True, rate_hz_range=ACCELEROMETER_RATES_HZ)
 """``pose,ux,uy,uz[,t][,temp]`` (samples or per-pose means) or ``t,ux,uy,uz[,temp]``."""
-READINGS = TableSpec("readings file", (*_U, _T, _TEMP), time="t", distinct_rows=True)
+READINGS = TableSpec("readings file", (*_U, _T, _TEMP), time="t", distinct_rows=True,
+                     rate_hz_range=ACCELEROMETER_RATES_HZ)
 """``ux,uy,uz[,t][,temp]``: readings to correct (``align apply``, ``align tilt``)."""
 
 

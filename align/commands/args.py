@@ -78,6 +78,15 @@ def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = 
 ALPHA = number(0, 1, lo_open=True, hi_open=True, what=": a significance level 0 < α < 1")
 POSITIVE = number(0, None, lo_open=True)
 SEED = number(0, 2**63 - 1, integer=True)
+MAX_PIXELS = number(256, 10**12, integer=True, what=": pixels (default 100000000)")
+
+
+def add_max_pixels(parser: argparse.ArgumentParser) -> None:
+    """``--max-pixels``: the image pixel budget, checked on each file's header before
+    decoding (imaging.io)."""
+    parser.add_argument("--max-pixels", type=MAX_PIXELS, metavar="N",
+                        help="refuse an image declaring more than N pixels before decoding it "
+                        "(default 100000000; also $ALIGN_MAX_PIXELS)")
 
 
 def unique(items: Sequence[str], flag: str, what: str = "file") -> None:

@@ -11,13 +11,14 @@ a fraction of a second.
 from __future__ import annotations
 
 import io
+import os
 import sys
 import traceback
 from collections.abc import Sequence
 
 from align.commands.args import attach_signs
 from align.commands.parser import build_parser
-from axisbase.console import console, setup_logging
+from axisbase.console import ConsoleWriteError, console, setup_logging
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, InputError
 
 
@@ -25,9 +26,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``align`` with ``argv`` (default: the command line); returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
     given_out, given_err = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = console(sys.stdout), console(sys.stderr)
+    sys.stdout, sys.stderr = console(sys.stdout), console(sys.stderr, "standard error")
     try:
-        return _main(argv)
+        status = _main(argv)
+        try:  # what is still buffered: a full disk shows only now (> /dev/full)
+            sys.stdout.flush()
+        except ConsoleWriteError as exc:
+            print(f"align: {exc}", file=sys.stderr)
+            return EXIT_INPUT
+        return status
     finally:
         for s in (sys.stdout, sys.stderr):
             try:
@@ -50,6 +57,11 @@ def _main(argv: list[str]) -> int:
     set_command(["align", *argv])
     real_stdout = sys.stdout
     set_real_stdout(real_stdout)
+    budget_before = os.environ.get("ALIGN_MAX_PIXELS")
+    if getattr(args, "max_pixels", None) is not None:  # the image reader's budget, here
+        from imaging.io import set_max_pixels  # (and in the processes a batch starts)
+
+        set_max_pixels(args.max_pixels)
     handlers = raise_on_signals()  # SIGTERM unwinds like Ctrl-C: no half-written outputs
     if getattr(args, "json", None) == "-":
         # The JSON owns standard output: messages go to stderr, or nowhere with -q (which
@@ -73,3 +85,7 @@ def _main(argv: list[str]) -> int:
     finally:
         sys.stdout = real_stdout
         restore(handlers)
+        if budget_before is None:  # main() called in-process: the budget was for this call
+            os.environ.pop("ALIGN_MAX_PIXELS", None)
+        else:
+            os.environ["ALIGN_MAX_PIXELS"] = budget_before

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, POSITIVE, number, pattern, unique
+from align.commands.args import ALPHA, POSITIVE, add_max_pixels, number, pattern, unique
 from align.commands.common import log, plan, progress, say, settings, warn, wrote
 
 
@@ -131,6 +131,7 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
                    "image's smaller side)")
     m.add_argument("--one", action="store_true",
                    help="each image holds one mark: two competing marks are an error")
+    add_max_pixels(m)
     m.set_defaults(func=cmd_marks)
 
 
@@ -142,4 +143,5 @@ def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
     c.add_argument("--json", help="write the camera model to this new JSON file ('-': stdout)")
     c.add_argument("--fix-k3", action="store_true", help="keep k3 at 0")
     c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
+    add_max_pixels(c)
     c.set_defaults(func=cmd_camera)

@@ -12,6 +12,7 @@ from align.commands.args import (
     ALPHA,
     UsageError,
     add_decision_flags,
+    add_max_pixels,
     decision_keywords,
     number,
     unique,
@@ -24,19 +25,28 @@ EXECUTION = ("jobs", "scheduler", "resume")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from align.session.batch import SessionJob, exit_status, resume
+    from align.session.batch import SessionJob, exit_status, in_folder, resume
 
     if len(args.sessions) > 1:
         unique(args.sessions, "sessions")
         return _run_batch(args)
     if args.scheduler:  # one session runs in this process (--scheduler is for batches)
         log.info("one session: it runs here (--scheduler is for batches)")
-    job = SessionJob(args.sessions[0], args.json, args.report, args.calibration, args.alpha,
+    one = args.sessions[0]  # an output ending in '/' is a folder, as for a batch
+    job = SessionJob(one, in_folder(args.json, one, ".json"),
+                     in_folder(args.report, one, ".html"),
+                     in_folder(args.calibration, one, ".cal.json"), args.alpha,
                      args.force, args.allow_outside, settings(args, EXECUTION),
                      keep_result=True, decision=decision_keywords(args))
-    if args.resume and not resume([job])[1]:
-        print(f"session {args.sessions[0]}: outputs complete, skipped (--resume)")
-        return 0
+    if args.resume:
+        done, todo = resume([job], say=log.warning)
+        if not todo:
+            if done[0].get("error"):
+                raise UsageError(done[0]["error"])
+            print(f"session {args.sessions[0]}: outputs complete and trusted, skipped "
+                  "(--resume)")
+            return exit_status(done, args.fail_on_reject)
+        job = todo[0]
     out = run_here(job)
     show_session(out, args.budget, args.plan)
     return exit_status([out], args.fail_on_reject)
@@ -78,10 +88,10 @@ def _run_batch(args: argparse.Namespace) -> int:
                       decision=decision_keywords(args))
     results = []
     if args.resume:
-        results, jobs = resume(jobs)
+        results, jobs = resume(jobs, say=log.warning)
         if results:
-            log.info("--resume: %d of %d sessions already complete, skipped", len(results),
-                     len(results) + len(jobs))
+            log.info("--resume: %d of %d sessions already complete and trusted, skipped",
+                     sum(bool(r.get("skipped")) for r in results), len(results) + len(jobs))
     scheduler = args.scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS") or None
     if scheduler:
         log.info("running %d sessions on the Dask cluster at %s", len(jobs), scheduler)
@@ -156,6 +166,7 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
     r.add_argument("--resume", action="store_true",
                    help="skip sessions whose outputs are all in place (an interrupted batch) "
                    "and run the rest")
+    add_max_pixels(r)
     r.add_argument("--scheduler", metavar="ADDRESS",
                    help="run the sessions of a batch on this Dask scheduler, e.g. "
                    "tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else local processes)")

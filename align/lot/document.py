@@ -12,7 +12,7 @@ from pathlib import Path
 
 from align.contract import document
 from align.decision import ToleranceSpec
-from align.lot.duplicates import Duplicate
+from align.lot.duplicates import Duplicate, spelling_warnings
 from align.lot.read import ANGLE_NAMES, ReadFile
 from align.lot.stats import GUARD, PROVISIONAL, AngleStats, Lot
 from axisbase.output import write_atomic, write_json
@@ -41,6 +41,7 @@ def lot_warnings(lot: Lot) -> list[str]:
     statistics, units outside the control limits or the tolerance, capability below
     1.33, angles that differ with the metadata, provisional limits."""
     out = _capped([f"{r.file}: not read: {r.reason}" for r in lot.rejected], "files not read")
+    out += _capped(spelling_warnings(lot.units), "serials written several ways")
     out += _capped([duplicate_line(d, lot) for d in lot.duplicates], "units in several results")
     out += _capped([f"unit {u.label} ({u.file}): result NOT ok or not fused ("
                     + ("; ".join(f"stage {s} failed: {m}" for s, m in u.failed_stages)

@@ -81,15 +81,37 @@ def _choose(units: Sequence[UnitResult], group: list[int]) -> tuple[int, str]:
     return cand[-1], tell("the last given")
 
 
+def unit_key(label: str) -> str:
+    """The label as units are compared: trimmed, inner white space as one space, case-folded
+    ('SN-4 ', 'sn-4' and 'SN-4' are one unit)."""
+    return " ".join(label.split()).casefold()
+
+
+def spelling_warnings(units: Sequence[UnitResult]) -> list[str]:
+    """One line per unit whose serial is written in more than one way across the lot (taken
+    as one unit; the spellings named so a typo can be found)."""
+    spellings: dict[str, list[str]] = {}
+    for u in units:
+        raw = next((str(u.metadata[k]) for k in ("unit", "serial")
+                    if u.metadata.get(k) not in (None, "")), u.label)
+        seen = spellings.setdefault(unit_key(u.label), [])
+        if raw not in seen:
+            seen.append(raw)
+    return [f"unit {s[0].strip()!r} is written {len(s)} ways ({', '.join(map(repr, s))}): "
+            "taken as one unit (serials are compared trimmed and case-folded)"
+            for s in spellings.values() if len(s) > 1]
+
+
 def find_duplicates(units: Sequence[UnitResult]) -> tuple[Duplicate, ...]:
     """Every unit that appears in more than one result, in the order of first appearance."""
     groups: dict[str, list[int]] = {}
     for k, u in enumerate(units):
-        groups.setdefault(u.label, []).append(k)
+        groups.setdefault(unit_key(u.label), []).append(k)
     out = []
-    for label, group in groups.items():
+    for group in groups.values():
         if len(group) < 2:
             continue
+        label = units[group[0]].label  # as first written (the key is case-folded)
         used, why = _choose(units, group)
         left = tuple(k for k in group if k != used)
         out.append(Duplicate(label, used, left,

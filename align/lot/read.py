@@ -13,6 +13,7 @@ import codecs
 import datetime as _dt
 import hashlib
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -115,8 +116,7 @@ class UnitResult:
                                  f"{list(ANGLE_NAMES)}")
             e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad", diagonal=True)
             u = _angles(d.get("misalignment_u_rad"), f"{where}: misalignment_u_rad")
-            if any(v < 0 for v in u):
-                raise InputError(f"{where}: misalignment_u_rad: a negative uncertainty")
+            _consistent(d, e, u, where)
             chi2, dof, p = d.get("chi2"), d.get("dof"), d.get("p_value")
         meta = d.get("metadata") or {}
         if not isinstance(meta, Mapping):
@@ -125,14 +125,20 @@ class UnitResult:
             if not isinstance(v, str | int | float | bool):  # what session.toml allows
                 raise InputError(f"{where}: metadata {k}: expected a text, number or "
                                  "true/false")
-        label = next((str(meta[k]) for k in _ID_KEYS if meta.get(k) not in (None, "")),
-                     str(d["session"]))
+        # A serial as written, less the white space around it ('SN-4 ' is 'SN-4'); units
+        # are compared case-folded (align.lot.duplicates).
+        label = next((str(meta[k]).strip() for k in _ID_KEYS
+                      if meta.get(k) is not None and str(meta[k]).strip()),
+                     str(d["session"]).strip())
         errs = d.get("errors") or []
         warns = d.get("warnings") or []
         if not isinstance(errs, list) or not isinstance(warns, list):
             raise InputError(f"{where}: 'errors' and 'warnings' must be lists")
         failed = tuple((str(x.get("stage", "?")), str(x.get("message", "")))
                        if isinstance(x, Mapping) else ("?", str(x)) for x in errs)
+        if ok and failed:
+            raise InputError(f"{where}: 'ok' is true but stage {failed[0][0]} failed "
+                             f"({failed[0][1]}): a corrupt or edited result")
         created = d.get("created_utc")
         inputs = d.get("inputs")
         digests = tuple(sorted(str(x["sha256"]) for x in inputs
@@ -166,6 +172,42 @@ class UnitResult:
                 "warnings": list(self.warnings),
                 "failed_stages": [{"stage": s, "message": m} for s, m in self.failed_stages],
                 "metadata": dict(self.metadata)}
+
+
+MAX_E_RAD = 5 * math.pi / 180
+"""Largest |E_ij| a lot takes [rad] (5°): the fusion's model is first order in the small
+angles (at 5° its second-order terms reach 0.4 % of E); a larger value is no mounting error
+of a navigation triad but a corrupt file or a failed measurement."""
+
+_AGREE_ARCSEC = 1e-6
+"""How far [″] the arc-second copy of a matrix may differ from the radian one (both are
+written from one float64; 1e-6″ is far above their rounding)."""
+
+
+def _consistent(d: Mapping[str, Any], e: tuple[float, ...], u: tuple[float, ...],
+                where: str) -> None:
+    """A fused result's matrices agree with each other and with physics: the arc-second
+    copies equal the radian ones, each u > 0, each |E_ij| <= :data:`MAX_E_RAD`."""
+    from axisbase.units import ARCSEC
+
+    for (i, j), v in zip(_INDEX, u, strict=True):
+        if not v > 0:
+            raise InputError(f"{where}: misalignment_u_rad[{i}][{j}] = {v!r}: an uncertainty "
+                             "must be > 0 (no measured angle is exact)")
+    for (i, j), v in zip(_INDEX, e, strict=True):
+        if abs(v) > MAX_E_RAD:
+            raise InputError(f"{where}: misalignment_rad[{i}][{j}] = {v:.6g} rad "
+                             f"({math.degrees(v):.4g}°): beyond {math.degrees(MAX_E_RAD):g}°, "
+                             "no mounting error of a triad")
+    for key, rad in (("misalignment_arcsec", e), ("misalignment_u_arcsec", u)):
+        if key not in d:
+            continue
+        arc = _angles(d[key], f"{where}: {key}")
+        for (i, j), a, r in zip(_INDEX, arc, rad, strict=True):
+            if abs(a - r / ARCSEC) > _AGREE_ARCSEC + 1e-9 * abs(a):
+                raise InputError(f"{where}: {key}[{i}][{j}] = {a:.6g}″ but "
+                                 f"{key.replace('arcsec', 'rad')} gives {r / ARCSEC:.6g}″: "
+                                 "the two copies disagree (an edited result?)")
 
 
 def _finite_or_none(v: object) -> float | None:
@@ -215,6 +257,24 @@ def when_of(meta: Mapping[str, Any]) -> _dt.datetime | None:
     return None
 
 
+NOT_RESULTS = ("axis-align/platform-calibration",)
+"""Formats a results folder may also hold that are not session results (left out of a
+folder's files, by their ``format`` field)."""
+
+_FORMAT_KEY = re.compile(rb'"format"\s*:\s*"([^"]{1,80})"')
+
+
+def _declared_format(path: Path) -> str | None:
+    """The ``format`` a JSON file declares in its first 4 kB (where this tool writes it: the
+    first key), without reading the whole file; None if it does not say."""
+    try:
+        with open(path, "rb") as f:
+            m = _FORMAT_KEY.search(f.read(4096))
+    except OSError:
+        return None
+    return m.group(1).decode("utf-8", "replace") if m else None
+
+
 def result_files(paths: Sequence[str | Path]) -> list[Path]:
     """The result files named: files as given, folders as their ``*.json`` files (sorted by
     name, not descending into sub-folders; ``*.cal.json`` platform calibrations left out).
@@ -226,10 +286,11 @@ def result_files(paths: Sequence[str | Path]) -> list[Path]:
         p = Path(given)
         if p.is_dir():
             # 'align run --calibration FOLDER' writes NAME.cal.json, possibly beside the
-            # results: platform calibrations, not results.
+            # results: platform calibrations, not results — told by their format field, not
+            # by their name (a session folder named 'u2.cal' has the result u2.cal.json).
             found = sorted((q for q in p.iterdir() if q.suffix.lower() == ".json"
-                            and not q.name.lower().endswith(".cal.json")
-                            and q.is_file() and not q.name.startswith(".")),
+                            and q.is_file() and not q.name.startswith(".")
+                            and _declared_format(q) not in NOT_RESULTS),
                            key=lambda q: q.name)
             if not found:
                 raise InputError(f"{p}: a folder with no .json files (session results)")

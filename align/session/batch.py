@@ -149,9 +149,37 @@ def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | N
     def path_in(folder: str | None, name: str, ext: str) -> str | None:
         return None if folder is None else str(Path(folder) / f"{name}{ext}")
 
-    return [SessionJob(s, path_in(json, n, ".json"), path_in(report, n, ".html"),
+    jobs = [SessionJob(s, path_in(json, n, ".json"), path_in(report, n, ".html"),
                        path_in(cal, n, ".cal.json"), **common)
             for s, n in zip(sessions, names, strict=True)]
+    check_distinct_outputs(jobs)
+    return jobs
+
+
+def in_folder(path: str | None, session: str, ext: str) -> str | None:
+    """An output given as a folder (``--json out/``, with the trailing slash) as the file
+    a batch would write there (``out/<session folder name><ext>``); else ``path``."""
+    if path is None or not path.endswith(("/", os.sep)):
+        return path
+    return str(Path(path) / f"{Path(session).resolve().name}{ext}")
+
+
+def check_distinct_outputs(jobs: Sequence[SessionJob]) -> None:
+    """Refuse, before anything is computed, two outputs of a batch that are one file (a
+    session folder named ``u2.cal`` writes ``u2.cal.json``, which is also session ``u2``'s
+    calibration when ``--json`` and ``--calibration`` name one folder)."""
+    seen: dict[str, tuple[str, str]] = {}
+    for j in jobs:
+        for flag, p in (("--json", j.json), ("--report", j.report), ("--calibration", j.cal)):
+            if p is None or p == "-":
+                continue
+            key = os.path.normcase(os.path.abspath(p))
+            if key in seen:
+                other, other_flag = seen[key]
+                raise InputError(f"{p}: both the {other_flag} output of session {other} and "
+                                 f"the {flag} output of session {j.folder}; rename a session "
+                                 "folder or give each output its own folder")
+            seen[key] = (j.folder, flag)
 
 
 def is_complete(job: SessionJob) -> bool:
@@ -201,11 +229,113 @@ def skipped(job: SessionJob) -> Summary:
                                           ("cal", job.cal)) if v and Path(v).is_file()}}
 
 
-def resume(jobs: Sequence[SessionJob]) -> tuple[list[Summary], list[SessionJob]]:
-    """``--resume``: the summaries of the jobs a previous batch finished (:func:`skipped`)
-    and the jobs still to run."""
-    done = [j for j in jobs if is_complete(j)]
-    return [skipped(j) for j in done], [j for j in jobs if j not in done]
+NUMBER_SETTINGS = ("alpha",)
+"""The run settings that change a session's numbers (everything else that does is in
+session.toml, an input checked by its sha256)."""
+
+
+def reuse_verdict(job: SessionJob) -> tuple[str, str | None]:
+    """Whether ``--resume`` may reuse ``job``'s outputs: ``("reuse", None)``; ``("run",
+    None)`` when none is there yet; ``("redo", why)`` when they are there but cannot be
+    trusted (redone, replacing them); ``("refuse", why)`` when the result belongs to another
+    session folder (never replaced).
+
+    Trusted by content, not by name: the JSON must read back as a complete session result of
+    this tool version and format version, made from this session folder with the same
+    number-changing settings, from inputs whose sha256 still match, and ``ok``; the report
+    and calibration asked for must be there too."""
+    import json as _json
+
+    from align.contract import FORMATS
+    from axisbase.output import STDOUT
+    from axisbase.provenance import sha256_file
+    from axisbase.version import __version__
+
+    asked = [p for p in (job.json, job.report, job.cal) if p is not None]
+    if job.json == STDOUT or not asked or not any(Path(p).exists() for p in asked):
+        return "run", None
+    if job.json is None:
+        return "redo", "no result JSON asked for, so nothing to check the outputs against"
+    try:
+        doc = _json.loads(Path(job.json).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return "redo", f"{job.json} is missing or unreadable (truncated?)"
+    if not isinstance(doc, dict) or doc.get("format") != "axis-align/session":
+        return "refuse", f"{job.json} is not a session result (format {doc.get('format')!r})" \
+            if isinstance(doc, dict) else f"{job.json} is not a session result"
+    made_in = doc.get("folder")
+    if made_in is None or not _same_folder(made_in, job.folder):
+        return "refuse", (f"{job.json} holds the result of another session folder "
+                          f"({made_in}); not replaced — give this batch another output folder")
+    if doc.get("format_version") != FORMATS["session"]:
+        return "redo", (f"{job.json} has format version {doc.get('format_version')}, this tool "
+                        f"writes {FORMATS['session']}")
+    if doc.get("tool_version") != __version__:
+        return "redo", (f"{job.json} was made by version {doc.get('tool_version')}, this is "
+                        f"{__version__}")
+    made = doc.get("settings") or {}
+    for key in NUMBER_SETTINGS:
+        if key in job.settings and made.get(key) != job.settings[key] or \
+                key not in job.settings and made.get(key) != getattr(job, key, None):
+            want = job.settings.get(key, getattr(job, key, None))
+            return "redo", f"{job.json} was made with {key} = {made.get(key)}, this run asks {want}"
+    inputs = doc.get("inputs") or []
+    if not inputs:
+        return "redo", f"{job.json} records no inputs to check"
+    for rec in inputs:
+        path, sha = rec.get("path"), rec.get("sha256")
+        try:
+            now = sha256_file(path)
+        except (OSError, TypeError):
+            return "redo", f"its input {path} is gone"
+        if now != sha:
+            return "redo", f"its input {path} changed since (sha256 differs)"
+    if doc.get("ok") is not True:
+        return "redo", f"{job.json} was not ok"
+    if job.report is not None and not Path(job.report).is_file():
+        return "redo", f"the report {job.report} is missing"
+    if job.cal is not None and not Path(job.cal).is_file() and \
+            doc.get("platform_calibration") is not None:
+        return "redo", f"the calibration {job.cal} is missing"
+    return "reuse", None
+
+
+def _same_folder(recorded: str, folder: str) -> bool:
+    try:
+        return Path(recorded).resolve() == Path(folder).resolve()
+    except OSError:
+        return False
+
+
+def refused(job: SessionJob, why: str) -> Summary:
+    """The summary of a session ``--resume`` will not run (its output is another's)."""
+    return {"session": job.name, "folder": job.folder, "ok": False, "bad_input": True,
+            "error": f"--resume: {why}"}
+
+
+def resume(jobs: Sequence[SessionJob], say: Callable[[str], None] | None = None
+           ) -> tuple[list[Summary], list[SessionJob]]:
+    """``--resume``: the summaries of the jobs a previous batch finished and that are
+    trusted (:func:`reuse_verdict`; :func:`skipped`) or refused, and the jobs still to run —
+    those whose outputs cannot be trusted are redone (replacing them), each reason given to
+    ``say``."""
+    from dataclasses import replace
+
+    done: list[Summary] = []
+    todo: list[SessionJob] = []
+    for j in jobs:
+        verdict, why = reuse_verdict(j)
+        if verdict == "reuse":
+            done.append(skipped(j))
+        elif verdict == "refuse":
+            done.append(refused(j, why or ""))
+        elif verdict == "redo":
+            if say is not None:
+                say(f"--resume: session {j.folder} redone: {why}")
+            todo.append(replace(j, force=True))
+        else:
+            todo.append(j)
+    return done, todo
 
 
 @dataclass(frozen=True)
@@ -449,7 +579,7 @@ class DaskCluster:
     file system). A worker that dies mid-session: the scheduler runs the session again
     elsewhere; one that keeps killing workers is reported (``KilledWorker``)."""
 
-    def __init__(self, address: str, connect_timeout_s: float = 20.0):
+    def __init__(self, address: str, connect_timeout_s: float = 5.0):
         self.address = address
         self.connect_timeout_s = connect_timeout_s
 
@@ -461,6 +591,7 @@ class DaskCluster:
         except ImportError:  # pragma: no cover - a declared dependency
             raise InputError("--scheduler: the 'distributed' package is not installed "
                              "(pip install 'dask[distributed]')") from None
+        probe_scheduler(self.address, self.connect_timeout_s)
         try:
             client = Client(self.address, timeout=self.connect_timeout_s,
                             set_as_default=False)
@@ -486,6 +617,34 @@ class DaskCluster:
             raise
         finally:
             client.close()
+
+
+def probe_scheduler(address: str, timeout_s: float = 5.0) -> None:
+    """Refuse, at once and in one line, a ``--scheduler`` address that is malformed or where
+    nothing listens. Written by hand because a ``distributed.Client`` given such an address
+    waits out its connect timeout, and then its finaliser waits 40 s more and prints a
+    traceback (distributed 2024-2025); a plain TCP connect answers in milliseconds."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme not in ("tcp", "tls"):
+        raise InputError(f"--scheduler {address}: only tcp:// and tls:// addresses are "
+                         "supported (e.g. tcp://10.0.0.5:8786)")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if not host or port is None:
+        raise InputError(f"--scheduler {address}: expected tcp://HOST:PORT "
+                         "(e.g. tcp://10.0.0.5:8786)")
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else exc.strerror or str(exc)
+        raise InputError(f"--scheduler {address}: cannot reach a Dask scheduler there "
+                         f"({reason})") from None
 
 
 def _absolute(job: SessionJob) -> SessionJob:

@@ -344,8 +344,10 @@ def test_lot_command_refuses_missing_paths_and_files_twice(real_result, tmp_path
     assert "nope.json: no such file or folder" in capsys.readouterr().err
     assert main(["lot", str(paths[0]), str(tmp_path / "r")]) == 2
     assert "given twice" in capsys.readouterr().err
-    # platform calibrations written beside the results are not results
-    (tmp_path / "r" / "unit00000.cal.json").write_text("{}")
+    # platform calibrations written beside the results are not results (told by their
+    # format field, not their name: issue 22)
+    (tmp_path / "r" / "unit00000.cal.json").write_text(
+        '{"format": "axis-align/platform-calibration", "format_version": 3}')
     from align.lot import result_files
 
     assert [p.name for p in result_files([tmp_path / "r"])] == [p.name for p in paths]
