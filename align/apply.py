@@ -22,6 +22,8 @@ from align.calibration import TriadModel, r_matrix
 from align.contract import check, document
 from align.errors import InputError
 from align.fusion import E_NAMES, axes_from, e_matrix
+from align.tilt import calibrated_force, roll_pitch
+from axisbase.output import csv_text
 from axisbase.provenance import Provenance
 
 
@@ -181,7 +183,6 @@ class AppliedReadings:
 
     def csv_text(self) -> str:
         """``t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]``; t blank when the readings had none."""
-        from axisbase.output import csv_text
 
         cols, names = [self.t, *self.a.T], ["t", "ax_g", "ay_g", "az_g"]
         if self.roll is not None:
@@ -195,7 +196,6 @@ def apply_to_readings(pc: PlatformCalibration, tab, tilt: bool = False,
     """Readings ``tab`` (ux, uy, uz[, t][, temp]) -> specific force in the platform frame.
     Readings without times keep none; a drift of the model is then taken at its reference
     time, and a warning says so (likewise a temperature)."""
-    from align.tilt import calibrated_force, roll_pitch
 
     t, a, warnings = calibrated_force(pc, tab)
     warnings = tuple(warnings)

@@ -20,8 +20,10 @@ absorbed by the face angles (only a reversal on the table separates it).
 
 from __future__ import annotations
 
+import logging
 import sys
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -43,6 +45,8 @@ from goniometry.timing import TimingAngles, timing_angles
 
 if TYPE_CHECKING:
     from align.loop import Candidate, LoopReport, StageFit, Term
+
+log = logging.getLogger("align.gonio")
 
 EARTH = "earth_rate"
 LOOP_REVOLUTIONS = 20000
@@ -344,7 +348,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                 direction: int = 1, alpha: float = 1e-3,
                 reverse_log: str | Path | None = None, apply_loop: bool = True,
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
-                latitude_range_deg: tuple[float, float] | None = None) -> GonioRun:
+                latitude_range_deg: tuple[float, float] | None = None,
+                on_bytes: Callable[[int], None] | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -364,9 +369,10 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
         fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False,
-                          steady_table=steady_table, columns=columns)
+                          steady_table=steady_table, columns=columns, on_bytes=on_bytes)
         rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
-                          apply_loop=False, steady_table=steady_table, columns=columns)
+                          apply_loop=False, steady_table=steady_table, columns=columns,
+                          on_bytes=on_bytes)
         comb, term = combine_directions(fwd.angles, rev.angles)
         check_reversed(fwd.angles, rev.angles, term, path, reverse_log, alpha)
         notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
@@ -401,8 +407,14 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                 pool = ThreadPoolExecutor(1, thread_name_prefix="loop")
                 early["loop"] = pool.submit(loop_gonio, counts, dt, t_end, alpha)
                 pool.shutdown(wait=False)
+    start = time.perf_counter()
     summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
-                               on_kept_at=LOOP_REVOLUTIONS)
+                               on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes)
+    log.debug("gonio %s: one pass in %.2f s: %d rows, %d revolutions excluded "
+              "(%s), times %s", Path(path).name, time.perf_counter() - start, summary.rows,
+              summary.excluded_revolutions,
+              ", ".join(f"{n} x {r}" for r, n in summary.exclusions.counts.items()) or "none",
+              "present" if summary.has_time else "absent")
     if summary.armed_face:
         notes.append(f"log armed on face {summary.armed_face}: the first "
                      f"{summary.incomplete_head} rows are a partial revolution, not used")
@@ -436,6 +448,9 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         m = LOOP_REVOLUTIONS
         loop = loop_gonio(counts[:m], dt[:m], t_end[:m], alpha=alpha)
     earth = [e for e in loop.effects if e.name == EARTH]
+    log.debug("gonio: Earth rate from the loop: %s (plausible if |rate| <= %.4g rad/s + 3 u)",
+              f"{earth[0].estimate:.4g} ± {earth[0].u:.2g} rad/s" if earth else "not seen",
+              OMEGA_EARTH)
     if earth and not plausible_earth_rate(earth[0].estimate, earth[0].u):
         notes.append(f"counts per revolution follow the period with a slope of "
                      f"{earth[0].estimate:.3g} rad/s: not the Earth's rotation; NOT applied")

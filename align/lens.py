@@ -38,11 +38,17 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.stats import chi2, norm
 
-from axisbase.errors import InputError
+from axisbase.errors import InputError, NotApplicable
 from imaging import fit_line, line_frame
-from imaging.lens import PARAMS, undistort_points, undistortion_jacobian
+from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
 
-ARCSEC = np.pi / 180 / 3600
+
+class LensFolds(NotApplicable):
+    """The lens (as estimated or probed) folds the image along a mark: no undistortion exists
+    there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
+    one is not mistaken for a folding lens)."""
+
+
 
 
 @dataclass(frozen=True)
@@ -131,7 +137,7 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
             only: Sequence[int] | None = None) -> _Design:
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
-        raise ValueError("the lens folds the image along this mark")
+        raise LensFolds("the lens folds the image along this mark")
     lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
     u, n = line_frame(lf.angle_rad)
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
@@ -160,7 +166,7 @@ class _DesignCache:
         self._memo: dict[tuple, _Design] = {}
 
     def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
-        """Line ``k``'s design at ``lam`` (ValueError where the lens folds it)."""
+        """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
         key = (k, lam.tobytes(), only)
         d = self._memo.get(key)
         if d is None:
@@ -172,7 +178,7 @@ class _DesignCache:
         return self._memo.get((k, lam.tobytes(), None))
 
     def all(self, lam: np.ndarray) -> list[_Design]:
-        """Every line's design at ``lam`` (ValueError where the lens folds any)."""
+        """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
         return [self.one(k, lam) for k in range(len(self.lines))]
 
 
@@ -259,7 +265,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                 break
             try:
                 designs = cache.all(lam)
-            except ValueError:
+            except LensFolds:
                 break  # folds: refused below
             F = sum(d.G.T @ d.G for d in designs)
             b = sum(d.G.T @ d.z for d in designs)
@@ -275,7 +281,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                 break
         try:
             designs = cache.all(lam)
-        except ValueError:  # the estimate folds the image: no lens, refused below
+        except LensFolds:  # the estimate folds the image: no lens, refused below
             lam[applied] = np.where(np.abs(lam[applied]) > rng[applied], lam[applied],
                                     2 * rng[applied])
             designs = cache.all(np.zeros(P))
@@ -377,7 +383,7 @@ def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: li
     for p in _pp_probes(lam, det, rng):
         try:
             ds = cache.all(p)
-        except ValueError:
+        except LensFolds:
             out[applied] = np.inf
             continue
         F = sum(d.G.T @ d.G for d in ds)
@@ -397,7 +403,7 @@ def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.nd
             full = cache.cached(k, p)  # its radial columns are the radial-only design's
             try:
                 s = full.s * radial if full is not None else cache.one(k, p, (0, 1)).s
-            except ValueError:
+            except LensFolds:
                 out[k][:] = np.inf
                 continue
             out[k] = np.maximum(out[k], np.abs(s))
@@ -439,7 +445,6 @@ def camera_terms(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray |
 
     ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
     the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-    from imaging.lens import distort_points
 
     raw = distort_points(points_ideal, lam, scale)
     d = _design(LineGeometry(raw, sigma, chol), lam, scale)

@@ -21,6 +21,7 @@ callers that pass it; :func:`measure_image` no longer offers it.
 from __future__ import annotations
 
 import functools
+import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from align.errors import NotApplicable
 from align.family import LineFamily, line_family
 from align.lens import (
     LensRanges,
@@ -51,6 +53,7 @@ from align.loop import (
     periodogram_test,
     run_loop,
 )
+from axisbase.errors import internal_error
 from imaging import (
     CameraModel,
     ImageInputError,
@@ -64,11 +67,14 @@ from imaging import (
     read_image_notes,
     undistort,
 )
+from imaging.lens import PARAMS
 
 RADIAL = "radial_distortion"
 WIGGLE = "periodic_wiggle"
 ILLUM = "illumination_gradient"
 BEND = "bent_mark"
+
+log = logging.getLogger("align.marks")
 
 
 def half_diagonal(shape: tuple[int, int]) -> float:
@@ -99,7 +105,7 @@ class MarkStage:
         q = undistort(self.m.points, [k1], self.scale)
         g = cross_magnification(self.m.points, [k1], self.scale, line_frame(angle_rad)[1])
         if not np.all(np.isfinite(q)) or not np.all(g > 0):
-            raise ValueError("k1 folds the image along this mark")
+            raise NotApplicable("k1 folds the image along this mark")
         return q, self.sigma * g
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
@@ -588,7 +594,6 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
     if p < alpha:
-        from imaging.lens import PARAMS
         what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
         notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
                      f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
@@ -770,12 +775,15 @@ def measure_files(paths: Sequence[str | Path], camera: CameraModel | None = None
 
     Bad input is already a failed entry; anything else raised inside one image is a bug, but
     it must not cost the user the other images: it becomes that image's failed entry, marked
-    ``internal_error`` ("internal error: <type>: <message>"), and the batch goes on.
+    ``internal_error`` ("internal error — please report (<type>: <message>)", the traceback
+    in the log), and the batch goes on.
     """
     for path in paths:
         try:
             yield measure_file(path, camera, alpha, max_marks, expect_one, roi, min_length_px,
                                ranges)
         except Exception as exc:  # noqa: BLE001 - deliberate: isolate one image's bug
+            bug = internal_error(exc)
+            log.error("%s: %s", path, bug, exc_info=exc)
             yield [MarkResult(image=str(path), found=False, internal_error=True,
-                              error=f"internal error: {type(exc).__name__}: {exc}")]
+                              error=str(bug))]

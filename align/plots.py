@@ -3,64 +3,20 @@ files, ``png_bytes`` gives the PNG for embedding in a report."""
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
+from align.calibration import delta_g
+from align.figures import PNG, jpeg_bytes, png_bytes
+from align.figures import new_png as _new_png
+from align.figures import pyplot as _plt
+from align.figures import write_png as _write
 from align.marks import MarkResult
 
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-# zlib level 3 instead of PIL's default 6: these figures come out smaller and the encoding
-# takes a third less time (measured on the session report's figures).
-PNG = {"compress_level": 3}
-
-
-def png_bytes(fig, dpi: int = 90) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, pil_kwargs=PNG)
-    _plt().close(fig)
-    return buf.getvalue()
-
-
-def jpeg_bytes(fig, dpi: int = 90, quality: int = 75) -> bytes:
-    """A photograph-like figure (an image's thumbnail) as JPEG: its sensor noise does not
-    compress in a PNG (30 kB a thumbnail against 6 kB)."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="jpeg", dpi=dpi, pil_kwargs={"quality": quality})
-    _plt().close(fig)
-    return buf.getvalue()
-
-
-def _write(fig, folder: Path, stem: str) -> Path:
-    """A new PNG (temporary name, then an exclusive rename: nothing is overwritten)."""
-    from axisbase.output import write_atomic
-
-    out = _new_png(Path(folder), stem)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, pil_kwargs=PNG)
-    _plt().close(fig)
-    return write_atomic(out, buf.getvalue())
-
-
-def _new_png(folder: Path, stem: str) -> Path:
-    """A PNG path in ``folder`` that does not exist yet (nothing is overwritten)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    out = folder / f"{stem}.png"
-    k = 1
-    while out.exists():
-        out = folder / f"{stem}_{k}.png"
-        k += 1
-    return out
+__all__ = ["PNG", "png_bytes", "jpeg_bytes", "plot_mark", "fig_mark", "plot_calibration",
+           "fig_calibration", "plot_gonio", "fig_gonio", "fig_fusion", "_new_png", "_plt",
+           "_write"]
 
 
 def plot_mark(r: MarkResult, folder: str | Path, image: np.ndarray | None = None) -> Path:
@@ -172,7 +128,6 @@ def plot_calibration(cal, poses, check, folder: Path) -> Path:
 
 def fig_calibration(cal, poses, check):
     """Δg per pose (calibration and check poses) and the residual against orientation."""
-    from align.calibration import delta_g
 
     plt = _plt()
     fig, ax = plt.subplots(1, 2, figsize=(11, 4))

@@ -12,6 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from align.decision import Disposition
+from align.fusion.budget import Budget
+from align.plan import plan_from_result
 from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
@@ -82,8 +85,8 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
     m, a = cal.model, cal.algebraic
     sign_note = ("negative" if all(s < 0 for s in signs) else "positive"
                  if all(s > 0 for s in signs) else "mixed")
-    lines = [f"{n_poses} poses in {units}; scale-factor signs {tuple(signs)} ({sign_note}: an "
-             "ellipsoid cannot tell them, --scale-sign sets them)"]
+    lines = [f"{n_poses} poses in {units}; scale-factor signs {tuple(signs)} ({sign_note}: "
+             "from the face labels +x,-x,... when the poses carry them, else --scale-sign)"]
     if cal.method == "known-pose":
         kf = cal.known
         used = Counter(kf.faces)
@@ -193,6 +196,11 @@ def session_lines(res) -> list[str]:
     return lines
 
 
+def timing_lines(timings: dict[str, float]) -> list[str]:
+    """One short line per stage: its wall-clock time [s]."""
+    return [f"  {stage}: {dt:.2f} s" for stage, dt in timings.items()]
+
+
 def truth_lines(err: np.ndarray, z_rms: float) -> list[str]:
     """A synthetic session's error against its truth [″] and the RMS of error / u."""
     lines = ["  error against truth [″]:"]
@@ -220,16 +228,10 @@ def batch_row_line(row) -> str | None:
 def decision_lines(js: dict, budget: bool = False, plan: bool = False) -> list[str]:
     """A session result's verdict line (:mod:`align.decision`), and with ``budget`` its
     uncertainty budget, with ``plan`` what to measure next (:mod:`align.plan`)."""
-    from align.decision import Disposition
-
     lines = ["  " + Disposition.from_dict(js["disposition"]).line()]
     if budget and js.get("budget"):
-        from align.fusion.budget import Budget
-
         lines += ["  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()]
     if plan and js.get("budget"):
-        from align.plan import plan_from_result
-
         lines += ["  " + ln for ln in plan_from_result(js).lines()]
     return lines
 

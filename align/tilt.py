@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axisbase.output import csv_text
+
 
 def roll_pitch(G: np.ndarray, method: str = "exact", mu: float = 0.001
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +87,6 @@ class TiltOfReadings:
 
     def csv_text(self) -> str:
         """``t,roll_deg,pitch_deg``; t blank on every row when the readings had no time."""
-        from axisbase.output import csv_text
 
         return csv_text(["t", "roll_deg", "pitch_deg"],
                         [self.t, np.rad2deg(self.roll), np.rad2deg(self.pitch)], "%.9g",

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
+from axisbase.units import ARCSEC
+from goniometry.revolutions import R_TAIL
 
 
 def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
@@ -83,11 +86,9 @@ def calibration_warnings(cal, poses) -> list[str]:
 def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) -> list[str]:
     """A goniometer run (``GonioRun``); with the faces' names and nominal angles [rad], a
     nominal that does not describe the measured faces too."""
-    from align.gonio import nominal_mismatch
 
     out = loop_warnings("goniometer", run.loop)
     out += [f"goniometer: {w}" for w in run.warnings]
-    from goniometry.revolutions import R_TAIL
 
     # Noise's own tail in a long log is listed in the JSON's exclusions, not warned of.
     ex = {why: k for why, k in run.summary.exclusions.counts.items() if why != R_TAIL}
@@ -113,7 +114,6 @@ def setup_notices(fusion) -> list[str]:
     """Set-up effects the fusion's loop found and corrected for (a camera's roll, the
     reference face's offset, the table's tilt): E is corrected, but the set-up is not what
     session.toml declares, and the reader must know (``FusionResult``, run or loaded)."""
-    from axisbase.units import ARCSEC
 
     out = []
     for e in fusion.loop.summary().effects:
@@ -132,6 +132,7 @@ def setup_notices(fusion) -> list[str]:
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
     out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
+    out += res.log_warnings
     if res.calibration is not None and res.calibration_poses is not None:
         out += calibration_warnings(res.calibration, res.calibration_poses)
     if res.gonio is not None:

@@ -9,7 +9,7 @@ numpy or pyarrow (``align --help`` must start fast).
 
 from importlib import import_module
 
-from axisbase.errors import AxisAlignError, InputError, InternalError
+from axisbase.errors import AxisAlignError, InputError, InternalError, NotApplicable
 from axisbase.units import ARCMIN, ARCSEC, DEG, G0, MICRO_G
 from axisbase.version import __version__
 
@@ -27,7 +27,7 @@ _LAZY = {
 
 __all__ = [
     "ARCMIN", "ARCSEC", "DEG", "G0", "MICRO_G", "__version__",
-    "AxisAlignError", "InputError", "InternalError", *_LAZY,
+    "AxisAlignError", "InputError", "InternalError", "NotApplicable", *_LAZY,
 ]
 
 

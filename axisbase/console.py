@@ -7,9 +7,12 @@ Imports nothing heavy: ``align --help`` starts with it.
 from __future__ import annotations
 
 import codecs
+import contextlib
 import logging
 import os
 import sys
+import threading
+from collections.abc import Iterator
 from typing import TextIO
 
 from axisbase.errors import InputError
@@ -112,3 +115,30 @@ def setup_logging(name: str, quiet: bool = False, verbose: bool = False) -> logg
     log.setLevel(level)
     log.propagate = False
     return log
+
+
+class _Capture(logging.Filter):
+    def __init__(self) -> None:
+        super().__init__()
+        self.thread = threading.get_ident()
+        self.messages: list[str] = []
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno != logging.WARNING or threading.get_ident() != self.thread:
+            return True
+        self.messages.append(record.getMessage().removeprefix("WARNING: "))
+        return False  # the caller shows it, with the result's other warnings
+
+
+@contextlib.contextmanager
+def captured_warnings(name: str = "align") -> Iterator[list[str]]:
+    """The warnings logged on logger ``name`` (in this thread) while the block runs, taken
+    off the log and collected in the list yielded, so that a result can carry them in its
+    ``warnings`` (JSON, report) and the terminal shows them once, with the others."""
+    cap = _Capture()
+    logger = logging.getLogger(name)
+    logger.addFilter(cap)
+    try:
+        yield cap.messages
+    finally:
+        logger.removeFilter(cap)

@@ -5,6 +5,8 @@
   is wrong. The CLI prints it as one line and exits with status 2.
 * :class:`InternalError` — a state the code should never reach; the CLI reports it as a bug
   (exit status 1).
+* :class:`NotApplicable` — an effect that does not apply to these data; the residual loop
+  skips that candidate and records why (anything else a candidate raises is a bug).
 
 Each package derives its own input errors from :class:`InputError` (``LogError`` for counter
 logs, ``ImageInputError`` for images), so one ``except InputError`` catches them all.
@@ -36,3 +38,19 @@ class InputError(AxisAlignError, ValueError):
 
 class InternalError(AxisAlignError, RuntimeError):
     """A state the code should never reach (a bug to report)."""
+
+
+class NotApplicable(AxisAlignError):
+    """This effect does not apply to these data (no temperature column for a temperature
+    term, more parameters than observations, a distortion that folds the image): a candidate
+    of the residual loop that is skipped, with this message as the reason. Not a
+    ``ValueError``: a defect raising one is not mistaken for a skipped effect."""
+
+
+def internal_error(exc: BaseException) -> InternalError:
+    """The :class:`InternalError` a defect ``exc`` becomes where one item (an image, a
+    session's stage) is isolated so that the others go on: "internal error — please report
+    (<type>: <message>)", caused by ``exc`` (its traceback goes to the log)."""
+    bug = InternalError(f"internal error — please report ({type(exc).__name__}: {exc})")
+    bug.__cause__ = exc
+    return bug

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from axisbase.errors import InputError
+from axisbase.stop import stops_held
 
 STDOUT = "-"
 
@@ -237,8 +238,6 @@ class OutputSet:
         self.discard()
 
     def stage(self, path: str | Path, data: str | bytes) -> None:
-        from axisbase.stop import stops_held
-
         p = Path(path)
         raw = data.encode("utf-8") if isinstance(data, str) else data
         # A stop between the file's creation and its record here would leave it behind.
@@ -257,7 +256,6 @@ class OutputSet:
     def commit(self) -> list[Path]:
         """Put every staged file in place; returns their paths (:class:`OutputError` and
         nothing in place if one of them cannot be)."""
-        from axisbase.stop import stops_held
 
         done: list[Path] = []
         with stops_held():
@@ -284,7 +282,6 @@ class OutputSet:
 
     def discard(self) -> None:
         """Remove the temporary files (those not committed)."""
-        from axisbase.stop import stops_held
 
         with stops_held():  # a second stop (the parent's end, say) must not cut this short
             for _, tmp in self._staged:

@@ -37,7 +37,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 
 from axisbase.errors import InputError
-from axisbase.units import time_scale, value_unit
+from axisbase.units import TIME_UNITS, time_scale, value_unit
 
 KINDS = ("float", "int", "label")
 MAX_MAGNITUDE = 1e100
@@ -602,7 +602,6 @@ def rate_warning(table: Table) -> str | None:
     lo, hi = spec.rate_hz_range
     if lo <= 1.0 / dt <= hi:
         return None
-    from axisbase.units import TIME_UNITS
 
     fits = [u for u in ("ms", "us", "ns", "min", "h")
             if lo <= 1.0 / (dt * TIME_UNITS[u]) <= hi]

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import goniometry.beat as beat
 from goniometry.errors import LogError
 from goniometry.revolutions import LogSummary
 
@@ -243,7 +244,6 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     revolutions for the pattern, or its pattern does not follow the path."""
     from scipy.special import chdtrc  # (the chi-square survival function)
 
-    from goniometry import beat
 
     counts, dt, t_end = kept_table(summary)
     if len(counts) < 16 or (dt is None and summary.excluded_revolutions):

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from goniometry.revolutions import fill_first_interval
+
 # Harmonics of the sawtooth summed explicitly at most (fewer where the jitter blurs them);
 # the rest (1 % of its variance) is white.
 HARMONICS = 48
@@ -52,7 +54,6 @@ def phase_path(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | No
         theta = np.repeat(turn[:, None] * K, n + 1, axis=1)
         theta[:, n] += K
         return theta, turn
-    from goniometry.revolutions import fill_first_interval
 
     d = fill_first_interval(counts, np.asarray(dt, float))
     T = d.sum(1)

@@ -908,7 +908,8 @@ class _Pass:
 def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
                      block_bytes: int = 1 << 20, correct=None,
                      columns: Mapping[str, str] | None = None,
-                     on_kept: Callable | None = None, on_kept_at: int = 0) -> LogSummary:
+                     on_kept: Callable | None = None, on_kept_at: int = 0,
+                     on_bytes: Callable[[int], None] | None = None) -> LogSummary:
     """Stream a log into revolution statistics in one pass (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
@@ -917,6 +918,8 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     ``on_kept(counts, dt, t_end)``: called once, during the pass, as soon as the first
     ``on_kept_at`` (<= ``keep``) revolutions are kept (at the end for a shorter log), with
     them — work on the head of a log (the loop) can then run while the rest is read.
+    ``on_bytes(n)``: called after each chunk with about how many bytes of the file it held
+    (``block_bytes``; for a progress bar).
     """
     reuse_freed_memory()  # the pass frees and reallocates MB-sized temporaries per chunk
     if on_kept is not None and not 0 < on_kept_at <= keep:
@@ -925,4 +928,6 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     p.stats.on_kept, p.stats.on_kept_at = on_kept, on_kept_at
     for ch in iter_log(path, block_bytes, columns):
         p.feed(ch)
+        if on_bytes is not None:
+            on_bytes(block_bytes)
     return p.finish(path)

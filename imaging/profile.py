@@ -26,6 +26,7 @@ from scipy.special import erf
 
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
+from imaging.ring import ring_slope
 from imaging.texture import TextureModel, texture_model
 
 # Gauss–Legendre nodes/weights on a pixel [-1/2, 1/2]: 2 points (exact to cubics) for the
@@ -370,20 +371,6 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
     sel &= seg < nseg
     idx, e, seg = idx[sel], e[sel], seg[sel]
     return idx // image.shape[1], idx % image.shape[1], e, seg
-
-
-def ring_slope(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, nseg: int,
-               full_scale: float) -> np.ndarray:
-    """Background slope across the mark [DN/px] per segment from its ring pixels (clipped
-    pixels left out; 0 where a segment has too few)."""
-    sel = (vals < full_scale) & (vals > 0)
-    vals, e, seg = vals[sel], e[sel], seg[sel]
-    no = np.bincount(seg, minlength=nseg)
-    me = np.bincount(seg, e, minlength=nseg) / np.maximum(no, 1)
-    mr = np.bincount(seg, vals, minlength=nseg) / np.maximum(no, 1)
-    see = np.bincount(seg, (e - me[seg]) ** 2, minlength=nseg)
-    ser = np.bincount(seg, (e - me[seg]) * (vals - mr[seg]), minlength=nseg)
-    return np.where(see > 0, ser / np.maximum(see, 1e-12), 0.0)
 
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from imaging.ring import ring_slope  # the ring's slope, as for the real mark
+
 ALPHA = 1e-3
 """Level of each test that the replicas show texture (one false use per 1000 clean marks)."""
 
@@ -95,7 +97,6 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance.
     """
-    from imaging.profile import ring_slope  # the ring's slope, as for the real mark
 
     ys, xs, seg = band
     v0, v1 = noise_var

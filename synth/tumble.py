@@ -2,12 +2,20 @@
 
 The triad follows the seed paper's model with the exact trigonometric R of eq. (5):
 
-    x = R (a + b(t, T))                     input along each sensing axis [g]
-    u_i = k_i (x_i + K2_i x_i^2) + noise     output [V], quantised to ``lsb_v``
+    x = R (a + b(t, T) + h)                  input along each sensing axis [g]
+    u_i = k_i s_i(t) (x_i + K2_i x_i^2 + sum_{j<l} K_i,jl x_j x_l) + noise
+                                             output [V], quantised to ``lsb_v``
 
 a is the specific force in the unit's orthogonal "convenient" frame [g] (static: the unit
 vector pointing up, times g_local / g0), b the bias [g] drifting linearly in time (``drift``
-[g/s]) and with temperature (``temp_coeff`` [g/K]), K2 the second-order nonlinearity [1/g].
+[g/s]) and with temperature (``temp_coeff`` [g/K]), K2 the second-order nonlinearity [1/g],
+K_i,jl the cross-axis second-order terms (IEEE Std 1293's K_ip, K_io: the pendulum of axis i
+also responds to the product of two inputs) [1/g], s_i(t) = 1 + ``scale_drift_i`` t +
+``scale_warmup_i`` exp(-t / ``warmup_tau_s``) the scale factor drifting in time (electronics
+ageing over the run, and settling after switch-on), h the bias hysteresis: a pendulum that
+sticks lags behind the way it last moved, so each pose's bias is offset by
+``hysteresis_g_i`` x the sign of the change of x_i in the turn into the pose (0 for the first
+pose: it was not turned into).
 Poses come from fixtures (the paper's cube: 6 faces + 8 vertices) placed with small random
 errors, or are random; each pose is held for ``dwell_s`` and sampled at ``rate_hz``.
 
@@ -55,6 +63,15 @@ class Triad:
     k2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     drift: tuple[float, float, float] = (0.0, 0.0, 0.0)
     temp_coeff: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    cross: tuple[tuple[float, float, float], ...] = ((0.0,) * 3,) * 3
+    """Per output axis i, (K_i,xy, K_i,xz, K_i,yz) [1/g] on the products of the inputs."""
+    scale_drift: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Relative scale-factor change per second [1/s] (from t = 0)."""
+    scale_warmup: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Relative scale-factor excess at switch-on (t = 0), decaying with ``warmup_tau_s``."""
+    warmup_tau_s: float = 300.0
+    hysteresis_g: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Bias offset [g] x the sign of the last change of each axis's input (see the module)."""
     noise_v: float = 2.4e-5
     lsb_v: float = 0.0
     full_scale_v: float = 10.0
@@ -67,12 +84,20 @@ class Triad:
             np.asarray(self.beta))
 
     def outputs(self, a: np.ndarray, t: np.ndarray, temp: np.ndarray,
-                rng: np.random.Generator | None) -> np.ndarray:
-        """Outputs u (N, 3) [V] for specific forces a (N, 3) [g] at times t [s], temps [K]."""
+                rng: np.random.Generator | None, offset: np.ndarray | None = None
+                ) -> np.ndarray:
+        """Outputs u (N, 3) [V] for specific forces a (N, 3) [g] at times t [s], temps [K];
+        ``offset`` (N, 3) [g]: a bias added per sample (the hysteresis, from the motion)."""
         b = (np.asarray(self.bias) + np.outer(t, self.drift)
              + np.outer(temp, self.temp_coeff))
+        if offset is not None:
+            b = b + offset
         x = (a + b) @ self.sensing().T
-        u = np.asarray(self.k) * (x + np.asarray(self.k2) * x * x)
+        prod = np.column_stack([x[:, 0] * x[:, 1], x[:, 0] * x[:, 2], x[:, 1] * x[:, 2]])
+        s = (1.0 + np.outer(t, self.scale_drift)
+             + np.outer(np.exp(-np.asarray(t, float) / self.warmup_tau_s), self.scale_warmup))
+        u = np.asarray(self.k) * s * (x + np.asarray(self.k2) * x * x
+                                      + prod @ np.asarray(self.cross, float).T)
         if rng is not None and self.noise_v:
             u = u + rng.normal(0.0, self.noise_v, u.shape)
         if self.lsb_v:
@@ -125,6 +150,8 @@ class TumbleSpec:
     temp_rate_k_per_s: float = 0.0
     g_ratio: float = 1.0
     seed: int = 0
+    up: tuple[tuple[float, float, float], ...] | None = None
+    """Up directions of the poses in the order held (overrides ``poses``): a planned order."""
 
 
 @dataclass(frozen=True)
@@ -152,7 +179,11 @@ class TumbleData:
         tr = self.spec.triad
         return {"k_v_per_g": list(tr.k), "beta_rad": list(tr.beta), "bias_g": list(tr.bias),
                 "k2_per_g": list(tr.k2), "drift_g_per_s": list(tr.drift),
-                "temp_coeff_g_per_k": list(tr.temp_coeff), "noise_v": tr.noise_v,
+                "temp_coeff_g_per_k": list(tr.temp_coeff),
+                "cross_per_g": [list(r) for r in tr.cross], "scale_drift_per_s":
+                list(tr.scale_drift), "scale_warmup": list(tr.scale_warmup),
+                "warmup_tau_s": tr.warmup_tau_s, "hysteresis_g": list(tr.hysteresis_g),
+                "noise_v": tr.noise_v,
                 "lsb_v": tr.lsb_v, "poses": self.spec.poses, "n_cal": self.n_cal,
                 "mean_time_s": float(self.t[self.pose < self.n_cal].mean()),
                 "seed": self.spec.seed}
@@ -168,7 +199,9 @@ def _placed(up: np.ndarray, err: float, rng: np.random.Generator) -> np.ndarray:
 def tumble(spec: TumbleSpec) -> TumbleData:
     """Simulate the static poses (samples only while the unit is at rest)."""
     rng = np.random.default_rng(spec.seed)
-    up = _placed(pose_directions(spec.poses, spec.n_random, rng), spec.fixture_error_rad, rng)
+    dirs = (np.asarray(spec.up, float) if spec.up is not None
+            else pose_directions(spec.poses, spec.n_random, rng))
+    up = _placed(dirs, spec.fixture_error_rad, rng)
     n_cal = len(up)
     if spec.check_poses:
         up = np.vstack([up, pose_directions("random", spec.check_poses, rng)])
@@ -178,8 +211,27 @@ def tumble(spec: TumbleSpec) -> TumbleData:
     t = (start[:, None] + np.arange(n)[None, :] / spec.rate_hz).ravel()
     temp = spec.temp_start_k + spec.temp_rate_k_per_s * t
     a = up[pose] * spec.g_ratio
-    u = spec.triad.outputs(a, t, temp, rng)
+    u = spec.triad.outputs(a, t, temp, rng, hysteresis(spec.triad, up)[pose])
     return TumbleData(pose, t, u, temp, up, n_cal, spec)
+
+
+HYSTERESIS_MOVE_G = 0.02
+"""Smallest change of an axis's input [g] that carries its pendulum to the other side of its
+hysteresis loop; a smaller one (a fixture's wobble) leaves it on the side it was."""
+
+
+def hysteresis(triad: Triad, up: np.ndarray) -> np.ndarray:
+    """Bias offset (N, 3) [g] of each pose held in the order given: ``hysteresis_g`` x the sign
+    of the last change of each sensing axis's input larger than :data:`HYSTERESIS_MOVE_G`
+    (0 before any: the first pose was not turned into)."""
+    x = up @ triad.sensing().T
+    state = np.zeros(3)
+    out = np.zeros_like(x)
+    for p in range(1, len(x)):
+        d = x[p] - x[p - 1]
+        state = np.where(np.abs(d) > HYSTERESIS_MOVE_G, np.sign(d), state)
+        out[p] = state
+    return out * np.asarray(triad.hysteresis_g, float)
 
 
 def recording(spec: TumbleSpec, vibration_g: float = 0.05) -> tuple[np.ndarray, np.ndarray,

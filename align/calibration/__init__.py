@@ -7,16 +7,11 @@ from align.calibration.model import (
     NONLIN,
     TEMP,
     WARMUP,
-    Calibration,
     CalibrationStage,
-    Poses,
-    TriadModel,
     admissible,
     algebraic,
-    calibrate,
-    delta_g,
-    poses_from_samples,
 )
+from align.calibration.pipeline import Calibration, calibrate
 from align.calibration.static import (
     READINGS,
     STATIC,
@@ -28,6 +23,7 @@ from align.calibration.static import (
     read_poses,
     read_readings,
 )
+from align.calibration.triad import Poses, TriadModel, delta_g, poses_from_samples
 
 __all__ = [
     "CANDIDATES", "DRIFT", "NONLIN", "TEMP", "WARMUP", "Calibration", "CalibrationStage",

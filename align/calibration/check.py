@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from align.calibration.model import Calibration, Poses, delta_g, pose_sigma_g
+from align.calibration.pipeline import Calibration
+from align.calibration.triad import Poses, delta_g, pose_sigma_g
 from align.calibration.units import UNIT_SCALE_REFUSE
 
 

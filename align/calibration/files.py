@@ -12,6 +12,7 @@ from align.calibration import STATIC, StaticSettings, calibrate, read_poses
 from align.calibration.check import CheckResult, check_poses
 from align.calibration.units import unit_scale_check
 from align.warnings import calibration_warnings
+from axisbase.console import captured_warnings
 from axisbase.table import header_units, resolve_units
 from axisbase.units import DEG
 
@@ -74,10 +75,11 @@ class CalibrationRun:
 
 
 def calibrate_files(static: str | Path, check: str | Path | None, units: str,
-                    signs: tuple[float, float, float], settings: StaticSettings,
+                    signs: tuple[float, float, float] | None, settings: StaticSettings,
                     columns: Mapping[str, str] | None = None, rate_hz: float | None = None,
                     alpha: float = 1e-3, fixture_error_rad: float = 0.5 * DEG,
-                    unit_source: str | None = None) -> CalibrationRun:
+                    unit_source: str | None = None,
+                    adc_range: tuple[float, float] | None = None) -> CalibrationRun:
     """Read the static poses (and check poses), calibrate the triad and judge the check.
 
     Parameters
@@ -86,18 +88,26 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
         by ``settings``) and the check poses (or None).
     units : their unit (:func:`calibration_units`); ``unit_source`` says who declared it
         (default: the static file's header).
-    signs : the scale factors' signs (an ellipsoid cannot tell them).
+    signs : the scale factors' signs (an ellipsoid cannot tell them), or None: from
+        labelled faces when the poses carry them, else +,+,+.
     columns, rate_hz : see :func:`axisbase.table.read_table`.
     alpha : significance of the residual loop's tests and of the check.
     fixture_error_rad : placement error of the faces (known-pose method) [rad].
+    adc_range : the ADC's rails (LO, HI) in ``units``, when declared: a pose at a rail is
+        left out (warned) or refused (:func:`align.calibration.static.read_poses`).
     """
-    poses, intervals = read_poses(static, settings, columns=columns, rate_hz=rate_hz)
-    chk = (read_poses(check, settings, calibration=False, columns=columns,
-                      rate_hz=rate_hz)[0] if check else None)
+    left_out: list[str] = []
+    with captured_warnings() as logged:  # (how the files were read: into the JSON too)
+        poses, intervals = read_poses(static, settings, columns=columns, rate_hz=rate_hz,
+                                      adc_range=adc_range, warnings=left_out)
+        chk = (read_poses(check, settings, calibration=False, columns=columns,
+                          rate_hz=rate_hz, adc_range=adc_range, warnings=left_out)[0]
+               if check else None)
     cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad)
     warnings = unit_scale_check(cal.model, units,
                                 unit_source or f"{static}: header unit [{units}]")
     checked = check_poses(cal, poses, chk, alpha, f"{check}") if chk is not None else None
-    warnings = (calibration_warnings(cal, poses) + warnings
+    warnings = (list(dict.fromkeys(logged)) + left_out + calibration_warnings(cal, poses)
+                + warnings
                 + (list(checked.warnings) if checked is not None else []))
     return CalibrationRun(cal, poses, intervals, chk, checked, units, tuple(warnings))

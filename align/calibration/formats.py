@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from align.calibration.triad import poses_from_samples
 from align.errors import InputError
 
 
@@ -56,8 +57,6 @@ def ferraris_session(folder: str | Path, rate_hz: float = 102.4):
     ``_list.json`` of sections): the six faces as :class:`Poses` (accelerometer, m/s²; the
     turns are for the gyroscope and are left out), the raw columns and the sections."""
     import json
-
-    from align.calibration.model import poses_from_samples
 
     folder = Path(folder)
     d = np.genfromtxt(folder / "example_ferraris_session.csv", delimiter=",", names=True)

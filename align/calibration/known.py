@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg import rq
 
 from align.calibration.ellipsoid import triad_from_upper
-from align.calibration.model import Poses, TriadModel
+from align.calibration.triad import Poses, TriadModel
 from align.errors import InputError
 from align.loop import StageFit, Term
 
@@ -150,9 +150,85 @@ def _triad(theta: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate([k, beta, b]), C
 
 
+LABEL_AXES_DEG = 45.0
+"""The face labels name the triad's own axes (and so give the signs) only when each triad
+axis is within this of its fixture axis; beyond it a sign would be read from noise."""
+
+
+def face_signs(poses: Poses, faces: Sequence[str | None]) -> tuple[np.ndarray, float]:
+    """Scale-factor signs (+-1 each) that labelled faces determine.
+
+    A face label says which triad axis pointed up, so the fixture frame is the triad's own
+    frame up to its small mounting rotation C: of the RQ split M = (K R) C, the one with C's
+    diagonal positive (C near the identity) gives the signs of K. An ellipsoid cannot tell
+    them; the labels can. Returns the signs and the largest angle between a triad axis and
+    its fixture axis [deg] (:data:`LABEL_AXES_DEG`).
+    """
+    use = [i for i, f in enumerate(faces) if f is not None]
+    d = np.array([direction(faces[i]) for i in use])
+    A = np.column_stack([d, np.ones(len(use))])
+    M = np.linalg.lstsq(A, poses.u[use], rcond=None)[0][:3].T  # u = M d + o, unweighted
+    T, C = rq(M)
+    off = float(np.degrees(np.arccos(np.clip(np.abs(np.diag(C)).min(), 0.0, 1.0))))
+    return np.sign(np.diag(T)) * np.where(np.diag(C) < 0, -1.0, 1.0), off
+
+
+def resolve_signs(poses: Poses, faces: Sequence[str | None],
+                  given: Sequence[float] | None) -> tuple[float, float, float]:
+    """The scale-factor signs: from labelled faces when the poses carry them (an explicit
+    ``given`` that contradicts them is refused, naming both), else ``given`` or +,+,+.
+    Labels whose axes are more than :data:`LABEL_AXES_DEG` off the triad's give no signs:
+    ``given`` is then used, and without it the calibration is refused."""
+    if not (labelled(poses) and has_six_faces(faces)):
+        return tuple(float(s) for s in (given if given is not None else (1, 1, 1)))
+    s, off = face_signs(poses, faces)
+    if off > LABEL_AXES_DEG:
+        if given is not None:
+            return tuple(float(v) for v in given)  # type: ignore[return-value]
+        raise InputError(f"the labelled faces do not name the triad's axes (an axis "
+                         f"{off:.0f}° from its face, > {LABEL_AXES_DEG:g}°: swapped labels, or "
+                         "the triad turned in the fixture), so they cannot give the "
+                         "scale-factor signs: correct the labels or give --scale-sign")
+    derived = tuple(float(v) for v in s)
+    if given is not None and tuple(float(v) for v in given) != derived:
+        raise InputError(f"scale sign {_sign_text(given)} (--scale-sign, session key "
+                         f"scale_sign) contradicts the labelled faces, "
+                         f"which give {_sign_text(derived)} ({_worst_face(poses, faces, s)}"
+                         "): drop --scale-sign or correct the pose labels")
+    return derived  # type: ignore[return-value]
+
+
+def _sign_text(signs: Sequence[float]) -> str:
+    return ",".join("-" if v < 0 else "+" for v in signs)
+
+
+def _worst_face(poses: Poses, faces: Sequence[str | None], signs: np.ndarray) -> str:
+    """A face whose reading shows a sign: '+x up reads -2.41 (u_x)'."""
+    i = int(np.argmin(signs)) if np.any(signs < 0) else 0
+    ax = "xyz"[i]
+    up = [j for j, f in enumerate(faces) if f == f"+{ax}"]
+    down = [j for j, f in enumerate(faces) if f == f"-{ax}"]
+    half = (poses.u[up, i].mean() - poses.u[down, i].mean()) / 2
+    return f"u{ax} of face +{ax} is {half:+.4g} from the mid-point of faces +{ax} and -{ax}"
+
+
+def check_mounting(C: np.ndarray) -> None:
+    """A mounting is a rotation: det C = -1 (a mirror) means the labels and the signs
+    describe no physical triad — refused with the reason."""
+    det = float(np.linalg.det(C))
+    if det < 0:
+        raise InputError(f"known-pose calibration: the mounting rotation has determinant "
+                         f"{det:+.3f} (a mirror, not a rotation): the scale-factor signs and "
+                         "the face labels contradict each other (swapped labels, or a "
+                         "--scale-sign with one axis wrong)")
+
+
 def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] = (1, 1, 1),
               fixture_error_rad: float = FIXTURE_ERROR_RAD) -> KnownPoseFit:
-    """Known-pose fit over the poses that are faces (the others are ignored here)."""
+    """Known-pose fit over the poses that are faces (the others are ignored here).
+
+    Refused (:func:`check_mounting`) when the mounting it implies is not a proper rotation.
+    """
     use = [i for i, f in enumerate(faces) if f is not None]
     used = [faces[i] for i in use]
     if not has_six_faces(used):
@@ -199,6 +275,7 @@ def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] 
     sig = np.sqrt(1 / np.diag(W))
     s = np.asarray(signs, float)
     q, C = _triad(theta, s)
+    check_mounting(C)
     # Propagate (M, o) -> (k, beta, b) by central differences (the map is smooth).
     J = np.zeros((9, 12))
     for j in range(12):

@@ -8,8 +8,9 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from align.calibration.check import CheckResult
-from align.calibration.model import Calibration, Poses, delta_g
+from align.calibration.pipeline import Calibration
 from align.calibration.static import StaticInterval
+from align.calibration.triad import Poses, delta_g
 from align.contract import document
 from axisbase.table import OUTPUT_UNITS
 

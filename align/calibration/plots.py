@@ -9,14 +9,13 @@ from pathlib import Path
 import numpy as np
 
 from align.calibration.static import STATIC, StaticSettings, detect_static
+from align.figures import pyplot, write_png
 from axisbase.table import read_table
 
 
 def fig_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings):
-    from align.plots import _plt
-
     det = detect_static(t, u, settings)
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
     for i, name in enumerate("xyz"):
         ax[0].plot(t, u[:, i], lw=0.6, label=f"u{name}")
@@ -39,8 +38,6 @@ def fig_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings):
 def plot_static(path: str | Path, settings: StaticSettings,
                 columns: Mapping[str, str] | None, rate_hz: float | None, folder: Path) -> Path:
     """Write the detection figure of the recording ``path`` into ``folder`` (a new PNG)."""
-    from align.plots import _write
-
     tab = read_table(path, STATIC, columns, rate_hz)
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    return _write(fig_static(tab["t"], u, settings), folder, "static_intervals")
+    return write_png(fig_static(tab["t"], u, settings), folder, "static_intervals")

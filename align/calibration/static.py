@@ -20,7 +20,11 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from align.calibration.model import Poses
+from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
+from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
+from align.calibration.known import faces_of, has_six_faces
+from align.calibration.saturation import find_saturated
+from align.calibration.triad import Poses
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
 
@@ -95,16 +99,19 @@ def _check_values(tab: Table, u: np.ndarray) -> None:
 
 def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                calibration: bool = True, columns: Mapping[str, str] | None = None,
-               rate_hz: float | None = None) -> tuple[Poses, list[StaticInterval] | None]:
+               rate_hz: float | None = None, adc_range: tuple[float, float] | None = None,
+               warnings: list[str] | None = None
+               ) -> tuple[Poses, list[StaticInterval] | None]:
     """Per-pose means from a pose file, or from a continuous recording's static intervals.
 
     ``calibration``: check that the poses can carry a calibration (units, 3-D spread); off
     for check poses, which may be few. ``columns``, ``rate_hz``: see
-    :func:`axisbase.table.read_table`.
+    :func:`axisbase.table.read_table`. ``adc_range``: the ADC's rails (LO, HI) [output
+    units], when declared. A pose saturated on an axis (:mod:`align.calibration.saturation`)
+    is left out with a warning (appended to ``warnings``, else logged) when the others still
+    determine the calibration, else refused naming it.
     """
     path = Path(path)
-    from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
-
     if path.suffix.lower() in SUFFIXES:
         tab, notes = read_arrays(path, STATIC, columns, rate_hz)
         for note in notes:
@@ -121,7 +128,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                 "%s: %d rows, no pose or time column: each row read as one pose's mean "
                 "(a recording needs --rate HZ)", path, len(tab))
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
-    _check_values(tab, u)
     t = tab.get("t")
     temp = tab.get("temp")
     if "pose" in tab:
@@ -137,6 +143,9 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         if calibration:  # check poses use only their means
             _check_counts(path, tab, order, count, first[np.argsort(first)],
                           path.suffix.lower() in SUFFIXES)
+        if count.max() < MIN_SAMPLES:
+            _check_values(tab, u)  # per-pose means: no pose's samples to judge
+        samples = [u[ids == i] for i in range(n)]
         mean = np.array([u[ids == i].mean(0) for i in range(n)])
         sig = None
         if count.min() >= MIN_SAMPLES:
@@ -146,7 +155,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         tt = (np.array([t[ids == i].mean() for i in range(n)]) if t is not None
               else np.arange(n, dtype=float))
         tm = np.array([temp[ids == i].mean() for i in range(n)]) if temp is not None else None
-        poses = Poses(mean, tt, tm, sig, count, order)
+        poses = Poses(mean, tt, tm, sig, count, order, ordered=t is not None)
         intervals = None
     else:
         if t is None:
@@ -169,6 +178,8 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
             tm = np.array([temp[(t >= iv.start_s) & (t <= iv.end_s)].mean() for iv in intervals])
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
+        samples = [u[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals]
+    poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)
     if calibration:
         try:
             _check_geometry(path, poses)
@@ -177,8 +188,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                 raise
             raise InputError(f"{exc}\n{_listing(intervals)}") from None
         if intervals is not None and len(intervals) < 9:
-            from align.calibration.known import faces_of, has_six_faces
-
             if not has_six_faces(faces_of(poses)):
                 raise InputError(f"{path}: too few poses: {len(intervals)} static intervals "
                                  "found, the ellipsoid needs 9 (or the six faces for the "
@@ -186,6 +195,42 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                                  f" (--window, --threshold, --min-static, --margin)"
                                  f"{_notes(det)}\n{_listing(intervals)}")
     return poses, intervals
+
+
+def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
+                    adc_range: tuple[float, float] | None, calibration: bool,
+                    warnings: list[str] | None) -> Poses:
+    """The poses without those saturated on an axis; refused (naming them) when the rest no
+    longer determine the calibration: the six faces when all poses are faces, else nine
+    poses or the six faces."""
+    sat = find_saturated(samples, poses.labels, adc_range)
+    if not sat:
+        return poses
+    keep = np.ones(len(poses.u), bool)
+    keep[[s.index for s in sat]] = False
+    rest = Poses(poses.u[keep], poses.t[keep],
+                 None if poses.temp is None else poses.temp[keep],
+                 None if poses.sigma_u is None else poses.sigma_u[keep], poses.count[keep],
+                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k))
+    what = "; ".join(s.text() for s in sat)
+    if calibration:
+        faces = faces_of(rest)
+        if all(f is not None for f in faces_of(poses)):
+            enough = has_six_faces(faces)
+        else:
+            enough = len(rest.u) >= 9 or has_six_faces(faces)
+        if not enough:
+            raise InputError(f"{path}: {what}; without {'it' if len(sat) == 1 else 'them'} "
+                             f"the remaining {len(rest.u)} poses do not determine the "
+                             "calibration (the six faces, or nine poses all round): repeat "
+                             "the pose within the sensor's range")
+    msg = (f"{path}: {what}: left out; the calculation uses the remaining {len(rest.u)} "
+           "poses")
+    if warnings is None:
+        logging.getLogger("align").warning("WARNING: %s", msg)
+    else:
+        warnings.append(msg)
+    return rest
 
 
 MIN_SAMPLES = 3
@@ -266,8 +311,6 @@ def _listing(intervals) -> str:
 
 
 def _check_geometry(path: Path, poses: Poses) -> None:
-    from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
-
     u = poses.u
     if len(u) >= 3:
         s = np.linalg.svd(u - u.mean(0), compute_uv=False)
@@ -276,7 +319,7 @@ def _check_geometry(path: Path, poses: Poses) -> None:
                              "(degenerate): tilt the unit out of that plane")
     # A pose in another unit is far off the sphere through the others (geometry.odd_pose);
     # that sphere is determined only when the poses surround its centre: poses clustered
-    # in a narrow cone are judged after the fit (model._cone_notes), not called mixed units.
+    # in a narrow cone are judged after the fit (pipeline._cone_notes), not called mixed units.
     odd = odd_pose(u) if len(u) > 3 else None
     if odd is not None:
         i, rho = odd

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from align.calibration.model import TriadModel
+from align.calibration.triad import TriadModel
 from axisbase.errors import InputError
 from axisbase.units import G0
 

@@ -114,7 +114,7 @@ _SIGNS = re.compile(r"^[+-](,[+-])+$")
 
 # Options whose value may start with '-' (signs; lists of numbers: a southern latitude range,
 # a region of interest or nominal angles written with a negative first number).
-_DASH_VALUES = {"--scale-sign": _SIGNS,
+_DASH_VALUES = {"--scale-sign": _SIGNS, "--adc-range": re.compile(r"^-\d"),
                 "--latitude-range": re.compile(r"^-\d"), "--roi": re.compile(r"^-\d"),
                 "--nominal": re.compile(r"^-\d")}
 
@@ -187,6 +187,18 @@ def latitude_range(text: str) -> list[float]:
     if not all(math.isfinite(v) and -90 <= v <= 90 for v in (lo, hi)) or lo > hi:
         raise argparse.ArgumentTypeError(f"{text}: need -90 <= LO <= HI <= 90")
     return [lo, hi]
+
+
+def adc_range(text: str) -> tuple[float, float]:
+    """argparse type of ``--adc-range LO,HI`` [the readings' unit]."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: two numbers LO,HI (the ADC's rails in "
+                                         "the readings' unit)") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise argparse.ArgumentTypeError(f"{text}: need finite LO < HI")
+    return lo, hi
 
 
 def distinct_files(a: str, b: str, flag_a: str, flag_b: str) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, POSITIVE, number, signs, unique
+from align.commands.args import ALPHA, POSITIVE, adc_range, number, signs, unique
 from align.commands.common import (
     plan,
     same_units,
@@ -16,7 +16,7 @@ from align.commands.common import (
     warn,
     wrote,
 )
-from align.commands.parents import tables
+from align.commands.parents import examples, tables
 from axisbase.units import DEG
 
 
@@ -24,20 +24,34 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from align.calibration.files import calibrate_files, calibration_units
     from axisbase.table import parse_column_map
 
+    if args.plan is not None or args.static is None:
+        return _plan_poses(args)
     inputs = [args.static] + ([args.check] if args.check else [])
     unique(inputs, "static/--check")
-    sign, cols = signs(args.scale_sign), parse_column_map(args.columns)
+    sign = signs(args.scale_sign) if args.scale_sign is not None else None
+    cols = parse_column_map(args.columns)
     units = calibration_units(args.static, args.check, args.units, cols)
     outs = plan(args, inputs)
     out, plot = (outs.add("--json", args.json, stdout_ok=True),
                  outs.add("--plot", args.plot, folder=True))
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
-                          f"--units {units}" if args.units else None)
-    _show_calibration(args, run, sign, cols, plot)
+                          f"--units {units}" if args.units else None, args.adc_range)
+    _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
     return 0 if run.checked is None or run.checked.ok else 2
+
+
+def _plan_poses(args: argparse.Namespace) -> int:
+    from align.calibration.plan import plan_report
+    from align.commands.args import UsageError
+
+    if args.plan is None:
+        raise UsageError("give the static-pose file (or --plan N for a pose "
+                         "sequence to record)")
+    say(plan_report(args.plan))
+    return 0
 
 
 def _static_settings(args: argparse.Namespace):
@@ -127,14 +141,26 @@ def cmd_apply(args: argparse.Namespace) -> int:
 
 
 def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
-    k = add("calibrate", "ellipsoid calibration of the triad from static poses", tables())
-    k.add_argument("static", help="pose,ux,uy,uz[,t][,temp] or a recording t,ux,uy,uz (CSV), "
-                   "or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
+    k = add("calibrate", "ellipsoid calibration of the triad from static poses", tables(),
+            epilog=examples("align calibrate static.csv --json cal.json",
+                            "align calibrate recording.csv --check check.csv --scale-sign -,-,- "
+                            "--plot figs/",
+                            "align calibrate --plan 28"))
+    k.add_argument("static", nargs="?", help="pose,ux,uy,uz[,t][,temp] or a recording "
+                   "t,ux,uy,uz (CSV), or a .mat/.npz with named arrays (--columns u=NAME,t=NAME)")
+    k.add_argument("--plan", type=int, metavar="N", help="print an N-pose order (N >= 28) "
+                   "that makes the effects identifiable, with its check by simulation, and "
+                   "exit")
     k.add_argument("--check", help="check poses (same format): |a| - 1 per pose")
     k.add_argument("--json", help="write results (and the model for tilt/apply) to a new file "
                    "('-': stdout)")
     k.add_argument("--plot", help="folder for the dg-per-pose / residual figure")
-    k.add_argument("--scale-sign", default="+", help="signs of k: +, - or e.g. -,-,-")
+    k.add_argument("--scale-sign", default=None,
+                   help="signs of k: +, - or e.g. -,-,- (default: from the face labels "
+                   "+x,-x,... when the poses carry them, else +)")
+    k.add_argument("--adc-range", type=adc_range, metavar="LO,HI",
+                   help="the ADC's rails in the readings' unit: a pose reaching one is left "
+                   "out (warned) or refused (default: a pile-up at a pose's extreme value)")
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     k.add_argument("--window", type=POSITIVE, default=0.25,
                    help="static detection window [s] (at least 5 samples)")
@@ -155,7 +181,10 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_tilt(add: Callable[..., argparse.ArgumentParser]) -> None:
-    tl = add("tilt", "roll and pitch from readings through a calibration", tables())
+    tl = add("tilt", "roll and pitch from readings through a calibration", tables(),
+             epilog=examples("align tilt readings.csv --calibration cal.json --out tilt.csv",
+                             "align tilt readings.csv --calibration pc.json --method paper "
+                             "--json tilt.json"))
     tl.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     tl.add_argument("--calibration", required=True,
                     help="JSON written by 'align calibrate' (roll/pitch of the triad's own "
@@ -171,7 +200,8 @@ def add_tilt(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_apply(add: Callable[..., argparse.ArgumentParser]) -> None:
-    ap = add("apply", "readings -> specific force in the platform frame", tables())
+    ap = add("apply", "readings -> specific force in the platform frame", tables(),
+             epilog=examples("align apply pc.json readings.csv --out platform.csv --tilt"))
     ap.add_argument("calibration_file", help="JSON from 'align run --calibration' or --json")
     ap.add_argument("readings", help="CSV with ux,uy,uz[,t][,temp]")
     ap.add_argument("--out", required=True, help="new CSV t,ax_g,ay_g,az_g[,roll_deg,pitch_deg]")

@@ -4,9 +4,11 @@ of its outputs, warnings and 'wrote' lines on the terminal, a progress bar over 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import os
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from align.commands.args import UsageError
@@ -64,6 +66,38 @@ def warn(lines: Sequence[str]) -> None:
 def wrote(path: Path | str | None) -> None:
     if path is not None and str(path) != "-":
         print(f"wrote {path}")
+
+
+@contextlib.contextmanager
+def byte_progress(paths: Sequence[str], desc: str) -> Iterator[Callable[[int], None] | None]:
+    """A callback ``on_bytes(n)`` driving a byte-based progress bar on stderr over ``paths``
+    (when stderr is a terminal, or with -v; not with -q; only for files over 16 MB); None
+    otherwise."""
+    total = 0
+    for p in paths:
+        with contextlib.suppress(OSError):
+            total += os.path.getsize(p)
+    level = log.getEffectiveLevel()
+    show = (level <= logging.DEBUG or (sys.stderr.isatty() and level <= logging.INFO))
+    if not show or total < BAR_BYTES:
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit="B", unit_scale=True, unit_divisor=1024,
+               file=sys.stderr, leave=False)
+
+    def on_bytes(n: int) -> None:
+        bar.update(min(n, bar.total - bar.n))
+
+    try:
+        yield on_bytes
+    finally:
+        bar.close()
+
+
+BAR_BYTES = 16 << 20
+"""Smallest input that gets a progress bar [bytes] (a smaller log is read in well under 1 s)."""
 
 
 def progress(items: Sequence[str], desc: str):

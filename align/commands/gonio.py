@@ -14,8 +14,8 @@ from align.commands.args import (
     nominal,
     number,
 )
-from align.commands.common import plan, say, settings, warn, wrote
-from align.commands.parents import tables
+from align.commands.common import byte_progress, plan, say, settings, warn, wrote
+from align.commands.parents import examples, tables
 
 
 def cmd_gonio(args: argparse.Namespace) -> int:
@@ -45,14 +45,17 @@ def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], 
 
     if args.latitude is not None and args.latitude_range is not None:
         raise UsageError("--latitude-range: give it or --latitude, not both")
-    try:
-        return measure_log(args.log, len(names), args.latitude,
-                           1 if args.direction == "ccw" else -1, args.alpha,
-                           reverse_log=args.reverse_log, steady_table=args.steady_table,
-                           columns=cols, latitude_range_deg=args.latitude_range)
-    except FaceCountError as exc:
-        raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} has "
-                         f"{exc.found} pulses per revolution") from None
+    logs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
+    with byte_progress(logs, "reading") as on_bytes:
+        try:
+            return measure_log(args.log, len(names), args.latitude,
+                               1 if args.direction == "ccw" else -1, args.alpha,
+                               reverse_log=args.reverse_log, steady_table=args.steady_table,
+                               columns=cols, latitude_range_deg=args.latitude_range,
+                               on_bytes=on_bytes)
+        except FaceCountError as exc:
+            raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} "
+                             f"has {exc.found} pulses per revolution") from None
 
 
 def _nominal_rad(nominal_deg: list[float] | None):
@@ -85,7 +88,11 @@ def _write_gonio(args, run, names, nominal_deg, out, inputs) -> None:
 
 def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
     g = add("gonio", "face angles from a ring-laser counter log",
-            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"))
+            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"),
+            epilog=examples("align gonio log.csv --faces ref,z,y,x --nominal 90,90,90,90 "
+                            "--latitude 48.1 --json gonio.json",
+                            "align gonio ccw.csv --faces ref,z,y,x --reverse-log cw.csv "
+                            "--latitude-range 40,55 --plot figs/"))
     g.add_argument("log", help="CSV count,counter,ref[,t]")
     g.add_argument("--faces", required=True, help="face names in passing order, e.g. ref,z,y,x")
     g.add_argument("--nominal", help="nominal angles [deg] summing to 360, e.g. 90,90,90,90")

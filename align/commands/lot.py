@@ -7,46 +7,57 @@ from collections.abc import Callable
 
 from align.commands.args import add_decision_flags, decision_keywords
 from align.commands.common import log, plan, say, settings, warn
+from align.commands.parents import examples
+from axisbase.units import ARCSEC
 
 
 def cmd_lot(args: argparse.Namespace) -> int:
     from align.decision import resolve
     from align.lot import analyse, lot_outputs, read_results, result_files
     from align.present import lot_lines, verdict_lines
-    from align.session.batch import rejected
-    from axisbase.errors import EXIT_INPUT, EXIT_OK, EXIT_REJECTED
-    from axisbase.units import ARCSEC
 
     files = result_files(args.results)
     outs = plan(args, files)
     paths = {"json": outs.add("--json", args.json, stdout_ok=True),
              "csv": outs.add("--csv", args.csv), "report": outs.add("--report", args.report)}
     read = read_results(files)
-    tol = args.tolerance_arcsec
-    # Capability (Cp, Cpk) is against a symmetric ±T about a zero nominal.
-    half = tol[1] if tol is not None and tol[0] == -tol[1] else None
-    if tol is not None and half is None:
-        log.warning("--tolerance-arcsec %g,%g: asymmetric: per-unit verdicts only, no "
-                    "capability (Cpk is computed against a symmetric ±T)", *tol)
+    half = _capability_half(args.tolerance_arcsec)
     lot = analyse([r.unit for r in read if r.unit is not None],
                   [r.rejected for r in read if r.rejected is not None],
                   None if half is None else half * ARCSEC)
     spec = resolve(None, **decision_keywords(args))
     written, doc = lot_outputs(lot, read, paths, args.force, settings(args), spec)
-    say(lot_lines(lot, doc, half))
-    say(verdict_lines(doc["dispositions"], spec.rule if spec else None))
+    say([*lot_lines(lot, doc, half),
+         *verdict_lines(doc["dispositions"], spec.rule if spec else None)])
     warn(doc["warnings"])
-    for k, v in written.items():
-        if str(v) != "-":
-            print(f"  wrote {k}: {v}")
+    say(f"  wrote {k}: {v}" for k, v in written.items() if str(v) != "-")
+    return _lot_status(lot, doc, args.fail_on_reject)
+
+
+def _capability_half(tol: tuple[float, float] | None) -> float | None:
+    """T of a symmetric ±T [″] (capability, Cp and Cpk, is against a symmetric ±T about a
+    zero nominal); None for an asymmetric tolerance (said) or none."""
+    half = tol[1] if tol is not None and tol[0] == -tol[1] else None
+    if tol is not None and half is None:
+        log.warning("--tolerance-arcsec %g,%g: asymmetric: per-unit verdicts only, no "
+                    "capability (Cpk is computed against a symmetric ±T)", *tol)
+    return half
+
+
+def _lot_status(lot, doc: dict, fail_on_reject: bool) -> int:
+    from align.session.batch import rejected
+    from axisbase.errors import EXIT_INPUT, EXIT_OK, EXIT_REJECTED
+
     if not lot.ok:
         return EXIT_INPUT
-    return EXIT_REJECTED if args.fail_on_reject and rejected(
+    return EXIT_REJECTED if fail_on_reject and rejected(
         d["verdict"] for d in doc["dispositions"]) else EXIT_OK
 
 
 def add_lot(add: Callable[..., argparse.ArgumentParser]) -> None:
-    lt = add("lot", "a production lot: control charts, outliers, capability, metadata")
+    lt = add("lot", "a production lot: control charts, outliers, capability, metadata",
+             epilog=examples("align lot results/ --report lot.html --csv lot.csv "
+                             "--tolerance-arcsec 20"))
     lt.add_argument("results", nargs="+",
                     help="session results ('align run --json') or folders of them (*.json)")
     lt.add_argument("--report", help="HTML report of the lot (a new file)")

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from align.commands.args import ALPHA, POSITIVE, add_max_pixels, number, pattern, unique
 from align.commands.common import log, plan, progress, say, settings, warn, wrote
+from align.commands.parents import examples
 
 
 def cmd_marks(args: argparse.Namespace) -> int:
@@ -110,7 +111,9 @@ def _read_boards(paths: list[str]) -> dict:
 
 
 def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
-    m = add("marks", "measure scribe marks in images")
+    m = add("marks", "measure scribe marks in images", epilog=examples(
+        "align marks mark1.png mark2.tif --json marks.json",
+        "align marks photo.tif --camera camera.json --roi 100,200,800,600 --one --plot figs/"))
     m.add_argument("images", nargs="+", help="image files (PNG, TIFF, JPEG; 8 or 16 bit)")
     m.add_argument("--camera", help="camera model JSON written by 'align camera' (trusted: "
                    "applied, its u propagated, no distortion fitted on top)")
@@ -136,7 +139,8 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
-    c = add("camera", "calibrate a camera from chessboard photographs")
+    c = add("camera", "calibrate a camera from chessboard photographs", epilog=examples(
+        "align camera board*.jpg --pattern 9x6 --square 25 --json camera.json"))
     c.add_argument("images", nargs="+", help="chessboard photographs")
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS")
     c.add_argument("--square", type=POSITIVE, default=1.0, help="square size (any unit)")

@@ -15,7 +15,25 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
 
 
-FMT = argparse.ArgumentDefaultsHelpFormatter
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter,
+                    argparse.RawDescriptionHelpFormatter):
+    """Defaults shown only where there is one (not "(default: None)" or "(default: False)");
+    the description and the examples in the epilog kept as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.default in (None, False, [], argparse.SUPPRESS) or action.required:
+            return action.help
+        return super()._get_help_string(action)
+
+
+FMT = HelpFormatter
+
+
+def examples(*lines: str) -> str:
+    """An epilog of example command lines (each '  $ align ...'; a line starting with '#'
+    is a comment for the one below)."""
+    return "examples:\n" + "\n".join(f"  {line}" if line.startswith("#") else f"  $ {line}"
+                                       for line in lines)
 
 
 def common() -> argparse.ArgumentParser:

@@ -5,23 +5,30 @@ from __future__ import annotations
 import argparse
 
 from align.commands import calibrate, gonio, lot, marks, plan, run, session, synth
-from align.commands.parents import FMT, Parser, common, writes
+from align.commands.parents import FMT, Parser, common, examples, writes
 from axisbase.version import __version__
 
 DESCRIPTION = ("Align and calibrate navigation accelerometers: scribe marks in images, "
                "ring-laser goniometer logs, ellipsoid calibration of the triad, fused into "
                "the misalignment matrix E with its uncertainty.")
 
+EPILOG = examples("align demo", "align run SESSION --json result.json --report report.html",
+                  "align COMMAND --help") + (
+    "\n\nexit status: 0 success; 1 internal error (please report); 2 bad input or usage,\n"
+    "  or a result that cannot be trusted (written, with ok: false); 130 interrupted;\n"
+    "  143 stopped (SIGTERM)")
+
 
 def build_parser() -> argparse.ArgumentParser:
-    p = Parser(prog="align", description=DESCRIPTION, formatter_class=FMT)
+    p = Parser(prog="align", description=DESCRIPTION, formatter_class=FMT, epilog=EPILOG)
     p.add_argument("--version", action="version", version=f"axis-align {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND", parser_class=Parser)
     parents = [common(), writes()]
 
-    def add(name: str, help: str, *more: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    def add(name: str, help: str, *more: argparse.ArgumentParser,
+            epilog: str | None = None) -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help, description=help, formatter_class=FMT,
-                              parents=[*parents, *more])
+                              parents=[*parents, *more], epilog=epilog)
 
     marks.add_marks(add)
     marks.add_camera(add)

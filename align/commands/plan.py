@@ -6,6 +6,7 @@ import argparse
 from collections.abc import Callable
 
 from align.commands.common import plan, say, settings, wrote
+from align.commands.parents import examples
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -27,7 +28,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def add_plan(add: Callable[..., argparse.ArgumentParser]) -> None:
     pl = add("plan", "what to measure next: the measurement that lowers u of the critical "
-             "angle most per minute of work")
+             "angle most per minute of work", epilog=examples(
+                 "align plan result.json", "align plan result.json --json plan.json"))
     pl.add_argument("result", help="session result JSON ('align run --json')")
     pl.add_argument("--json", help="the plan as JSON ('-': stdout)")
     pl.set_defaults(func=cmd_plan)

@@ -18,14 +18,15 @@ from align.commands.args import (
     unique,
 )
 from align.commands.common import log, say, settings, warn
+from align.commands.parents import examples
 
 # Flags that say how a batch runs, not what it computes: left out of the results' settings,
 # so a batch gives the same JSON however it is run.
-EXECUTION = ("jobs", "scheduler", "resume")
+EXECUTION = ("jobs", "scheduler", "resume", "calibration_flag")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from align.session.batch import SessionJob, exit_status, in_folder, resume
+    from align.session.batch import SessionJob, exit_status, in_folder
 
     if len(args.sessions) > 1:
         unique(args.sessions, "sessions")
@@ -37,19 +38,29 @@ def cmd_run(args: argparse.Namespace) -> int:
                      in_folder(args.report, one, ".html"),
                      in_folder(args.calibration, one, ".cal.json"), args.alpha,
                      args.force, args.allow_outside, settings(args, EXECUTION),
-                     keep_result=True, decision=decision_keywords(args))
+                     keep_result=True, cal_flag=args.calibration_flag,
+                     decision=decision_keywords(args))
     if args.resume:
-        done, todo = resume([job], say=log.warning)
-        if not todo:
-            if done[0].get("error"):
-                raise UsageError(done[0]["error"])
-            print(f"session {args.sessions[0]}: outputs complete and trusted, skipped "
-                  "(--resume)")
-            return exit_status(done, args.fail_on_reject)
-        job = todo[0]
+        job = _resume_one(job, args)
+        if isinstance(job, int):
+            return job
     out = run_here(job)
     show_session(out, args.budget, args.plan)
     return exit_status([out], args.fail_on_reject)
+
+
+def _resume_one(job, args: argparse.Namespace):
+    """--resume for one session: its exit status when its outputs are complete and trusted
+    (skipped), else the job to run."""
+    from align.session.batch import exit_status, resume
+
+    done, todo = resume([job], say=log.warning)
+    if todo:
+        return todo[0]
+    if done[0].get("error"):
+        raise UsageError(done[0]["error"])
+    print(f"session {args.sessions[0]}: outputs complete and trusted, skipped (--resume)")
+    return exit_status(done, args.fail_on_reject)
 
 
 def run_here(job) -> dict:
@@ -64,12 +75,13 @@ def run_here(job) -> dict:
 
 def show_session(out: dict, budget: bool = False, plan: bool = False) -> None:
     """A session's result, its verdict (with ``budget``/``plan`` the budget and what to
-    measure next), warnings and outputs on the terminal."""
-    from align.present import decision_lines, session_lines
+    measure next), stage timings, warnings and outputs on the terminal."""
+    from align.present import decision_lines, session_lines, timing_lines
 
     print(f"session {out['session']}:")
     say(session_lines(out["result"]))
     say(decision_lines(out["json"], budget, plan))
+    say(timing_lines(out["result"].timings))
     warn(out["warnings"])
     for k, v in out["outputs"].items():
         if v != "-":
@@ -85,7 +97,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     jobs = batch_jobs(args.sessions, args.json, args.report, args.calibration,
                       alpha=args.alpha, force=args.force, allow_outside=args.allow_outside,
                       settings=settings(args, EXECUTION), command=tuple(command_line()),
-                      decision=decision_keywords(args))
+                      cal_flag=args.calibration_flag, decision=decision_keywords(args))
     results = []
     if args.resume:
         results, jobs = resume(jobs, say=log.warning)
@@ -150,13 +162,29 @@ def _show_batch(results: list[dict]) -> None:
           + (f", {failed} failed" if failed else ""))
 
 
+class NamedBy(argparse.Action):
+    """Stores the value, and in ``<dest>_flag`` which of the option's names the user typed
+    (its messages then name that one)."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        setattr(namespace, self.dest, values)
+        setattr(namespace, f"{self.dest}_flag", option_string)
+
+
 def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
-    r = add("run", "run whole sessions: every stage, the loops, the fusion")
+    r = add("run", "run whole sessions: every stage, the loops, the fusion", epilog=examples(
+        "align run SESSION --json result.json --report report.html --platform-calibration "
+        "pc.json",
+        "# a production batch, then the rest of it after a stop",
+        "align run S1 S2 S3 --json results/ --report reports/ --jobs 4",
+        "align run S1 S2 S3 --json results/ --report reports/ --resume"))
     r.add_argument("sessions", nargs="+", help="session folder(s) holding session.toml")
     r.add_argument("--json", help="result JSON (a folder when several sessions; '-': stdout)")
     r.add_argument("--report", help="HTML report (a folder when several sessions)")
-    r.add_argument("--calibration", help="platform calibration JSON for 'align apply' "
-                   "(a folder when several sessions)")
+    r.add_argument("--platform-calibration", "--calibration", dest="calibration",
+                   action=NamedBy,
+                   metavar="OUT", help="write the platform calibration JSON for 'align apply' "
+                   "(a folder when several sessions; --calibration: the older name)")
     r.add_argument("--jobs", type=number(1, 1024, integer=True),
                    help="parallel sessions (default: all cores)")
     r.add_argument("--alpha", type=ALPHA, default=1e-3,
@@ -175,5 +203,5 @@ def add_run(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="print the uncertainty budget of every angle (largest first)")
     r.add_argument("--plan", action="store_true",
                    help="print what to measure next (as 'align plan' on the result)")
-    r.set_defaults(func=cmd_run)
+    r.set_defaults(func=cmd_run, calibration_flag="--platform-calibration")
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
+from align.commands.parents import examples
 from axisbase.errors import EXIT_INPUT, EXIT_OK
 
 
@@ -34,7 +35,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def add_init(add: Callable[..., argparse.ArgumentParser]) -> None:
-    p = add("init", "write a commented session.toml for the instruments named")
+    p = add("init", "write a commented session.toml for the instruments named",
+            epilog=examples("align init unit42 --cameras A,B --gonio --tumble --static",
+                            "align init unit43 --gonio --tumble"))
     p.add_argument("folder", help="the session folder (made if absent)")
     p.add_argument("--cameras", metavar="A,B", help="camera names (standard layout: the first "
                    "looks along +Y, the second along -X)")
@@ -45,6 +48,7 @@ def add_init(add: Callable[..., argparse.ArgumentParser]) -> None:
 
 
 def add_check(add: Callable[..., argparse.ArgumentParser]) -> None:
-    p = add("check", "check sessions without computing: keys, files, headers, images")
+    p = add("check", "check sessions without computing: keys, files, headers, images",
+            epilog=examples("align check unit42", "align check lot7/unit*"))
     p.add_argument("sessions", nargs="+", metavar="FOLDER", help="session folders")
     p.set_defaults(func=cmd_check)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from align.commands.args import SEED, UsageError, effects
 from align.commands.common import say, settings
-from align.commands.parents import FMT, Parser
+from align.commands.parents import FMT, Parser, examples
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
@@ -111,10 +111,16 @@ def _write_demo(session: Path, seed: int):
 
 def add_synth(sub, parents: list[argparse.ArgumentParser]) -> None:
     sy = sub.add_parser("synth", help="write synthetic data with known truth",
-                        formatter_class=FMT)
+                        description="write synthetic data with known truth",
+                        formatter_class=FMT, epilog=examples(
+                            "align synth session demo1 --seed 3 --effect camera_roll_A=30"))
     sy_sub = sy.add_subparsers(dest="what", required=True, parser_class=Parser)
     ss = sy_sub.add_parser("session", help="a complete synthetic session folder",
-                           formatter_class=FMT, parents=parents)
+                           description="a complete synthetic session folder (images, "
+                           "goniometer log, tumble, platform poses, session.toml, truth.json)",
+                           formatter_class=FMT, parents=parents, epilog=examples(
+                               "align synth session demo1 --seed 3 --effect camera_roll_A=30",
+                               "align synth session demo2 --undeclared table_tilt_x=5"))
     ss.add_argument("out", help="new folder (must not exist or be empty)")
     ss.add_argument("--seed", type=SEED, default=0,
                     help="random seed (the same seed gives the same session)")
@@ -127,7 +133,8 @@ def add_synth(sub, parents: list[argparse.ArgumentParser]) -> None:
 
 
 def add_demo(add: Callable[..., argparse.ArgumentParser]) -> None:
-    d = add("demo", "synthesise a session with known truth and run it")
+    d = add("demo", "synthesise a session with known truth and run it",
+            epilog=examples("align demo", "align demo --out demo/ --seed 2"))
     d.add_argument("--out", help="folder for the session and outputs (default: a new temp folder)")
     d.add_argument("--seed", type=SEED, default=1, help="random seed")
     d.set_defaults(func=cmd_demo)

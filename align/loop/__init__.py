@@ -6,6 +6,7 @@ from align.loop.loop import (
     LoopReport,
     LoopSummary,
     RefusedEffect,
+    SkippedCandidate,
     Stage,
     StageFit,
     Term,
@@ -16,8 +17,8 @@ from align.loop.loop import (
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 
 __all__ = [
-    "Candidate", "EffectReport", "LoopReport", "LoopSummary", "RefusedEffect", "Stage",
-    "StageFit",
+    "Candidate", "EffectReport", "LoopReport", "LoopSummary", "RefusedEffect",
+    "SkippedCandidate", "Stage", "StageFit",
     "StructureReport", "StructureTest", "Term", "bic", "f_test", "periodogram_test",
     "run_loop", "check_structure",
 ]

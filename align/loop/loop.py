@@ -8,10 +8,19 @@ unit and physical meaning) from the current fit. The loop scores each candidate 
 adds the best one only if an F-test (corrected for searched parameters) and BIC both call for
 it, and stops when nothing more is significant. Structure that remains is reported, never
 hidden.
+
+A candidate that does not apply to the data (its builder returns None or raises
+:class:`~axisbase.errors.NotApplicable`, or its refit does) or whose refit is singular
+(``numpy.linalg.LinAlgError``) is skipped, and the report says which and why
+(``LoopReport.skipped``). Anything else a candidate raises is a defect and propagates.
+With ``-v`` (the ``align`` logger at DEBUG) the loop logs every candidate it tries, with its
+p-value and ΔBIC, and what it decided.
 """
 
 from __future__ import annotations
 
+import logging
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -20,6 +29,9 @@ import numpy as np
 from scipy import special  # (not scipy.stats: 1 s to import; the same functions)
 
 from align.loop.structure import StructureReport, check_structure
+from axisbase.errors import NotApplicable
+
+log = logging.getLogger("align.loop")
 
 
 @dataclass(frozen=True)
@@ -93,7 +105,8 @@ class Stage(Protocol):
 
 @dataclass(frozen=True)
 class Candidate:
-    """A candidate effect: builds its Term from the current fit (None if it does not apply)."""
+    """A candidate effect: builds its Term from the current fit (None, or
+    :class:`~axisbase.errors.NotApplicable` raised with the reason, if it does not apply)."""
 
     name: str
     unit: str
@@ -159,8 +172,25 @@ class RefusedEffect:
 
 
 @dataclass(frozen=True)
+class SkippedCandidate:
+    """A candidate the loop could not try: it does not apply to these data, or its refit was
+    singular (``reason`` says which, in the stage's words)."""
+
+    name: str
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> SkippedCandidate:
+        return cls(str(d["name"]), str(d["reason"]))
+
+
+@dataclass(frozen=True)
 class LoopReport:
-    """Before/after of one stage's loop; ``refused``: significant candidates not added."""
+    """Before/after of one stage's loop; ``refused``: significant candidates not added;
+    ``skipped``: candidates that could not be tried, with why."""
 
     effects: tuple[EffectReport, ...]
     before: StageFit
@@ -169,6 +199,7 @@ class LoopReport:
     structure_after: StructureReport
     terms: tuple[Term, ...]
     refused: tuple[RefusedEffect, ...] = ()
+    skipped: tuple[SkippedCandidate, ...] = ()
 
     @property
     def unexplained_structure(self) -> bool:
@@ -187,7 +218,7 @@ class LoopReport:
                            chi2_dof(self.before), chi2_dof(self.after),
                            self.unexplained_structure,
                            None if w is None else w.name, None if w is None else w.p_value,
-                           "" if w is None else w.detail, self.refused)
+                           "" if w is None else w.detail, self.refused, self.skipped)
 
 
 @dataclass(frozen=True)
@@ -204,6 +235,8 @@ class LoopSummary:
     structure_test, structure_p, structure_detail : the test that found it, its p-value and
         what it saw (None, None, "" if none).
     refused : significant candidates the stage's physical checks refused, with why.
+    skipped : candidates not tried (not applicable to these data, or a singular refit),
+        with why.
     """
 
     effects: tuple[EffectReport, ...]
@@ -216,6 +249,7 @@ class LoopSummary:
     structure_p: float | None = None
     structure_detail: str = ""
     refused: tuple[RefusedEffect, ...] = ()
+    skipped: tuple[SkippedCandidate, ...] = ()
 
     def summary(self) -> LoopSummary:
         """Itself (a loaded result's loop is already a summary)."""
@@ -245,6 +279,7 @@ class LoopSummary:
         return {"effects": [e.to_dict() for e in self.effects],
                 "unexplained_structure": self.unexplained_structure,
                 "refused_effects": [r.to_dict() for r in self.refused],
+                "skipped_candidates": [s.to_dict() for s in self.skipped],
                 "loop": {"rms_before": self.rms_before, "rms_after": self.rms_after,
                          "chi2_dof_before": self.chi2_dof_before,
                          "chi2_dof_after": self.chi2_dof_after,
@@ -267,7 +302,9 @@ class LoopSummary:
                    num("chi2_dof_before"), num("chi2_dof_after"),
                    bool(d.get("unexplained_structure", False)), lp.get("structure_test"),
                    num("structure_p"), str(lp.get("structure_detail", "")),
-                   tuple(RefusedEffect.from_dict(r) for r in d.get("refused_effects", ())))
+                   tuple(RefusedEffect.from_dict(r) for r in d.get("refused_effects", ())),
+                   tuple(SkippedCandidate.from_dict(s)
+                         for s in d.get("skipped_candidates", ())))
 
 
 def bic(fit: StageFit, extra_k: int = 0) -> float:
@@ -317,13 +354,19 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     An effect is added when its (look-elsewhere corrected) F-test p-value is below ``alpha``
     and it lowers BIC by at least ``min_delta_bic``; the best such effect is added first.
     ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
-    else None): the refusal is reported in ``LoopReport.refused``, never silent.
+    else None): the refusal is reported in ``LoopReport.refused``, never silent. A candidate
+    that does not apply or whose refit is singular is reported in ``LoopReport.skipped``.
     """
     refused: dict[str, RefusedEffect] = {}
+    skipped: dict[str, SkippedCandidate] = {}
     terms: list[Term] = []
+    start = time.perf_counter()
     current = stage.fit(terms)
     before = current
     s_before = structure_of(current, alpha)
+    log.debug("loop %s: declared model: N %d, RMS %.4g, chi2/dof %s; structure %s",
+              type(stage).__name__, current.n, current.rms, _chi2_dof(current),
+              _structure_note(s_before))
     effects: list[EffectReport] = []
     searched = 0
     while len(effects) < max_effects:
@@ -331,26 +374,31 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
         for cand in candidates:
             if any(t.name == cand.name for t in terms):
                 continue
-            term = cand.build(current)
-            if term is None:
+            trial, term = _try(stage, cand, current, terms, skipped)
+            if trial is None:
                 continue
-            try:
-                trial = stage.fit([*terms, term])
-            except (np.linalg.LinAlgError, ValueError):
-                continue
+            skipped.pop(cand.name, None)  # tried now: not skipped after all
             d_bic = (bic(trial, searched + term.searched)
                      - bic(current, searched))
             p = f_test(current, trial, term.width)
             p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
+            log.debug("loop   candidate %s: p %.3g (look-elsewhere corrected, %g trials), "
+                      "dBIC %+.1f (needs p < %g and dBIC < %+.1f)", cand.name, p_adj,
+                      term.trials, d_bic, alpha, -min_delta_bic)
             if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
                 why = admissible(current, trial, term) if admissible is not None else None
                 if why is not None:
+                    log.debug("loop   candidate %s: significant but refused: %s", cand.name,
+                              why)
                     refused[cand.name] = RefusedEffect(cand.name, why, p_adj, float(d_bic))
                     continue
                 best = (d_bic, p_adj, term, trial, cand)
         if best is None:
+            log.debug("loop %s: no candidate significant: stop", type(stage).__name__)
             break
         d_bic, p_adj, term, trial, cand = best
+        log.debug("loop %s: added %s (p %.3g, dBIC %+.1f)", type(stage).__name__, cand.name,
+                  p_adj, d_bic)
         est, u = trial.effects.get(term.name, (float("nan"), float("nan")))
         effects.append(EffectReport(term.name, est, u, term.unit, current.rms, trial.rms,
                                     float(d_bic), p_adj, cand.description))
@@ -362,6 +410,39 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                             e.rms_before, e.rms_after, e.delta_bic, e.p_value, e.description,
                             tuple(current.components.get(e.name, ())))
                for e in effects]
-    return LoopReport(tuple(effects), before, current, s_before, structure_of(current, alpha),
-                      tuple(terms), tuple(r for n, r in refused.items()
-                                          if not any(t.name == n for t in terms)))
+    s_after = structure_of(current, alpha)
+    log.debug("loop %s: final model: RMS %.4g, chi2/dof %s; structure %s; %.3f s",
+              type(stage).__name__, current.rms, _chi2_dof(current), _structure_note(s_after),
+              time.perf_counter() - start)
+    added = {t.name for t in terms}
+    return LoopReport(tuple(effects), before, current, s_before, s_after, tuple(terms),
+                      tuple(r for n, r in refused.items() if n not in added),
+                      tuple(s for n, s in skipped.items() if n not in added))
+
+
+def _try(stage: Stage, cand: Candidate, current: StageFit, terms: Sequence[Term],
+         skipped: dict[str, SkippedCandidate]) -> tuple[StageFit | None, Term | None]:
+    """The refit with ``cand``'s term, or (None, None) with the candidate recorded in
+    ``skipped`` when it does not apply or its refit is singular."""
+    try:
+        term = cand.build(current)
+        if term is None:
+            raise NotApplicable("does not apply to these data")
+        return stage.fit([*terms, term]), term
+    except NotApplicable as exc:
+        why = str(exc) or "does not apply to these data"
+    except np.linalg.LinAlgError as exc:
+        why = f"singular refit ({exc})" if str(exc) else "singular refit"
+    log.debug("loop   candidate %s: skipped: %s", cand.name, why)
+    skipped[cand.name] = SkippedCandidate(cand.name, why)
+    return None, None
+
+
+def _chi2_dof(fit: StageFit) -> str:
+    return "n/a (noise unknown)" if fit.sigma is None else f"{fit.chi2 / max(fit.dof, 1):.3f}"
+
+
+def _structure_note(s: StructureReport) -> str:
+    w = s.worst
+    return ("none" if not s.structured else
+            f"{w.name} p {w.p_value:.2g}" if w is not None else "found")

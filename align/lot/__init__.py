@@ -14,6 +14,7 @@ Public API::
 from align.lot.document import lot_csv, lot_document, lot_outputs, lot_warnings
 from align.lot.duplicates import Duplicate, find_duplicates
 from align.lot.read import ANGLE_NAMES, ReadFile, Rejected, UnitResult, read_results, result_files
+from align.lot.report import write_lot_report as _write
 from align.lot.stats import (
     Capability,
     ControlChart,
@@ -27,7 +28,6 @@ from align.lot.stats import (
 def write_lot_report(lot, path, doc, force=False):
     """The HTML report (:func:`align.lot.report.write_lot_report`; matplotlib is imported
     only when a report is written)."""
-    from align.lot.report import write_lot_report as _write
 
     return _write(lot, path, doc, force)
 

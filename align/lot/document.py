@@ -12,8 +12,10 @@ from pathlib import Path
 
 from align.contract import document
 from align.decision import ToleranceSpec
+from align.lot.dispose import dispositions
 from align.lot.duplicates import Duplicate, spelling_warnings
 from align.lot.read import ANGLE_NAMES, ReadFile
+from align.lot.report import write_lot_report
 from align.lot.stats import GUARD, PROVISIONAL, AngleStats, Lot
 from axisbase.output import write_atomic, write_json
 from axisbase.provenance import InputFile, Provenance
@@ -200,8 +202,6 @@ def lot_outputs(lot: Lot, read: Sequence[ReadFile], outs: Mapping[str, Path | No
     """Write the outputs asked for (``json``, ``csv``, ``report``: checked paths or None);
     returns what was written and the lot JSON. ``spec``: the tolerance and decision rule
     every unit is judged against (None: each unit's own, :mod:`align.lot.dispose`)."""
-    from align.lot.dispose import dispositions
-
     doc = lot_document(lot, read, settings)
     doc["dispositions"] = dispositions(lot.units, spec)
     written: dict[str, Path] = {}
@@ -210,7 +210,6 @@ def lot_outputs(lot: Lot, read: Sequence[ReadFile], outs: Mapping[str, Path | No
     if outs.get("csv") is not None:
         written["csv"] = write_atomic(outs["csv"], lot_csv(lot), force)
     if outs.get("report") is not None:
-        from align.lot.report import write_lot_report
 
         written["report"] = write_lot_report(lot, outs["report"], doc, force)
     return written, doc

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from align.lot.read import ANGLE_NAMES
-from align.lot.stats import AngleStats, Lot, MetadataEffect
+from align.lot.stats import AngleStats, Lot, MetadataEffect, _day
 from axisbase.units import ARCSEC
 
 DENSE = 2000
@@ -131,7 +131,6 @@ def fig_metadata(m: MetadataEffect, lot: Lot):
     for u in used:
         v = u.metadata.get(m.key)
         if m.by_day:
-            from align.lot.stats import _day
 
             d = _day(v)
             v = d if d is not None else v

@@ -24,6 +24,7 @@ import orjson
 
 from align.contract import check
 from align.errors import InputError
+from axisbase.units import ARCSEC
 
 ANGLE_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
 """The six angles in the order of ``angle_names`` of a session result (``align.fusion``'s
@@ -160,7 +161,6 @@ class UnitResult:
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
-        from axisbase.units import ARCSEC
 
         return {"file": self.file, "session": self.session, "unit": self.label,
                 "ok": self.ok, "fused": self.fused,
@@ -188,7 +188,6 @@ def _consistent(d: Mapping[str, Any], e: tuple[float, ...], u: tuple[float, ...]
                 where: str) -> None:
     """A fused result's matrices agree with each other and with physics: the arc-second
     copies equal the radian ones, each u > 0, each |E_ij| <= :data:`MAX_E_RAD`."""
-    from axisbase.units import ARCSEC
 
     for (i, j), v in zip(_INDEX, u, strict=True):
         if not v > 0:

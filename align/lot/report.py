@@ -16,9 +16,20 @@ from pathlib import Path
 
 from markupsafe import Markup
 
-from align.html import esc, png_img, table
+from align.html import esc, png_img, render, table
+from align.lot.disposition import (
+    SEVERITY,
+    lot_name,
+    rank_warnings,
+    relative_link,
+    session_report_of,
+    unit_dispositions,
+)
+from align.lot.figures import fig_control_chart, fig_distributions, fig_metadata, png
 from align.lot.read import ANGLE_NAMES
 from align.lot.stats import FALSE_RATE, GUARD, Lot
+from axisbase.output import write_atomic
+from axisbase.provenance import Provenance
 from axisbase.units import ARCSEC
 
 UNIT_ROWS_MAX = 20000
@@ -26,8 +37,6 @@ UNIT_ROWS_MAX = 20000
 
 
 def _img(fig, alt: str) -> str:
-    from align.lot.figures import png
-
     return str(png_img(png(fig), alt))  # a str: these pages are joined as text
 
 
@@ -40,8 +49,6 @@ def _n(v: float | None, fmt: str = "{:.2f}") -> str:
 
 
 def _provenance(doc: dict) -> str:
-    from axisbase.provenance import Provenance
-
     p = Provenance.from_dict(doc)
     return (f"<p>{esc(p.tool)} {esc(p.tool_version)}, {esc(doc['format'])} format version "
             f"{doc['format_version']}, written {esc(p.created_utc)} (UTC) by "
@@ -110,8 +117,6 @@ def _flagged(lot: Lot) -> str:
 
 
 def _metadata(lot: Lot) -> str:
-    from align.lot.figures import fig_metadata
-
     parts = ["<h2 id='metadata'>Each angle against the session metadata</h2>"]
     if not lot.metadata:
         parts.append("<p>No metadata key varies over the units in groups that can be "
@@ -158,7 +163,6 @@ def _units(lot: Lot) -> str:
 def write_lot_report(lot: Lot, path: str | Path, doc: dict, force: bool = False) -> Path:
     """Write the lot's report to ``path`` (atomically; exclusively unless ``force``).
     ``doc``: the lot JSON, whose warnings and provenance the page shows."""
-    from axisbase.output import write_atomic
 
     return write_atomic(path, lot_html(lot, doc, Path(path)), force)
 
@@ -176,7 +180,6 @@ def _dispositions(lot: Lot, disps: list, page: Path | None
                   ) -> tuple[list[dict], list[dict], int]:
     """The units needing a decision (FAIL, INCONCLUSIVE, NOT MEASURED), the others, and how
     many are left out of the table (beyond :data:`DISPOSITION_ROWS_MAX`)."""
-    from align.lot.disposition import relative_link, session_report_of
 
     decide, rest = [], []
     for d in disps[:DISPOSITION_ROWS_MAX]:
@@ -213,9 +216,6 @@ def _banner(lot: Lot, counts: dict[str, int]) -> dict:
 def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
     """The lot's report as one self-contained HTML page; ``page``: where it will be written
     (links to the units' session reports are relative to it; None: no links)."""
-    from align.html import render
-    from align.lot.disposition import SEVERITY, lot_name, rank_warnings, unit_dispositions
-    from align.lot.figures import fig_control_chart, fig_distributions
 
     n_units, n_stats = len(lot.units), len(lot.in_stats)
     counts: dict[str, int] = {}

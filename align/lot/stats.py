@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from align.lot.duplicates import Duplicate, find_duplicates
-from align.lot.read import ANGLE_NAMES, Rejected, UnitResult
+from align.lot.read import ANGLE_NAMES, Rejected, UnitResult, when_of
 
 D2 = 1.128
 """Mean range of two normal draws in units of σ (d2 for n = 2)."""
@@ -286,8 +286,6 @@ def _run_order(units: Sequence[UnitResult]) -> tuple[list[int], str, str]:
 
 
 def _day(v: object) -> str | None:
-    from align.lot.read import when_of
-
     w = when_of({"date": v}) if isinstance(v, str) else None
     return None if w is None else w.date().isoformat()
 

@@ -28,8 +28,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from align.contract import FORMATS
+from align.decision import resolve
 from align.errors import InputError
+from align.session.config import load_session
+from align.session.output import session_outputs
+from align.session.run import run_session
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_REJECTED
+from axisbase.output import STDOUT, OutputPlan
+from axisbase.provenance import set_command, sha256_file
+from axisbase.stop import Stopped, on_signal
+from axisbase.version import __version__
 
 Summary = dict
 OnDone = Callable[[Summary], None]
@@ -56,6 +65,8 @@ class SessionJob:
     settings: dict = field(default_factory=dict)
     command: tuple[str, ...] = ()
     keep_result: bool = False
+    cal_flag: str = "--platform-calibration"
+    """How the user named ``cal`` (the older ``--calibration`` is an alias): messages say it."""
     decision: dict = field(default_factory=dict)
     """The command line's decision flags, :func:`align.decision.resolve`'s keywords
     (``tolerance`` (lower, upper) [″], ``rule``, ``k``): they override session.toml's
@@ -77,23 +88,19 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
 
     Every output is checked before anything is computed; a stage that failed still gives
     the result (``ok: false``)."""
-    from align.decision import resolve
-    from align.session import load_session, run_session, session_outputs
-    from axisbase.output import OutputPlan
-    from axisbase.provenance import set_command
 
     if job.command:
         set_command(job.command)
     try:
         s = load_session(job.folder, allow_outside=job.allow_outside)
         if job.cal is not None and s.calibration is None:
-            raise InputError(f"--calibration {job.cal}: the session {s.folder} has no "
+            raise InputError(f"{job.cal_flag} {job.cal}: the session {s.folder} has no "
                              "[calibration] section, so there is no platform calibration "
                              "to write")
         plan = OutputPlan(s.inputs, force=job.force)
         outs = {"json": plan.add("--json", job.json, stdout_ok=True),
                 "report": plan.add("--report", job.report),
-                "cal": plan.add("--calibration", job.cal)}
+                "cal": plan.add(job.cal_flag, job.cal)}
     except InputError as exc:
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
@@ -112,9 +119,10 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
                 "error": str(exc)}
     warnings = list(js["warnings"])
     if outs["cal"] is not None and "cal" not in written:
-        warnings.append(f"--calibration {outs['cal']}: NOT written: no platform calibration "
-                        "(the calibration or the fusion failed)")
-    return {"session": s.name, "folder": job.folder, "ok": res.ok, "bad_input": not res.ok,
+        warnings.append(f"{job.cal_flag} {outs['cal']}: NOT written: no platform "
+                        "calibration (the calibration or the fusion failed)")
+    return {"session": s.name, "folder": job.folder, "ok": res.ok,
+            "bad_input": not res.ok and not res.internal_error,
             "result": res if job.keep_result else None, "json": js, "warnings": warnings,
             "outputs": {k: str(v) for k, v in written.items()}}
 
@@ -133,12 +141,12 @@ def batch_jobs(sessions: Sequence[str], json: str | None = None, report: str | N
     ``<session>.json``, ``<session>.html``, ``<session>.cal.json`` each, named after the
     session's folder). The folders are created and checked writable now; ``common``: the
     other :class:`SessionJob` fields."""
-    from axisbase.output import OutputPlan
 
     names = [Path(s).resolve().name for s in sessions]
     if len(set(names)) != len(names):
         raise InputError("two sessions have the same folder name; outputs would collide")
-    flags = (("--json", json), ("--report", report), ("--calibration", cal))
+    flags = (("--json", json), ("--report", report),
+             (common.get("cal_flag", "--platform-calibration"), cal))
     for flag, folder in flags:
         if folder == "-":
             raise InputError(f"{flag} -: standard output takes one session, not a batch")
@@ -186,7 +194,6 @@ def is_complete(job: SessionJob) -> bool:
     """Every output ``job`` asks for is in place: a session result JSON, the report, and the
     calibration (unless the JSON says the session gave none). Outputs appear all together or
     not at all, so this is what an interrupted batch finished."""
-    from axisbase.output import STDOUT
 
     if job.json == STDOUT or not (job.json or job.report or job.cal):
         return False
@@ -246,10 +253,6 @@ def reuse_verdict(job: SessionJob) -> tuple[str, str | None]:
     and calibration asked for must be there too."""
     import json as _json
 
-    from align.contract import FORMATS
-    from axisbase.output import STDOUT
-    from axisbase.provenance import sha256_file
-    from axisbase.version import __version__
 
     asked = [p for p in (job.json, job.report, job.cal) if p is not None]
     if job.json == STDOUT or not asked or not any(Path(p).exists() for p in asked):
@@ -380,9 +383,10 @@ def batch_row(summary: Summary) -> BatchRow:
 
 def exit_status(summaries: Sequence[Summary], fail_on_reject: bool = False) -> int:
     """The exit status of ``align run`` (one session or a batch): 1 if a session hit an
-    internal error, else 2 if a session failed (bad input, or a failed stage: its result is
-    written with ``ok: false``), else with ``fail_on_reject`` 3 if a verdict is FAIL or
-    INCONCLUSIVE, else 0."""
+    internal error (in one of its stages, or its job crashed), else 2 if a session failed
+    (bad input, or a failed stage: its result is written with ``ok: false``), else with
+    ``fail_on_reject`` 3 if a verdict is FAIL or INCONCLUSIVE, else 0 — as ``align marks``
+    for its images."""
     if any(not r["ok"] and not r.get("bad_input", False) for r in summaries):
         return EXIT_INTERNAL
     if any(not r["ok"] for r in summaries):
@@ -446,8 +450,6 @@ def _worker_init(parent: int) -> None:
 
 
 def _worker_signal(signum: int, frame: object) -> None:
-    from axisbase.stop import on_signal
-
     if not _IN_JOB[0]:
         os._exit(128 + signum)
     on_signal(signum, frame)  # raises Stopped in the job (held back during a commit)
@@ -492,8 +494,6 @@ def _exists(pid: int) -> bool:
 
 
 def _pool_job(job: SessionJob) -> Summary:
-    from axisbase.stop import Stopped
-
     try:
         _IN_JOB[0] = True
         return run_job(job)

@@ -19,7 +19,12 @@ import tomllib
 from collections.abc import Iterator
 from pathlib import Path
 
+from align.calibration import STATIC
+from align.contract import schema
 from align.errors import InputError
+from align.session.config import load_session
+from axisbase.table import header_units, parse_column_map
+from goniometry.reader import COUNTER_LOG
 
 MIN_SIDE_PX = 16
 """An image smaller than this on a side cannot hold a mark (``imaging.read_image`` refuses it
@@ -63,7 +68,6 @@ def schema_problems(d: dict, src: str) -> list[str]:
     """Every disagreement of the document with the shipped schema, one line each."""
     import jsonschema
 
-    from align.contract import schema
 
     v = jsonschema.Draft7Validator(schema("session-toml"))
     out = []
@@ -135,7 +139,6 @@ def image_header(path: Path) -> tuple[int, int]:
 
 def _file_problem(folder: Path, where: str, value: object, kind: str,
                   section: dict) -> str | None:
-    from axisbase.table import parse_column_map
 
     if not isinstance(value, str) or not value.strip():
         return None  # the schema pass has said so
@@ -152,13 +155,9 @@ def _file_problem(folder: Path, where: str, value: object, kind: str,
             mapping = parse_column_map(cols if isinstance(cols, str) else None,
                                        f"{where.split(']')[0]}] columns")
             if kind == "static":
-                from align.calibration import STATIC
-                from axisbase.table import header_units
 
                 header_units(p, STATIC, mapping, ("ux", "uy", "uz"))
             else:
-                from axisbase.table import header_units
-                from goniometry.reader import COUNTER_LOG
 
                 header_units(p, COUNTER_LOG, mapping, ())
         elif kind == "image":
@@ -199,7 +198,6 @@ def check_session(folder: str | Path) -> list[str]:
             problems.append(f"{src}: {msg}")
     # The loader's checks of the keys together: reported unless a pass above already named
     # the same part of the file (its first problem would be the same one, said again).
-    from align.session.config import load_session
 
     try:
         load_session(folder)

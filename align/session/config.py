@@ -18,6 +18,7 @@ import numpy as np
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
+from axisbase.provenance import sha256_file
 from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
@@ -91,9 +92,10 @@ class TableKeys:
 @dataclass(frozen=True)
 class CalibrationInput:
     static: Path
-    scale_sign: tuple[float, float, float]
+    scale_sign: tuple[float, float, float] | None  # None: from labelled faces, else +
     check: Path | None = None
     table: TableKeys = field(default_factory=TableKeys)
+    adc_range: tuple[float, float] | None = None  # the ADC's rails [output units]
 
 
 @dataclass(frozen=True)
@@ -172,9 +174,20 @@ class _Files:
 
 def _same_contents(a: Path, b: Path) -> bool:
     """Byte-identical files (size first, then streamed hashes: logs can be gigabytes)."""
-    from axisbase.provenance import sha256_file
 
     return a.stat().st_size == b.stat().st_size and sha256_file(a) == sha256_file(b)
+
+
+def _adc_range(value: object, where: str) -> tuple[float, float] | None:
+    """``adc_range = [LO, HI]``: the ADC's rails in the readings' unit (None when absent)."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != 2:
+        raise InputError(f"{where} = {value!r}: expected [LO, HI] in the readings' unit")
+    lo, hi = (_number(v, where) for v in value)
+    if not lo < hi:
+        raise InputError(f"{where} = {value!r}: need LO < HI")
+    return lo, hi
 
 
 def _number(value: object, where: str, lo: float | None = None, hi: float | None = None,
@@ -215,7 +228,8 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 
 KEYS = {
-    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz"},
+    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz",
+                    "adc_range"},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec",
@@ -310,9 +324,11 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                              "three of them, e.g. \"-,-,-\"")
         cal = CalibrationInput(
             _file(c.get("static"), f"{src}: [calibration] static"),
-            tuple(-1.0 if p == "-" else 1.0 for p in parts),  # type: ignore[arg-type]
+            tuple(-1.0 if p == "-" else 1.0 for p in parts)  # type: ignore[arg-type]
+            if "scale_sign" in c else None,
             _file(c["check"], f"{src}: [calibration] check") if "check" in c else None,
-            _table_keys(c, f"{src}: [calibration]"))
+            _table_keys(c, f"{src}: [calibration]"),
+            _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"))
 
     gon = None
     if "goniometer" in d:

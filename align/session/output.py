@@ -10,7 +10,9 @@ import numpy as np
 
 from align.contract import document
 from align.fusion import E_INDEX
+from align.session.report import report_html
 from align.session.run import SessionResult
+from axisbase.output import OutputSet, dumps, write_atomic
 from axisbase.provenance import Provenance
 
 
@@ -28,8 +30,6 @@ def session_outputs(res: SessionResult, outs: Mapping[str, Path | None], force: 
     written to a temporary name, then all are renamed into place, exclusively unless
     ``force``); the JSON is put in place last, so an existing JSON means a complete set. A JSON
     to standard output (``-``) is written after the files."""
-    from align.session.report import report_html
-    from axisbase.output import OutputSet, dumps, write_atomic
 
     js = session_document(res, settings)
     pc = res.platform_calibration()

@@ -16,10 +16,26 @@ from pathlib import Path
 
 import numpy as np
 
+from align.fusion import E_INDEX, E_NAMES
 from align.html import png_img, render
 from align.loop import LoopReport, LoopSummary
+from align.plots import (
+    fig_calibration,
+    fig_fusion,
+    fig_gonio,
+    fig_mark_residuals,
+    fig_mark_thumb,
+    jpeg_bytes,
+    png_bytes,
+)
 from align.session.run import SessionResult
+from align.warnings import session_warnings, setup_notices
+from axisbase.output import write_atomic
+from axisbase.provenance import Provenance
+from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
+from goniometry import kept_table
+from imaging import ImageInputError, read_image
 
 IDENTITY_KEYS = ("serial", "unit", "operator", "date", "lot")
 """``[metadata]`` keys shown first, in this order, as the unit's identity."""
@@ -29,14 +45,10 @@ VERDICT_CLASS = {"PASS": "v-pass", "FAIL": "v-fail", "INCONCLUSIVE": "v-inconclu
 
 
 def _img(fig, alt: str = "figure", cls: str = "", dpi: int = 90):
-    from align.plots import png_bytes
-
     return png_img(png_bytes(fig, dpi), alt, cls)
 
 
 def _thumb(fig, alt: str):
-    from align.plots import jpeg_bytes
-
     return png_img(jpeg_bytes(fig), alt, "thumb", "image/jpeg")
 
 
@@ -154,8 +166,6 @@ def _num(d: dict, key: str, fmt: str = "{:+.2f}") -> str:
 
 
 def _angles(res: SessionResult, disposition: dict | None) -> tuple[list[str], list[list[str]]]:
-    from align.fusion import E_INDEX, E_NAMES
-
     f = res.fusion
     head = ["angle", "E ± u [″]"]
     by_name = {a["name"]: a for a in (disposition or {}).get("angles", [])}
@@ -189,8 +199,6 @@ def _budget(doc: dict) -> list[dict]:
 
 
 def _fusion(res: SessionResult) -> dict | None:
-    from align.plots import fig_fusion
-
     f = res.fusion
     if f is None:
         return None
@@ -211,9 +219,6 @@ def _fusion(res: SessionResult) -> dict | None:
 
 
 def _calibration(res: SessionResult) -> dict | None:
-    from align.plots import fig_calibration
-    from axisbase.table import OUTPUT_UNITS
-
     if res.calibration is None:
         return None
     c, m = res.calibration, res.calibration.model
@@ -229,9 +234,6 @@ def _calibration(res: SessionResult) -> dict | None:
 
 
 def _gonio(res: SessionResult) -> dict | None:
-    from align.plots import fig_gonio
-    from goniometry import kept_table
-
     if res.gonio is None:
         return None
     s, g, fa = res.session, res.gonio, res.gonio.angles
@@ -250,9 +252,6 @@ def _gonio(res: SessionResult) -> dict | None:
 
 
 def _marks(res: SessionResult) -> dict | None:
-    from align.plots import fig_mark_residuals, fig_mark_thumb
-    from imaging import ImageInputError, read_image
-
     s = res.session
     if not s.images:
         return None
@@ -295,7 +294,6 @@ def provenance_view(doc: dict | None) -> dict:
     """Provenance as table rows (tool, format, when, command, each setting) and the inputs."""
     if not doc or "tool" not in doc:
         return {"rows": [["provenance", "not recorded (no result document)"]], "inputs": []}
-    from axisbase.provenance import Provenance
 
     p = Provenance.from_dict(doc)
     rows = [["tool", f"{p.tool} {p.tool_version}"],
@@ -309,7 +307,6 @@ def write_report(res: SessionResult, path: str | Path, force: bool = False,
                  doc: dict | None = None) -> Path:
     """Write the report to ``path`` (atomically; exclusively unless ``force``). ``doc``: the
     result JSON, whose warnings, disposition, budget and provenance the report shows."""
-    from axisbase.output import write_atomic
 
     return write_atomic(path, report_html(res, doc), force)
 
@@ -325,7 +322,6 @@ def report_html(res: SessionResult, doc: dict | None = None,
                 views: dict | None = None) -> str:
     """The report as one self-contained HTML page (see :func:`write_report`); ``views``:
     :func:`stage_views` of ``res`` when already drawn."""
-    from align.warnings import session_warnings, setup_notices
 
     d = doc if doc is not None else res.to_dict()
     v = views if views is not None else stage_views(res)

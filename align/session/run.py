@@ -1,11 +1,23 @@
 """Run a whole session: calibration, goniometer, marks, platform static, fusion.
 
 Each stage's failure is recorded (``StageError``) and the others go on; the fusion uses
-whatever succeeded, and says so. Nothing is written here: outputs are the caller's business.
+whatever succeeded, and says so. A stage fails in one of two ways, the same for every stage:
+
+* bad input (an :class:`~axisbase.errors.InputError`: a file, a key, an image) — the stage's
+  error is its message, for the user to fix;
+* anything else is a defect of the tool: an :class:`~axisbase.errors.InternalError` "internal
+  error — please report" is recorded for that stage (``StageError.internal``), its traceback
+  goes to the log, and the other stages still run.
+
+``align run`` exits 1 when a stage hit an internal error, else 2 when one failed, else 0 —
+as ``align marks`` does for its images. Nothing is written here: outputs are the caller's
+business.
 """
 
 from __future__ import annotations
 
+import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -13,6 +25,7 @@ import numpy as np
 
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
+from align.calibration.output import with_units
 from align.calibration.units import unit_scale_check
 from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
@@ -34,17 +47,24 @@ from align.gonio import GonioRun, measure_log
 from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
+from align.warnings import session_warnings
+from axisbase.console import captured_warnings
+from axisbase.errors import internal_error
 from axisbase.table import resolve_units
-from goniometry import LogError
-from imaging import CameraModel, ImageInputError
+from imaging import CameraModel
 
 Progress = Callable[[str], None]
+log = logging.getLogger("align.session")
 
 
 @dataclass(frozen=True)
 class StageError:
+    """A stage that failed: its name, the message, and whether it was a defect of the tool
+    (``internal``: "internal error — please report") rather than bad input."""
+
     stage: str
     message: str
+    internal: bool = False
 
 
 @dataclass
@@ -61,6 +81,10 @@ class SessionResult:
     fusion: FusionResult | None = None
     errors: list[StageError] = field(default_factory=list)
     units: str = "V"
+    timings: dict[str, float] = field(default_factory=dict)
+    """Wall-clock time of each stage [s] (in the order they ran)."""
+    log_warnings: list[str] = field(default_factory=list)
+    """Warnings the stages logged (e.g. how a file was read): they reach the JSON too."""
     tolerance: ToleranceSpec | None = None
     """The specification the disposition is judged against (session.toml's ``[tolerance]``
     unless the command line overrides it)."""
@@ -68,6 +92,11 @@ class SessionResult:
     def __post_init__(self) -> None:
         if self.tolerance is None:
             self.tolerance = self.session.tolerance
+
+    @property
+    def internal_error(self) -> bool:
+        """A stage hit a defect of the tool (exit status 1), not bad input."""
+        return any(e.internal for e in self.errors)
 
     def disposition(self, d: dict | None = None) -> Disposition:
         """PASS / FAIL / INCONCLUSIVE / NOT MEASURED / NO TOLERANCE (:mod:`align.decision`);
@@ -104,12 +133,11 @@ class SessionResult:
         return d
 
     def _core_dict(self) -> dict:
-        from align.calibration.output import with_units
-        from align.warnings import session_warnings
-
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
                    "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
-                   "errors": [{"stage": e.stage, "message": e.message} for e in self.errors],
+                   "errors": [{"stage": e.stage, "message": e.message,
+                               **({"internal": True} if e.internal else {})}
+                              for e in self.errors],
                    "metadata": dict(self.session.metadata)}
         if self.fusion is not None:
             d.update(self.fusion.to_dict())
@@ -130,17 +158,25 @@ class SessionResult:
         return d
 
 
-def _try(res: SessionResult, stage: str, fn: Callable[[], object]) -> object | None:
+def _try(res: SessionResult, stage: str, fn: Callable[[], object],
+         where: str = "") -> object | None:
     """``fn()``, or None with the stage's failure recorded. Bad input is the user's to fix;
-    a numerical failure inside a stage is a defect of the tool and is named as one (the other
-    stages still run, so nothing else is lost)."""
+    anything else is a defect of the tool and is named as one, with its traceback in the log
+    (the other stages still run, so nothing else is lost). An interruption (Ctrl-C, a stop
+    signal) is not a stage's failure: it propagates."""
+    start = time.perf_counter()
     try:
         return fn()
-    except (InputError, LogError, ImageInputError) as exc:
-        res.errors.append(StageError(stage, str(exc)))
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        res.errors.append(StageError(stage, f"internal error ({type(exc).__name__}: {exc}); "
-                                            "please report it with the session's files"))
+    except InputError as exc:
+        res.errors.append(StageError(stage, f"{where}{exc}"))
+    except Exception as exc:  # noqa: BLE001 - deliberate: one stage's defect, not the session's
+        bug = internal_error(exc)
+        log.error("stage %s: %s%s", stage, where, bug, exc_info=exc)
+        res.errors.append(StageError(stage, f"{where}{bug}", internal=True))
+    finally:
+        dt = time.perf_counter() - start
+        res.timings[stage] = res.timings.get(stage, 0.0) + dt
+        log.debug("stage %s: %s%.3f s", stage, where, dt)
     return None
 
 
@@ -148,6 +184,13 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
                 alpha: float = 1e-3) -> SessionResult:
     """Run every stage of ``s`` and fuse; stage failures are collected, not raised."""
     res = SessionResult(s)
+    with captured_warnings() as logged:
+        _run_stages(s, res, progress, alpha)
+    res.log_warnings.extend(dict.fromkeys(logged))
+    return res
+
+
+def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float) -> None:
     if s.calibration is not None:
         progress("calibration: ellipsoid fit over the static poses")
         c = s.calibration
@@ -157,9 +200,13 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
             res.units = resolve_units(tk.units, [c.static] + ([c.check] if c.check else []),
                                       STATIC, tk.columns, ("ux", "uy", "uz"),
                                       flag="[calibration] units")
+            left_out: list[str] = []
             res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
-                                                  rate_hz=tk.rate_hz)
+                                                  rate_hz=tk.rate_hz, adc_range=c.adc_range,
+                                                  warnings=left_out)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            if left_out:
+                cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
             # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
             source = ("[calibration] units" if tk.units else
@@ -189,14 +236,19 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
             progress(f"marks: {s.images[idx[j]].file.name} ({done + j + 1}/{len(s.images)})")
 
         cam_cfg = s.cameras.get(cname)
-        got = measure_camera([(s.images[k].file, s.images[k].roi) for k in idx],
-                             cams.get(cname), alpha=alpha, expect_one=True,
-                             ranges=cam_cfg.lens if cam_cfg is not None else None,
-                             label=cname, on_image=tick)
-        found_of.update(zip(idx, got, strict=True))
+        got = _try(res, "marks", lambda idx=idx, cname=cname, cam_cfg=cam_cfg, tick=tick:
+                   measure_camera([(s.images[k].file, s.images[k].roi) for k in idx],
+                                  cams.get(cname), alpha=alpha, expect_one=True,
+                                  ranges=cam_cfg.lens if cam_cfg is not None else None,
+                                  label=cname, on_image=tick),
+                   where=f"camera {cname}: ")
+        if got is not None:
+            found_of.update(zip(idx, got, strict=True))
         done += len(idx)
     for k, im in enumerate(s.images):
-        found = found_of[k]
+        found = found_of.get(k)
+        if found is None:  # its camera's stage error says why
+            continue
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
@@ -225,7 +277,6 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
         res.errors.append(StageError("fusion", "no stage produced observations"))
     elif res.fusion is not None and res.fusion.gross:
         res.errors.append(StageError("fusion", res.fusion.gross_message()))
-    return res
 
 
 def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:

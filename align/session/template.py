@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from align.errors import InputError
+from axisbase.output import write_atomic
 
 LAYOUT = (("+X", "x"), ("+Y", "y"))
 """Camera k of the standard layout: the platform axis pointing right in its image and the
@@ -113,12 +114,14 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "static = \"tumble.csv\"         # FILL IN: static poses, "
                 "pose,ux,uy,uz[,t][,temp] (CSV)",
                 "scale_sign = \"+\"              # FILL IN: sign of each scale factor: +, - "
-                "or \"-,-,-\" (default +)",
+                "or \"-,-,-\" (default: from face labels +x,... when given, else +)",
                 "# check = \"check.csv\"        # more poses kept out of the fit, to check it",
                 "# units = \"V\"                # g, m/s2, counts or V (default: the header's "
                 "[unit], else V)",
                 "# rate_hz = 100.0             # [Hz] when the file has no time column",
-                "# columns = \"ux=ax,uy=ay,uz=az\"  # when the headers are not ux, uy, uz"]
+                "# columns = \"ux=ax,uy=ay,uz=az\"  # when the headers are not ux, uy, uz",
+                "# adc_range = [-5.0, 5.0]     # the ADC's rails (readings' unit): a pose at "
+                "one is left out"]
     if gonio:
         out += ["", "[goniometer]                  # ring-laser goniometer",
                 "log = \"gonio.csv\"             # FILL IN: counter log, count,counter,ref[,t] "
@@ -160,7 +163,6 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
 def write_template(folder: str | Path, text: str, force: bool = False) -> Path:
     """``folder/session.toml`` (the folder made if absent); an existing one is replaced only
     with ``force`` (``InputError`` otherwise)."""
-    from axisbase.output import write_atomic
 
     path = Path(folder) / "session.toml"
     if path.exists() and not force:

@@ -60,20 +60,22 @@ def test_table1_recovered_within_stated_uncertainty():
 @pytest.mark.parametrize("k2", [(40e-6, 0.0, -30e-6), (0.0, 25e-6, 0.0)])
 def test_undeclared_nonlinearity_found_and_removed(k2):
     tr = Triad(noise_v=NOISE_V, k2=k2)
-    d = tumble(TumbleSpec(triad=tr, seed=7))
+    # 24 poses: on the paper's 14 a K2 and a cross-axis product or a drifting scale factor
+    # explain the data alike (the calibration then widens u for the ambiguity, see
+    # test_calibration_effects.py); the edges' poses tell them apart.
+    d = tumble(TumbleSpec(triad=tr, poses="cube24", seed=7))
     cal = calibrate(poses_of(d), np.sign(tr.k))
-    assert [e.name for e in cal.loop.effects] == [NONLIN]
+    assert [e.name for e in cal.loop.effects] == [NONLIN] and cal.widening is None
     assert np.all(np.abs(cal.model.k2 - k2) < 4.5 * np.array(
         [cal.model.u_of(f"{NONLIN}_{a}") for a in "xyz"]))
     before = np.abs(cal.algebraic.bias - tr.bias)
     after = np.abs(cal.model.bias - tr.bias)
     u = np.array([cal.model.u_of(f"bias_{a}") for a in "xyz"])
     assert np.all(after < 4.5 * u) and np.max(before / u) > 8
-    dg_before = np.abs(delta_g(cal.algebraic, poses_of(d, True)))
     dg_after = np.abs(delta_g(cal.model, poses_of(d, True)))
-    # Per check pose: 1.4 µg of mean noise and ~1.5 µg from the parameters -> ~2 µg.
+    # Per check pose: 1.4 µg of mean noise and ~1.5 µg from the parameters -> ~2 µg. (On 24
+    # poses the algebraic fit's check poses are at that level too: the gain is in the biases.)
     assert dg_after.max() < 4.5 * 2e-6
-    assert np.sqrt(np.mean(dg_after**2)) < np.sqrt(np.mean(dg_before**2))
 
 
 def test_undeclared_bias_drift_found():
@@ -90,9 +92,11 @@ def test_undeclared_bias_drift_found():
     assert np.all(np.abs(cal.model.bias - bias_mid) < 4.5 * ub)
 
 
-def test_no_false_effects_over_fifty_clean_datasets():
+@pytest.mark.parametrize("n", [10, pytest.param(50, marks=pytest.mark.slow)])
+def test_no_false_effects_over_fifty_clean_datasets(n):
+    # (17 candidates since issue 19: ~0.3 s a calibration, the 50 datasets are a slow test)
     false = 0
-    for seed in range(50):
+    for seed in range(n):
         tr = Triad(noise_v=NOISE_V)
         d = tumble(TumbleSpec(triad=tr, seed=100 + seed))
         cal = calibrate(poses_of(d), np.sign(tr.k))

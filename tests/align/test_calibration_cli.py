@@ -170,3 +170,18 @@ def test_scale_sign_of_two_axes_is_refused_naming_the_flag(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path / "s.csv"), "--scale-sign", "-,+"]) == 2
     err = capsys.readouterr().err
     assert "--scale-sign '-,+'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_warning_on_how_the_file_was_read_reaches_the_json(tmp_path, capsys):
+    """Rows without pose or time are read as pose means: said once on the terminal and in
+    the JSON's warnings (it was only logged)."""
+    data = tumble(TumbleSpec(seed=3, check_poses=0))
+    means = write_tumble_csv(data, tmp_path / "means.csv", per_sample=False)
+    rows = [ln.split(",") for ln in means.read_text().splitlines()]
+    bare = tmp_path / "bare.csv"
+    bare.write_text("\n".join(",".join(r[1:4]) for r in rows) + "\n")
+    out = tmp_path / "cal.json"
+    assert main(["calibrate", str(bare), "--json", str(out)]) == 0
+    said = "no pose or time column: each row read as one pose's mean"
+    assert capsys.readouterr().err.count(said) == 1
+    assert sum(said in w for w in json.loads(out.read_text())["warnings"]) == 1

@@ -49,8 +49,9 @@ def test_turn_chunks_do_not_make_k2_run_away(seed):
     # Guarded, K2 is refused and the refusal says why (unguarded: the next test).
     cal = calibrate(p)
     assert NONLIN not in [e.name for e in cal.loop.effects]
-    assert [r.name for r in cal.loop.refused] == [NONLIN]
-    assert "physical prior" in cal.loop.refused[0].reason
+    # (with it the other effects that would absorb the turns: scale drift, hysteresis)
+    assert NONLIN in [r.name for r in cal.loop.refused]
+    assert all("physical prior" in r.reason for r in cal.loop.refused)
     assert any(line.startswith("REFUSED nonlinearity_k2") for line in cal.loop.summary_lines())
     assert np.allclose(cal.model.k, tr.k, rtol=0.05)
 

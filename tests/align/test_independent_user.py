@@ -875,7 +875,9 @@ def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, capsys, flag
     ui.write_csv(d / "notime.csv", LOG_HEADER[:3], [r[:3] for r in rows])
     rc, doc, se = _gonio_doc(d, capsys, "notime.csv", *flags)
     assert doc["notes"], "the tool knows it did not do it"
-    assert rc == 2 or any(k in w.lower() for w in doc["warnings"] for k in words), doc["warnings"]
+    # The angles are still measured (exit 0); what was not done is a warning in the JSON.
+    assert rc == 0, se
+    assert any(k in w.lower() for w in doc["warnings"] for k in words), doc["warnings"]
 
 
 def _bad_logs(rows):
@@ -982,7 +984,9 @@ def test_gonio_wrong_number_of_faces(gonio_log, capsys, faces):
 def test_gonio_nominal_far_from_the_measured_angles_is_flagged(gonio_log, capsys):
     d, _, _ = gonio_log
     rc, doc, se = _gonio_doc(d, capsys, "log.csv", "--nominal", "100,80,90,90")
-    assert rc == 2 or any("nominal" in w for w in doc["warnings"]), (rc, se)
+    # The measured angles stand (exit 0); the nominal that disagrees is a warning.
+    assert rc == 0, se
+    assert any("nominal" in w for w in doc["warnings"]), doc["warnings"]
 
 
 @pytest.mark.parametrize("flags, name", [
@@ -1092,8 +1096,10 @@ def test_tilt_readings_without_time_get_no_invented_time(readings, capsys):
     ui.write_csv(d / "read_nt.csv", ["ux", "uy", "uz"], [r[1:] for r in rows])
     rc, out, se = _tilt_csv(d, capsys, "read_nt.csv")
     assert rc == 0, se
-    t = [ln.split(",")[0] for ln in out.splitlines()[1:]]
-    assert len(set(t)) == len(t) or set(t) == {""}, t[:3]
+    lines = out.splitlines()
+    assert lines[0] == "t,roll_deg,pitch_deg" and len(lines) == len(rows) + 1
+    t = [ln.split(",")[0] for ln in lines[1:]]
+    assert set(t) == {""}, t[:3]  # blank on every row: no time is made up
 
 
 @pytest.mark.parametrize("bad_k", [float("nan"), 0.0])
@@ -1110,7 +1116,10 @@ def test_tilt_flags_readings_far_from_one_g(readings, capsys):
     d, _, _ = readings
     (d / "zero.csv").write_text("t,ux,uy,uz\n0,0,0,0\n0.1,0,0,0\n")
     rc, out, se = _tilt_csv(d, capsys, "zero.csv")
-    assert rc == 2 or "WARNING" in se, (rc, se)
+    # Roll and pitch are still written (the other readings of a longer file are tilts);
+    # the readings that are not 1 g are named in a warning, exit 0.
+    assert rc == 0, se
+    assert "WARNING: 2 of 2 readings have |a| more than 0.1 g from 1 g" in se, se
 
 
 @pytest.mark.parametrize("args, name", [

@@ -75,3 +75,48 @@ def test_structure_tests_detect_autocorrelation_not_noise():
     x = np.arange(500.0)
     assert not check_structure(white, np.ones(500), x, {}, 498).structured
     assert check_structure(red, np.ones(500), x, {}, 498).structured
+
+
+# ----------------------------------------------------------------------------- skipped candidates
+
+def _not_applicable(f):
+    from align.errors import NotApplicable
+
+    raise NotApplicable("no temperature column")
+
+
+class _SingularStage(PolyStage):
+    """Refits with the term 'twin' (a copy of x) are singular."""
+
+    def fit(self, terms):
+        if any(t.name == "twin" for t in terms):
+            raise np.linalg.LinAlgError("x twice")
+        return super().fit(terms)
+
+
+def test_skipped_candidates_are_reported_with_why():
+    from align.loop import LoopSummary
+
+    cands = [QUAD,
+             Candidate("temp", "1/K", "temperature", _not_applicable),
+             Candidate("none", "1", "builds nothing", lambda f: None),
+             Candidate("twin", "1", "x again", lambda f: Term("twin", "1",
+                                                            f.regressors["x"][:, None]))]
+    rep = run_loop(_SingularStage(*_data(1, quad=0.02)), cands)
+    assert [e.name for e in rep.effects] == ["quadratic"]
+    why = {s.name: s.reason for s in rep.skipped}
+    assert why == {"temp": "no temperature column", "none": "does not apply to these data",
+                   "twin": "singular refit (x twice)"}
+    d = rep.summary().to_dict()
+    assert d["skipped_candidates"] == [{"name": n, "reason": r} for n, r in why.items()]
+    assert LoopSummary.from_dict(d).skipped == rep.summary().skipped
+
+
+def test_a_defect_in_a_candidate_is_not_a_skipped_effect():
+    import pytest
+
+    def broken(f):
+        raise ValueError("a bug")
+
+    with pytest.raises(ValueError, match="a bug"):
+        run_loop(PolyStage(*_data(1)), [Candidate("broken", "1", "a bug", broken)])

@@ -30,7 +30,7 @@ def test_internal_error_in_one_image_keeps_the_others(tmp_path, monkeypatch, cap
     assert main(["marks", str(good[0]), str(good[1]), "--json", str(out)]) == 1
     js = json.loads(out.read_text())["marks"]
     assert [m["found"] for m in js] == [True, False]
-    assert js[1]["error"] == "internal error: ZeroDivisionError: simulated bug"
+    assert js[1]["error"] == "internal error — please report (ZeroDivisionError: simulated bug)"
     assert "internal error" in capsys.readouterr().err
 
 

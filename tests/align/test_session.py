@@ -117,6 +117,42 @@ def test_a_stage_failure_is_reported_and_the_rest_still_fuse(session, tmp_path):
     assert any("z_B.png" in w and "FAILED" in w for w in d["warnings"])
 
 
+def test_a_defect_in_a_stage_is_that_stages_internal_error(session, tmp_path, monkeypatch,
+                                                           capsys):
+    """A bug (not bad input) in the goniometer stage and in one camera's images: each is its
+    stage's 'internal error — please report' with the traceback on the log, the other stages
+    and the other camera's images still run and fuse, and the exit status is 1 (as 'align
+    marks' gives for a bug in an image), not 2 (bad input)."""
+    import align.session.run as run
+
+    real_measure_camera = run.measure_camera
+
+    def broken_gonio(*a, **k):
+        raise TypeError("simulated bug")
+
+    def broken_on_b(images, *a, label="", **k):
+        if label == "B":
+            raise ZeroDivisionError("simulated bug")
+        return real_measure_camera(images, *a, label=label, **k)
+
+    monkeypatch.setattr(run, "measure_log", broken_gonio)
+    monkeypatch.setattr(run, "measure_camera", broken_on_b)
+    out = tmp_path / "r.json"
+    assert main(["run", str(session), "--json", str(out)]) == 1
+    d = json.loads(out.read_text())
+    errors = {e["stage"]: e for e in d["errors"]}
+    assert set(errors) == {"goniometer", "marks"}
+    assert errors["goniometer"]["message"] == ("internal error — please report "
+                                               "(TypeError: simulated bug)")
+    assert errors["marks"]["message"] == ("camera B: internal error — please report "
+                                          "(ZeroDivisionError: simulated bug)")
+    assert all(e["internal"] for e in errors.values())
+    assert not d["ok"] and d["fused"] and len(d["stages"]["marks"]) == 4  # camera A's
+    assert "calibration" in d["stages"] and "goniometer" not in d["stages"]
+    err = capsys.readouterr().err
+    assert err.count("Traceback") == 2 and "ZeroDivisionError: simulated bug" in err
+
+
 @pytest.mark.parametrize("units,fails", [("m/s2", True), ("g", False)])
 def test_a_calibration_unit_the_readings_contradict_is_caught(session, tmp_path, units, fails):
     """The synthetic triad reads ~2.4 V per g: declared m/s² (9.81 per g expected, 4x off:

@@ -1,0 +1,261 @@
+"""The calibration's orchestrator: which method the poses call for, the residual loop over
+the ML stage (:mod:`align.calibration.model`), the known-pose cross-check, and the result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from align.calibration.geometry import (
+    HEMISPHERE_DEG,
+    SURROUND_DEG,
+    cone_deg,
+    cone_estimate_deg,
+)
+from align.calibration.known import (
+    FIXTURE_ERROR_RAD,
+    KnownPoseStage,
+    cross_check,
+    faces_of,
+    fit_known,
+    has_six_faces,
+    labelled,
+    recognise_directions,
+    resolve_signs,
+)
+from align.calibration.model import (
+    CANDIDATES,
+    PRIOR_ANGLE_RAD,
+    PRIOR_BIAS_G,
+    PRIOR_SCALE,
+    CalibrationStage,
+    admissible,
+)
+from align.calibration.triad import Poses, TriadModel, delta_g
+from align.calibration.widen import (
+    AMBIGUITY,
+    AMBIGUOUS_BIC,
+    STRUCTURE,
+    Widening,
+    ambiguity_term,
+    structure_term,
+    widen,
+)
+from align.errors import InputError
+from align.loop import Candidate, LoopReport, bic, run_loop
+
+SCALE_FACTOR_DEFINITION = (
+    "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
+    "from (k, beta); model.k_v_per_g is the model's K of u = K R(beta) (a + b), whose R has "
+    "rows of length 1 + O(beta^2)")
+"""What the reported scale factors are (in the JSON next to them)."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Result of :func:`calibrate`: algebraic start, final model, loop report."""
+
+    algebraic: TriadModel
+    model: TriadModel
+    loop: LoopReport
+    signs: tuple[float, float, float]
+    noise_known: bool
+    method: str = "ellipsoid"
+    known: object = None
+    cross_check: dict | None = None
+    notes: tuple[str, ...] = ()
+    widening: Widening | None = None
+
+    @property
+    def residual_rms_g(self) -> float:
+        return self.loop.after.rms
+
+    def effect_lines(self, unit: str = "") -> list[str]:
+        """The loop's summary with every effect's components by axis (one line each)."""
+        out = []
+        for line in self.loop.summary_lines():
+            out.append(line)
+            if line.startswith("added "):
+                e = next(x for x in self.loop.effects if line.startswith(f"added {x.name}:"))
+                out += [f"    {e.name}_{ax}: {v:+.4g} ± {u:.2g} {e.unit}"
+                        for ax, v, u in e.components]
+        return out
+
+    def to_dict(self, poses: Poses) -> dict:
+        m, a = self.model, self.algebraic
+        return {
+            "scale_factors_v_per_g": m.sensitivity().tolist(), "beta_rad": m.beta.tolist(),
+            "bias_g": m.bias.tolist(),
+            "scale_factors_u_v_per_g": m.sensitivity_u().tolist(),
+            "scale_factor_definition": SCALE_FACTOR_DEFINITION,
+            "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
+            "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+            "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
+            "dof": self.loop.after.dof,
+            "effects": [e.to_dict() for e in self.loop.effects],
+            "unexplained_structure": self.loop.unexplained_structure,
+            "noise_known": self.noise_known,
+            "algebraic": {"scale_factors_v_per_g": a.sensitivity().tolist(),
+                          "beta_rad": a.beta.tolist(), "bias_g": a.bias.tolist()},
+            "poses": [{"pose": lab, "dg_g": float(d)} for lab, d in
+                      zip(poses.labels, delta_g(m, poses), strict=True)],
+            "model": m.to_dict(),
+            "method": self.method,
+            "refused_effects": [r.to_dict() for r in self.loop.refused],
+            "known_pose": self.known.to_dict() if self.known is not None else None,
+            "cross_check": self.cross_check,
+            "u_widening": None if self.widening is None else self.widening.to_dict(),
+        }
+
+
+
+def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
+              candidates: Sequence[Candidate] = CANDIDATES,
+              fixture_error_rad: float | None = None) -> Calibration:
+    """Calibrate the triad from its poses.
+
+    * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
+      ``+x,-x,...`` or imucal's ``x_p,x_a,...``, or recognised from the means): the
+      known-pose (six-position) fit alone.
+    * 9 or more: algebraic ellipsoid fit, ML refinement, the residual loop over the effects
+      (each guarded by :func:`admissible`); when the six faces are among the poses, the
+      known-pose fit runs too and the two are cross-checked (``cross_check``, ``notes``).
+
+    ``signs``: the scale factors' signs; None: from labelled faces when the poses carry
+    them, else +,+,+ (an explicit one that contradicts the labels is refused:
+    :func:`align.calibration.known.resolve_signs`). ``fixture_error_rad``: declared placement
+    error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    """
+    fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
+    faces = faces_of(poses)
+    signs = signs_t = resolve_signs(poses, faces, signs)
+    six = has_six_faces(faces)
+    # Poses that are all faces (however many) span six directions: the ellipsoid's nine
+    # parameters are not determined by them, the known-pose fit is.
+    if len(poses.u) < 9 or (six and all(f is not None for f in faces)):
+        if not six:
+            raise InputError(f"only {len(poses.u)} usable poses; the ellipsoid needs at least 9 "
+                             "(the paper's cube gives 14), or the six faces labelled "
+                             "+x,-x,+y,-y,+z,-z for the known-pose (six-position) method")
+        kf = fit_known(poses, faces, signs, fe)
+        rep = run_loop(KnownPoseStage(kf, poses), ())
+        return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
+                           "known-pose", kf)
+    try:
+        stage = CalibrationStage(poses, signs)
+    except InputError as exc:
+        cone = cone_estimate_deg(poses.u)
+        if cone < SURROUND_DEG:  # the fit failed on poses clustered in a cone: say so
+            raise InputError(f"geometry: the {len(poses.u)} poses span only a cone of "
+                             f"~{cone:.0f}° about one direction ({exc}): {TUMBLE}") from None
+        raise
+    rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
+    kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
+    model, widening = rep.after.payload, None
+    increments = []
+    if rep.unexplained_structure and rep.after.dof > 0:
+        # Structure remains: u must cover it (widen), never the clean-data u.
+        w = rep.structure_after.worst
+        A, r_w = stage.projection[tuple(t.name for t in rep.terms)]
+        cov, m = structure_term(A, r_w, rep.after.dof, stage.sigma is not None)
+        size = f"{m:.3g} sigma" if stage.sigma is not None else f"{m * 1e6:.3g} µg"
+        increments.append((STRUCTURE, f"unexplained structure ({w.name} p = {w.p_value:.2g}):"
+                           f" a systematic error of {size} per pose", cov))
+    alts = alternatives(stage, rep, candidates, admissible(stage, overfit=False))
+    if alts:
+        shifts = np.array([d for _, d in alts])
+        increments.append((AMBIGUITY, "the data cannot tell the effects added ("
+                           + (" + ".join(t.name for t in rep.terms) or "none") + ") from "
+                           + ", ".join(n for n, _ in alts) + f" (within {AMBIGUOUS_BIC:g} of "
+                           "BIC): the parameters' shifts between them", ambiguity_term(
+                               shifts, len(model.names))))
+    if increments:
+        model, widening = widen(model, increments)
+        notes = (*notes, widening.warning())
+    if not labelled(poses):
+        # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
+        a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
+        faces = recognise_directions(a)
+    if has_six_faces(faces):
+        kf = fit_known(poses, faces, signs, fe)
+        cc, w = cross_check(rep.after.payload, kf.model)
+        notes = (*notes, *w)
+    return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
+                       "ellipsoid", kf, cc, notes, widening)
+
+
+TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
+
+
+def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
+    """Poses within one hemisphere: a warning with the cone and the largest uncertainties;
+    an :class:`InputError` (geometry) when a parameter is not determined by them — its
+    3u covers the physical range the loop's guard allows (:data:`PRIOR_SCALE`,
+    :data:`PRIOR_ANGLE_RAD`, :data:`PRIOR_BIAS_G`): the data then say nothing about it
+    beyond what any triad is, and the linear uncertainty itself no longer holds."""
+    cone = cone_deg(m.specific_force(poses.u, poses.t, poses.temp))
+    if cone >= HEMISPHERE_DEG:
+        return ()
+    rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
+           zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
+    ang = {f"beta_{ax}": (m.u_of(f"beta_{ax}"), PRIOR_ANGLE_RAD,
+                          f"{m.u_of(f'beta_{ax}'):.3g} rad") for ax in "xyz"}
+    bias = {f"bias_{ax}": (m.u_of(f"bias_{ax}"), PRIOR_BIAS_G,
+                           f"{m.u_of(f'bias_{ax}'):.3g} g") for ax in "xyz"}
+    q = {**rel, **ang, **bias}
+    bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
+    where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "
+             "direction (no axis seen both up and down)")
+    if bad:
+        raise InputError(f"{where}: {', '.join(bad)} not determined by them (u "
+                         + ", ".join(q[n][2] for n in bad) + f": 3u beyond the physical range "
+                         f"{PRIOR_SCALE:.0%}, {PRIOR_ANGLE_RAD} rad, {PRIOR_BIAS_G} g): "
+                         f"{TUMBLE}")
+    worst_k = max(rel, key=lambda n: rel[n][0])
+    worst_b = max(bias, key=lambda n: bias[n][0])
+    return (f"calibration: {where}: its uncertainties are large for it (u({worst_k}) "
+            f"{rel[worst_k][2]}, u({worst_b}) {bias[worst_b][2]}); {TUMBLE}",)
+
+
+
+
+def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[Candidate],
+                 guard) -> list[tuple[str, np.ndarray]]:
+    """Sets of effects that explain the data as well as the loop's: every fit the loop tried
+    and, for each effect added, that effect replaced by each other candidate; those within
+    :data:`AMBIGUOUS_BIC` of the final fit that the physical guard admits, as (their effects,
+    shift of the nine core parameters from the final fit)."""
+    final = rep.after
+    names = tuple(t.name for t in rep.terms)
+    for k in range(len(rep.terms)):
+        rest = [*rep.terms[:k], *rep.terms[k + 1:]]
+        base = stage.fit(rest)
+        for cand in candidates:
+            alt = cand.build(base) if cand.name not in names else None
+            if alt is None:
+                continue
+            try:
+                stage.fit([*rest[:k], alt, *rest[k:]])
+            except (np.linalg.LinAlgError, ValueError):
+                continue  # not applicable to these poses (as in the loop)
+    b_final = bic(final, sum(t.searched for t in rep.terms))
+    core = _core(final.payload)
+    out = []
+    for effects, (fit, terms) in stage.fits.items():
+        if not names or not terms or set(names) <= set(effects):
+            # No effect added or the no-effect fit (the loop's choice stands), or the final
+            # set itself or one extended by an effect the tests did not call for.
+            continue
+        d_bic = bic(fit, sum(t.searched for t in terms)) - b_final
+        base = stage.fits.get(effects[:-1], (rep.before,))[0]
+        if d_bic < AMBIGUOUS_BIC and (not terms or guard(base, fit, terms[-1]) is None):
+            out.append((" + ".join(effects), _core(fit.payload) - core))
+    return out
+
+
+def _core(m: TriadModel) -> np.ndarray:
+    return np.concatenate([m.k, m.beta, m.bias])
+

@@ -1,0 +1,103 @@
+"""Static tumbles with the effects a real accelerometer has and the model may lack (issue 19).
+
+Each *class* is a triad of the seed paper's Table 1 with one effect rendered in the sensor's
+physics by :mod:`synth.tumble` (not the calibration model run backwards), held on the paper's
+14 cube poses in that order. :func:`run` calibrates one seed and returns the normalised errors
+of the nine parameters (scale factors, non-orthogonality angles, biases) against the truth at
+the calibration's reference time, and what the loop reported. The benchmark
+``benchmarks/calibration_effects.py`` and the tests share these cases.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from align.calibration import Poses, calibrate, poses_from_samples
+from synth.tumble import Triad, TumbleSpec, r_matrix, tumble
+
+NOISE_V = 2.4e-5
+"""Per-sample noise [V] (1e-5 g; 200 samples a pose: 0.7 µg per pose mean)."""
+RUN_S = 14 * 15.0
+"""Duration of the 14 calibration poses [s] (10 s dwell + 5 s turn each)."""
+
+CLASSES: dict[str, dict] = {
+    "clean": {},
+    # The issue's cases: K_xy a_x a_y = 300 µg/g² on the x axis; 50 µg hysteresis on each
+    # axis; the scale factor drifting by 100 ppm over the run.
+    "cross": {"cross": ((300e-6, 0.0, 0.0), (0.0,) * 3, (0.0,) * 3)},
+    "hysteresis": {"hysteresis_g": (50e-6, 50e-6, 50e-6)},
+    "scale_drift": {"scale_drift": (100e-6 / RUN_S,) * 3},
+    "scale_warmup": {"scale_warmup": (100e-6,) * 3, "warmup_tau_s": 60.0},
+}
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One calibration of one seed: ``z`` the nine normalised errors (err / u) of the scale
+    factors, beta and biases; ``effects`` the names the loop added; ``structure`` whether
+    unexplained structure was reported; ``widened`` whether u was widened for it."""
+
+    z: np.ndarray
+    effects: tuple[str, ...]
+    structure: bool
+    widened: bool
+
+
+def triad_of(name: str, noise_v: float = NOISE_V) -> Triad:
+    return replace(Triad(noise_v=noise_v), **CLASSES[name])
+
+
+def poses_of(d, check: bool = False) -> Poses:
+    sel = (d.pose >= d.n_cal) if check else (d.pose < d.n_cal)
+    return poses_from_samples(d.pose[sel], d.u[sel], d.t[sel])
+
+
+def truth_at(tr: Triad, t_ref: float) -> np.ndarray:
+    """The nine true parameters at time ``t_ref`` [s]: scale factors along the sensing axes
+    [V/g] (k_i s_i(t_ref) |r_i|), beta [rad], bias [g]."""
+    s = (1.0 + np.asarray(tr.scale_drift) * t_ref
+         + np.asarray(tr.scale_warmup) * np.exp(-t_ref / tr.warmup_tau_s))
+    rows = np.linalg.norm(r_matrix(np.asarray(tr.beta)), axis=1)
+    return np.concatenate([np.asarray(tr.k) * s * rows, tr.beta, tr.bias])
+
+
+def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "cube14",
+        up: np.ndarray | None = None) -> Outcome:
+    """One seed of class ``name`` on the pose set ``poses`` of synth, or on the up directions
+    ``up`` in their order (a plan)."""
+    tr = triad_of(name)
+    d = tumble(TumbleSpec(triad=tr, poses=poses, seed=seed,
+                          up=None if up is None else tuple(map(tuple, up))))
+    kw = {} if candidates is None else {"candidates": candidates}
+    cal = calibrate(poses_of(d), np.sign(tr.k), **kw)
+    m = cal.model
+    est = np.concatenate([m.sensitivity(), m.beta, m.bias])
+    u = np.concatenate([m.sensitivity_u(), [m.u_of(f"{p}_{a}") for p in ("beta", "bias")
+                                            for a in "xyz"]])
+    z = (est - truth_at(tr, m.t_ref)) / u
+    widened = getattr(cal, "widening", None) is not None
+    return Outcome(z, tuple(e.name for e in cal.loop.effects), cal.loop.unexplained_structure,
+                   widened)
+
+
+EXPECTED = {"cross": "cross_x_xy", "hysteresis": "bias_hysteresis",
+            "scale_drift": "scale_drift", "scale_warmup": "scale_warmup"}
+"""The effect each class is: what 'found' means."""
+
+
+def sweep(name: str, seeds: Sequence[int], candidates: Sequence | None = None,
+          poses: str = "cube14", up: np.ndarray | None = None) -> dict:
+    """Over seeds: |z| RMS and max over the nine parameters, the fraction of seeds where the
+    loop added the class's effect (``found``), any effect (``any_effect``: on clean data,
+    false effects), reported unexplained structure, and widened u."""
+    out = [run(name, s, candidates, poses, up) for s in seeds]
+    z = np.array([o.z for o in out])
+    return {"rms": float(np.sqrt(np.mean(z**2))), "max": float(np.max(np.abs(z))),
+            "any_effect": float(np.mean([bool(o.effects) for o in out])),
+            "found": float(np.mean([EXPECTED.get(name) in o.effects for o in out])),
+            "structure": float(np.mean([o.structure for o in out])),
+            "widened": float(np.mean([o.widened for o in out])),
+            "effects": [o.effects for o in out]}

@@ -1,0 +1,151 @@
+"""The project's import graph: no cycle among its modules, and no project module imported
+inside a function (which hides a cycle) outside the command line's deliberate lazy loading.
+
+Both kinds of import count: at module level and inside functions. An import names the module
+it loads (``from a.b import c`` is an edge to ``a.b.c`` when that is a module, else to
+``a.b``); a package's ``__init__`` is its own node.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("align", "axisbase", "goniometry", "imaging", "synth")
+
+# Lazy by design: the command line loads the library per command (align --help stays fast).
+LAZY_OK = ("align.commands",)
+# Deliberate: align.gonio imports the loop (scipy, 1 s) on a thread during the log's pass
+# and inside the functions that use it, so the import overlaps the parsing.
+LAZY_EDGES_OK = {("align.gonio", "align.loop")}
+KNOWN_CYCLE: set[str] = set()
+KNOWN_LAZY: set[tuple[str, str]] = set()
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for pkg in PACKAGES:
+        for f in (ROOT / pkg).rglob("*.py"):
+            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            mods[".".join(parts)] = f
+    return mods
+
+
+@functools.cache
+def _project_imports() -> tuple[tuple[str, str, bool, int], ...]:
+    return tuple(_imports(_modules()))
+
+
+def _imports(mods: dict[str, Path]) -> list[tuple[str, str, bool, int]]:
+    """(importer, imported, inside a function, line) for every import of a project module."""
+    def resolve(name: str) -> str | None:
+        parts = name.split(".")
+        while parts:
+            if ".".join(parts) in mods:
+                return ".".join(parts)
+            parts.pop()
+        return None
+
+    found = []
+    for mod, path in mods.items():
+        package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+
+        def visit(node: ast.AST, in_function: bool, mod=mod, package=package) -> None:
+            for ch in ast.iter_child_nodes(node):
+                if isinstance(ch, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+                    visit(ch, True)
+                    continue
+                if (isinstance(ch, ast.If) and isinstance(ch.test, ast.Name)
+                        and ch.test.id == "TYPE_CHECKING"):
+                    continue  # for type checkers only: never run
+                names: list[str] = []
+                if isinstance(ch, ast.Import):
+                    names = [a.name for a in ch.names]
+                elif isinstance(ch, ast.ImportFrom):
+                    base = ch.module or ""
+                    if ch.level:
+                        up = package.split(".")[:len(package.split(".")) - ch.level + 1]
+                        base = ".".join(up + ([base] if base else []))
+                    # the submodule when one is named, else the module itself
+                    names = [f"{base}.{a.name}" if resolve(f"{base}.{a.name}") ==
+                             f"{base}.{a.name}" else base for a in ch.names]
+                for target in {resolve(n) for n in names} - {None, mod}:
+                    found.append((mod, target, in_function, ch.lineno))
+                visit(ch, in_function)
+
+        visit(ast.parse(path.read_text(encoding="utf-8")), False)
+    return found
+
+
+def _cycles(edges: dict[str, set[str]]) -> list[set[str]]:
+    """Strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[set[str]] = []
+    counter = 0
+    for root in sorted(edges):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges.get(root, ()))))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(edges.get(w, ())))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = set()
+                while True:
+                    x = stack.pop()
+                    on.discard(x)
+                    comp.add(x)
+                    if x == v:
+                        break
+                if len(comp) > 1:
+                    out.append(comp)
+    return out
+
+
+def test_no_import_cycle_among_project_modules():
+    edges: dict[str, set[str]] = {}
+    for a, b, _, _ in _project_imports():
+        edges.setdefault(a, set()).add(b)
+    cycles = [c for c in _cycles(edges) if c != KNOWN_CYCLE]
+    assert not cycles, "import cycles: " + "; ".join(" <-> ".join(sorted(c)) for c in cycles)
+
+
+def test_no_function_level_import_of_a_project_module():
+    lazy = [f"{a} (line {n}) imports {b}" for a, b, inside, n in _project_imports()
+            if inside and not a.startswith(LAZY_OK) and (a, b) not in LAZY_EDGES_OK
+            and (a, b) not in KNOWN_LAZY]
+    assert not lazy, "function-level imports hide cycles: " + "; ".join(lazy)
+
+
+def test_the_checks_see_a_cycle_and_a_hidden_import(tmp_path):
+    """The graph finds what it is for: a two-module cycle and a function-level import."""
+    assert _cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [{"a", "b"}]
+    assert _cycles({"a": {"b"}, "b": {"c"}}) == []
+    found = _project_imports()
+    assert ("align.commands.main", "align.commands.parser", False) in {
+        (a, b, f) for a, b, f, _ in found}
+    assert any(a.startswith("align.commands") and inside for a, _, inside, _ in found)
