@@ -658,6 +658,50 @@ def check_repeats(table: Table) -> None:
             raise InputError(f"{table.path}:{table.line(1)}: every row is written twice in "
                              f"a row ({n // 2} pairs of identical rows): duplicated samples? "
                              "Each sample must appear once")
+    block = repeated_block(cols)
+    if block is not None:
+        start, length, offset = block
+        raise InputError(f"{table.path}:{table.line(start)}: rows {start + 1}-"
+                         f"{start + length} repeat rows {start - offset + 1}-"
+                         f"{start - offset + length} exactly (lines "
+                         f"{table.line(start - offset)}-{table.line(start - offset + length - 1)}"
+                         f"): a block of rows pasted twice (one pose's samples?)? Each sample "
+                         "must appear once")
+
+
+BLOCK_REPEAT_ROWS = 32
+"""Fewest rows of a block found again elsewhere in the file for :func:`repeated_block`, with
+at least half of them distinct: 32 rows of noisy readings repeating at one offset by chance
+needs each row to match, p ≤ (1/16)³² even for data with only 16 distinct values."""
+
+
+def repeated_block(cols: list[np.ndarray]) -> tuple[int, int, int] | None:
+    """The first block of :data:`BLOCK_REPEAT_ROWS` or more consecutive rows that repeats an
+    earlier block exactly (every column, the same offset for every row), with at least half
+    its rows distinct (a stuck or noise-free stretch repeats by itself): ``(start, length,
+    offset)`` in rows, or None. Rows are matched by identity, O(n log n) in the rows."""
+    n = len(cols[0])
+    if n < 2 * BLOCK_REPEAT_ROWS:
+        return None
+    key = np.zeros(n, np.int64)
+    for x in cols:  # one integer per distinct row (re-coded per column: no overflow)
+        code = np.unique(np.asarray(x), return_inverse=True)[1].reshape(-1)
+        key = np.unique(np.stack([key, code]), axis=1, return_inverse=True)[1].reshape(-1)
+    order = np.argsort(key, kind="stable")
+    same = key[order][1:] == key[order][:-1]
+    prev = np.full(n, -1)
+    prev[order[1:][same]] = order[:-1][same]  # the latest earlier row with the same values
+    offset = np.where(prev >= 0, np.arange(n) - prev, 0)
+    # runs of one non-zero offset
+    change = np.flatnonzero(np.diff(offset) != 0) + 1
+    starts = np.concatenate([[0], change])
+    ends = np.concatenate([change, [n]])
+    for a, b in zip(starts, ends, strict=True):
+        if offset[a] == 0 or b - a < BLOCK_REPEAT_ROWS:
+            continue
+        if len(np.unique(key[a:b])) >= (b - a) / 2:
+            return int(a), int(b - a), int(offset[a])
+    return None
 
 
 OUTPUT_UNITS = {"g": "g/g", "m/s2": "(m/s²)/g", "counts": "counts/g", "V": "V/g"}

@@ -197,6 +197,45 @@ def test_quantised_counts_with_chance_repeats_are_not_duplicates(tmp_path):
         read_table(save(np.concatenate([counts[:100], counts[:100]]), "block.csv"), spec)
 
 
+def test_one_poses_rows_pasted_twice_are_refused_naming_both_blocks(tmp_path):
+    """A block of rows pasted again elsewhere (one pose's 200 samples of a 14-pose file)
+    shrinks that pose's u by sqrt 2 without adding information: refused, naming the lines of
+    both copies. Clean noisy poses, quantised counts with chance repeats and a stuck stretch
+    are read as they are."""
+    from axisbase.errors import InputError as Err
+
+    rng = np.random.default_rng(11)
+    poses = [f"P{k:02d}" for k in range(14)]
+    rows = [(p, *rng.normal(0, 1e-3, 3) + rng.normal(0, 1, 3)) for p in poses
+            for _ in range(200)]
+    spec = TableSpec("static poses", (Column("pose", "label"),
+                                      *(Column(c) for c in ("ux", "uy", "uz"))),
+                     distinct_rows=True)
+
+    def save(rs, name):
+        p = tmp_path / name
+        p.write_text("pose,ux,uy,uz\n" + "".join(f"{a},{b:.9e},{c:.9e},{d:.9e}\n"
+                                                  for a, b, c, d in rs))
+        return p
+
+    assert len(read_table(save(rows, "clean.csv"), spec)) == len(rows)
+    pasted = rows[:1400] + rows[1200:1400] + rows[1400:]  # pose P06 twice, back to back
+    with pytest.raises(Err, match=r"pasted\.csv:1402: rows 1401-1600 repeat rows 1201-1400"):
+        read_table(save(pasted, "pasted.csv"), spec)
+    elsewhere = rows + rows[400:600]  # P02 again at the end
+    with pytest.raises(Err, match=r"rows 2801-3000 repeat rows 401-600 exactly \(lines 402-601"):
+        read_table(save(elsewhere, "elsewhere.csv"), spec)
+    stuck = list(rows)
+    stuck[600:700] = [rows[600]] * 100  # a stuck stretch repeats itself: not a paste
+    assert len(read_table(save(stuck, "stuck.csv"), spec)) == len(rows)
+    counts = np.round(rng.normal([1000, -20, 3], 0.4, (3000, 3))).astype(int)
+    spec3 = TableSpec("readings file", tuple(Column(c) for c in ("ux", "uy", "uz")),
+                      distinct_rows=True)
+    q = tmp_path / "counts.csv"
+    q.write_text("ux,uy,uz\n" + "".join(f"{a},{b},{c}\n" for a, b, c in counts))
+    assert len(read_table(q, spec3)) == 3000
+
+
 @pytest.mark.parametrize("comment", ["# paused", "#", "  # indented", "# a, b, c", "# 1,2,3,4,5",
                                      "# gain,2,3,4,5,6", "# x,y,z,w,v,u",
                                      '#a,"open quote', "# x,y,z,w,v,u,t,s"])
