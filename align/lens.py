@@ -156,6 +156,32 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
 
 
+class _DesignCache:
+    """Each line's design per lens vector, computed once: the solver revisits the same
+    vectors (zero before and in the first step, the converged lens after the loop, the
+    principal point's probes in :func:`_pp_spread` and :func:`_pp_probe_s`)."""
+
+    def __init__(self, lines: Sequence[LineGeometry], scale: float) -> None:
+        self.lines, self.scale = lines, scale
+        self._memo: dict[tuple, _Design] = {}
+
+    def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
+        """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
+        key = (k, lam.tobytes(), only)
+        d = self._memo.get(key)
+        if d is None:
+            d = self._memo[key] = _design(self.lines[k], lam, self.scale, only)
+        return d
+
+    def cached(self, k: int, lam: np.ndarray) -> _Design | None:
+        """Line ``k``'s full design at ``lam`` if already computed."""
+        return self._memo.get((k, lam.tobytes(), None))
+
+    def all(self, lam: np.ndarray) -> list[_Design]:
+        """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
+        return [self.one(k, lam) for k in range(len(self.lines))]
+
+
 @dataclass(frozen=True)
 class LensSolution:
     """The lens of one camera from its marks (see the module docstring).
@@ -215,7 +241,8 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     rng = ranges.vector()
     P = len(PARAMS)
     lam = np.zeros(P)
-    designs = [_design(ln, lam, scale) for ln in lines]
+    cache = _DesignCache(lines, scale)
+    designs = cache.all(lam)
     F0 = sum(d.G.T @ d.G for d in designs)
     # Which parameters the lines determine: drop the worst-determined until every one left
     # would tell its largest plausible value from zero at level alpha.
@@ -237,7 +264,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             if not applied:
                 break
             try:
-                designs = [_design(ln, lam, scale) for ln in lines]
+                designs = cache.all(lam)
             except LensFolds:
                 break  # folds: refused below
             F = sum(d.G.T @ d.G for d in designs)
@@ -253,16 +280,16 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             if np.all(np.abs(step) < 1e-3 * rng[applied]):
                 break
         try:
-            designs = [_design(ln, lam, scale) for ln in lines]
+            designs = cache.all(lam)
         except LensFolds:  # the estimate folds the image: no lens, refused below
             lam[applied] = np.where(np.abs(lam[applied]) > rng[applied], lam[applied],
                                     2 * rng[applied])
-            designs = [_design(ln, np.zeros(P), scale) for ln in lines]
+            designs = cache.all(np.zeros(P))
         F = sum(d.G.T @ d.G for d in designs)
         if det:
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
-        spread = _pp_spread(lines, lam, applied, det, rng, scale)
+        spread = _pp_spread(cache, lam, applied, det, rng)
         spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
@@ -277,15 +304,15 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     if not applied:
         spread = np.zeros(P)
     elif spread_for != applied:  # the applied set changed after its last spread
-        spread = _pp_spread(lines, lam_out, applied, det, rng, scale)
-    designs = [_design(ln, lam_out, scale) for ln in lines]
+        spread = _pp_spread(cache, lam_out, applied, det, rng)
+    designs = cache.all(lam_out)
     F = sum(d.G.T @ d.G for d in designs)
     cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
     if applied:  # the principal point's range moves the estimate: uniform, as Type B
         cov = cov + np.diag(spread[applied] ** 2 / 3)
         u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread / np.sqrt(3)),
                            u_lines)
-    s_probe = _pp_probe_s(lines, lam_out, det, rng, scale)
+    s_probe = _pp_probe_s(cache, lam_out, det, rng)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
@@ -345,8 +372,8 @@ def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndar
     return out
 
 
-def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int],
-               det: list[int], rng: np.ndarray, scale: float) -> np.ndarray:
+def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
+               rng: np.ndarray) -> np.ndarray:
     """How far the applied estimates move when the principal point is put at the corners of
     its range (one linearised step from ``lam`` each; inf where the lens then folds)."""
     out = np.zeros(len(PARAMS))
@@ -355,7 +382,7 @@ def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int
     A = np.ix_(applied, applied)
     for p in _pp_probes(lam, det, rng):
         try:
-            ds = [_design(ln, p, scale) for ln in lines]
+            ds = cache.all(p)
         except LensFolds:
             out[applied] = np.inf
             continue
@@ -365,16 +392,21 @@ def _pp_spread(lines: Sequence[LineGeometry], lam: np.ndarray, applied: list[int
     return out
 
 
-def _pp_probe_s(lines: Sequence[LineGeometry], lam: np.ndarray, det: list[int],
-                rng: np.ndarray, scale: float) -> list[np.ndarray]:
+def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.ndarray
+                ) -> list[np.ndarray]:
     """Each line's largest |d angle / d lam| over the principal point's range [rad/unit]."""
-    out = [np.zeros(len(PARAMS)) for _ in lines]
+    out = [np.zeros(len(PARAMS)) for _ in cache.lines]
+    radial = np.zeros(len(PARAMS))
+    radial[:2] = 1.0  # only the radial terms act about the principal point
     for p in _pp_probes(lam, det, rng):
-        for k, ln in enumerate(lines):
-            try:  # only the radial terms act about the principal point
-                out[k] = np.maximum(out[k], np.abs(_design(ln, p, scale, (0, 1)).s))
+        for k in range(len(cache.lines)):
+            full = cache.cached(k, p)  # its radial columns are the radial-only design's
+            try:
+                s = full.s * radial if full is not None else cache.one(k, p, (0, 1)).s
             except LensFolds:
                 out[k][:] = np.inf
+                continue
+            out[k] = np.maximum(out[k], np.abs(s))
     return out
 
 

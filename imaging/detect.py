@@ -51,8 +51,10 @@ def line_frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
 
 def wrap_angle(angle_rad: float) -> float:
     """Wrap a line direction to (-pi/2, pi/2]."""
-    a = (angle_rad + np.pi / 2) % np.pi - np.pi / 2
-    return float(np.pi / 2 if np.isclose(a, -np.pi / 2, atol=0) else a)
+    a = float((angle_rad + np.pi / 2) % np.pi - np.pi / 2)
+    # np.isclose(a, -pi/2, atol=0) written out: the scalar test is ~50x cheaper, and this
+    # runs in every line fit.
+    return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
 
 
 def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
@@ -180,20 +182,31 @@ def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: 
     return vals, e, t
 
 
-def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float
-          ) -> tuple[float, float]:
+def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each column's median over its finite values (nan where it has none) and which columns
+    have any. np.median when nothing is missing (the same values, in about half the time of
+    np.nanmedian, which sorts column by column)."""
+    finite = np.isfinite(vals)
+    cols = finite.any(axis=0)
+    prof = np.full(vals.shape[1], np.nan)
+    sub = vals[:, cols]
+    prof[cols] = np.median(sub, axis=0) if finite.all() else np.nanmedian(sub, axis=0)
+    return prof, cols
+
+
+def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float,
+          median: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
     """Median profile's extreme within ``search`` of the line: (position [px], contrast [DN]).
 
     The contrast is against the background on each side separately (the median of up to 6 px
     just beyond the flank), and the smaller of the two counts: a mark stands out from both
     sides, whereas an edge, or the strip of background between a mark and a dark padded
     border, stands out from one side only. No valid pixel beyond one flank: contrast 0.
+    ``median``: :func:`_column_median` of ``vals`` when the caller has it already.
     """
-    cols = np.isfinite(vals).any(axis=0)
+    prof, cols = median if median is not None else _column_median(vals)
     if cols.sum() < 5:
         return 0.0, 0.0
-    prof = np.full(e.size, np.nan)
-    prof[cols] = np.nanmedian(vals[:, cols], axis=0)
     sign = -1.0 if dark else 1.0
     score = np.where(np.abs(e) <= search, sign * prof, np.nan)
     if not np.isfinite(score).any():
@@ -269,12 +282,12 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     n_along = int(np.clip(c.length_px, 16, 2000))
     vals, e, _ = _across(image, c, int(np.ceil(reach + half)), n_along, top)
     cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
-    prof = np.full(e.size, np.nan)
-    prof[cols] = np.nanmedian(vals[:, cols], axis=0)
+    med = _column_median(vals)  # one median profile for both uses (each column's own)
+    prof = np.where(cols, med[0], np.nan)
     bg = cols & (np.abs(e) > 2 * half + 2)
     if bg.sum() < 20:
         return float("inf"), 0.0
-    _, contrast = _peak(vals, e, c.dark, half, half + 1)
+    _, contrast = _peak(vals, e, c.dark, half, half + 1, med)
     x, y = e[bg], prof[bg]
     res = y - np.polyval(np.polyfit(x, y, 2), x)
     spread = 1.4826 * float(np.median(np.abs(res - np.median(res))))

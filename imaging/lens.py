@@ -26,9 +26,6 @@ import numpy as np
 PARAMS = ("k1", "k2", "p1", "p2", "aspect", "cx", "cy")
 """The lens vector's entries, in order (see the module docstring for their units)."""
 
-STEPS = np.array([1e-3, 1e-3, 1e-5, 1e-5, 1e-4, 0.05, 0.05])
-"""Finite-difference steps for each entry (derivatives of the undistortion)."""
-
 
 def _distort_norm(x: np.ndarray, y: np.ndarray, lam: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -47,34 +44,31 @@ def distort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndar
     return np.column_stack([scale * xd + lam[5], (1 + lam[4]) * scale * yd + lam[6]])
 
 
-def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
-    """Sensor points (relative to the image centre) -> ideal points (relative to the principal
-    point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
-    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
-    lam = np.asarray(lam, float)
-    q = np.asarray(q, float)
+def _undistort_norm(q: np.ndarray, lam: np.ndarray, scale: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`undistort_points` in the normalised coordinates (x, y) = ideal point / R."""
     xn = (q[:, 0] - lam[5]) / scale
     yn = (q[:, 1] - lam[6]) / ((1 + lam[4]) * scale)
     if not np.any(lam[:4]):
-        return np.column_stack([xn, yn]) * scale
-    k1, k2, p1, p2 = lam[:4]
+        return xn, yn
+    k1, k2, p1, p2 = (float(v) for v in lam[:4])
     x, y = xn.copy(), yn.copy()
     for _ in range(30):
-        fx, fy = _distort_norm(x, y, lam)
-        ex, ey = fx - xn, fy - yn
+        # _distort_norm and its Jacobian sharing r^2 and g (same expressions, so the same
+        # bits as calling it: this loop is the lens stage's inner cost).
         r2 = x * x + y * y
         g = 1.0 + k1 * r2 + k2 * r2 * r2
+        ex = x * g + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) - xn
+        ey = y * g + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y - yn
         dg = k1 + 2 * k2 * r2  # d g / d (r^2)
         j11 = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x
-        j12 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
-        j21 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+        j12 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y  # = j21
         j22 = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x
-        det = j11 * j22 - j12 * j21
+        det = j11 * j22 - j12 * j12
         x = x - (j22 * ex - j12 * ey) / det
-        y = y - (-j21 * ex + j11 * ey) / det
-        if max(np.max(np.abs(ex), initial=0), np.max(np.abs(ey), initial=0)) < 1e-14:
+        y = y - (-j12 * ex + j11 * ey) / det
+        if max(np.abs(ex).max(initial=0), np.abs(ey).max(initial=0)) < 1e-14:
             break
-    out = np.column_stack([x, y]) * scale
     fx, fy = _distort_norm(x, y, lam)
     # A root on the far branch (the lens folded: the point came back through the centre, or
     # the map's Jacobian changed sign) is no undistortion.
@@ -82,25 +76,58 @@ def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.nd
     g = 1.0 + k1 * r2 + k2 * r2 * r2
     bad = (np.hypot(fx - xn, fy - yn) > 1e-9) | ~np.isfinite(det) | (g <= 0) | (
         1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2 <= 0)
-    out[bad] = np.nan
-    return out
+    x[bad] = np.nan
+    y[bad] = np.nan
+    return x, y
+
+
+def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
+    """Sensor points (relative to the image centre) -> ideal points (relative to the principal
+    point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
+    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
+    x, y = _undistort_norm(np.asarray(q, float), np.asarray(lam, float), scale)
+    return np.column_stack([x, y]) * scale
 
 
 def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
                           only: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The undistorted points at ``lam`` and d(undistorted point)/d(lam_j) for every entry
-    (central differences; shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just
-    these entries (the others are zero)."""
+    (shape (N, 2, len(PARAMS))) [px per unit]; ``only``: compute just these entries (the
+    others are zero).
+
+    Analytic, by the implicit-function theorem on D(x, y; lam) = (xn, yn)(lam): one
+    undistortion, then d(x, y)/d lam = J^-1 (d(xn, yn)/d lam - dD/d lam) with J the map's
+    2x2 Jacobian at the root, for all points and entries at once (it replaced central
+    differences through 14 iterative undistortions; the two agree to their truncation error,
+    ~1e-6 relative). Non-finite where the lens folds.
+    """
     lam = np.asarray(lam, float)
-    base = undistort_points(q, lam, scale)
-    jac = np.zeros((len(q), 2, len(PARAMS)))
-    for j, h in enumerate(STEPS):
-        if only is not None and j not in only:
-            continue
-        e = np.zeros(len(PARAMS))
-        e[j] = h
-        jac[:, :, j] = (undistort_points(q, lam + e, scale)
-                        - undistort_points(q, lam - e, scale)) / (2 * h)
+    q = np.asarray(q, float)
+    x, y = _undistort_norm(q, lam, scale)
+    base = np.column_stack([x, y]) * scale
+    k1, k2, p1, p2, a = lam[:5]
+    r2 = x * x + y * y
+    g = 1.0 + k1 * r2 + k2 * r2 * r2
+    dg = k1 + 2 * k2 * r2  # d g / d (r^2)
+    xy2 = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+    j11 = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x
+    j22 = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x
+    det = j11 * j22 - xy2 * xy2
+    # b[:, :, j] = d(xn, yn)/d lam_j - dD/d lam_j (normalised units per unit of lam_j).
+    b = np.zeros((len(q), 2, len(PARAMS)))
+    b[:, 0, 0], b[:, 1, 0] = -x * r2, -y * r2
+    b[:, 0, 1], b[:, 1, 1] = -x * r2 * r2, -y * r2 * r2
+    b[:, 0, 2], b[:, 1, 2] = -2 * x * y, -(r2 + 2 * y * y)
+    b[:, 0, 3], b[:, 1, 3] = -(r2 + 2 * x * x), -2 * x * y
+    b[:, 1, 4] = -(q[:, 1] - lam[6]) / ((1 + a) ** 2 * scale)
+    b[:, 0, 5] = -1.0 / scale
+    b[:, 1, 6] = -1.0 / ((1 + a) * scale)
+    if only is not None:
+        b[:, :, [j for j in range(len(PARAMS)) if j not in only]] = 0.0
+    jac = np.empty_like(b)
+    f = (scale / det)[:, None]
+    jac[:, 0, :] = f * (j22[:, None] * b[:, 0, :] - xy2[:, None] * b[:, 1, :])
+    jac[:, 1, :] = f * (j11[:, None] * b[:, 1, :] - xy2[:, None] * b[:, 0, :])
     return base, jac
 
 
