@@ -25,8 +25,9 @@ def cmd_lot(args: argparse.Namespace) -> int:
     lot = analyse([r.unit for r in read if r.unit is not None],
                   [r.rejected for r in read if r.rejected is not None],
                   None if half is None else half * ARCSEC)
-    spec = resolve(None, **decision_keywords(args))
-    written, doc = lot_outputs(lot, read, paths, args.force, settings(args), spec)
+    flags = decision_keywords(args)
+    spec = resolve(None, **flags)
+    written, doc = lot_outputs(lot, read, paths, args.force, settings(args), spec, flags)
     say([*lot_lines(lot, doc, half),
          *verdict_lines(doc["dispositions"], spec.rule if spec else None)])
     warn(doc["warnings"])

@@ -197,13 +197,14 @@ def lot_csv(lot: Lot) -> str:
 
 
 def lot_outputs(lot: Lot, read: Sequence[ReadFile], outs: Mapping[str, Path | None],
-                force: bool, settings: Mapping, spec: ToleranceSpec | None = None
-                ) -> tuple[dict[str, Path], dict]:
+                force: bool, settings: Mapping, spec: ToleranceSpec | None = None,
+                flags: Mapping | None = None) -> tuple[dict[str, Path], dict]:
     """Write the outputs asked for (``json``, ``csv``, ``report``: checked paths or None);
     returns what was written and the lot JSON. ``spec``: the tolerance and decision rule
-    every unit is judged against (None: each unit's own, :mod:`align.lot.dispose`)."""
+    every unit is judged against (None: each unit's own, :mod:`align.lot.dispose`); ``flags``:
+    the decision flags given, applied over each unit's own tolerance."""
     doc = lot_document(lot, read, settings)
-    doc["dispositions"] = dispositions(lot.units, spec)
+    doc["dispositions"] = dispositions(lot.units, spec, flags)
     written: dict[str, Path] = {}
     if outs.get("json") is not None:
         written["json"] = write_json(outs["json"], doc, force)

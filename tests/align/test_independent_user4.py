@@ -573,8 +573,6 @@ def test_check_validates_camera_model_named_in_session(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="'align lot --tolerance-arcsec' drops the session's "
-                   "[tolerance] nominal_arcsec (run keeps it, docs: nominals stay): PASS -> FAIL")
 def test_lot_tolerance_flag_keeps_session_nominals(session, tmp_path):
     s = copy_session(session, tmp_path)
     _, _, doc = session
@@ -630,8 +628,6 @@ def test_plan_on_failed_session_says_so(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="'align lot --decision simple' without --tolerance-arcsec "
-                   "drops the session's [tolerance]: NO TOLERANCE (run keeps it: PASS)")
 def test_lot_decision_flag_alone_keeps_session_tolerance(session, tmp_path):
     s = copy_session(session, tmp_path)
     _, _, doc = session
