@@ -59,9 +59,11 @@ def test_turn_chunks_do_not_make_k2_run_away(seed):
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_unguarded_loop_runs_away(seed):
-    """What the guard is for: unguarded, the loop takes K2 and k leaves every bound."""
+    """What the guard is for: unguarded, the loop takes K2 and k leaves every bound (K2
+    alone offered: among all candidates an unguarded loop takes whichever absorbs the turns
+    first — now the bias hysteresis — which is the same run-away by another name)."""
     _, p = faces_and_turn_chunks(seed)
-    wild = run_loop(CalibrationStage(p, (1, 1, 1)), CANDIDATES)
+    wild = run_loop(CalibrationStage(p, (1, 1, 1)), [c for c in CANDIDATES if c.name == NONLIN])
     assert [e.name for e in wild.effects] == [NONLIN]
     assert np.max(np.abs(wild.after.payload.k / wild.before.payload.k - 1)) > 1.0
 
@@ -78,11 +80,12 @@ def test_guard_keeps_real_effects():
 
 
 @pytest.mark.slow
-def test_underdetermined_effect_refused_as_inseparable():
+def test_underdetermined_effect_is_not_taken():
     """Poses on the two cones a_x = +-0.5: a_x^2 is the same in every pose, so K2_x is a
-    bias in disguise: the guard refuses it."""
-    from align.calibration import admissible
-
+    bias in disguise. The calibration does not take it, and its ill-determined base fit
+    (condition ~1e5) states an honest u: k within 3 u of the truth. (This used to assert the
+    guard's own refusal, which came from the base fit's arbitrary k_x, 0.68 on one solver path
+    and 0.79 on another: the behaviour a user sees is what is asserted now.)"""
     tr = Triad(k=(1.0, 1.0, 1.0), noise_v=0.0)
     ang = np.linspace(0, 2 * np.pi, 9, endpoint=False)
     r = np.sqrt(0.75)
@@ -92,14 +95,9 @@ def test_underdetermined_effect_refused_as_inseparable():
     ids = np.repeat(np.arange(len(up)), 200)
     u = tr.outputs(up[ids], np.zeros(len(ids)), np.zeros(len(ids)), None)
     u = u + rng.normal(0, 1e-4, u.shape)
-    stage = CalibrationStage(poses_from_samples(ids, u, np.arange(len(ids)) / 100.0), (1, 1, 1))
-    base = stage.fit([])
-    term = next(c for c in CANDIDATES if c.name == NONLIN).build(base)
-    trial = stage.fit([term])
-    why = admissible(stage)(base, trial, term)
-    # Here the base fit is itself ill-determined (condition ~1e5, k_x off by 30 %), and the
-    # effect would move it by a quarter: refused, whichever check sees it first.
-    assert why is not None
+    cal = calibrate(poses_from_samples(ids, u, np.arange(len(ids)) / 100.0))
+    assert NONLIN not in [e.name for e in cal.loop.effects]
+    assert np.all(np.abs(cal.model.k - np.asarray(tr.k)) <= 3 * cal.model.sensitivity_u())
 
 
 def test_overfit_rule():
