@@ -94,6 +94,7 @@ def _outputs_all_or_nothing(out: Path, names: list[str]) -> list[str]:
 
 # ----------------------------------------------------------------------------- signals
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig,status", [
     (signal.SIGTERM, 143), pytest.param(signal.SIGINT, 130, marks=pytest.mark.slow)])
 def test_a_stopped_batch_stops_its_workers_and_leaves_nothing_half_written(
@@ -244,6 +245,7 @@ def cluster():
         yield c
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_local_pool_results(sessions, bad_session, tmp_path, cluster,
                                                    capsys):
     batch = [*map(str, sessions[:2]), str(bad_session)]

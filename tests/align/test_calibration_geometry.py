@@ -56,6 +56,7 @@ def test_cone_estimates():
             np.clip(d @ (d.mean(0) / np.linalg.norm(d.mean(0))), -1, 1))).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("half", [5.0, 10.0])
 def test_a_narrow_cone_is_refused_as_geometry_with_its_angle(half):
     for seed in range(4):

@@ -409,6 +409,7 @@ def _normalised_errors(seeds, tmp):
         return np.concatenate(list(pool.map(lambda s: _random_run(s, tmp), seeds)))
 
 
+@pytest.mark.slow
 def test_u_is_honest_on_a_few_random_logs(tmp_path):
     """8 logs (32 angles): no angle beyond 4 u; the RMS in a wide band for 32 values."""
     z = _normalised_errors(range(8), tmp_path)

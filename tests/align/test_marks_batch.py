@@ -34,6 +34,7 @@ def test_internal_error_in_one_image_keeps_the_others(tmp_path, monkeypatch, cap
     assert "internal error" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_real_chessboard_photos_never_raise():
     """These photos once raised ValueError (zero-size array) in sample_centres."""
     folder = real_folder("opencv-chessboard")

@@ -34,6 +34,7 @@ def test_undeclared_radial_distortion_is_found_and_carried(k1, offset, seed):
     assert abs(after) < 3 * r.angle_u_rad
 
 
+@pytest.mark.slow
 def test_no_false_effects_on_fifty_clean_images():
     rng = np.random.default_rng(2024)
     false, flagged, z = 0, 0, []

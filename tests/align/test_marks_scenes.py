@@ -45,6 +45,7 @@ def _score(seeds, sizes=SIZES, weights=None):
     return n_true, n_found, gross, extra, missed
 
 
+@pytest.mark.slow
 def test_sixteen_small_random_scenes():
     sizes = SIZES[:4]  # up to 1280 x 1024: a few seconds
     n_true, n_found, gross, extra, missed = _score(range(16), sizes, (1, 1, 1, 1))

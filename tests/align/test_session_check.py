@@ -30,6 +30,7 @@ def synthetic(tmp_path_factory) -> Path:
     return folder
 
 
+@pytest.mark.slow
 def test_init_fill_in_check_run(synthetic, tmp_path, capsys):
     folder = tmp_path / "mine"
     assert main(["init", str(folder), "--cameras", "A,B", "--gonio", "--tumble",

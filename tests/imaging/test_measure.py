@@ -169,7 +169,7 @@ def test_undistortion_carries_sigma_across_the_line():
     assert abs(g[0] - 1 / (1 + 0.3 * ru**2)) < 1e-12
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
 def test_angle_and_u_follow_a_rotation_or_mirror_exactly(seed):
     """The same pixels rotated by 90/180/270 deg or mirrored give the transformed angle and
     the same u: nothing may depend on which end of the mark the measurement starts from
