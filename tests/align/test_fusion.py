@@ -223,7 +223,12 @@ def test_lens_on_one_camera_is_no_camera_roll(tmp_path):
           f"{np.sqrt(np.mean(z**2)):.2f}, max |z| {np.max(np.abs(z)):.2f} over {z.size}")
     assert not named
     assert np.max(np.abs(z)) < 3.5
-    assert abs(np.sqrt(np.mean(z**2)) - 1) < 3.3 / np.sqrt(2 * z.size)
+    # u is never understated; since the lens belongs to the camera and an undetermined lens
+    # is carried as a Type B term over its plausible range (align/lens.py), it is
+    # conservative here (RMS 0.67 on these seeds: the error is the lens's actual value, not
+    # a draw from its range) — bounded so that it stays useful.
+    rms = np.sqrt(np.mean(z**2))
+    assert 0.5 < rms < 1 + 3.3 / np.sqrt(2 * z.size)
     # The same sessions do show a real roll of camera A (30", u ~3"): "no roll" above is
     # not blindness.
     folder = tmp_path / "roll"
