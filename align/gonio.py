@@ -364,6 +364,21 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     noted. ``columns``: header names of the log's columns (``--columns``), for both logs.
 
     Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
+
+    Examples
+    --------
+    A synthetic 50-revolution log of a 4-face table (``synth.gonio``, with its truth):
+
+    >>> import tempfile, pathlib
+    >>> import numpy as np
+    >>> from synth.gonio import GonioSpec, simulate, write_log
+    >>> from align import measure_log
+    >>> sim = simulate(GonioSpec(revolutions=50, seed=1))
+    >>> log = write_log(sim, pathlib.Path(tempfile.mkdtemp()) / "log.csv")
+    >>> run = measure_log(log, 4, latitude_deg=50.45)
+    >>> z = (run.angles.angles_rad - sim["truth"]["angles_rad"]) / run.angles.u_rad
+    >>> bool(np.all(np.abs(z) < 4))
+    True
     """
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself

@@ -648,6 +648,20 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
 
     ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search; ``ranges``: the
     plausible lens (Type B) when no camera model is given.
+
+    Examples
+    --------
+    A synthetic 400 px mark at 0.1° (``synth`` renders it, with its truth), no lens:
+
+    >>> import numpy as np
+    >>> from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+    >>> from align import LensRanges, measure_image
+    >>> spec = ImageSpec(marks=(MarkSpec(np.deg2rad(0.1), 5.0, 400.0, 4.0, contrast=-0.6),),
+    ...                  width=640, height=480, full_well_e=full_well_for_snr(50, -0.6), seed=1)
+    >>> (m,) = measure_image(render_marks(spec, with_crlb=False).image,
+    ...                      ranges=LensRanges.none())
+    >>> bool(abs(m.angle_rad - np.deg2rad(0.1)) < 3 * m.angle_u_rad), m.lens_limited
+    (True, False)
     """
     try:
         measured = measure_frame(image, camera, where=name, max_marks=max_marks,

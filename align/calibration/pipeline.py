@@ -128,6 +128,22 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     them, else +,+,+ (an explicit one that contradicts the labels is refused:
     :func:`align.calibration.known.resolve_signs`). ``fixture_error_rad``: declared placement
     error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+
+    Examples
+    --------
+    The seed paper's 14-pose tumble of a synthetic triad (``synth.tumble``, with its truth;
+    pose numbers carry no face labels, so the signs of k are given):
+
+    >>> import numpy as np
+    >>> from synth.tumble import TumbleSpec, tumble
+    >>> from align import calibrate
+    >>> from align.calibration import poses_from_samples
+    >>> d = tumble(TumbleSpec(seed=1))
+    >>> cal = calibrate(poses_from_samples(d.pose[d.pose < d.n_cal], d.u[d.pose < d.n_cal],
+    ...                                    d.t[d.pose < d.n_cal]), signs=(-1, -1, -1))
+    >>> k_true = np.array(d.spec.triad.k)
+    >>> bool(np.all(np.abs(cal.model.k - k_true) < 4 * cal.model.sensitivity_u()))
+    True
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
     faces = faces_of(poses)
