@@ -25,6 +25,7 @@ from align.errors import InputError
 from align.session.config import load_session
 from axisbase.table import header_units, parse_column_map
 from goniometry.reader import COUNTER_LOG
+from imaging.camera import CameraModel
 
 MIN_SIDE_PX = 16
 """An image smaller than this on a side cannot hold a mark (``imaging.read_image`` refuses it
@@ -165,7 +166,7 @@ def _file_problem(folder: Path, where: str, value: object, kind: str,
             if min(w, h) < MIN_SIDE_PX:
                 return f"{where} = {value!r}: only {w}x{h} px, too small for a mark"
         elif kind == "camera":
-            json.loads(p.read_text(encoding="utf-8"))
+            CameraModel.load(p)  # every key checked as align run checks it
     except InputError as exc:
         return f"{where} = {value!r}: {exc}"
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

@@ -553,8 +553,6 @@ def test_ruled_scale_through_lens_with_camera_pitch(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="'align check' says 'ready to run' for a [cameras.A] "
-                   "model whose principal point is outside the image; 'align run' then refuses it")
 def test_check_validates_camera_model_named_in_session(tmp_path):
     s = tmp_path / "syn"
     assert align("synth", "session", s, "--seed", "5", "-q").returncode == 0
