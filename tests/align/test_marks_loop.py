@@ -171,12 +171,16 @@ def test_session_images_normalised_errors_and_false_effects():
 @pytest.mark.parametrize("k1,seed", [(-0.3, 7), (0.2, 8)])
 def test_undeclared_distortion_on_session_images_normalised_errors(k1, seed):
     """Issue 9 item 4: one camera with undeclared radial distortion (session-like textured
-    images, one mark each): the loop's corrected angles have normalised errors ~N(0, 1)."""
+    images, one mark each): the angles' normalised errors are never understated. Since the lens
+    belongs to the camera (issue 18), a single mark cannot determine it and the lens is carried
+    as a Type B term over its plausible range: u is conservative here (RMS 0.55 for k1 +0.2,
+    seed 8: the error is the lens's actual value, not a draw from its range), bounded below so
+    that it stays useful."""
     n = 40
     z, _, _ = _session_like_marks(n, seed, k1=k1)
     rms = float(np.sqrt(np.mean(z**2)))
     print(f"k1 {k1}: normalised-error RMS {rms:.2f}, max |z| {np.max(np.abs(z)):.2f}")
-    assert abs(rms - 1) < 3.3 / np.sqrt(2 * n)
+    assert 0.4 < rms < 1 + 3.3 / np.sqrt(2 * n)
     assert np.max(np.abs(z)) < 4.5
 
 
