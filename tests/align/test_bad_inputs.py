@@ -880,6 +880,7 @@ def test_quiet_and_verbose(base, capsys):
     assert main(["gonio", log, "--faces", "ref,y,x,z", "-q", "-v"]) == 2
 
 
+@pytest.mark.slow
 def test_two_concurrent_runs_on_the_same_outputs(base, tmp_path):
     """Both check their outputs before computing; the exclusive rename lets exactly one
     write, the other says so (exit 2) — no result is silently lost."""

@@ -144,6 +144,7 @@ def test_a_stopped_single_session_writes_nothing(sessions, tmp_path):
     assert list(out.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_killing_the_batch_ends_its_workers(sessions, tmp_path):
     """SIGKILL cannot be caught: the workers notice their parent has gone and stop, leaving
     no orphan and no half-written output."""

@@ -46,6 +46,7 @@ def _case(seed, check_scale=1.0):
     return calibrate(poses), poses, check
 
 
+@pytest.mark.slow
 def test_clean_check_poses_agree_over_seeds():
     """25 seeds x 6 check poses: z RMS ~1, none flagged (alpha 1e-3 over the lot: a false
     flag expected in 2.5 % of such runs)."""

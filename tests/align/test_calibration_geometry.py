@@ -81,6 +81,7 @@ def test_a_wider_cone_is_kept_with_a_warning_and_honest_u():
         assert np.all(np.abs(m.sensitivity() - k) < 4.5 * m.sensitivity_u())
 
 
+@pytest.mark.slow
 def test_clean_tumbles_are_never_refused_nor_warned():
     """The cube (6 faces + 8 corners, 0.2 deg placement) and 14 random poses over the whole
     sphere: no geometry warning, no 'mixed units', 30 seeds each."""

@@ -65,6 +65,7 @@ def test_noise_free_sensitivities_are_exact_where_the_models_k_is_not():
     assert "sensitive axis" in d["scale_factor_definition"]
 
 
+@pytest.mark.slow
 def test_sensitivities_against_truth_over_seeds():
     """20 seeded triads, ~17' non-orthogonality, 2e-5 per sample: z = (s - truth)/u has
     RMS ~1 (a 4.5 bound on 60 values: 7e-6 false-alarm chance for a normal z)."""

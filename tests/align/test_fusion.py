@@ -45,6 +45,7 @@ def clean(tmp_path_factory):
     return _session(tmp_path_factory.mktemp("fusion"), "clean", seed=11)
 
 
+@pytest.mark.slow
 def test_clean_session_recovers_E_within_its_uncertainty(clean):
     res, truth = clean
     f = res.fusion
@@ -100,6 +101,7 @@ def test_declared_camera_roll_is_applied_not_searched(tmp_path):
     assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
 
 
+@pytest.mark.slow
 def test_undeclared_reference_face_offset_is_found(tmp_path):
     off = 25.0
     res, truth = _session(tmp_path, "ref", seed=13, undeclared={"reference_offset": off})

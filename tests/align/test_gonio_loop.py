@@ -113,6 +113,7 @@ def _independent(tmp_path, seed, name="ind.csv"):
     return p, truth
 
 
+@pytest.mark.slow
 def test_undetermined_earth_rate_is_carried_as_type_b(tmp_path):
     """The issue's case, on a log written independently of synth (2^20 periods per inertial
     revolution, 10 MHz stamps): 1.6 % locked ripple + 0.4 % random wander, 0.5 rev/s, 2000
@@ -170,6 +171,7 @@ def test_session_latitude_range_key(tmp_path):
         load_session(tmp_path)
 
 
+@pytest.mark.slow
 def test_latency_on_a_rippled_table_is_warned_in_one_direction_and_cancelled_in_two(tmp_path):
     """5 µs of autocollimator latency on a table whose speed is locked to its angle (2 %
     ripple) biases one direction's angles by tens of u — the latitude given, nothing in the

@@ -182,6 +182,7 @@ def test_valid_variants_of_a_big_log_give_identical_angles_and_u(big, name):
     assert res["revolutions_used"] == ref["revolutions_used"]
 
 
+@pytest.mark.slow
 def test_padded_extra_column_log_of_2000_revolutions_matches_the_plain_one(tmp_path):
     """<= 2048 revolutions (the new u) in a > 5 MB CRLF file: a 700-character extra column."""
     c, k, r, t, _ = make_log(5, revs=2000, latitude=30.0)
@@ -446,6 +447,7 @@ def _cli(*args, cwd=None):
                           capture_output=True, text=True, env=env, cwd=cwd, timeout=120)
 
 
+@pytest.mark.slow
 def test_json_to_a_pipe_and_a_closed_pipe(ulog):
     p = _cli(ulog, "--faces", FACES, "--latitude", "45", "--json", "-")
     assert p.returncode == 0, p.stderr
@@ -471,6 +473,7 @@ def test_plot_writes_a_figure_and_never_replaces_one(ulog, tmp_path):
     assert all(f.read_bytes() == b for f, b in before.items())  # nothing lost
 
 
+@pytest.mark.slow
 def test_two_runs_on_the_same_output_at_once(ulog, tmp_path):
     out = tmp_path / "same.json"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -537,6 +540,7 @@ def test_flag_values_are_refused_in_one_line(ulog):
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, args
 
 
+@pytest.mark.slow
 def test_southern_latitude_range_as_documented(ulog):
     p = _cli(ulog, "--faces", FACES, "--latitude-range", "-40,-30")
     q = _cli(ulog, "--faces", FACES, "--latitude-range=-40,-30")
@@ -628,6 +632,7 @@ def test_epoch_time_stamps_with_steady_table_are_honest_or_flagged(tmp_path):
     assert flagged or np.abs(z).max() < 4.0, (z, res["angles_u_arcsec"])
 
 
+@pytest.mark.slow
 def test_epoch_time_stamps_do_not_change_the_counts_angles(tmp_path):
     """Without --steady-table the times only carry the Earth rate: an epoch offset is harmless."""
     c, k, r, t, truth = make_log(3, revs=300, jitter_arcsec=0.05, latitude=45.0)

@@ -205,6 +205,7 @@ def numbers(d):
                        d["chi2"], d["dof"]])
 
 
+@pytest.mark.slow
 # ============================================================ 1. align run on hand-built sessions
 def test_run_matches_my_truth_over_20_sessions(tmp_path):
     """|E - truth| / u over 20 random sessions (E ~ 300" per angle, k errors 1e-3)."""
@@ -258,6 +259,7 @@ def _dialect_sessions(tmp_path):
     return variants
 
 
+@pytest.mark.slow
 def test_run_same_session_in_every_dialect_is_bit_identical(tmp_path):
     folders = _dialect_sessions(tmp_path)
     rc, out, err = align("run", *folders, "--json", tmp_path / "res", "-q", "--jobs", "2")
@@ -547,6 +549,7 @@ def test_marks_angle_follows_a_rotation_or_mirror_exactly(tmp_path, how):
     assert abs(b["angle_deg"] - expect) < 0.01 * a["angle_u_arcsec"] / 3600
 
 
+@pytest.mark.slow
 def test_marks_no_false_distortion_on_a_mark_through_the_centre(tmp_path):
     rng = np.random.default_rng(4)
     paths = []
@@ -728,6 +731,7 @@ def test_calibrate_refuses_poses_in_a_plane_and_too_few(tmp_path):
     assert d is None
 
 
+@pytest.mark.slow
 def test_calibrate_poses_near_one_axis_is_a_geometry_refusal(tmp_path):
     rng = np.random.default_rng(1)
     d = np.array([0, 0, 1.0]) + rng.normal(0, 0.1, (14, 3))
@@ -915,6 +919,7 @@ def test_lot_tolerance_marginal_and_capability_as_readme_says(tmp_path, lot_resu
     assert np.isclose(a["capability"]["cpk"], min(T - xs.mean(), xs.mean() + T) / (3 * sw))
 
 
+@pytest.mark.slow
 def test_run_refuses_a_view_of_an_undeclared_camera(tmp_path):
     f = camera_session(tmp_path / "s", Triad(300), 0)
     text = (f / "session.toml").read_text()
@@ -960,6 +965,7 @@ def test_run_E_is_the_unit_diagonal_row_at_degree_misalignments(tmp_path):
     assert np.abs(z).max() < 4.5 and np.sqrt(np.mean(z ** 2)) < 1.4, z
 
 
+@pytest.mark.slow
 def test_tilt_with_a_platform_calibration_gives_platform_roll_and_pitch(tmp_path):
     t = Triad(61)
     f = make_session(tmp_path / "s", t)

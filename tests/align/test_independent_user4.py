@@ -282,6 +282,7 @@ def copy_session(session, tmp_path):
 
 # ---------------------------------------------------------------- (4) init -> check -> run
 
+@pytest.mark.slow
 def test_init_unfilled_session_check_names_each_problem(tmp_path):
     s = tmp_path / "blank"
     assert align("init", s, "--gonio", "--tumble", "-q").returncode == 0
@@ -512,6 +513,7 @@ def test_empty_acceptance_zone_never_pass_and_p_conform(session, tmp_path):
     assert d["p_conform_all"] < want
 
 
+@pytest.mark.slow
 def test_lens_option_bad_values_refused_in_one_line(tmp_path):
     img = render_marks(320, 240, [(159.5, 119.5, 0.3, 150.0)], seed=15, ss=1)
     p = write_png(tmp_path / "m.png", img)

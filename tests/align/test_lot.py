@@ -212,6 +212,7 @@ def test_units_not_ok_are_listed_not_used():
     assert any("unit u9" in x and "not fused" in x for x in lot_warnings(lot))
 
 
+@pytest.mark.slow
 def test_lots_too_small_for_statistics(real_result, tmp_path, capsys):
     """No unit ok: no statistics, but every output written and the exit says so; one unit:
     no chart, no capability, and the JSON still valid against its schema."""
@@ -275,6 +276,7 @@ def test_bad_metadata_names_the_key(tmp_path, text, key):
 
 # ----------------------------------------------------------------------------- the command
 
+@pytest.mark.slow
 def test_lot_command_end_to_end(real_result, tmp_path, capsys):
     from align.contract import validate
 

@@ -138,6 +138,7 @@ def lot_page(tmp_path_factory) -> tuple[Path, Path]:
     return page, rep
 
 
+@pytest.mark.slow
 def test_the_report_opens_with_the_dispositions_and_links_the_session_report(lot_page):
     page, rep = lot_page
     tmp_path = rep.parent.parent

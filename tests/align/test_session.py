@@ -79,6 +79,7 @@ def test_too_few_sources_to_determine_E(session, tmp_path, capsys):
     assert "E_xY" in out.out + out.err
 
 
+@pytest.mark.slow
 def test_run_writes_json_report_and_calibration_and_never_overwrites(session, tmp_path,
                                                                      capsys):
     js, rep, cal = tmp_path / "r.json", tmp_path / "r.html", tmp_path / "cal.json"
@@ -171,6 +172,7 @@ def test_a_calibration_unit_the_readings_contradict_is_caught(session, tmp_path,
         assert any("scale factor" in w and "[calibration] units" in w for w in d["warnings"])
 
 
+@pytest.mark.slow
 def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):
     good2 = _copy(session, tmp_path, "unit8")
     bad = _copy(session, tmp_path, "unit9")
@@ -229,6 +231,7 @@ def test_demo_runs_a_session_and_reports_its_error(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path / "d")]) == 2  # never overwrites
 
 
+@pytest.mark.slow
 def test_session_with_both_table_directions(tmp_path):
     from align.session import run_session
 

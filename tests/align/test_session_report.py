@@ -74,6 +74,7 @@ def _disposition(verdict: str, worst: str | None = "E_xZ") -> dict:
             "reason": f"constructed {verdict.lower()} case", "worst": worst, "angles": angles}
 
 
+@pytest.mark.slow
 def test_the_set_up_effect_is_a_warning_and_a_notice(run):
     res, doc, page, views = run
     roll = [w for w in doc["warnings"] if w.startswith("set-up:")]

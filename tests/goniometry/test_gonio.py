@@ -129,6 +129,7 @@ def test_gonio_command_contract(tmp_path):
     assert main(["gonio", str(p), "--faces", "a"]) == 2
 
 
+@pytest.mark.slow
 def test_loop_adds_nothing_to_fifty_clean_logs(tmp_path):
     false = 0
     for seed in range(50):
