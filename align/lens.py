@@ -223,6 +223,20 @@ class LensSolution:
                 "notes": list(self.notes)}
 
 
+def _determined(F: np.ndarray, rng: np.ndarray, z: float) -> list[int]:
+    """The lens parameters (indices into PARAMS) the lines' information ``F`` determines:
+    drop the worst-determined until every one left would tell its largest plausible value
+    (``rng``) from zero at the two-sided level whose normal quantile is ``z``."""
+    det = [j for j in range(len(rng)) if rng[j] > 0]
+    while det:
+        u = _marginal_u(F, det, rng)
+        worst = int(np.argmax(u / rng[det]))
+        if z * u[worst] < rng[det[worst]]:
+            break
+        det.pop(worst)
+    return det
+
+
 def _marginal_u(F: np.ndarray, idx: list[int], rng: np.ndarray) -> np.ndarray:
     """Marginal u of the parameters ``idx`` from information F (range-normalised inversion
     with a tiny ridge, so a null direction reads as u far beyond the range)."""
@@ -244,15 +258,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     cache = _DesignCache(lines, scale)
     designs = cache.all(lam)
     F0 = sum(d.G.T @ d.G for d in designs)
-    # Which parameters the lines determine: drop the worst-determined until every one left
-    # would tell its largest plausible value from zero at level alpha.
-    det = [j for j in range(P) if rng[j] > 0]
-    while det:
-        u = _marginal_u(F0, det, rng)
-        worst = int(np.argmax(u / rng[det]))
-        if z * u[worst] < rng[det[worst]]:
-            break
-        det.pop(worst)
+    det = _determined(F0, rng, z)
     notes: list[str] = []
     est = np.full(P, np.nan)
     u_lines = np.full(P, np.inf)
@@ -464,13 +470,7 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     designs = [_design(ln, lam, scale) for ln in lines]
     F = sum(d.G.T @ d.G for d in designs)
     b = sum(d.G.T @ d.z for d in designs)
-    det = [j for j in range(P) if rng[j] > 0]
-    while det:
-        u = _marginal_u(F, det, rng)
-        worst = int(np.argmax(u / rng[det]))
-        if z * u[worst] < rng[det[worst]]:
-            break
-        det.pop(worst)
+    det = _determined(F, rng, z)
     dlam = np.zeros(P)
     if not det:
         return 1.0, dlam, designs
