@@ -27,7 +27,7 @@ from scipy.linalg import rq
 
 from align.calibration.ellipsoid import triad_from_upper
 from align.calibration.triad import Poses, TriadModel
-from align.errors import InputError
+from align.errors import InputError, InternalError
 from align.loop import StageFit, Term
 
 FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
@@ -300,7 +300,8 @@ class KnownPoseStage:
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         if terms:
-            raise ValueError("the known-pose fit takes no effects")
+            # The pipeline runs this stage with no candidates: a term here is a defect.
+            raise InternalError("the known-pose fit takes no effects")
         f = self.result
         m = f.model
         t = np.repeat(np.arange(len(f.faces), dtype=float), 3)
