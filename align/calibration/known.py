@@ -109,7 +109,10 @@ class KnownPoseFit:
     ``cov_mo`` (12, 12) over (M row by row, offset); ``model`` the triad (k, beta, bias) with
     its covariance over ``model.names``; ``mounting`` C, the triad's rotation in the fixture
     frame; ``chi2``, ``dof``; ``faces`` used; ``fixture_error_rad`` declared;
-    ``noise_known``: False when only means were given (uncertainty from the residual)."""
+    ``noise_known``: False when only means were given (uncertainty from the residual);
+    ``projection`` (9, 3n): the map from the weighted residuals ``residuals_w`` (3n; noise
+    unknown: the residuals [output]) to (k, beta, bias), for the widening of u when structure
+    remains (:mod:`align.calibration.widen`)."""
 
     M: np.ndarray
     offset: np.ndarray
@@ -123,6 +126,8 @@ class KnownPoseFit:
     noise_known: bool
     residuals: np.ndarray
     sigma: np.ndarray
+    projection: np.ndarray | None = None
+    residuals_w: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"method": "known-pose (six-position)", "faces": list(self.faces),
@@ -287,8 +292,16 @@ def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] 
     names = tuple(f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz")
     model = TriadModel(q[:3], q[3:6], q[6:9], t_ref=float(np.mean(poses.t[use])),
                        cov=J @ cov @ J.T, names=names)
+    # theta = N^-1 A^T W y: with W = L L^T, dtheta = N^-1 A^T L d(L^T r) per weighted
+    # residual; noise unknown (W a multiple of I): per residual [output], N^-1 A^T W.
+    gain = np.linalg.solve(N, A.T @ W)
+    if known:
+        L = np.linalg.cholesky(W)
+        proj, r_w = J @ gain @ np.linalg.inv(L).T, L.T @ r
+    else:
+        proj, r_w = J @ gain, r
     return KnownPoseFit(theta[:9].reshape(3, 3), theta[9:], cov, model, C, chi2, dof,
-                        tuple(used), fixture_error_rad, known, r, sig)
+                        tuple(used), fixture_error_rad, known, r, sig, proj, r_w)
 
 
 class KnownPoseStage:
