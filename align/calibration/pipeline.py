@@ -50,7 +50,7 @@ from align.calibration.widen import (
     widen,
 )
 from align.errors import InputError, NotApplicable
-from align.loop import Candidate, LoopReport, bic, run_loop
+from align.loop import Candidate, LoopReport, bic, optimistic_fit, run_loop
 
 SCALE_FACTOR_DEFINITION = (
     "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
@@ -274,10 +274,18 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
         rest = [*rep.terms[:k], *rep.terms[k + 1:]]
         base = stage.fits.get(tuple(t.name for t in rest), (None,))[0] or stage.fit(rest)
         drop = base.chi2 - final.chi2
+        predicted = stage.screen(base, rest, [c.name for c in candidates])
         for cand in candidates:
             alt = cand.build(base) if cand.name not in names else None
             if alt is None:
                 continue
+            if cand.name in predicted:
+                # Refit only what might be plausible (the loop's screen, its margin).
+                opt = optimistic_fit(base, predicted[cand.name], alt.width)
+                if not (bic(opt, sum(t.searched for t in [*rest, alt])) - b_final
+                        < AMBIGUOUS_BIC or drop > 0 and (base.chi2 - opt.chi2) / drop
+                        >= ALIASED):
+                    continue
             try:
                 fit = stage.fit([*rest[:k], alt, *rest[k:]])
             except (np.linalg.LinAlgError, NotApplicable):
