@@ -105,6 +105,10 @@ def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_re
                       warmup_tau_s=tau_s if SCALE_WARMUP in effects else 0.0, **kw)
 
 
+SCREEN_STEP = 10.0
+"""The screen predicts a candidate's chi2 only when the linearised step moves no fitted
+parameter by more than this many of its typical sizes (x_scale: k by 1e-3, beta 1e-4 rad,
+bias 1e-4 g)."""
 TURN_G = 0.1
 """Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
 fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
@@ -242,7 +246,7 @@ class CalibrationStage:
             h = self._scale(ext)[len(base):]
             taus = (np.asarray(WARMUP_TAUS) * span if name == SCALE_WARMUP and SCALE_WARMUP
                     not in effects else [tau0])
-            best = 0.0
+            best, linear = 0.0, True
             for tau in taus:
                 th = np.concatenate([base, np.zeros(len(h))])
                 f0 = resid(th, float(tau))
@@ -252,9 +256,17 @@ class CalibrationStage:
                     tj[len(base) + j] = hj
                     cols.append((resid(tj, float(tau)) - f0) / hj)
                 c = np.column_stack(cols)
+                # The step the linearisation implies for the fitted parameters: beyond
+                # SCREEN_STEP of their typical sizes (k by 1 %, beta or a bias by 1e-3) the
+                # model is not linear over it (a K2 that runs k away): no prediction.
+                step = np.linalg.lstsq(np.hstack([jac, c]), r, rcond=None)[0]
+                if np.max(np.abs(step[:9] / self._scale(())[:9])) > SCREEN_STEP:
+                    linear = False
                 c = c - q @ (q.T @ c)
                 beta = np.linalg.lstsq(c, r_perp, rcond=None)[0]
                 best = max(best, float(np.sum((c @ beta) ** 2)))
+            if not linear:
+                continue
             chi2 = current.chi2
             # In chi2's units (sigma unknown: the residuals are in g, chi2 the RSS).
             out[name] = max(chi2 - best, 0.0)
