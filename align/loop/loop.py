@@ -79,6 +79,10 @@ class StageFit:
     components: Mapping[str, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
     payload: object = None
     noise_dof: float | None = None
+    sequence: bool = True
+    """False when the residuals are not independent in their order (a fit with fewer
+    degrees of freedom than residuals whose projection correlates them, as the known-pose
+    fit's 18 components in 6 dof): only the chi2 and regressor tests then apply."""
 
     @property
     def n(self) -> int:
@@ -342,7 +346,7 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
     return check_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
-                          fit.regressors, fit.dof, alpha, fit.noise_dof)
+                          fit.regressors, fit.dof, alpha, fit.noise_dof, fit.sequence)
 
 
 SCREEN_MARGIN = 3.0

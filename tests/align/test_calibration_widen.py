@@ -111,12 +111,14 @@ def test_known_pose_u_covers_structure(name):
 
 
 def test_known_pose_clean_faces_keep_their_u():
+    """No structure flag on clean faces (the runs and spectral tests, which took the
+    fit's own correlations of 18 components in 6 dof for structure, flagged 9 in 100)."""
     out = []
     for seed in range(8):
         tr, p = _six("clean", seed)
         cal = calibrate(p, fixture_error_rad=0.0)
         out.append((cal.widening is None, np.abs(_z(cal.model, tr)).max()))
-    assert sum(not kept for kept, _ in out) <= 1 and max(z for _, z in out) < 4
+    assert all(kept for kept, _ in out) and max(z for _, z in out) < 4
 
 
 SIX = ("+x", "+y", "+z", "-x", "-y", "-z")  # synth 'six' order
