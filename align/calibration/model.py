@@ -105,10 +105,9 @@ def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_re
                       warmup_tau_s=tau_s if SCALE_WARMUP in effects else 0.0, **kw)
 
 
-SCREEN_STEP = 10.0
-"""The screen predicts a candidate's chi2 only when the linearised step moves no fitted
-parameter by more than this many of its typical sizes (x_scale: k by 1e-3, beta 1e-4 rad,
-bias 1e-4 g)."""
+SCREEN_TRUST = 0.25
+"""The screen predicts a candidate's chi2 only where the model's chi2 at the Gauss-Newton
+step is the linear prediction to this fraction of the predicted drop (+1)."""
 TURN_G = 0.1
 """Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
 fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
@@ -256,15 +255,17 @@ class CalibrationStage:
                     tj[len(base) + j] = hj
                     cols.append((resid(tj, float(tau)) - f0) / hj)
                 c = np.column_stack(cols)
-                # The step the linearisation implies for the fitted parameters: beyond
-                # SCREEN_STEP of their typical sizes (k by 1 %, beta or a bias by 1e-3) the
-                # model is not linear over it (a K2 that runs k away): no prediction.
-                step = np.linalg.lstsq(np.hstack([jac, c]), r, rcond=None)[0]
-                if np.max(np.abs(step[:9] / self._scale(())[:9])) > SCREEN_STEP:
-                    linear = False
+                # The Gauss-Newton step with the candidate: trusted where the model is
+                # quadratic over it (its chi2 there as predicted, to a quarter of the drop);
+                # else (a K2 that runs k away) no prediction: the refit decides.
+                step = -np.linalg.lstsq(np.hstack([jac, c]), f0, rcond=None)[0]
                 c = c - q @ (q.T @ c)
                 beta = np.linalg.lstsq(c, r_perp, rcond=None)[0]
-                best = max(best, float(np.sum((c @ beta) ** 2)))
+                drop = float(np.sum((c @ beta) ** 2))
+                there = float(np.sum(resid(th + step, float(tau)) ** 2))
+                if abs(there - (current.chi2 - drop)) > SCREEN_TRUST * drop + 1.0:
+                    linear = False
+                best = max(best, drop)
             if not linear:
                 continue
             chi2 = current.chi2

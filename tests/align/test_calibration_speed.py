@@ -35,11 +35,14 @@ def _same(a, b) -> None:
     np.testing.assert_allclose(a.after.chi2, b.after.chi2, rtol=1e-9)
 
 
-def test_screen_refits_nothing_on_clean_data():
-    """Clean 14 poses: only the declared model is fitted (17 candidate refits before)."""
-    (st, rep), (st0, rep0) = _loops("clean", 2)
+@pytest.mark.parametrize("seed", [2, 5])
+def test_screen_refits_almost_nothing_on_clean_data(seed):
+    """Clean 14 poses: the declared model is fitted, and at most the bias hysteresis (so
+    ill-conditioned on these poses that its Gauss-Newton step leaves the region where the
+    model is quadratic: the screen does not trust its prediction) — 15 refits unscreened."""
+    (st, rep), (st0, rep0) = _loops("clean", seed)
     _same(rep, rep0)
-    assert len(st.fits) == 1 and len(st0.fits) >= 15
+    assert set(st.fits) <= {(), ("bias_hysteresis",)} and len(st0.fits) >= 15
 
 
 @pytest.mark.parametrize("name", ["cross", "hysteresis"])
