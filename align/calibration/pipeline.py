@@ -195,7 +195,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
             tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
             ambiguity_term(alts, len(model.names))))
     if increments:
-        model, widening = widen(model, increments)
+        model, widening = widen(model, increments, alts)
         notes = (*notes, widening.warning())
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.

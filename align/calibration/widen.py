@@ -39,6 +39,7 @@ and warm-up): docs/calibration-effects.md.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -70,6 +71,7 @@ class Widening:
     terms : per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
         unit] (what it adds in quadrature).
     u : the widened u per name [the parameter's unit].
+    alternatives : the sets of effects the :data:`AMBIGUITY` term averages over.
     """
 
     reasons: tuple[tuple[str, str], ...]
@@ -77,6 +79,7 @@ class Widening:
     u_noise: np.ndarray
     terms: tuple[tuple[str, np.ndarray], ...]
     u: np.ndarray
+    alternatives: tuple[Alternative, ...] = ()
 
     @property
     def factor(self) -> np.ndarray:
@@ -88,7 +91,8 @@ class Widening:
                 "parameters": {n: {"u_noise": float(self.u_noise[i]), "u": float(self.u[i]),
                                    "factor": float(self.factor[i]),
                                    **{t: float(v[i]) for t, v in self.terms}}
-                               for i, n in enumerate(self.names)}}
+                               for i, n in enumerate(self.names)},
+                "alternatives": [a.to_dict() for a in self.alternatives]}
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
@@ -199,9 +203,10 @@ def ambiguity_reason(chosen: tuple[str, ...], alts: list[Alternative], plan_n: i
     return "; ".join(parts) + ": u covers the parameters' spread over them"
 
 
-def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]]
-          ) -> tuple[TriadModel, Widening]:
-    """The model with ``increments`` (term, why, covariance) added to its covariance."""
+def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]],
+          alternatives: Sequence[Alternative] = ()) -> tuple[TriadModel, Widening]:
+    """The model with ``increments`` (term, why, covariance) added to its covariance
+    (``alternatives``: those the ambiguity term averages over, for the record)."""
     names = (*model.names, *(f"scale_factor_{ax}" for ax in "xyz"))
 
     def us(m: TriadModel) -> np.ndarray:
@@ -214,4 +219,4 @@ def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]]
         terms.append((term, np.sqrt(np.clip(alone**2 - u0**2, 0, None))))
     wide = replace(model, cov=model.cov + sum(c for _, _, c in increments))
     return wide, Widening(tuple((t, why) for t, why, _ in increments), names, u0,
-                          tuple(terms), us(wide))
+                          tuple(terms), us(wide), tuple(alternatives))

@@ -9,6 +9,7 @@ on clean data nothing is widened. Effects the poses cannot tell apart (aliased o
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -17,7 +18,7 @@ import pytest
 from align.calibration import TriadModel, calibrate, poses_from_samples
 from align.calibration.plan import plan
 from align.calibration.widen import AMBIGUITY
-from synth.tumble import TumbleSpec, tumble
+from synth.tumble import TumbleSpec, tumble, write_tumble_csv
 from tests.align.effects_cases import EXPECTED, poses_of, run, sweep, triad_of, truth_at
 
 UNKNOWN = ("cross", "hysteresis", "scale_drift", "scale_warmup")
@@ -83,6 +84,24 @@ def test_an_aliased_wrong_effect_leaves_no_confident_number(name, seed):
     w = cal.widening.to_dict()["terms"][AMBIGUITY]
     assert "these poses cannot tell" in w and EXPECTED[name] in w and "--plan 28" in w
     assert any("cannot tell" in n for n in cal.notes)
+
+
+def test_ambiguity_in_the_json_follows_its_schema(tmp_path):
+    """``align calibrate --json`` on the cross-axis seed: u_widening names the aliased
+    alternatives and validates against the shipped schema."""
+    from align.cli import main
+    from align.contract import validate
+
+    p = write_tumble_csv(tumble(TumbleSpec(triad=triad_of("cross"), seed=13)),
+                         tmp_path / "t.csv")
+    assert main(["calibrate", str(p), "--scale-sign", "-", "--json",
+                 str(tmp_path / "c.json")]) == 0
+    js = json.loads((tmp_path / "c.json").read_text())
+    validate(js, "calibration")
+    alts = js["u_widening"]["alternatives"]
+    assert any(a["effects"] == "cross_x_xy" and a["aliased"] and a["explained"] >= 0.99
+               for a in alts)
+    assert any("cannot tell" in w for w in js["warnings"])
 
 
 @pytest.mark.slow
