@@ -31,6 +31,7 @@ from scipy import stats
 
 from align.errors import InputError
 from align.fusion.observations import E_INDEX, E_NAMES
+from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
 FORMAT_VERSION = 1
@@ -261,8 +262,7 @@ def _joint_p(angles: Sequence[AngleDisposition], cov: np.ndarray | None) -> floa
     covariance is not at hand)."""
     if cov is None:
         return float(np.prod([a.p_conform for a in angles]))
-    idx = [E_NAMES.index(a.name) for a in angles]
-    C = np.asarray(cov, float)[np.ix_(idx, idx)]
+    C = cov_of(np.asarray(cov, float), E_NAMES, [a.name for a in angles])
     if np.any(np.diag(C) <= 0):
         return float(np.prod([a.p_conform for a in angles]))
     mean = np.array([a.value for a in angles])

@@ -32,6 +32,7 @@ import numpy as np
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
 from align.fusion.observations import E_NAMES
+from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
 
 FORMAT_VERSION = 1
@@ -198,17 +199,18 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     return Plan(target, why, float(u0[k]), tuple(ranked))
 
 
-def plan_from_result(js: Mapping, where: str = "the result") -> Plan:
-    """:func:`plan` from a session result JSON ('align run --json')."""
-    verdict = (js.get("disposition") or {}).get("verdict")
-    if js.get("ok") is False or verdict == "NOT MEASURED":
-        failed = [e.get("stage", "?") for e in js.get("errors") or [] if isinstance(e, Mapping)]
-        raise InputError(f"{where}: the session was NOT MEASURED (not ok"
+def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:
+    """:func:`plan` from a session result (``align run --json``; its JSON is read by the one
+    reader, :class:`~align.session_json.LoadedSession`)."""
+    r = js if isinstance(js, LoadedSession) else LoadedSession.from_dict(js, where)
+    if not r.ok or r.verdict == "NOT MEASURED":
+        failed = [e.stage for e in r.errors]
+        raise InputError(f"{r.where}: the session was NOT MEASURED (not ok"
                          + (f": {', '.join(failed)} failed" if failed else "")
                          + "): its u are not a basis for planning; fix what failed (its "
                          "warnings and errors say what) and run it again")
-    b = js.get("budget")
-    if not js.get("fused") or not b or not b.get("model"):
-        raise InputError(f"{where}: no fused misalignment with its budget (a failed session, "
+    b = r.budget
+    if not r.fused or not b or not b.get("model"):
+        raise InputError(f"{r.where}: no fused misalignment with its budget (a failed session, "
                          "or a result written before budgets existed): nothing to plan from")
-    return plan(Linearisation.from_dict(b["model"]), js.get("disposition"))
+    return plan(Linearisation.from_dict(b["model"]), r.disposition)

@@ -131,9 +131,9 @@ class KnownPoseFit:
                 "scale_factors": self.model.sensitivity().tolist(),
                 "scale_factors_u": self.model.sensitivity_u().tolist(),
                 "beta_rad": self.model.beta.tolist(),
-                "beta_u_rad": [self.model.u_of(f"beta_{a}") for a in "xyz"],
+                "beta_u_rad": self.model.u_per_axis("beta").tolist(),
                 "bias_g": self.model.bias.tolist(),
-                "bias_u_g": [self.model.u_of(f"bias_{a}") for a in "xyz"],
+                "bias_u_g": self.model.u_per_axis("bias").tolist(),
                 "mounting_rotation": self.mounting.tolist(), "chi2": self.chi2,
                 "dof": self.dof, "noise_known": self.noise_known}
 

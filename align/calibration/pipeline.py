@@ -34,7 +34,7 @@ from align.calibration.model import (
     CalibrationStage,
     admissible,
 )
-from align.calibration.triad import Poses, TriadModel, delta_g
+from align.calibration.triad import Poses, TriadModel, delta_g, per_axis
 from align.calibration.widen import (
     AMBIGUITY,
     AMBIGUOUS_BIC,
@@ -91,8 +91,8 @@ class Calibration:
             "bias_g": m.bias.tolist(),
             "scale_factors_u_v_per_g": m.sensitivity_u().tolist(),
             "scale_factor_definition": SCALE_FACTOR_DEFINITION,
-            "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
-            "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+            "beta_u_rad": m.u_per_axis("beta").tolist(),
+            "bias_u_g": m.u_per_axis("bias").tolist(),
             "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
             "dof": self.loop.after.dof,
             "effects": [e.to_dict() for e in self.loop.effects],
@@ -217,10 +217,8 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
         return ()
     rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
            zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
-    ang = {f"beta_{ax}": (m.u_of(f"beta_{ax}"), PRIOR_ANGLE_RAD,
-                          f"{m.u_of(f'beta_{ax}'):.3g} rad") for ax in "xyz"}
-    bias = {f"bias_{ax}": (m.u_of(f"bias_{ax}"), PRIOR_BIAS_G,
-                           f"{m.u_of(f'bias_{ax}'):.3g} g") for ax in "xyz"}
+    ang = {n: (m.u_of(n), PRIOR_ANGLE_RAD, f"{m.u_of(n):.3g} rad") for n in per_axis("beta")}
+    bias = {n: (m.u_of(n), PRIOR_BIAS_G, f"{m.u_of(n):.3g} g") for n in per_axis("bias")}
     q = {**rel, **ang, **bias}
     bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
     where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "

@@ -18,6 +18,15 @@ import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
 from align.errors import InputError
+from axisbase.covariance import cov_of
+
+AXES = ("x", "y", "z")
+
+
+def per_axis(*groups: str) -> tuple[str, ...]:
+    """The parameter names of per-axis groups, in the model's naming: ``per_axis("beta",
+    "bias")`` is ``("beta_x", "beta_y", "beta_z", "bias_x", "bias_y", "bias_z")``."""
+    return tuple(f"{g}_{a}" for g in groups for a in AXES)
 
 
 @dataclass(frozen=True)
@@ -123,21 +132,35 @@ class TriadModel:
     def sensitivity_u(self) -> np.ndarray:
         """Standard uncertainty of :meth:`sensitivity`, propagated from the covariance of
         (k, beta) (nan where not determined or without a covariance)."""
-        names = [f"{p}_{ax}" for p in ("k", "beta") for ax in "xyz"]
+        names = per_axis("k", "beta")
         if self.cov is None or any(n not in self.names for n in names):
             return np.full(3, np.nan)
-        idx = [self.names.index(n) for n in names]
         n, dn = row_norms(self.beta)
         J = np.hstack([np.diag(n), self.k[:, None] * dn])
-        var = np.einsum("ij,jk,ik->i", J, self.cov[np.ix_(idx, idx)], J)
+        var = np.einsum("ij,jk,ik->i", J, self.cov_of(*names), J)
         return np.where(var >= 0, np.sqrt(np.abs(var)), np.nan)
 
+    def cov_of(self, *names: str) -> np.ndarray:
+        """The covariance of the named parameters (of :attr:`names`, e.g. ``cov_of("k_x",
+        "beta_y")``; :func:`per_axis` names a group) in the order given [products of their
+        units]; ``KeyError`` for a parameter not fitted, ``ValueError`` without a
+        covariance."""
+        if self.cov is None:
+            raise ValueError("this model carries no covariance")
+        return cov_of(self.cov, self.names, names)
+
     def u_of(self, name: str) -> float:
+        """Standard uncertainty of one parameter [its unit]; nan when not fitted, without a
+        covariance, or not determined (a negative variance)."""
         if self.cov is None or name not in self.names:
             return float("nan")
-        i = self.names.index(name)
-        v = float(self.cov[i, i])
+        v = float(self.cov_of(name)[0, 0])
         return float(np.sqrt(v)) if v >= 0 else float("nan")  # nan: not determined
+
+    def u_per_axis(self, group: str) -> np.ndarray:
+        """Standard uncertainties of a per-axis group (``"beta"``, ``"bias"``, ``"k"``) in
+        x, y, z order [its unit]."""
+        return np.array([self.u_of(n) for n in per_axis(group)])
 
     def to_dict(self) -> dict:
         """The model as JSON-ready numbers (SI/radians/g), covariance included."""

@@ -77,10 +77,11 @@ def show_session(out: dict, budget: bool = False, plan: bool = False) -> None:
     """A session's result, its verdict (with ``budget``/``plan`` the budget and what to
     measure next), stage timings, warnings and outputs on the terminal."""
     from align.present import decision_lines, session_lines, timing_lines
+    from align.session_json import LoadedSession
 
     print(f"session {out['session']}:")
     say(session_lines(out["result"]))
-    say(decision_lines(out["json"], budget, plan))
+    say(decision_lines(LoadedSession.from_dict(out["json"], out["session"]), budget, plan))
     say(timing_lines(out["result"].timings))
     warn(out["warnings"])
     for k, v in out["outputs"].items():

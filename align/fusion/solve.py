@@ -36,6 +36,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
+from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2, LEVEL: 2}
@@ -240,6 +241,11 @@ class FusionResult:
     # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
     disagreement: SourceDisagreement | None = None
 
+    def cov_of(self, *names: str) -> np.ndarray:
+        """The covariance [rad²] of the named angles of E (``E_NAMES``, e.g.
+        ``cov_of("E_xY", "E_zX")``) in the order given."""
+        return cov_of(self.cov, E_NAMES, names)
+
     @property
     def consistent(self) -> bool:
         return not self.loop.unexplained_structure
@@ -348,8 +354,8 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         for k, (lab, v, p, u) in enumerate(zip(b.labels, b.values, pred, b.u, strict=True)):
             rows.append(ObservationRow(b.source, lab, float(v), float(p), float(u),
                                        b.unit_of(k)))
-    nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
-            for k, n in enumerate(sol.names) if k >= 6}
+    nuis = {n: (float(sol.params[k]), float(np.sqrt(cov_of(sol.cov, sol.names, (n,))[0, 0]))
+                * inflation) for k, n in enumerate(sol.names) if k >= 6}
     sources = tuple(dict.fromkeys(b.source for b in stage.blocks))
     named = None
     if loop.unexplained_structure and len(sources) > 1:

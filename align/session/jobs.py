@@ -20,9 +20,11 @@ from align.errors import InputError
 from align.session.config import load_session
 from align.session.output import session_outputs
 from align.session.run import run_session
+from align.session_json import LoadedSession
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_REJECTED
 from axisbase.output import OutputPlan
 from axisbase.provenance import set_command
+from axisbase.units import ARCSEC
 
 Summary = dict
 OnDone = Callable[[Summary], None]
@@ -195,23 +197,22 @@ class BatchRow:
 
 def batch_row(summary: Summary) -> BatchRow:
     """The :class:`BatchRow` of a session's summary (:func:`run_job`, :func:`skipped`,
-    :func:`crashed`)."""
+    :func:`crashed`); its result JSON read by the one reader (:class:`LoadedSession`)."""
     js = summary.get("json")
+    res = None if js is None else LoadedSession.from_dict(js, summary["session"])
     error = None
     if not summary["ok"]:
         error = summary.get("error") or "; ".join(
-            f"{e['stage']}: {e['message']}" for e in (js or {}).get("errors", []))
+            f"{e.stage}: {e.message}" for e in (res.errors if res is not None else ()))
     common = {"session": summary["session"], "ok": summary["ok"],
               "skipped": bool(summary.get("skipped")),
               "outputs": dict(summary.get("outputs", {})), "error": error,
-              "verdict": ((js or {}).get("disposition") or {}).get("verdict")}
-    if js is None or js.get("misalignment_arcsec") is None:
+              "verdict": None if res is None else res.verdict}
+    if res is None or res.e_rad is None:
         return BatchRow(**common)
-    E = [abs(v) for row in js["misalignment_arcsec"] for v in row]
-    U = [v for row in js["misalignment_u_arcsec"] for v in row]
-    return BatchRow(**common, e_max_arcsec=float(max(E)), u_max_arcsec=float(max(U)),
-                    chi2=js["chi2"], dof=js["dof"],
-                    consistent=not js["unexplained_structure"])
+    return BatchRow(**common, e_max_arcsec=max(abs(v) for v in res.e_rad) / ARCSEC,
+                    u_max_arcsec=max(res.u_rad) / ARCSEC, chi2=res.chi2, dof=res.dof,
+                    consistent=res.consistent)
 
 
 def exit_status(summaries: Sequence[Summary], fail_on_reject: bool = False) -> int:

@@ -10,7 +10,9 @@ from dataclasses import replace
 from pathlib import Path
 
 from align.contract import FORMATS
+from align.errors import InputError
 from align.session.jobs import SessionJob, Summary
+from align.session_json import LoadedSession
 from axisbase.output import STDOUT
 from axisbase.provenance import sha256_file
 from axisbase.version import __version__
@@ -23,40 +25,52 @@ def is_complete(job: SessionJob) -> bool:
 
     if job.json == STDOUT or not (job.json or job.report or job.cal):
         return False
-    doc = None
+    res = None
     if job.json is not None:
-        doc = _session_json(job.json)
-        if doc is None:
+        res = _loaded(job.json)
+        if res is None:
             return False
     if job.report is not None and not Path(job.report).is_file():
         return False
     if job.cal is not None and not Path(job.cal).is_file():
-        return doc is not None and doc.get("platform_calibration") is None
+        return res is not None and res.platform_calibration is None
     return True
 
 
-def _session_json(path: str) -> dict | None:
-
+def _raw(path: str) -> object:
+    """The JSON value in ``path``; None when it is missing or unreadable (truncated)."""
     try:
-        d = json.loads(Path(path).read_text(encoding="utf-8"))
+        return json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    return d if isinstance(d, dict) and d.get("format") == "axis-align/session" else None
+
+
+def _loaded(path: str) -> LoadedSession | None:
+    """The session result in ``path`` as the one reader reads it; None when there is none
+    (missing, truncated, another kind of file, or not readable as a session result)."""
+    d = _raw(path)
+    if not isinstance(d, dict) or d.get("format") != "axis-align/session":
+        return None
+    try:
+        return LoadedSession.from_dict(d, path)
+    except InputError:  # not a result of this tool: the caller treats it as absent
+        return None
 
 
 def skipped(job: SessionJob) -> Summary:
     """The summary of a session a previous batch finished (``--resume``)."""
-    doc = _session_json(job.json) if job.json else None
-    ok = bool(doc.get("ok")) if doc is not None else True
+    res = _loaded(job.json) if job.json else None
+    ok = res.ok if res is not None else True
     warnings = []
-    made = (doc or {}).get("settings", {}).get("alpha")
+    made = res.provenance.settings.get("alpha") if res is not None else None
     if made is not None and made != job.alpha:
         # a lot of results made with different significance levels is not one lot
         ok = False
         warnings.append(f"{job.json}: made with alpha = {made:g}, this batch asks {job.alpha:g}"
                         ": not resumed (redo it with --force)")
     return {"session": job.name, "folder": job.folder, "ok": ok, "bad_input": not ok,
-            "skipped": True, "json": doc, "warnings": warnings,
+            "skipped": True, "json": _raw(job.json) if res is not None else None,
+            "warnings": warnings,
             "outputs": {k: v for k, v in (("json", job.json), ("report", job.report),
                                           ("cal", job.cal)) if v and Path(v).is_file()}}
 
@@ -84,51 +98,58 @@ def reuse_verdict(job: SessionJob) -> tuple[str, str | None]:
         return "run", None
     if job.json is None:
         return "redo", "no result JSON asked for, so nothing to check the outputs against"
-    try:
-        doc = json.loads(Path(job.json).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    doc = _raw(job.json)
+    if doc is None:
         return "redo", f"{job.json} is missing or unreadable (truncated?)"
     if not isinstance(doc, dict) or doc.get("format") != "axis-align/session":
         return "refuse", f"{job.json} is not a session result (format {doc.get('format')!r})" \
             if isinstance(doc, dict) else f"{job.json} is not a session result"
-    made_in = doc.get("folder")
-    if made_in is None or not _same_folder(made_in, job.folder):
+    try:
+        res = LoadedSession.from_dict(doc, job.json)
+    except InputError as exc:  # a result this tool cannot read: whose it is decides
+        if not _same_folder(doc.get("folder"), job.folder):
+            return "refuse", (f"{job.json} holds the result of another session folder "
+                              f"({doc.get('folder')}); not replaced — give this batch another "
+                              "output folder")
+        return "redo", str(exc)
+    if res.folder is None or not _same_folder(res.folder, job.folder):
         return "refuse", (f"{job.json} holds the result of another session folder "
-                          f"({made_in}); not replaced — give this batch another output folder")
-    if doc.get("format_version") != FORMATS["session"]:
-        return "redo", (f"{job.json} has format version {doc.get('format_version')}, this tool "
+                          f"({res.folder}); not replaced — give this batch another output folder")
+    if res.format_version != FORMATS["session"]:
+        return "redo", (f"{job.json} has format version {res.format_version}, this tool "
                         f"writes {FORMATS['session']}")
-    if doc.get("tool_version") != __version__:
-        return "redo", (f"{job.json} was made by version {doc.get('tool_version')}, this is "
+    prov = res.provenance
+    if prov.tool_version != __version__:
+        return "redo", (f"{job.json} was made by version {prov.tool_version}, this is "
                         f"{__version__}")
-    made = doc.get("settings") or {}
+    made = prov.settings
     for key in NUMBER_SETTINGS:
         if key in job.settings and made.get(key) != job.settings[key] or \
                 key not in job.settings and made.get(key) != getattr(job, key, None):
             want = job.settings.get(key, getattr(job, key, None))
             return "redo", f"{job.json} was made with {key} = {made.get(key)}, this run asks {want}"
-    inputs = doc.get("inputs") or []
-    if not inputs:
+    if not prov.inputs:
         return "redo", f"{job.json} records no inputs to check"
-    for rec in inputs:
-        path, sha = rec.get("path"), rec.get("sha256")
+    for rec in prov.inputs:
         try:
-            now = sha256_file(path)
-        except (OSError, TypeError):
-            return "redo", f"its input {path} is gone"
-        if now != sha:
-            return "redo", f"its input {path} changed since (sha256 differs)"
-    if doc.get("ok") is not True:
+            now = sha256_file(rec.path)
+        except OSError:
+            return "redo", f"its input {rec.path} is gone"
+        if now != rec.sha256:
+            return "redo", f"its input {rec.path} changed since (sha256 differs)"
+    if not res.ok:
         return "redo", f"{job.json} was not ok"
     if job.report is not None and not Path(job.report).is_file():
         return "redo", f"the report {job.report} is missing"
     if job.cal is not None and not Path(job.cal).is_file() and \
-            doc.get("platform_calibration") is not None:
+            res.platform_calibration is not None:
         return "redo", f"the calibration {job.cal} is missing"
     return "reuse", None
 
 
-def _same_folder(recorded: str, folder: str) -> bool:
+def _same_folder(recorded: object, folder: str) -> bool:
+    if not isinstance(recorded, str):
+        return False
     try:
         return Path(recorded).resolve() == Path(folder).resolve()
     except OSError:

@@ -26,6 +26,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
+from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check
 from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
@@ -412,11 +413,9 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
     if res.calibration is not None:
         m = res.calibration.model
         if res.platform:
-            idx = [m.names.index(f"{p}_{a}") for p in ("beta", "bias") for a in "xyz"]
-            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)], m.bias))
+            blocks.append(ellipsoid_block(m.beta, m.cov_of(*per_axis("beta", "bias")), m.bias))
             blocks.append(static_block(res.platform, np.linalg.norm(r_matrix(m.beta), axis=1),
                                        s.platform.table_tilt_rad))
         else:
-            idx = [m.names.index(f"beta_{a}") for a in "xyz"]
-            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)]))
+            blocks.append(ellipsoid_block(m.beta, m.cov_of(*per_axis("beta"))))
     return blocks

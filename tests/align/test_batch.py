@@ -196,13 +196,22 @@ def test_an_output_set_appears_whole_or_not_at_all(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.html"]  # never committed
 
 
+def _minimal_result(**keys) -> dict:
+    """The smallest session result the one reader takes: a session that did not fuse."""
+    return {"format": "axis-align/session", "format_version": 3, "session": "unit1",
+            "ok": True, "fused": False, **keys}
+
+
 def test_complete_means_every_output_asked_for(sessions, tmp_path):
     out = tmp_path / "o"
     job, = batch_jobs([str(sessions[0])], json=str(out), report=None, cal=str(out))
     assert not is_complete(job)
     (out / "unit1.cal.json").write_text("{}")
     assert not is_complete(job)  # the JSON (put in place last) is missing
+    # a session result the one reader reads (a stub with only its format is not one)
     (out / "unit1.json").write_text('{"format": "axis-align/session"}')
+    assert not is_complete(job)
+    (out / "unit1.json").write_text(json.dumps(_minimal_result()))
     assert is_complete(job)
     assert not is_complete(SessionJob(job.folder, job.json, str(out / "r.html"), job.cal))
     (out / "unit1.json").write_text("not json")
@@ -217,8 +226,7 @@ def test_resume_does_not_pass_off_a_result_made_with_another_alpha(sessions, tmp
     out = tmp_path / "o"
     out.mkdir()
     job, = batch_jobs([str(sessions[0])], json=str(out), report=None, cal=None)
-    (out / "unit1.json").write_text(json.dumps({"format": "axis-align/session", "ok": True,
-                                                "settings": {"alpha": job.alpha}}))
+    (out / "unit1.json").write_text(json.dumps(_minimal_result(settings={"alpha": job.alpha})))
     same = skipped(job)
     assert same["ok"] and not same["warnings"]
     other = skipped(replace(job, alpha=0.01))
