@@ -26,6 +26,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
+from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check
 from align.decision import Disposition, ToleranceSpec, decide
@@ -220,7 +221,7 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                       STATIC, tk.columns, ("ux", "uy", "uz"),
                                       flag="[calibration] units")
             left_out: list[str] = []
-            res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
+            res.calibration_poses, _ = read_poses(c.static, c.detection, columns=tk.columns,
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
                                                   warnings=left_out)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
@@ -362,7 +363,8 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
     if stated is not None and stated != units:
         raise InputError(f"{p.static}: readings in {stated}, but the triad was calibrated "
                          f"from {units}: one triad, one unit")
-    poses, _ = read_poses(p.static, calibration=False, columns=p.table.columns,
+    poses, _ = read_poses(p.static, StaticSettings(names=session_names("[platform]")),
+                          calibration=False, columns=p.table.columns,
                           rate_hz=p.table.rate_hz)
     missing = [lab for lab in poses.labels if lab not in p.poses]
     if missing:
