@@ -30,8 +30,17 @@ from axisbase.provenance import Provenance
 
 @dataclass(frozen=True)
 class PlatformCalibration:
-    """Triad model plus the misalignment E [rad] (6 angles in ``E_NAMES`` order) and its
-    6x6 covariance [rad^2]."""
+    """Triad model plus the misalignment E and its covariance (what ``align apply`` needs).
+
+    Attributes
+    ----------
+    model : TriadModel
+        The triad's calibration; unit — (its own fields carry units).
+    e6 : numpy.ndarray
+        The six angles of E in ``E_NAMES`` order [rad].
+    cov : numpy.ndarray
+        Their 6×6 covariance [rad²].
+    """
 
     model: TriadModel
     e6: np.ndarray

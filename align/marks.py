@@ -305,16 +305,28 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
-    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit), as
+    results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
-    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
-    ``applied``: whether it was significant, explained the lines, and the marks were
-    undistorted with it; ``consistent``: whether the lines are straight within their
-    uncertainties once it is removed (False: the lines disagree in a way no single radial
-    distortion explains — bent marks, or lines that are not straight in the world — and every
-    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
-    straightness; ``p_value`` of the k1 = 0 test.
+    Attributes
+    ----------
+    k1 : float
+        Radial distortion at the image half-diagonal — dimensionless.
+    k1_u : float
+        Its standard uncertainty — dimensionless.
+    applied : bool
+        It was significant, explained the lines, and the marks were undistorted with it;
+        unit —.
+    consistent : bool
+        The lines are straight within their uncertainties once it is removed (False: the lines
+        disagree in a way no single radial distortion explains — bent marks, or lines that are
+        not straight in the world — and every mark's u is inflated by sqrt(chi2/dof)); unit —.
+    n_lines : int
+        Marks in the fit — dimensionless.
+    chi2_dof_before, chi2_dof_after : float
+        All lines' straightness, χ²/dof — dimensionless.
+    p_value : float
+        Of the k1 = 0 test — dimensionless.
     """
 
     k1: float
@@ -347,7 +359,60 @@ def _num(v: object) -> float:
 
 @dataclass(frozen=True)
 class MarkResult:
-    """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
+    """One mark (or one failure) of one image.
+
+    Attributes
+    ----------
+    image : str
+        The image file; unit —.
+    found : bool
+        A mark was measured (else ``error`` says why); unit —.
+    error : str or None
+        Why not; unit —.
+    index : int
+        The mark's index in its image — dimensionless.
+    angle_rad, angle_u_rad : float
+        The mark's angle in the image and its standard uncertainty [rad].
+    offset_px, offset_u_px : float
+        Its distance from the image centre and its standard uncertainty [px].
+    length_px : float
+        Its length, between the groove's half-depth ends [px].
+    width_px : float
+        Its width [px].
+    blur_px : float
+        The edge blur [px].
+    dark : bool
+        A dark groove on a bright surface (else bright); unit —.
+    n_points : int
+        Centre points fitted — dimensionless.
+    n_rejected : int
+        Centre points rejected — dimensionless.
+    angle_before_rad : float
+        The angle of the declared model, before the loop [rad].
+    loop : LoopReport or LoopSummary or None
+        The residual loop's report; unit —.
+    measurement : MarkMeasurement or None
+        The raw measurement (not saved); unit —.
+    uncertainty_inflation : float
+        Factor on u for structure no effect explains — dimensionless.
+    internal_error : bool
+        The failure was a defect of the tool; unit —.
+    frame : FrameDistortion or None
+        The frame's shared distortion (older results); unit —.
+    family : LineFamily or None
+        The family of parallel lines it belongs to; unit —.
+    unreported : int
+        Lines found in the image and not reported — dimensionless.
+    lens : Mapping or None
+        The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
+        [px]).
+    u_terms : Mapping
+        Named contributions to ``angle_u_rad`` [rad].
+    notes : tuple of str
+        What the reader must know; unit —.
+    lens_limited : bool
+        The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
+    """
 
     image: str
     found: bool

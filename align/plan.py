@@ -54,8 +54,24 @@ roll to ~1–3″)."""
 
 @dataclass(frozen=True)
 class Option:
-    """One measurement to add: ``action`` (what to do), ``kind``, ``minutes`` [min], ``u_after``
-    [rad] of the critical angle and of all six (``u_after_all``, ``E_NAMES`` order)."""
+    """One measurement to add.
+
+    Attributes
+    ----------
+    action : str
+        What to do; unit —.
+    kind : str
+        The kind of measurement; unit —.
+    minutes : float
+        The work it takes [min].
+    u_after : float
+        u of the critical angle after it [rad].
+    u_after_all : tuple of float
+        u of all six angles after it, ``E_NAMES`` order [rad].
+    detail : Mapping
+        What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a camera's
+        ``camera``, a replaced input's ``source``; unit —.
+    """
 
     action: str
     kind: str
@@ -77,8 +93,19 @@ class Option:
 
 @dataclass(frozen=True)
 class Plan:
-    """The critical angle (``target``), why it was chosen, its u now [rad], and the options
-    ranked by the lowering of its u per minute, best first."""
+    """What to measure next.
+
+    Attributes
+    ----------
+    target : str
+        The critical angle; unit —.
+    why : str
+        Why it was chosen; unit —.
+    u_before : float
+        Its u now [rad].
+    options : tuple of Option
+        Ranked by the lowering of its u per minute, best first; unit —.
+    """
 
     target: str
     why: str

@@ -171,10 +171,11 @@ def gonio_lines(run, faces: Sequence[str], nominal_rad: np.ndarray | None) -> li
 # ----------------------------------------------------------------------------- sessions
 
 def session_lines(res) -> list[str]:
-    """A session result: failed stages, then the misalignment E [″] ± u, the consistency of
-    the instruments and the effects the fusion loop added."""
+    """A session result: the misalignment E [″] ± u, the consistency of the instruments and
+    the effects the fusion loop added. Its failed stages are its warnings (said once, by
+    :func:`align.warnings.session_warnings`), not repeated here."""
     f = res.fusion
-    lines = [f"  stage {e.stage}: FAILED: {e.message}" for e in res.errors]
+    lines: list[str] = []
     if f is None:
         return lines + ["  no misalignment (the fusion did not run)"]
     lines.append("  misalignment E [″] (row: accelerometer, column: platform X Y Z), sources: "

@@ -45,11 +45,11 @@ class StageFailure:
     Attributes
     ----------
     stage : str
-        The stage that failed (``calibration``, ``goniometer``, ``marks``, ...) — dimensionless.
+        The stage that failed (``calibration``, ``goniometer``, ``marks``, ...); unit —.
     message : str
-        Why, as the result says it — dimensionless.
+        Why, as the result says it; unit —.
     internal : bool
-        A defect of the tool ("internal error — please report"), not bad input — dimensionless.
+        A defect of the tool ("internal error — please report"), not bad input; unit —.
     """
 
     stage: str
@@ -64,17 +64,17 @@ class LoadedSession:
     Attributes
     ----------
     where : str
-        The file (or the label) it was read from, for messages — dimensionless.
+        The file (or the label) it was read from, for messages; unit —.
     format_version : int
         The result's format version — dimensionless.
     session : str
-        The session's name — dimensionless.
+        The session's name; unit —.
     folder : str or None
-        The session folder it was made from (None: the result does not say) — dimensionless.
+        The session folder it was made from (None: the result does not say); unit —.
     ok : bool
-        Every stage succeeded and the fusion ran — dimensionless.
+        Every stage succeeded and the fusion ran; unit —.
     fused : bool
-        A misalignment matrix exists (perhaps from fewer sources than named) — dimensionless.
+        A misalignment matrix exists (perhaps from fewer sources than named); unit —.
     e_rad : tuple of float or None
         The six angles E_ij in :data:`ANGLE_NAMES` order [rad] (None when not fused).
     u_rad : tuple of float or None
@@ -88,24 +88,24 @@ class LoadedSession:
     p_value : float or None
         P(χ² ≥ chi2) — dimensionless.
     consistent : bool
-        No structure left in the fusion's residual (``not unexplained_structure``) —
-        dimensionless.
+        No structure left in the fusion's residual (``not unexplained_structure``); unit —.
     warnings : tuple of str
-        The result's warnings — dimensionless.
+        The result's warnings; unit —.
     errors : tuple of StageFailure
-        Each failed stage — dimensionless.
+        Each failed stage; unit —.
     metadata : Mapping
-        The session's ``[metadata]`` (texts, numbers, booleans) — as the user wrote them.
+        The session's ``[metadata]`` (texts, numbers, booleans) as the user wrote them;
+        unit —.
     provenance : Provenance
-        Tool version, creation time, settings and inputs (read from either layout).
+        Tool version, creation time, settings and inputs (read from either layout); unit —.
     disposition : Mapping or None
         The verdict block (:meth:`align.decision.Disposition.from_dict` reads it); None in
-        results written before verdicts.
+        results written before verdicts; unit —.
     budget : Mapping or None
-        The uncertainty budget block (:meth:`align.fusion.budget.Budget.from_dict`).
+        The uncertainty budget block (:meth:`align.fusion.budget.Budget.from_dict`); unit —.
     platform_calibration : Mapping or None
         The platform calibration block (:meth:`align.apply.PlatformCalibration.from_dict`
-        reads it); None when the session gave none.
+        reads it); None when the session gave none; unit —.
     """
 
     where: str

@@ -135,15 +135,9 @@ def setup_notices(fusion) -> list[str]:
     return out
 
 
-def stage_failed(e) -> str:
-    """The warning of a failed stage (``StageError``): in the JSON's warnings; the terminal
-    says it once, in the session's block (or as an error line with -q)."""
-    return f"stage {e.stage} FAILED: {e.message}"
-
-
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
-    out = [stage_failed(e) for e in res.errors]
+    out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
     out += res.log_warnings
     if res.calibration is not None and res.calibration_poses is not None:
         out += calibration_warnings(res.calibration, res.calibration_poses)

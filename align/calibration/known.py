@@ -105,11 +105,36 @@ def has_six_faces(faces: Sequence[str | None]) -> bool:
 
 @dataclass(frozen=True)
 class KnownPoseFit:
-    """Known-pose calibration. ``M`` (3, 3) [output/g] and ``offset`` (3,) [output] with
-    ``cov_mo`` (12, 12) over (M row by row, offset); ``model`` the triad (k, beta, bias) with
-    its covariance over ``model.names``; ``mounting`` C, the triad's rotation in the fixture
-    frame; ``chi2``, ``dof``; ``faces`` used; ``fixture_error_rad`` declared;
-    ``noise_known``: False when only means were given (uncertainty from the residual)."""
+    """Known-pose calibration.
+
+    Attributes
+    ----------
+    M : numpy.ndarray
+        (3, 3) matrix from specific force to output [output unit/g].
+    offset : numpy.ndarray
+        (3,) output at zero specific force [output unit].
+    cov_mo : numpy.ndarray
+        (12, 12) covariance over (M row by row, offset) [products of their units].
+    model : TriadModel
+        The triad (k, beta, bias) with its covariance over ``model.names``; unit — (its
+        own fields carry units).
+    mounting : numpy.ndarray
+        C, the triad's rotation in the fixture frame — dimensionless.
+    chi2 : float
+        The fit's χ² — dimensionless.
+    dof : int
+        Its degrees of freedom — dimensionless.
+    faces : tuple of str
+        The faces used (``+x``, ``-x``, ...); unit —.
+    fixture_error_rad : float
+        The declared placement error of the faces [rad].
+    noise_known : bool
+        False when only means were given (uncertainty from the residual); unit —.
+    residuals : numpy.ndarray
+        Each pose's residual [output unit].
+    sigma : numpy.ndarray
+        Each pose's standard uncertainty [output unit].
+    """
 
     M: np.ndarray
     offset: np.ndarray

@@ -56,7 +56,31 @@ SCALE_FACTOR_DEFINITION = (
 
 @dataclass(frozen=True)
 class Calibration:
-    """Result of :func:`calibrate`: algebraic start, final model, loop report."""
+    """Result of :func:`calibrate`: algebraic start, final model, loop report.
+
+    Attributes
+    ----------
+    algebraic : TriadModel
+        The algebraic (closed-form) first estimate; unit — (its own fields carry units).
+    model : TriadModel
+        The refined model (maximum likelihood, the loop's effects); unit —.
+    loop : LoopReport
+        The residual loop's report (effects tried, added, refused, skipped); unit —.
+    signs : tuple of float
+        The scale factors' signs (+1 or -1 per axis) — dimensionless.
+    noise_known : bool
+        The poses carried their samples' scatter (else u from the residual); unit —.
+    method : str
+        ``ellipsoid`` or ``known-pose``; unit —.
+    known : KnownPoseFit or None
+        The known-pose fit, when the six faces were among the poses; unit —.
+    cross_check : dict or None
+        Ellipsoid vs known-pose per parameter: difference and its z — dimensionless.
+    notes : tuple of str
+        What the user should know (poses left out, units stretched); unit —.
+    widening : Widening or None
+        How u was widened for unexplained structure (None: not widened); unit —.
+    """
 
     algebraic: TriadModel
     model: TriadModel

@@ -58,7 +58,51 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
 
 @dataclass(frozen=True)
 class TriadModel:
-    """A calibration: parameters and optional effects; ``cov`` is over ``names``."""
+    """A calibration of the triad: u = K R (a + b) and its optional effects; ``cov`` is over
+    ``names``.
+
+    Attributes
+    ----------
+    k : numpy.ndarray
+        Scale factors K (3,) [output unit/g].
+    beta : numpy.ndarray
+        Misalignment angles of the seed paper's R (3,) [rad].
+    bias : numpy.ndarray
+        Bias (3,) [g].
+    k2 : numpy.ndarray
+        Second-order scale terms (3,) [1/g].
+    drift : numpy.ndarray
+        Bias drift (3,) [g/s] about ``t_ref``.
+    temp_coeff : numpy.ndarray
+        Bias change per kelvin (3,) [g/K] about ``temp_ref``.
+    drift2 : numpy.ndarray
+        Quadratic bias drift (3,) [g/s²].
+    t_ref : float
+        Reference time of the drifts [s].
+    temp_ref : float
+        Reference temperature [K] (or the readings' temperature unit).
+    cov : numpy.ndarray or None
+        Covariance over ``names`` [products of the parameters' units]; :meth:`cov_of` reads it
+        by name.
+    names : tuple of str
+        The fitted parameters, in ``cov``'s order (``k_x``, ``beta_y``, ``bias_z``, ...); unit —.
+    cross : numpy.ndarray
+        Cross-axis second-order terms [1/g]: row i (output axis), columns the products
+        x_x x_y, x_x x_z, x_y x_z of the inputs (IEEE Std 1293's K_ip, K_io).
+    scale_drift : numpy.ndarray
+        Relative scale-factor change per second [1/s] about ``t_ref``.
+    scale_temp : numpy.ndarray
+        Relative scale-factor change per kelvin [1/K] about ``temp_ref``.
+    scale_warmup : numpy.ndarray
+        Relative scale-factor warm-up amplitude: s = 1 + w (exp(-(t - t_ref)/tau) - 1) —
+        dimensionless.
+    warmup_tau_s : float
+        Time constant of the scale-factor warm-up [s] (0: none).
+    hysteresis : numpy.ndarray
+        Bias hysteresis [g]: each pose's bias is offset by this x the sign of the change of its
+        axis's input in the turn into the pose. Readings without their turns cannot be
+        corrected for it: ``bias`` is the middle of the two branches.
+    """
 
     k: np.ndarray
     beta: np.ndarray

@@ -78,23 +78,16 @@ def show_session(out: dict, budget: bool = False, plan: bool = False,
                  quiet: bool = False) -> None:
     """A session's result, its verdict (with ``budget``/``plan`` the budget and what to
     measure next), stage timings, warnings and outputs on the terminal; ``quiet`` (-q): only
-    the warnings and the failed stages (as errors). A failed stage is said once: in the
-    block, or with -q as an error line — never again as a warning."""
+    the warnings (a failed stage is one of them, said once, on stderr)."""
     from align.present import decision_lines, session_lines, timing_lines
     from align.session_json import LoadedSession
-    from align.warnings import stage_failed
 
-    res = out["result"]
-    failed = {stage_failed(e) for e in res.errors}
-    if quiet:
-        for e in res.errors:
-            log.error("session %s: stage %s FAILED: %s", out["session"], e.stage, e.message)
-    else:
+    if not quiet:
         print(f"session {out['session']}:")
-        say(session_lines(res))
+        say(session_lines(out["result"]))
         say(decision_lines(LoadedSession.from_dict(out["json"], out["session"]), budget, plan))
-        say(timing_lines(res.timings))
-    warn([w for w in out["warnings"] if w not in failed])
+        say(timing_lines(out["result"].timings))
+    warn(out["warnings"])
     if not quiet:
         for k, v in out["outputs"].items():
             if v != "-":

@@ -35,7 +35,15 @@ _WHEN_KEYS = ("datetime", "date")
 
 @dataclass(frozen=True)
 class Rejected:
-    """A file given as a session result that could not be read as one."""
+    """A file given as a session result that could not be read as one.
+
+    Attributes
+    ----------
+    file : str
+        The file; unit —.
+    reason : str
+        Why, in one line; unit —.
+    """
 
     file: str
     reason: str
@@ -50,19 +58,39 @@ class UnitResult:
 
     Attributes
     ----------
-    file : the result file read.
-    session : the session's name; ``label``: the unit (metadata ``unit`` or ``serial``, else
-        the session name).
-    ok, fused : as in the result (every stage succeeded and fused / a matrix exists).
-    e_rad, u_rad : the six angles E_ij [rad] in :data:`ANGLE_NAMES` order and their standard
-        uncertainties [rad] (None when not fused).
-    chi2, dof, p_value : the fusion's consistency (None when not fused).
-    warnings : the result's warnings; ``failed_stages``: (stage, message) of each failure.
-    metadata : the session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text).
-    format_version : the result's format version.
-    sha256 : the file's SHA-256 (None when built in memory); ``created_utc``: when the
-        result was written (its envelope); ``inputs_sha256``: the SHA-256 of every input
-        file of the session, sorted (the same data give the same tuple).
+    file : str
+        The result file read; unit —.
+    session : str
+        The session's name; unit —.
+    label : str
+        The unit (metadata ``unit`` or ``serial``, else the session name); unit —.
+    ok, fused : bool
+        As in the result (every stage succeeded and fused / a matrix exists); unit —.
+    e_rad, u_rad : tuple of float or None
+        The six angles E_ij in :data:`ANGLE_NAMES` order and their standard uncertainties
+        [rad] (None when not fused).
+    chi2, dof, p_value : float, int, float or None
+        The fusion's consistency (None when not fused) — dimensionless.
+    warnings : tuple of str
+        The result's warnings; unit —.
+    failed_stages : tuple of (str, str)
+        (stage, message) of each failure; unit —.
+    metadata : Mapping
+        The session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text), as the
+        user wrote them; unit —.
+    format_version : int
+        The result's format version — dimensionless.
+    sha256 : str or None
+        The file's SHA-256 (None when built in memory); unit —.
+    created_utc : str or None
+        When the result was written (ISO 8601, UTC); unit —.
+    inputs_sha256 : tuple of str
+        The SHA-256 of every input file of the session, sorted (the same data give the same
+        tuple); unit —.
+    covariance : tuple of tuple of float or None
+        The 6×6 covariance of ``e_rad`` [rad²].
+    disposition : Mapping or None
+        The result's verdict block (:class:`align.decision.Disposition`); unit —.
     """
 
     file: str

@@ -71,8 +71,37 @@ class StageError:
 
 @dataclass
 class SessionResult:
-    """Everything a session produced (stage results are None when the stage failed or was
-    not in the session)."""
+    """Everything a session produced (stage results are None when the stage failed or was not in
+    the session).
+
+    Attributes
+    ----------
+    session : Session
+        The session as loaded; unit —.
+    calibration : Calibration or None
+        The triad's calibration (its fields carry units); unit —.
+    calibration_poses : Poses or None
+        The static poses it was made from, their readings in ``units``; unit —.
+    gonio : GonioRun or None
+        The goniometer log's face angles; unit —.
+    marks : list of (ImageEntry, MarkResult)
+        Each image measured; unit —.
+    platform : list of PlatformPose
+        The platform's static readings, calibrated [g].
+    fusion : FusionResult or None
+        The fused misalignment; unit —.
+    errors : list of StageError
+        Each failed stage; unit —.
+    units : str
+        The output unit of the triad's readings (``V``, ``g``, ...); unit —.
+    timings : dict
+        Wall-clock time of each stage [s] (in the order they ran).
+    log_warnings : list of str
+        Warnings the stages logged (e.g. how a file was read): they reach the JSON too; unit —.
+    tolerance : ToleranceSpec or None
+        The specification the disposition is judged against (session.toml's ``[tolerance]``
+        unless the command line overrides it); unit —.
+    """
 
     session: Session
     calibration: Calibration | None = None

@@ -129,7 +129,11 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# min_static_s = 0.5          # [s] shortest static interval kept "
                 "(as --min-static)",
                 "# margin_s = 0.1              # [s] cut from each end of an interval "
-                "(as --margin)"]
+                "(as --margin)",
+                "# split_sigma = 8.0           # split an interval whose mean moves by more "
+                "standard errors than this ...",
+                "# split_deg = 1.0             # ... and by more than this tilt [°] "
+                "(as --split-sigma, --split-deg)"]
     if gonio:
         out += ["", "[goniometer]                  # ring-laser goniometer",
                 "log = \"gonio.csv\"             # FILL IN: counter log, count,counter,ref[,t] "
