@@ -29,6 +29,10 @@ def per_axis(*groups: str) -> tuple[str, ...]:
     return tuple(f"{g}_{a}" for g in groups for a in AXES)
 
 
+CORE = per_axis("k", "beta", "bias")
+"""The nine parameters every model fits, in the covariance's first nine places."""
+
+
 @dataclass(frozen=True)
 class Poses:
     """Per-pose means of a static test: u (N, 3) [V or counts], t [s], temp [K], sigma of the
