@@ -167,7 +167,8 @@ def test_a_dead_local_worker_loses_no_session(sessions, tmp_path):
     """A worker killed mid-batch (out of memory, say): the pool is rebuilt and every session
     still finishes."""
     out = tmp_path / "out"
-    proc = _start(["run", *map(str, sessions), "--json", str(out), "--jobs", "2", "-q"])
+    # not -q: the batch's count is on stdout, which -q leaves to warnings and errors
+    proc = _start(["run", *map(str, sessions), "--json", str(out), "--jobs", "2"])
     try:
         workers = _workers(proc)
         time.sleep(1.0)
@@ -260,9 +261,9 @@ def test_dask_cluster_gives_the_local_pool_results(sessions, bad_session, tmp_pa
     batch = [*map(str, sessions[:2]), str(bad_session)]
     local, dask = tmp_path / "local", tmp_path / "dask"
     assert main(["run", *batch, "--json", str(local), "--calibration", str(local),
-                 "--jobs", "2", "-q"]) == 2
+                 "--jobs", "2"]) == 2
     assert main(["run", *batch, "--json", str(dask), "--calibration", str(dask),
-                 "--scheduler", cluster.scheduler_address, "-q"]) == 2
+                 "--scheduler", cluster.scheduler_address]) == 2
     cap = capsys.readouterr()
     assert cap.out.count("2 of 3 sessions done, 1 failed") == 2
     assert "unit_bad: FAILED" in cap.err and "gonio.csv" in cap.err
