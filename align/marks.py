@@ -621,11 +621,22 @@ class CameraLens:
     notes: tuple[str, ...]
     record: Mapping
     max_u_rad: float
+    model_as: str = "--camera"
+    """How the user gives this camera a model: the flag, or session.toml's key."""
 
 
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
                 ) -> CameraLens:
+    """:func:`_camera_lens`; ``label`` names a session's camera (its messages then name
+    session.toml's ``[cameras.LABEL] model``, not ``--camera``)."""
+    lens = _camera_lens(ms, camera, ranges, alpha, label)
+    return replace(lens, model_as=f"[cameras.{label}] model") if label else lens
+
+
+def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                 ) -> CameraLens:
     """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
 
     Without a camera model: identifiability, then the determined parameters fitted jointly
@@ -700,7 +711,7 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
-                     "(`align camera`) and pass it with --camera")
+                     f"(`align camera`) and give it with {lens.model_as}")
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited)
 

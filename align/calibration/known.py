@@ -199,11 +199,14 @@ def face_signs(poses: Poses, faces: Sequence[str | None]) -> tuple[np.ndarray, f
 
 
 def resolve_signs(poses: Poses, faces: Sequence[str | None],
-                  given: Sequence[float] | None) -> tuple[float, float, float]:
+                  given: Sequence[float] | None, given_as: str = "--scale-sign"
+                  ) -> tuple[float, float, float]:
     """The scale-factor signs: from labelled faces when the poses carry them (an explicit
     ``given`` that contradicts them is refused, naming both), else ``given`` or +,+,+.
     Labels whose axes are more than :data:`LABEL_AXES_DEG` off the triad's give no signs:
-    ``given`` is then used, and without it the calibration is refused."""
+    ``given`` is then used, and without it the calibration is refused. ``given_as``: how
+    the user gives the signs (``--scale-sign``, or session.toml's ``[calibration]
+    scale_sign``), which the messages name."""
     if not (labelled(poses) and has_six_faces(faces)):
         return tuple(float(s) for s in (given if given is not None else (1, 1, 1)))
     s, off = face_signs(poses, faces)
@@ -213,13 +216,13 @@ def resolve_signs(poses: Poses, faces: Sequence[str | None],
         raise InputError(f"the labelled faces do not name the triad's axes (an axis "
                          f"{off:.0f}° from its face, > {LABEL_AXES_DEG:g}°: swapped labels, or "
                          "the triad turned in the fixture), so they cannot give the "
-                         "scale-factor signs: correct the labels or give --scale-sign")
+                         f"scale-factor signs: correct the labels or give {given_as}")
     derived = tuple(float(v) for v in s)
     if given is not None and tuple(float(v) for v in given) != derived:
-        raise InputError(f"scale sign {_sign_text(given)} (--scale-sign, session key "
-                         f"scale_sign) contradicts the labelled faces, "
-                         f"which give {_sign_text(derived)} ({_worst_face(poses, faces, s)}"
-                         "): drop --scale-sign or correct the pose labels")
+        raise InputError(f"scale sign {_sign_text(given)} ({given_as}) contradicts the "
+                         f"labelled faces, which give {_sign_text(derived)} "
+                         f"({_worst_face(poses, faces, s)}): drop {given_as} or correct the "
+                         "pose labels")
     return derived  # type: ignore[return-value]
 
 
@@ -245,7 +248,7 @@ def check_mounting(C: np.ndarray) -> None:
         raise InputError(f"known-pose calibration: the mounting rotation has determinant "
                          f"{det:+.3f} (a mirror, not a rotation): the scale-factor signs and "
                          "the face labels contradict each other (swapped labels, or a "
-                         "--scale-sign with one axis wrong)")
+                         "scale sign given with one axis wrong)")
 
 
 def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] = (1, 1, 1),

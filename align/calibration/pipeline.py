@@ -138,7 +138,8 @@ class Calibration:
 
 def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES,
-              fixture_error_rad: float | None = None) -> Calibration:
+              fixture_error_rad: float | None = None,
+              signs_as: str = "--scale-sign") -> Calibration:
     """Calibrate the triad from its poses.
 
     * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
@@ -152,6 +153,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     them, else +,+,+ (an explicit one that contradicts the labels is refused:
     :func:`align.calibration.known.resolve_signs`). ``fixture_error_rad``: declared placement
     error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    ``signs_as``: how the user gave ``signs`` (the flag, or session.toml's key), for the
+    messages.
 
     Examples
     --------
@@ -171,7 +174,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
     faces = faces_of(poses)
-    signs = signs_t = resolve_signs(poses, faces, signs)
+    signs = signs_t = resolve_signs(poses, faces, signs, signs_as)
     six = has_six_faces(faces)
     # Poses that are all faces (however many) span six directions: the ellipsoid's nine
     # parameters are not determined by them, the known-pose fit is.

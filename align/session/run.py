@@ -253,14 +253,15 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
             res.calibration_poses, _ = read_poses(c.static, c.detection, columns=tk.columns,
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
                                                   warnings=left_out)
-            cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
+                            signs_as="[calibration] scale_sign")
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
             # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
             source = ("[calibration] units" if tk.units else
                       f"{c.static}: header unit [{res.units}]")
-            w = unit_scale_check(cal.model, res.units, source)
+            w = unit_scale_check(cal.model, res.units, source, "[calibration] units")
             return replace(cal, notes=(*cal.notes, *w)) if w else cal
         res.calibration = _try(res, "calibration", _cal)
     if s.goniometer is not None:
