@@ -26,7 +26,8 @@ def result(tmp_path_factory) -> dict:
     from synth.session import SessionSpec
 
     root = tmp_path_factory.mktemp("loaded")
-    s = imageless_session(root, SessionSpec(seed=21))
+    # short poses and log: the readers are under test, not the estimates (~1 s CPU)
+    s = imageless_session(root, SessionSpec(seed=21, samples_per_pose=30, revolutions=40))
     out = root / "r.json"
     assert main(["run", str(s), "--json", str(out), "--tolerance-arcsec", "600", "-q"]) == 0
     return json.loads(out.read_text())
