@@ -97,8 +97,8 @@ class PlatformCalibration:
     def load_with_units(cls, path: str | Path) -> tuple[PlatformCalibration, str | None]:
         """The calibration and the output unit of the readings it was made from (None for
         files that do not say)."""
-        d = read_json(path, "a platform calibration")
-        return cls.from_dict(d, str(path)), _output_unit(_block(d, str(path)))
+        block = _block(read_json(path, "a platform calibration"), str(path))
+        return cls.from_dict(block, str(path)), _output_unit(block)
 
     def specific_force(self, u: np.ndarray, t: np.ndarray | float = 0.0,
                        temp: np.ndarray | float | None = None) -> np.ndarray:
@@ -162,7 +162,8 @@ def load_tilt_calibration(path: str | Path) -> tuple[TriadModel | PlatformCalibr
     d = read_json(path, "a calibration")
     if (_is_session(d) or d.get("format") == "axis-align/platform-calibration"
             or "misalignment_rad" in d):
-        return PlatformCalibration.from_dict(d, str(path)), _output_unit(_block(d, str(path)))
+        block = _block(d, str(path))  # read once: the body is a version-1 calibration
+        return PlatformCalibration.from_dict(block, str(path)), _output_unit(block)
     return load_triad_model(path)
 
 
