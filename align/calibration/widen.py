@@ -65,13 +65,20 @@ class Widening:
 
     Attributes
     ----------
-    reasons : per term, why (the structure test and what it saw; the alternatives).
-    names : parameters, in the covariance's order (then ``scale_factor_x..z``).
-    u_noise : u from the noise alone, per name [the parameter's unit].
-    terms : per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
+    reasons : tuple of (str, str)
+        Per term, why (the structure test and what it saw; the alternatives); unit —.
+    names : tuple of str
+        Parameters, in the covariance's order (then ``scale_factor_x..z``); unit —.
+    u_noise : numpy.ndarray
+        u from the noise alone, per name [the parameter's unit].
+    terms : tuple of (str, numpy.ndarray)
+        Per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
         unit] (what it adds in quadrature).
-    u : the widened u per name [the parameter's unit].
-    alternatives : the sets of effects the :data:`AMBIGUITY` term averages over.
+    u : numpy.ndarray
+        The widened u per name [the parameter's unit].
+    alternatives : tuple of Alternative
+        The sets of effects the :data:`AMBIGUITY` term averages over; unit — (each names its
+        own units).
     """
 
     reasons: tuple[tuple[str, str], ...]
@@ -136,13 +143,20 @@ class Alternative:
 
     Attributes
     ----------
-    effects : its effects, joined by " + ".
-    replaces : the chosen effect it replaces ("" for another fit the loop tried).
-    d_bic : its BIC minus the chosen set's.
-    explained : the fraction of the replaced effect's chi2 drop it reproduces (NaN when it
-        replaces none).
-    shift : its nine core parameters (k, beta, bias) minus the chosen fit's [their units].
-    excess : (9, 9) its core covariance beyond the chosen fit's (the positive part).
+    effects : str
+        Its effects, joined by " + "; unit —.
+    replaces : str
+        The chosen effect it replaces ("" for another fit the loop tried); unit —.
+    d_bic : float
+        Its BIC minus the chosen set's — dimensionless.
+    explained : float
+        The fraction of the replaced effect's chi2 drop it reproduces (NaN when it replaces
+        none) — dimensionless.
+    shift : numpy.ndarray
+        Its nine core parameters (k, beta, bias) minus the chosen fit's [their units].
+    excess : numpy.ndarray
+        (9, 9) its core covariance beyond the chosen fit's (the positive part) [products of
+        their units].
     """
 
     effects: str
