@@ -380,3 +380,73 @@ def test_shallow_stripes_under_a_mark_are_flagged_or_covered(tmp_path):
     # a warning beside a number its u does not cover is still wrong: only "not ok" excuses it
     assert abs(mark_z(m, 10.0)) < 3.0 or rc != 0 or not js["ok"], (m["angle_deg"],
                                                                    m["angle_u_arcsec"])
+
+
+# ------------------------------------------------------------------- slow statistical sweeps
+
+@pytest.mark.slow
+def test_camera_model_from_my_rendered_chessboards_covers_marks_everywhere(tmp_path):
+    """The real chessboard camera's lens (f 535 px, k1 −0.279, k2 0.079, p1 0.0023, p2 −0.0008,
+    k3 −0.006, principal point (+19, −3) px off) renders 10 chessboards; `align camera` makes
+    the model (its parameters within 2 of their u of my truth); four straight marks at the
+    frame's edges measured through it: every angle within 3 u, or the result not ok."""
+    lens = U.Lens(f=535.0, dcx=19.0, dcy=-3.0,
+                  dist=(-0.2787, 0.0785, 0.0023, -0.00077, -0.0063))
+    boards = [U.write_image(tmp_path / f"b{i:02d}.png", v)
+              for i, v in enumerate(U.chessboard_views(lens, 640, 480, count=10, seed=1))]
+    cam = tmp_path / "cam.json"
+    rc, out, err = align("camera", *boards, "--pattern", "9x6", "--json", cam)
+    assert rc == 0, err
+    model = json.loads(cam.read_text())
+    K = np.asarray(model["camera_matrix"])
+    truth_K = lens.matrix(640, 480)
+    u = model["u"]
+    assert abs(K[0, 2] - truth_K[0, 2]) < 3 * u["cx"] and abs(K[1, 2] - truth_K[1, 2]) < 3 * u["cy"]
+    assert abs(model["dist_coeffs"][0] - lens.dist[0]) < 3 * u["k1"]
+    places = [(320, 80, 3.0, 250), (560, 240, 88.0, 300), (300, 420, -2.0, 300),
+              (80, 250, -89.0, 300)]
+    paths, truths = [], []
+    for i, (x, y, a, L) in enumerate(places):
+        sc = U.Scene(marks=(U.Mark(x, y, a, L),), lens=lens, seed=22 + i)
+        paths.append(U.write_image(tmp_path / f"m{i}.png", U.render(sc)))
+        truths.append(a)
+    rc, js, err = marks_json(paths, "--camera", cam)
+    zs = [mark_z(m, t) for m, t in zip(js["marks"], truths, strict=True)]
+    assert max(map(abs, zs)) < 3.0 or not js["ok"], zs
+
+
+BENT_U_SHORT = (
+    "straight marks, 300 px, bow (sagitta) 1.0 px, centred, 8 seeds: every mark flagged "
+    "'bent' and u 'widened to cover both', yet z RMS 1.79, max 2.94 (a further 7 marks with "
+    "bows 0.5-1.5 px: RMS 1.89, max 3.06 at u 8.7 arcsec, err +26.5 arcsec); straight control, "
+    "16 seeds: RMS 1.33")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=BENT_U_SHORT)
+def test_bent_marks_u_covers_the_chord_over_seeds(tmp_path):
+    """For a symmetric circular bow the chord and the straight fit point the same way, so the
+    widened u should hold the error: z RMS below 1.5 over 8 marks (P(RMS > 1.5 | N(0,1)) ≈ 0.03
+    — the figures in the reason are the defect's)."""
+    rng = np.random.default_rng
+    paths, truths = [], []
+    for s in range(8):
+        r = rng(6000 + s)
+        a = float(r.uniform(-89, 89))
+        sc = U.Scene(marks=(U.Mark(320, 240, a, 300, bow_px=1.0),), seed=s)
+        paths.append(U.write_image(tmp_path / f"b{s}.png", U.render(sc)))
+        truths.append(a)
+    rc, js, err = marks_json(paths, *DECLARED_DISTORTION_FREE)
+    zs = np.array([mark_z(m, t) for m, t in zip(js["marks"], truths, strict=True)])
+    assert all("bent" in w for w in js["warnings"])
+    assert np.sqrt(np.mean(zs ** 2)) < 1.5, zs
+
+
+@pytest.mark.slow
+def test_clean_tumbles_over_ten_seeds(tmp_path):
+    """90 normalised errors of clean tumbles: RMS within the χ² bounds at 10⁻³ (0.72–1.29)
+    and max < 4."""
+    res = _calibrate_seeds(tmp_path, U.Triad(), range(10, 20))
+    z = np.concatenate([r[2] for r in res])
+    assert all(r[1]["ok"] for r in res)
+    assert np.abs(z).max() < 4.0 and 0.72 < np.sqrt(np.mean(z ** 2)) < 1.29, z
