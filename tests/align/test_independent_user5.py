@@ -450,3 +450,31 @@ def test_clean_tumbles_over_ten_seeds(tmp_path):
     z = np.concatenate([r[2] for r in res])
     assert all(r[1]["ok"] for r in res)
     assert np.abs(z).max() < 4.0 and 0.72 < np.sqrt(np.mean(z ** 2)) < 1.29, z
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "two straight 300 px marks crossing near the centre at 20 and 28 deg (640x480, seed 73): "
+    "3 marks reported, exit 0, ok true: a phantom at 24.3690 deg +- 1229.5 arcsec (13072 "
+    "arcsec = 10.6 u from the nearer true mark; warned only 'unexplained structure ... "
+    "inflated x7.25'), the 20 deg mark twice (20.0306 and 20.0509 deg), the 28 deg mark "
+    "missing. Crossings at 30, 60 and 90 deg are measured right (|z| <= 1.44)"))
+def test_two_marks_crossing_at_a_shallow_angle_are_not_merged_into_a_phantom(tmp_path):
+    truths = (20.0, 28.0)
+    sc = U.Scene(marks=(U.Mark(320, 240, truths[0], 300), U.Mark(325, 235, truths[1], 300)),
+                 seed=73)
+    p = U.write_image(tmp_path / "x.png", U.render(sc))
+    rc, js, err = marks_json([p], *DECLARED_DISTORTION_FREE)
+    zs = [min((mark_z(m, t) for t in truths), key=abs) for m in js["marks"] if m["found"]]
+    assert rc != 0 or not js["ok"] or (len(zs) == 2 and max(map(abs, zs)) < 3.0), zs
+
+
+def test_two_marks_crossing_at_30_to_90_degrees_are_both_measured(tmp_path):
+    sc = U.Scene(width=480, height=400, marks=(U.Mark(240, 200, 10.0, 240),
+                                               U.Mark(245, 195, -50.0, 240)), seed=71)
+    p = U.write_image(tmp_path / "x.png", U.render(sc))
+    rc, js, err = marks_json([p], *DECLARED_DISTORTION_FREE)
+    assert rc == 0 and js["ok"], err
+    got = sorted(m["angle_deg"] for m in js["marks"])
+    assert len(got) == 2
+    assert abs(mark_z(min(js["marks"], key=lambda m: m["angle_deg"]), -50.0)) < 3.0
+    assert abs(mark_z(max(js["marks"], key=lambda m: m["angle_deg"]), 10.0)) < 3.0

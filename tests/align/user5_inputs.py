@@ -414,14 +414,14 @@ def write_plain_session(folder: Path, E_arcsec: dict, seed: int = 0, noise_g: fl
                         tolerance: str | None = None, k=(2.41, 2.38, 2.45),
                         bias=(8e-4, -5e-4, 3e-4), samples: int = 200,
                         platform_noise_g: float | None = None,
-                        platform_bias_shift=(0.0, 0.0, 0.0)) -> dict:
+                        platform_bias_shift=(0.0, 0.0, 0.0), tumble_kw=None) -> dict:
     """A session of a tumble and platform static readings (no images, no goniometer), from
     one physical triad whose axes give ``E_arcsec``; returns the truth."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     S = axes_from_E(E_arcsec)
     tr = Triad(k=k, axes=tuple(map(tuple, S)), bias=bias)
-    rows, _ = tumble(tr, seed=seed, noise_g=noise_g, samples=samples)
+    rows, _ = tumble(tr, seed=seed, noise_g=noise_g, samples=samples, **(tumble_kw or {}))
     write_tumble(folder / "tumble.csv", rows)
     rng = np.random.default_rng(seed + 7919)
     pn = noise_g if platform_noise_g is None else platform_noise_g
