@@ -445,3 +445,16 @@ def write_plain_session(folder: Path, E_arcsec: dict, seed: int = 0, noise_g: fl
         text += f"\n[tolerance]\n{tolerance}\n"
     (folder / "session.toml").write_text(text)
     return {name: E_arcsec.get(name, 0.0) for name in E_NAMES.values()}
+
+
+def write_pose_means(path: Path, rows) -> Path:
+    """The tumble as one row per pose (its mean), no time column: the plainest format."""
+    labels = list(dict.fromkeys(r[0] for r in rows))
+    arr = np.array([r[1:4] for r in rows], float)
+    lab = np.array([r[0] for r in rows])
+    with open(path, "w") as fh:
+        fh.write("pose,ux,uy,uz\n")
+        for name in labels:
+            m = arr[lab == name].mean(axis=0)
+            fh.write(f"{name},{m[0]:.9f},{m[1]:.9f},{m[2]:.9f}\n")
+    return Path(path)
