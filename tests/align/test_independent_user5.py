@@ -73,6 +73,7 @@ def test_centred_mark_declared_distortion_free_is_within_its_u(tmp_path):
     assert abs(m["offset_px"] - off) < 5 * m["offset_u_px"] + 0.02
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k1_cv", [-0.25, 0.15])
 def test_off_centre_mark_under_a_lens_without_a_model_is_lens_limited_not_wrong(tmp_path, k1_cv):
     """Barrel / pincushion, a mark in the top third, no camera model, default lens ranges:
@@ -93,6 +94,7 @@ EXIF_INVERSE = {1: lambda a: a, 2: lambda a: a[:, ::-1], 3: lambda a: np.rot90(a
                 7: lambda a: np.rot90(a, 2).T, 8: lambda a: np.rot90(a, -1)}
 
 
+@pytest.mark.slow
 def test_exif_orientations_all_give_the_displayed_angle(tmp_path):
     """The same displayed scene stored under each EXIF orientation 1-8 (raw pixels turned /
     mirrored so a viewer shows the scene): every file gives the displayed angle within 3 u."""
@@ -114,6 +116,7 @@ def test_exif_orientations_all_give_the_displayed_angle(tmp_path):
     assert sum(bool(m["notes"]) for m in js["marks"]) == 7
 
 
+@pytest.mark.slow
 def test_jpeg_quality_40_flags_or_covers(tmp_path):
     """Heavy JPEG blocking: the mark is measured and |error| < 3 u (the tool may inflate)."""
     rng = np.random.default_rng(40)
@@ -156,6 +159,7 @@ def _calibrate_seeds(tmp_path, triad, seeds, **kw):
     return out
 
 
+@pytest.mark.slow
 def test_clean_tumble_normalised_errors_are_unit_over_seeds(tmp_path):
     """Clean 14-pose tumbles, 1e-5 g per sample, 200 samples a pose: 9 parameters × 3 seeds;
     |z| < 4 each (27 values: P(|N(0,1)| > 4) × 27 ≈ 2e-3) and RMS within 0.5–1.6
@@ -167,6 +171,7 @@ def test_clean_tumble_normalised_errors_are_unit_over_seeds(tmp_path):
     assert 0.5 < np.sqrt(np.mean(z ** 2)) < 1.6, z
 
 
+@pytest.mark.slow
 def test_noise_bursts_do_not_bias_the_calibration(tmp_path):
     """Three 10-sample bursts of 30× the noise in every pose (a door slammed): the pose means
     move by ~1 σ of a pose; the result stays within its u."""
@@ -175,6 +180,7 @@ def test_noise_bursts_do_not_bias_the_calibration(tmp_path):
     assert np.abs(z).max() < 4.0, z
 
 
+@pytest.mark.slow
 def test_bias_drift_found_or_covered(tmp_path):
     """A bias drift of 3e-7 g/s on x and −2e-7 g/s on z (50 µg over the run): compared at the
     mean sample time (where the tool states b), every parameter within 4 u."""
@@ -201,6 +207,7 @@ def test_clean_per_pose_means_give_a_result_not_a_traceback(tmp_path):
     assert rc in (0, 2), err
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=NO_TIME_TRACEBACK)
 def test_tumble_without_time_and_with_hysteresis_gives_a_result_not_a_traceback(tmp_path):
     rows, _ = U.tumble(U.Triad(hyst=(5e-5, 5e-5, 5e-5)), seed=0)
@@ -236,7 +243,8 @@ BARREL_FALSE_BOW = (
 
 
 @pytest.mark.parametrize("k1_cv", [
-    -0.10, pytest.param(-0.2787, marks=pytest.mark.xfail(strict=True, reason=BARREL_FALSE_BOW))])
+    pytest.param(-0.10, marks=pytest.mark.slow),
+    pytest.param(-0.2787, marks=pytest.mark.xfail(strict=True, reason=BARREL_FALSE_BOW))])
 def test_exact_camera_model_of_a_barrel_lens_leaves_a_straight_mark_straight(tmp_path, k1_cv):
     """A straight 300 px mark 240 px right of the centre, rendered through a pure-k1 lens at
     f = 535 px (k1 = −0.2787 is the OpenCV sample camera's), measured with a camera file that
@@ -282,6 +290,7 @@ def session_z(js: dict, truth: dict) -> dict:
     return {n: (E[i][j] - truth[n]) / Eu[i][j] for n, (i, j) in E_INDEX.items()}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("e_yz, verdict", [(55.0, "PASS"), (60.05, "INCONCLUSIVE"),
                                            (60.6, "FAIL")])
 def test_session_verdict_matches_my_truth(tmp_path, e_yz, verdict):
@@ -299,6 +308,7 @@ def test_session_verdict_matches_my_truth(tmp_path, e_yz, verdict):
     assert js["disposition"]["verdict"] == verdict, js["disposition"]["reason"]
 
 
+@pytest.mark.slow
 def test_session_bias_shift_between_tumble_and_platform_is_flagged_and_covered(tmp_path):
     """The triad's bias moves by 30 µg on x between the tumble and the platform readings (turn-on
     repeatability; no effect in the docs names it). Not a confident wrong answer: the fusion
@@ -313,13 +323,15 @@ def test_session_bias_shift_between_tumble_and_platform_is_flagged_and_covered(t
     assert max(map(abs, z.values())) < 3.0, z
 
 
+SLOW = pytest.mark.slow
 BAD_SESSION_EDITS = [
     ('arcsec = 60', 'arcsec = "sixty"', "[tolerance] arcsec"),
-    ('arcsec = 60', 'arcsec = 60\ndecision = "fuzzy"', "[tolerance] decision"),
-    ('arcsec = 60', 'arcsec = -5', "[tolerance] arcsec"),
-    ('arcsec = 60', 'arcsec = 60\nk = 50', "[tolerance] k"),
-    ('arcsec = 60', 'arcsec = 60\nE_xQ = 30', "E_xQ"),
-    ('Xup = { up = "+X" }', 'Xup = { up = "+W" }', "Xup"),
+    pytest.param('arcsec = 60', 'arcsec = 60\ndecision = "fuzzy"', "[tolerance] decision",
+                 marks=SLOW),
+    pytest.param('arcsec = 60', 'arcsec = -5', "[tolerance] arcsec", marks=SLOW),
+    pytest.param('arcsec = 60', 'arcsec = 60\nk = 50', "[tolerance] k", marks=SLOW),
+    pytest.param('arcsec = 60', 'arcsec = 60\nE_xQ = 30', "E_xQ", marks=SLOW),
+    pytest.param('Xup = { up = "+X" }', 'Xup = { up = "+W" }', "Xup", marks=SLOW),
 ]
 
 
@@ -334,6 +346,7 @@ def test_bad_session_key_is_named_by_check(tmp_path, old, new, needle):
     assert needle in out + err, out + err
 
 
+@pytest.mark.slow
 def test_camera_file_that_is_a_calibration_is_refused_naming_the_key(tmp_path):
     folder = tmp_path / "unit"
     U.write_plain_session(folder, E_TRUE, seed=0, samples=10)
@@ -345,6 +358,7 @@ def test_camera_file_that_is_a_calibration_is_refused_naming_the_key(tmp_path):
     assert "[cameras.A] model" in out + err and "camera_matrix" in out + err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("flags, needle", [
     (("--pattern", "9x"), "--pattern"), (("--pattern", "0x6"), "--pattern")])
 def test_camera_bad_pattern_one_line(tmp_path, flags, needle):
@@ -481,6 +495,7 @@ def test_two_marks_crossing_at_a_shallow_angle_are_not_merged_into_a_phantom(tmp
     assert rc != 0 or not js["ok"] or (len(zs) == 2 and max(map(abs, zs)) < 3.0), zs
 
 
+@pytest.mark.slow
 def test_two_marks_crossing_at_30_to_90_degrees_are_both_measured(tmp_path):
     sc = U.Scene(width=480, height=400, marks=(U.Mark(240, 200, 10.0, 240),
                                                U.Mark(245, 195, -50.0, 240)), seed=71)
@@ -528,6 +543,7 @@ def test_session_with_a_wandering_bias_in_the_tumble_keeps_e_within_u(tmp_path):
         assert max(map(abs, z.values())) < 3.0 or not js["ok"], (s, z)
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=NO_TIME_TRACEBACK + "; in `align run` the calibration "
                    "stage fails 'internal error — please report (NotApplicable ...)', no E, "
                    "exit 1")
