@@ -555,3 +555,21 @@ def test_session_with_a_per_pose_means_tumble_gives_e(tmp_path):
     U.write_pose_means(folder / "tumble.csv", rows)
     rc, js, err = run_session(folder)
     assert rc in (0, 2) and js["fused"], err
+
+
+@pytest.mark.slow
+def test_session_with_striped_mark_images_keeps_e_within_u(tmp_path):
+    """A whole session: tumble, platform static and eight mark images (views A/Ar along Y, B/Br
+    along X, cameras declared distortion-free) on the striped background that misleads the
+    mark stage (test_shallow_stripes_...): with the platform's 0.1″ observations beside them
+    the fusion keeps E within 3 u of my truth and the verdict PASS (measured |z| <= 2.6 over 2
+    seeds; the images' own u is 8–17″, so they barely weigh here)."""
+    folder = tmp_path / "unit"
+    U.write_plain_session(folder, E_TRUE, seed=1, tolerance="arcsec = 60", samples=100)
+    U.add_images(folder, E_TRUE, seed=1, scene_kw={"stripes_amp": 0.06, "stripes_deg": 20.0,
+                                                   "stripes_period": 31.0})
+    assert align("check", folder)[0] == 0
+    rc, js, err = run_session(folder)
+    z = session_z(js, E_TRUE)
+    assert rc == 0 and max(map(abs, z.values())) < 3.0, z
+    assert js["disposition"]["verdict"] == "PASS"

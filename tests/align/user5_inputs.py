@@ -458,3 +458,46 @@ def write_pose_means(path: Path, rows) -> Path:
             m = arr[lab == name].mean(axis=0)
             fh.write(f"{name},{m[0]:.9f},{m[1]:.9f},{m[2]:.9f}\n")
     return Path(path)
+
+
+VIEWS = {"A": ("+X", "+Z"), "Ar": ("-X", "+Z"), "B": ("+Y", "+Z"), "Br": ("-Y", "+Z")}
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _vec(name: str) -> np.ndarray:
+    v = np.zeros(3)
+    v[_AXIS[name[1]]] = 1.0 if name[0] == "+" else -1.0
+    return v
+
+
+def add_images(folder: Path, E_arcsec: dict, seed: int = 0, scene_kw=None,
+               width: int = 480, height: int = 360) -> None:
+    """Eight mark images (x, z in views A/Ar along Y; y, z in B/Br along X), one mark each, the
+    mark's direction in the image that of the housing's axis (right, up) — my own projection;
+    cameras declared distortion-free."""
+    folder = Path(folder)
+    S = axes_from_E(E_arcsec)
+    rng = np.random.default_rng(seed + 104729)
+    entries = []
+    plan = [("x", "A"), ("z", "A"), ("x", "Ar"), ("z", "Ar"),
+            ("y", "B"), ("z", "B"), ("y", "Br"), ("z", "Br")]
+    for k, (housing, view) in enumerate(plan):
+        r, u = (_vec(v) for v in VIEWS[view])
+        s = S["xyz".index(housing)]
+        ang = float(np.degrees(np.arctan2(s @ u, s @ r)))
+        nominal = "vertical" if housing == "z" else "horizontal"
+        sc = Scene(width=width, height=height,
+                   marks=(Mark(width / 2 + rng.uniform(-15, 15), height / 2 + rng.uniform(-15, 15),
+                               ang, 0.6 * min(width, height)),),
+                   seed=seed * 100 + k, **(scene_kw or {}))
+        name = f"{housing}_{view}.png"
+        write_image(folder / name, render(sc))
+        entries.append(f'[[images]]\nfile = "{name}"\nhousing = "{housing}"\nview = "{view}"\n'
+                       f'nominal = "{nominal}"\n')
+    zero = "".join(f"lens_{k} = 0.0\n" for k in ("k1", "k2", "p", "aspect", "pp_px"))
+    text = (folder / "session.toml").read_text()
+    text += f"\n[cameras.A]\n{zero}[cameras.B]\n{zero}"
+    for v, (r, u) in VIEWS.items():
+        text += f'[views.{v}]\ncamera = "{v[0]}"\nright = "{r}"\nup = "{u}"\n'
+    text += "\n" + "\n".join(entries)
+    (folder / "session.toml").write_text(text)
