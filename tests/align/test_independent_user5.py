@@ -597,3 +597,25 @@ def test_align_camera_u_covers_my_lens_over_seeds(tmp_path):
                **dict(zip(("k1", "k2", "p1", "p2", "k3"), d, strict=True))}
         z = {k: (est[k] - truth[k]) / c["u"][k] for k in truth}
         assert max(map(abs, z.values())) < 3.5, (seed, z)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "stripes across the mark (6 %, within 10 deg of perpendicular, period 8-40 px; a ground "
+    "surface's lay), 250 px marks, 480x360, 8 seeds: z RMS 1.72, max 3.27 (seed 7: +34.4 "
+    "arcsec at u 10.5 arcsec), no effect, no warning, exit 0 — u short by ~1.7x; a random "
+    "texture of 8 % is fine (RMS 0.85)"))
+def test_stripes_across_the_mark_u_covers_over_seeds(tmp_path):
+    rng = np.random.default_rng
+    paths, truths = [], []
+    for s in range(8):
+        r = rng(13000 + s)
+        a = float(r.uniform(-89, 89))
+        sc = U.Scene(width=480, height=360, marks=(U.Mark(240, 180, a, 250),),
+                     stripes_amp=0.06, stripes_deg=a + 90 + r.uniform(-10, 10),
+                     stripes_period=r.uniform(8, 40), seed=500 + s)
+        paths.append(U.write_image(tmp_path / f"s{s}.png", U.render(sc)))
+        truths.append(a)
+    rc, js, err = marks_json(paths, *DECLARED_DISTORTION_FREE)
+    zs = np.array([mark_z(m, t) for m, t in zip(js["marks"], truths, strict=True)])
+    assert not js["ok"] or (np.abs(zs).max() < 3.0 and np.sqrt(np.mean(zs ** 2)) < 1.5), zs
