@@ -190,15 +190,12 @@ def test_bias_drift_found_or_covered(tmp_path):
     assert np.abs(z).max() < 4.0, z
 
 
-NO_TIME_TRACEBACK = (
-    "a tumble without a time column -> `align calibrate` exits 1 with a traceback "
-    "(NotApplicable 'the pose order is not known (no time column)' raised from model.refine "
-    "via pipeline.alternatives) instead of a result: a CLEAN 14-pose file of per-pose means "
-    "(seed 6; 1 of 8 clean seeds), and per-sample files of a triad with 50 ug bias hysteresis "
-    "(6 of 6 seeds)")
+# Found: a tumble without a time column made `align calibrate` exit 1 with a traceback
+# (NotApplicable 'the pose order is not known' from model.refine via pipeline.alternatives):
+# a clean 14-pose file of per-pose means (seed 6; 1 of 8 clean seeds) and per-sample files
+# with 50 ug bias hysteresis (6 of 6 seeds). Fixed: the alternatives skip what does not apply.
 
 
-@pytest.mark.xfail(strict=True, reason=NO_TIME_TRACEBACK)
 def test_clean_per_pose_means_give_a_result_not_a_traceback(tmp_path):
     rows, _ = U.tumble(U.Triad(), seed=6, samples=50)
     p = U.write_pose_means(tmp_path / "means.csv", rows)
@@ -208,7 +205,6 @@ def test_clean_per_pose_means_give_a_result_not_a_traceback(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=NO_TIME_TRACEBACK)
 def test_tumble_without_time_and_with_hysteresis_gives_a_result_not_a_traceback(tmp_path):
     rows, _ = U.tumble(U.Triad(hyst=(5e-5, 5e-5, 5e-5)), seed=0)
     p = U.write_tumble(tmp_path / "tumble.csv", rows, with_t=False)
@@ -544,9 +540,6 @@ def test_session_with_a_wandering_bias_in_the_tumble_keeps_e_within_u(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=NO_TIME_TRACEBACK + "; in `align run` the calibration "
-                   "stage fails 'internal error — please report (NotApplicable ...)', no E, "
-                   "exit 1")
 def test_session_with_a_per_pose_means_tumble_gives_e(tmp_path):
     folder = tmp_path / "unit"
     U.write_plain_session(folder, E_TRUE, seed=0, samples=100)
