@@ -63,7 +63,6 @@ from imaging import (
     fit_line,
     line_frame,
     measure_frame,
-    measure_marks,
     read_image_notes,
     undistort,
 )
@@ -680,6 +679,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             continue
         out.append(finish_mark(m, lens, k, name, i, alpha))
         k += 1
+    if measured.notes:  # the frame's background (stripes): on each of its marks
+        out = [replace(r, notes=measured.notes + r.notes) for r in out]
     return with_families(out, measured.families, measured.unreported,
                          "camera model" if camera is not None else
                          "frame lens" if lens.lam is not None else "none", alpha)
@@ -736,9 +737,10 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             on_image(j)
         try:
             got = read_image_notes(path)
-            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes)
-            found_all.append(list(measure_marks(got.pixels, camera, where=str(path),
-                                                expect_one=expect_one, roi=roi)))
+            fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
+                               roi=roi)
+            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
+            found_all.append(list(fr.items))
         except ImageInputError as exc:
             found_all.append([exc])
     ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]

@@ -27,7 +27,15 @@ from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.io import full_scale
 from imaging.linefit import LineFit, fit_line
-from imaging.profile import Centres, ProfileFit, fit_profile, groove_extent, sample_centres
+from imaging.profile import (
+    Centres,
+    ProfileFit,
+    band_indices,
+    fit_profile,
+    groove_extent,
+    sample_centres,
+)
+from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 
 
@@ -170,11 +178,14 @@ class MeasuredFrame:
     it, per reported line), ``families`` (index tuples into ``items``, see
     :mod:`imaging.families`), ``unreported`` (lines found but not reported: beyond
     ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
-    and not counted)."""
+    and not counted); ``notes``: what the frame's background did (stripes found, removed or
+    carried: :mod:`imaging.stripes`), one line each; ``stripes``: those findings."""
 
     items: list[MarkMeasurement | ImageInputError]
     families: tuple[tuple[int, ...], ...] = ()
     unreported: int = 0
+    notes: tuple[str, ...] = ()
+    stripes: tuple[Stripes, ...] = ()
 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
@@ -223,6 +234,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
     member = {i for g in det.families for i in g}
+    # Row/column fixed-pattern noise: tested on the background away from every line found,
+    # and removed when each line's columns (rows) have background to estimate it from.
+    image, stripes = find_stripes(image, [band_indices(image, c) for c in
+                                          (*cands, *det.unreported)], top)
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
@@ -239,4 +254,6 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
-    return MeasuredFrame(out, fams, len(det.unreported))
+    contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
+    notes = stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
+    return MeasuredFrame(out, fams, len(det.unreported), notes, stripes)

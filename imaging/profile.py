@@ -180,6 +180,14 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     return image[ys, xs], e[sel], t[sel], ys * w + xs
 
 
+def band_indices(image: np.ndarray, cand: MarkCandidate, reach_px: float = 20.0) -> np.ndarray:
+    """Flat indices of the pixels a candidate's measurement can use: its band (as wide as
+    :func:`fit_profile`'s, plus its illumination ring) and ``reach_px`` beyond its ends."""
+    half = float(np.clip(2.5 * cand.thickness_px + 8, 10, 40)) + 6.0
+    return _band(image, cand.angle_rad, cand.offset_px, cand.t_start_px - reach_px,
+                 cand.t_end_px + reach_px, half)[3]
+
+
 def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
                 full_scale: float = 65535.0) -> ProfileFit:
     """Fit the groove model over the whole band of a detected mark (robust to dust)."""
