@@ -23,7 +23,7 @@ pattern. Rows: the same on the transposed image, after the columns.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -36,7 +36,7 @@ WINDOW_PX = 65
 ~90 % of a white pattern's variance, narrow enough to follow vignetting."""
 MIN_ROWS = 16
 """Fewest background pixels along a column (row) for its offset to be estimated."""
-TEST_ROWS = 256
+TEST_ROWS = 128
 """Rows (columns) per half used by the test (a sample keeps 5 MP cheap)."""
 
 
@@ -76,46 +76,90 @@ def _highpass(p: np.ndarray) -> np.ndarray:
     return out
 
 
-def _column_median(a: np.ndarray) -> np.ndarray:
-    """Median of each column over its finite entries (NaN with fewer than MIN_ROWS)."""
-    n = np.isfinite(a).sum(axis=0)
-    out = np.full(a.shape[1], np.nan)
-    good = n >= MIN_ROWS
-    if good.any():
-        out[good] = np.nanmedian(a[:, good], axis=0)
-    return out
+def _column_median(a: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Interquartile mean of each column (``axis`` 0) or row (1) over its finite entries
+    (NaN with fewer than MIN_ROWS): robust to dust and a label like the median, but not
+    quantised like it (the median of 8-bit data moves in steps of 1/2 DN, and a pattern of
+    1 DN was lost in them)."""
+    s = np.sort(a, axis=axis)  # NaN last
+    n = np.isfinite(a).sum(axis=axis)
+    lo, hi = n // 4, n - n // 4
+    k = np.arange(a.shape[axis])
+    k = k[:, None] if axis == 0 else k[None, :]
+    lo_, hi_ = (lo[None, :], hi[None, :]) if axis == 0 else (lo[:, None], hi[:, None])
+    total = np.where((k >= lo_) & (k < hi_), s, 0.0).sum(axis=axis)
+    return np.where(n >= MIN_ROWS, total / np.maximum(hi - lo, 1), np.nan)
 
 
-def column_stripes(bg: np.ndarray, bands: np.ndarray, alpha: float = ALPHA) -> Stripes:
-    """Test the background ``bg`` (float, NaN where marks or clipped pixels are) for column
-    stripes; ``bands``: which columns a mark's band touches (their offsets are needed)."""
-    h, w = bg.shape
-    rowlev = np.nanmedian(bg, axis=1)
-    ok = np.isfinite(rowlev)
-    r = bg[ok] - rowlev[ok, None]
-    half = r.shape[0] // 2
+def _effective_n(a: np.ndarray, b: np.ndarray, lags: int = 32) -> float:
+    """Independent pairs behind the correlation of two autocorrelated series (Bartlett's
+    variance of r under independence: (1/n) sum_k rho_a(k) rho_b(k), Pyper & Peterman 1998).
+
+    Texture whose lay crosses the columns at a shallow angle makes neighbouring columns'
+    medians alike (each half's profile is smooth): with n columns counted as independent the
+    test flagged 4 % of textured backgrounds at p < 0.01."""
+    n = a.size
+
+    def acf(x: np.ndarray) -> np.ndarray:
+        return np.array([x[k:] @ x[:n - k] for k in range(lags + 1)]) / (x @ x)
+
+    s = float(np.sum(acf(a)[1:] * acf(b)[1:]))
+    return float(n / max(1.0 + 2.0 * s, 1.0))
+
+
+def _background(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
+                minus: np.ndarray | None) -> np.ndarray:
+    """Rows ``rows`` of the image as float, NaN on the marks' bands and clipped pixels, each
+    row's level (its interquartile mean) taken out; ``minus``: offsets per row removed
+    first (the other axis's stripes)."""
+    v = image[rows].astype(np.float32)
+    v[mask[rows] | (v <= 0) | (v >= full_scale)] = np.nan
+    if minus is not None:
+        v -= minus[rows, None]
+    lev = _column_median(v, axis=1)
+    return v[np.isfinite(lev)] - lev[np.isfinite(lev), None]
+
+
+def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
+                   alpha: float = ALPHA, minus: np.ndarray | None = None,
+                   axis: str = "column") -> Stripes:
+    """Test an image's background for column stripes (rows: pass the transposed image).
+
+    ``mask``: True on the marks' bands (left out; every column one touches needs an offset
+    for a removal); ``minus``: offsets per row already found (the other axis's stripes).
+    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced; the offsets, when
+    found, every row.
+    """
+    h, w = image.shape
+    half = h // 2
     if half < MIN_ROWS or w < 2 * WINDOW_PX:
-        return Stripes("column", 1.0, False, reason="too few rows or columns to test")
+        return Stripes(axis, 1.0, False, reason="too few rows or columns to test")
     step = max(1, half // TEST_ROWS)
-    top = _highpass(_column_median(r[:half:step]))
-    bot = _highpass(_column_median(r[half::step]))
+    top = _highpass(_column_median(_background(image, mask, np.arange(0, half, step),
+                                               full_scale, minus)))
+    bot = _highpass(_column_median(_background(image, mask, np.arange(half, h, step),
+                                               full_scale, minus)))
     both = np.isfinite(top) & np.isfinite(bot)
     n = int(both.sum())
     if n < 2 * WINDOW_PX:
-        return Stripes("column", 1.0, False, reason="too few columns with background")
+        return Stripes(axis, 1.0, False, reason="too few columns with background")
     a, b = top[both] - top[both].mean(), bot[both] - bot[both].mean()
+    if not (a @ a > 0 and b @ b > 0):
+        return Stripes(axis, 1.0, False, reason="a flat background profile")
     rho = float(a @ b / np.sqrt((a @ a) * (b @ b)))
-    p = float(stats.norm.sf(np.arctanh(np.clip(rho, -0.999999, 0.999999)) * np.sqrt(n - 3)))
+    p = float(stats.norm.sf(np.arctanh(np.clip(rho, -0.999999, 0.999999))
+                            * np.sqrt(max(_effective_n(a, b) - 3, 1.0))))
     rms = float(np.sqrt(max(a @ b / n, 0.0)))
     if p >= alpha:
-        return Stripes("column", p, False, rms)
-    off = _highpass(_column_median(r))
-    need = bands & ~np.isfinite(off)
+        return Stripes(axis, p, False, rms)
+    off = _highpass(_column_median(_background(image, mask, np.arange(h), full_scale,
+                                               minus)))
+    need = mask.any(axis=0) & ~np.isfinite(off)
     if need.any():
         cols = np.flatnonzero(need)
-        return Stripes("column", p, True, rms, reason=(
-            f"columns {cols[0]}-{cols[-1]} hold a mark along all their background"))
-    return Stripes("column", p, True, rms, np.where(np.isfinite(off), off, 0.0))
+        return Stripes(axis, p, True, rms, reason=(
+            f"{axis}s {cols[0]}-{cols[-1]} hold a mark along all their background"))
+    return Stripes(axis, p, True, rms, np.where(np.isfinite(off), off, 0.0))
 
 
 def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
@@ -127,28 +171,19 @@ def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: flo
     columns/rows must have an offset for a removal). Clipped pixels (0 or ``full_scale``)
     are left out too.
     """
-    h, w = image.shape
-    bg = image.astype(np.float32)  # half the memory of float64; medians need no more
-    bg[(image <= 0) | (image >= full_scale)] = np.nan
-    flat = bg.reshape(-1)
-    ys, xs = np.zeros(h, bool), np.zeros(w, bool)
+    mask = np.zeros(image.shape, bool)
     for idx in masks:
-        flat[idx] = np.nan
-        ys[idx // w] = True
-        xs[idx % w] = True
-    cols = column_stripes(bg, xs, alpha)
-    rows_first = column_stripes(bg.T, ys, alpha) if not cols.removed else None
-    if not cols.found and rows_first is not None and not rows_first.found:
-        return image, (cols, replace(rows_first, axis="row"))  # the usual case: untouched
+        mask.flat[idx] = True
+    cols = column_stripes(image, mask, full_scale, alpha)
+    rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row")
+    if not (cols.removed or rows.removed):
+        return image, (cols, rows)  # the usual case: untouched
     out = image.astype(float)
-    clipped = (image <= 0) | (image >= full_scale)  # they say "beyond the range": kept
     if cols.removed:
         out -= cols.offsets_dn[None, :]
-        bg -= cols.offsets_dn[None, :]
-    rows = replace(rows_first if rows_first is not None else column_stripes(bg.T, ys, alpha),
-                   axis="row")
     if rows.removed:
         out -= rows.offsets_dn[:, None]
+    clipped = (image <= 0) | (image >= full_scale)  # they say "beyond the range": kept
     out[clipped] = image[clipped]
     return out, (cols, rows)
 
@@ -165,5 +200,6 @@ def stripes_notes(where: str, found: Sequence[Stripes], contrast_dn: float) -> t
                 if s.removed else f"not removed ({s.reason}): carried in u as background "
                 "texture")
         out.append(f"{where}: {s.axis} stripes in the background ({s.axis} fixed-pattern "
-                   f"noise, {size}, p = {s.p_value:.2g}): {done}")
+                   f"noise, or a surface lay along the {s.axis}s; {size}, p = "
+                   f"{s.p_value:.2g}): {done}")
     return tuple(out)
