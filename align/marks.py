@@ -60,6 +60,7 @@ from imaging import (
     MarkMeasurement,
     Roi,
     cross_magnification,
+    defocus_note,
     fit_line,
     line_frame,
     measure_frame,
@@ -469,7 +470,10 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     terms: dict[str, float] = {}
     notes: list[str] = []
     f = rep.after
-    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+    defocus = defocus_note(f"{image} mark {index}", m.blur)
+    if defocus:
+        notes.append(defocus)
+    elif f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
         notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")

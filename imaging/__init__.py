@@ -11,6 +11,7 @@ Public API::
 """
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
+from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
@@ -33,8 +34,10 @@ from imaging.plumbline import (
     undistort,
 )
 from imaging.profile import Centres, ProfileFit
+from imaging.stripes import Stripes
 
 __all__ = [
+    "BlurTrend", "Stripes", "defocus_note",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",

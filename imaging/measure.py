@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
+from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
     MarkCandidate,
@@ -49,7 +50,8 @@ class MarkMeasurement:
     local illumination slope / contrast [1/px]); ``chol``: lower Cholesky factor of the
     centres' correlation matrix when surface texture correlates their errors along the mark
     (None: independent), for generalised least squares; ``sigma`` then includes the
-    texture's share of the variance.
+    texture's share of the variance; ``blur``: the blur's trend along the mark (a defocus
+    gradient, :mod:`imaging.defocus`; None: too few segments to tell).
     """
 
     candidate: MarkCandidate
@@ -63,6 +65,7 @@ class MarkMeasurement:
     n_rejected: int = 0
     chol: np.ndarray | None = None
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
+    blur: BlurTrend | None = None
 
     @property
     def length_px(self) -> float:
@@ -116,7 +119,11 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
-    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px)
+    u, n = line_frame(pf.angle_rad)
+    # The first centres as the start along the new line (a bowed groove's ends are far
+    # from any straight line through it).
+    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+                         guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px))
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -128,8 +135,11 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
             "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
+    blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
+            if cen.blur_dev is not None else None)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf))
+                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
+                           blur)
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
