@@ -62,6 +62,7 @@ from imaging import (
     cross_magnification,
     defocus_note,
     fit_line,
+    jpeg_note,
     line_frame,
     measure_frame,
     read_image_notes,
@@ -470,6 +471,11 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     terms: dict[str, float] = {}
     notes: list[str] = []
     f = rep.after
+    if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
+        terms["jpeg_blocks"] = m.jpeg_u_rad
+        au = float(np.hypot(au, m.jpeg_u_rad))
+        notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
+                               float(np.rad2deg(m.jpeg_u_rad) * 3600)))
     defocus = defocus_note(f"{image} mark {index}", m.blur)
     if defocus:
         notes.append(defocus)

@@ -27,6 +27,7 @@ from imaging.detect import (
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.io import full_scale
+from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.profile import (
     Centres,
@@ -51,7 +52,9 @@ class MarkMeasurement:
     centres' correlation matrix when surface texture correlates their errors along the mark
     (None: independent), for generalised least squares; ``sigma`` then includes the
     texture's share of the variance; ``blur``: the blur's trend along the mark (a defocus
-    gradient, :mod:`imaging.defocus`; None: too few segments to tell).
+    gradient, :mod:`imaging.defocus`; None: too few segments to tell); ``jpeg``: the JPEG
+    encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
+    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term).
     """
 
     candidate: MarkCandidate
@@ -66,6 +69,8 @@ class MarkMeasurement:
     chol: np.ndarray | None = None
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
     blur: BlurTrend | None = None
+    jpeg: JpegBlocks | None = None
+    jpeg_u_rad: float = 0.0
 
     @property
     def length_px(self) -> float:
@@ -106,12 +111,14 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
-                      neighbours_px: Sequence[float] = ()) -> MarkMeasurement:
+                      neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None
+                      ) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
     ``neighbours_px``: signed distances of other lines beside it [px] (see
-    :func:`neighbours`), kept out of the texture's replicas."""
+    :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
+    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
@@ -139,7 +146,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             if cen.blur_dev is not None else None)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
-                           blur)
+                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
+                           if jpeg is not None else 0.0)
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
@@ -248,11 +256,12 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # and removed when each line's columns (rows) have background to estimate it from.
     image, stripes = find_stripes(image, [band_indices(image, c) for c in
                                           (*cands, *det.unreported)], top)
+    jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i))
+            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg)
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)

@@ -198,6 +198,20 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     return image[ys, xs], e[sel], t[sel], ys * w + xs
 
 
+def centres_half(pf: ProfileFit) -> float:
+    """Half-width of the band :func:`sample_centres` fits a groove's centres on [px]."""
+    return float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+
+
+def band_pixels(image: np.ndarray, pf: ProfileFit, half: float, reach_px: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance e from the fitted line [px] and flat index of the pixels within
+    ``half`` of it, ``reach_px`` beyond the measured stretch, in ``image``."""
+    _, e, _, idx = _band(image, pf.angle_rad, pf.offset_px,
+                         pf.t_start_px - reach_px, pf.t_end_px + reach_px, half)
+    return e, idx
+
+
 def band_indices(image: np.ndarray, cand: MarkCandidate, reach_px: float = 20.0) -> np.ndarray:
     """Flat indices of the pixels a candidate's measurement can use: its band (as wide as
     :func:`fit_profile`'s, plus its illumination ring) and ``reach_px`` beyond its ends."""
@@ -414,7 +428,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
     a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
     """
-    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    half = centres_half(pf)
     vals, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
                             half)
     unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
