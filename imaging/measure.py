@@ -49,10 +49,11 @@ class MarkMeasurement:
     ``regressors``: per-point arrays for the residual loop (``t`` along the line [px],
     ``x``/``y`` [px], ``r2`` squared distance from the image centre [px^2], ``cross_slope``
     local illumination slope / contrast [1/px]); ``chol``: lower Cholesky factor of the
-    centres' correlation matrix when surface texture correlates their errors along the mark
-    (None: independent), for generalised least squares; ``sigma`` then includes the
-    texture's share of the variance; ``blur``: the blur's trend along the mark (a defocus
-    gradient, :mod:`imaging.defocus`; None: too few segments to tell); ``jpeg``: the JPEG
+    centres' correlation matrix when surface texture (or removed stripes' offsets,
+    :mod:`imaging.stripes`) correlates their errors along the mark (None: independent), for
+    generalised least squares; ``sigma`` then includes their share of the variance;
+    ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
+    None: too few segments to tell); ``jpeg``: the JPEG
     encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
     mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term).
     """
@@ -111,14 +112,17 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
-                      neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None
+                      neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None,
+                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
                       ) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
     ``neighbours_px``: signed distances of other lines beside it [px] (see
     :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
-    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured."""
+    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
+    ``offsets_var``: variances of the column and row offsets removed from the image
+    (:mod:`imaging.stripes`), carried into the centres' covariance."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
@@ -130,7 +134,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # The first centres as the start along the new line (a bowed groove's ends are far
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
-                         guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px))
+                         guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
+                         offsets_var=offsets_var)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -139,6 +144,9 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     if cen.texture is not None and cen.texture.acf is not None:
         scale, chol = correlation_cholesky(cen.texture.acf, np.flatnonzero(use))
         sig = sig * scale
+    if cen.offsets_cov is not None:
+        sig, chol = _with_offsets(sig, chol, cen.offsets_cov[np.ix_(use, use)],
+                                  sig / cen.sigma[use] if camera is not None else None)
     regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
             "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
@@ -148,6 +156,23 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                            int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0)
+
+
+def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
+                  gain: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The centres' sigma and correlation factor with removed stripes' offsets' covariance
+    ``C`` [px^2] added (``gain``: the undistortion's magnification per centre, if any)."""
+    if gain is not None:
+        C = C * np.outer(gain, gain)
+    R = chol @ chol.T if chol is not None else np.eye(len(sig))
+    total = sig[:, None] * R * sig[None, :] + C
+    s = np.sqrt(np.diag(total))
+    R = total / np.outer(s, s)
+    try:
+        L = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError:
+        L = np.linalg.cholesky(R + 1e-6 * np.eye(len(R)))
+    return s, L
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
@@ -261,7 +286,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg)
+            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg,
+                                  (stripes[0].offsets_var, stripes[1].offsets_var))
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)

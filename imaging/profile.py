@@ -145,7 +145,9 @@ class Centres:
     not; see :mod:`imaging.texture`); ``blur_dev``, ``blur_dev_u``: each segment's blur
     minus the band's [px] and its standard uncertainty, linearised at the solution (one
     Gauss–Newton step on the blur with the segment's other parameters free; None unless
-    asked for: :mod:`imaging.defocus` reads a defocus gradient from them).
+    asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
+    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
+    (None: none removed).
     """
 
     xy: np.ndarray
@@ -158,6 +160,7 @@ class Centres:
     texture: TextureModel | None = None
     blur_dev: np.ndarray | None = None
     blur_dev_u: np.ndarray | None = None
+    offsets_cov: np.ndarray | None = None
 
 
 def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
@@ -416,7 +419,9 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image",
                    texture: bool = False, avoid_px: Sequence[float] = (),
-                   guess: tuple[np.ndarray, np.ndarray] | None = None) -> Centres:
+                   guess: tuple[np.ndarray, np.ndarray] | None = None,
+                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+                   ) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
@@ -424,6 +429,9 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     pass's centres), the start of each segment's offset; Gauss–Newton runs ``iterations``
     steps of at most 1 px each, and on (up to :data:`EXTRA_STEPS` more) while a segment still
     moves, so a strongly bowed groove's ends are not left where the steps stopped.
+    ``offsets_var``: variances [DN^2] of per-column and per-row offsets already subtracted
+    from the image (removed stripes, :mod:`imaging.stripes`); their errors are shared by
+    every segment on the same column (row), and ``Centres.offsets_cov`` carries them.
     ``texture``: also measure how the background's texture correlates the centres' errors
     (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
     a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
@@ -506,6 +514,9 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             slp += step[:, 3]
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
+    ocov = None
+    if any(v is not None for v in offsets_var):
+        ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
     blur_dev = blur_dev_u = None
     if texture:
         blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
@@ -537,7 +548,29 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
-                   blur_dev_u=blur_dev_u)
+                   blur_dev_u=blur_dev_u, offsets_cov=ocov)
+
+
+def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,
+                 J: Sequence[np.ndarray], cov: np.ndarray, ok: np.ndarray,
+                 offsets_var: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
+    """Covariance [px^2] (nseg x nseg) the removed offsets' errors put on the centres.
+
+    A centre is a linear functional of its pixels, delta_k = sum_px f_px v_px with f the
+    first row of N^-1 J^T W; an error e_x on column x moves it by e_x sum_{px in k, col x}
+    f_px = A[k, x] e_x, so the covariance is A diag(var) A^T (columns, then rows alike)."""
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    f = wgt * sum(c0[seg, i] * J[i] for i in range(len(J)))
+    out = np.zeros((nseg, nseg))
+    for var, where in zip(offsets_var, (idx % width, idx // width), strict=True):
+        if var is None:
+            continue
+        lo = int(where.min())
+        span = int(where.max()) - lo + 1
+        A = np.bincount(seg * span + (where - lo), f, minlength=nseg * span).reshape(nseg,
+                                                                                      span)
+        out += (A * var[lo:lo + span][None, :]) @ A.T
+    return out
 
 
 def _blur_step(js: np.ndarray, J: Sequence[np.ndarray], wgt: np.ndarray, r: np.ndarray,

@@ -51,7 +51,11 @@ class Stripes:
     test that there are none; ``found``: p below :data:`ALPHA`; ``rms_dn``: the pattern's
     standard deviation [DN] (from the covariance of the two halves' profiles);
     ``offsets_dn``: the offsets subtracted (None: none were: not found, or a mark covers a
-    column without background, ``reason``).
+    column without background, ``reason``); ``offsets_var``: each removed offset's variance
+    [DN^2] (the interquartile mean of n background pixels of noise sigma: 1.19 sigma^2 / n),
+    which the centres' covariance carries (:func:`imaging.profile.sample_centres`): a mark
+    leaves its own columns few background rows, and their offsets' errors are shared by
+    every segment on them.
     """
 
     axis: str
@@ -60,6 +64,7 @@ class Stripes:
     rms_dn: float = 0.0
     offsets_dn: np.ndarray | None = None
     reason: str = ""
+    offsets_var: np.ndarray | None = None
 
     @property
     def removed(self) -> bool:
@@ -161,14 +166,22 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     rms = float(np.sqrt(max(a @ b / n, 0.0)))
     if p >= alpha:
         return Stripes(axis, p, False, rms)
-    off = _highpass(_column_median(_background(image, mask, np.arange(h), full_scale,
-                                               minus)))
+    bg = _background(image, mask, np.arange(h), full_scale, minus)
+    off = _highpass(_column_median(bg))
     need = mask.any(axis=0) & ~np.isfinite(off)
     if need.any():
         cols = np.flatnonzero(need)
         return Stripes(axis, p, True, rms, reason=(
             f"{axis}s {cols[0]}-{cols[-1]} hold a mark along all their background"))
-    return Stripes(axis, p, True, rms, np.where(np.isfinite(off), off, 0.0))
+    # Pixel noise about each column's offset (robust, pooled over the columns: shot noise
+    # varies with the level, which is about the same across a background).
+    dev = bg - off[None, :]
+    mad = np.nanmedian(np.abs(dev - np.nanmedian(dev, axis=0)[None, :]), axis=0)
+    sigma2 = float(np.nanmedian((1.4826 * mad) ** 2))
+    n = np.isfinite(bg).sum(axis=0)
+    var = np.where(n > 0, 1.19 * sigma2 / np.maximum(n, 1), 0.0)
+    return Stripes(axis, p, True, rms, np.where(np.isfinite(off), off, 0.0),
+                   offsets_var=np.where(np.isfinite(off), var, 0.0))
 
 
 def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
