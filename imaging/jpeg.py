@@ -31,9 +31,18 @@ from imaging.profile import ProfileFit, ProfileTable, band_pixels, centres_half,
 
 R_MIN = 0.5
 """Concentration on the steps' multiples that says "quantised" (noise alone gives ~0.01)."""
-MIN_BLOCKS = 30
+MIN_BLOCKS = 12
 """Fewest blocks with a coefficient beyond its zero bin for it to count (at least 3 must)."""
-_COEFFS = ((0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (2, 0), (1, 2), (2, 1), (0, 3), (3, 0))
+FLAT_MIN = 20
+"""Flat blocks on the grid that say "JPEG" when the coefficients cannot (a background the
+encoder flattened: quality unknown, every quality's effect is then carried)."""
+Z_MIN = 5.0
+"""The coefficients' pooled concentration in noise units (sum n R / sqrt(sum n / 2)) needed:
+with 12 blocks one coefficient's R has a standard deviation of 0.2 without JPEG."""
+# AC only: a block the encoder left flat decodes to one integer level, so its DC moves by
+# up to 4 steps of the orthonormal DCT together (DC at quality 70 followed its step at 0.44).
+_COEFFS = ((0, 1), (1, 0), (1, 1), (0, 2), (2, 0), (1, 2), (2, 1), (0, 3), (3, 0), (2, 2),
+           (0, 4), (4, 0))
 # The IJG (libjpeg) standard luminance table (ITU-T T.81 Annex K.1), row-major.
 _LUMA = np.array([
     16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55,
@@ -60,10 +69,11 @@ def _dct_matrix() -> np.ndarray:
 @dataclass(frozen=True)
 class JpegBlocks:
     """A decoded JPEG's encoder as the pixels show it: ``quality`` of the IJG table whose
-    steps the coefficients follow, ``concentration`` (the smallest R over the tested
-    coefficients at that quality), ``blocks`` used."""
+    steps the coefficients follow (None: only flattened blocks show it, quality unknown),
+    ``concentration`` (the smallest R over the tested coefficients at that quality),
+    ``blocks`` used."""
 
-    quality: int
+    quality: int | None
     concentration: float
     blocks: int
 
@@ -88,16 +98,39 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
             x = c[:, u, v]
             # Beyond the zero bin, and small multiples only: the encoder's fast DCT is exact
             # to a fraction of a % of the coefficient, which at 10 steps blurs the phase.
-            big = (np.abs(x) >= 0.5 * T[u, v]) & ((np.abs(x) <= 4.5 * T[u, v]) | (u + v == 0))
+            big = (np.abs(x) >= 0.5 * T[u, v]) & (np.abs(x) <= 4.5 * T[u, v])
             if big.sum() < MIN_BLOCKS or T[u, v] < 2:
                 continue  # too few coefficients beyond the zero bin to tell
             # The mean cosine, not the resultant length: noise coefficients just past the
             # +-T/2 cut sit at phase pi (a resultant length near 1 on a raw image).
-            rs.append(float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v]))))
-        if len(rs) >= 3 and min(rs) > R_MIN:
-            best = JpegBlocks(quality, min(rs), len(c))
+            rs.append((float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v]))),
+                       min(int(big.sum()), 1000)))
+        if len(rs) < 3:
+            continue
+        r, n = np.array(rs).T
+        if r.min() > R_MIN and (n @ r) / np.sqrt(n.sum() / 2) > Z_MIN:
+            best = JpegBlocks(quality, float(r.min()), len(c))
             break  # the lowest quality (largest steps) the coefficients follow
+    if best is None and _flat_on_the_grid(image[:h, :w]):
+        best = JpegBlocks(None, float("nan"), len(c))
     return best
+
+
+def _flat_on_the_grid(img: np.ndarray) -> bool:
+    """Whether the encoder flattened blocks (every AC step beyond the background's noise):
+    8x8 blocks of one value, not clipped, far more often on the block grid than on the
+    grid shifted by (4, 4) (a raw image's noise makes both rare and alike), or on most of
+    the frame."""
+    def flat(a: np.ndarray) -> int:
+        hh, ww = (s // 8 * 8 for s in a.shape)
+        b = a[:hh, :ww].reshape(hh // 8, 8, ww // 8, 8)
+        lo, hi = b.min(axis=(1, 3)), b.max(axis=(1, 3))
+        return int(np.sum((lo == hi) & (lo > 0) & (hi < 255)))
+
+    on, off = flat(img), flat(img[4:, 4:])
+    # Or most of the frame flat on the grid: no sensor is that quiet (8-bit shot noise
+    # alone is ~1 DN at mid-scale); the encoder removed the noise with every AC step.
+    return on >= FLAT_MIN and (on >= 4 * (off + 1) or on >= 0.5 * (img.size // 64))
 
 
 def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
@@ -113,15 +146,20 @@ def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
 
 def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
     """The line that names JPEG blocks on a mark and what they add to its u."""
-    return (f"{where}: JPEG compression (8x8 blocks, quality ~{jb.quality} of the standard "
-            f"table): the blocks move the centres with the edge's place in the grid; u "
-            f"widened by {u_arcsec:.2g}\" (jpeg_blocks: the fitted groove re-encoded)")
+    q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
+         "flattened blocks, quality unknown: the worst of 10-90 carried")
+    return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "
+            f"with the edge's place in the grid; u widened by {u_arcsec:.2g}\" (jpeg_blocks: "
+            "the fitted groove re-encoded)")
 
 
-def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int) -> float:
+def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None) -> float:
     """How far JPEG at ``quality`` moves the angle of the fitted groove ``pf`` [rad], on an
     image of ``shape`` with its block grid: the noise-free model rendered there and measured
-    with and without the round trip (the same segments, equal weights)."""
+    with and without the round trip (the same segments, equal weights). Quality unknown
+    (None): the largest shift over qualities 10, 20, ..., 90."""
+    if quality is None:
+        return max(jpeg_angle_shift(shape, pf, q) for q in range(10, 100, 10))
     model = np.full(shape, pf.background_dn)
     half = centres_half(pf) + 8.0
     e, idx = band_pixels(model, pf, half, 30.0)
