@@ -8,7 +8,7 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -29,6 +29,7 @@ from imaging.families import detect_lines
 from imaging.io import full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
+from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import (
     Centres,
     ProfileFit,
@@ -55,7 +56,9 @@ class MarkMeasurement:
     ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
     None: too few segments to tell); ``jpeg``: the JPEG
     encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
-    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term).
+    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term); ``background_u_rad``: what
+    the removal of an oriented striped background may leave on the angle [rad]
+    (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
     """
 
     candidate: MarkCandidate
@@ -72,6 +75,7 @@ class MarkMeasurement:
     blur: BlurTrend | None = None
     jpeg: JpegBlocks | None = None
     jpeg_u_rad: float = 0.0
+    background_u_rad: float = 0.0
 
     @property
     def length_px(self) -> float:
@@ -222,13 +226,15 @@ class MeasuredFrame:
     :mod:`imaging.families`), ``unreported`` (lines found but not reported: beyond
     ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
     and not counted); ``notes``: what the frame's background did (stripes found, removed or
-    carried: :mod:`imaging.stripes`), one line each; ``stripes``: those findings."""
+    carried: :mod:`imaging.stripes`, :mod:`imaging.oriented`), one line each; ``stripes``:
+    the row/column findings; ``oriented``: the oriented periodic background's."""
 
     items: list[MarkMeasurement | ImageInputError]
     families: tuple[tuple[int, ...], ...] = ()
     unreported: int = 0
     notes: tuple[str, ...] = ()
     stripes: tuple[Stripes, ...] = ()
+    oriented: OrientedStripes | None = None
 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
@@ -279,8 +285,12 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     member = {i for g in det.families for i in g}
     # Row/column fixed-pattern noise: tested on the background away from every line found,
     # and removed when each line's columns (rows) have background to estimate it from.
-    image, stripes = find_stripes(image, [band_indices(image, c) for c in
-                                          (*cands, *det.unreported)], top)
+    bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
+    image, stripes = find_stripes(image, bands, top)
+    # Stripes at any other angle (a surface's lay): divided out; each angle then carries
+    # what the removal may leave of the change it made (measured without the removal).
+    before = image
+    image, oriented = find_oriented(image, bands, top)
     jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
@@ -292,6 +302,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
             index[i] = len(out)
             out.append(exc)
             continue
+        if oriented.found:
+            m = _with_background_u(m, before, c, camera, where, top, neighbours(cands, i),
+                                   jpeg, (stripes[0].offsets_var, stripes[1].offsets_var),
+                                   oriented.residual)
         if m.length_px >= shortest or i in member:
             index[i] = len(out)
             out.append(m)
@@ -300,5 +314,24 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{shortest:.0f} px once measured)")
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
-    notes = stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
-    return MeasuredFrame(out, fams, len(det.unreported), notes, stripes)
+    notes = (stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
+             + oriented_note(where, oriented))
+    return MeasuredFrame(out, fams, len(det.unreported), notes, stripes, oriented)
+
+
+def _with_background_u(m: MarkMeasurement, before: np.ndarray, cand: MarkCandidate,
+                       camera: CameraModel | None, where: str, top: float,
+                       neighbours_px: Sequence[float], jpeg: JpegBlocks | None,
+                       offsets_var: tuple[np.ndarray | None, np.ndarray | None],
+                       residual: float) -> MarkMeasurement:
+    """``m`` with ``background_u_rad``: the angle change the removed pattern made (the mark
+    measured again on the image before the removal) times the fraction of the pattern the
+    removal may leave. A mark the pattern made unmeasurable before the removal gives no
+    change to scale: the term is then the angle's own u (the mark stands with u x sqrt 2)."""
+    try:
+        m0 = measure_candidate(before, cand, camera, where, top, neighbours_px, jpeg,
+                               offsets_var)
+    except ImageInputError:
+        return replace(m, background_u_rad=float(m.line.angle_u_rad))
+    d = abs(wrap_angle(m0.line.angle_rad - m.line.angle_rad))
+    return replace(m, background_u_rad=float(residual * d))

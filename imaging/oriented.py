@@ -1,0 +1,280 @@
+"""Oriented periodic background: stripes at any angle, found and removed.
+
+A turned or ground surface, a woven or knurled one, interference fringes: the background
+carries a periodic pattern of a few to ~100 px whose lay can run at any angle to a mark.
+Row/column patterns are :mod:`imaging.stripes`' job; this module finds the rest. Such a
+pattern is not random texture: it is correlated along a mark over its whole length (the
+stripes cross the mark at the same phase for hundreds of px when they run nearly parallel to
+it), so every centre moves alike and the texture replicas (:mod:`imaging.texture`, whose
+correlation is tapered at a span much shorter than the mark) do not carry it. It is found
+and divided out instead; what the removal leaves is carried in u.
+
+The test (hand-written: no library tests an image for a periodic pattern under a mask).
+The background (marks masked, clipped pixels out) relative to its quadratic shading, under
+a Hann window, is Fourier transformed. A plane wave is a peak; a random texture, a smooth
+spectrum — but a texture *lay* (a 1-D random profile, :mod:`synth.marks` ``texture``) is a
+whole ray of high power through the origin. So a bin's power is compared with the mean
+power along its own ray at radii 0.6-0.85 and 1.2-1.6 of its own (a lay's ray is high
+there too; a plane wave's is not) and with the mean of the 2-D neighbourhood; under no
+pattern each ratio is ~Exp(1), and the test is the smaller of the two above
+ln(bins searched / :data:`ALPHA`) times :data:`MARGIN` (the neighbourhood means are
+estimates themselves).
+
+Removal: the wave's frequency is refined by least squares on the background pixels
+(variable projection: cos/sin amplitudes linear), the image is divided by
+1 + a cos + b sin (the pattern modulates the surface's reflectance, the groove's too), and
+the test runs again on the result (a second pattern, a harmonic) up to :data:`MAX_WAVES`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft, optimize
+from scipy.ndimage import map_coordinates, uniform_filter
+
+ALPHA = 1e-3
+"""Level of the test for a periodic background (one false flag per 1000 clean images)."""
+MARGIN = 1.5
+"""Factor on the threshold ln(M / ALPHA): the neighbourhood means (~20-200 bins each) are
+estimates, and Hann-windowed bins are correlated with their neighbours."""
+PERIOD_PX = (3.0, 128.0)
+"""Periods searched [px]: finer is pixel noise, coarser is shading."""
+MAX_SIDE = 1024
+"""Side of the square (about the image centre) the test transforms: keeps 5 MP cheap."""
+MAX_WAVES = 3
+"""Patterns removed at most (a pattern and its harmonics)."""
+FIT_PIXELS = 40_000
+"""Background pixels (evenly spaced) behind the frequency fit."""
+MIN_BACKGROUND = 0.3
+"""Smallest fraction of the tested square that must be usable background."""
+
+
+@dataclass(frozen=True)
+class Wave:
+    """One plane wave in the background: relative amplitude ``amplitude`` (of the local level)
+    with standard uncertainty ``amplitude_u``, ``period_px`` [px], ``angle_rad`` the
+    stripes' direction (along the crests, the marks' angle convention: x right, y up,
+    (-pi/2, pi/2]), wave vector ``k`` [rad/px] (x, y image), cos/sin amplitudes ``ab``, and
+    ``ratio`` (peak power over the spectrum about it)."""
+
+    amplitude: float
+    amplitude_u: float
+    period_px: float
+    angle_rad: float
+    k: tuple[float, float]
+    ab: tuple[float, float]
+    ratio: float
+
+    def pattern(self, shape: tuple[int, int]) -> np.ndarray:
+        """a cos(k.r) + b sin(k.r) over an image of ``shape`` (relative)."""
+        y, x = np.ogrid[:shape[0], :shape[1]]
+        ph = self.k[0] * x + self.k[1] * y
+        return self.ab[0] * np.cos(ph) + self.ab[1] * np.sin(ph)
+
+
+@dataclass(frozen=True)
+class OrientedStripes:
+    """What the test found: the waves removed (empty: none), the largest ratio seen with the
+    threshold it was held against, and ``residual``: the relative amplitude of each wave left
+    after the removal (fitted again at its frequency, plus 2 of its u) over its amplitude —
+    the fraction of the pattern's effect on an angle that the removal may leave."""
+
+    waves: tuple[Wave, ...]
+    ratio: float
+    threshold: float
+    residual: float = 0.0
+    reason: str = ""
+
+    @property
+    def found(self) -> bool:
+        return bool(self.waves)
+
+
+def _square(shape: tuple[int, int]) -> tuple[slice, slice]:
+    h, w = shape
+    sy, sx = min(h, MAX_SIDE), min(w, MAX_SIDE)
+    y0, x0 = (h - sy) // 2, (w - sx) // 2
+    return slice(y0, y0 + sy), slice(x0, x0 + sx)
+
+
+def _relative(image: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The image over its quadratic shading minus 1 (0 where not valid) and the shading."""
+    h, w = image.shape
+    yy, xx = np.nonzero(valid)
+    step = max(1, yy.size // 20000)
+    x, y = xx[::step] / w - 0.5, yy[::step] / h - 0.5
+    A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
+    c, *_ = np.linalg.lstsq(A, image[yy[::step], xx[::step]].astype(float), rcond=None)
+    Y, X = np.ogrid[:h, :w]
+    X, Y = X / w - 0.5, Y / h - 0.5
+    lev = c[0] + c[1] * X + c[2] * Y + c[3] * X * X + c[4] * X * Y + c[5] * Y * Y
+    lev = np.broadcast_to(lev, image.shape)
+    rel = np.where(valid, image / np.where(lev > 0, lev, 1.0) - 1.0, 0.0)
+    return rel, lev
+
+
+def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
+          ) -> tuple[float, float, float, float]:
+    """The strongest periodic peak: (ratio, threshold, fx, fy) [cycles/px]."""
+    h, w = rel.shape
+    win = np.outer(np.hanning(h), np.hanning(w))
+    P = np.abs(fft.rfft2((rel - rel[valid].mean() * valid) * win, workers=1)) ** 2
+    fy = fft.fftfreq(h)[:, None]
+    fx = fft.rfftfreq(w)[None, :]
+    f = np.hypot(fx, fy)
+    search = (f >= 1 / PERIOD_PX[1]) & (f <= 1 / PERIOD_PX[0])
+    # 2-D neighbourhood: 15x15 bins less the 5x5 core (a windowed peak's spread)
+    big, core = uniform_filter(P, 15, mode="wrap") * 225, uniform_filter(P, 5, mode="wrap") * 25
+    box = (big - core) / 200.0
+    cand = np.where(search, P / np.maximum(box, 1e-300), 0.0)
+    m = int(search.sum())
+    thr = MARGIN * float(np.log(m / alpha))
+    best = (0.0, thr, 0.0, 0.0)
+    above = np.flatnonzero(cand >= thr)  # usually none
+    order = above[np.argsort(cand.flat[above])[::-1]][:20]
+    for flat in order:
+        iy, ix = np.unravel_index(flat, P.shape)
+        r = _radial_ratio(P, iy, ix)
+        ratio = min(float(cand[iy, ix]), r)
+        if ratio > best[0]:
+            best = (ratio, thr, float(fx[0, ix]), float(fy[iy, 0]))
+    if best[0] == 0.0:
+        best = (float(cand.max()), thr, 0.0, 0.0)
+    return best
+
+
+def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
+    """The bin's power over the mean along its own ray (radii 0.6-0.85 and 1.2-1.6 of its
+    own, +-1 bin across): a texture lay is high all along its ray, a plane wave is not."""
+    h = P.shape[0]
+    ky = iy if iy < h // 2 else iy - h  # signed row frequency index
+    r = np.hypot(ix, ky)
+    s = np.r_[np.linspace(0.6, 0.85, 6), np.linspace(1.2, 1.6, 8)]
+    ux, uy = ix / r, ky / r
+    vals = []
+    for off in (-1.0, 0.0, 1.0):
+        px = s * ix + off * (-uy)
+        py = s * ky + off * ux
+        flip = px < 0  # the rfft half-plane: P(-f) = P(f)
+        px, py = np.where(flip, -px, px), np.where(flip, -py, py)
+        vals.append(map_coordinates(P, [np.mod(py, h), px], order=1, mode="nearest"))
+    return float(P[iy, ix] / max(np.mean(vals), 1e-300))
+
+
+def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tuple[int, int]
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wave vector k [rad/px] (full-image coordinates), (a, b) and their covariance, fitted by
+    least squares on the background (variable projection: a, b linear)."""
+    yy, xx = np.nonzero(valid)
+    step = max(1, yy.size // FIT_PIXELS)
+    yy, xx = yy[::step], xx[::step]
+    z = rel[yy, xx]
+    X, Y = xx + origin[1], yy + origin[0]
+
+    def design(k: np.ndarray) -> np.ndarray:
+        ph = k[0] * X + k[1] * Y
+        return np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
+
+    def resid(k: np.ndarray) -> np.ndarray:
+        A = design(k)
+        c, *_ = np.linalg.lstsq(A, z, rcond=None)
+        return A @ c - z
+
+    k0 = 2 * np.pi * np.asarray(f0)
+    sol = optimize.least_squares(resid, k0, x_scale=2 * np.pi / max(rel.shape), method="lm")
+    A = design(sol.x)
+    c, *_ = np.linalg.lstsq(A, z, rcond=None)
+    r = A @ c - z
+    cov = np.linalg.inv(A.T @ A) * float(r @ r) / max(z.size - 5, 1)
+    return sol.x, c[:2], cov[:2, :2]
+
+
+def _wave(k: np.ndarray, ab: np.ndarray, cov: np.ndarray, ratio: float) -> Wave:
+    amp = float(np.hypot(*ab))
+    g = ab / max(amp, 1e-300)
+    # The crests run perpendicular to k; angles counter-clockwise with y up (the marks').
+    ang = float(np.arctan2(-k[0], -k[1]))
+    ang = float((ang + np.pi / 2) % np.pi - np.pi / 2)
+    return Wave(amp, float(np.sqrt(max(g @ cov @ g, 0.0))), float(2 * np.pi / np.hypot(*k)),
+                ang if ang != -np.pi / 2 else np.pi / 2, (float(k[0]), float(k[1])),
+                (float(ab[0]), float(ab[1])), ratio)
+
+
+def find_oriented(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
+                  alpha: float = ALPHA) -> tuple[np.ndarray, OrientedStripes]:
+    """The image with its oriented periodic background divided out where found, and the
+    finding.
+
+    ``masks``: flat pixel indices of each line's band (left out of the background); clipped
+    pixels (0 or ``full_scale``) too. The image comes back unchanged (same object) when no
+    pattern is found.
+    """
+    mask = np.zeros(image.shape, bool)
+    for idx in masks:
+        mask.flat[idx] = True
+    sl = _square(image.shape)
+    if min(image[sl].shape) < 4 * PERIOD_PX[1] // 2:
+        return image, OrientedStripes((), 0.0, float("inf"), reason="image too small to test")
+    raw = image[sl].astype(float)
+    valid = ~mask[sl] & (raw > 0) & (raw < full_scale)
+    if valid.mean() < MIN_BACKGROUND:
+        return image, OrientedStripes((), 0.0, float("inf"),
+                                      reason="too little background to test")
+    cur = raw
+    waves: list[Wave] = []
+    ratio0, thr = 0.0, float("inf")
+    for _ in range(MAX_WAVES):
+        rel, _ = _relative(cur, valid)
+        ratio, thr, fx, fy = _peak(rel, valid, alpha)
+        ratio0 = ratio0 or ratio
+        if ratio < thr:
+            break
+        k, ab, cov = _fit(rel, valid, (fx, fy), (sl[0].start, sl[1].start))
+        w = _wave(k, ab, cov, ratio)
+        waves.append(w)
+        cur = cur / (1.0 + w.pattern(image.shape)[sl])
+    if not waves:
+        return image, OrientedStripes((), ratio0, thr)
+    # What is left of each wave at its own frequency: the removal's remaining fraction.
+    rel, _ = _relative(cur, valid)
+    left = 0.0
+    for w in waves:
+        _, ab, cov = _fit_fixed(rel, valid, w.k, (sl[0].start, sl[1].start))
+        amp = float(np.hypot(*ab))
+        left = max(left, (amp + 2 * float(np.sqrt(np.trace(cov) / 2))) / w.amplitude)
+    total = np.ones(image.shape)
+    for w in waves:
+        total *= 1.0 + w.pattern(image.shape)
+    out = image.astype(float) / total
+    clipped = (image <= 0) | (image >= full_scale)  # "beyond the range": kept as they are
+    out[clipped] = image[clipped]
+    return out, OrientedStripes(tuple(waves), ratio0, thr, min(left, 1.0))
+
+
+def _fit_fixed(rel: np.ndarray, valid: np.ndarray, k: tuple[float, float],
+               origin: tuple[int, int]) -> tuple[None, np.ndarray, np.ndarray]:
+    """(a, b) and their covariance at a fixed wave vector."""
+    yy, xx = np.nonzero(valid)
+    step = max(1, yy.size // FIT_PIXELS)
+    yy, xx = yy[::step], xx[::step]
+    z = rel[yy, xx]
+    ph = k[0] * (xx + origin[1]) + k[1] * (yy + origin[0])
+    A = np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
+    c, *_ = np.linalg.lstsq(A, z, rcond=None)
+    r = A @ c - z
+    cov = np.linalg.inv(A.T @ A) * float(r @ r) / max(z.size - 3, 1)
+    return None, c[:2], cov[:2, :2]
+
+
+def oriented_note(where: str, found: OrientedStripes) -> tuple[str, ...]:
+    """One line per wave removed: what it is and what was done about it."""
+    return tuple(
+        f"{where}: striped background: period {w.period_px:.1f} px at "
+        f"{np.rad2deg(w.angle_rad):.1f} deg, amplitude {100 * w.amplitude:.2g} % of the "
+        f"level (peak {w.ratio:.3g}x the spectrum about it; a turned or ground surface's lay, "
+        "or fringes): divided out; the angle change it made, times the fraction the removal "
+        f"may leave ({100 * found.residual:.2g} %), is carried in u"
+        for w in found.waves)
