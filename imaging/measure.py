@@ -272,6 +272,18 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
     cands = det.marks
+    # Stripes nearly along a mark can hide it from the detector: then the frame is tested
+    # for an oriented periodic background (nothing masked) and searched again without it.
+    pre = None
+    if not cands:
+        cleaned, pre = find_oriented(image, [], top)
+        if pre.found:
+            try:
+                det = detect_lines(cleaned, min_length_px=min_length_px, max_marks=max_marks,
+                                   roi=roi, top=top, families=not expect_one)
+            except ImageInputError as exc:
+                raise ImageInputError(f"{where}: {exc}") from None
+            cands, image = det.marks, cleaned
     if not cands:
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
@@ -289,8 +301,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     image, stripes = find_stripes(image, bands, top)
     # Stripes at any other angle (a surface's lay): divided out; each angle then carries
     # what the removal may leave of the change it made (measured without the removal).
-    before = image
+    before = image if pre is None or not pre.found else image * pre.factor(image.shape)
     image, oriented = find_oriented(image, bands, top)
+    if pre is not None and pre.found:
+        oriented = pre.then(oriented)
     jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}

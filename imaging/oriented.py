@@ -14,11 +14,11 @@ The background (marks masked, clipped pixels out) relative to its quadratic shad
 a Hann window, is Fourier transformed. A plane wave is a peak; a random texture, a smooth
 spectrum — but a texture *lay* (a 1-D random profile, :mod:`synth.marks` ``texture``) is a
 whole ray of high power through the origin. So a bin's power is compared with the mean
-power along its own ray at radii 0.6-0.85 and 1.2-1.6 of its own (a lay's ray is high
-there too; a plane wave's is not) and with the mean of the 2-D neighbourhood; under no
-pattern each ratio is ~Exp(1), and the test is the smaller of the two above
-ln(bins searched / :data:`ALPHA`) times :data:`MARGIN` (the neighbourhood means are
-estimates themselves).
+power along its own ray, 0.2-0.5 of its radius (>= 3 bins) either side (the largest bin
+within 2 across the ray at each radius: a lay's ray is high there too; a plane wave's is
+not), and with the mean of its 2-D neighbourhood; under no pattern each ratio is at most
+~Exp(1), and the test is the smaller of the two above ln(bins searched / :data:`ALPHA`)
+times :data:`MARGIN` (the neighbourhood means are estimates themselves).
 
 Removal: the wave's frequency is refined by least squares on the background pixels
 (variable projection: cos/sin amplitudes linear), the image is divided by
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import fft, optimize
-from scipy.ndimage import map_coordinates, uniform_filter
+from scipy.ndimage import uniform_filter
 
 ALPHA = 1e-3
 """Level of the test for a periodic background (one false flag per 1000 clean images)."""
@@ -92,6 +92,21 @@ class OrientedStripes:
     def found(self) -> bool:
         return bool(self.waves)
 
+    def factor(self, shape: tuple[int, int]) -> np.ndarray:
+        """The reflectance factor the waves make over an image of ``shape`` (what was
+        divided out)."""
+        total = np.ones(shape)
+        for w in self.waves:
+            total *= 1.0 + w.pattern(shape)
+        return total
+
+    def then(self, other: OrientedStripes) -> OrientedStripes:
+        """This removal followed by ``other`` (found on the image this one left)."""
+        if not other.found:
+            return self
+        return OrientedStripes(self.waves + other.waves, self.ratio, self.threshold,
+                               max(self.residual, other.residual))
+
 
 def _square(shape: tuple[int, int]) -> tuple[slice, slice]:
     h, w = shape
@@ -147,21 +162,27 @@ def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
 
 
 def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
-    """The bin's power over the mean along its own ray (radii 0.6-0.85 and 1.2-1.6 of its
-    own, +-1 bin across): a texture lay is high all along its ray, a plane wave is not."""
+    """The bin's power over the mean along its own ray (0.2-0.5 of its radius either side,
+    at least 3-6 bins, none nearer the origin than 2 bins): a texture lay is high all along
+    its ray, a plane wave is not. The ray's power at a radius is the largest of the bins
+    within 2 across it — a lay's line is one or two bins wide and seldom on the grid, so an
+    interpolated sample beside it would miss it (a lay
+    passed for a peak in 2 of 240 clean frames that way)."""
     h = P.shape[0]
     ky = iy if iy < h // 2 else iy - h  # signed row frequency index
     r = np.hypot(ix, ky)
-    s = np.r_[np.linspace(0.6, 0.85, 6), np.linspace(1.2, 1.6, 8)]
+    # Out of the windowed peak's main lobe (+-2 bins) however close to the origin it is.
+    d = np.linspace(max(3.0, 0.2 * r), max(6.0, 0.5 * r), 7)
+    s = np.r_[1 - d[r - d >= 2] / r, 1 + d]
     ux, uy = ix / r, ky / r
-    vals = []
-    for off in (-1.0, 0.0, 1.0):
-        px = s * ix + off * (-uy)
-        py = s * ky + off * ux
+    best = np.zeros(s.size)
+    for off in np.arange(-2.0, 2.5, 0.5):
+        px = np.rint(s * ix - off * uy).astype(int)
+        py = np.rint(s * ky + off * ux).astype(int)
         flip = px < 0  # the rfft half-plane: P(-f) = P(f)
         px, py = np.where(flip, -px, px), np.where(flip, -py, py)
-        vals.append(map_coordinates(P, [np.mod(py, h), px], order=1, mode="nearest"))
-    return float(P[iy, ix] / max(np.mean(vals), 1e-300))
+        best = np.maximum(best, P[np.mod(py, h), np.minimum(px, P.shape[1] - 1)])
+    return float(P[iy, ix] / max(best.mean(), 1e-300))
 
 
 def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tuple[int, int]
@@ -245,13 +266,11 @@ def find_oriented(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: fl
         _, ab, cov = _fit_fixed(rel, valid, w.k, (sl[0].start, sl[1].start))
         amp = float(np.hypot(*ab))
         left = max(left, (amp + 2 * float(np.sqrt(np.trace(cov) / 2))) / w.amplitude)
-    total = np.ones(image.shape)
-    for w in waves:
-        total *= 1.0 + w.pattern(image.shape)
-    out = image.astype(float) / total
+    found = OrientedStripes(tuple(waves), ratio0, thr, min(left, 1.0))
+    out = image.astype(float) / found.factor(image.shape)
     clipped = (image <= 0) | (image >= full_scale)  # "beyond the range": kept as they are
     out[clipped] = image[clipped]
-    return out, OrientedStripes(tuple(waves), ratio0, thr, min(left, 1.0))
+    return out, found
 
 
 def _fit_fixed(rel: np.ndarray, valid: np.ndarray, k: tuple[float, float],

@@ -87,6 +87,12 @@ class ImageSpec:
     per-column / per-row read-out offsets, as a fraction of the bare surface's signal
     (``exposure * full_well_e``), drawn once from the seed's own stream; ``jpeg_quality``
     (1-100, 0: none) encodes the 8-bit image as a baseline JPEG and decodes it.
+
+    Oriented stripes (a turned, ground or milled surface's lay; a woven or knurled one):
+    the surface's reflectance, groove included, times 1 + ``stripes`` sin(2 pi q / P + phase)
+    + ``stripes`` ``stripes_second`` sin(4 pi q / P + 2 phase), q the distance across the
+    crests, which run at ``stripes_angle_rad`` (the marks' convention), P
+    ``stripes_period_px``; ``stripes_phase`` [rad].
     """
 
     marks: tuple[MarkSpec, ...]
@@ -115,6 +121,11 @@ class ImageSpec:
     column_fpn: float = 0.0
     row_fpn: float = 0.0
     jpeg_quality: int = 0
+    stripes: float = 0.0
+    stripes_period_px: float = 30.0
+    stripes_angle_rad: float = 0.0
+    stripes_phase: float = 0.0
+    stripes_second: float = 0.0
 
     def blur_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The PSF's sigma [px] at sensor pixel (x, y) relative to the image centre."""
@@ -330,6 +341,19 @@ def _texture(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     return spec.texture * np.interp(q, grid, prof / prof.std())
 
 
+def _stripes(spec: ImageSpec) -> np.ndarray:
+    """The lay's reflectance factor over the frame (blurred by the optics like the rest)."""
+    xs, ys = _pixel_grid(spec)
+    X, Y = np.meshgrid(xs, ys)
+    a = spec.stripes_angle_rad
+    q = X * np.sin(a) + Y * np.cos(a)  # across crests that run along (cos a, -sin a)
+    ph = 2 * np.pi * q / spec.stripes_period_px + spec.stripes_phase
+    # A sinusoid through a Gaussian PSF keeps its shape, its amplitude x exp(-2 pi^2 s^2 f^2).
+    s2 = 2 * (np.pi * spec.blur_px / spec.stripes_period_px) ** 2
+    return 1 + spec.stripes * (np.exp(-s2) * np.sin(ph)
+                               + spec.stripes_second * np.exp(-4 * s2) * np.sin(2 * ph))
+
+
 def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     """Dust specks (blobs) and scratches (thin short lines), already blurred by the optics."""
     h, w = spec.height, spec.width
@@ -422,6 +446,8 @@ def _mean_electrons(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     for m in spec.marks:
         r, c = _mark_band(spec, m, margin)
         refl[r, c] += m.contrast * mark_coverage(spec, m, r, c)
+    if spec.stripes:  # the surface and its grooves; dust lies on top
+        refl *= _stripes(spec)
     refl += _clutter(spec, rng)
     return np.clip(refl, 0, None) * _illumination(spec) * spec.exposure * spec.full_well_e
 
