@@ -42,6 +42,9 @@ MARGIN = 1.5
 estimates, and Hann-windowed bins are correlated with their neighbours."""
 PERIOD_PX = (3.0, 128.0)
 """Periods searched [px]: finer is pixel noise, coarser is shading."""
+MIN_BINS = 5
+"""Fewest periods across the tested square for a pattern to be searched (a 480 px frame
+sees periods up to 96 px)."""
 MAX_SIDE = 1024
 """Side of the square (about the image centre) the test transforms: keeps 5 MP cheap."""
 MAX_WAVES = 3
@@ -140,7 +143,10 @@ def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
     fy = fft.fftfreq(h)[:, None]
     fx = fft.rfftfreq(w)[None, :]
     f = np.hypot(fx, fy)
-    search = (f >= 1 / PERIOD_PX[1]) & (f <= 1 / PERIOD_PX[0])
+    # At least MIN_BINS from the origin: the ray test needs its inner side (a steep smooth
+    # spectrum — shading, a lay's broad part — is lower outside than inside).
+    bins = np.hypot(fx * w, fy * h)
+    search = (f >= 1 / PERIOD_PX[1]) & (f <= 1 / PERIOD_PX[0]) & (bins >= MIN_BINS)
     # 2-D neighbourhood: 15x15 bins less the 5x5 core (a windowed peak's spread)
     big, core = uniform_filter(P, 15, mode="wrap") * 225, uniform_filter(P, 5, mode="wrap") * 25
     box = (big - core) / 200.0
@@ -166,8 +172,8 @@ def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
     at least 3-6 bins, none nearer the origin than 2 bins): a texture lay is high all along
     its ray, a plane wave is not. The ray's power at a radius is the largest of the bins
     within 2 across it — a lay's line is one or two bins wide and seldom on the grid, so an
-    interpolated sample beside it would miss it (a lay
-    passed for a peak in 2 of 240 clean frames that way)."""
+    interpolated sample beside it would miss it (a lay passed for a peak in 2 of 240 clean
+    frames that way). The level is the larger of the inner and the outer side's means."""
     h = P.shape[0]
     ky = iy if iy < h // 2 else iy - h  # signed row frequency index
     r = np.hypot(ix, ky)
@@ -175,6 +181,7 @@ def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
     d = np.linspace(max(3.0, 0.2 * r), max(6.0, 0.5 * r), 7)
     s = np.r_[1 - d[r - d >= 2] / r, 1 + d]
     ux, uy = ix / r, ky / r
+    inner = s < 1
     best = np.zeros(s.size)
     for off in np.arange(-2.0, 2.5, 0.5):
         px = np.rint(s * ix - off * uy).astype(int)
@@ -182,7 +189,10 @@ def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
         flip = px < 0  # the rfft half-plane: P(-f) = P(f)
         px, py = np.where(flip, -px, px), np.where(flip, -py, py)
         best = np.maximum(best, P[np.mod(py, h), np.minimum(px, P.shape[1] - 1)])
-    return float(P[iy, ix] / max(best.mean(), 1e-300))
+    # The larger side: a steep but smooth spectrum (a lay's broad component) is far lower
+    # outside than inside; a peak stands above both.
+    level = max(best[inner].mean() if inner.any() else 0.0, best[~inner].mean())
+    return float(P[iy, ix] / max(level, 1e-300))
 
 
 def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tuple[int, int]
