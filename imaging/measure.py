@@ -295,13 +295,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
     member = {i for g in det.families for i in g}
-    # Row/column fixed-pattern noise: tested on the background away from every line found,
-    # and removed when each line's columns (rows) have background to estimate it from.
     bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
-    image, stripes = find_stripes(image, bands, top)
-    # Stripes at any other angle (a surface's lay): divided out; each angle then carries
-    # what the removal may leave of the change it made (measured without the removal).
-    before = image if pre is None or not pre.found else image * pre.factor(image.shape)
+    # Stripes at any angle (a surface's lay): divided out first — an oblique pattern leaves
+    # a profile along the columns that the row/column test below would take for its own.
     image, oriented = find_oriented(image, bands, top)
     if oriented.found and (pre is None or not pre.found):
         # The lines again on the image without the pattern: a crest beside a mark's end
@@ -312,8 +308,15 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
             det = again
             cands = [require_single(det.marks, where)] if expect_one else det.marks
             member = {i for g in det.families for i in g}
+            bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
     if pre is not None and pre.found:
         oriented = pre.then(oriented)
+    # Row/column fixed-pattern noise: tested on the background away from every line found,
+    # and removed when each line's columns (rows) have background to estimate it from.
+    image, stripes = find_stripes(image, bands, top)
+    # Each angle carries what the oriented removal may leave of the change it made: the
+    # mark measured again with the pattern put back.
+    before = image * oriented.factor(image.shape) if oriented.found else image
     jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}

@@ -1,0 +1,121 @@
+"""Oriented periodic background (issue 18 item 4): stripes at any angle to a mark — a turned
+or ground surface's lay — found on the background, divided out, named, and what the removal
+may leave carried in u; clean and randomly textured backgrounds left alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from align.lens import LensRanges
+from align.marks import measure_image
+from imaging import detect_lines, measure_frame
+from imaging.oriented import find_oriented
+from imaging.profile import band_indices
+from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from tests.conftest import angle_error
+
+
+def _striped(seed: int, mark_deg: float, rel_deg: float, amp: float, period: float,
+             phase: float = 0.0, **kw):
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(mark_deg), kw.pop("offset", 0.0), 300.0, 4.0),),
+                     width=640, height=480, full_well_e=full_well_for_snr(40, -0.6), seed=seed,
+                     stripes=amp, stripes_period_px=period,
+                     stripes_angle_rad=np.deg2rad(mark_deg + rel_deg), stripes_phase=phase, **kw)
+    return render_marks(spec, with_crlb=False)
+
+
+def _z(sample) -> tuple[float, object]:
+    (r,) = measure_image(sample.image, ranges=LensRanges.none())
+    return angle_error(r.angle_rad, sample.truth.marks[0].image_angle_rad) / r.angle_u_rad, r
+
+
+def test_shallow_stripes_are_found_removed_and_named():
+    """Stripes of 4 % at 10 deg to a 300 px mark, period 25 px: the frame names them (period
+    within 0.5 px, direction within 0.5 deg of the render's), the angle is within 3 u, and u
+    holds the named Type B term."""
+    s = _striped(4, 30.0, 10.0, 0.04, 25.0, 1.0)
+    fr = measure_frame(s.image)
+    (w,) = fr.oriented.waves
+    assert abs(w.period_px - 25.0) < 0.5
+    assert abs(np.rad2deg(angle_error(w.angle_rad, np.deg2rad(40.0)))) < 0.5
+    assert any("striped background: period 25.0 px at 40.0 deg" in n for n in fr.notes)
+    z, r = _z(s)
+    assert abs(z) <= 3.0
+    assert "striped_background" in r.u_terms
+
+
+def test_stripes_along_a_mark_that_hide_it_are_removed_first():
+    """Stripes of 7 % at 2 deg to the mark, period 59 px: the detector alone finds no line;
+    with the pattern divided out the mark is found, named and within 3 u."""
+    s = _striped(35, 30.9, -2.0, 0.077, 58.6, 2.0, offset=20.0)
+    z, r = _z(s)
+    assert any("striped background" in n for n in r.notes)
+    assert abs(z) <= 3.0
+
+
+def test_a_texture_lay_is_not_a_periodic_background():
+    """Machining streaks (a random 1-D profile along 0.3 rad, 8 %): a whole ray of the
+    spectrum, not a peak — not flagged, the image returned untouched."""
+    spec = ImageSpec(marks=(MarkSpec(1.0, 0.0, 300.0, 4.0),), width=640, height=480,
+                     full_well_e=full_well_for_snr(40, -0.6), seed=3, texture=0.08,
+                     texture_scale_px=3.0)
+    im = render_marks(spec, with_crlb=False).image
+    det = detect_lines(im)
+    out, found = find_oriented(im, [band_indices(im, c) for c in det.marks], 65535)
+    assert not found.found and out is im
+
+
+@pytest.mark.slow
+def test_oriented_stripes_over_seeds_are_flagged_and_covered():
+    """40 seeds: mark at any angle, stripes 0-90 deg from it (either side), 1-8 %, period
+    8-60 px, any phase: every one flagged, every |z| <= 3 and the RMS of z below 1.3
+    (measured: 40 flagged, RMS 1.01, max 2.03; before: the pattern moved the angle by up to
+    0.6 deg, unflagged)."""
+    zs, flagged = [], 0
+    for s in range(40):
+        r = np.random.default_rng(9000 + s)
+        a = r.uniform(-89, 89)
+        rel = r.uniform(0, 90) * r.choice([-1, 1])
+        amp, per = r.uniform(0.01, 0.08), r.uniform(8, 60)
+        sample = _striped(s, a, rel, amp, per, r.uniform(0, 2 * np.pi),
+                          offset=r.uniform(-40, 40))
+        z, res = _z(sample)
+        flagged += any("striped background" in n for n in res.notes)
+        zs.append(z)
+    zs = np.array(zs)
+    assert flagged == 40
+    assert np.abs(zs).max() <= 3.0 and np.sqrt(np.mean(zs**2)) < 1.3, zs
+
+
+@pytest.mark.slow
+def test_clean_backgrounds_are_rarely_flagged():
+    """300 stripe-free frames (plain; a texture lay of 2-10 % at any angle and scale; dust,
+    scratches, labels, shading and vignetting; 8/12/16-bit; 480-800 px): at most 3 flagged
+    (the test's level is 1e-3 per frame; 1 % is the bound asked; measured: 0 of 400)."""
+    flags = 0
+    for s in range(300):
+        r = np.random.default_rng(20000 + s)
+        kind = s % 4
+        kw = (dict(texture=r.uniform(0.02, 0.1), texture_angle_rad=r.uniform(0, np.pi),
+                   texture_scale_px=r.uniform(1, 4)) if kind in (1, 3) else {})
+        if kind >= 2:
+            kw.update(dust=int(r.integers(0, 20)), scratches=int(r.integers(0, 6)),
+                      text=int(r.integers(0, 3)),
+                      gradient=(r.uniform(-.3, .3), r.uniform(-.3, .3)),
+                      vignetting=r.uniform(0, 0.4))
+        bits = int(r.choice([8, 12, 16]))
+        a = r.uniform(-89, 89)
+        spec = ImageSpec(marks=(MarkSpec(np.deg2rad(a), r.uniform(-60, 60), r.uniform(200, 400),
+                                         r.uniform(2, 6)),),
+                         width=int(r.choice([480, 640, 800])),
+                         height=int(r.choice([360, 480, 600])),
+                         full_well_e=full_well_for_snr(r.uniform(15, 80), -0.6), seed=s,
+                         bits=bits, blur_px=r.uniform(0.8, 2.5), **kw)
+        im = render_marks(spec, with_crlb=False).image
+        top = float(2**bits - 1)
+        det = detect_lines(im, top=top)
+        _, found = find_oriented(im, [band_indices(im, c) for c in (*det.marks, *det.unreported)],
+                                 top)
+        flags += found.found
+    assert flags <= 3, flags
