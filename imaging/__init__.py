@@ -27,6 +27,7 @@ from imaging.measure import (
     measure_frame,
     measure_marks,
 )
+from imaging.oriented import OrientedStripes, Wave
 from imaging.plumbline import (
     PlumbLineFit,
     chessboard_lines,
@@ -38,7 +39,7 @@ from imaging.profile import Centres, ProfileFit
 from imaging.stripes import Stripes
 
 __all__ = [
-    "BlurTrend", "JpegBlocks", "Stripes", "defocus_note", "jpeg_note",
+    "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",

@@ -40,8 +40,9 @@ ALPHA = 1e-3
 MARGIN = 1.5
 """Factor on the threshold ln(M / ALPHA): the neighbourhood means (~20-200 bins each) are
 estimates, and Hann-windowed bins are correlated with their neighbours."""
-PERIOD_PX = (3.0, 128.0)
-"""Periods searched [px]: finer is pixel noise, coarser is shading."""
+PERIOD_PX = (3.0, 100.0)
+"""Periods searched [px]: finer is pixel noise, coarser is shading (with 128 px, a clean frame
+with a gradient, vignetting and a label flagged a 126 px "period": 1 of 400)."""
 MIN_BINS = 5
 """Fewest periods across the tested square for a pattern to be searched (a 480 px frame
 sees periods up to 96 px)."""
