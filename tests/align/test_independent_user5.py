@@ -388,7 +388,7 @@ def test_bias_random_walk_is_not_turned_into_a_confident_scale_drift(tmp_path):
 
 def test_shallow_stripes_under_a_mark_are_flagged_or_covered(tmp_path):
     """Was: -78.3 arcsec = 4.7 u, silent (seed 33: 3.7 u). Now the pattern is found, divided
-    out and named (imaging/oriented.py): +6.8 arcsec at u 13.5 (0.5 u); seeds 31/33/34/35 x
+    out and named (imaging/oriented.py): +7.8 arcsec at u 13.6 (0.6 u); seeds 31/33/34/35 x
     stripes 10/20/40 deg from the mark: RMS z 1.08 (was 2.46)."""
     sc = U.Scene(width=800, height=600, marks=(U.Mark(200, 150, 10.0, 220),),
                  stripes_amp=0.06, stripes_deg=20.0, stripes_period=31.0, seed=31)
