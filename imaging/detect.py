@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from scipy import special
 
+from imaging.crossing import split_two_lines
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
 
@@ -466,7 +467,9 @@ def _candidates(layers, min_length_px: float, f: int, centre_small: np.ndarray,
     best: list[MarkCandidate] = []
     for sigma, dark, resp, mask, mad in layers:
         # Pieces down to an eighth of the shortest mark: a wide or dusty mark breaks up.
-        for pts in _merge(_components(mask, max(3.0, min_length_px / f / 8)), centre_small):
+        piece = max(3.0, min_length_px / f / 8)
+        for pts in _merge(_split_crossings(_components(mask, piece), piece), centre_small,
+                          resp):
             a, d, t, thick = _pca_line(pts, centre_small)
             length = (t.max() - t.min()) * f
             # The response fades below the threshold about a filter width before each
@@ -530,8 +533,41 @@ def _to_full(a, d, t, dark, thick, strength, f, centre_small, centre, contrast
                          float(t.max() * f + shift), dark, float(thick * f), strength, contrast)
 
 
-def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
-    """Join collinear pieces (a mark interrupted by dust or a dropout)."""
+def _split_crossings(comps: list[np.ndarray], piece: float) -> list[np.ndarray]:
+    """Components that are two lines crossing at a shallow angle, as the two lines' points
+    (their fused ridge would otherwise be one phantom mark between them)."""
+    out = []
+    for c in comps:
+        two = split_two_lines(c, piece) if np.ptp(c, axis=0).max() >= 4 * piece else None
+        out.extend(two if two is not None else [c])
+    return out
+
+
+def _bridged(resp: np.ndarray, p0: np.ndarray, p1: np.ndarray, level: float,
+             side: float = 2.0) -> bool:
+    """Whether the ridge response stays above ``level`` (within ``side`` px across) at 80 %
+    of the 1 px steps from p0 to p1 (small-image pixels): a groove runs on through the gap.
+
+    Where another mark crosses at a shallow angle the two grooves fuse into one ridge along
+    their bisector, so each mark's own ridge stops and resumes beyond the crossing; the
+    fused ridge lies within a pixel or two of both, and the gap is bridged. Between two
+    marks of a row the gap is background."""
+    h, w = resp.shape
+    v = p1 - p0
+    n_steps = max(int(np.hypot(*v)), 1)
+    nrm = np.array([-v[1], v[0]]) / max(float(np.hypot(*v)), 1e-9)
+    s = np.linspace(0.0, 1.0, n_steps + 1)[:, None]
+    e = np.arange(-side, side + 1)
+    q = p0 + s[:, :, None].transpose(0, 2, 1) * v + e[None, :, None] * nrm  # (steps, e, 2)
+    xi = np.clip(np.rint(q[..., 0]).astype(int), 0, w - 1)
+    yi = np.clip(np.rint(q[..., 1]).astype(int), 0, h - 1)
+    return float(np.mean(resp[yi, xi].max(axis=1) >= level)) >= 0.8
+
+
+def _merge(comps: list[np.ndarray], centre: np.ndarray, resp: np.ndarray | None = None
+           ) -> list[np.ndarray]:
+    """Join collinear pieces (a mark interrupted by dust or a dropout, or by the fused ridge
+    where another mark crosses it: ``resp``, the ridge response, tells the gap is bridged)."""
     lines = [(_pca_line(c, centre), c) for c in comps if len(c) >= 5]
     lines.sort(key=lambda x: -len(x[1]))
     used = [False] * len(lines)
@@ -552,11 +588,28 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray) -> list[np.ndarray]:
             tg = np.vstack(group) @ uu
             tj = lines[j][1] @ uu
             gap = max(tj.min() - tg.max(), tg.min() - tj.max())
-            if dang < np.deg2rad(3) and np.max(dist) < 3.0 and gap <= max(np.ptp(tg), np.ptp(tj)):
+            if not (dang < np.deg2rad(3) and np.max(dist) < 3.0):
+                continue
+            if gap <= max(np.ptp(tg), np.ptp(tj)) or (resp is not None and _bridged(
+                    resp, *_gap_ends(np.vstack(group), lines[j][1], uu),
+                    0.5 * _level(resp, np.vstack(group)))):
                 group.append(lines[j][1])
                 used[j] = True
         out.append(np.vstack(group))
     return out
+
+
+def _gap_ends(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The facing end points of two point sets along direction u (the gap between them)."""
+    ta, tb = a @ u, b @ u
+    if ta.max() < tb.min():
+        return a[np.argmax(ta)], b[np.argmin(tb)]
+    return b[np.argmax(tb)], a[np.argmin(ta)]
+
+
+def _level(resp: np.ndarray, pts: np.ndarray) -> float:
+    """Median ridge response over a piece's points."""
+    return float(np.median(resp[pts[:, 1].astype(int), pts[:, 0].astype(int)]))
 
 
 def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:

@@ -1,0 +1,116 @@
+"""Two marks that cross at a shallow angle: told apart in the coarse search, kept apart in the fit.
+
+Where two grooves cross at a few degrees their ridges fuse into one long connected component;
+its principal axis then points between the two (a phantom mark), and the arms of each mark
+beyond the fused stretch become separate, shorter pieces. :func:`split_two_lines` tests a
+component for a second straight line (a two-line RANSAC on its ridge points) and returns the
+two lines' points apart. :func:`crossing_stretch` gives the stretch of one mark over which the
+other's groove lies inside its profile window: there the fitted centres are pulled towards the
+other groove, so that stretch is left out of the mark's fit.
+
+Pure numpy on point sets; nothing here knows the image or the rest of the pipeline.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+TOL_PX = 1.0
+"""Half-width of a line's band of ridge points in the (block-averaged) search image [px]."""
+MIN_ANGLE = np.deg2rad(1.0)
+"""Two lines closer in direction than this are one (a wide or bowed mark, not a crossing)."""
+_HYPOTHESES = 300
+
+
+def _ransac_line(pts: np.ndarray, tol: float, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The straight line with most points within ``tol``, refitted to them by least squares:
+    (point on it, unit direction, inlier mask). RANSAC is written here because what matters
+    is the second line after the first (scikit-image's ``ransac`` fits one model; looping it
+    would cost more than this vectorised draw of point pairs)."""
+    n = len(pts)
+    i = rng.integers(0, n, _HYPOTHESES)
+    j = rng.integers(0, n, _HYPOTHESES)
+    d = pts[j] - pts[i]
+    norm = np.hypot(d[:, 0], d[:, 1])
+    ok = norm >= 4.0
+    if not ok.any():
+        return pts.mean(0), np.array([1.0, 0.0]), np.ones(n, bool)
+    i, d, norm = i[ok], d[ok], norm[ok]
+    nrm = np.column_stack([-d[:, 1], d[:, 0]]) / norm[:, None]
+    dist = np.abs(np.einsum("hnk,hk->hn", pts[None, :, :] - pts[i][:, None, :], nrm))
+    best = int(np.argmax((dist <= tol).sum(1)))
+    inl = dist[best] <= tol
+    for _ in range(2):  # least-squares refit on the inliers, then their new band
+        m = pts[inl].mean(0)
+        w, v = np.linalg.eigh(np.cov((pts[inl] - m).T))
+        u = v[:, 1]
+        inl = np.abs((pts - m) @ np.array([-u[1], u[0]])) <= tol
+        if inl.sum() < 3:
+            break
+    return m, u, inl
+
+
+def _intersection(m1, u1, m2, u2) -> np.ndarray:
+    """Where two lines (point, direction) meet."""
+    a = np.column_stack([u1, -u2])
+    s = np.linalg.solve(a, m2 - m1)
+    return m1 + s[0] * u1
+
+
+def split_two_lines(pts: np.ndarray, min_piece: float, tol: float = TOL_PX
+                    ) -> list[np.ndarray] | None:
+    """A component's ridge points as two crossing straight lines, or None when it is one.
+
+    Parameters
+    ----------
+    pts : ndarray (N, 2)
+        Ridge pixels (x, y) of one connected component [px].
+    min_piece : float
+        Shortest stretch of ridge that counts as a piece of a line [px].
+    tol : float
+        Half-width of a line's band of points [px].
+
+    Returns
+    -------
+    None when one straight line explains the points (or the second line is not a crossing:
+    a bowed mark is two chords meeting at a kink, each on one side of it); else the points
+    of each line, those in both bands (the fused stretch at the crossing) in neither.
+    """
+    if len(pts) < 20:
+        return None
+    rng = np.random.default_rng(0)  # deterministic: the same image, the same marks
+    m1, u1, in1 = _ransac_line(pts, tol, rng)
+    n1 = np.array([-u1[1], u1[0]])
+    rest = np.abs((pts - m1) @ n1) > 2 * tol
+    if rest.sum() < max(10, 0.1 * len(pts)):
+        return None
+    m2, u2, in2r = _ransac_line(pts[rest], tol, rng)
+    sin = abs(float(u1[0] * u2[1] - u1[1] * u2[0]))
+    if sin < np.sin(MIN_ANGLE) or in2r.sum() < max(10, 0.6 * rest.sum()):
+        return None
+    n2 = np.array([-u2[1], u2[0]])
+    in2 = np.abs((pts - m2) @ n2) <= tol
+    x = _intersection(m1, u1, m2, u2)
+    # A crossing: at least one line runs on past the meeting point on both sides, beyond
+    # the fused stretch (a bow's two chords each stop at their kink).
+    fused = 2 * tol / sin
+    sides = []
+    for inl, u in ((in1, u1), (in2, u2)):
+        t = (pts[inl] - x) @ u
+        if len(t) < 10 or np.ptp(t) < min_piece:
+            return None
+        sides.append(min(-t.min(), t.max()))
+    if max(sides) < max(fused, min_piece / 2):
+        return None
+    both = in1 & in2
+    return [pts[in1 & ~both], pts[in2 & ~both]]
+
+
+def crossing_stretch(t_other_cross: float, sin_angle: float, half_window_px: float
+                     ) -> tuple[float, float]:
+    """The stretch along a mark (position t [px]) over which another mark crossing it at
+    ``t_other_cross`` with |sin(angle between them)| ``sin_angle`` lies within
+    ``half_window_px`` of its line: (t0, t1) [px]."""
+    half = half_window_px / max(sin_angle, 1e-9)
+    return t_other_cross - half, t_other_cross + half
