@@ -107,10 +107,44 @@ def split_two_lines(pts: np.ndarray, min_piece: float, tol: float = TOL_PX
     return [pts[in1 & ~both], pts[in2 & ~both]]
 
 
-def crossing_stretch(t_other_cross: float, sin_angle: float, half_window_px: float
-                     ) -> tuple[float, float]:
-    """The stretch along a mark (position t [px]) over which another mark crossing it at
-    ``t_other_cross`` with |sin(angle between them)| ``sin_angle`` lies within
-    ``half_window_px`` of its line: (t0, t1) [px]."""
-    half = half_window_px / max(sin_angle, 1e-9)
-    return t_other_cross - half, t_other_cross + half
+MIN_CROSSING = np.deg2rad(1.0)
+"""Lines closer in direction than this are parallel neighbours (kept out of the texture's
+replicas by :func:`imaging.measure.neighbours`), not crossings."""
+
+
+def _frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    # The package's line convention (imaging.detect.line_frame), restated: detect imports
+    # this module.
+    return (np.array([np.cos(angle_rad), -np.sin(angle_rad)]),
+            np.array([np.sin(angle_rad), np.cos(angle_rad)]))
+
+
+def crossing_stretch(c, o, half_px: float) -> tuple[float, float, np.ndarray] | None:
+    """The stretch of line ``c`` over which line ``o``'s groove lies within ``half_px`` of it.
+
+    ``c`` and ``o`` carry ``angle_rad``, ``offset_px`` [px], ``t_start_px``/``t_end_px``
+    [px] and ``thickness_px`` (MarkCandidate or ProfileFit-like). ``half_px``: half-width of
+    c's profile window plus o's half-width [px].
+
+    Returns (t0, t1, where) [px along c; where: the crossing point, px from the image
+    centre], clipped to c's extent, or None when o does not come that close within both
+    extents or runs parallel to c (within :data:`MIN_CROSSING`).
+    """
+    uc, nc = _frame(c.angle_rad)
+    uo, no = _frame(o.angle_rad)
+    sin = float(uo @ nc)  # how fast o leaves c's line per px along o
+    if abs(sin) < np.sin(MIN_CROSSING):
+        return None
+    p0 = o.offset_px * no  # o's point at s = 0
+    d0 = float(p0 @ nc) - c.offset_px
+    # |d0 + s sin| <= half over s in o's extent
+    s_lo, s_hi = sorted(((-half_px - d0) / sin, (half_px - d0) / sin))
+    s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
+    if s_lo >= s_hi:
+        return None
+    t_lo, t_hi = sorted(float((p0 + s * uo) @ uc) for s in (s_lo, s_hi))
+    t_lo, t_hi = max(t_lo, c.t_start_px), min(t_hi, c.t_end_px)
+    if t_lo >= t_hi:
+        return None
+    s_x = -d0 / sin
+    return t_lo, t_hi, p0 + np.clip(s_x, o.t_start_px, o.t_end_px) * uo

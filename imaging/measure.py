@@ -8,12 +8,13 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
+from imaging.crossmask import crossing_skip
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
@@ -72,6 +73,8 @@ class MarkMeasurement:
     blur: BlurTrend | None = None
     jpeg: JpegBlocks | None = None
     jpeg_u_rad: float = 0.0
+    crossings: tuple[tuple[int, int], ...] = ()
+    """(index of the other candidate, px of this mark's length left out) per crossing."""
 
     @property
     def length_px(self) -> float:
@@ -79,8 +82,12 @@ class MarkMeasurement:
         return float(self.extent_px[1] - self.extent_px[0])
 
 
-def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
-    """Segments that fit the groove and agree with their neighbours (dust/scratches out)."""
+def _usable(cen: Centres, where: str, cand: MarkCandidate,
+            skip: np.ndarray | None = None) -> np.ndarray:
+    """Segments that fit the groove and agree with their neighbours (dust/scratches out);
+    ``skip``: segments left out beforehand (where another mark crosses)."""
+    if skip is not None:
+        cen = replace(cen, ok=cen.ok & ~skip)
     if cen.ok.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
@@ -113,8 +120,8 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
                       neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None,
-                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-                      ) -> MarkMeasurement:
+                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+                      crossing: Sequence[tuple[int, MarkCandidate]] = ()) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
@@ -122,10 +129,13 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
     encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
     ``offsets_var``: variances of the column and row offsets removed from the image
-    (:mod:`imaging.stripes`), carried into the centres' covariance."""
+    (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
+    candidate) of the other marks, whose grooves are kept out of this one's fit where they
+    cross it (:func:`crossing_skip`)."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
-    use = _usable(cen, where, cand)
+    skip, crossed = crossing_skip(cen, pf, crossing, image.shape, where)
+    use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
@@ -136,7 +146,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
                          offsets_var=offsets_var)
-    use = _usable(cen, where, cand)
+    skip, crossed = crossing_skip(cen, pf, crossing, image.shape, where)
+    use = _usable(cen, where, cand, skip)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -155,7 +166,13 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
-                           if jpeg is not None else 0.0)
+                           if jpeg is not None else 0.0, crossed)
+
+
+def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
+    """The other candidates with their indices (the ones that cross candidate i are found
+    by :func:`crossing_skip` once its groove's width is known)."""
+    return [(j, o) for j, o in enumerate(cands) if j != i]
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
@@ -287,7 +304,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     for i, c in enumerate(cands):
         try:
             m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg,
-                                  (stripes[0].offsets_var, stripes[1].offsets_var))
+                                  (stripes[0].offsets_var, stripes[1].offsets_var),
+                                  crossings(cands, i))
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)
@@ -298,6 +316,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if not out:
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
+    # Crossings name the other mark by its place in the output, as the user sees it.
+    out = [replace(m, crossings=tuple((index.get(j, j), n) for j, n in m.crossings))
+           if isinstance(m, MarkMeasurement) and m.crossings else m for m in out]
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
     notes = stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)

@@ -472,12 +472,6 @@ def test_clean_tumbles_over_ten_seeds(tmp_path):
     assert np.abs(z).max() < 4.0 and 0.72 < np.sqrt(np.mean(z ** 2)) < 1.29, z
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "two straight 300 px marks crossing near the centre at 20 and 28 deg (640x480, seed 73): "
-    "3 marks reported, exit 0, ok true: a phantom at 24.3690 deg +- 1229.5 arcsec (13072 "
-    "arcsec = 10.6 u from the nearer true mark; warned only 'unexplained structure ... "
-    "inflated x7.25'), the 20 deg mark twice (20.0306 and 20.0509 deg), the 28 deg mark "
-    "missing. Crossings at 30, 60 and 90 deg are measured right (|z| <= 1.44)"))
 def test_two_marks_crossing_at_a_shallow_angle_are_not_merged_into_a_phantom(tmp_path):
     truths = (20.0, 28.0)
     sc = U.Scene(marks=(U.Mark(320, 240, truths[0], 300), U.Mark(325, 235, truths[1], 300)),
