@@ -148,3 +148,68 @@ def crossing_stretch(c, o, half_px: float) -> tuple[float, float, np.ndarray] | 
         return None
     s_x = -d0 / sin
     return t_lo, t_hi, p0 + np.clip(s_x, o.t_start_px, o.t_end_px) * uo
+
+
+def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
+                  half_px: float) -> tuple[float, float] | None:
+    """Two grooves side by side in a median profile across a line: their positions, or None.
+
+    Parameters
+    ----------
+    prof : ndarray
+        Median profile [DN] at the across positions ``e`` [px] (1 px steps; NaN: no data).
+    dark : bool
+        Grooves darker than the surface.
+    sigma : float
+        Noise of one value of ``prof`` [DN].
+    half_px : float
+        Half-width of one groove [px]: minima closer than this are one groove.
+
+    Returns (e1, e2) [px], e1 < e2, when the profile has two minima (maxima for bright
+    grooves) each at least a third of the deeper one's depth below the background, with a
+    hump between them rising 5 ``sigma`` and a tenth of that depth above the shallower one.
+    """
+    ok = np.isfinite(prof)
+    if ok.sum() < 8:
+        return None
+    y = np.where(ok, -prof if dark else prof, np.nan)  # grooves as peaks
+    bg = float(np.nanmedian(np.concatenate([y[:4], y[-4:]])))
+    y = y - bg
+    peaks = [k for k in range(1, len(y) - 1)
+             if np.isfinite(y[k - 1:k + 2]).all() and y[k] >= y[k - 1] and y[k] > y[k + 1]]
+    if len(peaks) < 2:
+        return None
+    top = max(y[k] for k in peaks)
+    peaks = [k for k in peaks if y[k] >= top / 3]
+    best = None
+    for a in range(len(peaks)):
+        for b in range(a + 1, len(peaks)):
+            i, j = peaks[a], peaks[b]
+            if e[j] - e[i] < half_px:
+                continue
+            low = min(y[i], y[j])
+            dip = low - float(np.nanmin(y[i:j + 1]))
+            if dip >= max(5 * sigma, 0.1 * top) and (best is None or dip > best[0]):
+                best = (dip, float(e[i]), float(e[j]))
+    return None if best is None else (best[1], best[2])
+
+
+def fused_crossing(pairs: list[tuple[float, tuple[float, float] | None]], half_px: float
+                   ) -> tuple[float, float] | None:
+    """Whether a line is the fused ridge of two marks crossing at a shallow angle.
+
+    ``pairs``: (position t along the line [px], :func:`double_groove` of the profile across
+    it there). The fused ridge runs along the bisector of the two marks, so where their
+    grooves part, both lie off the line on opposite sides; along a true mark that another
+    crosses, one of the two grooves is the mark itself, on the line. Fused: two or more
+    places where the grooves straddle the line (each more than ``half_px`` / 2 off it). (Two
+    parallel grooves found as one line straddle it too, and cannot be measured as one mark
+    either.)
+
+    Returns (t [px], separation [px]) of the widest such place, or None.
+    """
+    straddle = [(t, g[1] - g[0]) for t, g in pairs
+                if g is not None and g[0] < -half_px / 2 and g[1] > half_px / 2]
+    if len(straddle) < 2:
+        return None
+    return max(straddle, key=lambda p: p[1])

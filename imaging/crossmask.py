@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from imaging.crossing import crossing_stretch
-from imaging.detect import MarkCandidate, wrap_angle
+from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.profile import Centres, ProfileFit, centres_half
 
@@ -53,3 +53,17 @@ def crossing_skip(cen: Centres, pf: ProfileFit, crossing: Sequence[tuple[int, Ma
         skip |= (cen.t >= t0) & (cen.t <= t1)
         crossed.append((j, int(round(t1 - t0))))
     return skip, tuple(crossed)
+
+
+def fused_error(c: MarkCandidate, where: str, shape: tuple[int, int]) -> ImageInputError:
+    """The refusal of a candidate that is two grooves fused into one line (c.fused)."""
+    t, sep = c.fused if c.fused is not None else (0.5 * (c.t_start_px + c.t_end_px), 0.0)
+    u, n = line_frame(c.angle_rad)
+    centre = np.array([(shape[1] - 1) / 2, (shape[0] - 1) / 2])
+    ends = [centre + c.offset_px * n + s * u for s in (c.t_start_px, c.t_end_px)]
+    x, y = centre + c.offset_px * n + t * u
+    return ImageInputError(
+        f"{where}: the line from pixel (x {ends[0][0]:.0f}, y {ends[0][1]:.0f}) to (x "
+        f"{ends[1][0]:.0f}, y {ends[1][1]:.0f}) is two grooves (marks crossing at a shallow "
+        f"angle, or side by side: {sep:.0f} px apart near (x {x:.0f}, y {y:.0f})) that cannot "
+        "be measured apart; not measured")

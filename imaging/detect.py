@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from scipy import special
 
-from imaging.crossing import split_two_lines
+from imaging.crossing import crossing_stretch, double_groove, fused_crossing, split_two_lines
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
 
@@ -28,7 +28,11 @@ from imaging.io import full_scale
 @dataclass(frozen=True)
 class MarkCandidate:
     """A coarse mark: line (angle [rad], offset [px]), extent along it [px], polarity,
-    strength (contrast x length) and mean ridge contrast (in units of the response noise)."""
+    strength (contrast x length) and mean ridge contrast (in units of the response noise).
+
+    ``fused``: (t [px], separation [px]) where the line is seen to be two grooves that part
+    on either side of it (two marks crossing at a shallow angle, fused into one ridge along
+    their bisector; :func:`imaging.crossing.fused_crossing`); None: one groove."""
 
     angle_rad: float
     offset_px: float
@@ -38,6 +42,7 @@ class MarkCandidate:
     thickness_px: float
     strength: float
     contrast: float = float("inf")
+    fused: tuple[float, float] | None = None
 
     @property
     def length_px(self) -> float:
@@ -486,7 +491,7 @@ def _candidates(layers, min_length_px: float, f: int, centre_small: np.ndarray,
                          np.array([(w - 1) / 2, (h - 1) / 2]), contrast)
             if keep is None or keep(c):
                 best.append(c)
-    return _dedupe(sorted(best, key=lambda c: -c.strength))
+    return _dedupe(_drop_fused(sorted(best, key=lambda c: -c.strength)))
 
 
 def _confirm(image: np.ndarray, cands: list[MarkCandidate], noise_full: float, f: int,
@@ -504,8 +509,56 @@ def _confirm(image: np.ndarray, cands: list[MarkCandidate], noise_full: float, f
         # filter integrates it into a strong response, but beside it lie many like it.
         ratio, limit = distinctness(image, c, top, reach)
         if ratio >= limit:
+            out.append(replace(c, fused=_fused(image, c, noise_full, top)))
+    return _drop_fused(_dedupe(out))
+
+
+def _fused(image: np.ndarray, c: MarkCandidate, noise: float, top: float,
+           block_px: int = 20) -> tuple[float, float] | None:
+    """Where a candidate is seen as two grooves straddling it (see MarkCandidate.fused):
+    median profiles across it over ``block_px`` stretches, each tested for two grooves."""
+    half = max(2.5, c.thickness_px)
+    n_along = max(int(c.length_px), 2 * block_px)
+    vals, e, t = _across(image, c, int(np.ceil(c.thickness_px + 18)), n_along, top)
+    sigma = 1.25 * noise / np.sqrt(block_px)
+    pairs = []
+    for k in range(0, n_along - block_px + 1, block_px):
+        prof, _ = _column_median(vals[k:k + block_px])
+        pairs.append((float(t[k:k + block_px].mean()),
+                      double_groove(prof, e, c.dark, sigma, half)))
+    return fused_crossing(pairs, half)
+
+
+def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
+    """Fused ridges of two crossing marks that were themselves found: not a mark.
+
+    Where two marks cross at a shallow angle their grooves fuse into one ridge along the
+    bisector: a third line, between the two in direction, that lies within a groove's reach
+    of both over its whole length (a mark there could not be measured apart from them)."""
+    out = []
+    for c in cands:
+        if not any(_fused_of(c, o1, o2) for i, o1 in enumerate(cands) for o2 in cands[i + 1:]
+                   if o1 is not c and o2 is not c):
             out.append(c)
-    return _dedupe(out)
+    return out
+
+
+def _fused_of(c: MarkCandidate, o1: MarkCandidate, o2: MarkCandidate) -> bool:
+    """Whether c is the fused ridge of o1 and o2 (see :func:`_drop_fused`)."""
+    if not (c.dark == o1.dark == o2.dark) or o1.fused is not None or o2.fused is not None:
+        return False
+    d1, d2 = wrap_angle(c.angle_rad - o1.angle_rad), wrap_angle(o2.angle_rad - c.angle_rad)
+    if d1 * d2 <= 0:  # c's direction not between theirs
+        return False
+    whole = (c.t_start_px, c.t_end_px)
+    return all(_covers(c, o, max(6.0, 2 * o.thickness_px), whole) for o in (o1, o2))
+
+
+def _covers(c: MarkCandidate, o: MarkCandidate, half_px: float,
+            whole: tuple[float, float]) -> bool:
+    """Whether line o lies within half_px of c over c's whole extent."""
+    got = crossing_stretch(c, o, half_px)
+    return got is not None and got[0] <= whole[0] + half_px and got[1] >= whole[1] - half_px
 
 
 def _central(image: np.ndarray, size: int) -> np.ndarray:

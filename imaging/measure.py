@@ -14,7 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
-from imaging.crossmask import crossing_skip
+from imaging.crossmask import crossing_skip, fused_error
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
@@ -131,7 +131,9 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     ``offsets_var``: variances of the column and row offsets removed from the image
     (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
     candidate) of the other marks, whose grooves are kept out of this one's fit where they
-    cross it (:func:`crossing_skip`)."""
+    cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused."""
+    if cand.fused is not None:
+        raise fused_error(cand, where, image.shape)
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     skip, crossed = crossing_skip(cen, pf, crossing, image.shape, where)
