@@ -119,12 +119,15 @@ def _frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
             np.array([np.sin(angle_rad), np.cos(angle_rad)]))
 
 
-def crossing_stretch(c, o, half_px: float) -> tuple[float, float, np.ndarray] | None:
+def crossing_stretch(c, o, half_px: float, extend: bool = False
+                     ) -> tuple[float, float, np.ndarray] | None:
     """The stretch of line ``c`` over which line ``o``'s groove lies within ``half_px`` of it.
 
     ``c`` and ``o`` carry ``angle_rad``, ``offset_px`` [px], ``t_start_px``/``t_end_px``
-    [px] and ``thickness_px`` (MarkCandidate or ProfileFit-like). ``half_px``: half-width of
-    c's profile window plus o's half-width [px].
+    [px] (MarkCandidate or ProfileFit-like). ``half_px``: half-width of c's profile window
+    plus o's half-width [px]. ``extend``: o's groove may run on past its found ends by the
+    stretch over which it lies within ``half_px`` of c (its ridge fused with c's there); if
+    that reaches the crossing, the whole stretch around the crossing counts.
 
     Returns (t0, t1, where) [px along c; where: the crossing point, px from the image
     centre], clipped to c's extent, or None when o does not come that close within both
@@ -139,15 +142,21 @@ def crossing_stretch(c, o, half_px: float) -> tuple[float, float, np.ndarray] | 
     d0 = float(p0 @ nc) - c.offset_px
     # |d0 + s sin| <= half over s in o's extent
     s_lo, s_hi = sorted(((-half_px - d0) / sin, (half_px - d0) / sin))
-    s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
+    # o's groove may run on past its found ends by the stretch where it is fused with c's
+    # (its ridge is lost there, and how far it goes beyond is unknown): when it comes that
+    # close to the crossing, all of the crossing's stretch counts.
+    fused = half_px / abs(sin) if extend else 0.0
+    s_x = -d0 / sin
+    # (Twice that stretch: the coarse search's ridge fuses at a filter width further out.)
+    if not (extend and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
+        s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
     if s_lo >= s_hi:
         return None
     t_lo, t_hi = sorted(float((p0 + s * uo) @ uc) for s in (s_lo, s_hi))
     t_lo, t_hi = max(t_lo, c.t_start_px), min(t_hi, c.t_end_px)
     if t_lo >= t_hi:
         return None
-    s_x = -d0 / sin
-    return t_lo, t_hi, p0 + np.clip(s_x, o.t_start_px, o.t_end_px) * uo
+    return t_lo, t_hi, p0 + np.clip(s_x, o.t_start_px - fused, o.t_end_px + fused) * uo
 
 
 def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,

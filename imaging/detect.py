@@ -556,8 +556,9 @@ def _fused_of(c: MarkCandidate, o1: MarkCandidate, o2: MarkCandidate) -> bool:
 
 def _covers(c: MarkCandidate, o: MarkCandidate, half_px: float,
             whole: tuple[float, float]) -> bool:
-    """Whether line o lies within half_px of c over c's whole extent."""
-    got = crossing_stretch(c, o, half_px)
+    """Whether line o lies within half_px of c over c's whole extent (o's ridge may stop
+    where the fused one begins: its groove counts on through the fused stretch)."""
+    got = crossing_stretch(c, o, half_px, extend=True)
     return got is not None and got[0] <= whole[0] + half_px and got[1] >= whole[1] - half_px
 
 

@@ -134,9 +134,10 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused."""
     if cand.fused is not None:
         raise fused_error(cand, where, image.shape)
-    pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
+    top = full_scale(image) if top is None else top
+    pf = fit_profile(image, cand, where, top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
-    skip, crossed = crossing_skip(cen, pf, crossing, image.shape, where)
+    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
@@ -148,7 +149,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
                          offsets_var=offsets_var)
-    skip, crossed = crossing_skip(cen, pf, crossing, image.shape, where)
+    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
