@@ -749,8 +749,9 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     lens_u = float(np.sqrt(sum(v**2 for k_, v in terms.items() if k_.startswith(LENS_TERMS))))
     limited = bool(lens_u > lens.max_u_rad)
     notes = list(lens.notes) + list(r.notes) + [
-        f"{name} mark {index}: crossing with mark {j}: {n} px excluded (the other groove "
-        "lies in its profile window there)" for j, n in m.crossings]
+        f"{name} mark {index}: crossing with "
+        f"{f'mark {j}' if j >= 0 else 'a groove not found as a mark'}: {n} px excluded "
+        "(the other groove lies in its profile window there)" for j, n in m.crossings]
     if limited:
         worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
