@@ -211,14 +211,14 @@ def fused_crossing(pairs: list[tuple[float, tuple[float, float] | None]], half_p
     it there). The fused ridge runs along the bisector of the two marks, so where their
     grooves part, both lie off the line on opposite sides; along a true mark that another
     crosses, one of the two grooves is the mark itself, on the line. Fused: two or more
-    places where the grooves straddle the line (each more than ``half_px`` / 2 off it). (Two
+    places where the grooves straddle the line (each more than ``half_px`` off it). (Two
     parallel grooves found as one line straddle it too, and cannot be measured as one mark
     either.)
 
     Returns (t [px], separation [px]) of the widest such place, or None.
     """
     straddle = [(t, g[1] - g[0]) for t, g in pairs
-                if g is not None and g[0] < -half_px / 2 and g[1] > half_px / 2]
+                if g is not None and g[0] < -half_px and g[1] > half_px]
     if len(straddle) < 2:
         return None
     return max(straddle, key=lambda p: p[1])

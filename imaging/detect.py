@@ -500,6 +500,9 @@ def _confirm(image: np.ndarray, cands: list[MarkCandidate], noise_full: float, f
     from the background's relief."""
     out = []
     for c in cands:
+        # Two marks fused along their bisector: seen so on the coarse line (re-centring
+        # would pull it onto one of the two grooves, and the other would go unsaid).
+        coarse, fused = c, _fused(image, c, noise_full, top)
         # Twice: a coarse angle smears the profile along a short mark (and hides its contrast).
         c, _ = _full_res(image, c, noise_full, f, top)
         c, snr = _full_res(image, c, noise_full, f, top)
@@ -508,8 +511,12 @@ def _confirm(image: np.ndarray, cands: list[MarkCandidate], noise_full: float, f
         # A machining lay running along the candidate: each streak is long, and the ridge
         # filter integrates it into a strong response, but beside it lie many like it.
         ratio, limit = distinctness(image, c, top, reach)
-        if ratio >= limit:
+        if ratio < limit:
+            continue
+        if fused is None:
             out.append(replace(c, fused=_fused(image, c, noise_full, top)))
+        else:
+            out.append(replace(coarse, fused=fused))
     return _drop_fused(_dedupe(out))
 
 
