@@ -79,6 +79,11 @@ def split_two_lines(pts: np.ndarray, min_piece: float, tol: float = TOL_PX
     """
     if len(pts) < 20:
         return None
+    # One straight ridge lies within the band of its principal axis: nothing to split.
+    m = pts.mean(0)
+    axis = np.linalg.eigh(np.cov((pts - m).T))[1][:, 1]
+    if np.abs((pts - m) @ np.array([-axis[1], axis[0]])).max() <= 2 * tol:
+        return None
     rng = np.random.default_rng(0)  # deterministic: the same image, the same marks
     m1, u1, in1 = _ransac_line(pts, tol, rng)
     n1 = np.array([-u1[1], u1[0]])
@@ -182,10 +187,12 @@ def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
     if ok.sum() < 8:
         return None
     y = np.where(ok, -prof if dark else prof, np.nan)  # grooves as peaks
-    bg = float(np.nanmedian(np.concatenate([y[:4], y[-4:]])))
+    ends = np.concatenate([y[:4], y[-4:]])
+    ends = ends[np.isfinite(ends)]
+    bg = float(ends.mean()) if ends.size else float(np.nanmean(y))  # background beyond both
     y = y - bg
-    peaks = [k for k in range(1, len(y) - 1)
-             if np.isfinite(y[k - 1:k + 2]).all() and y[k] >= y[k - 1] and y[k] > y[k + 1]]
+    with np.errstate(invalid="ignore"):  # NaN compares False: no peak next to a gap
+        peaks = list(np.flatnonzero((y[1:-1] >= y[:-2]) & (y[1:-1] > y[2:])) + 1)
     if len(peaks) < 2:
         return None
     top = max(y[k] for k in peaks)

@@ -11,9 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
-from imaging.detect import MarkCandidate, line_frame
+from imaging.detect import MarkCandidate, block_medians, line_frame
 from imaging.detect import _across as across
-from imaging.detect import _column_median as column_median
 from imaging.errors import ImageInputError
 from imaging.profile import Centres, ProfileFit, centres_half
 
@@ -23,8 +22,8 @@ CROSSING_MAX_SHARE = 0.75
 
 
 def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
-                  crossing: Sequence[tuple[int, MarkCandidate]], top: float, where: str
-                  ) -> tuple[np.ndarray | None, tuple[tuple[int, int], ...]]:
+                  crossing: Sequence[tuple[int, MarkCandidate]], top: float, where: str,
+                  look: bool = True) -> tuple[np.ndarray | None, tuple[tuple[int, int], ...]]:
     """Segments of a mark over which another mark's groove lies inside its centres' band.
 
     There the fitted centre is pulled towards the other groove (at a shallow crossing over a
@@ -32,10 +31,11 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
     left out of the fit. Two sources, joined: the other marks found (``crossing``: (index,
     candidate)), their grooves taken to run on through the stretch where they fuse with this
     one (their ridge is lost there), and a second groove seen in this mark's own profiles
-    (:func:`grooves_beside`: a mark found too short, or not found). Gaps between excluded
-    stretches shorter than the longest of them are the fused core (one groove, pulled) and
-    are excluded too. When they are most of the mark (:data:`CROSSING_MAX_SHARE`) the two
-    cannot be told apart: an ImageInputError naming the pixel region.
+    (:func:`grooves_beside`, when ``look``: a mark found too short, or not found). Gaps
+    between excluded stretches shorter than the longest of them are the fused core (one
+    groove, pulled) and are excluded too. When they are most of the mark
+    (:data:`CROSSING_MAX_SHARE`) the two cannot be told apart: an ImageInputError naming
+    the pixel region.
 
     Returns (skip mask or None, ((other index or -1: not found, px left out), ...)).
     """
@@ -49,7 +49,7 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
         got = crossing_stretch(pf, o, centres_half(pf) + o.thickness_px / 2 + 1, extend=True)
         if got is not None:
             stretches.append((got[0], got[1], j))
-    for t0, t1 in grooves_beside(image, pf, top, window):
+    for t0, t1 in grooves_beside(image, pf, top, window) if look else ():
         stretches.append((t0, t1, -1))
     if not stretches:
         return None, ()
@@ -98,15 +98,15 @@ def grooves_beside(image: np.ndarray, pf: ProfileFit, top: float, window: float,
     d = d[np.isfinite(d)]
     noise = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2) if d.size else 0.0
     sigma = 1.25 * noise / np.sqrt(block_px)
+    profs, ts = block_medians(vals, t, block_px)
     seen = []
-    for k in range(0, n_along - block_px + 1, block_px):
-        prof, _ = column_median(vals[k:k + block_px])
+    for tk, prof in zip(ts, profs, strict=True):
         g = double_groove(prof, e, pf.contrast_dn < 0, sigma, half)
         if g is None or min(abs(g[0]), abs(g[1])) > half:
             continue
         other = g[1] if abs(g[0]) <= abs(g[1]) else g[0]
         if abs(other) <= window:
-            seen.append((float(t[k:k + block_px].mean()), other))
+            seen.append((float(tk), other))
     if len(seen) < 2:
         return []
     ts, es = np.array(seen).T

@@ -137,7 +137,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     top = full_scale(image) if top is None else top
     pf = fit_profile(image, cand, where, top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
-    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where, look=False)
     use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
