@@ -25,11 +25,16 @@ members' own offset u.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
 from scipy.special import ndtri
 from scipy.stats import chi2 as chi2_dist
+
+from imaging.ends import groove_ends
+
+R = TypeVar("R")
 
 FORMAT_VERSION = 1
 
@@ -71,6 +76,14 @@ class LineFamily:
         from the frame's lines), ``none``.
     failed : int
         Lines of the family found but not measured (each is its own failed entry).
+    lengths_px, lengths_max_px : tuple of float
+        Each member's visible length and the longest it can be [px] (:mod:`imaging.ends`:
+        larger only when an end lies under an obstruction — dust, ink — whose far side
+        bounds it), in ``members`` order.
+    hidden_ends : tuple of int
+        Each member's ends under an obstruction (0, 1 or 2), in ``members`` order.
+    typical_length_px : float
+        Median visible length of the members with both ends seen [px] (nan: none).
     """
 
     members: tuple[int, ...]
@@ -89,6 +102,10 @@ class LineFamily:
     lens: str = "none"
     failed: int = 0
     angle_u_lens_rad: float = 0.0
+    lengths_px: tuple[float, ...] = ()
+    lengths_max_px: tuple[float, ...] = ()
+    hidden_ends: tuple[int, ...] = ()
+    typical_length_px: float = float("nan")
 
     @property
     def chi2_dof(self) -> float:
@@ -111,7 +128,10 @@ class LineFamily:
                 "steps": list(self.steps), "pitch_residuals_px": list(self.pitch_residuals_px),
                 "pitch_spread_px": self.pitch_spread_px, "lens": self.lens,
                 "failed": self.failed, "angle_u_lens_rad": self.angle_u_lens_rad,
-                "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600)}
+                "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600),
+                "lengths_px": list(self.lengths_px), "lengths_max_px": list(self.lengths_max_px),
+                "hidden_ends": list(self.hidden_ends),
+                "typical_length_px": self.typical_length_px}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineFamily:
@@ -129,7 +149,11 @@ class LineFamily:
                    num(d["pitch_px"]), num(d["pitch_u_px"]), tuple(int(k) for k in d["steps"]),
                    tuple(num(v) for v in d["pitch_residuals_px"]), num(d["pitch_spread_px"]),
                    str(d.get("lens", "none")), int(d.get("failed", 0)),
-                   num(d.get("angle_u_lens_rad", 0.0)))
+                   num(d.get("angle_u_lens_rad", 0.0)),
+                   tuple(num(v) for v in d.get("lengths_px", ())),
+                   tuple(num(v) for v in d.get("lengths_max_px", ())),
+                   tuple(int(v) for v in d.get("hidden_ends", ())),
+                   num(d.get("typical_length_px")))
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -137,19 +161,45 @@ class LineFamily:
              f"± {np.rad2deg(self.angle_u_rad) * 3600:.2f}″, chi2/dof {self.chi2_dof:.2f} "
              f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px, "
              f"spread {self.pitch_spread_px:.3f} px, lens: {self.lens}")
+        if np.isfinite(self.typical_length_px):
+            s += f", typical length {self.typical_length_px:.0f} px"
+        if any(self.hidden_ends):
+            s += f", {sum(1 for h in self.hidden_ends if h)} with an end hidden"
         if self.deviant:
             s += f"; NOT PARALLEL: marks {', '.join(map(str, self.deviant))}"
         return s
 
 
+def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
+    """A measured member (an ``align.marks.MarkResult``) with its ends checked for
+    obstructions (:func:`imaging.ends.groove_ends`): its ``length_px`` the visible length,
+    a note when an end is hidden (the length is then a lower bound, the far side of the
+    obstruction its upper one); and (visible length, longest length [px], ends hidden)."""
+    m = r.measurement
+    if m is None:
+        return r, (r.length_px, r.length_px, 0)
+    e = groove_ends(image, m.profile, m.extent_px)
+    n_hidden = sum(e.hidden)
+    notes = tuple(r.notes)
+    if n_hidden:
+        notes += (f"{r.image} mark {r.index}: {'both ends' if n_hidden == 2 else 'one end'} "
+                  f"under an obstruction (dust or print): length {e.length_px:.0f} px seen, "
+                  f"up to {e.length_max_px:.0f} px hidden under it (its angle is measured "
+                  "on what is seen)",)
+    return (replace(r, length_px=e.length_px, notes=notes),
+            (e.length_px, e.length_max_px, n_hidden))
+
+
 def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 middles: np.ndarray, offset_u: np.ndarray, lens: str = "none",
                 failed: int = 0, alpha: float = 1e-3,
-                lens_terms: Sequence[Mapping[str, float]] = ()) -> LineFamily:
+                lens_terms: Sequence[Mapping[str, float]] = (),
+                lengths: Sequence[tuple[float, float, int]] = ()) -> LineFamily:
     """The family of lines with these angles [rad] (``angle_u``: each one's own u without
     the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
     [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
-    mean's u, not the members' chi2); see the module docstring for the formulas."""
+    mean's u, not the members' chi2); ``lengths``: per member (visible length, longest
+    length [px], ends hidden); see the module docstring for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
@@ -198,7 +248,11 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     else:
         pitch, res, pitch_u = float("nan"), np.full(n, np.nan), float("nan")
     idx = tuple(int(indices[i]) for i in order)
+    ln = [lengths[i] for i in order] if len(lengths) == n else []
+    seen = [v for v, _, h in ln if not h]
     return LineFamily(idx, mean, u_mean, chi2, dof, p, tuple(float(v) for v in z[order]),
                       deviant, float(pitch), float(pitch_u), tuple(int(v) for v in k),
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
-                      failed, u_lens)
+                      failed, u_lens, tuple(float(v) for v, _, _ in ln),
+                      tuple(float(v) for _, v, _ in ln), tuple(int(h) for _, _, h in ln),
+                      float(np.median(seen)) if seen else float("nan"))

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from align.errors import NotApplicable
-from align.family import LineFamily, line_family
+from align.family import LineFamily, line_family, member_ends
 from align.lens import (
     LensRanges,
     LineGeometry,
@@ -682,19 +682,28 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         k += 1
     return with_families(out, measured.families, measured.unreported,
                          "camera model" if camera is not None else
-                         "frame lens" if lens.lam is not None else "none", alpha)
+                         "frame lens" if lens.lam is not None else "none", alpha, image)
 
 
 
 def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
-                  unreported: int, lens: str, alpha: float = 1e-3) -> list[MarkResult]:
+                  unreported: int, lens: str, alpha: float = 1e-3,
+                  image: np.ndarray | None = None) -> list[MarkResult]:
     """The image's results with each family's :class:`align.family.LineFamily` on its
-    measured members, and the count of lines found but not reported on every entry."""
+    measured members, and the count of lines found but not reported on every entry. With
+    the ``image``, each member's ends are checked for obstructions (dust, ink:
+    :func:`align.family.member_ends`): its length is the visible one, and a hidden end is
+    said with the bound it leaves."""
     out = [replace(r, unreported=unreported) for r in results]
     for g in families:
         ok = [i for i in g if out[i].found]
         if len(ok) < 2:
             continue
+        lengths: list[tuple[float, float, int]] = []
+        if image is not None:
+            for i in ok:
+                out[i], got = member_ends(image, out[i])
+                lengths.append(got)
         ms = [out[i] for i in ok]
         mids = []
         for r in ms:
@@ -714,7 +723,7 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
                                   for r, t in zip(ms, shared, strict=True)], 1e-30))
         fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
                           np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
-                          len(g) - len(ok), alpha, shared)
+                          len(g) - len(ok), alpha, shared, lengths)
         for i in ok:
             out[i] = replace(out[i], family=fam)
     return out

@@ -12,6 +12,12 @@ what the cap leaves out is counted in :attr:`Detection.unreported`, never droppe
 With an explicit ``min_length_px`` (the user's), two parallel lines side by side already seed
 the second search, and a family's lines shorter than that are counted as unreported.
 
+A *grating* — many identical lines at a fine pitch, none standing out — is not measured:
+the search reads a row of identical lines as a surface's lay (:func:`imaging.detect.
+distinctness`) and the groove model needs each line alone in its window.
+:func:`grating_note` recognises one (a sharp peak of the image's power spectrum) so that the
+refusal says so, with its pitch and direction.
+
 Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
 """
 
@@ -213,3 +219,63 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     return Detection([found[i] for i in keep],
                      tuple(tuple(index[i] for i in g) for g in groups),
                      tuple(found[i] for i in others[max_marks:] + short))
+
+
+GRATING_PEAK = 30.0
+"""A spectral peak this many times the median power at its spatial frequency (over all
+directions) is a grating's."""
+GRATING_SHARE = 0.05
+"""... and holding at least this share of the image's power beyond the longest pitch."""
+GRATING_MAX_PITCH_PX = 120.0
+"""Longest pitch looked for [px] (coarser rulings are found line by line)."""
+
+
+def grating_note(image: np.ndarray, size: int = 512) -> str | None:
+    """What to say when an image holds a grating: None, or "a grating of pitch p px, lines at
+    a deg: ..." from the power spectrum of its central ``size`` x ``size`` pixels.
+
+    The spectrum (Hann window, mean removed) of a grating is a sharp peak at 1/pitch across
+    its lines; texture, noise and isolated lines spread their power. The peak is compared
+    with the median power on its frequency's ring (:data:`GRATING_PEAK`) and with all the
+    power at frequencies above 1/:data:`GRATING_MAX_PITCH_PX` (:data:`GRATING_SHARE`).
+    """
+    h, w = image.shape
+    r0, c0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
+    a = np.asarray(image[r0:r0 + size, c0:c0 + size], float)
+    n_r, n_c = a.shape
+    if min(n_r, n_c) < 32:
+        return None
+    a = (a - a.mean()) * np.outer(np.hanning(n_r), np.hanning(n_c))
+    p = np.abs(np.fft.rfft2(a)) ** 2
+    fy = np.fft.fftfreq(n_r)[:, None]
+    fx = np.fft.rfftfreq(n_c)[None, :]
+    f = np.hypot(fx, fy)
+    band = f > 1 / GRATING_MAX_PITCH_PX
+    if not band.any() or p[band].sum() == 0:
+        return None
+    # Each frequency's power against the median of its ring (all directions): an edge's or
+    # a blob's power falls off smoothly with frequency, a grating's stands out of its ring.
+    rb = np.rint(f * min(n_r, n_c)).astype(int)
+    med = np.zeros(rb.max() + 1)
+    for k in np.unique(rb[band]):
+        med[k] = float(np.median(p[rb == k]))
+    ref = med[rb]
+    ratio = np.divide(p, ref, out=np.zeros_like(p), where=band & (ref > 0))
+    i = np.unravel_index(int(np.argmax(ratio)), p.shape)
+    if ratio[i] < GRATING_PEAK or p[i] < GRATING_SHARE * float(p[band].sum()):
+        return None
+    # Refine the peak's frequency by the power-weighted mean of its 3 x 3 neighbourhood.
+    rr = np.clip(np.arange(i[0] - 1, i[0] + 2), 0, n_r - 1)
+    cc = np.clip(np.arange(i[1] - 1, i[1] + 2), 0, p.shape[1] - 1)
+    wgt = p[np.ix_(rr, cc)]
+    vx = float(np.sum(wgt * fx[0, cc][None, :]) / wgt.sum())
+    vy = float(np.sum(wgt * fy[rr, 0][:, None]) / wgt.sum())
+    pitch = 1 / float(np.hypot(vx, vy))
+    # The lines run across the frequency vector (x right, y down; angles counter-clockwise).
+    angle = wrap_angle(float(np.arctan2(-vx, -vy)))
+    return (f"a grating (identical parallel lines, none standing out) of pitch {pitch:.1f} px, "
+            f"lines at {np.rad2deg(angle):.1f}°: gratings are not measured (the search reads "
+            "a row of identical lines as a surface's lay, and the groove model needs each "
+            "line alone in its window); give a ruling whose lines differ (a scale's long and "
+            "short graduations) or measure single marks")
+

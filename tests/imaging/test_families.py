@@ -130,3 +130,21 @@ def test_min_length_above_the_short_lines_says_how_many_it_left_out():
     assert len(res) == len(kinds) - kinds.count("short")
     assert res[0].unreported == kinds.count("short")
     assert any("not reported" in w for w in mark_warnings(res))
+
+
+def test_grating_refused_with_its_pitch_and_why():
+    """Gratings (identical lines at 6-16 px pitch, blurred to near-sinusoidal) are not measured:
+    the refusal names the grating, its pitch and direction, and why."""
+    from synth.grating import GratingSpec, render_grating
+
+    for pitch, angle, blur in ((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (16.0, -1.0, 1.0)):
+        s = render_grating(GratingSpec(pitch_px=pitch, line_angle_rad=angle, blur_px=blur,
+                                       seed=1))
+        res = measure_image(s.image)
+        assert len(res) == 1 and not res[0].found
+        msg = res[0].error
+        assert "a grating" in msg and "not measured" in msg
+        got = float(msg.split("pitch ")[1].split(" px")[0])
+        ang = float(msg.split("lines at ")[1].split("°")[0])
+        assert abs(got - pitch) < 0.02 * pitch
+        assert abs(_wrap(np.deg2rad(ang) - angle)) < np.deg2rad(1.0)
