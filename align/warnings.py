@@ -39,6 +39,14 @@ def mark_warnings(results: Sequence) -> list[str]:
         if fam is not None and (r.image, fam.members[0]) not in seen:
             seen.add((r.image, fam.members[0]))
             out += family_warnings(r.image, fam)
+        dial = getattr(r, "dial", None)
+        if dial is not None and (r.image, dial.members[0]) not in seen:
+            seen.add((r.image, dial.members[0]))
+            if not dial.uniform():
+                out.append(f"{r.image}: dial of {len(dial.members)} lines: the lines do not "
+                           f"meet at one point (p {dial.centre_p:.2g}) or are not evenly "
+                           f"spaced (chi2/dof {dial.chi2_dof:.2f}, p {dial.p_value:.2g}) "
+                           "within their u; the increment's u is widened by sqrt(chi2/dof)")
         if not r.found:
             out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
             continue

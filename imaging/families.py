@@ -99,6 +99,12 @@ def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
         ref = cands[seed].angle_rad
         same = [i for i in left if cands[i].dark == cands[seed].dark
                 and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        # The family's direction from all of them (a short seed's own is off by up to ~1
+        # deg), and its lines again about that.
+        ref = wrap_angle(ref + float(np.median([wrap_angle(cands[i].angle_rad - ref)
+                                                for i in same])))
+        same = [i for i in left if i == seed or (cands[i].dark == cands[seed].dark
+                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE)]
         left = [i for i in left if i != seed]
         if len(same) < min_members:
             continue
@@ -118,6 +124,76 @@ def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
                 out.append([int(i) for i in run])
                 left = [i for i in left if i not in run]
     return out
+
+
+MIN_DIAL = 4
+"""Fewest lines meeting at one point that make a dial."""
+DIAL_ANGLE = np.deg2rad(1.0)
+"""Direction error of a detected line (short lines: ~0.5 deg): how far it may miss the
+dial's centre is this angle times its distance from it, plus :data:`DIAL_MISS_PX`."""
+DIAL_MISS_PX = 3.0
+
+
+def _meets(c: MarkCandidate, p: np.ndarray) -> tuple[bool, float]:
+    """Whether a line runs radially from point p (its line passes near p, and p lies beyond
+    the segment's end, not on it): (meets, distance of its middle from p [px])."""
+    u, n = line_frame(c.angle_rad)
+    mid = _middle(c)
+    r = float(np.hypot(*(mid - p)))
+    miss = abs(float(p @ n) - c.offset_px)
+    along = abs(float((mid - p) @ u))
+    return (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE) and along > 0.5 * c.length_px + 5,
+            r)
+
+
+def dial_centre(cands: list[MarkCandidate], idx: list[int]) -> np.ndarray:
+    """Least-squares point nearest to the lines ``idx`` [px, relative to the image centre]
+    (each weighted by 1 / its distance from the point: the direction error's reach)."""
+    p = np.zeros(2)
+    for _ in range(3):
+        a, b = np.zeros((2, 2)), np.zeros(2)
+        for i in idx:
+            n = line_frame(cands[i].angle_rad)[1]
+            w = 1 / max(float(np.hypot(*(_middle(cands[i]) - p))), 10.0) ** 2
+            a += w * np.outer(n, n)
+            b += w * n * cands[i].offset_px
+        p = np.linalg.solve(a, b)
+    return p
+
+
+def group_dial(cands: list[MarkCandidate], idx: list[int]) -> list[int]:
+    """The lines among ``idx`` that meet at one point, radially (a dial's graduations), at
+    least :data:`MIN_DIAL` of them in at least 3 directions; [] if none.
+
+    Every pair of lines more than 5 deg apart proposes its crossing; the crossing most lines
+    run radially from wins, refined by least squares (:func:`dial_centre`)."""
+    if len(idx) < MIN_DIAL:
+        return []
+    best: list[int] = []
+    for k, i in enumerate(idx):
+        ui, ni = line_frame(cands[i].angle_rad)
+        for j in idx[k + 1:]:
+            if cands[j].dark != cands[i].dark:
+                continue
+            uj, nj = line_frame(cands[j].angle_rad)
+            m = np.array([ni, nj])
+            if abs(np.linalg.det(m)) < np.sin(np.deg2rad(5.0)):
+                continue
+            p = np.linalg.solve(m, [cands[i].offset_px, cands[j].offset_px])
+            got = [q for q in idx if cands[q].dark == cands[i].dark and _meets(cands[q], p)[0]]
+            if len(got) > len(best):
+                best = got
+    if len(best) < MIN_DIAL:
+        return []
+    p = dial_centre(cands, best)
+    best = [q for q in idx if cands[q].dark == cands[best[0]].dark and _meets(cands[q], p)[0]]
+    dirs = np.array([wrap_angle(cands[q].angle_rad) for q in best])
+    # At least 3 distinct directions (parallel lines "meet" anywhere along their normal).
+    if len(best) < MIN_DIAL or np.ptp(np.sort(dirs)) < 3 * FAMILY_ANGLE:
+        return []
+    # Ordered round the centre.
+    theta = [np.arctan2(-(m[1] - p[1]), m[0] - p[0]) for m in (_middle(cands[q]) for q in best)]
+    return [best[k] for k in np.argsort(theta)]
 
 
 def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
@@ -205,6 +281,12 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
+    if families:
+        # Lines meeting at a point (a dial's graduations): a group too, every one reported.
+        used = {i for g in groups for i in g}
+        dial = group_dial(found, [i for i in range(len(found)) if i not in used])
+        if dial:
+            groups = [*groups, dial]
     short: list[int] = []
     if min_length_px is not None:
         # The user's shortest line holds for families too: their shorter members are said.
