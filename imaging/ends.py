@@ -7,10 +7,12 @@ half-depth points) is therefore checked for an obstruction touching it: along th
 beyond the end, the band's pixels are fitted per 1-px bin as level + contrast x the groove's
 profile (as for the extent). A bin is *disturbed* when its level leaves the surface's (a
 linear trend over the measured stretch) by more than :data:`LEVEL_K` robust deviations, or
-its residual RMS exceeds :data:`RESID_K` times the stretch's median. A disturbed run that
+its residual RMS exceeds :data:`RESID_K` times the stretch's median, or its contrast is
+of the wrong sign or far deeper than the groove's (:data:`AMP_K`). A disturbed run that
 starts within two blur widths of the end is an obstruction:
 
-* if the groove is seen again beyond it (:data:`DEEP_RUN` bins at half its depth or more),
+* if the groove is seen again beyond it (:data:`DEEP_RUN` undisturbed bins at half its
+  depth or more, past the obstruction's fringe: bins not *quiet*, within :data:`QUIET_K`),
   the end was not one: it moves to the end of that stretch (and is checked again);
 * otherwise the end is *hidden*: the groove ends somewhere under the obstruction, between
   the visible end and the far side of the disturbed run (out to where the surface is
@@ -32,9 +34,12 @@ LEVEL_K = 4.5
 """A bin's level this many robust deviations from the surface's trend is disturbed."""
 RESID_K = 3.0
 """A bin whose residual RMS is this many times the stretch's median is disturbed."""
+AMP_K = 0.5
+"""A bin whose groove contrast is below -AMP_K or above 1 + AMP_K times the stretch's median
+is disturbed."""
 DEEP_RUN = 6
-"""Consecutive quiet bins at half the groove's depth that say the groove goes on past a
-speck (a blurred speck's fringe alone can look like a few bins of groove)."""
+"""Consecutive undisturbed bins at half the groove's depth that say the groove goes on past
+a speck (a blurred speck's fringe alone can look like a few bins of groove)."""
 QUIET_K = 2.5
 """A bin within this many robust deviations of the surface's level is quiet (the surface
 seen, no speck's fringe)."""
@@ -83,12 +88,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     extent : (t0, t1)
         Its half-depth ends [px] (:func:`imaging.profile.groove_extent`).
     reach_px : float
-        How far beyond each end to look [px].
+        How far beyond each end to look at least [px] (and as far as the groove is long).
     """
     t0, t1 = extent
     same = GrooveEnds(t0, t1, t0, t1)
     if not (np.isfinite(t0) and np.isfinite(t1)) or t1 - t0 < 10:
         return same
+    # A speck across the middle can leave a piece seen beyond it as long as the rest.
+    reach_px = max(reach_px, t1 - t0)
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0 - reach_px, t1 + reach_px,
                           half)
@@ -131,15 +138,20 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     amp_s[good] = median_filter(amp[good], size=5, mode="nearest")
     ref = float(np.median(amp_s[inside]))
     deep = good & (amp_s / ref >= 0.5) if ref != 0 else np.zeros(nb, bool)
+    # Contrast of the wrong sign (a bright speck on a dark groove's line) or far beyond the
+    # groove's (a dark one) is no groove either, even when its level stays near the surface's.
+    if ref != 0:
+        disturbed |= good & ((amp_s / ref < -AMP_K) | (amp_s / ref > 1 + AMP_K))
     quiet = good & (np.abs(dev) <= QUIET_K * scale) & (rms <= RESID_K * rms_ref)
     touch = int(np.ceil(2 * pf.blur_px + 2))
 
     def run_from(i: int, step: int) -> int:
-        """The last disturbed bin of the run through bin i going ``step`` (gaps <= GAP)."""
+        """The last bin of the obstruction through bin i going ``step``: bins not quiet
+        (its fringe included), gaps of up to GAP quiet bins."""
         last, clean = i, 0
         while 0 <= i + step < nb and clean <= GAP:
             i += step
-            if disturbed[i]:
+            if good[i] and not quiet[i]:
                 last, clean = i, 0
             else:
                 clean += 1
@@ -150,7 +162,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         farthest bin an obstruction touching the end covers); equal when none does."""
         while True:
             # The groove seen on past the end (the extent stops at its search's reach).
-            while 0 <= k + step < nb and deep[k + step] and quiet[k + step]:
+            while 0 <= k + step < nb and deep[k + step] and not disturbed[k + step]:
                 k += step
             near = [k + step * i for i in range(-touch, touch + 1) if 0 <= k + step * i < nb]
             hit = [i for i in near if disturbed[i]]
@@ -161,14 +173,21 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
             outer = run_from(hit[-1], step)
             clean_end = min(k, inner - step) if step > 0 else max(k, inner - step)
             # The groove seen again beyond it (deep, on the surface's level): the end was a
-            # speck lying on the groove; the groove's end is further.
-            i = outer + step
-            while 0 <= i < nb and not quiet[i] and abs(i - outer) <= GAP + 1:
-                i += step
-            run = 0
-            while 0 <= i < nb and deep[i] and quiet[i]:
-                run += 1
-                i += step
+            # speck lying on the groove; the groove's end is further. A stretch of groove
+            # too short to say so, ending on another obstruction, joins them (a numeral's
+            # bar, then a speck on the end).
+            while True:
+                i = outer + step
+                while (0 <= i < nb and not (deep[i] and quiet[i])
+                       and abs(i - outer) <= touch + GAP):
+                    i += step
+                run = 0
+                while 0 <= i < nb and deep[i] and not disturbed[i]:
+                    run += 1
+                    i += step
+                if run >= DEEP_RUN or not (0 <= i < nb and disturbed[i]):
+                    break
+                outer = run_from(i, step)
             if run >= DEEP_RUN and (i - step - k) * step > 0:
                 k = i - step  # strictly further out: the walk ends
                 continue
