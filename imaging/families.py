@@ -282,11 +282,46 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
     if families:
-        # Lines meeting at a point (a dial's graduations): a group too, every one reported.
+        # Lines meeting at a point (a dial's graduations): a group too, every one reported,
+        # completed by a second search down to half their typical length (as a family's).
         used = {i for g in groups for i in g}
         dial = group_dial(found, [i for i in range(len(found)) if i not in used])
         if dial:
-            groups = [*groups, dial]
+            p = dial_centre(found, dial)
+            typical = float(np.median([found[i].length_px for i in dial]))
+            shift = search.shift
+            extra = [c for c in search.candidates(MEMBER_FRACTION * typical)
+                     if c.dark == found[dial[0]].dark
+                     and _meets(replace_shift(c, shift), p)[0]]
+            for c in search.confirm(extra):
+                if not any(o.dark == c.dark and _near(c, o, FAMILY_ANGLE,
+                                                      max(6.0, o.thickness_px))
+                           and _overlap(c, o) for o in found):
+                    found.append(c)
+            # Two graduations on one diameter are one straight line to the search, joined
+            # across the dial's middle: cut at the inner circle, each is a graduation.
+            inner = min(float(np.hypot(*(_middle(found[i]) - p))) - found[i].length_px / 2
+                        for i in dial)
+            for j, c in enumerate(list(found)):
+                if j in used or c.dark != found[dial[0]].dark:
+                    continue
+                u, n = line_frame(c.angle_rad)
+                tp = float(p @ u)
+                miss = abs(float(p @ n) - c.offset_px)
+                if (miss < DIAL_MISS_PX + 2 and inner > 10
+                        and c.t_start_px < tp - inner < tp + inner < c.t_end_px):
+                    cut = 0.9 * inner
+                    found[j] = dc_replace(c, t_end_px=tp - cut)
+                    found.append(dc_replace(c, t_start_px=tp + cut))
+            # The parallel families' members first (their order kept), then the others.
+            kept = sorted(used)
+            others = [c for i, c in enumerate(found) if i not in used]
+            found = [found[i] for i in kept] + _dedupe(sorted(others, key=lambda c: -c.strength))
+            remap = {old: new for new, old in enumerate(kept)}
+            groups = [[remap[i] for i in g] for g in groups]
+            dial = group_dial(found, list(range(len(used), len(found))))
+            if dial:
+                groups = [*groups, dial]
     short: list[int] = []
     if min_length_px is not None:
         # The user's shortest line holds for families too: their shorter members are said.

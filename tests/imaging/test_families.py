@@ -148,3 +148,71 @@ def test_grating_refused_with_its_pitch_and_why():
         ang = float(msg.split("lines at ")[1].split("°")[0])
         assert abs(got - pitch) < 0.02 * pitch
         assert abs(_wrap(np.deg2rad(ang) - angle)) < np.deg2rad(1.0)
+
+
+def _dial_check(spec):
+    """A rendered dial measured: every graduation found and in the dial, the increment and
+    the centre against the truth in units of their u."""
+    from synth.dial import render_dial
+
+    s = render_dial(spec)
+    res = measure_image(s.image)
+    assert all(r.found for r in res) and len(res) == spec.n_lines
+    dial = res[0].dial
+    assert dial is not None and len(dial.members) == spec.n_lines and res[0].family is None
+    z_inc = (dial.increment_rad - spec.increment_rad) / dial.increment_u_rad
+    z_c = (np.array(dial.centre_px) - spec.centre_px) / np.array(dial.centre_u_px)
+    return dial, z_inc, z_c
+
+
+def test_dial_found_whole_with_centre_and_increment():
+    from synth.dial import DialSpec
+
+    spec = DialSpec(centre_px=(12.0, -7.0), n_lines=8, increment_rad=np.deg2rad(45.0),
+                    first_rad=0.2, inner_px=50.0, lengths_px=(90.0, 100.0, 110.0), width=400,
+                    height=400, seed=1)
+    dial, z_inc, z_c = _dial_check(spec)
+    assert abs(z_inc) < 4 and np.all(np.abs(z_c) < 4)
+    assert dial.uniform()
+
+
+def test_dial_not_uniform_is_said():
+    """Graduations off their places by 0.3 deg RMS (far beyond the lines' u): not uniform,
+    warned, and the increment's u widened to cover the scatter."""
+    from synth.dial import DialSpec
+
+    spec = DialSpec(centre_px=(12.0, -7.0), n_lines=8, increment_rad=np.deg2rad(45.0),
+                    first_rad=0.2, inner_px=50.0, lengths_px=(90.0, 100.0, 110.0), width=400,
+                    height=400, seed=1,
+                    increment_error_rad=np.deg2rad(0.3))
+    from synth.dial import render_dial
+
+    res = measure_image(render_dial(spec).image)
+    dial = res[0].dial
+    assert dial is not None and not dial.uniform()
+    assert any("dial of 8 lines" in w for w in mark_warnings(res))
+    assert abs(dial.increment_rad - spec.increment_rad) < 4 * dial.increment_u_rad
+
+
+@pytest.mark.slow
+def test_dial_over_seeds():
+    """Dials of random centre, increment 10-36 deg, SNR 20-60 (640 x 640): every line found
+    and in the dial, increment and centre z ~ N(0, 1) over seeds, chi2/dof 0.7-1.4 on
+    average."""
+    from synth.dial import DialSpec
+
+    zs, chis = [], []
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        inc = np.deg2rad(rng.choice([10.0, 12.0, 15.0, 20.0, 30.0, 36.0]))
+        spec = DialSpec(centre_px=tuple(rng.uniform(-30, 30, 2)), increment_rad=inc,
+                        n_lines=int(min(24, round(2 * np.pi / inc))), first_rad=rng.uniform(0, 1),
+                        inner_px=90.0, lengths_px=(80.0, 100.0, 120.0), snr=rng.uniform(20, 60),
+                        width=640, height=640, seed=seed)
+        dial, z_inc, z_c = _dial_check(spec)
+        zs += [z_inc, *z_c]
+        chis.append(dial.chi2_dof)
+    z = np.array(zs)
+    assert np.max(np.abs(z)) < 4
+    assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
+    assert 0.7 < np.mean(chis) < 1.4, chis
