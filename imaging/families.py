@@ -132,6 +132,10 @@ DIAL_ANGLE = np.deg2rad(1.0)
 """Direction error of a detected line (short lines: ~0.5 deg): how far it may miss the
 dial's centre is this angle times its distance from it, plus :data:`DIAL_MISS_PX`."""
 DIAL_MISS_PX = 3.0
+DIAL_MIN_STEP = np.deg2rad(2.0)
+"""Smallest angle between a dial's neighbouring graduations."""
+DIAL_MAX_SKIP = 3.0
+"""Most steps per gap on average (a dial may miss some graduations, not most)."""
 
 
 def _meets(c: MarkCandidate, p: np.ndarray) -> tuple[bool, float]:
@@ -192,8 +196,20 @@ def group_dial(cands: list[MarkCandidate], idx: list[int]) -> list[int]:
     if len(best) < MIN_DIAL or np.ptp(np.sort(dirs)) < 3 * FAMILY_ANGLE:
         return []
     # Ordered round the centre.
-    theta = [np.arctan2(-(m[1] - p[1]), m[0] - p[0]) for m in (_middle(cands[q]) for q in best)]
-    return [best[k] for k in np.argsort(theta)]
+    theta = np.array([np.arctan2(-(m[1] - p[1]), m[0] - p[0])
+                      for m in (_middle(cands[q]) for q in best)])
+    order = np.argsort(theta)
+    # A graduation: neighbours at least DIAL_MIN_STEP apart, few steps missing. Lines that
+    # merely converge (a photograph's vanishing point) are spaced anyhow.
+    th = theta[order]
+    gaps = np.diff(np.append(th, th[0] + 2 * np.pi))
+    gaps = np.delete(gaps, np.argmax(gaps))  # the open side of a partial dial
+    g0 = float(np.min(gaps))
+    steps = np.rint(gaps / g0)
+    if (g0 < DIAL_MIN_STEP or np.sum(steps) > DIAL_MAX_SKIP * len(gaps)
+            or np.max(np.abs(gaps / g0 - steps)) > 0.25):
+        return []
+    return [best[k] for k in order]
 
 
 def _ruling(cands: list[MarkCandidate], members: list[int], ref: float

@@ -206,8 +206,9 @@ def test_dial_over_seeds():
         rng = np.random.default_rng(seed)
         inc = np.deg2rad(rng.choice([10.0, 12.0, 15.0, 20.0, 30.0, 36.0]))
         spec = DialSpec(centre_px=tuple(rng.uniform(-30, 30, 2)), increment_rad=inc,
-                        n_lines=int(min(24, round(2 * np.pi / inc))), first_rad=rng.uniform(0, 1),
-                        inner_px=90.0, lengths_px=(80.0, 100.0, 120.0), snr=rng.uniform(20, 60),
+                        n_lines=int(min(24, round(2 * np.pi / inc))),
+                        first_rad=rng.uniform(0, 1),
+                        inner_px=90.0, lengths_px=(100.0, 120.0, 140.0), snr=rng.uniform(20, 60),
                         width=640, height=640, seed=seed)
         dial, z_inc, z_c = _dial_check(spec)
         zs += [z_inc, *z_c]
