@@ -368,9 +368,11 @@ def grating_note(image: np.ndarray, size: int = 512) -> str | None:
     a deg: ..." from the power spectrum of its central ``size`` x ``size`` pixels.
 
     The spectrum (Hann window, mean removed) of a grating is a sharp peak at 1/pitch across
-    its lines; texture, noise and isolated lines spread their power. The peak is compared
-    with the median power on its frequency's ring (:data:`GRATING_PEAK`) and with all the
-    power at frequencies above 1/:data:`GRATING_MAX_PITCH_PX` (:data:`GRATING_SHARE`).
+    its lines; texture, noise and isolated lines spread their power. The frequency standing
+    out most above the median power of its ring (at least :data:`GRATING_PEAK` times), or
+    its lowest, stronger sub-harmonic that also does (a sharp-edged ruling's fundamental), must
+    hold :data:`GRATING_SHARE` of all the power at frequencies above
+    1/:data:`GRATING_MAX_PITCH_PX`.
     """
     h, w = image.shape
     r0, c0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
@@ -395,7 +397,17 @@ def grating_note(image: np.ndarray, size: int = 512) -> str | None:
     ref = med[rb]
     ratio = np.divide(p, ref, out=np.zeros_like(p), where=band & (ref > 0))
     i = np.unravel_index(int(np.argmax(ratio)), p.shape)
-    if ratio[i] < GRATING_PEAK or p[i] < GRATING_SHARE * float(p[band].sum()):
+    if ratio[i] < GRATING_PEAK:
+        return None
+    # The peak may be a harmonic of a sharp-edged ruling: the fundamental is the lowest
+    # sub-harmonic (f/m, same direction) that stands out of its ring too and is stronger
+    # (a ruling's harmonics are weaker than its fundamental, the blur weakens them more).
+    for m in (5, 4, 3, 2):
+        j = (int(np.rint(fy[i[0], 0] / m * n_r)) % n_r, int(np.rint(fx[0, i[1]] / m * n_c)))
+        if band[j] and ratio[j] >= GRATING_PEAK and p[j] >= p[i]:
+            i = j
+            break
+    if p[i] < GRATING_SHARE * float(p[band].sum()):
         return None
     # Refine the peak's frequency by the power-weighted mean of its 3 x 3 neighbourhood.
     rr = np.clip(np.arange(i[0] - 1, i[0] + 2), 0, n_r - 1)

@@ -132,14 +132,12 @@ def test_min_length_above_the_short_lines_says_how_many_it_left_out():
     assert any("not reported" in w for w in mark_warnings(res))
 
 
-def test_grating_refused_with_its_pitch_and_why():
-    """Gratings (identical lines at 6-16 px pitch, blurred to near-sinusoidal) are not measured:
-    the refusal names the grating, its pitch and direction, and why."""
+def _grating_refused(cases, **frame):
     from synth.grating import GratingSpec, render_grating
 
-    for pitch, angle, blur in ((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (16.0, -1.0, 1.0)):
+    for pitch, angle, blur in cases:
         s = render_grating(GratingSpec(pitch_px=pitch, line_angle_rad=angle, blur_px=blur,
-                                       seed=1))
+                                       seed=1, **frame))
         res = measure_image(s.image)
         assert len(res) == 1 and not res[0].found
         msg = res[0].error
@@ -148,6 +146,20 @@ def test_grating_refused_with_its_pitch_and_why():
         ang = float(msg.split("lines at ")[1].split("°")[0])
         assert abs(got - pitch) < 0.02 * pitch
         assert abs(_wrap(np.deg2rad(ang) - angle)) < np.deg2rad(1.0)
+
+
+def test_grating_refused_with_its_pitch_and_why():
+    """Gratings (identical lines, 6 px pitch blurred to near-sinusoidal, 30 px sharp-edged)
+    are not measured: the refusal names the grating, its pitch and direction, and why."""
+    _grating_refused(((6.0, 0.3, 1.5), (30.0, 1.2, 1.5)), width=320, height=240,
+                     span_px=150.0, length_px=120.0)
+
+
+@pytest.mark.slow
+def test_gratings_refused_6_to_60_px():
+    _grating_refused(((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (10.0, 1.2, 3.0),
+                      (16.0, -1.0, 1.0), (30.0, 1.2, 1.5), (40.0, 0.5, 1.5),
+                      (60.0, 0.2, 1.5)))
 
 
 def _dial_check(spec):
@@ -217,3 +229,17 @@ def test_dial_over_seeds():
     assert np.max(np.abs(z)) < 4
     assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
     assert 0.7 < np.mean(chis) < 1.4, chis
+
+
+def test_no_grating_named_where_there_is_none():
+    """A lone mark among dust and texture, and a blank frame with noise: no grating said."""
+    from imaging.families import grating_note
+    from synth import ImageSpec, MarkSpec, render_marks
+
+    one = render_marks(ImageSpec(marks=(MarkSpec(0.1, 5.0, 400.0, 4.0),), width=640,
+                                 height=480, dust=30, texture=0.05, seed=2),
+                       with_crlb=False).image
+    assert grating_note(one) is None
+    noise = np.random.default_rng(0).normal(1000, 10, (480, 640))
+    assert grating_note(noise) is None
+
