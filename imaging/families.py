@@ -36,6 +36,7 @@ from imaging.detect import (
     _near,
     _overlap,
     _shift,
+    default_min_length,
     detect_lines_once,
     line_frame,
     wrap_angle,
@@ -48,6 +49,9 @@ FAMILY_ANGLE = np.deg2rad(2.0)
 to ~0.5 deg on short lines); the measured angles are then tested by their chi2."""
 MAX_GAP = 3.0
 """Largest gap between neighbouring members, in units of the family's median gap."""
+RAW_MEMBERS = 4
+"""Fewest parallel unconfirmed candidates side by side that are looked at as a ruling when
+the search confirmed no family."""
 MEMBER_FRACTION = 0.5
 """A line joins a family from this fraction of the family's median length."""
 PIECE_FRACTION = 0.15
@@ -237,6 +241,28 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     # then counted as found but not reported (never dropped unsaid).
     groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
         if families else []
+    if families and not found:
+        # Lines at a pitch under the relief window beside each line are alike their
+        # neighbours there, and the search refuses them all as a lay. A regular ruling of
+        # them among the unconfirmed candidates is confirmed with the window inside the
+        # pitch (only when nothing was found: it costs a second pass over the candidates).
+        seed_len = LENGTH_SLACK * (min_length_px if min_length_px is not None
+                                   else default_min_length(search.image.shape))
+        raw = search.candidates(seed_len)
+        for g in group_families(raw, RAW_MEMBERS):
+            origin, pitch = _ruling(raw, g, raw[g[0]].angle_rad)
+            q = np.array([_position(raw[i], raw[g[0]].angle_rad) for i in g])
+            k = (q - origin) / pitch
+            if np.max(np.abs(k - np.rint(k))) > GRID_TOLERANCE:
+                continue  # not a ruling: streaks of a surface's lay fall anywhere
+            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6, 20, 60))
+            got = search.confirm([raw[i] for i in g], reach)
+            if len(got) >= MIN_MEMBERS:
+                found += [c for c in got if not any(
+                    o.dark == c.dark and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
+                    and _overlap(c, o) for o in found)]
+        found = _dedupe(sorted(found, key=lambda c: -c.strength))
+        groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS)
     for g in groups:
         ref = found[g[0]].angle_rad
         typical = float(np.median([found[i].length_px for i in g]))
