@@ -50,7 +50,7 @@ class LineFamily:
     Attributes
     ----------
     members : tuple of int
-        The members' mark indices in the image, ordered across the lines.
+        The members' mark indices in the image, ordered across the lines — dimensionless.
     angle_rad, angle_u_rad : float
         Weighted mean angle of the members [rad] and its standard uncertainty [rad]
         (widened by sqrt(chi2/dof) when the members disagree), the lens's share included.
@@ -58,30 +58,35 @@ class LineFamily:
         The lens's share of ``angle_u_rad`` [rad]: per lens term, the members' terms
         averaged with the mean's weights (added linearly: one lens moves them together).
     chi2, dof, p_value : float, int, float
-        Members' angles about the weighted mean: chi2, n - 1, upper-tail probability.
+        Members' angles about the weighted mean: chi2, n - 1, upper-tail probability —
+        dimensionless.
     z : tuple of float
-        Each member's normalised deviation from the mean angle.
+        Each member's normalised deviation from the mean angle — dimensionless.
     deviant : tuple of int
-        Mark indices of the members beyond the Bonferroni limit (tilted or bent lines).
+        Mark indices of the members beyond the Bonferroni limit (tilted or bent lines) —
+        dimensionless.
     pitch_px, pitch_u_px : float
         Distance between neighbouring ruling positions [px] and its uncertainty [px].
     steps : tuple of int
-        Each member's ruling step (0 for the first; a skipped graduation skips a step).
+        Each member's ruling step (0 for the first; a skipped graduation skips a step) —
+        dimensionless.
     pitch_residuals_px : tuple of float
         Each member's position minus the uniform ruling's [px].
     pitch_spread_px : float
         RMS of ``pitch_residuals_px`` [px] (the ruling's non-uniformity, as imaged).
     lens : str
         What corrected the members for the lens: ``camera model``, ``frame lens`` (fitted
-        from the frame's lines), ``none``.
+        from the frame's lines), ``none``; unit —.
     failed : int
-        Lines of the family found but not measured (each is its own failed entry).
+        Lines of the family found but not measured (each is its own failed entry) —
+        dimensionless.
     lengths_px, lengths_max_px : tuple of float
         Each member's visible length and the longest it can be [px] (:mod:`imaging.ends`:
         larger only when an end lies under an obstruction — dust, ink — whose far side
         bounds it), in ``members`` order.
     hidden_ends : tuple of int
-        Each member's ends under an obstruction (0, 1 or 2), in ``members`` order.
+        Each member's ends under an obstruction (0, 1 or 2), in ``members`` order —
+        dimensionless.
     typical_length_px : float
         Median visible length of the members with both ends seen [px] (nan: none).
     """
@@ -277,23 +282,25 @@ class LineDial:
     Attributes
     ----------
     members : tuple of int
-        Mark indices, ordered round the centre.
+        Mark indices, ordered round the centre — dimensionless.
     centre_px, centre_u_px : (float, float)
         P (x, y) [px, relative to the image centre, x right, y down] and its u [px].
     centre_chi2, centre_dof, centre_p : float, int, float
-        chi2_c, n - 2, its upper-tail probability (lines that miss one point: p small).
+        chi2_c, n - 2, its upper-tail probability (lines that miss one point: p small) —
+        dimensionless.
     increment_rad, increment_u_rad : float
         Angle between neighbouring graduations [rad] and its u [rad].
     steps : tuple of int
-        Each member's step k_i round the dial.
+        Each member's step k_i round the dial — dimensionless.
     residuals_rad : tuple of float
         theta_i minus the uniform graduation's [rad].
     spread_rad : float
         RMS of the residuals [rad] (the graduation's non-uniformity, as imaged).
     chi2, dof, p_value : float, int, float
-        The residuals' chi2, n - 2, upper-tail probability.
+        The residuals' chi2, n - 2, upper-tail probability — dimensionless.
     lens : str
-        As :attr:`LineFamily.lens` (the lens's share is not in these u: see the docs).
+        As :attr:`LineFamily.lens` (the lens's share is not in these u: see the docs);
+        unit —.
     """
 
     members: tuple[int, ...]
