@@ -402,6 +402,8 @@ class MarkResult:
         The family of parallel lines it belongs to; unit —.
     unreported : int
         Lines found in the image and not reported — dimensionless.
+    dial : LineDial or None
+        The graduated dial (lines meeting at a point) it belongs to; unit —.
     lens : Mapping or None
         The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
         [px]).
