@@ -136,6 +136,8 @@ DIAL_ANGLE = np.deg2rad(1.0)
 """Direction error of a detected line (short lines: ~0.5 deg): how far it may miss the
 dial's centre is this angle times its distance from it, plus :data:`DIAL_MISS_PX`."""
 DIAL_MISS_PX = 3.0
+DIAL_PROPOSERS = 40
+"""The strongest lines whose pairs propose a dial's centre."""
 DIAL_MIN_STEP = np.deg2rad(2.0)
 """Smallest angle between a dial's neighbouring graduations."""
 DIAL_MAX_SKIP = 3.0
@@ -177,22 +179,37 @@ def group_dial(cands: list[MarkCandidate], idx: list[int]) -> list[int]:
     run radially from wins, refined by least squares (:func:`dial_centre`)."""
     if len(idx) < MIN_DIAL:
         return []
-    best: list[int] = []
-    for k, i in enumerate(idx):
-        ui, ni = line_frame(cands[i].angle_rad)
-        for j in idx[k + 1:]:
-            if cands[j].dark != cands[i].dark:
+    # Every proposal tested against every line at once (arrays over the lines); the
+    # strongest DIAL_PROPOSERS lines propose (a busy photograph has hundreds of pairs).
+    a = np.array([cands[q].angle_rad for q in idx])
+    nrm = np.column_stack([np.sin(a), np.cos(a)])
+    along = np.column_stack([np.cos(a), -np.sin(a)])
+    off = np.array([cands[q].offset_px for q in idx])
+    mid = np.array([_middle(cands[q]) for q in idx])
+    half = np.array([cands[q].length_px / 2 for q in idx])
+    dark = np.array([cands[q].dark for q in idx])
+
+    def meeting(p: np.ndarray, pol: bool) -> np.ndarray:
+        r = np.hypot(*(mid - p).T)
+        miss = np.abs(nrm @ p - off)
+        return ((dark == pol) & (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE))
+                & (np.abs(np.sum((mid - p) * along, axis=1)) > half + 5))
+
+    best = np.zeros(len(idx), bool)
+    prop = sorted(range(len(idx)), key=lambda k: -cands[idx[k]].strength)[:DIAL_PROPOSERS]
+    for x, k in enumerate(prop):
+        for j in prop[x + 1:]:
+            if dark[j] != dark[k]:
                 continue
-            uj, nj = line_frame(cands[j].angle_rad)
-            m = np.array([ni, nj])
+            m = nrm[[k, j]]
             if abs(np.linalg.det(m)) < np.sin(np.deg2rad(5.0)):
                 continue
-            p = np.linalg.solve(m, [cands[i].offset_px, cands[j].offset_px])
-            got = [q for q in idx if cands[q].dark == cands[i].dark and _meets(cands[q], p)[0]]
-            if len(got) > len(best):
+            got = meeting(np.linalg.solve(m, off[[k, j]]), bool(dark[k]))
+            if got.sum() > best.sum():
                 best = got
-    if len(best) < MIN_DIAL:
+    if best.sum() < MIN_DIAL:
         return []
+    best = [idx[k] for k in np.flatnonzero(best)]
     p = dial_centre(cands, best)
     best = [q for q in idx if cands[q].dark == cands[best[0]].dark and _meets(cands[q], p)[0]]
     dirs = np.array([wrap_angle(cands[q].angle_rad) for q in best])
