@@ -15,7 +15,7 @@ import numpy as np
 from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
-from axisbase.table import OUTPUT_UNITS
+from axisbase.header import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
 # ----------------------------------------------------------------------------- imaging

@@ -18,8 +18,8 @@ import numpy as np
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
+from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
-from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
 

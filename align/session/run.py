@@ -50,7 +50,7 @@ from align.tilt import FAR_FROM_1G
 from align.warnings import session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
-from axisbase.table import resolve_units
+from axisbase.header import resolve_units
 from imaging import CameraModel
 
 Progress = Callable[[str], None]
