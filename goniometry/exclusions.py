@@ -58,7 +58,15 @@ R_NOPATTERN = "no clean revolution nearby to predict the face pattern: stretch e
 
 @dataclass
 class Exclusions:
-    """What was excluded or repaired, by reason, with line numbers (the first 1000)."""
+    """What was excluded or repaired, by reason, with line numbers.
+
+    Attributes
+    ----------
+    counts : Counter
+        Reason (one of the ``R_*`` strings) -> how many times.
+    lines : dict of str to list of int
+        Reason -> the file lines where it happened (the first ``LINES_KEPT``).
+    """
 
     counts: Counter = field(default_factory=Counter)
     lines: dict = field(default_factory=dict)

@@ -50,12 +50,32 @@ FACE_COUNT_SEGMENTS = 16
 
 @dataclass(frozen=True)
 class LogSummary:
-    """One pass over a log: ``stats`` (sums over the revolutions used), ``exclusions``
-    (every fault and decision, with lines), ``rows``; ``incomplete_head``: rows before the
-    first complete revolution (the log armed on face ``armed_face``, None when unknown);
-    ``incomplete_tail``: rows after the last; ``sigma_counts``: the per-interval scatter of
-    the clean revolutions [counts] (quantisation and jitter) that the 5-sigma screen uses;
-    ``tolerance_counts``: the pulse-to-face match tolerance; ``excluded_revolutions``."""
+    """One pass over a log.
+
+    Attributes
+    ----------
+    stats : RevolutionStats
+        Sums over the revolutions used (and the first ``keep`` kept whole).
+    exclusions : Exclusions
+        Every fault and decision, with lines.
+    has_time : bool
+        The log has pulse times.
+    rows : int
+        Rows read.
+    incomplete_tail : int
+        Rows after the last complete revolution.
+    incomplete_head : int
+        Rows before the first complete revolution.
+    armed_face : int or None
+        The face the log was armed on (None when unknown).
+    sigma_counts : float
+        Per-interval scatter of the clean revolutions [counts] (quantisation and jitter)
+        that the 5-sigma screen uses.
+    tolerance_counts : float
+        The pulse-to-face match tolerance [counts].
+    excluded_revolutions : int
+        Revolutions excluded.
+    """
 
     stats: RevolutionStats
     exclusions: Exclusions
@@ -302,6 +322,36 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     them — work on the head of a log (the loop) can then run while the rest is read.
     ``on_bytes(n)``: called after each chunk with about how many bytes of the file it held
     (``block_bytes``; for a progress bar).
+
+    Parameters
+    ----------
+    path : str or Path
+        The counter log.
+    n_faces : int
+        Faces of the housing (pulses per revolution).
+    keep : int
+        Revolutions kept whole (the first ones).
+    block_bytes : int
+        Text per chunk [bytes].
+    correct : callable, optional
+        ``correct(counts, dt) -> counts``, see above.
+    columns : mapping of str to str, optional
+        Canonical name -> header name (``--columns``).
+    on_kept, on_bytes : callable, optional
+        See above.
+    on_kept_at : int
+        Revolutions handed to ``on_kept`` (1..``keep``).
+
+    Returns
+    -------
+    LogSummary
+        The statistics, exclusions with their lines, and the pass's thresholds.
+
+    Raises
+    ------
+    LogError
+        A log that cannot be used (too few revolutions, no reference pulse, two tables'
+        logs concatenated, a log written twice, a bad row), naming the file and line.
     """
     reuse_freed_memory()  # the pass frees and reallocates MB-sized temporaries per chunk
     if on_kept is not None and not 0 < on_kept_at <= keep:

@@ -19,8 +19,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("align", "axisbase", "goniometry", "imaging", "synth")
+from tests.test_import_graph import PACKAGES, ROOT
+from tests.test_import_graph import _modules as project_modules
+
 SECTION = r"^\s*{}\s*\n\s*-{{3,}}\s*$"
 
 
@@ -82,13 +83,7 @@ class Count:
 
 
 def _modules(pkg: str) -> dict[str, Path]:
-    out = {}
-    for f in sorted((ROOT / pkg).rglob("*.py")):
-        parts = list(f.relative_to(ROOT).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts = parts[:-1]
-        out[".".join(parts)] = f
-    return out
+    return {m: f for m, f in project_modules().items() if m.split(".")[0] == pkg}
 
 
 @functools.cache
