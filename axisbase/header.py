@@ -66,7 +66,25 @@ def show_cell(v: str) -> str:
 
 
 def parse_column_map(text: str | None, flag: str = "--columns") -> dict[str, str]:
-    """``'ux=ax, uy=ay'`` -> ``{'ux': 'ax', 'uy': 'ay'}`` (canonical name = header name)."""
+    """``'ux=ax, uy=ay'`` -> ``{'ux': 'ax', 'uy': 'ay'}`` (canonical name = header name).
+
+    Parameters
+    ----------
+    text : str or None
+        The flag's or key's value.
+    flag : str
+        The flag (or session.toml key) it came from, for the messages.
+
+    Returns
+    -------
+    dict of str to str
+        Canonical name (lower case) -> header name (normalised as headers are).
+
+    Raises
+    ------
+    InputError
+        An item that is not NAME=HEADER, an empty side, a name mapped twice.
+    """
     if not text:
         return {}
     out: dict[str, str] = {}
@@ -165,7 +183,29 @@ def header_units(path: str | Path, spec: TableSpec, columns: Mapping[str, str] |
                  names: tuple[str, ...]) -> str | None:
     """The output unit written in the header for ``names`` (e.g. ``ux [V]``), normalised to
     a key of :data:`OUTPUT_UNITS`; None when none is written. Different units for different
-    axes, or a unit the tool does not know, are refused."""
+    axes, or a unit the tool does not know, are refused.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    spec : TableSpec
+        Its format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name.
+    names : tuple of str
+        The columns whose unit is the output's (``('ux', 'uy', 'uz')``).
+
+    Returns
+    -------
+    str or None
+        A key of :data:`OUTPUT_UNITS`, or None.
+
+    Raises
+    ------
+    InputError
+        A unit not known, or different units on different axes.
+    """
     h = read_header(Path(path), spec, columns or {})
     found = {n: h.units[n] for n in names if n in h.units}
     if not found:
@@ -186,7 +226,35 @@ def resolve_units(given: str | None, paths: list[str | Path], spec: TableSpec,
                   columns: Mapping[str, str] | None, names: tuple[str, ...],
                   flag: str = "--units", default: str | None = "V") -> str | None:
     """The output unit of the data: ``given`` (the flag/key) checked against the units
-    written in the headers of ``paths``; else the header's; else ``default``."""
+    written in the headers of ``paths``; else the header's; else ``default``.
+
+    Parameters
+    ----------
+    given : str or None
+        The unit the user gave (a key of :data:`OUTPUT_UNITS`).
+    paths : list of str or Path
+        The files whose headers may say it.
+    spec : TableSpec
+        Their format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name.
+    names : tuple of str
+        The columns whose unit is the output's.
+    flag : str
+        The flag (or session.toml key) ``given`` came from, for the messages.
+    default : str or None
+        The unit when nobody says one.
+
+    Returns
+    -------
+    str or None
+        A key of :data:`OUTPUT_UNITS` (or ``default``).
+
+    Raises
+    ------
+    InputError
+        A unit not known, or the flag and a header (or two headers) disagreeing.
+    """
     if given is not None and given not in OUTPUT_UNITS:
         raise InputError(f"{flag} {given!r}: one of {', '.join(OUTPUT_UNITS)}")
     unit = given

@@ -34,7 +34,18 @@ def check_repeats(table: Table) -> None:
     noise-free) file is not refused (its successive rows are all equal anyway), and the pair
     test needs :data:`PAIR_ROWS` rows and repeats only in pairs (successive rows across pairs
     equal in fewer than half the cases). A repeated time stamp is already refused by the time
-    check."""
+    check.
+
+    Parameters
+    ----------
+    table : Table
+        The table as read.
+
+    Raises
+    ------
+    InputError
+        Naming the lines repeated.
+    """
     n = len(table)
     if n < BLOCK_ROWS or n % 2:
         return

@@ -48,8 +48,19 @@ _ARROW = {"float": pa.float64(), "int": pa.int64(), "label": pa.string()}
 
 @dataclass(frozen=True)
 class Column:
-    """One column of a format: canonical ``name``, ``kind`` ('float', 'int' or 'label'),
-    whether it is ``required``, and the other header spellings accepted for it."""
+    """One column of a format.
+
+    Attributes
+    ----------
+    name : str
+        Canonical name (what the code and the messages call it).
+    kind : str
+        'float', 'int' or 'label'.
+    required : bool
+        Whether a file without it is refused.
+    aliases : tuple of str
+        Other header spellings accepted for it.
+    """
 
     name: str
     kind: str = "float"
@@ -59,10 +70,22 @@ class Column:
 
 @dataclass(frozen=True)
 class TableSpec:
-    """A table format: what it is called in messages (``what``) and its columns. ``time``
-    names the column that must increase strictly (and that ``rate_hz`` may supply).
-    ``distinct_rows``: a file whose rows are each written twice, or which holds the same block
-    of rows twice, is refused (see :func:`check_repeats`)."""
+    """A table format.
+
+    Attributes
+    ----------
+    what : str
+        What it is called in messages ("static poses", "counter log").
+    columns : tuple of Column
+        Its columns.
+    time : str or None
+        The column that must increase strictly (and that ``rate_hz`` may supply).
+    distinct_rows : bool
+        Refuse a file whose rows are each written twice, or which holds the same block of
+        rows twice (see :func:`axisbase.repeats.check_repeats`).
+    rate_hz_range : tuple of float, or None
+        Plausible sample rates of the sensor [Hz] (see :func:`rate_warning`).
+    """
 
     what: str
     columns: tuple[Column, ...]
@@ -84,11 +107,29 @@ class TableSpec:
 
 @dataclass(frozen=True)
 class Table:
-    """Parsed columns under their canonical names (float64 / int64 arrays, labels as an object
-    array of str), ``first_line``: the file line of the first row, ``ignored``: header names no
-    column of the format took, ``units``: units written in the header (``{'ux': 'V'}``),
-    ``time_from_rate``: the time column was made from the sample rate, ``row0``: the index in
-    the file of this table's first row (a chunk of a streamed file)."""
+    """A parsed table (or a chunk of a streamed one).
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    spec : TableSpec
+        Its format.
+    data : dict of str to ndarray
+        Columns under their canonical names: float64 / int64 arrays, labels as an object
+        array of str; in the tool's units (seconds; g, m/s², V, counts) when the header
+        declared another.
+    first_line : int
+        File line of the file's first data row.
+    ignored : tuple of str
+        Header names no column of the format took.
+    units : dict of str to str
+        Units of the columns as they now are (``{'ux': 'V', 't': 's'}``).
+    time_from_rate : bool
+        The time column was made from the sample rate.
+    row0 : int
+        Index in the file of this table's first row (a chunk of a streamed file).
+    """
 
     path: Path
     spec: TableSpec
@@ -249,10 +290,19 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
 
     Parameters
     ----------
-    path : the file.
-    spec : its format.
-    columns : canonical name -> header name, for headers the format does not know.
-    rate_hz : sample rate [Hz] for a file without the time column: row k gets t = k / rate.
+    path : str or Path
+        The file.
+    spec : TableSpec
+        Its format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name, for headers the format does not know.
+    rate_hz : float, optional
+        Sample rate [Hz] for a file without the time column: row k gets t = k / rate.
+
+    Returns
+    -------
+    Table
+        The checked columns.
 
     Raises
     ------
@@ -295,7 +345,18 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
 def rate_warning(table: Table) -> str | None:
     """A sentence when the table's median sample interval (within a pose, if labelled) is
     implausible for its sensor (``spec.rate_hz_range``), naming the time unit that would make
-    it plausible (times in ms under a plain ``t``: a 20 Hz recording read as 0.02 Hz)."""
+    it plausible (times in ms under a plain ``t``: a 20 Hz recording read as 0.02 Hz).
+
+    Parameters
+    ----------
+    table : Table
+        A table read with its format's ``rate_hz_range``.
+
+    Returns
+    -------
+    str or None
+        The warning, None when the rate is plausible (or cannot be told).
+    """
     spec = table.spec
     if spec.rate_hz_range is None or spec.time not in table.data or table.time_from_rate:
         return None
@@ -346,6 +407,29 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
 
     ``parallel``: parse on a pool of threads (see :func:`parallel_batches`); for tables of
     numbers only (a label could hold a quoted line break, which only a serial parse follows).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    spec : TableSpec
+        Its format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name.
+    block_bytes : int
+        Text per chunk [bytes].
+    parallel : bool
+        Parse on a pool of threads.
+
+    Yields
+    ------
+    Table
+        Checked chunks, ``row0`` their first row's index in the file.
+
+    Raises
+    ------
+    InputError
+        Naming the file, the line, the column and what is wrong.
     """
     if parallel and any(c.kind == "label" for c in spec.columns):
         raise ValueError("iter_table(parallel=True) is for tables of numbers only")
