@@ -140,9 +140,45 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     the table turns at constant speed within a revolution; the angles then come from the
     pulse times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the
     timing estimate is the more precise one; otherwise the counts are used and the reason is
-    noted. ``columns``: header names of the log's columns (``--columns``), for both logs.
+    noted.
 
-    Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
+    Parameters
+    ----------
+    path : str or Path
+        The counter log.
+    n_faces : int
+        Faces of the housing (pulses per revolution).
+    latitude_deg : float, optional
+        Latitude of the table [deg] (the Earth rate then comes from it).
+    direction : int
+        +1: the table turns counter-clockwise seen from above; -1: clockwise.
+    alpha : float
+        Significance level of the loop's and the consistency checks' tests.
+    reverse_log : str or Path, optional
+        A log of the same faces with the table turning the other way.
+    apply_loop : bool
+        Apply the Earth rate the loop finds (False for each direction of a pair).
+    steady_table : bool
+        The user asserts a constant speed within a revolution (pulse-time angles).
+    columns : mapping of str to str, optional
+        Header names of the log's columns (``--columns``), for both logs.
+    latitude_range_deg : tuple of float, optional
+        Latitudes [deg] the Earth rate's bound is taken over when it is not determined.
+    on_bytes : callable, optional
+        Called with about how many bytes each chunk held (a progress bar).
+
+    Returns
+    -------
+    GonioRun
+        The summary of the pass, the face angles [rad] with u and covariance, the loop's
+        report and the notes and warnings for the user.
+
+    Raises
+    ------
+    LogError
+        A log that cannot be used (naming the file and line).
+    InputError
+        A reverse log that is not the other direction of the same faces.
 
     Examples
     --------
