@@ -639,6 +639,7 @@ def lot_results(tmp_path_factory):
     return root / "res"
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_results):
     import shutil
 
@@ -664,6 +665,7 @@ def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_re
     assert [u["unit"] for u in failed] == ["u9"] and not failed[0]["in_statistics"]
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_says_when_a_unit_is_counted_twice(tmp_path, lot_results):
     import shutil
 
@@ -901,6 +903,7 @@ def test_marks_at_pixel_locking_angles_8_and_16_bit(tmp_path):
     assert np.abs(z).max() < 4 and 0.6 < np.sqrt(np.mean(z ** 2)) < 1.4, z
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_tolerance_marginal_and_capability_as_readme_says(tmp_path, lot_results):
     d0 = load(lot_results / "u0.json")
     E, U = d0["misalignment_arcsec"][0][1], d0["misalignment_u_arcsec"][0][1]
