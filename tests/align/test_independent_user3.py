@@ -537,7 +537,10 @@ def test_marks_same_pixels_in_png_tiff_8_16_bit(tmp_path):
     assert abs(wrap_angle(m[5]["angle_deg"] + 90.0) - m[0]["angle_deg"]) < 1e-3 * u
 
 
-@pytest.mark.parametrize("how", ["rot180", pytest.param("fliplr", marks=pytest.mark.slow)])
+# (both under slow: the default run turns and mirrors a mark's image in
+# test_marks_same_pixels_in_png_tiff_8_16_bit above and in tests/imaging/test_measure.py)
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["rot180", "fliplr"])
 def test_marks_angle_follows_a_rotation_or_mirror_exactly(tmp_path, how):
     img, tr = render_mark(shape=(480, 640), angle_deg=23.0, offset_px=40, length_px=350, seed=3)
     moved = np.rot90(img, 2) if how == "rot180" else np.fliplr(img)
