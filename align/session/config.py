@@ -278,10 +278,28 @@ def _metadata(d: dict, src: str) -> dict[str, str | int | float | bool]:
 
 
 def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
-    """Read and check ``folder/session.toml`` (``InputError`` names the key at fault).
+    """Read and check ``folder/session.toml``.
 
     Every file it names must lie inside the session folder (symlinks followed) unless
-    ``allow_outside``; no file may be named twice."""
+    ``allow_outside``; no file may be named twice.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The session folder (or its session.toml).
+    allow_outside : bool
+        Allow files outside the folder.
+
+    Returns
+    -------
+    Session
+        The checked settings, stages and files.
+
+    Raises
+    ------
+    InputError
+        Naming the key at fault (``session.toml: [[images]] #3 housing = 'w': ...``).
+    """
     folder = Path(folder)
     path = folder / "session.toml" if folder.is_dir() else folder
     if folder.is_file():

@@ -184,6 +184,21 @@ def run_session(s: Session, progress: Progress = lambda msg: None,
                 alpha: float = 1e-3) -> SessionResult:
     """Run every stage of ``s`` and fuse; stage failures are collected, not raised.
 
+    Parameters
+    ----------
+    s : Session
+        A checked session (:func:`load_session`).
+    progress : callable
+        Called with a line of text as each stage starts.
+    alpha : float
+        Significance level of every stage's tests.
+
+    Returns
+    -------
+    SessionResult
+        Each stage's result (None where it failed, with the error in ``errors``), the
+        fusion (E [rad] with its covariance) and the warnings.
+
     Examples
     --------
     A synthetic session folder (``synth.session``: images, counter log, tumble, platform
