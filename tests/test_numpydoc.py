@@ -147,10 +147,11 @@ def count(pkg: str, exported: bool = False) -> Count:
                  sum(numpydoc_complete(n) for n in nodes))
 
 
-# The figures when this test was written (issue 21): each may rise, none may fall. Raise a
-# floor when you fill more.
-FLOOR_PUBLIC = {"align": 0, "axisbase": 0, "goniometry": 0, "imaging": 0, "synth": 0}
-FLOOR_EXPORTED = {"align": 0, "axisbase": 0, "goniometry": 0, "imaging": 0, "synth": 0}
+# The figures when this test was written (issue 21; before it: align 11 of 414 public names,
+# axisbase 7 of 65, goniometry 3 of 36, imaging 2 of 57, synth 3 of 43): each may rise, none
+# may fall. Raise a floor when you fill more.
+FLOOR_PUBLIC = {"align": 20, "axisbase": 26, "goniometry": 14, "imaging": 2, "synth": 3}
+FLOOR_EXPORTED = {"align": 9, "axisbase": 25, "goniometry": 12, "imaging": 2, "synth": 2}
 
 
 def test_numpydoc_coverage_does_not_fall():
