@@ -34,12 +34,10 @@ from align.family import LineFamily, line_family
 from align.lens import (
     LensRanges,
     LineGeometry,
-    camera_terms,
+    angle_coupling,
+    camera_coupling,
     check_camera,
     solve_lens,
-)
-from align.lens import (
-    angle_terms as lens_angle_terms,
 )
 from align.lens import (
     undistorted as lens_undistorted,
@@ -375,6 +373,10 @@ class MarkResult:
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     lens_limited: bool = False
+    # The lens terms of u as signed components [rad] and the lens solve they belong to:
+    # marks of one group share the lens's error (align.lens.angle_coupling).
+    lens_coupling: Mapping[str, float] = field(default_factory=dict)
+    lens_group: str = ""
 
     @property
     def unexplained_structure(self) -> bool:
@@ -416,6 +418,9 @@ class MarkResult:
         d["angle_u_terms_rad"] = {k: float(v) for k, v in self.u_terms.items()}
         d["notes"] = list(self.notes)
         d["lens_limited"] = self.lens_limited
+        if self.lens_coupling:
+            d["lens_group"] = self.lens_group
+            d["angle_lens_coupling_rad"] = {k: float(v) for k, v in self.lens_coupling.items()}
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -455,7 +460,10 @@ class MarkResult:
                    u_terms={str(k): _num(v)
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
                    notes=tuple(str(n) for n in d.get("notes", ())),
-                   lens_limited=bool(d.get("lens_limited", False)))
+                   lens_limited=bool(d.get("lens_limited", False)),
+                   lens_coupling={str(k): _num(v) for k, v in
+                                  (d.get("angle_lens_coupling_rad") or {}).items()},
+                   lens_group=str(d.get("lens_group", "")))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -549,13 +557,32 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
     centres before the loop (None: nothing; a camera model already undistorted them), the
-    named angle-u terms per mark [rad], the notes, the saved dict."""
+    named angle-u terms per mark [rad], the notes, the saved dict; ``coupling``: each
+    mark's terms as signed components on the lens's error directions (shared by every mark
+    of this lens, :func:`align.lens.angle_coupling`).
+
+    The terms are the coupling's sizes: a term is the root sum of squares of its components
+    (``lens_fit.0``, ``lens_fit.1``, ... for a fitted lens's covariance, one each else)."""
 
     lam: np.ndarray | None
-    terms: tuple[dict[str, float], ...]
     notes: tuple[str, ...]
     record: Mapping
     max_u_rad: float
+    coupling: tuple[dict[str, float], ...] = ()
+
+    @property
+    def terms(self) -> tuple[dict[str, float], ...]:
+        """Named standard uncertainties [rad] per mark (the coupling's sizes per term)."""
+        return tuple(_term_sizes(c) for c in self.coupling)
+
+
+def _term_sizes(coupling: Mapping[str, float]) -> dict[str, float]:
+    """Root sum of squares per term name (``lens_fit.0`` and ``lens_fit.1`` are ``lens_fit``)."""
+    out: dict[str, float] = {}
+    for k, v in coupling.items():
+        name = k.split(".")[0]
+        out[name] = float(np.hypot(out.get(name, 0.0), v))
+    return out
 
 
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
@@ -572,25 +599,25 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
     ranges = ranges or LensRanges()
     max_u = ranges.max_u_arcsec * np.pi / 180 / 3600
     if not ms:
-        return CameraLens(None, (), (), {}, max_u)
+        return CameraLens(None, (), {}, max_u)
     shape = ms[0].image_shape
     R = half_diagonal(shape)
     lines = lens_lines(ms)
     who = f"camera {label}" if label else "camera"
     if camera is None and not np.any(ranges.vector()):
         # Declared distortion-free: nothing to determine, nothing to carry.
-        return CameraLens(None, tuple({} for _ in ms), (),
+        return CameraLens(None, (),
                           {"source": "declared distortion-free", "lines": len(ms),
-                           "ranges": ranges.to_dict()}, max_u)
+                           "ranges": ranges.to_dict()}, max_u, tuple({} for _ in ms))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
-        terms = tuple(lens_angle_terms(sol, d) for d in designs)
+        coupling = tuple(angle_coupling(sol, d) for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
-        return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
-                          {"source": "marks", **sol.to_dict()}, max_u)
+        return CameraLens(sol.lam if np.any(sol.lam) else None, notes,
+                          {"source": "marks", **sol.to_dict()}, max_u, coupling)
     lam_u = camera_lens_u(camera, shape)
     zero = np.zeros_like(lam_u)
-    terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
+    terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
     if p < alpha:
@@ -599,10 +626,10 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
                      f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
-            t["camera_disagreement"] = float(abs(d.s @ dlam))
-    return CameraLens(None, tuple(terms_l), tuple(notes),
+            t["camera_disagreement"] = float(d.s @ dlam)
+    return CameraLens(None, tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
-                       "u_lens_vector": lam_u.tolist()}, max_u)
+                       "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l))
 
 
 def _lens_undistorted(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
@@ -617,9 +644,10 @@ LENS_TERMS = ("lens_", "camera_")
 
 
 def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: int,
-                alpha: float = 1e-3) -> MarkResult:
+                alpha: float = 1e-3, group: str = "") -> MarkResult:
     """One mark of a camera whose lens is known (:func:`camera_lens`, ``k`` the mark's place
-    in it): undistorted by it, through the loop, the lens's u terms added to the angle."""
+    in it): undistorted by it, through the loop, the lens's u terms added to the angle.
+    ``group`` names the lens solve the mark shares with others (default: the image)."""
     before = m.line.angle_rad
     mu = _lens_undistorted(m, lens.lam) if lens.lam is not None else m
     r = loop_mark(mu, name, index, alpha)
@@ -636,8 +664,10 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
                      "(`align camera`) and pass it with --camera")
+    coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
-                   lens=lens.record, notes=tuple(notes), lens_limited=limited)
+                   lens=lens.record, notes=tuple(notes), lens_limited=limited,
+                   lens_coupling=dict(coupling), lens_group=(group or name) if coupling else "")
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
@@ -753,9 +783,11 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
                 continue
             if lens is None:  # images of different sizes: one lens each
                 one = camera_lens([m], camera, ranges, alpha, label)
-                res.append(finish_mark(m, one, 0, str(path), i, alpha))
+                res.append(finish_mark(m, one, 0, str(path), i, alpha,
+                                       group=f"{path} mark {i}"))
             else:
-                res.append(finish_mark(m, lens, k, str(path), i, alpha))
+                res.append(finish_mark(m, lens, k, str(path), i, alpha,
+                                       group=f"camera {label}" if label else "camera"))
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)

@@ -411,7 +411,7 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
                                HOUSINGS.index(im.housing), v.right, v.up, v.camera,
                                0.0 if im.nominal == "horizontal" else np.pi / 2,
                                r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad,
-                               im.file.name, im.view))
+                               im.file.name, im.view, r.lens_coupling, r.lens_group))
         blocks.append(mark_block(obs))
     if res.gonio is not None:
         g = s.goniometer
