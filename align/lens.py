@@ -55,10 +55,19 @@ class LensFolds(NotApplicable):
 class LensRanges:
     """Plausible range of each lens parameter (Type B, uniform over +- the value).
 
-    k1, k2, p at the image half-diagonal (dimensionless; OpenCV's k1 = k1 (f/R)^2, p = p f/R),
-    ``aspect``: |fy/fx - 1|, ``pp_px``: principal point from the image centre [px].
-    ``max_u_arcsec``: an angle whose lens-limited u exceeds this is not ok ("calibrate the
-    camera").
+    Attributes
+    ----------
+    k1, k2 : float
+        Radial distortion at the image half-diagonal (OpenCV's k1 = k1 (f/R)^2) —
+        dimensionless.
+    p : float
+        Tangential distortion at the half-diagonal (p = p f/R) — dimensionless.
+    aspect : float
+        |fy/fx - 1| — dimensionless.
+    pp_px : float
+        Principal point from the image centre [px].
+    max_u_arcsec : float
+        An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
     """
 
     k1: float = 0.3
@@ -186,10 +195,37 @@ class _DesignCache:
 class LensSolution:
     """The lens of one camera from its marks (see the module docstring).
 
-    ``lam``: the applied lens vector (zeros where not applied); ``determined``, ``applied``:
-    per parameter; ``u_lines``: each parameter's marginal u from the lines (inf: not
-    determined); ``estimate``: the fitted value of each determined parameter (nan
-    otherwise); ``notes``: what the reader must know (one line each).
+    Attributes
+    ----------
+    lam : numpy.ndarray
+        The applied lens vector over ``PARAMS`` (zeros where not applied) — dimensionless (pp
+        in [px]).
+    determined, applied : tuple of bool
+        Per parameter; unit —.
+    u_lines : numpy.ndarray
+        Each parameter's marginal u from the lines (inf: not determined) — dimensionless (pp
+        in [px]).
+    estimate : numpy.ndarray
+        The fitted value of each determined parameter (nan otherwise) — dimensionless (pp in
+        [px]).
+    cov_applied : numpy.ndarray
+        Covariance of the applied parameters [products of their units].
+    ranges : LensRanges
+        The plausible ranges used; unit —.
+    n_lines : int
+        Marks that entered the fit — dimensionless.
+    chi2_dof : float
+        χ²/dof of the lines' fit — dimensionless.
+    notes : tuple of str
+        What the reader must know (one line each); unit —.
+    info : numpy.ndarray
+        The lines' information matrix over ``PARAMS`` [1/products of the units].
+    confirmed : bool
+        The lines confirm the lens applied; unit —.
+    bow_chi2 : float
+        χ² of the marks' bows about the lens — dimensionless.
+    bow_dof : int
+        Its degrees of freedom — dimensionless.
     """
 
     lam: np.ndarray

@@ -58,10 +58,11 @@ from imaging import (
     MarkMeasurement,
     Roi,
     cross_magnification,
+    defocus_note,
     fit_line,
+    jpeg_note,
     line_frame,
     measure_frame,
-    measure_marks,
     read_image_notes,
     undistort,
 )
@@ -303,16 +304,28 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
-    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit), as
+    results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
-    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
-    ``applied``: whether it was significant, explained the lines, and the marks were
-    undistorted with it; ``consistent``: whether the lines are straight within their
-    uncertainties once it is removed (False: the lines disagree in a way no single radial
-    distortion explains — bent marks, or lines that are not straight in the world — and every
-    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
-    straightness; ``p_value`` of the k1 = 0 test.
+    Attributes
+    ----------
+    k1 : float
+        Radial distortion at the image half-diagonal — dimensionless.
+    k1_u : float
+        Its standard uncertainty — dimensionless.
+    applied : bool
+        It was significant, explained the lines, and the marks were undistorted with it;
+        unit —.
+    consistent : bool
+        The lines are straight within their uncertainties once it is removed (False: the lines
+        disagree in a way no single radial distortion explains — bent marks, or lines that are
+        not straight in the world — and every mark's u is inflated by sqrt(chi2/dof)); unit —.
+    n_lines : int
+        Marks in the fit — dimensionless.
+    chi2_dof_before, chi2_dof_after : float
+        All lines' straightness, χ²/dof — dimensionless.
+    p_value : float
+        Of the k1 = 0 test — dimensionless.
     """
 
     k1: float
@@ -345,7 +358,66 @@ def _num(v: object) -> float:
 
 @dataclass(frozen=True)
 class MarkResult:
-    """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
+    """One mark (or one failure) of one image.
+
+    Attributes
+    ----------
+    image : str
+        The image file; unit —.
+    found : bool
+        A mark was measured (else ``error`` says why); unit —.
+    error : str or None
+        Why not; unit —.
+    index : int
+        The mark's index in its image — dimensionless.
+    angle_rad, angle_u_rad : float
+        The mark's angle in the image and its standard uncertainty [rad].
+    offset_px, offset_u_px : float
+        Its distance from the image centre and its standard uncertainty [px].
+    length_px : float
+        Its length, between the groove's half-depth ends [px].
+    width_px : float
+        Its width [px].
+    blur_px : float
+        The edge blur [px].
+    dark : bool
+        A dark groove on a bright surface (else bright); unit —.
+    n_points : int
+        Centre points fitted — dimensionless.
+    n_rejected : int
+        Centre points rejected — dimensionless.
+    angle_before_rad : float
+        The angle of the declared model, before the loop [rad].
+    loop : LoopReport or LoopSummary or None
+        The residual loop's report; unit —.
+    measurement : MarkMeasurement or None
+        The raw measurement (not saved); unit —.
+    uncertainty_inflation : float
+        Factor on u for structure no effect explains — dimensionless.
+    internal_error : bool
+        The failure was a defect of the tool; unit —.
+    frame : FrameDistortion or None
+        The frame's shared distortion (older results); unit —.
+    family : LineFamily or None
+        The family of parallel lines it belongs to; unit —.
+    unreported : int
+        Lines found in the image and not reported — dimensionless.
+    lens : Mapping or None
+        The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
+        [px]).
+    u_terms : Mapping
+        Named contributions to ``angle_u_rad`` [rad].
+    notes : tuple of str
+        What the reader must know; unit —.
+    lens_limited : bool
+        The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
+    lens_coupling : Mapping
+        The lens terms of u as signed components on the lens's error directions [rad]
+        (:func:`align.lens.angle_coupling`).
+    lens_group : str
+        The lens solve the mark shares with others (marks of one group share the lens's
+        error); unit —.
+    """
 
     image: str
     found: bool
@@ -478,7 +550,15 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     terms: dict[str, float] = {}
     notes: list[str] = []
     f = rep.after
-    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+    if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
+        terms["jpeg_blocks"] = m.jpeg_u_rad
+        au = float(np.hypot(au, m.jpeg_u_rad))
+        notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
+                               float(np.rad2deg(m.jpeg_u_rad) * 3600)))
+    defocus = defocus_note(f"{image} mark {index}", m.blur)
+    if defocus:
+        notes.append(defocus)
+    elif f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
         notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")
@@ -569,6 +649,8 @@ class CameraLens:
     record: Mapping
     max_u_rad: float
     coupling: tuple[dict[str, float], ...] = ()
+    model_as: str = "--camera"
+    """How the user gives this camera a model: the flag, or session.toml's key."""
 
     @property
     def terms(self) -> tuple[dict[str, float], ...]:
@@ -588,6 +670,15 @@ def _term_sizes(coupling: Mapping[str, float]) -> dict[str, float]:
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
                 ) -> CameraLens:
+    """:func:`_camera_lens`; ``label`` names a session's camera (its messages then name
+    session.toml's ``[cameras.LABEL] model``, not ``--camera``)."""
+    lens = _camera_lens(ms, camera, ranges, alpha, label)
+    return replace(lens, model_as=f"[cameras.{label}] model") if label else lens
+
+
+def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                 ) -> CameraLens:
     """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
 
     Without a camera model: identifiability, then the determined parameters fitted jointly
@@ -663,7 +754,7 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
-                     "(`align camera`) and pass it with --camera")
+                     f"(`align camera`) and give it with {lens.model_as}")
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,
@@ -710,6 +801,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             continue
         out.append(finish_mark(m, lens, k, name, i, alpha))
         k += 1
+    if measured.notes:  # the frame's background (stripes): on each of its marks
+        out = [replace(r, notes=measured.notes + r.notes) for r in out]
     return with_families(out, measured.families, measured.unreported,
                          "camera model" if camera is not None else
                          "frame lens" if lens.lam is not None else "none", alpha)
@@ -766,9 +859,10 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             on_image(j)
         try:
             got = read_image_notes(path)
-            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes)
-            found_all.append(list(measure_marks(got.pixels, camera, where=str(path),
-                                                expect_one=expect_one, roi=roi)))
+            fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
+                               roi=roi)
+            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
+            found_all.append(list(fr.items))
         except ImageInputError as exc:
             found_all.append([exc])
     ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]

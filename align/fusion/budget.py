@@ -58,11 +58,24 @@ def inverse(info: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Group:
-    """One named input of the fusion: ``source`` ("image x_A.png", "goniometer gonio.csv",
-    "calibration", "static poses"), ``kind`` (``KINDS``), the Jacobian ``A`` (n, P) of its
-    predicted values over the parameters [value unit / parameter unit], their covariance
-    ``C`` (n, n) [value unit²], its Type B parts (name, (n, n)) included in ``C``, and
-    ``meta`` (an image's housing, view, camera)."""
+    """One named input of the fusion.
+
+    Attributes
+    ----------
+    source : str
+        Its name ("image x_A.png", "goniometer gonio.csv", "calibration", "static poses"); unit —.
+    kind : str
+        One of ``KINDS``; unit —.
+    A : numpy.ndarray
+        The Jacobian (n, P) of its predicted values over the parameters [value unit / parameter
+        unit].
+    C : numpy.ndarray
+        Their covariance (n, n) [value unit²].
+    type_b : tuple of (str, numpy.ndarray)
+        Its Type B parts (name, (n, n)) [value unit²], included in ``C``.
+    meta : Mapping
+        An image's housing, view, camera; unit —.
+    """
 
     source: str
     kind: str
@@ -90,10 +103,20 @@ class Group:
 
 @dataclass(frozen=True)
 class Linearisation:
-    """The fused solve linearised at its solution: parameter names (the six E_NAMES first,
-    then the nuisances, each nuisance named once per component), the groups, the nuisance
-    groups (label, parameter indices) in the order they are freed, and the inflation factor
-    f [-] applied to cov(E)."""
+    """The fused solve linearised at its solution.
+
+    Attributes
+    ----------
+    params : tuple of str
+        Parameter names: the six E_NAMES first, then the nuisances, each nuisance named once
+        per component; unit —.
+    groups : tuple of Group
+        The inputs (their fields carry units); unit —.
+    nuisances : tuple of (str, tuple of int)
+        The nuisance groups (label, parameter indices) in the order they are freed — dimensionless.
+    inflation : float
+        The inflation factor f applied to cov(E) — dimensionless.
+    """
 
     params: tuple[str, ...]
     groups: tuple[Group, ...]
@@ -170,8 +193,17 @@ class Contribution:
 
 @dataclass(frozen=True)
 class Budget:
-    """Per angle name: (u [rad], contributions largest first, summing to u²); the inflation
-    applied; the linearisation it came from (what 'align plan' works on)."""
+    """Each input's share of u² of every angle.
+
+    Attributes
+    ----------
+    angles : Mapping
+        Per angle name: (u [rad], contributions largest first, summing to u² [rad²]).
+    inflation : float
+        The inflation applied — dimensionless.
+    model : Linearisation or None
+        The linearisation it came from (what 'align plan' works on); unit —.
+    """
 
     angles: Mapping[str, tuple[float, tuple[Contribution, ...]]]
     inflation: float = 1.0

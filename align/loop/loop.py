@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -108,6 +108,10 @@ class StageFit:
     components: Mapping[str, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
     payload: object = None
     noise_dof: float | None = None
+    sequence: bool = True
+    """False when the residuals are not independent in their order (a fit with fewer
+    degrees of freedom than residuals whose projection correlates them, as the known-pose
+    fit's 18 components in 6 dof): only the chi2 and regressor tests then apply."""
 
     @property
     def n(self) -> int:
@@ -158,6 +162,30 @@ class Candidate:
 
 @dataclass(frozen=True)
 class EffectReport:
+    """An effect the loop added.
+
+    Attributes
+    ----------
+    name : str
+        The effect; unit —.
+    estimate : float
+        Its value [``unit``].
+    u : float
+        Its standard uncertainty [``unit``].
+    unit : str
+        The unit of ``estimate`` and ``u``; unit —.
+    rms_before, rms_after : float
+        The residual RMS before and after adding it [the stage's residual unit].
+    delta_bic : float
+        The change in BIC — dimensionless.
+    p_value : float
+        Its significance (look-elsewhere corrected) — dimensionless.
+    description : str
+        What it is, in words; unit —.
+    components : tuple of (str, float, float)
+        Per axis (name, estimate, u) [``unit``].
+    """
+
     name: str
     estimate: float
     u: float
@@ -195,8 +223,20 @@ class EffectReport:
 
 @dataclass(frozen=True)
 class RefusedEffect:
-    """A candidate the tests called for but the stage's ``admissible`` check refused: why,
-    and its significance (it was *not* added)."""
+    """A candidate the tests called for but the stage's ``admissible`` check refused: why, and
+    its significance (it was *not* added).
+
+    Attributes
+    ----------
+    name : str
+        The candidate; unit —.
+    reason : str
+        Why it was refused; unit —.
+    p_value : float
+        Its significance — dimensionless.
+    delta_bic : float
+        Its change in BIC — dimensionless.
+    """
 
     name: str
     reason: str
@@ -216,7 +256,15 @@ class RefusedEffect:
 @dataclass(frozen=True)
 class SkippedCandidate:
     """A candidate the loop could not try: it does not apply to these data, or its refit was
-    singular (``reason`` says which, in the stage's words)."""
+    singular (``reason`` says which, in the stage's words).
+
+    Attributes
+    ----------
+    name : str
+        The candidate; unit —.
+    reason : str
+        Why it was skipped; unit —.
+    """
 
     name: str
     reason: str
@@ -285,16 +333,22 @@ class LoopSummary:
 
     Attributes
     ----------
-    effects : the effects added, in order.
-    rms_before, rms_after : residual RMS of the declared model and of the final one [the
-        stage's residual unit].
-    chi2_dof_before, chi2_dof_after : χ²/dof against the stated noise (None: noise unknown).
-    unexplained_structure : whether structure no candidate explains remains.
-    structure_test, structure_p, structure_detail : the test that found it, its p-value and
-        what it saw (None, None, "" if none).
-    refused : significant candidates the stage's physical checks refused, with why.
-    skipped : candidates not tried (not applicable to these data, or a singular refit),
-        with why.
+    effects : tuple of EffectReport
+        The effects added, in order; unit — (theirs are in their fields).
+    rms_before, rms_after : float
+        Residual RMS of the declared model and of the final one [the stage's residual unit].
+    chi2_dof_before, chi2_dof_after : float or None
+        χ²/dof against the stated noise (None: noise unknown) — dimensionless.
+    unexplained_structure : bool
+        Whether structure no candidate explains remains; unit —.
+    structure_test, structure_p, structure_detail : str, float, str
+        The test that found it, its p-value (dimensionless) and what it saw (None, None, "" if
+        none); unit —.
+    refused : tuple of RefusedEffect
+        Significant candidates the stage's physical checks refused, with why; unit —.
+    skipped : tuple of SkippedCandidate
+        Candidates not tried (not applicable to these data, or a singular refit), with why;
+        unit —.
     """
 
     effects: tuple[EffectReport, ...]
@@ -400,7 +454,41 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
     return check_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
-                          fit.regressors, fit.dof, alpha, fit.noise_dof)
+                          fit.regressors, fit.dof, alpha, fit.noise_dof, fit.sequence)
+
+
+SCREEN_MARGIN = 3.0
+"""A stage may predict each candidate's chi2 drop by a linearised (score) test before its
+refit (``stage.screen(current, terms, names)``: name -> predicted chi2); the loop refits only
+candidates that would pass with SCREEN_MARGIN times the predicted drop plus
+:data:`SCREEN_SLACK` — a screen that cannot turn away an effect the refit would take (the
+refit's drop differs from the linear one by the effect's curvature, percent for the
+calibration's effects: ``tests/align/test_calibration_speed.py`` checks the loop's choices
+with and without it)."""
+SCREEN_SLACK = 4.0
+
+
+def optimistic_fit(current: StageFit, chi2_pred: float, extra_params: int) -> StageFit:
+    """A stand-in for the refit of ``current`` with ``extra_params`` more parameters whose
+    linearised chi2 is ``chi2_pred``: its drop made SCREEN_MARGIN times larger plus
+    SCREEN_SLACK (the residuals scaled to that chi2), for the tests a screen applies."""
+    drop = SCREEN_MARGIN * max(current.chi2 - chi2_pred, 0.0) + SCREEN_SLACK
+    chi2 = max(current.chi2 - drop, 1e-12 * max(current.chi2, 1e-300))
+    return replace(current, residuals=current.residuals * np.sqrt(chi2 / current.chi2)
+                   if current.chi2 > 0 else current.residuals,
+                   n_params=current.n_params + extra_params)
+
+
+def _may_pass(current: StageFit, chi2_pred: float, term: Term, searched: int, alpha: float,
+              min_delta_bic: float) -> bool:
+    """Whether a candidate predicted to leave ``chi2_pred`` could pass the loop's tests
+    (with the screen's margin): a stand-in fit with the predicted chi2 goes through the
+    same BIC and F-test."""
+    trial = optimistic_fit(current, chi2_pred, term.width)
+    d_bic = bic(trial, searched + term.searched) - bic(current, searched)
+    p = f_test(current, trial, term.width)
+    p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
+    return p_adj < alpha and d_bic < -min_delta_bic
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
@@ -448,11 +536,20 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
               _structure_note(s_before))
     effects: list[EffectReport] = []
     searched = 0
+    screen = getattr(stage, "screen", None)
     while len(effects) < max_effects:
         best = None
+        predicted = screen(current, terms, [c.name for c in candidates]) if screen else {}
         for cand in candidates:
             if any(t.name == cand.name for t in terms):
                 continue
+            if cand.name in predicted:
+                term = cand.build(current)
+                if term is not None and not _may_pass(current, predicted[cand.name], term,
+                                                      searched, alpha, min_delta_bic):
+                    log.debug("loop   candidate %s: screened out (linearised chi2 %.4g from "
+                              "%.4g)", cand.name, predicted[cand.name], current.chi2)
+                    continue
             trial, term = _try(stage, cand, current, terms, skipped)
             if trial is None:
                 continue
