@@ -89,6 +89,11 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         Its half-depth ends [px] (:func:`imaging.profile.groove_extent`).
     reach_px : float
         How far beyond each end to look at least [px] (and as far as the groove is long).
+
+    Returns
+    -------
+    GrooveEnds
+        The visible ends and how far each could reach under an obstruction [px].
     """
     t0, t1 = extent
     same = GrooveEnds(t0, t1, t0, t1)

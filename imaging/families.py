@@ -416,6 +416,19 @@ def grating_note(image: np.ndarray, size: int = 512) -> str | None:
     its lowest, stronger sub-harmonic that also does (a sharp-edged ruling's fundamental), must
     hold :data:`GRATING_SHARE` of all the power at frequencies above
     1/:data:`GRATING_MAX_PITCH_PX`.
+
+    Parameters
+    ----------
+    image : (H, W) array
+        The image [DN].
+    size : int
+        Side of the central square examined [px].
+
+    Returns
+    -------
+    str or None
+        The sentence naming the grating (pitch [px], direction [deg]) and why it is not
+        measured; None when the spectrum shows no grating.
     """
     h, w = image.shape
     r0, c0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
