@@ -24,11 +24,15 @@ def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: 
     u, n = line_frame(c.angle_rad)
     e = np.arange(-reach, reach + 1, dtype=float)
     t = np.linspace(c.t_start_px, c.t_end_px, n_along + 2)[1:-1]
-    p = (np.array([(w - 1) / 2, (h - 1) / 2]) + c.offset_px * n)[None, None, :] + \
-        t[:, None, None] * u + e[None, :, None] * n
-    xi, yi = np.rint(p[..., 0]).astype(int), np.rint(p[..., 1]).astype(int)
+    # Each coordinate on its own (along, across) grid: the sums of the 3-D (along, across, xy)
+    # array this replaced, in the same order, at half the passes over ~250k samples at 5 MP.
+    base = np.array([(w - 1) / 2, (h - 1) / 2]) + c.offset_px * n
+    xi = np.rint((base[0] + t * u[0])[:, None] + e * n[0]).astype(np.intp)
+    yi = np.rint((base[1] + t * u[1])[:, None] + e * n[1]).astype(np.intp)
     inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
-    vals = image[np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)]
+    yc, xc = np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)
+    # One flat index instead of a (row, column) pair: numpy's 2-D fancy indexing costs ~2x.
+    vals = image.ravel()[yc * w + xc] if image.flags.c_contiguous else image[yc, xc]
     # Off the image and clipped pixels (a padded border, a saturated patch) say nothing.
     vals = np.where(inside & (vals > 0) & (vals < top), vals, np.nan)
     return vals, e, t
@@ -41,8 +45,10 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     finite = np.isfinite(vals)
     cols = finite.any(axis=0)
     prof = np.full(vals.shape[1], np.nan)
-    sub = vals[:, cols]
-    prof[cols] = np.median(sub, axis=0) if finite.all() else np.nanmedian(sub, axis=0)
+    if finite.all():
+        prof[:] = np.median(vals, axis=0)  # no column to leave out: no copy of the samples
+    else:
+        prof[cols] = np.nanmedian(vals[:, cols], axis=0)
     return prof, cols
 
 

@@ -17,6 +17,7 @@ line fit downstream propagates a real uncertainty.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -65,19 +66,54 @@ class ProfileTable:
     """The pixel-integrated profile and its slope tabulated on a fine grid of e.
 
     The centres stage evaluates the same (w, s, angle) profile millions of times; tabulating
-    it once (3x3 quadrature, step ``step`` px) and interpolating linearly costs two
-    ``np.interp`` per pixel instead of 9 erf + 18 exp. The interpolation error is below
+    it once (3x3 quadrature, step ``step`` px) and interpolating linearly costs one cell
+    look-up per pixel instead of 9 erf + 18 exp. The interpolation error is below
     step^2/8 |P''| ~ 1e-6 of the contrast.
     """
 
     def __init__(self, w: float, s: float, angle: float, reach: float, step: float = 0.004):
-        self.grid = np.arange(-reach, reach + step, step)
-        sh, wt = _quad_offsets(angle)
-        self.p, self.pe = profile_and_derivs(self.grid, w, s, sh, wt, shape_derivs=False)
+        self.grid, self.p, self.pe, self.slopes = _table(w, s, angle, reach, step)
+        self.step = step
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return (np.interp(e, self.grid, self.p, left=0.0, right=0.0),
-                np.interp(e, self.grid, self.pe, left=0.0, right=0.0))
+        """(P, dP/de) at ``e``: exactly np.interp(e, grid, ., left=0, right=0) of each.
+
+        Hand-written (np.interp has no uniform-grid mode): the cell is found by division, not
+        by np.interp's binary search (~5x the cost on a mark's ~40k unsorted pixels), then
+        corrected by one cell where rounding put e across a grid point, and the value is
+        np.interp's own expression, so the result is the same to the last bit.
+        """
+        g = self.grid
+        last = g.size - 1
+        out = []
+        # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
+        with np.errstate(invalid="ignore"):
+            j = np.clip(((e - g[0]) / self.step).astype(np.intp), 0, last - 1)
+            j -= (g[j] > e) & (j > 0)
+            j += (g[j + 1] <= e) & (j < last - 1)
+            d = e - g[j]  # on a grid point d = 0 and the value is f[j] exactly, as np.interp's
+            at_end = e == g[last]
+            off = (e < g[0]) | (e > g[last])
+            for f, slope in zip((self.p, self.pe), self.slopes, strict=True):
+                v = slope[j] * d + f[j]
+                v[at_end] = f[last]
+                v[off] = 0.0
+                out.append(v)
+        return out[0], out[1]
+
+
+@functools.lru_cache(maxsize=8)
+def _table(w: float, s: float, angle: float, reach: float, step: float
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The tabulated profile (grid, P, dP/de) and np.interp's per-cell slopes of each; cached:
+    a mark's second centres pass and its extent share one (read-only arrays)."""
+    grid = np.arange(-reach, reach + step, step)
+    sh, wt = _quad_offsets(angle)
+    p, pe = profile_and_derivs(grid, w, s, sh, wt, shape_derivs=False)
+    slopes = tuple(np.diff(f) / np.diff(grid) for f in (p, pe))
+    for a in (grid, p, pe, *slopes):
+        a.flags.writeable = False
+    return grid, p, pe, slopes
 
 
 @dataclass(frozen=True)
