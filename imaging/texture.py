@@ -57,6 +57,12 @@ def _replica(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, dx: int, dy: int
              full_scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Pixel values shifted by (dx, dy) and which of them are usable."""
     h, w = image.shape
+    if (image.flags.c_contiguous and ys.size and ys.min() + dy >= 0 and ys.max() + dy < h
+            and xs.min() + dx >= 0 and xs.max() + dx < w):
+        # All inside (the usual case): one gather by flat index, ~3x cheaper than the masks
+        # and 2-D fancy indexing below (16 replicas per mark).
+        v = image.ravel()[(ys + dy) * w + (xs + dx)].astype(float, copy=False)
+        return v, (v < full_scale) & (v > 0)
     yy, xx = ys + dy, xs + dx
     inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
     v = np.zeros(ys.size)
