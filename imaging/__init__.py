@@ -11,8 +11,7 @@ Public API::
 """
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
-from imaging.candidate import MarkCandidate, Roi, check_roi, line_frame, wrap_angle
-from imaging.detect import detect_marks
+from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
