@@ -472,9 +472,10 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         N = np.empty((nseg, k, k))
         g = np.empty((nseg, k))
         for i in range(k):
-            g[:, i] = bc(wgt * J[i] * r)
+            wj = wgt * J[i]  # once per column (the products are the same to the bit)
+            g[:, i] = bc(wj * r)
             for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
+                N[:, i, j] = N[:, j, i] = bc(wj * J[j])
         ok = np.linalg.det(N) > 0
         if it == iterations:
             break  # the last pass only refreshes weights and information at the solution

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from imaging.ring import ring_slope  # the ring's slope, as for the real mark
+from imaging.ring import ring_geometry, ring_slope  # the ring's slope, as for the mark
 
 ALPHA = 1e-3
 """Level of each test that the replicas show texture (one false use per 1000 clean marks)."""
@@ -122,6 +122,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     w0 = np.einsum("ni,nij,nj->n", c0, M0, c0)
     npx = np.maximum(bc(np.ones(ys.size)), 1)
     ring_n = np.bincount(ring[3], minlength=nseg)
+    ring_geo = ring_geometry(ring[2], ring[3], nseg)  # the same for every replica
     reps = []
     for dist in shifts_px:
         for sign in (1.0, -1.0):
@@ -129,7 +130,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                 continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
             v, good = _replica(image, ys, xs, dx, dy, full_scale)
-            valid = ok & (bc((~good).astype(float)) == 0)
+            valid = ok & (np.bincount(seg[~good], minlength=nseg) == 0)
             rv, rgood = _replica(image, ring[0], ring[1], dx, dy, full_scale)
             valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
@@ -140,7 +141,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
-            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale)
+            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale,
+                           ring_geo)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
             # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
