@@ -305,15 +305,17 @@ def _half_depth_width(e: np.ndarray, vals: np.ndarray, bg: float, amp: float) ->
     if amp == 0:
         return 0.0
     bins = np.round(e * 2).astype(int)
-    lo = bins.min()
-    idx = bins - lo
+    idx = bins - bins.min()
     cnt = np.bincount(idx)
-    med = np.full(cnt.size, np.nan)
-    order = np.argsort(idx, kind="stable")
-    splits = np.split(vals[order], np.cumsum(cnt)[:-1])
-    for i, v in enumerate(splits):
-        if v.size >= 5:
-            med[i] = np.median(v)
+    # Each bin's median from one sort by (bin, value): np.median's values (the middle one, or
+    # the mean of the middle two), without a call per bin (~40 of them).
+    v = vals[np.lexsort((vals, idx))]
+    start = np.cumsum(cnt) - cnt
+    mid = start + cnt // 2
+    even = cnt % 2 == 0
+    med = np.where(even, (v[np.maximum(mid - 1, 0)] + v[np.minimum(mid, v.size - 1)]) / 2,
+                   v[np.minimum(mid, v.size - 1)])
+    med[(cnt < 5) | (np.bincount(idx, np.isnan(vals), cnt.size) > 0)] = np.nan
     deep = (med - bg) / amp > 0.5
     return 0.5 * float(np.count_nonzero(deep))
 
