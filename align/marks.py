@@ -34,12 +34,10 @@ from align.family import LineFamily, line_family
 from align.lens import (
     LensRanges,
     LineGeometry,
-    camera_terms,
+    angle_coupling,
+    camera_coupling,
     check_camera,
     solve_lens,
-)
-from align.lens import (
-    angle_terms as lens_angle_terms,
 )
 from align.lens import (
     undistorted as lens_undistorted,
@@ -305,16 +303,28 @@ CANDIDATES: tuple[Candidate, ...] = (
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
-    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit), as
+    results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
-    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
-    ``applied``: whether it was significant, explained the lines, and the marks were
-    undistorted with it; ``consistent``: whether the lines are straight within their
-    uncertainties once it is removed (False: the lines disagree in a way no single radial
-    distortion explains — bent marks, or lines that are not straight in the world — and every
-    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
-    straightness; ``p_value`` of the k1 = 0 test.
+    Attributes
+    ----------
+    k1 : float
+        Radial distortion at the image half-diagonal — dimensionless.
+    k1_u : float
+        Its standard uncertainty — dimensionless.
+    applied : bool
+        It was significant, explained the lines, and the marks were undistorted with it;
+        unit —.
+    consistent : bool
+        The lines are straight within their uncertainties once it is removed (False: the lines
+        disagree in a way no single radial distortion explains — bent marks, or lines that are
+        not straight in the world — and every mark's u is inflated by sqrt(chi2/dof)); unit —.
+    n_lines : int
+        Marks in the fit — dimensionless.
+    chi2_dof_before, chi2_dof_after : float
+        All lines' straightness, χ²/dof — dimensionless.
+    p_value : float
+        Of the k1 = 0 test — dimensionless.
     """
 
     k1: float
@@ -347,7 +357,66 @@ def _num(v: object) -> float:
 
 @dataclass(frozen=True)
 class MarkResult:
-    """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
+    """One mark (or one failure) of one image.
+
+    Attributes
+    ----------
+    image : str
+        The image file; unit —.
+    found : bool
+        A mark was measured (else ``error`` says why); unit —.
+    error : str or None
+        Why not; unit —.
+    index : int
+        The mark's index in its image — dimensionless.
+    angle_rad, angle_u_rad : float
+        The mark's angle in the image and its standard uncertainty [rad].
+    offset_px, offset_u_px : float
+        Its distance from the image centre and its standard uncertainty [px].
+    length_px : float
+        Its length, between the groove's half-depth ends [px].
+    width_px : float
+        Its width [px].
+    blur_px : float
+        The edge blur [px].
+    dark : bool
+        A dark groove on a bright surface (else bright); unit —.
+    n_points : int
+        Centre points fitted — dimensionless.
+    n_rejected : int
+        Centre points rejected — dimensionless.
+    angle_before_rad : float
+        The angle of the declared model, before the loop [rad].
+    loop : LoopReport or LoopSummary or None
+        The residual loop's report; unit —.
+    measurement : MarkMeasurement or None
+        The raw measurement (not saved); unit —.
+    uncertainty_inflation : float
+        Factor on u for structure no effect explains — dimensionless.
+    internal_error : bool
+        The failure was a defect of the tool; unit —.
+    frame : FrameDistortion or None
+        The frame's shared distortion (older results); unit —.
+    family : LineFamily or None
+        The family of parallel lines it belongs to; unit —.
+    unreported : int
+        Lines found in the image and not reported — dimensionless.
+    lens : Mapping or None
+        The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
+        [px]).
+    u_terms : Mapping
+        Named contributions to ``angle_u_rad`` [rad].
+    notes : tuple of str
+        What the reader must know; unit —.
+    lens_limited : bool
+        The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
+    lens_coupling : Mapping
+        The lens terms of u as signed components on the lens's error directions [rad]
+        (:func:`align.lens.angle_coupling`).
+    lens_group : str
+        The lens solve the mark shares with others (marks of one group share the lens's
+        error); unit —.
+    """
 
     image: str
     found: bool
@@ -375,6 +444,10 @@ class MarkResult:
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     lens_limited: bool = False
+    # The lens terms of u as signed components [rad] and the lens solve they belong to:
+    # marks of one group share the lens's error (align.lens.angle_coupling).
+    lens_coupling: Mapping[str, float] = field(default_factory=dict)
+    lens_group: str = ""
 
     @property
     def unexplained_structure(self) -> bool:
@@ -416,6 +489,9 @@ class MarkResult:
         d["angle_u_terms_rad"] = {k: float(v) for k, v in self.u_terms.items()}
         d["notes"] = list(self.notes)
         d["lens_limited"] = self.lens_limited
+        if self.lens_coupling:
+            d["lens_group"] = self.lens_group
+            d["angle_lens_coupling_rad"] = {k: float(v) for k, v in self.lens_coupling.items()}
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -455,7 +531,10 @@ class MarkResult:
                    u_terms={str(k): _num(v)
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
                    notes=tuple(str(n) for n in d.get("notes", ())),
-                   lens_limited=bool(d.get("lens_limited", False)))
+                   lens_limited=bool(d.get("lens_limited", False)),
+                   lens_coupling={str(k): _num(v) for k, v in
+                                  (d.get("angle_lens_coupling_rad") or {}).items()},
+                   lens_group=str(d.get("lens_group", "")))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -549,18 +628,48 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
     centres before the loop (None: nothing; a camera model already undistorted them), the
-    named angle-u terms per mark [rad], the notes, the saved dict."""
+    named angle-u terms per mark [rad], the notes, the saved dict; ``coupling``: each
+    mark's terms as signed components on the lens's error directions (shared by every mark
+    of this lens, :func:`align.lens.angle_coupling`).
+
+    The terms are the coupling's sizes: a term is the root sum of squares of its components
+    (``lens_fit.0``, ``lens_fit.1``, ... for a fitted lens's covariance, one each else)."""
 
     lam: np.ndarray | None
-    terms: tuple[dict[str, float], ...]
     notes: tuple[str, ...]
     record: Mapping
     max_u_rad: float
+    coupling: tuple[dict[str, float], ...] = ()
+    model_as: str = "--camera"
+    """How the user gives this camera a model: the flag, or session.toml's key."""
+
+    @property
+    def terms(self) -> tuple[dict[str, float], ...]:
+        """Named standard uncertainties [rad] per mark (the coupling's sizes per term)."""
+        return tuple(_term_sizes(c) for c in self.coupling)
+
+
+def _term_sizes(coupling: Mapping[str, float]) -> dict[str, float]:
+    """Root sum of squares per term name (``lens_fit.0`` and ``lens_fit.1`` are ``lens_fit``)."""
+    out: dict[str, float] = {}
+    for k, v in coupling.items():
+        name = k.split(".")[0]
+        out[name] = float(np.hypot(out.get(name, 0.0), v))
+    return out
 
 
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
                 ) -> CameraLens:
+    """:func:`_camera_lens`; ``label`` names a session's camera (its messages then name
+    session.toml's ``[cameras.LABEL] model``, not ``--camera``)."""
+    lens = _camera_lens(ms, camera, ranges, alpha, label)
+    return replace(lens, model_as=f"[cameras.{label}] model") if label else lens
+
+
+def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                 ) -> CameraLens:
     """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
 
     Without a camera model: identifiability, then the determined parameters fitted jointly
@@ -572,25 +681,25 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
     ranges = ranges or LensRanges()
     max_u = ranges.max_u_arcsec * np.pi / 180 / 3600
     if not ms:
-        return CameraLens(None, (), (), {}, max_u)
+        return CameraLens(None, (), {}, max_u)
     shape = ms[0].image_shape
     R = half_diagonal(shape)
     lines = lens_lines(ms)
     who = f"camera {label}" if label else "camera"
     if camera is None and not np.any(ranges.vector()):
         # Declared distortion-free: nothing to determine, nothing to carry.
-        return CameraLens(None, tuple({} for _ in ms), (),
+        return CameraLens(None, (),
                           {"source": "declared distortion-free", "lines": len(ms),
-                           "ranges": ranges.to_dict()}, max_u)
+                           "ranges": ranges.to_dict()}, max_u, tuple({} for _ in ms))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
-        terms = tuple(lens_angle_terms(sol, d) for d in designs)
+        coupling = tuple(angle_coupling(sol, d) for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
-        return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
-                          {"source": "marks", **sol.to_dict()}, max_u)
+        return CameraLens(sol.lam if np.any(sol.lam) else None, notes,
+                          {"source": "marks", **sol.to_dict()}, max_u, coupling)
     lam_u = camera_lens_u(camera, shape)
     zero = np.zeros_like(lam_u)
-    terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
+    terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
     if p < alpha:
@@ -599,10 +708,10 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
                      f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
-            t["camera_disagreement"] = float(abs(d.s @ dlam))
-    return CameraLens(None, tuple(terms_l), tuple(notes),
+            t["camera_disagreement"] = float(d.s @ dlam)
+    return CameraLens(None, tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
-                       "u_lens_vector": lam_u.tolist()}, max_u)
+                       "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l))
 
 
 def _lens_undistorted(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
@@ -617,9 +726,10 @@ LENS_TERMS = ("lens_", "camera_")
 
 
 def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: int,
-                alpha: float = 1e-3) -> MarkResult:
+                alpha: float = 1e-3, group: str = "") -> MarkResult:
     """One mark of a camera whose lens is known (:func:`camera_lens`, ``k`` the mark's place
-    in it): undistorted by it, through the loop, the lens's u terms added to the angle."""
+    in it): undistorted by it, through the loop, the lens's u terms added to the angle.
+    ``group`` names the lens solve the mark shares with others (default: the image)."""
     before = m.line.angle_rad
     mu = _lens_undistorted(m, lens.lam) if lens.lam is not None else m
     r = loop_mark(mu, name, index, alpha)
@@ -635,9 +745,11 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
-                     "(`align camera`) and pass it with --camera")
+                     f"(`align camera`) and give it with {lens.model_as}")
+    coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
-                   lens=lens.record, notes=tuple(notes), lens_limited=limited)
+                   lens=lens.record, notes=tuple(notes), lens_limited=limited,
+                   lens_coupling=dict(coupling), lens_group=(group or name) if coupling else "")
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
@@ -753,9 +865,11 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
                 continue
             if lens is None:  # images of different sizes: one lens each
                 one = camera_lens([m], camera, ranges, alpha, label)
-                res.append(finish_mark(m, one, 0, str(path), i, alpha))
+                res.append(finish_mark(m, one, 0, str(path), i, alpha,
+                                       group=f"{path} mark {i}"))
             else:
-                res.append(finish_mark(m, lens, k, str(path), i, alpha))
+                res.append(finish_mark(m, lens, k, str(path), i, alpha,
+                                       group=f"camera {label}" if label else "camera"))
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
