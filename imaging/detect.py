@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from axisbase.memory import reuse_freed_memory
 from imaging.candidate import (
     MarkCandidate,
     Roi,
@@ -175,6 +176,10 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
                       min_fill: float = 0.5, min_pixel_snr: float = 2.4,
                       top: float | None = None) -> Search:
     """The search of :func:`detect_marks` (same parameters), every confirmed line kept."""
+    # The measurement of every line allocates and frees the same 0.1-2 MB temporaries over
+    # and over: fresh mmap pages each time, unless freed memory is kept (~15 % of a 5 MP
+    # image's CPU was page faults: the ridge filter at 640x480 took 2.5 ms, 0.5 ms without).
+    reuse_freed_memory()
     h_full, w_full = image.shape
     x0 = y0 = 0
     if roi is not None:
