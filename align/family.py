@@ -393,7 +393,7 @@ def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     m = len(a)
     c_chi2 = float(np.sum(res_c**2 / s2))
     c_dof = m - 2
-    c_p = float(chi2_dist.sf(c_chi2, c_dof)) if c_dof > 0 else 1.0
+    c_p = float(special.chdtrc(c_dof, c_chi2)) if c_dof > 0 else 1.0
     # Each line's direction away from the centre (display angles: +x towards -y).
     out = np.arctan2(-(mid[:, 1] - p[1]), mid[:, 0] - p[0])
     th = a + np.pi * (np.cos(a - out) < 0)
@@ -410,7 +410,7 @@ def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     res = th - X @ beta
     dof = m - 2
     chi2 = float(np.sum(w * res**2))
-    pv = float(chi2_dist.sf(chi2, dof)) if dof > 0 else 1.0
+    pv = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
     inc_u = float(np.sqrt(C[1, 1]))
     if pv < alpha:
         inc_u *= float(np.sqrt(chi2 / dof))
