@@ -17,6 +17,8 @@ from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
 from imaging.errors import ImageInputError
 from imaging.profile import Centres, ProfileFit, centres_half
 
+MIN_SEGMENTS = 10
+"""Fewest centres a mark's fit is made from (as :func:`imaging.measure._usable` asks)."""
 CROSSING_MAX_SHARE = 0.75
 """A mark whose length lies more than this inside crossing marks' grooves is not measured
 (what is left, at most two short stretches at its ends, no longer shows whether they agree)."""
@@ -69,7 +71,9 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
     for t0, t1, _ in merged:
         skip |= (cen.t >= t0) & (cen.t <= t1)
     share = sum(min(t1, pf.t_end_px) - max(t0, pf.t_start_px) for t0, t1, _ in merged)
-    if share > CROSSING_MAX_SHARE * length:
+    # (and too few segments left beside the crossing to fit: the same refusal, not a bare
+    # "too few usable segments")
+    if share > CROSSING_MAX_SHARE * length or (cen.ok & ~skip).sum() < MIN_SEGMENTS:
         t0, t1, j = max(merged, key=lambda s: s[1] - s[0])
         u, n = line_frame(pf.angle_rad)
         centre = np.array([(image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2])
