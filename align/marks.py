@@ -64,8 +64,10 @@ from imaging import (
     line_frame,
     measure_frame,
     measure_marks,
+    on_line,
     read_image_notes,
     undistort,
+    undistort_points,
 )
 from imaging.lens import PARAMS
 
@@ -609,8 +611,11 @@ def _lens_undistorted(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
     q, s = lens_undistorted(LineGeometry(m.points, m.sigma, m.chol), lam,
                             half_diagonal(m.image_shape))
     regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
-    return replace(m, points=q, sigma=s, regressors=regs,
-                   line=fit_line(q, s, reject_sigma=None, chol=m.chol))
+    line = fit_line(q, s, reject_sigma=None, chol=m.chol)
+    ends = (None if m.ends_px is None else on_line(
+        undistort_points(m.ends_px, lam, half_diagonal(m.image_shape)), line.angle_rad,
+        line.offset_px))
+    return replace(m, points=q, sigma=s, regressors=regs, ends_px=ends, line=line)
 
 
 LENS_TERMS = ("lens_", "camera_")
@@ -698,15 +703,12 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
         ms = [out[i] for i in ok]
         mids = []
         for r in ms:
-            if r.measurement is None:
+            if r.measurement is None or r.measurement.ends_px is None:
                 mids.append(r.offset_px * line_frame(r.angle_rad)[1])
                 continue
-            # The extent is along the profile's own line (whose angle may sit across
-            # +-90 deg from the result's).
-            pf = r.measurement.profile
-            u, n = line_frame(pf.angle_rad)
-            t0, t1 = r.measurement.extent_px
-            mids.append(pf.offset_px * n + 0.5 * (t0 + t1) * u)
+            # The groove's ends where its centres are (undistorted by the camera's lens):
+            # the pitch is measured in the same coordinates as the offsets.
+            mids.append(r.measurement.ends_px.mean(axis=0))
         # The lens's terms are shared by the members: out of their u for the chi2 of their
         # angles, into the family mean's u (align.family).
         shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]

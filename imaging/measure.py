@@ -41,7 +41,10 @@ class MarkMeasurement:
     local illumination slope / contrast [1/px]); ``chol``: lower Cholesky factor of the
     centres' correlation matrix when surface texture correlates their errors along the mark
     (None: independent), for generalised least squares; ``sigma`` then includes the
-    texture's share of the variance.
+    texture's share of the variance. ``extent_px``: where the groove ends along the profile's
+    line (raw image); ``ends_px``: those two ends as (2, 2) points like ``points`` (relative
+    to the image centre, undistorted if a camera model was given): a bent mark's chord and a
+    ruled scale's line middles are read between them.
     """
 
     candidate: MarkCandidate
@@ -55,6 +58,7 @@ class MarkMeasurement:
     n_rejected: int = 0
     chol: np.ndarray | None = None
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
+    ends_px: np.ndarray | None = None
 
     @property
     def length_px(self) -> float:
@@ -120,8 +124,29 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
             "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
+    ext = groove_extent(image, pf)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf))
+                           int(cen.ok.sum() - use.sum()), chol, ext,
+                           groove_ends(pf, ext, line, camera, image.shape))
+
+
+def groove_ends(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
+                camera: CameraModel | None, shape: tuple[int, int]) -> np.ndarray:
+    """The groove's two ends (half-depth, ``extent`` along the profile's line) as points on
+    the measured ``line`` [px, relative to the image centre]: undistorted by the camera, then
+    put on the line (the profile's line is the raw image's chord, off a mark the lens bows
+    by up to its sagitta at the ends; only the position along the line is read from it)."""
+    u, n = line_frame(pf.angle_rad)
+    ends = np.array([pf.offset_px * n + t * u for t in extent])
+    if camera is not None:
+        ends = camera.undistort_centred(ends, np.ones(2), shape)[0]
+    return on_line(ends, line.angle_rad, line.offset_px)
+
+
+def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
+    """Points ``p`` (N, 2) moved across onto the line (angle, offset) [px]."""
+    u, n = line_frame(angle_rad)
+    return offset_px * n + np.outer(p @ u, u)
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)

@@ -533,8 +533,6 @@ def test_camera_model_for_another_image_size_is_not_measured(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="ruled scale (9 lines, 70 px pitch) through a k1=-0.3 "
-                   "lens with its exact --camera: pitch 58.04 +- 1.94 px, a step skipped, exit 0")
 def test_ruled_scale_through_lens_with_camera_pitch(tmp_path):
     w, h = 800, 600
     f = 1.325 * 0.5 * math.hypot(w, h)
