@@ -264,27 +264,9 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     u_lines = np.full(P, np.inf)
     applied = list(det)
     spread, spread_for = np.zeros(P), list(applied)
+    fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
-        lam = np.zeros(P)
-        for _ in range(iters):
-            if not applied:
-                break
-            try:
-                designs = cache.all(lam)
-            except LensFolds:
-                break  # folds: refused below
-            F = sum(d.G.T @ d.G for d in designs)
-            b = sum(d.G.T @ d.z for d in designs)
-            A = np.ix_(applied, applied)
-            step = -np.linalg.solve(F[A], b[applied])
-            trial = lam.copy()
-            trial[applied] += step
-            if np.any(np.abs(trial[applied]) > 2 * rng[applied]):
-                lam = trial  # beyond any lens: refused below
-                break
-            lam = trial
-            if np.all(np.abs(step) < 1e-3 * rng[applied]):
-                break
+        lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters)
         try:
             designs = cache.all(lam)
         except LensFolds:  # the estimate folds the image: no lens, refused below
@@ -307,6 +289,20 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         applied = keep
     lam_out = np.zeros(P)
     lam_out[applied] = lam[applied]
+    needed = _needed(cache, lam_out, applied, det, fits, est, rng, alpha)
+    if needed is not None:
+        # The lines determine these parameters and need them: without them their bows
+        # disagree with one lens, with them they agree. Only the principal point's range
+        # (carried in u below) left their sign open: a lens the lines call for is applied,
+        # and only what no lens explains is a bend.
+        lam_out, chi_without, chi_with = needed
+        added = [j for j in det if lam_out[j] and j not in applied]
+        notes.append(f"lens {', '.join(PARAMS[j] for j in added)} applied although the "
+                     "principal point's range leaves its sign open: the lines need it (their "
+                     f"bows without it chi2 {chi_without[0]:.1f} on {chi_without[1]} dof, with "
+                     f"it {chi_with[0]:.1f} on {chi_with[1]}); that range is carried in u")
+        applied = sorted(applied + added)
+        spread_for = []
     if not applied:
         spread = np.zeros(P)
     elif spread_for != applied:  # the applied set changed after its last spread
@@ -357,6 +353,69 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
     return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+
+
+def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int
+                  ) -> np.ndarray:
+    """The lens vector fitting the parameters ``applied`` to the lines' bows (Gauss-Newton
+    from zero; stopped, and left for the caller to refuse, beyond twice the range or where
+    the lens folds the image)."""
+    lam = np.zeros(len(PARAMS))
+    for _ in range(iters):
+        if not applied:
+            break
+        try:
+            designs = cache.all(lam)
+        except LensFolds:
+            break  # folds: refused by the caller
+        F = sum(d.G.T @ d.G for d in designs)
+        b = sum(d.G.T @ d.z for d in designs)
+        A = np.ix_(applied, applied)
+        step = -np.linalg.solve(F[A], b[applied])
+        trial = lam.copy()
+        trial[applied] += step
+        lam = trial
+        if np.any(np.abs(trial[applied]) > 2 * rng[applied]):
+            break  # beyond any lens: refused by the caller
+        if np.all(np.abs(step) < 1e-3 * rng[applied]):
+            break
+    return lam
+
+
+def _bow_test(cache: _DesignCache, lam: np.ndarray, k: int) -> tuple[float, int] | None:
+    """The lines' bows left at ``lam`` (``k`` parameters fitted): (chi2, dof), None when the
+    lens folds the image or no line is to spare."""
+    try:
+        bz = np.array([d.bow_z for d in cache.all(lam)])
+    except LensFolds:
+        return None
+    dof = len(bz) - k
+    return (float(bz @ bz), dof) if dof > 0 else None
+
+
+def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
+            fits: Mapping[tuple[int, ...], np.ndarray], est: np.ndarray, rng: np.ndarray,
+            alpha: float) -> tuple[np.ndarray, tuple[float, int], tuple[float, int]] | None:
+    """The lens with every determined parameter within its range, when the applied ones
+    alone leave the lines' bows disagreeing (chi2 test at ``alpha``) and all of them explain
+    the bows: (that lens, the bow test without, with). None otherwise."""
+    full = [j for j in det if np.isfinite(est[j]) and abs(est[j]) <= rng[j]]
+    if not applied or sorted(full) == sorted(applied) or not set(applied) <= set(full):
+        return None
+    without = _bow_test(cache, lam, len(applied))
+    if without is None or chi2.sf(*without) >= alpha:
+        return None
+    lam_full = fits.get(tuple(full))
+    if lam_full is None:
+        lam_full = _gauss_newton(cache, full, rng, 5)
+    if np.any(np.abs(lam_full[full]) > rng[full]):
+        return None
+    out = np.zeros(len(PARAMS))
+    out[full] = lam_full[full]
+    with_ = _bow_test(cache, out, len(full))
+    if with_ is None or chi2.sf(*with_) < alpha:
+        return None
+    return out, without, with_
 
 
 def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
@@ -442,6 +501,43 @@ def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
             out[f"lens_{PARAMS[j]}_small"] = float(abs(seff) * np.hypot(e, sol.u_lines[j]))
         else:
             out[f"lens_{PARAMS[j]}_range"] = float(abs(seff) * rng[j] / np.sqrt(3))
+    return out
+
+
+def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
+    """The bow each lens parameter leaves on this line, per unit of it: the sagitta [px] of
+    the quadratic across the line over the centres' span (as the mark's loop measures a
+    bow: b (t - t_m)^2, sagitta b (span / 2)^2), after a straight line absorbed what it can.
+    ``lam``: the lens the centres are undistorted by (zeros: raw or already undistorted).
+    Non-finite where the lens folds."""
+    q, jac = undistortion_jacobian(line.points, lam, scale)
+    if not np.all(np.isfinite(jac)):
+        return np.full(len(PARAMS), np.inf)
+    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
+    u, n = line_frame(lf.angle_rad)
+    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]
+    t = q @ u
+    tm = (t.min() + t.max()) / 2
+    X = np.column_stack([t - tm, np.ones(len(t)), (t - tm) ** 2])
+    beta = np.linalg.lstsq(X, E, rcond=None)[0][2]
+    return beta * (np.ptp(t) / 2) ** 2
+
+
+def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
+    """How far each lens parameter may still be from the applied lens (per PARAMS, in its
+    unit): its plausible range when the lines leave it undetermined, |estimate| + z u when
+    determined but not applied, z u when applied."""
+    rng = sol.ranges.vector()
+    out = np.zeros(len(PARAMS))
+    for j in range(len(PARAMS)):
+        uj = sol.u_lines[j]
+        if sol.applied[j]:
+            out[j] = z * uj if np.isfinite(uj) else rng[j]
+        elif sol.determined[j]:
+            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
+            out[j] = min(abs(e) + z * uj, rng[j]) if np.isfinite(uj) else rng[j]
+        else:
+            out[j] = rng[j]
     return out
 
 

@@ -27,15 +27,17 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.stats import chi2, norm
 
 from align.errors import NotApplicable
 from align.family import LineFamily, line_family
 from align.lens import (
     LensRanges,
     LineGeometry,
+    bow_reach,
     camera_terms,
     check_camera,
+    lens_bow,
     solve_lens,
 )
 from align.lens import (
@@ -159,7 +161,9 @@ class MarkStage:
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
-            payload={"offset_px": lf.offset_px, "chord_rad": _chord_angle(q, lf, terms)},
+            payload=dict(zip(("chord_rad", "curvature_per_px"),
+                             _chord_angle(q, lf, terms, m.ends_px), strict=True),
+                         offset_px=lf.offset_px),
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
                         "offset_px": (lf.offset_px, lf.offset_u_px)},
             noise_dof=self.noise_dof)
@@ -222,17 +226,24 @@ def _bend_column(q: np.ndarray, angle: float) -> np.ndarray:
     return ((t - (t.min() + t.max()) / 2) ** 2)[:, None]
 
 
-def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term]) -> float:
-    """Angle of the chord between the fitted curve's ends (the straight fit's angle when no
-    bow is fitted): how a bent mark's direction is read end to end [rad]."""
+def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term], ends: np.ndarray | None = None
+                 ) -> tuple[float, float]:
+    """Angle of the chord between the fitted curve's points at the groove's ``ends`` (the
+    measured centres' span when None), and the curve's curvature [rad, 1/px] (the straight
+    fit's angle and 0 when no bow is fitted): how a bent mark's direction is read end to end.
+
+    The bow is b (t - t_m)^2 across the line, so the chord between t0 and t1 turns from the
+    fitted line by b (t0 + t1 - 2 t_m): the tangent at the chord's middle (a parabola's
+    chord is parallel to its tangent there; an arc's within its small-angle terms)."""
     if not any(t.name == BEND for t in terms):
-        return float(lf.angle_rad)
+        return float(lf.angle_rad), 0.0
     j = MarkStage._col_index(terms, BEND)
-    u, n = line_frame(lf.angle_rad)
+    u, _ = line_frame(lf.angle_rad)
     t = q @ u
     tm = (t.min() + t.max()) / 2
-    ends = [(lf.offset_px + lf.beta[j] * (te - tm) ** 2) for te in (t.min(), t.max())]
-    return float(lf.angle_rad - (ends[1] - ends[0]) / (t.max() - t.min()))
+    t0, t1 = (t.min(), t.max()) if ends is None else tuple(ends @ u)
+    b = float(lf.beta[j])
+    return float(lf.angle_rad - b * (t0 + t1 - 2 * tm)), 2 * b
 
 
 def _bend(fit: StageFit) -> Term:
@@ -461,8 +472,15 @@ class MarkResult:
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
-              candidates: Sequence[Candidate] = CANDIDATES) -> MarkResult:
-    """Run the residual loop over one measured mark."""
+              candidates: Sequence[Candidate] = CANDIDATES, lens_bow_px: float = 0.0
+              ) -> MarkResult:
+    """Run the residual loop over one measured mark.
+
+    ``lens_bow_px``: the largest sagitta the camera's lens can still leave on this mark
+    (:attr:`CameraLens.bow_px`; 0: none, the lens is known or declared absent). A bow the
+    loop finds beyond it (by more than its u at ``alpha``) has no lens's shape here: a bent
+    mark, named; within it, lens or bend, said so. Either way the direction is read end to
+    end and u covers the other readings."""
     rep = run_loop(MarkStage(m), candidates, alpha=alpha,
                    admissible=functools.partial(radial_admissible, alpha=alpha))
     a, au = rep.after.quantities["angle_rad"]
@@ -481,13 +499,34 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
         # and which one the user means is not in the image. Cover both: the difference
         # (and the angle without the bow term) enter u.
+        # Its direction is read as the chord between the groove's own ends (the tangent at
+        # its middle), and u covers the other readings: the straight fit over the measured
+        # centres and the tangent at their middle.
+        bent = abs(bend.estimate) > lens_bow_px + float(norm.isf(alpha / 2)) * bend.u
+        pre = "bent_mark" if bent else "bow"
         chord = float(rep.after.payload["chord_rad"])
         a0 = rep.before.quantities["angle_rad"][0]
-        terms["bent_mark_chord_vs_fit"] = float(max(abs(_wrap(chord - a)), abs(_wrap(a0 - a))))
-        notes.append(f"{image} mark {index}: the mark is bent (sagitta {bend.estimate:+.3g} ± "
-                     f"{bend.u:.2g} px) and the lens does not explain the bow: its direction "
-                     "is ambiguous (straight fit vs chord), u widened to cover both")
-        au = float(np.hypot(au, terms["bent_mark_chord_vs_fit"]))
+        terms[f"{pre}_chord_vs_fit"] = float(max(abs(_wrap(a - chord)),
+                                                 abs(_wrap(a0 - chord))))
+        # Where the ends are: a groove's tip (round, square or tapering over about its own
+        # width w, blurred by s) puts each half-depth end within +-(w/2 + s), uniform (Type
+        # B); their middle then moves by that / sqrt(2), and the chord turns with the
+        # curvature times that shift.
+        u_mid = (m.profile.width_px / 2 + m.profile.blur_px) / np.sqrt(3) / np.sqrt(2)
+        terms[f"{pre}_ends"] = float(abs(rep.after.payload["curvature_per_px"]) * u_mid)
+        a = chord
+        if bent:
+            notes.append(f"{image} mark {index}: the mark is bent (sagitta "
+                         f"{bend.estimate:+.3g} ± {bend.u:.2g} px; the lens can make at most "
+                         f"{lens_bow_px:.2g} px here) and the lens does not explain the bow: "
+                         "its direction is ambiguous (chord between its ends vs straight "
+                         "fit), u widened to cover both")
+        else:
+            notes.append(f"{image} mark {index}: a bow of {bend.estimate:+.3g} ± "
+                         f"{bend.u:.2g} px, within what the camera's undetermined lens can "
+                         f"make here ({lens_bow_px:.2g} px): lens or a bend of the mark; its "
+                         "direction is read end to end, u covers the straight fit too")
+        au = float(np.sqrt(au**2 + terms[f"{pre}_chord_vs_fit"]**2 + terms[f"{pre}_ends"]**2))
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
@@ -551,13 +590,16 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
     centres before the loop (None: nothing; a camera model already undistorted them), the
-    named angle-u terms per mark [rad], the notes, the saved dict."""
+    named angle-u terms per mark [rad], the notes, the saved dict; ``bow_px``: per mark, the
+    largest sagitta [px] the lens can still leave on it (what the lines leave undetermined,
+    or the calibration's u): a larger bow is no lens (:func:`bow_bound`)."""
 
     lam: np.ndarray | None
     terms: tuple[dict[str, float], ...]
     notes: tuple[str, ...]
     record: Mapping
     max_u_rad: float
+    bow_px: tuple[float, ...] = ()
 
 
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
@@ -583,13 +625,15 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
         # Declared distortion-free: nothing to determine, nothing to carry.
         return CameraLens(None, tuple({} for _ in ms), (),
                           {"source": "declared distortion-free", "lines": len(ms),
-                           "ranges": ranges.to_dict()}, max_u)
+                           "ranges": ranges.to_dict()}, max_u, tuple(0.0 for _ in ms))
+    z = float(norm.isf(alpha / 2))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
         terms = tuple(lens_angle_terms(sol, d) for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
         return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
-                          {"source": "marks", **sol.to_dict()}, max_u)
+                          {"source": "marks", **sol.to_dict()}, max_u,
+                          bow_bound(lines, sol.lam, bow_reach(sol, z), R))
     lam_u = camera_lens_u(camera, shape)
     zero = np.zeros_like(lam_u)
     terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
@@ -602,9 +646,19 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(abs(d.s @ dlam))
+    reach = z * lam_u + (np.abs(dlam) if p < alpha else 0.0)
     return CameraLens(None, tuple(terms_l), tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
-                       "u_lens_vector": lam_u.tolist()}, max_u)
+                       "u_lens_vector": lam_u.tolist()}, max_u,
+                      bow_bound(lines, zero, reach, R))
+
+
+def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray, scale: float
+              ) -> tuple[float, ...]:
+    """Per line, the largest sagitta [px] a lens within ``reach`` of ``lam`` leaves on it
+    (each parameter's bow at its reach, added in the worst case: a bow beyond this has no
+    lens's shape at this line's position)."""
+    return tuple(float(np.abs(lens_bow(ln, lam, scale)) @ reach) for ln in lines)
 
 
 def _lens_undistorted(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
@@ -627,7 +681,8 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     in it): undistorted by it, through the loop, the lens's u terms added to the angle."""
     before = m.line.angle_rad
     mu = _lens_undistorted(m, lens.lam) if lens.lam is not None else m
-    r = loop_mark(mu, name, index, alpha)
+    r = loop_mark(mu, name, index, alpha,
+                  lens_bow_px=lens.bow_px[k] if k < len(lens.bow_px) else 0.0)
     terms = dict(r.u_terms)
     terms.update(lens.terms[k] if k < len(lens.terms) else {})
     au = float(np.sqrt(r.angle_u_rad**2 + sum(v**2 for k_, v in terms.items()
