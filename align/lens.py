@@ -251,7 +251,55 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
 
     Returns the solution and each mark's design at the applied lens (angle sensitivities).
+
+    A bow is a lens only if the other lines agree. When no plausible lens explains all the
+    lines' bows (:func:`_plausible`) but one fits all the others, the line left out is a
+    bent mark: the lens comes from the others (its own loop then names the bend), rather
+    than one bent mark dragging the camera's lens beyond any lens and every angle with it.
     """
+    sol, designs = _solve(lines, scale, ranges, alpha, iters)
+    if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
+        return sol, designs
+    best: tuple[float, int, LensSolution] | None = None
+    for k in range(len(lines)):
+        rest = [ln for i, ln in enumerate(lines) if i != k]
+        try:
+            sk, dk = _solve(rest, scale, ranges, alpha, iters)
+        except LensFolds:
+            continue
+        p = _plausible(sk, dk, alpha)
+        if p >= alpha and (best is None or p > best[0]):
+            best = (p, k, sk)
+    if best is None:
+        return sol, designs
+    _, k, sk = best
+    cache = _DesignCache(lines, scale)
+    try:
+        ds = cache.all(sk.lam)
+    except LensFolds:
+        return sol, designs
+    det = [j for j in range(len(PARAMS)) if sk.determined[j]]
+    probes = _pp_probe_s(cache, sk.lam, det, ranges.vector())
+    note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
+            f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
+            "bent mark, left out of the lens")
+    sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines))
+    return sk, [replace(d, s_probe=sp) for d, sp in zip(ds, probes, strict=True)]
+
+
+def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> float:
+    """p-value of the lines' bows left once the applied lens and every other parameter within
+    its plausible range explain what they can (1 with no line to spare)."""
+    rng = sol.ranges.vector()
+    others = [j for j in range(len(PARAMS)) if not sol.applied[j] and rng[j] > 0]
+    bz = _bows_left(designs, others, rng)
+    dof = len(bz) - sum(sol.applied)
+    return float(chi2.sf(float(bz @ bz), dof)) if dof > 0 else 1.0
+
+
+def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alpha: float,
+           iters: int) -> tuple[LensSolution, list[_Design]]:
+    """:func:`solve_lens` over all of ``lines``."""
     z = float(norm.isf(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
