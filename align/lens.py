@@ -596,7 +596,9 @@ def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
         if design.s_probe is not None and not sol.determined[j]:
             seff = max(seff, float(design.s_probe[j]))
         if sol.determined[j]:
-            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
+            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
+            # is within the range.
+            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
             out[f"lens_{PARAMS[j]}_small"] = float(abs(seff) * np.hypot(e, sol.u_lines[j]))
         else:
             out[f"lens_{PARAMS[j]}_range"] = float(abs(seff) * rng[j] / np.sqrt(3))
