@@ -125,6 +125,7 @@ class MarkResult:
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     lens_limited: bool = False
+    bend_off_frame: bool = False
 
     @property
     def unexplained_structure(self) -> bool:
@@ -166,6 +167,7 @@ class MarkResult:
         d["angle_u_terms_rad"] = {k: float(v) for k, v in self.u_terms.items()}
         d["notes"] = list(self.notes)
         d["lens_limited"] = self.lens_limited
+        d["bent_mark_off_frame"] = self.bend_off_frame
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -205,7 +207,8 @@ class MarkResult:
                    u_terms={str(k): _num(v)
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
                    notes=tuple(str(n) for n in d.get("notes", ())),
-                   lens_limited=bool(d.get("lens_limited", False)))
+                   lens_limited=bool(d.get("lens_limited", False)),
+                   bend_off_frame=bool(d.get("bent_mark_off_frame", False)))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -232,6 +235,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")
     bend = next((e for e in rep.effects if e.name == BEND), None)
+    off_frame = False
     if bend is not None:
         # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
         # and which one the user means is not in the image. Cover both: the difference
@@ -264,13 +268,31 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
                          f"make here ({lens_bow_px:.2g} px): lens or a bend of the mark; its "
                          "direction is read end to end, u covers the straight fit too")
         au = float(np.sqrt(au**2 + terms[f"{pre}_chord_vs_fit"]**2 + terms[f"{pre}_ends"]**2))
+        off_frame = runs_off_frame(m)
+        if off_frame:
+            notes.append(f"{image} mark {index}: NOT OK: the bowed mark runs off the image, so "
+                         "its ends are not in it: the whole mark's chord (its direction) cannot "
+                         "be read; image the whole mark")
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
         loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
-        notes=tuple(notes))
+        notes=tuple(notes), bend_off_frame=bend is not None and off_frame)
+
+
+def runs_off_frame(m: MarkMeasurement) -> bool:
+    """Whether an end of the groove (its half-depth end in the raw image) lies within its
+    blurred half-width of the frame's edge: the mark may go on beyond it."""
+    h, w = m.image_shape
+    u, n = line_frame(m.profile.angle_rad)
+    reach = m.profile.width_px / 2 + 3 * m.profile.blur_px + 2
+    for t in m.extent_px:
+        x, y = m.profile.offset_px * n + t * u
+        if abs(x) > (w - 1) / 2 - reach or abs(y) > (h - 1) / 2 - reach:
+            return True
+    return False
 
 
 def _wrap(a: float) -> float:
