@@ -346,10 +346,11 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         # and only what no lens explains is a bend.
         lam_out, chi_without, chi_with = needed
         added = [j for j in det if lam_out[j] and j not in applied]
-        notes.append(f"lens {', '.join(PARAMS[j] for j in added)} applied although the "
-                     "principal point's range leaves its sign open: the lines need it (their "
-                     f"bows without it chi2 {chi_without[0]:.1f} on {chi_without[1]} dof, with "
-                     f"it {chi_with[0]:.1f} on {chi_with[1]}); that range is carried in u")
+        notes.append(f"lens {', '.join(PARAMS[j] for j in added)} applied: the lines need "
+                     f"it (their bows without it chi2 {chi_without[0]:.1f} on "
+                     f"{chi_without[1]} dof, with it {chi_with[0]:.1f} on {chi_with[1]}), with "
+                     "the same sign wherever the principal point is in its range; that range "
+                     "is carried in u")
         applied = sorted(applied + added)
         spread_for = []
     if not applied:
@@ -406,12 +407,12 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
 
 
-def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int
-                  ) -> np.ndarray:
+def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
+                  start: np.ndarray | None = None) -> np.ndarray:
     """The lens vector fitting the parameters ``applied`` to the lines' bows (Gauss-Newton
-    from zero; stopped, and left for the caller to refuse, beyond twice the range or where
-    the lens folds the image)."""
-    lam = np.zeros(len(PARAMS))
+    from ``start``, zero by default, the other entries held there; stopped, and left for the
+    caller to refuse, running away beyond any range or where no step improves the fit)."""
+    lam = np.zeros(len(PARAMS)) if start is None else start.copy()
     if not applied:
         return lam
     A = np.ix_(applied, applied)
@@ -491,7 +492,7 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
     within every parameter's range: the fewest added parameters that do, the best fit among
     those. Returns (that lens, the bow test without, with); None otherwise."""
     extra = [j for j in det if j not in applied]
-    if not applied or not extra:
+    if not extra:
         return None
     undet = [j for j in range(len(PARAMS)) if j not in det and rng[j] > 0]
     without = _bow_test(cache, lam, len(applied), undet, rng)
@@ -510,11 +511,26 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
             out[full] = lam_full[full]
             with_ = _bow_test(cache, out, len(full), undet, rng)
             if with_ is not None and chi2.sf(*with_) >= alpha and (
-                    best is None or with_[0] < best[2][0]):
+                    best is None or with_[0] < best[2][0]) and _same_sign_over_pp(
+                    cache, out, full, det, undet, rng, alpha):
                 best = (out, without, with_)
         if best is not None:
             return best
     return None
+
+
+def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], det: list[int],
+                       undet: list[int], rng: np.ndarray, alpha: float) -> bool:
+    """Whether no principal point in its range lets a lens with another sign of any of the
+    parameters ``full`` explain the lines: refitted with the principal point at each corner
+    of its range, every fit that explains the bows keeps the signs of ``lam``."""
+    for probe in _pp_probes(np.zeros(len(PARAMS)), det, rng):
+        lam_p = _gauss_newton(cache, full, rng, 8, start=probe)
+        if np.any(np.sign(lam_p[full]) != np.sign(lam[full])):
+            t = _bow_test(cache, lam_p, len(full), [j for j in undet if j not in (5, 6)], rng)
+            if t is not None and chi2.sf(*t) >= alpha:  # (None: that lens folds the image)
+                return False
+    return True
 
 
 def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
