@@ -96,9 +96,11 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
         sol, designs = solve_lens(lines, R, ranges, alpha)
         terms = tuple(lens_angle_terms(sol, d) for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
+        # A line no lens of the others explains: no bow of it is the lens's.
+        bows = bow_bound(lines, sol.lam, bow_reach(sol, z), R)
+        bows = tuple(0.0 if k in sol.bent_lines else b for k, b in enumerate(bows))
         return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
-                          {"source": "marks", **sol.to_dict()}, max_u,
-                          bow_bound(lines, sol.lam, bow_reach(sol, z), R))
+                          {"source": "marks", **sol.to_dict()}, max_u, bows)
     lam_u = camera_lens_u(camera, shape)
     zero = np.zeros_like(lam_u)
     terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]

@@ -190,7 +190,8 @@ class LensSolution:
     ``lam``: the applied lens vector (zeros where not applied); ``determined``, ``applied``:
     per parameter; ``u_lines``: each parameter's marginal u from the lines (inf: not
     determined); ``estimate``: the fitted value of each determined parameter (nan
-    otherwise); ``notes``: what the reader must know (one line each).
+    otherwise); ``notes``: what the reader must know (one line each); ``bent_lines``: the
+    line whose bow no lens the other lines agree on explains (left out of the fit).
     """
 
     lam: np.ndarray
@@ -207,6 +208,7 @@ class LensSolution:
     confirmed: bool = True
     bow_chi2: float = 0.0
     bow_dof: int = 0
+    bent_lines: tuple[int, ...] = ()
 
     def to_dict(self) -> dict:
         def num(v: float) -> float | None:
@@ -215,6 +217,7 @@ class LensSolution:
         return {"model": "brown-conrady at the half-diagonal", "lines": self.n_lines,
                 "confirmed_by_other_lines": self.confirmed,
                 "bow_chi2": float(self.bow_chi2), "bow_dof": self.bow_dof,
+                "bent_lines": list(self.bent_lines),
                 "chi2_dof": num(self.chi2_dof), "ranges": self.ranges.to_dict(),
                 "parameters": {p: {"determined": self.determined[j],
                                    "applied": self.applied[j], "value": float(self.lam[j]),
@@ -283,7 +286,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
             f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
             "bent mark, left out of the lens")
-    sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines))
+    sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
     return sk, [replace(d, s_probe=sp) for d, sp in zip(ds, probes, strict=True)]
 
 
