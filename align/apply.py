@@ -12,25 +12,35 @@ authors state, removed).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from align.calibration import TriadModel, r_matrix
-from align.contract import check, document
+from align.contract import check, document, read_json
 from align.errors import InputError
 from align.fusion import E_NAMES, axes_from, e_matrix
+from align.session_json import LoadedSession
 from align.tilt import calibrated_force, roll_pitch
+from axisbase.covariance import cov_of
 from axisbase.output import csv_text
 from axisbase.provenance import Provenance
 
 
 @dataclass(frozen=True)
 class PlatformCalibration:
-    """Triad model plus the misalignment E [rad] (6 angles in ``E_NAMES`` order) and its
-    6x6 covariance [rad^2]."""
+    """Triad model plus the misalignment E and its covariance (what ``align apply`` needs).
+
+    Attributes
+    ----------
+    model : TriadModel
+        The triad's calibration; unit — (its own fields carry units).
+    e6 : numpy.ndarray
+        The six angles of E in ``E_NAMES`` order [rad].
+    cov : numpy.ndarray
+        Their 6×6 covariance [rad²].
+    """
 
     model: TriadModel
     e6: np.ndarray
@@ -38,7 +48,12 @@ class PlatformCalibration:
 
     @property
     def axes(self) -> np.ndarray:
+        """Unit rows s_i of M: where accelerometer i points in the platform frame."""
         return axes_from(self.e6)
+
+    def cov_of(self, *names: str) -> np.ndarray:
+        """The covariance [rad²] of the named angles of E (``E_NAMES``) in the order given."""
+        return cov_of(self.cov, E_NAMES, names)
 
     def to_dict(self, units: str | None = None) -> dict:
         """The calibration's body (``units``: the output unit of the readings it was made
@@ -64,17 +79,7 @@ class PlatformCalibration:
         """Read a platform calibration — the file itself or a session result holding one —
         of any format version this tool reads (version 1: the files written before
         versions existed); ``InputError`` says which versions it cannot."""
-        if "platform_calibration" in d:
-            check(d, "session", where)
-            d = d["platform_calibration"]
-            if not isinstance(d, dict):
-                raise InputError(f"{where}: platform_calibration is not a table")
-        elif d.get("format") == "axis-align/session" or "misalignment_rad" in d and \
-                "model" not in d:
-            raise InputError(f"{where}: a session result without a platform calibration "
-                             "(the session had no [calibration] or its fusion failed)")
-        else:
-            check(d, "platform-calibration", where)
+        d = _block(d, where)
         try:
             model = TriadModel.from_dict(d["model"], where)
             e6 = np.array(d["angles_rad"], float).reshape(6)
@@ -92,10 +97,8 @@ class PlatformCalibration:
     def load_with_units(cls, path: str | Path) -> tuple[PlatformCalibration, str | None]:
         """The calibration and the output unit of the readings it was made from (None for
         files that do not say)."""
-        d = read_json(path, "a platform calibration")
-        pc = cls.from_dict(d, str(path))
-        inner = d.get("platform_calibration", d)
-        return pc, inner.get("model", {}).get("output_unit")
+        block = _block(read_json(path, "a platform calibration"), str(path))
+        return cls.from_dict(block, str(path)), _output_unit(block)
 
     def specific_force(self, u: np.ndarray, t: np.ndarray | float = 0.0,
                        temp: np.ndarray | float | None = None) -> np.ndarray:
@@ -107,21 +110,29 @@ class PlatformCalibration:
         return np.linalg.solve(self.axes, w.T).T
 
 
-def read_json(path: str | Path, what: str) -> dict:
-    """A JSON object from a file (``InputError`` naming the file otherwise)."""
-    p = Path(path)
-    try:
-        d = json.loads(p.read_text(encoding="utf-8-sig"))
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{p}: is a folder, not {what}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{p}: not JSON ({type(exc).__name__} at position "
-                         f"{getattr(exc, 'pos', getattr(exc, 'start', '?'))})") from None
-    if not isinstance(d, dict):
-        raise InputError(f"{p}: not {what} (a JSON object was expected)")
-    return d
+def _is_session(d: dict) -> bool:
+    """A session result (any version: version 1 has no ``format``), not a calibration file."""
+    return ("platform_calibration" in d or d.get("format") == "axis-align/session"
+            or "misalignment_rad" in d and "model" not in d)
+
+
+def _block(d: dict, where: str) -> dict:
+    """The platform calibration's block: the file itself (its format checked) or a session
+    result's, read by the one reader of session results (:class:`LoadedSession`)."""
+    if not _is_session(d):
+        check(d, "platform-calibration", where)
+        return d
+    block = LoadedSession.from_dict(d, where).platform_calibration
+    if block is None:
+        raise InputError(f"{where}: a session result without a platform calibration "
+                         "(the session had no [calibration] or its fusion failed)")
+    return dict(block)
+
+
+def _output_unit(block: dict) -> str | None:
+    model = block.get("model")
+    return model.get("output_unit", block.get("output_unit")) if isinstance(model, dict) \
+        else block.get("output_unit")
 
 
 def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
@@ -129,11 +140,8 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     version, or a bare model block) and the output unit it was made from (None if unknown)."""
     d = read_json(path, "a calibration")
     fmt = d.get("format")
-    if fmt == "axis-align/session" or "platform_calibration" in d:
-        check(d, "session", str(path))  # a session result: its triad model
-        d = d.get("platform_calibration") or {}
-        if not d:
-            raise InputError(f"{path}: a session result without a calibration")
+    if _is_session(d):  # a session result: its triad model
+        d = _block(d, str(path))
     elif fmt == "axis-align/platform-calibration":
         check(d, "platform-calibration", str(path))
     elif "model" in d:
@@ -152,12 +160,10 @@ def load_tilt_calibration(path: str | Path) -> tuple[TriadModel | PlatformCalibr
     calibrate --json``) -> its ``TriadModel`` (the triad's own frame: no misalignment known).
     With the output unit of the readings it was made from (None if the file does not say)."""
     d = read_json(path, "a calibration")
-    if ("platform_calibration" in d or d.get("format") in ("axis-align/session",
-                                                           "axis-align/platform-calibration")
+    if (_is_session(d) or d.get("format") == "axis-align/platform-calibration"
             or "misalignment_rad" in d):
-        pc = PlatformCalibration.from_dict(d, str(path))
-        inner = d.get("platform_calibration", d)
-        return pc, inner.get("model", {}).get("output_unit")
+        block = _block(d, str(path))  # read once: the body is a version-1 calibration
+        return PlatformCalibration.from_dict(block, str(path)), _output_unit(block)
     return load_triad_model(path)
 
 

@@ -1,6 +1,7 @@
 """The lens of one camera as its marks meet it: the lens solved from the marks or taken from a
-camera model (:mod:`align.lens`), what it adds to each mark's u, and the largest bow it can
-still leave on each mark (beyond which a bow is a bent mark, docs/camera.md)."""
+camera model (:mod:`align.lens`), what it adds to each mark's u (named terms, and their signed
+components shared by the marks of one lens), and the largest bow it can still leave on each
+mark (beyond which a bow is a bent mark, docs/camera.md)."""
 
 from __future__ import annotations
 
@@ -13,14 +14,12 @@ from scipy.stats import norm
 from align.lens import (
     LensRanges,
     LineGeometry,
+    angle_coupling,
     bow_reach,
-    camera_terms,
+    camera_coupling,
     check_camera,
     lens_bow,
     solve_lens,
-)
-from align.lens import (
-    angle_terms as lens_angle_terms,
 )
 from align.lens import (
     undistorted as lens_undistorted,
@@ -55,21 +54,52 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
     centres before the loop (None: nothing; a camera model already undistorted them), the
-    named angle-u terms per mark [rad], the notes, the saved dict; ``bow_px``: per mark, the
-    largest sagitta [px] the lens can still leave on it (what the lines leave undetermined,
-    or the calibration's u): a larger bow is no lens (:func:`bow_bound`)."""
+    named angle-u terms per mark [rad], the notes, the saved dict; ``coupling``: each
+    mark's terms as signed components on the lens's error directions (shared by every mark
+    of this lens, :func:`align.lens.angle_coupling`).
+
+    The terms are the coupling's sizes: a term is the root sum of squares of its components
+    (``lens_fit.0``, ``lens_fit.1``, ... for a fitted lens's covariance, one each else)."""
 
     lam: np.ndarray | None
-    terms: tuple[dict[str, float], ...]
     notes: tuple[str, ...]
     record: Mapping
     max_u_rad: float
+    coupling: tuple[dict[str, float], ...] = ()
+    model_as: str = "--camera"
+    """How the user gives this camera a model: the flag, or session.toml's key."""
     bow_px: tuple[float, ...] = ()
+    """Per mark, the largest sagitta [px] the lens can still leave on it (what the lines
+    leave undetermined, or the calibration's u): a larger bow is no lens
+    (:func:`bow_bound`)."""
+
+    @property
+    def terms(self) -> tuple[dict[str, float], ...]:
+        """Named standard uncertainties [rad] per mark (the coupling's sizes per term)."""
+        return tuple(_term_sizes(c) for c in self.coupling)
+
+
+def _term_sizes(coupling: Mapping[str, float]) -> dict[str, float]:
+    """Root sum of squares per term name (``lens_fit.0`` and ``lens_fit.1`` are ``lens_fit``)."""
+    out: dict[str, float] = {}
+    for k, v in coupling.items():
+        name = k.split(".")[0]
+        out[name] = float(np.hypot(out.get(name, 0.0), v))
+    return out
 
 
 def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
                 ) -> CameraLens:
+    """:func:`_camera_lens`; ``label`` names a session's camera (its messages then name
+    session.toml's ``[cameras.LABEL] model``, not ``--camera``)."""
+    lens = _camera_lens(ms, camera, ranges, alpha, label)
+    return replace(lens, model_as=f"[cameras.{label}] model") if label else lens
+
+
+def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                 ) -> CameraLens:
     """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
 
     Without a camera model: identifiability, then the determined parameters fitted jointly
@@ -81,29 +111,31 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
     ranges = ranges or LensRanges()
     max_u = ranges.max_u_arcsec * np.pi / 180 / 3600
     if not ms:
-        return CameraLens(None, (), (), {}, max_u)
+        return CameraLens(None, (), {}, max_u)
     shape = ms[0].image_shape
     R = half_diagonal(shape)
     lines = lens_lines(ms)
     who = f"camera {label}" if label else "camera"
     if camera is None and not np.any(ranges.vector()):
         # Declared distortion-free: nothing to determine, nothing to carry.
-        return CameraLens(None, tuple({} for _ in ms), (),
+        return CameraLens(None, (),
                           {"source": "declared distortion-free", "lines": len(ms),
-                           "ranges": ranges.to_dict()}, max_u, tuple(0.0 for _ in ms))
+                           "ranges": ranges.to_dict()}, max_u, tuple({} for _ in ms),
+                          bow_px=tuple(0.0 for _ in ms))
     z = float(norm.isf(alpha / 2))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
-        terms = tuple(lens_angle_terms(sol, d) for d in designs)
+        coupling = tuple(angle_coupling(sol, d) for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
         # A line no lens of the others explains: no bow of it is the lens's.
         bows = bow_bound(lines, sol.lam, bow_reach(sol, z), R)
         bows = tuple(0.0 if k in sol.bent_lines else b for k, b in enumerate(bows))
-        return CameraLens(sol.lam if np.any(sol.lam) else None, terms, notes,
-                          {"source": "marks", **sol.to_dict()}, max_u, bows)
+        return CameraLens(sol.lam if np.any(sol.lam) else None, notes,
+                          {"source": "marks", **sol.to_dict()}, max_u, coupling,
+                          bow_px=bows)
     lam_u = camera_lens_u(camera, shape)
     zero = np.zeros_like(lam_u)
-    terms_l = [camera_terms(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
+    terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
     if p < alpha:
@@ -112,12 +144,12 @@ def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None
                      f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
-            t["camera_disagreement"] = float(abs(d.s @ dlam))
+            t["camera_disagreement"] = float(d.s @ dlam)
     reach = z * lam_u + (np.abs(dlam) if p < alpha else 0.0)
-    return CameraLens(None, tuple(terms_l), tuple(notes),
+    return CameraLens(None, tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
-                       "u_lens_vector": lam_u.tolist()}, max_u,
-                      bow_bound(lines, zero, reach, R))
+                       "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
+                      bow_px=bow_bound(lines, zero, reach, R))
 
 
 def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray, scale: float

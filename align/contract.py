@@ -14,6 +14,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from align.errors import InputError
 from axisbase.provenance import Provenance, check_format, envelope
 
 FORMATS = {
@@ -71,3 +72,20 @@ def validate(d: Mapping[str, Any], kind: str) -> None:
     env = schema("envelope")
     registry = Registry().with_resource(env["$id"], Resource.from_contents(env))
     jsonschema.Draft202012Validator(schema(kind), registry=registry).validate(d)
+
+
+def read_json(path: str | Path, what: str) -> dict:
+    """A JSON object from a file (``InputError`` naming the file otherwise)."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text(encoding="utf-8-sig"))
+    except FileNotFoundError:
+        raise InputError(f"{p}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{p}: is a folder, not {what}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{p}: not JSON ({type(exc).__name__} at position "
+                         f"{getattr(exc, 'pos', getattr(exc, 'start', '?'))})") from None
+    if not isinstance(d, dict):
+        raise InputError(f"{p}: not {what} (a JSON object was expected)")
+    return d

@@ -31,6 +31,7 @@ from scipy import stats
 
 from align.errors import InputError
 from align.fusion.observations import E_INDEX, E_NAMES
+from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
 FORMAT_VERSION = 1
@@ -158,9 +159,29 @@ def resolve(spec: ToleranceSpec | None, tolerance: tuple[float, float] | None = 
 
 @dataclass(frozen=True)
 class AngleDisposition:
-    """One toleranced angle: value v, standard uncertainty u, nominal n, absolute limits
-    lower/upper (n + lo, n + hi), guard band w (k·u, 0 for the simple rule), margin (distance
-    to the nearest tolerance limit, positive inside) — all [rad]; ``p_conform`` [-]; verdict."""
+    """One toleranced angle.
+
+    Attributes
+    ----------
+    name : str
+        The angle (``E_xY``, ...); unit —.
+    value : float
+        Its value v [rad].
+    u : float
+        Its standard uncertainty [rad].
+    nominal : float
+        The nominal n [rad].
+    lower, upper : float
+        The absolute tolerance limits n + lo, n + hi [rad].
+    guard : float
+        The guard band w [rad] (k·u; 0 for the simple rule).
+    margin : float
+        Distance to the nearest tolerance limit [rad], positive inside.
+    p_conform : float
+        Probability that the angle lies within its limits — dimensionless.
+    verdict : str
+        PASS / FAIL / INCONCLUSIVE; unit —.
+    """
 
     name: str
     value: float
@@ -191,11 +212,27 @@ class AngleDisposition:
 
 @dataclass(frozen=True)
 class Disposition:
-    """The unit's verdict (one of :data:`VERDICTS`), the rule and k, one reason line, the
-    angle nearest to (or furthest beyond) its acceptance limit (``worst``: smallest
-    margin − guard band; None without a verdict on numbers), each
-    toleranced angle, and ``p_conform_all``: the probability that every toleranced angle
-    conforms at once (from the 6×6 covariance; None without a verdict on numbers)."""
+    """The unit's verdict and why.
+
+    Attributes
+    ----------
+    verdict : str
+        One of :data:`VERDICTS`; unit —.
+    rule : str
+        ``simple`` or ``guarded``; unit —.
+    k : float
+        The guard band's coverage factor — dimensionless.
+    reason : str
+        One line saying why; unit —.
+    worst : str or None
+        The angle nearest to (or furthest beyond) its acceptance limit (smallest margin −
+        guard band; None without a verdict on numbers); unit —.
+    angles : tuple of AngleDisposition
+        Each toleranced angle; unit — (their fields carry units).
+    p_conform_all : float or None
+        The probability that every toleranced angle conforms at once (from the 6×6
+        covariance; None without a verdict on numbers) — dimensionless.
+    """
 
     verdict: str
     rule: str
@@ -261,8 +298,7 @@ def _joint_p(angles: Sequence[AngleDisposition], cov: np.ndarray | None) -> floa
     covariance is not at hand)."""
     if cov is None:
         return float(np.prod([a.p_conform for a in angles]))
-    idx = [E_NAMES.index(a.name) for a in angles]
-    C = np.asarray(cov, float)[np.ix_(idx, idx)]
+    C = cov_of(np.asarray(cov, float), E_NAMES, [a.name for a in angles])
     if np.any(np.diag(C) <= 0):
         return float(np.prod([a.p_conform for a in angles]))
     mean = np.array([a.value for a in angles])

@@ -45,7 +45,7 @@ class LineFamily:
     Attributes
     ----------
     members : tuple of int
-        The members' mark indices in the image, ordered across the lines.
+        The members' mark indices in the image, ordered across the lines — dimensionless.
     angle_rad, angle_u_rad : float
         Weighted mean angle of the members [rad] and its standard uncertainty [rad]
         (widened by sqrt(chi2/dof) when the members disagree), the lens's share included.
@@ -53,24 +53,28 @@ class LineFamily:
         The lens's share of ``angle_u_rad`` [rad]: per lens term, the members' terms
         averaged with the mean's weights (added linearly: one lens moves them together).
     chi2, dof, p_value : float, int, float
-        Members' angles about the weighted mean: chi2, n - 1, upper-tail probability.
+        Members' angles about the weighted mean: chi2, n - 1, upper-tail probability —
+        dimensionless.
     z : tuple of float
-        Each member's normalised deviation from the mean angle.
+        Each member's normalised deviation from the mean angle — dimensionless.
     deviant : tuple of int
-        Mark indices of the members beyond the Bonferroni limit (tilted or bent lines).
+        Mark indices of the members beyond the Bonferroni limit (tilted or bent lines) —
+        dimensionless.
     pitch_px, pitch_u_px : float
         Distance between neighbouring ruling positions [px] and its uncertainty [px].
     steps : tuple of int
-        Each member's ruling step (0 for the first; a skipped graduation skips a step).
+        Each member's ruling step (0 for the first; a skipped graduation skips a step) —
+        dimensionless.
     pitch_residuals_px : tuple of float
         Each member's position minus the uniform ruling's [px].
     pitch_spread_px : float
         RMS of ``pitch_residuals_px`` [px] (the ruling's non-uniformity, as imaged).
     lens : str
         What corrected the members for the lens: ``camera model``, ``frame lens`` (fitted
-        from the frame's lines), ``none``.
+        from the frame's lines), ``none``; unit —.
     failed : int
-        Lines of the family found but not measured (each is its own failed entry).
+        Lines of the family found but not measured (each is its own failed entry) —
+        dimensionless.
     """
 
     members: tuple[int, ...]

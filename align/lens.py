@@ -56,10 +56,19 @@ class LensFolds(NotApplicable):
 class LensRanges:
     """Plausible range of each lens parameter (Type B, uniform over +- the value).
 
-    k1, k2, p at the image half-diagonal (dimensionless; OpenCV's k1 = k1 (f/R)^2, p = p f/R),
-    ``aspect``: |fy/fx - 1|, ``pp_px``: principal point from the image centre [px].
-    ``max_u_arcsec``: an angle whose lens-limited u exceeds this is not ok ("calibrate the
-    camera").
+    Attributes
+    ----------
+    k1, k2 : float
+        Radial distortion at the image half-diagonal (OpenCV's k1 = k1 (f/R)^2) —
+        dimensionless.
+    p : float
+        Tangential distortion at the half-diagonal (p = p f/R) — dimensionless.
+    aspect : float
+        |fy/fx - 1| — dimensionless.
+    pp_px : float
+        Principal point from the image centre [px].
+    max_u_arcsec : float
+        An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
     """
 
     k1: float = 0.3
@@ -187,11 +196,40 @@ class _DesignCache:
 class LensSolution:
     """The lens of one camera from its marks (see the module docstring).
 
-    ``lam``: the applied lens vector (zeros where not applied); ``determined``, ``applied``:
-    per parameter; ``u_lines``: each parameter's marginal u from the lines (inf: not
-    determined); ``estimate``: the fitted value of each determined parameter (nan
-    otherwise); ``notes``: what the reader must know (one line each); ``bent_lines``: the
-    line whose bow no lens the other lines agree on explains (left out of the fit).
+    Attributes
+    ----------
+    lam : numpy.ndarray
+        The applied lens vector over ``PARAMS`` (zeros where not applied) — dimensionless (pp
+        in [px]).
+    determined, applied : tuple of bool
+        Per parameter; unit —.
+    u_lines : numpy.ndarray
+        Each parameter's marginal u from the lines (inf: not determined) — dimensionless (pp
+        in [px]).
+    estimate : numpy.ndarray
+        The fitted value of each determined parameter (nan otherwise) — dimensionless (pp in
+        [px]).
+    cov_applied : numpy.ndarray
+        Covariance of the applied parameters [products of their units].
+    ranges : LensRanges
+        The plausible ranges used; unit —.
+    n_lines : int
+        Marks that entered the fit — dimensionless.
+    chi2_dof : float
+        χ²/dof of the lines' fit — dimensionless.
+    notes : tuple of str
+        What the reader must know (one line each); unit —.
+    info : numpy.ndarray
+        The lines' information matrix over ``PARAMS`` [1/products of the units].
+    confirmed : bool
+        The lines confirm the lens applied; unit —.
+    bow_chi2 : float
+        χ² of the marks' bows about the lens — dimensionless.
+    bow_dof : int
+        Its degrees of freedom — dimensionless.
+    bent_lines : tuple of int
+        The line whose bow no lens the other lines agree on explains (left out of the fit,
+        a bent mark) — dimensionless.
     """
 
     lam: np.ndarray
@@ -593,34 +631,42 @@ def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.nd
     return out
 
 
-def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
-    """Named standard uncertainties [rad] the lens adds to one mark's angle."""
+def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
+    """Each named lens term of one mark's angle as signed components [rad] on the lens's
+    own error directions (the same directions for every mark of one solve): see
+    :func:`angle_terms` (their norms) and :func:`angle_coupling` (the components)."""
     P = len(PARAMS)
     A = [j for j in range(P) if sol.applied[j]]
     rng = sol.ranges.vector()
-    out: dict[str, float] = {}
+    out: dict[str, np.ndarray] = {}
     s = design.s
     if A:
-        out["lens_fit"] = float(np.sqrt(s[A] @ sol.cov_applied @ s[A]))
+        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
+        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
+        w, V = np.linalg.eigh(sol.cov_applied)
+        L = V * np.sqrt(np.clip(w, 0.0, None))
+        out["lens_fit"] = L.T @ s[A]
         if not sol.confirmed:
             # Lens or bend: the angle with the lens applied and without it both stand.
-            out["lens_or_bend"] = float(abs(s[A] @ sol.lam[A]))
+            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A]])
     FA = sol.info[np.ix_(A, A)] if A else None
     for j in range(P):
         if sol.applied[j] or rng[j] <= 0:
             continue
         # What the applied parameters absorb of parameter j's bow changes their estimates,
         # hence the angle: the angle's net sensitivity to j.
-        seff = abs(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
+        seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
         if design.s_probe is not None and not sol.determined[j]:
-            seff = max(seff, float(design.s_probe[j]))
+            # Over the principal point's range the sensitivity can grow: its largest size,
+            # with the sign it has at the centre.
+            seff = float(np.copysign(max(abs(seff), float(design.s_probe[j])), seff))
         if sol.determined[j]:
             # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
             # is within the range.
             e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            out[f"lens_{PARAMS[j]}_small"] = float(abs(seff) * np.hypot(e, sol.u_lines[j]))
+            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
         else:
-            out[f"lens_{PARAMS[j]}_range"] = float(abs(seff) * rng[j] / np.sqrt(3))
+            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
     return out
 
 
@@ -661,16 +707,36 @@ def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
     return out
 
 
-def camera_terms(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
-                 lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
-    """Named standard uncertainties [rad] a calibrated camera's own u adds to a mark's angle.
+def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
+    """Named standard uncertainties [rad] the lens adds to one mark's angle."""
+    return {k: float(np.linalg.norm(v)) for k, v in _signed_parts(sol, design).items()}
+
+
+def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
+    """The lens terms of one mark's angle as signed components [rad]: for two marks of one
+    solve, the sum over shared keys of the products is the covariance their angles share
+    through the one lens (every mark of a camera sees the same lens error); each mark's own
+    sum of squares is the square sum of :func:`angle_terms`."""
+    out: dict[str, float] = {}
+    for k, v in _signed_parts(sol, design).items():
+        if len(v) == 1:
+            out[k] = float(v[0])
+        else:
+            out.update({f"{k}.{i}": float(x) for i, x in enumerate(v)})
+    return out
+
+
+def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
+                    lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
+    """Signed angle components [rad] of a calibrated camera's own u (one per lens parameter):
+    their sizes are a mark's named terms ``camera_<p>``, their products between two marks of
+    the camera the covariance the calibration's error puts between their angles.
 
     ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
     the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-
     raw = distort_points(points_ideal, lam, scale)
     d = _design(LineGeometry(raw, sigma, chol), lam, scale)
-    return {f"camera_{p}": float(abs(d.s[j]) * lam_u[j])
+    return {f"camera_{p}": float(d.s[j] * lam_u[j])
             for j, p in enumerate(PARAMS) if lam_u[j] > 0}
 
 

@@ -55,16 +55,28 @@ __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens",
 
 @dataclass(frozen=True)
 class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit),
-    as results written before the lens moved to :mod:`align.lens` saved it (read back only).
+    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit), as
+    results written before the lens moved to :mod:`align.lens` saved it (read back only).
 
-    ``k1`` at the image half-diagonal (dimensionless) with standard uncertainty ``k1_u``;
-    ``applied``: whether it was significant, explained the lines, and the marks were
-    undistorted with it; ``consistent``: whether the lines are straight within their
-    uncertainties once it is removed (False: the lines disagree in a way no single radial
-    distortion explains — bent marks, or lines that are not straight in the world — and every
-    mark's u is inflated by sqrt(chi2/dof)); ``chi2_dof_before``/``after``: all lines'
-    straightness; ``p_value`` of the k1 = 0 test.
+    Attributes
+    ----------
+    k1 : float
+        Radial distortion at the image half-diagonal — dimensionless.
+    k1_u : float
+        Its standard uncertainty — dimensionless.
+    applied : bool
+        It was significant, explained the lines, and the marks were undistorted with it;
+        unit —.
+    consistent : bool
+        The lines are straight within their uncertainties once it is removed (False: the lines
+        disagree in a way no single radial distortion explains — bent marks, or lines that are
+        not straight in the world — and every mark's u is inflated by sqrt(chi2/dof)); unit —.
+    n_lines : int
+        Marks in the fit — dimensionless.
+    chi2_dof_before, chi2_dof_after : float
+        All lines' straightness, χ²/dof — dimensionless.
+    p_value : float
+        Of the k1 = 0 test — dimensionless.
     """
 
     k1: float
@@ -97,7 +109,69 @@ def _num(v: object) -> float:
 
 @dataclass(frozen=True)
 class MarkResult:
-    """One mark (or one failure) of one image. Angles [rad], lengths [px]."""
+    """One mark (or one failure) of one image.
+
+    Attributes
+    ----------
+    image : str
+        The image file; unit —.
+    found : bool
+        A mark was measured (else ``error`` says why); unit —.
+    error : str or None
+        Why not; unit —.
+    index : int
+        The mark's index in its image — dimensionless.
+    angle_rad, angle_u_rad : float
+        The mark's angle in the image and its standard uncertainty [rad].
+    offset_px, offset_u_px : float
+        Its distance from the image centre and its standard uncertainty [px].
+    length_px : float
+        Its length, between the groove's half-depth ends [px].
+    width_px : float
+        Its width [px].
+    blur_px : float
+        The edge blur [px].
+    dark : bool
+        A dark groove on a bright surface (else bright); unit —.
+    n_points : int
+        Centre points fitted — dimensionless.
+    n_rejected : int
+        Centre points rejected — dimensionless.
+    angle_before_rad : float
+        The angle of the declared model, before the loop [rad].
+    loop : LoopReport or LoopSummary or None
+        The residual loop's report; unit —.
+    measurement : MarkMeasurement or None
+        The raw measurement (not saved); unit —.
+    uncertainty_inflation : float
+        Factor on u for structure no effect explains — dimensionless.
+    internal_error : bool
+        The failure was a defect of the tool; unit —.
+    frame : FrameDistortion or None
+        The frame's shared distortion (older results); unit —.
+    family : LineFamily or None
+        The family of parallel lines it belongs to; unit —.
+    unreported : int
+        Lines found in the image and not reported — dimensionless.
+    lens : Mapping or None
+        The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
+        [px]).
+    u_terms : Mapping
+        Named contributions to ``angle_u_rad`` [rad].
+    notes : tuple of str
+        What the reader must know; unit —.
+    lens_limited : bool
+        The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
+    lens_coupling : Mapping
+        The lens terms of u as signed components on the lens's error directions [rad]
+        (:func:`align.lens.angle_coupling`).
+    lens_group : str
+        The lens solve the mark shares with others (marks of one group share the lens's
+        error); unit —.
+    bend_off_frame : bool
+        A bowed mark runs off the image: its ends, hence its chord (direction), are not in
+        it; not ok; unit —.
+    """
 
     image: str
     found: bool
@@ -125,6 +199,10 @@ class MarkResult:
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
     lens_limited: bool = False
+    # The lens terms of u as signed components [rad] and the lens solve they belong to:
+    # marks of one group share the lens's error (align.lens.angle_coupling).
+    lens_coupling: Mapping[str, float] = field(default_factory=dict)
+    lens_group: str = ""
     bend_off_frame: bool = False
 
     @property
@@ -168,6 +246,9 @@ class MarkResult:
         d["notes"] = list(self.notes)
         d["lens_limited"] = self.lens_limited
         d["bent_mark_off_frame"] = self.bend_off_frame
+        if self.lens_coupling:
+            d["lens_group"] = self.lens_group
+            d["angle_lens_coupling_rad"] = {k: float(v) for k, v in self.lens_coupling.items()}
         if self.loop:
             s = self.loop.summary()
             d.update(s.to_dict())
@@ -208,6 +289,9 @@ class MarkResult:
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
                    notes=tuple(str(n) for n in d.get("notes", ())),
                    lens_limited=bool(d.get("lens_limited", False)),
+                   lens_coupling={str(k): _num(v) for k, v in
+                                  (d.get("angle_lens_coupling_rad") or {}).items()},
+                   lens_group=str(d.get("lens_group", "")),
                    bend_off_frame=bool(d.get("bent_mark_off_frame", False)))
 
 
@@ -325,9 +409,10 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
 
 
 def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: int,
-                alpha: float = 1e-3) -> MarkResult:
+                alpha: float = 1e-3, group: str = "") -> MarkResult:
     """One mark of a camera whose lens is known (:func:`camera_lens`, ``k`` the mark's place
-    in it): undistorted by it, through the loop, the lens's u terms added to the angle."""
+    in it): undistorted by it, through the loop, the lens's u terms added to the angle.
+    ``group`` names the lens solve the mark shares with others (default: the image)."""
     before = m.line.angle_rad
     mu = undistorted_mark(m, lens.lam) if lens.lam is not None else m
     r = loop_mark(mu, name, index, alpha,
@@ -344,9 +429,11 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
-                     "(`align camera`) and pass it with --camera")
+                     f"(`align camera`) and give it with {lens.model_as}")
+    coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
-                   lens=lens.record, notes=tuple(notes), lens_limited=limited)
+                   lens=lens.record, notes=tuple(notes), lens_limited=limited,
+                   lens_coupling=dict(coupling), lens_group=(group or name) if coupling else "")
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
@@ -459,9 +546,11 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
                 continue
             if lens is None:  # images of different sizes: one lens each
                 one = camera_lens([m], camera, ranges, alpha, label)
-                res.append(finish_mark(m, one, 0, str(path), i, alpha))
+                res.append(finish_mark(m, one, 0, str(path), i, alpha,
+                                       group=f"{path} mark {i}"))
             else:
-                res.append(finish_mark(m, lens, k, str(path), i, alpha))
+                res.append(finish_mark(m, lens, k, str(path), i, alpha,
+                                       group=f"camera {label}" if label else "camera"))
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)

@@ -32,6 +32,7 @@ import numpy as np
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
 from align.fusion.observations import E_NAMES
+from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
 
 FORMAT_VERSION = 1
@@ -53,8 +54,24 @@ roll to ~1–3″)."""
 
 @dataclass(frozen=True)
 class Option:
-    """One measurement to add: ``action`` (what to do), ``kind``, ``minutes`` [min], ``u_after``
-    [rad] of the critical angle and of all six (``u_after_all``, ``E_NAMES`` order)."""
+    """One measurement to add.
+
+    Attributes
+    ----------
+    action : str
+        What to do; unit —.
+    kind : str
+        The kind of measurement; unit —.
+    minutes : float
+        The work it takes [min].
+    u_after : float
+        u of the critical angle after it [rad].
+    u_after_all : tuple of float
+        u of all six angles after it, ``E_NAMES`` order [rad].
+    detail : Mapping
+        What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a camera's
+        ``camera``, a replaced input's ``source``; unit —.
+    """
 
     action: str
     kind: str
@@ -76,8 +93,19 @@ class Option:
 
 @dataclass(frozen=True)
 class Plan:
-    """The critical angle (``target``), why it was chosen, its u now [rad], and the options
-    ranked by the lowering of its u per minute, best first."""
+    """What to measure next.
+
+    Attributes
+    ----------
+    target : str
+        The critical angle; unit —.
+    why : str
+        Why it was chosen; unit —.
+    u_before : float
+        Its u now [rad].
+    options : tuple of Option
+        Ranked by the lowering of its u per minute, best first; unit —.
+    """
 
     target: str
     why: str
@@ -198,17 +226,18 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     return Plan(target, why, float(u0[k]), tuple(ranked))
 
 
-def plan_from_result(js: Mapping, where: str = "the result") -> Plan:
-    """:func:`plan` from a session result JSON ('align run --json')."""
-    verdict = (js.get("disposition") or {}).get("verdict")
-    if js.get("ok") is False or verdict == "NOT MEASURED":
-        failed = [e.get("stage", "?") for e in js.get("errors") or [] if isinstance(e, Mapping)]
-        raise InputError(f"{where}: the session was NOT MEASURED (not ok"
+def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:
+    """:func:`plan` from a session result (``align run --json``; its JSON is read by the one
+    reader, :class:`~align.session_json.LoadedSession`)."""
+    r = js if isinstance(js, LoadedSession) else LoadedSession.from_dict(js, where)
+    if not r.ok or r.verdict == "NOT MEASURED":
+        failed = [e.stage for e in r.errors]
+        raise InputError(f"{r.where}: the session was NOT MEASURED (not ok"
                          + (f": {', '.join(failed)} failed" if failed else "")
                          + "): its u are not a basis for planning; fix what failed (its "
                          "warnings and errors say what) and run it again")
-    b = js.get("budget")
-    if not js.get("fused") or not b or not b.get("model"):
-        raise InputError(f"{where}: no fused misalignment with its budget (a failed session, "
+    b = r.budget
+    if not r.fused or not b or not b.get("model"):
+        raise InputError(f"{r.where}: no fused misalignment with its budget (a failed session, "
                          "or a result written before budgets existed): nothing to plan from")
-    return plan(Linearisation.from_dict(b["model"]), js.get("disposition"))
+    return plan(Linearisation.from_dict(b["model"]), r.disposition)

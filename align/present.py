@@ -15,6 +15,7 @@ import numpy as np
 from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
+from align.session_json import LoadedSession
 from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
@@ -105,12 +106,13 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
     sa, sm, su = a.sensitivity(), m.sensitivity(), m.sensitivity_u()
     for i, ax in enumerate("xyz"):  # per g along each sensitive axis (k_i |r_i|)
         lines.append(f"{f'k_{ax} [{ku}]':14s} {sa[i]:22.7f} {sm[i]:16.7f} {su[i]:10.2g}")
+    u_beta, u_bias = m.u_per_axis("beta"), m.u_per_axis("bias")
     for i, ax in enumerate("xyz"):
         lines.append(f"{f'beta_{ax} [µrad]':14s} {a.beta[i] * 1e6:22.3f} "
-                     f"{m.beta[i] * 1e6:16.3f} {m.u_of(f'beta_{ax}') * 1e6:10.3g}")
+                     f"{m.beta[i] * 1e6:16.3f} {u_beta[i] * 1e6:10.3g}")
     for i, ax in enumerate("xyz"):
         lines.append(f"{f'b_{ax} [µg]':14s} {a.bias[i] * 1e6:22.3f} {m.bias[i] * 1e6:16.3f} "
-                     f"{m.u_of(f'bias_{ax}') * 1e6:10.3g}")
+                     f"{u_bias[i] * 1e6:10.3g}")
     lines += ["  " + line for line in cal.effect_lines()]
     if cal.cross_check:
         lines.append("cross-check ellipsoid vs known-pose (difference / combined u): "
@@ -171,10 +173,11 @@ def gonio_lines(run, faces: Sequence[str], nominal_rad: np.ndarray | None) -> li
 # ----------------------------------------------------------------------------- sessions
 
 def session_lines(res) -> list[str]:
-    """A session result: failed stages, then the misalignment E [″] ± u, the consistency of
-    the instruments and the effects the fusion loop added."""
+    """A session result: the misalignment E [″] ± u, the consistency of the instruments and
+    the effects the fusion loop added. Its failed stages are its warnings (said once, by
+    :func:`align.warnings.session_warnings`), not repeated here."""
     f = res.fusion
-    lines = [f"  stage {e.stage}: FAILED: {e.message}" for e in res.errors]
+    lines: list[str] = []
     if f is None:
         return lines + ["  no misalignment (the fusion did not run)"]
     lines.append("  misalignment E [″] (row: accelerometer, column: platform X Y Z), sources: "
@@ -227,14 +230,14 @@ def batch_row_line(row) -> str | None:
     return None
 
 
-def decision_lines(js: dict, budget: bool = False, plan: bool = False) -> list[str]:
+def decision_lines(res: LoadedSession, budget: bool = False, plan: bool = False) -> list[str]:
     """A session result's verdict line (:mod:`align.decision`), and with ``budget`` its
     uncertainty budget, with ``plan`` what to measure next (:mod:`align.plan`)."""
-    lines = ["  " + Disposition.from_dict(js["disposition"]).line()]
-    if budget and js.get("budget"):
-        lines += ["  " + ln for ln in Budget.from_dict(js["budget"]).table_lines()]
-    if plan and js.get("budget"):
-        lines += ["  " + ln for ln in plan_from_result(js).lines()]
+    lines = ["  " + Disposition.from_dict(res.disposition).line()]
+    if budget and res.budget:
+        lines += ["  " + ln for ln in Budget.from_dict(res.budget).table_lines()]
+    if plan and res.budget:
+        lines += ["  " + ln for ln in plan_from_result(res).lines()]
     return lines
 
 

@@ -52,9 +52,26 @@ free fall, a shock, the wrong unit or the wrong calibration (|a| off by far more
 
 @dataclass(frozen=True)
 class TiltOfReadings:
-    """Roll and pitch [rad] of every reading (times ``t`` [s], None when the readings have
-    none) through a calibration (in ``frame``), the calibrated specific force ``a`` (N, 3)
-    [g], and what the user must know about the result (``warnings``)."""
+    """Roll and pitch of every reading through a calibration.
+
+    Attributes
+    ----------
+    t : numpy.ndarray or None
+        Times [s] (None when the readings have none).
+    a : numpy.ndarray
+        The calibrated specific force (N, 3) [g] (in ``frame``).
+    roll, pitch : numpy.ndarray
+        Per reading [rad].
+    method : str
+        ``exact`` or ``paper`` (the tilt paper's regularised roll); unit —.
+    mu : float
+        The paper's regularisation — dimensionless.
+    warnings : tuple of str
+        What the user must know about the result; unit —.
+    frame : str
+        ``platform`` (a platform calibration: its misalignment applied) or ``triad`` (a triad
+        calibration alone: the triad's own calibration frame); unit —.
+    """
 
     t: np.ndarray | None
     a: np.ndarray

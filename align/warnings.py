@@ -24,6 +24,12 @@ def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]
             f"p = {s.structure_p:.2g}): the model does not describe the data fully"]
 
 
+def not_measured(r) -> str:
+    """The warning of an image that was not measured (:class:`align.marks.MarkResult` not
+    ``found``): in the JSON's warnings; the terminal says it once, as the image's error."""
+    return f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}"
+
+
 def mark_warnings(results: Sequence) -> list[str]:
     """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
     out = []
@@ -40,7 +46,7 @@ def mark_warnings(results: Sequence) -> list[str]:
             seen.add((r.image, fam.members[0]))
             out += family_warnings(r.image, fam)
         if not r.found:
-            out.append(f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}")
+            out.append(not_measured(r))
             continue
         out += loop_warnings(what, r.loop)
         out += [n for n in getattr(r, "notes", ()) if n not in out]

@@ -74,11 +74,17 @@ class Provenance:
 
     Attributes
     ----------
-    tool, tool_version : the program and its version.
-    created_utc : when the result was made, ISO 8601 UTC to the second (``...Z``).
-    command : the command line, one string per argument.
-    settings : the settings that shaped the result (α, seeds, flags), JSON values.
-    inputs : every input file with its SHA-256.
+    tool, tool_version : str
+        The program and its version; unit —.
+    created_utc : str
+        When the result was made, ISO 8601 UTC to the second (``...Z``); unit —.
+    command : tuple of str
+        The command line, one string per argument; unit —.
+    settings : Mapping
+        The settings that shaped the result (α, seeds, flags), JSON values, each in the unit
+        its name says; unit —.
+    inputs : tuple of InputFile
+        Every input file with its SHA-256 and size [bytes].
     """
 
     tool: str = TOOL

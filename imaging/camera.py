@@ -71,6 +71,26 @@ def checked_intrinsics(d: Mapping) -> tuple[np.ndarray, np.ndarray, tuple[int, i
 
 @dataclass(frozen=True)
 class CameraModel:
+    """A camera's intrinsics and lens distortion (OpenCV's model), from ``align camera``.
+
+    Attributes
+    ----------
+    camera_matrix : numpy.ndarray
+        K (3, 3): focal lengths and principal point [px].
+    dist_coeffs : numpy.ndarray
+        OpenCV's distortion coefficients (k1, k2, p1, p2[, k3 ...]) — dimensionless.
+    image_size : tuple of int
+        (width, height) [px].
+    rms_px : float
+        RMS reprojection error of the calibration [px].
+    views : int
+        Chessboard views used — dimensionless.
+    u : dict or None
+        Standard uncertainty per parameter (fx, fy, cx, cy [px]; k1, ... dimensionless).
+    per_view_rms_px : dict or None
+        RMS reprojection error of each view [px].
+    """
+
     camera_matrix: np.ndarray
     dist_coeffs: np.ndarray
     image_size: tuple[int, int]

@@ -61,8 +61,13 @@ def _numeric(v: np.ndarray) -> bool:
 
 
 def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
-                rate_hz: float | None = None) -> tuple[Table, list[str]]:
-    """The table in a .mat/.npz file, and notes on how it was read (for the terminal)."""
+                rate_hz: float | None = None, names: Mapping[str, str] | None = None
+                ) -> tuple[Table, list[str]]:
+    """The table in a .mat/.npz file, and notes on how it was read (for the terminal).
+    ``names``: how the user gave ``rate_hz`` and ``columns`` (default the flags ``--rate``,
+    ``--columns``; a session's keys), for the messages."""
+    rate_name = (names or {}).get("rate_hz", "--rate")
+    cols_name = (names or {}).get("columns", "--columns")
     path = Path(path)
     arrays, note = _load(path)
     notes = [note] if note else []
@@ -71,7 +76,7 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
 
     def get(name: str, flag: str) -> np.ndarray:
         if name not in arrays:
-            raise InputError(f"--columns {flag}={name}: {path} has no variable {name!r} "
+            raise InputError(f"{cols_name} {flag}={name}: {path} has no variable {name!r} "
                              f"(it has {', '.join(sorted(arrays)) or 'none'})")
         return np.asarray(arrays[name])
 
@@ -86,7 +91,7 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
             raise InputError(f"{path}: {'no' if not cands else 'several'} N x 3 arrays "
                              f"({', '.join(sorted(cands)) or 'none'} of "
                              f"{', '.join(sorted(arrays)) or 'none'}): name the outputs with "
-                             "--columns u=NAME")
+                             f"{cols_name} u=NAME")
         name, u = next(iter(cands.items()))
         notes.append(f"{path}: outputs from variable {name!r} {u.shape}")
     u = np.asarray(u, float)
@@ -101,7 +106,7 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
             notes.append(f"{path}: 4 columns, the first increasing: read as t, ux, uy, uz")
         else:
             raise InputError(f"{path}: a 4-column array whose first column is not a time; "
-                             "name the variables with --columns")
+                             f"name the variables with {cols_name}")
     for i, a in enumerate("xyz"):
         data[f"u{a}"] = np.ascontiguousarray(u[:, i])
     n = len(u)
@@ -113,7 +118,7 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
             hits = [k for k, v in arrays.items() if k.lower() in _BY_NAME[canon]]
             if len(hits) > 1:
                 raise InputError(f"{path}: variables {', '.join(sorted(hits))} could each be "
-                                 f"{canon}: name one with --columns {canon}=NAME")
+                                 f"{canon}: name one with {cols_name} {canon}=NAME")
             if hits:
                 v = np.asarray(arrays[hits[0]]).ravel()
                 if v.size != n:
@@ -123,7 +128,7 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
                 if canon != "t":
                     notes.append(f"{path}: {canon} from variable {hits[0]!r}")
     if cols:
-        raise InputError(f"--columns: {', '.join(sorted(cols))} not a column of a {spec.what}")
+        raise InputError(f"{cols_name}: {', '.join(sorted(cols))} not a column of a {spec.what}")
     for k, v in data.items():
         if len(v) != n:
             raise InputError(f"{path}: {k} has {len(v)} values, the outputs {n}")
@@ -134,13 +139,14 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
         data["pose"] = np.array([str(x) for x in data["pose"]], dtype=object)
     if rate_hz is not None:
         if "t" in data:
-            raise InputError(f"--rate {rate_hz:g}: {path} has its own time; give one or the "
-                             "other")
+            raise InputError(f"{rate_name} {rate_hz:g}: {path} has its own time; give one or "
+                             "the other")
         data["t"] = np.arange(n, dtype=float) / rate_hz
     elif "t" not in data and "pose" not in data:
         if n > MEANS_ROWS:
             raise InputError(f"{path}: {n} rows and no time: give the sample rate with "
-                             "--rate HZ (or name the time variable with --columns t=NAME)")
+                             f"{rate_name} (or name the time variable with {cols_name} "
+                             "t=NAME)")
         data["pose"] = np.array([str(i + 1) for i in range(n)], dtype=object)
         notes.append(f"{path}: {n} rows, no time: each row read as one pose's mean")
     if "t" in data and not np.all(np.diff(data["t"]) > 0):

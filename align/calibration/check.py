@@ -17,7 +17,7 @@ import numpy as np
 from scipy import stats
 
 from align.calibration.pipeline import Calibration
-from align.calibration.triad import Poses, delta_g, pose_sigma_g
+from align.calibration.triad import CORE, Poses, delta_g, pose_sigma_g
 from align.calibration.units import UNIT_SCALE_REFUSE
 
 
@@ -58,7 +58,7 @@ def _model_u(cal: Calibration, check: Poses) -> np.ndarray:
 
     J = np.column_stack([(norm_a(theta + h * e) - norm_a(theta - h * e)) / (2 * h)
                          for h, e in zip(steps, np.eye(9), strict=True)])
-    var = np.einsum("ij,jk,ik->i", J, np.nan_to_num(m.cov[:9, :9]), J)
+    var = np.einsum("ij,jk,ik->i", J, np.nan_to_num(m.cov_of(*CORE)), J)
     return np.sqrt(np.maximum(var, 0.0))
 
 

@@ -105,11 +105,36 @@ def has_six_faces(faces: Sequence[str | None]) -> bool:
 
 @dataclass(frozen=True)
 class KnownPoseFit:
-    """Known-pose calibration. ``M`` (3, 3) [output/g] and ``offset`` (3,) [output] with
-    ``cov_mo`` (12, 12) over (M row by row, offset); ``model`` the triad (k, beta, bias) with
-    its covariance over ``model.names``; ``mounting`` C, the triad's rotation in the fixture
-    frame; ``chi2``, ``dof``; ``faces`` used; ``fixture_error_rad`` declared;
-    ``noise_known``: False when only means were given (uncertainty from the residual)."""
+    """Known-pose calibration.
+
+    Attributes
+    ----------
+    M : numpy.ndarray
+        (3, 3) matrix from specific force to output [output unit/g].
+    offset : numpy.ndarray
+        (3,) output at zero specific force [output unit].
+    cov_mo : numpy.ndarray
+        (12, 12) covariance over (M row by row, offset) [products of their units].
+    model : TriadModel
+        The triad (k, beta, bias) with its covariance over ``model.names``; unit — (its
+        own fields carry units).
+    mounting : numpy.ndarray
+        C, the triad's rotation in the fixture frame — dimensionless.
+    chi2 : float
+        The fit's χ² — dimensionless.
+    dof : int
+        Its degrees of freedom — dimensionless.
+    faces : tuple of str
+        The faces used (``+x``, ``-x``, ...); unit —.
+    fixture_error_rad : float
+        The declared placement error of the faces [rad].
+    noise_known : bool
+        False when only means were given (uncertainty from the residual); unit —.
+    residuals : numpy.ndarray
+        Each pose's residual [output unit].
+    sigma : numpy.ndarray
+        Each pose's standard uncertainty [output unit].
+    """
 
     M: np.ndarray
     offset: np.ndarray
@@ -131,9 +156,9 @@ class KnownPoseFit:
                 "scale_factors": self.model.sensitivity().tolist(),
                 "scale_factors_u": self.model.sensitivity_u().tolist(),
                 "beta_rad": self.model.beta.tolist(),
-                "beta_u_rad": [self.model.u_of(f"beta_{a}") for a in "xyz"],
+                "beta_u_rad": self.model.u_per_axis("beta").tolist(),
                 "bias_g": self.model.bias.tolist(),
-                "bias_u_g": [self.model.u_of(f"bias_{a}") for a in "xyz"],
+                "bias_u_g": self.model.u_per_axis("bias").tolist(),
                 "mounting_rotation": self.mounting.tolist(), "chi2": self.chi2,
                 "dof": self.dof, "noise_known": self.noise_known}
 
@@ -174,11 +199,14 @@ def face_signs(poses: Poses, faces: Sequence[str | None]) -> tuple[np.ndarray, f
 
 
 def resolve_signs(poses: Poses, faces: Sequence[str | None],
-                  given: Sequence[float] | None) -> tuple[float, float, float]:
+                  given: Sequence[float] | None, given_as: str = "--scale-sign"
+                  ) -> tuple[float, float, float]:
     """The scale-factor signs: from labelled faces when the poses carry them (an explicit
     ``given`` that contradicts them is refused, naming both), else ``given`` or +,+,+.
     Labels whose axes are more than :data:`LABEL_AXES_DEG` off the triad's give no signs:
-    ``given`` is then used, and without it the calibration is refused."""
+    ``given`` is then used, and without it the calibration is refused. ``given_as``: how
+    the user gives the signs (``--scale-sign``, or session.toml's ``[calibration]
+    scale_sign``), which the messages name."""
     if not (labelled(poses) and has_six_faces(faces)):
         return tuple(float(s) for s in (given if given is not None else (1, 1, 1)))
     s, off = face_signs(poses, faces)
@@ -188,13 +216,13 @@ def resolve_signs(poses: Poses, faces: Sequence[str | None],
         raise InputError(f"the labelled faces do not name the triad's axes (an axis "
                          f"{off:.0f}° from its face, > {LABEL_AXES_DEG:g}°: swapped labels, or "
                          "the triad turned in the fixture), so they cannot give the "
-                         "scale-factor signs: correct the labels or give --scale-sign")
+                         f"scale-factor signs: correct the labels or give {given_as}")
     derived = tuple(float(v) for v in s)
     if given is not None and tuple(float(v) for v in given) != derived:
-        raise InputError(f"scale sign {_sign_text(given)} (--scale-sign, session key "
-                         f"scale_sign) contradicts the labelled faces, "
-                         f"which give {_sign_text(derived)} ({_worst_face(poses, faces, s)}"
-                         "): drop --scale-sign or correct the pose labels")
+        raise InputError(f"scale sign {_sign_text(given)} ({given_as}) contradicts the "
+                         f"labelled faces, which give {_sign_text(derived)} "
+                         f"({_worst_face(poses, faces, s)}): drop {given_as} or correct the "
+                         "pose labels")
     return derived  # type: ignore[return-value]
 
 
@@ -220,7 +248,7 @@ def check_mounting(C: np.ndarray) -> None:
         raise InputError(f"known-pose calibration: the mounting rotation has determinant "
                          f"{det:+.3f} (a mirror, not a rotation): the scale-factor signs and "
                          "the face labels contradict each other (swapped labels, or a "
-                         "--scale-sign with one axis wrong)")
+                         "scale sign given with one axis wrong)")
 
 
 def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] = (1, 1, 1),

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
-from align.calibration.triad import Poses, TriadModel, pose_sigma_g
+from align.calibration.triad import CORE, Poses, TriadModel, pose_sigma_g
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -80,7 +80,7 @@ warm-up faster than a tenth of the run is one or two poses, not a trend."""
 
 
 def _pack_names(effects: Sequence[str]) -> tuple[str, ...]:
-    names = [f"{p}_{ax}" for p in ("k", "beta", "bias") for ax in "xyz"]
+    names = list(CORE)
     for e in effects:
         names += [n for _, _, n in EFFECTS[e].slots]
     return tuple(names)
@@ -266,7 +266,7 @@ class CalibrationStage:
                               float(uu)) for (_, _, n), v, uu in zip(slots, vals, us,
                                                                      strict=True))
         q = {n: (float(v), m.u_of(n)) for n, v in zip(
-            m.names[:9], np.concatenate([m.k, m.beta, m.bias]), strict=True)}
+            CORE, np.concatenate([m.k, m.beta, m.bias]), strict=True)}
         fit = StageFit(r, self.sigma, _n_params(effects), regs, "t", eff, q,
                        components=comps, payload=m)
         self.fits[tuple(effects)] = (fit, tuple(terms))
@@ -387,7 +387,7 @@ def admissible(stage: CalibrationStage, overfit: bool = True
                     "outside the physical prior")
         if overfit and trial.sigma is not None and trial.dof > 0:
             red = trial.chi2 / trial.dof
-            u = np.array([base.quantities[n][1] for n in mb.names[:9]])
+            u = np.array([base.quantities[n][1] for n in CORE])
             shift = np.abs(np.concatenate([mt.k - mb.k, mt.beta - mb.beta, mt.bias - mb.bias]))
             z = shift / np.where(u > 0, u, np.inf)
             if red < OVERFIT_CHI2 and z.max() > OVERFIT_SIGMA:

@@ -34,7 +34,7 @@ from align.calibration.model import (
     CalibrationStage,
     admissible,
 )
-from align.calibration.triad import Poses, TriadModel, delta_g
+from align.calibration.triad import Poses, TriadModel, delta_g, per_axis
 from align.calibration.widen import (
     AMBIGUITY,
     AMBIGUOUS_BIC,
@@ -56,7 +56,31 @@ SCALE_FACTOR_DEFINITION = (
 
 @dataclass(frozen=True)
 class Calibration:
-    """Result of :func:`calibrate`: algebraic start, final model, loop report."""
+    """Result of :func:`calibrate`: algebraic start, final model, loop report.
+
+    Attributes
+    ----------
+    algebraic : TriadModel
+        The algebraic (closed-form) first estimate; unit — (its own fields carry units).
+    model : TriadModel
+        The refined model (maximum likelihood, the loop's effects); unit —.
+    loop : LoopReport
+        The residual loop's report (effects tried, added, refused, skipped); unit —.
+    signs : tuple of float
+        The scale factors' signs (+1 or -1 per axis) — dimensionless.
+    noise_known : bool
+        The poses carried their samples' scatter (else u from the residual); unit —.
+    method : str
+        ``ellipsoid`` or ``known-pose``; unit —.
+    known : KnownPoseFit or None
+        The known-pose fit, when the six faces were among the poses; unit —.
+    cross_check : dict or None
+        Ellipsoid vs known-pose per parameter: difference and its z — dimensionless.
+    notes : tuple of str
+        What the user should know (poses left out, units stretched); unit —.
+    widening : Widening or None
+        How u was widened for unexplained structure (None: not widened); unit —.
+    """
 
     algebraic: TriadModel
     model: TriadModel
@@ -91,8 +115,8 @@ class Calibration:
             "bias_g": m.bias.tolist(),
             "scale_factors_u_v_per_g": m.sensitivity_u().tolist(),
             "scale_factor_definition": SCALE_FACTOR_DEFINITION,
-            "beta_u_rad": [m.u_of(f"beta_{ax}") for ax in "xyz"],
-            "bias_u_g": [m.u_of(f"bias_{ax}") for ax in "xyz"],
+            "beta_u_rad": m.u_per_axis("beta").tolist(),
+            "bias_u_g": m.u_per_axis("bias").tolist(),
             "scale_sign": list(self.signs), "residual_rms_g": self.residual_rms_g,
             "dof": self.loop.after.dof,
             "effects": [e.to_dict() for e in self.loop.effects],
@@ -114,7 +138,8 @@ class Calibration:
 
 def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES,
-              fixture_error_rad: float | None = None) -> Calibration:
+              fixture_error_rad: float | None = None,
+              signs_as: str = "--scale-sign") -> Calibration:
     """Calibrate the triad from its poses.
 
     * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
@@ -128,6 +153,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     them, else +,+,+ (an explicit one that contradicts the labels is refused:
     :func:`align.calibration.known.resolve_signs`). ``fixture_error_rad``: declared placement
     error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
+    ``signs_as``: how the user gave ``signs`` (the flag, or session.toml's key), for the
+    messages.
 
     Examples
     --------
@@ -147,7 +174,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
     faces = faces_of(poses)
-    signs = signs_t = resolve_signs(poses, faces, signs)
+    signs = signs_t = resolve_signs(poses, faces, signs, signs_as)
     six = has_six_faces(faces)
     # Poses that are all faces (however many) span six directions: the ellipsoid's nine
     # parameters are not determined by them, the known-pose fit is.
@@ -217,10 +244,8 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
         return ()
     rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
            zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
-    ang = {f"beta_{ax}": (m.u_of(f"beta_{ax}"), PRIOR_ANGLE_RAD,
-                          f"{m.u_of(f'beta_{ax}'):.3g} rad") for ax in "xyz"}
-    bias = {f"bias_{ax}": (m.u_of(f"bias_{ax}"), PRIOR_BIAS_G,
-                           f"{m.u_of(f'bias_{ax}'):.3g} g") for ax in "xyz"}
+    ang = {n: (m.u_of(n), PRIOR_ANGLE_RAD, f"{m.u_of(n):.3g} rad") for n in per_axis("beta")}
+    bias = {n: (m.u_of(n), PRIOR_BIAS_G, f"{m.u_of(n):.3g} g") for n in per_axis("bias")}
     q = {**rel, **ang, **bias}
     bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
     where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "

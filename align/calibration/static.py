@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +27,8 @@ from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
+
+log = logging.getLogger("align.calibration")
 
 
 @dataclass(frozen=True)
@@ -46,15 +48,63 @@ class StaticInterval:
         return self.end_s - self.start_s
 
 
+CLI_NAMES = {"window_s": "--window", "threshold": "--threshold",
+             "min_duration_s": "--min-static", "margin_s": "--margin",
+             "split_sigma": "--split-sigma", "split_deg": "--split-deg", "rate_hz": "--rate",
+             "columns": "--columns"}
+"""How a user of ``align calibrate`` sets each detection setting (its flag)."""
+
+SESSION_KEYS = {"window_s": "window_s", "threshold": "threshold",
+                "min_duration_s": "min_static_s", "margin_s": "margin_s",
+                "split_sigma": "split_sigma", "split_deg": "split_deg", "rate_hz": "rate_hz",
+                "columns": "columns"}
+"""The session.toml key of each detection setting (in the file's own section)."""
+
+_RULES = {  # setting -> (lowest, lowest excluded, what it is): the one check of each value
+    "window_s": (0.0, True, "the static detection window [s]"),
+    "threshold": (1.0, True, "a multiple of the recording's own noise"),
+    "min_duration_s": (0.0, True, "the shortest static interval kept [s]"),
+    "margin_s": (0.0, False, "the time cut from each end of an interval [s]"),
+    "split_sigma": (0.0, True, "a number of standard errors"),
+    "split_deg": (0.0, False, "a tilt [°]"),
+}
+
+
+_DETECT_KEYS = ("window_s", "threshold", "min_duration_s", "margin_s")
+"""The settings a refusal for too few or no static intervals suggests changing."""
+
+
+def session_names(section: str) -> dict[str, str]:
+    """The names a session user gives the detection settings: ``[calibration] window_s``..."""
+    return {k: f"{section} {v}" for k, v in SESSION_KEYS.items()}
+
+
 @dataclass(frozen=True)
 class StaticSettings:
-    """Detection settings (see :func:`detect_static`): moving window [s] (at least
-    :data:`MIN_WINDOW` samples); ``threshold``: a window is static while its standard
-    deviation stays below this multiple of the recording's own noise; ``min_duration_s``:
-    shortest interval kept [s] (1 s poses pass); ``margin_s``: cut from each end [s]
-    (settling); ``split_sigma``, ``split_deg``: an interval whose mean moves by more than
-    this many of its own standard errors and by more than this tilt [deg] is split (a slow
-    turn the moving window cannot see; smaller moves are settling, not a new pose)."""
+    """Detection settings (see :func:`detect_static`).
+
+    Attributes
+    ----------
+    window_s : float
+        Moving window [s] (at least :data:`MIN_WINDOW` samples).
+    threshold : float
+        A window is static while its standard deviation stays below this multiple of the
+        recording's own noise — dimensionless.
+    min_duration_s : float
+        Shortest interval kept [s] (1 s poses pass).
+    margin_s : float
+        Cut from each end [s] (settling).
+    split_sigma : float
+        An interval whose mean moves by more than this many of its own standard errors ...
+        — dimensionless.
+    split_deg : float
+        ... and by more than this tilt [°] is split (a slow turn the moving window cannot
+        see; smaller moves are settling, not a new pose).
+    names : Mapping
+        How the user set each of them (``--window`` on the command line, ``[calibration]
+        window_s`` in session.toml; also ``rate_hz`` and ``columns``): every message about
+        a setting names it so — dimensionless.
+    """
 
     window_s: float = 0.25
     threshold: float = 3.0
@@ -62,6 +112,36 @@ class StaticSettings:
     margin_s: float = 0.1
     split_sigma: float = 8.0
     split_deg: float = 1.0
+    names: Mapping[str, str] = field(default_factory=lambda: dict(CLI_NAMES), compare=False,
+                                     hash=False)
+
+    @classmethod
+    def given(cls, names: Mapping[str, str], **values: object) -> StaticSettings:
+        """The settings the user gave (a value None or absent: the default), each checked
+        by its one rule; ``InputError`` naming the flag or key (``names``) otherwise. The
+        command line and session.toml both come here."""
+        out: dict[str, float] = {}
+        for key, value in values.items():
+            if value is None:
+                continue
+            lo, open_lo, what = _RULES[key]
+            name = names[key]
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or not np.isfinite(value):
+                raise InputError(f"{name} = {value!r}: not a finite number ({what})")
+            if value < lo or (open_lo and value == lo):
+                raise InputError(f"{name} = {value:g}: must be {'>' if open_lo else '>='} "
+                                 f"{lo:g} ({what})")
+            out[key] = float(value)
+        return cls(**out, names=dict(names))
+
+    def flags(self, *keys: str) -> str:
+        """The user's names of ``keys``, for a message: ``--window, --threshold``."""
+        return ", ".join(self.names[k] for k in keys)
+
+    def describe(self) -> str:
+        """The settings in use, each with the user's name (the ``-v`` log)."""
+        return ", ".join(f"{self.names[k]} {getattr(self, k):g}" for k in _RULES)
 
 
 _AXES = {ax: (f"a{ax}", f"acc_{ax}", f"accel_{ax}", f"acc{ax}", f"u_{ax}") for ax in "xyz"}
@@ -97,6 +177,12 @@ def _check_values(tab: Table, u: np.ndarray) -> None:
                                "samples: saturated or clipped")
 
 
+def _rate(settings: StaticSettings) -> str:
+    """How the user gives a sample rate: ``--rate HZ`` or ``[calibration] rate_hz = HZ``."""
+    name = settings.names["rate_hz"]
+    return f"{name} HZ" if name.startswith("--") else f"{name} = HZ"
+
+
 def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                calibration: bool = True, columns: Mapping[str, str] | None = None,
                rate_hz: float | None = None, adc_range: tuple[float, float] | None = None,
@@ -113,7 +199,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     """
     path = Path(path)
     if path.suffix.lower() in SUFFIXES:
-        tab, notes = read_arrays(path, STATIC, columns, rate_hz)
+        tab, notes = read_arrays(path, STATIC, columns, rate_hz, names=settings.names)
         for note in notes:
             logging.getLogger("align").warning("%s", note)
     else:
@@ -126,7 +212,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
             tab = replace(tab, data={**tab.data, "pose": labels})
             logging.getLogger("align").warning(
                 "%s: %d rows, no pose or time column: each row read as one pose's mean "
-                "(a recording needs --rate HZ)", path, len(tab))
+                "(a recording needs %s)", path, len(tab), _rate(settings))
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     t = tab.get("t")
     temp = tab.get("temp")
@@ -160,15 +246,24 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     else:
         if t is None:
             raise InputError(f"{path}: {len(u)} rows and neither a pose column nor a time "
-                             "column t (give --rate HZ for a recording without time stamps)")
+                             f"column t (give {_rate(settings)} for a recording without time "
+                             "stamps)")
+        log.debug("%s: static detection: %s", path, settings.describe())
         det = detect_static(t, u, settings)
+        log.debug("%s: %d static intervals (window %d samples at %.4g Hz, static below %.3g "
+                  "x the noise); the recording's noise %s (its unit)", path,
+                  len(det.intervals), det.window, det.rate_hz, det.limit,
+                  " ".join(f"{v:.3g}" for v in det.noise))
         for note in det.notes:
             logging.getLogger("align").warning("WARNING: %s: %s", path, note)
         intervals = list(det.intervals)
         if not intervals:
-            raise InputError(f"{path}: no static interval found (window {settings.window_s} s,"
-                             f" threshold {settings.threshold} x the recording's noise, at "
-                             f"least {settings.min_duration_s} s){_notes(det)}")
+            raise InputError(f"{path}: no static interval found "
+                             f"({settings.names['window_s']} {settings.window_s:g} s, "
+                             f"{settings.names['threshold']} {settings.threshold:g} x the "
+                             "recording's noise, "
+                             f"{settings.names['min_duration_s']} {settings.min_duration_s:g}"
+                             f" s){_notes(det)}")
         mean = np.array([iv.mean for iv in intervals])
         count = np.array([iv.samples for iv in intervals])
         sig = np.array([iv.sem for iv in intervals])
@@ -192,7 +287,7 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
                 raise InputError(f"{path}: too few poses: {len(intervals)} static intervals "
                                  "found, the ellipsoid needs 9 (or the six faces for the "
                                  "known-pose method); the detection settings may be too strict"
-                                 f" (--window, --threshold, --min-static, --margin)"
+                                 f" ({settings.flags(*_DETECT_KEYS)})"
                                  f"{_notes(det)}\n{_listing(intervals)}")
     return poses, intervals
 
@@ -430,7 +525,7 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
     notes = []
     if dt == 1.0 and np.all(t == np.round(t)):
         notes.append("the time column steps by exactly 1: if it is a row index, give the "
-                     "sample rate with --rate HZ (durations are read in seconds)")
+                     f"sample rate with {_rate(settings)} (durations are read in seconds)")
     n = max(MIN_WINDOW, int(round(settings.window_s * rate)))
     if len(u) < 2 * n:
         return StaticDetection((), np.full(u.shape[1], np.nan), np.full(u.shape[1], np.nan),

@@ -18,6 +18,19 @@ import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
 from align.errors import InputError
+from axisbase.covariance import cov_of
+
+AXES = ("x", "y", "z")
+
+
+def per_axis(*groups: str) -> tuple[str, ...]:
+    """The parameter names of per-axis groups, in the model's naming: ``per_axis("beta",
+    "bias")`` is ``("beta_x", "beta_y", "beta_z", "bias_x", "bias_y", "bias_z")``."""
+    return tuple(f"{g}_{a}" for g in groups for a in AXES)
+
+
+CORE = per_axis("k", "beta", "bias")
+"""The nine parameters every model fits, in the covariance's first nine places."""
 
 
 @dataclass(frozen=True)
@@ -49,7 +62,51 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
 
 @dataclass(frozen=True)
 class TriadModel:
-    """A calibration: parameters and optional effects; ``cov`` is over ``names``."""
+    """A calibration of the triad: u = K R (a + b) and its optional effects; ``cov`` is over
+    ``names``.
+
+    Attributes
+    ----------
+    k : numpy.ndarray
+        Scale factors K (3,) [output unit/g].
+    beta : numpy.ndarray
+        Misalignment angles of the seed paper's R (3,) [rad].
+    bias : numpy.ndarray
+        Bias (3,) [g].
+    k2 : numpy.ndarray
+        Second-order scale terms (3,) [1/g].
+    drift : numpy.ndarray
+        Bias drift (3,) [g/s] about ``t_ref``.
+    temp_coeff : numpy.ndarray
+        Bias change per kelvin (3,) [g/K] about ``temp_ref``.
+    drift2 : numpy.ndarray
+        Quadratic bias drift (3,) [g/s²].
+    t_ref : float
+        Reference time of the drifts [s].
+    temp_ref : float
+        Reference temperature [K] (or the readings' temperature unit).
+    cov : numpy.ndarray or None
+        Covariance over ``names`` [products of the parameters' units]; :meth:`cov_of` reads it
+        by name.
+    names : tuple of str
+        The fitted parameters, in ``cov``'s order (``k_x``, ``beta_y``, ``bias_z``, ...); unit —.
+    cross : numpy.ndarray
+        Cross-axis second-order terms [1/g]: row i (output axis), columns the products
+        x_x x_y, x_x x_z, x_y x_z of the inputs (IEEE Std 1293's K_ip, K_io).
+    scale_drift : numpy.ndarray
+        Relative scale-factor change per second [1/s] about ``t_ref``.
+    scale_temp : numpy.ndarray
+        Relative scale-factor change per kelvin [1/K] about ``temp_ref``.
+    scale_warmup : numpy.ndarray
+        Relative scale-factor warm-up amplitude: s = 1 + w (exp(-(t - t_ref)/tau) - 1) —
+        dimensionless.
+    warmup_tau_s : float
+        Time constant of the scale-factor warm-up [s] (0: none).
+    hysteresis : numpy.ndarray
+        Bias hysteresis [g]: each pose's bias is offset by this x the sign of the change of its
+        axis's input in the turn into the pose. Readings without their turns cannot be
+        corrected for it: ``bias`` is the middle of the two branches.
+    """
 
     k: np.ndarray
     beta: np.ndarray
@@ -123,21 +180,35 @@ class TriadModel:
     def sensitivity_u(self) -> np.ndarray:
         """Standard uncertainty of :meth:`sensitivity`, propagated from the covariance of
         (k, beta) (nan where not determined or without a covariance)."""
-        names = [f"{p}_{ax}" for p in ("k", "beta") for ax in "xyz"]
+        names = per_axis("k", "beta")
         if self.cov is None or any(n not in self.names for n in names):
             return np.full(3, np.nan)
-        idx = [self.names.index(n) for n in names]
         n, dn = row_norms(self.beta)
         J = np.hstack([np.diag(n), self.k[:, None] * dn])
-        var = np.einsum("ij,jk,ik->i", J, self.cov[np.ix_(idx, idx)], J)
+        var = np.einsum("ij,jk,ik->i", J, self.cov_of(*names), J)
         return np.where(var >= 0, np.sqrt(np.abs(var)), np.nan)
 
+    def cov_of(self, *names: str) -> np.ndarray:
+        """The covariance of the named parameters (of :attr:`names`, e.g. ``cov_of("k_x",
+        "beta_y")``; :func:`per_axis` names a group) in the order given [products of their
+        units]; ``KeyError`` for a parameter not fitted, ``ValueError`` without a
+        covariance."""
+        if self.cov is None:
+            raise ValueError("this model carries no covariance")
+        return cov_of(self.cov, self.names, names)
+
     def u_of(self, name: str) -> float:
+        """Standard uncertainty of one parameter [its unit]; nan when not fitted, without a
+        covariance, or not determined (a negative variance)."""
         if self.cov is None or name not in self.names:
             return float("nan")
-        i = self.names.index(name)
-        v = float(self.cov[i, i])
+        v = float(self.cov_of(name)[0, 0])
         return float(np.sqrt(v)) if v >= 0 else float("nan")  # nan: not determined
+
+    def u_per_axis(self, group: str) -> np.ndarray:
+        """Standard uncertainties of a per-axis group (``"beta"``, ``"bias"``, ``"k"``) in
+        x, y, z order [its unit]."""
+        return np.array([self.u_of(n) for n in per_axis(group)])
 
     def to_dict(self) -> dict:
         """The model as JSON-ready numbers (SI/radians/g), covariance included."""

@@ -34,9 +34,17 @@ UNIT_SCALE_WARN = 0.10
 _NAMES = {"g": "g", "m/s2": "m/s²"}
 
 
-def unit_scale_check(model: TriadModel, units: str, source: str) -> list[str]:
+def _give(name: str, value: str) -> str:
+    """``--units g`` on the command line, ``[calibration] units = "g"`` in session.toml."""
+    return f"{name} {value}" if name.startswith("--") else f'{name} = "{value}"'
+
+
+def unit_scale_check(model: TriadModel, units: str, source: str,
+                     units_as: str = "--units") -> list[str]:
     """Warnings about the declared unit ``units`` (from ``source``, e.g. ``--units m/s2``)
-    given the calibrated sensitivities; :class:`InputError` when they contradict it."""
+    given the calibrated sensitivities; :class:`InputError` when they contradict it.
+    ``units_as``: how the user names a unit (``--units``, or session.toml's ``[calibration]
+    units``), which the hint names."""
     expected = EXPECTED_PER_G.get(units)
     if expected is None:
         return []
@@ -47,9 +55,10 @@ def unit_scale_check(model: TriadModel, units: str, source: str) -> list[str]:
     if np.any((ratio > UNIT_SCALE_REFUSE) | (ratio < 1 / UNIT_SCALE_REFUSE)):
         mean = float(np.exp(np.mean(np.log(s))))
         nearest = min(EXPECTED_PER_G, key=lambda u: abs(np.log(mean / EXPECTED_PER_G[u])))
-        hint = (f"; they look like {_NAMES[nearest]} (give --units {nearest})"
+        hint = (f"; they look like {_NAMES[nearest]} (give {_give(units_as, nearest)})"
                 if abs(np.log(mean / EXPECTED_PER_G[nearest])) < np.log(UNIT_SCALE_REFUSE)
-                else "; if they are volts or counts, say so (--units V or counts)")
+                else f"; if they are volts or counts, say so ({_give(units_as, 'V')} or "
+                "counts)")
         raise InputError(f"{source}: readings in {nm} change by {expected:.5g} {nm} per g, "
                          f"these change by {mags} per g (scale factors): not {nm}{hint}")
     far = np.flatnonzero(np.abs(ratio - 1) > UNIT_SCALE_WARN)

@@ -47,12 +47,17 @@ class Widening:
 
     Attributes
     ----------
-    reasons : per term, why (the structure test and what it saw; the alternatives).
-    names : parameters, in the covariance's order (then ``scale_factor_x..z``).
-    u_noise : u from the noise alone, per name [the parameter's unit].
-    terms : per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
+    reasons : tuple of (str, str)
+        Per term, why (the structure test and what it saw; the alternatives); unit —.
+    names : tuple of str
+        Parameters, in the covariance's order (then ``scale_factor_x..z``); unit —.
+    u_noise : numpy.ndarray
+        u from the noise alone, per name [the parameter's unit].
+    terms : tuple of (str, numpy.ndarray)
+        Per term (:data:`STRUCTURE`, :data:`AMBIGUITY`), its u per name [the parameter's
         unit] (what it adds in quadrature).
-    u : the widened u per name [the parameter's unit].
+    u : numpy.ndarray
+        The widened u per name [the parameter's unit].
     """
 
     reasons: tuple[tuple[str, str], ...]

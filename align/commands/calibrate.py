@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, POSITIVE, adc_range, number, signs, unique
+from align.commands.args import ALPHA, adc_range, number, signs, unique
 from align.commands.common import (
     plan,
     same_units,
@@ -55,10 +55,11 @@ def _plan_poses(args: argparse.Namespace) -> int:
 
 
 def _static_settings(args: argparse.Namespace):
-    from align.calibration import StaticSettings
+    from align.calibration.static import CLI_NAMES, StaticSettings
 
-    return StaticSettings(args.window, args.threshold, args.min_static, args.margin,
-                          args.split_sigma, args.split_deg)
+    return StaticSettings.given(CLI_NAMES, window_s=args.window, threshold=args.threshold,
+                                min_duration_s=args.min_static, margin_s=args.margin,
+                                split_sigma=args.split_sigma, split_deg=args.split_deg)
 
 
 def _show_calibration(args: argparse.Namespace, run, sign, cols, plot) -> None:
@@ -162,18 +163,20 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="the ADC's rails in the readings' unit: a pose reaching one is left "
                    "out (warned) or refused (default: a pile-up at a pose's extreme value)")
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
-    k.add_argument("--window", type=POSITIVE, default=0.25,
+    # The detection settings' rules are StaticSettings.given's (session.toml's keys pass them
+    # too): here only "a number".
+    k.add_argument("--window", type=float, default=0.25,
                    help="static detection window [s] (at least 5 samples)")
-    k.add_argument("--threshold", type=number(1, None, lo_open=True), default=3.0,
+    k.add_argument("--threshold", type=float, default=3.0,
                    help="static if the moving std < this x the recording's own noise "
                    "(estimated from its quietest windows)")
-    k.add_argument("--min-static", type=POSITIVE, default=0.5,
+    k.add_argument("--min-static", type=float, default=0.5,
                    help="shortest static interval kept [s]")
-    k.add_argument("--margin", type=number(0), default=0.1, help="cut from each end [s]")
-    k.add_argument("--split-sigma", type=POSITIVE, default=8.0,
+    k.add_argument("--margin", type=float, default=0.1, help="cut from each end [s]")
+    k.add_argument("--split-sigma", type=float, default=8.0,
                    help="split an interval whose mean moves by more than this many standard "
                    "errors ...")
-    k.add_argument("--split-deg", type=number(0), default=1.0,
+    k.add_argument("--split-deg", type=float, default=1.0,
                    help="... and by more than this tilt [deg] (a slow turn, not settling)")
     k.add_argument("--fixture-error", type=number(0, 90), default=0.5, metavar="DEG",
                    help="placement error of the faces +x,-x,... (known-pose method) [deg]")

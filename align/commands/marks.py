@@ -40,10 +40,13 @@ def _not_ok(results) -> int:
 
 def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:
     from align.documents import marks_document
+    from align.warnings import not_measured
     from axisbase.output import write_json
 
     doc = marks_document(results, settings(args), inputs)
-    warn(doc["warnings"])
+    # A failed image was said once, as its error (_show_marks): not again as a warning.
+    said = {not_measured(r) for r in results if not r.found}
+    warn([w for w in doc["warnings"] if w not in said])
     if out is not None:
         wrote(write_json(out, doc, args.force))
 

@@ -10,14 +10,12 @@ from align.commands.parents import examples
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from align.apply import read_json
-    from align.contract import check, document
+    from align.contract import document
     from align.plan import plan_from_result
+    from align.session_json import LoadedSession
     from axisbase.output import dumps, write_atomic
 
-    js = read_json(args.result, "a session result")
-    check(js, "session", args.result)
-    p = plan_from_result(js, args.result)
+    p = plan_from_result(LoadedSession.load(args.result))
     out = plan(args, [args.result]).add("--json", args.json, stdout_ok=True)
     say(p.lines())
     if out is not None:

@@ -45,7 +45,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if isinstance(job, int):
             return job
     out = run_here(job)
-    show_session(out, args.budget, args.plan)
+    show_session(out, args.budget, args.plan, args.quiet)
     return exit_status([out], args.fail_on_reject)
 
 
@@ -59,7 +59,8 @@ def _resume_one(job, args: argparse.Namespace):
         return todo[0]
     if done[0].get("error"):
         raise UsageError(done[0]["error"])
-    print(f"session {args.sessions[0]}: outputs complete and trusted, skipped (--resume)")
+    if not args.quiet:
+        print(f"session {args.sessions[0]}: outputs complete and trusted, skipped (--resume)")
     return exit_status(done, args.fail_on_reject)
 
 
@@ -73,19 +74,24 @@ def run_here(job) -> dict:
     return out
 
 
-def show_session(out: dict, budget: bool = False, plan: bool = False) -> None:
+def show_session(out: dict, budget: bool = False, plan: bool = False,
+                 quiet: bool = False) -> None:
     """A session's result, its verdict (with ``budget``/``plan`` the budget and what to
-    measure next), stage timings, warnings and outputs on the terminal."""
+    measure next), stage timings, warnings and outputs on the terminal; ``quiet`` (-q): only
+    the warnings (a failed stage is one of them, said once, on stderr)."""
     from align.present import decision_lines, session_lines, timing_lines
+    from align.session_json import LoadedSession
 
-    print(f"session {out['session']}:")
-    say(session_lines(out["result"]))
-    say(decision_lines(out["json"], budget, plan))
-    say(timing_lines(out["result"].timings))
+    if not quiet:
+        print(f"session {out['session']}:")
+        say(session_lines(out["result"]))
+        say(decision_lines(LoadedSession.from_dict(out["json"], out["session"]), budget, plan))
+        say(timing_lines(out["result"].timings))
     warn(out["warnings"])
-    for k, v in out["outputs"].items():
-        if v != "-":
-            print(f"  wrote {k}: {v}")
+    if not quiet:
+        for k, v in out["outputs"].items():
+            if v != "-":
+                print(f"  wrote {k}: {v}")
 
 
 def _run_batch(args: argparse.Namespace) -> int:
@@ -108,7 +114,7 @@ def _run_batch(args: argparse.Namespace) -> int:
     if scheduler:
         log.info("running %d sessions on the Dask cluster at %s", len(jobs), scheduler)
     results += _run_jobs(jobs, executor_for(scheduler, args.jobs))
-    _show_batch(results)
+    _show_batch(results, args.quiet)
     return exit_status(results, args.fail_on_reject)
 
 
@@ -146,20 +152,22 @@ def _run_jobs(jobs: list, executor) -> list[dict]:
     return done
 
 
-def _show_batch(results: list[dict]) -> None:
+def _show_batch(results: list[dict], quiet: bool = False) -> None:
+    """A line per session and the count (not with -q: quiet leaves the errors alone)."""
     from align.present import batch_row_line
     from align.session.batch import batch_row
 
     rows = sorted((batch_row(r) for r in results), key=lambda row: row.session)
     for row in rows:
         line = batch_row_line(row)
-        if line is not None:
+        if line is not None and not quiet:
             print(line)
         if not row.ok:
             log.error("%s: FAILED: %s", row.session, row.error)
     failed = sum(not row.ok for row in rows)
-    print(f"{len(rows) - failed} of {len(rows)} sessions done"
-          + (f", {failed} failed" if failed else ""))
+    if not quiet:
+        print(f"{len(rows) - failed} of {len(rows)} sessions done"
+              + (f", {failed} failed" if failed else ""))
 
 
 class NamedBy(argparse.Action):

@@ -35,6 +35,8 @@ FORMAT_VERSION = 1
 KINDS = ("image", "gonio", "calibration", "static", "typeB", "nuisance")
 _BLOCK_KIND = {"camera": "image", "goniometer": "gonio", "ellipsoid": "calibration",
                "platform static": "static"}
+SHARED_PREFIX = "lens of camera "
+"""How a shared lens error is named (align.fusion.observations.mark_block)."""
 NUISANCE_LABEL = {"bias": "calibration bias error", "camera_roll": "camera roll",
                   "reference_face_offset": "reference face offset",
                   "platform_tilt": "table-axis tilt", "platform_level": "platform levelling offset"}
@@ -56,11 +58,24 @@ def inverse(info: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Group:
-    """One named input of the fusion: ``source`` ("image x_A.png", "goniometer gonio.csv",
-    "calibration", "static poses"), ``kind`` (``KINDS``), the Jacobian ``A`` (n, P) of its
-    predicted values over the parameters [value unit / parameter unit], their covariance
-    ``C`` (n, n) [value unit²], its Type B parts (name, (n, n)) included in ``C``, and
-    ``meta`` (an image's housing, view, camera)."""
+    """One named input of the fusion.
+
+    Attributes
+    ----------
+    source : str
+        Its name ("image x_A.png", "goniometer gonio.csv", "calibration", "static poses"); unit —.
+    kind : str
+        One of ``KINDS``; unit —.
+    A : numpy.ndarray
+        The Jacobian (n, P) of its predicted values over the parameters [value unit / parameter
+        unit].
+    C : numpy.ndarray
+        Their covariance (n, n) [value unit²].
+    type_b : tuple of (str, numpy.ndarray)
+        Its Type B parts (name, (n, n)) [value unit²], included in ``C``.
+    meta : Mapping
+        An image's housing, view, camera; unit —.
+    """
 
     source: str
     kind: str
@@ -88,10 +103,20 @@ class Group:
 
 @dataclass(frozen=True)
 class Linearisation:
-    """The fused solve linearised at its solution: parameter names (the six E_NAMES first,
-    then the nuisances, each nuisance named once per component), the groups, the nuisance
-    groups (label, parameter indices) in the order they are freed, and the inflation factor
-    f [-] applied to cov(E)."""
+    """The fused solve linearised at its solution.
+
+    Attributes
+    ----------
+    params : tuple of str
+        Parameter names: the six E_NAMES first, then the nuisances, each nuisance named once
+        per component; unit —.
+    groups : tuple of Group
+        The inputs (their fields carry units); unit —.
+    nuisances : tuple of (str, tuple of int)
+        The nuisance groups (label, parameter indices) in the order they are freed — dimensionless.
+    inflation : float
+        The inflation factor f applied to cov(E) — dimensionless.
+    """
 
     params: tuple[str, ...]
     groups: tuple[Group, ...]
@@ -118,6 +143,8 @@ class Linearisation:
         V0 = inverse(I[:6, :6])
         shares: list[tuple[str, str, np.ndarray]] = []
         for g in self.groups:
+            if not np.any(g.A[:, :6]):  # a prior on shared errors: its share is below
+                continue
             K = V0 @ g.A[:, :6].T @ np.linalg.inv(g.C)  # the gain of this group's values
             CA = g.C - sum((c for _, c in g.type_b), np.zeros_like(g.C))
             shares.append((g.source, g.kind, np.diag(K @ CA @ K.T)))
@@ -127,7 +154,10 @@ class Linearisation:
         for label, idx in self.nuisances:
             free += list(idx)
             now = np.diag(inverse(I[np.ix_(free, free)]))[:6]
-            shares.append((f"nuisance: {label}", "nuisance", now - prev))
+            if label.startswith(SHARED_PREFIX):  # a camera's lens: Type B, not a nuisance
+                shares.append((label, "typeB", now - prev))
+            else:
+                shares.append((f"nuisance: {label}", "nuisance", now - prev))
             prev = now
         f2 = self.inflation**2
         angles = {}
@@ -163,8 +193,17 @@ class Contribution:
 
 @dataclass(frozen=True)
 class Budget:
-    """Per angle name: (u [rad], contributions largest first, summing to u²); the inflation
-    applied; the linearisation it came from (what 'align plan' works on)."""
+    """Each input's share of u² of every angle.
+
+    Attributes
+    ----------
+    angles : Mapping
+        Per angle name: (u [rad], contributions largest first, summing to u² [rad²]).
+    inflation : float
+        The inflation applied — dimensionless.
+    model : Linearisation or None
+        The linearisation it came from (what 'align plan' works on); unit —.
+    """
 
     angles: Mapping[str, tuple[float, tuple[Contribution, ...]]]
     inflation: float = 1.0
@@ -219,16 +258,36 @@ def linearise(blocks: Sequence, predict_all, params: np.ndarray, names: Sequence
         plus, minus = predict_all(params + d), predict_all(params - d)
         for J, a, b in zip(jac, plus, minus, strict=True):
             J[:, k] = (a - b) / (2 * step)
+    # Errors several rows share (a camera's lens, Block.shared) are parameters with a unit
+    # prior here: the rows stay independent given them (each image its own group), and the
+    # same GLS follows (C = D + G Gᵀ marginalised is D with G's errors estimated).
+    shared = [(j, name, rows, G) for j, b in enumerate(blocks) for name, rows, G in b.shared]
+    m = sum(G.shape[1] for *_, G in shared)
+    names = [*names, *(f"{name}[{k}]" for _, name, _, G in shared for k in range(G.shape[1]))]
+    jac = [np.hstack([J, np.zeros((len(J), m))]) for J in jac]
+    lens_nuis, col = [], P
     groups: list[Group] = []
+    for j, name, rows, G in shared:
+        J = jac[j]
+        w = G.shape[1]
+        J[list(rows), col:col + w] = G
+        prior = np.zeros((w, P + m))
+        prior[:, col:col + w] = np.eye(w)
+        groups.append(Group(name, "typeB", prior, np.eye(w)))
+        lens_nuis.append((name, tuple(range(col, col + w))))
+        col += w
     for b, J in zip(blocks, jac, strict=True):
         kind = _BLOCK_KIND.get(b.source, b.source)
         if b.row_sources:
+            own = b.cov.copy()
+            for _, rows, G in b.shared:
+                own[np.ix_(rows, rows)] -= G @ G.T
             for r, src in enumerate(b.row_sources):
                 meta = b.row_meta[r] if b.row_meta else {}
-                groups.append(Group(src, kind, J[r:r + 1], b.cov[r:r + 1, r:r + 1], (), meta))
+                groups.append(Group(src, kind, J[r:r + 1], own[r:r + 1, r:r + 1], (), meta))
         else:
             groups.append(Group(b.budget_source or b.source, kind, J, b.cov, b.type_b))
-    nuis, i = [], 6
+    nuis, i = list(lens_nuis), 6
     for name, w in layout:
         base = name.split("[")[0]
         label = NUISANCE_LABEL.get(base, base)

@@ -35,10 +35,33 @@ SAYS = {"camera": "camera images", "goniometer": "goniometer log",
 
 @dataclass(frozen=True)
 class SourceDisagreement:
-    """Source ``source`` given its own E: ``delta`` [rad] and ``u`` [rad] per angle of
-    ``E_NAMES`` (nan where the source does not determine the angle), the fall in chi2
-    ``chi2_drop`` with ``dof`` degrees of freedom and its p-value, and the chi2 that
-    remains (``chi2_rest`` over ``dof_rest``)."""
+    """A source that, given its own E, lets the rest agree.
+
+    Attributes
+    ----------
+    source : str
+        The source; unit —.
+    others : tuple of str
+        The other sources; unit —.
+    delta : numpy.ndarray
+        Its own E minus the others' per angle of ``E_NAMES`` [rad] (nan where the source does
+        not determine the angle).
+    u : numpy.ndarray
+        The standard uncertainty of ``delta`` [rad].
+    chi2_drop : float
+        The fall in χ² when the source gets its own E — dimensionless.
+    dof : int
+        Its degrees of freedom — dimensionless.
+    p_value : float
+        The fall's p-value — dimensionless.
+    chi2_rest : float
+        The χ² that remains — dimensionless.
+    dof_rest : int
+        Its degrees of freedom — dimensionless.
+    also : tuple of str
+        Other sources that, given their own E, make the rest agree as well (which one moved,
+        the data cannot tell); unit —.
+    """
 
     source: str
     others: tuple[str, ...]

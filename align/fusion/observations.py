@@ -23,7 +23,7 @@ added. Angles in radians, readings in g.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -81,6 +81,10 @@ class Block:
     row_sources: tuple[str, ...] = ()
     row_meta: tuple[Mapping[str, str], ...] = ()
     type_b: tuple[tuple[str, np.ndarray], ...] = ()
+    # Errors several rows share, included in ``cov`` (name, rows, G: len(rows) × m): the rows'
+    # covariance holds G Gᵀ, i.e. m unit-variance errors (a camera's lens) reach those rows
+    # with the weights G. The budget carries them as the parameters they are (budget.py).
+    shared: tuple[tuple[str, tuple[int, ...], np.ndarray], ...] = ()
 
     @property
     def u(self) -> np.ndarray:
@@ -110,6 +114,25 @@ class MarkObs:
     declared_roll: float = 0.0
     file: str = ""
     view: str = ""
+    # The lens terms of u as signed components [rad] on the lens's error directions, and
+    # the lens solve they belong to (align.marks.MarkResult.lens_coupling / lens_group):
+    # marks of one camera's solve share its lens error.
+    coupling: Mapping[str, float] = field(default_factory=dict)
+    lens_group: str = ""
+
+
+def _lens_shared(marks: list[MarkObs]) -> tuple[tuple[str, tuple[int, ...], np.ndarray], ...]:
+    """Each lens solve's rows and the weights its errors reach them with (Block.shared)."""
+    groups: dict[tuple[str, str], list[int]] = {}
+    for i, m in enumerate(marks):
+        if m.coupling and m.lens_group:
+            groups.setdefault((m.camera, m.lens_group), []).append(i)
+    out = []
+    for (cam, _), rows in groups.items():
+        keys = sorted({k for i in rows for k in marks[i].coupling})
+        G = np.array([[marks[i].coupling.get(k, 0.0) for k in keys] for i in rows])
+        out.append((f"lens of camera {cam}", tuple(rows), G))
+    return tuple(out)
 
 
 def mark_block(marks: list[MarkObs]) -> Block:
@@ -127,12 +150,21 @@ def mark_block(marks: list[MarkObs]) -> Block:
                          for c in cams])
         return wrap_half(ang - nom) + roll
 
-    return Block("camera", tuple(m.label for m in marks), values,
-                 np.diag([m.u**2 for m in marks]), predict,
+    # A row's own part is its u² less its lens part; one lens's error reaches all its rows.
+    shared = _lens_shared(marks)
+    own = np.array([m.u**2 for m in marks])
+    cov = np.zeros((len(marks), len(marks)))
+    for _, rows, G in shared:
+        own[list(rows)] -= (G**2).sum(1)
+        cov[np.ix_(rows, rows)] += G @ G.T
+    # (a floor keeps the covariance positive definite where a lens term is all of a u)
+    cov += np.diag(np.maximum(own, 1e-6 * np.array([m.u**2 for m in marks])))
+    return Block("camera", tuple(m.label for m in marks), values, cov, predict,
                  sees=tuple(sorted({f"{ROLL}[{c}]" for c in cams})),
                  row_sources=tuple(f"image {m.file or m.label}" for m in marks),
                  row_meta=tuple({"housing": HOUSINGS[m.housing], "view": m.view,
-                                 "camera": m.camera, "label": m.label} for m in marks))
+                                 "camera": m.camera, "label": m.label} for m in marks),
+                 shared=shared)
 
 
 # ----------------------------------------------------------------------------- goniometer

@@ -36,6 +36,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
+from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2, LEVEL: 2}
@@ -192,6 +193,22 @@ def candidates(stage: FusionStage) -> tuple[Candidate, ...]:
 
 @dataclass(frozen=True)
 class ObservationRow:
+    """One observation of the fusion beside what the fit predicts.
+
+    Attributes
+    ----------
+    source : str
+        The instrument or file it came from; unit —.
+    label : str
+        Which observation; unit —.
+    value, predicted : float
+        Observed and predicted value [``unit``].
+    u : float
+        Its standard uncertainty [``unit``].
+    unit : str
+        The unit of ``value``, ``predicted`` and ``u`` (``rad``, ``g``); unit —.
+    """
+
     source: str
     label: str
     value: float
@@ -216,11 +233,42 @@ class ObservationRow:
 
 @dataclass(frozen=True)
 class FusionResult:
-    """The misalignment E [rad] (3x3, row i accelerometer, column j platform axis, zero
-    diagonal), its standard uncertainties and the 6x6 covariance over ``E_NAMES``; the unit
-    axes (rows of M); chi2 of the final fit with its p-value; per-observation rows; the
-    loop's before/after; ``inflation`` (>1 when unexplained inconsistency remains and the
-    uncertainties were scaled by sqrt(chi2/dof))."""
+    """The fused misalignment and how it was reached.
+
+    Attributes
+    ----------
+    E : numpy.ndarray
+        The misalignment (3×3, row i accelerometer, column j platform axis, zero diagonal)
+        [rad].
+    E_u : numpy.ndarray
+        Its standard uncertainties (3×3) [rad].
+    cov : numpy.ndarray
+        The 6×6 covariance over ``E_NAMES`` [rad²]; :meth:`cov_of` reads it by name.
+    axes : numpy.ndarray
+        The unit axes (rows of M) in the platform frame — dimensionless.
+    chi2 : float
+        χ² of the final fit — dimensionless.
+    dof : int
+        Its degrees of freedom — dimensionless.
+    p_value : float
+        P(χ² ≥ chi2) — dimensionless.
+    rows : tuple of ObservationRow
+        Per observation (their fields carry units); unit —.
+    loop : LoopReport or LoopSummary
+        The loop's before/after; unit —.
+    inflation : float
+        > 1 when unexplained inconsistency remains and the uncertainties were scaled by
+        sqrt(chi2/dof) — dimensionless.
+    nuisances : dict
+        Per nuisance the loop added: (estimate, u) [rad].
+    sources : tuple of str
+        The sources fused; unit —.
+    budget : Budget or None
+        Each input's share of u² of every angle (:mod:`align.fusion.budget`); unit —.
+    disagreement : SourceDisagreement or None
+        When inconsistent: the source that sees another E, and in which angles (None: none
+        singled out, or consistent; :mod:`align.fusion.diagnosis`); unit —.
+    """
 
     E: np.ndarray
     E_u: np.ndarray
@@ -239,6 +287,11 @@ class FusionResult:
     # When inconsistent: the source that sees another E, and in which angles (None: none
     # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
     disagreement: SourceDisagreement | None = None
+
+    def cov_of(self, *names: str) -> np.ndarray:
+        """The covariance [rad²] of the named angles of E (``E_NAMES``, e.g.
+        ``cov_of("E_xY", "E_zX")``) in the order given."""
+        return cov_of(self.cov, E_NAMES, names)
 
     @property
     def consistent(self) -> bool:
@@ -348,8 +401,8 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         for k, (lab, v, p, u) in enumerate(zip(b.labels, b.values, pred, b.u, strict=True)):
             rows.append(ObservationRow(b.source, lab, float(v), float(p), float(u),
                                        b.unit_of(k)))
-    nuis = {n: (float(sol.params[k]), float(np.sqrt(sol.cov[k, k])) * inflation)
-            for k, n in enumerate(sol.names) if k >= 6}
+    nuis = {n: (float(sol.params[k]), float(np.sqrt(cov_of(sol.cov, sol.names, (n,))[0, 0]))
+                * inflation) for k, n in enumerate(sol.names) if k >= 6}
     sources = tuple(dict.fromkeys(b.source for b in stage.blocks))
     named = None
     if loop.unexplained_structure and len(sources) > 1:

@@ -116,6 +116,30 @@ class Candidate:
 
 @dataclass(frozen=True)
 class EffectReport:
+    """An effect the loop added.
+
+    Attributes
+    ----------
+    name : str
+        The effect; unit —.
+    estimate : float
+        Its value [``unit``].
+    u : float
+        Its standard uncertainty [``unit``].
+    unit : str
+        The unit of ``estimate`` and ``u``; unit —.
+    rms_before, rms_after : float
+        The residual RMS before and after adding it [the stage's residual unit].
+    delta_bic : float
+        The change in BIC — dimensionless.
+    p_value : float
+        Its significance (look-elsewhere corrected) — dimensionless.
+    description : str
+        What it is, in words; unit —.
+    components : tuple of (str, float, float)
+        Per axis (name, estimate, u) [``unit``].
+    """
+
     name: str
     estimate: float
     u: float
@@ -153,8 +177,20 @@ class EffectReport:
 
 @dataclass(frozen=True)
 class RefusedEffect:
-    """A candidate the tests called for but the stage's ``admissible`` check refused: why,
-    and its significance (it was *not* added)."""
+    """A candidate the tests called for but the stage's ``admissible`` check refused: why, and
+    its significance (it was *not* added).
+
+    Attributes
+    ----------
+    name : str
+        The candidate; unit —.
+    reason : str
+        Why it was refused; unit —.
+    p_value : float
+        Its significance — dimensionless.
+    delta_bic : float
+        Its change in BIC — dimensionless.
+    """
 
     name: str
     reason: str
@@ -174,7 +210,15 @@ class RefusedEffect:
 @dataclass(frozen=True)
 class SkippedCandidate:
     """A candidate the loop could not try: it does not apply to these data, or its refit was
-    singular (``reason`` says which, in the stage's words)."""
+    singular (``reason`` says which, in the stage's words).
+
+    Attributes
+    ----------
+    name : str
+        The candidate; unit —.
+    reason : str
+        Why it was skipped; unit —.
+    """
 
     name: str
     reason: str
@@ -227,16 +271,22 @@ class LoopSummary:
 
     Attributes
     ----------
-    effects : the effects added, in order.
-    rms_before, rms_after : residual RMS of the declared model and of the final one [the
-        stage's residual unit].
-    chi2_dof_before, chi2_dof_after : χ²/dof against the stated noise (None: noise unknown).
-    unexplained_structure : whether structure no candidate explains remains.
-    structure_test, structure_p, structure_detail : the test that found it, its p-value and
-        what it saw (None, None, "" if none).
-    refused : significant candidates the stage's physical checks refused, with why.
-    skipped : candidates not tried (not applicable to these data, or a singular refit),
-        with why.
+    effects : tuple of EffectReport
+        The effects added, in order; unit — (theirs are in their fields).
+    rms_before, rms_after : float
+        Residual RMS of the declared model and of the final one [the stage's residual unit].
+    chi2_dof_before, chi2_dof_after : float or None
+        χ²/dof against the stated noise (None: noise unknown) — dimensionless.
+    unexplained_structure : bool
+        Whether structure no candidate explains remains; unit —.
+    structure_test, structure_p, structure_detail : str, float, str
+        The test that found it, its p-value (dimensionless) and what it saw (None, None, "" if
+        none); unit —.
+    refused : tuple of RefusedEffect
+        Significant candidates the stage's physical checks refused, with why; unit —.
+    skipped : tuple of SkippedCandidate
+        Candidates not tried (not applicable to these data, or a singular refit), with why;
+        unit —.
     """
 
     effects: tuple[EffectReport, ...]

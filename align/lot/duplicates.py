@@ -23,9 +23,21 @@ from align.lot.read import UnitResult
 
 @dataclass(frozen=True)
 class Duplicate:
-    """One unit found in several results: ``used`` (index into the lot's units) is counted,
-    ``left_out`` are not; ``relations[i]`` says how ``left_out[i]`` relates to the used
-    result; ``why`` which rule chose it."""
+    """One unit found in several results.
+
+    Attributes
+    ----------
+    label : str
+        The unit; unit —.
+    used : int
+        Index into the lot's units of the result counted — dimensionless.
+    left_out : tuple of int
+        Indices of the results not counted — dimensionless.
+    relations : tuple of str
+        ``relations[i]``: how ``left_out[i]`` relates to the used result; unit —.
+    why : str
+        Which rule chose the one counted; unit —.
+    """
 
     label: str
     used: int

@@ -1,5 +1,6 @@
 """Reading a lot: session results (``align run --json``, format ``axis-align/session``) from
-files and folders, each checked by the format machinery of :mod:`align.contract`.
+files and folders, each read by the one reader of session results
+(:class:`align.session_json.LoadedSession`, format and version checked).
 
 One unit is one session result: its six misalignment angles E_ij with their standard
 uncertainties [rad], the fusion's χ², its warnings, its failed stages and the session's
@@ -19,17 +20,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import orjson
 
-from align.contract import check
 from align.errors import InputError
+from align.session_json import ANGLE_INDEX as _INDEX
+from align.session_json import ANGLE_NAMES, LoadedSession
 from axisbase.units import ARCSEC
 
-ANGLE_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
-"""The six angles in the order of ``angle_names`` of a session result (``align.fusion``'s
-``E_NAMES``, repeated here so reading a lot does not import the fusion)."""
-_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
 _ID_KEYS = ("unit", "serial")
 """Metadata keys naming the unit (in this order of preference; else the session name)."""
 _WHEN_KEYS = ("datetime", "date")
@@ -38,7 +35,15 @@ _WHEN_KEYS = ("datetime", "date")
 
 @dataclass(frozen=True)
 class Rejected:
-    """A file given as a session result that could not be read as one."""
+    """A file given as a session result that could not be read as one.
+
+    Attributes
+    ----------
+    file : str
+        The file; unit —.
+    reason : str
+        Why, in one line; unit —.
+    """
 
     file: str
     reason: str
@@ -53,19 +58,39 @@ class UnitResult:
 
     Attributes
     ----------
-    file : the result file read.
-    session : the session's name; ``label``: the unit (metadata ``unit`` or ``serial``, else
-        the session name).
-    ok, fused : as in the result (every stage succeeded and fused / a matrix exists).
-    e_rad, u_rad : the six angles E_ij [rad] in :data:`ANGLE_NAMES` order and their standard
-        uncertainties [rad] (None when not fused).
-    chi2, dof, p_value : the fusion's consistency (None when not fused).
-    warnings : the result's warnings; ``failed_stages``: (stage, message) of each failure.
-    metadata : the session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text).
-    format_version : the result's format version.
-    sha256 : the file's SHA-256 (None when built in memory); ``created_utc``: when the
-        result was written (its envelope); ``inputs_sha256``: the SHA-256 of every input
-        file of the session, sorted (the same data give the same tuple).
+    file : str
+        The result file read; unit —.
+    session : str
+        The session's name; unit —.
+    label : str
+        The unit (metadata ``unit`` or ``serial``, else the session name); unit —.
+    ok, fused : bool
+        As in the result (every stage succeeded and fused / a matrix exists); unit —.
+    e_rad, u_rad : tuple of float or None
+        The six angles E_ij in :data:`ANGLE_NAMES` order and their standard uncertainties
+        [rad] (None when not fused).
+    chi2, dof, p_value : float, int, float or None
+        The fusion's consistency (None when not fused) — dimensionless.
+    warnings : tuple of str
+        The result's warnings; unit —.
+    failed_stages : tuple of (str, str)
+        (stage, message) of each failure; unit —.
+    metadata : Mapping
+        The session's ``[metadata]`` (texts, numbers, booleans; dates as ISO text), as the
+        user wrote them; unit —.
+    format_version : int
+        The result's format version — dimensionless.
+    sha256 : str or None
+        The file's SHA-256 (None when built in memory); unit —.
+    created_utc : str or None
+        When the result was written (ISO 8601, UTC); unit —.
+    inputs_sha256 : tuple of str
+        The SHA-256 of every input file of the session, sorted (the same data give the same
+        tuple); unit —.
+    covariance : tuple of tuple of float or None
+        The 6×6 covariance of ``e_rad`` [rad²].
+    disposition : Mapping or None
+        The result's verdict block (:class:`align.decision.Disposition`); unit —.
     """
 
     file: str
@@ -97,67 +122,33 @@ class UnitResult:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], where: str) -> UnitResult:
         """A unit from a session result's JSON (``InputError`` naming ``where`` and the key
-        when it is not a readable session result)."""
-        if not isinstance(d, Mapping):
-            raise InputError(f"{where}: not a JSON object (a session result is one)")
-        version = check(d, "session", where)
-        for key in ("session", "ok", "fused"):
-            if key not in d:
-                raise InputError(f"{where}: no {key!r}: not a session result")
-        ok, fused = d["ok"], d["fused"]
-        if not isinstance(ok, bool) or not isinstance(fused, bool):
-            raise InputError(f"{where}: 'ok' and 'fused' must be true or false")
-        e = u = None
-        chi2 = p = None
-        dof = None
-        if fused:
-            names = d.get("angle_names", list(ANGLE_NAMES))
-            if list(names) != list(ANGLE_NAMES):
-                raise InputError(f"{where}: angle_names {names!r}: expected "
-                                 f"{list(ANGLE_NAMES)}")
-            e = _angles(d.get("misalignment_rad"), f"{where}: misalignment_rad", diagonal=True)
-            u = _angles(d.get("misalignment_u_rad"), f"{where}: misalignment_u_rad")
-            _consistent(d, e, u, where)
-            chi2, dof, p = d.get("chi2"), d.get("dof"), d.get("p_value")
-        meta = d.get("metadata") or {}
-        if not isinstance(meta, Mapping):
-            raise InputError(f"{where}: metadata: expected an object")
-        for k, v in meta.items():
-            if not isinstance(v, str | int | float | bool):  # what session.toml allows
-                raise InputError(f"{where}: metadata {k}: expected a text, number or "
-                                 "true/false")
+        when it is not a readable session result, or not one a lot takes)."""
+        return cls.of(LoadedSession.from_dict(d, where))
+
+    @classmethod
+    def of(cls, r: LoadedSession) -> UnitResult:
+        """A unit from a session result as read by the one reader (:class:`LoadedSession`);
+        a lot also refuses an angle beyond :data:`MAX_E_RAD`."""
+        if r.e_rad is not None:
+            for (i, j), v in zip(_INDEX, r.e_rad, strict=True):
+                if abs(v) > MAX_E_RAD:
+                    raise InputError(f"{r.where}: misalignment_rad[{i}][{j}] = {v:.6g} rad "
+                                     f"({math.degrees(v):.4g}°): beyond "
+                                     f"{math.degrees(MAX_E_RAD):g}°, no mounting error of a "
+                                     "triad")
+        meta = r.metadata
         # A serial as written, less the white space around it ('SN-4 ' is 'SN-4'); units
         # are compared case-folded (align.lot.duplicates).
         label = next((str(meta[k]).strip() for k in _ID_KEYS
                       if meta.get(k) is not None and str(meta[k]).strip()),
-                     str(d["session"]).strip())
-        errs = d.get("errors") or []
-        warns = d.get("warnings") or []
-        if not isinstance(errs, list) or not isinstance(warns, list):
-            raise InputError(f"{where}: 'errors' and 'warnings' must be lists")
-        failed = tuple((str(x.get("stage", "?")), str(x.get("message", "")))
-                       if isinstance(x, Mapping) else ("?", str(x)) for x in errs)
-        if ok and failed:
-            raise InputError(f"{where}: 'ok' is true but stage {failed[0][0]} failed "
-                             f"({failed[0][1]}): a corrupt or edited result")
-        created = d.get("created_utc")
-        inputs = d.get("inputs")
-        digests = tuple(sorted(str(x["sha256"]) for x in inputs
-                               if isinstance(x, Mapping) and isinstance(x.get("sha256"), str))
-                        ) if isinstance(inputs, list) else ()
-        cov = d.get("covariance_rad2") if fused else None
-        if cov is not None:
-            a = np.asarray(cov, float) if isinstance(cov, list) else None
-            if a is None or a.shape != (6, 6) or not np.all(np.isfinite(a)):
-                raise InputError(f"{where}: covariance_rad2: expected a 6×6 matrix of numbers")
-            cov = tuple(map(tuple, a.tolist()))
-        disp = d.get("disposition")
-        return cls(where, str(d["session"]), label, ok, fused, e, u,
-                   _finite_or_none(chi2), dof if isinstance(dof, int) else None,
-                   _finite_or_none(p), tuple(str(w) for w in warns), failed, dict(meta),
-                   version, created_utc=created if isinstance(created, str) else None,
-                   inputs_sha256=digests, covariance=cov,
-                   disposition=disp if isinstance(disp, Mapping) else None)
+                     r.session.strip())
+        digests = tuple(sorted(i.sha256 for i in r.provenance.inputs
+                               if isinstance(i.sha256, str)))
+        return cls(r.where, r.session, label, r.ok, r.fused, r.e_rad, r.u_rad, r.chi2, r.dof,
+                   r.p_value, r.warnings, tuple((e.stage, e.message) for e in r.errors),
+                   dict(meta), r.format_version,
+                   created_utc=r.provenance.created_utc or None, inputs_sha256=digests,
+                   covariance=r.covariance, disposition=r.disposition)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""
@@ -178,61 +169,6 @@ MAX_E_RAD = 5 * math.pi / 180
 """Largest |E_ij| a lot takes [rad] (5°): the fusion's model is first order in the small
 angles (at 5° its second-order terms reach 0.4 % of E); a larger value is no mounting error
 of a navigation triad but a corrupt file or a failed measurement."""
-
-_AGREE_ARCSEC = 1e-6
-"""How far [″] the arc-second copy of a matrix may differ from the radian one (both are
-written from one float64; 1e-6″ is far above their rounding)."""
-
-
-def _consistent(d: Mapping[str, Any], e: tuple[float, ...], u: tuple[float, ...],
-                where: str) -> None:
-    """A fused result's matrices agree with each other and with physics: the arc-second
-    copies equal the radian ones, each u > 0, each |E_ij| <= :data:`MAX_E_RAD`."""
-
-    for (i, j), v in zip(_INDEX, u, strict=True):
-        if not v > 0:
-            raise InputError(f"{where}: misalignment_u_rad[{i}][{j}] = {v!r}: an uncertainty "
-                             "must be > 0 (no measured angle is exact)")
-    for (i, j), v in zip(_INDEX, e, strict=True):
-        if abs(v) > MAX_E_RAD:
-            raise InputError(f"{where}: misalignment_rad[{i}][{j}] = {v:.6g} rad "
-                             f"({math.degrees(v):.4g}°): beyond {math.degrees(MAX_E_RAD):g}°, "
-                             "no mounting error of a triad")
-    for key, rad in (("misalignment_arcsec", e), ("misalignment_u_arcsec", u)):
-        if key not in d:
-            continue
-        arc = _angles(d[key], f"{where}: {key}")
-        for (i, j), a, r in zip(_INDEX, arc, rad, strict=True):
-            if abs(a - r / ARCSEC) > _AGREE_ARCSEC + 1e-9 * abs(a):
-                raise InputError(f"{where}: {key}[{i}][{j}] = {a:.6g}″ but "
-                                 f"{key.replace('arcsec', 'rad')} gives {r / ARCSEC:.6g}″: "
-                                 "the two copies disagree (an edited result?)")
-
-
-def _finite_or_none(v: object) -> float | None:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        return None
-    return float(v)
-
-
-def _angles(m: object, where: str, diagonal: bool = False) -> tuple[float, ...]:
-    """The six off-diagonal elements of a 3×3 list, each a finite number; ``diagonal``: the
-    diagonal must be zero too (E has none: a non-zero one is a corrupt or edited file)."""
-    if not (isinstance(m, list) and len(m) == 3
-            and all(isinstance(r, list) and len(r) == 3 for r in m)):
-        raise InputError(f"{where}: expected a 3×3 matrix")
-    if diagonal:
-        for i in range(3):
-            if m[i][i] != 0:
-                raise InputError(f"{where}[{i}][{i}] = {m[i][i]!r}: the diagonal of E is zero "
-                                 "(a corrupt or edited result?)")
-    out = []
-    for i, j in _INDEX:
-        v = m[i][j]
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise InputError(f"{where}[{i}][{j}] = {v!r}: not a finite number")
-        out.append(float(v))
-    return tuple(out)
 
 
 def when_of(meta: Mapping[str, Any]) -> _dt.datetime | None:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
@@ -96,6 +97,11 @@ class CalibrationInput:
     check: Path | None = None
     table: TableKeys = field(default_factory=TableKeys)
     adc_range: tuple[float, float] | None = None  # the ADC's rails [output units]
+    detection: StaticSettings = field(
+        default_factory=lambda: StaticSettings(names=session_names("[calibration]")))
+    """Static detection of a continuous recording (keys ``window_s``, ``threshold``,
+    ``min_static_s``, ``margin_s``, ``split_sigma``, ``split_deg``: ``align calibrate``'s
+    ``--window`` ...), checked by the rules the command line uses."""
 
 
 @dataclass(frozen=True)
@@ -205,6 +211,21 @@ def _number(value: object, where: str, lo: float | None = None, hi: float | None
     return v
 
 
+DETECTION_KEYS = {v for k, v in SESSION_KEYS.items() if k not in ("rate_hz", "columns")}
+"""The static-detection keys of ``[calibration]`` (:data:`align.calibration.SESSION_KEYS`)."""
+
+
+def _detection(c: dict, src: str) -> StaticSettings:
+    """``[calibration]``'s static-detection keys through the rules ``align calibrate``'s
+    flags go through (:meth:`StaticSettings.given`), named as keys."""
+    names = session_names("[calibration]")
+    values = {k: c[v] for k, v in SESSION_KEYS.items() if v in DETECTION_KEYS and v in c}
+    try:
+        return StaticSettings.given(names, **values)
+    except InputError as exc:
+        raise InputError(f"{src}{exc}") from None
+
+
 def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> TableKeys:
     cols = t.get("columns")
     if cols is not None and not isinstance(cols, str | dict):
@@ -229,7 +250,7 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz",
-                    "adc_range"},
+                    "adc_range", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec",
@@ -328,7 +349,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             if "scale_sign" in c else None,
             _file(c["check"], f"{src}: [calibration] check") if "check" in c else None,
             _table_keys(c, f"{src}: [calibration]"),
-            _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"))
+            _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"),
+            _detection(c, f"{src}: "))
 
     gon = None
     if "goniometer" in d:

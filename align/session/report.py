@@ -223,9 +223,10 @@ def _calibration(res: SessionResult) -> dict | None:
         return None
     c, m = res.calibration, res.calibration.model
     k, k_u = m.sensitivity(), m.sensitivity_u()  # output per g along each axis
+    u_beta, u_bias = m.u_per_axis("beta"), m.u_per_axis("bias")
     rows = [[ax, f"{k[i]:.7f} ± {k_u[i]:.2g}",
-             f"{m.beta[i] * 1e6:.2f} ± {m.u_of(f'beta_{ax}') * 1e6:.2g}",
-             f"{m.bias[i] * 1e6:.2f} ± {m.u_of(f'bias_{ax}') * 1e6:.2g}"]
+             f"{m.beta[i] * 1e6:.2f} ± {u_beta[i] * 1e6:.2g}",
+             f"{m.bias[i] * 1e6:.2f} ± {u_bias[i] * 1e6:.2g}"]
             for i, ax in enumerate("xyz")]
     fig = (_img(fig_calibration(c, res.calibration_poses, None), "delta g per pose")
            if res.calibration_poses is not None else None)

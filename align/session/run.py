@@ -26,6 +26,8 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
+from align.calibration.static import StaticSettings, session_names
+from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check
 from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
@@ -69,8 +71,37 @@ class StageError:
 
 @dataclass
 class SessionResult:
-    """Everything a session produced (stage results are None when the stage failed or was
-    not in the session)."""
+    """Everything a session produced (stage results are None when the stage failed or was not in
+    the session).
+
+    Attributes
+    ----------
+    session : Session
+        The session as loaded; unit —.
+    calibration : Calibration or None
+        The triad's calibration (its fields carry units); unit —.
+    calibration_poses : Poses or None
+        The static poses it was made from, their readings in ``units``; unit —.
+    gonio : GonioRun or None
+        The goniometer log's face angles; unit —.
+    marks : list of (ImageEntry, MarkResult)
+        Each image measured; unit —.
+    platform : list of PlatformPose
+        The platform's static readings, calibrated [g].
+    fusion : FusionResult or None
+        The fused misalignment; unit —.
+    errors : list of StageError
+        Each failed stage; unit —.
+    units : str
+        The output unit of the triad's readings (``V``, ``g``, ...); unit —.
+    timings : dict
+        Wall-clock time of each stage [s] (in the order they ran).
+    log_warnings : list of str
+        Warnings the stages logged (e.g. how a file was read): they reach the JSON too; unit —.
+    tolerance : ToleranceSpec or None
+        The specification the disposition is judged against (session.toml's ``[tolerance]``
+        unless the command line overrides it); unit —.
+    """
 
     session: Session
     calibration: Calibration | None = None
@@ -219,17 +250,18 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                       STATIC, tk.columns, ("ux", "uy", "uz"),
                                       flag="[calibration] units")
             left_out: list[str] = []
-            res.calibration_poses, _ = read_poses(c.static, columns=tk.columns,
+            res.calibration_poses, _ = read_poses(c.static, c.detection, columns=tk.columns,
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
                                                   warnings=left_out)
-            cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha)
+            cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
+                            signs_as="[calibration] scale_sign")
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
             # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
             source = ("[calibration] units" if tk.units else
                       f"{c.static}: header unit [{res.units}]")
-            w = unit_scale_check(cal.model, res.units, source)
+            w = unit_scale_check(cal.model, res.units, source, "[calibration] units")
             return replace(cal, notes=(*cal.notes, *w)) if w else cal
         res.calibration = _try(res, "calibration", _cal)
     if s.goniometer is not None:
@@ -361,7 +393,8 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
     if stated is not None and stated != units:
         raise InputError(f"{p.static}: readings in {stated}, but the triad was calibrated "
                          f"from {units}: one triad, one unit")
-    poses, _ = read_poses(p.static, calibration=False, columns=p.table.columns,
+    poses, _ = read_poses(p.static, StaticSettings(names=session_names("[platform]")),
+                          calibration=False, columns=p.table.columns,
                           rate_hz=p.table.rate_hz)
     missing = [lab for lab in poses.labels if lab not in p.poses]
     if missing:
@@ -396,7 +429,7 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
                                HOUSINGS.index(im.housing), v.right, v.up, v.camera,
                                0.0 if im.nominal == "horizontal" else np.pi / 2,
                                r.angle_rad, r.angle_u_rad, s.cameras[v.camera].roll_rad,
-                               im.file.name, im.view))
+                               im.file.name, im.view, r.lens_coupling, r.lens_group))
         blocks.append(mark_block(obs))
     if res.gonio is not None:
         g = s.goniometer
@@ -412,11 +445,9 @@ def observation_blocks(s: Session, res: SessionResult) -> list[Block]:
     if res.calibration is not None:
         m = res.calibration.model
         if res.platform:
-            idx = [m.names.index(f"{p}_{a}") for p in ("beta", "bias") for a in "xyz"]
-            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)], m.bias))
+            blocks.append(ellipsoid_block(m.beta, m.cov_of(*per_axis("beta", "bias")), m.bias))
             blocks.append(static_block(res.platform, np.linalg.norm(r_matrix(m.beta), axis=1),
                                        s.platform.table_tilt_rad))
         else:
-            idx = [m.names.index(f"beta_{a}") for a in "xyz"]
-            blocks.append(ellipsoid_block(m.beta, m.cov[np.ix_(idx, idx)]))
+            blocks.append(ellipsoid_block(m.beta, m.cov_of(*per_axis("beta"))))
     return blocks

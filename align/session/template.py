@@ -121,7 +121,19 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# rate_hz = 100.0             # [Hz] when the file has no time column",
                 "# columns = \"ux=ax,uy=ay,uz=az\"  # when the headers are not ux, uy, uz",
                 "# adc_range = [-5.0, 5.0]     # the ADC's rails (readings' unit): a pose at "
-                "one is left out"]
+                "one is left out",
+                "# window_s = 0.25             # [s] static detection window of a recording "
+                "(as --window)",
+                "# threshold = 3.0             # static below this x the recording's noise "
+                "(as --threshold)",
+                "# min_static_s = 0.5          # [s] shortest static interval kept "
+                "(as --min-static)",
+                "# margin_s = 0.1              # [s] cut from each end of an interval "
+                "(as --margin)",
+                "# split_sigma = 8.0           # split an interval whose mean moves by more "
+                "standard errors than this ...",
+                "# split_deg = 1.0             # ... and by more than this tilt [°] "
+                "(as --split-sigma, --split-deg)"]
     if gonio:
         out += ["", "[goniometer]                  # ring-laser goniometer",
                 "log = \"gonio.csv\"             # FILL IN: counter log, count,counter,ref[,t] "

@@ -758,6 +758,33 @@ def test_a_schema_refuses_what_it_should(base):
             validate(bad, "calibration")
 
 
+def test_schemas_hold_skipped_candidates_and_internal_errors(base):
+    """``skipped_candidates`` (each loop) and ``errors[].internal`` are in the schemas, not
+    passed as unknown keys: a well-formed one validates, a malformed one does not."""
+    import copy
+
+    import jsonschema
+
+    from align.contract import schema, validate
+
+    d = _json(base / "outputs" / "result.json")
+    assert "skipped_candidates" in schema("session")["properties"]
+    good = copy.deepcopy(d)
+    good["skipped_candidates"] = [{"name": "scale_drift", "reason": "no times"}]
+    good["errors"] = [{"stage": "marks", "message": "internal error", "internal": True}]
+    validate(good, "session")
+    for key, bad in (("skipped_candidates", [{"name": "scale_drift"}]),
+                     ("skipped_candidates", [{"name": "x", "reason": "y", "extra": 1}]),
+                     ("errors", [{"stage": "marks", "message": "m", "internal": False}]),
+                     ("errors", [{"stage": "marks", "message": "m", "internals": True}])):
+        with pytest.raises(jsonschema.ValidationError):
+            validate(dict(d, **{key: bad}), "session")
+    cal = _json(base / "outputs" / "cal.json")
+    validate(dict(cal, skipped_candidates=[{"name": "k", "reason": "r"}]), "calibration")
+    with pytest.raises(jsonschema.ValidationError):
+        validate(dict(cal, skipped_candidates=[{"reason": "r"}]), "calibration")
+
+
 def test_provenance_round_trip_and_earlier_layout(base):
     from axisbase.provenance import Provenance
 

@@ -167,7 +167,8 @@ def test_a_dead_local_worker_loses_no_session(sessions, tmp_path):
     """A worker killed mid-batch (out of memory, say): the pool is rebuilt and every session
     still finishes."""
     out = tmp_path / "out"
-    proc = _start(["run", *map(str, sessions), "--json", str(out), "--jobs", "2", "-q"])
+    # not -q: the batch's count is on stdout, which -q leaves to warnings and errors
+    proc = _start(["run", *map(str, sessions), "--json", str(out), "--jobs", "2"])
     try:
         workers = _workers(proc)
         time.sleep(1.0)
@@ -196,13 +197,22 @@ def test_an_output_set_appears_whole_or_not_at_all(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.html"]  # never committed
 
 
+def _minimal_result(**keys) -> dict:
+    """The smallest session result the one reader takes: a session that did not fuse."""
+    return {"format": "axis-align/session", "format_version": 3, "session": "unit1",
+            "ok": True, "fused": False, **keys}
+
+
 def test_complete_means_every_output_asked_for(sessions, tmp_path):
     out = tmp_path / "o"
     job, = batch_jobs([str(sessions[0])], json=str(out), report=None, cal=str(out))
     assert not is_complete(job)
     (out / "unit1.cal.json").write_text("{}")
     assert not is_complete(job)  # the JSON (put in place last) is missing
+    # a session result the one reader reads (a stub with only its format is not one)
     (out / "unit1.json").write_text('{"format": "axis-align/session"}')
+    assert not is_complete(job)
+    (out / "unit1.json").write_text(json.dumps(_minimal_result()))
     assert is_complete(job)
     assert not is_complete(SessionJob(job.folder, job.json, str(out / "r.html"), job.cal))
     (out / "unit1.json").write_text("not json")
@@ -217,8 +227,7 @@ def test_resume_does_not_pass_off_a_result_made_with_another_alpha(sessions, tmp
     out = tmp_path / "o"
     out.mkdir()
     job, = batch_jobs([str(sessions[0])], json=str(out), report=None, cal=None)
-    (out / "unit1.json").write_text(json.dumps({"format": "axis-align/session", "ok": True,
-                                                "settings": {"alpha": job.alpha}}))
+    (out / "unit1.json").write_text(json.dumps(_minimal_result(settings={"alpha": job.alpha})))
     same = skipped(job)
     assert same["ok"] and not same["warnings"]
     other = skipped(replace(job, alpha=0.01))
@@ -252,9 +261,9 @@ def test_dask_cluster_gives_the_local_pool_results(sessions, bad_session, tmp_pa
     batch = [*map(str, sessions[:2]), str(bad_session)]
     local, dask = tmp_path / "local", tmp_path / "dask"
     assert main(["run", *batch, "--json", str(local), "--calibration", str(local),
-                 "--jobs", "2", "-q"]) == 2
+                 "--jobs", "2"]) == 2
     assert main(["run", *batch, "--json", str(dask), "--calibration", str(dask),
-                 "--scheduler", cluster.scheduler_address, "-q"]) == 2
+                 "--scheduler", cluster.scheduler_address]) == 2
     cap = capsys.readouterr()
     assert cap.out.count("2 of 3 sessions done, 1 failed") == 2
     assert "unit_bad: FAILED" in cap.err and "gonio.csv" in cap.err

@@ -186,3 +186,17 @@ def test_model_from_dict_refuses_what_cannot_be_applied(key, index, value, words
         TriadModel.from_dict(d, "cal.json")
     msg = str(exc.value)
     assert msg.startswith("cal.json: model.") and words in msg and "\n" not in msg
+
+
+def test_triad_model_cov_of_and_per_axis():
+    from align.calibration.triad import TriadModel, per_axis
+
+    names = per_axis("k", "beta", "bias")
+    assert names[:4] == ("k_x", "k_y", "k_z", "beta_x")
+    c = np.diag(np.arange(1.0, 10.0))
+    m = TriadModel(np.ones(3), np.zeros(3), np.zeros(3), cov=c, names=names)
+    assert np.array_equal(m.cov_of("bias_y", "k_x"), np.diag([8.0, 1.0]))
+    assert np.allclose(m.u_per_axis("beta"), np.sqrt([4.0, 5.0, 6.0]))
+    assert np.isnan(m.u_of("k2_x"))
+    with pytest.raises(KeyError, match="k2_x"):
+        m.cov_of("k2_x")

@@ -93,3 +93,20 @@ def test_cli_default_signs_from_labels(tmp_path, capsys):
     assert "scale-factor signs (-1.0, -1.0, -1.0)" in capsys.readouterr().out
     assert main(["calibrate", str(path), "--scale-sign", "+"]) == 2
     assert "contradicts the labelled faces, which give -,-,-" in capsys.readouterr().err
+
+
+def test_a_session_is_told_its_key_not_the_flag(tmp_path):
+    """The same refusal from session.toml names ``[calibration] scale_sign`` (a session user
+    has no --scale-sign)."""
+    from align.session import load_session, run_session
+
+    _, p = six_faces(7, triad=NEGATIVE)
+    (tmp_path / "six.csv").write_text("pose,ux,uy,uz\n" + "".join(
+        f"{lab},{a},{b},{c}\n" for lab, (a, b, c) in zip(p.labels, p.u, strict=True)))
+    (tmp_path / "session.toml").write_text('[calibration]\nstatic = "six.csv"\n'
+                                           'scale_sign = "+"\n')
+    err = run_session(load_session(tmp_path)).errors[0]
+    assert err.stage == "calibration"
+    assert ("scale sign +,+,+ ([calibration] scale_sign) contradicts the labelled faces, "
+            "which give -,-,-") in err.message
+    assert "drop [calibration] scale_sign" in err.message and "--" not in err.message

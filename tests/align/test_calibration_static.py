@@ -11,6 +11,7 @@ import pytest
 
 from align.calibration import StaticSettings, calibrate, detect_static, find_static, read_poses
 from align.calibration import formats as F
+from align.calibration.arrays import MEANS_ROWS
 from align.calibration.static import StaticDetection
 from synth.handheld import HandheldRecording, HandheldSpec, handheld
 from synth.tumble import Triad
@@ -211,3 +212,83 @@ def test_sampled_poses_or_per_pose_means_are_read(tmp_path, counts, noise_known)
     _pose_file(tmp_path / "p.csv", counts)
     poses, _ = read_poses(tmp_path / "p.csv")
     assert poses.count.tolist() == counts and (poses.sigma_u is not None) == noise_known
+
+
+# ----------------------------------------------------------------------------- one rule, two names
+
+def _csv(path, header: str, rows: np.ndarray) -> None:
+    path.write_text(header + "\n" + "\n".join(",".join(f"{v:.9g}" for v in r) for r in rows)
+                    + "\n")
+
+
+@pytest.fixture
+def two_paths(tmp_path):
+    """A session folder holding only a [calibration] (its recording named by the test), and
+    the two ways to refuse: ``align calibrate FILE FLAGS`` (its stderr line) and session.toml
+    keys through ``align run`` (the stage's error, or the load's refusal)."""
+    import io
+    from contextlib import redirect_stderr
+
+    from align.cli import main
+    from align.errors import InputError
+    from align.session import load_session, run_session
+
+    def cli(name: str, *flags: str) -> str:
+        err = io.StringIO()
+        with redirect_stderr(err):
+            assert main(["calibrate", str(tmp_path / name), *flags, "-q"]) == 2
+        line = err.getvalue().strip().splitlines()[0]
+        return line.removeprefix("align calibrate: ")
+
+    def session(name: str, keys: str = "") -> str:
+        (tmp_path / "session.toml").write_text(f'[calibration]\nstatic = "{name}"\n{keys}')
+        try:
+            s = load_session(tmp_path)
+        except InputError as exc:
+            return str(exc).removeprefix(f"{tmp_path / 'session.toml'}: ")
+        errors = run_session(s).errors
+        assert errors[0].stage == "calibration"
+        return errors[0].message.splitlines()[0]
+
+    return tmp_path, cli, session
+
+
+@pytest.mark.parametrize("setting,flag,key,value,why", [
+    ("threshold", "--threshold", "threshold", "0.5", "must be > 1"),
+    ("window_s", "--window", "window_s", "0", "must be > 0"),
+    ("margin_s", "--margin", "margin_s", "-0.1", "must be >= 0"),
+    ("min_duration_s", "--min-static", "min_static_s", "nan", "not a finite number")])
+def test_a_detection_setting_is_refused_alike_naming_the_flag_or_the_key(
+        two_paths, setting, flag, key, value, why):
+    """One rule (StaticSettings.given) for both paths; each message names what the user
+    typed."""
+    folder, cli, session = two_paths
+    _csv(folder / "rec.csv", "t,ux,uy,uz", np.zeros((4, 4)) + np.arange(4)[:, None])
+    by_cli = cli("rec.csv", flag, value)
+    by_toml = session("rec.csv", f"{key} = {value}\n")
+    assert by_cli.startswith(f"{flag} = ") and why in by_cli
+    assert by_toml.startswith(f"[calibration] {key} = ") and why in by_toml
+    assert by_cli.split(" = ", 1)[1] == by_toml.split(" = ", 1)[1]
+    assert "--" not in by_toml
+
+
+def test_recording_refusals_name_the_flag_or_the_key(two_paths):
+    """A recording without times, and one with too few static intervals: the same refusal
+    on both paths, the CLI's naming --rate / --window ..., the session's naming its keys
+    (a session user has no flags)."""
+    folder, cli, session = two_paths
+    rng = np.random.default_rng(2)
+    _csv(folder / "no_t.csv", "ux,uy,uz", rng.normal(size=(MEANS_ROWS + 1, 3)))
+    a, b = cli("no_t.csv"), session("no_t.csv")
+    assert "give --rate HZ" in a and "give [calibration] rate_hz = HZ" in b
+    assert a.replace("--rate HZ", "X") == b.replace("[calibration] rate_hz = HZ", "X")
+    # never still (a random walk of the attitude): one short interval at most
+    t = np.arange(600) / 100
+    rng = np.random.default_rng(1)
+    walk = np.cumsum(rng.normal(0, 0.05, (600, 3)), 0) + rng.normal(0, 1e-3, (600, 3))
+    _csv(folder / "moving.csv", "t,ux,uy,uz", np.column_stack([t, walk]))
+    a, b = cli("moving.csv"), session("moving.csv")
+    assert "(--window, --threshold, --min-static, --margin)" in a
+    assert ("([calibration] window_s, [calibration] threshold, [calibration] min_static_s, "
+            "[calibration] margin_s)") in b
+    assert "--" not in b and a.split(" (")[0] == b.split(" (")[0]

@@ -83,3 +83,15 @@ def test_cli_refuses_in_one_line_naming_the_flag_or_header(tmp_path, capsys):
     d = json.loads(out.read_text())
     assert np.allclose(d["scale_factors_m_s2_per_g"], G0, rtol=1e-4)
     assert not any("unit" in w for w in d["warnings"])
+
+
+def test_a_session_is_told_its_key_not_the_flag(tmp_path):
+    """``[calibration] units = "m/s2"`` on readings in g: the hint names the key."""
+    from align.session import load_session, run_session
+
+    _pose_file(tmp_path / "g.csv", 1.0)
+    (tmp_path / "session.toml").write_text('[calibration]\nstatic = "g.csv"\n'
+                                           'units = "m/s2"\n')
+    err = run_session(load_session(tmp_path)).errors[0]
+    assert err.stage == "calibration" and err.message.startswith("[calibration] units: ")
+    assert 'give [calibration] units = "g"' in err.message and "--" not in err.message

@@ -171,7 +171,7 @@ def test_run_writes_the_disposition_and_fail_on_reject_exits_3(session, tmp_path
                                           + "\n[tolerance]\narcsec = 1000\nE_xZ = [-30, 90]\n"
                                           "nominal_arcsec = { E_xZ = 5.0 }\n")
     js = tmp_path / "r.json"
-    code = main(["run", str(session), "--json", str(js), "--fail-on-reject", "-q"])
+    code = main(["run", str(session), "--json", str(js), "--fail-on-reject"])
     d = json.loads(js.read_text())
     validate(d, "session")
     disp = d["disposition"]

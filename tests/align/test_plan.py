@@ -31,7 +31,7 @@ def test_plan_ranks_by_gain_per_minute_and_targets_the_critical_angle(tmp_path, 
     write_session(tmp_path / "s", SessionSpec(seed=3, views=("A", "B")))
     js = tmp_path / "r.json"
     assert main(["run", str(tmp_path / "s"), "--json", str(js), "--tolerance-arcsec",
-                 "30,400", "--decision", "simple", "--plan", "-q"]) == 0
+                 "30,400", "--decision", "simple", "--plan"]) == 0
     assert main(["plan", str(js)]) == 0
     out = capsys.readouterr().out
     assert "VERDICT:" in out and "what to measure next" in out
