@@ -39,9 +39,10 @@ from imaging import (
     ImageInputError,
     MarkMeasurement,
     Roi,
+    defocus_note,
+    jpeg_note,
     line_frame,
     measure_frame,
-    measure_marks,
     read_image_notes,
 )
 
@@ -314,7 +315,15 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     terms: dict[str, float] = {}
     notes: list[str] = []
     f = rep.after
-    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+    if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
+        terms["jpeg_blocks"] = m.jpeg_u_rad
+        au = float(np.hypot(au, m.jpeg_u_rad))
+        notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
+                               float(np.rad2deg(m.jpeg_u_rad) * 3600)))
+    defocus = defocus_note(f"{image} mark {index}", m.blur)
+    if defocus:
+        notes.append(defocus)
+    elif f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
         notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")
@@ -476,6 +485,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             continue
         out.append(finish_mark(m, lens, k, name, i, alpha))
         k += 1
+    if measured.notes:  # the frame's background (stripes): on each of its marks
+        out = [replace(r, notes=measured.notes + r.notes) for r in out]
     return with_families(out, measured.families, measured.unreported,
                          "camera model" if camera is not None else
                          "frame lens" if lens.lam is not None else "none", alpha)
@@ -529,9 +540,10 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             on_image(j)
         try:
             got = read_image_notes(path)
-            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes)
-            found_all.append(list(measure_marks(got.pixels, camera, where=str(path),
-                                                expect_one=expect_one, roi=roi)))
+            fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
+                               roi=roi)
+            said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
+            found_all.append(list(fr.items))
         except ImageInputError as exc:
             found_all.append([exc])
     ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]

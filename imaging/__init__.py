@@ -11,10 +11,12 @@ Public API::
 """
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
+from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
+from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
 from imaging.linefit import LineFit, fit_line
@@ -34,8 +36,10 @@ from imaging.plumbline import (
     undistort,
 )
 from imaging.profile import Centres, ProfileFit
+from imaging.stripes import Stripes
 
 __all__ = [
+    "BlurTrend", "JpegBlocks", "Stripes", "defocus_note", "jpeg_note",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",

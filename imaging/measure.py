@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
+from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
     MarkCandidate,
@@ -26,8 +27,17 @@ from imaging.detect import (
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.io import full_scale
+from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
-from imaging.profile import Centres, ProfileFit, fit_profile, groove_extent, sample_centres
+from imaging.profile import (
+    Centres,
+    ProfileFit,
+    band_indices,
+    fit_profile,
+    groove_extent,
+    sample_centres,
+)
+from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 
 
@@ -39,12 +49,16 @@ class MarkMeasurement:
     ``regressors``: per-point arrays for the residual loop (``t`` along the line [px],
     ``x``/``y`` [px], ``r2`` squared distance from the image centre [px^2], ``cross_slope``
     local illumination slope / contrast [1/px]); ``chol``: lower Cholesky factor of the
-    centres' correlation matrix when surface texture correlates their errors along the mark
-    (None: independent), for generalised least squares; ``sigma`` then includes the
-    texture's share of the variance. ``extent_px``: where the groove ends along the profile's
-    line (raw image); ``ends_px``: those two ends as (2, 2) points like ``points`` (relative
-    to the image centre, undistorted if a camera model was given): a bent mark's chord and a
-    ruled scale's line middles are read between them.
+    centres' correlation matrix when surface texture (or removed stripes' offsets,
+    :mod:`imaging.stripes`) correlates their errors along the mark (None: independent), for
+    generalised least squares; ``sigma`` then includes their share of the variance;
+    ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
+    None: too few segments to tell); ``jpeg``: the JPEG
+    encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
+    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term). ``extent_px``: where the
+    groove ends along the profile's line (raw image); ``ends_px``: those two ends as (2, 2)
+    points like ``points`` (relative to the image centre, undistorted if a camera model was
+    given): a bent mark's chord and a ruled scale's line middles are read between them.
     """
 
     candidate: MarkCandidate
@@ -58,6 +72,9 @@ class MarkMeasurement:
     n_rejected: int = 0
     chol: np.ndarray | None = None
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
+    blur: BlurTrend | None = None
+    jpeg: JpegBlocks | None = None
+    jpeg_u_rad: float = 0.0
     ends_px: np.ndarray | None = None
 
     @property
@@ -99,12 +116,17 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
-                      neighbours_px: Sequence[float] = ()) -> MarkMeasurement:
+                      neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None,
+                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+                      ) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
     ``neighbours_px``: signed distances of other lines beside it [px] (see
-    :func:`neighbours`), kept out of the texture's replicas."""
+    :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
+    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
+    ``offsets_var``: variances of the column and row offsets removed from the image
+    (:mod:`imaging.stripes`), carried into the centres' covariance."""
     pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
     use = _usable(cen, where, cand)
@@ -112,7 +134,12 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
-    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px)
+    u, n = line_frame(pf.angle_rad)
+    # The first centres as the start along the new line (a bowed groove's ends are far
+    # from any straight line through it).
+    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+                         guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
+                         offsets_var=offsets_var)
     use = _usable(cen, where, cand)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
@@ -121,13 +148,37 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     if cen.texture is not None and cen.texture.acf is not None:
         scale, chol = correlation_cholesky(cen.texture.acf, np.flatnonzero(use))
         sig = sig * scale
+    if cen.offsets_cov is not None:
+        sig, chol = _with_offsets(sig, chol, cen.offsets_cov[np.ix_(use, use)],
+                                  sig / cen.sigma[use] if camera is not None else None)
     regs = {"t": cen.t[use], "x": pts[:, 0], "y": pts[:, 1], "r2": (pts**2).sum(1),
             "cross_slope": cen.cross_slope[use]}
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
+    blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
+            if cen.blur_dev is not None else None)
     ext = groove_extent(image, pf)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
+                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
+                           if jpeg is not None else 0.0,
                            groove_ends(pf, ext, line, camera, image.shape))
+
+
+def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
+                  gain: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The centres' sigma and correlation factor with removed stripes' offsets' covariance
+    ``C`` [px^2] added (``gain``: the undistortion's magnification per centre, if any)."""
+    if gain is not None:
+        C = C * np.outer(gain, gain)
+    R = chol @ chol.T if chol is not None else np.eye(len(sig))
+    total = sig[:, None] * R * sig[None, :] + C
+    s = np.sqrt(np.diag(total))
+    R = total / np.outer(s, s)
+    try:
+        L = np.linalg.cholesky(R)
+    except np.linalg.LinAlgError:
+        L = np.linalg.cholesky(R + 1e-6 * np.eye(len(R)))
+    return s, L
 
 
 def groove_ends(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
@@ -195,11 +246,14 @@ class MeasuredFrame:
     it, per reported line), ``families`` (index tuples into ``items``, see
     :mod:`imaging.families`), ``unreported`` (lines found but not reported: beyond
     ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
-    and not counted)."""
+    and not counted); ``notes``: what the frame's background did (stripes found, removed or
+    carried: :mod:`imaging.stripes`), one line each; ``stripes``: those findings."""
 
     items: list[MarkMeasurement | ImageInputError]
     families: tuple[tuple[int, ...], ...] = ()
     unreported: int = 0
+    notes: tuple[str, ...] = ()
+    stripes: tuple[Stripes, ...] = ()
 
 
 def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
@@ -248,11 +302,17 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
     member = {i for g in det.families for i in g}
+    # Row/column fixed-pattern noise: tested on the background away from every line found,
+    # and removed when each line's columns (rows) have background to estimate it from.
+    image, stripes = find_stripes(image, [band_indices(image, c) for c in
+                                          (*cands, *det.unreported)], top)
+    jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i))
+            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg,
+                                  (stripes[0].offsets_var, stripes[1].offsets_var))
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)
@@ -264,4 +324,6 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
-    return MeasuredFrame(out, fams, len(det.unreported))
+    contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
+    notes = stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
+    return MeasuredFrame(out, fams, len(det.unreported), notes, stripes)

@@ -36,6 +36,10 @@ _GAUSS = {2: (np.array([-0.5, 0.5]) / np.sqrt(3), np.array([0.5, 0.5])),
 _SQ2 = np.sqrt(2.0)
 _SQ2PI = np.sqrt(2 * np.pi)
 _SHAPE_PIXELS = 2500
+EXTRA_STEPS = 4
+"""Gauss–Newton steps a segment's centre may take beyond the usual ones while it still moves
+(a lens bows a long off-centre mark by several px: with 2 steps of at most 1 px its ends
+stopped 0.2-0.35 px short, and a calibrated lens was reported as differing from itself)."""
 
 
 def _quad_offsets(angle: float, order: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -74,6 +78,15 @@ class ProfileTable:
         self.grid = np.arange(-reach, reach + step, step)
         sh, wt = _quad_offsets(angle)
         self.p, self.pe = profile_and_derivs(self.grid, w, s, sh, wt, shape_derivs=False)
+        self._shape = (w, s, sh, wt)
+        self._ps: np.ndarray | None = None
+
+    def blur_slope(self, e: np.ndarray) -> np.ndarray:
+        """dP/ds at ``e``: the profile's change per px of blur (tabulated on first use)."""
+        if self._ps is None:
+            w, s, sh, wt = self._shape
+            self._ps = profile_and_derivs(self.grid, w, s, sh, wt)[3]
+        return np.interp(e, self.grid, self._ps, left=0.0, right=0.0)
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return (np.interp(e, self.grid, self.p, left=0.0, right=0.0),
@@ -129,7 +142,12 @@ class Centres:
     (regressor for illumination-gradient bias); ``chi2_red``: each segment's pixel chi2/dof;
     ``ok``: segments usable for the line fit; ``texture``: how the background's texture
     correlates the centres' errors along the mark and with ``cross_slope`` (None: it does
-    not; see :mod:`imaging.texture`).
+    not; see :mod:`imaging.texture`); ``blur_dev``, ``blur_dev_u``: each segment's blur
+    minus the band's [px] and its standard uncertainty, linearised at the solution (one
+    Gauss–Newton step on the blur with the segment's other parameters free; None unless
+    asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
+    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
+    (None: none removed).
     """
 
     xy: np.ndarray
@@ -140,6 +158,9 @@ class Centres:
     chi2_red: np.ndarray
     ok: np.ndarray
     texture: TextureModel | None = None
+    blur_dev: np.ndarray | None = None
+    blur_dev_u: np.ndarray | None = None
+    offsets_cov: np.ndarray | None = None
 
 
 def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
@@ -178,6 +199,28 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     sel = (np.abs(e) <= half) & (t >= t0) & (t <= t1)
     ys, xs = ys[sel], xs[sel]
     return image[ys, xs], e[sel], t[sel], ys * w + xs
+
+
+def centres_half(pf: ProfileFit) -> float:
+    """Half-width of the band :func:`sample_centres` fits a groove's centres on [px]."""
+    return float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+
+
+def band_pixels(image: np.ndarray, pf: ProfileFit, half: float, reach_px: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance e from the fitted line [px] and flat index of the pixels within
+    ``half`` of it, ``reach_px`` beyond the measured stretch, in ``image``."""
+    _, e, _, idx = _band(image, pf.angle_rad, pf.offset_px,
+                         pf.t_start_px - reach_px, pf.t_end_px + reach_px, half)
+    return e, idx
+
+
+def band_indices(image: np.ndarray, cand: MarkCandidate, reach_px: float = 20.0) -> np.ndarray:
+    """Flat indices of the pixels a candidate's measurement can use: its band (as wide as
+    :func:`fit_profile`'s, plus its illumination ring) and ``reach_px`` beyond its ends."""
+    half = float(np.clip(2.5 * cand.thickness_px + 8, 10, 40)) + 6.0
+    return _band(image, cand.angle_rad, cand.offset_px, cand.t_start_px - reach_px,
+                 cand.t_end_px + reach_px, half)[3]
 
 
 def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
@@ -375,15 +418,25 @@ def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, eve
 
 def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image",
-                   texture: bool = False, avoid_px: Sequence[float] = ()) -> Centres:
+                   texture: bool = False, avoid_px: Sequence[float] = (),
+                   guess: tuple[np.ndarray, np.ndarray] | None = None,
+                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+                   ) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
+    ``guess``: (t, offset) [px] of the groove from the reference line along it (an earlier
+    pass's centres), the start of each segment's offset; Gauss–Newton runs ``iterations``
+    steps of at most 1 px each, and on (up to :data:`EXTRA_STEPS` more) while a segment still
+    moves, so a strongly bowed groove's ends are not left where the steps stopped.
+    ``offsets_var``: variances [DN^2] of per-column and per-row offsets already subtracted
+    from the image (removed stripes, :mod:`imaging.stripes`); their errors are shared by
+    every segment on the same column (row), and ``Centres.offsets_cov`` carries them.
     ``texture``: also measure how the background's texture correlates the centres' errors
     (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
     a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
     """
-    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    half = centres_half(pf)
     vals, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
                             half)
     unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
@@ -401,6 +454,13 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
+    if guess is not None and len(guess[0]) >= 2:
+        mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+        reach = int(np.round(0.5 * (pf.t_end_px - pf.t_start_px) / segment_px)) + 1
+        t_nom = mid + (np.arange(nseg) * every - reach) * segment_px
+        order = np.argsort(guess[0])
+        delta = np.clip(np.interp(t_nom, guess[0][order], guess[1][order]), -half / 2, half / 2)
+    moving = np.zeros(nseg, bool)
     amp = np.full(nseg, pf.contrast_dn)
     lev = np.full(nseg, pf.background_dn)
     # Each segment has its own background slope across the mark: surface texture and uneven
@@ -413,7 +473,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
 
-    for it in range(iterations + 1):
+    for it in range(iterations + 1 + EXTRA_STEPS):
         ee = e - delta[seg]
         p, pe = table(ee)
         mu = lev[seg] + slp[seg] * ee + amp[seg] * p
@@ -438,10 +498,14 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             for j in range(i, k):
                 N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
         ok = np.linalg.det(N) > 0
-        if it == iterations:
+        if it >= iterations and not (moving & ok).any():
             break  # the last pass only refreshes weights and information at the solution
+        if it == iterations + EXTRA_STEPS:
+            break  # still moving: those segments are left out below
         step = np.zeros((nseg, k))
         step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
+        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+        moving = np.abs(step[:, 0]) > 0.1
         step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
         delta += step[:, 0]
         amp += step[:, 1]
@@ -450,6 +514,13 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             slp += step[:, 3]
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
+    ocov = None
+    if any(v is not None for v in offsets_var):
+        ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
+    blur_dev = blur_dev_u = None
+    if texture:
+        blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
+                                          ok, bc)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     npx = bc(np.ones_like(e))
@@ -459,7 +530,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     ring = _ring(image, pf, half, segment_px, every, nseg)
     slope = ring_slope(image[ring[0], ring[1]], ring[2], ring[3], nseg, pf.full_scale_dn)
     u, n = line_frame(pf.angle_rad)
-    good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2)
+    good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2) & ~moving
     amp_safe = np.where(amp != 0, amp, 1.0)
     tex = None
     if texture:
@@ -476,7 +547,45 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         delta = delta - tex.coupling_px2 * slope / amp_safe
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
-                   chi2_red=chi2_red, ok=good, texture=tex)
+                   chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
+                   blur_dev_u=blur_dev_u, offsets_cov=ocov)
+
+
+def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,
+                 J: Sequence[np.ndarray], cov: np.ndarray, ok: np.ndarray,
+                 offsets_var: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
+    """Covariance [px^2] (nseg x nseg) the removed offsets' errors put on the centres.
+
+    A centre is a linear functional of its pixels, delta_k = sum_px f_px v_px with f the
+    first row of N^-1 J^T W; an error e_x on column x moves it by e_x sum_{px in k, col x}
+    f_px = A[k, x] e_x, so the covariance is A diag(var) A^T (columns, then rows alike)."""
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    f = wgt * sum(c0[seg, i] * J[i] for i in range(len(J)))
+    out = np.zeros((nseg, nseg))
+    for var, where in zip(offsets_var, (idx % width, idx // width), strict=True):
+        if var is None:
+            continue
+        lo = int(where.min())
+        span = int(where.max()) - lo + 1
+        A = np.bincount(seg * span + (where - lo), f, minlength=nseg * span).reshape(nseg,
+                                                                                      span)
+        out += (A * var[lo:lo + span][None, :]) @ A.T
+    return out
+
+
+def _blur_step(js: np.ndarray, J: Sequence[np.ndarray], wgt: np.ndarray, r: np.ndarray,
+               g: np.ndarray, cov: np.ndarray, ok: np.ndarray, bc) -> tuple[np.ndarray, ...]:
+    """Each segment's blur change [px] and its u from one Gauss–Newton step on the blur with
+    the segment's other parameters free (the Schur complement of the segment's normal
+    matrix): ``js`` the pixels' dP/ds times the contrast, ``J``/``g``/``cov`` the segment
+    fit's columns, gradient and inverse normal matrix at the solution."""
+    a = np.stack([bc(wgt * js * j) for j in J], axis=1)
+    c = np.where(ok[:, None, None], cov, 0.0)
+    den = bc(wgt * js * js) - np.einsum("ni,nij,nj->n", a, c, a)
+    num = bc(wgt * js * r) - np.einsum("ni,nij,nj->n", a, c, g)
+    good = ok & (den > 0)
+    dev = np.where(good, num / np.where(good, den, 1.0), np.nan)
+    return dev, np.where(good, 1.0 / np.sqrt(np.where(good, den, 1.0)), np.inf)
 
 
 def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0

@@ -7,7 +7,10 @@ the irradiance over its area (supersampled); the sensor adds Poisson shot noise 
 read noise and quantises to 8, 12 or 16 bits, clipping at full scale (saturation). Optional
 clutter: machined-surface streaks, an illumination gradient and vignetting, dust specks,
 scratches, printed labels, zero padding along the edges. Optional camera effects: OpenCV
-radial distortion, camera roll, non-square pixels (see :mod:`synth.optics`).
+radial distortion, camera roll, non-square pixels (see :mod:`synth.optics`); a defocus
+gradient (the PSF's width changing across the field: a tilted or curved object plane); row and
+column fixed-pattern noise (per-row / per-column offsets of the read-out, fixed for the
+sensor); JPEG compression of 8-bit images (the camera's encoder, with its 8x8 blocks).
 
 Every image comes with an :class:`ImageTruth` that records the marks and the Cramér–Rao bound
 on each mark's angle, computed from the noise-free render by numerical differentiation.
@@ -101,6 +104,13 @@ class ImageSpec:
     = full well). Clutter: ``dust`` specks, ``scratches`` (thin, up to ``scratch_max_px`` long;
     0: 15 % of the smaller side), ``text`` printed labels of 2-4 numeral-like glyphs, and
     ``padding_px`` rows/columns of zeros along the frame edges (a driver's padding).
+
+    Imaging effects: ``blur_gradient`` (gx, gy) the change of the PSF's sigma [px] per px of
+    image x / y from the centre (defocus across the field; the local sigma is ``blur_px`` +
+    gx x + gy y, at least 0.2 px); ``column_fpn``, ``row_fpn`` the standard deviation of the
+    per-column / per-row read-out offsets, as a fraction of the bare surface's signal
+    (``exposure * full_well_e``), drawn once from the seed's own stream; ``jpeg_quality``
+    (1-100, 0: none) encodes the 8-bit image as a baseline JPEG and decodes it.
     """
 
     marks: tuple[MarkSpec, ...]
@@ -125,6 +135,15 @@ class ImageSpec:
     padding_px: int = 0
     camera: CameraGeometry = field(default_factory=CameraGeometry)
     seed: int = 0
+    blur_gradient: tuple[float, float] = (0.0, 0.0)
+    column_fpn: float = 0.0
+    row_fpn: float = 0.0
+    jpeg_quality: int = 0
+
+    def blur_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The PSF's sigma [px] at sensor pixel (x, y) relative to the image centre."""
+        gx, gy = self.blur_gradient
+        return np.maximum(self.blur_px + gx * x + gy * y, 0.2)
 
     def with_marks(self, *marks: MarkSpec) -> ImageSpec:
         return replace(self, marks=tuple(marks))
@@ -211,9 +230,9 @@ def _blurred_profile(profile: str, width: float, sigma: float):
     return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
 
 
-def _along_profile(length: float, sigma: float):
+def _along_profile(length: float, sigma: float | np.ndarray):
     half = length / 2
-    if sigma <= 0:
+    if np.ndim(sigma) == 0 and sigma <= 0:
         return lambda t: (np.abs(t) <= half).astype(float)
     s2 = np.sqrt(2) * sigma
     return lambda t: 0.5 * (erf((t + half) / s2) - erf((t - half) / s2))
@@ -279,9 +298,38 @@ def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.nd
     e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
     t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
     e = e - mark.bow(t)
-    across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
-    along = _along_profile(mark.length_px, spec.blur_px)
-    return (across(e) * along(t)).mean(axis=1)
+    if tuple(spec.blur_gradient) == (0.0, 0.0):
+        across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
+        along = _along_profile(mark.length_px, spec.blur_px)
+        return (across(e) * along(t)).mean(axis=1)
+    return (_across_varying(mark, e, spec.blur_at(px, py))
+            * _along_profile(mark.length_px, spec.blur_at(px, py))(t)).mean(axis=1)
+
+
+def _max_blur(spec: ImageSpec) -> float:
+    """The widest PSF sigma anywhere in the frame [px]."""
+    gx, gy = spec.blur_gradient
+    return float(spec.blur_px + abs(gx) * spec.width / 2 + abs(gy) * spec.height / 2)
+
+
+def _across_varying(mark: MarkSpec, e: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """The blurred groove profile at ``e`` seen through a PSF of local width ``sigma`` [px].
+
+    A defocus gradient changes the PSF over tens of px, the groove's profile over a few: the
+    PSF is locally the Gaussian of the local sigma. Profiles are tabulated on a grid of sigma
+    0.02 px apart and interpolated linearly between them (error ~1e-5 of the depth).
+    """
+    step = 0.02
+    lo = float(np.floor(sigma.min() / step)) * step
+    idx = (sigma - lo) / step
+    out = np.zeros_like(e)
+    for i in range(int(np.floor(idx.max())) + 2):
+        w = np.clip(1 - np.abs(idx - i), 0, None)
+        sel = w > 0
+        if sel.any():
+            out[sel] += w[sel] * _blurred_profile(mark.profile, mark.width_px,
+                                                  lo + i * step)(e[sel])
+    return out
 
 
 def _illumination(spec: ImageSpec) -> np.ndarray:
@@ -396,7 +444,7 @@ def _mean_electrons(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
         from scipy.ndimage import gaussian_filter
 
         refl += gaussian_filter(_texture(spec, rng), spec.blur_px) if spec.blur_px else 0
-    margin = 7 * spec.blur_px + 3
+    margin = 7 * _max_blur(spec) + 3
     for m in spec.marks:
         r, c = _mark_band(spec, m, margin)
         refl[r, c] += m.contrast * mark_coverage(spec, m, r, c)
@@ -404,15 +452,41 @@ def _mean_electrons(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     return np.clip(refl, 0, None) * _illumination(spec) * spec.exposure * spec.full_well_e
 
 
+def _fixed_pattern(spec: ImageSpec) -> np.ndarray:
+    """Row and column read-out offsets [e-] (fixed for the sensor: column amplifiers and
+    row drivers), from the seed's own stream so they leave every other draw unchanged."""
+    fpn = np.random.default_rng([spec.seed, 0xF9]).standard_normal(spec.width + spec.height)
+    signal = spec.exposure * spec.full_well_e
+    return (spec.column_fpn * signal * fpn[None, :spec.width]
+            + spec.row_fpn * signal * fpn[spec.width:, None])
+
+
+def _jpeg(dn: np.ndarray, quality: int) -> np.ndarray:
+    """The 8-bit image through a baseline JPEG encoder and decoder (the camera's)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", dn, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise OSError("JPEG encoding failed")
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+
+
 def _digitise(spec: ImageSpec, mean_e: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     e = rng.poisson(mean_e).astype(float) + rng.normal(0.0, spec.read_noise_e, mean_e.shape)
+    if spec.column_fpn or spec.row_fpn:
+        e += _fixed_pattern(spec)
     full = 2**spec.bits - 1
     dn = np.clip(np.round(e * full / spec.full_well_e), 0, full)
     p = spec.padding_px
     if p:
         # A driver's padding: whole rows/columns of zeros after read-out, not light.
         dn[:p], dn[-p:], dn[:, :p], dn[:, -p:] = 0, 0, 0, 0
-    return dn.astype(np.uint16 if spec.bits > 8 else np.uint8)
+    out = dn.astype(np.uint16 if spec.bits > 8 else np.uint8)
+    if spec.jpeg_quality:
+        if spec.bits != 8:
+            raise ValueError("jpeg_quality needs bits = 8 (baseline JPEG is 8-bit)")
+        out = _jpeg(out, spec.jpeg_quality)
+    return out
 
 
 # ----------------------------------------------------------------------------- CRLB
@@ -425,7 +499,7 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
     Clutter (texture, dust, scratches) is left out: it is not noise.
     """
     m = spec.marks[index]
-    margin = 7 * spec.blur_px + 4
+    margin = 7 * _max_blur(spec) + 4
     rows, cols = _mark_band(spec, m, margin)
     gain = (2**spec.bits - 1) / spec.full_well_e
     illum = _illumination(spec)[rows, cols] * spec.exposure * spec.full_well_e

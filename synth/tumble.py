@@ -239,10 +239,15 @@ def recording(spec: TumbleSpec, vibration_g: float = 0.05) -> tuple[np.ndarray, 
     """A continuous recording (t, u) with motion between the static poses.
 
     Between poses the unit turns (slerp) and is shaken (random accelerations of
-    ``vibration_g``); returns t [s], u (N, 3) [V] and the true static intervals [s].
+    ``vibration_g``); returns t [s], u (N, 3) [V] and the true static intervals [s]. The bias
+    hysteresis is the tumble's (:func:`hysteresis`: each static pose on the side of the turn
+    into it); during a turn an axis's pendulum changes side once its input (without the
+    shaking) has moved more than :data:`HYSTERESIS_MOVE_G` from the pose it left.
     """
     rng = np.random.default_rng(spec.seed + 1)
     up = _placed(pose_directions(spec.poses, spec.n_random, rng), spec.fixture_error_rad, rng)
+    side = hysteresis(spec.triad, up)
+    sensing = spec.triad.sensing()
     # Orientations whose "up" is each pose direction (any yaw).
     rots = [Rotation.align_vectors([u_], [[0, 0, 1]])[0] for u_ in up]
     dt = 1 / spec.rate_hz
@@ -252,7 +257,8 @@ def recording(spec: TumbleSpec, vibration_g: float = 0.05) -> tuple[np.ndarray, 
         tt = t0 + np.arange(int(spec.dwell_s * spec.rate_hz)) * dt
         a = np.repeat(r.apply([0, 0, 1])[None] * spec.g_ratio, len(tt), axis=0)
         ts.append(tt)
-        us.append(spec.triad.outputs(a, tt, spec.temp_start_k + 0 * tt, rng))
+        us.append(spec.triad.outputs(a, tt, spec.temp_start_k + 0 * tt, rng,
+                                     np.repeat(side[i][None], len(tt), axis=0)))
         intervals.append((float(tt[0]), float(tt[-1])))
         t0 = tt[-1] + dt
         if i + 1 < len(rots):
@@ -260,9 +266,12 @@ def recording(spec: TumbleSpec, vibration_g: float = 0.05) -> tuple[np.ndarray, 
             s = Slerp([0, 1], Rotation.concatenate([r, rots[i + 1]]))
             frac = (tm - tm[0]) / max(tm[-1] - tm[0], dt)
             a = s(frac).apply([0, 0, 1]) * spec.g_ratio
+            moved = np.logical_or.accumulate(
+                np.abs((a - a[0]) @ sensing.T) > HYSTERESIS_MOVE_G, axis=0)
+            offset = np.where(moved, side[i + 1], side[i])
             a = a + rng.normal(0, vibration_g, a.shape)
             ts.append(tm)
-            us.append(spec.triad.outputs(a, tm, spec.temp_start_k + 0 * tm, rng))
+            us.append(spec.triad.outputs(a, tm, spec.temp_start_k + 0 * tm, rng, offset))
             t0 = tm[-1] + dt
     return np.concatenate(ts), np.vstack(us), intervals
 

@@ -105,6 +105,9 @@ def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_re
                       warmup_tau_s=tau_s if SCALE_WARMUP in effects else 0.0, **kw)
 
 
+SCREEN_TRUST = 0.25
+"""The screen predicts a candidate's chi2 only where the model's chi2 at the Gauss-Newton
+step is the linear prediction to this fraction of the predicted drop (+1)."""
 TURN_G = 0.1
 """Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
 fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
@@ -145,6 +148,7 @@ class CalibrationStage:
         # widening of u when structure remains (align.calibration.widen).
         self.projection: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray]] = {}
         self.solutions: dict[tuple[str, ...], np.ndarray] = {}
+        self.jacobians: dict[tuple[str, ...], np.ndarray] = {}
         # Every fit made (the loop's trials too), for the alternatives that widen u.
         self.fits: dict[tuple[str, ...], tuple[StageFit, tuple[Term, ...]]] = {}
         self.start = algebraic(poses, signs)
@@ -152,25 +156,25 @@ class CalibrationStage:
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
 
-    def refine(self, effects: Sequence[str]) -> tuple[TriadModel, np.ndarray, np.ndarray]:
+    def _check_applies(self, effects: Sequence[str]) -> None:
         p = self.poses
-        s0 = self.start
         for e in effects:
             if e in (TEMP, SCALE_TEMP) and p.temp is None:
                 raise NotApplicable("no temperature column")
             if e == HYSTERESIS and not p.ordered:
                 raise NotApplicable("the pose order is not known (no time column)")
-        theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(_n_params(effects) - 9)])
-        prev = self.solutions.get(tuple(effects[:-1]))
-        if prev is not None:  # start a trial from the fit it extends (a few iterations)
-            theta0[:len(prev)] = prev
+
+    def _residual(self, effects: Sequence[str]) -> Callable[[np.ndarray, float], np.ndarray]:
+        """The weighted residuals (|a_p| - 1) / sigma_p as a function of (theta, tau).
+
+        The inverse model of TriadModel.specific_force written out on the poses' arrays:
+        the loop fits ~50 models of ~100 evaluations each, and building a TriadModel per
+        evaluation was 2/3 of the calibration's time. test_stage_residual_is_the_model's
+        checks the two agree."""
+        p = self.poses
+        s0 = self.start
         w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
         hyst = HYSTERESIS in effects
-
-        # The inverse model of TriadModel.specific_force written out on the poses' arrays:
-        # the loop fits ~50 models of ~100 evaluations each, and building a TriadModel per
-        # evaluation was 2/3 of the calibration's time. test_stage_residual_is_the_model's
-        # checks the two agree.
         slots = [(fld, idx) for e in effects for fld, idx, _ in EFFECTS[e].slots]
         dt = p.t - s0.t_ref
         dT = p.temp - s0.temp_ref if p.temp is not None else np.zeros(len(p.t))
@@ -201,11 +205,87 @@ class CalibrationStage:
                     a = a - self.turns * f["hysteresis"]
             return (np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0) * w
 
+        return resid
+
+    def _scale(self, effects: Sequence[str]) -> np.ndarray:
+        """Typical size of each parameter (least_squares' x_scale, the screening's step)."""
+        s0, p = self.start, self.poses
+        return np.concatenate([np.abs(s0.k) * 1e-3, np.full(3, 1e-4), np.full(3, 1e-4),
+                               np.concatenate([_effect_scale(e, p) for e in effects])
+                               if effects else []])
+
+    def screen(self, current: StageFit, terms: Sequence[Term], names: Sequence[str]
+               ) -> dict[str, float]:
+        """The chi2 each candidate in ``names`` would leave, linearised at ``current`` (the
+        fit of ``terms``): the score test's drop |P r|^2, P the projection on the
+        candidate's Jacobian columns with the fitted parameters' columns projected out
+        (the scale warm-up: the largest drop over its tau grid). A screen, not the test:
+        the loop refits what might pass (:data:`align.loop.SCREEN_MARGIN`). Candidates that
+        do not apply are left out (the refit says why)."""
+        effects = tuple(t.name for t in terms)
+        base = self.solutions.get(effects)
+        jac = self.jacobians.get(effects)
+        if base is None or jac is None:
+            return {}
+        r = self.projection[effects][1]
+        tau0 = current.payload.warmup_tau_s if current.payload is not None else 0.0
+        q, _ = np.linalg.qr(jac)
+        r_perp = r - q @ (q.T @ r)
+        span = max(float(np.ptp(self.poses.t)), 1.0)
+        out = {}
+        for name in names:
+            if name in effects:
+                continue
+            try:
+                self._check_applies([name])
+            except NotApplicable:
+                continue
+            ext = [*effects, name]
+            resid = self._residual(ext)
+            h = self._scale(ext)[len(base):]
+            taus = (np.asarray(WARMUP_TAUS) * span if name == SCALE_WARMUP and SCALE_WARMUP
+                    not in effects else [tau0])
+            best, linear = 0.0, True
+            for tau in taus:
+                th = np.concatenate([base, np.zeros(len(h))])
+                f0 = resid(th, float(tau))
+                cols = []
+                for j, hj in enumerate(h):
+                    tj = th.copy()
+                    tj[len(base) + j] = hj
+                    cols.append((resid(tj, float(tau)) - f0) / hj)
+                c = np.column_stack(cols)
+                # The Gauss-Newton step with the candidate: trusted where the model is
+                # quadratic over it (its chi2 there as predicted, to a quarter of the drop);
+                # else (a K2 that runs k away) no prediction: the refit decides.
+                step = -np.linalg.lstsq(np.hstack([jac, c]), f0, rcond=None)[0]
+                c = c - q @ (q.T @ c)
+                beta = np.linalg.lstsq(c, r_perp, rcond=None)[0]
+                drop = float(np.sum((c @ beta) ** 2))
+                there = float(np.sum(resid(th + step, float(tau)) ** 2))
+                if abs(there - (current.chi2 - drop)) > SCREEN_TRUST * drop + 1.0:
+                    linear = False
+                best = max(best, drop)
+            if not linear:
+                continue
+            chi2 = current.chi2
+            # In chi2's units (sigma unknown: the residuals are in g, chi2 the RSS).
+            out[name] = max(chi2 - best, 0.0)
+        return out
+
+    def refine(self, effects: Sequence[str]) -> tuple[TriadModel, np.ndarray, np.ndarray]:
+        p = self.poses
+        s0 = self.start
+        self._check_applies(effects)
+        theta0 = np.concatenate([s0.k, s0.beta, s0.bias, np.zeros(_n_params(effects) - 9)])
+        prev = self.solutions.get(tuple(effects[:-1]))
+        if prev is not None:  # start a trial from the fit it extends (a few iterations)
+            theta0[:len(prev)] = prev
+        w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
+        resid = self._residual(effects)
         if len(p.u) < len(theta0):
             raise NotApplicable("more parameters than poses")
-        scale = np.concatenate([np.abs(s0.k) * 1e-3, np.full(3, 1e-4), np.full(3, 1e-4),
-                                np.concatenate([_effect_scale(e, p) for e in effects])
-                                if effects else []])
+        scale = self._scale(effects)
         span = max(float(np.ptp(p.t)), 1.0)
 
         def solve(tau: float):
@@ -226,6 +306,7 @@ class CalibrationStage:
             tau = 0.0
         res = solve(tau)
         self.solutions[tuple(effects)] = res.x
+        self.jacobians[tuple(effects)] = np.asarray(res.jac, float)
         r = res.fun / w
         J = res.jac
         # Separability: condition number of the Jacobian with unit-norm columns (scale-free).

@@ -34,18 +34,23 @@ from align.calibration.model import (
     CalibrationStage,
     admissible,
 )
+from align.calibration.plan import MIN_POSES as PLAN_MIN
 from align.calibration.triad import Poses, TriadModel, delta_g, per_axis
 from align.calibration.widen import (
+    ALIASED,
     AMBIGUITY,
     AMBIGUOUS_BIC,
     STRUCTURE,
+    Alternative,
     Widening,
+    ambiguity_reason,
     ambiguity_term,
+    positive_part,
     structure_term,
     widen,
 )
-from align.errors import InputError
-from align.loop import Candidate, LoopReport, bic, run_loop
+from align.errors import InputError, NotApplicable
+from align.loop import Candidate, LoopReport, bic, optimistic_fit, run_loop
 
 SCALE_FACTOR_DEFINITION = (
     "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
@@ -185,8 +190,15 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
                              "+x,-x,+y,-y,+z,-z for the known-pose (six-position) method")
         kf = fit_known(poses, faces, signs, fe)
         rep = run_loop(KnownPoseStage(kf, poses), ())
-        return Calibration(kf.model, kf.model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf)
+        model, widening, notes = kf.model, None, ()
+        if rep.unexplained_structure and kf.dof > 0:
+            # The same widening as the ellipsoid's: u covers the structure left.
+            model, widening = widen(kf.model, [_structure_increment(
+                rep, kf.projection, kf.residuals_w, kf.dof, kf.noise_known, "pose-axis",
+                bound=kf.dof < len(kf.model.names) + 3)])
+            notes = (widening.warning(),)
+        return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
+                           "known-pose", kf, None, notes, widening)
     try:
         stage = CalibrationStage(poses, signs)
     except InputError as exc:
@@ -201,22 +213,16 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     increments = []
     if rep.unexplained_structure and rep.after.dof > 0:
         # Structure remains: u must cover it (widen), never the clean-data u.
-        w = rep.structure_after.worst
         A, r_w = stage.projection[tuple(t.name for t in rep.terms)]
-        cov, m = structure_term(A, r_w, rep.after.dof, stage.sigma is not None)
-        size = f"{m:.3g} sigma" if stage.sigma is not None else f"{m * 1e6:.3g} µg"
-        increments.append((STRUCTURE, f"unexplained structure ({w.name} p = {w.p_value:.2g}):"
-                           f" a systematic error of {size} per pose", cov))
+        increments.append(_structure_increment(rep, A, r_w, rep.after.dof,
+                                               stage.sigma is not None, "pose"))
     alts = alternatives(stage, rep, candidates, admissible(stage, overfit=False))
     if alts:
-        shifts = np.array([d for _, d in alts])
-        increments.append((AMBIGUITY, "the data cannot tell the effects added ("
-                           + (" + ".join(t.name for t in rep.terms) or "none") + ") from "
-                           + ", ".join(n for n, _ in alts) + f" (within {AMBIGUOUS_BIC:g} of "
-                           "BIC): the parameters' shifts between them", ambiguity_term(
-                               shifts, len(model.names))))
+        increments.append((AMBIGUITY, ambiguity_reason(
+            tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
+            ambiguity_term(alts, len(model.names))))
     if increments:
-        model, widening = widen(model, increments)
+        model, widening = widen(model, increments, alts)
         notes = (*notes, widening.warning())
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
@@ -228,6 +234,19 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         notes = (*notes, *w)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes, widening)
+
+
+def _structure_increment(rep: LoopReport, projection: np.ndarray, residuals_w: np.ndarray,
+                         dof: int, noise_known: bool, per: str, bound: bool = False
+                         ) -> tuple[str, str, np.ndarray]:
+    """The widening for the structure the loop left (:func:`structure_term`): (term, why,
+    covariance); ``per``: what one residual is ("pose", "pose-axis")."""
+    w = rep.structure_after.worst
+    cov, m = structure_term(projection, residuals_w, dof, noise_known, bound)
+    size = (f"{m:.3g} sigma" if noise_known else
+            f"{m * 1e6:.3g} µg" if per == "pose" else f"{m:.3g} (output unit)")
+    return (STRUCTURE, f"unexplained structure ({w.name} p = {w.p_value:.2g}): a systematic "
+            f"error of {size} per {per}", cov)
 
 
 TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
@@ -264,39 +283,63 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
 
 
 def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[Candidate],
-                 guard) -> list[tuple[str, np.ndarray]]:
-    """Sets of effects that explain the data as well as the loop's: every fit the loop tried
-    and, for each effect added, that effect replaced by each other candidate; those within
-    :data:`AMBIGUOUS_BIC` of the final fit that the physical guard admits, as (their effects,
-    shift of the nine core parameters from the final fit)."""
+                 guard) -> list[Alternative]:
+    """Sets of effects the data cannot tell from the loop's (:mod:`align.calibration.widen`):
+    each effect added replaced by each other candidate, and every other fit the loop tried;
+    those the physical guard admits that are within :data:`AMBIGUOUS_BIC` of the final fit or,
+    for a replacement, aliased with the effect it replaces (:data:`ALIASED`)."""
     final = rep.after
     names = tuple(t.name for t in rep.terms)
-    for k in range(len(rep.terms)):
+    if not names:
+        return []  # no effect added: the loop's choice (the declared model) stands
+    b_final = bic(final, sum(t.searched for t in rep.terms))
+    core, cov = _core(final.payload), _core_cov(final.payload)
+    explained: dict[tuple[str, ...], tuple[str, float]] = {}
+    for k, chosen in enumerate(rep.terms):
         rest = [*rep.terms[:k], *rep.terms[k + 1:]]
-        base = stage.fit(rest)
+        base = stage.fits.get(tuple(t.name for t in rest), (None,))[0] or stage.fit(rest)
+        drop = base.chi2 - final.chi2
+        predicted = stage.screen(base, rest, [c.name for c in candidates])
         for cand in candidates:
             alt = cand.build(base) if cand.name not in names else None
             if alt is None:
                 continue
+            if cand.name in predicted:
+                # Refit only what might be plausible (the loop's screen, its margin).
+                opt = optimistic_fit(base, predicted[cand.name], alt.width)
+                if not (bic(opt, sum(t.searched for t in [*rest, alt])) - b_final
+                        < AMBIGUOUS_BIC or drop > 0 and (base.chi2 - opt.chi2) / drop
+                        >= ALIASED):
+                    continue
             try:
-                stage.fit([*rest[:k], alt, *rest[k:]])
-            except (np.linalg.LinAlgError, ValueError):
+                fit = stage.fit([*rest[:k], alt, *rest[k:]])
+            except (np.linalg.LinAlgError, NotApplicable):
                 continue  # not applicable to these poses (as in the loop)
-    b_final = bic(final, sum(t.searched for t in rep.terms))
-    core = _core(final.payload)
+            explained[tuple(t.name for t in [*rest[:k], alt, *rest[k:]])] = (
+                chosen.name, (base.chi2 - fit.chi2) / drop if drop > 0 else float("nan"))
     out = []
     for effects, (fit, terms) in stage.fits.items():
-        if not names or not terms or set(names) <= set(effects):
-            # No effect added or the no-effect fit (the loop's choice stands), or the final
-            # set itself or one extended by an effect the tests did not call for.
+        if not terms or set(names) <= set(effects):
+            # The no-effect fit, or the final set itself or one extended by an effect the
+            # tests did not call for.
             continue
         d_bic = bic(fit, sum(t.searched for t in terms)) - b_final
+        replaces, frac = explained.get(effects, ("", float("nan")))
+        if not (d_bic < AMBIGUOUS_BIC or frac >= ALIASED):
+            continue
         base = stage.fits.get(effects[:-1], (rep.before,))[0]
-        if d_bic < AMBIGUOUS_BIC and (not terms or guard(base, fit, terms[-1]) is None):
-            out.append((" + ".join(effects), _core(fit.payload) - core))
+        if guard(base, fit, terms[-1]) is None:
+            out.append(Alternative(" + ".join(effects), replaces, float(d_bic), float(frac),
+                                   _core(fit.payload) - core,
+                                   positive_part(_core_cov(fit.payload) - cov)))
     return out
 
 
 def _core(m: TriadModel) -> np.ndarray:
     return np.concatenate([m.k, m.beta, m.bias])
+
+
+def _core_cov(m: TriadModel) -> np.ndarray:
+    """The covariance of (k, beta, bias) (the model's first nine names)."""
+    return np.asarray(m.cov, float)[:9, :9]
 

@@ -17,15 +17,29 @@ u_B,j = a_j / sqrt(3); it enters the covariance with the correlations of A A^T:
 
 so ``align apply`` and the fusion, which read the covariance, use the widened u.
 
-When the loop chose an effect but another candidate explains the data within
-:data:`AMBIGUOUS_BIC` (the 14 cube poses cannot tell a cross-axis product from K2), the
-shifts of the parameters between the two fits enter the same way (:func:`ambiguity_term`).
+When the loop chose an effect but the poses cannot tell it from another candidate, the
+parameters are averaged over the plausible models (:func:`ambiguity_term`): each alternative's
+shift of the parameters from the chosen fit (as the half-width of a rectangular distribution)
+and whatever u the alternative's own fit has beyond the chosen one's. An alternative is
+plausible when either
+
+* it explains the data within :data:`AMBIGUOUS_BIC` of the chosen set (the noise cannot tell
+  them apart), or
+* it is *aliased* with the effect it replaces on these poses: its regressors reproduce at
+  least :data:`ALIASED` of what the chosen effect explained (its chi2 drop from the fit
+  without either, over the chosen effect's: the squared correlation of the alternative's
+  regressors with the chosen effect's fitted signal, the model's own parameters projected
+  out). Then only the last fraction tells the two apart, and a model error of that size —
+  a real triad's effect is never exactly one candidate's shape — decides between them
+  whatever the BIC says: on the seed paper's 14 poses a cross-axis product, K2 and a bias
+  drift each explain 99.9 % of one another's signal, and the wrong one won by 12 in BIC.
 Measured on the effects of issue 19 (cross-axis products, bias hysteresis, scale-factor drift
 and warm-up): docs/calibration-effects.md.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,6 +51,10 @@ RECTANGULAR = np.sqrt(3.0)
 AMBIGUOUS_BIC = 10.0
 """An alternative effect within this BIC of the one the loop chose is as plausible (Kass and
 Raftery's 'strong' evidence starts at 6-10): the data cannot tell the two apart."""
+ALIASED = 0.99
+"""An alternative that reproduces this fraction of the chosen effect's chi2 drop is aliased
+with it on these poses (squared correlation of the regressors along the fitted signal; the
+poses of ``align calibrate --plan 28`` keep the candidates of issue 19 below it)."""
 STRUCTURE = "unexplained_structure"
 AMBIGUITY = "effect_ambiguity"
 
@@ -58,6 +76,9 @@ class Widening:
         unit] (what it adds in quadrature).
     u : numpy.ndarray
         The widened u per name [the parameter's unit].
+    alternatives : tuple of Alternative
+        The sets of effects the :data:`AMBIGUITY` term averages over; unit — (each names its
+        own units).
     """
 
     reasons: tuple[tuple[str, str], ...]
@@ -65,6 +86,7 @@ class Widening:
     u_noise: np.ndarray
     terms: tuple[tuple[str, np.ndarray], ...]
     u: np.ndarray
+    alternatives: tuple[Alternative, ...] = ()
 
     @property
     def factor(self) -> np.ndarray:
@@ -76,7 +98,8 @@ class Widening:
                 "parameters": {n: {"u_noise": float(self.u_noise[i]), "u": float(self.u[i]),
                                    "factor": float(self.factor[i]),
                                    **{t: float(v[i]) for t, v in self.terms}}
-                               for i, n in enumerate(self.names)}}
+                               for i, n in enumerate(self.names)},
+                "alternatives": [a.to_dict() for a in self.alternatives]}
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
@@ -91,7 +114,7 @@ class Widening:
 
 
 def structure_term(projection: np.ndarray, residuals_w: np.ndarray, dof: int,
-                   noise_known: bool) -> tuple[np.ndarray, float]:
+                   noise_known: bool, bound: bool = False) -> tuple[np.ndarray, float]:
     """The Type B covariance for unexplained structure (see the module) and m.
 
     Parameters
@@ -100,28 +123,104 @@ def structure_term(projection: np.ndarray, residuals_w: np.ndarray, dof: int,
     residuals_w : the final fit's weighted residuals (noise unknown: residuals [g]).
     dof : degrees of freedom of the final fit (> 0).
     noise_known : whether the weights are 1/sigma of each pose (else 1).
+    bound : take the worst case itself as u, not as a rectangular half-width — for a fit
+        with fewer residual degrees of freedom than parameters (the known-pose fit: 12
+        parameters, 6 dof on six faces), where most of a systematic error lies in the
+        parameters' span and the residual shows too little of it to judge its distribution
+        (a 50 µg hysteresis on six faces: k_y, k_z 4 u off with the rectangular u).
     """
     chi2_dof = float(np.sum(residuals_w**2)) / dof
     m = np.sqrt(max(chi2_dof, 1.0)) if noise_known else np.sqrt(chi2_dof)
-    u_b = m * np.sum(np.abs(projection), axis=1) / RECTANGULAR
+    u_b = m * np.sum(np.abs(projection), axis=1) / (1.0 if bound else RECTANGULAR)
     aat = projection @ projection.T
     s = np.sqrt(np.clip(np.diag(aat), 1e-300, None))
     return u_b[:, None] * (aat / np.outer(s, s)) * u_b[None, :], float(m)
 
 
-def ambiguity_term(shifts: np.ndarray, n_params: int) -> np.ndarray:
-    """The covariance for effects the data cannot tell apart: each alternative's shift of the
-    nine core parameters (rows of ``shifts``) taken as the half-width of a rectangular
-    distribution, summed over the alternatives (sum of d d^T / 3: its diagonal is at least
-    the largest shift's square / 3)."""
+@dataclass(frozen=True)
+class Alternative:
+    """A set of effects that explains the data about as well as the loop's choice.
+
+    Attributes
+    ----------
+    effects : str
+        Its effects, joined by " + "; unit —.
+    replaces : str
+        The chosen effect it replaces ("" for another fit the loop tried); unit —.
+    d_bic : float
+        Its BIC minus the chosen set's — dimensionless.
+    explained : float
+        The fraction of the replaced effect's chi2 drop it reproduces (NaN when it replaces
+        none) — dimensionless.
+    shift : numpy.ndarray
+        Its nine core parameters (k, beta, bias) minus the chosen fit's [their units].
+    excess : numpy.ndarray
+        (9, 9) its core covariance beyond the chosen fit's (the positive part) [products of
+        their units].
+    """
+
+    effects: str
+    replaces: str
+    d_bic: float
+    explained: float
+    shift: np.ndarray
+    excess: np.ndarray
+
+    @property
+    def aliased(self) -> bool:
+        return bool(self.explained >= ALIASED)
+
+    def to_dict(self) -> dict:
+        return {"effects": self.effects, "replaces": self.replaces or None,
+                "delta_bic": self.d_bic,
+                "explained": None if not np.isfinite(self.explained) else self.explained,
+                "aliased": self.aliased}
+
+
+def positive_part(cov: np.ndarray) -> np.ndarray:
+    """The positive semi-definite part of a symmetric matrix (negative eigenvalues to 0)."""
+    w, v = np.linalg.eigh((cov + cov.T) / 2)
+    return (v * np.clip(w, 0, None)) @ v.T
+
+
+def ambiguity_term(alts: list[Alternative], n_params: int) -> np.ndarray:
+    """The covariance for effects the data cannot tell apart (model averaging over the
+    plausible alternatives, each counted in full whatever its BIC): each alternative's shift
+    of the nine core parameters taken as the half-width of a rectangular distribution, and its
+    own covariance beyond the chosen fit's, summed over the alternatives (the diagonal is at
+    least the largest shift's square / 3)."""
     cov = np.zeros((n_params, n_params))
-    cov[:9, :9] = shifts.T @ shifts / RECTANGULAR**2
+    for a in alts:
+        cov[:9, :9] += np.outer(a.shift, a.shift) / RECTANGULAR**2 + a.excess
     return cov
 
 
-def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]]
-          ) -> tuple[TriadModel, Widening]:
-    """The model with ``increments`` (term, why, covariance) added to its covariance."""
+def ambiguity_reason(chosen: tuple[str, ...], alts: list[Alternative], plan_n: int) -> str:
+    """Why u was widened for the alternatives, and what to record when they are aliased."""
+    close = [a for a in alts if not a.aliased]
+    aliased = [a for a in alts if a.aliased]
+    parts = []
+    if aliased:
+        by = {}
+        for a in aliased:
+            by.setdefault(a.replaces, []).append(a)
+        parts.append("; ".join(
+            f"these poses cannot tell {c} from " + ", ".join(
+                f"{a.effects} ({a.explained:.2%} of its signal)" for a in group)
+            for c, group in by.items())
+                     + f": record the poses of `align calibrate --plan {plan_n}`")
+    if close:
+        parts.append("the data cannot tell the effects added (" + (" + ".join(chosen) or
+                                                                   "none")
+                     + ") from " + ", ".join(a.effects for a in close)
+                     + f" (within {AMBIGUOUS_BIC:g} of BIC)")
+    return "; ".join(parts) + ": u covers the parameters' spread over them"
+
+
+def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]],
+          alternatives: Sequence[Alternative] = ()) -> tuple[TriadModel, Widening]:
+    """The model with ``increments`` (term, why, covariance) added to its covariance
+    (``alternatives``: those the ambiguity term averages over, for the record)."""
     names = (*model.names, *(f"scale_factor_{ax}" for ax in "xyz"))
 
     def us(m: TriadModel) -> np.ndarray:
@@ -134,4 +233,4 @@ def widen(model: TriadModel, increments: list[tuple[str, str, np.ndarray]]
         terms.append((term, np.sqrt(np.clip(alone**2 - u0**2, 0, None))))
     wide = replace(model, cov=model.cov + sum(c for _, _, c in increments))
     return wide, Widening(tuple((t, why) for t, why, _ in increments), names, u0,
-                          tuple(terms), us(wide))
+                          tuple(terms), us(wide), tuple(alternatives))

@@ -12,6 +12,7 @@ from align.loop.loop import (
     Term,
     bic,
     f_test,
+    optimistic_fit,
     run_loop,
 )
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
@@ -19,6 +20,6 @@ from align.loop.structure import StructureReport, StructureTest, check_structure
 __all__ = [
     "Candidate", "EffectReport", "LoopReport", "LoopSummary", "RefusedEffect",
     "SkippedCandidate", "Stage", "StageFit",
-    "StructureReport", "StructureTest", "Term", "bic", "f_test", "periodogram_test",
-    "run_loop", "check_structure",
+    "StructureReport", "StructureTest", "Term", "bic", "f_test", "optimistic_fit",
+    "periodogram_test", "run_loop", "check_structure",
 ]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -79,6 +79,10 @@ class StageFit:
     components: Mapping[str, tuple[tuple[str, float, float], ...]] = field(default_factory=dict)
     payload: object = None
     noise_dof: float | None = None
+    sequence: bool = True
+    """False when the residuals are not independent in their order (a fit with fewer
+    degrees of freedom than residuals whose projection correlates them, as the known-pose
+    fit's 18 components in 6 dof): only the chi2 and regressor tests then apply."""
 
     @property
     def n(self) -> int:
@@ -392,7 +396,41 @@ def f_test(base: StageFit, ext: StageFit, m: int) -> float:
 
 def structure_of(fit: StageFit, alpha: float) -> StructureReport:
     return check_structure(fit.residuals, fit.sigma, fit.regressors[fit.order],
-                          fit.regressors, fit.dof, alpha, fit.noise_dof)
+                          fit.regressors, fit.dof, alpha, fit.noise_dof, fit.sequence)
+
+
+SCREEN_MARGIN = 3.0
+"""A stage may predict each candidate's chi2 drop by a linearised (score) test before its
+refit (``stage.screen(current, terms, names)``: name -> predicted chi2); the loop refits only
+candidates that would pass with SCREEN_MARGIN times the predicted drop plus
+:data:`SCREEN_SLACK` — a screen that cannot turn away an effect the refit would take (the
+refit's drop differs from the linear one by the effect's curvature, percent for the
+calibration's effects: ``tests/align/test_calibration_speed.py`` checks the loop's choices
+with and without it)."""
+SCREEN_SLACK = 4.0
+
+
+def optimistic_fit(current: StageFit, chi2_pred: float, extra_params: int) -> StageFit:
+    """A stand-in for the refit of ``current`` with ``extra_params`` more parameters whose
+    linearised chi2 is ``chi2_pred``: its drop made SCREEN_MARGIN times larger plus
+    SCREEN_SLACK (the residuals scaled to that chi2), for the tests a screen applies."""
+    drop = SCREEN_MARGIN * max(current.chi2 - chi2_pred, 0.0) + SCREEN_SLACK
+    chi2 = max(current.chi2 - drop, 1e-12 * max(current.chi2, 1e-300))
+    return replace(current, residuals=current.residuals * np.sqrt(chi2 / current.chi2)
+                   if current.chi2 > 0 else current.residuals,
+                   n_params=current.n_params + extra_params)
+
+
+def _may_pass(current: StageFit, chi2_pred: float, term: Term, searched: int, alpha: float,
+              min_delta_bic: float) -> bool:
+    """Whether a candidate predicted to leave ``chi2_pred`` could pass the loop's tests
+    (with the screen's margin): a stand-in fit with the predicted chi2 goes through the
+    same BIC and F-test."""
+    trial = optimistic_fit(current, chi2_pred, term.width)
+    d_bic = bic(trial, searched + term.searched) - bic(current, searched)
+    p = f_test(current, trial, term.width)
+    p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
+    return p_adj < alpha and d_bic < -min_delta_bic
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
@@ -419,11 +457,20 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
               _structure_note(s_before))
     effects: list[EffectReport] = []
     searched = 0
+    screen = getattr(stage, "screen", None)
     while len(effects) < max_effects:
         best = None
+        predicted = screen(current, terms, [c.name for c in candidates]) if screen else {}
         for cand in candidates:
             if any(t.name == cand.name for t in terms):
                 continue
+            if cand.name in predicted:
+                term = cand.build(current)
+                if term is not None and not _may_pass(current, predicted[cand.name], term,
+                                                      searched, alpha, min_delta_bic):
+                    log.debug("loop   candidate %s: screened out (linearised chi2 %.4g from "
+                              "%.4g)", cand.name, predicted[cand.name], current.chi2)
+                    continue
             trial, term = _try(stage, cand, current, terms, skipped)
             if trial is None:
                 continue

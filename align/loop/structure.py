@@ -183,12 +183,15 @@ def periodogram_test(z: np.ndarray, x: np.ndarray, nu: float | None = None
 
 def check_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.ndarray,
                    regressors: Mapping[str, np.ndarray], dof: int,
-                   alpha: float = 1e-3, noise_dof: float | None = None) -> StructureReport:
+                   alpha: float = 1e-3, noise_dof: float | None = None,
+                   sequence: bool = True) -> StructureReport:
     """Run every structure test on residuals ordered by the regressor ``order``.
 
     ``sigma`` None means the noise level is unknown: the chi2 test is skipped and the
     residuals are scaled by their RMS. ``noise_dof``: dof of an estimated whitening
-    covariance (None: known).
+    covariance (None: known). ``sequence`` False: the residuals are not independent in
+    their order (the runs, Ljung–Box and periodogram tests would flag the fit's own
+    correlations): those tests are left out.
     """
     r = np.asarray(residuals, float)
     if sigma is None:
@@ -200,6 +203,8 @@ def check_structure(residuals: np.ndarray, sigma: np.ndarray | None, order: np.n
     nu = noise_dof
     infl = autocorrelation_inflation(nu)
     tests = [chi2_test(z, dof, nu)] if sigma is not None else []
-    tests += [runs_test(zs, infl), ljung_box(zs, inflation=infl), periodogram_test(zs, xs, nu)[0]]
+    if sequence:
+        tests += [runs_test(zs, infl), ljung_box(zs, inflation=infl),
+                  periodogram_test(zs, xs, nu)[0]]
     tests += regressor_tests(z, regressors, nu)
     return StructureReport(tuple(tests), alpha)

@@ -38,12 +38,15 @@ CLASSES: dict[str, dict] = {
 class Outcome:
     """One calibration of one seed: ``z`` the nine normalised errors (err / u) of the scale
     factors, beta and biases; ``effects`` the names the loop added; ``structure`` whether
-    unexplained structure was reported; ``widened`` whether u was widened for it."""
+    unexplained structure was reported; ``widened`` whether u was widened for it;
+    ``u_ratio`` the nine parameters' u over their u from the noise alone (1 when not
+    widened)."""
 
     z: np.ndarray
     effects: tuple[str, ...]
     structure: bool
     widened: bool
+    u_ratio: np.ndarray
 
 
 def triad_of(name: str, noise_v: float = NOISE_V) -> Triad:
@@ -78,9 +81,15 @@ def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "
     u = np.concatenate([m.sensitivity_u(), [m.u_of(f"{p}_{a}") for p in ("beta", "bias")
                                             for a in "xyz"]])
     z = (est - truth_at(tr, m.t_ref)) / u
-    widened = getattr(cal, "widening", None) is not None
+    w = getattr(cal, "widening", None)
+    if w is None:
+        ratio = np.ones(9)
+    else:  # the scale factors along the sensing axes, beta, biases (as z)
+        i = [w.names.index(n) for n in (*(f"scale_factor_{a}" for a in "xyz"),
+                                        *(f"{p}_{a}" for p in ("beta", "bias") for a in "xyz"))]
+        ratio = w.factor[i]
     return Outcome(z, tuple(e.name for e in cal.loop.effects), cal.loop.unexplained_structure,
-                   widened)
+                   w is not None, ratio)
 
 
 EXPECTED = {"cross": "cross_x_xy", "hysteresis": "bias_hysteresis",
@@ -92,7 +101,8 @@ def sweep(name: str, seeds: Sequence[int], candidates: Sequence | None = None,
           poses: str = "cube14", up: np.ndarray | None = None) -> dict:
     """Over seeds: |z| RMS and max over the nine parameters, the fraction of seeds where the
     loop added the class's effect (``found``), any effect (``any_effect``: on clean data,
-    false effects), reported unexplained structure, and widened u."""
+    false effects), reported unexplained structure, and widened u; the median and max of u
+    over its noise-only value (``u_ratio_median``, ``u_ratio_max``)."""
     out = [run(name, s, candidates, poses, up) for s in seeds]
     z = np.array([o.z for o in out])
     return {"rms": float(np.sqrt(np.mean(z**2))), "max": float(np.max(np.abs(z))),
@@ -100,4 +110,6 @@ def sweep(name: str, seeds: Sequence[int], candidates: Sequence | None = None,
             "found": float(np.mean([EXPECTED.get(name) in o.effects for o in out])),
             "structure": float(np.mean([o.structure for o in out])),
             "widened": float(np.mean([o.widened for o in out])),
+            "u_ratio_median": float(np.median([o.u_ratio for o in out])),
+            "u_ratio_max": float(np.max([o.u_ratio for o in out])),
             "effects": [o.effects for o in out]}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -81,3 +82,51 @@ def test_crlb_rejects_nothing_silently():
     with pytest.raises(ValueError):
         render_marks(ImageSpec(marks=(MarkSpec(0.1, 0, 200, profile="zigzag"),), width=64,
                                height=64))
+
+
+def test_defocus_gradient_widens_the_groove_along_the_mark():
+    """blur_gradient: the PSF's sigma grows along x; the groove's second moment across the
+    mark grows with it (width^2/12 + sigma^2 for a box), measured on the noise-free mean."""
+    g = 2.0 / 400
+    spec = ImageSpec(marks=(MarkSpec(np.pi / 2, 0.0, 60, 4.0, profile="box", contrast=-0.5),),
+                     width=440, height=120, read_noise_e=0, blur_px=2.0,
+                     blur_gradient=(g, 0.0))
+    bg = spec.exposure * spec.full_well_e
+    for x in (-150.0, 0.0, 150.0):
+        # A vertical mark at x: rendered as its own image, the blur there is 2 + g x.
+        s = render_marks(_vertical_at(spec, x), with_crlb=False)
+        prof = (bg - s.mean_e[50:70].mean(axis=0)) / (0.5 * bg)
+        cols = np.arange(prof.size) - (spec.width - 1) / 2 - x
+        m2 = (prof * cols**2).sum() / prof.sum()
+        assert m2 == pytest.approx(4.0**2 / 12 + (2.0 + g * x) ** 2 + 1 / 12, rel=0.03)
+
+
+def _vertical_at(spec: ImageSpec, x: float) -> ImageSpec:
+    return spec.with_marks(MarkSpec(np.pi / 2, x, 60, 4.0, profile="box", contrast=-0.5))
+
+
+def test_fixed_pattern_noise_is_fixed_per_column_and_row():
+    """column_fpn / row_fpn: offsets of the stated rms (fraction of the surface signal), the
+    same in every row (column), and the other random draws left as they were."""
+    base = ImageSpec(marks=(MarkSpec(0.3, 0, 50, 3.0),), width=300, height=200,
+                     full_well_e=2e5, read_noise_e=0, seed=4)
+    plain = render_marks(base, with_crlb=False).image.astype(float)
+    cols = render_marks(replace(base, column_fpn=0.02), with_crlb=False).image.astype(float)
+    d = (cols - plain)[:, 100:]  # the mark is in the left part
+    gain = 65535 / base.full_well_e
+    signal = base.exposure * base.full_well_e * gain
+    assert np.std(d.mean(axis=0)) == pytest.approx(0.02 * signal, rel=0.15)
+    assert np.max(np.std(d, axis=0)) < 1.0  # the same in every row (rounding only)
+    rows = render_marks(replace(base, row_fpn=0.02), with_crlb=False).image.astype(float)
+    assert np.max(np.std((rows - plain)[:, 100:], axis=1)) < 1.0
+
+
+def test_jpeg_round_trip_is_8_bit_and_blocky():
+    spec = ImageSpec(marks=(MarkSpec(0.3, 0, 200, 4.0),), width=256, height=256, bits=8,
+                     jpeg_quality=50, seed=2)
+    img = render_marks(spec, with_crlb=False).image
+    assert img.dtype == np.uint8
+    raw = render_marks(replace(spec, jpeg_quality=0), with_crlb=False).image
+    assert np.any(img != raw)
+    with pytest.raises(ValueError, match="bits = 8"):
+        render_marks(replace(spec, bits=16), with_crlb=False)

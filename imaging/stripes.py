@@ -1,0 +1,227 @@
+"""Row and column fixed-pattern noise: stripes in the background, found and removed.
+
+A sensor's column amplifiers (and row drivers) add an offset fixed per column (row): a
+pattern of stripes of 1-2 % of a mark's contrast moves a near-vertical (near-horizontal)
+mark's centres by the same amount all along it, and its angle as it drifts across columns.
+
+The test (hand-written: no library tests an image for stripes). Away from the marks the
+background is level + illumination + texture + noise + stripes. Each row's median is taken
+out (it holds the row offsets and the vertical shading), each column's median over the top
+half and over the bottom half of the rows is taken, and the slow horizontal shading is
+removed from both profiles by a running median over :data:`WINDOW_PX` columns. Noise and
+texture (whose lay is not along the columns) are independent between the two halves; a
+column pattern is common to both. The test is the correlation of the two profiles (Fisher's
+z, one-sided at :data:`ALPHA`): it needs no noise model, and clean backgrounds flag at alpha.
+
+When found, the column offsets (the profile over all the rows, high-passed the same way)
+are subtracted from the image, unless a mark's band covers a column whose offset the
+background away from the marks does not give (a full-height mark): then the stripes stay and
+the texture replicas (:mod:`imaging.texture`) carry them in u, as they do any background
+pattern. Rows: the same on the transposed image, after the columns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.ndimage import median_filter
+
+ALPHA = 1e-3
+"""Level of the test for stripes along each axis (one false flag per 1000 clean images)."""
+WINDOW_PX = 65
+"""Running median that takes the slow shading out of a profile [px]: wide enough to keep
+~90 % of a white pattern's variance, narrow enough to follow vignetting."""
+MIN_ROWS = 16
+"""Fewest background pixels along a column (row) for its offset to be estimated."""
+GAP_PX = 48
+"""Rows left out between the halves the test compares (a blob smaller than this is never in
+both)."""
+TEST_ROWS = 128
+"""Rows (columns) per half used by the test (a sample keeps 5 MP cheap)."""
+
+
+@dataclass(frozen=True)
+class Stripes:
+    """Stripes along one axis of an image.
+
+    ``axis``: "column" (vertical stripes, offsets per column) or "row"; ``p_value`` of the
+    test that there are none; ``found``: p below :data:`ALPHA`; ``rms_dn``: the pattern's
+    standard deviation [DN] (from the covariance of the two halves' profiles);
+    ``offsets_dn``: the offsets subtracted (None: none were: not found, or a mark covers a
+    column without background, ``reason``); ``offsets_var``: each removed offset's variance
+    [DN^2] (the interquartile mean of n background pixels of noise sigma: 1.19 sigma^2 / n),
+    which the centres' covariance carries (:func:`imaging.profile.sample_centres`): a mark
+    leaves its own columns few background rows, and their offsets' errors are shared by
+    every segment on them.
+    """
+
+    axis: str
+    p_value: float
+    found: bool
+    rms_dn: float = 0.0
+    offsets_dn: np.ndarray | None = None
+    reason: str = ""
+    offsets_var: np.ndarray | None = None
+
+    @property
+    def removed(self) -> bool:
+        return self.offsets_dn is not None
+
+
+def _highpass(p: np.ndarray) -> np.ndarray:
+    """The profile minus its running median over :data:`WINDOW_PX` (NaN stays NaN; gaps are
+    bridged by interpolation for the median only)."""
+    ok = np.isfinite(p)
+    if ok.sum() < 2:
+        return np.full_like(p, np.nan)
+    x = np.arange(p.size)
+    # A quadratic first: the running median is biased near the ends on a sloping profile
+    # (its window is cut there), by the same amount in both halves (a false pattern).
+    p = p - np.polyval(np.polyfit(x[ok], p[ok], 2), x)
+    filled = np.interp(x, x[ok], p[ok])
+    out = p - median_filter(filled, size=min(WINDOW_PX, p.size // 2 * 2 + 1), mode="nearest")
+    out[~ok] = np.nan
+    return out
+
+
+def _column_median(a: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Interquartile mean of each column (``axis`` 0) or row (1) over its finite entries
+    (NaN with fewer than MIN_ROWS): robust to dust and a label like the median, but not
+    quantised like it (the median of 8-bit data moves in steps of 1/2 DN, and a pattern of
+    1 DN was lost in them)."""
+    s = np.sort(a, axis=axis)  # NaN last
+    n = np.isfinite(a).sum(axis=axis)
+    lo, hi = n // 4, n - n // 4
+    k = np.arange(a.shape[axis])
+    k = k[:, None] if axis == 0 else k[None, :]
+    lo_, hi_ = (lo[None, :], hi[None, :]) if axis == 0 else (lo[:, None], hi[:, None])
+    total = np.where((k >= lo_) & (k < hi_), s, 0.0).sum(axis=axis)
+    return np.where(n >= MIN_ROWS, total / np.maximum(hi - lo, 1), np.nan)
+
+
+def _effective_n(a: np.ndarray, b: np.ndarray, lags: int = 32) -> float:
+    """Independent pairs behind the correlation of two autocorrelated series (Bartlett's
+    variance of r under independence: (1/n) sum_k rho_a(k) rho_b(k), Pyper & Peterman 1998).
+
+    Texture whose lay crosses the columns at a shallow angle makes neighbouring columns'
+    medians alike (each half's profile is smooth): with n columns counted as independent the
+    test flagged 4 % of textured backgrounds at p < 0.01."""
+    n = a.size
+
+    def acf(x: np.ndarray) -> np.ndarray:
+        return np.array([x[k:] @ x[:n - k] for k in range(lags + 1)]) / (x @ x)
+
+    s = float(np.sum(acf(a)[1:] * acf(b)[1:]))
+    return float(n / max(1.0 + 2.0 * s, 1.0))
+
+
+def _background(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
+                minus: np.ndarray | None) -> np.ndarray:
+    """Rows ``rows`` of the image as float, NaN on the marks' bands and clipped pixels, each
+    row's level (its interquartile mean) taken out; ``minus``: offsets per row removed
+    first (the other axis's stripes)."""
+    v = image[rows].astype(np.float32)
+    v[mask[rows] | (v <= 0) | (v >= full_scale)] = np.nan
+    if minus is not None:
+        v -= minus[rows, None]
+    lev = _column_median(v, axis=1)
+    return v[np.isfinite(lev)] - lev[np.isfinite(lev), None]
+
+
+def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
+                   alpha: float = ALPHA, minus: np.ndarray | None = None,
+                   axis: str = "column") -> Stripes:
+    """Test an image's background for column stripes (rows: pass the transposed image).
+
+    ``mask``: True on the marks' bands (left out; every column one touches needs an offset
+    for a removal); ``minus``: offsets per row already found (the other axis's stripes).
+    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced; the offsets, when
+    found, every row.
+    """
+    h, w = image.shape
+    half = h // 2
+    if half < MIN_ROWS or w < 2 * WINDOW_PX:
+        return Stripes(axis, 1.0, False, reason="too few rows or columns to test")
+    # The halves stay GAP_PX apart: a dust speck or a label across the split would be common
+    # to both (a false pattern over its columns).
+    gap = min(GAP_PX, half - MIN_ROWS) // 2
+    step = max(1, (half - gap) // TEST_ROWS)
+    top = _highpass(_column_median(_background(image, mask, np.arange(0, half - gap, step),
+                                               full_scale, minus)))
+    bot = _highpass(_column_median(_background(image, mask, np.arange(half + gap, h, step),
+                                               full_scale, minus)))
+    both = np.isfinite(top) & np.isfinite(bot)
+    n = int(both.sum())
+    if n < 2 * WINDOW_PX:
+        return Stripes(axis, 1.0, False, reason="too few columns with background")
+    a, b = top[both] - top[both].mean(), bot[both] - bot[both].mean()
+    if not (a @ a > 0 and b @ b > 0):
+        return Stripes(axis, 1.0, False, reason="a flat background profile")
+    rho = float(a @ b / np.sqrt((a @ a) * (b @ b)))
+    p = float(stats.norm.sf(np.arctanh(np.clip(rho, -0.999999, 0.999999))
+                            * np.sqrt(max(_effective_n(a, b) - 3, 1.0))))
+    rms = float(np.sqrt(max(a @ b / n, 0.0)))
+    if p >= alpha:
+        return Stripes(axis, p, False, rms)
+    bg = _background(image, mask, np.arange(h), full_scale, minus)
+    off = _highpass(_column_median(bg))
+    need = mask.any(axis=0) & ~np.isfinite(off)
+    if need.any():
+        cols = np.flatnonzero(need)
+        return Stripes(axis, p, True, rms, reason=(
+            f"{axis}s {cols[0]}-{cols[-1]} hold a mark along all their background"))
+    # Pixel noise about each column's offset (robust, pooled over the columns: shot noise
+    # varies with the level, which is about the same across a background).
+    dev = bg - off[None, :]
+    mad = np.nanmedian(np.abs(dev - np.nanmedian(dev, axis=0)[None, :]), axis=0)
+    sigma2 = float(np.nanmedian((1.4826 * mad) ** 2))
+    n = np.isfinite(bg).sum(axis=0)
+    var = np.where(n > 0, 1.19 * sigma2 / np.maximum(n, 1), 0.0)
+    return Stripes(axis, p, True, rms, np.where(np.isfinite(off), off, 0.0),
+                   offsets_var=np.where(np.isfinite(off), var, 0.0))
+
+
+def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
+                 alpha: float = ALPHA) -> tuple[np.ndarray, tuple[Stripes, Stripes]]:
+    """The image with its row and column stripes removed where found and removable, and the
+    two findings (columns, rows).
+
+    ``masks``: flat pixel indices of each mark's band (left out of the background; their
+    columns/rows must have an offset for a removal). Clipped pixels (0 or ``full_scale``)
+    are left out too.
+    """
+    mask = np.zeros(image.shape, bool)
+    for idx in masks:
+        mask.flat[idx] = True
+    cols = column_stripes(image, mask, full_scale, alpha)
+    rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row")
+    if not (cols.removed or rows.removed):
+        return image, (cols, rows)  # the usual case: untouched
+    out = image.astype(float)
+    if cols.removed:
+        out -= cols.offsets_dn[None, :]
+    if rows.removed:
+        out -= rows.offsets_dn[:, None]
+    clipped = (image <= 0) | (image >= full_scale)  # they say "beyond the range": kept
+    out[clipped] = image[clipped]
+    return out, (cols, rows)
+
+
+def stripes_notes(where: str, found: Sequence[Stripes], contrast_dn: float) -> tuple[str, ...]:
+    """One line per axis with stripes: what they are and what was done about them."""
+    out = []
+    for s in found:
+        if not s.found:
+            continue
+        size = (f"rms {s.rms_dn:.3g} DN, {100 * s.rms_dn / contrast_dn:.2g} % of the marks' "
+                "contrast" if contrast_dn > 0 else f"rms {s.rms_dn:.3g} DN")
+        done = ("removed: each offset estimated from the background away from the marks"
+                if s.removed else f"not removed ({s.reason}): carried in u as background "
+                "texture")
+        out.append(f"{where}: {s.axis} stripes in the background ({s.axis} fixed-pattern "
+                   f"noise, or a surface lay along the {s.axis}s; {size}, p = "
+                   f"{s.p_value:.2g}): {done}")
+    return tuple(out)

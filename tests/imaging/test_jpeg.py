@@ -1,0 +1,48 @@
+"""JPEG 8x8 blocks (issue 18 item 4): the encoder's quality read from the pixels, its effect on
+a mark's angle carried in u."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from align.lens import LensRanges
+from align.marks import measure_image
+from imaging.jpeg import find_jpeg, ijg_table
+from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from tests.conftest import angle_error
+
+
+def _image(seed: int, quality: int, angle_deg: float = 90.3, snr: float = 40.0,
+           size=(640, 480)):
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(angle_deg), 10.0, 400.0, 4.0),),
+                     width=size[0], height=size[1], bits=8, jpeg_quality=quality,
+                     exposure=0.4, full_well_e=full_well_for_snr(snr, -0.6, exposure=0.4),
+                     seed=seed)
+    return render_marks(spec, with_crlb=False)
+
+
+def test_ijg_table_is_libjpegs():
+    assert ijg_table(50)[0, 0] == 16 and ijg_table(50)[7, 7] == 99
+    assert ijg_table(100).max() == 1 and ijg_table(1).min() == 255
+
+
+@pytest.mark.parametrize("quality", [50, 70, 90])
+def test_quality_is_read_from_the_pixels(quality):
+    jb = find_jpeg(_image(1, quality, angle_deg=30.0).image)
+    assert jb is not None and abs(jb.quality - quality) <= 6
+
+
+@pytest.mark.parametrize("snr", [10, 40])
+def test_raw_8_bit_images_show_no_jpeg(snr):
+    assert find_jpeg(_image(2, 0, snr=snr).image) is None
+
+
+def test_a_jpeg_mark_is_named_and_within_u():
+    """Quality 50 on a near-vertical mark (the blocks' systematic: +16-20" at a line u of
+    3.5"): the note names JPEG, u carries jpeg_blocks, the angle is within 3 u."""
+    s = _image(0, 50)
+    (r,) = measure_image(s.image, ranges=LensRanges.none())
+    assert any("JPEG compression" in n for n in r.notes)
+    assert "jpeg_blocks" in r.u_terms
+    assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad

@@ -1,0 +1,82 @@
+"""Row and column fixed-pattern noise (issue 18 item 4): found on the background away from the
+marks, removed, and a clean background left alone at the test's level."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from align.lens import LensRanges
+from align.marks import measure_image
+from imaging import measure_frame
+from imaging.stripes import ALPHA, find_stripes
+from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from tests.conftest import angle_error
+
+
+def _image(seed: int, angle_deg: float = 90.05, **kw):
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(angle_deg), 10.0, 400.0, 4.0),), width=640,
+                     height=480, full_well_e=full_well_for_snr(40, -0.6), seed=seed, **kw)
+    return render_marks(spec, with_crlb=False)
+
+
+@pytest.mark.parametrize("kw", [{"column_fpn": 0.6 * 0.01}, {"row_fpn": 0.6 * 0.015}],
+                         ids=["columns 1 %", "rows 1.5 %"])
+def test_stripes_of_one_percent_of_the_contrast_are_found_and_removed(kw):
+    """Offsets of 1-1.5 % of the mark's contrast (the surface signal x 0.6 x that): found,
+    removed (the mark leaves background above and below it), and named in the frame's
+    notes with their size."""
+    s = _image(3, **kw)
+    fr = measure_frame(s.image)
+    axis = "column" if "column_fpn" in kw else "row"
+    found = {st.axis: st for st in fr.stripes}
+    assert found[axis].found and found[axis].removed
+    other = "row" if axis == "column" else "column"
+    assert not found[other].found
+    assert any(f"{axis} stripes" in n and "removed" in n for n in fr.notes)
+    # The removed pattern is the rendered one (up to its high-passed slow part and noise).
+    truth = np.random.default_rng([3, 0xF9]).standard_normal(640 + 480)
+    truth = truth[:640] if axis == "column" else truth[640:]
+    assert np.corrcoef(found[axis].offsets_dn, truth)[0, 1] > 0.9
+
+
+def test_a_full_height_mark_keeps_its_stripes_and_says_so():
+    """A vertical mark through every row leaves its columns no background: the stripes are
+    found, not removed (carried by the texture replicas), and the note says why."""
+    spec = ImageSpec(marks=(MarkSpec(np.pi / 2, 10.0, 600.0, 4.0),), width=640, height=480,
+                     full_well_e=full_well_for_snr(40, -0.6), seed=2, column_fpn=0.012)
+    fr = measure_frame(render_marks(spec, with_crlb=False).image)
+    cols = fr.stripes[0]
+    assert cols.found and not cols.removed and "hold a mark" in cols.reason
+    assert any("carried in u" in n for n in fr.notes)
+
+
+def test_clean_backgrounds_flag_at_the_tests_level():
+    """200 stripe-free backgrounds (white noise of 1-100 DN, shading, a dark blob, 8- and
+    16-bit): the p-values are uniform (KS), and at most 2 of the 200 tests fall below ALPHA
+    (0.2 expected; P(>= 3) ~ 1e-3)."""
+    rng = np.random.default_rng(7)
+    ps = []
+    y, x = np.mgrid[0:240, 0:320]
+    for k in range(100):
+        level, sd = rng.uniform(50, 3000), rng.uniform(1, 100)
+        shade = 1 + rng.uniform(-0.2, 0.2) * x / 320 + rng.uniform(-0.2, 0.2) * y / 240
+        img = level * shade + rng.normal(0, sd, x.shape)
+        img[((x - 160) ** 2 + (y - 100) ** 2) < 100] -= 5 * sd
+        top = 255.0 if k % 2 else 65535.0
+        img = np.clip(np.round(img * (0.05 if k % 2 else 1)), 0, top)
+        _, (c, r) = find_stripes(img, [], top)
+        ps += [c.p_value, r.p_value]
+    assert np.sum(np.array(ps) < ALPHA) <= 2
+    assert stats.kstest(ps, "uniform").pvalue > 1e-3
+
+
+def test_a_column_pattern_moves_a_near_vertical_mark_no_more_than_its_u():
+    """The issue's case (column FPN 2 % of the contrast, a near-vertical mark, -9.6" at no
+    flag before): one seed here (the slow sweep has the statistics); the stripes are named
+    and the angle is within 3 u of the truth."""
+    s = _image(5, column_fpn=0.6 * 0.02)
+    (r,) = measure_image(s.image, ranges=LensRanges.none())
+    assert any("column stripes" in n for n in r.notes)
+    assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
