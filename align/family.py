@@ -28,8 +28,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.special import ndtri
-from scipy.stats import chi2 as chi2_dist
 
 FORMAT_VERSION = 1
 
@@ -174,7 +174,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
         keep[worst] = False
     dof = int(keep.sum()) - 1
     chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
-    p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else 1.0
+    p = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
     deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
         u_mean *= np.sqrt(chi2 / dof)

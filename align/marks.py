@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2, norm
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
 from align.family import LineFamily, line_family
@@ -323,7 +323,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     defocus = defocus_note(f"{image} mark {index}", m.blur)
     if defocus:
         notes.append(defocus)
-    elif f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+    elif f.dof > 0 and special.chdtr(f.dof, f.chi2) < 1e-6:
         notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")
@@ -336,7 +336,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # Its direction is read as the chord between the groove's own ends (the tangent at
         # its middle), and u covers the other readings: the straight fit over the measured
         # centres and the tangent at their middle.
-        bent = abs(bend.estimate) > lens_bow_px + float(norm.isf(alpha / 2)) * bend.u
+        bent = abs(bend.estimate) > lens_bow_px + float(-special.ndtri(alpha / 2)) * bend.u
         pre = "bent_mark" if bent else "bow"
         chord = float(rep.after.payload["chord_rad"])
         a0 = rep.before.quantities["angle_rad"][0]
@@ -403,7 +403,7 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
     """
     f = rep.after
-    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < alpha_low:
+    if f.dof > 0 and special.chdtr(f.dof, f.chi2) < alpha_low:
         # The centres scatter far less than their stated sigma: the groove model's shape
         # does not describe this groove. A model misfit never narrows u (a defocus gradient
         # once got x0.4 here and scattered at twice its u): u stays as stated, and the

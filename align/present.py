@@ -16,7 +16,7 @@ from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
 from align.session_json import LoadedSession
-from axisbase.table import OUTPUT_UNITS
+from axisbase.header import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
 # ----------------------------------------------------------------------------- imaging

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
 from axisbase.units import ARCSEC
-from goniometry.revolutions import R_TAIL
+from goniometry.exclusions import R_TAIL
 
 
 def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
