@@ -38,6 +38,9 @@ def mark_lines(r) -> list[str]:
     fam = getattr(r, "family", None)
     if fam is not None and r.index == max(fam.members):  # once, after its last member
         lines.append(f"    {fam.summary()} (marks {', '.join(map(str, fam.members))})")
+    dial = getattr(r, "dial", None)
+    if dial is not None and r.index == max(dial.members):
+        lines.append(f"    {dial.summary()} (marks {', '.join(map(str, sorted(dial.members)))})")
     if r.lens and "parameters" in r.lens:
         par = r.lens["parameters"]
         fitted = [f"{k} {v['value']:+.4g}" for k, v in par.items() if v["applied"]]
