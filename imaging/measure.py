@@ -161,7 +161,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           groove_ends(pf, ext, line, camera, image.shape))
+                           ends_on_line(pf, ext, line, camera, image.shape))
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
@@ -181,7 +181,7 @@ def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
     return s, L
 
 
-def groove_ends(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
+def ends_on_line(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
                 camera: CameraModel | None, shape: tuple[int, int]) -> np.ndarray:
     """The groove's two ends (half-depth, ``extent`` along the profile's line) as points on
     the measured ``line`` [px, relative to the image centre]: undistorted by the camera, then
