@@ -18,7 +18,8 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
-from align.calibration.triad import CORE, Poses, TriadModel, pose_sigma_g
+from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
+from align.calibration.walk import walk_covariance
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -153,6 +154,15 @@ class CalibrationStage:
         self.fits: dict[tuple[str, ...], tuple[StageFit, tuple[Term, ...]]] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
+        # The bias instability the samples show (align.calibration.walk): the poses'
+        # residuals are correlated in time; the fit whitens them with the Cholesky factor of
+        # their covariance (generalised least squares), and sigma is each pose's total.
+        self.whiten: np.ndarray | None = None
+        if self.sigma is not None and poses.walk_rate is not None and poses.ordered:
+            C = np.diag(self.sigma**2) + walk_covariance(
+                poses.walk_rate, pose_gradient(self.start, poses), poses.t)
+            self.whiten = np.linalg.inv(np.linalg.cholesky(C))
+            self.sigma = np.sqrt(np.diag(C))
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
 
@@ -203,7 +213,8 @@ class CalibrationStage:
                      - dT[:, None] * f["temp_coeff"])
                 if hyst:
                     a = a - self.turns * f["hysteresis"]
-            return (np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0) * w
+            d = np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0
+            return d * w if self.whiten is None else self.whiten @ d
 
         return resid
 
@@ -307,6 +318,7 @@ class CalibrationStage:
         res = solve(tau)
         self.solutions[tuple(effects)] = res.x
         self.jacobians[tuple(effects)] = np.asarray(res.jac, float)
+        # In g at each pose's sigma (whitened residuals when the walk correlates them).
         r = res.fun / w
         J = res.jac
         # Separability: condition number of the Jacobian with unit-norm columns (scale-free).
