@@ -19,7 +19,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
-from align.calibration.walk import walk_covariance
+from align.calibration.walk import WanderFit, walk_covariance, wander_fit, wander_shape
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -159,8 +159,12 @@ class CalibrationStage:
         # their covariance (generalised least squares), and sigma is each pose's total.
         self.whiten: np.ndarray | None = None
         if self.sigma is not None and poses.walk_rate is not None and poses.ordered:
+            # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
+            # the per-axis estimates scatter by about their size at a few µg/√s.
+            k2 = self.start.k**2
+            rate = np.maximum(poses.walk_rate / k2, np.mean(poses.walk_rate / k2)) * k2
             C = np.diag(self.sigma**2) + walk_covariance(
-                poses.walk_rate, pose_gradient(self.start, poses), poses.t)
+                rate, pose_gradient(self.start, poses), poses.t)
             self.whiten = np.linalg.inv(np.linalg.cholesky(C))
             self.sigma = np.sqrt(np.diag(C))
         # The input along each sensing axis (u / k; its bias cancels in the changes).
@@ -337,6 +341,21 @@ class CalibrationStage:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))
         return _model_from(res.x, effects, s0.t_ref, s0.temp_ref, cov, tau), r, res.x
+
+    def wander(self, level: float | None = None) -> WanderFit | None:
+        """The declared model (no effect) with a bias random walk between the poses, its
+        level fitted (:func:`align.calibration.walk.wander_fit`): the explanation every
+        effect the loop adds is weighed against (on 14 poses a wander of a few µg is not
+        separable from a drift); ``level`` [g²/s]: at that level instead. None: noise
+        unknown, order unknown, or not fitted."""
+        p = self.poses
+        if self.sigma is None or not p.ordered or () not in self.fits:
+            return None
+        a = self.fits[()][0].payload.specific_force(p.u, p.t, p.temp)
+        up = a / np.linalg.norm(a, axis=1, keepdims=True)
+        W = self.whiten if self.whiten is not None else np.diag(1.0 / self.sigma)
+        return wander_fit(self.projection[()][1], self.jacobians[()],
+                          wander_shape(up, p.t, W), level)
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         effects = [t.name for t in terms]

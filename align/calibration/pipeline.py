@@ -35,7 +35,8 @@ from align.calibration.model import (
     admissible,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
-from align.calibration.triad import Poses, TriadModel, delta_g, per_axis
+from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis
+from align.calibration.walk import WANDER
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -332,6 +333,22 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
             out.append(Alternative(" + ".join(effects), replaces, float(d_bic), float(frac),
                                    _core(fit.payload) - core,
                                    positive_part(_core_cov(fit.payload) - cov)))
+    # No effect but a bias wandering between the poses (a bias instability every triad has),
+    # its level fitted (one parameter in BIC): plausible within AMBIGUOUS_BIC, or when the
+    # samples within the poses do not exclude the level it needs (the poses' means alone
+    # cannot tell a wander of a few µg from a drift on 14 poses).
+    w = stage.wander()
+    if w is not None and w.level > 0:
+        d_bic = w.m2ll + (len(CORE) + 1) * np.log(len(stage.poses.u)) - b_final
+        bound = stage.poses.walk_bound
+        top = float(np.max(bound / stage.start.k**2)) if bound is not None else 0.0
+        if w.level <= top:
+            # u covers the wander at the largest level the samples allow.
+            w = stage.wander(top)
+        if d_bic < AMBIGUOUS_BIC or w.level == top:
+            theta = stage.solutions[()][:9] + w.step[:9]
+            out.append(Alternative(WANDER, " + ".join(names), float(d_bic), float("nan"),
+                                   theta - core, positive_part(w.cov[:9, :9] - cov)))
     return out
 
 

@@ -25,7 +25,7 @@ from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
-from align.calibration.walk import walk_rate
+from align.calibration.walk import walk_levels
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
 
@@ -276,7 +276,8 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
     if t is not None:  # the bias instability the samples within the poses show
         times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
                  [t[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals])
-        poses = replace(poses, walk_rate=walk_rate(samples, times))
+        rate, bound = walk_levels(samples, times)
+        poses = replace(poses, walk_rate=rate, walk_bound=bound)
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)
     if calibration:
         try:
@@ -310,7 +311,7 @@ def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
                  None if poses.temp is None else poses.temp[keep],
                  None if poses.sigma_u is None else poses.sigma_u[keep], poses.count[keep],
                  tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k),
-                 poses.ordered, poses.walk_rate)
+                 poses.ordered, poses.walk_rate, poses.walk_bound)
     what = "; ".join(s.text() for s in sat)
     if calibration:
         faces = faces_of(rest)

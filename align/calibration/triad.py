@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
-from align.calibration.walk import walk_rate
+from align.calibration.walk import walk_levels
 from align.errors import InputError
 from axisbase.covariance import cov_of
 
@@ -50,7 +50,10 @@ class Poses:
     then is the turn into each pose known (bias hysteresis)."""
     walk_rate: np.ndarray | None = None
     """The bias random walk's rate per axis [output unit² / s] the samples within the poses
-    show (:func:`align.calibration.walk.walk_rate`), or None (white noise)."""
+    show (:func:`align.calibration.walk.walk_levels`), or None (white noise)."""
+    walk_bound: np.ndarray | None = None
+    """The largest such rate the samples do not exclude [output unit² / s], or None (too
+    short, or no times)."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -62,7 +65,7 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
                  None, np.array([u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
                  np.array([s.sum() for s in sel]),
                  tuple(labels) if labels is not None else tuple(str(i) for i in ids),
-                 walk_rate=walk_rate([u[s] for s in sel], [t[s] for s in sel]))
+                 True, *walk_levels([u[s] for s in sel], [t[s] for s in sel]))
 
 
 @dataclass(frozen=True)

@@ -9,43 +9,78 @@ it as a time-correlated covariance between the poses (a Wiener process, Cov(b_p,
 q min(t_p, t_q)), so a drift candidate must beat the wander, not white noise.
 
 The level q is measured where no calibration effect can mimic it: within each pose, from the
-Allan variance of its samples at two block lengths (a drift of the scale factor over a pose's
-seconds is far below it). Hand-written: no well-kept library estimates one random-walk level
-from many short, separate records (allantools wants one long series).
+spectrum of its samples at the lowest frequencies after the pose's mean and trend are
+removed (a drift of the scale factor or the bias over a pose is a trend). When the samples
+show a walk, it enters the noise model (:class:`align.calibration.model.CalibrationStage`).
+When they do not, they still bound it; the poses' means may then show a wander a drift
+candidate explains as well (:func:`wander_fit`, the alternatives that widen u in
+:mod:`align.calibration.pipeline`). Hand-written: no well-kept library estimates one
+random-walk level from many short, separate records (allantools wants one long series).
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import fft, stats
+from scipy.optimize import minimize_scalar
 
 WALK_ALPHA = 1e-3
-"""Significance at which the within-pose Allan variances must show a random walk before it
-enters the noise model (white noise alone: the clean triad's fit is unchanged)."""
-MIN_WALK_SAMPLES = 64
-"""Fewest samples of a pose whose Allan variance is used (eight blocks of eight)."""
+"""Significance at which the poses' low-frequency scatter must exceed white noise before a
+random walk enters the noise model (white noise alone: the clean triad's fit is unchanged)."""
+MIN_WALK_SAMPLES = 48
+"""Fewest samples of a pose whose spectrum is used."""
+MAX_POINTS = 240
+"""A longer pose is averaged in blocks down to at most this many points first (the exact
+expectations below take O(n²) memory; the low modes are what counts)."""
+LOW_MODES = (2, 7)
+"""The DCT modes [first, last) that carry the walk (0 and 1, the mean and the trend, are
+removed: a drift of the scale factor or the bias over a pose is not a wander)."""
+WHITE_BAND = (1 / 8, 1 / 3)
+"""The modes, as fractions of the points, that give the white level: below the sampling's
+anti-alias filter (which lowers the highest modes of a real sensor) and above the walk."""
 
 
-def _avar(x: np.ndarray, m: int) -> tuple[np.ndarray, int]:
-    """Allan variance at blocks of ``m`` samples (adjacent non-overlapping pairs) per column,
-    and the number of pairs."""
-    nb = len(x) // m
-    means = x[:nb * m].reshape(nb, m, -1).mean(1)
-    d = np.diff(means, axis=0)
-    return 0.5 * np.mean(d * d, 0), nb - 1
+@functools.lru_cache(maxsize=8)
+def _expectations(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per DCT mode of a detrended series of n points: the expected square for unit white
+    noise and for a unit random walk (variance 1 per point). Exact: the detrending projector
+    P and the walk's covariance min(i, j) through the orthonormal DCT-II."""
+    i = np.arange(n, dtype=float)
+    X = np.column_stack([np.ones(n), i - i.mean()])
+    P = np.eye(n) - X @ np.linalg.pinv(X)
+    D = fft.dct(np.eye(n), norm="ortho", axis=0)
+    DP = D @ P
+    walk = np.minimum.outer(i + 1, i + 1)
+    return np.einsum("ij,ij->i", DP, DP), np.einsum("ij,jk,ik->i", DP, walk, DP)
 
 
-def walk_rate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]) -> np.ndarray | None:
-    """The bias random walk's rate q per axis [output unit² / s], or None when the samples do
-    not show one at :data:`WALK_ALPHA` (or are too short to tell).
+def walk_levels(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
+                ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The bias random walk's rate q per axis [output unit² / s] when the samples show one
+    at :data:`WALK_ALPHA` (else None), and the largest rate they do not exclude at
+    :data:`WALK_ALPHA` (one-sided; None: too short to tell) — :func:`walk_estimate`."""
+    est = walk_estimate(samples, times)
+    if est is None:
+        return None, None
+    rate, sd, p = est
+    return (rate if p < WALK_ALPHA else None), rate + stats.norm.isf(WALK_ALPHA) * sd
 
-    Per pose, the Allan variances at m1 = n/8 and m2 = n/2 samples: white noise gives
-    A/m, a random walk of q_s per sample adds q_s m / 3, so 4 σ²(m2) − σ²(m1) = 5 q_s m1
-    (white noise cancels). Pooled over the poses (sums of squared differences over pairs);
-    the test: that excess against its white-noise standard deviation (A/m1) √(2/P2 + 2/P1),
-    P the pairs, pooled over the axes (each scaled by its own white level).
+
+def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
+                  ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The bias random walk's rate q per axis [output unit² / s] (clipped at 0), its standard
+    deviation, and the p-value of white noise alone; None when too short to tell.
+
+    Each pose's samples (block-averaged to at most :data:`MAX_POINTS`), detrended, through
+    the orthonormal DCT: white noise of variance s² puts s² w_k in mode k, a random walk of
+    q per point q g_k (w, g exact for the detrended series). Summed over the poses, the low
+    modes (:data:`LOW_MODES`) and a white band (:data:`WHITE_BAND`) give two equations in
+    (s², q) per axis; the test: the low modes' mean square over the white band's, an
+    F(3 dof_low, 3 dof_white) under white noise (the axes pooled).
 
     Parameters
     ----------
@@ -54,30 +89,40 @@ def walk_rate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]) -> np.
     times : sequence of (n_p,) arrays
         Their times [s].
     """
-    s1 = s2 = 0.0
-    p1 = p2 = 0
-    m1s, rates = [], []
+    lo = slice(*LOW_MODES)
+    S = np.zeros((2, 3))
+    W = np.zeros(2)
+    G = np.zeros(2)
+    dof = np.zeros(2)
     for x, t in zip(samples, times, strict=True):
-        n = len(x)
-        if n < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
+        if len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
             continue
-        m1, m2 = n // 8, n // 2
-        a1, k1 = _avar(x, m1)
-        a2, k2 = _avar(x, m2)
-        s1, p1 = s1 + a1 * k1, p1 + k1
-        s2, p2 = s2 + a2 * k2, p2 + k2
-        m1s.append(m1)
-        rates.append((n - 1) / np.ptp(t))
-    if len(m1s) < 3:
+        b = -(-len(x) // MAX_POINTS)
+        n = len(x) // b
+        y = x[:n * b].reshape(n, b, -1).mean(1)
+        dt = np.ptp(t) / (len(x) - 1) * b  # one point's time [s]
+        i = np.arange(n, dtype=float)
+        X = np.column_stack([np.ones(n), i - i.mean()])
+        r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+        c2 = fft.dct(r, norm="ortho", axis=0) ** 2
+        w, g = _expectations(n)
+        hi = slice(int(n * WHITE_BAND[0]), int(n * WHITE_BAND[1]))
+        for j, band in enumerate((lo, hi)):
+            # White variance of a point: s²/b, the walk's per point q dt: both per second.
+            S[j] += c2[band].sum(0) * b
+            W[j] += w[band].sum()
+            G[j] += g[band].sum() * dt * b
+            dof[j] += len(w[band])
+    if dof[0] < 3 * (LOW_MODES[1] - LOW_MODES[0]) or dof[1] < 10:
         return None
-    av1, av2 = s1 / p1, s2 / p2
-    m1 = float(np.mean(m1s))
-    excess = 4 * av2 - av1
-    sd = av1 * np.sqrt(2 / p2 + 2 / p1)
-    z = float(np.sum(excess / sd) / np.sqrt(len(sd)))
-    if not z > stats.norm.isf(WALK_ALPHA):
-        return None
-    return np.maximum(excess, 0.0) / (5 * m1) * float(np.median(rates))
+    ratio = float(np.mean((S[0] / W[0]) / (S[1] / W[1])))
+    # (s² b, q) from S = W s² b + G q in the two bands, per axis; each band's sum a
+    # chi2 of its dof times its mean (a normal approximation for the bound).
+    M = np.array([[W[0], G[0]], [W[1], G[1]]])
+    sol = np.linalg.solve(M, S)
+    inv = np.linalg.inv(M)
+    sd = np.sqrt((inv[1, 0] * S[0]) ** 2 * 2 / dof[0] + (inv[1, 1] * S[1]) ** 2 * 2 / dof[1])
+    return np.maximum(sol[1], 0.0), sd, float(stats.f.sf(ratio, 3 * dof[0], 3 * dof[1]))
 
 
 def walk_covariance(rate: np.ndarray, g: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -88,3 +133,80 @@ def walk_covariance(rate: np.ndarray, g: np.ndarray, t: np.ndarray) -> np.ndarra
     unit]; ``rate`` q per axis [output unit² / s]; ``t`` the poses' times [s]."""
     s = np.asarray(t, float) - float(np.min(t))
     return (g * rate) @ g.T * np.minimum(s[:, None], s[None, :])
+
+
+WANDER = "bias_wander"
+"""The alternative the loop's effects are weighed against: the declared model with a bias
+random walk between the poses (its level fitted), no effect."""
+
+
+@dataclass(frozen=True)
+class WanderFit:
+    """The declared model's fit with a bias wander in its noise (:func:`wander_fit`).
+
+    Attributes
+    ----------
+    m2ll : float
+        −2 log likelihood (constants shared with the white-noise fits dropped) —
+        dimensionless.
+    chi2 : float
+        The generalised chi2 of the residuals under that noise — dimensionless.
+    level : float
+        The walk's rate q [g² / s] (in the units of ``shape``'s scale).
+    step : numpy.ndarray
+        The parameters' change from the fit it linearises [the parameters' units].
+    cov : numpy.ndarray
+        Their covariance [products of their units].
+    """
+
+    m2ll: float
+    chi2: float
+    level: float
+    step: np.ndarray
+    cov: np.ndarray
+
+
+def wander_shape(up: np.ndarray, t: np.ndarray, whiten: np.ndarray) -> np.ndarray:
+    """The covariance shape K (N, N) of an isotropic bias random walk of unit rate [g²/s]
+    in the whitened pose residuals: ``whiten`` W (N, N) K₀ Wᵀ, K₀_pq = (n_p · n_q)
+    (min(t_p, t_q) − t₀), ``up`` the poses' unit up vectors n (N, 3), ``t`` [s]."""
+    s = np.asarray(t, float) - float(np.min(t))
+    return whiten @ ((up @ up.T) * np.minimum.outer(s, s)) @ whiten.T
+
+
+def wander_fit(r: np.ndarray, J: np.ndarray, shape: np.ndarray, level: float | None = None
+               ) -> WanderFit:
+    """Maximum likelihood of the walk's level q for the whitened residuals ``r`` (N,) of a
+    fit with Jacobian ``J`` (N, P), linearised there: r + J δ ~ N(0, I + q K), K ``shape``.
+    Profile likelihood over log q (bounded scalar search), δ and its covariance by
+    generalised least squares at the best q (or at ``level`` when given). Hand-written: a
+    one-parameter variance model in a few lines of numpy (statsmodels' GLS takes the
+    covariance as given)."""
+    norms = np.linalg.norm(J, axis=0)
+    d = 1.0 / np.where(norms > 0, norms, 1.0)
+    Jn = J * d
+
+    def solve(q: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+        L = np.linalg.cholesky(np.eye(len(r)) + q * shape)
+        rt = np.linalg.solve(L, r)
+        Jt = np.linalg.solve(L, Jn)
+        step = -np.linalg.lstsq(Jt, rt, rcond=None)[0]
+        res = rt + Jt @ step
+        chi2 = float(res @ res)
+        return chi2 + 2 * float(np.sum(np.log(np.diag(L)))), chi2, step, Jt
+
+    if level is not None:
+        m2ll, chi2, step, Jt = solve(level)
+        return WanderFit(m2ll, chi2, level, step * d,
+                         d[:, None] * np.linalg.pinv(Jt.T @ Jt) * d[None, :])
+    top = max(float(np.max(np.diag(shape))), 1e-300)
+    lo, hi = np.log(1e-4 / top), np.log(1e5 / top)
+    best = minimize_scalar(lambda g: solve(float(np.exp(g)))[0], bounds=(lo, hi),
+                           method="bounded", options={"xatol": 0.05})
+    q = float(np.exp(best.x))
+    fit = solve(q)
+    if solve(0.0)[0] <= fit[0]:  # no wander explains it better than none
+        q, fit = 0.0, solve(0.0)
+    m2ll, chi2, step, Jt = fit
+    cov = d[:, None] * np.linalg.pinv(Jt.T @ Jt) * d[None, :]
+    return WanderFit(m2ll, chi2, q, step * d, cov)
