@@ -31,6 +31,9 @@ SCALE_DRIFT = "scale_drift"
 SCALE_TEMP = "scale_temperature"
 SCALE_WARMUP = "scale_warmup"
 HYSTERESIS = "bias_hysteresis"
+IN_TIME = frozenset({DRIFT, WARMUP, TEMP, SCALE_DRIFT, SCALE_WARMUP, SCALE_TEMP})
+"""The effects that change over the run (a temperature follows the time): a bias wandering
+between the poses can take their shape (:mod:`align.calibration.walk`)."""
 PAIRS = ("xy", "xz", "yz")
 CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
 """One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
@@ -135,6 +138,13 @@ def algebraic(poses: Poses, signs: Sequence[float]) -> TriadModel:
                       temp_ref=float(np.mean(poses.temp)) if poses.temp is not None else 0.0)
 
 
+def walk_physical(rate_g: np.ndarray, t: np.ndarray) -> bool:
+    """Whether a bias random walk of ``rate_g`` per axis [g²/s] stays within
+    :data:`EFFECT_PRIOR_G` (one sigma) over the poses' time span ``t`` [s]: beyond, the
+    samples within the poses move (turn chunks taken for poses), no bias wanders so."""
+    return bool(np.sqrt(np.max(rate_g) * max(float(np.ptp(t)), 1.0)) <= EFFECT_PRIOR_G)
+
+
 class CalibrationStage:
     """Maximum-likelihood ellipsoid refinement with optional effects (the loop's stage)."""
 
@@ -158,7 +168,8 @@ class CalibrationStage:
         # residuals are correlated in time; the fit whitens them with the Cholesky factor of
         # their covariance (generalised least squares), and sigma is each pose's total.
         self.whiten: np.ndarray | None = None
-        if self.sigma is not None and poses.walk_rate is not None and poses.ordered:
+        if (self.sigma is not None and poses.walk_rate is not None and poses.ordered
+                and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
             # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
             # the per-axis estimates scatter by about their size at a few µg/√s.
             k2 = self.start.k**2
