@@ -19,7 +19,7 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
-from align.calibration.walk import WanderFit, walk_covariance, wander_fit, wander_shape
+from align.calibration.walk import WALK_ALPHA, WanderFit, walk_covariance, wander_fit, wander_shape
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -168,6 +168,9 @@ class CalibrationStage:
         # residuals are correlated in time; the fit whitens them with the Cholesky factor of
         # their covariance (generalised least squares), and sigma is each pose's total.
         self.whiten: np.ndarray | None = None
+        self._white: tuple[float, np.ndarray, np.ndarray] | None = None
+        # The input along each sensing axis (u / k; its bias cancels in the changes).
+        self.turns = turn_signs(poses.u / self.start.k, poses.t)
         if (self.sigma is not None and poses.walk_rate is not None and poses.ordered
                 and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
             # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
@@ -176,10 +179,52 @@ class CalibrationStage:
             rate = np.maximum(poses.walk_rate / k2, np.mean(poses.walk_rate / k2)) * k2
             C = np.diag(self.sigma**2) + walk_covariance(
                 rate, pose_gradient(self.start, poses), poses.t)
-            self.whiten = np.linalg.inv(np.linalg.cholesky(C))
-            self.sigma = np.sqrt(np.diag(C))
-        # The input along each sensing axis (u / k; its bias cancels in the changes).
-        self.turns = turn_signs(poses.u / self.start.k, poses.t)
+            f = self.means_allow(C - np.diag(self.sigma**2))
+            if f > 0:
+                C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
+                self.whiten = np.linalg.inv(np.linalg.cholesky(C))
+                self.sigma = np.sqrt(np.diag(C))
+
+    def means_allow(self, walk: np.ndarray) -> float:
+        """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that the
+        pose means allow: the declared model's white-noise chi2 not in the lower WALK_ALPHA
+        tail of its distribution under diag(sigma²) + f walk (Σ λ_i χ²₁, λ the eigenvalues of
+        the residual-space covariance; 20000 seeded draws: scipy has no such distribution);
+        0 when even 1e-4 of it is excluded. A pose's own settling (a hand-placed unit)
+        shows in its samples as a walk does but does not go on from pose to pose: the means
+        then scatter as white noise, and the walk is not one."""
+        if self._white is None:
+            # The white-noise fit of the declared model, leaving the stage's own as it was.
+            whiten, self.whiten = self.whiten, None
+            stores = (self.solutions, self.projection, self.condition, self.jacobians)
+            kept = [st.pop((), None) for st in stores]
+            _, r, _ = self.refine([])
+            J = self.jacobians[()]
+            for st, v in zip(stores, kept, strict=True):
+                st.pop((), None)
+                if v is not None:
+                    st[()] = v
+            self.whiten = whiten
+            q, _ = np.linalg.qr(J)
+            self._white = (float(np.sum((r / self.sigma) ** 2)),
+                           np.eye(len(r)) - q @ q.T, 1.0 / self.sigma)
+        chi2, P, w = self._white
+        Ww = P @ (w[:, None] * walk * w[None, :]) @ P
+        z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
+
+        def allowed(f: float) -> bool:
+            lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
+            return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
+
+        if allowed(1.0):
+            return 1.0
+        lo, hi = np.log(1e-4), 0.0
+        if not allowed(float(np.exp(lo))):
+            return 0.0
+        for _ in range(12):  # bisection on log f: the chi2's lower tail grows with f
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if allowed(float(np.exp(mid))) else (lo, mid)
+        return float(np.exp(lo))
 
     def _check_applies(self, effects: Sequence[str]) -> None:
         p = self.poses

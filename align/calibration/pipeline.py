@@ -37,8 +37,8 @@ from align.calibration.model import (
     walk_physical,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
-from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis
-from align.calibration.walk import WANDER
+from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
+from align.calibration.walk import WANDER, walk_covariance
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -347,6 +347,11 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
         bound = stage.poses.walk_bound
         top = (float(np.max(bound / stage.start.k**2)) if bound is not None and
                walk_physical(bound / stage.start.k**2, stage.poses.t) else 0.0)
+        if top > 0 and stage.sigma is not None and stage.whiten is None:
+            # ... and the pose means allow (a settling within the poses is not a walk).
+            p = stage.poses
+            top *= stage.means_allow(walk_covariance(
+                np.full(3, top) * stage.start.k**2, pose_gradient(stage.start, p), p.t))
         if w.level <= top:
             # u covers the wander at the largest level the samples allow.
             w = stage.wander(top)

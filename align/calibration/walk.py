@@ -39,23 +39,29 @@ expectations below take O(n²) memory; the low modes are what counts)."""
 LOW_MODES = (2, 7)
 """The DCT modes [first, last) that carry the walk (0 and 1, the mean and the trend, are
 removed: a drift of the scale factor or the bias over a pose is not a wander)."""
+TREND_PARAMS = 4
+"""The fit each axis's pose trends are taken less: (1, t, u, u t), a bias or scale drift,
+steady or changing over the run."""
 WHITE_BAND = (1 / 8, 1 / 3)
 """The modes, as fractions of the points, that give the white level: below the sampling's
 anti-alias filter (which lowers the highest modes of a real sensor) and above the walk."""
 
 
 @functools.lru_cache(maxsize=8)
-def _expectations(n: int) -> tuple[np.ndarray, np.ndarray]:
+def _expectations(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Per DCT mode of a detrended series of n points: the expected square for unit white
-    noise and for a unit random walk (variance 1 per point). Exact: the detrending projector
-    P and the walk's covariance min(i, j) through the orthonormal DCT-II."""
+    noise and for a unit random walk (variance 1 per point); the unit ramp (centred) and the
+    walk's expected square on it (white: 1). Exact: the detrending projector P and the walk's
+    covariance min(i, j) through the orthonormal DCT-II."""
     i = np.arange(n, dtype=float)
     X = np.column_stack([np.ones(n), i - i.mean()])
     P = np.eye(n) - X @ np.linalg.pinv(X)
     D = fft.dct(np.eye(n), norm="ortho", axis=0)
     DP = D @ P
     walk = np.minimum.outer(i + 1, i + 1)
-    return np.einsum("ij,ij->i", DP, DP), np.einsum("ij,jk,ik->i", DP, walk, DP)
+    ramp = (i - i.mean()) / np.linalg.norm(i - i.mean())
+    return (np.einsum("ij,ij->i", DP, DP), np.einsum("ij,jk,ik->i", DP, walk, DP), ramp,
+            float(ramp @ walk @ ramp))
 
 
 def walk_levels(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
@@ -94,6 +100,7 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     W = np.zeros(2)
     G = np.zeros(2)
     dof = np.zeros(2)
+    trend, trend_g, where, when = [], [], [], []
     for x, t in zip(samples, times, strict=True):
         if len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
             continue
@@ -105,7 +112,7 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
         X = np.column_stack([np.ones(n), i - i.mean()])
         r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
         c2 = fft.dct(r, norm="ortho", axis=0) ** 2
-        w, g = _expectations(n)
+        w, g, ramp, g_ramp = _expectations(n)
         hi = slice(int(n * WHITE_BAND[0]), int(n * WHITE_BAND[1]))
         for j, band in enumerate((lo, hi)):
             # White variance of a point: s²/b, the walk's per point q dt: both per second.
@@ -113,6 +120,25 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
             W[j] += w[band].sum()
             G[j] += g[band].sum() * dt * b
             dof[j] += len(w[band])
+        trend.append(ramp @ y * np.sqrt(b))
+        trend_g.append(g_ramp * dt * b)
+        where.append(y.mean(0))
+        when.append(float(np.mean(t)))
+    if len(trend) > 2 * TREND_PARAMS:
+        # Each pose's trend (its samples on the unit ramp): a walk's is random, a drift's
+        # (of the bias or the scale factor, steady or not) follows the run and the pose's
+        # output: the trends less their fit on (1, t, u, u t) per axis carry the walk alone.
+        tr, gr = np.array(trend), np.array(trend_g)
+        tt = np.array(when) - np.mean(when)
+        u = np.array(where)
+        for ax in range(3):
+            D = np.column_stack([np.ones(len(tt)), tt, u[:, ax], u[:, ax] * tt])
+            res = tr[:, ax] - D @ np.linalg.lstsq(D, tr[:, ax], rcond=None)[0]
+            S[0, ax] += res @ res
+        free = len(tr) - TREND_PARAMS
+        W[0] += free
+        G[0] += free * float(np.mean(gr))
+        dof[0] += free
     if dof[0] < 3 * (LOW_MODES[1] - LOW_MODES[0]) or dof[1] < 10:
         return None
     ratio = float(np.mean((S[0] / W[0]) / (S[1] / W[1])))
