@@ -101,6 +101,7 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     G = np.zeros(2)
     dof = np.zeros(2)
     trend, trend_g, where, when = [], [], [], []
+    low_w, low_g = [], []  # each low mode's expected square per unit white and walk
     for x, t in zip(samples, times, strict=True):
         if len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
             continue
@@ -120,6 +121,8 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
             W[j] += w[band].sum()
             G[j] += g[band].sum() * dt * b
             dof[j] += len(w[band])
+        low_w.append(w[lo])
+        low_g.append(g[lo] * dt * b)
         trend.append(ramp @ y * np.sqrt(b))
         trend_g.append(g_ramp * dt * b)
         where.append(y.mean(0))
@@ -139,6 +142,8 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
         W[0] += free
         G[0] += free * float(np.mean(gr))
         dof[0] += free
+        low_w.append(np.ones(free))
+        low_g.append(np.full(free, float(np.mean(gr))))
     if dof[0] < 3 * (LOW_MODES[1] - LOW_MODES[0]) or dof[1] < 10:
         return None
     ratio = float(np.mean((S[0] / W[0]) / (S[1] / W[1])))
@@ -147,7 +152,12 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     M = np.array([[W[0], G[0]], [W[1], G[1]]])
     sol = np.linalg.solve(M, S)
     inv = np.linalg.inv(M)
-    sd = np.sqrt((inv[1, 0] * S[0]) ** 2 * 2 / dof[0] + (inv[1, 1] * S[1]) ** 2 * 2 / dof[1])
+    # The low band's terms are unequal (a walk's modes fall as 1/k²): its variance is
+    # 2 Σ E_k², E_k each term's expectation at the solution.
+    e_low = (np.concatenate(low_w)[:, None] * np.maximum(sol[0], 0.0)
+             + np.concatenate(low_g)[:, None] * np.maximum(sol[1], 0.0))
+    sd = np.sqrt(inv[1, 0] ** 2 * 2 * np.sum(e_low**2, 0)
+                 + (inv[1, 1] * S[1]) ** 2 * 2 / dof[1])
     return np.maximum(sol[1], 0.0), sd, float(stats.f.sf(ratio, 3 * dof[0], 3 * dof[1]))
 
 
