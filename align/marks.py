@@ -27,10 +27,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.errors import NotApplicable
-from align.family import LineFamily, line_family
+from align.family import LineDial, LineFamily, line_dial, line_family, member_ends
 from align.lens import (
     LensRanges,
     LineGeometry,
@@ -275,7 +275,7 @@ def radial_admissible(current: StageFit, trial: StageFit, term: Term, alpha: flo
         return None
     k1, u = trial.effects.get(RADIAL, (float("nan"), float("inf")))
     d = float(trial.payload["offset_px"]) if isinstance(trial.payload, dict) else float("nan")
-    z = float(np.sqrt(chi2.isf(alpha, 1)))
+    z = float(np.sqrt(special.chdtri(1, alpha)))
     if not u * z <= K1_MAX:
         return (f"k1 not identifiable on this mark: it passes {abs(d):.2g} px from the image "
                 f"centre, where a radial distortion leaves a line straight (u(k1) = {u:.2g}; "
@@ -402,6 +402,8 @@ class MarkResult:
         The family of parallel lines it belongs to; unit —.
     unreported : int
         Lines found in the image and not reported — dimensionless.
+    dial : LineDial or None
+        The graduated dial (lines meeting at a point) it belongs to; unit —.
     lens : Mapping or None
         The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
         [px]).
@@ -441,6 +443,7 @@ class MarkResult:
     frame: FrameDistortion | None = None
     family: LineFamily | None = None
     unreported: int = 0
+    dial: LineDial | None = None
     lens: Mapping | None = None
     u_terms: Mapping[str, float] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
@@ -483,6 +486,8 @@ class MarkResult:
             d["frame_radial_distortion"] = self.frame.to_dict()
         if self.family is not None:
             d["family"] = self.family.to_dict()
+        if self.dial is not None:
+            d["dial"] = self.dial.to_dict()
         if self.lens is not None:
             d["lens"] = dict(self.lens)
         d["angle_u_terms_arcsec"] = {k: float(np.rad2deg(v) * 3600)
@@ -528,6 +533,7 @@ class MarkResult:
                    uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
                    frame=None if fr is None else FrameDistortion.from_dict(fr),
                    family=LineFamily.from_dict(d["family"]) if "family" in d else None,
+                   dial=LineDial.from_dict(d["dial"]) if "dial" in d else None,
                    lens=d.get("lens"),
                    u_terms={str(k): _num(v)
                             for k, v in (d.get("angle_u_terms_rad") or {}).items()},
@@ -558,7 +564,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     defocus = defocus_note(f"{image} mark {index}", m.blur)
     if defocus:
         notes.append(defocus)
-    elif f.dof > 0 and chi2.cdf(f.chi2, f.dof) < 1e-6:
+    elif f.dof > 0 and special.chdtr(f.dof, f.chi2) < 1e-6:
         notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
                      f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
                      "this groove; u kept as stated (a misfit never narrows it)")
@@ -598,7 +604,7 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
     (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
     """
     f = rep.after
-    if f.dof > 0 and chi2.cdf(f.chi2, f.dof) < alpha_low:
+    if f.dof > 0 and special.chdtr(f.dof, f.chi2) < alpha_low:
         # The centres scatter far less than their stated sigma: the groove model's shape
         # does not describe this groove. A model misfit never narrows u (a defocus gradient
         # once got x0.4 here and scattered at twice its u): u stays as stated, and the
@@ -805,19 +811,36 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
     return with_families(out, measured.families, measured.unreported,
                          "camera model" if camera is not None else
-                         "frame lens" if lens.lam is not None else "none", alpha)
+                         "frame lens" if lens.lam is not None else "none", alpha, image)
 
+
+
+DIAL_SPREAD = np.deg2rad(10.0)
+"""A group whose lines' directions spread wider than this is a dial, not a family."""
+
+
+def _wrap_all(a: np.ndarray) -> np.ndarray:
+    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
 
 
 def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
-                  unreported: int, lens: str, alpha: float = 1e-3) -> list[MarkResult]:
+                  unreported: int, lens: str, alpha: float = 1e-3,
+                  image: np.ndarray | None = None) -> list[MarkResult]:
     """The image's results with each family's :class:`align.family.LineFamily` on its
-    measured members, and the count of lines found but not reported on every entry."""
+    measured members, and the count of lines found but not reported on every entry. With
+    the ``image``, each member's ends are checked for obstructions (dust, ink:
+    :func:`align.family.member_ends`): its length is the visible one, and a hidden end is
+    said with the bound it leaves."""
     out = [replace(r, unreported=unreported) for r in results]
     for g in families:
         ok = [i for i in g if out[i].found]
         if len(ok) < 2:
             continue
+        lengths: list[tuple[float, float, int]] = []
+        if image is not None:
+            for i in ok:
+                out[i], got = member_ends(image, out[i])
+                lengths.append(got)
         ms = [out[i] for i in ok]
         mids = []
         for r in ms:
@@ -835,9 +858,18 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
         shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
         own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
                                   for r, t in zip(ms, shared, strict=True)], 1e-30))
+        angles = np.array([r.angle_rad for r in ms])
+        if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD and len(ms) >= 3:
+            # Lines that meet at a point (imaging.families.group_dial): a dial.
+            dial = line_dial([r.index for r in ms], angles, own,
+                             np.array([r.offset_px for r in ms]),
+                             np.array([r.offset_u_px for r in ms]), np.array(mids), lens, alpha)
+            for i in ok:
+                out[i] = replace(out[i], dial=dial)
+            continue
         fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
                           np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
-                          len(g) - len(ok), alpha, shared)
+                          len(g) - len(ok), alpha, shared, lengths)
         for i in ok:
             out[i] = replace(out[i], family=fam)
     return out

@@ -25,7 +25,7 @@ from imaging.detect import (
     wrap_angle,
 )
 from imaging.errors import ImageInputError
-from imaging.families import detect_lines
+from imaging.families import detect_lines, grating_note
 from imaging.io import full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
@@ -267,8 +267,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         raise ImageInputError(f"{where}: {exc}") from None
     cands = det.marks
     if not cands:
+        grating = grating_note(image)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
-                              + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
+                              + (f" in roi {','.join(map(str, roi))})" if roi else ")")
+                              + (f": {grating}" if grating else ""))
     if expect_one:
         cands = [require_single(cands, where)]
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be

@@ -164,6 +164,33 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     ``signs_as``: how the user gave ``signs`` (the flag, or session.toml's key), for the
     messages.
 
+    Parameters
+    ----------
+    poses : Poses
+        Mean output of each static pose (N, 3) [the triad's unit: V, g, m/s², counts],
+        with times [s], temperatures, the standard error of each mean and labels (the
+        faces' labels fix the signs).
+    signs : sequence of float, optional
+        The scale factors' signs (see above).
+    alpha : float
+        Significance level of the residual loop's tests.
+    candidates : sequence of Candidate
+        The effects the loop may add.
+    fixture_error_rad : float, optional
+        Declared placement error of the faces [rad].
+
+    Returns
+    -------
+    Calibration
+        The algebraic start and the final triad model (scale factors [unit/g], bias
+        [unit], axes; their covariance), the loop's report and the notes.
+
+    Raises
+    ------
+    InputError
+        Too few usable poses, poses that do not determine the ellipsoid (a plane, a
+        cone), signs that contradict the labelled faces.
+
     Examples
     --------
     The seed paper's 14-pose tumble of a synthetic triad (``synth.tumble``, with its truth;
