@@ -25,7 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import fft, stats
+from scipy import fft, special
 from scipy.optimize import minimize_scalar
 
 WALK_ALPHA = 1e-3
@@ -73,7 +73,7 @@ def walk_levels(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     if est is None:
         return None, None
     rate, sd, p = est
-    return (rate if p < WALK_ALPHA else None), rate + stats.norm.isf(WALK_ALPHA) * sd
+    return (rate if p < WALK_ALPHA else None), rate - special.ndtri(WALK_ALPHA) * sd
 
 
 def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
@@ -158,7 +158,7 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
              + np.concatenate(low_g)[:, None] * np.maximum(sol[1], 0.0))
     sd = np.sqrt(inv[1, 0] ** 2 * 2 * np.sum(e_low**2, 0)
                  + (inv[1, 1] * S[1]) ** 2 * 2 / dof[1])
-    return np.maximum(sol[1], 0.0), sd, float(stats.f.sf(ratio, 3 * dof[0], 3 * dof[1]))
+    return np.maximum(sol[1], 0.0), sd, float(special.fdtrc(3 * dof[0], 3 * dof[1], ratio))
 
 
 def walk_covariance(rate: np.ndarray, g: np.ndarray, t: np.ndarray) -> np.ndarray:
