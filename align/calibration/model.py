@@ -180,7 +180,11 @@ class CalibrationStage:
             C = np.diag(self.sigma**2) + walk_covariance(
                 rate, pose_gradient(self.start, poses), poses.t)
             f = self.means_allow(C - np.diag(self.sigma**2))
-            if f > 0:
+            # ... when they allow the level the samples show, within its uncertainty (the
+            # one-sided bound mirrored): less, and the samples' low frequencies are mostly
+            # a settling, not a walk (the wander alternative still weighs one).
+            low = np.mean(2 * poses.walk_rate - poses.walk_bound) / np.mean(poses.walk_rate)
+            if f > 0 and f >= low:
                 C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
                 self.whiten = np.linalg.inv(np.linalg.cholesky(C))
                 self.sigma = np.sqrt(np.diag(C))
