@@ -53,6 +53,8 @@ def mark_lines(r) -> list[str]:
                                                        for k, v in big))
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
+    if r.bend_off_frame:
+        lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     return lines
 
 

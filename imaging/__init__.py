@@ -29,6 +29,7 @@ from imaging.measure import (
     measure_candidate,
     measure_frame,
     measure_marks,
+    on_line,
 )
 from imaging.plumbline import (
     PlumbLineFit,
@@ -47,7 +48,7 @@ __all__ = [
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
-    "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
+    "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",
     "GrooveEnds", "grating_note", "groove_ends",
 ]

@@ -55,7 +55,10 @@ class MarkMeasurement:
     ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
     None: too few segments to tell); ``jpeg``: the JPEG
     encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
-    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term).
+    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term). ``extent_px``: where the
+    groove ends along the profile's line (raw image); ``ends_px``: those two ends as (2, 2)
+    points like ``points`` (relative to the image centre, undistorted if a camera model was
+    given): a bent mark's chord and a ruled scale's line middles are read between them.
     """
 
     candidate: MarkCandidate
@@ -72,6 +75,7 @@ class MarkMeasurement:
     blur: BlurTrend | None = None
     jpeg: JpegBlocks | None = None
     jpeg_u_rad: float = 0.0
+    ends_px: np.ndarray | None = None
 
     @property
     def length_px(self) -> float:
@@ -152,10 +156,12 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
+    ext = groove_extent(image, pf)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
+                           int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
-                           if jpeg is not None else 0.0)
+                           if jpeg is not None else 0.0,
+                           ends_on_line(pf, ext, line, camera, image.shape))
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
@@ -173,6 +179,25 @@ def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + 1e-6 * np.eye(len(R)))
     return s, L
+
+
+def ends_on_line(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
+                camera: CameraModel | None, shape: tuple[int, int]) -> np.ndarray:
+    """The groove's two ends (half-depth, ``extent`` along the profile's line) as points on
+    the measured ``line`` [px, relative to the image centre]: undistorted by the camera, then
+    put on the line (the profile's line is the raw image's chord, off a mark the lens bows
+    by up to its sagitta at the ends; only the position along the line is read from it)."""
+    u, n = line_frame(pf.angle_rad)
+    ends = np.array([pf.offset_px * n + t * u for t in extent])
+    if camera is not None:
+        ends = camera.undistort_centred(ends, np.ones(2), shape)[0]
+    return on_line(ends, line.angle_rad, line.offset_px)
+
+
+def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
+    """Points ``p`` (N, 2) moved across onto the line (angle, offset) [px]."""
+    u, n = line_frame(angle_rad)
+    return offset_px * n + np.outer(p @ u, u)
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
