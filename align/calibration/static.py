@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +26,7 @@ from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
+from align.calibration.walk import walk_levels
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
 
@@ -207,8 +208,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         tab = read_table(path, STATIC, columns, rate_hz)
         if "pose" not in tab and "t" not in tab and len(tab) <= MEANS_ROWS:
             # ux,uy,uz without pose or time, a few rows: per-pose means (as for arrays).
-            from dataclasses import replace
-
             labels = np.array([str(i + 1) for i in range(len(tab))], dtype=object)
             tab = replace(tab, data={**tab.data, "pose": labels})
             logging.getLogger("align").warning(
@@ -275,6 +274,11 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
         samples = [u[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals]
+    if t is not None:  # the bias instability the samples within the poses show
+        times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
+                 [t[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals])
+        rate, bound = walk_levels(samples, times)
+        poses = replace(poses, walk_rate=rate, walk_bound=bound)
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)
     if calibration:
         try:
@@ -307,7 +311,8 @@ def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
     rest = Poses(poses.u[keep], poses.t[keep],
                  None if poses.temp is None else poses.temp[keep],
                  None if poses.sigma_u is None else poses.sigma_u[keep], poses.count[keep],
-                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k))
+                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k),
+                 poses.ordered, poses.walk_rate, poses.walk_bound)
     what = "; ".join(s.text() for s in sat)
     if calibration:
         faces = faces_of(rest)

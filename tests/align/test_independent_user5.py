@@ -370,12 +370,6 @@ def test_truncated_png_is_named_not_a_traceback(tmp_path):
     assert "trunc.png" in err and "truncated" in err
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bias random walk 3e-7 g per sample at 100 Hz (~16 ug over the 3-min tumble, a bias "
-    "instability any triad has; seed 5): the loop adds scale_drift (p 1e-154) and reports "
-    "k_x 2.410261 +- 0.000018 V/g against the true 2.41 (+108 ppm, 14.4 u), k_y -10.2 u, "
-    "k_z -9.3 u, beta_z -6.3 u; exit 0, ok true, the only warnings 'u widened (scale_drift vs "
-    "scale_warmup)' and '2 degrees of freedom left'"))
 def test_bias_random_walk_is_not_turned_into_a_confident_scale_drift(tmp_path):
     triad = U.Triad()
     rows, _ = U.tumble(triad, seed=5, rw_g=3e-7)
