@@ -21,7 +21,7 @@ from importlib import import_module
 _LAZY = {
     "Candidate": "align.loop", "LoopReport": "align.loop", "StageFit": "align.loop",
     "Term": "align.loop", "run_loop": "align.loop",
-    "MarkResult": "align.marks", "MarkStage": "align.marks", "loop_mark": "align.marks",
+    "MarkResult": "align.marks", "MarkStage": "align.mark_stage", "loop_mark": "align.marks",
     "measure_file": "align.marks", "measure_image": "align.marks",
     "measure_camera": "align.marks", "LensRanges": "align.lens", "solve_lens": "align.lens",
     "measure_log": "align.gonio", "calibrate": "align.calibration",

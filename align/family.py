@@ -25,11 +25,16 @@ members' own offset u.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import TypeVar
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.special import ndtri
-from scipy.stats import chi2 as chi2_dist
+
+from imaging.ends import groove_ends
+
+R = TypeVar("R")
 
 FORMAT_VERSION = 1
 
@@ -75,6 +80,15 @@ class LineFamily:
     failed : int
         Lines of the family found but not measured (each is its own failed entry) —
         dimensionless.
+    lengths_px, lengths_max_px : tuple of float
+        Each member's visible length and the longest it can be [px] (:mod:`imaging.ends`:
+        larger only when an end lies under an obstruction — dust, ink — whose far side
+        bounds it), in ``members`` order.
+    hidden_ends : tuple of int
+        Each member's ends under an obstruction (0, 1 or 2), in ``members`` order —
+        dimensionless.
+    typical_length_px : float
+        Median visible length of the members with both ends seen [px] (nan: none).
     """
 
     members: tuple[int, ...]
@@ -93,6 +107,10 @@ class LineFamily:
     lens: str = "none"
     failed: int = 0
     angle_u_lens_rad: float = 0.0
+    lengths_px: tuple[float, ...] = ()
+    lengths_max_px: tuple[float, ...] = ()
+    hidden_ends: tuple[int, ...] = ()
+    typical_length_px: float = float("nan")
 
     @property
     def chi2_dof(self) -> float:
@@ -115,7 +133,10 @@ class LineFamily:
                 "steps": list(self.steps), "pitch_residuals_px": list(self.pitch_residuals_px),
                 "pitch_spread_px": self.pitch_spread_px, "lens": self.lens,
                 "failed": self.failed, "angle_u_lens_rad": self.angle_u_lens_rad,
-                "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600)}
+                "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600),
+                "lengths_px": list(self.lengths_px), "lengths_max_px": list(self.lengths_max_px),
+                "hidden_ends": list(self.hidden_ends),
+                "typical_length_px": self.typical_length_px}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineFamily:
@@ -133,7 +154,11 @@ class LineFamily:
                    num(d["pitch_px"]), num(d["pitch_u_px"]), tuple(int(k) for k in d["steps"]),
                    tuple(num(v) for v in d["pitch_residuals_px"]), num(d["pitch_spread_px"]),
                    str(d.get("lens", "none")), int(d.get("failed", 0)),
-                   num(d.get("angle_u_lens_rad", 0.0)))
+                   num(d.get("angle_u_lens_rad", 0.0)),
+                   tuple(num(v) for v in d.get("lengths_px", ())),
+                   tuple(num(v) for v in d.get("lengths_max_px", ())),
+                   tuple(int(v) for v in d.get("hidden_ends", ())),
+                   num(d.get("typical_length_px")))
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -141,19 +166,45 @@ class LineFamily:
              f"± {np.rad2deg(self.angle_u_rad) * 3600:.2f}″, chi2/dof {self.chi2_dof:.2f} "
              f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px, "
              f"spread {self.pitch_spread_px:.3f} px, lens: {self.lens}")
+        if np.isfinite(self.typical_length_px):
+            s += f", typical length {self.typical_length_px:.0f} px"
+        if any(self.hidden_ends):
+            s += f", {sum(1 for h in self.hidden_ends if h)} with an end hidden"
         if self.deviant:
             s += f"; NOT PARALLEL: marks {', '.join(map(str, self.deviant))}"
         return s
 
 
+def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
+    """A measured member (an ``align.marks.MarkResult``) with its ends checked for
+    obstructions (:func:`imaging.ends.groove_ends`): its ``length_px`` the visible length,
+    a note when an end is hidden (the length is then a lower bound, the far side of the
+    obstruction its upper one); and (visible length, longest length [px], ends hidden)."""
+    m = r.measurement
+    if m is None:
+        return r, (r.length_px, r.length_px, 0)
+    e = groove_ends(image, m.profile, m.extent_px)
+    n_hidden = sum(e.hidden)
+    notes = tuple(r.notes)
+    if n_hidden:
+        notes += (f"{r.image} mark {r.index}: {'both ends' if n_hidden == 2 else 'one end'} "
+                  f"under an obstruction (dust or print): length {e.length_px:.0f} px seen, "
+                  f"up to {e.length_max_px:.0f} px hidden under it (its angle is measured "
+                  "on what is seen)",)
+    return (replace(r, length_px=e.length_px, notes=notes),
+            (e.length_px, e.length_max_px, n_hidden))
+
+
 def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 middles: np.ndarray, offset_u: np.ndarray, lens: str = "none",
                 failed: int = 0, alpha: float = 1e-3,
-                lens_terms: Sequence[Mapping[str, float]] = ()) -> LineFamily:
+                lens_terms: Sequence[Mapping[str, float]] = (),
+                lengths: Sequence[tuple[float, float, int]] = ()) -> LineFamily:
     """The family of lines with these angles [rad] (``angle_u``: each one's own u without
     the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
     [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
-    mean's u, not the members' chi2); see the module docstring for the formulas."""
+    mean's u, not the members' chi2); ``lengths``: per member (visible length, longest
+    length [px], ends hidden); see the module docstring for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
@@ -174,7 +225,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
         keep[worst] = False
     dof = int(keep.sum()) - 1
     chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
-    p = float(chi2_dist.sf(chi2, dof)) if dof > 0 else 1.0
+    p = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
     deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
         u_mean *= np.sqrt(chi2 / dof)
@@ -202,7 +253,169 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     else:
         pitch, res, pitch_u = float("nan"), np.full(n, np.nan), float("nan")
     idx = tuple(int(indices[i]) for i in order)
+    ln = [lengths[i] for i in order] if len(lengths) == n else []
+    seen = [v for v, _, h in ln if not h]
     return LineFamily(idx, mean, u_mean, chi2, dof, p, tuple(float(v) for v in z[order]),
                       deviant, float(pitch), float(pitch_u), tuple(int(v) for v in k),
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
-                      failed, u_lens)
+                      failed, u_lens, tuple(float(v) for v, _, _ in ln),
+                      tuple(float(v) for _, v, _ in ln), tuple(int(h) for _, _, h in ln),
+                      float(np.median(seen)) if seen else float("nan"))
+
+
+DIAL_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class LineDial:
+    """Lines of one image that meet at a point (a graduated dial) measured as one.
+
+    Centre: the point P minimising chi2_c = sum((n_i . P - d_i)^2 / s_i^2) (n_i, d_i each
+    line's normal and offset; s_i^2 = u(d_i)^2 + (r_i u(a_i))^2, r_i the distance from P to
+    its middle), on n - 2 dof. Directions: each line's angle a_i turned to point away from P,
+    theta_i [rad, from +x towards -y], ordered round P; steps k_i = round((theta_i -
+    theta_0) / g_min); theta_i = theta_0 + increment k_i by weighted least squares (w_i =
+    1 / u(a_i)^2, each line's own u without the lens's share); chi2 of the residuals on n - 2
+    dof says whether the graduation is uniform within the lines' u; u(increment) is widened
+    by sqrt(chi2/dof) when chi2 is significant.
+
+    Attributes
+    ----------
+    members : tuple of int
+        Mark indices, ordered round the centre — dimensionless.
+    centre_px, centre_u_px : (float, float)
+        P (x, y) [px, relative to the image centre, x right, y down] and its u [px].
+    centre_chi2, centre_dof, centre_p : float, int, float
+        chi2_c, n - 2, its upper-tail probability (lines that miss one point: p small) —
+        dimensionless.
+    increment_rad, increment_u_rad : float
+        Angle between neighbouring graduations [rad] and its u [rad].
+    steps : tuple of int
+        Each member's step k_i round the dial — dimensionless.
+    residuals_rad : tuple of float
+        theta_i minus the uniform graduation's [rad].
+    spread_rad : float
+        RMS of the residuals [rad] (the graduation's non-uniformity, as imaged).
+    chi2, dof, p_value : float, int, float
+        The residuals' chi2, n - 2, upper-tail probability — dimensionless.
+    lens : str
+        As :attr:`LineFamily.lens` (the lens's share is not in these u: see the docs);
+        unit —.
+    """
+
+    members: tuple[int, ...]
+    centre_px: tuple[float, float]
+    centre_u_px: tuple[float, float]
+    centre_chi2: float
+    centre_dof: int
+    centre_p: float
+    increment_rad: float
+    increment_u_rad: float
+    steps: tuple[int, ...]
+    residuals_rad: tuple[float, ...]
+    spread_rad: float
+    chi2: float
+    dof: int
+    p_value: float
+    lens: str = "none"
+
+    @property
+    def chi2_dof(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    def uniform(self, alpha: float = 1e-3) -> bool:
+        """Whether the lines meet at one point and are evenly spaced within their u."""
+        return bool(self.p_value >= alpha and self.centre_p >= alpha)
+
+    def to_dict(self) -> dict:
+        """The ``dial`` block of a member's entry in ``align marks --json``."""
+        arc = float(np.rad2deg(1) * 3600)
+        return {"format_version": DIAL_FORMAT_VERSION, "members": list(self.members),
+                "lines": len(self.members), "centre_px": list(self.centre_px),
+                "centre_u_px": list(self.centre_u_px), "centre_chi2": self.centre_chi2,
+                "centre_dof": self.centre_dof, "centre_p": self.centre_p,
+                "increment_rad": self.increment_rad, "increment_u_rad": self.increment_u_rad,
+                "increment_deg": float(np.rad2deg(self.increment_rad)),
+                "increment_u_arcsec": self.increment_u_rad * arc, "steps": list(self.steps),
+                "residuals_rad": list(self.residuals_rad), "spread_rad": self.spread_rad,
+                "spread_arcsec": self.spread_rad * arc, "chi2": self.chi2, "dof": self.dof,
+                "chi2_dof": self.chi2_dof, "p_value": self.p_value, "lens": self.lens}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> LineDial:
+        """From :meth:`to_dict`'s keys; a newer format version is refused."""
+        if int(d.get("format_version", 1)) > DIAL_FORMAT_VERSION:
+            raise ValueError(f"dial block format_version {d['format_version']}: newer than "
+                             f"this tool reads ({DIAL_FORMAT_VERSION})")
+        f = float
+        return cls(tuple(int(i) for i in d["members"]),
+                   (f(d["centre_px"][0]), f(d["centre_px"][1])),
+                   (f(d["centre_u_px"][0]), f(d["centre_u_px"][1])), f(d["centre_chi2"]),
+                   int(d["centre_dof"]), f(d["centre_p"]), f(d["increment_rad"]),
+                   f(d["increment_u_rad"]), tuple(int(k) for k in d["steps"]),
+                   tuple(f(v) for v in d["residuals_rad"]), f(d["spread_rad"]),
+                   f(d["chi2"]), int(d["dof"]), f(d["p_value"]), str(d.get("lens", "none")))
+
+    def summary(self) -> str:
+        """One line for the terminal."""
+        arc = float(np.rad2deg(1) * 3600)
+        s = (f"dial of {len(self.members)} lines: centre ({self.centre_px[0]:+.2f}, "
+             f"{self.centre_px[1]:+.2f}) ± ({self.centre_u_px[0]:.2f}, "
+             f"{self.centre_u_px[1]:.2f}) px from the image centre (p {self.centre_p:.2g}), "
+             f"increment {np.rad2deg(self.increment_rad):.5f}° ± "
+             f"{self.increment_u_rad * arc:.1f}″, chi2/dof {self.chi2_dof:.2f} "
+             f"(p {self.p_value:.2g}), spread {self.spread_rad * arc:.1f}″, lens: {self.lens}")
+        if not self.uniform():
+            s += "; NOT UNIFORM"
+        return s
+
+
+def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
+              offsets: np.ndarray, offset_u: np.ndarray, middles: np.ndarray,
+              lens: str = "none", alpha: float = 1e-3) -> LineDial:
+    """The dial of lines with these angles [rad] (own u [rad]), offsets from the image
+    centre along their normals [px] (u [px]) and middles (N, 2) [px]; formulas in
+    :class:`LineDial`."""
+    a = np.asarray(angles, float)
+    au = np.asarray(angle_u, float)
+    d = np.asarray(offsets, float)
+    du = np.asarray(offset_u, float)
+    mid = np.asarray(middles, float)
+    n = np.column_stack([np.sin(a), np.cos(a)])
+    p = np.zeros(2)
+    for _ in range(4):
+        r = np.hypot(*(mid - p).T)
+        s2 = du**2 + (r * au) ** 2
+        A = (n / s2[:, None]).T @ n
+        p = np.linalg.solve(A, (n / s2[:, None]).T @ d)
+    cov = np.linalg.inv(A)
+    res_c = n @ p - d
+    m = len(a)
+    c_chi2 = float(np.sum(res_c**2 / s2))
+    c_dof = m - 2
+    c_p = float(special.chdtrc(c_dof, c_chi2)) if c_dof > 0 else 1.0
+    # Each line's direction away from the centre (display angles: +x towards -y).
+    out = np.arctan2(-(mid[:, 1] - p[1]), mid[:, 0] - p[0])
+    th = a + np.pi * (np.cos(a - out) < 0)
+    order = np.argsort(np.mod(th - th[0], 2 * np.pi))
+    th, w_u = np.unwrap(th[order]), au[order]
+    th = th - 2 * np.pi * np.floor((th[0] + np.pi) / (2 * np.pi))
+    gaps = np.diff(th)
+    g0 = float(np.min(gaps)) if gaps.size else float("nan")
+    k = np.rint((th - th[0]) / g0)
+    w = 1 / w_u**2
+    X = np.column_stack([np.ones(m), k])
+    C = np.linalg.inv((X * w[:, None]).T @ X)
+    beta = C @ ((X * w[:, None]).T @ th)
+    res = th - X @ beta
+    dof = m - 2
+    chi2 = float(np.sum(w * res**2))
+    pv = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
+    inc_u = float(np.sqrt(C[1, 1]))
+    if pv < alpha:
+        inc_u *= float(np.sqrt(chi2 / dof))
+    return LineDial(tuple(int(indices[i]) for i in order), (float(p[0]), float(p[1])),
+                    (float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))), c_chi2, c_dof, c_p,
+                    float(beta[1]), inc_u, tuple(int(v) for v in k),
+                    tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), chi2, dof,
+                    pv, lens)

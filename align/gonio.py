@@ -1,21 +1,12 @@
-"""The residual loop over the goniometer log, at the level where the effects show.
+"""The goniometer pipeline for one counter log (or two, one per direction): ``measure_log``.
 
-Observations: the counts of each whole revolution, N_r [ring-laser periods]. Declared model:
-a constant N (the closure normalisation assumes each revolution is exactly 360 deg of the
-table). Candidates (need pulse times):
-
-* ``earth_rate`` — the ring laser counts inertial rotation, so N_r = K (1 + Omega_v T_r / 2 pi)
-  with Omega_v = d Omega_E sin(latitude): when the table's period T_r wanders, N_r follows
-  it. Its estimate gives Omega_v [rad/s] (and the latitude); the counts are then corrected
-  interval by interval, which removes the bias an unsteady table leaves in the face angles.
-* ``scale_drift`` — the ring laser's scale factor drifting in time: N_r trends with t.
-
-Why not per interval: an interval's duration carries the autocollimator's timing jitter,
-which is also in its count, so any duration regressor there finds the jitter, not the Earth.
-A speed ripple locked to the table angle gives the same Earth-rate bias in every revolution:
-no residual shows it, which is why the latitude (``--latitude``) is the first-class input
-and this loop the fallback. A once-per-revolution error locked to the table is likewise
-absorbed by the face angles (only a reversal on the table separates it).
+One streaming pass (:func:`goniometry.read_revolutions`) gives the revolutions' statistics;
+the Earth's rotation is then removed from the latitude when given, else by the
+revolution-level loop (:mod:`align.gonio_loop`) when the log shows it, else bounded over the
+latitudes in u. A log of the other direction is combined by the plain mean
+(:mod:`align.gonio_directions`); the pulse times may replace the counts on a steady table and
+a latency bias is warned of (:mod:`align.gonio_timing`). The result, :class:`GonioRun`, owns
+its JSON form.
 """
 
 from __future__ import annotations
@@ -24,13 +15,20 @@ import logging
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from align.errors import InputError
+from align.gonio_directions import (
+    DirectionTerm,
+    check_reversed,
+    combine_directions,
+    direction_effect,
+)
+from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
+from align.gonio_timing import LATENCY, with_timing
 from axisbase.units import ARCSEC
 from goniometry import (
     FaceAngles,
@@ -41,174 +39,14 @@ from goniometry import (
     vertical_earth_rate,
 )
 from goniometry.angles import OMEGA_EARTH
-from goniometry.timing import TimingAngles, timing_angles
+from goniometry.timing import TimingAngles
 
 if TYPE_CHECKING:
-    from align.loop import Candidate, LoopReport, StageFit, Term
+    from align.loop import LoopReport
 
 log = logging.getLogger("align.gonio")
 
-EARTH = "earth_rate"
 LOOP_REVOLUTIONS = 20000
-SCALE = "scale_drift"
-
-
-def quantisation_pattern(N: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """The counter's own pattern in counts per revolution, and its fraction of agreement.
-
-    With the ring-laser phase at reference pulse r being phi0 + r F (a steady table: F counts
-    per revolution, not an integer), N_r = floor(phi0 + (r + 1) F) - floor(phi0 + r F): the
-    floor or the ceiling of F in a deterministic beat that the structure tests rightly see as
-    non-random. (phi0, frac F) are found by a coarse-to-fine search over growing prefixes of
-    the log (each step keeps the phase error over its span below 0.1 count), the jitter's blur
-    of each floor by a search over its width. Returns the expected N_r, the fraction of
-    revolutions the sharp pattern predicts exactly, and frac F. With a wandering table the
-    pattern dithers and the agreement falls to chance.
-    """
-    F = float(np.mean(N))
-    base = np.floor(F)
-    b = N - base
-    rr = (r - r[0]).astype(float)
-    phis = (np.arange(200) + 0.5) / 200
-    lo, hi = F - base - 0.1, F - base + 0.1
-    best = (0.0, F - base)
-    n_use = 64
-    while True:
-        n_use = min(n_use, len(b))
-        x, y = rr[:n_use], b[:n_use]
-        step = 0.1 / (x[-1] + 1)
-        fs = np.arange(lo, hi + step, step)
-        score = np.empty((len(fs), len(phis)))
-        for i, f in enumerate(fs):
-            pred = (phis[:, None] + x[None, :] * f) % 1.0 >= 1.0 - (f % 1.0)
-            score[i] = (pred == (y[None, :] >= 1)).sum(1)
-        i, j = np.unravel_index(int(np.argmax(score)), score.shape)
-        best = (phis[j] % 1.0, fs[i])
-        if n_use == len(b):
-            break
-        lo, hi = fs[i] - 3 * step, fs[i] + 3 * step
-        # The phase is known to ~1/n_use after a stage: the next searches only near it
-        # (the whole 200-point grid at every stage cost 5 s at 25000 revolutions).
-        phis = phis[j] + np.arange(-6, 7) * 0.005
-        n_use *= 4
-    phi, f = best
-    a, b_ = phi + rr * f, phi + (rr + 1) * f
-    hard = base + np.floor(b_) - np.floor(a)
-    # The autocollimator's jitter (sigma, in counts) blurs each floor near its step: the
-    # expected floor(x + e) is floor(x) + Phi((frac x - 1) / sigma) - Phi(-frac x / sigma).
-    # sigma by a 1-D search on the residual.
-    from scipy.special import ndtr  # (the normal CDF; scipy.stats costs 0.8 s to import)
-
-    def soft(sig: float) -> np.ndarray:
-        def h(x: np.ndarray) -> np.ndarray:
-            fr = x % 1.0
-            return ndtr((fr - 1) / sig) - ndtr(-fr / sig)
-        return hard + h(b_) - h(a)
-
-    sigmas = np.geomspace(0.005, 0.5, 24)
-    rss = [float(np.sum((N - soft(sg)) ** 2)) for sg in sigmas]
-    pred = soft(float(sigmas[int(np.argmin(rss))]))
-    return pred, float(np.mean(hard == N)), float(f % 1.0)
-
-
-class RevolutionStage:
-    """N_r = N0 + c * (the counter's quantisation pattern) + sum of effect columns, least
-    squares (noise unknown: F-tests). The pattern is part of the declared model: it is how a
-    counter of a steadily advancing phase behaves, not an effect."""
-
-    def __init__(self, counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray):
-        ok = np.all(np.isfinite(dt), axis=1)
-        N = counts[ok].sum(1)
-        T = dt[ok].sum(1)
-        # The period regressor must not share a pulse with the revolution it explains: the
-        # reference pulses' jitter moves N_r and T_r together (slope omega, not the Earth's
-        # rate). Revolutions r-2 and r+2 share none; the wander is slow enough to follow.
-        # Every other revolution: consecutive ones share a reference pulse, whose quantisation
-        # and jitter make their counts anti-correlated (lag-1 r = -0.3 to -0.5) by
-        # construction, which is not an effect.
-        self.N = N[2:-2:2]
-        self.T = ((T[:-4] + T[4:]) / 2)[::2]
-        self.t = (t_end[ok] - T / 2)[2:-2:2]
-        self.K = float(self.N.mean()) if len(self.N) else 0.0
-        self.regs = {"t": self.t, "period": self.T}
-        self.pattern = None
-        if len(self.N) >= 32:
-            # Revolution numbers from the times: excluded revolutions leave gaps in the phase.
-            Tm = float(np.median(T))
-            r_all = np.round((t_end[ok] - t_end[ok][0]) / Tm).astype(np.int64)
-            pred, agree, _ = quantisation_pattern(self.N, r_all[2:-2:2])
-            if np.ptp(pred) > 0:
-                self.pattern, self.pattern_agreement = pred - pred.mean(), agree
-
-    def fit(self, terms: Sequence[Term]) -> StageFit:
-        from align.loop import StageFit
-
-        y = self.N - self.K
-        base = [np.ones_like(y)] + ([self.pattern] if self.pattern is not None else [])
-        cols = base + [np.asarray(t.columns, float).ravel() for t in terms]
-        A = np.column_stack(cols)
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        r = y - A @ coef
-        dof = max(len(y) - A.shape[1], 1)
-        cov = np.linalg.pinv(A.T @ A) * (r @ r / dof)
-        eff = {}
-        for j, t in enumerate(terms, start=len(base)):
-            # Slope of counts per revolution -> the physical rate (divide by K / 2 pi).
-            eff[t.name] = (float(coef[j] * 2 * np.pi / self.K),
-                           float(np.sqrt(cov[j, j]) * 2 * np.pi / self.K))
-        return StageFit(r, None, A.shape[1], self.regs, "t", eff,
-                        {"counts_per_rev": (float(self.K + coef[0]), float(np.sqrt(cov[0, 0])))})
-
-
-def candidates(stage: RevolutionStage) -> tuple[Candidate, ...]:
-    from align.loop import Candidate, Term
-
-    T = stage.T - stage.T.mean()
-    t = stage.t - stage.t.mean()
-    return (
-        Candidate(EARTH, "rad/s", "Earth's rotation: counts per revolution follow its period",
-                  lambda fit: Term(EARTH, "rad/s", T[:, None]) if np.ptp(T) > 0 else None),
-        Candidate(SCALE, "1/s", "ring-laser scale factor drifting in time",
-                  lambda fit: Term(SCALE, "1/s", t[:, None]) if np.ptp(t) > 0 else None),
-    )
-
-
-def loop_gonio(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray,
-               alpha: float = 1e-3) -> LoopReport:
-    from align.loop import run_loop
-
-    stage = RevolutionStage(counts, dt, t_end)
-    return run_loop(stage, candidates(stage), alpha=alpha)
-
-
-def plausible_earth_rate(rate: float, u: float) -> bool:
-    """Whether a fitted vertical rate can be the Earth's (|rate| <= Omega_E within 3 u)."""
-    return abs(rate) <= OMEGA_EARTH + 3 * u
-
-
-def latitude_from_earth_rate(rate: float, u: float, direction: int) -> tuple[float, float]:
-    """Latitude [rad] and its u implied by a fitted vertical Earth rate [rad/s]."""
-    s = np.clip(rate / (direction * OMEGA_EARTH), -1, 1)
-    lat = float(np.arcsin(s))
-    return lat, float(u / OMEGA_EARTH / max(np.cos(lat), 1e-6))
-
-
-@dataclass(frozen=True)
-class DirectionTerm:
-    """Half the difference between the counter-clockwise and clockwise estimates of each angle
-    [rad] (ccw order) with its covariance: what flips with the direction — autocollimator
-    latency times a speed change locked to the table, an Earth rate not removed — and which
-    the mean of the two directions cancels. chi2 over n - 1 dof (closure) and its p-value."""
-
-    half_difference_rad: np.ndarray
-    cov: np.ndarray
-    chi2: float
-    dof: int
-    p_value: float
-
-    @property
-    def u_rad(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.cov))
 
 
 @dataclass(frozen=True)
@@ -273,65 +111,6 @@ class GonioRun:
         return js
 
 
-def combine_directions(fwd: FaceAngles, rev: FaceAngles) -> tuple[FaceAngles, DirectionTerm]:
-    """Mean of a run and a run in the other direction, angles in the first run's order.
-
-    The other direction brings the faces in reverse order (0, n-1, ..., 1): its angle m is the
-    first run's angle n-1-m. Equal weights on purpose: only the plain mean cancels what flips
-    sign with the direction.
-    """
-    n = len(fwd.angles_rad)
-    if len(rev.angles_rad) != n:
-        raise InputError(f"the two directions have {n} and {len(rev.angles_rad)} faces")
-    P = np.eye(n)[::-1]
-    a_rev = P @ rev.angles_rad
-    c_rev = P @ rev.cov @ P.T
-    mean = (fwd.angles_rad + a_rev) / 2
-    cov = (fwd.cov + c_rev) / 4
-    half = (fwd.angles_rad - a_rev) / 2
-    chi2 = float(half @ np.linalg.pinv(cov, rcond=1e-10) @ half)
-    from scipy.special import chdtrc  # (the chi2 survival function)
-
-    term = DirectionTerm(half, cov, chi2, n - 1, float(chdtrc(n - 1, chi2)))
-    comb = replace(
-        fwd, angles_rad=mean, u_rad=np.sqrt(np.diag(cov)), cov=cov,
-        u_type_a_rad=np.sqrt(fwd.u_type_a_rad**2 + (P @ rev.u_type_a_rad) ** 2) / 2,
-        u_type_b_rad=np.sqrt(fwd.u_type_b_rad**2 + (P @ rev.u_type_b_rad) ** 2) / 2,
-        revolutions=fwd.revolutions + rev.revolutions,
-        quantisation_locked=fwd.quantisation_locked & (P @ rev.quantisation_locked > 0))
-    return comb, term
-
-
-DIRECTION_LIMIT_ARCSEC = 10.0
-"""The largest direction-dependent part of a face angle a real reversal leaves [″]. What
-flips with the direction — the autocollimator's latency times the change of the table's
-speed between faces (5 µs x a 2 % ripple at 1 rev/s: 0.13″), a tilted detector slit over
-pyramidal errors (10″ x tan 1°: 0.17″) — stays under a second of arc; a 'reverse' log whose
-reversed angles differ from the forward run's by more is not the other direction of the same
-faces (the same direction read reversed differs by the faces' deviations from equal spacing:
-arc-minutes)."""
-
-
-def check_reversed(fwd: FaceAngles, rev: FaceAngles, term: DirectionTerm, path,
-                   reverse_log, alpha: float) -> None:
-    """Refuse a reverse log that is not the forward run's faces turning the other way (its
-    direction-dependent part far beyond what a reversal leaves: see
-    ``DIRECTION_LIMIT_ARCSEC``), saying whether it matches the forward run unreversed."""
-    worst = float(np.max(np.abs(term.half_difference_rad))) / ARCSEC
-    if worst <= DIRECTION_LIMIT_ARCSEC or term.p_value >= alpha:
-        return
-    same = float(np.max(np.abs(fwd.angles_rad - rev.angles_rad))) / ARCSEC
-    why = (f"its angles read unreversed match {Path(path).name}'s within {same:.2g}″: the "
-           "table turned the same way in both runs" if same <= DIRECTION_LIMIT_ARCSEC else
-           "nor do they match it unreversed (another table, or other faces)")
-    raise InputError(
-        f"--reverse-log {reverse_log}: reversed, its face angles differ from {path}'s by up to "
-        f"{2 * worst:.3g}″ (direction-dependent part {worst:.3g}″, beyond the "
-        f"{DIRECTION_LIMIT_ARCSEC:g}″ a latency or a slit tilt leaves) — it is not a run in "
-        f"the other direction; {why}. Measure each log alone, or give a log of the table "
-        "turning the other way")
-
-
 def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
                      direction: int) -> tuple[float, float]:
     """Mid-point and half-range [rad/s] of the vertical Earth rate over a latitude range
@@ -361,9 +140,45 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     the table turns at constant speed within a revolution; the angles then come from the
     pulse times (:mod:`goniometry.timing`, jitter-limited) when the counts confirm it and the
     timing estimate is the more precise one; otherwise the counts are used and the reason is
-    noted. ``columns``: header names of the log's columns (``--columns``), for both logs.
+    noted.
 
-    Raises ``LogError`` / ``ValueError`` on logs that cannot be used.
+    Parameters
+    ----------
+    path : str or Path
+        The counter log.
+    n_faces : int
+        Faces of the housing (pulses per revolution).
+    latitude_deg : float, optional
+        Latitude of the table [deg] (the Earth rate then comes from it).
+    direction : int
+        +1: the table turns counter-clockwise seen from above; -1: clockwise.
+    alpha : float
+        Significance level of the loop's and the consistency checks' tests.
+    reverse_log : str or Path, optional
+        A log of the same faces with the table turning the other way.
+    apply_loop : bool
+        Apply the Earth rate the loop finds (False for each direction of a pair).
+    steady_table : bool
+        The user asserts a constant speed within a revolution (pulse-time angles).
+    columns : mapping of str to str, optional
+        Header names of the log's columns (``--columns``), for both logs.
+    latitude_range_deg : tuple of float, optional
+        Latitudes [deg] the Earth rate's bound is taken over when it is not determined.
+    on_bytes : callable, optional
+        Called with about how many bytes each chunk held (a progress bar).
+
+    Returns
+    -------
+    GonioRun
+        The summary of the pass, the face angles [rad] with u and covariance, the loop's
+        report and the notes and warnings for the user.
+
+    Raises
+    ------
+    LogError
+        A log that cannot be used (naming the file and line).
+    InputError
+        A reverse log that is not the other direction of the same faces.
 
     Examples
     --------
@@ -439,19 +254,19 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                      "pulse to the first complete revolution, are not used")
     if latitude_deg is not None and summary.has_time:
         rate = vertical_earth_rate(latitude_deg, direction)
-        return _with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
+        return with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
                                      rate), steady_table, alpha)
     if latitude_deg is not None:
         why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
                "pulse times; NOT applied (nor can a table speed that follows its angle be "
                "seen, which with autocollimator latency biases one direction: measure both)")
         notes.append(why)
-        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None,
+        return with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None,
                                      warnings=(why,)), steady_table, alpha)
     if not summary.has_time:
         notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
                      "nor bounded without pulse times; the angles assume a steady table")
-        return _with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+        return with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
                             steady_table, alpha)
     # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
     # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time), started by
@@ -472,7 +287,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     elif earth and not apply_loop:
         notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s), "
                      "not applied: the other direction cancels it")
-        return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
+        return with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
     elif earth and loop.unexplained_structure:
         notes.append(f"Earth rate seen ({earth[0].estimate:.3g} ± {earth[0].u:.2g} rad/s) but "
@@ -483,10 +298,10 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         lat, ulat = latitude_from_earth_rate(rate, rate_u, direction)
         notes.append(f"implied latitude {np.rad2deg(lat):.1f} ± {np.rad2deg(ulat):.1f}°; "
                      "its uncertainty is carried into the angles")
-        return _with_timing(GonioRun(summary, face_angles(summary, rate, rate_u), loop,
+        return with_timing(GonioRun(summary, face_angles(summary, rate, rate_u), loop,
                                      tuple(notes), rate), steady_table, alpha)
     if not apply_loop:
-        return _with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
+        return with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
     # Not determined by the log: its bound over the latitudes enters u (Type B), named.
     mid, half = earth_rate_range(latitude_range_deg, direction)
@@ -497,100 +312,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     worst = float(np.max(fa.type_b_terms[name])) * np.rad2deg(1) * 3600
     notes.append(f"Earth rate not determined by this log and no --latitude: its effect over "
                  f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
-    return _with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
+    return with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
-
-
-LATENCY = "one direction only, on a table whose speed varies with its angle"
-
-
-def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """Change of each angle [rad] per second of autocollimator latency, from the table's mean
-    speed at each face (the mean of the intervals either side of it, angle over duration):
-    a pulse late by L reads the face L * speed further on, so angle k moves by
-    L * (speed at face k+1 - speed at face k)."""
-    a = counts / counts.sum(1, keepdims=True) * 2 * np.pi
-    w = np.mean(a / dt, axis=0)  # mean speed over each interval [rad/s]
-    at_face = (np.roll(w, 1) + w) / 2  # face k: between interval k-1 and interval k
-    return np.roll(at_face, -1) - at_face
-
-
-def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
-    """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
-    from the count fractions): then any latency of the autocollimator biases one direction's
-    angles, which only the other direction cancels (--reverse-log); the log cannot tell the
-    latency. Stated per microsecond of it."""
-    if not run.summary.has_time or run.timing_used:
-        return run
-    counts, dt, _ = kept_table(run.summary)
-    ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
-    if ok.sum() < 16:
-        return run
-    ta = run.timing if run.timing is not None else timing_angles(run.summary)
-    if ta.p_value >= alpha or ta.stamp_limited:
-        return run
-    per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
-    arcsec = np.rad2deg(1) * 3600
-    why = (f"{LATENCY} (pulse-time and count fractions differ, p {ta.p_value:.2g}): each µs "
-           f"of autocollimator latency biases an angle by up to {per_us * arcsec:.3g}″ (u is "
-           f"{float(np.max(run.angles.u_rad)) * arcsec:.3g}″), and the log cannot tell the "
-           "latency; measure the other direction too (--reverse-log) to cancel it")
-    return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
-
-
-def _with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
-    """Replace the count angles by the timing angles when asked, confirmed and better; warn
-    of a latency bias the log cannot determine (see _latency_check)."""
-    return _latency_check(_timing_choice(run, steady_table, alpha), alpha)
-
-
-def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
-    if not steady_table:
-        return run
-    if not run.summary.has_time:
-        why = ("steady table asked, but the log has no t column (pulse times): the angles are "
-               "from the counts")
-        return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
-    ta = timing_angles(run.summary)
-    arcsec = np.rad2deg(1) * 3600
-    worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
-    if ta.p_value < alpha:
-        why = ("a speed ripple locked to the table" if not ta.stamp_limited else
-               f"time stamps too coarse ({ta.stamp_resolution_s:.2g} s, locked to the table's "
-               "period) or a speed ripple locked to the table")
-        note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
-                f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — "
-                f"{why}; counts used")
-        return replace(run, timing=ta, notes=(*run.notes, note))
-    if np.all(ta.u_rad >= run.angles.u_rad) and ta.stamp_limited:
-        note = (f"steady table confirmed, but the time stamps' resolution "
-                f"({ta.stamp_resolution_s:.2g} s) limits the pulse-time angles to "
-                f"±{float(np.max(ta.u_rad)) * arcsec:.3f}″: counts used")
-        return replace(run, timing=ta, notes=(*run.notes, note))
-    if np.all(ta.u_rad >= run.angles.u_rad):
-        note = ("steady table confirmed, but the pulse times are the noisier estimate (speed "
-                "wander within revolutions): counts used")
-        return replace(run, timing=ta, notes=(*run.notes, note))
-    fa = replace(run.angles, angles_rad=ta.angles_rad, u_rad=ta.u_rad, cov=ta.cov)
-    note = (f"angles from pulse times (steady table, confirmed by the counts to "
-            f"±{float(np.max(ta.diff_u_rad)) * arcsec:.3f}″ per angle, chi2 {ta.chi2:.1f} / "
-            f"{ta.dof}); a locked ripple below that is not excluded")
-    return replace(run, angles=fa, timing=ta, timing_used=True, notes=(*run.notes, note))
-
-
-def direction_effect(term: DirectionTerm, faces: Sequence[str]) -> dict:
-    """The direction-dependent term as an entry of the JSON ``effects`` list: per angle the
-    half difference ccw - cw [rad]; the most significant one is the estimate; after the mean
-    of both directions it is cancelled (rms_after 0)."""
-    n = len(faces)
-    k = int(np.argmax(np.abs(term.half_difference_rad) / term.u_rad))
-    return {"name": "direction_dependent", "estimate": float(term.half_difference_rad[k]),
-            "u": float(term.u_rad[k]), "unit": "rad",
-            "rms_before": float(np.sqrt(np.mean(term.half_difference_rad**2))),
-            "rms_after": 0.0, "p_value": term.p_value, "chi2": term.chi2, "dof": term.dof,
-            "components": [{"axis": f"{faces[i]}->{faces[(i + 1) % n]}",
-                            "estimate": float(term.half_difference_rad[i]),
-                            "u": float(term.u_rad[i])} for i in range(n)]}
 
 
 # A housing's faces are made to arc-seconds or arc-minutes of their nominal angles; a

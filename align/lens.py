@@ -31,12 +31,13 @@ and the lines only test it (see :func:`check_camera`).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.linalg import solve_triangular
-from scipy.stats import chi2, norm
 
 from axisbase.errors import InputError, NotApplicable
 from imaging import fit_line, line_frame
@@ -226,6 +227,9 @@ class LensSolution:
         χ² of the marks' bows about the lens — dimensionless.
     bow_dof : int
         Its degrees of freedom — dimensionless.
+    bent_lines : tuple of int
+        The line whose bow no lens the other lines agree on explains (left out of the fit,
+        a bent mark) — dimensionless.
     """
 
     lam: np.ndarray
@@ -242,6 +246,7 @@ class LensSolution:
     confirmed: bool = True
     bow_chi2: float = 0.0
     bow_dof: int = 0
+    bent_lines: tuple[int, ...] = ()
 
     def to_dict(self) -> dict:
         def num(v: float) -> float | None:
@@ -250,6 +255,7 @@ class LensSolution:
         return {"model": "brown-conrady at the half-diagonal", "lines": self.n_lines,
                 "confirmed_by_other_lines": self.confirmed,
                 "bow_chi2": float(self.bow_chi2), "bow_dof": self.bow_dof,
+                "bent_lines": list(self.bent_lines),
                 "chi2_dof": num(self.chi2_dof), "ranges": self.ranges.to_dict(),
                 "parameters": {p: {"determined": self.determined[j],
                                    "applied": self.applied[j], "value": float(self.lam[j]),
@@ -286,8 +292,56 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
 
     Returns the solution and each mark's design at the applied lens (angle sensitivities).
+
+    A bow is a lens only if the other lines agree. When no plausible lens explains all the
+    lines' bows (:func:`_plausible`) but one fits all the others, the line left out is a
+    bent mark: the lens comes from the others (its own loop then names the bend), rather
+    than one bent mark dragging the camera's lens beyond any lens and every angle with it.
     """
-    z = float(norm.isf(alpha / 2))
+    sol, designs = _solve(lines, scale, ranges, alpha, iters)
+    if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
+        return sol, designs
+    best: tuple[float, int, LensSolution] | None = None
+    for k in range(len(lines)):
+        rest = [ln for i, ln in enumerate(lines) if i != k]
+        try:
+            sk, dk = _solve(rest, scale, ranges, alpha, iters)
+        except LensFolds:
+            continue
+        p = _plausible(sk, dk, alpha)
+        if p >= alpha and (best is None or p > best[0]):
+            best = (p, k, sk)
+    if best is None:
+        return sol, designs
+    _, k, sk = best
+    cache = _DesignCache(lines, scale)
+    try:
+        ds = cache.all(sk.lam)
+    except LensFolds:
+        return sol, designs
+    det = [j for j in range(len(PARAMS)) if sk.determined[j]]
+    probes = _pp_probe_s(cache, sk.lam, det, ranges.vector())
+    note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
+            f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
+            "bent mark, left out of the lens")
+    sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
+    return sk, [replace(d, s_probe=sp) for d, sp in zip(ds, probes, strict=True)]
+
+
+def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> float:
+    """p-value of the lines' bows left once the applied lens and every other parameter within
+    its plausible range explain what they can (1 with no line to spare)."""
+    rng = sol.ranges.vector()
+    others = [j for j in range(len(PARAMS)) if not sol.applied[j] and rng[j] > 0]
+    bz = _bows_left(designs, others, rng)
+    dof = len(bz) - sum(sol.applied)
+    return float(special.chdtrc(dof, float(bz @ bz))) if dof > 0 else 1.0
+
+
+def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alpha: float,
+           iters: int) -> tuple[LensSolution, list[_Design]]:
+    """:func:`solve_lens` over all of ``lines``."""
+    z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
     lam = np.zeros(P)
@@ -300,27 +354,9 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     u_lines = np.full(P, np.inf)
     applied = list(det)
     spread, spread_for = np.zeros(P), list(applied)
+    fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
-        lam = np.zeros(P)
-        for _ in range(iters):
-            if not applied:
-                break
-            try:
-                designs = cache.all(lam)
-            except LensFolds:
-                break  # folds: refused below
-            F = sum(d.G.T @ d.G for d in designs)
-            b = sum(d.G.T @ d.z for d in designs)
-            A = np.ix_(applied, applied)
-            step = -np.linalg.solve(F[A], b[applied])
-            trial = lam.copy()
-            trial[applied] += step
-            if np.any(np.abs(trial[applied]) > 2 * rng[applied]):
-                lam = trial  # beyond any lens: refused below
-                break
-            lam = trial
-            if np.all(np.abs(step) < 1e-3 * rng[applied]):
-                break
+        lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters)
         try:
             designs = cache.all(lam)
         except LensFolds:  # the estimate folds the image: no lens, refused below
@@ -343,6 +379,21 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         applied = keep
     lam_out = np.zeros(P)
     lam_out[applied] = lam[applied]
+    needed = _needed(cache, lam_out, applied, det, fits, est, rng, alpha)
+    if needed is not None:
+        # The lines determine these parameters and need them: without them their bows
+        # disagree with one lens, with them they agree. Only the principal point's range
+        # (carried in u below) left their sign open: a lens the lines call for is applied,
+        # and only what no lens explains is a bend.
+        lam_out, chi_without, chi_with = needed
+        added = [j for j in det if lam_out[j] and j not in applied]
+        notes.append(f"lens {', '.join(PARAMS[j] for j in added)} applied: the lines need "
+                     f"it (their bows without it chi2 {chi_without[0]:.1f} on "
+                     f"{chi_without[1]} dof, with it {chi_with[0]:.1f} on {chi_with[1]}), with "
+                     "the same sign wherever the principal point is in its range; that range "
+                     "is carried in u")
+        applied = sorted(applied + added)
+        spread_for = []
     if not applied:
         spread = np.zeros(P)
     elif spread_for != applied:  # the applied set changed after its last spread
@@ -366,14 +417,16 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             notes.append(f"lens {PARAMS[j]} = {e:.3g} ± {u_lines[j]:.2g} from the lines: {why}; "
                          "not applied, carried in u")
     # A bow is a lens only if the camera's other lines agree: the lines' bows left after the
-    # lens must be noise (chi2 over lines - fitted parameters). With no line to spare (one
-    # mark, or as many marks as parameters) a lens and a bent mark are the same bow.
-    bz = np.array([d.bow_z for d in designs])
+    # lens, and after what the undetermined parameters can make within their ranges, must
+    # be noise (chi2 over lines - fitted parameters). With no line to spare (one mark, or as
+    # many marks as parameters) a lens and a bent mark are the same bow.
+    undet = [j for j in range(P) if j not in det and rng[j] > 0]
+    bz = _bows_left(designs, undet, rng)
     bow_dof = len(lines) - len(applied)
     bow_chi2 = float(bz @ bz)
     confirmed = True
     if applied:
-        confirmed = bow_dof > 0 and chi2.sf(bow_chi2, bow_dof) >= alpha
+        confirmed = bow_dof > 0 and special.chdtrc(bow_dof, bow_chi2) >= alpha
         if bow_dof <= 0:
             notes.append(f"the bow of {len(lines)} line(s) fits {len(applied)} lens "
                          "parameter(s) with no line to spare: a lens and a bent mark are the "
@@ -393,6 +446,133 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
     return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+
+
+def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
+                  start: np.ndarray | None = None) -> np.ndarray:
+    """The lens vector fitting the parameters ``applied`` to the lines' bows (Gauss-Newton
+    from ``start``, zero by default, the other entries held there; stopped, and left for the
+    caller to refuse, running away beyond any range or where no step improves the fit)."""
+    lam = np.zeros(len(PARAMS)) if start is None else start.copy()
+    if not applied:
+        return lam
+    A = np.ix_(applied, applied)
+    try:
+        designs = cache.all(lam)
+    except LensFolds:
+        return lam
+    cost = sum(float(d.z @ d.z) for d in designs)
+    for _ in range(iters):
+        F = sum(d.G.T @ d.G for d in designs)
+        b = sum(d.G.T @ d.z for d in designs)
+        step = -np.linalg.solve(F[A], b[applied])
+        # The step linearised at zero overshoots a strong lens's higher terms (k2 -0.16
+        # for -0.04 after a k1 -0.17): halved until the lines fit better (and the lens
+        # does not fold), so that a lens is judged beyond its range only where the fit
+        # itself ends up there.
+        for _ in range(8):
+            trial = lam.copy()
+            trial[applied] += step
+            try:
+                t_designs = cache.all(trial)
+            except LensFolds:
+                step = step / 2
+                continue
+            t_cost = sum(float(d.z @ d.z) for d in t_designs)
+            if t_cost <= cost:
+                break
+            step = step / 2
+        else:
+            break  # no step improves: stay
+        lam, designs, cost = trial, t_designs, t_cost
+        if np.any(np.abs(lam[applied]) > 10 * rng[applied]):
+            break  # running away, beyond any lens: refused by the caller
+        if np.all(np.abs(step) < 1e-3 * rng[applied]):
+            break
+    return lam
+
+
+def _bows_left(designs: Sequence[_Design], undet: Sequence[int], rng: np.ndarray
+               ) -> np.ndarray:
+    """Each line's bow [its u] left once the undetermined parameters ``undet`` explain what
+    they can within their ranges: ridge least squares with each one's plausible range as
+    its prior standard deviation (so a bow they could make is not a disagreement, and one
+    beyond their reach stays). The parameters' bows are read in each line's own bow
+    direction (``w``); the ridge's prior term is spread over the lines, so the squared sum
+    is the penalised chi2."""
+    bz = np.array([d.bow_z for d in designs])
+    if not undet:
+        return bz
+    B = np.array([d.w @ d.G[:, undet] for d in designs])
+    prior = 1.0 / rng[list(undet)] ** 2
+    delta = np.linalg.solve(B.T @ B + np.diag(prior), B.T @ bz)
+    left = bz - B @ delta
+    pen = float(delta @ (prior * delta))
+    # Spread the prior's share over the lines (their sum of squares is the statistic).
+    return left * np.sqrt(1.0 + pen / max(float(left @ left), 1e-300))
+
+
+def _bow_test(cache: _DesignCache, lam: np.ndarray, k: int, undet: Sequence[int],
+              rng: np.ndarray) -> tuple[float, int] | None:
+    """The lines' bows left at ``lam`` (``k`` parameters fitted; ``undet`` as in
+    :func:`_bows_left`): (chi2, dof), None when the lens folds the image or no line is to
+    spare."""
+    try:
+        bz = _bows_left(cache.all(lam), undet, rng)
+    except LensFolds:
+        return None
+    dof = len(bz) - k
+    return (float(bz @ bz), dof) if dof > 0 else None
+
+
+def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
+            fits: Mapping[tuple[int, ...], np.ndarray], est: np.ndarray, rng: np.ndarray,
+            alpha: float) -> tuple[np.ndarray, tuple[float, int], tuple[float, int]] | None:
+    """The lens with more of the determined parameters, when the applied ones alone leave
+    the lines' bows disagreeing (chi2 test at ``alpha``) and the larger set explains them
+    within every parameter's range: the fewest added parameters that do, the best fit among
+    those. Returns (that lens, the bow test without, with); None otherwise."""
+    extra = [j for j in det if j not in applied]
+    if not extra:
+        return None
+    undet = [j for j in range(len(PARAMS)) if j not in det and rng[j] > 0]
+    without = _bow_test(cache, lam, len(applied), undet, rng)
+    if without is None or special.chdtrc(without[1], without[0]) >= alpha:
+        return None
+    for size in range(1, len(extra) + 1):
+        best = None
+        for add in itertools.combinations(extra, size):
+            full = sorted(applied + list(add))
+            lam_full = fits.get(tuple(full))
+            if lam_full is None:
+                lam_full = _gauss_newton(cache, full, rng, 5)
+            if not np.all(np.abs(lam_full[full]) <= rng[full]):
+                continue
+            out = np.zeros(len(PARAMS))
+            out[full] = lam_full[full]
+            with_ = _bow_test(cache, out, len(full), undet, rng)
+            if with_ is not None and special.chdtrc(with_[1], with_[0]) >= alpha and (
+                    best is None or with_[0] < best[2][0]) and _same_sign_over_pp(
+                    cache, out, full, det, undet, rng, alpha):
+                best = (out, without, with_)
+        if best is not None:
+            return best
+    return None
+
+
+def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], det: list[int],
+                       undet: list[int], rng: np.ndarray, alpha: float) -> bool:
+    """Whether no principal point in its range lets a lens with another sign of any of the
+    parameters ``full`` explain the lines: refitted with the principal point at each corner
+    of its range, every fit that explains the bows keeps the signs of ``lam``."""
+    for probe in _pp_probes(np.zeros(len(PARAMS)), det, rng):
+        lam_p = _gauss_newton(cache, full, rng, 8, start=probe)
+        if np.any(np.sign(lam_p[full]) != np.sign(lam[full])):
+            t = _bow_test(cache, lam_p, len(full), [j for j in undet if j not in (5, 6)], rng)
+            # (None: that lens folds the image, so it explains nothing)
+            if t is not None and special.chdtrc(t[1], t[0]) >= alpha:
+                return False
+    return True
 
 
 def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
@@ -482,10 +662,49 @@ def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
             # with the sign it has at the centre.
             seff = float(np.copysign(max(abs(seff), float(design.s_probe[j])), seff))
         if sol.determined[j]:
-            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
+            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
+            # is within the range.
+            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
             out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
         else:
             out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
+    return out
+
+
+def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
+    """The bow each lens parameter leaves on this line, per unit of it: the sagitta [px] of
+    the quadratic across the line over the centres' span (as the mark's loop measures a
+    bow: b (t - t_m)^2, sagitta b (span / 2)^2), after a straight line absorbed what it can.
+    ``lam``: the lens the centres are undistorted by (zeros: raw or already undistorted).
+    Non-finite where the lens folds."""
+    q, jac = undistortion_jacobian(line.points, lam, scale)
+    if not np.all(np.isfinite(jac)):
+        return np.full(len(PARAMS), np.inf)
+    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
+    u, n = line_frame(lf.angle_rad)
+    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]
+    t = q @ u
+    tm = (t.min() + t.max()) / 2
+    X = np.column_stack([t - tm, np.ones(len(t)), (t - tm) ** 2])
+    beta = np.linalg.lstsq(X, E, rcond=None)[0][2]
+    return beta * (np.ptp(t) / 2) ** 2
+
+
+def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
+    """How far each lens parameter may still be from the applied lens (per PARAMS, in its
+    unit): its plausible range when the lines leave it undetermined, |estimate| + z u when
+    determined but not applied, z u when applied."""
+    rng = sol.ranges.vector()
+    out = np.zeros(len(PARAMS))
+    for j in range(len(PARAMS)):
+        uj = sol.u_lines[j]
+        if sol.applied[j]:
+            out[j] = z * uj if np.isfinite(uj) else rng[j]
+        elif sol.determined[j]:
+            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
+            out[j] = min(abs(e) + z * uj, rng[j]) if np.isfinite(uj) else rng[j]
+        else:
+            out[j] = rng[j]
     return out
 
 
@@ -528,7 +747,7 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     """Whether the marks agree with a calibrated lens: the determined correction to the
     camera's lens from the lines, and its chi2 probability against the lines' u plus the
     camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
-    z = float(norm.isf(alpha / 2))
+    z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
     designs = [_design(ln, lam, scale) for ln in lines]
@@ -542,7 +761,7 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     dlam[det] = -np.linalg.solve(F[D], b[det])
     C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
-    return float(chi2.sf(stat, len(det))), dlam, designs
+    return float(special.chdtrc(len(det), stat)), dlam, designs
 
 
 def undistorted(line: LineGeometry, lam: np.ndarray, scale: float

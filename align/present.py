@@ -16,7 +16,7 @@ from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
 from align.session_json import LoadedSession
-from axisbase.table import OUTPUT_UNITS
+from axisbase.header import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
 # ----------------------------------------------------------------------------- imaging
@@ -38,6 +38,9 @@ def mark_lines(r) -> list[str]:
     fam = getattr(r, "family", None)
     if fam is not None and r.index == max(fam.members):  # once, after its last member
         lines.append(f"    {fam.summary()} (marks {', '.join(map(str, fam.members))})")
+    dial = getattr(r, "dial", None)
+    if dial is not None and r.index == max(dial.members):
+        lines.append(f"    {dial.summary()} (marks {', '.join(map(str, sorted(dial.members)))})")
     if r.lens and "parameters" in r.lens:
         par = r.lens["parameters"]
         fitted = [f"{k} {v['value']:+.4g}" for k, v in par.items() if v["applied"]]
@@ -50,6 +53,8 @@ def mark_lines(r) -> list[str]:
                                                        for k, v in big))
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
+    if r.bend_off_frame:
+        lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     return lines
 
 

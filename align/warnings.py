@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
 from axisbase.units import ARCSEC
-from goniometry.revolutions import R_TAIL
+from goniometry.exclusions import R_TAIL
 
 
 def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
@@ -45,6 +45,14 @@ def mark_warnings(results: Sequence) -> list[str]:
         if fam is not None and (r.image, fam.members[0]) not in seen:
             seen.add((r.image, fam.members[0]))
             out += family_warnings(r.image, fam)
+        dial = getattr(r, "dial", None)
+        if dial is not None and (r.image, dial.members[0]) not in seen:
+            seen.add((r.image, dial.members[0]))
+            if not dial.uniform():
+                out.append(f"{r.image}: dial of {len(dial.members)} lines: the lines do not "
+                           f"meet at one point (p {dial.centre_p:.2g}) or are not evenly "
+                           f"spaced (chi2/dof {dial.chi2_dof:.2f}, p {dial.p_value:.2g}) "
+                           "within their u; the increment's u is widened by sqrt(chi2/dof)")
         if not r.found:
             out.append(not_measured(r))
             continue
@@ -66,7 +74,7 @@ def family_warnings(image: str, fam) -> list[str]:
     if fam.deviant:
         out.append(f"{what}: mark(s) {', '.join(map(str, fam.deviant))} not parallel to the "
                    "others beyond their u (a tilted or bent line)")
-    if not fam.consistent():
+    if fam.p_value < 1e-3:  # the deviant members have their own line above
         out.append(f"{what}: angles disagree (chi2/dof {fam.chi2_dof:.2f}, p {fam.p_value:.2g})"
                    "; the family's angle u is widened by sqrt(chi2/dof)")
     if fam.failed:

@@ -15,8 +15,11 @@ from axisbase.version import __version__
 
 _LAZY = {
     "Column": "axisbase.table", "Table": "axisbase.table", "TableSpec": "axisbase.table",
-    "iter_table": "axisbase.table", "parse_column_map": "axisbase.table",
-    "read_table": "axisbase.table",
+    "iter_table": "axisbase.table", "read_table": "axisbase.table",
+    "rate_warning": "axisbase.table",
+    "OUTPUT_UNITS": "axisbase.header", "header_units": "axisbase.header",
+    "parse_column_map": "axisbase.header", "resolve_units": "axisbase.header",
+    "check_repeats": "axisbase.repeats",
     "OutputError": "axisbase.output", "OutputPlan": "axisbase.output",
     "OutputSet": "axisbase.output", "Stopped": "axisbase.stop",
     "dumps": "axisbase.output", "write_atomic": "axisbase.output",

@@ -72,7 +72,19 @@ def jsonable(obj: Any) -> Any:
 def dumps(data: Any) -> str:
     """The tool's one JSON encoder (strict: no NaN/Infinity tokens; see :func:`jsonable`),
     indented, UTF-8 text. orjson, not the standard library: with ``indent`` the stdlib falls
-    back to its pure-Python encoder, ~15x slower on a lot's or a session's result."""
+    back to its pure-Python encoder, ~15x slower on a lot's or a session's result.
+
+    Parameters
+    ----------
+    data : any
+        Dicts, lists, tuples, sets, strings, numbers (non-finite: null), numpy arrays and
+        scalars, paths (see :func:`jsonable`).
+
+    Returns
+    -------
+    str
+        The JSON text.
+    """
     import orjson
 
     return orjson.dumps(jsonable(data), option=orjson.OPT_INDENT_2).decode() + "\n"
@@ -95,8 +107,12 @@ def _same(a: Path, b: Path) -> bool:
 class OutputPlan:
     """The outputs of one command, checked before the computation starts.
 
-    ``inputs``: files the command reads (an output may never be one of them); ``force``:
-    existing outputs may be replaced.
+    Parameters
+    ----------
+    inputs : iterable of str or Path
+        Files the command reads (an output may never be one of them).
+    force : bool
+        Existing outputs may be replaced.
     """
 
     def __init__(self, inputs: Iterable[str | Path] = (), force: bool = False):
@@ -182,6 +198,25 @@ def write_atomic(path: str | Path, data: str | bytes, force: bool = False) -> Pa
     Without ``force`` the file is created exclusively: if ``path`` exists (or appeared since
     the outputs were checked) nothing is replaced and :class:`OutputError` is raised. ``path``
     ``-`` writes text to standard output.
+
+    Parameters
+    ----------
+    path : str or Path
+        Where (``-``: standard output).
+    data : str or bytes
+        The contents.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OutputError
+        The file exists (without ``force``) or cannot be written.
     """
     if str(path) == STDOUT:
         # A file format's bytes (UTF-8), whatever the console's encoding: through the
@@ -225,6 +260,11 @@ class OutputSet:
     back during the commit, while a temporary file is created and recorded, and while the
     temporary files are removed. Temporary files are removed by :meth:`discard` (``with`` does it),
     so a run that is stopped or fails leaves nothing behind.
+
+    Parameters
+    ----------
+    force : bool
+        Existing files may be replaced.
     """
 
     def __init__(self, force: bool = False):
@@ -334,7 +374,22 @@ def _umask() -> int:
 
 
 def write_json(path: str | Path, data: Any, force: bool = False) -> Path:
-    """Strict JSON (:func:`dumps`) written by :func:`write_atomic`."""
+    """Strict JSON (:func:`dumps`) written by :func:`write_atomic`.
+
+    Parameters
+    ----------
+    path : str or Path
+        Where (``-``: standard output).
+    data : any
+        What :func:`dumps` takes.
+    force : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     return write_atomic(path, dumps(data), force)
 
 

@@ -127,15 +127,48 @@ class Provenance:
 
 def provenance(settings: Mapping[str, Any] | None = None,
                inputs: Iterable[str | Path] = ()) -> Provenance:
-    """This run's :class:`Provenance` (tool, version, UTC time, command, settings, inputs)."""
+    """This run's provenance.
+
+    Parameters
+    ----------
+    settings : mapping, optional
+        The settings that shaped the result (α, seeds, flags), JSON values.
+    inputs : iterable of str or Path
+        Input files (hashed with SHA-256).
+
+    Returns
+    -------
+    Provenance
+        Tool, version, UTC time, command, settings, inputs.
+    """
     return Provenance.now(settings, inputs)
 
 
 def envelope(fmt: str, version: int, body: Mapping[str, Any],
              settings: Mapping[str, Any] | None = None,
              inputs: Iterable[str | Path] = (), prov: Provenance | None = None) -> dict:
-    """``{format, format_version, <provenance keys>, **body}``: a result ready to write.
-    ``prov``: a provenance already made for the same run (inputs are hashed once)."""
+    """A result ready to write: ``{format, format_version, <provenance keys>, **body}``.
+
+    Parameters
+    ----------
+    fmt : str
+        The format's name (``axis-align/gonio``).
+    version : int
+        Its version.
+    body : mapping
+        The result's own keys.
+    settings : mapping, optional
+        The settings that shaped the result.
+    inputs : iterable of str or Path
+        Input files (hashed).
+    prov : Provenance, optional
+        A provenance already made for the same run (inputs are hashed once).
+
+    Returns
+    -------
+    dict
+        The document.
+    """
     p = prov if prov is not None else Provenance.now(settings, inputs)
     clash = set(PROVENANCE_KEYS).intersection(body)
     if clash:   # a body key would silently replace a provenance fact
@@ -149,6 +182,29 @@ def check_format(d: Mapping[str, Any], fmt: str, readable: Iterable[int], where:
 
     Files written before versions existed carry no ``format_version``: they are version
     ``unversioned`` (None: refuse them).
+
+    Parameters
+    ----------
+    d : mapping
+        The document read.
+    fmt : str
+        The format expected.
+    readable : iterable of int
+        Versions this tool reads.
+    where : str
+        The file, for the message.
+    unversioned : int or None
+        The version of a file without ``format_version``.
+
+    Returns
+    -------
+    int
+        The version.
+
+    Raises
+    ------
+    InputError
+        Another format, or a version this tool cannot read.
     """
     readable = sorted(readable)
     got_fmt = d.get("format")

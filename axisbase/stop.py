@@ -20,8 +20,14 @@ from contextlib import contextmanager
 
 
 class Stopped(KeyboardInterrupt):
-    """The run was told to stop by signal ``signum`` (a KeyboardInterrupt, so that only code
-    that means to catch an interruption catches it)."""
+    """The run was told to stop by a signal (a KeyboardInterrupt, so that only code that
+    means to catch an interruption catches it).
+
+    Parameters
+    ----------
+    signum : int
+        The signal (SIGINT, SIGTERM); its name is the exception's message.
+    """
 
     def __init__(self, signum: int = signal.SIGINT):
         super().__init__(signal.Signals(signum).name)

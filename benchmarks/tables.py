@@ -21,7 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from align.calibration import STATIC  # noqa: E402
-from axisbase.table import check_repeats, read_table  # noqa: E402
+from axisbase.repeats import check_repeats  # noqa: E402
+from axisbase.table import read_table  # noqa: E402
 
 
 def best(fn, n: int = 3) -> float:

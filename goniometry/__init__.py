@@ -15,8 +15,9 @@ from goniometry.angles import (
     vertical_earth_rate,
 )
 from goniometry.errors import FaceCountError, LogError
+from goniometry.exclusions import Exclusions
 from goniometry.reader import Chunk, iter_log
-from goniometry.revolutions import Exclusions, LogSummary, read_revolutions
+from goniometry.revolutions import LogSummary, read_revolutions
 
 __all__ = [
     "Chunk", "Exclusions", "FaceAngles", "FaceCountError", "LogError", "LogSummary",

@@ -37,15 +37,37 @@ FIT_REVOLUTIONS = 512
 class FaceAngles:
     """Angles [rad] from face k to face k+1 in passing order (face 0: the reference).
 
-    ``angles_rad`` (n,): means over the revolutions; ``u_rad``: standard uncertainties [rad]
-    (Type A batch means, with the Type B terms in quadrature); ``cov`` (n, n) [rad^2] in the
-    same order; ``u_type_a_rad`` / ``u_type_b_rad``: the two parts; ``revolutions``: used;
-    ``counts_per_rev``: mean counts of a revolution; ``allan_tau_rev`` / ``allan_dev_rad``:
-    Allan deviation per angle; ``quantisation_locked`` (n,) bool; ``type_b_terms``: name ->
-    (n,) [rad], each effect the log cannot determine (or determines only to +-u) whose bound
-    enters u; ``type_a_method``: how the scatter part was evaluated ("phase path": the
-    quantisation and jitter along the log's own phase path, :mod:`goniometry.beat`; "batch
-    means"; "lag 1"); ``jitter_counts``: the autocollimator's jitter [counts] it used."""
+    Per revolution a_k = 2 pi c_k / sum(c) (closure-normalised); the fields are statistics
+    of a_k - rho g_k over the revolutions used (rho: the vertical rate removed).
+
+    Attributes
+    ----------
+    angles_rad : ndarray, shape (n,)
+        Means over the revolutions [rad].
+    u_rad : ndarray, shape (n,)
+        Standard uncertainties [rad]: Type A and the Type B terms in quadrature.
+    cov : ndarray, shape (n, n)
+        Covariance of the angles [rad^2], in the same order.
+    u_type_a_rad, u_type_b_rad : ndarray, shape (n,)
+        The two parts of ``u_rad`` [rad].
+    revolutions : int
+        Revolutions used.
+    counts_per_rev : float
+        Mean counts of a revolution [ring-laser periods].
+    allan_tau_rev, allan_dev_rad : ndarray
+        Allan deviation per angle [rad] at averaging lengths [revolutions].
+    quantisation_locked : ndarray of bool, shape (n,)
+        Angles whose quantisation phase is locked (per-revolution scatter below half of
+        q / sqrt(6)): it does not average, and q / sqrt(6) itself enters u.
+    type_b_terms : dict of str to ndarray
+        Name -> (n,) [rad]: each effect the log cannot determine (or determines only to
+        +-u) whose bound enters u.
+    type_a_method : str
+        How the scatter part was evaluated: "phase path" (the quantisation and jitter along
+        the log's own phase path, :mod:`goniometry.beat`), "batch means" or "lag 1".
+    jitter_counts : float
+        The autocollimator's jitter it used [counts].
+    """
 
     angles_rad: np.ndarray
     u_rad: np.ndarray
@@ -104,13 +126,27 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
 
     Parameters
     ----------
-    summary : the one pass over the log.
-    earth_rate : vertical rate [rad/s] removed from the counts (the Earth's, signed as the
-        ring laser sees it), applied through the accumulated sensitivities g (exact to 1e-9).
-    earth_rate_u : its standard uncertainty [rad/s], carried into the angles.
-    type_b : further rate terms not determined by the log, name -> half-range [rad/s] of the
+    summary : LogSummary
+        The one pass over the log (:func:`goniometry.read_revolutions`).
+    earth_rate : float
+        Vertical rate [rad/s] removed from the counts (the Earth's, signed as the ring laser
+        sees it), applied through the accumulated sensitivities g (exact to 1e-9).
+    earth_rate_u : float
+        Its standard uncertainty [rad/s], carried into the angles.
+    type_b : dict of str to float, optional
+        Further rate terms not determined by the log, name -> half-range [rad/s] of the
         rate (e.g. the Earth rate over all latitudes): each enters u as |mean g| times it,
         fully correlated between the angles.
+
+    Returns
+    -------
+    FaceAngles
+        Means, uncertainties [rad], covariance [rad^2] and Allan deviation.
+
+    Raises
+    ------
+    LogError
+        Fewer than 2 usable revolutions.
     """
     st = summary.stats
     if st.n < 2:
@@ -307,13 +343,40 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
 
 
 def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """The kept revolutions: counts (R, n), interval durations (R, n) [s], end times [s]."""
+    """The revolutions the pass kept whole (the first ``keep`` of them).
+
+    Parameters
+    ----------
+    summary : LogSummary
+        The one pass over the log.
+
+    Returns
+    -------
+    counts : ndarray, shape (R, n)
+        Counts of each face interval [ring-laser periods].
+    dt : ndarray, shape (R, n), or None
+        Interval durations [s] (None without times).
+    t_end : ndarray, shape (R,), or None
+        End time of each revolution [s] (None without times).
+    """
     return summary.stats.kept()
 
 
 def vertical_earth_rate(latitude_deg: float, direction: int) -> float:
-    """The Earth's rotation about the table axis as the ring laser sees it [rad/s]
-    (direction +1: counter-clockwise seen from above)."""
+    """The Earth's rotation about the table axis as the ring laser sees it.
+
+    Parameters
+    ----------
+    latitude_deg : float
+        Latitude of the table [deg] (the one degree input: it is what a user knows).
+    direction : int
+        +1: the table turns counter-clockwise seen from above; -1: clockwise.
+
+    Returns
+    -------
+    float
+        direction * Omega_E * sin(latitude) [rad/s].
+    """
     return direction * OMEGA_EARTH * np.sin(np.deg2rad(latitude_deg))
 
 
@@ -325,6 +388,20 @@ def earth_rate_counts(counts: np.ndarray, dt: np.ndarray, rate: float) -> np.nda
     revolution's own count rate: leaving that interval uncorrected would bias the first angle
     by the whole Earth share of one interval divided by the number of revolutions (~0.02″ over
     100 revolutions at 1 rev/s — seen as a 0.3 sigma offset of the reference face).
+
+    Parameters
+    ----------
+    counts : ndarray, shape (R, n)
+        Counts of each face interval [ring-laser periods].
+    dt : ndarray, shape (R, n)
+        Interval durations [s]; NaN where unknown.
+    rate : float
+        Vertical rate to remove [rad/s].
+
+    Returns
+    -------
+    ndarray, shape (R, n)
+        c - N rate dt / 2 pi [ring-laser periods], N the revolution's counts.
     """
     dt = np.asarray(dt, float)
     miss = ~np.isfinite(dt)

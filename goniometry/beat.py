@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from goniometry.revolutions import fill_first_interval
+from goniometry.stats import fill_first_interval
 
 # Harmonics of the sawtooth summed explicitly at most (fewer where the jitter blurs them);
 # the rest (1 % of its variance) is white.

@@ -8,7 +8,21 @@ class LogError(InputError):
 
 
 class FaceCountError(LogError):
-    """The log's reference marks are ``found`` rows apart, not the ``named`` faces given."""
+    """The log's reference marks are ``found`` rows apart, not the ``named`` faces given.
+
+    Parameters
+    ----------
+    path : str or Path
+        The log.
+    found : int
+        Rows between most pairs of successive reference marks (pulses per revolution).
+    named : int
+        Faces the user named.
+    share : int
+        Revolutions that have ``found`` rows.
+    revolutions : int
+        Revolutions looked at.
+    """
 
     def __init__(self, path, found: int, named: int, share: int, revolutions: int) -> None:
         self.path, self.found, self.named = path, found, named

@@ -29,9 +29,21 @@ COLUMNS = ("count", "counter", "ref")
 
 @dataclass(frozen=True)
 class Chunk:
-    """Rows of the log (int64): counts [ring-laser periods], counter (1/2), ref (0/1), t [s]
-    or None;
-    ``first_line``: the file line number of the first row (blank lines not counted)."""
+    """Rows of the log, as read and validated.
+
+    Attributes
+    ----------
+    count : ndarray of int64
+        Ring-laser periods between a pulse and the one before [counts].
+    counter : ndarray of int64
+        Which of the two counters wrote the row (1 or 2; they alternate).
+    ref : ndarray of int64
+        1 where the reference (face 0) signal marked the pulse, else 0.
+    t : ndarray of float, or None
+        Pulse times [s], None when the log has no ``t`` column.
+    first_line : int
+        File line of the first row (blank lines not counted).
+    """
 
     count: np.ndarray
     counter: np.ndarray
@@ -47,6 +59,27 @@ def iter_log(path: str | Path, block_bytes: int = 1 << 20,
 
     Small chunks keep the pass's numpy temporaries cache-sized; the parse itself works on
     larger blocks, a bounded number in flight, so memory does not grow with the log.
+
+    Parameters
+    ----------
+    path : str or Path
+        The counter log (``count,counter,ref[,t]``).
+    block_bytes : int
+        Text per chunk [bytes].
+    columns : mapping of str to str, optional
+        Canonical name -> header name (``--columns``).
+    threads : bool
+        Parse on a pool of threads.
+
+    Yields
+    ------
+    Chunk
+        Validated rows.
+
+    Raises
+    ------
+    LogError
+        Naming the file, the line, the column and what is wrong.
     """
     try:
         for tab in iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads):

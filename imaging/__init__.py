@@ -4,7 +4,9 @@ Public API::
 
     read_image(path) -> ndarray
     detect_marks(image, min_length_px=None, roi=None) -> [MarkCandidate]
-    detect_lines(image, ...) -> Detection               (with families of parallel lines)
+    detect_lines(image, ...) -> Detection               (with families of lines, dials)
+    grating_note(image) -> str | None                   (a grating's pitch, when it is one)
+    groove_ends(image, profile, extent) -> GrooveEnds   (ends under dust or ink, bounded)
     measure_marks(image, camera=None) -> [MarkMeasurement | ImageInputError]
     fit_line(points, sigma, extra=None) -> LineFit      (accepts extra model terms)
     CameraModel, calibrate_chessboard, plumb_line
@@ -13,8 +15,9 @@ Public API::
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
+from imaging.ends import GrooveEnds, groove_ends
 from imaging.errors import ImageInputError
-from imaging.families import Detection, detect_lines
+from imaging.families import Detection, detect_lines, grating_note
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
@@ -26,6 +29,7 @@ from imaging.measure import (
     measure_candidate,
     measure_frame,
     measure_marks,
+    on_line,
 )
 from imaging.oriented import OrientedStripes, Wave
 from imaging.plumbline import (
@@ -45,6 +49,7 @@ __all__ = [
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
-    "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
+    "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",
+    "GrooveEnds", "grating_note", "groove_ends",
 ]

@@ -12,6 +12,12 @@ what the cap leaves out is counted in :attr:`Detection.unreported`, never droppe
 With an explicit ``min_length_px`` (the user's), two parallel lines side by side already seed
 the second search, and a family's lines shorter than that are counted as unreported.
 
+A *grating* — many identical lines at a fine pitch, none standing out — is not measured:
+the search reads a row of identical lines as a surface's lay (:func:`imaging.detect.
+distinctness`) and the groove model needs each line alone in its window.
+:func:`grating_note` recognises one (a sharp peak of the image's power spectrum) so that the
+refusal says so, with its pitch and direction.
+
 Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
 """
 
@@ -30,6 +36,7 @@ from imaging.detect import (
     _near,
     _overlap,
     _shift,
+    default_min_length,
     detect_lines_once,
     line_frame,
     wrap_angle,
@@ -42,6 +49,9 @@ FAMILY_ANGLE = np.deg2rad(2.0)
 to ~0.5 deg on short lines); the measured angles are then tested by their chi2."""
 MAX_GAP = 3.0
 """Largest gap between neighbouring members, in units of the family's median gap."""
+RAW_MEMBERS = 4
+"""Fewest parallel unconfirmed candidates side by side that are looked at as a ruling when
+the search confirmed no family."""
 MEMBER_FRACTION = 0.5
 """A line joins a family from this fraction of the family's median length."""
 PIECE_FRACTION = 0.15
@@ -93,6 +103,12 @@ def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
         ref = cands[seed].angle_rad
         same = [i for i in left if cands[i].dark == cands[seed].dark
                 and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        # The family's direction from all of them (a short seed's own is off by up to ~1
+        # deg), and its lines again about that.
+        ref = wrap_angle(ref + float(np.median([wrap_angle(cands[i].angle_rad - ref)
+                                                for i in same])))
+        same = [i for i in left if i == seed or (cands[i].dark == cands[seed].dark
+                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE)]
         left = [i for i in left if i != seed]
         if len(same) < min_members:
             continue
@@ -112,6 +128,109 @@ def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
                 out.append([int(i) for i in run])
                 left = [i for i in left if i not in run]
     return out
+
+
+MIN_DIAL = 4
+"""Fewest lines meeting at one point that make a dial."""
+DIAL_ANGLE = np.deg2rad(1.0)
+"""Direction error of a detected line (short lines: ~0.5 deg): how far it may miss the
+dial's centre is this angle times its distance from it, plus :data:`DIAL_MISS_PX`."""
+DIAL_MISS_PX = 3.0
+DIAL_PROPOSERS = 40
+"""The strongest lines whose pairs propose a dial's centre."""
+DIAL_MIN_STEP = np.deg2rad(2.0)
+"""Smallest angle between a dial's neighbouring graduations."""
+DIAL_MAX_SKIP = 3.0
+"""Most steps per gap on average (a dial may miss some graduations, not most)."""
+
+
+def _meets(c: MarkCandidate, p: np.ndarray) -> tuple[bool, float]:
+    """Whether a line runs radially from point p (its line passes near p, and p lies beyond
+    the segment's end, not on it): (meets, distance of its middle from p [px])."""
+    u, n = line_frame(c.angle_rad)
+    mid = _middle(c)
+    r = float(np.hypot(*(mid - p)))
+    miss = abs(float(p @ n) - c.offset_px)
+    along = abs(float((mid - p) @ u))
+    return (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE) and along > 0.5 * c.length_px + 5,
+            r)
+
+
+def dial_centre(cands: list[MarkCandidate], idx: list[int]) -> np.ndarray:
+    """Least-squares point nearest to the lines ``idx`` [px, relative to the image centre]
+    (each weighted by 1 / its distance from the point: the direction error's reach)."""
+    p = np.zeros(2)
+    for _ in range(3):
+        a, b = np.zeros((2, 2)), np.zeros(2)
+        for i in idx:
+            n = line_frame(cands[i].angle_rad)[1]
+            w = 1 / max(float(np.hypot(*(_middle(cands[i]) - p))), 10.0) ** 2
+            a += w * np.outer(n, n)
+            b += w * n * cands[i].offset_px
+        p = np.linalg.solve(a, b)
+    return p
+
+
+def group_dial(cands: list[MarkCandidate], idx: list[int]) -> list[int]:
+    """The lines among ``idx`` that meet at one point, radially (a dial's graduations), at
+    least :data:`MIN_DIAL` of them in at least 3 directions; [] if none.
+
+    Every pair of lines more than 5 deg apart proposes its crossing; the crossing most lines
+    run radially from wins, refined by least squares (:func:`dial_centre`)."""
+    if len(idx) < MIN_DIAL:
+        return []
+    # Every proposal tested against every line at once (arrays over the lines); the
+    # strongest DIAL_PROPOSERS lines propose (a busy photograph has hundreds of pairs).
+    a = np.array([cands[q].angle_rad for q in idx])
+    nrm = np.column_stack([np.sin(a), np.cos(a)])
+    along = np.column_stack([np.cos(a), -np.sin(a)])
+    off = np.array([cands[q].offset_px for q in idx])
+    mid = np.array([_middle(cands[q]) for q in idx])
+    half = np.array([cands[q].length_px / 2 for q in idx])
+    dark = np.array([cands[q].dark for q in idx])
+
+    def meeting(p: np.ndarray, pol: bool) -> np.ndarray:
+        r = np.hypot(*(mid - p).T)
+        miss = np.abs(nrm @ p - off)
+        return ((dark == pol) & (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE))
+                & (np.abs(np.sum((mid - p) * along, axis=1)) > half + 5))
+
+    best = np.zeros(len(idx), bool)
+    prop = sorted(range(len(idx)), key=lambda k: -cands[idx[k]].strength)[:DIAL_PROPOSERS]
+    for x, k in enumerate(prop):
+        for j in prop[x + 1:]:
+            if dark[j] != dark[k]:
+                continue
+            m = nrm[[k, j]]
+            if abs(np.linalg.det(m)) < np.sin(np.deg2rad(5.0)):
+                continue
+            got = meeting(np.linalg.solve(m, off[[k, j]]), bool(dark[k]))
+            if got.sum() > best.sum():
+                best = got
+    if best.sum() < MIN_DIAL:
+        return []
+    best = [idx[k] for k in np.flatnonzero(best)]
+    p = dial_centre(cands, best)
+    best = [q for q in idx if cands[q].dark == cands[best[0]].dark and _meets(cands[q], p)[0]]
+    dirs = np.array([wrap_angle(cands[q].angle_rad) for q in best])
+    # At least 3 distinct directions (parallel lines "meet" anywhere along their normal).
+    if len(best) < MIN_DIAL or np.ptp(np.sort(dirs)) < 3 * FAMILY_ANGLE:
+        return []
+    # Ordered round the centre.
+    theta = np.array([np.arctan2(-(m[1] - p[1]), m[0] - p[0])
+                      for m in (_middle(cands[q]) for q in best)])
+    order = np.argsort(theta)
+    # A graduation: neighbours at least DIAL_MIN_STEP apart, few steps missing. Lines that
+    # merely converge (a photograph's vanishing point) are spaced anyhow.
+    th = theta[order]
+    gaps = np.diff(np.append(th, th[0] + 2 * np.pi))
+    gaps = np.delete(gaps, np.argmax(gaps))  # the open side of a partial dial
+    g0 = float(np.min(gaps))
+    steps = np.rint(gaps / g0)
+    if (g0 < DIAL_MIN_STEP or np.sum(steps) > DIAL_MAX_SKIP * len(gaps)
+            or np.max(np.abs(gaps / g0 - steps)) > 0.25):
+        return []
+    return [best[k] for k in order]
 
 
 def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
@@ -139,6 +258,28 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     # then counted as found but not reported (never dropped unsaid).
     groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
         if families else []
+    if families and not found:
+        # Lines at a pitch under the relief window beside each line are alike their
+        # neighbours there, and the search refuses them all as a lay. A regular ruling of
+        # them among the unconfirmed candidates is confirmed with the window inside the
+        # pitch (only when nothing was found: it costs a second pass over the candidates).
+        seed_len = LENGTH_SLACK * (min_length_px if min_length_px is not None
+                                   else default_min_length(search.image.shape))
+        raw = search.candidates(seed_len)
+        for g in group_families(raw, RAW_MEMBERS):
+            origin, pitch = _ruling(raw, g, raw[g[0]].angle_rad)
+            q = np.array([_position(raw[i], raw[g[0]].angle_rad) for i in g])
+            k = (q - origin) / pitch
+            if np.max(np.abs(k - np.rint(k))) > GRID_TOLERANCE:
+                continue  # not a ruling: streaks of a surface's lay fall anywhere
+            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6, 20, 60))
+            got = search.confirm([raw[i] for i in g], reach)
+            if len(got) >= MIN_MEMBERS:
+                found += [c for c in got if not any(
+                    o.dark == c.dark and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
+                    and _overlap(c, o) for o in found)]
+        found = _dedupe(sorted(found, key=lambda c: -c.strength))
+        groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS)
     for g in groups:
         ref = found[g[0]].angle_rad
         typical = float(np.median([found[i].length_px for i in g]))
@@ -199,6 +340,47 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
+    if families:
+        # Lines meeting at a point (a dial's graduations): a group too, every one reported,
+        # completed by a second search down to half their typical length (as a family's).
+        used = {i for g in groups for i in g}
+        dial = group_dial(found, [i for i in range(len(found)) if i not in used])
+        if dial:
+            p = dial_centre(found, dial)
+            typical = float(np.median([found[i].length_px for i in dial]))
+            shift = search.shift
+            extra = [c for c in search.candidates(MEMBER_FRACTION * typical)
+                     if c.dark == found[dial[0]].dark
+                     and _meets(replace_shift(c, shift), p)[0]]
+            for c in search.confirm(extra):
+                if not any(o.dark == c.dark and _near(c, o, FAMILY_ANGLE,
+                                                      max(6.0, o.thickness_px))
+                           and _overlap(c, o) for o in found):
+                    found.append(c)
+            # Two graduations on one diameter are one straight line to the search, joined
+            # across the dial's middle: cut at the inner circle, each is a graduation.
+            inner = min(float(np.hypot(*(_middle(found[i]) - p))) - found[i].length_px / 2
+                        for i in dial)
+            for j, c in enumerate(list(found)):
+                if j in used or c.dark != found[dial[0]].dark:
+                    continue
+                u, n = line_frame(c.angle_rad)
+                tp = float(p @ u)
+                miss = abs(float(p @ n) - c.offset_px)
+                if (miss < DIAL_MISS_PX + 2 and inner > 10
+                        and c.t_start_px < tp - inner < tp + inner < c.t_end_px):
+                    cut = 0.9 * inner
+                    found[j] = dc_replace(c, t_end_px=tp - cut)
+                    found.append(dc_replace(c, t_start_px=tp + cut))
+            # The parallel families' members first (their order kept), then the others.
+            kept = sorted(used)
+            others = [c for i, c in enumerate(found) if i not in used]
+            found = [found[i] for i in kept] + _dedupe(sorted(others, key=lambda c: -c.strength))
+            remap = {old: new for new, old in enumerate(kept)}
+            groups = [[remap[i] for i in g] for g in groups]
+            dial = group_dial(found, list(range(len(used), len(found))))
+            if dial:
+                groups = [*groups, dial]
     short: list[int] = []
     if min_length_px is not None:
         # The user's shortest line holds for families too: their shorter members are said.
@@ -213,3 +395,88 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     return Detection([found[i] for i in keep],
                      tuple(tuple(index[i] for i in g) for g in groups),
                      tuple(found[i] for i in others[max_marks:] + short))
+
+
+GRATING_PEAK = 30.0
+"""A spectral peak this many times the median power at its spatial frequency (over all
+directions) is a grating's."""
+GRATING_SHARE = 0.05
+"""... and holding at least this share of the image's power beyond the longest pitch."""
+GRATING_MAX_PITCH_PX = 120.0
+"""Longest pitch looked for [px] (coarser rulings are found line by line)."""
+
+
+def grating_note(image: np.ndarray, size: int = 512) -> str | None:
+    """What to say when an image holds a grating: None, or "a grating of pitch p px, lines at
+    a deg: ..." from the power spectrum of its central ``size`` x ``size`` pixels.
+
+    The spectrum (Hann window, mean removed) of a grating is a sharp peak at 1/pitch across
+    its lines; texture, noise and isolated lines spread their power. The frequency standing
+    out most above the median power of its ring (at least :data:`GRATING_PEAK` times), or
+    its lowest, stronger sub-harmonic that also does (a sharp-edged ruling's fundamental), must
+    hold :data:`GRATING_SHARE` of all the power at frequencies above
+    1/:data:`GRATING_MAX_PITCH_PX`.
+
+    Parameters
+    ----------
+    image : (H, W) array
+        The image [DN].
+    size : int
+        Side of the central square examined [px].
+
+    Returns
+    -------
+    str or None
+        The sentence naming the grating (pitch [px], direction [deg]) and why it is not
+        measured; None when the spectrum shows no grating.
+    """
+    h, w = image.shape
+    r0, c0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
+    a = np.asarray(image[r0:r0 + size, c0:c0 + size], float)
+    n_r, n_c = a.shape
+    if min(n_r, n_c) < 32:
+        return None
+    a = (a - a.mean()) * np.outer(np.hanning(n_r), np.hanning(n_c))
+    p = np.abs(np.fft.rfft2(a)) ** 2
+    fy = np.fft.fftfreq(n_r)[:, None]
+    fx = np.fft.rfftfreq(n_c)[None, :]
+    f = np.hypot(fx, fy)
+    band = f > 1 / GRATING_MAX_PITCH_PX
+    if not band.any() or p[band].sum() == 0:
+        return None
+    # Each frequency's power against the median of its ring (all directions): an edge's or
+    # a blob's power falls off smoothly with frequency, a grating's stands out of its ring.
+    rb = np.rint(f * min(n_r, n_c)).astype(int)
+    med = np.zeros(rb.max() + 1)
+    for k in np.unique(rb[band]):
+        med[k] = float(np.median(p[rb == k]))
+    ref = med[rb]
+    ratio = np.divide(p, ref, out=np.zeros_like(p), where=band & (ref > 0))
+    i = np.unravel_index(int(np.argmax(ratio)), p.shape)
+    if ratio[i] < GRATING_PEAK:
+        return None
+    # The peak may be a harmonic of a sharp-edged ruling: the fundamental is the lowest
+    # sub-harmonic (f/m, same direction) that stands out of its ring too and is stronger
+    # (a ruling's harmonics are weaker than its fundamental, the blur weakens them more).
+    for m in (5, 4, 3, 2):
+        j = (int(np.rint(fy[i[0], 0] / m * n_r)) % n_r, int(np.rint(fx[0, i[1]] / m * n_c)))
+        if band[j] and ratio[j] >= GRATING_PEAK and p[j] >= p[i]:
+            i = j
+            break
+    if p[i] < GRATING_SHARE * float(p[band].sum()):
+        return None
+    # Refine the peak's frequency by the power-weighted mean of its 3 x 3 neighbourhood.
+    rr = np.clip(np.arange(i[0] - 1, i[0] + 2), 0, n_r - 1)
+    cc = np.clip(np.arange(i[1] - 1, i[1] + 2), 0, p.shape[1] - 1)
+    wgt = p[np.ix_(rr, cc)]
+    vx = float(np.sum(wgt * fx[0, cc][None, :]) / wgt.sum())
+    vy = float(np.sum(wgt * fy[rr, 0][:, None]) / wgt.sum())
+    pitch = 1 / float(np.hypot(vx, vy))
+    # The lines run across the frequency vector (x right, y down; angles counter-clockwise).
+    angle = wrap_angle(float(np.arctan2(-vx, -vy)))
+    return (f"a grating (identical parallel lines, none standing out) of pitch {pitch:.1f} px, "
+            f"lines at {np.rad2deg(angle):.1f}°: gratings are not measured (the search reads "
+            "a row of identical lines as a surface's lay, and the groove model needs each "
+            "line alone in its window); give a ruling whose lines differ (a scale's long and "
+            "short graduations) or measure single marks")
+

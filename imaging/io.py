@@ -12,6 +12,7 @@ unsigned. Whatever was done is said in :attr:`ImageRead.notes`.
 from __future__ import annotations
 
 import os
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -149,7 +150,10 @@ def _check_header(p: Path, budget: int) -> int | None:
         with Image.open(p) as im:
             w, h = im.size
             _budget(p, w, h, budget)
-            code = im.getexif().get(0x0112)
+            # Pillow decodes a whole PNG to look for an eXIf chunk after the pixel data (as
+            # long as OpenCV's decoding after it, at 5 MP): not when the chunks hold none.
+            no_exif = im.format == "PNG" and "exif" not in im.info and not _png_has_exif(p)
+            code = None if no_exif else im.getexif().get(0x0112)
     except UnidentifiedImageError:
         return None
     except OSError as exc:
@@ -159,6 +163,25 @@ def _check_header(p: Path, budget: int) -> int | None:
     if code not in ORIENTATIONS:
         raise ImageInputError(f"{p}: EXIF orientation {code} is not one of 1-8")
     return int(code)
+
+
+def _png_has_exif(p: Path) -> bool:
+    """Whether a PNG file may hold an eXIf chunk, from its chunk headers alone (the pixel data
+    are skipped, not decompressed). Hand-written: Pillow reads chunks after the image data
+    only by decoding it. A file that ends before IEND says "may" (Pillow then reads it and
+    reports the truncation as before)."""
+    with open(p, "rb") as f:
+        f.seek(8)  # the signature (Pillow has identified the file as a PNG)
+        while True:
+            head = f.read(8)
+            if len(head) < 8:
+                return True
+            size, kind = struct.unpack(">I4s", head)
+            if kind == b"eXIf":
+                return True
+            if kind == b"IEND":
+                return False
+            f.seek(size + 4, os.SEEK_CUR)  # the data and the CRC
 
 
 def _read_tiff(p: Path, budget: int) -> tuple[np.ndarray, int | None]:

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.camera import CameraModel
+from imaging.crossmask import crossing_skip, fused_error
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
@@ -25,7 +26,7 @@ from imaging.detect import (
     wrap_angle,
 )
 from imaging.errors import ImageInputError
-from imaging.families import detect_lines
+from imaging.families import detect_lines, grating_note
 from imaging.io import full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
@@ -56,9 +57,12 @@ class MarkMeasurement:
     ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
     None: too few segments to tell); ``jpeg``: the JPEG
     encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
-    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term); ``background_u_rad``: what
-    the removal of an oriented striped background may leave on the angle [rad]
-    (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
+    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term). ``extent_px``: where the
+    groove ends along the profile's line (raw image); ``ends_px``: those two ends as (2, 2)
+    points like ``points`` (relative to the image centre, undistorted if a camera model was
+    given): a bent mark's chord and a ruled scale's line middles are read between them.
+    ``background_u_rad``: what the removal of an oriented striped background may leave on
+    the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
     """
 
     candidate: MarkCandidate
@@ -75,6 +79,9 @@ class MarkMeasurement:
     blur: BlurTrend | None = None
     jpeg: JpegBlocks | None = None
     jpeg_u_rad: float = 0.0
+    ends_px: np.ndarray | None = None
+    crossings: tuple[tuple[int, int], ...] = ()
+    """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
 
     @property
@@ -83,8 +90,12 @@ class MarkMeasurement:
         return float(self.extent_px[1] - self.extent_px[0])
 
 
-def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
-    """Segments that fit the groove and agree with their neighbours (dust/scratches out)."""
+def _usable(cen: Centres, where: str, cand: MarkCandidate,
+            skip: np.ndarray | None = None) -> np.ndarray:
+    """Segments that fit the groove and agree with their neighbours (dust/scratches out);
+    ``skip``: segments left out beforehand (where another mark crosses)."""
+    if skip is not None:
+        cen = replace(cen, ok=cen.ok & ~skip)
     if cen.ok.sum() < 10:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
@@ -117,8 +128,8 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate) -> np.ndarray:
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
                       neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None,
-                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-                      ) -> MarkMeasurement:
+                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+                      crossing: Sequence[tuple[int, MarkCandidate]] = ()) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
@@ -126,10 +137,16 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
     encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
     ``offsets_var``: variances of the column and row offsets removed from the image
-    (:mod:`imaging.stripes`), carried into the centres' covariance."""
-    pf = fit_profile(image, cand, where, full_scale(image) if top is None else top)
+    (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
+    candidate) of the other marks, whose grooves are kept out of this one's fit where they
+    cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused."""
+    if cand.fused is not None:
+        raise fused_error(cand, where, image.shape)
+    top = full_scale(image) if top is None else top
+    pf = fit_profile(image, cand, where, top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
-    use = _usable(cen, where, cand)
+    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where, look=False)
+    use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
@@ -140,7 +157,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
                          offsets_var=offsets_var)
-    use = _usable(cen, where, cand)
+    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+    use = _usable(cen, where, cand, skip)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -156,10 +174,18 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
+    ext = groove_extent(image, pf)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
-                           int(cen.ok.sum() - use.sum()), chol, groove_extent(image, pf),
+                           int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
-                           if jpeg is not None else 0.0)
+                           if jpeg is not None else 0.0,
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
+
+
+def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
+    """The other candidates with their indices (the ones that cross candidate i are found
+    by :func:`crossing_skip` once its groove's width is known)."""
+    return [(j, o) for j, o in enumerate(cands) if j != i]
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
@@ -177,6 +203,25 @@ def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + 1e-6 * np.eye(len(R)))
     return s, L
+
+
+def ends_on_line(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
+                camera: CameraModel | None, shape: tuple[int, int]) -> np.ndarray:
+    """The groove's two ends (half-depth, ``extent`` along the profile's line) as points on
+    the measured ``line`` [px, relative to the image centre]: undistorted by the camera, then
+    put on the line (the profile's line is the raw image's chord, off a mark the lens bows
+    by up to its sagitta at the ends; only the position along the line is read from it)."""
+    u, n = line_frame(pf.angle_rad)
+    ends = np.array([pf.offset_px * n + t * u for t in extent])
+    if camera is not None:
+        ends = camera.undistort_centred(ends, np.ones(2), shape)[0]
+    return on_line(ends, line.angle_rad, line.offset_px)
+
+
+def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
+    """Points ``p`` (N, 2) moved across onto the line (angle, offset) [px]."""
+    u, n = line_frame(angle_rad)
+    return offset_px * n + np.outer(p @ u, u)
 
 
 def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
@@ -285,8 +330,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                 raise ImageInputError(f"{where}: {exc}") from None
             cands, image = det.marks, cleaned
     if not cands:
+        grating = grating_note(image)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
-                              + (f" in roi {','.join(map(str, roi))})" if roi else ")"))
+                              + (f" in roi {','.join(map(str, roi))})" if roi else ")")
+                              + (f": {grating}" if grating else ""))
     if expect_one:
         cands = [require_single(cands, where)]
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be
@@ -322,22 +369,24 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            m = measure_candidate(image, c, camera, where, top, neighbours(cands, i), jpeg,
-                                  (stripes[0].offsets_var, stripes[1].offsets_var))
+            args = (c, camera, where, top, neighbours(cands, i), jpeg,
+                    (stripes[0].offsets_var, stripes[1].offsets_var), crossings(cands, i))
+            m = measure_candidate(image, *args)
         except ImageInputError as exc:
             index[i] = len(out)
             out.append(exc)
             continue
         if oriented.found:
-            m = _with_background_u(m, before, c, camera, where, top, neighbours(cands, i),
-                                   jpeg, (stripes[0].offsets_var, stripes[1].offsets_var),
-                                   oriented.residual)
+            m = _with_background_u(m, before, args, oriented.residual)
         if m.length_px >= shortest or i in member:
             index[i] = len(out)
             out.append(m)
     if not out:
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
+    # Crossings name the other mark by its place in the output, as the user sees it.
+    out = [replace(m, crossings=tuple((index.get(j, j), n) for j, n in m.crossings))
+           if isinstance(m, MarkMeasurement) and m.crossings else m for m in out]
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
     notes = (stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
@@ -345,18 +394,15 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     return MeasuredFrame(out, fams, len(det.unreported), notes, stripes, oriented)
 
 
-def _with_background_u(m: MarkMeasurement, before: np.ndarray, cand: MarkCandidate,
-                       camera: CameraModel | None, where: str, top: float,
-                       neighbours_px: Sequence[float], jpeg: JpegBlocks | None,
-                       offsets_var: tuple[np.ndarray | None, np.ndarray | None],
+def _with_background_u(m: MarkMeasurement, before: np.ndarray, args: tuple,
                        residual: float) -> MarkMeasurement:
     """``m`` with ``background_u_rad``: the angle change the removed pattern made (the mark
-    measured again on the image before the removal) times the fraction of the pattern the
-    removal may leave. A mark the pattern made unmeasurable before the removal gives no
-    change to scale: the term is then the angle's own u (the mark stands with u x sqrt 2)."""
+    measured again on the image before the removal, with :func:`measure_candidate`'s other
+    arguments ``args``) times the fraction of the pattern the removal may leave. A mark the
+    pattern made unmeasurable before the removal gives no change to scale: the term is then
+    the angle's own u (the mark stands with u x sqrt 2)."""
     try:
-        m0 = measure_candidate(before, cand, camera, where, top, neighbours_px, jpeg,
-                               offsets_var)
+        m0 = measure_candidate(before, *args)
     except ImageInputError:
         return replace(m, background_u_rad=float(m.line.angle_u_rad))
     d = abs(wrap_angle(m0.line.angle_rad - m.line.angle_rad))

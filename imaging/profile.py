@@ -17,6 +17,7 @@ line fit downstream propagates a real uncertainty.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -69,8 +70,8 @@ class ProfileTable:
     """The pixel-integrated profile and its slope tabulated on a fine grid of e.
 
     The centres stage evaluates the same (w, s, angle) profile millions of times; tabulating
-    it once (3x3 quadrature, step ``step`` px) and interpolating linearly costs two
-    ``np.interp`` per pixel instead of 9 erf + 18 exp. The interpolation error is below
+    it once (3x3 quadrature, step ``step`` px) and interpolating linearly costs one cell
+    look-up per pixel instead of 9 erf + 18 exp. The interpolation error is below
     step^2/8 |P''| ~ 1e-6 of the contrast.
     """
 
@@ -89,8 +90,43 @@ class ProfileTable:
         return np.interp(e, self.grid, self._ps, left=0.0, right=0.0)
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return (np.interp(e, self.grid, self.p, left=0.0, right=0.0),
-                np.interp(e, self.grid, self.pe, left=0.0, right=0.0))
+        return _interp_uniform(e, self.grid, (self.p, self.pe))
+
+
+@functools.lru_cache(maxsize=8)
+def _profile_table(w: float, s: float, angle: float, reach: float) -> ProfileTable:
+    """:class:`ProfileTable`, cached: a mark's second centres pass and its extent share one."""
+    return ProfileTable(w, s, angle, reach)
+
+
+def _interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
+                    ) -> tuple[np.ndarray, ...]:
+    """np.interp(e, grid, f, left=0, right=0) for each f of ``fs``, the same to the last bit,
+    on a uniformly spaced ``grid`` (np.arange).
+
+    Hand-written: np.interp has no uniform-grid mode, and its binary search for the cell cost
+    ~5x this on a mark's ~40k unsorted pixels. The cell is found by division, corrected by
+    one where rounding put e across a grid point, and the value is np.interp's expression
+    (per-cell slope) with its special cases: the last grid point, outside the grid, NaN.
+    """
+    last = grid.size - 1
+    step = (grid[last] - grid[0]) / last
+    out = []
+    # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
+    with np.errstate(invalid="ignore"):
+        j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
+        j -= (grid[j] > e) & (j > 0)
+        j += (grid[j + 1] <= e) & (j < last - 1)
+        d = e - grid[j]  # on a grid point d = 0 and the value is f[j] exactly, as np.interp's
+        at_end = e == grid[last]
+        off = (e < grid[0]) | (e > grid[last])
+        dx = np.diff(grid)
+        for f in fs:
+            v = (np.diff(f) / dx)[j] * d + f[j]
+            v[at_end] = f[last]
+            v[off] = 0.0
+            out.append(v)
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -197,8 +233,10 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     e = px * n[0] + py * n[1] - offset
     t = px * u[0] + py * u[1]
     sel = (np.abs(e) <= half) & (t >= t0) & (t <= t1)
-    ys, xs = ys[sel], xs[sel]
-    return image[ys, xs], e[sel], t[sel], ys * w + xs
+    idx = ys[sel] * w + xs[sel]
+    # By flat index: numpy's 2-D fancy indexing costs ~2x (this runs ~6 times per mark).
+    vals = image.ravel()[idx] if image.flags.c_contiguous else image[ys[sel], xs[sel]]
+    return vals, e[sel], t[sel], idx
 
 
 def centres_half(pf: ProfileFit) -> float:
@@ -310,15 +348,17 @@ def _half_depth_width(e: np.ndarray, vals: np.ndarray, bg: float, amp: float) ->
     if amp == 0:
         return 0.0
     bins = np.round(e * 2).astype(int)
-    lo = bins.min()
-    idx = bins - lo
+    idx = bins - bins.min()
     cnt = np.bincount(idx)
-    med = np.full(cnt.size, np.nan)
-    order = np.argsort(idx, kind="stable")
-    splits = np.split(vals[order], np.cumsum(cnt)[:-1])
-    for i, v in enumerate(splits):
-        if v.size >= 5:
-            med[i] = np.median(v)
+    # Each bin's median from one sort by (bin, value): np.median's values (the middle one, or
+    # the mean of the middle two), without a call per bin (~40 of them).
+    v = vals[np.lexsort((vals, idx))]
+    start = np.cumsum(cnt) - cnt
+    mid = start + cnt // 2
+    even = cnt % 2 == 0
+    med = np.where(even, (v[np.maximum(mid - 1, 0)] + v[np.minimum(mid, v.size - 1)]) / 2,
+                   v[np.minimum(mid, v.size - 1)])
+    med[(cnt < 5) | (np.bincount(idx, np.isnan(vals), cnt.size) > 0)] = np.nan
     deep = (med - bg) / amp > 0.5
     return 0.5 * float(np.count_nonzero(deep))
 
@@ -451,7 +491,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
                               "its segments")
     nseg = int(seg.max()) + 1
-    table = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
     if guess is not None and len(guess[0]) >= 2:
@@ -494,9 +534,10 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         N = np.empty((nseg, k, k))
         g = np.empty((nseg, k))
         for i in range(k):
-            g[:, i] = bc(wgt * J[i] * r)
+            wj = wgt * J[i]  # once per column (the products are the same to the bit)
+            g[:, i] = bc(wj * r)
             for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wgt * J[i] * J[j])
+                N[:, i, j] = N[:, j, i] = bc(wj * J[j])
         ok = np.linalg.det(N) > 0
         if it >= iterations and not (moving & ok).any():
             break  # the last pass only refreshes weights and information at the solution
@@ -611,7 +652,7 @@ def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
     j = np.round(t - mid).astype(int)
     j -= j.min()
     nb = int(j.max()) + 1
-    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     cnt = np.bincount(j, minlength=nb)
     sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
     sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)

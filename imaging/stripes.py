@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.ndimage import median_filter
 
 ALPHA = 1e-3
@@ -161,7 +161,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     if not (a @ a > 0 and b @ b > 0):
         return Stripes(axis, 1.0, False, reason="a flat background profile")
     rho = float(a @ b / np.sqrt((a @ a) * (b @ b)))
-    p = float(stats.norm.sf(np.arctanh(np.clip(rho, -0.999999, 0.999999))
+    p = float(special.ndtr(-np.arctanh(np.clip(rho, -0.999999, 0.999999))
                             * np.sqrt(max(_effective_n(a, b) - 3, 1.0))))
     rms = float(np.sqrt(max(a @ b / n, 0.0)))
     if p >= alpha:

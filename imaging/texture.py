@@ -23,9 +23,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
-from imaging.ring import ring_slope  # the ring's slope, as for the real mark
+from imaging.ring import ring_geometry, ring_slope  # the ring's slope, as for the mark
 
 ALPHA = 1e-3
 """Level of each test that the replicas show texture (one false use per 1000 clean marks)."""
@@ -62,6 +62,25 @@ def _replica(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, dx: int, dy: int
     v = np.zeros(ys.size)
     v[inside] = image[yy[inside], xx[inside]]
     return v, inside & (v < full_scale) & (v > 0)
+
+
+class _Shifted:
+    """:func:`_replica` of one set of pixels at many shifts, their flat index and bounding box
+    taken once (16 replicas per mark): a replica wholly inside the image (the usual case)
+    is one gather by flat index, ~3x cheaper than the masks and 2-D indexing."""
+
+    def __init__(self, image: np.ndarray, ys: np.ndarray, xs: np.ndarray, full_scale: float):
+        self.image, self.ys, self.xs, self.full_scale = image, ys, xs, full_scale
+        self.flat = ys * image.shape[1] + xs if image.flags.c_contiguous and ys.size else None
+        self.box = (ys.min(), ys.max(), xs.min(), xs.max()) if self.flat is not None else None
+
+    def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray]:
+        h, w = self.image.shape
+        if self.box is not None and (self.box[0] + dy >= 0 and self.box[1] + dy < h
+                                     and self.box[2] + dx >= 0 and self.box[3] + dx < w):
+            v = self.image.ravel()[self.flat + (dy * w + dx)].astype(float, copy=False)
+            return v, (v < self.full_scale) & (v > 0)
+        return _replica(self.image, self.ys, self.xs, dx, dy, self.full_scale)
 
 
 def _demean(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -116,16 +135,19 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     w0 = np.einsum("ni,nij,nj->n", c0, M0, c0)
     npx = np.maximum(bc(np.ones(ys.size)), 1)
     ring_n = np.bincount(ring[3], minlength=nseg)
+    ring_geo = ring_geometry(ring[2], ring[3], nseg)  # the same for every replica
+    band_at, ring_at = _Shifted(image, ys, xs, full_scale), _Shifted(image, *ring[:2], full_scale)
     reps = []
     for dist in shifts_px:
         for sign in (1.0, -1.0):
             if any(abs(sign * dist - a) < clear_px for a in avoid_px):
                 continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
-            v, good = _replica(image, ys, xs, dx, dy, full_scale)
-            valid = ok & (bc((~good).astype(float)) == 0)
-            rv, rgood = _replica(image, ring[0], ring[1], dx, dy, full_scale)
-            valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
+            v, good = band_at(dx, dy)
+            valid = ok & (np.bincount(seg[~good], minlength=nseg) == 0)
+            rv, rgood = ring_at(dx, dy)
+            if not rgood.all():  # (all usable: every segment has its whole ring)
+                valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
                 continue
             # The centre functional applied to the replica: (N^-1 J^T W v)_0 per segment,
@@ -134,7 +156,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
-            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale)
+            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale,
+                           ring_geo)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
             # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
@@ -148,8 +171,9 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     clean = []
     for z, x, _, valid in reps:
         for y in (z, x):  # the ring's slope too: dust beside the band moves both
-            mad = 1.4826 * np.median(np.abs(y[valid] - np.median(y[valid])))
-            valid = valid & (np.abs(y - np.median(y[valid])) <= 6 * max(mad, 1e-12))
+            med = np.median(y[valid])
+            mad = 1.4826 * np.median(np.abs(y[valid] - med))
+            valid = valid & (np.abs(y - med) <= 6 * max(mad, 1e-12))
         clean.append((np.where(valid, z, 0.0), np.where(valid, x, 0.0), valid))
     var0 = np.array([np.sum(z**2) / v.sum() for z, _, v in clean])
     keep = var0 <= 2.0 * np.median(var0)
@@ -177,8 +201,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     lags = int(min(20, max(2, nseg // 5)))
     rho = acf[1:lags + 1] / acf[0]
     # Portmanteau on the pooled replicas, and their variance against chi2(n).
-    p_corr = float(stats.chi2.sf(n_tot * np.sum(rho**2), lags))
-    p_var = float(stats.chi2.sf(acf[0] * n_tot, n_tot))
+    p_corr = float(special.chdtrc(lags, n_tot * np.sum(rho**2)))
+    p_var = float(special.chdtrc(n_tot, acf[0] * n_tot))
     dof = float("inf")
     if min(p_corr, p_var) >= ALPHA / 3:
         acf_out = None

@@ -55,6 +55,13 @@ class MarkSpec:
     contrast : float
         Change of reflectance at full depth, relative to the surface (-0.6: a groove that
         reflects 40 % of the surface's light; +1.0: a bright groove twice as bright).
+    bow_px : float
+        A physically bent mark: sagitta of the groove's centre line from the chord between
+        its ends, at the middle, along +normal [px] (0: straight). The chord keeps
+        ``angle_rad`` and ``offset_px``, so the truth of a bent mark is its end-to-end
+        direction.
+    bow_shape : str
+        ``parabola`` (sagitta x (1 - (2t/L)^2)) or ``arc`` (a circular arc through the ends).
     """
 
     angle_rad: float
@@ -64,6 +71,23 @@ class MarkSpec:
     centre_t_px: float = 0.0
     profile: str = "round"
     contrast: float = -0.6
+    bow_px: float = 0.0
+    bow_shape: str = "parabola"
+
+    def bow(self, t: np.ndarray) -> np.ndarray:
+        """The centre line's displacement from the chord along the normal at ``t`` (from the
+        mark's middle along it) [px]; 0 beyond the ends' reach is irrelevant (the along
+        profile ends the groove there)."""
+        s, half = self.bow_px, self.length_px / 2
+        if s == 0:
+            return np.zeros_like(t)
+        tc = np.clip(t, -half, half)
+        if self.bow_shape == "parabola":
+            return s * (1 - (tc / half) ** 2)
+        if self.bow_shape != "arc":
+            raise ValueError(f"unknown bow shape {self.bow_shape!r}; use parabola or arc")
+        rho = (half**2 + s**2) / (2 * abs(s))  # radius of the arc through both ends
+        return np.sign(s) * (np.sqrt(rho**2 - tc**2) - (rho - abs(s)))
 
     def centre_xy(self) -> tuple[float, float]:
         a = self.angle_rad
@@ -245,7 +269,8 @@ def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarr
     u = np.array([np.cos(a), -np.sin(a)])
     n = np.array([np.sin(a), np.cos(a)])
     mid = np.array(mark.centre_xy())
-    ends = [mid + su * (mark.length_px / 2 + margin) * u + sn * (mark.width_px / 2 + margin) * n
+    reach = mark.width_px / 2 + margin + abs(mark.bow_px)
+    ends = [mid + su * (mark.length_px / 2 + margin) * u + sn * reach * n
             for su in (-1, 1) for sn in (-1, 1)]
     ex, ey = spec.camera.distort(*spec.camera.scene_to_ideal(
         np.array([p[0] for p in ends]), np.array([p[1] for p in ends])))
@@ -261,7 +286,7 @@ def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarr
         e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
         t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
         # Distortion stretches the sensor by at most a few %; the margin covers it.
-        r, c = np.nonzero((np.abs(e) < mark.width_px / 2 + margin)
+        r, c = np.nonzero((np.abs(e - mark.bow(t)) < mark.width_px / 2 + margin)
                           & (np.abs(t) < mark.length_px / 2 + margin))
         out_r.append(rows[r])
         out_c.append(cols[c])
@@ -283,6 +308,7 @@ def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.nd
     a = mark.angle_rad
     e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
     t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
+    e = e - mark.bow(t)
     if tuple(spec.blur_gradient) == (0.0, 0.0):
         across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
         along = _along_profile(mark.length_px, spec.blur_px)

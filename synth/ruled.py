@@ -31,6 +31,7 @@ from synth.marks import (
     full_well_for_snr,
     mark_coverage,
 )
+from synth.occlusion import Occluder, disk, occlude, strokes
 from synth.optics import CameraGeometry, wrap_half_turn
 
 KINDS = ("short", "medium", "long")
@@ -68,6 +69,14 @@ class RuledSpec:
     numerals, dust, dust_on_lines, logo, vignetting, blur_px, bits, camera :
         Clutter and optics as in :class:`synth.marks.ImageSpec`; numerals beyond each long
         graduation's end, ``dust_on_lines`` specks on random graduations.
+    dust_on_ends : int
+        Opaque particles (:mod:`synth.occlusion`) each over one end of a random graduation
+        (centred within half its radius of the end): the end is hidden under it.
+    dust_end_radius_px : (min, max)
+        Radius range of those particles [px]; dark (absorbing) or bright (scattering).
+    numerals_over_lines : bool
+        Print the numerals in opaque ink across the long graduations themselves (at 3/4 of
+        their length, reading across them) instead of beyond their ends.
     """
 
     width: int = 1600
@@ -93,13 +102,18 @@ class RuledSpec:
     supersample: int = 4
     camera: CameraGeometry = field(default_factory=CameraGeometry)
     seed: int = 0
+    dust_on_ends: int = 0
+    dust_end_radius_px: tuple[float, float] = (3.0, 7.0)
+    numerals_over_lines: bool = False
 
 
 @dataclass(frozen=True)
 class GraduationTruth:
     """One graduation as the ideal camera sees it: angle [rad], offset from the frame centre
     along the normal (sin a, cos a) [px], middle (x, y) relative to the centre [px], length
-    [px], kind (short/medium/long) and its index along the scale."""
+    [px], kind (short/medium/long) and its index along the scale; ``hidden``: what covers
+    part of it (``start``/``end``: that end under an opaque particle — ``start`` at the
+    baseline; ``ink``: a numeral printed across it; empty: nothing but ordinary dust)."""
 
     index: int
     kind: str
@@ -107,6 +121,7 @@ class GraduationTruth:
     offset_px: float
     centre_xy_px: tuple[float, float]
     length_px: float
+    hidden: str = ""
 
 
 @dataclass(frozen=True)
@@ -161,17 +176,26 @@ def _digit_strokes(ch: str) -> list[tuple[int, int]]:
     return [seg[s] for s in on]
 
 
-def _text(out: np.ndarray, text: str, org: np.ndarray, size: float, ux: np.ndarray,
-          uy: np.ndarray, amp: float, blur: float) -> None:
-    """Printed seven-segment text at ``org`` (frame pixels), glyph height ``size`` [px],
+def _text_segments(text: str, org: np.ndarray, size: float, ux: np.ndarray, uy: np.ndarray
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Seven-segment strokes (p0, p1) of ``text`` at ``org``, glyph height ``size`` [px],
     reading along ``ux`` with glyph 'down' along ``uy``."""
     corners = np.array([[0, 0], [1, 0], [0, 1], [1, 1], [0, 2], [1, 2]]) * size / 2
+    out = []
     for k, ch in enumerate(text):
         o = org + k * 0.8 * size * ux
         for i, j in _digit_strokes(ch):
-            p0 = o + corners[i][0] * ux + corners[i][1] * uy
-            p1 = o + corners[j][0] * ux + corners[j][1] * uy
-            _stroke(out, p0, p1, 0.12 * size, amp, blur)
+            out.append((o + corners[i][0] * ux + corners[i][1] * uy,
+                        o + corners[j][0] * ux + corners[j][1] * uy))
+    return out
+
+
+def _text(out: np.ndarray, text: str, org: np.ndarray, size: float, ux: np.ndarray,
+          uy: np.ndarray, amp: float, blur: float) -> None:
+    """Printed seven-segment text at ``org`` (frame pixels), glyph height ``size`` [px],
+    reading along ``ux`` with glyph 'down' along ``uy`` (additive, as a faint print)."""
+    for p0, p1 in _text_segments(text, org, size, ux, uy):
+        _stroke(out, p0, p1, 0.12 * size, amp, blur)
 
 
 def _logo(out: np.ndarray, spec: RuledSpec, grads: list) -> None:
@@ -260,6 +284,8 @@ def render_ruled(spec: RuledSpec) -> RuledImage:
     a = spec.line_angle_rad
     u = np.array([np.cos(a), -np.sin(a)])
     nrm = np.array([np.sin(a), np.cos(a)])
+    ink: list[Occluder] = []
+    hidden: dict[int, str] = {}
     if spec.numerals:
         size = min(0.35 * spec.pitch_px, 40.0)
         for m, kind, j in grads:
@@ -268,12 +294,41 @@ def render_ruled(spec: RuledSpec) -> RuledImage:
             # Beyond the long graduation's end, a glyph-gap further, reading across the lines.
             x, y = m.centre_xy()
             text = str(abs(j))
+            if spec.numerals_over_lines:
+                # Across the graduation at 3/4 of its length, in opaque ink: the line
+                # runs through the middle of the last glyph (a '0': its top and bottom bars
+                # cross it).
+                top = np.array([x, y]) + (m.length_px / 4 + size / 2) * u
+                start = top - (0.8 * (len(text) - 1) + 0.25) * size * nrm
+                ink.append(strokes(_text_segments(text, start, size, nrm, -u), 0.12 * size,
+                                   level=0.05))
+                hidden[j] = "ink"
+                continue
             top = np.array([x, y]) + (m.length_px / 2 + 1.4 * size) * u
             start = centre + top - 0.4 * size * len(text) * nrm
             # Glyphs read across the graduations, their foot towards the line's end.
             _text(refl, text, start, size, nrm, -u, -0.55, spec.blur_px)
     if spec.logo:
         _logo(refl, spec, grads)
+    # Opaque particles over graduations' ends (their own stream: the other draws, hence
+    # the scales rendered without them, stay as they were).
+    rng_end = np.random.default_rng([spec.seed, 1])
+    for j in rng_end.permutation(len(grads))[:spec.dust_on_ends]:
+        m, _, idx = grads[j]
+        r = rng_end.uniform(*spec.dust_end_radius_px)
+        side = rng_end.choice(["start", "end"])
+        ua = np.array([np.cos(m.angle_rad), -np.sin(m.angle_rad)])
+        na = np.array([np.sin(m.angle_rad), np.cos(m.angle_rad)])
+        # The graduation runs from the baseline along +u (the tilt aside): 'start' is there.
+        sgn = 1.0 if float(ua @ u) > 0 else -1.0
+        t_end = m.centre_t_px + sgn * (m.length_px / 2 if side == "end" else -m.length_px / 2)
+        t_end += rng_end.uniform(-0.5, 0.5) * r
+        p = m.offset_px * na + t_end * ua + rng_end.uniform(-0.3, 0.3) * r * na
+        px, py = spec.camera.distort(*spec.camera.scene_to_ideal(p[0], p[1]))
+        ink.append(disk(float(px), float(py), r, level=0.05 if rng_end.uniform() < 0.7
+                        else 1.6))
+        hidden[idx] = str(side)
+    occlude(refl, ink, [g[0] for g in grads], spec.blur_px, spec.camera)
     mean_e = np.clip(refl, 0, None) * _illumination(base) * base.exposure * full_well
     img = _digitise(base, mean_e, rng)
     gain = (2**spec.bits - 1) / full_well
@@ -284,7 +339,7 @@ def render_ruled(spec: RuledSpec) -> RuledImage:
         cx, cy = m.centre_xy()
         ix, iy = spec.camera.scene_to_ideal(np.array(cx), np.array(cy))
         truths.append(GraduationTruth(j, kind, ia, float(ix * np.sin(ia) + iy * np.cos(ia)),
-                                      (float(ix), float(iy)), m.length_px))
+                                      (float(ix), float(iy)), m.length_px, hidden.get(j, "")))
     tilted = next((j for m, _, j in grads if m.angle_rad != wrap_half_turn(a)), None)
     truth = RuledTruth(spec.width, spec.height, spec.pitch_px,
                        spec.camera.image_angle(spec.line_angle_rad), spec.bits, noise_dn,

@@ -72,6 +72,9 @@ class Triad:
     warmup_tau_s: float = 300.0
     hysteresis_g: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Bias offset [g] x the sign of the last change of each axis's input (see the module)."""
+    bias_walk_g: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Bias random walk [g/√s] per axis (a bias instability): the bias wanders by this x √t
+    over t seconds, while the unit is turned too (from t = 0, where it is ``bias``)."""
     noise_v: float = 2.4e-5
     lsb_v: float = 0.0
     full_scale_v: float = 10.0
@@ -183,6 +186,7 @@ class TumbleData:
                 "cross_per_g": [list(r) for r in tr.cross], "scale_drift_per_s":
                 list(tr.scale_drift), "scale_warmup": list(tr.scale_warmup),
                 "warmup_tau_s": tr.warmup_tau_s, "hysteresis_g": list(tr.hysteresis_g),
+                "bias_walk_g": list(tr.bias_walk_g),
                 "noise_v": tr.noise_v,
                 "lsb_v": tr.lsb_v, "poses": self.spec.poses, "n_cal": self.n_cal,
                 "mean_time_s": float(self.t[self.pose < self.n_cal].mean()),
@@ -211,8 +215,20 @@ def tumble(spec: TumbleSpec) -> TumbleData:
     t = (start[:, None] + np.arange(n)[None, :] / spec.rate_hz).ravel()
     temp = spec.temp_start_k + spec.temp_rate_k_per_s * t
     a = up[pose] * spec.g_ratio
-    u = spec.triad.outputs(a, t, temp, rng, hysteresis(spec.triad, up)[pose])
+    offset = hysteresis(spec.triad, up)[pose]
+    if any(spec.triad.bias_walk_g):
+        offset = offset + bias_walk(spec.triad, t, rng)
+    u = spec.triad.outputs(a, t, temp, rng, offset)
     return TumbleData(pose, t, u, temp, up, n_cal, spec)
+
+
+def bias_walk(triad: Triad, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The bias's random walk (N, 3) [g] at the sample times ``t`` [s] (increasing): a Wiener
+    process of ``bias_walk_g`` [g/√s] from 0 at t = 0 that goes on between the samples (the
+    turns between poses included)."""
+    dt = np.diff(np.concatenate([[0.0], np.asarray(t, float)]))
+    steps = rng.normal(size=(len(dt), 3)) * np.sqrt(dt)[:, None]
+    return np.cumsum(steps, axis=0) * np.asarray(triad.bias_walk_g, float)
 
 
 HYSTERESIS_MOVE_G = 0.02

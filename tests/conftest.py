@@ -63,6 +63,24 @@ def imageless_session(root: Path, spec) -> Path:
     return plain
 
 
+@pytest.fixture(scope="session")
+def session21_result(tmp_path_factory) -> Path:
+    """The synthetic session of seed 21 with [metadata], run once by ``align run``: the path
+    of its result JSON. Shared by the lot tests (test_lot, test_lot_duplicates), which only
+    read it; a full session run is seconds of CPU."""
+    from align.cli import main
+    from synth.session import SessionSpec, write_session
+
+    folder = tmp_path_factory.mktemp("seed21") / "unit1"
+    write_session(folder, SessionSpec(seed=21))
+    with open(folder / "session.toml", "a") as f:
+        f.write('\n[metadata]\nserial = "SN-0001"\noperator = "kim"\n'
+                "date = 2026-11-20T08:30:00Z\nbatch = 7\n")
+    out = folder.parent / "r.json"
+    assert main(["run", str(folder), "--json", str(out), "-q"]) == 0
+    return out
+
+
 @pytest.fixture
 def tmp_out(tmp_path: Path) -> Path:
     return tmp_path

@@ -13,7 +13,7 @@ from align.calibration.check import CheckResult, check_poses
 from align.calibration.units import unit_scale_check
 from align.warnings import calibration_warnings
 from axisbase.console import captured_warnings
-from axisbase.table import header_units, resolve_units
+from axisbase.header import header_units, resolve_units
 from axisbase.units import DEG
 
 _U = ("ux", "uy", "uz")
@@ -33,7 +33,7 @@ def calibration_units(static: str | Path, check: str | Path | None, given: str |
 
     Returns
     -------
-    The unit (a key of :data:`axisbase.table.OUTPUT_UNITS`): ``given``, else the static
+    The unit (a key of :data:`axisbase.header.OUTPUT_UNITS`): ``given``, else the static
     file's header unit, else V. Raises :class:`~axisbase.errors.InputError` when a header
     disagrees (naming the file and what said otherwise)."""
     def has_header(p: str | Path | None) -> bool:

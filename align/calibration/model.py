@@ -18,7 +18,8 @@ import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
-from align.calibration.triad import CORE, Poses, TriadModel, pose_sigma_g
+from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
+from align.calibration.walk import WALK_ALPHA, WanderFit, walk_covariance, wander_fit, wander_shape
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -30,6 +31,9 @@ SCALE_DRIFT = "scale_drift"
 SCALE_TEMP = "scale_temperature"
 SCALE_WARMUP = "scale_warmup"
 HYSTERESIS = "bias_hysteresis"
+IN_TIME = frozenset({DRIFT, WARMUP, TEMP, SCALE_DRIFT, SCALE_WARMUP, SCALE_TEMP})
+"""The effects that change over the run (a temperature follows the time): a bias wandering
+between the poses can take their shape (:mod:`align.calibration.walk`)."""
 PAIRS = ("xy", "xz", "yz")
 CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
 """One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
@@ -134,6 +138,13 @@ def algebraic(poses: Poses, signs: Sequence[float]) -> TriadModel:
                       temp_ref=float(np.mean(poses.temp)) if poses.temp is not None else 0.0)
 
 
+def walk_physical(rate_g: np.ndarray, t: np.ndarray) -> bool:
+    """Whether a bias random walk of ``rate_g`` per axis [g²/s] stays within
+    :data:`EFFECT_PRIOR_G` (one sigma) over the poses' time span ``t`` [s]: beyond, the
+    samples within the poses move (turn chunks taken for poses), no bias wanders so."""
+    return bool(np.sqrt(np.max(rate_g) * max(float(np.ptp(t)), 1.0)) <= EFFECT_PRIOR_G)
+
+
 class CalibrationStage:
     """Maximum-likelihood ellipsoid refinement with optional effects (the loop's stage)."""
 
@@ -153,8 +164,71 @@ class CalibrationStage:
         self.fits: dict[tuple[str, ...], tuple[StageFit, tuple[Term, ...]]] = {}
         self.start = algebraic(poses, signs)
         self.sigma = pose_sigma_g(self.start, poses)
+        # The bias instability the samples show (align.calibration.walk): the poses'
+        # residuals are correlated in time; the fit whitens them with the Cholesky factor of
+        # their covariance (generalised least squares), and sigma is each pose's total.
+        self.whiten: np.ndarray | None = None
+        self._white: tuple[float, np.ndarray, np.ndarray] | None = None
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
+        if (self.sigma is not None and poses.walk_rate is not None and poses.ordered
+                and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
+            # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
+            # the per-axis estimates scatter by about their size at a few µg/√s.
+            k2 = self.start.k**2
+            rate = np.maximum(poses.walk_rate / k2, np.mean(poses.walk_rate / k2)) * k2
+            C = np.diag(self.sigma**2) + walk_covariance(
+                rate, pose_gradient(self.start, poses), poses.t)
+            f = self.means_allow(C - np.diag(self.sigma**2))
+            # ... when they allow the level the samples show, within its uncertainty (the
+            # one-sided bound mirrored): less, and the samples' low frequencies are mostly
+            # a settling, not a walk (the wander alternative still weighs one).
+            low = np.mean(2 * poses.walk_rate - poses.walk_bound) / np.mean(poses.walk_rate)
+            if f > 0 and f >= low:
+                C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
+                self.whiten = np.linalg.inv(np.linalg.cholesky(C))
+                self.sigma = np.sqrt(np.diag(C))
+
+    def means_allow(self, walk: np.ndarray) -> float:
+        """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that the
+        pose means allow: the declared model's white-noise chi2 not in the lower WALK_ALPHA
+        tail of its distribution under diag(sigma²) + f walk (Σ λ_i χ²₁, λ the eigenvalues of
+        the residual-space covariance; 20000 seeded draws: scipy has no such distribution);
+        0 when even 1e-4 of it is excluded. A pose's own settling (a hand-placed unit)
+        shows in its samples as a walk does but does not go on from pose to pose: the means
+        then scatter as white noise, and the walk is not one."""
+        if self._white is None:
+            # The white-noise fit of the declared model, leaving the stage's own as it was.
+            whiten, self.whiten = self.whiten, None
+            stores = (self.solutions, self.projection, self.condition, self.jacobians)
+            kept = [st.pop((), None) for st in stores]
+            _, r, _ = self.refine([])
+            J = self.jacobians[()]
+            for st, v in zip(stores, kept, strict=True):
+                st.pop((), None)
+                if v is not None:
+                    st[()] = v
+            self.whiten = whiten
+            q, _ = np.linalg.qr(J)
+            self._white = (float(np.sum((r / self.sigma) ** 2)),
+                           np.eye(len(r)) - q @ q.T, 1.0 / self.sigma)
+        chi2, P, w = self._white
+        Ww = P @ (w[:, None] * walk * w[None, :]) @ P
+        z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
+
+        def allowed(f: float) -> bool:
+            lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
+            return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
+
+        if allowed(1.0):
+            return 1.0
+        lo, hi = np.log(1e-4), 0.0
+        if not allowed(float(np.exp(lo))):
+            return 0.0
+        for _ in range(12):  # bisection on log f: the chi2's lower tail grows with f
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if allowed(float(np.exp(mid))) else (lo, mid)
+        return float(np.exp(lo))
 
     def _check_applies(self, effects: Sequence[str]) -> None:
         p = self.poses
@@ -203,7 +277,8 @@ class CalibrationStage:
                      - dT[:, None] * f["temp_coeff"])
                 if hyst:
                     a = a - self.turns * f["hysteresis"]
-            return (np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0) * w
+            d = np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0
+            return d * w if self.whiten is None else self.whiten @ d
 
         return resid
 
@@ -307,6 +382,7 @@ class CalibrationStage:
         res = solve(tau)
         self.solutions[tuple(effects)] = res.x
         self.jacobians[tuple(effects)] = np.asarray(res.jac, float)
+        # In g at each pose's sigma (whitened residuals when the walk correlates them).
         r = res.fun / w
         J = res.jac
         # Separability: condition number of the Jacobian with unit-norm columns (scale-free).
@@ -325,6 +401,21 @@ class CalibrationStage:
             # Noise unknown: scale by the residual variance (Type A only).
             cov = cov * (np.sum(res.fun**2) / max(dof, 1))
         return _model_from(res.x, effects, s0.t_ref, s0.temp_ref, cov, tau), r, res.x
+
+    def wander(self, level: float | None = None) -> WanderFit | None:
+        """The declared model (no effect) with a bias random walk between the poses, its
+        level fitted (:func:`align.calibration.walk.wander_fit`): the explanation every
+        effect the loop adds is weighed against (on 14 poses a wander of a few µg is not
+        separable from a drift); ``level`` [g²/s]: at that level instead. None: noise
+        unknown, order unknown, or not fitted."""
+        p = self.poses
+        if self.sigma is None or not p.ordered or () not in self.fits:
+            return None
+        a = self.fits[()][0].payload.specific_force(p.u, p.t, p.temp)
+        up = a / np.linalg.norm(a, axis=1, keepdims=True)
+        W = self.whiten if self.whiten is not None else np.diag(1.0 / self.sigma)
+        return wander_fit(self.projection[()][1], self.jacobians[()],
+                          wander_shape(up, p.t, W), level)
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
         effects = [t.name for t in terms]

@@ -12,7 +12,7 @@ from align.calibration.pipeline import Calibration
 from align.calibration.static import StaticInterval
 from align.calibration.triad import Poses, delta_g
 from align.contract import document
-from axisbase.table import OUTPUT_UNITS
+from axisbase.header import OUTPUT_UNITS
 
 SCALE_KEYS = {"V": "scale_factors_v_per_g", "counts": "scale_factors_counts_per_g",
               "m/s2": "scale_factors_m_s2_per_g", "g": "scale_factors_g_per_g"}

@@ -28,14 +28,17 @@ from align.calibration.known import (
 )
 from align.calibration.model import (
     CANDIDATES,
+    IN_TIME,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
     PRIOR_SCALE,
     CalibrationStage,
     admissible,
+    walk_physical,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
-from align.calibration.triad import Poses, TriadModel, delta_g, per_axis
+from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
+from align.calibration.walk import WANDER, walk_covariance
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -160,6 +163,33 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     error of the faces (default :data:`align.calibration.known.FIXTURE_ERROR_RAD`).
     ``signs_as``: how the user gave ``signs`` (the flag, or session.toml's key), for the
     messages.
+
+    Parameters
+    ----------
+    poses : Poses
+        Mean output of each static pose (N, 3) [the triad's unit: V, g, m/s², counts],
+        with times [s], temperatures, the standard error of each mean and labels (the
+        faces' labels fix the signs).
+    signs : sequence of float, optional
+        The scale factors' signs (see above).
+    alpha : float
+        Significance level of the residual loop's tests.
+    candidates : sequence of Candidate
+        The effects the loop may add.
+    fixture_error_rad : float, optional
+        Declared placement error of the faces [rad].
+
+    Returns
+    -------
+    Calibration
+        The algebraic start and the final triad model (scale factors [unit/g], bias
+        [unit], axes; their covariance), the loop's report and the notes.
+
+    Raises
+    ------
+    InputError
+        Too few usable poses, poses that do not determine the ellipsoid (a plane, a
+        cone), signs that contradict the labelled faces.
 
     Examples
     --------
@@ -332,6 +362,30 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
             out.append(Alternative(" + ".join(effects), replaces, float(d_bic), float(frac),
                                    _core(fit.payload) - core,
                                    positive_part(_core_cov(fit.payload) - cov)))
+    # No effect but a bias wandering between the poses (a bias instability every triad has),
+    # its level fitted (one parameter in BIC), when the effects chosen or their alternatives
+    # are in time (a wander's shape): plausible within AMBIGUOUS_BIC, or when the
+    # samples within the poses do not exclude the level it needs (the poses' means alone
+    # cannot tell a wander of a few µg from a drift on 14 poses).
+    timed = {e for a in out for e in a.effects.split(" + ")} | set(names)
+    w = stage.wander() if timed & IN_TIME else None
+    if w is not None and w.level > 0:
+        d_bic = w.m2ll + (len(CORE) + 1) * np.log(len(stage.poses.u)) - b_final
+        bound = stage.poses.walk_bound
+        top = (float(np.max(bound / stage.start.k**2)) if bound is not None and
+               walk_physical(bound / stage.start.k**2, stage.poses.t) else 0.0)
+        if top > 0 and stage.sigma is not None and stage.whiten is None:
+            # ... and the pose means allow (a settling within the poses is not a walk).
+            p = stage.poses
+            top *= stage.means_allow(walk_covariance(
+                np.full(3, top) * stage.start.k**2, pose_gradient(stage.start, p), p.t))
+        if w.level <= top:
+            # u covers the wander at the largest level the samples allow.
+            w = stage.wander(top)
+        if d_bic < AMBIGUOUS_BIC or w.level == top:
+            theta = stage.solutions[()][:9] + w.step[:9]
+            out.append(Alternative(WANDER, " + ".join(names), float(d_bic), float("nan"),
+                                   theta - core, positive_part(w.cov[:9, :9] - cov)))
     return out
 
 

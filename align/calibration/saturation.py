@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import binomtest
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 PILE_FRACTION = 0.05
 """Least share of a pose's samples at its extreme value to call it a pile-up."""
@@ -107,6 +107,6 @@ def _piled(x: np.ndarray, typical_levels: float) -> tuple[float, int, str] | Non
     need = max(PILE_MIN, PILE_FRACTION * len(x))
     for end, inner in ((-1, -2), (0, 1)):
         c, ci = int(counts[end]), int(counts[inner])
-        if c >= need and binomtest(c, c + ci, 0.5, alternative="greater").pvalue < PILE_ALPHA:
+        if c >= need and special.bdtrc(c - 1, c + ci, 0.5) < PILE_ALPHA:
             return float(values[end]), c, "piled at its extreme"
     return None

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.ndimage import uniform_filter1d
 
 from align.calibration.arrays import MEANS_ROWS, SUFFIXES, read_arrays
@@ -25,6 +26,7 @@ from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
+from align.calibration.walk import walk_levels
 from axisbase.errors import InputError
 from axisbase.table import Column, Table, TableSpec, read_table
 
@@ -206,8 +208,6 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         tab = read_table(path, STATIC, columns, rate_hz)
         if "pose" not in tab and "t" not in tab and len(tab) <= MEANS_ROWS:
             # ux,uy,uz without pose or time, a few rows: per-pose means (as for arrays).
-            from dataclasses import replace
-
             labels = np.array([str(i + 1) for i in range(len(tab))], dtype=object)
             tab = replace(tab, data={**tab.data, "pose": labels})
             logging.getLogger("align").warning(
@@ -274,6 +274,11 @@ def read_poses(path: str | Path, settings: StaticSettings = StaticSettings(),
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
         samples = [u[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals]
+    if t is not None:  # the bias instability the samples within the poses show
+        times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
+                 [t[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals])
+        rate, bound = walk_levels(samples, times)
+        poses = replace(poses, walk_rate=rate, walk_bound=bound)
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)
     if calibration:
         try:
@@ -306,7 +311,8 @@ def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
     rest = Poses(poses.u[keep], poses.t[keep],
                  None if poses.temp is None else poses.temp[keep],
                  None if poses.sigma_u is None else poses.sigma_u[keep], poses.count[keep],
-                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k))
+                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k),
+                 poses.ordered, poses.walk_rate, poses.walk_bound)
     what = "; ".join(s.text() for s in sat)
     if calibration:
         faces = faces_of(rest)
@@ -469,8 +475,6 @@ def noise_levels(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     deviation at ``n`` samples over adjacent pairs of quiet windows (median form, robust to a
     pair that straddles a small move), never below the white value noise / sqrt(n).
     """
-    from scipy import stats
-
     nb = len(u) // n
     m = u.shape[1]
     if nb < 4:
@@ -488,7 +492,7 @@ def noise_levels(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     # degrees of freedom, E[X | X < q] = d F_{d+2}(q) / F_d(q) for X ~ chi2(d) (white noise;
     # exact enough for a threshold).
     d = m * (n - 1)
-    corr = np.sqrt(stats.chi2.cdf(stats.chi2.ppf(0.2, d), d + 2) / 0.2)
+    corr = np.sqrt(special.chdtr(d + 2, special.chdtri(d, 0.8)) / 0.2)
     noise = np.sqrt(np.mean(sd[quiet] ** 2, 0)) / corr
     noise = np.maximum(noise, q / np.sqrt(12))
     noise = np.maximum(noise, 1e-12 * np.maximum(np.abs(u).max(0), 1e-300))
@@ -496,7 +500,7 @@ def noise_levels(u: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     white = noise / np.sqrt(n)
     if pairs.sum() >= 5:
         d2 = (means[1:][pairs] - means[:-1][pairs]) ** 2
-        allan = np.sqrt(np.median(d2, 0) / stats.chi2.ppf(0.5, 1) / 2)
+        allan = np.sqrt(np.median(d2, 0) / special.chdtri(1, 0.5) / 2)
         return noise, np.maximum(allan, white)
     return noise, white
 
@@ -516,8 +520,6 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
        ``split_sigma`` of their noise (binary segmentation), the Allan deviation setting the
        noise of a mean.
     """
-    from scipy import stats
-
     t = np.asarray(t, float)
     u = np.asarray(u, float)
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
@@ -542,7 +544,7 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
     var = np.maximum(m2 - m * m, 0) * (n / (n - 1))
     ratio = np.sqrt(np.mean(var / noise**2, axis=1))
     k = u.shape[1] * (n - 1)
-    limit = max(settings.threshold, float(np.sqrt(stats.chi2.ppf(1 - 1e-4, k) / k)))
+    limit = max(settings.threshold, float(np.sqrt(special.chdtri(k, 1e-4) / k)))
     quiet = ratio <= limit
     edges = np.diff(np.concatenate([[0], quiet.astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1

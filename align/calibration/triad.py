@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
+from align.calibration.walk import walk_levels
 from align.errors import InputError
 from axisbase.covariance import cov_of
 
@@ -47,6 +48,12 @@ class Poses:
     ordered: bool = True
     """Whether the poses were held in the order of ``t`` (times given, or a recording): only
     then is the turn into each pose known (bias hysteresis)."""
+    walk_rate: np.ndarray | None = None
+    """The bias random walk's rate per axis [output unit² / s] the samples within the poses
+    show (:func:`align.calibration.walk.walk_levels`), or None (white noise)."""
+    walk_bound: np.ndarray | None = None
+    """The largest such rate the samples do not exclude [output unit² / s], or None (too
+    short, or no times)."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -57,7 +64,8 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
     return Poses(np.array([u[s].mean(0) for s in sel]), np.array([t[s].mean() for s in sel]),
                  None, np.array([u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
                  np.array([s.sum() for s in sel]),
-                 tuple(labels) if labels is not None else tuple(str(i) for i in ids))
+                 tuple(labels) if labels is not None else tuple(str(i) for i in ids),
+                 True, *walk_levels([u[s] for s in sel], [t[s] for s in sel]))
 
 
 @dataclass(frozen=True)
@@ -260,11 +268,14 @@ def pose_sigma_g(model: TriadModel, poses: Poses) -> np.ndarray | None:
     n = poses.count.astype(float)
     pooled = np.sqrt(np.sum((poses.sigma_u**2) * n[:, None] ** 2, 0) / np.sum(n))
     sigma_u = pooled[None, :] / np.sqrt(n)[:, None]
+    return np.sqrt(np.sum((pose_gradient(model, poses) * sigma_u) ** 2, axis=1))
+
+
+def pose_gradient(model: TriadModel, poses: Poses) -> np.ndarray:
+    """d|a|/du of each pose (N, 3) [g per output unit]."""
     a = model.specific_force(poses.u, poses.t, poses.temp)
     n = a / np.linalg.norm(a, axis=1, keepdims=True)
-    G = np.linalg.inv(model.k[:, None] * r_matrix(model.beta))
-    g = n @ G  # d|a|/du per pose
-    return np.sqrt(np.sum((g * sigma_u) ** 2, axis=1))
+    return n @ np.linalg.inv(model.k[:, None] * r_matrix(model.beta))
 
 
 def delta_g(model: TriadModel, poses: Poses) -> np.ndarray:

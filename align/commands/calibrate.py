@@ -22,7 +22,7 @@ from axisbase.units import DEG
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from align.calibration.files import calibrate_files, calibration_units
-    from axisbase.table import parse_column_map
+    from axisbase.header import parse_column_map
 
     if args.plan is not None or args.static is None:
         return _plan_poses(args)

@@ -35,7 +35,7 @@ def table_options(args: argparse.Namespace, paths: Sequence[str], spec,
                   default: str | None = "V") -> tuple[dict, str | None]:
     """``--columns`` as a mapping and the data's output unit (``--units`` checked against
     the units written in the files' headers; ``default`` when neither says)."""
-    from axisbase.table import parse_column_map, resolve_units
+    from axisbase.header import parse_column_map, resolve_units
 
     cols = parse_column_map(getattr(args, "columns", None))
     units = resolve_units(getattr(args, "units", None), list(paths), spec, cols,

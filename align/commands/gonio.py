@@ -22,7 +22,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     # (align.documents, align.warnings and align.present import the loop, i.e. scipy: after
     # the pass, which imports it on a thread while it waits on the parser)
     from align.gonio import measure_log
-    from axisbase.table import parse_column_map
+    from axisbase.header import parse_column_map
 
     names = faces(args.faces)
     nominal_deg = nominal(args.nominal, len(names))

@@ -30,7 +30,12 @@ def cmd_marks(args: argparse.Namespace) -> int:
     results, failed, internal = _show_marks(batch, plot_dir)
     _write_marks(args, results, inputs, out)
     # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
-    return _marks_status(failed + sum(r.lens_limited for r in results), internal)
+    return _marks_status(failed + _not_ok(results), internal)
+
+
+def _not_ok(results) -> int:
+    """Marks measured but not ok: lens-limited, or a bent mark running off the image."""
+    return sum(r.lens_limited or r.bend_off_frame for r in results)
 
 
 def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:

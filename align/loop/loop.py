@@ -38,10 +38,21 @@ log = logging.getLogger("align.loop")
 class Term:
     """Extra design columns for one effect.
 
-    ``columns``: (N, m) regressors entering the stage's model linearly; ``searched``: number of
-    nonlinear parameters chosen by a search before fitting (e.g. a frequency), counted in
-    BIC; ``trials``: number of independent trials of that search (look-elsewhere factor);
-    ``meta``: what the stage needs to interpret the term (e.g. a period).
+    Attributes
+    ----------
+    name : str
+        The effect's name (``earth_rate``, ``camera_roll[B]``).
+    unit : str
+        Unit of its estimate (``rad/s``, ``rad``).
+    columns : ndarray, shape (N,) or (N, m)
+        Regressors entering the stage's model linearly.
+    searched : int
+        Nonlinear parameters chosen by a search before fitting (e.g. a frequency), counted
+        in BIC.
+    trials : float
+        Independent trials of that search (the look-elsewhere factor).
+    meta : mapping of str to float
+        What the stage needs to interpret the term (e.g. a period [s]).
     """
 
     name: str
@@ -60,13 +71,31 @@ class Term:
 class StageFit:
     """What a stage returns from one fit.
 
-    ``effects``: per term name, (estimate, standard uncertainty) in the term's unit;
-    ``quantities``: the stage's quantities of interest, name -> (value, u), SI/radians;
-    ``components``: for effects with several parameters, (label, estimate, u) of each (the
-    ``effects`` entry is the most significant one); ``payload``: the stage's own fitted model.
-    ``noise_dof``: degrees of freedom of an *estimated* noise covariance behind ``sigma``
-    (None: sigma known); the effect and structure tests then use their null distributions
-    with an estimated covariance (F- and t-type instead of chi2 and normal).
+    Attributes
+    ----------
+    residuals : ndarray, shape (N,)
+        Observed minus fitted, in the observations' unit.
+    sigma : ndarray, shape (N,), or None
+        Their standard uncertainties (None: unknown, the tests then estimate the noise).
+    n_params : int
+        Parameters fitted (``dof`` = N - n_params; ``chi2`` = sum (r / sigma)^2).
+    regressors : mapping of str to ndarray
+        Quantities the residuals may depend on (time, period, position along a mark).
+    order : str
+        The regressor the structure tests order the residuals by.
+    effects : mapping of str to (float, float)
+        Per term name, (estimate, standard uncertainty) in the term's unit.
+    quantities : mapping of str to (float, float)
+        The stage's quantities of interest, name -> (value, u), SI/radians.
+    components : mapping of str to tuple of (str, float, float)
+        For effects with several parameters, (label, estimate, u) of each (the ``effects``
+        entry is the most significant one).
+    payload : object
+        The stage's own fitted model.
+    noise_dof : float or None
+        Degrees of freedom of an *estimated* noise covariance behind ``sigma`` (None: sigma
+        known); the effect and structure tests then use their null distributions with an
+        estimated covariance (F- and t-type instead of chi2 and normal).
     """
 
     residuals: np.ndarray
@@ -109,8 +138,21 @@ class Stage(Protocol):
 
 @dataclass(frozen=True)
 class Candidate:
-    """A candidate effect: builds its Term from the current fit (None, or
-    :class:`~axisbase.errors.NotApplicable` raised with the reason, if it does not apply)."""
+    """A candidate effect.
+
+    Attributes
+    ----------
+    name : str
+        The effect's name (the Term's).
+    unit : str
+        Unit of its estimate.
+    description : str
+        What it is, for the report.
+    build : callable
+        ``build(current_fit) -> Term``: its columns from the current fit (None, or
+        :class:`~axisbase.errors.NotApplicable` raised with the reason, if it does not
+        apply).
+    """
 
     name: str
     unit: str
@@ -237,8 +279,24 @@ class SkippedCandidate:
 
 @dataclass(frozen=True)
 class LoopReport:
-    """Before/after of one stage's loop; ``refused``: significant candidates not added;
-    ``skipped``: candidates that could not be tried, with why."""
+    """Before/after of one stage's loop.
+
+    Attributes
+    ----------
+    effects : tuple of EffectReport
+        The effects added, in order, with estimate, u and the RMS before/after.
+    before, after : StageFit
+        The declared model's fit and the final one.
+    structure_before, structure_after : StructureReport
+        The residuals' structure tests before and after (``unexplained_structure``: what
+        remains after).
+    terms : tuple of Term
+        The terms of the final model.
+    refused : tuple of RefusedEffect
+        Significant candidates not added, with why.
+    skipped : tuple of SkippedCandidate
+        Candidates that could not be tried, with why.
+    """
 
     effects: tuple[EffectReport, ...]
     before: StageFit
@@ -444,6 +502,27 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
     else None): the refusal is reported in ``LoopReport.refused``, never silent. A candidate
     that does not apply or whose refit is singular is reported in ``LoopReport.skipped``.
+
+    Parameters
+    ----------
+    stage : Stage
+        Fits its observations with a list of terms (``stage.fit(terms) -> StageFit``).
+    candidates : sequence of Candidate
+        The effects that may be added.
+    alpha : float
+        Significance level of the effect and structure tests.
+    min_delta_bic : float
+        Least drop of BIC an effect must bring.
+    max_effects : int
+        Most effects added.
+    admissible : callable, optional
+        ``admissible(current, trial, term) -> str | None``: a reason to refuse a
+        significant effect (a physical prior), else None.
+
+    Returns
+    -------
+    LoopReport
+        Before/after fits, the effects added, refused and skipped.
     """
     refused: dict[str, RefusedEffect] = {}
     skipped: dict[str, SkippedCandidate] = {}

@@ -23,7 +23,7 @@ from align.calibration import STATIC
 from align.contract import schema
 from align.errors import InputError
 from align.session.config import load_session
-from axisbase.table import header_units, parse_column_map
+from axisbase.header import header_units, parse_column_map
 from goniometry.reader import COUNTER_LOG
 from imaging.camera import CameraModel
 

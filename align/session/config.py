@@ -19,8 +19,8 @@ from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
+from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
-from axisbase.table import OUTPUT_UNITS, parse_column_map
 from axisbase.units import ARCSEC
 from imaging import ImageInputError, check_roi
 
@@ -299,10 +299,28 @@ def _metadata(d: dict, src: str) -> dict[str, str | int | float | bool]:
 
 
 def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
-    """Read and check ``folder/session.toml`` (``InputError`` names the key at fault).
+    """Read and check ``folder/session.toml``.
 
     Every file it names must lie inside the session folder (symlinks followed) unless
-    ``allow_outside``; no file may be named twice."""
+    ``allow_outside``; no file may be named twice.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The session folder (or its session.toml).
+    allow_outside : bool
+        Allow files outside the folder.
+
+    Returns
+    -------
+    Session
+        The checked settings, stages and files.
+
+    Raises
+    ------
+    InputError
+        Naming the key at fault (``session.toml: [[images]] #3 housing = 'w': ...``).
+    """
     folder = Path(folder)
     path = folder / "session.toml" if folder.is_dir() else folder
     if folder.is_file():

@@ -30,9 +30,9 @@ from align.plots import (
 )
 from align.session.run import SessionResult
 from align.warnings import session_warnings, setup_notices
+from axisbase.header import OUTPUT_UNITS
 from axisbase.output import write_atomic
 from axisbase.provenance import Provenance
-from axisbase.table import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 from goniometry import kept_table
 from imaging import ImageInputError, read_image

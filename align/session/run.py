@@ -52,7 +52,7 @@ from align.tilt import FAR_FROM_1G
 from align.warnings import session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
-from axisbase.table import resolve_units
+from axisbase.header import resolve_units
 from imaging import CameraModel
 
 Progress = Callable[[str], None]
@@ -214,6 +214,21 @@ def _try(res: SessionResult, stage: str, fn: Callable[[], object],
 def run_session(s: Session, progress: Progress = lambda msg: None,
                 alpha: float = 1e-3) -> SessionResult:
     """Run every stage of ``s`` and fuse; stage failures are collected, not raised.
+
+    Parameters
+    ----------
+    s : Session
+        A checked session (:func:`load_session`).
+    progress : callable
+        Called with a line of text as each stage starts.
+    alpha : float
+        Significance level of every stage's tests.
+
+    Returns
+    -------
+    SessionResult
+        Each stage's result (None where it failed, with the error in ``errors``), the
+        fusion (E [rad] with its covariance) and the warnings.
 
     Examples
     --------

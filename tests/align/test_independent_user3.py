@@ -285,7 +285,9 @@ BAD_TOML = {
 }
 
 
-FAST_BAD = {"misspelt_key", "deg_nan", "duplicate_pose", "same_file", "outside"}
+# Each case is one `align run` process (~1.5 s CPU, nearly all of it imports): the default run
+# keeps a misspelt key and a file outside the folder, `-m slow` the other cases.
+FAST_BAD = {"misspelt_key", "outside"}
 
 
 @pytest.mark.parametrize("case", [c if c in FAST_BAD else pytest.param(c, marks=pytest.mark.slow)
@@ -325,7 +327,7 @@ def _gross(tmp_path, triad, toml=SESSION_TOML, platform_rows=None):
 GROSS = ["scale_sign_undeclared", "platform_z_flipped", "xup_xdn_swapped", "platform_in_mV"]
 
 
-@pytest.mark.parametrize("case", [c if c in ("scale_sign_undeclared", "platform_in_mV") else
+@pytest.mark.parametrize("case", [c if c == "scale_sign_undeclared" else
                                   pytest.param(c, marks=pytest.mark.slow) for c in GROSS])
 def test_run_never_calls_a_grossly_inconsistent_session_ok(tmp_path, case):
     t = Triad(11)
@@ -537,7 +539,10 @@ def test_marks_same_pixels_in_png_tiff_8_16_bit(tmp_path):
     assert abs(wrap_angle(m[5]["angle_deg"] + 90.0) - m[0]["angle_deg"]) < 1e-3 * u
 
 
-@pytest.mark.parametrize("how", ["rot180", pytest.param("fliplr", marks=pytest.mark.slow)])
+# (both under slow: the default run turns and mirrors a mark's image in
+# test_marks_same_pixels_in_png_tiff_8_16_bit above and in tests/imaging/test_measure.py)
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["rot180", "fliplr"])
 def test_marks_angle_follows_a_rotation_or_mirror_exactly(tmp_path, how):
     img, tr = render_mark(shape=(480, 640), angle_deg=23.0, offset_px=40, length_px=350, seed=3)
     moved = np.rot90(img, 2) if how == "rot180" else np.fliplr(img)
@@ -639,6 +644,7 @@ def lot_results(tmp_path_factory):
     return root / "res"
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_results):
     import shutil
 
@@ -664,6 +670,7 @@ def test_lot_reads_mine_rejects_the_broken_and_keeps_failed_out(tmp_path, lot_re
     assert [u["unit"] for u in failed] == ["u9"] and not failed[0]["in_statistics"]
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_says_when_a_unit_is_counted_twice(tmp_path, lot_results):
     import shutil
 
@@ -901,6 +908,7 @@ def test_marks_at_pixel_locking_angles_8_and_16_bit(tmp_path):
     assert np.abs(z).max() < 4 and 0.6 < np.sqrt(np.mean(z ** 2)) < 1.4, z
 
 
+@pytest.mark.slow  # (its fixture runs seven sessions through `align run`)
 def test_lot_tolerance_marginal_and_capability_as_readme_says(tmp_path, lot_results):
     d0 = load(lot_results / "u0.json")
     E, U = d0["misalignment_arcsec"][0][1], d0["misalignment_u_arcsec"][0][1]

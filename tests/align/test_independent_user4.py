@@ -132,8 +132,6 @@ def test_straight_mark_declared_lens_free_is_within_3u(tmp_path):
     assert abs(err) <= 3 * m["angle_u_arcsec"], (err, m["angle_u_arcsec"])
 
 
-@pytest.mark.xfail(strict=True, reason="symmetric bent mark (2 px sagitta over 400 px), lens "
-                   "declared free: angle 24\" off at u 5.4\" (4.5 u), ok and exit 0")
 def test_bent_mark_lens_free_angle_within_3u(tmp_path):
     # A parabolic bow symmetric about the mark's middle: chord, straight fit and tangent at
     # the middle all have the nominal direction, so the truth is unambiguous.
@@ -156,8 +154,6 @@ def test_bent_mark_is_named_bent(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="3 straight marks through one k1+k2 lens: k2 found "
-                   "(0.0306, truth 0.0324) but not applied, then a straight mark is called bent")
 def test_three_straight_marks_one_lens_not_called_bent(tmp_path):
     three = [(200, 150, 10.0, 250), (600, 450, -20.0, 250), (650, 150, 75.0, 250)]
     img = render_marks(800, 600, three, f=1.325 * 500.0, dist=LENS, seed=2, ss=3)
@@ -533,8 +529,6 @@ def test_camera_model_for_another_image_size_is_not_measured(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="ruled scale (9 lines, 70 px pitch) through a k1=-0.3 "
-                   "lens with its exact --camera: pitch 58.04 +- 1.94 px, a step skipped, exit 0")
 def test_ruled_scale_through_lens_with_camera_pitch(tmp_path):
     w, h = 800, 600
     f = 1.325 * 0.5 * math.hypot(w, h)

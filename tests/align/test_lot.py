@@ -28,18 +28,10 @@ ARCSEC = np.pi / 180 / 3600
 # ----------------------------------------------------------------------------- fixtures
 
 @pytest.fixture(scope="module")
-def real_result(tmp_path_factory) -> dict:
-    """One real session result, run by 'align run' from a session with [metadata]."""
-    from synth.session import SessionSpec, write_session
-
-    folder = tmp_path_factory.mktemp("lot") / "unit1"
-    write_session(folder, SessionSpec(seed=21))
-    with open(folder / "session.toml", "a") as f:
-        f.write('\n[metadata]\nserial = "SN-0001"\noperator = "kim"\n'
-                "date = 2026-11-20T08:30:00Z\nbatch = 7\n")
-    out = folder.parent / "r.json"
-    assert main(["run", str(folder), "--json", str(out), "-q"]) == 0
-    return json.loads(out.read_text())
+def real_result(session21_result) -> dict:
+    """One real session result, run by 'align run' from a session with [metadata] (the
+    shared seed-21 run, tests/conftest.py)."""
+    return json.loads(session21_result.read_text())
 
 
 def _unit(k: int, e_arcsec, u_arcsec=0.1, ok=True, meta=None) -> UnitResult:
@@ -394,6 +386,7 @@ def _chromium() -> str:
     pytest.skip("headless Chromium is absent (Debian package 'chromium'; .ci/run installs it)")
 
 
+@pytest.mark.slow  # (a headless browser; the page's own checks stay in the default run)
 def test_report_renders_in_headless_chromium(real_result, tmp_path):
     from PIL import Image
 

@@ -161,6 +161,7 @@ def test_the_report_opens_with_the_dispositions_and_links_the_session_report(lot
     assert "control limits" not in act
 
 
+@pytest.mark.slow  # (a headless browser; the page's own checks stay in the default run)
 def test_the_lot_page_in_headless_chromium(lot_page, tmp_path):
     """The verdict and the first unit to decide on the first screen, in-page links resolve,
     images decode, nothing on the console, and the page of 40 units stays under 1 MB."""

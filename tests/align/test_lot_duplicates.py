@@ -94,14 +94,10 @@ def test_distinct_units_are_never_merged():
 
 
 @pytest.fixture(scope="module")
-def result(tmp_path_factory) -> Path:
-    from synth.session import SessionSpec, write_session
-
-    folder = tmp_path_factory.mktemp("dup") / "unit1"
-    write_session(folder, SessionSpec(seed=21))
-    out = folder.parent / "unit1.json"
-    assert main(["run", str(folder), "--json", str(out), "-q"]) == 0
-    return out
+def result(session21_result) -> Path:
+    """A real session result (the shared seed-21 run, tests/conftest.py; ``lot_results``
+    replaces its metadata per unit)."""
+    return session21_result
 
 
 def test_cli_a_copy_in_the_folder(result, tmp_path, capsys):

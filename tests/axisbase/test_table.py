@@ -314,9 +314,9 @@ def test_parallel_parse_gives_the_serial_numbers_and_lines(tmp_path, monkeypatch
                                                            variant):
     """Blocks cut anywhere (64 bytes: every few rows; 1 MiB: one block), in every dialect:
     the same numbers as the serial reader, in the same order, and the same line for a row."""
-    import axisbase.table as table
+    import axisbase.csvblocks as csvblocks
 
-    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    monkeypatch.setattr(csvblocks, "PARALLEL_BLOCK", block)
     head, rows = _numbers(7)
     p = _dialect(tmp_path / f"{variant}.csv", head, rows, variant)
     serial = list(iter_table(p, NUM_SPEC, block_bytes=1 << 10))
@@ -341,9 +341,9 @@ def test_parallel_parse_gives_the_serial_numbers_and_lines(tmp_path, monkeypatch
 ])
 def test_parallel_parse_names_the_same_bad_line(tmp_path, monkeypatch, block, edit, match):
     """A bad row in a later block is named by its own line, as the serial reader names it."""
-    import axisbase.table as table
+    import axisbase.csvblocks as csvblocks
 
-    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    monkeypatch.setattr(csvblocks, "PARALLEL_BLOCK", block)
     head, rows = _numbers(3)
     i = 317
     f = list(rows[i])
@@ -358,9 +358,9 @@ def test_parallel_parse_names_the_same_bad_line(tmp_path, monkeypatch, block, ed
 def test_parallel_reader_stopped_early_leaves_no_thread(tmp_path, monkeypatch):
     import threading
 
-    import axisbase.table as table
+    import axisbase.csvblocks as csvblocks
 
-    monkeypatch.setattr(table, "PARALLEL_BLOCK", 256)
+    monkeypatch.setattr(csvblocks, "PARALLEL_BLOCK", 256)
     head, rows = _numbers(2, n=3000)
     p = _dialect(tmp_path / "long.csv", head, rows, "plain")
     before = threading.active_count()

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from align.gonio import measure_log
-from goniometry.revolutions import R_DROPOUT
+from goniometry.exclusions import R_DROPOUT
 from synth.gonio import GonioSpec, drop_out, simulate, write_log
 
 N_FACES = 4

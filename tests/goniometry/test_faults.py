@@ -13,7 +13,7 @@ import pytest
 
 from align.gonio import measure_log
 from goniometry import read_revolutions
-from goniometry.revolutions import R_DROPOUT
+from goniometry.exclusions import R_DROPOUT
 from synth.gonio import GonioSpec, simulate, write_log
 
 N_FACES = 4
@@ -218,7 +218,7 @@ def test_a_double_trigger_too_close_to_tell_excludes_its_revolution(tmp_path):
     """A second pulse 1 µs after a face (0.8 count at 1 rev/s) and a glint ~1 count before
     another: which pulse is the face cannot be known from the counts (nor from the times,
     which read the same instants): those revolutions are excluded and said so, not guessed."""
-    from goniometry.revolutions import R_AMBIGUOUS
+    from goniometry.exclusions import R_AMBIGUOUS
 
     faults = (("double", 101, 1e-6), ("glint", 202, 1 - 5e-6))
     sim = simulate(GonioSpec(revolutions=150, faults=faults, seed=3))
@@ -241,7 +241,7 @@ ARCSEC = np.pi / 180 / 3600
 def test_the_noise_reach_grows_with_the_log_as_the_gaussian_tail_says():
     from scipy.stats import norm
 
-    from goniometry.revolutions import SCREEN_SIGMA, TAIL_ALPHA, noise_reach
+    from goniometry.exclusions import SCREEN_SIGMA, TAIL_ALPHA, noise_reach
 
     assert noise_reach(10) == SCREEN_SIGMA  # a short log: the screen's 5 sigma
     for samples in (10**3, 10**5, 4 * 60000, 10**8):
@@ -267,7 +267,7 @@ def test_a_displaced_pulse_in_a_long_log_is_a_fault_and_warned(tmp_path):
     """The look-elsewhere reach only forgives what noise can do: a pulse moved by 20 sigma
     in a 20 000-revolution log is excluded as a fault, named by its line and warned of."""
     from align.warnings import gonio_warnings
-    from goniometry.revolutions import R_TAIL
+    from goniometry.exclusions import R_TAIL
 
     sim = simulate(GonioSpec(revolutions=20000, jitter_rad=1 * ARCSEC, seed=5))
     p = write_log(sim, tmp_path / "long.csv")
@@ -290,7 +290,7 @@ def test_long_clean_jittery_logs_are_never_warned_of_pulse_faults(tmp_path):
     listed as the noise's tail), yet no log is warned of pulse faults and every angle stays
     within 4 u of the truth."""
     from align.warnings import gonio_warnings
-    from goniometry.revolutions import R_TAIL
+    from goniometry.exclusions import R_TAIL
 
     tails = 0
     for seed in range(30):

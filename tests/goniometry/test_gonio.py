@@ -184,14 +184,14 @@ def test_where_the_log_is_cut_changes_nothing(tmp_path, monkeypatch, block, chun
     """The parse blocks (parallel) and the pass's chunks fall anywhere — inside a revolution,
     on a fault, on a reference pulse: the same revolutions, faults with their lines, angles
     (to rounding) and u as one block read in one chunk."""
-    import axisbase.table as table
+    import axisbase.csvblocks as csvblocks
 
     p, _ = _log(tmp_path, revolutions=1500, seed=5, p_missing=2e-3, p_spurious=2e-3,
                 failed_refs=3, arm_face=2, stop_pulses=1)
-    monkeypatch.setattr(table, "PARALLEL_BLOCK", 1 << 26)
+    monkeypatch.setattr(csvblocks, "PARALLEL_BLOCK", 1 << 26)
     ref = read_revolutions(p, 4, block_bytes=1 << 26)
     fa_ref = face_angles(ref)
-    monkeypatch.setattr(table, "PARALLEL_BLOCK", block)
+    monkeypatch.setattr(csvblocks, "PARALLEL_BLOCK", block)
     got = read_revolutions(p, 4, block_bytes=chunk)
     fa = face_angles(got)
     assert got.exclusions.counts == ref.exclusions.counts and got.exclusions.counts

@@ -55,9 +55,8 @@ def _check(spec):
     assert fam is not None and len(fam.members) == len(res)
     z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / _own_u(r) for k, r in got.items()]
     # Lines as long as the truth's (not cut by numerals, nor by dust in their middle). A
-    # speck within ~30 px of an end still hides that end (a known limit: 16 % of the lines
-    # over the slow sweep's 12 seeds, with 4 specks on ~10 lines per image): most lines
-    # within 5 %, and none cut below half.
+    # speck on an end hides it (its bound is checked in tests/imaging/test_ends.py; 5 of the
+    # slow sweep's 124 lines seen >= 5 % short): most lines within 5 %, none below half.
     true_len = np.array([s.truth.lines[k].length_px for k in got])
     err = np.array([r.length_px for r in got.values()]) - true_len
     assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len), err
@@ -117,7 +116,9 @@ def test_family_block_saved_validated_and_read_back():
     doc = json.loads(dumps(marks_document(res, {}, [])))  # as the file holds it
     validate(doc, "marks")
     back = [MarkResult.from_dict(d) for d in doc["marks"]]
-    assert back[0].family == res[0].family
+    # (At 60 px pitch the lines are alike within the search's relief window: found through
+    # the ruling of the unconfirmed candidates; before, none was, and this compared None.)
+    assert res[0].family is not None and back[0].family == res[0].family
 
 
 def test_min_length_above_the_short_lines_says_how_many_it_left_out():
@@ -130,3 +131,140 @@ def test_min_length_above_the_short_lines_says_how_many_it_left_out():
     assert len(res) == len(kinds) - kinds.count("short")
     assert res[0].unreported == kinds.count("short")
     assert any("not reported" in w for w in mark_warnings(res))
+
+
+def _grating_refused(cases, **frame):
+    from synth.grating import GratingSpec, render_grating
+
+    for pitch, angle, blur in cases:
+        s = render_grating(GratingSpec(pitch_px=pitch, line_angle_rad=angle, blur_px=blur,
+                                       seed=1, **frame))
+        res = measure_image(s.image)
+        assert len(res) == 1 and not res[0].found
+        msg = res[0].error
+        assert "a grating" in msg and "not measured" in msg
+        got = float(msg.split("pitch ")[1].split(" px")[0])
+        ang = float(msg.split("lines at ")[1].split("°")[0])
+        assert abs(got - pitch) < 0.02 * pitch
+        assert abs(_wrap(np.deg2rad(ang) - angle)) < np.deg2rad(1.0)
+
+
+def test_grating_refused_with_its_pitch_and_why():
+    """Gratings (identical lines, 6 px pitch blurred to near-sinusoidal, 30 px sharp-edged)
+    are not measured: the refusal names the grating, its pitch and direction, and why."""
+    _grating_refused(((6.0, 0.3, 1.5), (30.0, 1.2, 1.5)), width=320, height=240,
+                     span_px=150.0, length_px=120.0)
+
+
+@pytest.mark.slow
+def test_gratings_refused_6_to_60_px():
+    _grating_refused(((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (10.0, 1.2, 3.0),
+                      (16.0, -1.0, 1.0), (30.0, 1.2, 1.5), (40.0, 0.5, 1.5),
+                      (60.0, 0.2, 1.5)))
+
+
+def _dial_check(spec):
+    """A rendered dial measured: every graduation found and in the dial, the increment and
+    the centre against the truth in units of their u."""
+    from synth.dial import render_dial
+
+    s = render_dial(spec)
+    res = measure_image(s.image)
+    assert all(r.found for r in res) and len(res) == spec.n_lines
+    dial = res[0].dial
+    assert dial is not None and len(dial.members) == spec.n_lines and res[0].family is None
+    z_inc = (dial.increment_rad - spec.increment_rad) / dial.increment_u_rad
+    z_c = (np.array(dial.centre_px) - spec.centre_px) / np.array(dial.centre_u_px)
+    return dial, z_inc, z_c
+
+
+def test_dial_found_whole_with_centre_and_increment():
+    from synth.dial import DialSpec
+
+    spec = DialSpec(centre_px=(12.0, -7.0), n_lines=8, increment_rad=np.deg2rad(45.0),
+                    first_rad=0.2, inner_px=50.0, lengths_px=(90.0, 100.0, 110.0), width=400,
+                    height=400, seed=1)
+    dial, z_inc, z_c = _dial_check(spec)
+    assert abs(z_inc) < 4 and np.all(np.abs(z_c) < 4)
+    assert dial.uniform()
+
+
+def test_dial_not_uniform_is_said():
+    """Graduations off their places by 0.3 deg RMS (far beyond the lines' u): not uniform,
+    warned, and the increment's u widened to cover the scatter."""
+    from synth.dial import DialSpec
+
+    spec = DialSpec(centre_px=(12.0, -7.0), n_lines=8, increment_rad=np.deg2rad(45.0),
+                    first_rad=0.2, inner_px=50.0, lengths_px=(90.0, 100.0, 110.0), width=400,
+                    height=400, seed=1,
+                    increment_error_rad=np.deg2rad(0.3))
+    from synth.dial import render_dial
+
+    res = measure_image(render_dial(spec).image)
+    dial = res[0].dial
+    assert dial is not None and not dial.uniform()
+    assert any("dial of 8 lines" in w for w in mark_warnings(res))
+    assert abs(dial.increment_rad - spec.increment_rad) < 4 * dial.increment_u_rad
+
+
+@pytest.mark.slow
+def test_dial_over_seeds():
+    """Dials of random centre, increment 10-36 deg, SNR 20-60 (640 x 640): every line found
+    and in the dial, increment and centre z ~ N(0, 1) over seeds, chi2/dof 0.7-1.4 on
+    average."""
+    from synth.dial import DialSpec
+
+    zs, chis = [], []
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        inc = np.deg2rad(rng.choice([10.0, 12.0, 15.0, 20.0, 30.0, 36.0]))
+        spec = DialSpec(centre_px=tuple(rng.uniform(-30, 30, 2)), increment_rad=inc,
+                        n_lines=int(min(24, round(2 * np.pi / inc))),
+                        first_rad=rng.uniform(0, 1),
+                        inner_px=90.0, lengths_px=(100.0, 120.0, 140.0), snr=rng.uniform(20, 60),
+                        width=640, height=640, seed=seed)
+        dial, z_inc, z_c = _dial_check(spec)
+        zs += [z_inc, *z_c]
+        chis.append(dial.chi2_dof)
+    z = np.array(zs)
+    assert np.max(np.abs(z)) < 4
+    assert 0.6 < np.sqrt(np.mean(z**2)) < 1.4
+    assert 0.7 < np.mean(chis) < 1.4, chis
+
+
+def test_no_grating_named_where_there_is_none():
+    """A lone mark among dust and texture, and a blank frame with noise: no grating said."""
+    from imaging.families import grating_note
+    from synth import ImageSpec, MarkSpec, render_marks
+
+    one = render_marks(ImageSpec(marks=(MarkSpec(0.1, 5.0, 400.0, 4.0),), width=640,
+                                 height=480, dust=30, texture=0.05, seed=2),
+                       with_crlb=False).image
+    assert grating_note(one) is None
+    noise = np.random.default_rng(0).normal(1000, 10, (480, 640))
+    assert grating_note(noise) is None
+
+
+
+def test_dial_and_hidden_ends_saved_validated_and_read_back():
+    """The dial block and a family's lengths/hidden ends survive the JSON file (schema)."""
+    from align.contract import validate
+    from align.documents import marks_document
+    from align.marks import MarkResult
+    from axisbase.output import dumps
+    from synth.dial import DialSpec, render_dial
+
+    spec = DialSpec(centre_px=(12.0, -7.0), n_lines=8, increment_rad=np.deg2rad(45.0),
+                    first_rad=0.2, inner_px=50.0, lengths_px=(90.0, 100.0, 110.0), width=400,
+                    height=400, seed=1)
+    res = measure_image(render_dial(spec).image)
+    n = len(res)
+    s = render_ruled(RuledSpec(width=640, height=480, pitch_px=60.0, seed=2, dust_on_ends=3,
+                               lengths_px=(110.0, 140.0, 170.0)))
+    res += measure_image(s.image, max_marks=2)
+    doc = json.loads(dumps(marks_document(res, {}, [])))
+    validate(doc, "marks")
+    back = [MarkResult.from_dict(d) for d in doc["marks"]]
+    assert back[0].dial == res[0].dial and back[0].dial is not None
+    fam = back[n].family
+    assert fam is not None and fam == res[n].family and any(fam.hidden_ends)

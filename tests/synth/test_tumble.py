@@ -36,3 +36,20 @@ def test_recording_has_the_tumbles_hysteresis():
     # R differs from I by beta ~ 6e-4 rad: 3e-8 g of 50 µg.
     np.testing.assert_allclose(got, expected, atol=1e-7)
     assert np.count_nonzero(expected[1:] > 0) > 5 and np.count_nonzero(expected < 0) > 5
+
+
+def test_bias_walk_is_a_wiener_process_over_the_whole_run():
+    """bias_walk(triad, t) over 400 seeds: the value at t has variance walk² t (turns
+    included: t is the clock, not the sample count), independent increments, 0 at t = 0."""
+    from synth.tumble import bias_walk
+
+    tr = Triad(bias_walk_g=(2e-6, 1e-6, 0.0))
+    t = np.array([1.0, 50.0, 200.0])
+    w = np.array([bias_walk(tr, t, np.random.default_rng(s)) for s in range(400)])
+    var = w.var(0)  # (3 times, 3 axes) [g²]
+    expected = np.outer(t, np.square(tr.bias_walk_g))
+    # 400 draws: the variance within 4 standard errors (sqrt(2/400) of itself).
+    assert np.all(np.abs(var[:, :2] - expected[:, :2]) < 4 * np.sqrt(2 / 400) * expected[:, :2])
+    assert np.all(w[:, :, 2] == 0)
+    inc = np.diff(w[:, :, 0], axis=1)
+    assert abs(np.corrcoef(inc[:, 0], inc[:, 1])[0, 1]) < 4 / np.sqrt(400)

@@ -1,0 +1,192 @@
+"""The lens of one camera as its marks meet it: the lens solved from the marks or taken from a
+camera model (:mod:`align.lens`), what it adds to each mark's u (named terms, and their signed
+components shared by the marks of one lens), and the largest bow it can still leave on each
+mark (beyond which a bow is a bent mark, docs/camera.md)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
+
+from align.lens import (
+    LensRanges,
+    LineGeometry,
+    angle_coupling,
+    bow_reach,
+    camera_coupling,
+    check_camera,
+    lens_bow,
+    solve_lens,
+)
+from align.lens import (
+    undistorted as lens_undistorted,
+)
+from align.mark_stage import half_diagonal, texture_scale
+from imaging import CameraModel, MarkMeasurement, fit_line, on_line, undistort_points
+from imaging.lens import PARAMS
+
+
+def lens_lines(ms: Sequence[MarkMeasurement]) -> list[LineGeometry]:
+    """The marks as the lens solver sees them (sigma with the texture's re-read scale)."""
+    return [LineGeometry(m.points, m.sigma * np.sqrt(texture_scale(m)), m.chol) for m in ms]
+
+
+def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
+    """A calibration's standard uncertainties (``align camera``'s ``u``) as the lens vector's
+    (:data:`imaging.lens.PARAMS`: k1, k2, p at the half-diagonal, aspect, principal point)."""
+    u = camera.u or {}
+    R = half_diagonal(shape)
+    fx, fy = float(camera.camera_matrix[0, 0]), float(camera.camera_matrix[1, 1])
+    a = R / fx
+
+    def g(k: str) -> float:
+        v = float(u.get(k, 0.0))
+        return v if np.isfinite(v) else 0.0
+
+    return np.array([g("k1") * a**2, g("k2") * a**4, g("p1") * a, g("p2") * a,
+                     np.hypot(g("fx") / fx, g("fy") / fy) * fy / fx, g("cx"), g("cy")])
+
+
+@dataclass(frozen=True)
+class CameraLens:
+    """What the lens of one camera adds to each of its marks: the lens vector applied to the
+    centres before the loop (None: nothing; a camera model already undistorted them), the
+    named angle-u terms per mark [rad], the notes, the saved dict; ``coupling``: each
+    mark's terms as signed components on the lens's error directions (shared by every mark
+    of this lens, :func:`align.lens.angle_coupling`).
+
+    The terms are the coupling's sizes: a term is the root sum of squares of its components
+    (``lens_fit.0``, ``lens_fit.1``, ... for a fitted lens's covariance, one each else)."""
+
+    lam: np.ndarray | None
+    notes: tuple[str, ...]
+    record: Mapping
+    max_u_rad: float
+    coupling: tuple[dict[str, float], ...] = ()
+    model_as: str = "--camera"
+    """How the user gives this camera a model: the flag, or session.toml's key."""
+    bow_px: tuple[float, ...] = ()
+    """Per mark, the largest sagitta [px] the lens can still leave on it (what the lines
+    leave undetermined, or the calibration's u): a larger bow is no lens
+    (:func:`bow_bound`)."""
+
+    @property
+    def terms(self) -> tuple[dict[str, float], ...]:
+        """Named standard uncertainties [rad] per mark (the coupling's sizes per term)."""
+        return tuple(_term_sizes(c) for c in self.coupling)
+
+
+def _term_sizes(coupling: Mapping[str, float]) -> dict[str, float]:
+    """Root sum of squares per term name (``lens_fit.0`` and ``lens_fit.1`` are ``lens_fit``)."""
+    out: dict[str, float] = {}
+    for k, v in coupling.items():
+        name = k.split(".")[0]
+        out[name] = float(np.hypot(out.get(name, 0.0), v))
+    return out
+
+
+def camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                ) -> CameraLens:
+    """:func:`_camera_lens`; ``label`` names a session's camera (its messages then name
+    session.toml's ``[cameras.LABEL] model``, not ``--camera``)."""
+    lens = _camera_lens(ms, camera, ranges, alpha, label)
+    return replace(lens, model_as=f"[cameras.{label}] model") if label else lens
+
+
+def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = None,
+                 ranges: LensRanges | None = None, alpha: float = 1e-3, label: str = ""
+                 ) -> CameraLens:
+    """The lens of one camera from all its marks ``ms`` (one frame, or all its images).
+
+    Without a camera model: identifiability, then the determined parameters fitted jointly
+    and the rest carried in u (:func:`align.lens.solve_lens`). With one: the model *is* the
+    lens (the centres are already undistorted by it); its u is propagated into every angle,
+    nothing is fitted on top, and marks that disagree with it beyond their u are a warning
+    naming the camera, the disagreement added to u.
+    """
+    ranges = ranges or LensRanges()
+    max_u = ranges.max_u_arcsec * np.pi / 180 / 3600
+    if not ms:
+        return CameraLens(None, (), {}, max_u)
+    shape = ms[0].image_shape
+    R = half_diagonal(shape)
+    lines = lens_lines(ms)
+    who = f"camera {label}" if label else "camera"
+    if camera is None and not np.any(ranges.vector()):
+        # Declared distortion-free: nothing to determine, nothing to carry.
+        return CameraLens(None, (),
+                          {"source": "declared distortion-free", "lines": len(ms),
+                           "ranges": ranges.to_dict()}, max_u, tuple({} for _ in ms),
+                          bow_px=tuple(0.0 for _ in ms))
+    z = float(-special.ndtri(alpha / 2))
+    if camera is None:
+        sol, designs = solve_lens(lines, R, ranges, alpha)
+        coupling = tuple(angle_coupling(sol, d) for d in designs)
+        notes = tuple(f"{who}: {n}" for n in sol.notes)
+        # A line no lens of the others explains: no bow of it is the lens's.
+        bows = bow_bound(lines, sol.lam, bow_reach(sol, z), R)
+        bows = tuple(0.0 if k in sol.bent_lines else b for k, b in enumerate(bows))
+        return CameraLens(sol.lam if np.any(sol.lam) else None, notes,
+                          {"source": "marks", **sol.to_dict()}, max_u, coupling,
+                          bow_px=bows)
+    lam_u = camera_lens_u(camera, shape)
+    zero = np.zeros_like(lam_u)
+    terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
+    p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
+    notes = []
+    if p < alpha:
+        what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
+        notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
+                     f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
+                     "recalibrate the camera (`align camera`)")
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_disagreement"] = float(d.s @ dlam)
+    reach = z * lam_u + (np.abs(dlam) if p < alpha else 0.0)
+    return CameraLens(None, tuple(notes),
+                      {"source": "camera model", "p_marks_agree": p,
+                       "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
+                      bow_px=bow_bound(lines, zero, reach, R))
+
+
+def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray, scale: float
+              ) -> tuple[float, ...]:
+    """Per line, the largest sagitta [px] a lens within ``reach`` of ``lam`` leaves on it
+    (each parameter's bow at its reach, added in the worst case: a bow beyond this has no
+    lens's shape at this line's position).
+
+    The bows per unit are derivatives; a strong radial lens bends more than its derivative
+    at ``lam`` says (the undistortion's next terms, ~30 % at k1 -0.17 near the corners), so
+    they are also taken at the radial terms' reach either way, and the largest is used."""
+    probes = [lam]
+    for s1 in (-1, 1):
+        for s2 in (-1, 1):
+            p = lam.copy()
+            p[:2] += np.array([s1, s2]) * reach[:2]
+            probes.append(p)
+    out = []
+    for ln in lines:
+        bows = np.array([lens_bow(ln, p, scale) for p in probes])
+        bows = bows[np.all(np.isfinite(bows), axis=1)]  # a probe that folds says nothing
+        worst = np.max(np.abs(bows), axis=0) if len(bows) else np.full(len(reach), np.inf)
+        out.append(float(worst @ reach))
+    return tuple(out)
+
+
+def undistorted_mark(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
+    """The mark with its centres (and their sigma, regressors, line and groove ends)
+    undistorted by the lens vector ``lam``."""
+    q, s = lens_undistorted(LineGeometry(m.points, m.sigma, m.chol), lam,
+                            half_diagonal(m.image_shape))
+    regs = dict(m.regressors, x=q[:, 0], y=q[:, 1], r2=(q**2).sum(1))
+    line = fit_line(q, s, reject_sigma=None, chol=m.chol)
+    ends = (None if m.ends_px is None else on_line(
+        undistort_points(m.ends_px, lam, half_diagonal(m.image_shape)), line.angle_rad,
+        line.offset_px))
+    return replace(m, points=q, sigma=s, regressors=regs, ends_px=ends, line=line)
+
+
+LENS_TERMS = ("lens_", "camera_")

@@ -1,0 +1,97 @@
+"""Angles from pulse times on a steady table, and the latency a one-direction run cannot tell.
+
+``steady_table``: the user asserts the table turns at constant speed within a revolution; the
+pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the counts confirm
+it and they are the more precise. Either way, a table whose speed is locked to its angle makes
+any autocollimator latency bias one direction's angles: a warning names the bias per µs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from goniometry import kept_table
+from goniometry.timing import timing_angles
+
+if TYPE_CHECKING:
+    from align.gonio import GonioRun
+
+
+LATENCY = "one direction only, on a table whose speed varies with its angle"
+
+
+def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Change of each angle [rad] per second of autocollimator latency, from the table's mean
+    speed at each face (the mean of the intervals either side of it, angle over duration):
+    a pulse late by L reads the face L * speed further on, so angle k moves by
+    L * (speed at face k+1 - speed at face k)."""
+    a = counts / counts.sum(1, keepdims=True) * 2 * np.pi
+    w = np.mean(a / dt, axis=0)  # mean speed over each interval [rad/s]
+    at_face = (np.roll(w, 1) + w) / 2  # face k: between interval k-1 and interval k
+    return np.roll(at_face, -1) - at_face
+
+
+def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
+    """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
+    from the count fractions): then any latency of the autocollimator biases one direction's
+    angles, which only the other direction cancels (--reverse-log); the log cannot tell the
+    latency. Stated per microsecond of it."""
+    if not run.summary.has_time or run.timing_used:
+        return run
+    counts, dt, _ = kept_table(run.summary)
+    ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
+    if ok.sum() < 16:
+        return run
+    ta = run.timing if run.timing is not None else timing_angles(run.summary)
+    if ta.p_value >= alpha or ta.stamp_limited:
+        return run
+    per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
+    arcsec = np.rad2deg(1) * 3600
+    why = (f"{LATENCY} (pulse-time and count fractions differ, p {ta.p_value:.2g}): each µs "
+           f"of autocollimator latency biases an angle by up to {per_us * arcsec:.3g}″ (u is "
+           f"{float(np.max(run.angles.u_rad)) * arcsec:.3g}″), and the log cannot tell the "
+           "latency; measure the other direction too (--reverse-log) to cancel it")
+    return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
+
+
+def with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
+    """Replace the count angles by the timing angles when asked, confirmed and better; warn
+    of a latency bias the log cannot determine (see _latency_check)."""
+    return _latency_check(_timing_choice(run, steady_table, alpha), alpha)
+
+
+def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
+    if not steady_table:
+        return run
+    if not run.summary.has_time:
+        why = ("steady table asked, but the log has no t column (pulse times): the angles are "
+               "from the counts")
+        return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
+    ta = timing_angles(run.summary)
+    arcsec = np.rad2deg(1) * 3600
+    worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
+    if ta.p_value < alpha:
+        why = ("a speed ripple locked to the table" if not ta.stamp_limited else
+               f"time stamps too coarse ({ta.stamp_resolution_s:.2g} s, locked to the table's "
+               "period) or a speed ripple locked to the table")
+        note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
+                f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — "
+                f"{why}; counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    if np.all(ta.u_rad >= run.angles.u_rad) and ta.stamp_limited:
+        note = (f"steady table confirmed, but the time stamps' resolution "
+                f"({ta.stamp_resolution_s:.2g} s) limits the pulse-time angles to "
+                f"±{float(np.max(ta.u_rad)) * arcsec:.3f}″: counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    if np.all(ta.u_rad >= run.angles.u_rad):
+        note = ("steady table confirmed, but the pulse times are the noisier estimate (speed "
+                "wander within revolutions): counts used")
+        return replace(run, timing=ta, notes=(*run.notes, note))
+    fa = replace(run.angles, angles_rad=ta.angles_rad, u_rad=ta.u_rad, cov=ta.cov)
+    note = (f"angles from pulse times (steady table, confirmed by the counts to "
+            f"±{float(np.max(ta.diff_u_rad)) * arcsec:.3f}″ per angle, chi2 {ta.chi2:.1f} / "
+            f"{ta.dof}); a locked ripple below that is not excluded")
+    return replace(run, angles=fa, timing=ta, timing_used=True, notes=(*run.notes, note))

@@ -1,0 +1,269 @@
+"""A table's header line: which column is which, and the units written in it.
+
+The header is the first line that is neither blank nor a ``#`` comment. Its delimiter (``,``,
+``;`` or tab) is the one it holds most of; each name is compared case- and
+white-space-insensitively with the format's columns and their aliases (or with the name the
+user maps, ``--columns ux=ax``), a unit in brackets allowed (``Ux [V]``, ``t (s)``). The units
+written there are what :func:`header_units` reads for the accelerometer's output unit
+(:data:`OUTPUT_UNITS`) and what the reader converts from.
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from axisbase.errors import InputError
+from axisbase.units import value_unit
+
+if TYPE_CHECKING:
+    from axisbase.table import TableSpec
+
+_UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
+
+
+
+@dataclass(frozen=True)
+class Header:
+    names: list[str]           # canonical name, or '' for a column the format does not know
+    raw: list[str]             # as written
+    units: dict[str, str]
+    delimiter: str
+    skip: int                  # lines before the first data row (comments + header)
+    header_line: int
+
+
+def _norm(text: str) -> tuple[str, str]:
+    """'  Ux [V] ' -> ('ux', 'V'); quotes and surrounding white space dropped."""
+    t = text.strip().strip('"').strip("'").strip()
+    unit = ""
+    m = _UNIT.match(t)
+    if m:
+        t, unit = m.group(1), m.group(2)
+    return re.sub(r"\s+", "_", t.strip().lower()), unit
+
+
+_SAFE = re.compile(r"^[\w .,\[\]()%/°²µ^+-]{0,24}$")
+
+
+def show_header(raw: list[str]) -> str:
+    """The header for a message — but never a file's contents: if a field does not look like
+    a column name (e.g. the first line of a file that is not a table at all), only the number
+    of fields is given."""
+    names = [r.strip() for r in raw]
+    if all(_SAFE.match(n) for n in names):
+        return "(" + ", ".join(names) + ")"
+    return f"({len(names)} field(s), not column names)"
+
+
+def show_cell(v: str) -> str:
+    """A bad cell for a message: short ones quoted, longer ones only described."""
+    return repr(v) if _SAFE.match(v) and len(v) <= 16 else f"a {len(v)}-character text"
+
+
+def parse_column_map(text: str | None, flag: str = "--columns") -> dict[str, str]:
+    """``'ux=ax, uy=ay'`` -> ``{'ux': 'ax', 'uy': 'ay'}`` (canonical name = header name).
+
+    Parameters
+    ----------
+    text : str or None
+        The flag's or key's value.
+    flag : str
+        The flag (or session.toml key) it came from, for the messages.
+
+    Returns
+    -------
+    dict of str to str
+        Canonical name (lower case) -> header name (normalised as headers are).
+
+    Raises
+    ------
+    InputError
+        An item that is not NAME=HEADER, an empty side, a name mapped twice.
+    """
+    if not text:
+        return {}
+    out: dict[str, str] = {}
+    for item in text.split(","):
+        if "=" not in item:
+            raise InputError(f"{flag} {text!r}: {item.strip()!r} is not NAME=HEADER "
+                             "(e.g. ux=ax,uy=ay,uz=az)")
+        k, v = (s.strip() for s in item.split("=", 1))
+        if not k or not v:
+            raise InputError(f"{flag} {text!r}: {item.strip()!r} has an empty side")
+        if k.lower() in out:
+            raise InputError(f"{flag} {text!r}: {k} is mapped twice")
+        out[k.lower()] = _norm(v)[0]
+    return out
+
+
+def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> Header:
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as f:
+            skip = 0
+            for line in f:
+                skip += 1
+                if line.strip() and not line.lstrip().startswith("#"):
+                    break
+            else:
+                raise InputError(f"{path}: empty file: expected a header line "
+                                 f"{spec.layout} ({spec.what})")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, not a {spec.what}") from None
+    except PermissionError:
+        raise InputError(f"{path}: not readable (permission denied)") from None
+    except UnicodeDecodeError:
+        raise (not_utf8(path, spec) or InputError(
+            f"{path}: not a UTF-8 text file (a {spec.what} is CSV text)")) from None
+    text = line.rstrip("\r\n")
+    if "\x00" in text:
+        raise InputError(f"{path}:{skip}: NUL bytes in the header: UTF-16 text or a binary "
+                         f"file? a {spec.what} is UTF-8 CSV text")
+    delimiter = max(",;\t", key=text.count)
+    raw = next(csv.reader([text], delimiter=delimiter))
+    normed = [_norm(r) for r in raw]
+    where = f"{path}:{skip}: header"
+    known = {c.name for c in spec.columns}
+    unknown_map = sorted(set(mapping) - known)
+    if unknown_map:
+        raise InputError(f"--columns: {', '.join(unknown_map)} not a column of a {spec.what} "
+                         f"({', '.join(sorted(known))})")
+    names = [""] * len(raw)
+    for col in spec.columns:
+        wanted = [mapping[col.name]] if col.name in mapping else [col.name, *col.aliases]
+        hits = [i for i, (n, _) in enumerate(normed) if n in wanted]
+        if len(hits) > 1:
+            raise InputError(f"{where}: {col.name}: given {len(hits)} times "
+                             f"{show_header([raw[i] for i in hits])}")
+        if hits:
+            if names[hits[0]]:
+                raise InputError(f"{where}: {raw[hits[0]].strip()!r} would be both "
+                                 f"{names[hits[0]]} and {col.name}")
+            names[hits[0]] = col.name
+        elif col.name in mapping:
+            raise InputError(f"{where}: --columns {col.name}={mapping[col.name]}: no such "
+                             f"column in the header {show_header(raw)}")
+    missing = [c.name for c in spec.columns if c.required and c.name not in names]
+    if missing:
+        raise InputError(f"{where}: {show_header(raw)} lacks {', '.join(missing)}; a "
+                         f"{spec.what} has "
+                         f"{spec.layout} (name other headers with --columns, e.g. "
+                         f"{missing[0]}=YOUR_NAME)")
+    units = {n: u for n, (_, u) in zip(names, normed, strict=True) if n and u}
+    return Header(names, raw, units, delimiter, skip, skip)
+
+
+def not_utf8(path: Path, spec: TableSpec) -> InputError | None:
+    """The first line that is not UTF-8 text, as the error naming it (None if there is none).
+    Only on the error paths: the parser itself does not check the bytes of lines it skips
+    (comments) and names no line for a cell it cannot decode."""
+    with open(path, "rb") as f:
+        for ln, raw in enumerate(f, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as exc:
+                byte = raw[exc.start]
+                return InputError(f"{path}:{ln}: not a UTF-8 text file (byte 0x{byte:02X} at "
+                                  f"column {exc.start + 1}): a {spec.what} is UTF-8 CSV; save "
+                                  "it as UTF-8")
+    return None
+
+
+OUTPUT_UNITS = {"g": "g/g", "m/s2": "(m/s²)/g", "counts": "counts/g", "V": "V/g"}
+"""Output unit of an accelerometer -> the unit of its scale factor (per g of input)."""
+
+
+def header_units(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None,
+                 names: tuple[str, ...]) -> str | None:
+    """The output unit written in the header for ``names`` (e.g. ``ux [V]``), normalised to
+    a key of :data:`OUTPUT_UNITS`; None when none is written. Different units for different
+    axes, or a unit the tool does not know, are refused.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    spec : TableSpec
+        Its format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name.
+    names : tuple of str
+        The columns whose unit is the output's (``('ux', 'uy', 'uz')``).
+
+    Returns
+    -------
+    str or None
+        A key of :data:`OUTPUT_UNITS`, or None.
+
+    Raises
+    ------
+    InputError
+        A unit not known, or different units on different axes.
+    """
+    h = read_header(Path(path), spec, columns or {})
+    found = {n: h.units[n] for n in names if n in h.units}
+    if not found:
+        return None
+    keys = {n: (value_unit(u) or (None,))[0] for n, u in found.items()}
+    bad = [n for n, k in keys.items() if k is None]
+    if bad:
+        raise InputError(f"{path}:{h.header_line}: {bad[0]}: unit {found[bad[0]]!r} not "
+                         f"known; use one of {', '.join(OUTPUT_UNITS)} (or mg, µg, mm/s2, "
+                         "mV: converted)")
+    if len(set(keys.values())) > 1:
+        raise InputError(f"{path}:{h.header_line}: header: the axes are in different units "
+                         f"({', '.join(f'{n} [{u}]' for n, u in found.items())})")
+    return next(iter(keys.values()))
+
+
+def resolve_units(given: str | None, paths: list[str | Path], spec: TableSpec,
+                  columns: Mapping[str, str] | None, names: tuple[str, ...],
+                  flag: str = "--units", default: str | None = "V") -> str | None:
+    """The output unit of the data: ``given`` (the flag/key) checked against the units
+    written in the headers of ``paths``; else the header's; else ``default``.
+
+    Parameters
+    ----------
+    given : str or None
+        The unit the user gave (a key of :data:`OUTPUT_UNITS`).
+    paths : list of str or Path
+        The files whose headers may say it.
+    spec : TableSpec
+        Their format.
+    columns : mapping of str to str, optional
+        Canonical name -> header name.
+    names : tuple of str
+        The columns whose unit is the output's.
+    flag : str
+        The flag (or session.toml key) ``given`` came from, for the messages.
+    default : str or None
+        The unit when nobody says one.
+
+    Returns
+    -------
+    str or None
+        A key of :data:`OUTPUT_UNITS` (or ``default``).
+
+    Raises
+    ------
+    InputError
+        A unit not known, or the flag and a header (or two headers) disagreeing.
+    """
+    if given is not None and given not in OUTPUT_UNITS:
+        raise InputError(f"{flag} {given!r}: one of {', '.join(OUTPUT_UNITS)}")
+    unit = given
+    for p in paths:
+        hu = header_units(p, spec, columns, names)
+        if hu is None:
+            continue
+        if unit is not None and hu != unit:
+            src = flag if given is not None else "another file's header"
+            raise InputError(f"{p}: the header says {hu}, {src} says {unit}")
+        unit = hu
+    return unit or default

@@ -1,0 +1,170 @@
+"""A coarse mark found by the search, and how two of them compare (one mark found twice,
+pieces along one line); regions of interest.
+
+Geometry convention (whole package): x = column, y = row (down), pixel centres at integers,
+coordinates relative to the image centre ((W-1)/2, (H-1)/2). A line has angle a in
+(-pi/2, pi/2] from +x towards -y, direction u = (cos a, -sin a), normal n = (sin a, cos a),
+offset d = n . p, position along it t = u . p.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from imaging.crossing import crossing_stretch
+from imaging.errors import ImageInputError
+
+
+@dataclass(frozen=True)
+class MarkCandidate:
+    """A coarse mark: line (angle [rad], offset [px]), extent along it [px], polarity,
+    strength (contrast x length) and mean ridge contrast (in units of the response noise).
+
+    ``fused``: (t [px], separation [px]) where the line is seen to be two grooves that part
+    on either side of it (two marks crossing at a shallow angle, fused into one ridge along
+    their bisector; :func:`imaging.crossing.fused_crossing`); None: one groove."""
+
+    angle_rad: float
+    offset_px: float
+    t_start_px: float
+    t_end_px: float
+    dark: bool
+    thickness_px: float
+    strength: float
+    contrast: float = float("inf")
+    fused: tuple[float, float] | None = None
+
+    @property
+    def length_px(self) -> float:
+        return self.t_end_px - self.t_start_px
+
+
+def line_frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit direction u and normal n of a line at ``angle_rad`` in (x right, y down) pixels."""
+    return (np.array([np.cos(angle_rad), -np.sin(angle_rad)]),
+            np.array([np.sin(angle_rad), np.cos(angle_rad)]))
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """Wrap a line direction to (-pi/2, pi/2]."""
+    a = float((angle_rad + np.pi / 2) % np.pi - np.pi / 2)
+    # np.isclose(a, -pi/2, atol=0) written out: the scalar test is ~50x cheaper, and this
+    # runs in every line fit.
+    return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
+
+
+def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
+              tol_offset: float) -> bool:
+    """Whether two lines (angle [rad], offset [px]) coincide within tolerances.
+
+    Across the +-90 deg wrap the normal flips, and with it the sign of the offset.
+    """
+    if abs(wrap_angle(a1 - a2)) >= tol_angle:
+        return False
+    flipped = abs(a1 - a2) > np.pi / 2
+    return abs(d1 - (-d2 if flipped else d2)) < tol_offset
+
+
+Roi = tuple[int, int, int, int]
+
+
+def check_roi(values: object, where: str = "roi") -> Roi:
+    """A region of interest (x, y, w, h) [px] from 4 numbers, or an ImageInputError naming
+    ``where``: x = column and y = row of the top-left corner, w x h at least 16 x 16 px."""
+    try:
+        parts = [float(v) for v in values]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        parts = []
+    if len(parts) != 4 or any(v != int(v) for v in parts) or min(parts[:2]) < 0 or \
+            min(parts[2:]) < 16:
+        text = ",".join(map(str, values)) if isinstance(values, list | tuple) else values
+        raise ImageInputError(f"{where} = {text!r}: expected four whole numbers X,Y,W,H "
+                              "(top-left column and row, width and height >= 16 px)")
+    x, y, w, h = (int(v) for v in parts)
+    return x, y, w, h
+
+
+def _shift(c: MarkCandidate, s: np.ndarray) -> MarkCandidate:
+    """The candidate in a frame whose centre lies at -s from the current one [px]."""
+    u, n = line_frame(c.angle_rad)
+    return replace(c, offset_px=float(c.offset_px + s @ n), t_start_px=float(c.t_start_px + s @ u),
+                   t_end_px=float(c.t_end_px + s @ u))
+
+
+def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:
+    """The same mark found at two scales or twice: keep the strongest.
+
+    Only of one polarity: a dark mark and the bright strip of background beside it (between
+    it and a padded border, say) are two things, and the strip must not replace the mark.
+    """
+    out: list[MarkCandidate] = []
+    for c in cands:
+        if any(c.dark == o.dark and _near(c, o, np.deg2rad(3), max(6.0, o.thickness_px))
+               and _overlap(c, o) for o in out):
+            continue
+        out.append(c)
+    return out
+
+
+def _near(c: MarkCandidate, o: MarkCandidate, tol_angle: float, tol_px: float) -> bool:
+    """Whether c lies along o: directions within tol_angle, c's middle within tol_px of o's
+    line. (Comparing offsets instead would multiply a small angle difference by the lever
+    arm from the image centre.)"""
+    if abs(wrap_angle(c.angle_rad - o.angle_rad)) >= tol_angle:
+        return False
+    u, n = line_frame(c.angle_rad)
+    mid = c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+    return abs(float(mid @ line_frame(o.angle_rad)[1]) - o.offset_px) < tol_px
+
+
+def _overlap(c: MarkCandidate, o: MarkCandidate) -> bool:
+    """Whether two nearly coincident candidates share part of their length."""
+    if abs(c.angle_rad - o.angle_rad) > np.pi / 2:  # directions opposite: t runs backwards
+        return -c.t_end_px < o.t_end_px and o.t_start_px < -c.t_start_px
+    return c.t_start_px < o.t_end_px and o.t_start_px < c.t_end_px
+
+
+def require_single(cands: list[MarkCandidate], where: str) -> MarkCandidate:
+    """The one mark an image is expected to hold, or a clear error."""
+    if not cands:
+        raise ImageInputError(f"{where}: no mark found (no long straight line stands out)")
+    if len(cands) > 1 and cands[1].strength > 0.5 * cands[0].strength:
+        raise ImageInputError(
+            f"{where}: two competing marks (strengths {cands[0].strength:.0f} and "
+            f"{cands[1].strength:.0f}) where one was expected")
+    return cands[0]
+
+
+def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
+    """Fused ridges of two crossing marks that were themselves found: not a mark.
+
+    Where two marks cross at a shallow angle their grooves fuse into one ridge along the
+    bisector: a third line, between the two in direction, that lies within a groove's reach
+    of both over its whole length (a mark there could not be measured apart from them)."""
+    out = []
+    for c in cands:
+        if not any(_fused_of(c, o1, o2) for i, o1 in enumerate(cands) for o2 in cands[i + 1:]
+                   if o1 is not c and o2 is not c):
+            out.append(c)
+    return out
+
+
+def _fused_of(c: MarkCandidate, o1: MarkCandidate, o2: MarkCandidate) -> bool:
+    """Whether c is the fused ridge of o1 and o2 (see :func:`_drop_fused`)."""
+    if not (c.dark == o1.dark == o2.dark) or o1.fused is not None or o2.fused is not None:
+        return False
+    d1, d2 = wrap_angle(c.angle_rad - o1.angle_rad), wrap_angle(o2.angle_rad - c.angle_rad)
+    if d1 * d2 <= 0:  # c's direction not between theirs
+        return False
+    whole = (c.t_start_px, c.t_end_px)
+    return all(_covers(c, o, max(6.0, 2 * o.thickness_px), whole) for o in (o1, o2))
+
+
+def _covers(c: MarkCandidate, o: MarkCandidate, half_px: float,
+            whole: tuple[float, float]) -> bool:
+    """Whether line o lies within half_px of c over c's whole extent (o's ridge may stop
+    where the fused one begins: its groove counts on through the fused stretch)."""
+    got = crossing_stretch(c, o, half_px, extend=True)
+    return got is not None and got[0] <= whole[0] + half_px and got[1] >= whole[1] - half_px

@@ -1,0 +1,224 @@
+"""Where a groove's ends lie when something opaque may cover them (dust, printed ink).
+
+An opaque particle over a groove's end replaces the reflectance there, groove and surface
+alike: the groove seems to end at the particle's edge, and where it really ends under it
+cannot be seen. Each end of a measured groove (:func:`imaging.profile.groove_extent`, the
+half-depth points) is therefore checked for an obstruction touching it: along the line,
+beyond the end, the band's pixels are fitted per 1-px bin as level + contrast x the groove's
+profile (as for the extent). A bin is *disturbed* when its level leaves the surface's (a
+linear trend over the measured stretch) by more than :data:`LEVEL_K` robust deviations, or
+its residual RMS exceeds :data:`RESID_K` times the stretch's median, or its contrast is
+of the wrong sign or far deeper than the groove's (:data:`AMP_K`). A disturbed run that
+starts within two blur widths of the end is an obstruction:
+
+* if the groove is seen again beyond it (:data:`DEEP_RUN` undisturbed bins at half its
+  depth or more, past the obstruction's fringe: bins not *quiet*, within :data:`QUIET_K`),
+  the end was not one: it moves to the end of that stretch (and is checked again);
+* otherwise the end is *hidden*: the groove ends somewhere under the obstruction, between
+  the visible end and the far side of the disturbed run (out to where the surface is
+  seen quiet again, plus a blur width) — a bound, not a length.
+
+Positions t [px] along the line of the :class:`~imaging.profile.ProfileFit` (its frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from imaging.profile import ProfileFit, ProfileTable, _band
+
+LEVEL_K = 4.5
+"""A bin's level this many robust deviations from the surface's trend is disturbed."""
+RESID_K = 3.0
+"""A bin whose residual RMS is this many times the stretch's median is disturbed."""
+AMP_K = 0.5
+"""A bin whose groove contrast is below -AMP_K or above 1 + AMP_K times the stretch's median
+is disturbed."""
+DEEP_RUN = 6
+"""Consecutive undisturbed bins at half the groove's depth that say the groove goes on past
+a speck (a blurred speck's fringe alone can look like a few bins of groove)."""
+QUIET_K = 2.5
+"""A bin within this many robust deviations of the surface's level is quiet (the surface
+seen, no speck's fringe)."""
+GAP = 2
+"""Clean bins allowed inside one obstruction's disturbed run."""
+
+
+@dataclass(frozen=True)
+class GrooveEnds:
+    """Both ends of a groove along its line [px]: ``start_px``/``end_px`` the visible ends
+    (half-depth points, past any speck the groove is seen beyond), ``start_min_px``/
+    ``end_max_px`` how far each could reach under an obstruction touching it (equal to the
+    visible end when nothing covers it)."""
+
+    start_px: float
+    end_px: float
+    start_min_px: float
+    end_max_px: float
+
+    @property
+    def hidden(self) -> tuple[bool, bool]:
+        """Whether the start, the end is under an obstruction."""
+        return self.start_min_px < self.start_px, self.end_max_px > self.end_px
+
+    @property
+    def length_px(self) -> float:
+        """Visible length [px] (a lower bound when an end is hidden)."""
+        return self.end_px - self.start_px
+
+    @property
+    def length_max_px(self) -> float:
+        """Longest length the groove can have under the obstructions [px]."""
+        return self.end_max_px - self.start_min_px
+
+
+def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
+                reach_px: float = 40.0) -> GrooveEnds:
+    """The groove's ends, each checked for an obstruction (see the module docstring).
+
+    Parameters
+    ----------
+    image : (H, W) array
+        The image [DN].
+    pf : ProfileFit
+        The groove's fitted profile and line.
+    extent : (t0, t1)
+        Its half-depth ends [px] (:func:`imaging.profile.groove_extent`).
+    reach_px : float
+        How far beyond each end to look at least [px] (and as far as the groove is long).
+
+    Returns
+    -------
+    GrooveEnds
+        The visible ends and how far each could reach under an obstruction [px].
+    """
+    t0, t1 = extent
+    same = GrooveEnds(t0, t1, t0, t1)
+    if not (np.isfinite(t0) and np.isfinite(t1)) or t1 - t0 < 10:
+        return same
+    # A speck across the middle can leave a piece seen beyond it as long as the rest.
+    reach_px = max(reach_px, t1 - t0)
+    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0 - reach_px, t1 + reach_px,
+                          half)
+    ok = (vals < pf.full_scale_dn) & (vals > 0)
+    # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
+    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int)
+    vals, e, t = vals[ok].astype(float), e[ok], t[ok]
+    if vals.size == 0:
+        return same
+    j = np.round(t - t0 + reach_px).astype(int)
+    nb = int(np.ceil(t1 - t0 + 2 * reach_px)) + 1
+    j = np.clip(j, 0, nb - 1)
+    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
+    cnt = np.bincount(j, minlength=nb).astype(float)
+    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
+    sv, spv, svv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb), \
+        np.bincount(j, vals * vals, nb)
+    det = cnt * spp - sp * sp
+    good = (cnt >= 4) & (det > 1e-9 * np.maximum(cnt * spp, 1e-300))
+    dd = np.where(good, det, 1.0)
+    amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
+    level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
+    ss = svv - level * sv - amp * spv
+    rms = np.where(good, np.sqrt(np.maximum(ss, 0) / np.maximum(cnt - 2, 1)), np.nan)
+    tb = t0 - reach_px + np.arange(nb)
+    inside = good & (tb >= t0) & (tb <= t1)
+    if inside.sum() < 10:
+        return same
+    # The surface's level along the stretch (vignetting, a gradient: a slow trend), and its
+    # robust scatter from bin to bin (noise, texture, ordinary dust on the groove).
+    slope, icpt = np.polyfit(tb[inside], level[inside], 1)
+    dev = level - (icpt + slope * tb)
+    scale = 1.4826 * float(np.median(np.abs(dev[inside] - np.median(dev[inside]))))
+    scale = max(scale, 1e-9 * abs(icpt) + 1e-12)
+    rms_ref = float(np.median(rms[inside]))
+    disturbed = good & ((np.abs(dev) > LEVEL_K * scale) | (rms > RESID_K * rms_ref))
+    disturbed[np.clip(clip_bin, 0, nb - 1)] = True
+    amp_s = np.full(nb, np.nan)
+    amp_s[good] = median_filter(amp[good], size=5, mode="nearest")
+    ref = float(np.median(amp_s[inside]))
+    deep = good & (amp_s / ref >= 0.5) if ref != 0 else np.zeros(nb, bool)
+    # Contrast of the wrong sign (a bright speck on a dark groove's line) or far beyond the
+    # groove's (a dark one) is no groove either, even when its level stays near the surface's.
+    if ref != 0:
+        disturbed |= good & ((amp_s / ref < -AMP_K) | (amp_s / ref > 1 + AMP_K))
+    quiet = good & (np.abs(dev) <= QUIET_K * scale) & (rms <= RESID_K * rms_ref)
+    touch = int(np.ceil(2 * pf.blur_px + 2))
+
+    def run_from(i: int, step: int) -> int:
+        """The last bin of the obstruction through bin i going ``step``: bins not quiet
+        (its fringe included), gaps of up to GAP quiet bins."""
+        last, clean = i, 0
+        while 0 <= i + step < nb and clean <= GAP:
+            i += step
+            if good[i] and not quiet[i]:
+                last, clean = i, 0
+            else:
+                clean += 1
+        return last
+
+    def walk(k: int, step: int) -> tuple[int, int]:
+        """From the end's bin k (step +-1 outward): (last bin of the groove seen clean,
+        farthest bin an obstruction touching the end covers); equal when none does."""
+        while True:
+            # The groove seen on past the end (the extent stops at its search's reach).
+            while 0 <= k + step < nb and deep[k + step] and not disturbed[k + step]:
+                k += step
+            near = [k + step * i for i in range(-touch, touch + 1) if 0 <= k + step * i < nb]
+            hit = [i for i in near if disturbed[i]]
+            if not hit:
+                return k, k
+            # The obstruction's run, inward and outward from what touches the end.
+            inner = run_from(hit[0], -step)
+            outer = run_from(hit[-1], step)
+            clean_end = min(k, inner - step) if step > 0 else max(k, inner - step)
+            # The groove seen again beyond it (deep, on the surface's level): the end was a
+            # speck lying on the groove; the groove's end is further. A stretch of groove
+            # too short to say so, ending on another obstruction, joins them (a numeral's
+            # bar, then a speck on the end).
+            while True:
+                i = outer + step
+                while (0 <= i < nb and not (deep[i] and quiet[i])
+                       and abs(i - outer) <= touch + GAP):
+                    i += step
+                run = 0
+                while 0 <= i < nb and deep[i] and not disturbed[i]:
+                    run += 1
+                    i += step
+                if run >= DEEP_RUN or not (0 <= i < nb and disturbed[i]):
+                    break
+                outer = run_from(i, step)
+            if run >= DEEP_RUN and (i - step - k) * step > 0:
+                k = i - step  # strictly further out: the walk ends
+                continue
+            # The groove may end anywhere the obstruction's fringe still hides it: out to
+            # the surface seen quiet again, plus a blur width.
+            far = outer + step
+            while 0 <= far + step < nb and not quiet[far]:
+                far += step
+            far = int(np.clip(far + step * int(np.ceil(pf.blur_px)), 0, nb - 1))
+            return clean_end, far
+
+    k0 = int(np.argmin(np.abs(tb - t0)))
+    k1 = int(np.argmin(np.abs(tb - t1)))
+    def cross(k: int, step: int) -> float:
+        """Half-depth crossing between the last deep bin k and the next one out."""
+        k_out = k + step
+        if not (0 <= k_out < nb) or not good[k_out] or not good[k]:
+            return float(tb[k])
+        a, b = amp_s[k] / ref - 0.5, amp_s[k_out] / ref - 0.5
+        return float(tb[k] + step * a / (a - b)) if a > 0 > b else float(tb[k])
+
+    ends = []
+    for k, t_end, step in ((k0, t0, -1), (k1, t1, +1)):
+        vis, far = walk(k, step)
+        # An end that did not move (by more than a bin) keeps its half-depth crossing.
+        v = t_end if abs(vis - k) <= 1 else cross(vis, step)
+        ends.append((v, v if far == vis else float(tb[far])))
+    (s_vis, s_min), (e_vis, e_max) = ends
+    return GrooveEnds(s_vis, e_vis, min(s_min, s_vis), max(e_max, e_vis))

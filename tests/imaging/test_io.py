@@ -1,0 +1,82 @@
+"""Reading images: a PNG's EXIF orientation wherever its eXIf chunk lies, found without
+decoding the pixels twice when it has none."""
+
+from __future__ import annotations
+
+import io
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image, ImageFile
+
+from imaging import ImageInputError, read_image_notes
+
+
+def _chunks(data: bytes) -> list[bytes]:
+    """A PNG's chunks, each whole (length, type, data, CRC), after the signature."""
+    out, k = [], 8
+    while k < len(data):
+        size = struct.unpack(">I", data[k:k + 4])[0]
+        out.append(data[k:k + 12 + size])
+        k += 12 + size
+    return out
+
+
+def _png(path: Path, pixels: np.ndarray, orientation: int | None, where: str) -> Path:
+    """A 16-bit gray PNG, with an eXIf chunk holding ``orientation`` before the pixel data
+    (as Pillow writes it) or moved after it (``where`` = "after", allowed by the PNG spec)."""
+    buf = io.BytesIO()
+    exif = Image.Exif()
+    if orientation is not None:
+        exif[0x0112] = orientation
+    Image.fromarray(pixels.astype(np.uint16)).save(
+        buf, format="PNG", **({"exif": exif} if orientation is not None else {}))
+    data = buf.getvalue()
+    chunks = _chunks(data)
+    if where == "after":
+        ex = [c for c in chunks if c[4:8] == b"eXIf"]
+        assert len(ex) == 1
+        rest = [c for c in chunks if c[4:8] != b"eXIf"]
+        chunks = rest[:-1] + ex + rest[-1:]  # just before IEND
+    path.write_bytes(data[:8] + b"".join(chunks))
+    return path
+
+
+@pytest.fixture
+def pixels() -> np.ndarray:
+    return np.arange(40 * 24, dtype=float).reshape(24, 40) * 50
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_png_exif_orientation_applied_wherever_its_chunk_lies(tmp_path, pixels, where):
+    path = _png(tmp_path / "turned.png", pixels, 6, where)
+    kinds = [c[4:8] for c in _chunks(path.read_bytes())]
+    assert (kinds.index(b"eXIf") < kinds.index(b"IDAT")) == (where == "before")
+    read = read_image_notes(path)
+    np.testing.assert_array_equal(read.pixels, np.rot90(pixels, -1))
+    assert any("orientation tag 6" in n for n in read.notes)
+
+
+def test_png_without_exif_is_decoded_once(tmp_path, pixels, monkeypatch):
+    """Pillow reads the header only: the pixels are decoded by OpenCV alone (Pillow used to
+    decode every PNG in full looking for a trailing eXIf chunk: +90 ms per 5 MP image)."""
+    path = _png(tmp_path / "plain.png", pixels, None, "before")
+
+    def no_load(self):
+        raise AssertionError("Pillow decoded the pixels")
+
+    monkeypatch.setattr(ImageFile.ImageFile, "load", no_load)
+    read = read_image_notes(path)
+    np.testing.assert_array_equal(read.pixels, pixels)
+    assert read.notes == ()
+
+
+def test_truncated_png_is_one_line_error(tmp_path, pixels):
+    """A PNG cut inside its pixel data: the chunk walk cannot tell, Pillow reads it and the
+    truncation is reported in one line, as before."""
+    path = _png(tmp_path / "cut.png", pixels, None, "before")
+    path.write_bytes(path.read_bytes()[:-40])
+    with pytest.raises(ImageInputError, match="cut.png"):
+        read_image_notes(path)
