@@ -324,11 +324,15 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         cleaned, pre = find_oriented(image, [], top)
         if pre.found:
             try:
-                det = detect_lines(cleaned, min_length_px=min_length_px, max_marks=max_marks,
-                                   roi=roi, top=top, families=not expect_one)
+                again = detect_lines(cleaned, min_length_px=min_length_px,
+                                     max_marks=max_marks, roi=roi, top=top,
+                                     families=not expect_one)
             except ImageInputError as exc:
                 raise ImageInputError(f"{where}: {exc}") from None
-            cands, image = det.marks, cleaned
+            if again.marks:  # else the frame stays as it was (a grating is said below)
+                det, cands, image = again, again.marks, cleaned
+            else:
+                pre = None
     if not cands:
         grating = grating_note(image)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
