@@ -152,8 +152,17 @@ def crossing_stretch(c, o, half_px: float, extend: bool = False
     # close to the crossing, all of the crossing's stretch counts.
     fused = half_px / abs(sin) if extend else 0.0
     s_x = -d0 / sin
+    # A groove found whole inside that stretch, and further from c along it than its own
+    # found length, is another piece of (nearly) the same line — two graduations of one
+    # dial diameter, collinear up to their angles' errors, the dial's centre between them —
+    # not a groove that fused with c (at a crossing the ridge is lost where the two meet, so
+    # what is found of it ends at c, give or take the coarse filter's width).
+    o_t = sorted(float((p0 + s * uo) @ uc) for s in (o.t_start_px, o.t_end_px))
+    gap = max(o_t[0] - c.t_end_px, c.t_start_px - o_t[1])
+    beside = (s_lo <= o.t_start_px and o.t_end_px <= s_hi
+              and gap > o.t_end_px - o.t_start_px)
     # (Twice that stretch: the coarse search's ridge fuses at a filter width further out.)
-    if not (extend and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
+    if not (extend and not beside and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
         s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
     if s_lo >= s_hi:
         return None

@@ -72,3 +72,21 @@ def test_crossing_stretch_is_the_window_over_sin_angle():
     assert crossing_stretch(c, short, 12.0, extend=True) is not None
     parallel = SimpleNamespace(angle_rad=0.001, offset_px=5.0, t_start_px=-150.0, t_end_px=150.0)
     assert crossing_stretch(c, parallel, 12.0) is None
+
+
+def test_two_graduations_of_one_diameter_do_not_cross():
+    """Two pieces of nearly one line (a dial's graduations on one diameter, their coarse
+    angles 1.5 deg apart), the dial's centre between them: not a crossing, even though the
+    lines meet (found on a dial of 10 graduations, which refused one as crossing another).
+    The same geometry with the other piece ending at this one (a 3 deg crossing whose ridge
+    was lost where the two fuse) still is one."""
+    c = SimpleNamespace(angle_rad=np.deg2rad(-0.48), offset_px=-23.7, t_start_px=-208.0,
+                        t_end_px=-120.0)
+    far = SimpleNamespace(angle_rad=np.deg2rad(1.05), offset_px=-27.5, t_start_px=86.0,
+                          t_end_px=208.0)
+    assert crossing_stretch(c, far, 12.9, extend=True) is None
+    c2 = SimpleNamespace(angle_rad=np.deg2rad(-11.25), offset_px=27.1, t_start_px=-131.0,
+                         t_end_px=121.0)
+    near = SimpleNamespace(angle_rad=np.deg2rad(-9.12), offset_px=27.8, t_start_px=151.0,
+                           t_end_px=263.0)
+    assert crossing_stretch(c2, near, 12.9, extend=True) is not None
