@@ -152,15 +152,14 @@ def crossing_stretch(c, o, half_px: float, extend: bool = False
     # close to the crossing, all of the crossing's stretch counts.
     fused = half_px / abs(sin) if extend else 0.0
     s_x = -d0 / sin
-    # A groove found whole inside that stretch, and further from c along it than its own
-    # found length, is another piece of (nearly) the same line — two graduations of one
+    # A groove found further from c along its line than its own found length is another
+    # piece of (nearly) the same line — two graduations of one
     # dial diameter, collinear up to their angles' errors, the dial's centre between them —
     # not a groove that fused with c (at a crossing the ridge is lost where the two meet, so
     # what is found of it ends at c, give or take the coarse filter's width).
     o_t = sorted(float((p0 + s * uo) @ uc) for s in (o.t_start_px, o.t_end_px))
     gap = max(o_t[0] - c.t_end_px, c.t_start_px - o_t[1])
-    beside = (s_lo <= o.t_start_px and o.t_end_px <= s_hi
-              and gap > o.t_end_px - o.t_start_px)
+    beside = gap > o.t_end_px - o.t_start_px
     # (Twice that stretch: the coarse search's ridge fuses at a filter width further out.)
     if not (extend and not beside and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
         s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
@@ -219,6 +218,11 @@ def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
     return None if best is None else (best[1], best[2])
 
 
+FUSE_WIDTHS = 5.0
+"""Widest separation of two straddling grooves that can be one fused ridge [groove
+half-widths] (see :func:`fused_crossing`)."""
+
+
 def fused_crossing(pairs: list[tuple[float, tuple[float, float] | None]], half_px: float
                    ) -> tuple[float, float] | None:
     """Whether a line is the fused ridge of two marks crossing at a shallow angle.
@@ -233,8 +237,12 @@ def fused_crossing(pairs: list[tuple[float, tuple[float, float] | None]], half_p
 
     Returns (t [px], separation [px]) of the widest such place, or None.
     """
+    # Two grooves far apart no longer make one ridge between them (the coarse filter is a
+    # few groove widths wide): beyond FUSE_WIDTHS half-widths apart they are neighbours —
+    # a ruled scale's next line, a speck or a numeral beside the line — not a fused pair.
     straddle = [(t, g[1] - g[0]) for t, g in pairs
-                if g is not None and g[0] < -half_px and g[1] > half_px]
+                if g is not None and g[0] < -half_px and g[1] > half_px
+                and g[1] - g[0] <= FUSE_WIDTHS * half_px]
     if len(straddle) < 2:
         return None
     return max(straddle, key=lambda p: p[1])

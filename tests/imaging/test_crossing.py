@@ -54,8 +54,12 @@ def test_double_groove_finds_two_and_not_one():
 def test_fused_ridge_is_where_grooves_straddle_the_line():
     straddle = [(t, (-0.05 * abs(t) - 2, 0.05 * abs(t) + 2)) for t in (-100, -60, 60, 100)]
     beside = [(t, (0.0, 0.1 * t)) for t in (40, 80, 120)]  # a true mark: one groove on it
-    assert fused_crossing(straddle + [(0, None)], 2.5) == (-100, pytest.approx(14.0))
+    # the widest place whose grooves are close enough to make one ridge (5 half-widths)
+    assert fused_crossing(straddle + [(0, None)], 2.5) == (-60, pytest.approx(10.0))
     assert fused_crossing(beside + [(0, None)], 2.5) is None
+    # two neighbours 28 px apart either side (a scale's lines, a speck beside a line's end)
+    apart = [(t, (-14.0, 14.0)) for t in (-40, 0, 40)]
+    assert fused_crossing(apart, 2.5) is None
 
 
 def test_crossing_stretch_is_the_window_over_sin_angle():
