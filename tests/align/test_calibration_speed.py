@@ -29,7 +29,7 @@ def _loops(name: str, seed: int):
     return out
 
 
-def _same(a, b) -> None:
+def assert_same_choice(a, b) -> None:
     assert [e.name for e in a.effects] == [e.name for e in b.effects]
     assert [r.name for r in a.refused] == [r.name for r in b.refused]
     np.testing.assert_allclose(a.after.chi2, b.after.chi2, rtol=1e-9)
@@ -41,7 +41,7 @@ def test_screen_refits_almost_nothing_on_clean_data(seed):
     ill-conditioned on these poses that its Gauss-Newton step leaves the region where the
     model is quadratic: the screen does not trust its prediction) — 15 refits unscreened."""
     (st, rep), (st0, rep0) = _loops("clean", seed)
-    _same(rep, rep0)
+    assert_same_choice(rep, rep0)
     assert set(st.fits) <= {(), ("bias_hysteresis",)} and len(st0.fits) >= 15
 
 
@@ -49,7 +49,7 @@ def test_screen_refits_almost_nothing_on_clean_data(seed):
 def test_screen_keeps_the_loops_choice(name):
     (_, rep), (_, rep0) = _loops(name, 13)
     assert rep.effects  # an effect was added: the screen let its refit through
-    _same(rep, rep0)
+    assert_same_choice(rep, rep0)
 
 
 @pytest.mark.slow
@@ -57,4 +57,4 @@ def test_screen_keeps_the_loops_choice(name):
 def test_screen_keeps_the_loops_choice_sweep(name):
     for seed in range(20):
         (_, rep), (_, rep0) = _loops(name, seed)
-        _same(rep, rep0)
+        assert_same_choice(rep, rep0)

@@ -98,7 +98,7 @@ def _inside_by(mark: MarkSpec) -> float:
                      for p in (mid + s * mark.length_px / 2 * u for s in (-1, 1))))
 
 
-def _bent_sweep(seeds, positions) -> np.ndarray:
+def assert_bent_sweep(seeds, positions) -> np.ndarray:
     zs = []
     for seed in seeds:
         for where in positions:
@@ -113,12 +113,12 @@ def _bent_sweep(seeds, positions) -> np.ndarray:
 
 def test_bent_marks_named_and_covered():
     """One bent mark per position (arc or parabola, sagitta 0.5-4 px), lens declared free."""
-    _bent_sweep([3], POSITIONS)
+    assert_bent_sweep([3], POSITIONS)
 
 
 @pytest.mark.slow
 def test_bent_marks_named_and_covered_over_seeds():
-    zs = _bent_sweep(range(30), POSITIONS)
+    zs = assert_bent_sweep(range(30), POSITIONS)
     off = int(np.sum(np.isnan(zs)))
     zs = zs[np.isfinite(zs)]
     print(f"bent marks: {len(zs) + off} ({off} running off the frame, not ok), RMS z "

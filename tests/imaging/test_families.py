@@ -133,7 +133,7 @@ def test_min_length_above_the_short_lines_says_how_many_it_left_out():
     assert any("not reported" in w for w in mark_warnings(res))
 
 
-def _grating_refused(cases, **frame):
+def assert_grating_refused(cases, **frame):
     from synth.grating import GratingSpec, render_grating
 
     for pitch, angle, blur in cases:
@@ -152,13 +152,13 @@ def _grating_refused(cases, **frame):
 def test_grating_refused_with_its_pitch_and_why():
     """Gratings (identical lines, 6 px pitch blurred to near-sinusoidal, 30 px sharp-edged)
     are not measured: the refusal names the grating, its pitch and direction, and why."""
-    _grating_refused(((6.0, 0.3, 1.5), (30.0, 1.2, 1.5)), width=320, height=240,
+    assert_grating_refused(((6.0, 0.3, 1.5), (30.0, 1.2, 1.5)), width=320, height=240,
                      span_px=150.0, length_px=120.0)
 
 
 @pytest.mark.slow
 def test_gratings_refused_6_to_60_px():
-    _grating_refused(((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (10.0, 1.2, 3.0),
+    assert_grating_refused(((6.0, np.pi / 2, 1.5), (8.0, 0.3, 2.5), (10.0, 1.2, 3.0),
                       (16.0, -1.0, 1.0), (30.0, 1.2, 1.5), (40.0, 0.5, 1.5),
                       (60.0, 0.2, 1.5)))
 
