@@ -53,7 +53,7 @@ class Stripes:
     ``offsets_dn``: the offsets subtracted (None: none were: not found, or a mark covers a
     column without background, ``reason``); ``offsets_var``: each removed offset's variance
     [DN^2] (the interquartile mean of n background pixels of noise sigma: 1.19 sigma^2 / n),
-    which the centres' covariance carries (:func:`imaging.profile.sample_centres`): a mark
+    which the centres' covariance carries (:func:`imaging.centres.sample_centres`): a mark
     leaves its own columns few background rows, and their offsets' errors are shared by
     every segment on them.
     """
