@@ -177,7 +177,13 @@ def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
     """The strongest periodic peak: (ratio, threshold, fx, fy) [cycles/px]."""
     h, w = rel.shape
     win, fx, fy, search = _grid(h, w)
-    P = np.abs(fft.rfft2((rel - rel[valid].mean() * valid) * win, workers=1)) ** 2
+    # (rel - mean * valid) * win, in one buffer: off the background 0 - 0 * mean = 0.
+    x = rel - rel[valid].mean()
+    np.copyto(x, 0.0, where=~valid)
+    x *= win
+    P = np.abs(fft.rfft2(x, workers=1))
+    del x
+    P *= P
     # 2-D neighbourhood: 15x15 bins less the 5x5 core (a windowed peak's spread)
     box = (_box_sum(P, 15) - _box_sum(P, 5)) / 200.0
     cand = np.where(search, P / np.maximum(box, 1e-300), 0.0)
