@@ -26,7 +26,8 @@ The angle of each mark then carries, as named terms:
   it (Type B, the way the goniometer carries an undetermined Earth rate).
 
 A given camera model replaces all this: its covariance is propagated instead (``camera_<p>``),
-and the lines only test it (see :func:`check_camera`).
+and the lines only test it (see :func:`align.lens_terms.check_camera`). The ranges and each
+mark's design are :mod:`align.lens_design`'s; the terms above are :mod:`align.lens_terms`'s.
 """
 
 from __future__ import annotations
@@ -37,159 +38,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
-from scipy.linalg import solve_triangular
 
-from axisbase.errors import InputError, NotApplicable
-from imaging import fit_line, line_frame
-from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
+from align.lens_design import (
+    DEFAULT_RANGES,
+    LensFolds,
+    LensRanges,
+    LineGeometry,
+    _Design,
+    _DesignCache,
+)
+from imaging.lens import PARAMS
 
-
-class LensFolds(NotApplicable):
-    """The lens (as estimated or probed) folds the image along a mark: no undistortion exists
-    there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
-    one is not mistaken for a folding lens)."""
-
-
-
-
-@dataclass(frozen=True)
-class LensRanges:
-    """Plausible range of each lens parameter (Type B, uniform over +- the value).
-
-    Attributes
-    ----------
-    k1, k2 : float
-        Radial distortion at the image half-diagonal (OpenCV's k1 = k1 (f/R)^2) —
-        dimensionless.
-    p : float
-        Tangential distortion at the half-diagonal (p = p f/R) — dimensionless.
-    aspect : float
-        |fy/fx - 1| — dimensionless.
-    pp_px : float
-        Principal point from the image centre [px].
-    max_u_arcsec : float
-        An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
-    """
-
-    k1: float = 0.3
-    k2: float = 0.05
-    p: float = 1e-3
-    aspect: float = 0.005
-    pp_px: float = 20.0
-    max_u_arcsec: float = 60.0
-
-    @classmethod
-    def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
-        """A camera declared free of distortion (a telecentric or already-corrected optic):
-        nothing fitted, nothing carried."""
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0, max_u_arcsec)
-
-    def vector(self) -> np.ndarray:
-        return np.array([self.k1, self.k2, self.p, self.p, self.aspect, self.pp_px,
-                         self.pp_px])
-
-    def to_dict(self) -> dict:
-        return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
-                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec}
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> LensRanges:
-        return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
-
-    @classmethod
-    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
-        """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
-        defaults); one line naming the flag and the bad item on error."""
-        vals: dict[str, float] = {}
-        for item in filter(None, (x.strip() for x in text.split(","))):
-            key, eq, val = item.partition("=")
-            key = key.strip()
-            if not eq or key not in cls.__dataclass_fields__:
-                raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
-                                 f"{', '.join(cls.__dataclass_fields__)}")
-            try:
-                v = float(val)
-            except ValueError:
-                raise InputError(f"{where}: {item!r}: {val.strip()!r} is not a number") from None
-            if not np.isfinite(v) or v < 0 or (key == "max_u_arcsec" and v == 0):
-                raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
-                                 + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
-            vals[key] = v
-        return cls(**vals)
-
-
-@dataclass(frozen=True)
-class LineGeometry:
-    """One mark as the lens solver sees it: raw centres relative to the image centre [px],
-    their sigma across the line [px] and correlation factor (None: independent)."""
-
-    points: np.ndarray
-    sigma: np.ndarray
-    chol: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class _Design:
-    angle: float
-    s: np.ndarray            # d angle / d lam [rad per unit], per parameter
-    G: np.ndarray            # whitened bow columns (straight-line part projected out)
-    z: np.ndarray            # whitened residual of the straight-line fit
-    w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
-    s_probe: np.ndarray | None = None  # max |s| over the principal point's range
-
-    @property
-    def bow_z(self) -> float:
-        """The residual's bow in units of its standard uncertainty (N(0, 1) when straight)."""
-        return float(self.w @ self.z)
-
-
-def _design(line: LineGeometry, lam: np.ndarray, scale: float,
-            only: Sequence[int] | None = None) -> _Design:
-    q, jac = undistortion_jacobian(line.points, lam, scale, only)
-    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
-        raise LensFolds("the lens folds the image along this mark")
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
-    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
-    J = np.column_stack([q @ u, -np.ones(len(q))])
-    r = q @ n - lf.offset_px
-    t = q @ u
-    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
-    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
-    if line.chol is not None:
-        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
-    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
-    coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
-    G = Ew - Jw @ coef[:, :-1]
-    w = bw - Jw @ coef[:, -1]
-    # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
-    return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
-
-
-class _DesignCache:
-    """Each line's design per lens vector, computed once: the solver revisits the same
-    vectors (zero before and in the first step, the converged lens after the loop, the
-    principal point's probes in :func:`_pp_spread` and :func:`_pp_probe_s`)."""
-
-    def __init__(self, lines: Sequence[LineGeometry], scale: float) -> None:
-        self.lines, self.scale = lines, scale
-        self._memo: dict[tuple, _Design] = {}
-
-    def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
-        """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
-        key = (k, lam.tobytes(), only)
-        d = self._memo.get(key)
-        if d is None:
-            d = self._memo[key] = _design(self.lines[k], lam, self.scale, only)
-        return d
-
-    def cached(self, k: int, lam: np.ndarray) -> _Design | None:
-        """Line ``k``'s full design at ``lam`` if already computed."""
-        return self._memo.get((k, lam.tobytes(), None))
-
-    def all(self, lam: np.ndarray) -> list[_Design]:
-        """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
-        return [self.one(k, lam) for k in range(len(self.lines))]
+__all__ = ["LensFolds", "LensRanges", "LensSolution", "LineGeometry", "solve_lens"]
 
 
 @dataclass(frozen=True)
@@ -287,7 +147,7 @@ def _marginal_u(F: np.ndarray, idx: list[int], rng: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.diag(C), 0, None)) * rng[idx]
 
 
-def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges = LensRanges(),
+def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges = DEFAULT_RANGES,
                alpha: float = 1e-3, iters: int = 5) -> tuple[LensSolution, list[_Design]]:
     """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
 
@@ -630,150 +490,3 @@ def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.nd
                 continue
             out[k] = np.maximum(out[k], np.abs(s))
     return out
-
-
-def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
-    """Each named lens term of one mark's angle as signed components [rad] on the lens's
-    own error directions (the same directions for every mark of one solve): see
-    :func:`angle_terms` (their norms) and :func:`angle_coupling` (the components)."""
-    P = len(PARAMS)
-    A = [j for j in range(P) if sol.applied[j]]
-    rng = sol.ranges.vector()
-    out: dict[str, np.ndarray] = {}
-    s = design.s
-    if A:
-        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
-        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
-        w, V = np.linalg.eigh(sol.cov_applied)
-        L = V * np.sqrt(np.clip(w, 0.0, None))
-        out["lens_fit"] = L.T @ s[A]
-        if not sol.confirmed:
-            # Lens or bend: the angle with the lens applied and without it both stand.
-            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A]])
-    FA = sol.info[np.ix_(A, A)] if A else None
-    for j in range(P):
-        if sol.applied[j] or rng[j] <= 0:
-            continue
-        # What the applied parameters absorb of parameter j's bow changes their estimates,
-        # hence the angle: the angle's net sensitivity to j.
-        seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
-        if design.s_probe is not None and not sol.determined[j]:
-            # Over the principal point's range the sensitivity can grow: its largest size,
-            # with the sign it has at the centre.
-            seff = float(np.copysign(max(abs(seff), float(design.s_probe[j])), seff))
-        if sol.determined[j]:
-            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
-            # is within the range.
-            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
-        else:
-            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
-    return out
-
-
-def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
-    """The bow each lens parameter leaves on this line, per unit of it: the sagitta [px] of
-    the quadratic across the line over the centres' span (as the mark's loop measures a
-    bow: b (t - t_m)^2, sagitta b (span / 2)^2), after a straight line absorbed what it can.
-    ``lam``: the lens the centres are undistorted by (zeros: raw or already undistorted).
-    Non-finite where the lens folds."""
-    q, jac = undistortion_jacobian(line.points, lam, scale)
-    if not np.all(np.isfinite(jac)):
-        return np.full(len(PARAMS), np.inf)
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
-    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]
-    t = q @ u
-    tm = (t.min() + t.max()) / 2
-    X = np.column_stack([t - tm, np.ones(len(t)), (t - tm) ** 2])
-    beta = np.linalg.lstsq(X, E, rcond=None)[0][2]
-    return beta * (np.ptp(t) / 2) ** 2
-
-
-def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
-    """How far each lens parameter may still be from the applied lens (per PARAMS, in its
-    unit): its plausible range when the lines leave it undetermined, |estimate| + z u when
-    determined but not applied, z u when applied."""
-    rng = sol.ranges.vector()
-    out = np.zeros(len(PARAMS))
-    for j in range(len(PARAMS)):
-        uj = sol.u_lines[j]
-        if sol.applied[j]:
-            out[j] = z * uj if np.isfinite(uj) else rng[j]
-        elif sol.determined[j]:
-            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
-            out[j] = min(abs(e) + z * uj, rng[j]) if np.isfinite(uj) else rng[j]
-        else:
-            out[j] = rng[j]
-    return out
-
-
-def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
-    """Named standard uncertainties [rad] the lens adds to one mark's angle."""
-    return {k: float(np.linalg.norm(v)) for k, v in _signed_parts(sol, design).items()}
-
-
-def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
-    """The lens terms of one mark's angle as signed components [rad]: for two marks of one
-    solve, the sum over shared keys of the products is the covariance their angles share
-    through the one lens (every mark of a camera sees the same lens error); each mark's own
-    sum of squares is the square sum of :func:`angle_terms`."""
-    out: dict[str, float] = {}
-    for k, v in _signed_parts(sol, design).items():
-        if len(v) == 1:
-            out[k] = float(v[0])
-        else:
-            out.update({f"{k}.{i}": float(x) for i, x in enumerate(v)})
-    return out
-
-
-def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
-                    lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
-    """Signed angle components [rad] of a calibrated camera's own u (one per lens parameter):
-    their sizes are a mark's named terms ``camera_<p>``, their products between two marks of
-    the camera the covariance the calibration's error puts between their angles.
-
-    ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
-    the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-    raw = distort_points(points_ideal, lam, scale)
-    d = _design(LineGeometry(raw, sigma, chol), lam, scale)
-    return {f"camera_{p}": float(d.s[j] * lam_u[j])
-            for j, p in enumerate(PARAMS) if lam_u[j] > 0}
-
-
-def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarray,
-                 scale: float, ranges: LensRanges = LensRanges(), alpha: float = 1e-3
-                 ) -> tuple[float, np.ndarray, list[_Design]]:
-    """Whether the marks agree with a calibrated lens: the determined correction to the
-    camera's lens from the lines, and its chi2 probability against the lines' u plus the
-    camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
-    z = float(-special.ndtri(alpha / 2))
-    rng = ranges.vector()
-    P = len(PARAMS)
-    designs = [_design(ln, lam, scale) for ln in lines]
-    F = sum(d.G.T @ d.G for d in designs)
-    b = sum(d.G.T @ d.z for d in designs)
-    det = _determined(F, rng, z)
-    dlam = np.zeros(P)
-    if not det:
-        return 1.0, dlam, designs
-    D = np.ix_(det, det)
-    dlam[det] = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
-    stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
-    return float(special.chdtrc(len(det), stat)), dlam, designs
-
-
-def undistorted(line: LineGeometry, lam: np.ndarray, scale: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """A mark's centres undistorted by ``lam`` and their sigma scaled by the undistortion's
-    magnification across the line (a centre moved 1 px across the raw line moves this much
-    across the undistorted one)."""
-    q = undistort_points(line.points, lam, scale)
-    if not np.any(lam):
-        return q, line.sigma
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    n = line_frame(lf.angle_rad)[1]
-    q2 = undistort_points(line.points + 0.5 * n, lam, scale)
-    g = np.abs((q2 - q) @ n) / 0.5
-    return q, line.sigma * g
