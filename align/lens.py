@@ -185,7 +185,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
             "bent mark, left out of the lens")
     sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
-    return sk, [replace(d, s_probe=sp) for d, sp in zip(ds, probes, strict=True)]
+    return sk, [replace(d, s_pp_var=v) for d, v in zip(ds, probes, strict=True)]
 
 
 def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> float:
@@ -213,7 +213,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     est = np.full(P, np.nan)
     u_lines = np.full(P, np.inf)
     applied = list(det)
-    spread, spread_for = np.zeros(P), list(applied)
+    spread, spread_u, spread_for = np.zeros(P), np.zeros(P), list(applied)
     fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
         lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters)
@@ -227,7 +227,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         if det:
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
-        spread = _pp_spread(cache, lam, applied, det, rng)
+        spread, spread_u = _pp_spread(cache, lam, applied, det, rng)
         spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
@@ -255,17 +255,16 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         applied = sorted(applied + added)
         spread_for = []
     if not applied:
-        spread = np.zeros(P)
+        spread_u = np.zeros(P)
     elif spread_for != applied:  # the applied set changed after its last spread
-        spread = _pp_spread(cache, lam_out, applied, det, rng)
+        spread_u = _pp_spread(cache, lam_out, applied, det, rng)[1]
     designs = cache.all(lam_out)
     F = sum(d.G.T @ d.G for d in designs)
     cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
-    if applied:  # the principal point's range moves the estimate: uniform, as Type B
-        cov = cov + np.diag(spread[applied] ** 2 / 3)
-        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread / np.sqrt(3)),
-                           u_lines)
-    s_probe = _pp_probe_s(cache, lam_out, det, rng)
+    if applied:  # the principal point's range (uniform, Type B) moves the estimate
+        cov = cov + np.diag(spread_u[applied] ** 2)
+        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread_u), u_lines)
+    s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
@@ -305,7 +304,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
-    return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+    return sol, [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
 
 
 def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
@@ -454,39 +453,82 @@ def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndar
     return out
 
 
+def _uniform_msq(corners: Sequence[np.ndarray], centre: np.ndarray) -> np.ndarray:
+    """Mean square of a function of the principal point, uniform over its range (the Type B
+    distribution every range is taken as), from its values at the centre and at the four
+    corners of :func:`_pp_probes` (order (-,-), (-,+), (+,-), (+,+)).
+
+    The function is taken as the quadratic through those five points, c (x^2 + y^2) / 2 +
+    gx x + gy y + h x y about the centre (x, y in units of the range): over the uniform square
+    its mean is s0 + c/3 and its variance c^2 2/45 + gx^2/3 + gy^2/3 + h^2/9 (the largest of
+    the corners would be a bound, not a standard uncertainty). Where any corner is not
+    finite (the lens folds there), inf."""
+    v = np.asarray(corners, float)
+    if not len(v):
+        return centre**2
+    if not np.all(np.isfinite(v)):
+        return np.full_like(centre, np.inf)
+    mm, mp, pm, pp = v
+    c = (mm + mp + pm + pp) / 4 - centre
+    gx = (pm + pp - mm - mp) / 4
+    gy = (mp + pp - mm - pm) / 4
+    h = (pp + mm - mp - pm) / 4
+    return (centre + c / 3) ** 2 + c**2 * 2 / 45 + gx**2 / 3 + gy**2 / 3 + h**2 / 9
+
+
 def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
-               rng: np.ndarray) -> np.ndarray:
+               rng: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How far the applied estimates move when the principal point is put at the corners of
-    its range (one linearised step from ``lam`` each; inf where the lens then folds)."""
-    out = np.zeros(len(PARAMS))
+    its range (one linearised step from ``lam`` each): the largest |move| (a bound: the
+    sign test) and its standard uncertainty with the principal point uniform over its range
+    (:func:`_uniform_msq`); inf where the lens then folds."""
+    P = len(PARAMS)
     if not applied:
-        return out
+        return np.zeros(P), np.zeros(P)
     A = np.ix_(applied, applied)
+    moves = []
     for p in _pp_probes(lam, det, rng):
+        m = np.zeros(P)
         try:
             ds = cache.all(p)
         except LensFolds:
-            out[applied] = np.inf
+            m[applied] = np.inf
+            moves.append(m)
             continue
         F = sum(d.G.T @ d.G for d in ds)
         b = sum(d.G.T @ d.z for d in ds)
-        out[applied] = np.maximum(out[applied], np.abs(np.linalg.solve(F[A], b[applied])))
-    return out
+        m[applied] = np.linalg.solve(F[A], b[applied])
+        moves.append(m)
+    if not moves:
+        return np.zeros(P), np.zeros(P)
+    return np.max(np.abs(moves), axis=0), np.sqrt(_uniform_msq(moves, np.zeros(P)))
 
 
 def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.ndarray
                 ) -> list[np.ndarray]:
-    """Each line's largest |d angle / d lam| over the principal point's range [rad/unit]."""
-    out = [np.zeros(len(PARAMS)) for _ in cache.lines]
-    radial = np.zeros(len(PARAMS))
-    radial[:2] = 1.0  # only the radial terms act about the principal point
-    for p in _pp_probes(lam, det, rng):
-        for k in range(len(cache.lines)):
-            full = cache.cached(k, p)  # its radial columns are the radial-only design's
-            try:
-                s = full.s * radial if full is not None else cache.one(k, p, (0, 1)).s
-            except LensFolds:
-                out[k][:] = np.inf
-                continue
-            out[k] = np.maximum(out[k], np.abs(s))
+    """Each line's variance of d angle / d lam over the principal point's range, uniform
+    [rad^2/unit^2]: only the radial terms act about the principal point, so only theirs is
+    not zero (inf where the lens folds at a corner)."""
+    P = len(PARAMS)
+    radial = np.zeros(P)
+    radial[:2] = 1.0
+    probes = _pp_probes(lam, det, rng)
+    if not probes:
+        return [np.zeros(P) for _ in cache.lines]
+
+    def radial_s(k: int, p: np.ndarray) -> np.ndarray:
+        full = cache.cached(k, p)  # its radial columns are the radial-only design's
+        try:
+            return full.s * radial if full is not None else cache.one(k, p, (0, 1)).s * radial
+        except LensFolds:
+            return np.full(P, np.inf)
+
+    out = []
+    for k in range(len(cache.lines)):
+        s0 = radial_s(k, lam)
+        if not np.all(np.isfinite(s0)):
+            out.append(np.full(P, np.inf))
+            continue
+        var = _uniform_msq([radial_s(k, p) for p in probes], s0) - s0**2
+        out.append(np.clip(var, 0.0, None))
     return out

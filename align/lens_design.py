@@ -107,7 +107,7 @@ class _Design:
     G: np.ndarray            # whitened bow columns (straight-line part projected out)
     z: np.ndarray            # whitened residual of the straight-line fit
     w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
-    s_probe: np.ndarray | None = None  # max |s| over the principal point's range
+    s_pp_var: np.ndarray | None = None  # var of s over the principal point's range [rad^2]
 
     @property
     def bow_z(self) -> float:

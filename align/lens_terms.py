@@ -32,8 +32,12 @@ def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
         L = V * np.sqrt(np.clip(w, 0.0, None))
         out["lens_fit"] = L.T @ s[A]
         if not sol.confirmed:
-            # Lens or bend: the angle with the lens applied and without it both stand.
-            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A]])
+            # Lens or bend: the angle with the lens applied and without it both stand, and
+            # the bow may be part lens, part bend: the truth anywhere between the two
+            # readings, uniform (Type B); about the reading given (the lens applied) its
+            # standard uncertainty is the difference / sqrt 3 (the difference itself is the
+            # bound, not a standard uncertainty).
+            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A] / np.sqrt(3)])
     FA = sol.info[np.ix_(A, A)] if A else None
     for j in range(P):
         if sol.applied[j] or rng[j] <= 0:
@@ -41,10 +45,10 @@ def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
         # What the applied parameters absorb of parameter j's bow changes their estimates,
         # hence the angle: the angle's net sensitivity to j.
         seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
-        if design.s_probe is not None and not sol.determined[j]:
-            # Over the principal point's range the sensitivity can grow: its largest size,
-            # with the sign it has at the centre.
-            seff = float(np.copysign(max(abs(seff), float(design.s_probe[j])), seff))
+        if design.s_pp_var is not None and not sol.determined[j]:
+            # Over the principal point's range (uniform) the sensitivity varies about its
+            # value at the centre: its mean square, with the sign it has at the centre.
+            seff = float(np.copysign(np.sqrt(seff**2 + float(design.s_pp_var[j])), seff))
         if sol.determined[j]:
             # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
             # is within the range.
