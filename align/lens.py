@@ -18,12 +18,20 @@ jointly (Gauss-Newton from zero). A fitted value is applied only when its sign i
 
 The angle of each mark then carries, as named terms:
 
-* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A);
+* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A), with
+  how far the undetermined principal point (uniform over its range) moves them;
 * ``lens_<p>_small``: a determined parameter not applied (its sign undetermined): its
-  estimate and u as an rms bound (Type A);
+  estimate and u as an rms (Type A);
 * ``lens_<p>_range``: an undetermined parameter: uniform over its plausible range, range/sqrt 3,
   times the angle's sensitivity to it *after* the fitted parameters absorbed what they can of
-  it (Type B, the way the goniometer carries an undetermined Earth rate).
+  it, for radial terms the rms of that sensitivity over the principal point's range (Type B,
+  the way the goniometer carries an undetermined Earth rate);
+* ``lens_or_bend``: a lens no other line confirms: the angle with it minus without it, the
+  truth uniform between them, / sqrt 3 (Type B).
+
+Every Type B term is a standard uncertainty of its stated distribution (uniform over a range:
+half-width / sqrt 3), never the bound itself: over lenses drawn from the ranges the tool is
+given, the normalised errors have RMS ~1 (``tests/align/lens_grid.py``'s ``plausible`` class).
 
 A given camera model replaces all this: its covariance is propagated instead (``camera_<p>``),
 and the lines only test it (see :func:`align.lens_terms.check_camera`). The ranges and each
