@@ -311,3 +311,25 @@ def test_the_exact_camera_model_is_not_called_different():
           f"min p {min(ps):.2g}, KS p {stats.kstest(ps, 'uniform').pvalue:.2g}")
     assert sum(p < 1e-3 for p in ps) <= 1
     assert stats.kstest(ps, "uniform").pvalue > 1e-3
+
+
+def test_principal_point_range_enters_as_its_rms_not_its_corners():
+    """The principal point is uniform over its range (Type B): a quantity known at the centre
+    and the range's corners enters u as its mean square over the square, the quadratic
+    through those points averaged exactly (against a Monte Carlo over the square), not the
+    largest corner's (the bound it used to be). A corner where the lens folds: inf."""
+    from align.lens import _uniform_msq
+
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        s0, c, gx, gy, h = rng.normal(size=5)
+
+        def f(x, y, s0=s0, c=c, gx=gx, gy=gy, h=h):
+            return s0 + c * (x**2 + y**2) / 2 + gx * x + gy * y + h * x * y
+
+        corners = [np.array([f(sx, sy)]) for sx in (-1, 1) for sy in (-1, 1)]
+        got = float(_uniform_msq(corners, np.array([s0]))[0])
+        xy = rng.uniform(-1, 1, size=(400_000, 2))
+        mc = float(np.mean(f(xy[:, 0], xy[:, 1]) ** 2))
+        assert got == pytest.approx(mc, rel=0.01)
+    assert not np.isfinite(_uniform_msq([np.array([np.inf])] * 4, np.zeros(1))[0])
