@@ -39,6 +39,7 @@ from goniometry import (
     vertical_earth_rate,
 )
 from goniometry.angles import OMEGA_EARTH
+from goniometry.reader import source_name
 from goniometry.timing import TimingAngles
 
 if TYPE_CHECKING:
@@ -123,9 +124,9 @@ def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
 EARTH_BOUND = "earth_rate (latitude not given: bound over {})"
 
 
-def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
+def measure_log(path: str | Path | object, n_faces: int, latitude_deg: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
-                reverse_log: str | Path | None = None, apply_loop: bool = True,
+                reverse_log: str | Path | object | None = None, apply_loop: bool = True,
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
                 latitude_range_deg: tuple[float, float] | None = None,
                 on_bytes: Callable[[int], None] | None = None) -> GonioRun:
@@ -144,8 +145,11 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
 
     Parameters
     ----------
-    path : str or Path
-        The counter log.
+    path : str, Path, mapping of str to array-like, numpy structured array or pyarrow Table
+        The counter log: its file, or its rows already in memory under the log's column
+        names (``count``, ``counter``, ``ref``, ``t`` [s], or as ``columns`` maps them).
+        Rows go through the same reader and checks as a file; a bad one is named by its
+        index (``rows: row k: column: what``) and the exclusions' ``lines`` are row indexes.
     n_faces : int
         Faces of the housing (pulses per revolution).
     latitude_deg : float, optional
@@ -154,8 +158,9 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         +1: the table turns counter-clockwise seen from above; -1: clockwise.
     alpha : float
         Significance level of the loop's and the consistency checks' tests.
-    reverse_log : str or Path, optional
-        A log of the same faces with the table turning the other way.
+    reverse_log : str, Path or rows, optional
+        A log of the same faces with the table turning the other way (a file or rows, as
+        ``path``).
     apply_loop : bool
         Apply the Earth rate the loop finds (False for each direction of a pair).
     steady_table : bool
@@ -194,6 +199,20 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     >>> z = (run.angles.angles_rad - sim["truth"]["angles_rad"]) / run.angles.u_rad
     >>> bool(np.all(np.abs(z) < 4))
     True
+
+    The same log's rows already in memory (a dict of columns, a numpy structured array or a
+    pyarrow Table) give the same angles; a bad row is named by its index:
+
+    >>> rows = {k: np.loadtxt(log, delimiter=",", skiprows=1, usecols=i)
+    ...         for i, k in enumerate(["count", "counter", "ref", "t"])}
+    >>> same = measure_log(rows, 4, latitude_deg=50.45)
+    >>> bool(np.array_equal(same.angles.angles_rad, run.angles.angles_rad))
+    True
+    >>> rows["ref"][7] = 2
+    >>> measure_log(rows, 4, latitude_deg=50.45)
+    Traceback (most recent call last):
+    ...
+    goniometry.errors.LogError: rows: row 7: ref: must be 0 or 1
     """
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
@@ -204,7 +223,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                           apply_loop=False, steady_table=steady_table, columns=columns,
                           on_bytes=on_bytes)
         comb, term = combine_directions(fwd.angles, rev.angles)
-        check_reversed(fwd.angles, rev.angles, term, path, reverse_log, alpha)
+        check_reversed(fwd.angles, rev.angles, term, source_name(path),
+                       source_name(reverse_log), alpha)
         notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
                  *(f"reverse run: {n}" for n in rev.notes if not n.startswith(LATENCY)),
                  f"both directions combined: the direction-dependent part is "
@@ -241,7 +261,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
                                on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes)
     log.debug("gonio %s: one pass in %.2f s: %d rows, %d revolutions excluded "
-              "(%s), times %s", Path(path).name, time.perf_counter() - start, summary.rows,
+              "(%s), times %s", Path(source_name(path)).name, time.perf_counter() - start,
+              summary.rows,
               summary.excluded_revolutions,
               ", ".join(f"{n} x {r}" for r, n in summary.exclusions.counts.items()) or "none",
               "present" if summary.has_time else "absent")
