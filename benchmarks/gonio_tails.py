@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from axisbase.units import DEG
+
 ARCSEC = np.pi / 180 / 3600
 
 
@@ -39,7 +41,7 @@ def main() -> None:
             sim = simulate(GonioSpec(revolutions=a.revolutions, jitter_rad=a.jitter * ARCSEC,
                                      seed=1000 + seed))
             p = write_log(sim, Path(d) / f"l{seed}.csv")
-            run = measure_log(p, 4, 50.45)
+            run = measure_log(p, 4, 50.45 * DEG)
             why.update(run.summary.exclusions.counts)
             warned += any("pulse faults" in w for w in gonio_warnings(run))
             p.unlink()

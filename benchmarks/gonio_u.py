@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from axisbase.units import DEG
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "goniometry"))
 
 
@@ -39,7 +41,7 @@ def scan(n_logs: int, faulty: bool) -> list[dict]:
                 spec = replace(spec, faults=())
             sim = simulate(spec)
             p = write_log(sim, Path(d) / f"l{seed}.csv")
-            run = measure_log(p, N_FACES, spec.latitude_deg, direction=spec.direction)
+            run = measure_log(p, N_FACES, spec.latitude_deg * DEG, direction=spec.direction)
             p.unlink()
             fa = run.angles
             truth = np.array(sim["truth"]["angles_rad"])

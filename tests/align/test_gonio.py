@@ -13,6 +13,7 @@ import pyarrow as pa
 import pytest
 
 from align import measure_log
+from axisbase.units import DEG
 from goniometry.errors import LogError
 from synth.gonio import GonioSpec, simulate, write_log
 
@@ -42,8 +43,8 @@ def test_rows_in_memory_give_the_file_s_result(tmp_path, seed):
     # comparison; 3000 revolutions are a few chunks of the file's and one of the rows'.
     spec = GonioSpec(revolutions=3000, seed=seed, p_missing=1e-3, p_spurious=1e-3)
     path, rows = _file_and_rows(tmp_path, spec)
-    from_file = measure_log(path, 4, latitude_deg=50.45)
-    from_rows = measure_log(rows, 4, latitude_deg=50.45)
+    from_file = measure_log(path, 4, latitude_rad=50.45 * DEG)
+    from_rows = measure_log(rows, 4, latitude_rad=50.45 * DEG)
     _same(from_file, from_rows)
     assert from_file.summary.excluded_revolutions > 0  # (the faults were there to compare)
 
@@ -53,14 +54,14 @@ def test_every_kind_of_rows_and_the_loop_path(tmp_path):
     # and a pyarrow Table with other header names (aliases, a unit) go the same way.
     path, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=400, seed=5))
     _same(measure_log(path, 4), measure_log(rows, 4))
-    from_file = measure_log(path, 4, latitude_deg=50.45)
-    _same(from_file, measure_log(pa.table(rows), 4, latitude_deg=50.45))
+    from_file = measure_log(path, 4, latitude_rad=50.45 * DEG)
+    _same(from_file, measure_log(pa.table(rows), 4, latitude_rad=50.45 * DEG))
     structured = np.zeros(len(rows["t"]), dtype=[("counts", "i8"), ("counter", "i8"),
                                                   ("REF", "i8"), ("t [ms]", "f8")])
     for k, name in zip(NAMES, structured.dtype.names, strict=True):
         structured[name] = rows[k] * (1e3 if k == "t" else 1)
     # t in ms is converted to s (x 1e-3): not bit for bit, the same to far below u.
-    ms = measure_log(structured, 4, latitude_deg=50.45)
+    ms = measure_log(structured, 4, latitude_rad=50.45 * DEG)
     assert np.allclose(ms.angles.angles_rad, from_file.angles.angles_rad, rtol=0,
                        atol=1e-3 * float(np.min(from_file.angles.u_rad)))
 
@@ -75,7 +76,7 @@ def test_a_bad_row_is_named_by_its_index(tmp_path, column, row, value, what):
     _, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=40, seed=2))
     rows[column][row] = value
     with pytest.raises(LogError, match=f"^rows: row {row}: {what}"):
-        measure_log(rows, 4, latitude_deg=50.45)
+        measure_log(rows, 4, latitude_rad=50.45 * DEG)
 
 
 def test_rows_that_are_not_a_log_are_refused_by_name():
