@@ -17,6 +17,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 from axisbase.units import DEG
@@ -59,4 +60,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: whole-revolution drop-outs")

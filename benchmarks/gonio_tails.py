@@ -16,6 +16,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 from axisbase.units import DEG
@@ -53,4 +54,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: false fault warnings on long clean logs")

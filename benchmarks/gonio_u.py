@@ -20,6 +20,7 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 from axisbase.units import DEG
@@ -90,4 +91,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: is u honest on short logs?")

@@ -31,6 +31,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import benchpage
+
 ROOT = Path(__file__).resolve().parents[1]
 # The command, the cluster's workers and this process import this checkout.
 os.environ["PYTHONPATH"] = os.pathsep.join(
@@ -130,4 +132,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "A production lot: local pool and Dask")
