@@ -175,7 +175,21 @@ class CameraModel:
 
 
 def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
-    """Sub-pixel inner corners of a chessboard (cols x rows inner corners), or None."""
+    """Sub-pixel inner corners of a chessboard (cols x rows inner corners), or None.
+
+    Parameters
+    ----------
+    image : ndarray
+        Grayscale image [DN] (any depth: scaled to 8 bits for the search).
+    pattern : tuple of int
+        Inner corners per row and per column (cols, rows).
+
+    Returns
+    -------
+    ndarray or None
+        (cols x rows, 2) corners (x, y) [px] in OpenCV's order; None when the board is not
+        found.
+    """
     img8 = image if image.dtype == np.uint8 else cv2.normalize(
         image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     ok, corners = cv2.findChessboardCorners(img8, pattern)
@@ -197,6 +211,27 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     (``u``; 0 for a fixed one) and each view's RMS reprojection error. ``fix_k3`` keeps k3 at
     0, ``fix_aspect`` keeps fx / fy at 1. Returns the model and, per file that could not be
     used, the reason.
+
+    Parameters
+    ----------
+    images : dict of str to ndarray
+        Grayscale views of the board [DN], by file name.
+    pattern : tuple of int
+        Inner corners (cols, rows).
+    square : float
+        Side of a square (any length unit: only the extrinsics use it).
+    fix_k3 : bool
+        Keep k3 at 0.
+    fix_aspect : bool
+        Keep fx / fy at 1.
+
+    Returns
+    -------
+    model : CameraModel
+        Intrinsics [px], distortion (dimensionless), their u and the reprojection errors
+        [px].
+    skipped : dict of str to str
+        File -> why it was not used.
     """
     obj = np.zeros((pattern[0] * pattern[1], 3), np.float32)
     obj[:, :2] = np.mgrid[0:pattern[0], 0:pattern[1]].T.reshape(-1, 2) * square
