@@ -97,18 +97,6 @@ def wrap_angle(angle_rad: float) -> float:
     return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
 
 
-def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
-              tol_offset: float) -> bool:
-    """Whether two lines (angle [rad], offset [px]) coincide within tolerances.
-
-    Across the +-90 deg wrap the normal flips, and with it the sign of the offset.
-    """
-    if abs(wrap_angle(a1 - a2)) >= tol_angle:
-        return False
-    flipped = abs(a1 - a2) > np.pi / 2
-    return abs(d1 - (-d2 if flipped else d2)) < tol_offset
-
-
 Roi = tuple[int, int, int, int]
 
 
