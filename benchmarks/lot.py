@@ -73,7 +73,7 @@ def run(sessions: list[str], out: Path, extra: list[str], report: bool) -> dict:
     if out.exists():
         shutil.rmtree(out)
     cmd = [sys.executable, "-m", "align", "run", *sessions, "--json", str(out),
-           "--calibration", str(out), "-q", *extra] + (["--report", str(out)] if report else [])
+           "--calibration", str(out), *extra] + (["--report", str(out)] if report else [])
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=ENV, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - t0
