@@ -25,6 +25,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# This tree's packages, not an installed copy: its root after PYTHONPATH's entries (a
+# comparison against another checkout puts that one first) and before site-packages, here and
+# in the processes a benchmark starts. ``import benchpage`` comes before the project's imports.
+_PATH = [e for e in os.environ.get("PYTHONPATH", "").split(os.pathsep) if e]
+if str(ROOT) not in sys.path[: 1 + len(_PATH)]:
+    sys.path.insert(1 + len(_PATH), str(ROOT))
+if str(ROOT) not in _PATH:
+    os.environ["PYTHONPATH"] = os.pathsep.join([*_PATH, str(ROOT)])
 HELP = ("  --markdown PATH       also write the output as a generated Markdown page "
         "(benchmarks/benchpage.py)")
 
@@ -87,6 +96,15 @@ def render(output: str) -> str:
     return "\n\n".join(parts) if parts else "(the script printed nothing)"
 
 
+def _code() -> str:
+    """Where the ``align`` this run used came from (this tree, or another checkout)."""
+    mod = sys.modules.get("align")
+    if mod is None or not getattr(mod, "__file__", None):
+        return "this tree"
+    where = Path(mod.__file__).resolve().parents[1]
+    return "this tree" if where == ROOT else f"`{where}`"
+
+
 def page(title: str, command: str, output: str, load: tuple[float, float],
          wall_s: float) -> str:
     """The page's text (see the module's docstring)."""
@@ -95,7 +113,7 @@ def page(title: str, command: str, output: str, load: tuple[float, float],
             f"{load[0]:.1f} at the start, {load[1]:.1f} at the end); wall time {wall_s:.0f} s; "
             f"Python {platform.python_version()}")
     return (f"# {title}\n\n"
-            f"*Generated* {stamp} at commit `{_commit()}` by\n\n"
+            f"*Generated* {stamp} at commit `{_commit()}` (code: {_code()}) by\n\n"
             f"```sh\n{command}\n```\n\n"
             f"(do not edit: run the command again). **Host:** {host}. Wall-clock figures carry "
             "the host's load: compare the ratios within one run, not times across runs. The "
