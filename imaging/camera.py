@@ -98,10 +98,12 @@ class CameraModel:
     per_view_rms_px : dict or None
         RMS reprojection error of each view [px].
     u_formal : dict or None
-        OpenCV's formal standard uncertainty per parameter (same units as ``u``).
+        OpenCV's formal standard uncertainty per parameter (fx, fy, cx, cy [px]; k1, ...
+        dimensionless, as ``u``).
     u_jackknife : dict or None
-        Delete-one-view jackknife standard uncertainty per parameter (same units as ``u``);
-        None with fewer than :data:`JACKKNIFE_MIN_VIEWS` views.
+        Delete-one-view jackknife standard uncertainty per parameter (fx, fy, cx, cy [px];
+        k1, ... dimensionless, as ``u``); None with fewer than :data:`JACKKNIFE_MIN_VIEWS`
+        views.
     """
 
     camera_matrix: np.ndarray
