@@ -29,6 +29,7 @@ from align.gonio_directions import (
 )
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_timing import LATENCY, with_timing
+from axisbase.errors import InputError
 from axisbase.units import ARCSEC, DEG
 from goniometry import (
     FaceAngles,
@@ -183,7 +184,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
     LogError
         A log that cannot be used (naming the file and line).
     InputError
-        A reverse log that is not the other direction of the same faces.
+        A reverse log that is not the other direction of the same faces; a latitude beyond
+        +-pi/2 (degrees given where radians are taken).
 
     Examples
     --------
@@ -215,6 +217,7 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
     ...
     goniometry.errors.LogError: rows: row 7: ref: must be 0 or 1
     """
+    _check_latitudes(latitude_rad, latitude_range_rad)
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
@@ -336,6 +339,19 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                  f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
     return with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
+
+
+def _check_latitudes(latitude_rad: float | None,
+                     latitude_range_rad: tuple[float, float] | None) -> None:
+    """Latitudes are radians here (degrees only at the flags and keys): a value beyond pi/2
+    is degrees passed by mistake, which would remove a wrong Earth rate without a word."""
+    given = ([] if latitude_rad is None else [("latitude_rad", latitude_rad)]) + (
+        [] if latitude_range_rad is None else
+        [("latitude_range_rad", v) for v in latitude_range_rad])
+    for name, v in given:
+        if not (np.isfinite(v) and abs(v) <= np.pi / 2):
+            raise InputError(f"measure_log {name} = {v:g}: a latitude in radians is within "
+                             "+-pi/2 (degrees? multiply by axisbase.units.DEG)")
 
 
 # A housing's faces are made to arc-seconds or arc-minutes of their nominal angles; a

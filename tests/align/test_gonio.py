@@ -13,6 +13,7 @@ import pyarrow as pa
 import pytest
 
 from align import measure_log
+from axisbase.errors import InputError
 from axisbase.units import DEG
 from goniometry.errors import LogError
 from synth.gonio import GonioSpec, simulate, write_log
@@ -77,6 +78,15 @@ def test_a_bad_row_is_named_by_its_index(tmp_path, column, row, value, what):
     rows[column][row] = value
     with pytest.raises(LogError, match=f"^rows: row {row}: {what}"):
         measure_log(rows, 4, latitude_rad=50.45 * DEG)
+
+
+def test_a_latitude_in_degrees_is_refused_not_used(tmp_path):
+    # Radians inside: 50.45 (degrees by mistake) would remove a wrong Earth rate silently.
+    _, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=40, seed=2))
+    with pytest.raises(InputError, match=r"latitude_rad = 50\.45: .*radians"):
+        measure_log(rows, 4, 50.45)
+    with pytest.raises(InputError, match=r"latitude_range_rad = 60: .*radians"):
+        measure_log(rows, 4, latitude_range_rad=(0.7, 60.0))
 
 
 def test_rows_that_are_not_a_log_are_refused_by_name():
