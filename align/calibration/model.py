@@ -148,7 +148,7 @@ def walk_physical(rate_g: np.ndarray, t: np.ndarray) -> bool:
 class CalibrationStage:
     """Maximum-likelihood ellipsoid refinement with optional effects (the loop's stage)."""
 
-    def __init__(self, poses: Poses, signs: Sequence[float]):
+    def __init__(self, poses: Poses, signs: Sequence[float], walk: bool = True):
         if len(poses.u) < 9:
             raise InputError(f"only {len(poses.u)} usable poses; the model needs at least 9 "
                              "(the paper's cube gives 14)")
@@ -171,7 +171,8 @@ class CalibrationStage:
         self._white: tuple[float, np.ndarray, np.ndarray] | None = None
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
-        if (self.sigma is not None and poses.walk_rate is not None and poses.ordered
+        self.walk_share = 0.0  # the fraction of the samples' walk rate in the noise model
+        if (walk and self.sigma is not None and poses.walk_rate is not None and poses.ordered
                 and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
             # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
             # the per-axis estimates scatter by about their size at a few µg/√s.
@@ -188,15 +189,35 @@ class CalibrationStage:
                 C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
                 self.whiten = np.linalg.inv(np.linalg.cholesky(C))
                 self.sigma = np.sqrt(np.diag(C))
+                self.walk_share = f
 
-    def means_allow(self, walk: np.ndarray) -> float:
+    def log_det(self) -> float:
+        """log det of the pose residuals' covariance [ln g²] (the noise model's part of −2 log
+        likelihood: two noise models are compared by chi2 + log det, not chi2 alone)."""
+        if self.whiten is not None:
+            return float(-2 * np.sum(np.log(np.abs(np.diag(self.whiten)))))
+        return float(2 * np.sum(np.log(self.sigma))) if self.sigma is not None else 0.0
+
+    def means_allow(self, walk: np.ndarray, effects: tuple[str, ...] | None = None) -> float:
         """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that the
         pose means allow: the declared model's white-noise chi2 not in the lower WALK_ALPHA
         tail of its distribution under diag(sigma²) + f walk (Σ λ_i χ²₁, λ the eigenvalues of
         the residual-space covariance; 20000 seeded draws: scipy has no such distribution);
         0 when even 1e-4 of it is excluded. A pose's own settling (a hand-placed unit)
         shows in its samples as a walk does but does not go on from pose to pose: the means
-        then scatter as white noise, and the walk is not one."""
+        then scatter as white noise, and the walk is not one.
+
+        ``effects``: judged on the white fit with these effects instead (fitted before, the
+        stage's noise white): a warming bias makes the declared model's chi2 large whatever
+        the walk, and only the residual beyond the effects tells whether a walk goes on."""
+        if effects is not None:
+            if self.whiten is not None or effects not in self.jacobians:
+                raise NotApplicable("the means are judged on a white-noise fit")
+            J = self.jacobians[effects]
+            q, _ = np.linalg.qr(J)
+            r_w = self.projection[effects][1]
+            return self._allowed(float(np.sum(r_w**2)), np.eye(len(r_w)) - q @ q.T,
+                                 1.0 / self.sigma, walk)
         if self._white is None:
             # The white-noise fit of the declared model, leaving the stage's own as it was.
             whiten, self.whiten = self.whiten, None
@@ -212,7 +233,12 @@ class CalibrationStage:
             q, _ = np.linalg.qr(J)
             self._white = (float(np.sum((r / self.sigma) ** 2)),
                            np.eye(len(r)) - q @ q.T, 1.0 / self.sigma)
-        chi2, P, w = self._white
+        return self._allowed(*self._white, walk)
+
+    @staticmethod
+    def _allowed(chi2: float, P: np.ndarray, w: np.ndarray, walk: np.ndarray) -> float:
+        """:meth:`means_allow` for a white fit's chi2, its residual-space projector ``P`` and
+        weights ``w`` = 1/sigma."""
         Ww = P @ (w[:, None] * walk * w[None, :]) @ P
         z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
 
