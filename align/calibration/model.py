@@ -172,6 +172,9 @@ class CalibrationStage:
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
         self.walk_share = 0.0  # the fraction of the samples' walk rate in the noise model
+        # The walk the samples show [g²] between the poses, and the least fraction of it
+        # their estimate allows (None: no walk in the noise).
+        self.walk: tuple[np.ndarray, float] | None = None
         if (walk and self.sigma is not None and poses.walk_rate is not None and poses.ordered
                 and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
             # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
@@ -188,6 +191,7 @@ class CalibrationStage:
             if f > 0 and f >= low:
                 C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
                 self.whiten = np.linalg.inv(np.linalg.cholesky(C))
+                self.walk = (C - np.diag(self.sigma**2)) / f, float(low)
                 self.sigma = np.sqrt(np.diag(C))
                 self.walk_share = f
 

@@ -29,6 +29,7 @@ from align.calibration.known import (
 from align.calibration.model import (
     CANDIDATES,
     IN_TIME,
+    OVERFIT_CHI2,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
     PRIOR_SCALE,
@@ -38,7 +39,7 @@ from align.calibration.model import (
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
-from align.calibration.walk import WANDER, walk_covariance
+from align.calibration.walk import WANDER, walk_covariance, wander_fit
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -88,6 +89,8 @@ class Calibration:
         What the user should know (poses left out, units stretched); unit —.
     widening : Widening or None
         How u was widened for unexplained structure (None: not widened); unit —.
+    problems : tuple of str
+        Why the result is not ok (empty: ok); unit —.
     """
 
     algebraic: TriadModel
@@ -100,6 +103,14 @@ class Calibration:
     cross_check: dict | None = None
     notes: tuple[str, ...] = ()
     widening: Widening | None = None
+    problems: tuple[str, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        """Whether the result is a measurement (``problems`` empty): not when the effects
+        the poses cannot tell apart leave u far beyond the noise's
+        (:meth:`~align.calibration.widen.Widening.undetermined`)."""
+        return not self.problems
 
     @property
     def residual_rms_g(self) -> float:
@@ -237,7 +248,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
             raise InputError(f"geometry: the {len(poses.u)} poses span only a cone of "
                              f"~{cone:.0f}° about one direction ({exc}): {TUMBLE}") from None
         raise
-    stage, rep, noise_alt = noise_model(stage, candidates, alpha)
+    stage, rep = noise_model(stage, candidates, alpha)
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     model, widening = rep.after.payload, None
     increments = []
@@ -247,15 +258,17 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append(_structure_increment(rep, A, r_w, rep.after.dof,
                                                stage.sigma is not None, "pose"))
     alts = alternatives(stage, rep, candidates, admissible(stage, overfit=False))
-    if noise_alt is not None:
-        alts.append(noise_alt)
     if alts:
         increments.append((AMBIGUITY, ambiguity_reason(
             tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
             ambiguity_term(alts, len(model.names))))
+    problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
         notes = (*notes, widening.warning())
+        why = widening.undetermined(tuple(t.name for t in rep.terms),
+                                    max(PLAN_MIN, len(poses.u)))
+        problems = (why,) if why else ()
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
@@ -265,50 +278,47 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
-                       "ellipsoid", kf, cc, notes, widening)
+                       "ellipsoid", kf, cc, notes, widening, problems)
 
 
-WHITE = "white noise"
-"""The noise model without the bias walk (the alternative a walk in the noise is weighed
-against, :func:`noise_model`)."""
+WANDER_ANY = True
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float
-                ) -> tuple[CalibrationStage, LoopReport, Alternative | None]:
-    """The loop under the noise model the pose means support: when the samples' bias walk
+                ) -> tuple[CalibrationStage, LoopReport]:
+    """The loop under the noise model the pose means support. When the samples' bias walk
     entered the stage's noise (:class:`~align.calibration.model.CalibrationStage`), the loop
-    runs again under white noise, and the two are weighed by their evidence, −2 log L + k ln N
-    (chi2, the covariance's log det, the effects' parameters; the walk's level counts as one
-    when the means cut it). The samples' low frequencies within a pose (seconds) do not say
-    how the bias goes on from pose to pose (minutes): a flicker floor or a settling looks
-    like a walk there, and a warming bias under a walk's covariance is explained by the walk
-    and not found (the BMI160 of openaxes-imu9 read by ``align calibrate``: walk +
-    cross_z_xz at −2 log L −596, white + bias_warmup + K2 at −671, 8 parameters more).
-
-    Returns the stage and loop report chosen, and the other as an :class:`Alternative` when
-    within :data:`AMBIGUOUS_BIC` of it (u then covers both), else None."""
+    runs again under white noise, and the walk is kept only when the pose means beyond the
+    effects that loop found still show it: a walk of fitted level in their residual
+    (:func:`~align.calibration.walk.wander_fit`, its shape the samples' walk) lowers
+    −2 log L by more than ln N (one parameter in BIC). The samples' low frequencies within
+    a pose (seconds) do not say how the bias goes on from pose to pose (minutes): a flicker
+    floor or a settling looks like a walk there, and a warming bias under a walk's covariance
+    is explained by the walk and not found (the BMI160 of openaxes-imu9 read by ``align
+    calibrate``: cross_z_xz under the walk; bias_warmup + K2 under white noise leave
+    chi2 18.9 on 21 dof, and the walk's fitted level in that residual is 0)."""
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
-    if stage.whiten is None:
-        return stage, rep, None
+    if stage.walk is None:
+        return stage, rep
     white = CalibrationStage(stage.poses, np.sign(stage.start.k), walk=False)
     rep_w = run_loop(white, candidates, alpha=alpha, admissible=admissible(white))
-    n = np.log(len(stage.poses.u))
+    effects = tuple(t.name for t in rep_w.terms)
+    w = 1.0 / white.sigma
+    shape = w[:, None] * stage.walk[0] * w[None, :]
+    r, J = white.projection[effects][1], white.jacobians[effects]
+    if rep_w.after.dof < MIN_WALK_DOF or rep_w.after.chi2 < OVERFIT_CHI2 * rep_w.after.dof:
+        return stage, rep  # too little residual beyond the effects to exclude the walk
+    gain = wander_fit(r, J, shape, 0.0).m2ll - wander_fit(r, J, shape).m2ll
+    if gain > np.log(len(stage.poses.u)):
+        return stage, rep
+    return white, rep_w
 
-    def evidence(st: CalibrationStage, r: LoopReport, extra: int) -> float:
-        return (r.after.chi2 + st.log_det()
-                + (r.after.n_params + sum(t.searched for t in r.terms) + extra) * n)
 
-    e_walk = evidence(stage, rep, int(stage.walk_share < 1))
-    e_white = evidence(white, rep_w, 0)
-    runs = [(e_walk, stage, rep, WANDER + " in the noise"), (e_white, white, rep_w, WHITE)]
-    (e_win, st, r, _), (e_lose, _, r_lose, what) = sorted(runs, key=lambda x: x[0])
-    if e_lose - e_win >= AMBIGUOUS_BIC:
-        return st, r, None
-    names = " + ".join(t.name for t in r_lose.terms) or "no effect"
-    return st, r, Alternative(f"{names} ({what})", "", float(e_lose - e_win), float("nan"),
-                              _core(r_lose.after.payload) - _core(r.after.payload),
-                              positive_part(_core_cov(r_lose.after.payload)
-                                            - _core_cov(r.after.payload)))
+MIN_WALK_DOF = 3
+"""Fewest residual degrees of freedom beyond the white loop's effects on which the means may
+exclude the samples' walk (:func:`noise_model`); fewer, or a residual an over-fit's size
+(chi2/dof below :data:`~align.calibration.model.OVERFIT_CHI2`: 6 effect parameters on 14
+poses took a walk's whole signal), and the walk stays."""
 
 
 def _structure_increment(rep: LoopReport, projection: np.ndarray, residuals_w: np.ndarray,
@@ -413,7 +423,7 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
     # samples within the poses do not exclude the level it needs (the poses' means alone
     # cannot tell a wander of a few µg from a drift on 14 poses).
     timed = {e for a in out for e in a.effects.split(" + ")} | set(names)
-    w = stage.wander() if timed & IN_TIME else None
+    w = stage.wander() if WANDER_ANY or timed & IN_TIME else None
     if w is not None and w.level > 0:
         d_bic = w.m2ll + (len(CORE) + 1) * np.log(len(stage.poses.u)) - b_final
         bound = stage.poses.walk_bound

@@ -55,6 +55,11 @@ ALIASED = 0.99
 """An alternative that reproduces this fraction of the chosen effect's chi2 drop is aliased
 with it on these poses (squared correlation of the regressors along the fitted signal; the
 poses of ``align calibrate --plan 28`` keep the candidates of issue 19 below it)."""
+USEFUL_FACTOR = 10.0
+"""The ambiguity term may widen u of a scale factor, an axis angle or a bias to at most this
+many times what the noise allows: beyond, the number covers the effects' spread but is no
+measurement of the triad (a hysteresis on the paper's 14 poses: u of k 1.2 %, 1.5e4 x its
+noise u) and the result is marked not ok with the pose order that tells them apart."""
 STRUCTURE = "unexplained_structure"
 AMBIGUITY = "effect_ambiguity"
 
@@ -100,6 +105,28 @@ class Widening:
                                    **{t: float(v[i]) for t, v in self.terms}}
                                for i, n in enumerate(self.names)},
                 "alternatives": [a.to_dict() for a in self.alternatives]}
+
+    def undetermined(self, chosen: Sequence[str], plan_n: int) -> str | None:
+        """Why the result is not ok, when the :data:`AMBIGUITY` term alone widens u of a
+        core parameter or scale factor beyond :data:`USEFUL_FACTOR` x its noise u (the
+        alternative that moves it most named), else None."""
+        amb = dict(self.terms).get(AMBIGUITY)
+        if amb is None or not self.alternatives:
+            return None
+        core = [i for i, n in enumerate(self.names) if n.startswith(("scale_factor_", "beta_",
+                                                                     "bias_"))]
+        f = np.sqrt(1 + (amb[core] / np.where(self.u_noise[core] > 0, self.u_noise[core],
+                                               np.inf)) ** 2)
+        j = int(np.argmax(f))
+        if not f[j] > USEFUL_FACTOR:
+            return None
+        k = core[j] if core[j] < 9 else None
+        alt = max(self.alternatives, key=lambda a: abs(a.shift[k]) if k is not None
+                  else float(np.max(np.abs(a.shift[:3]))))
+        return (f"calibration NOT OK: {' + '.join(chosen)} and {alt.effects} cannot be told "
+                f"apart on this pose order (u of {self.names[core[j]]} widened x{f[j]:.3g} to "
+                f"cover both, > {USEFUL_FACTOR:g}x its noise u; the JSON keeps the widened u):"
+                f" measure with `align calibrate --plan {plan_n}`")
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
