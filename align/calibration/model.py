@@ -19,7 +19,13 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
-from align.calibration.walk import WALK_ALPHA, WanderFit, walk_covariance, wander_fit, wander_shape
+from align.calibration.walk import (
+    WanderFit,
+    allowed_fraction,
+    walk_covariance,
+    wander_fit,
+    wander_shape,
+)
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -220,7 +226,7 @@ class CalibrationStage:
             J = self.jacobians[effects]
             q, _ = np.linalg.qr(J)
             r_w = self.projection[effects][1]
-            return self._allowed(float(np.sum(r_w**2)), np.eye(len(r_w)) - q @ q.T,
+            return allowed_fraction(float(np.sum(r_w**2)), np.eye(len(r_w)) - q @ q.T,
                                  1.0 / self.sigma, walk)
         if self._white is None:
             # The white-noise fit of the declared model, leaving the stage's own as it was.
@@ -237,28 +243,7 @@ class CalibrationStage:
             q, _ = np.linalg.qr(J)
             self._white = (float(np.sum((r / self.sigma) ** 2)),
                            np.eye(len(r)) - q @ q.T, 1.0 / self.sigma)
-        return self._allowed(*self._white, walk)
-
-    @staticmethod
-    def _allowed(chi2: float, P: np.ndarray, w: np.ndarray, walk: np.ndarray) -> float:
-        """:meth:`means_allow` for a white fit's chi2, its residual-space projector ``P`` and
-        weights ``w`` = 1/sigma."""
-        Ww = P @ (w[:, None] * walk * w[None, :]) @ P
-        z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
-
-        def allowed(f: float) -> bool:
-            lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
-            return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
-
-        if allowed(1.0):
-            return 1.0
-        lo, hi = np.log(1e-4), 0.0
-        if not allowed(float(np.exp(lo))):
-            return 0.0
-        for _ in range(12):  # bisection on log f: the chi2's lower tail grows with f
-            mid = (lo + hi) / 2
-            lo, hi = (mid, hi) if allowed(float(np.exp(mid))) else (lo, mid)
-        return float(np.exp(lo))
+        return allowed_fraction(*self._white, walk)
 
     def _check_applies(self, effects: Sequence[str]) -> None:
         p = self.poses
