@@ -106,27 +106,25 @@ class Widening:
                                for i, n in enumerate(self.names)},
                 "alternatives": [a.to_dict() for a in self.alternatives]}
 
-    def undetermined(self, chosen: Sequence[str], plan_n: int) -> str | None:
-        """Why the result is not ok, when the :data:`AMBIGUITY` term alone widens u of a
-        core parameter or scale factor beyond :data:`USEFUL_FACTOR` x its noise u (the
+    def undetermined(self, chosen: Sequence[str], plan_n: int, wander: str) -> str | None:
+        """Why the result is not ok, when the alternative *effects* (not ``wander``, the
+        bias's own instability: u then says what the sensor allows) widen u of one of the
+        nine core parameters (k, beta, bias) beyond :data:`USEFUL_FACTOR` x its noise u (the
         alternative that moves it most named), else None."""
-        amb = dict(self.terms).get(AMBIGUITY)
-        if amb is None or not self.alternatives:
+        alts = [a for a in self.alternatives if a.effects != wander]
+        if not alts:
             return None
-        core = [i for i, n in enumerate(self.names) if n.startswith(("scale_factor_", "beta_",
-                                                                     "bias_"))]
-        f = np.sqrt(1 + (amb[core] / np.where(self.u_noise[core] > 0, self.u_noise[core],
-                                               np.inf)) ** 2)
+        var = sum(a.shift**2 / RECTANGULAR**2 + np.diag(a.excess) for a in alts)
+        u0 = self.u_noise[:9]
+        f = np.sqrt(1 + var / np.where(u0 > 0, u0, np.inf) ** 2)
         j = int(np.argmax(f))
         if not f[j] > USEFUL_FACTOR:
             return None
-        k = core[j] if core[j] < 9 else None
-        alt = max(self.alternatives, key=lambda a: abs(a.shift[k]) if k is not None
-                  else float(np.max(np.abs(a.shift[:3]))))
+        alt = max(alts, key=lambda a: abs(a.shift[j]))
         return (f"calibration NOT OK: {' + '.join(chosen)} and {alt.effects} cannot be told "
-                f"apart on this pose order (u of {self.names[core[j]]} widened x{f[j]:.3g} to "
-                f"cover both, > {USEFUL_FACTOR:g}x its noise u; the JSON keeps the widened u):"
-                f" measure with `align calibrate --plan {plan_n}`")
+                f"apart on this pose order (u of {self.names[j]} widened x{f[j]:.3g} to cover "
+                f"both, > {USEFUL_FACTOR:g}x its noise u; the JSON keeps the widened u): "
+                f"measure with `align calibrate --plan {plan_n}`")
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
