@@ -28,6 +28,7 @@ from align.calibration.known import (
 )
 from align.calibration.model import (
     CANDIDATES,
+    IN_TIME,
     OVERFIT_CHI2,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
@@ -437,7 +438,10 @@ def alternatives(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[
         if w.level <= top:
             # u covers the wander at the largest level the samples allow.
             w = stage.wander(top)
-        if d_bic < AMBIGUOUS_BIC or w.level == top:
+        # Within AMBIGUOUS_BIC counts only beside an effect in time (a wander's shape); an
+        # attitude effect (K2 on 24 poses) or no effect, only at a level the samples allow.
+        timed = {e for a in out for e in a.effects.split(" + ")} | set(names)
+        if d_bic < AMBIGUOUS_BIC and timed & IN_TIME or w.level == top:
             theta = stage.solutions[()][:9] + w.step[:9]
             out.append(Alternative(WANDER, " + ".join(names), float(d_bic), float("nan"),
                                    theta - core, positive_part(w.cov[:9, :9] - cov)))
