@@ -234,11 +234,14 @@ def ambiguity_reason(chosen: tuple[str, ...], alts: list[Alternative], plan_n: i
                 f"{a.effects} ({a.explained:.2%} of its signal)" for a in group)
             for c, group in by.items())
                      + f": record the poses of `align calibrate --plan {plan_n}`")
-    if close:
-        parts.append("the data cannot tell the effects added (" + (" + ".join(chosen) or
-                                                                   "none")
-                     + ") from " + ", ".join(a.effects for a in close)
-                     + f" (within {AMBIGUOUS_BIC:g} of BIC)")
+    near = [a for a in close if a.d_bic < AMBIGUOUS_BIC]
+    allowed = [a for a in close if not a.d_bic < AMBIGUOUS_BIC]  # (the wander, by its level)
+    for group, why in ((near, f"within {AMBIGUOUS_BIC:g} of BIC"),
+                       (allowed, "at a level the samples within the poses allow")):
+        if group:
+            parts.append("the data cannot tell the effects added (" + (" + ".join(chosen)
+                                                                       or "none")
+                         + ") from " + ", ".join(a.effects for a in group) + f" ({why})")
     return "; ".join(parts) + ": u covers the parameters' spread over them"
 
 
