@@ -98,9 +98,11 @@ class CameraModel:
     per_view_rms_px : dict or None
         RMS reprojection error of each view [px].
     u_formal : dict or None
-        OpenCV's formal standard uncertainty per parameter (same units as ``u``).
+        OpenCV's formal standard uncertainty per parameter (fx, fy, cx, cy [px]; k1, ...
+        dimensionless).
     u_jackknife : dict or None
-        Delete-one-view jackknife standard uncertainty per parameter (same units as ``u``);
+        Delete-one-view jackknife standard uncertainty per parameter (fx, fy, cx, cy [px];
+        k1, ... dimensionless);
         None with fewer than :data:`JACKKNIFE_MIN_VIEWS` views.
     """
 
