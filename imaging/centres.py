@@ -44,6 +44,29 @@ class Centres:
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
     ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
     (None: none removed).
+
+    Attributes
+    ----------
+    xy : ndarray
+        (N, 2) centres [px].
+    sigma : ndarray
+        (N,) their u across the line [px].
+    t : ndarray
+        (N,) positions along the line [px].
+    contrast : ndarray
+        (N,) contrast A_k [DN].
+    cross_slope : ndarray
+        (N,) background slope / contrast [1/px].
+    chi2_red : ndarray
+        (N,) pixel chi2/dof per segment.
+    ok : ndarray
+        (N,) usable segments (bool).
+    texture : TextureModel or None
+        The texture's correlation model.
+    blur_dev, blur_dev_u : ndarray or None
+        Per-segment blur minus the band's and its u [px].
+    offsets_cov : ndarray or None
+        Covariance from removed stripes' offsets [px^2].
     """
 
     xy: np.ndarray

@@ -12,8 +12,7 @@ import numpy as np
 
 from imaging.candidate import MarkCandidate, line_frame
 from imaging.centres import Centres
-from imaging.confirm import _across as across
-from imaging.confirm import block_medians
+from imaging.confirm import across, block_medians
 from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, centres_half
