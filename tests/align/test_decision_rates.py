@@ -106,7 +106,7 @@ def test_goniometer_finds_dropouts(tmp_path):
         found += out["fault found"]
         z.append(out["z_max"])
     print(f"| goniometer | drop-out of 3-20 rows | fault found | {found}/{n} | "
-          f"max |error|/u {max(z):.2f} |")
+          f"max \\|error\\|/u {max(z):.2f} |")
     assert found >= 0.9 * n and max(z) < 4.5
 
 
