@@ -22,6 +22,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from align.session import load_session, run_session  # noqa: E402
@@ -55,4 +57,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Decisions: false alarms on clean sessions")
