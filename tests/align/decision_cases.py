@@ -34,6 +34,7 @@ from align.session.decisions import (
     mark_decisions,
     upper95,
 )
+from axisbase.units import DEG
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from synth.gonio import GonioSpec, drop_out, simulate, write_log
 from synth.session import SessionSpec, write_session
@@ -138,7 +139,8 @@ def gonio_log(seed: int, folder: Path, latitude: bool, dropout: int = 0) -> dict
         sim = drop_out(sim, int(rng.integers(0, len(sim["rows"]["count"]) - dropout)),
                        dropout)
     p = write_log(sim, folder / f"log{seed}_{int(latitude)}_{dropout}.csv")
-    run = measure_log(p, 4, spec.latitude_deg if latitude else None, direction=spec.direction)
+    run = measure_log(p, 4, spec.latitude_deg * DEG if latitude else None,
+                      direction=spec.direction)
     z = (run.angles.angles_rad - np.array(sim["truth"]["angles_rad"])) / run.angles.u_rad
     got = gonio_decisions(run)
     if run.loop is None:
