@@ -17,6 +17,7 @@ import io
 import os
 import subprocess
 import sys
+import warnings
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import NamedTuple
@@ -64,13 +65,20 @@ def _text(stream: io.TextIOWrapper) -> str:
     return stream.buffer.getvalue().decode("utf-8")  # type: ignore[attr-defined]
 
 
+def _warning_to_stderr(message, category, filename, lineno, file=None, line=None) -> None:
+    sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def run_cli(*args: object, cwd: str | Path | None = None,
             env: Mapping[str, str] | None = None) -> CliResult:
     """``align ARGS`` in this process, from ``cwd`` with ``env`` added to the environment
     (both restored afterwards); its standard output and error captured."""
     out, err = _stream(), _stream()
     with _environment(cwd, env), contextlib.redirect_stdout(out), \
-            contextlib.redirect_stderr(err):
+            contextlib.redirect_stderr(err), warnings.catch_warnings():
+        # A Python warning is a stderr line for the user, as in a fresh process (not only an
+        # entry in pytest's summary): a "one line on stderr" check sees it.
+        warnings.showwarning = _warning_to_stderr
         try:
             rc = main([str(a) for a in args])
         except SystemExit as exc:  # main() returns its status; argparse's --help exits 0
