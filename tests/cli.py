@@ -54,26 +54,54 @@ def _environment(cwd: str | Path | None, env: Mapping[str, str] | None) -> Itera
                 os.environ[k] = v
 
 
-def _stream() -> io.TextIOWrapper:
-    # A text stream with a binary buffer (the JSON writer writes ``-`` to ``.buffer``), UTF-8
-    # like a terminal that shows ″ ± µ °.
-    return io.TextIOWrapper(io.BytesIO(), encoding="utf-8", newline="", write_through=True)
+class _Pipe(io.BytesIO):
+    """What a reader like ``head -N`` leaves a writer: its first ``lines`` lines are read,
+    then the reader has gone and every write is EPIPE."""
+
+    def __init__(self, lines: int | None):
+        super().__init__()
+        self.lines = lines
+
+    def write(self, b) -> int:
+        if self.lines is not None and self.getvalue().count(b"\n") >= self.lines:
+            raise BrokenPipeError(32, "Broken pipe")
+        n = super().write(b)
+        if self.lines is not None:  # what the reader took: up to its last line
+            kept = self.getvalue().split(b"\n")[:self.lines]
+            self.seek(0)
+            self.truncate()
+            super().write(b"\n".join(kept) + (b"\n" if len(kept) == self.lines else b""))
+        return n
+
+
+def _stream(encoding: str = "utf-8", lines: int | None = None) -> io.TextIOWrapper:
+    # A text stream with a binary buffer (the JSON writer writes ``-`` to ``.buffer``); UTF-8
+    # like a terminal that shows ″ ± µ °, unless told otherwise; strict, like a console.
+    return io.TextIOWrapper(_Pipe(lines), encoding=encoding, newline="", write_through=True)
 
 
 def _text(stream: io.TextIOWrapper) -> str:
-    stream.flush()
-    return stream.buffer.getvalue().decode("utf-8")  # type: ignore[attr-defined]
+    try:
+        stream.flush()
+    except BrokenPipeError:
+        pass
+    # Decoded as the console's encoding: raises on any character it could not show.
+    return stream.buffer.getvalue().decode(stream.encoding)  # type: ignore[attr-defined]
 
 
 def _warning_to_stderr(message, category, filename, lineno, file=None, line=None) -> None:
     sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
-def run_cli(*args: object, cwd: str | Path | None = None,
-            env: Mapping[str, str] | None = None) -> CliResult:
+def run_cli(*args: object, cwd: str | Path | None = None, env: Mapping[str, str] | None = None,
+            encoding: str = "utf-8", stdout_lines: int | None = None) -> CliResult:
     """``align ARGS`` in this process, from ``cwd`` with ``env`` added to the environment
-    (both restored afterwards); its standard output and error captured."""
-    out, err = _stream(), _stream()
+    (both restored afterwards); its standard output and error captured.
+
+    ``encoding``: the console's (``"ascii"``: as ``PYTHONIOENCODING=ascii`` or ``LANG=C``).
+    ``stdout_lines``: standard output is a pipe whose reader takes that many lines and goes
+    (``align ... | head -1``)."""
+    out, err = _stream(encoding, stdout_lines), _stream(encoding)
     with _environment(cwd, env), contextlib.redirect_stdout(out), \
             contextlib.redirect_stderr(err), warnings.catch_warnings():
         # A Python warning is a stderr line for the user, as in a fresh process (not only an
