@@ -21,7 +21,7 @@ from axisbase.errors import InputError
 from axisbase.units import value_unit
 
 if TYPE_CHECKING:
-    from axisbase.table import TableSpec
+    from axisbase.tablespec import TableSpec
 
 _UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
 

@@ -30,150 +30,29 @@ from __future__ import annotations
 
 import io
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from axisbase.badrows import Uncommented, refused, row_lines, skip_comment
+from axisbase.badrows import Uncommented, refused, skip_comment
 from axisbase.csvblocks import parallel_batches, read_batches
 from axisbase.errors import InputError
 from axisbase.header import Header, match_names, read_header, show_cell
 from axisbase.repeats import check_repeats
+from axisbase.tabledata import Table
+from axisbase.tablespec import KINDS, Column, TableSpec
 from axisbase.units import TIME_UNITS, time_scale, value_unit
 
-KINDS = ("float", "int", "label")
+__all__ = ["KINDS", "MAX_MAGNITUDE", "Column", "Table", "TableSpec", "iter_rows", "iter_table",
+           "rate_warning", "read_table"]
+"""The reader's interface; the format and result types live in :mod:`axisbase.tablespec` and
+:mod:`axisbase.tabledata` (so the modules the reader uses can name them without a cycle)."""
+
 MAX_MAGNITUDE = 1e100
 """Largest |value| a float column takes (see :func:`_check`)."""
 _ARROW = {"float": pa.float64(), "int": pa.int64(), "label": pa.string()}
-
-
-@dataclass(frozen=True)
-class Column:
-    """One column of a format.
-
-    Attributes
-    ----------
-    name : str
-        Canonical name (what the code and the messages call it).
-    kind : str
-        'float', 'int' or 'label'.
-    required : bool
-        Whether a file without it is refused.
-    aliases : tuple of str
-        Other header spellings accepted for it.
-    """
-
-    name: str
-    kind: str = "float"
-    required: bool = True
-    aliases: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class TableSpec:
-    """A table format.
-
-    Attributes
-    ----------
-    what : str
-        What it is called in messages ("static poses", "counter log").
-    columns : tuple of Column
-        Its columns.
-    time : str or None
-        The column that must increase strictly (and that ``rate_hz`` may supply).
-    distinct_rows : bool
-        Refuse a file whose rows are each written twice, or which holds the same block of
-        rows twice (see :func:`axisbase.repeats.check_repeats`).
-    rate_hz_range : tuple of float, or None
-        Plausible sample rates of the sensor [Hz] (see :func:`rate_warning`).
-    """
-
-    what: str
-    columns: tuple[Column, ...]
-    time: str | None = None
-    distinct_rows: bool = False
-    rate_hz_range: tuple[float, float] | None = None
-    """Plausible sample rates of the sensor [Hz]: a median interval outside is a warning
-    naming the likely time unit (see :func:`rate_warning`)."""
-
-    def column(self, name: str) -> Column:
-        return next(c for c in self.columns if c.name == name)
-
-    @property
-    def layout(self) -> str:
-        """The header a user should write, e.g. ``pose,ux,uy,uz[,t][,temp]``."""
-        req = ",".join(c.name for c in self.columns if c.required)
-        return req + "".join(f"[,{c.name}]" for c in self.columns if not c.required)
-
-
-@dataclass(frozen=True)
-class Table:
-    """A parsed table (or a chunk of a streamed one).
-
-    Attributes
-    ----------
-    path : Path
-        The file.
-    spec : TableSpec
-        Its format.
-    data : dict of str to ndarray
-        Columns under their canonical names: float64 / int64 arrays, labels as an object
-        array of str; in the tool's units (seconds; g, m/s², V, counts) when the header
-        declared another.
-    first_line : int
-        File line of the file's first data row.
-    ignored : tuple of str
-        Header names no column of the format took.
-    units : dict of str to str
-        Units of the columns as they now are (``{'ux': 'V', 't': 's'}``).
-    time_from_rate : bool
-        The time column was made from the sample rate.
-    row0 : int
-        Index in the file of this table's first row (a chunk of a streamed file).
-    in_memory : bool
-        Rows given in memory (:func:`iter_rows`), not read from a file: ``path`` is their
-        name for the messages, ``first_line`` 0 and a bad row is named by its index.
-    """
-
-    path: Path
-    spec: TableSpec
-    data: dict[str, np.ndarray]
-    first_line: int
-    ignored: tuple[str, ...] = ()
-    units: dict[str, str] = field(default_factory=dict)
-    time_from_rate: bool = False
-    row0: int = 0
-    in_memory: bool = False
-
-    def __len__(self) -> int:
-        return len(next(iter(self.data.values()))) if self.data else 0
-
-    def __contains__(self, name: str) -> bool:
-        return name in self.data
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        return self.data[name]
-
-    def get(self, name: str) -> np.ndarray | None:
-        return self.data.get(name)
-
-    def line(self, row: int) -> int:
-        """The file line of row ``row`` (0-based). Blank lines are skipped by the parser, so
-        they are counted by scanning the file — only called when reporting an error. Rows in
-        memory: the row's index."""
-        if self.in_memory:
-            return self.row0 + row
-        return row_lines(self.path, self.first_line, [self.row0 + row])[0]
-
-    def fail(self, row: int, column: str, what: str) -> InputError:
-        """The error for a bad value, in the house form ``file:line: column: what`` (rows in
-        memory: ``rows: row k: column: what``)."""
-        if self.in_memory:
-            return InputError(f"{self.path}: row {self.line(row)}: {column}: {what}")
-        return InputError(f"{self.path}:{self.line(row)}: {column}: {what}")
 
 
 # ----------------------------------------------------------------------------- parsing

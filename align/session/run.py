@@ -45,7 +45,8 @@ from align.fusion import (
 )
 from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
-from align.gonio import GonioRun, measure_log
+from align.gonio import measure_log
+from align.gonio_run import GonioRun
 from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
