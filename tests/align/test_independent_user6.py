@@ -1,0 +1,250 @@
+"""user6, an independent user: does axis-align give a confident wrong answer?
+
+Every input is made by ``tests/align/user6_inputs.py`` (my own physics: a ring-laser counter
+log, a groove integrated over each pixel through an OpenCV lens, a triad tumbled with
+effects, session folders) and run through the CLI as a user runs it (``python3 -m align``).
+A confident wrong answer is exit 0 / ``ok: true`` / no warning with a number more than 3 of
+its stated u from my truth. Right behaviour passes; a defect is ``xfail(strict=True)`` with
+the figures seen in its reason.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.align import user6_inputs as U
+
+ROOT = Path(__file__).resolve().parents[2]
+CHESS = ROOT.parent / "shared" / "data" / "real" / "opencv-chessboard"
+FACES = ("--faces", "ref,y,x,z", "--latitude", "50.45")
+NO_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
+
+
+def align(*args, timeout=600):
+    p = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=timeout)
+    return p.returncode, p.stdout, p.stderr
+
+
+def json_of(*args):
+    rc, out, err = align(*args, "--json", "-", "-q")
+    js = json.loads(out) if out.strip().startswith("{") else None
+    return rc, js, err
+
+
+def assert_one_line_refusal(rc, out, err, *needles):
+    assert rc == 2, (rc, out, err)
+    assert "Traceback" not in err + out, err
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], (n, lines[0])
+
+
+def gonio_z(js, g: U.Gonio) -> np.ndarray:
+    err = (np.asarray(js["angles_deg"]) - g.truth_deg()) * 3600.0
+    return err / np.asarray(js["angles_u_arcsec"])
+
+
+def dropout_named(js) -> list:
+    return [v["lines"] for k, v in js["exclusions"].items() if "drop-out" in k]
+
+
+def need_chessboards():
+    if not sorted(CHESS.glob("left*.jpg")):
+        pytest.skip(f"real data folder {CHESS} is absent (it lives in ../shared/data/real)")
+
+
+# ------------------------------------------------------------------------- goniometer
+
+def test_my_gonio_log_clean_is_within_u():
+    """My generator against the tool on a clean log: the basis of the drop-out checks."""
+    g = U.Gonio(seed=3)
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = U.write_gonio(Path(d) / "g.csv", g.rows())
+        rc, js, err = json_of("gonio", p, *FACES)
+    assert rc == 0 and js["ok"], err
+    assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
+
+
+@pytest.mark.parametrize("with_t", [True, False])
+def test_dropout_across_the_reference_face_is_named_and_angles_within_u(tmp_path, with_t):
+    """12 rows lost from 2 rows before a reference pulse: excluded and named (with times:
+    by the row's duration; without: by the faces' sequence, 12 is not a multiple of 4 ...
+    unless the phase is kept, which 12 rows keep: then the stitch is exact)."""
+    g = U.Gonio(seed=4)
+    rows = list(g.rows())
+    refs = [i for i, r in enumerate(rows) if r[2] == 1]
+    at = refs[40] - 2
+    rows = rows[:at] + rows[at + 13:]   # 13 rows: the phase jumps by one face
+    p = U.write_gonio(tmp_path / "g.csv", rows, with_t)
+    rc, js, err = json_of("gonio", p, *FACES)
+    assert rc == 0, err
+    assert dropout_named(js) == [[at + 2]], js["exclusions"]   # line of the row after the gap
+    assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
+
+
+@pytest.mark.slow
+def test_dropouts_of_3_to_20_rows_anywhere_over_seeds(tmp_path):
+    """20 logs, one drop-out of 3-20 rows at a random place (head, across a reference face,
+    tail), with and without times: normalised errors' RMS near 1, none beyond 4, every
+    drop-out with times named at its line."""
+    zs = []
+    for seed in range(20):
+        rng = np.random.default_rng(1000 + seed)
+        g = U.Gonio(seed=seed, rev_per_s=float(rng.uniform(0.5, 2.0)))
+        rows = list(g.rows())
+        n = int(rng.integers(3, 21))
+        at = int(rng.integers(0, len(rows) - n))
+        cut = rows[:at] + rows[at + n:]
+        for with_t in (True, False):
+            p = U.write_gonio(tmp_path / f"g{seed}{with_t}.csv", cut, with_t)
+            rc, js, err = json_of("gonio", p, *FACES)
+            assert rc in (0, 2) and js is not None, err
+            if not js["ok"]:
+                continue
+            zs.append(gonio_z(js, g))
+            if with_t and at > 0:
+                assert [at + 2] in dropout_named(js), (seed, at, n, js["exclusions"])
+    zs = np.concatenate(zs)
+    assert len(zs) >= 120
+    assert np.sqrt(np.mean(zs ** 2)) < 1.4 and np.abs(zs).max() < 4.0, zs
+
+
+def test_duplicated_row_with_times_is_refused_in_one_line_naming_it(tmp_path):
+    g = U.Gonio(seed=5)
+    rows = list(g.rows())
+    rows = rows[:201] + [rows[200]] + rows[201:]
+    p = U.write_gonio(tmp_path / "g.csv", rows)
+    rc, out, err = align("gonio", p, *FACES, "-q")
+    assert_one_line_refusal(rc, out, err, "g.csv:203", "t")
+
+
+def test_duplicated_row_without_times_is_excluded_not_stitched(tmp_path):
+    """A row written twice adds one face interval's counts: the walk must not keep it."""
+    g = U.Gonio(seed=5)
+    rows = list(g.rows())
+    rows = rows[:201] + [rows[200]] + rows[201:]
+    p = U.write_gonio(tmp_path / "g.csv", rows, with_t=False)
+    rc, js, err = json_of("gonio", p, *FACES)
+    assert js is not None and "Traceback" not in err, err
+    assert js["exclusions"], "the duplicated row left no trace"
+    assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
+
+
+@pytest.mark.parametrize("jump_s", [0.5, 3600.0])
+def test_clock_jump_forward_is_named_and_angles_within_u(tmp_path, jump_s):
+    """The logger's clock jumps forward (NTP step) with no row lost: the revolution it
+    falls in is excluded as a drop-out (its duration is not its counts'), and nothing
+    carries the jump into the Earth-rate correction."""
+    g = U.Gonio(seed=6)
+    rows = [list(r) for r in g.rows()]
+    for r in rows[150:]:
+        r[3] += jump_s
+    p = U.write_gonio(tmp_path / "g.csv", rows)
+    rc, js, err = json_of("gonio", p, *FACES)
+    assert rc == 0, err
+    assert dropout_named(js) == [[152]], js["exclusions"]
+    assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
+
+
+def test_clock_jump_backward_is_refused_in_one_line(tmp_path):
+    g = U.Gonio(seed=6)
+    rows = [list(r) for r in g.rows()]
+    for r in rows[150:]:
+        r[3] -= 2.0
+    p = U.write_gonio(tmp_path / "g.csv", rows)
+    rc, out, err = align("gonio", p, *FACES, "-q")
+    assert_one_line_refusal(rc, out, err, "g.csv:152", "t")
+
+
+# ------------------------------------------------------------------------- camera stage
+
+def test_my_lens_map_is_exact_to_a_thousandth_of_a_pixel():
+    """My renderer's interpolated inverse of the real chessboard lens, pushed back through
+    cv2.projectPoints, lands within 1e-3 px of where it started, all over the frame."""
+    need_chessboards()
+    lens = U.chessboard_lens()
+    f = U.ideal_map(lens, 640, 480)
+    rng = np.random.default_rng(0)
+    px = rng.uniform([0, 0], [639, 479], size=(20000, 2))
+    back = lens.distort(f(px))
+    assert np.abs(back - px).max() < 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "align camera on the 7 real left*.jpg views states u(cx) 0.72 px, u(p1) 1.5e-4; the "
+    "jackknife over the views gives 2.37 px (3.3x) and 4.2e-4 (2.8x); cy 1.6x, k1 1.6x"))
+def test_camera_u_matches_the_jackknife_over_real_views():
+    """The stated u of each intrinsic against the delete-one jackknife over the 7 views
+    (6 dof: a ratio beyond 2.2 has p < 1e-3 for an honest u)."""
+    need_chessboards()
+    files = sorted(map(str, CHESS.glob("left*.jpg")))
+
+    def cal(fs):
+        rc, js, err = json_of("camera", *fs)
+        assert rc == 0, err
+        K, D = js["camera_matrix"], js["dist_coeffs"]
+        return np.array([K[0][0], K[1][1], K[0][2], K[1][2], *D[:4]]), js["u"]
+
+    _, u = cal(files)
+    subs = np.array([cal(files[:i] + files[i + 1:])[0] for i in range(len(files))])
+    n = len(files)
+    jk = np.sqrt((n - 1) / n * ((subs - subs.mean(0)) ** 2).sum(0))
+    names = ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"]
+    ratio = {k: jk[i] / u[k] for i, k in enumerate(names)}
+    assert max(ratio.values()) < 2.2, ratio
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "marks rendered through my OpenCV calibration of the real chessboard lens, measured "
+    "with the tool's model of the same 7 views (--camera): -239, -216, -280 arcsec at u 56, "
+    "32, 63 (4.3-6.8 u), exit 0 / ok for two of three; the model's cx differs from mine by "
+    "2.0 px at a stated u 0.72 px"))
+def test_marks_through_the_real_lens_with_its_model_within_u(tmp_path):
+    """Both calibrations estimate one real lens; allowing my own as much error as the
+    tool's (a factor sqrt 2), an ok angle stays within 3 sqrt(2) u of my truth."""
+    need_chessboards()
+    cam = tmp_path / "cam.json"
+    rc, _, err = align("camera", *sorted(CHESS.glob("left*.jpg")), "--json", cam, "-q")
+    assert rc == 0, err
+    lens = U.chessboard_lens()
+    bad = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        x, y, a = 320 + rng.uniform(-40, 40), rng.uniform(60, 110), rng.uniform(-0.3, 0.3)
+        sc = U.Scene(width=640, height=480, lens=lens, marks=(U.Mark(x, y, a, 300),),
+                     seed=seed, bits=12)
+        p = U.write_image(tmp_path / f"m{seed}.png", U.render(sc))
+        rc, js, err = json_of("marks", p, "--camera", cam)
+        (m,) = js["marks"]
+        z = U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"]
+        if js["ok"] and abs(z) > 3 * np.sqrt(2):
+            bad.append((seed, round(z, 2), rc))
+    assert not bad, bad
+
+
+@pytest.mark.slow
+def test_real_lens_without_a_model_is_lens_limited_not_wrong(tmp_path):
+    """No model, default lens ranges: an off-centre mark is either within 3 u or NOT OK."""
+    need_chessboards()
+    lens = U.chessboard_lens()
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        x, y, a = 320 + rng.uniform(-40, 40), rng.uniform(60, 110), rng.uniform(-0.3, 0.3)
+        sc = U.Scene(width=640, height=480, lens=lens, marks=(U.Mark(x, y, a, 300),),
+                     seed=seed, bits=12)
+        p = U.write_image(tmp_path / f"m{seed}.png", U.render(sc))
+        rc, js, err = json_of("marks", p)
+        (m,) = js["marks"]
+        z = U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"]
+        assert abs(z) < 3 or (rc == 2 and not js["ok"] and "NOT OK" in err), (seed, z, rc)
