@@ -248,3 +248,130 @@ def test_real_lens_without_a_model_is_lens_limited_not_wrong(tmp_path):
         (m,) = js["marks"]
         z = U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"]
         assert abs(z) < 3 or (rc == 2 and not js["ok"] and "NOT OK" in err), (seed, z, rc)
+
+
+# ------------------------------------------------------------------------- calibration
+
+def cal_json(path, *flags):
+    return json_of("calibrate", path, *flags)
+
+
+def k_z(js, k_true) -> np.ndarray:
+    k = np.asarray(js["scale_factors_v_per_g"])
+    return (k - k_true) / np.asarray(js["scale_factors_u_v_per_g"])
+
+
+def triad(seed: int) -> tuple:
+    rng = np.random.default_rng(seed)
+    return U.Triad(U.s_from_E(U.E_arcsec(*rng.uniform(-300, 300, 6)))), rng
+
+
+def test_my_clean_tumble_gives_k_within_u(tmp_path):
+    tri, rng = triad(1)
+    p = U.write_tumble(tmp_path / "t.csv", U.tumble_rows(tri, U.cube14(), rng))
+    rc, js, err = cal_json(p)
+    assert rc == 0 and js["ok"], err
+    assert np.all(np.abs(k_z(js, tri.k)) < 3), k_z(js, tri.k)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 2])
+def test_scale_warmup_without_temperature_column_k_at_the_mean_time_within_u(tmp_path, seed):
+    """The scale factor warms up by 450 ppm (tau 60 s) over a 14-pose tumble, no temperature
+    column: k is reported at the mean pose time; it must be within 3 u of my k there."""
+    tri, rng = triad(seed)
+
+    def sf(t):
+        return 1 + 450e-6 * (1 - np.exp(-t / 60.0))
+
+    rows = U.tumble_rows(tri, U.cube14(), rng, scale_of_t=sf)
+    t_ref = np.mean([r[1] for r in rows])
+    p = U.write_tumble(tmp_path / "t.csv", rows)
+    rc, js, err = cal_json(p)
+    assert js is not None, err
+    z = k_z(js, tri.k * sf(np.array([t_ref]))[0])
+    assert np.all(np.abs(z) < 3) or not js["ok"], z
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "scale factor cycling +-100 ppm (HVAC +-1 K at 100 ppm/K, 15 min period), 60 s poses, no "
+    "temperature column: seed 2 k_x 2.41022 +- 1.6e-5 V/g while the true k spans "
+    "2.40976-2.41024: 24 u from k at the mean time, 11 u from the run's mean k, chi2/dof 1.42, "
+    "exit 0, ok, no warning (seed 0: structure flagged, u x3, still 9 u off, ok true)"))
+def test_scale_cycling_with_temperature_without_a_temp_column_is_covered_or_not_ok(tmp_path):
+    bad = []
+    for seed in range(3):
+        tri, rng = triad(seed)
+        ph = rng.uniform(0, 2 * np.pi)
+
+        def sf(t, ph=ph):
+            return 1 + 100e-6 * np.sin(2 * np.pi * t / 900.0 + ph)
+
+        rows = U.tumble_rows(tri, U.cube14(), rng, n=1200, scale_of_t=sf, t_gap=30.0)
+        ts = np.array([r[1] for r in rows])
+        p = U.write_tumble(tmp_path / f"t{seed}.csv", rows)
+        rc, js, err = cal_json(p)
+        assert js is not None, err
+        z_ref = k_z(js, tri.k * sf(np.array([ts.mean()]))[0])
+        z_avg = k_z(js, tri.k * sf(ts).mean())
+        covered = np.all(np.minimum(np.abs(z_ref), np.abs(z_avg)) < 3)
+        if not covered and js["ok"]:
+            bad.append((seed, np.round(z_ref, 1), np.round(z_avg, 1), rc))
+    assert not bad, bad
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "per-pose means of a cube14 tumble whose +z pose the analogue stage clipped by 1 mg on "
+    "uz: k_z 4.4 u off (seeds 0 and 1), exit 0, ok, only 'noise unknown' said"))
+def test_one_clipped_pose_in_per_pose_means_is_covered_or_flagged(tmp_path):
+    tri, rng = triad(0)
+    rows = U.tumble_rows(tri, U.cube14(), rng, clip=(2, tri.k[2] * 0.999 + tri.b[2]))
+    p = tmp_path / "means.csv"
+    p.write_text("pose,ux,uy,uz\n" + "".join(
+        f"{r[0]},{r[1]:.9e},{r[2]:.9e},{r[3]:.9e}\n" for r in U.pose_means(rows)))
+    rc, js, err = cal_json(p)
+    assert js is not None, err
+    z = k_z(js, tri.k)
+    assert np.all(np.abs(z) < 3) or not js["ok"] or any("clip" in w for w in js["warnings"]), z
+
+
+def test_analogue_saturation_with_adc_noise_after_it_is_covered(tmp_path):
+    """The amplifier saturates 1 mg below the +z face's reading; the ADC adds its noise
+    after it, so no value piles up at a rail: the samples' residual shows it, and u covers
+    it (or the result is not ok)."""
+    tri, rng = triad(0)
+    rows = U.tumble_rows(tri, U.cube14(), rng, clip=(2, tri.k[2] * 0.999 + tri.b[2]))
+    p = U.write_tumble(tmp_path / "t.csv", rows)
+    rc, js, err = cal_json(p)
+    assert js is not None, err
+    z = k_z(js, tri.k)
+    assert np.all(np.abs(z) < 3) or not js["ok"], z
+    assert js["unexplained_structure"] or not js["ok"]
+
+
+def test_a_pose_with_a_vibration_is_refused_naming_the_pose_and_its_lines(tmp_path):
+    tri, rng = triad(0)
+    rows = U.tumble_rows(tri, U.cube14(), rng, vib=(5, 0.05, 7.3))
+    p = U.write_tumble(tmp_path / "t.csv", rows)
+    rc, out, err = align("calibrate", p, "-q")
+    assert_one_line_refusal(rc, out, err, "t.csv", "pose 5", "lines 1002-1201")
+
+
+def test_pose_blocks_written_out_of_time_order_are_refused_naming_the_line(tmp_path):
+    tri, rng = triad(0)
+    rows = U.tumble_rows(tri, U.cube14(), rng)
+    blocks = [rows[i * 200:(i + 1) * 200] for i in range(14)]
+    blocks[3], blocks[7] = blocks[7], blocks[3]
+    p = U.write_tumble(tmp_path / "t.csv", sum(blocks, []))
+    rc, out, err = align("calibrate", p, "-q")
+    assert_one_line_refusal(rc, out, err, "t.csv:802", "t:")
+
+
+def test_labels_of_two_faces_swapped_are_refused(tmp_path):
+    """+x and +y labels exchanged: the labels do not name the triad's axes."""
+    tri, rng = triad(0)
+    labels = ["+y", "-x", "+x", "-y", "+z", "-z"] + [f"c{i}" for i in range(8)]
+    p = U.write_tumble(tmp_path / "t.csv", U.tumble_rows(tri, U.cube14(), rng, labels=labels))
+    rc, out, err = align("calibrate", p, "-q")
+    assert_one_line_refusal(rc, out, err, "labelled faces", "--scale-sign")
