@@ -375,3 +375,90 @@ def test_labels_of_two_faces_swapped_are_refused(tmp_path):
     p = U.write_tumble(tmp_path / "t.csv", U.tumble_rows(tri, U.cube14(), rng, labels=labels))
     rc, out, err = align("calibrate", p, "-q")
     assert_one_line_refusal(rc, out, err, "labelled faces", "--scale-sign")
+
+
+# ------------------------------------------------------------------------- scenes
+
+def marks_of(js) -> list:
+    return [m for m in js["marks"] if m.get("found", True)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_stage_micrometer_with_numerals_and_dust_family_within_u(tmp_path, seed):
+    """11 graduations at a 40 px pitch, every 5th long and numbered, 25 specks of dust:
+    every graduation found, each and the family's mean within 3 u, pitch within 0.05 px."""
+    a = 90 + np.random.default_rng(seed).uniform(-0.4, 0.4)
+    sc = U.micrometer(a, seed=seed)
+    p = U.write_image(tmp_path / "scale.png", U.render(sc))
+    rc, js, err = json_of("marks", p, *NO_LENS)
+    ms = marks_of(js)
+    assert len(ms) == 11, err
+    z = [U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"] for m in ms]
+    assert np.all(np.abs(z) < 3.5), z
+    fam = ms[0]["family"]
+    assert fam["lines"] == 11
+    assert abs(U.wrap_deg(fam["angle_deg"] - a) * 3600) < 3 * fam["angle_u_arcsec"]
+    assert abs(fam["pitch_px"] - 40.0) < 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 4])
+def test_dial_of_12_graduations_each_within_u(tmp_path, seed):
+    sc, truth = U.dial(seed=seed, turn_deg=np.random.default_rng(seed).uniform(0, 30))
+    p = U.write_image(tmp_path / "dial.png", U.render(sc))
+    rc, js, err = json_of("marks", p, *NO_LENS)
+    ms = marks_of(js)
+    assert len(ms) == 12, err
+    z = []
+    for m in ms:
+        t = min(truth, key=lambda t, m=m: abs(U.wrap_deg(m["angle_deg"] - t)))
+        z.append(U.wrap_deg(m["angle_deg"] - t) * 3600 / m["angle_u_arcsec"])
+    assert np.all(np.abs(z) < 3.5) and np.sqrt(np.mean(np.square(z))) < 1.6, np.round(z, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "a clean vertical 250 px mark in a 480x360 12-bit frame (no stripes rendered): 'column "
+    "stripes in the background ... removed' in 6 of 6 seeds, p 2e-7..6e-4 at alpha 1e-3 "
+    "(also 3 of 4 vertical marks of a clean session, 2 of 8 clean dials, 2 of 2 micrometers)"))
+def test_clean_vertical_mark_raises_no_stripe_warning(tmp_path):
+    found = []
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        a = 90 + rng.uniform(-0.3, 0.3)
+        sc = U.Scene(480, 360, (U.Mark(239.5 + rng.uniform(-6, 6), 179.5, a, 250.0, 4.5),),
+                     seed=seed, bits=12)
+        p = U.write_image(tmp_path / f"v{seed}.png", U.render(sc))
+        rc, js, err = json_of("marks", p, *NO_LENS)
+        found += [w for w in js["warnings"] if "stripes" in w]
+    assert not found, found
+
+
+def test_vertical_mark_angle_within_u_in_a_12_bit_tiff(tmp_path):
+    """12-bit data in a 16-bit TIFF, vignetting 25 %: the angle within 3 u."""
+    a = 89.83
+    sc = U.Scene(480, 360, (U.Mark(241.0, 180.2, a, 250.0, 4.5),), seed=7, bits=12)
+    p = U.write_image(tmp_path / "v.tif", U.render(sc))
+    rc, js, err = json_of("marks", p, *NO_LENS)
+    assert rc == 0, err
+    (m,) = marks_of(js)
+    assert abs(U.wrap_deg(m["angle_deg"] - a) * 3600) < 3 * m["angle_u_arcsec"]
+
+
+@pytest.mark.slow
+def test_tangential_lens_beyond_the_default_range_is_lens_limited_not_wrong(tmp_path):
+    """|p| x R/f = 0.003 (three times the default range), mark in the top quarter, no model:
+    within 3 u or NOT OK (exit 2)."""
+    for seed in range(2):
+        rng = np.random.default_rng(seed)
+        lens = U.Lens(530, 530, 319.5 + rng.uniform(-8, 8), 239.5 + rng.uniform(-8, 8),
+                      (-0.12, 0.02, 0.004, -0.003, 0.0))
+        a = rng.uniform(-0.3, 0.3)
+        sc = U.Scene(640, 480, (U.Mark(320 + rng.uniform(-30, 30), rng.uniform(70, 110), a,
+                                       320),), lens=lens, seed=seed, bits=12)
+        p = U.write_image(tmp_path / f"t{seed}.png", U.render(sc))
+        rc, js, err = json_of("marks", p)
+        (m,) = marks_of(js)
+        z = U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"]
+        assert abs(z) < 3 or (rc == 2 and not js["ok"]), (seed, z, rc)

@@ -405,3 +405,167 @@ def pose_means(rows) -> list:
             acc[r[0]] = []
         acc[r[0]].append(r[2:])
     return [(p, *np.mean(acc[p], axis=0)) for p in order]
+
+
+# ----------------------------------------------------------------------------- scenes
+
+def text_feature(texts, width: int, height: int, depth: float = 0.6, ss: int = 4):
+    """Printed numerals (cv2.putText, anti-aliased) as dark ink in the pinhole image:
+    ``texts`` is a list of (string, (x, y) bottom-left [px], font scale). Returns a feature
+    function for ``Scene.extra``."""
+    from scipy.ndimage import map_coordinates
+
+    canvas = np.zeros((height * ss, width * ss), np.uint8)
+    for s, (x, y), scale in texts:
+        cv2.putText(canvas, s, (int(x * ss), int(y * ss)), cv2.FONT_HERSHEY_SIMPLEX,
+                    scale * ss, 255, max(1, int(2 * ss * scale)), cv2.LINE_AA)
+    ink = canvas.astype(float) / 255.0
+    fat = cv2.dilate(ink, np.ones((9 * ss, 9 * ss), np.uint8))
+
+    def fn(px, want_fat):
+        img = fat if want_fat else ink
+        c = np.stack([px[:, 1] * ss + (ss - 1) / 2, px[:, 0] * ss + (ss - 1) / 2])
+        return depth * map_coordinates(img, c, order=1, mode="constant")
+    return fn
+
+
+def micrometer(angle_deg: float, width: int = 640, height: int = 480, pitch: float = 40.0,
+               n: int = 11, seed: int = 0, numerals: bool = True, lens: Lens | None = None,
+               dust: int = 25) -> Scene:
+    """A stage micrometer: n parallel graduations at ``pitch`` px across, every 5th longer,
+    every 5th numbered, the lines' direction ``angle_deg`` (near 90: vertical rulings)."""
+    a = np.deg2rad(angle_deg)
+    normal = np.array([np.sin(a), np.cos(a)])   # across the lines (image x for vertical ones)
+    along = np.array([np.cos(a), -np.sin(a)])
+    c0 = np.array([(width - 1) / 2, (height - 1) / 2 + 20])
+    marks, texts = [], []
+    for i in range(n):
+        k = i - (n - 1) // 2
+        long_ = i % 5 == 0
+        ln = 220.0 if long_ else 150.0
+        # graduations share their bottom end (the scale's base line side)
+        base = c0 + k * pitch * normal
+        centre = base + along * (ln / 2 - 110.0)
+        marks.append(Mark(float(centre[0]), float(centre[1]), angle_deg, ln, 3.5, 0.6))
+        if long_ and numerals:
+            top = base + along * (ln - 110.0 + 14)
+            texts.append((str(i), (top[0] - 8, top[1]), 0.6))
+    extra = [text_feature(texts, width, height)] if texts else []
+    return Scene(width, height, tuple(marks), lens=lens, blur_px=1.0, seed=seed, bits=12,
+                 dust=dust, extra=extra)
+
+
+def dial(width: int = 640, height: int = 480, n: int = 12, r_in: float = 90.0,
+         r_out: float = 210.0, seed: int = 0, turn_deg: float = 0.0) -> tuple:
+    """Radial graduations every 360/n deg between radii r_in and r_out about the frame's
+    centre (nudged), turned by ``turn_deg``; returns (scene, their direction angles)."""
+    cx, cy = (width - 1) / 2 + 3.3, (height - 1) / 2 - 2.1
+    marks, truth = [], []
+    for i in range(n):
+        th = np.deg2rad(turn_deg + 360.0 * i / n)
+        rm = (r_in + r_out) / 2
+        x, y = cx + rm * np.cos(th), cy - rm * np.sin(th)
+        if not (r_out < min(width, height) / 2 or (0 < x < width and 0 < y < height)):
+            continue
+        marks.append(Mark(x, y, float(np.rad2deg(th)), r_out - r_in, 4.0, 0.6))
+        truth.append(wrap_deg(float(np.rad2deg(th))))
+    return Scene(width, height, tuple(marks), seed=seed, bits=12), truth
+
+
+# ----------------------------------------------------------------------------- sessions
+
+VIEWS = {  # view: (camera, image right, image up) as platform unit vectors
+    "A": ("A", np.array([1.0, 0, 0]), np.array([0, 0, 1.0])),
+    "Ar": ("A", np.array([-1.0, 0, 0]), np.array([0, 0, 1.0])),
+    "B": ("B", np.array([0, 1.0, 0]), np.array([0, 0, 1.0])),
+    "Br": ("B", np.array([0, -1.0, 0]), np.array([0, 0, 1.0])),
+}
+VIEW_KEYS = {"A": ("+X", "+Z"), "Ar": ("-X", "+Z"), "B": ("+Y", "+Z"), "Br": ("-Y", "+Z")}
+IMAGES = [("x", "A", "horizontal"), ("z", "A", "vertical"), ("x", "Ar", "horizontal"),
+          ("z", "Ar", "vertical"), ("y", "B", "horizontal"), ("z", "B", "vertical"),
+          ("y", "Br", "horizontal"), ("z", "Br", "vertical")]
+PLATFORM_POSES = {  # label: (up in the platform frame before levelling error, table deg)
+    "L000": ("+Z", 0.0), "L090": ("+Z", 90.0), "L180": ("+Z", 180.0), "L270": ("+Z", 270.0),
+    "Xup": ("+X", 0.0), "Xdn": ("-X", 0.0), "Yup": ("+Y", 0.0), "Ydn": ("-Y", 0.0)}
+
+
+def rot(axis: str, ang: float) -> np.ndarray:
+    c, s = np.cos(ang), np.sin(ang)
+    return {"x": np.array([[1, 0, 0], [0, c, -s], [0, s, c]]),
+            "y": np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]),
+            "z": np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])}[axis]
+
+
+def mark_angle_deg(s: np.ndarray, view: str) -> float:
+    """The displayed direction of a housing's mark along the sensitive axis s (platform
+    frame) in a view: atan2(s . up, s . right), as a line direction in (-90, 90]."""
+    _, r, u = VIEW_KEYS and VIEWS[view]
+    return wrap_deg(float(np.rad2deg(np.arctan2(s @ u, s @ r))))
+
+
+@dataclass
+class SessionSpec:
+    E_arcsec: tuple = (40.0, -25.0, 15.0, 35.0, -20.0, 30.0)   # xY xZ yX yZ zX zY
+    seed: int = 0
+    level_arcsec: tuple = (0.0, 0.0)   # the levelled poses' up tilted towards +X, +Y
+    creep_y_arcsec: float = 0.0        # the triad turned about Y after the images
+    lens_A: Lens | None = None         # the real optics of camera A
+    lens_A_keys: str = "zero"          # "zero": lens_* = 0 declared; "none": keys absent
+    off_centre_A: float = 0.0          # camera A's marks this far above the centre [px]
+    width: int = 480
+    height: int = 360
+    samples: int = 200
+
+
+def write_session(folder: Path, sp: SessionSpec) -> dict:
+    """A session folder (session.toml, tumble.csv, platform.csv, eight mark images) whose
+    truth is E (E_ij = s_ij / s_ii); returns the truth."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(sp.seed)
+    E = E_arcsec(*sp.E_arcsec)
+    S_img = s_from_E(E)                                # the triad when imaged
+    S_static = S_img @ rot("y", sp.creep_y_arcsec * ARCSEC).T   # after creep
+    tri = Triad(S_static)
+    write_tumble(folder / "tumble.csv", tumble_rows(tri, cube14(), rng, n=sp.samples))
+    lines = ["pose,ux,uy,uz,t"]
+    t0 = 0.0
+    lx, ly = (np.asarray(sp.level_arcsec) * ARCSEC)
+    for lab, (up, _) in PLATFORM_POSES.items():
+        sign = 1.0 if up[0] == "+" else -1.0
+        f = sign * np.eye(3)["XYZ".index(up[1])]
+        if up[1] == "Z":
+            f = np.array([lx, ly, 1.0])
+            f /= np.linalg.norm(f)
+        u = tri.read(np.tile(f, (sp.samples, 1)), rng)
+        for i, ui in enumerate(u):
+            lines.append(f"{lab},{ui[0]:.9e},{ui[1]:.9e},{ui[2]:.9e},{t0 + 0.05 * i:.3f}")
+        t0 += 0.05 * sp.samples + 10
+    (folder / "platform.csv").write_text("\n".join(lines) + "\n")
+    toml = ['name = "user6"', "", "[calibration]", 'static = "tumble.csv"', ""]
+    for cam in ("A", "B"):
+        toml.append(f"[cameras.{cam}]")
+        if cam == "B" or sp.lens_A_keys == "zero":
+            toml += [f"lens_{k} = 0.0" for k in ("k1", "k2", "p", "aspect", "pp_px")]
+        toml.append("")
+    for v, (cam, _, _) in VIEWS.items():
+        r, u = VIEW_KEYS[v]
+        toml += [f"[views.{v}]", f'camera = "{cam}"', f'right = "{r}"', f'up = "{u}"', ""]
+    truth_marks = {}
+    for i, (housing, view, nominal) in enumerate(IMAGES):
+        s = S_img["xyz".index(housing)]
+        a = mark_angle_deg(s, view)
+        cam = VIEWS[view][0]
+        yoff = sp.off_centre_A if cam == "A" else 0.0
+        cx, cy = (sp.width - 1) / 2 + rng.uniform(-6, 6), (sp.height - 1) / 2 - yoff
+        sc = Scene(sp.width, sp.height, (Mark(cx, cy, a, 250.0, 4.5, 0.6),),
+                   lens=sp.lens_A if cam == "A" else None, seed=sp.seed * 100 + i, bits=12)
+        name = f"{housing}_{view}.png"
+        write_image(folder / name, render(sc))
+        truth_marks[name] = a
+        toml += ["[[images]]", f'file = "{name}"', f'housing = "{housing}"',
+                 f'view = "{view}"', f'nominal = "{nominal}"', ""]
+    toml += ["[platform]", 'static = "platform.csv"', "", "[platform.poses]"]
+    for lab, (up, tab) in PLATFORM_POSES.items():
+        toml.append(f'{lab} = {{ up = "{up}", table_deg = {tab} }}')
+    (folder / "session.toml").write_text("\n".join(toml) + "\n")
+    return {"E": E, "marks": truth_marks}
