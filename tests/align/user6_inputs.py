@@ -511,7 +511,7 @@ class SessionSpec:
     creep_y_arcsec: float = 0.0        # the triad turned about Y after the images
     lens_A: Lens | None = None         # the real optics of camera A
     lens_A_keys: str = "zero"          # "zero": lens_* = 0 declared; "none": keys absent
-    off_centre_A: float = 0.0          # camera A's marks this far above the centre [px]
+    off_centre_A: float = 0.0          # camera A's marks this far off the centre [px]
     width: int = 480
     height: int = 360
     samples: int = 200
@@ -555,8 +555,12 @@ def write_session(folder: Path, sp: SessionSpec) -> dict:
         s = S_img["xyz".index(housing)]
         a = mark_angle_deg(s, view)
         cam = VIEWS[view][0]
-        yoff = sp.off_centre_A if cam == "A" else 0.0
-        cx, cy = (sp.width - 1) / 2 + rng.uniform(-6, 6), (sp.height - 1) / 2 - yoff
+        off = sp.off_centre_A if cam == "A" else 0.0
+        cx, cy = (sp.width - 1) / 2 + rng.uniform(-6, 6), (sp.height - 1) / 2
+        if nominal == "horizontal":
+            cy -= off           # a horizontal mark in the top of the frame
+        else:
+            cx -= off           # a vertical one at its left
         sc = Scene(sp.width, sp.height, (Mark(cx, cy, a, 250.0, 4.5, 0.6),),
                    lens=sp.lens_A if cam == "A" else None, seed=sp.seed * 100 + i, bits=12)
         name = f"{housing}_{view}.png"
