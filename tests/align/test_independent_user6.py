@@ -555,3 +555,84 @@ def test_session_with_lens_limited_marks_is_not_ok(session_run):
     rc, js, err, truth = session_run("lens_none")
     assert any("lens-limited" in w for w in js["warnings"]), js["warnings"]
     assert rc == 2 and not js["ok"], (rc, js["ok"])
+
+
+# ------------------------------------------------------------------------- bad input
+
+def _gonio_file(tmp_path, edit):
+    rows = [list(r) for r in U.Gonio(seed=1, revolutions=12).rows()]
+    p = U.write_gonio(tmp_path / "g.csv", rows)
+    lines = p.read_text().splitlines()
+    edit(lines)
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def _tumble_file(tmp_path, edit):
+    tri, rng = triad(1)
+    p = U.write_tumble(tmp_path / "t.csv", U.tumble_rows(tri, U.cube14(), rng, n=20))
+    lines = p.read_text().splitlines()
+    edit(lines)
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def _set(i, col, value):
+    def edit(lines):
+        cells = lines[i - 1].split(",")
+        cells[col] = value
+        lines[i - 1] = ",".join(cells)
+    return edit
+
+
+BAD_TABLES = [
+    ("gonio", _set(20, 0, "191127.5"), ("g.csv:20", "count")),
+    ("gonio", _set(30, 1, "3"), ("g.csv:30", "counter")),
+    ("calibrate", _set(150, 4, "nan"), ("t.csv:150", "uz")),
+    ("calibrate", _set(77, 1, ""), ("t.csv:77", "t")),
+]
+
+
+@pytest.mark.parametrize("cmd, edit, needles", BAD_TABLES)
+def test_bad_cell_is_one_line_naming_file_line_and_column(tmp_path, cmd, edit, needles):
+    if cmd == "gonio":
+        rc, out, err = align("gonio", _gonio_file(tmp_path, edit), *FACES, "-q")
+    else:
+        rc, out, err = align("calibrate", _tumble_file(tmp_path, edit), "-q")
+    assert_one_line_refusal(rc, out, err, *needles)
+
+
+@pytest.mark.parametrize("flags, needle", [
+    (("--faces", "ref,y,x"), "--faces"),
+    (("--faces", "ref,y,x,z", "--nominal", "90,90,90,80"), "--nominal"),
+])
+def test_gonio_flag_contradicting_the_log_is_one_line_naming_the_flag(tmp_path, flags, needle):
+    p = U.write_gonio(tmp_path / "g.csv", U.Gonio(seed=1, revolutions=12).rows())
+    rc, out, err = align("gonio", p, *flags, "-q")
+    assert_one_line_refusal(rc, out, err, needle)
+
+
+@pytest.mark.parametrize("flags, needle", [
+    (("--roi", "10,10,-5,100"), "--roi"),
+    (("--lens", "k1=abc"), "--lens"),
+    (("--lens", "k9=0.1"), "--lens"),
+])
+def test_marks_bad_flag_is_one_line_naming_it(tmp_path, flags, needle):
+    p = U.write_image(tmp_path / "m.png", np.full((120, 160), 2000, np.uint16))
+    rc, out, err = align("marks", p, *flags, "-q")
+    assert_one_line_refusal(rc, out, err, needle)
+
+
+def test_roi_outside_the_image_names_the_image_and_the_region(tmp_path):
+    sc = U.Scene(480, 360, (U.Mark(240, 180, 0.1, 200),), ss=2)
+    p = U.write_image(tmp_path / "m.png", U.render(sc))
+    rc, out, err = align("marks", p, "--roi", "400,0,200,100", "-q")
+    assert_one_line_refusal(rc, out, err, "m.png", "400,0,200,100", "480x360")
+
+
+def test_truncated_image_is_one_line_naming_it(tmp_path):
+    sc = U.Scene(160, 120, (U.Mark(80, 60, 0.1, 100),), ss=2)
+    p = U.write_image(tmp_path / "m.png", U.render(sc))
+    p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    rc, out, err = align("marks", p, "-q")
+    assert_one_line_refusal(rc, out, err, "m.png", "truncated")
