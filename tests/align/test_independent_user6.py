@@ -377,6 +377,23 @@ def test_labels_of_two_faces_swapped_are_refused(tmp_path):
     assert_one_line_refusal(rc, out, err, "labelled faces", "--scale-sign")
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("with_t", [True, False])
+def test_continuous_recording_with_turns_and_shake_k_within_u(tmp_path, with_t):
+    """A hand tumble recorded at 50 Hz (8 s poses, 3 s turns with 0.02 g of shake), with
+    and without a time column (--rate 50): 14 poses found, k within 3 u over 3 seeds."""
+    zs = []
+    for seed in range(3):
+        tri, rng = triad(seed)
+        rec = U.recording(tri, U.cube14(), rng)
+        p = U.write_recording(tmp_path / f"r{seed}.csv", rec, with_t)
+        rc, js, err = cal_json(p, *(() if with_t else ("--rate", "50")))
+        assert rc == 0 and js["ok"], err
+        assert len(js["poses"]) == 14
+        zs.append(k_z(js, tri.k))
+    assert np.all(np.abs(zs) < 3), np.round(zs, 2)
+
+
 # ------------------------------------------------------------------------- scenes
 
 def marks_of(js) -> list:

@@ -573,3 +573,39 @@ def write_session(folder: Path, sp: SessionSpec) -> dict:
         toml.append(f'{lab} = {{ up = "{up}", table_deg = {tab} }}')
     (folder / "session.toml").write_text("\n".join(toml) + "\n")
     return {"E": E, "marks": truth_marks}
+
+
+def recording(triad: Triad, dirs: np.ndarray, rng, rate: float = 50.0, static_s: float = 8.0,
+              move_s: float = 3.0, shake_g: float = 0.02) -> np.ndarray:
+    """A continuous tumble recording (t, ux, uy, uz): static poses joined by turns (the
+    direction swept along a great circle, via a waypoint when the next pose is opposite),
+    with a hand's shake of ``shake_g`` while moving."""
+    def sweep(d0, d1, n):
+        if d0 @ d1 < -0.9:
+            w = np.cross(d0, rng.normal(size=3))
+            w /= np.linalg.norm(w)
+            return np.vstack([sweep(d0, w, n // 2), sweep(w, d1, n - n // 2)])
+        ang = np.arccos(np.clip(d0 @ d1, -1, 1))
+        s = 0.5 - 0.5 * np.cos(np.linspace(0, np.pi, n))
+        if ang < 1e-9:
+            return np.tile(d0, (n, 1))
+        out = (np.sin((1 - s) * ang)[:, None] * d0 + np.sin(s * ang)[:, None] * d1) / np.sin(ang)
+        return out
+    ns, nm = int(static_s * rate), int(move_s * rate)
+    f = []
+    for i, d in enumerate(dirs):
+        f.append(np.tile(d, (ns, 1)))
+        if i + 1 < len(dirs):
+            mv = sweep(d, dirs[i + 1], nm)
+            mv = mv + rng.normal(0, shake_g, mv.shape)
+            f.append(mv)
+    f = np.vstack(f)
+    t = np.arange(len(f)) / rate
+    return np.column_stack([t, triad.read(f, rng)])
+
+
+def write_recording(path: Path, rec: np.ndarray, with_t: bool = True) -> Path:
+    h = "t,ux,uy,uz" if with_t else "ux,uy,uz"
+    body = rec if with_t else rec[:, 1:]
+    np.savetxt(path, body, delimiter=",", header=h, comments="", fmt="%.9e")
+    return path
