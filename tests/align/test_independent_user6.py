@@ -653,3 +653,46 @@ def test_truncated_image_is_one_line_naming_it(tmp_path):
     p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
     rc, out, err = align("marks", p, "-q")
     assert_one_line_refusal(rc, out, err, "m.png", "truncated")
+
+
+# ------------------------------------------------------------------------- exposure, edges
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "a horizontal 300 px mark 6 px from the bottom edge, vignetting 35 %, 12-bit, clean: "
+    "over 16 seeds RMS z 1.78 (centred marks of the same render 1.29), 3 of 16 beyond 3 u "
+    "(3.32, 3.51, 3.16), every one exit 0, ok, no warning"))
+def test_mark_near_the_frame_edge_under_vignetting_within_u_over_seeds(tmp_path):
+    zs = []
+    for seed in range(16):
+        rng = np.random.default_rng(seed)
+        a = rng.uniform(-0.3, 0.3)
+        sc = U.Scene(640, 480, (U.Mark(320 + rng.uniform(-20, 20), 473, a, 300),), seed=seed,
+                     bits=12, vignetting=0.35)
+        p = U.write_image(tmp_path / f"e{seed}.png", U.render(sc))
+        rc, js, err = json_of("marks", p, *NO_LENS)
+        (m,) = marks_of(js)
+        if js["ok"] and not js["warnings"]:
+            zs.append(U.wrap_deg(m["angle_deg"] - a) * 3600 / m["angle_u_arcsec"])
+    zs = np.asarray(zs)
+    # 16 honest z: RMS beyond 1.5 has p < 0.01 (chi2 16 dof), |z| > 3.3 p < 0.02
+    assert np.sqrt(np.mean(zs ** 2)) < 1.5 and np.abs(zs).max() < 3.3, np.round(zs, 2)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "an over-exposed frame (background 1.15 x full scale at the centre, vignetting 35 %: the "
+    "centre clipped at 4095, the groove itself not): 'no mark found (no long straight line "
+    "stands out)' in 6 of 6 seeds; the clipped region is not named (at 1.05 the mark is "
+    "measured within u)"))
+def test_over_exposed_frame_is_measured_or_the_clipping_is_named(tmp_path):
+    a = 0.12
+    sc = U.Scene(640, 480, (U.Mark(322.0, 238.0, a, 300),), seed=0, bits=12, level=1.15,
+                 vignetting=0.35)
+    p = U.write_image(tmp_path / "over.png", U.render(sc))
+    rc, js, err = json_of("marks", p, *NO_LENS)
+    ms = marks_of(js)
+    if ms:
+        m = ms[0]
+        assert abs(U.wrap_deg(m["angle_deg"] - a) * 3600) < 3 * m["angle_u_arcsec"]
+    else:
+        assert rc == 2 and any(w in err for w in ("clip", "saturat", "4095")), err
