@@ -491,6 +491,8 @@ SESSIONS = {
     "lens_zero": U.SessionSpec(seed=0, lens_A=CHESS_LIKE, off_centre_A=110.0),
     "lens_none": U.SessionSpec(seed=0, lens_A=CHESS_LIKE, off_centre_A=110.0,
                                lens_A_keys="none"),
+    "level_plain": U.SessionSpec(seed=0, level_arcsec=(24.0, -18.0), images=False),
+    "chess_model": U.SessionSpec(seed=0, off_centre_A=110.0, model_A="camA.json"),
 }
 _RUNS: dict = {}
 
@@ -501,7 +503,15 @@ def session_run(tmp_path_factory):
     def run(name):
         if name not in _RUNS:
             folder = tmp_path_factory.mktemp("u6sess") / name
-            truth = U.write_session(folder, SESSIONS[name])
+            spec = SESSIONS[name]
+            if spec.model_A:   # the tool's model of the real lens; images through mine
+                need_chessboards()
+                folder.mkdir(parents=True)
+                rc, _, err = align("camera", *sorted(CHESS.glob("left*.jpg")), "--json",
+                                   folder / spec.model_A, "-q")
+                assert rc == 0, err
+                spec = U.SessionSpec(**{**spec.__dict__, "lens_A": U.chessboard_lens()})
+            truth = U.write_session(folder, spec)
             rc, js, err = json_of("run", folder)
             assert js is not None, err
             _RUNS[name] = (rc, js, err, truth)
@@ -696,3 +706,22 @@ def test_over_exposed_frame_is_measured_or_the_clipping_is_named(tmp_path):
         assert abs(U.wrap_deg(m["angle_deg"] - a) * 3600) < 3 * m["angle_u_arcsec"]
     else:
         assert rc == 2 and any(w in err for w in ("clip", "saturat", "4095")), err
+
+
+@pytest.mark.slow
+def test_session_imageless_platform_out_of_level_is_found_and_E_within_u(session_run):
+    """Tumble and platform poses only: the ellipsoid and the gimbal poses see E_xZ, E_yZ
+    without the levelled poses, so a 30" levelling error is separable and found."""
+    rc, js, err, truth = session_run("level_plain")
+    assert "platform_level" in [e["name"] for e in js["effects"]], js["effects"]
+    assert np.all(np.abs(e_z(js, truth["E"])) < 3), e_z(js, truth["E"])
+
+
+@pytest.mark.slow
+def test_session_four_images_through_the_real_lens_test_its_model(session_run):
+    """Camera A's four images rendered through my calibration of the real chessboard lens,
+    the session given the tool's own model of it: the marks' bows disagree with the model
+    (named: 'the lens differs from its calibration'), and E stays within u."""
+    rc, js, err, truth = session_run("chess_model")
+    assert any("differs from its calibration" in w for w in js["warnings"]), js["warnings"]
+    assert np.all(np.abs(e_z(js, truth["E"])) < 3), e_z(js, truth["E"])

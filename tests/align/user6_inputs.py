@@ -499,7 +499,7 @@ def rot(axis: str, ang: float) -> np.ndarray:
 def mark_angle_deg(s: np.ndarray, view: str) -> float:
     """The displayed direction of a housing's mark along the sensitive axis s (platform
     frame) in a view: atan2(s . up, s . right), as a line direction in (-90, 90]."""
-    _, r, u = VIEW_KEYS and VIEWS[view]
+    _, r, u = VIEWS[view]
     return wrap_deg(float(np.rad2deg(np.arctan2(s @ u, s @ r))))
 
 
@@ -515,6 +515,8 @@ class SessionSpec:
     width: int = 480
     height: int = 360
     samples: int = 200
+    images: bool = True                # False: tumble and platform only
+    model_A: str = ""                  # a camera model file for [cameras.A] model
 
 
 def write_session(folder: Path, sp: SessionSpec) -> dict:
@@ -542,16 +544,18 @@ def write_session(folder: Path, sp: SessionSpec) -> dict:
         t0 += 0.05 * sp.samples + 10
     (folder / "platform.csv").write_text("\n".join(lines) + "\n")
     toml = ['name = "user6"', "", "[calibration]", 'static = "tumble.csv"', ""]
-    for cam in ("A", "B"):
+    for cam in ("A", "B") if sp.images else ():
         toml.append(f"[cameras.{cam}]")
-        if cam == "B" or sp.lens_A_keys == "zero":
+        if cam == "A" and sp.model_A:
+            toml.append(f'model = "{sp.model_A}"')
+        elif cam == "B" or sp.lens_A_keys == "zero":
             toml += [f"lens_{k} = 0.0" for k in ("k1", "k2", "p", "aspect", "pp_px")]
         toml.append("")
-    for v, (cam, _, _) in VIEWS.items():
+    for v, (cam, _, _) in VIEWS.items() if sp.images else ():
         r, u = VIEW_KEYS[v]
         toml += [f"[views.{v}]", f'camera = "{cam}"', f'right = "{r}"', f'up = "{u}"', ""]
     truth_marks = {}
-    for i, (housing, view, nominal) in enumerate(IMAGES):
+    for i, (housing, view, nominal) in enumerate(IMAGES if sp.images else ()):
         s = S_img["xyz".index(housing)]
         a = mark_angle_deg(s, view)
         cam = VIEWS[view][0]
@@ -561,7 +565,9 @@ def write_session(folder: Path, sp: SessionSpec) -> dict:
             cy -= off           # a horizontal mark in the top of the frame
         else:
             cx -= off           # a vertical one at its left
-        sc = Scene(sp.width, sp.height, (Mark(cx, cy, a, 250.0, 4.5, 0.6),),
+        wh = (640, 480) if cam == "A" and sp.model_A else (sp.width, sp.height)
+        cx, cy = cx + (wh[0] - sp.width) / 2, cy + (wh[1] - sp.height) / 2
+        sc = Scene(*wh, (Mark(cx, cy, a, 250.0, 4.5, 0.6),),
                    lens=sp.lens_A if cam == "A" else None, seed=sp.seed * 100 + i, bits=12)
         name = f"{housing}_{view}.png"
         write_image(folder / name, render(sc))
