@@ -84,7 +84,7 @@ def family_warnings(image: str, fam) -> list[str]:
 
 def calibration_warnings(cal, poses) -> list[str]:
     """A triad calibration (``Calibration``) and its poses."""
-    out = loop_warnings("calibration", cal.loop)
+    out = list(getattr(cal, "problems", ())) + loop_warnings("calibration", cal.loop)
     out += [f"calibration: effect {r.name} REFUSED: {r.reason}" for r in cal.loop.refused]
     out += list(getattr(cal, "notes", ()))
     dof = cal.loop.after.dof

@@ -363,7 +363,9 @@ def report_html(res: SessionResult, doc: dict | None = None,
         strip=stage_strip(res, warnings),
         notices=notices, toc=sections, warnings=shown,
         errors=[[e.stage, e.message] for e in res.errors], ok=res.ok,
-        not_ok_reason=f"stage(s) failed: {failed}" if failed else "not ok",
+        not_ok_reason=(f"stage(s) failed: {failed}" if failed else
+                       res.calibration.problems[0] if res.calibration is not None
+                       and res.calibration.problems else "not ok"),
         fusion=fusion, disposition=disposition, angle_head=angle_head, angle_rows=angle_rows,
         budget=_budget(d), calibration=cal, gonio=gon, marks=marks,
         provenance_view=provenance_view(doc))

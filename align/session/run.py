@@ -142,8 +142,10 @@ class SessionResult:
     @property
     def ok(self) -> bool:
         """Every stage the session names succeeded and the fusion ran. A result with a
-        failed stage is still written, but is not ok (exit status 2)."""
-        return self.fusion is not None and not self.errors
+        failed stage is still written, but is not ok (exit status 2); so is one whose
+        calibration is no measurement (effects its poses cannot tell apart)."""
+        return (self.fusion is not None and not self.errors
+                and (self.calibration is None or self.calibration.ok))
 
     def platform_calibration(self) -> PlatformCalibration | None:
         """The triad model and the misalignment in one (what 'align apply' needs), when both
