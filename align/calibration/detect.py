@@ -14,6 +14,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from scipy.ndimage import uniform_filter1d
 
 from axisbase.errors import InputError
+from axisbase.units import DEG
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,9 @@ _RULES = {  # setting -> (lowest, lowest excluded, what it is): the one check of
     "split_sigma": (0.0, True, "a number of standard errors"),
     "split_deg": (0.0, False, "a tilt [°]"),
 }
+_IN_SI = {"split_deg": ("split_rad", DEG)}
+"""A setting given in the user's unit -> (its field, the field's value of one such unit): the
+one conversion of the command line's and session.toml's degrees (radians inside)."""
 
 
 DETECT_KEYS = ("window_s", "threshold", "min_duration_s", "margin_s")
@@ -82,9 +86,10 @@ class StaticSettings:
     split_sigma : float
         An interval whose mean moves by more than this many of its own standard errors ...
         — dimensionless.
-    split_deg : float
-        ... and by more than this tilt [°] is split (a slow turn the moving window cannot
-        see; smaller moves are settling, not a new pose).
+    split_rad : float
+        ... and by more than this tilt [rad] (``--split-deg``, session key ``split_deg``, in
+        degrees) is split (a slow turn the moving window cannot see; smaller moves are
+        settling, not a new pose).
     names : Mapping
         How the user set each of them (``--window`` on the command line, ``[calibration]
         window_s`` in session.toml; also ``rate_hz`` and ``columns``): every message about
@@ -96,7 +101,7 @@ class StaticSettings:
     min_duration_s: float = 0.5
     margin_s: float = 0.1
     split_sigma: float = 8.0
-    split_deg: float = 1.0
+    split_rad: float = 1.0 * DEG
     names: Mapping[str, str] = field(default_factory=lambda: dict(CLI_NAMES), compare=False,
                                      hash=False)
 
@@ -104,7 +109,8 @@ class StaticSettings:
     def given(cls, names: Mapping[str, str], **values: object) -> StaticSettings:
         """The settings the user gave (a value None or absent: the default), each checked
         by its one rule; ``InputError`` naming the flag or key (``names``) otherwise. The
-        command line and session.toml both come here."""
+        command line and session.toml both come here, with values in the user's units
+        (``split_deg`` in degrees: converted here to ``split_rad``)."""
         out: dict[str, float] = {}
         for key, value in values.items():
             if value is None:
@@ -117,7 +123,8 @@ class StaticSettings:
             if value < lo or (open_lo and value == lo):
                 raise InputError(f"{name} = {value:g}: must be {'>' if open_lo else '>='} "
                                  f"{lo:g} ({what})")
-            out[key] = float(value)
+            field_name, unit = _IN_SI.get(key, (key, 1.0))
+            out[field_name] = float(value) * unit
         return cls(**out, names=dict(names))
 
     def flags(self, *keys: str) -> str:
@@ -126,7 +133,11 @@ class StaticSettings:
 
     def describe(self) -> str:
         """The settings in use, each with the user's name (the ``-v`` log)."""
-        return ", ".join(f"{self.names[k]} {getattr(self, k):g}" for k in _RULES)
+        def shown(k: str) -> float:
+            field_name, unit = _IN_SI.get(k, (k, 1.0))
+            return getattr(self, field_name) / unit
+
+        return ", ".join(f"{self.names[k]} {shown(k):g}" for k in _RULES)
 
 
 
@@ -245,11 +256,11 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
                                n, float("nan"), rate, np.zeros(len(u)), tuple(notes))
     noise, noise_mean = noise_levels(u, n)
     # One g in output units per channel, from the spread of window means (half their range):
-    # a tilt of split_deg moves a channel by at most sin(split_deg) of it.
+    # a tilt of split_rad moves a channel by at most sin(split_rad) of it.
     nb = len(u) // n
     wm = u[: nb * n].reshape(nb, n, -1).mean(1)
     g_out = (np.percentile(wm, 99, 0) - np.percentile(wm, 1, 0)) / 2
-    floor = np.sin(np.deg2rad(settings.split_deg)) * g_out
+    floor = np.sin(settings.split_rad) * g_out
     m = uniform_filter1d(u, n, axis=0, mode="nearest")
     m2 = uniform_filter1d(u * u, n, axis=0, mode="nearest")
     var = np.maximum(m2 - m * m, 0) * (n / (n - 1))

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from align.calibration.geometry import (
-    HEMISPHERE_DEG,
-    SURROUND_DEG,
-    cone_deg,
-    cone_estimate_deg,
+    HEMISPHERE_RAD,
+    SURROUND_RAD,
+    cone_estimate,
+    cone_half_angle,
 )
 from align.calibration.known import (
     FIXTURE_ERROR_RAD,
@@ -55,6 +55,7 @@ from align.calibration.widen import (
 )
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, LoopReport, bic, optimistic_fit, run_loop
+from axisbase.units import DEG
 
 SCALE_FACTOR_DEFINITION = (
     "scale_factors_*: output per g along each sensitive axis, k_i |r_i(beta)|, u propagated "
@@ -243,10 +244,10 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     try:
         stage = CalibrationStage(poses, signs)
     except InputError as exc:
-        cone = cone_estimate_deg(poses.u)
-        if cone < SURROUND_DEG:  # the fit failed on poses clustered in a cone: say so
+        cone = cone_estimate(poses.u)
+        if cone < SURROUND_RAD:  # the fit failed on poses clustered in a cone: say so
             raise InputError(f"geometry: the {len(poses.u)} poses span only a cone of "
-                             f"~{cone:.0f}° about one direction ({exc}): {TUMBLE}") from None
+                             f"~{cone / DEG:.0f}° about one direction ({exc}): {TUMBLE}") from None
         raise
     stage, rep = noise_model(stage, candidates, alpha)
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
@@ -340,8 +341,8 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
     3u covers the physical range the loop's guard allows (:data:`PRIOR_SCALE`,
     :data:`PRIOR_ANGLE_RAD`, :data:`PRIOR_BIAS_G`): the data then say nothing about it
     beyond what any triad is, and the linear uncertainty itself no longer holds."""
-    cone = cone_deg(m.specific_force(poses.u, poses.t, poses.temp))
-    if cone >= HEMISPHERE_DEG:
+    cone = cone_half_angle(m.specific_force(poses.u, poses.t, poses.temp))
+    if cone >= HEMISPHERE_RAD:
         return ()
     rel = {f"k_{ax}": (v / abs(k), PRIOR_SCALE, f"{v / abs(k):.2%}") for ax, v, k in
            zip("xyz", m.sensitivity_u(), m.sensitivity(), strict=True)}
@@ -349,7 +350,7 @@ def _cone_notes(m: TriadModel, poses: Poses) -> tuple[str, ...]:
     bias = {n: (m.u_of(n), PRIOR_BIAS_G, f"{m.u_of(n):.3g} g") for n in per_axis("bias")}
     q = {**rel, **ang, **bias}
     bad = [n for n, (u, prior, _) in q.items() if not (3 * u < prior)]
-    where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone:.0f}° about one "
+    where = (f"geometry: the {len(poses.u)} poses span only a cone of ~{cone / DEG:.0f}° about one "
              "direction (no axis seen both up and down)")
     if bad:
         raise InputError(f"{where}: {', '.join(bad)} not determined by them (u "

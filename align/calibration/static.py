@@ -36,7 +36,7 @@ from align.calibration.detect import (  # (re-exported: the package's API since 
     rate_flag,
     session_names,
 )
-from align.calibration.geometry import SURROUND_DEG, cone_estimate_deg, odd_pose
+from align.calibration.geometry import SURROUND_RAD, cone_estimate, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
 from align.calibration.triad import Poses
@@ -268,14 +268,14 @@ def _check_one_pose(path: Path, tab: Table, labels: tuple[str, ...], ids: np.nda
     orientations, or a pose that moved. Both of: its scatter is far beyond the others' noise
     (:data:`MIXED_NOISE_RATIO`) and it is a change of attitude, more than the 1° tilt (of the
     file's full scale, half its poses' widest range) by which the static-interval detector
-    splits one interval into two poses (``StaticSettings.split_deg``). Its mean would be a
+    splits one interval into two poses (``StaticSettings.split_rad``). Its mean would be a
     direction no pose had; the file, the label and its line ranges are named."""
     if len(labels) < 3:
         return  # no typical noise to compare with
     typical = np.median(sd, axis=0)
     scale = np.max(np.ptp(mean, axis=0)) / 2
     ratio = np.max(sd / np.where(typical > 0, typical, np.inf), axis=1)
-    moved = np.linalg.norm(sd, axis=1) > np.sin(np.deg2rad(StaticSettings.split_deg)) * scale
+    moved = np.linalg.norm(sd, axis=1) > np.sin(StaticSettings.split_rad) * scale
     bad = np.flatnonzero((ratio > MIXED_NOISE_RATIO) & moved)
     if not bad.size:
         return
@@ -319,7 +319,7 @@ def _check_geometry(path: Path, poses: Poses) -> None:
     odd = odd_pose(u) if len(u) > 3 else None
     if odd is not None:
         i, rho = odd
-        if not cone_estimate_deg(np.delete(u, i, 0)) < SURROUND_DEG:
+        if not cone_estimate(np.delete(u, i, 0)) < SURROUND_RAD:
             raise InputError(f"{path}: pose {poses.labels[i]} is {rho:.3g} radii from the "
                              "centre of the sphere through the other poses (one sensor in "
                              "one unit: 1 within a few %): mixed units?")

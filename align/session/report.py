@@ -152,9 +152,10 @@ def banner(res: SessionResult, disposition: dict | None) -> dict:
             text += f"; P(every angle conforms) = {disposition['p_conform_all']:.3f}"
         return {"verdict": v, "cls": VERDICT_CLASS.get(v, "v-none"), "text": text}
     if not res.ok:
+        why = (f"stage(s) failed: {failed or 'fusion'}" if failed or res.fusion is None
+               else "; ".join(res.problems))
         return {"verdict": "NOT ok", "cls": "v-notmeasured",
-                "text": f"no tolerance given; stage(s) failed: {failed or 'fusion'} — not a "
-                        "measurement of this unit"}
+                "text": f"no tolerance given; {why} — not a measurement of this unit"}
     return {"verdict": "No tolerance given", "cls": "v-none",
             "text": "E ± u below; a [tolerance] in session.toml or --tolerance-arcsec gives "
                     "a verdict"}
