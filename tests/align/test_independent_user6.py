@@ -91,35 +91,48 @@ def test_dropout_across_the_reference_face_is_named_and_angles_within_u(tmp_path
     assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
 
 
-@pytest.mark.slow
-def test_dropouts_of_3_to_20_rows_anywhere_over_seeds(tmp_path):
+def _dropout_logs(tmp_path, with_t):
     """12 logs, one drop-out of 3-20 rows at a random place (head, across a reference face,
-    tail). With times: named at its line, normalised errors' RMS near 1, none beyond 4.
-    Without times (the Earth rate can then be neither removed nor bounded on my unsteady
-    table, as docs/goniometer-dropouts.md says): each angle within 1 u of its drop-out-free
-    twin's."""
-    zs, moved = [], []
+    tail), 0.5-2 rev/s: yields (seed, row of the gap, truth, result, clean rows)."""
     for seed in range(12):
         rng = np.random.default_rng(1000 + seed)
         g = U.Gonio(seed=seed, rev_per_s=float(rng.uniform(0.5, 2.0)))
         rows = list(g.rows())
         n = int(rng.integers(3, 21))
         at = int(rng.integers(0, len(rows) - n))
-        cut = rows[:at] + rows[at + n:]
-        for with_t in (True, False):
-            p = U.write_gonio(tmp_path / f"g{seed}{with_t}.csv", cut, with_t)
-            rc, js, err = json_of("gonio", p, *FACES)
-            assert rc in (0, 2) and js is not None, err
-            if with_t:
-                zs.append(gonio_z(js, g))
-                if at > 0:
-                    assert [at + 2] in dropout_named(js), (seed, at, n, js["exclusions"])
-            else:
-                q = U.write_gonio(tmp_path / f"twin{seed}.csv", rows, False)
-                _, twin, err = json_of("gonio", q, *FACES)
-                moved.append(gonio_z(js, g) - gonio_z(twin, g))
-    zs, moved = np.concatenate(zs), np.concatenate(moved)
+        p = U.write_gonio(tmp_path / f"g{seed}.csv", rows[:at] + rows[at + n:], with_t)
+        rc, js, err = json_of("gonio", p, *FACES)
+        assert rc in (0, 2) and js is not None, err
+        yield seed, at, g, js, rows
+
+
+@pytest.mark.slow
+def test_dropouts_of_3_to_20_rows_with_times_named_and_within_u(tmp_path):
+    """With times: each drop-out named at the line after the gap; normalised errors' RMS
+    near 1, none beyond 4."""
+    zs = []
+    for seed, at, g, js, _ in _dropout_logs(tmp_path, True):
+        zs.append(gonio_z(js, g))
+        if at > 0:
+            assert [at + 2] in dropout_named(js), (seed, at, js["exclusions"])
+    zs = np.concatenate(zs)
     assert np.sqrt(np.mean(zs ** 2)) < 1.4 and np.abs(zs).max() < 4.0, np.round(zs, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "without times, one drop-out of 3-20 rows in 12 logs (100 revolutions, 0.5-2 rev/s, 1 % "
+    "ripple): an angle moved by 1.55 u from its drop-out-free twin's (next 1.16 u); "
+    "docs/goniometer-dropouts.md: 'the drop-out moving their angles by less than 0.3 of u'"))
+def test_dropouts_without_times_move_angles_less_than_the_documented_bound(tmp_path):
+    """Without times the Earth rate is neither removed nor bounded on my unsteady table, so
+    compare with the drop-out-free twin (as the docs do): within 1 u (docs: < 0.3 u)."""
+    moved = []
+    for seed, _, g, js, rows in _dropout_logs(tmp_path, False):
+        q = U.write_gonio(tmp_path / f"twin{seed}.csv", rows, False)
+        _, twin, err = json_of("gonio", q, *FACES)
+        moved.append(gonio_z(js, g) - gonio_z(twin, g))
+    moved = np.concatenate(moved)
     assert np.abs(moved).max() < 1.0, np.round(moved, 2)
 
 
