@@ -446,11 +446,9 @@ def test_dial_of_12_graduations_each_within_u(tmp_path, seed):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "a clean vertical 250 px mark in a 480x360 12-bit frame (no stripes rendered): 'column "
-    "stripes in the background ... removed' in 6 of 6 seeds, p 2e-7..6e-4 at alpha 1e-3 "
-    "(also 3 of 4 vertical marks of a clean session, 2 of 8 clean dials, 2 of 2 micrometers)"))
 def test_clean_vertical_mark_raises_no_stripe_warning(tmp_path):
+    """A clean vertical 250 px mark, no stripes rendered: no stripe warning. Was: 'column
+    stripes ... removed' in 6 of 6 seeds (p 2e-7..6e-4); holds on main since."""
     found = []
     for seed in range(2):
         rng = np.random.default_rng(seed)
