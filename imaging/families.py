@@ -23,6 +23,7 @@ Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angle
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from dataclasses import replace as dc_replace
 
@@ -243,6 +244,39 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     return float(origin), float(pitch)
 
 
+SHORT_MEMBER = 0.9
+"""A member shorter than this fraction of the family's median length is searched over the
+members' common stretch (:func:`_span_members`)."""
+
+
+def _span_members(found: list[MarkCandidate], group: Sequence[int]) -> None:
+    """Members cut short by the search (a bright speck or a numeral across them, and the
+    piece beyond too short or too faint to be a candidate of its own) searched over the
+    stretch most members share: the median of their ends along the family's direction.
+
+    Only the search's extent grows: the measurement's own end finder
+    (:func:`imaging.profile.groove_extent`) and the groove model's test per segment then
+    say where the groove is; a line truly shorter than its neighbours keeps its own ends
+    (the segments beyond it hold no groove and are left out)."""
+    u_ref = line_frame(found[group[0]].angle_rad)[0]
+    ends = []
+    for i in group:
+        c = found[i]
+        u, n = line_frame(c.angle_rad)
+        s = float(np.sign(u @ u_ref)) or 1.0
+        ends.append(sorted((s * c.t_start_px, s * c.t_end_px)))
+    lo, hi = np.median(np.array(ends), axis=0)
+    typical = float(np.median([found[i].length_px for i in group]))
+    for i, (a, b) in zip(group, ends, strict=True):
+        c = found[i]
+        if c.length_px >= SHORT_MEMBER * typical:
+            continue
+        s = float(np.sign(line_frame(c.angle_rad)[0] @ u_ref)) or 1.0
+        a, b = min(a, float(lo)), max(b, float(hi))
+        t0, t1 = sorted((s * a, s * b))
+        found[i] = dc_replace(c, t_start_px=t0, t_end_px=t1)
+
+
 def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_marks: int = 8,
                  roi: Roi | None = None, top: float | None = None,
                  families: bool = True) -> Detection:
@@ -340,6 +374,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
+        for g in groups:
+            _span_members(found, g)
     if families:
         # Lines meeting at a point (a dial's graduations): a group too, every one reported,
         # completed by a second search down to half their typical length (as a family's).
