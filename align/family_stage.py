@@ -26,9 +26,10 @@ from align.lens import LensRanges
 from align.mark_result import MarkResult
 from align.mark_stage import half_diagonal
 from imaging import line_frame
+from imaging.grating import grating_regions
 from imaging.lens import PARAMS, undistortion_jacobian
 
-__all__ = ["DIAL_SPREAD", "lens_u_vector", "with_families"]
+__all__ = ["DIAL_SPREAD", "grating_notes", "lens_u_vector", "with_families"]
 
 
 def lens_u_vector(record: Mapping | None) -> np.ndarray:
@@ -136,3 +137,21 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
         for i in ok:
             out[i] = replace(out[i], family=fam)
     return out
+
+
+def grating_notes(image: np.ndarray, name: str, results: Sequence[MarkResult]
+                  ) -> tuple[str, ...]:
+    """A note per grating in the tiles near the measured marks (:mod:`imaging.grating`),
+    naming its pitch, direction and pixel region; a measured family's own ruling is not a
+    grating to name."""
+    segs, known = [], set()
+    c = np.array([(image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2])
+    for r in results:
+        m = r.measurement
+        if m is None or not np.all(np.isfinite(m.extent_px)):
+            continue
+        u, n = line_frame(m.profile.angle_rad)
+        segs.append(np.array([m.profile.offset_px * n + t * u + c for t in m.extent_px]))
+        if r.family is not None and np.isfinite(r.family.pitch_px):
+            known.add((abs(r.family.pitch_px), r.family.angle_rad))
+    return tuple(f"{name}: {g.describe()}" for g in grating_regions(image, segs, sorted(known)))

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
-from align.family_stage import with_families
+from align.family_stage import grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
 from align.mark_result import FrameDistortion, MarkResult
@@ -252,9 +252,12 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         k += 1
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
-    return with_families(out, measured.families, measured.unreported,
-                         "camera model" if camera is not None else
-                         "frame lens" if lens.lam is not None else "none", alpha, image)
+    out = with_families(out, measured.families, measured.unreported,
+                        "camera model" if camera is not None else
+                        "frame lens" if lens.lam is not None else "none", alpha, image)
+    # A grating beside the marks: named with its region, never passed over unsaid.
+    said = grating_notes(image, name, out)
+    return [replace(r, notes=said + r.notes) for r in out] if said else out
 
 
 

@@ -119,6 +119,8 @@ def test_family_block_saved_validated_and_read_back():
     # (At 60 px pitch the lines are alike within the search's relief window: found through
     # the ruling of the unconfirmed candidates; before, none was, and this compared None.)
     assert res[0].family is not None and back[0].family == res[0].family
+    # The scale's own ruling (its pitch and direction measured) is no grating to name.
+    assert not any("grating" in w for w in mark_warnings(res))
 
 
 def test_min_length_above_the_short_lines_says_how_many_it_left_out():
