@@ -25,11 +25,11 @@ from align.family import line_dial, line_family, member_ends
 from align.lens import LensRanges
 from align.mark_result import MarkResult
 from align.mark_stage import half_diagonal
-from imaging import line_frame
+from imaging import Roi, detect_lines, line_frame
 from imaging.grating import grating_regions
 from imaging.lens import PARAMS, undistortion_jacobian
 
-__all__ = ["DIAL_SPREAD", "grating_notes", "lens_u_vector", "with_families"]
+__all__ = ["DIAL_SPREAD", "family_note", "grating_notes", "lens_u_vector", "with_families"]
 
 
 def lens_u_vector(record: Mapping | None) -> np.ndarray:
@@ -155,3 +155,36 @@ def grating_notes(image: np.ndarray, name: str, results: Sequence[MarkResult]
         if r.family is not None and np.isfinite(r.family.pitch_px):
             known.add((abs(r.family.pitch_px), r.family.angle_rad))
     return tuple(f"{name}: {g.describe()}" for g in grating_regions(image, segs, sorted(known)))
+
+
+def family_note(image: np.ndarray, roi: Roi | None = None) -> str | None:
+    """What an image expected to hold one mark (a session's) holds instead, when it is a
+    family of lines (a ruled scale, a dial): "it holds a family of N parallel lines at a°
+    (pitch ~p px) in pixels x ..., y ...: measure it with `align marks`", from the search
+    with families (:func:`imaging.detect_lines`); None when it holds none.
+
+    A family has no place in a session's E (a view's angle is one mark's): said on the
+    image's entry rather than dropped with "two competing marks"."""
+    det = detect_lines(image, roi=roi)
+    if not det.families:
+        return None
+    c = np.array([(image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2])
+    said = []
+    for g in det.families:
+        cs = [det.marks[i] for i in g]
+        ends = np.array([[c + m.offset_px * line_frame(m.angle_rad)[1]
+                          + t * line_frame(m.angle_rad)[0] for t in (m.t_start_px, m.t_end_px)]
+                         for m in cs]).reshape(-1, 2)
+        (x0, y0), (x1, y1) = ends.min(axis=0), ends.max(axis=0)
+        angles = np.array([m.angle_rad for m in cs])
+        where = f"in pixels x {x0:.0f}–{x1:.0f}, y {y0:.0f}–{y1:.0f}"
+        if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD:
+            said.append(f"a dial of {len(cs)} lines meeting at a point {where}")
+            continue
+        a = float(angles[0] + np.median(_wrap_all(angles - angles[0])))
+        q = np.sort([m.offset_px * float(line_frame(m.angle_rad)[1] @ line_frame(a)[1])
+                     for m in cs])
+        said.append(f"a family of {len(cs)} parallel lines at {np.rad2deg(a):.1f}° (pitch "
+                    f"~{float(np.median(np.diff(q))):.1f} px) {where}")
+    return ("it holds " + " and ".join(said) + ": measured by `align marks` (family, pitch, "
+            "parallelism), not by a session, whose views are one mark each")

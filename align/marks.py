@@ -21,7 +21,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
-from align.family_stage import grating_notes, with_families
+from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
 from align.mark_result import FrameDistortion, MarkResult
@@ -277,12 +277,18 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             on_image(j)
         try:
             got = read_image_notes(path)
+        except ImageInputError as exc:
+            found_all.append([exc])
+            continue
+        try:
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
             found_all.append(list(fr.items))
         except ImageInputError as exc:
-            found_all.append([exc])
+            # One mark expected and a family of lines there: named, not just "competing".
+            note = family_note(got.pixels, roi) if expect_one else None
+            found_all.append([ImageInputError(f"{exc}; {note}") if note else exc])
     ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]
     shapes = {m.image_shape for m in ms}
     lens = camera_lens(ms, camera, ranges, alpha, label) if len(shapes) <= 1 else None

@@ -244,6 +244,42 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     return float(origin), float(pitch)
 
 
+def _pieced(pieces: list[MarkCandidate], found: list[MarkCandidate],
+            members: list[MarkCandidate], ref: float, origin: float, pitch: float,
+            typical: float, shift: np.ndarray) -> list[MarkCandidate]:
+    """Members cut in pieces (specks across one graduation, none of its pieces half the
+    typical length): the pieces on one step of the ruling where no line was found, within
+    :data:`PIECE_ANGLE` of the family's direction, together at least
+    :data:`MEMBER_FRACTION` of the typical length, make one candidate along the family's
+    direction over their stretch (the longest piece's other properties). Its measurement
+    says whether a groove runs there (:func:`_span_members` then widens its stretch)."""
+    if len(members) < MIN_MEMBERS:
+        return []
+    u_ref = line_frame(ref)[0]
+    taken = [_position(o, ref) for o in found if o.dark == members[0].dark
+             and abs(wrap_angle(o.angle_rad - ref)) < FAMILY_ANGLE]
+    steps: dict[int, list[MarkCandidate]] = {}
+    for c in pieces:
+        c = replace_shift(c, shift)
+        q = _position(c, ref)
+        k = (q - origin) / pitch
+        if (c.dark != members[0].dark or abs(wrap_angle(c.angle_rad - ref)) > PIECE_ANGLE
+                or abs(k - np.rint(k)) > GRID_TOLERANCE
+                or any(abs(q - t) < GRID_TOLERANCE * abs(pitch) for t in taken)):
+            continue
+        steps.setdefault(int(np.rint(k)), []).append(c)
+    out = []
+    for ps in steps.values():
+        if sum(c.length_px for c in ps) < MEMBER_FRACTION * typical:
+            continue
+        ends = [float(_middle(c) @ u_ref) + h * c.length_px / 2 for c in ps for h in (-1, 1)]
+        best = max(ps, key=lambda c: c.length_px)
+        out.append(dc_replace(best, angle_rad=ref,
+                              offset_px=float(np.median([_position(c, ref) for c in ps])),
+                              t_start_px=min(ends), t_end_px=max(ends)))
+    return out
+
+
 SHORT_MEMBER = 0.9
 """A member shorter than this fraction of the family's median length is searched over the
 members' common stretch (:func:`_span_members`)."""
@@ -360,6 +396,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                 t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
                 if gap < MEMBER_FRACTION * typical and t1 - t0 <= 1.1 * longest:
                     found[j] = dc_replace(o, t_start_px=t0, t_end_px=t1)
+        found += _pieced(pieces, found, members, ref, origin, pitch, typical, shift)
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         reach = float(np.clip(abs(pitch) - max(o.thickness_px for o in members) - 6, 20, 60))
