@@ -90,9 +90,9 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
                   image: np.ndarray | None = None) -> list[MarkResult]:
     """The image's results with each family's :class:`align.family.LineFamily` on its
     measured members, and the count of lines found but not reported on every entry. With
-    the ``image``, each member's ends are checked for obstructions (dust, ink:
-    :func:`align.family.member_ends`): its length is the visible one, and a hidden end is
-    said with the bound it leaves."""
+    the ``image``, every mark's ends are checked for obstructions (dust, ink:
+    :func:`align.family.member_ends`), a family's members' and single marks' alike: its
+    length is the visible one, and a hidden end is said with the bound it leaves."""
     out = [replace(r, unreported=unreported) for r in results]
     for g in families:
         ok = [i for i in g if out[i].found]
@@ -136,6 +136,10 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
                           len(g) - len(ok), alpha, shared, lengths, shifts)
         for i in ok:
             out[i] = replace(out[i], family=fam)
+    if image is not None:
+        # Every other mark's ends checked alike (a single mark, a dial's graduation): its
+        # length the visible one, a hidden end said with its bound.
+        out = [member_ends(image, r)[0] if r.found and r.family is None else r for r in out]
     return out
 
 

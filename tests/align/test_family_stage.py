@@ -80,3 +80,21 @@ def test_dial_increment_carries_the_lens_coupling():
                    lens_coupling=ramp)
     assert np.isclose(d1.increment_u_lens_rad, arc)
     assert np.isclose(d1.increment_u_rad, np.hypot(d0.increment_u_rad, arc))
+
+
+def test_single_mark_hidden_end_said_with_its_bound():
+    """A single line (no family) with an opaque particle over one end: its length the
+    visible part (not longer than the truth), a note that the end is hidden with a bound
+    that holds the true length — as a family's member gets (align.family.member_ends)."""
+    from align.marks import measure_image
+
+    for seed in range(2):
+        s = render_ruled(RuledSpec(width=640, height=480, n_lines=1, seed=seed, dust=5,
+                                   lengths_px=(200.0, 200.0, 200.0), dust_on_ends=1,
+                                   numerals=False, dust_on_lines=0))
+        (r,) = measure_image(s.image)
+        assert r.found and r.family is None and s.truth.lines[0].hidden in ("start", "end")
+        said = [n for n in r.notes if "under an obstruction" in n]
+        assert len(said) == 1, r.notes
+        up_to = float(said[0].split("up to ")[1].split(" px")[0])
+        assert r.length_px <= 200.0 + 1.0 and up_to >= 200.0 - 1.0, (r.length_px, said)

@@ -16,6 +16,10 @@ from imaging import line_frame
 from synth.ruled import RuledSpec, random_ruled, render_ruled
 
 
+END_TOL_PX = 3.0
+"""How far a hidden end's bound may miss (blur, the particle's fringe): as test_ends's."""
+
+
 def _wrap(a):
     return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
 
@@ -63,13 +67,18 @@ def _check(spec):
     # through a lens, the whole u.
     z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad)
          / (_own_u(r) if spec.camera.is_identity else r.angle_u_rad) for k, r in got.items()]
-    # Lines as long as the truth's (not cut by numerals, nor by dust in their middle). A
-    # speck on an end hides it (its bound is checked in tests/imaging/test_ends.py; 5 of the
-    # slow sweep's 124 lines seen >= 5 % short): most lines within 5 %, none below half.
+    # Lines as long as the truth's (not cut by numerals, nor by dust in their middle): most
+    # within 5 %, none below half. An opaque particle over an end hides it: seen no longer
+    # than the truth, and the bound said holds it (as tests/imaging/test_ends.py checks).
     true_len = np.array([s.truth.lines[k].length_px for k in got])
     err = np.array([r.length_px for r in got.values()]) - true_len
-    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len), err
-    assert np.mean(np.abs(err) < 0.05 * true_len) >= 0.5, err
+    hidden = np.array([s.truth.lines[k].hidden in ("start", "end") for k in got])
+    most = np.array([fam.lengths_max_px[fam.members.index(r.index)] for r in got.values()])
+    assert np.all(err[hidden] < END_TOL_PX), err
+    assert np.all(most[hidden] > true_len[hidden] - END_TOL_PX), (most, true_len)
+    err = err[~hidden]
+    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len[~hidden]), err
+    assert np.mean(np.abs(err) < 0.05 * true_len[~hidden]) >= 0.5, err
     assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
     fam_z = _wrap(fam.angle_rad - s.truth.line_angle_rad) / fam.angle_u_rad
     # The pitch against its own u (the ruling's scatter, without the lens's share): the
@@ -77,7 +86,7 @@ def _check(spec):
     own = np.sqrt(max(fam.pitch_u_px**2 - fam.pitch_u_lens_px**2, 1e-30))
     pitch_z = ((fam.pitch_px - s.truth.pitch_px) / fam.pitch_u_px,
                (fam.pitch_px - s.truth.pitch_px) / own)
-    return fam, np.array(z), np.abs(err) >= 0.05 * true_len, fam_z, pitch_z
+    return fam, np.array(z), np.abs(err) >= 0.05 * true_len[~hidden], fam_z, pitch_z
 
 
 def test_ruled_scale_every_line_found_quick():
