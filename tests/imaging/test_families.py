@@ -15,7 +15,6 @@ from align.warnings import mark_warnings
 from imaging import line_frame
 from synth.ruled import RuledSpec, random_ruled, render_ruled
 
-
 END_TOL_PX = 3.0
 """How far a hidden end's bound may miss (blur, the particle's fringe): as test_ends's."""
 
