@@ -11,17 +11,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
-from align.lens import (
-    LensRanges,
-    LineGeometry,
+from align.lens import LensRanges, LineGeometry, solve_lens
+from align.lens_terms import (
     angle_coupling,
     bow_reach,
     camera_coupling,
     check_camera,
     lens_bow,
-    solve_lens,
 )
-from align.lens import (
+from align.lens_terms import (
     undistorted as lens_undistorted,
 )
 from align.mark_stage import half_diagonal, texture_scale
@@ -56,7 +54,7 @@ class CameraLens:
     centres before the loop (None: nothing; a camera model already undistorted them), the
     named angle-u terms per mark [rad], the notes, the saved dict; ``coupling``: each
     mark's terms as signed components on the lens's error directions (shared by every mark
-    of this lens, :func:`align.lens.angle_coupling`).
+    of this lens, :func:`align.lens_terms.angle_coupling`).
 
     The terms are the coupling's sizes: a term is the root sum of squares of its components
     (``lens_fit.0``, ``lens_fit.1``, ... for a fitted lens's covariance, one each else)."""

@@ -38,7 +38,7 @@ def lens_u_vector(record: Mapping | None) -> np.ndarray:
     model's own u; for a lens from the lines, an applied parameter's u from them, a
     determined one not applied its |estimate| (within the range) and u together, an
     undetermined one its plausible range as a uniform (range / sqrt 3) — as each mark's
-    angle carries them (:func:`align.lens.angle_coupling`); zeros when declared
+    angle carries them (:func:`align.lens_terms.angle_coupling`); zeros when declared
     distortion-free or unknown."""
     out = np.zeros(len(PARAMS))
     if not record:

@@ -18,15 +18,24 @@ jointly (Gauss-Newton from zero). A fitted value is applied only when its sign i
 
 The angle of each mark then carries, as named terms:
 
-* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A);
+* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A), with
+  how far the undetermined principal point (uniform over its range) moves them;
 * ``lens_<p>_small``: a determined parameter not applied (its sign undetermined): its
-  estimate and u as an rms bound (Type A);
+  estimate and u as an rms (Type A);
 * ``lens_<p>_range``: an undetermined parameter: uniform over its plausible range, range/sqrt 3,
   times the angle's sensitivity to it *after* the fitted parameters absorbed what they can of
-  it (Type B, the way the goniometer carries an undetermined Earth rate).
+  it, for radial terms the rms of that sensitivity over the principal point's range (Type B,
+  the way the goniometer carries an undetermined Earth rate);
+* ``lens_or_bend``: a lens no other line confirms: the angle with it minus without it, the
+  truth uniform between them, / sqrt 3 (Type B).
+
+Every Type B term is a standard uncertainty of its stated distribution (uniform over a range:
+half-width / sqrt 3), never the bound itself: over lenses drawn from the ranges the tool is
+given, the normalised errors have RMS ~1 (``tests/align/lens_grid.py``'s ``plausible`` class).
 
 A given camera model replaces all this: its covariance is propagated instead (``camera_<p>``),
-and the lines only test it (see :func:`check_camera`).
+and the lines only test it (see :func:`align.lens_terms.check_camera`). The ranges and each
+mark's design are :mod:`align.lens_design`'s; the terms above are :mod:`align.lens_terms`'s.
 """
 
 from __future__ import annotations
@@ -37,159 +46,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
-from scipy.linalg import solve_triangular
 
-from axisbase.errors import InputError, NotApplicable
-from imaging import fit_line, line_frame
-from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
+from align.lens_design import (
+    DEFAULT_RANGES,
+    LensFolds,
+    LensRanges,
+    LineGeometry,
+    _Design,
+    _DesignCache,
+)
+from imaging.lens import PARAMS
 
-
-class LensFolds(NotApplicable):
-    """The lens (as estimated or probed) folds the image along a mark: no undistortion exists
-    there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
-    one is not mistaken for a folding lens)."""
-
-
-
-
-@dataclass(frozen=True)
-class LensRanges:
-    """Plausible range of each lens parameter (Type B, uniform over +- the value).
-
-    Attributes
-    ----------
-    k1, k2 : float
-        Radial distortion at the image half-diagonal (OpenCV's k1 = k1 (f/R)^2) —
-        dimensionless.
-    p : float
-        Tangential distortion at the half-diagonal (p = p f/R) — dimensionless.
-    aspect : float
-        |fy/fx - 1| — dimensionless.
-    pp_px : float
-        Principal point from the image centre [px].
-    max_u_arcsec : float
-        An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
-    """
-
-    k1: float = 0.3
-    k2: float = 0.05
-    p: float = 1e-3
-    aspect: float = 0.005
-    pp_px: float = 20.0
-    max_u_arcsec: float = 60.0
-
-    @classmethod
-    def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
-        """A camera declared free of distortion (a telecentric or already-corrected optic):
-        nothing fitted, nothing carried."""
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0, max_u_arcsec)
-
-    def vector(self) -> np.ndarray:
-        return np.array([self.k1, self.k2, self.p, self.p, self.aspect, self.pp_px,
-                         self.pp_px])
-
-    def to_dict(self) -> dict:
-        return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
-                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec}
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> LensRanges:
-        return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
-
-    @classmethod
-    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
-        """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
-        defaults); one line naming the flag and the bad item on error."""
-        vals: dict[str, float] = {}
-        for item in filter(None, (x.strip() for x in text.split(","))):
-            key, eq, val = item.partition("=")
-            key = key.strip()
-            if not eq or key not in cls.__dataclass_fields__:
-                raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
-                                 f"{', '.join(cls.__dataclass_fields__)}")
-            try:
-                v = float(val)
-            except ValueError:
-                raise InputError(f"{where}: {item!r}: {val.strip()!r} is not a number") from None
-            if not np.isfinite(v) or v < 0 or (key == "max_u_arcsec" and v == 0):
-                raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
-                                 + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
-            vals[key] = v
-        return cls(**vals)
-
-
-@dataclass(frozen=True)
-class LineGeometry:
-    """One mark as the lens solver sees it: raw centres relative to the image centre [px],
-    their sigma across the line [px] and correlation factor (None: independent)."""
-
-    points: np.ndarray
-    sigma: np.ndarray
-    chol: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class _Design:
-    angle: float
-    s: np.ndarray            # d angle / d lam [rad per unit], per parameter
-    G: np.ndarray            # whitened bow columns (straight-line part projected out)
-    z: np.ndarray            # whitened residual of the straight-line fit
-    w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
-    s_probe: np.ndarray | None = None  # max |s| over the principal point's range
-
-    @property
-    def bow_z(self) -> float:
-        """The residual's bow in units of its standard uncertainty (N(0, 1) when straight)."""
-        return float(self.w @ self.z)
-
-
-def _design(line: LineGeometry, lam: np.ndarray, scale: float,
-            only: Sequence[int] | None = None) -> _Design:
-    q, jac = undistortion_jacobian(line.points, lam, scale, only)
-    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
-        raise LensFolds("the lens folds the image along this mark")
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
-    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
-    J = np.column_stack([q @ u, -np.ones(len(q))])
-    r = q @ n - lf.offset_px
-    t = q @ u
-    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
-    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
-    if line.chol is not None:
-        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
-    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
-    coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
-    G = Ew - Jw @ coef[:, :-1]
-    w = bw - Jw @ coef[:, -1]
-    # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
-    return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
-
-
-class _DesignCache:
-    """Each line's design per lens vector, computed once: the solver revisits the same
-    vectors (zero before and in the first step, the converged lens after the loop, the
-    principal point's probes in :func:`_pp_spread` and :func:`_pp_probe_s`)."""
-
-    def __init__(self, lines: Sequence[LineGeometry], scale: float) -> None:
-        self.lines, self.scale = lines, scale
-        self._memo: dict[tuple, _Design] = {}
-
-    def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
-        """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
-        key = (k, lam.tobytes(), only)
-        d = self._memo.get(key)
-        if d is None:
-            d = self._memo[key] = _design(self.lines[k], lam, self.scale, only)
-        return d
-
-    def cached(self, k: int, lam: np.ndarray) -> _Design | None:
-        """Line ``k``'s full design at ``lam`` if already computed."""
-        return self._memo.get((k, lam.tobytes(), None))
-
-    def all(self, lam: np.ndarray) -> list[_Design]:
-        """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
-        return [self.one(k, lam) for k in range(len(self.lines))]
+__all__ = ["LensFolds", "LensRanges", "LensSolution", "LineGeometry", "solve_lens"]
 
 
 @dataclass(frozen=True)
@@ -287,7 +155,7 @@ def _marginal_u(F: np.ndarray, idx: list[int], rng: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(np.diag(C), 0, None)) * rng[idx]
 
 
-def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges = LensRanges(),
+def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges = DEFAULT_RANGES,
                alpha: float = 1e-3, iters: int = 5) -> tuple[LensSolution, list[_Design]]:
     """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
 
@@ -325,7 +193,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
             "bent mark, left out of the lens")
     sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
-    return sk, [replace(d, s_probe=sp) for d, sp in zip(ds, probes, strict=True)]
+    return sk, [replace(d, s_pp_var=v) for d, v in zip(ds, probes, strict=True)]
 
 
 def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> float:
@@ -353,7 +221,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     est = np.full(P, np.nan)
     u_lines = np.full(P, np.inf)
     applied = list(det)
-    spread, spread_for = np.zeros(P), list(applied)
+    spread, spread_u, spread_for = np.zeros(P), np.zeros(P), list(applied)
     fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
         lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters)
@@ -367,7 +235,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         if det:
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
-        spread = _pp_spread(cache, lam, applied, det, rng)
+        spread, spread_u = _pp_spread(cache, lam, applied, det, rng)
         spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
@@ -395,17 +263,16 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         applied = sorted(applied + added)
         spread_for = []
     if not applied:
-        spread = np.zeros(P)
+        spread_u = np.zeros(P)
     elif spread_for != applied:  # the applied set changed after its last spread
-        spread = _pp_spread(cache, lam_out, applied, det, rng)
+        spread_u = _pp_spread(cache, lam_out, applied, det, rng)[1]
     designs = cache.all(lam_out)
     F = sum(d.G.T @ d.G for d in designs)
     cov = np.linalg.inv(F[np.ix_(applied, applied)]) if applied else np.zeros((0, 0))
-    if applied:  # the principal point's range moves the estimate: uniform, as Type B
-        cov = cov + np.diag(spread[applied] ** 2 / 3)
-        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread / np.sqrt(3)),
-                           u_lines)
-    s_probe = _pp_probe_s(cache, lam_out, det, rng)
+    if applied:  # the principal point's range (uniform, Type B) moves the estimate
+        cov = cov + np.diag(spread_u[applied] ** 2)
+        u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread_u), u_lines)
+    s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
@@ -445,7 +312,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
-    return sol, [replace(d, s_probe=sp) for d, sp in zip(designs, s_probe, strict=True)]
+    return sol, [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
 
 
 def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
@@ -594,186 +461,82 @@ def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndar
     return out
 
 
+def _uniform_msq(corners: Sequence[np.ndarray], centre: np.ndarray) -> np.ndarray:
+    """Mean square of a function of the principal point, uniform over its range (the Type B
+    distribution every range is taken as), from its values at the centre and at the four
+    corners of :func:`_pp_probes` (order (-,-), (-,+), (+,-), (+,+)).
+
+    The function is taken as the quadratic through those five points, c (x^2 + y^2) / 2 +
+    gx x + gy y + h x y about the centre (x, y in units of the range): over the uniform square
+    its mean is s0 + c/3 and its variance c^2 2/45 + gx^2/3 + gy^2/3 + h^2/9 (the largest of
+    the corners would be a bound, not a standard uncertainty). Where any corner is not
+    finite (the lens folds there), inf."""
+    v = np.asarray(corners, float)
+    if not len(v):
+        return centre**2
+    if not np.all(np.isfinite(v)):
+        return np.full_like(centre, np.inf)
+    mm, mp, pm, pp = v
+    c = (mm + mp + pm + pp) / 4 - centre
+    gx = (pm + pp - mm - mp) / 4
+    gy = (mp + pp - mm - pm) / 4
+    h = (pp + mm - mp - pm) / 4
+    return (centre + c / 3) ** 2 + c**2 * 2 / 45 + gx**2 / 3 + gy**2 / 3 + h**2 / 9
+
+
 def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
-               rng: np.ndarray) -> np.ndarray:
+               rng: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """How far the applied estimates move when the principal point is put at the corners of
-    its range (one linearised step from ``lam`` each; inf where the lens then folds)."""
-    out = np.zeros(len(PARAMS))
+    its range (one linearised step from ``lam`` each): the largest |move| (a bound: the
+    sign test) and its standard uncertainty with the principal point uniform over its range
+    (:func:`_uniform_msq`); inf where the lens then folds."""
+    P = len(PARAMS)
     if not applied:
-        return out
+        return np.zeros(P), np.zeros(P)
     A = np.ix_(applied, applied)
+    moves = []
     for p in _pp_probes(lam, det, rng):
+        m = np.zeros(P)
         try:
             ds = cache.all(p)
         except LensFolds:
-            out[applied] = np.inf
+            m[applied] = np.inf
+            moves.append(m)
             continue
         F = sum(d.G.T @ d.G for d in ds)
         b = sum(d.G.T @ d.z for d in ds)
-        out[applied] = np.maximum(out[applied], np.abs(np.linalg.solve(F[A], b[applied])))
-    return out
+        m[applied] = np.linalg.solve(F[A], b[applied])
+        moves.append(m)
+    if not moves:
+        return np.zeros(P), np.zeros(P)
+    return np.max(np.abs(moves), axis=0), np.sqrt(_uniform_msq(moves, np.zeros(P)))
 
 
 def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.ndarray
                 ) -> list[np.ndarray]:
-    """Each line's largest |d angle / d lam| over the principal point's range [rad/unit]."""
-    out = [np.zeros(len(PARAMS)) for _ in cache.lines]
-    radial = np.zeros(len(PARAMS))
-    radial[:2] = 1.0  # only the radial terms act about the principal point
-    for p in _pp_probes(lam, det, rng):
-        for k in range(len(cache.lines)):
-            full = cache.cached(k, p)  # its radial columns are the radial-only design's
-            try:
-                s = full.s * radial if full is not None else cache.one(k, p, (0, 1)).s
-            except LensFolds:
-                out[k][:] = np.inf
-                continue
-            out[k] = np.maximum(out[k], np.abs(s))
-    return out
-
-
-def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
-    """Each named lens term of one mark's angle as signed components [rad] on the lens's
-    own error directions (the same directions for every mark of one solve): see
-    :func:`angle_terms` (their norms) and :func:`angle_coupling` (the components)."""
+    """Each line's variance of d angle / d lam over the principal point's range, uniform
+    [rad^2/unit^2]: only the radial terms act about the principal point, so only theirs is
+    not zero (inf where the lens folds at a corner)."""
     P = len(PARAMS)
-    A = [j for j in range(P) if sol.applied[j]]
-    rng = sol.ranges.vector()
-    out: dict[str, np.ndarray] = {}
-    s = design.s
-    if A:
-        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
-        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
-        w, V = np.linalg.eigh(sol.cov_applied)
-        L = V * np.sqrt(np.clip(w, 0.0, None))
-        out["lens_fit"] = L.T @ s[A]
-        if not sol.confirmed:
-            # Lens or bend: the angle with the lens applied and without it both stand.
-            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A]])
-    FA = sol.info[np.ix_(A, A)] if A else None
-    for j in range(P):
-        if sol.applied[j] or rng[j] <= 0:
+    radial = np.zeros(P)
+    radial[:2] = 1.0
+    probes = _pp_probes(lam, det, rng)
+    if not probes:
+        return [np.zeros(P) for _ in cache.lines]
+
+    def radial_s(k: int, p: np.ndarray) -> np.ndarray:
+        full = cache.cached(k, p)  # its radial columns are the radial-only design's
+        try:
+            return full.s * radial if full is not None else cache.one(k, p, (0, 1)).s * radial
+        except LensFolds:
+            return np.full(P, np.inf)
+
+    out = []
+    for k in range(len(cache.lines)):
+        s0 = radial_s(k, lam)
+        if not np.all(np.isfinite(s0)):
+            out.append(np.full(P, np.inf))
             continue
-        # What the applied parameters absorb of parameter j's bow changes their estimates,
-        # hence the angle: the angle's net sensitivity to j.
-        seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
-        if design.s_probe is not None and not sol.determined[j]:
-            # Over the principal point's range the sensitivity can grow: its largest size,
-            # with the sign it has at the centre.
-            seff = float(np.copysign(max(abs(seff), float(design.s_probe[j])), seff))
-        if sol.determined[j]:
-            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
-            # is within the range.
-            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
-        else:
-            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
+        var = _uniform_msq([radial_s(k, p) for p in probes], s0) - s0**2
+        out.append(np.clip(var, 0.0, None))
     return out
-
-
-def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
-    """The bow each lens parameter leaves on this line, per unit of it: the sagitta [px] of
-    the quadratic across the line over the centres' span (as the mark's loop measures a
-    bow: b (t - t_m)^2, sagitta b (span / 2)^2), after a straight line absorbed what it can.
-    ``lam``: the lens the centres are undistorted by (zeros: raw or already undistorted).
-    Non-finite where the lens folds."""
-    q, jac = undistortion_jacobian(line.points, lam, scale)
-    if not np.all(np.isfinite(jac)):
-        return np.full(len(PARAMS), np.inf)
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
-    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]
-    t = q @ u
-    tm = (t.min() + t.max()) / 2
-    X = np.column_stack([t - tm, np.ones(len(t)), (t - tm) ** 2])
-    beta = np.linalg.lstsq(X, E, rcond=None)[0][2]
-    return beta * (np.ptp(t) / 2) ** 2
-
-
-def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
-    """How far each lens parameter may still be from the applied lens (per PARAMS, in its
-    unit): its plausible range when the lines leave it undetermined, |estimate| + z u when
-    determined but not applied, z u when applied."""
-    rng = sol.ranges.vector()
-    out = np.zeros(len(PARAMS))
-    for j in range(len(PARAMS)):
-        uj = sol.u_lines[j]
-        if sol.applied[j]:
-            out[j] = z * uj if np.isfinite(uj) else rng[j]
-        elif sol.determined[j]:
-            e = sol.estimate[j] if np.isfinite(sol.estimate[j]) else 0.0
-            out[j] = min(abs(e) + z * uj, rng[j]) if np.isfinite(uj) else rng[j]
-        else:
-            out[j] = rng[j]
-    return out
-
-
-def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
-    """Named standard uncertainties [rad] the lens adds to one mark's angle."""
-    return {k: float(np.linalg.norm(v)) for k, v in _signed_parts(sol, design).items()}
-
-
-def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
-    """The lens terms of one mark's angle as signed components [rad]: for two marks of one
-    solve, the sum over shared keys of the products is the covariance their angles share
-    through the one lens (every mark of a camera sees the same lens error); each mark's own
-    sum of squares is the square sum of :func:`angle_terms`."""
-    out: dict[str, float] = {}
-    for k, v in _signed_parts(sol, design).items():
-        if len(v) == 1:
-            out[k] = float(v[0])
-        else:
-            out.update({f"{k}.{i}": float(x) for i, x in enumerate(v)})
-    return out
-
-
-def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
-                    lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
-    """Signed angle components [rad] of a calibrated camera's own u (one per lens parameter):
-    their sizes are a mark's named terms ``camera_<p>``, their products between two marks of
-    the camera the covariance the calibration's error puts between their angles.
-
-    ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
-    the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-    raw = distort_points(points_ideal, lam, scale)
-    d = _design(LineGeometry(raw, sigma, chol), lam, scale)
-    return {f"camera_{p}": float(d.s[j] * lam_u[j])
-            for j, p in enumerate(PARAMS) if lam_u[j] > 0}
-
-
-def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarray,
-                 scale: float, ranges: LensRanges = LensRanges(), alpha: float = 1e-3
-                 ) -> tuple[float, np.ndarray, list[_Design]]:
-    """Whether the marks agree with a calibrated lens: the determined correction to the
-    camera's lens from the lines, and its chi2 probability against the lines' u plus the
-    camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
-    z = float(-special.ndtri(alpha / 2))
-    rng = ranges.vector()
-    P = len(PARAMS)
-    designs = [_design(ln, lam, scale) for ln in lines]
-    F = sum(d.G.T @ d.G for d in designs)
-    b = sum(d.G.T @ d.z for d in designs)
-    det = _determined(F, rng, z)
-    dlam = np.zeros(P)
-    if not det:
-        return 1.0, dlam, designs
-    D = np.ix_(det, det)
-    dlam[det] = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
-    stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
-    return float(special.chdtrc(len(det), stat)), dlam, designs
-
-
-def undistorted(line: LineGeometry, lam: np.ndarray, scale: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """A mark's centres undistorted by ``lam`` and their sigma scaled by the undistortion's
-    magnification across the line (a centre moved 1 px across the raw line moves this much
-    across the undistorted one)."""
-    q = undistort_points(line.points, lam, scale)
-    if not np.any(lam):
-        return q, line.sigma
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    n = line_frame(lf.angle_rad)[1]
-    q2 = undistort_points(line.points + 0.5 * n, lam, scale)
-    g = np.abs((q2 - q) @ n) / 0.5
-    return q, line.sigma * g

@@ -127,7 +127,7 @@ class MarkResult:
         The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
     lens_coupling : Mapping
         The lens terms of u as signed components on the lens's error directions [rad]
-        (:func:`align.lens.angle_coupling`).
+        (:func:`align.lens_terms.angle_coupling`).
     lens_group : str
         The lens solve the mark shares with others (marks of one group share the lens's
         error); unit —.
@@ -164,7 +164,7 @@ class MarkResult:
     notes: tuple[str, ...] = ()
     lens_limited: bool = False
     # The lens terms of u as signed components [rad] and the lens solve they belong to:
-    # marks of one group share the lens's error (align.lens.angle_coupling).
+    # marks of one group share the lens's error (align.lens_terms.angle_coupling).
     lens_coupling: Mapping[str, float] = field(default_factory=dict)
     lens_group: str = ""
     bend_off_frame: bool = False

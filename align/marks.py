@@ -93,17 +93,18 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     off_frame = False
     if bend is not None:
         # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
-        # and which one the user means is not in the image. Cover both: the difference
-        # (and the angle without the bow term) enter u.
-        # Its direction is read as the chord between the groove's own ends (the tangent at
-        # its middle), and u covers the other readings: the straight fit over the measured
-        # centres and the tangent at their middle.
+        # and which one the user means is not in the image. Its direction is read as the
+        # chord between the groove's own ends (the tangent at its middle), and u covers the
+        # other readings (the straight fit over the measured centres, the tangent at their
+        # middle): the direction meant anywhere between the chord and the farthest of them,
+        # uniform (Type B), so about the chord its standard uncertainty is that difference
+        # / sqrt 3 (the difference is the bound, not a standard uncertainty).
         bent = abs(bend.estimate) > lens_bow_px + float(-special.ndtri(alpha / 2)) * bend.u
         pre = "bent_mark" if bent else "bow"
         chord = float(rep.after.payload["chord_rad"])
         a0 = rep.before.quantities["angle_rad"][0]
         terms[f"{pre}_chord_vs_fit"] = float(max(abs(_wrap(a - chord)),
-                                                 abs(_wrap(a0 - chord))))
+                                                 abs(_wrap(a0 - chord))) / np.sqrt(3))
         # Where the ends are: a groove's tip (round, square or tapering over about its own
         # width w, blurred by s) puts each half-depth end within +-(w/2 + s), uniform (Type
         # B); their middle then moves by that / sqrt(2), and the chord turns with the

@@ -271,11 +271,11 @@ def _structure_increment(rep: LoopReport, projection: np.ndarray, residuals_w: n
                          ) -> tuple[str, str, np.ndarray]:
     """The widening for the structure the loop left (:func:`structure_term`): (term, why,
     covariance); ``per``: what one residual is ("pose", "pose-axis")."""
-    w = rep.structure_after.worst
+    name, p, _ = rep.structure_evidence
     cov, m = structure_term(projection, residuals_w, dof, noise_known, bound)
     size = (f"{m:.3g} sigma" if noise_known else
             f"{m * 1e6:.3g} µg" if per == "pose" else f"{m:.3g} (output unit)")
-    return (STRUCTURE, f"unexplained structure ({w.name} p = {w.p_value:.2g}): a systematic "
+    return (STRUCTURE, f"unexplained structure ({name} p = {p:.2g}): a systematic "
             f"error of {size} per {per}", cov)
 
 

@@ -296,6 +296,10 @@ class LoopReport:
         Significant candidates not added, with why.
     skipped : tuple of SkippedCandidate
         Candidates that could not be tried, with why.
+
+    ``unexplained_structure`` is true when the structure tests still find structure after
+    the loop *or* a candidate the data called for was refused: either way the model lacks
+    something the residual shows, and the stage must widen u or say not ok.
     """
 
     effects: tuple[EffectReport, ...]
@@ -309,7 +313,18 @@ class LoopReport:
 
     @property
     def unexplained_structure(self) -> bool:
-        return self.structure_after.structured
+        return self.structure_after.structured or bool(self.refused)
+
+    @property
+    def structure_evidence(self) -> tuple[str, float, str]:
+        """What shows the structure left: (test or refused candidate, p-value, detail) —
+        the structure tests' worst when they find structure, else the most significant
+        refused candidate."""
+        if self.structure_after.structured or not self.refused:
+            w = self.structure_after.worst
+            return w.name, w.p_value, w.detail
+        r = min(self.refused, key=lambda r: r.p_value)
+        return f"{r.name} refused", r.p_value, r.reason
 
     def summary_lines(self) -> list[str]:
         return self.summary().summary_lines()
@@ -319,12 +334,12 @@ class LoopReport:
         def chi2_dof(f: StageFit) -> float | None:
             return None if f.sigma is None else f.chi2 / max(f.dof, 1)
 
-        w = self.structure_after.worst if self.unexplained_structure else None
+        w = self.structure_evidence if self.unexplained_structure else None
         return LoopSummary(self.effects, self.before.rms, self.after.rms,
                            chi2_dof(self.before), chi2_dof(self.after),
                            self.unexplained_structure,
-                           None if w is None else w.name, None if w is None else w.p_value,
-                           "" if w is None else w.detail, self.refused, self.skipped)
+                           None if w is None else w[0], None if w is None else w[1],
+                           "" if w is None else w[2], self.refused, self.skipped)
 
 
 @dataclass(frozen=True)

@@ -572,25 +572,39 @@ def test_align_camera_u_covers_my_lens_over_seeds(tmp_path):
         assert max(map(abs, z.values())) < 3.5, (seed, z)
 
 
+def _stripes_across(s: int, stripes: bool) -> tuple[U.Scene, float]:
+    """Scene ``s`` of the stripes-across sweep (or its clean twin: the same mark and noise
+    seed, no stripes) and its truth [deg]."""
+    r = np.random.default_rng(13000 + s)
+    a = float(r.uniform(-89, 89))
+    kw = dict(stripes_amp=0.06, stripes_deg=a + 90 + r.uniform(-10, 10),
+              stripes_period=r.uniform(8, 40)) if stripes else {}
+    return U.Scene(width=480, height=360, marks=(U.Mark(240, 180, a, 250),), seed=500 + s,
+                   **kw), a
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "stripes across the mark (6 %, within 10 deg of perpendicular, period 8-40 px; a ground "
-    "surface's lay), 250 px marks, 480x360, 8 seeds: now every frame names the stripes and "
-    "divides them out (imaging/oriented.py), z RMS 1.57, max 3.78 (seed 7: +34 arcsec at u "
-    "9.6) — and the same 8 scenes rendered WITHOUT stripes give RMS 1.51, max 3.54 (seed 7: "
-    "+35.3 arcsec at u 10.0): what is left is not the stripes but this renderer's clean "
-    "250 px marks at 480x360 (u short by ~1.5x there)"))
 def test_stripes_across_the_mark_u_covers_over_seeds(tmp_path):
-    rng = np.random.default_rng
-    paths, truths = [], []
-    for s in range(8):
-        r = rng(13000 + s)
-        a = float(r.uniform(-89, 89))
-        sc = U.Scene(width=480, height=360, marks=(U.Mark(240, 180, a, 250),),
-                     stripes_amp=0.06, stripes_deg=a + 90 + r.uniform(-10, 10),
-                     stripes_period=r.uniform(8, 40), seed=500 + s)
-        paths.append(U.write_image(tmp_path / f"s{s}.png", U.render(sc)))
-        truths.append(a)
-    rc, js, err = marks_json(paths, *DECLARED_DISTORTION_FREE)
-    zs = np.array([mark_z(m, t) for m, t in zip(js["marks"], truths, strict=True)])
-    assert not js["ok"] or (np.abs(zs).max() < 3.0 and np.sqrt(np.mean(zs ** 2)) < 1.5), zs
+    """Stripes across the mark (6 %, within 10 deg of perpendicular, period 8-40 px; a ground
+    surface's lay), 250 px marks at 480x360, 32 seeds, and their clean twins (the same marks
+    and noise, no stripes). With 8 seeds this read z RMS 1.57 (clean twins 1.51), taken for u
+    short by 1.5x on this renderer's short marks; it was one draw, seed 7: +35" at u 10.0
+    (3.5 u) with or without stripes, at supersample 3 or 9 (the noise realisation, not the
+    rendering). 120 other noise seeds of seed 7's mark: RMS z 1.03, max 2.99 (sd 10.5" for a
+    stated 10.3"). So u is right; the test is over enough seeds to say so: RMS z below 1.35
+    (a calibrated u exceeds it over 32 marks with probability ~1e-3) and max |z| <= 4, both
+    sets."""
+    figures = {}
+    for stripes in (True, False):
+        paths, truths = [], []
+        for s in range(32):
+            sc, a = _stripes_across(s, stripes)
+            paths.append(U.write_image(tmp_path / f"s{s}_{stripes}.png", U.render(sc)))
+            truths.append(a)
+        rc, js, err = marks_json(paths, *DECLARED_DISTORTION_FREE)
+        zs = np.array([mark_z(m, t) for m, t in zip(js["marks"], truths, strict=True)])
+        figures[stripes] = (float(np.sqrt(np.mean(zs**2))), float(np.abs(zs).max()))
+        print(f"stripes {stripes}: RMS z {figures[stripes][0]:.2f}, max |z| "
+              f"{figures[stripes][1]:.2f}")
+    for rms, mx in figures.values():
+        assert rms < 1.35 and mx <= 4.0, figures

@@ -120,3 +120,20 @@ def test_a_defect_in_a_candidate_is_not_a_skipped_effect():
 
     with pytest.raises(ValueError, match="a bug"):
         run_loop(PolyStage(*_data(1)), [Candidate("broken", "1", "a bug", broken)])
+
+
+def test_a_refused_effect_leaves_structure_the_stage_must_answer_for():
+    """A candidate the data call for but the stage's physics refuses is still in the data:
+    the report says unexplained structure and names the refused candidate as the evidence
+    (a clipped pose's error booked as an out-of-prior warm-up left u at the clean-data size:
+    4.4 u off, ok)."""
+    rep = run_loop(PolyStage(*_data(1, quad=0.02)), [QUAD],
+                   admissible=lambda cur, trial, term: "outside the physical prior")
+    assert not rep.effects and [r.name for r in rep.refused] == ["quadratic"]
+    assert rep.unexplained_structure
+    name, p, why = rep.structure_evidence
+    assert rep.structure_after.structured or (name, why) == ("quadratic refused",
+                                                              "outside the physical prior")
+    assert p < 1e-3 and rep.summary().unexplained_structure
+    clean = run_loop(PolyStage(*_data(2)), [QUAD], admissible=lambda cur, trial, term: "never")
+    assert not clean.refused and not clean.unexplained_structure

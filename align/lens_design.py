@@ -1,0 +1,164 @@
+"""The lens solver's building blocks: the plausible ranges of a lens (Type B), one mark as
+the solver sees it, and each mark's design (how every lens parameter bows it and turns its
+angle), cached per lens vector. See :mod:`align.lens` for how they are used."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from axisbase.errors import InputError, NotApplicable
+from imaging import fit_line, line_frame
+from imaging.lens import undistortion_jacobian
+
+
+class LensFolds(NotApplicable):
+    """The lens (as estimated or probed) folds the image along a mark: no undistortion exists
+    there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
+    one is not mistaken for a folding lens)."""
+
+@dataclass(frozen=True)
+class LensRanges:
+    """Plausible range of each lens parameter (Type B, uniform over +- the value).
+
+    Attributes
+    ----------
+    k1, k2 : float
+        Radial distortion at the image half-diagonal (OpenCV's k1 = k1 (f/R)^2) —
+        dimensionless.
+    p : float
+        Tangential distortion at the half-diagonal (p = p f/R) — dimensionless.
+    aspect : float
+        |fy/fx - 1| — dimensionless.
+    pp_px : float
+        Principal point from the image centre [px].
+    max_u_arcsec : float
+        An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
+    """
+
+    k1: float = 0.3
+    k2: float = 0.05
+    p: float = 1e-3
+    aspect: float = 0.005
+    pp_px: float = 20.0
+    max_u_arcsec: float = 60.0
+
+    @classmethod
+    def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
+        """A camera declared free of distortion (a telecentric or already-corrected optic):
+        nothing fitted, nothing carried."""
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0, max_u_arcsec)
+
+    def vector(self) -> np.ndarray:
+        return np.array([self.k1, self.k2, self.p, self.p, self.aspect, self.pp_px,
+                         self.pp_px])
+
+    def to_dict(self) -> dict:
+        return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
+                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> LensRanges:
+        return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
+
+    @classmethod
+    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
+        """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
+        defaults); one line naming the flag and the bad item on error."""
+        vals: dict[str, float] = {}
+        for item in filter(None, (x.strip() for x in text.split(","))):
+            key, eq, val = item.partition("=")
+            key = key.strip()
+            if not eq or key not in cls.__dataclass_fields__:
+                raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
+                                 f"{', '.join(cls.__dataclass_fields__)}")
+            try:
+                v = float(val)
+            except ValueError:
+                raise InputError(f"{where}: {item!r}: {val.strip()!r} is not a number") from None
+            if not np.isfinite(v) or v < 0 or (key == "max_u_arcsec" and v == 0):
+                raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
+                                 + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
+            vals[key] = v
+        return cls(**vals)
+
+
+DEFAULT_RANGES = LensRanges()
+"""The default plausible ranges (the issue's: |k1| <= 0.3 at the half-diagonal, ...)."""
+
+
+@dataclass(frozen=True)
+class LineGeometry:
+    """One mark as the lens solver sees it: raw centres relative to the image centre [px],
+    their sigma across the line [px] and correlation factor (None: independent)."""
+
+    points: np.ndarray
+    sigma: np.ndarray
+    chol: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Design:
+    angle: float
+    s: np.ndarray            # d angle / d lam [rad per unit], per parameter
+    G: np.ndarray            # whitened bow columns (straight-line part projected out)
+    z: np.ndarray            # whitened residual of the straight-line fit
+    w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
+    s_pp_var: np.ndarray | None = None  # var of s over the principal point's range [rad^2]
+
+    @property
+    def bow_z(self) -> float:
+        """The residual's bow in units of its standard uncertainty (N(0, 1) when straight)."""
+        return float(self.w @ self.z)
+
+
+def _design(line: LineGeometry, lam: np.ndarray, scale: float,
+            only: Sequence[int] | None = None) -> _Design:
+    q, jac = undistortion_jacobian(line.points, lam, scale, only)
+    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
+        raise LensFolds("the lens folds the image along this mark")
+    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
+    u, n = line_frame(lf.angle_rad)
+    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
+    J = np.column_stack([q @ u, -np.ones(len(q))])
+    r = q @ n - lf.offset_px
+    t = q @ u
+    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
+    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
+    if line.chol is not None:
+        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
+    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
+    G = Ew - Jw @ coef[:, :-1]
+    w = bw - Jw @ coef[:, -1]
+    # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
+    return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
+
+
+class _DesignCache:
+    """Each line's design per lens vector, computed once: the solver revisits the same
+    vectors (zero before and in the first step, the converged lens after the loop, the
+    principal point's probes in :func:`_pp_spread` and :func:`_pp_probe_s`)."""
+
+    def __init__(self, lines: Sequence[LineGeometry], scale: float) -> None:
+        self.lines, self.scale = lines, scale
+        self._memo: dict[tuple, _Design] = {}
+
+    def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
+        """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
+        key = (k, lam.tobytes(), only)
+        d = self._memo.get(key)
+        if d is None:
+            d = self._memo[key] = _design(self.lines[k], lam, self.scale, only)
+        return d
+
+    def cached(self, k: int, lam: np.ndarray) -> _Design | None:
+        """Line ``k``'s full design at ``lam`` if already computed."""
+        return self._memo.get((k, lam.tobytes(), None))
+
+    def all(self, lam: np.ndarray) -> list[_Design]:
+        """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
+        return [self.one(k, lam) for k in range(len(self.lines))]
