@@ -233,11 +233,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     ends = []
     for k, t_end, step in ((k0, t0, -1), (k1, t1, +1)):
         b = body_end(k, step)
-        if b != k:
+        # (Only the outer half of each half: a gap near the middle is no groove's end.)
+        if b != k and abs(tb[b] - tb[(k0 + k1) // 2]) >= 0.25 * (t1 - t0):
             k, t_end = b, cross(b, step)
         vis, far = walk(k, step)
         # An end that did not move (by more than a bin) keeps its half-depth crossing.
         v = t_end if abs(vis - k) <= 1 else cross(vis, step)
         ends.append((v, v if far == vis else float(tb[far])))
     (s_vis, s_min), (e_vis, e_max) = ends
+    if e_vis <= s_vis:
+        return same
     return GrooveEnds(s_vis, e_vis, min(s_min, s_vis), max(e_max, e_vis))

@@ -338,13 +338,15 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     # then counted as found but not reported (never dropped unsaid).
     groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
         if families else []
-    if families and not groups and (not found or group_families(found, 2)):
+    if families and not groups and (not found or (len(found) == 2
+                                                  and group_families(found, 2))):
         # Lines at a pitch under the relief window beside each line are alike their
         # neighbours there, and the search refuses them all as a lay. A regular ruling of
         # them among the unconfirmed candidates is confirmed with the window inside the
-        # pitch (only when nothing was found, or two parallel lines side by side — a
+        # pitch (only when nothing was found, or just two parallel lines side by side — a
         # scale whose other lines a lens bent or a speck marked, 2 of 8 found at 640 x 480
-        # with k1 -0.15: it costs a second pass over the candidates).
+        # with k1 -0.15 —: it costs a second pass over the candidates, and a photograph's
+        # many lines, regular window edges among them, are no ruling).
         seed_len = LENGTH_SLACK * (min_length_px if min_length_px is not None
                                    else default_min_length(search.image.shape))
         raw = search.candidates(seed_len)
@@ -382,8 +384,15 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                     and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
                     # A ruling of 3 or more extends over the frame; two lines fix none
                     # (their gap may be any multiple of the pitch): lines near them only.
-                    and (abs(k - np.rint(k)) < GRID_TOLERANCE if len(members) >= 3
+                    # (Or half-way: every other graduation alike its neighbours was refused
+                    # as a lay, the ruling seen at twice its pitch.)
+                    and (abs(2 * k - np.rint(2 * k)) < GRID_TOLERANCE if len(members) >= 3
                          else lo - pitch * MAX_GAP < q < hi + pitch * MAX_GAP))
+
+        def half_way(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
+                     shift=shift) -> bool:
+            k = (float((_middle(c) + shift) @ line_frame(ref)[1]) - origin) / pitch
+            return abs(k - np.rint(k)) > GRID_TOLERANCE
 
         pieces = search.candidates(PIECE_FRACTION * typical)
         extra = [c for c in pieces if c.length_px >= MEMBER_FRACTION * typical
@@ -409,7 +418,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         found += _pieced(pieces, found, members, ref, origin, pitch, typical, shift)
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
-        reach = float(np.clip(abs(pitch) - max(o.thickness_px for o in members) - 6, 20, 60))
+        step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
+        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, 20, 60))
         for c in search.confirm(extra, reach):
             # A piece of a member (the first search joined it differently) is that member:
             # the longer one stays.
