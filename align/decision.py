@@ -333,6 +333,7 @@ def decide(result: Mapping, spec: ToleranceSpec | None) -> Disposition:
         u6 = [float(U[i, j]) for i, j in E_INDEX]
     errs = [(str(e.get("stage", "?")), str(e.get("message", "")))
             for e in result.get("errors") or []]
+    errs += [("not ok", str(p)) for p in result.get("problems") or []]
     return decide_values(bool(result.get("ok")), e6, u6, result.get("covariance_rad2"), spec,
                          errs)
 
@@ -348,7 +349,7 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
     if not ok or e6 is None or u6 is None:
         why = ("; ".join(f"{st}: {msg}" for st, msg in errors[:2])
                if errors else "the fusion did not run")
-        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a failed session ({why})")
+        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})")
     if spec is None or not spec.limits:
         return Disposition(NO_TOLERANCE, rule, k,
                            "no tolerance given ([tolerance] in session.toml or "

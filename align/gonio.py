@@ -15,107 +15,42 @@ import logging
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from align.gonio_directions import (
-    DirectionTerm,
     check_reversed,
     combine_directions,
-    direction_effect,
 )
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
+from align.gonio_run import GonioRun
 from align.gonio_timing import LATENCY, with_timing
-from axisbase.units import ARCSEC
+from axisbase.errors import InputError
+from axisbase.units import DEG
 from goniometry import (
-    FaceAngles,
-    LogSummary,
     face_angles,
     kept_table,
     read_revolutions,
     vertical_earth_rate,
 )
 from goniometry.angles import OMEGA_EARTH
-from goniometry.timing import TimingAngles
+from goniometry.reader import source_name
 
 if TYPE_CHECKING:
-    from align.loop import LoopReport
+    pass
 
 log = logging.getLogger("align.gonio")
 
 LOOP_REVOLUTIONS = 20000
 
 
-@dataclass(frozen=True)
-class GonioRun:
-    """A counter log through the goniometer pipeline: the revolution summary, the face angles,
-    the revolution-level loop (None when it did not run) and notes for the user. With a log
-    of the other direction, ``angles`` is the mean of both, ``reverse`` that run and
-    ``direction`` the term the mean cancelled."""
-
-    summary: LogSummary
-    angles: FaceAngles
-    loop: LoopReport | None
-    notes: tuple[str, ...]
-    earth_rate_applied: float | None
-    reverse: GonioRun | None = None
-    direction: DirectionTerm | None = None
-    timing: TimingAngles | None = None
-    timing_used: bool = False
-    warnings: tuple[str, ...] = ()  # options given that this log cannot honour
-
-    def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
-        """The run as JSON (the contract of ``align gonio``, also a session's stage);
-        angles in degrees, uncertainties in arc-seconds at this edge. ``faces``: their
-        names in passing order; ``nominal``: nominal angles [rad] for the deviations."""
-        fa, summary, loop = self.angles, self.summary, self.loop
-        arcsec = 1.0 / ARCSEC
-        effects = [e.to_dict() for e in loop.effects] if loop is not None else []
-        if self.direction is not None:
-            effects.append(direction_effect(self.direction, faces))
-        js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
-              "angles_u_arcsec": (fa.u_rad * arcsec).tolist(),
-              "revolutions_used": fa.revolutions, "effects": effects,
-              "unexplained_structure": bool(loop and loop.unexplained_structure),
-              "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
-              "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
-              "type_a_method": fa.type_a_method, "jitter_counts": fa.jitter_counts,
-              "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
-              "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
-                             for k, v in summary.exclusions.counts.items()},
-              "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
-                        "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
-              "angles_source": "pulse times (steady table)" if self.timing_used else "counts",
-              "type_b_terms_arcsec": {k: (v * arcsec).tolist()
-                                      for k, v in fa.type_b_terms.items()},
-              "faults": {"sigma_counts": summary.sigma_counts,
-                         "tolerance_counts": summary.tolerance_counts,
-                         "revolutions_excluded": summary.excluded_revolutions,
-                         "armed_face": summary.armed_face,
-                         "rows_before_first_revolution": summary.incomplete_head,
-                         "rows_after_last_revolution": summary.incomplete_tail},
-              "notes": list(self.notes)}
-        if self.timing is not None:
-            ta = self.timing
-            js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
-                            "angles_u_arcsec": (ta.u_rad * arcsec).tolist(),
-                            "counts_minus_timing_arcsec": (ta.diff_rad * arcsec).tolist(),
-                            "counts_minus_timing_u_arcsec": (ta.diff_u_rad * arcsec).tolist(),
-                            "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
-                            "used": self.timing_used}
-        if nominal is not None:
-            js["deviation_arcsec"] = ((fa.angles_rad - nominal) * arcsec).tolist()
-        return js
-
-
-def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
+def earth_rate_range(latitude_range_rad: tuple[float, float] | None,
                      direction: int) -> tuple[float, float]:
     """Mid-point and half-range [rad/s] of the vertical Earth rate over a latitude range
-    [deg] (all latitudes when None)."""
-    lo, hi = latitude_range_deg if latitude_range_deg is not None else (-90.0, 90.0)
+    [rad] (all latitudes when None)."""
+    lo, hi = latitude_range_rad if latitude_range_rad is not None else (-90 * DEG, 90 * DEG)
     r1, r2 = vertical_earth_rate(lo, direction), vertical_earth_rate(hi, direction)
     return (r1 + r2) / 2, abs(r2 - r1) / 2
 
@@ -123,17 +58,17 @@ def earth_rate_range(latitude_range_deg: tuple[float, float] | None,
 EARTH_BOUND = "earth_rate (latitude not given: bound over {})"
 
 
-def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = None,
+def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | None = None,
                 direction: int = 1, alpha: float = 1e-3,
-                reverse_log: str | Path | None = None, apply_loop: bool = True,
+                reverse_log: str | Path | object | None = None, apply_loop: bool = True,
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
-                latitude_range_deg: tuple[float, float] | None = None,
+                latitude_range_rad: tuple[float, float] | None = None,
                 on_bytes: Callable[[int], None] | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
     when the data show it and it is physically possible; when neither determines it, the
-    range of its effect over all latitudes (or ``latitude_range_deg``) is carried in u as a
+    range of its effect over all latitudes (or ``latitude_range_rad``) is carried in u as a
     named Type B term (an unsteady table makes the angles depend on it). ``reverse_log``: a
     log of the same faces with the table turning the other way; the result is then the mean
     of both directions (see :func:`combine_directions`). ``steady_table``: the user asserts
@@ -144,26 +79,30 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
 
     Parameters
     ----------
-    path : str or Path
-        The counter log.
+    path : str, Path, mapping of str to array-like, numpy structured array or pyarrow Table
+        The counter log: its file, or its rows already in memory under the log's column
+        names (``count``, ``counter``, ``ref``, ``t`` [s], or as ``columns`` maps them).
+        Rows go through the same reader and checks as a file; a bad one is named by its
+        index (``rows: row k: column: what``) and the exclusions' ``lines`` are row indexes.
     n_faces : int
         Faces of the housing (pulses per revolution).
-    latitude_deg : float, optional
-        Latitude of the table [deg] (the Earth rate then comes from it).
+    latitude_rad : float, optional
+        Latitude of the table [rad] (the Earth rate then comes from it).
     direction : int
         +1: the table turns counter-clockwise seen from above; -1: clockwise.
     alpha : float
         Significance level of the loop's and the consistency checks' tests.
-    reverse_log : str or Path, optional
-        A log of the same faces with the table turning the other way.
+    reverse_log : str, Path or rows, optional
+        A log of the same faces with the table turning the other way (a file or rows, as
+        ``path``).
     apply_loop : bool
         Apply the Earth rate the loop finds (False for each direction of a pair).
     steady_table : bool
         The user asserts a constant speed within a revolution (pulse-time angles).
     columns : mapping of str to str, optional
         Header names of the log's columns (``--columns``), for both logs.
-    latitude_range_deg : tuple of float, optional
-        Latitudes [deg] the Earth rate's bound is taken over when it is not determined.
+    latitude_range_rad : tuple of float, optional
+        Latitudes [rad] the Earth rate's bound is taken over when it is not determined.
     on_bytes : callable, optional
         Called with about how many bytes each chunk held (a progress bar).
 
@@ -178,7 +117,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     LogError
         A log that cannot be used (naming the file and line).
     InputError
-        A reverse log that is not the other direction of the same faces.
+        A reverse log that is not the other direction of the same faces; a latitude beyond
+        +-pi/2 (degrees given where radians are taken).
 
     Examples
     --------
@@ -188,23 +128,40 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     >>> import numpy as np
     >>> from synth.gonio import GonioSpec, simulate, write_log
     >>> from align import measure_log
+    >>> from axisbase.units import DEG
     >>> sim = simulate(GonioSpec(revolutions=50, seed=1))
     >>> log = write_log(sim, pathlib.Path(tempfile.mkdtemp()) / "log.csv")
-    >>> run = measure_log(log, 4, latitude_deg=50.45)
+    >>> run = measure_log(log, 4, latitude_rad=50.45 * DEG)
     >>> z = (run.angles.angles_rad - sim["truth"]["angles_rad"]) / run.angles.u_rad
     >>> bool(np.all(np.abs(z) < 4))
     True
+
+    The same log's rows already in memory (a dict of columns, a numpy structured array or a
+    pyarrow Table) give the same angles; a bad row is named by its index:
+
+    >>> rows = {k: np.loadtxt(log, delimiter=",", skiprows=1, usecols=i)
+    ...         for i, k in enumerate(["count", "counter", "ref", "t"])}
+    >>> same = measure_log(rows, 4, latitude_rad=50.45 * DEG)
+    >>> bool(np.array_equal(same.angles.angles_rad, run.angles.angles_rad))
+    True
+    >>> rows["ref"][7] = 2
+    >>> measure_log(rows, 4, latitude_rad=50.45 * DEG)
+    Traceback (most recent call last):
+    ...
+    goniometry.errors.LogError: rows: row 7: ref: must be 0 or 1
     """
+    _check_latitudes(latitude_rad, latitude_range_rad)
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
-        fwd = measure_log(path, n_faces, latitude_deg, direction, alpha, apply_loop=False,
+        fwd = measure_log(path, n_faces, latitude_rad, direction, alpha, apply_loop=False,
                           steady_table=steady_table, columns=columns, on_bytes=on_bytes)
-        rev = measure_log(reverse_log, n_faces, latitude_deg, -direction, alpha,
+        rev = measure_log(reverse_log, n_faces, latitude_rad, -direction, alpha,
                           apply_loop=False, steady_table=steady_table, columns=columns,
                           on_bytes=on_bytes)
         comb, term = combine_directions(fwd.angles, rev.angles)
-        check_reversed(fwd.angles, rev.angles, term, path, reverse_log, alpha)
+        check_reversed(fwd.angles, rev.angles, term, source_name(path),
+                       source_name(reverse_log), alpha)
         notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
                  *(f"reverse run: {n}" for n in rev.notes if not n.startswith(LATENCY)),
                  f"both directions combined: the direction-dependent part is "
@@ -227,7 +184,7 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         threading.Thread(target=import_module, args=("align.loop",), daemon=True).start()
     early = {}
     hook = None
-    if latitude_deg is None:
+    if latitude_rad is None:
         def hook(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None) -> None:
             # The loop sees only the head of the log: it runs while the rest is read. (A
             # shorter log hands over at its end, not yet checked: the loop runs after.)
@@ -241,7 +198,8 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
     summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
                                on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes)
     log.debug("gonio %s: one pass in %.2f s: %d rows, %d revolutions excluded "
-              "(%s), times %s", Path(path).name, time.perf_counter() - start, summary.rows,
+              "(%s), times %s", Path(source_name(path)).name, time.perf_counter() - start,
+              summary.rows,
               summary.excluded_revolutions,
               ", ".join(f"{n} x {r}" for r, n in summary.exclusions.counts.items()) or "none",
               "present" if summary.has_time else "absent")
@@ -252,11 +210,11 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         # Not a fault: the arming pulse fits no face (armed between faces).
         notes.append(f"lead-in: the first {summary.incomplete_head} rows, from the arming "
                      "pulse to the first complete revolution, are not used")
-    if latitude_deg is not None and summary.has_time:
-        rate = vertical_earth_rate(latitude_deg, direction)
+    if latitude_rad is not None and summary.has_time:
+        rate = vertical_earth_rate(latitude_rad, direction)
         return with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
                                      rate), steady_table, alpha)
-    if latitude_deg is not None:
+    if latitude_rad is not None:
         why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
                "pulse times; NOT applied (nor can a table speed that follows its angle be "
                "seen, which with autocollimator latency biases one direction: measure both)")
@@ -304,9 +262,9 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
         return with_timing(GonioRun(summary, face_angles(summary), loop, tuple(notes), None),
                             steady_table, alpha)
     # Not determined by the log: its bound over the latitudes enters u (Type B), named.
-    mid, half = earth_rate_range(latitude_range_deg, direction)
-    where = ("all latitudes" if latitude_range_deg is None else
-             f"latitudes {latitude_range_deg[0]:g}..{latitude_range_deg[1]:g}°")
+    mid, half = earth_rate_range(latitude_range_rad, direction)
+    where = ("all latitudes" if latitude_range_rad is None else
+             f"latitudes {latitude_range_rad[0] / DEG:g}..{latitude_range_rad[1] / DEG:g}°")
     name = EARTH_BOUND.format(where)
     fa = face_angles(summary, mid, type_b={name: half})
     worst = float(np.max(fa.type_b_terms[name])) * np.rad2deg(1) * 3600
@@ -314,6 +272,19 @@ def measure_log(path: str | Path, n_faces: int, latitude_deg: float | None = Non
                  f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
     return with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
+
+
+def _check_latitudes(latitude_rad: float | None,
+                     latitude_range_rad: tuple[float, float] | None) -> None:
+    """Latitudes are radians here (degrees only at the flags and keys): a value beyond pi/2
+    is degrees passed by mistake, which would remove a wrong Earth rate without a word."""
+    given = ([] if latitude_rad is None else [("latitude_rad", latitude_rad)]) + (
+        [] if latitude_range_rad is None else
+        [("latitude_range_rad", v) for v in latitude_range_rad])
+    for name, v in given:
+        if not (np.isfinite(v) and abs(v) <= np.pi / 2):
+            raise InputError(f"measure_log {name} = {v:g}: a latitude in radians is within "
+                             "+-pi/2 (degrees? multiply by axisbase.units.DEG)")
 
 
 # A housing's faces are made to arc-seconds or arc-minutes of their nominal angles; a

@@ -17,7 +17,7 @@ from goniometry import kept_table
 from goniometry.timing import timing_angles
 
 if TYPE_CHECKING:
-    from align.gonio import GonioRun
+    from align.gonio_run import GonioRun
 
 
 LATENCY = "one direction only, on a table whose speed varies with its angle"

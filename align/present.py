@@ -16,6 +16,7 @@ from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
 from align.session_json import LoadedSession
+from align.warnings import handled_crossing
 from axisbase.header import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
@@ -51,6 +52,8 @@ def mark_lines(r) -> list[str]:
         big = sorted(r.u_terms.items(), key=lambda kv: -kv[1])[:3]
         lines.append("    largest u terms: " + ", ".join(f"{k} {v / ARCSEC:.2f}″"
                                                        for k, v in big))
+    lines += [f"    note: {n.removeprefix(f'{r.image} mark {r.index}: ')}" for n in r.notes
+              if handled_crossing(n)]
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     if r.bend_off_frame:

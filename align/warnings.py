@@ -7,6 +7,7 @@ to be taken at face value, and why.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 
 from align.gonio import nominal_mismatch
@@ -28,6 +29,19 @@ def not_measured(r) -> str:
     """The warning of an image that was not measured (:class:`align.marks.MarkResult` not
     ``found``): in the JSON's warnings; the terminal says it once, as the image's error."""
     return f"{r.image}: not measured: {str(r.error).removeprefix(f'{r.image}: ')}"
+
+
+HANDLED_CROSSING = re.compile(r" mark \d+: crossing with .*: \d+ px excluded \(the other "
+                              r"groove lies in its profile window there\)$")
+"""A crossing :func:`align.marks.finish_mark` handled: the stretch under the other groove left
+out of the fit, the angle and its u from the rest (a crossing that cannot be handled so is
+refused, as the mark's error). A note for the reader, not a warning: nothing is less to be
+trusted (``tests/align/test_marks_crossing.py``)."""
+
+
+def handled_crossing(note: str) -> bool:
+    """Whether a mark's note is a handled crossing (:data:`HANDLED_CROSSING`)."""
+    return HANDLED_CROSSING.search(note) is not None
 
 
 def mark_warnings(results: Sequence) -> list[str]:
@@ -57,7 +71,7 @@ def mark_warnings(results: Sequence) -> list[str]:
             out.append(not_measured(r))
             continue
         out += loop_warnings(what, r.loop)
-        out += [n for n in getattr(r, "notes", ()) if n not in out]
+        out += [n for n in getattr(r, "notes", ()) if n not in out and not handled_crossing(n)]
         if r.uncertainty_inflation > 1:
             out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
                        "structure no effect explains")
@@ -84,7 +98,7 @@ def family_warnings(image: str, fam) -> list[str]:
 
 def calibration_warnings(cal, poses) -> list[str]:
     """A triad calibration (``Calibration``) and its poses."""
-    out = loop_warnings("calibration", cal.loop)
+    out = list(getattr(cal, "problems", ())) + loop_warnings("calibration", cal.loop)
     out += [f"calibration: effect {r.name} REFUSED: {r.reason}" for r in cal.loop.refused]
     out += list(getattr(cal, "notes", ()))
     dof = cal.loop.after.dof

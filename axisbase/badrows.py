@@ -23,7 +23,7 @@ from axisbase.errors import InputError
 from axisbase.header import Header, not_utf8, show_cell
 
 if TYPE_CHECKING:
-    from axisbase.table import TableSpec
+    from axisbase.tablespec import TableSpec
 
 
 def _quiet_undecodable_rows(unraisable) -> None:

@@ -21,7 +21,7 @@ from axisbase.errors import InputError
 from axisbase.units import value_unit
 
 if TYPE_CHECKING:
-    from axisbase.table import TableSpec
+    from axisbase.tablespec import TableSpec
 
 _UNIT = re.compile(r"^(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$")
 
@@ -127,8 +127,39 @@ def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> Head
                          f"file? a {spec.what} is UTF-8 CSV text")
     delimiter = max(",;\t", key=text.count)
     raw = next(csv.reader([text], delimiter=delimiter))
+    names, units = match_names(raw, spec, mapping, f"{path}:{skip}: header")
+    return Header(names, raw, units, delimiter, skip, skip)
+
+
+def match_names(raw: list[str], spec: TableSpec, mapping: Mapping[str, str], where: str
+                ) -> tuple[list[str], dict[str, str]]:
+    """Which of the names ``raw`` (a header line's fields, or the keys of rows in memory) is
+    which column of ``spec``, and the units written with them.
+
+    Parameters
+    ----------
+    raw : list of str
+        The names as written (``'Ux [V]'``).
+    spec : TableSpec
+        The format.
+    mapping : mapping of str to str
+        Canonical name -> name as written (``--columns``).
+    where : str
+        What the messages name (``'log.csv:1: header'``).
+
+    Returns
+    -------
+    names : list of str
+        Canonical name of each field, '' for one the format does not know.
+    units : dict of str to str
+        Canonical name -> the unit written with it.
+
+    Raises
+    ------
+    InputError
+        A column given twice, a mapped name not there, a required column missing.
+    """
     normed = [_norm(r) for r in raw]
-    where = f"{path}:{skip}: header"
     known = {c.name for c in spec.columns}
     unknown_map = sorted(set(mapping) - known)
     if unknown_map:
@@ -156,7 +187,7 @@ def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> Head
                          f"{spec.layout} (name other headers with --columns, e.g. "
                          f"{missing[0]}=YOUR_NAME)")
     units = {n: u for n, (_, u) in zip(names, normed, strict=True) if n and u}
-    return Header(names, raw, units, delimiter, skip, skip)
+    return names, units
 
 
 def not_utf8(path: Path, spec: TableSpec) -> InputError | None:

@@ -14,7 +14,7 @@ import numpy as np
 from axisbase.errors import InputError
 
 if TYPE_CHECKING:
-    from axisbase.table import Table
+    from axisbase.tabledata import Table
 
 PAIR_ROWS = 20
 """Fewest rows for the 'every row written twice' test: with quantised raw counts two

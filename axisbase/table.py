@@ -20,146 +20,39 @@ When pyarrow rejects a row, the file is scanned once more by Python's csv module
 line, the column and what is wrong: ``file:line: column: what``. Rows are checked after
 parsing: numbers finite, labels not blank, integer columns whole, a time column strictly
 increasing. A file without a time column can be given one from its sample rate (``rate_hz``).
+
+Rows already in memory (a mapping of column name to values, a numpy structured array, a
+pyarrow Table) go through the same name matching, unit conversion and checks
+(:func:`iter_rows`); a bad row is then named by its index, ``rows: row k: column: what``.
 """
 
 from __future__ import annotations
 
 import io
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from axisbase.badrows import Uncommented, refused, row_lines, skip_comment
+from axisbase.badrows import Uncommented, refused, skip_comment
 from axisbase.csvblocks import parallel_batches, read_batches
 from axisbase.errors import InputError
-from axisbase.header import Header, read_header
+from axisbase.header import Header, match_names, read_header, show_cell
 from axisbase.repeats import check_repeats
+from axisbase.tabledata import Table
+from axisbase.tablespec import KINDS, Column, TableSpec
 from axisbase.units import TIME_UNITS, time_scale, value_unit
 
-KINDS = ("float", "int", "label")
+__all__ = ["KINDS", "MAX_MAGNITUDE", "Column", "Table", "TableSpec", "iter_rows", "iter_table",
+           "rate_warning", "read_table"]
+"""The reader's interface; the format and result types live in :mod:`axisbase.tablespec` and
+:mod:`axisbase.tabledata` (so the modules the reader uses can name them without a cycle)."""
+
 MAX_MAGNITUDE = 1e100
 """Largest |value| a float column takes (see :func:`_check`)."""
 _ARROW = {"float": pa.float64(), "int": pa.int64(), "label": pa.string()}
-
-
-@dataclass(frozen=True)
-class Column:
-    """One column of a format.
-
-    Attributes
-    ----------
-    name : str
-        Canonical name (what the code and the messages call it).
-    kind : str
-        'float', 'int' or 'label'.
-    required : bool
-        Whether a file without it is refused.
-    aliases : tuple of str
-        Other header spellings accepted for it.
-    """
-
-    name: str
-    kind: str = "float"
-    required: bool = True
-    aliases: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True)
-class TableSpec:
-    """A table format.
-
-    Attributes
-    ----------
-    what : str
-        What it is called in messages ("static poses", "counter log").
-    columns : tuple of Column
-        Its columns.
-    time : str or None
-        The column that must increase strictly (and that ``rate_hz`` may supply).
-    distinct_rows : bool
-        Refuse a file whose rows are each written twice, or which holds the same block of
-        rows twice (see :func:`axisbase.repeats.check_repeats`).
-    rate_hz_range : tuple of float, or None
-        Plausible sample rates of the sensor [Hz] (see :func:`rate_warning`).
-    """
-
-    what: str
-    columns: tuple[Column, ...]
-    time: str | None = None
-    distinct_rows: bool = False
-    rate_hz_range: tuple[float, float] | None = None
-    """Plausible sample rates of the sensor [Hz]: a median interval outside is a warning
-    naming the likely time unit (see :func:`rate_warning`)."""
-
-    def column(self, name: str) -> Column:
-        return next(c for c in self.columns if c.name == name)
-
-    @property
-    def layout(self) -> str:
-        """The header a user should write, e.g. ``pose,ux,uy,uz[,t][,temp]``."""
-        req = ",".join(c.name for c in self.columns if c.required)
-        return req + "".join(f"[,{c.name}]" for c in self.columns if not c.required)
-
-
-@dataclass(frozen=True)
-class Table:
-    """A parsed table (or a chunk of a streamed one).
-
-    Attributes
-    ----------
-    path : Path
-        The file.
-    spec : TableSpec
-        Its format.
-    data : dict of str to ndarray
-        Columns under their canonical names: float64 / int64 arrays, labels as an object
-        array of str; in the tool's units (seconds; g, m/s², V, counts) when the header
-        declared another.
-    first_line : int
-        File line of the file's first data row.
-    ignored : tuple of str
-        Header names no column of the format took.
-    units : dict of str to str
-        Units of the columns as they now are (``{'ux': 'V', 't': 's'}``).
-    time_from_rate : bool
-        The time column was made from the sample rate.
-    row0 : int
-        Index in the file of this table's first row (a chunk of a streamed file).
-    """
-
-    path: Path
-    spec: TableSpec
-    data: dict[str, np.ndarray]
-    first_line: int
-    ignored: tuple[str, ...] = ()
-    units: dict[str, str] = field(default_factory=dict)
-    time_from_rate: bool = False
-    row0: int = 0
-
-    def __len__(self) -> int:
-        return len(next(iter(self.data.values()))) if self.data else 0
-
-    def __contains__(self, name: str) -> bool:
-        return name in self.data
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        return self.data[name]
-
-    def get(self, name: str) -> np.ndarray | None:
-        return self.data.get(name)
-
-    def line(self, row: int) -> int:
-        """The file line of row ``row`` (0-based). Blank lines are skipped by the parser, so
-        they are counted by scanning the file — only called when reporting an error."""
-        return row_lines(self.path, self.first_line, [self.row0 + row])[0]
-
-    def fail(self, row: int, column: str, what: str) -> InputError:
-        """The error for a bad value, in the house form ``file:line: column: what``."""
-        return InputError(f"{self.path}:{self.line(row)}: {column}: {what}")
 
 
 # ----------------------------------------------------------------------------- parsing
@@ -242,20 +135,21 @@ def _check(table: Table, prev_t: float | None = None) -> None:
 
 
 def _table(path: Path, spec: TableSpec, h: Header, columns: Mapping[str, pa.Array],
-           row0: int = 0) -> Table:
+           row0: int = 0, in_memory: bool = False) -> Table:
     kinds = {c.name: c.kind for c in spec.columns}
+    first = 0 if in_memory else h.skip + 1
     data = {}
     for n, col in columns.items():
         if col.null_count:
             rows = np.flatnonzero(np.asarray(col.is_null()))
-            t = Table(path, spec, {}, h.skip + 1, row0=row0)
+            t = Table(path, spec, {}, first, row0=row0, in_memory=in_memory)
             what = ("is blank: every row needs a label" if kinds[n] == "label"
                     else "is empty")
             raise t.fail(int(rows[0]), n, what)
         data[n] = _numpy(col, kinds[n])
     ignored = tuple(r.strip() for r, n in zip(h.raw, h.names, strict=True) if not n)
     data, units = _in_own_units(path, spec, h, data)
-    return Table(path, spec, data, h.skip + 1, ignored, units, row0=row0)
+    return Table(path, spec, data, first, ignored, units, row0=row0, in_memory=in_memory)
 
 
 def _in_own_units(path: Path, spec: TableSpec, h: Header, data: dict[str, np.ndarray]
@@ -270,7 +164,8 @@ def _in_own_units(path: Path, spec: TableSpec, h: Header, data: dict[str, np.nda
         if n == spec.time:
             scale = time_scale(u)
             if scale is None:
-                raise InputError(f"{path}:{h.header_line}: {n}: time unit {u!r} not known; "
+                where = f"{path}:{h.header_line}" if h.header_line else f"{path}"
+                raise InputError(f"{where}: {n}: time unit {u!r} not known; "
                                  f"use one of s, ms, us, ns, min, h")
             unit = "s"
         else:
@@ -396,7 +291,7 @@ def _with_rate(table: Table, rate_hz: float | None) -> Table:
     data = dict(table.data)
     data[spec.time] = np.arange(len(table), dtype=float) / rate_hz
     return Table(table.path, spec, data, table.first_line, table.ignored, table.units, True,
-                 table.row0)
+                 table.row0, table.in_memory)
 
 
 def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
@@ -475,3 +370,97 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
 
 class _Commented(Exception):
     """A comment line parsed as a row (see :func:`_commented_labels`): read again."""
+
+
+ROWS_PER_CHUNK = 1 << 16
+"""Rows per chunk of rows in memory (:func:`iter_rows`): about the 1 MiB of text of a file's."""
+
+
+def _memory_columns(rows: object, name: str) -> dict[str, object]:
+    """Column name -> values of rows in memory (keys as written: ``'t [ms]'`` allowed)."""
+    if isinstance(rows, pa.Table | pa.RecordBatch):
+        return {n: rows.column(n) for n in rows.column_names}
+    if isinstance(rows, np.ndarray) and rows.dtype.names:
+        return {n: rows[n] for n in rows.dtype.names}
+    if isinstance(rows, Mapping):
+        return {str(k): v for k, v in rows.items()}
+    raise InputError(f"{name}: a {type(rows).__name__} is not rows of a table: give a mapping "
+                     "of column name to values, a numpy structured array or a pyarrow Table")
+
+
+def _memory_array(values: object, kind: str, column: str, name: str) -> pa.Array:
+    """One column in memory as the Arrow type its kind has in a file; a value that type
+    cannot hold (1.5 as a count, 'x' as a number) refused with its row."""
+    if isinstance(values, pa.ChunkedArray):
+        values = values.combine_chunks()
+    try:
+        arr = values if isinstance(values, pa.Array) else pa.array(np.asarray(values))
+        return arr.cast(_ARROW[kind])
+    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+        pass
+    # Only on the error path: the values one by one, to name the first bad one's row.
+    want = "a whole number" if kind == "int" else "a number" if kind == "float" else "a label"
+    seq = values.to_pylist() if isinstance(values, pa.Array) else list(np.ravel(values))
+    for k, v in enumerate(seq):
+        try:
+            pa.array([v]).cast(_ARROW[kind])
+        except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+            raise InputError(f"{name}: row {k}: {column}: {show_cell(str(v))} is not "
+                             f"{want}") from None
+    raise InputError(f"{name}: {column}: values of type {type(values).__name__} cannot be "
+                     f"read as {want}s")
+
+
+def iter_rows(rows: object, spec: TableSpec, columns: Mapping[str, str] | None = None,
+              chunk_rows: int = ROWS_PER_CHUNK, name: str = "rows") -> Iterator[Table]:
+    """Rows already in memory as checked chunks, as :func:`iter_table` gives a file's.
+
+    The column names are matched as a header's are (case, aliases, a unit in brackets,
+    ``columns``), values converted to the column's kind and unit, and checked the same way;
+    a bad value is named by its row's index (``rows: row 12: count: ...``).
+
+    Parameters
+    ----------
+    rows : mapping of str to array-like, numpy structured array or pyarrow Table
+        The table's columns under their names.
+    spec : TableSpec
+        Its format.
+    columns : mapping of str to str, optional
+        Canonical name -> the name the rows use.
+    chunk_rows : int
+        Rows per chunk.
+    name : str
+        What the messages call the rows.
+
+    Yields
+    ------
+    Table
+        Checked chunks (``in_memory``), ``row0`` their first row's index.
+
+    Raises
+    ------
+    InputError
+        Naming the row, the column and what is wrong (or the column names).
+    """
+    cols = _memory_columns(rows, name)
+    raw = list(cols)
+    names, units = match_names(raw, spec, columns or {}, f"{name}: column names")
+    kinds = {c.name: c.kind for c in spec.columns}
+    arrays = {n: _memory_array(cols[r], kinds[n], r, name)
+              for r, n in zip(raw, names, strict=True) if n}
+    lengths = {len(a) for a in arrays.values()}
+    if len(lengths) > 1:
+        raise InputError(f"{name}: columns of different lengths ("
+                         + ", ".join(f"{n} {len(a)}" for n, a in arrays.items()) + ")")
+    n_rows = lengths.pop()
+    if n_rows == 0:
+        raise InputError(f"{name}: no rows (a {spec.what} needs data)")
+    h = Header(names, raw, units, "", 0, 0)
+    prev_t = None
+    for start in range(0, n_rows, chunk_rows):
+        chunk = _table(Path(name), spec, h, {n: a.slice(start, chunk_rows)
+                                             for n, a in arrays.items()}, start, True)
+        _check(chunk, prev_t)
+        if spec.time and spec.time in chunk.data:
+            prev_t = float(chunk.data[spec.time][-1])
+        yield chunk

@@ -24,6 +24,7 @@ import argparse
 import time
 from dataclasses import replace
 
+import benchpage
 import numpy as np
 
 from align.calibration import (
@@ -374,4 +375,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Triad calibration: the seed paper, ML vs algebraic vs the CRLB, peers")

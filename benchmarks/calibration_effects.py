@@ -25,6 +25,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import benchpage
+
 # This tree before any installed copy, after PYTHONPATH's entries (another version put there
 # wins).
 sys.path.insert(1 + len([e for e in os.environ.get("PYTHONPATH", "").split(os.pathsep) if e]),
@@ -62,4 +64,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Calibration: effects the triad model may lack")

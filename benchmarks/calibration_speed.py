@@ -22,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 # This tree before any installed copy, after PYTHONPATH's entries (another version put there
@@ -66,4 +67,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Calibration: CPU time of one calibration")

@@ -20,6 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from scipy.stats import beta  # noqa: E402
@@ -59,4 +61,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Decisions: false alarms on clean sessions")

@@ -8,9 +8,8 @@ Fresh processes, median (and best) of N runs each:
   before (numpy, scipy, pyarrow, OpenCV, matplotlib through align.session/marks/plots).
 
 Usage: ``python3 benchmarks/cli_startup.py [N] [--markdown PATH]`` (default 7). On a loaded
-host the figures vary; the ratio within one run is the figure to quote. ``--markdown`` also
-writes them as a Markdown table (``docs/generated/cli_startup.md`` is included by the
-performance page of the docs).
+host the figures vary; the ratio within one run is the figure to quote. ``--markdown``: also
+a generated page (:mod:`benchpage`; ``docs/perf/cli_startup.md``).
 """
 
 from __future__ import annotations
@@ -22,6 +21,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import benchpage
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -42,7 +43,6 @@ def timed(cmd: list[str], n: int) -> tuple[float, float]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("n", nargs="?", type=int, default=7, help="runs of each command")
-    ap.add_argument("--markdown", type=Path, help="also write the table to this Markdown file")
     args = ap.parse_args()
     n = args.n
     py = sys.executable
@@ -52,21 +52,13 @@ def main() -> None:
             ("bare python3 -c pass", [py, "-c", "pass"]),
             ("eager imports + --help (the old way)", [py, "-c", EAGER])]
     res = {name: timed(cmd, n) for name, cmd in rows}
+    print("| command | median [ms] | best [ms] |")
+    print("|---|---|---|")
     for name, (med, best) in res.items():
-        print(f"{name:40s} median {med * 1000:7.0f} ms   best {best * 1000:7.0f} ms")
+        print(f"| `{name}` | {med * 1000:.0f} | {best * 1000:.0f} |")
     ratio = res["eager imports + --help (the old way)"][0] / res["align --help"][0]
-    print(f"eager / deferred (median): {ratio:.1f}x; target: align --help < 500 ms")
-    if args.markdown:
-        rows = ["| command | median [ms] | best [ms] |", "|---|---|---|"]
-        rows += [f"| `{name}` | {med * 1000:.0f} | {best * 1000:.0f} |"
-                 for name, (med, best) in res.items()]
-        stamp = time.strftime("%Y-%m-%d", time.gmtime())
-        args.markdown.write_text(
-            "\n".join(rows) + f"\n\nEager / deferred (median): {ratio:.1f}×. Measured {stamp}, "
-            f"{n} fresh processes each, by `python3 benchmarks/cli_startup.py {n} --markdown "
-            f"docs/generated/cli_startup.md`; {os.cpu_count()} cores, load average "
-            f"{os.getloadavg()[0]:.1f}.\n")
-
+    print(f"\neager / deferred (median): {ratio:.1f}x, {n} fresh processes each; target: "
+          "align --help < 500 ms")
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Start-up time of the align command")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 
+import benchpage
 import numpy as np
 
 from align.marks import LENS_TERMS, measure_image
@@ -114,10 +115,15 @@ def gratings() -> None:
               f"{np.rad2deg(_wrap(ang - angle)):+.2f}°")
 
 
-if __name__ == "__main__":
+
+def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     a = ap.parse_args()
     hidden_ends(a.seeds)
     dials(min(a.seeds, 8))
     gratings()
+
+
+if __name__ == "__main__":
+    benchpage.run(main, "Families of lines: hidden ends, dials, gratings")

@@ -15,6 +15,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -63,4 +64,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Fusion: diagnosis of an undeclared disagreement")

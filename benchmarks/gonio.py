@@ -25,6 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 ARCSEC = np.pi / 180 / 3600
@@ -161,4 +162,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: accuracy and streaming speed")

@@ -17,7 +17,10 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
 import numpy as np
+
+from axisbase.units import DEG
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -46,7 +49,7 @@ def main() -> None:
             k, r0 = int(rng.choice([4, 8, 12])), int(rng.integers(20, 400))
             for s, out in ((drop_out(sim, r0, k), err), (sim, twin)):
                 p = write_log(s, Path(tmp) / f"{seed}_{len(out)}_{s is sim}.csv")
-                run = measure_log(p, 4, spec.latitude_deg, direction=spec.direction)
+                run = measure_log(p, 4, spec.latitude_deg * DEG, direction=spec.direction)
                 out.append(run.angles.angles_rad - truth)
                 if s is not sim:
                     z.append(out[-1] / run.angles.u_rad)
@@ -57,4 +60,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: whole-revolution drop-outs")

@@ -16,7 +16,10 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import benchpage
 import numpy as np
+
+from axisbase.units import DEG
 
 ARCSEC = np.pi / 180 / 3600
 
@@ -39,7 +42,7 @@ def main() -> None:
             sim = simulate(GonioSpec(revolutions=a.revolutions, jitter_rad=a.jitter * ARCSEC,
                                      seed=1000 + seed))
             p = write_log(sim, Path(d) / f"l{seed}.csv")
-            run = measure_log(p, 4, 50.45)
+            run = measure_log(p, 4, 50.45 * DEG)
             why.update(run.summary.exclusions.counts)
             warned += any("pulse faults" in w for w in gonio_warnings(run))
             p.unlink()
@@ -51,4 +54,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: false fault warnings on long clean logs")

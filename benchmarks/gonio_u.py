@@ -20,7 +20,10 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
+import benchpage
 import numpy as np
+
+from axisbase.units import DEG
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "goniometry"))
 
@@ -39,7 +42,7 @@ def scan(n_logs: int, faulty: bool) -> list[dict]:
                 spec = replace(spec, faults=())
             sim = simulate(spec)
             p = write_log(sim, Path(d) / f"l{seed}.csv")
-            run = measure_log(p, N_FACES, spec.latitude_deg, direction=spec.direction)
+            run = measure_log(p, N_FACES, spec.latitude_deg * DEG, direction=spec.direction)
             p.unlink()
             fa = run.angles
             truth = np.array(sim["truth"]["angles_rad"])
@@ -88,4 +91,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Goniometer: is u honest on short logs?")

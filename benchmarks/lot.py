@@ -31,6 +31,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import benchpage
+
 ROOT = Path(__file__).resolve().parents[1]
 # The command, the cluster's workers and this process import this checkout.
 os.environ["PYTHONPATH"] = os.pathsep.join(
@@ -71,7 +73,7 @@ def run(sessions: list[str], out: Path, extra: list[str], report: bool) -> dict:
     if out.exists():
         shutil.rmtree(out)
     cmd = [sys.executable, "-m", "align", "run", *sessions, "--json", str(out),
-           "--calibration", str(out), "-q", *extra] + (["--report", str(out)] if report else [])
+           "--calibration", str(out), *extra] + (["--report", str(out)] if report else [])
     t0 = time.perf_counter()
     p = subprocess.run(cmd, env=ENV, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - t0
@@ -130,4 +132,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "A production lot: local pool and Dask")

@@ -25,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import benchpage
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -117,4 +119,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    benchpage.run(main, "align lot over many results")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 from align.calibration import StaticSettings, calibrate
@@ -58,4 +59,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Two real triads on one board")

@@ -19,6 +19,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import benchpage
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -65,10 +67,15 @@ def run(out: Path) -> None:
     shot(lot, out / "report-lot-first-screen.png")
 
 
-if __name__ == "__main__":
+
+def screens() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, help="a new folder (default: a temporary one)")
     a = ap.parse_args()
     out = a.out or Path(tempfile.mkdtemp(prefix="report-screens-"))
     out.mkdir(parents=True, exist_ok=True)
     run(out)
+
+
+if __name__ == "__main__":
+    benchpage.run(screens, "Reports: first screens and page sizes")

@@ -21,6 +21,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 from align.fusion import E_INDEX, E_NAMES, fuse
@@ -117,4 +118,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Whole sessions: E against truth")

@@ -3,19 +3,19 @@
 ``loadtxt`` (the obvious alternative, which checks nothing).
 
 Usage: ``python3 benchmarks/tables.py [ROWS] [--markdown PATH]`` (default 10⁶). Best of 3,
-fresh file in a temporary folder. ``--markdown`` also writes the figures as a Markdown table
-(``docs/generated/tables.md`` is included by the performance page of the docs).
+fresh file in a temporary folder. ``--markdown``: also a generated page
+(:mod:`benchpage`; ``docs/perf/tables.md``).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import benchpage
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -37,7 +37,6 @@ def best(fn, n: int = 3) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("rows", nargs="?", type=int, default=10**6)
-    ap.add_argument("--markdown", type=Path, help="also write the table to this Markdown file")
     args = ap.parse_args()
     n = args.rows
     rng = np.random.default_rng(1)
@@ -52,26 +51,11 @@ def main() -> None:
         t_read = best(lambda: read_table(p, STATIC))
         t_rep = best(lambda: check_repeats(tab))
         t_np = best(lambda: np.loadtxt(p, delimiter=",", skiprows=1), 1)
-    print(f"{n} rows: read_table {t_read:.3f} s (of which the duplicate check {t_rep:.3f} s, "
-          f"{100 * t_rep / t_read:.0f} %); np.loadtxt {t_np:.2f} s "
-          f"({t_np / t_read:.1f}x slower, no checks)")
-    if args.markdown:
-        write_markdown(args.markdown, [
-            "| reader | rows | time [s] (best of 3) | ratio |",
-            "|---|---|---|---|",
-            f"| `axisbase.table.read_table` (checked) | {n} | {t_read:.3f} | 1.0 |",
-            f"| … of which the duplicate-row check | {n} | {t_rep:.3f} | "
-            f"{t_rep / t_read:.2f} |",
-            f"| `np.loadtxt` (no checks) | {n} | {t_np:.2f} | {t_np / t_read:.1f} |",
-        ], "python3 benchmarks/tables.py --markdown docs/generated/tables.md")
-
-
-def write_markdown(path: Path, rows: list[str], command: str) -> None:
-    """The figures as a Markdown table with the date and the command that wrote them."""
-    stamp = time.strftime("%Y-%m-%d", time.gmtime())
-    path.write_text("\n".join(rows) + f"\n\nMeasured {stamp} by `{command}`; "
-                    f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}.\n")
-
+    print("| reader | rows | time [s] (best of 3) | ratio |")
+    print("|---|---|---|---|")
+    print(f"| `axisbase.table.read_table` (checked) | {n} | {t_read:.3f} | 1.0 |")
+    print(f"| … of which the duplicate-row check | {n} | {t_rep:.3f} | {t_rep / t_read:.2f} |")
+    print(f"| `np.loadtxt` (no checks) | {n} | {t_np:.2f} | {t_np / t_read:.1f} |")
 
 if __name__ == "__main__":
-    main()
+    benchpage.run(main, "Reading tables: the one reader against numpy")

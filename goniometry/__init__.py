@@ -2,8 +2,8 @@
 
 Public API::
 
-    iter_log(path) -> chunks                     (streaming, validated)
-    read_revolutions(path, n_faces) -> LogSummary (repairs / exclusions recorded)
+    iter_log(path or rows) -> chunks             (streaming, validated; rows in memory too)
+    read_revolutions(path or rows, n_faces) -> LogSummary (repairs / exclusions recorded)
     face_angles(summary) -> FaceAngles            (means, uncertainty, covariance, Allan)
 """
 

@@ -362,13 +362,14 @@ def kept_table(summary: LogSummary) -> tuple[np.ndarray, np.ndarray | None, np.n
     return summary.stats.kept()
 
 
-def vertical_earth_rate(latitude_deg: float, direction: int) -> float:
+def vertical_earth_rate(latitude_rad: float, direction: int) -> float:
     """The Earth's rotation about the table axis as the ring laser sees it.
 
     Parameters
     ----------
-    latitude_deg : float
-        Latitude of the table [deg] (the one degree input: it is what a user knows).
+    latitude_rad : float
+        Latitude of the table [rad] (a user's degrees are converted at the edge:
+        ``--latitude``, ``latitude_deg`` in session.toml).
     direction : int
         +1: the table turns counter-clockwise seen from above; -1: clockwise.
 
@@ -377,7 +378,7 @@ def vertical_earth_rate(latitude_deg: float, direction: int) -> float:
     float
         direction * Omega_E * sin(latitude) [rad/s].
     """
-    return direction * OMEGA_EARTH * np.sin(np.deg2rad(latitude_deg))
+    return direction * OMEGA_EARTH * np.sin(latitude_rad)
 
 
 def earth_rate_counts(counts: np.ndarray, dt: np.ndarray, rate: float) -> np.ndarray:

@@ -13,6 +13,7 @@ import numpy as np
 
 from goniometry.errors import LogError
 from goniometry.exclusions import SCREEN_SIGMA
+from goniometry.reader import where
 from goniometry.stats import rowall, rowsum
 
 # Revolutions on each side of a face-pattern change (see FacePattern._pattern_change).
@@ -85,7 +86,7 @@ class FacePattern:
         m = k + w
         counts = float((med[m, face] - med[k, face]) * np.median(N))
         arcsec = float((med[m, face] - med[k, face]) * 360 * 3600)
-        raise LogError(f"{self.path}:{int(lines[m])}: the face pattern changes here (the "
+        raise LogError(f"{where(self.path, int(lines[m]))}: the face pattern changes here (the "
                        f"interval after face {face} by {counts:+.0f} counts, {arcsec:+.1f}″; "
                        f"one table's faces stay within {self.tol:.1f} counts): two tables' "
                        "logs concatenated? Measure each log alone")

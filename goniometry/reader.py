@@ -2,7 +2,9 @@
 
 Read through the tool's one table reader (:mod:`axisbase.table`: BOM, CRLF, header case,
 aliases and ``--columns`` handled there) in record batches, so memory does not grow with the
-log; every problem is reported as ``file:line: column: what is wrong``.
+log; every problem is reported as ``file:line: column: what is wrong``. Rows already in memory
+(a mapping of column name to values, a numpy structured array, a pyarrow Table) go through
+the same reader (:func:`axisbase.table.iter_rows`); their problems name the row's index.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from axisbase.errors import InputError
-from axisbase.table import Column, Table, TableSpec, iter_table
+from axisbase.table import Column, Table, TableSpec, iter_rows, iter_table
 from goniometry.errors import LogError
 
 COUNTER_LOG = TableSpec(
@@ -25,6 +27,18 @@ COUNTER_LOG = TableSpec(
      Column("t", "float", required=False, aliases=("time", "t_s", "time_s", "timestamp"))),
     time="t")
 COLUMNS = ("count", "counter", "ref")
+ROWS = "rows"
+"""What messages call a log given as rows in memory."""
+
+
+def source_name(log: object) -> str | Path:
+    """The file of a log given as a path; :data:`ROWS` for rows in memory."""
+    return log if isinstance(log, str | Path) else ROWS
+
+
+def where(source: str | Path, line: int) -> str:
+    """``file:line`` for a file, ``rows: row k`` for rows in memory (``line`` their index)."""
+    return f"{ROWS}: row {line}" if source == ROWS else f"{source}:{line}"
 
 
 @dataclass(frozen=True)
@@ -42,7 +56,8 @@ class Chunk:
     t : ndarray of float, or None
         Pulse times [s], None when the log has no ``t`` column.
     first_line : int
-        File line of the first row (blank lines not counted).
+        File line of the first row (blank lines not counted); for rows in memory, the
+        first row's index.
     """
 
     count: np.ndarray
@@ -52,18 +67,19 @@ class Chunk:
     first_line: int
 
 
-def iter_log(path: str | Path, block_bytes: int = 1 << 20,
+def iter_log(path: str | Path | object, block_bytes: int = 1 << 20,
              columns: Mapping[str, str] | None = None, threads: bool = True) -> Iterator[Chunk]:
     """Yield the log in chunks (about ``block_bytes`` of text each), parsed ahead on a
-    pool of threads (``threads``; see :func:`axisbase.table.iter_table`).
+    pool of threads (``threads``; see :func:`axisbase.table.iter_table`); rows in memory in
+    chunks of :data:`axisbase.table.ROWS_PER_CHUNK` rows (:func:`axisbase.table.iter_rows`).
 
     Small chunks keep the pass's numpy temporaries cache-sized; the parse itself works on
     larger blocks, a bounded number in flight, so memory does not grow with the log.
 
     Parameters
     ----------
-    path : str or Path
-        The counter log (``count,counter,ref[,t]``).
+    path : str, Path, mapping of str to array-like, numpy structured array or pyarrow Table
+        The counter log (``count,counter,ref[,t]``): its file, or its rows in memory.
     block_bytes : int
         Text per chunk [bytes].
     columns : mapping of str to str, optional
@@ -82,7 +98,10 @@ def iter_log(path: str | Path, block_bytes: int = 1 << 20,
         Naming the file, the line, the column and what is wrong.
     """
     try:
-        for tab in iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads):
+        tables = (iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads)
+                  if isinstance(path, str | Path) else
+                  iter_rows(path, COUNTER_LOG, columns, name=ROWS))
+        for tab in tables:
             _validate(tab)
             yield Chunk(tab["count"], tab["counter"], tab["ref"], tab.get("t"),
                         tab.first_line + tab.row0)

@@ -33,7 +33,7 @@ from goniometry.dropouts import dropouts
 from goniometry.errors import FaceCountError, LogError
 from goniometry.exclusions import LINES_KEPT, R_SCREEN, R_TAIL, Exclusions, noise_reach
 from goniometry.pattern import PATTERN_WINDOW
-from goniometry.reader import iter_log
+from goniometry.reader import ROWS, iter_log, source_name, where
 from goniometry.repeats import repeated_block
 from goniometry.stats import RevolutionStats, rowany, rowsum
 from goniometry.stretches import Walker
@@ -272,12 +272,13 @@ class _Pass(Walker):
             rep = repeated_block(np.concatenate(self.stats.hashes))
             if rep is not None:
                 a, b, m = rep
-                line = 2 + self.head + b * self.n  # (exact when nothing was excluded before)
+                # (exact when nothing was excluded before; a file's rows start on line 2)
+                line = (0 if path == ROWS else 2) + self.head + b * self.n
                 raise LogError(
-                    f"{path}:{line}: usable revolutions {b + 1}-{b + m} repeat revolutions "
-                    f"{a + 1}-{a + m} count for count ({m} revolutions; chance never does "
-                    "that): the log written twice, or a block of it pasted again? Remove "
-                    "the copy")
+                    f"{where(path, line)}: usable revolutions {b + 1}-{b + m} repeat "
+                    f"revolutions {a + 1}-{a + m} count for count ({m} revolutions; chance "
+                    "never does that): the log written twice, or a block of it pasted again? "
+                    "Remove the copy")
         self.stats.hand_over()  # (a log shorter than on_kept_at: what there is)
         self._tails()
         if self.stats.n < MIN_REVOLUTIONS:
@@ -325,8 +326,9 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
 
     Parameters
     ----------
-    path : str or Path
-        The counter log.
+    path : str, Path, mapping of str to array-like, numpy structured array or pyarrow Table
+        The counter log: its file, or its rows in memory (see :func:`iter_log`; lines are
+        then the rows' indexes).
     n_faces : int
         Faces of the housing (pulses per revolution).
     keep : int
@@ -356,10 +358,11 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     reuse_freed_memory()  # the pass frees and reallocates MB-sized temporaries per chunk
     if on_kept is not None and not 0 < on_kept_at <= keep:
         raise ValueError(f"on_kept_at {on_kept_at}: must be in 1..keep ({keep})")
-    p = _Pass(n_faces, keep, correct, path)
+    name = source_name(path)
+    p = _Pass(n_faces, keep, correct, name)
     p.stats.on_kept, p.stats.on_kept_at = on_kept, on_kept_at
     for ch in iter_log(path, block_bytes, columns):
         p.feed(ch)
         if on_bytes is not None:
             on_bytes(block_bytes)
-    return p.finish(path)
+    return p.finish(name)

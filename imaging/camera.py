@@ -98,9 +98,11 @@ class CameraModel:
     per_view_rms_px : dict or None
         RMS reprojection error of each view [px].
     u_formal : dict or None
-        OpenCV's formal standard uncertainty per parameter (same units as ``u``).
+        OpenCV's formal standard uncertainty per parameter (fx, fy, cx, cy [px]; k1, ...
+        dimensionless).
     u_jackknife : dict or None
-        Delete-one-view jackknife standard uncertainty per parameter (same units as ``u``);
+        Delete-one-view jackknife standard uncertainty per parameter (fx, fy, cx, cy [px];
+        k1, ... dimensionless);
         None with fewer than :data:`JACKKNIFE_MIN_VIEWS` views.
     """
 
@@ -193,7 +195,21 @@ class CameraModel:
 
 
 def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
-    """Sub-pixel inner corners of a chessboard (cols x rows inner corners), or None."""
+    """Sub-pixel inner corners of a chessboard (cols x rows inner corners), or None.
+
+    Parameters
+    ----------
+    image : ndarray
+        Grayscale image [DN] (any depth: scaled to 8 bits for the search).
+    pattern : tuple of int
+        Inner corners per row and per column (cols, rows).
+
+    Returns
+    -------
+    ndarray or None
+        (cols x rows, 2) corners (x, y) [px] in OpenCV's order; None when the board is not
+        found.
+    """
     img8 = image if image.dtype == np.uint8 else cv2.normalize(
         image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     ok, corners = cv2.findChessboardCorners(img8, pattern)

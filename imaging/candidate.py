@@ -24,7 +24,27 @@ class MarkCandidate:
 
     ``fused``: (t [px], separation [px]) where the line is seen to be two grooves that part
     on either side of it (two marks crossing at a shallow angle, fused into one ridge along
-    their bisector; :func:`imaging.crossing.fused_crossing`); None: one groove."""
+    their bisector; :func:`imaging.crossing.fused_crossing`); None: one groove.
+
+    Attributes
+    ----------
+    angle_rad : float
+        Direction of the line, (-pi/2, pi/2] [rad] (x right, y up).
+    offset_px : float
+        Signed distance of the line from the image centre [px].
+    t_start_px, t_end_px : float
+        Extent along the line [px].
+    dark : bool
+        A groove darker than the surface.
+    thickness_px : float
+        Width of the ridge response [px].
+    strength : float
+        Contrast x length (ranks the candidates).
+    contrast : float
+        Mean ridge contrast, in units of the response noise — dimensionless.
+    fused : tuple of float or None
+        (t [px], separation [px]) of two fused grooves, None for one groove.
+    """
 
     angle_rad: float
     offset_px: float
@@ -42,29 +62,39 @@ class MarkCandidate:
 
 
 def line_frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
-    """Unit direction u and normal n of a line at ``angle_rad`` in (x right, y down) pixels."""
+    """Unit direction u and normal n of a line at ``angle_rad`` in (x right, y down) pixels.
+
+    Parameters
+    ----------
+    angle_rad : float
+        The line's direction [rad].
+
+    Returns
+    -------
+    u, n : ndarray
+        Unit vectors (2,) along and across the line (dimensionless).
+    """
     return (np.array([np.cos(angle_rad), -np.sin(angle_rad)]),
             np.array([np.sin(angle_rad), np.cos(angle_rad)]))
 
 
 def wrap_angle(angle_rad: float) -> float:
-    """Wrap a line direction to (-pi/2, pi/2]."""
+    """Wrap a line direction to (-pi/2, pi/2].
+
+    Parameters
+    ----------
+    angle_rad : float
+        A line's direction [rad].
+
+    Returns
+    -------
+    float
+        The same line's direction in (-pi/2, pi/2] [rad].
+    """
     a = float((angle_rad + np.pi / 2) % np.pi - np.pi / 2)
     # np.isclose(a, -pi/2, atol=0) written out: the scalar test is ~50x cheaper, and this
     # runs in every line fit.
     return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
-
-
-def same_line(a1: float, d1: float, a2: float, d2: float, tol_angle: float,
-              tol_offset: float) -> bool:
-    """Whether two lines (angle [rad], offset [px]) coincide within tolerances.
-
-    Across the +-90 deg wrap the normal flips, and with it the sign of the offset.
-    """
-    if abs(wrap_angle(a1 - a2)) >= tol_angle:
-        return False
-    flipped = abs(a1 - a2) > np.pi / 2
-    return abs(d1 - (-d2 if flipped else d2)) < tol_offset
 
 
 Roi = tuple[int, int, int, int]
@@ -72,7 +102,25 @@ Roi = tuple[int, int, int, int]
 
 def check_roi(values: object, where: str = "roi") -> Roi:
     """A region of interest (x, y, w, h) [px] from 4 numbers, or an ImageInputError naming
-    ``where``: x = column and y = row of the top-left corner, w x h at least 16 x 16 px."""
+    ``where``: x = column and y = row of the top-left corner, w x h at least 16 x 16 px.
+
+    Parameters
+    ----------
+    values : object
+        Four whole numbers (x, y, w, h) [px].
+    where : str
+        The flag or key it came from (``--roi``, ``[images] roi``), for the message.
+
+    Returns
+    -------
+    Roi
+        (x, y, w, h) [px].
+
+    Raises
+    ------
+    ImageInputError
+        Not four whole numbers, a negative corner, or smaller than 16 x 16 px.
+    """
     try:
         parts = [float(v) for v in values]  # type: ignore[union-attr]
     except (TypeError, ValueError):

@@ -18,10 +18,11 @@ from imaging.candidate import MarkCandidate, _dedupe, _drop_fused, line_frame, w
 from imaging.crossing import double_groove, fused_crossing
 
 
-def _across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
+def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Profiles across a candidate at ``n_along`` places, nearest-pixel sampled at 1 px steps
-    (NaN off the image and where clipped at 0 or ``top``): (values (n_along, E), e, t [px])."""
+    (NaN off the image and where clipped at 0 or ``top``): (values (n_along, E), e, t [px]).
+    Also used by :mod:`imaging.crossmask` (where another mark crosses this one)."""
     h, w = image.shape
     u, n = line_frame(c.angle_rad)
     e = np.arange(-reach, reach + 1, dtype=float)
@@ -99,7 +100,7 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: fl
     """
     reach = int(np.ceil(c.thickness_px + 8 + 3 * f))
     half = max(1.0, c.thickness_px / 2 + 1)
-    vals, e, t = _across(image, c, reach, n_along, top)
+    vals, e, t = across(image, c, reach, n_along, top)
     search = half + 1 + 2 * f
     pos, contrast = _peak(vals, e, c.dark, half, search)
     m = n_along // 2
@@ -140,7 +141,7 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     """
     half = max(1.0, c.thickness_px / 2 + 1)
     n_along = int(np.clip(c.length_px, 16, 2000))
-    vals, e, _ = _across(image, c, int(np.ceil(reach + half)), n_along, top)
+    vals, e, _ = across(image, c, int(np.ceil(reach + half)), n_along, top)
     cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
     med = _column_median(vals)  # one median profile for both uses (each column's own)
     prof = np.where(cols, med[0], np.nan)
@@ -194,7 +195,7 @@ def _fused(image: np.ndarray, c: MarkCandidate, noise: float, top: float,
     median profiles across it over ``block_px`` stretches, each tested for two grooves."""
     half = max(2.5, c.thickness_px)
     n_along = max(int(c.length_px), 2 * block_px)
-    vals, e, t = _across(image, c, int(np.ceil(c.thickness_px + 18)), n_along, top)
+    vals, e, t = across(image, c, int(np.ceil(c.thickness_px + 18)), n_along, top)
     sigma = 1.25 * noise / np.sqrt(block_px)
     profs, ts = block_medians(vals, t, block_px)
     return fused_crossing([(tk, double_groove(p, e, c.dark, sigma, half))
@@ -203,7 +204,7 @@ def _fused(image: np.ndarray, c: MarkCandidate, noise: float, top: float,
 
 def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Median profiles over consecutive blocks of ``block_px`` rows of :func:`_across`
+    """Median profiles over consecutive blocks of ``block_px`` rows of :func:`across`
     values (NaN where a column has no value), and each block's mean position t [px]."""
     nb = len(t) // block_px
     v = vals[:nb * block_px].reshape(nb, block_px, -1)

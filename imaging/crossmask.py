@@ -11,8 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from imaging.candidate import MarkCandidate, line_frame
-from imaging.confirm import _across as across
-from imaging.confirm import block_medians
+from imaging.confirm import across, block_medians
 from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
 from imaging.errors import ImageInputError
 from imaging.profile import Centres, ProfileFit, centres_half

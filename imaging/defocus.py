@@ -30,7 +30,21 @@ class BlurTrend:
     """The blur along one mark: ``slope`` [px of blur per px along the mark] with standard
     uncertainty ``slope_u``, ``p_value`` of no slope, ``found`` (p below :data:`ALPHA`),
     ``ends_px``: the blur at the measured ends [px] (the band's blur plus the fitted trend,
-    linearised: indicative)."""
+    linearised: indicative).
+
+    Attributes
+    ----------
+    slope : float
+        Change of the blur along the mark [px of blur per px].
+    slope_u : float
+        Its standard uncertainty [px/px].
+    p_value : float
+        Of no slope.
+    found : bool
+        p below :data:`ALPHA`.
+    ends_px : tuple of float
+        The blur at the two measured ends [px].
+    """
 
     slope: float
     slope_u: float
@@ -66,7 +80,20 @@ def blur_trend(t: np.ndarray, dev: np.ndarray, dev_u: np.ndarray, blur_px: float
 
 
 def defocus_note(where: str, trend: BlurTrend | None) -> str | None:
-    """The line that names a defocus gradient (None when there is none)."""
+    """The line that names a defocus gradient (None when there is none).
+
+    Parameters
+    ----------
+    where : str
+        The mark, as messages name it (``image.png: mark 1``).
+    trend : BlurTrend or None
+        The blur's trend along it.
+
+    Returns
+    -------
+    str or None
+        The note; None when no gradient was found.
+    """
     if trend is None or not trend.found:
         return None
     a, b = trend.ends_px

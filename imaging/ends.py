@@ -56,7 +56,15 @@ class GrooveEnds:
     """Both ends of a groove along its line [px]: ``start_px``/``end_px`` the visible ends
     (half-depth points, past any speck the groove is seen beyond), ``start_min_px``/
     ``end_max_px`` how far each could reach under an obstruction touching it (equal to the
-    visible end when nothing covers it)."""
+    visible end when nothing covers it).
+
+    Attributes
+    ----------
+    start_px, end_px : float
+        The visible ends along the line [px].
+    start_min_px, end_max_px : float
+        How far each end could reach under an obstruction touching it [px].
+    """
 
     start_px: float
     end_px: float

@@ -72,6 +72,15 @@ class Detection:
     to ``max_marks``); ``families``: index tuples into ``marks``, one per family, ordered
     across the lines; ``unreported``: lines found but left out (beyond ``max_marks``, or a
     family's lines shorter than an explicit ``min_length_px``).
+
+    Attributes
+    ----------
+    marks : list of MarkCandidate
+        The lines reported.
+    families : tuple of tuple of int
+        Indexes into ``marks``, one tuple per family.
+    unreported : tuple of MarkCandidate
+        Lines found but left out.
     """
 
     marks: list[MarkCandidate]
@@ -330,6 +339,26 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
 
     Parameters as :func:`~imaging.detect.detect_marks`; ``families``: False finds lines one
     by one only (no second pass; every line under the ``max_marks`` cap).
+
+    Parameters
+    ----------
+    image : ndarray
+        Grayscale image [DN].
+    min_length_px : float, optional
+        Shortest line reported [px] (default: the detector's own).
+    max_marks : int
+        Most lines reported (family members not counted against it).
+    roi : Roi, optional
+        (x, y, w, h) [px] searched.
+    top : float, optional
+        The image's full scale [DN] (else from the image).
+    families : bool
+        Complete families of lines (a second pass).
+
+    Returns
+    -------
+    Detection
+        The lines, their families and those left out.
     """
     search = detect_lines_once(image, min_length_px, roi=roi, top=top)
     found = list(search.marks)

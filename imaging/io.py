@@ -38,7 +38,15 @@ ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "turned 180°",
 @dataclass(frozen=True)
 class ImageRead:
     """An image as read: ``pixels`` [DN] (float64, 2-D) and ``notes``, one sentence per
-    thing the reader did to the stored data (orientation applied, signed data offset)."""
+    thing the reader did to the stored data (orientation applied, signed data offset).
+
+    Attributes
+    ----------
+    pixels : ndarray
+        Grayscale pixels [DN], float64, 2-D.
+    notes : tuple of str
+        What was done to the stored data.
+    """
 
     pixels: np.ndarray
     notes: tuple[str, ...] = ()
@@ -59,7 +67,13 @@ def max_pixels() -> int:
 
 
 def set_max_pixels(n: int | None) -> None:
-    """Set the pixel budget for this process and the ones it starts (None: the default)."""
+    """Set the pixel budget for this process and the ones it starts (None: the default).
+
+    Parameters
+    ----------
+    n : int or None
+        Largest image [pixels]; None: :data:`DEFAULT_MAX_PIXELS`.
+    """
     if n is None:
         os.environ.pop(MAX_PIXELS_ENV, None)
     else:
@@ -72,13 +86,41 @@ def read_image(path: str | Path) -> np.ndarray:
     Colour images are converted with OpenCV's luminance weights. Raises
     :class:`ImageInputError` naming the file and the reason for anything unreadable. See
     :func:`read_image_notes` for what was done to the stored data.
+
+    Parameters
+    ----------
+    path : str or Path
+        The image file.
+
+    Returns
+    -------
+    ndarray
+        Grayscale pixels [DN], float64, 2-D.
     """
     return read_image_notes(path).pixels
 
 
 def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
     """:func:`read_image` with the notes of what was done (orientation, signed offset).
-    ``budget``: largest image [pixels] (default :func:`max_pixels`)."""
+    ``budget``: largest image [pixels] (default :func:`max_pixels`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The image file.
+    budget : int, optional
+        Largest image [pixels].
+
+    Returns
+    -------
+    ImageRead
+        The pixels [DN] and the notes.
+
+    Raises
+    ------
+    ImageInputError
+        Naming the file and why it cannot be read (or is beyond the budget).
+    """
     p = Path(path)
     if not p.exists():
         raise ImageInputError(f"{p}: no such file")

@@ -71,7 +71,17 @@ class JpegBlocks:
     """A decoded JPEG's encoder as the pixels show it: ``quality`` of the IJG table whose
     steps the coefficients follow (None: only flattened blocks show it, quality unknown),
     ``concentration`` (the smallest R over the tested coefficients at that quality),
-    ``blocks`` used."""
+    ``blocks`` used.
+
+    Attributes
+    ----------
+    quality : int or None
+        IJG quality 1-100 the coefficients follow; None: unknown.
+    concentration : float
+        Smallest R over the tested coefficients at that quality — dimensionless.
+    blocks : int
+        8x8 blocks used.
+    """
 
     quality: int | None
     concentration: float
@@ -145,7 +155,22 @@ def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
 
 
 def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
-    """The line that names JPEG blocks on a mark and what they add to its u."""
+    """The line that names JPEG blocks on a mark and what they add to its u.
+
+    Parameters
+    ----------
+    where : str
+        The mark, as messages name it.
+    jb : JpegBlocks
+        The encoder found.
+    u_arcsec : float
+        What the blocks add to the angle's u [″] (text: an edge).
+
+    Returns
+    -------
+    str
+        The note.
+    """
     q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
          "flattened blocks, quality unknown: the worst of 10-90 carried")
     return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "

@@ -38,7 +38,23 @@ def _distort_norm(x: np.ndarray, y: np.ndarray, lam: np.ndarray
 
 def distort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
     """Ideal points (relative to the principal point) -> sensor points (relative to the image
-    centre) [px]; ``lam`` ordered as :data:`PARAMS`, ``scale`` = R [px]."""
+    centre) [px]; ``lam`` ordered as :data:`PARAMS`, ``scale`` = R [px].
+
+    Parameters
+    ----------
+    q : ndarray
+        (N, 2) ideal points [px].
+    lam : sequence of float
+        The lens vector (k1, k2, p1, p2 at the half-diagonal, dimensionless; aspect
+        fy/fx - 1; principal point cx, cy [px]).
+    scale : float
+        R, the half-diagonal the coefficients are expressed at [px].
+
+    Returns
+    -------
+    ndarray
+        (N, 2) sensor points [px].
+    """
     lam = np.asarray(lam, float)
     xd, yd = _distort_norm(q[:, 0] / scale, q[:, 1] / scale, lam)
     return np.column_stack([scale * xd + lam[5], (1 + lam[4]) * scale * yd + lam[6]])
@@ -84,7 +100,22 @@ def _undistort_norm(q: np.ndarray, lam: np.ndarray, scale: float
 def undistort_points(q: np.ndarray, lam: Sequence[float], scale: float) -> np.ndarray:
     """Sensor points (relative to the image centre) -> ideal points (relative to the principal
     point) [px]: Newton's method on both coordinates with the analytic Jacobian (the
-    tangential terms leave no closed-form inverse). Non-finite where the lens folds."""
+    tangential terms leave no closed-form inverse). Non-finite where the lens folds.
+
+    Parameters
+    ----------
+    q : ndarray
+        (N, 2) sensor points [px].
+    lam : sequence of float
+        The lens vector, as :func:`distort_points`.
+    scale : float
+        R [px].
+
+    Returns
+    -------
+    ndarray
+        (N, 2) ideal points [px] (NaN where the lens folds).
+    """
     x, y = _undistort_norm(np.asarray(q, float), np.asarray(lam, float), scale)
     return np.column_stack([x, y]) * scale
 
@@ -134,7 +165,22 @@ def undistortion_jacobian(q: np.ndarray, lam: Sequence[float], scale: float,
 def opencv_to_lens(camera_matrix: np.ndarray, dist: Sequence[float],
                    image_size: tuple[int, int]) -> np.ndarray:
     """An OpenCV camera (K, k1 k2 p1 p2 [k3]) as this module's lens vector (k3 dropped: the
-    caller adds its effect if it matters). ``image_size`` (width, height) [px]."""
+    caller adds its effect if it matters). ``image_size`` (width, height) [px].
+
+    Parameters
+    ----------
+    camera_matrix : ndarray
+        OpenCV's 3 x 3 K [px].
+    dist : sequence of float
+        OpenCV's k1, k2, p1, p2[, k3] (normalised coordinates).
+    image_size : tuple of int
+        (width, height) [px].
+
+    Returns
+    -------
+    ndarray
+        The lens vector ordered as :data:`PARAMS` (coefficients at the half-diagonal).
+    """
     w, h = image_size
     scale = float(np.hypot(w - 1, h - 1) / 2)
     fx, fy = float(camera_matrix[0, 0]), float(camera_matrix[1, 1])

@@ -35,6 +35,31 @@ class LineFit:
     ``used``: mask over the input points; ``chi2``/``dof``; ``z``: the residuals whitened
     by the points' correlation and divided by their sigma (independent N(0, 1) under the
     model; residual / sigma when the points are independent).
+
+    Attributes
+    ----------
+    angle_rad : float
+        Direction of the line [rad].
+    offset_px : float
+        Signed distance from the origin [px].
+    cov : ndarray
+        Covariance of (angle [rad], offset [px], beta...).
+    beta : ndarray
+        Coefficients of the extra columns (their units over px).
+    residuals_px : ndarray
+        Perpendicular residual of each used point [px].
+    t_px : ndarray
+        Position of each used point along the line [px].
+    sigma_px : ndarray
+        Standard uncertainty of each used point [px].
+    used : ndarray
+        Boolean mask over the input points.
+    chi2 : float
+        Chi-square of the fit.
+    dof : int
+        Its degrees of freedom.
+    z : ndarray or None
+        Whitened, normalised residuals (dimensionless).
     """
 
     angle_rad: float
@@ -114,6 +139,13 @@ def fit_line(points: np.ndarray, sigma: np.ndarray, extra: np.ndarray | None = N
     chol : (N, N) array, optional
         Lower Cholesky factor of the points' correlation matrix (generalised least squares);
         every point is then kept (``reject_sigma`` must be None).
+    max_rounds : int
+        Most rounds of rejection and refit.
+
+    Returns
+    -------
+    LineFit
+        The line, its covariance and the residuals.
     """
     q = np.asarray(points, float)
     sigma = np.asarray(sigma, float)

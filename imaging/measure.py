@@ -63,6 +63,43 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
+
+    Attributes
+    ----------
+    candidate : MarkCandidate
+        The detection it started from.
+    profile : ProfileFit
+        The band fit of the groove.
+    centres : Centres
+        The per-segment centres.
+    points : ndarray
+        (N, 2) centres used [px].
+    sigma : ndarray
+        (N,) their standard uncertainty across the line [px].
+    regressors : dict of str to ndarray
+        Per-point regressors of the residual loop (units above).
+    line : LineFit
+        The straight-line fit.
+    image_shape : tuple of int
+        (rows, columns) of the image [px].
+    n_rejected : int
+        Centres rejected as outliers.
+    chol : ndarray or None
+        Cholesky factor of the centres' correlation (None: independent).
+    extent_px : tuple of float
+        Where the groove ends along the profile's line [px].
+    blur : BlurTrend or None
+        The blur's trend along the mark.
+    jpeg : JpegBlocks or None
+        The image's JPEG encoder.
+    jpeg_u_rad : float
+        What its blocks add to the angle's u [rad].
+    ends_px : ndarray or None
+        (2, 2) ends [px].
+    crossings : tuple of tuple of int
+        (other candidate, px of this mark left out) per crossing.
+    background_u_rad : float
+        What an oriented background's removal may leave on the angle [rad].
     """
 
     candidate: MarkCandidate
@@ -139,7 +176,39 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     ``offsets_var``: variances of the column and row offsets removed from the image
     (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
     candidate) of the other marks, whose grooves are kept out of this one's fit where they
-    cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused."""
+    cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused.
+
+    Parameters
+    ----------
+    image : ndarray
+        Grayscale image [DN].
+    cand : MarkCandidate
+        The detected mark.
+    camera : CameraModel, optional
+        A camera model: the centres are undistorted with it.
+    where : str
+        The image, as messages name it.
+    top : float, optional
+        Full scale [DN].
+    neighbours_px : sequence of float
+        Signed distances of other lines beside it [px].
+    jpeg : JpegBlocks, optional
+        The image's JPEG encoder.
+    offsets_var : tuple of ndarray or None
+        Variances of removed column and row offsets [DN^2].
+    crossing : sequence of (int, MarkCandidate)
+        The other marks.
+
+    Returns
+    -------
+    MarkMeasurement
+        The centres, their covariance and the line fit.
+
+    Raises
+    ------
+    ImageInputError
+        A mark that cannot be measured (naming ``where`` and why).
+    """
     if cand.fused is not None:
         raise fused_error(cand, where, image.shape)
     top = full_scale(image) if top is None else top
@@ -219,7 +288,22 @@ def ends_on_line(pf: ProfileFit, extent: tuple[float, float], line: LineFit,
 
 
 def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
-    """Points ``p`` (N, 2) moved across onto the line (angle, offset) [px]."""
+    """Points ``p`` (N, 2) moved across onto the line (angle, offset) [px].
+
+    Parameters
+    ----------
+    p : ndarray
+        (N, 2) points [px].
+    angle_rad : float
+        The line's direction [rad].
+    offset_px : float
+        Its signed distance from the origin [px].
+
+    Returns
+    -------
+    ndarray
+        (N, 2) points on the line [px].
+    """
     u, n = line_frame(angle_rad)
     return offset_px * n + np.outer(p @ u, u)
 
@@ -272,7 +356,23 @@ class MeasuredFrame:
     ``max_marks``; a line the measurement finds shorter than the shortest mark is no mark
     and not counted); ``notes``: what the frame's background did (stripes found, removed or
     carried: :mod:`imaging.stripes`, :mod:`imaging.oriented`), one line each; ``stripes``:
-    the row/column findings; ``oriented``: the oriented periodic background's."""
+    the row/column findings; ``oriented``: the oriented periodic background's.
+
+    Attributes
+    ----------
+    items : list of MarkMeasurement or ImageInputError
+        Per reported line.
+    families : tuple of tuple of int
+        Indexes into ``items``, one tuple per family.
+    unreported : int
+        Lines found but not reported.
+    notes : tuple of str
+        What the background did.
+    stripes : tuple of Stripes
+        The row / column stripes' findings.
+    oriented : OrientedStripes or None
+        The oriented periodic background's.
+    """
 
     items: list[MarkMeasurement | ImageInputError]
     families: tuple[tuple[int, ...], ...] = ()
@@ -290,6 +390,28 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     With ``expect_one`` the image must hold a single mark: two of similar strength raise.
     ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search (see detect_marks).
+
+    Parameters
+    ----------
+    image : ndarray
+        Grayscale image [DN].
+    camera : CameraModel, optional
+        A camera model (centres undistorted).
+    where : str
+        The image, as messages name it.
+    max_marks : int
+        Most marks measured.
+    min_length_px : float, optional
+        Shortest mark [px].
+    expect_one : bool
+        The image must hold one mark.
+    roi : Roi, optional
+        (x, y, w, h) [px] searched.
+
+    Returns
+    -------
+    list of MarkMeasurement or ImageInputError
+        Per mark, its measurement or why it could not be measured.
     """
     return measure_frame(image, camera, where, max_marks, min_length_px, expect_one,
                          roi).items
@@ -302,6 +424,16 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     Every member of a family is measured (whatever ``max_marks``), and kept whatever its
     length: the family, not ``min_length_px``, says it is a line.
+
+    Parameters
+    ----------
+    image, camera, where, max_marks, min_length_px, expect_one, roi
+        As :func:`measure_marks`.
+
+    Returns
+    -------
+    MeasuredFrame
+        The measurements, the families and what the background did.
     """
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):

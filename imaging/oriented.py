@@ -62,7 +62,23 @@ class Wave:
     with standard uncertainty ``amplitude_u``, ``period_px`` [px], ``angle_rad`` the
     stripes' direction (along the crests, the marks' angle convention: x right, y up,
     (-pi/2, pi/2]), wave vector ``k`` [rad/px] (x, y image), cos/sin amplitudes ``ab``, and
-    ``ratio`` (peak power over the spectrum about it)."""
+    ``ratio`` (peak power over the spectrum about it).
+
+    Attributes
+    ----------
+    amplitude, amplitude_u : float
+        Relative amplitude and its u — dimensionless.
+    period_px : float
+        Period [px].
+    angle_rad : float
+        Direction of the crests [rad].
+    k : tuple of float
+        Wave vector (x, y) [rad/px].
+    ab : tuple of float
+        Cosine and sine amplitudes (relative).
+    ratio : float
+        Peak power over the spectrum about it — dimensionless.
+    """
 
     amplitude: float
     amplitude_u: float
@@ -84,7 +100,21 @@ class OrientedStripes:
     """What the test found: the waves removed (empty: none), the largest ratio seen with the
     threshold it was held against, and ``residual``: the relative amplitude of each wave left
     after the removal (fitted again at its frequency, plus 2 of its u) over its amplitude —
-    the fraction of the pattern's effect on an angle that the removal may leave."""
+    the fraction of the pattern's effect on an angle that the removal may leave.
+
+    Attributes
+    ----------
+    waves : tuple of Wave
+        The waves removed.
+    ratio : float
+        The largest peak ratio seen — dimensionless.
+    threshold : float
+        The ratio it was held against.
+    residual : float
+        Fraction of the pattern's effect the removal may leave — dimensionless.
+    reason : str
+        Why nothing was removed, when so.
+    """
 
     waves: tuple[Wave, ...]
     ratio: float

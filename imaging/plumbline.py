@@ -25,6 +25,17 @@ class PlumbLineFit:
 
     ``rms_before_px``/``rms_after_px``: RMS perpendicular residual of per-line straight-line
     fits to the raw and to the undistorted points [px].
+
+    Attributes
+    ----------
+    k, k_u : ndarray
+        k1[, k2] at scale R and their u — dimensionless.
+    scale_px : float
+        R [px].
+    rms_before_px, rms_after_px : float
+        Straightness before and after [px].
+    n_lines, n_points : int
+        Lines and points used.
     """
 
     k: np.ndarray
@@ -43,7 +54,22 @@ class PlumbLineFit:
 
 def undistort(q: np.ndarray, k: Sequence[float], scale: float) -> np.ndarray:
     """Invert x_d = x_u (1 + k1 (r_u/R)^2 + k2 (r_u/R)^4 ...) by Newton iteration on the
-    radius (points relative to the principal point, R = ``scale``)."""
+    radius (points relative to the principal point, R = ``scale``).
+
+    Parameters
+    ----------
+    q : ndarray
+        (N, 2) distorted points [px].
+    k : sequence of float
+        k1[, k2, ...] at R — dimensionless.
+    scale : float
+        R [px].
+
+    Returns
+    -------
+    ndarray
+        (N, 2) undistorted points [px].
+    """
     rd = np.linalg.norm(q, axis=1) / scale
     ru = rd.copy()
     for _ in range(25):
@@ -66,6 +92,22 @@ def cross_magnification(q: np.ndarray, k: Sequence[float], scale: float,
     A centre's standard uncertainty across its line is multiplied by this when the centres
     are undistorted: leaving it as it was would read points pulled together by a strong
     fitted k1 as points that fit better, and make the fit prefer k1 for that alone.
+
+    Parameters
+    ----------
+    q : ndarray
+        (N, 2) distorted points [px].
+    k : sequence of float
+        k1[, k2] at R.
+    scale : float
+        R [px].
+    normal : ndarray
+        (2,) or (N, 2) unit normal(s) of the line.
+
+    Returns
+    -------
+    ndarray
+        (N,) magnification along the normal — dimensionless.
     """
     q = np.asarray(q, float)
     qu = undistort(q, k, scale)
@@ -100,6 +142,11 @@ def plumb_line(lines: Sequence[np.ndarray], scale_px: float, n_coeffs: int = 1,
         1 (k1) or 2 (k1, k2).
     centre : (2,) array, optional
         Principal point relative to the coordinates' origin [px] (default: origin).
+
+    Returns
+    -------
+    PlumbLineFit
+        k with u and the straightness before and after [px].
     """
     c = np.zeros(2) if centre is None else np.asarray(centre, float)
     lines = [np.asarray(q, float) - c for q in lines if len(q) >= 3]
@@ -128,6 +175,19 @@ def plumb_line(lines: Sequence[np.ndarray], scale_px: float, n_coeffs: int = 1,
 
 
 def chessboard_lines(corners: np.ndarray, pattern: tuple[int, int]) -> list[np.ndarray]:
-    """Rows and columns of chessboard inner corners (cols x rows) as point sets."""
+    """Rows and columns of chessboard inner corners (cols x rows) as point sets.
+
+    Parameters
+    ----------
+    corners : ndarray
+        (cols x rows, 2) corners [px] (:func:`imaging.camera.find_chessboard`).
+    pattern : tuple of int
+        (cols, rows).
+
+    Returns
+    -------
+    list of ndarray
+        One (n, 2) array [px] per row, then per column.
+    """
     grid = corners.reshape(pattern[1], pattern[0], 2)
     return [grid[i] for i in range(pattern[1])] + [grid[:, j] for j in range(pattern[0])]

@@ -131,7 +131,31 @@ def _interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
 
 @dataclass(frozen=True)
 class ProfileFit:
-    """Band fit of one mark. Lengths [px], angle [rad], levels [DN]."""
+    """Band fit of one mark. Lengths [px], angle [rad], levels [DN].
+
+    Attributes
+    ----------
+    angle_rad : float
+        Direction of the band's line [rad].
+    offset_px : float
+        Its signed distance from the image centre [px].
+    width_px : float
+        Groove width [px].
+    blur_px : float
+        PSF sigma [px].
+    contrast_dn : float
+        Groove depth [DN] (negative: dark).
+    background_dn : float
+        Surface level [DN].
+    slope_across_dn_per_px : float
+        Background slope across the mark [DN/px].
+    noise_var : tuple of float
+        (v0, v1): pixel noise variance = v0 + v1 x level [DN^2, DN].
+    t_start_px, t_end_px : float
+        Extent along the line [px].
+    full_scale_dn : float
+        The image's full scale [DN].
+    """
 
     angle_rad: float
     offset_px: float
@@ -184,6 +208,29 @@ class Centres:
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
     ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
     (None: none removed).
+
+    Attributes
+    ----------
+    xy : ndarray
+        (N, 2) centres [px].
+    sigma : ndarray
+        (N,) their u across the line [px].
+    t : ndarray
+        (N,) positions along the line [px].
+    contrast : ndarray
+        (N,) contrast A_k [DN].
+    cross_slope : ndarray
+        (N,) background slope / contrast [1/px].
+    chi2_red : ndarray
+        (N,) pixel chi2/dof per segment.
+    ok : ndarray
+        (N,) usable segments (bool).
+    texture : TextureModel or None
+        The texture's correlation model.
+    blur_dev, blur_dev_u : ndarray or None
+        Per-segment blur minus the band's and its u [px].
+    offsets_cov : ndarray or None
+        Covariance from removed stripes' offsets [px^2].
     """
 
     xy: np.ndarray

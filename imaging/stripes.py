@@ -56,6 +56,23 @@ class Stripes:
     which the centres' covariance carries (:func:`imaging.profile.sample_centres`): a mark
     leaves its own columns few background rows, and their offsets' errors are shared by
     every segment on them.
+
+    Attributes
+    ----------
+    axis : str
+        'column' or 'row'.
+    p_value : float
+        Of no stripes.
+    found : bool
+        p below :data:`ALPHA`.
+    rms_dn : float
+        The pattern's standard deviation [DN].
+    offsets_dn : ndarray or None
+        Offsets subtracted [DN].
+    reason : str
+        Why none were subtracted.
+    offsets_var : ndarray or None
+        Each removed offset's variance [DN^2].
     """
 
     axis: str

@@ -349,6 +349,18 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
     Fisher information over pixels for (angle about the mark's middle, offset, contrast,
     surface exposure, width, blur), with per-pixel variance shot + read + ADC quantisation.
     Clutter (texture, dust, scratches) is left out: it is not noise.
+
+    Parameters
+    ----------
+    spec : ImageSpec
+        The image.
+    index : int
+        Which of its marks.
+
+    Returns
+    -------
+    tuple of float
+        The bounds on the angle [rad] and on the offset [px] (standard deviations).
     """
     m = spec.marks[index]
     margin = 7 * _max_blur(spec) + 4
@@ -398,7 +410,25 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
 # ----------------------------------------------------------------------------- public
 
 def render_marks(spec: ImageSpec, with_crlb: bool = True) -> SynthImage:
-    """Render a synthetic image and its truth."""
+    """Render a synthetic image and its truth.
+
+    Parameters
+    ----------
+    spec : ImageSpec
+        The image to render.
+    with_crlb : bool
+        Compute each mark's Cramér–Rao bounds (else NaN; they cost a second render).
+
+    Returns
+    -------
+    SynthImage
+        The digitised image [DN], its truth and the noise-free signal [e-].
+
+    Raises
+    ------
+    ValueError
+        ``bits`` not 8, 12 or 16.
+    """
     if spec.bits not in (8, 12, 16):
         raise ValueError("bits must be 8, 12 or 16")
     rng = np.random.default_rng(spec.seed)
@@ -430,7 +460,24 @@ def render_marks(spec: ImageSpec, with_crlb: bool = True) -> SynthImage:
 
 def full_well_for_snr(snr: float, contrast: float, exposure: float = 0.5,
                       read_noise_e: float = 10.0) -> float:
-    """Full well [e-] that gives a mark contrast / background noise ratio of ``snr``."""
+    """Full well [e-] that gives a mark contrast / background noise ratio of ``snr``.
+
+    Parameters
+    ----------
+    snr : float
+        The wanted contrast / noise ratio — dimensionless.
+    contrast : float
+        The mark's relative contrast (its sign does not matter) — dimensionless.
+    exposure : float
+        The bare surface's signal as a fraction of the full well.
+    read_noise_e : float
+        Read noise [e-].
+
+    Returns
+    -------
+    float
+        The full well [e-].
+    """
     # snr = |c| B / sqrt(B + r^2)  ->  solve the quadratic for B (background electrons).
     k = (snr / abs(contrast)) ** 2
     b = (k + np.sqrt(k * k + 4 * k * read_noise_e**2)) / 2
@@ -438,7 +485,27 @@ def full_well_for_snr(snr: float, contrast: float, exposure: float = 0.5,
 
 
 def write_image(path: str | Path, image: np.ndarray) -> Path:
-    """Write an 8/16-bit grayscale image as PNG or TIFF (by suffix); never overwrite."""
+    """Write an 8/16-bit grayscale image as PNG or TIFF (by suffix); never overwrite.
+
+    Parameters
+    ----------
+    path : str or Path
+        A new file: ``.tif``/``.tiff`` for TIFF, else PNG.
+    image : ndarray
+        Grayscale pixels [DN], uint8 or uint16.
+
+    Returns
+    -------
+    Path
+        The file written.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists.
+    OSError
+        OpenCV could not write it.
+    """
     path = Path(path)
     if path.exists():
         raise FileExistsError(f"{path}: exists; synth never overwrites files")
@@ -455,7 +522,20 @@ def write_image(path: str | Path, image: np.ndarray) -> Path:
 
 
 def write_synth(sample: SynthImage, path: str | Path) -> tuple[Path, Path]:
-    """Write the image and ``<stem>.truth.json`` beside it."""
+    """Write the image and ``<stem>.truth.json`` beside it.
+
+    Parameters
+    ----------
+    sample : SynthImage
+        The rendered image.
+    path : str or Path
+        The image file (see :func:`write_image`).
+
+    Returns
+    -------
+    tuple of Path
+        The image and the truth file.
+    """
     p = write_image(path, sample.image)
     tp = p.with_suffix(".truth.json")
     tp.write_text(sample.truth.to_json())

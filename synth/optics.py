@@ -138,6 +138,17 @@ class CameraGeometry:
 
 
 def wrap_half_turn(angle_rad: float) -> float:
-    """Wrap a line direction to (-pi/2, pi/2]."""
+    """Wrap a line direction to (-pi/2, pi/2].
+
+    Parameters
+    ----------
+    angle_rad : float
+        A line's direction [rad].
+
+    Returns
+    -------
+    float
+        The same line's direction in (-pi/2, pi/2] [rad].
+    """
     a = (angle_rad + np.pi / 2) % np.pi - np.pi / 2
     return float(np.pi / 2 if a == -np.pi / 2 else a)

@@ -102,6 +102,68 @@ class ImageSpec:
     + ``stripes`` ``stripes_second`` sin(4 pi q / P + 2 phase), q the distance across the
     crests, which run at ``stripes_angle_rad`` (the marks' convention), P
     ``stripes_period_px``; ``stripes_phase`` [rad].
+
+    Attributes
+    ----------
+    marks : tuple of MarkSpec
+        The scribe marks in the scene.
+    width, height : int
+        Image size [px].
+    blur_px : float
+        Sigma of the optics' Gaussian PSF [px].
+    exposure : float
+        Bare surface's signal as a fraction of the full well — dimensionless.
+    full_well_e : float
+        Full well [e-] (the ADC's full scale).
+    read_noise_e : float
+        Read noise [e-] RMS.
+    bits : int
+        ADC bits: 8, 12 or 16.
+    supersample : int
+        Sub-samples per pixel side for the area integral of the groove.
+    texture : float
+        RMS of the machining streaks' relative reflectance — dimensionless (0: none).
+    texture_angle_rad : float
+        Direction of the streaks (the lay) [rad].
+    texture_scale_px : float
+        Correlation length of the streaks across the lay [px].
+    gradient : tuple of float
+        Illumination gradient (gx, gy): relative change from the centre to the right / bottom
+        edge — dimensionless.
+    vignetting : float
+        Relative fall-off of the illumination at the corners — dimensionless.
+    dust : int
+        Dust specks anywhere in the frame.
+    dust_on_mark : int
+        Dust specks placed on the marks.
+    scratches : int
+        Thin short scratches.
+    scratch_max_px : float
+        Longest scratch [px] (0: 15 % of the smaller side).
+    text : int
+        Printed labels of 2-4 numeral-like glyphs.
+    padding_px : int
+        Rows / columns of zeros along the frame edges [px].
+    camera : CameraGeometry
+        Distortion, roll, aspect and principal point of the camera.
+    seed : int
+        Seed of every random draw.
+    blur_gradient : tuple of float
+        Change of the PSF's sigma per px of image x / y from the centre [px/px].
+    column_fpn, row_fpn : float
+        RMS of the per-column / per-row offsets, relative to the bare surface's signal.
+    jpeg_quality : int
+        Baseline JPEG quality 1-100 of an 8-bit image (0: no JPEG).
+    stripes : float
+        Relative amplitude of the oriented stripes — dimensionless (0: none).
+    stripes_period_px : float
+        Their period P [px].
+    stripes_angle_rad : float
+        Direction of their crests [rad].
+    stripes_phase : float
+        Their phase [rad].
+    stripes_second : float
+        Relative amplitude of their second harmonic — dimensionless.
     """
 
     marks: tuple[MarkSpec, ...]
@@ -152,6 +214,29 @@ class MarkTruth:
     ``angle_rad``/``offset_px``: in the scene; ``image_angle_rad``/``image_offset_px``: the
     same line in the ideal (undistorted) pinhole image, i.e. after roll and non-square pixels
     (what a single image can reveal). ``crlb_angle_rad``: Cramér–Rao bound on the angle.
+
+    Attributes
+    ----------
+    angle_rad : float
+        Direction of the mark in the scene, wrapped to (-pi/2, pi/2] [rad].
+    offset_px : float
+        Signed distance of the line from the image centre in the scene [px].
+    image_angle_rad : float
+        Direction of the same line in the ideal pinhole image [rad].
+    image_offset_px : float
+        Its signed distance from the image centre there [px].
+    length_px, width_px : float
+        Length and width of the groove [px].
+    centre_xy_px : tuple of float
+        The mark's middle (x, y) relative to the image centre [px].
+    profile : str
+        Shape of the groove across it ('box', 'v', 'round').
+    contrast : float
+        Relative depth of the groove (negative: darker than the surface) — dimensionless.
+    crlb_angle_rad : float
+        Cramér–Rao bound on the angle [rad] (NaN when not computed).
+    crlb_offset_px : float
+        Cramér–Rao bound on the offset [px] (NaN when not computed).
     """
 
     angle_rad: float
@@ -169,6 +254,30 @@ class MarkTruth:
 
 @dataclass(frozen=True)
 class ImageTruth:
+    """Truth of a synthetic image (what ``<stem>.truth.json`` holds).
+
+    Attributes
+    ----------
+    width, height : int
+        Image size [px].
+    blur_px : float
+        Sigma of the PSF [px].
+    bits : int
+        ADC bits.
+    noise_dn_background : float
+        Noise of the bare surface (shot + read) [DN].
+    contrast_dn : tuple of float
+        Each mark's contrast [DN].
+    snr : tuple of float
+        Each mark's contrast / background noise — dimensionless.
+    marks : tuple of MarkTruth
+        Each mark's truth.
+    camera : dict
+        The camera geometry (:class:`CameraGeometry` as a dict).
+    seed : int
+        The image's seed.
+    """
+
     width: int
     height: int
     blur_px: float
@@ -186,6 +295,18 @@ class ImageTruth:
 
 @dataclass(frozen=True)
 class SynthImage:
+    """A rendered image with its truth.
+
+    Attributes
+    ----------
+    image : ndarray
+        The digitised image (height, width) [DN]: uint8 or uint16.
+    truth : ImageTruth
+        What it shows.
+    mean_e : ndarray
+        The noise-free expected signal per pixel [e-].
+    """
+
     image: np.ndarray
     truth: ImageTruth
     mean_e: np.ndarray

@@ -73,6 +73,11 @@ class CalibrationRun:
     units: str
     warnings: tuple[str, ...]
 
+    @property
+    def ok(self) -> bool:
+        """The calibration is a measurement and the check poses (if any) agree with it."""
+        return self.cal.ok and (self.checked is None or self.checked.ok)
+
 
 def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                     signs: tuple[float, float, float] | None, settings: StaticSettings,

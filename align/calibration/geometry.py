@@ -14,18 +14,19 @@ from __future__ import annotations
 import numpy as np
 
 from align.calibration.units import UNIT_SCALE_REFUSE
+from axisbase.units import DEG
 
-HEMISPHERE_DEG = 90.0
-"""Poses within a cone of this half-angle [deg] or less see no axis both up and down."""
-SURROUND_DEG = 60.0
-"""Below this estimated half-angle [deg] the poses do not surround their median: a cap of
+HEMISPHERE_RAD = 90 * DEG
+"""Poses within a cone of this half-angle [rad] or less see no axis both up and down."""
+SURROUND_RAD = 60 * DEG
+"""Below this estimated half-angle [rad] the poses do not surround their median: a cap of
 half-angle theta has its centroid at (1 + cos theta)/2 of the radius from the centre, so
 below ~60 deg a pose near the cap's apex sits closer to the median than a third of the
 typical distance, and 'far from the median' no longer means 'another unit'."""
 
 
-def cone_estimate_deg(u: np.ndarray) -> float:
-    """Half-angle [deg] of the cap of the ellipsoid the outputs ``u`` (N, 3) lie on, from
+def cone_estimate(u: np.ndarray) -> float:
+    """Half-angle [rad] of the cap of the ellipsoid the outputs ``u`` (N, 3) lie on, from
     their own shape: a cap of half-angle theta is tan(theta/2) as deep (along the poses'
     least-spread direction) as it is wide (half its extent across). Exact for a sphere's cap
     with apex and rim populated; saturates near 90-120 deg for poses all round (then it
@@ -38,20 +39,20 @@ def cone_estimate_deg(u: np.ndarray) -> float:
     width = max(np.ptp(p[:, 0]), np.ptp(p[:, 1])) / 2
     if width <= 0:
         return 0.0
-    return float(np.degrees(2 * np.arctan(np.ptp(p[:, 2]) / width)))
+    return float(2 * np.arctan(np.ptp(p[:, 2]) / width))
 
 
-def cone_deg(a: np.ndarray) -> float:
-    """Half-angle [deg] of the cone about the poses' mean direction that holds every pose
-    direction ``a`` (N, 3) (specific forces through a calibration; 180 when they have no
+def cone_half_angle(a: np.ndarray) -> float:
+    """Half-angle [rad] of the cone about the poses' mean direction that holds every pose
+    direction ``a`` (N, 3) (specific forces through a calibration; pi when they have no
     mean direction)."""
     d = np.asarray(a, float)
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     m = d.mean(0)
     if np.linalg.norm(m) < 1e-9:
-        return 180.0
+        return float(np.pi)
     m = m / np.linalg.norm(m)
-    return float(np.degrees(np.arccos(np.clip(d @ m, -1.0, 1.0)).max()))
+    return float(np.arccos(np.clip(d @ m, -1.0, 1.0)).max())
 
 
 def odd_pose(u: np.ndarray) -> tuple[int, float] | None:
@@ -60,7 +61,7 @@ def odd_pose(u: np.ndarray) -> tuple[int, float] | None:
     against the sphere fitted to the others
     (algebraic, |u|^2 = 2 c.u + d: the offset and a common scale, which is all a unit
     mix-up changes), so one bad pose cannot hide by dragging the fit. Meaningful only for
-    poses that surround the centre (see :data:`SURROUND_DEG`)."""
+    poses that surround the centre (see :data:`SURROUND_RAD`)."""
     u = np.asarray(u, float)
     n = len(u)
     if n < 6:

@@ -29,15 +29,16 @@ from align.calibration.ellipsoid import triad_from_upper
 from align.calibration.triad import Poses, TriadModel
 from align.errors import InputError, InternalError
 from align.loop import StageFit, Term
+from axisbase.units import DEG
 
 FACES = ("+x", "-x", "+y", "-y", "+z", "-z")
 _ALIASES = {"x+": "+x", "x-": "-x", "y+": "+y", "y-": "-y", "z+": "+z", "z-": "-z",
             "x_p": "+x", "x_a": "-x", "y_p": "+y", "y_a": "-y", "z_p": "+z", "z_a": "-z",
             "xp": "+x", "xn": "-x", "yp": "+y", "yn": "-y", "zp": "+z", "zn": "-z"}
-FIXTURE_ERROR_RAD = np.deg2rad(0.5)
+FIXTURE_ERROR_RAD = 0.5 * DEG
 """Default placement error of a face on its support (a hand against a box edge) [rad]."""
-RECOGNISE_DEG = 15.0
-"""An unlabelled pose is taken as a face when its direction is within this of an axis."""
+RECOGNISE_RAD = 15 * DEG
+"""An unlabelled pose is taken as a face when its direction is within this of an axis [rad]."""
 
 
 def face_of(label: str) -> str | None:
@@ -52,38 +53,38 @@ def direction(face: str) -> np.ndarray:
     return d
 
 
-def recognise(u: np.ndarray, tol_deg: float = RECOGNISE_DEG) -> list[str | None]:
+def recognise(u: np.ndarray, tol_rad: float = RECOGNISE_RAD) -> list[str | None]:
     """Faces of unlabelled pose means: centred on the mid-range and scaled by the half-range
-    of each axis, a pose within ``tol_deg`` of +-axis i is that face; else None."""
+    of each axis, a pose within ``tol_rad`` [rad] of +-axis i is that face; else None."""
     u = np.asarray(u, float)
     lo, hi = u.min(0), u.max(0)
     half = (hi - lo) / 2
     if np.any(half <= 0):
         return [None] * len(u)
-    return _nearest_faces((u - (hi + lo) / 2) / half, tol_deg)
+    return _nearest_faces((u - (hi + lo) / 2) / half, tol_rad)
 
 
-def _nearest_faces(v: np.ndarray, tol_deg: float) -> list[str | None]:
-    """Per row of v (N, 3): the face '+x' ... '-z' whose axis is within ``tol_deg`` of the
+def _nearest_faces(v: np.ndarray, tol_rad: float) -> list[str | None]:
+    """Per row of v (N, 3): the face '+x' ... '-z' whose axis is within ``tol_rad`` of the
     row's direction, else None."""
     v = v / np.linalg.norm(v, axis=1, keepdims=True)
     out: list[str | None] = []
     for row in v:
         i = int(np.argmax(np.abs(row)))
-        ok = np.abs(row[i]) >= np.cos(np.deg2rad(tol_deg))
+        ok = np.abs(row[i]) >= np.cos(tol_rad)
         out.append(("+" if row[i] > 0 else "-") + "xyz"[i] if ok else None)
     return out
 
 
-RECOGNISE_FIT_DEG = 2.0
+RECOGNISE_FIT_RAD = 2 * DEG
 """After an ellipsoid fit, a pose is taken as a face (for the cross-check) only when its
-calibrated direction is within this of an axis: hand-placed poses near an axis are not."""
+calibrated direction is within this [rad] of an axis: hand-placed poses near an axis are not."""
 
 
-def recognise_directions(a: np.ndarray, tol_deg: float = RECOGNISE_FIT_DEG
+def recognise_directions(a: np.ndarray, tol_rad: float = RECOGNISE_FIT_RAD
                          ) -> list[str | None]:
-    """Faces of calibrated specific forces a (N, 3): within ``tol_deg`` of +-axis i."""
-    return _nearest_faces(np.asarray(a, float), tol_deg)
+    """Faces of calibrated specific forces a (N, 3): within ``tol_rad`` [rad] of +-axis i."""
+    return _nearest_faces(np.asarray(a, float), tol_rad)
 
 
 def labelled(poses: Poses) -> bool:
@@ -184,9 +185,9 @@ def _triad(theta: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate([k, beta, b]), C
 
 
-LABEL_AXES_DEG = 45.0
+LABEL_AXES_RAD = 45 * DEG
 """The face labels name the triad's own axes (and so give the signs) only when each triad
-axis is within this of its fixture axis; beyond it a sign would be read from noise."""
+axis is within this [rad] of its fixture axis; beyond it a sign would be read from noise."""
 
 
 def face_signs(poses: Poses, faces: Sequence[str | None]) -> tuple[np.ndarray, float]:
@@ -196,14 +197,14 @@ def face_signs(poses: Poses, faces: Sequence[str | None]) -> tuple[np.ndarray, f
     frame up to its small mounting rotation C: of the RQ split M = (K R) C, the one with C's
     diagonal positive (C near the identity) gives the signs of K. An ellipsoid cannot tell
     them; the labels can. Returns the signs and the largest angle between a triad axis and
-    its fixture axis [deg] (:data:`LABEL_AXES_DEG`).
+    its fixture axis [rad] (:data:`LABEL_AXES_RAD`).
     """
     use = [i for i, f in enumerate(faces) if f is not None]
     d = np.array([direction(faces[i]) for i in use])
     A = np.column_stack([d, np.ones(len(use))])
     M = np.linalg.lstsq(A, poses.u[use], rcond=None)[0][:3].T  # u = M d + o, unweighted
     T, C = rq(M)
-    off = float(np.degrees(np.arccos(np.clip(np.abs(np.diag(C)).min(), 0.0, 1.0))))
+    off = float(np.arccos(np.clip(np.abs(np.diag(C)).min(), 0.0, 1.0)))
     return np.sign(np.diag(T)) * np.where(np.diag(C) < 0, -1.0, 1.0), off
 
 
@@ -212,19 +213,19 @@ def resolve_signs(poses: Poses, faces: Sequence[str | None],
                   ) -> tuple[float, float, float]:
     """The scale-factor signs: from labelled faces when the poses carry them (an explicit
     ``given`` that contradicts them is refused, naming both), else ``given`` or +,+,+.
-    Labels whose axes are more than :data:`LABEL_AXES_DEG` off the triad's give no signs:
+    Labels whose axes are more than :data:`LABEL_AXES_RAD` off the triad's give no signs:
     ``given`` is then used, and without it the calibration is refused. ``given_as``: how
     the user gives the signs (``--scale-sign``, or session.toml's ``[calibration]
     scale_sign``), which the messages name."""
     if not (labelled(poses) and has_six_faces(faces)):
         return tuple(float(s) for s in (given if given is not None else (1, 1, 1)))
     s, off = face_signs(poses, faces)
-    if off > LABEL_AXES_DEG:
+    if off > LABEL_AXES_RAD:
         if given is not None:
             return tuple(float(v) for v in given)  # type: ignore[return-value]
         raise InputError(f"the labelled faces do not name the triad's axes (an axis "
-                         f"{off:.0f}° from its face, > {LABEL_AXES_DEG:g}°: swapped labels, or "
-                         "the triad turned in the fixture), so they cannot give the "
+                         f"{off / DEG:.0f}° from its face, > {LABEL_AXES_RAD / DEG:g}°: swapped "
+                         "labels, or the triad turned in the fixture), so they cannot give the "
                          f"scale-factor signs: correct the labels or give {given_as}")
     derived = tuple(float(v) for v in s)
     if given is not None and tuple(float(v) for v in given) != derived:

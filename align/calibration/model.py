@@ -19,7 +19,13 @@ from scipy.optimize import least_squares, minimize_scalar
 
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
-from align.calibration.walk import WALK_ALPHA, WanderFit, walk_covariance, wander_fit, wander_shape
+from align.calibration.walk import (
+    WanderFit,
+    allowed_fraction,
+    walk_covariance,
+    wander_fit,
+    wander_shape,
+)
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
@@ -148,7 +154,7 @@ def walk_physical(rate_g: np.ndarray, t: np.ndarray) -> bool:
 class CalibrationStage:
     """Maximum-likelihood ellipsoid refinement with optional effects (the loop's stage)."""
 
-    def __init__(self, poses: Poses, signs: Sequence[float]):
+    def __init__(self, poses: Poses, signs: Sequence[float], walk: bool = True):
         if len(poses.u) < 9:
             raise InputError(f"only {len(poses.u)} usable poses; the model needs at least 9 "
                              "(the paper's cube gives 14)")
@@ -171,7 +177,11 @@ class CalibrationStage:
         self._white: tuple[float, np.ndarray, np.ndarray] | None = None
         # The input along each sensing axis (u / k; its bias cancels in the changes).
         self.turns = turn_signs(poses.u / self.start.k, poses.t)
-        if (self.sigma is not None and poses.walk_rate is not None and poses.ordered
+        self.walk_share = 0.0  # the fraction of the samples' walk rate in the noise model
+        # The walk the samples show [g²] between the poses, and the least fraction of it
+        # their estimate allows (None: no walk in the noise).
+        self.walk: tuple[np.ndarray, float] | None = None
+        if (walk and self.sigma is not None and poses.walk_rate is not None and poses.ordered
                 and walk_physical(poses.walk_rate / self.start.k**2, poses.t)):
             # Each axis at least the axes' mean rate [g²/s]: one sensor technology, and
             # the per-axis estimates scatter by about their size at a few µg/√s.
@@ -187,16 +197,37 @@ class CalibrationStage:
             if f > 0 and f >= low:
                 C = np.diag(self.sigma**2) + f * (C - np.diag(self.sigma**2))
                 self.whiten = np.linalg.inv(np.linalg.cholesky(C))
+                self.walk = (C - np.diag(self.sigma**2)) / f, float(low)
                 self.sigma = np.sqrt(np.diag(C))
+                self.walk_share = f
 
-    def means_allow(self, walk: np.ndarray) -> float:
+    def log_det(self) -> float:
+        """log det of the pose residuals' covariance [ln g²] (the noise model's part of −2 log
+        likelihood: two noise models are compared by chi2 + log det, not chi2 alone)."""
+        if self.whiten is not None:
+            return float(-2 * np.sum(np.log(np.abs(np.diag(self.whiten)))))
+        return float(2 * np.sum(np.log(self.sigma))) if self.sigma is not None else 0.0
+
+    def means_allow(self, walk: np.ndarray, effects: tuple[str, ...] | None = None) -> float:
         """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that the
         pose means allow: the declared model's white-noise chi2 not in the lower WALK_ALPHA
         tail of its distribution under diag(sigma²) + f walk (Σ λ_i χ²₁, λ the eigenvalues of
         the residual-space covariance; 20000 seeded draws: scipy has no such distribution);
         0 when even 1e-4 of it is excluded. A pose's own settling (a hand-placed unit)
         shows in its samples as a walk does but does not go on from pose to pose: the means
-        then scatter as white noise, and the walk is not one."""
+        then scatter as white noise, and the walk is not one.
+
+        ``effects``: judged on the white fit with these effects instead (fitted before, the
+        stage's noise white): a warming bias makes the declared model's chi2 large whatever
+        the walk, and only the residual beyond the effects tells whether a walk goes on."""
+        if effects is not None:
+            if self.whiten is not None or effects not in self.jacobians:
+                raise NotApplicable("the means are judged on a white-noise fit")
+            J = self.jacobians[effects]
+            q, _ = np.linalg.qr(J)
+            r_w = self.projection[effects][1]
+            return allowed_fraction(float(np.sum(r_w**2)), np.eye(len(r_w)) - q @ q.T,
+                                 1.0 / self.sigma, walk)
         if self._white is None:
             # The white-noise fit of the declared model, leaving the stage's own as it was.
             whiten, self.whiten = self.whiten, None
@@ -212,23 +243,7 @@ class CalibrationStage:
             q, _ = np.linalg.qr(J)
             self._white = (float(np.sum((r / self.sigma) ** 2)),
                            np.eye(len(r)) - q @ q.T, 1.0 / self.sigma)
-        chi2, P, w = self._white
-        Ww = P @ (w[:, None] * walk * w[None, :]) @ P
-        z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
-
-        def allowed(f: float) -> bool:
-            lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
-            return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
-
-        if allowed(1.0):
-            return 1.0
-        lo, hi = np.log(1e-4), 0.0
-        if not allowed(float(np.exp(lo))):
-            return 0.0
-        for _ in range(12):  # bisection on log f: the chi2's lower tail grows with f
-            mid = (lo + hi) / 2
-            lo, hi = (mid, hi) if allowed(float(np.exp(mid))) else (lo, mid)
-        return float(np.exp(lo))
+        return allowed_fraction(*self._white, walk)
 
     def _check_applies(self, effects: Sequence[str]) -> None:
         p = self.poses

@@ -246,3 +246,28 @@ def wander_fit(r: np.ndarray, J: np.ndarray, shape: np.ndarray, level: float | N
     m2ll, chi2, step, Jt = fit
     cov = d[:, None] * np.linalg.pinv(Jt.T @ Jt) * d[None, :]
     return WanderFit(m2ll, chi2, q, step * d, cov)
+
+
+def allowed_fraction(chi2: float, P: np.ndarray, w: np.ndarray, walk: np.ndarray) -> float:
+    """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that a white
+    fit's ``chi2`` allows: not in the lower :data:`WALK_ALPHA` tail of its distribution under
+    diag(sigma²) + f walk (Σ λ_i χ²₁, λ the eigenvalues of the residual-space covariance,
+    ``P`` the fit's residual-space projector, ``w`` = 1/sigma per pose [1/g]; 20000 seeded
+    draws: scipy has no such distribution); 0 when even 1e-4 of it is excluded
+    (:meth:`align.calibration.model.CalibrationStage.means_allow`)."""
+    Ww = P @ (w[:, None] * walk * w[None, :]) @ P
+    z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
+
+    def allowed(f: float) -> bool:
+        lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
+        return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
+
+    if allowed(1.0):
+        return 1.0
+    lo, hi = np.log(1e-4), 0.0
+    if not allowed(float(np.exp(lo))):
+        return 0.0
+    for _ in range(12):  # bisection on log f: the chi2's lower tail grows with f
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if allowed(float(np.exp(mid))) else (lo, mid)
+    return float(np.exp(lo))

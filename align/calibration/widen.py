@@ -55,6 +55,11 @@ ALIASED = 0.99
 """An alternative that reproduces this fraction of the chosen effect's chi2 drop is aliased
 with it on these poses (squared correlation of the regressors along the fitted signal; the
 poses of ``align calibrate --plan 28`` keep the candidates of issue 19 below it)."""
+USEFUL_FACTOR = 10.0
+"""The ambiguity term may widen u of a scale factor, an axis angle or a bias to at most this
+many times what the noise allows: beyond, the number covers the effects' spread but is no
+measurement of the triad (a hysteresis on the paper's 14 poses: u of k 1.2 %, 1.5e4 x its
+noise u) and the result is marked not ok with the pose order that tells them apart."""
 STRUCTURE = "unexplained_structure"
 AMBIGUITY = "effect_ambiguity"
 
@@ -100,6 +105,26 @@ class Widening:
                                    **{t: float(v[i]) for t, v in self.terms}}
                                for i, n in enumerate(self.names)},
                 "alternatives": [a.to_dict() for a in self.alternatives]}
+
+    def undetermined(self, chosen: Sequence[str], plan_n: int, wander: str) -> str | None:
+        """Why the result is not ok, when the alternative *effects* (not ``wander``, the
+        bias's own instability: u then says what the sensor allows) widen u of one of the
+        nine core parameters (k, beta, bias) beyond :data:`USEFUL_FACTOR` x its noise u (the
+        alternative that moves it most named), else None."""
+        alts = [a for a in self.alternatives if a.effects != wander]
+        if not alts:
+            return None
+        var = sum(a.shift**2 / RECTANGULAR**2 + np.diag(a.excess) for a in alts)
+        u0 = self.u_noise[:9]
+        f = np.sqrt(1 + var / np.where(u0 > 0, u0, np.inf) ** 2)
+        j = int(np.argmax(f))
+        if not f[j] > USEFUL_FACTOR:
+            return None
+        alt = max(alts, key=lambda a: abs(a.shift[j]))
+        return (f"calibration NOT OK: {' + '.join(chosen)} and {alt.effects} cannot be told "
+                f"apart on this pose order (u of {self.names[j]} widened x{f[j]:.3g} to cover "
+                f"both, > {USEFUL_FACTOR:g}x its noise u; the JSON keeps the widened u): "
+                f"measure with `align calibrate --plan {plan_n}`")
 
     def warning(self) -> str:
         """One line for the terminal and ``warnings``: why, and by how much."""
@@ -209,11 +234,14 @@ def ambiguity_reason(chosen: tuple[str, ...], alts: list[Alternative], plan_n: i
                 f"{a.effects} ({a.explained:.2%} of its signal)" for a in group)
             for c, group in by.items())
                      + f": record the poses of `align calibrate --plan {plan_n}`")
-    if close:
-        parts.append("the data cannot tell the effects added (" + (" + ".join(chosen) or
-                                                                   "none")
-                     + ") from " + ", ".join(a.effects for a in close)
-                     + f" (within {AMBIGUOUS_BIC:g} of BIC)")
+    near = [a for a in close if a.d_bic < AMBIGUOUS_BIC]
+    allowed = [a for a in close if not a.d_bic < AMBIGUOUS_BIC]  # (the wander, by its level)
+    for group, why in ((near, f"within {AMBIGUOUS_BIC:g} of BIC"),
+                       (allowed, "at a level the samples within the poses allow")):
+        if group:
+            parts.append("the data cannot tell the effects added (" + (" + ".join(chosen)
+                                                                       or "none")
+                         + ") from " + ", ".join(a.effects for a in group) + f" ({why})")
     return "; ".join(parts) + ": u covers the parameters' spread over them"
 
 

@@ -40,7 +40,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
-    return 0 if run.checked is None or run.checked.ok else 2
+    return 0 if run.ok else 2
 
 
 def _plan_poses(args: argparse.Namespace) -> int:

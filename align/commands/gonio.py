@@ -16,6 +16,7 @@ from align.commands.args import (
 )
 from align.commands.common import byte_progress, plan, say, settings, warn, wrote
 from align.commands.parents import examples, tables
+from axisbase.units import DEG
 
 
 def cmd_gonio(args: argparse.Namespace) -> int:
@@ -48,10 +49,13 @@ def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], 
     logs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
     with byte_progress(logs, "reading") as on_bytes:
         try:
-            return measure_log(args.log, len(names), args.latitude,
+            lat = None if args.latitude is None else args.latitude * DEG
+            lat_range = (None if args.latitude_range is None else
+                         tuple(v * DEG for v in args.latitude_range))
+            return measure_log(args.log, len(names), lat,
                                1 if args.direction == "ccw" else -1, args.alpha,
                                reverse_log=args.reverse_log, steady_table=args.steady_table,
-                               columns=cols, latitude_range_deg=args.latitude_range,
+                               columns=cols, latitude_range_rad=lat_range,
                                on_bytes=on_bytes)
         except FaceCountError as exc:
             raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} "

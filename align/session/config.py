@@ -21,7 +21,7 @@ from align.errors import InputError
 from align.lens import LensRanges
 from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
-from axisbase.units import ARCSEC
+from axisbase.units import ARCSEC, DEG
 from imaging import ImageInputError, check_roi
 
 HOUSINGS = ("x", "y", "z")
@@ -116,14 +116,14 @@ class PlatformInput:
 class Session:
     folder: Path
     name: str
-    latitude_deg: float | None
+    latitude_rad: float | None  # session.toml latitude_deg, converted [rad]
     calibration: CalibrationInput | None
     goniometer: Goniometer | None
     cameras: dict[str, Camera]
     views: dict[str, View]
     images: tuple[ImageEntry, ...]
     platform: PlatformInput | None
-    latitude_range_deg: tuple[float, float] | None = None
+    latitude_range_rad: tuple[float, float] | None = None  # latitude_range_deg [rad]
     metadata: dict[str, str | int | float | bool] = field(default_factory=dict)
     """``[metadata]``: free keys about the unit and the set-up (unit, serial, operator,
     camera, table, date, ...), carried into the result for 'align lot'."""
@@ -531,5 +531,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         raise InputError(f"{src}: names no sources (images, goniometer, calibration, platform)")
     tol = (ToleranceSpec.from_table(_table(d, "tolerance", src + ": "), f"{src}: [tolerance]")
            if "tolerance" in d else None)
-    return Session(folder, name, lat, cal, gon, cameras,
-                   views, tuple(imgs), plat, lat_range, _metadata(d, src), tol)
+    # The file's degrees stop here: the library takes radians.
+    return Session(folder, name, None if lat is None else lat * DEG, cal, gon, cameras,
+                   views, tuple(imgs), plat,
+                   None if lat_range is None else (lat_range[0] * DEG, lat_range[1] * DEG),
+                   _metadata(d, src), tol)

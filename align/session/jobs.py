@@ -103,7 +103,8 @@ def run_job(job: SessionJob, progress: Callable[[str], None] | None = None) -> S
     except InputError as exc:  # an output that appeared while computing: not replaced
         return {"session": job.folder, "folder": job.folder, "ok": False, "bad_input": True,
                 "error": str(exc)}
-    warnings = list(js["warnings"])
+    # What makes a result that ran not ok leads (the JSON has it under "problems").
+    warnings = [f"NOT OK: {p}" for p in js.get("problems", ())] + list(js["warnings"])
     if outs["cal"] is not None and "cal" not in written:
         warnings.append(f"{job.cal_flag} {outs['cal']}: NOT written: no platform "
                         "calibration (the calibration or the fusion failed)")

@@ -152,9 +152,10 @@ def banner(res: SessionResult, disposition: dict | None) -> dict:
             text += f"; P(every angle conforms) = {disposition['p_conform_all']:.3f}"
         return {"verdict": v, "cls": VERDICT_CLASS.get(v, "v-none"), "text": text}
     if not res.ok:
+        why = (f"stage(s) failed: {failed or 'fusion'}" if failed or res.fusion is None
+               else "; ".join(res.problems))
         return {"verdict": "NOT ok", "cls": "v-notmeasured",
-                "text": f"no tolerance given; stage(s) failed: {failed or 'fusion'} — not a "
-                        "measurement of this unit"}
+                "text": f"no tolerance given; {why} — not a measurement of this unit"}
     return {"verdict": "No tolerance given", "cls": "v-none",
             "text": "E ± u below; a [tolerance] in session.toml or --tolerance-arcsec gives "
                     "a verdict"}
@@ -363,7 +364,9 @@ def report_html(res: SessionResult, doc: dict | None = None,
         strip=stage_strip(res, warnings),
         notices=notices, toc=sections, warnings=shown,
         errors=[[e.stage, e.message] for e in res.errors], ok=res.ok,
-        not_ok_reason=f"stage(s) failed: {failed}" if failed else "not ok",
+        not_ok_reason=(f"stage(s) failed: {failed}" if failed else
+                       res.calibration.problems[0] if res.calibration is not None
+                       and res.calibration.problems else "not ok"),
         fusion=fusion, disposition=disposition, angle_head=angle_head, angle_rows=angle_rows,
         budget=_budget(d), calibration=cal, gonio=gon, marks=marks,
         provenance_view=provenance_view(doc))

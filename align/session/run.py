@@ -45,7 +45,8 @@ from align.fusion import (
 )
 from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
-from align.gonio import GonioRun, measure_log
+from align.gonio import measure_log
+from align.gonio_run import GonioRun
 from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
@@ -141,9 +142,36 @@ class SessionResult:
 
     @property
     def ok(self) -> bool:
-        """Every stage the session names succeeded and the fusion ran. A result with a
-        failed stage is still written, but is not ok (exit status 2)."""
-        return self.fusion is not None and not self.errors
+        """Every stage the session names succeeded, the fusion ran and nothing in the
+        result is untrusted (:attr:`problems`). A result that is not ok is still written
+        (exit status 2)."""
+        return self.fusion is not None and not self.errors and not self.problems
+
+    @property
+    def problems(self) -> list[str]:
+        """Why a result that ran is still not a measurement to act on (empty: none) — the
+        README's exit-2 cases beyond a failed stage: a calibration whose effects its poses
+        cannot tell apart, a mark whose angle the uncalibrated lens limits or that bends
+        off the frame, instruments that disagree beyond their uncertainties (E's u is then
+        inflated or widened to cover the disagreement, but which instrument is right is the
+        user's to find out)."""
+        out: list[str] = []
+        if self.calibration is not None and not self.calibration.ok:
+            out += [f"calibration: {p}" for p in self.calibration.problems]
+        for im, r in self.marks:
+            if not r.found:
+                continue  # a stage error already
+            if r.lens_limited:
+                out.append(f"{im.file.name}: the angle is lens-limited (calibrate camera "
+                           "or declare its lens)")
+            if r.bend_off_frame:
+                out.append(f"{im.file.name}: a bent mark running off the frame")
+        f = self.fusion
+        if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
+            who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
+            out.append(f"fusion: the instruments disagree beyond their uncertainties "
+                       f"(chi2 {f.chi2:.4g} / {f.dof} dof){who}")
+        return out
 
     def platform_calibration(self) -> PlatformCalibration | None:
         """The triad model and the misalignment in one (what 'align apply' needs), when both
@@ -165,7 +193,8 @@ class SessionResult:
 
     def _core_dict(self) -> dict:
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
-                   "ok": self.ok, "fused": self.fused, "warnings": session_warnings(self),
+                   "ok": self.ok, "fused": self.fused, "problems": self.problems,
+                   "warnings": session_warnings(self),
                    "errors": [{"stage": e.stage, "message": e.message,
                                **({"internal": True} if e.internal else {})}
                               for e in self.errors],
@@ -283,9 +312,9 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
         g = s.goniometer
         progress(f"goniometer: {g.log.name}")
         res.gonio = _try(res, "goniometer", lambda: measure_log(
-            g.log, len(g.faces), s.latitude_deg, g.direction, alpha, reverse_log=g.reverse_log,
+            g.log, len(g.faces), s.latitude_rad, g.direction, alpha, reverse_log=g.reverse_log,
             steady_table=g.steady_table, columns=g.columns,
-            latitude_range_deg=s.latitude_range_deg))
+            latitude_range_rad=s.latitude_range_rad))
     cams: dict[str, CameraModel | None] = {}
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))

@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from align.calibration import calibrate, poses_from_samples
-from align.calibration.geometry import cone_deg, cone_estimate_deg, odd_pose
+from align.calibration.geometry import cone_estimate, cone_half_angle, odd_pose
 from align.calibration.static import _check_geometry
 from align.errors import InputError
 
@@ -51,9 +51,9 @@ def _judge(p):
 def test_cone_estimates():
     for seed in range(5):
         p, d, _ = _poses(seed, 20.0)
-        assert 12 < cone_estimate_deg(p.u) < 25
-        assert cone_deg(d) == pytest.approx(np.degrees(np.arccos(
-            np.clip(d @ (d.mean(0) / np.linalg.norm(d.mean(0))), -1, 1))).max())
+        assert np.radians(12) < cone_estimate(p.u) < np.radians(25)
+        assert cone_half_angle(d) == pytest.approx(np.arccos(
+            np.clip(d @ (d.mean(0) / np.linalg.norm(d.mean(0))), -1, 1)).max())
 
 
 @pytest.mark.slow

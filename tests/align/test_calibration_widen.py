@@ -17,7 +17,7 @@ import pytest
 
 from align.calibration import TriadModel, calibrate, poses_from_samples
 from align.calibration.plan import plan
-from align.calibration.widen import AMBIGUITY
+from align.calibration.widen import AMBIGUITY, USEFUL_FACTOR
 from synth.tumble import TumbleSpec, tumble, write_tumble_csv
 from tests.align.effects_cases import EXPECTED, poses_of, run, sweep, triad_of, truth_at
 
@@ -88,20 +88,43 @@ def test_an_aliased_wrong_effect_leaves_no_confident_number(name, seed):
 
 def test_ambiguity_in_the_json_follows_its_schema(tmp_path):
     """``align calibrate --json`` on the cross-axis seed: u_widening names the aliased
-    alternatives and validates against the shipped schema."""
+    alternatives and validates against the shipped schema; u of bias_y widened x217 by the
+    ambiguity: not ok (exit 2), the widened u kept."""
     from align.cli import main
     from align.contract import validate
 
     p = write_tumble_csv(tumble(TumbleSpec(triad=triad_of("cross"), seed=13)),
                          tmp_path / "t.csv")
     assert main(["calibrate", str(p), "--scale-sign", "-", "--json",
-                 str(tmp_path / "c.json")]) == 0
+                 str(tmp_path / "c.json")]) == 2
     js = json.loads((tmp_path / "c.json").read_text())
     validate(js, "calibration")
+    assert js["ok"] is False and js["warnings"][0].startswith("calibration NOT OK: ")
+    assert js["u_widening"]["parameters"]["bias_y"]["factor"] > USEFUL_FACTOR
     alts = js["u_widening"]["alternatives"]
     assert any(a["effects"] == "cross_x_xy" and a["aliased"] and a["explained"] >= 0.99
                for a in alts)
     assert any("cannot tell" in w for w in js["warnings"])
+
+
+def test_hysteresis_that_the_poses_cannot_tell_apart_is_not_ok(tmp_path):
+    """A 50 µg hysteresis on the paper's 14 poses: the loop takes it (seed 0) and cannot
+    tell it from a scale warm-up; u of k widened x78 covers both but is no measurement:
+    not ok, naming both and the plan; its widened u kept. The same hysteresis on the
+    28-pose plan: found, ok."""
+    tr = triad_of("hysteresis")
+    cal = calibrate(poses_of(tumble(TumbleSpec(triad=tr, seed=0))), np.sign(tr.k))
+    assert not cal.ok and len(cal.problems) == 1
+    why = cal.problems[0]
+    assert "bias_hysteresis and scale_warmup cannot be told apart" in why
+    assert "--plan 28" in why
+    w = cal.widening
+    k = [i for i, n in enumerate(w.names) if n.startswith("scale_factor_")]
+    assert np.max(w.factor[k]) > USEFUL_FACTOR  # kept, not cut back
+    assert np.allclose(cal.model.sensitivity_u(), w.u[k])
+    up = tuple(map(tuple, plan(28).up))
+    cal = calibrate(poses_of(tumble(TumbleSpec(triad=tr, seed=0, up=up))), np.sign(tr.k))
+    assert "bias_hysteresis" in [e.name for e in cal.loop.effects] and cal.ok
 
 
 @pytest.mark.slow

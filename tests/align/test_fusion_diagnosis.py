@@ -83,6 +83,11 @@ def test_creep_between_images_and_static_readings_names_the_sources(tmp_path, se
                and "platform static poses" in w for w in session_warnings(res))
     back = type(f).from_dict(f.to_dict())
     assert back.disagreement is not None and back.disagreement.message() == d.message()
+    # u covers the images' E, but which instrument is right is the user's to find out: the
+    # result is not ok (exit 2, NOT MEASURED), saying why (README's exit-status contract).
+    assert not res.ok and any("instruments disagree" in p for p in res.problems)
+    assert res.disposition().verdict == "NOT MEASURED"
+    assert "instruments disagree" in res.disposition().reason
 
 
 @pytest.mark.slow
@@ -91,3 +96,4 @@ def test_a_clean_session_names_no_source(tmp_path):
     f = res.fusion
     assert f.consistent and f.disagreement is None
     assert not f.loop.effects
+    assert res.ok and res.problems == []

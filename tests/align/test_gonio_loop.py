@@ -11,6 +11,7 @@ import pytest
 
 from align.cli import main
 from align.gonio import EARTH, measure_log
+from axisbase.units import DEG
 from goniometry import face_angles, read_revolutions, vertical_earth_rate
 from synth.gonio import GonioSpec, simulate, write_log
 
@@ -25,7 +26,7 @@ def _log(tmp_path, name, **kw):
 
 def test_clockwise_run_gives_angles_in_its_own_passing_order(tmp_path):
     p, truth = _log(tmp_path, "cw.csv", direction=-1, revolutions=300, seed=4)
-    run = measure_log(p, 4, 50.45, direction=-1)
+    run = measure_log(p, 4, 50.45 * DEG, direction=-1)
     assert np.all(np.abs(run.angles.angles_rad - truth) < TOL * run.angles.u_rad)
     # cw passes faces 0, 3, 2, 1: its angles are the ccw order's, reversed.
     ccw = GonioSpec(**{**SLOW, "seed": 4}).angles
@@ -39,11 +40,11 @@ def test_undeclared_earth_rate_with_unsteady_table_is_found(tmp_path):
     locked ripple it leaves its own bias, which only both directions remove — next test.)"""
     p, truth = _log(tmp_path, "ccw.csv", ripple=0.02, wander=0.01, latency_s=0.0, seed=0)
     before = face_angles(read_revolutions(p, 4))
-    run = measure_log(p, 4, latitude_deg=None)
+    run = measure_log(p, 4, latitude_rad=None)
     names = [e.name for e in run.loop.effects]
     assert names == [EARTH]
     e = run.loop.effects[0]
-    assert abs(e.estimate - vertical_earth_rate(50.45, 1)) < TOL * e.u
+    assert abs(e.estimate - vertical_earth_rate(50.45 * DEG, 1)) < TOL * e.u
     z_before = (before.angles_rad - truth) / before.u_rad
     z_after = (run.angles.angles_rad - truth) / run.angles.u_rad
     assert np.max(np.abs(z_before)) > TOL
@@ -81,8 +82,8 @@ def test_steady_table_timing_goes_below_the_count_quantisation(tmp_path):
     z, ratio, gain = [], [], []
     for seed in range(8):
         p, truth = _log(tmp_path, f"s{seed}.csv", revolutions=300, rev_per_s=1.0, seed=seed)
-        counts = measure_log(p, 4, 50.45)
-        run = measure_log(p, 4, 50.45, steady_table=True)
+        counts = measure_log(p, 4, 50.45 * DEG)
+        run = measure_log(p, 4, 50.45 * DEG, steady_table=True)
         assert run.timing_used
         fa = run.angles
         z.append((fa.angles_rad - truth) / fa.u_rad)
@@ -96,7 +97,7 @@ def test_steady_table_timing_goes_below_the_count_quantisation(tmp_path):
     # = 3.7; each u is a batch-means estimate (~25 % scatter with ~37 blocks).
     assert np.median(gain) > 2.5
     p, _ = _log(tmp_path, "ripple.csv", revolutions=300, rev_per_s=1.0, ripple=1e-4, seed=1)
-    run = measure_log(p, 4, 50.45, steady_table=True)
+    run = measure_log(p, 4, 50.45 * DEG, steady_table=True)
     assert not run.timing_used and any("NOT confirmed" in n for n in run.notes)
 
 
@@ -130,10 +131,10 @@ def test_undetermined_earth_rate_is_carried_as_type_b(tmp_path):
     # The term is what moves the angles: without it the errors are several u.
     u_a = np.sqrt(fa.u_rad**2 - fa.type_b_terms[name] ** 2)
     assert np.max(np.abs(fa.angles_rad - truth) / u_a) > 3
-    rng = measure_log(p, 4, latitude_range_deg=(40.0, 60.0)).angles
+    rng = measure_log(p, 4, latitude_range_rad=(40.0 * DEG, 60.0 * DEG)).angles
     assert np.all(rng.u_rad <= fa.u_rad + 1e-15)
     assert np.all(np.abs(rng.angles_rad - truth) < 2.0 * rng.u_rad)
-    lat = measure_log(p, 4, 50.45).angles
+    lat = measure_log(p, 4, 50.45 * DEG).angles
     assert not lat.type_b_terms
     assert np.all(np.abs(lat.angles_rad - truth) < TOL * lat.u_rad)
     out = tmp_path / "tb.json"
@@ -165,7 +166,7 @@ def test_session_latitude_range_key(tmp_path):
     p, _ = _log(tmp_path, "gonio.csv", revolutions=50)
     toml = '[goniometer]\nlog = "gonio.csv"\nfaces = ["ref", "z", "y", "x"]\n'
     (tmp_path / "session.toml").write_text("latitude_range_deg = [40, 60]\n" + toml)
-    assert load_session(tmp_path).latitude_range_deg == (40.0, 60.0)
+    assert load_session(tmp_path).latitude_range_rad == (40.0 * DEG, 60.0 * DEG)
     (tmp_path / "session.toml").write_text("latitude_range_deg = [60, 40]\n" + toml)
     with pytest.raises(InputError, match="latitude_range_deg"):
         load_session(tmp_path)
@@ -181,13 +182,13 @@ def test_latency_on_a_rippled_table_is_warned_in_one_direction_and_cancelled_in_
 
     p, truth = _log(tmp_path, "f.csv", revolutions=3000, seed=3, ripple=0.02, wander=0.01,
                     latency_s=5e-6)
-    one = measure_log(p, 4, 50.45)
+    one = measure_log(p, 4, 50.45 * DEG)
     assert np.max(np.abs(one.angles.angles_rad - truth) / one.angles.u_rad) > 10
     assert any(w.startswith(LATENCY) for w in one.warnings)
     r, _ = _log(tmp_path, "r.csv", revolutions=3000, seed=4, ripple=0.02, wander=0.01,
                 latency_s=5e-6, direction=-1)
-    both = measure_log(p, 4, 50.45, reverse_log=r)
+    both = measure_log(p, 4, 50.45 * DEG, reverse_log=r)
     assert np.all(np.abs(both.angles.angles_rad - truth) < TOL * both.angles.u_rad)
     assert not any(LATENCY in w for w in both.warnings)
     steady, _ = _log(tmp_path, "s.csv", revolutions=3000, seed=3, latency_s=5e-6)
-    assert not any(w.startswith(LATENCY) for w in measure_log(steady, 4, 50.45).warnings)
+    assert not any(w.startswith(LATENCY) for w in measure_log(steady, 4, 50.45 * DEG).warnings)

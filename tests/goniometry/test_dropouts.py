@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from align.gonio import measure_log
+from axisbase.units import DEG
 from goniometry.exclusions import R_DROPOUT
 from synth.gonio import GonioSpec, drop_out, simulate, write_log
 
@@ -51,7 +52,7 @@ def dropout_case(seed: int, with_time: bool, latitude: bool, where: str = "any")
 
 def measure(spec, sim, latitude: bool, path):
     p = write_log(sim, path)
-    run = measure_log(p, N_FACES, spec.latitude_deg if latitude else None,
+    run = measure_log(p, N_FACES, spec.latitude_deg * DEG if latitude else None,
                       direction=spec.direction)
     truth = np.array(sim["truth"]["angles_rad"])
     return run, (run.angles.angles_rad - truth) / run.angles.u_rad

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from align.gonio import measure_log
+from axisbase.units import DEG
 from goniometry import read_revolutions
 from goniometry.exclusions import R_DROPOUT
 from synth.gonio import GonioSpec, simulate, write_log
@@ -84,7 +85,7 @@ def run_plan(seed: int, tmp_path) -> tuple[float, int, int, list]:
     spec = fault_plan(seed)
     sim = simulate(spec)
     p = write_log(sim, tmp_path / f"f{seed}.csv")
-    run = measure_log(p, N_FACES, spec.latitude_deg, direction=spec.direction)
+    run = measure_log(p, N_FACES, spec.latitude_deg * DEG, direction=spec.direction)
     truth = np.array(sim["truth"]["angles_rad"])
     worst = float(np.max(np.abs(run.angles.angles_rad - truth) / run.angles.u_rad))
     ex = run.summary.exclusions
@@ -114,7 +115,7 @@ def twin_errors(seed: int, tmp_path) -> np.ndarray:
     spec = replace(fault_plan(seed), faults=())
     sim = simulate(spec)
     p = write_log(sim, tmp_path / f"c{seed}.csv")
-    run = measure_log(p, N_FACES, spec.latitude_deg, direction=spec.direction)
+    run = measure_log(p, N_FACES, spec.latitude_deg * DEG, direction=spec.direction)
     truth = np.array(sim["truth"]["angles_rad"])
     return (run.angles.angles_rad - truth) / run.angles.u_rad
 
@@ -174,7 +175,7 @@ def test_slow_unsteady_short_logs_normalised_errors(tmp_path):
                          stop_pulses=int(rng.integers(0, 4)), seed=7000 + seed)
         sim = simulate(spec)
         run = measure_log(write_log(sim, tmp_path / f"s{seed}.csv"), N_FACES,
-                          spec.latitude_deg, direction=spec.direction)
+                          spec.latitude_deg * DEG, direction=spec.direction)
         truth = np.array(sim["truth"]["angles_rad"])
         z.append((run.angles.angles_rad - truth) / run.angles.u_rad)
     z = np.array(z)
@@ -195,7 +196,7 @@ def test_the_reported_double_trigger(tmp_path):
     sim = simulate(GonioSpec(revolutions=200, faults=faults, arm_face=1, stop_pulses=2,
                              seed=7))
     p = write_log(sim, tmp_path / "issue.csv")
-    run = measure_log(p, N_FACES, 50.45)
+    run = measure_log(p, N_FACES, 50.45 * DEG)
     truth = np.array(sim["truth"]["angles_rad"])
     assert np.all(np.abs(run.angles.angles_rad - truth) < 4 * run.angles.u_rad)
     ex = run.summary.exclusions
@@ -222,7 +223,7 @@ def test_a_double_trigger_too_close_to_tell_excludes_its_revolution(tmp_path):
 
     faults = (("double", 101, 1e-6), ("glint", 202, 1 - 5e-6))
     sim = simulate(GonioSpec(revolutions=150, faults=faults, seed=3))
-    run = measure_log(write_log(sim, tmp_path / "close.csv"), N_FACES, 50.45)
+    run = measure_log(write_log(sim, tmp_path / "close.csv"), N_FACES, 50.45 * DEG)
     ex = run.summary.exclusions
     assert ex.counts[R_AMBIGUOUS] == 2
     rows = [line - 2 for line in ex.lines[R_AMBIGUOUS]]
@@ -274,7 +275,7 @@ def test_a_displaced_pulse_in_a_long_log_is_a_fault_and_warned(tmp_path):
     sigma = read_revolutions(p, N_FACES).sigma_counts
     row = 4 * 9000 + 1  # face 1's pulse in revolution ~9000
     _displace_pulse(p, row, round(20 * sigma))
-    run = measure_log(p, N_FACES, 50.45)
+    run = measure_log(p, N_FACES, 50.45 * DEG)
     ex = run.summary.exclusions
     faults = {why: lines for why, lines in ex.lines.items() if why != R_TAIL}
     assert faults and all(abs(lines[0] - (row + 2)) <= 1 for lines in faults.values()), faults
@@ -296,7 +297,7 @@ def test_long_clean_jittery_logs_are_never_warned_of_pulse_faults(tmp_path):
     for seed in range(30):
         sim = simulate(GonioSpec(revolutions=60000, jitter_rad=3 * ARCSEC, seed=1000 + seed))
         p = write_log(sim, tmp_path / f"l{seed}.csv")
-        run = measure_log(p, N_FACES, 50.45)
+        run = measure_log(p, N_FACES, 50.45 * DEG)
         ex = run.summary.exclusions.counts
         assert set(ex) <= {R_TAIL}, dict(ex)
         tails += ex.get(R_TAIL, 0)

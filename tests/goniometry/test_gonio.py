@@ -7,6 +7,7 @@ import pytest
 
 from align.cli import main
 from align.gonio import EARTH, loop_gonio
+from axisbase.units import DEG
 from goniometry import (
     LogError,
     earth_rate_counts,
@@ -81,7 +82,7 @@ def test_earth_rate_with_unsteady_table(tmp_path):
     p, truth = _log(tmp_path, revolutions=600, seed=3, ripple=0.02, wander=0.01,
                     latitude_deg=lat, latency_s=0.0)
     raw = face_angles(read_revolutions(p, 4))
-    rate = vertical_earth_rate(lat, 1)
+    rate = vertical_earth_rate(lat * DEG, 1)
     fixed = face_angles(read_revolutions(p, 4, correct=lambda c, dt: earth_rate_counts(
         c, dt, rate)))
     assert np.max(np.abs(fixed.angles_rad - truth) / fixed.u_rad) < 4.5

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from align.gonio import measure_log
+from axisbase.units import DEG
 from tests.goniometry.independent_log import independent_log
 
 
@@ -29,7 +30,7 @@ def test_normalised_errors_over_random_independent_logs(tmp_path):
                                                                        np.log(3)))),
                                 arm_face=int(rng.integers(4)),
                                 stop_pulses=int(rng.integers(4)))
-        run = measure_log(p, 4, lat)
+        run = measure_log(p, 4, lat * DEG)
         z.extend((run.angles.angles_rad - truth) / run.angles.u_rad)
         methods.append(run.angles.type_a_method)
         p.unlink()

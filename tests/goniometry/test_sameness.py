@@ -13,6 +13,7 @@ import pytest
 
 from align.errors import InputError
 from align.gonio import measure_log
+from axisbase.units import DEG
 from goniometry import LogError
 from synth.gonio import ARCSEC, GonioSpec, simulate, write_log
 
@@ -36,7 +37,7 @@ def test_a_log_written_twice_is_refused_naming_the_line(tmp_path, with_time):
     q.write_text("\n".join(rows + rows[1:]) + "\n")
     first_copy_line = len(rows) + 1
     with pytest.raises(LogError) as e:
-        measure_log(q, N_FACES, 50.45)
+        measure_log(q, N_FACES, 50.45 * DEG)
     msg = str(e.value)
     assert f"twice.csv:{first_copy_line}:" in msg, msg
     assert ("repeat" in msg) if not with_time else ("backwards" in msg)
@@ -55,7 +56,7 @@ def test_two_tables_logs_concatenated_are_refused_naming_the_line(tmp_path, with
     q = tmp_path / "two.csv"
     q.write_text("\n".join(a + b[1:]) + "\n")
     with pytest.raises(LogError) as e:
-        measure_log(q, N_FACES, 50.45)
+        measure_log(q, N_FACES, 50.45 * DEG)
     msg = str(e.value)
     assert "face pattern changes" in msg, msg
     line = int(msg.split("two.csv:")[1].split(":")[0])
@@ -68,9 +69,9 @@ def test_a_reverse_log_turning_the_same_way_is_refused(tmp_path):
     other = _log(tmp_path, "o", seed=7, direction=-1,
                  face_offsets_rad=(30 * ARCSEC, -220 * ARCSEC, 95 * ARCSEC))
     with pytest.raises(InputError, match="turned the same way"):
-        measure_log(fwd, N_FACES, 50.45, reverse_log=same)
+        measure_log(fwd, N_FACES, 50.45 * DEG, reverse_log=same)
     with pytest.raises(InputError, match="not a run in the other direction"):
-        measure_log(fwd, N_FACES, 50.45, reverse_log=other)
+        measure_log(fwd, N_FACES, 50.45 * DEG, reverse_log=other)
 
 
 def test_a_real_reversal_is_combined(tmp_path):
@@ -79,7 +80,7 @@ def test_a_real_reversal_is_combined(tmp_path):
     spec = GonioSpec(revolutions=150, seed=1, ripple=0.02)
     fwd = write_log(simulate(spec), tmp_path / "f.csv")
     rev = _log(tmp_path, "r", seed=6, direction=-1, ripple=0.02)
-    run = measure_log(fwd, N_FACES, 50.45, reverse_log=rev)
+    run = measure_log(fwd, N_FACES, 50.45 * DEG, reverse_log=rev)
     truth = np.array(simulate(spec)["truth"]["angles_rad"])
     assert np.max(np.abs(run.angles.angles_rad - truth) / run.angles.u_rad) < 4.0
 

@@ -1,0 +1,80 @@
+"""The result of the goniometer pipeline (:func:`align.gonio.measure_log`) and its JSON form:
+face angles with u, the revolution summary, the loop, the direction and timing terms."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from align.gonio_directions import DirectionTerm, direction_effect
+from axisbase.units import ARCSEC
+from goniometry import FaceAngles, LogSummary
+from goniometry.timing import TimingAngles
+
+if TYPE_CHECKING:
+    from align.loop import LoopReport
+
+
+@dataclass(frozen=True)
+class GonioRun:
+    """A counter log through the goniometer pipeline: the revolution summary, the face angles,
+    the revolution-level loop (None when it did not run) and notes for the user. With a log
+    of the other direction, ``angles`` is the mean of both, ``reverse`` that run and
+    ``direction`` the term the mean cancelled."""
+
+    summary: LogSummary
+    angles: FaceAngles
+    loop: LoopReport | None
+    notes: tuple[str, ...]
+    earth_rate_applied: float | None
+    reverse: GonioRun | None = None
+    direction: DirectionTerm | None = None
+    timing: TimingAngles | None = None
+    timing_used: bool = False
+    warnings: tuple[str, ...] = ()  # options given that this log cannot honour
+
+    def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
+        """The run as JSON (the contract of ``align gonio``, also a session's stage);
+        angles in degrees, uncertainties in arc-seconds at this edge. ``faces``: their
+        names in passing order; ``nominal``: nominal angles [rad] for the deviations."""
+        fa, summary, loop = self.angles, self.summary, self.loop
+        arcsec = 1.0 / ARCSEC
+        effects = [e.to_dict() for e in loop.effects] if loop is not None else []
+        if self.direction is not None:
+            effects.append(direction_effect(self.direction, faces))
+        js = {"faces": list(faces), "angles_deg": np.rad2deg(fa.angles_rad).tolist(),
+              "angles_u_arcsec": (fa.u_rad * arcsec).tolist(),
+              "revolutions_used": fa.revolutions, "effects": effects,
+              "unexplained_structure": bool(loop and loop.unexplained_structure),
+              "covariance_arcsec2": (fa.cov * arcsec**2).tolist(),
+              "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
+              "type_a_method": fa.type_a_method, "jitter_counts": fa.jitter_counts,
+              "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
+              "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
+                             for k, v in summary.exclusions.counts.items()},
+              "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
+                        "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
+              "angles_source": "pulse times (steady table)" if self.timing_used else "counts",
+              "type_b_terms_arcsec": {k: (v * arcsec).tolist()
+                                      for k, v in fa.type_b_terms.items()},
+              "faults": {"sigma_counts": summary.sigma_counts,
+                         "tolerance_counts": summary.tolerance_counts,
+                         "revolutions_excluded": summary.excluded_revolutions,
+                         "armed_face": summary.armed_face,
+                         "rows_before_first_revolution": summary.incomplete_head,
+                         "rows_after_last_revolution": summary.incomplete_tail},
+              "notes": list(self.notes)}
+        if self.timing is not None:
+            ta = self.timing
+            js["timing"] = {"angles_deg": np.rad2deg(ta.angles_rad).tolist(),
+                            "angles_u_arcsec": (ta.u_rad * arcsec).tolist(),
+                            "counts_minus_timing_arcsec": (ta.diff_rad * arcsec).tolist(),
+                            "counts_minus_timing_u_arcsec": (ta.diff_u_rad * arcsec).tolist(),
+                            "chi2": ta.chi2, "dof": ta.dof, "p_value": ta.p_value,
+                            "used": self.timing_used}
+        if nominal is not None:
+            js["deviation_arcsec"] = ((fa.angles_rad - nominal) * arcsec).tolist()
+        return js

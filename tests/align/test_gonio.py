@@ -1,0 +1,100 @@
+"""``measure_log`` from a file and from the same rows in memory: one reader, one result.
+
+No log in ../shared/data/real is a goniometer (counter) log (its README: none public was
+found), so the comparison runs on seeded synthetic logs only.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from align import measure_log
+from axisbase.errors import InputError
+from axisbase.units import DEG
+from goniometry.errors import LogError
+from synth.gonio import GonioSpec, simulate, write_log
+
+NAMES = ("count", "counter", "ref", "t")
+
+
+def _file_and_rows(tmp_path, spec: GonioSpec):
+    path = write_log(simulate(spec), tmp_path / "log.csv")
+    # The rows as the file holds them (t written to 9 decimals), read by numpy, not the tool.
+    table = np.loadtxt(path, delimiter=",", skiprows=1)
+    return path, {k: table[:, i] for i, k in enumerate(NAMES)}
+
+
+def _same(from_file, from_rows) -> None:
+    """The same JSON, number for number, but for the exclusions' lines: a file's name its
+    lines, the rows' their indexes (the header line and 1-based lines: 2 apart)."""
+    faces = ["f0", "f1", "f2", "f3"]
+    a, b = from_file.to_dict(faces), from_rows.to_dict(faces)
+    for e in a["exclusions"].values():
+        e["lines"] = [ln - 2 for ln in e["lines"]]
+    assert json.dumps(a) == json.dumps(b)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_rows_in_memory_give_the_file_s_result(tmp_path, seed):
+    # Faults (missing and spurious pulses) make the exclusions and their lines part of the
+    # comparison; 3000 revolutions are a few chunks of the file's and one of the rows'.
+    spec = GonioSpec(revolutions=3000, seed=seed, p_missing=1e-3, p_spurious=1e-3)
+    path, rows = _file_and_rows(tmp_path, spec)
+    from_file = measure_log(path, 4, latitude_rad=50.45 * DEG)
+    from_rows = measure_log(rows, 4, latitude_rad=50.45 * DEG)
+    _same(from_file, from_rows)
+    assert from_file.summary.excluded_revolutions > 0  # (the faults were there to compare)
+
+
+def test_every_kind_of_rows_and_the_loop_path(tmp_path):
+    # Without the latitude the loop runs (another branch of measure_log); a structured array
+    # and a pyarrow Table with other header names (aliases, a unit) go the same way.
+    path, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=400, seed=5))
+    _same(measure_log(path, 4), measure_log(rows, 4))
+    from_file = measure_log(path, 4, latitude_rad=50.45 * DEG)
+    _same(from_file, measure_log(pa.table(rows), 4, latitude_rad=50.45 * DEG))
+    structured = np.zeros(len(rows["t"]), dtype=[("counts", "i8"), ("counter", "i8"),
+                                                  ("REF", "i8"), ("t [ms]", "f8")])
+    for k, name in zip(NAMES, structured.dtype.names, strict=True):
+        structured[name] = rows[k] * (1e3 if k == "t" else 1)
+    # t in ms is converted to s (x 1e-3): not bit for bit, the same to far below u.
+    ms = measure_log(structured, 4, latitude_rad=50.45 * DEG)
+    assert np.allclose(ms.angles.angles_rad, from_file.angles.angles_rad, rtol=0,
+                       atol=1e-3 * float(np.min(from_file.angles.u_rad)))
+
+
+@pytest.mark.parametrize(("column", "row", "value", "what"), [
+    ("ref", 9, 2, "ref: must be 0 or 1"),
+    ("count", 4, -1, "count: must not be negative"),
+    ("t", 6, np.nan, "t: is not a finite number"),
+    ("t", 3, 0.0, "t: 0 runs backwards"),
+])
+def test_a_bad_row_is_named_by_its_index(tmp_path, column, row, value, what):
+    _, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=40, seed=2))
+    rows[column][row] = value
+    with pytest.raises(LogError, match=f"^rows: row {row}: {what}"):
+        measure_log(rows, 4, latitude_rad=50.45 * DEG)
+
+
+def test_a_latitude_in_degrees_is_refused_not_used(tmp_path):
+    # Radians inside: 50.45 (degrees by mistake) would remove a wrong Earth rate silently.
+    _, rows = _file_and_rows(tmp_path, GonioSpec(revolutions=40, seed=2))
+    with pytest.raises(InputError, match=r"latitude_rad = 50\.45: .*radians"):
+        measure_log(rows, 4, 50.45)
+    with pytest.raises(InputError, match=r"latitude_range_rad = 60: .*radians"):
+        measure_log(rows, 4, latitude_range_rad=(0.7, 60.0))
+
+
+def test_rows_that_are_not_a_log_are_refused_by_name():
+    with pytest.raises(LogError, match=r"^rows: column names: .* lacks ref"):
+        measure_log({"count": [1, 2], "counter": [1, 2]}, 4)
+    with pytest.raises(LogError, match=r"^rows: row 1: count: '2\.5' is not a whole number"):
+        measure_log({"count": [1.0, 2.5], "counter": [1, 2], "ref": [1, 0]}, 4)
+    with pytest.raises(LogError, match=r"^rows: columns of different lengths"):
+        measure_log({"count": [1, 2], "counter": [1, 2], "ref": [1]}, 4)
+    with pytest.raises(LogError, match=r"^rows: a list is not rows of a table"):
+        measure_log([[1, 1, 1]], 4)
