@@ -44,8 +44,11 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
         v = float(u.get(k, 0.0))
         return v if np.isfinite(v) else 0.0
 
+    # The aspect's own u when the calibration states it (fx, fy correlated); else fx's and
+    # fy's as if independent (an upper bound).
+    aspect = g("aspect") if "aspect" in u else np.hypot(g("fx") / fx, g("fy") / fy) * fy / fx
     return np.array([g("k1") * a**2, g("k2") * a**4, g("p1") * a, g("p2") * a,
-                     np.hypot(g("fx") / fx, g("fy") / fy) * fy / fx, g("cx"), g("cy")])
+                     aspect, g("cx"), g("cy")])
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,32 @@ class GonioRun:
     """A counter log through the goniometer pipeline: the revolution summary, the face angles,
     the revolution-level loop (None when it did not run) and notes for the user. With a log
     of the other direction, ``angles`` is the mean of both, ``reverse`` that run and
-    ``direction`` the term the mean cancelled."""
+    ``direction`` the term the mean cancelled.
+
+    Attributes
+    ----------
+    summary : LogSummary
+        The streaming pass's revolutions, exclusions and faults; unit — (its fields carry
+        units).
+    angles : FaceAngles
+        The face angles [rad] with their u [rad] (Earth's rotation removed or bounded).
+    loop : LoopReport or None
+        The revolution-level loop (None when it did not run); unit —.
+    notes : tuple of str
+        What the user should know about the log; unit —.
+    earth_rate_applied : float or None
+        The vertical Earth rate removed [rad/s] (None: bounded in u, not removed).
+    reverse : GonioRun or None
+        The run of the other direction's log, when given; unit —.
+    direction : DirectionTerm or None
+        The term the mean of both directions cancelled; unit — (its fields carry units).
+    timing : TimingAngles or None
+        The face angles from the pulse times [rad], when the log has them; unit —.
+    timing_used : bool
+        Whether the pulse times replaced the counts (a steady table); unit —.
+    warnings : tuple of str
+        Options given that this log cannot honour; unit —.
+    """
 
     summary: LogSummary
     angles: FaceAngles
@@ -34,7 +59,7 @@ class GonioRun:
     direction: DirectionTerm | None = None
     timing: TimingAngles | None = None
     timing_used: bool = False
-    warnings: tuple[str, ...] = ()  # options given that this log cannot honour
+    warnings: tuple[str, ...] = ()
 
     def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
         """The run as JSON (the contract of ``align gonio``, also a session's stage);

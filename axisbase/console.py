@@ -104,17 +104,28 @@ def console(stream: TextIO, name: str = "standard output") -> ClosedPipeSafe:
     return ClosedPipeSafe(stream, name)
 
 
-def setup_logging(name: str, quiet: bool = False, verbose: bool = False) -> logging.Logger:
-    """The logger ``name`` (and its children, the library's loggers) to stderr, message only:
-    WARNING with ``quiet``, DEBUG with ``verbose``, else INFO."""
-    level = logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO
+@contextlib.contextmanager
+def logging_to_stderr(name: str, quiet: bool = False,
+                      verbose: bool = False) -> Iterator[logging.Logger]:
+    """The logger ``name`` (and its children, the library's loggers) to stderr, message only,
+    while the block runs: WARNING with ``quiet``, DEBUG with ``verbose``, else INFO.
+
+    Afterwards the logger is as it was: the command line may run in-process more than once
+    (a test, a notebook), and a handler left on the stderr of a finished run would swallow
+    the next caller's log records."""
+    log = logging.getLogger(name)
+    saved = (log.handlers[:], log.level, log.propagate)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(message)s"))
-    log = logging.getLogger(name)
     log.handlers[:] = [handler]
-    log.setLevel(level)
+    log.setLevel(logging.WARNING if quiet else logging.DEBUG if verbose else logging.INFO)
     log.propagate = False
-    return log
+    try:
+        yield log
+    finally:
+        log.handlers[:] = saved[0]
+        log.setLevel(saved[1])
+        log.propagate = saved[2]
 
 
 class _Capture(logging.Filter):

@@ -397,8 +397,9 @@ _STDOUT_STREAM: list = []
 
 
 def set_real_stdout(stream) -> None:
-    """Where ``-`` outputs go when the CLI has redirected its messages to stderr."""
-    _STDOUT_STREAM[:] = [stream]
+    """Where ``-`` outputs go when the CLI has redirected its messages to stderr (None, at
+    the end of its run: ``sys.stdout`` again)."""
+    _STDOUT_STREAM[:] = [] if stream is None else [stream]
 
 
 def _real_stdout():

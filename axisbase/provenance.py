@@ -28,9 +28,10 @@ PROVENANCE_KEYS = ("tool", "tool_version", "created_utc", "command", "settings",
 """The top-level keys :meth:`Provenance.to_dict` writes (format version 3 and later)."""
 
 
-def set_command(argv: Iterable[str]) -> None:
-    """Record the command line of this run (the CLI calls it once)."""
-    _COMMAND[:] = [list(argv)]
+def set_command(argv: Iterable[str] | None) -> None:
+    """Record the command line of this run (the CLI calls it once, and with None at its end:
+    then :func:`command_line` is this process's ``sys.argv`` again)."""
+    _COMMAND[:] = [] if argv is None else [list(argv)]
 
 
 def command_line() -> list[str]:

@@ -8,7 +8,9 @@ Over N clean sessions (``synth.session``, no effect put in), counts per stage
 * refuses (a stage error, or the fusion's gross disagreement),
 
 and, for the fusion, how many name a disagreeing source. Prints one line per stage with the
-rates and the 95 % upper bound of each (Clopper-Pearson). The target is <= 1 % per stage.
+rates and the 95 % upper bound of each (Clopper-Pearson). The target is <= 1 % per stage;
+each stage on its own cheap inputs, with N large enough to show it:
+``tests/align/test_decision_rates.py`` (docs/decisions.md).
 
 Run: ``python3 benchmarks/clean_decisions.py --sessions 100 --seed0 20000`` (~8 s a session).
 """
@@ -24,15 +26,9 @@ import benchpage
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from scipy.stats import beta  # noqa: E402
-
 from align.session import load_session, run_session  # noqa: E402
-from align.session.decisions import STAGES, decisions  # noqa: E402
+from align.session.decisions import STAGES, decisions, upper95  # noqa: E402
 from synth.session import SessionSpec, write_session  # noqa: E402
-
-
-def upper95(k: int, n: int) -> float:
-    return 1.0 if k >= n else float(beta.ppf(0.95, k + 1, n - k))
 
 
 def run(sessions: int, seed0: int, folder: Path) -> dict[str, dict[str, int]]:

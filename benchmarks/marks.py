@@ -183,7 +183,9 @@ TARGET_MS = {(640, 480): ("+ residual loop", 60.0), (2592, 1944): ("detect + mea
 def speed(repeats: int = 15) -> None:
     """CPU time per image at 640x480 (300-px mark) and 5 MP (2000-px mark), with OpenCV's LSD
     on the same image in the same run: median and least of ``repeats`` calls (the host is
-    shared: the least is the figure other jobs disturb least)."""
+    shared: the least is the figure other jobs disturb least). Ends with issue 18's two
+    figures on one line."""
+    summary = []
     for title, size, length in (("640x480 16-bit image, 300-px mark", (640, 480),
                                  300.0),
                                 ("5-megapixel 16-bit image (2592x1944, 2000-px mark)",
@@ -211,6 +213,10 @@ def speed(repeats: int = 15) -> None:
         label, target = TARGET_MS[size]
         print(f"target: {label} <= {target:.0f} ms: "
               f"{'met' if 1e3 * med[label] <= target else 'NOT met'} (median)")
+        summary.append(f"{size[0]}x{size[1]} {label} {1e3 * med[label]:.1f} ms (target "
+                       f"{target:.0f}; {med[label] / med['OpenCV LSD']:.2f} x LSD's "
+                       f"{1e3 * med['OpenCV LSD']:.1f} ms)")
+    print("\nissue 18, point 6 (CPU per image, medians): " + "; ".join(summary))
 
 
 if __name__ == "__main__":

@@ -13,11 +13,13 @@ Public API::
 """
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
+from imaging.centres import Centres
 from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.ends import GrooveEnds, groove_ends
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines, grating_note
+from imaging.groove import ProfileFit
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
@@ -39,7 +41,6 @@ from imaging.plumbline import (
     plumb_line,
     undistort,
 )
-from imaging.profile import Centres, ProfileFit
 from imaging.stripes import Stripes
 
 __all__ = [

@@ -94,7 +94,8 @@ class CameraModel:
         Chessboard views used — dimensionless.
     u : dict or None
         Standard uncertainty per parameter (fx, fy, cx, cy [px]; k1, ... dimensionless): the
-        larger of ``u_formal`` and ``u_jackknife``.
+        larger of ``u_formal`` and ``u_jackknife``; from five views also ``aspect`` (of
+        fy / fx, dimensionless: fx and fy are strongly correlated, so far below their u's).
     per_view_rms_px : dict or None
         RMS reprojection error of each view [px].
     u_formal : dict or None
@@ -240,6 +241,7 @@ def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarra
     est = np.array([_intrinsics(*cv2.calibrateCamera(
         objpts[:i] + objpts[i + 1:], imgpts[:i] + imgpts[i + 1:], size,
         None if K0 is None else K0.copy(), None, flags=flags)[1:3]) for i in range(n)])
+    est = np.column_stack([est, est[:, 1] / est[:, 0]])  # and the aspect fy / fx
     return np.sqrt((n - 1) / n * np.sum((est - est.mean(axis=0)) ** 2, axis=0))
 
 
@@ -303,9 +305,15 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     u = dict(u_formal)
     if len(objpts) >= JACKKNIFE_MIN_VIEWS:
         jack = jackknife_u(objpts, imgpts, size, K0, flags)
-        jack[formal == 0] = 0.0  # a fixed parameter stays exact
-        u_jack = {k: float(v) for k, v in zip(INTRINSICS, jack, strict=True)}
+        jack[:-1][formal == 0] = 0.0  # a fixed parameter stays exact
+        u_jack = {k: float(v) for k, v in zip((*INTRINSICS, "aspect"), jack, strict=True)}
         u = {k: float(max(v, u_jack[k])) for k, v in u_formal.items()}
+        # fx and fy move together (one board scale): the aspect fy / fx is known far better
+        # than their u's together say. OpenCV gives no covariance, so its u is the jackknife's,
+        # at least what fully correlated fx, fy would leave; 0 when fixed.
+        a = K[1, 1] / K[0, 0]
+        floor = a * abs(u["fy"] / K[1, 1] - u["fx"] / K[0, 0])
+        u["aspect"] = 0.0 if fix_aspect else float(max(u_jack["aspect"], floor))
     return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
                        {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)},
                        u_formal, u_jack), failed

@@ -208,8 +208,12 @@ def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int
     values (NaN where a column has no value), and each block's mean position t [px]."""
     nb = len(t) // block_px
     v = vals[:nb * block_px].reshape(nb, block_px, -1)
-    if np.isfinite(v).all():  # np.median: the same values, several times faster
-        profs = np.median(v, axis=1)
+    if np.isfinite(v).all():
+        # np.median's values (the middle one, or the mean of the middle two) from one sort:
+        # on blocks of ~20 rows ~4x faster than its partition, and np.nanmedian's.
+        s = np.sort(v, axis=1)
+        m = block_px // 2
+        profs = s[:, m] if block_px % 2 else (s[:, m - 1] + s[:, m]) / 2
     else:
         with warnings.catch_warnings():  # an all-NaN column is NaN, as it should be
             warnings.simplefilter("ignore", RuntimeWarning)

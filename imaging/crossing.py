@@ -200,22 +200,28 @@ def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
     bg = float(ends.mean()) if ends.size else float(np.nanmean(y))  # background beyond both
     y = y - bg
     with np.errstate(invalid="ignore"):  # NaN compares False: no peak next to a gap
-        peaks = list(np.flatnonzero((y[1:-1] >= y[:-2]) & (y[1:-1] > y[2:])) + 1)
+        peaks = np.flatnonzero((y[1:-1] >= y[:-2]) & (y[1:-1] > y[2:])) + 1
     if len(peaks) < 2:
         return None
-    top = max(y[k] for k in peaks)
-    peaks = [k for k in peaks if y[k] >= top / 3]
-    best = None
-    for a in range(len(peaks)):
-        for b in range(a + 1, len(peaks)):
-            i, j = peaks[a], peaks[b]
-            if e[j] - e[i] < half_px:
-                continue
-            low = min(y[i], y[j])
-            dip = low - float(np.nanmin(y[i:j + 1]))
-            if dip >= max(5 * sigma, 0.1 * top) and (best is None or dip > best[0]):
-                best = (dip, float(e[i]), float(e[j]))
-    return None if best is None else (best[1], best[2])
+    top = float(y[peaks].max())
+    peaks = peaks[y[peaks] >= top / 3]
+    if len(peaks) < 2:
+        return None
+    # Every pair (i < j) at once (a loop over the pairs cost ~0.1 ms a profile, ~200 profiles
+    # a 5 MP mark): the lowest value between them is the running minimum from i (NaN
+    # skipped) read at j; the deepest dip wins, the first pair in (i, j) order on a tie.
+    yp, ep = y[peaks], e[peaks]
+    span = np.arange(peaks[0], peaks[-1] + 1)
+    runs = np.fmin.accumulate(np.where(span[None, :] >= peaks[:, None], y[span][None, :],
+                                       np.nan), axis=1)
+    low = np.minimum(yp[:, None], yp[None, :])
+    dip = low - runs[:, peaks - peaks[0]]
+    pair = np.triu(np.ones((len(peaks),) * 2, bool), 1) & (ep[None, :] - ep[:, None] >= half_px)
+    good = pair & (dip >= max(5 * sigma, 0.1 * top))
+    if not good.any():
+        return None
+    a, b = np.unravel_index(np.argmax(np.where(good, dip, -np.inf)), dip.shape)
+    return float(ep[a]), float(ep[b])
 
 
 FUSE_WIDTHS = 5.0

@@ -11,10 +11,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from imaging.candidate import MarkCandidate, line_frame
+from imaging.centres import Centres
 from imaging.confirm import across, block_medians
 from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
 from imaging.errors import ImageInputError
-from imaging.profile import Centres, ProfileFit, centres_half
+from imaging.groove import ProfileFit, centres_half
 
 MIN_SEGMENTS = 10
 """Fewest centres a mark's fit is made from (as :func:`imaging.measure._usable` asks)."""

@@ -7,7 +7,7 @@ its residuals swells, and the centres' stated sigma no longer match their scatte
 then sees chi2 far below its dof). Here the gradient is found and named.
 
 Each segment's blur change (one Gauss–Newton step on the blur, the segment's other
-parameters free: :func:`imaging.profile.sample_centres`) is regressed on the position along
+parameters free: :func:`imaging.centres.sample_centres`) is regressed on the position along
 the mark. The slope's u is taken from the scatter about the line (never below the Fisher u),
 widened for lag-1 correlation of that scatter (AR(1): texture correlates neighbouring
 segments), and the slope is tested against zero at :data:`ALPHA`. A groove whose shape

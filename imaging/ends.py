@@ -18,7 +18,7 @@ starts within two blur widths of the end is an obstruction:
   the visible end and the far side of the disturbed run (out to where the surface is
   seen quiet again, plus a blur width) — a bound, not a length.
 
-Positions t [px] along the line of the :class:`~imaging.profile.ProfileFit` (its frame).
+Positions t [px] along the line of the :class:`~imaging.groove.ProfileFit` (its frame).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.profile import ProfileFit, ProfileTable, _band
+from imaging.band import _band
+from imaging.groove import ProfileFit, ProfileTable
 
 LEVEL_K = 4.5
 """A bin's level this many robust deviations from the surface's trend is disturbed."""

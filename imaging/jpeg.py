@@ -26,8 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imaging.band import band_pixels
+from imaging.centres import sample_centres
+from imaging.groove import ProfileFit, ProfileTable, centres_half
 from imaging.linefit import fit_line
-from imaging.profile import ProfileFit, ProfileTable, band_pixels, centres_half, sample_centres
 
 R_MIN = 0.5
 """Concentration on the steps' multiples that says "quantised" (noise alone gives ~0.01)."""

@@ -13,7 +13,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import median_filter
 
+from imaging.band import band_indices
 from imaging.camera import CameraModel
+from imaging.centres import Centres, sample_centres
 from imaging.crossmask import crossing_skip, fused_error
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
@@ -27,18 +29,12 @@ from imaging.detect import (
 )
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines, grating_note
+from imaging.groove import ProfileFit
 from imaging.io import full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
-from imaging.profile import (
-    Centres,
-    ProfileFit,
-    band_indices,
-    fit_profile,
-    groove_extent,
-    sample_centres,
-)
+from imaging.profile import fit_profile, groove_extent
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 

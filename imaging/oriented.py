@@ -28,12 +28,13 @@ the test runs again on the result (a second pattern, a harmonic) up to :data:`MA
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy import fft, optimize
-from scipy.ndimage import uniform_filter
 
 ALPHA = 1e-3
 """Level of the test for a periodic background (one false flag per 1000 clean images)."""
@@ -149,28 +150,37 @@ def _square(shape: tuple[int, int]) -> tuple[slice, slice]:
     return slice(y0, y0 + sy), slice(x0, x0 + sx)
 
 
-def _relative(image: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The image over its quadratic shading minus 1 (0 where not valid) and the shading."""
+def _relative(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The image over its quadratic shading minus 1 (0 where not valid)."""
     h, w = image.shape
-    yy, xx = np.nonzero(valid)
-    step = max(1, yy.size // 20000)
-    x, y = xx[::step] / w - 0.5, yy[::step] / h - 0.5
+    # Every step-th valid pixel, from one flat index (the same pixels as nonzero's pairs).
+    flat = np.flatnonzero(valid)
+    step = max(1, flat.size // 20000)
+    flat = flat[::step]
+    yy, xx = np.divmod(flat, w)
+    x, y = xx / w - 0.5, yy / h - 0.5
     A = np.column_stack([np.ones_like(x), x, y, x * x, x * y, y * y])
-    c, *_ = np.linalg.lstsq(A, image[yy[::step], xx[::step]].astype(float), rcond=None)
-    Y, X = np.ogrid[:h, :w]
-    X, Y = X / w - 0.5, Y / h - 0.5
-    lev = c[0] + c[1] * X + c[2] * Y + c[3] * X * X + c[4] * X * Y + c[5] * Y * Y
-    lev = np.broadcast_to(lev, image.shape)
-    rel = np.where(valid, image / np.where(lev > 0, lev, 1.0) - 1.0, 0.0)
-    return rel, lev
+    c, *_ = np.linalg.lstsq(A, image.ravel()[flat].astype(float), rcond=None)
+    X = np.arange(w)[None, :] / w - 0.5
+    Y = np.arange(h)[:, None] / h - 0.5
+    # The same sums in the same order as c0 + c1 X + c2 Y + c3 X^2 + c4 X Y + c5 Y^2, with
+    # one full-frame buffer (each full-frame temporary of 5 MP costs its page faults).
+    lev = (c[0] + c[1] * X) + c[2] * Y
+    lev += c[3] * X * X
+    lev += np.multiply(c[4] * X, Y)
+    lev += c[5] * Y * Y
+    np.copyto(lev, 1.0, where=~(lev > 0))
+    rel = np.divide(image, lev, out=lev)
+    rel -= 1.0
+    rel[~valid] = 0.0
+    return rel
 
 
-def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
-          ) -> tuple[float, float, float, float]:
-    """The strongest periodic peak: (ratio, threshold, fx, fy) [cycles/px]."""
-    h, w = rel.shape
+@functools.lru_cache(maxsize=8)
+def _grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame shape: the 2-D Hann window, the rfft2 frequencies fx (1, w//2+1), fy (h, 1)
+    [cycles/px] and the bins searched (read-only; frames of one camera share them)."""
     win = np.outer(np.hanning(h), np.hanning(w))
-    P = np.abs(fft.rfft2((rel - rel[valid].mean() * valid) * win, workers=1)) ** 2
     fy = fft.fftfreq(h)[:, None]
     fx = fft.rfftfreq(w)[None, :]
     f = np.hypot(fx, fy)
@@ -178,11 +188,36 @@ def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
     # spectrum — shading, a lay's broad part — is lower outside than inside).
     bins = np.hypot(fx * w, fy * h)
     search = (f >= 1 / PERIOD_PX[1]) & (f <= 1 / PERIOD_PX[0]) & (bins >= MIN_BINS)
+    for a in (win, fx, fy, search):
+        a.flags.writeable = False
+    return win, fx, fy, search
+
+
+def _box_sum(P: np.ndarray, size: int) -> np.ndarray:
+    """Sum of P over the size x size bins about each bin, the spectrum wrapped around (as
+    scipy.ndimage.uniform_filter(mode="wrap") x size^2, ~4x faster)."""
+    r = size // 2
+    Q = np.pad(P, r, mode="wrap")
+    return cv2.boxFilter(Q, -1, (size, size), normalize=False,
+                         borderType=cv2.BORDER_CONSTANT)[r:-r, r:-r]
+
+
+def _peak(rel: np.ndarray, valid: np.ndarray, alpha: float = ALPHA
+          ) -> tuple[float, float, float, float]:
+    """The strongest periodic peak: (ratio, threshold, fx, fy) [cycles/px]."""
+    h, w = rel.shape
+    win, fx, fy, search = _grid(h, w)
+    # (rel - mean * valid) * win, in one buffer: off the background 0 - 0 * mean = 0.
+    x = rel - rel[valid].mean()
+    np.copyto(x, 0.0, where=~valid)
+    x *= win
+    P = np.abs(fft.rfft2(x, workers=1))
+    del x
+    P *= P
     # 2-D neighbourhood: 15x15 bins less the 5x5 core (a windowed peak's spread)
-    big, core = uniform_filter(P, 15, mode="wrap") * 225, uniform_filter(P, 5, mode="wrap") * 25
-    box = (big - core) / 200.0
+    box = (_box_sum(P, 15) - _box_sum(P, 5)) / 200.0
     cand = np.where(search, P / np.maximum(box, 1e-300), 0.0)
-    m = int(search.sum())
+    m = int(np.count_nonzero(search))
     thr = MARGIN * float(np.log(m / alpha))
     best = (0.0, thr, 0.0, 0.0)
     above = np.flatnonzero(cand >= thr)  # usually none
@@ -289,7 +324,7 @@ def find_oriented(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: fl
     waves: list[Wave] = []
     ratio0, thr = 0.0, float("inf")
     for _ in range(MAX_WAVES):
-        rel, _ = _relative(cur, valid)
+        rel = _relative(cur, valid)
         ratio, thr, fx, fy = _peak(rel, valid, alpha)
         ratio0 = ratio0 or ratio
         if ratio < thr:
@@ -301,7 +336,7 @@ def find_oriented(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: fl
     if not waves:
         return image, OrientedStripes((), ratio0, thr)
     # What is left of each wave at its own frequency: the removal's remaining fraction.
-    rel, _ = _relative(cur, valid)
+    rel = _relative(cur, valid)
     left = 0.0
     for w in waves:
         _, ab, cov = _fit_fixed(rel, valid, w.k, (sl[0].start, sl[1].start))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -48,14 +49,9 @@ def _strip_images(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def imageless_session(root: Path, spec) -> Path:
-    """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
-    copy without images under ``root/plain`` (calibration, goniometer, platform: ~1 s to run);
-    returns the copy."""
-    from synth.session import write_session
-
-    full, plain = root / "full", root / "plain"
-    write_session(full, spec)
+def strip_images(full: Path, plain: Path) -> Path:
+    """A copy of the session ``full`` without its images at ``plain`` (calibration,
+    goniometer, platform: ~1 s to run); returns ``plain``."""
     plain.mkdir()
     for name in ("tumble.csv", "gonio.csv", "platform.csv"):
         (plain / name).write_bytes((full / name).read_bytes())
@@ -63,16 +59,36 @@ def imageless_session(root: Path, spec) -> Path:
     return plain
 
 
+def imageless_session(root: Path, spec) -> Path:
+    """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
+    copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy."""
+    from synth.session import write_session
+
+    write_session(root / "full", spec)
+    return strip_images(root / "full", root / "plain")
+
+
 @pytest.fixture(scope="session")
-def session21_result(tmp_path_factory) -> Path:
-    """The synthetic session of seed 21 with [metadata], run once by ``align run``: the path
+def session21(tmp_path_factory) -> Path:
+    """The synthetic session of seed 21 (``SessionSpec(seed=21)``: images, tumble, counter
+    log, platform), written once for the whole run as folder ``unit7``. Read-only: a test
+    that edits a session edits a copy."""
+    from synth.session import SessionSpec, write_session
+
+    folder = tmp_path_factory.mktemp("seed21") / "unit7"
+    write_session(folder, SessionSpec(seed=21))
+    return folder
+
+
+@pytest.fixture(scope="session")
+def session21_result(session21, tmp_path_factory) -> Path:
+    """The session of seed 21 with [metadata], run once by ``align run``: the path
     of its result JSON. Shared by the lot tests (test_lot, test_lot_duplicates), which only
     read it; a full session run is seconds of CPU."""
     from align.cli import main
-    from synth.session import SessionSpec, write_session
 
-    folder = tmp_path_factory.mktemp("seed21") / "unit1"
-    write_session(folder, SessionSpec(seed=21))
+    folder = tmp_path_factory.mktemp("seed21meta") / "unit1"
+    shutil.copytree(session21, folder)
     with open(folder / "session.toml", "a") as f:
         f.write('\n[metadata]\nserial = "SN-0001"\noperator = "kim"\n'
                 "date = 2026-11-20T08:30:00Z\nbatch = 7\n")

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 from align.commands.args import attach_signs
 from align.commands.parser import build_parser
-from axisbase.console import ConsoleWriteError, console, setup_logging
+from axisbase.console import ConsoleWriteError, console, logging_to_stderr
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, InputError
 
 
@@ -45,15 +45,23 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: list[str]) -> int:
-    from axisbase.output import set_real_stdout
-    from axisbase.provenance import set_command
-    from axisbase.stop import Stopped, raise_on_signals, restore
-
     try:
         args = build_parser().parse_args(attach_signs(argv))
     except SystemExit as exc:
         return int(exc.code or 0) and EXIT_INPUT
-    setup_logging("align", getattr(args, "quiet", False), getattr(args, "verbose", False))
+    with logging_to_stderr("align", getattr(args, "quiet", False),
+                           getattr(args, "verbose", False)):
+        return _run(args, argv)
+
+
+def _run(args, argv: list[str]) -> int:
+    """The parsed command, with this run's global settings (the command line in the
+    provenance, where ``-`` outputs go, the pixel budget, signal handlers) undone afterwards:
+    ``main()`` may be called in-process more than once."""
+    from axisbase.output import set_real_stdout
+    from axisbase.provenance import set_command
+    from axisbase.stop import Stopped, raise_on_signals, restore
+
     set_command(["align", *argv])
     real_stdout = sys.stdout
     set_real_stdout(real_stdout)
@@ -85,6 +93,8 @@ def _main(argv: list[str]) -> int:
     finally:
         sys.stdout = real_stdout
         restore(handlers)
+        set_command(None)
+        set_real_stdout(None)
         if budget_before is None:  # main() called in-process: the budget was for this call
             os.environ.pop("ALIGN_MAX_PIXELS", None)
         else:

@@ -1,19 +1,13 @@
 """The shared residual loop: structure tests, candidate effects, selection, report."""
 
-from align.loop.loop import (
-    Candidate,
+from align.loop.fit import Candidate, Stage, StageFit, Term
+from align.loop.loop import bic, f_test, optimistic_fit, run_loop
+from align.loop.report import (
     EffectReport,
     LoopReport,
     LoopSummary,
     RefusedEffect,
     SkippedCandidate,
-    Stage,
-    StageFit,
-    Term,
-    bic,
-    f_test,
-    optimistic_fit,
-    run_loop,
 )
 from align.loop.structure import StructureReport, StructureTest, check_structure, periodogram_test
 

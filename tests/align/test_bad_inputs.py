@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +27,7 @@ import numpy as np
 import pytest
 
 from align.cli import build_parser, main
-from tests.conftest import imageless_session
+from tests.conftest import strip_images
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -34,12 +35,12 @@ ROOT = Path(__file__).resolve().parents[2]
 # ----------------------------------------------------------------------------- fixtures
 
 @pytest.fixture(scope="module")
-def base(tmp_path_factory):
-    """A seeded synthetic session (no images), its result and platform calibration."""
-    from synth.session import SessionSpec
-
+def base(session21, tmp_path_factory):
+    """A seeded synthetic session (seed 21: ``full`` a copy of it, ``plain`` without images),
+    its result and platform calibration."""
     root = tmp_path_factory.mktemp("contract")
-    s = imageless_session(root, SessionSpec(seed=21))
+    shutil.copytree(session21, root / "full")
+    s = strip_images(root / "full", root / "plain")
     # The readings for tilt/apply: the platform file without its pose labels.
     rows = (s / "platform.csv").read_text().splitlines()
     (root / "readings.csv").write_text(

@@ -20,11 +20,12 @@ import os
 import shutil
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from tests.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 N_RL = 2**20  # ring-laser periods per inertial revolution
@@ -74,17 +75,16 @@ def write(path: Path, data) -> Path:
 
 
 def gonio(log, *extra, json_out=None, latitude="0", env_extra=None, faces=FACES):
-    """Run ``align gonio`` as a user does; returns (process, JSON dict or None, JSON path)."""
+    """Run ``align gonio`` as a user does; returns (its result: ``returncode``, ``stdout``,
+    ``stderr``; the JSON dict or None; the JSON path)."""
     log = Path(log)
     out = Path(json_out) if json_out else log.parent / (log.name + ".json")
     if out.exists():
         out.unlink()
-    args = [sys.executable, "-m", "align", "gonio", str(log), "--faces", faces, "-q",
-            "--json", str(out), *extra]
+    args = ["gonio", log, "--faces", faces, "-q", "--json", out, *extra]
     if latitude is not None:
         args.append(f"--latitude={latitude}")
-    env = dict(os.environ, PYTHONPATH=str(ROOT), **(env_extra or {}))
-    p = subprocess.run(args, capture_output=True, text=True, env=env, timeout=300)
+    p = run_cli(*args, env=env_extra)  # in this process (tests.cli): the user's exit status
     d = json.loads(out.read_text()) if out.exists() else None
     return p, d, out
 
@@ -410,8 +410,9 @@ def _random_run(seed, tmp: Path):
 
 
 def _normalised_errors(seeds, tmp):
-    with ThreadPoolExecutor(2) as pool:
-        return np.concatenate(list(pool.map(lambda s: _random_run(s, tmp), seeds)))
+    # One after the other: the runs are in this process (tests.cli), and main() owns the
+    # process's streams and signal handlers while it runs.
+    return np.concatenate([_random_run(s, tmp) for s in seeds])
 
 
 @pytest.mark.slow
@@ -446,9 +447,7 @@ def ulog(tmp_path_factory):
 
 
 def _cli(*args, cwd=None):
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "align", "gonio", *map(str, args)],
-                          capture_output=True, text=True, env=env, cwd=cwd, timeout=120)
+    return run_cli("gonio", *args, cwd=cwd)
 
 
 @pytest.mark.slow
@@ -587,9 +586,7 @@ def _run_near_locked(seed, tmp):
 @pytest.mark.slow
 def test_u_is_honest_over_40_nearly_locked_logs(tmp_path):
     """Measured: RMS 0.96, worst 3.3 u of 160 angles (see the two defects below)."""
-    with ThreadPoolExecutor(2) as pool:
-        z = np.concatenate([x[1] for x in pool.map(lambda s: _run_near_locked(s, tmp_path),
-                                                   range(40))])
+    z = np.concatenate([_run_near_locked(s, tmp_path)[1] for s in range(40)])
     assert np.abs(z).max() < 4.0, z
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.2
 

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from tests.align import user_inputs as ui
+from tests.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,29 +29,10 @@ ROOT = Path(__file__).resolve().parents[2]
 # --------------------------------------------------------------------------- helpers
 
 
-def cli(args, cwd: Path, capsys) -> tuple[int, str, str]:
-    """Run ``align ARGS`` in-process from ``cwd``; (exit status, stdout, stderr)."""
-    from align.cli import main
-
-    old = os.getcwd()
-    os.chdir(cwd)
-    try:
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as e:  # argparse and friends
-            rc = e.code if isinstance(e.code, int) else 2
-    finally:
-        os.chdir(old)
-    out = capsys.readouterr()
-    return rc, out.out, out.err
-
-
-def cli_proc(args, cwd: Path) -> tuple[int, str, str]:
-    """Run ``python -m align ARGS`` as the user does (a fresh process)."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    r = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=cwd,
-                       capture_output=True, text=True, env=env, timeout=300)
-    return r.returncode, r.stdout, r.stderr
+def cli(args, cwd: Path) -> tuple[int, str, str]:
+    """Run ``align ARGS`` from ``cwd`` (in this process: ``tests.cli``); (exit status, stdout,
+    stderr)."""
+    return run_cli(*args, cwd=cwd)
 
 
 def err_lines(err: str) -> list[str]:
@@ -159,17 +141,17 @@ FLAT_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
 and diagonal marks are then lens-limited, exit 2; see docs/camera.md)."""
 
 
-def _marks(capsys, d: Path, files, *extra):
+def _marks(d: Path, files, *extra):
     out = d / "out.json"
     if out.exists():
         out.unlink()
     lens = () if any(x in extra for x in ("--lens", "--camera")) else FLAT_LENS
-    rc, so, se = cli(["marks", *files, "--json", "out.json", "-q", *extra, *lens], d, capsys)
+    rc, so, se = cli(["marks", *files, "--json", "out.json", "-q", *extra, *lens], d)
     doc = json.loads(out.read_text()) if out.exists() else None
     return rc, doc, se
 
 
-def test_marks_same_image_as_png_tiff_8_and_16_bit_gives_the_same_numbers(tmp_path, capsys):
+def test_marks_same_image_as_png_tiff_8_and_16_bit_gives_the_same_numbers(tmp_path):
     """8-bit PNG, the same data ×257 as 16-bit PNG and uncompressed 16-bit TIFF, and 8-bit
     TIFF are one image: the measured line must be the same."""
     import cv2
@@ -182,7 +164,7 @@ def test_marks_same_image_as_png_tiff_8_and_16_bit_gives_the_same_numbers(tmp_pa
     cv2.imwrite(str(tmp_path / "a16.tif"), q16, [cv2.IMWRITE_TIFF_COMPRESSION, 1])
     cv2.imwrite(str(tmp_path / "a8.tif"), q8, [cv2.IMWRITE_TIFF_COMPRESSION, 1])
     files = ["a8.png", "a16.png", "a16.tif", "a8.tif"]
-    rc, doc, se = _marks(capsys, tmp_path, files)
+    rc, doc, se = _marks(tmp_path, files)
     assert rc == 0, se
     ms = doc["marks"]
     assert [m["image"] for m in ms] == files and all(m["found"] for m in ms)
@@ -193,22 +175,22 @@ def test_marks_same_image_as_png_tiff_8_and_16_bit_gives_the_same_numbers(tmp_pa
     assert abs(err) < 4.5 * ms[0]["angle_u_arcsec"]
 
 
-def test_marks_reads_lzw_tiff(tmp_path, capsys):
+def test_marks_reads_lzw_tiff(tmp_path):
     import cv2
 
     img, truth = _mark_image()
     cv2.imwrite(str(tmp_path / "lzw.tif"), ui.quantise(img, 16))  # default: LZW
-    rc, doc, se = _marks(capsys, tmp_path, ["lzw.tif"])
+    rc, doc, se = _marks(tmp_path, ["lzw.tif"])
     assert rc == 0 and doc["marks"][0]["found"], se
 
 
-def test_marks_multipage_tiff_is_not_misread(tmp_path, capsys):
+def test_marks_multipage_tiff_is_not_misread(tmp_path):
     import tifffile
 
     img, truth = _mark_image()
     q = ui.quantise(img, 16)
     tifffile.imwrite(tmp_path / "stack.tif", np.stack([q, q]))
-    rc, doc, se = _marks(capsys, tmp_path, ["stack.tif"])
+    rc, doc, se = _marks(tmp_path, ["stack.tif"])
     m = doc["marks"][0]
     if m["found"]:
         assert abs(ui.wrap_angle(m["angle_deg"] - truth.angle_deg)) * 3600 < 5 * m["angle_u_arcsec"]
@@ -238,7 +220,7 @@ def _edge_scene(i: int, rng, shape=(480, 640)):
     return a, (cx, cy), L
 
 
-def _measure_scenes(tmp_path, capsys, scenes):
+def _measure_scenes(tmp_path, scenes):
     """Write and measure (angle, centre, length, kw) scenes; per-image (truth, marks)."""
     import cv2
 
@@ -251,7 +233,7 @@ def _measure_scenes(tmp_path, capsys, scenes):
         cv2.imwrite(str(tmp_path / f), ui.quantise(img, bits))
         files.append(f)
         truths.append((tr, shape))
-    rc, doc, se = _marks(capsys, tmp_path, files)
+    rc, doc, se = _marks(tmp_path, files)
     by = {f: [] for f in files}
     for m in doc["marks"]:
         by[m["image"]].append(m)
@@ -271,20 +253,20 @@ def _check_found_once(results):
     return np.asarray(z)
 
 
-def test_marks_hugging_every_edge_are_found_and_the_border_never(tmp_path, capsys):
+def test_marks_hugging_every_edge_are_found_and_the_border_never(tmp_path):
     rng = np.random.default_rng(11)
     scenes = []
     for i in range(8):
         a, c, L = _edge_scene(i, rng)
         scenes.append((a, c, L, dict(width_px=rng.uniform(2, 6), snr=rng.uniform(15, 60),
                                      seed=700 + i, bits=[8, 16][i % 2])))
-    rc, results, se = _measure_scenes(tmp_path, capsys, scenes)
+    rc, results, se = _measure_scenes(tmp_path, scenes)
     assert rc == 0, se
     z = _check_found_once(results)
     assert np.all(np.abs(z) < 4.5), z
 
 
-def test_marks_running_off_the_frame_and_beside_a_padded_border(tmp_path, capsys):
+def test_marks_running_off_the_frame_and_beside_a_padded_border(tmp_path):
     """A mark cut by the frame edge is measured (its visible part); a black padded strip
     and a saturated strip along the border are not marks."""
     import cv2
@@ -298,7 +280,7 @@ def test_marks_running_off_the_frame_and_beside_a_padded_border(tmp_path, capsys
     for f, im in (("c1.png", ui.quantise(img1, 16)), ("c2.png", ui.quantise(img2, 16)),
                   ("pad.png", q3)):
         cv2.imwrite(str(tmp_path / f), im)
-    rc, doc, se = _marks(capsys, tmp_path, ["c1.png", "c2.png", "pad.png"])
+    rc, doc, se = _marks(tmp_path, ["c1.png", "c2.png", "pad.png"])
     assert rc == 0, se
     for tr, f in ((t1, "c1.png"), (t2, "c2.png"), (t3, "pad.png")):
         ms = [m for m in doc["marks"] if m["image"] == f]
@@ -308,7 +290,7 @@ def test_marks_running_off_the_frame_and_beside_a_padded_border(tmp_path, capsys
             "angle_u_arcsec"]
 
 
-def test_marks_two_marks_in_one_frame_both_measured_and_one_refuses(tmp_path, capsys):
+def test_marks_two_marks_in_one_frame_both_measured_and_one_refuses(tmp_path):
     """A long near-horizontal mark and a short oblique one (150 px, the README's 'short mark
     beside a long strong one'): both found, each within its u.  --one refuses a frame with
     two comparable marks."""
@@ -317,7 +299,7 @@ def test_marks_two_marks_in_one_frame_both_measured_and_one_refuses(tmp_path, ca
     img, tr = ui.render_mark((1024, 1280), 0.2, (640.0, 300.0), 900, seed=22, snr=60,
                              extra_marks=[(45.0, (900.0, 750.0), 150)])
     cv2.imwrite(str(tmp_path / "two.png"), ui.quantise(img, 16))
-    rc, doc, se = _marks(capsys, tmp_path, ["two.png"])
+    rc, doc, se = _marks(tmp_path, ["two.png"])
     assert rc == 0, se
     ms = sorted(doc["marks"], key=lambda m: m["length_px"], reverse=True)
     assert len(ms) == 2 and all(m["found"] for m in ms)
@@ -327,7 +309,7 @@ def test_marks_two_marks_in_one_frame_both_measured_and_one_refuses(tmp_path, ca
     img, tr = ui.render_mark((1024, 1280), 0.2, (640.0, 300.0), 900, seed=21, snr=60,
                              extra_marks=[(90.3, (300.0, 600.0), 500)])
     cv2.imwrite(str(tmp_path / "two2.png"), ui.quantise(img, 16))
-    rc, doc, se = _marks(capsys, tmp_path, ["two2.png"], "--one")
+    rc, doc, se = _marks(tmp_path, ["two2.png"], "--one")
     assert rc == 2 and doc["marks"][0]["found"] is False and "two" in doc["marks"][0]["error"]
 
 
@@ -355,20 +337,20 @@ def _random_scenes(n, seed, sizes=((480, 640),)):
     return scenes
 
 
-def test_marks_random_small_scenes_truth_and_honest_u(tmp_path, capsys):
-    rc, results, se = _measure_scenes(tmp_path, capsys, _random_scenes(10, seed=1))
+def test_marks_random_small_scenes_truth_and_honest_u(tmp_path):
+    rc, results, se = _measure_scenes(tmp_path, _random_scenes(10, seed=1))
     assert rc == 0, se
     z = _check_found_once(results)
     assert np.all(np.abs(z) < 4.5), z
 
 
 @pytest.mark.slow
-def test_marks_many_scenes_normalised_errors_and_no_false_flags(tmp_path, capsys):
+def test_marks_many_scenes_normalised_errors_and_no_false_flags(tmp_path):
     """90 marks 100 px ... 80 % of the short side, 0.3-5 MP, 8/16 bit, half within 1 deg
     of an axis, 40 % pushed against an edge: all found once, normalised angle error RMS in
     [0.8, 1.25], and at most 1 % flagged with a loop effect or unexplained structure."""
     sizes = ((480, 640), (1024, 1280), (2048, 2448))
-    rc, results, se = _measure_scenes(tmp_path, capsys, _random_scenes(90, 3, sizes))
+    rc, results, se = _measure_scenes(tmp_path, _random_scenes(90, 3, sizes))
     assert rc == 0, se
     z = _check_found_once(results)
     assert 0.8 < np.sqrt(np.mean(z ** 2)) < 1.25, z
@@ -376,7 +358,7 @@ def test_marks_many_scenes_normalised_errors_and_no_false_flags(tmp_path, capsys
     assert len(flagged) <= 1, flagged
 
 
-def test_marks_no_mark_and_broken_files_in_one_batch_lose_nothing(tmp_path, capsys):
+def test_marks_no_mark_and_broken_files_in_one_batch_lose_nothing(tmp_path):
     import cv2
 
     img, truth = _mark_image()
@@ -391,7 +373,7 @@ def test_marks_no_mark_and_broken_files_in_one_batch_lose_nothing(tmp_path, caps
     shutil.copy(tmp_path / "ok.png", tmp_path / "ok2.png")
     files = ["ok.png", "uniform.png", "noise.png", "text.png", "trunc.png", "folder.png",
              "missing.png", "ok2.png"]
-    rc, doc, se = _marks(capsys, tmp_path, files)
+    rc, doc, se = _marks(tmp_path, files)
     assert rc == 2 and "Traceback" not in se
     assert [m["image"] for m in doc["marks"]] == files
     found = {m["image"]: m["found"] for m in doc["marks"]}
@@ -410,38 +392,38 @@ def test_marks_no_mark_and_broken_files_in_one_batch_lose_nothing(tmp_path, caps
     (["--camera", "ok.png"], "ok.png"), (["--plot", "ok.png"], "--plot"),
     (["--json", "ok.png"], "--json"),
 ])
-def test_marks_bad_flags_refused_in_one_line(tmp_path, capsys, flags, name):
+def test_marks_bad_flags_refused_in_one_line(tmp_path, flags, name):
     import cv2
 
     img, _ = _mark_image()
     cv2.imwrite(str(tmp_path / "ok.png"), ui.quantise(img, 8))
     before = (tmp_path / "ok.png").read_bytes()
-    rc, so, se = cli(["marks", "ok.png", *flags], tmp_path, capsys)
+    rc, so, se = cli(["marks", "ok.png", *flags], tmp_path)
     assert_one_line_refusal(rc, se, name)
     assert (tmp_path / "ok.png").read_bytes() == before
 
 
-def test_marks_existing_json_is_kept_and_force_replaces_only_outputs(tmp_path, capsys):
+def test_marks_existing_json_is_kept_and_force_replaces_only_outputs(tmp_path):
     import cv2
 
     img, _ = _mark_image()
     cv2.imwrite(str(tmp_path / "ok.png"), ui.quantise(img, 8))
     (tmp_path / "out.json").write_text("precious")
-    rc, so, se = cli(["marks", "ok.png", "--json", "out.json"], tmp_path, capsys)
+    rc, so, se = cli(["marks", "ok.png", "--json", "out.json"], tmp_path)
     assert_one_line_refusal(rc, se, "out.json")
     assert (tmp_path / "out.json").read_text() == "precious"
     rc, so, se = cli(["marks", "ok.png", "--json", "out.json", "--force", "-q", *FLAT_LENS],
-                     tmp_path, capsys)
+                     tmp_path)
     assert rc == 0 and json.loads((tmp_path / "out.json").read_text())["marks"][0]["found"]
 
 
 # =========================================================================== calibrate
 
-def _cal_doc(d: Path, capsys, name: str, *extra):
+def _cal_doc(d: Path, name: str, *extra):
     out = d / (name + ".out.json")
     if out.exists():
         out.unlink()
-    rc, so, se = cli(["calibrate", name, "--json", out.name, "-q", *extra], d, capsys)
+    rc, so, se = cli(["calibrate", name, "--json", out.name, "-q", *extra], d)
     return rc, (json.loads(out.read_text()) if out.exists() else None), se
 
 
@@ -472,7 +454,7 @@ def cal_plain(tumble):
 
 
 @pytest.mark.parametrize("variant", [*CSV_VARIANTS, "header_case_spaces", "unit_suffix"])
-def test_calibrate_valid_variants_give_identical_numbers(tumble, cal_plain, capsys, variant):
+def test_calibrate_valid_variants_give_identical_numbers(tumble, cal_plain, variant):
     d, rows = tumble
     header = TUMBLE_HEADER
     kw = CSV_VARIANTS.get(variant, {})
@@ -482,7 +464,7 @@ def test_calibrate_valid_variants_give_identical_numbers(tumble, cal_plain, caps
         header = ["pose", "ux [V]", "uy [V]", "uz [V]", "t [s]"]
     name = f"v_{variant}.csv"
     ui.write_csv(d / name, header, rows, **kw)
-    rc, doc, se = _cal_doc(d, capsys, name)
+    rc, doc, se = _cal_doc(d, name)
     assert rc == 0, se
     assert numbers(doc) == numbers(cal_plain)
 
@@ -499,12 +481,12 @@ def test_calibrate_against_the_generators_truth(triad, cal_plain):
     assert cal_plain["ok"] is True and cal_plain["noise_known"] is True
 
 
-def test_calibrate_same_tumble_in_m_per_s2_scales_exactly(tumble, cal_plain, capsys):
+def test_calibrate_same_tumble_in_m_per_s2_scales_exactly(tumble, cal_plain):
     d, rows = tumble
     g0 = 9.80665
     ui.write_csv(d / "ms2.csv", ["pose", "ux [m/s2]", "uy [m/s2]", "uz [m/s2]", "t"],
                  [[r[0], r[1] * g0, r[2] * g0, r[3] * g0, r[4]] for r in rows])
-    rc, doc, se = _cal_doc(d, capsys, "ms2.csv")
+    rc, doc, se = _cal_doc(d, "ms2.csv")
     assert rc == 0, se
     assert doc["output_unit"] != cal_plain["output_unit"]
     assert "m/s" in doc["scale_factor_unit"]
@@ -512,7 +494,7 @@ def test_calibrate_same_tumble_in_m_per_s2_scales_exactly(tumble, cal_plain, cap
                                np.array(cal_plain["scale_factors_v_per_g"]) * g0, rtol=1e-9)
     np.testing.assert_allclose(doc["bias_g"], cal_plain["bias_g"], rtol=1e-7)
     np.testing.assert_allclose(doc["beta_rad"], cal_plain["beta_rad"], rtol=1e-7)
-    rc, so, se = cli(["calibrate", "ms2.csv", "--units", "g"], d, capsys)
+    rc, so, se = cli(["calibrate", "ms2.csv", "--units", "g"], d)
     assert_one_line_refusal(rc, se, "ms2.csv", "--units")
 
 
@@ -552,10 +534,10 @@ def _continuous_recording(tri, seed=5, fs=100.0):
     return [[r[0], *(round(float(x), 9) for x in r[1:])] for r in out]
 
 
-def test_calibrate_continuous_recording_finds_every_pose(tumble, triad, capsys):
+def test_calibrate_continuous_recording_finds_every_pose(tumble, triad):
     d, _ = tumble
     ui.write_csv(d / "cont.csv", ["t", "ux", "uy", "uz"], _continuous_recording(triad))
-    rc, doc, se = _cal_doc(d, capsys, "cont.csv")
+    rc, doc, se = _cal_doc(d, "cont.csv")
     assert rc == 0, se
     assert len(doc["poses"]) == 18
     k, ku = np.array(doc["scale_factors_v_per_g"]), np.array(doc["scale_factors_u_v_per_g"])
@@ -565,12 +547,12 @@ def test_calibrate_continuous_recording_finds_every_pose(tumble, triad, capsys):
 
 
 @pytest.mark.slow
-def test_calibrate_uncertainty_is_honest_over_seeds(tmp_path, capsys):
+def test_calibrate_uncertainty_is_honest_over_seeds(tmp_path):
     zk = []
     for s in range(12):
         tri = ui.make_triad(100 + s)
         ui.write_csv(tmp_path / f"t{s}.csv", TUMBLE_HEADER, ui.tumble_rows(tri, seed=s))
-        rc, doc, se = _cal_doc(tmp_path, capsys, f"t{s}.csv")
+        rc, doc, se = _cal_doc(tmp_path, f"t{s}.csv")
         assert rc == 0, se
         zk += list((np.array(doc["scale_factors_v_per_g"]) - tri.k)
                    / np.array(doc["scale_factors_u_v_per_g"]))
@@ -621,35 +603,35 @@ BAD_TUMBLE_NAMES = list(_bad_tumbles([["P", 1.0, 0.0, 0.0, 0.0]] * 100))
 
 
 @pytest.mark.parametrize("case", BAD_TUMBLE_NAMES)
-def test_calibrate_malformed_static_file_refused_in_one_line(tumble, capsys, case):
+def test_calibrate_malformed_static_file_refused_in_one_line(tumble, case):
     d, rows = tumble
     data, must = _bad_tumbles(rows)[case]
     name = f"bad_{case}.csv"
     (d / name).write_bytes(data)
-    rc, doc, se = _cal_doc(d, capsys, name)
+    rc, doc, se = _cal_doc(d, name)
     line = assert_one_line_refusal(rc, se, must)
     assert doc is None
     if case not in ("one_pose",):
         assert name in line, line
 
 
-def test_calibrate_folder_and_missing_file(tumble, capsys):
+def test_calibrate_folder_and_missing_file(tumble):
     d, _ = tumble
     (d / "folder.csv").mkdir(exist_ok=True)
-    rc, so, se = cli(["calibrate", "folder.csv"], d, capsys)
+    rc, so, se = cli(["calibrate", "folder.csv"], d)
     assert_one_line_refusal(rc, se, "folder.csv", "folder")
-    rc, so, se = cli(["calibrate", "nothere.csv"], d, capsys)
+    rc, so, se = cli(["calibrate", "nothere.csv"], d)
     assert_one_line_refusal(rc, se, "nothere.csv")
 
 
-def test_calibrate_folder_message_reads_well(tumble, capsys):
+def test_calibrate_folder_message_reads_well(tumble):
     d, _ = tumble
     (d / "folder.csv").mkdir(exist_ok=True)
-    rc, so, se = cli(["calibrate", "folder.csv"], d, capsys)
+    rc, so, se = cli(["calibrate", "folder.csv"], d)
     assert "file file" not in se
 
 
-def test_calibrate_huge_value_one_line_with_line_number(tumble, capsys):
+def test_calibrate_huge_value_one_line_with_line_number(tumble):
     d, rows = tumble
     lines = [",".join(map(str, r)) for r in rows]
     r = lines[70].split(",")
@@ -660,16 +642,16 @@ def test_calibrate_huge_value_one_line_with_line_number(tumble, capsys):
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # an overflow would surface as rc 1
-        rc, so, se = cli(["calibrate", "huge.csv"], d, capsys)
+        rc, so, se = cli(["calibrate", "huge.csv"], d)
     assert_one_line_refusal(rc, se, "huge.csv:72")
 
 
-def test_table_messages_show_plain_numbers(tumble, capsys):
+def test_table_messages_show_plain_numbers(tumble):
     d, rows = tumble
     lines = [",".join(map(str, r)) for r in rows]
     (d / "back.csv").write_text("\n".join([",".join(TUMBLE_HEADER), *lines[:70], lines[71],
                                            lines[70], *lines[72:]]) + "\n")
-    rc, so, se = cli(["calibrate", "back.csv"], d, capsys)
+    rc, so, se = cli(["calibrate", "back.csv"], d)
     assert rc == 2 and "np.float64" not in se, se
 
 
@@ -685,40 +667,40 @@ def test_table_messages_show_plain_numbers(tumble, capsys):
     (["--units", "furlong"], "--units"), (["--check", "tumble.csv"], "tumble.csv"),
     (["--json", "tumble.csv"], "--json"), (["--plot", "tumble.csv"], "--plot"),
 ])
-def test_calibrate_bad_flags_refused_in_one_line(tumble, capsys, flags, name):
+def test_calibrate_bad_flags_refused_in_one_line(tumble, flags, name):
     d, _ = tumble
     before = (d / "tumble.csv").read_bytes()
-    rc, so, se = cli(["calibrate", "tumble.csv", *flags], d, capsys)
+    rc, so, se = cli(["calibrate", "tumble.csv", *flags], d)
     assert_one_line_refusal(rc, se, name)
     assert (d / "tumble.csv").read_bytes() == before
 
 
 @pytest.mark.parametrize("cmd", ["calibrate", "gonio"])
-def test_quiet_with_json_to_stdout_leaves_stderr_to_warnings(tumble, gonio_log, capsys, cmd):
+def test_quiet_with_json_to_stdout_leaves_stderr_to_warnings(tumble, gonio_log, cmd):
     if cmd == "calibrate":
         d, args = tumble[0], ["calibrate", "tumble.csv"]
     else:
         d, args = gonio_log[0], ["gonio", "log.csv", "--faces", "ref,y,x,z"]
-    rc, so, se = cli([*args, "--json", "-", "-q"], d, capsys)
+    rc, so, se = cli([*args, "--json", "-", "-q"], d)
     assert rc == 0 and json.loads(so)
     noise = [ln for ln in err_lines(se) if not ln.startswith("WARNING")]
     assert noise == [], noise
 
 
-def test_calibrate_scale_sign_three_signs_as_documented(tumble, capsys):
+def test_calibrate_scale_sign_three_signs_as_documented(tumble):
     d, _ = tumble
-    rc, doc, se = _cal_doc(d, capsys, "tumble.csv", "--scale-sign", "-,-,-")
+    rc, doc, se = _cal_doc(d, "tumble.csv", "--scale-sign", "-,-,-")
     assert rc == 0, se
     assert doc["scale_sign"] == [-1.0, -1.0, -1.0]
 
 
-def test_calibrate_one_stray_sample_does_not_silently_change_the_result(tmp_path, triad, capsys):
+def test_calibrate_one_stray_sample_does_not_silently_change_the_result(tmp_path, triad):
     rows = ui.tumble_rows(triad, seed=3, samples=20, poses=14)
     ui.write_csv(tmp_path / "clean.csv", TUMBLE_HEADER, rows)
     ui.write_csv(tmp_path / "stray.csv", TUMBLE_HEADER, [*rows, ["PX", *rows[5][1:4], 9999.0]])
-    rc, clean, se = _cal_doc(tmp_path, capsys, "clean.csv")
+    rc, clean, se = _cal_doc(tmp_path, "clean.csv")
     assert rc == 0 and clean["noise_known"] is True, se
-    rc, doc, se = _cal_doc(tmp_path, capsys, "stray.csv")
+    rc, doc, se = _cal_doc(tmp_path, "stray.csv")
     if rc == 2:  # refused, naming the pose: fine
         assert "PX" in se
         return
@@ -749,18 +731,17 @@ def gonio_plain(gonio_log):
     return json.loads((d / "plain.json").read_text())
 
 
-def _gonio_doc(d: Path, capsys, name: str, *extra, faces="ref,y,x,z"):
+def _gonio_doc(d: Path, name: str, *extra, faces="ref,y,x,z"):
     out = d / (name + ".out.json")
     if out.exists():
         out.unlink()
-    rc, so, se = cli(["gonio", name, "--faces", faces, "--json", out.name, "-q", *extra], d,
-                     capsys)
+    rc, so, se = cli(["gonio", name, "--faces", faces, "--json", out.name, "-q", *extra], d)
     return rc, (json.loads(out.read_text()) if out.exists() else None), se
 
 
 @pytest.mark.parametrize("variant", [*CSV_VARIANTS, "header_case_spaces", "unit_suffix",
                                      "no_time"])
-def test_gonio_valid_variants_give_identical_angles(gonio_log, gonio_plain, capsys, variant):
+def test_gonio_valid_variants_give_identical_angles(gonio_log, gonio_plain, variant):
     d, rows, _ = gonio_log
     header, kw = LOG_HEADER, dict(CSV_VARIANTS.get(variant, {}))
     if "order" in kw:
@@ -773,7 +754,7 @@ def test_gonio_valid_variants_give_identical_angles(gonio_log, gonio_plain, caps
         header, rows = LOG_HEADER[:3], [r[:3] for r in rows]
     name = f"v_{variant}.csv"
     ui.write_csv(d / name, header, rows, **kw)
-    rc, doc, se = _gonio_doc(d, capsys, name)
+    rc, doc, se = _gonio_doc(d, name)
     assert rc == 0, se
     assert doc["angles_deg"] == gonio_plain["angles_deg"]
     if variant == "no_time":
@@ -795,7 +776,7 @@ def test_gonio_against_the_generators_truth(gonio_log, gonio_plain):
 
 
 @pytest.mark.slow
-def test_gonio_uncertainty_is_honest_with_jitter(tmp_path, capsys):
+def test_gonio_uncertainty_is_honest_with_jitter(tmp_path):
     rng = np.random.default_rng(0)
     z = []
     for s in range(30):
@@ -804,16 +785,16 @@ def test_gonio_uncertainty_is_honest_with_jitter(tmp_path, capsys):
         rows, true = ui.counter_log(faces, revs=100, seed=100 + s, jitter_s=2e-6,
                                     phase0=rng.uniform())
         ui.write_csv(tmp_path / f"g{s}.csv", LOG_HEADER, rows)
-        rc, doc, se = _gonio_doc(tmp_path, capsys, f"g{s}.csv")
+        rc, doc, se = _gonio_doc(tmp_path, f"g{s}.csv")
         assert rc == 0, se
         z += list((np.array(doc["angles_deg"]) - true) * 3600 / np.array(doc["angles_u_arcsec"]))
     assert 0.8 < np.sqrt(np.mean(np.square(z))) < 1.15, z
 
 
-def test_gonio_lost_row_excludes_one_revolution_and_says_where(gonio_log, gonio_plain, capsys):
+def test_gonio_lost_row_excludes_one_revolution_and_says_where(gonio_log, gonio_plain):
     d, rows, true = gonio_log
     ui.write_csv(d / "lost.csv", LOG_HEADER, rows[:50] + rows[51:])
-    rc, doc, se = _gonio_doc(d, capsys, "lost.csv")
+    rc, doc, se = _gonio_doc(d, "lost.csv")
     assert rc == 0, se
     assert doc["revolutions_used"] == gonio_plain["revolutions_used"] - 1
     assert any("missing" in w for w in doc["warnings"])
@@ -826,42 +807,41 @@ def test_gonio_clean_log_has_no_warning(gonio_log, gonio_plain):
 
 
 @pytest.mark.parametrize("where", ["middle", "end"])
-def test_gonio_comment_lines_anywhere_are_ignored(gonio_log, gonio_plain, capsys, where):
+def test_gonio_comment_lines_anywhere_are_ignored(gonio_log, gonio_plain, where):
     d, rows, _ = gonio_log
     h = ",".join(LOG_HEADER)
     lines = [",".join(map(str, r)) for r in rows]
     body = ([h, *lines[:100], "# table paused", *lines[100:]] if where == "middle"
             else [h, *lines, "# end of log"])
     (d / f"comment_{where}.csv").write_text("\n".join(["# logger 1.2", *body]) + "\n")
-    rc, doc, se = _gonio_doc(d, capsys, f"comment_{where}.csv")
+    rc, doc, se = _gonio_doc(d, f"comment_{where}.csv")
     assert rc == 0, se
     assert doc["angles_deg"] == gonio_plain["angles_deg"]
 
 
-def test_gonio_comment_and_blank_lines_at_the_top_and_blank_lines_inside(gonio_log, gonio_plain,
-                                                                         capsys):
+def test_gonio_comment_and_blank_lines_at_the_top_and_blank_lines_inside(gonio_log, gonio_plain):
     d, rows, _ = gonio_log
     lines = [",".join(map(str, r)) for r in rows]
     text = "\n".join(["# logger 1.2", "", ",".join(LOG_HEADER), *lines[:100], "", *lines[100:],
                       "", ""]) + "\n"
     (d / "blanks.csv").write_text(text)
-    rc, doc, se = _gonio_doc(d, capsys, "blanks.csv")
+    rc, doc, se = _gonio_doc(d, "blanks.csv")
     assert rc == 0, se
     assert doc["angles_deg"] == gonio_plain["angles_deg"]
 
 
-def test_gonio_reverse_log_mean_of_both_directions_against_truth(gonio_log, capsys):
+def test_gonio_reverse_log_mean_of_both_directions_against_truth(gonio_log):
     """The same faces logged with the table turning clockwise (faces pass ref, z, x, y)."""
     d, _, true = gonio_log
     cw_positions = [0.0] + [360.0 - f for f in FACES_DEG[:0:-1]]
     rows, _ = ui.counter_log(cw_positions, revs=100, seed=2)
     ui.write_csv(d / "cw.csv", LOG_HEADER, rows)
-    rc, doc, se = _gonio_doc(d, capsys, "log.csv", "--reverse-log", "cw.csv")
+    rc, doc, se = _gonio_doc(d, "log.csv", "--reverse-log", "cw.csv")
     assert rc == 0, se
     err = (np.array(doc["angles_deg"]) - np.array(true)) * 3600
     assert np.all(np.abs(err) < 4.5 * np.array(doc["angles_u_arcsec"])), err
     assert any(e["name"] == "direction_dependent" for e in doc["effects"])
-    rc, cw, se = _gonio_doc(d, capsys, "cw.csv", "--direction", "cw", faces="ref,z,x,y")
+    rc, cw, se = _gonio_doc(d, "cw.csv", "--direction", "cw", faces="ref,z,x,y")
     assert rc == 0, se
     # ref->z, z->x, x->y, y->ref clockwise are the ccw angles in reverse order
     np.testing.assert_allclose(cw["angles_deg"], true[::-1], atol=4.5 * max(
@@ -870,10 +850,10 @@ def test_gonio_reverse_log_mean_of_both_directions_against_truth(gonio_log, caps
 
 @pytest.mark.parametrize("flags, words", [(["--latitude", "50"], ("earth", "latitude")),
                                           (["--steady-table"], ("steady",))])
-def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, capsys, flags, words):
+def test_gonio_flag_that_cannot_be_honoured_is_a_warning(gonio_log, flags, words):
     d, rows, _ = gonio_log
     ui.write_csv(d / "notime.csv", LOG_HEADER[:3], [r[:3] for r in rows])
-    rc, doc, se = _gonio_doc(d, capsys, "notime.csv", *flags)
+    rc, doc, se = _gonio_doc(d, "notime.csv", *flags)
     assert doc["notes"], "the tool knows it did not do it"
     # The angles are still measured (exit 0); what was not done is a warning in the JSON.
     assert rc == 0, se
@@ -911,7 +891,7 @@ def _bad_logs(rows):
     }
 
 
-def test_gonio_double_trigger_gives_the_clean_logs_angles_and_u(gonio_log, gonio_plain, capsys):
+def test_gonio_double_trigger_gives_the_clean_logs_angles_and_u(gonio_log, gonio_plain):
     """A double trigger 1 ms after a reference face (an extra pulse: the counts of the next
     interval split, every later counter flipped) is resolved exactly: the same angles AND the
     same u as the clean log, listed with its line. (Found by the lead on data of this file's
@@ -926,13 +906,13 @@ def test_gonio_double_trigger_gives_the_clean_logs_angles_and_u(gonio_log, gonio
     flip = [[r[0], 2 if r[1] == 1 else 1, r[2], r[3]] for r in [[nxt[0] - k, *nxt[1:]],
                                                                   *rows[i + 2:]]]
     ui.write_csv(d / "dbl.csv", LOG_HEADER, [*rows[:i + 1], extra, *flip])
-    rc, doc, se = _gonio_doc(d, capsys, "dbl.csv")
+    rc, doc, se = _gonio_doc(d, "dbl.csv")
     assert rc == 0 and "spurious" in se, se
     assert doc["angles_deg"] == gonio_plain["angles_deg"]
     assert np.allclose(doc["angles_u_arcsec"], gonio_plain["angles_u_arcsec"], rtol=1e-12)
 
 
-def test_gonio_zero_count_is_a_listed_fault_not_a_silent_change(gonio_log, gonio_plain, capsys):
+def test_gonio_zero_count_is_a_listed_fault_not_a_silent_change(gonio_log, gonio_plain):
     """A count of 0 is what two pulses within one ring-laser period give (a double trigger),
     so it is a fault to resolve, not a malformed file: listed with a warning, and the angles
     stay within their uncertainty of the clean log's."""
@@ -942,48 +922,48 @@ def test_gonio_zero_count_is_a_listed_fault_not_a_silent_change(gonio_log, gonio
     r[0] = "0"
     (d / "zero.csv").write_text("\n".join([",".join(LOG_HEADER), *lines[:50], ",".join(r),
                                            *lines[51:]]) + "\n")
-    rc, doc, se = _gonio_doc(d, capsys, "zero.csv")
+    rc, doc, se = _gonio_doc(d, "zero.csv")
     assert rc == 0 and "WARNING" in se and doc["warnings"], se
     err = np.subtract(doc["angles_deg"], gonio_plain["angles_deg"]) * 3600
     assert np.all(np.abs(err) < 4 * np.asarray(doc["angles_u_arcsec"])), err
 
 
 @pytest.mark.parametrize("case", list(_bad_logs([[1, 1, 1, 0.0]] * 60)))
-def test_gonio_malformed_log_refused_in_one_line(gonio_log, capsys, case):
+def test_gonio_malformed_log_refused_in_one_line(gonio_log, case):
     d, rows, _ = gonio_log
     text, must = _bad_logs(rows)[case]
     name = f"bad_{case}.csv"
     (d / name).write_text(text)
-    rc, doc, se = _gonio_doc(d, capsys, name)
+    rc, doc, se = _gonio_doc(d, name)
     line = assert_one_line_refusal(rc, se, must)
     assert name in line and doc is None
 
 
-def test_gonio_log_shorter_than_a_revolution(gonio_log, capsys):
+def test_gonio_log_shorter_than_a_revolution(gonio_log):
     d, rows, _ = gonio_log
     ui.write_csv(d / "short3.csv", LOG_HEADER, rows[:3])
-    rc, doc, se = _gonio_doc(d, capsys, "short3.csv")
+    rc, doc, se = _gonio_doc(d, "short3.csv")
     assert_one_line_refusal(rc, se, "short3.csv")
 
 
-def test_gonio_log_of_a_few_revolutions(gonio_log, capsys):
+def test_gonio_log_of_a_few_revolutions(gonio_log):
     d, rows, _ = gonio_log
     ui.write_csv(d / "short9.csv", LOG_HEADER, rows[:9])
-    rc, so, se = cli(["gonio", "short9.csv", "--faces", "ref,y,x,z"], d, capsys)
+    rc, so, se = cli(["gonio", "short9.csv", "--faces", "ref,y,x,z"], d)
     line = assert_one_line_refusal(rc, se, "short9.csv")
     assert "zero-size" not in line
 
 
 @pytest.mark.parametrize("faces", ["ref,y,x", "ref,y,x,z,w"])
-def test_gonio_wrong_number_of_faces(gonio_log, capsys, faces):
+def test_gonio_wrong_number_of_faces(gonio_log, faces):
     d, _, _ = gonio_log
-    rc, doc, se = _gonio_doc(d, capsys, "log.csv", faces=faces)
+    rc, doc, se = _gonio_doc(d, "log.csv", faces=faces)
     assert_one_line_refusal(rc, se, "--faces")
 
 
-def test_gonio_nominal_far_from_the_measured_angles_is_flagged(gonio_log, capsys):
+def test_gonio_nominal_far_from_the_measured_angles_is_flagged(gonio_log):
     d, _, _ = gonio_log
-    rc, doc, se = _gonio_doc(d, capsys, "log.csv", "--nominal", "100,80,90,90")
+    rc, doc, se = _gonio_doc(d, "log.csv", "--nominal", "100,80,90,90")
     # The measured angles stand (exit 0); the nominal that disagrees is a warning.
     assert rc == 0, se
     assert any("nominal" in w for w in doc["warnings"]), doc["warnings"]
@@ -1000,30 +980,30 @@ def test_gonio_nominal_far_from_the_measured_angles_is_flagged(gonio_log, capsys
     (["--json", "log.csv"], "--json"), (["--plot", "log.csv"], "--plot"),
     (["--json", "o.json", "--plot", "o.json"], "--plot"),
 ])
-def test_gonio_bad_flags_refused_in_one_line(gonio_log, capsys, flags, name):
+def test_gonio_bad_flags_refused_in_one_line(gonio_log, flags, name):
     d, _, _ = gonio_log
     shutil.copy(d / "log.csv", d / "copy.csv")
     before = (d / "log.csv").read_bytes()
     args = ["gonio", "log.csv", *([] if flags[0] == "--faces" else ["--faces", "ref,y,x,z"]),
             *flags]
-    rc, so, se = cli(args, d, capsys)
+    rc, so, se = cli(args, d)
     assert_one_line_refusal(rc, se, name)
     assert (d / "log.csv").read_bytes() == before
     assert not (d / "o.json").exists()
 
 
-def test_gonio_json_to_stdout_and_closed_pipe(gonio_log, capsys):
+def test_gonio_json_to_stdout_and_closed_pipe(gonio_log):
     d, _, _ = gonio_log
-    rc, so, se = cli(["gonio", "log.csv", "--faces", "ref,y,x,z", "--json", "-", "-q"], d, capsys)
+    rc, so, se = cli(["gonio", "log.csv", "--faces", "ref,y,x,z", "--json", "-", "-q"], d)
     assert rc == 0 and json.loads(so)["format"] == "axis-align/gonio"
     out = d / "piped.json"
     if out.exists():
         out.unlink()
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.run(f"{sys.executable} -m align gonio log.csv --faces ref,y,x,z --json "
-                       f"piped.json | head -1", shell=True, cwd=d, env=env, capture_output=True,
-                       text=True, timeout=120)
-    assert "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr
+    # ``| head -1`` (in this process; the shell's own pipe: tests/align/test_bad_inputs.py)
+    rc, so, se = run_cli("gonio", "log.csv", "--faces", "ref,y,x,z", "--json", "piped.json",
+                         cwd=d, stdout_lines=1)
+    assert "Traceback" not in se and "BrokenPipe" not in se
+    assert so.count("\n") == 1
     assert json.loads(out.read_text())["angles_deg"]
 
 
@@ -1048,11 +1028,11 @@ def test_gonio_two_concurrent_runs_on_one_output_one_wins_one_refuses(gonio_log)
 
 def test_ascii_console_gets_ascii_symbols(gonio_log):
     d, _, _ = gonio_log
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONIOENCODING="ascii")
-    r = subprocess.run([sys.executable, "-m", "align", "gonio", "log.csv", "--faces",
-                        "ref,y,x,z"], cwd=d, env=env, capture_output=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    out = r.stdout.decode("ascii")  # raises if anything else came out
+    # An ASCII console (in this process; PYTHONIOENCODING=ascii in a fresh one:
+    # tests/align/test_bad_inputs.py)
+    rc, out, se = run_cli("gonio", "log.csv", "--faces", "ref,y,x,z", cwd=d,
+                          encoding="ascii")  # decoded as ASCII: raises on anything else
+    assert rc == 0, se
     assert "+/-" in out and '"' in out
 
 
@@ -1066,22 +1046,21 @@ def readings(tumble, triad, cal_plain):
     return d, rows, f
 
 
-def _tilt_csv(d, capsys, name, cal="plain.json", *extra):
+def _tilt_csv(d, name, cal="plain.json", *extra):
     out = d / (name + ".tilt.csv")
     if out.exists():
         out.unlink()
-    rc, so, se = cli(["tilt", name, "--calibration", cal, "--out", out.name, "-q", *extra], d,
-                     capsys)
+    rc, so, se = cli(["tilt", name, "--calibration", cal, "--out", out.name, "-q", *extra], d)
     return rc, (out.read_text() if out.exists() else None), se
 
 
-def test_tilt_variants_identical_and_roll_pitch_near_truth(readings, capsys):
+def test_tilt_variants_identical_and_roll_pitch_near_truth(readings):
     d, rows, f = readings
-    rc, plain, se = _tilt_csv(d, capsys, "read.csv")
+    rc, plain, se = _tilt_csv(d, "read.csv")
     assert rc == 0, se
     ui.write_csv(d / "read_v.csv", ["T ", "Ux", "uy", "UZ"], rows, order=[0, 3, 2, 1],
                  sep=";", bom=True, eol="\r\n")
-    rc, variant, se = _tilt_csv(d, capsys, "read_v.csv")
+    rc, variant, se = _tilt_csv(d, "read_v.csv")
     assert rc == 0 and variant == plain
     out = np.loadtxt(plain.splitlines()[1:], delimiter=",")
     roll = np.degrees(np.arctan2(f[:, 1], f[:, 2]))
@@ -1091,10 +1070,10 @@ def test_tilt_variants_identical_and_roll_pitch_near_truth(readings, capsys):
     assert np.abs(out[:, 2] - pitch).max() < np.degrees(1e-3)
 
 
-def test_tilt_readings_without_time_get_no_invented_time(readings, capsys):
+def test_tilt_readings_without_time_get_no_invented_time(readings):
     d, rows, _ = readings
     ui.write_csv(d / "read_nt.csv", ["ux", "uy", "uz"], [r[1:] for r in rows])
-    rc, out, se = _tilt_csv(d, capsys, "read_nt.csv")
+    rc, out, se = _tilt_csv(d, "read_nt.csv")
     assert rc == 0, se
     lines = out.splitlines()
     assert lines[0] == "t,roll_deg,pitch_deg" and len(lines) == len(rows) + 1
@@ -1103,19 +1082,19 @@ def test_tilt_readings_without_time_get_no_invented_time(readings, capsys):
 
 
 @pytest.mark.parametrize("bad_k", [float("nan"), 0.0])
-def test_tilt_refuses_a_calibration_with_invalid_scale(readings, capsys, bad_k):
+def test_tilt_refuses_a_calibration_with_invalid_scale(readings, bad_k):
     d, _, _ = readings
     doc = json.loads((d / "plain.json").read_text())
     doc["model"]["k_v_per_g"][0] = bad_k
     (d / "badk.json").write_text(json.dumps(doc))
-    rc, out, se = _tilt_csv(d, capsys, "read.csv", "badk.json")
+    rc, out, se = _tilt_csv(d, "read.csv", "badk.json")
     assert_one_line_refusal(rc, se, "badk.json")
 
 
-def test_tilt_flags_readings_far_from_one_g(readings, capsys):
+def test_tilt_flags_readings_far_from_one_g(readings):
     d, _, _ = readings
     (d / "zero.csv").write_text("t,ux,uy,uz\n0,0,0,0\n0.1,0,0,0\n")
-    rc, out, se = _tilt_csv(d, capsys, "zero.csv")
+    rc, out, se = _tilt_csv(d, "zero.csv")
     # Roll and pitch are still written (the other readings of a longer file are tilts);
     # the readings that are not 1 g are named in a warning, exit 0.
     assert rc == 0, se
@@ -1134,13 +1113,13 @@ def test_tilt_flags_readings_far_from_one_g(readings, capsys):
     (["read.csv", "--calibration", "plain.json", "--out", "plain.json"], "--out"),
     (["read.csv", "--calibration", "read.csv"], "read.csv"),
 ])
-def test_tilt_bad_inputs_refused_in_one_line(readings, capsys, args, name):
+def test_tilt_bad_inputs_refused_in_one_line(readings, args, name):
     d, _, _ = readings
     (d / "hdr.csv").write_text("t,ux,uy,uz\n")
     (d / "trunc.csv").write_text("t,ux,uy,uz\n0,1,2\n")
     (d / "notjson.json").write_text("{not json")
     before = {f: (d / f).read_bytes() for f in ("read.csv", "plain.json")}
-    rc, so, se = cli(["tilt", *args], d, capsys)
+    rc, so, se = cli(["tilt", *args], d)
     assert_one_line_refusal(rc, se, name)
     assert before == {f: (d / f).read_bytes() for f in before}
 
@@ -1150,7 +1129,7 @@ def test_tilt_bad_inputs_refused_in_one_line(readings, capsys, args, name):
 @pytest.fixture(scope="module")
 def session_result(session_dir):
     d, tri = session_dir
-    rc, so, se = cli_proc(["run", d.name, "--json", "base.json", "--calibration",
+    rc, so, se = cli(["run", d.name, "--json", "base.json", "--calibration",
                            "base_cal.json", "-q"], d.parent)
     assert rc == 0, se
     return json.loads((d.parent / "base.json").read_text()), d.parent / "base_cal.json"
@@ -1167,14 +1146,14 @@ def test_run_misalignment_against_the_generators_truth(session_dir, session_resu
     assert np.all(np.abs(z) < 4.5), z
 
 
-def test_run_bom_crlf_session_files_give_the_same_matrix(session_dir, session_result, capsys):
+def test_run_bom_crlf_session_files_give_the_same_matrix(session_dir, session_result):
     d, _ = session_dir
     doc, _ = session_result
     s = copy_session(d, "bom")
     for f in ("session.toml", "platform.csv", "tumble.csv"):
         p = s / f
         p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes().replace(b"\n", b"\r\n"))
-    rc, so, se = cli(["run", "bom", "--json", "bom.json", "-q"], s.parent, capsys)
+    rc, so, se = cli(["run", "bom", "--json", "bom.json", "-q"], s.parent)
     assert rc == 0, se
     other = json.loads((s.parent / "bom.json").read_text())
     assert other["misalignment_rad"] == doc["misalignment_rad"]
@@ -1182,7 +1161,7 @@ def test_run_bom_crlf_session_files_give_the_same_matrix(session_dir, session_re
 
 
 @pytest.mark.parametrize("variant", ["semicolon_reordered_caps", "tab_no_time"])
-def test_run_platform_file_variants_give_the_same_matrix(session_dir, session_result, capsys,
+def test_run_platform_file_variants_give_the_same_matrix(session_dir, session_result,
                                                          variant):
     d, tri = session_dir
     doc, _ = session_result
@@ -1194,7 +1173,7 @@ def test_run_platform_file_variants_give_the_same_matrix(session_dir, session_re
     else:
         ui.write_csv(s / "platform.csv", ["pose", "ux", "uy", "uz"], [r[:4] for r in rows],
                      sep="\t")
-    rc, so, se = cli(["run", s.name, "--json", f"pv_{variant}.json", "-q"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, "--json", f"pv_{variant}.json", "-q"], s.parent)
     assert rc == 0, se
     other = json.loads((s.parent / f"pv_{variant}.json").read_text())
     if variant == "tab_no_time":  # the time only serves drift terms; none is found here
@@ -1239,7 +1218,7 @@ SESSION_FAULTS = {
 
 
 @pytest.mark.parametrize("case", list(SESSION_FAULTS))
-def test_run_session_faults_refused_in_one_line_naming_the_key(session_dir, capsys, case):
+def test_run_session_faults_refused_in_one_line_naming_the_key(session_dir, case):
     d, _ = session_dir
     s = copy_session(d, f"f_{case}")
     (s.parent / "outside.csv").write_bytes((s / "platform.csv").read_bytes())
@@ -1247,14 +1226,14 @@ def test_run_session_faults_refused_in_one_line_naming_the_key(session_dir, caps
         os.symlink("/etc/hostname", s / "link.csv")
     edit, must = SESSION_FAULTS[case]
     (s / "session.toml").write_text(edit((s / "session.toml").read_text()))
-    rc, so, se = cli(["run", s.name, "--json", f"{case}.json"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, "--json", f"{case}.json"], s.parent)
     line = assert_one_line_refusal(rc, se, must)
     assert "session.toml" in line
     assert "root:" not in se + so  # nothing of /etc/passwd is echoed
 
 
 def test_run_allow_outside_lifts_confinement_but_never_echoes_contents(session_dir,
-                                                                       session_result, capsys):
+                                                                       session_result):
     d, _ = session_dir
     doc, _ = session_result
     s = copy_session(d, "outside_ok")
@@ -1262,25 +1241,23 @@ def test_run_allow_outside_lifts_confinement_but_never_echoes_contents(session_d
     t = (s / "session.toml").read_text()
     (s / "session.toml").write_text(
         t.replace('static = "platform.csv"', 'static = "../outside_ok_platform.csv"'))
-    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "oo.json", "-q"], s.parent,
-                     capsys)
+    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "oo.json", "-q"], s.parent)
     assert rc == 0, se
     assert json.loads((s.parent / "oo.json").read_text())["misalignment_rad"] == doc[
         "misalignment_rad"]
     (s / "session.toml").write_text(t.replace('static = "platform.csv"', 'static = "/etc/passwd"'))
-    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "op.json", "-q"], s.parent,
-                     capsys)
+    rc, so, se = cli(["run", s.name, "--allow-outside", "--json", "op.json", "-q"], s.parent)
     assert rc == 2
     written = (s.parent / "op.json").read_text()
     assert "root:" not in se + so + written and "/etc/passwd" in se
 
 
-def test_run_failed_stage_exit_2_result_written_ok_false(session_dir, capsys):
+def test_run_failed_stage_exit_2_result_written_ok_false(session_dir):
     d, _ = session_dir
     s = copy_session(d, "broken_stage")
     p = s / "platform.csv"
     p.write_text(p.read_text() + "Ydn,abc,1,2,9999\n")
-    rc, so, se = cli(["run", s.name, "--json", "broken.json", "-q"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, "--json", "broken.json", "-q"], s.parent)
     assert rc == 2 and "Traceback" not in se
     doc = json.loads((s.parent / "broken.json").read_text())
     assert doc["ok"] is False
@@ -1288,18 +1265,18 @@ def test_run_failed_stage_exit_2_result_written_ok_false(session_dir, capsys):
                for e in doc["errors"]), doc["errors"]
 
 
-def test_run_undeclared_pose_label_fails_the_stage_naming_it(session_dir, capsys):
+def test_run_undeclared_pose_label_fails_the_stage_naming_it(session_dir):
     d, _ = session_dir
     s = copy_session(d, "undeclared")
     t = (s / "session.toml").read_text()
     (s / "session.toml").write_text(t.replace('Ydn = { up = "-Y" }', ""))
-    rc, so, se = cli(["run", s.name, "--json", "und.json", "-q"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, "--json", "und.json", "-q"], s.parent)
     assert rc == 2
     doc = json.loads((s.parent / "und.json").read_text())
     assert doc["ok"] is False and any("Ydn" in e["message"] for e in doc["errors"])
 
 
-def test_run_declared_pose_absent_from_the_data_fails_the_stage_naming_it(session_dir, capsys):
+def test_run_declared_pose_absent_from_the_data_fails_the_stage_naming_it(session_dir):
     """The mirror case (noticed by the independent user, fixed after): an attitude declared in
     [platform.poses] whose pose is not in the platform file is a typo or a lost pose."""
     d, _ = session_dir
@@ -1308,7 +1285,7 @@ def test_run_declared_pose_absent_from_the_data_fails_the_stage_naming_it(sessio
     assert 'Ydn = { up = "-Y" }' in t
     (s / "session.toml").write_text(t.replace('Ydn = { up = "-Y" }',
                                               'Ydn = { up = "-Y" }\nZdn = { up = "-Z" }'))
-    rc, so, se = cli(["run", s.name, "--json", "abs.json", "-q"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, "--json", "abs.json", "-q"], s.parent)
     assert rc == 2
     doc = json.loads((s.parent / "abs.json").read_text())
     assert doc["ok"] is False and any("Zdn" in e["message"] for e in doc["errors"])
@@ -1317,17 +1294,17 @@ def test_run_declared_pose_absent_from_the_data_fails_the_stage_naming_it(sessio
 @pytest.mark.parametrize("flags", [["--json", "{s}/tumble.csv"], ["--report", "{s}/session.toml"],
                                    ["--calibration", "{s}/platform.csv"],
                                    ["--json", "x.out", "--report", "x.out"]])
-def test_run_never_writes_over_inputs_even_with_force(session_dir, capsys, flags):
+def test_run_never_writes_over_inputs_even_with_force(session_dir, flags):
     d, _ = session_dir
     s = copy_session(d, "outs")
     before = {p.name: p.read_bytes() for p in s.iterdir()}
     args = [f.format(s=s.name) for f in flags]
-    rc, so, se = cli(["run", s.name, *args, "--force"], s.parent, capsys)
+    rc, so, se = cli(["run", s.name, *args, "--force"], s.parent)
     assert_one_line_refusal(rc, se, args[-2])
     assert before == {p.name: p.read_bytes() for p in s.iterdir()}
 
 
-def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path, capsys):
+def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path):
     """Cameras (two, each with its reversal view) + tumble + platform poses, camera A rolled
     by 30 arcsec and nobody told: the fusion loop names camera A's roll within its u, and E
     stays within 4.5 u of the generator's axes.  Without the platform poses nothing fixes
@@ -1335,7 +1312,7 @@ def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path, capsys):
     tri = ui.make_triad(7, mis_rad=3e-4)
     d = tmp_path / "cams"
     toml = ui.image_session(d, tri, seed=7, roll_a_arcsec=30.0)
-    rc, so, se = cli(["run", "cams", "--json", "cams.json", "-q"], tmp_path, capsys)
+    rc, so, se = cli(["run", "cams", "--json", "cams.json", "-q"], tmp_path)
     assert rc == 0, se
     doc = json.loads((tmp_path / "cams.json").read_text())
     E, U = np.array(doc["misalignment_rad"]), np.array(doc["misalignment_u_rad"])
@@ -1347,14 +1324,14 @@ def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path, capsys):
     u = np.degrees(rolls[0]["u"]) * 3600
     assert abs(est - 30.0) < 4.5 * u, (est, u)
     (d / "session.toml").write_text(toml.split("[platform]")[0])
-    rc, so, se = cli(["run", "cams", "--json", "cams2.json", "-q"], tmp_path, capsys)
+    rc, so, se = cli(["run", "cams", "--json", "cams2.json", "-q"], tmp_path)
     assert rc == 2
     doc = json.loads((tmp_path / "cams2.json").read_text())
     assert doc["ok"] is False and doc["fused"] is False
     assert any("E_xY" in e["message"] and "E_yX" in e["message"] for e in doc["errors"])
 
 
-def test_run_folder_with_spaces_and_umlauts_report_and_provenance(session_dir, capsys):
+def test_run_folder_with_spaces_and_umlauts_report_and_provenance(session_dir):
     """A session folder named like a real one; a failed stage is at the top of the report,
     and the JSON's provenance carries the true SHA-256 of every input."""
     import hashlib
@@ -1363,8 +1340,7 @@ def test_run_folder_with_spaces_and_umlauts_report_and_provenance(session_dir, c
     s = copy_session(d, "Prüfung März 1")
     p = s / "platform.csv"
     p.write_text(p.read_text() + "Ydn,abc,1,2,9999\n")
-    rc, so, se = cli(["run", s.name, "--json", "pm.json", "--report", "pm.html", "-q"], s.parent,
-                     capsys)
+    rc, so, se = cli(["run", s.name, "--json", "pm.json", "--report", "pm.html", "-q"], s.parent)
     assert rc == 2 and "Traceback" not in se
     doc = json.loads((s.parent / "pm.json").read_text())
     listed = doc["inputs"] if "inputs" in doc else doc["provenance"]["inputs"]
@@ -1377,13 +1353,13 @@ def test_run_folder_with_spaces_and_umlauts_report_and_provenance(session_dir, c
     assert 0 <= body.find("platform.csv:") < body.find("<table"), "failure not at the top"
 
 
-def test_run_image_without_a_mark_fails_its_stage_but_fuses_the_rest(tmp_path, capsys):
+def test_run_image_without_a_mark_fails_its_stage_but_fuses_the_rest(tmp_path):
     tri = ui.make_triad(8, mis_rad=3e-4)
     d = tmp_path / "noimg"
     ui.image_session(d, tri, seed=8)
     noise = np.random.default_rng(0).normal(30000, 300, (480, 640))
     ui.write_image(d / "x_A.png", np.clip(noise, 0, 65535).astype(np.uint16))
-    rc, so, se = cli(["run", "noimg", "--json", "noimg.json", "-q"], tmp_path, capsys)
+    rc, so, se = cli(["run", "noimg", "--json", "noimg.json", "-q"], tmp_path)
     assert rc == 2
     doc = json.loads((tmp_path / "noimg.json").read_text())
     assert doc["ok"] is False and doc["fused"] is True
@@ -1404,7 +1380,7 @@ def test_run_batch_of_clean_camera_sessions_honest_u_and_no_false_effects(tmp_pa
         ui.image_session(tmp_path / f"s{k}", tri, seed=200 + k)
         names.append(f"s{k}")
         tris[f"s{k}"] = tri
-    rc, so, se = cli_proc(["run", *names, "--json", "out", "--jobs", "2", "-q"], tmp_path)
+    rc, so, se = cli(["run", *names, "--json", "out", "--jobs", "2", "-q"], tmp_path)
     assert rc == 0, se
     z = []
     off = ~np.eye(3, dtype=bool)
@@ -1416,7 +1392,7 @@ def test_run_batch_of_clean_camera_sessions_honest_u_and_no_false_effects(tmp_pa
     assert 0.75 < np.sqrt(np.mean(np.square(z))) < 1.35, z
 
 
-def test_apply_variants_identical_and_near_truth(session_dir, session_result, capsys):
+def test_apply_variants_identical_and_near_truth(session_dir, session_result):
     d, _ = session_dir
     _, cal = session_result
     tri = ui.make_triad(3, mis_rad=3e-4)
@@ -1432,7 +1408,7 @@ def test_apply_variants_identical_and_near_truth(session_dir, session_result, ca
         o = w / f"o_{name}"
         if o.exists():
             o.unlink()
-        rc, so, se = cli(["apply", "cal.json", name, "--out", o.name, "--tilt", "-q"], w, capsys)
+        rc, so, se = cli(["apply", "cal.json", name, "--out", o.name, "--tilt", "-q"], w)
         assert rc == 0, se
         outs.append(o.read_text())
     assert outs[0] == outs[1]
@@ -1443,7 +1419,7 @@ def test_apply_variants_identical_and_near_truth(session_dir, session_result, ca
 
 @pytest.mark.parametrize("case", ["newer_version", "calibration_not_platform", "out_is_input",
                                   "out_exists", "header_only"])
-def test_apply_bad_inputs_refused_in_one_line(session_dir, session_result, tumble, capsys, case):
+def test_apply_bad_inputs_refused_in_one_line(session_dir, session_result, tumble, case):
     d, _ = session_dir
     _, cal = session_result
     w = d.parent / "apply_bad"
@@ -1463,20 +1439,20 @@ def test_apply_bad_inputs_refused_in_one_line(session_dir, session_result, tumbl
         "out_exists": (["cal.json", "r.csv", "--out", "exists.csv"], "exists.csv"),
         "header_only": (["cal.json", "hdr.csv", "--out", "o.csv"], "hdr.csv"),
     }[case]
-    rc, so, se = cli(["apply", *args], w, capsys)
+    rc, so, se = cli(["apply", *args], w)
     assert_one_line_refusal(rc, se, must)
     assert (w / "exists.csv").read_text() == "keep me"
     assert not (w / "o.csv").exists()
 
 
-def test_demo_force_never_replaces_the_users_own_folder(tmp_path, capsys):
+def test_demo_force_never_replaces_the_users_own_folder(tmp_path):
     d = tmp_path / "mine"
     (d / "session").mkdir(parents=True)
     (d / "notes.txt").write_text("mine")
     (d / "session" / "important.csv").write_text("my data")
-    rc, so, se = cli(["demo", "--out", "mine", "-q"], tmp_path, capsys)
+    rc, so, se = cli(["demo", "--out", "mine", "-q"], tmp_path)
     assert_one_line_refusal(rc, se, "mine")
-    rc, so, se = cli(["demo", "--out", "mine", "--force", "-q"], tmp_path, capsys)
+    rc, so, se = cli(["demo", "--out", "mine", "--force", "-q"], tmp_path)
     assert_one_line_refusal(rc, se, "session")
     assert (d / "notes.txt").read_text() == "mine"
     assert (d / "session" / "important.csv").read_text() == "my data"
@@ -1484,8 +1460,8 @@ def test_demo_force_never_replaces_the_users_own_folder(tmp_path, capsys):
 
 
 def test_every_command_has_version_and_help_without_traceback(tmp_path):
-    rc, so, se = cli_proc(["--version"], tmp_path)
+    rc, so, se = cli(["--version"], tmp_path)
     assert rc == 0 and re.search(r"\d+\.\d+", so + se)
     for cmd in ("marks", "calibrate", "gonio", "tilt", "apply", "run"):
-        rc, so, se = cli_proc([cmd, "--help"], tmp_path)
+        rc, so, se = cli([cmd, "--help"], tmp_path)
         assert rc == 0 and "usage" in so and "Traceback" not in se

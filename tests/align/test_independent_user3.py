@@ -25,22 +25,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.cli import run_cli
+
 ROOT = Path(__file__).resolve().parents[2]
 ARCSEC = np.pi / 180 / 3600
 AXES = "XYZ"
 
 
 # ----------------------------------------------------------------------------- running align
-def align(*args, cwd=None, timeout=300, env_extra=None):
-    """Run the CLI as a user would; return (rc, stdout, stderr)."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT)
-    env.setdefault("OMP_NUM_THREADS", "1")
-    if env_extra:
-        env.update(env_extra)
-    p = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=cwd, env=env,
-                       capture_output=True, text=True, timeout=timeout)
-    return p.returncode, p.stdout, p.stderr
+def align(*args, cwd=None, env_extra=None):
+    """Run the CLI as a user would (in this process: ``tests.cli``); return (rc, stdout,
+    stderr)."""
+    return run_cli(*args, cwd=cwd, env=env_extra)
 
 
 def assert_clean_refusal(rc, out, err, *needles):

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from tests.cli import run_cli
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from user4_inputs import (  # noqa: E402
@@ -33,12 +33,10 @@ LENS = (-0.3, 0.1, 0.0, 0.0)                # OpenCV k1, k2, p1, p2
 LENS_FREE = "k1=0,k2=0,p=0,aspect=0,pp_px=0"
 
 
-def align(*args, check_json=True):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    r = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=ROOT, env=env,
-                       capture_output=True, text=True, timeout=300)
-    return r
+def align(*args):
+    """``align ARGS`` from the project's root (in this process: ``tests.cli``); the result
+    reads like ``subprocess.run``'s (``returncode``, ``stdout``, ``stderr``)."""
+    return run_cli(*args, cwd=ROOT)
 
 
 def marks_json(img_path, *extra):

@@ -13,24 +13,22 @@ is right passes; a defect is ``xfail(strict=True)`` with the figures in its reas
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.align import user5_inputs as U
+from tests.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 REAL = ROOT.parent / "shared" / "data" / "real"
 DECLARED_DISTORTION_FREE = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
 
 
-def align(*args, timeout=600):
-    p = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=ROOT,
-                       capture_output=True, text=True, timeout=timeout)
-    return p.returncode, p.stdout, p.stderr
+def align(*args):
+    """``align ARGS`` run from the project's root (in this process: ``tests.cli``)."""
+    return run_cli(*args, cwd=ROOT)
 
 
 def marks_json(paths, *flags):

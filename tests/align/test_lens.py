@@ -88,7 +88,7 @@ def _camera_model(cam: CameraGeometry, w=640, h=480, k1=None, u_k1=5e-4) -> Came
                   [0, 0, 1]])
     D = np.array([cam.k1 if k1 is None else k1, cam.k2, cam.p1, cam.p2, 0.0])
     u = {"fx": 0.7, "fy": 0.8, "cx": 0.7, "cy": 0.7, "k1": u_k1, "k2": 1e-3,
-         "p1": 5e-5, "p2": 5e-5, "k3": 0.0}
+         "p1": 5e-5, "p2": 5e-5, "k3": 0.0, "aspect": 4e-4}  # aspect: the real chessboards'
     return CameraModel(K, D, (w, h), 0.2, 12, u)
 
 

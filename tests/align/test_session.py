@@ -16,11 +16,10 @@ from align.session import load_session
 from synth.session import SessionSpec, write_session
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("sess") / "unit7"
-    write_session(folder, SessionSpec(seed=21))
-    return folder
+@pytest.fixture
+def session(session21) -> Path:
+    """The session of seed 21 (folder ``unit7``), written once for the run: read-only."""
+    return session21
 
 
 def _copy(session: Path, tmp_path: Path, name: str = "copy") -> Path:

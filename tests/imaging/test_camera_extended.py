@@ -43,8 +43,11 @@ def test_u_is_the_larger_of_formal_and_jackknife_on_real_views():
     files = sorted(real_folder("opencv-chessboard").glob("left*.jpg"))
     imgs = {str(f): read_image(f).astype(np.uint8) for f in files}
     model, _ = calibrate_chessboard(imgs, (9, 6))
-    for k, v in model.u.items():
-        assert v == max(model.u_formal[k], model.u_jackknife[k]), k
+    for k, v in model.u_formal.items():
+        assert model.u[k] == max(v, model.u_jackknife[k]), k
+    # the aspect fy / fx: far better known than fx and fy together (they move together)
+    fx, fy = model.camera_matrix[0, 0], model.camera_matrix[1, 1]
+    assert model.u["aspect"] < 0.5 * np.hypot(model.u["fx"] / fx, model.u["fy"] / fy)
     assert model.u_jackknife["cx"] > 2 * model.u_formal["cx"]
     back = CameraModel.from_dict(model.to_dict())
     assert back.u_jackknife == model.u_jackknife and back.u_formal == model.u_formal
@@ -75,18 +78,22 @@ def test_jackknife_agrees_with_the_formal_u_when_the_model_is_exact():
     K = np.array([[530.0, 0, 320], [0, 530, 240], [0, 0, 1]])
     D = np.array([-0.27, 0.1, 1e-4, -2e-4, 0.0])
     truth = np.r_[530, 530, 320, 240, D[:4]]
-    ratios, zs = [], []
+    ratios, zs, aspect_z = [], [], []
     for seed in range(12):
         objpts, imgpts = _board_views(np.random.default_rng(seed), 10, K, D, 0.1)
         flags = cv2.CALIB_FIX_K3
         _, K1, D1, _, _, sd, _, _ = cv2.calibrateCameraExtended(
             objpts, imgpts, (640, 480), None, None, flags=flags)
         formal = np.ravel(sd)[:8]
-        jack = jackknife_u(objpts, imgpts, (640, 480), None, flags)[:8]
+        jack = jackknife_u(objpts, imgpts, (640, 480), None, flags)[:8]  # [-1]: the aspect
         ratios.append(jack / formal)
         est = np.r_[K1[0, 0], K1[1, 1], K1[0, 2], K1[1, 2], np.ravel(D1)[:4]]
         zs.append((est - truth) / np.maximum(formal, jack))
+        aspect_z.append((K1[1, 1] / K1[0, 0] - 1.0) / jackknife_u(
+            objpts, imgpts, (640, 480), None, flags)[-1])
     med = np.median(ratios, axis=0)
     print("median jackknife/formal", np.round(med, 2), "max |z|", np.abs(zs).max())
     assert np.all((med > 0.6) & (med < 1.7)), med
     assert np.abs(zs).max() < 4, np.abs(zs).max(axis=0)
+    # the aspect fy / fx (its u far below fx's and fy's together): covered too
+    assert np.abs(aspect_z).max() < 4, np.round(aspect_z, 2)

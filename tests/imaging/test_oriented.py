@@ -10,8 +10,8 @@ import pytest
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
+from imaging.band import band_indices
 from imaging.oriented import find_oriented
-from imaging.profile import band_indices
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 

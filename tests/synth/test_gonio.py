@@ -24,7 +24,7 @@ def test_pyramidal_error_with_a_tilted_slit_shifts_the_pulses_in_both_directions
     normals = spec.angles
     shift = np.diff(np.append(spec.trigger_azimuths, 2 * np.pi)) - normals
     assert np.max(np.abs(shift)) > 1.5 * ARCSEC
-    both = measure_log(p1, 4, 50.45, reverse_log=p2)
+    both = measure_log(p1, 4, np.deg2rad(50.45), reverse_log=p2)
     fa = both.angles
     assert np.all(np.abs(fa.angles_rad - (normals + shift)) < 4.5 * fa.u_rad)
     assert np.max(np.abs(fa.angles_rad - normals) / fa.u_rad) > 10

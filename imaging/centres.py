@@ -1,0 +1,289 @@
+"""Sub-pixel centres of a mark all along its length.
+
+The mark is cut into short segments along its length and each segment's centre offset
+delta_k (with its own contrast A_k, level b_k and background slope across the mark g_k) is
+fitted by Gauss–Newton on the groove model (:mod:`imaging.groove`) about the band fit's
+line (:mod:`imaging.profile`), with per-pixel weights from a shot + read noise model
+estimated from the data. The per-segment standard uncertainties come from each segment's
+Fisher information, so the line fit downstream propagates a real uncertainty.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from imaging.band import _band
+from imaging.detect import line_frame
+from imaging.errors import ImageInputError
+from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
+from imaging.ring import ring_slope
+from imaging.texture import TextureModel, texture_model
+
+EXTRA_STEPS = 4
+"""Gauss–Newton steps a segment's centre may take beyond the usual ones while it still moves
+(a lens bows a long off-centre mark by several px: with 2 steps of at most 1 px its ends
+stopped 0.2-0.35 px short, and a calibrated lens was reported as differing from itself)."""
+
+
+@dataclass(frozen=True)
+class Centres:
+    """Per-segment centres of a mark (image coordinates relative to the image centre, px).
+
+    ``xy``: (N, 2) centre points; ``sigma``: (N,) standard uncertainty of each across the
+    line [px]; ``t``: position along the reference line [px]; ``contrast``: A_k [DN];
+    ``cross_slope``: local background slope across the mark divided by the contrast [1/px]
+    (regressor for illumination-gradient bias); ``chi2_red``: each segment's pixel chi2/dof;
+    ``ok``: segments usable for the line fit; ``texture``: how the background's texture
+    correlates the centres' errors along the mark and with ``cross_slope`` (None: it does
+    not; see :mod:`imaging.texture`); ``blur_dev``, ``blur_dev_u``: each segment's blur
+    minus the band's [px] and its standard uncertainty, linearised at the solution (one
+    Gauss–Newton step on the blur with the segment's other parameters free; None unless
+    asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
+    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
+    (None: none removed).
+
+    Attributes
+    ----------
+    xy : ndarray
+        (N, 2) centres [px].
+    sigma : ndarray
+        (N,) their u across the line [px].
+    t : ndarray
+        (N,) positions along the line [px].
+    contrast : ndarray
+        (N,) contrast A_k [DN].
+    cross_slope : ndarray
+        (N,) background slope / contrast [1/px].
+    chi2_red : ndarray
+        (N,) pixel chi2/dof per segment.
+    ok : ndarray
+        (N,) usable segments (bool).
+    texture : TextureModel or None
+        The texture's correlation model.
+    blur_dev, blur_dev_u : ndarray or None
+        Per-segment blur minus the band's and its u [px].
+    offsets_cov : ndarray or None
+        Covariance from removed stripes' offsets [px^2].
+    """
+
+    xy: np.ndarray
+    sigma: np.ndarray
+    t: np.ndarray
+    contrast: np.ndarray
+    cross_slope: np.ndarray
+    chi2_red: np.ndarray
+    ok: np.ndarray
+    texture: TextureModel | None = None
+    blur_dev: np.ndarray | None = None
+    blur_dev_u: np.ndarray | None = None
+    offsets_cov: np.ndarray | None = None
+
+
+def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Segment of each pixel at ``t`` along the mark, and which pixels ``every`` keeps.
+
+    The segments are laid out from the middle of the measured stretch, one centred on it,
+    so that the grid is the same from either end: the same pixels rotated by 180 deg or
+    mirrored (t runs the other way) fall in the same segments. (Counted from t_start, the
+    two ends' part segments differed, and the angle by 0.1 u.) Indices run from 0 along t;
+    with ``every`` > 1 only segments a multiple of ``every`` from the middle one are kept.
+    """
+    mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+    j = np.round((t - mid) / segment_px).astype(int)
+    reach = int(np.round(0.5 * (pf.t_end_px - pf.t_start_px) / segment_px)) + 1
+    keep = np.abs(j) % every == 0 if every > 1 else np.ones(t.shape, bool)
+    return (j + reach) // every if every > 1 else j + reach, keep
+
+
+def _ring(image: np.ndarray, pf: ProfileFit, half: float, segment_px: float, every: int,
+          nseg: int, ring: float = 6.0) -> tuple[np.ndarray, ...]:
+    """Pixels of a ring just outside the band the centres are fitted on (half < |e| <=
+    half + ring): (rows, columns, e, segment), for the background slope across the mark.
+
+    Outside the band on purpose: the slope fitted inside it shares its pixels' noise with
+    the centre (both odd in e), and would correlate with the centre's error by chance.
+    """
+    _, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                         half + ring)
+    seg, keep = segment_index(t, pf, segment_px, every)
+    sel = (np.abs(e) > half) & keep
+    sel &= seg < nseg
+    idx, e, seg = idx[sel], e[sel], seg[sel]
+    return idx // image.shape[1], idx % image.shape[1], e, seg
+
+
+def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
+                   iterations: int = 2, every: int = 1, where: str = "image",
+                   texture: bool = False, avoid_px: Sequence[float] = (),
+                   guess: tuple[np.ndarray, np.ndarray] | None = None,
+                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
+                   ) -> Centres:
+    """Centre offset of the mark in consecutive segments along its length (vectorised GN).
+
+    ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
+    ``guess``: (t, offset) [px] of the groove from the reference line along it (an earlier
+    pass's centres), the start of each segment's offset; Gauss–Newton runs ``iterations``
+    steps of at most 1 px each, and on (up to :data:`EXTRA_STEPS` more) while a segment still
+    moves, so a strongly bowed groove's ends are not left where the steps stopped.
+    ``offsets_var``: variances [DN^2] of per-column and per-row offsets already subtracted
+    from the image (removed stripes, :mod:`imaging.stripes`); their errors are shared by
+    every segment on the same column (row), and ``Centres.offsets_cov`` carries them.
+    ``texture``: also measure how the background's texture correlates the centres' errors
+    (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
+    a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
+    """
+    half = centres_half(pf)
+    vals, e, t, idx = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                            half)
+    unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
+    vals, e, t, idx = vals[unclipped], e[unclipped], t[unclipped], idx[unclipped]
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
+                              "outside the image or is all clipped")
+    seg, keep = segment_index(t, pf, segment_px, every)
+    if not keep.all():
+        vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep], idx[keep]
+    if vals.size == 0:
+        raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
+                              "its segments")
+    nseg = int(seg.max()) + 1
+    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    v0, v1 = pf.noise_var
+    delta = np.zeros(nseg)
+    if guess is not None and len(guess[0]) >= 2:
+        mid = 0.5 * (pf.t_start_px + pf.t_end_px)
+        reach = int(np.round(0.5 * (pf.t_end_px - pf.t_start_px) / segment_px)) + 1
+        t_nom = mid + (np.arange(nseg) * every - reach) * segment_px
+        order = np.argsort(guess[0])
+        delta = np.clip(np.interp(t_nom, guess[0][order], guess[1][order]), -half / 2, half / 2)
+    moving = np.zeros(nseg, bool)
+    amp = np.full(nseg, pf.contrast_dn)
+    lev = np.full(nseg, pf.background_dn)
+    # Each segment has its own background slope across the mark: surface texture and uneven
+    # light tilt the background differently along the mark, and a slope left in the model
+    # moves the fitted centre (a false "illumination gradient"). Costs little precision: the
+    # slope is set by the pixels beside the groove, the centre by its flanks.
+    slp = np.full(nseg, pf.slope_across_dn_per_px)
+    k = 4
+
+    def bc(x: np.ndarray) -> np.ndarray:
+        return np.bincount(seg, x, minlength=nseg)
+
+    for it in range(iterations + 1 + EXTRA_STEPS):
+        ee = e - delta[seg]
+        p, pe = table(ee)
+        mu = lev[seg] + slp[seg] * ee + amp[seg] * p
+        r = vals - mu
+        if it == 1:
+            # Noise model again, now from the segment model's residuals (local level and
+            # contrast absorb illumination and texture that the band fit could not);
+            # each segment spends k of its pixels' degrees of freedom.
+            npx = bc(np.ones_like(e))
+            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+        # The linear noise model is fitted over the band's levels; below them (a segment's
+        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+        # of a groove is quieter than a quarter of the band's typical variance.
+        floor = max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
+        wgt = 1.0 / np.maximum(v0 + v1 * mu, floor)
+        J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
+        N = np.empty((nseg, k, k))
+        g = np.empty((nseg, k))
+        for i in range(k):
+            wj = wgt * J[i]  # once per column (the products are the same to the bit)
+            g[:, i] = bc(wj * r)
+            for j in range(i, k):
+                N[:, i, j] = N[:, j, i] = bc(wj * J[j])
+        ok = np.linalg.det(N) > 0
+        if it >= iterations and not (moving & ok).any():
+            break  # the last pass only refreshes weights and information at the solution
+        if it == iterations + EXTRA_STEPS:
+            break  # still moving: those segments are left out below
+        step = np.zeros((nseg, k))
+        step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
+        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+        moving = np.abs(step[:, 0]) > 0.1
+        step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
+        delta += step[:, 0]
+        amp += step[:, 1]
+        lev += step[:, 2]
+        if k == 4:
+            slp += step[:, 3]
+    cov = np.full((nseg, k, k), np.inf)
+    cov[ok] = np.linalg.inv(N[ok])
+    ocov = None
+    if any(v is not None for v in offsets_var):
+        ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
+    blur_dev = blur_dev_u = None
+    if texture:
+        blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
+                                          ok, bc)
+    # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
+    sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
+    npx = bc(np.ones_like(e))
+    chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
+    info = wgt * (amp[seg] * pe) ** 2
+    t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
+    ring = _ring(image, pf, half, segment_px, every, nseg)
+    slope = ring_slope(image[ring[0], ring[1]], ring[2], ring[3], nseg, pf.full_scale_dn)
+    u, n = line_frame(pf.angle_rad)
+    good = ok & (npx >= 6) & np.isfinite(sigma) & (np.abs(delta) < half / 2) & ~moving
+    amp_safe = np.where(amp != 0, amp, 1.0)
+    tex = None
+    if texture:
+        # Replicas just clear of the band and of its illumination ring, and further out:
+        # 8 series (4 distances, both sides) make the autocovariance precise enough that
+        # the loop's tests see white residuals (4 left ~10 % of textured marks flagged).
+        shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
+        tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
+                            wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
+                            pf.full_scale_dn, avoid_px, 2 * (half + 4))
+    if tex is not None:
+        # Control variate: the part of the centre's error that the ring's texture slope
+        # predicts is taken out (what stays is independent of the regressor).
+        delta = delta - tex.coupling_px2 * slope / amp_safe
+    xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
+    return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
+                   chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
+                   blur_dev_u=blur_dev_u, offsets_cov=ocov)
+
+
+def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,
+                 J: Sequence[np.ndarray], cov: np.ndarray, ok: np.ndarray,
+                 offsets_var: tuple[np.ndarray | None, np.ndarray | None]) -> np.ndarray:
+    """Covariance [px^2] (nseg x nseg) the removed offsets' errors put on the centres.
+
+    A centre is a linear functional of its pixels, delta_k = sum_px f_px v_px with f the
+    first row of N^-1 J^T W; an error e_x on column x moves it by e_x sum_{px in k, col x}
+    f_px = A[k, x] e_x, so the covariance is A diag(var) A^T (columns, then rows alike)."""
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    f = wgt * sum(c0[seg, i] * J[i] for i in range(len(J)))
+    out = np.zeros((nseg, nseg))
+    for var, where in zip(offsets_var, (idx % width, idx // width), strict=True):
+        if var is None:
+            continue
+        lo = int(where.min())
+        span = int(where.max()) - lo + 1
+        A = np.bincount(seg * span + (where - lo), f, minlength=nseg * span).reshape(nseg,
+                                                                                      span)
+        out += (A * var[lo:lo + span][None, :]) @ A.T
+    return out
+
+
+def _blur_step(js: np.ndarray, J: Sequence[np.ndarray], wgt: np.ndarray, r: np.ndarray,
+               g: np.ndarray, cov: np.ndarray, ok: np.ndarray, bc) -> tuple[np.ndarray, ...]:
+    """Each segment's blur change [px] and its u from one Gauss–Newton step on the blur with
+    the segment's other parameters free (the Schur complement of the segment's normal
+    matrix): ``js`` the pixels' dP/ds times the contrast, ``J``/``g``/``cov`` the segment
+    fit's columns, gradient and inverse normal matrix at the solution."""
+    a = np.stack([bc(wgt * js * j) for j in J], axis=1)
+    c = np.where(ok[:, None, None], cov, 0.0)
+    den = bc(wgt * js * js) - np.einsum("ni,nij,nj->n", a, c, a)
+    num = bc(wgt * js * r) - np.einsum("ni,nij,nj->n", a, c, g)
+    good = ok & (den > 0)
+    dev = np.where(good, num / np.where(good, den, 1.0), np.nan)
+    return dev, np.where(good, 1.0 / np.sqrt(np.where(good, den, 1.0)), np.inf)
