@@ -89,6 +89,9 @@ class LineFamily:
         dimensionless.
     typical_length_px : float
         Median visible length of the members with both ends seen [px] (nan: none).
+    pitch_u_lens_px : float
+        The frame's lens's share of the pitch's u [px] (:mod:`align.family_stage`: what the
+        lens's u moves the members' positions by), in ``pitch_u_px`` (0: none).
     """
 
     members: tuple[int, ...]
@@ -111,6 +114,7 @@ class LineFamily:
     lengths_max_px: tuple[float, ...] = ()
     hidden_ends: tuple[int, ...] = ()
     typical_length_px: float = float("nan")
+    pitch_u_lens_px: float = 0.0
 
     @property
     def chi2_dof(self) -> float:
@@ -136,7 +140,8 @@ class LineFamily:
                 "angle_u_lens_arcsec": float(np.rad2deg(self.angle_u_lens_rad) * 3600),
                 "lengths_px": list(self.lengths_px), "lengths_max_px": list(self.lengths_max_px),
                 "hidden_ends": list(self.hidden_ends),
-                "typical_length_px": self.typical_length_px}
+                "typical_length_px": self.typical_length_px,
+                "pitch_u_lens_px": self.pitch_u_lens_px}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineFamily:
@@ -158,13 +163,15 @@ class LineFamily:
                    tuple(num(v) for v in d.get("lengths_px", ())),
                    tuple(num(v) for v in d.get("lengths_max_px", ())),
                    tuple(int(v) for v in d.get("hidden_ends", ())),
-                   num(d.get("typical_length_px")))
+                   num(d.get("typical_length_px")), num(d.get("pitch_u_lens_px", 0.0)))
 
     def summary(self) -> str:
         """One line for the terminal."""
         s = (f"family of {len(self.members)} lines: angle {np.rad2deg(self.angle_rad):+.6f}° "
              f"± {np.rad2deg(self.angle_u_rad) * 3600:.2f}″, chi2/dof {self.chi2_dof:.2f} "
-             f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px, "
+             f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px"
+             + (f" ({self.pitch_u_lens_px:.3f} of it the lens)" if self.pitch_u_lens_px else "")
+             + ", "
              f"spread {self.pitch_spread_px:.3f} px, lens: {self.lens}")
         if np.isfinite(self.typical_length_px):
             s += f", typical length {self.typical_length_px:.0f} px"
@@ -199,12 +206,15 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 middles: np.ndarray, offset_u: np.ndarray, lens: str = "none",
                 failed: int = 0, alpha: float = 1e-3,
                 lens_terms: Sequence[Mapping[str, float]] = (),
-                lengths: Sequence[tuple[float, float, int]] = ()) -> LineFamily:
+                lengths: Sequence[tuple[float, float, int]] = (),
+                lens_shift: np.ndarray | None = None) -> LineFamily:
     """The family of lines with these angles [rad] (``angle_u``: each one's own u without
     the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
     [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
     mean's u, not the members' chi2); ``lengths``: per member (visible length, longest
-    length [px], ends hidden); see the module docstring for the formulas."""
+    length [px], ends hidden); ``lens_shift`` (N, 2, P): how far each lens parameter's u
+    moves each member's middle [px] (its share of the pitch's u, :mod:`align.family_stage`);
+    see the module docstring for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
@@ -252,6 +262,13 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
         pitch_u = scatter / float(np.sqrt(np.sum((k - k.mean()) ** 2)))
     else:
         pitch, res, pitch_u = float("nan"), np.full(n, np.nan), float("nan")
+    pitch_lens = 0.0
+    if lens_shift is not None and np.isfinite(pitch):
+        # Each lens parameter's move of the positions, as the pitch's slope takes it.
+        dq = np.einsum("nip,i->np", np.asarray(lens_shift, float), normal)[order]
+        kc = k - k.mean()
+        pitch_lens = float(np.linalg.norm(kc @ dq / (kc @ kc)))
+        pitch_u = float(np.hypot(pitch_u, pitch_lens))
     idx = tuple(int(indices[i]) for i in order)
     ln = [lengths[i] for i in order] if len(lengths) == n else []
     seen = [v for v, _, h in ln if not h]
@@ -260,7 +277,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
                       failed, u_lens, tuple(float(v) for v, _, _ in ln),
                       tuple(float(v) for _, v, _ in ln), tuple(int(h) for _, _, h in ln),
-                      float(np.median(seen)) if seen else float("nan"))
+                      float(np.median(seen)) if seen else float("nan"), pitch_lens)
 
 
 DIAL_FORMAT_VERSION = 1
@@ -299,8 +316,12 @@ class LineDial:
     chi2, dof, p_value : float, int, float
         The residuals' chi2, n - 2, upper-tail probability — dimensionless.
     lens : str
-        As :attr:`LineFamily.lens` (the lens's share is not in these u: see the docs);
-        unit —.
+        As :attr:`LineFamily.lens`; unit —.
+    increment_u_lens_rad : float
+        The frame's lens's share of ``increment_u_rad`` [rad]: the increment is a weighted
+        sum of the members' angles, so per lens error direction the same sum of their
+        signed lens couplings (one lens moves them together), the directions in quadrature
+        (0: no lens u). The centre's u holds the lines' own u only.
     """
 
     members: tuple[int, ...]
@@ -318,6 +339,7 @@ class LineDial:
     dof: int
     p_value: float
     lens: str = "none"
+    increment_u_lens_rad: float = 0.0
 
     @property
     def chi2_dof(self) -> float:
@@ -339,7 +361,9 @@ class LineDial:
                 "increment_u_arcsec": self.increment_u_rad * arc, "steps": list(self.steps),
                 "residuals_rad": list(self.residuals_rad), "spread_rad": self.spread_rad,
                 "spread_arcsec": self.spread_rad * arc, "chi2": self.chi2, "dof": self.dof,
-                "chi2_dof": self.chi2_dof, "p_value": self.p_value, "lens": self.lens}
+                "chi2_dof": self.chi2_dof, "p_value": self.p_value, "lens": self.lens,
+                "increment_u_lens_rad": self.increment_u_lens_rad,
+                "increment_u_lens_arcsec": self.increment_u_lens_rad * arc}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineDial:
@@ -354,7 +378,8 @@ class LineDial:
                    int(d["centre_dof"]), f(d["centre_p"]), f(d["increment_rad"]),
                    f(d["increment_u_rad"]), tuple(int(k) for k in d["steps"]),
                    tuple(f(v) for v in d["residuals_rad"]), f(d["spread_rad"]),
-                   f(d["chi2"]), int(d["dof"]), f(d["p_value"]), str(d.get("lens", "none")))
+                   f(d["chi2"]), int(d["dof"]), f(d["p_value"]), str(d.get("lens", "none")),
+                   f(d.get("increment_u_lens_rad", 0.0)))
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -372,10 +397,12 @@ class LineDial:
 
 def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
               offsets: np.ndarray, offset_u: np.ndarray, middles: np.ndarray,
-              lens: str = "none", alpha: float = 1e-3) -> LineDial:
+              lens: str = "none", alpha: float = 1e-3,
+              lens_coupling: Sequence[Mapping[str, float]] = ()) -> LineDial:
     """The dial of lines with these angles [rad] (own u [rad]), offsets from the image
-    centre along their normals [px] (u [px]) and middles (N, 2) [px]; formulas in
-    :class:`LineDial`."""
+    centre along their normals [px] (u [px]) and middles (N, 2) [px]; ``lens_coupling``:
+    each line's angle's signed components on the frame lens's error directions [rad]
+    (:attr:`align.mark_result.MarkResult.lens_coupling`); formulas in :class:`LineDial`."""
     a = np.asarray(angles, float)
     au = np.asarray(angle_u, float)
     d = np.asarray(offsets, float)
@@ -414,8 +441,18 @@ def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     inc_u = float(np.sqrt(C[1, 1]))
     if pv < alpha:
         inc_u *= float(np.sqrt(chi2 / dof))
+    inc_lens = 0.0
+    if len(lens_coupling) == m:
+        # The increment's weights on the members' angles (theta_i = a_i + a half turn or
+        # not: d theta_i / d a_i = 1), applied to each lens direction's components.
+        c = (C @ (X * w[:, None]).T)[1]
+        cpl = [lens_coupling[i] for i in order]
+        keys = sorted({k for t in cpl for k in t})
+        inc_lens = float(np.sqrt(sum(sum(c[i] * cpl[i].get(key, 0.0) for i in range(m)) ** 2
+                                     for key in keys)))
+        inc_u = float(np.hypot(inc_u, inc_lens))
     return LineDial(tuple(int(indices[i]) for i in order), (float(p[0]), float(p[1])),
                     (float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))), c_chi2, c_dof, c_p,
                     float(beta[1]), inc_u, tuple(int(v) for v in k),
                     tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), chi2, dof,
-                    pv, lens)
+                    pv, lens, inc_lens)

@@ -13,17 +13,18 @@ from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
-from align.family import LineDial, LineFamily, line_dial, line_family, member_ends
+from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
-from align.loop import Candidate, LoopReport, LoopSummary, run_loop
+from align.loop import Candidate, LoopReport, run_loop
+from align.mark_result import FrameDistortion, MarkResult
 from align.mark_stage import (
     BEND,
     CANDIDATES,
@@ -52,254 +53,6 @@ __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens",
            "FrameDistortion", "MarkResult", "camera_lens", "half_diagonal", "loop_mark",
            "finish_mark", "measure_image", "measure_camera", "measure_file", "measure_files",
            "structure_inflation", "with_families"]
-
-
-@dataclass(frozen=True)
-class FrameDistortion:
-    """One radial distortion shared by all marks of a frame (joint weighted plumb-line fit), as
-    results written before the lens moved to :mod:`align.lens` saved it (read back only).
-
-    Attributes
-    ----------
-    k1 : float
-        Radial distortion at the image half-diagonal — dimensionless.
-    k1_u : float
-        Its standard uncertainty — dimensionless.
-    applied : bool
-        It was significant, explained the lines, and the marks were undistorted with it;
-        unit —.
-    consistent : bool
-        The lines are straight within their uncertainties once it is removed (False: the lines
-        disagree in a way no single radial distortion explains — bent marks, or lines that are
-        not straight in the world — and every mark's u is inflated by sqrt(chi2/dof)); unit —.
-    n_lines : int
-        Marks in the fit — dimensionless.
-    chi2_dof_before, chi2_dof_after : float
-        All lines' straightness, χ²/dof — dimensionless.
-    p_value : float
-        Of the k1 = 0 test — dimensionless.
-    """
-
-    k1: float
-    k1_u: float
-    applied: bool
-    consistent: bool
-    n_lines: int
-    chi2_dof_before: float
-    chi2_dof_after: float
-    p_value: float
-
-    def to_dict(self) -> dict:
-        return {"k1": self.k1, "k1_u": self.k1_u, "applied": self.applied,
-                "consistent": self.consistent, "lines": self.n_lines,
-                "chi2_dof_before": self.chi2_dof_before,
-                "chi2_dof_after": self.chi2_dof_after, "p_value": self.p_value}
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> FrameDistortion:
-        """From :meth:`to_dict`'s keys (a non-finite number is saved as null)."""
-        return cls(_num(d["k1"]), _num(d["k1_u"]), bool(d["applied"]), bool(d["consistent"]),
-                   int(d["lines"]), _num(d["chi2_dof_before"]), _num(d["chi2_dof_after"]),
-                   _num(d["p_value"]))
-
-
-def _num(v: object) -> float:
-    """A saved float: strict JSON writes NaN and ±inf as null, read back as NaN."""
-    return float("nan") if v is None else float(v)  # type: ignore[arg-type]
-
-
-@dataclass(frozen=True)
-class MarkResult:
-    """One mark (or one failure) of one image.
-
-    Attributes
-    ----------
-    image : str
-        The image file; unit —.
-    found : bool
-        A mark was measured (else ``error`` says why); unit —.
-    error : str or None
-        Why not; unit —.
-    index : int
-        The mark's index in its image — dimensionless.
-    angle_rad, angle_u_rad : float
-        The mark's angle in the image and its standard uncertainty [rad].
-    offset_px, offset_u_px : float
-        Its distance from the image centre and its standard uncertainty [px].
-    length_px : float
-        Its length, between the groove's half-depth ends [px].
-    width_px : float
-        Its width [px].
-    blur_px : float
-        The edge blur [px].
-    dark : bool
-        A dark groove on a bright surface (else bright); unit —.
-    n_points : int
-        Centre points fitted — dimensionless.
-    n_rejected : int
-        Centre points rejected — dimensionless.
-    angle_before_rad : float
-        The angle of the declared model, before the loop [rad].
-    loop : LoopReport or LoopSummary or None
-        The residual loop's report; unit —.
-    measurement : MarkMeasurement or None
-        The raw measurement (not saved); unit —.
-    uncertainty_inflation : float
-        Factor on u for structure no effect explains — dimensionless.
-    internal_error : bool
-        The failure was a defect of the tool; unit —.
-    frame : FrameDistortion or None
-        The frame's shared distortion (older results); unit —.
-    family : LineFamily or None
-        The family of parallel lines it belongs to; unit —.
-    unreported : int
-        Lines found in the image and not reported — dimensionless.
-    dial : LineDial or None
-        The graduated dial (lines meeting at a point) it belongs to; unit —.
-    lens : Mapping or None
-        The camera's lens as used (source, parameters fitted or carried; dimensionless, pp in
-        [px]).
-    u_terms : Mapping
-        Named contributions to ``angle_u_rad`` [rad].
-    notes : tuple of str
-        What the reader must know; unit —.
-    lens_limited : bool
-        The lens terms of u exceed the limit: not ok, calibrate the camera; unit —.
-    lens_coupling : Mapping
-        The lens terms of u as signed components on the lens's error directions [rad]
-        (:func:`align.lens_terms.angle_coupling`).
-    lens_group : str
-        The lens solve the mark shares with others (marks of one group share the lens's
-        error); unit —.
-    bend_off_frame : bool
-        A bowed mark runs off the image: its ends, hence its chord (direction), are not in
-        it; not ok; unit —.
-    """
-
-    image: str
-    found: bool
-    error: str | None = None
-    index: int = 0
-    angle_rad: float = float("nan")
-    angle_u_rad: float = float("nan")
-    offset_px: float = float("nan")
-    offset_u_px: float = float("nan")
-    length_px: float = float("nan")
-    width_px: float = float("nan")
-    blur_px: float = float("nan")
-    dark: bool = True
-    n_points: int = 0
-    n_rejected: int = 0
-    angle_before_rad: float = float("nan")
-    loop: LoopReport | LoopSummary | None = None
-    measurement: MarkMeasurement | None = None
-    uncertainty_inflation: float = 1.0
-    internal_error: bool = False
-    frame: FrameDistortion | None = None
-    family: LineFamily | None = None
-    unreported: int = 0
-    dial: LineDial | None = None
-    lens: Mapping | None = None
-    u_terms: Mapping[str, float] = field(default_factory=dict)
-    notes: tuple[str, ...] = ()
-    lens_limited: bool = False
-    # The lens terms of u as signed components [rad] and the lens solve they belong to:
-    # marks of one group share the lens's error (align.lens_terms.angle_coupling).
-    lens_coupling: Mapping[str, float] = field(default_factory=dict)
-    lens_group: str = ""
-    bend_off_frame: bool = False
-
-    @property
-    def unexplained_structure(self) -> bool:
-        return bool(self.loop and self.loop.unexplained_structure)
-
-    def to_dict(self) -> dict:
-        """The mark as ``align marks --json`` and a session's ``stages.marks`` save it:
-        angles in degrees (and radians, exact), the loop's summary
-        (:meth:`align.loop.LoopSummary.to_dict`), the frame's shared distortion."""
-        d: dict = {"image": self.image, "found": self.found, "error": self.error}
-        if self.internal_error:
-            d["internal_error"] = True
-        if self.unreported:
-            d["lines_not_reported"] = self.unreported
-        if not self.found:
-            return d
-        d.update({
-            "index": self.index, "angle_deg": float(np.rad2deg(self.angle_rad)),
-            "angle_u_deg": float(np.rad2deg(self.angle_u_rad)),
-            "angle_u_arcsec": float(np.rad2deg(self.angle_u_rad) * 3600),
-            "angle_rad": self.angle_rad, "angle_u_rad": self.angle_u_rad,
-            "offset_px": self.offset_px, "offset_u_px": self.offset_u_px,
-            "length_px": self.length_px, "width_px": self.width_px, "blur_px": self.blur_px,
-            "polarity": "dark" if self.dark else "bright", "points": self.n_points,
-            "rejected_points": self.n_rejected,
-            "angle_before_loop_deg": float(np.rad2deg(self.angle_before_rad)),
-            "angle_before_loop_rad": self.angle_before_rad,
-            "effects": [], "unexplained_structure": self.unexplained_structure,
-            "uncertainty_inflation": self.uncertainty_inflation,
-        })
-        if self.frame is not None:
-            d["frame_radial_distortion"] = self.frame.to_dict()
-        if self.family is not None:
-            d["family"] = self.family.to_dict()
-        if self.dial is not None:
-            d["dial"] = self.dial.to_dict()
-        if self.lens is not None:
-            d["lens"] = dict(self.lens)
-        d["angle_u_terms_arcsec"] = {k: float(np.rad2deg(v) * 3600)
-                                     for k, v in self.u_terms.items()}
-        d["angle_u_terms_rad"] = {k: float(v) for k, v in self.u_terms.items()}
-        d["notes"] = list(self.notes)
-        d["lens_limited"] = self.lens_limited
-        d["bent_mark_off_frame"] = self.bend_off_frame
-        if self.lens_coupling:
-            d["lens_group"] = self.lens_group
-            d["angle_lens_coupling_rad"] = {k: float(v) for k, v in self.lens_coupling.items()}
-        if self.loop:
-            s = self.loop.summary()
-            d.update(s.to_dict())
-            d["residual_rms_px"] = {"before": s.rms_before, "after": s.rms_after}
-            d["chi2_dof"] = {"before": s.chi2_dof_before, "after": s.chi2_dof_after}
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> MarkResult:
-        """From :meth:`to_dict`'s keys. What is not saved comes back None: the measurement,
-        and the full loop (its saved part is an :class:`align.loop.LoopSummary`, which
-        answers ``effects``, ``unexplained_structure`` and ``summary_lines()`` alike)."""
-        base = {"image": str(d["image"]), "found": bool(d["found"]),
-                "error": None if d.get("error") is None else str(d["error"]),
-                "internal_error": bool(d.get("internal_error", False)),
-                "unreported": int(d.get("lines_not_reported", 0))}
-        if not base["found"]:
-            return cls(**base)
-
-        def rad(key: str) -> float:  # radians saved exactly; degrees from older files
-            return _num(d[key + "_rad"]) if key + "_rad" in d else np.deg2rad(
-                _num(d[key + "_deg"]))
-
-        fr = d.get("frame_radial_distortion")
-        return cls(**base, index=int(d["index"]), angle_rad=rad("angle"),
-                   angle_u_rad=rad("angle_u"), offset_px=_num(d["offset_px"]),
-                   offset_u_px=_num(d["offset_u_px"]), length_px=_num(d["length_px"]),
-                   width_px=_num(d["width_px"]), blur_px=_num(d["blur_px"]),
-                   dark=d.get("polarity", "dark") == "dark", n_points=int(d["points"]),
-                   n_rejected=int(d.get("rejected_points", 0)),
-                   angle_before_rad=rad("angle_before_loop"),
-                   loop=LoopSummary.from_dict(d) if "loop" in d else None,
-                   uncertainty_inflation=_num(d.get("uncertainty_inflation", 1.0)),
-                   frame=None if fr is None else FrameDistortion.from_dict(fr),
-                   family=LineFamily.from_dict(d["family"]) if "family" in d else None,
-                   dial=LineDial.from_dict(d["dial"]) if "dial" in d else None,
-                   lens=d.get("lens"),
-                   u_terms={str(k): _num(v)
-                            for k, v in (d.get("angle_u_terms_rad") or {}).items()},
-                   notes=tuple(str(n) for n in d.get("notes", ())),
-                   lens_limited=bool(d.get("lens_limited", False)),
-                   lens_coupling={str(k): _num(v) for k, v in
-                                  (d.get("angle_lens_coupling_rad") or {}).items()},
-                   lens_group=str(d.get("lens_group", "")),
-                   bend_off_frame=bool(d.get("bent_mark_off_frame", False)))
 
 
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
@@ -500,67 +253,13 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         k += 1
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
-    return with_families(out, measured.families, measured.unreported,
-                         "camera model" if camera is not None else
-                         "frame lens" if lens.lam is not None else "none", alpha, image)
+    out = with_families(out, measured.families, measured.unreported,
+                        "camera model" if camera is not None else
+                        "frame lens" if lens.lam is not None else "none", alpha, image)
+    # A grating beside the marks: named with its region, never passed over unsaid.
+    said = grating_notes(image, name, out)
+    return [replace(r, notes=said + r.notes) for r in out] if said else out
 
-
-
-DIAL_SPREAD = np.deg2rad(10.0)
-"""A group whose lines' directions spread wider than this is a dial, not a family."""
-
-
-def _wrap_all(a: np.ndarray) -> np.ndarray:
-    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
-
-
-def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
-                  unreported: int, lens: str, alpha: float = 1e-3,
-                  image: np.ndarray | None = None) -> list[MarkResult]:
-    """The image's results with each family's :class:`align.family.LineFamily` on its
-    measured members, and the count of lines found but not reported on every entry. With
-    the ``image``, each member's ends are checked for obstructions (dust, ink:
-    :func:`align.family.member_ends`): its length is the visible one, and a hidden end is
-    said with the bound it leaves."""
-    out = [replace(r, unreported=unreported) for r in results]
-    for g in families:
-        ok = [i for i in g if out[i].found]
-        if len(ok) < 2:
-            continue
-        lengths: list[tuple[float, float, int]] = []
-        if image is not None:
-            for i in ok:
-                out[i], got = member_ends(image, out[i])
-                lengths.append(got)
-        ms = [out[i] for i in ok]
-        mids = []
-        for r in ms:
-            if r.measurement is None or r.measurement.ends_px is None:
-                mids.append(r.offset_px * line_frame(r.angle_rad)[1])
-                continue
-            # The groove's ends where its centres are (undistorted by the camera's lens):
-            # the pitch is measured in the same coordinates as the offsets.
-            mids.append(r.measurement.ends_px.mean(axis=0))
-        # The lens's terms are shared by the members: out of their u for the chi2 of their
-        # angles, into the family mean's u (align.family).
-        shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
-        own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
-                                  for r, t in zip(ms, shared, strict=True)], 1e-30))
-        angles = np.array([r.angle_rad for r in ms])
-        if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD and len(ms) >= 3:
-            # Lines that meet at a point (imaging.families.group_dial): a dial.
-            dial = line_dial([r.index for r in ms], angles, own,
-                             np.array([r.offset_px for r in ms]),
-                             np.array([r.offset_u_px for r in ms]), np.array(mids), lens, alpha)
-            for i in ok:
-                out[i] = replace(out[i], dial=dial)
-            continue
-        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
-                          np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
-                          len(g) - len(ok), alpha, shared, lengths)
-        for i in ok:
-            out[i] = replace(out[i], family=fam)
-    return out
 
 
 def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
@@ -579,12 +278,18 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             on_image(j)
         try:
             got = read_image_notes(path)
+        except ImageInputError as exc:
+            found_all.append([exc])
+            continue
+        try:
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
             found_all.append(list(fr.items))
         except ImageInputError as exc:
-            found_all.append([exc])
+            # One mark expected and a family of lines there: named, not just "competing".
+            note = family_note(got.pixels, roi) if expect_one else None
+            found_all.append([ImageInputError(f"{exc}; {note}") if note else exc])
     ms = [m for f in found_all for m in f if isinstance(m, MarkMeasurement)]
     shapes = {m.image_shape for m in ms}
     lens = camera_lens(ms, camera, ranges, alpha, label) if len(shapes) <= 1 else None

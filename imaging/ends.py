@@ -46,6 +46,10 @@ QUIET_K = 2.5
 seen, no speck's fringe)."""
 GAP = 2
 """Clean bins allowed inside one obstruction's disturbed run."""
+BARE_RUN = 6
+"""Consecutive bins of bare surface (quiet, no groove) inside the extent that end the groove
+there, at least 3 blur widths: what lies beyond is something else on the line (a numeral's
+bar printed just past a scale's long line was read as 18 px more of it)."""
 
 
 @dataclass(frozen=True)
@@ -223,11 +227,29 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         a, b = amp_s[k] / ref - 0.5, amp_s[k_out] / ref - 0.5
         return float(tb[k] + step * a / (a - b)) if a > 0 > b else float(tb[k])
 
+    bare = max(BARE_RUN, int(np.ceil(3 * pf.blur_px)))
+
+    def body_end(k: int, step: int) -> int:
+        """The groove's last bin before bare surface, from its middle out to bin k."""
+        i, run = (k0 + k1) // 2, 0
+        while (k - i) * step > 0:
+            i += step
+            run = run + 1 if quiet[i] and not deep[i] else 0
+            if run >= bare:
+                return i - step * run
+        return k
+
     ends = []
     for k, t_end, step in ((k0, t0, -1), (k1, t1, +1)):
+        b = body_end(k, step)
+        # (Only the outer half of each half: a gap near the middle is no groove's end.)
+        if b != k and abs(tb[b] - tb[(k0 + k1) // 2]) >= 0.25 * (t1 - t0):
+            k, t_end = b, cross(b, step)
         vis, far = walk(k, step)
         # An end that did not move (by more than a bin) keeps its half-depth crossing.
         v = t_end if abs(vis - k) <= 1 else cross(vis, step)
         ends.append((v, v if far == vis else float(tb[far])))
     (s_vis, s_min), (e_vis, e_max) = ends
+    if e_vis <= s_vis:
+        return same
     return GrooveEnds(s_vis, e_vis, min(s_min, s_vis), max(e_max, e_vis))

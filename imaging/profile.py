@@ -61,7 +61,12 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     # saturated patch beside it) only cost the pixels they cover.
     clipped = (vals >= full_scale) | (vals <= 0)
     core = np.abs(e) <= max(2.0, cand.thickness_px / 2 + 1.5)
-    if np.mean(clipped[core]) > 0.02:
+    # Along the mark, 8 px at a time: a groove clipped shows in most stretches, an opaque
+    # speck over its end in a few (its pixels only are lost; a ruled scale's line was
+    # refused for 3 % of its pixels under a black particle).
+    step = np.floor((t[core] - t0) / 8).astype(int)
+    per = np.bincount(step, clipped[core]) / np.maximum(np.bincount(step), 1)
+    if np.mean(clipped[core]) > 0.02 and np.median(per[np.bincount(step) > 0]) > 0.02:
         raise ImageInputError(
             f"{where}: mark near ({cand.offset_px:.0f} px offset) is saturated or clipped "
             f"({100 * np.mean(clipped[core]):.0f} % of its pixels at 0 or {full_scale:.0f}, "

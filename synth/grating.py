@@ -22,7 +22,10 @@ class GratingSpec:
     """One grating image: ``pitch_px`` between grooves [px], ``duty`` groove width / pitch,
     ``length_px`` each groove's length [px], ``line_angle_rad`` their direction [rad],
     ``blur_px`` the PSF's sigma [px], ``snr`` contrast / noise, ``contrast`` (negative:
-    dark grooves), frame, bits and seed as :class:`synth.marks.ImageSpec`."""
+    dark grooves), frame, bits and seed as :class:`synth.marks.ImageSpec`; ``offset_px``
+    and ``centre_t_px`` move the grating from the frame's centre across and along its lines
+    [px] (beside a scribe mark: :meth:`marks` into an :class:`~synth.marks.ImageSpec` with
+    the mark's)."""
 
     pitch_px: float = 8.0
     duty: float = 0.5
@@ -36,13 +39,16 @@ class GratingSpec:
     height: int = 480
     bits: int = 8
     seed: int = 0
+    offset_px: float = 0.0
+    centre_t_px: float = 0.0
 
     def marks(self) -> tuple[MarkSpec, ...]:
         """The grooves, centred on the frame across ``span_px``."""
         n = int(self.span_px // self.pitch_px) + 1
-        offs = (np.arange(n) - (n - 1) / 2) * self.pitch_px
+        offs = (np.arange(n) - (n - 1) / 2) * self.pitch_px + self.offset_px
         return tuple(MarkSpec(self.line_angle_rad, float(o), self.length_px,
-                              self.duty * self.pitch_px, 0.0, "box", self.contrast)
+                              self.duty * self.pitch_px, self.centre_t_px, "box",
+                              self.contrast)
                      for o in offs)
 
 

@@ -5,6 +5,7 @@ member flagged."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,13 +15,21 @@ from align.warnings import mark_warnings
 from imaging import line_frame
 from synth.ruled import RuledSpec, random_ruled, render_ruled
 
+END_TOL_PX = 3.0
+"""How far a hidden end's bound may miss (blur, the particle's fringe): as test_ends's."""
+
 
 def _wrap(a):
     return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
 
 
-def _match(res, truth):
-    """Each measured line's truth (nearest middle, within 20 px), and the unmatched ones."""
+def _match(res, truth, camera=None):
+    """Each measured line's truth (nearest middle, within 20 px), and the unmatched ones;
+    ``camera``: the render's (its lens moves the truth's middles in the raw image)."""
+    if camera is not None:
+        truth = replace(truth, lines=tuple(
+            replace(g, centre_xy_px=tuple(float(v) for v in camera.distort(*g.centre_xy_px)))
+            for g in truth.lines))
     got, extra = {}, 0
     for r in res:
         # The middle of the groove's extent, along the measured line (its own frame: the
@@ -49,25 +58,42 @@ def _check(spec):
     s = render_ruled(spec)
     res = measure_image(s.image)
     assert all(r.found for r in res), [r.error for r in res if not r.found]
-    got, extra = _match(res, s.truth)
+    got, extra = _match(res, s.truth, spec.camera)
     assert extra == 0 and len(got) == len(s.truth.lines)
     fam = res[0].family
     assert fam is not None and len(fam.members) == len(res)
-    z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad) / _own_u(r) for k, r in got.items()]
-    # Lines as long as the truth's (not cut by numerals, nor by dust in their middle). A
-    # speck on an end hides it (its bound is checked in tests/imaging/test_ends.py; 5 of the
-    # slow sweep's 124 lines seen >= 5 % short): most lines within 5 %, none below half.
+    # Lens-free renders: each line's own u (the lens's Type B terms move them together);
+    # through a lens, the whole u.
+    z = [_wrap(r.angle_rad - s.truth.lines[k].angle_rad)
+         / (_own_u(r) if spec.camera.is_identity else r.angle_u_rad) for k, r in got.items()]
+    # Lines as long as the truth's (not cut by numerals, nor by dust in their middle): most
+    # within 5 %, none below half. An opaque particle over an end hides it: seen no longer
+    # than the truth, and the bound said holds it (as tests/imaging/test_ends.py checks).
     true_len = np.array([s.truth.lines[k].length_px for k in got])
     err = np.array([r.length_px for r in got.values()]) - true_len
-    assert np.median(np.abs(err)) < 2.0 and np.all(err > -0.5 * true_len), err
-    assert np.mean(np.abs(err) < 0.05 * true_len) >= 0.5, err
+    hidden = np.array([s.truth.lines[k].hidden in ("start", "end") for k in got])
+    most = np.array([fam.lengths_max_px[fam.members.index(r.index)] for r in got.values()])
+    assert np.all(err[hidden] < END_TOL_PX), err
+    assert np.all(most[hidden] > true_len[hidden] - END_TOL_PX), (most, true_len)
+    err = err[~hidden]
+    assert np.all(err > -0.5 * true_len[~hidden]), err
+    assert np.mean(np.abs(err) < 0.05 * true_len[~hidden]) >= 0.5, err
     assert abs(fam.pitch_px - s.truth.pitch_px) < 5 * fam.pitch_u_px + 0.01
-    return fam, np.array(z), np.abs(err) >= 0.05 * true_len
+    fam_z = _wrap(fam.angle_rad - s.truth.line_angle_rad) / fam.angle_u_rad
+    # The pitch against its own u (the ruling's scatter, without the lens's share): the
+    # lens-free renders' test of it.
+    own = np.sqrt(max(fam.pitch_u_px**2 - fam.pitch_u_lens_px**2, 1e-30))
+    pitch_z = ((fam.pitch_px - s.truth.pitch_px) / fam.pitch_u_px,
+               (fam.pitch_px - s.truth.pitch_px) / own)
+    # (The callers test the median error of the seen lengths over their images: < 2 px.)
+    return fam, np.array(z), err / true_len[~hidden], fam_z, pitch_z, err
 
 
 def test_ruled_scale_every_line_found_quick():
-    fam, z, _ = _check(RuledSpec(width=800, height=600, pitch_px=70.0, line_angle_rad=1.3,
-                              lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    fam, z, *_, err = _check(RuledSpec(width=800, height=600, pitch_px=70.0,
+                                       line_angle_rad=1.3, lengths_px=(110.0, 140.0, 170.0),
+                                       bits=12, snr=30, seed=5))
+    assert np.median(np.abs(err)) < 2.0, err
     assert fam.dof == len(z) - 1 and np.isfinite(fam.chi2_dof)
     assert np.max(np.abs(z)) < 4.5
 
@@ -92,16 +118,77 @@ def test_tilted_member_flagged():
 def test_ruled_scale_over_seeds():
     """Random scales (pitch 40-140 px, any direction, 8-16 bits, 800 x 600): every line
     found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
-    chis, zs, shorts = [], [], []
+    chis, zs, shorts, errs = [], [], [], []
     for seed in range(12):
-        fam, z, short = _check(random_ruled(seed, width=800, height=600))
+        fam, z, rel, *_, err = _check(random_ruled(seed, width=800, height=600))
         chis.append(fam.chi2_dof)
         zs.append(z)
-        shorts.append(short)
+        shorts.append(np.abs(rel) >= 0.05)
+        errs.append(err)
     z = np.concatenate(zs)
-    assert np.mean(np.concatenate(shorts)) < 0.25  # lines with an end hidden by a speck
+    assert np.mean(np.concatenate(shorts)) < 0.25  # lines shortened by a speck on an end
+    assert np.median(np.abs(np.concatenate(errs))) < 2.0
     assert 0.7 < np.mean(chis) < 1.4, chis
     assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="issue 18 point 5 open: at 1600 x 1200 a graduation or three of "
+                   "19-29 are still missed in some cases (the failures are listed)",
+                   strict=False)
+def test_ruled_scale_grid_every_line_found():
+    """Issue 18's test: random scales with numerals (beyond the long lines, or printed
+    across them), dust (on the lines, and opaque particles over 2 lines' ends) and a logo,
+    8/12/16-bit, 640 x 480 and 1600 x 1200, without a lens and through a barrel lens (k1
+    -0.15 at f = 0.8 x the diagonal), 2 seeds each (pitch at most 0.16 of the width: at least
+    5 graduations in the frame): every line found and none extra, as long
+    as its truth (tests _check), the family's angle and pitch within 3 u of the truth
+    (the lens's share in u); lens-free, the members' chi2/dof 0.7-1.4 on average, their
+    angles' z RMS 0.75-1.3 and the pitch within 4 of its own u (no lens share)."""
+    from synth.optics import CameraGeometry
+
+    rows, chis, zs, errs, failed = [], [], [], [], []
+    for w, h in ((640, 480), (1600, 1200)):
+        for bits in (8, 12, 16):
+            for k1 in (0.0, -0.15):
+                cam = (CameraGeometry(focal_px=0.8 * np.hypot(w, h), k1=k1) if k1
+                       else CameraGeometry())
+                for seed in (bits, bits + 30):
+                    spec = random_ruled(seed + w, width=w, height=h, bits=bits, camera=cam,
+                                        dust_on_ends=2, numerals_over_lines=bool(seed % 2))
+                    # A scale, not 3 lines: at 640 x 480 a pitch over 100 px leaves 3-4
+                    # graduations, and with one cut by a particle the search's two make no
+                    # family (docs/ruled-scales.md, Limits).
+                    spec = replace(spec, pitch_px=min(spec.pitch_px, 0.16 * w))
+                    try:
+                        fam, z, _, fam_z, (pz, pz_own), err = _check(spec)
+                    except AssertionError as exc:  # every case run; the misses listed
+                        failed.append((w, bits, k1, seed, str(exc).splitlines()[0][:120]))
+                        continue
+                    errs.append(err)
+                    rows.append((w, bits, k1, seed, len(fam.members), fam.chi2_dof,
+                                 float(np.max(np.abs(z))), fam_z, pz, pz_own))
+                    if not (abs(fam_z) < 3 and abs(pz) < 3):
+                        failed.append((*rows[-1][:4], "family or pitch beyond 3 u"))
+                    if not k1:
+                        chis.append(fam.chi2_dof)
+                        zs.append(z)
+                        if not abs(pz_own) < 4:
+                            failed.append((*rows[-1][:4], "pitch beyond 4 own u"))
+    for r in rows:  # the table the docs quote (pytest -s)
+        w, bits, k1, seed, n, chi, zmax, fz, pz, pzo = r
+        print(f"{w:5d} {bits:2d} {k1:+.2f} {seed:3d} lines {n:2d} chi2/dof {chi:.2f} "
+              f"max|z| {zmax:.2f} family z {fz:+.2f} pitch z {pz:+.2f} (own u {pzo:+.2f})")
+    for f in failed:
+        print("FAILED", *f)
+    z = np.concatenate(zs)
+    print(f"chi2/dof lens-free: mean {np.mean(chis):.2f}, {np.min(chis):.2f}-{np.max(chis):.2f}; "
+          f"z RMS {np.sqrt(np.mean(z**2)):.2f}")
+    assert 0.7 < np.mean(chis) < 1.4, chis
+    assert 0.75 < np.sqrt(np.mean(z**2)) < 1.3
+    assert np.median(np.abs(np.concatenate(errs))) < 2.0
+    assert not failed, failed
+    assert np.median(np.abs(np.concatenate(errs))) < 2.0
 
 
 def test_family_block_saved_validated_and_read_back():
@@ -119,6 +206,8 @@ def test_family_block_saved_validated_and_read_back():
     # (At 60 px pitch the lines are alike within the search's relief window: found through
     # the ruling of the unconfirmed candidates; before, none was, and this compared None.)
     assert res[0].family is not None and back[0].family == res[0].family
+    # The scale's own ruling (its pitch and direction measured) is no grating to name.
+    assert not any("grating" in w for w in mark_warnings(res))
 
 
 def test_min_length_above_the_short_lines_says_how_many_it_left_out():

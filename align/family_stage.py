@@ -1,0 +1,194 @@
+"""A frame's families and dials among its measured marks (:mod:`imaging.families` grouped
+them), with what the frame's one lens leaves on them.
+
+The lens's share: the frame's lens (a camera model, the lens the lines determined, or the
+plausible range of what they leave undetermined — :mod:`align.camera_lens`) is one for every
+member, so its u moves them together. On a family's pitch it enters through each member's
+position: every lens parameter j, at its standard u u_j (:func:`lens_u_vector`), moves the
+members' middles by J_i u_j (J_i the undistortion's Jacobian at the middle,
+:func:`imaging.lens.undistortion_jacobian`), and the pitch by the least-squares slope of
+those moves over the ruling steps; the parameters add in quadrature. On a dial's increment it
+enters through the members' angles: the increment is a weighted sum of them, so its share per
+lens error direction is that sum of the members' signed couplings
+(:attr:`align.mark_result.MarkResult.lens_coupling`), and the directions add in quadrature.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from align.camera_lens import LENS_TERMS
+from align.family import line_dial, line_family, member_ends
+from align.lens import LensRanges
+from align.mark_result import MarkResult
+from align.mark_stage import half_diagonal
+from imaging import Roi, detect_lines, line_frame
+from imaging.grating import grating_regions
+from imaging.lens import PARAMS, undistortion_jacobian
+
+__all__ = ["DIAL_SPREAD", "family_note", "grating_notes", "lens_u_vector", "with_families"]
+
+
+def lens_u_vector(record: Mapping | None) -> np.ndarray:
+    """Standard u of each lens parameter (:data:`imaging.lens.PARAMS` order, at the
+    half-diagonal) that the frame's lens record (``MarkResult.lens``) leaves: a camera
+    model's own u; for a lens from the lines, an applied parameter's u from them, a
+    determined one not applied its |estimate| (within the range) and u together, an
+    undetermined one its plausible range as a uniform (range / sqrt 3) — as each mark's
+    angle carries them (:func:`align.lens_terms.angle_coupling`); zeros when declared
+    distortion-free or unknown."""
+    out = np.zeros(len(PARAMS))
+    if not record:
+        return out
+    if record.get("source") == "camera model":
+        return np.asarray(record.get("u_lens_vector", out), float)
+    if record.get("source") != "marks" or "parameters" not in record:
+        return out
+    rng = LensRanges.from_dict(record.get("ranges", {})).vector()
+
+    def num(v: object) -> float:
+        return float("nan") if v is None else float(v)  # type: ignore[arg-type]
+
+    for j, p in enumerate(PARAMS):
+        q = record["parameters"].get(p, {})
+        ul, est = num(q.get("u_from_lines")), num(q.get("estimate"))
+        if q.get("applied"):
+            out[j] = ul if np.isfinite(ul) else rng[j]
+        elif q.get("determined"):
+            e = min(abs(est), rng[j]) if np.isfinite(est) else 0.0
+            out[j] = float(np.hypot(e, ul if np.isfinite(ul) else 0.0))
+        else:
+            out[j] = rng[j] / np.sqrt(3)
+    return out
+
+
+def lens_shifts(middles: np.ndarray, record: Mapping | None, shape: tuple[int, int]
+                ) -> np.ndarray:
+    """(N, 2, P) moves of the members' middles [px] (relative to the image centre, already
+    corrected for the lens as far as it is known) per lens parameter at its standard u."""
+    u = lens_u_vector(record)
+    if not np.any(u):
+        return np.zeros((len(middles), 2, len(PARAMS)))
+    _, jac = undistortion_jacobian(np.asarray(middles, float), np.zeros(len(PARAMS)),
+                                   half_diagonal(shape))
+    return np.nan_to_num(jac) * u[None, None, :]
+
+
+DIAL_SPREAD = np.deg2rad(10.0)
+"""A group whose lines' directions spread wider than this is a dial, not a family."""
+
+
+def _wrap_all(a: np.ndarray) -> np.ndarray:
+    return (np.asarray(a) + np.pi / 2) % np.pi - np.pi / 2
+
+
+def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
+                  unreported: int, lens: str, alpha: float = 1e-3,
+                  image: np.ndarray | None = None) -> list[MarkResult]:
+    """The image's results with each family's :class:`align.family.LineFamily` on its
+    measured members, and the count of lines found but not reported on every entry. With
+    the ``image``, every mark's ends are checked for obstructions (dust, ink:
+    :func:`align.family.member_ends`), a family's members' and single marks' alike: its
+    length is the visible one, and a hidden end is said with the bound it leaves."""
+    out = [replace(r, unreported=unreported) for r in results]
+    for g in families:
+        ok = [i for i in g if out[i].found]
+        if len(ok) < 2:
+            continue
+        lengths: list[tuple[float, float, int]] = []
+        if image is not None:
+            for i in ok:
+                out[i], got = member_ends(image, out[i])
+                lengths.append(got)
+        ms = [out[i] for i in ok]
+        mids = []
+        for r in ms:
+            if r.measurement is None or r.measurement.ends_px is None:
+                mids.append(r.offset_px * line_frame(r.angle_rad)[1])
+                continue
+            # The groove's ends where its centres are (undistorted by the camera's lens):
+            # the pitch is measured in the same coordinates as the offsets.
+            mids.append(r.measurement.ends_px.mean(axis=0))
+        shape = next((r.measurement.image_shape for r in ms if r.measurement is not None),
+                     None)
+        shifts = (lens_shifts(np.array(mids), ms[0].lens, shape) if shape is not None
+                  else None)
+        # The lens's terms are shared by the members: out of their u for the chi2 of their
+        # angles, into the family mean's u (align.family).
+        shared = [{k: v for k, v in r.u_terms.items() if k.startswith(LENS_TERMS)} for r in ms]
+        own = np.sqrt(np.maximum([r.angle_u_rad**2 - sum(v**2 for v in t.values())
+                                  for r, t in zip(ms, shared, strict=True)], 1e-30))
+        angles = np.array([r.angle_rad for r in ms])
+        if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD and len(ms) >= 3:
+            # Lines that meet at a point (imaging.families.group_dial): a dial.
+            dial = line_dial([r.index for r in ms], angles, own,
+                             np.array([r.offset_px for r in ms]),
+                             np.array([r.offset_u_px for r in ms]), np.array(mids), lens, alpha,
+                             [r.lens_coupling for r in ms])
+            for i in ok:
+                out[i] = replace(out[i], dial=dial)
+            continue
+        fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
+                          np.array(mids), np.array([r.offset_u_px for r in ms]), lens,
+                          len(g) - len(ok), alpha, shared, lengths, shifts)
+        for i in ok:
+            out[i] = replace(out[i], family=fam)
+    if image is not None:
+        # Every other mark's ends checked alike (a single mark, a dial's graduation): its
+        # length the visible one, a hidden end said with its bound.
+        out = [member_ends(image, r)[0] if r.found and r.family is None else r for r in out]
+    return out
+
+
+def grating_notes(image: np.ndarray, name: str, results: Sequence[MarkResult]
+                  ) -> tuple[str, ...]:
+    """A note per grating in the tiles near the measured marks (:mod:`imaging.grating`),
+    naming its pitch, direction and pixel region; a measured family's own ruling is not a
+    grating to name."""
+    segs, known = [], set()
+    c = np.array([(image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2])
+    for r in results:
+        m = r.measurement
+        if m is None or not np.all(np.isfinite(m.extent_px)):
+            continue
+        u, n = line_frame(m.profile.angle_rad)
+        segs.append(np.array([m.profile.offset_px * n + t * u + c for t in m.extent_px]))
+        if r.family is not None and np.isfinite(r.family.pitch_px):
+            known.add((abs(r.family.pitch_px), r.family.angle_rad))
+    return tuple(f"{name}: {g.describe()}" for g in grating_regions(image, segs, sorted(known)))
+
+
+def family_note(image: np.ndarray, roi: Roi | None = None) -> str | None:
+    """What an image expected to hold one mark (a session's) holds instead, when it is a
+    family of lines (a ruled scale, a dial): "it holds a family of N parallel lines at a°
+    (pitch ~p px) in pixels x ..., y ...: measure it with `align marks`", from the search
+    with families (:func:`imaging.detect_lines`); None when it holds none.
+
+    A family has no place in a session's E (a view's angle is one mark's): said on the
+    image's entry rather than dropped with "two competing marks"."""
+    det = detect_lines(image, roi=roi)
+    if not det.families:
+        return None
+    c = np.array([(image.shape[1] - 1) / 2, (image.shape[0] - 1) / 2])
+    said = []
+    for g in det.families:
+        cs = [det.marks[i] for i in g]
+        ends = np.array([[c + m.offset_px * line_frame(m.angle_rad)[1]
+                          + t * line_frame(m.angle_rad)[0] for t in (m.t_start_px, m.t_end_px)]
+                         for m in cs]).reshape(-1, 2)
+        (x0, y0), (x1, y1) = ends.min(axis=0), ends.max(axis=0)
+        angles = np.array([m.angle_rad for m in cs])
+        where = f"in pixels x {x0:.0f}–{x1:.0f}, y {y0:.0f}–{y1:.0f}"
+        if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD:
+            said.append(f"a dial of {len(cs)} lines meeting at a point {where}")
+            continue
+        a = float(angles[0] + np.median(_wrap_all(angles - angles[0])))
+        q = np.sort([m.offset_px * float(line_frame(m.angle_rad)[1] @ line_frame(a)[1])
+                     for m in cs])
+        said.append(f"a family of {len(cs)} parallel lines at {np.rad2deg(a):.1f}° (pitch "
+                    f"~{float(np.median(np.diff(q))):.1f} px) {where}")
+    return ("it holds " + " and ".join(said) + ": measured by `align marks` (family, pitch, "
+            "parallelism), not by a session, whose views are one mark each")

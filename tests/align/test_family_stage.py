@@ -1,0 +1,100 @@
+"""align.family_stage: a ruled scale where a session expects one mark is named as a family;
+the frame lens's share in a family's pitch u and a dial's increment u."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from align.family import line_dial, line_family
+from align.family_stage import lens_u_vector
+from align.marks import measure_camera
+from synth.marks import write_image
+from synth.ruled import RuledSpec, render_ruled
+
+
+def test_session_image_of_a_scale_names_the_family(tmp_path):
+    """A camera's image holding a ruled scale (one mark expected, as in a session): the
+    entry says the family — its lines, direction, pitch, pixel region — not only that two
+    marks compete."""
+    s = render_ruled(RuledSpec(width=640, height=480, pitch_px=70.0, line_angle_rad=1.3,
+                               lengths_px=(110.0, 140.0, 170.0), bits=12, snr=30, seed=5))
+    path = write_image(tmp_path / "scale.png", s.image)
+    (res,) = measure_camera([(path, None)], expect_one=True, label="A")
+    assert len(res) == 1 and not res[0].found
+    err = res[0].error
+    n = len(s.truth.lines)
+    said = f"a family of {n} parallel lines at {np.rad2deg(s.truth.line_angle_rad):.1f}°"
+    assert said in err, err
+    pitch = float(err.split("(pitch ~")[1].split(" px")[0])
+    assert abs(pitch - 70.0) < 3.0 and "in pixels x " in err and "\n" not in err
+
+
+def test_lens_u_vector_from_records():
+    """A calibrated camera's own u; for a lens from the lines: applied -> u from the lines,
+    determined and not applied -> |estimate| and u together (within the range),
+    undetermined -> range / sqrt 3; declared flat -> zeros."""
+    assert not np.any(lens_u_vector({"source": "declared distortion-free"}))
+    assert list(lens_u_vector({"source": "camera model",
+                               "u_lens_vector": [1e-3, 0, 0, 0, 0, 0.5, 0.5]}))[0] == 1e-3
+    par = {p: {"determined": False, "applied": False, "estimate": None, "u_from_lines": None}
+           for p in ("k1", "k2", "p1", "p2", "aspect", "cx", "cy")}
+    par["k1"] = {"determined": True, "applied": True, "estimate": -0.05, "u_from_lines": 0.004}
+    par["k2"] = {"determined": True, "applied": False, "estimate": 0.03, "u_from_lines": 0.04}
+    u = lens_u_vector({"source": "marks", "parameters": par,
+                       "ranges": {"k1": 0.3, "k2": 0.1, "p": 1e-3, "aspect": 0.005,
+                                  "pp_px": 20.0}})
+    assert np.allclose(u, [0.004, np.hypot(0.03, 0.04), 1e-3 / np.sqrt(3), 1e-3 / np.sqrt(3),
+                           0.005 / np.sqrt(3), 20 / np.sqrt(3), 20 / np.sqrt(3)])
+
+
+def test_pitch_lens_share_is_the_slope_of_the_lens_moves():
+    """Members at 0, 10, ..., 40 px; a lens whose u moves member k by 0.01 k px across the
+    lines (a scale change of 0.1 %): the pitch's lens share is 0.01 px; a uniform shift
+    (the principal point) adds nothing."""
+    n = 5
+    mids = np.column_stack([np.zeros(n), 10.0 * np.arange(n)])  # lines along x: normal y
+    shift = np.zeros((n, 2, 2))
+    shift[:, 1, 0] = 0.01 * np.arange(n)
+    shift[:, 1, 1] = 0.7
+    fam = line_family(range(n), np.zeros(n), np.full(n, 1e-5), mids, np.full(n, 0.01),
+                      lens_shift=shift)
+    assert np.isclose(fam.pitch_u_lens_px, 0.01)
+    assert fam.pitch_u_px >= fam.pitch_u_lens_px
+
+
+def test_dial_increment_carries_the_lens_coupling():
+    """Eight lines round a point 45° apart; one lens direction moves every angle by the same
+    amount (a roll-like term): the increment's share is 0; one that moves line k by k x
+    (1 arc-second) is the increment's slope, 1 arc-second."""
+    arc = np.deg2rad(1 / 3600)
+    th = np.deg2rad(45.0) * np.arange(8) + 0.2
+    r = 100.0
+    mid = np.column_stack([r * np.cos(th), -r * np.sin(th)])
+    offs = np.zeros(8)
+    same = [{"lens_fit.0": 2 * arc} for _ in range(8)]
+    d0 = line_dial(range(8), th, np.full(8, 1e-4), offs, np.full(8, 0.01), mid,
+                   lens_coupling=same)
+    assert d0.increment_u_lens_rad < 1e-12
+    ramp = [{"lens_k1_range": k * arc} for k in range(8)]
+    d1 = line_dial(range(8), th, np.full(8, 1e-4), offs, np.full(8, 0.01), mid,
+                   lens_coupling=ramp)
+    assert np.isclose(d1.increment_u_lens_rad, arc)
+    assert np.isclose(d1.increment_u_rad, np.hypot(d0.increment_u_rad, arc))
+
+
+def test_single_mark_hidden_end_said_with_its_bound():
+    """A single line (no family) with an opaque particle over one end: its length the
+    visible part (not longer than the truth), a note that the end is hidden with a bound
+    that holds the true length — as a family's member gets (align.family.member_ends)."""
+    from align.marks import measure_image
+
+    for seed in range(2):
+        s = render_ruled(RuledSpec(width=640, height=480, n_lines=1, seed=seed, dust=5,
+                                   lengths_px=(200.0, 200.0, 200.0), dust_on_ends=1,
+                                   numerals=False, dust_on_lines=0))
+        (r,) = measure_image(s.image)
+        assert r.found and r.family is None and s.truth.lines[0].hidden in ("start", "end")
+        said = [n for n in r.notes if "under an obstruction" in n]
+        assert len(said) == 1, r.notes
+        up_to = float(said[0].split("up to ")[1].split(" px")[0])
+        assert r.length_px <= 200.0 + 1.0 and up_to >= 200.0 - 1.0, (r.length_px, said)
