@@ -253,52 +253,6 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     return float(origin), float(pitch)
 
 
-def _pieced(pieces: list[MarkCandidate], found: list[MarkCandidate],
-            members: list[MarkCandidate], ref: float, origin: float, pitch: float,
-            typical: float, shift: np.ndarray) -> list[MarkCandidate]:
-    """Members cut in pieces (specks across one graduation, none of its pieces half the
-    typical length): the pieces on one step of the ruling where no line was found (within
-    the members' steps and one beyond each end; across, within :data:`PIECE_PLACE` of the
-    pitch or 6 px of the step's place), within :data:`PIECE_ANGLE` of the family's
-    direction, together at least :data:`PIECED_FRACTION` of the typical length, make one
-    candidate along the family's direction over their stretch (the longest piece's other
-    properties). Its measurement says whether a groove runs there (:func:`_span_members`
-    then widens its stretch)."""
-    if len(members) < MIN_MEMBERS:
-        return []
-    u_ref = line_frame(ref)[0]
-    ks = [(_position(o, ref) - origin) / pitch for o in members]
-    k_lo, k_hi = np.rint(min(ks)) - 1, np.rint(max(ks)) + 1
-    place = max(6.0, PIECE_PLACE * abs(pitch))
-    taken = [_position(o, ref) for o in found if o.dark == members[0].dark
-             and abs(wrap_angle(o.angle_rad - ref)) < FAMILY_ANGLE]
-    steps: dict[int, list[MarkCandidate]] = {}
-    for c in pieces:
-        c = replace_shift(c, shift)
-        q = _position(c, ref)
-        k = (q - origin) / pitch
-        if (c.dark != members[0].dark or abs(wrap_angle(c.angle_rad - ref)) > PIECE_ANGLE
-                or abs(q - origin - np.rint(k) * pitch) > place or not k_lo <= np.rint(k) <= k_hi
-                or any(abs(q - t) < GRID_TOLERANCE * abs(pitch) for t in taken)):
-            continue
-        steps.setdefault(int(np.rint(k)), []).append(c)
-    out = []
-    for ps in steps.values():
-        if sum(c.length_px for c in ps) < PIECED_FRACTION * typical:
-            continue
-        ends = [float(_middle(c) @ u_ref) + h * c.length_px / 2 for c in ps for h in (-1, 1)]
-        best = max(ps, key=lambda c: c.length_px)
-        out.append(dc_replace(best, angle_rad=ref,
-                              offset_px=float(np.median([_position(c, ref) for c in ps])),
-                              t_start_px=min(ends), t_end_px=max(ends)))
-    return out
-
-
-PIECED_FRACTION = 0.3
-"""Pieces on a step of the ruling make a member from this fraction of the typical length
-together (a particle over a 103 px graduation's start and a speck on it left 43 px)."""
-PIECE_PLACE = 0.1
-"""... lying within this fraction of the pitch of the step's place across the lines."""
 SHORT_MEMBER = 0.9
 """A member shorter than this fraction of the family's median length is searched over the
 members' common stretch (:func:`_span_members`)."""
@@ -444,7 +398,6 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                 t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
                 if gap < MEMBER_FRACTION * typical and t1 - t0 <= 1.1 * longest:
                     found[j] = dc_replace(o, t_start_px=t0, t_end_px=t1)
-        found += _pieced(pieces, found, members, ref, origin, pitch, typical, shift)
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
