@@ -20,6 +20,13 @@ from align.commands.parents import examples, tables
 from axisbase.units import DEG
 
 
+def _outputs(args: argparse.Namespace, inputs: list[str]):
+    """--json and --plot, checked against the inputs and each other before any work."""
+    outs = plan(args, inputs)
+    return (outs.add("--json", args.json, stdout_ok=True),
+            outs.add("--plot", args.plot, folder=True))
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from align.calibration.files import calibrate_files, calibration_units
     from axisbase.header import parse_column_map
@@ -31,9 +38,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     sign = signs(args.scale_sign) if args.scale_sign is not None else None
     cols = parse_column_map(args.columns)
     units = calibration_units(args.static, args.check, args.units, cols)
-    outs = plan(args, inputs)
-    out, plot = (outs.add("--json", args.json, stdout_ok=True),
-                 outs.add("--plot", args.plot, folder=True))
+    out, plot = _outputs(args, inputs)
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
                           f"--units {units}" if args.units else None, args.adc_range)

@@ -11,9 +11,18 @@ from align.commands.parents import examples
 from axisbase.units import ARCSEC
 
 
+def _analyse(read, half: float | None):
+    """The lot's statistics over the units read (``half``: the capability's half-width [″])."""
+    from align.lot import analyse
+
+    return analyse([r.unit for r in read if r.unit is not None],
+                   [r.rejected for r in read if r.rejected is not None],
+                   None if half is None else half * ARCSEC)
+
+
 def cmd_lot(args: argparse.Namespace) -> int:
     from align.decision import resolve
-    from align.lot import analyse, lot_outputs, read_results, result_files
+    from align.lot import lot_outputs, read_results, result_files
     from align.present import lot_lines, verdict_lines
 
     files = result_files(args.results)
@@ -22,9 +31,7 @@ def cmd_lot(args: argparse.Namespace) -> int:
              "csv": outs.add("--csv", args.csv), "report": outs.add("--report", args.report)}
     read = read_results(files)
     half = _capability_half(args.tolerance_arcsec)
-    lot = analyse([r.unit for r in read if r.unit is not None],
-                  [r.rejected for r in read if r.rejected is not None],
-                  None if half is None else half * ARCSEC)
+    lot = _analyse(read, half)
     flags = decision_keywords(args)
     spec = resolve(None, **flags)
     written, doc = lot_outputs(lot, read, paths, args.force, settings(args), spec, flags)

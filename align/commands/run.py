@@ -26,20 +26,14 @@ EXECUTION = ("jobs", "scheduler", "resume", "calibration_flag")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from align.session.batch import SessionJob, exit_status, in_folder
+    from align.session.batch import exit_status
 
     if len(args.sessions) > 1:
         unique(args.sessions, "sessions")
         return _run_batch(args)
     if args.scheduler:  # one session runs in this process (--scheduler is for batches)
         log.info("one session: it runs here (--scheduler is for batches)")
-    one = args.sessions[0]  # an output ending in '/' is a folder, as for a batch
-    job = SessionJob(one, in_folder(args.json, one, ".json"),
-                     in_folder(args.report, one, ".html"),
-                     in_folder(args.calibration, one, ".cal.json"), args.alpha,
-                     args.force, args.allow_outside, settings(args, EXECUTION),
-                     keep_result=True, cal_flag=args.calibration_flag,
-                     decision=decision_keywords(args))
+    job = _single_job(args)
     if args.resume:
         job = _resume_one(job, args)
         if isinstance(job, int):
@@ -47,6 +41,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = run_here(job)
     show_session(out, args.budget, args.plan, args.quiet)
     return exit_status([out], args.fail_on_reject)
+
+
+def _single_job(args: argparse.Namespace):
+    """The one session's job (an output ending in '/' is a folder, as for a batch)."""
+    from align.session.batch import SessionJob, in_folder
+
+    one = args.sessions[0]
+    return SessionJob(one, in_folder(args.json, one, ".json"),
+                      in_folder(args.report, one, ".html"),
+                      in_folder(args.calibration, one, ".cal.json"), args.alpha,
+                      args.force, args.allow_outside, settings(args, EXECUTION),
+                      keep_result=True, cal_flag=args.calibration_flag,
+                      decision=decision_keywords(args))
 
 
 def _resume_one(job, args: argparse.Namespace):
