@@ -119,13 +119,16 @@ def test_undetermined_earth_rate_is_carried_as_type_b(tmp_path):
     """The issue's case, on a log written independently of synth (2^20 periods per inertial
     revolution, 10 MHz stamps): 1.6 % locked ripple + 0.4 % random wander, 0.5 rev/s, 2000
     revolutions, no latitude. The log cannot determine the Earth rate (structure remains),
-    so its effect over all latitudes enters u, named; the normalised errors stay <= ~1.
+    so its effect over all latitudes enters u, named; the normalised errors stay well inside
+    3 (1.43 at most here: since the order tests no longer read the counter's quantisation
+    stretches as structure, docs/false-alarms.md, a wander below one count RMS no longer
+    inflates u on top of the Type B term; it was 1.2).
     With a latitude range the term shrinks and still covers; with --latitude it is gone."""
     p, truth = _independent(tmp_path, 0)
     run = measure_log(p, 4)
     fa = run.angles
     z = (fa.angles_rad - truth) / fa.u_rad
-    assert np.all(np.abs(z) < 1.3), z
+    assert np.all(np.abs(z) < 2.0), z
     (name,) = fa.type_b_terms
     assert name.startswith("earth_rate") and "all latitudes" in name
     # The term is what moves the angles: without it the errors are several u.
@@ -156,7 +159,9 @@ def test_type_b_normalised_errors_over_seeds(tmp_path):
         zs.append((fa.angles_rad - truth) / fa.u_rad)
     zs = np.array(zs)
     print(f"Type B case: max |z| {np.max(np.abs(zs)):.2f}, RMS {np.sqrt(np.mean(zs**2)):.2f}")
-    assert np.max(np.abs(zs)) < 1.5
+    # 32 angles: max 1.92, RMS 0.60 (before the quantisation rule of the order tests: 1.01,
+    # 0.65 — the wander no longer inflates u; the Type B term still covers, RMS below 1)
+    assert np.max(np.abs(zs)) < 2.5 and np.sqrt(np.mean(zs**2)) < 1.0
 
 
 def test_session_latitude_range_key(tmp_path):
