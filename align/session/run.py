@@ -151,8 +151,8 @@ class SessionResult:
     def problems(self) -> list[str]:
         """Why a result that ran is still not a measurement to act on (empty: none) — the
         README's exit-2 cases beyond a failed stage: a calibration whose effects its poses
-        cannot tell apart, a mark whose angle the uncalibrated lens limits or that bends
-        off the frame, instruments that disagree beyond their uncertainties (E's u is then
+        cannot tell apart, a mark whose angle the uncalibrated lens limits, instruments that
+        disagree beyond their uncertainties (E's u is then
         inflated or widened to cover the disagreement, but which instrument is right is the
         user's to find out)."""
         out: list[str] = []
@@ -164,8 +164,6 @@ class SessionResult:
             if r.lens_limited:
                 out.append(f"{im.file.name}: the angle is lens-limited (calibrate camera "
                            "or declare its lens)")
-            if r.bend_off_frame:
-                out.append(f"{im.file.name}: a bent mark running off the frame")
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
