@@ -62,7 +62,19 @@ def test_init_fill_in_check_run(synthetic, tmp_path, capsys):
     assert main(["check", str(folder)]) == 0
     assert capsys.readouterr().out.strip() == f"{folder}: ready to run"
     res, page = tmp_path / "r.json", tmp_path / "r.html"
-    assert main(["run", str(folder), "--json", str(res), "--report", str(page), "-q"]) == 0
+    # The cameras were never calibrated and nothing is said of their lenses: camera B's
+    # off-centre marks are lens-limited, so the result is not ok (exit 2), saying which and
+    # what to do; the user knows their lenses are distortion-free and says so, as the
+    # template shows (all lens ranges 0), and runs again.
+    assert main(["run", str(folder), "--json", str(res), "--report", str(page), "-q"]) == 2
+    d = json.loads(res.read_text())
+    assert not d["ok"] and any("lens-limited" in p for p in d["problems"]), d["problems"]
+    assert "NOT OK" in capsys.readouterr().err
+    text = re.sub(r"^# (lens_(k1|k2|p|aspect|pp_px)) = [0-9.]+", r"\1 = 0.0",
+                  toml.read_text(), flags=re.M)
+    toml.write_text(text)
+    assert main(["run", str(folder), "--json", str(res), "--report", str(page), "-q",
+                 "--force"]) == 0
     d = json.loads(res.read_text())
     assert d["ok"] and d["metadata"]["serial"] == "SN-RT-1"
     # the verdict against the template's tolerance heads the report, as the JSON has it
