@@ -150,8 +150,8 @@ def count(pkg: str, exported: bool = False) -> Count:
 # The figures when this test was written (issue 21; before it: align 11 of 414 public names,
 # axisbase 7 of 65, goniometry 3 of 36, imaging 2 of 57, synth 3 of 43): each may rise, none
 # may fall. Raise a floor when you fill more.
-FLOOR_PUBLIC = {"align": 49, "axisbase": 28, "goniometry": 14, "imaging": 44, "synth": 13}
-FLOOR_EXPORTED = {"align": 11, "axisbase": 25, "goniometry": 12, "imaging": 43, "synth": 12}
+FLOOR_PUBLIC = {"align": 58, "axisbase": 28, "goniometry": 14, "imaging": 44, "synth": 13}
+FLOOR_EXPORTED = {"align": 17, "axisbase": 25, "goniometry": 12, "imaging": 43, "synth": 12}
 
 
 def test_numpydoc_coverage_does_not_fall():
