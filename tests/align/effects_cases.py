@@ -10,13 +10,24 @@ the calibration's reference time, and what the loop reported. The benchmark
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from align.calibration import Poses, calibrate, poses_from_samples
+from align.calibration.plan import plan
 from synth.tumble import Triad, TumbleSpec, r_matrix, tumble
+
+
+@functools.cache
+def plan28() -> np.ndarray:
+    """The 28-pose plan's attitudes (``plan(28).up``, deterministic): searched once per test
+    run (each search is ~1 s of CPU; four modules use it). Read-only."""
+    up = plan(28).up
+    up.setflags(write=False)
+    return up
 
 NOISE_V = 2.4e-5
 """Per-sample noise [V] (1e-5 g; 200 samples a pose: 0.7 µg per pose mean)."""
