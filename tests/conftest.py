@@ -85,8 +85,9 @@ def session21(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def session21_result(session21, tmp_path_factory) -> Path:
     """The session of seed 21 with [metadata], run once by ``align run``: the path
-    of its result JSON, what the command printed beside it (``run.stdout``, ``run.stderr``).
-    Shared by the lot tests (test_lot, test_lot_duplicates) and the clean session's terminal
+    of its result JSON, beside it its platform calibration (``pc.json``) and what the command
+    printed (``run.stdout``, ``run.stderr``). Shared by the lot tests (test_lot,
+    test_lot_duplicates), 'align apply' (test_session) and the clean session's terminal
     (test_warnings), which only read them; a full session run is seconds of CPU."""
     from align.cli import main
 
@@ -98,7 +99,8 @@ def session21_result(session21, tmp_path_factory) -> Path:
     out = folder.parent / "r.json"
     printed, said = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(said):
-        rc = main(["run", str(folder), "--json", str(out)])
+        rc = main(["run", str(folder), "--json", str(out), "--calibration",
+                   str(folder.parent / "pc.json")])
     (folder.parent / "run.stdout").write_text(printed.getvalue(), encoding="utf-8")
     (folder.parent / "run.stderr").write_text(said.getvalue(), encoding="utf-8")
     assert rc == 0, said.getvalue()

@@ -186,10 +186,11 @@ def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):
     assert sorted(p.name for p in outdir.iterdir()) == ["unit7.json", "unit8.json"]
 
 
-def test_apply_corrects_readings_into_the_platform_frame(session, tmp_path):
-    """Readings of the session's own platform poses come back as their nominal directions."""
-    cal = tmp_path / "cal.json"
-    assert main(["run", str(session), "--calibration", str(cal)]) == 0
+def test_apply_corrects_readings_into_the_platform_frame(session, session21_result, tmp_path):
+    """Readings of the session's own platform poses come back as their nominal directions
+    (the platform calibration 'align run --calibration' wrote of this session, once for the
+    run: tests/conftest.py)."""
+    cal = session21_result.parent / "pc.json"
     readings = tmp_path / "readings.csv"
     lines = (session / "platform.csv").read_text().splitlines()
     readings.write_text("ux,uy,uz,t\n" + "\n".join(",".join(r.split(",")[1:])
