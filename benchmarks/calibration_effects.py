@@ -1,7 +1,7 @@
 """Effects the triad model may lack (issue 19): |err|/u, effect found, false alarms.
 
 Run:  python3 benchmarks/calibration_effects.py [--seeds 20] [--control 100] [--poses paper|plan]
-      [--scale-stability-ppm 100]  (the term ``align calibrate`` adds without a temperature
+      [--scale-stability-ppm 20]  (the term ``align calibrate`` adds without a temperature
       column; without the flag, none, as the library)
 
 Per class of tests/align/effects_cases.py (each effect rendered by synth in the sensor's
@@ -45,7 +45,7 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=list(CLASSES))
     ap.add_argument("--scale-stability-ppm", type=float, default=None,
                     help="declare this scale stability (align calibrate's default without a "
-                    "temperature column: 100); default: none (the library's)")
+                    "temperature column: 20); default: none (the library's)")
     a = ap.parse_args()
     up = None
     if a.poses == "plan":

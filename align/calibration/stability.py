@@ -35,13 +35,15 @@ import numpy as np
 
 from align.errors import InputError
 
-DEFAULT_PPM = 100.0
+DEFAULT_PPM = 20.0
 """Scale-factor stability assumed over a run without a temperature column [ppm] (±, each
-axis): a laboratory held to ±1 K by its air conditioning (the usual band of an HVAC cycle)
-times a scale-factor temperature coefficient of 100 ppm/K — the datasheet figure of
-navigation-grade quartz servo accelerometers (Honeywell QA-2000: < 180 ppm/°C) and of the
-better MEMS (ADXL355: ±100 ppm/°C; the BMI160 states ±300 ppm/K). A triad in a thermostat
-(or compensated) declares less; one in an unregulated room, more."""
+axis). The room: an air conditioner holds ±1 K in a cycle of ~15 min. The sensor: a scale
+factor temperature coefficient of 100 ppm/K (navigation-grade quartz servo accelerometers,
+QA-2000: < 180 ppm/°C; the better MEMS, ADXL355: ±100 ppm/°C; the BMI160 states ±300 ppm/K).
+Between them the triad's own thermal mass: a block in its housing follows the air with a time
+constant of 10-20 min, which passes 1/sqrt(1 + (2 pi tau / P)^2) = 0.16-0.23 of a 15-min
+cycle: ±0.2 K inside, ±20 ppm. A triad bolted bare to a thin fixture, or one tempco of
+300 ppm/K, declares more (a ±1 K cycle reaching the sensor: 100); a thermostat, less."""
 MAX_PPM = 1e5
 """Largest stability a user may declare [ppm]: 10 %, the loop's physical prior on a scale
 factor (:data:`align.calibration.model.PRIOR_SCALE`); beyond it the triad has no scale
@@ -96,6 +98,7 @@ def stability_gain(projection: np.ndarray, weights: np.ndarray, gradient: np.nda
 def stability_reason(ppm: float, default: bool) -> str:
     """Why the term is there (for ``u_widening.terms`` and the warning)."""
     why = (f"no temperature column: scale factors assumed stable to ±{ppm:g} ppm over the "
-           f"run (the default: ±1 K at 100 ppm/K; declare it with {FLAG} or {KEY})"
+           f"run (the default: a ±1 K room cycle through the triad's thermal lag at 100 ppm/K; "
+           f"declare it with {FLAG} or {KEY})"
            if default else f"scale factors declared stable to ±{ppm:g} ppm over the run")
     return why + ", each pose's reading anywhere within it"

@@ -157,3 +157,29 @@ def test_a_temperature_cycle_is_covered_when_declared_and_not_without():
                                 truth)).max())
         worst[x] = max(zs)
     assert worst[100.0] < 3.0 and worst[0.0] > 3.0, worst
+
+
+@pytest.mark.slow
+def test_user6_cycle_is_covered_when_its_stability_is_declared(tmp_path, capsys):
+    """user6's own case (tests/align/user6_inputs.py: ±100 ppm, 15 min, 60 s poses, no
+    temperature column) with --scale-stability-ppm 100: every k within 3 u of the run's mean
+    or of k at the mean time (the user's test's criterion), and the term named."""
+    from tests.align import user6_inputs as U
+    from tests.align.test_independent_user6 import k_z, triad
+
+    for seed in range(3):
+        tri, rng = triad(seed)
+        ph = rng.uniform(0, 2 * np.pi)
+
+        def sf(t, ph=ph):
+            return 1 + 100e-6 * np.sin(2 * np.pi * t / 900.0 + ph)
+
+        rows = U.tumble_rows(tri, U.cube14(), rng, n=1200, scale_of_t=sf, t_gap=30.0)
+        ts = np.array([r[1] for r in rows])
+        p = U.write_tumble(tmp_path / f"t{seed}.csv", rows)
+        assert main(["calibrate", str(p), FLAG, "100", "--json", "-", "-q"]) == 0
+        js = json.loads(capsys.readouterr().out)
+        assert "declared stable to ±100 ppm" in js["u_widening"]["terms"][STABILITY]
+        z_ref = k_z(js, tri.k * sf(np.array([ts.mean()]))[0])
+        z_avg = k_z(js, tri.k * sf(ts).mean())
+        assert np.all(np.minimum(np.abs(z_ref), np.abs(z_avg)) < 3), (seed, z_ref, z_avg)
