@@ -31,7 +31,7 @@ from imaging.errors import ImageInputError
 from imaging.families import detect_lines, grating_note
 from imaging.gridphase import grid_phase_bound_px, grid_phase_u_rad
 from imaging.groove import ProfileFit
-from imaging.io import full_scale
+from imaging.io import clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
@@ -473,9 +473,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                 pre = None
     if not cands:
         grating = grating_note(image)
+        clipped = clipped_note(image, top)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")")
-                              + (f": {grating}" if grating else ""))
+                              + (f": {grating}" if grating else "")
+                              + (f": {clipped}" if clipped else ""))
     if expect_one:
         cands = [require_single(cands, where)]
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be
