@@ -441,6 +441,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     MeasuredFrame
         The measurements, the families and what the background did.
     """
+    # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
+    # same frame as an array got u 1745" where its file got 5.3". (read_image gives floats:
+    # no copy then.)
+    image = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
