@@ -120,10 +120,6 @@ def test_dropouts_of_3_to_20_rows_with_times_named_and_within_u(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "without times, one drop-out of 3-20 rows in 12 logs (100 revolutions, 0.5-2 rev/s, 1 % "
-    "ripple): an angle moved by 1.55 u from its drop-out-free twin's (next 1.16 u); "
-    "docs/goniometer-dropouts.md: 'the drop-out moving their angles by less than 0.3 of u'"))
 def test_dropouts_without_times_move_angles_less_than_the_documented_bound(tmp_path):
     """Without times the Earth rate is neither removed nor bounded on my unsteady table, so
     compare with the drop-out-free twin (as the docs do): within 1 u (docs: < 0.3 u)."""
