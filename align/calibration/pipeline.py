@@ -43,6 +43,7 @@ from align.calibration.stability import (
     STABILITY,
     stability_gain,
     stability_reason,
+    stability_statement,
 )
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
 from align.calibration.walk import WANDER, walk_covariance, wander_fit
@@ -99,6 +100,10 @@ class Calibration:
         How u was widened for unexplained structure (None: not widened); unit —.
     problems : tuple of str
         Why the result is not ok (empty: ok); unit —.
+    stability : dict or None
+        What u assumes about the scale factors' wander over the run (``ppm`` [ppm] or None
+        when assumed stable, ``assumed``, ``statement``:
+        :func:`align.calibration.stability.stability_statement`); unit —.
     """
 
     algebraic: TriadModel
@@ -112,6 +117,7 @@ class Calibration:
     notes: tuple[str, ...] = ()
     widening: Widening | None = None
     problems: tuple[str, ...] = ()
+    stability: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -159,6 +165,7 @@ class Calibration:
             "known_pose": self.known.to_dict() if self.known is not None else None,
             "cross_check": self.cross_check,
             "u_widening": None if self.widening is None else self.widening.to_dict(),
+            "scale_stability": self.stability,
         }
 
 
@@ -203,11 +210,12 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         How stable the scale factors are over the run, ± [ppm] (checked by
         :func:`align.calibration.stability.stability_ppm`): u covers a wander of that size
         (:mod:`align.calibration.stability`, the ``scale_stability`` term); None or 0: no
-        term. ``align calibrate`` and ``align run`` pass the user's declaration or the
-        default (:func:`align.calibration.stability.chosen_ppm`: 100 ppm without a
-        temperature column); a caller of the library states it here.
+        term. ``align calibrate`` and ``align run`` pass the user's declaration
+        (:func:`align.calibration.stability.chosen_ppm`); a caller of the library states it
+        here.
     stability_default : bool
-        ``scale_stability_ppm`` is the default, not the user's (said so in the reason).
+        Nothing was declared and the poses carry no temperature column: the result states
+        that the scale factors were assumed stable (``Calibration.stability``).
 
     Returns
     -------
@@ -238,6 +246,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     True
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
+    stated = stability_statement(scale_stability_ppm or 0.0, stability_default,
+                                 poses.temp is not None)
     faces = faces_of(poses)
     signs = signs_t = resolve_signs(poses, faces, signs, signs_as)
     six = has_six_faces(faces)
@@ -263,7 +273,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
             model, widening = widen(kf.model, increments)
             notes = (widening.warning(),)
         return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf, None, notes, widening)
+                           "known-pose", kf, None, notes, widening, (), stated)
     try:
         stage = CalibrationStage(poses, signs)
     except InputError as exc:
@@ -305,7 +315,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
-                       "ellipsoid", kf, cc, notes, widening, problems)
+                       "ellipsoid", kf, cc, notes, widening, problems, stated)
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float

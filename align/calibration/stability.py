@@ -21,10 +21,13 @@ any pattern in time; the worst case moves parameter j by X Σ |G_j·|, which is 
 the half-width of a rectangular distribution (GUM 4.3.7): u_j = X Σ |G_j·| / √3, with the
 correlations of G Gᵀ (the structure term's form, :func:`~align.calibration.widen.bound_cov`).
 For k this is X k / √3 (k's row of G sums to k with one sign); for a bias about X g / √3
-(the ±X pattern across opposite poses); the angles β move by X β only (second order).
+(the ±X pattern across opposite poses); for the angles β about X rad / √3 (a pattern that
+differs between the axes of one pose tilts the fitted frame).
 
-The default, when the poses carry no temperature column and nothing is declared:
-:data:`DEFAULT_PPM`, from the physics of the triads this tool calibrates.
+When the poses carry no temperature column and nothing is declared, no term is added and
+the result *states* that the scale factors were assumed stable over the run (JSON
+``scale_stability``, a line under the calibration table): :data:`TYPICAL_PPM` says why a
+user should think about it.
 """
 
 from __future__ import annotations
@@ -35,15 +38,22 @@ import numpy as np
 
 from align.errors import InputError
 
-DEFAULT_PPM = 20.0
-"""Scale-factor stability assumed over a run without a temperature column [ppm] (±, each
-axis). The room: an air conditioner holds ±1 K in a cycle of ~15 min. The sensor: a scale
-factor temperature coefficient of 100 ppm/K (navigation-grade quartz servo accelerometers,
-QA-2000: < 180 ppm/°C; the better MEMS, ADXL355: ±100 ppm/°C; the BMI160 states ±300 ppm/K).
-Between them the triad's own thermal mass: a block in its housing follows the air with a time
-constant of 10-20 min, which passes 1/sqrt(1 + (2 pi tau / P)^2) = 0.16-0.23 of a 15-min
-cycle: ±0.2 K inside, ±20 ppm. A triad bolted bare to a thin fixture, or one tempco of
-300 ppm/K, declares more (a ±1 K cycle reaching the sensor: 100); a thermostat, less."""
+TYPICAL_PPM = 20.0
+"""A scale-factor stability typical of a run in an air-conditioned room [ppm] (±, each axis),
+quoted in the statement made when nothing is declared — not applied. The room: an air
+conditioner holds ±1 K in a cycle of ~15 min. The sensor: a scale factor temperature
+coefficient of 100 ppm/K (navigation-grade quartz servo accelerometers, QA-2000: < 180
+ppm/°C; the better MEMS, ADXL355: ±100 ppm/°C; the BMI160 states ±300 ppm/K). Between them
+the triad's own thermal mass: a block in its housing follows the air with a time constant of
+10-20 min, which passes 1/sqrt(1 + (2 pi tau / P)^2) = 0.16-0.23 of a 15-min cycle: ±0.2 K
+inside, ±20 ppm.
+
+Why it is not the default: the term is a worst case over *any* pattern of the wander across
+the poses (each pose's reading anywhere within ±X), and such patterns mimic the angles β as
+well as k and the biases — on the demo's 14 poses ±20 ppm widens k ×23, the biases ×25 and β
+×23 (1.5 → 35 µrad). A wander that is smooth in time moves β far less; until the tool has a
+smooth-wander model, it states the assumption and the user declares what their triad needs."""
+
 MAX_PPM = 1e5
 """Largest stability a user may declare [ppm]: 10 %, the loop's physical prior on a scale
 factor (:data:`align.calibration.model.PRIOR_SCALE`); beyond it the triad has no scale
@@ -68,12 +78,26 @@ def stability_ppm(value: object, where: str) -> float:
 
 
 def chosen_ppm(declared: float | None, has_temperature: bool) -> tuple[float, bool]:
-    """The stability that applies [ppm] and whether it is the default: the declaration,
-    else :data:`DEFAULT_PPM` without a temperature column, else 0 (the column lets the loop
-    fit the scale's temperature coefficient)."""
+    """The stability that applies [ppm] and whether it is *assumed* (nothing declared and no
+    temperature column: 0, stated as an assumption — :data:`TYPICAL_PPM` says why)."""
     if declared is not None:
         return float(declared), False
-    return (0.0, False) if has_temperature else (DEFAULT_PPM, True)
+    return 0.0, not has_temperature
+
+
+def stability_statement(ppm: float, assumed: bool, has_temperature: bool) -> dict:
+    """The JSON ``scale_stability`` record: what u assumes about the scale's wander."""
+    if assumed:
+        why = (f"no temperature column and no declaration: scale factors assumed stable over "
+               f"the run (a ±1 K room cycle through a triad's thermal lag is typically "
+               f"±{TYPICAL_PPM:g} ppm; declare it with {FLAG} or {KEY} to carry it in u)")
+    elif ppm:
+        why = f"scale factors declared stable to ±{ppm:g} ppm over the run (carried in u)"
+    elif has_temperature:
+        why = "temperature column: the scale's temperature coefficient is a loop candidate"
+    else:
+        why = "scale factors declared stable over the run"
+    return {"ppm": None if assumed else float(ppm), "assumed": bool(assumed), "statement": why}
 
 
 def stability_gain(projection: np.ndarray, weights: np.ndarray, gradient: np.ndarray,
@@ -97,8 +121,6 @@ def stability_gain(projection: np.ndarray, weights: np.ndarray, gradient: np.nda
 
 def stability_reason(ppm: float, default: bool) -> str:
     """Why the term is there (for ``u_widening.terms`` and the warning)."""
-    why = (f"no temperature column: scale factors assumed stable to ±{ppm:g} ppm over the "
-           f"run (the default: a ±1 K room cycle through the triad's thermal lag at 100 ppm/K; "
-           f"declare it with {FLAG} or {KEY})"
-           if default else f"scale factors declared stable to ±{ppm:g} ppm over the run")
-    return why + ", each pose's reading anywhere within it"
+    del default  # a term is only added for a declared stability
+    return (f"scale factors declared stable to ±{ppm:g} ppm over the run, each pose's reading "
+            "anywhere within it")

@@ -13,7 +13,6 @@ import pytest
 
 from align.calibration import calibrate, poses_from_samples
 from align.calibration.stability import (
-    DEFAULT_PPM,
     FLAG,
     STABILITY,
     chosen_ppm,
@@ -66,29 +65,41 @@ def test_flag_and_key_are_refused_in_one_line_naming_them(tmp_path, capsys):
     assert load_session(tmp_path).calibration.scale_stability_ppm == 30.0
 
 
-def test_the_default_is_stated_and_only_without_a_temperature_column():
-    assert chosen_ppm(None, False) == (DEFAULT_PPM, True)
+def test_nothing_declared_is_an_assumption_only_without_a_temperature_column():
+    assert chosen_ppm(None, False) == (0.0, True)
     assert chosen_ppm(None, True) == (0.0, False)
     assert chosen_ppm(20.0, False) == (20.0, False) == chosen_ppm(20.0, True)
 
 
-def test_cli_states_the_default_and_the_json_has_the_term_per_parameter(tmp_path, capsys):
-    """No temperature column: the warning says what is assumed, u_widening has the term and
-    its u per parameter; with a temperature column, no term."""
+def test_cli_states_the_assumption_and_a_declaration_puts_the_term_per_parameter(
+        tmp_path, capsys):
+    """No temperature column, nothing declared: the JSON and the terminal state that the
+    scale factors were assumed stable (no term, u unchanged); declared: u_widening has the
+    term and its u per parameter; with a temperature column nothing is assumed."""
     d = tumble(TumbleSpec(seed=2, check_poses=0))
     for temp in (False, True):
         path = _csv(tmp_path / f"t{temp}.csv", d, temp)
         assert main(["calibrate", str(path), "--json", "-", "-q"]) == 0
         js = json.loads(capsys.readouterr().out)
-        said = [w for w in js["warnings"] if "no temperature column: scale factors assumed "
-                f"stable to ±{DEFAULT_PPM:g} ppm" in w]
+        st = js["scale_stability"]
+        assert st["assumed"] is (not temp) and (st["ppm"] is None) is (not temp), st
         wid = js["u_widening"]
-        if temp:
-            assert not said and (wid is None or STABILITY not in wid["terms"])
-            continue
-        assert len(said) == 1 and STABILITY in wid["terms"], js["warnings"]
-        k = wid["parameters"]["scale_factor_x"]
-        assert k[STABILITY] > 0 and k["u"] >= k[STABILITY]
+        assert wid is None or STABILITY not in wid["terms"]
+        if not temp:
+            assert "assumed stable" in st["statement"] and "--scale-stability-ppm" in (
+                st["statement"])
+            assert main(["calibrate", str(path)]) == 0
+            assert "scale stability: no temperature column" in capsys.readouterr().out
+    path = tmp_path / "tFalse.csv"
+    assert main(["calibrate", str(path), "--json", "-", "-q",
+                 "--scale-stability-ppm", "20"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    wid = js["u_widening"]
+    assert js["scale_stability"] == {"ppm": 20.0, "assumed": False, "statement": (
+        "scale factors declared stable to ±20 ppm over the run (carried in u)")}
+    assert STABILITY in wid["terms"], js["warnings"]
+    k = wid["parameters"]["scale_factor_x"]
+    assert k[STABILITY] > 0 and k["u"] >= k[STABILITY]
 
 
 def test_known_pose_propagation_is_the_derived_one():
