@@ -11,14 +11,13 @@ the figures seen in its reason.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.align import user6_inputs as U
+from tests.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 CHESS = ROOT.parent / "shared" / "data" / "real" / "opencv-chessboard"
@@ -26,10 +25,10 @@ FACES = ("--faces", "ref,y,x,z", "--latitude", "50.45")
 NO_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
 
 
-def align(*args, timeout=600):
-    p = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=ROOT,
-                       capture_output=True, text=True, timeout=timeout)
-    return p.returncode, p.stdout, p.stderr
+def align(*args):
+    """``align ARGS`` from the project's root, in this process (``tests.cli.run_cli``: the
+    same exit status and streams as ``python3 -m align`` without ~1.3 s of imports a call)."""
+    return tuple(run_cli(*args, cwd=ROOT))
 
 
 def json_of(*args):
@@ -454,7 +453,9 @@ def test_clean_vertical_mark_raises_no_stripe_warning(tmp_path):
                      seed=seed, bits=12)
         p = U.write_image(tmp_path / f"v{seed}.png", U.render(sc))
         rc, js, err = json_of("marks", p, *NO_LENS)
-        found += [w for w in js["warnings"] if "stripes" in w]
+        # A removed stripe pattern is a note, not a warning: both count as a false finding.
+        notes = [n for m in js["marks"] for n in m.get("notes", [])]
+        found += [w for w in js["warnings"] + notes if "stripes" in w]
     assert not found, found
 
 
