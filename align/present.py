@@ -120,6 +120,8 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
         lines.append(f"{f'b_{ax} [µg]':14s} {a.bias[i] * 1e6:22.3f} {m.bias[i] * 1e6:16.3f} "
                      f"{u_bias[i] * 1e6:10.3g}")
     lines += ["  " + line for line in cal.effect_lines()]
+    if cal.stability and cal.stability["assumed"]:
+        lines.append("  scale stability: " + cal.stability["statement"])
     if cal.cross_check:
         lines.append("cross-check ellipsoid vs known-pose (difference / combined u): "
                      + ", ".join(f"{n} {v['z']:+.1f}" for n, v in cal.cross_check.items()))
