@@ -15,13 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
+from align.calibration.stability import KEY as STABILITY_KEY
+from align.calibration.stability import stability_ppm
 from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
 from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
-from axisbase.units import ARCSEC, DEG
+from axisbase.units import ARCSEC, DECLARED_TIME_UNITS, DEG
 from imaging import ImageInputError, check_roi
 
 HOUSINGS = ("x", "y", "z")
@@ -82,12 +84,13 @@ class Goniometer:
 
 @dataclass(frozen=True)
 class TableKeys:
-    """How a table file is read (keys ``columns``, ``units``, ``rate_hz``; the CLI's
-    ``--columns``, ``--units``, ``--rate``)."""
+    """How a table file is read (keys ``columns``, ``units``, ``rate_hz``, ``time_unit``; the
+    CLI's ``--columns``, ``--units``, ``--rate``, ``--time-unit``)."""
 
     columns: dict[str, str] = field(default_factory=dict)
     units: str | None = None
     rate_hz: float | None = None
+    time_unit: str | None = None  # the time column's unit when its header says none
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,7 @@ class CalibrationInput:
     check: Path | None = None
     table: TableKeys = field(default_factory=TableKeys)
     adc_range: tuple[float, float] | None = None  # the ADC's rails [output units]
+    scale_stability_ppm: float | None = None  # declared; None: the default (stability.py)
     detection: StaticSettings = field(
         default_factory=lambda: StaticSettings(names=session_names("[calibration]")))
     """Static detection of a continuous recording (keys ``window_s``, ``threshold``,
@@ -238,7 +242,11 @@ def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> T
         raise InputError(f"{where} units = {u!r}: one of {', '.join(OUTPUT_UNITS)}")
     r = (_number(t["rate_hz"], f"{where} rate_hz", 0, 1e7, open_lo=True)
          if rate and "rate_hz" in t else None)
-    return TableKeys(mapping, u, r)
+    tu = t.get("time_unit") if rate else None
+    if tu is not None and tu not in DECLARED_TIME_UNITS:
+        raise InputError(f"{where} time_unit = {tu!r}: one of "
+                         f"{', '.join(DECLARED_TIME_UNITS)}")
+    return TableKeys(mapping, u, r, tu)
 
 
 # Physical ranges of the angles a session may declare: a known roll, offset or tilt is a
@@ -249,15 +257,16 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 
 KEYS = {
-    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz",
-                    "adc_range", *DETECTION_KEYS},
+    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz", "time_unit",
+                    "adc_range", "scale_stability_ppm", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec",
                 *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
-    "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
+    "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz",
+                 "time_unit"},
 }
 
 
@@ -368,6 +377,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             _file(c["check"], f"{src}: [calibration] check") if "check" in c else None,
             _table_keys(c, f"{src}: [calibration]"),
             _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"),
+            (stability_ppm(c["scale_stability_ppm"], f"{src}: {STABILITY_KEY}")
+             if "scale_stability_ppm" in c else None),
             _detection(c, f"{src}: "))
 
     gon = None

@@ -26,6 +26,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
+from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check
@@ -294,9 +295,13 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
             left_out: list[str] = []
             res.calibration_poses, _ = read_poses(c.static, c.detection, columns=tk.columns,
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
+                                                  time_unit=tk.time_unit,
                                                   warnings=left_out)
+            ppm, default = chosen_ppm(c.scale_stability_ppm,
+                                      res.calibration_poses.temp is not None)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
-                            signs_as="[calibration] scale_sign")
+                            signs_as="[calibration] scale_sign", scale_stability_ppm=ppm,
+                            stability_default=default)
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
@@ -437,7 +442,7 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
                          f"from {units}: one triad, one unit")
     poses, _ = read_poses(p.static, StaticSettings(names=session_names("[platform]")),
                           calibration=False, columns=p.table.columns,
-                          rate_hz=p.table.rate_hz)
+                          rate_hz=p.table.rate_hz, time_unit=p.table.time_unit)
     missing = [lab for lab in poses.labels if lab not in p.poses]
     if missing:
         raise InputError(f"{p.static}: pose(s) {', '.join(missing)} have no attitude in "
