@@ -349,7 +349,7 @@ def test_dial_over_seeds():
 
 def test_no_grating_named_where_there_is_none():
     """A lone mark among dust and texture, and a blank frame with noise: no grating said."""
-    from imaging.families import grating_note
+    from imaging.grating import grating_note
     from synth import ImageSpec, MarkSpec, render_marks
 
     one = render_marks(ImageSpec(marks=(MarkSpec(0.1, 5.0, 400.0, 4.0),), width=640,
