@@ -8,9 +8,9 @@ straight band. So a straight groove is bowed by the lens exactly as a real camer
 the truth angle is the groove's direction in the normalised plane (which a fronto-parallel
 housing face preserves), in the tool's convention (from +x towards -y, in (-90, 90] degrees).
 
-The groove profile is a ball-end scribe's: a circular-arc section of width ``width_px`` whose
-reflectance drops by ``contrast`` at its floor, with ends that taper over ``taper_px``. The
-sensor adds defocus (Gaussian PSF), shot noise (Poisson on ``full_well`` electrons at the
+The groove is flat-bottomed, ``width_px`` wide, its reflectance ``contrast`` lower, with square
+ends, seen through a Gaussian PSF (defocus, ``blur_px``) convolved analytically. The sensor
+integrates each pixel's area (sub-samples) and adds shot noise (Poisson on ``full_well`` electrons at the
 background level) and read noise, and quantises to 8, 12 (in a 16-bit file) or 16 bits.
 """
 
@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
+from scipy.special import erf as _erf
 
 REAL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "shared", "data", "real")
 CHESSBOARD = os.path.join(REAL, "opencv-chessboard")
@@ -91,7 +92,6 @@ class Mark:
     length_px: float = 300.0
     width_px: float = 4.0
     contrast: float = 0.5
-    taper_px: float = 3.0
     sagitta_px: float = 0.0  # a truly bent groove (circular arc), in ideal pixels
 
 
@@ -140,20 +140,24 @@ def ideal_coords(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     return xi, yi
 
 
-def _groove_depth(xi: np.ndarray, yi: np.ndarray, m: Mark) -> np.ndarray:
+def _groove_depth(xi: np.ndarray, yi: np.ndarray, m: Mark, blur_px: float) -> np.ndarray:
     a = math.radians(m.angle_deg)
     d = np.array([math.cos(a), -math.sin(a)])  # direction in image coords (y down)
     n = np.array([math.sin(a), math.cos(a)])
     dx, dy = xi - m.centre_px[0], yi - m.centre_px[1]
     t = dx * d[0] + dy * d[1]
-    s = dx * n[0] + dy * n[1]
+    sn = dx * n[0] + dy * n[1]
     if m.sagitta_px:
         half = m.length_px / 2
-        s = s - m.sagitta_px * (1 - (t / half) ** 2)  # parabolic bow (sagitta at the middle)
+        sn = sn - m.sagitta_px * (1 - (t / half) ** 2)  # parabolic bow (sagitta at the middle)
+    # a flat-bottomed groove seen through the Gaussian PSF, convolved analytically: point
+    # sampling a sharp-edged profile on the sub-sample grid aliases it onto the pixel grid
+    # (measured: a -200" mark rendered at -143" with 2x2 sub-samples), the erf edges do not.
     hw = m.width_px / 2
-    prof = np.clip(1 - (s / hw) ** 2, 0, None) ** 0.5  # circular-arc (ball-end) section
+    sig = math.sqrt(2) * max(blur_px, 0.3)
+    prof = 0.5 * (_erf((hw - sn) / sig) + _erf((hw + sn) / sig))
     half = m.length_px / 2
-    end = np.clip((half - np.abs(t)) / m.taper_px, 0, 1)
+    end = 0.5 * (_erf((half - t) / sig) + _erf((half + t) / sig))
     return prof * end
 
 
@@ -176,13 +180,11 @@ def render(scene: Scene, seed: int = 0) -> np.ndarray:
             marks.append(Mark((c[0], c[1]), sl["angle_deg"], sl["length_px"],
                               sl.get("width_px", 4.0), sl.get("contrast", 0.5)))
     for m in marks:
-        depth = np.maximum(depth, _groove_depth(xi, yi, m) * m.contrast)
+        depth = np.maximum(depth, _groove_depth(xi, yi, m, scene.blur_px) * m.contrast)
     X, Y = _sub_grid(W, H, s)
     illum = 1 + scene.shading * (X / W - 0.5)
     refl = scene.background * (1 - depth) * illum
     img = refl.reshape(H, s, W, s).mean(axis=(1, 3))
-    if scene.blur_px > 0:
-        img = cv2.GaussianBlur(img, (0, 0), scene.blur_px, borderType=cv2.BORDER_REFLECT)
     electrons = rng.poisson(np.clip(img, 0, None) * scene.full_well).astype(float)
     electrons += rng.normal(0, scene.read_noise_e, electrons.shape)
     full = 2 ** scene.bits - 1
@@ -241,3 +243,98 @@ def tumble_csv(path: str, seed: int, n_poses: int = 18, samples: int = 50,
         for r in rows:
             w.writerow([r[0]] + [f"{v:.7f}" for v in r[1:]])
     return {"scale": scale, "bias": bias, "M": M}
+
+
+# ---------------------------------------------------------------------------------------------
+# A whole session with known truth E: cameras A (along Y) and B (along X) with their reversals,
+# a tumble of the triad, and the mounted triad's static readings (docs/concepts.md).
+# ---------------------------------------------------------------------------------------------
+
+ARCSEC = math.pi / 180 / 3600
+E_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
+AXIS = {"+X": (1, 0, 0), "-X": (-1, 0, 0), "+Y": (0, 1, 0), "-Y": (0, -1, 0),
+        "+Z": (0, 0, 1), "-Z": (0, 0, -1)}
+VIEWS = {"A": ("+X", "+Z", "A"), "Ar": ("-X", "+Z", "A"), "B": ("+Y", "+Z", "B"),
+         "Br": ("-Y", "+Z", "B")}
+IMAGES = [("x", "A", "horizontal"), ("z", "A", "vertical"), ("x", "Ar", "horizontal"),
+          ("z", "Ar", "vertical"), ("y", "B", "horizontal"), ("z", "B", "vertical"),
+          ("y", "Br", "horizontal"), ("z", "Br", "vertical")]
+
+
+def axes_from_E(E_arcsec: dict) -> np.ndarray:
+    """Unit sensitivity axes s_i (rows) in the platform frame: row i of I + E, normalised."""
+    M = np.eye(3)
+    idx = {"x": 0, "y": 1, "z": 2, "X": 0, "Y": 1, "Z": 2}
+    for name, v in E_arcsec.items():
+        M[idx[name[2]], idx[name[3]]] = v * ARCSEC
+    return M / np.linalg.norm(M, axis=1, keepdims=True)
+
+
+def write_session(folder: str, seed: int, E_arcsec: dict, lens_A: Lens | None = None,
+                  lens_B: Lens | None = None, camera_keys: dict | None = None,
+                  positions: dict | None = None, size=(640, 480), roll_A_arcsec: float = 0.0,
+                  noise_g: float = 1e-4, tolerance_arcsec: float | None = None,
+                  supersample: int = 2) -> dict:
+    """Write a session folder (session.toml and its files); return the truth.
+
+    ``camera_keys`` maps camera name to extra ``[cameras.X]`` lines (e.g. lens declarations).
+    ``positions`` maps an image's file stem (``x_A``) to the mark's ideal-pixel centre."""
+    os.makedirs(folder, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    S = axes_from_E(E_arcsec)
+    k = np.array([2.01, 1.98, 2.03])  # V/g
+    b = np.array([0.012, -0.021, 0.008])  # V
+    # tumble: the triad alone in 18 attitudes, 40 samples each
+    with open(os.path.join(folder, "tumble.csv"), "w") as fh:
+        fh.write("pose,ux,uy,uz\n")
+        for i, g in enumerate(tumble_poses(18, rng)):
+            for _ in range(40):
+                u = k * (S @ g) + b + rng.normal(0, noise_g, 3) * k
+                fh.write(f"T{i:02d}," + ",".join(f"{v:.7f}" for v in u) + "\n")
+    poses = {"L000": ("+Z", 0), "L090": ("+Z", 90), "L180": ("+Z", 180), "L270": ("+Z", 270),
+             "Xup": ("+X", 0), "Xdn": ("-X", 0), "Yup": ("+Y", 0), "Ydn": ("-Y", 0)}
+    with open(os.path.join(folder, "platform.csv"), "w") as fh:
+        fh.write("pose,ux,uy,uz\n")
+        for name, (up, _) in poses.items():
+            f = np.array(AXIS[up], float)
+            for _ in range(40):
+                u = k * (S @ f) + b + rng.normal(0, noise_g, 3) * k
+                fh.write(f"{name}," + ",".join(f"{v:.7f}" for v in u) + "\n")
+    positions = positions or {}
+    lenses = {"A": lens_A, "B": lens_B}
+    truth_angles = {}
+    toml = [f'name = "{os.path.basename(folder)}"', "", "[calibration]",
+            'static = "tumble.csv"', 'units = "V"', 'scale_sign = "+"', ""]
+    for cam in ("A", "B"):
+        toml.append(f"[cameras.{cam}]")
+        toml += (camera_keys or {}).get(cam, [])
+        toml.append("")
+    for v, (r, u, cam) in VIEWS.items():
+        toml += [f"[views.{v}]", f'camera = "{cam}"', f'right = "{r}"', f'up = "{u}"', ""]
+    H = {"x": 0, "y": 1, "z": 2}
+    for j, (h, v, nominal) in enumerate(IMAGES):
+        r, u, cam = VIEWS[v]
+        s = S[H[h]]
+        ang = math.degrees(math.atan2(s @ np.array(AXIS[u]), s @ np.array(AXIS[r])))
+        if cam == "A":
+            ang += roll_A_arcsec / 3600
+        stem = f"{h}_{v}"
+        pos = positions.get(stem, (0.0, 0.0))
+        m = Mark(pos, ang, 260.0)
+        truth_angles[stem] = truth_angle(m)
+        lens = lenses[cam]
+        if lens is None:
+            lens = Lens(1000.0, 1000.0, (size[0] - 1) / 2, (size[1] - 1) / 2)
+        img = render(Scene(size=size, lens=lens, marks=[m], supersample=supersample),
+                     seed * 100 + j)
+        write_png(os.path.join(folder, stem + ".png"), img)
+        toml += ["[[images]]", f'file = "{stem}.png"', f'housing = "{h}"', f'view = "{v}"',
+                 f'nominal = "{nominal}"', ""]
+    toml += ["[platform]", 'static = "platform.csv"', "[platform.poses]"]
+    for name, (up, t) in poses.items():
+        toml.append(f'{name} = {{ up = "{up}", table_deg = {float(t)} }}')
+    if tolerance_arcsec is not None:
+        toml += ["", "[tolerance]", f"arcsec = {tolerance_arcsec}"]
+    with open(os.path.join(folder, "session.toml"), "w") as fh:
+        fh.write("\n".join(toml) + "\n")
+    return {"E_arcsec": dict(E_arcsec), "angles_deg": truth_angles}
