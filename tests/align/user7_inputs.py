@@ -10,8 +10,8 @@ housing face preserves), in the tool's convention (from +x towards -y, in (-90, 
 
 The groove is flat-bottomed, ``width_px`` wide, its reflectance ``contrast`` lower, with square
 ends, seen through a Gaussian PSF (defocus, ``blur_px``) convolved analytically. The sensor
-integrates each pixel's area (sub-samples) and adds shot noise (Poisson on ``full_well`` electrons at the
-background level) and read noise, and quantises to 8, 12 (in a 16-bit file) or 16 bits.
+integrates each pixel's area (sub-samples) and adds shot noise (Poisson on ``full_well``
+electrons at full scale) and read noise, and quantises to 8, 12 (in a 16-bit file) or 16 bits.
 """
 
 from __future__ import annotations
