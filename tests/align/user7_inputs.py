@@ -92,7 +92,9 @@ class Mark:
     length_px: float = 300.0
     width_px: float = 4.0
     contrast: float = 0.5
-    sagitta_px: float = 0.0  # a truly bent groove (circular arc), in ideal pixels
+    sagitta_px: float = 0.0  # a truly bent groove (parabolic bow), in ideal pixels
+    wiggle_px: float = 0.0  # scribe chatter: a lateral sine of this amplitude [ideal px]
+    wiggle_period_px: float = 60.0
 
 
 @dataclass
@@ -150,6 +152,8 @@ def _groove_depth(xi: np.ndarray, yi: np.ndarray, m: Mark, blur_px: float) -> np
     if m.sagitta_px:
         half = m.length_px / 2
         sn = sn - m.sagitta_px * (1 - (t / half) ** 2)  # parabolic bow (sagitta at the middle)
+    if m.wiggle_px:
+        sn = sn - m.wiggle_px * np.sin(2 * np.pi * t / m.wiggle_period_px + 0.7)
     # a flat-bottomed groove seen through the Gaussian PSF, convolved analytically: point
     # sampling a sharp-edged profile on the sub-sample grid aliases it onto the pixel grid
     # (measured: a -200" mark rendered at -143" with 2x2 sub-samples), the erf edges do not.
@@ -274,7 +278,7 @@ def write_session(folder: str, seed: int, E_arcsec: dict, lens_A: Lens | None = 
                   lens_B: Lens | None = None, camera_keys: dict | None = None,
                   positions: dict | None = None, size=(640, 480), roll_A_arcsec: float = 0.0,
                   noise_g: float = 1e-4, tolerance_arcsec: float | None = None,
-                  supersample: int = 2) -> dict:
+                  supersample: int = 2, platform_samples: int = 40) -> dict:
     """Write a session folder (session.toml and its files); return the truth.
 
     ``camera_keys`` maps camera name to extra ``[cameras.X]`` lines (e.g. lens declarations).
@@ -297,7 +301,7 @@ def write_session(folder: str, seed: int, E_arcsec: dict, lens_A: Lens | None = 
         fh.write("pose,ux,uy,uz\n")
         for name, (up, _) in poses.items():
             f = np.array(AXIS[up], float)
-            for _ in range(40):
+            for _ in range(platform_samples):
                 u = k * (S @ f) + b + rng.normal(0, noise_g, 3) * k
                 fh.write(f"{name}," + ",".join(f"{v:.7f}" for v in u) + "\n")
     positions = positions or {}
