@@ -82,6 +82,16 @@ def chessboard_lens(side: str = "left") -> tuple[Lens, tuple[int, int]]:
     return Lens(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), d), size
 
 
+def charuco_lens() -> Lens:
+    """The real camera of OpenCV's ChArUco tutorial (its own calibration, fy/fx = 1.0094)."""
+    fs = cv2.FileStorage(os.path.join(REAL, "opencv-lines", "tutorial_camera_charuco.yml"),
+                         cv2.FILE_STORAGE_READ)
+    K = fs.getNode("camera_matrix").mat()
+    D = fs.getNode("distortion_coefficients").mat().ravel()
+    return Lens(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]),
+                tuple(float(v) for v in D[:5]))
+
+
 @dataclass
 class Mark:
     """A straight groove in the normalised plane: centre and direction given in *ideal pixels*
