@@ -448,3 +448,25 @@ def test_plan_refuses_a_not_ok_session_by_name(tmp_path):
     run_session(f)
     r = align("plan", str(f) + ".json")
     assert r.returncode == 2 and "NOT MEASURED" in r.stderr and "Traceback" not in r.stderr
+
+
+# ------------------------------------------------------------------------------------------
+# The goniometer, from a counter log of my own (ring-laser phase floored at each pulse).
+# ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("faults", [False, True])
+def test_gonio_log_angles_within_u_and_faults_named(tmp_path, faults):
+    """40 revolutions; with a missing pulse and a glint: both named, angles still within 3 u
+    (seen: |z| <= 0.8, u 0.14")."""
+    p = str(tmp_path / "gonio.csv")
+    kw = {"drop": (45,), "spurious": (90,)} if faults else {}
+    truth = ui.gonio_log(p, 1, **kw)
+    r = align("gonio", p, "--faces", "ref,y,x,z", "--latitude", "50.45", "--json", "-", "-q")
+    assert r.returncode == 0 and "Traceback" not in r.stderr
+    d = json.loads(r.stdout[r.stdout.find("{"):])
+    for a, b, u in zip(d["angles_deg"], truth["angles_deg"], d["angles_u_arcsec"]):
+        assert abs((a - b) * 3600 / u) < Z1
+    if faults:
+        assert "missing" in r.stderr and "spurious" in r.stderr
+    else:
+        assert not d["warnings"]

@@ -352,3 +352,56 @@ def write_session(folder: str, seed: int, E_arcsec: dict, lens_A: Lens | None = 
     with open(os.path.join(folder, "session.toml"), "w") as fh:
         fh.write("\n".join(toml) + "\n")
     return {"E_arcsec": dict(E_arcsec), "angles_deg": truth_angles}
+
+
+# ---------------------------------------------------------------------------------------------
+# A ring-laser goniometer's counter log (docs/commands/gonio.md): the laser counts the table's
+# inertial angle (table + the Earth's vertical rate), a counter is latched at each face's
+# autocollimator pulse, and the two counters alternate.
+# ---------------------------------------------------------------------------------------------
+
+EARTH_RATE = 7.2921159e-5  # rad/s
+
+
+def gonio_log(path: str, seed: int, deviations_arcsec=(287.6, 0.4, -355.9, 67.9),
+              revolutions: int = 40, counts_per_rev: float = 764355.84, period_s: float = 20.0,
+              latitude_deg: float = 50.45, jitter_arcsec: float = 0.3,
+              drop: tuple = (), spurious: tuple = ()) -> dict:
+    """Write count,counter,ref,t; ``drop`` = pulse indices that never fired, ``spurious`` =
+    pulse indices after which a glint fires at 40 % of the interval. Returns the truth."""
+    rng = np.random.default_rng(seed)
+    n = len(deviations_arcsec)
+    steps = np.array([2 * np.pi / n + d * ARCSEC for d in deviations_arcsec])
+    steps[-1] = 2 * np.pi - steps[:-1].sum()  # the faces close the circle
+    face_angle = np.concatenate([[0.0], np.cumsum(steps)[:-1]])
+    omega = 2 * np.pi / period_s
+    rate_v = EARTH_RATE * math.sin(math.radians(latitude_deg))
+    phase0 = rng.uniform(0, 1)
+    times, faces = [], []
+    for r in range(revolutions):
+        for k in range(n):
+            ang = 2 * np.pi * r + face_angle[k] + rng.normal(0, jitter_arcsec * ARCSEC)
+            times.append(ang / omega)
+            faces.append(k)
+    times = np.array(times) + 5.0
+    # the ring laser's phase: the table's angle plus the Earth's vertical rotation (ccw)
+    ph = phase0 + (omega * (times - 5.0) + rate_v * times) / (2 * np.pi) * counts_per_rev
+    cum = np.floor(ph)
+    events = [(times[i], cum[i], faces[i] == 0) for i in range(len(times))]
+    out, k_sp = [], set(spurious)
+    for i, ev in enumerate(events):
+        if i in drop:
+            continue
+        out.append(ev)
+        if i in k_sp and i + 1 < len(events):
+            t2 = ev[0] + 0.4 * (events[i + 1][0] - ev[0])
+            c2 = np.floor(phase0 + (omega * (t2 - 5.0) + rate_v * t2) / (2 * np.pi)
+                          * counts_per_rev)
+            out.append((t2, c2, False))
+    with open(path, "w") as fh:
+        fh.write("count,counter,ref,t\n")
+        prev = out[0][1]
+        for j, (t, c, ref) in enumerate(out[1:]):
+            fh.write(f"{int(c - prev)},{1 + j % 2},{int(ref)},{t:.6f}\n")
+            prev = c
+    return {"angles_deg": [math.degrees(s) for s in steps]}
