@@ -464,7 +464,7 @@ def test_gonio_log_angles_within_u_and_faults_named(tmp_path, faults):
     r = align("gonio", p, "--faces", "ref,y,x,z", "--latitude", "50.45", "--json", "-", "-q")
     assert r.returncode == 0 and "Traceback" not in r.stderr
     d = json.loads(r.stdout[r.stdout.find("{"):])
-    for a, b, u in zip(d["angles_deg"], truth["angles_deg"], d["angles_u_arcsec"]):
+    for a, b, u in zip(d["angles_deg"], truth["angles_deg"], d["angles_u_arcsec"], strict=True):
         assert abs((a - b) * 3600 / u) < Z1
     if faults:
         assert "missing" in r.stderr and "spurious" in r.stderr
