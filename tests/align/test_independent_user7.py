@@ -72,7 +72,8 @@ def camera_file(tmp_path, lens: ui.Lens, name: str = "cam.json", u=TIGHT_U) -> s
 # What works: a distortion-free camera declared so; a lens the model gives exactly.
 # ------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("bits", [8, pytest.param(12, marks=pytest.mark.slow), 16])
+@pytest.mark.parametrize("bits", [pytest.param(8, marks=pytest.mark.slow),
+                                  pytest.param(12, marks=pytest.mark.slow), 16])
 def test_declared_free_camera_small_angle_within_u(tmp_path, bits):
     """A near-horizontal mark (-200") on an 8-, 12- (in a 16-bit file) and 16-bit sensor."""
     m = ui.Mark((15.0, -20.0), -200 / 3600, 260)
@@ -129,7 +130,8 @@ def test_ruled_scale_through_exact_barrel_model(tmp_path):
     assert abs(f["pitch_px"] - 40.0) < 0.05, f["pitch_px"]
 
 
-@pytest.mark.parametrize("which", [pytest.param("pincushion", marks=pytest.mark.slow), "barrel",
+@pytest.mark.parametrize("which", [pytest.param("pincushion", marks=pytest.mark.slow),
+                                   pytest.param("barrel", marks=pytest.mark.slow),
                                    pytest.param("tangential", marks=pytest.mark.slow)])
 def test_undeclared_lens_off_centre_is_never_silent(tmp_path, which):
     """No camera model, default ranges, one corner mark per frame: the angle is either within
@@ -147,6 +149,7 @@ def test_undeclared_lens_off_centre_is_never_silent(tmp_path, which):
         assert found[0].get("lens_limited") and rc == 2 and not d["ok"], (e, u)
 
 
+@pytest.mark.slow
 def test_camera_model_for_another_image_size_is_refused(tmp_path):
     lens = ui.Lens(540.0, 540.0, 319.5, 239.5)
     p = tmp_path / "big.json"
@@ -194,6 +197,7 @@ def test_real_charuco_camera_model_45deg_mark(tmp_path):
     assert abs(z) < Z1 or not d["ok"], (e, u)
 
 
+@pytest.mark.slow
 def test_declared_aspect_range_covers_non_square_pixels(tmp_path):
     """The same image without a model, the aspect declared as a range: u covers it."""
     lens = ui.Lens(600.0, 603.0, 319.5, 239.5)
@@ -204,6 +208,7 @@ def test_declared_aspect_range_covers_non_square_pixels(tmp_path):
     assert abs(z) < Z1, (e, u)
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="the real OpenCV sample camera, calibrated here with "
                    "cv2.calibrateCamera (fy/fx - 1 = 3.2e-4), given exactly as the model: a "
                    "-60 deg mark -40.7\" off at u 9.1\" (z -4.5), a +75 deg one +20.3\" at 14.2\"; "
@@ -223,6 +228,7 @@ def test_real_chessboard_lens_exact_model_three_marks(tmp_path):
         assert abs(z) < Z1 or not d["ok"], (t.angle_deg, e, u)
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="a 40 px ruled scale at 60 deg through a model with "
                    "fy/fx = 1.0056: family angle +494.7\" off at u 2.1\" (z +239), pitch "
                    "40.055 px (truth 40.000); at 12 deg +237.3\" (z +115), pitch 40.213; ok true")
@@ -242,6 +248,7 @@ def test_ruled_scale_camera_model_non_square_pixels(tmp_path):
 # Defects: misleading notes on clean marks and lenses inside the declared ranges.
 # ------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="a clean, square-ended 180 px groove, no lens, no dust: "
                    "'both ends under an obstruction (dust or print): length 180 px seen, up to "
                    "184 px hidden under it' on every such mark")
@@ -252,6 +259,7 @@ def test_clean_square_ended_groove_has_no_obstruction_note(tmp_path):
     assert not [w for w in d["warnings"] if "obstruction" in w], d["warnings"]
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="a 180 px (ideal) corner mark through the exact model of a "
                    "k1_cv = -0.28 lens: its image is 163.6 px long, the tool reports length 138 px "
                    "'seen, up to 167 px hidden under an obstruction (dust or print)' - no dust")
@@ -272,6 +280,7 @@ def test_camera_model_corner_mark_length(tmp_path):
     assert abs(found[0]["length_px"] - true_len) < 3.0, (found[0]["length_px"], true_len)
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="5 straight marks through a pincushion lens inside the "
                    "default ranges (k1 +0.066 at the half-diagonal, principal point (+10.5, -9.5) "
                    "px, p = 0): 'lens p1 = 0.00139 +- 0.00014 ... beyond any lens: not a lens', "
@@ -292,6 +301,7 @@ def test_decentred_radial_lens_is_not_called_not_a_lens(tmp_path):
         [w for w in d["warnings"] if "not a lens" in w]
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="camera JSON with u = {'k1': 'abc'}: 'not a usable camera "
                    "file: could not convert string to float: 'abc'' - the key is not named")
 def test_bad_camera_u_names_the_key(tmp_path):
@@ -469,7 +479,7 @@ def test_plan_refuses_a_not_ok_session_by_name(tmp_path):
 # The goniometer, from a counter log of my own (ring-laser phase floored at each pulse).
 # ------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("faults", [False, True])
+@pytest.mark.parametrize("faults", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_gonio_log_angles_within_u_and_faults_named(tmp_path, faults):
     """40 revolutions; with a missing pulse and a glint: both named, angles still within 3 u
     (seen: |z| <= 0.8, u 0.14")."""
