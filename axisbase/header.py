@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from axisbase.errors import InputError
-from axisbase.units import value_unit
+from axisbase.units import DECLARED_TIME_UNITS, time_scale, value_unit
 
 if TYPE_CHECKING:
     from axisbase.tablespec import TableSpec
@@ -35,6 +35,8 @@ class Header:
     delimiter: str
     skip: int                  # lines before the first data row (comments + header)
     header_line: int
+    meta: tuple[str, ...] = ()  # lines before the header that are not the table's (a logger's
+    # metadata, e.g. "Fs,100"): skipped, and said in a note (see meta_note)
 
 
 def _norm(text: str) -> tuple[str, str]:
@@ -101,17 +103,70 @@ def parse_column_map(text: str | None, flag: str = "--columns") -> dict[str, str
     return out
 
 
-def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> Header:
+MAX_META_LINES = 64
+"""Lines before the header a logger may write (its settings: "Fs,100", "Logging Type,0")."""
+
+
+def _header_lines(f) -> list[tuple[int, str]]:
+    """(line number, text) of the lines that are neither blank nor ``#`` comments, up to
+    the first and MAX_META_LINES after it."""
+    out = []
+    for ln, line in enumerate(f, start=1):
+        if line.strip() and not line.lstrip().startswith("#"):
+            out.append((ln, line))
+            if len(out) > MAX_META_LINES:
+                break
+    return out
+
+
+def _fields(path: Path, ln: int, line: str, spec: TableSpec) -> tuple[str, list[str]]:
+    text = line.rstrip("\r\n")
+    if "\x00" in text:
+        raise InputError(f"{path}:{ln}: NUL bytes in the header: UTF-16 text or a binary "
+                         f"file? a {spec.what} is UTF-8 CSV text")
+    delimiter = max(",;\t", key=text.count)
+    return delimiter, next(csv.reader([text], delimiter=delimiter))
+
+
+def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str],
+                time_unit: str | None = None) -> Header:
+    """The header of a table file: the first line that is neither blank nor a ``#`` comment
+    — or, when that line lacks the format's columns, the first of the next MAX_META_LINES
+    that has them (a logger's metadata lines before the header are then skipped; the
+    :class:`Header` lists them for :func:`meta_note`).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    spec : TableSpec
+        Its format.
+    mapping : mapping of str to str
+        Canonical name -> header name (``--columns``).
+    time_unit : str, optional
+        The time column's unit when the header says none (``--time-unit``, the session's
+        ``time_unit``; a key of :data:`axisbase.units.TIME_UNITS`).
+
+    Returns
+    -------
+    Header
+        Names, units, delimiter and where the data start.
+
+    Raises
+    ------
+    InputError
+        No header, the columns not found, or a time unit the header contradicts, naming
+        the file and line.
+    """
+    if time_unit is not None and time_scale(time_unit) is None:
+        raise InputError(f"--time-unit / time_unit {time_unit!r}: not a time unit; one of "
+                         f"{', '.join(DECLARED_TIME_UNITS)}")
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
-            skip = 0
-            for line in f:
-                skip += 1
-                if line.strip() and not line.lstrip().startswith("#"):
-                    break
-            else:
-                raise InputError(f"{path}: empty file: expected a header line "
-                                 f"{spec.layout} ({spec.what})")
+            lines = _header_lines(f)
+        if not lines:
+            raise InputError(f"{path}: empty file: expected a header line "
+                             f"{spec.layout} ({spec.what})")
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -121,14 +176,59 @@ def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str]) -> Head
     except UnicodeDecodeError:
         raise (not_utf8(path, spec) or InputError(
             f"{path}: not a UTF-8 text file (a {spec.what} is CSV text)")) from None
-    text = line.rstrip("\r\n")
-    if "\x00" in text:
-        raise InputError(f"{path}:{skip}: NUL bytes in the header: UTF-16 text or a binary "
-                         f"file? a {spec.what} is UTF-8 CSV text")
-    delimiter = max(",;\t", key=text.count)
-    raw = next(csv.reader([text], delimiter=delimiter))
-    names, units = match_names(raw, spec, mapping, f"{path}:{skip}: header")
-    return Header(names, raw, units, delimiter, skip, skip)
+    ln, line = lines[0]
+    delimiter, raw = _fields(path, ln, line, spec)
+    meta: tuple[str, ...] = ()
+    try:
+        names, units = match_names(raw, spec, mapping, f"{path}:{ln}: header")
+    except InputError as first:
+        # A logger's metadata before the header: the first later line that has the
+        # format's columns (none: the first line's error stands).
+        for k, (ln_k, line_k) in enumerate(lines[1:], start=1):
+            d_k, raw_k = _fields(path, ln_k, line_k, spec)
+            try:
+                names, units = match_names(raw_k, spec, mapping, f"{path}:{ln_k}: header")
+            except InputError:
+                continue
+            meta = tuple(x.rstrip("\r\n") for _, x in lines[:k])
+            ln, delimiter, raw = ln_k, d_k, raw_k
+            break
+        else:
+            raise first from None
+    time = spec.time if spec.time in names else None
+    if time_unit is not None and time is not None:
+        said = units.get(time)
+        if said is None:
+            units = {**units, time: time_unit}
+        elif time_scale(said) != time_scale(time_unit):
+            raise InputError(f"{path}:{ln}: {time}: the header says [{said}], the declared "
+                             f"time unit (--time-unit / time_unit) says {time_unit}: give "
+                             "one or make them agree")
+    return Header(names, raw, units, delimiter, ln, ln, meta)
+
+
+def meta_note(path: Path, h: Header) -> str | None:
+    """A sentence saying which lines before the header were skipped (None if none).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    h : Header
+        Its header.
+
+    Returns
+    -------
+    str or None
+        The note.
+    """
+    if not h.meta:
+        return None
+    shown = "; ".join(show_header(next(csv.reader([m], delimiter=h.delimiter)))
+                      for m in h.meta[:4])
+    more = f" and {len(h.meta) - 4} more" if len(h.meta) > 4 else ""
+    return (f"{path}: {len(h.meta)} line(s) before the header at line {h.header_line} "
+            f"skipped as the logger's metadata, not rows: {shown}{more}")
 
 
 def match_names(raw: list[str], spec: TableSpec, mapping: Mapping[str, str], where: str

@@ -39,7 +39,7 @@ import pyarrow.csv as pacsv
 from axisbase.badrows import Uncommented, refused, skip_comment
 from axisbase.csvblocks import parallel_batches, read_batches
 from axisbase.errors import InputError
-from axisbase.header import Header, match_names, read_header, show_cell
+from axisbase.header import Header, match_names, meta_note, read_header, show_cell
 from axisbase.repeats import check_repeats
 from axisbase.tabledata import Table
 from axisbase.tablespec import KINDS, Column, TableSpec
@@ -180,7 +180,7 @@ def _in_own_units(path: Path, spec: TableSpec, h: Header, data: dict[str, np.nda
 
 
 def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
-               rate_hz: float | None = None) -> Table:
+               rate_hz: float | None = None, time_unit: str | None = None) -> Table:
     """Read a whole table.
 
     Parameters
@@ -193,6 +193,9 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         Canonical name -> header name, for headers the format does not know.
     rate_hz : float, optional
         Sample rate [Hz] for a file without the time column: row k gets t = k / rate.
+    time_unit : str, optional
+        The time column's unit when its header says none (``us``: a logger's microsecond
+        stamps), see :func:`axisbase.header.read_header`.
 
     Returns
     -------
@@ -205,7 +208,8 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         naming the file, the line, the column and what is wrong.
     """
     path = Path(path)
-    h = read_header(path, spec, columns or {})
+    h = read_header(path, spec, columns or {}, time_unit)
+    _note(meta_note(path, h))
     ro, po, co = _arrow_options(path, spec, h, None, threads=True)
     try:
         at = pacsv.read_csv(path, read_options=ro, parse_options=po, convert_options=co)
@@ -231,10 +235,16 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         check_repeats(table)
     warning = rate_warning(table)
     if warning:
+        _note(f"WARNING: {warning}")
+    return table
+
+
+def _note(text: str | None) -> None:
+    """How the file was read, to the log (the commands collect it into their warnings)."""
+    if text:
         import logging
 
-        logging.getLogger("align").warning("WARNING: %s", warning)
-    return table
+        logging.getLogger("align").warning("%s", text)
 
 
 def rate_warning(table: Table) -> str | None:
@@ -295,7 +305,8 @@ def _with_rate(table: Table, rate_hz: float | None) -> Table:
 
 
 def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | None = None,
-               block_bytes: int = 1 << 20, parallel: bool = False) -> Iterator[Table]:
+               block_bytes: int = 1 << 20, parallel: bool = False,
+               time_unit: str | None = None) -> Iterator[Table]:
     """Read a table in chunks of about ``block_bytes`` of text, each a checked :class:`Table`
     (a time column is checked across chunk boundaries too). Memory stays flat in the file's
     length: 1 MiB blocks kept Arrow's pool at 41 MB for 2·10⁶ and 6·10⁶ rows.
@@ -315,6 +326,8 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         Text per chunk [bytes].
     parallel : bool
         Parse on a pool of threads.
+    time_unit : str, optional
+        The time column's unit when its header says none (see :func:`read_table`).
 
     Yields
     ------
@@ -329,7 +342,8 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     if parallel and any(c.kind == "label" for c in spec.columns):
         raise ValueError("iter_table(parallel=True) is for tables of numbers only")
     path = Path(path)
-    h = read_header(path, spec, columns or {})
+    h = read_header(path, spec, columns or {}, time_unit)
+    _note(meta_note(path, h))
     ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
     row0 = 0
     prev_t = None

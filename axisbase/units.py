@@ -22,6 +22,10 @@ TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "
               "h": 3600.0, "hour": 3600.0}
 """A time unit -> seconds per unit."""
 
+DECLARED_TIME_UNITS = ("s", "ms", "us", "ns", "min", "h")
+"""The time units a user declares for a header that says none (``--time-unit``, the
+session's ``time_unit``)."""
+
 VALUE_UNITS = {"g": ("g", 1.0), "mg": ("g", 1e-3), "ug": ("g", MICRO_G), "µg": ("g", MICRO_G),
                "μg": ("g", MICRO_G),
                "m/s2": ("m/s2", 1.0), "m/s^2": ("m/s2", 1.0), "m/s²": ("m/s2", 1.0),

@@ -282,9 +282,12 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
 
 
     counts, dt, t_end = kept_table(summary)
-    if len(counts) < 16 or (dt is None and summary.excluded_revolutions):
-        return None  # (without times a gap of excluded revolutions breaks the path)
-    theta, turn = beat.phase_path(counts, dt, t_end, rate)
+    # Without times, where revolutions were excluded the path goes on with an unknown phase
+    # (see beat.unlinked_runs): the kept revolutions' lines say where.
+    links = summary.stats.kept_links() if dt is None else None
+    if len(counts) < 16 or (dt is None and summary.excluded_revolutions and links is None):
+        return None
+    theta, turn = beat.phase_path(counts, dt, t_end, rate, links)
     # The pattern from the longest run of consecutive revolutions (at most FIT_REVOLUTIONS:
     # the fit's cost grows with R). Where excluded revolutions cut the log, the runs'
     # patterns did not join up to a common counts per revolution (a lost row, seed 256 of
@@ -321,7 +324,7 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     # The larger at the two ends of the jitters the pulses allow: a locked phase whose
     # pulses never come near a step says little about the jitter, which decides whether it
     # dithers.
-    var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk, spread)
+    var = np.max([beat.variance_of_mean(counts, dt, t_end, rate, sg, dk, spread, links)
                   for sg in sorted({sigmas[0], sigmas[2]})], axis=0)
     consistent = np.ones(len(var), bool)
     if usable.any():
@@ -329,14 +332,14 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
         nb = len(counts) // int(taus[j])
         nu = 2 * (nb - 1) ** 2 / (3 * nb - 4)
         expect = beat.allan_expected(counts, dt, t_end, rate, sigma, int(taus[j]), dk,
-                                     spread)
+                                     spread, links)
         ratio = (adev[j] / q) ** 2 / np.maximum(expect, np.finfo(float).tiny)
         consistent = chdtrc(nu, nu * ratio) >= 0.01
     # How far each pulse's fractional phase drifts over the log [counts] (the net of its
     # per-revolution advances taken modulo one count): an angle whose ends drift through
     # several whole counts has its quantisation averaged, however little the counts of
     # successive revolutions scatter.
-    step = np.diff(theta, axis=0)
+    step = np.diff(theta, axis=0)[np.diff(turn) == 1]  # (across a gap: not a drift)
     drift = np.abs((step - np.round(step)).sum(0))
     sweep = np.minimum(drift[:-1], drift[1:])
     return q * np.sqrt(var), consistent, sigma, sweep

@@ -37,19 +37,23 @@ K_STEPS = 5
 
 
 def phase_path(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
-               rate: float) -> tuple[np.ndarray, np.ndarray]:
+               rate: float, links: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Phase [counts] of every face pulse of the kept revolutions, up to one offset per face,
     and the revolution numbers.
 
     Returns ``theta`` (R, n + 1) — faces 0..n-1 at the start of each revolution and the
     closing reference pulse — and ``turn`` (R,), each revolution's number from the first
     (gaps where revolutions were excluded: from the times; without times the revolutions are
-    taken as consecutive and the table as steady).
+    taken as consecutive and the table as steady, except where ``links`` (R - 1,) is False:
+    there revolutions were excluded, how many is unknown (a drop-out takes its rows with it),
+    and ``turn`` skips one — the runs' phases are then unlinked, see :func:`unlinked_runs`).
     """
     R, n = counts.shape
     N = counts.sum(1)
     if dt is None or t_end is None:
         turn = np.arange(R, dtype=float)
+        if links is not None:
+            turn += np.concatenate([[0.0], np.cumsum(~np.asarray(links, bool))])
         K = float(N.mean())
         theta = np.repeat(turn[:, None] * K, n + 1, axis=1)
         theta[:, n] += K
@@ -70,6 +74,21 @@ def phase_path(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | No
     theta = turn[:, None] * K + E * (t - t[0, 0])
     theta[:, n] += K  # the closing reference is the next revolution's face 0
     return theta, turn
+
+
+def unlinked_runs(turn: np.ndarray, timed: bool) -> np.ndarray:
+    """Run number of each revolution whose phase is unknown relative to the other runs'
+    (zeros when every gap's phase is known: with times, the path crosses a gap by them).
+
+    Without times the revolutions an exclusion took are not counted, so the phase across it
+    is unknown: each run then has its own offsets (uniform over a count), and averaged over
+    them the cross terms between runs vanish — the variance of a mean over the runs is the
+    sum of each run's share (a drop-out without times otherwise left u to batch means of
+    5-10 degrees of freedom: 0.042" against the path's 0.077" on its drop-out-free twin).
+    """
+    if timed:
+        return np.zeros(len(turn), int)
+    return np.concatenate([[0], np.cumsum(np.diff(turn) != 1)]).astype(int)
 
 
 def _weights(counts: np.ndarray) -> np.ndarray:
@@ -102,9 +121,10 @@ def _merge(w: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _variance(w: np.ndarray, theta: np.ndarray, turn: np.ndarray, sigma: float,
-              dk: float) -> np.ndarray:
+              dk: float, runs: np.ndarray | None = None) -> np.ndarray:
     """Variance [counts^2] over the unknown phase offsets of sum w * frac(theta + jitter),
-    for weight sets w (..., R, n + 1); the counts per revolution off by ``dk``."""
+    for weight sets w (..., R, n + 1); the counts per revolution off by ``dk``; ``runs``
+    (R,): revolutions of different runs have independent offsets (see unlinked_runs)."""
     R, n1 = theta.shape
     n = n1 - 1
     th = theta + dk * (turn[:, None] + (np.arange(n1) == n)[None, :])
@@ -118,10 +138,14 @@ def _variance(w: np.ndarray, theta: np.ndarray, turn: np.ndarray, sigma: float,
     lead = w.shape[:-2]
     wf = w.reshape(-1, R, n1)
     tot = np.zeros(len(wf))
+    if runs is None:
+        runs = np.zeros(R, int)
     for f in range(n):
         cols = face == f
-        W = np.einsum("brj,mrj->bm", wf[:, :, cols], e[:, :, cols])
-        tot += (np.abs(W) ** 2) @ c
+        for r_ in np.unique(runs):
+            rr = runs == r_
+            W = np.einsum("brj,mrj->bm", wf[:, rr][:, :, cols], e[:, rr][:, :, cols])
+            tot += (np.abs(W) ** 2) @ c
     merged, sep = _merge(wf, turn)
     white = 1 / 12 + sigma**2 - c.sum()
     tot += white * ((merged**2).sum((1, 2)) + (sep**2).sum(1))
@@ -260,23 +284,27 @@ def _dks(dk: float | None, span: float, spread: float | None) -> np.ndarray:
 
 def variance_of_mean(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
                      rate: float, sigma: float, dk: float | None = None,
-                     spread: float | None = None) -> np.ndarray:
+                     spread: float | None = None, links: np.ndarray | None = None
+                     ) -> np.ndarray:
     """Variance [counts^2] of each mean face angle's error from quantisation and jitter
     (sigma [counts] per pulse), averaged over the counts per revolution's uncertainty (dk
-    +- ``spread``, see :func:`_dks`)."""
-    theta, turn = phase_path(counts, dt, t_end, rate)
+    +- ``spread``, see :func:`_dks`); ``links`` as in :func:`phase_path`."""
+    theta, turn = phase_path(counts, dt, t_end, rate, links)
+    runs = unlinked_runs(turn, dt is not None and t_end is not None)
     R = len(counts)
     w = _weights(counts) / R
-    return np.mean([_variance(w, theta, turn, sigma, d)
+    return np.mean([_variance(w, theta, turn, sigma, d, runs)
                     for d in _dks(dk, turn[-1] + 1, spread)], axis=0)
 
 
 def allan_expected(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
                    rate: float, sigma: float, tau: int, dk: float | None = None,
-                   spread: float | None = None) -> np.ndarray:
+                   spread: float | None = None, links: np.ndarray | None = None
+                   ) -> np.ndarray:
     """Expected non-overlapping Allan variance [counts^2] of the per-revolution angles at
     averaging ``tau`` revolutions (blocks aligned from the first), under the same model."""
-    theta, turn = phase_path(counts, dt, t_end, rate)
+    theta, turn = phase_path(counts, dt, t_end, rate, links)
+    runs = unlinked_runs(turn, dt is not None and t_end is not None)
     R, n = counts.shape
     nb = R // tau
     w1 = _weights(counts)  # (n, R, n + 1)
@@ -288,11 +316,12 @@ def allan_expected(counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray 
         for i in range(nb - 1):
             sl = slice(i * tau, (i + 2) * tau)
             w[i, :, sl] = w1[:, sl] * sign[None, :, None]
-        return np.mean([_variance(w, theta, turn, sigma, d) for d in dks],
+        return np.mean([_variance(w, theta, turn, sigma, d, runs) for d in dks],
                        axis=0).sum(0) / (2 * (nb - 1))
     tot = np.zeros(n)
     for i in range(nb - 1):  # longer: each pair on its own revolutions
         sl = slice(i * tau, (i + 2) * tau)
         w = w1[:, sl] * sign[None, :, None]
-        tot += np.mean([_variance(w, theta[sl], turn[sl], sigma, d) for d in dks], axis=0)
+        tot += np.mean([_variance(w, theta[sl], turn[sl], sigma, d, runs[sl]) for d in dks],
+                       axis=0)
     return tot / (2 * (nb - 1))

@@ -151,7 +151,9 @@ class _Pass(Walker):
         if not self.faces_checked:
             self._check_faces(lengths, self.path)
         normal = lengths == n
-        used: list[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None]] = []
+        # (last end row, counts, durations, end times, (start, end) pulse rows of each)
+        used: list[tuple[int, np.ndarray, np.ndarray | None, np.ndarray | None,
+                         np.ndarray]] = []
         seg_used = np.zeros(0, int)
         C_used = np.zeros((0, n))
         if normal.any():
@@ -185,7 +187,8 @@ class _Pass(Walker):
             used.append((int(ends_used[-1]) if len(ends_used) else -1,
                          C if all_ok else C_used,
                          None if D is None else (D if all_ok else D[ok]),
-                         None if dt is None else cur["t"][ends_used]))
+                         None if dt is None else cur["t"][ends_used],
+                         np.column_stack([ends_used - n, ends_used])))
             if len(C_used):
                 self.neigh = C_used[-NEIGHBOURS:].astype(float)
         is_bad = np.ones(len(starts), bool)
@@ -209,7 +212,7 @@ class _Pass(Walker):
             # variance, batch means) must see a repaired revolution where it was, not after
             # the chunk's clean ones (it changed u by up to 35 % for one repaired pulse).
             keys = []
-            for j, (e, c, _, _) in enumerate(used):
+            for j, (e, c, _, _, _) in enumerate(used):
                 m = len(c)
                 if j == 0 and normal.any():
                     keys.append(ends_used.astype(float))  # the clean block: one end per row
@@ -221,9 +224,10 @@ class _Pass(Walker):
                  np.concatenate([np.asarray(u[2]).reshape(-1, n) for u in used])[order])
             te = (None if used[0][3] is None else
                   np.concatenate([np.asarray(u[3]).ravel() for u in used])[order])
-            used = [(0, c, d, te)]
-        for _, c, d, te in used:
-            self.stats.add(c, d, te, self.correct)
+            span = np.concatenate([u[4] for u in used])[order]
+            used = [(0, c, d, te, span)]
+        for _, c, d, te, span in used:
+            self.stats.add(c, d, te, self.correct, line0 + span)
         last = int(refs[-1])
         self.carry = {k: (None if v is None else v[last:]) for k, v in cur.items()}
         self.carry_line0 = line0 + last
@@ -265,8 +269,8 @@ class _Pass(Walker):
             brk = np.zeros(L + 1, bool)
             brk[1:] = cur["counter"][1:] == cur["counter"][:-1]
             got = self._stretch(cur, X, brk, 0, L, self.neigh, self.carry_line0, tail=True)
-            for _, c, d, te in got:
-                self.stats.add(c, d, te, self.correct)
+            for _, c, d, te, span in got:
+                self.stats.add(c, d, te, self.correct, self.carry_line0 + span)
         self.stats.flush()
         if self.stats.hashes and not self.has_time:  # (with times the reader refuses a copy)
             rep = repeated_block(np.concatenate(self.stats.hashes))

@@ -132,6 +132,8 @@ class RevolutionStats:
     kept_counts: list = field(default_factory=list)
     kept_dt: list = field(default_factory=list)
     kept_tend: list = field(default_factory=list)
+    # Lines of each kept revolution's first and closing face pulses (see kept_links).
+    kept_lines: list = field(default_factory=list)
     n_kept: int = 0
     shift: np.ndarray | None = None
     pending: list = field(default_factory=list)
@@ -163,7 +165,7 @@ class RevolutionStats:
         self.allan.add(y)  # (differences and means: the shift does not matter)
 
     def add(self, counts: np.ndarray, dt: np.ndarray | None, t_end: np.ndarray | None,
-            correct=None) -> None:
+            correct=None, lines: np.ndarray | None = None) -> None:
         if len(counts) == 0:
             return
         if dt is None:  # (with times the reader refuses a copy: no hash needed)
@@ -197,6 +199,7 @@ class RevolutionStats:
             # Copies: the rows may be views into a whole chunk.
             self.kept_dt.append(None if dt is None else np.array(dt[:m], float))
             self.kept_tend.append(None if t_end is None else np.array(t_end[:m], float))
+            self.kept_lines.append(None if lines is None else np.array(lines[:m], np.int64))
             self.n_kept += m
             if self.on_kept is not None and self.n_kept >= self.on_kept_at:
                 self.hand_over()
@@ -210,6 +213,15 @@ class RevolutionStats:
         if self.kept_dt[0] is None:
             return c, None, None
         return c, np.vstack(self.kept_dt), np.concatenate(self.kept_tend)
+
+    def kept_links(self) -> np.ndarray | None:
+        """Whether each kept revolution after the first starts on the pulse that closed the
+        one before (shape (R - 1,)): False where revolutions were excluded between them (a
+        drop-out, a fault). None when the lines were not given."""
+        if not self.kept_lines or any(x is None for x in self.kept_lines):
+            return None
+        span = np.vstack(self.kept_lines)
+        return span[1:, 0] == span[:-1, 1]
 
     def hand_over(self) -> None:
         """Give the first ``on_kept_at`` kept revolutions to ``on_kept``, once."""

@@ -174,7 +174,7 @@ class Walker(FacePattern):
             tr = te_all[r + 1]
             d = np.diff(tr)[None]
             te = tr[-1:]
-        return (int(r[-1]), c, d, te)
+        return (int(r[-1]), c, d, te, np.array([[int(r[0]), int(r[-1])]]))
 
     def _report(self, w, good, bad, rows, cur, brk, line0, tail, backward=False,
                 armed=True) -> list:

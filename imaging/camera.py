@@ -170,8 +170,11 @@ class CameraModel:
                           ) -> tuple[np.ndarray, np.ndarray]:
         """Undistort points given relative to the image centre; keep that convention.
 
-        The output is in the pinhole image with the same camera matrix (pixels), so lengths
-        stay in pixels; each sigma is scaled by the local magnification of the undistortion.
+        The output is in the pinhole image with square pixels of the column pitch (the
+        camera matrix with fy set to fx): an angle there is the angle in the object plane,
+        the same convention as the lens route's y / (1 + aspect); keeping fy/fx in the
+        coordinates would turn a 45 deg mark by (fy/fx - 1) / 2 rad (0.1 deg at 1.0035).
+        Lengths stay in pixels; each sigma is scaled by the local magnification.
         """
         h, w = shape
         if (w, h) != tuple(self.image_size):
@@ -184,14 +187,17 @@ class CameraModel:
         return out, sigma * scale
 
     def undistort_pixels(self, pix: np.ndarray) -> np.ndarray:
+        """Undistorted pinhole pixels (square, of the column pitch) of distorted pixels [px]."""
         src = np.ascontiguousarray(pix, dtype=np.float64).reshape(-1, 1, 2)
+        square = self.camera_matrix.copy()
+        square[1, 1] = square[0, 0]
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4
             und = cv2.undistortPointsIter(src, self.camera_matrix, self.dist_coeffs, None,
-                                          self.camera_matrix, crit)
+                                          square, crit)
         else:  # OpenCV 5 takes the criteria in undistortPoints itself
             und = cv2.undistortPoints(src, self.camera_matrix, self.dist_coeffs, None, None,
-                                      self.camera_matrix, crit)
+                                      square, crit)
         return und.reshape(-1, 2)
 
 

@@ -274,3 +274,20 @@ def full_scale(image: np.ndarray | float) -> float:
     """
     mx = float(np.max(image))
     return next((2.0**b - 1 for b in BIT_DEPTHS if mx <= 2**b - 1), 2.0**BIT_DEPTHS[-1] - 1)
+
+
+def clipped_note(image: np.ndarray, top: float, least: float = 0.01) -> str:
+    """Where the frame is clipped at full scale ``top`` [DN], when at least ``least`` of it
+    is: the region (x0,y0–x1,y1, the box holding 98 % of the clipped pixels), the level and
+    the share; '' otherwise. Said with "no mark found": an over-exposed background leaves a
+    groove in it nothing to be read against, and the user must know it is the exposure."""
+    hot = image >= top
+    share = float(hot.mean())
+    if share < least:
+        return ""
+    rows, cols = np.nonzero(hot)
+    x0, x1 = np.percentile(cols, [1, 99]).astype(int)
+    y0, y1 = np.percentile(rows, [1, 99]).astype(int)
+    bits = int(np.log2(top + 1))
+    return (f"region {x0},{y0}–{x1},{y1} is clipped at {top:.0f} (the {bits}-bit full scale; "
+            f"{100 * share:.0f} % of the frame): over-exposed, expose less")

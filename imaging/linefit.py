@@ -118,6 +118,14 @@ def _solve(q, sigma, F, a, d, iters=4, chol=None):
     u, n = line_frame(a)
     J = np.column_stack([qw @ u, -one, -Fw])
     cov = np.linalg.pinv(J.T @ J)
+    if np.any(np.diag(cov) < 0):
+        # J^T J squares J's condition: on a noise-free frame (sigma ~1e-4 px, a bow's t^2
+        # column ~1e4) its pseudo-inverse lost a variance's sign (sqrt of a negative in the
+        # loop). From J's own QR factor R the covariance R^-1 R^-T has row norms squared on
+        # its diagonal: never negative.
+        r_inv = solve_triangular(np.linalg.qr(J, mode="r"), np.eye(J.shape[1]),
+                                 check_finite=False)
+        cov = r_inv @ r_inv.T
     return a, d, beta, q @ n - d - F @ beta, cov, qw @ n - d * one - Fw @ beta
 
 

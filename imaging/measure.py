@@ -29,8 +29,9 @@ from imaging.detect import (
 )
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines, grating_note
+from imaging.gridphase import grid_phase_bound_px, grid_phase_u_rad
 from imaging.groove import ProfileFit
-from imaging.io import full_scale
+from imaging.io import clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
@@ -59,6 +60,8 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
+    ``grid_phase_u_rad``: what the groove model's misfit, sampled at the pixel grid's
+    phase, may leave on the angle [rad] (:mod:`imaging.gridphase`; a Type B term).
 
     Attributes
     ----------
@@ -116,6 +119,9 @@ class MarkMeasurement:
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
+    grid_phase_u_rad: float = 0.0
+    """What the groove model's misfit, sampled at the pixel grid's phase, may leave on the
+    angle [rad] (:mod:`imaging.gridphase`; a Type B term)."""
 
     @property
     def length_px(self) -> float:
@@ -240,11 +246,15 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
     ext = groove_extent(image, pf)
+    # Raw-image centres: the phase is the pixel grid's, before any undistortion.
+    phase_u = grid_phase_u_rad(cen.xy[use], sig, cen.t[use], pf.angle_rad, image.shape,
+                               grid_phase_bound_px(cen.misfit, cen.sigma[use]))
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed,
+                           grid_phase_u_rad=phase_u)
 
 
 def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
@@ -431,6 +441,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     MeasuredFrame
         The measurements, the families and what the background did.
     """
+    # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
+    # same frame as an array got u 1745" where its file got 5.3". (read_image gives floats:
+    # no copy then.)
+    image = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
@@ -463,9 +477,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                 pre = None
     if not cands:
         grating = grating_note(image)
+        clipped = clipped_note(image, top)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")")
-                              + (f": {grating}" if grating else ""))
+                              + (f": {grating}" if grating else "")
+                              + (f": {clipped}" if clipped else ""))
     if expect_one:
         cands = [require_single(cands, where)]
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be

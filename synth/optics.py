@@ -131,10 +131,12 @@ class CameraGeometry:
         """Angle in the ideal pinhole image of a scene line at ``scene_angle_rad``.
 
         Angles are measured from +x towards -y (counter-clockwise as displayed), in (-pi/2, pi/2].
+        Non-square pixels do not enter: they scale the sensor's rows after the lens, and the
+        physical angle is the pinhole image's (square pixels), not the pixel grid's.
         """
         ux, uy = np.cos(scene_angle_rad), -np.sin(scene_angle_rad)
         xi, yi = self.scene_to_ideal(np.array(ux), np.array(uy))
-        return wrap_half_turn(float(np.arctan2(-yi * self.aspect, xi)))
+        return wrap_half_turn(float(np.arctan2(-yi, xi)))
 
 
 def wrap_half_turn(angle_rad: float) -> float:

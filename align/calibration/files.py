@@ -84,7 +84,8 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                     columns: Mapping[str, str] | None = None, rate_hz: float | None = None,
                     alpha: float = 1e-3, fixture_error_rad: float = 0.5 * DEG,
                     unit_source: str | None = None,
-                    adc_range: tuple[float, float] | None = None) -> CalibrationRun:
+                    adc_range: tuple[float, float] | None = None,
+                    time_unit: str | None = None) -> CalibrationRun:
     """Read the static poses (and check poses), calibrate the triad and judge the check.
 
     Parameters
@@ -95,7 +96,7 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
         (default: the static file's header).
     signs : the scale factors' signs (an ellipsoid cannot tell them), or None: from
         labelled faces when the poses carry them, else +,+,+.
-    columns, rate_hz : see :func:`axisbase.table.read_table`.
+    columns, rate_hz, time_unit : see :func:`axisbase.table.read_table`.
     alpha : significance of the residual loop's tests and of the check.
     fixture_error_rad : placement error of the faces (known-pose method) [rad].
     adc_range : the ADC's rails (LO, HI) in ``units``, when declared: a pose at a rail is
@@ -104,9 +105,11 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
     left_out: list[str] = []
     with captured_warnings() as logged:  # (how the files were read: into the JSON too)
         poses, intervals = read_poses(static, settings, columns=columns, rate_hz=rate_hz,
-                                      adc_range=adc_range, warnings=left_out)
+                                      adc_range=adc_range, warnings=left_out,
+                                      time_unit=time_unit)
         chk = (read_poses(check, settings, calibration=False, columns=columns,
-                          rate_hz=rate_hz, adc_range=adc_range, warnings=left_out)[0]
+                          rate_hz=rate_hz, adc_range=adc_range, warnings=left_out,
+                          time_unit=time_unit)[0]
                if check else None)
     cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad)
     warnings = unit_scale_check(cal.model, units,

@@ -36,8 +36,9 @@ def fig_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings):
 
 
 def plot_static(path: str | Path, settings: StaticSettings,
-                columns: Mapping[str, str] | None, rate_hz: float | None, folder: Path) -> Path:
+                columns: Mapping[str, str] | None, rate_hz: float | None, folder: Path,
+                time_unit: str | None = None) -> Path:
     """Write the detection figure of the recording ``path`` into ``folder`` (a new PNG)."""
-    tab = read_table(path, STATIC, columns, rate_hz)
+    tab = read_table(path, STATIC, columns, rate_hz, time_unit)
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     return write_png(fig_static(tab["t"], u, settings), folder, "static_intervals")

@@ -63,9 +63,10 @@ READINGS = TableSpec("readings file", (*_U, _T, _TEMP), time="t", distinct_rows=
 
 
 def read_readings(path: str | Path, columns: Mapping[str, str] | None = None,
-                  rate_hz: float | None = None) -> Table:
-    """Readings ``ux,uy,uz[,t][,temp]`` (see :mod:`axisbase.table` for what is accepted)."""
-    return read_table(path, READINGS, columns, rate_hz)
+                  rate_hz: float | None = None, time_unit: str | None = None) -> Table:
+    """Readings ``ux,uy,uz[,t][,temp]`` (see :mod:`axisbase.table` for what is accepted;
+    ``time_unit``: the time column's unit when its header says none)."""
+    return read_table(path, READINGS, columns, rate_hz, time_unit)
 
 
 def _check_values(tab: Table, u: np.ndarray) -> None:
@@ -83,12 +84,12 @@ def _check_values(tab: Table, u: np.ndarray) -> None:
 def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
                calibration: bool = True, columns: Mapping[str, str] | None = None,
                rate_hz: float | None = None, adc_range: tuple[float, float] | None = None,
-               warnings: list[str] | None = None
+               warnings: list[str] | None = None, time_unit: str | None = None
                ) -> tuple[Poses, list[StaticInterval] | None]:
     """Per-pose means from a pose file, or from a continuous recording's static intervals.
 
     ``calibration``: check that the poses can carry a calibration (units, 3-D spread); off
-    for check poses, which may be few. ``columns``, ``rate_hz``: see
+    for check poses, which may be few. ``columns``, ``rate_hz``, ``time_unit``: see
     :func:`axisbase.table.read_table`. ``adc_range``: the ADC's rails (LO, HI) [output
     units], when declared. A pose saturated on an axis (:mod:`align.calibration.saturation`)
     is left out with a warning (appended to ``warnings``, else logged) when the others still
@@ -100,7 +101,7 @@ def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
         for note in notes:
             logging.getLogger("align").warning("%s", note)
     else:
-        tab = read_table(path, STATIC, columns, rate_hz)
+        tab = read_table(path, STATIC, columns, rate_hz, time_unit)
         if "pose" not in tab and "t" not in tab and len(tab) <= MEANS_ROWS:
             # ux,uy,uz without pose or time, a few rows: per-pose means (as for arrays).
             labels = np.array([str(i + 1) for i in range(len(tab))], dtype=object)

@@ -41,7 +41,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     out, plot = _outputs(args, inputs)
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
-                          f"--units {units}" if args.units else None, args.adc_range)
+                          f"--units {units}" if args.units else None, args.adc_range,
+                          args.time_unit)
     _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
@@ -82,7 +83,8 @@ def _show_calibration(args: argparse.Namespace, run, sign, cols, plot) -> None:
 
         print(f"plot: {plot_calibration(run.cal, run.poses, run.check, plot)}")
         if run.intervals is not None:
-            fig = plot_static(args.static, _static_settings(args), cols, args.rate, plot)
+            fig = plot_static(args.static, _static_settings(args), cols, args.rate, plot,
+                              args.time_unit)
             print(f"plot: {fig}")
 
 
@@ -108,8 +110,8 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     same_units(units, cal_units, args.calibration)
     outs = plan(args, inputs)
     out_json, out_csv = outs.add("--json", args.json, stdout_ok=True), outs.add("--out", args.out)
-    res = tilt_of_readings(model, read_readings(args.readings, cols, args.rate), args.method,
-                           args.mu)
+    res = tilt_of_readings(model, read_readings(args.readings, cols, args.rate, args.time_unit),
+                           args.method, args.mu)
     say(tilt_lines(res, args.method))
     warn(res.warnings)
     _write_tilt(args, res, out_json, out_csv, inputs)
@@ -138,7 +140,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
     pc, cal_units = PlatformCalibration.load_with_units(args.calibration_file)
     same_units(units, cal_units, args.calibration_file)
     out = plan(args, inputs).add("--out", args.out)
-    tab = read_readings(args.readings, cols, args.rate)
+    tab = read_readings(args.readings, cols, args.rate, args.time_unit)
     res = apply_to_readings(pc, tab, tilt=args.tilt, method=args.method)
     say(apply_lines(res))
     warn(res.warnings)

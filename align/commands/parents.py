@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from align.commands.args import POSITIVE, UNITS
+from axisbase.units import DECLARED_TIME_UNITS
 
 
 class Parser(argparse.ArgumentParser):
@@ -68,4 +69,7 @@ def tables(rate: bool = True, units: bool = True,
     if rate:
         t.add_argument("--rate", type=POSITIVE, metavar="HZ",
                        help="sample rate for a file without a time column (row k at k/HZ s)")
+        t.add_argument("--time-unit", choices=DECLARED_TIME_UNITS,
+                       help="the time column's unit when its header says none (a logger's "
+                       "microsecond stamps: us)")
     return t

@@ -21,7 +21,7 @@ from align.errors import InputError
 from align.lens import LensRanges
 from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
-from axisbase.units import ARCSEC, DEG
+from axisbase.units import ARCSEC, DECLARED_TIME_UNITS, DEG
 from imaging import ImageInputError, check_roi
 
 HOUSINGS = ("x", "y", "z")
@@ -82,12 +82,13 @@ class Goniometer:
 
 @dataclass(frozen=True)
 class TableKeys:
-    """How a table file is read (keys ``columns``, ``units``, ``rate_hz``; the CLI's
-    ``--columns``, ``--units``, ``--rate``)."""
+    """How a table file is read (keys ``columns``, ``units``, ``rate_hz``, ``time_unit``; the
+    CLI's ``--columns``, ``--units``, ``--rate``, ``--time-unit``)."""
 
     columns: dict[str, str] = field(default_factory=dict)
     units: str | None = None
     rate_hz: float | None = None
+    time_unit: str | None = None  # the time column's unit when its header says none
 
 
 @dataclass(frozen=True)
@@ -238,7 +239,11 @@ def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> T
         raise InputError(f"{where} units = {u!r}: one of {', '.join(OUTPUT_UNITS)}")
     r = (_number(t["rate_hz"], f"{where} rate_hz", 0, 1e7, open_lo=True)
          if rate and "rate_hz" in t else None)
-    return TableKeys(mapping, u, r)
+    tu = t.get("time_unit") if rate else None
+    if tu is not None and tu not in DECLARED_TIME_UNITS:
+        raise InputError(f"{where} time_unit = {tu!r}: one of "
+                         f"{', '.join(DECLARED_TIME_UNITS)}")
+    return TableKeys(mapping, u, r, tu)
 
 
 # Physical ranges of the angles a session may declare: a known roll, offset or tilt is a
@@ -249,7 +254,7 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 
 KEYS = {
-    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz",
+    "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz", "time_unit",
                     "adc_range", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
@@ -257,7 +262,8 @@ KEYS = {
                 *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
-    "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz"},
+    "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz",
+                 "time_unit"},
 }
 
 

@@ -294,6 +294,7 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
             left_out: list[str] = []
             res.calibration_poses, _ = read_poses(c.static, c.detection, columns=tk.columns,
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
+                                                  time_unit=tk.time_unit,
                                                   warnings=left_out)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
                             signs_as="[calibration] scale_sign")
@@ -437,7 +438,7 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
                          f"from {units}: one triad, one unit")
     poses, _ = read_poses(p.static, StaticSettings(names=session_names("[platform]")),
                           calibration=False, columns=p.table.columns,
-                          rate_hz=p.table.rate_hz)
+                          rate_hz=p.table.rate_hz, time_unit=p.table.time_unit)
     missing = [lab for lab in poses.labels if lab not in p.poses]
     if missing:
         raise InputError(f"{p.static}: pose(s) {', '.join(missing)} have no attitude in "

@@ -119,6 +119,8 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# units = \"V\"                # g, m/s2, counts or V (default: the header's "
                 "[unit], else V)",
                 "# rate_hz = 100.0             # [Hz] when the file has no time column",
+                "# time_unit = \"us\"            # the time column's unit when its header "
+                "says none",
                 "# columns = \"ux=ax,uy=ay,uz=az\"  # when the headers are not ux, uy, uz",
                 "# adc_range = [-5.0, 5.0]     # the ADC's rails (readings' unit): a pose at "
                 "one is left out",

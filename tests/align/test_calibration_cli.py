@@ -185,3 +185,31 @@ def test_a_warning_on_how_the_file_was_read_reaches_the_json(tmp_path, capsys):
     said = "no pose or time column: each row read as one pose's mean"
     assert capsys.readouterr().err.count(said) == 1
     assert sum(said in w for w in json.loads(out.read_text())["warnings"]) == 1
+
+
+def test_microsecond_times_and_meta_lines_read_as_the_plain_file(tmp_path, capsys):
+    """The phone's recording as a logger writes it — settings lines before the header, a
+    plain 't' in µs — read with --time-unit us: the numbers of the plain file at --rate;
+    the skipped lines said in the JSON's warnings. A header that says [ms] against
+    --time-unit us is refused in one line naming file, line and flag."""
+    plain = phone(n_poses=28).write_csv(tmp_path / "phone.csv")
+    lines = plain.read_text().splitlines()
+    logged = tmp_path / "logger.csv"
+    logged.write_text("Fs,50\nLogging Type,0\nsensor,phone\n" + f"{lines[0]},t\n" + "\n".join(
+        f"{ln},{k * 20000}" for k, ln in enumerate(lines[1:])) + "\n")
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["calibrate", str(plain), "--rate", "50", "--units", "m/s2", "-q",
+                 "--json", str(a)]) == 0
+    assert main(["calibrate", str(logged), "--time-unit", "us", "--units", "m/s2", "-q",
+                 "--json", str(b)]) == 0
+    ja, jb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert np.allclose(jb["scale_factors_m_s2_per_g"], ja["scale_factors_m_s2_per_g"],
+                       rtol=1e-12, atol=0)
+    assert any("3 line(s) before the header at line 4 skipped" in w for w in jb["warnings"])
+    capsys.readouterr()
+    said = tmp_path / "said.csv"
+    said.write_text(logged.read_text().replace(",t\n", ",t [ms]\n", 1))
+    assert main(["calibrate", str(said), "--time-unit", "us", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "said.csv:4: t: the header says [ms]" in err[0], err
+    assert "--time-unit" in err[0]

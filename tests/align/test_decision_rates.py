@@ -73,6 +73,13 @@ def test_calibration_finds_the_effects_of_issue_19():
         assert found >= 9, (name, found)
 
 
+N_GONIO_LOOP = 1000
+"""Clean logs without --latitude (the revolution loop runs: structure and effect decisions).
+300 bounded a rate seen once or twice only below 1.6-2.1 % (95 %); 1000 (0.1 s of CPU a log)
+bound up to 4 events below 1 %. Measured (seeds 50000-50999): structure 3/1000 (95 % upper
+0.77 %), effect 5/1000 (upper 1.05 %: just above 1 %; docs/false-alarms.md)."""
+
+
 @pytest.mark.slow
 def test_goniometer_false_alarms(tmp_path):
     over, z = {}, []
@@ -83,8 +90,9 @@ def test_goniometer_false_alarms(tmp_path):
             return _bools(out)
 
         inputs = "120 rev, " + ("--latitude" if lat else "no latitude")
+        n = N_CHEAP if lat else N_GONIO_LOOP
         t = dc.tally("goniometer", inputs, run, range(50000 + 1000 * lat,
-                                                       50000 + 1000 * lat + N_CHEAP))
+                                                       50000 + 1000 * lat + n))
         over.update({(inputs, d): c for d, c in t.over().items()})
     # The angles on clean logs: the largest of 4 |error|/u per log above 3.5 for a N(0,1)
     # error 0.19 % of logs; allow 1 %.

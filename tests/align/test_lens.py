@@ -116,6 +116,20 @@ def test_a_given_camera_is_trusted_and_its_u_propagated():
         assert abs(_z(r, t.angle_rad)) <= 3
 
 
+@pytest.mark.parametrize("ang", [45.0, -45.0, 30.0])
+def test_a_camera_models_non_square_pixels_are_taken_out(ang):
+    """A camera with fy/fx = 1.005 and its model: the angle is the pinhole image's (the
+    scene's), not the pixel grid's, which differs by (fy/fx - 1) sin(2a) / 2 (516" at 45 deg;
+    before: +519" at u 3.3", z 156, ok — an independent user's test)."""
+    cam = CameraGeometry(focal_px=600.0, aspect=1.005)
+    a = np.deg2rad(ang)
+    s = _render([MarkSpec(a, 0.0, 300.0, 4.0)], cam, seed=5)
+    (r,) = [r for r in measure_image(s.image, "cam.png", camera=_camera_model(cam)) if r.found]
+    grid = np.arctan2(np.sin(a) * 1.005, np.cos(a))  # the same line in the pixel grid
+    assert abs(angle_error(grid, a)) > 6 * r.angle_u_rad  # the convention is tested
+    assert abs(_z(r, a)) <= 3
+
+
 @pytest.mark.parametrize("ranges", [LensRanges.none(), None], ids=["flat declared", "default"])
 def test_a_bent_mark_is_named_and_covered(ranges):
     """A mark bowed by 0.5 px, 120 px off the centre, on a lens-free camera: named a bent

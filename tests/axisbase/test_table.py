@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from align.calibration.static import STATIC
 from axisbase import Column, InputError, TableSpec, iter_table, parse_column_map, read_table
+from axisbase.table import rate_warning
+from tests.conftest import real_folder
 
 SPEC = TableSpec("test table", (
     Column("pose", "label", required=False, aliases=("label",)),
@@ -370,3 +373,89 @@ def test_parallel_reader_stopped_early_leaves_no_thread(tmp_path, monkeypatch):
     assert threading.active_count() == before
     with pytest.raises(ValueError, match="numbers only"):
         next(iter_table(p, SPEC, parallel=True))
+
+
+# ------------------------------------------------- declared time unit, logger's meta lines
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("unit, scale", [("us", 1e-6), ("ms", 1e-3), ("s", 1.0)])
+def test_declared_time_unit_reads_as_the_header_unit_would(tmp_path, seed, unit, scale):
+    """A plain 't' in µs with time_unit='us' gives the numbers 't [us]' gives, in seconds;
+    read whole and streamed alike."""
+    head, rows = _plain(seed)
+    rows = [r[:5] + [repr(float(r[5]) / scale)] for r in rows]
+    plain = _write(tmp_path / "p.csv", head, rows)
+    said = _write(tmp_path / "s.csv", head[:5] + [f"t [{unit}]"], rows)
+    a, b = read_table(plain, SPEC, time_unit=unit), read_table(said, SPEC)
+    assert np.array_equal(a["t"], b["t"])
+    assert np.allclose(a["t"], _rows(seed)[2], rtol=1e-12)  # the truth, in seconds
+    c = np.concatenate([ch["t"] for ch in iter_table(plain, SPEC, block_bytes=256,
+                                                     time_unit=unit)])
+    assert np.array_equal(c, a["t"])
+
+
+def test_declared_time_unit_refused_when_the_header_disagrees_or_it_is_no_unit(tmp_path):
+    p = tmp_path / "m.csv"
+    p.write_text("# a comment\nux,uy,uz,t [ms]\n1,2,3,0\n1,2,3,5\n")
+    with pytest.raises(InputError, match=r"m\.csv:2: t: the header says \[ms\].*--time-unit"):
+        read_table(p, SPEC, time_unit="us")
+    assert np.allclose(read_table(p, SPEC, time_unit="ms")["t"], [0, 0.005])  # agreeing
+    with pytest.raises(InputError, match="--time-unit / time_unit 'parsec': not a time unit"):
+        read_table(p, SPEC, time_unit="parsec")
+
+
+@pytest.mark.parametrize("meta", [["Fs,100", "Logging Type,0", "Initialization time,36.5",
+                                   "Waiting time,3"],
+                                  ["sensor;MPU-6050", "", "# note", "gain;2 g"]])
+def test_meta_lines_before_the_header_are_skipped_and_said(tmp_path, caplog, meta):
+    """A logger's settings before the header: the same numbers as without them, a note
+    naming the lines skipped; a file whose later lines never hold the columns keeps the
+    first line's error."""
+    head, rows = _plain(4)
+    clean = _write(tmp_path / "c.csv", head, rows)
+    p = tmp_path / "m.csv"
+    p.write_text("\n".join(meta) + "\n" + clean.read_text())
+    with caplog.at_level("WARNING", logger="align"):
+        tab = read_table(p, SPEC)
+    ref = read_table(clean, SPEC)
+    for k in ("ux", "uy", "uz", "t", "n"):
+        assert np.array_equal(tab[k], ref[k])
+    assert list(tab["pose"]) == list(ref["pose"])
+    skipped = sum(1 for m in meta if m.strip() and not m.startswith("#"))
+    assert f"{skipped} line(s) before the header at line {len(meta) + 1} skipped" in caplog.text
+    chunks = list(iter_table(p, SPEC, block_bytes=512))
+    assert np.array_equal(np.concatenate([c["ux"] for c in chunks]), ref["ux"])
+    # a bad row is named at its own line in the file (meta lines counted)
+    lines = p.read_text().splitlines()
+    lines[len(meta) + 3] = lines[len(meta) + 3].replace(",", ",x", 1)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=rf"m\.csv:{len(meta) + 4}:"):
+        read_table(p, SPEC)
+    q = tmp_path / "none.csv"
+    q.write_text("Fs,100\nfoo,bar,baz\n1,2,3\n")
+    with pytest.raises(InputError, match=r"none\.csv:1: header: \(Fs, 100\) lacks ux"):
+        read_table(q, SPEC)
+
+
+def test_real_openaxes_log_with_microsecond_times_reads_directly():
+    """The OpenAXES log: ';'-separated, TIME in µs with no unit in its header. Declared
+    'us', it reads at the logger's ~100 Hz with no implausible-rate warning (read as
+    seconds: 9e-5 Hz and the warning names us)."""
+    path = real_folder("openaxes-imu9") / "log_imu9_2022-06-22_22-13-55.csv"
+    cols = parse_column_map("ux=ACCEL_ADXL355_0,uy=ACCEL_ADXL355_1,uz=ACCEL_ADXL355_2")
+    tab = read_table(path, STATIC, cols, time_unit="us")
+    dt = float(np.median(np.diff(tab["t"])))
+    assert 1e-3 < dt < 0.1 and rate_warning(tab) is None, dt
+    assert "us" in rate_warning(read_table(path, STATIC, cols))
+    assert len(tab) == len(path.read_text().splitlines()) - 1
+
+
+def test_real_mpu6050_csv_with_four_meta_lines_reads_directly(caplog):
+    """The MPU-6050 CSV: 'Fs,100' and three more settings lines before its header."""
+    path = real_folder("mpu6050-tomisuarez") / "example_data_calibration.csv"
+    with caplog.at_level("WARNING", logger="align"):
+        tab = read_table(path, STATIC, rate_hz=100.0)
+    lines = path.read_text().splitlines()
+    assert len(tab) == len(lines) - 5
+    assert list(tab["ux"][:3]) == [float(v.split(",")[0]) for v in lines[5:8]]
+    assert "4 line(s) before the header at line 5 skipped" in caplog.text

@@ -94,6 +94,26 @@ def test_a_whole_revolution_dropout_with_times_is_not_stitched(tmp_path):
     assert run.summary.stats.n == twin.summary.stats.n - 3
 
 
+def test_a_dropout_without_times_keeps_the_phase_path_u(tmp_path):
+    """Without times the runs either side of a drop-out are unlinked (how many revolutions
+    were lost is unknown), not handed to batch means: u stays the phase path's, within the
+    change of one run's share of its drop-out-free twin's (before: batch means of 5-10
+    degrees of freedom, u 0.55-1.2 of the twin's; an independent user saw an angle move by
+    1.55 of u from its twin's that way)."""
+    for seed in range(3):
+        spec = GonioSpec(revolutions=REVS, seed=20 + seed, with_time=False)
+        clean = simulate(spec)
+        ref = np.flatnonzero(clean["rows"]["ref"])
+        r0 = int(ref[30 + 25 * seed]) + 2
+        sim = drop_out(clean, r0, 6)  # 6 rows: the faces' sequence jumps, the gap is seen
+        run, _ = measure(spec, sim, False, tmp_path / f"d{seed}.csv")
+        twin, _ = measure(spec, clean, False, tmp_path / f"c{seed}.csv")
+        assert named(run, r0)
+        assert run.angles.type_a_method.startswith("phase path"), run.angles.type_a_method
+        ratio = run.angles.u_rad / twin.angles.u_rad
+        assert np.all((ratio > 0.9) & (ratio < 1.25)), ratio
+
+
 def test_clean_logs_name_no_dropout(tmp_path):
     """Unsteady and steady tables, 0.2-5 rev/s, with and without times: no drop-out."""
     for seed in range(6):

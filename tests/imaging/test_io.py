@@ -80,3 +80,26 @@ def test_truncated_png_is_one_line_error(tmp_path, pixels):
     path.write_bytes(path.read_bytes()[:-40])
     with pytest.raises(ImageInputError, match="cut.png"):
         read_image_notes(path)
+
+
+def _frame(exposure: float) -> np.ndarray:
+    from synth import ImageSpec, MarkSpec, render_marks
+    spec = ImageSpec(marks=(MarkSpec(0.002, 3.0, 300.0, 4.0, contrast=-0.55),), width=480,
+                     height=360, bits=12, exposure=exposure, vignetting=0.35, seed=2)
+    return render_marks(spec, with_crlb=False).image
+
+
+def test_over_exposed_frame_names_its_clipped_region_and_a_normal_one_does_not():
+    """synth at 2.3x the usual exposure (the background clipped at 4095 over most of the
+    frame, the groove's floor not): 'no mark found' names the clipping and where. The
+    normal exposure: nothing said of clipping (clipped_note '' below 1 % at full scale)."""
+    from imaging import measure_frame
+    from imaging.io import clipped_note
+    over = _frame(1.15)
+    assert (over >= 4095).mean() > 0.3
+    note = clipped_note(over, 4095.0)
+    assert "clipped at 4095" in note and "12-bit" in note and "region" in note
+    with pytest.raises(ImageInputError, match="no mark found") as exc:
+        measure_frame(over)
+    assert note in str(exc.value), exc.value
+    assert clipped_note(_frame(0.5), 4095.0) == ""

@@ -224,3 +224,16 @@ def test_clipped_groove_refused_alike_in_16_and_12_bit_data():
         assert isinstance(r, ImageInputError) and f"0 or {top:.0f}, the" in str(r), r
         ok = np.round((0.3 + 0.5 * bright) * 0.6 * top).astype(np.uint16)  # below full scale
         assert len(measure_marks(ok)) == 1
+
+
+def test_integer_pixels_give_the_numbers_of_their_float_copy():
+    """A valid variant: the same 16-bit frame (background ~0.8 of full scale) as uint16 (as
+    OpenCV reads it) and as floats gives the same angle and u (uint16 differences wrapped
+    around: an independent renderer's frame got u 22098" against its float copy's 5.3")."""
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(0.1), 5.0, 300.0, 4.0, contrast=-0.6),),
+                     width=480, height=360, exposure=0.8, seed=1)
+    img = render_marks(spec, with_crlb=False).image
+    assert img.dtype == np.uint16 and np.median(img) > 40000
+    (a,) = measure_marks(img)
+    (b,) = measure_marks(img.astype(float))
+    assert a.line.angle_rad == b.line.angle_rad and a.line.angle_u_rad == b.line.angle_u_rad
