@@ -165,12 +165,12 @@ def test_camera_model_for_another_image_size_is_refused(tmp_path):
 # Defects: a camera model's non-square pixels are not taken out of the angle.
 # ------------------------------------------------------------------------------------------
 
-@pytest.mark.xfail(strict=True, reason="camera model fy/fx = 1.005, mark at +-45 deg in the "
-                   "centre, no distortion: +518.8\" off at u 3.3\" (z +156), -514.2\" at 3.3\" "
-                   "(z -156), exit 0, ok true: the angle is that of the fy-scaled pixel grid, "
-                   "not the pinhole image (the same data with --lens aspect=0.005: u 298\")")
 @pytest.mark.parametrize("ang", [45.0, pytest.param(-45.0, marks=pytest.mark.slow)])
 def test_camera_model_non_square_pixels_taken_out(tmp_path, ang):
+    """Before (a defect I found, fixed on main): camera model fy/fx = 1.005, mark at +-45 deg in
+    the centre, no distortion: +518.8'' off at u 3.3'' (z +156), -514.2'' at 3.3'' (z -156),
+    exit 0, ok true: the angle is that of the fy-scaled pixel grid, not the pinhole image (the
+    same data with --lens aspect=0.005: u 298''); now (main 4d30a21): +4.4" at u 3.3."""
     lens = ui.Lens(600.0, 603.0, 319.5, 239.5)
     m = ui.Mark((0.0, 0.0), ang, 300)
     rc, d, found = one_mark(tmp_path, ui.Scene(lens=lens, marks=[m], supersample=2), 3,
@@ -180,11 +180,11 @@ def test_camera_model_non_square_pixels_taken_out(tmp_path, ang):
     assert abs(z) < Z1 or not d["ok"], (e, u)
 
 
-@pytest.mark.xfail(strict=True, reason="the real ChArUco tutorial camera's own calibration "
-                   "(fy/fx = 1.0094, k3 2.95) as the model: a 45 deg mark in the centre +972.9\" "
-                   "off at u 6.7\" (z +146), a 30 deg one at (-60, 40) +829\" at 6.2\"; exit 0, "
-                   "ok true")
 def test_real_charuco_camera_model_45deg_mark(tmp_path):
+    """Before (a defect I found, fixed on main): the real ChArUco tutorial camera's own
+    calibration (fy/fx = 1.0094, k3 2.95) as the model: a 45 deg mark in the centre +972.9'' off
+    at u 6.7'' (z +146), a 30 deg one at (-60, 40) +829'' at 6.2''; exit 0, ok true; now: +7.4''
+    at u 6.7''."""
     yml = os.path.join(ui.REAL, "opencv-lines", "tutorial_camera_charuco.yml")
     if not os.path.exists(yml):
         pytest.skip("real data absent: ../shared/data/real/opencv-lines")
@@ -209,11 +209,11 @@ def test_declared_aspect_range_covers_non_square_pixels(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the real OpenCV sample camera, calibrated here with "
-                   "cv2.calibrateCamera (fy/fx - 1 = 3.2e-4), given exactly as the model: a "
-                   "-60 deg mark -40.7\" off at u 9.1\" (z -4.5), a +75 deg one +20.3\" at 14.2\"; "
-                   "exit 0, ok true (the aspect's effect: -33\" and +19\")")
 def test_real_chessboard_lens_exact_model_three_marks(tmp_path):
+    """Before (a defect I found, fixed on main): the real OpenCV sample camera, calibrated here
+    with cv2.calibrateCamera (fy/fx - 1 = 3.2e-4), given exactly as the model: a -60 deg mark
+    -40.7'' off at u 9.1'' (z -4.5), a +75 deg one +20.3'' at 14.2''; exit 0, ok true (the
+    aspect's effect: -33'' and +19''); now within 3 u."""
     if not os.path.isdir(ui.CHESSBOARD):
         pytest.skip("real data absent: ../shared/data/real/opencv-chessboard")
     lens, size = ui.chessboard_lens()
@@ -229,10 +229,10 @@ def test_real_chessboard_lens_exact_model_three_marks(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 40 px ruled scale at 60 deg through a model with "
-                   "fy/fx = 1.0056: family angle +494.7\" off at u 2.1\" (z +239), pitch "
-                   "40.055 px (truth 40.000); at 12 deg +237.3\" (z +115), pitch 40.213; ok true")
 def test_ruled_scale_camera_model_non_square_pixels(tmp_path):
+    """Before (a defect I found, fixed on main): a 40 px ruled scale at 60 deg through a model
+    with fy/fx = 1.0056: family angle +494.7'' off at u 2.1'' (z +239), pitch 40.055 px (truth
+    40.000); at 12 deg +237.3'' (z +115), pitch 40.213; ok true; now within 3 u and 0.05 px."""
     lens = ui.Lens(540.0, 543.0, 319.5, 239.5)
     sc = ui.Scene(lens=lens, supersample=2, scale_lines={
         "angle_deg": 60.0, "pitch_px": 40.0, "n": 7, "length_px": 220.0,
@@ -371,12 +371,13 @@ def test_s_shaped_mark_read_as_its_chord_or_covered(tmp_path):
     assert abs(z) < Z1 or not d["ok"], (e, u)
 
 
-@pytest.mark.xfail(strict=True, reason="a straight 300 px mark near the top edge through the exact "
-                   "model of a barrel lens (k1_cv -0.2): its middle 3.9 px from the edge, its ends "
-                   "6 px: +94.0\" at u 8.1\" (z +11.6) and +96.7\" at u 11.0\" (z +8.8) on 2 of 2 "
-                   "seeds, exit 0, ok true ('unexplained structure', u inflated x1.0-1.4); 10 px "
-                   "further in: |z| <= 0.9; the same row without a lens: |z| <= 1.8")
 def test_lens_bowed_mark_along_the_frame_edge(tmp_path):
+    """Before (a defect I found, fixed on main): a straight 300 px mark near the top edge
+    through the exact model of a barrel lens (k1_cv -0.2): its middle 3.9 px from the edge, its
+    ends 6 px: +94.0'' at u 8.1'' (z +11.6) and +96.7'' at u 11.0'' (z +8.8) on 2 of 2 seeds,
+    exit 0, ok true ('unexplained structure', u inflated x1.0-1.4); 10 px further in: |z| <=
+    0.9; the same row without a lens: |z| <= 1.8; now: the same +94.0'' and +96.7'' at u 52.1'' and
+    51.4'' (z 1.8, 1.9)."""
     lens = ui.Lens(540.0, 540.0, 330.0, 230.0, (-0.2, 0.0, 0.0, 0.0, 0.0))
     m = ui.Mark((0.0, -235.0), 2.0, 300)
     rc, d, found = one_mark(tmp_path, ui.Scene(lens=lens, marks=[m], supersample=2), 1,
