@@ -12,6 +12,7 @@ import numpy as np
 from align.gonio_directions import DirectionTerm, direction_effect
 from axisbase.units import ARCSEC
 from goniometry import FaceAngles, LogSummary
+from goniometry.exclusions import code_of
 from goniometry.timing import TimingAngles
 
 if TYPE_CHECKING:
@@ -78,7 +79,8 @@ class GonioRun:
               "type_a_arcsec": (fa.u_type_a_rad * arcsec).tolist(),
               "type_a_method": fa.type_a_method, "jitter_counts": fa.jitter_counts,
               "type_b_arcsec": (fa.u_type_b_rad * arcsec).tolist(),
-              "exclusions": {k: {"count": v, "lines": summary.exclusions.lines[k]}
+              "exclusions": {k: {"code": code_of(k), "count": v,
+                                 "lines": summary.exclusions.lines[k]}
                              for k, v in summary.exclusions.counts.items()},
               "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
                         "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},

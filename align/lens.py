@@ -159,7 +159,26 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
                alpha: float = 1e-3, iters: int = 5) -> tuple[LensSolution, list[_Design]]:
     """The lens of one camera from the marks ``lines`` (all of its images), ``scale`` = R.
 
-    Returns the solution and each mark's design at the applied lens (angle sensitivities).
+    Parameters
+    ----------
+    lines : sequence of LineGeometry
+        Each mark's centres [px] and their sigma [px], all images of the camera.
+    scale : float
+        The half-diagonal R [px] normalising the radial terms.
+    ranges : LensRanges
+        The plausible lens (Type B): each parameter's range (k1, k2, p [-], aspect [-],
+        principal point [px]).
+    alpha : float
+        Significance of the tests (a parameter applied, a bow a lens).
+    iters : int
+        Rounds of the applied set (Gauss-Newton, then the sign test).
+
+    Returns
+    -------
+    LensSolution
+        The applied lens vector, which parameters the lines determine, their u, the notes.
+    list of _Design
+        Each mark's design at the applied lens (its angle sensitivities [rad per unit]).
 
     A bow is a lens only if the other lines agree. When no plausible lens explains all the
     lines' bows (:func:`_plausible`) but one fits all the others, the line left out is a

@@ -44,7 +44,25 @@ barrel model folds the image, so a larger fitted k1 means the lines do not const
 
 
 class MarkStage:
-    """Line fit along one mark, with extra terms (the stage the loop drives)."""
+    """Line fit along one mark, with extra terms (the stage the loop drives).
+
+    Parameters
+    ----------
+    m : imaging.MarkMeasurement
+        The measured mark: its centres [px], their sigma across the line [px], its profile.
+
+    Attributes
+    ----------
+    m : imaging.MarkMeasurement
+        The mark.
+    scale : float
+        The image's half-diagonal R [px] (the radial term's normalisation).
+    sigma : numpy.ndarray
+        Each centre's sigma across the line [px], scaled by the texture's variance factor.
+    noise_dof : float or None
+        Degrees of freedom of the centres' estimated covariance (None: independent centres
+        with their Fisher sigma, nothing estimated).
+    """
 
     def __init__(self, m: MarkMeasurement):
         self.m = m

@@ -69,7 +69,29 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     (:attr:`CameraLens.bow_px`; 0: none, the lens is known or declared absent). A bow the
     loop finds beyond it (by more than its u at ``alpha``) has no lens's shape here: a bent
     mark, named; within it, lens or bend, said so. Either way the direction is read end to
-    end and u covers the other readings."""
+    end and u covers the other readings.
+
+    Parameters
+    ----------
+    m : imaging.MarkMeasurement
+        The mark's measured centres [px] and their sigma across the line [px].
+    image : str
+        The image's name, in the result and its notes.
+    index : int
+        The mark's index in its image.
+    alpha : float
+        Significance of the loop's tests (probability of a false alarm per test).
+    candidates : sequence of Candidate
+        The effects the loop may add (radial distortion, bend, ...).
+    lens_bow_px : float
+        Largest sagitta the camera's undetermined lens can leave on this mark [px].
+
+    Returns
+    -------
+    MarkResult
+        The mark's angle and its u [rad], offset and its u [px], the loop's report, the
+        named u terms [rad] and notes.
+    """
     rep = run_loop(MarkStage(m), candidates, alpha=alpha,
                    admissible=functools.partial(radial_admissible, alpha=alpha))
     a, au = rep.after.quantities["angle_rad"]
@@ -246,8 +268,33 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
                   ranges: LensRanges | None = None) -> list[MarkResult]:
     """Every mark of an in-memory image, each through the loop; failures become entries.
 
-    ``roi`` (x, y, w, h) [px] and ``min_length_px`` restrict the search; ``ranges``: the
-    plausible lens (Type B) when no camera model is given.
+    Parameters
+    ----------
+    image : numpy.ndarray
+        The image, 2-D grey levels [DN].
+    name : str
+        Its name in the results and notes (a file's path).
+    camera : imaging.CameraModel or None
+        A calibrated camera (its lens removed from the marks); None: the lens from the
+        marks' bows within ``ranges``.
+    alpha : float
+        Significance of the residual loops' tests.
+    max_marks : int
+        Most marks reported (the strongest; the rest counted as unreported).
+    expect_one : bool
+        One mark expected: competing lines are an error, not more marks.
+    roi : tuple of int or None
+        Region searched, (x, y, w, h) [px].
+    min_length_px : float or None
+        Shortest line taken as a mark [px].
+    ranges : LensRanges or None
+        The plausible lens (Type B) when no camera model is given (None: the default).
+
+    Returns
+    -------
+    list of MarkResult
+        One per mark found, in the image's order (angles [rad], offsets [px]); an image
+        that cannot be measured is one entry with ``found`` False and its ``error``.
 
     Examples
     --------
@@ -299,7 +346,30 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     """All images of one camera with one lens (issue 18): every mark of every image enters
     one plumb-line fit (:func:`camera_lens`), then each goes through its loop. ``images``:
     (path, roi) pairs; one list of results per image, in order; an unreadable image or one
-    without a mark is its failed entry, as in :func:`measure_file`."""
+    without a mark is its failed entry, as in :func:`measure_file`.
+
+    Parameters
+    ----------
+    images : sequence of (str or Path, tuple of int or None)
+        Each image file and its region searched, (x, y, w, h) [px] or None.
+    camera : imaging.CameraModel or None
+        A calibrated camera; None: one lens from all the images' marks within ``ranges``.
+    alpha : float
+        Significance of the residual loops' tests.
+    expect_one : bool
+        One mark expected per image.
+    ranges : LensRanges or None
+        The plausible lens (Type B) when no camera model is given.
+    label : str
+        The camera's name, in the notes and the marks' lens group.
+    on_image : callable or None
+        Called with each image's index before it is read (progress).
+
+    Returns
+    -------
+    list of list of MarkResult
+        One list per image, in the order of ``images`` (angles [rad], offsets [px]).
+    """
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
     said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
     for j, (path, roi) in enumerate(images):
@@ -346,7 +416,21 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
                  max_marks: int = 8, expect_one: bool = False, roi: Roi | None = None,
                  min_length_px: float | None = None, ranges: LensRanges | None = None
                  ) -> list[MarkResult]:
-    """Every mark in an image file; an unreadable file is one failed entry."""
+    """Every mark in an image file; an unreadable file is one failed entry.
+
+    Parameters
+    ----------
+    path : str or Path
+        The image file (PNG, TIFF, JPEG, ...).
+    camera, alpha, max_marks, expect_one, roi, min_length_px, ranges
+        As in :func:`measure_image` (``roi`` [px], ``min_length_px`` [px]).
+
+    Returns
+    -------
+    list of MarkResult
+        As :func:`measure_image`, with what the reader did to the stored image
+        (orientation, data offset) in each mark's notes.
+    """
     try:
         got = read_image_notes(path)
     except ImageInputError as exc:

@@ -16,7 +16,7 @@ from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
 from align.session_json import LoadedSession
-from align.warnings import handled_crossing
+from align.warnings import is_information, mark_notes
 from axisbase.header import OUTPUT_UNITS
 from axisbase.units import ARCSEC
 
@@ -53,7 +53,7 @@ def mark_lines(r) -> list[str]:
         lines.append("    largest u terms: " + ", ".join(f"{k} {v / ARCSEC:.2f}″"
                                                        for k, v in big))
     lines += [f"    note: {n.removeprefix(f'{r.image} mark {r.index}: ')}" for n in r.notes
-              if handled_crossing(n)]
+              if is_information(n)]
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     if r.bend_off_frame:
@@ -120,6 +120,8 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
         lines.append(f"{f'b_{ax} [µg]':14s} {a.bias[i] * 1e6:22.3f} {m.bias[i] * 1e6:16.3f} "
                      f"{u_bias[i] * 1e6:10.3g}")
     lines += ["  " + line for line in cal.effect_lines()]
+    if cal.stability and cal.stability["assumed"]:
+        lines.append("  scale stability: " + cal.stability["statement"])
     if cal.cross_check:
         lines.append("cross-check ellipsoid vs known-pose (difference / combined u): "
                      + ", ".join(f"{n} {v['z']:+.1f}" for n, v in cal.cross_check.items()))
@@ -181,11 +183,13 @@ def gonio_lines(run, faces: Sequence[str], nominal_rad: np.ndarray | None) -> li
 def session_lines(res) -> list[str]:
     """A session result: the misalignment E [″] ± u, the consistency of the instruments and
     the effects the fusion loop added. Its failed stages are its warnings (said once, by
-    :func:`align.warnings.session_warnings`), not repeated here."""
+    :func:`align.warnings.session_warnings`), not repeated here; the marks' information
+    notes (:func:`align.warnings.mark_notes`) last, as ``note:`` lines."""
+    notes = [f"  note: {n}" for n in mark_notes([r for _, r in res.marks])]
     f = res.fusion
     lines: list[str] = []
     if f is None:
-        return lines + ["  no misalignment (the fusion did not run)"]
+        return lines + ["  no misalignment (the fusion did not run)"] + notes
     lines.append("  misalignment E [″] (row: accelerometer, column: platform X Y Z), sources: "
                  f"{', '.join(f.sources)}")
     for i in range(3):
@@ -204,7 +208,7 @@ def session_lines(res) -> list[str]:
                      f"{e.delta_bic:.1f})")
     if f.loop.unexplained_structure:
         lines.append("  " + f.loop.summary_lines()[-1])
-    return lines
+    return lines + notes
 
 
 def timing_lines(timings: dict[str, float]) -> list[str]:

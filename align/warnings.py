@@ -44,6 +44,45 @@ def handled_crossing(note: str) -> bool:
     return HANDLED_CROSSING.search(note) is not None
 
 
+INFORMATION = (
+    HANDLED_CROSSING,
+    # A lens the lines determine and need, applied; the principal point's range in u.
+    re.compile(r": lens [\w, ]+ applied: the lines need it \(.*that range is carried in u$"),
+    # A lens parameter whose sign the lines leave open: not applied, its range in u.
+    re.compile(r": lens \w+ = \S+ ± \S+ from the lines: sign not determined; not applied, "
+               r"carried in u$"),
+    # Parameters the lines do not determine (the usual case of few marks): ranges in u.
+    re.compile(r": lens [\w, ]+ not determined by these \d+ line\(s\): carried in u over "
+               r"their plausible range$"),
+    # Stripes found and divided out, what the removal may leave a Type B term of each mark.
+    re.compile(r": (column|row) stripes in the background \(.*\): removed: each offset "
+               r"estimated from the background away from the marks$"),
+    # The stored image turned as its header says (as every viewer shows it). (A signed
+    # image's offset stays a warning: that its zero means mid-scale is an assumption.)
+    re.compile(r": orientation tag \d+ applied \([^)]*\)$"),
+)
+"""Marks' notes that are information, not warnings: the tool did what the data called for
+and u carries what is left, nothing for the user to act on and nothing less to be trusted.
+They stay in each mark's JSON ``notes`` and are printed as ``note:`` lines; every other
+note of a mark (a bent mark, a lens beyond any lens or disagreeing with its calibration,
+JPEG blocks, a defocus gradient, stripes not removed, a misfit, a signed image's
+offset, NOT OK) is a warning."""
+
+
+def is_information(note: str) -> bool:
+    """Whether a mark's note is information (:data:`INFORMATION`), not a warning."""
+    return any(p.search(note) for p in INFORMATION)
+
+
+def mark_notes(results: Sequence) -> list[str]:
+    """The information notes of marks (``MarkResult``), each once, in order (the
+    terminal's ``note:`` lines; the JSON keeps them in each mark's ``notes``)."""
+    out: list[str] = []
+    for r in results:
+        out += [n for n in getattr(r, "notes", ()) if is_information(n) and n not in out]
+    return out
+
+
 def mark_warnings(results: Sequence) -> list[str]:
     """Marks (``MarkResult``): failures, unexplained structure, inflated uncertainty."""
     out = []
@@ -71,7 +110,7 @@ def mark_warnings(results: Sequence) -> list[str]:
             out.append(not_measured(r))
             continue
         out += loop_warnings(what, r.loop)
-        out += [n for n in getattr(r, "notes", ()) if n not in out and not handled_crossing(n)]
+        out += [n for n in getattr(r, "notes", ()) if n not in out and not is_information(n)]
         if r.uncertainty_inflation > 1:
             out.append(f"{what}: uncertainty inflated x{r.uncertainty_inflation:.2f} for the "
                        "structure no effect explains")

@@ -1,6 +1,8 @@
 """Effects the triad model may lack (issue 19): |err|/u, effect found, false alarms.
 
 Run:  python3 benchmarks/calibration_effects.py [--seeds 20] [--control 100] [--poses paper|plan]
+      [--scale-stability-ppm 20]  (the term ``align calibrate`` adds without a temperature
+      column; without the flag, none, as the library)
 
 Per class of tests/align/effects_cases.py (each effect rendered by synth in the sensor's
 physics) over seeded tumbles: the RMS and max over seeds and the nine parameters of
@@ -41,6 +43,9 @@ def main() -> None:
     ap.add_argument("--control", type=int, default=100)
     ap.add_argument("--poses", choices=("paper", "plan"), default="paper")
     ap.add_argument("--only", nargs="*", default=list(CLASSES))
+    ap.add_argument("--scale-stability-ppm", type=float, default=None,
+                    help="declare this scale stability (align calibrate's default without a "
+                    "temperature column: 20); default: none (the library's)")
     a = ap.parse_args()
     up = None
     if a.poses == "plan":
@@ -54,7 +59,7 @@ def main() -> None:
     for name in a.only:
         t0 = time.time()
         n = a.control if name == "clean" else a.seeds
-        r = sweep(name, range(n), up=up)
+        r = sweep(name, range(n), up=up, stability=a.scale_stability_ppm)
         found = f"{r['any_effect']:.0%}*" if name == "clean" else f"{r['found']:.0%}"
         print(f"{name:13s} {r['rms']:7.2f} {r['max']:8.2f} {found:>6s} {r['structure']:7.0%} "
               f"{r['widened']:8.0%} {r['u_ratio_median']:13.3g} {r['u_ratio_max']:8.3g} "

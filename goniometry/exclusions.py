@@ -56,6 +56,33 @@ R_DROPOUT = ("communication drop-out: rows missing from the log (the time of a r
 R_NOPATTERN = "no clean revolution nearby to predict the face pattern: stretch excluded"
 
 
+CODES = {
+    R_SPURIOUS: "spurious_pulse", R_AMBIGUOUS: "double_trigger", R_MISSING: "missing_pulse",
+    R_REF_FAILED: "reference_failed", R_REF_WRONG: "reference_misplaced",
+    R_LOST: "row_missing", R_LABEL: "counter_mislabelled", R_REANCHOR: "pattern_lost",
+    R_SCREEN: "off_pattern", R_TAIL: "noise_tail", R_DROPOUT: "dropout",
+    R_NOPATTERN: "no_pattern",
+}
+"""Reason (the sentence a reader sees) -> its stable machine code (the JSON's ``code``: a
+program tests the code, never the sentence, whose wording may change)."""
+
+
+def code_of(reason: str) -> str:
+    """The machine code of an exclusion's reason (:data:`CODES`).
+
+    Parameters
+    ----------
+    reason : str
+        One of the ``R_*`` sentences.
+
+    Returns
+    -------
+    str
+        Its code, e.g. ``"missing_pulse"``; ``"other"`` for a sentence not in the table.
+    """
+    return CODES.get(reason, "other")
+
+
 @dataclass
 class Exclusions:
     """What was excluded or repaired, by reason, with line numbers.

@@ -140,6 +140,9 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
         for j in range(i, k):
             M0[:, i, j] = M0[:, j, i] = bc(wj[i] * wj[j])
     w0 = np.einsum("ni,nij,nj->n", c0, M0, c0)
+    # The centre functional per pixel, (N^-1 J^T W)_0: a replica's centre is one sum of
+    # f v per segment (not k sums then the segment's row of N^-1).
+    f = sum(c0[seg, i] * wj[i] for i in range(k))
     npx = np.maximum(bc(np.ones(ys.size)), 1)
     ring_n = np.bincount(ring[3], minlength=nseg)
     ring_geo = ring_geometry(ring[2], ring[3], nseg)  # the same for every replica
@@ -159,7 +162,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                 continue
             # The centre functional applied to the replica: (N^-1 J^T W v)_0 per segment,
             # and its white-noise variance (N^-1 J^T W V W J N^-1)_00.
-            d = np.einsum("ni,ni->n", c0, np.stack([bc(x * v) for x in wj], axis=1))
+            d = bc(f * v)
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))

@@ -11,7 +11,8 @@ vector pointing up, times g_local / g0), b the bias [g] drifting linearly in tim
 [g/s]) and with temperature (``temp_coeff`` [g/K]), K2 the second-order nonlinearity [1/g],
 K_i,jl the cross-axis second-order terms (IEEE Std 1293's K_ip, K_io: the pendulum of axis i
 also responds to the product of two inputs) [1/g], s_i(t) = 1 + ``scale_drift_i`` t +
-``scale_warmup_i`` exp(-t / ``warmup_tau_s``) the scale factor drifting in time (electronics
+``scale_warmup_i`` exp(-t / ``warmup_tau_s``) [+ ``scale_cycle_i`` sin(2 pi t / P + phi), a
+temperature cycle] the scale factor drifting in time (electronics
 ageing over the run, and settling after switch-on), h the bias hysteresis: a pendulum that
 sticks lags behind the way it last moved, so each pose's bias is offset by
 ``hysteresis_g_i`` x the sign of the change of x_i in the turn into the pose (0 for the first
@@ -70,6 +71,11 @@ class Triad:
     scale_warmup: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Relative scale-factor excess at switch-on (t = 0), decaying with ``warmup_tau_s``."""
     warmup_tau_s: float = 300.0
+    scale_cycle: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Relative scale-factor amplitude of a temperature cycle (an HVAC's ±1 K at 100 ppm/K:
+    1e-4): s_i gains ``scale_cycle_i`` sin(2 pi t / ``cycle_period_s`` + ``cycle_phase``)."""
+    cycle_period_s: float = 900.0
+    cycle_phase: float = 0.0
     hysteresis_g: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """Bias offset [g] x the sign of the last change of each axis's input (see the module)."""
     bias_walk_g: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -98,7 +104,9 @@ class Triad:
         x = (a + b) @ self.sensing().T
         prod = np.column_stack([x[:, 0] * x[:, 1], x[:, 0] * x[:, 2], x[:, 1] * x[:, 2]])
         s = (1.0 + np.outer(t, self.scale_drift)
-             + np.outer(np.exp(-np.asarray(t, float) / self.warmup_tau_s), self.scale_warmup))
+             + np.outer(np.exp(-np.asarray(t, float) / self.warmup_tau_s), self.scale_warmup)
+             + np.outer(np.sin(2 * np.pi * np.asarray(t, float) / self.cycle_period_s
+                               + self.cycle_phase), self.scale_cycle))
         u = np.asarray(self.k) * s * (x + np.asarray(self.k2) * x * x
                                       + prod @ np.asarray(self.cross, float).T)
         if rng is not None and self.noise_v:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import shutil
 from pathlib import Path
 
@@ -83,8 +85,10 @@ def session21(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def session21_result(session21, tmp_path_factory) -> Path:
     """The session of seed 21 with [metadata], run once by ``align run``: the path
-    of its result JSON. Shared by the lot tests (test_lot, test_lot_duplicates), which only
-    read it; a full session run is seconds of CPU."""
+    of its result JSON, beside it its platform calibration (``pc.json``) and what the command
+    printed (``run.stdout``, ``run.stderr``). Shared by the lot tests (test_lot,
+    test_lot_duplicates), 'align apply' (test_session) and the clean session's terminal
+    (test_warnings), which only read them; a full session run is seconds of CPU."""
     from align.cli import main
 
     folder = tmp_path_factory.mktemp("seed21meta") / "unit1"
@@ -93,7 +97,13 @@ def session21_result(session21, tmp_path_factory) -> Path:
         f.write('\n[metadata]\nserial = "SN-0001"\noperator = "kim"\n'
                 "date = 2026-11-20T08:30:00Z\nbatch = 7\n")
     out = folder.parent / "r.json"
-    assert main(["run", str(folder), "--json", str(out), "-q"]) == 0
+    printed, said = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(said):
+        rc = main(["run", str(folder), "--json", str(out), "--calibration",
+                   str(folder.parent / "pc.json")])
+    (folder.parent / "run.stdout").write_text(printed.getvalue(), encoding="utf-8")
+    (folder.parent / "run.stderr").write_text(said.getvalue(), encoding="utf-8")
+    assert rc == 0, said.getvalue()
     return out
 
 

@@ -82,8 +82,15 @@ class Count:
                 f"{self.numpydoc:4d} numpydoc ({pct:.0f} %)")
 
 
+@functools.cache
 def _modules(pkg: str) -> dict[str, Path]:
     return {m: f for m, f in project_modules().items() if m.split(".")[0] == pkg}
+
+
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """A module's syntax tree, parsed once (the definitions and the re-exports read it)."""
+    return ast.parse(path.read_text(encoding="utf-8"))
 
 
 @functools.cache
@@ -91,7 +98,7 @@ def _defs(pkg: str) -> dict[tuple[str, str], ast.AST]:
     """(module, name) -> the module-level function or class, for every module of ``pkg``."""
     out = {}
     for mod, path in _modules(pkg).items():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = _tree(path)
         for node in tree.body:
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
                 out[(mod, node.name)] = node
@@ -133,7 +140,7 @@ def _definition(module: str, name: str, depth: int = 0) -> ast.AST | None:
     path = _modules(pkg).get(module)
     if path is None:
         return None
-    for imp in ast.parse(path.read_text(encoding="utf-8")).body:
+    for imp in _tree(path).body:
         if isinstance(imp, ast.ImportFrom) and imp.module and not imp.level:
             for a in imp.names:
                 if (a.asname or a.name) == name:
@@ -150,8 +157,8 @@ def count(pkg: str, exported: bool = False) -> Count:
 # The figures when this test was written (issue 21; before it: align 11 of 414 public names,
 # axisbase 7 of 65, goniometry 3 of 36, imaging 2 of 57, synth 3 of 43): each may rise, none
 # may fall. Raise a floor when you fill more.
-FLOOR_PUBLIC = {"align": 49, "axisbase": 28, "goniometry": 14, "imaging": 44, "synth": 13}
-FLOOR_EXPORTED = {"align": 11, "axisbase": 25, "goniometry": 12, "imaging": 43, "synth": 12}
+FLOOR_PUBLIC = {"align": 58, "axisbase": 28, "goniometry": 14, "imaging": 44, "synth": 13}
+FLOOR_EXPORTED = {"align": 17, "axisbase": 25, "goniometry": 12, "imaging": 43, "synth": 12}
 
 
 def test_numpydoc_coverage_does_not_fall():

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from align.calibration import STATIC, StaticSettings, calibrate, read_poses
 from align.calibration.check import CheckResult, check_poses
+from align.calibration.stability import chosen_ppm
 from align.calibration.units import unit_scale_check
 from align.warnings import calibration_warnings
 from axisbase.console import captured_warnings
@@ -85,7 +86,8 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                     alpha: float = 1e-3, fixture_error_rad: float = 0.5 * DEG,
                     unit_source: str | None = None,
                     adc_range: tuple[float, float] | None = None,
-                    time_unit: str | None = None) -> CalibrationRun:
+                    time_unit: str | None = None,
+                    scale_stability_ppm: float | None = None) -> CalibrationRun:
     """Read the static poses (and check poses), calibrate the triad and judge the check.
 
     Parameters
@@ -101,6 +103,8 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
     fixture_error_rad : placement error of the faces (known-pose method) [rad].
     adc_range : the ADC's rails (LO, HI) in ``units``, when declared: a pose at a rail is
         left out (warned) or refused (:func:`align.calibration.static.read_poses`).
+    scale_stability_ppm : the scale factors' declared stability over the run [ppm], or None
+        (the default of :func:`align.calibration.stability.chosen_ppm`).
     """
     left_out: list[str] = []
     with captured_warnings() as logged:  # (how the files were read: into the JSON too)
@@ -111,7 +115,9 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                           rate_hz=rate_hz, adc_range=adc_range, warnings=left_out,
                           time_unit=time_unit)[0]
                if check else None)
-    cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad)
+    ppm, default = chosen_ppm(scale_stability_ppm, poses.temp is not None)
+    cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad,
+                    scale_stability_ppm=ppm, stability_default=default)
     warnings = unit_scale_check(cal.model, units,
                                 unit_source or f"{static}: header unit [{units}]")
     checked = check_poses(cal, poses, chk, alpha, f"{check}") if chk is not None else None

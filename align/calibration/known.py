@@ -142,6 +142,9 @@ class KnownPoseFit:
     residuals_w : numpy.ndarray or None
         The weighted residuals (3n) — dimensionless (noise unknown: the residuals [output
         unit]).
+    scale_gain : numpy.ndarray or None
+        (9, 3n) change of (k, beta, bias) per relative change of each pose-axis reading
+        (:mod:`align.calibration.stability`) [each parameter's unit].
     """
 
     M: np.ndarray
@@ -158,6 +161,7 @@ class KnownPoseFit:
     sigma: np.ndarray
     projection: np.ndarray | None = None
     residuals_w: np.ndarray | None = None
+    scale_gain: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"method": "known-pose (six-position)", "faces": list(self.faces),
@@ -334,7 +338,8 @@ def fit_known(poses: Poses, faces: Sequence[str | None], signs: Sequence[float] 
     else:
         proj, r_w = J @ gain, r
     return KnownPoseFit(theta[:9].reshape(3, 3), theta[9:], cov, model, C, chi2, dof,
-                        tuple(used), fixture_error_rad, known, r, sig, proj, r_w)
+                        tuple(used), fixture_error_rad, known, r, sig, proj, r_w,
+                        J @ gain * y[None, :])
 
 
 class KnownPoseStage:

@@ -38,6 +38,13 @@ from align.calibration.model import (
     walk_physical,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
+from align.calibration.stability import (
+    PPM,
+    STABILITY,
+    stability_gain,
+    stability_reason,
+    stability_statement,
+)
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
 from align.calibration.walk import WANDER, walk_covariance, wander_fit
 from align.calibration.widen import (
@@ -49,6 +56,7 @@ from align.calibration.widen import (
     Widening,
     ambiguity_reason,
     ambiguity_term,
+    bound_cov,
     positive_part,
     structure_term,
     widen,
@@ -92,6 +100,10 @@ class Calibration:
         How u was widened for unexplained structure (None: not widened); unit —.
     problems : tuple of str
         Why the result is not ok (empty: ok); unit —.
+    stability : dict or None
+        What u assumes about the scale factors' wander over the run (``ppm`` [ppm] or None
+        when assumed stable, ``assumed``, ``statement``:
+        :func:`align.calibration.stability.stability_statement`); unit —.
     """
 
     algebraic: TriadModel
@@ -105,6 +117,7 @@ class Calibration:
     notes: tuple[str, ...] = ()
     widening: Widening | None = None
     problems: tuple[str, ...] = ()
+    stability: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -152,6 +165,7 @@ class Calibration:
             "known_pose": self.known.to_dict() if self.known is not None else None,
             "cross_check": self.cross_check,
             "u_widening": None if self.widening is None else self.widening.to_dict(),
+            "scale_stability": self.stability,
         }
 
 
@@ -159,7 +173,9 @@ class Calibration:
 def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES,
               fixture_error_rad: float | None = None,
-              signs_as: str = "--scale-sign") -> Calibration:
+              signs_as: str = "--scale-sign",
+              scale_stability_ppm: float | None = None,
+              stability_default: bool = False) -> Calibration:
     """Calibrate the triad from its poses.
 
     * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
@@ -190,6 +206,16 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         The effects the loop may add.
     fixture_error_rad : float, optional
         Declared placement error of the faces [rad].
+    scale_stability_ppm : float, optional
+        How stable the scale factors are over the run, ± [ppm] (checked by
+        :func:`align.calibration.stability.stability_ppm`): u covers a wander of that size
+        (:mod:`align.calibration.stability`, the ``scale_stability`` term); None or 0: no
+        term. ``align calibrate`` and ``align run`` pass the user's declaration
+        (:func:`align.calibration.stability.chosen_ppm`); a caller of the library states it
+        here.
+    stability_default : bool
+        Nothing was declared and the poses carry no temperature column: the result states
+        that the scale factors were assumed stable (``Calibration.stability``).
 
     Returns
     -------
@@ -220,6 +246,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     True
     """
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
+    stated = stability_statement(scale_stability_ppm or 0.0, stability_default,
+                                 poses.temp is not None)
     faces = faces_of(poses)
     signs = signs_t = resolve_signs(poses, faces, signs, signs_as)
     six = has_six_faces(faces)
@@ -233,14 +261,19 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         kf = fit_known(poses, faces, signs, fe)
         rep = run_loop(KnownPoseStage(kf, poses), ())
         model, widening, notes = kf.model, None, ()
+        increments = []
         if rep.unexplained_structure and kf.dof > 0:
             # The same widening as the ellipsoid's: u covers the structure left.
-            model, widening = widen(kf.model, [_structure_increment(
+            increments.append(_structure_increment(
                 rep, kf.projection, kf.residuals_w, kf.dof, kf.noise_known, "pose-axis",
-                bound=kf.dof < len(kf.model.names) + 3)])
+                bound=kf.dof < len(kf.model.names) + 3))
+        increments += _stability_increment(kf.scale_gain, scale_stability_ppm,
+                                           stability_default)
+        if increments:
+            model, widening = widen(kf.model, increments)
             notes = (widening.warning(),)
         return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf, None, notes, widening)
+                           "known-pose", kf, None, notes, widening, (), stated)
     try:
         stage = CalibrationStage(poses, signs)
     except InputError as exc:
@@ -263,6 +296,9 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((AMBIGUITY, ambiguity_reason(
             tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
             ambiguity_term(alts, len(model.names))))
+    if scale_stability_ppm:
+        increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
+                                           stability_default)
     problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
@@ -279,7 +315,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
-                       "ellipsoid", kf, cc, notes, widening, problems)
+                       "ellipsoid", kf, cc, notes, widening, problems, stated)
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float
@@ -330,6 +366,24 @@ def _structure_increment(rep: LoopReport, projection: np.ndarray, residuals_w: n
             f"{m * 1e6:.3g} µg" if per == "pose" else f"{m:.3g} (output unit)")
     return (STRUCTURE, f"unexplained structure ({name} p = {p:.2g}): a systematic "
             f"error of {size} per {per}", cov)
+
+
+def _ellipsoid_gain(stage: CalibrationStage, rep: LoopReport) -> np.ndarray:
+    """G of :mod:`align.calibration.stability` for the loop's final fit."""
+    A, _ = stage.projection[tuple(t.name for t in rep.terms)]
+    n = len(stage.poses.u)
+    W = (stage.whiten if stage.whiten is not None else
+         np.diag(1.0 / stage.sigma) if stage.sigma is not None else np.eye(n))
+    m = rep.after.payload
+    return stability_gain(A, W, pose_gradient(m, stage.poses), stage.poses.u)
+
+
+def _stability_increment(gain: np.ndarray | None, ppm: float | None, default: bool
+                         ) -> list[tuple[str, str, np.ndarray]]:
+    """The ``scale_stability`` term (none for a stability of 0 or None)."""
+    if gain is None or not ppm:
+        return []
+    return [(STABILITY, stability_reason(ppm, default), bound_cov(gain, ppm * PPM))]
 
 
 TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"

@@ -156,10 +156,19 @@ def structure_term(projection: np.ndarray, residuals_w: np.ndarray, dof: int,
     """
     chi2_dof = float(np.sum(residuals_w**2)) / dof
     m = np.sqrt(max(chi2_dof, 1.0)) if noise_known else np.sqrt(chi2_dof)
-    u_b = m * np.sum(np.abs(projection), axis=1) / (1.0 if bound else RECTANGULAR)
-    aat = projection @ projection.T
+    return bound_cov(projection, m, 1.0 if bound else RECTANGULAR), float(m)
+
+
+def bound_cov(gain: np.ndarray, half_width: float, divisor: float = RECTANGULAR
+              ) -> np.ndarray:
+    """The covariance of a systematic error bounded by ``half_width`` in each input of
+    ``gain`` (parameters per input, (n_params, n_inputs)): the worst case moves parameter
+    j by a_j = half_width sum_i |gain_ji|, u_j = a_j / ``divisor`` (rectangular: sqrt 3),
+    with the correlations of gain gain^T [products of the parameters' units]."""
+    u_b = half_width * np.sum(np.abs(gain), axis=1) / divisor
+    aat = gain @ gain.T
     s = np.sqrt(np.clip(np.diag(aat), 1e-300, None))
-    return u_b[:, None] * (aat / np.outer(s, s)) * u_b[None, :], float(m)
+    return u_b[:, None] * (aat / np.outer(s, s)) * u_b[None, :]
 
 
 @dataclass(frozen=True)

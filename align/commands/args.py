@@ -28,6 +28,25 @@ def tolerance_limits(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def scale_stability(text: str) -> float:
+    """``--scale-stability-ppm``: the rule session.toml's key goes through too
+    (:func:`align.calibration.stability.stability_ppm`)."""
+    from align.calibration.stability import FLAG, stability_ppm
+
+    try:
+        return stability_ppm(float(text) if _is_number(text) else text, FLAG)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def add_decision_flags(p: argparse.ArgumentParser) -> None:
     """The tolerance and decision-rule flags of 'align run' and 'align lot'."""
     p.add_argument("--tolerance-arcsec", type=tolerance_limits, metavar="T|LO,HI",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, adc_range, number, signs, unique
+from align.commands.args import ALPHA, adc_range, number, scale_stability, signs, unique
 from align.commands.common import (
     plan,
     same_units,
@@ -42,7 +42,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
                           f"--units {units}" if args.units else None, args.adc_range,
-                          args.time_unit)
+                          args.time_unit, args.scale_stability_ppm)
     _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
@@ -170,6 +170,10 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="the ADC's rails in the readings' unit: a pose reaching one is left "
                    "out (warned) or refused (default: a pile-up at a pose's extreme value)")
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
+    k.add_argument("--scale-stability-ppm", type=scale_stability, metavar="PPM",
+                   help="how stable the scale factors are over the run, ± [ppm]: u covers a "
+                   "wander of that size (default without a temperature column: 20, a ±1 K "
+                   "room through the triad's thermal lag at 100 ppm/K; with one: 0)")
     # The detection settings' rules are StaticSettings.given's (session.toml's keys pass them
     # too): here only "a number".
     k.add_argument("--window", type=float, default=0.25,

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from align.calibration.stability import KEY as STABILITY_KEY
+from align.calibration.stability import stability_ppm
 from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
@@ -98,6 +100,7 @@ class CalibrationInput:
     check: Path | None = None
     table: TableKeys = field(default_factory=TableKeys)
     adc_range: tuple[float, float] | None = None  # the ADC's rails [output units]
+    scale_stability_ppm: float | None = None  # declared; None: the default (stability.py)
     detection: StaticSettings = field(
         default_factory=lambda: StaticSettings(names=session_names("[calibration]")))
     """Static detection of a continuous recording (keys ``window_s``, ``threshold``,
@@ -255,7 +258,7 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz", "time_unit",
-                    "adc_range", *DETECTION_KEYS},
+                    "adc_range", "scale_stability_ppm", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns"},
     "cameras": {"model", "roll_arcsec",
@@ -374,6 +377,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             _file(c["check"], f"{src}: [calibration] check") if "check" in c else None,
             _table_keys(c, f"{src}: [calibration]"),
             _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"),
+            (stability_ppm(c["scale_stability_ppm"], f"{src}: {STABILITY_KEY}")
+             if "scale_stability_ppm" in c else None),
             _detection(c, f"{src}: "))
 
     gon = None

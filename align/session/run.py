@@ -26,6 +26,7 @@ import numpy as np
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.output import with_units
+from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check
@@ -296,8 +297,11 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                                   rate_hz=tk.rate_hz, adc_range=c.adc_range,
                                                   time_unit=tk.time_unit,
                                                   warnings=left_out)
+            ppm, default = chosen_ppm(c.scale_stability_ppm,
+                                      res.calibration_poses.temp is not None)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
-                            signs_as="[calibration] scale_sign")
+                            signs_as="[calibration] scale_sign", scale_stability_ppm=ppm,
+                            stability_default=default)
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as

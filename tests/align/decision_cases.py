@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from align.calibration import calibrate, read_poses
-from align.calibration.plan import plan
 from align.fusion import fuse
 from align.gonio import measure_log
 from align.lens import LensRanges
@@ -39,7 +38,7 @@ from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render
 from synth.gonio import GonioSpec, drop_out, simulate, write_log
 from synth.session import SessionSpec, write_session
 from synth.tumble import Triad, TumbleSpec, recording, tumble, write_tumble_csv
-from tests.align.effects_cases import NOISE_V, poses_of, triad_of
+from tests.align.effects_cases import NOISE_V, plan28, poses_of, triad_of
 from tests.align.test_lens import _camera_model
 
 TARGET = 0.01
@@ -85,7 +84,7 @@ def tally(stage: str, inputs: str, run: Callable[[int], dict[str, bool]],
 
 
 # ------------------------------------------------------------------------------ calibration
-PLAN28 = tuple(map(tuple, plan(28).up))
+PLAN28 = tuple(map(tuple, plan28()))
 
 
 def calibration_poses(seed: int, poses: str = "cube14", effect: str = "clean") -> dict:

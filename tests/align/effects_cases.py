@@ -10,13 +10,24 @@ the calibration's reference time, and what the loop reported. The benchmark
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from align.calibration import Poses, calibrate, poses_from_samples
+from align.calibration.plan import plan
 from synth.tumble import Triad, TumbleSpec, r_matrix, tumble
+
+
+@functools.cache
+def plan28() -> np.ndarray:
+    """The 28-pose plan's attitudes (``plan(28).up``, deterministic): searched once per test
+    run (each search is ~1 s of CPU; four modules use it). Read-only."""
+    up = plan(28).up
+    up.setflags(write=False)
+    return up
 
 NOISE_V = 2.4e-5
 """Per-sample noise [V] (1e-5 g; 200 samples a pose: 0.7 µg per pose mean)."""
@@ -68,13 +79,16 @@ def truth_at(tr: Triad, t_ref: float) -> np.ndarray:
 
 
 def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "cube14",
-        up: np.ndarray | None = None) -> Outcome:
+        up: np.ndarray | None = None, stability: float | None = None) -> Outcome:
     """One seed of class ``name`` on the pose set ``poses`` of synth, or on the up directions
-    ``up`` in their order (a plan)."""
+    ``up`` in their order (a plan); ``stability``: the scale stability declared [ppm] (None:
+    the library's, no term)."""
     tr = triad_of(name)
     d = tumble(TumbleSpec(triad=tr, poses=poses, seed=seed,
                           up=None if up is None else tuple(map(tuple, up))))
     kw = {} if candidates is None else {"candidates": candidates}
+    if stability is not None:
+        kw["scale_stability_ppm"] = stability
     cal = calibrate(poses_of(d), np.sign(tr.k), **kw)
     m = cal.model
     est = np.concatenate([m.sensitivity(), m.beta, m.bias])
@@ -98,12 +112,13 @@ EXPECTED = {"cross": "cross_x_xy", "hysteresis": "bias_hysteresis",
 
 
 def sweep(name: str, seeds: Sequence[int], candidates: Sequence | None = None,
-          poses: str = "cube14", up: np.ndarray | None = None) -> dict:
+          poses: str = "cube14", up: np.ndarray | None = None,
+          stability: float | None = None) -> dict:
     """Over seeds: |z| RMS and max over the nine parameters, the fraction of seeds where the
     loop added the class's effect (``found``), any effect (``any_effect``: on clean data,
     false effects), reported unexplained structure, and widened u; the median and max of u
     over its noise-only value (``u_ratio_median``, ``u_ratio_max``)."""
-    out = [run(name, s, candidates, poses, up) for s in seeds]
+    out = [run(name, s, candidates, poses, up, stability) for s in seeds]
     z = np.array([o.z for o in out])
     return {"rms": float(np.sqrt(np.mean(z**2))), "max": float(np.max(np.abs(z))),
             "any_effect": float(np.mean([bool(o.effects) for o in out])),

@@ -17,9 +17,9 @@ from align.calibration.model import HYSTERESIS, SCALE_DRIFT, CalibrationStage
 from align.calibration.plan import identifiability, paper14, plan
 from axisbase.errors import InputError
 from synth.tumble import TumbleSpec, tumble
-from tests.align.effects_cases import poses_of, sweep, triad_of
+from tests.align.effects_cases import plan28, poses_of, sweep, triad_of
 
-PLAN = plan(28).up
+PLAN = plan28()
 FAST = ("cross", "hysteresis", "scale_drift")
 
 

@@ -16,10 +16,9 @@ import numpy as np
 import pytest
 
 from align.calibration import TriadModel, calibrate, poses_from_samples
-from align.calibration.plan import plan
 from align.calibration.widen import AMBIGUITY, USEFUL_FACTOR
 from synth.tumble import TumbleSpec, tumble, write_tumble_csv
-from tests.align.effects_cases import EXPECTED, poses_of, run, sweep, triad_of, truth_at
+from tests.align.effects_cases import EXPECTED, plan28, poses_of, run, sweep, triad_of, truth_at
 
 UNKNOWN = ("cross", "hysteresis", "scale_drift", "scale_warmup")
 
@@ -122,7 +121,7 @@ def test_hysteresis_that_the_poses_cannot_tell_apart_is_not_ok(tmp_path):
     k = [i for i, n in enumerate(w.names) if n.startswith("scale_factor_")]
     assert np.max(w.factor[k]) > USEFUL_FACTOR  # kept, not cut back
     assert np.allclose(cal.model.sensitivity_u(), w.u[k])
-    up = tuple(map(tuple, plan(28).up))
+    up = tuple(map(tuple, plan28()))
     cal = calibrate(poses_of(tumble(TumbleSpec(triad=tr, seed=0, up=up))), np.sign(tr.k))
     assert "bias_hysteresis" in [e.name for e in cal.loop.effects] and cal.ok
 
@@ -132,7 +131,7 @@ def test_aliasing_is_a_property_of_the_poses():
     """On the 28-pose plan the true effect is found and no alternative is aliased with it
     (the widening for ambiguity stays off) — the 14 poses' aliasing is theirs, not the
     effect's."""
-    up = plan(28).up
+    up = plan28()
     for name in ("cross", "hysteresis"):
         o = run(name, 13 if name == "cross" else 8, up=up)
         assert EXPECTED[name] in o.effects and not o.widened and np.abs(o.z).max() <= 3.0

@@ -98,3 +98,25 @@ def test_rows_that_are_not_a_log_are_refused_by_name():
         measure_log({"count": [1, 2], "counter": [1, 2], "ref": [1]}, 4)
     with pytest.raises(LogError, match=r"^rows: a list is not rows of a table"):
         measure_log([[1, 1, 1]], 4)
+
+
+def test_each_exclusion_carries_its_machine_code_and_the_document_validates(tmp_path):
+    # Missing and spurious pulses: two kinds of exclusion, each with its code beside the
+    # sentence a reader sees (a program tests the code, never the wording).
+    import goniometry.exclusions as gx
+    from align.contract import FORMATS, validate
+    from align.documents import gonio_document
+
+    spec = GonioSpec(revolutions=3000, seed=11, p_missing=1e-3, p_spurious=1e-3)
+    path, _ = _file_and_rows(tmp_path, spec)
+    run = measure_log(path, 4, latitude_rad=50.45 * DEG)
+    d = gonio_document(run, ["f0", "f1", "f2", "f3"], None, {}, [])
+    codes = {e["code"] for e in d["exclusions"].values()}
+    assert {"missing_pulse", "spurious_pulse"} <= codes, d["exclusions"]
+    for reason, e in d["exclusions"].items():
+        assert e["code"] == gx.CODES[reason] and e["count"] == len(e["lines"]), (reason, e)
+    assert d["format_version"] == FORMATS["gonio"] == 4
+    validate(d, "gonio")
+    # every reason the pass can give has its own code
+    reasons = {v for k, v in vars(gx).items() if k.startswith("R_")}
+    assert reasons == set(gx.CODES) and len(set(gx.CODES.values())) == len(reasons)

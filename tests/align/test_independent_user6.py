@@ -11,14 +11,13 @@ the figures seen in its reason.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.align import user6_inputs as U
+from tests.cli import run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 CHESS = ROOT.parent / "shared" / "data" / "real" / "opencv-chessboard"
@@ -26,10 +25,10 @@ FACES = ("--faces", "ref,y,x,z", "--latitude", "50.45")
 NO_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
 
 
-def align(*args, timeout=600):
-    p = subprocess.run([sys.executable, "-m", "align", *map(str, args)], cwd=ROOT,
-                       capture_output=True, text=True, timeout=timeout)
-    return p.returncode, p.stdout, p.stderr
+def align(*args):
+    """``align ARGS`` from the project's root, in this process (``tests.cli.run_cli``: the
+    same exit status and streams as ``python3 -m align`` without ~1.3 s of imports a call)."""
+    return tuple(run_cli(*args, cwd=ROOT))
 
 
 def json_of(*args):
@@ -304,9 +303,10 @@ def test_scale_warmup_without_temperature_column_k_at_the_mean_time_within_u(tmp
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
     "scale factor cycling +-100 ppm (HVAC +-1 K at 100 ppm/K, 15 min period), 60 s poses, no "
-    "temperature column: seed 2 k_x 2.41022 +- 1.6e-5 V/g while the true k spans "
-    "2.40976-2.41024: 24 u from k at the mean time, 11 u from the run's mean k, chi2/dof 1.42, "
-    "exit 0, ok, no warning (seed 0: structure flagged, u x3, still 9 u off, ok true)"))
+    "temperature column, nothing declared: the scale factors are assumed stable and the JSON "
+    "and terminal say so (scale_stability.assumed), but seed 2 k_x is 24 u from k at the mean "
+    "time and 11 u from the run's mean k, chi2/dof 1.42, exit 0, ok — a stated limit; "
+    "declared --scale-stability-ppm 100, covered (max 1.2 u: test_calibration_stability.py)"))
 def test_scale_cycling_with_temperature_without_a_temp_column_is_covered_or_not_ok(tmp_path):
     bad = []
     for seed in range(3):
@@ -453,7 +453,9 @@ def test_clean_vertical_mark_raises_no_stripe_warning(tmp_path):
                      seed=seed, bits=12)
         p = U.write_image(tmp_path / f"v{seed}.png", U.render(sc))
         rc, js, err = json_of("marks", p, *NO_LENS)
-        found += [w for w in js["warnings"] if "stripes" in w]
+        # A removed stripe pattern is a note, not a warning: both count as a false finding.
+        notes = [n for m in js["marks"] for n in m.get("notes", [])]
+        found += [w for w in js["warnings"] + notes if "stripes" in w]
     assert not found, found
 
 

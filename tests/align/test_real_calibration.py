@@ -172,10 +172,14 @@ def test_the_cli_keeps_the_pose_routes_results(name, expected, tmp_path):
     walk its samples show, u 1.6-2.8x the pose route's."""
     import json
 
+    from align.calibration.stability import chosen_ppm
     from align.cli import main
 
     poses, argv = _recording(name, tmp_path)
-    ref = calibrate(poses)
+    # The reference under the scale stability the CLI assumes (no temperature column: the
+    # default's term), so the two routes are compared under one model.
+    ppm, default = chosen_ppm(None, poses.temp is not None)
+    ref = calibrate(poses, scale_stability_ppm=ppm, stability_default=default)
     assert tuple(e.name for e in ref.loop.effects) == expected  # the reference as it was
     out = tmp_path / "cal.json"
     assert main(["calibrate", *argv, "--json", str(out)]) == 0

@@ -14,6 +14,7 @@ from align.cli import main
 from align.errors import InputError
 from align.session import load_session
 from synth.session import SessionSpec, write_session
+from tests.conftest import strip_images
 
 
 @pytest.fixture
@@ -157,8 +158,9 @@ def test_a_defect_in_a_stage_is_that_stages_internal_error(session, tmp_path, mo
 def test_a_calibration_unit_the_readings_contradict_is_caught(session, tmp_path, units, fails):
     """The synthetic triad reads ~2.4 V per g: declared m/s² (9.81 per g expected, 4x off:
     nearer another unit) the calibration stage fails naming the key; declared g (2.4x off:
-    not nearer another unit, but far beyond a triad's tolerance) it is warned of."""
-    folder = _copy(session, tmp_path)
+    not nearer another unit, but far beyond a triad's tolerance) it is warned of. (The
+    session without its images: the marks play no part in the calibration's units.)"""
+    folder = strip_images(session, tmp_path / "plain")
     _edit(folder, 'static = "tumble.csv"', f'static = "tumble.csv"\nunits = "{units}"')
     out = tmp_path / "r.json"
     main(["run", str(folder), "--json", str(out)])
@@ -186,10 +188,11 @@ def test_batch_runs_in_parallel_and_keeps_going(session, tmp_path, capsys):
     assert sorted(p.name for p in outdir.iterdir()) == ["unit7.json", "unit8.json"]
 
 
-def test_apply_corrects_readings_into_the_platform_frame(session, tmp_path):
-    """Readings of the session's own platform poses come back as their nominal directions."""
-    cal = tmp_path / "cal.json"
-    assert main(["run", str(session), "--calibration", str(cal)]) == 0
+def test_apply_corrects_readings_into_the_platform_frame(session, session21_result, tmp_path):
+    """Readings of the session's own platform poses come back as their nominal directions
+    (the platform calibration 'align run --calibration' wrote of this session, once for the
+    run: tests/conftest.py)."""
+    cal = session21_result.parent / "pc.json"
     readings = tmp_path / "readings.csv"
     lines = (session / "platform.csv").read_text().splitlines()
     readings.write_text("ux,uy,uz,t\n" + "\n".join(",".join(r.split(",")[1:])

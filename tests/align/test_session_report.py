@@ -186,6 +186,8 @@ def test_one_table_of_marks_plots_collapsed_links_resolve_and_size(run):
     assert len(text.encode()) <= 600_000
 
 
+@pytest.mark.slow  # (a headless browser, as the lot page's; the page's own checks — links,
+# images, size, first-screen order — stay in the default run)
 def test_the_page_in_headless_chromium(run, tmp_path):
     """The verdict and the serial on the first screen (1280 × 900), every in-page link
     resolving, every image decoded, nothing on the console."""

@@ -10,7 +10,7 @@ from scipy import stats
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import measure_frame
-from imaging.stripes import ALPHA, MIN_ROWS, _column_median, _row_levels_whole, find_stripes
+from imaging.stripes import ALPHA, find_stripes
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -80,27 +80,6 @@ def test_a_column_pattern_moves_a_near_vertical_mark_no_more_than_its_u():
     (r,) = measure_image(s.image, ranges=LensRanges.none())
     assert any("column stripes" in n for n in r.notes)
     assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
-
-
-def test_row_levels_from_the_16_bit_sort_are_the_float_ones_to_the_bit():
-    """The radix-sorted row levels (whole-number pixels, long rows) equal the float path's:
-    rows with masked runs, rows left with fewer than MIN_ROWS pixels, kept pixels at 65535
-    (the masked entries' stand-in) and at 0; non-whole pixels and short rows are declined."""
-    rng = np.random.default_rng(7)
-    v = rng.integers(0, 65536, (24, 1500)).astype(np.float32)
-    v[0, :40] = 65535.0
-    v[1, :40] = 0.0
-    out = rng.random(v.shape) < 0.1
-    out[2:5, 100:700] = True
-    out[5, MIN_ROWS - 1:] = True  # fewer than MIN_ROWS left: NaN in both
-    want = v.copy()
-    want[out] = np.nan
-    got = _row_levels_whole(v, out)
-    assert got is not None
-    assert np.array_equal(got, _column_median(want, axis=1), equal_nan=True)
-    assert np.isnan(got[5]) and np.isfinite(got[:5]).all()
-    assert _row_levels_whole(v + np.float32(0.5), out) is None
-    assert _row_levels_whole(v[:, :600], out[:, :600]) is None
 
 
 def _clean_marked(k: int, vignetting: float, offset_px: float, length_px: float):
