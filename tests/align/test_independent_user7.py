@@ -1,15 +1,18 @@
 """Independent user 7: the camera stage on real optics, from generators of my own.
 
 The images come from ``tests/align/user7_inputs.py`` (a flat-bottomed groove through an OpenCV
-lens, each pixel's area integrated, shot and read noise): nothing here imports the project, the
-CLI is run as a user runs it (``python3 -m align ...`` from the worktree root). The truth angle
-is the groove's direction in the normalised (pinhole) plane, the physical direction on a
-fronto-parallel housing face. Right behaviour passes; each defect is written as the tool
-should behave and marked ``xfail(strict=True)`` with the figures I saw.
+lens, each pixel's area integrated, shot and read noise) and import nothing from the project;
+the CLI runs in process through ``align.cli.main(argv)`` (``ALIGN7_SUBPROCESS=1``: as
+``python3 -m align`` from the worktree root). The truth angle is the groove's direction in the
+normalised (pinhole) plane, the physical direction on a fronto-parallel housing face. Right
+behaviour passes; each defect is written as the tool should behave and marked
+``xfail(strict=True)`` with the figures I saw.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -32,8 +35,21 @@ Z1 = 3.0
 
 
 def align(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "align", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=600)
+    """``align ARGS`` in process through ``align.cli.main(argv)`` (docs/changelog.md: tests call
+    the CLI in-process; it returns the exit status), with its output captured; every path
+    given is absolute. ``ALIGN7_SUBPROCESS=1`` runs ``python3 -m align`` instead."""
+    if os.environ.get("ALIGN7_SUBPROCESS"):
+        return subprocess.run([sys.executable, "-m", "align", *args], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+    from align.cli import main  # the CLI's documented entry point, imported where used
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main(list(args))
+        except SystemExit as e:  # argparse's own refusals
+            rc = e.code if isinstance(e.code, int) else 2
+    return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
 
 
 def marks(paths: list[str], *args: str) -> tuple[int, dict, str]:
