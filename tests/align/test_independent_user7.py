@@ -22,6 +22,7 @@ import sys
 import numpy as np
 import pytest
 
+from align.cli import main as align_main  # the CLI's entry point: argv -> exit status
 from tests.align import user7_inputs as ui
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -41,12 +42,10 @@ def align(*args: str) -> subprocess.CompletedProcess:
     if os.environ.get("ALIGN7_SUBPROCESS"):
         return subprocess.run([sys.executable, "-m", "align", *args], cwd=ROOT,
                               capture_output=True, text=True, timeout=600)
-    from align.cli import main  # the CLI's documented entry point, imported where used
-
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
-            rc = main(list(args))
+            rc = align_main(list(args))
         except SystemExit as e:  # argparse's own refusals
             rc = e.code if isinstance(e.code, int) else 2
     return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
