@@ -160,8 +160,15 @@ def crossing_stretch(c, o, half_px: float, extend: bool = False
     o_t = sorted(float((p0 + s * uo) @ uc) for s in (o.t_start_px, o.t_end_px))
     gap = max(o_t[0] - c.t_end_px, c.t_start_px - o_t[1])
     beside = gap > o.t_end_px - o.t_start_px
+    # The crossing itself must lie on c (within its extent, give or take the window): two
+    # near-parallel lines side by side whose lines would meet far beyond c's ends (a family
+    # of window edges 1-3 deg apart: hundreds of px of "stretch") are neighbours, not a
+    # crossing (building.jpg lost 8 of 14 lines that way).
+    t_x = float((p0 + s_x * uo) @ uc)
+    on_c = c.t_start_px - half_px <= t_x <= c.t_end_px + half_px
     # (Twice that stretch: the coarse search's ridge fuses at a filter width further out.)
-    if not (extend and not beside and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
+    if not (extend and not beside and on_c
+            and o.t_start_px - 2 * fused <= s_x <= o.t_end_px + 2 * fused):
         s_lo, s_hi = max(s_lo, o.t_start_px), min(s_hi, o.t_end_px)
     if s_lo >= s_hi:
         return None
