@@ -194,10 +194,21 @@ def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     # Per line, the lines that cover it first, then whether two of them lie on either side
     # of it in direction: n^2 coverage tests, not a test per triple (n^3: building.jpg's
     # ~400 candidates took ~100 s CPU that way).
+    if not cands:
+        return []
+    angle = np.array([o.angle_rad for o in cands])
+    half = np.array([max(6.0, 2 * o.thickness_px) for o in cands])
     out = []
     for c in cands:
         whole = (c.t_start_px, c.t_end_px)
-        side = [o for o in cands if o is not c and o.dark == c.dark and o.fused is None
+        # A line covers c only if its window stretch, 2 half / sin of the angle between
+        # them, spans c's length less the slack at both ends (a necessary condition, so the
+        # few left are tested in full).
+        sin = np.abs(np.sin(angle - c.angle_rad))
+        with np.errstate(divide="ignore"):
+            may = 2 * half / sin >= (whole[1] - whole[0] - 2 * half) - 1e-6
+        side = [o for o, m in zip(cands, may, strict=True)
+                if m and o is not c and o.dark == c.dark and o.fused is None
                 and _covers(c, o, max(6.0, 2 * o.thickness_px), whole)]
         if not _straddled(c, side):
             out.append(c)
