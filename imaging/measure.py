@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import band_indices
+from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
 from imaging.centres import Centres, sample_centres
 from imaging.crossmask import crossing_skip, fused_error
@@ -463,7 +463,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # for an oriented periodic background (nothing masked) and searched again without it.
     pre = None
     if not cands:
-        cleaned, pre = find_oriented(image, [], top)
+        cleaned, pre = find_oriented(image, None, top)
         if pre.found:
             try:
                 again = detect_lines(cleaned, min_length_px=min_length_px,
@@ -490,7 +490,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
     member = {i for g in det.families for i in g}
-    bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
+    # The lines' bands, left out of both background tests: one mask for the frame.
+    bands = band_mask(image.shape, [band_indices(image, c) for c in (*cands, *det.unreported)])
     # Stripes at any angle (a surface's lay): divided out first — an oblique pattern leaves
     # a profile along the columns that the row/column test below would take for its own.
     image, oriented = find_oriented(image, bands, top)
@@ -503,7 +504,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
             det = again
             cands = [require_single(det.marks, where)] if expect_one else det.marks
             member = {i for g in det.families for i in g}
-            bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
+            bands = band_mask(image.shape,
+                              [band_indices(image, c) for c in (*cands, *det.unreported)])
     if pre is not None and pre.found:
         oriented = pre.then(oriented)
     # Row/column fixed-pattern noise: tested on the background away from every line found,

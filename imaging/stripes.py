@@ -251,18 +251,17 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
                    offsets_var=np.where(np.isfinite(off), var, 0.0))
 
 
-def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
+def find_stripes(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
                  alpha: float = ALPHA) -> tuple[np.ndarray, tuple[Stripes, Stripes]]:
     """The image with its row and column stripes removed where found and removable, and the
     two findings (columns, rows).
 
-    ``masks``: flat pixel indices of each mark's band (left out of the background; their
-    columns/rows must have an offset for a removal). Clipped pixels (0 or ``full_scale``)
-    are left out too.
+    ``mask``: True on the marks' bands (:func:`imaging.band.band_mask`; None: no marks), left
+    out of the background; their columns/rows must have an offset for a removal. Clipped
+    pixels (0 or ``full_scale``) are left out too.
     """
-    mask = np.zeros(image.shape, bool)
-    for idx in masks:
-        mask.flat[idx] = True
+    if mask is None:
+        mask = np.zeros(image.shape, bool)
     cols = column_stripes(image, mask, full_scale, alpha)
     rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row")
     if not (cols.removed or rows.removed):
