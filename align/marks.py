@@ -137,17 +137,25 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # curvature times that shift.
         u_mid = (m.profile.width_px / 2 + m.profile.blur_px) / np.sqrt(3) / np.sqrt(2)
         ends = float(abs(rep.after.payload["curvature_per_px"]) * u_mid)
+        # (Where the ends lie along the line; across it, the centres' noise near each end
+        # moves the chord too: ``chord_u_rad``, added to the ends term of a bent mark.)
         # A bow is a finding only if it matters to the angle: what it does for certain —
         # its ends term, and the straight fit with the bow's column against without it —
         # must widen u by at least NEGLIGIBLE_BOW. (A 0.025 +- 0.007 px bow on a clean
         # mark, 3.6 sigma, was called bent: its own sigma says it is there, not that it
-        # changes any reading.) The chord is not in the test: its ends' noise is not the bow's.
+        # changes any reading.) The chord is in the test only by how far it differs from the
+        # fit beyond its own noise (at alpha): its ends' noise is not the bow's, but a groove
+        # whose ends lie off the fitted curve (an S the parabola averages away) is read
+        # differently end to end, for certain.
         shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        if np.hypot(ends, shift) < np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au:
+        chord_u = float(np.hypot(ends, rep.after.payload["chord_u_rad"]))
+        off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
+        if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (
+                np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au):
             terms["bow_ends"], terms["bow_vs_straight"] = ends, shift
             au = float(np.sqrt(au**2 + ends**2 + shift**2))
         else:
-            au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, ends, lens_bow_px,
+            au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, chord_u, lens_bow_px,
                                   alpha, f"{image} mark {index}")
             a = chord
     return MarkResult(
