@@ -131,7 +131,8 @@ class MarkStage:
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
-            payload=dict(zip(("chord_rad", "curvature_per_px", "chord_u_rad"),
+            payload=dict(zip(("chord_rad", "curvature_per_px", "chord_u_rad",
+                              "chord_bound_rad"),
                              _chord_angle(q, lf, terms, m.ends_px, m.chol), strict=True),
                          offset_px=lf.offset_px),
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
@@ -203,11 +204,12 @@ sagitta, long enough to average the centres' noise."""
 
 
 def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term], ends: np.ndarray | None = None,
-                 chol: np.ndarray | None = None) -> tuple[float, float, float]:
+                 chol: np.ndarray | None = None) -> tuple[float, float, float, float]:
     """Angle of the chord between the groove's own positions at its ``ends`` (the measured
-    centres' span when None), the fitted curve's curvature, and the chord's standard
-    uncertainty from the centres' noise [rad, 1/px, rad] (the straight fit's angle, 0 and 0
-    when no bow is fitted): how a bent mark's direction is read end to end.
+    centres' span when None), the fitted curve's curvature, the chord's standard
+    uncertainty from the centres' noise, and the bound on how far the ends' extrapolation
+    beyond the last centres may turn it [rad, 1/px, rad, rad]: how a bent mark's direction is
+    read end to end, and how far a mark whose residual keeps structure may turn from its fit.
 
     The bow is b (t - t_m)^2 across the line, so the fitted curve's chord between t0 and t1
     turns from the fitted line by b (t0 + t1 - 2 t_m). A groove of another shape (an S: its
@@ -215,37 +217,42 @@ def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term], ends: np.ndarray | No
     each end is moved across the line by the centres' misfit there (a straight line through
     the residuals of the last :data:`END_WINDOW`-th of the span, taken at the end): the
     chord is the groove's, not the model's."""
-    if not any(t.name == BEND for t in terms):
-        return float(lf.angle_rad), 0.0, 0.0
-    j = MarkStage._col_index(terms, BEND)
     u, _ = line_frame(lf.angle_rad)
     t = q @ u
     tm = (t.min() + t.max()) / 2
     t0, t1 = (t.min(), t.max()) if ends is None else tuple(ends @ u)
-    b = float(lf.beta[j])
+    bent = any(tt.name == BEND for tt in terms)
+    b = float(lf.beta[MarkStage._col_index(terms, BEND)]) if bent else 0.0
     w = np.ptp(t) / END_WINDOW
     r, s = lf.residuals_px, lf.sigma_px
     R = None if chol is None else chol @ chol.T
     lo, hi = (t0, t1) if t0 <= t1 else (t1, t0)
-    shift, var = [], 0.0
+    shift, var, amb = [], 0.0, 0.0
     for near, te in ((t <= t.min() + w, lo), (t >= t.max() - w, hi)):
         idx = np.flatnonzero(near)
-        if len(idx) < 3:  # too few centres to read an end: the model's curve stands
+        if len(idx) < 5:  # too few centres to read an end: the model's curve stands
             shift.append(0.0)
             continue
         # The misfit near this end, a straight line in t, taken at the groove's end (its
         # slope matters: an S leaves the parabola at a slant there, and a window's mean
         # would sit a slope times half the window off the end).
-        X = np.column_stack([np.ones(len(idx)), t[idx] - te])
-        g = np.linalg.pinv(X / s[idx, None])[0] / s[idx]  # the end value's weights
+        X = np.column_stack([np.ones(len(idx)), t[idx] - te, (t[idx] - te) ** 2])
+        g = np.linalg.pinv(X[:, :2] / s[idx, None])[0] / s[idx]  # the end value's weights
         shift.append(float(g @ r[idx]))
         cov = np.outer(s[idx], s[idx]) * (R[np.ix_(idx, idx)] if R is not None
                                           else np.eye(len(idx)))
         var += float(g @ cov @ g)
+        # The groove's end lies beyond the last centres (its tip is not read): how far a
+        # curving misfit may carry it from the straight extrapolation — the quadratic's
+        # value there against the line's (a bound, Type B).
+        # Only what stands beyond that difference's own noise (2 sigma) counts: on a groove
+        # the model fits, the quadratic's extrapolation is noise, not a curve.
+        dg = np.linalg.pinv(X / s[idx, None])[0] / s[idx] - g
+        amb += max(0.0, abs(float(dg @ r[idx])) - 2 * float(np.sqrt(dg @ cov @ dg)))
     d0, d1 = (shift[0], shift[1]) if t0 <= t1 else (shift[1], shift[0])
     span = max(abs(t1 - t0), 1.0)
     turn = b * (t0 + t1 - 2 * tm) + (d1 - d0) / (t1 - t0 if t1 != t0 else 1.0)
-    return float(lf.angle_rad - turn), 2 * b, float(np.sqrt(var) / span)
+    return float(lf.angle_rad - turn), 2 * b, float(np.sqrt(var) / span), amb / span
 
 
 def _bend(fit: StageFit) -> Term:

@@ -148,7 +148,8 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # whose ends lie off the fitted curve (an S the parabola averages away) is read
         # differently end to end, for certain.
         shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        chord_u = float(np.hypot(ends, rep.after.payload["chord_u_rad"]))
+        chord_u = float(np.sqrt(ends**2 + rep.after.payload["chord_u_rad"]**2
+                                + rep.after.payload["chord_bound_rad"]**2 / 3))
         off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
         if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (
                 np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au):
@@ -158,6 +159,16 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
             au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, chord_u, lens_bow_px,
                                   alpha, f"{image} mark {index}")
             a = chord
+    elif rep.unexplained_structure:
+        # Structure no effect named (an S-shaped groove, whose odd bow no parabola takes):
+        # the straight fit is then not the groove's end-to-end direction for certain, and
+        # which one the user means is not in the image: the truth anywhere between the fit
+        # and the chord between the groove's ends (or as far as their extrapolation beyond
+        # the last centres may carry it), uniform (Type B), about the fit the bound / sqrt 3.
+        chord = float(rep.after.payload["chord_rad"])
+        terms["structure_chord_vs_fit"] = (abs(_wrap(a - chord))
+                                           + rep.after.payload["chord_bound_rad"]) / np.sqrt(3)
+        au = float(np.hypot(au, terms["structure_chord_vs_fit"]))
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
