@@ -28,7 +28,8 @@ from imaging.detect import (
     wrap_angle,
 )
 from imaging.errors import ImageInputError
-from imaging.families import detect_lines, grating_note
+from imaging.families import detect_lines
+from imaging.grating import grating_note
 from imaging.gridphase import grid_phase_bound_px, grid_phase_u_rad
 from imaging.groove import ProfileFit
 from imaging.io import clipped_note, full_scale
