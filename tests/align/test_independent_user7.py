@@ -317,8 +317,6 @@ def test_decentred_radial_lens_is_not_called_not_a_lens(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="camera JSON with u = {'k1': 'abc'}: 'not a usable camera "
-                   "file: could not convert string to float: 'abc'' - the key is not named")
 def test_bad_camera_u_names_the_key(tmp_path):
     lens = ui.Lens(540.0, 540.0, 319.5, 239.5)
     p = tmp_path / "badu.json"
