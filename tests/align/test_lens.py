@@ -159,6 +159,11 @@ def test_lens_ranges_flag_and_its_errors():
                       ("max_u_arcsec=0", "> 0")):
         with pytest.raises(InputError, match=said):
             LensRanges.parse(bad)
+    # beside a camera model only the bound on u applies; a range would be silently ignored
+    assert LensRanges.parse("max_u_arcsec=20", beside="--camera").max_u_arcsec == 20.0
+    for given in ("k1=0.1", "max_u_arcsec=20,pp_px=5,aspect=0"):
+        with pytest.raises(InputError, match=r"--lens (k1|pp_px,aspect) with --camera"):
+            LensRanges.parse(given, beside="--camera")
 
 
 def test_default_grid_two_cases():
