@@ -88,6 +88,37 @@ class GrooveEnds:
         return self.end_max_px - self.start_min_px
 
 
+def _bin_rms(j: np.ndarray, vals: np.ndarray, p: np.ndarray, dt: np.ndarray, nb: int,
+             good: np.ndarray) -> np.ndarray:
+    """Each bin's residual RMS [DN] about level + (amp + slope dt) x profile: the groove's
+    depth may change within the bin (dt [px] along the line from the bin's centre). A square
+    end drops the depth from full to none over a few blur widths, and a 1-px bin across it
+    misfits level + amp x profile by far more than the noise — it was read as an
+    obstruction on every clean end. What the slope cannot absorb is no groove: a speck's
+    level or shape. (Per-bin 3x3 normal equations from bincount sums; no library fits many
+    tiny grouped regressions at once.)"""
+    cols = (np.ones_like(p), p, p * dt)
+    A = np.empty((nb, 3, 3))
+    b = np.empty((nb, 3))
+    for r in range(3):
+        b[:, r] = np.bincount(j, cols[r] * vals, nb)
+        for c in range(r, 3):
+            A[:, r, c] = A[:, c, r] = np.bincount(j, cols[r] * cols[c], nb)
+    cnt = A[:, 0, 0]
+    # A bin too short along the line to tell a slope (or with no spread in dt) keeps 2 terms.
+    ok = good & (cnt >= 5) & (np.abs(np.linalg.det(A)) > 1e-9 * np.prod(
+        np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300), axis=1))
+    A[~ok, 2, :] = A[~ok, :, 2] = 0.0
+    A[~ok, 2, 2] = 1.0
+    b[~ok, 2] = 0.0
+    A[~good] = np.eye(3)
+    x = np.linalg.solve(A, b[..., None])[..., 0]
+    pred = x[j, 0] + x[j, 1] * p + x[j, 2] * p * dt
+    ss = np.bincount(j, (vals - pred) ** 2, nb)
+    dof = np.maximum(cnt - np.where(ok, 3, 2), 1)
+    return np.where(good, np.sqrt(ss / dof), np.nan)
+
+
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                 reach_px: float = 40.0) -> GrooveEnds:
     """The groove's ends, each checked for an obstruction (see the module docstring).
@@ -130,16 +161,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
     cnt = np.bincount(j, minlength=nb).astype(float)
     sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
-    sv, spv, svv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb), \
-        np.bincount(j, vals * vals, nb)
+    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
     det = cnt * spp - sp * sp
     good = (cnt >= 4) & (det > 1e-9 * np.maximum(cnt * spp, 1e-300))
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
-    ss = svv - level * sv - amp * spv
-    rms = np.where(good, np.sqrt(np.maximum(ss, 0) / np.maximum(cnt - 2, 1)), np.nan)
     tb = t0 - reach_px + np.arange(nb)
+    rms = _bin_rms(j, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
         return same
