@@ -29,6 +29,8 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.band import _band
+from imaging.centres import Centres
+from imaging.detect import line_frame
 from imaging.groove import ProfileFit, ProfileTable
 
 LEVEL_K = 4.5
@@ -119,8 +121,25 @@ def _bin_rms(j: np.ndarray, vals: np.ndarray, p: np.ndarray, dt: np.ndarray, nb:
     return np.where(good, np.sqrt(ss / dof), np.nan)
 
 
+def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | None:
+    """The groove's centre across the profile's line as a smooth function of t [px]: a
+    weighted quadratic through its usable measured ``centres`` (raw image); None from fewer
+    than 5. A lens bows a straight groove's image by a smooth curve (pixels at a frame's
+    corner), and off a straight band the groove's ends looked shallow and misfit — they were
+    read as obstructions.
+    """
+    u, n = line_frame(pf.angle_rad)
+    xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
+    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
+    if good.sum() < 5:
+        return None
+    return np.polynomial.Polynomial.fit(xy[good] @ u, xy[good] @ n - pf.offset_px, 2,
+                                        w=1 / sigma[good])
+
+
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
-                reach_px: float = 40.0) -> GrooveEnds:
+                reach_px: float = 40.0, path: np.polynomial.Polynomial | None = None
+                ) -> GrooveEnds:
     """The groove's ends, each checked for an obstruction (see the module docstring).
 
     Parameters
@@ -133,6 +152,9 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         Its half-depth ends [px] (:func:`imaging.profile.groove_extent`).
     reach_px : float
         How far beyond each end to look at least [px] (and as far as the groove is long).
+    path : numpy.polynomial.Polynomial or None
+        The groove's centre across the line as a function of t [px] (:func:`groove_path`,
+        extrapolated past the ends); None: on the line.
 
     Returns
     -------
@@ -146,8 +168,16 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # A speck across the middle can leave a piece seen beyond it as long as the rest.
     reach_px = max(reach_px, t1 - t0)
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    span = np.linspace(t0 - reach_px, t1 + reach_px, 65)
+    # The band follows the groove's path (clipped: a wild extrapolation is no path).
+    bow = (lambda tt: np.clip(path(tt), -half, half)) if path is not None else None
+    wide = half + (float(np.abs(bow(span)).max()) if bow is not None else 0.0)
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0 - reach_px, t1 + reach_px,
-                          half)
+                          wide)
+    if bow is not None:
+        e = e - bow(t)
+        near = np.abs(e) <= half
+        vals, e, t = vals[near], e[near], t[near]
     ok = (vals < pf.full_scale_dn) & (vals > 0)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
     clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int)

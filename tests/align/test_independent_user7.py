@@ -264,9 +264,6 @@ def test_ruled_scale_camera_model_non_square_pixels(tmp_path):
 # ------------------------------------------------------------------------------------------
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a clean, square-ended 180 px groove, no lens, no dust: "
-                   "'both ends under an obstruction (dust or print): length 180 px seen, up to "
-                   "184 px hidden under it' on every such mark")
 def test_clean_square_ended_groove_has_no_obstruction_note(tmp_path):
     m = ui.Mark((0.0, 0.0), 20.0, 180)
     rc, d, found = one_mark(tmp_path, ui.Scene(marks=[m], supersample=2), 1, *FREE)
@@ -275,9 +272,6 @@ def test_clean_square_ended_groove_has_no_obstruction_note(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 180 px (ideal) corner mark through the exact model of a "
-                   "k1_cv = -0.28 lens: its image is 163.6 px long, the tool reports length 138 px "
-                   "'seen, up to 167 px hidden under an obstruction (dust or print)' - no dust")
 def test_camera_model_corner_mark_length(tmp_path):
     lens = ui.Lens(538.4, 538.6, 338.3, 236.5, (-0.2787, 0.0785, 0.0023, -0.00077, -0.0063))
     m = ui.Mark((-200.0, -140.0), 20.0, 180)
