@@ -290,11 +290,6 @@ def test_camera_model_corner_mark_length(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="5 straight marks through a pincushion lens inside the "
-                   "default ranges (k1 +0.066 at the half-diagonal, principal point (+10.5, -9.5) "
-                   "px, p = 0): 'lens p1 = 0.00139 +- 0.00014 ... beyond any lens: not a lens', "
-                   "p2 = -0.00198 +- 0.00021 likewise - it is the radial term about the offset "
-                   "principal point, inside the declared pp_px = 20")
 def test_decentred_radial_lens_is_not_called_not_a_lens(tmp_path):
     lens = ui.Lens(540.0, 540.0, 330.0, 230.0, (0.12, 0.0, 0.0, 0.0, 0.0))
     ms = [ui.Mark((-150.0, -150.0), 5.0, 250), ui.Mark((150.0, 150.0), -8.0, 250),
@@ -456,11 +451,6 @@ def test_session_undeclared_lens_is_not_ok_but_E_honest(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="camera A is the real sample lens (my calibration) with "
-                   "its ranges declared to cover it (lens_k1 0.2 >= 0.154, lens_k2 0.03 >= 0.024, "
-                   "lens_p 0.002 >= 0.0017, pp 18.8 px <= 20): 'lens p1 = 0.00264 +- 0.00011 ... "
-                   "beyond any lens (|p1| <= 0.002): not a lens' and the straight z_Ar mark "
-                   "'is bent (sagitta -0.402 px; the lens can make at most 0 px here)'")
 def test_session_lens_inside_declared_ranges_no_false_bend(tmp_path):
     f = tmp_path / "s"
     keys = {"A": ["lens_k1 = 0.2", "lens_k2 = 0.03", "lens_p = 0.002", "lens_pp_px = 20.0"],
