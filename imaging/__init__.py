@@ -18,7 +18,8 @@ from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.ends import GrooveEnds, groove_ends
 from imaging.errors import ImageInputError
-from imaging.families import Detection, detect_lines, grating_note
+from imaging.families import Detection, detect_lines
+from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note

@@ -158,6 +158,10 @@ class Search:
     top: float
     min_fill: float
     min_pixel_snr: float
+    first: tuple[MarkCandidate, ...] = ()
+    """The first search's coarse candidates (at its ``min_length_px``), confirmed or not: a
+    second pass at a shorter length splits some lines differently (a numeral's strokes beside
+    a line's end become pieces of it there), so it looks at these too."""
 
     def candidates(self, min_length_px: float, keep=None) -> list[MarkCandidate]:
         """Coarse candidates at least ``min_length_px`` long (whole-image coordinates are
@@ -237,7 +241,8 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
         shift = np.array([x0 + (w - 1) / 2 - (w_full - 1) / 2, y0 + (h - 1) / 2 - (h_full - 1) / 2])
     search = Search([], image, shift, f, layers, centre_small, noise_full, top, min_fill,
                     min_pixel_snr)
-    return replace(search, marks=search.confirm(search.candidates(min_length_px)))
+    first = search.candidates(min_length_px)
+    return replace(search, marks=search.confirm(first), first=tuple(first))
 
 
 def _candidates(layers, min_length_px: float, f: int, centre_small: np.ndarray,

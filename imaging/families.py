@@ -15,8 +15,8 @@ the second search, and a family's lines shorter than that are counted as unrepor
 A *grating* — many identical lines at a fine pitch, none standing out — is not measured:
 the search reads a row of identical lines as a surface's lay (:func:`imaging.detect.
 distinctness`) and the groove model needs each line alone in its window.
-:func:`grating_note` recognises one (a sharp peak of the image's power spectrum) so that the
-refusal says so, with its pitch and direction.
+:func:`imaging.grating.grating_note` recognises one (a sharp peak of the image's power
+spectrum) so that the refusal says so, with its pitch and direction.
 
 Geometry as in :mod:`imaging.detect` (pixels relative to the image centre; angles [rad]).
 """
@@ -286,6 +286,83 @@ def _span_members(found: list[MarkCandidate], group: Sequence[int]) -> None:
         found[i] = dc_replace(c, t_start_px=t0, t_end_px=t1)
 
 
+JOIN_PASSES = 4
+"""Most passes of :func:`_join` (each with the family's typical length as it then stands)."""
+
+
+def _near_step(q: float, anchors: np.ndarray, pitch: float) -> bool:
+    """Whether position ``q`` [px] lies a whole (or half) step of the local pitch from the
+    nearest of the family's lines (``anchors``, sorted positions), at most :data:`MAX_GAP`
+    steps away.
+
+    Through a lens the ruling is not uniform in the image (barrel distortion: a 1600 x 1200
+    scale at 54 px pitch read 50 px at the frame's sides, k1 -0.15): a ruling fitted to
+    lines on one side misses those across the middle by more than its tolerance. The local
+    pitch is the nearest line's gap to its neighbour on the far side from ``q`` (else on
+    ``q``'s side), in whole steps of ``pitch``."""
+    if anchors.size < 2:
+        return False
+    j = int(np.argmin(np.abs(anchors - q)))
+    d = q - anchors[j]
+    far = j - 1 if d > 0 else j + 1
+    near = j + 1 if d > 0 else j - 1
+    nb = far if 0 <= far < anchors.size else near
+    gap = abs(float(anchors[nb] - anchors[j]))
+    local = gap / max(1.0, float(np.rint(gap / pitch)))
+    if abs(local / pitch - 1) > 0.25:
+        local = pitch
+    k = d / local
+    return abs(k) <= MAX_GAP + GRID_TOLERANCE and abs(2 * k - np.rint(2 * k)) < GRID_TOLERANCE
+
+
+def _join(found: list[MarkCandidate], members: list[MarkCandidate],
+          pool: list[MarkCandidate], on_ruling, half_way, position, search, pitch: float,
+          floor: float) -> None:
+    """Lines of ``pool`` (coarse candidates) on the family's ruling, from ``floor`` px long,
+    confirmed and added to ``found`` (a piece of a member the first search joined otherwise
+    is that member: the longer one stays).
+
+    The seeds are the lines the first search confirmed: on a scale whose short graduations
+    sit at a pitch under its relief window those are the long and medium ones, alike nothing
+    beside them, and half their median length is about the short ones' whole length (a
+    1600 x 1200 scale at 54 px pitch: short lines of 147 px seen as 78-108 px ridges, 4 of 29
+    missed). The family's typical line is what its members are once joined: after each pass
+    the floor is half their median length, and lines between the new floor and the old one
+    are looked at again; lines joined in one pass are the next pass's neighbours to step
+    from (:func:`_near_step`), at most :data:`JOIN_PASSES` passes. ``position``: a line's
+    place across the family [px].
+    """
+    lengths = [m.length_px for m in members]
+    anchors = sorted(position(m) for m in members)
+    tried = [False] * len(pool)
+    for _ in range(JOIN_PASSES):
+        extra = []
+        for k, c in enumerate(pool):
+            if not tried[k] and c.length_px >= floor and on_ruling(c, np.array(anchors)):
+                tried[k] = True
+                extra.append(c)
+        if not extra:
+            return
+        # The relief beside a member is judged between it and its neighbours: the next
+        # graduation is no machining streak.
+        step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
+        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, 20, 60))
+        for c in search.confirm(extra, reach):
+            twin = next((j for j, o in enumerate(found) if o.dark == c.dark
+                         and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
+                         and _overlap(c, o)), None)
+            if twin is None:
+                found.append(c)
+            elif c.length_px > found[twin].length_px:
+                found[twin] = c
+            else:
+                continue
+            lengths.append(c.length_px)
+            anchors.append(position(c))
+        anchors.sort()
+        floor = min(floor, MEMBER_FRACTION * float(np.median(lengths)))
+
+
 def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_marks: int = 8,
                  roi: Roi | None = None, top: float | None = None,
                  families: bool = True) -> Detection:
@@ -357,8 +434,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         shift = search.shift
         members = [found[i] for i in g]
 
-        def on_ruling(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
-                      members=members, shift=shift, lo=lo, hi=hi) -> bool:
+        def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
+                      pitch=pitch, members=members, shift=shift, lo=lo, hi=hi) -> bool:
             # Coarse candidates are in the search's (roi) frame: compare in the image's.
             p = _middle(c) + shift
             q = float(p @ line_frame(ref)[1])
@@ -369,7 +446,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                     # (their gap may be any multiple of the pitch): lines near them only.
                     # (Or half-way: every other graduation alike its neighbours was refused
                     # as a lay, the ruling seen at twice its pitch.)
-                    and (abs(2 * k - np.rint(2 * k)) < GRID_TOLERANCE if len(members) >= 3
+                    and ((abs(2 * k - np.rint(2 * k)) < GRID_TOLERANCE
+                          or _near_step(q, anchors, pitch)) if len(members) >= 3
                          else lo - pitch * MAX_GAP < q < hi + pitch * MAX_GAP))
 
         def half_way(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
@@ -378,8 +456,6 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             return abs(k - np.rint(k)) > GRID_TOLERANCE
 
         pieces = search.candidates(PIECE_FRACTION * typical)
-        extra = [c for c in pieces if c.length_px >= MEMBER_FRACTION * typical
-                 and on_ruling(c)]
         # Pieces along a member (it was cut at a numeral or a dust speck) extend it, across
         # a gap under half the typical length, to at most the longest member's length (the
         # ridge fades over a speck's halo): its measurement then spans the whole graduation
@@ -398,20 +474,11 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                 t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
                 if gap < MEMBER_FRACTION * typical and t1 - t0 <= 1.1 * longest:
                     found[j] = dc_replace(o, t_start_px=t0, t_end_px=t1)
-        # The relief beside a member is judged between it and its neighbours: the next
-        # graduation is no machining streak.
-        step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
-        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, 20, 60))
-        for c in search.confirm(extra, reach):
-            # A piece of a member (the first search joined it differently) is that member:
-            # the longer one stays.
-            twin = next((j for j, o in enumerate(found) if o.dark == c.dark
-                         and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
-                         and _overlap(c, o)), None)
-            if twin is None:
-                found.append(c)
-            elif c.length_px > found[twin].length_px:
-                found[twin] = c
+        # Lines that join: the second search's, and the first's it split differently (a
+        # numeral's strokes beside a line's end become pieces there, none as long).
+        pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
+        _join(found, members, pool, on_ruling, half_way,
+              lambda c, ref=ref: _position(c, ref), search, pitch, MEMBER_FRACTION * typical)
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
@@ -472,107 +539,3 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     return Detection([found[i] for i in keep],
                      tuple(tuple(index[i] for i in g) for g in groups),
                      tuple(found[i] for i in others[max_marks:] + short))
-
-
-GRATING_PEAK = 30.0
-"""A spectral peak this many times the median power at its spatial frequency (over all
-directions) is a grating's."""
-GRATING_SHARE = 0.05
-"""... and holding at least this share of the image's power beyond the longest pitch."""
-GRATING_MAX_PITCH_PX = 120.0
-"""Longest pitch looked for [px] (coarser rulings are found line by line)."""
-
-
-def _rings(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """For an rfft2 of this (rows, columns) shape: frequencies fy (rows, 1), fx (1, cols),
-    |f|, and each frequency's ring index round(|f| min(shape))."""
-    n_r, n_c = shape
-    fy = np.fft.fftfreq(n_r)[:, None]
-    fx = np.fft.rfftfreq(n_c)[None, :]
-    f = np.hypot(fx, fy)
-    return fy, fx, f, np.rint(f * min(n_r, n_c)).astype(int)
-
-
-def spectral_grating(a: np.ndarray, max_pitch_px: float = 120.0
-                     ) -> tuple[float, float] | None:
-    """(pitch [px], line direction [rad]) of a grating filling the patch ``a`` [DN], or None.
-
-    The spectrum (Hann window, mean removed) of a grating is a sharp peak at 1/pitch across
-    its lines; texture, noise and isolated lines spread their power. The frequency standing
-    out most above the typical power of its ring (at least :data:`GRATING_PEAK` times), or
-    its lowest, stronger sub-harmonic that also does (a sharp-edged ruling's fundamental), must
-    hold :data:`GRATING_SHARE` of all the power at frequencies above 1/``max_pitch_px``.
-    A ring's typical power is its median, taken as 1.23 times its geometric mean (the two's
-    ratio for noise's exponentially distributed power, ln 2 e^gamma): one sum per ring
-    instead of a sort, ~1 ms per 256 x 256 patch.
-    """
-    n_r, n_c = a.shape
-    if min(n_r, n_c) < 32:
-        return None
-    a = np.asarray(a, float)
-    a = (a - a.mean()) * np.outer(np.hanning(n_r), np.hanning(n_c))
-    p = np.abs(np.fft.rfft2(a)) ** 2
-    fy, fx, f, rb = _rings(a.shape)
-    band = f > 1 / max_pitch_px
-    if not band.any() or p[band].sum() == 0:
-        return None
-    # Each frequency's power against its ring's (all directions): an edge's or a blob's
-    # power falls off smoothly with frequency, a grating's stands out of its ring.
-    logp = np.log(np.maximum(p, 1e-300))
-    cnt = np.bincount(rb.ravel())
-    med = np.log(2) * np.exp(np.euler_gamma) * np.exp(
-        np.bincount(rb.ravel(), logp.ravel()) / np.maximum(cnt, 1))
-    ref = med[rb]
-    ratio = np.divide(p, ref, out=np.zeros_like(p), where=band & (ref > 0))
-    i = np.unravel_index(int(np.argmax(ratio)), p.shape)
-    if ratio[i] < GRATING_PEAK:
-        return None
-    # The peak may be a harmonic of a sharp-edged ruling: the fundamental is the lowest
-    # sub-harmonic (f/m, same direction) that stands out of its ring too and is stronger
-    # (a ruling's harmonics are weaker than its fundamental, the blur weakens them more).
-    for m in (5, 4, 3, 2):
-        j = (int(np.rint(fy[i[0], 0] / m * n_r)) % n_r, int(np.rint(fx[0, i[1]] / m * n_c)))
-        if band[j] and ratio[j] >= GRATING_PEAK and p[j] >= p[i]:
-            i = j
-            break
-    if p[i] < GRATING_SHARE * float(p[band].sum()):
-        return None
-    # Refine the peak's frequency by the power-weighted mean of its 3 x 3 neighbourhood.
-    rr = np.clip(np.arange(i[0] - 1, i[0] + 2), 0, n_r - 1)
-    cc = np.clip(np.arange(i[1] - 1, i[1] + 2), 0, p.shape[1] - 1)
-    wgt = p[np.ix_(rr, cc)]
-    vx = float(np.sum(wgt * fx[0, cc][None, :]) / wgt.sum())
-    vy = float(np.sum(wgt * fy[rr, 0][:, None]) / wgt.sum())
-    # The lines run across the frequency vector (x right, y down; angles counter-clockwise).
-    return 1 / float(np.hypot(vx, vy)), wrap_angle(float(np.arctan2(-vx, -vy)))
-
-
-def grating_note(image: np.ndarray, size: int = 512) -> str | None:
-    """What to say when an image holds a grating: None, or "a grating of pitch p px, lines at
-    a deg: ..." from the power spectrum of its central ``size`` x ``size`` pixels
-    (:func:`spectral_grating`, pitches up to :data:`GRATING_MAX_PITCH_PX`).
-
-    Parameters
-    ----------
-    image : (H, W) array
-        The image [DN].
-    size : int
-        Side of the central square examined [px].
-
-    Returns
-    -------
-    str or None
-        The sentence naming the grating (pitch [px], direction [deg]) and why it is not
-        measured; None when the spectrum shows no grating.
-    """
-    h, w = image.shape
-    r0, c0 = max(0, (h - size) // 2), max(0, (w - size) // 2)
-    got = spectral_grating(image[r0:r0 + size, c0:c0 + size], GRATING_MAX_PITCH_PX)
-    if got is None:
-        return None
-    pitch, angle = got
-    return (f"a grating (identical parallel lines, none standing out) of pitch {pitch:.1f} px, "
-            f"lines at {np.rad2deg(angle):.1f}°: gratings are not measured (the search reads "
-            "a row of identical lines as a surface's lay, and the groove model needs each "
-            "line alone in its window); give a ruling whose lines differ (a scale's long and "
-            "short graduations) or measure single marks")

@@ -28,8 +28,8 @@ from imaging.detect import (
     wrap_angle,
 )
 from imaging.errors import ImageInputError
-from imaging.families import detect_lines, grating_note
-from imaging.gridphase import grid_phase_bound_px, grid_phase_u_rad
+from imaging.families import detect_lines
+from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
@@ -60,8 +60,6 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
-    ``grid_phase_u_rad``: what the groove model's misfit, sampled at the pixel grid's
-    phase, may leave on the angle [rad] (:mod:`imaging.gridphase`; a Type B term).
 
     Attributes
     ----------
@@ -119,9 +117,6 @@ class MarkMeasurement:
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
-    grid_phase_u_rad: float = 0.0
-    """What the groove model's misfit, sampled at the pixel grid's phase, may leave on the
-    angle [rad] (:mod:`imaging.gridphase`; a Type B term)."""
 
     @property
     def length_px(self) -> float:
@@ -246,15 +241,11 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
     ext = groove_extent(image, pf)
-    # Raw-image centres: the phase is the pixel grid's, before any undistortion.
-    phase_u = grid_phase_u_rad(cen.xy[use], sig, cen.t[use], pf.angle_rad, image.shape,
-                               grid_phase_bound_px(cen.misfit, cen.sigma[use]))
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           ends_on_line(pf, ext, line, camera, image.shape), crossed,
-                           grid_phase_u_rad=phase_u)
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
 
 
 def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:

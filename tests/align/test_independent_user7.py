@@ -318,13 +318,12 @@ def test_bad_camera_u_names_the_key(tmp_path):
     assert "badu.json" in r.stderr and "k1" in r.stderr, r.stderr
 
 
-@pytest.mark.xfail(strict=True, reason="an exact, distortion-free camera model (u tiny); 3 marks, "
-                   "the -35 deg one truly bent (sagitta 1.5 px): 'the lens differs from its "
-                   "calibration (the marks' bows call for k1 +0.178, k2 -0.268, p1 -0.0373 on top "
-                   "of it, p = 0) ... recalibrate the camera'; the two straight marks lens-limited "
-                   "at u 5183\" and 7455\" (5.5\" and 6.6\" without the bent one); with a "
-                   "tangential model (p1 0.003, p2 -0.002) likewise: 4910\" and 7449\"")
 def test_one_bent_mark_does_not_condemn_a_calibrated_camera(tmp_path):
+    """Before (a defect I found, fixed on fix7a): an exact, distortion-free camera model; 3
+    marks, the -35 deg one truly bent (sagitta 1.5 px): 'the lens differs from its calibration
+    (k1 +0.178, k2 -0.268, p1 -0.0373 on top of it) ... recalibrate the camera', the two
+    straight marks lens-limited at u 5183'' and 7455'' (tangential model: 4910'', 7449''); now
+    the departure no two marks agree on is the bent mark's bow (leave-one-out)."""
     lens = ui.Lens(540.0, 540.0, 319.5, 239.5)
     ms = [ui.Mark((0.0, 0.0), -35.0, 240, sagitta_px=1.5), ui.Mark((-150.0, -130.0), 10.0, 220),
           ui.Mark((170.0, 120.0), 70.0, 200)]
@@ -342,12 +341,10 @@ def test_one_bent_mark_does_not_condemn_a_calibrated_camera(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the real sample lens's exact model (square pixels), one "
-                   "mark in the centre at -35 deg, truly bent (sagitta 1.5 px): 'the lens differs "
-                   "from its calibration (the marks' bows call for k1 +1.31 on top of it ...)', "
-                   "lens-limited at u 647\" (error 18\"); sagitta 3 px: k1 +2.76, u 1194\" - a "
-                   "k1 correction 4-9x beyond any lens, where a bent mark is the reading")
 def test_bent_mark_with_exact_model_is_a_bent_mark_not_a_lens(tmp_path):
+    """Before (fixed on fix7a): the real sample lens's exact model, one centred mark bent by
+    1.5 px: 'the lens differs from its calibration (k1 +1.31 on top of it)', lens-limited at
+    u 647''; now one mark's departure beyond any plausible lens is a bent mark."""
     lens = ui.Lens(538.4, 538.4, 338.3, 236.5, (-0.2787, 0.0785, 0.0023, -0.00077, -0.0063))
     m = ui.Mark((0.0, 0.0), -35.0, 240, sagitta_px=1.5)
     rc, d, found = one_mark(tmp_path, ui.Scene(lens=lens, marks=[m], supersample=2), 5,
@@ -359,13 +356,10 @@ def test_bent_mark_with_exact_model_is_a_bent_mark_not_a_lens(tmp_path):
     assert u < 100.0, u  # a bent mark's u covers chord vs fit (~20-40") - not the lens's 647"
 
 
-@pytest.mark.xfail(strict=True, reason="an S-shaped 300 px mark (one sine period of 0.4 px along "
-                   "it, both ends on the straight line: the chord is the truth), no lens: read "
-                   "-602\", -588\", -600\" off at u 156-161\" (z -3.8 on 3 of 3 seeds), exit 0, "
-                   "ok true; the loop saw it (bent_mark, unexplained structure, u inflated x21-92) "
-                   "but its 'chord' equals the straight fit (bent_mark_chord_vs_fit 0.87\"); the "
-                   "straight fit over the groove is -434\", the chord -45\"")
 def test_s_shaped_mark_read_as_its_chord_or_covered(tmp_path):
+    """Before (fixed on fix7a): an S-shaped 300 px mark (one sine period of 0.4 px), no lens:
+    -602'', -588'', -600'' off at u 156-161'' (z -3.8 on 3 of 3 seeds), exit 0, the 'chord'
+    equal to the straight fit; now the chord is read from the centres near each end."""
     m = ui.Mark((0.0, -5.0), 12.0, 300, wiggle_px=0.4, wiggle_period_px=300.0)
     rc, d, found = one_mark(tmp_path, ui.Scene(marks=[m], supersample=2), 0, *FREE)
     assert len(found) == 1

@@ -133,9 +133,9 @@ def test_ruled_scale_over_seeds():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="issue 18 point 5 open: at 1600 x 1200 a graduation or three of "
-                   "19-29 are still missed in some cases (the failures are listed)",
-                   strict=False)
+@pytest.mark.xfail(reason="issue 18 point 5 open: 23 of 24 (1600 x 1200, 16-bit, lens, seed 46: "
+                   "a corner line with a speck on it measured 196 of 230 px, counted missed "
+                   "and extra; the failures are listed)", strict=False)
 def test_ruled_scale_grid_every_line_found():
     """Issue 18's test: random scales with numerals (beyond the long lines, or printed
     across them), dust (on the lines, and opaque particles over 2 lines' ends) and a logo,
@@ -189,6 +189,27 @@ def test_ruled_scale_grid_every_line_found():
     assert np.median(np.abs(np.concatenate(errs))) < 2.0
     assert not failed, failed
     assert np.median(np.abs(np.concatenate(errs))) < 2.0
+
+
+def test_near_step_follows_a_ruling_the_lens_compresses():
+    """A line joins from its nearest member by whole or half steps of the local pitch (the
+    nearest member's gap to the next), at most MAX_GAP steps: through a barrel lens the
+    pitch shrinks towards the sides, where a ruling fitted to one side's lines misses the
+    middle's (the 1600 x 1200 grid, k1 -0.15: 4 of 29 lines)."""
+    from imaging.families import MAX_GAP, _near_step
+
+    # Members at 50 px pitch on the left; the pitch grows towards the middle.
+    anchors = np.array([-700.0, -650.0, -600.0, -550.0])
+    pitch = 50.0
+    # 3 steps 3 % wider than the members' from the nearest one: joins.
+    assert _near_step(-550.0 + 3 * 50.0 * 1.03, anchors, pitch)
+    # The local pitch is the nearest member's gap on the far side, in whole steps (a gap of
+    # 2 steps of 53 px here): a line one such step on joins.
+    assert _near_step(-490.0 + 53.0, np.array([-700.0, -650.0, -596.0, -490.0]), 53.0)
+    assert _near_step(-550.0 + 25.0, anchors, pitch)  # half-way (every other line a lay)
+    assert not _near_step(-550.0 + 62.5, anchors, pitch)  # a quarter step off
+    assert not _near_step(-550.0 + (MAX_GAP + 1) * pitch, anchors, pitch)  # too far
+    assert not _near_step(0.0, anchors[:1], pitch)  # one line fixes no pitch
 
 
 def test_family_block_saved_validated_and_read_back():
@@ -328,7 +349,7 @@ def test_dial_over_seeds():
 
 def test_no_grating_named_where_there_is_none():
     """A lone mark among dust and texture, and a blank frame with noise: no grating said."""
-    from imaging.families import grating_note
+    from imaging.grating import grating_note
     from synth import ImageSpec, MarkSpec, render_marks
 
     one = render_marks(ImageSpec(marks=(MarkSpec(0.1, 5.0, 400.0, 4.0),), width=640,
