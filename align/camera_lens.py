@@ -18,6 +18,7 @@ from align.lens_terms import (
     camera_coupling,
     check_camera,
     lens_bow,
+    lone_departures,
 )
 from align.lens_terms import (
     undistorted as lens_undistorted,
@@ -139,16 +140,30 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
-    if p < alpha:
+    lone = lone_departures(designs, lam_u, ranges, alpha) if p < alpha else ()
+    if lone:
+        # A departure no two marks agree on is a bent mark's bow: the lens stays the
+        # calibrated one (nothing widened), and the mark's own loop names the bend and
+        # reads it end to end (its bow is beyond what the calibration leaves it).
+        which = ", ".join(str(k) for k in lone)
+        notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the calibrated "
+                     "lens's and no other mark agrees on a change of the lens: read as a bent "
+                     "mark, the calibration kept")
+        p_used = 1.0
+        dlam = np.zeros_like(dlam)
+    else:
+        p_used = p
+    if p_used < alpha:
         what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
         notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
                      f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
-    reach = z * lam_u + (np.abs(dlam) if p < alpha else 0.0)
+    reach = z * lam_u + (np.abs(dlam) if p_used < alpha else 0.0)
     return CameraLens(None, tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
+                       "bent_lines": list(lone),
                        "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
                       bow_px=bow_bound(lines, zero, reach, R))
 

@@ -32,7 +32,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.special import ndtri
 
-from imaging.ends import groove_ends
+from imaging.ends import groove_ends, groove_path
 
 R = TypeVar("R")
 
@@ -190,7 +190,7 @@ def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
     m = r.measurement
     if m is None:
         return r, (r.length_px, r.length_px, 0)
-    e = groove_ends(image, m.profile, m.extent_px)
+    e = groove_ends(image, m.profile, m.extent_px, path=groove_path(m.centres, m.profile))
     n_hidden = sum(e.hidden)
     notes = tuple(r.notes)
     if n_hidden:

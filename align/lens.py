@@ -258,15 +258,16 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
+        bound = _p_with_decentring(rng, lam, u_lines, det, scale, z)
         keep = [j for j in applied
-                if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= rng[j]]
+                if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= bound[j]]
         est[applied] = lam[applied]
         if keep == applied:
             break
         applied = keep
     lam_out = np.zeros(P)
     lam_out[applied] = lam[applied]
-    needed = _needed(cache, lam_out, applied, det, fits, est, rng, alpha)
+    needed = _needed(cache, lam_out, applied, det, fits, est, rng, alpha, bound)
     if needed is not None:
         # The lines determine these parameters and need them: without them their bows
         # disagree with one lens, with them they agree. Only the principal point's range
@@ -298,8 +299,10 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     for j in det:
         if j not in applied:
             e = est[j]
-            why = (f"beyond any lens (|{PARAMS[j]}| <= {rng[j]:g}): not a lens"
-                   if np.isfinite(e) and abs(e) > rng[j] else "sign not determined")
+            why = (f"beyond any lens (|{PARAMS[j]}| <= {bound[j]:.3g}"
+                   + (", the principal point's range included" if bound[j] > rng[j] else "")
+                   + "): not a lens"
+                   if np.isfinite(e) and abs(e) > bound[j] else "sign not determined")
             notes.append(f"lens {PARAMS[j]} = {e:.3g} ± {u_lines[j]:.2g} from the lines: {why}; "
                          "not applied, carried in u")
     # A bow is a lens only if the camera's other lines agree: the lines' bows left after the
@@ -411,13 +414,32 @@ def _bow_test(cache: _DesignCache, lam: np.ndarray, k: int, undet: Sequence[int]
     return (float(bz @ bz), dof) if dof > 0 else None
 
 
+def _p_with_decentring(rng: np.ndarray, lam: np.ndarray, u: np.ndarray, det: list[int],
+                       scale: float, z: float) -> np.ndarray:
+    """How large each parameter may plausibly be about the image centre: its range, and for
+    p1, p2 also what a radial lens about a principal point within its range makes there.
+    k1 about a point (cx, cy) [px] off the centre is, to first order, k1 about the centre
+    plus p1 = -k1 cy / R, p2 = -k1 cx / R (all at the half-diagonal R = ``scale``): a
+    pincushion lens with the principal point 10 px off read as a p "beyond any lens". k1 is
+    the lines' (its estimate + z u, within its range) when they determine it, else its
+    range."""
+    out = rng.astype(float).copy()
+    k1 = (min(abs(lam[0]) + z * u[0], rng[0]) if 0 in det and np.isfinite(u[0])
+          else rng[0])
+    out[2] += k1 * rng[6] / scale  # p1 from cy
+    out[3] += k1 * rng[5] / scale  # p2 from cx
+    return out
+
+
 def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
             fits: Mapping[tuple[int, ...], np.ndarray], est: np.ndarray, rng: np.ndarray,
-            alpha: float) -> tuple[np.ndarray, tuple[float, int], tuple[float, int]] | None:
+            alpha: float, bound: np.ndarray
+            ) -> tuple[np.ndarray, tuple[float, int], tuple[float, int]] | None:
     """The lens with more of the determined parameters, when the applied ones alone leave
     the lines' bows disagreeing (chi2 test at ``alpha``) and the larger set explains them
-    within every parameter's range: the fewest added parameters that do, the best fit among
-    those. Returns (that lens, the bow test without, with); None otherwise."""
+    within every parameter's ``bound`` (:func:`_p_with_decentring`): the fewest added
+    parameters that do, the best fit among those. Returns (that lens, the bow test without,
+    with); None otherwise."""
     extra = [j for j in det if j not in applied]
     if not extra:
         return None
@@ -432,7 +454,7 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
             lam_full = fits.get(tuple(full))
             if lam_full is None:
                 lam_full = _gauss_newton(cache, full, rng, 5)
-            if not np.all(np.abs(lam_full[full]) <= rng[full]):
+            if not np.all(np.abs(lam_full[full]) <= bound[full]):
                 continue
             out = np.zeros(len(PARAMS))
             out[full] = lam_full[full]

@@ -4,7 +4,7 @@ angle), cached per lens vector. See :mod:`align.lens` for how they are used."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,9 +65,11 @@ class LensRanges:
         return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
 
     @classmethod
-    def parse(cls, text: str, where: str = "--lens") -> LensRanges:
+    def parse(cls, text: str, where: str = "--lens", beside: str = "") -> LensRanges:
         """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
-        defaults); one line naming the flag and the bad item on error."""
+        defaults); one line naming the flag and the bad item on error. ``beside`` names a
+        camera model given too (``--camera``): then only ``max_u_arcsec`` may be given (the
+        model is the lens; any other range would be silently ignored)."""
         vals: dict[str, float] = {}
         for item in filter(None, (x.strip() for x in text.split(","))):
             key, eq, val = item.partition("=")
@@ -83,7 +85,19 @@ class LensRanges:
                 raise InputError(f"{where}: {item!r}: expected a finite number >= 0"
                                  + (" (> 0 for max_u_arcsec)" if key == "max_u_arcsec" else ""))
             vals[key] = v
+        ignored = replaced_by_model(vals) if beside else []
+        if ignored:
+            raise InputError(f"{where} {','.join(ignored)} with {beside}: the camera model is "
+                             f"the lens (its u is carried); {where} ranges are for a camera "
+                             "without one (only max_u_arcsec applies beside it)")
         return cls(**vals)
+
+
+def replaced_by_model(keys: Iterable[str]) -> list[str]:
+    """Which of ``keys`` (LensRanges field names) a camera model makes meaningless: a model
+    *is* the lens, so ranges of k1, k2, p, aspect, principal point given beside it would be
+    silently ignored (``max_u_arcsec`` still applies: the bound on a lens-limited u)."""
+    return [k for k in keys if k in LensRanges.__dataclass_fields__ and k != "max_u_arcsec"]
 
 
 DEFAULT_RANGES = LensRanges()

@@ -135,21 +135,51 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     """Whether the marks agree with a calibrated lens: the determined correction to the
     camera's lens from the lines, and its chi2 probability against the lines' u plus the
     camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
+    designs = [_design(ln, lam, scale) for ln in lines]
+    p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
+    return p, dlam, designs
+
+
+def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
+                      alpha: float) -> tuple[float, np.ndarray]:
+    """:func:`check_camera` over the marks' ``designs``: (p-value, correction dlam)."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
-    designs = [_design(ln, lam, scale) for ln in lines]
     F = sum(d.G.T @ d.G for d in designs)
     b = sum(d.G.T @ d.z for d in designs)
     det = _determined(F, rng, z)
     dlam = np.zeros(P)
     if not det:
-        return 1.0, dlam, designs
+        return 1.0, dlam
     D = np.ix_(det, det)
     dlam[det] = -np.linalg.solve(F[D], b[det])
     C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
-    return float(special.chdtrc(len(det), stat)), dlam, designs
+    return float(special.chdtrc(len(det), stat)), dlam
+
+
+def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
+                    ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3
+                    ) -> tuple[int, ...]:
+    """The marks without which the rest agree with the calibrated lens (leave-one-out): a
+    departure only one mark calls for is that mark's bow (a bent mark), not the lens's — a
+    changed lens bows every mark it reaches, so the departure must stand without any one of
+    them. A single mark is alone when its departure is beyond any plausible lens
+    (``ranges``). Empty when the departure stands without each mark in turn (the marks agree
+    on it)."""
+    if len(designs) < 2:
+        # One mark cannot show that marks agree: its departure is the lens's only if a lens
+        # could make it (within the plausible ranges); beyond them it is the mark's bow.
+        p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
+        beyond = p < alpha and bool(np.any(np.abs(dlam) > ranges.vector()))
+        return (0,) if beyond else ()
+    out = []
+    for k in range(len(designs)):
+        rest = [d for i, d in enumerate(designs) if i != k]
+        if _camera_departure(rest, lam_u, ranges, alpha)[0] >= alpha:
+            out.append(k)
+    return tuple(out)
 
 
 def undistorted(line: LineGeometry, lam: np.ndarray, scale: float

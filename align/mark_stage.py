@@ -131,8 +131,9 @@ class MarkStage:
             regressors={"t": m.regressors["t"], "r2": (q**2).sum(1),
                         "cross_slope": m.regressors["cross_slope"]},
             order="t", effects=effects,
-            payload=dict(zip(("chord_rad", "curvature_per_px"),
-                             _chord_angle(q, lf, terms, m.ends_px), strict=True),
+            payload=dict(zip(("chord_rad", "curvature_per_px", "chord_u_rad",
+                              "chord_bound_rad"),
+                             _chord_angle(q, lf, terms, m.ends_px, m.chol), strict=True),
                          offset_px=lf.offset_px),
             quantities={"angle_rad": (lf.angle_rad, lf.angle_u_rad),
                         "offset_px": (lf.offset_px, lf.offset_u_px)},
@@ -196,24 +197,62 @@ def _bend_column(q: np.ndarray, angle: float) -> np.ndarray:
     return ((t - (t.min() + t.max()) / 2) ** 2)[:, None]
 
 
-def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term], ends: np.ndarray | None = None
-                 ) -> tuple[float, float]:
-    """Angle of the chord between the fitted curve's points at the groove's ``ends`` (the
-    measured centres' span when None), and the curve's curvature [rad, 1/px] (the straight
-    fit's angle and 0 when no bow is fitted): how a bent mark's direction is read end to end.
+END_WINDOW = 8
+"""A bent mark's ends are read over 1/this of its span at each end: short enough that a
+straight line through the centres there meets the groove's curvature within ~1 % of its
+sagitta, long enough to average the centres' noise."""
 
-    The bow is b (t - t_m)^2 across the line, so the chord between t0 and t1 turns from the
-    fitted line by b (t0 + t1 - 2 t_m): the tangent at the chord's middle (a parabola's
-    chord is parallel to its tangent there; an arc's within its small-angle terms)."""
-    if not any(t.name == BEND for t in terms):
-        return float(lf.angle_rad), 0.0
-    j = MarkStage._col_index(terms, BEND)
+
+def _chord_angle(q: np.ndarray, lf, terms: Sequence[Term], ends: np.ndarray | None = None,
+                 chol: np.ndarray | None = None) -> tuple[float, float, float, float]:
+    """Angle of the chord between the groove's own positions at its ``ends`` (the measured
+    centres' span when None), the fitted curve's curvature, the chord's standard
+    uncertainty from the centres' noise, and the bound on how far the ends' extrapolation
+    beyond the last centres may turn it [rad, 1/px, rad, rad]: how a bent mark's direction is
+    read end to end, and how far a mark whose residual keeps structure may turn from its fit.
+
+    The bow is b (t - t_m)^2 across the line, so the fitted curve's chord between t0 and t1
+    turns from the fitted line by b (t0 + t1 - 2 t_m). A groove of another shape (an S: its
+    ends on one line, a bow the parabola averages away) is not that curve near its ends, so
+    each end is moved across the line by the centres' misfit there (a straight line through
+    the residuals of the last :data:`END_WINDOW`-th of the span, taken at the end): the
+    chord is the groove's, not the model's."""
     u, _ = line_frame(lf.angle_rad)
     t = q @ u
     tm = (t.min() + t.max()) / 2
     t0, t1 = (t.min(), t.max()) if ends is None else tuple(ends @ u)
-    b = float(lf.beta[j])
-    return float(lf.angle_rad - b * (t0 + t1 - 2 * tm)), 2 * b
+    bent = any(tt.name == BEND for tt in terms)
+    b = float(lf.beta[MarkStage._col_index(terms, BEND)]) if bent else 0.0
+    w = np.ptp(t) / END_WINDOW
+    r, s = lf.residuals_px, lf.sigma_px
+    R = None if chol is None else chol @ chol.T
+    lo, hi = (t0, t1) if t0 <= t1 else (t1, t0)
+    shift, var, amb = [], 0.0, 0.0
+    for near, te in ((t <= t.min() + w, lo), (t >= t.max() - w, hi)):
+        idx = np.flatnonzero(near)
+        if len(idx) < 5:  # too few centres to read an end: the model's curve stands
+            shift.append(0.0)
+            continue
+        # The misfit near this end, a straight line in t, taken at the groove's end (its
+        # slope matters: an S leaves the parabola at a slant there, and a window's mean
+        # would sit a slope times half the window off the end).
+        X = np.column_stack([np.ones(len(idx)), t[idx] - te, (t[idx] - te) ** 2])
+        g = np.linalg.pinv(X[:, :2] / s[idx, None])[0] / s[idx]  # the end value's weights
+        shift.append(float(g @ r[idx]))
+        cov = np.outer(s[idx], s[idx]) * (R[np.ix_(idx, idx)] if R is not None
+                                          else np.eye(len(idx)))
+        var += float(g @ cov @ g)
+        # The groove's end lies beyond the last centres (its tip is not read): how far a
+        # curving misfit may carry it from the straight extrapolation — the quadratic's
+        # value there against the line's (a bound, Type B).
+        # Only what stands beyond that difference's own noise (2 sigma) counts: on a groove
+        # the model fits, the quadratic's extrapolation is noise, not a curve.
+        dg = np.linalg.pinv(X / s[idx, None])[0] / s[idx] - g
+        amb += max(0.0, abs(float(dg @ r[idx])) - 2 * float(np.sqrt(dg @ cov @ dg)))
+    d0, d1 = (shift[0], shift[1]) if t0 <= t1 else (shift[1], shift[0])
+    span = max(abs(t1 - t0), 1.0)
+    turn = b * (t0 + t1 - 2 * tm) + (d1 - d0) / (t1 - t0 if t1 != t0 else 1.0)
+    return float(lf.angle_rad - turn), 2 * b, float(np.sqrt(var) / span), amb / span
 
 
 def _bend(fit: StageFit) -> Term:

@@ -106,9 +106,6 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         au = float(np.hypot(au, m.jpeg_u_rad))
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
                                float(np.rad2deg(m.jpeg_u_rad) * 3600)))
-    if m.grid_phase_u_rad:  # a Type B term: the model's misfit at the pixel grid's phase
-        terms["grid_phase"] = m.grid_phase_u_rad
-        au = float(np.hypot(au, m.grid_phase_u_rad))
     if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
         terms["striped_background"] = m.background_u_rad
         au = float(np.hypot(au, m.background_u_rad))
@@ -137,19 +134,38 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # curvature times that shift.
         u_mid = (m.profile.width_px / 2 + m.profile.blur_px) / np.sqrt(3) / np.sqrt(2)
         ends = float(abs(rep.after.payload["curvature_per_px"]) * u_mid)
+        # (Where the ends lie along the line; across it, the centres' noise near each end
+        # moves the chord too: ``chord_u_rad``, added to the ends term of a bent mark.)
         # A bow is a finding only if it matters to the angle: what it does for certain —
         # its ends term, and the straight fit with the bow's column against without it —
         # must widen u by at least NEGLIGIBLE_BOW. (A 0.025 +- 0.007 px bow on a clean
         # mark, 3.6 sigma, was called bent: its own sigma says it is there, not that it
-        # changes any reading.) The chord is not in the test: its ends' noise is not the bow's.
+        # changes any reading.) The chord is in the test only by how far it differs from the
+        # fit beyond its own noise (at alpha): its ends' noise is not the bow's, but a groove
+        # whose ends lie off the fitted curve (an S the parabola averages away) is read
+        # differently end to end, for certain.
         shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        if np.hypot(ends, shift) < np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au:
+        chord_u = float(np.sqrt(ends**2 + rep.after.payload["chord_u_rad"]**2
+                                + rep.after.payload["chord_bound_rad"]**2 / 3))
+        off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
+        if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (
+                np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au):
             terms["bow_ends"], terms["bow_vs_straight"] = ends, shift
             au = float(np.sqrt(au**2 + ends**2 + shift**2))
         else:
-            au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, ends, lens_bow_px,
+            au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, chord_u, lens_bow_px,
                                   alpha, f"{image} mark {index}")
             a = chord
+    elif rep.unexplained_structure:
+        # Structure no effect named (an S-shaped groove, whose odd bow no parabola takes):
+        # the straight fit is then not the groove's end-to-end direction for certain, and
+        # which one the user means is not in the image: the truth anywhere between the fit
+        # and the chord between the groove's ends (or as far as their extrapolation beyond
+        # the last centres may carry it), uniform (Type B), about the fit the bound / sqrt 3.
+        chord = float(rep.after.payload["chord_rad"])
+        terms["structure_chord_vs_fit"] = (abs(_wrap(a - chord))
+                                           + rep.after.payload["chord_bound_rad"]) / np.sqrt(3)
+        au = float(np.hypot(au, terms["structure_chord_vs_fit"]))
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,

@@ -7,6 +7,8 @@ image centre (the :func:`imaging.detect.line_frame` convention); flat pixel indi
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from imaging.detect import MarkCandidate, line_frame
@@ -60,6 +62,16 @@ def band_pixels(image: np.ndarray, pf: ProfileFit, half: float, reach_px: float 
     _, e, _, idx = _band(image, pf.angle_rad, pf.offset_px,
                          pf.t_start_px - reach_px, pf.t_end_px + reach_px, half)
     return e, idx
+
+
+def band_mask(shape: tuple[int, int], bands: Sequence[np.ndarray]) -> np.ndarray:
+    """True on the pixels of every band (flat indices, as :func:`band_indices` gives them) of
+    an image of ``shape``: built once per frame and shared by the background tests (each
+    full-frame mask costs a 5 MP pass)."""
+    mask = np.zeros(shape, bool)
+    for idx in bands:
+        mask.flat[idx] = True
+    return mask
 
 
 def band_indices(image: np.ndarray, cand: MarkCandidate, reach_px: float = 20.0) -> np.ndarray:

@@ -135,14 +135,26 @@ class CameraModel:
     def from_dict(cls, d: Mapping) -> CameraModel:
         """From :meth:`to_dict`'s keys; raises KeyError, ValueError or TypeError on a dict
         that is not a camera model (:meth:`load` turns them into one line naming the file)."""
-        def num(v: object) -> float:  # strict JSON saves NaN as null
-            return float("nan") if v is None else float(v)  # type: ignore[arg-type]
+        def num(v: object, key: str) -> float:  # strict JSON saves NaN as null
+            if v is None:
+                return float("nan")
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ValueError(f"'{key}' is {json.dumps(v)}, not a number")
+            return float(v)
 
         def table(key: str) -> dict[str, float] | None:
-            return {k: num(v) for k, v in (d.get(key) or {}).items()} or None
+            t = d.get(key) or {}
+            if not isinstance(t, Mapping):
+                raise ValueError(f"'{key}' is not a table of name: number")
+            out = {k: num(v, f"{key}.{k}") for k, v in t.items()}
+            bad = [k for k, v in out.items() if key != "per_view_rms_px" and v < 0]
+            if bad:
+                raise ValueError(f"'{key}.{bad[0]}' is {out[bad[0]]:g}: an uncertainty is "
+                                 ">= 0")
+            return out or None
 
         K, D, (w, h) = checked_intrinsics(d)
-        return cls(K, D, (w, h), num(d.get("rms_px")), int(d.get("views", 0)), table("u"),
+        return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
                    table("per_view_rms_px"), table("u_formal"), table("u_jackknife"))
 
     @classmethod

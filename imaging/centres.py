@@ -43,8 +43,7 @@ class Centres:
     Gauss–Newton step on the blur with the segment's other parameters free; None unless
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
     ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
-    (None: none removed); ``misfit``: a bound on the groove model's misfit (weighted chi2
-    per segment) that :mod:`imaging.gridphase` turns into a pixel-phase bias bound.
+    (None: none removed).
 
     Attributes
     ----------
@@ -81,9 +80,6 @@ class Centres:
     blur_dev: np.ndarray | None = None
     blur_dev_u: np.ndarray | None = None
     offsets_cov: np.ndarray | None = None
-    misfit: float = 0.0
-    """Upper bound on the groove model's misfit, a weighted chi2 per segment (see
-    :func:`_pooled_misfit`; :mod:`imaging.gridphase` turns it into a centre bias bound)."""
 
 
 def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
@@ -230,9 +226,6 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     npx = bc(np.ones_like(e))
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
-    # Only where the groove's flanks are (|e| <= w/2 + 2.5 s) can a misfit move a centre.
-    flank = np.abs(e - delta[seg]) <= pf.width_px / 2 + 2.5 * pf.blur_px
-    misfit = _pooled_misfit((e - delta[seg])[flank], r[flank], wgt[flank], nseg)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
     ring = _ring(image, pf, half, segment_px, every, nseg)
@@ -256,34 +249,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
-                   blur_dev_u=blur_dev_u, offsets_cov=ocov, misfit=misfit)
-
-
-Z_MISFIT = 1.0
-"""The misfit's bound: its estimate plus this many standard deviations of its noise share
-(sqrt(2 x bins)): one, as for a standard uncertainty (two widened near-axis marks' u by a
-further 16 % and left their normalised errors at RMS 0.87)."""
-
-
-def _pooled_misfit(e: np.ndarray, r: np.ndarray, wgt: np.ndarray, nseg: int,
-                   bin_px: float = 0.25) -> float:
-    """Bound on the groove model's misfit as a weighted chi2 per segment, from the residual
-    pooled over the whole mark in bins of the distance ``e`` from each segment's centre [px].
-
-    Every segment sees the same groove, so what the model misses is the same function of e
-    in all of them: pooled over the segments its noise falls by their number. Each bin's
-    weighted mean has a chi2 of 1 from noise alone; what the bins hold beyond that, plus
-    :data:`Z_MISFIT` of its standard deviations (sqrt(2 x bins)), is what the data cannot
-    exclude. Bins of a quarter pixel: the misfit of a blurred groove is smooth on that scale.
-    """
-    b = np.floor(e / bin_px).astype(int)
-    b -= b.min()
-    sw = np.bincount(b, wgt)
-    swr = np.bincount(b, wgt * r)
-    used = sw > 0
-    nb = np.count_nonzero(used)
-    m = float(np.sum(swr[used] ** 2 / sw[used]) - nb + Z_MISFIT * np.sqrt(2 * nb))
-    return max(m, 0.0) / max(nseg, 1)
+                   blur_dev_u=blur_dev_u, offsets_cov=ocov)
 
 
 def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,

@@ -29,6 +29,8 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.band import _band
+from imaging.centres import Centres
+from imaging.detect import line_frame
 from imaging.groove import ProfileFit, ProfileTable
 
 LEVEL_K = 4.5
@@ -88,8 +90,56 @@ class GrooveEnds:
         return self.end_max_px - self.start_min_px
 
 
+def _bin_rms(j: np.ndarray, vals: np.ndarray, p: np.ndarray, dt: np.ndarray, nb: int,
+             good: np.ndarray) -> np.ndarray:
+    """Each bin's residual RMS [DN] about level + (amp + slope dt) x profile: the groove's
+    depth may change within the bin (dt [px] along the line from the bin's centre). A square
+    end drops the depth from full to none over a few blur widths, and a 1-px bin across it
+    misfits level + amp x profile by far more than the noise — it was read as an
+    obstruction on every clean end. What the slope cannot absorb is no groove: a speck's
+    level or shape. (Per-bin 3x3 normal equations from bincount sums; no library fits many
+    tiny grouped regressions at once.)"""
+    cols = (np.ones_like(p), p, p * dt)
+    A = np.empty((nb, 3, 3))
+    b = np.empty((nb, 3))
+    for r in range(3):
+        b[:, r] = np.bincount(j, cols[r] * vals, nb)
+        for c in range(r, 3):
+            A[:, r, c] = A[:, c, r] = np.bincount(j, cols[r] * cols[c], nb)
+    cnt = A[:, 0, 0]
+    # A bin too short along the line to tell a slope (or with no spread in dt) keeps 2 terms.
+    ok = good & (cnt >= 5) & (np.abs(np.linalg.det(A)) > 1e-9 * np.prod(
+        np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300), axis=1))
+    A[~ok, 2, :] = A[~ok, :, 2] = 0.0
+    A[~ok, 2, 2] = 1.0
+    b[~ok, 2] = 0.0
+    A[~good] = np.eye(3)
+    x = np.linalg.solve(A, b[..., None])[..., 0]
+    pred = x[j, 0] + x[j, 1] * p + x[j, 2] * p * dt
+    ss = np.bincount(j, (vals - pred) ** 2, nb)
+    dof = np.maximum(cnt - np.where(ok, 3, 2), 1)
+    return np.where(good, np.sqrt(ss / dof), np.nan)
+
+
+def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | None:
+    """The groove's centre across the profile's line as a smooth function of t [px]: a
+    weighted quadratic through its usable measured ``centres`` (raw image); None from fewer
+    than 5. A lens bows a straight groove's image by a smooth curve (pixels at a frame's
+    corner), and off a straight band the groove's ends looked shallow and misfit — they were
+    read as obstructions.
+    """
+    u, n = line_frame(pf.angle_rad)
+    xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
+    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
+    if good.sum() < 5:
+        return None
+    return np.polynomial.Polynomial.fit(xy[good] @ u, xy[good] @ n - pf.offset_px, 2,
+                                        w=1 / sigma[good])
+
+
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
-                reach_px: float = 40.0) -> GrooveEnds:
+                reach_px: float = 40.0, path: np.polynomial.Polynomial | None = None
+                ) -> GrooveEnds:
     """The groove's ends, each checked for an obstruction (see the module docstring).
 
     Parameters
@@ -102,6 +152,9 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         Its half-depth ends [px] (:func:`imaging.profile.groove_extent`).
     reach_px : float
         How far beyond each end to look at least [px] (and as far as the groove is long).
+    path : numpy.polynomial.Polynomial or None
+        The groove's centre across the line as a function of t [px] (:func:`groove_path`,
+        extrapolated past the ends); None: on the line.
 
     Returns
     -------
@@ -115,8 +168,16 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # A speck across the middle can leave a piece seen beyond it as long as the rest.
     reach_px = max(reach_px, t1 - t0)
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    span = np.linspace(t0 - reach_px, t1 + reach_px, 65)
+    # The band follows the groove's path (clipped: a wild extrapolation is no path).
+    bow = (lambda tt: np.clip(path(tt), -half, half)) if path is not None else None
+    wide = half + (float(np.abs(bow(span)).max()) if bow is not None else 0.0)
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0 - reach_px, t1 + reach_px,
-                          half)
+                          wide)
+    if bow is not None:
+        e = e - bow(t)
+        near = np.abs(e) <= half
+        vals, e, t = vals[near], e[near], t[near]
     ok = (vals < pf.full_scale_dn) & (vals > 0)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
     clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int)
@@ -130,16 +191,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
     cnt = np.bincount(j, minlength=nb).astype(float)
     sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
-    sv, spv, svv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb), \
-        np.bincount(j, vals * vals, nb)
+    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
     det = cnt * spp - sp * sp
     good = (cnt >= 4) & (det > 1e-9 * np.maximum(cnt * spp, 1e-300))
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
-    ss = svv - level * sv - amp * spv
-    rms = np.where(good, np.sqrt(np.maximum(ss, 0) / np.maximum(cnt - 2, 1)), np.nan)
     tb = t0 - reach_px + np.arange(nb)
+    rms = _bin_rms(j, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
         return same

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import band_indices
+from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
 from imaging.centres import Centres, sample_centres
 from imaging.crossmask import crossing_skip, fused_error
@@ -30,7 +30,6 @@ from imaging.detect import (
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
-from imaging.gridphase import grid_phase_bound_px, grid_phase_u_rad
 from imaging.groove import ProfileFit
 from imaging.io import clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
@@ -61,8 +60,6 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
-    ``grid_phase_u_rad``: what the groove model's misfit, sampled at the pixel grid's
-    phase, may leave on the angle [rad] (:mod:`imaging.gridphase`; a Type B term).
 
     Attributes
     ----------
@@ -120,9 +117,6 @@ class MarkMeasurement:
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
-    grid_phase_u_rad: float = 0.0
-    """What the groove model's misfit, sampled at the pixel grid's phase, may leave on the
-    angle [rad] (:mod:`imaging.gridphase`; a Type B term)."""
 
     @property
     def length_px(self) -> float:
@@ -247,15 +241,11 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
     ext = groove_extent(image, pf)
-    # Raw-image centres: the phase is the pixel grid's, before any undistortion.
-    phase_u = grid_phase_u_rad(cen.xy[use], sig, cen.t[use], pf.angle_rad, image.shape,
-                               grid_phase_bound_px(cen.misfit, cen.sigma[use]))
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           ends_on_line(pf, ext, line, camera, image.shape), crossed,
-                           grid_phase_u_rad=phase_u)
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
 
 
 def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
@@ -464,7 +454,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # for an oriented periodic background (nothing masked) and searched again without it.
     pre = None
     if not cands:
-        cleaned, pre = find_oriented(image, [], top)
+        cleaned, pre = find_oriented(image, None, top)
         if pre.found:
             try:
                 again = detect_lines(cleaned, min_length_px=min_length_px,
@@ -491,7 +481,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     shortest = LENGTH_SLACK * (min_length_px if min_length_px is not None else
                                default_min_length(image.shape if roi is None else roi[:1:-1]))
     member = {i for g in det.families for i in g}
-    bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
+    # The lines' bands, left out of both background tests: one mask for the frame.
+    bands = band_mask(image.shape, [band_indices(image, c) for c in (*cands, *det.unreported)])
     # Stripes at any angle (a surface's lay): divided out first — an oblique pattern leaves
     # a profile along the columns that the row/column test below would take for its own.
     image, oriented = find_oriented(image, bands, top)
@@ -504,7 +495,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
             det = again
             cands = [require_single(det.marks, where)] if expect_one else det.marks
             member = {i for g in det.families for i in g}
-            bands = [band_indices(image, c) for c in (*cands, *det.unreported)]
+            bands = band_mask(image.shape,
+                              [band_indices(image, c) for c in (*cands, *det.unreported)])
     if pre is not None and pre.found:
         oriented = pre.then(oriented)
     # Row/column fixed-pattern noise: tested on the background away from every line found,

@@ -29,7 +29,6 @@ the test runs again on the result (a second pattern, a harmonic) up to :data:`MA
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -302,23 +301,22 @@ def _wave(k: np.ndarray, ab: np.ndarray, cov: np.ndarray, ratio: float) -> Wave:
                 (float(ab[0]), float(ab[1])), ratio)
 
 
-def find_oriented(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
+def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
                   alpha: float = ALPHA) -> tuple[np.ndarray, OrientedStripes]:
     """The image with its oriented periodic background divided out where found, and the
     finding.
 
-    ``masks``: flat pixel indices of each line's band (left out of the background); clipped
-    pixels (0 or ``full_scale``) too. The image comes back unchanged (same object) when no
-    pattern is found.
+    ``mask``: True on the lines' bands (:func:`imaging.band.band_mask`; None: no lines), left
+    out of the background; clipped pixels (0 or ``full_scale``) too. The image comes back
+    unchanged (same object) when no pattern is found.
     """
-    mask = np.zeros(image.shape, bool)
-    for idx in masks:
-        mask.flat[idx] = True
     sl = _square(image.shape)
     if min(image[sl].shape) < 4 * PERIOD_PX[1] // 2:
         return image, OrientedStripes((), 0.0, float("inf"), reason="image too small to test")
     raw = image[sl]  # a view: _relative and the division below make their own arrays
-    valid = ~mask[sl] & (raw > 0) & (raw < full_scale)
+    valid = (raw > 0) & (raw < full_scale)
+    if mask is not None:
+        valid &= ~mask[sl]
     if valid.mean() < MIN_BACKGROUND:
         return image, OrientedStripes((), 0.0, float("inf"),
                                       reason="too little background to test")

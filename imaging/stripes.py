@@ -151,12 +151,24 @@ def _effective_n(a: np.ndarray, b: np.ndarray, lags: int = 32) -> float:
     return float(n / max(1.0 + 2.0 * s, 1.0))
 
 
-def _background(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
-                minus: np.ndarray | None, shading: np.ndarray | None = None,
+def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
+          minus: np.ndarray | None) -> np.ndarray:
+    """Rows ``rows`` of the image as float32, NaN on the marks' bands and clipped pixels;
+    ``minus``: offsets per row removed (the other axis's stripes). Gathered once per test:
+    on the transposed image (the row test) each row is a strided column of the frame, whose
+    gathers cost most of that test at 5 MP."""
+    v = image[rows].astype(np.float32)
+    out = mask[rows] | (v <= 0) | (v >= full_scale)
+    v[out] = np.nan
+    if minus is not None:
+        v -= minus[rows, None]
+    return v
+
+
+def _background(v: np.ndarray, shading: np.ndarray | None = None,
                 whole_rows: bool = False) -> np.ndarray:
-    """Rows ``rows`` of the image as float, NaN on the marks' bands and clipped pixels, each
-    row's level (its interquartile mean) taken out; ``minus``: offsets per row removed
-    first (the other axis's stripes); ``shading``: the slow column profile (see
+    """Rows ``v`` (from :func:`_rows`) with each row's level (its interquartile mean) taken
+    out, rows without one dropped; ``shading``: the slow column profile (see
     :func:`_shading`), out of the rows while their levels are taken (not out of the rows
     returned); ``whole_rows``: the levels from every pixel (for the offsets removed), not
     from a sample (for the test, see LEVEL_PX).
@@ -167,11 +179,6 @@ def _background(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scal
     480 px row, 25 % vignetting, 12-bit), and the mark's columns, whose background is all in
     the unmasked rows above and below it, got a dip common to both halves: a clean vertical
     mark was "column stripes" in 5 of 6 frames (user6)."""
-    v = image[rows].astype(np.float32)
-    out = mask[rows] | (v <= 0) | (v >= full_scale)
-    v[out] = np.nan
-    if minus is not None:
-        v -= minus[rows, None]
     # The test's levels from every k-th pixel of the row (see LEVEL_PX): a sort of ~200 px,
     # not of the whole row. The offsets removed do not carry the sample's extra noise.
     k = 1 if whole_rows else max(1, v.shape[1] // LEVEL_PX)
@@ -213,13 +220,10 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     # The slow column profile (vignetting) from every SHADING_STRIDE-th row of both halves
     # (it is smooth: a quarter of the rows gives it to well under 1 DN, at a quarter of the
     # cost), out of every row before its level is taken (see _background).
-    shading = _shading(_column_median(_background(
-        image, mask, np.concatenate([rows_top, rows_bot])[::SHADING_STRIDE], full_scale,
-        minus)))
-    top = _highpass(_column_median(_background(image, mask, rows_top, full_scale, minus,
-                                               shading)))
-    bot = _highpass(_column_median(_background(image, mask, rows_bot, full_scale, minus,
-                                               shading)))
+    v = _rows(image, mask, np.concatenate([rows_top, rows_bot]), full_scale, minus)
+    shading = _shading(_column_median(_background(v[::SHADING_STRIDE])))
+    top = _highpass(_column_median(_background(v[:rows_top.size], shading)))
+    bot = _highpass(_column_median(_background(v[rows_top.size:], shading)))
     both = np.isfinite(top) & np.isfinite(bot)
     n = int(both.sum())
     if n < 2 * WINDOW_PX:
@@ -233,7 +237,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     rms = float(np.sqrt(max(a @ b / n, 0.0)))
     if p >= alpha:
         return Stripes(axis, p, False, rms)
-    bg = _background(image, mask, np.arange(h), full_scale, minus, shading, True)
+    bg = _background(_rows(image, mask, np.arange(h), full_scale, minus), shading, True)
     off = _highpass(_column_median(bg))
     need = mask.any(axis=0) & ~np.isfinite(off)
     if need.any():
@@ -251,18 +255,17 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
                    offsets_var=np.where(np.isfinite(off), var, 0.0))
 
 
-def find_stripes(image: np.ndarray, masks: Sequence[np.ndarray], full_scale: float,
+def find_stripes(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
                  alpha: float = ALPHA) -> tuple[np.ndarray, tuple[Stripes, Stripes]]:
     """The image with its row and column stripes removed where found and removable, and the
     two findings (columns, rows).
 
-    ``masks``: flat pixel indices of each mark's band (left out of the background; their
-    columns/rows must have an offset for a removal). Clipped pixels (0 or ``full_scale``)
-    are left out too.
+    ``mask``: True on the marks' bands (:func:`imaging.band.band_mask`; None: no marks), left
+    out of the background; their columns/rows must have an offset for a removal. Clipped
+    pixels (0 or ``full_scale``) are left out too.
     """
-    mask = np.zeros(image.shape, bool)
-    for idx in masks:
-        mask.flat[idx] = True
+    if mask is None:
+        mask = np.zeros(image.shape, bool)
     cols = column_stripes(image, mask, full_scale, alpha)
     rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row")
     if not (cols.removed or rows.removed):

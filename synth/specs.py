@@ -46,7 +46,9 @@ class MarkSpec:
         ``angle_rad`` and ``offset_px``, so the truth of a bent mark is its end-to-end
         direction.
     bow_shape : str
-        ``parabola`` (sagitta x (1 - (2t/L)^2)) or ``arc`` (a circular arc through the ends).
+        ``parabola`` (sagitta x (1 - (2t/L)^2)), ``arc`` (a circular arc through the ends) or
+        ``s`` (one sine period along the mark, amplitude the sagitta: an S whose ends and
+        middle lie on the chord).
     """
 
     angle_rad: float
@@ -69,8 +71,10 @@ class MarkSpec:
         tc = np.clip(t, -half, half)
         if self.bow_shape == "parabola":
             return s * (1 - (tc / half) ** 2)
+        if self.bow_shape == "s":
+            return s * np.sin(np.pi * tc / half)
         if self.bow_shape != "arc":
-            raise ValueError(f"unknown bow shape {self.bow_shape!r}; use parabola or arc")
+            raise ValueError(f"unknown bow shape {self.bow_shape!r}; use parabola, arc or s")
         rho = (half**2 + s**2) / (2 * abs(s))  # radius of the arc through both ends
         return np.sign(s) * (np.sqrt(rho**2 - tc**2) - (rho - abs(s)))
 

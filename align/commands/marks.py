@@ -19,7 +19,8 @@ def cmd_marks(args: argparse.Namespace) -> int:
     unique(args.images, "images")
     roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
     camera = CameraModel.load(args.camera) if args.camera else None
-    ranges = LensRanges.parse(args.lens) if args.lens is not None else None
+    ranges = (LensRanges.parse(args.lens, beside="--camera" if args.camera else "")
+              if args.lens is not None else None)
     inputs = [*args.images] + ([args.camera] if args.camera else [])
     outs = plan(args, inputs)
     out, plot_dir = (outs.add("--json", args.json, stdout_ok=True),

@@ -21,6 +21,7 @@ estimate's error, and each test takes it into its null distribution:
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -151,6 +152,23 @@ def regressor_tests(z: np.ndarray, regressors: Mapping[str, np.ndarray],
 FFT_ABOVE = 200  # points: above this an evenly spaced series gets the FFT periodogram
 
 
+@functools.lru_cache(maxsize=16)
+def _lomb_scargle(x: bytes, z: bytes, f_lo: float, f_hi: float, m: int) -> np.ndarray:
+    """scipy's normalised Lomb-Scargle power of z (float64 bytes) at x over ``m`` frequencies
+    f_lo..f_hi [cycles per unit of x], cached by value: a mark's residuals go through the
+    same test up to three times (the loop's structure check before and after it, and the
+    wiggle term's period), each call ~0.9 ms at 60 points."""
+    from scipy import signal  # (here only: importing it costs ~1 s)
+
+    xa, za = np.frombuffer(x), np.frombuffer(z)
+    freqs = 2 * np.pi * np.linspace(f_lo, f_hi, m)
+    p = np.concatenate([
+        signal.lombscargle(xa, za - za.mean(), freqs[i:i + 1024], normalize=True,
+                           floating_mean=True) for i in range(0, len(freqs), 1024)])
+    p.flags.writeable = False
+    return p
+
+
 def periodogram_test(z: np.ndarray, x: np.ndarray, nu: float | None = None
                      ) -> tuple[StructureTest, float]:
     """Largest Lomb–Scargle peak against white noise, with the look-elsewhere correction
@@ -178,12 +196,9 @@ def periodogram_test(z: np.ndarray, x: np.ndarray, nu: float | None = None
         freq = 2 * np.pi * k / (4 * n * spacing)
     else:
         # From ~1.5 cycles over the span up to the Nyquist of the mean spacing.
-        from scipy import signal  # (here only: importing it costs ~1 s)
-
         freqs = 2 * np.pi * np.linspace(1.5 / span, 0.5 / spacing, min(4 * n, 8192))
-        p = np.concatenate([
-            signal.lombscargle(x, z - z.mean(), freqs[i:i + 1024], normalize=True,
-                               floating_mean=True) for i in range(0, len(freqs), 1024)])
+        p = _lomb_scargle(np.asarray(x, float).tobytes(), np.asarray(z, float).tobytes(),
+                          1.5 / span, 0.5 / spacing, len(freqs))
         k = int(np.argmax(p))
         power = float(np.clip(p[k], 0, 1 - 1e-15))
         freq = float(freqs[k])

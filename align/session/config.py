@@ -21,6 +21,7 @@ from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.lens import LensRanges
+from align.lens_design import replaced_by_model
 from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
 from axisbase.units import ARCSEC, DECLARED_TIME_UNITS, DEG
@@ -441,6 +442,13 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         # The plausible lens when no model is given (Type B ranges, issue 18).
         lens = {k: _number(c[f"lens_{k}"], f"{w} lens_{k}", 0.0,
                            None) for k in LensRanges.__dataclass_fields__ if f"lens_{k}" in c}
+        beside = replaced_by_model(lens) if model is not None else []
+        if beside:  # silently ignored otherwise: the model is the lens
+            raise InputError(f"{w} model = {c['model']!r} and "
+                             f"{', '.join(f'lens_{k}' for k in beside)} both given: a camera "
+                             "model is the lens (its u is carried), lens_ ranges are for a "
+                             "camera without one (lens_max_u_arcsec applies to both); remove "
+                             "one of them")
         if lens.get("max_u_arcsec") == 0:
             raise InputError(f"{w} lens_max_u_arcsec = 0: must be > 0")
         cameras[name] = Camera(name, model,

@@ -8,6 +8,8 @@ lens unless a test gives it a camera model.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -159,6 +161,11 @@ def test_lens_ranges_flag_and_its_errors():
                       ("max_u_arcsec=0", "> 0")):
         with pytest.raises(InputError, match=said):
             LensRanges.parse(bad)
+    # beside a camera model only the bound on u applies; a range would be silently ignored
+    assert LensRanges.parse("max_u_arcsec=20", beside="--camera").max_u_arcsec == 20.0
+    for given in ("k1=0.1", "max_u_arcsec=20,pp_px=5,aspect=0"):
+        with pytest.raises(InputError, match=r"--lens (k1|pp_px,aspect) with --camera"):
+            LensRanges.parse(given, beside="--camera")
 
 
 def test_default_grid_two_cases():
@@ -347,3 +354,56 @@ def test_principal_point_range_enters_as_its_rms_not_its_corners():
         mc = float(np.mean(f(xy[:, 0], xy[:, 1]) ** 2))
         assert got == pytest.approx(mc, rel=0.01)
     assert not np.isfinite(_uniform_msq([np.array([np.inf])] * 4, np.zeros(1))[0])
+
+
+# Five straight marks spread over a 640 x 480 frame (centre [px] from the image centre,
+# direction [deg], length [px]); p is read at the half-diagonal R = 400 px.
+_SPREAD = [((-150.0, -150.0), 5.0, 250), ((150.0, 150.0), -8.0, 250),
+           ((-230.0, 40.0), 80.0, 200), ((240.0, -30.0), 95.0, 200), ((30.0, -10.0), 40.0, 220)]
+_P1 = re.compile(r"lens p1 = (\S+) ± (\S+) from the lines")
+
+
+def _spread_marks(cam: CameraGeometry, seed: int):
+    ms = []
+    for (x, y), deg, length in _SPREAD:
+        a = np.deg2rad(deg)
+        ms.append(MarkSpec(a, x * np.sin(a) + y * np.cos(a), length, 4.0,
+                           centre_t_px=x * np.cos(a) - y * np.sin(a)))
+    s = _render(ms, cam, seed=seed)
+    rs = [r for r in measure_image(s.image, "spread.png") if r.found]
+    assert len(rs) == len(ms)
+    notes = {n for r in rs for n in r.notes}
+    for r in rs:  # each angle honest: within 3 u, or said to be lens-limited
+        t = min(ms, key=lambda m: abs(angle_error(r.angle_rad, m.angle_rad)))
+        assert abs(_z(r, t.angle_rad)) <= 3 or r.lens_limited
+    return notes
+
+
+def _decentred_cases(seeds):
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        pp = tuple(rng.uniform(8.0, 15.0, 2) * rng.choice([-1, 1], 2))  # within pp_px = 20
+        k1 = rng.uniform(0.08, 0.15)  # pincushion, +0.044..+0.082 at the half-diagonal
+        notes = _spread_marks(CameraGeometry(focal_px=540.0, k1=k1, pp_offset_px=pp), seed)
+        assert not [n for n in notes if "not a lens" in n], (seed, k1, pp, notes)
+
+
+def test_radial_lens_about_an_offset_principal_point_is_not_called_not_a_lens():
+    """k1 about a principal point 10 px off the centre looks like k1 + p about the centre
+    (p1 = -k1 cy/R, p2 = -k1 cx/R): a plausible lens (before: 'p1 = 0.00139 ... beyond any
+    lens: not a lens'). Positive controls: a real tangential lens inside the range is found
+    (its p1 within 3 u of the truth, not refused), and (slow) one ten times beyond any
+    lens, with no radial term to explain it, is still called not a lens."""
+    _decentred_cases([1])
+    f, R = 540.0, 400.0
+    notes = _spread_marks(CameraGeometry(focal_px=f, p1=1e-3, p2=-0.8e-3), 1)
+    assert not [n for n in notes if "not a lens" in n], notes
+    (p1, u), = {tuple(map(float, m.groups())) for n in notes if (m := _P1.search(n))}
+    assert abs(p1 - 1e-3 * R / f) < 3 * u, (p1, u)
+
+
+@pytest.mark.slow
+def test_decentred_radial_lenses_over_seeds():
+    _decentred_cases(range(2, 10))
+    notes = _spread_marks(CameraGeometry(focal_px=540.0, p1=1e-2), 1)  # the control above
+    assert [n for n in notes if "lens p1" in n and "beyond any lens" in n], notes

@@ -149,3 +149,29 @@ def test_no_session_toml_or_not_toml(tmp_path):
     (tmp_path / "session.toml").write_text("[calibration\n")
     p = check_session(tmp_path)
     assert len(p) == 1 and "not valid TOML" in p[0]
+
+
+@pytest.mark.parametrize("keys", [["lens_k1 = 0.1"], ["lens_p = 0.0", "lens_pp_px = 5.0"]])
+def test_a_camera_model_beside_lens_ranges_is_refused_naming_both(synthetic, tmp_path, keys):
+    """A camera model *is* the lens: lens_ ranges given beside it would be silently ignored."""
+    folder = tmp_path / "both"
+    shutil.copytree(synthetic, folder)
+    (folder / "camA.json").write_text(json.dumps(
+        {"camera_matrix": [[800, 0, 160], [0, 800, 120], [0, 0, 1]],
+         "dist_coeffs": [0.0] * 5, "image_size": [320, 240]}))
+    toml = folder / "session.toml"
+    text = toml.read_text()
+    head, rest = text.split("[cameras.A]\n", 1)
+    own, tail = rest.split("\n\n", 1)  # camera A's own lines, up to the blank line
+    kept = [x for x in own.splitlines() if not x.startswith("lens_")]
+    toml.write_text(head + "[cameras.A]\n" + "\n".join([*kept, 'model = "camA.json"',
+                                                          "lens_max_u_arcsec = 30.0"])
+                    + "\n\n" + tail)
+    assert check_session(folder) == []  # the model alone (and its bound on u) is ready
+    toml.write_text(toml.read_text().replace('model = "camA.json"\n',
+                                             'model = "camA.json"\n' + "\n".join(keys) + "\n"))
+    problems = check_session(folder)
+    assert len(problems) == 1, problems
+    p = problems[0]
+    assert "[cameras.A] model = 'camA.json'" in p and "\n" not in p
+    assert all(k.split(" =")[0] in p for k in keys), p

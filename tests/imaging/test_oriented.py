@@ -10,7 +10,7 @@ import pytest
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
-from imaging.band import band_indices
+from imaging.band import band_indices, band_mask
 from imaging.oriented import find_oriented
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
@@ -62,7 +62,8 @@ def test_a_texture_lay_is_not_a_periodic_background():
                      texture_scale_px=3.0)
     im = render_marks(spec, with_crlb=False).image
     det = detect_lines(im)
-    out, found = find_oriented(im, [band_indices(im, c) for c in det.marks], 65535)
+    out, found = find_oriented(im, band_mask(im.shape, [band_indices(im, c) for c in det.marks]),
+                               65535)
     assert not found.found and out is im
 
 
@@ -116,7 +117,7 @@ def test_clean_backgrounds_are_rarely_flagged():
         im = render_marks(spec, with_crlb=False).image
         top = float(2**bits - 1)
         det = detect_lines(im, top=top)
-        _, found = find_oriented(im, [band_indices(im, c) for c in (*det.marks, *det.unreported)],
-                                 top)
+        bands = [band_indices(im, c) for c in (*det.marks, *det.unreported)]
+        _, found = find_oriented(im, band_mask(im.shape, bands), top)
         flags += found.found
     assert flags <= 3, flags

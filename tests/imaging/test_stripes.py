@@ -66,7 +66,7 @@ def test_clean_backgrounds_flag_at_the_tests_level():
         img[((x - 160) ** 2 + (y - 100) ** 2) < 100] -= 5 * sd
         top = 255.0 if k % 2 else 65535.0
         img = np.clip(np.round(img * (0.05 if k % 2 else 1)), 0, top)
-        _, (c, r) = find_stripes(img, [], top)
+        _, (c, r) = find_stripes(img, None, top)
         ps += [c.p_value, r.p_value]
     assert np.sum(np.array(ps) < ALPHA) <= 2
     assert stats.kstest(ps, "uniform").pvalue > 1e-3
