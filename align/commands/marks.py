@@ -12,15 +12,12 @@ from align.commands.parents import examples
 
 
 def cmd_marks(args: argparse.Namespace) -> int:
-    from align.lens import LensRanges
     from align.marks import measure_files
-    from imaging import CameraModel, check_roi
+    from imaging import check_roi
 
     unique(args.images, "images")
     roi = check_roi(args.roi.split(","), "--roi") if args.roi is not None else None
-    camera = CameraModel.load(args.camera) if args.camera else None
-    ranges = (LensRanges.parse(args.lens, beside="--camera" if args.camera else "")
-              if args.lens is not None else None)
+    camera, ranges = _lens_inputs(args)
     inputs = [*args.images] + ([args.camera] if args.camera else [])
     outs = plan(args, inputs)
     out, plot_dir = (outs.add("--json", args.json, stdout_ok=True),
@@ -32,6 +29,18 @@ def cmd_marks(args: argparse.Namespace) -> int:
     _write_marks(args, results, inputs, out)
     # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
     return _marks_status(failed + _not_ok(results), internal)
+
+
+def _lens_inputs(args: argparse.Namespace):
+    """The camera model (--camera) and the plausible lens ranges (--lens); ranges beside a
+    model are refused by :meth:`LensRanges.parse` naming both flags."""
+    from align.lens import LensRanges
+    from imaging import CameraModel
+
+    camera = CameraModel.load(args.camera) if args.camera else None
+    ranges = (LensRanges.parse(args.lens, beside="--camera" if args.camera else "")
+              if args.lens is not None else None)
+    return camera, ranges
 
 
 def _not_ok(results) -> int:
