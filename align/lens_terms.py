@@ -166,8 +166,8 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
     departure only one mark calls for is that mark's bow (a bent mark), not the lens's — a
     changed lens bows every mark it reaches, so the departure must stand without any one of
     them. A single mark is alone when its departure is beyond any plausible lens
-    (``ranges``). Empty when the departure stands without each mark in turn (the marks agree
-    on it)."""
+    (``ranges``). Empty when the departure stands without each mark in turn, or falls without
+    any of several (the marks agree on it, or share it)."""
     if len(designs) < 2:
         # One mark cannot show that marks agree: its departure is the lens's only if a lens
         # could make it (within the plausible ranges); beyond them it is the mark's bow.
@@ -179,7 +179,13 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
         rest = [d for i, d in enumerate(designs) if i != k]
         if _camera_departure(rest, lam_u, ranges, alpha)[0] >= alpha:
             out.append(k)
-    return tuple(out)
+    if len(out) > 1:
+        # The departure falls without any of several marks: the culprit is the one that
+        # departs on its own; when none or several do, they share it (a weak but common
+        # departure is the lens's: four images of one camera through a lens its model misses).
+        out = [k for k in out if _camera_departure([designs[k]], lam_u, ranges, alpha)[0]
+               < alpha]
+    return tuple(out) if len(out) == 1 else ()
 
 
 def undistorted(line: LineGeometry, lam: np.ndarray, scale: float

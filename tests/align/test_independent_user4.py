@@ -608,8 +608,13 @@ def test_plan_on_failed_session_says_so(tmp_path):
     doc["camera_matrix"][0][2] = 5000.0
     cam.write_text(json.dumps(doc))
     toml = (s / "session.toml").read_text()
+    # A camera model is the lens: the synthetic session's declared lens ranges for camera A
+    # go (a model beside them is refused naming both keys).
+    head, _, rest = toml.partition("[cameras.A]\n")
+    section, nxt, tail = rest.partition("\n[")
+    section = "\n".join(ln for ln in section.splitlines() if not ln.startswith("lens_"))
     (s / "session.toml").write_text(
-        toml.replace("[cameras.A]\n", '[cameras.A]\nmodel = "camA.json"\n', 1))
+        head + '[cameras.A]\nmodel = "camA.json"\n' + section + nxt + tail)
     out = tmp_path / "r.json"
     r = align("run", s, "--json", out, "-q")
     assert r.returncode == 2
