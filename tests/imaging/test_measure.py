@@ -24,6 +24,7 @@ def test_angle_within_stated_uncertainty_and_near_crlb(angle):
     assert abs(m.line.offset_px - t.image_offset_px) < 4.5 * m.line.offset_u_px + 1e-3
 
 
+@pytest.mark.slow  # the default run keeps each angle within u and near the CRLB (above)
 def test_normalised_errors_are_standard_normal_over_seeds():
     z = []
     for seed in range(16):
