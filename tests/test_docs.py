@@ -196,10 +196,12 @@ def test_example_runs(page, line, code, monkeypatch):
     # the root (in this process: a fresh interpreter per example cost ~1.4 s CPU of imports
     # each; the example's own imports are what it shows).
     monkeypatch.chdir(ROOT)
+    failure = None
     try:
         exec(compile(code, f"{page}:{line}", "exec"), {"__name__": "__main__"})
     except Exception as exc:  # any failure of the example is the finding, with its place
-        pytest.fail(f"{page}:{line}: the example fails: {type(exc).__name__}: {exc}")
+        failure = f"{type(exc).__name__}: {exc}"
+    assert failure is None, f"{page}:{line}: the example fails: {failure}"
 
 
 def test_the_schema_tables_are_current():
