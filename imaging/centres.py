@@ -20,6 +20,7 @@ from imaging.detect import line_frame
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
 from imaging.ring import ring_slope
+from imaging.shape import GrooveShape, fit_shape
 from imaging.texture import TextureModel, texture_model
 
 EXTRA_STEPS = 4
@@ -120,8 +121,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image",
                    texture: bool = False, avoid_px: Sequence[float] = (),
                    guess: tuple[np.ndarray, np.ndarray] | None = None,
-                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-                   ) -> Centres:
+                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+                   shaped: bool = False) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
@@ -151,7 +152,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
                               "its segments")
     nseg = int(seg.max()) + 1
-    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    table = base_table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    groove_reach = min(pf.width_px / 2 + 4 * pf.blur_px, half)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
     if guess is not None and len(guess[0]) >= 2:
@@ -173,51 +175,67 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
 
-    for it in range(iterations + 1 + EXTRA_STEPS):
-        ee = e - delta[seg]
-        p, pe = table(ee)
-        mu = lev[seg] + slp[seg] * ee + amp[seg] * p
-        r = vals - mu
-        if it == 1:
-            # Noise model again, now from the segment model's residuals (local level and
-            # contrast absorb illumination and texture that the band fit could not);
-            # each segment spends k of its pixels' degrees of freedom.
-            npx = bc(np.ones_like(e))
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
-        # The linear noise model is fitted over the band's levels; below them (a segment's
-        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
-        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
-        # of a groove is quieter than a quarter of the band's typical variance.
-        floor = max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
-        wgt = 1.0 / np.maximum(v0 + v1 * mu, floor)
-        J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
-        N = np.empty((nseg, k, k))
-        g = np.empty((nseg, k))
-        for i in range(k):
-            wj = wgt * J[i]  # once per column (the products are the same to the bit)
-            g[:, i] = bc(wj * r)
-            for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wj * J[j])
-        ok = np.linalg.det(N) > 0
-        if it >= iterations and not (moving & ok).any():
-            break  # the last pass only refreshes weights and information at the solution
-        if it == iterations + EXTRA_STEPS:
-            break  # still moving: those segments are left out below
-        step = np.zeros((nseg, k))
-        step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
-        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
-        moving = np.abs(step[:, 0]) > 0.1
-        step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
-        delta += step[:, 0]
-        amp += step[:, 1]
-        lev += step[:, 2]
-        if k == 4:
-            slp += step[:, 3]
+    shape = None
+    for shape_pass in range(1 + shaped):
+        for it in range(iterations + 1 + EXTRA_STEPS):
+            ee = e - delta[seg]
+            p, pe = table(ee)
+            mu = lev[seg] + slp[seg] * ee + amp[seg] * p
+            r = vals - mu
+            if it == 1:
+                # Noise model again, now from the segment model's residuals (local level and
+                # contrast absorb illumination and texture that the band fit could not);
+                # each segment spends k of its pixels' degrees of freedom.
+                npx = bc(np.ones_like(e))
+                v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+            # The linear noise model is fitted over the band's levels; below them (a segment's
+            # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+            # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+            # of a groove is quieter than a quarter of the band's typical variance.
+            floor = max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
+            wgt = 1.0 / np.maximum(v0 + v1 * mu, floor)
+            J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
+            N = np.empty((nseg, k, k))
+            g = np.empty((nseg, k))
+            for i in range(k):
+                wj = wgt * J[i]  # once per column (the products are the same to the bit)
+                g[:, i] = bc(wj * r)
+                for j in range(i, k):
+                    N[:, i, j] = N[:, j, i] = bc(wj * J[j])
+            ok = np.linalg.det(N) > 0
+            if it >= iterations and not (moving & ok).any():
+                break  # the last pass only refreshes weights and information at the solution
+            if it == iterations + EXTRA_STEPS:
+                break  # still moving: those segments are left out below
+            step = np.zeros((nseg, k))
+            step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
+            # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+            moving = np.abs(step[:, 0]) > 0.1
+            step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
+            delta += step[:, 0]
+            amp += step[:, 1]
+            lev += step[:, 2]
+            if k == 4:
+                slp += step[:, 3]
+        if shape_pass == shaped:
+            break
+        # The groove's own profile (imaging.shape): its even departure from the model,
+        # pooled over the segments' phases, and the centres refitted with it (a second
+        # round moved the departure by chi2 < 1 of its own noise on rounded grooves).
+        npx = bc(np.ones_like(e))
+        use = (ok & (npx >= 6) & (np.abs(delta) < half / 2) & ~moving)[seg]
+        shape = fit_shape(ee[use], r[use], amp[seg][use], wgt[use], groove_reach)
+        if shape is None:
+            break
+        table = base_table.with_departure(*shape.tabulate(base_table.grid))
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
     ocov = None
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
+    if shape is not None:
+        sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, bc)
+        ocov = sc if ocov is None else ocov + sc
     blur_dev = blur_dev_u = None
     if texture:
         blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
@@ -250,6 +268,20 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
                    blur_dev_u=blur_dev_u, offsets_cov=ocov)
+
+
+def _shape_cov(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[np.ndarray],
+               cov: np.ndarray, ok: np.ndarray, bc) -> np.ndarray:
+    """Covariance [px^2] (nseg x nseg) of the centres from the noise of the groove's own
+    profile (one departure shared by every segment): a change dc of its coefficients moves
+    segment k's centre by -[N_k^-1 sum_px w J A_k B(x)]_0 dc (one Gauss–Newton step), so the
+    covariance is S cov_c S^T. ``aw``: each pixel's contrast times its weight."""
+    B = shape.design(x)
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    G = np.stack([np.stack([bc(aw * J[i] * B[:, j]) for j in range(B.shape[1])], axis=1)
+                  for i in range(len(J))], axis=1)  # (nseg, k, K)
+    S = -np.einsum("ni,nij->nj", c0, G)
+    return S @ shape.cov @ S.T
 
 
 def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,

@@ -222,7 +222,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                         offsets_var=offsets_var)
+                         offsets_var=offsets_var, shaped=True)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
     pts, sig = cen.xy[use], cen.sigma[use]

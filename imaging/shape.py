@@ -1,0 +1,141 @@
+"""The groove's own cross-profile, read from the mark's residuals (an empirical line spread).
+
+The centres are fitted with a flat-bottomed groove through a Gaussian blur
+(:mod:`imaging.groove`). A real groove need not be flat-bottomed (a ground scribe's is a
+rounded V): the misfit is symmetric, but sampled by the pixel grid at a sub-pixel phase it
+moves each segment's centre by an amount that depends on that phase. On a mark within a
+fraction of a degree of a pixel axis the phase drifts slowly along the mark, and the bias
+becomes a slow trend that tilts the fitted line (user6's rounded groove: RMS z 1.52).
+
+The pixels of all segments sample the profile at many phases (x = e - delta_k, the pixel's
+distance from its own segment's centre), as the slanted-edge method (ISO 12233) oversamples
+an edge. Their residuals divided by the contrast, pooled over the mark, give the profile's
+departure D(x) from the model on a cubic B-spline basis (knots every :data:`KNOT_PX`), kept
+*even* in x: a symmetric groove's profile is even about its centre, so D cannot move a
+centre on its own, while it removes the phase-dependent misfit. D is zero beyond the groove
+and its blur (w/2 + 4 s), where the band holds background only. It is applied only when the
+pooled residuals hold it significantly (chi^2 of its coefficients, p < :data:`P_APPLY`): on
+a groove the model describes, nothing changes. Its own noise is propagated into the centres
+(:func:`shape_cov`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import BSpline
+from scipy.stats import chi2 as chi2_dist
+
+KNOT_PX = 0.5
+"""Knot spacing of the departure's B-spline basis [px]: the blurred, pixel-integrated
+profile varies over ~1 px (blur >= 0.5 px plus the pixel), which cubics every 0.5 px
+follow to a few per cent."""
+
+P_APPLY = 1e-3
+"""The departure is applied when the pooled residuals hold it at p < this (chi^2 test)."""
+
+MAX_Z = 5.0
+"""Pixels whose residual exceeds this many sigma (dust, a crossing) stay out of the pool."""
+
+
+@dataclass(frozen=True)
+class GrooveShape:
+    """An even departure D(x) of the groove's profile from the model (fraction of contrast).
+
+    Attributes
+    ----------
+    knots : ndarray
+        The B-spline's knots [px].
+    fold : ndarray
+        (n_basis, K) maps the K even coefficients onto the basis.
+    coef : ndarray
+        (K,) the even coefficients [1].
+    cov : ndarray
+        (K, K) their covariance [1].
+    chi2 : float
+        coef' cov^-1 coef: the departure's significance (K degrees of freedom).
+    """
+
+    knots: np.ndarray
+    fold: np.ndarray
+    coef: np.ndarray
+    cov: np.ndarray
+    chi2: float
+
+    @property
+    def significant(self) -> bool:
+        """Whether the residuals hold the departure at p < :data:`P_APPLY`."""
+        return bool(self.chi2 > chi2_dist.isf(P_APPLY, len(self.coef)))
+
+    def design(self, x: np.ndarray) -> np.ndarray:
+        """(len(x), K) the even basis at distances ``x`` from the centre [px] (0 outside)."""
+        return _design(x, self.knots) @ self.fold
+
+    def tabulate(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D and dD/dx on ``grid`` [px] (0 beyond the groove's reach)."""
+        spl = BSpline(self.knots, self.fold @ self.coef, 3, extrapolate=False)
+        d, dd = spl(grid), spl.derivative()(grid)
+        return np.nan_to_num(d), np.nan_to_num(dd)
+
+
+def _knots(reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """Uniform knots symmetric about 0 and the fold onto the even basis functions whose
+    support lies within +-reach [px] (so D and its first two derivatives vanish there)."""
+    m = max(int(np.ceil(reach / KNOT_PX)), 3)
+    knots = KNOT_PX * np.arange(-m - 3, m + 4, dtype=float)
+    n = len(knots) - 4
+    inside = [j for j in range(n) if knots[j] >= -m * KNOT_PX - 1e-9
+              and knots[j + 4] <= m * KNOT_PX + 1e-9]
+    pairs = sorted({(min(j, n - 1 - j), max(j, n - 1 - j)) for j in inside})
+    fold = np.zeros((n, len(pairs)))
+    for c, (a, b) in enumerate(pairs):
+        fold[a, c] = fold[b, c] = 1.0
+    return knots, fold
+
+
+def _design(x: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Dense cubic B-spline design matrix at ``x`` (rows of x outside the knots: 0)."""
+    lo, hi = knots[3], knots[-4]
+    inside = (x > lo) & (x < hi)
+    out = np.zeros((len(x), len(knots) - 4))
+    if inside.any():
+        out[inside] = BSpline.design_matrix(x[inside], knots, 3).toarray()
+    return out
+
+
+def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
+              reach: float) -> GrooveShape | None:
+    """The even departure of the profile from the model, from pooled residuals.
+
+    Parameters
+    ----------
+    x : ndarray
+        Each pixel's distance from its segment's fitted centre [px].
+    r : ndarray
+        Its residual from the model [DN].
+    amp : ndarray
+        Its segment's contrast [DN].
+    wgt : ndarray
+        Its weight (1 / noise variance) [1/DN^2].
+    reach : float
+        Half-width of the groove and its blur, w/2 + 4 s [px]: D is 0 beyond.
+
+    Returns
+    -------
+    GrooveShape or None
+        None when too few pixels for the basis.
+    """
+    knots, fold = _knots(reach)
+    keep = np.abs(r) * np.sqrt(wgt) < MAX_Z
+    X = (_design(x[keep], knots) @ fold) * amp[keep, None]
+    if keep.sum() < 4 * X.shape[1]:
+        return None
+    w = wgt[keep]
+    N = X.T @ (w[:, None] * X)
+    try:
+        cov = np.linalg.inv(N)
+    except np.linalg.LinAlgError:
+        return None
+    coef = cov @ (X.T @ (w * r[keep]))
+    return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
