@@ -238,7 +238,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
     if shape is not None:
-        sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, bc)
+        sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, seg)
         ocov = sc if ocov is None else ocov + sc
     blur_dev = blur_dev_u = None
     if texture:
@@ -292,15 +292,20 @@ def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) ->
 
 
 def _shape_cov(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[np.ndarray],
-               cov: np.ndarray, ok: np.ndarray, bc) -> np.ndarray:
+               cov: np.ndarray, ok: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """Covariance [px^2] (nseg x nseg) of the centres from the noise of the groove's own
     profile (one departure shared by every segment): a change dc of its coefficients moves
     segment k's centre by -[N_k^-1 sum_px w J A_k B(x)]_0 dc (one Gauss–Newton step), so the
     covariance is S cov_c S^T. ``aw``: each pixel's contrast times its weight."""
-    B = shape.design(x)
+    cols, vals = shape.local(x)
+    nseg, kk = len(ok), len(shape.coef)
+    G = np.zeros((nseg, len(J), kk))
+    for i in range(len(J)):
+        for a in range(4):
+            G[:, i, :] += np.bincount(seg * kk + np.maximum(cols[:, a], 0),
+                                      aw * J[i] * vals[:, a],
+                                      minlength=nseg * kk).reshape(nseg, kk)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
-    G = np.stack([np.stack([bc(aw * J[i] * B[:, j]) for j in range(B.shape[1])], axis=1)
-                  for i in range(len(J))], axis=1)  # (nseg, k, K)
     S = -np.einsum("ni,nij->nj", c0, G)
     return S @ shape.cov @ S.T
 
