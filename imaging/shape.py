@@ -16,10 +16,11 @@ an edge. Their residuals divided by the contrast, pooled over the mark, give the
 departure D(x) from the model on a cubic B-spline basis (knots every :data:`KNOT_PX`), kept
 *even* in x: a symmetric groove's profile is even about its centre, so D cannot move a
 centre on its own, while it removes the phase-dependent misfit. D is zero beyond the groove
-and its blur (w/2 + 4 s), where the band holds background only. It is applied only when the
-pooled residuals hold it significantly (chi^2 of its coefficients, p < :data:`P_APPLY`): on
-a groove the model describes, nothing changes. Its own noise is propagated into the centres
-(:func:`shape_cov`).
+and its blur (w/2 + 4 s), where the band holds background only. It is applied on every
+mark and its own noise is propagated into the centres (``imaging.centres._shape_cov``):
+gating it on a significance test left rounded grooves whose departure was not significant
+(chi^2 22-32 on 12 dof) biased, while applying it costs a clean flat-bottomed groove ~3 %
+of its u (median). :attr:`GrooveShape.significant` says whether the residuals hold it.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import BSpline
-from scipy.stats import chi2 as chi2_dist
+from scipy.special import chdtrc
 
 KNOT_PX = 0.5
 """Knot spacing of the departure's B-spline basis [px]: the blurred, pixel-integrated
@@ -36,7 +37,7 @@ profile varies over ~1 px (blur >= 0.5 px plus the pixel), which cubics every 0.
 follow to a few per cent."""
 
 P_APPLY = 1e-3
-"""The departure is applied when the pooled residuals hold it at p < this (chi^2 test)."""
+"""A departure the pooled residuals hold at p < this (chi^2 test) is significant."""
 
 MAX_Z = 5.0
 """Pixels whose residual exceeds this many sigma (dust, a crossing) stay out of the pool."""
@@ -69,7 +70,7 @@ class GrooveShape:
     @property
     def significant(self) -> bool:
         """Whether the residuals hold the departure at p < :data:`P_APPLY`."""
-        return bool(self.chi2 > chi2_dist.isf(P_APPLY, len(self.coef)))
+        return bool(chdtrc(len(self.coef), self.chi2) < P_APPLY)
 
     def local(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The even basis at ``x`` [px], sparse: (cols, vals), each (len(x), 4); a column of
