@@ -47,6 +47,7 @@ from align.calibration.stability import (
 )
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
 from align.calibration.walk import WANDER, walk_covariance, wander_fit
+from align.calibration.wander import corrected, scale_wander, wander_reason
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -299,6 +300,9 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
                                            stability_default)
+    elif stability_default:  # nothing declared: what the poses' own trends show
+        model, stated, more = _data_stability(stage, rep, model, alpha, stated)
+        increments += more
     problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
@@ -384,6 +388,23 @@ def _stability_increment(gain: np.ndarray | None, ppm: float | None, default: bo
     if gain is None or not ppm:
         return []
     return [(STABILITY, stability_reason(ppm, default), bound_cov(gain, ppm * PPM))]
+
+
+def _data_stability(stage: CalibrationStage, rep: LoopReport, model: TriadModel,
+                    alpha: float, stated: dict
+                    ) -> tuple[TriadModel, dict, list[tuple[str, str, np.ndarray]]]:
+    """The scale wander the poses' slopes show (:mod:`align.calibration.wander`): when found,
+    the model corrected for it, the statement saying so and the ``scale_stability`` term of
+    the path's u; else the model and the stated assumption (with the test, when run)."""
+    w = scale_wander(stage.poses, rep.after.payload, alpha)
+    if w is None:
+        return model, stated, []
+    if not w.found:
+        return model, {**stated, "wander": w.to_dict()}, []
+    model, cov = corrected(model, _ellipsoid_gain(stage, rep), w)
+    why = wander_reason(w)
+    return model, {"ppm": None, "assumed": False, "statement": why,
+                   "wander": w.to_dict()}, [(STABILITY, why, cov)]
 
 
 TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"
