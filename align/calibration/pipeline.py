@@ -398,9 +398,11 @@ def _data_stability(stage: CalibrationStage, rep: LoopReport, model: TriadModel,
     the path's u; else the model and the stated assumption (with the test, when run)."""
     w = scale_wander(stage.poses, rep.after.payload, alpha)
     if w is None:
-        return model, stated, []
+        return model, {**stated, "wander": None}, []
     if not w.found:
-        return model, {**stated, "wander": w.to_dict()}, []
+        seen = f"; the poses' slopes show no scale wander (p = {w.p:.2g})"
+        return model, {**stated, "statement": stated["statement"] + seen,
+                       "wander": w.to_dict()}, []
     model, cov = corrected(model, _ellipsoid_gain(stage, rep), w)
     why = wander_reason(w)
     return model, {"ppm": None, "assumed": False, "statement": why,
