@@ -289,8 +289,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         wander = scale_wander(stage.poses, rep.after.payload, alpha)
         stated = {**stated, "wander": None if wander is None else wander.to_dict()}
         if wander is not None and wander.found:  # each pose back to the scale at t_ref
-            stage, rep = noise_model(CalibrationStage(corrected_poses(stage.poses, wander),
-                                                      signs), candidates, alpha)
+            poses = corrected_poses(poses, wander)  # (the known-pose cross-check's too)
+            stage, rep = noise_model(CalibrationStage(poses, signs), candidates, alpha)
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     model, widening = rep.after.payload, None
     increments = []
