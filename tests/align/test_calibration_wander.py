@@ -72,7 +72,7 @@ def test_a_clean_tumble_shows_no_wander_and_keeps_its_result():
 
 
 def test_means_without_samples_keep_the_stated_assumption():
-    tr, poses, _ = _run(0, 1e-4)
+    tr, poses, _ = _run(1, 0.0)
     means = poses.__class__(poses.u, poses.t, None, poses.sigma_u, poses.count, poses.labels)
     cal = calibrate(means, np.sign(tr.k), stability_default=True)
     assert cal.stability["assumed"] and cal.stability["wander"] is None
