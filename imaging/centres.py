@@ -99,6 +99,10 @@ def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int =
     return (j + reach) // every if every > 1 else j + reach, keep
 
 
+_LEVEL = 2
+"""Index of the segment fit's level column (ones) among its columns (centre, contrast, level,
+slope)."""
+
 RING_PX = 6.0
 """Width of the ring just outside the band whose pixels give the background slope [px]."""
 
@@ -182,16 +186,17 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     def bc(x: np.ndarray) -> np.ndarray:
         return np.bincount(seg, x, minlength=nseg)
 
+    npx = bc(np.ones_like(e))
     for it in range(iterations + 1 + EXTRA_STEPS):
         ee = e - delta[seg]
         p, pe = table(ee)
-        mu = lev[seg] + slp[seg] * ee + amp[seg] * p
+        amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
+        mu = lev[seg] + slp_px * ee + amp_px * p
         r = vals - mu
         if it == 1:
             # Noise model again, now from the segment model's residuals (local level and
             # contrast absorb illumination and texture that the band fit could not);
             # each segment spends k of its pixels' degrees of freedom.
-            npx = bc(np.ones_like(e))
             v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
         # The linear noise model is fitted over the band's levels; below them (a segment's
         # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
@@ -199,14 +204,16 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         # of a groove is quieter than a quarter of the band's typical variance.
         var = v0 + v1 * mu
         wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
-        J = (-(amp[seg] * pe + slp[seg]), p, np.ones_like(p), ee)[:k]
+        J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
         N = np.empty((nseg, k, k))
         g = np.empty((nseg, k))
         for i in range(k):
-            wj = wgt * J[i]  # once per column (the products are the same to the bit)
+            # Once per column (the products are the same to the bit); the level's column is
+            # ones, and x * 1.0 is x: those products are skipped.
+            wj = wgt if i == _LEVEL else wgt * J[i]
             g[:, i] = bc(wj * r)
             for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wj * J[j])
+                N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
         ok = np.linalg.det(N) > 0
         if it >= iterations and not (moving & ok).any():
             break  # the last pass only refreshes weights and information at the solution
@@ -233,7 +240,6 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                                           ok, bc)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
-    npx = bc(np.ones_like(e))
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
