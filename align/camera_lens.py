@@ -194,6 +194,10 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                      "lens and bent marks cannot be told apart; recalibrate the camera "
                      "(`align camera`) or image straight marks far from the centre")
         unresolved = True
+        # u still widened by the change all the marks call for (as when they agree): the
+        # angles are not ok, but a session's fusion should not take them as sharp.
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_disagreement"] = float(d.s @ dlam)
     elif p_used < alpha:
         also = ""
         if told is not None:
