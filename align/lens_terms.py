@@ -268,24 +268,32 @@ def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
                        1.0 + float(h[det] @ C @ h[det]), beyond)
 
 
-def _agreement(k: int, with_: Sequence[int], Fb: Sequence[tuple[np.ndarray, np.ndarray]],
-               rng: np.ndarray, z: float) -> tuple[float, float]:
+def _agreement(k: int, with_: Sequence[int], designs: Sequence[_Design],
+               Fb: Sequence[tuple[np.ndarray, np.ndarray]], rng: np.ndarray, z: float
+               ) -> tuple[float, float]:
     """How well mark ``k`` agrees with the lens change the marks ``with_`` call for: the
     p-value of its own estimate of the change against theirs, over the parameters both
-    determine (chi2 with both covariances; 1 when there is nothing to compare), and the
-    chi2 per degree of freedom. ``Fb``: each mark's (G^T G, G^T z)."""
+    determine (chi2 with both covariances), and the chi2 per degree of freedom. A mark that
+    determines none of them on its own is tested by its bow: the quadratic across it left
+    after the others' change, against its noise and the change's u. ``Fb``: each mark's
+    (G^T G, G^T z)."""
     F = sum(Fb[i][0] for i in with_)
     det = _determined(F, rng, z)
     Fk, bk = Fb[k]
     det_k = _determined(Fk, rng, z)
     both = [j for j in det_k if j in det]
-    if not both:
-        return 1.0, 0.0
     P = len(rng)
     dl, Cr = np.zeros(P), np.zeros((P, P))
-    D = np.ix_(det, det)
-    dl[det] = -np.linalg.solve(F[D], sum(Fb[i][1] for i in with_)[det])
-    Cr[D] = np.linalg.inv(F[D])
+    if det:
+        D = np.ix_(det, det)
+        dl[det] = -np.linalg.solve(F[D], sum(Fb[i][1] for i in with_)[det])
+        Cr[D] = np.linalg.inv(F[D])
+    if not both:
+        d = designs[k]
+        wG = d.w @ d.G
+        r = float(d.w @ d.z + wG @ dl)
+        stat = r**2 / (1.0 + float(wG @ Cr @ wG))
+        return float(special.chdtrc(1, stat)), stat
     Dk = np.ix_(det_k, det_k)
     dk, Ck = np.zeros(P), np.zeros((P, P))
     dk[det_k] = -np.linalg.solve(Fk[Dk], bk[det_k])
@@ -315,12 +323,23 @@ def _agreeing(designs: Sequence[_Design], departing: Sequence[int], rng: np.ndar
             keep = [k for k in range(n) if k not in drop]
             if len(keep) < 2:
                 continue
-            p = min(_agreement(k, [i for i in keep if i != k], Fb, rng, z)[0] for k in keep)
+            p = min(_agreement(k, [i for i in keep if i != k], designs, Fb, rng, z)[0]
+                    for k in keep)
             if p >= alpha and p > best_p:
                 best, best_p = keep, p
         if best is not None:
             return best
     return None
+
+
+def _departs(d: _Design, lam_u: np.ndarray, ranges: LensRanges, alpha: float) -> bool:
+    """Whether one mark departs from the calibrated lens on its own: the change it alone
+    calls for stands, or its bow (the quadratic across it, which a mark that determines no
+    lens parameter on its own still shows) is beyond its noise and the calibration's u."""
+    if _camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
+        return True
+    var = 1.0 + float(np.sum((d.w @ d.G * lam_u) ** 2))
+    return abs(d.bow_z) > float(-special.ndtri(alpha / 2)) * np.sqrt(var)
 
 
 def lens_or_bends(designs: Sequence[_Design], lam_u: np.ndarray,
@@ -348,8 +367,7 @@ def lens_or_bends(designs: Sequence[_Design], lam_u: np.ndarray,
     n = len(designs)
     if n < 2:
         return None
-    departing = tuple(k for k in range(n)
-                      if _camera_departure([designs[k]], lam_u, ranges, alpha)[0] < alpha)
+    departing = tuple(k for k in range(n) if _departs(designs[k], lam_u, ranges, alpha))
     if not departing:
         return None
     keep = _agreeing(designs, departing, rng, z, alpha)

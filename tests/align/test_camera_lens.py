@@ -100,12 +100,13 @@ def test_a_wrong_k1_is_still_called_a_change_of_the_lens_with_a_bent_mark_presen
 
 def _two_bent(seed: int, n_straight: int = 2):
     """Two bent marks (sagitta 1-2 px, either sign, arc or parabola) — one near the centre,
-    one off it — and ``n_straight`` straight ones far from the centre (where a lens change
-    that bowed the bent ones would bow them too)."""
+    one in the fourth corner — and ``n_straight`` straight ones in the other corners (where
+    a lens change that bowed the bent ones would bow them too); no two marks come near each
+    other (an end near another groove is an obstruction, a case of its own)."""
     rng = np.random.default_rng([seed, 29])
     bend = [_at(rng.uniform(-40, 0), rng.uniform(-40, 40), rng.uniform(-60, -20), 200.0,
                 rng.uniform(1.0, 2.0) * rng.choice([-1, 1]), str(rng.choice(["arc", "parabola"]))),
-            _at(rng.uniform(100, 160), rng.uniform(-40, 40), rng.uniform(20, 60), 180.0,
+            _at(rng.uniform(130, 160), rng.uniform(-140, -110), rng.uniform(20, 60), 160.0,
                 rng.uniform(1.0, 2.0) * rng.choice([-1, 1]), str(rng.choice(["arc", "parabola"])))]
     straight = [_at(-150.0, -150.0, rng.uniform(0, 20), 200.0),
                 _at(170.0, 150.0, rng.uniform(60, 80), 180.0),
@@ -138,17 +139,15 @@ def _check_two_bent(seed: int, n_straight: int = 2) -> None:
 
 def test_two_bent_marks_do_not_make_a_false_lens_change():
     """Exact model, two bent marks and two straight ones far from the centre: the change the
-    bent ones call for would bow the straight ones tens of sigma; they are straight, so the
-    bent marks are named and the calibration kept (before: 'the lens differs from its
-    calibration', the straight marks lens-limited at 300-10700'')."""
+    bent ones call for would bow the straight ones tens to hundreds of sigma; they are
+    straight, so the bent marks are named and the calibration kept (before, seeds 0-9: 'the
+    lens differs from its calibration' in 10/10, the straight marks lens-limited at u
+    270-8300''; now their u 25-42'', |z| <= 1.25)."""
     for seed in range(2):
         _check_two_bent(seed)
 
 
-_SEED6 = pytest.param(6, marks=pytest.mark.xfail(strict=True, reason=(
-    "open: the bent mark near the centre (arc, sagitta 1.21 px) is read by its chord -4.5 u "
-    "off (its own loop's bent-mark reading, not the lens decision: the verdict is right)")))
-_SEEDS = [*range(2, 6), _SEED6, *range(7, 10)]
+_SEEDS = range(2, 10)
 
 
 @pytest.mark.slow
@@ -173,9 +172,10 @@ def _check_changed_lens_with_two_bent(seed: int, n_straight: int = 2) -> None:
 def test_a_changed_lens_is_found_beside_two_bent_marks():
     """Positive control: model k1 -0.20 for a lens of -0.27, two bent marks among the
     straight ones: the straight ones agree on the change (k1 about -0.04 at the
-    half-diagonal), the bent ones fit no change: 'differs', every angle within 3 u (before:
-    the change fitted through the bent marks too, a straight mark 2869'' off at u 116'',
-    z 24.8, not lens-limited)."""
+    half-diagonal), the bent ones fit no change: 'differs', every angle within 3 u (before,
+    seed 0: a straight mark read as the one bent mark, the calibration kept, z +24.3 and
+    -24.0 on the straight marks, nothing lens-limited; now 20/20 scenes 'differs', max |z|
+    1.43)."""
     for seed in (0, 2):
         _check_changed_lens_with_two_bent(seed)
 
@@ -198,3 +198,33 @@ def test_a_changed_lens_and_bent_marks_that_cannot_be_told_apart_are_not_ok():
     assert len(found) == 3
     assert all(r.lens_limited for r in found)
     assert all(any("cannot be told apart" in n for n in r.notes) for r in found)
+
+
+@pytest.mark.parametrize("seed", [0, *(pytest.param(k, marks=pytest.mark.slow)
+                                      for k in range(1, 6))])
+def test_marks_that_cannot_tell_a_changed_lens_from_bends_carry_both(seed):
+    """Model k1 -0.20 for a lens of -0.27; the two corner marks depart from it (bowed by the
+    change), the third is short and centred, where the change leaves no bow (the two
+    explanations < 1 sigma apart there): the data cannot tell a changed lens from two bent
+    marks. Warned naming the camera and the marks, the calibration's reading given, each
+    angle's difference under the two explanations in u (``camera_or_bent``): every angle
+    within 3 u (seeds 0-2: the corner marks |z| 1.9-2.1, lens-limited, so not ok)."""
+    rng = np.random.default_rng([seed, 37])
+    marks = [_at(-150.0, -150.0, rng.uniform(0, 20), 200.0),
+             _at(170.0, 150.0, rng.uniform(60, 80), 180.0),
+             _at(rng.uniform(-10, 10), rng.uniform(-10, 10), rng.uniform(100, 170), 120.0)]
+    spec = ImageSpec(marks=tuple(marks), width=640, height=480, camera=CAM, seed=seed,
+                     full_well_e=full_well_for_snr(40, -0.6), supersample=3)
+    img = render_marks(spec, with_crlb=False).image
+    found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM, k1=-0.20))
+             if r.found]
+    assert len(found) == 3
+    corners = ", ".join(str(r.index) for r in found if _match(r, marks) is not marks[2])
+    for r in found:
+        assert r.lens["lens_or_bent"] == "undecided", (seed, r.lens)
+        assert any("camera: cannot tell whether the lens differs" in n
+                   and f"line(s) {corners} of 3 are bent" in n for n in r.notes), (seed, r.notes)
+        assert "camera_or_bent" in r.u_terms
+        m = _match(r, marks)
+        z = angle_error(r.angle_rad, m.angle_rad) / r.angle_u_rad
+        assert abs(z) <= 3, (seed, z)
