@@ -142,12 +142,11 @@ def test_two_bent_marks_do_not_make_a_false_lens_change():
     bent ones call for would bow the straight ones tens to hundreds of sigma; they are
     straight, so the bent marks are named and the calibration kept (before, seeds 0-9: 'the
     lens differs from its calibration' in 10/10, the straight marks lens-limited at u
-    270-8300''; now their u 25-42'', |z| <= 1.25)."""
-    for seed in range(2):
-        _check_two_bent(seed)
+    270-8300''; now their u 25-42'', |z| <= 1.25). Seeds 1-9: the slow twin below."""
+    _check_two_bent(0)
 
 
-_SEEDS = range(2, 10)
+_SEEDS = range(1, 10)
 
 
 @pytest.mark.slow
@@ -175,14 +174,13 @@ def test_a_changed_lens_is_found_beside_two_bent_marks():
     half-diagonal), the bent ones fit no change: 'differs', every angle within 3 u (before,
     seed 0: a straight mark read as the one bent mark, the calibration kept, z +24.3 and
     -24.0 on the straight marks, nothing lens-limited; now 20/20 scenes 'differs', max |z|
-    1.43)."""
-    for seed in (0, 2):
-        _check_changed_lens_with_two_bent(seed)
+    1.43). Seeds 1-9: the slow twin below."""
+    _check_changed_lens_with_two_bent(0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n_straight", [2, 3])
-@pytest.mark.parametrize("seed", [1, *_SEEDS])
+@pytest.mark.parametrize("seed", _SEEDS)
 def test_changed_lens_beside_two_bent_marks_over_seeds(n_straight, seed):
     _check_changed_lens_with_two_bent(seed, n_straight)
 
