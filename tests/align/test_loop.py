@@ -7,7 +7,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from align.loop import Candidate, StageFit, Term, check_structure, run_loop
-from align.loop.structure import _lomb_scargle
 
 
 class PolyStage:
@@ -138,26 +137,3 @@ def test_a_refused_effect_leaves_structure_the_stage_must_answer_for():
     assert p < 1e-3 and rep.summary().unexplained_structure
     clean = run_loop(PolyStage(*_data(2)), [QUAD], admissible=lambda cur, trial, term: "never")
     assert not clean.refused and not clean.unexplained_structure
-
-
-def test_periodogram_is_scipys_lomb_scargle():
-    """The hand-written periodogram (one cos/sin pass) gives scipy's normalised floating-mean
-    Lomb-Scargle power to rounding, and the same peak, on uneven and exactly even grids (whose
-    top frequency is the Nyquist, where cos and sin are collinear), with and without a wave."""
-    from scipy import signal  # (here: ~1 s to import, for this test only)
-
-    rng = np.random.default_rng(7)
-    worst = 0.0
-    for trial in range(24):
-        n = (20, 63, 150, 240)[trial % 4]
-        x = 10.0 + 4.0 * np.arange(n) + (0.0 if trial % 3 == 0 else rng.normal(0, 0.3, n))
-        x = np.sort(x)
-        z = rng.normal(size=n) + (0.6 * np.sin(2 * np.pi * x / 37.0) if trial % 2 else 0.0)
-        span, spacing = np.ptp(x), np.ptp(x) / (n - 1)
-        m = min(4 * n, 8192)
-        w = 2 * np.pi * np.linspace(1.5 / span, 0.5 / spacing, m)
-        ref = signal.lombscargle(x, z - z.mean(), w, normalize=True, floating_mean=True)
-        ours = _lomb_scargle(x.tobytes(), z.tobytes(), 1.5 / span, 0.5 / spacing, m)
-        assert int(np.argmax(ours)) == int(np.argmax(ref)), trial
-        worst = max(worst, float(np.max(np.abs(ours - ref))))
-    assert worst < 1e-10
