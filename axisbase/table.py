@@ -288,7 +288,7 @@ def rate_warning(table: Table) -> str | None:
             if lo <= 1.0 / (dt * TIME_UNITS[u]) <= hi]
     unit = table.units.get(spec.time) or "s"
     likely = (f"; were the times in {fits[0]}? say so in the header: {spec.time} [{fits[0]}]"
-              if fits else "")
+              f" (or --time-unit {fits[0]})" if fits else "")
     return (f"{table.path}: {spec.time}: median sample interval {dt:g} {unit} "
             f"({1.0 / dt:.3g} Hz) is implausible for a {spec.what} ({lo:g} Hz to {hi:g} Hz)"
             f"{likely}")
@@ -373,9 +373,11 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                     done, n = done - cut, n - cut
                 if n == 0:
                     continue
-                empty = False
                 chunk = _table(path, spec, h, cols, row0)
                 _check(chunk, prev_t)
+                if empty and (warning := rate_warning(chunk)):
+                    _note(f"WARNING: {warning}")  # (the first chunk: thousands of rows)
+                empty = False
                 if spec.time and spec.time in chunk.data:
                     prev_t = float(chunk.data[spec.time][-1])
                 row0 += len(chunk)

@@ -25,7 +25,10 @@ COUNTER_LOG = TableSpec(
      Column("counter", "int", aliases=("counter_id",)),
      Column("ref", "int", aliases=("reference", "ref_pulse")),
      Column("t", "float", required=False, aliases=("time", "t_s", "time_s", "timestamp"))),
-    time="t")
+    time="t", rate_hz_range=(1e-2, 1e4))
+"""(Plausible pulse rates: a face every 100 s — a 4-face table at 0.9 °/s, about where a ring
+laser's lock-in ends — to 10⁴ faces a second, a 24-face polygon at 400 rev/s; times in ms or
+µs read as seconds fall below, and a warning names the unit.)"""
 COLUMNS = ("count", "counter", "ref")
 ROWS = "rows"
 """What messages call a log given as rows in memory."""
