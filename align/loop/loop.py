@@ -193,6 +193,7 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                      - bic(current, searched))
             p = f_test(current, trial, term.width)
             tried.append((cand, term, trial, sidak(p, term.trials), float(d_bic)))
+        lead = None  # the best admissible candidate by its own test (refusals' order)
         for cand, term, trial, p_term, d_bic in tried:
             # Holm over the candidates: the round adds the best of `tested` hypotheses, so
             # each is tested at the family's level (Sidak's exact form of alpha / tested);
@@ -202,13 +203,22 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
             log.debug("loop   candidate %s: p %.3g (look-elsewhere corrected, %g trials; "
                       "Holm over %d candidates), dBIC %+.1f (needs p < %g and dBIC < %+.1f)",
                       cand.name, p_adj, term.trials, tested, d_bic, alpha, -min_delta_bic)
-            if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
-                why = admissible(current, trial, term) if admissible is not None else None
-                if why is not None:
+            if p_term >= alpha or d_bic >= -min_delta_bic:
+                continue
+            # A significant effect outside its physical prior is refused and reported as
+            # structure the model lacks: a test on the residual, at the level of each
+            # candidate's own test and in the order the candidates lead (as before the count
+            # of candidates entered), so that a refusal is not lost to the correction that
+            # guards against adding effects (a clipped pose's scale_warmup, user6).
+            why = admissible(current, trial, term) if admissible is not None else None
+            if why is not None:
+                if lead is None or d_bic < lead:
                     log.debug("loop   candidate %s: significant but refused: %s", cand.name,
                               why)
-                    refused[cand.name] = RefusedEffect(cand.name, why, p_adj, float(d_bic))
-                    continue
+                    refused[cand.name] = RefusedEffect(cand.name, why, p_term, float(d_bic))
+                continue
+            lead = d_bic if lead is None else min(lead, d_bic)
+            if p_adj < alpha and (best is None or d_bic < best[0]):
                 best = (d_bic, p_adj, term, trial, cand)
         if best is None:
             log.debug("loop %s: no candidate significant: stop", type(stage).__name__)
