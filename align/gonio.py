@@ -63,7 +63,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 reverse_log: str | Path | object | None = None, apply_loop: bool = True,
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
                 latitude_range_rad: tuple[float, float] | None = None,
-                on_bytes: Callable[[int], None] | None = None) -> GonioRun:
+                on_bytes: Callable[[int], None] | None = None,
+                time_unit: str | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -105,6 +106,10 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         Latitudes [rad] the Earth rate's bound is taken over when it is not determined.
     on_bytes : callable, optional
         Called with about how many bytes each chunk held (a progress bar).
+    time_unit : str, optional
+        The ``t`` column's unit when its header (or its name in rows) says none, for both
+        logs (``--time-unit``, the session's ``time_unit``: ``s``, ``ms``, ``us``, ``ns``,
+        ``min``, ``h``); a header that says another unit is refused.
 
     Returns
     -------
@@ -155,10 +160,11 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
         fwd = measure_log(path, n_faces, latitude_rad, direction, alpha, apply_loop=False,
-                          steady_table=steady_table, columns=columns, on_bytes=on_bytes)
+                          steady_table=steady_table, columns=columns, on_bytes=on_bytes,
+                          time_unit=time_unit)
         rev = measure_log(reverse_log, n_faces, latitude_rad, -direction, alpha,
                           apply_loop=False, steady_table=steady_table, columns=columns,
-                          on_bytes=on_bytes)
+                          on_bytes=on_bytes, time_unit=time_unit)
         comb, term = combine_directions(fwd.angles, rev.angles)
         check_reversed(fwd.angles, rev.angles, term, source_name(path),
                        source_name(reverse_log), alpha)
@@ -196,7 +202,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 pool.shutdown(wait=False)
     start = time.perf_counter()
     summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
-                               on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes)
+                               on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes,
+                               time_unit=time_unit)
     log.debug("gonio %s: one pass in %.2f s: %d rows, %d revolutions excluded "
               "(%s), times %s", Path(source_name(path)).name, time.perf_counter() - start,
               summary.rows,
