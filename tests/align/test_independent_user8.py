@@ -1,0 +1,293 @@
+"""Independent user 8: the camera stage through a lens I calibrated myself, and the triad's
+calibration with effects a real accelerometer has.
+
+The inputs come from ``tests/align/user8_inputs.py`` (my own groove profile, a rounded
+asymmetric V, integrated over each pixel through a Brown-Conrady lens from
+``cv2.calibrateCamera`` on the real chessboard photographs; static tumbles with an asymmetric
+scale factor, quantisation, a bias step, vibration) and import nothing from the project. The
+CLI runs in process through ``align.cli.main(argv)`` (``ALIGN8_SUBPROCESS=1``: as
+``python3 -m align`` from the worktree root). Right behaviour passes; each defect is written
+as the tool should behave and marked ``xfail(strict=True)`` with the figures I saw.
+
+Truth conventions. A mark's angle: its direction in the normalised (pinhole, square-pixel)
+plane. A tumble's scale factor: (k+ + k-)/2, the output per g along the sensitive axis; its
+bias: the output at zero input over k [g] (for an asymmetric scale factor the six-position
+convention (u(+g) + u(-g)) / 2k differs by the asymmetry; a test accepts either).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from align.cli import main as align_main  # the CLI's entry point: argv -> exit status
+from tests.align import user8_inputs as ui
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# a single Gaussian estimate beyond 3.5 u: 5e-4 of the time
+Z1 = 3.5
+
+
+def align(*args: str) -> subprocess.CompletedProcess:
+    """``align ARGS`` in process (the CLI returns its exit status), output captured."""
+    if os.environ.get("ALIGN8_SUBPROCESS"):
+        return subprocess.run([sys.executable, "-m", "align", *args], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = align_main(list(args))
+        except SystemExit as e:  # argparse's own refusals
+            rc = e.code if isinstance(e.code, int) else 2
+    return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
+
+
+def _json(r: subprocess.CompletedProcess) -> dict:
+    i = r.stdout.find("{")
+    assert i >= 0, f"no JSON on stdout (exit {r.returncode}): {r.stderr[-400:]}"
+    return json.loads(r.stdout[i:])
+
+
+# ---------------------------------------------------------------- the camera stage
+
+
+@pytest.fixture(scope="module")
+def lens():
+    if not ui.CHESS.is_dir():
+        pytest.skip(f"real data folder {ui.CHESS} is absent (it lives in ../shared/data/real)")
+    return ui.chessboard_lens()
+
+
+def exact_camera(k: np.ndarray, d: np.ndarray, folder: Path) -> str:
+    """A camera JSON holding my lens exactly, with a tight u (a very good calibration), written
+    to the format of ``align/schemas/camera.schema.json``."""
+    cam = {"format": "axis-align/camera", "format_version": 3, "tool": "axis-align",
+           "tool_version": "0.1.0", "camera_matrix": k.tolist(),
+           "dist_coeffs": [float(x) for x in d], "image_size": list(ui.SIZE), "rms_px": 0.1,
+           "u": {"fx": 0.05, "fy": 0.05, "cx": 0.05, "cy": 0.05, "k1": 1e-5, "k2": 1e-5,
+                 "p1": 1e-6, "p2": 1e-6, "k3": 1e-5, "aspect": 1e-6},
+           "per_view_rms_px": {}}
+    p = folder / "exact_camera.json"
+    p.write_text(json.dumps(cam))
+    return str(p)
+
+
+def measure(sc: ui.Scene, folder: Path, name: str, *args: str):
+    p = ui.write(sc, folder / f"{name}.png")
+    r = align("marks", str(p), "--json", "-", "-q", "--force", *args)
+    return r.returncode, _json(r), r.stderr
+
+
+def mark_errors(js: dict, truths_rad: list[float]) -> list[tuple[float, float, bool]]:
+    """(error ″, u ″, ok) of each mark found, matched to the nearest truth."""
+    out = []
+    for m in js["marks"]:
+        if not m["found"]:
+            continue
+        e = min((ui.wrap_deg(m["angle_deg"] - np.rad2deg(t)) * 3600 for t in truths_rad),
+                key=abs)
+        out.append((e, m["angle_u_deg"] * 3600, not m.get("lens_limited", False)))
+    return out
+
+
+def check_covered(rc: int, js: dict, errs, n_expected: int) -> list[str]:
+    """What is wrong: a mark missing, or an angle beyond Z1 u with the document ok."""
+    bad = []
+    if len(errs) != n_expected:
+        bad.append(f"{len(errs)} marks found, {n_expected} drawn")
+    for e, u, _ in errs:
+        if abs(e) > Z1 * u and js["ok"] and rc == 0:
+            bad.append(f"error {e:+.1f}″ = {e / u:+.1f} u (u {u:.1f}″) with ok and exit 0")
+    return bad
+
+
+def test_centre_mark_through_exact_camera_is_within_u(lens, tmp_path):
+    """A 300 px mark near the centre, 8-bit PNG, my groove through my lens: the angle lies
+    within 3.5 u, ok, exit 0 (seen: +4.3″ ± 5.6″)."""
+    k, d = lens
+    cam = exact_camera(k, d, tmp_path)
+    a = np.deg2rad(12.0)
+    rc, js, err = measure(ui.Scene([ui.mark_at(k, a, 320, 240)], k, d, seed=0), tmp_path, "c",
+                          "--camera", cam)
+    errs = mark_errors(js, [a])
+    assert check_covered(rc, js, errs, 1) == []
+    assert rc == 0 and js["ok"], err
+
+
+def test_two_marks_in_one_image_both_within_u(lens, tmp_path):
+    """Two marks (12° and 95°, 300 and 250 px) in one frame: both found, each within 3.5 u
+    (seen: z +1.08 and +0.58)."""
+    k, d = lens
+    cam = exact_camera(k, d, tmp_path)
+    t = [np.deg2rad(12.0), np.deg2rad(95.0)]
+    sc = ui.Scene([ui.mark_at(k, t[0], 250, 150), ui.mark_at(k, t[1], 450, 300, length_px=250)],
+                  k, d, seed=0)
+    rc, js, err = measure(sc, tmp_path, "two", "--camera", cam)
+    assert check_covered(rc, js, mark_errors(js, t), 2) == []
+
+
+def test_uncalibrated_lens_is_not_a_confident_answer(lens, tmp_path):
+    """Without a camera model the real lens (k1_cv -0.28) bends four marks near the corners by
+    up to 2400″: the tool must either cover it or say not ok (seen: exit 2, ok false,
+    u ~5000″)."""
+    k, d = lens
+    t = [np.deg2rad(5), np.deg2rad(85), np.deg2rad(-5), np.deg2rad(92)]
+    sc = ui.Scene([ui.mark_at(k, t[0], 150, 100, length_px=220),
+                   ui.mark_at(k, t[1], 500, 120, length_px=220),
+                   ui.mark_at(k, t[2], 480, 380, length_px=220),
+                   ui.mark_at(k, t[3], 130, 350, length_px=220)], k, d, seed=0)
+    rc, js, err = measure(sc, tmp_path, "nocam")
+    assert check_covered(rc, js, mark_errors(js, t), 4) == []
+
+
+CAMERA_CASES = {
+    # name: (mark pixel x, y, length, Scene keywords)
+    "centre": (320, 240, 300, {}),
+    "corner": (130, 110, 200, {}),
+    "short": (200, 300, 120, {}),
+    "jpeg75": (320, 240, 300, {"jpeg": 75}),
+    "bits12": (320, 240, 300, {"bits": 12}),
+    "bits16": (320, 240, 300, {"bits": 16}),
+    "defocus": (320, 240, 400, {"defocus_px": 2.5}),
+    "vignette_dim": (450, 350, 250, {"vignette": 0.6, "full_well": 4000.0}),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(CAMERA_CASES))
+def test_camera_cases_over_seeds(lens, tmp_path, case):
+    """Over 6 seeds each angle lies within 3.5 u (or the mark is not ok) and the normalised
+    errors' RMS is at most 1.6 (6 z's: the RMS of 6 unit normals exceeds 1.6 with p ~ 2e-3).
+    Seen (4 seeds): centre RMS z 0.86, corner 1.29, short 0.67, JPEG 1.07, 12-bit 0.62,
+    16-bit 0.64, defocus 0.55."""
+    k, d = lens
+    cam = exact_camera(k, d, tmp_path)
+    x, y, length, kw = CAMERA_CASES[case]
+    zs, bad = [], []
+    for s in range(6):
+        a = np.deg2rad(30.0 + 7.0 * s)
+        sc = ui.Scene([ui.mark_at(k, a, x, y, length_px=length)], k, d, seed=200 + s, **kw)
+        rc, js, err = measure(sc, tmp_path, f"{case}{s}", "--camera", cam)
+        errs = mark_errors(js, [a])
+        bad += check_covered(rc, js, errs, 1)
+        zs += [e / u for e, u, ok in errs if ok]
+    assert bad == []
+    assert np.sqrt(np.mean(np.square(zs))) <= 1.6, np.round(zs, 2)
+
+
+# ---------------------------------------------------------------- the triad's calibration
+
+
+def calibrate(tr: ui.Triad, seed: int, folder: Path, ups=None, **kw):
+    ups = ui.cube26() if ups is None else ups
+    p = ui.write_tumble(ui.tumble_rows(tr, ups, seed, **kw), folder / f"tumble{seed}.csv")
+    r = align("calibrate", str(p), "--units", "g", "--json", "-", "-q", "--force")
+    return r.returncode, _json(r), r.stderr
+
+
+def cal_z(tr: ui.Triad, js: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """z of the scale factors, of the biases against the zero-input truth, and against the
+    six-position convention (u(+g) + u(-g)) / 2k = o/k + asym."""
+    k = np.array(js["scale_factors_v_per_g"])
+    ku = np.array(js["scale_factors_u_v_per_g"])
+    b = np.array(js["bias_g"])
+    bu = np.array(js["bias_u_g"])
+    kt = np.array(tr.k)
+    b0 = np.array(tr.o) / kt
+    return (k - kt) / ku, (b - b0) / bu, (b - b0 - np.array(tr.asym)) / bu
+
+
+def cal_problems(rc: int, js: dict, err: str, tr: ui.Triad) -> list[str]:
+    """A confident wrong answer: a parameter beyond Z1 u (the bias under both conventions)
+    while exit 0, ok true and no warning at all."""
+    zk, zb0, zb6 = cal_z(tr, js)
+    zb = np.where(np.abs(zb0) < np.abs(zb6), zb0, zb6)
+    flagged = rc != 0 or not js["ok"] or bool(js["warnings"]) or "WARNING" in err
+    out = []
+    if not flagged:
+        for name, z in (("k", zk), ("bias", zb)):
+            for i, zi in enumerate(z):
+                if abs(zi) > Z1:
+                    out.append(f"{name}_{'xyz'[i]} off by {zi:+.1f} u, exit 0, ok, no warning")
+    return out
+
+
+def test_clean_tumble_within_u(tmp_path):
+    """26 poses, white noise 0.3 mg a sample, no effect: every k and bias within 3.5 u, ok,
+    exit 0, no effect added (seen: |z| <= 2.7)."""
+    tr = ui.Triad()
+    rc, js, err = calibrate(tr, 0, tmp_path)
+    zk, zb, _ = cal_z(tr, js)
+    assert rc == 0 and js["ok"], err
+    assert np.all(np.abs(zk) <= Z1) and np.all(np.abs(zb) <= Z1), (zk, zb)
+    assert js["effects"] == []
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "asymmetric scale factor 300 ppm (k+ != k-) on a 26-pose tumble: the tool adds "
+    "nonlinearity_k2 (an even x^2 term, not |x|), exit 0, ok true, no warning; bias_x/y/z off "
+    "by +5.5/-7.5/+6.9 u (u 18 ug, error ~100-130 ug) against the zero-input truth and more "
+    "against the six-position convention; seed 2: +4.5/-6.4/+5.5 u"))
+def test_asymmetric_scale_factor_is_covered_or_flagged(tmp_path):
+    """A scale factor 300 ppm larger for +g than for -g on each axis (a pendulous
+    accelerometer's asymmetry): the biases must lie within 3.5 u under one of the two bias
+    conventions, or the result must be flagged."""
+    tr = ui.Triad(asym=(3e-4, -3e-4, 3e-4))
+    rc, js, err = calibrate(tr, 1, tmp_path)
+    assert cal_problems(rc, js, err, tr) == []
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "asymmetric scale factor 300 ppm over seeds 0-5: 2 of the first 3 seeds give biases "
+    "4.5-7.5 u off with exit 0, ok true, no warning (seed 0: u widened, covered); 1000 ppm: "
+    "biases ~20 u off (u 18 ug, error ~390 ug), exit 0, ok true, only the ellipsoid vs "
+    "known-pose cross-check warns"))
+def test_asymmetric_scale_factor_over_seeds(tmp_path):
+    bad = []
+    for s in range(6):
+        tr = ui.Triad(asym=(3e-4, -3e-4, 3e-4))
+        rc, js, err = calibrate(tr, s, tmp_path)
+        bad += [f"seed {s}: {p}" for p in cal_problems(rc, js, err, tr)]
+    assert bad == []
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "asymmetric scale factor 1000/-800/600 ppm on 26 poses: exit 0, ok true; biases "
+    "+22/-17/+12 u off the zero-input truth (error ~390 ug, u 18 ug) and -33/+28/-22 u off the "
+    "six-position convention; only warnings: ellipsoid vs known-pose disagree on the biases "
+    "(-8.2/+7.9/-6.9 sigma). A result off by 20 u is not 'ok'"))
+def test_large_asymmetric_scale_factor_is_not_ok(tmp_path):
+    """Whatever the warnings, a bias 20 u off under both conventions must not be ok/exit 0."""
+    tr = ui.Triad(asym=(1e-3, -8e-4, 6e-4))
+    rc, js, err = calibrate(tr, 0, tmp_path)
+    _, zb0, zb6 = cal_z(tr, js)
+    worst = np.minimum(np.abs(zb0), np.abs(zb6)).max()
+    assert worst <= Z1 or rc != 0 or not js["ok"], (zb0, zb6, rc, js["ok"])
+
+
+@pytest.mark.parametrize("name, triad", [
+    # quantum 2 mg with 0.1 mg noise: every pose mean off by up to 1 mg, deterministically
+    ("quantised", ui.Triad(noise=1e-4, lsb=2e-3)),
+    # a temperature step: the bias jumps by 1 mg on each axis a third into the run
+    ("bias_step", ui.Triad(step_g=(1e-3, -1e-3, 1e-3), step_t=70.0)),
+    # 10 mg of vibration at 100.3 Hz sampled at 100 Hz: aliased to a 0.3 Hz wander
+    ("vibration", ui.Triad(vib_g=0.01, vib_hz=100.3)),
+])
+def test_unlisted_effects_are_covered_or_flagged(tmp_path, name, triad):
+    """Effects the docs do not list: each parameter within 3.5 u, or the result flagged.
+    Seen: quantised |z| <= 2.5 (u widened, unexplained structure warned); bias step |z| <= 1.2
+    (u 0.4 mg, no warning); vibration |z| <= 1.2 (u widened, warned)."""
+    rc, js, err = calibrate(triad, 0, tmp_path)
+    assert cal_problems(rc, js, err, triad) == []
+    zk, zb, _ = cal_z(triad, js)
+    # a flagged result still must not be far off: within 3.5 u once widened
+    assert np.all(np.abs(zk) <= Z1) and np.all(np.abs(zb) <= Z1), (zk, zb)
