@@ -134,6 +134,7 @@ def test_two_marks_in_one_image_both_within_u(lens, tmp_path):
     assert check_covered(rc, js, mark_errors(js, t), 2) == []
 
 
+@pytest.mark.slow
 def test_uncalibrated_lens_is_not_a_confident_answer(lens, tmp_path):
     """Without a camera model the real lens (k1_cv -0.28) bends four marks near the corners by
     up to 2400″: the tool must either cover it or say not ok (seen: exit 2, ok false,
@@ -291,3 +292,28 @@ def test_unlisted_effects_are_covered_or_flagged(tmp_path, name, triad):
     zk, zb, _ = cal_z(triad, js)
     # a flagged result still must not be far off: within 3.5 u once widened
     assert np.all(np.abs(zk) <= Z1) and np.all(np.abs(zb) <= Z1), (zk, zb)
+
+
+@pytest.mark.slow
+def test_quantisation_dominated_narrow_groove_over_seeds(lens, tmp_path):
+    """A narrow (3 px), faint (8 %) groove at 89.8-89.9°, little blur (0.4 px), 8-bit with
+    0.15 DN of noise: the pixel quantisation, not the noise, dominates and is correlated along
+    a mark so close to the pixel grid. Over 16 seeds: RMS z <= 1.6 and every |z| <= 4.0 (the
+    Bonferroni bound for 16 at 1e-3), or the mark not ok. Seen: RMS z 1.3, largest +3.58
+    (seed 501: +17.1″ ± 4.8″, exit 0, ok, no warning) - u is a little short here, not
+    several times."""
+    k, d = lens
+    cam = exact_camera(k, d, tmp_path)
+    zs, bad = [], []
+    for s in range(16):
+        a = np.deg2rad(89.8) + 0.001 * s
+        sc = ui.Scene([ui.mark_at(k, a, 320, 240, length_px=350, contrast=0.08, width_px=3.0)],
+                      k, d, seed=500 + s, full_well=1e6, read_e=5, blur_px=0.4)
+        rc, js, err = measure(sc, tmp_path, f"q{s}", "--camera", cam)
+        errs = mark_errors(js, [a])
+        bad += [f"seed {500 + s}: {e:+.1f}″ ± {u:.1f}″" for e, u, ok in errs
+                if abs(e) > 4.0 * u and js["ok"]]
+        bad += [] if len(errs) == 1 else [f"seed {500 + s}: {len(errs)} marks"]
+        zs += [e / u for e, u, ok in errs]
+    assert bad == []
+    assert np.sqrt(np.mean(np.square(zs))) <= 1.6, np.round(zs, 2)
