@@ -150,15 +150,20 @@ def test_uncalibrated_lens_is_not_a_confident_answer(lens, tmp_path):
 
 
 CAMERA_CASES = {
-    # name: (mark pixel x, y, length, Scene keywords)
-    "centre": (320, 240, 300, {}),
-    "corner": (130, 110, 200, {}),
-    "short": (200, 300, 120, {}),
-    "jpeg75": (320, 240, 300, {"jpeg": 75}),
-    "bits12": (320, 240, 300, {"bits": 12}),
-    "bits16": (320, 240, 300, {"bits": 16}),
-    "defocus": (320, 240, 400, {"defocus_px": 2.5}),
-    "vignette_dim": (450, 350, 250, {"vignette": 0.6, "full_well": 4000.0}),
+    # name: (mark pixel x, y, length, Scene keywords, Mark keywords)
+    "centre": (320, 240, 300, {}, {}),
+    "corner": (130, 110, 200, {}, {}),
+    "short": (200, 300, 120, {}, {}),
+    "jpeg75": (320, 240, 300, {"jpeg": 75}, {}),
+    "jpeg30": (320, 240, 350, {"jpeg": 30}, {}),
+    "bits12": (320, 240, 300, {"bits": 12}, {}),
+    "bits16": (320, 240, 300, {"bits": 16}, {}),
+    "defocus": (320, 240, 400, {"defocus_px": 2.5}, {}),
+    "vignette_dim": (450, 350, 250, {"vignette": 0.6, "full_well": 4000.0}, {}),
+    # a face tilted to the camera: a symmetric groove's imaged width 5 px +- 30 % end to end
+    "tilted_face": (320, 240, 350, {}, {"asym": 0.0, "width_gain": 0.6}),
+    # rolling shutter on a shaking camera: rows shifted 0.3 px sin(2 pi row / 110)
+    "rolling_shutter": (320, 240, 350, {"shake": (0.3, 110.0, 1.0)}, {}),
 }
 
 
@@ -167,15 +172,17 @@ CAMERA_CASES = {
 def test_camera_cases_over_seeds(lens, tmp_path, case):
     """Over 6 seeds each angle lies within 3.5 u (or the mark is not ok) and the normalised
     errors' RMS is at most 1.6 (6 z's: the RMS of 6 unit normals exceeds 1.6 with p ~ 2e-3).
-    Seen (4 seeds): centre RMS z 0.86, corner 1.29, short 0.67, JPEG 1.07, 12-bit 0.62,
-    16-bit 0.64, defocus 0.55."""
+    Seen (4-8 seeds): centre RMS z 0.86, corner 0.95 (8 seeds, mean z +0.6), short 0.67,
+    JPEG q75 1.07, q30 0.77, 12-bit 0.62, 16-bit 0.64, defocus 0.55, tilted face 0.77,
+    rolling shutter 0.49 (u inflated 3-14x, unexplained structure warned)."""
     k, d = lens
     cam = exact_camera(k, d, tmp_path)
-    x, y, length, kw = CAMERA_CASES[case]
+    x, y, length, kw, mkw = CAMERA_CASES[case]
     zs, bad = [], []
     for s in range(6):
         a = np.deg2rad(30.0 + 7.0 * s)
-        sc = ui.Scene([ui.mark_at(k, a, x, y, length_px=length)], k, d, seed=200 + s, **kw)
+        sc = ui.Scene([ui.mark_at(k, a, x, y, length_px=length, **mkw)], k, d, seed=200 + s,
+                      **kw)
         rc, js, err = measure(sc, tmp_path, f"{case}{s}", "--camera", cam)
         errs = mark_errors(js, [a])
         bad += check_covered(rc, js, errs, 1)
@@ -273,6 +280,57 @@ def test_large_asymmetric_scale_factor_is_not_ok(tmp_path):
     _, zb0, zb6 = cal_z(tr, js)
     worst = np.minimum(np.abs(zb0), np.abs(zb6)).max()
     assert worst <= Z1 or rc != 0 or not js["ok"], (zb0, zb6, rc, js["ok"])
+
+
+def k_lin_problems(rc: int, js: dict, err: str, tr: ui.Triad) -> list[str]:
+    """k against the linear coefficient of u = k (a + K3 a^3) (the tool's own model equation,
+    docs/calibration-effects.md: k multiplies x, the higher terms are separate), beyond Z1 u
+    with exit 0, ok and no warning."""
+    zk, _, _ = cal_z(tr, js)
+    flagged = rc != 0 or not js["ok"] or bool(js["warnings"]) or "WARNING" in err
+    return [] if flagged else [f"k_{'xyz'[i]} off by {z:+.1f} u, exit 0, ok, no warning"
+                               for i, z in enumerate(zk) if abs(z) > Z1]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "cubic non-linearity K3 = +-100 ug/g^3 (IEEE Std 1293's K3; no odd candidate in the loop) "
+    "on 26 poses, seed 0: k_x/y/z off the linear coefficient by +8.0/-8.5/+5.6 u (u 10.9 ppm, "
+    "error 60-92 ppm), chi2/dof 2.3 (not significant), exit 0, ok true, no warning; against "
+    "the 1 g chord k(1 + K3) still -1.3/+0.8/-3.7 u"))
+def test_cubic_nonlinearity_is_covered_or_flagged(tmp_path):
+    tr = ui.Triad(k3=(1e-4, -1e-4, 1e-4))
+    rc, js, err = calibrate(tr, 0, tmp_path)
+    assert k_lin_problems(rc, js, err, tr) == []
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "K3 = +-100 ug/g^3 over seeds 0-5 (26 poses): 5 of 6 seeds give k 6-9 u off the linear "
+    "coefficient with exit 0, ok, no warning (seed 1: u widened, warned); cube14 (6 faces + 8 "
+    "corners): 3 of 3 seeds, k 7.0-9.5 u off, no warning; K3 = 30 ug/g^3: up to 4.8 u"))
+def test_cubic_nonlinearity_over_seeds(tmp_path):
+    bad = []
+    for s in range(6):
+        tr = ui.Triad(k3=(1e-4, -1e-4, 1e-4))
+        rc, js, err = calibrate(tr, s, tmp_path)
+        bad += [f"seed {s}: {p}" for p in k_lin_problems(rc, js, err, tr)]
+    assert bad == []
+
+
+@pytest.mark.parametrize("tilt_deg", [0.3, 2.0])
+def test_six_faces_off_square_are_covered(tmp_path, tilt_deg):
+    """Six labelled faces (+x, -x, ...), each tilted by 0.3° (inside the default
+    --fixture-error 0.5°) or 2° (beyond it) about a random axis: the known-pose method's k and
+    bias within 3.5 u (or flagged). Seen: 0.3°: |z| <= 1.5, beta's u ~0.5° carries the
+    fixture; 2°: unexplained structure warned, u widened x7-14, |z| <= 2.0."""
+    tr = ui.Triad()
+    p = ui.write_tumble(ui.tumble_rows(tr, ui.tilted_faces(tilt_deg, 0), 0, labels=ui.FACES),
+                        tmp_path / "faces.csv")
+    r = align("calibrate", str(p), "--units", "g", "--json", "-", "-q", "--force")
+    js = _json(r)
+    assert cal_problems(r.returncode, js, r.stderr, tr) == []
+    zk, zb, _ = cal_z(tr, js)
+    assert np.all(np.abs(zk) <= Z1) and np.all(np.abs(zb) <= Z1), (zk, zb)
 
 
 @pytest.mark.parametrize("name, triad", [

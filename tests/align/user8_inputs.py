@@ -20,7 +20,7 @@ step with temperature, quantisation, vibration.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -69,20 +69,24 @@ def undistort(xd: np.ndarray, yd: np.ndarray, k: np.ndarray, d: np.ndarray
 
 
 @functools.lru_cache(maxsize=8)
-def _corner_map(kb: bytes, db: bytes, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
+def _corner_map(kb: bytes, db: bytes, w: int, h: int, shake: tuple = (0.0, 1.0, 0.0)
+                ) -> tuple[np.ndarray, np.ndarray]:
     k = np.frombuffer(kb).reshape(3, 3)
     d = np.frombuffer(db)
     yy, xx = np.mgrid[0:h + 1, 0:w + 1].astype(float) - 0.5  # pixel corners
-    return undistort(xx, yy, k, d)
+    amp, period, phase = shake
+    # rolling shutter: row y is exposed at a later time, when the camera had moved by
+    # amp sin(2 pi y / period + phase) pixels along x: the scene seen at that row is shifted
+    return undistort(xx + amp * np.sin(2 * np.pi * yy / period + phase), yy, k, d)
 
 
-def normalised_grid(k: np.ndarray, d: np.ndarray, ss: int, size=SIZE
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def normalised_grid(k: np.ndarray, d: np.ndarray, ss: int, size=SIZE,
+                    shake: tuple = (0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
     """Normalised coordinates at ss x ss sub-samples of every pixel (bilinear between the
     pixel corners' exact undistortion: the lens is linear to 1e-6 px over one pixel)."""
     w, h = size
     xn, yn = _corner_map(np.ascontiguousarray(k, float).tobytes(),
-                         np.ascontiguousarray(d, float).tobytes(), w, h)
+                         np.ascontiguousarray(d, float).tobytes(), w, h, tuple(shake))
     f = (np.arange(ss) + 0.5) / ss
     out = []
     for g in (xn, yn):
@@ -118,6 +122,7 @@ class Mark:
     width_px: float = 5.0
     contrast: float = 0.5
     asym: float = 0.35
+    width_gain: float = 0.0   # relative change of the width from one end to the other
 
 
 @dataclass
@@ -136,14 +141,14 @@ class Scene:
     level: float = 0.6            # background as a fraction of full scale
     jpeg: int = 0                 # JPEG quality (0: PNG)
     seed: int = 0
-    extra: dict = field(default_factory=dict)
+    shake: tuple = (0.0, 1.0, 0.0)  # rolling shutter: amplitude [px], period [rows], phase
 
 
 def render(sc: Scene) -> np.ndarray:
     """Integer image of the scene (uint8 or uint16)."""
     rng = np.random.default_rng(sc.seed)
     w, h = sc.size
-    xn, yn = normalised_grid(sc.k, sc.d, sc.ss, sc.size)
+    xn, yn = normalised_grid(sc.k, sc.d, sc.ss, sc.size, sc.shake)
     f = 0.5 * (sc.k[0, 0] + sc.k[1, 1])
     refl = np.ones_like(xn)
     for m in sc.marks:
@@ -152,7 +157,9 @@ def render(sc: Scene) -> np.ndarray:
         t = (dx * ca - dy * sa) * f            # along the mark [px at f]
         dn = (dx * sa + dy * ca) * f           # across [px at f]
         ends = np.clip((0.5 * m.length_px - np.abs(t)) / 2.0 + 0.5, 0, 1)
-        refl *= 1 - m.contrast * groove_depth(dn, m.width_px, m.asym) * ends
+        # a face tilted to the camera: the groove's imaged width changes along it
+        wid = m.width_px * (1 + m.width_gain * np.clip(t / m.length_px, -0.5, 0.5))
+        refl *= 1 - m.contrast * groove_depth(dn, wid, m.asym) * ends
     # optical blur on the sub-sampled radiance, growing across the image for defocus
     s0 = sc.blur_px * sc.ss
     img = cv2.GaussianBlur(refl, (0, 0), s0) if s0 > 0 else refl
@@ -219,10 +226,11 @@ class Triad:
     step_t: float = 1e9
     vib_g: float = 0.0                    # vibration amplitude on every axis [g]
     vib_hz: float = 0.0
+    k3: tuple = (0.0, 0.0, 0.0)           # cubic non-linearity [1/g^2] (IEEE Std 1293's K3)
 
 
 def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float = 100.0,
-                gap_s: float = 5.0) -> list[tuple]:
+                gap_s: float = 5.0, labels: list[str] | None = None) -> list[tuple]:
     """Rows (pose, ux, uy, uz, t) of a static tumble: n samples a pose at `rate`, `gap_s` of
     turning between poses (not recorded)."""
     rng = np.random.default_rng(seed)
@@ -234,11 +242,13 @@ def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float
         a = np.tile(up, (n, 1))
         if tr.vib_g:
             a = a + tr.vib_g * np.sin(2 * np.pi * tr.vib_hz * t[:, None] + phase)
-        u = k * (1 + asym * np.sign(a)) * a + o + rng.normal(0, tr.noise, (n, 3))
+        lin = a + np.array(tr.k3) * a ** 3
+        u = k * (1 + asym * np.sign(a)) * lin + o + rng.normal(0, tr.noise, (n, 3))
         u = u + np.where(t[:, None] >= tr.step_t, np.array(tr.step_g) * k, 0.0)
         if tr.lsb:
             u = np.round(u / tr.lsb) * tr.lsb
-        rows += [(f"P{p:02d}", *map(float, u[i]), float(t[i])) for i in range(n)]
+        lab = labels[p] if labels else f"P{p:02d}"
+        rows += [(lab, *map(float, u[i]), float(t[i])) for i in range(n)]
         t0 = t[-1] + gap_s
     return rows
 
@@ -249,3 +259,20 @@ def write_tumble(rows: list[tuple], path: Path) -> Path:
         for r in rows:
             fh.write(f"{r[0]},{r[1]:.9f},{r[2]:.9f},{r[3]:.9f},{r[4]:.4f}\n")
     return path
+
+
+FACES = ["+x", "-x", "+y", "-y", "+z", "-z"]
+
+
+def tilted_faces(tilt_deg: float, seed: int, repeats: int = 1) -> np.ndarray:
+    """The six faces' up directions, each tilted by `tilt_deg` about a random horizontal axis
+    (a fixture whose faces are not square, or a unit set down on a burr)."""
+    rng = np.random.default_rng(seed + 9999)
+    base = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    out = []
+    for v in np.repeat(base, repeats, axis=0):
+        w = np.cross(v, rng.normal(size=3))
+        w /= np.linalg.norm(w)
+        a = np.deg2rad(tilt_deg)
+        out.append(np.cos(a) * v + np.sin(a) * w)
+    return np.array(out)
