@@ -142,6 +142,8 @@ class Scene:
     jpeg: int = 0                 # JPEG quality (0: PNG)
     seed: int = 0
     shake: tuple = (0.0, 1.0, 0.0)  # rolling shutter: amplitude [px], period [rows], phase
+    # a shadow's edge: (angle [rad], distance from the image centre [px], width [px], depth)
+    shadow: tuple = (0.0, 0.0, 1.0, 0.0)
 
 
 def render(sc: Scene) -> np.ndarray:
@@ -172,6 +174,10 @@ def render(sc: Scene) -> np.ndarray:
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
     r2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / (0.25 * (w * w + h * h))
     img = img * (1 - sc.vignette * r2)
+    sa, so, sw, sd = sc.shadow
+    if sd:
+        dist = ((xx - (w - 1) / 2) * np.sin(sa) + (yy - (h - 1) / 2) * np.cos(sa)) - so
+        img = img * (1 - sd / (1 + np.exp(-dist / sw)))
     e = rng.poisson(np.clip(img * sc.full_well, 0, None)) + rng.normal(0, sc.read_e, img.shape)
     full = 2 ** sc.bits - 1
     dn_img = np.clip(np.round(e / sc.full_well * sc.level * full), 0, full)
