@@ -339,6 +339,35 @@ def test_cubic_nonlinearity_over_seeds(tmp_path):
     assert bad == []
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "creep: 2e-4 of each turn's change still settling (time constant 0.5 s) in 2 s poses of "
+    "26: k_z off by -8.7 u (u 11.0 ppm, error -95 ppm), bias_z +3.5 u, exit 0, ok true, no "
+    "warning, no effect added"))
+def test_settling_creep_is_covered_or_flagged(tmp_path):
+    """After each turn the reading creeps the last 2e-4 of the way (anelastic flexure): the
+    pose means carry the previous attitude's trace. The samples within each pose show it (a
+    decaying trend); k and bias within 3.5 u, or flagged."""
+    tr = ui.Triad(creep=2e-4)
+    rc, js, err = calibrate(tr, 0, tmp_path)
+    assert cal_problems(rc, js, err, tr) == []
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "creep 2e-4 (tau 0.5 s) over seeds 0-7: k_z -7.2 to -8.8 u off in seeds 0, 3, 4, 6 with "
+    "exit 0, ok true and no warning (seed 2 the same with one warning); 3e-4: k_z -3.9 to "
+    "-4.8 u (u widened to ~33 ppm without a word) in seeds 0, 2, 5, k_x +4.8 u in seed 7, all "
+    "unflagged; 1e-3: unexplained structure warned, u widened, |z| <= 2.7 (covered)"))
+def test_settling_creep_over_seeds(tmp_path):
+    bad = []
+    for c in (2e-4, 3e-4, 1e-3):
+        for s in range(8):
+            tr = ui.Triad(creep=c)
+            rc, js, err = calibrate(tr, s, tmp_path)
+            bad += [f"creep {c} seed {s}: {p}" for p in cal_problems(rc, js, err, tr)]
+    assert bad == []
+
+
 @pytest.mark.parametrize("tilt_deg", [0.3, 2.0])
 def test_six_faces_off_square_are_covered(tmp_path, tilt_deg):
     """Six labelled faces (+x, -x, ...), each tilted by 0.3° (inside the default

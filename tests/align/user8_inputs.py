@@ -233,6 +233,8 @@ class Triad:
     vib_g: float = 0.0                    # vibration amplitude on every axis [g]
     vib_hz: float = 0.0
     k3: tuple = (0.0, 0.0, 0.0)           # cubic non-linearity [1/g^2] (IEEE Std 1293's K3)
+    creep: float = 0.0                    # fraction of the last turn's change still settling
+    creep_tau: float = 0.5                # its time constant [s]
 
 
 def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float = 100.0,
@@ -243,9 +245,13 @@ def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float
     k, o, asym = np.array(tr.k), np.array(tr.o), np.array(tr.asym)
     rows, t0 = [], 0.0
     phase = rng.uniform(0, 2 * np.pi, 3)
+    prev = ups[0]
     for p, up in enumerate(ups):
         t = t0 + np.arange(n) / rate
         a = np.tile(up, (n, 1))
+        # creep: the reading still follows the turn, decaying from the last attitude
+        a = a + tr.creep * np.outer(np.exp(-(t - t0) / tr.creep_tau), prev - up)
+        prev = up
         if tr.vib_g:
             a = a + tr.vib_g * np.sin(2 * np.pi * tr.vib_hz * t[:, None] + phase)
         lin = a + np.array(tr.k3) * a ** 3
