@@ -169,6 +169,27 @@ def test_mark_crossed_by_a_shadow_edge_is_measured(lens, tmp_path):
     assert check_covered(rc, js, errs, 1) == []
 
 
+@pytest.mark.slow
+def test_cropped_sensor_principal_point_far_off_centre_is_flagged(lens, tmp_path):
+    """A region-of-interest readout: the principal point (120, 90) px off the image centre
+    (the --lens default range is 20 px), six marks over the frame, no camera model: every
+    angle within 3.5 u or not ok. Seen: the lines' bows disagree with one lens (chi2 ~5000 on
+    5 dof), k2 'beyond any lens', every mark lens-limited, exit 2 (one mark +4320″ ± 101″,
+    z 43, but lens-limited and not ok)."""
+    k, d = lens
+    k2 = k.copy()
+    k2[0, 2], k2[1, 2] = 319.5 + 120.0, 239.5 + 90.0
+    angs = [np.deg2rad(x) for x in (5, -8, 85, 95, 12, -3)]
+    pos = [(160, 90), (470, 100), (110, 300), (540, 330), (320, 400), (330, 230)]
+    sc = ui.Scene([ui.mark_at(k2, a, x, y, length_px=200) for a, (x, y) in zip(angs, pos,
+                                                                             strict=True)],
+                  k2, d, seed=0)
+    rc, js, err = measure(sc, tmp_path, "roi")
+    errs = mark_errors(js, angs)
+    assert check_covered(rc, js, errs, 6) == []
+    assert all(not ok for e, u, ok in errs if abs(e) > Z1 * u), errs  # lens-limited
+
+
 CAMERA_CASES = {
     # name: (mark pixel x, y, length, Scene keywords, Mark keywords)
     "centre": (320, 240, 300, {}, {}),

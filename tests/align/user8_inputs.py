@@ -235,6 +235,13 @@ class Triad:
     k3: tuple = (0.0, 0.0, 0.0)           # cubic non-linearity [1/g^2] (IEEE Std 1293's K3)
     creep: float = 0.0                    # fraction of the last turn's change still settling
     creep_tau: float = 0.5                # its time constant [s]
+    # a room temperature step dT [K] at time temp_step_t, logged by a thermometer on the
+    # housing at once; the sensing element follows it with time constant temp_lag_s, and its
+    # bias with temp_coeff [g/K] of the element's temperature
+    temp_step: float = 0.0
+    temp_step_t: float = 1e9
+    temp_lag_s: float = 60.0
+    temp_coeff: tuple = (0.0, 0.0, 0.0)
 
 
 def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float = 100.0,
@@ -257,19 +264,25 @@ def tumble_rows(tr: Triad, ups: np.ndarray, seed: int, n: int = 200, rate: float
         lin = a + np.array(tr.k3) * a ** 3
         u = k * (1 + asym * np.sign(a)) * lin + o + rng.normal(0, tr.noise, (n, 3))
         u = u + np.where(t[:, None] >= tr.step_t, np.array(tr.step_g) * k, 0.0)
+        logged = 20.0 + tr.temp_step * (t >= tr.temp_step_t)
+        since = np.clip(t - tr.temp_step_t, 0, None)
+        inner = 20.0 + tr.temp_step * (t >= tr.temp_step_t) * (1 - np.exp(-since / tr.temp_lag_s))
+        u = u + np.outer(inner - 20.0, np.array(tr.temp_coeff) * k)
         if tr.lsb:
             u = np.round(u / tr.lsb) * tr.lsb
         lab = labels[p] if labels else f"P{p:02d}"
-        rows += [(lab, *map(float, u[i]), float(t[i])) for i in range(n)]
+        rows += [(lab, *map(float, u[i]), float(t[i]), float(logged[i])) for i in range(n)]
         t0 = t[-1] + gap_s
     return rows
 
 
-def write_tumble(rows: list[tuple], path: Path) -> Path:
+def write_tumble(rows: list[tuple], path: Path, temp: bool = False) -> Path:
+    """The tumble as CSV; with temp, the logged temperature [°C] as a last column."""
     with open(path, "w") as fh:
-        fh.write("pose,ux [g],uy [g],uz [g],t [s]\n")
+        fh.write("pose,ux [g],uy [g],uz [g],t [s]" + (",temp\n" if temp else "\n"))
         for r in rows:
-            fh.write(f"{r[0]},{r[1]:.9f},{r[2]:.9f},{r[3]:.9f},{r[4]:.4f}\n")
+            tail = f",{r[5]:.3f}" if temp else ""
+            fh.write(f"{r[0]},{r[1]:.9f},{r[2]:.9f},{r[3]:.9f},{r[4]:.4f}{tail}\n")
     return path
 
 
