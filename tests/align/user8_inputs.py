@@ -301,3 +301,47 @@ def tilted_faces(tilt_deg: float, seed: int, repeats: int = 1) -> np.ndarray:
         a = np.deg2rad(tilt_deg)
         out.append(np.cos(a) * v + np.sin(a) * w)
     return np.array(out)
+
+
+# ---------------------------------------------------------------- chessboards through my lens
+
+
+@functools.lru_cache(maxsize=2)
+def chessboard_poses(side: str = "left") -> tuple:
+    """(rvec, tvec) of each real photograph's board (square = 1), from my calibration."""
+    objp = np.zeros((54, 3), np.float32)
+    objp[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2)
+    k, d = chessboard_lens(side)
+    poses = []
+    for f in sorted(CHESS.glob(f"{side}*.jpg")):
+        g = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        ok, c = cv2.findChessboardCorners(g, (9, 6))
+        if ok:
+            c = cv2.cornerSubPix(g, c, (11, 11), (-1, -1),
+                                 (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-3))
+            _, rv, tv = cv2.solvePnP(objp, c, k, d)
+            poses.append((rv.ravel(), tv.ravel()))
+    return tuple(poses)
+
+
+def render_board(k: np.ndarray, d: np.ndarray, rvec, tvec, seed: int, ss: int = 3,
+                 blur_px: float = 0.7, size=SIZE) -> np.ndarray:
+    """An 8-bit photograph of a 10 x 7-square board (9 x 6 inner corners, square 1) at pose
+    (rvec, tvec) through my lens: each sub-sample's ray meets the board's plane; white 0.85,
+    black 0.1; blur, shot and read noise."""
+    rng = np.random.default_rng(seed)
+    xn, yn = normalised_grid(k, d, ss, size)
+    r, _ = cv2.Rodrigues(np.asarray(rvec, float))
+    n = r[:, 2]                                   # board normal in the camera frame
+    t = np.asarray(tvec, float)
+    s = (n @ t) / (n[0] * xn + n[1] * yn + n[2])  # ray length to the plane
+    pts = np.stack([xn * s - t[0], yn * s - t[1], s - t[2]], axis=-1) @ r  # board coords
+    bx, by = pts[..., 0] + 1.0, pts[..., 1] + 1.0  # inner corner (0, 0) at square (1, 1)
+    inside = (bx >= 0) & (bx < 10) & (by >= 0) & (by < 7)
+    chk = (np.floor(bx).astype(int) + np.floor(by).astype(int)) % 2 == 0
+    refl = np.where(inside, np.where(chk, 0.1, 0.85), 0.6)
+    w, h = size
+    img = cv2.GaussianBlur(refl, (0, 0), blur_px * ss)
+    img = img.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    e = rng.poisson(img * 20000.0) + rng.normal(0, 10, img.shape)
+    return np.clip(np.round(e / 20000.0 * 255), 0, 255).astype(np.uint8)
