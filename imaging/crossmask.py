@@ -53,9 +53,11 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
             continue
         half = centres_half(pf) + o.thickness_px / 2 + 1
         got = crossing_stretch(pf, o, half, extend=True)
-        if got is not None and groove_runs_on(image, pf, o, half) is False:
+        found = crossing_stretch(pf, o, half)  # o's found part only
+        if (got is not None and (found is None or found[:2] != got[:2])
+                and groove_runs_on(image, pf, o, half) is False):
             # A corner: o ends where its ridge was found; only that part lies in the window.
-            got = crossing_stretch(pf, o, half)
+            got = found
         if got is not None:
             stretches.append((got[0], got[1], j))
     for t0, t1 in grooves_beside(image, pf, top, window) if look else ():
