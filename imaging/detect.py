@@ -321,6 +321,7 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray, resp: np.ndarray | None 
     where another mark crosses it: ``resp``, the ridge response, tells the gap is bridged)."""
     lines = [(_pca_line(c, centre), c) for c in comps if len(c) >= 5]
     lines.sort(key=lambda x: -len(x[1]))
+    angles = np.array([ln[0][0] for ln in lines])
     used = [False] * len(lines)
     out = []
     for i, ((a, d, _, _), pts) in enumerate(lines):
@@ -328,24 +329,27 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray, resp: np.ndarray | None 
             continue
         group = [pts]
         uu, nn = line_frame(a)
-        for j in range(i + 1, len(lines)):
-            if used[j]:
+        tg = pts @ uu
+        tg_lo, tg_hi = float(tg.min()), float(tg.max())
+        # Only near-parallel pieces can join: the direction test for all of them at once
+        # (the pairwise loop below is what made this quadratic step slow on cluttered frames).
+        dang = np.abs((angles[i + 1:] - a + np.pi / 2) % np.pi - np.pi / 2)
+        for j in i + 1 + np.flatnonzero(dang < np.deg2rad(3) + 1e-12):
+            if used[j] or abs(wrap_angle(lines[j][0][0] - a)) >= np.deg2rad(3):
                 continue
-            aj, _, _, _ = lines[j][0]
-            dang = abs(wrap_angle(aj - a))
-            dist = np.abs((lines[j][1] - centre) @ nn - d)  # this piece's points, own normal
+            pj = lines[j][1]
+            if not np.max(np.abs((pj - centre) @ nn - d)) < 3.0:  # own normal, this piece
+                continue
             # Dust or a dropout leaves a gap shorter than the mark's pieces; a collinear
             # stroke far along the line (a logo, the next mark of a row) is another thing.
-            tg = np.vstack(group) @ uu
-            tj = lines[j][1] @ uu
-            gap = max(tj.min() - tg.max(), tg.min() - tj.max())
-            if not (dang < np.deg2rad(3) and np.max(dist) < 3.0):
-                continue
-            if gap <= max(np.ptp(tg), np.ptp(tj)) or (resp is not None and _bridged(
-                    resp, *_gap_ends(np.vstack(group), lines[j][1], uu),
+            tj = pj @ uu
+            gap = max(float(tj.min()) - tg_hi, tg_lo - float(tj.max()))
+            if gap <= max(tg_hi - tg_lo, float(np.ptp(tj))) or (resp is not None and _bridged(
+                    resp, *_gap_ends(np.vstack(group), pj, uu),
                     0.5 * _level(resp, np.vstack(group)))):
-                group.append(lines[j][1])
+                group.append(pj)
                 used[j] = True
+                tg_lo, tg_hi = min(tg_lo, float(tj.min())), max(tg_hi, float(tj.max()))
         out.append(np.vstack(group))
     return out
 

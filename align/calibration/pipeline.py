@@ -47,6 +47,7 @@ from align.calibration.stability import (
 )
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
 from align.calibration.walk import WANDER, walk_covariance, wander_fit
+from align.calibration.wander import ScaleWander, corrected_poses, scale_wander, wander_reason
 from align.calibration.widen import (
     ALIASED,
     AMBIGUITY,
@@ -283,6 +284,13 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
                              f"~{cone / DEG:.0f}° about one direction ({exc}): {TUMBLE}") from None
         raise
     stage, rep = noise_model(stage, candidates, alpha)
+    wander = None
+    if stability_default and not scale_stability_ppm:  # what the poses' own slopes show
+        wander = scale_wander(stage.poses, rep.after.payload, alpha)
+        stated = {**stated, "wander": None if wander is None else wander.to_dict()}
+        if wander is not None and wander.found:  # each pose back to the scale at t_ref
+            poses = corrected_poses(poses, wander)  # (the known-pose cross-check's too)
+            stage, rep = noise_model(CalibrationStage(poses, signs), candidates, alpha)
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     model, widening = rep.after.payload, None
     increments = []
@@ -299,6 +307,11 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
                                            stability_default)
+    elif wander is not None:
+        stated = _data_statement(wander, stated)
+        if wander.found:
+            gain = _ellipsoid_gain(stage, rep)
+            increments.append((STABILITY, stated["statement"], gain @ wander.cov @ gain.T))
     problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
@@ -384,6 +397,16 @@ def _stability_increment(gain: np.ndarray | None, ppm: float | None, default: bo
     if gain is None or not ppm:
         return []
     return [(STABILITY, stability_reason(ppm, default), bound_cov(gain, ppm * PPM))]
+
+
+def _data_statement(w: ScaleWander, stated: dict) -> dict:
+    """The ``scale_stability`` record when the poses' slopes were asked
+    (:mod:`align.calibration.wander`): the wander found and corrected, or none seen beside
+    the stated assumption."""
+    if w.found:
+        return {**stated, "ppm": None, "assumed": False, "statement": wander_reason(w)}
+    return {**stated, "statement": stated["statement"]
+            + f"; the poses' slopes show no scale wander (p = {w.p:.2g})"}
 
 
 TUMBLE = "tumble the unit over all directions (the six faces and the eight corners of a cube)"

@@ -39,6 +39,7 @@ from align.calibration.detect import (  # (re-exported: the package's API since 
 from align.calibration.geometry import SURROUND_RAD, cone_estimate, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
+from align.calibration.slopes import pose_slopes
 from align.calibration.triad import Poses
 from align.calibration.walk import walk_levels
 from axisbase.errors import InputError
@@ -174,7 +175,10 @@ def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
         times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
                  [t[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals])
         rate, bound = walk_levels(samples, times)
-        poses = replace(poses, walk_rate=rate, walk_bound=bound)
+        trend = pose_slopes(samples, times, rate)
+        poses = replace(poses, walk_rate=rate, walk_bound=bound,
+                        slope=None if trend is None else trend[0],
+                        slope_u=None if trend is None else trend[1])
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)
     if calibration:
         try:
@@ -204,11 +208,13 @@ def _drop_saturated(path: Path, poses: Poses, samples: list[np.ndarray],
         return poses
     keep = np.ones(len(poses.u), bool)
     keep[[s.index for s in sat]] = False
-    rest = Poses(poses.u[keep], poses.t[keep],
-                 None if poses.temp is None else poses.temp[keep],
-                 None if poses.sigma_u is None else poses.sigma_u[keep], poses.count[keep],
-                 tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k),
-                 poses.ordered, poses.walk_rate, poses.walk_bound)
+    def kept(x: np.ndarray | None) -> np.ndarray | None:
+        return None if x is None else x[keep]
+
+    rest = replace(poses, u=poses.u[keep], t=poses.t[keep], temp=kept(poses.temp),
+                   sigma_u=kept(poses.sigma_u), count=poses.count[keep],
+                   labels=tuple(lab for lab, k in zip(poses.labels, keep, strict=True) if k),
+                   slope=kept(poses.slope), slope_u=kept(poses.slope_u))
     what = "; ".join(s.text() for s in sat)
     if calibration:
         faces = faces_of(rest)

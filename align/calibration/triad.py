@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
+from align.calibration.slopes import pose_slopes
 from align.calibration.walk import walk_levels
 from align.errors import InputError
 from axisbase.covariance import cov_of
@@ -54,6 +55,11 @@ class Poses:
     walk_bound: np.ndarray | None = None
     """The largest such rate the samples do not exclude [output unit² / s], or None (too
     short, or no times)."""
+    slope: np.ndarray | None = None
+    """Each pose's trend per axis while static (N, 3) [output unit/s], NaN where too short
+    (:func:`align.calibration.slopes.pose_slopes`), or None (means only, no times)."""
+    slope_u: np.ndarray | None = None
+    """Its standard uncertainty (N, 3) [output unit/s] (inf where too short), or None."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -61,11 +67,14 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
     """Per-pose means (and their standard errors) from samples tagged with pose ids 0..N-1."""
     ids = np.unique(pose)
     sel = [pose == i for i in ids]
+    samples, times = [u[s] for s in sel], [t[s] for s in sel]
+    rate, bound = walk_levels(samples, times)
+    trend = pose_slopes(samples, times, rate)
     return Poses(np.array([u[s].mean(0) for s in sel]), np.array([t[s].mean() for s in sel]),
                  None, np.array([u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
                  np.array([s.sum() for s in sel]),
                  tuple(labels) if labels is not None else tuple(str(i) for i in ids),
-                 True, *walk_levels([u[s] for s in sel], [t[s] for s in sel]))
+                 True, rate, bound, *(trend[:2] if trend is not None else (None, None)))
 
 
 @dataclass(frozen=True)

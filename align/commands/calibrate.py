@@ -172,8 +172,8 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
     k.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     k.add_argument("--scale-stability-ppm", type=scale_stability, metavar="PPM",
                    help="how stable the scale factors are over the run, ± [ppm]: u covers a "
-                   "wander of that size (default without a temperature column: 20, a ±1 K "
-                   "room through the triad's thermal lag at 100 ppm/K; with one: 0)")
+                   "wander of that size (not given: a wander the poses' own slopes show is "
+                   "corrected and its u carried, else the scale is assumed stable, stated)")
     # The detection settings' rules are StaticSettings.given's (session.toml's keys pass them
     # too): here only "a number".
     k.add_argument("--window", type=float, default=0.25,

@@ -23,12 +23,19 @@ effect when found)."""
 
 def calibration_decisions(cal) -> dict[str, bool]:
     """A :class:`~align.calibration.Calibration`'s decisions: unexplained structure, an effect
-    added, u widened (structure or effect ambiguity), a significant effect refused by the
-    physical checks (``refused effect``)."""
+    added (or the scale wander its poses' slopes show), u widened (structure or effect
+    ambiguity), a significant effect refused by the physical checks (``refused effect``)."""
     return {"structure": bool(cal.loop.unexplained_structure),
-            "effect": bool(cal.loop.effects),
+            "effect": bool(cal.loop.effects) or _wander_found(cal),
             "widened": cal.widening is not None,
             "refused effect": bool(cal.loop.refused)}
+
+
+def _wander_found(cal) -> bool:
+    """The scale wander the poses' slopes showed (:mod:`align.calibration.wander`): an effect
+    found in the data, corrected and carried in u."""
+    w = (cal.stability or {}).get("wander")
+    return bool(w and w["found"])
 
 
 def gonio_decisions(run) -> dict[str, bool]:

@@ -125,7 +125,8 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# adc_range = [-5.0, 5.0]     # the ADC's rails (readings' unit): a pose at "
                 "one is left out",
                 "# scale_stability_ppm = 20.0  # ± [ppm] the scale factors' stability over "
-                "the run (not set: assumed stable, stated; as --scale-stability-ppm)",
+                "the run (not set: from the poses' slopes, else assumed stable, stated; as "
+                "--scale-stability-ppm)",
                 "# window_s = 0.25             # [s] static detection window of a recording "
                 "(as --window)",
                 "# threshold = 3.0             # static below this x the recording's noise "

@@ -102,7 +102,8 @@ def calibration_samples(seed: int, folder: Path) -> dict:
     tr = Triad(noise_v=NOISE_V)
     d = tumble(TumbleSpec(triad=tr, seed=seed))
     poses, _ = read_poses(write_tumble_csv(d, folder / f"tumble{seed}.csv"))
-    return calibration_decisions(calibrate(poses, np.sign(tr.k)))
+    # As `align calibrate` runs it: nothing declared, no temperature column.
+    return calibration_decisions(calibrate(poses, np.sign(tr.k), stability_default=True))
 
 
 def calibration_recording(seed: int, folder: Path) -> dict:
@@ -115,7 +116,7 @@ def calibration_recording(seed: int, folder: Path) -> dict:
     np.savetxt(path, np.column_stack([t, u]), fmt=["%.4f"] + ["%.9e"] * 3, delimiter=",",
                header="t,ux,uy,uz", comments="")
     poses, _ = read_poses(path)
-    return calibration_decisions(calibrate(poses, np.sign(tr.k)))
+    return calibration_decisions(calibrate(poses, np.sign(tr.k), stability_default=True))
 
 
 # ------------------------------------------------------------------------------ goniometer
