@@ -18,6 +18,7 @@ from align.lens_terms import (
     camera_coupling,
     check_camera,
     lens_bow,
+    lens_or_bends,
     lone_departures,
 )
 from align.lens_terms import (
@@ -74,6 +75,10 @@ class CameraLens:
     """Per mark, the largest sagitta [px] the lens can still leave on it (what the lines
     leave undetermined, or the calibration's u): a larger bow is no lens
     (:func:`bow_bound`)."""
+    unresolved: bool = False
+    """The marks' departure from the camera's model fits neither a changed lens nor bent
+    marks beside the calibrated one (:func:`align.lens_terms.lens_or_bends`): every angle of
+    the camera is not ok."""
 
     @property
     def terms(self) -> tuple[dict[str, float], ...]:
@@ -140,23 +145,71 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R) for ln in lines]
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     notes = []
-    lone = lone_departures(designs, lam_u, ranges, alpha) if p < alpha else ()
+    unresolved = False
+    told = lens_or_bends(designs, lam_u, ranges, alpha) if p < alpha else None
+    if told is None:
+        lone = lone_departures(designs, lam_u, ranges, alpha) if p < alpha else ()
+    else:
+        lone = told.departing if told.verdict == "bends" else ()
     if lone:
-        # A departure no two marks agree on is a bent mark's bow: the lens stays the
-        # calibrated one (nothing widened), and the mark's own loop names the bend and
-        # reads it end to end (its bow is beyond what the calibration leaves it).
+        # A departure no two marks agree on, or one the other marks do not show (a changed
+        # lens bows every mark by what its position predicts; these stay straight), is the
+        # bent marks' bows: the lens stays the calibrated one (nothing widened), and each
+        # mark's own loop names its bend and reads it end to end (its bow is beyond what the
+        # calibration leaves it).
         which = ", ".join(str(k) for k in lone)
+        why = ("no other mark agrees on a change of the lens" if told is None else
+               f"a lens change that made them would bow the other marks "
+               f"{told.separation:.1f} sigma, and they show {told.seen:+.2f} of that")
         notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the calibrated "
-                     "lens's and no other mark agrees on a change of the lens: read as a bent "
-                     "mark, the calibration kept")
+                     f"lens's and {why}: read as bent mark(s), the calibration kept")
         p_used = 1.0
         dlam = np.zeros_like(dlam)
     else:
         p_used = p
-    if p_used < alpha:
+    if told is not None and told.verdict == "undecided":
+        # The other marks cannot tell a changed lens from bent marks (too near the centre,
+        # too short, too few to show the bow the change predicts for them): both readings
+        # stand; the calibration's is given, and the difference of each mark's angle under
+        # the two enters u as a Type B term (the truth anywhere between, uniform: /sqrt 3).
+        which = ", ".join(str(k) for k in told.departing)
+        what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, told.dlam, strict=True)
+                         if v)
+        notes.append(f"{who}: cannot tell whether the lens differs from its calibration "
+                     f"({what} on top of it) or line(s) {which} of {len(ms)} are bent: the "
+                     f"other marks would show the change's bow only {told.separation:.1f} "
+                     "sigma apart; u carries both readings (camera_or_bent); image straight "
+                     "marks far from the centre or recalibrate the camera (`align camera`)")
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_or_bent"] = float(d.s @ told.dlam) / np.sqrt(3)
+        dlam, p_used = told.dlam, p
+    elif told is not None and told.verdict == "neither":
+        # No one changed lens predicts every mark from the others, and no straight mark
+        # shows that the calibration holds: bent marks and a changed lens cannot be told
+        # apart, and no u covers a reading that may be either: not ok.
+        which = ", ".join(str(k) for k in told.departing)
+        notes.append(f"{who}: NOT OK: the marks depart from the calibrated lens in a way no "
+                     f"one lens change explains (line(s) {which} of {len(ms)} depart on their "
+                     "own), and no straight mark shows that the calibration holds: a changed "
+                     "lens and bent marks cannot be told apart; recalibrate the camera "
+                     "(`align camera`) or image straight marks far from the centre")
+        unresolved = True
+        # u still widened by the change all the marks call for (as when they agree): the
+        # angles are not ok, but a session's fusion should not take them as sharp.
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_disagreement"] = float(d.s @ dlam)
+    elif p_used < alpha:
+        also = ""
+        if told is not None:
+            # The change the agreeing marks call for (a departing mark that does not fit it
+            # is bent on top of the changed lens: its loop reads it end to end).
+            dlam = told.dlam
+            if told.dropped:
+                also = (f"; line(s) {', '.join(str(k) for k in told.dropped)} do not fit that "
+                        "change either: bent marks")
         what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
         notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
-                     f"{what} on top of it, p = {p:.2g}): u widened by its effect; "
+                     f"{what} on top of it, p = {p:.2g}){also}: u widened by its effect; "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
@@ -164,8 +217,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     return CameraLens(None, tuple(notes),
                       {"source": "camera model", "p_marks_agree": p,
                        "bent_lines": list(lone),
+                       "lens_or_bent": None if told is None else told.verdict,
                        "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
-                      bow_px=bow_bound(lines, zero, reach, R))
+                      bow_px=bow_bound(lines, zero, reach, R), unresolved=unresolved)
 
 
 def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray, scale: float

@@ -15,6 +15,7 @@ import logging
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,7 @@ from align.gonio_directions import (
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
 from align.gonio_timing import LATENCY, with_timing
+from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
 from goniometry import (
@@ -63,7 +65,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 reverse_log: str | Path | object | None = None, apply_loop: bool = True,
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
                 latitude_range_rad: tuple[float, float] | None = None,
-                on_bytes: Callable[[int], None] | None = None) -> GonioRun:
+                on_bytes: Callable[[int], None] | None = None,
+                time_unit: str | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -105,6 +108,10 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         Latitudes [rad] the Earth rate's bound is taken over when it is not determined.
     on_bytes : callable, optional
         Called with about how many bytes each chunk held (a progress bar).
+    time_unit : str, optional
+        The ``t`` column's unit when its header (or its name in rows) says none, for both
+        logs (``--time-unit``, the session's ``time_unit``: ``s``, ``ms``, ``us``, ``ns``,
+        ``min``, ``h``); a header that says another unit is refused.
 
     Returns
     -------
@@ -155,10 +162,11 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
         fwd = measure_log(path, n_faces, latitude_rad, direction, alpha, apply_loop=False,
-                          steady_table=steady_table, columns=columns, on_bytes=on_bytes)
+                          steady_table=steady_table, columns=columns, on_bytes=on_bytes,
+                          time_unit=time_unit)
         rev = measure_log(reverse_log, n_faces, latitude_rad, -direction, alpha,
                           apply_loop=False, steady_table=steady_table, columns=columns,
-                          on_bytes=on_bytes)
+                          on_bytes=on_bytes, time_unit=time_unit)
         comb, term = combine_directions(fwd.angles, rev.angles)
         check_reversed(fwd.angles, rev.angles, term, source_name(path),
                        source_name(reverse_log), alpha)
@@ -173,6 +181,19 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
+    with captured_warnings() as logged:  # how the log was read (the table reader's
+        run = _one_direction(path, n_faces, latitude_rad, direction, alpha, apply_loop,
+                             steady_table, columns, latitude_range_rad, on_bytes, time_unit)
+    return replace(run, warnings=(*dict.fromkeys(logged), *run.warnings))  # warnings too
+
+
+def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float | None,
+                   direction: int, alpha: float, apply_loop: bool, steady_table: bool,
+                   columns: Mapping[str, str] | None,
+                   latitude_range_rad: tuple[float, float] | None,
+                   on_bytes: Callable[[int], None] | None, time_unit: str | None
+                   ) -> GonioRun:
+    """One direction's run of :func:`measure_log` (its parameters)."""
     notes: list[str] = []
     loop = None
     if "align.loop" not in sys.modules:
@@ -196,7 +217,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 pool.shutdown(wait=False)
     start = time.perf_counter()
     summary = read_revolutions(path, n_faces, columns=columns, on_kept=hook,
-                               on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes)
+                               on_kept_at=LOOP_REVOLUTIONS, on_bytes=on_bytes,
+                               time_unit=time_unit)
     log.debug("gonio %s: one pass in %.2f s: %d rows, %d revolutions excluded "
               "(%s), times %s", Path(source_name(path)).name, time.perf_counter() - start,
               summary.rows,

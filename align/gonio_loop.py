@@ -152,9 +152,11 @@ class RevolutionStage:
         cov = np.linalg.pinv(A.T @ A) * (r @ r / dof)
         eff = {}
         for j, t in enumerate(terms, start=len(base)):
-            # Slope of counts per revolution -> the physical rate (divide by K / 2 pi).
-            eff[t.name] = (float(coef[j] * 2 * np.pi / self.K),
-                           float(np.sqrt(cov[j, j]) * 2 * np.pi / self.K))
+            # Slope of counts per revolution -> the physical quantity: against the period,
+            # the rate (N = K (1 + rate T / 2 pi): divide by K / 2 pi); against time, the
+            # scale factor's relative drift (N = K (1 + kappa t): divide by K).
+            per = 2 * np.pi / self.K if t.name == EARTH else 1.0 / self.K
+            eff[t.name] = (float(coef[j] * per), float(np.sqrt(cov[j, j]) * per))
         return StageFit(r, None, A.shape[1], self.regs, "t", eff,
                         {"counts_per_rev": (float(self.K + coef[0]), float(np.sqrt(cov[0, 0])))},
                         sequence=self.sequence)

@@ -5,7 +5,9 @@ a calibrated lens."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
@@ -186,6 +188,209 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
         out = [k for k in out if _camera_departure([designs[k]], lam_u, ranges, alpha)[0]
                < alpha]
     return tuple(out) if len(out) == 1 else ()
+
+
+@dataclass(frozen=True)
+class LensOrBends:
+    """Which of two explanations of marks that depart from a calibrated lens the data hold:
+    the lens changed (every mark then shows the bow the change predicts at its position) or
+    the departing marks are bent (the others straight, the calibration kept).
+
+    Attributes
+    ----------
+    verdict : str
+        ``lens`` (one changed lens predicts every mark from the others' bows, and the marks
+        that do not depart show the bow it predicts for them), ``bends`` (they do not, or no
+        plausible lens makes the departing marks' bows), ``undecided`` (both fit: the other
+        marks are too near the centre, too short or too few to tell them apart) or
+        ``neither`` (no one lens predicts every mark, and no straight mark shows the
+        calibration holds: bent marks and a changed lens cannot be told apart).
+    departing : tuple of int
+        The marks that depart from the calibration on their own (the bent ones if bent).
+    dlam : numpy.ndarray
+        The lens change (per PARAMS, in its unit) the agreeing marks call for (the lens
+        reading).
+    separation : float
+        How far apart the two explanations put the other marks' bow, in its standard
+        uncertainty (the test's power: small means the data cannot tell).
+    seen : float
+        The other marks' bow along the predicted one, in units of the predicted (1: as
+        the lens change predicts, 0: straight).
+    """
+
+    verdict: str
+    departing: tuple[int, ...]
+    dlam: np.ndarray
+    separation: float = 0.0
+    seen: float = float("nan")
+    dropped: tuple[int, ...] = ()
+    """Departing marks that do not fit the changed lens the others agree on (bent on top
+    of it, when the verdict is ``lens``)."""
+
+
+@dataclass(frozen=True)
+class _Prediction:
+    """What a lens change fitted from some marks predicts for others: the separation |g| of
+    "straight" and "bowed as predicted" and the others' bow along g, t [sd], with the
+    variance of t under each."""
+
+    separation: float
+    t: float
+    var_bend: float
+    var_lens: float
+    beyond: bool
+
+
+def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
+             rng: np.ndarray, z: float) -> _Prediction | None:
+    """The change the ``fit`` marks call for, tested on the ``test`` marks (None: the fit
+    marks determine no lens parameter)."""
+    F = sum(d.G.T @ d.G for d in fit)
+    b = sum(d.G.T @ d.z for d in fit)
+    det = _determined(F, rng, z)
+    if not det:
+        return None
+    D = np.ix_(det, det)
+    C = np.linalg.inv(F[D])
+    dlam = -np.linalg.solve(F[D], b[det])
+    # A change beyond any plausible lens (by more than its own u) is no lens's.
+    beyond = bool(np.any(np.abs(dlam) - z * np.sqrt(np.diag(C)) > rng[det]))
+    g = [d.G[:, det] @ dlam for d in test]
+    sep = float(np.sqrt(sum(gi @ gi for gi in g)))
+    if sep == 0.0:
+        return _Prediction(0.0, 0.0, 1.0, 1.0, beyond)
+    # The test marks' whitened residual z along the predicted correction g: t = -g.z/|g| is
+    # N(0, 1 + the calibration's own u along g) if they are straight under the calibration,
+    # N(|g|, 1 + the change's estimation variance along g) if the lens changed.
+    t = -sum(gi @ d.z for gi, d in zip(g, test, strict=True)) / sep
+    h = sum(d.G.T @ gi for gi, d in zip(g, test, strict=True)) / sep
+    return _Prediction(sep, float(t), 1.0 + float(np.sum((h * lam_u) ** 2)),
+                       1.0 + float(h[det] @ C @ h[det]), beyond)
+
+
+def _agreement(k: int, with_: Sequence[int], designs: Sequence[_Design],
+               Fb: Sequence[tuple[np.ndarray, np.ndarray]], rng: np.ndarray, z: float
+               ) -> tuple[float, float]:
+    """How well mark ``k`` agrees with the lens change the marks ``with_`` call for: the
+    p-value of its own estimate of the change against theirs, over the parameters both
+    determine (chi2 with both covariances), and the chi2 per degree of freedom. A mark that
+    determines none of them on its own is tested by its bow: the quadratic across it left
+    after the others' change, against its noise and the change's u. ``Fb``: each mark's
+    (G^T G, G^T z)."""
+    F = sum(Fb[i][0] for i in with_)
+    det = _determined(F, rng, z)
+    Fk, bk = Fb[k]
+    det_k = _determined(Fk, rng, z)
+    both = [j for j in det_k if j in det]
+    P = len(rng)
+    dl, Cr = np.zeros(P), np.zeros((P, P))
+    if det:
+        D = np.ix_(det, det)
+        dl[det] = -np.linalg.solve(F[D], sum(Fb[i][1] for i in with_)[det])
+        Cr[D] = np.linalg.inv(F[D])
+    if not both:
+        d = designs[k]
+        wG = d.w @ d.G
+        r = float(d.w @ d.z + wG @ dl)
+        stat = r**2 / (1.0 + float(wG @ Cr @ wG))
+        return float(special.chdtrc(1, stat)), stat
+    Dk = np.ix_(det_k, det_k)
+    dk, Ck = np.zeros(P), np.zeros((P, P))
+    dk[det_k] = -np.linalg.solve(Fk[Dk], bk[det_k])
+    Ck[Dk] = np.linalg.inv(Fk[Dk])
+    B = np.ix_(both, both)
+    diff = dk[both] - dl[both]
+    stat = float(diff @ np.linalg.solve(Ck[B] + Cr[B], diff))
+    return float(special.chdtrc(len(both), stat)), stat / len(both)
+
+
+MAX_DROPPED = 4
+"""Most departing marks tried as bent on top of a changed lens (the subsets searched grow
+as 2^this)."""
+
+
+def _agreeing(designs: Sequence[_Design], departing: Sequence[int], rng: np.ndarray,
+              z: float, alpha: float) -> list[int] | None:
+    """The largest set of marks that agree on one lens change (each with the rest, at
+    ``alpha``), dropping only departing marks (up to :data:`MAX_DROPPED`; a mark that does
+    not depart is straight under the calibration and stays), at least two; among sets of
+    that size the one that agrees best. None: no such set."""
+    Fb = [(d.G.T @ d.G, d.G.T @ d.z) for d in designs]
+    n = len(designs)
+    for r in range(min(len(departing), MAX_DROPPED) + 1):
+        best, best_p = None, -1.0
+        for drop in itertools.combinations(departing, r):
+            keep = [k for k in range(n) if k not in drop]
+            if len(keep) < 2:
+                continue
+            p = min(_agreement(k, [i for i in keep if i != k], designs, Fb, rng, z)[0]
+                    for k in keep)
+            if p >= alpha and p > best_p:
+                best, best_p = keep, p
+        if best is not None:
+            return best
+    return None
+
+
+def _departs(d: _Design, lam_u: np.ndarray, ranges: LensRanges, alpha: float) -> bool:
+    """Whether one mark departs from the calibrated lens on its own: the change it alone
+    calls for stands, or its bow (the quadratic across it, which a mark that determines no
+    lens parameter on its own still shows) is beyond its noise and the calibration's u."""
+    if _camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
+        return True
+    var = 1.0 + float(np.sum((d.w @ d.G * lam_u) ** 2))
+    return abs(d.bow_z) > float(-special.ndtri(alpha / 2)) * np.sqrt(var)
+
+
+def lens_or_bends(designs: Sequence[_Design], lam_u: np.ndarray,
+                  ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3
+                  ) -> LensOrBends | None:
+    """Tell a changed lens from several bent marks (None: fewer than two marks, or no mark
+    departs on its own, so a departure is the marks' shared one: the lens's).
+
+    A change of the lens bows every mark by what its position predicts (distance from the
+    principal point, foot of the perpendicular, length); a bent mark bends whatever its
+    position. Two explanations, each tested:
+
+    * bends: the change the departing marks call for (:func:`_predict`), on the marks that
+      do not depart — straight (t ~ 0) or bowed as predicted (t ~ separation)? Untestable
+      without such marks.
+    * a changed lens: marks that agree (:func:`_agreement`, each with the others) on one change
+      within the plausible ranges, found by dropping the worst departing mark in turn (a
+      departing mark may be bent on top of a changed lens; a mark that does not depart may
+      not be dropped: it is straight under the calibration); the change must stand (the
+      agreeing marks depart from the calibration together), and the marks that do not
+      depart must show the bow it predicts for them.
+    """
+    z = float(-special.ndtri(alpha / 2))
+    rng = ranges.vector()
+    n = len(designs)
+    if n < 2:
+        return None
+    departing = tuple(k for k in range(n) if _departs(designs[k], lam_u, ranges, alpha))
+    if not departing:
+        return None
+    keep = _agreeing(designs, departing, rng, z, alpha)
+    dlam = np.zeros(len(PARAMS))
+    lens_fits = False
+    if keep is not None:
+        p_keep, dlam = _camera_departure([designs[i] for i in keep], lam_u, ranges, alpha)
+        pk = _predict([designs[i] for i in keep], [], lam_u, rng, z)
+        # The change must stand (the agreeing marks depart together) and be a lens's.
+        lens_fits = p_keep < alpha and not (pk is not None and pk.beyond)
+    dropped = () if keep is None else tuple(k for k in range(n) if k not in keep)
+    others = [designs[k] for k in range(n) if k not in departing]
+    pr = (_predict([designs[k] for k in departing], others, lam_u, rng, z) if others
+          else None)
+    if pr is None:
+        # No straight mark to test the bends by (or the departing marks determine nothing).
+        return LensOrBends("lens" if lens_fits else "neither", departing, dlam,
+                           dropped=dropped)
+    bends_fit = abs(pr.t) <= z * np.sqrt(pr.var_bend)
+    verdict = ("undecided" if bends_fit and lens_fits else "bends" if bends_fit
+               else "lens" if lens_fits else "neither")
+    seen = pr.t / pr.separation if pr.separation else float("nan")
+    return LensOrBends(verdict, departing, dlam, pr.separation, seen, dropped=dropped)
 
 
 def undistorted(line: LineGeometry, lam: np.ndarray, scale: float

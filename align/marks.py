@@ -261,12 +261,16 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     au = float(np.sqrt(r.angle_u_rad**2 + sum(v**2 for k_, v in terms.items()
                                               if k_ not in r.u_terms)))
     lens_u = float(np.sqrt(sum(v**2 for k_, v in terms.items() if k_.startswith(LENS_TERMS))))
-    limited = bool(lens_u > lens.max_u_rad)
+    limited = bool(lens_u > lens.max_u_rad) or lens.unresolved
     notes = list(lens.notes) + list(r.notes) + [
         f"{name} mark {index}: crossing with "
         f"{f'mark {j}' if j >= 0 else 'a groove not found as a mark'}: {n} px excluded "
         "(the other groove lies in its profile window there)" for j, n in m.crossings]
-    if limited:
+    if lens.unresolved:
+        notes.append(f"{name} mark {index}: NOT OK: the camera's marks fit neither its "
+                     "calibrated lens nor one changed lens (see the camera's note): recalibrate "
+                     f"the camera (`align camera`) and give it with {lens.model_as}")
+    elif limited:
         worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "

@@ -84,7 +84,9 @@ def interval_lines(intervals: Sequence) -> list[str]:
     return [f"{len(intervals)} static intervals found:"] + [
         f"  {iv.start_s:9.2f}-{iv.end_s:9.2f} s ({iv.duration_s:6.1f} s, "
         f"{iv.samples} samples), mean {' '.join(f'{v:.6g}' for v in iv.mean)}, "
-        f"noise {' '.join(f'{v:.3g}' for v in iv.std)}" for iv in intervals]
+        f"noise {' '.join(f'{v:.3g}' for v in iv.std)}"
+        + "".join(f"; {a:.2f}-{b:.2f} s left out (a disturbance, the attitude unchanged)"
+                  for a, b in iv.left_out) for iv in intervals]
 
 
 def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],

@@ -158,9 +158,7 @@ def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str],
         No header, the columns not found, or a time unit the header contradicts, naming
         the file and line.
     """
-    if time_unit is not None and time_scale(time_unit) is None:
-        raise InputError(f"--time-unit / time_unit {time_unit!r}: not a time unit; one of "
-                         f"{', '.join(DECLARED_TIME_UNITS)}")
+    declare_time_unit({}, None, time_unit, str(path))  # an unknown unit: before the file
     try:
         with open(path, encoding="utf-8-sig", newline="") as f:
             lines = _header_lines(f)
@@ -196,15 +194,50 @@ def read_header(path: Path, spec: TableSpec, mapping: Mapping[str, str],
         else:
             raise first from None
     time = spec.time if spec.time in names else None
-    if time_unit is not None and time is not None:
-        said = units.get(time)
-        if said is None:
-            units = {**units, time: time_unit}
-        elif time_scale(said) != time_scale(time_unit):
-            raise InputError(f"{path}:{ln}: {time}: the header says [{said}], the declared "
-                             f"time unit (--time-unit / time_unit) says {time_unit}: give "
-                             "one or make them agree")
+    units = declare_time_unit(units, time, time_unit, f"{path}:{ln}")
     return Header(names, raw, units, delimiter, ln, ln, meta)
+
+
+def declare_time_unit(units: Mapping[str, str], time: str | None, time_unit: str | None,
+                      where: str) -> dict[str, str]:
+    """The units of a header (or of rows in memory) with a declared time unit applied: the
+    one rule for ``--time-unit`` / ``time_unit`` of every command that reads times.
+
+    Parameters
+    ----------
+    units : mapping of str to str
+        Canonical name -> the unit written with it.
+    time : str or None
+        The time column's canonical name, None when the table has none (nothing to do).
+    time_unit : str or None
+        The declared unit (a key of :data:`axisbase.units.TIME_UNITS`), None if none.
+    where : str
+        What a refusal names (``'log.csv:1'``).
+
+    Returns
+    -------
+    dict of str to str
+        ``units``, the time column's unit set to ``time_unit`` when the header says none.
+
+    Raises
+    ------
+    InputError
+        ``time_unit`` not a time unit, or the header saying another one (naming ``where``,
+        the column and the flag/key).
+    """
+    if time_unit is not None and time_scale(time_unit) is None:
+        raise InputError(f"--time-unit / time_unit {time_unit!r}: not a time unit; one of "
+                         f"{', '.join(DECLARED_TIME_UNITS)}")
+    if time_unit is None or time is None:
+        return dict(units)
+    said = units.get(time)
+    if said is None:
+        return {**units, time: time_unit}
+    if time_scale(said) != time_scale(time_unit):
+        raise InputError(f"{where}: {time}: the header says [{said}], the declared "
+                         f"time unit (--time-unit / time_unit) says {time_unit}: give "
+                         "one or make them agree")
+    return dict(units)
 
 
 def meta_note(path: Path, h: Header) -> str | None:

@@ -39,7 +39,14 @@ import pyarrow.csv as pacsv
 from axisbase.badrows import Uncommented, refused, skip_comment
 from axisbase.csvblocks import parallel_batches, read_batches
 from axisbase.errors import InputError
-from axisbase.header import Header, match_names, meta_note, read_header, show_cell
+from axisbase.header import (
+    Header,
+    declare_time_unit,
+    match_names,
+    meta_note,
+    read_header,
+    show_cell,
+)
 from axisbase.repeats import check_repeats
 from axisbase.tabledata import Table
 from axisbase.tablespec import KINDS, Column, TableSpec
@@ -281,7 +288,7 @@ def rate_warning(table: Table) -> str | None:
             if lo <= 1.0 / (dt * TIME_UNITS[u]) <= hi]
     unit = table.units.get(spec.time) or "s"
     likely = (f"; were the times in {fits[0]}? say so in the header: {spec.time} [{fits[0]}]"
-              if fits else "")
+              f" (or --time-unit {fits[0]})" if fits else "")
     return (f"{table.path}: {spec.time}: median sample interval {dt:g} {unit} "
             f"({1.0 / dt:.3g} Hz) is implausible for a {spec.what} ({lo:g} Hz to {hi:g} Hz)"
             f"{likely}")
@@ -366,9 +373,11 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                     done, n = done - cut, n - cut
                 if n == 0:
                     continue
-                empty = False
                 chunk = _table(path, spec, h, cols, row0)
                 _check(chunk, prev_t)
+                if empty and (warning := rate_warning(chunk)):
+                    _note(f"WARNING: {warning}")  # (the first chunk: thousands of rows)
+                empty = False
                 if spec.time and spec.time in chunk.data:
                     prev_t = float(chunk.data[spec.time][-1])
                 row0 += len(chunk)
@@ -426,7 +435,8 @@ def _memory_array(values: object, kind: str, column: str, name: str) -> pa.Array
 
 
 def iter_rows(rows: object, spec: TableSpec, columns: Mapping[str, str] | None = None,
-              chunk_rows: int = ROWS_PER_CHUNK, name: str = "rows") -> Iterator[Table]:
+              chunk_rows: int = ROWS_PER_CHUNK, name: str = "rows",
+              time_unit: str | None = None) -> Iterator[Table]:
     """Rows already in memory as checked chunks, as :func:`iter_table` gives a file's.
 
     The column names are matched as a header's are (case, aliases, a unit in brackets,
@@ -445,6 +455,8 @@ def iter_rows(rows: object, spec: TableSpec, columns: Mapping[str, str] | None =
         Rows per chunk.
     name : str
         What the messages call the rows.
+    time_unit : str, optional
+        The time column's unit when its name says none (see :func:`read_table`).
 
     Yields
     ------
@@ -459,6 +471,8 @@ def iter_rows(rows: object, spec: TableSpec, columns: Mapping[str, str] | None =
     cols = _memory_columns(rows, name)
     raw = list(cols)
     names, units = match_names(raw, spec, columns or {}, f"{name}: column names")
+    units = declare_time_unit(units, spec.time if spec.time in names else None, time_unit,
+                              f"{name}: column names")
     kinds = {c.name: c.kind for c in spec.columns}
     arrays = {n: _memory_array(cols[r], kinds[n], r, name)
               for r, n in zip(raw, names, strict=True) if n}

@@ -25,7 +25,10 @@ COUNTER_LOG = TableSpec(
      Column("counter", "int", aliases=("counter_id",)),
      Column("ref", "int", aliases=("reference", "ref_pulse")),
      Column("t", "float", required=False, aliases=("time", "t_s", "time_s", "timestamp"))),
-    time="t")
+    time="t", rate_hz_range=(1e-2, 1e4))
+"""(Plausible pulse rates: a face every 100 s — a 4-face table at 0.9 °/s, about where a ring
+laser's lock-in ends — to 10⁴ faces a second, a 24-face polygon at 400 rev/s; times in ms or
+µs read as seconds fall below, and a warning names the unit.)"""
 COLUMNS = ("count", "counter", "ref")
 ROWS = "rows"
 """What messages call a log given as rows in memory."""
@@ -68,7 +71,8 @@ class Chunk:
 
 
 def iter_log(path: str | Path | object, block_bytes: int = 1 << 20,
-             columns: Mapping[str, str] | None = None, threads: bool = True) -> Iterator[Chunk]:
+             columns: Mapping[str, str] | None = None, threads: bool = True,
+             time_unit: str | None = None) -> Iterator[Chunk]:
     """Yield the log in chunks (about ``block_bytes`` of text each), parsed ahead on a
     pool of threads (``threads``; see :func:`axisbase.table.iter_table`); rows in memory in
     chunks of :data:`axisbase.table.ROWS_PER_CHUNK` rows (:func:`axisbase.table.iter_rows`).
@@ -86,6 +90,9 @@ def iter_log(path: str | Path | object, block_bytes: int = 1 << 20,
         Canonical name -> header name (``--columns``).
     threads : bool
         Parse on a pool of threads.
+    time_unit : str, optional
+        The ``t`` column's unit when its header says none (``--time-unit``, the session's
+        ``time_unit``; see :func:`axisbase.header.declare_time_unit`).
 
     Yields
     ------
@@ -98,9 +105,10 @@ def iter_log(path: str | Path | object, block_bytes: int = 1 << 20,
         Naming the file, the line, the column and what is wrong.
     """
     try:
-        tables = (iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads)
+        tables = (iter_table(path, COUNTER_LOG, columns, block_bytes, parallel=threads,
+                             time_unit=time_unit)
                   if isinstance(path, str | Path) else
-                  iter_rows(path, COUNTER_LOG, columns, name=ROWS))
+                  iter_rows(path, COUNTER_LOG, columns, name=ROWS, time_unit=time_unit))
         for tab in tables:
             _validate(tab)
             yield Chunk(tab["count"], tab["counter"], tab["ref"], tab.get("t"),

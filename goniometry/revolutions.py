@@ -316,7 +316,8 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
                      block_bytes: int = 1 << 20, correct=None,
                      columns: Mapping[str, str] | None = None,
                      on_kept: Callable | None = None, on_kept_at: int = 0,
-                     on_bytes: Callable[[int], None] | None = None) -> LogSummary:
+                     on_bytes: Callable[[int], None] | None = None,
+                     time_unit: str | None = None) -> LogSummary:
     """Stream a log into revolution statistics in one pass (see module docstring).
 
     ``correct(counts, dt) -> counts``: applied to each revolution before the statistics
@@ -347,6 +348,8 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
         See above.
     on_kept_at : int
         Revolutions handed to ``on_kept`` (1..``keep``).
+    time_unit : str, optional
+        The ``t`` column's unit when its header says none (``--time-unit``).
 
     Returns
     -------
@@ -365,7 +368,7 @@ def read_revolutions(path: str | Path, n_faces: int, keep: int = 50000,
     name = source_name(path)
     p = _Pass(n_faces, keep, correct, name)
     p.stats.on_kept, p.stats.on_kept_at = on_kept, on_kept_at
-    for ch in iter_log(path, block_bytes, columns):
+    for ch in iter_log(path, block_bytes, columns, time_unit=time_unit):
         p.feed(ch)
         if on_bytes is not None:
             on_bytes(block_bytes)

@@ -51,6 +51,17 @@ def _rings(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return out
 
 
+@functools.lru_cache(maxsize=8)
+def _window_and_counts(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """For a patch of this shape: its 2-D Hann window and the number of rfft2 bins in each
+    ring of :func:`_rings` (read-only; a frame's ~40 tiles near a 5 MP mark share them)."""
+    win = np.outer(np.hanning(shape[0]), np.hanning(shape[1]))
+    cnt = np.bincount(_rings(shape)[3].ravel())
+    for x in (win, cnt):
+        x.flags.writeable = False
+    return win, cnt
+
+
 def spectral_grating(a: np.ndarray, max_pitch_px: float = 120.0
                      ) -> tuple[float, float] | None:
     """(pitch [px], line direction [rad]) of a grating filling the patch ``a`` [DN], or None.
@@ -68,7 +79,8 @@ def spectral_grating(a: np.ndarray, max_pitch_px: float = 120.0
     if min(n_r, n_c) < 32:
         return None
     a = np.asarray(a, float)
-    a = (a - a.mean()) * np.outer(np.hanning(n_r), np.hanning(n_c))
+    win, cnt = _window_and_counts(a.shape)
+    a = (a - a.mean()) * win
     p = np.abs(np.fft.rfft2(a)) ** 2
     fy, fx, f, rb = _rings(a.shape)
     band = f > 1 / max_pitch_px
@@ -77,7 +89,6 @@ def spectral_grating(a: np.ndarray, max_pitch_px: float = 120.0
     # Each frequency's power against its ring's (all directions): an edge's or a blob's
     # power falls off smoothly with frequency, a grating's stands out of its ring.
     logp = np.log(np.maximum(p, 1e-300))
-    cnt = np.bincount(rb.ravel())
     med = np.log(2) * np.exp(np.euler_gamma) * np.exp(
         np.bincount(rb.ravel(), logp.ravel()) / np.maximum(cnt, 1))
     ref = med[rb]

@@ -20,7 +20,8 @@ from axisbase.units import DEG
 @dataclass(frozen=True)
 class StaticInterval:
     """A static interval of a recording: times [s], samples, mean, scatter and standard error
-    of the mean of u (same unit as u)."""
+    of the mean of u (same unit as u); ``left_out``: (first, last) sample times [s] of the
+    disturbances inside it that are not its samples (a tap between two runs of one pose)."""
 
     start_s: float
     end_s: float
@@ -28,10 +29,18 @@ class StaticInterval:
     mean: np.ndarray
     std: np.ndarray
     sem: np.ndarray
+    left_out: tuple[tuple[float, float], ...] = ()
 
     @property
     def duration_s(self) -> float:
         return self.end_s - self.start_s
+
+    def mask(self, t: np.ndarray) -> np.ndarray:
+        """Which of the recording's samples (times ``t`` [s]) are this interval's."""
+        sel = (t >= self.start_s) & (t <= self.end_s)
+        for a, b in self.left_out:
+            sel &= (t < a) | (t > b)
+        return sel
 
 
 CLI_NAMES = {"window_s": "--window", "threshold": "--threshold",
@@ -274,16 +283,46 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
     lo_ext, hi_ext = n // 2, n - 1 - n // 2
     cut = int(round(settings.margin_s * rate))
     shortest = max(n, int(round(settings.min_duration_s * rate)))
-    out: list[StaticInterval] = []
+    pieces: list[list[tuple[int, int]]] = []
     for a, b in zip(starts, ends, strict=True):
         a2 = max(0, a - lo_ext) + cut
         b2 = min(len(u) - 1, b + hi_ext) - cut
         for s, e in _split(u, a2, b2 + 1, noise_mean, floor, n, settings.split_sigma,
                            shortest):
-            sel = slice(s, e)
-            out.append(StaticInterval(float(t[s]), float(t[e - 1]), e - s, u[sel].mean(0),
-                                      u[sel].std(0, ddof=1), _sem(u[sel], max(n, (e - s) // 8))))
+            # A disturbance between two quiet runs (a tap on the fixture, a burst of samples)
+            # that leaves the attitude where it was is not a new pose: by the split rule's own
+            # test (mean moved by split_sigma standard errors and split_deg), the two runs are
+            # one pose — the rule that splits a quiet run also decides when two are one.
+            if pieces and not _moved(u, pieces[-1], (s, e), noise_mean, floor, n,
+                                     settings.split_sigma):
+                pieces[-1].append((s, e))
+            else:
+                pieces.append([(s, e)])
+    out: list[StaticInterval] = []
+    for runs in pieces:
+        x = np.concatenate([u[s:e] for s, e in runs])
+        gaps = tuple((float(t[e]), float(t[s2 - 1]))
+                     for (_, e), (s2, _) in zip(runs[:-1], runs[1:], strict=True))
+        out.append(StaticInterval(float(t[runs[0][0]]), float(t[runs[-1][1] - 1]), len(x),
+                                  x.mean(0), x.std(0, ddof=1), _sem(x, max(n, len(x) // 8)),
+                                  gaps))
     return StaticDetection(tuple(out), noise, noise_mean, n, limit, rate, ratio, tuple(notes))
+
+
+def _moved(u: np.ndarray, before: list[tuple[int, int]], after: tuple[int, int],
+           noise_mean: np.ndarray, floor: np.ndarray, n: int, z: float) -> bool:
+    """Whether the attitude moved from the runs ``before`` (one pose so far) to the quiet run
+    ``after``: by the split rule (a channel's mean moved by more than ``z`` standard errors
+    and more than ``floor``, see :func:`_split`), or, in between, the samples' mean left the
+    pose by more than ``floor`` — a turn that came back (a full revolution about a horizontal
+    axis) is motion, while a tap's ringing averages out about the pose it leaves."""
+    x = np.concatenate([u[s:e] for s, e in before])
+    y = u[after[0]:after[1]]
+    step = np.abs(x.mean(0) - y.mean(0))
+    se = noise_mean * np.sqrt(n / len(x) + n / len(y))
+    gap = u[before[-1][1]:after[0]]
+    away = len(gap) > 0 and bool(np.any(np.abs(gap.mean(0) - x.mean(0)) > floor))
+    return away or bool(np.any((step > floor) & (step / se > z)))
 
 
 def _split(u: np.ndarray, s: int, e: int, noise_mean: np.ndarray, floor: np.ndarray, n: int,

@@ -45,7 +45,8 @@ def calibration_document(cal: Calibration, poses: Poses, units: str,
     if intervals is not None:
         js["static_intervals"] = [{"start_s": iv.start_s, "end_s": iv.end_s,
                                    "samples": iv.samples, "mean": iv.mean.tolist(),
-                                   "std": iv.std.tolist()}
+                                   "std": iv.std.tolist(),
+                                   "left_out_s": [list(g) for g in iv.left_out]}
                                   for iv in intervals]
     if checked is not None:
         js["check"] = checked.to_list()

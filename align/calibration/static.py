@@ -167,13 +167,13 @@ def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
         tt = np.array([(iv.start_s + iv.end_s) / 2 for iv in intervals])
         tm = None
         if temp is not None:
-            tm = np.array([temp[(t >= iv.start_s) & (t <= iv.end_s)].mean() for iv in intervals])
+            tm = np.array([temp[iv.mask(t)].mean() for iv in intervals])
         poses = Poses(mean, tt, tm, sig, count,
                       tuple(f"static@{iv.start_s:.1f}s" for iv in intervals))
-        samples = [u[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals]
+        samples = [u[iv.mask(t)] for iv in intervals]
     if t is not None:  # the bias instability the samples within the poses show
         times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
-                 [t[(t >= iv.start_s) & (t <= iv.end_s)] for iv in intervals])
+                 [t[iv.mask(t)] for iv in intervals])
         rate, bound = walk_levels(samples, times)
         trend = pose_slopes(samples, times, rate)
         poses = replace(poses, walk_rate=rate, walk_bound=bound,

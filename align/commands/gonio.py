@@ -56,7 +56,7 @@ def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], 
                                1 if args.direction == "ccw" else -1, args.alpha,
                                reverse_log=args.reverse_log, steady_table=args.steady_table,
                                columns=cols, latitude_range_rad=lat_range,
-                               on_bytes=on_bytes)
+                               on_bytes=on_bytes, time_unit=args.time_unit)
         except FaceCountError as exc:
             raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} "
                              f"has {exc.found} pulses per revolution") from None
@@ -92,7 +92,8 @@ def _write_gonio(args, run, names, nominal_deg, out, inputs) -> None:
 
 def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
     g = add("gonio", "face angles from a ring-laser counter log",
-            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index"),
+            tables(rate=False, units=False, example="count=periods,counter=channel,ref=index",
+                   time_unit=True),
             epilog=examples("align gonio log.csv --faces ref,z,y,x --nominal 90,90,90,90 "
                             "--latitude 48.1 --json gonio.json",
                             "align gonio ccw.csv --faces ref,z,y,x --reverse-log cw.csv "

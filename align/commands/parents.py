@@ -55,9 +55,10 @@ def writes() -> argparse.ArgumentParser:
     return w
 
 
-def tables(rate: bool = True, units: bool = True,
-           example: str = "ux=ax,uy=ay,uz=az") -> argparse.ArgumentParser:
-    """--columns, --units, --rate (commands that read tables of readings)."""
+def tables(rate: bool = True, units: bool = True, example: str = "ux=ax,uy=ay,uz=az",
+           time_unit: bool | None = None) -> argparse.ArgumentParser:
+    """--columns, --units, --rate, --time-unit (commands that read tables; ``time_unit``
+    defaults to ``rate``: a counter log has times but no sample rate)."""
     t = argparse.ArgumentParser(add_help=False)
     t.add_argument("--columns", metavar="NAME=HEADER,...",
                    help=f"header names for the format's columns, e.g. {example} "
@@ -69,6 +70,7 @@ def tables(rate: bool = True, units: bool = True,
     if rate:
         t.add_argument("--rate", type=POSITIVE, metavar="HZ",
                        help="sample rate for a file without a time column (row k at k/HZ s)")
+    if rate if time_unit is None else time_unit:
         t.add_argument("--time-unit", choices=DECLARED_TIME_UNITS,
                        help="the time column's unit when its header says none (a logger's "
                        "microsecond stamps: us)")

@@ -5,8 +5,9 @@ fusion) implements ``fit(terms) -> StageFit``: it fits its declared model plus t
 terms and returns residuals, their standard uncertainties (or None when unknown), regressors
 and the quantities of interest. *Candidates* build a :class:`Term` (design columns with a name,
 unit and physical meaning) from the current fit. The loop scores each candidate by refitting,
-adds the best one only if an F-test (corrected for searched parameters) and BIC both call for
-it, and stops when nothing more is significant. Structure that remains is reported, never
+adds the best one only if an F-test (corrected for searched parameters, and Holm over the
+candidates a round tests) and BIC both call for it, and stops when nothing more is
+significant. Structure that remains is reported, never
 hidden.
 
 A candidate that does not apply to the data (its builder returns None or raises
@@ -100,6 +101,12 @@ def optimistic_fit(current: StageFit, chi2_pred: float, extra_params: int) -> St
                    n_params=current.n_params + extra_params)
 
 
+def sidak(p: float, trials: float) -> float:
+    """The p-value of the smallest of ``trials`` independent tests: 1 - (1 - p)^trials
+    (Sidak's look-elsewhere / family correction; ~ trials * p for small p)."""
+    return float(-np.expm1(trials * np.log1p(-min(p, 1 - 1e-16))))
+
+
 def _may_pass(current: StageFit, chi2_pred: float, term: Term, searched: int, alpha: float,
               min_delta_bic: float) -> bool:
     """Whether a candidate predicted to leave ``chi2_pred`` could pass the loop's tests
@@ -108,8 +115,7 @@ def _may_pass(current: StageFit, chi2_pred: float, term: Term, searched: int, al
     trial = optimistic_fit(current, chi2_pred, term.width)
     d_bic = bic(trial, searched + term.searched) - bic(current, searched)
     p = f_test(current, trial, term.width)
-    p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
-    return p_adj < alpha and d_bic < -min_delta_bic
+    return sidak(p, term.trials) < alpha and d_bic < -min_delta_bic
 
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
@@ -118,8 +124,12 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
              ) -> LoopReport:
     """Run the residual loop over ``stage`` with ``candidates``.
 
-    An effect is added when its (look-elsewhere corrected) F-test p-value is below ``alpha``
-    and it lowers BIC by at least ``min_delta_bic``; the best such effect is added first.
+    An effect is added when its F-test p-value, corrected for the look-elsewhere search of
+    its term (``Term.trials``) and for the number of candidates the round tests (Holm's
+    step-down in Sidak's form: a round of m candidates tests each at 1 - (1 - alpha)^(1/m),
+    the next round at m - 1), is below ``alpha`` and it lowers BIC by at least
+    ``min_delta_bic``; the best such effect is added first. ``alpha`` is then the chance that
+    a round adds an effect to data that have none, whatever the number of candidates.
     ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
     else None): the refusal is reported in ``LoopReport.refused``, never silent. A candidate
     that does not apply or whose refit is singular is reported in ``LoopReport.skipped``.
@@ -161,6 +171,8 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     while len(effects) < max_effects:
         best = None
         predicted = screen(current, terms, [c.name for c in candidates]) if screen else {}
+        tried = []
+        tested = 0  # hypotheses this round: tried, or turned away by the screen
         for cand in candidates:
             if any(t.name == cand.name for t in terms):
                 continue
@@ -170,25 +182,43 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                                                       searched, alpha, min_delta_bic):
                     log.debug("loop   candidate %s: screened out (linearised chi2 %.4g from "
                               "%.4g)", cand.name, predicted[cand.name], current.chi2)
+                    tested += 1
                     continue
             trial, term = _try(stage, cand, current, terms, skipped)
             if trial is None:
                 continue
+            tested += 1
             skipped.pop(cand.name, None)  # tried now: not skipped after all
             d_bic = (bic(trial, searched + term.searched)
                      - bic(current, searched))
             p = f_test(current, trial, term.width)
-            p_adj = float(-np.expm1(term.trials * np.log1p(-min(p, 1 - 1e-16))))
-            log.debug("loop   candidate %s: p %.3g (look-elsewhere corrected, %g trials), "
-                      "dBIC %+.1f (needs p < %g and dBIC < %+.1f)", cand.name, p_adj,
-                      term.trials, d_bic, alpha, -min_delta_bic)
-            if p_adj < alpha and d_bic < -min_delta_bic and (best is None or d_bic < best[0]):
-                why = admissible(current, trial, term) if admissible is not None else None
-                if why is not None:
+            tried.append((cand, term, trial, sidak(p, term.trials), float(d_bic)))
+        lead = None  # the best admissible candidate by its own test (refusals' order)
+        for cand, term, trial, p_term, d_bic in tried:
+            # Holm over the candidates: the round adds the best of `tested` hypotheses, so
+            # each is tested at the family's level (Sidak's exact form of alpha / tested);
+            # later rounds test fewer (the step-down). Without it a round of m candidates
+            # adds a false effect m times as often as alpha says.
+            p_adj = sidak(p_term, tested)
+            log.debug("loop   candidate %s: p %.3g (look-elsewhere corrected, %g trials; "
+                      "Holm over %d candidates), dBIC %+.1f (needs p < %g and dBIC < %+.1f)",
+                      cand.name, p_adj, term.trials, tested, d_bic, alpha, -min_delta_bic)
+            if p_term >= alpha or d_bic >= -min_delta_bic:
+                continue
+            # A significant effect outside its physical prior is refused and reported as
+            # structure the model lacks: a test on the residual, at the level of each
+            # candidate's own test and in the order the candidates lead (as before the count
+            # of candidates entered), so that a refusal is not lost to the correction that
+            # guards against adding effects (a clipped pose's scale_warmup, user6).
+            why = admissible(current, trial, term) if admissible is not None else None
+            if why is not None:
+                if lead is None or d_bic < lead:
                     log.debug("loop   candidate %s: significant but refused: %s", cand.name,
                               why)
-                    refused[cand.name] = RefusedEffect(cand.name, why, p_adj, float(d_bic))
-                    continue
+                    refused[cand.name] = RefusedEffect(cand.name, why, p_term, float(d_bic))
+                continue
+            lead = d_bic if lead is None else min(lead, d_bic)
+            if p_adj < alpha and (best is None or d_bic < best[0]):
                 best = (d_bic, p_adj, term, trial, cand)
         if best is None:
             log.debug("loop %s: no candidate significant: stop", type(stage).__name__)

@@ -81,6 +81,7 @@ class Goniometer:
     reverse_log: Path | None = None
     steady_table: bool = False
     columns: dict[str, str] = field(default_factory=dict)
+    time_unit: str | None = None  # the t column's unit when its header says none
 
 
 @dataclass(frozen=True)
@@ -231,7 +232,10 @@ def _detection(c: dict, src: str) -> StaticSettings:
         raise InputError(f"{src}{exc}") from None
 
 
-def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> TableKeys:
+def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True,
+                time_unit: bool | None = None) -> TableKeys:
+    """The table keys of ``t``, checked (``time_unit``: whether the key applies; default
+    ``rate``, as the command line's :func:`align.commands.parents.tables`)."""
     cols = t.get("columns")
     if cols is not None and not isinstance(cols, str | dict):
         raise InputError(f"{where} columns: expected \"ux=ax,uy=ay,uz=az\" or a table")
@@ -243,7 +247,7 @@ def _table_keys(t: dict, where: str, rate: bool = True, units: bool = True) -> T
         raise InputError(f"{where} units = {u!r}: one of {', '.join(OUTPUT_UNITS)}")
     r = (_number(t["rate_hz"], f"{where} rate_hz", 0, 1e7, open_lo=True)
          if rate and "rate_hz" in t else None)
-    tu = t.get("time_unit") if rate else None
+    tu = t.get("time_unit") if (rate if time_unit is None else time_unit) else None
     if tu is not None and tu not in DECLARED_TIME_UNITS:
         raise InputError(f"{where} time_unit = {tu!r}: one of "
                          f"{', '.join(DECLARED_TIME_UNITS)}")
@@ -261,7 +265,7 @@ KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz", "time_unit",
                     "adc_range", "scale_stability_ppm", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
-                   "reverse_log", "steady_table", "columns"},
+                   "reverse_log", "steady_table", "columns", "time_unit"},
     "cameras": {"model", "roll_arcsec",
                 *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
@@ -426,12 +430,12 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         if rev_path is not None and _same_contents(rev_path, log_path):
             raise InputError(f"{w} reverse_log = {g['reverse_log']!r}: the same contents as "
                              "log; the other direction is a different recording")
+        keys = _table_keys(g, w, rate=False, units=False, time_unit=True)
         gon = Goniometer(log_path, tuple(faces), nom_r, dsign,
                          _number(g.get("reference_offset_arcsec", 0.0),
                                  f"{w} reference_offset_arcsec", -MAX_OFFSET_ARCSEC,
                                  MAX_OFFSET_ARCSEC) * ARCSEC,
-                         rev_path, steady,
-                         _table_keys(g, w, rate=False, units=False).columns)
+                         rev_path, steady, keys.columns, keys.time_unit)
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():

@@ -154,7 +154,9 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "Earth rate)",
                 "# steady_table = false         # the table turned at a steady rate (default "
                 "false)",
-                "# columns = \"count=N,counter=C,ref=R\"   # when the headers differ"]
+                "# columns = \"count=N,counter=C,ref=R\"   # when the headers differ",
+                "# time_unit = \"us\"            # the t column's unit when its header says "
+                "none"]
     for k, name in enumerate(cameras):
         out.append(_camera_block(name, k).rstrip("\n"))
     if static:

@@ -521,6 +521,8 @@ KEY_FAULTS = [
     ("rate_zero", ('scale_sign = "-"', 'scale_sign = "-"\nrate_hz = 0'), "", "rate_hz"),
     ("time_unit_bad", ('scale_sign = "-"', 'scale_sign = "-"\ntime_unit = "fortnight"'), "",
      "time_unit"),
+    ("gonio_time_unit_bad", ('direction = "ccw"', 'direction = "ccw"\ntime_unit = "fortnight"'),
+     "", "time_unit"),
     ("columns_bad", ('scale_sign = "-"', 'scale_sign = "-"\ncolumns = "ux"'), "", "columns"),
     ("same_file_twice", ('static = "platform.csv"', 'static = "tumble.csv"'), "",
      "the same file"),

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from align.cli import main
+from axisbase.units import ARCSEC
 from tests.conftest import imageless_session, mark_image
 from tests.imaging.bad_images import png_bomb
 
@@ -619,3 +620,36 @@ def test_lot_serials_are_trimmed_and_case_folded_with_a_warning(result_doc, tmp_
     assert lot["n_in_statistics"] == 2
     spelled = [w for w in lot["warnings"] if "written 3 ways" in w]
     assert len(spelled) == 1 and "'SN-4 '" in spelled[0] and "'sn-4'" in spelled[0]
+
+
+
+def test_goniometer_time_unit_key_reads_a_microsecond_log(session, tmp_path):
+    """``[goniometer] time_unit = "us"`` with the counter log's plain 't' in µs: the session's
+    goniometer stage gives the angles and u of the log in seconds (``align gonio``); the same
+    key against a header that says [ms] fails the stage in one line naming the file, its
+    header line and the key."""
+    from align.session import load_session, run_session
+
+    s = tmp_path / "us"
+    s.mkdir()
+    toml = (session / "session.toml").read_text()
+    gonio = toml[toml.index("[goniometer]"):toml.index("[platform]")]
+    (s / "session.toml").write_text("latitude_deg = 50.45\n\n" + gonio.replace(
+        'direction = "ccw"', 'direction = "ccw"\ntime_unit = "us"', 1))
+    _rewrite(session / "gonio.csv", s / "gonio.csv", ["count", "counter", "ref", "t"],
+             lambda r: [*r[:3], repr(float(r[3]) * 1e6)])
+    out = tmp_path / "s.json"
+    assert main(["gonio", str(session / "gonio.csv"), "--faces", "ref,y,x,z", "--latitude",
+                 "50.45", "--json", str(out), "-q"]) == 0
+    a = json.loads(out.read_text())
+    g = run_session(load_session(s)).gonio.angles
+    u = np.array(a["angles_u_arcsec"])
+    assert np.all(np.abs(np.rad2deg(g.angles_rad) - a["angles_deg"]) * 3600 <= 1e-6 * u)
+    assert np.allclose(g.u_rad / ARCSEC, u, rtol=1e-6, atol=0)
+    _rewrite(session / "gonio.csv", s / "gonio.csv", ["count", "counter", "ref", "t [ms]"],
+             lambda r: [*r[:3], repr(float(r[3]) * 1e3)])
+    res = run_session(load_session(s))
+    assert res.gonio is None
+    said = [e.message for e in res.errors if e.stage == "goniometer"]
+    assert len(said) == 1 and "gonio.csv:1: t: the header says [ms]" in said[0], said
+    assert "time_unit" in said[0] and "\n" not in said[0]

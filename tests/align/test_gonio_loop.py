@@ -224,3 +224,24 @@ def test_latency_on_a_rippled_table_is_warned_in_one_direction_and_cancelled_in_
     assert not any(LATENCY in w for w in both.warnings)
     steady, _ = _log(tmp_path, "s.csv", revolutions=3000, seed=3, latency_s=5e-6)
     assert not any(w.startswith(LATENCY) for w in measure_log(steady, 4, 50.45 * DEG).warnings)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_scale_drift_estimate_is_the_relative_drift_of_the_counts(seed):
+    """Counts per revolution N_r = K (1 + kappa t) (a ring laser whose scale factor drifts by
+    kappa per second), each face's count a floor of the accumulated phase plus 0.1-count
+    jitter: the loop adds scale_drift and its estimate is kappa [1/s] within 3 u (it was
+    reported 2 pi too large: the Earth rate's rad/s conversion)."""
+    from align.gonio_loop import SCALE, loop_gonio
+
+    rng = np.random.default_rng(seed)
+    K, kappa, R, n = 764355.8, 4e-7, 400, 4
+    t_pulse = np.arange(R * n + 1) * 0.25  # 1 rev/s, four faces
+    rate = K * (1 + kappa * t_pulse) / n  # counts per face interval at each pulse
+    phase = np.concatenate([[0.3], 0.3 + np.cumsum(rate[:-1])]) + rng.normal(0, 0.1, R * n + 1)
+    counts = np.diff(np.floor(phase)).reshape(R, n)
+    dt = np.diff(t_pulse).reshape(R, n)
+    rep = loop_gonio(counts, dt, t_pulse[n::n])
+    e = {x.name: x for x in rep.effects}
+    assert SCALE in e, [x.name for x in rep.effects]
+    assert abs(e[SCALE].estimate - kappa) < 3 * e[SCALE].u, (e[SCALE].estimate, e[SCALE].u)

@@ -8,18 +8,27 @@ lens unless a test gives it a camera model.
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
 import pytest
 from scipy import stats
 
+from align.cli import main
 from align.documents import marks_document
 from align.lens import LensRanges
 from align.marks import BEND, measure_image
 from axisbase.errors import InputError
 from imaging import CameraModel, measure_marks
-from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from synth import (
+    CameraGeometry,
+    ImageSpec,
+    MarkSpec,
+    full_well_for_snr,
+    render_marks,
+    write_synth,
+)
 from tests.align.lens_grid import (
     K1_CLASSES,
     PLAUSIBLE,
@@ -407,3 +416,37 @@ def test_decentred_radial_lenses_over_seeds():
     _decentred_cases(range(2, 10))
     notes = _spread_marks(CameraGeometry(focal_px=540.0, p1=1e-2), 1)  # the control above
     assert [n for n in notes if "lens p1" in n and "beyond any lens" in n], notes
+
+
+@pytest.mark.slow
+def test_a_lens_ten_times_beyond_any_is_not_ok_everywhere(tmp_path, capsys):
+    """p1 = 1e-2 (ten times any plausible lens), five marks spread over the frame, no camera
+    model: the angles are 4-7 u off, so each such angle must be not ok wherever a user looks
+    — exit status 2, the JSON's ``ok`` false and the mark's ``lens_limited``, a NOT OK line
+    on the terminal for it, and the lens named as beyond any lens."""
+    ms = []
+    for (x, y), deg, length in _SPREAD:
+        a = np.deg2rad(deg)
+        ms.append(MarkSpec(a, x * np.sin(a) + y * np.cos(a), length, 4.0,
+                           centre_t_px=x * np.cos(a) - y * np.sin(a)))
+    png, _ = write_synth(_render(ms, CameraGeometry(focal_px=540.0, p1=1e-2), seed=1),
+                         tmp_path / "p10.png")
+    out = tmp_path / "p10.json"
+    assert main(["marks", str(png), "--json", str(out)]) == 2
+    js = json.loads(out.read_text())
+    assert js["ok"] is False
+    assert any("beyond any lens" in w and "p1" in w for w in js["warnings"]), js["warnings"]
+    text = capsys.readouterr()
+    shown = text.out + text.err
+    found = [m for m in js["marks"] if m["found"]]
+    assert len(found) == len(ms)
+    far = 0
+    for m in found:
+        a = np.deg2rad(m["angle_deg"])
+        t = min(ms, key=lambda s: abs(angle_error(a, s.angle_rad)))
+        z = angle_error(a, t.angle_rad) / np.deg2rad(m["angle_u_deg"])
+        far += abs(z) > 3
+        if abs(z) > 3:
+            assert m["lens_limited"], (m["index"], z)
+            assert f"mark {m['index']}: NOT OK" in shown, (m["index"], shown)
+    assert far  # the control is one: some angle is beyond 3 u (u cannot cover this lens)

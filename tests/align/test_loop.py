@@ -137,3 +137,31 @@ def test_a_refused_effect_leaves_structure_the_stage_must_answer_for():
     assert p < 1e-3 and rep.summary().unexplained_structure
     clean = run_loop(PolyStage(*_data(2)), [QUAD], admissible=lambda cur, trial, term: "never")
     assert not clean.refused and not clean.unexplained_structure
+
+
+def _noise_candidates(x: np.ndarray, m: int) -> list[Candidate]:
+    """m candidates whose columns are fixed random regressors (none in the data)."""
+    rng = np.random.default_rng(7)
+    cols = rng.normal(size=(m, x.size))
+    return [Candidate(f"c{k}", "1", "a regressor the data lack",
+                      lambda f, c=cols[k], k=k: Term(f"c{k}", "1", c[:, None]))
+            for k in range(m)]
+
+
+def test_a_round_adds_a_false_effect_at_alpha_whatever_the_number_of_candidates():
+    """Clean data, 6 candidates none of which is there, alpha 0.05 and no BIC bar (so the
+    F-test alone decides): the loop adds an effect in about alpha of the seeds — Holm over
+    the candidates (7 of 150); each at alpha alone added one in 1 - 0.95^6 = 26 % (41 of
+    150 before). More than a binomial's 1e-3 tail at 5 % (17) would be a defect."""
+    from scipy.stats import binom
+
+    x = np.linspace(-1, 1, 40)
+    cands = _noise_candidates(x, 6)
+    added = 0
+    for s in range(150):
+        rng = np.random.default_rng([s, 19])
+        stage = PolyStage(x, 0.3 + 0.5 * x + rng.normal(0, 0.01, x.size), np.full(x.size, 0.01))
+        added += bool(run_loop(stage, cands, alpha=0.05, min_delta_bic=-np.inf,
+                               max_effects=1).effects)
+    assert binom.sf(added - 1, 150, 0.05) > 1e-3, added  # not more than alpha allows
+    assert added >= 1  # the test can see an effect at all

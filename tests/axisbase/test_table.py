@@ -404,6 +404,22 @@ def test_declared_time_unit_refused_when_the_header_disagrees_or_it_is_no_unit(t
         read_table(p, SPEC, time_unit="parsec")
 
 
+
+def test_declared_time_unit_applies_to_rows_in_memory_by_the_same_rule():
+    """Rows in memory under a plain 't' take the declared unit as a file's header does; a
+    name that says another unit is refused naming the rows and the flag/key."""
+    from axisbase.table import iter_rows
+
+    rows = {"ux": [1.0, 1.0], "uy": [2.0, 2.0], "uz": [3.0, 3.0], "t": [0.0, 5000.0]}
+    got = next(iter_rows(rows, SPEC, time_unit="us"))["t"]
+    assert np.allclose(got, [0, 0.005], rtol=1e-15)
+    assert np.allclose(next(iter_rows(rows, SPEC))["t"], [0, 5000])  # seconds by default
+    said = {**{k: v for k, v in rows.items() if k != "t"}, "t [ms]": rows["t"]}
+    with pytest.raises(InputError, match=r"rows: column names: t: the header says \[ms\]"
+                       r".*--time-unit / time_unit"):
+        next(iter_rows(said, SPEC, time_unit="us"))
+
+
 @pytest.mark.parametrize("meta", [["Fs,100", "Logging Type,0", "Initialization time,36.5",
                                    "Waiting time,3"],
                                   ["sensor;MPU-6050", "", "# note", "gain;2 g"]])
