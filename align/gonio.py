@@ -15,6 +15,7 @@ import logging
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,6 +28,7 @@ from align.gonio_directions import (
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
 from align.gonio_timing import LATENCY, with_timing
+from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
 from goniometry import (
@@ -179,6 +181,19 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
+    with captured_warnings() as logged:  # how the log was read (the table reader's
+        run = _one_direction(path, n_faces, latitude_rad, direction, alpha, apply_loop,
+                             steady_table, columns, latitude_range_rad, on_bytes, time_unit)
+    return replace(run, warnings=(*dict.fromkeys(logged), *run.warnings))  # warnings too
+
+
+def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float | None,
+                   direction: int, alpha: float, apply_loop: bool, steady_table: bool,
+                   columns: Mapping[str, str] | None,
+                   latitude_range_rad: tuple[float, float] | None,
+                   on_bytes: Callable[[int], None] | None, time_unit: str | None
+                   ) -> GonioRun:
+    """One direction's run of :func:`measure_log` (its parameters)."""
     notes: list[str] = []
     loop = None
     if "align.loop" not in sys.modules:

@@ -4,8 +4,10 @@ On clean logs (``tests/align/decision_cases.gonio_spec``: 120 revolutions at 0.5
 ripple, 1 % wander, no latitude) the F-test of a trend in time on the declared fit, p per
 log: the fraction below 1e-3, 1e-2, 0.05, 0.1 against a uniform's (issue 19: the tail is
 heavier — the counter's floor/ceiling stretches). Then how often the loop adds scale_drift
-on the same seeds with a ring-laser scale drift (synth's ``kappa_per_s``, given per
-revolution so that every speed sees the same drift per revolution), and on clean logs.
+on the same seeds with a ring-laser scale drift (synth's ``kappa_per_s``: the scale factor's
+relative drift per second; until 2026-11-26 counts per revolution drifted at twice it),
+given per revolution so that every speed sees the same drift per revolution, and on clean
+logs.
 Compare two trees: ``PYTHONPATH=/work/main python3 benchmarks/gonio_scale_drift.py``.
 
 Run: ``python3 benchmarks/gonio_scale_drift.py [--n 1000] [--power-n 200]``

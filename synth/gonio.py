@@ -6,7 +6,7 @@ reference mirror and three housings) sit at azimuths a few arc-minutes off 90-de
 a photoelectric autocollimator fires when a face normal passes (latency, timing jitter); a
 ring laser on the table produces a continuous phase
 
-    Phi(t) = K (1 + kappa t) (theta(t) / 2 pi + d Omega_E sin(lat) t / 2 pi) + phi0
+    Phi(t) = K / 2 pi * integral of (1 + kappa s) d(theta(s) + d Omega_E sin(lat) s) + phi0
 
 (K pulses per revolution, d = +1 counter-clockwise seen from above, -1 clockwise: the Earth's
 rotation adds to a ccw table in the northern hemisphere); each counter holds
@@ -147,6 +147,18 @@ def _pulse_times(spec: GonioSpec, rng: np.random.Generator
     return np.interp(theta_targets, grid, t_grid), t_grid, grid
 
 
+def _int_t_dtheta(t: np.ndarray, omega0: float, t_grid: np.ndarray | None,
+                  grid: np.ndarray | None) -> np.ndarray:
+    """The integral of s d(theta(s)) from 0 to each t [rad s]: exact for the table's angle,
+    which is linear in time (``t_grid`` None: omega0 t) or piecewise linear on ``t_grid``."""
+    if t_grid is None:
+        return omega0 * t**2 / 2
+    rate = np.diff(grid) / np.diff(t_grid)
+    at_nodes = np.concatenate([[0.0], np.cumsum(rate * (t_grid[1:]**2 - t_grid[:-1]**2) / 2)])
+    k = np.clip(np.searchsorted(t_grid, t, side="right") - 1, 0, len(rate) - 1)
+    return at_nodes[k] + rate[k] * (t**2 - t_grid[k]**2) / 2
+
+
 def simulate(spec: GonioSpec) -> dict:
     """Simulate the run; returns the log columns and the truth."""
     rng = np.random.default_rng(spec.seed)
@@ -214,8 +226,12 @@ def simulate(spec: GonioSpec) -> dict:
     end = t_pulse.size - spec.stop_pulses
     t_pulse, is_ref, face, tag = (x[a:end] for x in (t_pulse, is_ref, face, tag))
     theta = (omega0 * t_pulse if t_grid is None else np.interp(t_pulse, t_grid, grid))
-    earth = spec.direction * OMEGA_EARTH * np.sin(np.deg2rad(spec.latitude_deg)) * t_pulse
-    phi = (spec.k_per_rev * (1 + spec.kappa_per_s * t_pulse) * (theta + earth) / (2 * np.pi)
+    earth_rate = spec.direction * OMEGA_EARTH * np.sin(np.deg2rad(spec.latitude_deg))
+    # The laser counts K (1 + kappa s) / 2 pi per radian turned at time s: the phase is the
+    # integral of that over the inertial angle, theta + earth + kappa * int s d(theta + earth).
+    drift = spec.kappa_per_s * (_int_t_dtheta(t_pulse, omega0, t_grid, grid)
+                                + earth_rate * t_pulse**2 / 2)
+    phi = (spec.k_per_rev * (theta + earth_rate * t_pulse + drift) / (2 * np.pi)
            + rng.random())
     cum = np.floor(phi)
     counts = np.diff(cum).astype(np.int64)

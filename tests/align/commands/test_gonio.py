@@ -67,9 +67,14 @@ def test_microsecond_times_give_the_angles_of_seconds(tmp_path, capsys):
         assert [e["name"] for e in a["effects"]] == [e["name"] for e in b["effects"]]
     capsys.readouterr()
     # Forgotten: the µs read as seconds (a face every 2.5e5 s) is warned of, naming the flag.
-    assert main(["gonio", str(us), "--faces", "ref,z,y,x", "-q"]) == 0
+    forgot = tmp_path / "forgot.json"
+    assert main(["gonio", str(us), "--faces", "ref,z,y,x", "-q", "--json", str(forgot)]) == 0
     err = capsys.readouterr().err
     assert "us.csv: t: median sample interval" in err and "--time-unit us" in err, err
+    # ... and the warning reaches the JSON (every warning does), once on the terminal
+    said_json = json.loads(forgot.read_text())["warnings"]
+    assert [w for w in said_json if "median sample interval" in w and "--time-unit us" in w]
+    assert err.count("median sample interval") == 1, err
     said = _microsecond_log(s, tmp_path / "said.csv", header="t [ms]")
     assert main(["gonio", str(said), "--faces", "ref,z,y,x", "--time-unit", "us", "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
