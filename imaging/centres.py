@@ -195,7 +195,10 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     npx = bc(np.ones_like(e))
     shape = None
     for shape_pass in range(1 + shaped):
-        for it in range(iterations + 1 + EXTRA_STEPS):
+        # With the groove's profile the centres move by ~0.01 px: one step from where they
+        # were (the last evaluation refreshes noise, weights and information there).
+        steps = iterations if shape is None else 1
+        for it in range(steps + 1 + EXTRA_STEPS):
             ee = e - delta[seg]
             p, pe = table(ee)
             amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
@@ -223,9 +226,9 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                 for j in range(i, k):
                     N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
             ok = np.linalg.det(N) > 0
-            if it >= iterations and not (moving & ok).any():
+            if it >= steps and not (moving & ok).any():
                 break  # the last pass only refreshes weights and information at the solution
-            if it == iterations + EXTRA_STEPS:
+            if it == steps + EXTRA_STEPS:
                 break  # still moving: those segments are left out below
             step = np.zeros((nseg, k))
             step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
