@@ -37,6 +37,7 @@ from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent
+from imaging.shape import SHAPE_BELOW_CYCLES, phase_cycles
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 
@@ -223,7 +224,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                         offsets_var=offsets_var, shaped=True)
+                         offsets_var=offsets_var,
+                         shaped=phase_cycles(pf.angle_rad, cand.length_px) < SHAPE_BELOW_CYCLES)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
     t0, t1, open0, open1 = extent_look(image, pf)

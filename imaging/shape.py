@@ -17,10 +17,11 @@ departure D(x) from the model on a cubic B-spline basis (knots every :data:`KNOT
 *even* in x: a symmetric groove's profile is even about its centre, so D cannot move a
 centre on its own, while it removes the phase-dependent misfit. D is zero beyond the groove
 and its blur (w/2 + 4 s), where the band holds background only. It is applied on every
-mark and its own noise is propagated into the centres (``imaging.centres._shape_cov``):
-gating it on a significance test left rounded grooves whose departure was not significant
-(chi^2 22-32 on 12 dof) biased, while applying it costs a clean flat-bottomed groove ~3 %
-of its u (median). :attr:`GrooveShape.significant` says whether the residuals hold it.
+mark that crosses few phase cycles (:data:`SHAPE_BELOW_CYCLES`) and its own noise is
+propagated into the centres (``imaging.centres._shape_cov``): gating it on a significance
+test left rounded grooves whose departure was not significant (chi^2 22-32 on 12 dof)
+biased, while applying it costs a clean flat-bottomed groove ~3 % of its u (median).
+:attr:`GrooveShape.significant` says whether the residuals hold it.
 """
 
 from __future__ import annotations
@@ -35,6 +36,34 @@ KNOT_PX = 0.5
 """Knot spacing of the departure's B-spline basis [px]: the blurred, pixel-integrated
 profile varies over ~1 px (blur >= 0.5 px plus the pixel), which cubics every 0.5 px
 follow to a few per cent."""
+
+SHAPE_BELOW_CYCLES = 4.0
+"""The departure is fitted on marks that cross fewer pixel-phase cycles than this along
+their length (:func:`phase_cycles`). The phase-dependent misfit is periodic in the phase:
+over many cycles it averages out of the line's angle (what is left is a wiggle at the pixel
+pitch, which the residual loop tests for), and only a mark that sees a cycle or two (a
+300 px mark within ~0.8 deg of a pixel axis) turns it into a tilt. The fit costs ~10-15 ms
+of CPU per mark, which the other marks are spared."""
+
+
+def phase_cycles(angle_rad: float, length_px: float) -> float:
+    """How many cycles of the sub-pixel phase a line crosses along its length.
+
+    Parameters
+    ----------
+    angle_rad : float
+        The line's direction in the image [rad].
+    length_px : float
+        Its length [px].
+
+    Returns
+    -------
+    float
+        length x |sin| of its angle to the nearest pixel axis (dimensionless).
+    """
+    off_axis = (angle_rad + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    return float(length_px * abs(np.sin(off_axis)))
+
 
 P_APPLY = 1e-3
 """A departure the pooled residuals hold at p < this (chi^2 test) is significant."""
