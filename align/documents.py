@@ -22,8 +22,10 @@ Inputs = Iterable[str | Path]
 def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
     """``align marks --json``: every mark (found or not), ok when every image was measured
     and no angle is lens-limited (``lens_limited``: calibrate the camera) or a bent mark
-    running off the image (``bent_mark_off_frame``)."""
+    running off the image (``bent_mark_off_frame``) or two grooves meeting at a kink
+    (``kinked_mark``)."""
     return document("marks", {"ok": all(r.found and not r.lens_limited and not r.bend_off_frame
+                                        and not r.kinked
                                         for r in results),
                               "warnings": mark_warnings(results),
                               "marks": [r.to_dict() for r in results]}, settings, inputs)

@@ -134,6 +134,9 @@ class MarkResult:
     bend_off_frame : bool
         A bowed mark runs off the image: its ends, hence its chord (direction), are not in
         it; not ok; unit —.
+    kinked : bool
+        Two straight grooves meeting at an angle were found as this one mark
+        (:mod:`align.mark_kink`): no one direction; not ok; unit —.
     """
 
     image: str
@@ -168,6 +171,7 @@ class MarkResult:
     lens_coupling: Mapping[str, float] = field(default_factory=dict)
     lens_group: str = ""
     bend_off_frame: bool = False
+    kinked: bool = False
 
     @property
     def unexplained_structure(self) -> bool:
@@ -212,6 +216,7 @@ class MarkResult:
         d["notes"] = list(self.notes)
         d["lens_limited"] = self.lens_limited
         d["bent_mark_off_frame"] = self.bend_off_frame
+        d["kinked_mark"] = self.kinked
         if self.lens_coupling:
             d["lens_group"] = self.lens_group
             d["angle_lens_coupling_rad"] = {k: float(v) for k, v in self.lens_coupling.items()}
@@ -259,4 +264,5 @@ class MarkResult:
                    lens_coupling={str(k): _num(v) for k, v in
                                   (d.get("angle_lens_coupling_rad") or {}).items()},
                    lens_group=str(d.get("lens_group", "")),
-                   bend_off_frame=bool(d.get("bent_mark_off_frame", False)))
+                   bend_off_frame=bool(d.get("bent_mark_off_frame", False)),
+                   kinked=bool(d.get("kinked_mark", False)))

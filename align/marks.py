@@ -24,6 +24,7 @@ from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_m
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
+from align.mark_kink import kink_test
 from align.mark_result import FrameDistortion, MarkResult
 from align.mark_stage import (
     BEND,
@@ -92,7 +93,8 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         The mark's angle and its u [rad], offset and its u [px], the loop's report, the
         named u terms [rad] and notes.
     """
-    rep = run_loop(MarkStage(m), candidates, alpha=alpha,
+    stage = MarkStage(m)
+    rep = run_loop(stage, candidates, alpha=alpha,
                    admissible=functools.partial(radial_admissible, alpha=alpha))
     a, au = rep.after.quantities["angle_rad"]
     d, du = rep.after.quantities["offset_px"]
@@ -166,13 +168,26 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         terms["structure_chord_vs_fit"] = (abs(_wrap(a - chord))
                                            + rep.after.payload["chord_bound_rad"]) / np.sqrt(3)
         au = float(np.hypot(au, terms["structure_chord_vs_fit"]))
+    # Two straight grooves meeting at an angle, found as one: no bow, chord or fit is either
+    # groove's direction (mark_kink). Tested only where the loop left structure or named a
+    # bow (a clean straight mark has nothing to break).
+    kink = (kink_test(m, stage.sigma) if rep.unexplained_structure or bend is not None
+            else None)
+    kinked = kink is not None and kink.p < alpha
+    if kinked:
+        notes.append(f"{image} mark {index}: NOT OK: a kink at t = {kink.t_px:+.0f} px from "
+                     f"the mark's middle (broken line against line and bow: sup-F "
+                     f"{kink.sup_f:.3g}, p = {kink.p:.2g}): two straight grooves meeting at an "
+                     "angle, measured as one line they have no one direction; measure each "
+                     "part on its own (an ROI on each)")
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
         blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
         n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
         loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
-        notes=tuple(notes), bend_off_frame=bend is not None and off_frame)
+        notes=tuple(notes), bend_off_frame=bend is not None and off_frame,
+        kinked=kinked)
 
 
 def _bent(terms: dict[str, float], notes: list[str], m: MarkMeasurement, bend, au: float,

@@ -58,6 +58,8 @@ def mark_lines(r) -> list[str]:
         lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
+    if r.kinked:
+        lines.append("    NOT OK: two grooves meeting at a kink: measure each part on its own")
     return lines
 
 

@@ -44,8 +44,9 @@ def _lens_inputs(args: argparse.Namespace):
 
 
 def _not_ok(results) -> int:
-    """Marks measured but not ok: lens-limited, or a bent mark running off the image."""
-    return sum(r.lens_limited or r.bend_off_frame for r in results)
+    """Marks measured but not ok: lens-limited, a bent mark running off the image, or two
+    grooves meeting at a kink."""
+    return sum(r.lens_limited or r.bend_off_frame or r.kinked for r in results)
 
 
 def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:
