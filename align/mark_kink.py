@@ -10,21 +10,21 @@ the mark's own design (its points along the line, its whitening) — a hand-writ
 library gives the sup-F null of a given design. A bow (a circular arc) is in the null model,
 so a bent mark does not fire it.
 
-When the kink is significant the mark is two lines and not ok (no one direction is the
-user's): :func:`align.marks.loop_mark` says where the break lies. (Each part is not measured
-on its own here: near the break the other stroke lies in the groove's profile window over
-(w + 6 s) / tan(kink) along the mark and pulls the centres, so a part's fit on the found
-mark's centres is not that stroke's direction.)
+When the kink is significant the mark is two marks: :func:`split_kinked` cuts it at the
+break into two measurements, each measured as its own mark (its own loop, its own u), with
+a note saying so. A part that cannot be read on its own (too few centres), or a kink
+:func:`align.marks.loop_mark` still finds after the loop, leaves the mark not ok.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import linalg, special
 
-from imaging import MarkMeasurement, line_frame
+from align.mark_stage import MarkStage
+from imaging import MarkMeasurement, fit_line, line_frame
 
 TRIM = 0.15
 """The break is searched between these fractions of the span from each end (Andrews' pi0:
@@ -133,3 +133,60 @@ def kink_test(m: MarkMeasurement, sigma: np.ndarray, seed: int = 0) -> Kink | No
     p_sim = (1 + int(np.sum(sims >= f_sup))) / (N_SIM + 1)
     p = p_sim if p_sim > 20 / N_SIM else min(p_sim, p_ext)
     return Kink(t_px=float(tb[k] - tm), sup_f=f_sup, p=p)
+
+
+MIN_PART = 20
+"""Fewest centres a part of a kinked mark needs to be measured on its own."""
+
+
+def _part(m: MarkMeasurement, idx: np.ndarray, sigma: np.ndarray) -> MarkMeasurement | None:
+    """The mark's centres ``idx`` as a measurement of their own (None: too few left)."""
+    chol = None if m.chol is None else np.linalg.cholesky((m.chol @ m.chol.T)[np.ix_(idx, idx)])
+    lf = fit_line(m.points[idx], sigma[idx], reject_sigma=None if chol is not None else 4.5,
+                  chol=chol)
+    idx = idx[lf.used]
+    if len(idx) < MIN_PART:
+        return None
+    if not lf.used.all():  # outliers of the part (the stroke's tip, dust) left out
+        lf = fit_line(m.points[idx], sigma[idx], reject_sigma=None)
+    u, _ = line_frame(lf.angle_rad)
+    t = m.points[idx] @ u
+    up, _ = line_frame(m.profile.angle_rad)
+    ends = np.array([m.points[idx][np.argmin(t)], m.points[idx][np.argmax(t)]])
+    te = np.sort(ends @ up)
+    return replace(m, points=m.points[idx], sigma=m.sigma[idx], line=lf, chol=chol,
+                   regressors={k: np.asarray(v)[idx] for k, v in m.regressors.items()},
+                   extent_px=(float(te[0]), float(te[1])), ends_px=ends,
+                   n_rejected=m.n_rejected + int(len(lf.used) - len(idx)))
+
+
+def split_kinked(m: MarkMeasurement, alpha: float = 1e-3
+                 ) -> tuple[tuple[MarkMeasurement, ...], Kink | None]:
+    """The mark, or its two straight parts when a kink is significant at ``alpha``.
+
+    Tested only when the straight line leaves a chi2 improbable at ``alpha`` (a kink of
+    either part's u leaves the line's chi2 far out; a clean mark costs no test). The
+    centres within the groove's blurred width of the break, where the two strokes'
+    profiles overlap, belong to neither part.
+
+    Returns
+    -------
+    tuple of MarkMeasurement, Kink or None
+        The measurement(s) (one: no kink, or a part too short to read) and the kink found.
+    """
+    stage = MarkStage(m)
+    lf = m.line
+    if lf.dof <= 0 or special.chdtrc(lf.dof, lf.chi2) >= alpha:
+        return (m,), None
+    kink = kink_test(m, stage.sigma)
+    if kink is None or kink.p >= alpha:
+        return (m,), kink
+    u, _ = line_frame(m.line.angle_rad)
+    t = m.points @ u
+    tb = (t.min() + t.max()) / 2 + kink.t_px
+    guard = m.profile.width_px + 3 * m.profile.blur_px
+    parts = [_part(m, np.flatnonzero(sel), m.sigma)
+             for sel in (t < tb - guard, t > tb + guard)]
+    if any(p is None for p in parts):
+        return (m,), kink
+    return tuple(parts), kink

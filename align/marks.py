@@ -24,7 +24,7 @@ from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_m
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
-from align.mark_kink import kink_test
+from align.mark_kink import kink_test, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
 from align.mark_stage import (
     BEND,
@@ -350,7 +350,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
                                  expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
-    found = measured.items
+    found, split = _split_kinked(measured.items, name, alpha)
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     # One lens for the frame, all its marks together (identifiability first).
     lens = camera_lens(ms, camera, ranges, alpha)
@@ -360,7 +360,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         if isinstance(m, ImageInputError):
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
             continue
-        out.append(finish_mark(m, lens, k, name, i, alpha))
+        r = finish_mark(m, lens, k, name, i, alpha)
+        out.append(replace(r, notes=r.notes + (split[i],)) if i in split else r)
         k += 1
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
@@ -407,6 +408,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     """
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
     said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
+    split_all: dict[str, dict[int, str]] = {}  # kinked marks measured as two, per image
     for j, (path, roi) in enumerate(images):
         if on_image is not None:
             on_image(j)
@@ -419,7 +421,9 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
-            found_all.append(list(fr.items))
+            items, split = _split_kinked(fr.items, str(path), alpha)
+            found_all.append(items)
+            split_all[str(path)] = split
         except ImageInputError as exc:
             # One mark expected and a family of lines there: named, not just "competing".
             note = family_note(got.pixels, roi) if expect_one else None
@@ -441,10 +445,33 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             else:
                 res.append(finish_mark(m, lens, k, str(path), i, alpha,
                                        group=f"camera {label}" if label else "camera"))
+            if i in split_all.get(str(path), {}):
+                res[-1] = replace(res[-1], notes=res[-1].notes + (split_all[str(path)][i],))
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
     return out
+
+
+def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float
+                  ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, str]]:
+    """The frame's marks with each kinked one (:func:`align.mark_kink.split_kinked`) as its
+    two straight parts, and the note of each part (by its new index)."""
+    out: list[MarkMeasurement | ImageInputError] = []
+    said: dict[int, str] = {}
+    for item in items:
+        parts, kink = ((item,), None) if isinstance(item, ImageInputError) else split_kinked(
+            item, alpha)
+        if len(parts) == 2 and kink is not None:
+            i = len(out)
+            turn = float(np.rad2deg(_wrap(parts[1].line.angle_rad - parts[0].line.angle_rad)))
+            for j in (0, 1):
+                said[i + j] = (f"{name} mark {i + j}: a kink of {turn:+.2f}° at t = "
+                               f"{kink.t_px:+.0f} px from the middle of a groove found as one "
+                               f"line (broken line against line and bow: p = {kink.p:.2g}): "
+                               f"measured as two lines, marks {i} and {i + 1}")
+        out.extend(parts)
+    return out, said
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,

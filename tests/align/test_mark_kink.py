@@ -1,10 +1,11 @@
-"""Two straight grooves meeting at a kink, found as one mark (align.mark_kink): flagged not
-ok; straight and bent (circular-arc) marks are not (the false-kink rate over many seeds)."""
+"""Two straight grooves meeting at a kink, found as one mark (align.mark_kink): measured as
+two marks, each within its u of its own groove (or, where a kink is left in one mark, not
+ok); straight and bent (circular-arc) marks are not split (the false-kink rate over seeds)."""
 
 import numpy as np
 import pytest
 
-from align import LensRanges, measure_image
+from align import LensRanges, loop_mark, measure_image
 from align.documents import marks_document
 from align.mark_kink import kink_test
 from align.mark_stage import MarkStage
@@ -14,8 +15,10 @@ from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 ALPHA = 1e-3
 
 
-def kink_spec(seed: int, kink_deg: float, length: float = 200.0) -> ImageSpec:
-    """Two 200 px strokes sharing an end point near the centre, at kink_deg to each other."""
+def kink_spec(seed: int, kink_deg: float, length: float = 200.0
+              ) -> tuple[ImageSpec, tuple[float, float]]:
+    """Two 200 px strokes sharing an end point near the centre, at kink_deg to each other;
+    and their angles [rad]."""
     rng = np.random.default_rng(seed)
     a1 = np.deg2rad(rng.uniform(-20, 20))
     a2 = a1 + np.deg2rad(kink_deg) * rng.choice([-1, 1])
@@ -26,7 +29,7 @@ def kink_spec(seed: int, kink_deg: float, length: float = 200.0) -> ImageSpec:
         mid = joint + side * u * length / 2
         marks.append(MarkSpec(a, float(mid @ n), length, 4.0, centre_t_px=float(mid @ u)))
     return ImageSpec(marks=tuple(marks), width=640, height=480,
-                     full_well_e=full_well_for_snr(50, -0.6), seed=seed)
+                     full_well_e=full_well_for_snr(50, -0.6), seed=seed), (a1, a2)
 
 
 def clean_spec(seed: int, bow: bool) -> ImageSpec:
@@ -45,17 +48,30 @@ def _kink_p(spec: ImageSpec) -> float:
 
 
 @pytest.mark.parametrize(("seed", "kink_deg"), [(0, 5.0), (1, 8.0)])
-def test_kinked_mark_is_not_ok(seed, kink_deg):
+def test_kinked_mark_measured_as_two(seed, kink_deg):
     # Before: one bent line, 12-26 u off after inflation, only "unexplained structure".
-    res = measure_image(render_marks(kink_spec(seed, kink_deg), with_crlb=False).image,
-                        ranges=LensRanges.none())
-    assert len(res) == 1 and res[0].found
-    r = res[0]
+    spec, truth = kink_spec(seed, kink_deg)
+    res = measure_image(render_marks(spec, with_crlb=False).image, ranges=LensRanges.none())
+    assert len(res) == 2 and all(r.found and not r.kinked for r in res)
+    for r in res:
+        err = min(abs(r.angle_rad - a) for a in truth)
+        assert err < 3 * r.angle_u_rad
+        assert any("measured as two lines, marks 0 and 1" in n for n in r.notes)
+    # one mark per groove, not both on the same one
+    got = sorted(int(np.argmin([abs(r.angle_rad - a) for a in truth])) for r in res)
+    assert got == [0, 1]
+    assert marks_document(res, {}, [])["ok"] is True
+
+
+def test_kink_left_in_one_mark_is_not_ok():
+    # Through the loop without the split: the kink is named and the mark is not ok.
+    spec, _ = kink_spec(2, 5.0)
+    m = measure_frame(render_marks(spec, with_crlb=False).image, None).items[0]
+    r = loop_mark(m, "image", 0)
     assert r.kinked
     assert any("NOT OK: a kink at t =" in n for n in r.notes)
-    doc = marks_document(res, {}, [])
-    assert doc["ok"] is False
-    assert doc["marks"][0]["kinked_mark"] is True
+    doc = marks_document([r], {}, [])
+    assert doc["ok"] is False and doc["marks"][0]["kinked_mark"] is True
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -83,5 +99,5 @@ def test_false_kink_rate(bow):
 @pytest.mark.slow
 def test_kinks_found_over_seeds():
     n = 20
-    found = sum(_kink_p(kink_spec(s, k)) < ALPHA for s in range(n) for k in (5.0, 8.0))
+    found = sum(_kink_p(kink_spec(s, k)[0]) < ALPHA for s in range(n) for k in (5.0, 8.0))
     assert found == 2 * n
