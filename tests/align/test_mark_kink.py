@@ -44,7 +44,8 @@ def clean_spec(seed: int, bow: bool) -> ImageSpec:
 
 def _kink_p(spec: ImageSpec) -> float:
     m = measure_frame(render_marks(spec, with_crlb=False).image, None).items[0]
-    return kink_test(m, MarkStage(m).sigma).p
+    k = kink_test(m, MarkStage(m).sigma)
+    return 1.0 if k is None else k.p  # None: too few centres to test (never split)
 
 
 @pytest.mark.parametrize(("seed", "kink_deg"), [(0, 5.0), (1, 8.0)])
