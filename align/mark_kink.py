@@ -174,11 +174,10 @@ def split_kinked(m: MarkMeasurement, alpha: float = 1e-3
     tuple of MarkMeasurement, Kink or None
         The measurement(s) (one: no kink, or a part too short to read) and the kink found.
     """
-    stage = MarkStage(m)
     lf = m.line
     if lf.dof <= 0 or special.chdtrc(lf.dof, lf.chi2) >= alpha:
         return (m,), None
-    kink = kink_test(m, stage.sigma)
+    kink = kink_test(m, MarkStage(m).sigma)
     if kink is None or kink.p >= alpha:
         return (m,), kink
     u, _ = line_frame(m.line.angle_rad)
