@@ -349,6 +349,9 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
         ok = [r for r in found if r.found]
         if len(ok) != 1:
             why = found[0].error if found and not ok else f"{len(ok)} marks found"
+            kinked = [n for r in ok for n in r.notes if "measured as two lines" in n]
+            if kinked:  # one groove with a kink: two lines, neither is the image's one mark
+                why += f" ({kinked[0]})"
             res.errors.append(StageError("marks", f"{im.key} ({im.file.name}): {why}"))
             continue
         off = _off_nominal(s, im, ok[0])
