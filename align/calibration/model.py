@@ -12,11 +12,28 @@ the loop works without a chi2 test.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
+from align.calibration.effects import (  # noqa: F401  (re-exported: the public names)
+    ASYMMETRY,
+    CROSS,
+    DRIFT,
+    EFFECT_UNITS,
+    EFFECTS,
+    HYSTERESIS,
+    IN_TIME,
+    K3,
+    NONLIN,
+    PAIRS,
+    SCALE_DRIFT,
+    SCALE_TEMP,
+    SCALE_WARMUP,
+    TEMP,
+    WARMUP,
+    Effect,
+)
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
 from align.calibration.walk import (
@@ -29,60 +46,6 @@ from align.calibration.walk import (
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
-NONLIN = "nonlinearity_k2"
-DRIFT = "bias_drift"
-TEMP = "bias_temperature"
-WARMUP = "bias_warmup"
-SCALE_DRIFT = "scale_drift"
-SCALE_TEMP = "scale_temperature"
-SCALE_WARMUP = "scale_warmup"
-HYSTERESIS = "bias_hysteresis"
-IN_TIME = frozenset({DRIFT, WARMUP, TEMP, SCALE_DRIFT, SCALE_WARMUP, SCALE_TEMP})
-"""The effects that change over the run (a temperature follows the time): a bias wandering
-between the poses can take their shape (:mod:`align.calibration.walk`)."""
-PAIRS = ("xy", "xz", "yz")
-CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
-"""One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
-would leave the paper's 14 poses no degrees of freedom; the loop picks the one the data call
-for, its search over nine counted as nine trials."""
-
-
-@dataclass(frozen=True)
-class Effect:
-    """An effect's parameters: (TriadModel field, index in it, parameter name) each;
-    ``report``: the slots whose values the loop reports (warm-up: its curvature, the part a
-    drift lacks); ``size``: the regressor's largest magnitude over the poses' span (for the
-    physical bound on the ``report`` slots, :data:`EFFECT_PRIOR_G`) given (time span [s],
-    temperature span [K])."""
-
-    unit: str
-    slots: tuple[tuple[str, tuple[int, ...], str], ...]
-    report: tuple[int, ...]
-    size: Callable[[float, float], float]
-
-
-def _per_axis(fld: str, prefix: str) -> tuple[tuple[str, tuple[int, ...], str], ...]:
-    return tuple((fld, (i,), f"{prefix}_{ax}") for i, ax in enumerate("xyz"))
-
-
-EFFECTS: dict[str, Effect] = {
-    NONLIN: Effect("1/g", _per_axis("k2", NONLIN), (0, 1, 2), lambda t, T: 1.0),
-    DRIFT: Effect("g/s", _per_axis("drift", DRIFT), (0, 1, 2), lambda t, T: t),
-    TEMP: Effect("g/K", _per_axis("temp_coeff", TEMP), (0, 1, 2), lambda t, T: T),
-    WARMUP: Effect("g/s^2", _per_axis("drift", "drift") + _per_axis("drift2", "drift2"),
-                   (3, 4, 5), lambda t, T: t * t),
-    SCALE_DRIFT: Effect("1/s", _per_axis("scale_drift", SCALE_DRIFT), (0, 1, 2),
-                        lambda t, T: t),
-    SCALE_TEMP: Effect("1/K", _per_axis("scale_temp", SCALE_TEMP), (0, 1, 2),
-                       lambda t, T: T),
-    SCALE_WARMUP: Effect("1", _per_axis("scale_warmup", SCALE_WARMUP), (0, 1, 2),
-                         lambda t, T: 1.0),
-    HYSTERESIS: Effect("g", _per_axis("hysteresis", HYSTERESIS), (0, 1, 2),
-                       lambda t, T: 1.0),
-    **{name: Effect("1/g", (("cross", (i // 3, i % 3), name),), (0,), lambda t, T: 1.0)
-       for i, name in enumerate(CROSS)},
-}
-EFFECT_UNITS = {n: e.unit for n, e in EFFECTS.items()}
 WARMUP_TAUS = (0.1, 0.2, 0.4, 0.8)
 """Scale warm-up time constants first tried, as fractions of the poses' time span (the best
 is then refined between its neighbours; one searched parameter in BIC). Not shorter: a
@@ -273,7 +236,8 @@ class CalibrationStage:
             f = {"k2": np.zeros(3), "drift": np.zeros(3), "drift2": np.zeros(3),
                  "temp_coeff": np.zeros(3), "cross": np.zeros((3, 3)),
                  "scale_drift": np.zeros(3), "scale_temp": np.zeros(3),
-                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3)}
+                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3),
+                 "k3": np.zeros(3), "asymmetry": np.zeros(3)}
             for (fld, idx), v in zip(slots, theta[9:], strict=True):
                 f[fld][idx] += v
             v = uu / theta[:3]
@@ -281,8 +245,8 @@ class CalibrationStage:
                 sc = (1.0 + dt[:, None] * f["scale_drift"] + dT[:, None] * f["scale_temp"])
                 if tau > 0:
                     sc = sc + np.expm1(-dt / tau)[:, None] * f["scale_warmup"]
-                v = v / sc
-                x = v - f["k2"] * v * v - np.stack(
+                v = v / sc / (1.0 + np.sign(v) * f["asymmetry"])
+                x = v - f["k2"] * v * v - f["k3"] * v**3 - np.stack(
                     [v[:, 0] * v[:, 1], v[:, 0] * v[:, 2], v[:, 1] * v[:, 2]], 1) @ f["cross"].T
             else:
                 x = v
@@ -505,6 +469,11 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term(SCALE_TEMP)),
     Candidate(SCALE_WARMUP, "1", "scale factor warming up: exp(-t/tau) settling (relative "
               "amplitude; tau searched)", _term(SCALE_WARMUP)),
+    Candidate(K3, "1/g^2", "third-order scale-factor nonlinearity K3 per axis (IEEE Std 1293; "
+              "odd: separable from k only with poses at intermediate components)", _term(K3)),
+    Candidate(ASYMMETRY, "1", "scale-factor asymmetry (k+ - k-)/(k+ + k-) per axis (IEEE Std "
+              "1293; separable only with both signs and intermediate components)",
+              _term(ASYMMETRY)),
     Candidate(HYSTERESIS, "g", "bias hysteresis: offset by the sign of the previous turn on "
               "each axis (pose order known)", _term(HYSTERESIS)),
 )
@@ -526,7 +495,11 @@ this [g] at 1 g over the poses' time and temperature spans (real triads: scale d
 1e-3 over a run, hysteresis below 1 mg; a phone-like recording with 2 mg noise took a 0.9 %
 scale drift at 1e-2) ..."""
 ATTITUDE_PRIOR_G = 1e-2
-"""... nor K2 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches 3e-3)."""
+"""... nor K2, K3 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches
+3e-3) ..."""
+ASYMMETRY_PRIOR = 1e-2
+"""... nor a scale-factor asymmetry (k+ - k-)/(k+ + k-) more than this [1] (navigation
+grade: below 1e-4; MEMS a few 1e-3)."""
 MAX_CONDITION = 1e7
 """Largest condition number of the (column-normalised) Jacobian: above it the data cannot
 separate the effect from the model."""
@@ -553,7 +526,8 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             size = float(np.max(np.abs(np.expm1(-(stage.poses.t - mt.t_ref)
                                                  / mt.warmup_tau_s))))
         reach = float(np.max(np.abs(vals))) * size
-        bound = ATTITUDE_PRIOR_G if term.name in (NONLIN, *CROSS) else EFFECT_PRIOR_G
+        bound = (ATTITUDE_PRIOR_G if term.name in (NONLIN, K3, *CROSS) else
+                 ASYMMETRY_PRIOR if term.name == ASYMMETRY else EFFECT_PRIOR_G)
         if reach > bound:
             return (f"it reaches {reach:.3g} g at 1 g over the run (> {bound} g): "
                     "outside the physical prior")

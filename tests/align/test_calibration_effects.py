@@ -31,7 +31,8 @@ def test_stage_residual_is_the_model():
     p = type(p)(p.u, p.t, p.t * 0.01, p.sigma_u, p.count, p.labels)
     st = CalibrationStage(p, np.sign(tr.k))
     for effects in (["nonlinearity_k2", "cross_y_xz"], ["scale_drift", "bias_warmup"],
-                    ["scale_temperature", "bias_temperature"], ["scale_warmup"]):
+                    ["scale_temperature", "bias_temperature"], ["scale_warmup"],
+                    ["nonlinearity_k3", "scale_asymmetry"]):
         m, r, _ = st.refine(effects)
         assert np.allclose(r, delta_g(m, p), rtol=0, atol=1e-12)
 
