@@ -497,10 +497,11 @@ scale drift at 1e-2) ..."""
 ATTITUDE_PRIOR_G = 1e-2
 """... nor K2, K3 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches
 3e-3) ..."""
-K3_PRIOR_G = 1e-3
-"""... nor K3 more than this [g] at 1 g: a MEMS datasheet's ±0.1 % FS nonlinearity at ±2 g
-bounds K3 to ~1.3e-3/g² (navigation grade: below 3e-5); a larger K3 on ±1 g poses is k
-taken for a cubic (its column is nearly k's) ..."""
+K3_PRIOR_G = 2e-3
+"""... nor K3 more than this [g] at 1 g: a MEMS datasheet's ±0.1 % nonlinearity over its
+±2 g span (4 mg) bounds K3 to 2e-3/g² (K3 x³ departs from its best line by 2 K3 at ±2 g;
+navigation grade: below 3e-5); a larger K3 is k taken for a cubic (its column is nearly
+k's) ..."""
 ASYMMETRY_PRIOR = 1e-2
 """... nor a scale-factor asymmetry (k+ - k-)/(k+ + k-) more than this [1] (navigation
 grade: below 1e-4; MEMS a few 1e-3)."""
