@@ -26,6 +26,7 @@ from align.lens import LensRanges
 from align.mark_result import MarkResult
 from align.mark_stage import half_diagonal
 from imaging import Roi, detect_lines, line_frame
+from imaging.families import MIN_MEMBERS
 from imaging.grating import grating_regions
 from imaging.lens import PARAMS, undistortion_jacobian
 
@@ -96,7 +97,10 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
     out = [replace(r, unreported=unreported) for r in results]
     for g in families:
         ok = [i for i in g if out[i].found]
-        if len(ok) < 2:
+        # A family whose refused members leave fewer measured lines than made it one (3,
+        # or the 2 an explicit --min-length allows) is no family: its pitch is not defined
+        # (building.jpg: 2 of 3 window edges, "pitch nan").
+        if len(ok) < min(len(g), MIN_MEMBERS):
             continue
         lengths: list[tuple[float, float, int]] = []
         if image is not None:

@@ -20,6 +20,7 @@ from imaging.detect import line_frame
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
 from imaging.ring import ring_slope
+from imaging.shape import GrooveShape, fit_shape
 from imaging.texture import TextureModel, texture_model
 
 EXTRA_STEPS = 4
@@ -42,8 +43,9 @@ class Centres:
     minus the band's [px] and its standard uncertainty, linearised at the solution (one
     Gauss–Newton step on the blur with the segment's other parameters free; None unless
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
-    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets
-    (None: none removed).
+    ``offsets_cov``: the covariance [px^2] of the centres from terms every segment shares:
+    removed stripes' offsets and the noise of the groove's own profile
+    (:mod:`imaging.shape`) (None: neither).
 
     Attributes
     ----------
@@ -66,7 +68,7 @@ class Centres:
     blur_dev, blur_dev_u : ndarray or None
         Per-segment blur minus the band's and its u [px].
     offsets_cov : ndarray or None
-        Covariance from removed stripes' offsets [px^2].
+        Covariance from removed stripes' offsets and the groove's profile [px^2].
     """
 
     xy: np.ndarray
@@ -128,8 +130,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    iterations: int = 2, every: int = 1, where: str = "image",
                    texture: bool = False, avoid_px: Sequence[float] = (),
                    guess: tuple[np.ndarray, np.ndarray] | None = None,
-                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
-                   ) -> Centres:
+                   offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+                   shaped: bool = False) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
@@ -164,7 +166,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
                               "its segments")
     nseg = int(seg.max()) + 1
-    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    table = base_table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    groove_reach = min(pf.width_px / 2 + 4 * pf.blur_px, half)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
     if guess is not None and len(guess[0]) >= 2:
@@ -173,6 +176,9 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         t_nom = mid + (np.arange(nseg) * every - reach) * segment_px
         order = np.argsort(guess[0])
         delta = np.clip(np.interp(t_nom, guess[0][order], guess[1][order]), -half / 2, half / 2)
+    sym = _symmetric_window(e - delta[seg], seg, nseg, half)
+    if not sym.all():
+        vals, e, t, seg, idx = vals[sym], e[sym], t[sym], seg[sym], idx[sym]
     moving = np.zeros(nseg, bool)
     amp = np.full(nseg, pf.contrast_dn)
     lev = np.full(nseg, pf.background_dn)
@@ -187,53 +193,71 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         return np.bincount(seg, x, minlength=nseg)
 
     npx = bc(np.ones_like(e))
-    for it in range(iterations + 1 + EXTRA_STEPS):
-        ee = e - delta[seg]
-        p, pe = table(ee)
-        amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
-        mu = lev[seg] + slp_px * ee + amp_px * p
-        r = vals - mu
-        if it == 1:
-            # Noise model again, now from the segment model's residuals (local level and
-            # contrast absorb illumination and texture that the band fit could not);
-            # each segment spends k of its pixels' degrees of freedom.
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
-        # The linear noise model is fitted over the band's levels; below them (a segment's
-        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
-        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
-        # of a groove is quieter than a quarter of the band's typical variance.
-        var = v0 + v1 * mu
-        wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
-        J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
-        N = np.empty((nseg, k, k))
-        g = np.empty((nseg, k))
-        for i in range(k):
-            # Once per column (the products are the same to the bit); the level's column is
-            # ones, and x * 1.0 is x: those products are skipped.
-            wj = wgt if i == _LEVEL else wgt * J[i]
-            g[:, i] = bc(wj * r)
-            for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
-        ok = np.linalg.det(N) > 0
-        if it >= iterations and not (moving & ok).any():
-            break  # the last pass only refreshes weights and information at the solution
-        if it == iterations + EXTRA_STEPS:
-            break  # still moving: those segments are left out below
-        step = np.zeros((nseg, k))
-        step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
-        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
-        moving = np.abs(step[:, 0]) > 0.1
-        step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
-        delta += step[:, 0]
-        amp += step[:, 1]
-        lev += step[:, 2]
-        if k == 4:
-            slp += step[:, 3]
+    shape = None
+    for shape_pass in range(1 + shaped):
+        # With the groove's profile the centres move by ~0.01 px: one step from where they
+        # were (the last evaluation refreshes noise, weights and information there).
+        steps = iterations if shape is None else 1
+        for it in range(steps + 1 + EXTRA_STEPS):
+            ee = e - delta[seg]
+            p, pe = table(ee)
+            amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
+            mu = lev[seg] + slp_px * ee + amp_px * p
+            r = vals - mu
+            if it == 1:
+                # Noise model again, now from the segment model's residuals (local level and
+                # contrast absorb illumination and texture that the band fit could not);
+                # each segment spends k of its pixels' degrees of freedom.
+                v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+            # The linear noise model is fitted over the band's levels; below them (a segment's
+            # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+            # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+            # of a groove is quieter than a quarter of the band's typical variance.
+            var = v0 + v1 * mu
+            wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
+            J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
+            N = np.empty((nseg, k, k))
+            g = np.empty((nseg, k))
+            for i in range(k):
+                # Once per column (the products are the same to the bit); the level's column is
+                # ones, and x * 1.0 is x: those products are skipped.
+                wj = wgt if i == _LEVEL else wgt * J[i]
+                g[:, i] = bc(wj * r)
+                for j in range(i, k):
+                    N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
+            ok = np.linalg.det(N) > 0
+            if it >= steps and not (moving & ok).any():
+                break  # the last pass only refreshes weights and information at the solution
+            if it == steps + EXTRA_STEPS:
+                break  # still moving: those segments are left out below
+            step = np.zeros((nseg, k))
+            step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
+            # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+            moving = np.abs(step[:, 0]) > 0.1
+            step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
+            delta += step[:, 0]
+            amp += step[:, 1]
+            lev += step[:, 2]
+            if k == 4:
+                slp += step[:, 3]
+        if shape_pass == shaped:
+            break
+        # The groove's own profile (imaging.shape): its even departure from the model,
+        # pooled over the segments' phases, and the centres refitted with it (a second
+        # round moved the departure by chi2 < 1 of its own noise on rounded grooves).
+        use = (ok & (npx >= 6) & (np.abs(delta) < half / 2) & ~moving)[seg]
+        shape = fit_shape(ee[use], r[use], amp[seg][use], wgt[use], groove_reach)
+        if shape is None:
+            break
+        table = base_table.with_departure(*shape.tabulate(base_table.grid))
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
     ocov = None
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
+    if shape is not None:
+        sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, seg)
+        ocov = sc if ocov is None else ocov + sc
     blur_dev = blur_dev_u = None
     if texture:
         blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
@@ -265,6 +289,42 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
                    blur_dev_u=blur_dev_u, offsets_cov=ocov)
+
+
+def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) -> np.ndarray:
+    """Pixels of a band that the frame's edge cuts on one side, kept symmetric about each
+    segment's centre: |x| <= the extent the cut side still has (``x``: distance from the
+    segment's centre [px]). A profile the model misses by an even amount (a rounded groove,
+    one narrowed by a lens at the edge) moves no centre when both sides are sampled alike;
+    cut on one side it did (user7's mark 2.4-4 px from the top edge: centres 0.03 px towards
+    the edge, +45 arcsec on 300 px). Bands that reach ``half`` on both sides keep every pixel
+    (a saturated or crossed pixel inside a band is no cut)."""
+    lo = np.full(nseg, np.inf)
+    hi = np.full(nseg, np.inf)
+    np.minimum.at(lo, seg, x)
+    np.minimum.at(hi, seg, -x)
+    reach = np.minimum(-lo, -hi)  # the shorter side's extent per segment
+    cut = reach < half - 1.0
+    return ~cut[seg] | (np.abs(x) <= reach[seg] + 1e-9)
+
+
+def _shape_cov(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[np.ndarray],
+               cov: np.ndarray, ok: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Covariance [px^2] (nseg x nseg) of the centres from the noise of the groove's own
+    profile (one departure shared by every segment): a change dc of its coefficients moves
+    segment k's centre by -[N_k^-1 sum_px w J A_k B(x)]_0 dc (one Gauss–Newton step), so the
+    covariance is S cov_c S^T. ``aw``: each pixel's contrast times its weight."""
+    cols, vals = shape.local(x)
+    nseg, kk = len(ok), len(shape.coef)
+    G = np.zeros((nseg, len(J), kk))
+    for i in range(len(J)):
+        for a in range(4):
+            G[:, i, :] += np.bincount(seg * kk + np.maximum(cols[:, a], 0),
+                                      aw * J[i] * vals[:, a],
+                                      minlength=nseg * kk).reshape(nseg, kk)
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    S = -np.einsum("ni,nij->nj", c0, G)
+    return S @ shape.cov @ S.T
 
 
 def _variance_floor(var: np.ndarray, mu: np.ndarray, v0: float, v1: float) -> float:

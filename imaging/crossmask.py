@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from imaging.band import _band
 from imaging.candidate import MarkCandidate, line_frame
 from imaging.centres import Centres
 from imaging.confirm import across, block_medians
@@ -49,7 +50,13 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
     for j, o in crossing:
         if o.fused is not None:  # refused itself; its grooves are the found marks'
             continue
-        got = crossing_stretch(pf, o, centres_half(pf) + o.thickness_px / 2 + 1, extend=True)
+        half = centres_half(pf) + o.thickness_px / 2 + 1
+        got = crossing_stretch(pf, o, half, extend=True)
+        found = crossing_stretch(pf, o, half)  # o's found part only
+        if (got is not None and (found is None or found[:2] != got[:2])
+                and groove_runs_on(image, pf, o, half) is False):
+            # A corner: o ends where its ridge was found; only that part lies in the window.
+            got = found
         if got is not None:
             stretches.append((got[0], got[1], j))
     for t0, t1 in grooves_beside(image, pf, top, window) if look else ():
@@ -87,6 +94,101 @@ def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,
             "cannot be measured apart")
     return skip, tuple((j, int(round(min(t1, pf.t_end_px) - max(t0, pf.t_start_px))))
                        for t0, t1, j in merged)
+
+
+RUNS_ON = 0.5
+"""The other groove runs on past its found end when its profile there is at least this
+fraction of its profile just inside the end (the regression slope of one on the other)."""
+ENDS = 0.25
+"""...and it ends there when that slope is below this (between the two: not known)."""
+PROBE_PX = 40.0
+"""Length of the stretches inside and past the other groove's found end compared [px]."""
+
+
+def _median_profile(image: np.ndarray, o: MarkCandidate, pf: ProfileFit, t0: float,
+                    t1: float, half: int, mask_px: float) -> np.ndarray:
+    """Median across o's line per 1-px bin of e (-half..half) [DN] between t0 and t1 along
+    it, leaving out the pixels within ``mask_px`` of ``pf``'s line (NaN: too few)."""
+    vals, e, t, _ = _band(image, o.angle_rad, o.offset_px, t0, t1, half + 0.5)
+    uo, no = line_frame(o.angle_rad)
+    nc = line_frame(pf.angle_rad)[1]
+    d_c = o.offset_px * float(no @ nc) - pf.offset_px + t * float(uo @ nc) + e * float(no @ nc)
+    keep = (np.abs(d_c) > mask_px) & (vals > 0) & (vals < pf.full_scale_dn)
+    k = np.round(e[keep]).astype(int) + half
+    out = np.full(2 * half + 1, np.nan)
+    for b in np.unique(k):
+        v = vals[keep][k == b]
+        if v.size >= 3:
+            out[b] = np.median(v)
+    return out
+
+
+def groove_runs_on(image: np.ndarray, pf: ProfileFit, o: MarkCandidate, half_px: float
+                   ) -> bool | None:
+    """Whether mark ``o``'s groove runs on past its found end(s) where it would lie in this
+    mark's (``pf``) profile window: a crossing (True), or a corner where it ends (False);
+    None when the image cannot tell (o's core hidden by this groove past its end, o's own
+    profile flat, too few pixels).
+
+    At a shallow crossing the other mark's ridge is lost where the two grooves fuse, so its
+    found end says nothing about whether it goes on (:func:`imaging.crossing.
+    crossing_stretch`'s ``extend``, ``half_px`` the window's half-width there). The ends
+    probed: the one facing the point where the two lines meet, when that lies beyond o's
+    found extent; else each end past which o's line lies in the window over this mark's
+    extent. At each, o's median profile across its own line over :data:`PROBE_PX` px just
+    inside the end (its groove, whatever its shape: a real edge is seldom the groove
+    model's) and over as much past it, each leaving out the pixels near this mark's groove;
+    the slope of the second on the first over the bins both hold is 1 where the groove goes
+    on, 0 where bare surface follows (:data:`RUNS_ON`, :data:`ENDS`). False only when every
+    end probed ends. (A comparison of two profiles, written here.)
+    """
+    uo, no = line_frame(o.angle_rad)
+    uc, nc = line_frame(pf.angle_rad)
+    sin = float(uo @ nc)
+    if abs(sin) < np.sin(MIN_CROSSING):
+        return None
+    d0 = o.offset_px * float(no @ nc) - pf.offset_px  # o's line's distance from c's at s = 0
+    s_x = -d0 / sin  # where o's line meets c's
+    if s_x > o.t_end_px:
+        steps = [1.0]
+    elif s_x < o.t_start_px:
+        steps = [-1.0]
+    else:
+        def in_window(s: float) -> bool:
+            tc = o.offset_px * float(no @ uc) + s * float(uo @ uc)
+            return (abs(d0 + s * sin) <= half_px
+                    and pf.t_start_px - half_px <= tc <= pf.t_end_px + half_px)
+        steps = [st for st, s_end in ((-1.0, o.t_start_px), (1.0, o.t_end_px))
+                 if in_window(s_end + 2 * st)]
+    got = [_probe_end(image, pf, o, st) for st in steps]
+    if not got or None in got:
+        return None
+    return any(got)
+
+
+def _probe_end(image: np.ndarray, pf: ProfileFit, o: MarkCandidate, step: float
+               ) -> bool | None:
+    """:func:`groove_runs_on` at o's end ``step`` (+1: its t_end, -1: its t_start)."""
+    s_end = o.t_end_px if step > 0 else o.t_start_px
+    half = int(np.ceil(o.thickness_px + 8))
+    mask = max(4.0, pf.width_px / 2 + 2)
+    inner = min(PROBE_PX, 0.5 * o.length_px)
+    ref, past = (_median_profile(image, o, pf, *sorted((s_end, s_end + d)), half, mask)
+                 for d in (-step * inner, step * PROBE_PX))
+    core = np.abs(np.arange(-half, half + 1)) <= o.thickness_px / 2 + 1
+    both = np.isfinite(ref) & np.isfinite(past)
+    if (both & core).sum() < 2 or both.sum() < 6:
+        return None
+    r, q = ref[both], past[both]
+    if np.ptp(r) == 0:
+        return None
+    # Theil-Sen (the median of the pairwise slopes): a bin or two of this groove's fringe
+    # left past the mask do not decide it. (By hand: scipy.stats.theilslopes would import
+    # scipy.stats, ~0.8 s of CPU per process, for a median of a few hundred slopes.)
+    i, j = np.triu_indices(r.size, 1)
+    dr = r[j] - r[i]
+    slope = float(np.median((q[j] - q[i])[dr != 0] / dr[dr != 0]))
+    return True if slope >= RUNS_ON else False if slope < ENDS else None
 
 
 def grooves_beside(image: np.ndarray, pf: ProfileFit, top: float, window: float,

@@ -23,6 +23,7 @@ Positions t [px] along the line of the :class:`~imaging.groove.ProfileFit` (its 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +31,7 @@ from scipy.ndimage import median_filter
 
 from imaging.band import _band
 from imaging.centres import Centres
-from imaging.detect import line_frame
+from imaging.detect import MarkCandidate, line_frame
 from imaging.groove import ProfileFit, _profile_table
 
 LEVEL_K = 4.5
@@ -314,3 +315,50 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     if e_vis <= s_vis:
         return same
     return GrooveEnds(s_vis, e_vis, min(s_min, s_vis), max(e_max, e_vis))
+
+
+RUNS_ON_PX = 10.0
+"""How far past the extent's look the groove must be seen for the centres to be sampled
+again over it [px] (a few blur widths: more than where the half-depth point may fall)."""
+
+
+def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], opened: Sequence[bool],
+             cen: Centres, others: Sequence[tuple[int, MarkCandidate]] = ()
+             ) -> tuple[float, float] | None:
+    """The stretch to sample the centres on when the groove runs on past the look of
+    :func:`imaging.profile.extent_look` (still deep at the look's limit), or None.
+
+    The search's stretch ends where its ridge broke (a speck beside the line, another on
+    it); the groove's half-depth extent is looked for only
+    :data:`imaging.profile.EXTENT_REACH_PX` beyond it. Its ends are then followed as the
+    end check does (:func:`imaging.ends.groove_ends`: past specks the groove is seen
+    beyond, never past bare surface), and the stretch is what they enclose, trimmed by the
+    blurred end (half-width + 2 blur widths), up to the nearest end of another mark found
+    on the same line (``others``: (index, candidate); two pieces of one edge stay two marks,
+    not one measured twice)."""
+    if not any(opened):
+        return None
+    e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
+    # Only a groove seen on well past the look (a clean long mark's end can lie just at it).
+    on = (opened[0] and e.start_px < ext[0] - RUNS_ON_PX,
+          opened[1] and e.end_px > ext[1] + RUNS_ON_PX)
+    if not any(on):
+        return None
+    trim = max(4.0, pf.width_px / 2 + 2 * pf.blur_px)
+    t0 = e.start_px + trim if on[0] else pf.t_start_px
+    t1 = e.end_px - trim if on[1] else pf.t_end_px
+    u, n = line_frame(pf.angle_rad)
+    for _, o in others:
+        uo, no = line_frame(o.angle_rad)
+        ends = np.array([o.offset_px * no + s * uo for s in (o.t_start_px, o.t_end_px)])
+        if np.max(np.abs(ends @ n - pf.offset_px)) > max(3.0, o.thickness_px):
+            continue  # not on this line
+        lo, hi = sorted(ends @ u)
+        if lo >= pf.t_end_px:
+            t1 = min(t1, lo - trim)
+        elif hi <= pf.t_start_px:
+            t0 = max(t0, hi + trim)
+    t0, t1 = min(t0, pf.t_start_px), max(t1, pf.t_end_px)
+    if t0 == pf.t_start_px and t1 == pf.t_end_px:
+        return None
+    return t0, t1

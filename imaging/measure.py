@@ -27,6 +27,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
+from imaging.ends import runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
@@ -35,7 +36,8 @@ from imaging.io import clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
-from imaging.profile import fit_profile, groove_extent
+from imaging.profile import extent_look, fit_profile, groove_extent
+from imaging.shape import SHAPE_BELOW_CYCLES, phase_cycles
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 
@@ -222,9 +224,23 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                         offsets_var=offsets_var)
+                         offsets_var=offsets_var,
+                         shaped=phase_cycles(pf.angle_rad, cand.length_px) < SHAPE_BELOW_CYCLES)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
+    t0, t1, open0, open1 = extent_look(image, pf)
+    ext = (t0, t1)
+    longer = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
+    if longer is not None:
+        # The search's stretch was cut short (a speck beside or on the line broke its
+        # ridge): the centres again over the groove's whole length, from those found.
+        pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
+        cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+                             guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
+                             offsets_var=offsets_var)
+        skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+        use = _usable(cen, where, cand, skip)
+        ext = groove_extent(image, pf)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -240,7 +256,6 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
-    ext = groove_extent(image, pf)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)

@@ -28,7 +28,7 @@ from imaging.groove import (
 )
 
 __all__ = ["Centres", "ProfileFit", "ProfileTable", "band_indices", "band_pixels",
-           "centres_half", "fit_profile", "groove_extent", "sample_centres"]
+           "centres_half", "extent_look", "fit_profile", "groove_extent", "sample_centres"]
 """The band fit's own functions, and (re-exported) what moved to imaging.groove, .band and
 .centres when this module was split."""
 
@@ -184,8 +184,18 @@ def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return x
 
 
-def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
+EXTENT_REACH_PX = 24.0
+"""How far beyond the measured stretch :func:`groove_extent` looks for the groove's ends [px]."""
+
+
+def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
                   ) -> tuple[float, float]:
+    """:func:`extent_look`'s ends (the half-depth points) only."""
+    return extent_look(image, pf, reach_px)[:2]
+
+
+def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
+                ) -> tuple[float, float, bool, bool]:
     """Where the groove ends along its line: the outermost positions t [px], either side of
     the measured stretch, at which its contrast is still half its median (the half-depth
     points of its blurred ends, like the width's).
@@ -195,6 +205,9 @@ def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
     this is the mark's own length. The groove's contrast is fitted per 1-px step along the
     line (level + contrast x the fitted profile), beyond the measured stretch by
     ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
+
+    Returns (t0, t1, open0, open1): the ends [px], and whether the groove was still deep
+    at the look's limit on that side (its end lies further out, unseen).
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
@@ -203,7 +216,7 @@ def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
     vals, e, t = vals[ok], e[ok], t[ok]
     mid = 0.5 * (pf.t_start_px + pf.t_end_px)
     if vals.size == 0:
-        return pf.t_start_px, pf.t_end_px
+        return pf.t_start_px, pf.t_end_px, False, False
     j = np.round(t - mid).astype(int)
     j -= j.min()
     nb = int(j.max()) + 1
@@ -218,16 +231,16 @@ def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
     tb = np.bincount(j, t, nb) / np.maximum(cnt, 1)  # each bin's mean position
     good = np.isfinite(amp)
     if good.sum() < 10:
-        return pf.t_start_px, pf.t_end_px
+        return pf.t_start_px, pf.t_end_px, False, False
     sm = np.full(nb, np.nan)
     sm[good] = median_filter(amp[good], size=5, mode="nearest")
     inside = (tb >= pf.t_start_px) & (tb <= pf.t_end_px) & good
     ref = float(np.median(sm[inside])) if inside.any() else float(pf.contrast_dn)
     if ref == 0:
-        return pf.t_start_px, pf.t_end_px
+        return pf.t_start_px, pf.t_end_px, False, False
     deep = np.flatnonzero(good & (sm / ref >= 0.5))
     if deep.size == 0:
-        return pf.t_start_px, pf.t_end_px
+        return pf.t_start_px, pf.t_end_px, False, False
     # The outermost deep bins: a stretch covered by dust in between does not shorten it.
     lo, hi = int(deep[0]), int(deep[-1])
 
@@ -238,4 +251,4 @@ def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = 24.0
         a, b = sm[k] / ref - 0.5, sm[k_out] / ref - 0.5
         return float(tb[k] + (tb[k_out] - tb[k]) * a / (a - b)) if a != b else float(tb[k])
 
-    return cross(lo, lo - 1), cross(hi, hi + 1)
+    return cross(lo, lo - 1), cross(hi, hi + 1), lo == 0, hi == nb - 1

@@ -53,7 +53,8 @@ class ScaleWander:
     p : float
         The F test's p-value of the scale-rate terms (pooled over the axes) — dimensionless.
     found : bool
-        p below the loop's significance level: the wander is corrected and its u carried.
+        p below the loop's significance level: the wander is corrected and its u carried —
+        dimensionless.
     terms : int
         The test's polynomial terms M — dimensionless.
     path : numpy.ndarray or None

@@ -661,14 +661,6 @@ def test_truncated_image_is_one_line_naming_it(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "clean centred 300 px marks within 0.3 deg of horizontal, 16-bit, no vignetting, no lens "
-    "(declared), 8x8 sub-pixel samples, seeds 100-129: RMS z 1.52, |z| 4.07 (a 0.080 deg, "
-    "seed 121) and 3.92 (seed 127), exit 0, no note, chi2/dof 0.89 and 1.09 — the rounded "
-    "groove's misfit at the pixel grid's phase drifts along a near-axis mark. A Type B bound "
-    "from the pooled residual (Cauchy-Schwarz) passed this test but widened the tool's own "
-    "clean near-axis marks up to x10 and let the fusion blame the platform for a camera's "
-    "roll (E z 6.8, 'consistent'): withdrawn, open"))
 def test_clean_near_horizontal_marks_u_is_honest_over_30_seeds(tmp_path):
     """My groove is a ground scribe's rounded V (not the tool's flat-bottomed model): its
     centres are unbiased by symmetry, so an honest u gives RMS z near 1 (30 z: above 1.41
@@ -690,11 +682,6 @@ def test_clean_near_horizontal_marks_u_is_honest_over_30_seeds(tmp_path):
 # ------------------------------------------------------------------------- exposure, edges
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "a horizontal 300 px mark 6 px from the bottom edge, vignetting 35 %, 12-bit, clean: "
-    "over 16 seeds RMS z 1.78 (centred marks of the same render 1.29), 3 of 16 beyond 3 u "
-    "(3.32, 3.51, 3.16), every one exit 0, ok, no warning (the same grid-phase drift as the "
-    "near-horizontal marks)"))
 def test_mark_near_the_frame_edge_under_vignetting_within_u_over_seeds(tmp_path):
     zs = []
     for seed in range(16):

@@ -367,10 +367,6 @@ def test_s_shaped_mark_read_as_its_chord_or_covered(tmp_path):
     assert abs(z) < Z1 or not d["ok"], (e, u)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "reopened: main's 'fix' was the grid_phase term (u 52\"), withdrawn; now +94.0\" at u "
-    "17.9\" (z 5.3), exit 0 — the profile window at 4-6 px from the frame edge through the "
-    "lens, open"))
 def test_lens_bowed_mark_along_the_frame_edge(tmp_path):
     """Before (a defect I found, fixed on main): a straight 300 px mark near the top edge
     through the exact model of a barrel lens (k1_cv -0.2): its middle 3.9 px from the edge, its

@@ -4,15 +4,19 @@ seen with a bound that holds the truth when an end is hidden, its angle not bias
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
+from imaging import detect_lines, measure_candidate
 from synth.marks import render_marks
 from synth.optics import CameraGeometry
 from synth.ruled import RuledSpec, random_ruled, render_ruled
 from synth.specs import ImageSpec, MarkSpec
+from tests.conftest import mark_image
 from tests.imaging.test_families import _match, _own_u, _wrap
 
 # The half-depth end of a blurred groove is good to ~1 px; a grazing speck's fringe moves it
@@ -140,3 +144,21 @@ def test_clean_square_and_lens_bowed_ends_are_no_obstruction():
 def test_clean_ends_over_seeds():
     wrong = _clean_ends(("box", "round", "lens"), range(12))
     assert not wrong, wrong
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_search_cut_short_is_measured_to_the_grooves_ends(seed):
+    """A candidate whose search stopped at 45 % of the groove (a speck beside the line broke
+    its ridge: issue 18's grid case, a 230 px line read over 149 px) is measured over the
+    whole groove: its half-depth ends within END_TOL_PX of the truth (+-150 px; before, the
+    extent stopped 24 px past the search's end) and its angle the full candidate's within
+    0.5 u (the same groove, slightly different segments). A clean candidate is not touched."""
+    img = mark_image(33.0, seed, length_px=300.0, size=(640, 480), with_crlb=False).image
+    img = img.astype(float)
+    c = detect_lines(img).marks[0]
+    full = measure_candidate(img, c)
+    cut = measure_candidate(img, replace(c, t_end_px=c.t_start_px + 0.45 * c.length_px))
+    for m in (full, cut):
+        assert np.allclose(np.abs(m.extent_px), 150.0, atol=END_TOL_PX), m.extent_px
+    assert abs(cut.line.angle_rad - full.line.angle_rad) < 0.5 * full.line.angle_u_rad
+    assert full.profile.t_end_px < 150.0 - 5  # the clean one's centres: inside the ridge

@@ -133,9 +133,6 @@ def test_ruled_scale_over_seeds():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="issue 18 point 5 open: 23 of 24 (1600 x 1200, 16-bit, lens, seed 46: "
-                   "a corner line with a speck on it measured 196 of 230 px, counted missed "
-                   "and extra; the failures are listed)", strict=False)
 def test_ruled_scale_grid_every_line_found():
     """Issue 18's test: random scales with numerals (beyond the long lines, or printed
     across them), dust (on the lines, and opaque particles over 2 lines' ends) and a logo,
