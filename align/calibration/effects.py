@@ -1,5 +1,6 @@
 """The calibration loop's candidate effects: their names, the model fields their parameters
-fill, their units and the regressor size the physical guard bounds them by.
+fill, their units and the regressor size the physical guard bounds them by; the turn signs
+that are the hysteresis's regressor.
 
 A table of its own (not in :mod:`align.calibration.model`): the fit, the guard, the plan and
 the widening all read it, and the fit's module was at its size limit.
@@ -9,6 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
 
 NONLIN = "nonlinearity_k2"
 DRIFT = "bias_drift"
@@ -68,3 +71,21 @@ EFFECTS: dict[str, Effect] = {
        for i, name in enumerate(CROSS)},
 }
 EFFECT_UNITS = {n: e.unit for n, e in EFFECTS.items()}
+
+TURN_G = 0.1
+"""Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
+fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
+
+
+def turn_signs(x: np.ndarray, t: np.ndarray, turn_g: float = TURN_G) -> np.ndarray:
+    """Side (N, 3) of each axis's hysteresis loop at each pose, the poses held in the order of
+    ``t``: the sign of the last change of the axis's input ``x`` [g] larger than ``turn_g``
+    (0 before any). Hand-written: a running state of a few poses."""
+    order = np.argsort(t, kind="stable")
+    out = np.zeros_like(x)
+    state = np.zeros(x.shape[1])
+    for prev, p in zip(order[:-1], order[1:], strict=True):
+        d = x[p] - x[prev]
+        state = np.where(np.abs(d) > turn_g, np.sign(d), state)
+        out[p] = state
+    return out

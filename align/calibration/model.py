@@ -31,8 +31,10 @@ from align.calibration.effects import (  # noqa: F401  (re-exported: the public 
     SCALE_TEMP,
     SCALE_WARMUP,
     TEMP,
+    TURN_G,
     WARMUP,
     Effect,
+    turn_signs,
 )
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
@@ -81,25 +83,6 @@ def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_re
 SCREEN_TRUST = 0.25
 """The screen predicts a candidate's chi2 only where the model's chi2 at the Gauss-Newton
 step is the linear prediction to this fraction of the predicted drop (+1)."""
-TURN_G = 0.1
-"""Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
-fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
-
-
-def turn_signs(x: np.ndarray, t: np.ndarray, turn_g: float = TURN_G) -> np.ndarray:
-    """Side (N, 3) of each axis's hysteresis loop at each pose, the poses held in the order of
-    ``t``: the sign of the last change of the axis's input ``x`` [g] larger than ``turn_g``
-    (0 before any). Hand-written: a running state of a few poses."""
-    order = np.argsort(t, kind="stable")
-    out = np.zeros_like(x)
-    state = np.zeros(x.shape[1])
-    for prev, p in zip(order[:-1], order[1:], strict=True):
-        d = x[p] - x[prev]
-        state = np.where(np.abs(d) > turn_g, np.sign(d), state)
-        out[p] = state
-    return out
-
-
 def algebraic(poses: Poses, signs: Sequence[float]) -> TriadModel:
     """The seed paper's solution: Li–Griffiths + exact extraction (no refinement)."""
     k, beta, b = extract(li_griffiths(poses.u), np.asarray(signs, float))
@@ -405,6 +388,15 @@ class CalibrationStage:
         regs = {"ax": d[:, 0], "ay": d[:, 1], "az": d[:, 2], "t": p.t}
         if p.temp is not None and np.ptp(p.temp) > 0:
             regs["temp"] = p.temp
+        for e in set(effects) & {K3, ASYMMETRY}:
+            # Odd K3 and |x| are k's and K2's columns on most poses: where the poses cannot
+            # measure the effect within its physical range, it is not a candidate for them
+            # (skipped, as hysteresis without the pose order) rather than a run-away to
+            # refuse (K2 on the paper's 14 poses: K3 = 0.02 at condition 5e3).
+            u_max = max(m.u_of(n) for _, _, n in EFFECTS[e].slots)
+            if not u_max <= prior_bound(e) / DETERMINED:
+                raise NotApplicable(f"these poses cannot measure it: u {u_max:.2g} > 1/"
+                                    f"{DETERMINED:g} of its physical bound {prior_bound(e):g}")
         eff = {}
         comps = {}
         for e in effects:
@@ -505,9 +497,18 @@ k's) ..."""
 ASYMMETRY_PRIOR = 1e-2
 """... nor a scale-factor asymmetry (k+ - k-)/(k+ + k-) more than this [1] (navigation
 grade: below 1e-4; MEMS a few 1e-3)."""
+DETERMINED = 3.0
+"""K3 and the asymmetry are tried only where the poses measure them to this fraction of
+their physical bound (u < bound / 3)."""
 MAX_CONDITION = 1e7
 """Largest condition number of the (column-normalised) Jacobian: above it the data cannot
 separate the effect from the model."""
+
+
+def prior_bound(name: str) -> float:
+    """The physical bound on an effect's reach at 1 g [g] (the asymmetry's: [1])."""
+    return (ATTITUDE_PRIOR_G if name in (NONLIN, *CROSS) else K3_PRIOR_G if name == K3
+            else ASYMMETRY_PRIOR if name == ASYMMETRY else EFFECT_PRIOR_G)
 
 
 def admissible(stage: CalibrationStage, overfit: bool = True
@@ -531,9 +532,7 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             size = float(np.max(np.abs(np.expm1(-(stage.poses.t - mt.t_ref)
                                                  / mt.warmup_tau_s))))
         reach = float(np.max(np.abs(vals))) * size
-        bound = (ATTITUDE_PRIOR_G if term.name in (NONLIN, *CROSS) else K3_PRIOR_G
-                 if term.name == K3 else ASYMMETRY_PRIOR if term.name == ASYMMETRY
-                 else EFFECT_PRIOR_G)
+        bound = prior_bound(term.name)
         if reach > bound:
             return (f"it reaches {reach:.3g} g at 1 g over the run (> {bound} g): "
                     "outside the physical prior")
