@@ -194,6 +194,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
 
     npx = bc(np.ones_like(e))
     shape = None
+    blur_dev = blur_dev_u = None
     for shape_pass in range(1 + shaped):
         # With the groove's profile the centres move by ~0.01 px: one step from where they
         # were (the last evaluation refreshes noise, weights and information there).
@@ -240,6 +241,14 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             lev += step[:, 2]
             if k == 4:
                 slp += step[:, 3]
+        if texture and shape_pass == 0:
+            # The defocus test (each segment's blur step) on the groove model's own profile:
+            # with the departure added, a near-axis mark's phase drift leaks into the blur
+            # steps (a false 'defocus gradient', p ~1e-5, on clean session marks).
+            cov0 = np.full((nseg, k, k), np.inf)
+            cov0[ok] = np.linalg.inv(N[ok])
+            blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g,
+                                              cov0, ok, bc)
         if shape_pass == shaped:
             break
         # The groove's own profile (imaging.shape): its even departure from the model,
@@ -258,10 +267,6 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if shape is not None:
         sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, seg)
         ocov = sc if ocov is None else ocov + sc
-    blur_dev = blur_dev_u = None
-    if texture:
-        blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g, cov,
-                                          ok, bc)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)

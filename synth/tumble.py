@@ -3,7 +3,8 @@
 The triad follows the seed paper's model with the exact trigonometric R of eq. (5):
 
     x = R (a + b(t, T) + h)                  input along each sensing axis [g]
-    u_i = k_i s_i(t) (x_i + K2_i x_i^2 + sum_{j<l} K_i,jl x_j x_l) + noise
+    u_i = k_i s_i(t) (1 + A_i sign x_i) (x_i + K2_i x_i^2 + K3_i x_i^3
+                                        + sum_{j<l} K_i,jl x_j x_l) + noise
                                              output [V], quantised to ``lsb_v``
 
 a is the specific force in the unit's orthogonal "convenient" frame [g] (static: the unit
@@ -62,6 +63,13 @@ class Triad:
     beta: tuple[float, float, float] = TABLE1_BETA
     bias: tuple[float, float, float] = TABLE1_BIAS
     k2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    k3: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Third-order nonlinearity K3 [1/g²] (IEEE Std 1293's K3: the pendulum's restoring
+    force is not quite linear; odd, so a ±1 g pose cannot tell it from k)."""
+    asymmetry: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Scale-factor asymmetry (k+ - k-) / (k+ + k-) [1]: the output per g differs for a
+    positive and a negative input (IEEE Std 1293; a pendulous sensor's torquer); ``k`` is
+    (k+ + k-) / 2."""
     drift: tuple[float, float, float] = (0.0, 0.0, 0.0)
     temp_coeff: tuple[float, float, float] = (0.0, 0.0, 0.0)
     cross: tuple[tuple[float, float, float], ...] = ((0.0,) * 3,) * 3
@@ -107,7 +115,11 @@ class Triad:
              + np.outer(np.exp(-np.asarray(t, float) / self.warmup_tau_s), self.scale_warmup)
              + np.outer(np.sin(2 * np.pi * np.asarray(t, float) / self.cycle_period_s
                                + self.cycle_phase), self.scale_cycle))
+        # The asymmetry follows the sign of the sensor's own input x_i (its pendulum swings
+        # one way or the other), not of the output.
+        s = s * (1.0 + np.sign(x) * np.asarray(self.asymmetry))
         u = np.asarray(self.k) * s * (x + np.asarray(self.k2) * x * x
+                                      + np.asarray(self.k3) * x ** 3
                                       + prod @ np.asarray(self.cross, float).T)
         if rng is not None and self.noise_v:
             u = u + rng.normal(0.0, self.noise_v, u.shape)
@@ -189,7 +201,8 @@ class TumbleData:
     def truth(self) -> dict:
         tr = self.spec.triad
         return {"k_v_per_g": list(tr.k), "beta_rad": list(tr.beta), "bias_g": list(tr.bias),
-                "k2_per_g": list(tr.k2), "drift_g_per_s": list(tr.drift),
+                "k2_per_g": list(tr.k2), "k3_per_g2": list(tr.k3),
+                "scale_asymmetry": list(tr.asymmetry), "drift_g_per_s": list(tr.drift),
                 "temp_coeff_g_per_k": list(tr.temp_coeff),
                 "cross_per_g": [list(r) for r in tr.cross], "scale_drift_per_s":
                 list(tr.scale_drift), "scale_warmup": list(tr.scale_warmup),

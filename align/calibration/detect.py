@@ -301,8 +301,10 @@ def detect_static(t: np.ndarray, u: np.ndarray, settings: StaticSettings = Stati
     out: list[StaticInterval] = []
     for runs in pieces:
         x = np.concatenate([u[s:e] for s, e in runs])
+        # (Two runs a change point split apart and the whole-run test joined again touch:
+        # no sample between them is left out.)
         gaps = tuple((float(t[e]), float(t[s2 - 1]))
-                     for (_, e), (s2, _) in zip(runs[:-1], runs[1:], strict=True))
+                     for (_, e), (s2, _) in zip(runs[:-1], runs[1:], strict=True) if s2 > e)
         out.append(StaticInterval(float(t[runs[0][0]]), float(t[runs[-1][1] - 1]), len(x),
                                   x.mean(0), x.std(0, ddof=1), _sem(x, max(n, len(x) // 8)),
                                   gaps))

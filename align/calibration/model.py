@@ -12,11 +12,30 @@ the loop works without a chi2 test.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares, minimize_scalar
 
+from align.calibration.effects import (  # noqa: F401  (re-exported: the public names)
+    ASYMMETRY,
+    CROSS,
+    DRIFT,
+    EFFECT_UNITS,
+    EFFECTS,
+    HYSTERESIS,
+    IN_TIME,
+    K3,
+    NONLIN,
+    PAIRS,
+    SCALE_DRIFT,
+    SCALE_TEMP,
+    SCALE_WARMUP,
+    TEMP,
+    TURN_G,
+    WARMUP,
+    Effect,
+    turn_signs,
+)
 from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
 from align.calibration.walk import (
@@ -29,60 +48,6 @@ from align.calibration.walk import (
 from align.errors import InputError, NotApplicable
 from align.loop import Candidate, StageFit, Term
 
-NONLIN = "nonlinearity_k2"
-DRIFT = "bias_drift"
-TEMP = "bias_temperature"
-WARMUP = "bias_warmup"
-SCALE_DRIFT = "scale_drift"
-SCALE_TEMP = "scale_temperature"
-SCALE_WARMUP = "scale_warmup"
-HYSTERESIS = "bias_hysteresis"
-IN_TIME = frozenset({DRIFT, WARMUP, TEMP, SCALE_DRIFT, SCALE_WARMUP, SCALE_TEMP})
-"""The effects that change over the run (a temperature follows the time): a bias wandering
-between the poses can take their shape (:mod:`align.calibration.walk`)."""
-PAIRS = ("xy", "xz", "yz")
-CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
-"""One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
-would leave the paper's 14 poses no degrees of freedom; the loop picks the one the data call
-for, its search over nine counted as nine trials."""
-
-
-@dataclass(frozen=True)
-class Effect:
-    """An effect's parameters: (TriadModel field, index in it, parameter name) each;
-    ``report``: the slots whose values the loop reports (warm-up: its curvature, the part a
-    drift lacks); ``size``: the regressor's largest magnitude over the poses' span (for the
-    physical bound on the ``report`` slots, :data:`EFFECT_PRIOR_G`) given (time span [s],
-    temperature span [K])."""
-
-    unit: str
-    slots: tuple[tuple[str, tuple[int, ...], str], ...]
-    report: tuple[int, ...]
-    size: Callable[[float, float], float]
-
-
-def _per_axis(fld: str, prefix: str) -> tuple[tuple[str, tuple[int, ...], str], ...]:
-    return tuple((fld, (i,), f"{prefix}_{ax}") for i, ax in enumerate("xyz"))
-
-
-EFFECTS: dict[str, Effect] = {
-    NONLIN: Effect("1/g", _per_axis("k2", NONLIN), (0, 1, 2), lambda t, T: 1.0),
-    DRIFT: Effect("g/s", _per_axis("drift", DRIFT), (0, 1, 2), lambda t, T: t),
-    TEMP: Effect("g/K", _per_axis("temp_coeff", TEMP), (0, 1, 2), lambda t, T: T),
-    WARMUP: Effect("g/s^2", _per_axis("drift", "drift") + _per_axis("drift2", "drift2"),
-                   (3, 4, 5), lambda t, T: t * t),
-    SCALE_DRIFT: Effect("1/s", _per_axis("scale_drift", SCALE_DRIFT), (0, 1, 2),
-                        lambda t, T: t),
-    SCALE_TEMP: Effect("1/K", _per_axis("scale_temp", SCALE_TEMP), (0, 1, 2),
-                       lambda t, T: T),
-    SCALE_WARMUP: Effect("1", _per_axis("scale_warmup", SCALE_WARMUP), (0, 1, 2),
-                         lambda t, T: 1.0),
-    HYSTERESIS: Effect("g", _per_axis("hysteresis", HYSTERESIS), (0, 1, 2),
-                       lambda t, T: 1.0),
-    **{name: Effect("1/g", (("cross", (i // 3, i % 3), name),), (0,), lambda t, T: 1.0)
-       for i, name in enumerate(CROSS)},
-}
-EFFECT_UNITS = {n: e.unit for n, e in EFFECTS.items()}
 WARMUP_TAUS = (0.1, 0.2, 0.4, 0.8)
 """Scale warm-up time constants first tried, as fractions of the poses' time span (the best
 is then refined between its neighbours; one searched parameter in BIC). Not shorter: a
@@ -118,25 +83,6 @@ def _model_from(theta: np.ndarray, effects: Sequence[str], t_ref: float, temp_re
 SCREEN_TRUST = 0.25
 """The screen predicts a candidate's chi2 only where the model's chi2 at the Gauss-Newton
 step is the linear prediction to this fraction of the predicted drop (+1)."""
-TURN_G = 0.1
-"""Smallest change of an axis's input [g] taken as a turn of that axis (hysteresis): a
-fixture's wobble between two poses (1e-4 g) is not one; a tumble's turns are >= 0.4 g."""
-
-
-def turn_signs(x: np.ndarray, t: np.ndarray, turn_g: float = TURN_G) -> np.ndarray:
-    """Side (N, 3) of each axis's hysteresis loop at each pose, the poses held in the order of
-    ``t``: the sign of the last change of the axis's input ``x`` [g] larger than ``turn_g``
-    (0 before any). Hand-written: a running state of a few poses."""
-    order = np.argsort(t, kind="stable")
-    out = np.zeros_like(x)
-    state = np.zeros(x.shape[1])
-    for prev, p in zip(order[:-1], order[1:], strict=True):
-        d = x[p] - x[prev]
-        state = np.where(np.abs(d) > turn_g, np.sign(d), state)
-        out[p] = state
-    return out
-
-
 def algebraic(poses: Poses, signs: Sequence[float]) -> TriadModel:
     """The seed paper's solution: Li–Griffiths + exact extraction (no refinement)."""
     k, beta, b = extract(li_griffiths(poses.u), np.asarray(signs, float))
@@ -273,7 +219,8 @@ class CalibrationStage:
             f = {"k2": np.zeros(3), "drift": np.zeros(3), "drift2": np.zeros(3),
                  "temp_coeff": np.zeros(3), "cross": np.zeros((3, 3)),
                  "scale_drift": np.zeros(3), "scale_temp": np.zeros(3),
-                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3)}
+                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3),
+                 "k3": np.zeros(3), "asymmetry": np.zeros(3)}
             for (fld, idx), v in zip(slots, theta[9:], strict=True):
                 f[fld][idx] += v
             v = uu / theta[:3]
@@ -281,8 +228,8 @@ class CalibrationStage:
                 sc = (1.0 + dt[:, None] * f["scale_drift"] + dT[:, None] * f["scale_temp"])
                 if tau > 0:
                     sc = sc + np.expm1(-dt / tau)[:, None] * f["scale_warmup"]
-                v = v / sc
-                x = v - f["k2"] * v * v - np.stack(
+                v = v / sc / (1.0 + np.sign(v) * f["asymmetry"])
+                x = v - f["k2"] * v * v - f["k3"] * v**3 - np.stack(
                     [v[:, 0] * v[:, 1], v[:, 0] * v[:, 2], v[:, 1] * v[:, 2]], 1) @ f["cross"].T
             else:
                 x = v
@@ -441,6 +388,15 @@ class CalibrationStage:
         regs = {"ax": d[:, 0], "ay": d[:, 1], "az": d[:, 2], "t": p.t}
         if p.temp is not None and np.ptp(p.temp) > 0:
             regs["temp"] = p.temp
+        for e in set(effects) & {K3, ASYMMETRY}:
+            # Odd K3 and |x| are k's and K2's columns on most poses: where the poses cannot
+            # measure the effect within its physical range, it is not a candidate for them
+            # (skipped, as hysteresis without the pose order) rather than a run-away to
+            # refuse (K2 on the paper's 14 poses: K3 = 0.02 at condition 5e3).
+            u_max = max(m.u_of(n) for _, _, n in EFFECTS[e].slots)
+            if not u_max <= prior_bound(e) / DETERMINED:
+                raise NotApplicable(f"these poses cannot measure it: u {u_max:.2g} > 1/"
+                                    f"{DETERMINED:g} of its physical bound {prior_bound(e):g}")
         eff = {}
         comps = {}
         for e in effects:
@@ -505,6 +461,11 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term(SCALE_TEMP)),
     Candidate(SCALE_WARMUP, "1", "scale factor warming up: exp(-t/tau) settling (relative "
               "amplitude; tau searched)", _term(SCALE_WARMUP)),
+    Candidate(K3, "1/g^2", "third-order scale-factor nonlinearity K3 per axis (IEEE Std 1293; "
+              "odd: separable from k only with poses at intermediate components)", _term(K3)),
+    Candidate(ASYMMETRY, "1", "scale-factor asymmetry (k+ - k-)/(k+ + k-) per axis (IEEE Std "
+              "1293; separable only with both signs and intermediate components)",
+              _term(ASYMMETRY)),
     Candidate(HYSTERESIS, "g", "bias hysteresis: offset by the sign of the previous turn on "
               "each axis (pose order known)", _term(HYSTERESIS)),
 )
@@ -526,10 +487,28 @@ this [g] at 1 g over the poses' time and temperature spans (real triads: scale d
 1e-3 over a run, hysteresis below 1 mg; a phone-like recording with 2 mg noise took a 0.9 %
 scale drift at 1e-2) ..."""
 ATTITUDE_PRIOR_G = 1e-2
-"""... nor K2 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches 3e-3)."""
+"""... nor K2, K3 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches
+3e-3) ..."""
+K3_PRIOR_G = 2e-3
+"""... nor K3 more than this [g] at 1 g: a MEMS datasheet's ±0.1 % nonlinearity over its
+±2 g span (4 mg) bounds K3 to 2e-3/g² (K3 x³ departs from its best line by 2 K3 at ±2 g;
+navigation grade: below 3e-5); a larger K3 is k taken for a cubic (its column is nearly
+k's) ..."""
+ASYMMETRY_PRIOR = 1e-2
+"""... nor a scale-factor asymmetry (k+ - k-)/(k+ + k-) more than this [1] (navigation
+grade: below 1e-4; MEMS a few 1e-3)."""
+DETERMINED = 3.0
+"""K3 and the asymmetry are tried only where the poses measure them to this fraction of
+their physical bound (u < bound / 3)."""
 MAX_CONDITION = 1e7
 """Largest condition number of the (column-normalised) Jacobian: above it the data cannot
 separate the effect from the model."""
+
+
+def prior_bound(name: str) -> float:
+    """The physical bound on an effect's reach at 1 g [g] (the asymmetry's: [1])."""
+    return (ATTITUDE_PRIOR_G if name in (NONLIN, *CROSS) else K3_PRIOR_G if name == K3
+            else ASYMMETRY_PRIOR if name == ASYMMETRY else EFFECT_PRIOR_G)
 
 
 def admissible(stage: CalibrationStage, overfit: bool = True
@@ -553,7 +532,7 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             size = float(np.max(np.abs(np.expm1(-(stage.poses.t - mt.t_ref)
                                                  / mt.warmup_tau_s))))
         reach = float(np.max(np.abs(vals))) * size
-        bound = ATTITUDE_PRIOR_G if term.name in (NONLIN, *CROSS) else EFFECT_PRIOR_G
+        bound = prior_bound(term.name)
         if reach > bound:
             return (f"it reaches {reach:.3g} g at 1 g over the run (> {bound} g): "
                     "outside the physical prior")
@@ -572,6 +551,10 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             i = int(np.argmax(dbias))
             return (f"it moves bias_{'xyz'[i]} by {dbias[i]:.3g} g (> {PRIOR_BIAS_G} g): "
                     "outside the physical prior")
+        if overfit and term.name == ASYMMETRY and NONLIN not in base.effects:
+            why = _not_separated(stage, base, trial)
+            if why:
+                return why
         if overfit and trial.sigma is not None and trial.dof > 0:
             red = trial.chi2 / trial.dof
             u = np.array([base.quantities[n][1] for n in CORE])
@@ -584,6 +567,29 @@ def admissible(stage: CalibrationStage, overfit: bool = True
         return None
 
     return check
+
+
+SEPARATE_CHI2 = 9.0
+"""chi2 by which a scale-factor asymmetry must explain the poses better than K2 to be taken
+for it (a 3-sigma difference): |x| and x² are equal at 0 and ±1 g and differ only at
+intermediate components, so on most pose sets the two even effects are near-aliases."""
+
+
+def _not_separated(stage: CalibrationStage, base: StageFit, trial: StageFit) -> str | None:
+    """Why an asymmetry is not taken for K2 (None: it is separated; noise unknown: no test).
+    K2 is the established effect: it is kept where the poses do not tell the two apart (the
+    widening still weighs the asymmetry as an alternative)."""
+    if trial.sigma is None:
+        return None
+    try:
+        _, r, _ = stage.refine([*base.effects, NONLIN])
+    except NotApplicable:
+        return None
+    d = float(np.sum((r / stage.sigma) ** 2)) - trial.chi2
+    if d < SEPARATE_CHI2:
+        return (f"the poses do not separate it from {NONLIN} (chi2 only {d:.3g} lower, "
+                f"< {SEPARATE_CHI2:g}): |x| and x^2 differ only at intermediate components")
+    return None
 
 
 def _terms_of(fit: StageFit) -> list[Term]:

@@ -1,8 +1,10 @@
 """The triad's data types: the poses of a static test and the calibrated triad model.
 
-Inverse model (the forward one is u_i = k_i (x_i + K2_i x_i^2), x = R (a + b(t, T))):
+Inverse model (the forward one is u_i = k_i (1 + A_i sign x_i) (x_i + K2_i x_i^2 + K3_i x_i^3),
+x = R (a + b(t, T))):
 
-    x_i = v_i - K2_i v_i^2,   v = u / k                 (first-order inverse of K2; K2 x ~ 1e-4)
+    x_i = v_i - K2_i v_i^2 - K3_i v_i^3,   v_i = u_i / (k_i (1 + A_i sign u_i))
+                                        (first-order inverse of K2, K3; K2 x, K3 x^2 ~ 1e-4)
     a   = R^-1 x - b - bdot (t - t_ref) - bddot (t - t_ref)^2 - c_T (T - T_ref)
 
 These types import nothing of the fit (:mod:`align.calibration.model`) nor of the orchestrator
@@ -123,6 +125,10 @@ class TriadModel:
         Bias hysteresis [g]: each pose's bias is offset by this x the sign of the change of its
         axis's input in the turn into the pose. Readings without their turns cannot be
         corrected for it: ``bias`` is the middle of the two branches.
+    k3 : numpy.ndarray
+        Third-order scale terms (3,) [1/g²] (IEEE Std 1293's K3).
+    asymmetry : numpy.ndarray
+        Scale-factor asymmetry (3,) (k+ - k-) / (k+ + k-) [1]: ``k`` is (k+ + k-) / 2.
     """
 
     k: np.ndarray
@@ -151,6 +157,10 @@ class TriadModel:
     """Bias hysteresis [g]: each pose's bias is offset by this x the sign of the change of its
     axis's input in the turn into the pose. Readings without their turns cannot be corrected
     for it: ``bias`` is the middle of the two branches."""
+    k3: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Third-order scale terms [1/g²] (IEEE Std 1293's K3)."""
+    asymmetry: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Scale-factor asymmetry (k+ - k-) / (k+ + k-) [1] (IEEE Std 1293)."""
 
     def scale_of(self, t: np.ndarray | float = 0.0,
                  temp: np.ndarray | float | None = None) -> np.ndarray:
@@ -172,7 +182,9 @@ class TriadModel:
         if np.any(self.scale_drift) or np.any(self.scale_warmup) or np.any(self.scale_temp):
             s = self.scale_of(t, temp)
             v = v / (s if v.ndim == 2 else s[0])
-        x = v - self.k2 * v * v
+        if np.any(self.asymmetry):
+            v = v / (1.0 + np.sign(v) * self.asymmetry)
+        x = v - self.k2 * v * v - self.k3 * v**3
         if np.any(self.cross):
             vv = np.atleast_2d(v)
             prod = np.stack([vv[:, 0] * vv[:, 1], vv[:, 0] * vv[:, 2], vv[:, 1] * vv[:, 2]], 1)
@@ -237,7 +249,8 @@ class TriadModel:
                 "scale_drift_per_s": self.scale_drift.tolist(),
                 "scale_temp_per_k": self.scale_temp.tolist(),
                 "scale_warmup": self.scale_warmup.tolist(), "warmup_tau_s": self.warmup_tau_s,
-                "hysteresis_g": self.hysteresis.tolist(), "parameter_names": list(self.names),
+                "hysteresis_g": self.hysteresis.tolist(), "k3_per_g2": self.k3.tolist(),
+                "scale_asymmetry": self.asymmetry.tolist(), "parameter_names": list(self.names),
                 "covariance": None if self.cov is None else self.cov.tolist()}
 
     @classmethod
@@ -260,7 +273,9 @@ class TriadModel:
                 np.array(d.get("scale_temp_per_k", [0, 0, 0]), float),
                 np.array(d.get("scale_warmup", [0, 0, 0]), float),
                 float(d.get("warmup_tau_s", 0.0)),
-                np.array(d.get("hysteresis_g", [0, 0, 0]), float))
+                np.array(d.get("hysteresis_g", [0, 0, 0]), float),
+                np.array(d.get("k3_per_g2", [0, 0, 0]), float),
+                np.array(d.get("scale_asymmetry", [0, 0, 0]), float))
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"{where}: not a calibration model ({exc!s}); expected the "
                              "'model' block that 'align calibrate --json' writes") from None
@@ -306,7 +321,7 @@ def _checked(m: TriadModel, where: str) -> TriadModel:
             "temp_ref_k": np.atleast_1d(m.temp_ref), "cross_per_g": m.cross.ravel(),
             "scale_drift_per_s": m.scale_drift, "scale_temp_per_k": m.scale_temp,
             "scale_warmup": m.scale_warmup, "warmup_tau_s": np.atleast_1d(m.warmup_tau_s),
-            "hysteresis_g": m.hysteresis}
+            "hysteresis_g": m.hysteresis, "k3_per_g2": m.k3, "scale_asymmetry": m.asymmetry}
     if m.cross.shape != (3, 3):
         raise InputError(f"{where}: model.cross_per_g: shape {m.cross.shape}, a triad has 3x3")
     for key, v in keys.items():

@@ -42,6 +42,10 @@ CLASSES: dict[str, dict] = {
     "hysteresis": {"hysteresis_g": (50e-6, 50e-6, 50e-6)},
     "scale_drift": {"scale_drift": (100e-6 / RUN_S,) * 3},
     "scale_warmup": {"scale_warmup": (100e-6,) * 3, "warmup_tau_s": 60.0},
+    # user8's cases (IEEE Std 1293's K3 and scale-factor asymmetry): K3 = ±100 µg/g³,
+    # (k+ - k-)/(k+ + k-) = ±300 ppm.
+    "k3": {"k3": (100e-6, -100e-6, 100e-6)},
+    "asymmetry": {"asymmetry": (300e-6, -300e-6, 300e-6)},
 }
 
 
@@ -107,7 +111,8 @@ def run(name: str, seed: int, candidates: Sequence | None = None, poses: str = "
 
 
 EXPECTED = {"cross": "cross_x_xy", "hysteresis": "bias_hysteresis",
-            "scale_drift": "scale_drift", "scale_warmup": "scale_warmup"}
+            "scale_drift": "scale_drift", "scale_warmup": "scale_warmup",
+            "k3": "nonlinearity_k3", "asymmetry": "scale_asymmetry"}
 """The effect each class is: what 'found' means."""
 
 

@@ -19,6 +19,7 @@ from align.calibration import (
     poses_from_samples,
     read_poses,
 )
+from align.calibration.model import ASYMMETRY
 from align.calibration.walk import WANDER
 from align.errors import InputError
 from synth.tumble import Triad, TumbleSpec, fisher_crlb, recording, tumble, write_tumble_csv
@@ -69,8 +70,11 @@ def test_undeclared_nonlinearity_found_and_removed(k2):
     assert [e.name for e in cal.loop.effects] == [NONLIN]
     # Each attitude held once, in one order: a bias wander at a level the samples within
     # the poses allow explains K2's signal too (25e-6 on y: bias_y's u x12.8); no other
-    # effect is an alternative. (The plan's repeated attitudes exclude the wander.)
-    assert cal.widening is None or {a.effects for a in cal.widening.alternatives} == {WANDER}
+    # effect is an alternative but a scale-factor asymmetry (x + A |x|: |x| and x² differ
+    # only at the edges' 0.707, a near-alias the loop refuses in K2's favour and the
+    # widening weighs). (The plan's repeated attitudes exclude the wander.)
+    assert cal.widening is None or {a.effects for a in cal.widening.alternatives} <= {
+        WANDER, ASYMMETRY}
     assert np.all(np.abs(cal.model.k2 - k2) < 4.5 * np.array(
         [cal.model.u_of(f"{NONLIN}_{a}") for a in "xyz"]))
     before = np.abs(cal.algebraic.bias - tr.bias)

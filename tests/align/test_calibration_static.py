@@ -90,6 +90,9 @@ def test_a_tap_that_leaves_the_attitude_is_one_pose(seed):
     assert s["span"] == 0 and s["extra"] == 0 and s["found"] == s["poses"]
     assert len(det.intervals) == s["poses"], (len(det.intervals), s["poses"])
     assert s["z"].max() < 8.0
+    # what is left out is samples between the runs: a forward stretch inside the interval
+    gaps = [(iv, g) for iv in det.intervals for g in iv.left_out]
+    assert gaps and all(iv.start_s < a <= b < iv.end_s for iv, (a, b) in gaps), gaps
 
 
 @pytest.mark.slow

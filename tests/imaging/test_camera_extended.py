@@ -6,6 +6,7 @@ import json
 
 import cv2
 import numpy as np
+import pytest
 
 from align.cli import main
 from imaging import CameraModel, calibrate_chessboard, read_image
@@ -70,6 +71,7 @@ def _board_views(rng, n_views, K, D, noise_px):
     return objpts, imgpts
 
 
+@pytest.mark.slow  # a jackknife over the views (~1.5 s CPU)
 def test_jackknife_agrees_with_the_formal_u_when_the_model_is_exact():
     """White corner noise through OpenCV's own model, 10 views, 12 seeds: the jackknife's u is
     the formal u within its sampling spread (median ratio 0.6-1.7 per parameter), so taking

@@ -256,6 +256,7 @@ def assert_grating_refused(cases, **frame):
         assert abs(_wrap(np.deg2rad(ang) - angle)) < np.deg2rad(1.0)
 
 
+@pytest.mark.slow  # tests/imaging/test_grating.py names a grating in the default run
 def test_grating_refused_with_its_pitch_and_why():
     """A grating (identical lines, 6 px pitch blurred to near-sinusoidal) is not measured:
     the refusal names the grating, its pitch and direction, and why. Sharp-edged and wider

@@ -47,6 +47,7 @@ def test_noise_matches_shot_plus_read():
     assert patch.std() == pytest.approx(expected, rel=0.05)
 
 
+@pytest.mark.slow  # three renders with their Fisher information (~2 s CPU)
 def test_crlb_scales_inversely_with_snr_and_length():
     a = mark_image(10, 0, snr=20).truth.marks[0].crlb_angle_rad
     b = mark_image(10, 0, snr=40).truth.marks[0].crlb_angle_rad
