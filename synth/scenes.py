@@ -122,3 +122,24 @@ def random_scene(seed: int, sizes: tuple[tuple[int, int], ...] = SIZES,
         dust=int(rng.integers(0, 30)), scratches=int(rng.integers(0, 8)),
         scratch_max_px=0.6 * MIN_MARK_PX, text=int(rng.integers(0, 4)),
         padding_px=int(rng.choice([0, 0, 0, 2, 4])), seed=seed)
+
+
+def kinked_pair(seed: int, kink_deg: float, length_px: float = 200.0
+                ) -> tuple[ImageSpec, tuple[float, float]]:
+    """Two straight strokes sharing an end point near the centre, at ``kink_deg`` [deg] to
+    each other (a "V" / bent-line corner), 640x480, SNR 50; and the strokes' angles [rad].
+
+    Each stroke is its own groove (where they overlap at the joint the reflectance losses
+    add, clipped at black, as two scribed passes deepen the groove there).
+    """
+    rng = np.random.default_rng(seed)
+    a1 = float(np.deg2rad(rng.uniform(-20, 20)))
+    a2 = a1 + float(np.deg2rad(kink_deg) * rng.choice([-1, 1]))
+    joint = rng.uniform(-20, 20, 2)
+    marks = []
+    for a, side in ((a1, -1), (a2, 1)):
+        u, n = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
+        mid = joint + side * u * length_px / 2
+        marks.append(MarkSpec(a, float(mid @ n), length_px, 4.0, centre_t_px=float(mid @ u)))
+    return ImageSpec(marks=tuple(marks), width=640, height=480,
+                     full_well_e=full_well_for_snr(50, -0.6), seed=seed), (a1, a2)

@@ -11,25 +11,9 @@ from align.mark_kink import kink_test
 from align.mark_stage import MarkStage
 from imaging import measure_frame
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+from synth.scenes import kinked_pair as kink_spec
 
 ALPHA = 1e-3
-
-
-def kink_spec(seed: int, kink_deg: float, length: float = 200.0
-              ) -> tuple[ImageSpec, tuple[float, float]]:
-    """Two 200 px strokes sharing an end point near the centre, at kink_deg to each other;
-    and their angles [rad]."""
-    rng = np.random.default_rng(seed)
-    a1 = np.deg2rad(rng.uniform(-20, 20))
-    a2 = a1 + np.deg2rad(kink_deg) * rng.choice([-1, 1])
-    joint = rng.uniform(-20, 20, 2)
-    marks = []
-    for a, side in ((a1, -1), (a2, 1)):
-        u, n = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
-        mid = joint + side * u * length / 2
-        marks.append(MarkSpec(a, float(mid @ n), length, 4.0, centre_t_px=float(mid @ u)))
-    return ImageSpec(marks=tuple(marks), width=640, height=480,
-                     full_well_e=full_well_for_snr(50, -0.6), seed=seed), (a1, a2)
 
 
 def clean_spec(seed: int, bow: bool) -> ImageSpec:
