@@ -9,12 +9,21 @@ many alike; a mark is one deep groove).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import special
+from scipy import ndimage, special
 
-from imaging.candidate import MarkCandidate, _dedupe, _drop_fused, line_frame, wrap_angle
+from imaging.candidate import (
+    MarkCandidate,
+    _dedupe,
+    _drop_fused,
+    _near,
+    _overlap,
+    line_frame,
+    wrap_angle,
+)
 from imaging.crossing import double_groove, fused_crossing
 
 
@@ -122,7 +131,7 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: fl
 
 
 def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 60.0,
-                 alpha: float = 1e-3) -> tuple[float, float]:
+                 alpha: float = 1e-3, lit: bool = False) -> tuple[float, float]:
     """How far a candidate stands out of the background's own relief across it, averaged
     along it, and how far the relief alone could reach by chance: (contrast / spread, limit).
 
@@ -138,10 +147,20 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     one per px, both polarities), widened by 3 standard errors of the MAD spread (relative
     1.16 / sqrt(n_eff); n_eff from the profile's lag-1 correlation r, n (1 - r) / (1 + r)).
     (inf, 0): too little background beside it to judge; left to the other tests.
+
+    ``lit``: each profile divided by its own light level first (:func:`relative_to_light`),
+    where a shadow's edge crosses the candidate (:func:`shadow_crossing`; else (0, inf)):
+    a shadow's edge crossing the candidate makes the medians along it step from the lit to
+    the shadowed level where the crossing point passes mid-length, a relief the groove
+    does not have.
     """
     half = max(1.0, c.thickness_px / 2 + 1)
     n_along = int(np.clip(c.length_px, 16, 2000))
     vals, e, _ = across(image, c, int(np.ceil(reach + half)), n_along, top)
+    if lit:
+        if not shadow_crossing(vals, e, half):
+            return 0.0, float("inf")  # no shadow edge across it: the plain test stands
+        vals = relative_to_light(vals, 4 * int(np.ceil(half)) + 3)
     cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
     med = _column_median(vals)  # one median profile for both uses (each column's own)
     prof = np.where(cols, med[0], np.nan)
@@ -164,6 +183,105 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     return float(contrast / spread), limit
 
 
+LIGHT_STEP = 0.08
+"""Relative change of the light along a candidate (10th to 90th percentile of its profiles'
+background levels) from which a shadow's edge is taken to cross it: above what vignetting
+changes along a mark (a few %), below the shallowest shadow that hid a mark (15-20 %)."""
+MONOTONE = 0.8
+"""Least |Spearman rank correlation| of that light level with the position along the
+candidate: one straight shadow edge takes it from one level to the other once; a busy
+scene (a circuit board, printed matter) changes it up and down."""
+UNDER = 0.5
+"""Largest fraction of a candidate's length along which the step in the light lies beside
+the groove (within its profile window): beyond it the edge runs along the mark (a shallow
+crossing), the step biases the groove's centres, and the candidate is not taken on this
+ground."""
+
+
+def light_steps(vals: np.ndarray, e: np.ndarray, half: float) -> tuple[float, float, float]:
+    """How the light changes along a line, from profiles across it (:func:`across`; ``half``
+    the groove's half-width [px]): (change, monotony, under).
+
+    ``change``: the spread (10th to 90th percentile) of the profiles' light levels (each the
+    median beyond ``2 half + 2`` px of the line, both sides) over their median; ``monotony``:
+    |Spearman rank correlation| of those levels with the position along the line;
+    ``under``: the fraction of profiles whose two sides (within 12 px beyond that) differ by
+    more than LIGHT_STEP / 2 (the step lies beside the groove). Zeros when too few profiles
+    have background.
+    """
+    clear = 2 * half + 2
+    far = np.abs(e) > clear
+    rows = np.isfinite(vals[:, far]).sum(axis=1) >= 5
+    if rows.sum() < 8:
+        return 0.0, 0.0, 0.0
+    v = vals[rows]
+    level = np.nanmedian(v[:, far], axis=1)
+    q10, q50, q90 = np.percentile(level, (10, 50, 90))
+    if q50 <= 0 or q90 == q10:
+        return 0.0, 0.0, 0.0
+    rho = abs(float(np.corrcoef(np.flatnonzero(rows), _ranks(level))[0, 1]))
+    with warnings.catch_warnings():  # a side off the image is NaN: no step seen there
+        warnings.simplefilter("ignore", RuntimeWarning)
+        left = np.nanmedian(v[:, (e < -clear) & (e >= -clear - 12)], axis=1)
+        right = np.nanmedian(v[:, (e > clear) & (e <= clear + 12)], axis=1)
+    under = float(np.mean(np.abs(left - right) > 0.5 * LIGHT_STEP * q50))
+    return float((q90 - q10) / q50), rho, under
+
+
+def _ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks of ``x``, ties averaged (Spearman's correlation is the linear one of ranks).
+    By hand: scipy.stats.rankdata would import scipy.stats, ~0.8 s per command
+    (tests/test_import_graph.py)."""
+    r = np.empty(len(x))
+    r[np.argsort(x, kind="stable")] = np.arange(len(x))
+    _, inv, cnt = np.unique(x, return_inverse=True, return_counts=True)
+    return (np.bincount(inv, r) / cnt)[inv]
+
+
+def shadow_crossing(vals: np.ndarray, e: np.ndarray, half: float) -> bool:
+    """Whether the light along a line changes as where one straight shadow edge crosses it
+    (:func:`light_steps`): by :data:`LIGHT_STEP` or more, monotonically (:data:`MONOTONE`),
+    the step beside the groove over at most :data:`UNDER` of its length."""
+    change, rho, under = light_steps(vals, e, half)
+    return change >= LIGHT_STEP and rho >= MONOTONE and under <= UNDER
+
+
+def shadow_note(image: np.ndarray, cands: Sequence[MarkCandidate], top: float) -> str | None:
+    """Why a line that a shadow's edge runs along was not taken (for "no mark found"): the
+    first coarse candidate ``cands`` whose light steps under its groove (:func:`light_steps`
+    beyond :data:`UNDER`), or None."""
+    for c in cands:
+        half = max(1.0, c.thickness_px / 2 + 1)
+        vals, e, _ = across(image, c, int(np.ceil(3 * half + 16)), 64, top)
+        change, rho, under = light_steps(vals, e, half)
+        if change >= LIGHT_STEP and rho >= MONOTONE and under > UNDER:
+            return (f"a shadow's edge runs along the line at {np.rad2deg(c.angle_rad):.1f}° "
+                    f"(the light steps {100 * change:.0f} % beside it over "
+                    f"{100 * under:.0f} % of its length): a groove whose background steps "
+                    "under it is not measured; light the face evenly or keep the shadow's "
+                    "edge off the mark")
+    return None
+
+
+def relative_to_light(vals: np.ndarray, window: int) -> np.ndarray:
+    """Profiles across a line (:func:`across`) each divided by its own light level: a running
+    median across, ``window`` px wide (odd, over twice the groove's width).
+
+    A shadow multiplies the light: the ratio is the surface's own reflectance, flat across a
+    shadow's edge. The running median keeps a step (a monotone edge passes a median filter
+    unchanged) and drops a groove or streak narrower than half the window, so those stay in
+    the ratio as they were. Missing samples (NaN) are filled with the row's median for the
+    filter and stay missing.
+    """
+    finite = np.isfinite(vals)
+    rows = finite.any(axis=1)
+    fill = np.zeros(len(vals))
+    fill[rows] = np.nanmedian(vals[rows], axis=1)
+    level = ndimage.median_filter(np.where(finite, vals, fill[:, None]), size=(1, window),
+                                  mode="nearest")
+    return np.where(finite & (level > 0), vals / np.where(level > 0, level, 1.0), np.nan)
+
+
 def confirm_candidates(image: np.ndarray, cands: list[MarkCandidate], noise_full: float,
                        f: int, top: float, min_pixel_snr: float, reach: float = 60.0
                        ) -> list[MarkCandidate]:
@@ -182,11 +300,24 @@ def confirm_candidates(image: np.ndarray, cands: list[MarkCandidate], noise_full
         # A machining lay running along the candidate: each streak is long, and the ridge
         # filter integrates it into a strong response, but beside it lie many like it.
         ratio, limit = distinctness(image, c, top, reach)
-        if ratio < limit:
-            continue
+        lit = ratio < limit
+        if lit:
+            # A shadow's edge crossing it: judged again on the light-normalised profiles.
+            ratio, limit = distinctness(image, c, top, reach, lit=True)
+            if ratio < limit:
+                continue
         # (once re-centred, a line lies on a groove: two grooves no longer straddle it)
-        out.append(c if fused is None else replace(coarse, fused=fused))
-    return _drop_fused(_dedupe(out))
+        out.append((c if fused is None else replace(coarse, fused=fused), lit))
+    return _drop_fused(_dedupe([c for c, lit in out
+                                if not (lit and any(_shoulder(c, o) for o, _ in out))]))
+
+
+def _shoulder(c: MarkCandidate, o: MarkCandidate) -> bool:
+    """Whether c is the strip of background between mark o and a shadow's edge along it:
+    of the other polarity, weaker, parallel and within o's width and a few px of it (the
+    strip is brighter than the groove on one side and the shadow on the other)."""
+    return (c.dark != o.dark and c.strength < o.strength
+            and _near(c, o, np.deg2rad(3), c.thickness_px + o.thickness_px + 6) and _overlap(c, o))
 
 
 def _fused(image: np.ndarray, c: MarkCandidate, noise: float, top: float,

@@ -106,6 +106,14 @@ def spectral_grating(a: np.ndarray, max_pitch_px: float = 120.0
             break
     if p[i] < GRATING_SHARE * float(p[band].sum()):
         return None
+    # An edge's (a shadow's) power falls off from zero frequency along its normal: its
+    # strongest frequency in the band stands out of its ring, but the same direction two
+    # bins further in is stronger still; a grating's peak stands above it (a Hann window's
+    # leakage is nil two bins from a peak).
+    s = max(0.0, 1 - 2 / (float(f[i]) * min(n_r, n_c)))
+    j = (int(np.rint(fy[i[0], 0] * s * n_r)) % n_r, int(np.rint(fx[0, i[1]] * s * n_c)))
+    if j != i and p[j] > p[i]:
+        return None
     # Refine the peak's frequency by the power-weighted mean of its 3 x 3 neighbourhood.
     rr = np.clip(np.arange(i[0] - 1, i[0] + 2), 0, n_r - 1)
     cc = np.clip(np.arange(i[1] - 1, i[1] + 2), 0, p.shape[1] - 1)

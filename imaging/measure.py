@@ -16,6 +16,7 @@ from scipy.ndimage import median_filter
 from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
 from imaging.centres import Centres, sample_centres
+from imaging.confirm import shadow_note
 from imaging.crossmask import crossing_skip, fused_error
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
@@ -23,6 +24,7 @@ from imaging.detect import (
     MarkCandidate,
     Roi,
     default_min_length,
+    detect_lines_once,
     line_frame,
     require_single,
     wrap_angle,
@@ -484,8 +486,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if not cands:
         grating = grating_note(image)
         clipped = clipped_note(image, top)
+        search = detect_lines_once(image, min_length_px, roi=roi, top=top)
+        shadow = shadow_note(search.image, search.first, top)
         raise ImageInputError(f"{where}: no mark found (no long straight line stands out"
                               + (f" in roi {','.join(map(str, roi))})" if roi else ")")
+                              + (f": {shadow}" if shadow else "")
                               + (f": {grating}" if grating else "")
                               + (f": {clipped}" if clipped else ""))
     if expect_one:

@@ -174,7 +174,15 @@ def _illumination(spec: ImageSpec) -> np.ndarray:
     X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
     gx, gy = spec.gradient
     r2 = (X**2 + Y**2) / 2
-    return (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
+    light = (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
+    a, offset, width, depth = spec.shadow
+    if depth:
+        # Something between the lamp and the face: its shadow multiplies the light, with a
+        # penumbra (the lamp's extent) across the edge.
+        gx_px, gy_px = np.meshgrid(xs, ys)
+        dist = gx_px * np.sin(a) + gy_px * np.cos(a) - offset
+        light = light * (1 - depth * 0.5 * (1 + erf(dist / (np.sqrt(2) * max(width, 1e-6)))))
+    return light
 
 
 def _texture(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:

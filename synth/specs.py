@@ -168,6 +168,11 @@ class ImageSpec:
         Their phase [rad].
     stripes_second : float
         Relative amplitude of their second harmonic — dimensionless.
+    shadow : tuple of float
+        A shadow's edge across the face (angle [rad], offset [px], width [px], depth): the edge
+        runs along (cos a, -sin a) at ``offset`` from the centre along its normal
+        (sin a, cos a); beyond it the light is multiplied by 1 - depth; the penumbra is an
+        error function of sigma ``width`` (depth 0: no shadow).
     """
 
     marks: tuple[MarkSpec, ...]
@@ -201,6 +206,7 @@ class ImageSpec:
     stripes_angle_rad: float = 0.0
     stripes_phase: float = 0.0
     stripes_second: float = 0.0
+    shadow: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 0.0)
 
     def blur_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The PSF's sigma [px] at sensor pixel (x, y) relative to the image centre."""

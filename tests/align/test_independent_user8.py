@@ -150,12 +150,6 @@ def test_uncalibrated_lens_is_not_a_confident_answer(lens, tmp_path):
     assert check_covered(rc, js, mark_errors(js, t), 4) == []
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a 350 px mark (contrast 50 %) crossed at 60° by the sharp edge (6 px) of a shadow 20 % "
-    "deep: 'FAILED: no mark found (no long straight line stands out)', exit 2, on 2 of 2 "
-    "seeds; also at 5° and 30° crossing (depth 0.2-0.5). Found and within u: the shadow at "
-    "90°, a soft edge (30 px), or 10 % deep. A refusal, not a wrong angle, but its reason is "
-    "wrong: the mark is plain to see"))
 def test_mark_crossed_by_a_shadow_edge_is_measured(lens, tmp_path):
     """A housing's edge throws a shadow across the face: the mark is still measured (its
     angle within 3.5 u), or the refusal names the shadow."""
