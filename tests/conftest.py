@@ -30,7 +30,7 @@ def angle_error(measured: float, truth: float) -> float:
 
 def mark_image(angle_deg: float, seed: int, snr: float = 30.0, width_px: float = 4.0,
                length_px: float = 500.0, offset_px: float = 12.3, size=(800, 600),
-               with_crlb: bool = True, **kw):
+               with_crlb: bool = False, **kw):
     spec = ImageSpec(
         marks=(MarkSpec(np.deg2rad(angle_deg), offset_px, length_px, width_px,
                         centre_t_px=kw.pop("centre_t_px", 0.0),

@@ -971,7 +971,7 @@ def test_marks_output_validates_and_carries_warnings(tmp_path):
     from synth import write_synth
     from tests.conftest import mark_image
 
-    s = mark_image(25.0, seed=4, size=(480, 360), length_px=250)
+    s = mark_image(25.0, seed=4, size=(480, 360), length_px=250, with_crlb=False)
     p, _ = write_synth(s, tmp_path / "mark.png")
     bad = tmp_path / "bad.png"
     bad.write_text("not an image")

@@ -14,7 +14,7 @@ from tests.conftest import mark_image, real_folder
 
 @pytest.fixture
 def mark_file(tmp_path):
-    s = mark_image(25.0, seed=4, size=(640, 480), length_px=350)
+    s = mark_image(25.0, seed=4, size=(640, 480), length_px=350, with_crlb=False)
     p, _ = write_synth(s, tmp_path / "mark.png")
     return p, s.truth
 
@@ -90,7 +90,7 @@ def test_two_competing_marks_when_one_is_expected(tmp_path, capsys):
 
 
 def test_sixteen_bit_tiff_through_the_cli(tmp_path):
-    s = mark_image(-20.0, seed=9, size=(500, 400), length_px=300, bits=16)
+    s = mark_image(-20.0, seed=9, size=(500, 400), length_px=300, bits=16, with_crlb=False)
     p, _ = write_synth(s, tmp_path / "m16.tif")
     out = tmp_path / "o.json"
     assert main(["marks", str(p), "--json", str(out), *FLAT]) == 0

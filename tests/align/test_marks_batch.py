@@ -52,7 +52,7 @@ def test_refined_line_wrapping_across_90_deg_keeps_the_mark():
     """
     for angle, centre_t in ((-89.995, 150.0), (89.995, -150.0)):
         s = mark_image(angle, seed=1, length_px=200, offset_px=40.0, size=(640, 480),
-                       centre_t_px=centre_t)
+                       centre_t_px=centre_t, with_crlb=True)
         # Lens-free render, declared so: the line fit's own u is checked against the CRLB.
         r = align.marks.measure_image(s.image.astype(float), ranges=LensRanges.none())[0]
         t = s.truth.marks[0]

@@ -15,7 +15,7 @@ from tests.conftest import angle_error, mark_image
                                    pytest.param(90.0, marks=pytest.mark.slow),
                                    pytest.param(-61.0, marks=pytest.mark.slow)])
 def test_angle_within_stated_uncertainty_and_near_crlb(angle):
-    s = mark_image(angle, seed=int(abs(angle) * 10) + 1)
+    s = mark_image(angle, seed=int(abs(angle) * 10) + 1, with_crlb=True)
     m = measure_marks(s.image.astype(float))[0]
     t = s.truth.marks[0]
     err = angle_error(m.line.angle_rad, t.image_angle_rad)

@@ -49,9 +49,9 @@ def test_noise_matches_shot_plus_read():
 
 @pytest.mark.slow  # three renders with their Fisher information (~2 s CPU)
 def test_crlb_scales_inversely_with_snr_and_length():
-    a = mark_image(10, 0, snr=20).truth.marks[0].crlb_angle_rad
-    b = mark_image(10, 0, snr=40).truth.marks[0].crlb_angle_rad
-    c = mark_image(10, 0, snr=20, length_px=250).truth.marks[0].crlb_angle_rad
+    a = mark_image(10, 0, snr=20, with_crlb=True).truth.marks[0].crlb_angle_rad
+    b = mark_image(10, 0, snr=40, with_crlb=True).truth.marks[0].crlb_angle_rad
+    c = mark_image(10, 0, snr=20, length_px=250, with_crlb=True).truth.marks[0].crlb_angle_rad
     assert b == pytest.approx(a / 2, rel=0.05)
     # Angle information grows as length^3 (slope of a line): halving it costs 2^1.5.
     assert c == pytest.approx(a * 2**1.5, rel=0.1)
