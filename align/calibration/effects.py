@@ -27,6 +27,11 @@ IN_TIME = frozenset({DRIFT, WARMUP, TEMP, SCALE_DRIFT, SCALE_WARMUP, SCALE_TEMP}
 """The effects that change over the run (a temperature follows the time): a bias wandering
 between the poses can take their shape (:mod:`align.calibration.walk`)."""
 PAIRS = ("xy", "xz", "yz")
+PAIR_I, PAIR_J = [0, 0, 1], [1, 2, 2]
+"""The axes of each pair of PAIRS (columns of the products v_i v_j, in that order)."""
+FIELDS3 = ("k2", "drift", "drift2", "temp_coeff", "scale_drift", "scale_temp",
+           "scale_warmup", "hysteresis", "k3", "asymmetry")
+"""The TriadModel fields of one value per axis that effects set (``cross`` is 3 x 3)."""
 CROSS = tuple(f"cross_{ax}_{pq}" for ax in "xyz" for pq in PAIRS)
 """One candidate per cross-axis product K_i,jl (output axis i, inputs j l): nine at once
 would leave the paper's 14 poses no degrees of freedom; the loop picks the one the data call

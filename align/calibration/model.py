@@ -36,7 +36,8 @@ from align.calibration.effects import (  # noqa: F401  (re-exported: the public 
     Effect,
     turn_signs,
 )
-from align.calibration.ellipsoid import extract, li_griffiths, r_matrix
+from align.calibration.ellipsoid import extract, li_griffiths
+from align.calibration.residual import stage_residual
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
 from align.calibration.walk import (
     WanderFit,
@@ -200,49 +201,9 @@ class CalibrationStage:
                 raise NotApplicable("the pose order is not known (no time column)")
 
     def _residual(self, effects: Sequence[str]) -> Callable[[np.ndarray, float], np.ndarray]:
-        """The weighted residuals (|a_p| - 1) / sigma_p as a function of (theta, tau).
-
-        The inverse model of TriadModel.specific_force written out on the poses' arrays:
-        the loop fits ~50 models of ~100 evaluations each, and building a TriadModel per
-        evaluation was 2/3 of the calibration's time. test_stage_residual_is_the_model's
-        checks the two agree."""
-        p = self.poses
-        s0 = self.start
-        w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
-        hyst = HYSTERESIS in effects
-        slots = [(fld, idx) for e in effects for fld, idx, _ in EFFECTS[e].slots]
-        dt = p.t - s0.t_ref
-        dT = p.temp - s0.temp_ref if p.temp is not None else np.zeros(len(p.t))
-        uu = p.u
-
-        def resid(theta, tau):
-            f = {"k2": np.zeros(3), "drift": np.zeros(3), "drift2": np.zeros(3),
-                 "temp_coeff": np.zeros(3), "cross": np.zeros((3, 3)),
-                 "scale_drift": np.zeros(3), "scale_temp": np.zeros(3),
-                 "scale_warmup": np.zeros(3), "hysteresis": np.zeros(3),
-                 "k3": np.zeros(3), "asymmetry": np.zeros(3)}
-            for (fld, idx), v in zip(slots, theta[9:], strict=True):
-                f[fld][idx] += v
-            v = uu / theta[:3]
-            if len(slots):
-                sc = (1.0 + dt[:, None] * f["scale_drift"] + dT[:, None] * f["scale_temp"])
-                if tau > 0:
-                    sc = sc + np.expm1(-dt / tau)[:, None] * f["scale_warmup"]
-                v = v / sc / (1.0 + np.sign(v) * f["asymmetry"])
-                x = v - f["k2"] * v * v - f["k3"] * v**3 - np.stack(
-                    [v[:, 0] * v[:, 1], v[:, 0] * v[:, 2], v[:, 1] * v[:, 2]], 1) @ f["cross"].T
-            else:
-                x = v
-            a = x @ np.linalg.inv(r_matrix(theta[3:6])).T - theta[6:9]
-            if len(slots):
-                a = (a - dt[:, None] * f["drift"] - (dt * dt)[:, None] * f["drift2"]
-                     - dT[:, None] * f["temp_coeff"])
-                if hyst:
-                    a = a - self.turns * f["hysteresis"]
-            d = np.sqrt(np.einsum("ij,ij->i", a, a)) - 1.0
-            return d * w if self.whiten is None else self.whiten @ d
-
-        return resid
+        """The weighted residuals (|a_p| - 1) / sigma_p as a function of (theta, tau):
+        :func:`align.calibration.residual.stage_residual`."""
+        return stage_residual(self, effects)
 
     def _scale(self, effects: Sequence[str]) -> np.ndarray:
         """Typical size of each parameter (least_squares' x_scale, the screening's step)."""
