@@ -1304,6 +1304,7 @@ def test_run_never_writes_over_inputs_even_with_force(session_dir, flags):
     assert before == {p.name: p.read_bytes() for p in s.iterdir()}
 
 
+@pytest.mark.slow  # the demo, the report page and test_fusion find an undeclared roll too
 def test_run_cameras_find_an_undeclared_roll_and_e_stays_true(tmp_path):
     """Cameras (two, each with its reversal view) + tumble + platform poses, camera A rolled
     by 30 arcsec and nobody told: the fusion loop names camera A's roll within its u, and E

@@ -420,9 +420,10 @@ def test_six_faces_off_square_are_covered(tmp_path, tilt_deg):
     # quantum 2 mg with 0.1 mg noise: every pose mean off by up to 1 mg, deterministically
     ("quantised", ui.Triad(noise=1e-4, lsb=2e-3)),
     # a temperature step: the bias jumps by 1 mg on each axis a third into the run
-    ("bias_step", ui.Triad(step_g=(1e-3, -1e-3, 1e-3), step_t=70.0)),
+    pytest.param("bias_step", ui.Triad(step_g=(1e-3, -1e-3, 1e-3), step_t=70.0),
+                 marks=pytest.mark.slow),
     # 10 mg of vibration at 100.3 Hz sampled at 100 Hz: aliased to a 0.3 Hz wander
-    ("vibration", ui.Triad(vib_g=0.01, vib_hz=100.3)),
+    pytest.param("vibration", ui.Triad(vib_g=0.01, vib_hz=100.3), marks=pytest.mark.slow),
 ])
 def test_unlisted_effects_are_covered_or_flagged(tmp_path, name, triad):
     """Effects the docs do not list: each parameter within 3.5 u, or the result flagged.

@@ -163,7 +163,8 @@ def _recording(name: str, tmp_path):
 @pytest.mark.parametrize("name,expected", [
     pytest.param("xsens", (WARMUP,), marks=pytest.mark.slow),  # ~15 s on the shared host
     pytest.param("ADXL355", (), marks=pytest.mark.slow),
-    ("BMI160", (WARMUP, "nonlinearity_k2")), ("mpu6050", ()), ("hassan", ()), ("imucal", ())])
+    pytest.param("BMI160", (WARMUP, "nonlinearity_k2"), marks=pytest.mark.slow),  # ~2 s
+    ("mpu6050", ()), ("hassan", ()), ("imucal", ())])
 def test_the_cli_keeps_the_pose_routes_results(name, expected, tmp_path):
     """`align calibrate <recording>` (the samples, their times: the bias walk the samples
     show is weighed) finds the effects of the pose route (the means alone, the reference) and

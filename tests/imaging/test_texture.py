@@ -15,7 +15,9 @@ FRAME = {"length_px": 1000.0, "offset_px": 9.3, "size": (1024, 1024), "blur_px":
          "with_crlb": False}
 
 
-@pytest.mark.parametrize("angle", [0.25, 10.0, 37.0, 60.0, 89.9])
+# Near each pixel axis and at a general angle in the default run; the rest slow.
+@pytest.mark.parametrize("angle", [0.25, pytest.param(10.0, marks=pytest.mark.slow), 37.0,
+                                   pytest.param(60.0, marks=pytest.mark.slow), 89.9])
 def test_noise_free_render_gives_the_angle_within_its_u(angle):
     """The expected electrons (no photon noise): the replicas beside the band hold only
     float rounding, and the texture's control variate was a ratio of rounding errors
