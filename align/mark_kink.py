@@ -52,11 +52,23 @@ class Kink:
         The supremum over the searched breaks of the F statistic — dimensionless.
     p : float
         Its p-value under no kink (simulated null of the supremum) — dimensionless.
+    turn_rad : float
+        The change of direction at the break of the best broken line [rad].
     """
 
     t_px: float
     sup_f: float
     p: float
+    turn_rad: float = 0.0
+
+
+KINK_MIN_RAD = float(np.deg2rad(1.0))
+"""The smallest turn taken for two strokes [rad]. The test's null holds a line and a bow;
+smooth departures beyond them (a lens's cubic bow, a groove's shape along a near-axis mark)
+fit a hinge of a few tenths of a degree at tiny p (a clean session's near-vertical mark:
+0.17 deg, p 6e-10). Below 1 deg a departure is left to the loop's structure terms (u
+inflated, the chord-vs-fit term), as before the kink test; the kinks it is for (two strokes
+of a V, a bent-line corner) turn by degrees."""
 
 
 def _whiten(cols: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None) -> np.ndarray:
@@ -115,8 +127,10 @@ def kink_test(m: MarkMeasurement, sigma: np.ndarray, seed: int = 0) -> Kink | No
     H1 = _whiten(np.maximum(0.0, t[:, None] - tb[None, :]), sigma, m.chol)
     H1 -= Q1 @ (Q1.T @ H1)
     z1 = _whiten(e[:, None], sigma, m.chol)
-    k = int(np.argmax((H1.T @ (z1 - Q1 @ (Q1.T @ z1)))[:, 0] ** 2
-                      / np.maximum(np.sum(H1 * H1, axis=0), 1e-300)))
+    proj = (H1.T @ (z1 - Q1 @ (Q1.T @ z1)))[:, 0]
+    norm2 = np.maximum(np.sum(H1 * H1, axis=0), 1e-300)
+    k = int(np.argmax(proj**2 / norm2))
+    turn = float(np.arctan(proj[k] / norm2[k]))  # the hinge's slope change [px/px]
     # The null: white residuals of the same design (the whitened centres are independent
     # under the model); F is scale-free, so a mis-stated sigma does not move it.
     Z = np.random.default_rng(seed).standard_normal((n_pts, N_SIM))
@@ -132,7 +146,7 @@ def kink_test(m: MarkMeasurement, sigma: np.ndarray, seed: int = 0) -> Kink | No
     p_ext = float(-np.expm1(m_eff * np.log1p(-p1))) if p1 < 1 else 1.0
     p_sim = (1 + int(np.sum(sims >= f_sup))) / (N_SIM + 1)
     p = p_sim if p_sim > 20 / N_SIM else min(p_sim, p_ext)
-    return Kink(t_px=float(tb[k] - tm), sup_f=f_sup, p=p)
+    return Kink(t_px=float(tb[k] - tm), sup_f=f_sup, p=p, turn_rad=turn)
 
 
 MIN_PART = 20
@@ -187,7 +201,7 @@ def split_kinked(m: MarkMeasurement, alpha: float = 1e-3
     if not kink_testable(m) or lf.dof <= 0 or special.chdtrc(lf.dof, lf.chi2) >= alpha:
         return (m,), None
     kink = kink_test(m, MarkStage(m).sigma)
-    if kink is None or kink.p >= alpha:
+    if kink is None or kink.p >= alpha or abs(kink.turn_rad) < KINK_MIN_RAD:
         return (m,), kink
     u, _ = line_frame(m.line.angle_rad)
     t = m.points @ u

@@ -24,7 +24,7 @@ from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_m
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
-from align.mark_kink import kink_test, kink_testable, split_kinked
+from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
 from align.mark_stage import (
     BEND,
@@ -173,7 +173,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     # bow (a clean straight mark has nothing to break).
     kink = (kink_test(m, stage.sigma) if kink_testable(m) and (
         rep.unexplained_structure or bend is not None) else None)
-    kinked = kink is not None and kink.p < alpha
+    kinked = kink is not None and kink.p < alpha and abs(kink.turn_rad) >= KINK_MIN_RAD
     if kinked:
         notes.append(f"{image} mark {index}: NOT OK: a kink at t = {kink.t_px:+.0f} px from "
                      f"the mark's middle (broken line against line and bow: sup-F "
