@@ -43,23 +43,34 @@ def _match(r, marks):
     return min(marks, key=lambda m: abs(angle_error(r.angle_rad, m.angle_rad)))
 
 
-def _check_calibrated(seed: int, n_straight: int = 2) -> None:
+def _check_calibrated(seed: int, n_straight: int = 2) -> list:
+    """What is wrong with the scene of ``seed`` (empty: nothing)."""
+    bad: list = []
     marks, img = _scene(seed, n_straight)
     found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
-    assert len(found) == len(marks)
+    if len(found) != len(marks):
+        bad.append((seed, f"{len(found)} marks found of {len(marks)}"))
     for r in found:
         m = _match(r, marks)
-        assert not any(DIFFERS in n for n in r.notes), (seed, r.notes)
-        assert "camera_disagreement" not in r.u_terms and not r.lens_limited, (seed, r.u_terms)
+        if any(DIFFERS in n for n in r.notes):
+            bad.append((seed, r.notes))
+        if not ("camera_disagreement" not in r.u_terms and not r.lens_limited):
+            bad.append((seed, r.u_terms))
         z = angle_error(r.angle_rad, m.angle_rad) / r.angle_u_rad
-        assert abs(z) <= 3, (seed, m, np.rad2deg(angle_error(r.angle_rad, m.angle_rad)) * 3600)
+        if abs(z) > 3:
+            bad.append((seed, m, np.rad2deg(angle_error(r.angle_rad, m.angle_rad)) * 3600))
         if m is marks[0]:  # the bent one: named, its u covering chord vs fit (not the lens)
-            assert BEND in [e.name for e in r.loop.effects], (seed, r.notes)
-            assert "bent_mark_chord_vs_fit" in r.u_terms, (seed, r.u_terms)
+            if BEND not in [e.name for e in r.loop.effects]:
+                bad.append((seed, r.notes))
+            if "bent_mark_chord_vs_fit" not in r.u_terms:
+                bad.append((seed, r.u_terms))
         else:  # the straight ones: neither bent nor lens-limited (before: u 5000-7500'')
-            assert r.angle_u_rad < np.deg2rad(60 / 3600), (
-                seed, np.rad2deg(r.angle_u_rad) * 3600, r.u_terms)
-            assert not any("the mark is bent" in n for n in r.notes)
+            if not (r.angle_u_rad < np.deg2rad(60 / 3600)):
+                bad.append((
+                    seed, np.rad2deg(r.angle_u_rad) * 3600, r.u_terms))
+            if any("the mark is bent" in n for n in r.notes):
+                bad.append((seed, "a straight mark called bent", r.notes))
+    return bad
 
 
 def test_one_bent_mark_does_not_condemn_a_calibrated_camera():
@@ -67,20 +78,20 @@ def test_one_bent_mark_does_not_condemn_a_calibrated_camera():
     calibration' and the straight marks lens-limited at thousands of arc-seconds (an
     independent user's report); now the bent mark is named, the calibration kept."""
     for seed in range(2):
-        _check_calibrated(seed)
+        assert not _check_calibrated(seed)
 
 
 def test_one_bent_mark_alone_with_an_exact_model_is_a_bent_mark():
     """One bent mark near the centre, exact model: one mark's departure beyond any lens is
     its bow (before: 'k1 +1.31 on top of it', u 647'')."""
-    _check_calibrated(0, n_straight=0)
+    assert not _check_calibrated(0, n_straight=0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n_straight", [0, 1, 2])
 def test_calibrated_camera_with_a_bent_mark_over_seeds(n_straight):
     for seed in range(2, 10):
-        _check_calibrated(seed, n_straight)
+        assert not _check_calibrated(seed, n_straight)
 
 
 def test_a_wrong_k1_is_still_called_a_change_of_the_lens_with_a_bent_mark_present():
@@ -117,24 +128,36 @@ def _two_bent(seed: int, n_straight: int = 2):
     return marks, render_marks(spec, with_crlb=False).image
 
 
-def _check_two_bent(seed: int, n_straight: int = 2) -> None:
+def _check_two_bent(seed: int, n_straight: int = 2) -> list:
+    """What is wrong with the scene of ``seed`` (empty: nothing)."""
+    bad: list = []
     marks, img = _two_bent(seed, n_straight)
     found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
-    assert len(found) == len(marks)
+    if len(found) != len(marks):
+        bad.append((seed, f"{len(found)} marks found of {len(marks)}"))
     for r in found:
         m = _match(r, marks)
-        assert not any(DIFFERS in n for n in r.notes), (seed, r.notes)
-        assert r.lens["lens_or_bent"] == "bends", (seed, r.lens)
-        assert not {"camera_disagreement", "camera_or_bent"} & set(r.u_terms), (seed, r.u_terms)
-        assert not r.lens_limited, (seed, r.notes)
+        if any(DIFFERS in n for n in r.notes):
+            bad.append((seed, r.notes))
+        if r.lens["lens_or_bent"] != "bends":
+            bad.append((seed, r.lens))
+        if {"camera_disagreement", "camera_or_bent"} & set(r.u_terms):
+            bad.append((seed, r.u_terms))
+        if r.lens_limited:
+            bad.append((seed, r.notes))
         z = angle_error(r.angle_rad, m.angle_rad) / r.angle_u_rad
-        assert abs(z) <= 3, (seed, m, np.rad2deg(angle_error(r.angle_rad, m.angle_rad)) * 3600)
+        if abs(z) > 3:
+            bad.append((seed, m, np.rad2deg(angle_error(r.angle_rad, m.angle_rad)) * 3600))
         if m.bow_px:  # each bent one named, read end to end
-            assert BEND in [e.name for e in r.loop.effects], (seed, r.notes)
-            assert "bent_mark_chord_vs_fit" in r.u_terms, (seed, r.u_terms)
+            if BEND not in [e.name for e in r.loop.effects]:
+                bad.append((seed, r.notes))
+            if "bent_mark_chord_vs_fit" not in r.u_terms:
+                bad.append((seed, r.u_terms))
         else:  # the straight ones: no false change of the lens (before: u 300-10700'')
-            assert r.angle_u_rad < np.deg2rad(60 / 3600), (
-                seed, np.rad2deg(r.angle_u_rad) * 3600, r.u_terms)
+            if not (r.angle_u_rad < np.deg2rad(60 / 3600)):
+                bad.append((
+                    seed, np.rad2deg(r.angle_u_rad) * 3600, r.u_terms))
+    return bad
 
 
 def test_two_bent_marks_do_not_make_a_false_lens_change():
@@ -143,7 +166,7 @@ def test_two_bent_marks_do_not_make_a_false_lens_change():
     straight, so the bent marks are named and the calibration kept (before, seeds 0-9: 'the
     lens differs from its calibration' in 10/10, the straight marks lens-limited at u
     270-8300''; now their u 25-42'', |z| <= 1.25). Seeds 1-9: the slow twin below."""
-    _check_two_bent(0)
+    assert not _check_two_bent(0)
 
 
 _SEEDS = range(1, 10)
@@ -153,19 +176,25 @@ _SEEDS = range(1, 10)
 @pytest.mark.parametrize("n_straight", [2, 3])
 @pytest.mark.parametrize("seed", _SEEDS)
 def test_two_bent_marks_over_seeds(n_straight, seed):
-    _check_two_bent(seed, n_straight)
+    assert not _check_two_bent(seed, n_straight)
 
 
-def _check_changed_lens_with_two_bent(seed: int, n_straight: int = 2) -> None:
+def _check_changed_lens_with_two_bent(seed: int, n_straight: int = 2) -> list:
+    """What is wrong with the scene of ``seed`` (empty: nothing)."""
+    bad: list = []
     marks, img = _two_bent(seed, n_straight)
     found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM, k1=-0.20))
              if r.found]
-    assert len(found) == len(marks)
+    if len(found) != len(marks):
+        bad.append((seed, f"{len(found)} marks found of {len(marks)}"))
     for r in found:
-        assert any(DIFFERS in n for n in r.notes), (seed, r.notes)
+        if not (any(DIFFERS in n for n in r.notes)):
+            bad.append((seed, r.notes))
         m = _match(r, marks)
         z = angle_error(r.angle_rad, m.angle_rad) / r.angle_u_rad
-        assert abs(z) <= 3, (seed, m.bow_px, z, r.u_terms)
+        if abs(z) > 3:
+            bad.append((seed, m.bow_px, z, r.u_terms))
+    return bad
 
 
 def test_a_changed_lens_is_found_beside_two_bent_marks():
@@ -175,14 +204,14 @@ def test_a_changed_lens_is_found_beside_two_bent_marks():
     seed 0: a straight mark read as the one bent mark, the calibration kept, z +24.3 and
     -24.0 on the straight marks, nothing lens-limited; now 20/20 scenes 'differs', max |z|
     1.43). Seeds 1-9: the slow twin below."""
-    _check_changed_lens_with_two_bent(0)
+    assert not _check_changed_lens_with_two_bent(0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n_straight", [2, 3])
 @pytest.mark.parametrize("seed", _SEEDS)
 def test_changed_lens_beside_two_bent_marks_over_seeds(n_straight, seed):
-    _check_changed_lens_with_two_bent(seed, n_straight)
+    assert not _check_changed_lens_with_two_bent(seed, n_straight)
 
 
 def test_a_changed_lens_and_bent_marks_that_cannot_be_told_apart_are_not_ok():
