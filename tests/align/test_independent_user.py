@@ -337,6 +337,7 @@ def _random_scenes(n, seed, sizes=((480, 640),)):
     return scenes
 
 
+@pytest.mark.slow  # random scenes: the statistical sweeps of test_measure and test_scenes
 def test_marks_random_small_scenes_truth_and_honest_u(tmp_path):
     rc, results, se = _measure_scenes(tmp_path, _random_scenes(10, seed=1))
     assert rc == 0, se

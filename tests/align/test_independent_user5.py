@@ -405,6 +405,7 @@ def test_bias_random_walk_is_not_turned_into_a_confident_scale_drift(tmp_path):
     assert not js["ok"] or np.abs(z_frame_free).max() < 4.0, z_frame_free
 
 
+@pytest.mark.slow  # tests/imaging/test_oriented.py removes and names shallow stripes by default
 def test_shallow_stripes_under_a_mark_are_flagged_or_covered(tmp_path):
     """Was: -78.3 arcsec = 4.7 u, silent (seed 33: 3.7 u). Now the pattern is found, divided
     out and named (imaging/oriented.py): +7.8 arcsec at u 13.6 (0.6 u); seeds 31/33/34/35 x

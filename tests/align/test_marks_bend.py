@@ -205,6 +205,7 @@ def _straight_sweep(seeds) -> tuple[int, int, int]:
     return n, bent, frames
 
 
+@pytest.mark.slow  # 4 seeds of the 120 its twin below sweeps
 def test_straight_marks_through_lenses_not_called_bent():
     n, bent, frames = _straight_sweep(range(4))
     assert bent == 0 and frames == 0

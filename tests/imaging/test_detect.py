@@ -25,9 +25,9 @@ def _matches(found, truth, tol_px=6.0):
     return None
 
 
-@pytest.mark.parametrize("seed,angle,length,snr", [(1, 0.03, 150, 11.0), (2, 89.97, 170, 14.0),
-                                                   pytest.param(3, 33.0, 300, 22.0,
-                                                                marks=pytest.mark.slow)])
+@pytest.mark.parametrize("seed,angle,length,snr", [
+    pytest.param(1, 0.03, 150, 11.0, marks=pytest.mark.slow), (2, 89.97, 170, 14.0),
+    pytest.param(3, 33.0, 300, 22.0, marks=pytest.mark.slow)])
 def test_short_off_centre_mark_in_a_large_frame_near_the_edge(seed, angle, length, snr):
     """The misses of issue 9: 150-400 px marks, 6-7 px wide, SNR 11-22, 2448x2048 frames."""
     rng = np.random.default_rng(seed)
