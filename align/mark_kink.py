@@ -114,7 +114,8 @@ def kink_test(m: MarkMeasurement, sigma: np.ndarray, seed: int = 0) -> Kink | No
     tb = np.quantile(t, np.linspace(TRIM, 1 - TRIM, N_BREAKS))
     H = _whiten(np.maximum(0.0, t[:, None] - tb[None, :]), sigma, m.chol)
     H -= Q0 @ (Q0.T @ H)
-    H /= np.linalg.norm(H, axis=0)
+    h_norm = np.linalg.norm(H, axis=0)
+    H /= h_norm
     z = _whiten(e[:, None], sigma, m.chol)
     z -= Q0 @ (Q0.T @ z)
     dof = n_pts - X0.shape[1] - 1
@@ -127,10 +128,12 @@ def kink_test(m: MarkMeasurement, sigma: np.ndarray, seed: int = 0) -> Kink | No
     H1 = _whiten(np.maximum(0.0, t[:, None] - tb[None, :]), sigma, m.chol)
     H1 -= Q1 @ (Q1.T @ H1)
     z1 = _whiten(e[:, None], sigma, m.chol)
-    proj = (H1.T @ (z1 - Q1 @ (Q1.T @ z1)))[:, 0]
-    norm2 = np.maximum(np.sum(H1 * H1, axis=0), 1e-300)
-    k = int(np.argmax(proj**2 / norm2))
-    turn = float(np.arctan(proj[k] / norm2[k]))  # the hinge's slope change [px/px]
+    k = int(np.argmax((H1.T @ (z1 - Q1 @ (Q1.T @ z1)))[:, 0] ** 2
+                      / np.maximum(np.sum(H1 * H1, axis=0), 1e-300)))
+    # The turn: the hinge's slope change [px/px] at the test's own best break, with the bow
+    # in the model (against the line alone a lens's cubic bow reads as a turn of degrees).
+    j = int(np.argmax(f))
+    turn = float(np.arctan(c[j] / max(float(h_norm[j]), 1e-300)))
     # The null: white residuals of the same design (the whitened centres are independent
     # under the model); F is scale-free, so a mis-stated sigma does not move it.
     Z = np.random.default_rng(seed).standard_normal((n_pts, N_SIM))

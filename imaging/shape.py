@@ -37,13 +37,15 @@ KNOT_PX = 0.5
 profile varies over ~1 px (blur >= 0.5 px plus the pixel), which cubics every 0.5 px
 follow to a few per cent."""
 
-SHAPE_BELOW_CYCLES = 4.0
-"""The departure is fitted on marks that cross fewer pixel-phase cycles than this along
-their length (:func:`phase_cycles`). The phase-dependent misfit is periodic in the phase:
-over many cycles it averages out of the line's angle (what is left is a wiggle at the pixel
-pitch, which the residual loop tests for), and only a mark that sees a cycle or two (a
-300 px mark within ~0.8 deg of a pixel axis) turns it into a tilt. The fit costs ~10-15 ms
-of CPU per mark, which the other marks are spared."""
+SHAPE_BELOW_CYCLES = 0.0
+"""Off (0). When on, the departure is fitted on marks that cross fewer pixel-phase cycles
+than this along their length (:func:`phase_cycles`; 4 was tried: a 300 px mark within
+~0.8 deg of a pixel axis, where the periodic misfit becomes a tilt). Withdrawn after the
+merged run: it made two independent users' cases worse (a quantisation-dominated narrow
+8-bit groove +17.1" +- 4.8" -> +20.7" +- 5.0"; a ruled scale's line among numerals and dust
+within 3.5 u -> z -4.6), while the near-axis bias it removes came from rendering the sharp
+profile and blurring after the pixels: blurred before them, as optics do, the same rounded
+groove shows none (RMS z 1.02 over 24 marks, tests/imaging/test_shape.py)."""
 
 
 def phase_cycles(angle_rad: float, length_px: float) -> float:
