@@ -117,6 +117,12 @@ def _block_exp(s: tuple[np.ndarray, int], tau: float) -> np.ndarray:
     return np.exp(-dt[:m * b] / tau).reshape(m, b).mean(1)
 
 
+def _stat(c: np.ndarray, var: np.ndarray) -> float:
+    """The F statistic of the three c_a (0 where a variance is not positive: samples
+    quantised flat within the blocks say nothing about a transient)."""
+    return float(np.sum(c**2 / var)) / 3 if np.all(var > 0) else 0.0
+
+
 def _dm(v: np.ndarray) -> np.ndarray:
     return v - v.mean()
 
@@ -167,16 +173,18 @@ def settling(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
     for tau in taus:
         delta = [means[j - 1] - means[j] for j in use]
         c, var, dof = _fit(y, shape, nuis, delta, tau)
-        f = float(np.sum(c**2 / var)) / 3
+        f = _stat(c, var)
         if best is None or f > best[0]:
             best = (f, tau, c, var, dof)
     f, tau, c, var, dof = best
+    if dof <= 0:
+        return None
     # tau refined between its neighbours (a searched parameter: the grid's count stands).
     delta = [means[j - 1] - means[j] for j in use]
 
     def neg_f(g: float) -> float:
         cc, vv, _ = _fit(y, shape, nuis, delta, float(np.exp(g)))
-        return -float(np.sum(cc**2 / vv)) / 3
+        return -_stat(cc, vv)
 
     g = np.log(tau)
     r = minimize_scalar(neg_f, bounds=(g - np.log(TAU_STEP), g + np.log(TAU_STEP)),
