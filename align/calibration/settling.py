@@ -11,15 +11,19 @@ of the means calling for anything: issue 19, user 8).
 While the triad is static only such a transient, the triad's wander (a bias or scale drift:
 a trend common to the poses, or in proportion to the axis's reading) and noise change its
 samples, so the transient is tested where nothing else can mimic it: each axis's block means
-of every pose (the pose's mean removed) regressed on the transient's shape c_a, with the
-drifts' trends as nuisance columns; an F test of the three c_a over the block means' own
-scatter (which carries the noise's correlation over up to a block), Sidak-corrected over the
-tau grid. Found, each pose's samples are taken back by the fitted transient (iterated: the
-changes u_{p-1} - u_p come from the corrected means), the correction's uncertainty is added
-to each pose's sigma, and the result says so.
+of every pose (less their mean) give the pose's amplitude of the transient's shape, and
+across the poses these amplitudes are regressed on the change into each pose (c_a), beside a
+constant and the pose's reading (a bias drift, a scale drift); an F test of the three c_a
+over the amplitudes' scatter about that fit (which carries whatever correlation the noise
+within a pose has: a bias walk moves each pose's amplitude, independently of the turn),
+Sidak-corrected over the tau grid. Found, the transient's c and tau are estimated from all
+block means at once (far better determined than by the poses' amplitudes), each pose's
+samples are taken back by it (iterated: the changes u_{p-1} - u_p come from the corrected
+means), the correction's uncertainty (the larger of the two estimates' u of c) is added to
+each pose's sigma, and the result says so.
 
-Hand-written: a pooled regression with per-pose intercepts over a few hundred block means,
-a few lines of numpy (no library fits one transient shared by many short records).
+Hand-written: two small regressions over a few hundred block means, a few lines of numpy
+(no library fits one transient shared by many short records).
 """
 
 from __future__ import annotations
@@ -40,8 +44,9 @@ for settling at most this often."""
 TAU_STEP = 2.0
 """Ratio of successive time constants of the grid: from two blocks' length up to half the
 shortest pose used (a transient longer than that is a trend of the pose, the wander's)."""
-MIN_POSES = 4
-"""Fewest poses with a previous pose and enough samples for the test."""
+MIN_POSES = 6
+"""Fewest poses with a previous pose and enough samples for the test (the amplitudes' fit
+has three coefficients per axis: three degrees of freedom left)."""
 
 
 @dataclass(frozen=True)
@@ -91,12 +96,40 @@ def _blocks(x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     return (x[:m * b].reshape(m, b, -1).mean(1), t[:m * b].reshape(m, b).mean(1), b)
 
 
-def _fit(y, shape, nuis, delta, tau):
-    """Per axis: c_a, its variance, the residual variance and dof; the regressor per block
-    delta_p,a (exp(-(t - t0)/tau) pose-demeaned), nuisance columns pose-demeaned."""
+def _fit(y, shape, level, delta, tau):
+    """Per axis: c_a, its variance and the dof of that variance. Each pose's own amplitude
+    of the shape exp(-(t - t0)/tau) in its block means (both less their mean), then across
+    the poses the amplitudes regressed on (1, the pose's reading ``level``, the change
+    ``delta`` into it) — a bias drift gives every pose one amplitude, a scale drift one in
+    proportion to its reading — weighted by the shape's energy in the pose, and c_a's
+    variance from their scatter about that fit: whatever correlation the noise within a
+    pose has (a bias walk), it is in the scatter of the poses' amplitudes, which a walk
+    makes independently of the turn."""
+    amp, w = [], []
+    for s, v in zip(shape, y, strict=True):
+        x = _dm(_block_exp(s, tau))
+        xx = float(x @ x)
+        w.append(xx)
+        amp.append((x @ (v - v.mean(0))) / xx if xx > 0 else np.zeros(3))
+    amp, w = np.array(amp), np.sqrt(np.array(w))
+    lev, d = np.array(level), np.array(delta)
+    dof = len(w) - 3
+    c, var = np.zeros(3), np.zeros(3)
+    for a in range(3):
+        X = np.column_stack([np.ones(len(w)), lev[:, a], d[:, a]]) * w[:, None]
+        Y = amp[:, a] * w
+        coef, *_ = np.linalg.lstsq(X, Y, rcond=None)
+        r = Y - X @ coef
+        c[a] = coef[2]
+        var[a] = float(r @ r) / dof * np.linalg.pinv(X.T @ X)[2, 2]
+    return c, var, dof
+
+
+def _pooled(y, shape, nuis, delta, tau):
+    """The estimate: per axis c_a and its variance from all block means at once (each pose
+    less its mean; a common bias and scale trend as nuisance), white block-mean noise."""
     c, var = np.zeros(3), np.zeros(3)
     dof = sum(len(v) for v in y) - len(y) - 3
-    s2 = np.zeros(3)
     for a in range(3):
         X = np.concatenate([np.column_stack([d[a] * _dm(_block_exp(s, tau)),
                                              *(_dm(v[:, a]) for v in nu)])
@@ -104,10 +137,29 @@ def _fit(y, shape, nuis, delta, tau):
         Y = np.concatenate([_dm(v[:, a]) for v in y])
         coef, *_ = np.linalg.lstsq(X, Y, rcond=None)
         r = Y - X @ coef
-        s2[a] = float(r @ r) / dof
-        cov = np.linalg.pinv(X.T @ X) * s2[a]
-        c[a], var[a] = coef[0], cov[0, 0]
+        c[a] = coef[0]
+        var[a] = float(r @ r) / dof * np.linalg.pinv(X.T @ X)[0, 0]
     return c, var, dof
+
+
+def _best_tau(fit, taus, args) -> tuple[float, float, np.ndarray, np.ndarray, int]:
+    """The tau of ``taus`` with the largest F of ``fit``, refined between its neighbours
+    (bounded search on log tau): (F, tau, c, var, dof)."""
+    best = None
+    for tau in taus:
+        c, var, dof = fit(*args, float(tau))
+        f = _stat(c, var)
+        if best is None or f > best[0]:
+            best = (f, float(tau), c, var, dof)
+    g = np.log(best[1])
+    r = minimize_scalar(lambda x: -_stat(*fit(*args, float(np.exp(x)))[:2]),
+                        bounds=(g - np.log(TAU_STEP), g + np.log(TAU_STEP)),
+                        method="bounded", options={"xatol": 0.02})
+    if -r.fun > best[0]:
+        tau = float(np.exp(r.x))
+        c, var, dof = fit(*args, tau)
+        best = (-float(r.fun), tau, c, var, dof)
+    return best
 
 
 def _block_exp(s: tuple[np.ndarray, int], tau: float) -> np.ndarray:
@@ -152,16 +204,14 @@ def settling(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
            if len(samples[order[j]]) >= MIN_SLOPE_SAMPLES and np.ptp(times[order[j]]) > 0]
     if len(use) < MIN_POSES:
         return None
-    y, shape, nuis, tb0 = [], [], [], []
-    lengths = []
+    y, shape, level, nuis, tb0, lengths = [], [], [], [], [], []
     for j in use:
         x, t = np.asarray(samples[order[j]], float), np.asarray(times[order[j]], float)
         yb, tb, b = _blocks(x, t)
         y.append(yb)
         shape.append((t - t[0], b))
+        level.append(means[j])
         tc = tb - tb.mean()
-        # Nuisance: a bias drift (a trend common to the poses) and a scale drift (a trend
-        # in proportion to the axis's reading).
         nuis.append((np.outer(tc, np.ones(3)), np.outer(tc, means[j])))
         tb0.append(b * float(np.median(np.diff(t))) if len(t) > 1 else 0.0)
         lengths.append(float(np.ptp(t)))
@@ -169,32 +219,17 @@ def settling(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
     if not hi > lo:
         return None
     taus = lo * TAU_STEP ** np.arange(int(np.floor(np.log(hi / lo) / np.log(TAU_STEP))) + 1)
-    best = None
-    for tau in taus:
-        delta = [means[j - 1] - means[j] for j in use]
-        c, var, dof = _fit(y, shape, nuis, delta, tau)
-        f = _stat(c, var)
-        if best is None or f > best[0]:
-            best = (f, tau, c, var, dof)
-    f, tau, c, var, dof = best
-    if dof <= 0:
-        return None
-    # tau refined between its neighbours (a searched parameter: the grid's count stands).
     delta = [means[j - 1] - means[j] for j in use]
-
-    def neg_f(g: float) -> float:
-        cc, vv, _ = _fit(y, shape, nuis, delta, float(np.exp(g)))
-        return -_stat(cc, vv)
-
-    g = np.log(tau)
-    r = minimize_scalar(neg_f, bounds=(g - np.log(TAU_STEP), g + np.log(TAU_STEP)),
-                        method="bounded", options={"xatol": 0.02})
-    if -r.fun > f:
-        tau = float(np.exp(r.x))
-        c, var, dof = _fit(y, shape, nuis, delta, tau)
-        f = -float(r.fun)
+    # The test: the amplitudes across the poses (robust to the noise's correlation).
+    f, _, _, _, dof = _best_tau(_fit, taus, (y, shape, level, delta))
     p = float(-np.expm1(len(taus) * np.log1p(-min(special.fdtrc(3, dof, f), 1 - 1e-16))))
-    return Settling(c, np.sqrt(var), float(tau), p, p < alpha)
+    if not p < alpha:
+        return Settling(np.zeros(3), np.full(3, np.inf), float("nan"), p, False)
+    # Found: the transient from every block mean at once (its tau and c determined far
+    # better than by the poses' amplitudes); its u the larger of the two estimates'.
+    _, tau, c, var, _ = _best_tau(_pooled, taus, (y, shape, nuis, delta))
+    _, v_rob, _ = _fit(y, shape, level, delta, tau)
+    return Settling(c, np.sqrt(np.maximum(var, v_rob)), tau, p, True)
 
 
 def settle_samples(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
