@@ -350,7 +350,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
                                  expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
-    found, split = _split_kinked(measured.items, name, alpha)
+    found, split = _split_kinked(measured.items, name, alpha, image, camera)
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     # One lens for the frame, all its marks together (identifiability first).
     lens = camera_lens(ms, camera, ranges, alpha)
@@ -421,7 +421,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
-            items, split = _split_kinked(fr.items, str(path), alpha)
+            items, split = _split_kinked(fr.items, str(path), alpha, got.pixels, camera)
             found_all.append(items)
             split_all[str(path)] = split
         except ImageInputError as exc:
@@ -453,15 +453,17 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     return out
 
 
-def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float
+def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float,
+                  image: np.ndarray, camera: CameraModel | None
                   ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, str]]:
     """The frame's marks with each kinked one (:func:`align.mark_kink.split_kinked`) as its
-    two straight parts, and the note of each part (by its new index)."""
+    two straight parts, each measured again from ``image`` as its own groove, and the note
+    of each part (by its new index)."""
     out: list[MarkMeasurement | ImageInputError] = []
     said: dict[int, str] = {}
     for item in items:
         parts, kink = ((item,), None) if isinstance(item, ImageInputError) else split_kinked(
-            item, alpha)
+            item, alpha, image, camera, name)
         if len(parts) == 2 and kink is not None:
             i = len(out)
             turn = float(np.rad2deg(_wrap(parts[1].line.angle_rad - parts[0].line.angle_rad)))
