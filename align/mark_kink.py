@@ -212,11 +212,20 @@ def _remeasured(image: np.ndarray, m: MarkMeasurement, part: MarkMeasurement, si
     t = raw @ u
     cand = replace(m.candidate, angle_rad=lf.angle_rad, offset_px=lf.offset_px,
                    t_start_px=float(t.min()), t_end_px=float(t.max()), fused=None)
+    # The other stroke out of the image (its side of the joint set to the groove's
+    # background level): measured with it, the part's groove ran on into it (a 5 deg V's
+    # strokes stay within one groove width for ~50 px from the joint), its band fit was the
+    # V's again and a part was read as a bent mark. (Set to 0, read as clipped, the band
+    # fit's profile degenerated: width 0.15 px, blur 5.5 px.)
+    h, w = image.shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    um, _ = line_frame(m.line.angle_rad)
+    along = (xs - (w - 1) / 2) * um[0] + (ys - (h - 1) / 2) * um[1]
     try:
-        again = measure_candidate(image, cand, camera, where)
+        again = measure_candidate(np.where(side * (along - tb) > 0, image,
+                                           m.profile.background_dn), cand, camera, where)
     except ImageInputError:
         return part
-    um, _ = line_frame(m.line.angle_rad)
     ta = again.points @ um
     keep = np.flatnonzero(side * (ta - tb) > guard)
     return _part(again, keep, again.sigma) or part
