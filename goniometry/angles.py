@@ -37,7 +37,8 @@ FIT_REVOLUTIONS = 512
 # a whole number of revolutions (the faces' sequence goes on, so nothing in the rows shows it,
 # but the ring laser's phase went on through the lost revolutions: the floors' steps after
 # the gap fall at another phase). Which of the two, and where, the floors cannot tell: a scan
-# for a phase offset at every pulse found 9 of 20 stitches and 8 false ones in 20 clean logs.
+# for a phase offset at every pulse found 2 of 40 stitches and 22 in their 40 clean twins
+# (benchmarks/gonio_stitch_scan.py; docs/goniometer-dropouts.md).
 METHOD_OFF_PATH = "batch means (floors off the phase path)"
 
 
