@@ -23,6 +23,7 @@ Positions t [px] along the line of the :class:`~imaging.groove.ProfileFit` (its 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -324,20 +325,24 @@ again over it [px] (a few blur widths: more than where the half-depth point may 
 
 @dataclass(frozen=True)
 class EndsCheck:
-    """:func:`groove_ends` of one measurement's profile, extent and centres (its path), on
-    the frame as given: kept with the measurement, so that the obstruction check of its ends
+    """:func:`groove_ends` of one measurement's profile, extent and centres (its path) in
+    one image: kept with the measurement, so that the obstruction check of its ends
     (``align.family.member_ends``) does not run again on the same pixels (~4 % of a 640 x 480
-    frame's time). It answers only for those very objects (:meth:`for_mark`)."""
+    frame's time). It answers only for those very objects (:meth:`for_mark`): the image
+    itself, not a copy or a version with a background or a shadow removed (held by a weak
+    reference: a session's results do not keep its frames alive)."""
 
+    image: weakref.ref
     profile: ProfileFit
     extent: tuple[float, float]
     centres: Centres
     ends: GrooveEnds
 
-    def for_mark(self, pf: ProfileFit, extent: Sequence[float], cen: Centres
-                 ) -> GrooveEnds | None:
-        """The ends when ``pf``, ``extent`` and ``cen`` are the ones checked, else None."""
-        same = (pf is self.profile and cen is self.centres
+    def for_mark(self, image: np.ndarray, pf: ProfileFit, extent: Sequence[float],
+                 cen: Centres) -> GrooveEnds | None:
+        """The ends when ``image``, ``pf``, ``extent`` and ``cen`` are the ones checked,
+        else None."""
+        same = (self.image() is image and pf is self.profile and cen is self.centres
                 and tuple(extent) == tuple(self.extent))
         return self.ends if same else None
 
@@ -346,7 +351,7 @@ def checked_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                  cen: Centres, check: EndsCheck | None = None) -> GrooveEnds:
     """:func:`groove_ends` along the groove's path through ``cen``, from ``check`` when it
     holds these very inputs (the same result: the same function of the same pixels)."""
-    got = check.for_mark(pf, extent, cen) if check is not None else None
+    got = check.for_mark(image, pf, extent, cen) if check is not None else None
     return got if got is not None else groove_ends(image, pf, extent,
                                                    path=groove_path(cen, pf))
 
@@ -369,7 +374,7 @@ def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], ope
     if not any(opened):
         return None, None
     e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
-    check = EndsCheck(pf, (float(ext[0]), float(ext[1])), cen, e)
+    check = EndsCheck(weakref.ref(image), pf, (float(ext[0]), float(ext[1])), cen, e)
     # Only a groove seen on well past the look (a clean long mark's end can lie just at it).
     on = (opened[0] and e.start_px < ext[0] - RUNS_ON_PX,
           opened[1] and e.end_px > ext[1] + RUNS_ON_PX)

@@ -64,9 +64,8 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
-    ``ends_check``: the obstruction check of the groove's ends made while measuring it, on
-    the frame as given (:class:`imaging.ends.EndsCheck`; None: not made, or the frame was
-    changed by a background's removal).
+    ``ends_check``: the obstruction check of the groove's ends made while measuring it
+    (:class:`imaging.ends.EndsCheck`, for the image measured; None: not made).
 
     Attributes
     ----------
@@ -105,7 +104,7 @@ class MarkMeasurement:
     background_u_rad : float
         What an oriented background's removal may leave on the angle [rad].
     ends_check : EndsCheck or None
-        Its ends' obstruction check, when made on the frame as given.
+        Its ends' obstruction check, when made.
     """
 
     candidate: MarkCandidate
@@ -460,7 +459,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
     # same frame as an array got u 1745" where its file got 5.3". (read_image gives floats:
     # no copy then.)
-    image = given = np.asarray(image, dtype=float)
+    image = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     if mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
@@ -553,9 +552,6 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if not out:
         raise ImageInputError(f"{where}: no mark found (the lines found are shorter than "
                               f"{shortest:.0f} px once measured)")
-    if image is not given:  # a background removed: the ends were checked on other pixels
-        out = [replace(m, ends_check=None) if isinstance(m, MarkMeasurement) else m
-               for m in out]
     # Crossings name the other mark by its place in the output, as the user sees it.
     out = [replace(m, crossings=tuple((index.get(j, j), n) for j, n in m.crossings))
            if isinstance(m, MarkMeasurement) and m.crossings else m for m in out]
