@@ -340,7 +340,8 @@ def test_run_never_calls_a_grossly_inconsistent_session_ok(tmp_path, case):
     rc, o, e, d = _gross(tmp_path, t, toml, rows)
     assert "Traceback" not in e
     # chi2/dof of 10^4-10^6: no inflation of u makes that a trustworthy result
-    assert rc == 2 and (d is None or d["ok"] is False), (rc, d and d["ok"])
+    # Decided (it was "no JSON, or ok false"): the result is written, ok false, exit 2.
+    assert rc == 2 and d is not None and d["ok"] is False, (rc, d and d["ok"])
 
 
 def test_run_swapped_platform_axes_is_a_clear_message(tmp_path):
