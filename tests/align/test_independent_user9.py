@@ -1,0 +1,269 @@
+"""Independent user 9: the camera stage with scribe marks rendered from physics, through lenses
+I calibrate (``cv2.calibrateCamera`` on the real chessboard photographs) or vary myself.
+
+The inputs come from ``tests/align/user9_inputs.py`` (my own groove profiles -- a V with a
+flat, a U, a double line -- rendered at 8 x 8 samples per pixel, blurred there by the optics,
+area-averaged, photon + read noise, quantised) and import nothing from the project. The CLI
+runs in process through ``align.cli.main(argv)``. Right behaviour passes; each defect is
+written as the tool should behave and marked ``xfail(strict=True)`` with the figures I saw.
+
+Truth: a mark's angle is its direction in the ideal (normalised, square-pixel) plane, from +x
+towards -y, in (-90, 90] degrees (docs/commands/marks.md).
+
+Tolerances. A single Gaussian estimate lies beyond 4 u with probability 6e-5; a test over a
+handful of marks allows |z| <= 4 each (the brief's "no |z| > 4"), so a correct tool fails it
+with p < 1e-3 for up to 16 marks. Where a result may be *flagged* instead (exit status 2,
+``ok`` false, ``lens_limited``), a flagged result passes: only a confident wrong answer
+fails.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from align.cli import main as align_main  # the CLI's entry point: argv -> exit status
+from tests.align import user9_inputs as ui
+
+Z_MAX = 4.0  # per mark; p = 6e-5 for a Gaussian z (see the module docstring)
+
+
+def align(*args: str) -> tuple[int, str, str]:
+    """``align ARGS`` in process: (exit status, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = align_main([str(a) for a in args])
+        except SystemExit as e:  # argparse's own refusals
+            rc = e.code if isinstance(e.code, int) else 2
+    return rc, out.getvalue(), err.getvalue()
+
+
+def marks(paths, *extra) -> tuple[int, dict, str]:
+    """``align marks PATHS --json -``: (exit status, the JSON, stderr)."""
+    rc, out, err = align("marks", *paths, "--json", "-", *extra)
+    i = out.find("{")
+    assert i >= 0, f"no JSON on stdout (exit {rc}): {err[-400:]}"
+    return rc, json.loads(out[i:]), err
+
+
+def matched(scene: ui.Scene, found: list[dict]) -> list[dict | None]:
+    """For each of my grooves, the reported mark whose line passes nearest its middle on the
+    sensor and whose angle is nearest its own (None when nothing is near: 40 px, 1 deg; the
+    reported offset is the undistorted line's, so a distorted middle may be tens of px off)."""
+    lens = scene.lens
+    w, h = lens.size
+    res = []
+    for g in scene.grooves:
+        m0, _ = ui.groove_geometry(lens, g)
+        mid = ui.project(lens, np.array([m0[0]]), np.array([m0[1]]))[0]
+        best, score = None, np.inf
+        for m in found:
+            if not m.get("found"):
+                continue
+            a = np.deg2rad(m["angle_deg"])
+            dist = abs((mid - [(w - 1) / 2, (h - 1) / 2]) @ [np.sin(a), np.cos(a)]
+                       - m["offset_px"])
+            da = abs(ui.angle_error_arcsec(m["angle_deg"], g.angle_deg)) / 3600
+            if dist < 40 and da < 1 and dist + 10 * da < score:
+                best, score = m, dist + 10 * da
+        res.append(best)
+    return res
+
+
+def confident_wrong(scene: ui.Scene, rc: int, doc: dict) -> list[str]:
+    """Each of my grooves reported ok with its angle beyond Z_MAX u of the truth, or not
+    reported at all while the document says all is well."""
+    bad = []
+    for g, m in zip(scene.grooves, matched(scene, doc["marks"]), strict=False):
+        if m is None:
+            if rc == 0 and doc["ok"]:
+                bad.append(f"{g.angle_deg:+.3f} deg mark at {g.centre_px} missing, yet ok")
+            continue
+        flagged = rc != 0 or not doc["ok"] or m.get("lens_limited")
+        z = ui.angle_error_arcsec(m["angle_deg"], g.angle_deg) / m["angle_u_arcsec"]
+        if not flagged and abs(z) > Z_MAX:
+            bad.append(f"{g.angle_deg:+.3f} deg at {g.centre_px}: read {m['angle_deg']:+.5f}"
+                       f" +- {m['angle_u_arcsec']:.2f}\" (z {z:+.2f}), ok")
+    return bad
+
+
+def z_scores(scene: ui.Scene, doc: dict) -> list[float]:
+    out = []
+    for g, m in zip(scene.grooves, matched(scene, doc["marks"]), strict=False):
+        assert m is not None, f"{g} not found: {doc['warnings']}"
+        out.append(ui.angle_error_arcsec(m["angle_deg"], g.angle_deg) / m["angle_u_arcsec"])
+    return out
+
+
+@pytest.fixture(scope="module")
+def chess():
+    if not ui.CHESS.is_dir():
+        pytest.skip(f"real data folder {ui.CHESS} is absent (it lives in ../shared/data/real)")
+    return ui.chessboard_calibration()[0]
+
+
+def shoot(scene: ui.Scene, seed: int, folder: Path, name: str = "mark", ext: str = ".png",
+          jpeg: int | None = None) -> Path:
+    return ui.write_image(ui.render(scene, seed), folder / f"{name}{ext}", jpeg)
+
+
+# ------------------------------------------------------- through my calibrated camera model
+
+
+# where marks are: centre, off-centre, near a corner, along the frame's top edge, full frame
+PLACES = [((320, 240), 0.0, 400), ((100, 80), 30.0, 150), ((560, 420), -20.0, 120),
+          ((600, 240), 85.0, 300), ((320, 240), 37.0, 560), ((320, 240), 5.0, 100)]
+
+
+def exact_model_trial(lens, folder, profile, places, seeds):
+    cam = ui.camera_json(lens, folder / "cam.json")
+    bad, zs, flagged = [], [], 0
+    for seed in seeds:
+        for i, (c, a, L) in enumerate(places):
+            scene = ui.Scene((ui.Groove(c, a, L, profile=profile),), lens)
+            rc, doc, _ = marks([shoot(scene, 10 * seed + i, folder), "--force", "--camera", cam])
+            bad += confident_wrong(scene, rc, doc)
+            if rc == 0:
+                zs += z_scores(scene, doc)
+            else:
+                flagged += 1
+    return bad, zs, flagged
+
+
+@pytest.mark.parametrize("profile,places", [("vflat", PLACES[:3]), ("u", PLACES[3:]),
+                                            ("double", PLACES[::2])])
+def test_marks_through_my_exact_camera_model_are_within_u(chess, tmp_path, profile, places):
+    """Marks (100-560 px, centre to corner) through the real lens, my calibration given as
+    the camera model (exact: the renderer uses it): each within 4 u, or flagged."""
+    bad, zs, flagged = exact_model_trial(chess, tmp_path, profile, places, [1])
+    assert not bad, bad
+    assert len(zs) >= 2, f"only {len(zs)} of 3 marks measured without a flag"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("profile", ["vflat", "u", "double"])
+def test_marks_through_my_exact_camera_model_over_seeds(chess, tmp_path, profile):
+    """The six places x 3 seeds: none beyond 4 u unflagged; RMS z of the unflagged ones below
+    1.5 (chi2_n / n > 2.25 has p < 1e-3 for n >= 12)."""
+    bad, zs, flagged = exact_model_trial(chess, tmp_path, profile, PLACES, [2, 3, 4])
+    assert not bad, bad
+    assert len(zs) >= 12, f"only {len(zs)} of 18 marks unflagged"
+    assert np.sqrt(np.mean(np.square(zs))) < 1.5, np.round(zs, 2)
+
+
+def test_several_marks_in_one_frame_through_my_camera_model(chess, tmp_path):
+    """Three marks in one frame (centre, upper left, lower right) through the exact model:
+    all found and within 4 u."""
+    cam = ui.camera_json(chess, tmp_path / "cam.json")
+    scene = ui.Scene((ui.Groove((320, 240), -12.0, 300), ui.Groove((130, 110), 75.0, 180),
+                      ui.Groove((500, 380), 40.0, 200, profile="u")), chess)
+    rc, doc, _ = marks([shoot(scene, 3, tmp_path), "--camera", cam])
+    assert rc == 0 and doc["ok"], doc["warnings"]
+    zs = z_scores(scene, doc)
+    assert max(abs(z) for z in zs) < Z_MAX, zs
+
+
+@pytest.mark.parametrize("dist", [
+    (0.35, -0.1, 0.0008, -0.0006, 0.02, 0.65, -0.05, 0.03),  # OpenCV's rational model
+    (-0.25, 0.07, 0.0015, -0.0009),                            # four coefficients
+], ids=["rational8", "four"])
+def test_camera_models_with_8_or_4_coefficients(chess, tmp_path, dist):
+    """The docs allow dist_coeffs of 4, 5, 8, 12 or 14 values: a lens of 8 (rational) or 4
+    coefficients, rendered through exactly that model and given as the camera: within 4 u."""
+    lens = ui.Lens(chess.K, dist)
+    cam = ui.camera_json(lens, tmp_path / "cam.json")
+    bad = []
+    for i, (c, a, L) in enumerate([((100, 80), 30.0, 200), ((560, 400), -60.0, 200),
+                                   ((320, 30), 3.0, 450)]):
+        scene = ui.Scene((ui.Groove(c, a, L),), lens)
+        rc, doc, _ = marks([shoot(scene, 20 + i, tmp_path), "--force", "--camera", cam])
+        assert rc == 0, doc["warnings"]
+        bad += [z for z in z_scores(scene, doc) if abs(z) > Z_MAX]
+    assert not bad, bad
+
+
+# ------------------------------------------------------------- a lens nobody declared
+
+
+def lens_trial(seed: int, folder: Path) -> tuple[list[str], list[str], list[float]]:
+    """One frame of 1-3 marks through a lens drawn from the brief's ranges, no model given.
+    Returns (confident wrong answers, wrong-sign k1 applied, z of the unflagged marks)."""
+    rng = np.random.default_rng(100 + seed)
+    lens = ui.varied_lens(rng)
+    grooves = tuple(
+        ui.Groove((float(rng.uniform(80, 560)), float(rng.uniform(60, 420))),
+                  float(rng.uniform(-90, 90)), float(rng.uniform(120, 380)),
+                  profile=str(rng.choice(["vflat", "u"])))
+        for _ in range(int(rng.integers(1, 4))))
+    scene = ui.Scene(grooves, lens, bits=int(rng.choice([8, 12])))
+    ext = ".png" if scene.bits == 8 else ".tif"
+    rc, doc, _ = marks([shoot(scene, seed, folder, ext=ext), "--force"])
+    k1_true = ui.half_diagonal_k1(lens)
+    wrong_sign = []
+    for m in doc["marks"]:
+        k1 = (m.get("lens") or {}).get("parameters", {}).get("k1", {})
+        if k1.get("applied") and np.sign(k1["value"]) != np.sign(k1_true):
+            wrong_sign.append(f"seed {seed}: k1 {k1['value']:+.4f} applied, truth {k1_true:+.4f}")
+    zs = []
+    if rc == 0 and doc["ok"]:
+        zs = z_scores(scene, doc)
+    return confident_wrong(scene, rc, doc), wrong_sign, zs
+
+
+def test_undeclared_lens_never_a_confident_wrong_answer(tmp_path):
+    """Three frames through lenses from k1 in [-0.3, 0.1] (OpenCV's units, f 540 px), p up to
+    1e-3, principal point up to 20 px off, aspect 0.995-1.005, no model: every mark within
+    4 u or flagged, and no k1 applied with the wrong sign."""
+    bad, signs = [], []
+    for seed in (0, 2, 9):
+        b, s, _ = lens_trial(seed, tmp_path)
+        bad += b
+        signs += s
+    assert not bad, bad
+    assert not signs, signs
+
+
+@pytest.mark.slow
+def test_undeclared_lens_over_seeds(tmp_path):
+    """24 frames (~50 marks) of the trial above."""
+    bad, signs, zs = [], [], []
+    for seed in range(24):
+        b, s, z = lens_trial(seed, tmp_path)
+        bad += b
+        signs += s
+        zs += z
+    assert not bad, bad
+    assert not signs, signs
+    if len(zs) >= 10:  # RMS z of n unflagged marks: chi2_n / n below 2.0 at p < 1e-3 for n >= 10
+        assert np.sqrt(np.mean(np.square(zs))) < np.sqrt(2.0), zs
+
+
+# ------------------------------------------------------------------------ near vertical
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "a 400 px mark 2.2\" past vertical (truth -89.9994 deg), distortion-free camera declared: "
+    "4 of 4 seeds read exactly +90.000000 deg (also 6 of 8 seeds in a longer run; truth "
+    "90.0: 5 of 8; truth 89.9994: 2 of 8), angle_before_loop_deg the same: readings just "
+    "past 90 deg are snapped to 90 instead of wrapping to -89.99x; no such pinning at 0 deg"))
+def test_a_near_vertical_mark_is_not_pinned_to_exactly_90_degrees(tmp_path):
+    """A mark 2.2" past vertical (truth -89.9994 deg, i.e. 90.0006), distortion-free camera
+    declared: the estimator is continuous, so no reading may be exactly 90.000000 deg (a
+    Gaussian estimate of u 2" lands within 1e-9 deg of 90 with probability ~1e-8)."""
+    lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
+    pinned = []
+    for seed in range(3):
+        scene = ui.Scene((ui.Groove((320, 240), -89.9994, 400),), lens, vignetting=0.0)
+        rc, doc, _ = marks([shoot(scene, seed, tmp_path), "--force",
+                            "--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0"])
+        assert rc == 0, doc["warnings"]
+        a = doc["marks"][0]["angle_deg"]
+        if abs(abs(a) - 90.0) < 1e-9:
+            pinned.append(seed)
+    assert not pinned, f"seeds {pinned} read exactly 90.000000 deg"
