@@ -267,3 +267,103 @@ def test_a_near_vertical_mark_is_not_pinned_to_exactly_90_degrees(tmp_path):
         if abs(abs(a) - 90.0) < 1e-9:
             pinned.append(seed)
     assert not pinned, f"seeds {pinned} read exactly 90.000000 deg"
+
+
+# ------------------------------------------------------------------------------ sessions
+#
+# My session (tests/align/user9_inputs.py, write_session): E drawn within +-200", the triad's
+# tumble (18 random attitudes x 60 samples, 100 ug noise, V), the mounted platform at 4 table
+# angles and X/Y up and down, eight mark images from cameras A and B (each view reversed),
+# one centred 380 px mark each. Checked: every angle of E within 4 u of my truth or the run
+# flagged (exit 2, ok false); an undeclared 30" roll of camera A found within 4 u.
+
+
+def run_session(folder: Path) -> tuple[int, dict, str]:
+    rc, out, err = align("run", folder, "--json", "-", "--force")
+    i = out.find("{")
+    assert i >= 0, f"no JSON on stdout (exit {rc}): {err[-600:]}"
+    return rc, json.loads(out[i:]), err
+
+
+def session_z(doc: dict, triad: ui.Triad) -> np.ndarray:
+    est = np.array(doc["misalignment_arcsec"], dtype=float)
+    u = np.array(doc["misalignment_u_arcsec"], dtype=float)
+    off = ~np.eye(3, dtype=bool)
+    return (est[off] - triad.E[off] / ui.ARCSEC) / u[off]
+
+
+def session_trial(tmp_path: Path, seed: int, **kw) -> tuple[int, dict, np.ndarray, ui.Triad]:
+    rng = np.random.default_rng(seed)
+    triad = ui.Triad(ui.random_E(rng))
+    folder = ui.write_session(tmp_path / f"unit{seed}", triad, seed, **kw)
+    rc, doc, _ = run_session(folder)
+    return rc, doc, session_z(doc, triad), triad
+
+
+def effect(doc: dict, name: str) -> dict | None:
+    return next((e for e in doc["effects"] if e["name"] == name), None)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_session_finds_an_undeclared_30_arcsec_roll(tmp_path, seed):
+    """Camera A rolled by +30" (every mark it shows turned +30" counter-clockwise), nobody
+    told: the fusion finds the roll within 4 u and E is within 4 u of my truth, ok."""
+    rc, doc, z, _ = session_trial(tmp_path, seed, rolls=(30.0, 0.0))
+    assert rc == 0 and doc["ok"], doc["warnings"]
+    assert np.max(np.abs(z)) < Z_MAX, np.round(z, 2)
+    roll = effect(doc, "camera_roll[A]")
+    assert roll is not None, [e["name"] for e in doc["effects"]]
+    zr = (roll["estimate"] / ui.ARCSEC - 30.0) / (roll["u"] / ui.ARCSEC)
+    assert abs(zr) < Z_MAX, (roll["estimate"] / ui.ARCSEC, roll["u"] / ui.ARCSEC)
+
+
+@pytest.mark.slow
+def test_session_with_an_undeclared_lens_on_camera_b(tmp_path, chess):
+    """Camera B photographs through the real chessboard lens (my calibration), its
+    [cameras.B] table empty (the lens's default ranges): E within 4 u of my truth, or the run
+    flagged (exit 2, ok false) -- never a confident wrong E."""
+    rc, doc, z, _ = session_trial(tmp_path, 2, rolls=(30.0, 0.0), lenses={"B": chess},
+                                  declare={"B": []})
+    flagged = rc != 0 or not doc["ok"]
+    assert flagged or np.max(np.abs(z)) < Z_MAX, np.round(z, 2)
+    assert np.max(np.abs(z)) < Z_MAX, ("even flagged, E's u should cover it", np.round(z, 2))
+
+
+def tilted_session(tmp_path: Path) -> tuple[int, dict, np.ndarray]:
+    # the table axis leans 25" about the lab's X and -15" about its Y: in the table frame the
+    # up vector has components (-15", -25") -- what the platform reads at table angle 0
+    rc, doc, z, _ = session_trial(tmp_path, 2, rolls=(30.0, 0.0), tilt_arcsec=(25.0, -15.0))
+    return rc, doc, z
+
+
+@pytest.mark.slow
+def test_session_with_the_platform_out_of_level(tmp_path):
+    """The table axis tilted (25", -15") and camera A rolled 30", neither declared: both
+    found, E within 4 u; the tilt's components within 4 u of (-15", -25") (up in the table
+    frame; declaring the values found makes the loop find nothing more: checked by hand)."""
+    rc, doc, z = tilted_session(tmp_path)
+    assert rc == 0 and doc["ok"], doc["warnings"]
+    assert np.max(np.abs(z)) < Z_MAX, np.round(z, 2)
+    tilt = effect(doc, "platform_tilt")
+    assert tilt is not None, [e["name"] for e in doc["effects"]]
+    comp = {c["axis"]: (c["estimate"] / ui.ARCSEC, c["u"] / ui.ARCSEC)
+            for c in tilt["components"]}
+    for axis, truth in (("x", -15.0), ("y", -25.0)):
+        est, u = comp[axis]
+        assert abs(est - truth) < Z_MAX * u, (axis, est, u)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the table tilt found is (x -16.5, y -22.9) +- 1.4\" (JSON components), but the warning "
+    "and the terminal say 'a tilt of the table axis ... (x, y) of -22.9 +- 1.4\"' -- one "
+    "number, the y component, for a two-component tilt; the effect's top-level 'estimate' is "
+    "the y component too: a user declaring table_tilt_arcsec from the message cannot"))
+def test_session_tilt_warning_names_both_components(tmp_path):
+    rc, doc, _ = tilted_session(tmp_path)
+    tilt = effect(doc, "platform_tilt")
+    comp = {c["axis"]: c["estimate"] / ui.ARCSEC for c in tilt["components"]}
+    msg = next(w for w in doc["warnings"] if "tilt of the table axis" in w)
+    for axis in ("x", "y"):
+        assert f"{comp[axis]:+.1f}" in msg or f"{comp[axis]:.1f}" in msg, (axis, comp, msg)

@@ -360,12 +360,12 @@ def _numerals(lens: Lens, scene: Scene, x0: float, y0: float, pitch: float, coun
     blurred; they are print, not grooves, so no lens is applied to them)."""
     w, h = lens.size
     n = 4
-    big = np.zeros((h * n, w * n), np.float32)
+    big = np.zeros((h * n, w * n), np.uint8)
     for i in range(count):
         org = (int((x0 + i * pitch) * n), int(y0 * n))
         cv2.putText(big, str(i % 10), org, cv2.FONT_HERSHEY_SIMPLEX, height * n / 22.0,
-                    0.5, thickness=max(1, int(0.12 * height * n / 4)), lineType=cv2.LINE_AA)
-    big = cv2.GaussianBlur(big, (0, 0), scene.sigma_px * n)
+                    255, thickness=max(1, int(0.12 * height * n / 4)), lineType=cv2.LINE_AA)
+    big = cv2.GaussianBlur(big.astype(np.float32) * (0.5 / 255), (0, 0), scene.sigma_px * n)
     return big.reshape(h, n, w, n).mean(axis=(1, 3)).astype(float)
 
 
@@ -419,3 +419,130 @@ def jpeg_with_orientation(img: np.ndarray, path: Path, orientation: int,
     seg = b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1
     path.write_bytes(data[:2] + seg + data[2:])
     return path
+
+
+# ------------------------------------------------------------------------------ a session
+
+AXES = {"+X": (1, 0, 0), "-X": (-1, 0, 0), "+Y": (0, 1, 0), "-Y": (0, -1, 0),
+        "+Z": (0, 0, 1), "-Z": (0, 0, -1)}
+VIEWS = {"A": ("A", "+X", "+Z"), "Ar": ("A", "-X", "+Z"),
+         "B": ("B", "+Y", "+Z"), "Br": ("B", "-Y", "+Z")}
+# which housings each view shows: (housing, nominal)
+VIEW_MARKS = {"A": (("x", "horizontal"), ("z", "vertical")),
+              "Ar": (("x", "horizontal"), ("z", "vertical")),
+              "B": (("y", "horizontal"), ("z", "vertical")),
+              "Br": (("y", "horizontal"), ("z", "vertical"))}
+
+
+@dataclass(frozen=True)
+class Triad:
+    """The truth: E [rad] (row i accelerometer, column j platform axis, zero diagonal), scale
+    factors k [V/g], biases b [V], white noise per sample [V]."""
+
+    E: np.ndarray
+    k: tuple = (2.51, 2.47, 2.53)
+    b: tuple = (0.012, -0.008, 0.02)
+    noise_v: float = 2.5e-4  # 100 ug at 2.5 V/g
+
+    @property
+    def S(self) -> np.ndarray:
+        """Unit sensitive axes (rows) in the platform frame: row i along (I + E)_i."""
+        m = np.eye(3) + self.E
+        return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+    def read(self, f_p: np.ndarray, rng: np.random.Generator, n: int) -> np.ndarray:
+        """n samples [V] of the triad under specific force f_p [g] (platform frame)."""
+        clean = np.array(self.k) * (self.S @ f_p) + np.array(self.b)
+        return clean + rng.normal(0, self.noise_v, (n, 3))
+
+
+def mark_angle_deg(triad: Triad, view: str, housing: str, roll_arcsec: float) -> float:
+    """A housing's mark as the view's camera displays it (docs/concepts.md: atan2(s.u, s.r)
+    + the camera's roll), in (-90, 90]."""
+    _cam, right, up = VIEWS[view]
+    s = triad.S["xyz".index(housing)]
+    a = np.degrees(np.arctan2(s @ np.array(AXES[up], float), s @ np.array(AXES[right], float)))
+    a += roll_arcsec / 3600.0
+    return float((a + 90.0) % 180.0 - 90.0) if (a + 90.0) % 180.0 != 0 else 90.0
+
+
+def tilt_up(table_deg: float, tilt_rad: tuple) -> np.ndarray:
+    """Specific force [g] in the platform frame on a table at ``table_deg`` whose axis leans
+    by ``tilt_rad`` = (about X, about Y) of the lab: the lab's up is the table axis rotated
+    back by the tilt, seen in the platform frame turned by the table angle."""
+    tx, ty = tilt_rad
+    up_table = np.array([ty, -tx, 1.0])
+    up_table /= np.linalg.norm(up_table)
+    c, s = np.cos(np.radians(table_deg)), np.sin(np.radians(table_deg))
+    rz_inv = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])  # lab/table -> platform
+    return rz_inv @ up_table
+
+
+def write_session(folder: Path, triad: Triad, seed: int, *, rolls=(0.0, 0.0),
+                  lenses: dict | None = None, declare: dict | None = None,
+                  tilt_arcsec=(0.0, 0.0), tumble_poses: int = 18) -> Path:
+    """A session folder: 8 mark images (cameras A, B, each view reversed), a tumble of the
+    triad, the mounted platform at 8 attitudes; ``session.toml`` as docs/formats.md shows.
+
+    rolls: (A, B) roll of each camera [arc-seconds], undeclared; lenses: camera -> Lens the
+    images are rendered through (default distortion-free 540 px); declare: camera -> the
+    [cameras.X] lines (default: declared distortion-free)."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    ideal = Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1.0)), (0, 0, 0, 0, 0))
+    lenses = lenses or {}
+    declare = declare or {}
+    toml = [f'name = "{folder.name}"', "", "[calibration]", 'static = "tumble.csv"',
+            'units = "V"', ""]
+    for cam in ("A", "B"):
+        toml += [f"[cameras.{cam}]"]
+        toml += declare.get(cam, ["lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0",
+                                  "lens_aspect = 0.0", "lens_pp_px = 0.0"])
+        toml += [""]
+    for v, (cam, right, up) in VIEWS.items():
+        toml += [f"[views.{v}]", f'camera = "{cam}"', f'right = "{right}"', f'up = "{up}"', ""]
+    for v, hs in VIEW_MARKS.items():
+        cam = VIEWS[v][0]
+        lens = lenses.get(cam, ideal)
+        roll = rolls["AB".index(cam)]
+        for h, nominal in hs:
+            a = mark_angle_deg(triad, v, h, roll)
+            off = rng.uniform(-40, 40, 2)
+            g = Groove((319.5 + off[0], 239.5 + off[1]), a, 380.0)
+            img = render(Scene((g,), lens), int(rng.integers(1 << 30)))
+            name = f"{h}_{v}.png"
+            write_image(img, folder / name)
+            toml += ["[[images]]", f'file = "{name}"', f'housing = "{h}"', f'view = "{v}"',
+                     f'nominal = "{nominal}"', ""]
+    # the tumble: random attitudes, 60 samples each
+    rows = ["pose,ux,uy,uz"]
+    for p in range(tumble_poses):
+        f = rng.normal(size=3)
+        f /= np.linalg.norm(f)
+        for r in triad.read(f, rng, 60):
+            rows.append(f"T{p:02d},{r[0]:.7f},{r[1]:.7f},{r[2]:.7f}")
+    (folder / "tumble.csv").write_text("\n".join(rows) + "\n")
+    # the platform
+    tilt = tuple(np.array(tilt_arcsec) * ARCSEC)
+    poses = {f"L{t:03d}": (tilt_up(t, tilt), f'{{ up = "+Z", table_deg = {t:.1f} }}')
+             for t in (0, 90, 180, 270)}
+    for ax in ("X", "Y"):
+        for sgn, nm in ((1, "up"), (-1, "dn")):
+            v = np.zeros(3)
+            v["XYZ".index(ax)] = sgn
+            poses[f"{ax}{nm}"] = (v, f'{{ up = "{"+" if sgn > 0 else "-"}{ax}" }}')
+    rows = ["pose,ux,uy,uz"]
+    for name, (f, _) in poses.items():
+        for r in triad.read(f, rng, 60):
+            rows.append(f"{name},{r[0]:.7f},{r[1]:.7f},{r[2]:.7f}")
+    (folder / "platform.csv").write_text("\n".join(rows) + "\n")
+    toml += ["[platform]", 'static = "platform.csv"', "[platform.poses]"]
+    toml += [f"{name} = {decl}" for name, (_, decl) in poses.items()]
+    (folder / "session.toml").write_text("\n".join(toml) + "\n")
+    return folder
+
+
+def random_E(rng: np.random.Generator, scale_arcsec: float = 200.0) -> np.ndarray:
+    e = rng.uniform(-scale_arcsec, scale_arcsec, (3, 3)) * ARCSEC
+    np.fill_diagonal(e, 0.0)
+    return e
