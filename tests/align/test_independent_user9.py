@@ -367,3 +367,115 @@ def test_session_tilt_warning_names_both_components(tmp_path):
     msg = next(w for w in doc["warnings"] if "tilt of the table axis" in w)
     for axis in ("x", "y"):
         assert f"{comp[axis]:+.1f}" in msg or f"{comp[axis]:.1f}" in msg, (axis, comp, msg)
+
+
+# ------------------------------------------------------------------ inputs a user may bring
+
+
+@pytest.mark.parametrize("fmt", ["jpeg75", "png12in16", "tif16"])
+def test_image_formats_through_my_camera_model(chess, tmp_path, fmt):
+    """The same off-centre 300 px mark as a JPEG (quality 75), 12-bit data in a 16-bit PNG
+    and a 16-bit TIFF, through the exact model: within 4 u (two seeds)."""
+    cam = ui.camera_json(chess, tmp_path / "cam.json")
+    g = ui.Groove((250, 300), 15.0, 300)
+    bits, ext, q = {"jpeg75": (8, ".jpg", 75), "png12in16": (12, ".png", None),
+                    "tif16": (16, ".tif", None)}[fmt]
+    zs = []
+    for seed in (1, 2):
+        scene = ui.Scene((g,), chess, bits=bits, full_well_e=20000.0 if bits == 8 else 60000.0)
+        rc, doc, _ = marks([shoot(scene, seed, tmp_path, ext=ext, jpeg=q), "--force",
+                            "--camera", cam])
+        assert rc == 0 and doc["ok"], doc["warnings"]
+        zs += z_scores(scene, doc)
+    assert max(abs(z) for z in zs) < Z_MAX, zs
+
+
+def test_odd_frame_size_and_off_centre_principal_point(tmp_path):
+    """A 641 x 479 frame, principal point (+7.3, -5.1) px off the centre, k1 -0.22, given as
+    the model: within 4 u."""
+    w, h = 641, 479
+    lens = ui.Lens(((500.0, 0, (w - 1) / 2 + 7.3), (0, 500.0, (h - 1) / 2 - 5.1), (0, 0, 1.0)),
+                   (-0.22, 0.06, 0.0005, 0.0004, 0.0), (w, h))
+    cam = ui.camera_json(lens, tmp_path / "cam.json")
+    scene = ui.Scene((ui.Groove((192.3, 143.7), 20.0, 240), ui.Groove((450, 340), -70.0, 200)),
+                     lens)
+    rc, doc, _ = marks([shoot(scene, 6, tmp_path), "--camera", cam])
+    assert rc == 0 and doc["ok"], doc["warnings"]
+    zs = z_scores(scene, doc)
+    assert max(abs(z) for z in zs) < Z_MAX, zs
+
+
+def test_exif_turned_jpeg_with_a_sensor_camera_model_is_refused_not_misread(chess, tmp_path):
+    """A JPEG of the sensor's pixels with EXIF Orientation 6 (shown turned 90 deg clockwise):
+    the model (640 x 480) is the sensor's, the displayed image 480 x 640. Applying the model to
+    the turned pixels would be wrong; the tool refuses, naming the size (exit 2). Without a
+    model the displayed angle (20 - 90 = -70 deg) is read within 4 u."""
+    cam = ui.camera_json(chess, tmp_path / "cam.json")
+    img = ui.render(ui.Scene((ui.Groove((480, 120), 20.0, 250),), chess), 3)
+    p = ui.jpeg_with_orientation(img, tmp_path / "turned.jpg", 6)
+    rc, doc, _ = marks([p, "--camera", cam])
+    assert rc == 2 and not doc["ok"]
+    assert "640x480" in doc["warnings"][0], doc["warnings"]
+    rc, doc, _ = marks([p, "--force"])
+    m = doc["marks"][0]
+    assert m["found"], doc["warnings"]
+    z = ui.angle_error_arcsec(m["angle_deg"], -70.0) / m["angle_u_arcsec"]
+    assert abs(z) < Z_MAX, (m["angle_deg"], m["angle_u_arcsec"])
+
+
+def ruled_scale(lens: ui.Lens, angle_deg: float = 3.0, numerals: bool = True) -> ui.Scene:
+    """A ruled scale: 21 lines 14 px apart along a direction ``angle_deg``, the lines across
+    it, 110 px long and every fifth 150 px, printed numerals above the long ones."""
+    a = np.deg2rad(angle_deg)
+    along = np.array([np.cos(a), -np.sin(a)])
+    up = -np.array([np.sin(a), np.cos(a)])
+    c0 = np.array([320.0, 260.0])
+    line_angle = angle_deg + 90 if angle_deg + 90 <= 90 else angle_deg - 90
+    grooves = []
+    for i in range(-10, 11):
+        L = 150.0 if i % 5 == 0 else 110.0
+        c = c0 + i * 14.0 * along + (L - 110) / 2 * up
+        grooves.append(ui.Groove((float(c[0]), float(c[1])), line_angle, L, flat=1.0,
+                                 wall=1.0))
+    extra = (("numerals", (float(c0[0] - 144), 160.0, 70.0, 5, 14.0)),) if numerals else ()
+    return ui.Scene(tuple(grooves), lens, extra=extra)
+
+
+@pytest.mark.slow  # ~8 s
+def test_ruled_scale_with_numerals_through_my_camera_model(chess, tmp_path):
+    """A ruled scale with numerals through the real lens, the exact model given: the family's
+    mean angle within 4 u of the truth, and no member beyond 4 u unflagged."""
+    cam = ui.camera_json(chess, tmp_path / "cam.json")
+    scene = ruled_scale(chess)
+    rc, doc, _ = marks([shoot(scene, 1, tmp_path), "--camera", cam, "--max-marks", "30"])
+    assert not confident_wrong(scene, rc, doc)
+    fam = next((m["family"] for m in doc["marks"] if m.get("family")), None)
+    assert fam is not None, doc["warnings"]
+    truth = scene.grooves[0].angle_deg
+    z = ui.angle_error_arcsec(fam["angle_deg"], truth) / fam["angle_u_arcsec"]
+    assert abs(z) < Z_MAX, (fam["angle_deg"], fam["angle_u_arcsec"])
+
+
+# ------------------------------------------------------------ align camera on my chessboards
+
+
+@pytest.mark.slow
+def test_align_camera_recovers_my_lens_from_rendered_chessboards(tmp_path):
+    """Ten chessboard photographs rendered through a lens I chose (k1 -0.25, k2 +0.075,
+    p1 +8.9e-4, principal point (+15.0, -13.2) px off, aspect 1.0011): every intrinsic
+    `align camera` reports within 4 u of my truth."""
+    rng = np.random.default_rng(4)
+    truth = ui.varied_lens(rng, k1=-0.25)
+    paths = []
+    for i, (R, t) in enumerate(ui.board_views(rng, 10)):
+        paths.append(ui.write_image(ui.render_board(truth, R, t, i), tmp_path / f"b{i}.png"))
+    rc, out, err = align("camera", *paths, "--pattern", "9x6", "--json", "-")
+    assert rc == 0, err[-400:]
+    d = json.loads(out[out.find("{"):])
+    k, dist, u = np.array(d["camera_matrix"]), d["dist_coeffs"], d["u"]
+    tk, td = truth.k, truth.d
+    got = {"fx": (k[0, 0], tk[0, 0]), "fy": (k[1, 1], tk[1, 1]), "cx": (k[0, 2], tk[0, 2]),
+           "cy": (k[1, 2], tk[1, 2]), "k1": (dist[0], td[0]), "k2": (dist[1], td[1]),
+           "p1": (dist[2], td[2]), "p2": (dist[3], td[3]), "k3": (dist[4], td[4])}
+    z = {n: (e - t) / u[n] for n, (e, t) in got.items()}
+    assert max(abs(v) for v in z.values()) < Z_MAX, {n: round(v, 2) for n, v in z.items()}
