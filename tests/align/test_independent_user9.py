@@ -136,8 +136,9 @@ def exact_model_trial(lens, folder, profile, places, seeds):
     return bad, zs, flagged
 
 
-@pytest.mark.parametrize("profile,places", [("vflat", PLACES[:3]), ("u", PLACES[3:]),
-                                            ("double", PLACES[::2])])
+@pytest.mark.parametrize("profile,places", [
+    ("vflat", PLACES[:3]), ("u", PLACES[3:]),
+    pytest.param("double", PLACES[::2], marks=pytest.mark.slow)])
 def test_marks_through_my_exact_camera_model_are_within_u(chess, tmp_path, profile, places):
     """Marks (100-560 px, centre to corner) through the real lens, my calibration given as
     the camera model (exact: the renderer uses it): each within 4 u, or flagged."""
@@ -171,7 +172,7 @@ def test_several_marks_in_one_frame_through_my_camera_model(chess, tmp_path):
 
 @pytest.mark.parametrize("dist", [
     (0.35, -0.1, 0.0008, -0.0006, 0.02, 0.65, -0.05, 0.03),  # OpenCV's rational model
-    (-0.25, 0.07, 0.0015, -0.0009),                            # four coefficients
+    pytest.param((-0.25, 0.07, 0.0015, -0.0009), marks=pytest.mark.slow),  # four coefficients
 ], ids=["rational8", "four"])
 def test_camera_models_with_8_or_4_coefficients(chess, tmp_path, dist):
     """The docs allow dist_coeffs of 4, 5, 8, 12 or 14 values: a lens of 8 (rational) or 4
@@ -372,7 +373,8 @@ def test_session_tilt_warning_names_both_components(tmp_path):
 # ------------------------------------------------------------------ inputs a user may bring
 
 
-@pytest.mark.parametrize("fmt", ["jpeg75", "png12in16", "tif16"])
+@pytest.mark.parametrize("fmt", ["jpeg75", pytest.param("png12in16", marks=pytest.mark.slow),
+                                 "tif16"])
 def test_image_formats_through_my_camera_model(chess, tmp_path, fmt):
     """The same off-centre 300 px mark as a JPEG (quality 75), 12-bit data in a 16-bit PNG
     and a 16-bit TIFF, through the exact model: within 4 u (two seeds)."""
