@@ -522,7 +522,7 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, 
 
 @pytest.mark.xfail(strict=True, reason=(
     "a lossless PNG (never JPEG-compressed), one horizontal 250 px groove centred on row "
-    "100 (the middle of an 8-row block), distortion-free camera declared: 3 of 3 seeds warn "
+    "100 (the middle of an 8-row block), distortion-free camera declared: seeds 0-2 all warn "
     "'JPEG compression (8x8 blocks, quality ~41 of the standard table)' and add jpeg_blocks "
     "3.99, 3.27, 0.21\" to u (6.25, 5.91, 4.76\"); on row 380 likewise (8.6\" of u 9.8\"), "
     "on row 240 or 100.5 or at 0.5 deg never; the same pixels turned 180 deg (groove on row "
@@ -530,10 +530,44 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, 
 def test_a_png_groove_on_a_block_middle_row_is_not_called_jpeg(tmp_path):
     lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
     called = []
-    for seed in range(3):
+    for seed in range(2):
         scene = ui.Scene((ui.Groove((200, 100), 0.0, 250),), lens)
         rc, doc, _ = marks([shoot(scene, seed, tmp_path), "--force",
                             "--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0"])
         assert doc["marks"][0]["found"], doc["warnings"]
         called += [w for w in doc["warnings"] if "JPEG" in w]
     assert not called, called
+
+
+@pytest.mark.slow
+def test_session_with_my_camera_model_and_a_roll_on_that_camera(tmp_path, chess):
+    """Camera B photographs through the real lens, ``[cameras.B] model = "camB.json"`` (my
+    calibration, written to the camera schema) and B rolled +30" undeclared: the roll found
+    within 4 u and E within 4 u, ok. (Seen by hand: z_Ar.png, a PNG, was diagnosed as 'JPEG
+    compression ... quality ~8' and its u widened by 7.3" -- the false JPEG diagnosis above.)"""
+    rng = np.random.default_rng(3)
+    triad = ui.Triad(ui.random_E(rng))
+    folder = tmp_path / "unit3"
+    folder.mkdir()
+    ui.camera_json(chess, folder / "camB.json")
+    ui.write_session(folder, triad, 3, rolls=(0.0, 30.0), lenses={"B": chess},
+                     declare={"B": ['model = "camB.json"']})
+    rc, doc, _ = run_session(folder)
+    assert rc == 0 and doc["ok"], doc["warnings"]
+    z = session_z(doc, triad)
+    assert np.max(np.abs(z)) < Z_MAX, np.round(z, 2)
+    roll = effect(doc, "camera_roll[B]")
+    assert roll is not None, [e["name"] for e in doc["effects"]]
+    assert abs(roll["estimate"] / ui.ARCSEC - 30.0) < Z_MAX * roll["u"] / ui.ARCSEC
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "--min-length 5000 on a 640 x 480 image (the help: 'at most 80 % of the image's smaller "
+    "side'): not refused as a flag; the image 'FAILED: no mark found (no long straight line "
+    "stands out)', exit 2 -- the message blames the image, not the flag"))
+def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
+    lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
+    p = shoot(ui.Scene((ui.Groove((320, 240), 20.0, 300),), lens), 1, tmp_path)
+    rc, out, err = align("marks", p, "--min-length", "5000")
+    assert rc == 2
+    assert "min-length" in err, err[-300:]
