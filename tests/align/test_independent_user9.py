@@ -24,6 +24,7 @@ import io
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -580,8 +581,6 @@ def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
     "'inputs' list the skipped photo with the three used -- docs/commands/index.md: warnings "
     "go to stderr as 'WARNING: ...' and into the JSON's 'warnings'"))
 def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, tmp_path):
-    import cv2
-
     big = tmp_path / "left01_big.png"
     g = cv2.imread(str(ui.CHESS / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
     cv2.imwrite(str(big), cv2.resize(g, (1280, 960)))
