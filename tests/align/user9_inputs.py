@@ -122,7 +122,7 @@ def half_diagonal_k1(lens: Lens) -> float:
 
 
 @functools.lru_cache(maxsize=8)
-def _ideal_map(lens: Lens):
+def ideal_map(lens: Lens):
     """Ideal normalised coordinates (xn, yn) seen by every whole pixel of the frame."""
     w, h = lens.size
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
@@ -281,7 +281,7 @@ def render(scene: Scene, seed: int) -> np.ndarray:
     lens = scene.lens
     w, h = lens.size
     n = scene.oversample
-    xn, yn = _ideal_map(lens)
+    xn, yn = ideal_map(lens)
     f = lens.k[0, 0]
     take = np.zeros((h, w))  # the fraction of light the grooves take away (pixel-integrated)
     margin = int(np.ceil(4 * scene.sigma_px)) + 2
@@ -575,7 +575,7 @@ def render_board(lens: Lens, R: np.ndarray, t: np.ndarray, seed: int, n: int = 4
     homography), black/white squares (10 x 7, a white border of one square), blurred at the
     fine grid, area-averaged, photon + read noise, 8 bit."""
     w, h = lens.size
-    xn, yn = _ideal_map(lens)
+    xn, yn = ideal_map(lens)
     mx, my = np.meshgrid(_fine_positions(0, w, n).astype(np.float32),
                          _fine_positions(0, h, n).astype(np.float32))
     fx = cv2.remap(xn.astype(np.float32), mx, my, cv2.INTER_LINEAR,
