@@ -497,7 +497,6 @@ def flipped_model(lens: ui.Lens, folder: Path) -> str:
     return ui.camera_json(ui.Lens(lens.K, tuple(d)), folder / "cam_flipped.json")
 
 
-@pytest.mark.slow  # ~8-14 s: the tool weighs a changed lens against bent marks
 def test_three_marks_through_a_sign_flipped_model_are_flagged(chess, tmp_path):
     """Three off-centre marks through the real lens, the model's k1/k2 sign-flipped: the
     marks contradict it; every angle within 4 u or the result not ok."""
