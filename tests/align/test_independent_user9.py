@@ -590,3 +590,23 @@ def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, 
     doc = json.loads(out[out.find("{"):])
     assert doc["views"] == 3
     assert any("left01_big.png" in w for w in doc.get("warnings", [])), sorted(doc)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "camera A really rolled +30\", [cameras.A] roll_arcsec = -30 declared (a sign slip): E "
+    "right (|z| <= 1.08), but the warning says 'found a roll of camera A ... of +61.1 +- "
+    "1.2\" ... declare it ([cameras.A] roll_arcsec)': a user who declares 61.1 is 31\" off; "
+    "it says neither that this is on top of the declared -30\" nor the total, +31.1\""))
+def test_a_wrongly_declared_roll_is_reported_as_the_total_or_against_the_declaration(tmp_path):
+    rng = np.random.default_rng(4)
+    triad = ui.Triad(ui.random_E(rng))
+    declare = {"A": ["lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
+                     "lens_pp_px = 0.0", "roll_arcsec = -30.0"]}
+    folder = ui.write_session(tmp_path / "unit4", triad, 4, rolls=(30.0, 0.0), declare=declare)
+    rc, doc, _ = run_session(folder)
+    assert np.max(np.abs(session_z(doc, triad))) < Z_MAX
+    roll = effect(doc, "camera_roll[A]")
+    total = -30.0 + roll["estimate"] / ui.ARCSEC
+    msg = next(w for w in doc["warnings"] if "roll of camera A" in w)
+    assert "-30" in msg or f"{total:+.1f}" in msg, msg
