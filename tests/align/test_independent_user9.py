@@ -140,7 +140,8 @@ def exact_model_trial(lens, folder, profile, places, seeds):
 
 
 @pytest.mark.parametrize("profile,places", [
-    ("vflat", PLACES[:3]), ("u", PLACES[3:]),
+    # the V with a flat over all six places and seeds is the slow sweep below
+    pytest.param("vflat", PLACES[:3], marks=pytest.mark.slow), ("u", PLACES[3:]),
     pytest.param("double", PLACES[::2], marks=pytest.mark.slow)])
 def test_marks_through_my_exact_camera_model_are_within_u(chess, tmp_path, profile, places):
     """Marks (100-560 px, centre to corner) through the real lens, my calibration given as
