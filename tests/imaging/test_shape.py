@@ -23,7 +23,7 @@ from scipy.ndimage import gaussian_filter1d
 import imaging.shape
 from imaging import measure_marks
 from imaging.centres import _symmetric_window
-from imaging.shape import fit_shape
+from imaging.shape import fit_shape, profile_angle_u
 from tests.conftest import angle_error
 
 W, H = 480, 360
@@ -69,8 +69,10 @@ def _z_scores(profile: str, seeds: range) -> tuple[np.ndarray, np.ndarray]:
         a = rng.uniform(-0.3, 0.3)
         img = render(a, (rng.uniform(-10, 10), rng.uniform(-10, 10)), seed, profile)
         (m,) = measure_marks(img)
-        zs.append(angle_error(m.line.angle_rad, np.deg2rad(a)) / m.line.angle_u_rad)
-        us.append(m.line.angle_u_rad)
+        # u with the Type B term groove_profile (align.marks adds it the same way)
+        u = float(np.hypot(m.line.angle_u_rad, m.profile_u_rad))
+        zs.append(angle_error(m.line.angle_rad, np.deg2rad(a)) / u)
+        us.append(u)
     return np.asarray(zs), np.asarray(us)
 
 
@@ -119,6 +121,20 @@ def test_even_departure_is_recovered_within_its_noise():
     noise = fit_shape(x, rng.normal(0, sd, n), amp, wgt, 6.0)
     assert noise is not None and not noise.significant, noise.chi2
     assert imaging.shape.P_APPLY == 1e-3
+
+
+def test_profile_term_is_the_tilt_the_shifts_give_the_line():
+    """The term is the weighted slope of the centres' shifts: a shift rising 1e-4 px per px
+    along the line is a 1e-4 rad tilt; a constant shift (an offset) tilts nothing, and then
+    only the shifts' own noise is left (the slope's u from their covariance)."""
+    t = np.arange(-150.0, 151.0, 4.0)
+    sig = np.full(t.size, 0.015)
+    zero = np.zeros((t.size, t.size))
+    assert profile_angle_u(t, sig, 1e-4 * t + 0.003, zero) == pytest.approx(1e-4, rel=1e-9)
+    assert profile_angle_u(t, sig, np.full(t.size, 0.003), zero) < 1e-15
+    cov = np.diag(np.full(t.size, 0.01 ** 2))
+    want = 0.01 / np.sqrt(np.sum((t - t.mean()) ** 2))
+    assert profile_angle_u(t, sig, np.zeros(t.size), cov) == pytest.approx(want, rel=1e-9)
 
 
 def test_symmetric_window_only_where_the_frame_cuts_the_band():
