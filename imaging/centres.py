@@ -43,9 +43,11 @@ class Centres:
     minus the band's [px] and its standard uncertainty, linearised at the solution (one
     Gauss–Newton step on the blur with the segment's other parameters free; None unless
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
-    ``offsets_cov``: the covariance [px^2] of the centres from terms every segment shares:
-    removed stripes' offsets and the noise of the groove's own profile
-    (:mod:`imaging.shape`) (None: neither).
+    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets,
+    which every segment on a column (row) shares (None: none); ``profile_shift``,
+    ``profile_shift_cov``: how far the groove's own profile (its even departure from the
+    model, :mod:`imaging.shape`) moves each centre [px] and that shift's covariance [px^2]
+    (None unless asked for: the Type B term ``groove_profile`` is read from them).
 
     Attributes
     ----------
@@ -68,7 +70,11 @@ class Centres:
     blur_dev, blur_dev_u : ndarray or None
         Per-segment blur minus the band's and its u [px].
     offsets_cov : ndarray or None
-        Covariance from removed stripes' offsets and the groove's profile [px^2].
+        Covariance from removed stripes' offsets [px^2].
+    profile_shift : ndarray or None
+        (N,) the centres' shift by the groove's own profile [px].
+    profile_shift_cov : ndarray or None
+        (N, N) its covariance [px^2].
     """
 
     xy: np.ndarray
@@ -144,6 +150,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     ``offsets_var``: variances [DN^2] of per-column and per-row offsets already subtracted
     from the image (removed stripes, :mod:`imaging.stripes`); their errors are shared by
     every segment on the same column (row), and ``Centres.offsets_cov`` carries them.
+    ``departure``: also read the groove's own profile from the residuals and how far it
+    moves each centre (``Centres.profile_shift``; not applied).
     ``texture``: also measure how the background's texture correlates the centres' errors
     (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
     a band and ring's width of the other lines at signed distances ``avoid_px`` [px].

@@ -101,6 +101,9 @@ class MarkMeasurement:
         (other candidate, px of this mark left out) per crossing.
     background_u_rad : float
         What an oriented background's removal may leave on the angle [rad].
+    profile_u_rad : float
+        What the groove's own profile, sampled at the pixel grid's phase, may do to the
+        angle [rad] (:func:`imaging.shape.profile_angle_u`; a Type B term).
     """
 
     candidate: MarkCandidate

@@ -21,14 +21,18 @@ centre on its own, only through the phase. D is zero beyond the groove and its b
 D is **measured, not applied**: how far it moves each segment's centre
 (:func:`shape_shift`) tilts the line by b, and sqrt(b^2 + sigma_b^2) enters the angle's u
 as the Type B term ``groove_profile`` (:func:`profile_angle_u`) on every mark, without a
-significance gate (a gate at p < 1e-3 left user6's rounded grooves, chi^2 15-55 on 12 dof,
+significance gate (at p < 1e-3 user6's rounded grooves, chi^2 15-55 on 12 dof, mostly went
 uncovered). Fitted back into the centres (tried and withdrawn) it moved a
 quantisation-dominated 8-bit groove (+17.1" -> +20.7" at u 5") and a ruled scale's line
-among numerals (z -4.6) the wrong way; as a term it can only widen u, by ~1 % on a clean
-mark of the model's own shape (median; ``python3 benchmarks/groove_shape.py --what
-synth``). It covers the deterministic phase bias, not all of user6's near-horizontal
-excess: blurred after the pixels, a mark crossing < 1/2 phase cycle scatters 1.5x its u
-about a bias of ~1 u over noise seeds, the line's residuals white (chi^2/dof ~1).
+among numerals (z -4.6) the wrong way; as a term it only widens u: x 1.003 on synth's clean
+marks (median), x 1.06 on flat-bottomed grooves within 0.3 deg of an axis (the departure's
+noise; ``tests/imaging/test_shape.py``).
+
+What it cannot see: on a mark crossing < 1 phase cycle every segment samples the profile at
+nearly one phase, and the centres absorb the part of the misfit that moves them, so the
+pooled residuals show about half the bias (user6's grooves noise-free: 2.0" of 4.2",
+1.2" of 3.1", 1.5" of 3.3"); fitting the departure jointly with the centres is not
+determined there (its tilt came out -50" for +4.2").
 """
 
 from __future__ import annotations

@@ -8,10 +8,10 @@ within 0.3 deg of the pixel rows are the case the flat-bottomed groove model bia
 misfit depends on the line's sub-pixel phase, which drifts slowly along such a mark.
 
 Measured (``python3 -m pytest -q -m slow tests/imaging/test_shape.py``; without the profile:
-``imaging.centres.fit_shape`` patched to None): rounded grooves RMS z 1.07, max 2.33 (without
-1.02, 2.33 — a groove blurred before the pixels integrate it shows no phase bias; user6's
-renderer, which samples the sharp profile and blurs after, did: RMS 1.41 in this generator
-made that way); flat-bottomed control RMS 1.10, max 2.31, u x 1.033 (median; max x 1.29).
+``imaging.centres.fit_shape`` patched to None), u with the Type B term ``groove_profile``:
+rounded grooves RMS z 0.98, max 2.31 (without 1.02, 2.33 — a groove blurred before the pixels
+integrate it shows little phase bias; user6's renderer, which samples the sharp profile and
+blurs after, did); flat-bottomed control RMS 0.91, max 2.24, u x 1.057 (median; max x 1.38).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def _z_scores(profile: str, seeds: range) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.slow
 def test_rounded_groove_near_a_pixel_axis_within_u_over_seeds():
     """24 near-horizontal rounded grooves: honest z have RMS < 1.46 (chi2 with 24 dof,
-    p < 1e-3) and max |z| < 3.9 (p ~ 0.002 for the largest of 24). Seen: RMS 1.07, max 2.33."""
+    p < 1e-3) and max |z| < 3.9 (p ~ 0.002 for the largest of 24). Seen: RMS 0.98, max 2.31."""
     zs, _ = _z_scores("round", range(24))
     assert np.sqrt(np.mean(zs ** 2)) < 1.46 and np.abs(zs).max() < 3.9, np.round(zs, 2)
 
@@ -88,7 +88,7 @@ def test_rounded_groove_near_a_pixel_axis_within_u_over_seeds():
 def test_flat_bottomed_groove_control_is_not_widened(monkeypatch):
     """The clean control: a flat-bottomed groove (the model's own shape) near the axis. z
     stays honest, and the u with the groove's own profile is within 10 % of the u without it
-    (median over 24 marks; the profile's noise is what it adds). Seen: RMS 1.10, ratio 1.033."""
+    (median over 24 marks; the profile's noise is what it adds). Seen: RMS 0.91, ratio 1.057."""
     zs, us = _z_scores("box", range(100, 124))
     assert np.sqrt(np.mean(zs ** 2)) < 1.46 and np.abs(zs).max() < 3.9, np.round(zs, 2)
     monkeypatch.setattr("imaging.centres.fit_shape", lambda *args: None)
