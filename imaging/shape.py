@@ -26,7 +26,9 @@ uncovered). Fitted back into the centres (tried and withdrawn) it moved a
 quantisation-dominated 8-bit groove (+17.1" -> +20.7" at u 5") and a ruled scale's line
 among numerals (z -4.6) the wrong way; as a term it only widens u: x 1.003 on synth's clean
 marks (median), x 1.06 on flat-bottomed grooves within 0.3 deg of an axis (the departure's
-noise; ``tests/imaging/test_shape.py``).
+noise, at most x 1.45; ``tests/imaging/test_shape.py``). The pixels' distances are taken
+from a straight line through the centres (``imaging.centres``), not from each segment's
+own noisy centre.
 
 What it cannot see: on a mark crossing < 1 phase cycle every segment samples the profile at
 nearly one phase, and the centres absorb the part of the misfit that moves them, so the

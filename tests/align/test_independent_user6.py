@@ -684,7 +684,7 @@ def test_clean_near_horizontal_marks_u_is_honest_over_30_seeds(tmp_path):
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
     "a horizontal 300 px mark 6 px from the bottom edge, vignetting 35 %, 12-bit, clean: over "
-    "16 seeds RMS z 1.90 -> 1.61 with the groove_profile term (max 3.16). Noise-free, seeds "
+    "16 seeds RMS z 1.90 -> 1.61 with the groove_profile term (max 3.15). Noise-free, seeds "
     "0, 8, 9, 13 are off by 6-9 arcsec with the sign of their angle, 4-7 at the frame's centre "
     "too (4 x 4 sub-pixel samples blurred after them): the grid-phase bias of a mark crossing "
     "< 1 phase cycle, of which the mark's own residuals show about half (the rest is absorbed "
