@@ -13,7 +13,6 @@ the reference line [px]; the pixels' variance v0 + v1 mu (shot + read noise). Th
 
 from __future__ import annotations
 
-import copy
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -103,13 +102,6 @@ class ProfileTable:
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return _interp_uniform(e, self.grid, (self.p, self.pe))
-
-    def with_departure(self, d: np.ndarray, dd: np.ndarray) -> ProfileTable:
-        """The same table with a departure D (and dD/de) added on its grid (the groove's
-        own profile, :mod:`imaging.shape`); dP/ds stays the model's."""
-        out = copy.copy(self)
-        out.p, out.pe = self.p + d, self.pe + dd
-        return out
 
 
 @functools.lru_cache(maxsize=8)
