@@ -564,10 +564,6 @@ def test_session_with_my_camera_model_and_a_roll_on_that_camera(tmp_path, chess)
     assert abs(roll["estimate"] / ui.ARCSEC - 30.0) < Z_MAX * roll["u"] / ui.ARCSEC
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "--min-length 5000 on a 640 x 480 image (the help: 'at most 80 % of the image's smaller "
-    "side'): not refused as a flag; the image 'FAILED: no mark found (no long straight line "
-    "stands out)', exit 2 -- the message blames the image, not the flag"))
 def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
     lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
     p = shoot(ui.Scene((ui.Groove((320, 240), 20.0, 300),), lens), 1, tmp_path)
