@@ -8,7 +8,7 @@ to be taken at face value, and why.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
@@ -133,6 +133,12 @@ def family_warnings(image: str, fam) -> list[str]:
     if fam.failed:
         out.append(f"{what}: {fam.failed} member(s) found but not measured")
     return out
+
+
+def camera_warnings(skipped: Mapping[str, str]) -> list[str]:
+    """A chessboard calibration's warnings: each photograph left out, and why."""
+    return [f"{name}: skipped, not used in the calibration: {why}"
+            for name, why in skipped.items()]
 
 
 def calibration_warnings(cal, poses) -> list[str]:

@@ -572,12 +572,6 @@ def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
     assert "min-length" in err, err[-300:]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "align camera left02-04.jpg plus left01 resized to 1280 x 960: stderr says "
-    "'left01_big.png: skipped: size 1280x960 differs from the first image's 640x480' (no "
-    "WARNING: prefix), exit 0, and the camera JSON has no 'warnings' (nor 'ok') while its "
-    "'inputs' list the skipped photo with the three used -- docs/commands/index.md: warnings "
-    "go to stderr as 'WARNING: ...' and into the JSON's 'warnings'"))
 def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, tmp_path):
     big = tmp_path / "left01_big.png"
     g = cv2.imread(str(ui.CHESS / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
