@@ -344,7 +344,8 @@ def report_html(res: SessionResult, doc: dict | None = None,
                                "Goniometer", gon), ("marks", "Scribe marks", marks)):
         if present:
             sections.append((key, name))
-    notices = setup_notices(res.fusion) if res.fusion is not None else []
+    notices = (setup_notices(res.fusion, res.session.declared_setup())
+               if res.fusion is not None else [])
     shown = [w for w in warnings if w not in notices]  # the notices are on the first screen
     if shown:
         sections.insert(0, ("warnings", f"Warnings ({len(shown)})"))

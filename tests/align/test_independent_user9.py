@@ -360,11 +360,6 @@ def test_session_with_the_platform_out_of_level(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "the table tilt found is (x -16.5, y -22.9) +- 1.4\" (JSON components), but the warning "
-    "and the terminal say 'a tilt of the table axis ... (x, y) of -22.9 +- 1.4\"' -- one "
-    "number, the y component, for a two-component tilt; the effect's top-level 'estimate' is "
-    "the y component too: a user declaring table_tilt_arcsec from the message cannot"))
 def test_session_tilt_warning_names_both_components(tmp_path):
     rc, doc, _ = tilted_session(tmp_path)
     tilt = effect(doc, "platform_tilt")
@@ -584,11 +579,6 @@ def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, 
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "camera A really rolled +30\", [cameras.A] roll_arcsec = -30 declared (a sign slip): E "
-    "right (|z| <= 1.08), but the warning says 'found a roll of camera A ... of +61.1 +- "
-    "1.2\" ... declare it ([cameras.A] roll_arcsec)': a user who declares 61.1 is 31\" off; "
-    "it says neither that this is on top of the declared -30\" nor the total, +31.1\""))
 def test_a_wrongly_declared_roll_is_reported_as_the_total_or_against_the_declaration(tmp_path):
     rng = np.random.default_rng(4)
     triad = ui.Triad(ui.random_E(rng))
