@@ -72,3 +72,82 @@ def stage_residual(stage: _Stage, effects: Sequence[str]
         return d * w if stage.whiten is None else stage.whiten @ d
 
     return resid
+
+
+def _d_r(beta: np.ndarray) -> np.ndarray:
+    """dR/d(beta_i) (3, 3, 3) of :func:`align.calibration.ellipsoid.r_matrix`."""
+    bx, by, bz = beta
+    sx, cx, sy, cy, sz, cz = (np.sin(bx), np.cos(bx), np.sin(by), np.cos(by), np.sin(bz),
+                              np.cos(bz))
+    d = np.zeros((3, 3, 3))
+    d[0, 1, 2], d[0, 2, 2] = cy * cx, -sx * cy
+    d[1, 0, 2], d[1, 1, 2], d[1, 2, 2] = cz * cy, -sy * sx, -sy * cx
+    d[2, 0, 1], d[2, 1, 1], d[2, 0, 2] = cz, -sz, -sz * sy
+    return d
+
+
+def stage_jacobian(stage: _Stage, effects: Sequence[str]
+                   ) -> Callable[[np.ndarray, float], np.ndarray]:
+    """The Jacobian (N, P) of :func:`stage_residual`'s residuals in theta, at (theta, tau).
+
+    Written out (the chain rule through |a|, R(beta)^-1, the nonlinear terms and the scale
+    factor's divisors): least_squares' differences called the residual P + 1 times per
+    iteration, half the default test run's calibration time. ``sign(v)`` (the asymmetry's
+    branch) is held, as the residual's differences do away from v = 0.
+    test_stage_jacobian_is_the_differences checks it for every effect.
+    """
+    p = stage.poses
+    s0 = stage.start
+    w = 1.0 / stage.sigma if stage.sigma is not None else np.ones(len(p.u))
+    slots = [(fld, idx) for e in effects for fld, idx, _ in EFFECTS[e].slots]
+    dt = p.t - s0.t_ref
+    dT = p.temp - s0.temp_ref if p.temp is not None else np.zeros(len(p.t))
+    uu = p.u
+    n_pose = len(uu)
+
+    def jac(theta: np.ndarray, tau: float) -> np.ndarray:
+        f = {n: np.zeros(3) for n in FIELDS3}
+        f["cross"] = np.zeros((3, 3))
+        for (fld, idx), v in zip(slots, theta[9:], strict=True):
+            f[fld][idx] += v
+        k = theta[:3]
+        v = uu / k
+        warm = np.expm1(-dt / tau) if tau > 0 else np.zeros(n_pose)
+        sc = (1.0 + dt[:, None] * f["scale_drift"] + dT[:, None] * f["scale_temp"]
+              + warm[:, None] * f["scale_warmup"])
+        sg = np.sign(v)
+        asy = 1.0 + sg * f["asymmetry"]
+        v2 = v / sc / asy
+        prod = v2[:, PAIR_I] * v2[:, PAIR_J]
+        x = v2 - f["k2"] * v2 * v2 - f["k3"] * v2**3 - prod @ f["cross"].T
+        r = r_matrix(theta[3:6])
+        m = np.linalg.inv(r).T  # a = x @ m
+        a = x @ m - theta[6:9] - dt[:, None] * f["drift"] - (dt * dt)[:, None] * f["drift2"]
+        a = a - dT[:, None] * f["temp_coeff"] - stage.turns * f["hysteresis"]
+        nrm = a / np.sqrt(np.einsum("ij,ij->i", a, a))[:, None]  # d|a|/da
+        g = nrm @ m.T  # d|a|/dx
+        # d|a|/dv2: x_c's own terms, then the cross products' v2_i v2_j.
+        h = g * (1.0 - 2 * f["k2"] * v2 - 3 * f["k3"] * v2 * v2)
+        gc = g @ f["cross"]  # (N, pairs): sum_c g_c cross[c, pair]
+        for q, (i, j) in enumerate(zip(PAIR_I, PAIR_J, strict=True)):
+            h[:, i] -= gc[:, q] * v2[:, j]
+            h[:, j] -= gc[:, q] * v2[:, i]
+        hv = h * v2  # d|a|/d(ln v2)
+        cols = {"k2": -g * v2 * v2, "k3": -g * v2**3, "drift": -nrm * dt[:, None],
+                "drift2": -nrm * (dt * dt)[:, None], "temp_coeff": -nrm * dT[:, None],
+                "hysteresis": -nrm * stage.turns,
+                "scale_drift": -hv * dt[:, None] / sc, "scale_temp": -hv * dT[:, None] / sc,
+                "scale_warmup": -hv * warm[:, None] / sc, "asymmetry": -hv * sg / asy}
+        out = np.empty((n_pose, len(theta)))
+        out[:, :3] = -hv / k
+        # d(R^-1)/d beta_i = -R^-1 dR_i R^-1, transposed as m is.
+        ri = m.T
+        for i, dr in enumerate(_d_r(theta[3:6])):
+            out[:, 3 + i] = np.einsum("nc,nc->n", nrm, x @ (-(ri @ dr @ ri)).T)
+        out[:, 6:9] = -nrm
+        for c, (fld, idx) in enumerate(slots):
+            out[:, 9 + c] = (-g[:, idx[0]] * prod[:, idx[1]] if fld == "cross"
+                             else cols[fld][:, idx[0]])
+        return out * w[:, None] if stage.whiten is None else stage.whiten @ out
+
+    return jac
