@@ -205,7 +205,9 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
     # Index of each pulse's (run, face) group: its constant c_f.
     grp = sg * n + fc
     ng = int(grp.max()) + 1
-    size = np.maximum(np.bincount(grp, minlength=ng), 1)
+    count = np.bincount(grp, minlength=ng)
+    size = np.maximum(count, 1)
+    first = np.cumsum(count) - count  # where each group starts among the pulses by group
     grid = (np.arange(64) + 0.5) / 64
 
     # Per face: its pulses and where each (run, face) group starts among them (runs are
@@ -251,10 +253,12 @@ def fit_pattern(counts: np.ndarray, theta: np.ndarray, turn: np.ndarray,
         y = (ph + dk * rev + phi[fc]) % 1.0
         w = v + y
         d = np.round(w - (np.bincount(grp, w, ng) / size)[grp])
-        # The constant by the most common step (zero: most pulses do not cross).
-        for g in np.unique(grp):
-            m = grp == g
-            d[m] -= np.median(d[m])
+        # The constant by the most common step (zero: most pulses do not cross): each
+        # group's median, (middle + middle) / 2 of its sorted steps as np.median takes it.
+        ds = d[np.lexsort((d, grp))]
+        med = (ds[np.minimum(first + (count - 1) // 2, len(d) - 1)]
+               + ds[np.minimum(first + count // 2, len(d) - 1)]) / 2
+        d -= med[grp]
         p_up, p_dn = ndtr((y - 1) / s_), ndtr(-y / s_)
         like = np.where(d > 0, p_up, np.where(d < 0, p_dn, 1 - p_up - p_dn))
         lg = np.log(np.maximum(like, 1e-300))
