@@ -133,11 +133,16 @@ def stage_jacobian(stage: _Stage, effects: Sequence[str]
             h[:, i] -= gc[:, q] * v2[:, j]
             h[:, j] -= gc[:, q] * v2[:, i]
         hv = h * v2  # d|a|/d(ln v2)
-        cols = {"k2": -g * v2 * v2, "k3": -g * v2**3, "drift": -nrm * dt[:, None],
-                "drift2": -nrm * (dt * dt)[:, None], "temp_coeff": -nrm * dT[:, None],
-                "hysteresis": -nrm * stage.turns,
-                "scale_drift": -hv * dt[:, None] / sc, "scale_temp": -hv * dT[:, None] / sc,
-                "scale_warmup": -hv * warm[:, None] / sc, "asymmetry": -hv * sg / asy}
+        # Each effect's column (the slots' fields only: most fits have one effect or none).
+        cols = {"k2": lambda i: -g[:, i] * v2[:, i] * v2[:, i],
+                "k3": lambda i: -g[:, i] * v2[:, i] ** 3,
+                "drift": lambda i: -nrm[:, i] * dt, "drift2": lambda i: -nrm[:, i] * (dt * dt),
+                "temp_coeff": lambda i: -nrm[:, i] * dT,
+                "hysteresis": lambda i: -nrm[:, i] * stage.turns[:, i],
+                "scale_drift": lambda i: -hv[:, i] * dt / sc[:, i],
+                "scale_temp": lambda i: -hv[:, i] * dT / sc[:, i],
+                "scale_warmup": lambda i: -hv[:, i] * warm / sc[:, i],
+                "asymmetry": lambda i: -hv[:, i] * sg[:, i] / asy[:, i]}
         out = np.empty((n_pose, len(theta)))
         out[:, :3] = -hv / k
         # d(R^-1)/d beta_i = -R^-1 dR_i R^-1, transposed as m is.
@@ -147,7 +152,7 @@ def stage_jacobian(stage: _Stage, effects: Sequence[str]
         out[:, 6:9] = -nrm
         for c, (fld, idx) in enumerate(slots):
             out[:, 9 + c] = (-g[:, idx[0]] * prod[:, idx[1]] if fld == "cross"
-                             else cols[fld][:, idx[0]])
+                             else cols[fld](idx[0]))
         return out * w[:, None] if stage.whiten is None else stage.whiten @ out
 
     return jac
