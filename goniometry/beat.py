@@ -138,13 +138,16 @@ def _variance(w: np.ndarray, theta: np.ndarray, turn: np.ndarray, sigma: float,
     lead = w.shape[:-2]
     wf = w.reshape(-1, R, n1)
     tot = np.zeros(len(wf))
-    if runs is None:
-        runs = np.zeros(R, int)
+    ids = np.unique(runs) if runs is not None else np.zeros(1, int)
     for f in range(n):
         cols = face == f
-        for r_ in np.unique(runs):
-            rr = runs == r_
-            W = np.einsum("brj,mrj->bm", wf[:, rr][:, :, cols], e[:, rr][:, :, cols])
+        wc, ec = wf[:, :, cols], e[:, :, cols]
+        for r_ in ids:
+            if len(ids) == 1:  # (one run: all its revolutions; the same arrays as selected)
+                W = np.einsum("brj,mrj->bm", wc, ec)
+            else:
+                rr = runs == r_
+                W = np.einsum("brj,mrj->bm", wc[:, rr], ec[:, rr])
             tot += (np.abs(W) ** 2) @ c
     merged, sep = _merge(wf, turn)
     white = 1 / 12 + sigma**2 - c.sum()
