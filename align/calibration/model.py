@@ -37,7 +37,7 @@ from align.calibration.effects import (  # noqa: F401  (re-exported: the public 
     turn_signs,
 )
 from align.calibration.ellipsoid import extract, li_griffiths
-from align.calibration.residual import stage_jacobian, stage_residual
+from align.calibration.residual import stage_functions, stage_residual
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
 from align.calibration.walk import (
     WanderFit,
@@ -280,8 +280,7 @@ class CalibrationStage:
         if prev is not None:  # start a trial from the fit it extends (a few iterations)
             theta0[:len(prev)] = prev
         w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
-        resid = self._residual(effects)
-        jac = stage_jacobian(self, effects)
+        resid, jac = stage_functions(self, effects)
         if len(p.u) < len(theta0):
             raise NotApplicable("more parameters than poses")
         scale = self._scale(effects)
