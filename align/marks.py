@@ -26,6 +26,7 @@ from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
 from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
+from align.mark_shadow import shadow_edge_note, unshadowed
 from align.mark_stage import (
     BEND,
     CANDIDATES,
@@ -350,7 +351,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
                                  expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
-    found, split = _split_kinked(measured.items, name, alpha)
+    found, split = _frame_marks(measured.items, name, alpha, image, camera)
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     # One lens for the frame, all its marks together (identifiability first).
     lens = camera_lens(ms, camera, ranges, alpha)
@@ -361,7 +362,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
             continue
         r = finish_mark(m, lens, k, name, i, alpha)
-        out.append(replace(r, notes=r.notes + (split[i],)) if i in split else r)
+        out.append(replace(r, notes=r.notes + split[i]) if i in split else r)
         k += 1
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
@@ -408,7 +409,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     """
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
     said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
-    split_all: dict[str, dict[int, str]] = {}  # kinked marks measured as two, per image
+    split_all: dict[str, dict[int, tuple[str, ...]]] = {}  # shadowed, kinked marks' notes
     for j, (path, roi) in enumerate(images):
         if on_image is not None:
             on_image(j)
@@ -421,7 +422,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
-            items, split = _split_kinked(fr.items, str(path), alpha)
+            items, split = _frame_marks(fr.items, str(path), alpha, got.pixels, camera)
             found_all.append(items)
             split_all[str(path)] = split
         except ImageInputError as exc:
@@ -446,22 +447,41 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
                 res.append(finish_mark(m, lens, k, str(path), i, alpha,
                                        group=f"camera {label}" if label else "camera"))
             if i in split_all.get(str(path), {}):
-                res[-1] = replace(res[-1], notes=res[-1].notes + (split_all[str(path)][i],))
+                res[-1] = replace(res[-1], notes=res[-1].notes + split_all[str(path)][i])
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
     return out
 
 
-def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float
+def _frame_marks(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float,
+                 image: np.ndarray, camera: CameraModel | None
+                 ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, tuple[str, ...]]]:
+    """The frame's marks measured again where a shadow's edge runs along one
+    (:func:`align.mark_shadow.unshadowed`) and split where one is kinked
+    (:func:`_split_kinked`), and the notes saying so, by each mark's final index."""
+    items, shaded = unshadowed(items, image, camera, name)
+    found, split = _split_kinked(items, name, alpha, image, camera)
+    notes: dict[int, tuple[str, ...]] = {}
+    for i, m in enumerate(found):
+        said = ((shadow_edge_note(f"{name} mark {i}", shaded[id(m)]),) if id(m) in shaded
+                else ()) + ((split[i],) if i in split else ())
+        if said:
+            notes[i] = said
+    return found, notes
+
+
+def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float,
+                  image: np.ndarray, camera: CameraModel | None
                   ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, str]]:
     """The frame's marks with each kinked one (:func:`align.mark_kink.split_kinked`) as its
-    two straight parts, and the note of each part (by its new index)."""
+    two straight parts, each measured again from ``image`` as its own groove, and the note
+    of each part (by its new index)."""
     out: list[MarkMeasurement | ImageInputError] = []
     said: dict[int, str] = {}
     for item in items:
         parts, kink = ((item,), None) if isinstance(item, ImageInputError) else split_kinked(
-            item, alpha)
+            item, alpha, image, camera, name)
         if len(parts) == 2 and kink is not None:
             i = len(out)
             turn = float(np.rad2deg(_wrap(parts[1].line.angle_rad - parts[0].line.angle_rad)))

@@ -14,6 +14,7 @@ Public API::
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.centres import Centres
+from imaging.confirm import shadow_free
 from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.ends import GrooveEnds, groove_ends
@@ -53,5 +54,5 @@ __all__ = [
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",
-    "GrooveEnds", "grating_note", "groove_ends",
+    "GrooveEnds", "grating_note", "groove_ends", "shadow_free",
 ]
