@@ -140,6 +140,9 @@ def calibration_warnings(cal, poses) -> list[str]:
     out = list(getattr(cal, "problems", ())) + loop_warnings("calibration", cal.loop)
     out += [f"calibration: effect {r.name} REFUSED: {r.reason}" for r in cal.loop.refused]
     out += list(getattr(cal, "notes", ()))
+    settled = getattr(poses, "settling", None)
+    if settled is not None and settled.found:
+        out.append(settled.statement())
     dof = cal.loop.after.dof
     if dof < 3:
         out.append(f"calibration: {len(poses.u)} poses leave {dof} degrees of freedom: the fit "

@@ -285,7 +285,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
         tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
                             wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
-                            pf.full_scale_dn, avoid_px, 2 * (half + 4))
+                            pf.full_scale_dn, avoid_px, 2 * (half + 4), npx)
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).

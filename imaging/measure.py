@@ -29,7 +29,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
-from imaging.ends import runs_on_stretch
+from imaging.ends import EndsCheck, runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
@@ -64,6 +64,8 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
+    ``ends_check``: the obstruction check of the groove's ends made while measuring it
+    (:class:`imaging.ends.EndsCheck`, for the image measured; None: not made).
 
     Attributes
     ----------
@@ -101,6 +103,8 @@ class MarkMeasurement:
         (other candidate, px of this mark left out) per crossing.
     background_u_rad : float
         What an oriented background's removal may leave on the angle [rad].
+    ends_check : EndsCheck or None
+        Its ends' obstruction check, when made.
     """
 
     candidate: MarkCandidate
@@ -121,6 +125,7 @@ class MarkMeasurement:
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
+    ends_check: EndsCheck | None = None
 
     @property
     def length_px(self) -> float:
@@ -232,7 +237,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     use = _usable(cen, where, cand, skip)
     t0, t1, open0, open1 = extent_look(image, pf)
     ext = (t0, t1)
-    longer = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
+    longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
     if longer is not None:
         # The search's stretch was cut short (a speck beside or on the line broke its
         # ridge): the centres again over the groove's whole length, from those found.
@@ -243,6 +248,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
         use = _usable(cen, where, cand, skip)
         ext = groove_extent(image, pf)
+        check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -262,7 +268,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed,
+                           ends_check=check)
 
 
 def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
