@@ -252,11 +252,6 @@ def test_undeclared_lens_over_seeds(tmp_path):
 # ------------------------------------------------------------------------ near vertical
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a 400 px mark 2.2\" past vertical (truth -89.9994 deg), distortion-free camera declared: "
-    "4 of 4 seeds read exactly +90.000000 deg (also 6 of 8 seeds in a longer run; truth "
-    "90.0: 5 of 8; truth 89.9994: 2 of 8), angle_before_loop_deg the same: readings just "
-    "past 90 deg are snapped to 90 instead of wrapping to -89.99x; no such pinning at 0 deg"))
 def test_a_near_vertical_mark_is_not_pinned_to_exactly_90_degrees(tmp_path):
     """A mark 2.2" past vertical (truth -89.9994 deg, i.e. 90.0006), distortion-free camera
     declared: the estimator is continuous, so no reading may be exactly 90.000000 deg (a
