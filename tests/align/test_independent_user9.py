@@ -518,13 +518,6 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, 
 # ------------------------------------------------------------------ false JPEG diagnosis
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a lossless PNG (never JPEG-compressed), one horizontal 250 px groove centred on row "
-    "100 (the middle of an 8-row block), distortion-free camera declared: seeds 0-2 all warn "
-    "'JPEG compression (8x8 blocks, quality ~41 of the standard table)' and add jpeg_blocks "
-    "3.99, 3.27, 0.21\" to u (6.25, 5.91, 4.76\"); on row 380 likewise (8.6\" of u 9.8\"), "
-    "on row 240 or 100.5 or at 0.5 deg never; the same pixels turned 180 deg (groove on row "
-    "379) gave jpeg_blocks 10.6\" against 0.0014\" (u 11.7 vs 4.8\")"))
 def test_a_png_groove_on_a_block_middle_row_is_not_called_jpeg(tmp_path):
     lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
     called = []
