@@ -503,11 +503,6 @@ def test_three_marks_through_a_sign_flipped_model_are_flagged(chess, tmp_path):
     assert not confident_wrong(scene, rc, doc)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "one 250 px mark at (150, 120) through the real lens, the model's k1/k2 sign-flipped "
-    "(k1 +0.279): read +14.797 deg for a 10.000 deg truth, 17259\" off at u 211\" (z +82), "
-    "exit 0, ok true; the 1.97 px bow (the model allows 0.001 px) is called a bent mark and "
-    "its chord read, the calibration kept -- nothing in u or ok covers the model being wrong"))
 def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, tmp_path):
     cam = flipped_model(chess, tmp_path)
     scene = ui.Scene((ui.Groove((150, 120), 10.0, 250),), chess)
