@@ -26,7 +26,7 @@ from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
-from imaging.linefit import LineFit, fit_line
+from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.measure import (
     MarkMeasurement,
     MeasuredFrame,
@@ -51,6 +51,7 @@ __all__ = [
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
+    "fit_line_only",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",

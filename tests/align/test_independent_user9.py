@@ -355,11 +355,6 @@ def test_session_with_the_platform_out_of_level(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "the table tilt found is (x -16.5, y -22.9) +- 1.4\" (JSON components), but the warning "
-    "and the terminal say 'a tilt of the table axis ... (x, y) of -22.9 +- 1.4\"' -- one "
-    "number, the y component, for a two-component tilt; the effect's top-level 'estimate' is "
-    "the y component too: a user declaring table_tilt_arcsec from the message cannot"))
 def test_session_tilt_warning_names_both_components(tmp_path):
     rc, doc, _ = tilted_session(tmp_path)
     tilt = effect(doc, "platform_tilt")
@@ -547,10 +542,6 @@ def test_session_with_my_camera_model_and_a_roll_on_that_camera(tmp_path, chess)
     assert abs(roll["estimate"] / ui.ARCSEC - 30.0) < Z_MAX * roll["u"] / ui.ARCSEC
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "--min-length 5000 on a 640 x 480 image (the help: 'at most 80 % of the image's smaller "
-    "side'): not refused as a flag; the image 'FAILED: no mark found (no long straight line "
-    "stands out)', exit 2 -- the message blames the image, not the flag"))
 def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
     lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
     p = shoot(ui.Scene((ui.Groove((320, 240), 20.0, 300),), lens), 1, tmp_path)
@@ -559,12 +550,6 @@ def test_a_min_length_beyond_the_image_is_named_as_the_flag(tmp_path):
     assert "min-length" in err, err[-300:]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "align camera left02-04.jpg plus left01 resized to 1280 x 960: stderr says "
-    "'left01_big.png: skipped: size 1280x960 differs from the first image's 640x480' (no "
-    "WARNING: prefix), exit 0, and the camera JSON has no 'warnings' (nor 'ok') while its "
-    "'inputs' list the skipped photo with the three used -- docs/commands/index.md: warnings "
-    "go to stderr as 'WARNING: ...' and into the JSON's 'warnings'"))
 def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, tmp_path):
     big = tmp_path / "left01_big.png"
     g = cv2.imread(str(ui.CHESS / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
@@ -577,11 +562,6 @@ def test_a_chessboard_photo_of_another_size_is_warned_in_the_camera_json(chess, 
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "camera A really rolled +30\", [cameras.A] roll_arcsec = -30 declared (a sign slip): E "
-    "right (|z| <= 1.08), but the warning says 'found a roll of camera A ... of +61.1 +- "
-    "1.2\" ... declare it ([cameras.A] roll_arcsec)': a user who declares 61.1 is 31\" off; "
-    "it says neither that this is on top of the declared -30\" nor the total, +31.1\""))
 def test_a_wrongly_declared_roll_is_reported_as_the_total_or_against_the_declaration(tmp_path):
     rng = np.random.default_rng(4)
     triad = ui.Triad(ui.random_E(rng))
