@@ -87,6 +87,15 @@ def parse_flag(text: str) -> tuple[float | None, float | None]:
     return out[0], out[1]
 
 
+def session_bounds(table: dict, src: str) -> tuple[float | None, float | None] | None:
+    """session.toml's ``[calibration] k2_bound_ug_per_g2`` and ``k3_bound_ug_per_g3`` ->
+    (K2 [1/g], K3 [1/g²]), None where a key is absent (None: neither); ``src`` prefixes the
+    keys in a refusal."""
+    out = tuple(bound_ug(table[key.split()[-1]], n, src + key) * UG
+                if key.split()[-1] in table else None for n, key in KEYS.items())
+    return None if out == (None, None) else (out[0], out[1])
+
+
 def declared_bounds(bound: tuple[float | None, float | None] | None) -> dict[str, float]:
     """The declared bounds by candidate name (K2 [1/g], K3 [1/g²]); None entries left out."""
     if bound is None:
