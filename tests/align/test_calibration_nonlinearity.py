@@ -215,3 +215,23 @@ def test_clean_with_a_bound_adds_no_effect_over_seeds():
         if cal.loop.effects or not cal.ok or np.any(np.abs(zk) > 3) or np.any(np.abs(zb) > 3):
             bad.append((s, [e.name for e in cal.loop.effects], cal.ok, zk, zb))
     assert bad == []
+
+
+def test_a_session_key_reaches_the_calibration(tmp_path):
+    """``[calibration] k3_bound_ug_per_g3`` in session.toml: the session's calibration
+    carries the declared K3 (synth's session; the calibration and platform poses alone)."""
+    from dataclasses import replace
+
+    from align.session import load_session, run_session
+    from synth.session import SessionSpec, write_session
+
+    folder = tmp_path / "unit"
+    write_session(folder, SessionSpec(seed=11))
+    toml = folder / "session.toml"
+    toml.write_text(toml.read_text().replace("[calibration]\n",
+                                             "[calibration]\nk3_bound_ug_per_g3 = 100\n", 1))
+    s = load_session(folder)
+    cal = run_session(replace(s, images=(), goniometer=None)).calibration
+    assert cal.nonlinearity["k3_bound_ug_per_g3"] == pytest.approx(100.0)
+    assert cal.nonlinearity["carried"] == [K3]
+    assert BOUND in cal.widening.to_dict()["terms"]
