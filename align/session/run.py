@@ -182,7 +182,8 @@ class SessionResult:
         if self.fusion is None or self.calibration is None or self.fusion.gross:
             return None  # a gross disagreement's E is not a measurement: nothing to apply
         e6 = np.array([self.fusion.E[i, j] for i, j in E_INDEX])
-        return PlatformCalibration(self.calibration.model, e6, self.fusion.cov)
+        why = tuple(self.problems) + tuple(f"{e.stage}: {e.message}" for e in self.errors)
+        return PlatformCalibration(self.calibration.model, e6, self.fusion.cov, why)
 
     def to_dict(self) -> dict:
         """The JSON contract of 'align run' (without its envelope): ok/fused, warnings,
