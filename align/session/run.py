@@ -470,7 +470,8 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
     # Calibrated per-axis readings w = R a_c = x - R b (see align.fusion.observations).
     w = a @ R.T
     u_w = poses.sigma_u / np.abs(m.k)
-    return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i])
+    return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i],
+                         int(poses.count[i]))
             for i, lab in enumerate(poses.labels)]
 
 
