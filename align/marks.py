@@ -38,6 +38,7 @@ from align.mark_stage import (
 )
 from axisbase.errors import internal_error
 from imaging import (
+    MAX_LENGTH_FRACTION,
     CameraModel,
     ImageInputError,
     MarkMeasurement,
@@ -109,6 +110,9 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         au = float(np.hypot(au, m.jpeg_u_rad))
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
                                float(np.rad2deg(m.jpeg_u_rad) * 3600)))
+    if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
+        terms["groove_profile"] = m.profile_u_rad
+        au = float(np.hypot(au, m.profile_u_rad))
     if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
         terms["striped_background"] = m.background_u_rad
         au = float(np.hypot(au, m.background_u_rad))
@@ -346,6 +350,9 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     >>> bool(abs(m.angle_rad - np.deg2rad(0.1)) < 3 * m.angle_u_rad), m.lens_limited
     (True, False)
     """
+    too_long = min_length_note(min_length_px, image.shape)
+    if too_long:  # refused before measuring: the flag is wrong, not the image
+        return [MarkResult(image=name, found=False, error=f"{name}: {too_long}")]
     try:
         measured = measure_frame(image, camera, where=name, max_marks=max_marks,
                                  expect_one=expect_one, roi=roi, min_length_px=min_length_px)
@@ -492,6 +499,22 @@ def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str,
                                f"measured as two lines, marks {i} and {i + 1}")
         out.extend(parts)
     return out, said
+
+
+def min_length_note(min_length_px: float | None, shape: tuple[int, ...]) -> str | None:
+    """Why ``min_length_px`` [px] cannot be asked of an image of ``shape`` (rows, columns),
+    or None: a mark is at most 80 % of the image's smaller side (the detector's bound,
+    :func:`imaging.detect.default_min_length`), so a longer minimum finds nothing and would
+    blame the image."""
+    if min_length_px is None:
+        return None
+    side = min(shape[:2])
+    bound = MAX_LENGTH_FRACTION * side
+    if min_length_px <= bound:
+        return None
+    return (f"--min-length {min_length_px:g} px is beyond this image's bound of {bound:g} px "
+            f"(at most {MAX_LENGTH_FRACTION * 100:g} % of its smaller side, {side} px): not "
+            "measured; give a shorter --min-length")
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,

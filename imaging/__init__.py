@@ -16,7 +16,15 @@ from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.centres import Centres
 from imaging.confirm import shadow_free
 from imaging.defocus import BlurTrend, defocus_note
-from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
+from imaging.detect import (
+    MAX_LENGTH_FRACTION,
+    MarkCandidate,
+    Roi,
+    check_roi,
+    detect_marks,
+    line_frame,
+    wrap_angle,
+)
 from imaging.ends import GrooveEnds, groove_ends
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
@@ -26,7 +34,7 @@ from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
-from imaging.linefit import LineFit, fit_line
+from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.measure import (
     MarkMeasurement,
     MeasuredFrame,
@@ -46,11 +54,13 @@ from imaging.plumbline import (
 from imaging.stripes import Stripes
 
 __all__ = [
+    "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
+    "fit_line_only",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",

@@ -21,6 +21,7 @@ from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
 from align.face_plan import check_face_plan
+from align.fusion.observations import REF, ROLL, TILT
 from align.lens import LensRanges
 from align.lens_design import replaced_by_model
 from axisbase.header import OUTPUT_UNITS, parse_column_map
@@ -137,6 +138,17 @@ class Session:
     tolerance: ToleranceSpec | None = None
     """``[tolerance]``: the specification of E and the decision rule (:mod:`align.decision`);
     None when the session gives none."""
+
+    def declared_setup(self) -> dict[str, np.ndarray]:
+        """What session.toml declares of the set-up the fusion's loop can find more of, by
+        the fusion's effect name [rad]: each camera's roll (``camera_roll[A]``), the
+        reference face's offset, the table's tilt (x, y). The loop finds an increment on it."""
+        out = {f"{ROLL}[{n}]": np.array([c.roll_rad]) for n, c in self.cameras.items()}
+        if self.goniometer is not None:
+            out[REF] = np.array([self.goniometer.reference_offset_rad])
+        if self.platform is not None:
+            out[TILT] = np.asarray(self.platform.table_tilt_rad, float)
+        return out
 
     @property
     def inputs(self) -> list[Path]:
