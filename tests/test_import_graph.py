@@ -12,8 +12,6 @@ import ast
 import functools
 from pathlib import Path
 
-from tests.sources import parsed
-
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("align", "axisbase", "goniometry", "imaging", "synth")
 
@@ -83,7 +81,7 @@ def _imports(mods: dict[str, Path], with_types: bool = False
                     found.append((mod, target, in_function, ch.lineno))
                 visit(ch, in_function)
 
-        visit(parsed(path), False)
+        visit(ast.parse(path.read_text(encoding="utf-8")), False)
     return found
 
 

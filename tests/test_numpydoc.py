@@ -19,7 +19,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from tests.sources import parsed
 from tests.test_import_graph import PACKAGES, ROOT
 from tests.test_import_graph import _modules as project_modules
 
@@ -89,11 +88,17 @@ def _modules(pkg: str) -> dict[str, Path]:
 
 
 @functools.cache
+def _tree(path: Path) -> ast.Module:
+    """A module's syntax tree, parsed once (the definitions and the re-exports read it)."""
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+@functools.cache
 def _defs(pkg: str) -> dict[tuple[str, str], ast.AST]:
     """(module, name) -> the module-level function or class, for every module of ``pkg``."""
     out = {}
     for mod, path in _modules(pkg).items():
-        tree = parsed(path)
+        tree = _tree(path)
         for node in tree.body:
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
                 out[(mod, node.name)] = node
@@ -108,7 +113,7 @@ def _public(pkg: str) -> list[ast.AST]:
 def _exported(pkg: str) -> dict[str, ast.AST]:
     """The functions and classes the package's ``__init__`` exports (constants have no
     docstring of their own and are not counted)."""
-    tree = parsed(ROOT / pkg / "__init__.py")
+    tree = ast.parse((ROOT / pkg / "__init__.py").read_text(encoding="utf-8"))
     where: dict[str, tuple[str, str]] = {}
     for node in tree.body:
         if isinstance(node, ast.ImportFrom) and node.module and not node.level:
@@ -135,7 +140,7 @@ def _definition(module: str, name: str, depth: int = 0) -> ast.AST | None:
     path = _modules(pkg).get(module)
     if path is None:
         return None
-    for imp in parsed(path).body:
+    for imp in _tree(path).body:
         if isinstance(imp, ast.ImportFrom) and imp.module and not imp.level:
             for a in imp.names:
                 if (a.asname or a.name) == name:
