@@ -8,13 +8,13 @@ session's is :func:`align.session.output.session_document`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from align.contract import document
-from align.warnings import gonio_warnings, mark_warnings
+from align.warnings import camera_warnings, gonio_warnings, mark_warnings
 
 Inputs = Iterable[str | Path]
 
@@ -45,6 +45,14 @@ def tilt_document(res, settings: dict, inputs: Inputs) -> dict:
     return document("tilt", res.to_dict(), settings, inputs)
 
 
-def camera_document(model, settings: dict, inputs: Inputs) -> dict:
-    """``align camera --json``: the camera model's own dict (``imaging.CameraModel``)."""
-    return document("camera", model.to_dict(), settings, inputs)
+def camera_document(model, settings: dict, inputs: Sequence[str | Path],
+                    skipped: Mapping[str, str] | None = None) -> dict:
+    """``align camera --json``: the camera model's own dict (``imaging.CameraModel``), ok,
+    its warnings, and the photographs ``skipped`` (name -> why: unreadable, another size, no
+    board found) apart from the ones used (the envelope's ``inputs``)."""
+    skipped = dict(skipped or {})
+    used = [p for p in inputs if str(p) not in skipped]
+    body = {"ok": True, "warnings": camera_warnings(skipped),
+            "skipped": [{"file": str(k), "reason": v} for k, v in skipped.items()],
+            **model.to_dict()}
+    return document("camera", body, settings, used)

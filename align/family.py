@@ -32,7 +32,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.special import ndtri
 
-from imaging.ends import groove_ends, groove_path
+from imaging.ends import checked_ends
 
 R = TypeVar("R")
 
@@ -190,7 +190,7 @@ def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
     m = r.measurement
     if m is None:
         return r, (r.length_px, r.length_px, 0)
-    e = groove_ends(image, m.profile, m.extent_px, path=groove_path(m.centres, m.profile))
+    e = checked_ends(image, m.profile, m.extent_px, m.centres, m.ends_check)
     n_hidden = sum(e.hidden)
     notes = tuple(r.notes)
     if n_hidden:

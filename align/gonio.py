@@ -32,12 +32,13 @@ from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
 from goniometry import (
+    FaceAngles,
     face_angles,
     kept_table,
     read_revolutions,
     vertical_earth_rate,
 )
-from goniometry.angles import OMEGA_EARTH
+from goniometry.angles import METHOD_OFF_PATH, OMEGA_EARTH
 from goniometry.reader import source_name
 
 if TYPE_CHECKING:
@@ -241,12 +242,14 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
                "pulse times; NOT applied (nor can a table speed that follows its angle be "
                "seen, which with autocollimator latency biases one direction: measure both)")
         notes.append(why)
-        return with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None,
+        fa = face_angles(summary)
+        return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None,
                                      warnings=(why,)), steady_table, alpha)
     if not summary.has_time:
         notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
                      "nor bounded without pulse times; the angles assume a steady table")
-        return with_timing(GonioRun(summary, face_angles(summary), None, tuple(notes), None),
+        fa = face_angles(summary)
+        return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None),
                             steady_table, alpha)
     # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
     # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time), started by
@@ -294,6 +297,17 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
                  f"{where} (up to {worst:.3g}″ per angle) is carried in u as a Type B term")
     return with_timing(GonioRun(summary, fa, loop, tuple(notes), mid or None), steady_table,
                         alpha)
+
+
+def _untimed_notes(fa: FaceAngles) -> tuple[str, ...]:
+    """What a log without times cannot show about drop-outs (docs/goniometer-dropouts.md)."""
+    notes = ["no t column: a drop-out of a whole number of revolutions keeps the faces' "
+             "sequence and cannot be seen; the revolution across it (genuine intervals) is used"]
+    if fa.type_a_method == METHOD_OFF_PATH:
+        notes.append("the counters' floors do not follow one phase path: a wandering table "
+                     "speed or whole revolutions lost (without times neither can be told apart "
+                     "nor located); u from batch means, which bound both")
+    return tuple(notes)
 
 
 def _check_latitudes(latitude_rad: float | None,

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from axisbase.errors import InputError, NotApplicable
-from imaging import fit_line, line_frame
+from imaging import fit_line_only, line_frame
 from imaging.lens import undistortion_jacobian
 
 
@@ -134,11 +134,11 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
+    angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
+    u, n = line_frame(angle)
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
     J = np.column_stack([q @ u, -np.ones(len(q))])
-    r = q @ n - lf.offset_px
+    r = q @ n - offset
     t = q @ u
     bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
     X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
@@ -149,7 +149,7 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     G = Ew - Jw @ coef[:, :-1]
     w = bw - Jw @ coef[:, -1]
     # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
-    return _Design(lf.angle_rad, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
+    return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
 
 
 class _DesignCache:

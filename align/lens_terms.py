@@ -14,7 +14,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.lens import LensSolution, _determined
 from align.lens_design import DEFAULT_RANGES, LensRanges, LineGeometry, _Design, _design
-from imaging import fit_line, line_frame
+from imaging import fit_line_only, line_frame
 from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
 
 
@@ -70,8 +70,7 @@ def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
     q, jac = undistortion_jacobian(line.points, lam, scale)
     if not np.all(np.isfinite(jac)):
         return np.full(len(PARAMS), np.inf)
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    u, n = line_frame(lf.angle_rad)
+    u, n = line_frame(fit_line_only(q, line.sigma, chol=line.chol)[0])
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]
     t = q @ u
     tm = (t.min() + t.max()) / 2
@@ -401,8 +400,7 @@ def undistorted(line: LineGeometry, lam: np.ndarray, scale: float
     q = undistort_points(line.points, lam, scale)
     if not np.any(lam):
         return q, line.sigma
-    lf = fit_line(q, line.sigma, reject_sigma=None, chol=line.chol)
-    n = line_frame(lf.angle_rad)[1]
+    n = line_frame(fit_line_only(q, line.sigma, chol=line.chol)[0])[1]
     q2 = undistort_points(line.points + 0.5 * n, lam, scale)
     g = np.abs((q2 - q) @ n) / 0.5
     return q, line.sigma * g

@@ -26,6 +26,7 @@ from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
 from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
+from align.mark_shadow import shadow_edge_note, unshadowed
 from align.mark_stage import (
     BEND,
     CANDIDATES,
@@ -54,6 +55,10 @@ NEGLIGIBLE_BOW = 0.05
 """A bow whose certain effects widen the angle's u by less than this fraction (below ~0.32 u
 in quadrature) changes no reading of the angle: carried in u as ``bow_ends`` and
 ``bow_vs_straight``, the straight fit kept, not named a bent mark."""
+
+MAX_LENGTH_FRACTION = 0.8
+"""The longest ``min_length_px`` an image allows, as a fraction of its smaller side: the
+detector's own cap on its default (:func:`imaging.detect.default_min_length`)."""
 
 __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens", "MarkStage",
            "FrameDistortion", "MarkResult", "camera_lens", "half_diagonal", "loop_mark",
@@ -108,6 +113,9 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         au = float(np.hypot(au, m.jpeg_u_rad))
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
                                float(np.rad2deg(m.jpeg_u_rad) * 3600)))
+    if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
+        terms["groove_profile"] = m.profile_u_rad
+        au = float(np.hypot(au, m.profile_u_rad))
     if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
         terms["striped_background"] = m.background_u_rad
         au = float(np.hypot(au, m.background_u_rad))
@@ -345,12 +353,15 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     >>> bool(abs(m.angle_rad - np.deg2rad(0.1)) < 3 * m.angle_u_rad), m.lens_limited
     (True, False)
     """
+    too_long = min_length_note(min_length_px, image.shape)
+    if too_long:  # refused before measuring: the flag is wrong, not the image
+        return [MarkResult(image=name, found=False, error=f"{name}: {too_long}")]
     try:
         measured = measure_frame(image, camera, where=name, max_marks=max_marks,
                                  expect_one=expect_one, roi=roi, min_length_px=min_length_px)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
-    found, split = _split_kinked(measured.items, name, alpha)
+    found, split = _frame_marks(measured.items, name, alpha, image, camera)
     ms = [m for m in found if isinstance(m, MarkMeasurement)]
     # One lens for the frame, all its marks together (identifiability first).
     lens = camera_lens(ms, camera, ranges, alpha)
@@ -361,7 +372,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
             out.append(MarkResult(image=name, found=False, error=str(m), index=i))
             continue
         r = finish_mark(m, lens, k, name, i, alpha)
-        out.append(replace(r, notes=r.notes + (split[i],)) if i in split else r)
+        out.append(replace(r, notes=r.notes + split[i]) if i in split else r)
         k += 1
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
@@ -408,7 +419,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
     """
     found_all: list[list[MarkMeasurement | ImageInputError]] = []
     said: dict[str, tuple[str, ...]] = {}  # what the reader did to each stored image
-    split_all: dict[str, dict[int, str]] = {}  # kinked marks measured as two, per image
+    split_all: dict[str, dict[int, tuple[str, ...]]] = {}  # shadowed, kinked marks' notes
     for j, (path, roi) in enumerate(images):
         if on_image is not None:
             on_image(j)
@@ -421,7 +432,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
                                roi=roi)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
-            items, split = _split_kinked(fr.items, str(path), alpha)
+            items, split = _frame_marks(fr.items, str(path), alpha, got.pixels, camera)
             found_all.append(items)
             split_all[str(path)] = split
         except ImageInputError as exc:
@@ -446,22 +457,41 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
                 res.append(finish_mark(m, lens, k, str(path), i, alpha,
                                        group=f"camera {label}" if label else "camera"))
             if i in split_all.get(str(path), {}):
-                res[-1] = replace(res[-1], notes=res[-1].notes + (split_all[str(path)][i],))
+                res[-1] = replace(res[-1], notes=res[-1].notes + split_all[str(path)][i])
             k += 1
         notes = said.get(str(path), ())
         out.append([replace(r, notes=notes + tuple(r.notes)) for r in res] if notes else res)
     return out
 
 
-def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float
+def _frame_marks(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float,
+                 image: np.ndarray, camera: CameraModel | None
+                 ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, tuple[str, ...]]]:
+    """The frame's marks measured again where a shadow's edge runs along one
+    (:func:`align.mark_shadow.unshadowed`) and split where one is kinked
+    (:func:`_split_kinked`), and the notes saying so, by each mark's final index."""
+    items, shaded = unshadowed(items, image, camera, name)
+    found, split = _split_kinked(items, name, alpha, image, camera)
+    notes: dict[int, tuple[str, ...]] = {}
+    for i, m in enumerate(found):
+        said = ((shadow_edge_note(f"{name} mark {i}", shaded[id(m)]),) if id(m) in shaded
+                else ()) + ((split[i],) if i in split else ())
+        if said:
+            notes[i] = said
+    return found, notes
+
+
+def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str, alpha: float,
+                  image: np.ndarray, camera: CameraModel | None
                   ) -> tuple[list[MarkMeasurement | ImageInputError], dict[int, str]]:
     """The frame's marks with each kinked one (:func:`align.mark_kink.split_kinked`) as its
-    two straight parts, and the note of each part (by its new index)."""
+    two straight parts, each measured again from ``image`` as its own groove, and the note
+    of each part (by its new index)."""
     out: list[MarkMeasurement | ImageInputError] = []
     said: dict[int, str] = {}
     for item in items:
         parts, kink = ((item,), None) if isinstance(item, ImageInputError) else split_kinked(
-            item, alpha)
+            item, alpha, image, camera, name)
         if len(parts) == 2 and kink is not None:
             i = len(out)
             turn = float(np.rad2deg(_wrap(parts[1].line.angle_rad - parts[0].line.angle_rad)))
@@ -472,6 +502,22 @@ def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str,
                                f"measured as two lines, marks {i} and {i + 1}")
         out.extend(parts)
     return out, said
+
+
+def min_length_note(min_length_px: float | None, shape: tuple[int, ...]) -> str | None:
+    """Why ``min_length_px`` [px] cannot be asked of an image of ``shape`` (rows, columns),
+    or None: a mark is at most 80 % of the image's smaller side (the detector's bound,
+    :func:`imaging.detect.default_min_length`), so a longer minimum finds nothing and would
+    blame the image."""
+    if min_length_px is None:
+        return None
+    side = min(shape[:2])
+    bound = MAX_LENGTH_FRACTION * side
+    if min_length_px <= bound:
+        return None
+    return (f"--min-length {min_length_px:g} px is beyond this image's bound of {bound:g} px "
+            f"(at most {MAX_LENGTH_FRACTION * 100:g} % of its smaller side, {side} px): not "
+            "measured; give a shorter --min-length")
 
 
 def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: float = 1e-3,

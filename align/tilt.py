@@ -12,11 +12,16 @@ Angles in radians.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from align.calibration import read_readings
+from axisbase.console import captured_warnings
 from axisbase.output import csv_text
+from axisbase.table import Table
 
 
 def roll_pitch(G: np.ndarray, method: str = "exact", mu: float = 0.001
@@ -138,15 +143,46 @@ def calibrated_force(cal, tab) -> tuple[np.ndarray | None, np.ndarray, list[str]
     return t, a, warnings
 
 
-def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001) -> TiltOfReadings:
+def read_readings_noted(path: str | Path, columns=None, rate_hz: float | None = None,
+                        time_unit: str | None = None) -> tuple[Table, list[str]]:
+    """Readings ``ux,uy,uz[,t][,temp]`` as :func:`align.calibration.read_readings` reads them,
+    with the warnings the reader gave on how it read the file (a median sample interval no
+    logger has: "were the times in ms?", logger lines skipped before the header).
+
+    Parameters
+    ----------
+    path : str or Path
+        The readings CSV.
+    columns : mapping of str to str, optional
+        Header names for the format's columns (``--columns``).
+    rate_hz : float, optional
+        Sample rate [Hz] of a file without a time column.
+    time_unit : str, optional
+        The time column's unit when its header says none.
+
+    Returns
+    -------
+    (Table, list of str)
+        The readings, and the reader's warnings: taken off the log so that the result
+        carries them (its JSON's ``warnings``) and the terminal says each once.
+    """
+    with captured_warnings() as read:
+        tab = read_readings(path, columns, rate_hz, time_unit)
+    return tab, list(read)
+
+
+def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001,
+                     read_warnings: Sequence[str] = ()) -> TiltOfReadings:
     """Roll and pitch of readings ``tab`` (a table with ux, uy, uz[, t][, temp]) through
     ``model``: a triad model (``TriadModel``: roll and pitch of its own calibration frame) or a
     platform calibration (``PlatformCalibration``: the platform's roll and pitch, as ``align
     apply --tilt`` gives them, through :func:`calibrated_force`). Readings without times get
     none; if the model drifts, its drift is taken at the reference time and a warning says so
     (likewise a temperature model without temperatures). Readings far from 1 g are counted in
-    a warning."""
+    a warning. ``read_warnings``: what the reader said of the file
+    (:func:`read_readings_noted`), first among the result's warnings."""
     t, a, warnings = calibrated_force(model, tab)
+    warnings = [*read_warnings, *warnings]
     frame = "platform" if hasattr(model, "model") else "triad"
     roll, pitch = roll_pitch(a, method=method, mu=mu)
     res = TiltOfReadings(t, a, roll, pitch, method, mu, frame=frame)

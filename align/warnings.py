@@ -8,7 +8,9 @@ to be taken at face value, and why.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+
+import numpy as np
 
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
@@ -135,11 +137,20 @@ def family_warnings(image: str, fam) -> list[str]:
     return out
 
 
+def camera_warnings(skipped: Mapping[str, str]) -> list[str]:
+    """A chessboard calibration's warnings: each photograph left out, and why."""
+    return [f"{name}: skipped, not used in the calibration: {why}"
+            for name, why in skipped.items()]
+
+
 def calibration_warnings(cal, poses) -> list[str]:
     """A triad calibration (``Calibration``) and its poses."""
     out = list(getattr(cal, "problems", ())) + loop_warnings("calibration", cal.loop)
     out += [f"calibration: effect {r.name} REFUSED: {r.reason}" for r in cal.loop.refused]
     out += list(getattr(cal, "notes", ()))
+    settled = getattr(poses, "settling", None)
+    if settled is not None and settled.found:
+        out.append(settled.statement())
     dof = cal.loop.after.dof
     if dof < 3:
         out.append(f"calibration: {len(poses.u)} poses leave {dof} degrees of freedom: the fit "
@@ -168,32 +179,71 @@ def gonio_warnings(run, faces: Sequence[str] | None = None, nominal_rad=None) ->
     return out
 
 
-SETUP_HINT = {
-    "camera_roll": "declare it ([cameras.{name}] roll_arcsec) or re-level the camera",
-    "reference_face_offset": "declare it ([goniometer] reference_offset_arcsec) or re-set the "
-                        "reference face",
-    "platform_tilt": "declare it ([platform] table_tilt_arcsec) or re-level the table",
+SETUP_KEY = {
+    "camera_roll": ("[cameras.{name}] roll_arcsec", "re-level the camera"),
+    "reference_face_offset": ("[goniometer] reference_offset_arcsec", "re-set the reference face"),
+    "platform_tilt": ("[platform] table_tilt_arcsec", "re-level the table"),
 }
-"""What to do about each kind of set-up effect the fusion found (by the effect's name)."""
+"""Per kind of set-up effect the fusion finds (by the effect's name): the session.toml key
+that declares it and what else to do about it."""
 
 
-def setup_notices(fusion) -> list[str]:
+def _arcsec(v: np.ndarray) -> str:
+    """A declared or found value [rad] as session.toml takes it [″]: a number or [x, y]."""
+    a = [f"{x / ARCSEC:+.1f}" for x in v]
+    return a[0] if len(a) == 1 else f"[{', '.join(a)}]"
+
+
+def _with_u(v: np.ndarray, u: np.ndarray, axes: Sequence[str]) -> str:
+    """Values [rad] with their u in [″]; a vector's components named by axis."""
+    parts = [f"{x / ARCSEC:+.1f} ± {s / ARCSEC:.1f}″" for x, s in zip(v, u, strict=True)]
+    return parts[0] if len(parts) == 1 else ", ".join(
+        f"{a} {p}" for a, p in zip(axes, parts, strict=True))
+
+
+def setup_notice(e, declared: np.ndarray | None = None) -> str:
+    """One set-up effect the fusion's loop found (an ``EffectReport``): every component with
+    its u; on top of a declared value [rad], the declaration, the increment found and the
+    total to declare (the loop's estimate is the increment: the declared set-up is applied
+    before it)."""
+    what = e.description or e.name
+    if e.unit != "rad":
+        return (f"set-up: the fusion found a {what} of {e.estimate:+.3g} ± {e.u:.2g} {e.unit} "
+                f"(p = {e.p_value:.2g}) and corrected E for it; check the set-up against "
+                "session.toml")
+    if e.components:  # the components are named with their values
+        what = what.removesuffix(" (x, y)")
+    axes = [c for c, _, _ in e.components] or [""]
+    found = np.array([v for _, v, _ in e.components] or [e.estimate])
+    u = np.array([s for _, _, s in e.components] or [e.u])
+    kind = next((k for k in SETUP_KEY if e.name.startswith(k)), None)
+    if kind is None:
+        return (f"set-up: the fusion found a {what} of {_with_u(found, u, axes)} "
+                f"(p = {e.p_value:.2g}) and corrected E for it; check the set-up against "
+                "session.toml")
+    key, other = SETUP_KEY[kind]
+    # camera_roll[A] -> A: the camera to name in the key
+    key = key.replace("{name}", e.name.partition("[")[2].rstrip("]") or "NAME")
+    dec = np.zeros_like(found) if declared is None else np.broadcast_to(declared, found.shape)
+    if not np.any(dec):
+        return (f"set-up: the fusion found a {what} of {_with_u(found, u, axes)} "
+                f"(p = {e.p_value:.2g}) and corrected E for it; declare it ({key} = "
+                f"{_arcsec(found)}) or {other}")
+    total = dec + found
+    return (f"set-up: the fusion found a {what}: declared {_arcsec(dec)}″, found "
+            f"{_with_u(found, u, axes)} more (p = {e.p_value:.2g}): it is "
+            f"{_with_u(total, u, axes)}; E is corrected for it; declare that ({key} = "
+            f"{_arcsec(total)}) or {other}")
+
+
+def setup_notices(fusion, declared: Mapping[str, np.ndarray] | None = None) -> list[str]:
     """Set-up effects the fusion's loop found and corrected for (a camera's roll, the
     reference face's offset, the table's tilt): E is corrected, but the set-up is not what
-    session.toml declares, and the reader must know (``FusionResult``, run or loaded)."""
-
-    out = []
-    for e in fusion.loop.summary().effects:
-        what = e.description or e.name
-        value = (f"{e.estimate / ARCSEC:+.1f} ± {e.u / ARCSEC:.1f}″" if e.unit == "rad"
-                 else f"{e.estimate:+.3g} ± {e.u:.2g} {e.unit}")
-        hint = next((h for k, h in SETUP_HINT.items() if e.name.startswith(k)),
-                    "check the set-up against session.toml")
-        # camera_roll[A] -> A: the camera to name in the hint
-        hint = hint.replace("{name}", e.name.partition("[")[2].rstrip("]") or "NAME")
-        out.append(f"set-up: the fusion found a {what} of {value} (p = {e.p_value:.2g}) and "
-                   f"corrected E for it; {hint}")
-    return out
+    session.toml declares, and the reader must know (``FusionResult``, run or loaded).
+    ``declared``: what session.toml declares, by effect name [rad]
+    (``Session.declared_setup``), which each estimate is an increment on."""
+    declared = declared or {}
+    return [setup_notice(e, declared.get(e.name)) for e in fusion.loop.summary().effects]
 
 
 def session_warnings(res) -> list[str]:
@@ -208,7 +258,7 @@ def session_warnings(res) -> list[str]:
     out += mark_warnings([r for _, r in res.marks])
     f = res.fusion
     if f is not None:
-        out += setup_notices(f)
+        out += setup_notices(f, res.session.declared_setup())
         out += loop_warnings("fusion", f.loop)
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "

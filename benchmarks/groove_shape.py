@@ -1,4 +1,4 @@
-"""The groove's own cross-profile (issue 18): z with and without it, and what it costs in u.
+"""The groove's own cross-profile (issue 18): z with and without its u term, and what it costs.
 
 Run:  python3 benchmarks/groove_shape.py [--what nh edge fresh synth] [--off]
 
@@ -6,9 +6,10 @@ Run:  python3 benchmarks/groove_shape.py [--what nh edge fresh synth] [--off]
 seeds 100-129, its test's scene); ``edge``: user6's mark 6 px from the bottom edge under 35 %
 vignetting (12-bit, seeds 0-15: its test's); ``fresh``: the same at seeds 16-47; ``synth``:
 synth's own clean marks (round and box profiles, 33 each: a third within 0.3 deg of 0 deg, a
-third of 90 deg, a third at any angle), u with the profile over u without it (median).
-``--off`` measures without the groove's own profile (``imaging.centres.fit_shape`` -> None);
-the frame-edge symmetric window stays. Each mark through ``align marks`` in process, lens
+third of 90 deg, a third at any angle), u with the Type B term ``groove_profile`` over u
+without it (median). ``--off`` measures without the groove's own profile
+(``imaging.centres.fit_shape`` -> None: no ``groove_profile`` term); the frame-edge
+symmetric window stays. Each mark through ``align marks`` in process, lens
 declared absent, as the tests call it.
 """
 
@@ -81,7 +82,7 @@ def _line(name: str, z: np.ndarray) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--what", nargs="+", default=["nh", "edge", "fresh", "synth"])
-    ap.add_argument("--off", action="store_true", help="without the groove's own profile")
+    ap.add_argument("--off", action="store_true", help="without the groove_profile term")
     args = ap.parse_args()
     real_fit = imaging.centres.fit_shape
     if args.off:

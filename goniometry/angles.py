@@ -31,6 +31,15 @@ UNLOCK_COUNTS = 4.0
 PATH_MODEL_REVOLUTIONS = 2048
 # The floors' pattern (the jitter) is fitted on at most this many revolutions.
 FIT_REVOLUTIONS = 512
+# The type A method when the floors do not follow the log's phase path (steps everywhere but
+# intervals as sharp as quantisation alone): batch means bound what moved the phase — a
+# wandering speed whose Earth share the path does not know, or, without times, a drop-out of
+# a whole number of revolutions (the faces' sequence goes on, so nothing in the rows shows it,
+# but the ring laser's phase went on through the lost revolutions: the floors' steps after
+# the gap fall at another phase). Which of the two, and where, the floors cannot tell: a scan
+# for a phase offset at every pulse found 2 of 40 stitches and 22 in their 40 clean twins
+# (benchmarks/gonio_stitch_scan.py; docs/goniometer-dropouts.md).
+METHOD_OFF_PATH = "batch means (floors off the phase path)"
 
 
 @dataclass(frozen=True)
@@ -211,6 +220,9 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
         # to estimate (batch means: 5-10, so Student tails — 3 angles beyond 4 u in 2400 —
         # and blind to a beat longer than their blocks). Longer logs keep batch means.
         model = _path_model(summary, earth_rate, n_per_rev, taus, adev, usable)
+        if isinstance(model, str):  # (METHOD_OFF_PATH)
+            model = None
+            method = METHOD_OFF_PATH if method == "batch means" else method
     q6 = 2 * np.pi / n_per_rev / np.sqrt(6)
     # Averaging beats quantisation only if its phase dithers from one revolution to the
     # next; a scatter well below q/sqrt(6) means it is locked (e.g. an integer number of
@@ -273,7 +285,7 @@ def face_angles(summary: LogSummary, earth_rate: float = 0.0, earth_rate_u: floa
 
 def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.ndarray,
                 adev: np.ndarray, usable: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray] | None:
+                ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray] | str | None:
     """u [rad] of each angle from the quantisation and jitter along the kept revolutions'
     phase path (:mod:`goniometry.beat`), whether the batch means agree with it (one-sided
     chi-square at 1 %), and the fitted jitter [counts]. None when the log has too few
@@ -317,8 +329,9 @@ def _path_model(summary: LogSummary, rate: float, n_per_rev: float, taus: np.nda
     elif sigmas[1] >= 0.25:
         # Steps everywhere but intervals as sharp as quantisation alone: the path is wrong,
         # not the jitter large (an unsteady table whose Earth rate is not removed: its share
-        # of the wandering period walks the phase by counts) — no model then.
-        return None
+        # of the wandering period walks the phase by counts; without times also a stitched
+        # whole-revolution drop-out) — no model then.
+        return METHOD_OFF_PATH
     sigma = sigmas[1]
     q = 2 * np.pi / n_per_rev
     # The larger at the two ends of the jitters the pulses allow: a locked phase whose

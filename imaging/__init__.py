@@ -14,6 +14,7 @@ Public API::
 
 from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.centres import Centres
+from imaging.confirm import shadow_free
 from imaging.defocus import BlurTrend, defocus_note
 from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
 from imaging.ends import GrooveEnds, groove_ends
@@ -25,7 +26,7 @@ from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import JpegBlocks, jpeg_note
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
-from imaging.linefit import LineFit, fit_line
+from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.measure import (
     MarkMeasurement,
     MeasuredFrame,
@@ -50,8 +51,9 @@ __all__ = [
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
     "detect_lines", "detect_marks", "distort_points", "find_chessboard", "fit_line",
+    "fit_line_only",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
     "ImageRead", "read_image_notes", "set_max_pixels",
-    "GrooveEnds", "grating_note", "groove_ends",
+    "GrooveEnds", "grating_note", "groove_ends", "shadow_free",
 ]

@@ -20,7 +20,7 @@ from imaging.detect import line_frame
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
 from imaging.ring import ring_slope
-from imaging.shape import GrooveShape, fit_shape
+from imaging.shape import fit_shape, shape_shift
 from imaging.texture import TextureModel, texture_model
 
 EXTRA_STEPS = 4
@@ -43,9 +43,11 @@ class Centres:
     minus the band's [px] and its standard uncertainty, linearised at the solution (one
     Gauss–Newton step on the blur with the segment's other parameters free; None unless
     asked for: :mod:`imaging.defocus` reads a defocus gradient from them);
-    ``offsets_cov``: the covariance [px^2] of the centres from terms every segment shares:
-    removed stripes' offsets and the noise of the groove's own profile
-    (:mod:`imaging.shape`) (None: neither).
+    ``offsets_cov``: the covariance [px^2] of the centres from removed stripes' offsets,
+    which every segment on a column (row) shares (None: none); ``profile_shift``,
+    ``profile_shift_cov``: how far the groove's own profile (its even departure from the
+    model, :mod:`imaging.shape`) moves each centre [px] and that shift's covariance [px^2]
+    (None unless asked for: the Type B term ``groove_profile`` is read from them).
 
     Attributes
     ----------
@@ -68,7 +70,11 @@ class Centres:
     blur_dev, blur_dev_u : ndarray or None
         Per-segment blur minus the band's and its u [px].
     offsets_cov : ndarray or None
-        Covariance from removed stripes' offsets and the groove's profile [px^2].
+        Covariance from removed stripes' offsets [px^2].
+    profile_shift : ndarray or None
+        (N,) the centres' shift by the groove's own profile [px].
+    profile_shift_cov : ndarray or None
+        (N, N) its covariance [px^2].
     """
 
     xy: np.ndarray
@@ -82,6 +88,8 @@ class Centres:
     blur_dev: np.ndarray | None = None
     blur_dev_u: np.ndarray | None = None
     offsets_cov: np.ndarray | None = None
+    profile_shift: np.ndarray | None = None
+    profile_shift_cov: np.ndarray | None = None
 
 
 def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
@@ -131,7 +139,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    texture: bool = False, avoid_px: Sequence[float] = (),
                    guess: tuple[np.ndarray, np.ndarray] | None = None,
                    offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
-                   shaped: bool = False) -> Centres:
+                   departure: bool = False) -> Centres:
     """Centre offset of the mark in consecutive segments along its length (vectorised GN).
 
     ``every`` > 1 keeps only every n-th segment (a quick pass that only sets a reference line).
@@ -142,6 +150,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     ``offsets_var``: variances [DN^2] of per-column and per-row offsets already subtracted
     from the image (removed stripes, :mod:`imaging.stripes`); their errors are shared by
     every segment on the same column (row), and ``Centres.offsets_cov`` carries them.
+    ``departure``: also read the groove's own profile from the residuals and how far it
+    moves each centre (``Centres.profile_shift``; not applied).
     ``texture``: also measure how the background's texture correlates the centres' errors
     (replicas of the band beside the mark, :mod:`imaging.texture`), with no replica within
     a band and ring's width of the other lines at signed distances ``avoid_px`` [px].
@@ -166,7 +176,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: no pixels in "
                               "its segments")
     nseg = int(seg.max()) + 1
-    table = base_table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     groove_reach = min(pf.width_px / 2 + 4 * pf.blur_px, half)
     v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
@@ -193,80 +203,75 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         return np.bincount(seg, x, minlength=nseg)
 
     npx = bc(np.ones_like(e))
-    shape = None
     blur_dev = blur_dev_u = None
-    for shape_pass in range(1 + shaped):
-        # With the groove's profile the centres move by ~0.01 px: one step from where they
-        # were (the last evaluation refreshes noise, weights and information there).
-        steps = iterations if shape is None else 1
-        for it in range(steps + 1 + EXTRA_STEPS):
-            ee = e - delta[seg]
-            p, pe = table(ee)
-            amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
-            mu = lev[seg] + slp_px * ee + amp_px * p
-            r = vals - mu
-            if it == 1:
-                # Noise model again, now from the segment model's residuals (local level and
-                # contrast absorb illumination and texture that the band fit could not);
-                # each segment spends k of its pixels' degrees of freedom.
-                v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
-            # The linear noise model is fitted over the band's levels; below them (a segment's
-            # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
-            # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
-            # of a groove is quieter than a quarter of the band's typical variance.
-            var = v0 + v1 * mu
-            wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
-            J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
-            N = np.empty((nseg, k, k))
-            g = np.empty((nseg, k))
-            for i in range(k):
-                # Once per column (the products are the same to the bit); the level's column is
-                # ones, and x * 1.0 is x: those products are skipped.
-                wj = wgt if i == _LEVEL else wgt * J[i]
-                g[:, i] = bc(wj * r)
-                for j in range(i, k):
-                    N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
-            ok = np.linalg.det(N) > 0
-            if it >= steps and not (moving & ok).any():
-                break  # the last pass only refreshes weights and information at the solution
-            if it == steps + EXTRA_STEPS:
-                break  # still moving: those segments are left out below
-            step = np.zeros((nseg, k))
-            step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
-            # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
-            moving = np.abs(step[:, 0]) > 0.1
-            step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
-            delta += step[:, 0]
-            amp += step[:, 1]
-            lev += step[:, 2]
-            if k == 4:
-                slp += step[:, 3]
-        if texture and shape_pass == 0:
-            # The defocus test (each segment's blur step) on the groove model's own profile:
-            # with the departure added, a near-axis mark's phase drift leaks into the blur
-            # steps (a false 'defocus gradient', p ~1e-5, on clean session marks).
-            cov0 = np.full((nseg, k, k), np.inf)
-            cov0[ok] = np.linalg.inv(N[ok])
-            blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g,
-                                              cov0, ok, bc)
-        if shape_pass == shaped:
-            break
-        # The groove's own profile (imaging.shape): its even departure from the model,
-        # pooled over the segments' phases, and the centres refitted with it (a second
-        # round moved the departure by chi2 < 1 of its own noise on rounded grooves).
-        use = (ok & (npx >= 6) & (np.abs(delta) < half / 2) & ~moving)[seg]
-        shape = fit_shape(ee[use], r[use], amp[seg][use], wgt[use], groove_reach)
-        if shape is None:
-            break
-        table = base_table.with_departure(*shape.tabulate(base_table.grid))
+    for it in range(iterations + 1 + EXTRA_STEPS):
+        ee = e - delta[seg]
+        p, pe = table(ee)
+        amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
+        mu = lev[seg] + slp_px * ee + amp_px * p
+        r = vals - mu
+        if it == 1:
+            # Noise model again, now from the segment model's residuals (local level and
+            # contrast absorb illumination and texture that the band fit could not);
+            # each segment spends k of its pixels' degrees of freedom.
+            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+        # The linear noise model is fitted over the band's levels; below them (a segment's
+        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+        # of a groove is quieter than a quarter of the band's typical variance.
+        var = v0 + v1 * mu
+        wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
+        J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
+        N = np.empty((nseg, k, k))
+        g = np.empty((nseg, k))
+        for i in range(k):
+            # Once per column (the products are the same to the bit); the level's column is
+            # ones, and x * 1.0 is x: those products are skipped.
+            wj = wgt if i == _LEVEL else wgt * J[i]
+            g[:, i] = bc(wj * r)
+            for j in range(i, k):
+                N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
+        ok = np.linalg.det(N) > 0
+        if it >= iterations and not (moving & ok).any():
+            break  # the last pass only refreshes weights and information at the solution
+        if it == iterations + EXTRA_STEPS:
+            break  # still moving: those segments are left out below
+        step = np.zeros((nseg, k))
+        step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
+        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+        moving = np.abs(step[:, 0]) > 0.1
+        step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
+        delta += step[:, 0]
+        amp += step[:, 1]
+        lev += step[:, 2]
+        if k == 4:
+            slp += step[:, 3]
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
+    if texture:
+        # The defocus test's input: each segment's blur step on the groove model's profile.
+        blur_dev, blur_dev_u = _blur_step(table.blur_slope(ee) * amp[seg], J, wgt, r, g,
+                                          cov, ok, bc)
     ocov = None
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
-    if shape is not None:
-        sc = _shape_cov(shape, ee, amp[seg] * wgt, J, cov, ok, seg)
-        ocov = sc if ocov is None else ocov + sc
+    shift = shift_cov = None
+    if departure:
+        # The groove's own profile (imaging.shape): its even departure from the model,
+        # pooled over the segments' phases, and how far it moves each centre (not applied:
+        # measured, for the Type B term ``groove_profile``).
+        # Each pixel's distance from a straight line through the centres, not from its own
+        # segment's noisy centre: near a phase where the departure is steep, the shift read
+        # at the noisy centres followed their noise (a clean mark at 0.02 deg: b -10" at
+        # 5 sigma_b, its error -3.5").
+        sg = ok & (npx >= 6) & (np.abs(delta) < half / 2) & ~moving
+        if sg.sum() >= 2:
+            jj = np.arange(nseg)
+            xx = e - np.polyval(np.polyfit(jj[sg], delta[sg], 1), jj)[seg]
+            shape = fit_shape(xx[sg[seg]], r[sg[seg]], amp[seg][sg[seg]], wgt[sg[seg]],
+                              groove_reach)
+            if shape is not None:
+                shift, shift_cov = shape_shift(shape, xx, amp[seg] * wgt, J, cov, ok, seg)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
@@ -285,7 +290,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
         tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
                             wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
-                            pf.full_scale_dn, avoid_px, 2 * (half + 4))
+                            pf.full_scale_dn, avoid_px, 2 * (half + 4), npx)
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).
@@ -293,7 +298,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
-                   blur_dev_u=blur_dev_u, offsets_cov=ocov)
+                   blur_dev_u=blur_dev_u, offsets_cov=ocov, profile_shift=shift,
+                   profile_shift_cov=shift_cov)
 
 
 def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) -> np.ndarray:
@@ -311,25 +317,6 @@ def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) ->
     reach = np.minimum(-lo, -hi)  # the shorter side's extent per segment
     cut = reach < half - 1.0
     return ~cut[seg] | (np.abs(x) <= reach[seg] + 1e-9)
-
-
-def _shape_cov(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[np.ndarray],
-               cov: np.ndarray, ok: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Covariance [px^2] (nseg x nseg) of the centres from the noise of the groove's own
-    profile (one departure shared by every segment): a change dc of its coefficients moves
-    segment k's centre by -[N_k^-1 sum_px w J A_k B(x)]_0 dc (one Gauss–Newton step), so the
-    covariance is S cov_c S^T. ``aw``: each pixel's contrast times its weight."""
-    cols, vals = shape.local(x)
-    nseg, kk = len(ok), len(shape.coef)
-    G = np.zeros((nseg, len(J), kk))
-    for i in range(len(J)):
-        for a in range(4):
-            G[:, i, :] += np.bincount(seg * kk + np.maximum(cols[:, a], 0),
-                                      aw * J[i] * vals[:, a],
-                                      minlength=nseg * kk).reshape(nseg, kk)
-    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
-    S = -np.einsum("ni,nij->nj", c0, G)
-    return S @ shape.cov @ S.T
 
 
 def _variance_floor(var: np.ndarray, mu: np.ndarray, v0: float, v1: float) -> float:

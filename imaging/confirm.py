@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import ndimage, special
+from scipy import ndimage, optimize, special
 
 from imaging.candidate import (
     MarkCandidate,
@@ -149,17 +149,21 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     (inf, 0): too little background beside it to judge; left to the other tests.
 
     ``lit``: each profile divided by its own light level first (:func:`relative_to_light`),
-    where a shadow's edge crosses the candidate (:func:`shadow_crossing`; else (0, inf)):
-    a shadow's edge crossing the candidate makes the medians along it step from the lit to
-    the shadowed level where the crossing point passes mid-length, a relief the groove
-    does not have.
+    where one straight shadow edge crosses the candidate or runs along it (the light steps
+    by :data:`LIGHT_STEP` or more, monotonically: :func:`light_steps`; else (0, inf)): a
+    shadow's edge crossing the candidate makes the medians along it step from the lit to
+    the shadowed level where the crossing point passes mid-length, one running along it
+    puts a step beside the groove in every profile: reliefs the groove does not have. (A
+    mark under an edge along it is measured on the light the edge's model divides out:
+    :func:`shadow_free`.)
     """
     half = max(1.0, c.thickness_px / 2 + 1)
     n_along = int(np.clip(c.length_px, 16, 2000))
     vals, e, _ = across(image, c, int(np.ceil(reach + half)), n_along, top)
     if lit:
-        if not shadow_crossing(vals, e, half):
-            return 0.0, float("inf")  # no shadow edge across it: the plain test stands
+        change, rho, _ = light_steps(vals, e, half)
+        if change < LIGHT_STEP or rho < MONOTONE:
+            return 0.0, float("inf")  # no shadow edge across or along it: the plain test stands
         vals = relative_to_light(vals, 4 * int(np.ceil(half)) + 3)
     cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
     med = _column_median(vals)  # one median profile for both uses (each column's own)
@@ -238,12 +242,66 @@ def _ranks(x: np.ndarray) -> np.ndarray:
     return (np.bincount(inv, r) / cnt)[inv]
 
 
-def shadow_crossing(vals: np.ndarray, e: np.ndarray, half: float) -> bool:
-    """Whether the light along a line changes as where one straight shadow edge crosses it
-    (:func:`light_steps`): by :data:`LIGHT_STEP` or more, monotonically (:data:`MONOTONE`),
-    the step beside the groove over at most :data:`UNDER` of its length."""
+def shadow_along(vals: np.ndarray, e: np.ndarray, half: float) -> bool:
+    """Whether one straight shadow edge runs along a line (:func:`light_steps`): the light
+    changes by :data:`LIGHT_STEP` or more, monotonically (:data:`MONOTONE`), and steps beside
+    the groove over more than :data:`UNDER` of its length."""
     change, rho, under = light_steps(vals, e, half)
-    return change >= LIGHT_STEP and rho >= MONOTONE and under <= UNDER
+    return change >= LIGHT_STEP and rho >= MONOTONE and under > UNDER
+
+
+def _edge_model(q: np.ndarray, t: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """A straight shadow edge's factor on the light at (t, e): 1 - D Phi((e - e0 - k t) / w),
+    ``q`` = (e0 [px], k, log w [log px], D)."""
+    e0, k, logw, d = q
+    return 1.0 - d * special.ndtr((e - e0 - k * t) / np.exp(logw))
+
+
+def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 40.0
+                ) -> tuple[np.ndarray, tuple[float, float, float, float]] | None:
+    """The image with the shadow of one straight edge running along candidate ``c`` divided
+    out, and the edge: (image [DN], (angle to the line [rad], offset at the line's middle
+    [px], penumbra sigma [px], depth)); None when no edge runs along it.
+
+    A shadow multiplies the light by 1 - D Phi(s / w) (s the distance from the edge, w the
+    penumbra's sigma). The edge is fitted, with a plane for the rest of the light, to the
+    background within ``reach`` px of the line (the groove's band left out; scipy's
+    least_squares from a grid of starts): the edge is straight, so where it runs under the
+    groove its place there is the one the background on both sides of that stretch fixes.
+    The groove is then measured on the image divided by the edge's factor (the plane
+    stays: the measurement takes a smooth light itself).
+    """
+    half = max(1.0, c.thickness_px / 2 + 1)
+    n_along = int(np.clip(c.length_px / 4, 16, 200))
+    vals, e, t = across(image, c, int(np.ceil(reach + half)), n_along, top)
+    if not shadow_along(vals, e, half):
+        return None
+    tt, ee = np.broadcast_arrays(t[:, None] - t.mean(), e[None, :])
+    keep = np.isfinite(vals) & (np.abs(ee) > 2 * half + 2)
+    y, tt, ee = vals[keep], tt[keep], ee[keep]
+    scale = float(np.median(y))
+
+    def resid(q: np.ndarray) -> np.ndarray:
+        plane = q[4] + q[5] * tt / 100 + q[6] * ee / 100
+        return plane * _edge_model(q[:4], tt, ee) - y / scale
+
+    best = None
+    for e0 in np.linspace(-reach / 2, reach / 2, 5):
+        for d0 in (0.3, -0.3):
+            r = optimize.least_squares(resid, [e0, 0.0, np.log(3.0), d0, 1.0, 0.0, 0.0],
+                                       bounds=([-reach, -0.5, np.log(0.3), -0.95, 0, -1, -1],
+                                               [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]))
+            if best is None or r.cost < best.cost:
+                best = r
+    q = best.x
+    h, w = image.shape
+    u, n = line_frame(c.angle_rad)
+    ys, xs = np.mgrid[0:h, 0:w]
+    px, py = xs - (w - 1) / 2, ys - (h - 1) / 2
+    tp = px * u[0] + py * u[1] - t.mean()
+    ep = px * n[0] + py * n[1] - c.offset_px
+    out = image / _edge_model(q[:4], tp, ep)
+    return out, (float(np.arctan(q[1])), float(q[0]), float(np.exp(q[2])), float(q[3]))
 
 
 def shadow_note(image: np.ndarray, cands: Sequence[MarkCandidate], top: float) -> str | None:
@@ -308,8 +366,69 @@ def confirm_candidates(image: np.ndarray, cands: list[MarkCandidate], noise_full
                 continue
         # (once re-centred, a line lies on a groove: two grooves no longer straddle it)
         out.append((c if fused is None else replace(coarse, fused=fused), lit))
-    return _drop_fused(_dedupe([c for c, lit in out
-                                if not (lit and any(_shoulder(c, o) for o, _ in out))]))
+    kept = _dedupe([c for c, lit in out if not (lit and any(_shoulder(c, o) for o, _ in out))])
+    return _drop_fused(_joined_along(image, kept, top))
+
+
+def _joined_along(image: np.ndarray, cands: list[MarkCandidate], top: float
+                  ) -> list[MarkCandidate]:
+    """Pieces of one mark that a shadow's edge along it broke in two, joined.
+
+    Where the edge runs under the groove (a 5 deg edge: over ~100 px of a 350 px mark) the
+    ridge filter sees no groove, and the mark is found as two collinear pieces; each was
+    then measured over the whole groove (the measurement follows it to its ends): one mark
+    reported twice, or refused as lying in the other's window. Two pieces of one polarity,
+    not overlapping, both along the line through their middles (:func:`_through`; the edge
+    pulls a piece's coarse direction by up to ~4 deg) and one of them with a shadow's edge
+    along it (:func:`shadow_along`): one candidate through both middles.
+    """
+    out = list(cands)
+    i = 0
+    while i < len(out):
+        c = out[i]
+        pair = next(((j, k) for j, o in enumerate(out) if j != i and o.dark == c.dark
+                     and not _overlap(c, o) and (k := _through(c, o)) is not None
+                     and (_along(image, c, top) or _along(image, o, top))), None)
+        if pair is None:
+            i += 1
+            continue
+        j, joined = pair
+        out = [k for m, k in enumerate(out) if m not in (i, j)]
+        out.insert(min(i, j), joined)
+        i = 0
+    return out
+
+
+def _through(c: MarkCandidate, o: MarkCandidate) -> MarkCandidate | None:
+    """One candidate through the middles of ``c`` and ``o`` when both lie along it (their
+    directions within 5 deg of it, their ends within their width + 6 px of it), else None."""
+    ends = np.array([_point(k, t) for k in (c, o) for t in (k.t_start_px, k.t_end_px)])
+    mids = np.array([ends[:2].mean(axis=0), ends[2:].mean(axis=0)])
+    v = mids[1] - mids[0]
+    a = wrap_angle(float(np.arctan2(-v[1], v[0])))
+    u, n = line_frame(a)
+    d = np.abs(ends @ n - mids[0] @ n)
+    if (any(abs(wrap_angle(k.angle_rad - a)) >= np.deg2rad(5) for k in (c, o))
+            or d[:2].max() >= c.thickness_px + 6 or d[2:].max() >= o.thickness_px + 6):
+        return None
+    t = ends @ u
+    return replace(c if c.strength >= o.strength else o, angle_rad=a,
+                   offset_px=float(mids[0] @ n), t_start_px=float(t.min()),
+                   t_end_px=float(t.max()), strength=c.strength + o.strength,
+                   thickness_px=max(c.thickness_px, o.thickness_px))
+
+
+def _point(c: MarkCandidate, t: float) -> np.ndarray:
+    """The point at ``t`` [px] along a candidate's line (relative to the image centre)."""
+    u, n = line_frame(c.angle_rad)
+    return c.offset_px * n + t * u
+
+
+def _along(image: np.ndarray, c: MarkCandidate, top: float) -> bool:
+    """Whether a shadow's edge runs along candidate ``c`` (:func:`shadow_along`)."""
+    half = max(1.0, c.thickness_px / 2 + 1)
+    vals, e, _ = across(image, c, int(np.ceil(3 * half + 16)), 64, top)
+    return shadow_along(vals, e, half)
 
 
 def _shoulder(c: MarkCandidate, o: MarkCandidate) -> bool:

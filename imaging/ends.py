@@ -23,6 +23,7 @@ Positions t [px] along the line of the :class:`~imaging.groove.ProfileFit` (its 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -322,9 +323,42 @@ RUNS_ON_PX = 10.0
 again over it [px] (a few blur widths: more than where the half-depth point may fall)."""
 
 
+@dataclass(frozen=True)
+class EndsCheck:
+    """:func:`groove_ends` of one measurement's profile, extent and centres (its path) in
+    one image: kept with the measurement, so that the obstruction check of its ends
+    (``align.family.member_ends``) does not run again on the same pixels (~4 % of a 640 x 480
+    frame's time). It answers only for those very objects (:meth:`for_mark`): the image
+    itself, not a copy or a version with a background or a shadow removed (held by a weak
+    reference: a session's results do not keep its frames alive)."""
+
+    image: weakref.ref
+    profile: ProfileFit
+    extent: tuple[float, float]
+    centres: Centres
+    ends: GrooveEnds
+
+    def for_mark(self, image: np.ndarray, pf: ProfileFit, extent: Sequence[float],
+                 cen: Centres) -> GrooveEnds | None:
+        """The ends when ``image``, ``pf``, ``extent`` and ``cen`` are the ones checked,
+        else None."""
+        same = (self.image() is image and pf is self.profile and cen is self.centres
+                and tuple(extent) == tuple(self.extent))
+        return self.ends if same else None
+
+
+def checked_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
+                 cen: Centres, check: EndsCheck | None = None) -> GrooveEnds:
+    """:func:`groove_ends` along the groove's path through ``cen``, from ``check`` when it
+    holds these very inputs (the same result: the same function of the same pixels)."""
+    got = check.for_mark(image, pf, extent, cen) if check is not None else None
+    return got if got is not None else groove_ends(image, pf, extent,
+                                                   path=groove_path(cen, pf))
+
+
 def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], opened: Sequence[bool],
              cen: Centres, others: Sequence[tuple[int, MarkCandidate]] = ()
-             ) -> tuple[float, float] | None:
+             ) -> tuple[tuple[float, float] | None, EndsCheck | None]:
     """The stretch to sample the centres on when the groove runs on past the look of
     :func:`imaging.profile.extent_look` (still deep at the look's limit), or None.
 
@@ -335,15 +369,17 @@ def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], ope
     beyond, never past bare surface), and the stretch is what they enclose, trimmed by the
     blurred end (half-width + 2 blur widths), up to the nearest end of another mark found
     on the same line (``others``: (index, candidate); two pieces of one edge stay two marks,
-    not one measured twice)."""
+    not one measured twice). Also the ends checked (:class:`EndsCheck`; None when no end
+    was open and none were)."""
     if not any(opened):
-        return None
+        return None, None
     e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
+    check = EndsCheck(weakref.ref(image), pf, (float(ext[0]), float(ext[1])), cen, e)
     # Only a groove seen on well past the look (a clean long mark's end can lie just at it).
     on = (opened[0] and e.start_px < ext[0] - RUNS_ON_PX,
           opened[1] and e.end_px > ext[1] + RUNS_ON_PX)
     if not any(on):
-        return None
+        return None, check
     trim = max(4.0, pf.width_px / 2 + 2 * pf.blur_px)
     t0 = e.start_px + trim if on[0] else pf.t_start_px
     t1 = e.end_px - trim if on[1] else pf.t_end_px
@@ -360,5 +396,5 @@ def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], ope
             t0 = max(t0, hi + trim)
     t0, t1 = min(t0, pf.t_start_px), max(t1, pf.t_end_px)
     if t0 == pf.t_start_px and t1 == pf.t_end_px:
-        return None
-    return t0, t1
+        return None, check
+    return (t0, t1), check

@@ -29,7 +29,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
-from imaging.ends import runs_on_stretch
+from imaging.ends import EndsCheck, runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
@@ -39,7 +39,7 @@ from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent
-from imaging.shape import SHAPE_BELOW_CYCLES, phase_cycles
+from imaging.shape import profile_angle_u
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.texture import correlation_cholesky
 
@@ -64,6 +64,8 @@ class MarkMeasurement:
     given): a bent mark's chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
     the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
+    ``ends_check``: the obstruction check of the groove's ends made while measuring it
+    (:class:`imaging.ends.EndsCheck`, for the image measured; None: not made).
 
     Attributes
     ----------
@@ -101,6 +103,11 @@ class MarkMeasurement:
         (other candidate, px of this mark left out) per crossing.
     background_u_rad : float
         What an oriented background's removal may leave on the angle [rad].
+    profile_u_rad : float
+        What the groove's own profile, sampled at the pixel grid's phase, may do to the
+        angle [rad] (:func:`imaging.shape.profile_angle_u`; a Type B term).
+    ends_check : EndsCheck or None
+        Its ends' obstruction check, when made.
     """
 
     candidate: MarkCandidate
@@ -121,6 +128,8 @@ class MarkMeasurement:
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
     background_u_rad: float = 0.0
+    profile_u_rad: float = 0.0
+    ends_check: EndsCheck | None = None
 
     @property
     def length_px(self) -> float:
@@ -226,23 +235,23 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                          guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                         offsets_var=offsets_var,
-                         shaped=phase_cycles(pf.angle_rad, cand.length_px) < SHAPE_BELOW_CYCLES)
+                         offsets_var=offsets_var, departure=True)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
     t0, t1, open0, open1 = extent_look(image, pf)
     ext = (t0, t1)
-    longer = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
+    longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
     if longer is not None:
         # The search's stretch was cut short (a speck beside or on the line broke its
         # ridge): the centres again over the groove's whole length, from those found.
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
         cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
                              guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                             offsets_var=offsets_var)
+                             offsets_var=offsets_var, departure=True)
         skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
         use = _usable(cen, where, cand, skip)
         ext = groove_extent(image, pf)
+        check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -258,11 +267,15 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     line = fit_line(pts, sig, reject_sigma=None, chol=chol)
     blur = (blur_trend(cen.t[use], cen.blur_dev[use], cen.blur_dev_u[use], pf.blur_px)
             if cen.blur_dev is not None else None)
+    prof = (profile_angle_u(cen.t[use], sig, cen.profile_shift[use],
+                            cen.profile_shift_cov[np.ix_(use, use)])
+            if cen.profile_shift is not None else 0.0)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
                            if jpeg is not None else 0.0,
-                           ends_on_line(pf, ext, line, camera, image.shape), crossed)
+                           ends_on_line(pf, ext, line, camera, image.shape), crossed,
+                           profile_u_rad=prof, ends_check=check)
 
 
 def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:

@@ -24,7 +24,7 @@ from imaging.groove import (
     _profile_table,
     _quad_offsets,
     centres_half,
-    profile_and_derivs,
+    profile_lazy,
 )
 
 __all__ = ["Centres", "ProfileFit", "ProfileTable", "band_indices", "band_pixels",
@@ -83,26 +83,28 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
     x0 = np.array([0.0, 0.0, amp0, bg, 0.0, 0.0, w0, 1.0])
     a_ref = cand.angle_rad
 
-    def model(p, want_jac=False):
+    def model(p):
+        """The model at ``p`` and a function that gives its Jacobian (see _irls_lm)."""
         da, dd, amp, b, g_e, g_t, w, s = p
         sh, wt = _quad_offsets(a_ref + da, order=2)
         # Small rotation about the band's middle, then shift: linearised line geometry.
         ee = e - dd - da * (t - tm)
-        pp, pe, pw, ps = profile_and_derivs(ee, w, s, sh, wt)
+        pp, derivs = profile_lazy(ee, w, s, sh, wt)
         mu = b + g_e * ee + g_t * (t - tm) / 100 + amp * pp
-        if not want_jac:
-            return mu
-        J = np.column_stack([
-            -(amp * pe + g_e) * (t - tm), -(amp * pe + g_e), pp, np.ones_like(ee), ee,
-            (t - tm) / 100, amp * pw, amp * ps])
-        return mu, J
+
+        def jac() -> np.ndarray:
+            pe, pw, ps = derivs()
+            return np.column_stack([
+                -(amp * pe + g_e) * (t - tm), -(amp * pe + g_e), pp, np.ones_like(ee), ee,
+                (t - tm) / 100, amp * pw, amp * ps])
+        return mu, jac
 
     scale = max(abs(amp0) / 10, 1.0)
     lo = [-0.05, -half / 2, -np.inf, -np.inf, -np.inf, -np.inf, 0.05, 0.3]
     hi = [0.05, half / 2, np.inf, np.inf, np.inf, np.inf, 4 * half, half]
-    x = _irls_lm(lambda p: model(p, True), vals, x0, np.array(lo), np.array(hi), scale)
+    # (the model at the solution comes back with it: no evaluation again)
+    x, mu = _irls_lm(model, vals, x0, np.array(lo), np.array(hi), scale)
     da, dd, amp, b, g_e, _, w, s = x
-    mu = model(x)
     var = _noise_model(mu, vals - mu)
     ang = wrap_angle(a_ref + da)
     # Re-express the shifted/rotated line in the image-centre convention.
@@ -143,16 +145,19 @@ def _half_depth_width(e: np.ndarray, vals: np.ndarray, bg: float, amp: float) ->
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-             scale: float, iterations: int = 25) -> np.ndarray:
+             scale: float, iterations: int = 25) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg–Marquardt on Huber-reweighted residuals (IRLS), parameters kept in [lo, hi].
 
     The band fit has 8 parameters and a few thousand pixels; a hand loop avoids the
     per-iteration overhead of scipy's trust-region solver, which dominated the time here.
     Dust pixels get Huber weights (threshold ``scale``) so they cannot pull the shape.
+    ``fun(x)`` gives the model at x and a function that computes its Jacobian, called only
+    for the steps accepted. Returns the solution and the model there.
     """
     x = x0.astype(float).copy()
     lam = 1e-3
-    mu, J = fun(x)
+    mu, jac = fun(x)
+    J = jac()
     r = y - mu
 
     def cost(res):
@@ -168,7 +173,7 @@ def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
         while True:
             step = np.linalg.solve(A + lam * np.diag(d * d), g)
             xn = np.clip(x + step, lo, hi)
-            mun, Jn = fun(xn)
+            mun, jacn = fun(xn)
             rn = y - mun
             cn = cost(rn)
             if cn <= c:
@@ -176,12 +181,13 @@ def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                 break
             lam *= 4
             if lam > 1e8:
-                return x
+                return x, mu
         done = c - cn < 1e-10 * c
-        x, mu, J, r, c = xn, mun, Jn, rn, cn
+        x, mu, r, c = xn, mun, rn, cn
         if done:
             break
-    return x
+        J = jacn()  # (not needed after the last step)
+    return x, mu
 
 
 EXTENT_REACH_PX = 24.0

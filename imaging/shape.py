@@ -15,17 +15,31 @@ distance from its own segment's centre), as the slanted-edge method (ISO 12233) 
 an edge. Their residuals divided by the contrast, pooled over the mark, give the profile's
 departure D(x) from the model on a cubic B-spline basis (knots every :data:`KNOT_PX`), kept
 *even* in x: a symmetric groove's profile is even about its centre, so D cannot move a
-centre on its own, while it removes the phase-dependent misfit. D is zero beyond the groove
-and its blur (w/2 + 4 s), where the band holds background only. It is applied on every
-mark that crosses few phase cycles (:data:`SHAPE_BELOW_CYCLES`) and its own noise is
-propagated into the centres (``imaging.centres._shape_cov``): gating it on a significance
-test left rounded grooves whose departure was not significant (chi^2 22-32 on 12 dof)
-biased, while applying it costs a clean flat-bottomed groove ~3 % of its u (median).
-:attr:`GrooveShape.significant` says whether the residuals hold it.
+centre on its own, only through the phase. D is zero beyond the groove and its blur
+(w/2 + 4 s), where the band holds background only.
+
+D is **measured, not applied**: how far it moves each segment's centre
+(:func:`shape_shift`) tilts the line by b, and sqrt(b^2 + sigma_b^2) enters the angle's u
+as the Type B term ``groove_profile`` (:func:`profile_angle_u`) on every mark, without a
+significance gate (at p < 1e-3 user6's rounded grooves, chi^2 15-55 on 12 dof, mostly went
+uncovered). Fitted back into the centres (tried and withdrawn) it moved a
+quantisation-dominated 8-bit groove (+17.1" -> +20.7" at u 5") and a ruled scale's line
+among numerals (z -4.6) the wrong way; as a term it only widens u: x 1.003 on synth's clean
+marks (median), x 1.06 on flat-bottomed grooves within 0.3 deg of an axis (the departure's
+noise, at most x 1.45; ``tests/imaging/test_shape.py``). The pixels' distances are taken
+from a straight line through the centres (``imaging.centres``), not from each segment's
+own noisy centre.
+
+What it cannot see: on a mark crossing < 1 phase cycle every segment samples the profile at
+nearly one phase, and the centres absorb the part of the misfit that moves them, so the
+pooled residuals show about half the bias (user6's grooves noise-free: 2.0" of 4.2",
+1.2" of 3.1", 1.5" of 3.3"); fitting the departure jointly with the centres is not
+determined there (its tilt came out -50" for +4.2").
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,17 +50,6 @@ KNOT_PX = 0.5
 """Knot spacing of the departure's B-spline basis [px]: the blurred, pixel-integrated
 profile varies over ~1 px (blur >= 0.5 px plus the pixel), which cubics every 0.5 px
 follow to a few per cent."""
-
-SHAPE_BELOW_CYCLES = 0.0
-"""Off (0). When on, the departure is fitted on marks that cross fewer pixel-phase cycles
-than this along their length (:func:`phase_cycles`; 4 was tried: a 300 px mark within
-~0.8 deg of a pixel axis, where the periodic misfit becomes a tilt). Withdrawn after the
-merged run: it made two independent users' cases worse (a quantisation-dominated narrow
-8-bit groove +17.1" +- 4.8" -> +20.7" +- 5.0"; a ruled scale's line among numerals and dust
-within 3.5 u -> z -4.6), while the near-axis bias it removes came from rendering the sharp
-profile and blurring after the pixels: blurred before them, as optics do, the same rounded
-groove shows none (RMS z 1.02 over 24 marks, tests/imaging/test_shape.py)."""
-
 
 def phase_cycles(angle_rad: float, length_px: float) -> float:
     """How many cycles of the sub-pixel phase a line crosses along its length.
@@ -216,3 +219,81 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
         fit = (vals * coef[np.maximum(cols, 0)]).sum(axis=1)
         w = np.where(np.abs(r - fit) * np.sqrt(wgt) < MAX_Z, wgt, 0.0)
     return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
+
+
+def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[np.ndarray],
+                cov: np.ndarray, ok: np.ndarray, seg: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """How far the departure moves each segment's centre, and that shift's covariance.
+
+    A departure D = B(x) c added to the model moves segment k's centre by
+    -[N_k^-1 sum_px w J A_k B(x)]_0 c (one Gauss–Newton step): S c, with covariance
+    S cov_c S^T from the departure's own noise.
+
+    Parameters
+    ----------
+    shape : GrooveShape
+        The fitted departure.
+    x : ndarray
+        Each pixel's distance from its segment's centre [px].
+    aw : ndarray
+        Each pixel's contrast times its weight [1/DN].
+    J : sequence of ndarray
+        The segment fit's columns at each pixel (centre first).
+    cov : ndarray
+        (nseg, k, k) the segments' inverse normal matrices.
+    ok : ndarray
+        (nseg,) segments whose fit is valid (bool).
+    seg : ndarray
+        Each pixel's segment.
+
+    Returns
+    -------
+    shift : ndarray
+        (nseg,) the centres' shift [px] (0 on segments not ok).
+    shift_cov : ndarray
+        (nseg, nseg) its covariance [px^2].
+    """
+    cols, vals = shape.local(x)
+    nseg, kk = len(ok), len(shape.coef)
+    G = np.zeros((nseg, len(J), kk))
+    for i in range(len(J)):
+        for a in range(4):
+            G[:, i, :] += np.bincount(seg * kk + np.maximum(cols[:, a], 0),
+                                      aw * J[i] * vals[:, a],
+                                      minlength=nseg * kk).reshape(nseg, kk)
+    c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
+    S = -np.einsum("ni,nij->nj", c0, G)
+    return S @ shape.coef, S @ shape.cov @ S.T
+
+
+def profile_angle_u(t: np.ndarray, sigma: np.ndarray, shift: np.ndarray,
+                    shift_cov: np.ndarray) -> float:
+    """The Type B term ``groove_profile`` [rad]: the tilt the departure's shifts give the line.
+
+    The straight line's slope is linear in the centres: g = w (t - t_w) / sum w (t - t_w)^2
+    with w = 1/sigma^2 and t_w their weighted mean. The shifts tilt it by b = g . shift, known
+    to sigma_b^2 = g' C g; both are carried, sqrt(b^2 + sigma_b^2) (the bias is not removed:
+    fitted back into the centres it moved a quantisation-dominated groove and a line among
+    numerals the wrong way, while as a term it only widens u where the residuals hold it).
+
+    Parameters
+    ----------
+    t : ndarray
+        The used centres' positions along the line [px].
+    sigma : ndarray
+        Their u across it [px].
+    shift : ndarray
+        Their shift by the departure [px] (:func:`shape_shift`).
+    shift_cov : ndarray
+        Its covariance [px^2].
+
+    Returns
+    -------
+    float
+        The term [rad].
+    """
+    w = 1.0 / sigma ** 2
+    dt = t - np.sum(w * t) / np.sum(w)
+    g = w * dt / np.sum(w * dt ** 2)
+    return float(np.hypot(g @ shift, np.sqrt(max(float(g @ shift_cov @ g), 0.0))))

@@ -100,8 +100,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                   ok: np.ndarray, ring: tuple[np.ndarray, ...], contrast: np.ndarray,
                   normal: np.ndarray, shifts_px: Sequence[float],
                   noise_var: tuple[float, float], full_scale: float,
-                  avoid_px: Sequence[float] = (), clear_px: float = 0.0
-                  ) -> TextureModel | None:
+                  avoid_px: Sequence[float] = (), clear_px: float = 0.0,
+                  npx: np.ndarray | None = None) -> TextureModel | None:
     """Measure the texture's effect on the centres from replicas of the band.
 
     Parameters
@@ -117,6 +117,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     avoid_px, clear_px : signed distances along ``normal`` of other lines beside the mark
         (a ruled scale's neighbours) [px]: no replica is taken within ``clear_px`` of one —
         there the replica holds a line, not background.
+    npx : the band's pixel count per segment, when the caller has it (else counted here)
 
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance,
@@ -143,7 +144,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     # The centre functional per pixel, (N^-1 J^T W)_0: a replica's centre is one sum of
     # f v per segment (not k sums then the segment's row of N^-1).
     f = sum(c0[seg, i] * wj[i] for i in range(k))
-    npx = np.maximum(bc(np.ones(ys.size)), 1)
+    npx = np.maximum(bc(np.ones(ys.size)) if npx is None else npx, 1)
     ring_n = np.bincount(ring[3], minlength=nseg)
     ring_geo = ring_geometry(ring[2], ring[3], nseg)  # the same for every replica
     band_at, ring_at = _Shifted(image, ys, xs, full_scale), _Shifted(image, *ring[:2], full_scale)

@@ -5,14 +5,18 @@
   lives);
 * every relative link resolves (to a file, and to a heading when it names an anchor);
 * README.md stays a first page (≤ 200 lines);
-* the Python blocks marked ``<!-- example -->`` run;
+* the Python blocks marked ``<!-- example -->`` run, and the shell blocks marked
+  ``<!-- example-shell -->`` exit 0 (slow: each in a fresh copy of ``align demo``'s folder);
 * the `session.toml` examples load and the generated schema tables are current.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
+import shlex
+import shutil
 import subprocess
 import sys
 from functools import cache
@@ -202,6 +206,57 @@ def test_example_runs(page, line, code, monkeypatch):
     except Exception as exc:  # any failure of the example is the finding, with its place
         failure = f"{type(exc).__name__}: {exc}"
     assert failure is None, f"{page}:{line}: the example fails: {failure}"
+
+
+def shell_examples() -> list[tuple[str, int, str]]:
+    """(page, line, block) of every ```bash block directly after ``<!-- example-shell -->``."""
+    out = []
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for m in re.finditer(r"<!-- example-shell -->\n```bash\n(.*?)^```", text,
+                             flags=re.S | re.M):
+            out.append((_rel(page), text[:m.start()].count("\n") + 3, m.group(1)))
+    return out
+
+
+def test_there_are_shell_examples():
+    assert len(shell_examples()) >= 8
+
+
+@pytest.fixture(scope="module")
+def demo_folder(tmp_path_factory) -> Path:
+    """What ``align demo --out /tmp/demo`` writes, once: the pages' examples name its files."""
+    out = tmp_path_factory.mktemp("docs-demo") / "demo"
+    done = subprocess.run([sys.executable, "-m", "align", "demo", "--out", str(out), "-q"],
+                          cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page,line,block", shell_examples(), ids=lambda v: str(v)[:40])
+def test_shell_example_runs(page, line, block, demo_folder, tmp_path):
+    # As a reader types it, line by line: in a fresh copy of the demo's folder standing where
+    # the pages say (/tmp/demo), starting in an empty folder; `cd` moves, every other line is
+    # an `align` command that must exit 0.
+    demo = tmp_path / "demo"
+    shutil.copytree(demo_folder, demo)
+    cwd = tmp_path / "work"
+    cwd.mkdir()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    for k, raw in enumerate(block.splitlines()):
+        words = shlex.split(raw.replace("/tmp/demo", str(demo)), comments=True)
+        if not words:
+            continue
+        where = f"{page}:{line + k}: {raw.strip()}"
+        if words[0] == "cd":
+            cwd = (cwd / words[1]).resolve()
+            assert cwd.is_dir(), f"{where}: no such folder"
+            continue
+        assert words[0] == "align", f"{where}: a shell example runs align commands only"
+        done = subprocess.run([sys.executable, "-m", "align", *words[1:]], cwd=cwd, env=env,
+                              capture_output=True, text=True)
+        assert done.returncode == 0, f"{where}: exit {done.returncode}\n{done.stderr[-1500:]}"
 
 
 def test_the_schema_tables_are_current():

@@ -46,6 +46,12 @@ from align.calibration.stability import (
     stability_statement,
 )
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
+from align.calibration.unproven import (
+    PLAUSIBLE,
+    plausible_effects,
+    plausible_reason,
+    plausible_term,
+)
 from align.calibration.walk import WANDER, walk_covariance, wander_fit
 from align.calibration.wander import ScaleWander, corrected_poses, scale_wander, wander_reason
 from align.calibration.widen import (
@@ -304,6 +310,12 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((AMBIGUITY, ambiguity_reason(
             tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
             ambiguity_term(alts, len(model.names))))
+    plaus = plausible_effects(stage.fits, rep, candidates, admissible(stage, overfit=False),
+                              [a.effects for a in alts])
+    if plaus:
+        increments.append((PLAUSIBLE, plausible_reason(plaus, alpha),
+                           plausible_term(plaus, len(model.names))))
+        alts = [*alts, *(a for a, _ in plaus)]
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
                                            stability_default)

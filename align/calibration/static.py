@@ -39,6 +39,7 @@ from align.calibration.detect import (  # (re-exported: the package's API since 
 from align.calibration.geometry import SURROUND_RAD, cone_estimate, odd_pose
 from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
+from align.calibration.settling import settle_samples
 from align.calibration.slopes import pose_slopes
 from align.calibration.triad import Poses
 from align.calibration.walk import walk_levels
@@ -174,9 +175,14 @@ def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
     if t is not None:  # the bias instability the samples within the poses show
         times = ([t[ids == i] for i in range(len(samples))] if intervals is None else
                  [t[iv.mask(t)] for iv in intervals])
+        samples, du, settled = settle_samples(samples, times, poses.ordered)
+        if du is not None:  # each pose's mean from its corrected samples, u carries it
+            poses = replace(poses, u=np.array([x.mean(0) for x in samples]),
+                            sigma_u=None if poses.sigma_u is None else
+                            np.sqrt(poses.sigma_u**2 + du**2))
         rate, bound = walk_levels(samples, times)
         trend = pose_slopes(samples, times, rate)
-        poses = replace(poses, walk_rate=rate, walk_bound=bound,
+        poses = replace(poses, settling=settled, walk_rate=rate, walk_bound=bound,
                         slope=None if trend is None else trend[0],
                         slope_u=None if trend is None else trend[1])
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)

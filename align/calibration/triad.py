@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from align.calibration.ellipsoid import r_matrix, row_norms
+from align.calibration.settling import Settling, settle_samples
 from align.calibration.slopes import pose_slopes
 from align.calibration.walk import walk_levels
 from align.errors import InputError
@@ -62,6 +63,10 @@ class Poses:
     (:func:`align.calibration.slopes.pose_slopes`), or None (means only, no times)."""
     slope_u: np.ndarray | None = None
     """Its standard uncertainty (N, 3) [output unit/s] (inf where too short), or None."""
+    settling: Settling | None = None
+    """The test for a transient after each turn (:mod:`align.calibration.settling`; found:
+    the means are of the corrected samples, ``sigma_u`` carries the correction), or None
+    (not testable: means only, no times, short poses)."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -70,13 +75,17 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
     ids = np.unique(pose)
     sel = [pose == i for i in ids]
     samples, times = [u[s] for s in sel], [t[s] for s in sel]
+    sigma = np.array([x.std(0, ddof=1) / np.sqrt(len(x)) for x in samples])
+    samples, du, settled = settle_samples(samples, times)
+    if du is not None:
+        sigma = np.sqrt(sigma**2 + du**2)
     rate, bound = walk_levels(samples, times)
     trend = pose_slopes(samples, times, rate)
-    return Poses(np.array([u[s].mean(0) for s in sel]), np.array([t[s].mean() for s in sel]),
-                 None, np.array([u[s].std(0, ddof=1) / np.sqrt(s.sum()) for s in sel]),
-                 np.array([s.sum() for s in sel]),
+    return Poses(np.array([x.mean(0) for x in samples]), np.array([t[s].mean() for s in sel]),
+                 None, sigma, np.array([s.sum() for s in sel]),
                  tuple(labels) if labels is not None else tuple(str(i) for i in ids),
-                 True, rate, bound, *(trend[:2] if trend is not None else (None, None)))
+                 True, rate, bound, *(trend[:2] if trend is not None else (None, None)),
+                 settled)
 
 
 @dataclass(frozen=True)

@@ -99,9 +99,9 @@ def _write_calibration(args: argparse.Namespace, run, out, inputs: list[str]) ->
 
 def cmd_tilt(args: argparse.Namespace) -> int:
     from align.apply import load_tilt_calibration
-    from align.calibration import READINGS, read_readings
+    from align.calibration import READINGS
     from align.present import tilt_lines
-    from align.tilt import tilt_of_readings
+    from align.tilt import read_readings_noted, tilt_of_readings
 
     inputs = [args.readings, args.calibration]
     unique(inputs, "readings/--calibration")
@@ -110,8 +110,8 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     same_units(units, cal_units, args.calibration)
     outs = plan(args, inputs)
     out_json, out_csv = outs.add("--json", args.json, stdout_ok=True), outs.add("--out", args.out)
-    res = tilt_of_readings(model, read_readings(args.readings, cols, args.rate, args.time_unit),
-                           args.method, args.mu)
+    tab, read = read_readings_noted(args.readings, cols, args.rate, args.time_unit)
+    res = tilt_of_readings(model, tab, args.method, args.mu, read)
     say(tilt_lines(res, args.method))
     warn(res.warnings)
     _write_tilt(args, res, out_json, out_csv, inputs)

@@ -9,9 +9,8 @@ from align.commands.args import (
     ALPHA,
     UsageError,
     distinct_files,
-    faces,
+    face_plan,
     latitude_range,
-    nominal,
     number,
 )
 from align.commands.common import byte_progress, plan, say, settings, warn, wrote
@@ -25,8 +24,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     from align.gonio import measure_log
     from axisbase.header import parse_column_map
 
-    names = faces(args.faces)
-    nominal_deg = nominal(args.nominal, len(names))
+    names, nominal_deg = face_plan(args.faces, args.nominal)
     inputs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
     if args.reverse_log:
         distinct_files(args.log, args.reverse_log, "log", "--reverse-log")

@@ -101,32 +101,32 @@ def cmd_camera(args: argparse.Namespace) -> int:
     cols, rows = pattern(args.pattern)
     unique(args.images, "images")
     out = plan(args, args.images).add("--json", args.json, stdout_ok=True)
-    imgs = _read_boards(args.images)
+    imgs, unread = _read_boards(args.images)
     model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
                                          fix_k3=args.fix_k3, fix_aspect=args.fix_aspect)
-    for k, v in failed.items():
-        log.warning("%s: skipped: %s", k, v)
+    doc = camera_document(model, settings(args), args.images, {**unread, **failed})
+    warn(doc["warnings"])
     say(camera_lines(model))
     if out is not None:
-        wrote(write_json(out, camera_document(model, settings(args), args.images), args.force))
+        wrote(write_json(out, doc, args.force))
     return 0
 
 
-def _read_boards(paths: list[str]) -> dict:
-    """The photographs that can be read, as 8- or 16-bit arrays (the others skipped, with a
-    warning naming them)."""
+def _read_boards(paths: list[str]) -> tuple[dict, dict[str, str]]:
+    """The photographs that can be read, as 8- or 16-bit arrays, and why each other one
+    cannot (skipped: a warning in the JSON and on the terminal)."""
     import numpy as np
 
     from imaging import ImageInputError, read_image
 
-    imgs = {}
+    imgs, unread = {}, {}
     for p in paths:
         try:
             img = read_image(p)
             imgs[p] = img.astype(np.uint8 if img.max() <= 255 else np.uint16)
         except ImageInputError as exc:
-            log.warning("%s: skipped: %s", p, exc)
-    return imgs
+            unread[p] = str(exc).removeprefix(f"{p}: ")
+    return imgs, unread
 
 
 def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:

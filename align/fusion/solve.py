@@ -157,8 +157,12 @@ class FusionStage:
             if w == 1:
                 effects[t.name] = (float(vals[0]), float(us[0]))
             else:
-                k = int(np.argmax(np.abs(vals) / us))
-                effects[t.name] = (float(vals[k]), float(us[k]))
+                # A vector effect's one number is its length (no one component stands for
+                # it); its u from the components' covariance, to first order.
+                size = float(np.linalg.norm(vals))
+                C = sol.cov[i:i + w, i:i + w]
+                g = vals / size if size > 0 else np.full(w, np.sqrt(1.0 / w))
+                effects[t.name] = (size, float(np.sqrt(g @ C @ g)))
                 components[t.name] = tuple((lab, float(v), float(uu)) for lab, v, uu in
                                            zip(("x", "y"), vals, us, strict=True))
             i += w

@@ -237,7 +237,8 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                             e.rms_before, e.rms_after, e.delta_bic, e.p_value, e.description,
                             tuple(current.components.get(e.name, ())))
                for e in effects]
-    s_after = structure_of(current, alpha)
+    # (no effect added: the final fit is the first, and so is its structure)
+    s_after = s_before if current is before else structure_of(current, alpha)
     log.debug("loop %s: final model: RMS %.4g, chi2/dof %s; structure %s; %.3f s",
               type(stage).__name__, current.rms, _chi2_dof(current), _structure_note(s_after),
               time.perf_counter() - start)

@@ -20,7 +20,8 @@ class EffectReport:
     name : str
         The effect; unit —.
     estimate : float
-        Its value [``unit``].
+        Its value [``unit``]; of an effect with ``components``, the length of their vector
+        (>= 0: each component's sign is in ``components``).
     u : float
         Its standard uncertainty [``unit``].
     unit : str

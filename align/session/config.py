@@ -20,6 +20,8 @@ from align.calibration.stability import stability_ppm
 from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
 from align.decision import ToleranceSpec
 from align.errors import InputError
+from align.face_plan import check_face_plan
+from align.fusion.observations import REF, ROLL, TILT
 from align.lens import LensRanges
 from align.lens_design import replaced_by_model
 from axisbase.header import OUTPUT_UNITS, parse_column_map
@@ -136,6 +138,17 @@ class Session:
     tolerance: ToleranceSpec | None = None
     """``[tolerance]``: the specification of E and the decision rule (:mod:`align.decision`);
     None when the session gives none."""
+
+    def declared_setup(self) -> dict[str, np.ndarray]:
+        """What session.toml declares of the set-up the fusion's loop can find more of, by
+        the fusion's effect name [rad]: each camera's roll (``camera_roll[A]``), the
+        reference face's offset, the table's tilt (x, y). The loop finds an increment on it."""
+        out = {f"{ROLL}[{n}]": np.array([c.roll_rad]) for n, c in self.cameras.items()}
+        if self.goniometer is not None:
+            out[REF] = np.array([self.goniometer.reference_offset_rad])
+        if self.platform is not None:
+            out[TILT] = np.asarray(self.platform.table_tilt_rad, float)
+        return out
 
     @property
     def inputs(self) -> list[Path]:
@@ -400,9 +413,6 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             raise InputError(f"{w} faces = {faces}: an empty face name")
         if len(set(faces)) != len(faces):
             raise InputError(f"{w} faces = {faces}: a face is named twice")
-        if faces[0] in HOUSINGS:
-            raise InputError(f"{w} faces: the first face is the reference face (marked by the "
-                             f"binding signal); {faces[0]!r} is a housing")
         nom = g.get("nominal_deg", [360.0 / len(faces)] * len(faces))
         if not isinstance(nom, list) or len(nom) != len(faces):
             raise InputError(f"{w} nominal_deg: expected {len(faces)} angles, one per face")
@@ -411,17 +421,11 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         if abs(np.rad2deg(nom_r.sum()) - 360) > 1e-6:
             raise InputError(f"{w} nominal_deg = {nom}: the angles of a full turn must sum to "
                              "360")
+        check_face_plan(faces, nom_r, f"{w} faces", f"{w} nominal_deg = {nom}")
         direction = g.get("direction", "ccw")
         if direction not in ("ccw", "cw"):
             raise InputError(f"{w} direction = {direction!r}: ccw or cw")
         dsign = 1 if direction == "ccw" else -1
-        rel = {f: -dsign * nom_r[:k].sum() for k, f in enumerate(faces)}
-        if "x" in rel and "y" in rel:
-            gap = (rel["y"] - rel["x"]) % np.pi
-            if abs(gap - np.pi / 2) > np.deg2rad(1):
-                raise InputError(f"{w} nominal_deg = {nom}: faces x and y would be "
-                                 f"{np.rad2deg(gap):.3f}° apart (mod 180°); the axes are "
-                                 "perpendicular — contradictory nominal orientation")
         steady = g.get("steady_table", False)
         if not isinstance(steady, bool):
             raise InputError(f"{w} steady_table = {steady!r}: true or false")

@@ -64,8 +64,12 @@ def loop_view(loop: LoopReport | LoopSummary | None, scale: float = 1.0,
     s = loop.summary()
     rows = [["declared model", "", "", f"{s.rms_before:.4g}", _chi(s.chi2_dof_before)]]
     for e in s.effects:
-        rows.append([f"+ {e.name}", f"{e.estimate * scale:.4g} ± {e.u * scale:.2g} "
-                     f"{unit or e.unit}", f"{e.p_value:.2g}", f"{e.rms_after:.4g}", ""])
+        # a vector effect by its components (its estimate is only their vector's length)
+        value = (", ".join(f"{c} {v * scale:+.4g} ± {u * scale:.2g}" for c, v, u in
+                           e.components) if e.components
+                 else f"{e.estimate * scale:.4g} ± {e.u * scale:.2g}")
+        rows.append([f"+ {e.name}", f"{value} {unit or e.unit}", f"{e.p_value:.2g}",
+                     f"{e.rms_after:.4g}", ""])
     rows[-1][4] = _chi(s.chi2_dof_after)
     structure = (f"{s.structure_test} (p = {s.structure_p:.2g}) {s.structure_detail}".strip()
                  if s.unexplained_structure else None)
@@ -344,7 +348,8 @@ def report_html(res: SessionResult, doc: dict | None = None,
                                "Goniometer", gon), ("marks", "Scribe marks", marks)):
         if present:
             sections.append((key, name))
-    notices = setup_notices(res.fusion) if res.fusion is not None else []
+    notices = (setup_notices(res.fusion, res.session.declared_setup())
+               if res.fusion is not None else [])
     shown = [w for w in warnings if w not in notices]  # the notices are on the first screen
     if shown:
         sections.insert(0, ("warnings", f"Warnings ({len(shown)})"))

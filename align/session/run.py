@@ -168,8 +168,11 @@ class SessionResult:
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
+            s = f.loop.summary()  # which test said so: chi2 alone may look fine
+            seen = (f"{s.structure_test}, p = {s.structure_p:.2g}; " if s.structure_test
+                    and s.structure_p is not None else "")
             out.append(f"fusion: the instruments disagree beyond their uncertainties "
-                       f"(chi2 {f.chi2:.4g} / {f.dof} dof){who}")
+                       f"({seen}chi2 {f.chi2:.4g} / {f.dof} dof){who}")
         return out
 
     def platform_calibration(self) -> PlatformCalibration | None:

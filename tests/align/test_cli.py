@@ -78,6 +78,36 @@ def test_camera_calibration_on_real_chessboards(tmp_path):
     assert cam["rms_px"] < 1.0
 
 
+def test_camera_photos_skipped_are_warned_and_kept_apart_from_the_used(tmp_path, capsys):
+    """A photograph of another size and one that is no image: each a WARNING on the terminal
+    and in the JSON's warnings, listed in ``skipped`` with why, not among the ``inputs`` (the
+    used ones); the file matches its schema and is read back as a camera model."""
+    import cv2
+
+    from align.contract import validate
+    from imaging import CameraModel
+
+    folder = real_folder("opencv-chessboard")
+    big, junk = tmp_path / "big.png", tmp_path / "junk.png"
+    g = cv2.imread(str(folder / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
+    cv2.imwrite(str(big), cv2.resize(g, (1280, 960)))
+    junk.write_text("not an image")
+    used = [str(folder / f"left0{i}.jpg") for i in (2, 3, 4)]
+    out = tmp_path / "cam.json"
+    assert main(["camera", *used, str(big), str(junk), "--json", str(out)]) == 0
+    err = capsys.readouterr().err
+    doc = json.loads(out.read_text())
+    validate(doc, "camera")
+    assert doc["ok"] and doc["views"] == 3
+    assert [s["file"] for s in doc["skipped"]] == [str(junk), str(big)]
+    assert "1280x960" in doc["skipped"][1]["reason"]
+    assert [i["path"] for i in doc["inputs"]] == used
+    for name in (big, junk):
+        assert any(str(name) in w for w in doc["warnings"]), doc["warnings"]
+        assert f"WARNING: {name}: skipped" in err, err
+    assert CameraModel.load(out).views == 3
+
+
 def test_two_competing_marks_when_one_is_expected(tmp_path, capsys):
     from synth import ImageSpec, MarkSpec, render_marks
 

@@ -15,6 +15,7 @@ import pytest
 
 from align.fusion import E_INDEX, E_NAMES, REF, TILT
 from align.session import load_session, run_session
+from align.warnings import session_warnings
 from synth.session import SessionSpec, write_session
 from tests.conftest import ARCSEC
 
@@ -125,6 +126,15 @@ def test_undeclared_table_tilt_is_found(tmp_path):
         v, u = comp[axis]
         assert abs(v / ARCSEC - true) < TOL * u / ARCSEC
     assert np.all(np.abs(_z(f.E, f.E_u, truth)) < TOL)
+    # The one number of a two-component effect is its length, not one of its components;
+    # the warning names both components, and the key to declare them with.
+    e = f.loop.effects[0]
+    assert e.estimate == pytest.approx(np.hypot(comp["x"][0], comp["y"][0]))
+    msg = next(w for w in session_warnings(res) if "tilt of the table axis" in w)
+    for axis in ("x", "y"):
+        assert f"{axis} {comp[axis][0] / ARCSEC:+.1f} ± {comp[axis][1] / ARCSEC:.1f}″" in msg
+    assert (f"table_tilt_arcsec = [{comp['x'][0] / ARCSEC:+.1f}, "
+            f"{comp['y'][0] / ARCSEC:+.1f}]") in msg, msg
 
 
 def test_inconsistency_no_candidate_explains_is_reported(clean):

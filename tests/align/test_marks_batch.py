@@ -97,3 +97,14 @@ def test_session_roi_key(tmp_path):
     toml.write_text(text[:first] + "\nroi = [10, 20, 3]" + text[first:])
     with pytest.raises(InputError, match=r"\[\[images\]\] #1 roi"):
         load_session(folder)
+
+
+def test_a_min_length_beyond_the_image_is_refused_naming_the_flag():
+    """A minimum longer than 80 % of the smaller side can find no mark: refused before
+    measuring, naming the flag, its value and the bound -- not "no mark found"; at the
+    bound itself nothing is refused."""
+    (r,) = align.marks.measure_image(np.zeros((480, 640)), "x.png", min_length_px=5000)
+    assert not r.found and not r.internal_error
+    assert "--min-length 5000 px" in r.error and "384 px" in r.error, r.error
+    assert align.marks.min_length_note(384.0, (480, 640)) is None
+    assert align.marks.min_length_note(384.5, (480, 640)) is not None

@@ -266,3 +266,21 @@ def test_session_nominal_far_from_the_measured_faces_is_warned(tmp_path):
                                                  "nominal_deg = [95.0, 90.0, 85.0, 90.0]"))
     off = run_session(load_session(s)).to_dict()
     assert any("nominal" in w for w in off["warnings"]), off["warnings"]
+
+
+@pytest.mark.parametrize("test, p, chi2", [("periodogram", 1.4e-4, 12.21), (None, None, 55.0)])
+def test_a_not_ok_fusion_says_which_test_found_the_disagreement(test, p, chi2):
+    """A fusion with structure left but an unremarkable chi2 (12.21 / 15 dof, p 0.66: a
+    newcomer's own session) named only the chi2 as the reason, which read as a contradiction;
+    the reason now names the test that found it (periodogram, its p) before the chi2."""
+    from types import SimpleNamespace
+
+    from align.loop import LoopSummary
+    from align.session.run import SessionResult
+
+    loop = LoopSummary((), 1.0, 1.0, 0.8, 0.8, True, test, p, "")
+    f = SimpleNamespace(gross=False, consistent=False, disagreement=None, chi2=chi2, dof=15,
+                        loop=loop)
+    said = SessionResult(session=SimpleNamespace(tolerance=None), fusion=f).problems
+    why = "periodogram, p = 0.00014; chi2 12.21 / 15 dof" if test else "chi2 55 / 15 dof"
+    assert said == [f"fusion: the instruments disagree beyond their uncertainties ({why})"]

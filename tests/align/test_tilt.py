@@ -125,3 +125,26 @@ def test_a_platform_calibration_gives_the_platform_roll_and_pitch():
     triad = tilt_of_readings(m, tab)
     assert triad.frame == "triad"
     assert np.abs(triad.roll - roll).max() > 100 / 206264.8   # the misalignment, not noise
+
+
+def test_what_the_reader_said_of_the_file_reaches_the_json(tmp_path, caplog):
+    """A readings file whose plain ``t`` is in ms (read as s: a sample every 10 s) gets the
+    reader's warning ("were the times in ms?") among the result's warnings, so ``align tilt
+    --json`` carries it (it was only logged); the same file with ``t [ms]`` gets none."""
+    from align.tilt import read_readings_noted, tilt_of_readings
+
+    rng = np.random.default_rng(8)
+    m = _model()
+    a = gravity_from_angles(rng.uniform(-1, 1, 40), rng.uniform(-1, 1, 40))
+    tab = _readings(m, a)
+    u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
+    rows = [f"{10 * k}," + ",".join(repr(float(v)) for v in u[k]) for k in range(40)]
+    said = {}
+    for head in ("t", "t [ms]"):
+        f = tmp_path / "r.csv"
+        f.write_text(f"{head},ux,uy,uz\n" + "\n".join(rows) + "\n")
+        read_tab, read = read_readings_noted(f)
+        said[head] = tilt_of_readings(m, read_tab, read_warnings=read).to_dict()["warnings"]
+    assert len(said["t"]) == 1 and "were the times in ms?" in said["t"][0]
+    assert said["t [ms]"] == []
+    assert not [r for r in caplog.records if "were the times" in r.getMessage()]  # said once

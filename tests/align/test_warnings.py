@@ -1,10 +1,15 @@
-"""What reaches a mark's warnings: a handled crossing is a note, not a warning."""
+"""What reaches a mark's warnings: a handled crossing is a note, not a warning; what the
+fusion's set-up warnings say of a declared set-up and a vector effect."""
 
 from __future__ import annotations
 
+import numpy as np
+
 from align import LensRanges, measure_image
+from align.loop import EffectReport
 from align.present import mark_lines
-from align.warnings import handled_crossing, is_information, mark_warnings
+from align.warnings import handled_crossing, is_information, mark_warnings, setup_notice
+from axisbase.units import ARCSEC
 from synth import render_marks
 from tests.align.test_marks_crossing import crossing_scene
 
@@ -107,3 +112,33 @@ def test_a_clean_demo_session_prints_no_warning_line(session21_result):
     assert {ln.removeprefix("  note: ") for ln in out.splitlines()
             if ln.startswith("  note: ")} == {n for n in notes if is_information(n)}
     assert all(is_information(n) for n in notes), notes
+
+
+def _effect(name: str, values: tuple[float, ...], u: float, description: str) -> EffectReport:
+    """An effect the fusion's loop added, values [″] (two: an x, y vector)."""
+    comps = (tuple((a, v * ARCSEC, u * ARCSEC) for a, v in zip("xy", values, strict=False))
+             if len(values) > 1 else ())
+    return EffectReport(name, values[0] * ARCSEC, u * ARCSEC, "rad", 2.0, 1.0, -50.0, 1e-9,
+                        description, comps)
+
+
+def test_a_found_increment_on_a_declared_roll_says_the_total_to_declare():
+    """Declared -30″, found +61.1″ more: the warning says all three, and the total to
+    declare is +31.1″ (not the increment)."""
+    e = _effect("camera_roll[A]", (61.1,), 1.2, "roll of camera A about its optical axis")
+    msg = setup_notice(e, np.array([-30.0 * ARCSEC]))
+    assert "declared -30.0″" in msg and "found +61.1 ± 1.2″ more" in msg, msg
+    assert "it is +31.1 ± 1.2″" in msg and "[cameras.A] roll_arcsec = +31.1" in msg, msg
+    # nothing declared: the value found is the one to declare
+    plain = setup_notice(e, np.zeros(1))
+    assert "declared" not in plain and "[cameras.A] roll_arcsec = +61.1" in plain, plain
+
+
+def test_a_declared_tilt_and_its_increment_name_both_components():
+    e = _effect("platform_tilt", (-16.5, -22.9), 1.4,
+                "tilt of the table axis under the levelled platform (x, y)")
+    msg = setup_notice(e, np.array([10.0, 0.0]) * ARCSEC)
+    assert "declared [+10.0, +0.0]″" in msg, msg
+    assert "found x -16.5 ± 1.4″, y -22.9 ± 1.4″ more" in msg, msg
+    assert "it is x -6.5 ± 1.4″, y -22.9 ± 1.4″" in msg, msg
+    assert "[platform] table_tilt_arcsec = [-6.5, -22.9]" in msg, msg

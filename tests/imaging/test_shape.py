@@ -8,10 +8,10 @@ within 0.3 deg of the pixel rows are the case the flat-bottomed groove model bia
 misfit depends on the line's sub-pixel phase, which drifts slowly along such a mark.
 
 Measured (``python3 -m pytest -q -m slow tests/imaging/test_shape.py``; without the profile:
-``imaging.centres.fit_shape`` patched to None): rounded grooves RMS z 1.07, max 2.33 (without
-1.02, 2.33 — a groove blurred before the pixels integrate it shows no phase bias; user6's
-renderer, which samples the sharp profile and blurs after, did: RMS 1.41 in this generator
-made that way); flat-bottomed control RMS 1.10, max 2.31, u x 1.033 (median; max x 1.29).
+``imaging.centres.fit_shape`` patched to None), u with the Type B term ``groove_profile``:
+rounded grooves RMS z 0.98, max 2.31 (without 1.02, 2.33 — a groove blurred before the pixels
+integrate it shows little phase bias; user6's renderer, which samples the sharp profile and
+blurs after, did); flat-bottomed control RMS 0.91, max 2.24, u x 1.059 (median; max x 1.45).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from scipy.ndimage import gaussian_filter1d
 import imaging.shape
 from imaging import measure_marks
 from imaging.centres import _symmetric_window
-from imaging.shape import fit_shape
+from imaging.shape import fit_shape, profile_angle_u
 from tests.conftest import angle_error
 
 W, H = 480, 360
@@ -69,15 +69,17 @@ def _z_scores(profile: str, seeds: range) -> tuple[np.ndarray, np.ndarray]:
         a = rng.uniform(-0.3, 0.3)
         img = render(a, (rng.uniform(-10, 10), rng.uniform(-10, 10)), seed, profile)
         (m,) = measure_marks(img)
-        zs.append(angle_error(m.line.angle_rad, np.deg2rad(a)) / m.line.angle_u_rad)
-        us.append(m.line.angle_u_rad)
+        # u with the Type B term groove_profile (align.marks adds it the same way)
+        u = float(np.hypot(m.line.angle_u_rad, m.profile_u_rad))
+        zs.append(angle_error(m.line.angle_rad, np.deg2rad(a)) / u)
+        us.append(u)
     return np.asarray(zs), np.asarray(us)
 
 
 @pytest.mark.slow
 def test_rounded_groove_near_a_pixel_axis_within_u_over_seeds():
     """24 near-horizontal rounded grooves: honest z have RMS < 1.46 (chi2 with 24 dof,
-    p < 1e-3) and max |z| < 3.9 (p ~ 0.002 for the largest of 24). Seen: RMS 1.07, max 2.33."""
+    p < 1e-3) and max |z| < 3.9 (p ~ 0.002 for the largest of 24). Seen: RMS 0.98, max 2.31."""
     zs, _ = _z_scores("round", range(24))
     assert np.sqrt(np.mean(zs ** 2)) < 1.46 and np.abs(zs).max() < 3.9, np.round(zs, 2)
 
@@ -86,7 +88,7 @@ def test_rounded_groove_near_a_pixel_axis_within_u_over_seeds():
 def test_flat_bottomed_groove_control_is_not_widened(monkeypatch):
     """The clean control: a flat-bottomed groove (the model's own shape) near the axis. z
     stays honest, and the u with the groove's own profile is within 10 % of the u without it
-    (median over 24 marks; the profile's noise is what it adds). Seen: RMS 1.10, ratio 1.033."""
+    (median over 24 marks; the profile's noise is what it adds). Seen: RMS 0.91, ratio 1.059."""
     zs, us = _z_scores("box", range(100, 124))
     assert np.sqrt(np.mean(zs ** 2)) < 1.46 and np.abs(zs).max() < 3.9, np.round(zs, 2)
     monkeypatch.setattr("imaging.centres.fit_shape", lambda *args: None)
@@ -119,6 +121,20 @@ def test_even_departure_is_recovered_within_its_noise():
     noise = fit_shape(x, rng.normal(0, sd, n), amp, wgt, 6.0)
     assert noise is not None and not noise.significant, noise.chi2
     assert imaging.shape.P_APPLY == 1e-3
+
+
+def test_profile_term_is_the_tilt_the_shifts_give_the_line():
+    """The term is the weighted slope of the centres' shifts: a shift rising 1e-4 px per px
+    along the line is a 1e-4 rad tilt; a constant shift (an offset) tilts nothing, and then
+    only the shifts' own noise is left (the slope's u from their covariance)."""
+    t = np.arange(-150.0, 151.0, 4.0)
+    sig = np.full(t.size, 0.015)
+    zero = np.zeros((t.size, t.size))
+    assert profile_angle_u(t, sig, 1e-4 * t + 0.003, zero) == pytest.approx(1e-4, rel=1e-9)
+    assert profile_angle_u(t, sig, np.full(t.size, 0.003), zero) < 1e-15
+    cov = np.diag(np.full(t.size, 0.01 ** 2))
+    want = 0.01 / np.sqrt(np.sum((t - t.mean()) ** 2))
+    assert profile_angle_u(t, sig, np.zeros(t.size), cov) == pytest.approx(want, rel=1e-9)
 
 
 def test_symmetric_window_only_where_the_frame_cuts_the_band():
