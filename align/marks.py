@@ -38,6 +38,7 @@ from align.mark_stage import (
 )
 from axisbase.errors import internal_error
 from imaging import (
+    MAX_LENGTH_FRACTION,
     CameraModel,
     ImageInputError,
     MarkMeasurement,
@@ -55,10 +56,6 @@ NEGLIGIBLE_BOW = 0.05
 """A bow whose certain effects widen the angle's u by less than this fraction (below ~0.32 u
 in quadrature) changes no reading of the angle: carried in u as ``bow_ends`` and
 ``bow_vs_straight``, the straight fit kept, not named a bent mark."""
-
-MAX_LENGTH_FRACTION = 0.8
-"""The longest ``min_length_px`` an image allows, as a fraction of its smaller side: the
-detector's own cap on its default (:func:`imaging.detect.default_min_length`)."""
 
 __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens", "MarkStage",
            "FrameDistortion", "MarkResult", "camera_lens", "half_diagonal", "loop_mark",

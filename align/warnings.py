@@ -18,13 +18,19 @@ from axisbase.units import ARCSEC
 from goniometry.exclusions import R_TAIL
 
 
+def p_is(p: float) -> str:
+    """``p = 0.0012``; a p below the smallest double (the test's tail underflowed) as
+    ``p < 1e-300`` rather than an impossible ``p = 0``."""
+    return f"p = {p:.2g}" if p > 0 else "p < 1e-300"
+
+
 def loop_warnings(what: str, loop: LoopReport | LoopSummary | None) -> list[str]:
     """Unexplained structure left by a residual loop (run now, or loaded)."""
     if loop is None or not loop.unexplained_structure:
         return []
     s = loop.summary()
     return [f"{what}: unexplained structure remains in the residual ({s.structure_test}, "
-            f"p = {s.structure_p:.2g}): the model does not describe the data fully"]
+            f"{p_is(s.structure_p)}): the model does not describe the data fully"]
 
 
 def not_measured(r) -> str:
@@ -209,7 +215,7 @@ def setup_notice(e, declared: np.ndarray | None = None) -> str:
     what = e.description or e.name
     if e.unit != "rad":
         return (f"set-up: the fusion found a {what} of {e.estimate:+.3g} ± {e.u:.2g} {e.unit} "
-                f"(p = {e.p_value:.2g}) and corrected E for it; check the set-up against "
+                f"({p_is(e.p_value)}) and corrected E for it; check the set-up against "
                 "session.toml")
     if e.components:  # the components are named with their values
         what = what.removesuffix(" (x, y)")
@@ -219,7 +225,7 @@ def setup_notice(e, declared: np.ndarray | None = None) -> str:
     kind = next((k for k in SETUP_KEY if e.name.startswith(k)), None)
     if kind is None:
         return (f"set-up: the fusion found a {what} of {_with_u(found, u, axes)} "
-                f"(p = {e.p_value:.2g}) and corrected E for it; check the set-up against "
+                f"({p_is(e.p_value)}) and corrected E for it; check the set-up against "
                 "session.toml")
     key, other = SETUP_KEY[kind]
     # camera_roll[A] -> A: the camera to name in the key
@@ -227,11 +233,11 @@ def setup_notice(e, declared: np.ndarray | None = None) -> str:
     dec = np.zeros_like(found) if declared is None else np.broadcast_to(declared, found.shape)
     if not np.any(dec):
         return (f"set-up: the fusion found a {what} of {_with_u(found, u, axes)} "
-                f"(p = {e.p_value:.2g}) and corrected E for it; declare it ({key} = "
+                f"({p_is(e.p_value)}) and corrected E for it; declare it ({key} = "
                 f"{_arcsec(found)}) or {other}")
     total = dec + found
     return (f"set-up: the fusion found a {what}: declared {_arcsec(dec)}″, found "
-            f"{_with_u(found, u, axes)} more (p = {e.p_value:.2g}): it is "
+            f"{_with_u(found, u, axes)} more ({p_is(e.p_value)}): it is "
             f"{_with_u(total, u, axes)}; E is corrected for it; declare that ({key} = "
             f"{_arcsec(total)}) or {other}")
 

@@ -16,7 +16,15 @@ from imaging.camera import CameraModel, calibrate_chessboard, find_chessboard
 from imaging.centres import Centres
 from imaging.confirm import shadow_free
 from imaging.defocus import BlurTrend, defocus_note
-from imaging.detect import MarkCandidate, Roi, check_roi, detect_marks, line_frame, wrap_angle
+from imaging.detect import (
+    MAX_LENGTH_FRACTION,
+    MarkCandidate,
+    Roi,
+    check_roi,
+    detect_marks,
+    line_frame,
+    wrap_angle,
+)
 from imaging.ends import GrooveEnds, groove_ends
 from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
@@ -46,6 +54,7 @@ from imaging.plumbline import (
 from imaging.stripes import Stripes
 
 __all__ = [
+    "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",

@@ -85,12 +85,15 @@ MIN_LENGTH_PX = 100.0
 """Default shortest mark [px]: scratches, printed strokes and dust are shorter."""
 LENGTH_SLACK = 0.8
 """A ridge this fraction of the shortest mark's length still counts (its ends fade)."""
+MAX_LENGTH_FRACTION = 0.8
+"""The longest shortest-mark length an image allows, as a fraction of its smaller side (a
+mark must fit with its faded ends inside the frame)."""
 
 
 def default_min_length(shape: tuple[int, int]) -> float:
     """The shortest mark searched for in an image (or roi) of this shape [px]:
-    :data:`MIN_LENGTH_PX`, at most 80 % of the smaller side."""
-    return min(MIN_LENGTH_PX, 0.8 * min(shape))
+    :data:`MIN_LENGTH_PX`, at most :data:`MAX_LENGTH_FRACTION` of the smaller side."""
+    return min(MIN_LENGTH_PX, MAX_LENGTH_FRACTION * min(shape))
 
 
 def detect_marks(image: np.ndarray, min_length_px: float | None = None,

@@ -8,7 +8,7 @@ import numpy as np
 from align import LensRanges, measure_image
 from align.loop import EffectReport
 from align.present import mark_lines
-from align.warnings import handled_crossing, is_information, mark_warnings, setup_notice
+from align.warnings import handled_crossing, is_information, mark_warnings, p_is, setup_notice
 from axisbase.units import ARCSEC
 from synth import render_marks
 from tests.align.test_marks_crossing import crossing_scene
@@ -142,3 +142,8 @@ def test_a_declared_tilt_and_its_increment_name_both_components():
     assert "found x -16.5 ± 1.4″, y -22.9 ± 1.4″ more" in msg, msg
     assert "it is x -6.5 ± 1.4″, y -22.9 ± 1.4″" in msg, msg
     assert "[platform] table_tilt_arcsec = [-6.5, -22.9]" in msg, msg
+
+
+def test_a_p_that_underflowed_is_said_as_below_the_smallest_double():
+    assert p_is(0.0) == "p < 1e-300"
+    assert p_is(1.234e-5) == "p = 1.2e-05"
