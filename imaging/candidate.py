@@ -78,6 +78,10 @@ def line_frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
             np.array([np.sin(angle_rad), np.cos(angle_rad)]))
 
 
+_WRAP_ULPS = 4 * np.finfo(float).eps
+"""[rad] How near -pi/2 a wrapped direction counts as -pi/2 itself (a few ulps of pi/2)."""
+
+
 def wrap_angle(angle_rad: float) -> float:
     """Wrap a line direction to (-pi/2, pi/2].
 
@@ -92,9 +96,9 @@ def wrap_angle(angle_rad: float) -> float:
         The same line's direction in (-pi/2, pi/2] [rad].
     """
     a = float((angle_rad + np.pi / 2) % np.pi - np.pi / 2)
-    # np.isclose(a, -pi/2, atol=0) written out: the scalar test is ~50x cheaper, and this
-    # runs in every line fit.
-    return np.pi / 2 if abs(a + np.pi / 2) <= 1e-5 * (np.pi / 2) else a
+    # Only -pi/2 itself (to rounding) becomes +pi/2: a relative tolerance here (np.isclose's
+    # 1e-5, i.e. 3.2") snapped every line up to 3" past vertical onto exactly 90 deg.
+    return np.pi / 2 if a <= -np.pi / 2 + _WRAP_ULPS else a
 
 
 Roi = tuple[int, int, int, int]

@@ -38,6 +38,9 @@ MIN_BLOCKS = 12
 FLAT_MIN = 20
 """Flat blocks on the grid that say "JPEG" when the coefficients cannot (a background the
 encoder flattened: quality unknown, every quality's effect is then carried)."""
+MIN_MULTIPLE = 3
+"""Blocks a multiple of a step must hold for it to count as one of the two or more distinct
+multiples a coefficient must show (see :func:`_one_multiple`)."""
 Z_MIN = 5.0
 """The coefficients' pooled concentration in noise units (sum n R / sqrt(sum n / 2)) needed:
 with 12 blocks one coefficient's R has a standard deviation of 0.2 without JPEG."""
@@ -113,6 +116,8 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
             big = (np.abs(x) >= 0.5 * T[u, v]) & (np.abs(x) <= 4.5 * T[u, v])
             if big.sum() < MIN_BLOCKS or T[u, v] < 2:
                 continue  # too few coefficients beyond the zero bin to tell
+            if _one_multiple(x[big], T[u, v]):
+                continue  # blocks alike (a groove along a block row), not a quantiser
             # The mean cosine, not the resultant length: noise coefficients just past the
             # +-T/2 cut sit at phase pi (a resultant length near 1 on a raw image).
             rs.append((float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v]))),
@@ -126,6 +131,16 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
     if best is None and _flat_on_the_grid(image[:h, :w]):
         best = JpegBlocks(None, float("nan"), len(c))
     return best
+
+
+def _one_multiple(x: np.ndarray, step: float) -> bool:
+    """Whether coefficients ``x`` sit at fewer than two multiples of ``step`` held by
+    ``MIN_MULTIPLE`` blocks each. Blocks with one content (an axis-aligned groove at one
+    phase of the grid: every block along it alike) share one value, which lies near a
+    multiple of some quality's step by chance; quantisation shows only as different
+    contents all falling on multiples."""
+    _, n = np.unique(np.round(x / step), return_counts=True)
+    return int(np.sum(n >= MIN_MULTIPLE)) < 2
 
 
 def _flat_on_the_grid(img: np.ndarray) -> bool:

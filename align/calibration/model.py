@@ -37,7 +37,7 @@ from align.calibration.effects import (  # noqa: F401  (re-exported: the public 
     turn_signs,
 )
 from align.calibration.ellipsoid import extract, li_griffiths
-from align.calibration.residual import stage_residual
+from align.calibration.residual import stage_functions, stage_residual
 from align.calibration.triad import CORE, Poses, TriadModel, pose_gradient, pose_sigma_g
 from align.calibration.walk import (
     WanderFit,
@@ -280,15 +280,16 @@ class CalibrationStage:
         if prev is not None:  # start a trial from the fit it extends (a few iterations)
             theta0[:len(prev)] = prev
         w = 1.0 / self.sigma if self.sigma is not None else np.ones(len(p.u))
-        resid = self._residual(effects)
+        resid, jac = stage_functions(self, effects)
         if len(p.u) < len(theta0):
             raise NotApplicable("more parameters than poses")
         scale = self._scale(effects)
         span = max(float(np.ptp(p.t)), 1.0)
 
         def solve(tau: float):
-            return least_squares(resid, theta0, x_scale=scale, method="lm", xtol=1e-10,
-                                 ftol=1e-12, gtol=1e-12, max_nfev=300, args=(tau,))
+            return least_squares(resid, theta0, jac=jac, x_scale=scale, method="lm",
+                                 xtol=1e-10, ftol=1e-12, gtol=1e-12, max_nfev=300,
+                                 args=(tau,))
 
         if SCALE_WARMUP in effects:
             # tau: the best of a log grid, then refined between its neighbours (bounded

@@ -140,15 +140,12 @@ def plan(n: int, seed: int = 0, tries: int = 2000) -> Plan:
         reps = n - 2 * m
         order = np.concatenate([order, rng.permutation(m)[:reps] if reps else []]).astype(int)
         s = _signs(dirs[order])
-        # For each attitude and axis: seen from + and from - ?
-        both = 0
-        total = 0
-        for a in range(m):
-            ss = s[order == a]
-            for k in range(3):
-                if np.any(ss[:, k] != 0):
-                    total += 1
-                    both += bool(np.any(ss[:, k] > 0) and np.any(ss[:, k] < 0))
+        # For each attitude and axis: seen from + and from - ? (counts of each by attitude
+        # (m, 3): the poses' one-hot attitudes times the turns' signs)
+        hot = (order[None, :] == np.arange(m)[:, None]).astype(float)
+        up_, down = hot @ (s > 0) > 0, hot @ (s < 0) > 0
+        total = int(np.sum(up_ | down))
+        both = int(np.sum(up_ & down))
         score = both / max(total, 1)
         if best is None or score > best[0]:
             best = (score, order)

@@ -45,6 +45,11 @@ TAU_STEP = 2.0
 """Ratio of successive time constants of the grid: from two blocks' length up to half the
 shortest pose used (a transient longer than that is a trend of the pose, the wander's)."""
 MIN_POSES = 6
+MAX_FRACTION = 0.01
+"""Largest settling taken as one [fraction of the turn's change]: anelastic creep of a
+mount or a sensor leaves 1e-5 to 1e-3 of a change still to come; a transient of more than a
+hundredth is the triad still moving within its "poses" (readings from motion, a turn cut
+into chunks), which no correction makes static: stated, not corrected."""
 """Fewest poses with a previous pose and enough samples for the test (the amplitudes' fit
 has three coefficients per axis: three degrees of freedom left)."""
 
@@ -74,10 +79,21 @@ class Settling:
     p: float
     found: bool
 
+    @property
+    def beyond(self) -> bool:
+        """Found, but larger than any settling (:data:`MAX_FRACTION`): motion, not corrected."""
+        return self.found and bool(np.any(np.abs(self.fraction) > MAX_FRACTION))
+
     def statement(self) -> str:
         """One line for the warnings (found)."""
         c = ", ".join(f"{1e6 * v:+.0f} ± {1e6 * u:.0f}" for v, u in
                       zip(self.fraction, self.fraction_u, strict=True))
+        if self.beyond:
+            return (f"calibration: the readings move within the poses after each turn (({c}) "
+                    f"ppm of the change into the pose per axis, tau {self.tau_s:.3g} s, p = "
+                    f"{self.p:.2g}): beyond any settling ({MAX_FRACTION:.0%} of the change), "
+                    "the poses are not static; NOT corrected: hold the triad still in each "
+                    "pose")
         return (f"calibration: the samples settle after each turn (a transient of ({c}) ppm "
                 f"of the change into the pose per axis, tau {self.tau_s:.3g} s, p = "
                 f"{self.p:.2g}): each pose's samples corrected for it, u carries the "
@@ -236,13 +252,14 @@ def settle_samples(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
                    ordered: bool = True
                    ) -> tuple[list[np.ndarray], np.ndarray | None, Settling | None]:
     """The poses' samples corrected for a settling transient when they show one
-    (:func:`settling`), the correction's standard uncertainty on each pose's mean (N, 3)
-    [output unit] (None: not corrected) and the test (None: not testable). Poses in an
-    unknown order (``ordered`` false: no previous pose) are not tested."""
+    (:func:`settling`; one beyond :data:`MAX_FRACTION` is stated, not corrected), the
+    correction's standard uncertainty on each pose's mean (N, 3) [output unit] (None: not
+    corrected) and the test (None: not testable). Poses in an unknown order (``ordered``
+    false: no previous pose) are not tested."""
     if not ordered:
         return list(samples), None, None
     s = settling(samples, times)
-    if s is None or not s.found:
+    if s is None or not s.found or s.beyond:
         return list(samples), None, s
     fixed, u = corrected(samples, times, s)
     return fixed, u, s

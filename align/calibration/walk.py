@@ -47,12 +47,14 @@ WHITE_BAND = (1 / 8, 1 / 3)
 anti-alias filter (which lowers the highest modes of a real sensor) and above the walk."""
 
 
-@functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=MAX_POINTS)
 def _expectations(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Per DCT mode of a detrended series of n points: the expected square for unit white
     noise and for a unit random walk (variance 1 per point); the unit ramp (centred) and the
     walk's expected square on it (white: 1). Exact: the detrending projector P and the walk's
-    covariance min(i, j) through the orthonormal DCT-II."""
+    covariance min(i, j) through the orthonormal DCT-II. Kept for every n (at most
+    MAX_POINTS of them, 3 n numbers each): poses of different lengths missed a cache of 8,
+    and each miss is an O(n³) product."""
     i = np.arange(n, dtype=float)
     X = np.column_stack([np.ones(n), i - i.mean()])
     P = np.eye(n) - X @ np.linalg.pinv(X)
@@ -248,6 +250,15 @@ def wander_fit(r: np.ndarray, J: np.ndarray, shape: np.ndarray, level: float | N
     return WanderFit(m2ll, chi2, q, step * d, cov)
 
 
+@functools.lru_cache(maxsize=4)
+def _chi2_draws(n: int) -> np.ndarray:
+    """:func:`allowed_fraction`'s 20000 seeded draws of n chi2_1 variables (20000, n), drawn
+    once per n (read-only): drawing them was a third of its time."""
+    z = np.random.default_rng(0).chisquare(1, (20000, n))
+    z.setflags(write=False)
+    return z
+
+
 def allowed_fraction(chi2: float, P: np.ndarray, w: np.ndarray, walk: np.ndarray) -> float:
     """The largest fraction f <= 1 of a walk's covariance ``walk`` (N, N) [g²] that a white
     fit's ``chi2`` allows: not in the lower :data:`WALK_ALPHA` tail of its distribution under
@@ -256,11 +267,16 @@ def allowed_fraction(chi2: float, P: np.ndarray, w: np.ndarray, walk: np.ndarray
     draws: scipy has no such distribution); 0 when even 1e-4 of it is excluded
     (:meth:`align.calibration.model.CalibrationStage.means_allow`)."""
     Ww = P @ (w[:, None] * walk * w[None, :]) @ P
-    z = np.random.default_rng(0).chisquare(1, (20000, len(w)))
+    z = _chi2_draws(len(w))
+    # z @ lam in blocks of rows: OpenBLAS threads a product of this size, which cost 10-20
+    # times the CPU of the blocks on a busy two-core machine (the same numbers: each row's
+    # sum is the same kernel's).
+    rows = max(40000 // len(w), 1)
 
     def allowed(f: float) -> bool:
         lam = np.clip(np.linalg.eigvalsh(P + f * Ww), 0, None)
-        return float(np.mean(z @ lam <= chi2)) >= WALK_ALPHA
+        s = np.concatenate([z[i:i + rows] @ lam for i in range(0, len(z), rows)])
+        return float(np.mean(s <= chi2)) >= WALK_ALPHA
 
     if allowed(1.0):
         return 1.0

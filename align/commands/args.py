@@ -197,19 +197,22 @@ def nominal(text: str | None, n: int) -> list[float] | None:
     return deg
 
 
-def face_plan(faces_text: str, nominal_text: str | None) -> tuple[list[str], list[float] | None]:
+def face_plan(faces_text: str, nominal_text: str | None, log: str = ""
+              ) -> tuple[list[str], list[float] | None]:
     """``--faces`` and ``--nominal`` parsed, and checked by the rule session.toml's
     ``[goniometer]`` also follows (:func:`align.face_plan.check_face_plan`: the reference face
-    is no housing, faces x and y 90° apart), the message naming the flags."""
+    is no housing, faces x and y 90° apart), the message naming the log and the flags."""
     import numpy as np
 
     from align.face_plan import check_face_plan
 
     names = faces(faces_text)
     deg = nominal(nominal_text, len(names))
-    check_face_plan(names, None if deg is None else np.deg2rad(deg), f"--faces {faces_text}",
-                    f"--nominal {nominal_text}" if nominal_text else
-                    f"--faces {faces_text} (without --nominal: equal angles)")
+    where = f"{log}: " if log else ""
+    check_face_plan(names, None if deg is None else np.deg2rad(deg),
+                    f"{where}--faces {faces_text}",
+                    f"{where}--nominal {nominal_text}" if nominal_text else
+                    f"{where}--faces {faces_text} (without --nominal: {len(names)} equal angles)")
     return names, deg
 
 

@@ -24,7 +24,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     from align.gonio import measure_log
     from axisbase.header import parse_column_map
 
-    names, nominal_deg = face_plan(args.faces, args.nominal)
+    names, nominal_deg = face_plan(args.faces, args.nominal, str(args.log))
     inputs = [args.log] + ([args.reverse_log] if args.reverse_log else [])
     if args.reverse_log:
         distinct_files(args.log, args.reverse_log, "log", "--reverse-log")

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from align.calibration import calibrate, poses_from_samples
-from align.calibration.settling import corrected, settling
+from align.calibration.settling import MAX_FRACTION, corrected, settling
 from align.session.decisions import alarm_limit
 from synth.tumble import TumbleSpec
 from synth.tumble import tumble as synth_tumble
 from tests.align import user8_inputs as ui
 from tests.align.effects_cases import poses_of, triad_of
+from tests.align.test_calibration_guard import faces_and_turn_chunks
 
 
 def tumble(tr: ui.Triad, seed: int):
@@ -79,3 +80,14 @@ def test_settling_rates_over_seeds():
     assert clean <= alarm_limit(300), clean
     assert walk <= alarm_limit(60), walk
     assert creep >= 36, creep
+
+
+def test_a_transient_beyond_any_settling_is_stated_not_corrected():
+    # Turns cut into chunks (readings from motion): within each "pose" the reading moves a
+    # large part of the way from the previous one. That is no settling a mount has (1e-5 to
+    # 1e-3 of the change): the poses are left as read, the statement says they are not static.
+    _, p = faces_and_turn_chunks(0, chunk_s=0.5)
+    assert p.settling is not None and p.settling.found and p.settling.beyond
+    assert np.abs(p.settling.fraction).max() > MAX_FRACTION
+    said = p.settling.statement()
+    assert "NOT corrected" in said and "not static" in said

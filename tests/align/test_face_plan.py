@@ -34,7 +34,8 @@ def test_the_command_line_and_session_toml_refuse_alike(tmp_path, capsys, faces,
     cli = capsys.readouterr().err
     assert cli.count("\n") == 1 and "Traceback" not in cli, cli
     named = flags[-2] + " " + flags[-1] if reason != REF_IS_HOUSING else "--faces"
-    assert cli.startswith(f"align gonio: {named}") and reason in cli, cli
+    # the log the plan was given for, then the flag (the independent user's rule: file, flag)
+    assert cli.startswith(f"align gonio: {tmp_path / 'g.csv'}: {named}") and reason in cli, cli
 
     s = tmp_path / "s"
     s.mkdir()

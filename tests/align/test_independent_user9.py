@@ -252,11 +252,6 @@ def test_undeclared_lens_over_seeds(tmp_path):
 # ------------------------------------------------------------------------ near vertical
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a 400 px mark 2.2\" past vertical (truth -89.9994 deg), distortion-free camera declared: "
-    "4 of 4 seeds read exactly +90.000000 deg (also 6 of 8 seeds in a longer run; truth "
-    "90.0: 5 of 8; truth 89.9994: 2 of 8), angle_before_loop_deg the same: readings just "
-    "past 90 deg are snapped to 90 instead of wrapping to -89.99x; no such pinning at 0 deg"))
 def test_a_near_vertical_mark_is_not_pinned_to_exactly_90_degrees(tmp_path):
     """A mark 2.2" past vertical (truth -89.9994 deg, i.e. 90.0006), distortion-free camera
     declared: the estimator is continuous, so no reading may be exactly 90.000000 deg (a
@@ -503,11 +498,6 @@ def test_three_marks_through_a_sign_flipped_model_are_flagged(chess, tmp_path):
     assert not confident_wrong(scene, rc, doc)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "one 250 px mark at (150, 120) through the real lens, the model's k1/k2 sign-flipped "
-    "(k1 +0.279): read +14.797 deg for a 10.000 deg truth, 17259\" off at u 211\" (z +82), "
-    "exit 0, ok true; the 1.97 px bow (the model allows 0.001 px) is called a bent mark and "
-    "its chord read, the calibration kept -- nothing in u or ok covers the model being wrong"))
 def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, tmp_path):
     cam = flipped_model(chess, tmp_path)
     scene = ui.Scene((ui.Groove((150, 120), 10.0, 250),), chess)
@@ -518,13 +508,6 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer(chess, 
 # ------------------------------------------------------------------ false JPEG diagnosis
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a lossless PNG (never JPEG-compressed), one horizontal 250 px groove centred on row "
-    "100 (the middle of an 8-row block), distortion-free camera declared: seeds 0-2 all warn "
-    "'JPEG compression (8x8 blocks, quality ~41 of the standard table)' and add jpeg_blocks "
-    "3.99, 3.27, 0.21\" to u (6.25, 5.91, 4.76\"); on row 380 likewise (8.6\" of u 9.8\"), "
-    "on row 240 or 100.5 or at 0.5 deg never; the same pixels turned 180 deg (groove on row "
-    "379) gave jpeg_blocks 10.6\" against 0.0014\" (u 11.7 vs 4.8\")"))
 def test_a_png_groove_on_a_block_middle_row_is_not_called_jpeg(tmp_path):
     lens = ui.Lens(((540.0, 0, 319.5), (0, 540.0, 239.5), (0, 0, 1)), (0, 0, 0, 0, 0))
     called = []

@@ -46,3 +46,27 @@ def test_a_jpeg_mark_is_named_and_within_u():
     assert any("JPEG compression" in n for n in r.notes)
     assert "jpeg_blocks" in r.u_terms
     assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
+
+
+def _groove_on_a_block_row(seed: int) -> np.ndarray:
+    """A raw 8-bit image (noise 1.5 DN, never compressed) with one horizontal 256 px groove
+    inside block row 12 whose across profile has its 8-point DCT at 4, -3 and -1 steps of the
+    quality-41 table (as user 9's groove on row 100 had): every block along it alike."""
+    T = ijg_table(41)[:, 0]
+    k = np.arange(8)
+    D = np.sqrt(2 / 8) * np.cos((2 * k[None, :] + 1) * k[:, None] * np.pi / 16)
+    D[0] /= np.sqrt(2)
+    coef = np.zeros(8)
+    coef[[1, 3, 4]] = 4 * T[1], -3 * T[3], -1 * T[4]
+    img = np.full((480, 640), 140.0)
+    img[96:104, 72:328] += (D.T @ (coef / np.sqrt(8)))[:, None]
+    rng = np.random.default_rng(seed)
+    return np.clip(np.round(img + rng.normal(0, 1.5, img.shape)), 0, 255).astype(np.uint8)
+
+
+def test_blocks_alike_along_a_groove_are_not_jpeg():
+    """Blocks of one content share their coefficients, which may sit on some quality's
+    multiples by chance; quantisation needs different contents on multiples (user 9: a PNG
+    groove on row 100 was called 'JPEG quality ~41')."""
+    for seed in range(4):
+        assert find_jpeg(_groove_on_a_block_row(seed)) is None, seed
