@@ -12,6 +12,7 @@ from align.calibration import STATIC, StaticSettings, calibrate, read_poses
 from align.calibration.check import CheckResult, check_poses
 from align.calibration.stability import chosen_ppm
 from align.calibration.units import unit_scale_check
+from align.calibration.units import unit_source as default_source
 from align.warnings import calibration_warnings
 from axisbase.console import captured_warnings
 from axisbase.header import header_units, resolve_units
@@ -123,8 +124,11 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
     cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad,
                     scale_stability_ppm=ppm, stability_default=default,
                     nonlinearity_bound=nonlinearity_bound)
-    warnings = unit_scale_check(cal.model, units,
-                                unit_source or f"{static}: header unit [{units}]")
+    if unit_source is None:
+        known = (Path(static).suffix.lower() not in ARRAY_SUFFIXES
+                 and header_units(static, STATIC, columns, _U) is not None)
+        unit_source = default_source(str(static), units, known)
+    warnings = unit_scale_check(cal.model, units, unit_source)
     checked = check_poses(cal, poses, chk, alpha, f"{check}") if chk is not None else None
     warnings = (list(dict.fromkeys(logged)) + left_out + calibration_warnings(cal, poses)
                 + warnings

@@ -123,7 +123,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     say(tilt_lines(res, args.method))
     warn(res.warnings)
     _write_tilt(args, res, out_json, out_csv, inputs)
-    return 0
+    return 2 if getattr(model, "not_ok", ()) else 0
 
 
 def _write_tilt(args: argparse.Namespace, res, out_json, out_csv, inputs: list[str]) -> None:
@@ -153,7 +153,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
     say(apply_lines(res))
     warn(res.warnings)
     wrote(write_atomic(out, res.csv_text(), args.force))
-    return 0
+    return 2 if pc.not_ok else 0
 
 
 def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
