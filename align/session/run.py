@@ -306,7 +306,7 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                       res.calibration_poses.temp is not None)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
                             signs_as="[calibration] scale_sign", scale_stability_ppm=ppm,
-                            stability_default=default)
+                            stability_default=default, nonlinearity_bound=c.nonlinearity_bound)
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
