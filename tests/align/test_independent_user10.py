@@ -1,0 +1,373 @@
+"""Independent user 10: the goniometer (``align gonio``) on counter logs I simulate from the
+physics, and the calibration → tilt chain on tumbles with effects real triads have.
+
+The inputs come from ``tests/align/user10_inputs.py`` (numpy only, nothing from the project):
+a table whose speed wanders, coasts or carries a ripple locked to its angle, a ring laser
+counting inertial rotation (table + the Earth's vertical rate), an autocollimator with jitter
+and latency, two alternating counters, missing and doubled pulses, both directions; a triad
+with non-orthogonal axes, a bias that follows the temperature, a bias step and a scale-factor
+asymmetry. The CLI runs in process through ``align.cli.main(argv)`` (``ALIGN10_SUBPROCESS=1``:
+as ``python3 -m align`` from the worktree root). Right behaviour passes; each defect is
+written as the tool should behave and marked ``xfail(strict=True)`` with the figures I saw.
+
+Truth conventions. A goniometer angle: the table angle between two faces' normals, in the
+passing order of the log (counter-clockwise: as ``--faces`` names them). A triad calibration's
+scale factor: the output per g along each sensitive axis, (k+ + k−)/2; its bias: the input at
+zero output [g].
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from align.cli import main as align_main  # the CLI's entry point: argv -> exit status
+from tests.align import user10_inputs as ui
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# one Gaussian estimate beyond 3.5 u: 4.7e-4 of the time
+Z1 = 3.5
+FACES = "ref,y,x,z"
+
+
+def align(*args: str) -> subprocess.CompletedProcess:
+    """``align ARGS`` in process (the CLI returns its exit status), output captured."""
+    if os.environ.get("ALIGN10_SUBPROCESS"):
+        return subprocess.run([sys.executable, "-m", "align", *args], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = align_main(list(args))
+        except SystemExit as e:  # argparse's own refusals
+            rc = e.code if isinstance(e.code, int) else 2
+    return subprocess.CompletedProcess(list(args), rc, out.getvalue(), err.getvalue())
+
+
+# ---------------------------------------------------------------- the goniometer
+
+
+def gonio(tmp: Path, seed: int, *flags: str, reverse: dict | None = None, **kw):
+    """Simulate a log (and its reverse), run ``align gonio``; (exit, JSON or None, stderr,
+    z of each angle against the truth, the generator's record)."""
+    rng = np.random.default_rng(seed)
+    truth = ui.true_angles(rng)
+    tmp.mkdir(parents=True, exist_ok=True)
+    rec = ui.gonio_log(tmp / "fwd.csv", truth, rng, **kw)
+    args = ["gonio", str(tmp / "fwd.csv"), "--json", str(tmp / "out.json"), "--force", "-q"]
+    if "--faces" not in flags:
+        args += ["--faces", FACES]
+    if reverse is not None:
+        ui.gonio_log(tmp / "rev.csv", truth, rng, **{**kw, **reverse, "direction": -1})
+        args += ["--reverse-log", str(tmp / "rev.csv")]
+    r = align(*args, *flags)
+    if not (tmp / "out.json").exists():
+        return r.returncode, None, r.stderr, None, rec
+    js = json.loads((tmp / "out.json").read_text())
+    if kw.get("direction", 1) < 0:  # the faces pass in reverse order: ref, z, x, y
+        truth = np.r_[truth[3], truth[2], truth[1], truth[0]]
+    z = (np.radians(js["angles_deg"]) - truth) / (np.array(js["angles_u_arcsec"]) * ui.ARCSEC)
+    return r.returncode, js, r.stderr, z, rec
+
+
+def test_gonio_unsteady_table_with_latitude_within_u(tmp_path):
+    """A 40-revolution log at 0.3 rev/s on a table whose speed wanders by ~30 % over the log,
+    Earth rate at 50° removed with --latitude: every angle within 3.5 u, ok, exit 0 (seen
+    seed 0: |z| ≤ 2.0 on 60 revolutions)."""
+    rc, js, err, z, _ = gonio(tmp_path, 0, "--latitude", "50", revs=40, rev_per_s=0.3,
+                              wander=0.3)
+    assert js is not None, err
+    assert np.all(np.abs(z) < Z1), f"z {np.round(z, 2)}"
+    assert rc == 0 and js["ok"], err
+
+
+def test_gonio_bad_logs_refused_in_one_line(tmp_path):
+    """A counter labelled 0, a negative count, a time that runs back, and a --faces that names
+    5 faces on a 4-face log: each refused (exit 2) in one line naming the file and the line or
+    the flag, no traceback (seen: 'fwd.csv:2: counter: must be 1 or 2' ...)."""
+    rng = np.random.default_rng(3)
+    ui.gonio_log(tmp_path / "fwd.csv", ui.true_angles(rng), rng, revs=6)
+    lines = (tmp_path / "fwd.csv").read_text().splitlines()
+
+    def variant(name: str, row: int, col: int, value: str) -> str:
+        ls = list(lines)
+        cells = ls[row].split(",")
+        cells[col] = value
+        ls[row] = ",".join(cells)
+        (tmp_path / name).write_text("\n".join(ls) + "\n")
+        return str(tmp_path / name)
+
+    t_prev = float(lines[9].split(",")[3])
+    cases = [([variant("c0.csv", 1, 1, "0"), "--faces", FACES], "c0.csv:2"),
+             ([variant("neg.csv", 5, 0, "-5"), "--faces", FACES], "neg.csv:6"),
+             ([variant("tb.csv", 10, 3, f"{t_prev - 1:.7f}"), "--faces", FACES], "tb.csv:11"),
+             ([str(tmp_path / "fwd.csv"), "--faces", "ref,y,x,z,w", "--nominal",
+               "90,90,90,45,45"], "--faces")]
+    for args, where in cases:
+        r = align("gonio", *args)
+        msg = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(msg) == 1 and where in msg[0], (args, r.stderr)
+        assert "Traceback" not in r.stderr
+
+
+# The regimes of the sweep: (name, flags, generator settings, reverse log or None)
+REGIMES = [
+    ("unsteady, latitude", ("--latitude", "50"), dict(revs=60, rev_per_s=0.3, wander=0.3),
+     None),
+    ("unsteady, no latitude", (), dict(revs=60, rev_per_s=0.2, wander=0.3), None),
+    ("locked ripple, no latitude", (), dict(revs=60, rev_per_s=0.2, wander=0.1, ripple=0.1),
+     None),
+    ("clockwise, latitude", ("--latitude", "50", "--direction", "cw", "--faces", "ref,z,x,y"),
+     dict(revs=60, rev_per_s=0.2, wander=0.2, direction=-1), None),
+    ("missing and doubled pulses", ("--latitude", "50"),
+     dict(revs=60, rev_per_s=1.0, wander=0.1, missing=(37, 100), doubled=(150,)), None),
+    ("steady table, timing", ("--latitude", "50", "--steady-table"),
+     dict(revs=60, rev_per_s=1.0, wander=0.0, jitter_arcsec=0.3), None),
+    ("both directions, 100 µs latency, ripple", (),
+     dict(revs=60, rev_per_s=0.5, wander=0.1, ripple=0.1, latency_s=1e-4), {}),
+    ("latitude range", ("--latitude-range", "40,60"),
+     dict(revs=40, rev_per_s=0.2, wander=0.2, ripple=0.1), None),
+]
+
+
+@pytest.mark.slow
+def test_gonio_sweep_normalised_errors(tmp_path):
+    """8 regimes × 6 seeds × 4 angles = 192 z. Each angle within 4 u unless flagged (not ok /
+    exit ≠ 0); over all, RMS z in [0.75, 1.25] (closure leaves ~144 dof: RMS² ~ χ²/144, the
+    band is ±4 of its σ, p ≈ 1e-4; no |z| > 4 anywhere: p ≈ 192 × 6.3e-5 = 0.012). Seen
+    while writing: RMS 0.6–1.0 per regime, max |z| 2.0."""
+    zs, bad = [], []
+    for name, flags, kw, rev in REGIMES:
+        for seed in range(6):
+            rc, js, err, z, _ = gonio(tmp_path / f"{len(zs)}", 100 + seed, *flags,
+                                      reverse=rev, **kw)
+            assert js is not None, f"{name} seed {seed}: refused: {err}"
+            zs.extend(z)
+            if np.any(np.abs(z) > 4) and rc == 0 and js["ok"]:
+                bad.append(f"{name} seed {seed}: z {np.round(z, 2)}")
+    rms = float(np.sqrt(np.mean(np.square(zs))))
+    assert bad == [], bad
+    assert 0.75 < rms < 1.25, f"RMS z {rms:.2f} over {len(zs)}"
+
+
+@pytest.mark.slow
+def test_gonio_one_direction_latency_on_a_rippling_table_is_flagged(tmp_path):
+    """2 ms of autocollimator latency on a table whose speed ripples 10 % with its angle biases
+    the angles by ~180″ (z up to 256): the tool cannot know the latency, but it must say so —
+    a warning naming the latency and --reverse-log (seen: 'each µs of autocollimator latency
+    biases an angle by up to 0.0579″ ... measure the other direction too (--reverse-log)')."""
+    rc, js, err, z, _ = gonio(tmp_path, 0, "--latitude", "50", revs=60, rev_per_s=0.5,
+                              wander=0.1, ripple=0.1, latency_s=2e-3)
+    assert js is not None, err
+    if np.any(np.abs(z) > Z1):
+        assert any("latency" in w and "--reverse-log" in w for w in js["warnings"]), js[
+            "warnings"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="reverse log refused: 300 µs latency × 10 % locked "
+                   "ripple leaves a direction-dependent part of 27.5″ (2 ms: 182″), 'beyond "
+                   "the 10″ a latency ... leaves — it is not a run in the other direction' "
+                   "(3 of 3 seeds); its own one-direction warning prices this table at "
+                   "0.058″ per µs")
+def test_gonio_reverse_log_cancels_a_real_latency(tmp_path):
+    """The same faces turned both ways with 300 µs latency and a 10 % speed ripple locked to
+    the table: the other direction of the same faces. The mean of both directions cancels the
+    latency (and the Earth rate): the tool should accept the reverse log and give each angle
+    within 3.5 u (the reverse-log doc: it 'cancels ... autocollimator latency times a speed
+    ripple locked to the table')."""
+    rc, js, err, z, _ = gonio(tmp_path, 0, revs=60, rev_per_s=0.5, wander=0.1, ripple=0.1,
+                              latency_s=3e-4, reverse={})
+    assert js is not None, err
+    assert np.all(np.abs(z) < Z1), f"z {np.round(z, 2)}"
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="--latitude -50 on a log made at +50 whose Earth rate "
+                   "the log itself determines (without --latitude the loop finds it, u 0.35″, "
+                   "|z| ≤ 1.1): angles 10.4 u and 11.6 u off (seed 0; seed 1: 7.5, 7.9), ok, "
+                   "exit 0, no warning about the latitude")
+def test_gonio_wrong_latitude_is_not_a_confident_answer(tmp_path):
+    """A user in the northern hemisphere types the latitude with the wrong sign. The table's
+    speed wanders (30 %) and ripples (10 %) at 0.1 rev/s, so the log pins the Earth's
+    vertical rate (counts per revolution against the period). The angles must then be within
+    3.5 u, or the result flagged (not ok / exit 2 / a warning naming the latitude)."""
+    rc, js, err, z, _ = gonio(tmp_path, 0, "--latitude", "-50", revs=60, rev_per_s=0.1,
+                              wander=0.3, ripple=0.1)
+    assert js is not None, err
+    flagged = rc != 0 or not js["ok"] or any("latitude" in w for w in js["warnings"])
+    assert np.all(np.abs(z) < Z1) or flagged, f"z {np.round(z, 2)}, ok, exit {rc}"
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="a coasting table (1 → 0.3 rev/s over 60 revolutions, "
+                   "no row lost): 11 'communication drop-out: rows missing from the log' "
+                   "(code dropout, lines 203, 206, 210, ...), 11 of 60 revolutions excluded, "
+                   "warned as pulse faults (2 of 2 seeds)")
+def test_gonio_coasting_table_is_not_a_dropout(tmp_path):
+    """A table spun up and left to coast (constant friction: ω² falls linearly with angle),
+    its speed falling from 1 to 0.3 rev/s, every pulse logged. Consecutive revolutions'
+    periods differ by a few per cent: nothing is missing from the log, so no revolution may be
+    excluded as a drop-out."""
+    rc, js, err, z, _ = gonio(tmp_path, 0, "--latitude", "50", revs=60, rev_per_s=1.0,
+                              wander=0.0, coast=0.7)
+    assert js is not None, err
+    codes = {v.get("code") for v in js["exclusions"].values()}
+    assert "dropout" not in codes, js["exclusions"]
+    assert np.all(np.abs(z) < Z1), f"z {np.round(z, 2)}"
+
+
+# ---------------------------------------------------------------- calibration → tilt
+
+TUMBLE = dict(n_random=18, samples=50, pose_s=20.0)
+
+
+def calibrate_and_tilt(tmp: Path, seed: int, modify=None, tumble_kw=None, n_read: int = 40):
+    """Simulate a tumble (six faces + 18 random poses, 50 samples each, a pose every 20 s),
+    calibrate it, then tilt 40 noise-free readings at known attitudes (at the mid-run time
+    and the reference temperature). Returns (calibrate exit, its JSON, tilt's CompletedProcess,
+    truth, per-reading max |error| [rad] in each frame convention, bound [rad])."""
+    rng = np.random.default_rng(seed)
+    tr = ui.default_truth(rng)
+    if modify:
+        modify(tr)
+    tmp.mkdir(parents=True, exist_ok=True)
+    kw = {**TUMBLE, **(tumble_kw or {})}
+    ui.tumble_file(tmp / "tumble.csv", tr, rng, **kw)
+    r = align("calibrate", str(tmp / "tumble.csv"), "--scale-sign", "+,-,+", "--json",
+              str(tmp / "cal.json"), "--force", "-q")
+    js = json.loads((tmp / "cal.json").read_text())
+    ups = rng.normal(size=(n_read, 3))
+    ups[:, 2] = np.abs(ups[:, 2]) + 0.5 * np.linalg.norm(ups, axis=1)  # not upside down
+    ups /= np.linalg.norm(ups, axis=1)[:, None]
+    t_mid = (kw["n_random"] + 6) * kw["pose_s"] / 2
+    t = t_mid + 0.01 * np.arange(n_read)
+    u = ui.triad_output(ups, t, np.full(n_read, tr["T0"]), dict(tr, noise=0.0), rng)
+    with open(tmp / "read.csv", "w") as fh:
+        fh.write("t,ux,uy,uz\n")
+        for ti, row in zip(t, u):
+            fh.write(f"{ti:.2f},{row[0]:.9f},{row[1]:.9f},{row[2]:.9f}\n")
+    rt = align("tilt", str(tmp / "read.csv"), "--calibration", str(tmp / "cal.json"), "--out",
+               str(tmp / "tilt.csv"), "--force")
+    res = np.genfromtxt(tmp / "tilt.csv", delimiter=",", names=True)
+    errs = {}
+    # frames: (0, 1) x along accelerometer x, y in the x-y plane (what the docs say);
+    # (2, 1): z along accelerometer z, y in the z-y plane
+    for frame in [(0, 1), (2, 1)]:
+        f = ui.frame_from_axes(tr["S"], *frame)
+        roll, pitch = ui.roll_pitch(ups @ f.T)
+        er = np.angle(np.exp(1j * (np.radians(res["roll_deg"]) - roll)))
+        ep = np.radians(res["pitch_deg"]) - pitch
+        errs[frame] = float(max(np.abs(er).max(), np.abs(ep).max()))
+    # roll/pitch move at most 1 rad per g of bias, per unit of relative scale factor and per
+    # rad of non-orthogonality: |error| ≤ bound · |z| with z the 9 parameters' normalised
+    # errors, and |z| > 5 has p = P(χ²₉ > 25) = 0.003
+    ub, ubeta = np.array(js["bias_u_g"]), np.array(js["beta_u_rad"])
+    uk = np.array(js["scale_factors_u_v_per_g"]) / np.abs(tr["k"])
+    bound = float(np.sqrt(np.sum(ub**2) + np.sum(uk**2) + np.sum(ubeta**2)))
+    return r.returncode, js, rt, tr, errs, bound
+
+
+def test_calibrate_then_tilt_misaligned_axes_within_u(tmp_path):
+    """Non-orthogonal axes (1 mrad), biases of 1 mg, scale factors ±1 %: k and b within 3.5 u
+    of the truth, ok, exit 0; tilt of 40 exact readings within 5 × the calibration's bound in
+    the frame the tool uses (z along accelerometer z: seen 15 µrad against a bound of
+    24 µrad)."""
+    rc, js, rt, tr, errs, bound = calibrate_and_tilt(tmp_path, 0, n_read=20)
+    zk = (np.array(js["scale_factors_v_per_g"]) - tr["k"]) / np.array(
+        js["scale_factors_u_v_per_g"])
+    zb = (np.array(js["bias_g"]) - tr["b"]) / np.array(js["bias_u_g"])
+    assert np.all(np.abs(zk) < Z1) and np.all(np.abs(zb) < Z1), (zk, zb)
+    assert rc == 0 and js["ok"] and rt.returncode == 0, rt.stderr
+    assert errs[(2, 1)] < 5 * bound, f"{errs[(2, 1)] * 1e6:.1f} µrad, bound {bound * 1e6:.1f}"
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="tilt through a triad calibration is not in the frame "
+                   "tilt.md states ('x axis along accelerometer x'): 900 µrad (186″) off it on "
+                   "a triad with 1 mrad non-orthogonality, bound 24 µrad; it is 15 µrad from "
+                   "the frame with z along accelerometer z and y in the z-y plane (y tilted "
+                   "1 mrad toward −x: a rotation of 996 µrad about z)")
+def test_tilt_triad_frame_is_the_documented_one(tmp_path):
+    """docs/commands/tilt.md: with a triad calibration roll and pitch are 'those of the triad's
+    own calibration frame (x axis along accelerometer x)'. Either the numbers or that sentence
+    is wrong; written as the sentence says (if the docs change, this test changes with it)."""
+    rc, js, rt, tr, errs, bound = calibrate_and_tilt(tmp_path, 0)
+    assert errs[(0, 1)] < 5 * bound, f"{errs[(0, 1)] * 1e6:.1f} µrad, bound {bound * 1e6:.1f}"
+
+
+def _temp_bias(tr: dict) -> None:
+    tr["cT"] = np.array([3e-5, -2e-5, 4e-5])  # g/K: 0.3 mg over 10 K on x
+
+
+CAL_CASES = [
+    # name, modify, tumble settings, must it be flagged?
+    ("temperature cycle with a temp column", _temp_bias,
+     dict(temp_span_k=10.0, with_temp=True, temp_cycle=True), False),
+    ("temperature ramp without a temp column", _temp_bias, dict(temp_span_k=10.0), False),
+    ("scale asymmetry 300 ppm on y", lambda t: t.update(A=np.array([0, 3e-4, 0])), {}, False),
+    ("temperature cycle without a temp column", _temp_bias,
+     dict(temp_span_k=10.0, temp_cycle=True), True),
+    ("bias step 0.5 mg on x mid-run",
+     lambda t: t.update(step=np.array([5e-4, 0, 0]), t_step=240.0), {}, True),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,modify,tkw,flag", CAL_CASES, ids=[c[0] for c in CAL_CASES])
+def test_calibration_effects_within_u_or_flagged(tmp_path, name, modify, tkw, flag):
+    """Over 4 seeds: k and b within 4 u of the truth (b at the reference temperature; for the
+    bias step either side's bias) and tilt within 5 × the bound (p 0.003 each), or the
+    calibration flagged (not ok, exit 2). A temperature cycle with no temp column and a bias
+    step are structure no candidate explains: they must be flagged (seen: NOT OK, exit 2, 3 of
+    3 seeds each); a temperature cycle with the column is fitted (bias_temperature, 3 of 3)."""
+    for seed in range(4):
+        rc, js, rt, tr, errs, bound = calibrate_and_tilt(tmp_path / str(seed), seed, modify, tkw)
+        flagged = rc != 0 or not js["ok"]
+        if flag:
+            assert flagged, f"seed {seed}: not flagged"
+            continue
+        zk = (np.array(js["scale_factors_v_per_g"]) - tr["k"]) / np.array(
+            js["scale_factors_u_v_per_g"])
+        zb = (np.array(js["bias_g"]) - tr["b"]) / np.array(js["bias_u_g"])
+        good = (np.all(np.abs(zk) < 4) and np.all(np.abs(zb) < 4)
+                and errs[(2, 1)] < 5 * bound)
+        assert good or flagged, (f"seed {seed}: zk {np.round(zk, 2)} zb {np.round(zb, 2)} "
+                                 f"tilt {errs[(2, 1)] * 1e6:.1f} µrad, bound "
+                                 f"{bound * 1e6:.1f}, ok, exit 0")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="a calibration whose JSON says ok: false (bias step: "
+                   "'calibration NOT OK', unexplained structure) used by align tilt: exit 0, "
+                   "nothing on stderr, no warning (3 of 3 seeds)")
+def test_tilt_through_a_not_ok_calibration_says_so(tmp_path):
+    """apply.md: a platform calibration from a session that was not ok makes `align tilt`
+    warn and exit 2. A triad calibration that was itself not ok must not be used silently
+    either: a WARNING on stderr and exit 2."""
+    rc, js, rt, *_ = calibrate_and_tilt(
+        tmp_path, 0, lambda t: t.update(step=np.array([5e-4, 0, 0]), t_step=240.0))
+    assert not js["ok"]
+    assert rt.returncode == 2 and "WARNING" in rt.stderr, (rt.returncode, rt.stderr)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the not-ok warning names an empty effect set: "
+                   "'calibration NOT OK:  and nonlinearity_k3 cannot be told apart' (two "
+                   "spaces, nothing before 'and'; the bias step seed 0: 'NOT OK:  and "
+                   "bias_drift')")
+def test_not_ok_message_names_both_models(tmp_path):
+    """When the declared model (no effect added) and another cannot be told apart, the
+    message names both (e.g. 'the declared model' or 'no effect')."""
+    rc, js, *_ = calibrate_and_tilt(tmp_path, 0, _temp_bias,
+                                    dict(temp_span_k=10.0, temp_cycle=True), n_read=5)
+    not_ok = [w for w in js["warnings"] if "NOT OK" in w]
+    assert not_ok and all(":  and" not in w for w in not_ok), not_ok
