@@ -33,7 +33,8 @@ def true_angles(rng: np.random.Generator, n_faces: int = 4, spread_arcsec: float
 
 def gonio_log(path: Path, angles: np.ndarray, rng: np.random.Generator, *, revs: int = 60,
               rev_per_s: float = 1.0, wander: float = 0.05, ripple: float = 0.0,
-              coast: float = 0.0, latency_s: float = 0.0, jitter_arcsec: float = 0.5, latitude_deg: float = 50.0,
+              coast: float = 0.0, latency_s: float = 0.0, jitter_arcsec: float = 0.5,
+              latitude_deg: float = 50.0,
               counts_per_rev: float = 764355.84, direction: int = +1,
               missing: tuple[int, ...] = (), doubled: tuple[int, ...] = (),
               double_delay_s: float = 2e-3, t0: float = 1000.0) -> dict:
@@ -43,7 +44,8 @@ def gonio_log(path: Path, angles: np.ndarray, rng: np.random.Generator, *, revs:
     (counter-clockwise) passing order, face 0 the reference. ``direction`` −1 turns the table
     clockwise: the faces then pass in reverse order (ref, then the last face, ...).
     ``coast``: the table coasts, its speed falling by that fraction over the log (constant
-    friction: ω² falls linearly with angle). ``missing``/``doubled`` are pulse indexes (of the logged pulses) the autocollimator misses /
+    friction: ω² falls linearly with angle). ``missing``/``doubled`` are pulse indexes (of the
+    logged pulses) the autocollimator misses /
     fires twice (the second ``double_delay_s`` later). Returns what was done.
     """
     n = len(angles)
@@ -96,7 +98,7 @@ def gonio_log(path: Path, angles: np.ndarray, rng: np.random.Generator, *, revs:
     t_log = t0 + t_p[1:]
     with open(path, "w") as fh:
         fh.write("count,counter,ref,t\n")
-        for c, k, r, t in zip(counts, counter, ref, t_log):
+        for c, k, r, t in zip(counts, counter, ref, t_log, strict=True):
             fh.write(f"{c},{k},{r},{t:.7f}\n")
     per_rev = np.diff(np.interp(2 * np.pi * np.arange(revs + 1), grid, t_grid))
     return {"arm_face": int(order[arm]), "rows": int(counts.size),
