@@ -135,10 +135,11 @@ def bound_reason(carried: dict[str, float]) -> str:
 
 
 def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
-                           k3_separable: bool) -> dict:
+                           k3_separable: bool, why_not: str = "at ±1 g x³ = x") -> dict:
     """The JSON ``nonlinearity`` record: the declared bounds [µg/g², µg/g³] (null: not
-    declared), the terms carried in u, whether the poses separate K3 from k, and the
-    statement printed under the table ("" when there is nothing to say)."""
+    declared), the terms carried in u, whether the poses separate K3 from k (``why_not``:
+    why not, in the statement), and the statement printed under the table ("" when there
+    is nothing to say)."""
     carried = [n for n, b in declared.items() if n not in added and b > 0]
     if declared:
         why = ("declared " + ", ".join(f"{n[-2:].upper()} within ±{b / UG:g} {UNITS[n]}"
@@ -146,7 +147,7 @@ def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
                + (f"; carried in u ({BOUND}): {', '.join(carried)}" if carried else
                   "; fitted by the loop where added"))
     elif not k3_separable:
-        why = (f"K3 is not separable from k on these poses (at ±1 g x³ = x): k is the 1 g "
+        why = (f"K3 is not separable from k on these poses ({why_not}): k is the 1 g "
                f"chord k (1 + K3); declare the datasheet's bound with {FLAG} K2,K3 or "
                f"{KEYS[K3]} to carry it in u")
     else:

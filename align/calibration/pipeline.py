@@ -367,9 +367,14 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
     separable = K3 in {c.name for c in candidates} - {s.name for s in rep.skipped}
+    # why not: the loop could not try it on these poses (its reason when it has more to say
+    # than the default), else it was never a candidate (the faces: x³ = x at ±1 g)
+    skip = next((s.reason for s in rep.skipped if s.name == K3), None)
+    why_not = ("at ±1 g x³ = x" if skip is None else
+               "the poses cannot determine it" if skip == "does not apply to these data" else skip)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes, widening, problems, stated,
-                       nonlinearity_statement(declared, names, separable))
+                       nonlinearity_statement(declared, names, separable, why_not))
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float
