@@ -129,11 +129,13 @@ def triad_output(a: np.ndarray, t: np.ndarray, temp: np.ndarray, truth: dict,
                  rng: np.random.Generator) -> np.ndarray:
     """Outputs [V] of the triad for specific force ``a`` [g] (N×3, triad frame) at times ``t``
     [s] and temperatures ``temp`` [K]: x = S a + b + c_T (T − T0) + step (t ≥ t_step); per axis
-    u = k (1 + A sign x) x + noise."""
+    u = k (1 + A sign x) (1 + k_T (T − T0)) x + noise."""
     x = a @ truth["S"].T + truth["b"] + np.outer(temp - truth["T0"], truth["cT"])
     if truth.get("step") is not None:
         x = x + np.outer(t >= truth["t_step"], truth["step"])
     k = truth["k"] * (1 + truth["A"] * np.sign(x))
+    if truth.get("kT") is not None:  # scale factor following the temperature [1/K]
+        k = k * (1 + np.outer(temp - truth["T0"], truth["kT"]))
     return k * x + rng.normal(0, truth["noise"], x.shape)
 
 
