@@ -298,10 +298,6 @@ def test_gonio_coasting_table_is_not_a_dropout(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a log without its t column, table at 0.1 rev/s with a "
-                   "15 % locked ripple: angles 27.9 u and 32.0 u off (≈ 4″, u 0.14″; seed 1: "
-                   "27.4, 29.4), ok, exit 0, warnings empty — only a note ('the Earth rate on "
-                   "an unsteady table can be neither removed nor bounded')")
 def test_gonio_without_times_unbounded_earth_rate_is_flagged(tmp_path):
     """Without pulse times the Earth rate's share on an unsteady table is neither removable
     nor boundable (gonio.md). A term that cannot be bounded is not in u, so the result cannot
