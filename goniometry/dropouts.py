@@ -11,28 +11,49 @@ from __future__ import annotations
 import numpy as np
 
 # A row's interval is a drop-out when its duration exceeds this many times what its counts
-# take at the log's speed (seconds per count, the chunk's median): the counts of the lost
-# rows are lost with them, so the row after a gap of k rows holds one face interval's counts
-# and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse has both doubled
-# (ratio 1) and a glint both split; a table whose speed changed by a third within one face
-# interval is no table a goniometer runs on.
+# take at the table's local speed (seconds per count of the rows around it): the
+# counts of the lost rows are lost with them, so the row after a gap of k rows holds one face
+# interval's counts and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse
+# has both doubled (ratio 1) and a glint both split; a table whose speed changed by a third
+# within one face interval is no table a goniometer runs on. A table that slows (coasts) or
+# speeds up over the log lengthens its intervals' time AND counts together: the seconds per
+# count change only as slowly as the speed, which the neighbours follow.
 DROPOUT_RATIO = 1.5
+
+
+def local_seconds_per_count(count: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """The table's local seconds per count at each row [s]: the mean of its four neighbours'
+    (two rows each side) duration / counts without the largest and the smallest (the chunk's
+    ends mirrored). A drop-out row is one outlier among them (two drop-outs within two rows:
+    the largest is dropped); a coasting table changes its speed by a few per cent over them.
+    Hand-written (min/max of four shifted arrays) rather than a sliding median: a median per
+    row cost a quarter of the pass. Rows without a finite ratio (the first row's unknown
+    duration) count as infinitely slow, so as a largest they drop out."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = dt / count
+    ratio = np.where(np.isfinite(ratio), ratio, np.inf)
+    if len(ratio) < 5:
+        return np.full(len(ratio), float(np.median(ratio)))
+    p = np.pad(ratio, 2, mode="reflect")
+    nb = (p[:-4], p[1:-3], p[3:-1], p[4:])
+    # the two middle values of four: of the pairs (a, b) and (c, d), the larger of the
+    # smaller ones and the smaller of the larger ones (no sum less the extremes: an infinite
+    # largest would make inf - inf)
+    mid_hi = np.minimum(np.maximum(nb[0], nb[1]), np.maximum(nb[2], nb[3]))
+    mid_lo = np.maximum(np.minimum(nb[0], nb[1]), np.minimum(nb[2], nb[3]))
+    return (mid_hi + mid_lo) / 2
 
 
 def dropouts(count: np.ndarray, dt: np.ndarray | None) -> np.ndarray:
     """Rows whose interval spans a communication drop-out (see ``DROPOUT_RATIO``): their
-    duration [s] beyond DROPOUT_RATIO times their counts at the median seconds per count
-    (of every 16th row: the speed, not each row, is what the median needs; a full median
-    per block cost a quarter of the pass). All False without times (then only the count
-    pattern tells, see :func:`phase_break`)."""
+    duration [s] beyond DROPOUT_RATIO times their counts at the local seconds per count
+    (:func:`local_seconds_per_count`). All False without times (then only the count pattern
+    tells, see :func:`phase_break`)."""
     if dt is None or len(count) < 2:
         return np.zeros(len(count), bool)
-    step = 16 if len(count) >= 256 else 1
-    ratio = dt[::step] / count[::step]
-    ratio = ratio[np.isfinite(ratio)]
-    if len(ratio) < 2:
+    if np.count_nonzero(np.isfinite(dt / np.where(count == 0, np.nan, count))) < 2:
         return np.zeros(len(count), bool)
-    limit = DROPOUT_RATIO * float(np.median(ratio))
+    limit = DROPOUT_RATIO * local_seconds_per_count(count, dt)
     with np.errstate(invalid="ignore"):  # (the first row's unknown duration: NaN, no gap)
         return dt > limit * count
 

@@ -279,10 +279,6 @@ def test_gonio_reverse_at_another_speed_is_not_a_confident_answer(tmp_path):
     assert np.all(np.abs(z) < Z1) or flagged, f"z {np.round(z, 2)}, ok, exit {rc}"
 
 
-@pytest.mark.xfail(strict=True, reason="a coasting table (1 → 0.3 rev/s over 60 revolutions, "
-                   "no row lost): 11 'communication drop-out: rows missing from the log' "
-                   "(code dropout, lines 203, 206, 210, ...), 11 of 60 revolutions excluded, "
-                   "warned as pulse faults (2 of 2 seeds)")
 def test_gonio_coasting_table_is_not_a_dropout(tmp_path):
     """A table spun up and left to coast (constant friction: ω² falls linearly with angle),
     its speed falling from 1 to 0.3 rev/s, every pulse logged. Consecutive revolutions'
