@@ -247,11 +247,6 @@ def test_gonio_locked_quantisation_is_covered(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a table at constant speed whose ring laser is locked "
-                   "(100 000 counts a revolution): warned 'one direction only, on a table "
-                   "whose speed varies with its angle (pulse-time and count fractions differ, "
-                   "p 0) ... measure the other direction too' (3 of 3 seeds); the fractions "
-                   "differ by the locked ½-count floor, not by any speed variation")
 def test_gonio_locked_steady_table_is_not_called_unsteady(tmp_path):
     """Same logs as the locked-quantisation test: the table's speed is constant, so no warning
     may say it varies with the angle (the counts' own floor is what the times disagree
