@@ -346,9 +346,6 @@ def test_gonio_log_faults_repaired_and_listed(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="one counter label flipped (line 102) is listed as 2 "
-                   "mislabelled rows, lines 102 and 103 (3 of 3 seeds); the pattern 1,2,[1],1,2 "
-                   "has one row whose flip restores the alternation")
 def test_gonio_one_mislabelled_counter_is_one_row(tmp_path):
     """Two counters alternate; one row's label flipped makes three equal labels in a row, and
     only the middle one is wrong: the exclusions list one mislabelled row, line 102."""
