@@ -231,6 +231,17 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
     u, n = line_frame(pf.angle_rad)
+    # Where the groove really ends, looked for before the full pass along the first
+    # centres' path: the detector's stretch stops short of a long mark's ends (its ridge
+    # fades a filter width of the downsampled search before them, ~40 px at 5 MP), and
+    # the full pass then ran twice, once on the short stretch and again on the whole
+    # groove (a quarter of a 5 MP frame's time). The ends found here follow the quick
+    # centres' path, not the full pass's: the stretch may differ by a fraction of a pixel.
+    look = extent_look(image, pf)
+    longer, _ = runs_on_stretch(image, pf, look[:2], look[2:], cen, crossing)
+    pf_short = pf
+    if longer is not None:
+        pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
     # The first centres as the start along the new line (a bowed groove's ends are far
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
@@ -238,7 +249,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                          offsets_var=offsets_var, departure=True)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
-    t0, t1, open0, open1 = extent_look(image, pf)
+    # (The same look of the same stretch when it was not lengthened.)
+    t0, t1, open0, open1 = look if pf is pf_short else extent_look(image, pf)
     ext = (t0, t1)
     longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
     if longer is not None:
