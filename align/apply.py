@@ -40,11 +40,24 @@ class PlatformCalibration:
         The six angles of E in ``E_NAMES`` order [rad].
     cov : numpy.ndarray
         Their 6×6 covariance [rad²].
+    not_ok : tuple of str
+        Why the session it came from was not ok (empty: it was); ``align apply`` and ``align
+        tilt`` warn with these and exit 2 (docs/commands/apply.md); unit —.
     """
 
     model: TriadModel
     e6: np.ndarray
     cov: np.ndarray
+    not_ok: tuple[str, ...] = ()
+
+    def not_ok_warning(self) -> list[str]:
+        """The warning ``align apply``/``tilt`` give for a calibration from a not-ok session
+        (empty when it was ok)."""
+        if not self.not_ok:
+            return []
+        return ["calibration: made from a session that was NOT OK (" + "; ".join(self.not_ok)
+                + "): its misalignment is not a measurement to act on — the outputs are "
+                "written, exit status 2"]
 
     @property
     def axes(self) -> np.ndarray:
@@ -67,7 +80,8 @@ class PlatformCalibration:
                 "misalignment_u_rad": e_matrix(np.sqrt(np.diag(self.cov))).tolist(),
                 "angle_names": list(E_NAMES), "angles_rad": self.e6.tolist(),
                 "angles_covariance_rad2": self.cov.tolist(),
-                "axes": self.axes.tolist()}
+                "axes": self.axes.tolist(),
+                "source_ok": not self.not_ok, "source_problems": list(self.not_ok)}
 
     def document(self, units: str | None, settings: dict, inputs,
                  prov: Provenance | None = None) -> dict:
@@ -87,7 +101,7 @@ class PlatformCalibration:
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"{where}: not a platform calibration ({exc!s}); expected the "
                              "JSON that 'align run --json' or '--calibration' writes") from None
-        return cls(model, e6, cov)
+        return cls(model, e6, cov, tuple(str(p) for p in d.get("source_problems", ())))
 
     @classmethod
     def load(cls, path: str | Path) -> PlatformCalibration:

@@ -142,15 +142,22 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     return p, dlam, designs
 
 
+def _normal(designs: Sequence[_Design], rng: np.ndarray, z: float
+            ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """The marks' normal equations for a lens change (F, b) and the parameters they
+    determine within the plausible ranges ``rng`` at ``z`` (:func:`align.lens._determined`)."""
+    F = sum(d.G.T @ d.G for d in designs)
+    b = sum(d.G.T @ d.z for d in designs)
+    return F, b, _determined(F, rng, z)
+
+
 def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
                       alpha: float) -> tuple[float, np.ndarray]:
     """:func:`check_camera` over the marks' ``designs``: (p-value, correction dlam)."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
-    F = sum(d.G.T @ d.G for d in designs)
-    b = sum(d.G.T @ d.z for d in designs)
-    det = _determined(F, rng, z)
+    F, b, det = _normal(designs, rng, z)
     dlam = np.zeros(P)
     if not det:
         return 1.0, dlam
@@ -183,9 +190,7 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     base = np.zeros(len(PARAMS)) if model is None else np.asarray(model, float)
-    F = sum(d.G.T @ d.G for d in designs)
-    b = sum(d.G.T @ d.z for d in designs)
-    det = _determined(F, rng, z)
+    F, b, det = _normal(designs, rng, z)
     if not det:
         return True
     D = np.ix_(det, det)
@@ -283,9 +288,7 @@ def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
              rng: np.ndarray, z: float) -> _Prediction | None:
     """The change the ``fit`` marks call for, tested on the ``test`` marks (None: the fit
     marks determine no lens parameter)."""
-    F = sum(d.G.T @ d.G for d in fit)
-    b = sum(d.G.T @ d.z for d in fit)
-    det = _determined(F, rng, z)
+    F, b, det = _normal(fit, rng, z)
     if not det:
         return None
     D = np.ix_(det, det)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from align.calibration import delta_g
-from align.figures import PNG, jpeg_bytes, png_bytes
+from align.figures import PNG, jpeg_bytes, png_bytes, tight
 from align.figures import new_png as _new_png
 from align.figures import pyplot as _plt
 from align.figures import write_png as _write
@@ -52,8 +52,7 @@ def fig_mark(r: MarkResult, image: np.ndarray | None = None):
     axes[1].set_xlabel("position along the mark t [px]")
     axes[1].set_ylabel("residual [px]")
     axes[1].legend(loc="upper right")
-    fig.tight_layout()
-    return fig
+    return tight(fig)
 
 
 def fig_mark_thumb(r: MarkResult, image: np.ndarray):
@@ -150,8 +149,7 @@ def fig_calibration(cal, poses, check):
     ax[1].set_xlabel("gravity direction component")
     ax[1].set_ylabel("residual |a| - 1 [µg]")
     ax[1].legend()
-    fig.tight_layout()
-    return fig
+    return tight(fig)
 
 
 def plot_gonio(counts: np.ndarray, fa, faces: list[str], folder: Path) -> Path:
@@ -186,8 +184,7 @@ def fig_gonio(counts: np.ndarray, fa, faces: list[str]):
     ax[2].semilogy(f[1:], p[1:], lw=0.7)
     ax[2].set_xlabel("frequency [cycles per revolution]")
     ax[2].set_ylabel("residual power [″² · rev]")
-    fig.tight_layout()
-    return fig
+    return tight(fig)
 
 
 def fig_fusion(rows) -> object:
@@ -204,5 +201,4 @@ def fig_fusion(rows) -> object:
     ax.set_xticklabels([r.label for r in rows], rotation=90, fontsize=6)
     ax.set_ylabel("(observed − fitted) / u")
     ax.legend(fontsize=8, ncol=len(sources))
-    fig.tight_layout()
-    return fig
+    return tight(fig)

@@ -126,6 +126,8 @@ def calibration_lines(cal, n_poses: int, units: str, signs: Sequence[float],
     lines += ["  " + line for line in cal.effect_lines()]
     if cal.stability and cal.stability["assumed"]:
         lines.append("  scale stability: " + cal.stability["statement"])
+    if getattr(cal, "nonlinearity", None) and cal.nonlinearity["statement"]:
+        lines.append("  nonlinearity: " + cal.nonlinearity["statement"])
     if cal.cross_check:
         lines.append("cross-check ellipsoid vs known-pose (difference / combined u): "
                      + ", ".join(f"{n} {v['z']:+.1f}" for n, v in cal.cross_check.items()))

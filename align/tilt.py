@@ -139,6 +139,8 @@ def calibrated_force(cal, tab) -> tuple[np.ndarray | None, np.ndarray, list[str]
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     t, temp = tab.get("t"), tab.get("temp")
     warnings = model_time_warnings(model, t, temp)
+    if hasattr(cal, "not_ok_warning"):  # a PlatformCalibration: from a not-ok session?
+        warnings = cal.not_ok_warning() + warnings
     a = cal.specific_force(u, model.t_ref if t is None else t, temp)
     return t, a, warnings
 

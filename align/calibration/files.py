@@ -12,6 +12,7 @@ from align.calibration import STATIC, StaticSettings, calibrate, read_poses
 from align.calibration.check import CheckResult, check_poses
 from align.calibration.stability import chosen_ppm
 from align.calibration.units import unit_scale_check
+from align.calibration.units import unit_source as default_source
 from align.warnings import calibration_warnings
 from axisbase.console import captured_warnings
 from axisbase.header import header_units, resolve_units
@@ -87,7 +88,9 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                     unit_source: str | None = None,
                     adc_range: tuple[float, float] | None = None,
                     time_unit: str | None = None,
-                    scale_stability_ppm: float | None = None) -> CalibrationRun:
+                    scale_stability_ppm: float | None = None,
+                    nonlinearity_bound: tuple[float | None, float | None] | None = None
+                    ) -> CalibrationRun:
     """Read the static poses (and check poses), calibrate the triad and judge the check.
 
     Parameters
@@ -105,6 +108,8 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
         left out (warned) or refused (:func:`align.calibration.static.read_poses`).
     scale_stability_ppm : the scale factors' declared stability over the run [ppm], or None
         (the default of :func:`align.calibration.stability.chosen_ppm`).
+    nonlinearity_bound : the declared bounds on K2 [1/g] and K3 [1/g²], or None
+        (:mod:`align.calibration.nonlinearity`).
     """
     left_out: list[str] = []
     with captured_warnings() as logged:  # (how the files were read: into the JSON too)
@@ -117,9 +122,13 @@ def calibrate_files(static: str | Path, check: str | Path | None, units: str,
                if check else None)
     ppm, default = chosen_ppm(scale_stability_ppm, poses.temp is not None)
     cal = calibrate(poses, signs, alpha=alpha, fixture_error_rad=fixture_error_rad,
-                    scale_stability_ppm=ppm, stability_default=default)
-    warnings = unit_scale_check(cal.model, units,
-                                unit_source or f"{static}: header unit [{units}]")
+                    scale_stability_ppm=ppm, stability_default=default,
+                    nonlinearity_bound=nonlinearity_bound)
+    if unit_source is None:
+        known = (Path(static).suffix.lower() not in ARRAY_SUFFIXES
+                 and header_units(static, STATIC, columns, _U) is not None)
+        unit_source = default_source(str(static), units, known)
+    warnings = unit_scale_check(cal.model, units, unit_source)
     checked = check_poses(cal, poses, chk, alpha, f"{check}") if chk is not None else None
     warnings = (list(dict.fromkeys(logged)) + left_out + calibration_warnings(cal, poses)
                 + warnings

@@ -101,11 +101,13 @@ def walk_physical(rate_g: np.ndarray, t: np.ndarray) -> bool:
 class CalibrationStage:
     """Maximum-likelihood ellipsoid refinement with optional effects (the loop's stage)."""
 
-    def __init__(self, poses: Poses, signs: Sequence[float], walk: bool = True):
+    def __init__(self, poses: Poses, signs: Sequence[float], walk: bool = True,
+                 bounds: dict[str, float] | None = None):
         if len(poses.u) < 9:
             raise InputError(f"only {len(poses.u)} usable poses; the model needs at least 9 "
                              "(the paper's cube gives 14)")
         self.poses = poses
+        self.bounds = dict(bounds or {})  # declared bounds replacing prior_bound's
         self.condition: dict[tuple[str, ...], float] = {}
         # Per fitted effect list: the map from the weighted pose residuals to the parameters
         # (A = cov_unit J^T W^1/2, dtheta = A dr_w) and the weighted residuals, for the
@@ -356,6 +358,8 @@ class CalibrationStage:
             # (skipped, as hysteresis without the pose order) rather than a run-away to
             # refuse (K2 on the paper's 14 poses: K3 = 0.02 at condition 5e3).
             u_max = max(m.u_of(n) for _, _, n in EFFECTS[e].slots)
+            # (The physical bound: whether the poses measure it at all; a declared bound
+            # is carried in u where they do not fit it, align.calibration.nonlinearity.)
             if not u_max <= prior_bound(e) / DETERMINED:
                 raise NotApplicable(f"these poses cannot measure it: u {u_max:.2g} > 1/"
                                     f"{DETERMINED:g} of its physical bound {prior_bound(e):g}")
@@ -459,6 +463,9 @@ k's) ..."""
 ASYMMETRY_PRIOR = 1e-2
 """... nor a scale-factor asymmetry (k+ - k-)/(k+ + k-) more than this [1] (navigation
 grade: below 1e-4; MEMS a few 1e-3)."""
+DECLARED_Z = 3.0
+"""A K2/K3 estimate is refused as beyond a declared bound only when it exceeds the bound by
+more than this many of its own u (the truth may lie at the bound's edge)."""
 DETERMINED = 3.0
 """K3 and the asymmetry are tried only where the poses measure them to this fraction of
 their physical bound (u < bound / 3)."""
@@ -467,8 +474,11 @@ MAX_CONDITION = 1e7
 separate the effect from the model."""
 
 
-def prior_bound(name: str) -> float:
-    """The physical bound on an effect's reach at 1 g [g] (the asymmetry's: [1])."""
+def prior_bound(name: str, declared: dict[str, float] | None = None) -> float:
+    """The physical bound on an effect's reach at 1 g [g] (the asymmetry's: [1]), or the
+    user's ``declared`` one (K2, K3: :mod:`align.calibration.nonlinearity`)."""
+    if declared and name in declared:
+        return declared[name]
     return (ATTITUDE_PRIOR_G if name in (NONLIN, *CROSS) else K3_PRIOR_G if name == K3
             else ASYMMETRY_PRIOR if name == ASYMMETRY else EFFECT_PRIOR_G)
 
@@ -494,8 +504,16 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             size = float(np.max(np.abs(np.expm1(-(stage.poses.t - mt.t_ref)
                                                  / mt.warmup_tau_s))))
         reach = float(np.max(np.abs(vals))) * size
-        bound = prior_bound(term.name)
-        if reach > bound:
+        bound = prior_bound(term.name, stage.bounds)
+        if term.name in stage.bounds:
+            # A datasheet's bound may hold the truth at its edge: refused only when the
+            # estimate lies beyond it by more than DECLARED_Z of its own u.
+            us = np.array([mt.u_of(e.slots[j][2]) for j in e.report]) * size
+            over = float(np.max(np.abs(vals) * size - DECLARED_Z * us))
+            if over > bound:
+                return (f"it reaches {reach:.3g} g at 1 g (less {DECLARED_Z:g} u: "
+                        f"{over:.3g} g), beyond its declared bound {bound:g} g")
+        elif reach > bound:
             return (f"it reaches {reach:.3g} g at 1 g over the run (> {bound} g): "
                     "outside the physical prior")
         rel = np.abs(mt.k / mb.k - 1)

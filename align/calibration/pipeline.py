@@ -29,6 +29,7 @@ from align.calibration.known import (
 from align.calibration.model import (
     CANDIDATES,
     IN_TIME,
+    K3,
     OVERFIT_CHI2,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
@@ -36,6 +37,11 @@ from align.calibration.model import (
     CalibrationStage,
     admissible,
     walk_physical,
+)
+from align.calibration.nonlinearity import (
+    bound_increment,
+    declared_bounds,
+    nonlinearity_statement,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
 from align.calibration.stability import (
@@ -111,6 +117,9 @@ class Calibration:
         What u assumes about the scale factors' wander over the run (``ppm`` [ppm] or None
         when assumed stable, ``assumed``, ``statement``:
         :func:`align.calibration.stability.stability_statement`); unit —.
+    nonlinearity : dict or None
+        The declared K2/K3 bounds, the terms carried in u, whether the poses separate K3
+        from k (:func:`align.calibration.nonlinearity.nonlinearity_statement`); unit —.
     """
 
     algebraic: TriadModel
@@ -125,6 +134,7 @@ class Calibration:
     widening: Widening | None = None
     problems: tuple[str, ...] = ()
     stability: dict | None = None
+    nonlinearity: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -173,6 +183,7 @@ class Calibration:
             "cross_check": self.cross_check,
             "u_widening": None if self.widening is None else self.widening.to_dict(),
             "scale_stability": self.stability,
+            "nonlinearity": self.nonlinearity,
         }
 
 
@@ -182,7 +193,9 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
               fixture_error_rad: float | None = None,
               signs_as: str = "--scale-sign",
               scale_stability_ppm: float | None = None,
-              stability_default: bool = False) -> Calibration:
+              stability_default: bool = False,
+              nonlinearity_bound: tuple[float | None, float | None] | None = None
+              ) -> Calibration:
     """Calibrate the triad from its poses.
 
     * Fewer than 9 poses, or poses that are all faces, with the six faces (labelled
@@ -223,6 +236,10 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     stability_default : bool
         Nothing was declared and the poses carry no temperature column: the result states
         that the scale factors were assumed stable (``Calibration.stability``).
+    nonlinearity_bound : (float or None, float or None), optional
+        The datasheet's bounds on K2 [1/g] and K3 [1/g²] (:mod:`align.calibration.nonlinearity`):
+        the loop refuses either beyond it, and one not added is carried in u (the
+        ``nonlinearity_bound`` term). None: the physical priors, nothing carried.
 
     Returns
     -------
@@ -255,6 +272,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     fe = FIXTURE_ERROR_RAD if fixture_error_rad is None else fixture_error_rad
     stated = stability_statement(scale_stability_ppm or 0.0, stability_default,
                                  poses.temp is not None)
+    declared = declared_bounds(nonlinearity_bound)
     faces = faces_of(poses)
     signs = signs_t = resolve_signs(poses, faces, signs, signs_as)
     six = has_six_faces(faces)
@@ -276,13 +294,16 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
                 bound=kf.dof < len(kf.model.names) + 3))
         increments += _stability_increment(kf.scale_gain, scale_stability_ppm,
                                            stability_default)
+        # The faces cannot tell K3 from k (x³ = x at ±1 g) nor K2 from a bias.
+        increments += bound_increment(kf.scale_gain, poses.u / kf.model.k, declared, ())
         if increments:
             model, widening = widen(kf.model, increments)
             notes = (widening.warning(),)
         return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf, None, notes, widening, (), stated)
+                           "known-pose", kf, None, notes, widening, (), stated,
+                           nonlinearity_statement(declared, (), False))
     try:
-        stage = CalibrationStage(poses, signs)
+        stage = CalibrationStage(poses, signs, bounds=declared)
     except InputError as exc:
         cone = cone_estimate(poses.u)
         if cone < SURROUND_RAD:  # the fit failed on poses clustered in a cone: say so
@@ -296,7 +317,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         stated = {**stated, "wander": None if wander is None else wander.to_dict()}
         if wander is not None and wander.found:  # each pose back to the scale at t_ref
             poses = corrected_poses(poses, wander)  # (the known-pose cross-check's too)
-            stage, rep = noise_model(CalibrationStage(poses, signs), candidates, alpha)
+            stage, rep = noise_model(CalibrationStage(poses, signs, bounds=declared),
+                                     candidates, alpha)
     kf, cc, notes = None, None, _cone_notes(rep.after.payload, poses)
     model, widening = rep.after.payload, None
     increments = []
@@ -310,12 +332,17 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((AMBIGUITY, ambiguity_reason(
             tuple(t.name for t in rep.terms), alts, max(PLAN_MIN, len(poses.u))),
             ambiguity_term(alts, len(model.names))))
-    plaus = plausible_effects(stage.fits, rep, candidates, admissible(stage, overfit=False),
-                              [a.effects for a in alts])
+    names = tuple(t.name for t in rep.terms)
+    bounded = bound_increment(_ellipsoid_gain(stage, rep), stage.poses.u / model.k,
+                              declared, names)
+    plaus = [(a, p) for a, p in plausible_effects(
+        stage.fits, rep, candidates, admissible(stage, overfit=False),
+        [a.effects for a in alts]) if not (bounded and a.effects.split(" + ")[-1] in declared)]
     if plaus:
         increments.append((PLAUSIBLE, plausible_reason(plaus, alpha),
                            plausible_term(plaus, len(model.names))))
         alts = [*alts, *(a for a, _ in plaus)]
+    increments += bounded  # (a declared term BIC prefers is carried at its bound above)
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
                                            stability_default)
@@ -339,8 +366,15 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
+    separable = K3 in {c.name for c in candidates} - {s.name for s in rep.skipped}
+    # why not: the loop could not try it on these poses (its reason when it has more to say
+    # than the default), else it was never a candidate (the faces: x³ = x at ±1 g)
+    skip = next((s.reason for s in rep.skipped if s.name == K3), None)
+    why_not = ("at ±1 g x³ = x" if skip is None else
+               "the poses cannot determine it" if skip == "does not apply to these data" else skip)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
-                       "ellipsoid", kf, cc, notes, widening, problems, stated)
+                       "ellipsoid", kf, cc, notes, widening, problems, stated,
+                       nonlinearity_statement(declared, names, separable, why_not))
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float
@@ -359,7 +393,8 @@ def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha:
     rep = run_loop(stage, candidates, alpha=alpha, admissible=admissible(stage))
     if stage.walk is None:
         return stage, rep
-    white = CalibrationStage(stage.poses, np.sign(stage.start.k), walk=False)
+    white = CalibrationStage(stage.poses, np.sign(stage.start.k), walk=False,
+                             bounds=stage.bounds)
     rep_w = run_loop(white, candidates, alpha=alpha, admissible=admissible(white))
     effects = tuple(t.name for t in rep_w.terms)
     w = 1.0 / white.sigma

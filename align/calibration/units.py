@@ -11,6 +11,13 @@ gravity is within 0.3 % of g0, so:
   magnitude (a calibration in a wrong unit would be written silently otherwise);
 * one further than :data:`UNIT_SCALE_WARN` (10 %, over three times the worst tolerance) is
   warned of: a conversion with the wrong range or a wrong factor.
+
+Readings in volts (the default unit) carry a plausible range, :data:`V_PER_G_RANGE`: a static
+calibration turns the triad through ±1 g, so its readings span ±k; no data-acquisition input
+reads beyond tens of volts, so k above 100 V/g cannot be volts (readings in counts left at the
+default unit give thousands), and below 0.1 mV/g a µg would be 0.1 nV, under any ADC's noise.
+Outside it is warned of (the numbers are right in the readings' own unit; only the label is
+not), naming the key or flag that declares the unit.
 """
 
 from __future__ import annotations
@@ -32,6 +39,15 @@ against 1 g (:mod:`align.calibration.check`)."""
 UNIT_SCALE_WARN = 0.10
 """Relative departure from the expected scale factor that is warned of."""
 _NAMES = {"g": "g", "m/s2": "m/s²"}
+V_PER_G_RANGE = (1e-4, 100.0)
+"""[V/g] plausible scale factors of readings in volts (see the module's notes)."""
+
+
+def unit_source(static: str, units: str, in_header: bool) -> str:
+    """Who declared the readings' unit when no flag or key did: ``static``'s header
+    (``in_header``), else nobody (the default V)."""
+    return (f"{static}: header unit [{units}]" if in_header
+            else f"{static}: no unit in its header, the default {units}")
 
 
 def _give(name: str, value: str) -> str:
@@ -45,6 +61,8 @@ def unit_scale_check(model: TriadModel, units: str, source: str,
     given the calibrated sensitivities; :class:`InputError` when they contradict it.
     ``units_as``: how the user names a unit (``--units``, or session.toml's ``[calibration]
     units``), which the hint names."""
+    if units == "V":
+        return _volts_check(np.abs(model.sensitivity()), source, units_as)
     expected = EXPECTED_PER_G.get(units)
     if expected is None:
         return []
@@ -69,3 +87,16 @@ def unit_scale_check(model: TriadModel, units: str, source: str,
                 f"({source}) have within a triad's tolerance of a few %: converted with the "
                 "wrong range or factor?"]
     return []
+
+
+def _volts_check(s: np.ndarray, source: str, units_as: str) -> list[str]:
+    """A warning when scale factors ``s`` [V/g] leave :data:`V_PER_G_RANGE` (``source``: where
+    the unit V came from; ``units_as``: the key or flag that declares it)."""
+    lo, hi = V_PER_G_RANGE
+    if np.all((s >= lo) & (s <= hi)):
+        return []
+    mags = ", ".join(f"{v:.4g}" for v in s)
+    return [f"calibration: scale factors {mags} V/g ({source}) are outside {lo:g}–{hi:g} V/g, "
+            "what any accelerometer read in volts has (its readings span ±k over the poses): "
+            f"are the readings counts or another unit? Declare it ({_give(units_as, 'counts')}"
+            ", or g, m/s2); the numbers are right in the readings' own unit"]

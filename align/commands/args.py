@@ -39,6 +39,17 @@ def scale_stability(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def nonlinearity_bound(text: str) -> tuple[float | None, float | None]:
+    """``--nonlinearity-bound K2,K3`` [µg/g², µg/g³] -> (K2 [1/g], K3 [1/g²]): the rule
+    session.toml's keys go through too (:mod:`align.calibration.nonlinearity`)."""
+    from align.calibration.nonlinearity import parse_flag
+
+    try:
+        return parse_flag(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text)

@@ -6,7 +6,15 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, adc_range, number, scale_stability, signs, unique
+from align.commands.args import (
+    ALPHA,
+    adc_range,
+    nonlinearity_bound,
+    number,
+    scale_stability,
+    signs,
+    unique,
+)
 from align.commands.common import (
     plan,
     same_units,
@@ -42,7 +50,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     run = calibrate_files(args.static, args.check, units, sign, _static_settings(args), cols,
                           args.rate, args.alpha, args.fixture_error * DEG,
                           f"--units {units}" if args.units else None, args.adc_range,
-                          args.time_unit, args.scale_stability_ppm)
+                          args.time_unit, args.scale_stability_ppm, args.nonlinearity_bound)
     _show_calibration(args, run, run.cal.signs, cols, plot)
     if out is not None:
         _write_calibration(args, run, out, inputs)
@@ -115,7 +123,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     say(tilt_lines(res, args.method))
     warn(res.warnings)
     _write_tilt(args, res, out_json, out_csv, inputs)
-    return 0
+    return 2 if getattr(model, "not_ok", ()) else 0
 
 
 def _write_tilt(args: argparse.Namespace, res, out_json, out_csv, inputs: list[str]) -> None:
@@ -145,7 +153,7 @@ def cmd_apply(args: argparse.Namespace) -> int:
     say(apply_lines(res))
     warn(res.warnings)
     wrote(write_atomic(out, res.csv_text(), args.force))
-    return 0
+    return 2 if pc.not_ok else 0
 
 
 def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
@@ -174,6 +182,10 @@ def add_calibrate(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="how stable the scale factors are over the run, ± [ppm]: u covers a "
                    "wander of that size (not given: a wander the poses' own slopes show is "
                    "corrected and its u carried, else the scale is assumed stable, stated)")
+    k.add_argument("--nonlinearity-bound", type=nonlinearity_bound, metavar="K2,K3",
+                   help="the datasheet's bounds on the second- and third-order non-linearity, "
+                   "± [µg/g², µg/g³]: the loop refuses K2/K3 beyond them, and a term it does "
+                   "not fit is carried in u (not given: the physical priors, nothing carried)")
     # The detection settings' rules are StaticSettings.given's (session.toml's keys pass them
     # too): here only "a number".
     k.add_argument("--window", type=float, default=0.25,

@@ -91,6 +91,11 @@ class FusionStage:
         self.base_nuis = ({"bias": 3} if any(b.source == "platform static" for b in blocks)
                           else {})
         self.n = sum(len(b.values) for b in self.blocks)
+        # The fewest dof of an estimated covariance among the blocks (None: all stated): the
+        # loop's effect and structure tests use F- and t-type nulls on it (align.loop) — a
+        # bound, since each row's u was estimated on its own (their errors partly average).
+        dofs = [b.noise_dof for b in self.blocks if b.noise_dof is not None]
+        self.noise_dof = min(dofs) if dofs else None
 
     def _layout(self, terms: Sequence[Term]) -> list[tuple[str, int]]:
         return [*self.base_nuis.items(), *((t.name, _width(t.name)) for t in terms)]
@@ -169,7 +174,8 @@ class FusionStage:
         quantities = {n: (float(sol.params[k]), float(u[k])) for k, n in enumerate(E_NAMES)}
         idx = np.arange(self.n, dtype=float)
         return StageFit(sol.residuals, np.ones(self.n), len(sol.params), {"index": idx},
-                        "index", effects, quantities, components, payload=sol)
+                        "index", effects, quantities, components, payload=sol,
+                        noise_dof=self.noise_dof)
 
 
 def candidates(stage: FusionStage) -> tuple[Candidate, ...]:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from align.calibration.nonlinearity import session_bounds
 from align.calibration.stability import KEY as STABILITY_KEY
 from align.calibration.stability import stability_ppm
 from align.calibration.static import SESSION_KEYS, StaticSettings, session_names
@@ -105,6 +106,7 @@ class CalibrationInput:
     table: TableKeys = field(default_factory=TableKeys)
     adc_range: tuple[float, float] | None = None  # the ADC's rails [output units]
     scale_stability_ppm: float | None = None  # declared; None: the default (stability.py)
+    nonlinearity_bound: tuple[float | None, float | None] | None = None  # K2 [1/g], K3 [1/g²]
     detection: StaticSettings = field(
         default_factory=lambda: StaticSettings(names=session_names("[calibration]")))
     """Static detection of a continuous recording (keys ``window_s``, ``threshold``,
@@ -276,7 +278,8 @@ MAX_TILT_ARCSEC = 3600.0        # 1°
 
 KEYS = {
     "calibration": {"static", "scale_sign", "check", "columns", "units", "rate_hz", "time_unit",
-                    "adc_range", "scale_stability_ppm", *DETECTION_KEYS},
+                    "adc_range", "scale_stability_ppm", "k2_bound_ug_per_g2",
+                    "k3_bound_ug_per_g3", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns", "time_unit"},
     "cameras": {"model", "roll_arcsec",
@@ -397,6 +400,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
             _adc_range(c.get("adc_range"), f"{src}: [calibration] adc_range"),
             (stability_ppm(c["scale_stability_ppm"], f"{src}: {STABILITY_KEY}")
              if "scale_stability_ppm" in c else None),
+            session_bounds(c, f"{src}: "),
             _detection(c, f"{src}: "))
 
     gon = None

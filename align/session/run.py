@@ -25,11 +25,12 @@ import numpy as np
 
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
+from align.calibration.files import ARRAY_SUFFIXES
 from align.calibration.output import with_units
 from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
-from align.calibration.units import unit_scale_check
+from align.calibration.units import unit_scale_check, unit_source
 from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
 from align.fusion import (
@@ -54,7 +55,7 @@ from align.tilt import FAR_FROM_1G
 from align.warnings import session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
-from axisbase.header import resolve_units
+from axisbase.header import header_units, resolve_units
 from imaging import CameraModel
 
 Progress = Callable[[str], None]
@@ -181,7 +182,8 @@ class SessionResult:
         if self.fusion is None or self.calibration is None or self.fusion.gross:
             return None  # a gross disagreement's E is not a measurement: nothing to apply
         e6 = np.array([self.fusion.E[i, j] for i, j in E_INDEX])
-        return PlatformCalibration(self.calibration.model, e6, self.fusion.cov)
+        why = tuple(self.problems) + tuple(f"{e.stage}: {e.message}" for e in self.errors)
+        return PlatformCalibration(self.calibration.model, e6, self.fusion.cov, why)
 
     def to_dict(self) -> dict:
         """The JSON contract of 'align run' (without its envelope): ok/fused, warnings,
@@ -304,13 +306,14 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                       res.calibration_poses.temp is not None)
             cal = calibrate(res.calibration_poses, c.scale_sign, alpha=alpha,
                             signs_as="[calibration] scale_sign", scale_stability_ppm=ppm,
-                            stability_default=default)
+                            stability_default=default, nonlinearity_bound=c.nonlinearity_bound)
             if left_out:
                 cal = replace(cal, notes=(*cal.notes, *left_out))
             # Readings declared in g or m/s² must read ~1 g of that unit per g (as
             # `align calibrate` checks): a contradiction fails the stage, a stretch is warned.
-            source = ("[calibration] units" if tk.units else
-                      f"{c.static}: header unit [{res.units}]")
+            source = ("[calibration] units" if tk.units else unit_source(
+                str(c.static), res.units, c.static.suffix.lower() not in ARRAY_SUFFIXES
+                and header_units(c.static, STATIC, tk.columns, ("ux", "uy", "uz")) is not None))
             w = unit_scale_check(cal.model, res.units, source, "[calibration] units")
             return replace(cal, notes=(*cal.notes, *w)) if w else cal
         res.calibration = _try(res, "calibration", _cal)
@@ -467,7 +470,8 @@ def _platform_poses(s: Session, cal: Calibration, units: str) -> list[PlatformPo
     # Calibrated per-axis readings w = R a_c = x - R b (see align.fusion.observations).
     w = a @ R.T
     u_w = poses.sigma_u / np.abs(m.k)
-    return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i])
+    return [PlatformPose(lab, p.poses[lab][0], p.poses[lab][1], w[i], u_w[i],
+                         int(poses.count[i]))
             for i, lab in enumerate(poses.labels)]
 
 

@@ -127,6 +127,10 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# scale_stability_ppm = 20.0  # ± [ppm] the scale factors' stability over "
                 "the run (not set: from the poses' slopes, else assumed stable, stated; as "
                 "--scale-stability-ppm)",
+                "# k2_bound_ug_per_g2 = 50.0   # ± [µg/g²] the datasheet's K2 (as "
+                "--nonlinearity-bound K2,K3; not set: the physical prior, nothing carried)",
+                "# k3_bound_ug_per_g3 = 100.0  # ± [µg/g³] the datasheet's K3: refused beyond, "
+                "carried in u where the poses do not fit it (six faces: always)",
                 "# window_s = 0.25             # [s] static detection window of a recording "
                 "(as --window)",
                 "# threshold = 3.0             # static below this x the recording's noise "

@@ -44,8 +44,20 @@ def test_realistic_triads_pass_and_volts_counts_are_not_checked():
         assert unit_scale_check(_model(k * g_local), "g", "--units g") == []
         assert unit_scale_check(_model(-k * g_local * G0, (0.01, -0.01, 0.02)), "m/s2",
                                 "x") == []
-    for units in ("V", "counts"):
-        assert unit_scale_check(_model([G0, 1.0, 4096.0]), units, "--units") == []
+    assert unit_scale_check(_model([G0, 1.0, 4096.0]), "counts", "--units") == []
+    assert unit_scale_check(_model([1e-4, 1.0, 100.0]), "V", "--units") == []
+
+
+def test_counts_read_as_the_default_volts_are_warned():
+    """Counts left at the default unit V give thousands of "V"/g (the newcomer's 25,000):
+    beyond V_PER_G_RANGE, a warning naming the unit's source and the key to declare it."""
+    src = "tumble.csv: no unit in its header, the default V"
+    w = unit_scale_check(_model([25000.0, 24800.0, 25300.0]), "V", src,
+                         "[calibration] units")
+    assert len(w) == 1 and src in w[0] and '[calibration] units = "counts"' in w[0]
+    assert "2.5e+04" in w[0] and "0.0001–100 V/g" in w[0]
+    w = unit_scale_check(_model([2e-5, 1.0, 1.0]), "V", "--units V")
+    assert len(w) == 1 and "--units counts" in w[0]
 
 
 def test_a_wrong_factor_short_of_another_unit_is_warned():

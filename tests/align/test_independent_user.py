@@ -964,10 +964,18 @@ def test_gonio_wrong_number_of_faces(gonio_log, faces):
 
 def test_gonio_nominal_far_from_the_measured_angles_is_flagged(gonio_log):
     d, _, _ = gonio_log
-    rc, doc, se = _gonio_doc(d, "log.csv", "--nominal", "100,80,90,90")
+    # x and y 90 deg apart as their axes are (a plan with them 80 deg apart is refused: the
+    # face-plan rule session.toml follows too), the reference and z 5 deg off what was measured
+    rc, doc, se = _gonio_doc(d, "log.csv", "--nominal", "95,90,85,90")
     # The measured angles stand (exit 0); the nominal that disagrees is a warning.
     assert rc == 0, se
     assert any("nominal" in w for w in doc["warnings"]), doc["warnings"]
+
+
+def test_gonio_nominal_with_x_and_y_not_perpendicular_is_refused(gonio_log):
+    d, _, _ = gonio_log
+    rc, so, se = cli(["gonio", "log.csv", "--faces", "ref,y,x,z", "--nominal", "100,80,90,90"], d)
+    assert_one_line_refusal(rc, se, "--nominal")
 
 
 @pytest.mark.parametrize("flags, name", [

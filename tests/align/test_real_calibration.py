@@ -83,6 +83,11 @@ def test_mpu6050_offsets_match_the_repository():
     assert np.allclose(np.abs(offset_counts), [712, 359, 1840], rtol=0.12)
     # Ten hand-placed poses leave beta_z weakly determined: the covariance says so.
     assert m.u_of("beta_z") > 10 * m.u_of("beta_x") or m.u_of("beta_z") > 5e-3
+    # Ten poses (1 dof): the loop cannot test K3; the note says so, not the faces' reason
+    # (these poses are not the six faces, where x³ = x).
+    said = cal.nonlinearity["statement"]
+    assert not cal.nonlinearity["k3_separable"]
+    assert "cannot determine" in said and "x³ = x" not in said, said
 
 
 SETTINGS = [StaticSettings(), StaticSettings(window_s=0.5), StaticSettings(window_s=1.0),

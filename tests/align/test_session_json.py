@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from align.cli import main
+from align.contract import FORMATS
 from align.errors import InputError
 from align.session_json import ANGLE_NAMES, LoadedSession
 from axisbase.units import ARCSEC
@@ -48,9 +49,15 @@ def _v2(d: dict) -> dict:
     return out
 
 
-@pytest.mark.parametrize("version", [1, 2, 3])
+def _v3(d: dict) -> dict:
+    """As format version 3 wrote it: the same keys (only the meaning of a multi-component
+    fusion effect's top-level estimate changed in version 4)."""
+    return dict(d, format_version=3)
+
+
+@pytest.mark.parametrize("version", [1, 2, 3, 4])
 def test_every_readable_version_reads_the_same(result, version):
-    d = {1: _v1, 2: _v2, 3: dict}[version](result)
+    d = {1: _v1, 2: _v2, 3: _v3, 4: dict}[version](result)
     r = LoadedSession.from_dict(d, "r.json")
     assert r.format_version == version
     assert (r.session, r.ok, r.fused, r.folder) == (result["session"], True, True,
@@ -72,14 +79,14 @@ def test_a_newer_or_another_format_is_refused_naming_the_file(result):
         LoadedSession.from_dict(dict(result, format="axis-align/gonio"), "r.json")
 
 
-@pytest.mark.parametrize("version", [1, 2, 3])
+@pytest.mark.parametrize("version", [1, 2, 3, 4])
 def test_the_former_readers_read_what_the_one_reader_reads(result, tmp_path, version):
     from align.apply import PlatformCalibration
     from align.lot.read import UnitResult, read_result
     from align.plan import plan_from_result
     from align.session.batch import batch_row
 
-    d = {1: _v1, 2: _v2, 3: dict}[version](result)
+    d = {1: _v1, 2: _v2, 3: _v3, 4: dict}[version](result)
     r = LoadedSession.from_dict(d, "r.json")
     # the lot
     f = tmp_path / "r.json"
@@ -145,7 +152,8 @@ def test_resume_reads_the_one_readers_provenance(result, tmp_path):
     out = tmp_path / "r.json"
     job = SessionJob(result["folder"], str(out))
     out.write_text(json.dumps(_v2(result)))
-    assert reuse_verdict(job) == ("redo", f"{out} has format version 2, this tool writes 3")
+    writes = FORMATS["session"]
+    assert reuse_verdict(job) == ("redo", f"{out} has format version 2, this tool writes {writes}")
     out.write_text(json.dumps(dict(result, folder=str(tmp_path))))
     assert reuse_verdict(job)[0] == "refuse"
     out.write_text(json.dumps(dict(result, ok="yes")))

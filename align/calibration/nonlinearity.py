@@ -1,0 +1,157 @@
+"""The declared non-linearity bound: K2 and K3 from the accelerometer's datasheet, a limit on
+the loop's candidates and a Type B term for what the poses cannot measure.
+
+A cubic non-linearity K3 (u_i = k_i (x_i + K3_i x_i³), IEEE Std 1293) is odd like k: at
+±1 g x³ = x, so on the six faces it is k itself (k is the 1 g chord k (1 + K3)) and only poses
+with intermediate components (edges, corners) separate the two — on the paper's 14 poses
+not to within the physical bound (the loop skips it), on 26 cube poses at a 0.3 mg noise
+barely (user 8: K3 = 100 µg/g³ moved k by 7-8.5 of its u with no test seeing it). K2 is even:
+on the faces a bias. The data alone cannot bound what they do not show; the datasheet can.
+
+Declared (``--nonlinearity-bound K2,K3`` in µg/g², µg/g³; ``[calibration]
+k2_bound_ug_per_g2``, ``k3_bound_ug_per_g3``):
+
+1. the loop refuses a K2 or K3 candidate beyond the declared bound (it replaces the default
+   physical prior, :func:`align.calibration.model.prior_bound`, for that term; K3 is then
+   also tried only where the poses measure it to a third of the declared bound);
+2. a declared term the loop did not add is carried in u: K_a uniform over ±bound on each
+   axis a, independently (GUM 4.3.7), and propagated exactly through the fit. A reading's
+   relative change from K_n is ε_pa = K_a x_pa^(n-1) (x = u / k the axis's input [g]), so
+   with G the fit's gain per relative change of each pose-axis reading
+   (:func:`align.calibration.stability.stability_gain`, the known-pose fit's
+   ``scale_gain``) parameter j moves by S_ja K_a, S_ja = Σ_p G_j,3p+a x_pa^(n-1), and the
+   term is S diag(bound² / 3) Sᵀ — ``nonlinearity_bound`` in ``u_widening``. An added term
+   carries its own u in the fit's covariance.
+
+Nothing declared: u is unchanged, and where the poses cannot separate K3 from k (the
+known-pose route, or the loop skipped it) the result says so once (JSON ``nonlinearity``, a
+line under the calibration table), naming the flag.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from align.calibration.effects import K3, NONLIN
+from align.calibration.widen import RECTANGULAR
+from align.errors import InputError
+
+BOUND = "nonlinearity_bound"
+"""The term's name in ``u_widening``."""
+UG = 1e-6
+"""A declared µg/g² (µg/g³) in the model's 1/g (1/g²)."""
+FLAG = "--nonlinearity-bound"
+KEYS = {NONLIN: "[calibration] k2_bound_ug_per_g2", K3: "[calibration] k3_bound_ug_per_g3"}
+UNITS = {NONLIN: "µg/g²", K3: "µg/g³"}
+ORDER = {NONLIN: 2, K3: 3}
+MAX_UG = {NONLIN: 1e4, K3: 2e3}
+"""Largest bound a user may declare [µg/g², µg/g³]: the loop's physical priors
+(:data:`~align.calibration.model.ATTITUDE_PRIOR_G` 1e-2 g at 1 g for K2,
+:data:`~align.calibration.model.K3_PRIOR_G` 2e-3 g for K3); beyond, the triad is no
+accelerometer to calibrate with a linear model."""
+
+
+def bound_ug(value: object, name: str, where: str) -> float:
+    """The one rule for a declared bound (the flag's and the session keys'): a finite number
+    in [0, :data:`MAX_UG`] of the term's unit; :class:`InputError` naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{where} = {value!r}: expected a number of {UNITS[name]}")
+    v = float(value)
+    if not math.isfinite(v) or not 0.0 <= v <= MAX_UG[name]:
+        raise InputError(f"{where} = {value!r}: the {name} bound must be a number of "
+                         f"{UNITS[name]} in [0, {MAX_UG[name]:g}] (the physical prior)")
+    return v
+
+
+def parse_flag(text: str) -> tuple[float | None, float | None]:
+    """``--nonlinearity-bound K2,K3`` [µg/g², µg/g³] -> (K2 [1/g], K3 [1/g²]); an empty
+    part declares nothing for that term (``,100``: K3 alone)."""
+    parts = text.split(",")
+    if len(parts) != 2 or not any(p.strip() for p in parts):
+        raise InputError(f"{FLAG} {text!r}: give two numbers K2,K3 in µg/g² and µg/g³ "
+                         "(e.g. 50,100; ,100 for K3 alone; 0 for a term the datasheet rules "
+                         "out)")
+    out: list[float | None] = []
+    for p, name in zip(parts, (NONLIN, K3), strict=True):
+        if not p.strip():
+            out.append(None)
+            continue
+        try:
+            v: object = float(p)
+        except ValueError:
+            v = p.strip()
+        out.append(bound_ug(v, name, f"{FLAG} {name[-2:].upper()}") * UG)
+    return out[0], out[1]
+
+
+def session_bounds(table: dict, src: str) -> tuple[float | None, float | None] | None:
+    """session.toml's ``[calibration] k2_bound_ug_per_g2`` and ``k3_bound_ug_per_g3`` ->
+    (K2 [1/g], K3 [1/g²]), None where a key is absent (None: neither); ``src`` prefixes the
+    keys in a refusal."""
+    out = tuple(bound_ug(table[key.split()[-1]], n, src + key) * UG
+                if key.split()[-1] in table else None for n, key in KEYS.items())
+    return None if out == (None, None) else (out[0], out[1])
+
+
+def declared_bounds(bound: tuple[float | None, float | None] | None) -> dict[str, float]:
+    """The declared bounds by candidate name (K2 [1/g], K3 [1/g²]); None entries left out."""
+    if bound is None:
+        return {}
+    return {n: float(b) for n, b in zip((NONLIN, K3), bound, strict=True) if b is not None}
+
+
+def sensitivity(gain: np.ndarray, x: np.ndarray, name: str) -> np.ndarray:
+    """S (n_params, 3): each parameter's change per unit of the term on each axis
+    [parameter unit per 1/g^(n-1)]; ``gain`` (n_params, 3N) per relative change of each
+    pose-axis reading, ``x`` (N, 3) each axis's input [g]."""
+    eps = x ** (ORDER[name] - 1)  # relative change of each reading per unit of the term
+    n = len(x)
+    return np.stack([gain[:, 3 * np.arange(n) + a] @ eps[:, a] for a in range(3)], axis=1)
+
+
+def bound_increment(gain: np.ndarray | None, x: np.ndarray, declared: dict[str, float],
+                    added: Sequence[str]) -> list[tuple[str, str, np.ndarray]]:
+    """The ``nonlinearity_bound`` term (term, why, covariance) for the declared terms not in
+    ``added`` (none when nothing is carried)."""
+    carried = {n: b for n, b in declared.items() if n not in added and b > 0}
+    if gain is None or not carried:
+        return []
+    cov = np.zeros((gain.shape[0], gain.shape[0]))
+    for name, b in carried.items():
+        s = sensitivity(gain, x, name)
+        cov += (s * (b / RECTANGULAR) ** 2) @ s.T
+    return [(BOUND, bound_reason(carried), cov)]
+
+
+def bound_reason(carried: dict[str, float]) -> str:
+    """Why the term is there (``u_widening.terms`` and the warning)."""
+    each = ", ".join(f"{n[-2:].upper()} within ±{b / UG:g} {UNITS[n]}"
+                     for n, b in carried.items())
+    return (f"non-linearity declared ({each}), not fitted on these poses: carried as a "
+            "uniform Type B term through each parameter's sensitivity to it")
+
+
+def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
+                           k3_separable: bool, why_not: str = "at ±1 g x³ = x") -> dict:
+    """The JSON ``nonlinearity`` record: the declared bounds [µg/g², µg/g³] (null: not
+    declared), the terms carried in u, whether the poses separate K3 from k (``why_not``:
+    why not, in the statement), and the statement printed under the table ("" when there
+    is nothing to say)."""
+    carried = [n for n, b in declared.items() if n not in added and b > 0]
+    if declared:
+        why = ("declared " + ", ".join(f"{n[-2:].upper()} within ±{b / UG:g} {UNITS[n]}"
+                                       for n, b in declared.items())
+               + (f"; carried in u ({BOUND}): {', '.join(carried)}" if carried else
+                  "; fitted by the loop where added"))
+    elif not k3_separable:
+        why = (f"K3 is not separable from k on these poses ({why_not}): k is the 1 g "
+               f"chord k (1 + K3); declare the datasheet's bound with {FLAG} K2,K3 or "
+               f"{KEYS[K3]} to carry it in u")
+    else:
+        why = ""
+    return {"k2_bound_ug_per_g2": declared[NONLIN] / UG if NONLIN in declared else None,
+            "k3_bound_ug_per_g3": declared[K3] / UG if K3 in declared else None,
+            "carried": carried, "k3_separable": bool(k3_separable), "statement": why}
