@@ -231,13 +231,11 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
     u, n = line_frame(pf.angle_rad)
-    # Where the groove really ends, looked for once, before the full pass, along the
-    # first centres' path: the detector's stretch stops short of a long mark's ends (its
-    # ridge fades a filter width of the downsampled search before them, ~40 px at 5 MP),
-    # and the full pass ran twice, on the short stretch and again on the whole groove (a
-    # quarter of a 5 MP frame's time). The path through the first centres (every 4th
-    # segment of a long mark) is the full pass's to a fraction of a pixel; the ends' check
-    # made here is kept for the measurement (:class:`imaging.ends.EndsCheck`).
+    # Where the groove really ends, looked for once, before the full pass, along the first
+    # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops
+    # ~40 px short of a 5 MP mark's ends (its ridge fades a filter width of the downsampled
+    # search before them), and the full pass ran twice, on the short stretch and again on
+    # the whole groove (a quarter of the frame's time). The ends' check made here is kept.
     look = extent_look(image, pf)
     longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, crossing)
     short = pf
