@@ -21,41 +21,46 @@ import numpy as np
 DROPOUT_RATIO = 1.5
 
 
-def local_seconds_per_count(count: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """The table's local seconds per count at each row [s]: the mean of its four neighbours'
-    (two rows each side) duration / counts without the largest and the smallest (the chunk's
-    ends mirrored). A drop-out row is one outlier among them (two drop-outs within two rows:
-    the largest is dropped); a coasting table changes its speed by a few per cent over them.
-    Hand-written (min/max of four shifted arrays) rather than a sliding median: a median per
-    row cost a quarter of the pass. Rows without a finite ratio (the first row's unknown
-    duration) count as infinitely slow, so as a largest they drop out."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = dt / count
-    ratio = np.where(np.isfinite(ratio), ratio, np.inf)
-    if len(ratio) < 5:
-        return np.full(len(ratio), float(np.median(ratio)))
-    p = np.pad(ratio, 2, mode="reflect")
-    nb = (p[:-4], p[1:-3], p[3:-1], p[4:])
-    # the two middle values of four: of the pairs (a, b) and (c, d), the larger of the
-    # smaller ones and the smaller of the larger ones (no sum less the extremes: an infinite
-    # largest would make inf - inf)
-    mid_hi = np.minimum(np.maximum(nb[0], nb[1]), np.maximum(nb[2], nb[3]))
-    mid_lo = np.maximum(np.minimum(nb[0], nb[1]), np.minimum(nb[2], nb[3]))
-    return (mid_hi + mid_lo) / 2
+def local_seconds_per_count(ratio: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The table's local seconds per count [s] at ``rows`` (indexes into ``ratio``, each row's
+    duration / counts): the mean of the four neighbours' ratios (two rows each side, the ends
+    mirrored) without the largest and the smallest. A drop-out row is one outlier among
+    them (two drop-outs within two rows: the largest is dropped); a coasting table changes
+    its speed by a few per cent over them. Rows without a finite ratio (the first row's
+    unknown duration) count as infinitely slow, so as a largest they drop out."""
+    n = len(ratio)
+    if n < 5:
+        fin = ratio[np.isfinite(ratio)]
+        return np.full(len(rows), float(np.median(fin)) if fin.size else np.inf)
+    idx = rows[:, None] + np.array([-2, -1, 1, 2])
+    idx = np.where(idx < 0, -idx, idx)
+    idx = np.where(idx > n - 1, 2 * (n - 1) - idx, idx)
+    nb = ratio[idx]
+    nb = np.sort(np.where(np.isfinite(nb), nb, np.inf), axis=1)
+    return (nb[:, 1] + nb[:, 2]) / 2
 
 
 def dropouts(count: np.ndarray, dt: np.ndarray | None) -> np.ndarray:
     """Rows whose interval spans a communication drop-out (see ``DROPOUT_RATIO``): their
     duration [s] beyond DROPOUT_RATIO times their counts at the local seconds per count
     (:func:`local_seconds_per_count`). All False without times (then only the count pattern
-    tells, see :func:`phase_break`)."""
+    tells, see :func:`phase_break`).
+
+    Only rows beyond DROPOUT_RATIO times the chunk's smallest seconds per count can be one,
+    so only theirs are compared with their neighbours (on a steady table a few rows: the
+    neighbours of every row cost ~5 times the pass's share of this test)."""
+    out = np.zeros(len(count), bool)
     if dt is None or len(count) < 2:
-        return np.zeros(len(count), bool)
-    if np.count_nonzero(np.isfinite(dt / np.where(count == 0, np.nan, count))) < 2:
-        return np.zeros(len(count), bool)
-    limit = DROPOUT_RATIO * local_seconds_per_count(count, dt)
-    with np.errstate(invalid="ignore"):  # (the first row's unknown duration: NaN, no gap)
-        return dt > limit * count
+        return out
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = dt / count
+        lo = float(np.fmin.reduce(ratio))  # (NaN ignored: the first row's unknown duration)
+        if not np.isfinite(lo):
+            return out
+        rows = np.flatnonzero(ratio > DROPOUT_RATIO * lo)
+    if rows.size:
+        out[rows] = ratio[rows] > DROPOUT_RATIO * local_seconds_per_count(ratio, rows)
+    return out
 
 
 def phase_break(count: np.ndarray, inc: np.ndarray, tol: float,
