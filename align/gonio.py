@@ -65,6 +65,8 @@ UNTIMED_EARTH = (
     "without pulse times and is NOT in u: on a table whose speed varies within a revolution "
     "the angles may be off by more than u; log the times (t column), or give --steady-table "
     "if the table turns at constant speed")
+ONE_DIRECTION = (LATENCY, f"no t column: {UNTIMED_EARTH}")
+"""How the warnings begin that only one direction's run gives (the other cancels them)."""
 UNTIMED_EARTH_STEADY = ("the angles assume the steady table asserted (--steady-table), on "
                         "which the Earth rate cancels in each revolution's fractions")
 
@@ -184,9 +186,11 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
-        # (both directions: the latency bias cancels, its one-direction warning does not hold)
-        warns = (*(w for w in fwd.warnings if not w.startswith(LATENCY)),
-                 *(f"reverse run: {w}" for w in rev.warnings if not w.startswith(LATENCY)))
+        # (both directions: the latency bias cancels, its one-direction warning does not hold;
+        # so does the Earth rate's share a log without times cannot remove)
+        warns = (*(w for w in fwd.warnings if not w.startswith(ONE_DIRECTION)),
+                 *(f"reverse run: {w}" for w in rev.warnings
+                   if not w.startswith(ONE_DIRECTION)))
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
