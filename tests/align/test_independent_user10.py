@@ -537,9 +537,6 @@ def test_bmi160_scale_tempco_with_a_temp_column_is_fitted(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a calibration whose JSON says ok: false (bias step: "
-                   "'calibration NOT OK', unexplained structure) used by align tilt: exit 0, "
-                   "nothing on stderr, no warning (3 of 3 seeds)")
 def test_tilt_through_a_not_ok_calibration_says_so(tmp_path):
     """apply.md: a platform calibration from a session that was not ok makes `align tilt`
     warn and exit 2. A triad calibration that was itself not ok must not be used silently
