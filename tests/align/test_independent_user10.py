@@ -548,10 +548,6 @@ def test_tilt_through_a_not_ok_calibration_says_so(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the not-ok warning names an empty effect set: "
-                   "'calibration NOT OK:  and nonlinearity_k3 cannot be told apart' (two "
-                   "spaces, nothing before 'and'; the bias step seed 0: 'NOT OK:  and "
-                   "bias_drift')")
 def test_not_ok_message_names_both_models(tmp_path):
     """When the declared model (no effect added) and another cannot be told apart, the
     message names both (e.g. 'the declared model' or 'no effect')."""
