@@ -115,6 +115,11 @@ class TiltOfReadings:
                         exact=("t",))
 
 
+SCALE_GAP_K = 100.0
+"""Readings this far from the calibration's reference temperature [K] are on another scale
+(°C against K: 273 K apart), not at another temperature a triad is used in."""
+
+
 def model_time_warnings(model, t, temp) -> list[str]:
     """What a reader of readings without times (or temperatures) must know when the model
     has a drift (or a temperature term): it is taken at the model's reference value."""
@@ -126,6 +131,12 @@ def model_time_warnings(model, t, temp) -> list[str]:
     if temp is None and np.any(model.temp_coeff != 0):
         out.append("the readings have no temperature but the calibration models one: "
                    f"taken at its reference {model.temp_ref:g} (give a temp column)")
+    temp_model = np.any(model.temp_coeff != 0) or np.any(model.scale_temp != 0)
+    if temp is not None and temp_model and np.nanmax(np.abs(temp - model.temp_ref)) > SCALE_GAP_K:
+        out.append(f"the readings' temperatures ({np.nanmin(temp):g} to {np.nanmax(temp):g}) lie "
+                   f"more than {SCALE_GAP_K:g} K from the calibration's reference "
+                   f"{model.temp_ref:g} K: one file in °C, the other in K? say the unit in both "
+                   "headers (temp [K] or temp [degC])")
     return out
 
 

@@ -629,9 +629,6 @@ def test_apply_temperature_bias_with_and_without_temp_column(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="'temp [F]' accepted silently: temp_coeff_g_per_k "
-                   "1.543e-5 where the same data in kelvin give 2.778e-5 (ratio 1/1.8), "
-                   "temp_ref_k 77.0; a 'temp [degC]' column gives temp_ref_k 25.0")
 def test_temperature_column_unit_converted_or_refused(tmp_path):
     """The same tumble with its temperature column in K and in °F (header 'temp [F]'): the
     docs convert every header unit by one table and refuse an unknown time unit naming the

@@ -188,3 +188,17 @@ def test_triad_frame_is_z_along_accelerometer_z_y_in_the_z_y_plane():
     fx = np.array([ex, ey, np.cross(ex, ey)])
     rx, px = roll_pitch(g @ fx.T)
     assert max(np.abs(res.roll - rx).max(), np.abs(res.pitch - px).max()) > 5e-4
+
+
+@pytest.mark.parametrize(("temp", "warned"), [(25.0, True), (300.0, False), (330.0, False)])
+def test_readings_on_another_temperature_scale_than_the_calibration_are_warned(temp, warned):
+    """A calibration with a temperature model referred to 298.15 K: readings at 25 (°C written
+    as a plain number) are said to be on another scale; at 300 K or 330 K nothing is said."""
+    from align.tilt import tilt_of_readings
+    from axisbase.table import Table
+
+    m = _model(temp_coeff=np.array([3e-5, 0, 0]), temp_ref=298.15)
+    tab = _readings(m, gravity_from_angles(np.zeros(5), np.zeros(5)))
+    tab = Table(None, None, {**tab.data, "temp": np.full(5, temp)}, 2)
+    said = [w for w in tilt_of_readings(m, tab).warnings if "another" in w or "°C" in w]
+    assert bool(said) is warned, said
