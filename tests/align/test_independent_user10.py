@@ -519,11 +519,6 @@ def test_calibration_effects_within_u_or_flagged(tmp_path, name, modify, tkw, fl
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 300 ppm/K scale tempco (the BMI160's, as "
-                   "calibration-effects.md says) over a ±5 K cycle with a temp column: "
-                   "scale_temperature refused, 'it reaches 0.00302 g at 1 g over the run "
-                   "(> 0.003 g): outside the physical prior' (dBIC −43 405), calibration NOT "
-                   "OK, exit 2 (2 of 2 seeds); at 50 ppm/K it is fitted, ok")
 def test_bmi160_scale_tempco_with_a_temp_column_is_fitted(tmp_path):
     """The docs name 300 ppm/K as a real triad's tempco; over a 10 K span that is 3000 ppm —
     physically plausible, and the temperature column determines it. The loop should fit
