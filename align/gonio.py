@@ -25,6 +25,7 @@ from align.gonio_directions import (
     check_reversed,
     combine_directions,
 )
+from align.gonio_earth import declared_earth_angles
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
 from align.gonio_timing import LATENCY, with_timing
@@ -234,9 +235,10 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
         notes.append(f"lead-in: the first {summary.incomplete_head} rows, from the arming "
                      "pulse to the first complete revolution, are not used")
     if latitude_rad is not None and summary.has_time:
-        rate = vertical_earth_rate(latitude_rad, direction)
-        return with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
-                                     rate), steady_table, alpha)
+        fa, rate, why = declared_earth_angles(summary, latitude_rad, direction, alpha,
+                                              LOOP_REVOLUTIONS)
+        return with_timing(GonioRun(summary, fa, None, tuple(notes), rate,
+                                     warnings=(why,) if why else ()), steady_table, alpha)
     if latitude_rad is not None:
         why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
                "pulse times; NOT applied (nor can a table speed that follows its angle be "

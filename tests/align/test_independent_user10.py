@@ -197,18 +197,9 @@ def test_gonio_reverse_log_cancels_a_real_latency(tmp_path):
 
 
 WRONG_EARTH = [
-    pytest.param(("--latitude", "-50"), {}, id="latitude sign flipped",
-                 marks=pytest.mark.xfail(strict=True, reason=(
-                     "--latitude -50 on a log made at +50 whose Earth rate the log itself "
-                     "determines (without --latitude the loop finds it, u 0.35″, |z| ≤ 1.1): "
-                     "angles 10.4 u and 11.6 u off (seed 0; seed 1: 7.5, 7.9), ok, exit 0, no "
-                     "warning about the latitude"))),
+    pytest.param(("--latitude", "-50"), {}, id="latitude sign flipped"),
     pytest.param(("--latitude", "50", "--faces", "ref,z,x,y"), {"direction": -1},
-                 id="clockwise table, --direction not given",
-                 marks=pytest.mark.xfail(strict=True, reason=(
-                     "a clockwise log read as counter-clockwise (the Earth rate's sign "
-                     "flipped): angles 11.4 u and 10.4 u off (seed 1: 8.2, 7.4), ok, exit 0, "
-                     "no warning about the direction"))),
+                 id="clockwise table, --direction not given"),
 ]
 
 
