@@ -11,8 +11,11 @@ prints one fingerprint of every result (``MarkResult.to_dict``, sha256 of the so
 (``PYTHONPATH=/work/main python3 benchmarks/marks_fingerprint.py --save main.json``) says
 how many results are bit-identical and, where they are not, the largest angle change in
 units of u, the largest relative change of u, and every decision that differs (found,
-ok, flags, effects, warnings: any value that is not a float). A speed change that is not
-bit-identical is accepted when angles move <= 0.05 u and no decision differs.
+ok, flags, effects, warnings: any value that is not a float). A text that differs only in
+decimal numbers written in it (a fitted k1 in a note) is a float in words, listed apart and
+not a decision; a count written in a text (a whole number) that differs is a decision. A
+speed change that is not bit-identical is accepted when angles move <= 0.05 u and no
+decision differs.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -101,10 +105,20 @@ def _leaves(d: object, path: str = ""):
         yield path, d
 
 
+_DECIMAL = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+)(?:e[-+]?\d+)?|[-+]?\d+e[-+]?\d+")
+
+
+def _decimals_only(a: object, b: object) -> bool:
+    """Whether two texts differ only in the decimal numbers written in them (the same
+    words, the same whole numbers)."""
+    return (isinstance(a, str) and isinstance(b, str) and a != b
+            and _DECIMAL.sub("#", a) == _DECIMAL.sub("#", b))
+
+
 def compare(ours: dict, theirs: dict) -> bool:
     """Print how ``ours`` differs from ``theirs``; True when within the tolerance."""
     same = moved = 0
-    worst_u, worst_du, decisions = 0.0, 0.0, []
+    worst_u, worst_du, decisions, worded = 0.0, 0.0, [], []
     names = [n for n in theirs if n in ours]  # (--quick against a full run: its subset)
     for name in names:
         a, b = ours[name], theirs[name]
@@ -116,7 +130,9 @@ def compare(ours: dict, theirs: dict) -> bool:
         for key in sorted(set(la) | set(lb)):
             va, vb = la.get(key), lb.get(key)
             floats = all(isinstance(v, float) for v in (va, vb))
-            if not floats and va != vb:
+            if _decimals_only(va, vb):
+                worded.append(f"{name}{key}: {vb!r} -> {va!r}")
+            elif not floats and va != vb:
                 decisions.append(f"{name}{key}: {vb!r} -> {va!r}")
         for i, (ra, rb) in enumerate(zip(a, b, strict=False)):
             if ra.get("found") and rb.get("found"):
@@ -128,9 +144,11 @@ def compare(ours: dict, theirs: dict) -> bool:
     print(f"against the saved results: {same} of {len(names)} images bit-identical, "
           f"{moved} differ; largest angle change {worst_u:.2e} u (tolerance {ANGLE_TOL_U}), "
           f"largest relative change of u {worst_du:.1e}; decisions that differ: "
-          f"{len(decisions)}")
+          f"{len(decisions)}; texts differing only in decimal numbers: {len(worded)}")
     for d in decisions[:20]:
         print("  " + d)
+    for d in worded[:20]:
+        print("  (numbers only) " + d)
     return worst_u <= ANGLE_TOL_U and not decisions and set(ours) <= set(theirs)
 
 

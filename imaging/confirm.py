@@ -24,7 +24,7 @@ from imaging.candidate import (
     line_frame,
     wrap_angle,
 )
-from imaging.crossing import double_groove, fused_crossing
+from imaging.crossing import double_grooves, fused_crossing
 
 
 def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
@@ -448,8 +448,8 @@ def _fused(image: np.ndarray, c: MarkCandidate, noise: float, top: float,
     vals, e, t = across(image, c, int(np.ceil(c.thickness_px + 18)), n_along, top)
     sigma = 1.25 * noise / np.sqrt(block_px)
     profs, ts = block_medians(vals, t, block_px)
-    return fused_crossing([(tk, double_groove(p, e, c.dark, sigma, half))
-                           for tk, p in zip(ts, profs, strict=True)], half)
+    return fused_crossing(list(zip(ts, double_grooves(profs, e, c.dark, sigma, half),
+                                   strict=True)), half)
 
 
 def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int

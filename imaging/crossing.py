@@ -231,6 +231,39 @@ def double_groove(prof: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
     return float(ep[a]), float(ep[b])
 
 
+def double_grooves(profs: np.ndarray, e: np.ndarray, dark: bool, sigma: float,
+                   half_px: float) -> list[tuple[float, float] | None]:
+    """:func:`double_groove` of each row of ``profs`` (median profiles, one per block along
+    a line), the same answers: a row without two peaks of a third of the highest's height
+    (above the background beyond both ends) is None at once, the others go through
+    :func:`double_groove`.
+
+    Along a clean line every block stops there (~220 blocks of a 5 MP mark, each a call
+    of ~20 us), so that first test runs on all rows together: for rows without NaN by the
+    same operations as :func:`double_groove`'s (the background the mean of the 4 values at
+    each end, summed in numpy's pairwise order for 8 values), with a margin of 1e-9 of the
+    profile's scale on the third (a row at the limit is passed on, never dropped). Rows
+    with NaN go through :func:`double_groove` whole.
+    """
+    profs = np.asarray(profs, dtype=float)
+    if profs.ndim != 2 or profs.shape[1] < 8 or profs.shape[0] == 0:
+        return [double_groove(p, e, dark, sigma, half_px) for p in profs]
+    y = -profs if dark else profs
+    E = np.concatenate([y[:, :4], y[:, -4:]], axis=1)
+    bg = (((E[:, 0] + E[:, 1]) + (E[:, 2] + E[:, 3]))
+          + ((E[:, 4] + E[:, 5]) + (E[:, 6] + E[:, 7]))) / 8
+    y = y - bg[:, None]
+    with np.errstate(invalid="ignore"):
+        mid = y[:, 1:-1]
+        peak = (mid >= y[:, :-2]) & (mid > y[:, 2:])
+        top = np.max(np.where(peak, mid, -np.inf), axis=1)
+        margin = 1e-9 * (np.abs(top) + np.abs(bg))
+        big = peak & (mid >= (top / 3 - margin)[:, None])
+    maybe = (big.sum(axis=1) >= 2) | ~np.isfinite(profs).all(axis=1)
+    return [double_groove(p, e, dark, sigma, half_px) if m else None
+            for p, m in zip(profs, maybe, strict=True)]
+
+
 FUSE_WIDTHS = 5.0
 """Widest separation of two straddling grooves that can be one fused ridge [groove
 half-widths] (see :func:`fused_crossing`)."""

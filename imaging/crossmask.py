@@ -14,7 +14,7 @@ from imaging.band import _band
 from imaging.candidate import MarkCandidate, line_frame
 from imaging.centres import Centres
 from imaging.confirm import across, block_medians
-from imaging.crossing import MIN_CROSSING, crossing_stretch, double_groove
+from imaging.crossing import MIN_CROSSING, crossing_stretch, double_grooves
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, centres_half
 
@@ -207,8 +207,8 @@ def grooves_beside(image: np.ndarray, pf: ProfileFit, top: float, window: float,
     sigma = 1.25 * noise / np.sqrt(block_px)
     profs, ts = block_medians(vals, t, block_px)
     seen = []
-    for tk, prof in zip(ts, profs, strict=True):
-        g = double_groove(prof, e, pf.contrast_dn < 0, sigma, half)
+    for tk, g in zip(ts, double_grooves(profs, e, pf.contrast_dn < 0, sigma, half),
+                     strict=True):
         if g is None or min(abs(g[0]), abs(g[1])) > half:
             continue
         other = g[1] if abs(g[0]) <= abs(g[1]) else g[0]

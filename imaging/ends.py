@@ -328,9 +328,13 @@ class EndsCheck:
     """:func:`groove_ends` of one measurement's profile, extent and centres (its path) in
     one image: kept with the measurement, so that the obstruction check of its ends
     (``align.family.member_ends``) does not run again on the same pixels (~4 % of a 640 x 480
-    frame's time). It answers only for those very objects (:meth:`for_mark`): the image
-    itself, not a copy or a version with a background or a shadow removed (held by a weak
-    reference: a session's results do not keep its frames alive)."""
+    frame's time). The measurement looks for its ends once, before its full centres pass,
+    along the path of its first (quick) centres, and keys the check to its final centres
+    (:func:`imaging.measure.measure_candidate`): the two paths agree to a fraction of a
+    pixel, and the same ends serve both. It answers only for those very objects
+    (:meth:`for_mark`): the image itself, not a copy or a version with a background or a
+    shadow removed (held by a weak reference: a session's results do not keep its frames
+    alive)."""
 
     image: weakref.ref
     profile: ProfileFit

@@ -231,6 +231,16 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
     pf = pf.with_line(first.angle_rad, first.offset_px)
     u, n = line_frame(pf.angle_rad)
+    # Where the groove really ends, looked for once, before the full pass, along the first
+    # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops
+    # ~40 px short of a 5 MP mark's ends (its ridge fades a filter width of the downsampled
+    # search before them), and the full pass ran twice, on the short stretch and again on
+    # the whole groove (a quarter of the frame's time). The ends' check made here is kept.
+    look = extent_look(image, pf)
+    longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, crossing)
+    short = pf
+    if longer is not None:
+        pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
     # The first centres as the start along the new line (a bowed groove's ends are far
     # from any straight line through it).
     cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
@@ -238,20 +248,24 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
                          offsets_var=offsets_var, departure=True)
     skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
     use = _usable(cen, where, cand, skip)
-    t0, t1, open0, open1 = extent_look(image, pf)
-    ext = (t0, t1)
-    longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
-    if longer is not None:
-        # The search's stretch was cut short (a speck beside or on the line broke its
-        # ridge): the centres again over the groove's whole length, from those found.
-        pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
-        cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
-                             guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                             offsets_var=offsets_var, departure=True)
-        skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
-        use = _usable(cen, where, cand, skip)
-        ext = groove_extent(image, pf)
-        check = None  # (made on the shorter stretch)
+    if pf is short:
+        ext = look[:2]
+        check = replace(check, centres=cen) if check is not None else None
+    else:
+        # The lengthened stretch looked at again: a groove still deep past its look (an
+        # end the first look could not follow) gets the centres once more over it.
+        t0, t1, open0, open1 = extent_look(image, pf)
+        ext = (t0, t1)
+        longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
+        if longer is not None:
+            pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
+            cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+                                 guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
+                                 offsets_var=offsets_var, departure=True)
+            skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+            use = _usable(cen, where, cand, skip)
+            ext = groove_extent(image, pf)
+            check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:
         pts, sig = camera.undistort_centred(pts, sig, image.shape)
@@ -467,7 +481,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # no copy then.)
     image = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
-    if mx == float(image.min()):
+    # (Uniform only if the first pixel is the maximum: the minimum's pass, ~1.5 ms at 5 MP,
+    # only then.)
+    if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
     top = full_scale(mx)
     if camera is not None and (image.shape[1], image.shape[0]) != tuple(camera.image_size):

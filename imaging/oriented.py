@@ -165,6 +165,9 @@ def _relative(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
     Y = (np.arange(h)[:, None] / h - 0.5).astype(np.float32)
     # c0 + c1 X + c3 X^2 + c2 Y + c5 Y^2 + c4 X Y: the terms in one variable on a row and a
     # column, then two full-frame passes (each full-frame pass of 5 MP costs its page faults).
+    # The coefficients as float32: a float64 scalar times a float32 array is float64 (NumPy
+    # 2), and the frame-wide level and ratio were float64, twice the bytes for nothing.
+    c = c.astype(np.float32)
     lev = np.add((c[0] + c[1] * X) + c[3] * X * X, c[2] * Y + c[5] * Y * Y)
     lev += np.multiply(c[4] * Y, X)
     np.copyto(lev, 1.0, where=~(lev > 0))

@@ -201,22 +201,26 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
     # own fit (a first fit on all, then without them; a clip on the residuals before the
     # departure dropped the groove's floor where the misfit itself is large).
     w = wgt.copy()
+    ca = np.maximum(cols, 0)
+    # N is symmetric: the pairs a <= c only, the others as the transpose (10 bincounts of
+    # the 16; the sums' order differs in the last bit). The bins are the same each pass.
+    pairs = [(a, c) for a in range(4) for c in range(a, 4)]
+    at = [ca[:, a] * k + ca[:, c] for a, c in pairs]
     for _ in range(2):
-        N = np.zeros(k * k)
+        N = np.zeros((k, k))
         b = np.zeros(k)
         for a in range(4):
-            ca = np.maximum(cols[:, a], 0)
-            b += np.bincount(ca, w * vals[:, a] * r, minlength=k)
-            for c in range(4):
-                N += np.bincount(ca * k + np.maximum(cols[:, c], 0),
-                                 w * vals[:, a] * vals[:, c], minlength=k * k)
-        N = N.reshape(k, k)
+            b += np.bincount(ca[:, a], w * vals[:, a] * r, minlength=k)
+        wv = w[:, None] * vals
+        for (a, c), idx in zip(pairs, at, strict=True):
+            part = np.bincount(idx, wv[:, a] * vals[:, c], minlength=k * k).reshape(k, k)
+            N += part if a == c else part + part.T
         try:
             cov = np.linalg.inv(N)
         except np.linalg.LinAlgError:
             return None
         coef = cov @ b
-        fit = (vals * coef[np.maximum(cols, 0)]).sum(axis=1)
+        fit = (vals * coef[ca]).sum(axis=1)
         w = np.where(np.abs(r - fit) * np.sqrt(wgt) < MAX_Z, wgt, 0.0)
     return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
 
@@ -257,10 +261,11 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     cols, vals = shape.local(x)
     nseg, kk = len(ok), len(shape.coef)
     G = np.zeros((nseg, len(J), kk))
+    at = [seg * kk + np.maximum(cols[:, a], 0) for a in range(4)]  # (the same for every i)
     for i in range(len(J)):
+        awj = aw * J[i]
         for a in range(4):
-            G[:, i, :] += np.bincount(seg * kk + np.maximum(cols[:, a], 0),
-                                      aw * J[i] * vals[:, a],
+            G[:, i, :] += np.bincount(at[a], awj * vals[:, a],
                                       minlength=nseg * kk).reshape(nseg, kk)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
     S = -np.einsum("ni,nij->nj", c0, G)

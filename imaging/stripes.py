@@ -184,7 +184,10 @@ def _background(v: np.ndarray, shading: np.ndarray | None = None,
     k = 1 if whole_rows else max(1, v.shape[1] // LEVEL_PX)
     sample = v[:, ::k] if shading is None else v[:, ::k] - shading[None, ::k]
     lev = _column_median(sample, axis=1)
-    return v[np.isfinite(lev)] - lev[np.isfinite(lev), None]
+    ok = np.isfinite(lev)
+    # float32 as the rows (a float64 level made every row float64: twice the bytes for the
+    # sorts of the columns that follow, for a level known to ~1e-4 DN either way).
+    return v[ok] - lev[ok, None].astype(np.float32)
 
 
 def _shading(profile: np.ndarray) -> np.ndarray | None:

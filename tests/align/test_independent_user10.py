@@ -179,11 +179,6 @@ def test_gonio_one_direction_latency_on_a_rippling_table_is_flagged(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="reverse log refused: 300 µs latency × 10 % locked "
-                   "ripple leaves a direction-dependent part of 27.5″ (2 ms: 182″), 'beyond "
-                   "the 10″ a latency ... leaves — it is not a run in the other direction' "
-                   "(3 of 3 seeds); its own one-direction warning prices this table at "
-                   "0.058″ per µs")
 def test_gonio_reverse_log_cancels_a_real_latency(tmp_path):
     """The same faces turned both ways with 300 µs latency and a 10 % speed ripple locked to
     the table: the other direction of the same faces. The mean of both directions cancels the
@@ -197,18 +192,9 @@ def test_gonio_reverse_log_cancels_a_real_latency(tmp_path):
 
 
 WRONG_EARTH = [
-    pytest.param(("--latitude", "-50"), {}, id="latitude sign flipped",
-                 marks=pytest.mark.xfail(strict=True, reason=(
-                     "--latitude -50 on a log made at +50 whose Earth rate the log itself "
-                     "determines (without --latitude the loop finds it, u 0.35″, |z| ≤ 1.1): "
-                     "angles 10.4 u and 11.6 u off (seed 0; seed 1: 7.5, 7.9), ok, exit 0, no "
-                     "warning about the latitude"))),
+    pytest.param(("--latitude", "-50"), {}, id="latitude sign flipped"),
     pytest.param(("--latitude", "50", "--faces", "ref,z,x,y"), {"direction": -1},
-                 id="clockwise table, --direction not given",
-                 marks=pytest.mark.xfail(strict=True, reason=(
-                     "a clockwise log read as counter-clockwise (the Earth rate's sign "
-                     "flipped): angles 11.4 u and 10.4 u off (seed 1: 8.2, 7.4), ok, exit 0, "
-                     "no warning about the direction"))),
+                 id="clockwise table, --direction not given"),
 ]
 
 
@@ -263,10 +249,6 @@ def test_gonio_locked_steady_table_is_not_called_unsteady(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="forward 0.5 rev/s, reverse 0.2 rev/s, 100 µs latency, "
-                   "10 % locked ripple: the plain mean leaves (9 − 3.6)/2 ≈ 2.7″ of latency "
-                   "bias: z 6.0, −24.3, −7.0, +25.4 (u 0.10″; seeds 1, 2 alike), ok, exit 0, "
-                   "no warning")
 def test_gonio_reverse_at_another_speed_is_not_a_confident_answer(tmp_path):
     """The reverse run made at another speed (0.2 instead of 0.5 rev/s): a latency's bias is
     L·Δω, proportional to the speed, so the mean of both directions no longer cancels it. The

@@ -8,7 +8,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from imaging.crossing import crossing_stretch, double_groove, fused_crossing, split_two_lines
+from imaging.crossing import (
+    crossing_stretch,
+    double_groove,
+    double_grooves,
+    fused_crossing,
+    split_two_lines,
+)
 
 
 def _line_pixels(angle_deg, length, shift=(0.0, 0.0), bow=0.0):
@@ -94,3 +100,29 @@ def test_two_graduations_of_one_diameter_do_not_cross():
     near = SimpleNamespace(angle_rad=np.deg2rad(-9.12), offset_px=27.8, t_start_px=151.0,
                            t_end_px=263.0)
     assert crossing_stretch(c2, near, 12.9, extend=True) is not None
+
+
+def test_double_grooves_gives_double_groove_of_every_row():
+    """The blocks' test at once (imaging.crossing.double_grooves) answers as
+    double_groove does row by row: one groove or two, dark or bright, with a NaN in a row,
+    and with whole-DN values (ties between neighbours, the peaks' >= / > matter)."""
+    rng = np.random.default_rng(7)
+    e = np.arange(-20.0, 21.0)
+    found = rows = 0
+    for trial in range(300):
+        prof = rng.normal(1000.0, 3.0, (12, e.size))
+        prof -= rng.uniform(0, 60) * np.exp(-0.5 * ((e - rng.uniform(-3, 3)) / 1.5) ** 2)
+        if trial % 2:  # a second groove beside the first
+            prof -= rng.uniform(0, 60) * np.exp(-0.5 * ((e - rng.uniform(-12, 12)) / 1.5) ** 2)
+        if trial % 5 == 0:
+            prof[rng.integers(12), rng.integers(e.size)] = np.nan
+        if trial % 3 == 0:
+            prof = np.round(prof)
+        dark = trial % 4 < 2
+        if not dark:
+            prof = 2000.0 - prof
+        one = [double_groove(p, e, dark, 1.0, 2.5) for p in prof]
+        assert double_grooves(prof, e, dark, 1.0, 2.5) == one
+        found += sum(g is not None for g in one)
+        rows += len(one)
+    assert 0.1 * rows < found < 0.9 * rows  # both answers are exercised
