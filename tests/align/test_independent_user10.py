@@ -501,11 +501,6 @@ def test_calibration_effects_within_u_or_flagged(tmp_path, name, modify, tkw, fl
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 300 ppm/K scale tempco (the BMI160's, as "
-                   "calibration-effects.md says) over a ±5 K cycle with a temp column: "
-                   "scale_temperature refused, 'it reaches 0.00302 g at 1 g over the run "
-                   "(> 0.003 g): outside the physical prior' (dBIC −43 405), calibration NOT "
-                   "OK, exit 2 (2 of 2 seeds); at 50 ppm/K it is fitted, ok")
 def test_bmi160_scale_tempco_with_a_temp_column_is_fitted(tmp_path):
     """The docs name 300 ppm/K as a real triad's tempco; over a 10 K span that is 3000 ppm —
     physically plausible, and the temperature column determines it. The loop should fit
@@ -519,9 +514,6 @@ def test_bmi160_scale_tempco_with_a_temp_column_is_fitted(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a calibration whose JSON says ok: false (bias step: "
-                   "'calibration NOT OK', unexplained structure) used by align tilt: exit 0, "
-                   "nothing on stderr, no warning (3 of 3 seeds)")
 def test_tilt_through_a_not_ok_calibration_says_so(tmp_path):
     """apply.md: a platform calibration from a session that was not ok makes `align tilt`
     warn and exit 2. A triad calibration that was itself not ok must not be used silently
@@ -533,10 +525,6 @@ def test_tilt_through_a_not_ok_calibration_says_so(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the not-ok warning names an empty effect set: "
-                   "'calibration NOT OK:  and nonlinearity_k3 cannot be told apart' (two "
-                   "spaces, nothing before 'and'; the bias step seed 0: 'NOT OK:  and "
-                   "bias_drift')")
 def test_not_ok_message_names_both_models(tmp_path):
     """When the declared model (no effect added) and another cannot be told apart, the
     message names both (e.g. 'the declared model' or 'no effect')."""
@@ -618,9 +606,6 @@ def test_apply_temperature_bias_with_and_without_temp_column(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="'temp [F]' accepted silently: temp_coeff_g_per_k "
-                   "1.543e-5 where the same data in kelvin give 2.778e-5 (ratio 1/1.8), "
-                   "temp_ref_k 77.0; a 'temp [degC]' column gives temp_ref_k 25.0")
 def test_temperature_column_unit_converted_or_refused(tmp_path):
     """The same tumble with its temperature column in K and in °F (header 'temp [F]'): the
     docs convert every header unit by one table and refuse an unknown time unit naming the
