@@ -12,8 +12,10 @@ authors state, removed).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -26,6 +28,55 @@ from align.tilt import calibrated_force, roll_pitch
 from axisbase.covariance import cov_of
 from axisbase.output import csv_text
 from axisbase.provenance import Provenance
+
+
+def not_ok_warning(made: str, what: str, problems: Sequence[str]) -> list[str]:
+    """The one wording of "this calibration was not ok" for ``align apply`` and ``align
+    tilt`` (empty when ``problems`` is)."""
+    if not problems:
+        return []
+    return [f"calibration: {made} NOT OK (" + "; ".join(problems) + f"): {what} not a "
+            "measurement to act on — the outputs are written, exit status 2"]
+
+
+@dataclass(frozen=True)
+class TriadCalibration:
+    """A triad calibration (``align calibrate --json``) as ``align tilt`` uses it: the model
+    and why the calibration was not ok (its own ``ok``/``problems``).
+
+    Attributes
+    ----------
+    model : TriadModel
+        The triad's calibration; unit — (its own fields carry units).
+    not_ok : tuple of str
+        The calibration's ``problems`` (empty: it was ok); ``align tilt`` warns with these and
+        exits 2, as for a platform calibration from a not-ok session; unit —.
+    """
+
+    model: TriadModel
+    not_ok: tuple[str, ...] = ()
+    tilt_frame: ClassVar[str] = "triad"
+
+    def not_ok_warning(self) -> list[str]:
+        """The warning ``align tilt`` gives for a not-ok triad calibration (empty if ok)."""
+        return not_ok_warning("the triad calibration was", "its roll and pitch are",
+                              self.not_ok)
+
+    def specific_force(self, u: np.ndarray, t: np.ndarray | float = 0.0,
+                       temp: np.ndarray | float | None = None) -> np.ndarray:
+        """Specific force in the triad's calibration frame (N, 3) [g] from outputs u (N, 3)."""
+        return self.model.specific_force(u, t, temp)
+
+
+def _triad_problems(d: dict) -> tuple[str, ...]:
+    """Why a calibration document is not ok: its ``problems``; files written before that field
+    existed give their "NOT OK" warnings, failing those all their warnings (or, with none,
+    ``ok: false`` itself)."""
+    if d.get("ok", True) is not False:
+        return ()
+    said = [str(w) for w in d.get("warnings", ())]
+    problems = d.get("problems") or [w for w in said if "NOT OK" in w] or said
+    return tuple(str(p) for p in problems) or ("the file says ok: false",)
 
 
 @dataclass(frozen=True)
@@ -50,14 +101,12 @@ class PlatformCalibration:
     cov: np.ndarray
     not_ok: tuple[str, ...] = ()
 
+    tilt_frame: ClassVar[str] = "platform"
+
     def not_ok_warning(self) -> list[str]:
         """The warning ``align apply``/``tilt`` give for a calibration from a not-ok session
         (empty when it was ok)."""
-        if not self.not_ok:
-            return []
-        return ["calibration: made from a session that was NOT OK (" + "; ".join(self.not_ok)
-                + "): its misalignment is not a measurement to act on — the outputs are "
-                "written, exit status 2"]
+        return not_ok_warning("made from a session that was", "its misalignment is", self.not_ok)
 
     @property
     def axes(self) -> np.ndarray:
@@ -152,6 +201,13 @@ def _output_unit(block: dict) -> str | None:
 def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     """The triad model of a calibration file (``align calibrate --json``, any readable format
     version, or a bare model block) and the output unit it was made from (None if unknown)."""
+    cal, units = load_triad_calibration(path)
+    return cal.model, units
+
+
+def load_triad_calibration(path: str | Path) -> tuple[TriadCalibration, str | None]:
+    """:func:`load_triad_model` with the calibration's not-ok reasons
+    (:class:`TriadCalibration`)."""
     d = read_json(path, "a calibration")
     fmt = d.get("format")
     if _is_session(d):  # a session result: its triad model
@@ -163,22 +219,24 @@ def load_triad_model(path: str | Path) -> tuple[TriadModel, str | None]:
     block = d.get("model", d)
     if not isinstance(block, dict):
         raise InputError(f"{path}: 'model' is not a table")
-    return TriadModel.from_dict(block, str(path)), block.get("output_unit", d.get("output_unit"))
+    return (TriadCalibration(TriadModel.from_dict(block, str(path)), _triad_problems(d)),
+            block.get("output_unit", d.get("output_unit")))
 
 
-def load_tilt_calibration(path: str | Path) -> tuple[TriadModel | PlatformCalibration,
+def load_tilt_calibration(path: str | Path) -> tuple[TriadCalibration | PlatformCalibration,
                                                       str | None]:
     """What ``align tilt --calibration`` reads: a platform calibration or a session result
     holding one -> that ``PlatformCalibration`` (roll and pitch of the platform, its
     misalignment applied, exactly as ``align apply --tilt``); a triad calibration (``align
-    calibrate --json``) -> its ``TriadModel`` (the triad's own frame: no misalignment known).
+    calibrate --json``) -> a ``TriadCalibration`` (the triad's own frame: no misalignment
+    known; not ok when the calibration was not).
     With the output unit of the readings it was made from (None if the file does not say)."""
     d = read_json(path, "a calibration")
     if (_is_session(d) or d.get("format") == "axis-align/platform-calibration"
             or "misalignment_rad" in d):
         block = _block(d, str(path))  # read once: the body is a version-1 calibration
         return PlatformCalibration.from_dict(block, str(path)), _output_unit(block)
-    return load_triad_model(path)
+    return load_triad_calibration(path)
 
 
 @dataclass(frozen=True)

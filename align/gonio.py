@@ -25,6 +25,8 @@ from align.gonio_directions import (
     check_reversed,
     combine_directions,
 )
+from align.gonio_earth import declared_earth_angles
+from align.gonio_latency import apply_direction_model, latency_model
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
 from align.gonio_timing import LATENCY, with_timing
@@ -179,13 +181,19 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                           apply_loop=False, steady_table=steady_table, columns=columns,
                           on_bytes=on_bytes, time_unit=time_unit)
         comb, term = combine_directions(fwd.angles, rev.angles)
+        model = (None if fwd.timing_used or rev.timing_used else
+                 latency_model(fwd.summary, rev.summary, fwd.angles, rev.angles,
+                               latitude_rad is not None))
+        comb, unexplained, fitted = apply_direction_model(model, comb, term.half_difference_rad,
+                                                          term.cov, alpha)
         check_reversed(fwd.angles, rev.angles, term, source_name(path),
-                       source_name(reverse_log), alpha)
+                       source_name(reverse_log), alpha, unexplained)
         notes = [*(n for n in fwd.notes if not n.startswith(LATENCY)),
                  *(f"reverse run: {n}" for n in rev.notes if not n.startswith(LATENCY)),
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
-                 f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled"]
+                 f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled",
+                 *([fitted] if fitted else [])]
         # (both directions: the latency bias cancels, its one-direction warning does not hold;
         # so does the Earth rate's share a log without times cannot remove)
         warns = (*(w for w in fwd.warnings if not w.startswith(ONE_DIRECTION)),
@@ -246,9 +254,10 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
         notes.append(f"lead-in: the first {summary.incomplete_head} rows, from the arming "
                      "pulse to the first complete revolution, are not used")
     if latitude_rad is not None and summary.has_time:
-        rate = vertical_earth_rate(latitude_rad, direction)
-        return with_timing(GonioRun(summary, face_angles(summary, rate), None, tuple(notes),
-                                     rate), steady_table, alpha)
+        fa, rate, why = declared_earth_angles(summary, latitude_rad, direction, alpha,
+                                              LOOP_REVOLUTIONS)
+        return with_timing(GonioRun(summary, fa, None, tuple(notes), rate,
+                                     warnings=(why,) if why else ()), steady_table, alpha)
     if latitude_rad is not None:
         why = ("latitude given, but the log has no t column: the Earth-rate correction needs "
                "pulse times; NOT applied (nor can a table speed that follows its angle be "

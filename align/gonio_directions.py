@@ -77,11 +77,15 @@ arc-minutes)."""
 
 
 def check_reversed(fwd: FaceAngles, rev: FaceAngles, term: DirectionTerm, path,
-                   reverse_log, alpha: float) -> None:
-    """Refuse a reverse log that is not the forward run's faces turning the other way (its
-    direction-dependent part far beyond what a reversal leaves: see
-    ``DIRECTION_LIMIT_ARCSEC``), saying whether it matches the forward run unreversed."""
-    worst = float(np.max(np.abs(term.half_difference_rad))) / ARCSEC
+                   reverse_log, alpha: float, unexplained: np.ndarray | None = None) -> None:
+    """Refuse a reverse log that is not the forward run's faces turning the other way, saying
+    whether it matches the forward run unreversed. Judged on ``unexplained``: the half
+    difference [rad] less what the autocollimator's latency times each run's measured speed
+    profile (and an Earth rate not removed) leaves (:mod:`align.gonio_latency`; the whole
+    half difference when not given) — beyond ``DIRECTION_LIMIT_ARCSEC``, what else a
+    reversal leaves, and significant."""
+    left = term.half_difference_rad if unexplained is None else unexplained
+    worst = float(np.max(np.abs(left))) / ARCSEC
     if worst <= DIRECTION_LIMIT_ARCSEC or term.p_value >= alpha:
         return
     same = float(np.max(np.abs(fwd.angles_rad - rev.angles_rad))) / ARCSEC
@@ -90,8 +94,9 @@ def check_reversed(fwd: FaceAngles, rev: FaceAngles, term: DirectionTerm, path,
            "nor do they match it unreversed (another table, or other faces)")
     raise InputError(
         f"--reverse-log {reverse_log}: reversed, its face angles differ from {path}'s by up to "
-        f"{2 * worst:.3g}″ (direction-dependent part {worst:.3g}″, beyond the "
-        f"{DIRECTION_LIMIT_ARCSEC:g}″ a latency or a slit tilt leaves) — it is not a run in "
+        f"{2 * float(np.max(np.abs(term.half_difference_rad))) / ARCSEC:.3g}″ (direction-"
+        f"dependent part {worst:.3g}″ beyond what the latency times the speeds explains, more "
+        f"than the {DIRECTION_LIMIT_ARCSEC:g}″ a slit tilt leaves) — it is not a run in "
         f"the other direction; {why}. Measure each log alone, or give a log of the table "
         "turning the other way")
 

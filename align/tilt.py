@@ -115,6 +115,11 @@ class TiltOfReadings:
                         exact=("t",))
 
 
+SCALE_GAP_K = 100.0
+"""Readings this far from the calibration's reference temperature [K] are on another scale
+(°C against K: 273 K apart), not at another temperature a triad is used in."""
+
+
 def model_time_warnings(model, t, temp) -> list[str]:
     """What a reader of readings without times (or temperatures) must know when the model
     has a drift (or a temperature term): it is taken at the model's reference value."""
@@ -126,20 +131,27 @@ def model_time_warnings(model, t, temp) -> list[str]:
     if temp is None and np.any(model.temp_coeff != 0):
         out.append("the readings have no temperature but the calibration models one: "
                    f"taken at its reference {model.temp_ref:g} (give a temp column)")
+    temp_model = np.any(model.temp_coeff != 0) or np.any(model.scale_temp != 0)
+    if temp is not None and temp_model and np.nanmax(np.abs(temp - model.temp_ref)) > SCALE_GAP_K:
+        out.append(f"the readings' temperatures ({np.nanmin(temp):g} to {np.nanmax(temp):g}) lie "
+                   f"more than {SCALE_GAP_K:g} K from the calibration's reference "
+                   f"{model.temp_ref:g} K: one file in °C, the other in K? say the unit in both "
+                   "headers (temp [K] or temp [degC])")
     return out
 
 
 def calibrated_force(cal, tab) -> tuple[np.ndarray | None, np.ndarray, list[str]]:
     """The one path from readings to specific force, shared by ``align tilt`` and ``align
     apply``: times (None when ``tab`` has none), the specific force (N, 3) [g] of readings
-    ``tab`` (ux, uy, uz[, t][, temp]) through ``cal`` — a ``TriadModel`` (the triad's own
-    calibration frame) or a ``PlatformCalibration`` (the platform frame: its misalignment
+    ``tab`` (ux, uy, uz[, t][, temp]) through ``cal`` — a ``TriadModel`` or
+    ``TriadCalibration`` (the triad's own calibration frame; a not-ok one warned) or a
+    ``PlatformCalibration`` (the platform frame: its misalignment
     applied) — and the warnings of :func:`model_time_warnings`."""
     model = getattr(cal, "model", cal)
     u = np.column_stack([tab["ux"], tab["uy"], tab["uz"]])
     t, temp = tab.get("t"), tab.get("temp")
     warnings = model_time_warnings(model, t, temp)
-    if hasattr(cal, "not_ok_warning"):  # a PlatformCalibration: from a not-ok session?
+    if hasattr(cal, "not_ok_warning"):  # a calibration file: was it (or its session) ok?
         warnings = cal.not_ok_warning() + warnings
     a = cal.specific_force(u, model.t_ref if t is None else t, temp)
     return t, a, warnings
@@ -176,7 +188,8 @@ def read_readings_noted(path: str | Path, columns=None, rate_hz: float | None = 
 def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001,
                      read_warnings: Sequence[str] = ()) -> TiltOfReadings:
     """Roll and pitch of readings ``tab`` (a table with ux, uy, uz[, t][, temp]) through
-    ``model``: a triad model (``TriadModel``: roll and pitch of its own calibration frame) or a
+    ``model``: a triad model (``TriadModel`` or ``TriadCalibration``: roll and pitch of its own
+    calibration frame) or a
     platform calibration (``PlatformCalibration``: the platform's roll and pitch, as ``align
     apply --tilt`` gives them, through :func:`calibrated_force`). Readings without times get
     none; if the model drifts, its drift is taken at the reference time and a warning says so
@@ -185,7 +198,7 @@ def tilt_of_readings(model, tab, method: str = "exact", mu: float = 0.001,
     (:func:`read_readings_noted`), first among the result's warnings."""
     t, a, warnings = calibrated_force(model, tab)
     warnings = [*read_warnings, *warnings]
-    frame = "platform" if hasattr(model, "model") else "triad"
+    frame = getattr(model, "tilt_frame", "triad")
     roll, pitch = roll_pitch(a, method=method, mu=mu)
     res = TiltOfReadings(t, a, roll, pitch, method, mu, frame=frame)
     far = res.far_from_1g

@@ -50,7 +50,13 @@ from axisbase.header import (
 from axisbase.repeats import check_repeats
 from axisbase.tabledata import Table
 from axisbase.tablespec import KINDS, Column, TableSpec
-from axisbase.units import TIME_UNITS, time_scale, value_unit
+from axisbase.units import (
+    DECLARED_TEMPERATURE_UNITS,
+    TIME_UNITS,
+    temperature_kelvin,
+    time_scale,
+    value_unit,
+)
 
 __all__ = ["KINDS", "MAX_MAGNITUDE", "Column", "Table", "TableSpec", "iter_rows", "iter_table",
            "rate_warning", "read_table"]
@@ -162,23 +168,31 @@ def _table(path: Path, spec: TableSpec, h: Header, columns: Mapping[str, pa.Arra
 def _in_own_units(path: Path, spec: TableSpec, h: Header, data: dict[str, np.ndarray]
                   ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """The columns whose header declares a unit (``t [ms]``, ``ux [mg]``) converted to the
-    tool's own (seconds; g, m/s², V, counts) by the one table in :mod:`axisbase.units`; the
-    units as they now are. A time in a unit that is not one is refused by name."""
+    tool's own (seconds; g, m/s², V, counts; kelvin for the temperature) by the one table in
+    :mod:`axisbase.units`; the units as they now are. A time or a temperature in a unit that
+    is not one is refused by name."""
     units = dict(h.units)
+    where = f"{path}:{h.header_line}" if h.header_line else f"{path}"
     for n, u in h.units.items():
         if n not in data or data[n].dtype.kind != "f" or not u.strip():
+            continue
+        if n == spec.temperature:
+            kelvin = temperature_kelvin(u)
+            if kelvin is None:
+                raise InputError(f"{where}: {n}: temperature unit {u!r} not known; use one of "
+                                 f"{', '.join(DECLARED_TEMPERATURE_UNITS)}")
+            data[n], units[n] = data[n] * kelvin[0] + kelvin[1], "K"
             continue
         if n == spec.time:
             scale = time_scale(u)
             if scale is None:
-                where = f"{path}:{h.header_line}" if h.header_line else f"{path}"
                 raise InputError(f"{where}: {n}: time unit {u!r} not known; "
                                  f"use one of s, ms, us, ns, min, h")
             unit = "s"
         else:
             vu = value_unit(u)
             if vu is None:
-                continue  # temperature [°C] and the like: carried, not converted
+                continue  # a column of no known quantity: carried, not converted
             unit, scale = vu
         if scale != 1.0:
             data[n] = data[n] * scale

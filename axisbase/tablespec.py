@@ -47,6 +47,9 @@ class TableSpec:
         rows twice (see :func:`axisbase.repeats.check_repeats`).
     rate_hz_range : tuple of float, or None
         Plausible sample rates of the sensor [Hz] (see :func:`rate_warning`).
+    temperature : str or None
+        The temperature column: a unit in its header (``temp [degC]``) is converted to kelvin,
+        an unknown one refused naming the column.
     """
 
     what: str
@@ -56,6 +59,7 @@ class TableSpec:
     rate_hz_range: tuple[float, float] | None = None
     """Plausible sample rates of the sensor [Hz]: a median interval outside is a warning
     naming the likely time unit (see :func:`rate_warning`)."""
+    temperature: str | None = None
 
     def column(self, name: str) -> Column:
         return next(c for c in self.columns if c.name == name)

@@ -26,6 +26,16 @@ DECLARED_TIME_UNITS = ("s", "ms", "us", "ns", "min", "h")
 """The time units a user declares for a header that says none (``--time-unit``, the
 session's ``time_unit``)."""
 
+TEMPERATURE_UNITS = {
+    **dict.fromkeys(("k", "kelvin"), (1.0, 0.0)),
+    **dict.fromkeys(("degc", "°c", "℃", "c", "celsius", "deg_c"), (1.0, 273.15)),
+    # °F: T [K] = (F + 459.67) · 5/9
+    **dict.fromkeys(("degf", "°f", "℉", "f", "fahrenheit", "deg_f"), (5 / 9, 459.67 * 5 / 9))}
+"""A temperature unit -> (kelvin per degree, offset [K]): T [K] = scale · value + offset."""
+
+DECLARED_TEMPERATURE_UNITS = ("K", "degC", "degF")
+"""The temperature units named in messages (each with its spellings in the table above)."""
+
 VALUE_UNITS = {"g": ("g", 1.0), "mg": ("g", 1e-3), "ug": ("g", MICRO_G), "µg": ("g", MICRO_G),
                "μg": ("g", MICRO_G),
                "m/s2": ("m/s2", 1.0), "m/s^2": ("m/s2", 1.0), "m/s²": ("m/s2", 1.0),
@@ -45,6 +55,12 @@ def unit_key(text: str) -> str:
 def time_scale(text: str) -> float | None:
     """Seconds per ``text`` (a time unit), None if it is not one."""
     return TIME_UNITS.get(unit_key(text))
+
+
+def temperature_kelvin(text: str) -> tuple[float, float] | None:
+    """``text`` (a temperature unit) as (kelvin per degree, offset [K]), None if it is not
+    one: T [K] = scale · value + offset."""
+    return TEMPERATURE_UNITS.get(unit_key(text))
 
 
 def value_unit(text: str) -> tuple[str, float] | None:

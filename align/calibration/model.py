@@ -452,6 +452,10 @@ EFFECT_PRIOR_G = 3e-3
 this [g] at 1 g over the poses' time and temperature spans (real triads: scale drift below
 1e-3 over a run, hysteresis below 1 mg; a phone-like recording with 2 mg noise took a 0.9 %
 scale drift at 1e-2) ..."""
+SCALE_TEMPCO_PRIOR_PER_K = 1e-3
+"""... nor a scale factor's temperature coefficient exceed this [1/K] (so its reach is this
+times the poses' temperature span [g at 1 g]): a tempco, not a reach, is what a sensor has
+(QA-2000 < 180 ppm/°C, ADXL355 ±100, BMI160 ±300 ppm/K: 3e-3 over 10 K, real) ..."""
 ATTITUDE_PRIOR_G = 1e-2
 """... nor K2, K3 or a cross-axis product more than this [g] at 1 g (a phone's K2 reaches
 3e-3) ..."""
@@ -474,11 +478,15 @@ MAX_CONDITION = 1e7
 separate the effect from the model."""
 
 
-def prior_bound(name: str, declared: dict[str, float] | None = None) -> float:
+def prior_bound(name: str, declared: dict[str, float] | None = None,
+                temp_span_k: float = 1.0) -> float:
     """The physical bound on an effect's reach at 1 g [g] (the asymmetry's: [1]), or the
-    user's ``declared`` one (K2, K3: :mod:`align.calibration.nonlinearity`)."""
+    user's ``declared`` one (K2, K3: :mod:`align.calibration.nonlinearity`); the scale
+    factor's tempco's over the poses' temperature span ``temp_span_k`` [K]."""
     if declared and name in declared:
         return declared[name]
+    if name == SCALE_TEMP:
+        return SCALE_TEMPCO_PRIOR_PER_K * temp_span_k
     return (ATTITUDE_PRIOR_G if name in (NONLIN, *CROSS) else K3_PRIOR_G if name == K3
             else ASYMMETRY_PRIOR if name == ASYMMETRY else EFFECT_PRIOR_G)
 
@@ -504,7 +512,7 @@ def admissible(stage: CalibrationStage, overfit: bool = True
             size = float(np.max(np.abs(np.expm1(-(stage.poses.t - mt.t_ref)
                                                  / mt.warmup_tau_s))))
         reach = float(np.max(np.abs(vals))) * size
-        bound = prior_bound(term.name, stage.bounds)
+        bound = prior_bound(term.name, stage.bounds, _spans(stage.poses)[1])
         if term.name in stage.bounds:
             # A datasheet's bound may hold the truth at its edge: refused only when the
             # estimate lies beyond it by more than DECLARED_Z of its own u.

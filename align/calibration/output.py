@@ -53,6 +53,6 @@ def calibration_document(cal: Calibration, poses: Poses, units: str,
     elif check is not None:
         js["check"] = [{"pose": lab, "dg_g": float(d)} for lab, d in
                        zip(check.labels, delta_g(cal.model, check), strict=True)]
-    ok = cal.ok and (checked is None or checked.ok)
-    body = {"ok": ok, "warnings": list(warnings), **js}
+    problems = [*cal.problems, *(() if checked is None else checked.warnings)]
+    body = {"ok": not problems, "problems": problems, "warnings": list(warnings), **js}
     return document("calibration", body, settings, inputs)

@@ -57,10 +57,11 @@ _TEMP = Column("temp", required=False, aliases=("temperature", "temp_c", "temper
 _U = tuple(Column(f"u{ax}", aliases=_AXES[ax]) for ax in "xyz")
 STATIC = TableSpec("static-pose file", (
     Column("pose", "label", required=False, aliases=("pose_id", "position", "label")),
-    *_U, _T, _TEMP), time="t", distinct_rows=True, rate_hz_range=ACCELEROMETER_RATES_HZ)
+    *_U, _T, _TEMP), time="t", distinct_rows=True, rate_hz_range=ACCELEROMETER_RATES_HZ,
+    temperature="temp")
 """``pose,ux,uy,uz[,t][,temp]`` (samples or per-pose means) or ``t,ux,uy,uz[,temp]``."""
 READINGS = TableSpec("readings file", (*_U, _T, _TEMP), time="t", distinct_rows=True,
-                     rate_hz_range=ACCELEROMETER_RATES_HZ)
+                     rate_hz_range=ACCELEROMETER_RATES_HZ, temperature="temp")
 """``ux,uy,uz[,t][,temp]``: readings to correct (``align apply``, ``align tilt``)."""
 
 

@@ -64,6 +64,15 @@ STRUCTURE = "unexplained_structure"
 AMBIGUITY = "effect_ambiguity"
 
 
+NO_EFFECT = "the declared model (no effect added)"
+
+
+def effect_set(effects: str) -> str:
+    """A set of effects as a message names it: ``effects`` (joined by " + "), or
+    :data:`NO_EFFECT` when the set is empty (the loop added none)."""
+    return effects or NO_EFFECT
+
+
 @dataclass(frozen=True)
 class Widening:
     """How the calibration's u was widened.
@@ -121,7 +130,8 @@ class Widening:
         if not f[j] > USEFUL_FACTOR:
             return None
         alt = max(alts, key=lambda a: abs(a.shift[j]))
-        return (f"calibration NOT OK: {' + '.join(chosen)} and {alt.effects} cannot be told "
+        return (f"calibration NOT OK: {effect_set(' + '.join(chosen))} and "
+                f"{effect_set(alt.effects)} cannot be told "
                 f"apart on this pose order (u of {self.names[j]} widened x{f[j]:.3g} to cover "
                 f"both, > {USEFUL_FACTOR:g}x its noise u; the JSON keeps the widened u): "
                 f"measure with `align calibrate --plan {plan_n}`")

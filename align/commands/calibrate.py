@@ -123,7 +123,7 @@ def cmd_tilt(args: argparse.Namespace) -> int:
     say(tilt_lines(res, args.method))
     warn(res.warnings)
     _write_tilt(args, res, out_json, out_csv, inputs)
-    return 2 if getattr(model, "not_ok", ()) else 0
+    return 2 if model.not_ok else 0
 
 
 def _write_tilt(args: argparse.Namespace, res, out_json, out_csv, inputs: list[str]) -> None:

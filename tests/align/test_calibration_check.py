@@ -111,3 +111,37 @@ def test_cli_check_header_unit_must_match_the_static_file(tmp_path, capsys):
     # declared the same: accepted
     assert main(["calibrate", str(tmp_path / "tum.csv"), "--check", str(tmp_path / "chk.csv"),
                  "--units", "g"]) == 0
+
+
+def test_tilt_through_a_not_ok_calibration_warns_and_exits_2(tmp_path, capsys):
+    """A triad calibration whose check poses disagree (``ok: false``, its ``problems``) used by
+    ``align tilt``: outputs written, a WARNING naming the problem on the terminal and in the
+    JSON, exit 2; the same calibration with agreeing check poses: exit 0, nothing said. Files
+    written before ``problems`` existed give their NOT OK warnings."""
+    rng, S, k, o = _triad(5)
+    pid, u = _samples(rng, S, k, o, _dirs(rng, 18))
+    _write(tmp_path / "tum.csv", (pid, u, [f"T{i}" for i in range(18)]))
+    cid, cu = _samples(rng, S, k, o, _dirs(rng, 6))
+    _write(tmp_path / "ok.csv", (cid, cu, [f"C{i}" for i in range(6)]))
+    _write(tmp_path / "mv.csv", (cid, 1000 * cu, [f"C{i}" for i in range(6)]))
+    rd = tmp_path / "r.csv"
+    rd.write_text("ux,uy,uz\n" + "\n".join(",".join(f"{v:.9f}" for v in r) for r in cu) + "\n")
+    said = {}
+    for name in ("ok", "mv"):
+        cal, js = tmp_path / f"{name}.json", tmp_path / f"t{name}.json"
+        main(["calibrate", str(tmp_path / "tum.csv"), "--check", str(tmp_path / f"{name}.csv"),
+              "--json", str(cal)])
+        capsys.readouterr()
+        rc = main(["tilt", str(rd), "--calibration", str(cal), "--json", str(js)])
+        said[name] = (rc, capsys.readouterr().err, json.loads(js.read_text())["warnings"],
+                      json.loads(cal.read_text()))
+    assert said["ok"][0] == 0 and "NOT OK" not in said["ok"][1] and said["ok"][2] == []
+    assert said["ok"][3]["ok"] and said["ok"][3]["problems"] == []
+    rc, err, warned, d = said["mv"]
+    assert d["ok"] is False and "check poses disagree" in d["problems"][0]
+    assert rc == 2 and "WARNING: calibration: the triad calibration was NOT OK" in err
+    assert "check poses disagree" in err and any("NOT OK" in w for w in warned)
+    del d["problems"]  # a file written before the key: its NOT OK warnings name the reason
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    assert main(["tilt", str(rd), "--calibration", str(tmp_path / "old.json")]) == 2
+    assert "check poses disagree" in capsys.readouterr().err

@@ -135,3 +135,52 @@ def test_false_effects_on_clean_data_sweep():
     plan_r = sweep("clean", range(200, 300), up=PLAN)
     paper_r = sweep("clean", range(200, 300))
     assert plan_r["any_effect"] <= 0.03 and paper_r["any_effect"] <= 0.03
+
+
+def _tempco_poses(tempco: float, seed: int = 0):
+    """The 28-pose plan, 40 samples a pose, an orthogonal triad whose scale factors follow
+    the temperature by ``tempco`` [1/K] (x, -0.7 on y, 0.8 on z) through a ±5 K room cycle
+    logged with the poses; returns (poses, k [V/g], T0 [K], tempco per axis)."""
+    from dataclasses import replace
+
+    from align.calibration import poses_from_samples
+
+    rng = np.random.default_rng(seed)
+    k, o = np.array([2.0, -1.5, 1.8]), np.array([2e-3, -1e-3, 3e-3])
+    c = tempco * np.array([1.0, -0.7, 0.8])
+    n, t0 = len(PLAN), 298.0
+    temp = t0 + 5.0 * np.sin(2 * np.pi * (np.arange(n) + 0.5) / n)
+    pid = np.repeat(np.arange(n), 40)
+    gain = k * (1 + c * (temp - t0)[:, None])                       # (n, 3)
+    u = (PLAN * gain + o)[pid] + rng.normal(0, 2e-5, (len(pid), 3))
+    p = poses_from_samples(pid, u, pid * 10.0)
+    return replace(p, temp=temp), k, t0, c
+
+
+@pytest.mark.parametrize(("tempco", "fitted"), [(0.0, False), (300e-6, True), (500e-6, True),
+                                                (3e-3, False)])
+def test_scale_tempco_prior_is_a_tempco_bound(tempco, fitted):
+    """The scale factor's temperature term is bounded by a tempco (SCALE_TEMPCO_PRIOR_PER_K,
+    1000 ppm/K, times the poses' temperature span), not a fixed reach: the BMI160's 300 ppm/K
+    and 500 ppm/K over 10 K (3e-3 and 5e-3 at 1 g; the old fixed 3e-3 g refused the latter)
+    are fitted, k within 4 u of the truth at the reference temperature; 3000 ppm/K (3 x the
+    bound) is refused as outside the physical prior; clean data (the control) get no
+    effect."""
+    from align.calibration.model import SCALE_TEMP, SCALE_TEMPCO_PRIOR_PER_K, prior_bound
+
+    assert prior_bound(SCALE_TEMP, None, 10.0) == pytest.approx(10 * SCALE_TEMPCO_PRIOR_PER_K)
+    p, k, t0, c = _tempco_poses(tempco)
+    cal = calibrate(p, np.sign(k))
+    m = cal.model
+    names = [e.name for e in cal.loop.effects]
+    assert (SCALE_TEMP in names) is fitted, (names, [r.to_dict() for r in
+                                                     cal.loop.refused])
+    if tempco == 0.0:
+        assert names == [] and cal.ok
+    elif fitted:
+        z = (m.sensitivity() - k * (1 + c * (m.temp_ref - t0))) / m.sensitivity_u()
+        assert cal.ok and np.all(np.abs(z) < 4), z
+    else:
+        why = [r.to_dict() for r in cal.loop.refused]
+        assert any("outside the physical prior" in str(r) and SCALE_TEMP in str(r)
+                   for r in why), why

@@ -188,3 +188,28 @@ def test_paper_poses_leave_no_confident_number_sweep(name):
     probability 1 %; RMS <= 1.25 (u not understated on the whole)."""
     r = sweep(name, range(20))
     assert r["max"] <= 4.0 and r["rms"] <= 1.25, r
+
+
+@pytest.mark.parametrize(("chosen", "alt"), [((), "nonlinearity_k3"),
+                                             (("bias_drift",), ""),
+                                             (("bias_drift",), "hysteresis")])
+def test_not_ok_message_names_both_sets_even_an_empty_one(chosen, alt):
+    """An alternative that moves k_x by 100 x its noise u makes the result not ok; the message
+    names both sets, the empty one (the loop added no effect) as the declared model — never a
+    blank. Control: an alternative within the noise says nothing."""
+    from align.calibration.widen import NO_EFFECT, Alternative, Widening
+
+    names = tuple(f"p{i}" for i in range(12))
+
+    def widening(shift0):
+        shift = np.zeros(9)
+        shift[0] = shift0
+        a = Alternative(alt, "", 1.0, float("nan"), shift, np.zeros((9, 9)))
+        return Widening((), names, np.ones(12), (), np.ones(12), (a,))
+
+    why = widening(100.0).undetermined(chosen, 28, "wander")
+    assert why is not None and ":  and" not in why and " and  cannot" not in why
+    first, second = why.removeprefix("calibration NOT OK: ").split(" cannot be told apart")[0] \
+        .split(" and ", 1)
+    assert first == (" + ".join(chosen) or NO_EFFECT) and second == (alt or NO_EFFECT)
+    assert widening(0.5).undetermined(chosen, 28, "wander") is None

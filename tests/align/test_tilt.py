@@ -148,3 +148,57 @@ def test_what_the_reader_said_of_the_file_reaches_the_json(tmp_path, caplog):
     assert len(said["t"]) == 1 and "were the times in ms?" in said["t"][0]
     assert said["t [ms]"] == []
     assert not [r for r in caplog.records if "were the times" in r.getMessage()]  # said once
+
+
+def test_triad_frame_is_z_along_accelerometer_z_y_in_the_z_y_plane():
+    """docs/commands/tilt.md: through a triad calibration, roll and pitch are those of the
+    frame of R(β) (eq. 5, upper triangular): z along accelerometer z, y in the plane of
+    accelerometers z and y. A triad built in such a lab frame (x tilted 1 mrad toward y and
+    0.8 mrad out of the x-y plane, y 0.6 mrad toward -z), calibrated from 18 noisy poses: tilt
+    of exact readings is the lab's within 5 x the calibration's bound (roll and pitch move at
+    most 1 rad per unit of each of the nine parameters' normalised errors); the frame with x
+    along accelerometer x is ~1 mrad away (the contrast: the test can fail)."""
+    from align.calibration import calibrate, poses_from_samples
+    from align.tilt import tilt_of_readings
+    from axisbase.table import Table
+
+    rng = np.random.default_rng(11)
+    S = np.array([[1.0, 1e-3, 8e-4], [0.0, 1.0, -6e-4], [0.0, 0.0, 1.0]])
+    S /= np.linalg.norm(S, axis=1, keepdims=True)
+    k, o = np.array([2.0, -1.5, 1.8]), np.array([2e-3, -1e-3, 3e-3])
+    d = rng.normal(size=(18, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    pid = np.repeat(np.arange(18), 40)
+    u = ((d @ S.T) * k + o)[pid] + rng.normal(0, 2e-5, (len(pid), 3))
+    cal = calibrate(poses_from_samples(pid, u, pid * 3.0), signs=(1, -1, 1))
+    roll, pitch = rng.uniform(-0.6, 0.6, (2, 30))
+    g = gravity_from_angles(roll, pitch)                      # in the lab frame
+    ur = (g @ S.T) * k + o
+    res = tilt_of_readings(cal.model, Table(None, None, {"ux": ur[:, 0], "uy": ur[:, 1],
+                                                         "uz": ur[:, 2]}, 2))
+    m = cal.model
+    bound = np.sqrt(np.sum(m.u_per_axis("bias") ** 2) + np.sum(m.u_per_axis("beta") ** 2)
+                    + np.sum((m.sensitivity_u() / np.abs(m.sensitivity())) ** 2))
+    err = max(np.abs(res.roll - roll).max(), np.abs(res.pitch - pitch).max())
+    assert err < 5 * bound, (err, bound)
+    # x along accelerometer x, y in the x-y plane: Gram-Schmidt from s_x, s_y
+    ex = S[0]
+    ey = S[1] - (S[1] @ ex) * ex
+    ey /= np.linalg.norm(ey)
+    fx = np.array([ex, ey, np.cross(ex, ey)])
+    rx, px = roll_pitch(g @ fx.T)
+    assert max(np.abs(res.roll - rx).max(), np.abs(res.pitch - px).max()) > 5e-4
+
+
+@pytest.mark.parametrize(("temp", "warned"), [(25.0, True), (300.0, False), (330.0, False)])
+def test_readings_on_another_temperature_scale_than_the_calibration_are_warned(temp, warned):
+    """A calibration with a temperature model referred to 298.15 K: readings at 25 (°C written
+    as a plain number) are said to be on another scale; at 300 K or 330 K nothing is said."""
+    from align.tilt import tilt_of_readings
+    from axisbase.table import Table
+
+    m = _model(temp_coeff=np.array([3e-5, 0, 0]), temp_ref=298.15)
+    tab = _readings(m, gravity_from_angles(np.zeros(5), np.zeros(5)))
+    tab = Table(None, None, {**tab.data, "temp": np.full(5, temp)}, 2)
+    said = [w for w in tilt_of_readings(m, tab).warnings if "another" in w or "°C" in w]
+    assert bool(said) is warned, said

@@ -475,3 +475,33 @@ def test_real_mpu6050_csv_with_four_meta_lines_reads_directly(caplog):
     assert len(tab) == len(lines) - 5
     assert list(tab["ux"][:3]) == [float(v.split(",")[0]) for v in lines[5:8]]
     assert "4 line(s) before the header at line 5 skipped" in caplog.text
+
+
+# ------------------------------------------------------------- temperature column's unit
+
+@pytest.mark.parametrize(("unit", "to_unit"), [
+    ("K", lambda k: k), ("kelvin", lambda k: k), ("degC", lambda k: k - 273.15),
+    ("°C", lambda k: k - 273.15), ("C", lambda k: k - 273.15),
+    ("F", lambda k: (k - 273.15) * 1.8 + 32), ("°F", lambda k: (k - 273.15) * 1.8 + 32),
+    ("degF", lambda k: (k - 273.15) * 1.8 + 32)])
+def test_temperature_header_unit_is_converted_to_kelvin(tmp_path, unit, to_unit):
+    """The same temperatures (290-300 K) written in K, °C or °F read back in kelvin (to the
+    rounding of the written digits); a plain ``temp`` column is carried as written."""
+    kelvin = np.linspace(290.0, 300.0, 12)
+    rows = "".join(f"p{i},1,2,3,{to_unit(k):.6f}\n" for i, k in enumerate(kelvin))
+    f = tmp_path / "s.csv"
+    f.write_text(f"pose,ux,uy,uz,temp [{unit}]\n" + rows)
+    tab = read_table(f, STATIC)
+    assert np.allclose(tab["temp"], kelvin, atol=2e-6) and tab.units["temp"] == "K"
+    f.write_text("pose,ux,uy,uz,temp\n" + rows)
+    assert np.allclose(read_table(f, STATIC)["temp"], [to_unit(k) for k in kelvin], atol=1e-6)
+
+
+def test_temperature_in_an_unknown_unit_is_refused_naming_file_column_and_unit(tmp_path):
+    f = tmp_path / "s.csv"
+    f.write_text("pose,ux,uy,uz,temp [Ra]\np0,1,2,3,540\n")
+    with pytest.raises(InputError) as e:
+        read_table(f, STATIC)
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith(f"{f}:1: temp: temperature unit 'Ra' not known")
+    assert "K, degC, degF" in msg
