@@ -61,6 +61,16 @@ def earth_rate_range(latitude_range_rad: tuple[float, float] | None,
 
 
 EARTH_BOUND = "earth_rate (latitude not given: bound over {})"
+UNTIMED_EARTH = (
+    "the Earth rate's share in the angles (Omega_E·sin(latitude), up to 15.04°/h, times each "
+    "face pulse's lead or lag against a steady table) can be neither removed nor bounded "
+    "without pulse times and is NOT in u: on a table whose speed varies within a revolution "
+    "the angles may be off by more than u; log the times (t column), or give --steady-table "
+    "if the table turns at constant speed")
+ONE_DIRECTION = (LATENCY, f"no t column: {UNTIMED_EARTH}")
+"""How the warnings begin that only one direction's run gives (the other cancels them)."""
+UNTIMED_EARTH_STEADY = ("the angles assume the steady table asserted (--steady-table), on "
+                        "which the Earth rate cancels in each revolution's fractions")
 
 
 def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | None = None,
@@ -184,9 +194,11 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled",
                  *([fitted] if fitted else [])]
-        # (both directions: the latency bias cancels, its one-direction warning does not hold)
-        warns = (*(w for w in fwd.warnings if not w.startswith(LATENCY)),
-                 *(f"reverse run: {w}" for w in rev.warnings if not w.startswith(LATENCY)))
+        # (both directions: the latency bias cancels, its one-direction warning does not hold;
+        # so does the Earth rate's share a log without times cannot remove)
+        warns = (*(w for w in fwd.warnings if not w.startswith(ONE_DIRECTION)),
+                 *(f"reverse run: {w}" for w in rev.warnings
+                   if not w.startswith(ONE_DIRECTION)))
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
@@ -255,11 +267,19 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
         return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None,
                                      warnings=(why,)), steady_table, alpha)
     if not summary.has_time:
-        notes.append("no t column: the Earth rate on an unsteady table can be neither removed "
-                     "nor bounded without pulse times; the angles assume a steady table")
         fa = face_angles(summary)
-        return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None),
-                            steady_table, alpha)
+        if steady_table:
+            # The user asserts a constant speed: the Earth rate then adds to every interval in
+            # proportion to its angle and cancels in the fractions of the revolution.
+            notes.append(f"no t column: {UNTIMED_EARTH_STEADY}")
+            return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)),
+                                        None), steady_table, alpha)
+        # Not a note: a term that can be neither removed nor bounded is not in u, so the
+        # angles cannot be fully trusted (at 0.1 rev/s with a 15 % ripple it is ~4″, 30 u).
+        why = f"no t column: {UNTIMED_EARTH}"
+        notes.append(why)
+        return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None,
+                                    warnings=(why,)), steady_table, alpha)
     # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
     # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time), started by
     # the pass as soon as it had them.

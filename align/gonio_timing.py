@@ -18,6 +18,7 @@ from goniometry.timing import timing_angles
 
 if TYPE_CHECKING:
     from align.gonio_run import GonioRun
+    from goniometry.timing import TimingAngles
 
 
 LATENCY = "one direction only, on a table whose speed varies with its angle"
@@ -45,6 +46,21 @@ def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
     return np.roll(at_face, -1) - at_face
 
 
+def count_floors_explain(counts: np.ndarray, ta: TimingAngles) -> bool:
+    """Whether the counts' own floors explain how the pulse-time and count fractions differ:
+    a locked ring laser (a whole number of counts a revolution) floors each interval at the
+    same phase every revolution, so its fractions barely scatter (below half the dithered
+    q/√6) and keep an error of up to one count q for good, which no average removes. A
+    difference within q (+ 3 u of the timing) is then no sign of a speed that varies with
+    the angle (and a ripple that small, ~1e-5 of the speed, moves an angle by ~1e-8 rad per
+    100 µs of latency); beyond it, or with dithered counts, the χ² decides."""
+    n_rev = counts.sum(1)
+    q = 2 * np.pi / float(n_rev.mean())  # one count [rad]
+    a_c = 2 * np.pi * counts / n_rev[:, None]
+    locked = bool(np.all(a_c.std(0) < 0.5 * q / np.sqrt(6)))
+    return locked and bool(np.all(np.abs(ta.diff_rad) <= q + 3 * ta.diff_u_rad))
+
+
 def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
     """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
     from the count fractions): then any latency of the autocollimator biases one direction's
@@ -57,7 +73,7 @@ def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
     if ok.sum() < 16:
         return run
     ta = run.timing if run.timing is not None else timing_angles(run.summary)
-    if ta.p_value >= alpha or ta.stamp_limited:
+    if ta.p_value >= alpha or ta.stamp_limited or count_floors_explain(counts[ok], ta):
         return run
     per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
     arcsec = np.rad2deg(1) * 3600

@@ -11,30 +11,56 @@ from __future__ import annotations
 import numpy as np
 
 # A row's interval is a drop-out when its duration exceeds this many times what its counts
-# take at the log's speed (seconds per count, the chunk's median): the counts of the lost
-# rows are lost with them, so the row after a gap of k rows holds one face interval's counts
-# and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse has both doubled
-# (ratio 1) and a glint both split; a table whose speed changed by a third within one face
-# interval is no table a goniometer runs on.
+# take at the table's local speed (seconds per count of the rows around it): the
+# counts of the lost rows are lost with them, so the row after a gap of k rows holds one face
+# interval's counts and k + 1 intervals' time (ratio ~k + 1). A missing autocollimator pulse
+# has both doubled (ratio 1) and a glint both split; a table whose speed changed by a third
+# within one face interval is no table a goniometer runs on. A table that slows (coasts) or
+# speeds up over the log lengthens its intervals' time AND counts together: the seconds per
+# count change only as slowly as the speed, which the neighbours follow.
 DROPOUT_RATIO = 1.5
+
+
+def local_seconds_per_count(ratio: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The table's local seconds per count [s] at ``rows`` (indexes into ``ratio``, each row's
+    duration / counts): the mean of the four neighbours' ratios (two rows each side, the ends
+    mirrored) without the largest and the smallest. A drop-out row is one outlier among
+    them (two drop-outs within two rows: the largest is dropped); a coasting table changes
+    its speed by a few per cent over them. Rows without a finite ratio (the first row's
+    unknown duration) count as infinitely slow, so as a largest they drop out."""
+    n = len(ratio)
+    if n < 5:
+        fin = ratio[np.isfinite(ratio)]
+        return np.full(len(rows), float(np.median(fin)) if fin.size else np.inf)
+    idx = rows[:, None] + np.array([-2, -1, 1, 2])
+    idx = np.where(idx < 0, -idx, idx)
+    idx = np.where(idx > n - 1, 2 * (n - 1) - idx, idx)
+    nb = ratio[idx]
+    nb = np.sort(np.where(np.isfinite(nb), nb, np.inf), axis=1)
+    return (nb[:, 1] + nb[:, 2]) / 2
 
 
 def dropouts(count: np.ndarray, dt: np.ndarray | None) -> np.ndarray:
     """Rows whose interval spans a communication drop-out (see ``DROPOUT_RATIO``): their
-    duration [s] beyond DROPOUT_RATIO times their counts at the median seconds per count
-    (of every 16th row: the speed, not each row, is what the median needs; a full median
-    per block cost a quarter of the pass). All False without times (then only the count
-    pattern tells, see :func:`phase_break`)."""
+    duration [s] beyond DROPOUT_RATIO times their counts at the local seconds per count
+    (:func:`local_seconds_per_count`). All False without times (then only the count pattern
+    tells, see :func:`phase_break`).
+
+    Only rows beyond DROPOUT_RATIO times the chunk's smallest seconds per count can be one,
+    so only theirs are compared with their neighbours (on a steady table a few rows: the
+    neighbours of every row cost ~5 times the pass's share of this test)."""
+    out = np.zeros(len(count), bool)
     if dt is None or len(count) < 2:
-        return np.zeros(len(count), bool)
-    step = 16 if len(count) >= 256 else 1
-    ratio = dt[::step] / count[::step]
-    ratio = ratio[np.isfinite(ratio)]
-    if len(ratio) < 2:
-        return np.zeros(len(count), bool)
-    limit = DROPOUT_RATIO * float(np.median(ratio))
-    with np.errstate(invalid="ignore"):  # (the first row's unknown duration: NaN, no gap)
-        return dt > limit * count
+        return out
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = dt / count
+        lo = float(np.fmin.reduce(ratio))  # (NaN ignored: the first row's unknown duration)
+        if not np.isfinite(lo):
+            return out
+        rows = np.flatnonzero(ratio > DROPOUT_RATIO * lo)
+    if rows.size:
+        out[rows] = ratio[rows] > DROPOUT_RATIO * local_seconds_per_count(ratio, rows)
+    return out
 
 
 def phase_break(count: np.ndarray, inc: np.ndarray, tol: float,

@@ -208,15 +208,29 @@ class Walker(FacePattern):
         for i in w.reanchored:
             self.exc.add(R_REANCHOR, line(i))
         # Counter breaks: a mislabelled row when its revolution is complete, else a lost row.
+        # (break b: rows b - 1 and b carry the same counter; a walked row r owns break r, or
+        # walking backward r + 1)
+        label: dict[int, int] = {}
         for i in range(len(rows)):
             r = int(rows[i])
             if r < 0:
                 continue
             if (brk[r] if not backward else (r + 1 < len(brk) and brk[r + 1])):
                 if i in in_good:
-                    self.exc.add(R_LABEL, line(i))
+                    label[r + backward] = i
                 else:
                     self.exc.add(R_LOST, line(i))
+        # One flipped label makes three equal labels in a row: breaks b and b + 1, and only
+        # row b is wrong (nothing was lost: its revolution is complete). In a run of breaks
+        # the 1st, 3rd, ... are flipped rows, each next one their consequence.
+        flipped: list[int] = []
+        for b in sorted(label):
+            if not (flipped and flipped[-1] == b - 1):
+                flipped.append(b)
+        for b in flipped:
+            # row b itself: walked forward as the owner of break b, backward of b + 1
+            self.exc.add(R_LABEL, line(label[b + 1] if backward and b + 1 in label
+                                       else label[b]))
         if not tail:
             self.excluded += len(bad)
         else:

@@ -233,11 +233,6 @@ def test_gonio_locked_quantisation_is_covered(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a table at constant speed whose ring laser is locked "
-                   "(100 000 counts a revolution): warned 'one direction only, on a table "
-                   "whose speed varies with its angle (pulse-time and count fractions differ, "
-                   "p 0) ... measure the other direction too' (3 of 3 seeds); the fractions "
-                   "differ by the locked ½-count floor, not by any speed variation")
 def test_gonio_locked_steady_table_is_not_called_unsteady(tmp_path):
     """Same logs as the locked-quantisation test: the table's speed is constant, so no warning
     may say it varies with the angle (the counts' own floor is what the times disagree
@@ -261,10 +256,6 @@ def test_gonio_reverse_at_another_speed_is_not_a_confident_answer(tmp_path):
     assert np.all(np.abs(z) < Z1) or flagged, f"z {np.round(z, 2)}, ok, exit {rc}"
 
 
-@pytest.mark.xfail(strict=True, reason="a coasting table (1 → 0.3 rev/s over 60 revolutions, "
-                   "no row lost): 11 'communication drop-out: rows missing from the log' "
-                   "(code dropout, lines 203, 206, 210, ...), 11 of 60 revolutions excluded, "
-                   "warned as pulse faults (2 of 2 seeds)")
 def test_gonio_coasting_table_is_not_a_dropout(tmp_path):
     """A table spun up and left to coast (constant friction: ω² falls linearly with angle),
     its speed falling from 1 to 0.3 rev/s, every pulse logged. Consecutive revolutions'
@@ -280,10 +271,6 @@ def test_gonio_coasting_table_is_not_a_dropout(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a log without its t column, table at 0.1 rev/s with a "
-                   "15 % locked ripple: angles 27.9 u and 32.0 u off (≈ 4″, u 0.14″; seed 1: "
-                   "27.4, 29.4), ok, exit 0, warnings empty — only a note ('the Earth rate on "
-                   "an unsteady table can be neither removed nor bounded')")
 def test_gonio_without_times_unbounded_earth_rate_is_flagged(tmp_path):
     """Without pulse times the Earth rate's share on an unsteady table is neither removable
     nor boundable (gonio.md). A term that cannot be bounded is not in u, so the result cannot
@@ -341,9 +328,6 @@ def test_gonio_log_faults_repaired_and_listed(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="one counter label flipped (line 102) is listed as 2 "
-                   "mislabelled rows, lines 102 and 103 (3 of 3 seeds); the pattern 1,2,[1],1,2 "
-                   "has one row whose flip restores the alternation")
 def test_gonio_one_mislabelled_counter_is_one_row(tmp_path):
     """Two counters alternate; one row's label flipped makes three equal labels in a row, and
     only the middle one is wrong: the exclusions list one mislabelled row, line 102."""

@@ -16,6 +16,7 @@ import pytest
 from align.gonio import measure_log
 from axisbase.units import DEG
 from goniometry.angles import METHOD_OFF_PATH
+from goniometry.dropouts import dropouts
 from goniometry.exclusions import R_DROPOUT
 from synth.gonio import GonioSpec, drop_out, simulate, write_log
 from tests.goniometry.stitch_cases import stitched_case
@@ -217,3 +218,59 @@ def test_dropouts_over_many_logs_normalised_errors(tmp_path):
     assert not missed
     assert chi2.ppf(5e-4, dof) < ss < chi2.ppf(1 - 5e-4, dof)
     assert not worse
+
+
+def coasting_rows(rng: np.random.Generator, revs: int = 60, coast: float = 0.7,
+                  spin_up: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Counts and durations [s] of a 4-face table left to coast under constant friction (ω²
+    falls linearly with the angle, from ω0 to (1 - coast)·ω0 over the log; ``spin_up``: the
+    same run backwards in time, a table speeding up), every pulse logged: t(θ) =
+    2 (1 - √(1 - aθ)) / (a ω0), counts the ring laser's whole periods (1e5 a revolution)
+    over each interval, the pulse times jittered by 1 µs."""
+    faces = np.cumsum(np.r_[0.0, np.radians([90.01, 89.98, 90.02])])
+    theta = (np.arange(revs)[:, None] * 2 * np.pi + faces[None, :]).ravel()
+    theta = np.r_[theta, revs * 2 * np.pi]
+    w0 = 2 * np.pi * rng.uniform(0.3, 3.0)
+    a = (1 - (1 - coast) ** 2) / theta[-1]
+    t = 2 * (1 - np.sqrt(1 - a * theta)) / (a * w0)
+    if spin_up:
+        theta, t = theta[-1] - theta[::-1], t[-1] - t[::-1]
+    t = t + rng.normal(0, 1e-6, t.size)
+    k = 1e5 / (2 * np.pi)
+    count = np.diff(np.floor(k * theta + rng.uniform()))
+    return count, np.diff(t)
+
+
+def test_a_coasting_table_is_no_dropout_and_its_dropouts_are_found():
+    """A table whose speed falls from ω0 to 0.1-0.7 ω0 over the log (or rises: spun up), no
+    row lost: its intervals' times AND counts grow together (the seconds per count follow
+    the speed), so no row is a drop-out (before: the log's median seconds per count called
+    the slow end's rows drop-outs, 11 of 60 revolutions). The same logs with 1-20 rows lost
+    anywhere, the slowest end too: the row after the gap, and only it, is found."""
+    for seed in range(40):
+        rng = np.random.default_rng(900 + seed)
+        count, dt = coasting_rows(rng, coast=rng.uniform(0.3, 0.9), spin_up=seed % 2 == 1)
+        assert not np.any(dropouts(count, dt)), seed
+        k = int(rng.integers(1, 21))
+        r0 = int(rng.integers(1, len(count) - k)) if seed % 4 else len(count) - k - 1
+        # the lost rows' counts are lost; the next row's time spans them (k + 1 intervals)
+        cut_dt = np.r_[dt[:r0], dt[r0:r0 + k + 1].sum(), dt[r0 + k + 1:]]
+        cut_count = np.r_[count[:r0], count[r0 + k], count[r0 + k + 1:]]
+        assert np.flatnonzero(dropouts(cut_count, cut_dt)).tolist() == [r0], (seed, k, r0)
+
+
+def test_a_rippling_steady_table_is_no_dropout():
+    """Control: a constant mean speed with a 15 % once-per-revolution ripple locked to the
+    table (each interval's seconds per count differ by up to ±15 % from its neighbours'),
+    60 revolutions, every pulse logged: no row is a drop-out."""
+    for seed in range(20):
+        rng = np.random.default_rng(950 + seed)
+        theta = np.linspace(0, 60 * 2 * np.pi, 60 * 4 + 1) + rng.normal(0, 1e-4, 241)
+        phase = rng.uniform(0, 2 * np.pi)
+        # t(θ) = ∫ dθ / (ω0 (1 + r sin(θ + φ))), on a fine grid
+        fine = np.linspace(0, theta[-1], 60 * 4096)
+        inv = 1 / (2 * np.pi * (1 + 0.15 * np.sin(fine + phase)))
+        t_fine = np.r_[0, np.cumsum((inv[1:] + inv[:-1]) / 2 * np.diff(fine))]
+        dt = np.diff(np.interp(theta, fine, t_fine))
+        count = np.diff(np.floor(1e5 / (2 * np.pi) * theta))
+        assert not np.any(dropouts(count, dt)), seed

@@ -14,7 +14,7 @@ import pytest
 from align.gonio import measure_log
 from axisbase.units import DEG
 from goniometry import read_revolutions
-from goniometry.exclusions import R_DROPOUT
+from goniometry.exclusions import R_DROPOUT, R_LABEL, R_LOST
 from synth.gonio import GonioSpec, simulate, write_log
 
 N_FACES = 4
@@ -308,3 +308,21 @@ def test_long_clean_jittery_logs_are_never_warned_of_pulse_faults(tmp_path):
         assert np.all(np.abs(run.angles.angles_rad - truth) < 4 * run.angles.u_rad)
         p.unlink()
     assert tails >= 3  # the case this guards was exercised (expected ~17)
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_one_mislabelled_counter_is_one_row(seed, tmp_path):
+    """One row's counter id flipped (in the head before the first reference mark too, with
+    and without times, both directions): three equal ids in a row, and only the middle one
+    is wrong — exactly that row is listed (before: it and the next, 14 of 16 logs)."""
+    rng = np.random.default_rng(3000 + seed)
+    i = int(rng.integers(1, 4)) if seed % 4 == 0 else int(rng.integers(8, 60 * 4 - 8))
+    spec = GonioSpec(revolutions=60, rev_per_s=float(rng.uniform(0.3, 3)),
+                     direction=int(rng.choice([-1, 1])), arm_face=int(rng.integers(0, 4)),
+                     faults=(("counter_swap", i, 0),), seed=seed, with_time=seed % 3 != 0)
+    sim = simulate(spec)
+    run = measure_log(write_log(sim, tmp_path / "s.csv"), N_FACES, spec.latitude_deg * DEG,
+                      direction=spec.direction)
+    ex = run.summary.exclusions.lines
+    listed = sorted(ex.get(R_LABEL, []) + ex.get(R_LOST, []))
+    assert listed == [f["row"] + 2 for f in sim["truth"]["faults"]], dict(ex)
