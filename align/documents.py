@@ -35,7 +35,7 @@ def gonio_document(run, faces: Sequence[str], nominal_rad: np.ndarray | None, se
                    inputs: Inputs) -> dict:
     """``align gonio --json``."""
 
-    body = {"ok": True, "warnings": gonio_warnings(run, faces, nominal_rad),
+    body = {"ok": not run.problems, "warnings": gonio_warnings(run, faces, nominal_rad),
             **run.to_dict(faces, nominal_rad)}
     return document("gonio", body, settings, inputs)
 

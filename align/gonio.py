@@ -279,7 +279,7 @@ def _one_direction(path: str | Path | object, n_faces: int, latitude_rad: float 
         why = f"no t column: {UNTIMED_EARTH}"
         notes.append(why)
         return with_timing(GonioRun(summary, fa, None, (*notes, *_untimed_notes(fa)), None,
-                                    warnings=(why,)), steady_table, alpha)
+                                    warnings=(why,), problems=(why,)), steady_table, alpha)
     # The loop sees the first LOOP_REVOLUTIONS (it fits a handful of revolution-level terms:
     # 10^4 revolutions pin the Earth rate to ~1e-6 rad/s; more only cost time), started by
     # the pass as soon as it had them.

@@ -49,6 +49,9 @@ class GonioRun:
         Whether the pulse times replaced the counts (a steady table); unit —.
     warnings : tuple of str
         Options given that this log cannot honour; unit —.
+    problems : tuple of str
+        Why the angles cannot be trusted: a term u does not cover (a log without times on a
+        table that may not be steady); the result is then not ok (exit 2); unit —.
     """
 
     summary: LogSummary
@@ -61,6 +64,7 @@ class GonioRun:
     timing: TimingAngles | None = None
     timing_used: bool = False
     warnings: tuple[str, ...] = ()
+    problems: tuple[str, ...] = ()
 
     def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
         """The run as JSON (the contract of ``align gonio``, also a session's stage);

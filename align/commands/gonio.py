@@ -36,7 +36,7 @@ def cmd_gonio(args: argparse.Namespace) -> int:
     _show_gonio(run, names, nominal_deg, plot)
     if out is not None:
         _write_gonio(args, run, names, nominal_deg, out, inputs)
-    return 0
+    return 2 if run.problems else 0  # angles u does not cover: not ok (docs/cli.md)
 
 
 def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], cols: dict):

@@ -160,6 +160,8 @@ class SessionResult:
         out: list[str] = []
         if self.calibration is not None and not self.calibration.ok:
             out += [f"calibration: {p}" for p in self.calibration.problems]
+        if self.gonio is not None:
+            out += [f"goniometer: {p}" for p in self.gonio.problems]
         for im, r in self.marks:
             if not r.found:
                 continue  # a stage error already

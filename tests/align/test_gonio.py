@@ -13,6 +13,7 @@ import pyarrow as pa
 import pytest
 
 from align import measure_log
+from align.cli import main
 from align.gonio import UNTIMED_EARTH, UNTIMED_EARTH_STEADY
 from axisbase.errors import InputError
 from axisbase.units import DEG
@@ -150,3 +151,17 @@ def test_both_directions_without_times_cancel_the_earth_rate_s_share(tmp_path):
     assert not any(UNTIMED_EARTH in w for w in run.warnings), run.warnings
     z = (run.angles.angles_rad - runs[1][1]["truth"]["angles_rad"]) / run.angles.u_rad
     assert np.all(np.abs(z) < 4), z
+
+
+def test_an_untimed_log_is_not_ok_unless_the_table_is_declared_steady(tmp_path):
+    # Without times the Earth rate's share on a table that may not be steady is not in u:
+    # warned AND not ok (exit 2, JSON ok false); --steady-table asserts it away (exit 0).
+    log = write_log(simulate(GonioSpec(revolutions=40, seed=3, with_time=False)),
+                    tmp_path / "g.csv")
+    assert main(["gonio", str(log), "--faces", "ref,y,x,z", "--json", str(tmp_path / "a.json"),
+                 "-q"]) == 2
+    doc = json.loads((tmp_path / "a.json").read_text())
+    assert doc["ok"] is False and any("NOT in u" in w for w in doc["warnings"])
+    assert main(["gonio", str(log), "--faces", "ref,y,x,z", "--steady-table", "--json",
+                 str(tmp_path / "b.json"), "-q"]) == 0
+    assert json.loads((tmp_path / "b.json").read_text())["ok"] is True

@@ -756,7 +756,10 @@ def test_gonio_valid_variants_give_identical_angles(gonio_log, gonio_plain, vari
     name = f"v_{variant}.csv"
     ui.write_csv(d / name, header, rows, **kw)
     rc, doc, se = _gonio_doc(d, name)
-    assert rc == 0, se
+    # without times the Earth rate's share on a table that may not be steady is not in u:
+    # the same angles, but not ok (exit 2; docs/commands/gonio.md)
+    assert rc == (2 if variant == "no_time" else 0), se
+    assert doc["ok"] is (variant != "no_time")
     assert doc["angles_deg"] == gonio_plain["angles_deg"]
     if variant == "no_time":
         # With times the pass also accumulates each angle's Earth-rate sensitivity beside the
