@@ -165,6 +165,8 @@ MIN_PART = 20
 
 def _part(m: MarkMeasurement, idx: np.ndarray, sigma: np.ndarray) -> MarkMeasurement | None:
     """The mark's centres ``idx`` as a measurement of their own (None: too few left)."""
+    if len(idx) < MIN_PART:  # (a break near an end, beyond the guard: no part to fit)
+        return None
     chol = None if m.chol is None else np.linalg.cholesky((m.chol @ m.chol.T)[np.ix_(idx, idx)])
     lf = fit_line(m.points[idx], sigma[idx], reject_sigma=None if chol is not None else 4.5,
                   chol=chol)
