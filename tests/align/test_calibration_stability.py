@@ -158,17 +158,21 @@ def _z(cal, truth):
 def test_a_temperature_cycle_is_covered_when_declared_and_not_without():
     """HVAC ±1 K at 100 ppm/K (±100 ppm, 15 min), 60 s poses of the paper's 14: declared
     100 ppm, every parameter of every seed within 3 u of the run's truth (scale factors at
-    the run's mean scale); declared 0 (the tool before), some seed beyond 3 u — the term is
-    what covers it (seed 0: beta_z 5.4 u, no structure flagged)."""
+    the run's mean scale). Declared 0: before stop 28 some seed was beyond 3 u unflagged
+    (seed 0: beta_z 5.4 u); the structure it leaves is now carried by the loop's own terms
+    (the candidates it could not add: ``plausible_effect``), so every seed is within 3 u
+    and its u says it was widened."""
     worst = {}
     for x in (100.0, 0.0):
         zs = []
         for seed in range(5):
             tr, poses, truth = _cycled(seed)
-            zs.append(np.abs(_z(calibrate(poses, np.sign(tr.k), scale_stability_ppm=x),
-                                truth)).max())
+            cal = calibrate(poses, np.sign(tr.k), scale_stability_ppm=x)
+            zs.append(np.abs(_z(cal, truth)).max())
+            if x == 0.0:
+                assert cal.widening is not None and cal.widening.reasons, seed
         worst[x] = max(zs)
-    assert worst[100.0] < 3.0 and worst[0.0] > 3.0, worst
+    assert worst[100.0] < 3.0 and worst[0.0] < 3.0, worst
 
 
 @pytest.mark.slow
