@@ -205,7 +205,11 @@ def seen_earth_rate(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray
     from align.loop import Term
 
     stage = RevolutionStage(counts, dt, t_end)
-    if len(stage.N) < 16 or np.ptp(stage.T) <= 0:
+    # The rate shows as counts per revolution that follow the period: the largest Earth rate
+    # over the period's spread must move them by a count (their quantum) for the log to
+    # carry it; a steady table's periods differ by pulse jitter only, and the fit on them
+    # returned nonsense (15 rad/s at u 1e-14 on a clean log, a false warning).
+    if len(stage.N) < 16 or OMEGA_EARTH * np.ptp(stage.T) * stage.K / (2 * np.pi) < 1.0:
         return None
     T = stage.T - stage.T.mean()
     t = stage.t - stage.t.mean()

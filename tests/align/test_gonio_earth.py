@@ -10,6 +10,7 @@ import pytest
 from align.gonio import measure_log
 from axisbase.units import DEG
 from synth.gonio import GonioSpec, simulate, write_log
+from tests.align.test_independent_gonio_user import HEADER, make_log, rows_of, write
 
 TOL = 3.5
 # 0.2 rev/s with a 20 % wander: the periods vary enough for the counts to pin the rate.
@@ -53,3 +54,14 @@ def test_false_alarms_of_the_declared_rate_check(tmp_path):
         run, _ = _run(tmp_path, 100 + seed, 50.45, 1 if seed % 2 else -1)
         alarms += any("Earth rate this log shows" in w for w in run.warnings)
     assert alarms <= 2
+
+
+def test_a_steady_table_pins_no_rate_and_raises_no_alarm(tmp_path):
+    # At constant speed the periods differ by pulse jitter only: the largest Earth rate
+    # moves no count over their spread, so the log shows no rate to check a latitude
+    # against (the fit on them returned 15 rad/s at u 1e-14 on this independent user's
+    # clean log: a false warning and a Type B term).
+    c, k, r, t, _ = make_log(3, revs=300, jitter_arcsec=0.05, latitude=45.0)
+    path = write(tmp_path / "steady.csv", "\n".join([HEADER, *rows_of(c, k, r, t)]) + "\n")
+    run = measure_log(path, 4, latitude_rad=45 * DEG)
+    assert not [w for w in run.warnings if "Earth rate this log shows" in w], run.warnings
