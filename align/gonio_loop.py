@@ -204,11 +204,17 @@ def seen_earth_rate(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray
     to carry it (a steady table) or the log is too short."""
     from align.loop import Term
 
-    stage = RevolutionStage(counts, dt, t_end)
     # The rate shows as counts per revolution that follow the period: the largest Earth rate
     # over the period's spread must move them by a count (their quantum) for the log to
     # carry it; a steady table's periods differ by pulse jitter only, and the fit on them
-    # returned nonsense (15 rad/s at u 1e-14 on a clean log, a false warning).
+    # returned nonsense (15 rad/s at u 1e-14 on a clean log, a false warning). The raw
+    # periods spread at least as far as the stage's averaged ones: tested first, they spare
+    # a steady table's log the stage (its quantisation pattern is most of its cost).
+    ok = np.all(np.isfinite(dt), axis=1)
+    per_count = OMEGA_EARTH * float(counts[ok].sum(1).mean()) / (2 * np.pi) if ok.any() else 0.0
+    if ok.sum() < 36 or per_count * np.ptp(dt[ok].sum(1)) < 1.0:
+        return None
+    stage = RevolutionStage(counts, dt, t_end)
     if len(stage.N) < 16 or OMEGA_EARTH * np.ptp(stage.T) * stage.K / (2 * np.pi) < 1.0:
         return None
     T = stage.T - stage.T.mean()
@@ -222,7 +228,6 @@ def seen_earth_rate(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray
     # 1.04-1.08 on a table wandering over ~20 revolutions (a 5-8 % bias, 5-7 u over 300
     # revolutions). lam is measured here from the periods themselves (T_r's own pulse jitter
     # is independent of the proxy's, so it does not bias lam).
-    ok = np.all(np.isfinite(dt), axis=1)
     T_r = dt[ok].sum(1)[2:-2:2]
     lam = float(np.cov(T_r, stage.T)[0, 1] / np.var(stage.T, ddof=1))
     if not (np.isfinite(u) and u > 0 and lam > 0):
