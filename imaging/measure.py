@@ -241,13 +241,17 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     short = pf
     if longer is not None:
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
-    # The first centres as the start along the new line (a bowed groove's ends are far
-    # from any straight line through it).
-    cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
-                         guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                         offsets_var=offsets_var, departure=True)
-    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
-    use = _usable(cen, where, cand, skip)
+
+    def full_pass(pf, cen, use):
+        # The centres over pf's stretch, started from the previous centres (a bowed
+        # groove's ends are far from any straight line through it), their crossings and use.
+        cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+                             guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
+                             offsets_var=offsets_var, departure=True)
+        skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+        return cen, crossed, _usable(cen, where, cand, skip)
+
+    cen, crossed, use = full_pass(pf, cen, use)
     if pf is short:
         ext = look[:2]
         check = replace(check, centres=cen) if check is not None else None
@@ -259,11 +263,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
         if longer is not None:
             pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
-            cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
-                                 guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                                 offsets_var=offsets_var, departure=True)
-            skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
-            use = _usable(cen, where, cand, skip)
+            cen, crossed, use = full_pass(pf, cen, use)
             ext = groove_extent(image, pf)
             check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]

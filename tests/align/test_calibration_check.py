@@ -75,13 +75,20 @@ def _write(path, labels_u, header="pose,ux,uy,uz"):
         + "\n")
 
 
-def test_cli_check_in_millivolts_is_exit_2_and_not_ok(tmp_path, capsys):
+def _tumble_and_checks(tmp_path):
+    """A tumble (tum.csv, 18 poses) and six check poses of the same triad, in its unit
+    (ok.csv) and a thousand times it (mv.csv: millivolts for volts); the checks' readings."""
     rng, S, k, o = _triad(5)
     pid, u = _samples(rng, S, k, o, _dirs(rng, 18))
     _write(tmp_path / "tum.csv", (pid, u, [f"T{i}" for i in range(18)]))
     cid, cu = _samples(rng, S, k, o, _dirs(rng, 6))
     _write(tmp_path / "ok.csv", (cid, cu, [f"C{i}" for i in range(6)]))
     _write(tmp_path / "mv.csv", (cid, 1000 * cu, [f"C{i}" for i in range(6)]))
+    return cu
+
+
+def test_cli_check_in_millivolts_is_exit_2_and_not_ok(tmp_path, capsys):
+    _tumble_and_checks(tmp_path)
     out = tmp_path / "c.json"
     assert main(["calibrate", str(tmp_path / "tum.csv"), "--check", str(tmp_path / "ok.csv"),
                  "--json", str(out)]) == 0
@@ -118,12 +125,7 @@ def test_tilt_through_a_not_ok_calibration_warns_and_exits_2(tmp_path, capsys):
     ``align tilt``: outputs written, a WARNING naming the problem on the terminal and in the
     JSON, exit 2; the same calibration with agreeing check poses: exit 0, nothing said. Files
     written before ``problems`` existed give their NOT OK warnings."""
-    rng, S, k, o = _triad(5)
-    pid, u = _samples(rng, S, k, o, _dirs(rng, 18))
-    _write(tmp_path / "tum.csv", (pid, u, [f"T{i}" for i in range(18)]))
-    cid, cu = _samples(rng, S, k, o, _dirs(rng, 6))
-    _write(tmp_path / "ok.csv", (cid, cu, [f"C{i}" for i in range(6)]))
-    _write(tmp_path / "mv.csv", (cid, 1000 * cu, [f"C{i}" for i in range(6)]))
+    cu = _tumble_and_checks(tmp_path)
     rd = tmp_path / "r.csv"
     rd.write_text("ux,uy,uz\n" + "\n".join(",".join(f"{v:.9f}" for v in r) for r in cu) + "\n")
     said = {}
