@@ -286,10 +286,11 @@ def _lens_session(tmp_path, seed, **kw):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("seed", range(10))
 def test_session_with_an_undeclared_lens_on_one_camera_names_no_roll(tmp_path, seed):
     """Cameras + goniometer + calibration, camera B with an undeclared k1 = -0.25 lens (one
-    lens fitted over its four images, the rest in u): no camera roll named, |err/u| <= 3."""
+    lens fitted over its four images, the rest in u): no camera roll named, |err/u| <= 3 --
+    over 10 seeds, as issue 18 asks (measured: nothing named, RMS z 1.02, max 2.95 of 60)."""
     res, z = _lens_session(tmp_path, seed, undeclared={"lens_k1_B": -0.25})
     names = [e.name for e in res.fusion.loop.effects]
     print(f"seed {seed}: effects {names}, z {np.round(z, 2)}")
