@@ -1,0 +1,181 @@
+"""An independent user's own physics generators for axis-align sessions (no project import).
+
+Written from the documentation only (docs/concepts.md, docs/formats.md): a triad whose
+sensitive axes s_i (unit vectors in the platform frame P) are row i of I + E normalised; a
+tumble of static poses in ADC counts; the mounted platform's static poses; a ring-laser
+goniometer counter log (the inertial phase floored per pulse, Earth rate included,
+autocollimator jitter on the pulse angle); and a session.toml tying them together.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ARCSEC = np.pi / 180 / 3600
+OMEGA_EARTH = 7.2921150e-5  # [rad/s] sidereal rate
+E_NAMES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
+_IDX = {"E_xY": (0, 1), "E_xZ": (0, 2), "E_yX": (1, 0), "E_yZ": (1, 2), "E_zX": (2, 0),
+        "E_zY": (2, 1)}
+
+
+@dataclass
+class Truth:
+    """What the user knows of the unit: E [rad], scale [counts/g], bias [counts]."""
+
+    E: np.ndarray
+    scale: np.ndarray
+    bias: np.ndarray
+    latitude_deg: float = 50.45
+    extra: dict = field(default_factory=dict)
+
+    def axes(self) -> np.ndarray:
+        """Rows s_i: unit sensitive axes in P."""
+        m = np.eye(3) + self.E
+        return m / np.linalg.norm(m, axis=1, keepdims=True)
+
+    def angle(self, name: str) -> float:
+        """E_ij [rad] = s_ij / s_ii (docs/concepts.md)."""
+        i, j = _IDX[name]
+        s = self.axes()
+        return float(s[i, j] / s[i, i])
+
+
+def make_truth(seed: int, spread_arcsec: float = 300.0, E_arcsec: dict | None = None) -> Truth:
+    rng = np.random.default_rng(seed)
+    E = np.zeros((3, 3))
+    for n in E_NAMES:
+        E[_IDX[n]] = rng.uniform(-spread_arcsec, spread_arcsec) * ARCSEC
+    for n, v in (E_arcsec or {}).items():
+        E[_IDX[n]] = v * ARCSEC
+    scale = 1.0e5 * (1 + rng.uniform(-0.02, 0.02, 3))
+    bias = rng.uniform(-500, 500, 3)
+    return Truth(E, scale, bias)
+
+
+def _readings(truth: Truth, f_p: np.ndarray, n: int, sigma_g: float, rng) -> np.ndarray:
+    """n samples [counts] of specific force f_p [g] (platform frame), integer ADC codes."""
+    ideal = truth.scale * (truth.axes() @ f_p) + truth.bias
+    noisy = ideal + rng.normal(0, sigma_g, (n, 3)) * truth.scale
+    return np.round(noisy)
+
+
+def tumble_directions(n_poses: int = 14) -> np.ndarray:
+    """Six faces and eight cube diagonals (unit vectors), the classic 14-pose tumble."""
+    d = [np.eye(3)[i] * s for i in range(3) for s in (1, -1)]
+    d += [np.array([a, b, c]) / np.sqrt(3) for a in (1, -1) for b in (1, -1) for c in (1, -1)]
+    return np.array(d[:n_poses])
+
+
+def write_tumble(path: Path, truth: Truth, seed: int, samples: int = 40,
+                 sigma_g: float = 30e-6) -> None:
+    rng = np.random.default_rng([seed, 1])
+    lines = ["pose,ux,uy,uz"]
+    for k, f in enumerate(tumble_directions()):
+        # the fixture is not a perfect cube: each pose a little off its nominal direction
+        f = f + rng.normal(0, 0.01, 3)
+        f /= np.linalg.norm(f)
+        for r in _readings(truth, f, samples, sigma_g, rng):
+            lines.append(f"T{k:02d},{r[0]:.0f},{r[1]:.0f},{r[2]:.0f}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+PLATFORM_POSES = {"L000": ((0, 0, 1), 0.0), "L090": ((0, 0, 1), 90.0),
+                  "L180": ((0, 0, 1), 180.0), "L270": ((0, 0, 1), 270.0),
+                  "Xup": ((1, 0, 0), None), "Xdn": ((-1, 0, 0), None),
+                  "Yup": ((0, 1, 0), None), "Ydn": ((0, -1, 0), None)}
+
+
+def write_platform(path: Path, truth: Truth, seed: int, samples: int = 40,
+                   sigma_g: float = 30e-6) -> None:
+    """Specific force +1 g along the declared 'up' (the table axis truly vertical)."""
+    rng = np.random.default_rng([seed, 2])
+    lines = ["pose,ux,uy,uz"]
+    for name, (up, _) in PLATFORM_POSES.items():
+        for r in _readings(truth, np.array(up, float), samples, sigma_g, rng):
+            lines.append(f"{name},{r[0]:.0f},{r[1]:.0f},{r[2]:.0f}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def face_azimuths(truth: Truth) -> np.ndarray:
+    """Azimuths [rad] of faces ref, y, x, z (the passing order of a ccw table)."""
+    s = truth.axes()
+    psi_x = np.arctan2(s[0, 1], s[0, 0])
+    psi_y = np.arctan2(s[1, 1], s[1, 0])
+    return np.array([np.pi, psi_y, psi_x, -np.pi / 2])
+
+
+def gonio_truth_angles(truth: Truth) -> np.ndarray:
+    """Table angle [rad] from face k to k+1 in passing order (sum 2 pi)."""
+    psi = face_azimuths(truth)
+    a = psi - np.roll(psi, -1)
+    return np.mod(a, 2 * np.pi)
+
+
+def gonio_rows(truth: Truth, seed: int, revolutions: int = 60, rev_per_s: float = 1.0,
+               counts_per_rev: int = 1_179_648, jitter_arcsec: float = 0.2) -> list[tuple]:
+    """(count, counter, ref, t) per pulse; ring-laser counts the inertial angle."""
+    rng = np.random.default_rng([seed, 3])
+    q = 2 * np.pi / counts_per_rev
+    omega_v = OMEGA_EARTH * np.sin(np.deg2rad(truth.latitude_deg))  # ccw from above, north
+    w = 2 * np.pi * rev_per_s
+    # table angle at each pass, measured from the reference face's (arming) pulse
+    alpha = np.concatenate([[0.0], np.cumsum(gonio_truth_angles(truth))[:-1]])
+    table = (np.arange(revolutions)[:, None] * 2 * np.pi + alpha[None, :]).ravel()
+    table = np.append(table, revolutions * 2 * np.pi)
+    table = table + rng.normal(0, jitter_arcsec * ARCSEC, table.size)
+    t = 0.37 + table / w
+    phase = np.floor((table + omega_v * t) / q + rng.uniform())
+    counts = np.diff(phase).astype(int)
+    refs = (np.arange(1, table.size) % 4 == 0).astype(int)
+    return [(int(c), 1 + k % 2, int(r), float(tt))
+            for k, (c, r, tt) in enumerate(zip(counts, refs, t[1:], strict=True))]
+
+
+def write_gonio(path: Path, truth: Truth, seed: int, **kw) -> None:
+    rows = gonio_rows(truth, seed, **kw)
+    path.write_text("count,counter,ref,t\n" + "".join(
+        f"{c},{k},{r},{t:.6f}\n" for c, k, r, t in rows))
+
+
+SESSION_TOML = """name = "{name}"
+latitude_deg = {lat}
+
+[calibration]
+static = "tumble.csv"
+units = "counts"
+scale_sign = "+"
+
+[goniometer]
+log = "gonio.csv"
+faces = ["ref", "y", "x", "z"]
+nominal_deg = [90.0, 90.0, 90.0, 90.0]
+direction = "ccw"
+
+[platform]
+static = "platform.csv"
+[platform.poses]
+L000 = {{ up = "+Z", table_deg = 0.0 }}
+L090 = {{ up = "+Z", table_deg = 90.0 }}
+L180 = {{ up = "+Z", table_deg = 180.0 }}
+L270 = {{ up = "+Z", table_deg = 270.0 }}
+Xup = {{ up = "+X" }}
+Xdn = {{ up = "-X" }}
+Yup = {{ up = "+Y" }}
+Ydn = {{ up = "-Y" }}
+{tolerance}"""
+
+
+def write_session(folder: Path, truth: Truth, seed: int, tolerance: str = "",
+                  gonio_kw: dict | None = None, static_samples: int = 40,
+                  tumble_samples: int = 40) -> Path:
+    """An image-less session (goniometer, tumble, platform static) of the unit ``truth``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_tumble(folder / "tumble.csv", truth, seed, samples=tumble_samples)
+    write_gonio(folder / "gonio.csv", truth, seed, **(gonio_kw or {}))
+    write_platform(folder / "platform.csv", truth, seed, samples=static_samples)
+    (folder / "session.toml").write_text(SESSION_TOML.format(
+        name=folder.name, lat=truth.latitude_deg, tolerance=tolerance))
+    return folder
