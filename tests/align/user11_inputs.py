@@ -70,10 +70,11 @@ def tumble_directions(n_poses: int = 14) -> np.ndarray:
 
 
 def write_tumble(path: Path, truth: Truth, seed: int, samples: int = 40,
-                 sigma_g: float = 30e-6) -> None:
+                 sigma_g: float = 30e-6, repeats: int = 1) -> None:
+    """The 14-pose tumble (``repeats`` times: a second tumble is 14 more poses)."""
     rng = np.random.default_rng([seed, 1])
     lines = ["pose,ux,uy,uz"]
-    for k, f in enumerate(tumble_directions()):
+    for k, f in enumerate(np.tile(tumble_directions(), (repeats, 1))):
         # the fixture is not a perfect cube: each pose a little off its nominal direction
         f = f + rng.normal(0, 0.01, 3)
         f /= np.linalg.norm(f)
@@ -170,10 +171,11 @@ Ydn = {{ up = "-Y" }}
 
 def write_session(folder: Path, truth: Truth, seed: int, tolerance: str = "",
                   gonio_kw: dict | None = None, static_samples: int = 40,
-                  tumble_samples: int = 40) -> Path:
+                  tumble_samples: int = 40, tumble_repeats: int = 1) -> Path:
     """An image-less session (goniometer, tumble, platform static) of the unit ``truth``."""
     folder.mkdir(parents=True, exist_ok=True)
-    write_tumble(folder / "tumble.csv", truth, seed, samples=tumble_samples)
+    write_tumble(folder / "tumble.csv", truth, seed, samples=tumble_samples,
+                 repeats=tumble_repeats)
     write_gonio(folder / "gonio.csv", truth, seed, **(gonio_kw or {}))
     write_platform(folder / "platform.csv", truth, seed, samples=static_samples)
     (folder / "session.toml").write_text(SESSION_TOML.format(
