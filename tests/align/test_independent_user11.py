@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 from align.cli import main
 
@@ -87,6 +88,13 @@ def test_own_session_E_u_budget_and_verdict(tmp_path):
         assert abs(b["u_arcsec"] / u_of(d, name) - 1) < 0.01, name
     assert 2.4 > 3 * u_of(d, "E_zX"), "the case must be decidable at k = 2"
     assert d["disposition"]["verdict"] == "FAIL", d["disposition"]["reason"]
+    # the angle's line agrees with the documented rule (docs/decision.md)
+    (a,) = [a for a in d["disposition"]["angles"] if a["name"] == "E_zX"]
+    v, u, lo, hi = a["value_arcsec"], a["u_arcsec"], a["lower_arcsec"], a["upper_arcsec"]
+    assert abs(a["margin_arcsec"] - min(v - lo, hi - v)) < 1e-9
+    assert abs(a["guard_arcsec"] - 2 * u) < 1e-9
+    p = norm.cdf((hi - v) / u) - norm.cdf((lo - v) / u)
+    assert abs(a["p_conform"] - p) < 1e-6, (a["p_conform"], p)
 
 
 @pytest.mark.slow
@@ -104,6 +112,34 @@ def test_own_sessions_over_seeds_E_within_u(tmp_path):
 
 
 # ---------------------------------------------------------------- (2) decisions
+
+@pytest.mark.slow
+def test_budget_model_predicts_u_without_the_goniometer(tmp_path):
+    """The budget's linearisation (groups A, C) gives the stated u, and with the goniometer's
+    group left out it gives the u a run without [goniometer] states (within 2 %)."""
+    truth = ui.make_truth(8)
+    folder = ui.write_session(tmp_path / "full", truth, 8)
+    rc, d, err = run_session(folder)
+    assert rc == 0, err
+    model = d["budget"]["model"]
+
+    def u_pred(groups: list[dict]) -> np.ndarray:
+        info = sum(np.array(g["A"]).T @ np.linalg.solve(np.array(g["C"]), np.array(g["A"]))
+                   for g in groups)
+        return np.sqrt(np.diag(np.linalg.inv(info)))[:6] / ui.ARCSEC * model["inflation"]
+
+    names = model["parameters"][:6]
+    stated = np.array([u_of(d, n) for n in names])
+    np.testing.assert_allclose(u_pred(model["groups"]), stated, rtol=0.01)
+    toml = (folder / "session.toml").read_text()
+    a, b = toml.index("[goniometer]"), toml.index("[platform]")
+    (folder / "session.toml").write_text(toml[:a] + toml[b:])
+    rc, d2, err = run_session(folder)
+    assert rc == 0 and d2["ok"], err
+    without = u_pred([g for g in model["groups"] if g["kind"] != "gonio"])
+    np.testing.assert_allclose(without, [u_of(d2, n) for n in names], rtol=0.02)
+    assert without[names.index("E_xY")] > 3 * stated[names.index("E_xY")]
+
 
 @pytest.mark.slow
 @pytest.mark.parametrize("outside_u, allowed", [(-3.0, {"PASS", "INCONCLUSIVE"}),

@@ -57,7 +57,10 @@ def make_truth(seed: int, spread_arcsec: float = 300.0, E_arcsec: dict | None = 
 
 def _readings(truth: Truth, f_p: np.ndarray, n: int, sigma_g: float, rng) -> np.ndarray:
     """n samples [counts] of specific force f_p [g] (platform frame), integer ADC codes."""
-    ideal = truth.scale * (truth.axes() @ f_p) + truth.bias
+    a = truth.axes() @ f_p  # [g] along each sensitive axis
+    # an undeclared second-order non-linearity K2 [g/g^2] per axis (Truth.extra["k2"])
+    a = a + np.asarray(truth.extra.get("k2", (0.0, 0.0, 0.0))) * a ** 2
+    ideal = truth.scale * a + truth.bias
     noisy = ideal + rng.normal(0, sigma_g, (n, 3)) * truth.scale
     return np.round(noisy)
 
@@ -90,12 +93,20 @@ PLATFORM_POSES = {"L000": ((0, 0, 1), 0.0), "L090": ((0, 0, 1), 90.0),
 
 
 def write_platform(path: Path, truth: Truth, seed: int, samples: int = 40,
-                   sigma_g: float = 30e-6) -> None:
-    """Specific force +1 g along the declared 'up' (the table axis truly vertical)."""
+                   sigma_g: float = 30e-6, table_tilt_arcsec: tuple = (0.0, 0.0)) -> None:
+    """Specific force +1 g along the declared 'up'. ``table_tilt_arcsec``: the true vertical
+    seen in the table's base frame leans by (x, y) [″]; at table angle theta the platform
+    (turned by theta about the table axis) sees it turned by -theta."""
     rng = np.random.default_rng([seed, 2])
     lines = ["pose,ux,uy,uz"]
-    for name, (up, _) in PLATFORM_POSES.items():
-        for r in _readings(truth, np.array(up, float), samples, sigma_g, rng):
+    v = np.array([table_tilt_arcsec[0] * ARCSEC, table_tilt_arcsec[1] * ARCSEC, 1.0])
+    v /= np.linalg.norm(v)
+    for name, (up, table_deg) in PLATFORM_POSES.items():
+        f = np.array(up, float)
+        if table_deg is not None:
+            c, s_ = np.cos(np.deg2rad(table_deg)), np.sin(np.deg2rad(table_deg))
+            f = np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]]) @ v
+        for r in _readings(truth, f, samples, sigma_g, rng):
             lines.append(f"{name},{r[0]:.0f},{r[1]:.0f},{r[2]:.0f}")
     path.write_text("\n".join(lines) + "\n")
 
@@ -171,13 +182,15 @@ Ydn = {{ up = "-Y" }}
 
 def write_session(folder: Path, truth: Truth, seed: int, tolerance: str = "",
                   gonio_kw: dict | None = None, static_samples: int = 40,
-                  tumble_samples: int = 40, tumble_repeats: int = 1) -> Path:
+                  tumble_samples: int = 40, tumble_repeats: int = 1,
+                  table_tilt_arcsec: tuple = (0.0, 0.0)) -> Path:
     """An image-less session (goniometer, tumble, platform static) of the unit ``truth``."""
     folder.mkdir(parents=True, exist_ok=True)
     write_tumble(folder / "tumble.csv", truth, seed, samples=tumble_samples,
                  repeats=tumble_repeats)
     write_gonio(folder / "gonio.csv", truth, seed, **(gonio_kw or {}))
-    write_platform(folder / "platform.csv", truth, seed, samples=static_samples)
+    write_platform(folder / "platform.csv", truth, seed, samples=static_samples,
+                   table_tilt_arcsec=table_tilt_arcsec)
     (folder / "session.toml").write_text(SESSION_TOML.format(
         name=folder.name, lat=truth.latitude_deg, tolerance=tolerance))
     return folder
