@@ -119,22 +119,32 @@ def face_azimuths(truth: Truth) -> np.ndarray:
     return np.array([np.pi, psi_y, psi_x, -np.pi / 2])
 
 
-def gonio_truth_angles(truth: Truth) -> np.ndarray:
-    """Table angle [rad] from face k to k+1 in passing order (sum 2 pi)."""
+def gonio_truth_angles(truth: Truth, direction: str = "ccw") -> np.ndarray:
+    """Table angle [rad] from face k to k+1 in passing order (sum 2 pi): ref, y, x, z when
+    the table turns ccw, ref, z, x, y when cw."""
     psi = face_azimuths(truth)
+    if direction == "cw":
+        psi = -psi[[0, 3, 2, 1]]
     a = psi - np.roll(psi, -1)
     return np.mod(a, 2 * np.pi)
 
 
 def gonio_rows(truth: Truth, seed: int, revolutions: int = 60, rev_per_s: float = 1.0,
-               counts_per_rev: int = 1_179_648, jitter_arcsec: float = 0.2) -> list[tuple]:
-    """(count, counter, ref, t) per pulse; ring-laser counts the inertial angle."""
+               counts_per_rev: int = 1_179_648, jitter_arcsec: float = 0.2,
+               direction: str = "ccw") -> list[tuple]:
+    """(count, counter, ref, t) per pulse; ring-laser counts the inertial angle.
+
+    ``direction = "cw"``: the table turns clockwise seen from above, so the faces pass in
+    order of increasing azimuth (ref, z, x, y) and the Earth's rate is subtracted."""
     rng = np.random.default_rng([seed, 3])
     q = 2 * np.pi / counts_per_rev
     omega_v = OMEGA_EARTH * np.sin(np.deg2rad(truth.latitude_deg))  # ccw from above, north
     w = 2 * np.pi * rev_per_s
     # table angle at each pass, measured from the reference face's (arming) pulse
-    alpha = np.concatenate([[0.0], np.cumsum(gonio_truth_angles(truth))[:-1]])
+    steps = gonio_truth_angles(truth, direction)
+    if direction == "cw":
+        omega_v = -omega_v
+    alpha = np.concatenate([[0.0], np.cumsum(steps)[:-1]])
     table = (np.arange(revolutions)[:, None] * 2 * np.pi + alpha[None, :]).ravel()
     table = np.append(table, revolutions * 2 * np.pi)
     table = table + rng.normal(0, jitter_arcsec * ARCSEC, table.size)
