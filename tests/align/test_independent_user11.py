@@ -193,6 +193,42 @@ def test_verdict_just_inside_and_outside_over_seeds(tmp_path, outside_u, allowed
 
 
 @pytest.mark.slow
+def test_p_conform_all_is_the_joint_normal_over_the_box(tmp_path):
+    """Three angles toleranced near their values (simple rule): each p_conform is
+    Phi((U-v)/u) - Phi((L-v)/u) and p_conform_all the 6x6 covariance's normal over the box
+    (scipy's multivariate_normal.cdf), as docs/decision.md says."""
+    from scipy.stats import multivariate_normal
+
+    truth = ui.make_truth(9)
+    folder = ui.write_session(tmp_path / "unit9", truth, 9)
+    rc, d, err = run_session(folder)
+    assert rc == 0, err
+    e = np.array(d["misalignment_arcsec"])
+    lines = ["\n[tolerance]\ndecision = \"simple\"\n"]
+    for name, f in (("E_xZ", 0.5), ("E_yZ", -0.3), ("E_zX", 1.0)):
+        v = e[ui._IDX[name]]
+        lines.append(f"{name} = [{v - 50:.4f}, {v + f * u_of(d, name):.4f}]\n")
+    with open(folder / "session.toml", "a") as fh:
+        fh.write("".join(lines))
+    rc, d, err = run_session(folder)
+    assert rc == 0, err
+    disp = d["disposition"]
+    judged = [a for a in disp["angles"] if a["lower_arcsec"] is not None]
+    assert [a["name"] for a in judged] == ["E_xZ", "E_yZ", "E_zX"], judged
+    ix = [d["angle_names"].index(a["name"]) for a in judged]
+    cov = np.array(d["covariance_rad2"])[np.ix_(ix, ix)] / ui.ARCSEC ** 2
+    v = np.array([a["value_arcsec"] for a in judged])
+    lo = np.array([a["lower_arcsec"] for a in judged])
+    hi = np.array([a["upper_arcsec"] for a in judged])
+    for a, m, s_ in zip(judged, v, np.sqrt(np.diag(cov)), strict=True):
+        assert abs(a["p_conform"] - (norm.cdf((a["upper_arcsec"] - m) / s_)
+                                     - norm.cdf((a["lower_arcsec"] - m) / s_))) < 1e-4, a
+    p_all = multivariate_normal(mean=v, cov=cov).cdf(hi, lower_limit=lo)
+    assert abs(disp["p_conform_all"] - p_all) < 2e-3, (disp["p_conform_all"], p_all)
+    assert disp["verdict"] == "FAIL" and disp["worst"] == "E_yZ", disp["reason"]
+
+
+@pytest.mark.slow
 def test_plan_advice_lowers_u_most(tmp_path):
     """The advised measurement, done (with my own generator), lowers the critical angle's u
     as predicted (within 15 %) and more than the other measurements I can do."""
