@@ -140,6 +140,21 @@ def test_own_sessions_clockwise_table_and_tilted_table_axis(tmp_path):
         assert any("tilt of the table axis" in w for w in d["warnings"]), d["warnings"]
 
 
+@pytest.mark.slow
+def test_own_session_from_a_continuous_tumble_recording(tmp_path):
+    """The tumble as a 100 Hz recording (t,ux,uy,uz; 14 holds of 4 s, hand-turned 2 s
+    moves with 2 mg of shake): 14 static intervals found, E within 4 u, ok."""
+    for seed in (90, 91):
+        truth = ui.make_truth(seed)
+        folder = ui.write_session(tmp_path / f"rec{seed}", truth, seed)
+        ui.write_tumble_recording(folder / "tumble.csv", truth, seed)
+        rc, d, err = run_session(folder)
+        assert rc == 0 and d["ok"], (seed, err)
+        assert len(d["stages"]["calibration"]["poses"]) == 14
+        z = normalised_errors(d, truth)
+        assert max(abs(v) for v in z.values()) < 4.0, (seed, z)
+
+
 # ---------------------------------------------------------------- (2) decisions
 
 @pytest.mark.slow

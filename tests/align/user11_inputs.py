@@ -321,3 +321,37 @@ def write_images(folder: Path, truth: Truth, seed: int, lens: dict, model_json: 
         toml.append(f'[[images]]\nfile = "{name}"\nhousing = "{housing}"\nview = "{view}"\n'
                     f'nominal = "{nominal}"\n')
     return "\n".join(toml)
+
+
+def write_tumble_recording(path: Path, truth: Truth, seed: int, rate_hz: float = 100.0,
+                           static_s: float = 4.0, move_s: float = 2.0,
+                           sigma_g: float = 30e-6) -> None:
+    """A continuous recording ``t,ux,uy,uz`` of the 14-pose tumble: each pose held
+    ``static_s``, then the triad turned to the next pose over ``move_s`` (the specific
+    force's direction slerped with a smooth-step; a hand-turned fixture also shakes:
+    2 mg of vibration while it moves)."""
+    rng = np.random.default_rng([seed, 4])
+    dirs = tumble_directions() + rng.normal(0, 0.01, (14, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    n_st, n_mv = int(static_s * rate_hz), int(move_s * rate_hz)
+    f_all = []
+    for k in range(14):
+        f_all.append(np.repeat(dirs[k][None], n_st, axis=0))
+        if k < 13:
+            a, b = dirs[k], dirs[k + 1]
+            om = np.arccos(np.clip(a @ b, -1, 1))
+            x = (np.arange(1, n_mv + 1) / (n_mv + 1))
+            s = x * x * (3 - 2 * x)
+            if om < 1e-6:
+                path_ = np.repeat(a[None], n_mv, axis=0)
+            else:
+                path_ = (np.sin((1 - s) * om)[:, None] * a
+                         + np.sin(s * om)[:, None] * b) / np.sin(om)
+            f_all.append(path_ + rng.normal(0, 2e-3, (n_mv, 3)))
+    f = np.concatenate(f_all)
+    a_ax = f @ truth.axes().T
+    a_ax = a_ax + np.asarray(truth.extra.get("k2", (0.0, 0.0, 0.0))) * a_ax ** 2
+    counts = np.round(truth.scale * (a_ax + rng.normal(0, sigma_g, a_ax.shape)) + truth.bias)
+    t = np.arange(len(counts)) / rate_hz
+    path.write_text("t,ux,uy,uz\n" + "".join(
+        f"{tt:.3f},{c[0]:.0f},{c[1]:.0f},{c[2]:.0f}\n" for tt, c in zip(t, counts, strict=True)))
