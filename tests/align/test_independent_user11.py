@@ -155,6 +155,23 @@ def test_own_session_from_a_continuous_tumble_recording(tmp_path):
         assert max(abs(v) for v in z.values()) < 4.0, (seed, z)
 
 
+@pytest.mark.slow
+def test_drifting_bias_in_the_tumble_is_never_a_confident_wrong_answer(tmp_path):
+    """A warm-up drift of 2-3 µg/s per axis over the 80 s recording (160-240 µg): either
+    every angle within 4 u of my truth, or the result not ok (exit 2) with the reason."""
+    for seed in (90, 91, 92):
+        truth = ui.make_truth(seed)
+        truth.extra["drift"] = (2e-6, -3e-6, 2.5e-6)
+        folder = ui.write_session(tmp_path / f"drift{seed}", truth, seed)
+        ui.write_tumble_recording(folder / "tumble.csv", truth, seed)
+        rc, d, err = run_session(folder)
+        z = normalised_errors(d, truth)
+        if d["ok"]:
+            assert rc == 0 and max(abs(v) for v in z.values()) < 4.0, (seed, z)
+        else:
+            assert rc == 2 and "NOT OK" in err, (seed, rc, err)
+
+
 # ---------------------------------------------------------------- (2) decisions
 
 @pytest.mark.slow

@@ -351,7 +351,10 @@ def write_tumble_recording(path: Path, truth: Truth, seed: int, rate_hz: float =
     f = np.concatenate(f_all)
     a_ax = f @ truth.axes().T
     a_ax = a_ax + np.asarray(truth.extra.get("k2", (0.0, 0.0, 0.0))) * a_ax ** 2
-    counts = np.round(truth.scale * (a_ax + rng.normal(0, sigma_g, a_ax.shape)) + truth.bias)
-    t = np.arange(len(counts)) / rate_hz
+    t = np.arange(len(a_ax)) / rate_hz
+    # a bias that drifts over the run (warm-up) [g/s] per axis: Truth.extra["drift"]
+    drift = np.asarray(truth.extra.get("drift", (0.0, 0.0, 0.0)))[None] * t[:, None]
+    counts = np.round(truth.scale * (a_ax + drift + rng.normal(0, sigma_g, a_ax.shape))
+                      + truth.bias)
     path.write_text("t,ux,uy,uz\n" + "".join(
         f"{tt:.3f},{c[0]:.0f},{c[1]:.0f},{c[2]:.0f}\n" for tt, c in zip(t, counts, strict=True)))
