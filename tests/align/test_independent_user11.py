@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +17,7 @@ import pytest
 from scipy.stats import norm
 
 from align.cli import main
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import user11_inputs as ui  # noqa: E402  (the generators beside this file)
+from tests.align import user11_inputs as ui
 
 FACES = ["--faces", "ref,y,x,z", "--latitude", "50.45"]
 
