@@ -299,9 +299,9 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     elif limited:
         worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
         # With a camera model given, "give it with --camera" is no advice: its own u limits.
-        advice = (f"the camera model's own u limits it: recalibrate (`align camera`) with "
-                  f"more views, reaching the frame's corners, and give it with {lens.model_as}"
-                  if lens.record.get("source") == CAMERA_MODEL else
+        advice = ("the camera model's own u limits it: recalibrate (`align camera`) with "
+                  "more views, reaching the frame's corners, or measure a mark nearer the "
+                  "centre" if lens.record.get("source") == CAMERA_MODEL else
                   f"calibrate the camera (`align camera`) and give it with {lens.model_as}")
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
