@@ -285,10 +285,24 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
         plane = q[4] + q[5] * tt / 100 + q[6] * ee / 100
         return plane * _edge_model(q[:4], tt, ee) - y / scale
 
+    def jac(q: np.ndarray) -> np.ndarray:
+        # By hand: finite differences cost 7 more evaluations of the model per step (on a
+        # real photo's edge, ~1 s CPU of 10 fits over ~17k pixels).
+        e0, k, logw, d = q[:4]
+        w = np.exp(logw)
+        z = (ee - e0 - k * tt) / w
+        phi = np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi)
+        plane = q[4] + q[5] * tt / 100 + q[6] * ee / 100
+        edge = 1.0 - d * special.ndtr(z)
+        g = plane * d * phi / w  # d(model)/d(e0); the edge moves with e0 + k t
+        return np.column_stack([g, g * tt, g * w * z, -plane * special.ndtr(z),
+                                edge, edge * tt / 100, edge * ee / 100])
+
     best = None
     for e0 in np.linspace(-reach / 2, reach / 2, 5):
         for d0 in (0.3, -0.3):
             r = optimize.least_squares(resid, [e0, 0.0, np.log(3.0), d0, 1.0, 0.0, 0.0],
+                                       jac=jac,
                                        bounds=([-reach, -0.5, np.log(0.3), -0.95, 0, -1, -1],
                                                [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]))
             if best is None or r.cost < best.cost:
