@@ -251,9 +251,9 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
     table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
     table = _with_rate(table, rate_hz)
-    _check(table)
-    if spec.distinct_rows:
+    if spec.distinct_rows:  # first: a copy's repeated times are better named as a copy
         check_repeats(table)
+    _check(table)
     warning = rate_warning(table)
     if warning:
         _note(f"WARNING: {warning}")
