@@ -129,9 +129,10 @@ def window_keys(keys: np.ndarray, w: int) -> np.ndarray:
 
 def find_copy(keys: np.ndarray, least: int, min_bits: float = 0.0) -> Copy | None:
     """The first copy in ``keys``: a run of consecutive rows equal to an earlier run at one
-    offset ``d``, whose part beside its original (``min(run, d)`` rows: a run longer than its
-    offset repeats itself, as a periodic signal does) has at least ``least`` rows and
-    ``min_bits`` bits (:func:`entropy_bits`). None when there is none.
+    offset ``d``, beside it (``run <= d``: a run longer than its offset repeats itself, as a
+    periodic signal does — unless it spans the whole file, which is then one block written
+    k times), whose rows beside the original (``min(run, d)``) are at least ``least`` and
+    carry ``min_bits`` bits (:func:`entropy_bits`). None when there is none.
 
     Candidate offsets are those of equal windows of ``least`` rows (:func:`window_keys`; a
     stable sort: each window's latest earlier twin), most frequent first; each is then
@@ -172,6 +173,9 @@ def find_copy(keys: np.ndarray, least: int, min_bits: float = 0.0) -> Copy | Non
         edges = np.flatnonzero(np.diff(eq))
         starts, ends = edges[::2], edges[1::2]
         for s, e in zip(starts, ends, strict=True):
+            if e - s > d and not (s == 0 and e + d == n):
+                continue  # over-lapping itself: a periodic stretch (a file written k times
+                # is one too, but spans the file: from its first row to its last)
             rows = min(int(e - s), d)
             if rows < least or (best is not None and s + d >= best.start):
                 continue
