@@ -235,3 +235,36 @@ def check_repeats(table: Table) -> None:
         raise InputError(f"{table.path}:{table.line(1)}: every row is written twice in "
                          f"a row ({n // 2} pairs of identical rows): duplicated samples? "
                          "Each sample must appear once")
+
+
+def first_row(table: Table) -> tuple[float, int, int] | None:
+    """A streamed table's first row as :func:`restarted` needs it: (time, key, line), or None
+    without a measured time."""
+    spec = table.spec
+    if not len(table) or spec.time not in table.data or table.time_from_rate:
+        return None
+    key = row_keys([table.data[c.name][:1] for c in spec.columns if c.name in table.data])
+    return float(table.data[spec.time][0]), int(key[0]), table.line(0)
+
+
+def restarted(chunk: Table, first: tuple[float, int, int] | None) -> None:
+    """A streamed table (a counter log of 10⁸ rows is never whole in memory) whose rows start
+    again from its first row — time and every column — was written twice: refused naming
+    where the copy starts (a measured time is decisive; its end is not known yet). One
+    comparison a row; a copy of another stretch is named by the time check ("runs
+    backwards")."""
+    if first is None:
+        return
+    t0, key0, line0 = first
+    t = chunk.data[chunk.spec.time]
+    hits = np.flatnonzero(t == t0)
+    hits = hits[hits + chunk.row0 > 0]
+    if not len(hits):
+        return
+    k = int(hits[0])
+    cols = [chunk.data[c.name][k:k + 1] for c in chunk.spec.columns if c.name in chunk.data]
+    if int(row_keys(cols)[0]) == key0:
+        line = chunk.line(k)
+        raise InputError(f"{chunk.path}:{line}: lines {line}- repeat lines {line0}- exactly "
+                         f"(the rows start again from the first, t = {t0:g}): the file was "
+                         "written twice? keep one copy")

@@ -47,7 +47,7 @@ from axisbase.header import (
     read_header,
     show_cell,
 )
-from axisbase.repeats import check_repeats
+from axisbase.repeats import check_repeats, first_row, restarted
 from axisbase.tabledata import Table
 from axisbase.tablespec import KINDS, Column, TableSpec
 from axisbase.units import (
@@ -368,6 +368,7 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
     row0 = 0
     prev_t = None
+    first = None
     empty = True
     for filtered in (False, True):
         # The file as it is; then, only if pyarrow met a comment it could not skip, the file
@@ -388,6 +389,8 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                 if n == 0:
                     continue
                 chunk = _table(path, spec, h, cols, row0)
+                first = first or first_row(chunk)
+                restarted(chunk, first)
                 _check(chunk, prev_t)
                 if empty and (warning := rate_warning(chunk)):
                     _note(f"WARNING: {warning}")  # (the first chunk: thousands of rows)
