@@ -225,6 +225,10 @@ def check_repeats(table: Table) -> None:
              and not (c.name == spec.time and table.time_from_rate)]
     if n < 2 * TIMED_COPY_ROWS or not names:
         return
+    if timed:
+        t = table.data[spec.time]
+        if bool((t[1:] > t[:-1]).all()):
+            return  # times all distinct: no row can equal another (O(n), no keys needed)
     cols = [table.data[c] for c in names]
     keys = row_keys(cols)
     copy = (find_copy(keys, TIMED_COPY_ROWS) if timed
