@@ -9,8 +9,8 @@ import pytest
 
 from align.cli import main
 from align.fusion import E_INDEX, E_NAMES
-from align.fusion.budget import Linearisation
-from align.plan import options, plan, plan_from_result
+from align.fusion.budget import Group, Linearisation
+from align.plan import NOISE_K, image_noise, options, plan, plan_from_result
 from align.session import load_session, run_session
 from axisbase.units import ARCSEC
 from synth.session import SessionSpec, write_session
@@ -52,6 +52,77 @@ def test_plan_ranks_by_gain_per_minute_and_targets_the_critical_angle(tmp_path, 
         {"name": "E_zX", "margin_arcsec": 50.0, "guard_arcsec": 0.4, "verdict": "PASS"}]}
     assert plan(lin, disp).target == "E_xY"
     assert plan_from_result(d).target == d["disposition"]["worst"]
+
+
+def _images_lin(own_arcsec2, lens_arcsec=0.0) -> Linearisation:
+    """E_xY seen only by images of housing x in view A (camera A), each with its own variance
+    ``own_arcsec2`` [″²], all coupled by ``lens_arcsec`` [″] to one lens error (a unit prior);
+    the other five angles known to 0.01″ (a static-like group)."""
+    P = 7  # the six angles, the lens error
+    rows = []
+    for k, v in enumerate(own_arcsec2):
+        A = np.zeros((1, P))
+        A[0, 0], A[0, 6] = 1.0, lens_arcsec * ARCSEC
+        rows.append(Group(f"image x_A_{k}.png", "image", A, np.array([[v * ARCSEC**2]]), (),
+                          {"housing": "x", "view": "A", "camera": "A"}))
+    rest = np.zeros((5, P))
+    rest[:, 1:6] = np.eye(5)
+    lens = np.zeros((1, P))
+    lens[0, 6] = 1.0
+    return Linearisation((*E_NAMES, "lens[0]"),
+                         (*rows, Group("static poses", "static", rest,
+                                       np.eye(5) * (0.01 * ARCSEC) ** 2),
+                          Group("lens of camera A", "typeB", lens, np.eye(1))),
+                         (("lens of camera A", (6,)),))
+
+
+def _option(lin, kind):
+    return next(o for o in options(lin) if o[1] == kind)
+
+
+def test_another_image_is_the_cameras_mean_image_not_a_copy():
+    """The defect of the copied covariance: one more image of x in A has the camera's mean
+    own variance (1 and 9 ″²: 5), and its draw's scatter is the prediction's noise."""
+    lin = _images_lin([1.0, 9.0])
+    _, _, _, add, drop, _ = _option(lin, "image")
+    assert add[0].C[0, 0] / ARCSEC**2 == pytest.approx(5.0)
+    # pooled relative SD of the own variances: |1/5 - 1| = |9/5 - 1| = 0.8 on 1 dof
+    images = [g for g in lin.groups if g.kind == "image"]
+    assert image_noise(images) == pytest.approx(0.8 * np.sqrt(2))
+    p = plan(lin)
+    o = next(o for o in p.options if o.kind == "image")
+    # u² = 1 / (1/1 + 1/9 + 1/5) ″²; d ln u / d ln v_new = (1/5) / 2 / (1/1 + 1/9 + 1/5)
+    info = 1 + 1 / 9 + 1 / 5
+    assert o.u_after / ARCSEC == pytest.approx(info ** -0.5, rel=1e-6)
+    rel = 0.8 * np.sqrt(2) * np.sqrt(1 + 1 / 2)
+    assert o.u_after_noise / o.u_after == pytest.approx(0.2 / 2 / info * rel, rel=0.05)
+
+
+def test_a_lens_the_cameras_images_share_does_not_average_down():
+    """A lens error of 3″ on every image of camera A (own u 0.5″): more images of that camera
+    leave E_xY lens-limited; the new row is coupled to the same lens error."""
+    lin = _images_lin([0.25, 0.25], lens_arcsec=3.0)
+    u0 = lin.u_with()[0]
+    _, _, _, add, drop, _ = _option(lin, "image")
+    assert add[0].A[0, 6] == pytest.approx(3.0 * ARCSEC)
+    u1 = lin.u_with(add=add, drop=drop)[0]
+    assert 1 - u1 / u0 < 0.01  # a per-image term would have fallen by 18 % (sqrt(2/3))
+
+
+def test_the_plan_says_when_no_gain_exceeds_the_noise_of_its_prediction():
+    """Two images whose own u² scatter 1 to 9: one more image or a reversal would lower u of
+    E_xY by less than twice its prediction's noise, and the plan says so; two alike images
+    (4 and 5 ″²) make the same gains clear."""
+    noisy = plan(_images_lin([1.0, 9.0]))
+    assert noisy.target == "E_xY" and noisy.options
+    assert all(noisy.u_before - o.u_after < NOISE_K * o.u_after_noise for o in noisy.options)
+    assert noisy.within_noise and noisy.to_dict()["within_noise"]
+    text = "\n".join(noisy.lines())
+    assert "no measurement improves E_xY by more than the noise of its prediction" in text
+    assert "->" not in text  # nothing advised
+    clear = plan(_images_lin([4.0, 5.0]))
+    assert not clear.within_noise
+    assert "->" in "\n".join(clear.lines()) and "noise" not in "\n".join(clear.lines())
 
 
 def _realise(spec: SessionSpec, o) -> SessionSpec | None:
