@@ -6,16 +6,23 @@ margin − guard band of the disposition), or, without a tolerance, the one with
 Each option is a hypothetical change of the observations, with the noise of the existing ones
 of that kind; its information is added to the session's and the new information inverted:
 
-* another image of a housing in a view: one more row like that image's (same Jacobian, same u);
+* another image of a housing in a view: the expected image of that camera (:func:`expected_image`):
+  the Jacobian of that housing in that view, coupled to the camera's lens errors as its images
+  are (a lens they share does not average down), and the mean own u² of the camera's images
+  (what each image reads from itself — noise, groove profile, background — is a new draw);
 * a reversed view (the platform turned 180° on the table, the same camera): the view's rows with
   the sign of their dependence on E flipped and that on the camera's roll kept — what separates
-  a roll from E;
+  a roll from E — each an expected image of the camera;
 * a goniometer log twice as long: the log's covariance without its Type B terms halved (more
   revolutions average the scatter, not a bound);
 * a second tumble (as many poses again): the calibration's covariance halved;
 * the platform static poses repeated: their covariance halved;
 * a calibrated camera (only when the loop estimated its roll): the roll known to
   ±``CAMERA_ROLL_U_ARCSEC``.
+
+Each prediction carries its noise (:func:`prediction_noise`): the new data's own u is not
+known before they are taken. When no option's gain exceeds ``NOISE_K`` times it, the plan says
+that no measurement improves the angle by more than the noise of its prediction.
 
 Minutes per option are the documented defaults ``MINUTES`` (a site changes them in code or by
 keyword). The prediction is first order in the data (the linearisation does not move) and keeps
@@ -47,13 +54,14 @@ MINUTES = {
 """Work per option [min], defaults."""
 MIN_GAIN = 1e-3
 """An option lowering u by less than this fraction is not listed (it does not matter)."""
-RESTATED_U_NOISE = {"gonio": 0.10, "static": 0.03, "tumble": 0.01}
+RESTATED_U_NOISE = {"gonio": 0.15, "static": 0.03, "tumble": 0.01}
 """Relative standard deviation of the u a repeated measurement of that kind will *state*
-about the u predicted for it (its u is estimated from its own data again: the goniometer's
-from the phase path of the new log and its quantisation, the static poses' from their
-samples' scatter, the tumble's from its fit's residuals) — dimensionless. Measured by
-simulation (logs of 100 and 200 revolutions, 12 seeds: SD 0.10 of the ratio; the static
-poses and tumble repeated in ``tests/align/test_plan.py``, see docs/decision.md)."""
+about the u predicted for it — dimensionless. Its u is estimated from its own data again:
+the goniometer's from the new log's phase path and quantisation (which averages faster than
+1/√n on some logs: the prediction is then high), the static poses' from their samples'
+scatter, the tumble's from its fit's residuals. Measured by simulation (predicted/obtained
+over seeds, ``tests/align/test_plan.py``, docs/decision.md): log twice as long SD 0.08–0.16,
+static poses repeated 0.02, second tumble 0.002."""
 NOISE_K = 2.0
 """A gain below ``NOISE_K`` standard deviations of its prediction is not promised: the plan
 says no measurement improves the angle by more than the prediction's noise."""
