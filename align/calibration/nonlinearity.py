@@ -31,16 +31,30 @@ line under the calibration table), naming the flag.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from align.calibration.effects import K3, NONLIN
-from align.calibration.widen import RECTANGULAR
-from align.errors import InputError
+from align.calibration.model import CalibrationStage
+from align.calibration.widen import RECTANGULAR, USEFUL_FACTOR, Alternative, positive_part
+from align.errors import InputError, NotApplicable
+from align.loop import Candidate, LoopReport, bic
+from align.loop.fit import StageFit, Term
 
 BOUND = "nonlinearity_bound"
 """The term's name in ``u_widening``."""
+UNEXCLUDED = "k3_not_excluded"
+"""The term's name in ``u_widening`` for a K3 the loop tried and did not add that the poses
+do not exclude (nothing declared)."""
+MOVES_K = 1.0
+"""That K3 is carried where it moves a scale factor by more than this many of the scale
+factor's noise u (its term's u beside the noise's; 26 cube poses: ×3-7) and at most
+:data:`~align.calibration.widen.USEFUL_FACTOR` of it: beyond, the free fit does not determine
+K3 on these poses (the 28-pose plan: its K3 correlated ±1 over the axes, u(k) ×1e3, while a
+K3 along that direction rendered at twice its u leaves χ² 111 on 19 dof without the
+candidate — the linear covariance is not what the data exclude there): not carried, stated."""
 UG = 1e-6
 """A declared µg/g² (µg/g³) in the model's 1/g (1/g²)."""
 FLAG = "--nonlinearity-bound"
@@ -135,17 +149,28 @@ def bound_reason(carried: dict[str, float]) -> str:
 
 
 def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
-                           k3_separable: bool, why_not: str = "at ±1 g x³ = x") -> dict:
+                           k3_separable: bool, why_not: str = "at ±1 g x³ = x",
+                           weak: Unexcluded | None = None) -> dict:
     """The JSON ``nonlinearity`` record: the declared bounds [µg/g², µg/g³] (null: not
-    declared), the terms carried in u, whether the poses separate K3 from k (``why_not``:
-    why not, in the statement), and the statement printed under the table ("" when there
-    is nothing to say)."""
+    declared), the terms carried in u (``weak``: K3 not excluded, :func:`unexcluded_k3`),
+    whether the poses separate K3 from k (``why_not``: why not, in the statement), and the
+    statement printed under the table ("" when there is nothing to say)."""
     carried = [n for n, b in declared.items() if n not in added and b > 0]
+    if weak is not None and weak.carried:
+        carried.append(K3)
     if declared:
         why = ("declared " + ", ".join(f"{n[-2:].upper()} within ±{b / UG:g} {UNITS[n]}"
                                        for n, b in declared.items())
                + (f"; carried in u ({BOUND}): {', '.join(carried)}" if carried else
                   "; fitted by the loop where added"))
+    elif weak is not None and weak.carried:
+        why = (f"K3 not added, not excluded by these poses: carried in u ({UNEXCLUDED}: k "
+               f"moves by up to {weak.moves:.2g} of its noise u); declare the datasheet's "
+               f"bound with {FLAG} K2,K3 or {KEYS[K3]} to carry that instead")
+    elif weak is not None:
+        why = (f"K3 not added and not determined by these poses (fitted, it would leave u of "
+               f"k x{weak.moves:.2g}): k is the linear coefficient at K3 = 0; declare the "
+               f"datasheet's bound with {FLAG} K2,K3 or {KEYS[K3]} to carry it in u")
     elif not k3_separable:
         why = (f"K3 is not separable from k on these poses ({why_not}): k is the 1 g "
                f"chord k (1 + K3); declare the datasheet's bound with {FLAG} K2,K3 or "
@@ -155,3 +180,101 @@ def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
     return {"k2_bound_ug_per_g2": declared[NONLIN] / UG if NONLIN in declared else None,
             "k3_bound_ug_per_g3": declared[K3] / UG if K3 in declared else None,
             "carried": carried, "k3_separable": bool(k3_separable), "statement": why}
+
+
+@dataclass(frozen=True)
+class Unexcluded:
+    """K3 the loop tried and did not add, not excluded by the poses: the free-K3 fit as
+    the alternative the parameters are averaged over (:data:`UNEXCLUDED`).
+
+    Attributes
+    ----------
+    alternative : Alternative
+        The free-K3 fit's shift of the nine core parameters and its excess covariance.
+    k3, u : numpy.ndarray
+        The free fit's K3 per axis and its u [1/g²].
+    moves : float
+        The term's largest u of a scale factor over that scale factor's noise u — ratio.
+    """
+
+    alternative: Alternative
+    k3: np.ndarray
+    u: np.ndarray
+    moves: float
+
+    @property
+    def carried(self) -> bool:
+        """Whether u carries it (:data:`MOVES_K` < moves <= ``USEFUL_FACTOR``)."""
+        return bool(self.moves <= USEFUL_FACTOR)
+
+    def reason(self) -> str:
+        """Why u was widened (``u_widening.terms`` and the warning)."""
+        each = ", ".join(f"{v / UG:+.0f} ± {u / UG:.0f}" for v, u in zip(self.k3, self.u,
+                                                                        strict=True))
+        return (f"K3 not excluded by these poses (tried, not added; the free fit's K3 x, y, "
+                f"z = {each} µg/g³): k moves with it by up to {self.moves:.2g} of its noise "
+                "u, so u covers the parameters' spread over the fits with and without it "
+                f"(declare the datasheet's bound with {FLAG} ,K3 to carry that instead)")
+
+    def term(self, n_params: int) -> np.ndarray:
+        """The covariance: the free fit's shift of the nine core parameters as a
+        rectangular half-width, plus its covariance beyond the chosen fit's."""
+        out = np.zeros((n_params, n_params))
+        a = self.alternative
+        out[:9, :9] = np.outer(a.shift, a.shift) / RECTANGULAR**2 + a.excess
+        return out
+
+
+def unexcluded_k3(stage: CalibrationStage, rep: LoopReport, candidates: Sequence[Candidate],
+                  guard: Callable[[StageFit, StageFit, Term], str | None],
+                  carried: Sequence[str]) -> Unexcluded | None:
+    """K3 carried in u where nothing bounds it and the poses measure it only weakly.
+
+    The loop's K3 test sees K3 only as far as its columns differ from k's; on 26 cube poses
+    at user 8's noise 100 µg/g³ is a noncentrality of ~14 on 3 degrees of freedom (found in
+    ~40 % of tumbles) and moves k by 7-8.5 of its u. No test on the data can tell such a K3
+    from none at a 1 % false-alarm rate, so whether it is carried is the design's question:
+    the free-K3 fit (the loop's last round plus K3, within the physical guard) is an
+    alternative the parameters are averaged over (as :mod:`align.calibration.unproven`'s:
+    its shift as a rectangular half-width plus its own covariance beyond the chosen fit's),
+    carried where it moves a scale factor by more than :data:`MOVES_K` of its noise u.
+
+    None where K3 was added, skipped (not separable: the statement says so), not a
+    candidate, declared (:func:`bound_increment` carries it), already in ``carried`` (a
+    plausible effect) or beyond the physical guard.
+    """
+    names = tuple(t.name for t in rep.terms)
+    cand = next((c for c in candidates if c.name == K3), None)
+    if (cand is None or K3 in names or K3 in stage.bounds or K3 in carried
+            or any(s.name == K3 for s in rep.skipped)):
+        return None
+    key = (*names, K3)
+    if key not in stage.fits:
+        term = cand.build(rep.after)
+        if term is None:
+            return None
+        try:
+            stage.fit([*rep.terms, term])
+        except (np.linalg.LinAlgError, NotApplicable):
+            return None  # not applicable to these poses (as in the loop)
+    trial, terms = stage.fits[key]
+    if guard(rep.after, trial, terms[-1]) is not None:
+        return None
+    final, free = rep.after.payload, trial.payload
+    shift = _core(free) - _core(final)
+    excess = positive_part(np.asarray(free.cov, float)[:9, :9]
+                           - np.asarray(final.cov, float)[:9, :9])
+    u_k = np.sqrt(np.diag(np.asarray(final.cov, float))[:3])
+    moves = float(np.max(np.sqrt(shift[:3] ** 2 / RECTANGULAR**2 + np.diag(excess)[:3])
+                         / u_k))
+    if not moves > MOVES_K:
+        return None
+    searched = sum(t.searched for t in rep.terms)
+    d_bic = bic(trial, searched + terms[-1].searched) - bic(rep.after, searched)
+    alt = Alternative(" + ".join(key), "", float(d_bic), float("nan"), shift, excess)
+    return Unexcluded(alt, np.array(free.k3, float),
+                      np.array([free.u_of(f"{K3}_{ax}") for ax in "xyz"]), moves)
+
+
+def _core(m) -> np.ndarray:
+    return np.concatenate([m.k, m.beta, m.bias])

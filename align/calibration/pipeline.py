@@ -39,9 +39,11 @@ from align.calibration.model import (
     walk_physical,
 )
 from align.calibration.nonlinearity import (
+    UNEXCLUDED,
     bound_increment,
     declared_bounds,
     nonlinearity_statement,
+    unexcluded_k3,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
 from align.calibration.stability import (
@@ -185,7 +187,6 @@ class Calibration:
             "scale_stability": self.stability,
             "nonlinearity": self.nonlinearity,
         }
-
 
 
 def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
@@ -342,6 +343,11 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((PLAUSIBLE, plausible_reason(plaus, alpha),
                            plausible_term(plaus, len(model.names))))
         alts = [*alts, *(a for a, _ in plaus)]
+    weak = unexcluded_k3(stage, rep, candidates, admissible(stage, overfit=False),
+                         [a.effects.split(" + ")[-1] for a, _ in plaus])
+    if weak is not None and weak.carried:  # nothing bounds the K3 the poses barely see
+        increments.append((UNEXCLUDED, weak.reason(), weak.term(len(model.names))))
+        alts = [*alts, weak.alternative]
     increments += bounded  # (a declared term BIC prefers is carried at its bound above)
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
@@ -354,7 +360,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
-        notes = (*notes, widening.warning())
+        if any(t != UNEXCLUDED for t, _, _ in increments):  # (K3 not excluded alone: the
+            notes = (*notes, widening.warning())  # design's, stated under the table)
         why = widening.undetermined(tuple(t.name for t in rep.terms),
                                     max(PLAN_MIN, len(poses.u)), WANDER)
         problems = (why,) if why else ()
@@ -374,7 +381,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
                "the poses cannot determine it" if skip == "does not apply to these data" else skip)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes, widening, problems, stated,
-                       nonlinearity_statement(declared, names, separable, why_not))
+                       nonlinearity_statement(declared, names, separable, why_not, weak))
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float
