@@ -1,5 +1,6 @@
-"""The declared non-linearity bound: K2 and K3 from the accelerometer's datasheet, a limit on
-the loop's candidates and a Type B term for what the poses cannot measure.
+"""The non-linearity the loop did not fit: K2 and K3 from the accelerometer's datasheet (a
+limit on the loop's candidates and a Type B term for what the poses cannot measure), and,
+nothing declared, the K3 the poses do not exclude.
 
 A cubic non-linearity K3 (u_i = k_i (x_i + K3_i x_i³), IEEE Std 1293) is odd like k: at
 ±1 g x³ = x, so on the six faces it is k itself (k is the 1 g chord k (1 + K3)) and only poses
@@ -23,9 +24,26 @@ k2_bound_ug_per_g2``, ``k3_bound_ug_per_g3``):
    term is S diag(bound² / 3) Sᵀ — ``nonlinearity_bound`` in ``u_widening``. An added term
    carries its own u in the fit's covariance.
 
-Nothing declared: u is unchanged, and where the poses cannot separate K3 from k (the
-known-pose route, or the loop skipped it) the result says so once (JSON ``nonlinearity``, a
-line under the calibration table), naming the flag.
+Nothing declared (:func:`unexcluded_k3`):
+
+* where the poses cannot separate K3 from k at all (the known-pose route; the loop skipped
+  it: the paper's 14 poses, u(K3) beyond a third of its physical bound) k is the 1 g chord
+  k (1 + K3), u is unchanged and the result says so once (JSON ``nonlinearity``, a line under
+  the calibration table), naming the flag;
+* where the loop tried K3 and did not add it (nor a plausible effect carried it) but the
+  poses measure it only weakly — the free-K3 fit would move a scale factor by more than
+  :data:`MOVES_K` of its noise u (26 cube poses: ×3 at any noise, a design's property; user
+  8's K3 = 100 µg/g³ there: a χ² drop of 5-9 in half the tumbles, k 7.4-9.1 u off, no test
+  at a 1 % false-alarm rate can see it) — u carries it: the free-K3 fit is an alternative
+  the parameters are averaged over (its shift of the nine core parameters as a rectangular
+  half-width, plus its covariance beyond the chosen fit's, as a plausible effect's), the
+  term ``k3_not_excluded`` in ``u_widening`` per parameter, K3 in ``nonlinearity.carried``
+  and the statement under the table. It is the design's, true of every clean tumble on such
+  poses: stated, not a warning (alone it raises none); a declared bound replaces it;
+* where the free fit does not determine K3 (its term beyond
+  :data:`~align.calibration.widen.USEFUL_FACTOR` of k's noise u: the 28-pose plan, the
+  Xsens recording) it is not carried and the statement says k is the linear coefficient at
+  K3 = 0.
 """
 
 from __future__ import annotations
