@@ -26,10 +26,11 @@ k2_bound_ug_per_g2``, ``k3_bound_ug_per_g3``):
 
 Nothing declared (:func:`unexcluded_k3`):
 
-* where the poses cannot separate K3 from k at all (the known-pose route; the loop skipped
-  it: the paper's 14 poses, u(K3) beyond a third of its physical bound) k is the 1 g chord
-  k (1 + K3), u is unchanged and the result says so once (JSON ``nonlinearity``, a line under
-  the calibration table), naming the flag;
+* where the poses cannot separate K3 from k at all (the known-pose route: k is the 1 g
+  chord k (1 + K3); the loop skipped it — the paper's 14 poses, u(K3) beyond a third of its
+  physical bound: k lies between that chord and the linear coefficient, :data:`FACES_WHY`)
+  u is unchanged and the result says so once (JSON ``nonlinearity``, a line under the
+  calibration table), naming the flag;
 * where the loop tried K3 and did not add it (nor a plausible effect carried it) but the
   poses measure it only weakly — the free-K3 fit would move a scale factor by more than
   :data:`MOVES_K` of its noise u (26 cube poses: ×3 at any noise, a design's property; user
@@ -57,7 +58,7 @@ import numpy as np
 from align.calibration.effects import K3, NONLIN
 from align.calibration.model import CalibrationStage
 from align.calibration.widen import RECTANGULAR, USEFUL_FACTOR, Alternative, positive_part
-from align.errors import InputError, NotApplicable
+from align.errors import InputError
 from align.loop import Candidate, LoopReport, bic
 from align.loop.fit import StageFit, Term
 
@@ -166,8 +167,15 @@ def bound_reason(carried: dict[str, float]) -> str:
             "uniform Type B term through each parameter's sensitivity to it")
 
 
+FACES_WHY = "at ±1 g x³ = x"
+"""Why the six faces cannot separate K3: there k is exactly the 1 g chord. Elsewhere (the
+paper's 14 poses: faces and corners, x³ = x/3 at a corner) k lies between the chord and the
+linear coefficient (user 8's K3 = ±100 µg/g³: 4.1 u from the chord, 11.5 u from the linear
+coefficient at most, ``benchmarks/calibration_k3.py``)."""
+
+
 def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
-                           k3_separable: bool, why_not: str = "at ±1 g x³ = x",
+                           k3_separable: bool, why_not: str = FACES_WHY,
                            weak: Unexcluded | None = None) -> dict:
     """The JSON ``nonlinearity`` record: the declared bounds [µg/g², µg/g³] (null: not
     declared), the terms carried in u (``weak``: K3 not excluded, :func:`unexcluded_k3`),
@@ -190,9 +198,10 @@ def nonlinearity_statement(declared: dict[str, float], added: Sequence[str],
                f"k x{weak.moves:.2g}): k is the linear coefficient at K3 = 0; declare the "
                f"datasheet's bound with {FLAG} K2,K3 or {KEYS[K3]} to carry it in u")
     elif not k3_separable:
-        why = (f"K3 is not separable from k on these poses ({why_not}): k is the 1 g "
-               f"chord k (1 + K3); declare the datasheet's bound with {FLAG} K2,K3 or "
-               f"{KEYS[K3]} to carry it in u")
+        what = ("k is the 1 g chord k (1 + K3)" if why_not == FACES_WHY else
+                "k lies between the linear coefficient and the 1 g chord k (1 + K3)")
+        why = (f"K3 is not separable from k on these poses ({why_not}): {what}; declare "
+               f"the datasheet's bound with {FLAG} K2,K3 or {KEYS[K3]} to carry it in u")
     else:
         why = ""
     return {"k2_bound_ug_per_g2": declared[NONLIN] / UG if NONLIN in declared else None,
@@ -260,6 +269,12 @@ def unexcluded_k3(stage: CalibrationStage, rep: LoopReport, candidates: Sequence
     None where K3 was added, skipped (not separable: the statement says so), not a
     candidate, declared (:func:`bound_increment` carries it), already in ``carried`` (a
     plausible effect) or beyond the physical guard.
+
+    Raises
+    ------
+    NotApplicable
+        The loop had not fitted K3 and its fit here finds that these poses cannot measure
+        it (the reason: not separable, :func:`k3_separability`).
     """
     names = tuple(t.name for t in rep.terms)
     cand = next((c for c in candidates if c.name == K3), None)
@@ -273,7 +288,7 @@ def unexcluded_k3(stage: CalibrationStage, rep: LoopReport, candidates: Sequence
             return None
         try:
             stage.fit([*rep.terms, term])
-        except (np.linalg.LinAlgError, NotApplicable):
+        except np.linalg.LinAlgError:
             return None  # not applicable to these poses (as in the loop)
     trial, terms = stage.fits[key]
     if guard(rep.after, trial, terms[-1]) is not None:
@@ -292,6 +307,18 @@ def unexcluded_k3(stage: CalibrationStage, rep: LoopReport, candidates: Sequence
     alt = Alternative(" + ".join(key), "", float(d_bic), float("nan"), shift, excess)
     return Unexcluded(alt, np.array(free.k3, float),
                       np.array([free.u_of(f"{K3}_{ax}") for ax in "xyz"]), moves)
+
+
+def k3_separability(candidates: Sequence[Candidate], rep: LoopReport,
+                    unmeasured: str | None = None) -> tuple[bool, str]:
+    """Whether the poses separate K3 from k, and why not: the loop could not try it on them
+    (its reason when it says more than the default; ``unmeasured``: the reason found by
+    :func:`unexcluded_k3` where the loop's screen had not fitted it), else it was never a
+    candidate (:data:`FACES_WHY`)."""
+    skip = next((s.reason for s in rep.skipped if s.name == K3), unmeasured)
+    separable = skip is None and K3 in {c.name for c in candidates}
+    return separable, (FACES_WHY if skip is None else "the poses cannot determine it"
+                       if skip == "does not apply to these data" else skip)
 
 
 def _core(m) -> np.ndarray:

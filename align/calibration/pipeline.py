@@ -29,7 +29,6 @@ from align.calibration.known import (
 from align.calibration.model import (
     CANDIDATES,
     IN_TIME,
-    K3,
     OVERFIT_CHI2,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
@@ -42,6 +41,7 @@ from align.calibration.nonlinearity import (
     UNEXCLUDED,
     bound_increment,
     declared_bounds,
+    k3_separability,
     nonlinearity_statement,
     unexcluded_k3,
 )
@@ -343,8 +343,11 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((PLAUSIBLE, plausible_reason(plaus, alpha),
                            plausible_term(plaus, len(model.names))))
         alts = [*alts, *(a for a, _ in plaus)]
-    weak = unexcluded_k3(stage, rep, candidates, admissible(stage, overfit=False),
-                         [a.effects.split(" + ")[-1] for a, _ in plaus])
+    try:
+        weak, unmeasured = unexcluded_k3(stage, rep, candidates, admissible(
+            stage, overfit=False), [a.effects.split(" + ")[-1] for a, _ in plaus]), None
+    except NotApplicable as exc:  # (the loop's screen had not fitted it: not separable)
+        weak, unmeasured = None, str(exc)
     if weak is not None and weak.carried:  # nothing bounds the K3 the poses barely see
         increments.append((UNEXCLUDED, weak.reason(), weak.term(len(model.names))))
         alts = [*alts, weak.alternative]
@@ -373,12 +376,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
-    separable = K3 in {c.name for c in candidates} - {s.name for s in rep.skipped}
-    # why not: the loop could not try it on these poses (its reason when it has more to say
-    # than the default), else it was never a candidate (the faces: x³ = x at ±1 g)
-    skip = next((s.reason for s in rep.skipped if s.name == K3), None)
-    why_not = ("at ±1 g x³ = x" if skip is None else
-               "the poses cannot determine it" if skip == "does not apply to these data" else skip)
+    separable, why_not = k3_separability(candidates, rep, unmeasured)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes, widening, problems, stated,
                        nonlinearity_statement(declared, names, separable, why_not, weak))
