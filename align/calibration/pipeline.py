@@ -350,7 +350,6 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         weak, unmeasured = None, str(exc)
     if weak is not None and weak.carried:  # nothing bounds the K3 the poses barely see
         increments.append((UNEXCLUDED, weak.reason(), weak.term(len(model.names))))
-        alts = [*alts, weak.alternative]
     increments += bounded  # (a declared term BIC prefers is carried at its bound above)
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
