@@ -269,8 +269,8 @@ def _loop_earth_z(tmp_path, seeds) -> np.ndarray:
 
 
 def test_the_loops_earth_rate_on_a_wandering_table_is_unbiased(tmp_path):
-    """Two seeds (the slow twin runs 40): each within 3 u (was 4.3 and 6.7 u high)."""
-    z = _loop_earth_z(tmp_path, (0, 1))
+    """One seed (the slow twin runs 40): within 3 u (was 6.7 u high)."""
+    z = _loop_earth_z(tmp_path, (0,))
     assert np.all(np.abs(z) < 3.0), z
 
 
