@@ -163,8 +163,9 @@ def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: flo
         v = np.ascontiguousarray(np.take(image.T, rows, axis=1).astype(np.float32).T)
     else:
         v = image[rows].astype(np.float32)
-    out = mask[rows] | (v <= 0) | (v >= full_scale)
-    v[out] = np.nan
+    out = mask[rows] | (v <= 0)
+    out |= v >= full_scale
+    np.copyto(v, np.nan, where=out)  # (a boolean-index assignment costs ~3x)
     if minus is not None:
         v -= minus[rows, None]
     return v
