@@ -31,8 +31,8 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     ends = np.array([c + offset * n + t * u for t in (t0, t1)])
     lo = max(0, int(np.floor(ends[:, ax].min() - half)))
     hi = min(size_ax - 1, int(np.ceil(ends[:, ax].max() + half)))
-    if hi < lo:
-        return (np.empty(0),) * 4
+    if hi < lo:  # (flat indices stay integers: an empty band still indexes an image)
+        return np.empty(0), np.empty(0), np.empty(0), np.empty(0, np.intp)
     k = np.arange(lo, hi + 1, dtype=float)
     # Where the line crosses walk coordinate k, and how far the band reaches across it.
     cross = c[other] + (offset - (k - c[ax]) * n[ax]) / n[other]
