@@ -174,7 +174,7 @@ def _relative(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
         np.copyto(lev, 1.0, where=~(lev > 0))
     rel = np.divide(image, lev, out=lev)
     rel -= 1.0
-    np.copyto(rel, 0.0, where=~valid)  # (a boolean-index assignment costs ~3x)
+    np.copyto(rel, 0.0, where=~valid)  # (a boolean-index assignment: ~1.5x the time)
     return rel
 
 

@@ -61,7 +61,7 @@ def pixel_noise(img: np.ndarray) -> float:
     conv = cv2.filter2D(img.astype(np.float32, copy=False), -1, k,
                         borderType=cv2.BORDER_REFLECT)[1:-1, 1:-1]
     # The mean |conv| as OpenCV's L1 norm (one pass, summed in float64) over the strided
-    # interior: numpy's abs and float32 mean of it cost ~1.5 ms of a 5 MP frame's 1 MP centre.
+    # interior: numpy's abs and float32 mean of it took ~1 ms more on a 5 MP frame's 1 MP centre.
     return float(np.sqrt(np.pi / 2) * cv2.norm(conv, cv2.NORM_L1) / conv.size / 6)
 
 
