@@ -55,7 +55,10 @@ def mark_lines(r) -> list[str]:
     lines += [f"    note: {n.removeprefix(f'{r.image} mark {r.index}: ')}" for n in r.notes
               if is_information(n)]
     if r.lens_limited:
-        lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
+        lines.append("    NOT OK: lens-limited: " + (
+            "the camera model's own u (more chessboard views over this region, or the mark "
+            "nearer the centre)" if (r.lens or {}).get("source") == "camera model" else
+            "calibrate the camera (`align camera`)"))
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     if r.kinked:

@@ -166,8 +166,10 @@ class SessionResult:
             if not r.found:
                 continue  # a stage error already
             if r.lens_limited:
-                out.append(f"{im.file.name}: the angle is lens-limited (calibrate camera "
-                           "or declare its lens)")
+                out.append(f"{im.file.name}: the angle is lens-limited (" + (
+                    "the camera model's own u: more chessboard views over the mark's region, "
+                    "or the mark nearer the centre" if (r.lens or {}).get("source") ==
+                    "camera model" else "calibrate camera or declare its lens") + ")")
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
