@@ -345,12 +345,20 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     if len(objpts) < 3:
         raise ImageInputError(f"only {len(objpts)} usable chessboard views; need at least 3 "
                               f"({'; '.join(f'{k}: {v}' for k, v in failed.items())})")
+    names = [n for n in images if n not in failed]
+    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect), failed
+
+
+def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                      fix_k3: bool = False, fix_aspect: bool = False) -> CameraModel:
+    """:func:`calibrate_chessboard` from the boards' corners found: ``objpts`` per view the
+    board's corners (N, 3) [board units] (float32), ``imgpts`` their image (N, 1, 2) [px]
+    (float32), ``size`` (width, height) [px], ``names`` one per view."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None
     rms, K, D, rvecs, tvecs, sd, _, per_view = cv2.calibrateCameraExtended(
         objpts, imgpts, size, None if K0 is None else K0.copy(), None, flags=flags)
-    names = [n for n in images if n not in failed]
     formal = np.ravel(sd)[:len(INTRINSICS)]
     u_formal = {k: float(v) for k, v in zip(INTRINSICS, formal, strict=True)}
     u_jack = None
@@ -373,4 +381,4 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
                        {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)},
                        u_formal, u_jack, cov_f if cov_j is None else dominating(cov_f, cov_j),
-                       cov_f, cov_j), failed
+                       cov_f, cov_j)

@@ -89,17 +89,23 @@ def jackknife_cov(estimates: np.ndarray) -> np.ndarray:
 
 
 def dominating(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The covariance at least as large as both ``a`` and ``b`` in every direction, equal to
-    the larger one along each generalised eigen-direction of the pair (``a`` positive
-    definite on its non-zero rows; those of ``b`` outside them are 0)."""
-    free = np.flatnonzero(np.diag(a) > 0)
+    """The covariance at least as large as both ``a`` and ``b`` in every direction of ``a``'s
+    range, equal to the larger one along each generalised eigen-direction of the pair (what
+    ``b`` holds outside that range, a parameter the calibration fixed, is left out).
+
+    By hand: a matrix "max" of two covariances is no library function. Worked on the
+    correlation scale of ``a`` (the intrinsics' units span 1e-4 to 1e2)."""
+    d = np.sqrt(np.clip(np.diag(a), 0.0, None))
+    free = np.flatnonzero(d > 0)
     out = np.zeros_like(a)
     if not free.size:
         return out
     F = np.ix_(free, free)
-    L = np.linalg.cholesky(a[F])
-    Li = np.linalg.inv(L)
-    w, V = np.linalg.eigh(Li @ b[F] @ Li.T)
-    T = L @ V
-    out[F] = T @ np.diag(np.maximum(w, 1.0)) @ T.T
+    S = 1.0 / np.outer(d[free], d[free])
+    s, U = np.linalg.eigh(a[F] * S)
+    keep = s > 1e-10 * s.max()
+    W = U[:, keep] / np.sqrt(s[keep])          # whitens a on its range
+    w, V = np.linalg.eigh(W.T @ (b[F] * S) @ W)
+    T = U[:, keep] * np.sqrt(s[keep]) @ V      # back from the whitened directions
+    out[F] = (T * np.maximum(w, 1.0)) @ T.T / S
     return 0.5 * (out + out.T)

@@ -476,13 +476,6 @@ def test_own_session_with_my_camera_images(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "align marks off.png --camera camera.json (a mark 190 px from the principal point, the "
-    "model from align camera on the 7 OpenCV left*.jpg): exit 2, '± 147″ from the lens, "
-    "mostly camera_k1 ... calibrate the camera (`align camera`) and give it with --camera' "
-    "although --camera was given; the angle itself was +93.3″ for a true +100″. (Its "
-    "camera_k1 100″ and camera_k2 98″ are added as if independent; the leave-one-view-out "
-    "spread of this angle through cv2.calibrateCamera is 85″.)"))
 def test_lens_limited_with_a_model_says_what_to_do(tmp_path):
     """With a camera model given, a lens-limited mark is refused (right) but its advice must
     not be to give the camera model the user gave: it should say the model's own u is the
