@@ -143,3 +143,35 @@ def test_real_chessboard_lens_joint_u_against_its_views():
           f"{u_old / ARCSEC:.1f}″ leave-one-view-out {loo / ARCSEC:.1f}″")
     assert uj >= 0.95 * loo
     assert uj < 0.8 * u_old and uj < ui
+
+
+def test_the_sensitivity_is_the_refitted_lines_turn():
+    """The one-fit sensitivity (each parameter's field across the line regressed on the
+    position along it, with the centres' weights and correlation) is the angle of the line
+    refitted through the model with that parameter moved ± its u, to 1e-5, at several
+    directions (the angle's sign convention: counter-clockwise with y down)."""
+    rng = np.random.default_rng(0)
+    obj_pts, img_pts = board_views(rng, 5, 0.15)
+    cam = from_corners(obj_pts, img_pts)
+    n = 120
+    sig = rng.uniform(0.5, 1.5, n)
+    L = np.linalg.cholesky(np.exp(-np.abs(np.subtract.outer(np.arange(n), np.arange(n))) / 5))
+    for a in (0.1, 1.2, -0.7, 1.55):
+        q = np.array([100.0, -80.0]) + np.outer(np.linspace(-120, 120, n),
+                                                [np.cos(a), -np.sin(a)])
+        g = angle_sensitivity(cam, q, sig, L, SHAPE)
+        raw = raw_pixels(cam, q, SHAPE) - CENTRE
+        ref = []
+        for j, h in enumerate(np.sqrt(np.diag(cam.cov))):
+            K, D = cam.camera_matrix.copy(), np.ravel(cam.dist_coeffs).copy()
+            turns = []
+            for s in (h, -h):
+                Kj, Dj = K.copy(), D.copy()
+                if j < 4:
+                    Kj[(0, 1, 0, 1)[j], (0, 1, 2, 2)[j]] += s
+                else:
+                    Dj[j - 4] += s
+                m = replace(cam, camera_matrix=Kj, dist_coeffs=Dj)
+                turns.append(fit_line_only(m.undistort_centred(raw, sig, SHAPE)[0], sig, L)[0])
+            ref.append((turns[0] - turns[1]) / (2 * h))
+        np.testing.assert_allclose(g, ref, rtol=0, atol=1e-5 * np.abs(ref).max())
