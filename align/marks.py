@@ -20,7 +20,13 @@ from pathlib import Path
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
-from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
+from align.camera_lens import (
+    CAMERA_MODEL,
+    LENS_TERMS,
+    CameraLens,
+    camera_lens,
+    undistorted_mark,
+)
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
@@ -304,13 +310,14 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
 def lens_advice(lens: CameraLens, m: MarkMeasurement) -> str:
     """What helps a lens-limited angle: without a camera model, calibrating the camera and
     giving the model; with one, the model's own u is the limit (where the mark lies)."""
-    if lens.record.get("source") != "camera model":
+    # With a camera model given, "give it with --camera" is no advice: its own u limits.
+    if lens.record.get("source") != CAMERA_MODEL:
         return f"calibrate the camera (`align camera`) and give it with {lens.model_as}"
     x, y = np.mean(m.points, axis=0)
-    return (f"the camera model's own u is the limit where this mark lies, ({x:+.0f}, {y:+.0f}) "
-            f"px from the image centre ({np.hypot(x, y):.0f} px out): recalibrate with more "
-            "chessboard views, spread so the boards cover this region of the frame, or place "
-            "the mark nearer the image centre")
+    return (f"the camera model's own u limits it where this mark lies, ({x:+.0f}, {y:+.0f}) px "
+            f"from the image centre ({np.hypot(x, y):.0f} px out): recalibrate (`align camera`) "
+            "with more chessboard views, spread so the boards cover this region of the frame, "
+            "or measure a mark nearer the centre")
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
@@ -385,7 +392,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
     out = with_families(out, measured.families, measured.unreported,
-                        "camera model" if camera is not None else
+                        CAMERA_MODEL if camera is not None else
                         "frame lens" if lens.lam is not None else "none", alpha, image)
     # A grating beside the marks: named with its region, never passed over unsaid.
     said = grating_notes(image, name, out)

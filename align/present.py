@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from align.camera_lens import CAMERA_MODEL
 from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
@@ -56,8 +57,8 @@ def mark_lines(r) -> list[str]:
               if is_information(n)]
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: " + (
-            "the camera model's own u (more chessboard views over this region, or the mark "
-            "nearer the centre)" if (r.lens or {}).get("source") == "camera model" else
+            "the camera model's own u limits it: recalibrate (`align camera`) with more views "
+            "over the mark's region, or a mark nearer the centre" if (r.lens or {}).get("source") == CAMERA_MODEL else
             "calibrate the camera (`align camera`)"))
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
