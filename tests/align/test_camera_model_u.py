@@ -16,6 +16,7 @@ from align.camera_lens import camera_lens_u
 from align.camera_model_u import angle_sensitivity, independent_u, model_coupling, raw_pixels
 from align.lens_terms import camera_coupling
 from align.mark_stage import half_diagonal
+from align.marks import measure_image
 from imaging import (
     CameraModel,
     calibrate_chessboard,
@@ -24,6 +25,8 @@ from imaging import (
     read_image,
 )
 from imaging.camera import calibrate_corners, jackknife_estimates
+from tests.align import user11_inputs as ui
+from tests.align.chessboard_render import board_photos, ray_grid
 from tests.conftest import real_folder
 from tests.imaging.test_camera_cov import D_T, K_T, board_views
 
@@ -162,6 +165,41 @@ def test_real_chessboard_lens_joint_u_against_its_views():
     print("joint u / views' spread over the grid: min", np.round(min(ratio), 3), "median",
           np.round(np.median(ratio), 3))
     assert min(ratio) >= 0.95
+
+
+@pytest.mark.slow  # ~30 s: 12 x 7 rendered boards calibrated, 24 marks rendered and measured
+def test_rendered_boards_and_marks_through_a_known_lens():
+    """End to end against truth: chessboard photographs rendered through a known OpenCV lens
+    (:mod:`tests.align.chessboard_render`), calibrated by ``align camera``'s
+    ``calibrate_chessboard``; a mark rendered through the same lens (user 11's renderer,
+    anywhere in the middle of the frame, any direction) measured with that model: error / u
+    within 3.5 for every mark, with ``cov`` and with the formal covariance alone; RMS with
+    ``cov`` at most 1.2 (conservative, as with corners alone), the formal's within
+    1 ± 3/sqrt(2·12) (one sample per calibration)."""
+    lens = {"K": K_T, "dist": D_T, "size": (640, 480)}
+    rays = ray_grid(K_T, D_T, (640, 480))
+    z = []
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        cam, _ = calibrate_chessboard(board_photos(rng, 7, rays, K_T, D_T), (9, 6))
+        assert cam.views >= 6  # (OpenCV misses a steep board now and then; skipped)
+        for k in range(2):
+            a = rng.uniform(-np.pi / 2, np.pi / 2)
+            img = ui.render_mark(lens, np.array([np.cos(a), np.sin(a)]),
+                                 (rng.uniform(200, 440), rng.uniform(150, 330)), 10 * seed + k)
+            row = []
+            for m in (cam, replace(cam, cov=cam.cov_formal)):
+                (r,) = [r for r in measure_image(img, "m.png", m) if r.found][:1]
+                row.append((r.angle_rad - a + np.pi / 2) % np.pi - np.pi / 2)
+                row[-1] /= r.angle_u_rad
+            z.append(row)
+    z = np.array(z)
+    rms = np.sqrt(np.mean(z**2, axis=0))
+    print("rendered: RMS z (cov, formal)", np.round(rms, 3), "max |z|",
+          np.round(np.abs(z).max(axis=0), 2))
+    assert np.abs(z).max() <= 3.5
+    assert rms[0] <= 1.2
+    assert abs(rms[1] - 1) <= 3 / np.sqrt(2 * 12), rms
 
 
 def test_the_sensitivity_is_the_refitted_lines_turn():
