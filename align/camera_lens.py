@@ -167,8 +167,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R)
                    for ln in lines]
         notes.append(f"{who}: its model holds no covariance of its parameters (written before "
-                     "camera format 4): their u's are added as if independent, an upper bound "
-                     "(re-run `align camera` for the joint covariance)")
+                     "camera format 4): their u's are added as if independent, which can misstate "
+                     "an angle's u either way (0.3-3x on the real chessboard lens); re-run "
+                     "`align camera` for the joint covariance")
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
     unresolved = False
     told = lens_or_bends(designs, lam_u, ranges, alpha) if p < alpha else None

@@ -110,7 +110,7 @@ class CameraModel:
         (9, 9) joint covariance of fx fy cx cy k1 k2 p1 p2 k3 (:data:`INTRINSICS`; [px²],
         [px], 1): at least the formal and the jackknife covariance in every direction
         (:mod:`imaging.camera_cov`). None in models written before format version 4: the
-        angles then carry the parameters' u as if independent (an upper bound).
+        angles then carry the parameters' u as if independent (warned: not an upper bound).
     cov_formal, cov_jackknife : numpy.ndarray or None
         The two covariances ``cov`` dominates (the jackknife's None below
         :data:`JACKKNIFE_MIN_VIEWS` views).
