@@ -112,8 +112,8 @@ class CameraModel:
         (:mod:`imaging.camera_cov`). None in models written before format version 4: the
         angles then carry the parameters' u as if independent (warned: not an upper bound).
     cov_formal, cov_jackknife : numpy.ndarray or None
-        The two covariances ``cov`` dominates (the jackknife's None below
-        :data:`JACKKNIFE_MIN_VIEWS` views).
+        (9, 9) [px², px, 1 as ``cov``]: the two covariances ``cov`` dominates (the
+        jackknife's None below :data:`JACKKNIFE_MIN_VIEWS` views).
     """
 
     camera_matrix: np.ndarray
