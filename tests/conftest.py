@@ -6,6 +6,8 @@ import contextlib
 import io
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -61,12 +63,28 @@ def strip_images(full: Path, plain: Path) -> Path:
     return plain
 
 
-def imageless_session(root: Path, spec) -> Path:
+def _unrendered(spec: ImageSpec, with_crlb: bool = False):
+    """What ``render_marks`` gives ``synth.session`` for an image nobody will read: no pixels,
+    the mark's own scene angle for the truth file (``imageless_session`` drops both)."""
+    mark = SimpleNamespace(image_angle_rad=spec.marks[0].angle_rad)
+    return SimpleNamespace(image=None, truth=SimpleNamespace(marks=[mark]))
+
+
+def imageless_session(root: Path, spec, render: bool = False) -> Path:
     """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
-    copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy."""
+    copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy.
+
+    The mark images are not drawn (~0.5 s of CPU each session) unless ``render``: the random
+    draws that place them are still taken, so the tumble, the counter log, the platform poses
+    and session.toml are byte for byte those of the full session
+    (``test_imageless_session_is_the_full_session_without_its_images``, slow)."""
     from synth.session import write_session
 
-    write_session(root / "full", spec)
+    with contextlib.ExitStack() as stack:
+        if not render:
+            stack.enter_context(mock.patch("synth.session.render_marks", _unrendered))
+            stack.enter_context(mock.patch("synth.session.write_synth", lambda *a, **k: None))
+        write_session(root / "full", spec)
     return strip_images(root / "full", root / "plain")
 
 
