@@ -65,26 +65,32 @@ def strip_images(full: Path, plain: Path) -> Path:
 
 def _unrendered(spec: ImageSpec, with_crlb: bool = False):
     """What ``render_marks`` gives ``synth.session`` for an image nobody will read: no pixels,
-    the mark's own scene angle for the truth file (``imageless_session`` drops both)."""
+    the mark's scene angle for truth.json (not its image angle: no test of an unrendered session
+    reads it)."""
     mark = SimpleNamespace(image_angle_rad=spec.marks[0].angle_rad)
     return SimpleNamespace(image=None, truth=SimpleNamespace(marks=[mark]))
+
+
+def write_unrendered(out: Path, spec) -> dict:
+    """``synth.session.write_session(out, spec)`` without drawing the mark images: no PNGs and
+    truth.json's image angles are the scene's; every other file byte for byte (the random
+    draws that place the images are still taken;
+    ``test_imageless_session_is_the_full_session_without_its_images``), for a test that reads
+    session.toml, the tumble, the log or the platform poses only (~0.5 s of CPU saved)."""
+    from synth.session import write_session
+
+    with mock.patch("synth.session.render_marks", _unrendered), \
+            mock.patch("synth.session.write_synth", lambda *a, **k: None):
+        return write_session(out, spec)
 
 
 def imageless_session(root: Path, spec, render: bool = False) -> Path:
     """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
     copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy.
-
-    The mark images are not drawn (~0.5 s of CPU each session) unless ``render``: the random
-    draws that place them are still taken, so the tumble, the counter log, the platform poses
-    and session.toml are byte for byte those of the full session
-    (``test_imageless_session_is_the_full_session_without_its_images``, slow)."""
+    The images are not drawn (:func:`write_unrendered`) unless ``render``."""
     from synth.session import write_session
 
-    with contextlib.ExitStack() as stack:
-        if not render:
-            stack.enter_context(mock.patch("synth.session.render_marks", _unrendered))
-            stack.enter_context(mock.patch("synth.session.write_synth", lambda *a, **k: None))
-        write_session(root / "full", spec)
+    (write_session if render else write_unrendered)(root / "full", spec)
     return strip_images(root / "full", root / "plain")
 
 

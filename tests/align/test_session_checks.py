@@ -27,10 +27,10 @@ from synth.session import SessionSpec, write_session
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("checks") / "unit"
-    write_session(folder, SessionSpec(seed=11))
-    return folder
+def session(session21) -> Path:
+    """The run's synthetic session of seed 21 (tests/conftest.py), read-only: a test that
+    edits it edits a copy."""
+    return session21
 
 
 def _copy(session: Path, tmp_path: Path) -> Path:
