@@ -107,6 +107,19 @@ def session21(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def session21_run(session21):
+    """``run_session`` of the session of seed 21, once for the run (a full session is ~1 s of
+    CPU): ``(result, truth misalignment [rad])``. Results are frozen: a test that changes
+    one changes a ``dataclasses.replace`` copy."""
+    import json
+
+    from align.session import load_session, run_session
+
+    truth = np.array(json.loads((session21 / "truth.json").read_text())["misalignment_rad"])
+    return run_session(load_session(session21)), truth
+
+
+@pytest.fixture(scope="session")
 def session21_result(session21, tmp_path_factory) -> Path:
     """The session of seed 21 with [metadata], run once by ``align run``: the path
     of its result JSON, beside it its platform calibration (``pc.json``) and what the command

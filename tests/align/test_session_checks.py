@@ -53,8 +53,8 @@ def _messages(res, stage: str) -> str:
     return " | ".join(e.message for e in res.errors if e.stage == stage)
 
 
-def test_clean_session_is_ok_and_far_from_the_gross_bound(session):
-    res = run_session(load_session(session))
+def test_clean_session_is_ok_and_far_from_the_gross_bound(session21_run):
+    res, _ = session21_run  # run_session of the fixture ``session`` (seed 21), shared
     assert res.ok and not res.errors
     f = res.fusion
     assert not f.gross
