@@ -264,8 +264,9 @@ def _static_faults(plain: str) -> dict[str, tuple[str, str]]:
                             "written twice"),
         "block_twice_no_t": ("pose,ux,uy,uz\n" + "\n".join(",".join(r[:4]) for r in rows) * 1
                              + "\n" + "\n".join(",".join(r[:4]) for r in rows) + "\n",
-                             "repeat rows"),
-        "rows_twice_with_t": (h + "\n" + "\n".join(dup_pairs) + "\n", "repeats"),
+                             "lines 2802-5601 repeat lines 2-2801 exactly"),
+        "rows_twice_with_t": (h + "\n" + "\n".join(dup_pairs) + "\n",
+                              "every row is written twice"),
         "not_utf8": ("", "UTF-8"),
         "passwd_like": ("root:x:0:0:root:/root:/bin/bash\ndaemon:x:1:1::/usr/sbin:/bin/sh\n",
                         "lacks"),
