@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import fft, optimize
+from scipy import fft, linalg, optimize
 
 ALPHA = 1e-3
 """Level of the test for a periodic background (one false flag per 1000 clean images)."""
@@ -271,30 +271,57 @@ def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
     return float(P[iy, ix] / max(level, 1e-300))
 
 
+def _resid_jac(k: np.ndarray, X: np.ndarray, Y: np.ndarray, z: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The variable-projection residual r(k) = A(k) c(k) - z (c the least-squares cos/sin/level
+    amplitudes at k), its Jacobian dr/dk (n, 2) [1/(rad/px)] and c.
+
+    The Jacobian is the exact one of the projected residual (Golub & Pereyra 1973, written
+    out: scipy has no variable projection): with P the projector off the columns of A = QR
+    and D_j = dA/dk_j, dr/dk_j = P D_j c - Q R^-T D_j^T r. A finite-difference Jacobian cost
+    two more residuals (cos, sin and a 3-column lstsq over ~40k pixels each) per step.
+    """
+    ph = k[0] * X + k[1] * Y
+    cs, sn = np.cos(ph), np.sin(ph)
+    A = np.column_stack([cs, sn, np.ones_like(ph)])
+    Q, R = np.linalg.qr(A)
+    c = linalg.solve_triangular(R, Q.T @ z)
+    r = A @ c - z
+    g = c[1] * cs - c[0] * sn  # d(A c)/d(phase)
+    J = np.empty((z.size, 2))
+    for j, coord in enumerate((X, Y)):
+        v = coord * g  # D_j c
+        w = np.array([-(sn * coord) @ r, (cs * coord) @ r, 0.0])  # D_j^T r
+        J[:, j] = v - Q @ (Q.T @ v + linalg.solve_triangular(R, w, trans="T"))
+    return r, J, c
+
+
 def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tuple[int, int]
          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Wave vector k [rad/px] (full-image coordinates), (a, b) and their covariance, fitted by
-    least squares on the background (variable projection: a, b linear)."""
+    least squares on the background (variable projection: a, b linear; analytic Jacobian,
+    :func:`_resid_jac`)."""
     yy, xx = np.nonzero(valid)
     step = max(1, yy.size // FIT_PIXELS)
     yy, xx = yy[::step], xx[::step]
-    z = rel[yy, xx]
-    X, Y = xx + origin[1], yy + origin[0]
+    z = rel[yy, xx].astype(float)
+    X, Y = (xx + origin[1]).astype(float), (yy + origin[0]).astype(float)
+    # least_squares asks for r and J at the same k in turn: one evaluation serves both.
+    last: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def design(k: np.ndarray) -> np.ndarray:
-        ph = k[0] * X + k[1] * Y
-        return np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
-
-    def resid(k: np.ndarray) -> np.ndarray:
-        A = design(k)
-        c, *_ = np.linalg.lstsq(A, z, rcond=None)
-        return A @ c - z
+    def at(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = np.asarray(k, float).tobytes()
+        if key not in last:
+            last.clear()
+            last[key] = _resid_jac(k, X, Y, z)
+        return last[key]
 
     k0 = 2 * np.pi * np.asarray(f0)
-    sol = optimize.least_squares(resid, k0, x_scale=2 * np.pi / max(rel.shape), method="lm")
-    A = design(sol.x)
-    c, *_ = np.linalg.lstsq(A, z, rcond=None)
-    r = A @ c - z
+    sol = optimize.least_squares(lambda k: at(k)[0], k0, jac=lambda k: at(k)[1],
+                                 x_scale=2 * np.pi / max(rel.shape), method="lm")
+    r, _, c = _resid_jac(sol.x, X, Y, z)
+    ph = sol.x[0] * X + sol.x[1] * Y
+    A = np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
     cov = np.linalg.inv(A.T @ A) * float(r @ r) / max(z.size - 5, 1)
     return sol.x, c[:2], cov[:2, :2]
 
