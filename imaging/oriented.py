@@ -271,57 +271,69 @@ def _radial_ratio(P: np.ndarray, iy: int, ix: int) -> float:
     return float(P[iy, ix] / max(level, 1e-300))
 
 
-def _resid_jac(k: np.ndarray, X: np.ndarray, Y: np.ndarray, z: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The variable-projection residual r(k) = A(k) c(k) - z (c the least-squares cos/sin/level
-    amplitudes at k), its Jacobian dr/dk (n, 2) [1/(rad/px)] and c.
-
-    The Jacobian is the exact one of the projected residual (Golub & Pereyra 1973, written
-    out: scipy has no variable projection): with P the projector off the columns of A = QR
-    and D_j = dA/dk_j, dr/dk_j = P D_j c - Q R^-T D_j^T r. A finite-difference Jacobian cost
-    two more residuals (cos, sin and a 3-column lstsq over ~40k pixels each) per step.
-    """
+def _project(k: np.ndarray, X: np.ndarray, Y: np.ndarray, z: np.ndarray
+             ) -> tuple[np.ndarray, ...]:
+    """At wave vector k: cos and sin of the phase, A = QR's Q and R (A: cos, sin, level), the
+    least-squares amplitudes c and the variable-projection residual r = A c - z."""
     ph = k[0] * X + k[1] * Y
     cs, sn = np.cos(ph), np.sin(ph)
     A = np.column_stack([cs, sn, np.ones_like(ph)])
     Q, R = np.linalg.qr(A)
     c = linalg.solve_triangular(R, Q.T @ z)
-    r = A @ c - z
+    return cs, sn, Q, R, c, A @ c - z
+
+
+def _jacobian(proj: tuple[np.ndarray, ...], X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """dr/dk (n, 2) of :func:`_project`'s residual [1/(rad/px)].
+
+    The exact Jacobian of the projected residual (Golub & Pereyra 1973, written out: scipy
+    has no variable projection): with A = QR and D_j = dA/dk_j,
+    dr/dk_j = (I - QQ^T) D_j c - Q R^-T D_j^T r. A finite-difference Jacobian cost two more
+    residuals (cos, sin and a 3-column fit over ~40k pixels each) per step.
+    """
+    cs, sn, Q, R, c, r = proj
     g = c[1] * cs - c[0] * sn  # d(A c)/d(phase)
-    J = np.empty((z.size, 2))
+    J = np.empty((r.size, 2))
     for j, coord in enumerate((X, Y)):
         v = coord * g  # D_j c
         w = np.array([-(sn * coord) @ r, (cs * coord) @ r, 0.0])  # D_j^T r
         J[:, j] = v - Q @ (Q.T @ v + linalg.solve_triangular(R, w, trans="T"))
-    return r, J, c
+    return J
+
+
+def _resid_jac(k: np.ndarray, X: np.ndarray, Y: np.ndarray, z: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The residual r(k) = A(k) c(k) - z, its Jacobian dr/dk and c (:func:`_project`)."""
+    proj = _project(k, X, Y, z)
+    return proj[5], _jacobian(proj, X, Y), proj[4]
 
 
 def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tuple[int, int]
          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Wave vector k [rad/px] (full-image coordinates), (a, b) and their covariance, fitted by
     least squares on the background (variable projection: a, b linear; analytic Jacobian,
-    :func:`_resid_jac`)."""
+    :func:`_jacobian`)."""
     yy, xx = np.nonzero(valid)
     step = max(1, yy.size // FIT_PIXELS)
     yy, xx = yy[::step], xx[::step]
     z = rel[yy, xx].astype(float)
     X, Y = (xx + origin[1]).astype(float), (yy + origin[0]).astype(float)
-    # least_squares asks for r and J at the same k in turn: one evaluation serves both.
-    last: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    # least_squares asks for r at each trial k and for J at the accepted ones: the last
+    # projection serves both (J is not made for a trial step that is turned down).
+    last: dict[bytes, tuple[np.ndarray, ...]] = {}
 
-    def at(k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def at(k: np.ndarray) -> tuple[np.ndarray, ...]:
         key = np.asarray(k, float).tobytes()
         if key not in last:
             last.clear()
-            last[key] = _resid_jac(k, X, Y, z)
+            last[key] = _project(k, X, Y, z)
         return last[key]
 
     k0 = 2 * np.pi * np.asarray(f0)
-    sol = optimize.least_squares(lambda k: at(k)[0], k0, jac=lambda k: at(k)[1],
+    sol = optimize.least_squares(lambda k: at(k)[5], k0, jac=lambda k: _jacobian(at(k), X, Y),
                                  x_scale=2 * np.pi / max(rel.shape), method="lm")
-    r, _, c = _resid_jac(sol.x, X, Y, z)
-    ph = sol.x[0] * X + sol.x[1] * Y
-    A = np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)])
+    cs, sn, _, _, c, r = _project(sol.x, X, Y, z)
+    A = np.column_stack([cs, sn, np.ones_like(cs)])
     cov = np.linalg.inv(A.T @ A) * float(r @ r) / max(z.size - 5, 1)
     return sol.x, c[:2], cov[:2, :2]
 

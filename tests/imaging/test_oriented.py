@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import optimize
 
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
 from imaging.band import band_indices, band_mask
-from scipy import optimize
-
 from imaging.oriented import _fit, _resid_jac, find_oriented
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
