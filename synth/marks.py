@@ -351,7 +351,7 @@ def _digitise(spec: ImageSpec, mean_e: np.ndarray, rng: np.random.Generator) -> 
 
 # ----------------------------------------------------------------------------- CRLB
 
-def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
+def crlb(spec: ImageSpec, index: int = 0, free_k1: bool = False) -> tuple[float, float]:
     """Cramér–Rao bounds (angle [rad], offset [px]) of mark ``index`` from the noise-free render.
 
     Fisher information over pixels for (angle about the mark's middle, offset, contrast,
@@ -364,6 +364,9 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
         The image.
     index : int
         Which of its marks.
+    free_k1 : bool
+        Also a nuisance parameter: the camera's k1 (OpenCV, about ``spec.camera.k1``), so the
+        bound is that of a line whose lens bow is fitted from its own pixels.
 
     Returns
     -------
@@ -378,13 +381,13 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
     cx, cy = m.centre_xy()
 
     def mean(angle=m.angle_rad, offset=None, contrast=m.contrast, exposure=1.0,
-             width=m.width_px, blur=spec.blur_px):
+             width=m.width_px, blur=spec.blur_px, k1=spec.camera.k1):
         # Rotating about the mark's middle keeps its centre fixed: recompute offset and t.
         off = cx * np.sin(angle) + cy * np.cos(angle) if offset is None else offset
         tc = cx * np.cos(angle) - cy * np.sin(angle)
         mk = replace(m, angle_rad=angle, offset_px=off, centre_t_px=tc,
                      contrast=contrast, width_px=width)
-        s = replace(spec, blur_px=blur)
+        s = replace(spec, blur_px=blur, camera=replace(spec.camera, k1=k1))
         return exposure * illum * (1 + contrast * mark_coverage(s, mk, rows, cols))
 
     mu = mean()
@@ -393,6 +396,8 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
         "angle": 2e-5, "offset": 1e-3, "contrast": 1e-3, "exposure": 1e-4,
         "width": 1e-3, "blur": 1e-3,
     }
+    if free_k1:
+        steps["k1"] = 1e-3
     derivs = []
     for name, h in steps.items():
         if name == "offset":
@@ -404,7 +409,7 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
             continue
         else:
             base = {"contrast": m.contrast, "exposure": 1.0, "width": m.width_px,
-                    "blur": spec.blur_px}[name]
+                    "blur": spec.blur_px, "k1": spec.camera.k1}[name]
             plus = mean(**{name: base + h})
             minus = mean(**{name: base - h})
         derivs.append((plus - minus) / (2 * h))
