@@ -20,6 +20,7 @@ Units: lengths in pixels, angles in radians, signal in electrons (e-) or digital
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -60,19 +61,32 @@ def _blurred_profile(profile: str, width: float, sigma: float):
         s2 = np.sqrt(2) * sigma
         return lambda e: 0.5 * (_erf((e + half) / s2) - _erf((e - half) / s2))
 
-    def depth(e: np.ndarray) -> np.ndarray:
-        z = np.clip(np.abs(e) / half, 0, 1)
-        inside = np.abs(e) <= half
-        if profile == "box":
-            d = np.ones_like(e)
-        elif profile == "v":
-            d = 1 - z
-        else:
-            d = np.sqrt(1 - z * z)
-        return np.where(inside, d, 0.0)
-
     if sigma <= 0:
-        return depth
+        return functools.partial(_depth, profile, half)
+    grid, blurred = _blurred_table(profile, float(width), float(sigma))
+    return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
+
+
+def _depth(profile: str, half: float, e: np.ndarray) -> np.ndarray:
+    """The groove's depth profile (0..1) at ``e`` [px] across it, half-width ``half``."""
+    z = np.clip(np.abs(e) / half, 0, 1)
+    inside = np.abs(e) <= half
+    if profile == "box":
+        d = np.ones_like(e)
+    elif profile == "v":
+        d = 1 - z
+    else:
+        d = np.sqrt(1 - z * z)
+    return np.where(inside, d, 0.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _blurred_table(profile: str, width: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The depth profile convolved with the PSF, tabulated (grid [px], value), read-only:
+    kept for the next render of the same (profile, width, sigma), which every call depends
+    on alone (a table is a ~2 M-term convolution, ~8 ms: the renders' CRLB asks for it 13
+    times a mark, the tests' renders for a handful of grooves)."""
+    half = width / 2
     step = min(0.004, width / 400, sigma / 20)
     reach = half + 7 * sigma
     grid = np.arange(-reach, reach + step / 2, step)
@@ -80,8 +94,10 @@ def _blurred_profile(profile: str, width: float, sigma: float):
     kern = np.exp(-0.5 * (kx / sigma) ** 2)
     kern /= kern.sum()
     # depth() sampled at cell midpoints integrates the discontinuity of the box/round edge.
-    blurred = np.convolve(depth(grid), kern, mode="same")
-    return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
+    blurred = np.convolve(_depth(profile, half, grid), kern, mode="same")
+    grid.setflags(write=False)
+    blurred.setflags(write=False)
+    return grid, blurred
 
 
 def _along_profile(length: float, sigma: float | np.ndarray):
@@ -141,6 +157,17 @@ def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarr
 def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.ndarray
                   ) -> np.ndarray:
     """Area-integrated, blurred groove depth (0..1) at the given pixels."""
+    return _coverage(spec, mark, _scene_points(spec, rows, cols))
+
+
+Points = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""The supersampled points of some pixels: sensor x, y and scene x, y [px], (pixels, ss^2)."""
+
+
+def _scene_points(spec: ImageSpec, rows: np.ndarray, cols: np.ndarray) -> Points:
+    """The pixels' supersampled points on the sensor and in the scene (they depend on the
+    frame, the supersampling and the camera alone: the CRLB's 13 renders of a mark share
+    them)."""
     cx, cy = (spec.width - 1) / 2, (spec.height - 1) / 2
     ss = spec.supersample
     off = (np.arange(ss) + 0.5) / ss - 0.5
@@ -148,6 +175,12 @@ def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.nd
     px = (cols[:, None] - cx) + ox.ravel()[None, :]
     py = (rows[:, None] - cy) + oy.ravel()[None, :]
     sx, sy = spec.camera.sensor_to_scene(px, py)
+    return px, py, sx, sy
+
+
+def _coverage(spec: ImageSpec, mark: MarkSpec, points: Points) -> np.ndarray:
+    """:func:`mark_coverage` at the pixels' :func:`_scene_points`."""
+    px, py, sx, sy = points
     a = mark.angle_rad
     e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
     t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
@@ -393,6 +426,7 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
     gain = (2**spec.bits - 1) / spec.full_well_e
     illum = _illumination(spec)[rows, cols] * spec.exposure * spec.full_well_e
     cx, cy = m.centre_xy()
+    points = _scene_points(spec, rows, cols)  # (the same for every render below)
 
     def mean(angle=m.angle_rad, offset=None, contrast=m.contrast, exposure=1.0,
              width=m.width_px, blur=spec.blur_px):
@@ -402,7 +436,7 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
         mk = replace(m, angle_rad=angle, offset_px=off, centre_t_px=tc,
                      contrast=contrast, width_px=width)
         s = replace(spec, blur_px=blur)
-        return exposure * illum * (1 + contrast * mark_coverage(s, mk, rows, cols))
+        return exposure * illum * (1 + contrast * _coverage(s, mk, points))
 
     mu = mean()
     off0 = m.offset_px
