@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import erf
 
+from axisbase.interp import interp_uniform
 from synth.optics import wrap_half_turn
 from synth.specs import PROFILES, ImageSpec, ImageTruth, MarkSpec, MarkTruth, SynthImage
 
@@ -64,7 +65,8 @@ def _blurred_profile(profile: str, width: float, sigma: float):
     if sigma <= 0:
         return functools.partial(_depth, profile, half)
     grid, blurred = _blurred_table(profile, float(width), float(sigma))
-    return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
+    # (np.interp's values, to the last bit, without its binary search per point)
+    return lambda e: interp_uniform(e, grid, (blurred,))[0]
 
 
 def _depth(profile: str, half: float, e: np.ndarray) -> np.ndarray:
