@@ -250,7 +250,8 @@ def _texture(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     fine = gaussian_filter1d(rng.standard_normal(grid.size), spec.texture_scale_px / step)
     broad = gaussian_filter1d(rng.standard_normal(grid.size), 8 * spec.texture_scale_px / step)
     prof = fine / fine.std() + 0.5 * broad / broad.std()
-    return spec.texture * np.interp(q, grid, prof / prof.std())
+    # (np.interp's values: q lies inside the grid, 10 px from either end)
+    return spec.texture * interp_uniform(q, grid, (prof / prof.std(),))[0]
 
 
 def _stripes(spec: ImageSpec) -> np.ndarray:
