@@ -223,10 +223,13 @@ def _across_varying(mark: MarkSpec, e: np.ndarray, sigma: np.ndarray) -> np.ndar
 
 def _illumination(spec: ImageSpec) -> np.ndarray:
     xs, ys = _pixel_grid(spec)
-    X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
     gx, gy = spec.gradient
-    r2 = (X**2 + Y**2) / 2
-    light = (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
+    if gx == 0 and gy == 0 and spec.vignetting == 0:
+        light = np.ones((spec.height, spec.width))  # (the expression below's 1.0, exactly)
+    else:
+        X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
+        r2 = (X**2 + Y**2) / 2
+        light = (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
     a, offset, width, depth = spec.shadow
     if depth:
         # Something between the lamp and the face: its shadow multiplies the light, with a
