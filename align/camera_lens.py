@@ -63,6 +63,11 @@ def camera_lens_vector(camera: CameraModel, shape: tuple[int, int]) -> np.ndarra
     return np.array([d[0] * a**2, d[1] * a**4, d[2] * a, d[3] * a, 0.0, 0.0, 0.0])
 
 
+CAMERA_MODEL = "camera model"
+"""The lens record's ``source`` when a camera model (``--camera``, ``[cameras.X] model``) is
+the lens."""
+
+
 @dataclass(frozen=True)
 class CameraLens:
     """What the lens of one camera adds to each of its marks: the lens vector applied to the
@@ -240,7 +245,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
             t["camera_disagreement"] = float(d.s @ dlam)
     reach = z * lam_u + (np.abs(dlam) if p_used < alpha else 0.0)
     return CameraLens(None, tuple(notes),
-                      {"source": "camera model", "p_marks_agree": p,
+                      {"source": CAMERA_MODEL, "p_marks_agree": p,
                        "bent_lines": list(lone),
                        "lens_or_bent": None if told is None else told.verdict,
                        "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),

@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from align.camera_lens import LENS_TERMS
+from align.camera_lens import CAMERA_MODEL, LENS_TERMS
 from align.family import line_dial, line_family, member_ends
 from align.lens import LensRanges
 from align.mark_result import MarkResult
@@ -44,7 +44,7 @@ def lens_u_vector(record: Mapping | None) -> np.ndarray:
     out = np.zeros(len(PARAMS))
     if not record:
         return out
-    if record.get("source") == "camera model":
+    if record.get("source") == CAMERA_MODEL:
         return np.asarray(record.get("u_lens_vector", out), float)
     if record.get("source") != "marks" or "parameters" not in record:
         return out

@@ -20,7 +20,13 @@ from pathlib import Path
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
-from align.camera_lens import LENS_TERMS, CameraLens, camera_lens, undistorted_mark
+from align.camera_lens import (
+    CAMERA_MODEL,
+    LENS_TERMS,
+    CameraLens,
+    camera_lens,
+    undistorted_mark,
+)
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
 from align.loop import Candidate, LoopReport, run_loop
@@ -292,10 +298,14 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
                      f"the camera (`align camera`) and give it with {lens.model_as}")
     elif limited:
         worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
+        # With a camera model given, "give it with --camera" is no advice: its own u limits.
+        advice = ("the camera model's own u limits it: recalibrate (`align camera`) with "
+                  "more views, reaching the frame's corners, or measure a mark nearer the "
+                  "centre" if lens.record.get("source") == CAMERA_MODEL else
+                  f"calibrate the camera (`align camera`) and give it with {lens.model_as}")
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
-                     f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): calibrate the camera "
-                     f"(`align camera`) and give it with {lens.model_as}")
+                     f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): {advice}")
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,
@@ -374,7 +384,7 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
     if measured.notes:  # the frame's background (stripes): on each of its marks
         out = [replace(r, notes=measured.notes + r.notes) for r in out]
     out = with_families(out, measured.families, measured.unreported,
-                        "camera model" if camera is not None else
+                        CAMERA_MODEL if camera is not None else
                         "frame lens" if lens.lam is not None else "none", alpha, image)
     # A grating beside the marks: named with its region, never passed over unsaid.
     said = grating_notes(image, name, out)

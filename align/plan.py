@@ -6,16 +6,23 @@ margin − guard band of the disposition), or, without a tolerance, the one with
 Each option is a hypothetical change of the observations, with the noise of the existing ones
 of that kind; its information is added to the session's and the new information inverted:
 
-* another image of a housing in a view: one more row like that image's (same Jacobian, same u);
+* another image of a housing in a view: the expected image of that camera (:func:`expected_image`):
+  the Jacobian of that housing in that view, coupled to the camera's lens errors as its images
+  are (a lens they share does not average down), and the mean own u² of the camera's images
+  (what each image reads from itself — noise, groove profile, background — is a new draw);
 * a reversed view (the platform turned 180° on the table, the same camera): the view's rows with
   the sign of their dependence on E flipped and that on the camera's roll kept — what separates
-  a roll from E;
+  a roll from E — each an expected image of the camera;
 * a goniometer log twice as long: the log's covariance without its Type B terms halved (more
   revolutions average the scatter, not a bound);
 * a second tumble (as many poses again): the calibration's covariance halved;
 * the platform static poses repeated: their covariance halved;
 * a calibrated camera (only when the loop estimated its roll): the roll known to
   ±``CAMERA_ROLL_U_ARCSEC``.
+
+Each prediction carries its noise (:func:`prediction_noise`): the new data's own u is not
+known before they are taken. When no option's gain exceeds ``NOISE_K`` times it, the plan says
+that no measurement improves the angle by more than the noise of its prediction.
 
 Minutes per option are the documented defaults ``MINUTES`` (a site changes them in code or by
 keyword). The prediction is first order in the data (the linearisation does not move) and keeps
@@ -24,7 +31,7 @@ the nuisances the loop chose; a new view may let the loop choose differently.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,6 +54,17 @@ MINUTES = {
 """Work per option [min], defaults."""
 MIN_GAIN = 1e-3
 """An option lowering u by less than this fraction is not listed (it does not matter)."""
+RESTATED_U_NOISE = {"gonio": 0.15, "static": 0.03, "tumble": 0.01}
+"""Relative standard deviation of the u a repeated measurement of that kind will *state*
+about the u predicted for it — dimensionless. Its u is estimated from its own data again:
+the goniometer's from the new log's phase path and quantisation (which averages faster than
+1/√n on some logs: the prediction is then high), the static poses' from their samples'
+scatter, the tumble's from its fit's residuals. Measured by simulation (predicted/obtained
+over seeds, ``tests/align/test_plan.py``, docs/decision.md): log twice as long SD 0.08–0.16,
+static poses repeated 0.02, second tumble 0.002."""
+NOISE_K = 2.0
+"""A gain below ``NOISE_K`` standard deviations of its prediction is not promised: the plan
+says no measurement improves the angle by more than the prediction's noise."""
 CAMERA_ROLL_U_ARCSEC = 2.0
 """Standard uncertainty [″] of a camera roll after its calibration (a plumb-line image: the
 roll to ~1–3″)."""
@@ -71,6 +89,10 @@ class Option:
     detail : Mapping
         What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a camera's
         ``camera``, a replaced input's ``source``; unit —.
+    u_after_noise : float
+        Standard deviation of ``u_after`` as a prediction [rad]: the u the new data will state
+        is not known before they are taken (a new image's own u is a new draw; a repeated
+        log's, poses' or tumble's u is estimated from them again).
     """
 
     action: str
@@ -81,11 +103,13 @@ class Option:
     detail: Mapping[str, str] = field(default_factory=dict)
     """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
     camera's ``camera``, a replaced input's ``source``."""
+    u_after_noise: float = 0.0
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
                 "detail": dict(self.detail),
                 "u_after_arcsec": self.u_after / ARCSEC,
+                "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
                                                strict=True)),
                 "gain_arcsec_per_minute": (u_before - self.u_after) / ARCSEC / self.minutes}
@@ -118,18 +142,34 @@ class Plan:
 
     def to_dict(self) -> dict:
         return {"format_version": FORMAT_VERSION, "target": self.target, "why": self.why,
-                "u_before_arcsec": self.u_before / ARCSEC,
+                "u_before_arcsec": self.u_before / ARCSEC, "within_noise": self.within_noise,
                 "options": [o.to_dict(self.u_before) for o in self.options]}
+
+    @property
+    def within_noise(self) -> bool:
+        """No option's gain exceeds ``NOISE_K`` standard deviations of its prediction (or
+        there is no option at all)."""
+        return not any(self.u_before - o.u_after > NOISE_K * o.u_after_noise
+                       for o in self.options)
 
     def lines(self) -> list[str]:
         out = [f"what to measure next for {self.target} ({self.why}; u now "
                f"{self.u_before / ARCSEC:.3f}″):"]
+        if not self.options:
+            out.append(f"  no measurement improves {self.target} by more than "
+                       f"{100 * MIN_GAIN:g} % of its u (of the kinds known here)")
+            return out
+        if self.within_noise:
+            o = max(self.options, key=lambda o: self.u_before - o.u_after)
+            out.append(f"  no measurement improves {self.target} by more than the noise of "
+                       f"its prediction: the largest gain, {o.action}, is "
+                       f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
+                       f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
-            out.append(f"  {'->' if k == 0 else '  '} {o.action}: u {o.u_after / ARCSEC:.3f}″ "
+            out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
+                       f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
                        f"{o.minutes:g} min")
-        if not self.options:
-            out.append("  no measurement of the kinds known here lowers it")
         return out
 
 
@@ -148,16 +188,93 @@ def _target(lin: Linearisation, disposition: Mapping | None) -> tuple[str, str]:
     return E_NAMES[k], "no tolerance: the largest u"
 
 
-def _halved(g: Group) -> Group:
-    """The group with its scatter halved (twice the data), its Type B bounds kept."""
+def _scaled(g: Group, factor: float) -> Group:
+    """The group with its scatter (C less its Type B terms) × ``factor``, its Type B bounds
+    kept."""
     B = sum((c for _, c in g.type_b), np.zeros_like(g.C))
-    return Group(g.source, g.kind, g.A, (g.C - B) / 2 + B, g.type_b, g.meta)
+    return Group(g.source, g.kind, g.A, (g.C - B) * factor + B, g.type_b, g.meta)
 
 
-def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
+def _halved(g: Group, kind: str) -> Group:
+    """The group with its scatter halved (twice the data), its Type B bounds kept; its
+    ``meta`` says how far the u the new data will state may differ (``RESTATED_U_NOISE``)."""
+    h = _scaled(g, 0.5)
+    return Group(h.source, h.kind, h.A, h.C, h.type_b,
+                 {**g.meta, "relative_sd": str(2 * RESTATED_U_NOISE[kind])})
+
+
+def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[str]
+                     ) -> np.ndarray:
+    """Standard deviation [rad] of the six predicted u after adding ``add`` (and dropping
+    ``drop``), from the scatter of the added groups' own variances: each added group's
+    ``meta['relative_sd']`` is the relative standard deviation of its scatter variance (a
+    new image's own u² about its camera's mean; a repeated input's u² about the halved one).
+    First order: the derivative of u with respect to each group's log-variance, by a 5 %
+    step (u² is smooth in it), times that relative SD, in quadrature over the groups (their
+    draws are independent)."""
+    u = lin.u_with(add=add, drop=drop)
+    var = np.zeros_like(u)
+    for i, g in enumerate(add):
+        rel = float(g.meta.get("relative_sd", 0.0))
+        if rel <= 0:
+            continue
+        step = 0.05
+        moved = [*add[:i], _scaled(g, 1 + step), *add[i + 1:]]
+        du = (lin.u_with(add=moved, drop=drop) - u) / np.log1p(step)
+        var += (du * rel) ** 2
+    return np.sqrt(var)
+
+
+def _own_var(g: Group) -> float:
+    """An image row's own variance [rad²]: its u² less what the camera's lens shares (the lens
+    is carried as parameters the row is coupled to through its Jacobian, budget.linearise)."""
+    return float(g.C[0, 0])
+
+
+def image_noise(images: Sequence[Group]) -> float:
+    """The relative standard deviation of one image's own variance about its camera's mean,
+    pooled over the cameras with ≥ 2 images (each image's u carries terms read from that image
+    — its groove profile, its background — that scatter from image to image); 1 when no camera
+    has two images (the scatter is then unknown: taken as large as the variance itself).
+    Dimensionless."""
+    cams: dict[str, list[float]] = {}
+    for g in images:
+        cams.setdefault(g.meta.get("camera", "?"), []).append(_own_var(g))
+    r2, dof = 0.0, 0
+    for v in cams.values():
+        if len(v) > 1:
+            r2 += float(np.sum((np.asarray(v) / np.mean(v) - 1) ** 2))
+            dof += len(v) - 1
+    return float(np.sqrt(r2 / dof)) if dof else 1.0
+
+
+def expected_image(g: Group, images: Sequence[Group], source: str, A: np.ndarray | None = None
+                   ) -> Group:
+    """One more image like ``g`` (its housing, its view, its camera): the expected row.
+
+    Its Jacobian is the mean of the rows of that housing in that view (``A`` overrides it: a
+    reversed view's): the angle's dependence on E and the camera's roll, and its coupling to
+    the camera's lens parameters — a lens error common to the camera's images does not
+    average down with more of them, and the new row shares it. Its own variance is the mean of
+    the camera's images' own variances: the terms each image reads from itself (noise, groove
+    profile, background) are new draws for a new image, whose expectation is their mean, not
+    the value of the one image copied.
+    """
+    cam = g.meta.get("camera")
+    same = [h for h in images if (h.meta.get("housing"), h.meta.get("view"))
+            == (g.meta.get("housing"), g.meta.get("view"))] or [g]
+    own = [_own_var(h) for h in images if h.meta.get("camera") == cam] or [_own_var(g)]
+    A = np.mean([h.A for h in same], axis=0) if A is None else A
+    rel = image_noise(images) * np.sqrt(1 + 1 / len(own))  # a new draw; the mean's own error
+    return Group(source, "image", A, np.array([[float(np.mean(own))]]), (),
+                 {**g.meta, "relative_sd": str(rel)})
+
+
+def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
+            camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC
             ) -> list[tuple[str, str, float, list[Group], list[str], dict[str, str]]]:
     """The hypothetical measurements: (action, kind, minutes, groups to add, sources to
-    drop, detail)."""
+    drop, detail). ``camera_roll_u`` [rad]: the u of a camera roll after its calibration."""
     out = []
     images = [g for g in lin.groups if g.kind == "image"]
     seen = set()
@@ -166,9 +283,9 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
         if key in seen:
             continue
         seen.add(key)
-        out.append((f"another image of housing {key[0]} in view {key[1]} (like "
-                    f"{g.source[len('image '):]})", "image", minutes["image"],
-                    [Group(g.source + " (again)", "image", g.A, g.C, (), g.meta)], [],
+        out.append((f"another image of housing {key[0]} in view {key[1]} (camera "
+                    f"{g.meta.get('camera', '?')})", "image", minutes["image"],
+                    [expected_image(g, images, f"image {key[0]} in {key[1]} (again)")], [],
                     {"housing": str(key[0]), "view": str(key[1])}))
     views: dict[str, list[Group]] = {}
     for g in images:
@@ -178,7 +295,7 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
         for g in gs:
             A = g.A.copy()
             A[:, :6] *= -1
-            flipped.append(Group(g.source + " (reversed)", "image", A, g.C, (), g.meta))
+            flipped.append(expected_image(g, images, g.source + " (reversed)", A))
         exists = all(any(np.allclose(f.A, h.A, rtol=1e-3, atol=1e-9 * np.abs(f.A).max())
                          for h in images) for f in flipped)
         if not exists:
@@ -189,39 +306,40 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES
     for g in lin.groups:
         if g.kind == "gonio":
             out.append((f"a log twice as long ({g.source})", "gonio", minutes["gonio"],
-                        [_halved(g)], [g.source], {"source": g.source}))
+                        [_halved(g, "gonio")], [g.source], {"source": g.source}))
         elif g.kind == "calibration":
             out.append(("a second tumble (as many poses again)", "tumble", minutes["tumble"],
-                        [_halved(g)], [g.source], {"source": g.source}))
+                        [_halved(g, "tumble")], [g.source], {"source": g.source}))
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
-                        [_halved(g)], [g.source], {"source": g.source}))
+                        [_halved(g, "static")], [g.source], {"source": g.source}))
     for label, idx in lin.nuisances:
         if label.startswith("camera roll "):
             A = np.zeros((1, len(lin.params)))
             A[0, idx[0]] = 1.0
             cam = label[len("camera roll "):]
-            out.append((f"calibrate camera {cam}'s roll (to ±{CAMERA_ROLL_U_ARCSEC:g}″)",
+            out.append((f"calibrate camera {cam}'s roll (to ±{camera_roll_u / ARCSEC:g}″)",
                         "camera", minutes["camera"],
                         [Group(f"camera {cam} roll calibration", "calibration", A,
-                               np.array([[(CAMERA_ROLL_U_ARCSEC * ARCSEC) ** 2]]))], [],
+                               np.array([[camera_roll_u ** 2]]))], [],
                         {"camera": cam}))
     return out
 
 
 def plan(lin: Linearisation, disposition: Mapping | None = None,
-         minutes: Mapping[str, float] = MINUTES) -> Plan:
+         minutes: Mapping[str, float] = MINUTES,
+         camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC) -> Plan:
     """Rank the options of :func:`options` for the critical angle of ``disposition`` (the
-    session result's ``disposition`` dict, or None)."""
+    session result's ``disposition`` dict, or None); ``camera_roll_u`` [rad] as there."""
     target, why = _target(lin, disposition)
     k = E_NAMES.index(target)
     u0 = lin.u_with()
     ranked = []
-    for action, kind, mins, add, drop, detail in options(lin, minutes):
+    for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
         u = lin.u_with(add=add, drop=drop)
         if u[k] < u0[k] * (1 - MIN_GAIN):
             ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)),
-                                 detail))
+                                 detail, float(prediction_noise(lin, add, drop)[k])))
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     return Plan(target, why, float(u0[k]), tuple(ranked))
 

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from align.camera_lens import CAMERA_MODEL
 from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
@@ -55,7 +56,10 @@ def mark_lines(r) -> list[str]:
     lines += [f"    note: {n.removeprefix(f'{r.image} mark {r.index}: ')}" for n in r.notes
               if is_information(n)]
     if r.lens_limited:
-        lines.append("    NOT OK: lens-limited: calibrate the camera (`align camera`)")
+        lines.append("    NOT OK: lens-limited: " + (
+            "the camera model's own u limits it: recalibrate (`align camera`) with more views"
+            if (r.lens or {}).get("source") == CAMERA_MODEL else
+            "calibrate the camera (`align camera`)"))
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     if r.kinked:

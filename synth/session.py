@@ -34,7 +34,15 @@ import numpy as np
 from synth.gonio import GonioSpec, simulate, write_log
 from synth.marks import ImageSpec, MarkSpec, full_well_for_snr, render_marks, write_synth
 from synth.optics import CameraGeometry, wrap_half_turn
-from synth.tumble import TABLE1_BIAS, TABLE1_K, Triad, TumbleSpec, tumble, write_tumble_csv
+from synth.tumble import (
+    TABLE1_BIAS,
+    TABLE1_K,
+    Triad,
+    TumbleSpec,
+    pose_directions,
+    tumble,
+    write_tumble_csv,
+)
 
 ARCSEC = np.pi / 180 / 3600
 AXES = {"X": np.array([1.0, 0, 0]), "Y": np.array([0, 1.0, 0]), "Z": np.array([0, 0, 1.0])}
@@ -102,7 +110,12 @@ class SessionSpec:
     # (housing, view) pairs photographed once more (a new exposure of the same mark: new
     # placement in the frame, new noise), as <housing>_<view>_2.png, _3.png, ...
     repeat_images: tuple[tuple[str, str], ...] = ()
+    # Views photographed after the others (a reversal added to a session). These and the
+    # repeated images draw from their own random stream: the rest of the session (its other
+    # images, log, tumble, static readings) is the same to the bit with or without them.
+    added_views: tuple[str, ...] = ()
     platform_static: bool = True  # False: no platform static readings at all
+    tumble_repeats: int = 1  # the tumble's 14 poses held this many times over (a second tumble)
 
 
 def true_axes(E: np.ndarray) -> np.ndarray:
@@ -150,7 +163,9 @@ def write_session(out: str | Path, spec: SessionSpec) -> dict:
     k2 = eff.get("k2", 0.0) * 1e-6
     triad = Triad(k=TABLE1_K, bias=tuple(bias_p), k2=(k2, k2, k2), noise_v=spec.noise_v,
                   axes=tuple(map(tuple, S)))
-    td = tumble(TumbleSpec(triad=triad, seed=int(rng.integers(1 << 30)), check_poses=0))
+    up = np.tile(pose_directions("cube14"), (spec.tumble_repeats, 1))
+    td = tumble(TumbleSpec(triad=triad, seed=int(rng.integers(1 << 30)), check_poses=0,
+                           up=tuple(map(tuple, up))))
     write_tumble_csv(td, out / "tumble.csv")
     # Creep: the static readings see the triad turned by a small rotation (Rodrigues) after
     # the images and the log were taken; the tumble (angles between axes) cannot see it.
@@ -180,24 +195,27 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
             rng: np.random.Generator) -> list[dict]:
     w, h = spec.image_size
     rows = []
-    shots = [(view, housing, nominal, "") for view in spec.views
+    shots = [(view, housing, nominal, "", rng) for view in spec.views
              for housing, nominal in VIEW_MARKS[view]]
+    later = np.random.default_rng([spec.seed, 1])
+    shots += [(view, housing, nominal, "", later) for view in spec.added_views
+              for housing, nominal in VIEW_MARKS[view]]
     for k, (housing, view) in enumerate(spec.repeat_images):
-        if view not in spec.views or housing not in dict(VIEW_MARKS[view]):
+        if view not in (*spec.views, *spec.added_views) or housing not in dict(VIEW_MARKS[view]):
             raise ValueError(f"repeat_images: housing {housing} is not in view {view}")
         n = sum(1 for hv in spec.repeat_images[:k + 1] if hv == (housing, view)) + 1
-        shots.append((view, housing, dict(VIEW_MARKS[view])[housing], f"_{n}"))
-    for view, housing, nominal, suffix in shots:
+        shots.append((view, housing, dict(VIEW_MARKS[view])[housing], f"_{n}", later))
+    for view, housing, nominal, suffix, draw in shots:
         cam, right, up = VIEWS[view]
         geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get(f"lens_k1_{cam}",
                                                            eff.get("lens_k1", 0.0)),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
         s = S[HOUSINGS.index(housing)]
         ang = _scene_angle(s, parse_direction(right), parse_direction(up))
-        mark = MarkSpec(ang, offset_px=float(rng.uniform(-40, 40)),
+        mark = MarkSpec(ang, offset_px=float(draw.uniform(-40, 40)),
                         length_px=spec.mark_length_px, width_px=4.0,
-                        centre_t_px=float(rng.uniform(-30, 30)))
-        img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(rng.integers(1 << 30)),
+                        centre_t_px=float(draw.uniform(-30, 30)))
+        img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(draw.integers(1 << 30)),
                         full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
                         dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
         sample = render_marks(img, with_crlb=False)
@@ -281,7 +299,7 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
             lines += ["# distortion-free optics, square pixels, principal point at the centre",
                       "lens_k1 = 0.0", "lens_k2 = 0.0", "lens_p = 0.0", "lens_aspect = 0.0",
                       "lens_pp_px = 0.0"]
-    for view in spec.views:
+    for view in (*spec.views, *spec.added_views):
         cam, right, up = VIEWS[view]
         lines += ["", f"[views.{view}]", f'camera = "{cam}"', f'right = "{right}"',
                   f'up = "{up}"']

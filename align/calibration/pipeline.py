@@ -29,7 +29,6 @@ from align.calibration.known import (
 from align.calibration.model import (
     CANDIDATES,
     IN_TIME,
-    K3,
     OVERFIT_CHI2,
     PRIOR_ANGLE_RAD,
     PRIOR_BIAS_G,
@@ -39,9 +38,12 @@ from align.calibration.model import (
     walk_physical,
 )
 from align.calibration.nonlinearity import (
+    UNEXCLUDED,
     bound_increment,
     declared_bounds,
+    k3_separability,
     nonlinearity_statement,
+    unexcluded_k3,
 )
 from align.calibration.plan import MIN_POSES as PLAN_MIN
 from align.calibration.stability import (
@@ -185,7 +187,6 @@ class Calibration:
             "scale_stability": self.stability,
             "nonlinearity": self.nonlinearity,
         }
-
 
 
 def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float = 1e-3,
@@ -342,6 +343,13 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         increments.append((PLAUSIBLE, plausible_reason(plaus, alpha),
                            plausible_term(plaus, len(model.names))))
         alts = [*alts, *(a for a, _ in plaus)]
+    try:
+        weak, unmeasured = unexcluded_k3(stage, rep, candidates, admissible(
+            stage, overfit=False), [a.effects.split(" + ")[-1] for a, _ in plaus]), None
+    except NotApplicable as exc:  # (the loop's screen had not fitted it: not separable)
+        weak, unmeasured = None, str(exc)
+    if weak is not None and weak.carried:  # nothing bounds the K3 the poses barely see
+        increments.append((UNEXCLUDED, weak.reason(), weak.term(len(model.names))))
     increments += bounded  # (a declared term BIC prefers is carried at its bound above)
     if scale_stability_ppm:
         increments += _stability_increment(_ellipsoid_gain(stage, rep), scale_stability_ppm,
@@ -354,7 +362,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
     problems: tuple[str, ...] = ()
     if increments:
         model, widening = widen(model, increments, alts)
-        notes = (*notes, widening.warning())
+        if any(t != UNEXCLUDED for t, _, _ in increments):  # (K3 not excluded alone: the
+            notes = (*notes, widening.warning())  # design's, stated under the table)
         why = widening.undetermined(tuple(t.name for t in rep.terms),
                                     max(PLAN_MIN, len(poses.u)), WANDER)
         problems = (why,) if why else ()
@@ -366,15 +375,10 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         kf = fit_known(poses, faces, signs, fe)
         cc, w = cross_check(rep.after.payload, kf.model)
         notes = (*notes, *w)
-    separable = K3 in {c.name for c in candidates} - {s.name for s in rep.skipped}
-    # why not: the loop could not try it on these poses (its reason when it has more to say
-    # than the default), else it was never a candidate (the faces: x³ = x at ±1 g)
-    skip = next((s.reason for s in rep.skipped if s.name == K3), None)
-    why_not = ("at ±1 g x³ = x" if skip is None else
-               "the poses cannot determine it" if skip == "does not apply to these data" else skip)
+    separable, why_not = k3_separability(candidates, rep, unmeasured)
     return Calibration(stage.start, model, rep, signs_t, stage.sigma is not None,
                        "ellipsoid", kf, cc, notes, widening, problems, stated,
-                       nonlinearity_statement(declared, names, separable, why_not))
+                       nonlinearity_statement(declared, names, separable, why_not, weak))
 
 
 def noise_model(stage: CalibrationStage, candidates: Sequence[Candidate], alpha: float

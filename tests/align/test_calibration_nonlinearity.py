@@ -16,9 +16,10 @@ import pytest
 
 from align.calibration import calibrate, poses_from_samples
 from align.calibration.effects import K3, NONLIN
-from align.calibration.nonlinearity import BOUND, FLAG, UG, bound_ug, parse_flag
+from align.calibration.nonlinearity import BOUND, FLAG, UG, UNEXCLUDED, bound_ug, parse_flag
 from align.cli import main
 from align.errors import InputError
+from align.session.decisions import alarm_limit
 
 from . import user8_inputs as ui
 
@@ -108,6 +109,7 @@ def test_six_faces_carry_k3_as_the_chord():
     plain = calibrate(poses)
     assert plain.widening is None and not plain.nonlinearity["k3_separable"]
     assert FLAG in plain.nonlinearity["statement"]
+    assert "k is the 1 g chord k (1 + K3)" in plain.nonlinearity["statement"]
     b = 100 * UG
     cal = calibrate(poses, nonlinearity_bound=(None, b))
     p = cal.widening.to_dict()["parameters"]
@@ -120,14 +122,16 @@ def test_six_faces_carry_k3_as_the_chord():
 
 def test_clean_26_poses_widen_only_by_the_propagated_term():
     """Clean cube poses, K3 declared at 100 µg/g³: no effect added, every u² grows by the
-    term's u² alone, and the term is the uniform ±b through each k's sensitivity to K3 — the
-    sensitivity checked against refits of the same tumble rendered with K3 = 30 µg/g³ on one
-    axis at a time (same noise: the shift is the fit's response alone)."""
+    term's u² alone (the declaration replaces the undeclared K3 term), and the term is the
+    uniform ±b through each k's sensitivity to K3 — the sensitivity checked against refits of
+    the same tumble rendered with K3 = 30 µg/g³ on one axis at a time (same noise: the shift
+    is the fit's response alone)."""
     seed, b, d = 3, 100 * UG, 30 * UG
     tr = ui.Triad()
     plain = calibrate(_poses(_rows(tr, CUBE26, seed)))
     cal = calibrate(_poses(_rows(tr, CUBE26, seed)), nonlinearity_bound=(None, b))
-    assert plain.widening is None and cal.loop.effects == () and cal.ok
+    assert tuple(plain.widening.to_dict()["terms"]) == (UNEXCLUDED,)
+    assert cal.loop.effects == () and cal.ok
     assert tuple(cal.widening.to_dict()["terms"]) == (BOUND,)
     p = cal.widening.to_dict()["parameters"]
     for name in p:
@@ -176,14 +180,102 @@ def test_k2_bound_is_carried_through_its_own_sensitivity():
 
 
 def test_user8_cubic_is_covered_with_the_bound_declared(tmp_path, capsys):
-    """User 8's seed 2 on 26 poses: K3 = ±100 µg/g³, no K3 the poses can test; undeclared k
-    is ~9 u off with exit 0 (the strict xfail of test_independent_user8); with the bound
-    declared at the true |K3| every k within 3 u, the term named in the JSON."""
+    """User 8's seed 2 on 26 poses: K3 = ±100 µg/g³, no K3 the poses can test (undeclared:
+    carried by ``k3_not_excluded``, below); with the bound declared at the true |K3| every k
+    within 3 u, the declared term named in the JSON (it replaces the undeclared one)."""
     tr = ui.Triad(k3=(K3_TRUE, -K3_TRUE, K3_TRUE))
     rc, js = _cli(tmp_path, _rows(tr, CUBE26, 2), capsys, FLAG, ",100")
     assert np.all(np.abs(_zk(js, tr)) <= Z_MAX), _zk(js, tr)
     assert BOUND in js["u_widening"]["terms"] and js["nonlinearity"]["carried"] == [K3]
+    assert UNEXCLUDED not in js["u_widening"]["terms"]
     assert any(BOUND in w or "non-linearity declared" in w for w in js["warnings"])
+
+
+# ------------------------------------------------- nothing declared: K3 the poses do not exclude
+
+
+def _k3(k: float) -> ui.Triad:
+    return ui.Triad(k3=(k, -k, k))
+
+
+def test_undeclared_k3_the_poses_miss_is_carried(tmp_path, capsys):
+    """User 8's seed 2, nothing declared: K3 = ±100 µg/g³ leaves a χ² drop of ~6 (no test
+    sees it) and moved k by 7.4-9.1 u with exit 0, ok, no warning (the strict xfail of
+    test_independent_user8, before). Now the free-K3 fit is averaged over: every k within
+    3 u, ok, the term in u_widening per parameter and in the nonlinearity record, which
+    names the flag that replaces it."""
+    tr = _k3(K3_TRUE)
+    rc, js = _cli(tmp_path, _rows(tr, CUBE26, 2), capsys)
+    z = _zk(js, tr)
+    assert np.all(np.abs(z) <= Z_MAX), z
+    assert rc == 0 and js["ok"] and js["effects"] == []
+    assert tuple(js["u_widening"]["terms"]) == (UNEXCLUDED,)
+    for ax in "xyz":
+        par = js["u_widening"]["parameters"][f"scale_factor_{ax}"]
+        assert par[UNEXCLUDED] > par["u_noise"]  # the rule: it moves k by more than 1 u
+    nl = js["nonlinearity"]
+    assert nl["carried"] == [K3] and UNEXCLUDED in nl["statement"] and FLAG in nl["statement"]
+
+
+def test_paper14_says_k_is_neither_the_chord_nor_the_linear_coefficient():
+    """The paper's 14 poses (faces and corners) cannot measure K3 (skipped): u unchanged,
+    and the statement does not call k the chord (at a corner x³ = x/3: with K3 = 100 µg/g³
+    k sat up to 4.1 u from the chord and 11.5 u from the linear coefficient over 24 runs,
+    benchmarks/calibration_k3.py) but says it lies between them, naming the flag."""
+    cal = calibrate(_poses(_rows(ui.Triad(), CUBE14, 4)))
+    said = cal.nonlinearity["statement"]
+    assert cal.widening is None and not cal.nonlinearity["k3_separable"]
+    assert "between the linear coefficient and the 1 g chord" in said and FLAG in said, said
+
+
+def test_clean_26_poses_carry_it_as_a_statement_not_a_warning(tmp_path, capsys):
+    """Clean 26 cube poses: the poses bound K3 no better than ~±100 µg/g³ whatever the data
+    (a design's property): u of k carries it (×1-10 of its noise u: still a measurement), the
+    line under the table says so, and no warning is raised (on every clean tumble it would be
+    a false alarm); biases barely move (the term is k's)."""
+    rc, js = _cli(tmp_path, _rows(ui.Triad(), CUBE26, 1000), capsys)
+    assert rc == 0 and js["ok"] and js["warnings"] == [] and js["effects"] == []
+    par = js["u_widening"]["parameters"]
+    assert all(1.0 < par[f"scale_factor_{ax}"]["factor"] < 10.0 for ax in "xyz")
+    assert all(par[f"bias_{ax}"]["factor"] < 1.1 for ax in "xyz")
+    assert js["nonlinearity"]["carried"] == [K3]
+
+
+@pytest.mark.slow
+def test_undeclared_k3_sweep_is_covered_or_flagged(tmp_path, capsys):
+    """Nothing declared, 26 cube poses, K3 = ±30, ±100, ±300 µg/g³ (both sign patterns),
+    seeds 0-7 each: every k within 3 u of the linear coefficient, or the result flagged
+    (a warning or not ok). Before: K3 100 left k up to 9.3 u off unflagged (5 of 12 seeds);
+    measured after: max 2.9 u (K3 300 is added by the loop)."""
+    bad = []
+    for k3 in (30 * UG, 100 * UG, 300 * UG):
+        for sign in (1, -1):
+            for s in range(8):
+                tr = _k3(sign * k3)
+                rc, js = _cli(tmp_path, _rows(tr, CUBE26, s), capsys)
+                z = _zk(js, tr)
+                flagged = rc != 0 or not js["ok"] or bool(js["warnings"])
+                if not flagged and np.any(np.abs(z) > Z_MAX):
+                    bad.append(f"K3 {sign * k3 / UG:+.0f} seed {s}: k {np.round(z, 2)}")
+    assert bad == []
+
+
+@pytest.mark.slow
+def test_clean_26_poses_false_warnings_over_seeds(tmp_path, capsys):
+    """120 clean 26-pose tumbles (seeds 2000-2119): a warning or not ok at most as often as
+    a true 1 % rate allows (alarm_limit: false-fail probability < 1e-3); the K3 term on each
+    (a statement); every k and bias within 3.5 u."""
+    n, alarms, bad = 120, 0, []
+    for s in range(2000, 2000 + n):
+        tr = ui.Triad()
+        rc, js = _cli(tmp_path, _rows(tr, CUBE26, s), capsys)
+        alarms += rc != 0 or not js["ok"] or bool(js["warnings"])
+        zb = ((np.array(js["bias_g"]) - np.array(tr.o) / np.array(tr.k))
+              / np.array(js["bias_u_g"]))
+        if np.any(np.abs(_zk(js, tr)) > 3.5) or np.any(np.abs(zb) > 3.5):
+            bad.append(s)
+    assert alarms <= alarm_limit(n), alarms
+    assert bad == []
 
 
 @pytest.mark.slow

@@ -43,7 +43,8 @@ def test_cubic_not_added_is_carried_in_u(seed):
 
 
 def test_clean_tumbles_are_not_widened():
-    """Clean control, 3 seeds: no plausible effect, u as before (every |z| within 3.5)."""
+    """Clean control, 3 seeds: no plausible effect (u carries the design's K3 term alone,
+    test_calibration_nonlinearity), every |z| within 3.5."""
     for s in range(3):
         cal, z = calibrated(ui.Triad(), 500 + s)
         assert not plausible(cal), s

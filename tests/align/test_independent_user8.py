@@ -352,11 +352,6 @@ def test_cubic_nonlinearity_is_covered_or_flagged(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "K3 = +-100 ug/g^3 over seeds 0-5 (26 poses): seeds 0, 1, 3 now warned and covered "
-    "(plausible_effect, k within 2.2 u); seeds 2, 4, 5 leave no K3 the poses can test (chi2 "
-    "drop 5-9) and k is 7-8.5 u off the linear coefficient with exit 0, ok, no warning; only a "
-    "declared K3 bound could cover it (lead's note, stop 28; was 5 of 6 seeds at 6-9 u)"))
 def test_cubic_nonlinearity_over_seeds(tmp_path):
     bad = []
     for s in range(6):

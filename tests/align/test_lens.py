@@ -19,6 +19,7 @@ from align.cli import main
 from align.documents import marks_document
 from align.lens import LensRanges
 from align.marks import BEND, measure_image
+from align.present import mark_lines
 from axisbase.errors import InputError
 from imaging import CameraModel, measure_marks
 from synth import (
@@ -125,6 +126,24 @@ def test_a_given_camera_is_trusted_and_its_u_propagated():
     for r in bad:
         t = min(marks, key=lambda m: abs(angle_error(r.angle_rad, m.angle_rad)))
         assert abs(_z(r, t.angle_rad)) <= 3
+
+
+def test_a_camera_model_too_uncertain_says_so_not_give_a_model():
+    """A camera model given whose own u makes the angle lens-limited (the real chessboards
+    calibrated by `align camera` from 7 views: u(k2) 0.068, marks at +-412-733" mostly
+    ``camera_k2``): not ok, and the advice is to recalibrate, not "give it with --camera"
+    (which the user did: that was the message before; user11's slow
+    ``test_lens_limited_with_a_model_says_what_to_do`` on a real calibration)."""
+    cam = CameraGeometry(focal_px=530.0, k1=-0.27)
+    m = _vertical(-150.0, -160.0, 250.0)
+    s = _render([m], cam, seed=3)
+    (r,) = [r for r in measure_image(s.image, "cam.png", camera=_camera_model(cam, u_k1=0.05))
+            if r.found]
+    assert r.lens_limited and max(r.u_terms, key=r.u_terms.get).startswith("camera_")
+    said = [n for n in r.notes if "lens-limited" in n]
+    assert said and all("camera model's own u limits it" in n for n in said), r.notes
+    assert not any("give it with --camera" in n for n in r.notes), r.notes
+    assert "camera model's own u limits it" in "\n".join(mark_lines(r))
 
 
 @pytest.mark.parametrize("ang", [45.0, -45.0, 30.0])
@@ -268,10 +287,11 @@ def _lens_session(tmp_path, seed, **kw):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("seed", range(10))
 def test_session_with_an_undeclared_lens_on_one_camera_names_no_roll(tmp_path, seed):
     """Cameras + goniometer + calibration, camera B with an undeclared k1 = -0.25 lens (one
-    lens fitted over its four images, the rest in u): no camera roll named, |err/u| <= 3."""
+    lens fitted over its four images, the rest in u): no camera roll named, |err/u| <= 3 --
+    over 10 seeds, as issue 18 asks (measured: nothing named, RMS z 1.02, max 2.95 of 60)."""
     res, z = _lens_session(tmp_path, seed, undeclared={"lens_k1_B": -0.25})
     names = [e.name for e in res.fusion.loop.effects]
     print(f"seed {seed}: effects {names}, z {np.round(z, 2)}")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -34,3 +36,21 @@ def test_lens_on_camera_a_only(tmp_path):
 def test_a_lens_can_only_be_undeclared(tmp_path):
     with pytest.raises(ValueError, match="lens_k1_B can only be undeclared"):
         write_session(tmp_path / "s", SessionSpec(effects={"lens_k1_B": 0.1}, **FAST))
+
+
+def test_added_views_and_images_leave_the_rest_of_the_session_bit_identical(tmp_path):
+    """What the plan's check relies on (tests/align/test_plan.py): a session with a reversed
+    view, a repeated image and its tumble held twice added has every other file the same."""
+    small = SessionSpec(seed=4, views=("A",), image_size=(240, 180), mark_length_px=120.0,
+                        revolutions=8, samples_per_pose=10)
+    write_session(tmp_path / "a", small)
+    write_session(tmp_path / "b", replace(small, added_views=("Ar",),
+                                          repeat_images=(("x", "A"),)))
+    for name in ("x_A.png", "z_A.png", "gonio.csv", "tumble.csv", "platform.csv"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    assert (tmp_path / "b" / "x_Ar.png").exists() and (tmp_path / "b" / "x_A_2.png").exists()
+    write_session(tmp_path / "c", replace(small, tumble_repeats=2))
+    for name in ("x_A.png", "gonio.csv", "platform.csv"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "c" / name).read_bytes()
+    n = [sum(1 for _ in open(tmp_path / f / "tumble.csv")) for f in "ac"]
+    assert n[1] - 1 == 2 * (n[0] - 1)
