@@ -58,8 +58,11 @@ def ridge_response(img: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarra
 def pixel_noise(img: np.ndarray) -> float:
     """Immerkær's fast estimate of white-noise sigma (insensitive to smooth structure) [DN]."""
     k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    conv = cv2.filter2D(img.astype(np.float32), -1, k, borderType=cv2.BORDER_REFLECT)[1:-1, 1:-1]
-    return float(np.sqrt(np.pi / 2) * np.mean(np.abs(conv)) / 6)
+    conv = cv2.filter2D(img.astype(np.float32, copy=False), -1, k,
+                        borderType=cv2.BORDER_REFLECT)[1:-1, 1:-1]
+    # The mean |conv| as OpenCV's L1 norm (one pass, summed in float64) over the strided
+    # interior: numpy's abs and float32 mean of it took ~1 ms more on a 5 MP frame's 1 MP centre.
+    return float(np.sqrt(np.pi / 2) * cv2.norm(conv, cv2.NORM_L1) / conv.size / 6)
 
 
 @functools.cache

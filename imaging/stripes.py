@@ -119,7 +119,7 @@ def _column_median(a: np.ndarray, axis: int = 0) -> np.ndarray:
     1 DN was lost in them)."""
     if axis == 0:  # sorted as rows: numpy sorts a contiguous row ~2x faster than a column
         a = np.ascontiguousarray(a.T)
-    n = np.isfinite(a).sum(axis=1)
+    n = np.count_nonzero(np.isfinite(a), axis=1)
     rows, m = a.shape
     if m < MIN_ROWS or rows == 0:
         return np.full(rows, np.nan)
@@ -157,9 +157,15 @@ def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: flo
     ``minus``: offsets per row removed (the other axis's stripes). Gathered once per test:
     on the transposed image (the row test) each row is a strided column of the frame, whose
     gathers cost most of that test at 5 MP."""
-    v = image[rows].astype(np.float32)
-    out = mask[rows] | (v <= 0) | (v >= full_scale)
-    v[out] = np.nan
+    if image.T.flags.c_contiguous and not image.flags.c_contiguous:
+        # The row test's transposed frame: its rows are the frame's columns, gathered along
+        # each of the frame's rows (one sequential read; strided per column cost ~20 % more).
+        v = np.ascontiguousarray(np.take(image.T, rows, axis=1).astype(np.float32).T)
+    else:
+        v = image[rows].astype(np.float32)
+    out = mask[rows] | (v <= 0)
+    out |= v >= full_scale
+    np.copyto(v, np.nan, where=out)
     if minus is not None:
         v -= minus[rows, None]
     return v
@@ -187,6 +193,8 @@ def _background(v: np.ndarray, shading: np.ndarray | None = None,
     ok = np.isfinite(lev)
     # float32 as the rows (a float64 level made every row float64: twice the bytes for the
     # sorts of the columns that follow, for a level known to ~1e-4 DN either way).
+    if ok.all():  # (the usual case: no copy of the rows to select them)
+        return v - lev[:, None].astype(np.float32)
     return v[ok] - lev[ok, None].astype(np.float32)
 
 
