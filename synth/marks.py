@@ -20,7 +20,6 @@ Units: lengths in pixels, angles in radians, signal in electrons (e-) or digital
 
 from __future__ import annotations
 
-import functools
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -29,86 +28,11 @@ from scipy.special import erf
 
 from axisbase.interp import interp_uniform
 from synth.optics import wrap_half_turn
+from synth.profiles import along_profile, blurred_profile
 from synth.specs import PROFILES, ImageSpec, ImageTruth, MarkSpec, MarkTruth, SynthImage
 
 __all__ = ["PROFILES", "ImageSpec", "ImageTruth", "MarkSpec", "MarkTruth", "SynthImage", "crlb",
            "full_well_for_snr", "mark_coverage", "render_marks", "write_image", "write_synth"]
-
-# ----------------------------------------------------------------------------- profiles
-
-ERF_ONE = 6.0
-"""Beyond this |z| scipy's erf is exactly +-1 in double precision (from 5.92 on)."""
-
-
-def _erf(z: np.ndarray) -> np.ndarray:
-    """erf(z), bit for bit, evaluated only where |z| < :data:`ERF_ONE` (+-1 exactly beyond).
-
-    A mark's profile along it is flat over most of its length and its tails across it
-    reach zero: most supersampled points of a render are where erf is +-1 to the last bit
-    (the along-profile's erf was ~12 s of the default test run's CPU, over whole marks)."""
-    z = np.asarray(z, float)
-    out = np.sign(z)
-    near = np.abs(z) < ERF_ONE
-    out[near] = erf(z[near])
-    return out
-
-
-def _blurred_profile(profile: str, width: float, sigma: float):
-    """Depth profile across the groove convolved with the Gaussian PSF, as a function of e."""
-    if profile not in PROFILES:
-        raise ValueError(f"unknown groove profile {profile!r}; use one of {PROFILES}")
-    half = width / 2
-    if profile == "box" and sigma > 0:
-        s2 = np.sqrt(2) * sigma
-        return lambda e: 0.5 * (_erf((e + half) / s2) - _erf((e - half) / s2))
-
-    if sigma <= 0:
-        return functools.partial(_depth, profile, half)
-    grid, blurred = _blurred_table(profile, float(width), float(sigma))
-    # (np.interp's values, to the last bit, without its binary search per point)
-    return lambda e: interp_uniform(e, grid, (blurred,))[0]
-
-
-def _depth(profile: str, half: float, e: np.ndarray) -> np.ndarray:
-    """The groove's depth profile (0..1) at ``e`` [px] across it, half-width ``half``."""
-    z = np.clip(np.abs(e) / half, 0, 1)
-    inside = np.abs(e) <= half
-    if profile == "box":
-        d = np.ones_like(e)
-    elif profile == "v":
-        d = 1 - z
-    else:
-        d = np.sqrt(1 - z * z)
-    return np.where(inside, d, 0.0)
-
-
-@functools.lru_cache(maxsize=64)
-def _blurred_table(profile: str, width: float, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """The depth profile convolved with the PSF, tabulated (grid [px], value), read-only:
-    kept for the next render of the same (profile, width, sigma), which every call depends
-    on alone (a table is a ~2 M-term convolution, ~8 ms: the renders' CRLB asks for it 13
-    times a mark, the tests' renders for a handful of grooves)."""
-    half = width / 2
-    step = min(0.004, width / 400, sigma / 20)
-    reach = half + 7 * sigma
-    grid = np.arange(-reach, reach + step / 2, step)
-    kx = np.arange(-6 * sigma, 6 * sigma + step / 2, step)
-    kern = np.exp(-0.5 * (kx / sigma) ** 2)
-    kern /= kern.sum()
-    # depth() sampled at cell midpoints integrates the discontinuity of the box/round edge.
-    blurred = np.convolve(_depth(profile, half, grid), kern, mode="same")
-    grid.setflags(write=False)
-    blurred.setflags(write=False)
-    return grid, blurred
-
-
-def _along_profile(length: float, sigma: float | np.ndarray):
-    half = length / 2
-    if np.ndim(sigma) == 0 and sigma <= 0:
-        return lambda t: (np.abs(t) <= half).astype(float)
-    s2 = np.sqrt(2) * sigma
-    return lambda t: 0.5 * (_erf((t + half) / s2) - _erf((t - half) / s2))
-
 
 # ----------------------------------------------------------------------------- rendering
 
@@ -188,11 +112,11 @@ def _coverage(spec: ImageSpec, mark: MarkSpec, points: Points) -> np.ndarray:
     t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
     e = e - mark.bow(t)
     if tuple(spec.blur_gradient) == (0.0, 0.0):
-        across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
-        along = _along_profile(mark.length_px, spec.blur_px)
+        across = blurred_profile(mark.profile, mark.width_px, spec.blur_px)
+        along = along_profile(mark.length_px, spec.blur_px)
         return (across(e) * along(t)).mean(axis=1)
     return (_across_varying(mark, e, spec.blur_at(px, py))
-            * _along_profile(mark.length_px, spec.blur_at(px, py))(t)).mean(axis=1)
+            * along_profile(mark.length_px, spec.blur_at(px, py))(t)).mean(axis=1)
 
 
 def _max_blur(spec: ImageSpec) -> float:
@@ -216,7 +140,7 @@ def _across_varying(mark: MarkSpec, e: np.ndarray, sigma: np.ndarray) -> np.ndar
         w = np.clip(1 - np.abs(idx - i), 0, None)
         sel = w > 0
         if sel.any():
-            out[sel] += w[sel] * _blurred_profile(mark.profile, mark.width_px,
+            out[sel] += w[sel] * blurred_profile(mark.profile, mark.width_px,
                                                   lo + i * step)(e[sel])
     return out
 
@@ -304,7 +228,7 @@ def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
         yy, xx = np.mgrid[r0:r1, c0:c1]
         t = (xx - x0) * ux + (yy - y0) * uy
         e = -(xx - x0) * uy + (yy - y0) * ux
-        inside = _along_profile(length, s)(t)
+        inside = along_profile(length, s)(t)
         out[r0:r1, c0:c1] += amp * inside * np.exp(-e * e / (2 * s * s))
     for _ in range(spec.text):
         _label(out, spec, rng)
@@ -330,7 +254,7 @@ def _stroke(out: np.ndarray, p0: np.ndarray, p1: np.ndarray, width: float, amp: 
     yy, xx = np.mgrid[r0:r1, c0:c1]
     t = (xx - mid[0]) * ux + (yy - mid[1]) * uy
     e = -(xx - mid[0]) * uy + (yy - mid[1]) * ux
-    out[r0:r1, c0:c1] += amp * _along_profile(length, s)(t) * _blurred_profile(
+    out[r0:r1, c0:c1] += amp * along_profile(length, s)(t) * blurred_profile(
         "box", width, s)(e)
 
 

@@ -131,16 +131,3 @@ def test_jpeg_round_trip_is_8_bit_and_blocky():
     assert np.any(img != raw)
     with pytest.raises(ValueError, match="bits = 8"):
         render_marks(replace(spec, bits=16), with_crlb=False)
-
-
-def test_the_saturating_erf_is_scipys_to_the_last_bit():
-    """The renders' erf (evaluated only where it is not +-1): scipy's values, across the
-    point where scipy's erf reaches 1.0 exactly (5.92) and beyond."""
-    from scipy.special import erf
-
-    from synth.marks import ERF_ONE, _erf
-
-    z = np.concatenate([np.linspace(-40, 40, 200001), np.linspace(5.8, 6.2, 4001),
-                        -np.linspace(5.8, 6.2, 4001), [0.0, -0.0, np.nan, np.inf, -np.inf]])
-    assert np.array_equal(_erf(z), erf(z), equal_nan=True)
-    assert np.all(np.abs(erf(z[np.abs(z) >= ERF_ONE])) == 1.0)
