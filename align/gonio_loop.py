@@ -123,6 +123,19 @@ class RevolutionStage:
         # construction, which is not an effect.
         self.N = N[2:-2:2]
         self.T = ((T[:-4] + T[4:]) / 2)[::2]
+        # The slope on this proxy is the slope on T_r times lam = cov(T_r, proxy) /
+        # var(proxy): 1.04-1.08 on a table wandering over ~20 revolutions (the Earth rate
+        # read 4-8 % high, 4-8 u over 300 revolutions). lam is measured from the periods
+        # themselves (T_r's own pulse jitter is independent of the proxy's, so it does not
+        # bias lam) and divided out in fit(): one correction for the loop and the
+        # declared-latitude check alike.
+        self.measured_attenuation = float("nan")
+        if len(self.N) >= 3 and np.var(self.T) > 0:
+            self.measured_attenuation = float(np.cov(T[2:-2:2], self.T)[0, 1]
+                                              / np.var(self.T, ddof=1))
+        lam = self.measured_attenuation
+        # (not measurable — a steady table, whose proxy does not follow T_r — none applied)
+        self.attenuation = lam if np.isfinite(lam) and lam > 0 else 1.0
         self.t = (t_end[ok] - T / 2)[2:-2:2]
         self.K = float(self.N.mean()) if len(self.N) else 0.0
         self.regs = {"t": self.t, "period": self.T}
@@ -155,7 +168,8 @@ class RevolutionStage:
             # Slope of counts per revolution -> the physical quantity: against the period,
             # the rate (N = K (1 + rate T / 2 pi): divide by K / 2 pi); against time, the
             # scale factor's relative drift (N = K (1 + kappa t): divide by K).
-            per = 2 * np.pi / self.K if t.name == EARTH else 1.0 / self.K
+            per = (2 * np.pi / self.K / self.attenuation if t.name == EARTH
+                   else 1.0 / self.K)
             eff[t.name] = (float(coef[j] * per), float(np.sqrt(cov[j, j]) * per))
         return StageFit(r, None, A.shape[1], self.regs, "t", eff,
                         {"counts_per_rev": (float(self.K + coef[0]), float(np.sqrt(cov[0, 0])))},
@@ -222,14 +236,7 @@ def seen_earth_rate(counts: np.ndarray, dt: np.ndarray, t_end: np.ndarray
     terms = [Term(EARTH, "rad/s", T[:, None])]
     if np.ptp(t) > 0:
         terms.append(Term(SCALE, "1/s", t[:, None]))
-    est, u = stage.fit(terms).effects[EARTH]
-    # The regressor is the mean period of revolutions r-2 and r+2 (no shared pulse), a proxy
-    # of T_r: the slope on it is the slope on T_r times lam = cov(T_r, proxy) / var(proxy),
-    # 1.04-1.08 on a table wandering over ~20 revolutions (a 5-8 % bias, 5-7 u over 300
-    # revolutions). lam is measured here from the periods themselves (T_r's own pulse jitter
-    # is independent of the proxy's, so it does not bias lam).
-    T_r = dt[ok].sum(1)[2:-2:2]
-    lam = float(np.cov(T_r, stage.T)[0, 1] / np.var(stage.T, ddof=1))
-    if not (np.isfinite(u) and u > 0 and lam > 0):
+    est, u = stage.fit(terms).effects[EARTH]  # (the proxy's attenuation divided out)
+    if not (np.isfinite(u) and u > 0 and stage.measured_attenuation > 0):
         return None
-    return est / lam, u / lam
+    return est, u

@@ -57,7 +57,8 @@ def mark_lines(r) -> list[str]:
               if is_information(n)]
     if r.lens_limited:
         lines.append("    NOT OK: lens-limited: " + (
-            "the camera model's own u limits it: recalibrate (`align camera`) with more views"
+            "the camera model's own u limits it: recalibrate (`align camera`) with more views "
+            "over the mark's region, or a mark nearer the centre"
             if (r.lens or {}).get("source") == CAMERA_MODEL else
             "calibrate the camera (`align camera`)"))
     if r.bend_off_frame:

@@ -47,7 +47,7 @@ from axisbase.header import (
     read_header,
     show_cell,
 )
-from axisbase.repeats import check_repeats
+from axisbase.repeats import check_repeats, first_row, restarted
 from axisbase.tabledata import Table
 from axisbase.tablespec import KINDS, Column, TableSpec
 from axisbase.units import (
@@ -251,9 +251,9 @@ def read_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
         raise InputError(f"{path}: the header has no rows under it (a {spec.what} needs data)")
     table = _table(path, spec, h, {n: at.column(n) for n in at.column_names})
     table = _with_rate(table, rate_hz)
-    _check(table)
-    if spec.distinct_rows:
+    if spec.distinct_rows:  # first: a copy's repeated times are better named as a copy
         check_repeats(table)
+    _check(table)
     warning = rate_warning(table)
     if warning:
         _note(f"WARNING: {warning}")
@@ -368,6 +368,7 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
     ro, po, co = _arrow_options(path, spec, h, block_bytes, threads=False)
     row0 = 0
     prev_t = None
+    first = None
     empty = True
     for filtered in (False, True):
         # The file as it is; then, only if pyarrow met a comment it could not skip, the file
@@ -388,6 +389,8 @@ def iter_table(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | N
                 if n == 0:
                     continue
                 chunk = _table(path, spec, h, cols, row0)
+                first = first or first_row(chunk)
+                restarted(chunk, first)
                 _check(chunk, prev_t)
                 if empty and (warning := rate_warning(chunk)):
                     _note(f"WARNING: {warning}")  # (the first chunk: thousands of rows)

@@ -72,6 +72,12 @@ class Table:
             return self.row0 + row
         return row_lines(self.path, self.first_line, [self.row0 + row])[0]
 
+    def lines(self, rows: list[int]) -> list[int]:
+        """The file lines of several rows in one scan (see :meth:`line`)."""
+        if self.in_memory:
+            return [self.row0 + r for r in rows]
+        return row_lines(self.path, self.first_line, [self.row0 + r for r in rows])
+
     def fail(self, row: int, column: str, what: str) -> InputError:
         """The error for a bad value, in the house form ``file:line: column: what`` (rows in
         memory: ``rows: row k: column: what``)."""

@@ -8,7 +8,8 @@ user would try (thresholded pixels + cv2.fitLine, Canny + HoughLinesP, OpenCV's 
 their RMS error and time; then the CPU time per 640x480 and per 5-megapixel 16-bit image on
 one core (median over distinct freshly rendered images, each timed once), against OpenCV's
 LSD on the same images in the same run, and the targets (issue 18: 640x480 <= 60 ms, 5 MP
-detect + measure <= 100 ms).
+detect + measure <= 100 ms); then the same per real photograph (``benchmarks/marks_real.py``:
+each <= 1 s).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import time
 from dataclasses import replace
 
 import benchpage
+from marks_real import real_speed
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -226,6 +228,7 @@ def speed(images: int = 9) -> None:
                        f"{1e3 * med['OpenCV LSD']:.1f} ms)")
     print("\nissue 18, point 6 (CPU per image, medians over fresh images): "
           + "; ".join(summary))
+    real_speed()  # issue 18, point 7: real photographs, against LSD on the same ones
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Reading a static-pose table of 10⁶ rows through the one table reader (what
 ``align calibrate`` does), with the share of the duplicate-row check, against numpy's
-``loadtxt`` (the obvious alternative, which checks nothing).
+``loadtxt`` (the obvious alternative, which checks nothing); and a table without a time
+(quantised counts read with ``--rate``), where the copy rule searches in full.
 
 Usage: ``python3 benchmarks/tables.py [ROWS] [--markdown PATH]`` (default 10⁶). Best of 3,
 fresh file in a temporary folder. ``--markdown``: also a generated page
@@ -51,11 +52,22 @@ def main() -> None:
         t_read = best(lambda: read_table(p, STATIC))
         t_rep = best(lambda: check_repeats(tab))
         t_np = best(lambda: np.loadtxt(p, delimiter=",", skiprows=1), 1)
+        # Without a time (--rate): the copy rule's full search (axisbase.repeats), on
+        # quantised counts (rows that repeat by chance).
+        q = Path(d) / "untimed.csv"
+        with open(q, "w") as f:
+            f.write("ux,uy,uz\n")
+            np.savetxt(f, np.round(rng.normal(0, 3, (n, 3))), delimiter=",", fmt="%d")
+        tab_u = read_table(q, STATIC, rate_hz=100.0)
+        u_read = best(lambda: read_table(q, STATIC, rate_hz=100.0))
+        u_rep = best(lambda: check_repeats(tab_u))
     print("| reader | rows | time [s] (best of 3) | ratio |")
     print("|---|---|---|---|")
     print(f"| `axisbase.table.read_table` (checked) | {n} | {t_read:.3f} | 1.0 |")
     print(f"| … of which the duplicate-row check | {n} | {t_rep:.3f} | {t_rep / t_read:.2f} |")
     print(f"| `np.loadtxt` (no checks) | {n} | {t_np:.2f} | {t_np / t_read:.1f} |")
+    print(f"| `read_table`, no time (`--rate`), quantised counts | {n} | {u_read:.3f} | 1.0 |")
+    print(f"| … of which the duplicate-row check | {n} | {u_rep:.3f} | {u_rep / u_read:.2f} |")
 
 if __name__ == "__main__":
     benchpage.run(main, "Reading tables: the one reader against numpy")

@@ -25,6 +25,7 @@ import numpy as np
 
 from axisbase.errors import InputError
 from axisbase.provenance import check_format
+from imaging.camera_cov import INTRINSICS, dominating, formal_cov, jackknife_cov
 from imaging.errors import ImageInputError
 
 DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -105,6 +106,14 @@ class CameraModel:
         Delete-one-view jackknife standard uncertainty per parameter (fx, fy, cx, cy [px];
         k1, ... dimensionless);
         None with fewer than :data:`JACKKNIFE_MIN_VIEWS` views.
+    cov : numpy.ndarray or None
+        (9, 9) joint covariance of fx fy cx cy k1 k2 p1 p2 k3 (:data:`INTRINSICS`; [px²],
+        [px], 1): at least the formal and the jackknife covariance in every direction
+        (:mod:`imaging.camera_cov`). None in models written before format version 4: the
+        angles then carry the parameters' u as if independent (warned: not an upper bound).
+    cov_formal, cov_jackknife : numpy.ndarray or None
+        (9, 9) [px², px, 1 as ``cov``]: the two covariances ``cov`` dominates (the
+        jackknife's None below :data:`JACKKNIFE_MIN_VIEWS` views).
     """
 
     camera_matrix: np.ndarray
@@ -116,6 +125,9 @@ class CameraModel:
     per_view_rms_px: dict[str, float] | None = None
     u_formal: dict[str, float] | None = None
     u_jackknife: dict[str, float] | None = None
+    cov: np.ndarray | None = None
+    cov_formal: np.ndarray | None = None
+    cov_jackknife: np.ndarray | None = None
 
     @property
     def focal_px(self) -> float:
@@ -129,6 +141,10 @@ class CameraModel:
             "image_size": list(self.image_size), "rms_px": self.rms_px, "views": self.views,
             "u": dict(self.u or {}), "per_view_rms_px": dict(self.per_view_rms_px or {}),
             "u_formal": dict(self.u_formal or {}), "u_jackknife": dict(self.u_jackknife or {}),
+            "cov_params": list(INTRINSICS),
+            **{k: (None if v is None else v.tolist()) for k, v in (
+                ("cov", self.cov), ("cov_formal", self.cov_formal),
+                ("cov_jackknife", self.cov_jackknife))},
         }
 
     @classmethod
@@ -153,9 +169,21 @@ class CameraModel:
                                  ">= 0")
             return out or None
 
+        def cov(key: str) -> np.ndarray | None:
+            if d.get(key) is None:
+                return None
+            if list(d.get("cov_params", INTRINSICS)) != list(INTRINSICS):
+                raise ValueError(f"'cov_params' is not {list(INTRINSICS)}")
+            c = _matrix(d, key, (len(INTRINSICS), len(INTRINSICS)))
+            s = np.sqrt(np.abs(np.outer(np.diag(c), np.diag(c))))
+            if np.any(np.diag(c) < 0) or np.any(np.abs(c - c.T) > 1e-6 * s):
+                raise ValueError(f"'{key}' is not a covariance (symmetric, diagonal >= 0)")
+            return c
+
         K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
-                   table("per_view_rms_px"), table("u_formal"), table("u_jackknife"))
+                   table("per_view_rms_px"), table("u_formal"), table("u_jackknife"),
+                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"))
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
@@ -173,7 +201,7 @@ class CameraModel:
                                   "camera_matrix, dist_coeffs, image_size as written by "
                                   "'align camera')") from None
         try:  # version 1: files written before format versions existed
-            check_format(d, "axis-align/camera", (1, 2, 3), str(p))
+            check_format(d, "axis-align/camera", (1, 2, 3, 4), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
         return model
@@ -238,7 +266,6 @@ def find_chessboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray |
     return cv2.cornerSubPix(img8, corners, (5, 5), (-1, -1), crit).reshape(-1, 2)
 
 
-INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 JACKKNIFE_MIN_VIEWS = 5
 """Fewest views for the delete-one jackknife of the intrinsics' u (four dof at five)."""
 
@@ -248,19 +275,26 @@ def _intrinsics(K: np.ndarray, D: np.ndarray) -> np.ndarray:
     return np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.ravel(D)[:5]]
 
 
-def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarray | None,
-                 flags: int) -> np.ndarray:
-    """Delete-one-view jackknife standard uncertainty of each intrinsic.
+def jackknife_estimates(objpts: list, imgpts: list, size: tuple[int, int],
+                        K0: np.ndarray | None, flags: int) -> np.ndarray:
+    """The intrinsics (:data:`INTRINSICS`, then the aspect fy / fx) of each of the n
+    leave-one-view-out calibrations, (n, 10).
 
     By hand because OpenCV states only the formal u (white corner noise, exact model); the
     spread of the calibration over its views is what a mark measured through the model
-    meets. u_J² = (n−1)/n · Σ (θ₋ᵢ − θ̄)² over the n leave-one-out calibrations."""
+    meets: u_J² = (n−1)/n · Σ (θ₋ᵢ − θ̄)² (:func:`imaging.camera_cov.jackknife_cov`)."""
     n = len(objpts)
     est = np.array([_intrinsics(*cv2.calibrateCamera(
         objpts[:i] + objpts[i + 1:], imgpts[:i] + imgpts[i + 1:], size,
         None if K0 is None else K0.copy(), None, flags=flags)[1:3]) for i in range(n)])
-    est = np.column_stack([est, est[:, 1] / est[:, 0]])  # and the aspect fy / fx
-    return np.sqrt((n - 1) / n * np.sum((est - est.mean(axis=0)) ** 2, axis=0))
+    return np.column_stack([est, est[:, 1] / est[:, 0]])  # and the aspect fy / fx
+
+
+def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarray | None,
+                flags: int) -> np.ndarray:
+    """Delete-one-view jackknife standard uncertainty of each intrinsic and the aspect."""
+    est = jackknife_estimates(objpts, imgpts, size, K0, flags)
+    return np.sqrt(np.diag(jackknife_cov(est)))
 
 
 
@@ -311,18 +345,30 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     if len(objpts) < 3:
         raise ImageInputError(f"only {len(objpts)} usable chessboard views; need at least 3 "
                               f"({'; '.join(f'{k}: {v}' for k, v in failed.items())})")
+    names = [n for n in images if n not in failed]
+    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect), failed
+
+
+def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                      fix_k3: bool = False, fix_aspect: bool = False) -> CameraModel:
+    """:func:`calibrate_chessboard` from the boards' corners found: ``objpts`` per view the
+    board's corners (N, 3) [board units] (float32), ``imgpts`` their image (N, 1, 2) [px]
+    (float32), ``size`` (width, height) [px], ``names`` one per view."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None
-    rms, K, D, _, _, sd, _, per_view = cv2.calibrateCameraExtended(
+    rms, K, D, rvecs, tvecs, sd, _, per_view = cv2.calibrateCameraExtended(
         objpts, imgpts, size, None if K0 is None else K0.copy(), None, flags=flags)
-    names = [n for n in images if n not in failed]
     formal = np.ravel(sd)[:len(INTRINSICS)]
     u_formal = {k: float(v) for k, v in zip(INTRINSICS, formal, strict=True)}
     u_jack = None
     u = dict(u_formal)
+    cov_f = formal_cov(objpts, imgpts, K, D, rvecs, tvecs, fix_k3, fix_aspect)
+    cov_j = None
     if len(objpts) >= JACKKNIFE_MIN_VIEWS:
-        jack = jackknife_u(objpts, imgpts, size, K0, flags)
+        est = jackknife_estimates(objpts, imgpts, size, K0, flags)
+        cov_j = jackknife_cov(est[:, :-1])
+        jack = np.sqrt(np.diag(jackknife_cov(est)))
         jack[:-1][formal == 0] = 0.0  # a fixed parameter stays exact
         u_jack = {k: float(v) for k, v in zip((*INTRINSICS, "aspect"), jack, strict=True)}
         u = {k: float(max(v, u_jack[k])) for k, v in u_formal.items()}
@@ -334,4 +380,5 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
         u["aspect"] = 0.0 if fix_aspect else float(max(u_jack["aspect"], floor))
     return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
                        {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)},
-                       u_formal, u_jack), failed
+                       u_formal, u_jack, cov_f if cov_j is None else dominating(cov_f, cov_j),
+                       cov_f, cov_j)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from imaging.crossing import crossing_stretch
+from imaging.crossing import MIN_CROSSING, crossing_stretch
 from imaging.errors import ImageInputError
 
 
@@ -201,22 +201,46 @@ def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     if not cands:
         return []
     angle = np.array([o.angle_rad for o in cands])
+    offset = np.array([o.offset_px for o in cands])
     half = np.array([max(6.0, 2 * o.thickness_px) for o in cands])
     out = []
     for c in cands:
         whole = (c.t_start_px, c.t_end_px)
         # A line covers c only if its window stretch, 2 half / sin of the angle between
-        # them, spans c's length less the slack at both ends (a necessary condition, so the
-        # few left are tested in full).
+        # them, spans c's length less the slack at both ends, and (_may_cover) where its
+        # line lies within half of c's does (necessary conditions, so the few left are
+        # tested in full).
         sin = np.abs(np.sin(angle - c.angle_rad))
         with np.errstate(divide="ignore"):
             may = 2 * half / sin >= (whole[1] - whole[0] - 2 * half) - 1e-6
+        may &= _may_cover(c, angle, offset, half)
         side = [o for o, m in zip(cands, may, strict=True)
                 if m and o is not c and o.dark == c.dark and o.fused is None
                 and _covers(c, o, max(6.0, 2 * o.thickness_px), whole)]
         if not _straddled(c, side):
             out.append(c)
     return out
+
+
+def _may_cover(c: MarkCandidate, angle: np.ndarray, offset: np.ndarray, half: np.ndarray
+               ) -> np.ndarray:
+    """Whether each line (``angle`` [rad], ``offset`` [px], ``half`` its window [px]) can
+    cover c (:func:`_covers`), for all at once: it crosses c's direction by at least
+    :data:`imaging.crossing.MIN_CROSSING`, and the stretch of c along which its whole line
+    lies within ``half`` of c (crossing_stretch's, before that is cut to either extent)
+    spans c's extent less ``half`` at both ends. Necessary, with a 1e-6 px slack for the
+    rounding of these sums against crossing_stretch's: building.jpg's ~400 candidates made
+    ~130k full tests, ~2.7 s CPU, that this leaves out without changing which are kept."""
+    rel = angle - c.angle_rad
+    sin, cos = -np.sin(rel), np.cos(rel)  # o's direction on c's normal and on c's direction
+    ok = np.abs(sin) >= np.sin(MIN_CROSSING) * (1 - 1e-9)
+    sin = np.where(ok, sin, 1.0)
+    d0 = offset * cos - c.offset_px  # o's point at s = 0, from c's line
+    s1, s2 = (-half - d0) / sin, (half - d0) / sin
+    t0 = offset * np.sin(rel)  # that point along c
+    t1, t2 = t0 + s1 * cos, t0 + s2 * cos
+    lo, hi = np.minimum(t1, t2), np.maximum(t1, t2)
+    return (ok & (lo <= c.t_start_px + half + 1e-6) & (hi >= c.t_end_px - half - 1e-6))
 
 
 def _straddled(c: MarkCandidate, side: list[MarkCandidate]) -> bool:

@@ -8,7 +8,6 @@ many alike; a mark is one deep groove).
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -50,6 +49,20 @@ def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: f
     return vals, e, t
 
 
+def nan_median(x: np.ndarray, axis: int) -> np.ndarray:
+    """np.nanmedian of an array along ``axis``, the same values (the middle one of the
+    sorted non-NaN values, the mean of the two middle ones when even; NaN where there is
+    none, without a warning). By hand: numpy takes a masked-array path for these short
+    axes, ~4 ms a call on a candidate's profiles (~0.5 s of a real photo's confirmation)."""
+    s = np.sort(x, axis=axis)  # NaN sorts last
+    cnt = np.count_nonzero(~np.isnan(x), axis=axis)
+    h = cnt // 2
+    lo = np.where(cnt % 2 == 1, h, np.maximum(h - 1, 0))
+    a = np.take_along_axis(s, np.expand_dims(lo, axis), axis).squeeze(axis)
+    b = np.take_along_axis(s, np.expand_dims(h, axis), axis).squeeze(axis)
+    return np.where(cnt > 0, (a + b) / 2, np.nan)
+
+
 def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each column's median over its finite values (nan where it has none) and which columns
     have any. np.median when nothing is missing (the same values, in about half the time of
@@ -60,7 +73,7 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if finite.all():
         prof[:] = np.median(vals, axis=0)  # no column to leave out: no copy of the samples
     else:
-        prof[cols] = np.nanmedian(vals[:, cols], axis=0)
+        prof[cols] = nan_median(vals[:, cols], axis=0)
     return prof, cols
 
 
@@ -219,15 +232,14 @@ def light_steps(vals: np.ndarray, e: np.ndarray, half: float) -> tuple[float, fl
     if rows.sum() < 8:
         return 0.0, 0.0, 0.0
     v = vals[rows]
-    level = np.nanmedian(v[:, far], axis=1)
+    level = nan_median(v[:, far], axis=1)
     q10, q50, q90 = np.percentile(level, (10, 50, 90))
     if q50 <= 0 or q90 == q10:
         return 0.0, 0.0, 0.0
     rho = abs(float(np.corrcoef(np.flatnonzero(rows), _ranks(level))[0, 1]))
-    with warnings.catch_warnings():  # a side off the image is NaN: no step seen there
-        warnings.simplefilter("ignore", RuntimeWarning)
-        left = np.nanmedian(v[:, (e < -clear) & (e >= -clear - 12)], axis=1)
-        right = np.nanmedian(v[:, (e > clear) & (e <= clear + 12)], axis=1)
+    # A side off the image is NaN: no step seen there.
+    left = nan_median(v[:, (e < -clear) & (e >= -clear - 12)], axis=1)
+    right = nan_median(v[:, (e > clear) & (e <= clear + 12)], axis=1)
     under = float(np.mean(np.abs(left - right) > 0.5 * LIGHT_STEP * q50))
     return float((q90 - q10) / q50), rho, under
 
@@ -255,6 +267,23 @@ def _edge_model(q: np.ndarray, t: np.ndarray, e: np.ndarray) -> np.ndarray:
     ``q`` = (e0 [px], k, log w [log px], D)."""
     e0, k, logw, d = q
     return 1.0 - d * special.ndtr((e - e0 - k * t) / np.exp(logw))
+
+
+def _lit_edge_jacobian(q: np.ndarray, t: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Jacobian (N, 7) of :func:`shadow_free`'s model of the light, plane (q[4] + q[5] t / 100
+    + q[6] e / 100) times the edge's factor (:func:`_edge_model` of q[:4]), at (t, e) [px].
+    By hand: finite differences cost 7 more evaluations of the model per step (a real
+    photo's edge: ~0.3 s CPU over 10 fits of ~17k pixels)."""
+    e0, k, logw, d = q[:4]
+    w = np.exp(logw)
+    z = (e - e0 - k * t) / w
+    phi = np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi)
+    plane = q[4] + q[5] * t / 100 + q[6] * e / 100
+    cdf = special.ndtr(z)
+    edge = 1.0 - d * cdf
+    g = plane * d * phi / w  # d/d(e0); the edge lies at e0 + k t
+    return np.column_stack([g, g * t, g * w * z, -plane * cdf,
+                            edge, edge * t / 100, edge * e / 100])
 
 
 def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 40.0
@@ -285,10 +314,14 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
         plane = q[4] + q[5] * tt / 100 + q[6] * ee / 100
         return plane * _edge_model(q[:4], tt, ee) - y / scale
 
+    def jac(q: np.ndarray) -> np.ndarray:
+        return _lit_edge_jacobian(q, tt, ee)
+
     best = None
     for e0 in np.linspace(-reach / 2, reach / 2, 5):
         for d0 in (0.3, -0.3):
             r = optimize.least_squares(resid, [e0, 0.0, np.log(3.0), d0, 1.0, 0.0, 0.0],
+                                       jac=jac,
                                        bounds=([-reach, -0.5, np.log(0.3), -0.95, 0, -1, -1],
                                                [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]))
             if best is None or r.cost < best.cost:
@@ -334,7 +367,7 @@ def relative_to_light(vals: np.ndarray, window: int) -> np.ndarray:
     finite = np.isfinite(vals)
     rows = finite.any(axis=1)
     fill = np.zeros(len(vals))
-    fill[rows] = np.nanmedian(vals[rows], axis=1)
+    fill[rows] = nan_median(vals[rows], axis=1)
     level = ndimage.median_filter(np.where(finite, vals, fill[:, None]), size=(1, window),
                                   mode="nearest")
     return np.where(finite & (level > 0), vals / np.where(level > 0, level, 1.0), np.nan)
@@ -465,7 +498,5 @@ def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int
         m = block_px // 2
         profs = s[:, m] if block_px % 2 else (s[:, m - 1] + s[:, m]) / 2
     else:
-        with warnings.catch_warnings():  # an all-NaN column is NaN, as it should be
-            warnings.simplefilter("ignore", RuntimeWarning)
-            profs = np.nanmedian(v, axis=1)
+        profs = nan_median(v, axis=1)  # an all-NaN column is NaN, as it should be
     return profs, t[:nb * block_px].reshape(nb, block_px).mean(axis=1)

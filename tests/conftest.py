@@ -6,6 +6,8 @@ import contextlib
 import io
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -61,12 +63,34 @@ def strip_images(full: Path, plain: Path) -> Path:
     return plain
 
 
-def imageless_session(root: Path, spec) -> Path:
-    """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
-    copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy."""
+def _unrendered(spec: ImageSpec, with_crlb: bool = False):
+    """What ``render_marks`` gives ``synth.session`` for an image nobody will read: no pixels,
+    the mark's scene angle for truth.json (not its image angle: no test of an unrendered session
+    reads it)."""
+    mark = SimpleNamespace(image_angle_rad=spec.marks[0].angle_rad)
+    return SimpleNamespace(image=None, truth=SimpleNamespace(marks=[mark]))
+
+
+def write_unrendered(out: Path, spec) -> dict:
+    """``synth.session.write_session(out, spec)`` without drawing the mark images: no PNGs and
+    truth.json's image angles are the scene's; every other file byte for byte (the random
+    draws that place the images are still taken;
+    ``test_imageless_session_is_the_full_session_without_its_images``), for a test that reads
+    session.toml, the tumble, the log or the platform poses only (~0.5 s of CPU saved)."""
     from synth.session import write_session
 
-    write_session(root / "full", spec)
+    with mock.patch("synth.session.render_marks", _unrendered), \
+            mock.patch("synth.session.write_synth", lambda *a, **k: None):
+        return write_session(out, spec)
+
+
+def imageless_session(root: Path, spec, render: bool = False) -> Path:
+    """A synthetic session (``synth.session.SessionSpec``) written under ``root/full`` and its
+    copy without images under ``root/plain`` (see :func:`strip_images`); returns the copy.
+    The images are not drawn (:func:`write_unrendered`) unless ``render``."""
+    from synth.session import write_session
+
+    (write_session if render else write_unrendered)(root / "full", spec)
     return strip_images(root / "full", root / "plain")
 
 
@@ -80,6 +104,19 @@ def session21(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("seed21") / "unit7"
     write_session(folder, SessionSpec(seed=21))
     return folder
+
+
+@pytest.fixture(scope="session")
+def session21_run(session21):
+    """``run_session`` of the session of seed 21, once for the run (a full session is ~1 s of
+    CPU): ``(result, truth misalignment [rad])``. Results are frozen: a test that changes
+    one changes a ``dataclasses.replace`` copy."""
+    import json
+
+    from align.session import load_session, run_session
+
+    truth = np.array(json.loads((session21 / "truth.json").read_text())["misalignment_rad"])
+    return run_session(load_session(session21)), truth
 
 
 @pytest.fixture(scope="session")

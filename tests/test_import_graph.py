@@ -12,6 +12,8 @@ import ast
 import functools
 from pathlib import Path
 
+from tests.source import tree
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("align", "axisbase", "goniometry", "imaging", "synth")
 
@@ -89,7 +91,7 @@ def _imports(mods: dict[str, Path]) -> list[tuple[str, str, bool, int, bool]]:
                     found.append((mod, target, in_function, ch.lineno, typing))
                 visit(ch, in_function, typing)
 
-        visit(ast.parse(path.read_text(encoding="utf-8")), False)
+        visit(tree(path), False)
     return found
 
 

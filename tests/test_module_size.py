@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tests.source import tree
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("align", "axisbase", "goniometry", "imaging", "synth")
 LIMIT = 600
@@ -25,7 +27,7 @@ def test_every_command_is_a_thin_call_into_the_library():
 
     long_ = {}
     for f in (ROOT / "align" / "commands").glob("*.py"):
-        for node in ast.parse(f.read_text(encoding="utf-8")).body:
+        for node in tree(f).body:
             if isinstance(node, ast.FunctionDef) and node.name.startswith("cmd_"):
                 n = node.end_lineno - node.lineno + 1
                 if n > 20:

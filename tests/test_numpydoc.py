@@ -19,6 +19,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from tests.source import tree as source_tree
 from tests.test_import_graph import PACKAGES, ROOT
 from tests.test_import_graph import _modules as project_modules
 
@@ -88,17 +89,11 @@ def _modules(pkg: str) -> dict[str, Path]:
 
 
 @functools.cache
-def _tree(path: Path) -> ast.Module:
-    """A module's syntax tree, parsed once (the definitions and the re-exports read it)."""
-    return ast.parse(path.read_text(encoding="utf-8"))
-
-
-@functools.cache
 def _defs(pkg: str) -> dict[tuple[str, str], ast.AST]:
     """(module, name) -> the module-level function or class, for every module of ``pkg``."""
     out = {}
     for mod, path in _modules(pkg).items():
-        tree = _tree(path)
+        tree = source_tree(path)
         for node in tree.body:
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
                 out[(mod, node.name)] = node
@@ -113,7 +108,7 @@ def _public(pkg: str) -> list[ast.AST]:
 def _exported(pkg: str) -> dict[str, ast.AST]:
     """The functions and classes the package's ``__init__`` exports (constants have no
     docstring of their own and are not counted)."""
-    tree = ast.parse((ROOT / pkg / "__init__.py").read_text(encoding="utf-8"))
+    tree = source_tree(ROOT / pkg / "__init__.py")
     where: dict[str, tuple[str, str]] = {}
     for node in tree.body:
         if isinstance(node, ast.ImportFrom) and node.module and not node.level:
@@ -140,7 +135,7 @@ def _definition(module: str, name: str, depth: int = 0) -> ast.AST | None:
     path = _modules(pkg).get(module)
     if path is None:
         return None
-    for imp in _tree(path).body:
+    for imp in source_tree(path).body:
         if isinstance(imp, ast.ImportFrom) and imp.module and not imp.level:
             for a in imp.names:
                 if (a.asname or a.name) == name:

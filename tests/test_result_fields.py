@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.source import tree as source_tree
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("align", "axisbase", "goniometry", "imaging")
 NOT_HERE: set[str] = set()
@@ -29,7 +31,7 @@ def _result_types() -> list[tuple[str, ast.ClassDef]]:
             text = f.read_text(encoding="utf-8")
             if not SERIALISES.search(text):  # no such method here: not parsed (the cost)
                 continue
-            tree = ast.parse(text)
+            tree = source_tree(f)
             for c in ast.walk(tree):
                 if not isinstance(c, ast.ClassDef) or not any(
                         "dataclass" in ast.unparse(d) for d in c.decorator_list):

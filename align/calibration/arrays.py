@@ -15,11 +15,13 @@ of 3 (ux, uy, uz) or 4 (t, ux, uy, uz) columns, and the reader says so.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from axisbase.errors import InputError
+from axisbase.repeats import check_repeats
 from axisbase.table import Table, TableSpec
 
 SUFFIXES = (".mat", ".npz")
@@ -149,7 +151,10 @@ def read_arrays(path: str | Path, spec: TableSpec, columns: Mapping[str, str] | 
                              "t=NAME)")
         data["pose"] = np.array([str(i + 1) for i in range(n)], dtype=object)
         notes.append(f"{path}: {n} rows, no time: each row read as one pose's mean")
+    table = Table(path, spec, data, 0, time_from_rate=rate_hz is not None)
+    if spec.distinct_rows:  # (rows named by their index, as below: no lines in an array)
+        check_repeats(replace(table, in_memory=True))
     if "t" in data and not np.all(np.diff(data["t"]) > 0):
         k = int(np.flatnonzero(np.diff(data["t"]) <= 0)[0]) + 1
         raise InputError(f"{path}: t: value {k} does not increase (duplicated or unsorted?)")
-    return Table(path, spec, data, 0, time_from_rate=rate_hz is not None), notes
+    return table, notes

@@ -31,6 +31,7 @@ from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check, unit_source
+from align.camera_lens import CAMERA_MODEL
 from align.decision import Disposition, ToleranceSpec, decide
 from align.errors import InputError
 from align.fusion import (
@@ -166,8 +167,10 @@ class SessionResult:
             if not r.found:
                 continue  # a stage error already
             if r.lens_limited:
-                out.append(f"{im.file.name}: the angle is lens-limited (calibrate camera "
-                           "or declare its lens)")
+                out.append(f"{im.file.name}: the angle is lens-limited (" + (
+                    "the camera model's own u: more chessboard views over the mark's region, "
+                    "or the mark nearer the centre" if (r.lens or {}).get("source") ==
+                    CAMERA_MODEL else "calibrate camera or declare its lens") + ")")
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""

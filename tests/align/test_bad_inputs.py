@@ -136,6 +136,24 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
+GONIO_ARGS = ["--faces", "ref,y,x,z", "--latitude", "50.45", "-q"]
+
+
+@pytest.fixture(scope="module")
+def refs(base, tmp_path_factory) -> Path:
+    """What the plain files give (the reference every variant is compared with), computed
+    once: ``gonio.json``, ``apply.csv`` and ``tilt.json``."""
+    out = tmp_path_factory.mktemp("refs")
+    assert main(["gonio", str(base / "plain" / "gonio.csv"), "--json", str(out / "gonio.json"),
+                 *GONIO_ARGS]) == 0
+    assert main(["apply", str(base / "outputs" / "pc.json"), str(base / "readings.csv"),
+                 "--out", str(out / "apply.csv"), "--tilt", "-q"]) == 0
+    assert main(["tilt", str(base / "readings.csv"), "--calibration",
+                 str(base / "outputs" / "cal.json"), "--json", str(out / "tilt.json"),
+                 "-q"]) == 0
+    return out
+
+
 @pytest.mark.parametrize("kind", VARIANTS)
 def test_valid_variant_calibrate(base, tmp_path, kind):
     text, extra = variant((base / "plain" / "tumble.csv").read_text(), kind)
@@ -150,11 +168,9 @@ def test_valid_variant_calibrate(base, tmp_path, kind):
 
 
 @pytest.mark.parametrize("kind", VARIANTS)
-def test_valid_variant_gonio(base, tmp_path, kind):
-    args = ["--faces", "ref,y,x,z", "--latitude", "50.45", "-q"]
-    ref_out = tmp_path / "ref.json"
-    assert main(["gonio", str(base / "plain" / "gonio.csv"), "--json", str(ref_out),
-                 *args]) == 0
+def test_valid_variant_gonio(base, refs, tmp_path, kind):
+    args = GONIO_ARGS
+    ref_out = refs / "gonio.json"
     if kind == "units":  # the counter log's columns are counts and a time
         text = (base / "plain" / "gonio.csv").read_text().replace("t\n", "t [s]\n", 1)
         extra: list[str] = []
@@ -170,10 +186,8 @@ def test_valid_variant_gonio(base, tmp_path, kind):
 
 
 @pytest.mark.parametrize("kind", VARIANTS)
-def test_valid_variant_apply(base, tmp_path, kind):
-    ref_csv = tmp_path / "ref.csv"
-    assert main(["apply", str(base / "outputs" / "pc.json"), str(base / "readings.csv"),
-                 "--out", str(ref_csv), "--tilt", "-q"]) == 0
+def test_valid_variant_apply(base, refs, tmp_path, kind):
+    ref_csv = refs / "apply.csv"
     text, extra = variant((base / "readings.csv").read_text(), kind)
     f = _write(tmp_path / "readings.csv", text)
     out = tmp_path / "a.csv"
@@ -184,11 +198,9 @@ def test_valid_variant_apply(base, tmp_path, kind):
 
 
 @pytest.mark.parametrize("kind", VARIANTS)
-def test_valid_variant_tilt(base, tmp_path, kind):
+def test_valid_variant_tilt(base, refs, tmp_path, kind):
     cal = str(base / "outputs" / "cal.json")
-    ref = tmp_path / "ref.json"
-    assert main(["tilt", str(base / "readings.csv"), "--calibration", cal, "--json", str(ref),
-                 "-q"]) == 0
+    ref = refs / "tilt.json"
     text, extra = variant((base / "readings.csv").read_text(), kind)
     f = _write(tmp_path / "readings.csv", text)
     out = tmp_path / "t.json"
@@ -252,8 +264,9 @@ def _static_faults(plain: str) -> dict[str, tuple[str, str]]:
                             "written twice"),
         "block_twice_no_t": ("pose,ux,uy,uz\n" + "\n".join(",".join(r[:4]) for r in rows) * 1
                              + "\n" + "\n".join(",".join(r[:4]) for r in rows) + "\n",
-                             "repeat rows"),
-        "rows_twice_with_t": (h + "\n" + "\n".join(dup_pairs) + "\n", "repeats"),
+                             "lines 2802-5601 repeat lines 2-2801 exactly"),
+        "rows_twice_with_t": (h + "\n" + "\n".join(dup_pairs) + "\n",
+                              "every row is written twice"),
         "not_utf8": ("", "UTF-8"),
         "passwd_like": ("root:x:0:0:root:/root:/bin/bash\ndaemon:x:1:1::/usr/sbin:/bin/sh\n",
                         "lacks"),

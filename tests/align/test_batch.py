@@ -23,7 +23,6 @@ import pytest
 from align.cli import main
 from align.session.batch import SessionJob, batch_jobs, is_complete
 from axisbase.output import OutputError, OutputSet
-from synth.session import SessionSpec, write_session
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -31,11 +30,12 @@ psutil = pytest.importorskip("psutil")  # a dependency of distributed
 
 
 @pytest.fixture(scope="module")
-def sessions(tmp_path_factory) -> list[Path]:
-    """Four sessions (one synthetic session, copied: each takes ~1 s of one core)."""
+def sessions(session21, tmp_path_factory) -> list[Path]:
+    """Four sessions (copies of the run's synthetic session of seed 21: each takes ~1 s of
+    one core to run)."""
     base = tmp_path_factory.mktemp("batch")
     first = base / "unit1"
-    write_session(first, SessionSpec(seed=31))
+    shutil.copytree(session21, first)
     out = [first]
     for k in range(2, 5):
         shutil.copytree(first, base / f"unit{k}")

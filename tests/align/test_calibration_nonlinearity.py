@@ -315,10 +315,10 @@ def test_a_session_key_reaches_the_calibration(tmp_path):
     from dataclasses import replace
 
     from align.session import load_session, run_session
-    from synth.session import SessionSpec, write_session
+    from synth.session import SessionSpec
+    from tests.conftest import imageless_session
 
-    folder = tmp_path / "unit"
-    write_session(folder, SessionSpec(seed=11))
+    folder = imageless_session(tmp_path, SessionSpec(seed=11))  # its images are not read
     toml = folder / "session.toml"
     toml.write_text(toml.read_text().replace("[calibration]\n",
                                              "[calibration]\nk3_bound_ug_per_g3 = 100\n", 1))

@@ -5,6 +5,8 @@ bent as a parabola or an arc), over seeds; the positive control is a model whose
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -25,7 +27,20 @@ def _at(x: float, y: float, a_deg: float, length: float, bow: float = 0.0,
                     centre_t_px=x * np.cos(a) - y * np.sin(a), bow_px=bow, bow_shape=shape)
 
 
+def _rendered(spec: ImageSpec) -> np.ndarray:
+    """The image of ``spec``, read-only: the scenes below are drawn once and shared
+    by the tests that measure them differently (a write to one raises)."""
+    img = render_marks(spec, with_crlb=False).image
+    img.setflags(write=False)
+    return img
+
+
 def _scene(seed: int, n_straight: int = 2):
+    return _scene_drawn(seed, n_straight)  # one cache key however it is called
+
+
+@functools.lru_cache(maxsize=4)  # a few 640x480 images at most
+def _scene_drawn(seed: int, n_straight: int):
     """A bent mark (sagitta 1-2 px, either sign, arc or parabola) near the centre and
     ``n_straight`` straight ones in two corners of a 640x480 frame."""
     rng = np.random.default_rng([seed, 23])
@@ -36,7 +51,7 @@ def _scene(seed: int, n_straight: int = 2):
     marks = [bent, *straight]
     spec = ImageSpec(marks=tuple(marks), width=640, height=480, camera=CAM, seed=seed,
                      full_well_e=full_well_for_snr(40, -0.6), supersample=3)
-    return marks, render_marks(spec, with_crlb=False).image
+    return marks, _rendered(spec)
 
 
 def _match(r, marks):
@@ -110,6 +125,11 @@ def test_a_wrong_k1_is_still_called_a_change_of_the_lens_with_a_bent_mark_presen
 
 
 def _two_bent(seed: int, n_straight: int = 2):
+    return _two_bent_drawn(seed, n_straight)  # one cache key however it is called
+
+
+@functools.lru_cache(maxsize=4)  # a few 640x480 images at most
+def _two_bent_drawn(seed: int, n_straight: int):
     """Two bent marks (sagitta 1-2 px, either sign, arc or parabola) — one near the centre,
     one in the fourth corner — and ``n_straight`` straight ones in the other corners (where
     a lens change that bowed the bent ones would bow them too); no two marks come near each
@@ -125,7 +145,7 @@ def _two_bent(seed: int, n_straight: int = 2):
     marks = [*bend, *straight]
     spec = ImageSpec(marks=tuple(marks), width=640, height=480, camera=CAM, seed=seed,
                      full_well_e=full_well_for_snr(40, -0.6), supersample=3)
-    return marks, render_marks(spec, with_crlb=False).image
+    return marks, _rendered(spec)
 
 
 def _check_two_bent(seed: int, n_straight: int = 2) -> list:

@@ -42,8 +42,9 @@ def _z_before(loop, truth: np.ndarray) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def clean(tmp_path_factory):
-    return _session(tmp_path_factory.mktemp("fusion"), "clean", seed=11)
+def clean(session21_run):
+    """A clean session (seed 21, shared with the run: tests/conftest.py) and its truth."""
+    return session21_run
 
 
 @pytest.mark.slow

@@ -27,10 +27,10 @@ from synth.session import SessionSpec, write_session
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("checks") / "unit"
-    write_session(folder, SessionSpec(seed=11))
-    return folder
+def session(session21) -> Path:
+    """The run's synthetic session of seed 21 (tests/conftest.py), read-only: a test that
+    edits it edits a copy."""
+    return session21
 
 
 def _copy(session: Path, tmp_path: Path) -> Path:
@@ -53,8 +53,8 @@ def _messages(res, stage: str) -> str:
     return " | ".join(e.message for e in res.errors if e.stage == stage)
 
 
-def test_clean_session_is_ok_and_far_from_the_gross_bound(session):
-    res = run_session(load_session(session))
+def test_clean_session_is_ok_and_far_from_the_gross_bound(session21_run):
+    res, _ = session21_run  # run_session of the fixture ``session`` (seed 21), shared
     assert res.ok and not res.errors
     f = res.fusion
     assert not f.gross

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imaging import measure_marks
-from imaging.candidate import wrap_angle
+from imaging.candidate import MarkCandidate, _covers, _may_cover, wrap_angle
 from tests.conftest import angle_error, mark_image
 
 
@@ -33,3 +33,35 @@ def test_angles_through_vertical_and_zero_within_u(angle):
     assert -np.pi / 2 < m.line.angle_rad <= np.pi / 2
     if angle != 90.0:
         assert abs(abs(m.line.angle_rad) - np.pi / 2) > 1e-9
+
+
+def test_fused_prefilter_never_drops_a_covering_line():
+    """_drop_fused's vectorised prefilter (_may_cover) is a necessary condition of the full
+    test (_covers): over random bundles of nearly parallel lines of random extents, offsets
+    and widths, every pair the full test says covers passes it, and it leaves most out."""
+    rng = np.random.default_rng(18)
+    covers = passed = tested = 0
+    for _ in range(10):
+        base = rng.uniform(-1.6, 1.6)
+        cands = []
+        for _ in range(25):
+            t0 = rng.uniform(-300, 100)
+            ang = base + rng.normal(0, 0.05) if rng.random() < 0.7 else rng.uniform(-1.6, 1.6)
+            cands.append(MarkCandidate(angle_rad=float(ang), offset_px=rng.normal(0, 15),
+                                       t_start_px=t0, t_end_px=t0 + rng.uniform(5, 400),
+                                       dark=True, thickness_px=rng.uniform(1, 8), strength=1.0))
+        angle = np.array([o.angle_rad for o in cands])
+        offset = np.array([o.offset_px for o in cands])
+        half = np.array([max(6.0, 2 * o.thickness_px) for o in cands])
+        for c in cands:
+            may = _may_cover(c, angle, offset, half)
+            for o, m, h in zip(cands, may, half, strict=True):
+                if o is c:
+                    continue
+                full = _covers(c, o, h, (c.t_start_px, c.t_end_px))
+                assert m or not full
+                covers += full
+                passed += m
+                tested += 1
+    assert covers > 30  # the sweep holds covering pairs to miss
+    assert passed < 0.2 * tested  # and the prefilter leaves most pairs out

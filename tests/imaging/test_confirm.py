@@ -6,12 +6,19 @@ along a mark is named in the refusal."""
 from __future__ import annotations
 
 import re
+import warnings
 
 import numpy as np
 import pytest
 
 from align import LensRanges, measure_image
-from imaging.confirm import relative_to_light, shadow_free
+from imaging.confirm import (
+    _edge_model,
+    _lit_edge_jacobian,
+    nan_median,
+    relative_to_light,
+    shadow_free,
+)
 from imaging.detect import detect_marks
 from imaging.errors import ImageInputError
 from imaging.measure import measure_frame
@@ -120,3 +127,43 @@ def test_marks_crossed_by_shadow_edges_over_seeds():
     rms = float(np.sqrt(np.mean(zs**2)))
     print(f"shadow crossings: {zs.size} marks, RMS z {rms:.2f}, max |z| {np.abs(zs).max():.2f}")
     assert np.abs(zs).max() <= 3.5 and 0.6 <= rms <= 1.4
+
+
+def test_nan_median_is_numpys_nanmedian():
+    """The one-sort median (confirm's profiles) gives np.nanmedian's values bit for bit:
+    odd and even counts, ties, all-NaN rows (NaN), 2-D and 3-D, either axis."""
+    rng = np.random.default_rng(18)
+    for _ in range(100):
+        shape = tuple(int(n) for n in rng.integers(1, 30, size=rng.integers(2, 4)))
+        x = rng.normal(100.0, 20.0, size=shape)
+        if rng.random() < 0.5:
+            x = np.round(x)  # ties
+        x[rng.random(shape) < rng.uniform(0.0, 0.95)] = np.nan
+        axis = int(rng.integers(0, len(shape)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # numpy's all-NaN slice warning
+            want = np.nanmedian(x, axis=axis)
+        assert np.array_equal(nan_median(x, axis), want, equal_nan=True)
+
+
+def test_lit_edge_jacobian_matches_finite_differences():
+    """shadow_free's hand Jacobian against central differences of its model, over random
+    edges (a wrong column would still converge, slower or elsewhere: checked here)."""
+    rng = np.random.default_rng(7)
+    t, e = np.meshgrid(np.linspace(-150, 150, 40), np.linspace(-40, 40, 33))
+    t, e = t.ravel(), e.ravel()
+
+    def model(q):
+        return (q[4] + q[5] * t / 100 + q[6] * e / 100) * _edge_model(q[:4], t, e)
+
+    for _ in range(20):
+        q = np.array([rng.uniform(-20, 20), rng.uniform(-0.3, 0.3), np.log(rng.uniform(0.5, 8)),
+                      rng.uniform(-0.9, 0.9), rng.uniform(0.5, 2), rng.uniform(-0.5, 0.5),
+                      rng.uniform(-0.5, 0.5)])
+        jac = _lit_edge_jacobian(q, t, e)
+        for i in range(7):
+            h = 1e-6 * max(1.0, abs(q[i]))
+            dq = np.zeros(7)
+            dq[i] = h
+            fd = (model(q + dq) - model(q - dq)) / (2 * h)
+            assert np.allclose(jac[:, i], fd, rtol=1e-5, atol=1e-7), i

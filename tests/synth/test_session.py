@@ -38,6 +38,26 @@ def test_a_lens_can_only_be_undeclared(tmp_path):
         write_session(tmp_path / "s", SessionSpec(effects={"lens_k1_B": 0.1}, **FAST))
 
 
+def test_imageless_session_is_the_full_session_without_its_images(tmp_path):
+    """tests.conftest.imageless_session skips drawing the mark images it drops: the tumble,
+    the counter log, the platform poses and session.toml stay byte for byte those written
+    with the images drawn (small images here: the random draws, not the pixels, matter)."""
+    import filecmp
+
+    from tests.conftest import imageless_session
+
+    spec = SessionSpec(seed=8, effects={"reference_offset": 20.0}, image_size=(320, 240),
+                       mark_length_px=200.0, revolutions=3, samples_per_pose=20)
+    quick = imageless_session(tmp_path / "quick", spec)
+    drawn = imageless_session(tmp_path / "drawn", spec, render=True)
+    names = sorted(p.name for p in drawn.iterdir())
+    assert names == ["gonio.csv", "platform.csv", "session.toml", "tumble.csv"]
+    assert sorted(p.name for p in quick.iterdir()) == names
+    for n in names:
+        assert filecmp.cmp(quick / n, drawn / n, shallow=False), n
+    assert len(list((tmp_path / "drawn" / "full").glob("*.png"))) == 8
+
+
 def test_added_views_and_images_leave_the_rest_of_the_session_bit_identical(tmp_path):
     """What the plan's check relies on (tests/align/test_plan.py): a session with a reversed
     view, a repeated image and its tumble held twice added has every other file the same."""
