@@ -14,12 +14,13 @@ the reference line [px]; the pixels' variance v0 + v1 mu (shot + read noise). Th
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.special import erf
 
+from axisbase.interp import interp_uniform
 from imaging.detect import line_frame
 
 # Gauss–Legendre nodes/weights on a pixel [-1/2, 1/2]: 2 points (exact to cubics) for the
@@ -98,10 +99,10 @@ class ProfileTable:
         if self._ps is None:
             w, s, sh, wt = self._shape
             self._ps = _blur_derivative(self.grid, w, s, sh, wt)
-        return _interp_uniform(e, self.grid, (self._ps,))[0]
+        return interp_uniform(e, self.grid, (self._ps,))[0]
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return _interp_uniform(e, self.grid, (self.p, self.pe))
+        return interp_uniform(e, self.grid, (self.p, self.pe))
 
 
 TABLE_ANGLE_STEP = 1e-3
@@ -121,36 +122,6 @@ def _profile_table(w: float, s: float, angle: float, reach: float) -> ProfileTab
 @functools.lru_cache(maxsize=8)
 def _table(w: float, s: float, angle: float, reach: float) -> ProfileTable:
     return ProfileTable(w, s, angle, reach)
-
-
-def _interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
-                    ) -> tuple[np.ndarray, ...]:
-    """np.interp(e, grid, f, left=0, right=0) for each f of ``fs``, the same to the last bit,
-    on a uniformly spaced ``grid`` (np.arange).
-
-    Hand-written: np.interp has no uniform-grid mode, and its binary search for the cell cost
-    ~5x this on a mark's ~40k unsorted pixels. The cell is found by division, corrected by
-    one where rounding put e across a grid point, and the value is np.interp's expression
-    (per-cell slope) with its special cases: the last grid point, outside the grid, NaN.
-    """
-    last = grid.size - 1
-    step = (grid[last] - grid[0]) / last
-    out = []
-    # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
-    with np.errstate(invalid="ignore"):
-        j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
-        j -= (grid[j] > e) & (j > 0)
-        j += (grid[j + 1] <= e) & (j < last - 1)
-        d = e - grid[j]  # on a grid point d = 0 and the value is f[j] exactly, as np.interp's
-        at_end = e == grid[last]
-        off = (e < grid[0]) | (e > grid[last])
-        dx = np.diff(grid)
-        for f in fs:
-            v = (np.diff(f) / dx)[j] * d + f[j]
-            v[at_end] = f[last]
-            v[off] = 0.0
-            out.append(v)
-    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -106,23 +106,30 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
     D = _dct_matrix()
     c = np.einsum("ij,abjk,lk->abil", D, b - 128.0, D).reshape(-1, 8, 8)
     best = None
+    # Each tested coefficient over the blocks, contiguous, and its magnitude: the same
+    # numbers for every quality (taken once, not 100 times from the strided array).
+    xs = {uv: np.ascontiguousarray(c[:, uv[0], uv[1]]) for uv in _COEFFS}
+    mags = {uv: np.abs(x) for uv, x in xs.items()}
     for quality in range(1, 101):
         T = ijg_table(quality)
-        rs = []
+        rs: list[tuple[float, int]] | None = []
         for u, v in _COEFFS:
-            x = c[:, u, v]
+            x, mag = xs[u, v], mags[u, v]
             # Beyond the zero bin, and small multiples only: the encoder's fast DCT is exact
             # to a fraction of a % of the coefficient, which at 10 steps blurs the phase.
-            big = (np.abs(x) >= 0.5 * T[u, v]) & (np.abs(x) <= 4.5 * T[u, v])
+            big = (mag >= 0.5 * T[u, v]) & (mag <= 4.5 * T[u, v])
             if big.sum() < MIN_BLOCKS or T[u, v] < 2:
                 continue  # too few coefficients beyond the zero bin to tell
             if _one_multiple(x[big], T[u, v]):
                 continue  # blocks alike (a groove along a block row), not a quantiser
             # The mean cosine, not the resultant length: noise coefficients just past the
             # +-T/2 cut sit at phase pi (a resultant length near 1 on a raw image).
-            rs.append((float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v]))),
-                       min(int(big.sum()), 1000)))
-        if len(rs) < 3:
+            r = float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v])))
+            if not r > R_MIN:
+                rs = None  # this quality fails (its smallest R is at most R_MIN): the rest
+                break      # of its coefficients cannot change that (a raw image: at once)
+            rs.append((r, min(int(big.sum()), 1000)))
+        if rs is None or len(rs) < 3:
             continue
         r, n = np.array(rs).T
         if r.min() > R_MIN and (n @ r) / np.sqrt(n.sum() / 2) > Z_MIN:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from axisbase.fixedpoint import iterate_elementwise
 from imaging.linefit import fit_line
 
 
@@ -71,14 +72,17 @@ def undistort(q: np.ndarray, k: Sequence[float], scale: float) -> np.ndarray:
         (N, 2) undistorted points [px].
     """
     rd = np.linalg.norm(q, axis=1) / scale
-    ru = rd.copy()
-    for _ in range(25):
+
+    def newton(at: np.ndarray, ru: np.ndarray) -> tuple[np.ndarray]:
         g = ru.copy()
         dg = np.ones_like(ru)
         for i, ki in enumerate(k, start=1):
             g += ki * ru ** (2 * i + 1)
             dg += (2 * i + 1) * ki * ru ** (2 * i)
-        ru = ru - (g - rd) / dg
+        return (ru - (g - rd[at]) / dg,)
+
+    # (25 steps at most; the points already converged to the last bit left alone)
+    (ru,) = iterate_elementwise(newton, (rd,), 25)
     f = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
     return q * f[:, None]
 

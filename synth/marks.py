@@ -26,54 +26,13 @@ from pathlib import Path
 import numpy as np
 from scipy.special import erf
 
+from axisbase.interp import interp_uniform
 from synth.optics import wrap_half_turn
+from synth.profiles import along_profile, blurred_profile
 from synth.specs import PROFILES, ImageSpec, ImageTruth, MarkSpec, MarkTruth, SynthImage
 
 __all__ = ["PROFILES", "ImageSpec", "ImageTruth", "MarkSpec", "MarkTruth", "SynthImage", "crlb",
            "full_well_for_snr", "mark_coverage", "render_marks", "write_image", "write_synth"]
-
-# ----------------------------------------------------------------------------- profiles
-
-def _blurred_profile(profile: str, width: float, sigma: float):
-    """Depth profile across the groove convolved with the Gaussian PSF, as a function of e."""
-    if profile not in PROFILES:
-        raise ValueError(f"unknown groove profile {profile!r}; use one of {PROFILES}")
-    half = width / 2
-    if profile == "box" and sigma > 0:
-        s2 = np.sqrt(2) * sigma
-        return lambda e: 0.5 * (erf((e + half) / s2) - erf((e - half) / s2))
-
-    def depth(e: np.ndarray) -> np.ndarray:
-        z = np.clip(np.abs(e) / half, 0, 1)
-        inside = np.abs(e) <= half
-        if profile == "box":
-            d = np.ones_like(e)
-        elif profile == "v":
-            d = 1 - z
-        else:
-            d = np.sqrt(1 - z * z)
-        return np.where(inside, d, 0.0)
-
-    if sigma <= 0:
-        return depth
-    step = min(0.004, width / 400, sigma / 20)
-    reach = half + 7 * sigma
-    grid = np.arange(-reach, reach + step / 2, step)
-    kx = np.arange(-6 * sigma, 6 * sigma + step / 2, step)
-    kern = np.exp(-0.5 * (kx / sigma) ** 2)
-    kern /= kern.sum()
-    # depth() sampled at cell midpoints integrates the discontinuity of the box/round edge.
-    blurred = np.convolve(depth(grid), kern, mode="same")
-    return lambda e: np.interp(e, grid, blurred, left=0.0, right=0.0)
-
-
-def _along_profile(length: float, sigma: float | np.ndarray):
-    half = length / 2
-    if np.ndim(sigma) == 0 and sigma <= 0:
-        return lambda t: (np.abs(t) <= half).astype(float)
-    s2 = np.sqrt(2) * sigma
-    return lambda t: 0.5 * (erf((t + half) / s2) - erf((t - half) / s2))
-
 
 # ----------------------------------------------------------------------------- rendering
 
@@ -124,6 +83,17 @@ def _mark_band(spec: ImageSpec, mark: MarkSpec, margin: float) -> tuple[np.ndarr
 def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.ndarray
                   ) -> np.ndarray:
     """Area-integrated, blurred groove depth (0..1) at the given pixels."""
+    return _coverage(spec, mark, _scene_points(spec, rows, cols))
+
+
+Points = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""The supersampled points of some pixels: sensor x, y and scene x, y [px], (pixels, ss^2)."""
+
+
+def _scene_points(spec: ImageSpec, rows: np.ndarray, cols: np.ndarray) -> Points:
+    """The pixels' supersampled points on the sensor and in the scene (they depend on the
+    frame, the supersampling and the camera alone: the CRLB's 13 renders of a mark share
+    them)."""
     cx, cy = (spec.width - 1) / 2, (spec.height - 1) / 2
     ss = spec.supersample
     off = (np.arange(ss) + 0.5) / ss - 0.5
@@ -131,16 +101,22 @@ def mark_coverage(spec: ImageSpec, mark: MarkSpec, rows: np.ndarray, cols: np.nd
     px = (cols[:, None] - cx) + ox.ravel()[None, :]
     py = (rows[:, None] - cy) + oy.ravel()[None, :]
     sx, sy = spec.camera.sensor_to_scene(px, py)
+    return px, py, sx, sy
+
+
+def _coverage(spec: ImageSpec, mark: MarkSpec, points: Points) -> np.ndarray:
+    """:func:`mark_coverage` at the pixels' :func:`_scene_points`."""
+    px, py, sx, sy = points
     a = mark.angle_rad
     e = sx * np.sin(a) + sy * np.cos(a) - mark.offset_px
     t = sx * np.cos(a) - sy * np.sin(a) - mark.centre_t_px
     e = e - mark.bow(t)
     if tuple(spec.blur_gradient) == (0.0, 0.0):
-        across = _blurred_profile(mark.profile, mark.width_px, spec.blur_px)
-        along = _along_profile(mark.length_px, spec.blur_px)
+        across = blurred_profile(mark.profile, mark.width_px, spec.blur_px)
+        along = along_profile(mark.length_px, spec.blur_px)
         return (across(e) * along(t)).mean(axis=1)
     return (_across_varying(mark, e, spec.blur_at(px, py))
-            * _along_profile(mark.length_px, spec.blur_at(px, py))(t)).mean(axis=1)
+            * along_profile(mark.length_px, spec.blur_at(px, py))(t)).mean(axis=1)
 
 
 def _max_blur(spec: ImageSpec) -> float:
@@ -164,17 +140,20 @@ def _across_varying(mark: MarkSpec, e: np.ndarray, sigma: np.ndarray) -> np.ndar
         w = np.clip(1 - np.abs(idx - i), 0, None)
         sel = w > 0
         if sel.any():
-            out[sel] += w[sel] * _blurred_profile(mark.profile, mark.width_px,
+            out[sel] += w[sel] * blurred_profile(mark.profile, mark.width_px,
                                                   lo + i * step)(e[sel])
     return out
 
 
 def _illumination(spec: ImageSpec) -> np.ndarray:
     xs, ys = _pixel_grid(spec)
-    X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
     gx, gy = spec.gradient
-    r2 = (X**2 + Y**2) / 2
-    light = (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
+    if gx == 0 and gy == 0 and spec.vignetting == 0:
+        light = np.ones((spec.height, spec.width))  # (the expression below's 1.0, exactly)
+    else:
+        X, Y = np.meshgrid(xs / max(xs.max(), 1), ys / max(ys.max(), 1))
+        r2 = (X**2 + Y**2) / 2
+        light = (1 + gx * X + gy * Y) * (1 - spec.vignetting * r2)
     a, offset, width, depth = spec.shadow
     if depth:
         # Something between the lamp and the face: its shadow multiplies the light, with a
@@ -198,7 +177,8 @@ def _texture(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
     fine = gaussian_filter1d(rng.standard_normal(grid.size), spec.texture_scale_px / step)
     broad = gaussian_filter1d(rng.standard_normal(grid.size), 8 * spec.texture_scale_px / step)
     prof = fine / fine.std() + 0.5 * broad / broad.std()
-    return spec.texture * np.interp(q, grid, prof / prof.std())
+    # (np.interp's values: q lies inside the grid, 10 px from either end)
+    return spec.texture * interp_uniform(q, grid, (prof / prof.std(),))[0]
 
 
 def _stripes(spec: ImageSpec) -> np.ndarray:
@@ -248,7 +228,7 @@ def _clutter(spec: ImageSpec, rng: np.random.Generator) -> np.ndarray:
         yy, xx = np.mgrid[r0:r1, c0:c1]
         t = (xx - x0) * ux + (yy - y0) * uy
         e = -(xx - x0) * uy + (yy - y0) * ux
-        inside = _along_profile(length, s)(t)
+        inside = along_profile(length, s)(t)
         out[r0:r1, c0:c1] += amp * inside * np.exp(-e * e / (2 * s * s))
     for _ in range(spec.text):
         _label(out, spec, rng)
@@ -274,7 +254,7 @@ def _stroke(out: np.ndarray, p0: np.ndarray, p1: np.ndarray, width: float, amp: 
     yy, xx = np.mgrid[r0:r1, c0:c1]
     t = (xx - mid[0]) * ux + (yy - mid[1]) * uy
     e = -(xx - mid[0]) * uy + (yy - mid[1]) * ux
-    out[r0:r1, c0:c1] += amp * _along_profile(length, s)(t) * _blurred_profile(
+    out[r0:r1, c0:c1] += amp * along_profile(length, s)(t) * blurred_profile(
         "box", width, s)(e)
 
 
@@ -351,7 +331,7 @@ def _digitise(spec: ImageSpec, mean_e: np.ndarray, rng: np.random.Generator) -> 
 
 # ----------------------------------------------------------------------------- CRLB
 
-def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
+def crlb(spec: ImageSpec, index: int = 0, free_k1: bool = False) -> tuple[float, float]:
     """Cramér–Rao bounds (angle [rad], offset [px]) of mark ``index`` from the noise-free render.
 
     Fisher information over pixels for (angle about the mark's middle, offset, contrast,
@@ -364,6 +344,9 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
         The image.
     index : int
         Which of its marks.
+    free_k1 : bool
+        Also a nuisance parameter: the camera's k1 (OpenCV, about ``spec.camera.k1``), so the
+        bound is that of a line whose lens bow is fitted from its own pixels.
 
     Returns
     -------
@@ -376,16 +359,20 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
     gain = (2**spec.bits - 1) / spec.full_well_e
     illum = _illumination(spec)[rows, cols] * spec.exposure * spec.full_well_e
     cx, cy = m.centre_xy()
+    points = _scene_points(spec, rows, cols)  # (the same for every render below)
 
     def mean(angle=m.angle_rad, offset=None, contrast=m.contrast, exposure=1.0,
-             width=m.width_px, blur=spec.blur_px):
+             width=m.width_px, blur=spec.blur_px, k1=spec.camera.k1):
         # Rotating about the mark's middle keeps its centre fixed: recompute offset and t.
         off = cx * np.sin(angle) + cy * np.cos(angle) if offset is None else offset
         tc = cx * np.cos(angle) - cy * np.sin(angle)
         mk = replace(m, angle_rad=angle, offset_px=off, centre_t_px=tc,
                      contrast=contrast, width_px=width)
         s = replace(spec, blur_px=blur)
-        return exposure * illum * (1 + contrast * mark_coverage(s, mk, rows, cols))
+        # A k1 other than the camera's moves every pixel's scene point: map them again.
+        pts = points if k1 == spec.camera.k1 else _scene_points(
+            replace(spec, camera=replace(spec.camera, k1=k1)), rows, cols)
+        return exposure * illum * (1 + contrast * _coverage(s, mk, pts))
 
     mu = mean()
     off0 = m.offset_px
@@ -393,6 +380,8 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
         "angle": 2e-5, "offset": 1e-3, "contrast": 1e-3, "exposure": 1e-4,
         "width": 1e-3, "blur": 1e-3,
     }
+    if free_k1:
+        steps["k1"] = 1e-3
     derivs = []
     for name, h in steps.items():
         if name == "offset":
@@ -404,7 +393,7 @@ def crlb(spec: ImageSpec, index: int = 0) -> tuple[float, float]:
             continue
         else:
             base = {"contrast": m.contrast, "exposure": 1.0, "width": m.width_px,
-                    "blur": spec.blur_px}[name]
+                    "blur": spec.blur_px, "k1": spec.camera.k1}[name]
             plus = mean(**{name: base + h})
             minus = mean(**{name: base - h})
         derivs.append((plus - minus) / (2 * h))

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from synth.marks import MarkSpec, _along_profile, _blurred_profile
+from synth.marks import MarkSpec
 from synth.optics import CameraGeometry
+from synth.profiles import along_profile, blurred_profile
 
 Mask = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """Sharp occluder mask (0..1) at points (x, y) of the frame [px, relative to the centre]."""
@@ -83,8 +84,8 @@ def sharp_reflectance(marks: Sequence[MarkSpec], camera: CameraGeometry, x: np.n
         a = m.angle_rad
         e = sx * np.sin(a) + sy * np.cos(a) - m.offset_px
         t = sx * np.cos(a) - sy * np.sin(a) - m.centre_t_px
-        r += m.contrast * _blurred_profile(m.profile, m.width_px, 0.0)(e) * \
-            _along_profile(m.length_px, 0.0)(t)
+        r += m.contrast * blurred_profile(m.profile, m.width_px, 0.0)(e) * \
+            along_profile(m.length_px, 0.0)(t)
     return r
 
 

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from axisbase.fixedpoint import iterate_elementwise
+
 
 @dataclass(frozen=True)
 class CameraGeometry:
@@ -102,26 +104,32 @@ class CameraGeometry:
             return f * xn, f * yn
         if self.p1 == 0 and self.p2 == 0:
             rd = np.hypot(xn, yn)
-            ru = rd.copy()
-            for _ in range(iters):
+            rd_flat = rd.ravel()
+
+            def radial(at: np.ndarray, ru: np.ndarray) -> tuple[np.ndarray]:
                 r2 = ru * ru
-                g = ru * (1 + self.k1 * r2 + self.k2 * r2 * r2) - rd
+                g = ru * (1 + self.k1 * r2 + self.k2 * r2 * r2) - rd_flat[at]
                 dg = 1 + 3 * self.k1 * r2 + 5 * self.k2 * r2 * r2
-                ru = ru - g / dg
+                return (ru - g / dg,)
+
+            (ru,) = iterate_elementwise(radial, (rd,), iters)
             scale = np.where(rd > 0, ru / np.where(rd > 0, rd, 1.0), 1.0)
             return f * xn * scale, f * yn * scale
-        x, y = xn.copy(), yn.copy()
+        xn, yn = np.broadcast_arrays(xn, yn)
+        xn_flat, yn_flat = xn.ravel(), yn.ravel()
         h = 1e-7
-        for _ in range(iters + 8):
+
+        def both(at: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
             fx, fy = self._lens(x, y)
-            ex, ey = fx - xn, fy - yn
+            ex, ey = fx - xn_flat[at], fy - yn_flat[at]
             ax, ay = self._lens(x + h, y)
             bx, by = self._lens(x, y + h)
             j11, j21 = (ax - fx) / h, (ay - fy) / h
             j12, j22 = (bx - fx) / h, (by - fy) / h
             det = j11 * j22 - j12 * j21
-            x = x - (j22 * ex - j12 * ey) / det
-            y = y - (-j21 * ex + j11 * ey) / det
+            return x - (j22 * ex - j12 * ey) / det, y - (-j21 * ex + j11 * ey) / det
+
+        x, y = iterate_elementwise(both, (xn, yn), iters + 8)
         return f * x, f * y
 
     def sensor_to_scene(self, xd: np.ndarray, yd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -80,7 +80,17 @@ EFFECTS = {
     "lens_k1_A": ("", "OpenCV radial distortion k1 of camera A only (overrides lens_k1)"),
     "lens_k1_B": ("", "OpenCV radial distortion k1 of camera B only (overrides lens_k1)"),
 }
-LENSES = ("lens_k1", "lens_k1_A", "lens_k1_B")
+# The rest of the lens, each for both cameras or one (``_A``/``_B`` overrides the shared key):
+# OpenCV's k2, p1, p2 and the pixel aspect fy/fx minus 1 (non-square pixels).
+_LENS_MORE = {"lens_k2": "OpenCV radial distortion k2", "lens_p1": "OpenCV tangential p1",
+              "lens_p2": "OpenCV tangential p2",
+              "lens_aspect": "pixel aspect fy/fx minus 1 (non-square pixels)"}
+for _key, _what in _LENS_MORE.items():
+    EFFECTS[_key] = ("", f"{_what} of both cameras")
+    for _cam in "AB":
+        EFFECTS[f"{_key}_{_cam}"] = ("", f"{_what} of camera {_cam} only (overrides {_key})")
+LENSES = ("lens_k1", "lens_k1_A", "lens_k1_B",
+          *(f"{k}{c}" for k in _LENS_MORE for c in ("", "_A", "_B")))
 
 
 def parse_direction(text: str) -> np.ndarray:
@@ -116,6 +126,10 @@ class SessionSpec:
     added_views: tuple[str, ...] = ()
     platform_static: bool = True  # False: no platform static readings at all
     tumble_repeats: int = 1  # the tumble's 14 poses held this many times over (a second tumble)
+    # camera -> (min, max) distance [px] of its marks' middles from the image centre (issue 18:
+    # marks 400-800 px out, where a lens bows them most). Drawn from their own random stream
+    # after the usual placement, so every other draw of the session is unchanged.
+    far_marks_px: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def true_axes(E: np.ndarray) -> np.ndarray:
@@ -205,16 +219,24 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
             raise ValueError(f"repeat_images: housing {housing} is not in view {view}")
         n = sum(1 for hv in spec.repeat_images[:k + 1] if hv == (housing, view)) + 1
         shots.append((view, housing, dict(VIEW_MARKS[view])[housing], f"_{n}", later))
+    far_rng = np.random.default_rng([spec.seed, 2])
     for view, housing, nominal, suffix, draw in shots:
         cam, right, up = VIEWS[view]
-        geom = CameraGeometry(focal_px=1.6 * w, k1=eff.get(f"lens_k1_{cam}",
-                                                           eff.get("lens_k1", 0.0)),
+        def lens(key: str, cam: str = cam) -> float:
+            return eff.get(f"{key}_{cam}", eff.get(key, 0.0))
+
+        # The lens acts on the scene points before the pixels integrate them (synth/optics.py).
+        geom = CameraGeometry(focal_px=1.6 * w, k1=lens("lens_k1"), k2=lens("lens_k2"),
+                              p1=lens("lens_p1"), p2=lens("lens_p2"),
+                              aspect=1.0 + lens("lens_aspect"),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
         s = S[HOUSINGS.index(housing)]
         ang = _scene_angle(s, parse_direction(right), parse_direction(up))
         mark = MarkSpec(ang, offset_px=float(draw.uniform(-40, 40)),
                         length_px=spec.mark_length_px, width_px=4.0,
                         centre_t_px=float(draw.uniform(-30, 30)))
+        if cam in spec.far_marks_px:
+            mark = _far(mark, spec, spec.far_marks_px[cam], far_rng)
         img = ImageSpec(marks=(mark,), width=w, height=h, seed=int(draw.integers(1 << 30)),
                         full_well_e=full_well_for_snr(spec.snr, -0.6), texture=0.01,
                         dust=4, scratches=2, gradient=(0.04, -0.02), camera=geom)
@@ -224,7 +246,38 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
         rows.append({"file": name, "housing": housing, "view": view, "nominal": nominal,
                      "image_angle_rad": sample.truth.marks[0].image_angle_rad,
                      })
+        if cam in spec.far_marks_px:
+            rows[-1].update(centre_xy_px=list(mark.centre_xy()),
+                            sagitta_px=_sagitta(mark, geom))
     return rows
+
+
+def _far(mark: MarkSpec, spec: SessionSpec, span: tuple[float, float],
+         rng: np.random.Generator, margin: float = 30.0) -> MarkSpec:
+    """``mark`` moved so that its middle lies ``span`` [px] from the image centre, in a
+    random direction, with the whole mark (and ``margin`` px) inside the frame."""
+    w, h = spec.image_size
+    a, half = mark.angle_rad, mark.length_px / 2
+    along, normal = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
+    for _ in range(2000):
+        d, phi = rng.uniform(*span), rng.uniform(0, 2 * np.pi)
+        mid = d * np.array([np.cos(phi), np.sin(phi)])
+        ends = np.abs([mid + half * along, mid - half * along])
+        if np.all(ends[:, 0] < w / 2 - margin) and np.all(ends[:, 1] < h / 2 - margin):
+            return replace(mark, offset_px=float(mid @ normal), centre_t_px=float(mid @ along))
+    raise ValueError(f"far_marks_px {span}: a {mark.length_px:.0f} px mark does not fit that "
+                     f"far out in a {w}x{h} frame")
+
+
+def _sagitta(mark: MarkSpec, geom: CameraGeometry) -> float:
+    """The largest distance [px] of the mark's imaged centre line from its chord."""
+    t = np.linspace(-mark.length_px / 2, mark.length_px / 2, 201)
+    a = mark.angle_rad
+    sx = mark.offset_px * np.sin(a) + (mark.centre_t_px + t) * np.cos(a)
+    sy = mark.offset_px * np.cos(a) - (mark.centre_t_px + t) * np.sin(a)
+    x, y = geom.distort(*geom.scene_to_ideal(sx, sy))
+    chord = np.array([x[-1] - x[0], y[-1] - y[0]]) / np.hypot(x[-1] - x[0], y[-1] - y[0])
+    return float(np.max(np.abs((x - x[0]) * chord[1] - (y - y[0]) * chord[0])))
 
 
 def _gonio(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
@@ -292,7 +345,8 @@ def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[di
         lines += ["", f"[cameras.{cam}]", f"# looks along {looks}"]
         if f"camera_roll_{cam}" in declared:
             lines.append(f"roll_arcsec = {declared[f'camera_roll_{cam}']}")
-        if not any(k in spec.effects for k in ("lens_k1", f"lens_k1_{cam}")):
+        if not any(k in spec.effects for k in LENSES if k[-2:] not in ("_A", "_B")
+                   or k.endswith(f"_{cam}")):
             # The rendered camera has no lens distortion and square pixels, and the file
             # says so (a corrected optic); an undeclared lens leaves the keys out, and the
             # pipeline carries its default plausible lens.

