@@ -48,10 +48,9 @@ import numpy as np  # noqa: E402
 from align import LensRanges, measure_image  # noqa: E402
 from align.session import load_session, run_session  # noqa: E402
 from imaging.band import band_pixels  # noqa: E402
-from imaging.centres import sample_centres  # noqa: E402
 from imaging.detect import line_frame  # noqa: E402
 from imaging.groove import ProfileFit, ProfileTable, centres_half  # noqa: E402
-from imaging.linefit import fit_line  # noqa: E402
+from imaging.jpeg import rendering_angle_shift  # noqa: E402
 from imaging.shape import phase_cycles  # noqa: E402
 from synth.session import SessionSpec, write_session  # noqa: E402
 from tests.align import user6_inputs as U  # noqa: E402
@@ -105,14 +104,7 @@ def grid_phase_shift(shape: tuple[int, int], pf: ProfileFit) -> float:
     if phase_cycles(pf.angle_rad, pf.t_end_px - pf.t_start_px) >= 3.0:
         return 0.0
     model, sharp = _renderings(shape, pf)
-    a, b = sample_centres(model, pf), sample_centres(sharp, pf)
-    ok = a.ok & b.ok
-    if ok.sum() < 10:
-        return 0.0
-    one = np.ones(int(ok.sum()))
-    da = fit_line(b.xy[ok], one, reject_sigma=None).angle_rad - fit_line(
-        a.xy[ok], one, reject_sigma=None).angle_rad
-    return float(abs((da + np.pi / 2) % np.pi - np.pi / 2))
+    return rendering_angle_shift(model, sharp, pf)
 
 
 def edge(seeds: range, noise_free: bool) -> None:

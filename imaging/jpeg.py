@@ -215,8 +215,14 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     model.flat[idx] += pf.contrast_dn * p
     model = np.clip(model, 0.0, 255.0)
-    a = sample_centres(model, pf)
-    b = sample_centres(jpeg_round_trip(model, quality), pf)
+    return rendering_angle_shift(model, jpeg_round_trip(model, quality), pf)
+
+
+def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
+    """|angle in ``b_image`` - angle in ``a_image``| [rad] of the groove ``pf``: its centres
+    sampled on the same segments of both, the line fitted with equal weights to the segments
+    valid in both (0 when fewer than 10 are)."""
+    a, b = sample_centres(a_image, pf), sample_centres(b_image, pf)
     ok = a.ok & b.ok
     if ok.sum() < 10:
         return 0.0
