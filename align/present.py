@@ -81,6 +81,9 @@ def camera_lines(model) -> list[str]:
     lines.append("distortion " + " ".join(
         f"{k} {v:+.5f} ± {u.get(k, np.nan):.5f}"
         for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5], strict=False)))
+    choice = model.lens_choice or {}
+    if choice.get("why"):
+        lines.append(f"k3 {choice['k3']}: {choice['why']}")
     return lines
 
 
