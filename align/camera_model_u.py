@@ -125,3 +125,36 @@ def independent_u(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
     added as if independent) [rad]: what the joint covariance replaces (for comparison)."""
     g = angle_sensitivity(camera, points, sigma, chol, shape)
     return float(np.sqrt(np.sum(g**2 * np.diag(camera.cov))))
+
+
+FIELD_RADII_PX = (100.0, 175.0, 250.0)
+"""Distances [px] from the image centre of the marks :func:`field_u` sums up."""
+FIELD_LENGTH_PX = 150.0
+"""Their length [px]."""
+
+
+def field_u(camera: CameraModel) -> dict | None:
+    """What the model's own u leaves the angle of a typical mark: 150 px marks 100-250 px
+    from the image centre (8 azimuths, radial and tangential), gᵀ C g each; their median
+    and largest [″] (None without a covariance). ``align camera`` states it, so a user
+    sees before measuring whether the calibration makes such marks lens-limited."""
+    if camera.cov is None:
+        return None
+    w, h = camera.image_size
+    t = np.linspace(-FIELD_LENGTH_PX / 2, FIELD_LENGTH_PX / 2, 76)
+    us = []
+    for r in FIELD_RADII_PX:
+        for phi in np.radians(np.arange(0.0, 360.0, 45.0)):
+            for a in (phi, phi + np.pi / 2):
+                q = r * np.array([np.cos(phi), np.sin(phi)]) + np.outer(
+                    t, [np.cos(a), np.sin(a)])
+                if np.any(np.abs(q) > np.array([w, h]) / 2 - 5):
+                    continue
+                g = angle_sensitivity(camera, q, np.ones(len(q)), None, (h, w))
+                us.append(float(np.sqrt(max(g @ camera.cov @ g, 0.0))))
+    if not us:
+        return None
+    arcsec = np.degrees(np.array(us)) * 3600
+    return {"median_u_arcsec": float(np.median(arcsec)), "max_u_arcsec": float(arcsec.max()),
+            "radii_px": [FIELD_RADII_PX[0], FIELD_RADII_PX[-1]], "length_px": FIELD_LENGTH_PX,
+            "marks": len(us)}

@@ -116,7 +116,8 @@ class CameraModel:
         (9, 9) [px², px, 1 as ``cov``]: the two covariances ``cov`` dominates (the
         jackknife's None below :data:`JACKKNIFE_MIN_VIEWS` views).
     lens_choice : dict or None
-        Whether k3 was fitted or left out and why (:func:`imaging.camera_k3.choose_k3`); a
+        Whether k3 was fitted or left out and why (:func:`imaging.camera_k3.choose_k3`;
+        k3, its u and range dimensionless, RMS [px]); a
         left-out k3's term (``k3_left_out``: ``carried_direction`` w per
         :data:`INTRINSICS`, ``carried_k3`` s) is already in ``cov`` (+ s² w wᵀ). None in
         files written before format version 5 (k3 then as the file has it).

@@ -107,7 +107,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                          else "free" if args.free_k3 else "auto")
     doc = camera_document(model, settings(args), args.images, {**unread, **failed})
     warn(doc["warnings"])
-    say(camera_lines(model))
+    say(camera_lines(model, doc["field_u"]))
     if out is not None:
         wrote(write_json(out, doc, args.force))
     return 0
