@@ -29,7 +29,8 @@ NOISE_DN = 18.0
 real photographs do (0.19 px); with 2 DN (0.07 px) the views determine the real lens's k3."""
 
 
-def _run(D: np.ndarray, seeds: range, marks: int = 2, views: int = 7) -> dict:
+def _run(D: np.ndarray, seeds: range, noise_dn: float, marks: int = 2, views: int = 7
+         ) -> dict:
     """Per mark: error / u through the chosen model, u through it and through the k3-free
     model [″]; and per calibration whether k3 was fitted."""
     lens = {"K": K_REAL, "dist": D, "size": (640, 480)}
@@ -37,7 +38,7 @@ def _run(D: np.ndarray, seeds: range, marks: int = 2, views: int = 7) -> dict:
     z, u_auto, u_free, fitted = [], [], [], []
     for seed in seeds:
         rng = np.random.default_rng(seed)
-        photos = board_photos(rng, views, rays, K_REAL, D, noise_dn=NOISE_DN)
+        photos = board_photos(rng, views, rays, K_REAL, D, noise_dn=noise_dn)
         cam, _ = calibrate_chessboard(photos, (9, 6))
         free, _ = calibrate_chessboard(photos, (9, 6), k3="free")
         fitted.append(cam.lens_choice["k3"] == "fitted")
@@ -62,13 +63,15 @@ def _run(D: np.ndarray, seeds: range, marks: int = 2, views: int = 7) -> dict:
 
 @pytest.mark.slow  # ~90 s: 2 lenses x 8 seeds: 7 boards rendered, calibrated twice, 2 marks
 def test_rendered_boards_and_marks_through_the_real_lens_and_a_k3_lens():
-    """Over 8 seeds per lens (boards as noisy as the real photographs): every |error| / u
-    ≤ 3 and RMS z within 0.6-1.2; the control's k3 always kept (the real lens's is left out
-    or kept as the views say: both branches run). Prints the median u of the marks
+    """Over 8 seeds per lens: every |error| / u ≤ 3 and RMS z within 0.6-1.2. The real
+    lens on boards as noisy as the real photographs (its k3 left out or kept as the views
+    say: both branches run); the control on clean boards (2 DN: 0.07 px), where 7 views
+    determine its k3, always kept (on 18 DN boards they determine it in 5 of 8, and the
+    angles stay covered: RMS z 0.72, max 2.27). Prints the median u of the marks
     through the chosen model and through the k3-free one (the issue's before/after).
     Default twin: tests/imaging/test_camera_k3.py (the same choice on projected corners)."""
-    for name, D, kept in (("real", D_REAL, None), ("k3 0.8", D_K3, True)):
-        out = _run(D, range(8))
+    for name, D, noise, kept in (("real", D_REAL, NOISE_DN, False), ("k3 0.8", D_K3, 2.0, True)):
+        out = _run(D, range(8), noise)
         z = out["z"]
         rms = float(np.sqrt(np.mean(z**2)))
         print(f"{name}: k3 fitted in {out['fitted'].mean():.2f} of calibrations; RMS z "
