@@ -11,6 +11,9 @@ noise taken as white and the model as exact) and the delete-one-view jackknife
 by 1.6-3.3x more than the formal u says (the corners' errors are correlated within a view and
 the lens is not exactly OpenCV's five-coefficient model), and the marks measured through the
 model inherit that error.
+
+k3 is fitted only when the views determine it (:mod:`imaging.camera_k3`): else the model is
+the k3-free fit with k3's range carried in ``cov`` (``lens_choice`` says which and why).
 """
 
 from __future__ import annotations
