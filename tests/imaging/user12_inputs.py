@@ -8,21 +8,25 @@ area (``ss`` x ``ss`` sub-samples) at the points the lens maps it from: OpenCV's
 gives the scene point of each sub-sample. Shot noise (Poisson on ``full_well`` electrons at the
 background), then quantised to ``bits``.
 
-The truth of a mark is the direction of the scene line in the ideal pixel frame, x right, y
-down, in (-90, 90] deg, counter-clockwise on screen positive is NOT assumed here: the sign
-convention is the tool's (docs: image x right, y down) and the test checks it on a centre mark.
+A groove's ``angle_deg`` is its direction in the ideal pixel frame, from +x towards +y (rows
+down). Its truth as the tool states angles (:func:`truth_deg`) is the direction in the camera's
+normalised frame (x/fx, y/fy: the scene, square), counter-clockwise on the screen positive (a
+centre mark drawn at +30 deg is read at -30 deg on a lens-free camera).
 """
 
 from __future__ import annotations
 
 import glob
+import json
+import re
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 from scipy.special import ndtr
-
 
 
 def calibrate_chessboard(folder: Path) -> tuple[np.ndarray, np.ndarray, float, int]:
@@ -57,6 +61,18 @@ class Groove:
     length: float     # [px]
     width: float = 4.0
     depth: float = 0.5
+
+
+def truth_deg(g: Groove, k: np.ndarray | None) -> float:
+    """The groove's direction as the tool reports it [deg]: normalised frame, y up."""
+    fx, fy = (1.0, 1.0) if k is None else (k[0, 0], k[1, 1])
+    th = np.deg2rad(g.angle_deg)
+    return float(-np.rad2deg(np.arctan2(np.sin(th) / fy, np.cos(th) / fx)))
+
+
+def angle_err_arcsec(measured_deg: float, truth: float) -> float:
+    """Difference of two line directions, wrapped to (-90, 90] deg, in arc-seconds."""
+    return ((measured_deg - truth + 90.0) % 180.0 - 90.0) * 3600.0
 
 
 def ideal_of_pixels(pts: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -187,3 +203,48 @@ def ruled_scale(seed: int = 0, size=(1600, 1200), n_lines: int = 23, pitch: floa
     truth = {"angle_deg": angle_deg, "pitch_px": pitch, "n_lines": n_lines,
              "mids": np.array(mids)}
     return np.clip(np.round(img), 0, 4095).astype(np.uint16), truth
+
+
+# ---------------------------------------------------------------- a session -----------------
+
+def lens_session(folder: Path, seed: int, k: np.ndarray, d: np.ndarray,
+                 off_px: float = 140.0, length: float = 300.0, roll_arcsec: float = 0.0,
+                 cameras_gonio_only: bool = True) -> dict:
+    """A session whose camera A looks through the lens (k, d), its lens undeclared.
+
+    The session's goniometer, tumble, platform and camera B come from ``align synth session``
+    (the CLI, as a user gets a complete session); camera A's four images are re-rendered here,
+    each mark at the angle the synth truth gives it (plus ``roll_arcsec``, a roll of camera A
+    about its axis), ``off_px`` from the centre across its direction, through the lens. The
+    [cameras.A] table is emptied: the tool gets its default lens ranges. ``cameras_gonio_only``
+    drops [calibration] and [platform]: E then rests on the cameras and the goniometer.
+    Returns the synth truth (misalignment_rad) and the images' truths.
+    """
+    subprocess.run([sys.executable, "-m", "align", "synth", "session", str(folder), "--seed",
+                    str(seed), "-q"], check=True, capture_output=True)
+    truth = json.loads((folder / "truth.json").read_text())
+    fx, fy = k[0, 0], k[1, 1]
+    roll = np.deg2rad(roll_arcsec / 3600.0)
+    for im in truth["images"]:
+        if not im["view"].startswith("A"):
+            continue
+        th = im["image_angle_rad"] + roll          # the tool's convention (y up)
+        a = np.rad2deg(np.arctan2(-np.sin(th) * fy, np.cos(th) * fx))  # ideal pixels, y down
+        horizontal = im["nominal"] == "horizontal"
+        side = 1.0 if (seed + len(im["file"])) % 2 else -1.0
+        x, y = (319.5, 239.5 + side * off_px) if horizontal else (319.5 + side * off_px, 239.5)
+        g = Groove(x, y, a, length, 4.0, 0.6)
+        img = render([g], k, d, (640, 480), 1.2, 6000.0, bits=16, seed=seed * 10 + len(im["file"]))
+        save(folder / im["file"], img)
+    toml = (folder / "session.toml").read_text()
+    toml = re.sub(r"\[cameras\.A\]\n(#[^\n]*\n|lens_[^\n]*\n)*", "[cameras.A]\n", toml)
+    if cameras_gonio_only:
+        keep, out = True, []
+        for line in toml.splitlines():
+            if line.startswith("["):
+                keep = not line.startswith(("[calibration", "[platform"))
+            if keep:
+                out.append(line)
+        toml = "\n".join(out) + "\n"
+    (folder / "session.toml").write_text(toml)
+    return truth
