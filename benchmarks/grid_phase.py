@@ -53,70 +53,17 @@ from pathlib import Path
 sys.path.insert(1 + len([e for e in os.environ.get("PYTHONPATH", "").split(os.pathsep) if e]),
                 str(Path(__file__).resolve().parents[1]))
 
-import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.special import ndtr  # noqa: E402
 
 from align import LensRanges, measure_image  # noqa: E402
+from align.grid_phase import grid_phase_shift  # noqa: E402
 from align.session import load_session, run_session  # noqa: E402
-from imaging.band import band_pixels  # noqa: E402
-from imaging.detect import line_frame  # noqa: E402
-from imaging.groove import ProfileFit, ProfileTable, centres_half  # noqa: E402
-from imaging.jpeg import rendering_angle_shift  # noqa: E402
 from imaging.shape import phase_cycles  # noqa: E402
 from synth.session import SessionSpec, write_session  # noqa: E402
 from tests.align import user6_inputs as U  # noqa: E402
 
 ARCSEC = np.deg2rad(1 / 3600)
-
-
-def _strip_cdf(c: np.ndarray, a: float, b: float) -> np.ndarray:
-    """P(a U1 + b U2 <= c) for U1, U2 uniform on [-1/2, 1/2], a >= b >= 0: the fraction of
-    a pixel on one side of a line at distance c from its centre (normal (a, b))."""
-    h, g = (a + b) / 2, (a - b) / 2
-    mid = 0.5 + c / a
-    if b < 1e-9:  # along a pixel axis: the quadratic corners vanish
-        return np.clip(mid, 0.0, 1.0)
-    lo = (c + h) ** 2 / (2 * a * b)
-    hi = 1.0 - (h - c) ** 2 / (2 * a * b)
-    out = np.where(c < -g, lo, np.where(c > g, hi, mid))
-    return np.where(c <= -h, 0.0, np.where(c >= h, 1.0, out))
-
-
-def sharp_fraction(e: np.ndarray, width_px: float, angle_rad: float) -> np.ndarray:
-    """The fraction of each pixel (its centre at signed distance ``e`` [px] from the groove's
-    middle line) that a sharp groove of ``width_px`` covers, integrated exactly."""
-    _, n = line_frame(angle_rad)
-    a, b = sorted((abs(float(n[0])), abs(float(n[1]))), reverse=True)
-    return (_strip_cdf(width_px / 2 - e, a, b) - _strip_cdf(-width_px / 2 - e, a, b))
-
-
-def _renderings(shape: tuple[int, int], pf: ProfileFit) -> tuple[np.ndarray, np.ndarray]:
-    """The fitted groove on a noise-free image of ``shape``: the model (blur, then pixel) and
-    the sharp groove pixel-integrated, then blurred by the model's sigma on the grid."""
-    model = np.full(shape, pf.background_dn, dtype=float)
-    sharp = np.zeros(shape, dtype=float)
-    half = centres_half(pf) + 8.0
-    e, idx = band_pixels(model, pf, half, 30.0)
-    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
-    model.flat[idx] += pf.contrast_dn * p
-    sharp.flat[idx] = pf.contrast_dn * sharp_fraction(e, pf.width_px, pf.angle_rad)
-    # Blur only the box about the band (the frame's edges stay where the image has them).
-    r, c = np.unravel_index(idx, shape)
-    m = int(np.ceil(4 * pf.blur_px)) + 2
-    r0, r1 = max(int(r.min()) - m, 0), min(int(r.max()) + m + 1, shape[0])
-    c0, c1 = max(int(c.min()) - m, 0), min(int(c.max()) + m + 1, shape[1])
-    sharp[r0:r1, c0:c1] = cv2.GaussianBlur(sharp[r0:r1, c0:c1], (0, 0), pf.blur_px)
-    return model, sharp + pf.background_dn
-
-
-def grid_phase_shift(shape: tuple[int, int], pf: ProfileFit) -> float:
-    """|angle of the sharp rendering - angle of the model's| [rad] of the fitted groove ``pf``
-    on an image of ``shape`` (0 beyond 3 phase cycles: the shift averages out)."""
-    if phase_cycles(pf.angle_rad, pf.t_end_px - pf.t_start_px) >= 3.0:
-        return 0.0
-    model, sharp = _renderings(shape, pf)
-    return rendering_angle_shift(model, sharp, pf)
 
 
 def edge(seeds: range, noise_free: bool) -> None:
