@@ -15,13 +15,13 @@ from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 
 
 def _marks(angle_deg: float, seed: int = 1):
-    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(angle_deg), 5.0, 400.0, 4.0, contrast=-0.6),),
-                     width=640, height=480, full_well_e=full_well_for_snr(50, -0.6), seed=seed)
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(angle_deg), 5.0, 200.0, 4.0, contrast=-0.6),),
+                     width=320, height=240, full_well_e=full_well_for_snr(50, -0.6), seed=seed)
     return measure_image(render_marks(spec, with_crlb=False).image, ranges=LensRanges.none())
 
 
 def test_a_mark_crossing_many_phase_cycles_is_left_alone():
-    """5 deg on 400 px is 35 phase cycles: the grid's phase averages out, term 0, u as it was,
+    """5 deg on 200 px is 17 phase cycles: the grid's phase averages out, term 0, u as it was,
     no note."""
     (r,) = _marks(5.0)
     (d,) = with_grid_phase([r])
@@ -29,9 +29,9 @@ def test_a_mark_crossing_many_phase_cycles_is_left_alone():
 
 
 def test_a_near_axis_mark_only_gains_u_and_a_note():
-    """0.1 deg on 400 px (0.7 cycles): the angle is the same, u = hypot(u, term) > u, the
+    """0.2 deg on 200 px (0.7 cycles): the angle is the same, u = hypot(u, term) > u, the
     note says what was declared."""
-    (r,) = _marks(0.1)
+    (r,) = _marks(0.2)
     (d,) = with_grid_phase([r])
     t = d.u_terms[TERM]
     assert t > 0 and d.angle_rad == r.angle_rad
