@@ -12,6 +12,7 @@ from align.commands.parents import examples
 
 
 def cmd_marks(args: argparse.Namespace) -> int:
+    from align.grid_phase import with_grid_phase
     from align.marks import measure_files
     from imaging import check_roi
 
@@ -25,9 +26,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
     batch = measure_files(progress(args.images, "marks"), camera, alpha=args.alpha,
                           max_marks=args.max_marks, expect_one=args.one, roi=roi,
                           min_length_px=args.min_length, ranges=ranges)
-    if args.blur_after_pixels:
-        from align.grid_phase import with_grid_phase
-        batch = map(with_grid_phase, batch)
+    batch = map(with_grid_phase, batch) if args.blur_after_pixels else batch  # declared
     results, failed, internal = _show_marks(batch, plot_dir)
     _write_marks(args, results, inputs, out)
     # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
