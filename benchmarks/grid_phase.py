@@ -1,4 +1,5 @@
-"""Blur before or after the pixels (issue 18, user6's frame-edge mark): measured, not applied.
+"""Blur before or after the pixels (issue 18, user6's frame-edge mark): measured; applied
+only when declared (``align marks --blur-after-pixels``, :mod:`align.grid_phase`).
 
 Run:  python3 benchmarks/grid_phase.py [--what edge nf session cause oracle] [--seeds 16]
 
@@ -31,14 +32,15 @@ difference d and what the Type B term |d|/sqrt(3) (``grid_phase``) would do:
   at 0.4-1.4 phase cycles, 0.03-0.20 (power <= 0.02) below 0.15 cycles. Power >= 90 % at
   <= 1 % false alarms needs d' >= 3.61: no gate on the image can tell the orders apart here.
 
-Why it is not applied (edge18, 26 Nov): it covers user6's marks (RMS z 1.61 -> 1.21, max
-3.15 -> 2.27), but the images cannot tell the two orders apart on such marks (the visible
-departure's tilt over its noise is 0.02-1.1 on user6's marks and 0.1-1.7 on synth's), so the
-term lands on synth's own session marks as well: x_A's u 5.1" -> 18.7" and the fusion's
-positive control (``tests/align/test_fusion.py::
+Why it is not applied undeclared (edge18, 26 Nov; ``oracle`` says why no gate can help): it
+covers user6's marks (RMS z 1.61 -> 1.21, max 3.15 -> 2.27), but the images cannot tell the
+two orders apart on such marks (the visible departure's tilt over its noise is 0.02-1.1 on
+user6's marks and 0.1-1.7 on synth's), so the term lands on synth's own session marks as
+well: x_A's u 5.1" -> 18.7" and the fusion's positive control
+(``tests/align/test_fusion.py::
 test_undeclared_camera_roll_is_found_through_redundant_sources``: E before the loop must be
-> 9 u off) fails at 7.96 u -- the conflict that withdrew the first grid-phase term. Capped at
-what the residuals show (``groove_profile``), user6 passes narrowly (1.44 / 2.92) but the
+> 9 u off) fails at 7.96 u -- the conflict that withdrew the first grid-phase term. Capped
+at what the residuals show (``groove_profile``), user6 passes narrowly (1.44 / 2.92) but the
 cap is no bound: noise-free seed 8 is 9.3" off with groove_profile 1.0".
 """
 
