@@ -85,5 +85,10 @@ def left_out_term(cov_free: np.ndarray, k3: float, u_k3: float) -> tuple[np.ndar
     per unit of k3 along its profile, from the free fit's covariance: cov[:, k3] / var k3,
     1 at k3) and ``s`` (k3's range: the estimate and its u in quadrature). The term added to
     the fixed model's covariance is s² w wᵀ."""
-    w = cov_free[:, K3] / cov_free[K3, K3]
+    var = float(cov_free[K3, K3])
+    if var > 0:
+        w = cov_free[:, K3] / var
+    else:  # (no covariance of k3: the others' profile unknown, k3 alone)
+        w = np.zeros(len(cov_free))
+        w[K3] = 1.0
     return w, float(np.hypot(k3, u_k3))
