@@ -30,6 +30,7 @@ from axisbase.errors import InputError
 from axisbase.provenance import check_format
 from imaging.camera_cov import INTRINSICS, dominating, formal_cov, jackknife_cov
 from imaging.camera_k3 import choose_k3, left_out_term
+from imaging.camera_views import MIN_VIEWS, not_one_camera_warning, one_camera_check, untested
 from imaging.errors import ImageInputError
 
 DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -124,6 +125,11 @@ class CameraModel:
         left-out k3's term (``k3_left_out``: ``carried_direction`` w per
         :data:`INTRINSICS`, ``carried_k3`` s) is already in ``cov`` (+ s² w wᵀ). None in
         files written before format version 5 (k3 then as the file has it).
+    views_one_camera : dict or None
+        Whether the views are of one camera (:func:`imaging.camera_views.one_camera_check`:
+        the Wald W [1] of the best split's two calibrations, its p, the groups' names and
+        their fx, cx, cy [px]); ``one_camera`` False makes the model not ok
+        (:attr:`problems`). None in files written before format version 6.
     """
 
     camera_matrix: np.ndarray
@@ -139,6 +145,14 @@ class CameraModel:
     cov_formal: np.ndarray | None = None
     cov_jackknife: np.ndarray | None = None
     lens_choice: dict | None = None
+    views_one_camera: dict | None = None
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the model cannot be trusted: its views are not of one camera
+        (:func:`imaging.camera_views.not_one_camera_warning`); empty when it can."""
+        w = not_one_camera_warning(self.views_one_camera or {})
+        return [w] if w else []
 
     @property
     def focal_px(self) -> float:
@@ -157,6 +171,8 @@ class CameraModel:
                 ("cov", self.cov), ("cov_formal", self.cov_formal),
                 ("cov_jackknife", self.cov_jackknife))},
             "lens_choice": None if self.lens_choice is None else dict(self.lens_choice),
+            "views_one_camera": (None if self.views_one_camera is None
+                                 else dict(self.views_one_camera)),
         }
 
     @classmethod
@@ -205,10 +221,19 @@ class CameraModel:
                 out["carried_direction"] = w.tolist()
             return out
 
+        def views() -> dict | None:
+            v = d.get("views_one_camera")
+            if v is not None and not isinstance(v, Mapping):
+                raise ValueError("'views_one_camera' is not a table")
+            if v is not None and not isinstance(v.get("one_camera"), (bool, type(None))):
+                raise ValueError("'views_one_camera.one_camera' is not true, false or null")
+            return None if v is None else dict(v)
+
         K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
                    table("per_view_rms_px"), table("u_formal"), table("u_jackknife"),
-                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice())
+                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice(),
+                   views())
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
@@ -226,7 +251,7 @@ class CameraModel:
                                   "camera_matrix, dist_coeffs, image_size as written by "
                                   "'align camera')") from None
         try:  # version 1: files written before format versions existed
-            check_format(d, "axis-align/camera", (1, 2, 3, 4, 5), str(p))
+            check_format(d, "axis-align/camera", (1, 2, 3, 4, 5, 6), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
         return model
@@ -313,6 +338,47 @@ def jackknife_estimates(objpts: list, imgpts: list, size: tuple[int, int],
         objpts[:i] + objpts[i + 1:], imgpts[:i] + imgpts[i + 1:], size,
         None if K0 is None else K0.copy(), None, flags=flags)[1:3]) for i in range(n)])
     return np.column_stack([est, est[:, 1] / est[:, 0]])  # and the aspect fy / fx
+
+
+def _pseudo_values(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarray | None,
+                   flags: int, est: np.ndarray | None = None) -> np.ndarray:
+    """Each view's jackknife pseudo-value n θ̂ − (n − 1) θ̂₋ᵢ of :data:`INTRINSICS` (n, 9)."""
+    n = len(objpts)
+    full = _intrinsics(*cv2.calibrateCamera(objpts, imgpts, size, None if K0 is None
+                                            else K0.copy(), None, flags=flags)[1:3])
+    if est is None:
+        est = jackknife_estimates(objpts, imgpts, size, K0, flags)
+    return n * full - (n - 1) * est[:, :len(INTRINSICS)]
+
+
+def views_one_camera(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                     K0: np.ndarray | None, flags: int, est: np.ndarray) -> dict:
+    """Whether the views are of one camera (:func:`imaging.camera_views.one_camera_check`),
+    from the pooled fit's leave-one-view-out ``est`` (:func:`jackknife_estimates`)."""
+    def sub(group: np.ndarray, keep: bool) -> tuple[list, list]:
+        idx = np.flatnonzero(group == keep)
+        return [objpts[i] for i in idx], [imgpts[i] for i in idx]
+
+    def view_rms(group: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(objpts), 2))
+        for j, keep in enumerate((False, True)):
+            o, q = sub(group, keep)
+            K, D = cv2.calibrateCamera(o, q, size, None if K0 is None else K0.copy(), None,
+                                       flags=flags)[1:3]
+            for i, (oi, qi) in enumerate(zip(objpts, imgpts, strict=True)):
+                _, r, t = cv2.solvePnP(oi, qi, K, D)
+                proj = cv2.projectPoints(oi, r, t, K, D)[0]
+                out[i, j] = np.sqrt(np.mean(np.sum((proj - qi).reshape(-1, 2)**2, axis=1)))
+        return out
+
+    def group_fit(group: np.ndarray) -> list:
+        fits = [_calibrate(o, q, size, [str(i) for i in range(len(o))],
+                           bool(flags & cv2.CALIB_FIX_K3), K0 is not None, check=False)
+                for o, q in (sub(group, False), sub(group, True))]
+        return [(_intrinsics(m.camera_matrix, m.dist_coeffs), m.cov) for m in fits]
+
+    return one_camera_check(_pseudo_values(objpts, imgpts, size, K0, flags, est), names,
+                            view_rms, group_fit)
 
 
 def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarray | None,
@@ -411,8 +477,9 @@ def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: 
 
 
 def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
-               fix_k3: bool, fix_aspect: bool) -> CameraModel:
-    """One OpenCV calibration with its u's and joint covariances (k3 free or at 0)."""
+               fix_k3: bool, fix_aspect: bool, check: bool = True) -> CameraModel:
+    """One OpenCV calibration with its u's and joint covariances (k3 free or at 0), and
+    (``check``) whether its views are of one camera (:func:`views_one_camera`)."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None
@@ -424,6 +491,7 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
     u = dict(u_formal)
     cov_f = formal_cov(objpts, imgpts, K, D, rvecs, tvecs, fix_k3, fix_aspect)
     cov_j = None
+    views = untested(len(objpts))
     if len(objpts) >= JACKKNIFE_MIN_VIEWS:
         est = jackknife_estimates(objpts, imgpts, size, K0, flags)
         cov_j = jackknife_cov(est[:, :-1])
@@ -437,7 +505,9 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
         a = K[1, 1] / K[0, 0]
         floor = a * abs(u["fy"] / K[1, 1] - u["fx"] / K[0, 0])
         u["aspect"] = 0.0 if fix_aspect else float(max(u_jack["aspect"], floor))
+        if check and len(objpts) >= MIN_VIEWS:
+            views = views_one_camera(objpts, imgpts, size, names, K0, flags, est)
     return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
                        {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)},
                        u_formal, u_jack, cov_f if cov_j is None else dominating(cov_f, cov_j),
-                       cov_f, cov_j)
+                       cov_f, cov_j, views_one_camera=views if check else None)

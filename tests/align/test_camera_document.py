@@ -22,7 +22,7 @@ def test_the_document_names_the_model_chosen_and_the_field_u():
     cam = _calibrate(0, D_T)
     doc = json.loads(json.dumps(camera_document(cam, {}, ["b0.png"])))
     validate(doc, "camera")
-    assert doc["format_version"] == 5
+    assert doc["format_version"] == 6
     assert doc["lens_choice"]["k3"] == "left out" and "do not determine k3" in \
         doc["lens_choice"]["why"]
     f = doc["field_u"]
