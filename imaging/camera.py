@@ -375,7 +375,13 @@ def views_one_camera(objpts: list, imgpts: list, size: tuple[int, int], names: l
         fits = [_calibrate(o, q, size, [str(i) for i in range(len(o))],
                            bool(flags & cv2.CALIB_FIX_K3), K0 is not None, check=False)
                 for o, q in (sub(group, False), sub(group, True))]
-        return [(_intrinsics(m.camera_matrix, m.dist_coeffs), m.cov) for m in fits]
+        out = []
+        for m, (o, q) in zip(fits, (sub(group, False), sub(group, True)), strict=True):
+            jack = m.cov_jackknife  # a group of 3-4 views: its own jackknife all the same
+            if jack is None:
+                jack = jackknife_cov(jackknife_estimates(o, q, size, K0, flags)[:, :-1])
+            out.append((_intrinsics(m.camera_matrix, m.dist_coeffs), m.cov_formal, jack))
+        return out
 
     return one_camera_check(_pseudo_values(objpts, imgpts, size, K0, flags, est), names,
                             view_rms, group_fit)

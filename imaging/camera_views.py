@@ -10,10 +10,13 @@ The test (:func:`one_camera_check`):
 1. **Propose a split.** The delete-one-view jackknife gives each view's pull, its
    pseudo-value n θ̂ − (n − 1) θ̂₋ᵢ of the intrinsics; the split of the views into two
    groups (each of at least :data:`MIN_GROUP`) that explains the largest share of the
-   pseudo-values' scatter in (fx, cx, cy) is the proposal (:func:`best_split`).
-2. **Refine it by the views' own fit.** Each group is calibrated alone and each view goes
-   to the group whose model reprojects it better (its pose re-fitted), until stable: the
-   pooled fit of a mixture scatters the pseudo-values twice as wide as either camera alone.
+   pseudo-values' scatter in (fx, cx, cy) is a proposal (:func:`best_splits`), with the
+   next best few and each coordinate's median split.
+2. **Refine each by the views' own fit.** Each group is calibrated alone and each view
+   goes to the group whose model reprojects it better (its pose re-fitted), until stable
+   (a mixture's pooled fit scatters the pseudo-values twice as wide as either camera
+   alone, so a proposal is often a view or two off); the split whose groups differ most
+   (W below) is kept.
 3. **Compare the two groups' calibrations** on (fx, cx, cy): W = dᵀ (C₀ + C₁)⁻¹ d, each C
    the group's own covariance — the larger of formal and jackknife, so the views' real
    disagreement (corner errors correlated within a view: the jackknife 2× the formal u on
@@ -34,7 +37,7 @@ from functools import lru_cache
 import numpy as np
 from scipy import special  # (not scipy.stats: slow to import)
 
-from imaging.camera_cov import INTRINSICS
+from imaging.camera_cov import INTRINSICS, dominating
 
 COLUMNS = tuple(INTRINSICS.index(k) for k in ("fx", "cx", "cy"))
 """The intrinsics tested (fx, cx, cy): where two cameras of one rig differ (focal length,
@@ -42,6 +45,9 @@ principal point); fy moves with fx (one board scale) and would add only its nois
 
 MIN_GROUP = 3
 """Fewest views in a group: a single odd view (a board badly found) is no second camera."""
+
+JACK_FULL = 5
+"""Fewest views whose jackknife covariance of (fx, cx, cy) is taken as it is (rank 4 > 3)."""
 
 MIN_VIEWS = 2 * MIN_GROUP
 """Fewest views the test runs on."""
@@ -72,14 +78,15 @@ def _splits(n: int) -> np.ndarray:
     return np.array([(0, *c) for c in rows], dtype=float)
 
 
-def _best_exhaustive(z: np.ndarray) -> tuple[float, np.ndarray]:
-    """The largest between-group share b over every split of whitened ``z`` (n, q)."""
+def _best_exhaustive(z: np.ndarray, top: int = 1) -> tuple[float, list[np.ndarray]]:
+    """The largest between-group share b over every split of whitened ``z`` (n, q), and the
+    ``top`` splits by b."""
     P = _splits(len(z))
     na = P.sum(axis=1)
     s = P @ z
     b = len(z) * np.einsum("ij,ij->i", s, s) / (na * (len(z) - na))
-    i = int(np.argmax(b))
-    return float(b[i]), P[i].astype(bool)
+    order = np.argsort(-b)[:top]
+    return float(b[order[0]]), [P[i].astype(bool) for i in order]
 
 
 def _best_local(z: np.ndarray) -> tuple[float, np.ndarray]:
@@ -103,15 +110,29 @@ def _best_local(z: np.ndarray) -> tuple[float, np.ndarray]:
             if np.allclose(new / np.linalg.norm(new), v):
                 break
             v = new / np.linalg.norm(new)
-    return best, group if not group[0] else ~group
+    return best, [group if not group[0] else ~group]
 
 
-def best_split(x: np.ndarray) -> tuple[float, np.ndarray]:
-    """The split of the rows of ``x`` (n, q) into two groups that explains the largest
-    share ``b`` of their scatter (between-group / total, affine invariant), and the group
-    (a boolean per row; row 0 outside it)."""
+def best_splits(x: np.ndarray, top: int = 3) -> tuple[float, list[np.ndarray]]:
+    """The largest share ``b`` of the rows of ``x`` (n, q)'s scatter a split into two
+    groups explains (between-group / total, affine invariant), and the best splits (up to
+    ``top``; a boolean per row, row 0 outside the group)."""
     z = _whitened(np.asarray(x, float))
-    return (_best_exhaustive if len(z) <= EXHAUSTIVE_MAX else _best_local)(z)
+    if len(z) <= EXHAUSTIVE_MAX:
+        return _best_exhaustive(z, top)
+    return _best_local(z)
+
+
+def _proposals(x: np.ndarray) -> list[np.ndarray]:
+    """Splits to start from: the best few by the pooled pseudo-values' b, and each
+    coordinate's median split (a mixture's pooled pseudo-values are wide: the first guess
+    is often a view or two off)."""
+    out = best_splits(x)[1]
+    for col in x.T:
+        g = col > np.median(col)
+        if MIN_GROUP <= g.sum() <= len(g) - MIN_GROUP:
+            out.append(g if not g[0] else ~g)
+    return out
 
 
 def _classify(group: np.ndarray, view_rms: Callable[[np.ndarray], np.ndarray],
@@ -125,6 +146,23 @@ def _classify(group: np.ndarray, view_rms: Callable[[np.ndarray], np.ndarray],
             break
         group = new
     return group
+
+
+def group_cov(formal: np.ndarray, jack: np.ndarray, views: int) -> np.ndarray:
+    """A group's covariance of (fx, cx, cy) (:data:`COLUMNS`, [px²]): at least its formal
+    and its jackknife covariance in every direction (:func:`imaging.camera_cov.dominating`).
+    Below :data:`JACK_FULL` views the jackknife is rank-deficient or barely more (rank ≤
+    views − 1) and a direction it happens not to see would keep the formal u alone, which
+    takes the real views' correlated corner errors (the jackknife 2× the formal u) for a
+    second camera (the 7 real left views split 3 + 4: W 21, p 0.003): the formal
+    covariance is then scaled by the largest excess the jackknife shows in any direction
+    (κ ≥ 1) first."""
+    sel = np.ix_(COLUMNS, COLUMNS)
+    f, j = formal[sel], jack[sel]
+    if views < JACK_FULL:
+        Li = np.linalg.inv(np.linalg.cholesky(f))
+        f = f * max(1.0, float(np.linalg.eigvalsh(Li @ j @ Li.T).max()))
+    return dominating(f, j)
 
 
 def untested(n: int) -> dict:
@@ -147,11 +185,11 @@ def one_camera_check(pseudo: np.ndarray, names: Sequence[str],
     """Whether the views look like one camera's (the record ``align camera`` saves as
     ``views_one_camera``).
 
-    The split is proposed by the pooled fit's pseudo-values (:func:`best_split`) and refined
-    by each view's reprojection under each group's own calibration; the two groups'
-    calibrations are then compared on (fx, cx, cy) by the Wald statistic
-    W = dᵀ (C₀ + C₁)⁻¹ d, each C the group's own covariance (the larger of formal and
-    jackknife, :func:`imaging.camera_cov.dominating`: the views' real scatter, not only the
+    Splits are proposed by the pooled fit's pseudo-values (:func:`best_splits`) and refined
+    by each view's reprojection under each group's own calibration; the split whose two
+    groups' calibrations differ most is kept. They are compared on (fx, cx, cy) by the Wald
+    statistic W = dᵀ (C₀ + C₁)⁻¹ d, each C the group's own covariance (the larger of formal
+    and jackknife, :func:`imaging.camera_cov.dominating`: the views' real scatter, not only the
     corners' white noise). W of one split is χ²(3); the split was searched for, so its p is
     multiplied by the number of splits (Bonferroni: conservative, never liberal).
 
@@ -166,8 +204,9 @@ def one_camera_check(pseudo: np.ndarray, names: Sequence[str],
         Boolean group (n,) -> (n, 2) each view's RMS reprojection [px] under the
         calibration of the views outside the group and of those in it (pose re-fitted).
     group_fit : callable
-        Boolean group (n,) -> [(θ, C) outside, (θ, C) inside]: each group's intrinsics (9,)
-        and covariance (9, 9) in :data:`INTRINSICS`' order.
+        Boolean group (n,) -> [(θ, F, J) outside, (θ, F, J) inside]: each group's
+        intrinsics (9,), formal and jackknife covariance (9, 9) in :data:`INTRINSICS`'
+        order (:func:`group_cov` combines them).
     alpha : float
         Significance.
 
@@ -183,19 +222,25 @@ def one_camera_check(pseudo: np.ndarray, names: Sequence[str],
     params = [INTRINSICS[i] for i in COLUMNS]
     if n < MIN_VIEWS:
         return untested(n)
-    _, g = best_split(np.asarray(pseudo, float)[:, COLUMNS])
-    g = _classify(g, view_rms)
-    (t0, c0), (t1, c1) = group_fit(g)
-    sel = np.ix_(COLUMNS, COLUMNS)
-    d = np.asarray(t1)[list(COLUMNS)] - np.asarray(t0)[list(COLUMNS)]
-    w = float(d @ np.linalg.lstsq(c0[sel] + c1[sel], d, rcond=None)[0])
+    tried: dict[tuple, tuple] = {}
+    for start in _proposals(np.asarray(pseudo, float)[:, COLUMNS]):
+        g = _classify(start, view_rms)
+        g = g if not g[0] else ~g
+        if tuple(g) in tried:
+            continue
+        (t0, f0, j0), (t1, f1, j1) = group_fit(g)
+        c0, c1 = group_cov(f0, j0, int((~g).sum())), group_cov(f1, j1, int(g.sum()))
+        d = np.asarray(t1)[list(COLUMNS)] - np.asarray(t0)[list(COLUMNS)]
+        w = float(d @ np.linalg.lstsq(c0 + c1, d, rcond=None)[0])
+        tried[tuple(g)] = (w, g, t0, c0, t1, c1)
+    w, g, t0, c0, t1, c1 = max(tried.values(), key=lambda r: r[0])
     m = split_count(n)
     p = float(min(1.0, m * special.chdtrc(len(COLUMNS), w)))
     groups = [[str(names[i]) for i in np.flatnonzero(k)] for k in (~g, g)]
     return {"tested": True, "one_camera": bool(p >= alpha), "W": w, "p": p, "splits": m,
             "alpha": alpha, "parameters": params, "groups": groups,
             "group_values": [np.asarray(t)[list(COLUMNS)].tolist() for t in (t0, t1)],
-            "group_u": [np.sqrt(np.diag(c[sel])).tolist() for c in (c0, c1)]}
+            "group_u": [np.sqrt(np.diag(c)).tolist() for c in (c0, c1)]}
 
 
 def not_one_camera_warning(check: dict) -> str | None:
