@@ -127,12 +127,13 @@ def _proposals(x: np.ndarray) -> list[np.ndarray]:
     """Splits to start from: the best few by the pooled pseudo-values' b, and each
     coordinate's median split (a mixture's pooled pseudo-values are wide: the first guess
     is often a view or two off)."""
-    out = best_splits(x)[1]
+    out = {tuple(g): g for g in best_splits(x, top=1)[1]}
     for col in x.T:
         g = col > np.median(col)
         if MIN_GROUP <= g.sum() <= len(g) - MIN_GROUP:
-            out.append(g if not g[0] else ~g)
-    return out
+            g = g if not g[0] else ~g
+            out.setdefault(tuple(g), g)
+    return list(out.values())
 
 
 def _classify(group: np.ndarray, view_rms: Callable[[np.ndarray], np.ndarray],
@@ -224,7 +225,7 @@ def one_camera_check(pseudo: np.ndarray, names: Sequence[str],
         return untested(n)
     tried: dict[tuple, tuple] = {}
     for start in _proposals(np.asarray(pseudo, float)[:, COLUMNS]):
-        g = _classify(start, view_rms)
+        g = _classify(start, view_rms, rounds=3)
         g = g if not g[0] else ~g
         if tuple(g) in tried:
             continue

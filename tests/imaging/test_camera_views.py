@@ -1,0 +1,112 @@
+"""Whether a chessboard calibration's views are of ONE camera (imaging/camera_views.py, issue
+18): the real stereo rig's left and right views pass alone and fire together, naming the
+groups; views of two lenses rendered through known optics fire, of one lens they do not."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from imaging.camera import calibrate_corners, jackknife_estimates, views_one_camera
+from imaging.camera_views import best_splits, group_cov, split_count
+from tests.conftest import real_folder
+
+K_REAL = np.array([[533.50, 0.0, 340.28], [0.0, 533.75, 234.72], [0.0, 0.0, 1.0]])
+D_REAL = np.array([-0.29865, 0.14847, 0.00149, -0.00014, 0.0])
+"""The real chessboard camera (left01-07, OpenCV's calibration), k3 at 0."""
+OBJ = np.zeros((54, 3), np.float32)
+OBJ[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2)
+
+
+def _projected_views(rng: np.random.Generator, K: np.ndarray, n: int, noise_px: float
+                     ) -> list[np.ndarray]:
+    """n views of the 9x6 board through (K, D_REAL) from random poses over the 640x480
+    frame, corners with white noise [px] (no image: the twin's fast route)."""
+    out = []
+    mid = np.array([4.0, 2.5, 0.0])
+    while len(out) < n:
+        rvec = rng.uniform(-1, 1, 3) * np.radians([35, 35, 20])
+        z = rng.uniform(14, 22)
+        R, _ = cv2.Rodrigues(rvec)
+        t = np.array([rng.uniform(-0.45, 0.45) * z, rng.uniform(-0.35, 0.35) * z, z]) - R @ mid
+        p = cv2.projectPoints(OBJ, rvec, t, K, D_REAL)[0].reshape(-1, 2)
+        if p.min() < 25 or p[:, 0].max() > 615 or p[:, 1].max() > 455:
+            continue
+        out.append((p + rng.normal(0, noise_px, p.shape)).astype(np.float32).reshape(-1, 1, 2))
+    return out
+
+
+def _check(views: list[np.ndarray], names: list[str]) -> dict:
+    flags = cv2.CALIB_FIX_K3
+    objs = [OBJ] * len(views)
+    est = jackknife_estimates(objs, views, (640, 480), None, flags)
+    return views_one_camera(objs, views, (640, 480), names, None, flags, est)
+
+
+def test_two_lenses_mixed_fire_and_are_named_one_lens_does_not():
+    """Default twin of the rendered sweep: 4 + 4 views of two lenses whose principal points
+    are 12 px apart (projected corners, 0.1 px white noise) fire, the groups exactly the
+    two lenses' views; 8 views of one lens do not. Fails if the check is gone, cannot
+    split, or takes one camera's scatter for two."""
+    rng = np.random.default_rng(18)
+    K2 = K_REAL.copy()
+    K2[1, 2] += 12.0
+    mixed = _projected_views(rng, K_REAL, 4, 0.1) + _projected_views(rng, K2, 4, 0.1)
+    names = [f"a{i}" for i in range(4)] + [f"b{i}" for i in range(4)]
+    c = _check(mixed, names)
+    assert c["tested"] and not c["one_camera"], c
+    assert sorted(map(sorted, c["groups"])) == [names[:4], names[4:]], c["groups"]
+    assert c["p"] < 1e-3, c
+    one = _check(_projected_views(rng, K_REAL, 8, 0.1), [f"v{i}" for i in range(8)])
+    assert one["tested"] and one["one_camera"], one
+
+
+def test_best_split_finds_a_planted_split_and_group_cov_dominates_both():
+    """The proposal: 12 points, 6 shifted by 6 sigma along one axis of three, are split
+    into exactly those; the groups' covariance is at least the formal and the jackknife
+    covariance in every direction, and a few views' scale the formal one up."""
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((12, 3))
+    x[6:, 1] += 6.0
+    _, (g, *_) = best_splits(x)
+    assert sorted([list(np.flatnonzero(g)), list(np.flatnonzero(~g))]) == [
+        list(range(6)), list(range(6, 12))]
+    A = rng.standard_normal((9, 9))
+    formal = A @ A.T + np.eye(9)
+    B = rng.standard_normal((9, 2))
+    jack = 4 * B @ B.T  # rank 2: a few views
+    sel = np.ix_((0, 2, 3), (0, 2, 3))
+    for views in (3, 7):
+        c = group_cov(formal, jack, views)
+        for other in (formal[sel], jack[sel]):
+            assert np.linalg.eigvalsh(c - other).min() > -1e-9 * np.trace(c)
+    assert np.trace(group_cov(formal, jack, 3)) > np.trace(group_cov(formal, jack, 7))
+    assert split_count(7) == 35 and split_count(14) == 8086
+
+
+def test_too_few_views_are_not_tested():
+    views = _projected_views(np.random.default_rng(1), K_REAL, 5, 0.1)
+    m = calibrate_corners([OBJ] * 5, views, (640, 480), [f"v{i}" for i in range(5)],
+                          k3="fixed")
+    assert m.views_one_camera["tested"] is False and not m.problems
+    assert "needs 6" in m.views_one_camera["why"]
+
+
+@pytest.mark.slow
+def test_real_stereo_views_pass_alone_and_fire_together():
+    """The real rig (../shared/data/real/opencv-chessboard): left0*.jpg alone and right0*.jpg
+    alone pass; all 14 fire, the groups exactly left and right (printed: W, p)."""
+    from imaging import calibrate_chessboard, read_image
+
+    folder = real_folder("opencv-chessboard")
+    for pat, one in (("left0*.jpg", True), ("right0*.jpg", True), ("*.jpg", False)):
+        files = sorted(folder.glob(pat))
+        m, _ = calibrate_chessboard({f.name: read_image(f) for f in files}, (9, 6))
+        c = m.views_one_camera
+        print(f"{pat}: W {c['W']:.1f}, p {c['p']:.2g}, groups {c['groups']}")
+        assert c["one_camera"] is one, c
+        assert bool(m.problems) is not one
+    assert sorted(map(sorted, c["groups"])) == [
+        [f"left0{i}.jpg" for i in range(1, 8)], [f"right0{i}.jpg" for i in range(1, 8)]]
+    assert "NOT OK: the views are not of one camera" in m.problems[0]
