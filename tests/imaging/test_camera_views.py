@@ -110,3 +110,89 @@ def test_real_stereo_views_pass_alone_and_fire_together():
     assert sorted(map(sorted, c["groups"])) == [
         [f"left0{i}.jpg" for i in range(1, 8)], [f"right0{i}.jpg" for i in range(1, 8)]]
     assert "NOT OK: the views are not of one camera" in m.problems[0]
+
+
+def _rendered(seed: int, K2: np.ndarray | None, views: int = 14) -> tuple[list, list]:
+    """``views`` chessboard photographs rendered through the real-like lens (k3 0) at the
+    real photos' noise (:data:`tests.align.test_camera_k3_rendered.NOISE_DN`: 0.16-0.2 px
+    RMS), the second half through ``K2`` (None: one lens); their corners found as
+    ``align camera`` finds them, and the names (a* first lens, b* second)."""
+    from imaging.camera import find_chessboard
+    from tests.align.chessboard_render import board_photos
+    from tests.align.test_camera_k3_rendered import NOISE_DN
+
+    rng = np.random.default_rng(seed)
+    lenses = [(K_REAL, views)] if K2 is None else [(K_REAL, views // 2), (K2, views // 2)]
+    corners, names = [], []
+    for j, (K, n) in enumerate(lenses):
+        for img in board_photos(rng, n, _rays(K.tobytes()), K, D_REAL,
+                                noise_dn=NOISE_DN).values():
+            c = find_chessboard(img, (9, 6))
+            if c is not None:
+                corners.append(c.astype(np.float32).reshape(-1, 1, 2))
+                names.append(f"{'ab'[j]}{len(names)}")
+    return corners, names
+
+
+_RAYS: dict[bytes, np.ndarray] = {}
+
+
+def _rays(key: bytes) -> np.ndarray:
+    from tests.align.chessboard_render import ray_grid
+
+    if key not in _RAYS:
+        _RAYS[key] = ray_grid(np.frombuffer(key).reshape(3, 3), D_REAL, (640, 480))
+    return _RAYS[key]
+
+
+def _sweep(seeds: range, K2: np.ndarray | None) -> tuple[list[float], int, int]:
+    """W per seed, how many fired, and how many of those named exactly the two lenses."""
+    ws, fired, named = [], 0, 0
+    for seed in seeds:
+        corners, names = _rendered(seed, K2)
+        m = calibrate_corners([OBJ] * len(corners), corners, (640, 480), names)
+        c = m.views_one_camera
+        ws.append(c["W"])
+        if not c["one_camera"]:
+            fired += 1
+            truth = [[n for n in names if n[0] == "a"], [n for n in names if n[0] == "b"]]
+            named += sorted(map(sorted, c["groups"])) == truth
+    return ws, fired, named
+
+
+@pytest.mark.slow
+def test_one_lens_rendered_false_alarms_at_most_one_percent():
+    """100 seeds x 14 chessboard photographs of one real-like lens, rendered through it at
+    the real photos' noise, calibrated as `align camera` does: at most 1 fires."""
+    ws, fired, _ = _sweep(range(100), None)
+    print(f"one lens: W median {np.median(ws):.1f}, 99th pct {np.percentile(ws, 99):.1f}, "
+          f"max {max(ws):.1f}; fired {fired}/100")
+    assert fired <= 1
+
+
+@pytest.mark.slow
+def test_two_lenses_principal_points_10px_apart_fire_90_percent():
+    """7 + 7 photographs of two real-like lenses whose principal points are 10 px apart
+    (7.07 px in x and y), 20 seeds: at least 18 fire, each naming exactly the two lenses'
+    photographs."""
+    K2 = K_REAL.copy()
+    K2[:2, 2] += 10 / np.sqrt(2)
+    ws, fired, named = _sweep(range(20), K2)
+    print(f"principal points 10 px apart: W median {np.median(ws):.1f}, min {min(ws):.1f}; "
+          f"fired {fired}/20, named {named}")
+    assert fired >= 18 and named == fired
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="focal lengths 1 % apart (5.3 px) are within what 7 "
+                   "views' own scatter of fx allows (W 8-13 over the first seeds): the "
+                   "test has no power there (issue 18, open)")
+def test_two_lenses_focal_lengths_1_percent_apart_fire_90_percent():
+    """7 + 7 photographs of two real-like lenses whose focal lengths are 1 % apart, 10
+    seeds: at least 9 should fire (they do not: the limit of the check, kept visible)."""
+    K2 = K_REAL.copy()
+    K2[0, 0] *= 1.01
+    K2[1, 1] *= 1.01
+    ws, fired, _ = _sweep(range(10), K2)
+    print(f"focal lengths 1 % apart: W median {np.median(ws):.1f}; fired {fired}/10")
+    assert fired >= 9
