@@ -241,8 +241,10 @@ def test_chessboard_lens_sweep_with_and_without_camera(tmp_path):
     folder = real_folder("opencv-chessboard")
     k, d, rms, n = calibrate_chessboard(folder, "left0*.jpg")
     cam = tmp_path / "cam.json"
-    r = cli_sub("camera", *sorted(glob.glob(str(folder / "left0*.jpg"))), "--json", str(cam),
-                "-q")
+    # --free-k3: my calibration frees k3 (OpenCV's default); on these 7 views the tool's
+    # own choice leaves it out, and the two camera matrices would differ by more than 0.05
+    r = cli_sub("camera", *sorted(glob.glob(str(folder / "left0*.jpg"))), "--free-k3",
+                "--json", str(cam), "-q")
     assert r.returncode == 0, r.stderr
     tool = json.loads(cam.read_text())
     # the tool's calibration and mine agree (same corners, same OpenCV solver)
