@@ -49,6 +49,8 @@ class Case:
     flagged: bool           # any note / bent / limited
     size: tuple[int, int] = (640, 480)
     found: bool = True      # False: the mark was not found (z etc. nan)
+    k1_estimator: str = ""  # how k1 entered the angle (LensSolution.estimator)
+    shares: tuple[tuple[str, float], ...] = ()  # each u term's share of u^2
 
 
 def draw_lens(k1: float, size: tuple[int, int], rng: np.random.Generator) -> CameraGeometry:
@@ -140,10 +142,12 @@ def run_case(lens_name: str, camera: CameraGeometry, position: str, size: tuple[
             continue  # not this mark (a spurious detection is another test's business)
         seen.add(i)
         k1 = r.lens["parameters"]["k1"]
+        shares = tuple((k, float(v / r.angle_u_rad) ** 2) for k, v in r.u_terms.items())
         out.append(Case(lens_name, where[i], float(err / r.angle_u_rad),
                         float(np.rad2deg(err) * 3600), float(np.rad2deg(r.angle_u_rad) * 3600),
                         float(k1t), float(k1["value"]) if k1["applied"] else 0.0,
-                        r.lens_limited, bool(r.notes), size))
+                        r.lens_limited, bool(r.notes), size, True,
+                        k1.get("estimator", ""), shares))
     # A mark not found is counted (the table says how many), not silently dropped.
     out += [Case(lens_name, where[i], float("nan"), float("nan"), float("nan"), float(k1t), 0.0,
                  False, False, size, found=False) for i in range(len(marks)) if i not in seen]
@@ -179,4 +183,23 @@ def grid_table(cases: list[Case]) -> list[str]:
                f"missed {len(missed)} {[(c.lens, c.position, c.size) for c in missed]}, "
                f"wrong-sign k1 applied {wrong_sign(cases)}, beyond 3 u {over}, "
                f"lens-limited {sum(c.limited for c in cases)}")
+    return out + share_table(cases)
+
+
+def share_table(cases: list[Case]) -> list[str]:
+    """Per lens class: how k1 entered the angles (estimator counts) and the three u terms
+    with the largest mean share of u^2 (what sets each class's RMS z: a Type B range
+    holding a fixed lens gives z below 1 by its share)."""
+    out = []
+    for lens in sorted({c.lens for c in cases if c.found}):
+        cs = [c for c in cases if c.lens == lens and c.found]
+        est = {e: sum(c.k1_estimator == e for c in cs) for e in sorted({c.k1_estimator
+                                                                       for c in cs})}
+        tot: dict[str, float] = {}
+        for c in cs:
+            for k, v in c.shares:
+                tot[k] = tot.get(k, 0.0) + v / len(cs)
+        top = sorted(tot.items(), key=lambda kv: -kv[1])[:3]
+        out.append(f"{lens:>12}: k1 {', '.join(f'{k} {n}' for k, n in est.items())}; "
+                   f"u^2 shares {', '.join(f'{k} {v:.0%}' for k, v in top)}")
     return out
