@@ -41,7 +41,7 @@ mark's design are :mod:`align.lens_design`'s; the terms above are :mod:`align.le
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -114,28 +114,30 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     lines' bows (:func:`_plausible`) but one fits all the others, the line left out is a
     bent mark: the lens comes from the others (its own loop then names the bend), rather
     than one bent mark dragging the camera's lens beyond any lens and every angle with it.
+    There a parameter whose sign the other lines leave open stays carried in u (no free fit:
+    the bent line's own angle is read by its loop).
     """
-    sol, designs = _solve(lines, scale, ranges, alpha, iters)
+    sol, designs, free_fit = _solve(lines, scale, ranges, alpha, iters)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
-        return sol, designs
+        return free_fit()
     best: tuple[float, int, LensSolution] | None = None
     for k in range(len(lines)):
         rest = [ln for i, ln in enumerate(lines) if i != k]
         try:
-            sk, dk = _solve(rest, scale, ranges, alpha, iters)
+            sk, dk, _ = _solve(rest, scale, ranges, alpha, iters)
         except LensFolds:
             continue
         p = _plausible(sk, dk, alpha)
         if p >= alpha and (best is None or p > best[0]):
             best = (p, k, sk)
     if best is None:
-        return sol, designs
+        return free_fit()
     _, k, sk = best
     cache = _DesignCache(lines, scale)
     try:
         ds = cache.all(sk.lam)
     except LensFolds:
-        return sol, designs
+        return free_fit()
     det = [j for j in range(len(PARAMS)) if sk.determined[j]]
     probes = _pp_probe_s(cache, sk.lam, det, ranges.vector())
     note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
@@ -156,8 +158,13 @@ def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> f
 
 
 def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alpha: float,
-           iters: int) -> tuple[LensSolution, list[_Design]]:
-    """:func:`solve_lens` over all of ``lines``."""
+           iters: int
+           ) -> tuple[LensSolution, list[_Design],
+                      Callable[[], tuple[LensSolution, list[_Design]]]]:
+    """:func:`solve_lens` over all of ``lines``: the solution with every parameter whose sign
+    the lines leave open carried in u, its designs, and the call that returns the solution
+    the angles are read under (:func:`_marginalise`: made only for the solution given, not
+    for the lines' leave-one-out tests)."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
@@ -222,7 +229,6 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     if applied:  # the principal point's range (uniform, Type B) moves the estimate
         cov = cov + np.diag(spread_u[applied] ** 2)
         u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread_u), u_lines)
-    s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
@@ -251,9 +257,16 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
-    designs = [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
-    sol, designs = _marginalise(cache, sol, designs, iters)
-    return replace(sol, notes=sol.notes + _carried_notes(sol, bound)), designs
+
+    def free_fit() -> tuple[LensSolution, list[_Design]]:
+        # (The sensitivities' spread over the principal point's range only for the solution
+        # given: the leave-one-out tests of solve_lens read the bows alone.)
+        s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
+        ds = [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
+        s, ds = _marginalise(cache, sol, ds, iters)
+        return replace(s, notes=s.notes + _carried_notes(s, bound)), ds
+
+    return replace(sol, notes=sol.notes + _carried_notes(sol, bound)), designs, free_fit
 
 
 def _carried_notes(sol: LensSolution, bound: np.ndarray) -> tuple[str, ...]:
