@@ -14,12 +14,16 @@ Fisher information F of the lens from the lines. A parameter is *determined* whe
 marginal u from F is small enough that the largest plausible value (its Type B range) would
 stand out of it at the loop's level (z u < range); only determined parameters are fitted,
 jointly (Gauss-Newton from zero). A fitted value is applied only when its sign is determined
-(|value| > z u) and it lies within the plausible range; the rest are set to zero.
+(|value| > z u) and it lies within the plausible range; the rest are set to zero. A k1
+whose sign stays open may instead be fitted free with the lines (the angle marginalised over
+it, not applied as the lens), when that gives the angles the smaller u
+(:func:`_marginalise`).
 
 The angle of each mark then carries, as named terms:
 
-* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A), with
-  how far the undetermined principal point (uniform over its range) moves them;
+* ``lens_fit``: the fitted parameters' covariance (applied or fitted free) propagated into
+  the angle (Type A), with how far the undetermined principal point (uniform over its range)
+  moves them;
 * ``lens_<p>_small``: a determined parameter not applied (its sign undetermined): its
   estimate and u as an rms (Type A);
 * ``lens_<p>_range``: an undetermined parameter: uniform over its plausible range, range/sqrt 3,
