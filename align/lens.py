@@ -327,6 +327,8 @@ def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design],
     A = [j for j in range(P) if sol.applied[j]]
     A2 = sorted(A + cand)
     det = [j for j in range(P) if sol.determined[j]]
+    if not _conditioned(sol.info, A2, rng):
+        return sol, designs  # the lines see no bow of it at all: nothing to fit it from
     lam = _gauss_newton(cache, A2, rng, max(iters, 8), start=sol.lam)
     lam[cand] = np.clip(lam[cand], -rng[cand], rng[cand])
     if np.any(np.sign(lam[A]) != np.sign(sol.lam[A])):
@@ -339,6 +341,8 @@ def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design],
     if not np.all(np.isfinite(spread_u[A2])):
         return sol, designs
     F = sum(d.G.T @ d.G for d in ds)
+    if not _conditioned(F, A2, rng):
+        return sol, designs
     cov = np.linalg.inv(F[np.ix_(A2, A2)]) + np.diag(spread_u[A2] ** 2)
     u_lines = sol.u_lines.copy()
     u_lines[cand] = np.sqrt(np.diag(cov))[[A2.index(j) for j in cand]]
@@ -498,3 +502,11 @@ def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], de
             if t is not None and special.chdtrc(t[1], t[0]) >= alpha:
                 return False
     return True
+
+
+def _conditioned(F: np.ndarray, idx: list[int], rng: np.ndarray) -> bool:
+    """Whether the information ``F`` over the parameters ``idx`` (range-normalised) can be
+    inverted: a parameter whose bow no line shows (a mark through the centre sees no k1)
+    makes it singular."""
+    Fs = F[np.ix_(idx, idx)] * np.outer(rng[idx], rng[idx])
+    return bool(np.all(np.isfinite(Fs)) and np.linalg.cond(Fs) < 1e12)
