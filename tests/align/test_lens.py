@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -481,7 +482,8 @@ def test_a_sign_open_k1_is_fitted_free_when_that_gives_the_smaller_u(monkeypatch
     The angle is read with k1 fitted free (the estimator with the smaller u: min u over the
     two readings, from the lines' information alone), reported as ``free`` and not as an
     applied lens, and its u is the lens terms' own (``lens_fit``, equal to
-    :func:`align.lens.lens_angle_var`); the mark's error is within 3 u."""
+    :func:`align.lens.lens_angle_var`); the mark's error is within 3 u, and so is the same
+    mark's without a lens."""
     k1_only = LensRanges(k1=0.3, k2=0.0, p=0.0, aspect=0.0, pp_px=0.0)
     rng = np.random.default_rng(4)  # a mark of the held-out sweep whose k1 sign is open
     mark = MarkSpec(rng.uniform(-np.pi / 2, np.pi / 2), rng.uniform(-150, 150), 300.0, 4.0,
@@ -506,3 +508,9 @@ def test_a_sign_open_k1_is_fitted_free_when_that_gives_the_smaller_u(monkeypatch
     carried, (dc,) = lens_mod.solve_lens(lines, R, k1_only)
     assert not any(carried.free) and not carried.applied[0]
     assert lens_mod.lens_angle_var(sol, d) < lens_mod.lens_angle_var(carried, dc)
+    # Without a lens (the same mark and noise, k1 still free over its range): the free fit's
+    # u covers its own scatter (the held-out sweep's k1 = 0 half).
+    s0 = render_marks(replace(spec, camera=CameraGeometry(focal_px=1024.0)), with_crlb=False)
+    ms0 = measure_frame(s0.image.astype(float), None, expect_one=True).items
+    r0 = finish_mark(ms0[0], camera_lens(ms0, None, k1_only), 0, "image", 0)
+    assert abs(angle_error(r0.angle_rad, s0.truth.marks[0].image_angle_rad)) <= 3 * r0.angle_u_rad
