@@ -105,30 +105,52 @@ class LensSolution:
                 "notes": list(self.notes)}
 
 
-def lens_angle_var(sol: LensSolution, design: _Design) -> float:
-    """The variance [rad^2] the lens adds to one mark's angle: the square sum of
-    :func:`align.lens_terms.angle_terms` (the same terms, summed here so that the solver can
-    choose between estimators before any term is named; ``tests/align/test_lens.py`` holds
-    the two equal)."""
+def signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
+    """Each named lens term of one mark's angle as signed components [rad] on the lens's
+    own error directions (the same directions for every mark of one solve): see
+    :func:`align.lens_terms.angle_terms` (their norms) and
+    :func:`align.lens_terms.angle_coupling` (the components)."""
     P = len(PARAMS)
     A = [j for j in range(P) if sol.applied[j]]
     rng = sol.ranges.vector()
+    out: dict[str, np.ndarray] = {}
     s = design.s
-    var = 0.0
     if A:
-        var += float(s[A] @ sol.cov_applied @ s[A])
+        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
+        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
+        w, V = np.linalg.eigh(sol.cov_applied)
+        L = V * np.sqrt(np.clip(w, 0.0, None))
+        out["lens_fit"] = L.T @ s[A]
         if not sol.confirmed:
-            var += float(s[A] @ sol.lam[A]) ** 2 / 3
+            # Lens or bend: the angle with the lens applied and without it both stand, and
+            # the bow may be part lens, part bend: the truth anywhere between the two
+            # readings, uniform (Type B); about the reading given (the lens applied) its
+            # standard uncertainty is the difference / sqrt 3 (the difference itself is the
+            # bound, not a standard uncertainty).
+            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A] / np.sqrt(3)])
     FA = sol.info[np.ix_(A, A)] if A else None
     for j in range(P):
         if sol.applied[j] or rng[j] <= 0:
             continue
+        # What the applied parameters absorb of parameter j's bow changes their estimates,
+        # hence the angle: the angle's net sensitivity to j.
         seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
         if design.s_pp_var is not None and not sol.determined[j]:
-            seff = float(np.sqrt(seff**2 + float(design.s_pp_var[j])))
+            # Over the principal point's range (uniform) the sensitivity varies about its
+            # value at the centre: its mean square, with the sign it has at the centre.
+            seff = float(np.copysign(np.sqrt(seff**2 + float(design.s_pp_var[j])), seff))
         if sol.determined[j]:
+            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
+            # is within the range.
             e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            var += (seff * np.hypot(e, sol.u_lines[j])) ** 2
+            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
         else:
-            var += (seff * rng[j]) ** 2 / 3
-    return var
+            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
+    return out
+
+
+def lens_angle_var(sol: LensSolution, design: _Design) -> float:
+    """The variance [rad^2] the lens adds to one mark's angle: the square sum of its
+    :func:`signed_parts` (the solver chooses between estimators by it before any term is
+    named)."""
+    return float(sum(np.sum(v**2) for v in signed_parts(sol, design).values()))
