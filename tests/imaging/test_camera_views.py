@@ -155,7 +155,7 @@ def _sweep(seeds: range, K2: np.ndarray | None) -> tuple[list[float], int, int]:
         ws.append(c["W"])
         if not c["one_camera"]:
             fired += 1
-            truth = [[n for n in names if n[0] == "a"], [n for n in names if n[0] == "b"]]
+            truth = [sorted(n for n in names if n[0] == ab) for ab in "ab"]
             named += sorted(map(sorted, c["groups"])) == truth
     return ws, fired, named
 
