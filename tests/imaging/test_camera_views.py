@@ -171,10 +171,27 @@ def test_one_lens_rendered_false_alarms_at_most_one_percent():
 
 
 @pytest.mark.slow
+def test_two_lenses_principal_points_20px_apart_fire_and_are_named():
+    """7 + 7 photographs of two real-like lenses whose principal points are 20 px apart (the
+    real rig's are 19.7 px), 10 seeds: every one fires, naming exactly the two lenses'
+    photographs."""
+    K2 = K_REAL.copy()
+    K2[:2, 2] += 20 / np.sqrt(2)
+    ws, fired, named = _sweep(range(10), K2)
+    print(f"principal points 20 px apart: W median {np.median(ws):.1f}, min {min(ws):.1f}; "
+          f"fired {fired}/10, named {named}")
+    assert fired == 10 and named == 10
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="principal points 10 px apart, 7 + 7 views: 8 of 20 "
+                   "fire (W median 28, the Bonferroni bound at 14 views 30.5; one camera's "
+                   "W reaches 27.7 over 100 seeds), 5 of them naming exactly the two "
+                   "lenses: power 40 %, not the 90 % issue 18 asks (open)")
 def test_two_lenses_principal_points_10px_apart_fire_90_percent():
     """7 + 7 photographs of two real-like lenses whose principal points are 10 px apart
-    (7.07 px in x and y), 20 seeds: at least 18 fire, each naming exactly the two lenses'
-    photographs."""
+    (7.07 px in x and y), 20 seeds: at least 18 should fire, each naming exactly the two
+    lenses' photographs (they do not: the check's limit, kept visible)."""
     K2 = K_REAL.copy()
     K2[:2, 2] += 10 / np.sqrt(2)
     ws, fired, named = _sweep(range(20), K2)
@@ -185,8 +202,8 @@ def test_two_lenses_principal_points_10px_apart_fire_90_percent():
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="focal lengths 1 % apart (5.3 px) are within what 7 "
-                   "views' own scatter of fx allows (W 8-13 over the first seeds): the "
-                   "test has no power there (issue 18, open)")
+                   "views' own scatter of fx allows (W 8.5-12.9 over 3 seeds, one "
+                   "camera's median 11): no power there (issue 18, open)")
 def test_two_lenses_focal_lengths_1_percent_apart_fire_90_percent():
     """7 + 7 photographs of two real-like lenses whose focal lengths are 1 % apart, 10
     seeds: at least 9 should fire (they do not: the limit of the check, kept visible)."""
