@@ -10,8 +10,8 @@ The test (:func:`one_camera_check`):
 1. **Propose a split.** The delete-one-view jackknife gives each view's pull, its
    pseudo-value n θ̂ − (n − 1) θ̂₋ᵢ of the intrinsics; the split of the views into two
    groups (each of at least :data:`MIN_GROUP`) that explains the largest share of the
-   pseudo-values' scatter in (fx, cx, cy) is a proposal (:func:`best_splits`), with the
-   next best few and each coordinate's median split.
+   pseudo-values' scatter in (fx, cx, cy) is a proposal (:func:`best_splits`), with
+   each coordinate's median split.
 2. **Refine each by the views' own fit.** Each group is calibrated alone and each view
    goes to the group whose model reprojects it better (its pose re-fitted), until stable
    (a mixture's pooled fit scatters the pseudo-values twice as wide as either camera
@@ -89,7 +89,7 @@ def _best_exhaustive(z: np.ndarray, top: int = 1) -> tuple[float, list[np.ndarra
     return float(b[order[0]]), [P[i].astype(bool) for i in order]
 
 
-def _best_local(z: np.ndarray) -> tuple[float, np.ndarray]:
+def _best_local(z: np.ndarray) -> tuple[float, list[np.ndarray]]:
     """The largest b found by threshold splits along a direction, the direction moved to
     the groups' difference until stable, from each axis (many views: 2ⁿ splits too many)."""
     n = len(z)
@@ -116,7 +116,8 @@ def _best_local(z: np.ndarray) -> tuple[float, np.ndarray]:
 def best_splits(x: np.ndarray, top: int = 3) -> tuple[float, list[np.ndarray]]:
     """The largest share ``b`` of the rows of ``x`` (n, q)'s scatter a split into two
     groups explains (between-group / total, affine invariant), and the best splits (up to
-    ``top``; a boolean per row, row 0 outside the group)."""
+    ``top``, every split tried up to :data:`EXHAUSTIVE_MAX` rows; beyond, the one a local
+    search finds; a boolean per row, row 0 outside the group)."""
     z = _whitened(np.asarray(x, float))
     if len(z) <= EXHAUSTIVE_MAX:
         return _best_exhaustive(z, top)
@@ -124,7 +125,7 @@ def best_splits(x: np.ndarray, top: int = 3) -> tuple[float, list[np.ndarray]]:
 
 
 def _proposals(x: np.ndarray) -> list[np.ndarray]:
-    """Splits to start from: the best few by the pooled pseudo-values' b, and each
+    """Splits to start from: the best by the pooled pseudo-values' b, and each
     coordinate's median split (a mixture's pooled pseudo-values are wide: the first guess
     is often a view or two off)."""
     out = {tuple(g): g for g in best_splits(x, top=1)[1]}
