@@ -19,6 +19,7 @@ from imaging.band import _band
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
+from imaging.groupsum import GroupSums
 from imaging.ring import ring_slope
 from imaging.shape import fit_shape, shape_shift
 from imaging.texture import TextureModel, texture_model
@@ -199,8 +200,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     slp = np.full(nseg, pf.slope_across_dn_per_px)
     k = 4
 
-    def bc(x: np.ndarray) -> np.ndarray:
-        return np.bincount(seg, x, minlength=nseg)
+    # Every per-segment sum below over the same pixels (~60 a pass): grouped once.
+    bc = GroupSums(seg, nseg)
 
     npx = bc(np.ones_like(e))
     blur_dev = blur_dev_u = None
@@ -290,7 +291,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         shifts = tuple(m * (half + 4) for m in (2, 4, 6, 8))
         tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
                             wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
-                            pf.full_scale_dn, avoid_px, 2 * (half + 4), npx)
+                            pf.full_scale_dn, avoid_px, 2 * (half + 4), npx, bc)
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).

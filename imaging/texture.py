@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
+from imaging.groupsum import GroupSums
 from imaging.ring import ring_geometry, ring_slope  # the ring's slope, as for the mark
 
 ALPHA = 1e-3
@@ -101,7 +102,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                   normal: np.ndarray, shifts_px: Sequence[float],
                   noise_var: tuple[float, float], full_scale: float,
                   avoid_px: Sequence[float] = (), clear_px: float = 0.0,
-                  npx: np.ndarray | None = None) -> TextureModel | None:
+                  npx: np.ndarray | None = None, sums: GroupSums | None = None
+                  ) -> TextureModel | None:
     """Measure the texture's effect on the centres from replicas of the band.
 
     Parameters
@@ -118,6 +120,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
         (a ruled scale's neighbours) [px]: no replica is taken within ``clear_px`` of one —
         there the replica holds a line, not background.
     npx : the band's pixel count per segment, when the caller has it (else counted here)
+    sums : the band's per-segment sums (:class:`imaging.groupsum.GroupSums` of its segments),
+        when the caller has them (else grouped here)
 
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance,
@@ -130,8 +134,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     k = len(J)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
 
-    def bc(x: np.ndarray) -> np.ndarray:
-        return np.bincount(seg, x, minlength=nseg)
+    bc = GroupSums(seg, nseg) if sums is None else sums
 
     wj = [wgt * j for j in J]
     # White-noise variance of a replica's centre, (N^-1 J^T W V W J N^-1)_00, with the
