@@ -21,7 +21,7 @@ from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
 from imaging.groupsum import GroupSums
 from imaging.ring import ring_slope
-from imaging.shape import fit_shape, shape_shift
+from imaging.shape import basis_spans, fit_shape, shape_shift
 from imaging.texture import TextureModel, texture_model
 
 EXTRA_STEPS = 4
@@ -269,10 +269,13 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         if sg.sum() >= 2:
             jj = np.arange(nseg)
             xx = e - np.polyval(np.polyfit(jj[sg], delta[sg], 1), jj)[seg]
-            shape = fit_shape(xx[sg[seg]], r[sg[seg]], amp[seg][sg[seg]], wgt[sg[seg]],
-                              groove_reach)
+            spans = basis_spans(xx, groove_reach)  # (for both: the pool is a subset)
+            pool = sg[seg]
+            shape = fit_shape(xx[pool], r[pool], amp[seg][pool], wgt[pool], groove_reach,
+                              (spans[0][pool], spans[1][pool], spans[2]))
             if shape is not None:
-                shift, shift_cov = shape_shift(shape, xx, amp[seg] * wgt, J, cov, ok, seg)
+                shift, shift_cov = shape_shift(shape, xx, amp[seg] * wgt, J, cov, ok, seg,
+                                               spans)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
