@@ -26,6 +26,7 @@ from imaging.groove import (
     centres_half,
     profile_lazy,
 )
+from imaging.groupsum import GroupSums
 
 __all__ = ["Centres", "ProfileFit", "ProfileTable", "band_indices", "band_pixels",
            "centres_half", "extent_look", "fit_profile", "groove_extent", "sample_centres"]
@@ -227,14 +228,15 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     j -= j.min()
     nb = int(j.max()) + 1
     p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
-    cnt = np.bincount(j, minlength=nb)
-    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
-    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
+    bc = GroupSums(j, nb)  # (5 sums over the same bins)
+    cnt = bc.counts
+    sp, spp = bc(p), bc(p * p)
+    sv, spv = bc(vals), bc(p * vals)
     det = cnt * spp - sp * sp
     amp = np.where(det > 1e-9 * np.maximum(cnt * spp, 1e-300),
                    (cnt * spv - sp * sv) / np.where(det > 0, det, 1.0), np.nan)
     amp[cnt < 4] = np.nan
-    tb = np.bincount(j, t, nb) / np.maximum(cnt, 1)  # each bin's mean position
+    tb = bc(t) / np.maximum(cnt, 1)  # each bin's mean position
     good = np.isfinite(amp)
     if good.sum() < 10:
         return pf.t_start_px, pf.t_end_px, False, False
