@@ -212,10 +212,13 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
     knots, fold = _knots(reach)
     k = fold.shape[1]
     span, vals, span_cols = _spans(x, knots, fold) if spans is None else spans
-    cols = span_cols[span]
-    vals = np.where(cols >= 0, vals, 0.0) * amp[:, None]
     if len(x) < 4 * k:
         return None
+    # Pixels no basis function reaches (the band's background) add exact zeros: left out.
+    on = (span_cols >= 0).any(axis=1)[span]
+    span, vals, r, amp, wgt = span[on], vals[on], r[on], amp[on], wgt[on]
+    cols = span_cols[span]
+    vals = np.where(cols >= 0, vals, 0.0) * amp[:, None]
     # Dust or a crossing stays out of the pool: pixels beyond MAX_Z sigma of the departure's
     # own fit (a first fit on all, then without them; a clip on the residuals before the
     # departure dropped the groove's floor where the misfit itself is large).
@@ -247,7 +250,9 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
         except np.linalg.LinAlgError:
             return None
         coef = cov @ b
-        fit = (vals * coef[ca]).sum(axis=1)
+        # (the sum over the 4 columns written out: the same order, ~3x faster than .sum)
+        fit = ((vals[:, 0] * coef[ca[:, 0]] + vals[:, 1] * coef[ca[:, 1]])
+               + vals[:, 2] * coef[ca[:, 2]]) + vals[:, 3] * coef[ca[:, 3]]
         w = np.where(np.abs(r - fit) * np.sqrt(wgt) < MAX_Z, wgt, 0.0)
     return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
 
@@ -296,8 +301,11 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     if spans is None:
         cols, vals = shape.local(x)
     else:
-        cols = spans[2][spans[0]]
-        vals = np.where(cols >= 0, spans[1], 0.0)
+        # Pixels no basis function reaches add exact zeros: left out.
+        on = (spans[2] >= 0).any(axis=1)[spans[0]]
+        cols = spans[2][spans[0][on]]
+        vals = np.where(cols >= 0, spans[1][on], 0.0)
+        aw, J, seg = aw[on], [j[on] for j in J], seg[on]
     nseg, kk = len(ok), len(shape.coef)
     G = np.zeros((nseg, len(J), kk))
     at = [seg * kk + np.maximum(cols[:, a], 0) for a in range(4)]  # (the same for every i)
