@@ -158,9 +158,11 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                 continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
             v, good = band_at(dx, dy)
-            valid = ok & (np.bincount(seg[~good], minlength=nseg) == 0)
+            valid = (ok & (np.bincount(seg[~good], minlength=nseg) == 0) if not good.all()
+                     else ok.copy())  # (changed in place below)
             rv, rgood = ring_at(dx, dy)
-            if not rgood.all():  # (all usable: every segment has its whole ring)
+            whole = rgood.all()
+            if not whole:  # (all usable: every segment has its whole ring)
                 valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
                 continue
@@ -170,8 +172,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
-            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale,
-                           ring_geo)
+            x = ring_slope(rv if whole else np.where(rgood, rv, 0.0), ring[2], ring[3], nseg,
+                           full_scale, ring_geo, rgood)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
             # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
