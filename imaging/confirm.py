@@ -71,10 +71,25 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cols = finite.any(axis=0)
     prof = np.full(vals.shape[1], np.nan)
     if finite.all():
-        prof[:] = np.median(vals, axis=0)  # no column to leave out: no copy of the samples
+        prof[:] = _median_axis0(vals)  # no column to leave out: no copy of the samples
     else:
         prof[cols] = nan_median(vals[:, cols], axis=0)
     return prof, cols
+
+
+def _median_axis0(vals: np.ndarray) -> np.ndarray:
+    """np.median(vals, axis=0) of finite values, the same numbers. When every value is a
+    whole number in 0..65535 (an image read from an integer file, not rescaled) each column
+    is sorted as 16-bit integers: ~2 ms, not ~4, for a 5 MP mark's 2000 profiles across it
+    (the middle value, or the mean of the middle two in float64, as np.median's)."""
+    if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
+        q = vals.T.astype(np.uint16)
+        if np.array_equal(q, vals.T):
+            q.sort(axis=1)
+            m = q.shape[1] // 2
+            return (q[:, m].astype(float) if q.shape[1] % 2
+                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
+    return np.median(vals, axis=0)
 
 
 def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float,
