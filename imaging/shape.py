@@ -235,15 +235,19 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
     for a, c in pairs:
         use = (span_cols[:, a] >= 0) & (span_cols[:, c] >= 0)
         into_n.append((use, span_cols[use, a], span_cols[use, c]))
+    # The 4 functions' values and columns as 4 contiguous rows (the products below read
+    # whole rows, not every 4th number), the same numbers.
+    vals, ca = np.ascontiguousarray(vals.T), np.ascontiguousarray(ca.T)
+    sw = np.sqrt(wgt)
     for _ in range(2):
-        wv = w[:, None] * vals
+        wv = w * vals
         b = np.zeros(k)
         for a, (use, col) in enumerate(into_b):
-            np.add.at(b, col[use], sums(wv[:, a] * r)[use])
+            np.add.at(b, col[use], sums(wv[a] * r)[use])
         N = np.zeros((k, k))
         for (a, c), (use, row, col) in zip(pairs, into_n, strict=True):
             part = np.zeros((k, k))
-            np.add.at(part, (row, col), sums(wv[:, a] * vals[:, c])[use])
+            np.add.at(part, (row, col), sums(wv[a] * vals[c])[use])
             N += part if a == c else part + part.T
         try:
             cov = np.linalg.inv(N)
@@ -251,9 +255,9 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
             return None
         coef = cov @ b
         # (the sum over the 4 columns written out: the same order, ~3x faster than .sum)
-        fit = ((vals[:, 0] * coef[ca[:, 0]] + vals[:, 1] * coef[ca[:, 1]])
-               + vals[:, 2] * coef[ca[:, 2]]) + vals[:, 3] * coef[ca[:, 3]]
-        w = np.where(np.abs(r - fit) * np.sqrt(wgt) < MAX_Z, wgt, 0.0)
+        fit = ((vals[0] * coef[ca[0]] + vals[1] * coef[ca[1]]) + vals[2] * coef[ca[2]]
+               + vals[3] * coef[ca[3]])
+        w = np.where(np.abs(r - fit) * sw < MAX_Z, wgt, 0.0)
     return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
 
 
@@ -299,21 +303,26 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
         (nseg, nseg) its covariance [px^2].
     """
     if spans is None:
-        cols, vals = shape.local(x)
-    else:
-        # Pixels no basis function reaches add exact zeros: left out.
-        on = (spans[2] >= 0).any(axis=1)[spans[0]]
-        cols = spans[2][spans[0][on]]
-        vals = np.where(cols >= 0, spans[1][on], 0.0)
-        aw, J, seg = aw[on], [j[on] for j in J], seg[on]
-    nseg, kk = len(ok), len(shape.coef)
+        spans = _spans(x, shape.knots, shape.fold)
+    span, vals, span_cols = spans
+    # Pixels no basis function reaches add exact zeros: left out.
+    on = (span_cols >= 0).any(axis=1)[span]
+    span = span[on]
+    vals = np.ascontiguousarray(np.where(span_cols[span] >= 0, vals[on], 0.0).T)
+    aw, J, seg = aw[on], [j[on] for j in J], seg[on]
+    nseg, kk, nspan = len(ok), len(shape.coef), len(span_cols)
+    # Sums per (segment, knot span), one grouping for all 16, then put in each span's
+    # column (as fit_shape: the 4 functions on a span are fixed; the sums' order differs
+    # in the last bit from sums per column).
+    # (No matrix product for the scatter: OpenBLAS's threads cost more than the work.)
+    sums = GroupSums(seg * nspan + span, nseg * nspan)
+    has = [np.flatnonzero(span_cols[:, a] >= 0) for a in range(4)]
     G = np.zeros((nseg, len(J), kk))
-    at = [seg * kk + np.maximum(cols[:, a], 0) for a in range(4)]  # (the same for every i)
     for i in range(len(J)):
         awj = aw * J[i]
         for a in range(4):
-            G[:, i, :] += np.bincount(at[a], awj * vals[:, a],
-                                      minlength=nseg * kk).reshape(nseg, kk)
+            part = sums(awj * vals[a]).reshape(nseg, nspan)
+            np.add.at(G[:, i, :], (slice(None), span_cols[has[a], a]), part[:, has[a]])
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
     S = -np.einsum("ni,nij->nj", c0, G)
     return S @ shape.coef, S @ shape.cov @ S.T
