@@ -314,18 +314,32 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     # Sums per (segment, knot span), one grouping for all 16, then put in each span's
     # column (as fit_shape: the 4 functions on a span are fixed; the sums' order differs
     # in the last bit from sums per column).
-    # (No matrix product for the scatter: OpenBLAS's threads cost more than the work.)
+    # (Not a matrix product for the scatter: OpenBLAS's threads cost more than the work;
+    # not np.add.at, slow on 2-D: the spans of each column in rounds without repeats.)
     sums = GroupSums(seg * nspan + span, nseg * nspan)
-    has = [np.flatnonzero(span_cols[:, a] >= 0) for a in range(4)]
+    rounds = [_unrepeated(span_cols[:, a]) for a in range(4)]
     G = np.zeros((nseg, len(J), kk))
     for i in range(len(J)):
         awj = aw * J[i]
         for a in range(4):
             part = sums(awj * vals[a]).reshape(nseg, nspan)
-            np.add.at(G[:, i, :], (slice(None), span_cols[has[a], a]), part[:, has[a]])
+            for spans_r, cols_r in rounds[a]:
+                G[:, i, cols_r] += part[:, spans_r]
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
     S = -np.einsum("ni,nij->nj", c0, G)
     return S @ shape.coef, S @ shape.cov @ S.T
+
+
+def _unrepeated(cols: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The knot spans with a column (``cols`` >= 0) as rounds of (spans, their columns), no
+    column twice within a round (a fancy-indexed += adds a repeated index once)."""
+    todo = np.flatnonzero(cols >= 0)
+    out = []
+    while todo.size:
+        _, first = np.unique(cols[todo], return_index=True)
+        out.append((todo[first], cols[todo[first]]))
+        todo = np.delete(todo, first)
+    return out
 
 
 def profile_angle_u(t: np.ndarray, sigma: np.ndarray, shift: np.ndarray,
