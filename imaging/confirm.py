@@ -511,9 +511,10 @@ def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int
     if np.isfinite(v).all():
         # np.median's values (the middle one, or the mean of the middle two) from one sort:
         # on blocks of ~20 rows ~4x faster than its partition, and np.nanmedian's.
-        s = np.sort(v, axis=1)
+        # (Each block's columns sorted as contiguous rows: ~30 % faster than along axis 1.)
+        s = np.sort(v.transpose(0, 2, 1), axis=-1)
         m = block_px // 2
-        profs = s[:, m] if block_px % 2 else (s[:, m - 1] + s[:, m]) / 2
+        profs = s[..., m] if block_px % 2 else (s[..., m - 1] + s[..., m]) / 2
     else:
         profs = nan_median(v, axis=1)  # an all-NaN column is NaN, as it should be
     return profs, t[:nb * block_px].reshape(nb, block_px).mean(axis=1)
