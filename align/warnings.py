@@ -68,6 +68,8 @@ INFORMATION = (
     # The stored image turned as its header says (as every viewer shows it). (A signed
     # image's offset stays a warning: that its zero means mid-scale is an assumption.)
     re.compile(r": orientation tag \d+ applied \([^)]*\)$"),
+    # The user declared the image blurred after its pixels (align/grid_phase.py): in u.
+    re.compile(r": blurred after the pixels \(declared\): .* carried in u as grid_phase$"),
 )
 """Marks' notes that are information, not warnings: the tool did what the data called for
 and u carries what is left, nothing for the user to act on and nothing less to be trusted.
@@ -143,10 +145,22 @@ def family_warnings(image: str, fam) -> list[str]:
     return out
 
 
-def camera_warnings(skipped: Mapping[str, str]) -> list[str]:
-    """A chessboard calibration's warnings: each photograph left out, and why."""
-    return [f"{name}: skipped, not used in the calibration: {why}"
-            for name, why in skipped.items()]
+def camera_warnings(skipped: Mapping[str, str], field: Mapping | None = None,
+                    bound_arcsec: float = float("inf")) -> list[str]:
+    """A chessboard calibration's warnings: each photograph left out, and why; and when the
+    model's own u leaves typical marks (``field``: :func:`align.camera_model_u.field_u`)
+    beyond the lens bound [″], that they will be lens-limited."""
+    out = [f"{name}: skipped, not used in the calibration: {why}"
+           for name, why in skipped.items()]
+    if field and field["median_u_arcsec"] > bound_arcsec:
+        out.append(f"camera: a {field['length_px']:.0f} px mark {field['radii_px'][0]:.0f}-"
+                   f"{field['radii_px'][1]:.0f} px from the centre carries "
+                   f"{field['median_u_arcsec']:.0f}″ (median; up to "
+                   f"{field['max_u_arcsec']:.0f}″) from this calibration alone, beyond the "
+                   f"lens bound {bound_arcsec:g}″: such marks will be lens-limited; more "
+                   "chessboard views spread over the frame lower it (about as "
+                   "1/sqrt(views))")
+    return out
 
 
 def calibration_warnings(cal, poses) -> list[str]:
