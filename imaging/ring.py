@@ -22,13 +22,15 @@ def ring_geometry(e: np.ndarray, seg: np.ndarray, nseg: int) -> tuple:
 
 def ring_slope(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, nseg: int,
                full_scale: float,
-               geometry: tuple | None = None, usable: np.ndarray | None = None) -> np.ndarray:
+               geometry: tuple | None = None, usable: np.ndarray | bool | None = None
+               ) -> np.ndarray:
     """Background slope across the mark [DN/px] per segment from its ring pixels (clipped
     pixels left out; 0 where a segment has too few). ``geometry``: :func:`ring_geometry` of
     (e, seg), used when no pixel is left out; ``usable``: the pixels not clipped, when the
-    caller has them (a pixel it zeroed is clipped too)."""
+    caller has them (True: all; a pixel it zeroed is clipped too)."""
     sel = (vals < full_scale) & (vals > 0) if usable is None else usable
-    if geometry is None or not sel.all():
+    if geometry is None or not np.all(sel):
+        sel = np.broadcast_to(sel, vals.shape)  # (``usable`` may be True: all of them)
         vals, e, seg = vals[sel], e[sel], seg[sel]
         geometry = ring_geometry(e, seg, nseg)
     no, ec, see, bc = geometry

@@ -80,11 +80,15 @@ class _Shifted:
         self.flat = ys * image.shape[1] + xs if image.flags.c_contiguous and ys.size else None
         self.box = (ys.min(), ys.max(), xs.min(), xs.max()) if self.flat is not None else None
 
-    def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The values shifted by (dx, dy) and which are usable (None: every one, as two
+        reductions told: cheaper than the masks, and the usual case)."""
         h, w = self.image.shape
         if self.box is not None and (self.box[0] + dy >= 0 and self.box[1] + dy < h
                                      and self.box[2] + dx >= 0 and self.box[3] + dx < w):
             v = self.image.ravel()[self.flat + (dy * w + dx)].astype(float, copy=False)
+            if v.min() > 0 and v.max() < self.full_scale:  # (NaN fails both)
+                return v, None
             return v, (v < self.full_scale) & (v > 0)
         return _replica(self.image, self.ys, self.xs, dx, dy, self.full_scale)
 
@@ -158,10 +162,10 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                 continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
             v, good = band_at(dx, dy)
-            valid = (ok & (np.bincount(seg[~good], minlength=nseg) == 0) if not good.all()
-                     else ok.copy())  # (changed in place below)
+            valid = (ok.copy() if good is None or good.all()  # (changed in place below)
+                     else ok & (np.bincount(seg[~good], minlength=nseg) == 0))
             rv, rgood = ring_at(dx, dy)
-            whole = rgood.all()
+            whole = rgood is None or rgood.all()
             if not whole:  # (all usable: every segment has its whole ring)
                 valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
@@ -173,7 +177,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
             x = ring_slope(rv if whole else np.where(rgood, rv, 0.0), ring[2], ring[3], nseg,
-                           full_scale, ring_geo, rgood)
+                           full_scale, ring_geo, True if rgood is None else rgood)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
             # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The
