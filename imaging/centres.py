@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imaging.band import _band
+from imaging.band import _band, unclipped
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
@@ -165,8 +165,9 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                  half + RING_PX)
     inner = np.abs(wide[1]) <= half
     vals, e, t, idx = (a[inner] for a in wide)
-    unclipped = (vals < pf.full_scale_dn) & (vals > 0)  # see fit_profile
-    vals, e, t, idx = vals[unclipped], e[unclipped], t[unclipped], idx[unclipped]
+    inside = unclipped(vals, pf.full_scale_dn)  # see fit_profile
+    if inside is not None:
+        vals, e, t, idx = vals[inside], e[inside], t[inside], idx[inside]
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
                               "outside the image or is all clipped")

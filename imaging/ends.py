@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import _band
+from imaging.band import _band, unclipped
 from imaging.centres import Centres
 from imaging.detect import MarkCandidate, line_frame
 from imaging.groove import ProfileFit, _profile_table
@@ -184,10 +184,12 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         e = e - bow(t)
         near = np.abs(e) <= half
         vals, e, t = vals[near], e[near], t[near]
-    ok = (vals < pf.full_scale_dn) & (vals > 0)
+    ok = unclipped(vals, pf.full_scale_dn)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
-    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int)
-    vals, e, t = vals[ok].astype(float), e[ok], t[ok]
+    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int) if ok is not None else np.empty(0, int)
+    if ok is not None:
+        vals, e, t = vals[ok], e[ok], t[ok]
+    vals = vals.astype(float)
     if vals.size == 0:
         return same
     j = np.round(t - t0 + reach_px).astype(int)

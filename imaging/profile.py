@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import _band, band_indices, band_pixels
+from imaging.band import _band, band_indices, band_pixels, unclipped
 from imaging.centres import Centres, sample_centres
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
@@ -219,8 +219,9 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
-    ok = (vals < pf.full_scale_dn) & (vals > 0)
-    vals, e, t = vals[ok], e[ok], t[ok]
+    ok = unclipped(vals, pf.full_scale_dn)
+    if ok is not None:
+        vals, e, t = vals[ok], e[ok], t[ok]
     mid = 0.5 * (pf.t_start_px + pf.t_end_px)
     if vals.size == 0:
         return pf.t_start_px, pf.t_end_px, False, False
