@@ -115,6 +115,22 @@ def test_tilted_member_flagged():
 
 
 @pytest.mark.slow
+def test_dense_ruler_of_two_tick_lengths_over_seeds():
+    """A ruler's two tick lengths (70 px, every 5th 110 px) at a 24 px pitch, 640 x 480,
+    numerals, dust, 8 and 12-bit, seeds 0-3: every tick found and measured, no step of the
+    ruling empty, the pitch within 5 u. The first search confirms the long ticks only (their
+    ruling 5 pitches); the family's pitch came out 73 px on 5 of 19 lines, ok, before.
+    Default twin: user 12's dense ruling (tests/imaging/test_independent_user12.py)."""
+    for seed in range(4):
+        fam, *_ = _check(RuledSpec(width=640, height=480, pitch_px=24.0,
+                                   lengths_px=(70.0, 110.0, 110.0), bits=8 + 4 * (seed % 2),
+                                   seed=seed))
+        print("dense ruler", seed, len(fam.members), fam.pitch_px, fam.pitch_u_px,
+              fam.missing_steps)
+        assert fam.missing_steps == () and fam.failed == 0
+
+
+@pytest.mark.slow
 def test_ruled_scale_over_seeds():
     """Random scales (pitch 40-140 px, any direction, 8-16 bits, 800 x 600): every line
     found, no extras, chi2/dof of the family's angles 0.7-1.4 on average, z ~ N(0, 1)."""
