@@ -361,10 +361,6 @@ def test_dense_ruling_over_seeds(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 1600x1200 ruling (23 lines, 70 px pitch) through "
-                   "the left chessboard lens scaled x2.5, lens undeclared: step 16 skipped "
-                   "where no line is missing, pitch 66.22 +- 0.48 px (z -7.8; seed 3); with "
-                   "its --camera: 70.000 +- 0.21 px, every step (exit 2 either way)")
 def test_ruled_scale_through_lens_steps_and_pitch(tmp_path):
     (kl, dl, _), _ = stereo_lenses()
     k = kl.copy()
