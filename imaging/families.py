@@ -60,6 +60,8 @@ PIECE_FRACTION = 0.15
 fraction of the family's median length."""
 PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
+MIN_REACH = 10.0
+"""Least relief window beside a family's line [px] (20 reached the next tick at 24 px)."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -254,8 +256,7 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
 
 
 FINE_LINES = 3
-"""Fewest lines between a family's members, at a whole fraction of its pitch, that show the
-ruling finer than its members (:func:`_finer_pitch`)."""
+"""Fewest lines on a ruling finer than the members' that make it the family's."""
 
 
 def _finer_pitch(members: list[MarkCandidate], pool: list[MarkCandidate], ref: float,
@@ -301,8 +302,7 @@ def _finer_pitch(members: list[MarkCandidate], pool: list[MarkCandidate], ref: f
 
 
 FADE_SIGMA = 3.0
-"""The search's coarser ridge filter [block-averaged px]: a line's ridge fades about this
-before each of its ends (:func:`imaging.detect._candidates`)."""
+"""The coarser ridge filter [block px]: a ridge fades about this before each end."""
 SHORT_MEMBER = 0.9
 """A member shorter than this fraction of the family's median length is searched over the
 members' common stretch (:func:`_span_members`)."""
@@ -396,7 +396,7 @@ def _join(found: list[MarkCandidate], members: list[MarkCandidate],
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
-        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, 20, 60))
+        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, MIN_REACH, 60))
         for c in search.confirm(extra, reach):
             twin = next((j for j, o in enumerate(found) if o.dark == c.dark
                          and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
@@ -466,7 +466,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             k = (q - origin) / pitch
             if np.max(np.abs(k - np.rint(k))) > GRID_TOLERANCE:
                 continue  # not a ruling: streaks of a surface's lay fall anywhere
-            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6, 20, 60))
+            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6,
+                                  MIN_REACH, 60))
             got = search.confirm([raw[i] for i in g], reach)
             if len(got) >= MIN_MEMBERS:
                 found += [c for c in got if not any(
@@ -484,8 +485,11 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         shift = search.shift
         members = [found[i] for i in g]
         pieces = search.candidates(PIECE_FRACTION * typical)
-        pitch = _finer_pitch(members, [c for c in pieces if c.length_px >= MEMBER_FRACTION
-                                       * MEMBER_FRACTION * typical], ref, origin, pitch, shift)
+        # A finer ruling's lines (short ticks: 70 px seen 44-52) join from a quarter length.
+        floor = MEMBER_FRACTION * MEMBER_FRACTION * typical
+        fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
+                            pitch, shift)
+        floor, pitch = (floor if fine != pitch else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
                       pitch=pitch, members=members, shift=shift, lo=lo, hi=hi) -> bool:
@@ -530,7 +534,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         # numeral's strokes beside a line's end become pieces there, none as long).
         pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
         _join(found, members, pool, on_ruling, half_way,
-              lambda c, ref=ref: _position(c, ref), search, pitch, MEMBER_FRACTION * typical)
+              lambda c, ref=ref: _position(c, ref), search, pitch, floor)
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
