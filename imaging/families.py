@@ -262,16 +262,13 @@ FINE_LINES = 3
 def _finer_pitch(members: list[MarkCandidate], pool: list[MarkCandidate], ref: float,
                  origin: float, pitch: float, shift: np.ndarray) -> float:
     """The family's pitch [px] once the lines beside its members are counted: ``pitch`` /
-    m when lines of the family's direction and polarity lie at whole steps of pitch / m
-    across its span (m >= 2), else ``pitch``.
+    m when lines of its direction and polarity lie at whole steps of pitch / m (m >= 2).
 
     A ruler's short ticks at a pitch under the relief window are alike their neighbours
-    there: the first search confirms only the long ticks, every 5th (a 640 x 480 ruling at
-    24 px, 70 / 110 px ticks: 3 long ones, their ruling 120 px), and the ruling fitted to
-    them is a multiple of the pitch; a half-step test on it then joins only the ticks that
-    happen to fall near half-steps (5 of 19 lines, "pitch 73 px"). The finer step is the
-    median gap between neighbouring lines, members and candidates together: on a ruling
-    with most lines present, the pitch."""
+    there: the first search confirms only the long ticks (every 5th: their ruling 5
+    pitches), and a half-step test on it joined the ticks near half-steps (5 of 19 lines,
+    "pitch 73 px" at 24 px). The finer step is the median gap between neighbouring lines,
+    members and candidates together: on a ruling with most lines present, the pitch."""
     u, n = line_frame(ref)
     q_m = np.array([float(_middle(c) @ n) for c in members])
     t_m = np.array([float(_middle(c) @ u) for c in members])
@@ -539,10 +536,10 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
         for g in groups:
-            # Every member's ridge faded a filter width (the coarser one's, in full-size
-            # pixels) before each of its ends: a short tick of a dense ruling (70 px, seen
-            # 50) with dust beside it left under 10 segments that fit (3 of 19 refused).
+            # Every member's ridge faded a filter width before each end: a short tick (70
+            # px, seen 50) with dust beside it kept under 10 segments that fit (3 of 19).
             _span_members(found, g, FADE_SIGMA * search.f)
+    faded = {id(found[i]) for g in groups for i in g}  # (their length, less that, is seen)
     if families:
         # Lines meeting at a point (a dial's graduations): a group too, every one reported,
         # completed by a second search down to half their typical length (as a family's).
@@ -587,8 +584,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     short: list[int] = []
     if min_length_px is not None:
         # The user's shortest line holds for families too: their shorter members are said.
-        short = [i for g in groups for i in g
-                 if found[i].length_px < LENGTH_SLACK * min_length_px]
+        short = [i for g in groups for i in g if found[i].length_px - 2 * FADE_SIGMA * search.f
+                 * (id(found[i]) in faded) < LENGTH_SLACK * min_length_px]
         groups = [[i for i in g if i not in short] for g in groups]
         groups = [g for g in groups if len(g) >= 2]
     in_family = {i for g in groups for i in g}
