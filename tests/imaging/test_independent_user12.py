@@ -434,10 +434,6 @@ def test_speed_640x480(tmp_path):
 
 # ---------------------------------------------------------------- (5) clipped frame -----------
 
-@pytest.mark.xfail(strict=True, reason="58 % of a 16-bit frame clipped at 65535 (a lamp "
-                   "brighter to one side): the mark is measured (ok true, -29.99319 deg, "
-                   "24.5\" off at +-13.1\", z 1.87) with 'defocus gradient' and 'an end under "
-                   "an obstruction' named, the clipping not")
 def test_clipped_background_is_named(tmp_path):
     img = render([Groove(320, 240, 30, 300, depth=0.3)], None, None, seed=3, bits=16,
                  full_well=60000).astype(float)
