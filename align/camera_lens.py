@@ -13,7 +13,8 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
-from align.lens_fallback import carried, lens_beyond_model
+from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
+from align.lens_terms import _camera_departure as camera_departure
 from align.lens_terms import (
     angle_coupling,
     bow_reach,
@@ -172,6 +173,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                      "an angle's u either way (0.3-3x on the real chessboard lens); re-run "
                      "`align camera` for the joint covariance")
     p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
+    # The model's principal point as the check's lever (align/lens_fallback.py).
+    designs = model_lever(designs, lines, camera, shape)
+    p, dlam = camera_departure(designs, lam_u, ranges, alpha)
     unresolved = False
     told = lens_or_bends(designs, lam_u, ranges, alpha) if p < alpha else None
     if told is None:
@@ -179,6 +183,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                                 camera_lens_vector(camera, shape)) if p < alpha else ())
     else:
         lone = told.departing if told.verdict == "bends" else ()
+    if lone and still_departs(designs, lone, lam_u, ranges, alpha):
+        # The other marks depart together too: no bend explains that (align/lens_fallback.py).
+        lone, told = (), None
     if lone:
         # A departure no two marks agree on, or one the other marks do not show (a changed
         # lens bows every mark by what its position predicts; these stay straight), is the

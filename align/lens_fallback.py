@@ -15,6 +15,10 @@ principal point moved under a strong model's distortion turns a line where no di
 left to turn it (the no-model solve's principal-point terms are 0 at no distortion), and the
 rig's other camera's model is 13-15 px off there. So the model's own principal point is
 carried too, anywhere within the plausible range of the image centre (:func:`pp_coupling`).
+For the same reason the check of the marks against the model gets the model's principal
+point as its lever (:func:`model_lever`): without it a straight mark that a moved principal
+point bowed was read as a bent mark beside a kept calibration — 11 of 108 marks under the
+other camera's model silently 3.6-11.6 u off (user 12's rig, tests/align/test_lens_fallback.py).
 """
 
 from __future__ import annotations
@@ -23,12 +27,16 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.linalg import solve_triangular
 
-from align.camera_model_u import model_coupling
+from align.camera_model_u import model_coupling, raw_pixels
 from align.lens import LensRanges, LensSolution, LineGeometry, solve_lens
+from align.lens_design import _Design
+from align.lens_terms import _camera_departure as camera_departure
 from align.lens_terms import angle_coupling
-from imaging import CameraModel
+from imaging import CameraModel, line_frame
 from imaging.camera_cov import INTRINSICS
+from imaging.lens import PARAMS
 
 WIDENING = ("camera_or_bent", "camera_disagreement")
 """The u terms a camera model's check adds when its marks depart from it (docs/camera.md);
@@ -50,6 +58,58 @@ class LensBeyondModel:
 
     sol: LensSolution
     coupling: tuple[dict[str, float], ...]
+
+
+PP = (PARAMS.index("cx"), PARAMS.index("cy"))
+
+
+def model_lever(designs: Sequence[_Design], lines: Sequence[LineGeometry],
+                camera: CameraModel, shape: tuple[int, int]) -> list[_Design]:
+    """The marks' designs against a camera model (taken at no lens on top of it:
+    :func:`align.lens_terms.check_camera`) with the principal point's columns (``cx``,
+    ``cy``, per px) of the model's own distortion: how each undistorted centre moves across
+    its line when the model's principal point moves (central difference of the model at
+    +- 1 px), its straight-line part projected out as :func:`align.lens_design._design` does.
+    At no lens those columns are 0, and a principal point's bow could only be read as a
+    bent mark."""
+    h, w = shape
+    c = np.array([(w - 1) / 2, (h - 1) / 2])
+    out = []
+    for d, ln in zip(designs, lines, strict=True):
+        raw = raw_pixels(camera, ln.points, shape) - c
+        u, n = line_frame(d.angle)
+        E = np.zeros((len(ln.points), len(PP)))
+        for col, (r_, c_) in enumerate(((0, 2), (1, 2))):
+            q = []
+            for step in (1.0, -1.0):
+                K = camera.camera_matrix.copy()
+                K[r_, c_] += step
+                q.append(replace(camera, camera_matrix=K).undistort_centred(raw, ln.sigma,
+                                                                            shape)[0])
+            E[:, col] = (q[0] - q[1]) @ n / 2.0
+        J = np.column_stack([ln.points @ u, -np.ones(len(ln.points))])
+        X = np.column_stack([J, E]) / ln.sigma[:, None]
+        if ln.chol is not None:
+            X = solve_triangular(ln.chol, X, lower=True, check_finite=False)
+        Jw, Ew = X[:, :2], X[:, 2:]
+        coef = np.linalg.lstsq(Jw, Ew, rcond=None)[0]
+        G, sv = d.G.copy(), d.s.copy()
+        G[:, list(PP)] = Ew - Jw @ coef
+        sv[list(PP)] = -coef[0]
+        out.append(replace(d, G=G, s=sv))
+    return out
+
+
+def still_departs(designs: Sequence[_Design], lone: Sequence[int], lam_u: np.ndarray,
+                  ranges: LensRanges, alpha: float) -> bool:
+    """Whether the marks not read as bent (``lone``: the marks a lens change cannot have
+    bowed, :func:`align.lens_terms.lone_departures`, :func:`align.lens_terms.lens_or_bends`)
+    still depart from the calibration together at ``alpha`` (their joint check): then the
+    bends do not explain the departure, and the lens is not its model. (Each of them may be
+    within the calibration's u on its own — user 12's rig, the other camera's model: the
+    straight marks bowed 13-15 sigma each, inside the model's u, jointly p 1e-9..1e-18.)"""
+    rest = [d for k, d in enumerate(designs) if k not in lone]
+    return bool(rest) and camera_departure(rest, lam_u, ranges, alpha)[0] < alpha
 
 
 def pp_coupling(camera: CameraModel, line: LineGeometry, shape: tuple[int, int],
