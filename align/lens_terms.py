@@ -15,51 +15,9 @@ from scipy.optimize import lsq_linear
 
 from align.lens import LensSolution, _determined
 from align.lens_design import DEFAULT_RANGES, LensRanges, LineGeometry, _Design, _design
+from align.lens_solution import signed_parts
 from imaging import fit_line_only, line_frame
 from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
-
-
-def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
-    """Each named lens term of one mark's angle as signed components [rad] on the lens's
-    own error directions (the same directions for every mark of one solve): see
-    :func:`angle_terms` (their norms) and :func:`angle_coupling` (the components)."""
-    P = len(PARAMS)
-    A = [j for j in range(P) if sol.applied[j]]
-    rng = sol.ranges.vector()
-    out: dict[str, np.ndarray] = {}
-    s = design.s
-    if A:
-        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
-        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
-        w, V = np.linalg.eigh(sol.cov_applied)
-        L = V * np.sqrt(np.clip(w, 0.0, None))
-        out["lens_fit"] = L.T @ s[A]
-        if not sol.confirmed:
-            # Lens or bend: the angle with the lens applied and without it both stand, and
-            # the bow may be part lens, part bend: the truth anywhere between the two
-            # readings, uniform (Type B); about the reading given (the lens applied) its
-            # standard uncertainty is the difference / sqrt 3 (the difference itself is the
-            # bound, not a standard uncertainty).
-            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A] / np.sqrt(3)])
-    FA = sol.info[np.ix_(A, A)] if A else None
-    for j in range(P):
-        if sol.applied[j] or rng[j] <= 0:
-            continue
-        # What the applied parameters absorb of parameter j's bow changes their estimates,
-        # hence the angle: the angle's net sensitivity to j.
-        seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
-        if design.s_pp_var is not None and not sol.determined[j]:
-            # Over the principal point's range (uniform) the sensitivity varies about its
-            # value at the centre: its mean square, with the sign it has at the centre.
-            seff = float(np.copysign(np.sqrt(seff**2 + float(design.s_pp_var[j])), seff))
-        if sol.determined[j]:
-            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
-            # is within the range.
-            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
-        else:
-            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
-    return out
 
 
 def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
@@ -100,7 +58,7 @@ def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
 
 def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
     """Named standard uncertainties [rad] the lens adds to one mark's angle."""
-    return {k: float(np.linalg.norm(v)) for k, v in _signed_parts(sol, design).items()}
+    return {k: float(np.linalg.norm(v)) for k, v in signed_parts(sol, design).items()}
 
 
 def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
@@ -109,7 +67,7 @@ def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
     through the one lens (every mark of a camera sees the same lens error); each mark's own
     sum of squares is the square sum of :func:`angle_terms`."""
     out: dict[str, float] = {}
-    for k, v in _signed_parts(sol, design).items():
+    for k, v in signed_parts(sol, design).items():
         if len(v) == 1:
             out[k] = float(v[0])
         else:
@@ -131,12 +89,23 @@ def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarra
             for j, p in enumerate(PARAMS) if lam_u[j] > 0}
 
 
+def lens_cov(lam_u: np.ndarray) -> np.ndarray:
+    """The calibrated lens's covariance in the lens vector (per PARAMS, in their units):
+    ``lam_u`` as given when it is one ((P, P): a camera model's joint covariance,
+    :func:`align.camera_lens.camera_lens_cov`), else its standard uncertainties taken as
+    independent (a camera file before format 4)."""
+    a = np.asarray(lam_u, float)
+    return a if a.ndim == 2 else np.diag(a**2)
+
+
 def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarray,
                  scale: float, ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3
                  ) -> tuple[float, np.ndarray, list[_Design]]:
     """Whether the marks agree with a calibrated lens: the determined correction to the
     camera's lens from the lines, and its chi2 probability against the lines' u plus the
-    camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
+    camera's u (``lam_u``: standard uncertainties per PARAMS, or the joint covariance,
+    :func:`lens_cov`). Returns (p-value, the correction dlam, each mark's design at the
+    camera)."""
     designs = [_design(ln, lam, scale) for ln in lines]
     p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
     return p, dlam, designs
@@ -163,7 +132,7 @@ def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: Len
         return 1.0, dlam
     D = np.ix_(det, det)
     dlam[det] = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
     return float(special.chdtrc(len(det), stat)), dlam
 
@@ -195,7 +164,7 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
         return True
     D = np.ix_(det, det)
     dlam = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
     W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
     bound = np.maximum(rng, np.abs(base))[det]
     fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))
@@ -305,7 +274,7 @@ def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
     # N(|g|, 1 + the change's estimation variance along g) if the lens changed.
     t = -sum(gi @ d.z for gi, d in zip(g, test, strict=True)) / sep
     h = sum(d.G.T @ gi for gi, d in zip(g, test, strict=True)) / sep
-    return _Prediction(sep, float(t), 1.0 + float(np.sum((h * lam_u) ** 2)),
+    return _Prediction(sep, float(t), 1.0 + float(h @ lens_cov(lam_u) @ h),
                        1.0 + float(h[det] @ C @ h[det]), beyond)
 
 
@@ -379,7 +348,8 @@ def _departs(d: _Design, lam_u: np.ndarray, ranges: LensRanges, alpha: float) ->
     lens parameter on its own still shows) is beyond its noise and the calibration's u."""
     if _camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
         return True
-    var = 1.0 + float(np.sum((d.w @ d.G * lam_u) ** 2))
+    wG = d.w @ d.G
+    var = 1.0 + float(wG @ lens_cov(lam_u) @ wG)
     return abs(d.bow_z) > float(-special.ndtri(alpha / 2)) * np.sqrt(var)
 
 
