@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from align.camera_model_u import model_coupling, raw_pixels
+from align.camera_model_u import angle_sensitivity, raw_pixels
 from align.lens import LensRanges, LensSolution, LineGeometry, solve_lens
 from align.lens_design import _Design
 from align.lens_terms import _camera_departure as camera_departure
@@ -117,14 +117,17 @@ def pp_coupling(camera: CameraModel, line: LineGeometry, shape: tuple[int, int],
     """One mark's angle components [rad] of the model's principal point taken anywhere
     within ``ranges.pp_px`` of the image centre (per axis a uniform about the model's own,
     half-width the range plus the model's distance from the centre: / sqrt 3), through the
-    model's distortion (:func:`align.camera_model_u.model_coupling`, keys ``pp.i``)."""
+    model's distortion (:func:`align.camera_model_u.angle_sensitivity`; keys ``pp.cx``,
+    ``pp.cy``)."""
     h, w = shape
     K = camera.camera_matrix
     half = ranges.pp_px + np.abs(K[:2, 2] - [(w - 1) / 2, (h - 1) / 2])
+    u = half / np.sqrt(3)
+    j = [INTRINSICS.index("cx"), INTRINSICS.index("cy")]
     cov = np.zeros((len(INTRINSICS), len(INTRINSICS)))
-    cov[2, 2], cov[3, 3] = (half / np.sqrt(3)) ** 2
-    got = model_coupling(replace(camera, cov=cov), line.points, line.sigma, line.chol, shape)
-    return {f"pp.{k.rsplit('.', 1)[1]}": v for k, v in got.items()}
+    cov[j, j] = u**2  # the sensitivity's steps: +- u (only cx, cy move)
+    g = angle_sensitivity(replace(camera, cov=cov), line.points, line.sigma, line.chol, shape)
+    return {"pp.cx": float(g[j[0]] * u[0]), "pp.cy": float(g[j[1]] * u[1])}
 
 
 def lens_beyond_model(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges,
