@@ -200,8 +200,9 @@ def _wrong_model_z(tmp_path, cases, seed0=100):
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="the right camera's model (mine, formal cov) on the "
                    "left camera's lens: a 250 px mark at (200,150) reads +1089\" off at +-311\" "
-                   "(z 3.5; +1095\" at +-112\", z 9.8, with the tool's own right-camera model), "
-                   "although the warning says u carries both readings (camera_or_bent)")
+                   "(z 3.5; +1089\" at +-112\", z 9.75, with the tool's own right-camera model): "
+                   "the one mark shows no departure from the model (p 0.65; 0.89), nothing is "
+                   "warned; lens-limited (not ok, exit 2) by the model's own u only")
 def test_other_cameras_model_u_covers_what_it_warns_about(tmp_path):
     """One mark of the slow sweep below (kept out of the default run: ~1.3 s CPU)."""
     code, d, zs = _wrong_model_z(tmp_path, WRONG_MODEL_CASES[:1])
@@ -211,9 +212,11 @@ def test_other_cameras_model_u_covers_what_it_warns_about(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="6 marks through the left lens, the right camera's "
-                   "model (mine, formal cov): z +3.5, +1.5, +9.4, -10.3, -3.9, -9.4 (e.g. "
-                   "-713\" at +-69\" on a 200 px mark 0.08 deg from the x axis); the tool's own "
-                   "right model: up to 9.79; warned 'the lens differs' but u short")
+                   "model (mine, formal cov): z +3.5, +1.5, +9.4, -0.46, -3.9, -0.59 (the 4th "
+                   "and 6th now found departing through the model's principal point, cy -8.3 / "
+                   "cx +14.3 px, and carried as undetermined: -713\" at +-1557\"); the other "
+                   "marks show no departure (p 0.65, 0.0076, 0.0023, 0.092): all six "
+                   "lens-limited (not ok), u the model's own; the tool's own model: up to 9.75")
 def test_other_cameras_model_sweep(tmp_path):
     code, d, zs = _wrong_model_z(tmp_path, WRONG_MODEL_CASES)
     for z in zs:
@@ -411,10 +414,6 @@ def test_real_photographs_refused_or_flagged_in_one_line():
 
 # ---------------------------------------------------------------- (5) clipped frame -----------
 
-@pytest.mark.xfail(strict=True, reason="58 % of a 16-bit frame clipped at 65535 (a lamp "
-                   "brighter to one side): the mark is measured (ok true, -29.99319 deg, "
-                   "24.5\" off at +-13.1\", z 1.87) with 'defocus gradient' and 'an end under "
-                   "an obstruction' named, the clipping not")
 def test_clipped_background_is_named(tmp_path):
     img = render([Groove(320, 240, 30, 300, depth=0.3)], None, None, seed=3, bits=16,
                  full_well=60000).astype(float)
