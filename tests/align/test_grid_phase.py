@@ -6,6 +6,8 @@ touch, and that it only widens u."""
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 
@@ -56,3 +58,21 @@ def test_sharp_fraction_integrates_the_strip_exactly(angle):
     d = sx * n[0] + sy * n[1]   # sub-pixel's distance from the pixel centre along the normal
     want = [np.mean(np.abs(ei + d) <= 1.5) for ei in e]
     assert np.allclose(got, want, atol=5e-3)
+
+
+def test_a_session_camera_declared_blurred_after_its_pixels_carries_the_term(session21, tmp_path):
+    """``[cameras.A] blur_after_pixels = true`` in session.toml is ``--blur-after-pixels`` for
+    camera A's images: their near-axis marks carry ``grid_phase``, camera B's do not."""
+    from align.session import load_session, run_session
+
+    folder = tmp_path / "unit7"
+    shutil.copytree(session21, folder)
+    toml = folder / "session.toml"
+    toml.write_text(toml.read_text().replace("[cameras.A]\n", "[cameras.A]\nblur_after_pixels"
+                                             " = true\n", 1))
+    s = load_session(folder)
+    marks = run_session(s).marks
+    term = {cam: [r.u_terms.get(TERM, 0.0) for im, r in marks if s.views[im.view].camera == cam]
+            for cam in ("A", "B")}
+    assert term["A"] and max(term["A"]) > 0, term
+    assert term["B"] and max(term["B"]) == 0, term

@@ -9,6 +9,13 @@ does not pay the interpreter's start-up again), reading its JSON.
 Default run: 4 tests (two of bad inputs on the camera path; the other camera's model, a twin of
 the slow sweep; a clipped frame). The rest is ``-m slow``; the session check has no default
 twin (one session run costs ~10 s CPU).
+
+My timing check (issue 18's 640x480 <= 60 ms per image: 0.25 s CPU per image, a 1-pixel
+image's failed run subtracted as the start-up) is not a test here: a timed test measures the
+host, and the project times in ``benchmarks/`` (``benchmarks/marks.py --speed``). The lead
+re-measured it as the marginal cost of three more images in one ``align marks`` call
+(~50-77 ms per image): the rest was the first image's imports, which the 1-pixel run never
+reached.
 """
 
 from __future__ import annotations
@@ -233,10 +240,13 @@ def test_chessboard_lens_sweep_with_and_without_camera(tmp_path):
     folder = real_folder("opencv-chessboard")
     k, d, rms, n = calibrate_chessboard(folder)
     cam = tmp_path / "cam.json"
-    r = cli_sub("camera", *sorted(glob.glob(str(folder / "*.jpg"))), "--json", str(cam), "-q")
+    # --free-k3: my calibration frees k3 as OpenCV does by default; the tool's default leaves
+    # k3 out unless the views determine it (docs/camera.md), so compare like for like.
+    r = cli_sub("camera", *sorted(glob.glob(str(folder / "*.jpg"))), "--free-k3", "--json",
+                str(cam), "-q")
     assert r.returncode == 0, r.stderr
     tool = json.loads(cam.read_text())
-    # the tool's calibration and mine agree (same corners, same OpenCV solver)
+    # the tool's calibration and mine agree (same corners, same OpenCV solver, same model)
     assert np.allclose(tool["camera_matrix"], k, atol=0.05)
     files = []
     for i, (x, y, a, length) in enumerate(SWEEP):
@@ -408,28 +418,6 @@ def test_real_photographs_refused_or_flagged_in_one_line():
             assert m["error"] and "\n" not in m["error"] and Path(f).name in m["error"]
         if any(m.get("lens_limited") for m in d["marks"]):
             assert r.returncode == 2 and not d["ok"]
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 18's target 640x480 <= 60 ms CPU per image: "
-                   "0.25 s CPU per synthetic 640x480 image (lens declared free, start-up "
-                   "0.9 s subtracted); left01.jpg 3.7-9.2 s, building.jpg 5.5-14.7 s CPU")
-def test_speed_640x480(tmp_path):
-    files = [save(tmp_path / f"p{i}.png",
-                  render([Groove(320, 240 + 20 * i, 10 + 30 * i, 300)], None, None, seed=i))
-             for i in range(3)]
-    save(tmp_path / "one.png", np.array([[1]], np.uint8))
-
-    def cpu(*args):
-        t0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cli_sub("marks", *args, "-q")
-        t1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        return (t1.ru_utime + t1.ru_stime) - (t0.ru_utime + t0.ru_stime)
-
-    startup = cpu(str(tmp_path / "one.png"))
-    per = (cpu(*map(str, files), "--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0") - startup) / 3
-    print(f"640x480: {per:.3f} s CPU per image (start-up {startup:.2f} s)")
-    assert per <= 0.06
 
 
 # ---------------------------------------------------------------- (5) clipped frame -----------
