@@ -22,9 +22,9 @@ from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_
 
 def pp_cross_coupling(sol: LensSolution, design: _Design, scale: float) -> dict[str, float]:
     """The second-order term of an undetermined principal point with a k1 read from the lines
-    (applied, fitted free, or determined but not applied), as
-    signed components [rad] shared by the marks of one solve (merged into
-    :func:`angle_coupling`'s; keys ``lens_pp_cross.0``, ``.1``).
+    (applied, fitted free, or determined but not applied), as signed components [rad] shared
+    by the marks of one solve (merged into :func:`angle_coupling`'s; keys
+    ``lens_pp_cross.0``, ``.1``).
 
     Each angle's pp coupling is linear about the image centre; the lens's radial field about
     a principal point c [px] off it tilts a line of direction u (normal n) by 2 k1 (n.q)(u.q)
