@@ -351,10 +351,6 @@ DENSE = {"size": (640, 480), "n_lines": 19, "pitch": 24.0, "short_len": 70.0,
          "long_len": 110.0}
 
 
-@pytest.mark.xfail(strict=True, reason="a 640x480 ruling of 19 lines at 24 px (70/110 px "
-                   "long, every 5th long): 5 lines found (the 4 long ones and one short), "
-                   "family pitch 73.05 +- 4.06 px on steps 0,1,3,4,6, exit 0, ok true, nothing "
-                   "said of the 14 others")
 def test_dense_ruling_every_line_and_its_pitch(tmp_path):
     """Default twin of the slow dense-ruling sweep: seed 0."""
     code, d, fam, truth = _dense_family(tmp_path, 0, **DENSE)
@@ -363,9 +359,6 @@ def test_dense_ruling_every_line_and_its_pitch(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="seeds 0-3 of the dense ruling, all exit 0: 5 of 19 "
-                   "lines at pitch 73.05 +- 4.06 px (seeds 0, 2, 3), 3 of 19 at 120.00 +- 0.09 "
-                   "px (seed 1: the long lines only); truth 24 px")
 def test_dense_ruling_over_seeds(tmp_path):
     bad = []
     for seed in range(4):
@@ -378,10 +371,6 @@ def test_dense_ruling_over_seeds(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="a 1600x1200 ruling (23 lines, 70 px pitch) through "
-                   "the left chessboard lens scaled x2.5, lens undeclared: step 16 skipped "
-                   "where no line is missing, pitch 66.22 +- 0.48 px (z -7.8; seed 3); with "
-                   "its --camera: 70.000 +- 0.21 px, every step (exit 2 either way)")
 def test_ruled_scale_through_lens_steps_and_pitch(tmp_path):
     (kl, dl, _), _ = stereo_lenses()
     k = kl.copy()
