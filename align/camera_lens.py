@@ -23,6 +23,7 @@ from align.lens_terms import (
     lens_bow,
     lens_or_bends,
     lone_departures,
+    pp_cross_coupling,
 )
 from align.lens_terms import (
     undistorted as lens_undistorted,
@@ -168,7 +169,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     z = float(-special.ndtri(alpha / 2))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
-        coupling = tuple(angle_coupling(sol, d) for d in designs)
+        coupling = tuple({**angle_coupling(sol, d), **pp_cross_coupling(sol, d, R)}
+                         for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
         # A line no lens of the others explains: no bow of it is the lens's.
         bows = bow_bound(lines, sol.lam, bow_reach(sol, z), R)
