@@ -12,7 +12,7 @@ from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
 from imaging.band import band_indices, band_mask
-from imaging.oriented import _fit, _resid_jac, find_oriented
+from imaging.oriented import Wave, _fit, _resid_jac, find_oriented
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -112,6 +112,21 @@ def test_fit_jacobian_is_the_residual_derivative_and_finds_the_same_wave():
     assert np.abs(ab - c_ref[:2]).max() < 1e-9
     # And it is the wave that is there: k's u is ~6e-5 rad/px (1 % noise on 3 % over ~25k px).
     assert np.abs(k - k_true).max() < 3e-4
+
+
+def test_wave_pattern_is_the_plane_wave():
+    """The pattern divided out (by the angle-addition formulas) is a cos(k.r) + b sin(k.r)
+    at every pixel of a frame, to 1e-12 of its amplitude, for waves at any angle."""
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[:97, :131]
+    for _ in range(5):
+        k = rng.uniform(-0.8, 0.8, 2)
+        ab = rng.uniform(-0.1, 0.1, 2)
+        w = Wave(float(np.hypot(*ab)), 0.0, 1.0, 0.0, (float(k[0]), float(k[1])),
+                 (float(ab[0]), float(ab[1])), 1.0)
+        ph = k[0] * x + k[1] * y
+        assert np.abs(w.pattern((97, 131)) - (ab[0] * np.cos(ph) + ab[1] * np.sin(ph))
+                      ).max() <= 1e-12 * np.hypot(*ab)
 
 
 @pytest.mark.slow
