@@ -5,6 +5,7 @@ Public API::
     run_loop, Candidate, Term, StageFit, LoopReport   (align.loop: the shared residual loop)
     measure_file, measure_image, MarkResult           (scribe marks through the loop)
     measure_camera, LensRanges, solve_lens            (one lens per camera, docs/camera.md)
+    with_grid_phase                                   (images blurred after the pixels, declared)
     measure_log                                       (a goniometer counter log's face angles)
     calibrate                                         (the triad from its static poses)
     load_session, run_session                         (a session folder, every stage, fused)
@@ -24,6 +25,7 @@ _LAZY = {
     "MarkResult": "align.marks", "MarkStage": "align.mark_stage", "loop_mark": "align.marks",
     "measure_file": "align.marks", "measure_image": "align.marks",
     "measure_camera": "align.marks", "LensRanges": "align.lens", "solve_lens": "align.lens",
+    "with_grid_phase": "align.grid_phase",
     "measure_log": "align.gonio", "calibrate": "align.calibration",
     "load_session": "align.session", "run_session": "align.session",
 }

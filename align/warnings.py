@@ -68,6 +68,8 @@ INFORMATION = (
     # The stored image turned as its header says (as every viewer shows it). (A signed
     # image's offset stays a warning: that its zero means mid-scale is an assumption.)
     re.compile(r": orientation tag \d+ applied \([^)]*\)$"),
+    # The user declared the image blurred after its pixels (align/grid_phase.py): in u.
+    re.compile(r": blurred after the pixels \(declared\): .* carried in u as grid_phase$"),
 )
 """Marks' notes that are information, not warnings: the tool did what the data called for
 and u carries what is left, nothing for the user to act on and nothing less to be trusted.

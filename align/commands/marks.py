@@ -12,6 +12,7 @@ from align.commands.parents import examples
 
 
 def cmd_marks(args: argparse.Namespace) -> int:
+    from align.grid_phase import with_grid_phase
     from align.marks import measure_files
     from imaging import check_roi
 
@@ -25,6 +26,7 @@ def cmd_marks(args: argparse.Namespace) -> int:
     batch = measure_files(progress(args.images, "marks"), camera, alpha=args.alpha,
                           max_marks=args.max_marks, expect_one=args.one, roi=roi,
                           min_length_px=args.min_length, ranges=ranges)
+    batch = map(with_grid_phase, batch) if args.blur_after_pixels else batch  # declared
     results, failed, internal = _show_marks(batch, plot_dir)
     _write_marks(args, results, inputs, out)
     # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
@@ -153,6 +155,10 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
                    "image's smaller side)")
     m.add_argument("--one", action="store_true",
                    help="each image holds one mark: two competing marks are an error")
+    m.add_argument("--blur-after-pixels", action="store_true",
+                   help="the images were filtered on the pixel grid after capture (demosaiced, "
+                   "sharpened, resampled): near-axis marks carry the grid_phase term "
+                   "(docs/camera.md)")
     add_max_pixels(m)
     m.set_defaults(func=cmd_marks)
 

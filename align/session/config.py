@@ -72,6 +72,7 @@ class Camera:
     model: Path | None = None
     roll_rad: float = 0.0
     lens: LensRanges | None = None
+    blur_after_pixels: bool = False
 
 
 @dataclass(frozen=True)
@@ -282,7 +283,7 @@ KEYS = {
                     "k3_bound_ug_per_g3", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reverse_log", "steady_table", "columns", "time_unit"},
-    "cameras": {"model", "roll_arcsec",
+    "cameras": {"model", "roll_arcsec", "blur_after_pixels",
                 *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
@@ -463,10 +464,13 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                              "one of them")
         if lens.get("max_u_arcsec") == 0:
             raise InputError(f"{w} lens_max_u_arcsec = 0: must be > 0")
+        after = c.get("blur_after_pixels", False)
+        if not isinstance(after, bool):
+            raise InputError(f"{w} blur_after_pixels = {after!r}: true or false")
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
                                        -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC,
-                               LensRanges(**lens) if lens else None)
+                               LensRanges(**lens) if lens else None, after)
 
     views = {}
     for name, v in _table(d, "views", src + ": ").items():

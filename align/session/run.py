@@ -50,6 +50,7 @@ from align.fusion.observations import wrap_half
 from align.fusion.solve import NOMINAL_LIMIT_DEG
 from align.gonio import measure_log
 from align.gonio_run import GonioRun
+from align.grid_phase import with_grid_phase
 from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
@@ -350,6 +351,8 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
                                   ranges=cam_cfg.lens if cam_cfg is not None else None,
                                   label=cname, on_image=tick),
                    where=f"camera {cname}: ")
+        if got is not None and cam_cfg is not None and cam_cfg.blur_after_pixels:
+            got = [with_grid_phase(r) for r in got]  # declared: the grid's phase in u
         if got is not None:
             found_of.update(zip(idx, got, strict=True))
         done += len(idx)

@@ -35,12 +35,16 @@ LENS = ("# without a model, the lens's plausible ranges (Type B, carried in u; a
 """The lens keys of a camera without a model (:class:`align.lens.LensRanges`)."""
 
 
+AFTER = ("# blur_after_pixels = false       # true: images filtered on the pixel grid "
+         "(demosaiced, sharpened)\n")
+
+
 def _camera_block(name: str, k: int) -> str:
     if k >= len(LAYOUT):
         return (f"\n[cameras.{name}]\n# model = \"{name}.camera.json\"   # lens model from "
                 "'align camera' (default: none; then the ranges below)\n"
                 "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-                "(default 0)\n" + LENS +
+                "(default 0)\n" + AFTER + LENS +
                 f"# FILL IN its views and [[images]] as for the cameras above: [views.{name}] "
                 "camera, right, up\n")
     right, housing = LAYOUT[k]
@@ -51,7 +55,7 @@ def _camera_block(name: str, k: int) -> str:
            f"# model = \"{name}.camera.json\"   # lens model from 'align camera' (default: "
            "none; then the ranges below)\n"
            "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-           "(default 0)\n" + LENS)
+           "(default 0)\n" + AFTER + LENS)
     for view, r in ((name, right), (f"{name}r", rev)):
         out += (f"\n[views.{view}]\ncamera = \"{name}\"\nright = \"{r}\"      # platform axis "
                 "pointing right in the image (+X, -X, +Y, -Y, +Z, -Z)\n"

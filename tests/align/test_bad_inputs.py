@@ -523,6 +523,8 @@ KEY_FAULTS = [
      "", "reverse_log"),
     ("roll_huge", None, '\n[cameras.A]\nroll_arcsec = 1e308\n', "roll_arcsec"),
     ("roll_inf", None, '\n[cameras.A]\nroll_arcsec = inf\n', "roll_arcsec"),
+    ("blur_after_text", None, '\n[cameras.A]\nblur_after_pixels = "yes"\n',
+     "blur_after_pixels"),
     ("tilt_huge", ('static = "platform.csv"', 'static = "platform.csv"\n'
                    'table_tilt_arcsec = [1e308, 0.0]'), "", "table_tilt_arcsec"),
     ("table_deg_nan", ('L090 = { up = "+Z", table_deg = 90.0 }',
