@@ -345,8 +345,12 @@ def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tu
             last.clear()
             proj = _project(k, X, Y, z)
             J, r = _jacobian(proj, X, Y), proj[4]
-            R = linalg.cholesky(J.T @ J)  # upper
-            qtr = linalg.solve_triangular(R, J.T @ r, trans="T")
+            try:
+                R = linalg.cholesky(J.T @ J)  # upper
+                qtr = linalg.solve_triangular(R, J.T @ r, trans="T")
+            except linalg.LinAlgError:  # J rank-deficient (rare): its QR, which any J has
+                Q, R = np.linalg.qr(J)
+                qtr = Q.T @ r
             rest = np.sqrt(max(float(r @ r) - float(qtr @ qtr), 0.0))
             last[key] = (np.append(qtr, rest), np.vstack([R, np.zeros((1, 2))]))
         return last[key]
