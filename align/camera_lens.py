@@ -64,6 +64,24 @@ def camera_lens_vector(camera: CameraModel, shape: tuple[int, int]) -> np.ndarra
     return np.array([d[0] * a**2, d[1] * a**4, d[2] * a, d[3] * a, 0.0, 0.0, 0.0])
 
 
+def camera_lens_cov(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray | None:
+    """A calibration's joint covariance (``cov``, :data:`imaging.camera_cov.INTRINSICS`)
+    as the lens vector's (:data:`imaging.lens.PARAMS`, the units of :func:`camera_lens_u`):
+    J C Jᵀ; None for a file without one (before format 4). k3's r⁶ is booked with k2's r⁴
+    at the half-diagonal (the lens vector has no k3; k2 and k3 of one calibration are
+    strongly anticorrelated, and their sum is what bows a mark there)."""
+    if camera.cov is None:
+        return None
+    fx, fy = float(camera.camera_matrix[0, 0]), float(camera.camera_matrix[1, 1])
+    a = half_diagonal(shape) / fx
+    J = np.zeros((len(PARAMS), 9))
+    J[0, 4], J[1, 5], J[1, 8], J[2, 6], J[3, 7] = a**2, a**4, a**6, a, a
+    J[4, 0], J[4, 1] = -fy / fx**2, 1.0 / fx  # the aspect fy / fx
+    J[5, 2] = J[6, 3] = 1.0
+    C = J @ camera.cov @ J.T
+    return 0.5 * (C + C.T)
+
+
 CAMERA_MODEL = "camera model"
 """The lens record's ``source`` when a camera model (``--camera``, ``[cameras.X] model``) is
 the lens."""
@@ -156,7 +174,13 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         return CameraLens(sol.lam if np.any(sol.lam) else None, notes,
                           {"source": "marks", **sol.to_dict()}, max_u, coupling,
                           bow_px=bows)
-    lam_u = camera_lens_u(camera, shape)
+    lam_cov = camera_lens_cov(camera, shape)
+    # The marks are checked against the calibration's joint covariance where the file has
+    # one (k1, k2, k3 of one calibration strongly anticorrelated: their u's as if
+    # independent miss a departure along their well-determined combination).
+    lam_u = (camera_lens_u(camera, shape) if lam_cov is None
+             else np.sqrt(np.clip(np.diag(lam_cov), 0.0, None)))
+    lam_chk = lam_u if lam_cov is None else lam_cov
     zero = np.zeros_like(lam_u)
     notes = []
     if camera.cov is not None:
@@ -170,11 +194,11 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                      "camera format 4): their u's are added as if independent, which can misstate "
                      "an angle's u either way (0.3-3x on the real chessboard lens); re-run "
                      "`align camera` for the joint covariance")
-    p, dlam, designs = check_camera(lines, zero, lam_u, R, ranges, alpha)
+    p, dlam, designs = check_camera(lines, zero, lam_chk, R, ranges, alpha)
     unresolved = False
-    told = lens_or_bends(designs, lam_u, ranges, alpha) if p < alpha else None
+    told = lens_or_bends(designs, lam_chk, ranges, alpha) if p < alpha else None
     if told is None:
-        lone = (lone_departures(designs, lam_u, ranges, alpha,
+        lone = (lone_departures(designs, lam_chk, ranges, alpha,
                                 camera_lens_vector(camera, shape)) if p < alpha else ())
     else:
         lone = told.departing if told.verdict == "bends" else ()

@@ -25,6 +25,10 @@ TERM = "camera_model"
 ``camera_model.1``, ... on the covariance's principal directions, shared by every mark of
 the camera)."""
 
+K3_TERM = "camera_k3_left_out"
+"""A mark's term for the k3 its camera's calibration left out (the views did not determine
+it): the change of the angle along k3's profile over k3's range (:mod:`imaging.camera_k3`)."""
+
 
 def raw_pixels(camera: CameraModel, points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Points undistorted by ``camera`` (relative to the image centre, square pixels of the
@@ -90,9 +94,29 @@ def model_coupling(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
     the angle's u from the model, gᵀ C g, and their products between two marks the
     covariance the calibration puts between their angles."""
     g = angle_sensitivity(camera, points, sigma, chol, shape)
-    w, V = np.linalg.eigh(camera.cov)
+    C, out = camera.cov, {}
+    carried = left_out_k3(camera)
+    if carried is not None:
+        # k3 left out by the calibration (the views do not determine it): its range along
+        # its profile is in cov as s² w wᵀ; named on its own (shared by every mark of the
+        # camera like the rest), the rest on cov's principal directions.
+        w_k3, s_k3 = carried
+        C = C - s_k3**2 * np.outer(w_k3, w_k3)
+        out[K3_TERM] = float(g @ w_k3) * s_k3
+    w, V = np.linalg.eigh(C)
     comp = (g @ V) * np.sqrt(np.clip(w, 0.0, None))
-    return {f"{TERM}.{i}": float(v) for i, v in enumerate(comp) if v != 0.0}
+    out.update({f"{TERM}.{i}": float(v) for i, v in enumerate(comp) if v != 0.0})
+    return out
+
+
+def left_out_k3(camera: CameraModel) -> tuple[np.ndarray, float] | None:
+    """A left-out k3's term in ``camera.cov`` (:mod:`imaging.camera_k3`): its direction w
+    per :data:`INTRINSICS` and range s; None when k3 was fitted, fixed as known, or the file
+    predates format 5."""
+    c = camera.lens_choice or {}
+    if c.get("carried_k3") is None or camera.cov is None:
+        return None
+    return np.asarray(c["carried_direction"], float), float(c["carried_k3"])
 
 
 def independent_u(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
@@ -101,3 +125,36 @@ def independent_u(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
     added as if independent) [rad]: what the joint covariance replaces (for comparison)."""
     g = angle_sensitivity(camera, points, sigma, chol, shape)
     return float(np.sqrt(np.sum(g**2 * np.diag(camera.cov))))
+
+
+FIELD_RADII_PX = (100.0, 175.0, 250.0)
+"""Distances [px] from the image centre of the marks :func:`field_u` sums up."""
+FIELD_LENGTH_PX = 150.0
+"""Their length [px]."""
+
+
+def field_u(camera: CameraModel) -> dict | None:
+    """What the model's own u leaves the angle of a typical mark: 150 px marks 100-250 px
+    from the image centre (8 azimuths, radial and tangential), gᵀ C g each; their median
+    and largest [″] (None without a covariance). ``align camera`` states it, so a user
+    sees before measuring whether the calibration makes such marks lens-limited."""
+    if camera.cov is None:
+        return None
+    w, h = camera.image_size
+    t = np.linspace(-FIELD_LENGTH_PX / 2, FIELD_LENGTH_PX / 2, 76)
+    us = []
+    for r in FIELD_RADII_PX:
+        for phi in np.radians(np.arange(0.0, 360.0, 45.0)):
+            for a in (phi, phi + np.pi / 2):
+                q = r * np.array([np.cos(phi), np.sin(phi)]) + np.outer(
+                    t, [np.cos(a), np.sin(a)])
+                if np.any(np.abs(q) > np.array([w, h]) / 2 - 5):
+                    continue
+                g = angle_sensitivity(camera, q, np.ones(len(q)), None, (h, w))
+                us.append(float(np.sqrt(max(g @ camera.cov @ g, 0.0))))
+    if not us:
+        return None
+    arcsec = np.degrees(np.array(us)) * 3600
+    return {"median_u_arcsec": float(np.median(arcsec)), "max_u_arcsec": float(arcsec.max()),
+            "radii_px": [FIELD_RADII_PX[0], FIELD_RADII_PX[-1]], "length_px": FIELD_LENGTH_PX,
+            "marks": len(us)}

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from align.camera_model_u import field_u
 from align.contract import document
+from align.lens_design import DEFAULT_RANGES
 from align.warnings import camera_warnings, gonio_warnings, mark_warnings
 
 Inputs = Iterable[str | Path]
@@ -52,7 +54,9 @@ def camera_document(model, settings: dict, inputs: Sequence[str | Path],
     board found) apart from the ones used (the envelope's ``inputs``)."""
     skipped = dict(skipped or {})
     used = [p for p in inputs if str(p) not in skipped]
-    body = {"ok": True, "warnings": camera_warnings(skipped),
+    field = field_u(model)
+    body = {"ok": True, "warnings": camera_warnings(skipped, field,
+                                                    DEFAULT_RANGES.max_u_arcsec),
             "skipped": [{"file": str(k), "reason": v} for k, v in skipped.items()],
-            **model.to_dict()}
+            **model.to_dict(), "field_u": field}
     return document("camera", body, settings, used)

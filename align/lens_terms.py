@@ -131,12 +131,23 @@ def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarra
             for j, p in enumerate(PARAMS) if lam_u[j] > 0}
 
 
+def lens_cov(lam_u: np.ndarray) -> np.ndarray:
+    """The calibrated lens's covariance in the lens vector (per PARAMS, in their units):
+    ``lam_u`` as given when it is one ((P, P): a camera model's joint covariance,
+    :func:`align.camera_lens.camera_lens_cov`), else its standard uncertainties taken as
+    independent (a camera file before format 4)."""
+    a = np.asarray(lam_u, float)
+    return a if a.ndim == 2 else np.diag(a**2)
+
+
 def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarray,
                  scale: float, ranges: LensRanges = DEFAULT_RANGES, alpha: float = 1e-3
                  ) -> tuple[float, np.ndarray, list[_Design]]:
     """Whether the marks agree with a calibrated lens: the determined correction to the
     camera's lens from the lines, and its chi2 probability against the lines' u plus the
-    camera's u. Returns (p-value, the correction dlam, each mark's design at the camera)."""
+    camera's u (``lam_u``: standard uncertainties per PARAMS, or the joint covariance,
+    :func:`lens_cov`). Returns (p-value, the correction dlam, each mark's design at the
+    camera)."""
     designs = [_design(ln, lam, scale) for ln in lines]
     p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
     return p, dlam, designs
@@ -163,7 +174,7 @@ def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: Len
         return 1.0, dlam
     D = np.ix_(det, det)
     dlam[det] = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
     return float(special.chdtrc(len(det), stat)), dlam
 
@@ -195,7 +206,7 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
         return True
     D = np.ix_(det, det)
     dlam = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + np.diag(lam_u[det] ** 2)
+    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
     W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
     bound = np.maximum(rng, np.abs(base))[det]
     fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))
@@ -305,7 +316,7 @@ def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
     # N(|g|, 1 + the change's estimation variance along g) if the lens changed.
     t = -sum(gi @ d.z for gi, d in zip(g, test, strict=True)) / sep
     h = sum(d.G.T @ gi for gi, d in zip(g, test, strict=True)) / sep
-    return _Prediction(sep, float(t), 1.0 + float(np.sum((h * lam_u) ** 2)),
+    return _Prediction(sep, float(t), 1.0 + float(h @ lens_cov(lam_u) @ h),
                        1.0 + float(h[det] @ C @ h[det]), beyond)
 
 
@@ -379,7 +390,8 @@ def _departs(d: _Design, lam_u: np.ndarray, ranges: LensRanges, alpha: float) ->
     lens parameter on its own still shows) is beyond its noise and the calibration's u."""
     if _camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
         return True
-    var = 1.0 + float(np.sum((d.w @ d.G * lam_u) ** 2))
+    wG = d.w @ d.G
+    var = 1.0 + float(wG @ lens_cov(lam_u) @ wG)
     return abs(d.bow_z) > float(-special.ndtri(alpha / 2)) * np.sqrt(var)
 
 

@@ -68,8 +68,9 @@ def mark_lines(r) -> list[str]:
     return lines
 
 
-def camera_lines(model) -> list[str]:
-    """A chessboard camera calibration: views, reprojection RMS, intrinsics, distortion."""
+def camera_lines(model, field: dict | None = None) -> list[str]:
+    """A chessboard camera calibration: views, reprojection RMS, intrinsics, distortion, the
+    lens model chosen, and (``field``) what its own u leaves a typical mark's angle."""
     K, D, u = model.camera_matrix, model.dist_coeffs, model.u or {}
     lines = [f"{model.views} views, RMS reprojection {model.rms_px:.3f} px"]
     lines += [f"    {name}: RMS {rms:.3f} px"
@@ -78,9 +79,19 @@ def camera_lines(model) -> list[str]:
                     strict=True))
     lines.append(" ".join(f"{k} {v:.2f} ± {u.get(k, np.nan):.2f}" for k, v in vals.items())
                  + " px")
+    choice = model.lens_choice or {}
+    carried = choice.get("carried_k3")
     lines.append("distortion " + " ".join(
-        f"{k} {v:+.5f} ± {u.get(k, np.nan):.5f}"
+        f"{k} left out (± {carried:.5f} carried)" if k == "k3" and carried is not None
+        else f"{k} {v:+.5f} ± {u.get(k, np.nan):.5f}"
         for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5], strict=False)))
+    if choice.get("why"):
+        lines.append(f"k3 {choice['k3']}: {choice['why']}")
+    if field:
+        lines.append(f"the model's own u in a {field['length_px']:.0f} px mark "
+                     f"{field['radii_px'][0]:.0f}-{field['radii_px'][1]:.0f} px from the "
+                     f"centre: {field['median_u_arcsec']:.0f}″ median, up to "
+                     f"{field['max_u_arcsec']:.0f}″")
     return lines
 
 

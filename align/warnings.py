@@ -145,10 +145,22 @@ def family_warnings(image: str, fam) -> list[str]:
     return out
 
 
-def camera_warnings(skipped: Mapping[str, str]) -> list[str]:
-    """A chessboard calibration's warnings: each photograph left out, and why."""
-    return [f"{name}: skipped, not used in the calibration: {why}"
-            for name, why in skipped.items()]
+def camera_warnings(skipped: Mapping[str, str], field: Mapping | None = None,
+                    bound_arcsec: float = float("inf")) -> list[str]:
+    """A chessboard calibration's warnings: each photograph left out, and why; and when the
+    model's own u leaves typical marks (``field``: :func:`align.camera_model_u.field_u`)
+    beyond the lens bound [″], that they will be lens-limited."""
+    out = [f"{name}: skipped, not used in the calibration: {why}"
+           for name, why in skipped.items()]
+    if field and field["median_u_arcsec"] > bound_arcsec:
+        out.append(f"camera: a {field['length_px']:.0f} px mark {field['radii_px'][0]:.0f}-"
+                   f"{field['radii_px'][1]:.0f} px from the centre carries "
+                   f"{field['median_u_arcsec']:.0f}″ (median; up to "
+                   f"{field['max_u_arcsec']:.0f}″) from this calibration alone, beyond the "
+                   f"lens bound {bound_arcsec:g}″: such marks will be lens-limited; more "
+                   "chessboard views spread over the frame lower it (about as "
+                   "1/sqrt(views))")
+    return out
 
 
 def calibration_warnings(cal, poses) -> list[str]:

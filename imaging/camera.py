@@ -11,13 +11,16 @@ noise taken as white and the model as exact) and the delete-one-view jackknife
 by 1.6-3.3x more than the formal u says (the corners' errors are correlated within a view and
 the lens is not exactly OpenCV's five-coefficient model), and the marks measured through the
 model inherit that error.
+
+k3 is fitted only when the views determine it (:mod:`imaging.camera_k3`): else the model is
+the k3-free fit with k3's range carried in ``cov`` (``lens_choice`` says which and why).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -26,6 +29,7 @@ import numpy as np
 from axisbase.errors import InputError
 from axisbase.provenance import check_format
 from imaging.camera_cov import INTRINSICS, dominating, formal_cov, jackknife_cov
+from imaging.camera_k3 import choose_k3, left_out_term
 from imaging.errors import ImageInputError
 
 DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -114,6 +118,12 @@ class CameraModel:
     cov_formal, cov_jackknife : numpy.ndarray or None
         (9, 9) [px², px, 1 as ``cov``]: the two covariances ``cov`` dominates (the
         jackknife's None below :data:`JACKKNIFE_MIN_VIEWS` views).
+    lens_choice : dict or None
+        Whether k3 was fitted or left out and why (:func:`imaging.camera_k3.choose_k3`;
+        k3, its u and range dimensionless, RMS [px]); a
+        left-out k3's term (``k3_left_out``: ``carried_direction`` w per
+        :data:`INTRINSICS`, ``carried_k3`` s) is already in ``cov`` (+ s² w wᵀ). None in
+        files written before format version 5 (k3 then as the file has it).
     """
 
     camera_matrix: np.ndarray
@@ -128,6 +138,7 @@ class CameraModel:
     cov: np.ndarray | None = None
     cov_formal: np.ndarray | None = None
     cov_jackknife: np.ndarray | None = None
+    lens_choice: dict | None = None
 
     @property
     def focal_px(self) -> float:
@@ -145,6 +156,7 @@ class CameraModel:
             **{k: (None if v is None else v.tolist()) for k, v in (
                 ("cov", self.cov), ("cov_formal", self.cov_formal),
                 ("cov_jackknife", self.cov_jackknife))},
+            "lens_choice": None if self.lens_choice is None else dict(self.lens_choice),
         }
 
     @classmethod
@@ -180,10 +192,23 @@ class CameraModel:
                 raise ValueError(f"'{key}' is not a covariance (symmetric, diagonal >= 0)")
             return c
 
+        def choice() -> dict | None:
+            c = d.get("lens_choice")
+            if c is None:
+                return None
+            if not isinstance(c, Mapping):
+                raise ValueError("'lens_choice' is not a table")
+            out = dict(c)
+            if out.get("carried_k3") is not None:
+                out["carried_k3"] = num(out["carried_k3"], "lens_choice.carried_k3")
+                w = _matrix(c, "carried_direction", (len(INTRINSICS),))
+                out["carried_direction"] = w.tolist()
+            return out
+
         K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
                    table("per_view_rms_px"), table("u_formal"), table("u_jackknife"),
-                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"))
+                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice())
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
@@ -201,7 +226,7 @@ class CameraModel:
                                   "camera_matrix, dist_coeffs, image_size as written by "
                                   "'align camera')") from None
         try:  # version 1: files written before format versions existed
-            check_format(d, "axis-align/camera", (1, 2, 3, 4), str(p))
+            check_format(d, "axis-align/camera", (1, 2, 3, 4, 5), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
         return model
@@ -299,14 +324,17 @@ def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarra
 
 
 def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int],
-                         square: float = 1.0, fix_k3: bool = False, fix_aspect: bool = False
-                         ) -> tuple[CameraModel, dict[str, str]]:
+                         square: float = 1.0, fix_k3: bool = False, fix_aspect: bool = False,
+                         k3: str = "auto") -> tuple[CameraModel, dict[str, str]]:
     """Calibrate intrinsics + 5-coefficient distortion from chessboard views.
 
     OpenCV's extended calibration: also the standard uncertainty of each intrinsic parameter
     (``u``; 0 for a fixed one: the larger of OpenCV's formal u and, from
     :data:`JACKKNIFE_MIN_VIEWS` views, the delete-one-view jackknife) and each view's RMS
-    reprojection error. ``fix_k3`` keeps k3 at 0, ``fix_aspect`` keeps fx / fy at 1.
+    reprojection error. ``k3``: ``auto`` fits k3 only when the views determine it, else
+    leaves it out and carries its range in ``cov`` (:mod:`imaging.camera_k3`); ``free``
+    always fits it (OpenCV's default), ``fixed`` (or ``fix_k3``) keeps it at 0 as known.
+    ``fix_aspect`` keeps fx / fy at 1.
 
     Parameters
     ----------
@@ -317,7 +345,9 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     square : float
         Side of a square (any unit; the intrinsics do not depend on it).
     fix_k3, fix_aspect : bool
-        Keep k3 at 0; keep fx / fy at 1.
+        Keep k3 at 0 (as ``k3="fixed"``); keep fx / fy at 1.
+    k3 : str
+        ``auto``, ``free`` or ``fixed`` (:data:`K3_MODES`).
 
     Returns
     -------
@@ -346,14 +376,43 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
         raise ImageInputError(f"only {len(objpts)} usable chessboard views; need at least 3 "
                               f"({'; '.join(f'{k}: {v}' for k, v in failed.items())})")
     names = [n for n in images if n not in failed]
-    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect), failed
+    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect, k3), failed
+
+
+K3_MODES = ("auto", "free", "fixed")
+"""How ``align camera`` treats k3 (:func:`calibrate_chessboard`)."""
 
 
 def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
-                      fix_k3: bool = False, fix_aspect: bool = False) -> CameraModel:
+                      fix_k3: bool = False, fix_aspect: bool = False, k3: str = "auto"
+                      ) -> CameraModel:
     """:func:`calibrate_chessboard` from the boards' corners found: ``objpts`` per view the
     board's corners (N, 3) [board units] (float32), ``imgpts`` their image (N, 1, 2) [px]
     (float32), ``size`` (width, height) [px], ``names`` one per view."""
+    mode = "fixed" if fix_k3 else k3
+    if mode not in K3_MODES:
+        raise ValueError(f"k3 mode {mode!r} is not one of {K3_MODES}")
+    if mode != "auto":
+        m = _calibrate(objpts, imgpts, size, names, mode == "fixed", fix_aspect)
+        return replace(m, lens_choice={"k3": "fitted" if mode == "free" else "left out",
+                                       "why": f"k3 {mode} as asked"})
+    free = _calibrate(objpts, imgpts, size, names, False, fix_aspect)
+    fixed = _calibrate(objpts, imgpts, size, names, True, fix_aspect)
+    k3_hat = float(np.ravel(free.dist_coeffs)[4])
+    u_k3 = float((free.u or {}).get("k3", 0.0))
+    points = sum(len(p) for p in imgpts)
+    params = 9 - int(fix_aspect) + 6 * len(objpts)
+    choice = choose_k3(free.rms_px, fixed.rms_px, points, params, k3_hat, u_k3)
+    if choice["k3"] == "fitted":
+        return replace(free, lens_choice=choice)
+    w, s_k3 = left_out_term(free.cov, k3_hat, u_k3)
+    choice.update(carried_k3=s_k3, carried_direction=w.tolist())
+    return replace(fixed, cov=fixed.cov + s_k3**2 * np.outer(w, w), lens_choice=choice)
+
+
+def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+               fix_k3: bool, fix_aspect: bool) -> CameraModel:
+    """One OpenCV calibration with its u's and joint covariances (k3 free or at 0)."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None

@@ -105,10 +105,11 @@ def cmd_camera(args: argparse.Namespace) -> int:
     out = plan(args, args.images).add("--json", args.json, stdout_ok=True)
     imgs, unread = _read_boards(args.images)
     model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
-                                         fix_k3=args.fix_k3, fix_aspect=args.fix_aspect)
+                                         fix_aspect=args.fix_aspect, k3="fixed" if args.fix_k3
+                                         else "free" if args.free_k3 else "auto")
     doc = camera_document(model, settings(args), args.images, {**unread, **failed})
     warn(doc["warnings"])
-    say(camera_lines(model))
+    say(camera_lines(model, doc["field_u"]))
     if out is not None:
         wrote(write_json(out, doc, args.force))
     return 0
@@ -170,7 +171,11 @@ def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS")
     c.add_argument("--square", type=POSITIVE, default=1.0, help="square size (any unit)")
     c.add_argument("--json", help="write the camera model to this new JSON file ('-': stdout)")
-    c.add_argument("--fix-k3", action="store_true", help="keep k3 at 0")
+    k3 = c.add_mutually_exclusive_group()
+    k3.add_argument("--fix-k3", action="store_true", help="keep k3 at 0 as known (default: "
+                    "fit k3 only when the views determine it, else leave it out and carry its "
+                    "range in the covariance; docs/camera.md)")
+    k3.add_argument("--free-k3", action="store_true", help="always fit k3 (OpenCV's default)")
     c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
     add_max_pixels(c)
     c.set_defaults(func=cmd_camera)

@@ -47,9 +47,10 @@ def render_board(rays: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
 
 
 def board_photos(rng: np.random.Generator, n: int, rays: np.ndarray, K: np.ndarray,
-                 D: np.ndarray, size: tuple[int, int] = (640, 480)) -> dict[str, np.ndarray]:
+                 D: np.ndarray, size: tuple[int, int] = (640, 480), noise_dn: float = 2.0
+                 ) -> dict[str, np.ndarray]:
     """``n`` photographs of the board from random poses over the frame (every corner at
-    least 25 px inside it), by name."""
+    least 25 px inside it), by name; ``noise_dn``: the sensor's white noise [DN]."""
     obj = np.zeros((PATTERN[0] * PATTERN[1], 3))
     obj[:, :2] = np.mgrid[0:PATTERN[0], 0:PATTERN[1]].T.reshape(-1, 2)
     mid = np.array([(PATTERN[0] - 1) / 2, (PATTERN[1] - 1) / 2, 0.0])
@@ -63,5 +64,5 @@ def board_photos(rng: np.random.Generator, n: int, rays: np.ndarray, K: np.ndarr
         p = p.reshape(-1, 2)
         if p.min() < 25 or p[:, 0].max() > size[0] - 25 or p[:, 1].max() > size[1] - 25:
             continue
-        out[f"board{len(out)}.png"] = render_board(rays, rvec, tvec, rng)
+        out[f"board{len(out)}.png"] = render_board(rays, rvec, tvec, rng, noise_dn)
     return out

@@ -240,10 +240,13 @@ def test_chessboard_lens_sweep_with_and_without_camera(tmp_path):
     folder = real_folder("opencv-chessboard")
     k, d, rms, n = calibrate_chessboard(folder)
     cam = tmp_path / "cam.json"
-    r = cli_sub("camera", *sorted(glob.glob(str(folder / "*.jpg"))), "--json", str(cam), "-q")
+    # --free-k3: my calibration frees k3 as OpenCV does by default; the tool's default leaves
+    # k3 out unless the views determine it (docs/camera.md), so compare like for like.
+    r = cli_sub("camera", *sorted(glob.glob(str(folder / "*.jpg"))), "--free-k3", "--json",
+                str(cam), "-q")
     assert r.returncode == 0, r.stderr
     tool = json.loads(cam.read_text())
-    # the tool's calibration and mine agree (same corners, same OpenCV solver)
+    # the tool's calibration and mine agree (same corners, same OpenCV solver, same model)
     assert np.allclose(tool["camera_matrix"], k, atol=0.05)
     files = []
     for i, (x, y, a, length) in enumerate(SWEEP):
