@@ -14,12 +14,16 @@ Fisher information F of the lens from the lines. A parameter is *determined* whe
 marginal u from F is small enough that the largest plausible value (its Type B range) would
 stand out of it at the loop's level (z u < range); only determined parameters are fitted,
 jointly (Gauss-Newton from zero). A fitted value is applied only when its sign is determined
-(|value| > z u) and it lies within the plausible range; the rest are set to zero.
+(|value| > z u) and it lies within the plausible range; the rest are set to zero. A k1
+whose sign stays open may instead be fitted free with the lines (the angle marginalised over
+it, not applied as the lens), when that gives the angles the smaller u
+(:func:`_marginalise`).
 
 The angle of each mark then carries, as named terms:
 
-* ``lens_fit``: the fitted parameters' covariance propagated into the angle (Type A), with
-  how far the undetermined principal point (uniform over its range) moves them;
+* ``lens_fit``: the fitted parameters' covariance (applied or fitted free) propagated into
+  the angle (Type A), with how far the undetermined principal point (uniform over its range)
+  moves them;
 * ``lens_<p>_small``: a determined parameter not applied (its sign undetermined): its
   estimate and u as an rms (Type A);
 * ``lens_<p>_range``: an undetermined parameter: uniform over its plausible range, range/sqrt 3,
@@ -41,8 +45,8 @@ mark's design are :mod:`align.lens_design`'s; the terms above are :mod:`align.le
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
@@ -55,82 +59,12 @@ from align.lens_design import (
     _Design,
     _DesignCache,
 )
+from align.lens_pp import _pp_probe_s, _pp_probes, _pp_spread
+from align.lens_solution import LensSolution, lens_angle_var
 from imaging.lens import PARAMS
 
-__all__ = ["LensFolds", "LensRanges", "LensSolution", "LineGeometry", "solve_lens"]
-
-
-@dataclass(frozen=True)
-class LensSolution:
-    """The lens of one camera from its marks (see the module docstring).
-
-    Attributes
-    ----------
-    lam : numpy.ndarray
-        The applied lens vector over ``PARAMS`` (zeros where not applied) — dimensionless (pp
-        in [px]).
-    determined, applied : tuple of bool
-        Per parameter; unit —.
-    u_lines : numpy.ndarray
-        Each parameter's marginal u from the lines (inf: not determined) — dimensionless (pp
-        in [px]).
-    estimate : numpy.ndarray
-        The fitted value of each determined parameter (nan otherwise) — dimensionless (pp in
-        [px]).
-    cov_applied : numpy.ndarray
-        Covariance of the applied parameters [products of their units].
-    ranges : LensRanges
-        The plausible ranges used; unit —.
-    n_lines : int
-        Marks that entered the fit — dimensionless.
-    chi2_dof : float
-        χ²/dof of the lines' fit — dimensionless.
-    notes : tuple of str
-        What the reader must know (one line each); unit —.
-    info : numpy.ndarray
-        The lines' information matrix over ``PARAMS`` [1/products of the units].
-    confirmed : bool
-        The lines confirm the lens applied; unit —.
-    bow_chi2 : float
-        χ² of the marks' bows about the lens — dimensionless.
-    bow_dof : int
-        Its degrees of freedom — dimensionless.
-    bent_lines : tuple of int
-        The line whose bow no lens the other lines agree on explains (left out of the fit,
-        a bent mark) — dimensionless.
-    """
-
-    lam: np.ndarray
-    determined: tuple[bool, ...]
-    applied: tuple[bool, ...]
-    u_lines: np.ndarray
-    estimate: np.ndarray
-    cov_applied: np.ndarray
-    ranges: LensRanges
-    n_lines: int
-    chi2_dof: float
-    notes: tuple[str, ...] = ()
-    info: np.ndarray = field(default_factory=lambda: np.zeros((len(PARAMS), len(PARAMS))))
-    confirmed: bool = True
-    bow_chi2: float = 0.0
-    bow_dof: int = 0
-    bent_lines: tuple[int, ...] = ()
-
-    def to_dict(self) -> dict:
-        def num(v: float) -> float | None:
-            return float(v) if np.isfinite(v) else None
-
-        return {"model": "brown-conrady at the half-diagonal", "lines": self.n_lines,
-                "confirmed_by_other_lines": self.confirmed,
-                "bow_chi2": float(self.bow_chi2), "bow_dof": self.bow_dof,
-                "bent_lines": list(self.bent_lines),
-                "chi2_dof": num(self.chi2_dof), "ranges": self.ranges.to_dict(),
-                "parameters": {p: {"determined": self.determined[j],
-                                   "applied": self.applied[j], "value": float(self.lam[j]),
-                                   "estimate": num(self.estimate[j]),
-                                   "u_from_lines": num(self.u_lines[j])}
-                               for j, p in enumerate(PARAMS)},
-                "notes": list(self.notes)}
+__all__ = ["LensFolds", "LensRanges", "LensSolution", "LineGeometry", "lens_angle_var",
+           "solve_lens"]
 
 
 def _determined(F: np.ndarray, rng: np.ndarray, z: float) -> list[int]:
@@ -184,28 +118,30 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     lines' bows (:func:`_plausible`) but one fits all the others, the line left out is a
     bent mark: the lens comes from the others (its own loop then names the bend), rather
     than one bent mark dragging the camera's lens beyond any lens and every angle with it.
+    There a parameter whose sign the other lines leave open stays carried in u (no free fit:
+    the bent line's own angle is read by its loop).
     """
-    sol, designs = _solve(lines, scale, ranges, alpha, iters)
+    sol, designs, free_fit = _solve(lines, scale, ranges, alpha, iters)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
-        return sol, designs
+        return free_fit()
     best: tuple[float, int, LensSolution] | None = None
     for k in range(len(lines)):
         rest = [ln for i, ln in enumerate(lines) if i != k]
         try:
-            sk, dk = _solve(rest, scale, ranges, alpha, iters)
+            sk, dk, _ = _solve(rest, scale, ranges, alpha, iters)
         except LensFolds:
             continue
         p = _plausible(sk, dk, alpha)
         if p >= alpha and (best is None or p > best[0]):
             best = (p, k, sk)
     if best is None:
-        return sol, designs
+        return free_fit()
     _, k, sk = best
     cache = _DesignCache(lines, scale)
     try:
         ds = cache.all(sk.lam)
     except LensFolds:
-        return sol, designs
+        return free_fit()
     det = [j for j in range(len(PARAMS)) if sk.determined[j]]
     probes = _pp_probe_s(cache, sk.lam, det, ranges.vector())
     note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
@@ -226,8 +162,13 @@ def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> f
 
 
 def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alpha: float,
-           iters: int) -> tuple[LensSolution, list[_Design]]:
-    """:func:`solve_lens` over all of ``lines``."""
+           iters: int
+           ) -> tuple[LensSolution, list[_Design],
+                      Callable[[], tuple[LensSolution, list[_Design]]]]:
+    """:func:`solve_lens` over all of ``lines``: the solution with every parameter whose sign
+    the lines leave open carried in u, its designs, and the call that returns the solution
+    the angles are read under (:func:`_marginalise`: made only for the solution given, not
+    for the lines' leave-one-out tests)."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
@@ -292,19 +233,9 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     if applied:  # the principal point's range (uniform, Type B) moves the estimate
         cov = cov + np.diag(spread_u[applied] ** 2)
         u_lines = np.where(np.isfinite(u_lines), np.hypot(u_lines, spread_u), u_lines)
-    s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
     n_pts = sum(len(ln.points) for ln in lines)
     c2 = float(sum(d.z @ d.z for d in designs))
     dof = max(n_pts - 2 * len(lines) - len(applied), 1)
-    for j in det:
-        if j not in applied:
-            e = est[j]
-            why = (f"beyond any lens (|{PARAMS[j]}| <= {bound[j]:.3g}"
-                   + (", the principal point's range included" if bound[j] > rng[j] else "")
-                   + "): not a lens"
-                   if np.isfinite(e) and abs(e) > bound[j] else "sign not determined")
-            notes.append(f"lens {PARAMS[j]} = {e:.3g} ± {u_lines[j]:.2g} from the lines: {why}; "
-                         "not applied, carried in u")
     # A bow is a lens only if the camera's other lines agree: the lines' bows left after the
     # lens, and after what the undetermined parameters can make within their ranges, must
     # be noise (chi2 over lines - fitted parameters). With no line to spare (one mark, or as
@@ -326,15 +257,105 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
             notes.append(f"the lines' bows disagree with one lens (chi2 {bow_chi2:.1f} on "
                          f"{bow_dof} dof; mark {worst} worst, {bz[worst]:+.1f} u): a bent mark; "
                          "u covers the lens and no lens")
-    und = [PARAMS[j] for j in range(P) if j not in det and rng[j] > 0]
-    if und:
-        notes.append(f"lens {', '.join(und)} not determined by these {len(lines)} line(s): "
-                     "carried in u over their plausible range")
     sol = LensSolution(lam_out, tuple(j in det for j in range(P)),
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
                        bow_dof)
-    return sol, [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
+
+    def free_fit() -> tuple[LensSolution, list[_Design]]:
+        # (The sensitivities' spread over the principal point's range only for the solution
+        # given: the leave-one-out tests of solve_lens read the bows alone.)
+        s_pp_var = _pp_probe_s(cache, lam_out, det, rng)
+        ds = [replace(d, s_pp_var=v) for d, v in zip(designs, s_pp_var, strict=True)]
+        s, ds = _marginalise(cache, sol, ds, iters)
+        return replace(s, notes=s.notes + _carried_notes(s, bound)), ds
+
+    return replace(sol, notes=sol.notes + _carried_notes(sol, bound)), designs, free_fit
+
+
+def _carried_notes(sol: LensSolution, bound: np.ndarray) -> tuple[str, ...]:
+    """The notes on the parameters the angles carry in u rather than apply: determined but
+    not applied (sign open, or beyond any lens: ``bound``), fitted free, not determined."""
+    rng = sol.ranges.vector()
+    out = []
+    for j, p in enumerate(PARAMS):
+        e, u = sol.estimate[j], sol.u_lines[j]
+        if sol.free[j]:
+            out.append(f"lens {p} fitted free with each angle ({sol.lam[j]:.3g} ± {u:.2g} "
+                       "from the lines, its sign not determined: not applied as the lens): "
+                       "the angle marginalised over it (u from the joint covariance, "
+                       "lens_fit), smaller than carrying it over its range")
+        elif sol.determined[j] and not sol.applied[j]:
+            why = (f"beyond any lens (|{p}| <= {bound[j]:.3g}"
+                   + (", the principal point's range included" if bound[j] > rng[j] else "")
+                   + "): not a lens"
+                   if np.isfinite(e) and abs(e) > bound[j] else "sign not determined")
+            out.append(f"lens {p} = {e:.3g} ± {u:.2g} from the lines: {why}; not applied, "
+                       "carried in u")
+    und = [p for j, p in enumerate(PARAMS)
+           if not sol.determined[j] and not sol.free[j] and rng[j] > 0]
+    if und:
+        out.append(f"lens {', '.join(und)} not determined by these {sol.n_lines} line(s): "
+                   "carried in u over their plausible range")
+    return tuple(out)
+
+
+FREE_CANDIDATES = (0,)
+"""The parameters (indices into PARAMS) the solver may fit free when their sign is open: k1,
+the one whose bow a single mark can see (k2 at the half-diagonal is the same bow at one
+mark's scale, p and aspect bow a line far less; the principal point has its own probes)."""
+
+
+def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design], iters: int
+                 ) -> tuple[LensSolution, list[_Design]]:
+    """The estimator of the angles with the smaller u: a parameter whose sign the lines do
+    not determine (:data:`FREE_CANDIDATES`) carried over its range (or as its estimate +- u),
+    as ``sol`` has it, or fitted free with the lines, the angle read at its estimate (clipped
+    to the plausible range: the lens is within it) with u from the joint covariance (the
+    angle marginalised over it: Type A, through the angle's sensitivity to it). Which one
+    does not depend on the data's values, only on the lines' geometry and noise (their
+    information matrix), so the choice biases nothing: min u, per mark for one mark, by the
+    marks' summed variance for a lens shared by several (one lens vector per camera). The
+    free fit is no claim about the lens: its sign is not determined, so it is not reported
+    as applied (``free``), and the parameters applied before keep their signs or the free
+    fit is not taken."""
+    rng = sol.ranges.vector()
+    cand = [j for j in FREE_CANDIDATES if not sol.applied[j] and rng[j] > 0]
+    if not cand:
+        return sol, designs
+    P = len(PARAMS)
+    A = [j for j in range(P) if sol.applied[j]]
+    A2 = sorted(A + cand)
+    det = [j for j in range(P) if sol.determined[j]]
+    if not _conditioned(sol.info, A2, rng):
+        return sol, designs  # the lines see no bow of it at all: nothing to fit it from
+    lam = _gauss_newton(cache, A2, rng, max(iters, 8), start=sol.lam)
+    lam[cand] = np.clip(lam[cand], -rng[cand], rng[cand])
+    if np.any(np.sign(lam[A]) != np.sign(sol.lam[A])):
+        return sol, designs
+    try:
+        ds = cache.all(lam)
+        spread_u = _pp_spread(cache, lam, A2, det, rng)[1]
+    except LensFolds:
+        return sol, designs
+    if not np.all(np.isfinite(spread_u[A2])):
+        return sol, designs
+    F = sum(d.G.T @ d.G for d in ds)
+    if not _conditioned(F, A2, rng):
+        return sol, designs
+    cov = np.linalg.inv(F[np.ix_(A2, A2)]) + np.diag(spread_u[A2] ** 2)
+    u_lines = sol.u_lines.copy()
+    u_lines[cand] = np.sqrt(np.diag(cov))[[A2.index(j) for j in cand]]
+    free = tuple(j in cand for j in range(P))
+    # The lens-or-bend reading is of a lens claimed (its sign determined): it stays the
+    # applied parameters' (none: confirmed, nothing claimed).
+    alt = replace(sol, lam=lam, applied=tuple(j in A2 for j in range(P)), u_lines=u_lines,
+                  cov_applied=cov, info=F, free=free, confirmed=sol.confirmed or not A)
+    ds = [replace(d, s_pp_var=v) for d, v in zip(ds, _pp_probe_s(cache, lam, det, rng),
+                                                  strict=True)]
+    v_carry = sum(lens_angle_var(sol, d) for d in designs)
+    v_free = sum(lens_angle_var(alt, d) for d in ds)
+    return (alt, ds) if v_free < v_carry else (sol, designs)
 
 
 def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
@@ -483,101 +504,9 @@ def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], de
     return True
 
 
-def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
-    """The lens at the corners of the principal point's range (where the lines leave it
-    undetermined): radial terms act about the principal point, so their effect on a line
-    near the image centre depends on where it is, a second-order effect a derivative at the
-    image centre misses."""
-    free = [j for j in (5, 6) if j not in det and rng[j] > 0]
-    if not free:
-        return []
-    out = []
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            p = lam.copy()
-            for j, sg in zip((5, 6), (sx, sy), strict=True):
-                if j in free:
-                    p[j] = sg * rng[j]
-            out.append(p)
-    return out
-
-
-def _uniform_msq(corners: Sequence[np.ndarray], centre: np.ndarray) -> np.ndarray:
-    """Mean square of a function of the principal point, uniform over its range (the Type B
-    distribution every range is taken as), from its values at the centre and at the four
-    corners of :func:`_pp_probes` (order (-,-), (-,+), (+,-), (+,+)).
-
-    The function is taken as the quadratic through those five points, c (x^2 + y^2) / 2 +
-    gx x + gy y + h x y about the centre (x, y in units of the range): over the uniform square
-    its mean is s0 + c/3 and its variance c^2 2/45 + gx^2/3 + gy^2/3 + h^2/9 (the largest of
-    the corners would be a bound, not a standard uncertainty). Where any corner is not
-    finite (the lens folds there), inf."""
-    v = np.asarray(corners, float)
-    if not len(v):
-        return centre**2
-    if not np.all(np.isfinite(v)):
-        return np.full_like(centre, np.inf)
-    mm, mp, pm, pp = v
-    c = (mm + mp + pm + pp) / 4 - centre
-    gx = (pm + pp - mm - mp) / 4
-    gy = (mp + pp - mm - pm) / 4
-    h = (pp + mm - mp - pm) / 4
-    return (centre + c / 3) ** 2 + c**2 * 2 / 45 + gx**2 / 3 + gy**2 / 3 + h**2 / 9
-
-
-def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[int],
-               rng: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """How far the applied estimates move when the principal point is put at the corners of
-    its range (one linearised step from ``lam`` each): the largest |move| (a bound: the
-    sign test) and its standard uncertainty with the principal point uniform over its range
-    (:func:`_uniform_msq`); inf where the lens then folds."""
-    P = len(PARAMS)
-    if not applied:
-        return np.zeros(P), np.zeros(P)
-    A = np.ix_(applied, applied)
-    moves = []
-    for p in _pp_probes(lam, det, rng):
-        m = np.zeros(P)
-        try:
-            ds = cache.all(p)
-        except LensFolds:
-            m[applied] = np.inf
-            moves.append(m)
-            continue
-        F = sum(d.G.T @ d.G for d in ds)
-        b = sum(d.G.T @ d.z for d in ds)
-        m[applied] = np.linalg.solve(F[A], b[applied])
-        moves.append(m)
-    if not moves:
-        return np.zeros(P), np.zeros(P)
-    return np.max(np.abs(moves), axis=0), np.sqrt(_uniform_msq(moves, np.zeros(P)))
-
-
-def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.ndarray
-                ) -> list[np.ndarray]:
-    """Each line's variance of d angle / d lam over the principal point's range, uniform
-    [rad^2/unit^2]: only the radial terms act about the principal point, so only theirs is
-    not zero (inf where the lens folds at a corner)."""
-    P = len(PARAMS)
-    radial = np.zeros(P)
-    radial[:2] = 1.0
-    probes = _pp_probes(lam, det, rng)
-    if not probes:
-        return [np.zeros(P) for _ in cache.lines]
-
-    def radial_s(k: int, p: np.ndarray) -> np.ndarray:
-        full = cache.cached(k, p)  # its radial columns are the radial-only design's
-        try:
-            return full.s * radial if full is not None else cache.one(k, p, (0, 1)).s * radial
-        except LensFolds:
-            return np.full(P, np.inf)
-
-    out = []
-    for k in range(len(cache.lines)):
-        s0 = radial_s(k, lam)
-        if not np.all(np.isfinite(s0)):
-            out.append(np.full(P, np.inf))
-            continue
-        var = _uniform_msq([radial_s(k, p) for p in probes], s0) - s0**2
-        out.append(np.clip(var, 0.0, None))
-    return out
+def _conditioned(F: np.ndarray, idx: list[int], rng: np.ndarray) -> bool:
+    """Whether the information ``F`` over the parameters ``idx`` (range-normalised) can be
+    inverted: a parameter whose bow no line shows (a mark through the centre sees no k1)
+    makes it singular."""
+    Fs = F[np.ix_(idx, idx)] * np.outer(rng[idx], rng[idx])
+    return bool(np.all(np.isfinite(Fs)) and np.linalg.cond(Fs) < 1e12)

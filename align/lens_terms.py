@@ -15,51 +15,9 @@ from scipy.optimize import lsq_linear
 
 from align.lens import LensSolution, _determined
 from align.lens_design import DEFAULT_RANGES, LensRanges, LineGeometry, _Design, _design
+from align.lens_solution import signed_parts
 from imaging import fit_line_only, line_frame
 from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
-
-
-def _signed_parts(sol: LensSolution, design: _Design) -> dict[str, np.ndarray]:
-    """Each named lens term of one mark's angle as signed components [rad] on the lens's
-    own error directions (the same directions for every mark of one solve): see
-    :func:`angle_terms` (their norms) and :func:`angle_coupling` (the components)."""
-    P = len(PARAMS)
-    A = [j for j in range(P) if sol.applied[j]]
-    rng = sol.ranges.vector()
-    out: dict[str, np.ndarray] = {}
-    s = design.s
-    if A:
-        # The fitted parameters' covariance C = L L^T: s C s^T = |L^T s|^2, and two marks
-        # share (L^T s_i) . (L^T s_j) = s_i C s_j^T.
-        w, V = np.linalg.eigh(sol.cov_applied)
-        L = V * np.sqrt(np.clip(w, 0.0, None))
-        out["lens_fit"] = L.T @ s[A]
-        if not sol.confirmed:
-            # Lens or bend: the angle with the lens applied and without it both stand, and
-            # the bow may be part lens, part bend: the truth anywhere between the two
-            # readings, uniform (Type B); about the reading given (the lens applied) its
-            # standard uncertainty is the difference / sqrt 3 (the difference itself is the
-            # bound, not a standard uncertainty).
-            out["lens_or_bend"] = np.array([s[A] @ sol.lam[A] / np.sqrt(3)])
-    FA = sol.info[np.ix_(A, A)] if A else None
-    for j in range(P):
-        if sol.applied[j] or rng[j] <= 0:
-            continue
-        # What the applied parameters absorb of parameter j's bow changes their estimates,
-        # hence the angle: the angle's net sensitivity to j.
-        seff = float(s[j] - (s[A] @ np.linalg.solve(FA, sol.info[A, j]) if A else 0.0))
-        if design.s_pp_var is not None and not sol.determined[j]:
-            # Over the principal point's range (uniform) the sensitivity varies about its
-            # value at the centre: its mean square, with the sign it has at the centre.
-            seff = float(np.copysign(np.sqrt(seff**2 + float(design.s_pp_var[j])), seff))
-        if sol.determined[j]:
-            # An estimate beyond the range is no lens (a bent mark's bow): the lens itself
-            # is within the range.
-            e = min(abs(sol.estimate[j]), rng[j]) if np.isfinite(sol.estimate[j]) else 0.0
-            out[f"lens_{PARAMS[j]}_small"] = np.array([seff * np.hypot(e, sol.u_lines[j])])
-        else:
-            out[f"lens_{PARAMS[j]}_range"] = np.array([seff * rng[j] / np.sqrt(3)])
-    return out
 
 
 def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
@@ -100,7 +58,7 @@ def bow_reach(sol: LensSolution, z: float) -> np.ndarray:
 
 def angle_terms(sol: LensSolution, design: _Design) -> dict[str, float]:
     """Named standard uncertainties [rad] the lens adds to one mark's angle."""
-    return {k: float(np.linalg.norm(v)) for k, v in _signed_parts(sol, design).items()}
+    return {k: float(np.linalg.norm(v)) for k, v in signed_parts(sol, design).items()}
 
 
 def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
@@ -109,7 +67,7 @@ def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
     through the one lens (every mark of a camera sees the same lens error); each mark's own
     sum of squares is the square sum of :func:`angle_terms`."""
     out: dict[str, float] = {}
-    for k, v in _signed_parts(sol, design).items():
+    for k, v in signed_parts(sol, design).items():
         if len(v) == 1:
             out[k] = float(v[0])
         else:

@@ -49,6 +49,9 @@ class Case:
     flagged: bool           # any note / bent / limited
     size: tuple[int, int] = (640, 480)
     found: bool = True      # False: the mark was not found (z etc. nan)
+    k1_estimator: str = ""  # how k1 entered the angle (LensSolution.estimator)
+    shares: tuple[tuple[str, float], ...] = ()  # each u term's share of u^2
+    drawn: float = float("nan")  # E z^2 given the lens drawn (see share_table)
 
 
 def draw_lens(k1: float, size: tuple[int, int], rng: np.random.Generator) -> CameraGeometry:
@@ -140,13 +143,37 @@ def run_case(lens_name: str, camera: CameraGeometry, position: str, size: tuple[
             continue  # not this mark (a spurious detection is another test's business)
         seen.add(i)
         k1 = r.lens["parameters"]["k1"]
+        shares = tuple((k, float(v / r.angle_u_rad) ** 2) for k, v in r.u_terms.items())
+        drawn = _z2_given_draw(shares, camera, R, r.lens.get("ranges", {}))
         out.append(Case(lens_name, where[i], float(err / r.angle_u_rad),
                         float(np.rad2deg(err) * 3600), float(np.rad2deg(r.angle_u_rad) * 3600),
                         float(k1t), float(k1["value"]) if k1["applied"] else 0.0,
-                        r.lens_limited, bool(r.notes), size))
+                        r.lens_limited, bool(r.notes), size, True,
+                        k1.get("estimator", ""), shares, drawn))
     # A mark not found is counted (the table says how many), not silently dropped.
     out += [Case(lens_name, where[i], float("nan"), float("nan"), float("nan"), float(k1t), 0.0,
                  False, False, size, found=False) for i in range(len(marks)) if i not in seen]
+    return out
+
+
+def _z2_given_draw(shares: tuple[tuple[str, float], ...], camera: CameraGeometry, R: float,
+                   ranges: dict) -> float:
+    """The z^2 a mark's u predicts given the lens actually drawn: a Type B term over a
+    parameter's range (``lens_<p>_range``, uniform: its variance r^2/3) delivers (v/r)^2 3 of
+    its share for the drawn value v; every other term its share (1 in all: an honest u). A
+    class's few lens draws (three per fixed class) can sit deep inside the ranges, and then
+    its RMS z is below 1 by the draw, not by the tool."""
+    a = camera.focal_px / R
+    v = {"k1": camera.k1 / a**2, "k2": camera.k2 / a**4, "p1": camera.p1 / a,
+         "p2": camera.p2 / a, "aspect": camera.aspect - 1.0, "cx": camera.pp_offset_px[0],
+         "cy": camera.pp_offset_px[1]}
+    rng = LensRanges.from_dict(ranges).to_dict()
+    rng = {**{k: rng[k] for k in ("k1", "k2", "aspect")}, "p1": rng["p"], "p2": rng["p"],
+           "cx": rng["pp_px"], "cy": rng["pp_px"]}
+    out = 0.0
+    for name, share in shares:
+        p = name[len("lens_"):-len("_range")] if name.endswith("_range") else ""
+        out += share * (3 * (v[p] / rng[p]) ** 2 if rng.get(p) else 1.0)
     return out
 
 
@@ -179,4 +206,26 @@ def grid_table(cases: list[Case]) -> list[str]:
                f"missed {len(missed)} {[(c.lens, c.position, c.size) for c in missed]}, "
                f"wrong-sign k1 applied {wrong_sign(cases)}, beyond 3 u {over}, "
                f"lens-limited {sum(c.limited for c in cases)}")
+    return out + share_table(cases)
+
+
+def share_table(cases: list[Case]) -> list[str]:
+    """Per lens class: how k1 entered the angles (estimator counts), the three u terms with
+    the largest mean share of u^2, and the RMS z the u predicts given the lenses drawn
+    (:func:`_z2_given_draw`): what sets each class's RMS z (a Type B range holding a lens
+    drawn near its middle gives z below 1 by its share)."""
+    out = []
+    for lens in sorted({c.lens for c in cases if c.found}):
+        cs = [c for c in cases if c.lens == lens and c.found]
+        est = {e: sum(c.k1_estimator == e for c in cs) for e in sorted({c.k1_estimator
+                                                                       for c in cs})}
+        tot: dict[str, float] = {}
+        for c in cs:
+            for k, v in c.shares:
+                tot[k] = tot.get(k, 0.0) + v / len(cs)
+        top = sorted(tot.items(), key=lambda kv: -kv[1])[:3]
+        pred = float(np.sqrt(np.mean([c.drawn for c in cs])))
+        out.append(f"{lens:>12}: k1 {', '.join(f'{k} {n}' for k, n in est.items())}; "
+                   f"u^2 shares {', '.join(f'{k} {v:.0%}' for k, v in top)}; RMS z given "
+                   f"the lenses drawn {pred:.2f}")
     return out

@@ -10,18 +10,21 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy import stats
 
+from align import lens as lens_mod
+from align.camera_lens import camera_lens, lens_lines
 from align.cli import main
 from align.documents import marks_document
 from align.lens import LensRanges
-from align.marks import BEND, measure_image
+from align.marks import BEND, finish_mark, measure_image
 from align.present import mark_lines
 from axisbase.errors import InputError
-from imaging import CameraModel, measure_marks
+from imaging import CameraModel, measure_frame, measure_marks
 from synth import (
     CameraGeometry,
     ImageSpec,
@@ -368,7 +371,7 @@ def test_principal_point_range_enters_as_its_rms_not_its_corners():
     and the range's corners enters u as its mean square over the square, the quadratic
     through those points averaged exactly (against a Monte Carlo over the square), not the
     largest corner's (the bound it used to be). A corner where the lens folds: inf."""
-    from align.lens import _uniform_msq
+    from align.lens_pp import _uniform_msq
 
     rng = np.random.default_rng(5)
     for _ in range(5):
@@ -470,3 +473,43 @@ def test_a_lens_ten_times_beyond_any_is_not_ok_everywhere(tmp_path, capsys):
             assert m["lens_limited"], (m["index"], z)
             assert f"mark {m['index']}: NOT OK" in shown, (m["index"], shown)
     assert far  # the control is one: some angle is beyond 3 u (u cannot cover this lens)
+
+
+def test_a_sign_open_k1_is_fitted_free_when_that_gives_the_smaller_u(monkeypatch):
+    """The default twin of tests/align/test_lens_crlb.py (issue 18, failure mode 5): one
+    300 px mark under an undeclared barrel lens whose k1 sign the mark does not determine.
+    The angle is read with k1 fitted free (the estimator with the smaller u: min u over the
+    two readings, from the lines' information alone), reported as ``free`` and not as an
+    applied lens, and its u holds the lens terms' own (``lens_fit``,
+    :func:`align.lens.lens_angle_var`); the mark's error is within 3 u, and so is the same
+    mark's without a lens."""
+    k1_only = LensRanges(k1=0.3, k2=0.0, p=0.0, aspect=0.0, pp_px=0.0)
+    rng = np.random.default_rng(4)  # a mark of the held-out sweep whose k1 sign is open
+    mark = MarkSpec(rng.uniform(-np.pi / 2, np.pi / 2), rng.uniform(-150, 150), 300.0, 4.0,
+                    centre_t_px=rng.uniform(-80, 80))
+    spec = ImageSpec(marks=(mark,), width=640, height=480, seed=4, supersample=4,
+                     camera=CameraGeometry(focal_px=1024.0, k1=-0.3),
+                     full_well_e=full_well_for_snr(40, -0.6))
+    s = render_marks(spec, with_crlb=False)
+    ms = measure_frame(s.image.astype(float), None, expect_one=True).items
+    r = finish_mark(ms[0], camera_lens(ms, None, k1_only), 0, "image", 0)
+    k1 = r.lens["parameters"]["k1"]
+    assert k1["estimator"] == "free" and not k1["applied"], k1
+    assert "lens_fit" in r.u_terms and "lens_k1_small" not in r.u_terms, r.u_terms
+    assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
+    lines = lens_lines(ms)
+    R = np.hypot(639, 479) / 2
+    sol, (d,) = lens_mod.solve_lens(lines, R, k1_only)
+    assert sol.free[0]
+    # The chosen estimator's variance is what the mark carries (its lens terms in its u).
+    assert lens_mod.lens_angle_var(sol, d) <= r.angle_u_rad**2
+    monkeypatch.setattr(lens_mod, "FREE_CANDIDATES", ())
+    carried, (dc,) = lens_mod.solve_lens(lines, R, k1_only)
+    assert not any(carried.free) and not carried.applied[0]
+    assert lens_mod.lens_angle_var(sol, d) < lens_mod.lens_angle_var(carried, dc)
+    # Without a lens (the same mark and noise, k1 still free over its range): the free fit's
+    # u covers its own scatter (the held-out sweep's k1 = 0 half).
+    s0 = render_marks(replace(spec, camera=CameraGeometry(focal_px=1024.0)), with_crlb=False)
+    ms0 = measure_frame(s0.image.astype(float), None, expect_one=True).items
+    r0 = finish_mark(ms0[0], camera_lens(ms0, None, k1_only), 0, "image", 0)
+    assert abs(angle_error(r0.angle_rad, s0.truth.marks[0].image_angle_rad)) <= 3 * r0.angle_u_rad
