@@ -13,6 +13,8 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
+from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
+from align.lens_terms import _camera_departure as camera_departure
 from align.lens_terms import (
     angle_coupling,
     bow_reach,
@@ -21,6 +23,7 @@ from align.lens_terms import (
     lens_bow,
     lens_or_bends,
     lone_departures,
+    pp_cross_coupling,
 )
 from align.lens_terms import (
     undistorted as lens_undistorted,
@@ -166,7 +169,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     z = float(-special.ndtri(alpha / 2))
     if camera is None:
         sol, designs = solve_lens(lines, R, ranges, alpha)
-        coupling = tuple(angle_coupling(sol, d) for d in designs)
+        coupling = tuple({**angle_coupling(sol, d), **pp_cross_coupling(sol, d, R)}
+                         for d in designs)
         notes = tuple(f"{who}: {n}" for n in sol.notes)
         # A line no lens of the others explains: no bow of it is the lens's.
         bows = bow_bound(lines, sol.lam, bow_reach(sol, z), R)
@@ -195,6 +199,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                      "an angle's u either way (0.3-3x on the real chessboard lens); re-run "
                      "`align camera` for the joint covariance")
     p, dlam, designs = check_camera(lines, zero, lam_chk, R, ranges, alpha)
+    # The model's principal point as the check's lever (align/lens_fallback.py).
+    designs = model_lever(designs, lines, camera, shape)
+    p, dlam = camera_departure(designs, lam_chk, ranges, alpha)
     unresolved = False
     told = lens_or_bends(designs, lam_chk, ranges, alpha) if p < alpha else None
     if told is None:
@@ -202,6 +209,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                                 camera_lens_vector(camera, shape)) if p < alpha else ())
     else:
         lone = told.departing if told.verdict == "bends" else ()
+    if lone and still_departs(designs, lone, lam_chk, ranges, alpha):
+        # The other marks depart together too: no bend explains that (align/lens_fallback.py).
+        lone, told = (), None
     if lone:
         # A departure no two marks agree on, or one the other marks do not show (a changed
         # lens bows every mark by what its position predicts; these stay straight), is the
@@ -221,16 +231,16 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     if len(ms) == 1 and p < alpha and not lone:
         # One mark whose bow a plausible lens (the model's own plus a change) could make: a
         # bent mark and a model that misses the lens (a sign slip, a recalibrated lens) leave
-        # it alike, and no other mark can tell them apart. Both readings stand: the
-        # calibration's is given, the angle under the change its bow calls for is the other
-        # end, and u carries the difference (uniform between: /sqrt 3); when that is beyond
-        # the lens bound the angle is lens-limited (not ok).
+        # it alike, and no other mark can tell them apart. Neither reading is the lens: u
+        # carries the lens as undetermined beyond the calibration (below); when that is
+        # beyond the lens bound the angle is lens-limited (not ok).
         what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
         notes.append(f"{who}: its one mark bows beyond what the calibrated lens leaves it "
                      f"(p = {p:.2g}): either the mark is bent or the lens differs from its "
-                     f"calibration ({what} on top of it), and one mark cannot tell which; u "
-                     "carries both readings (camera_or_bent); image more marks far from the "
-                     "centre or recalibrate the camera (`align camera`)")
+                     f"calibration ({what} on top of it), and one mark cannot tell which; "
+                     "neither reading is trusted: the lens is taken as undetermined beyond the "
+                     "calibration, as without a model, and u carries it (camera_or_bent); image "
+                     "more marks far from the centre or recalibrate the camera (`align camera`)")
         terms_l[0]["camera_or_bent"] = float(designs[0].s @ dlam) / np.sqrt(3)
     elif told is not None and told.verdict == "undecided":
         # The other marks cannot tell a changed lens from bent marks (too near the centre,
@@ -243,8 +253,10 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         notes.append(f"{who}: cannot tell whether the lens differs from its calibration "
                      f"({what} on top of it) or line(s) {which} of {len(ms)} are bent: the "
                      f"other marks would show the change's bow only {told.separation:.1f} "
-                     "sigma apart; u carries both readings (camera_or_bent); image straight "
-                     "marks far from the centre or recalibrate the camera (`align camera`)")
+                     "sigma apart; neither reading is trusted: the lens is taken as "
+                     "undetermined beyond the calibration, as without a model, and u carries it "
+                     "(camera_or_bent); image straight marks far from the centre or recalibrate "
+                     "the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_or_bent"] = float(d.s @ told.dlam) / np.sqrt(3)
         dlam, p_used = told.dlam, p
@@ -274,19 +286,32 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                         "change either: bent marks")
         what = ", ".join(f"{k} {v:+.3g}" for k, v in zip(PARAMS, dlam, strict=True) if v)
         notes.append(f"{who}: the lens differs from its calibration (the marks' bows call for "
-                     f"{what} on top of it, p = {p:.2g}){also}: u widened by its effect; "
+                     f"{what} on top of it, p = {p:.2g}){also}: neither the calibration nor "
+                     "that change is trusted: the lens is taken as undetermined beyond the "
+                     "calibration, as without a model, and u carries it (camera_disagreement); "
                      "recalibrate the camera (`align camera`)")
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
+    lam, record = None, {"source": CAMERA_MODEL}
     reach = z * lam_u + (np.abs(dlam) if p_used < alpha else 0.0)
-    return CameraLens(None, tuple(notes),
-                      {"source": CAMERA_MODEL, "p_marks_agree": p,
+    if p_used < alpha:
+        # The marks show the lens is not its model: neither the model's reading nor the one
+        # change their bows call for is trusted; the lens beyond the model is undetermined,
+        # as without a model (align/lens_fallback.py): its u replaces the widening above.
+        fb = lens_beyond_model(lines, R, ranges, alpha, camera, shape)
+        terms_l = [carried(t, c) for t, c in zip(terms_l, fb.coupling, strict=True)]
+        lam = fb.sol.lam if np.any(fb.sol.lam) else None
+        reach = z * lam_u + bow_reach(fb.sol, z)
+        record = {**fb.sol.to_dict(), "source": "marks", "camera_model": "departed from"}
+    return CameraLens(lam, tuple(notes),
+                      {**record, "p_marks_agree": p,
                        "u_from": ("joint covariance" if camera.cov is not None else
                                   "parameters' u as if independent"),
                        "bent_lines": list(lone),
                        "lens_or_bent": None if told is None else told.verdict,
                        "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
-                      bow_px=bow_bound(lines, zero, reach, R), unresolved=unresolved)
+                      bow_px=bow_bound(lines, zero if lam is None else lam, reach, R),
+                      unresolved=unresolved)
 
 
 def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray, scale: float

@@ -15,6 +15,7 @@ import numpy as np
 
 from align.camera_model_u import field_u
 from align.contract import document
+from align.family import family_gaps
 from align.lens_design import DEFAULT_RANGES
 from align.warnings import camera_warnings, gonio_warnings, mark_warnings
 
@@ -25,9 +26,10 @@ def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
     """``align marks --json``: every mark (found or not), ok when every image was measured
     and no angle is lens-limited (``lens_limited``: calibrate the camera) or a bent mark
     running off the image (``bent_mark_off_frame``) or two grooves meeting at a kink
-    (``kinked_mark``)."""
+    (``kinked_mark``) or a family of lines with a step of its ruling empty
+    (``missing_steps``)."""
     return document("marks", {"ok": all(r.found and not r.lens_limited and not r.bend_off_frame
-                                        and not r.kinked
+                                        and not r.kinked and not family_gaps(r)
                                         for r in results),
                               "warnings": mark_warnings(results),
                               "marks": [r.to_dict() for r in results]}, settings, inputs)

@@ -13,13 +13,21 @@ deviant (a tilted or bent graduation), the worst first, and left out of a_bar an
 sqrt(chi2 / dof) (Birge ratio): the stated u then covers the scatter. The lens the frame
 shares (its named u terms, :func:`align.marks.finish_mark`) is left out of the members' u for
 chi2 — one lens moves them together — and added to the mean's u: per term, the members'
-terms averaged with the mean's weights.
+terms averaged with the mean's weights. What the lens moves unlike (an undetermined k1
+turns the lines on either side of the centre opposite ways) is in chi2 and z when the
+members' signed lens couplings c_i are known: their covariance V = diag(u_i^2) + C C^T,
+chi2 = r' V^-1 r about the generalised least-squares mean, z_i each member's residual
+given the others (:func:`_lens_chi2`); a spread of angles the lens (undetermined) can
+explain is then no "not parallel" (a 23-line scale through an undeclared k1 -0.3 lens: 15
+lines so named before).
 
 Ruling: each member's middle projected on the mean normal, q_i [px]; the ruling steps k_i
-= round((q_i - q_0) / g_min) (g_min the smallest gap, so missing graduations are skipped);
-q_i = q_0 + pitch k_i by least squares. Uniformity: the residuals from that uniform ruling
-[px], their RMS (``pitch_spread_px``), and u(pitch) from the larger of that scatter and the
-members' own offset u.
+counted gap by gap, each gap in whole single steps (:func:`ruling_steps`: a missing
+graduation skips a step); q_i = q_0 + pitch k_i by least squares. Uniformity: the residuals
+from that uniform ruling [px], their RMS (``pitch_spread_px``), and u(pitch) from the larger
+of that scatter and the members' own offset u. A step between the first and the last member
+that holds no measured line is said (``missing_steps``; the result is then not ok): a
+regular family with a line missing is never reported as complete.
 """
 
 from __future__ import annotations
@@ -120,6 +128,14 @@ class LineFamily:
     def chi2_dof(self) -> float:
         return self.chi2 / self.dof if self.dof > 0 else float("nan")
 
+    @property
+    def missing_steps(self) -> tuple[int, ...]:
+        """Steps of the ruling between its first and last member that hold no measured
+        line (a graduation missing from the scale, not found, or not measured) —
+        dimensionless."""
+        have = set(self.steps)
+        return tuple(k for k in range(max(self.steps, default=0) + 1) if k not in have)
+
     def consistent(self, alpha: float = 1e-3) -> bool:
         """Whether the members are parallel within their u (chi2 test, none deviant)."""
         return bool(self.p_value >= alpha and not self.deviant)
@@ -141,7 +157,8 @@ class LineFamily:
                 "lengths_px": list(self.lengths_px), "lengths_max_px": list(self.lengths_max_px),
                 "hidden_ends": list(self.hidden_ends),
                 "typical_length_px": self.typical_length_px,
-                "pitch_u_lens_px": self.pitch_u_lens_px}
+                "pitch_u_lens_px": self.pitch_u_lens_px,
+                "missing_steps": list(self.missing_steps)}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LineFamily:
@@ -179,7 +196,16 @@ class LineFamily:
             s += f", {sum(1 for h in self.hidden_ends if h)} with an end hidden"
         if self.deviant:
             s += f"; NOT PARALLEL: marks {', '.join(map(str, self.deviant))}"
+        if self.missing_steps:
+            s += f"; LINES MISSING at steps {', '.join(map(str, self.missing_steps))}"
         return s
+
+
+def family_gaps(r: object) -> tuple[int, ...]:
+    """The missing steps of the family a mark result belongs to (() when none, or no
+    family): a regular family with lines missing is not ok."""
+    fam = getattr(r, "family", None)
+    return fam.missing_steps if fam is not None else ()
 
 
 def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
@@ -202,24 +228,75 @@ def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
             (e.length_px, e.length_max_px, n_hidden))
 
 
+def ruling_steps(q: np.ndarray) -> np.ndarray:
+    """Each sorted position's ruling step (0 for the first): neighbours' gaps in whole
+    steps of the single step, the median of the gaps under 1.5 of the smallest.
+
+    Steps counted gap by gap, not as (q_i - q_0) / g_min: through a lens the image's pitch
+    varies across the frame (barrel: 4-6 % smaller at a 1600 x 1200 frame's sides), and the
+    smallest gap, taken as the step for the whole ruling, put a skipped step where no line
+    is missing (step 16 of 23 at 70 px). Gaps at one step are the local ones, within 25 %."""
+    gaps = np.diff(q)
+    if not gaps.size:
+        return np.zeros(len(q))
+    g0 = float(np.min(gaps))
+    one = float(np.median(gaps[gaps < 1.5 * g0]))
+    return np.concatenate([[0.0], np.cumsum(np.maximum(np.rint(gaps / one), 1.0))])
+
+
+def _lens_chi2(d: np.ndarray, u: np.ndarray, vl: np.ndarray, keep: np.ndarray
+               ) -> tuple[np.ndarray, float]:
+    """(z of every member, chi2 of the kept ones) about their generalised least-squares
+    mean, their covariance V = diag(u^2) + C C^T (C: the lens couplings [rad]). A member's
+    z is its residual given all the others (kept ones, and it): (Q d)_i / sqrt(Q_ii), Q =
+    V^-1 - V^-1 1 1' V^-1 / (1' V^-1 1) — what the lens, one smooth turn over the frame,
+    cannot make of one line."""
+    z = np.zeros(len(d))
+    chi2 = 0.0
+    for i in [-1, *np.flatnonzero(~keep)]:
+        sel = keep.copy()
+        if i >= 0:
+            sel[i] = True
+        v = np.diag(u[sel] ** 2) + vl[np.ix_(sel, sel)]
+        vi = np.linalg.inv(v)
+        one = vi.sum(axis=0)
+        q = vi - np.outer(one, one) / one.sum()
+        zi = (q @ d[sel]) / np.sqrt(np.maximum(np.diag(q), 1e-300))
+        if i < 0:
+            z[sel] = zi
+            chi2 = float(d[sel] @ q @ d[sel])
+        else:
+            z[i] = zi[int(np.flatnonzero(sel).tolist().index(i))]
+    return z, chi2
+
+
 def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 middles: np.ndarray, offset_u: np.ndarray, lens: str = "none",
                 failed: int = 0, alpha: float = 1e-3,
                 lens_terms: Sequence[Mapping[str, float]] = (),
                 lengths: Sequence[tuple[float, float, int]] = (),
-                lens_shift: np.ndarray | None = None) -> LineFamily:
+                lens_shift: np.ndarray | None = None,
+                lens_coupling: Sequence[Mapping[str, float]] = ()) -> LineFamily:
     """The family of lines with these angles [rad] (``angle_u``: each one's own u without
     the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
     [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
     mean's u, not the members' chi2); ``lengths``: per member (visible length, longest
-    length [px], ends hidden); ``lens_shift`` (N, 2, P): how far each lens parameter's u
+    length [px], ends hidden); ``lens_shift`` (N, 2, P): how far each lens error direction
     moves each member's middle [px] (its share of the pitch's u, :mod:`align.family_stage`);
-    see the module docstring for the formulas."""
+    ``lens_coupling``: each member's angle's signed components on the frame lens's error
+    directions [rad] (:attr:`align.mark_result.MarkResult.lens_coupling`: what the lens's
+    u turns them by, unlike in different places of the frame); see the module docstring
+    for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
     u_all = np.asarray(angle_u, float)
     n = len(angles)
+    vl = None
+    if len(lens_coupling) == n and any(lens_coupling):
+        keys = sorted({k for c in lens_coupling for k in c})
+        cpl = np.array([[float(c.get(k, 0.0)) for k in keys] for c in lens_coupling])
+        vl = cpl @ cpl.T
     limit = float(-ndtri(alpha / (2 * n)))
     keep = np.ones(n, bool)
     while True:
@@ -228,13 +305,17 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
         w = 1 / u_all[keep] ** 2
         mean_d = float(np.sum(w * d[keep]) / w.sum())
         u_mean = float(1 / np.sqrt(w.sum()))
-        z = (d - mean_d) / np.sqrt(np.maximum(u_all**2 - np.where(keep, u_mean**2, 0), 1e-300))
+        if vl is None:
+            z = (d - mean_d) / np.sqrt(np.maximum(u_all**2 - np.where(keep, u_mean**2, 0),
+                                                  1e-300))
+            chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
+        else:
+            z, chi2 = _lens_chi2(d, u_all, vl, keep)
         worst = int(np.argmax(np.where(keep, np.abs(z), -1)))
         if abs(z[worst]) <= limit or keep.sum() <= 2:
             break
         keep[worst] = False
     dof = int(keep.sum()) - 1
-    chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
     p = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
     deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
@@ -252,9 +333,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     q = np.asarray(middles, float) @ normal
     order = np.argsort(q)
     q, ou = q[order], np.asarray(offset_u, float)[order]
-    gaps = np.diff(q)
-    g0 = float(np.min(gaps)) if gaps.size else float("nan")
-    k = np.rint((q - q[0]) / g0) if gaps.size else np.zeros(1)
+    k = ruling_steps(q)
     if n >= 3 and np.ptp(k) > 0:
         pitch, q0 = np.polyfit(k, q, 1)
         res = q - (q0 + pitch * k)

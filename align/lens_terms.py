@@ -20,6 +20,39 @@ from imaging import fit_line_only, line_frame
 from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
 
 
+def pp_cross_coupling(sol: LensSolution, design: _Design, scale: float) -> dict[str, float]:
+    """The second-order term of an undetermined principal point with a k1 read from the lines
+    (applied, fitted free, or determined but not applied), as signed components [rad] shared
+    by the marks of one solve (merged into :func:`angle_coupling`'s; keys
+    ``lens_pp_cross.0``, ``.1``).
+
+    Each angle's pp coupling is linear about the image centre; the lens's radial field about
+    a principal point c [px] off it tilts a line of direction u (normal n) by 2 k1 (n.q)(u.q)
+    / R^2 at q = p - c (any length: the chord of k1's bow), whose part of second order,
+    2 k1 (n.c)(u.c) / R^2 = 2 k1 [cos 2θ cx cy + sin 2θ (cy^2 - cx^2) / 2] / R^2, is the same
+    at every position: with (cx, cy) uniform over ±r, two zero-mean errors uncorrelated with
+    the linear terms, of standard uncertainty r^2/3 and r^2 sqrt(2/45). A reversal pair's
+    sum cancels the linear pp terms, not these (a roll-like residue of the cx-cy product):
+    left out, a fusion reads that residue as a lens parameter and moves E by it. Where k1 is
+    undetermined its range already carries s_k1's variation over the pp
+    (:func:`align.lens_solution.signed_parts`).
+    """
+    rng = sol.ranges.vector()
+    k1_read = sol.applied[0] or sol.determined[0]  # (applied includes a k1 fitted free)
+    if not k1_read or sol.determined[5] or sol.determined[6] or rng[5] <= 0:
+        return {}
+    if sol.applied[0]:
+        k1 = float(np.hypot(sol.lam[0], sol.u_lines[0] if np.isfinite(sol.u_lines[0]) else 0))
+    else:
+        e = min(abs(sol.estimate[0]), rng[0]) if np.isfinite(sol.estimate[0]) else rng[0]
+        k1 = float(np.hypot(e, sol.u_lines[0] if np.isfinite(sol.u_lines[0]) else 0.0))
+    r = float(rng[5])
+    g = 2.0 * k1 / scale**2
+    th = 2.0 * design.angle
+    return {"lens_pp_cross.0": g * np.cos(th) * r**2 / 3.0,
+            "lens_pp_cross.1": g * np.sin(th) * r**2 * np.sqrt(2.0 / 45.0)}
+
+
 def lens_bow(line: LineGeometry, lam: np.ndarray, scale: float) -> np.ndarray:
     """The bow each lens parameter leaves on this line, per unit of it: the sagitta [px] of
     the quadratic across the line over the centres' span (as the mark's loop measures a

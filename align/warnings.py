@@ -131,7 +131,8 @@ def mark_warnings(results: Sequence) -> list[str]:
 
 
 def family_warnings(image: str, fam) -> list[str]:
-    """A family of lines (``align.family.LineFamily``): members not parallel, failed ones."""
+    """A family of lines (``align.family.LineFamily``): members not parallel, failed ones,
+    steps of its ruling without a line."""
     out = []
     what = f"{image}: family of {len(fam.members)} lines (marks {fam.members[0]}..)"
     if fam.deviant:
@@ -142,6 +143,11 @@ def family_warnings(image: str, fam) -> list[str]:
                    "; the family's angle u is widened by sqrt(chi2/dof)")
     if fam.failed:
         out.append(f"{what}: {fam.failed} member(s) found but not measured")
+    gaps = getattr(fam, "missing_steps", ())
+    if gaps:
+        out.append(f"{what}: no line measured at step(s) {', '.join(map(str, gaps))} of its "
+                   f"ruling (pitch {fam.pitch_px:.2f} px): a graduation missing, hidden or "
+                   "not found; the family is not complete (not ok)")
     return out
 
 

@@ -60,6 +60,15 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     return vals, e[sel], t[sel], idx
 
 
+def unclipped(vals: np.ndarray, full_scale: float) -> np.ndarray | None:
+    """Which ``vals`` lie strictly inside (0, ``full_scale``) (clipped pixels say only "beyond
+    the range"); None when all do, as the minimum and maximum tell (the usual case: no masks
+    and no selections of a band's arrays)."""
+    if vals.size and vals.min() > 0 and vals.max() < full_scale:  # (NaN fails both)
+        return None
+    return (vals < full_scale) & (vals > 0)
+
+
 def band_pixels(image: np.ndarray, pf: ProfileFit, half: float, reach_px: float = 0.0
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Signed distance e from the fitted line [px] and flat index of the pixels within

@@ -40,8 +40,10 @@ def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: f
     base = np.array([(w - 1) / 2, (h - 1) / 2]) + c.offset_px * n
     xi = np.rint((base[0] + t * u[0])[:, None] + e * n[0]).astype(np.intp)
     yi = np.rint((base[1] + t * u[1])[:, None] + e * n[1]).astype(np.intp)
-    inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
-    yc, xc = np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1)
+    # Samples all on the image (the usual case, 4 reductions) need no clip and no mask.
+    whole = xi.size > 0 and xi.min() >= 0 and xi.max() < w and yi.min() >= 0 and yi.max() < h
+    inside = True if whole else (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+    yc, xc = (yi, xi) if whole else (np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1))
     # One flat index instead of a (row, column) pair: numpy's 2-D fancy indexing costs ~2x.
     vals = image.ravel()[yc * w + xc] if image.flags.c_contiguous else image[yc, xc]
     # Off the image and clipped pixels (a padded border, a saturated patch) say nothing.
@@ -71,10 +73,25 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     cols = finite.any(axis=0)
     prof = np.full(vals.shape[1], np.nan)
     if finite.all():
-        prof[:] = np.median(vals, axis=0)  # no column to leave out: no copy of the samples
+        prof[:] = _median_axis0(vals)  # no column to leave out: no copy of the samples
     else:
         prof[cols] = nan_median(vals[:, cols], axis=0)
     return prof, cols
+
+
+def _median_axis0(vals: np.ndarray) -> np.ndarray:
+    """np.median(vals, axis=0) of finite values, the same numbers. When every value is a
+    whole number in 0..65535 (an image read from an integer file, not rescaled) each column
+    is sorted as 16-bit integers: ~2 ms, not ~4, for a 5 MP mark's 2000 profiles across it
+    (the middle value, or the mean of the middle two in float64, as np.median's)."""
+    if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
+        q = vals.T.astype(np.uint16)
+        if np.array_equal(q, vals.T):
+            q.sort(axis=1)
+            m = q.shape[1] // 2
+            return (q[:, m].astype(float) if q.shape[1] % 2
+                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
+    return np.median(vals, axis=0)
 
 
 def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float,
@@ -494,9 +511,10 @@ def block_medians(vals: np.ndarray, t: np.ndarray, block_px: int
     if np.isfinite(v).all():
         # np.median's values (the middle one, or the mean of the middle two) from one sort:
         # on blocks of ~20 rows ~4x faster than its partition, and np.nanmedian's.
-        s = np.sort(v, axis=1)
+        # (Each block's columns sorted as contiguous rows: ~30 % faster than along axis 1.)
+        s = np.sort(v.transpose(0, 2, 1), axis=-1)
         m = block_px // 2
-        profs = s[:, m] if block_px % 2 else (s[:, m - 1] + s[:, m]) / 2
+        profs = s[..., m] if block_px % 2 else (s[..., m - 1] + s[..., m]) / 2
     else:
         profs = nan_median(v, axis=1)  # an all-NaN column is NaN, as it should be
     return profs, t[:nb * block_px].reshape(nb, block_px).mean(axis=1)

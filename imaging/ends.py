@@ -30,10 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import _band
+from imaging.band import _band, unclipped
 from imaging.centres import Centres
 from imaging.detect import MarkCandidate, line_frame
 from imaging.groove import ProfileFit, _profile_table
+from imaging.groupsum import GroupSums
 
 LEVEL_K = 4.5
 """A bin's level this many robust deviations from the surface's trend is disturbed."""
@@ -92,22 +93,25 @@ class GrooveEnds:
         return self.end_max_px - self.start_min_px
 
 
-def _bin_rms(j: np.ndarray, vals: np.ndarray, p: np.ndarray, dt: np.ndarray, nb: int,
-             good: np.ndarray) -> np.ndarray:
+def _bin_rms(j: np.ndarray | GroupSums, vals: np.ndarray, p: np.ndarray, dt: np.ndarray,
+             nb: int, good: np.ndarray) -> np.ndarray:
     """Each bin's residual RMS [DN] about level + (amp + slope dt) x profile: the groove's
     depth may change within the bin (dt [px] along the line from the bin's centre). A square
     end drops the depth from full to none over a few blur widths, and a 1-px bin across it
     misfits level + amp x profile by far more than the noise — it was read as an
     obstruction on every clean end. What the slope cannot absorb is no groove: a speck's
     level or shape. (Per-bin 3x3 normal equations from bincount sums; no library fits many
-    tiny grouped regressions at once.)"""
+    tiny grouped regressions at once.) ``j``: each pixel's bin, or their
+    :class:`imaging.groupsum.GroupSums` when the caller has it."""
+    bc = j if isinstance(j, GroupSums) else GroupSums(j, nb)
+    j = bc.labels
     cols = (np.ones_like(p), p, p * dt)
     A = np.empty((nb, 3, 3))
     b = np.empty((nb, 3))
     for r in range(3):
-        b[:, r] = np.bincount(j, cols[r] * vals, nb)
+        b[:, r] = bc(cols[r] * vals)
         for c in range(r, 3):
-            A[:, r, c] = A[:, c, r] = np.bincount(j, cols[r] * cols[c], nb)
+            A[:, r, c] = A[:, c, r] = bc(cols[r] * cols[c])
     cnt = A[:, 0, 0]
     # A bin too short along the line to tell a slope (or with no spread in dt) keeps 2 terms.
     ok = good & (cnt >= 5) & (np.abs(np.linalg.det(A)) > 1e-9 * np.prod(
@@ -118,7 +122,7 @@ def _bin_rms(j: np.ndarray, vals: np.ndarray, p: np.ndarray, dt: np.ndarray, nb:
     A[~good] = np.eye(3)
     x = np.linalg.solve(A, b[..., None])[..., 0]
     pred = x[j, 0] + x[j, 1] * p + x[j, 2] * p * dt
-    ss = np.bincount(j, (vals - pred) ** 2, nb)
+    ss = bc((vals - pred) ** 2)
     dof = np.maximum(cnt - np.where(ok, 3, 2), 1)
     return np.where(good, np.sqrt(ss / dof), np.nan)
 
@@ -180,10 +184,12 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         e = e - bow(t)
         near = np.abs(e) <= half
         vals, e, t = vals[near], e[near], t[near]
-    ok = (vals < pf.full_scale_dn) & (vals > 0)
+    ok = unclipped(vals, pf.full_scale_dn)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
-    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int)
-    vals, e, t = vals[ok].astype(float), e[ok], t[ok]
+    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int) if ok is not None else np.empty(0, int)
+    if ok is not None:
+        vals, e, t = vals[ok], e[ok], t[ok]
+    vals = vals.astype(float)
     if vals.size == 0:
         return same
     j = np.round(t - t0 + reach_px).astype(int)
@@ -193,16 +199,17 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # a cache hit, not ~1.3 ms of erf per mark.
     p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
-    cnt = np.bincount(j, minlength=nb).astype(float)
-    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
-    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
+    bc = GroupSums(j, nb)  # (15 sums over the same bins)
+    cnt = bc.counts.astype(float)
+    sp, spp = bc(p), bc(p * p)
+    sv, spv = bc(vals), bc(p * vals)
     det = cnt * spp - sp * sp
     good = (cnt >= 4) & (det > 1e-9 * np.maximum(cnt * spp, 1e-300))
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
     tb = t0 - reach_px + np.arange(nb)
-    rms = _bin_rms(j, vals, p, t - tb[j], nb, good)
+    rms = _bin_rms(bc, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
         return same
@@ -292,12 +299,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
 
     bare = max(BARE_RUN, int(np.ceil(3 * pf.blur_px)))
 
+    bare_bin = (quiet & ~deep).tolist()  # (a list: ~2000 look-ups a mark at 5 MP)
+
     def body_end(k: int, step: int) -> int:
         """The groove's last bin before bare surface, from its middle out to bin k."""
         i, run = (k0 + k1) // 2, 0
         while (k - i) * step > 0:
             i += step
-            run = run + 1 if quiet[i] and not deep[i] else 0
+            run = run + 1 if bare_bin[i] else 0
             if run >= bare:
                 return i - step * run
         return k

@@ -60,6 +60,8 @@ PIECE_FRACTION = 0.15
 fraction of the family's median length."""
 PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
+MIN_REACH = 10.0
+"""Least relief window beside a family's line [px] (20 reached the next tick at 24 px)."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -253,12 +255,58 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     return float(origin), float(pitch)
 
 
+FINE_LINES = 3
+"""Fewest lines on a ruling finer than the members' that make it the family's."""
+
+
+def _finer_pitch(members: list[MarkCandidate], pool: list[MarkCandidate], ref: float,
+                 origin: float, pitch: float, shift: np.ndarray) -> float:
+    """The family's pitch [px] once the lines beside its members are counted: ``pitch`` /
+    m when lines of its direction and polarity lie at whole steps of pitch / m (m >= 2).
+
+    A ruler's short ticks at a pitch under the relief window are alike their neighbours
+    there: the first search confirms only the long ticks (every 5th: their ruling 5
+    pitches), and a half-step test on it joined the ticks near half-steps (5 of 19 lines,
+    "pitch 73 px" at 24 px). The finer step is the median gap between neighbouring lines,
+    members and candidates together: on a ruling with most lines present, the pitch."""
+    u, n = line_frame(ref)
+    q_m = np.array([float(_middle(c) @ n) for c in members])
+    t_m = np.array([float(_middle(c) @ u) for c in members])
+    step = abs(pitch)
+    lo, hi = q_m.min() - step * MAX_GAP, q_m.max() + step * MAX_GAP
+    q = []
+    for c in pool:
+        p = _middle(c) + shift
+        if (c.dark == members[0].dark and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
+                and lo < float(p @ n) < hi
+                and t_m.min() - step < float(p @ u) < t_m.max() + step):
+            q.append(float(p @ n))
+    if len(q) < FINE_LINES:
+        return pitch
+    allq = np.sort(np.concatenate([q_m, q]))
+    gaps = np.diff(allq)
+    gaps = gaps[gaps > 3.0]  # one line found twice
+    if gaps.size < FINE_LINES:
+        return pitch
+    m = int(np.rint(step / float(np.median(gaps))))
+    if m < 2:
+        return pitch
+    fine = pitch / m
+    k = (np.array(q) - origin) / fine
+    on = np.abs(k - np.rint(k)) < GRID_TOLERANCE
+    between = on & (np.abs(k / m - np.rint(k / m)) > GRID_TOLERANCE / m)
+    return fine if np.count_nonzero(between) >= FINE_LINES else pitch
+
+
+FADE_SIGMA = 3.0
+"""The coarser ridge filter [block px]: a ridge fades about this before each end."""
 SHORT_MEMBER = 0.9
 """A member shorter than this fraction of the family's median length is searched over the
 members' common stretch (:func:`_span_members`)."""
 
 
-def _span_members(found: list[MarkCandidate], group: Sequence[int]) -> None:
+def _span_members(found: list[MarkCandidate], group: Sequence[int], fade: float = 0.0
+                  ) -> None:
     """Members cut short by the search (a bright speck or a numeral across them, and the
     piece beyond too short or too faint to be a candidate of its own) searched over the
     stretch most members share: the median of their ends along the family's direction.
@@ -278,11 +326,10 @@ def _span_members(found: list[MarkCandidate], group: Sequence[int]) -> None:
     typical = float(np.median([found[i].length_px for i in group]))
     for i, (a, b) in zip(group, ends, strict=True):
         c = found[i]
-        if c.length_px >= SHORT_MEMBER * typical:
-            continue
         s = float(np.sign(line_frame(c.angle_rad)[0] @ u_ref)) or 1.0
-        a, b = min(a, float(lo)), max(b, float(hi))
-        t0, t1 = sorted((s * a, s * b))
+        if c.length_px < SHORT_MEMBER * typical:
+            a, b = min(a, float(lo)), max(b, float(hi))
+        t0, t1 = sorted((s * (a - fade), s * (b + fade)))
         found[i] = dc_replace(c, t_start_px=t0, t_end_px=t1)
 
 
@@ -346,7 +393,7 @@ def _join(found: list[MarkCandidate], members: list[MarkCandidate],
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
-        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, 20, 60))
+        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, MIN_REACH, 60))
         for c in search.confirm(extra, reach):
             twin = next((j for j, o in enumerate(found) if o.dark == c.dark
                          and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
@@ -416,7 +463,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             k = (q - origin) / pitch
             if np.max(np.abs(k - np.rint(k))) > GRID_TOLERANCE:
                 continue  # not a ruling: streaks of a surface's lay fall anywhere
-            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6, 20, 60))
+            reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6,
+                                  MIN_REACH, 60))
             got = search.confirm([raw[i] for i in g], reach)
             if len(got) >= MIN_MEMBERS:
                 found += [c for c in got if not any(
@@ -433,6 +481,12 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         hi = max(_position(found[i], ref) for i in g) + pitch * (GRID_TOLERANCE + 0.5)
         shift = search.shift
         members = [found[i] for i in g]
+        pieces = search.candidates(PIECE_FRACTION * typical)
+        # A finer ruling's lines (short ticks: 70 px seen 44-52) join from a quarter length.
+        floor = MEMBER_FRACTION * MEMBER_FRACTION * typical
+        fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
+                            pitch, shift)
+        floor, pitch = (floor if fine != pitch else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
                       pitch=pitch, members=members, shift=shift, lo=lo, hi=hi) -> bool:
@@ -455,7 +509,6 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             k = (float((_middle(c) + shift) @ line_frame(ref)[1]) - origin) / pitch
             return abs(k - np.rint(k)) > GRID_TOLERANCE
 
-        pieces = search.candidates(PIECE_FRACTION * typical)
         # Pieces along a member (it was cut at a numeral or a dust speck) extend it, across
         # a gap under half the typical length, to at most the longest member's length (the
         # ridge fades over a speck's halo): its measurement then spans the whole graduation
@@ -478,12 +531,15 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         # numeral's strokes beside a line's end become pieces there, none as long).
         pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
         _join(found, members, pool, on_ruling, half_way,
-              lambda c, ref=ref: _position(c, ref), search, pitch, MEMBER_FRACTION * typical)
+              lambda c, ref=ref: _position(c, ref), search, pitch, floor)
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
         for g in groups:
-            _span_members(found, g)
+            # Every member's ridge faded a filter width before each end: a short tick (70
+            # px, seen 50) with dust beside it kept under 10 segments that fit (3 of 19).
+            _span_members(found, g, FADE_SIGMA * search.f)
+    faded = {id(found[i]) for g in groups for i in g}  # (their length, less that, is seen)
     if families:
         # Lines meeting at a point (a dial's graduations): a group too, every one reported,
         # completed by a second search down to half their typical length (as a family's).
@@ -528,8 +584,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     short: list[int] = []
     if min_length_px is not None:
         # The user's shortest line holds for families too: their shorter members are said.
-        short = [i for g in groups for i in g
-                 if found[i].length_px < LENGTH_SLACK * min_length_px]
+        short = [i for g in groups for i in g if found[i].length_px - 2 * FADE_SIGMA * search.f
+                 * (id(found[i]) in faded) < LENGTH_SLACK * min_length_px]
         groups = [[i for i in g if i not in short] for g in groups]
         groups = [g for g in groups if len(g) >= 2]
     in_family = {i for g in groups for i in g}

@@ -282,12 +282,19 @@ def clipped_note(image: np.ndarray, top: float, least: float = 0.01) -> str:
     the share; '' otherwise. Said with "no mark found": an over-exposed background leaves a
     groove in it nothing to be read against, and the user must know it is the exposure."""
     hot = image >= top
-    share = float(hot.mean())
-    if share < least:
+    if float(hot.mean()) < least:
         return ""
+    return clipped_region(hot, top) + ": over-exposed, expose less"
+
+
+def clipped_region(hot: np.ndarray, top: float) -> str:
+    """The clipped pixels ``hot`` (a mask with at least one True) of a frame whose full scale
+    is ``top`` [DN], named: the box holding 98 % of them (x0,y0–x1,y1 [px]), the level, the
+    share of the frame."""
+    share = float(hot.mean())
     rows, cols = np.nonzero(hot)
     x0, x1 = np.percentile(cols, [1, 99]).astype(int)
     y0, y1 = np.percentile(rows, [1, 99]).astype(int)
     bits = int(np.log2(top + 1))
     return (f"region {x0},{y0}–{x1},{y1} is clipped at {top:.0f} (the {bits}-bit full scale; "
-            f"{100 * share:.0f} % of the frame): over-exposed, expose less")
+            f"{100 * share:.{0 if share >= 0.01 else 2}f} % of the frame)")

@@ -16,6 +16,7 @@ from scipy.ndimage import median_filter
 from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
 from imaging.centres import Centres, sample_centres
+from imaging.clipped import clipped_notes
 from imaging.confirm import shadow_note
 from imaging.crossmask import crossing_skip, fused_error
 from imaging.defocus import BlurTrend, blur_trend
@@ -477,15 +478,14 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         The measurements, the families and what the background did.
     """
     # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
-    # same frame as an array got u 1745" where its file got 5.3". (read_image gives floats:
-    # no copy then.)
+    # same frame as an array got u 1745" where its file got 5.3" (read_image: floats, no copy).
     image = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
-    # (Uniform only if the first pixel is the maximum: the minimum's pass, ~1.5 ms at 5 MP,
-    # only then.)
+    # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
     if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
     top = full_scale(mx)
+    hot = image >= top  # the clipped pixels, named below (one pass)
     if camera is not None and (image.shape[1], image.shape[0]) != tuple(camera.image_size):
         raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
@@ -580,7 +580,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
     notes = (stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
-             + oriented_note(where, oriented))
+             + oriented_note(where, oriented) + clipped_notes(
+                 hot, top, where, [(index[i], c) for i, c in enumerate(cands) if i in index]))
     return MeasuredFrame(out, fams, len(det.unreported), notes, stripes, oriented)
 
 

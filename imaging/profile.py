@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter
 
-from imaging.band import _band, band_indices, band_pixels
+from imaging.band import _band, band_indices, band_pixels, unclipped
 from imaging.centres import Centres, sample_centres
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
 from imaging.errors import ImageInputError
@@ -26,6 +26,7 @@ from imaging.groove import (
     centres_half,
     profile_lazy,
 )
+from imaging.groupsum import GroupSums
 
 __all__ = ["Centres", "ProfileFit", "ProfileTable", "band_indices", "band_pixels",
            "centres_half", "extent_look", "fit_profile", "groove_extent", "sample_centres"]
@@ -218,8 +219,9 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
     vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
-    ok = (vals < pf.full_scale_dn) & (vals > 0)
-    vals, e, t = vals[ok], e[ok], t[ok]
+    ok = unclipped(vals, pf.full_scale_dn)
+    if ok is not None:
+        vals, e, t = vals[ok], e[ok], t[ok]
     mid = 0.5 * (pf.t_start_px + pf.t_end_px)
     if vals.size == 0:
         return pf.t_start_px, pf.t_end_px, False, False
@@ -227,14 +229,15 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     j -= j.min()
     nb = int(j.max()) + 1
     p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
-    cnt = np.bincount(j, minlength=nb)
-    sp, spp = np.bincount(j, p, nb), np.bincount(j, p * p, nb)
-    sv, spv = np.bincount(j, vals, nb), np.bincount(j, p * vals, nb)
+    bc = GroupSums(j, nb)  # (5 sums over the same bins)
+    cnt = bc.counts
+    sp, spp = bc(p), bc(p * p)
+    sv, spv = bc(vals), bc(p * vals)
     det = cnt * spp - sp * sp
     amp = np.where(det > 1e-9 * np.maximum(cnt * spp, 1e-300),
                    (cnt * spv - sp * sv) / np.where(det > 0, det, 1.0), np.nan)
     amp[cnt < 4] = np.nan
-    tb = np.bincount(j, t, nb) / np.maximum(cnt, 1)  # each bin's mean position
+    tb = bc(t) / np.maximum(cnt, 1)  # each bin's mean position
     good = np.isfinite(amp)
     if good.sum() < 10:
         return pf.t_start_px, pf.t_end_px, False, False

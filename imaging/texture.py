@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
+from imaging.groupsum import GroupSums
 from imaging.ring import ring_geometry, ring_slope  # the ring's slope, as for the mark
 
 ALPHA = 1e-3
@@ -79,11 +80,15 @@ class _Shifted:
         self.flat = ys * image.shape[1] + xs if image.flags.c_contiguous and ys.size else None
         self.box = (ys.min(), ys.max(), xs.min(), xs.max()) if self.flat is not None else None
 
-    def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The values shifted by (dx, dy) and which are usable (None: every one, as two
+        reductions told: cheaper than the masks, and the usual case)."""
         h, w = self.image.shape
         if self.box is not None and (self.box[0] + dy >= 0 and self.box[1] + dy < h
                                      and self.box[2] + dx >= 0 and self.box[3] + dx < w):
             v = self.image.ravel()[self.flat + (dy * w + dx)].astype(float, copy=False)
+            if v.min() > 0 and v.max() < self.full_scale:  # (NaN fails both)
+                return v, None
             return v, (v < self.full_scale) & (v > 0)
         return _replica(self.image, self.ys, self.xs, dx, dy, self.full_scale)
 
@@ -101,7 +106,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                   normal: np.ndarray, shifts_px: Sequence[float],
                   noise_var: tuple[float, float], full_scale: float,
                   avoid_px: Sequence[float] = (), clear_px: float = 0.0,
-                  npx: np.ndarray | None = None) -> TextureModel | None:
+                  npx: np.ndarray | None = None, sums: GroupSums | None = None
+                  ) -> TextureModel | None:
     """Measure the texture's effect on the centres from replicas of the band.
 
     Parameters
@@ -118,6 +124,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
         (a ruled scale's neighbours) [px]: no replica is taken within ``clear_px`` of one —
         there the replica holds a line, not background.
     npx : the band's pixel count per segment, when the caller has it (else counted here)
+    sums : the band's per-segment sums (:class:`imaging.groupsum.GroupSums` of its segments),
+        when the caller has them (else grouped here)
 
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance,
@@ -130,8 +138,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     k = len(J)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
 
-    def bc(x: np.ndarray) -> np.ndarray:
-        return np.bincount(seg, x, minlength=nseg)
+    bc = GroupSums(seg, nseg) if sums is None else sums
 
     wj = [wgt * j for j in J]
     # White-noise variance of a replica's centre, (N^-1 J^T W V W J N^-1)_00, with the
@@ -155,9 +162,11 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
                 continue
             dx, dy = (int(round(sign * dist * c)) for c in normal)
             v, good = band_at(dx, dy)
-            valid = ok & (np.bincount(seg[~good], minlength=nseg) == 0)
+            valid = (ok.copy() if good is None or good.all()  # (changed in place below)
+                     else ok & (np.bincount(seg[~good], minlength=nseg) == 0))
             rv, rgood = ring_at(dx, dy)
-            if not rgood.all():  # (all usable: every segment has its whole ring)
+            whole = rgood is None or rgood.all()
+            if not whole:  # (all usable: every segment has its whole ring)
                 valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
                 continue
@@ -167,8 +176,8 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
-            x = ring_slope(np.where(rgood, rv, 0.0), ring[2], ring[3], nseg, full_scale,
-                           ring_geo)
+            x = ring_slope(rv if whole else np.where(rgood, rv, 0.0), ring[2], ring[3], nseg,
+                           full_scale, ring_geo, True if rgood is None else rgood)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to
             # sum to ~0, i.e. no low-frequency power (u came out 20-30 % too small). The

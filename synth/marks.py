@@ -460,7 +460,9 @@ def render_marks(spec: ImageSpec, with_crlb: bool = True) -> SynthImage:
         width=spec.width, height=spec.height, blur_px=spec.blur_px, bits=spec.bits,
         noise_dn_background=noise_dn, contrast_dn=contrast_dn,
         snr=tuple(c / noise_dn for c in contrast_dn), marks=tuple(truths),
-        camera=asdict(spec.camera), seed=spec.seed)
+        # (k3 only when the lens has one: a truth file of a k3-free lens stays the same bits)
+        camera={k: v for k, v in asdict(spec.camera).items() if k != "k3" or v},
+        seed=spec.seed)
     return SynthImage(image=img, truth=truth, mean_e=mean_e)
 
 

@@ -34,8 +34,9 @@ class CameraGeometry:
     ----------
     focal_px : float
         Focal length in pixels (used only to normalise the distortion model).
-    k1, k2 : float
-        OpenCV radial distortion coefficients (dimensionless, normalised coordinates).
+    k1, k2, k3 : float
+        OpenCV radial distortion coefficients (dimensionless, normalised coordinates; k3
+        the r^6 term of a real wide lens's calibration).
     roll_rad : float
         Rotation of the sensor about the optical axis [rad]; positive turns scene features
         counter-clockwise as displayed.
@@ -55,15 +56,18 @@ class CameraGeometry:
     p1: float = 0.0
     p2: float = 0.0
     pp_offset_px: tuple[float, float] = (0.0, 0.0)
+    k3: float = 0.0
 
     @property
     def is_identity(self) -> bool:
         return (self.k1 == 0 and self.k2 == 0 and self.roll_rad == 0 and self.aspect == 1
-                and self.p1 == 0 and self.p2 == 0 and tuple(self.pp_offset_px) == (0.0, 0.0))
+                and self.p1 == 0 and self.p2 == 0 and tuple(self.pp_offset_px) == (0.0, 0.0)
+                and self.k3 == 0)
 
     @property
     def _lens_free(self) -> bool:
-        return self.k1 == 0 and self.k2 == 0 and self.p1 == 0 and self.p2 == 0
+        return (self.k1 == 0 and self.k2 == 0 and self.p1 == 0 and self.p2 == 0
+                and self.k3 == 0)
 
     def scene_to_ideal(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Scene plane -> undistorted (pinhole) pixel coordinates, both relative to centre."""
@@ -78,9 +82,11 @@ class CameraGeometry:
         return c * xi - s * yi, s * xi + c * yi
 
     def _lens(self, xn: np.ndarray, yn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Brown-Conrady in normalised coordinates (OpenCV's k1, k2, p1, p2)."""
+        """Brown-Conrady in normalised coordinates (OpenCV's k1, k2, p1, p2, k3)."""
         r2 = xn * xn + yn * yn
         g = 1.0 + self.k1 * r2 + self.k2 * r2 * r2
+        if self.k3:  # (the same bits without it)
+            g = g + self.k3 * r2 * r2 * r2
         return (xn * g + 2 * self.p1 * xn * yn + self.p2 * (r2 + 2 * xn * xn),
                 yn * g + self.p1 * (r2 + 2 * yn * yn) + 2 * self.p2 * xn * yn)
 
@@ -110,6 +116,9 @@ class CameraGeometry:
                 r2 = ru * ru
                 g = ru * (1 + self.k1 * r2 + self.k2 * r2 * r2) - rd_flat[at]
                 dg = 1 + 3 * self.k1 * r2 + 5 * self.k2 * r2 * r2
+                if self.k3:  # (the same bits without it)
+                    g = g + self.k3 * ru * r2 * r2 * r2
+                    dg = dg + 7 * self.k3 * r2 * r2 * r2
                 return (ru - g / dg,)
 
             (ru,) = iterate_elementwise(radial, (rd,), iters)

@@ -81,14 +81,21 @@ EFFECTS = {
     "lens_k1_B": ("", "OpenCV radial distortion k1 of camera B only (overrides lens_k1)"),
 }
 # The rest of the lens, each for both cameras or one (``_A``/``_B`` overrides the shared key):
-# OpenCV's k2, p1, p2 and the pixel aspect fy/fx minus 1 (non-square pixels).
-_LENS_MORE = {"lens_k2": "OpenCV radial distortion k2", "lens_p1": "OpenCV tangential p1",
+# OpenCV's k2, k3, p1, p2 and the pixel aspect fy/fx minus 1 (non-square pixels).
+_LENS_MORE = {"lens_k2": "OpenCV radial distortion k2", "lens_k3": "OpenCV radial distortion k3",
+              "lens_p1": "OpenCV tangential p1",
               "lens_p2": "OpenCV tangential p2",
               "lens_aspect": "pixel aspect fy/fx minus 1 (non-square pixels)"}
-for _key, _what in _LENS_MORE.items():
-    EFFECTS[_key] = ("", f"{_what} of both cameras")
+# The principal point's offset from the image centre [px] (a real lens's: the chessboard
+# camera's is 13 px in x), as the lens keys.
+_LENS_PP = {"lens_pp_x": "principal point minus image centre, x (columns)",
+            "lens_pp_y": "principal point minus image centre, y (rows down)"}
+for _key, _what in (*_LENS_MORE.items(), *_LENS_PP.items()):
+    _unit = "px" if _key in _LENS_PP else ""
+    EFFECTS[_key] = (_unit, f"{_what} of both cameras")
     for _cam in "AB":
-        EFFECTS[f"{_key}_{_cam}"] = ("", f"{_what} of camera {_cam} only (overrides {_key})")
+        EFFECTS[f"{_key}_{_cam}"] = (_unit, f"{_what} of camera {_cam} only (overrides {_key})")
+_LENS_MORE.update(_LENS_PP)
 LENSES = ("lens_k1", "lens_k1_A", "lens_k1_B",
           *(f"{k}{c}" for k in _LENS_MORE for c in ("", "_A", "_B")))
 
@@ -228,7 +235,8 @@ def _images(out: Path, spec: SessionSpec, S: np.ndarray, eff: dict[str, float],
         # The lens acts on the scene points before the pixels integrate them (synth/optics.py).
         geom = CameraGeometry(focal_px=1.6 * w, k1=lens("lens_k1"), k2=lens("lens_k2"),
                               p1=lens("lens_p1"), p2=lens("lens_p2"),
-                              aspect=1.0 + lens("lens_aspect"),
+                              aspect=1.0 + lens("lens_aspect"), k3=lens("lens_k3"),
+                              pp_offset_px=(lens("lens_pp_x"), lens("lens_pp_y")),
                               roll_rad=eff.get(f"camera_roll_{cam}", 0.0) * ARCSEC)
         s = S[HOUSINGS.index(housing)]
         ang = _scene_angle(s, parse_direction(right), parse_direction(up))

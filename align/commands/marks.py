@@ -46,9 +46,12 @@ def _lens_inputs(args: argparse.Namespace):
 
 
 def _not_ok(results) -> int:
-    """Marks measured but not ok: lens-limited, a bent mark running off the image, or two
-    grooves meeting at a kink."""
-    return sum(r.lens_limited or r.bend_off_frame or r.kinked for r in results)
+    """Marks measured but not ok: lens-limited, a bent mark running off the image, two
+    grooves meeting at a kink, or a member of a family with lines missing."""
+    from align.family import family_gaps
+
+    return sum(r.lens_limited or r.bend_off_frame or r.kinked or bool(family_gaps(r))
+               for r in results)
 
 
 def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import cv2
 import numpy as np
 import pytest
 
@@ -28,10 +27,8 @@ from imaging.camera import calibrate_corners, jackknife_estimates
 from tests.align import user11_inputs as ui
 from tests.align.chessboard_render import board_photos, ray_grid
 from tests.conftest import real_folder
-from tests.imaging.test_camera_cov import D_T, K_T, board_views
+from tests.imaging.test_camera_cov import CENTRE, D_T, K_T, SHAPE, board_views, through_lens
 
-SHAPE = (480, 640)
-CENTRE = np.array([319.5, 239.5])
 ARCSEC = np.pi / 180 / 3600
 
 
@@ -49,16 +46,9 @@ def _mark(rng: np.random.Generator, cam: CameraModel) -> tuple[float, np.ndarray
         c = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.37, 0.37)])
         a = rng.uniform(-np.pi / 2, np.pi / 2)
         s = np.linspace(-0.5, 0.5, 200) * rng.uniform(150, 300) / K_T[0, 0]
-        xy = c + np.outer(s, [np.cos(a), np.sin(a)])
-        raw, _ = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3),
-                                   np.zeros(3), K_T, D_T)
-        raw = raw.reshape(-1, 2)
-        if raw.min() > 5 and raw[:, 0].max() < 634 and raw[:, 1].max() < 474:
-            break
-    one = np.ones(len(raw))
-    q, _ = cam.undistort_centred(raw - CENTRE, one, SHAPE)
-    err = fit_line_only(q, one)[0] - fit_line_only(xy * K_T[0, 0], one)[0]
-    return float((err + np.pi / 2) % np.pi - np.pi / 2), q
+        got = through_lens(c + np.outer(s, [np.cos(a), np.sin(a)]), D_T, cam)
+        if got is not None:
+            return got
 
 
 def _z(seeds: range, marks: int = 4) -> np.ndarray:

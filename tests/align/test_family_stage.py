@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from align.family import line_dial, line_family
-from align.family_stage import lens_u_vector
+from align.family_stage import lens_or_bend_vector, lens_shifts, lens_u_vector
 from align.marks import measure_camera
 from synth.marks import write_image
 from synth.ruled import RuledSpec, render_ruled
@@ -61,6 +61,34 @@ def test_pitch_lens_share_is_the_slope_of_the_lens_moves():
                       lens_shift=shift)
     assert np.isclose(fam.pitch_u_lens_px, 0.01)
     assert fam.pitch_u_px >= fam.pitch_u_lens_px
+
+
+def test_unconfirmed_lens_carried_in_the_pitch_as_with_and_without():
+    """A lens from the lines that no other line confirms (the bows may be the marks' own):
+    the pitch carries (with it - without it) / sqrt 3, as the angles' lens_or_bend does.
+    Members 70 px apart across a 1600 x 1200 frame, k1 -0.17 applied: the last direction
+    moves them by the lens's own correction / sqrt 3, its slope a few tenths of the pitch's
+    change; confirmed, or a camera model, or nothing applied: no such direction."""
+    rec = {"source": "marks", "confirmed_by_other_lines": False,
+           "parameters": {"k1": {"applied": True, "value": -0.17, "u_from_lines": 1e-3},
+                          "k2": {"applied": False, "determined": False}},
+           "ranges": {"k1": 0.3, "k2": 0.05, "p": 1e-3, "aspect": 0.005, "pp_px": 20.0}}
+    assert np.allclose(lens_or_bend_vector(rec), [-0.17, 0, 0, 0, 0, 0, 0])
+    for other in ({**rec, "confirmed_by_other_lines": True}, {**rec, "source": "camera model"},
+                  None):
+        assert not np.any(lens_or_bend_vector(other))
+    n = 23
+    x = 70.0 * (np.arange(n) - 11)
+    mids = np.column_stack([x, np.zeros(n)])  # lines along y: normal x
+    sh = lens_shifts(mids, rec, (1200, 1600))
+    assert sh.shape == (n, 2, 8)
+    fam = line_family(range(n), np.full(n, np.pi / 2), np.full(n, 1e-5), mids,
+                      np.full(n, 0.01), lens_shift=sh)
+    # k1 at the half-diagonal (1000 px) moves x by k1 x^3 / 1000^2: the slope of those
+    # moves over the members, / sqrt 3.
+    moves = 0.17 * x**3 / 1000.0**2 / np.sqrt(3)
+    slope = np.polyfit(np.arange(n), moves, 1)[0]
+    assert 0.5 * slope < fam.pitch_u_lens_px < 1.5 * slope and slope > 1.0
 
 
 def test_dial_increment_carries_the_lens_coupling():

@@ -9,12 +9,33 @@ import cv2
 import numpy as np
 import pytest
 
-from imaging import CameraModel, ImageInputError
+from imaging import CameraModel, ImageInputError, fit_line_only
 from imaging.camera import calibrate_corners
 from imaging.camera_cov import INTRINSICS, dominating, formal_cov
 
 K_T = np.array([[530.0, 0, 326.0], [0, 531.5, 236.0], [0, 0, 1]])
 D_T = np.array([-0.28, 0.12, 8e-4, -5e-4, -0.03])
+
+
+SHAPE = (480, 640)
+CENTRE = np.array([319.5, 239.5])
+
+
+def through_lens(xy: np.ndarray, D: np.ndarray, cam: CameraModel
+                 ) -> tuple[float, np.ndarray] | None:
+    """A straight mark at normalised scene points ``xy`` imaged through the true lens (K_T,
+    ``D``) and measured through ``cam`` without noise: the angle's error [rad] and its
+    centres in the model's undistorted frame; None when it comes within 5 px of the frame's
+    edge (shared by the camera-model tests)."""
+    raw, _ = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), np.zeros(3),
+                               np.zeros(3), K_T, D)
+    raw = raw.reshape(-1, 2)
+    if not (raw.min() > 5 and raw[:, 0].max() < SHAPE[1] - 6 and raw[:, 1].max() < SHAPE[0] - 6):
+        return None
+    one = np.ones(len(raw))
+    q, _ = cam.undistort_centred(raw - CENTRE, one, SHAPE)
+    err = fit_line_only(q, one)[0] - fit_line_only(xy * K_T[0, 0], one)[0]
+    return float((err + np.pi / 2) % np.pi - np.pi / 2), q
 
 
 def board_views(rng: np.random.Generator, n: int, noise_px: float,

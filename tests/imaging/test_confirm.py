@@ -15,6 +15,7 @@ from align import LensRanges, measure_image
 from imaging.confirm import (
     _edge_model,
     _lit_edge_jacobian,
+    _median_axis0,
     nan_median,
     relative_to_light,
     shadow_free,
@@ -144,6 +145,21 @@ def test_nan_median_is_numpys_nanmedian():
             warnings.simplefilter("ignore", RuntimeWarning)  # numpy's all-NaN slice warning
             want = np.nanmedian(x, axis=axis)
         assert np.array_equal(nan_median(x, axis), want, equal_nan=True)
+
+
+def test_median_over_profiles_is_numpys_median():
+    """The 16-bit sort of the profiles' medians gives np.median's values bit for bit: odd
+    and even counts, whole numbers over the full 16-bit range, and the values it must leave
+    to np.median (fractions, negatives, beyond 65535, few rows)."""
+    rng = np.random.default_rng(19)
+    for k in range(120):
+        n, m = int(rng.integers(10, 400)), int(rng.integers(1, 40))
+        x = rng.integers(0, 65536, size=(n, m)).astype(float)
+        if k % 4 == 1:
+            x += 0.25
+        elif k % 4 == 2:
+            x[rng.integers(n), rng.integers(m)] = -1.0 if k % 8 == 2 else 65536.0
+        assert np.array_equal(_median_axis0(x), np.median(x, axis=0))
 
 
 def test_lit_edge_jacobian_matches_finite_differences():

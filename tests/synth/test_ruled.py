@@ -49,3 +49,26 @@ def test_tilted_graduation_in_its_own_place_across_the_wrap():
     t = render_ruled(spec).truth
     xs = sorted(g.centre_xy_px[0] for g in t.lines)
     assert np.allclose(np.diff(xs), 80.0)
+
+
+def test_ruler_of_two_tick_lengths():
+    """A ruler's two tick lengths (a long one every 5th, the short ones between: medium and
+    long alike) at a 24 px pitch in a 400 x 300 frame: two lengths in the truth, the long
+    ticks every 5th, and 90 px from their common baseline only the long ones dark."""
+    r = render_ruled(RuledSpec(width=400, height=300, pitch_px=24.0,
+                               lengths_px=(70.0, 110.0, 110.0), numerals=False, logo=False,
+                               dust=0, dust_on_lines=0, seed=4))
+    lines = r.truth.lines
+    assert len(lines) >= 12
+    assert sorted({g.length_px for g in lines}) == [70.0, 110.0]
+    for g in lines:
+        assert (g.length_px == 110.0) == (g.index % 5 == 0)
+    # 90 px along the ticks from their common baseline: only the long ones reach.
+    half = np.array([(r.truth.width - 1) / 2, (r.truth.height - 1) / 2])
+    for g in lines[len(lines) // 2 - 3: len(lines) // 2 + 3]:
+        u = np.array([np.cos(g.angle_rad), -np.sin(g.angle_rad)])
+        x, y = np.rint(np.array(g.centre_xy_px) + (90.0 - g.length_px / 2) * u + half
+                       ).astype(int)
+        beside = float(r.image[y, x + 12])
+        dark = r.image[y, x] < beside - 3 * r.truth.noise_dn_background
+        assert dark == (g.length_px == 110.0), (g.index, r.image[y, x], beside)

@@ -1,0 +1,55 @@
+"""A family's ruling steps and the lines it misses (align/family.py)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from align.family import family_gaps, line_family, ruling_steps
+from align.warnings import family_warnings
+
+
+def _positions(steps: np.ndarray, pitch: float, k1: float, half: float) -> np.ndarray:
+    """Positions [px] of a ruling imaged through a barrel lens: each one's distance from
+    the centre shrunk by (1 + k1 (x / half)^2)."""
+    x = (steps - steps.mean()) * pitch
+    return x * (1 + k1 * (x / half) ** 2)
+
+
+def test_steps_through_a_barrel_lens_skip_nothing():
+    """23 lines at 70 px through k1 -0.06 at the frame's half-width (the gaps shrink from
+    70 to ~63 px at the sides): every step counted once. The smallest gap taken as the step
+    for the whole ruling put a skipped step where no line was missing."""
+    k = np.arange(23.0)
+    q = _positions(k, 70.0, -0.06, 800.0)
+    gaps = np.diff(q)
+    assert gaps.min() < 0.93 * gaps.max()  # the case: the pitch varies across the frame
+    old = np.rint((q - q[0]) / gaps.min())
+    assert list(old) != list(k)  # what the old count did here
+    assert list(ruling_steps(q)) == list(k)
+
+
+def test_missing_lines_are_named_and_not_ok():
+    """A ruling found on steps 0, 1, 3, 4, 6 of its pitch (the dense ruling's old result):
+    steps 2 and 5 named as missing, on the family's line, in its warnings and its block,
+    and the family's marks not ok; a complete ruling has none."""
+    steps = np.array([0, 1, 3, 4, 6])
+    rng = np.random.default_rng(3)
+    q = 24.0 * steps + rng.normal(0, 0.05, steps.size)
+    a = np.full(steps.size, np.deg2rad(89.7)) + rng.normal(0, 1e-5, steps.size)
+    n = np.array([np.sin(a[0]), np.cos(a[0])])
+    mids = q[:, None] * n[None, :]
+    fam = line_family(range(5), a, np.full(5, 1e-5), mids, np.full(5, 0.05))
+    assert fam.steps == tuple(steps)
+    assert fam.missing_steps == (2, 5)
+    assert abs(fam.pitch_px - 24.0) < 5 * fam.pitch_u_px
+    assert "LINES MISSING at steps 2, 5" in fam.summary()
+    assert fam.to_dict()["missing_steps"] == [2, 5]
+    said = family_warnings("scale.tif", fam)
+    assert any("step(s) 2, 5" in w and "not ok" in w for w in said), said
+    assert family_gaps(SimpleNamespace(family=fam)) == (2, 5)
+    assert family_gaps(SimpleNamespace(family=None)) == ()
+    full = line_family(range(7), np.full(7, a[0]), np.full(7, 1e-5),
+                       (24.0 * np.arange(7.0))[:, None] * n[None, :], np.full(7, 0.05))
+    assert full.missing_steps == () and not family_warnings("scale.tif", full)
