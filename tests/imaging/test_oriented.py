@@ -12,7 +12,7 @@ from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
 from imaging.band import band_indices, band_mask
-from imaging.oriented import _fit, _resid_jac, find_oriented
+from imaging.oriented import Wave, _fit, _resid_jac, find_oriented
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -81,8 +81,10 @@ def _wave_background(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def test_fit_jacobian_is_the_residual_derivative_and_finds_the_same_wave():
     """The analytic Jacobian of the projected residual matches central differences (to 1e-5
-    of its scale) off and at the optimum, and the fit with it lands where a finite-difference
-    Jacobian's does (k within 1e-9 rad/px, a and b within 1e-9)."""
+    of its scale) off and at the optimum, the normal equations' amplitudes are lstsq's, and
+    the fit (Levenberg-Marquardt on the compressed 3-row problem) lands where one on all the
+    rows with a finite-difference Jacobian does (k within 1e-9 rad/px, a and b within
+    1e-9)."""
     rel, valid, k_true = _wave_background(3)
     yy, xx = np.nonzero(valid)
     z = rel[yy, xx].astype(float)
@@ -93,6 +95,10 @@ def test_fit_jacobian_is_the_residual_derivative_and_finds_the_same_wave():
         fd = np.column_stack([(_resid_jac(k + e, X, Y, z)[0] - _resid_jac(k - e, X, Y, z)[0])
                               / (2 * h) for e in np.eye(2) * h])
         assert np.abs(J - fd).max() <= 1e-5 * np.abs(fd).max()
+        ph = k[0] * X + k[1] * Y
+        c_ls = np.linalg.lstsq(np.column_stack([np.cos(ph), np.sin(ph), np.ones_like(ph)]), z,
+                               rcond=None)[0]
+        assert np.abs(_resid_jac(k, X, Y, z)[2] - c_ls).max() < 1e-12
     f0 = tuple(k_true * 1.005 / (2 * np.pi))
     k, ab, cov = _fit(rel, valid, f0, (0, 0))
 
@@ -106,6 +112,30 @@ def test_fit_jacobian_is_the_residual_derivative_and_finds_the_same_wave():
     assert np.abs(ab - c_ref[:2]).max() < 1e-9
     # And it is the wave that is there: k's u is ~6e-5 rad/px (1 % noise on 3 % over ~25k px).
     assert np.abs(k - k_true).max() < 3e-4
+
+
+def test_fit_with_a_singular_jacobian_runs():
+    """A background with no wave at all (flat): c = 0, so J = 0 and J^T J is singular —
+    the compressed problem falls back on J's QR and the fit returns its start, finite,
+    with zero amplitudes (no LinAlgError)."""
+    rel, valid, k_true = _wave_background(4)
+    k, ab, _ = _fit(np.zeros_like(rel), valid, tuple(k_true / (2 * np.pi)), (0, 0))
+    assert np.allclose(k, k_true) and np.all(ab == 0.0)
+
+
+def test_wave_pattern_is_the_plane_wave():
+    """The pattern divided out (by the angle-addition formulas) is a cos(k.r) + b sin(k.r)
+    at every pixel of a frame, to 1e-12 of its amplitude, for waves at any angle."""
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[:97, :131]
+    for _ in range(5):
+        k = rng.uniform(-0.8, 0.8, 2)
+        ab = rng.uniform(-0.1, 0.1, 2)
+        w = Wave(float(np.hypot(*ab)), 0.0, 1.0, 0.0, (float(k[0]), float(k[1])),
+                 (float(ab[0]), float(ab[1])), 1.0)
+        ph = k[0] * x + k[1] * y
+        assert np.abs(w.pattern((97, 131)) - (ab[0] * np.cos(ph) + ab[1] * np.sin(ph))
+                      ).max() <= 1e-12 * np.hypot(*ab)
 
 
 @pytest.mark.slow
