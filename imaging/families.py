@@ -60,8 +60,10 @@ PIECE_FRACTION = 0.15
 fraction of the family's median length."""
 PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
-MIN_REACH = 10.0
-"""Least relief window beside a family's line [px] (20 reached the next tick at 24 px)."""
+REACH = 20.0, 10.0
+"""Least relief window beside a family's line [px]; the second inside a finer pitch
+(:func:`_finer_pitch`: 20 reached the next tick at 24 px). Not 10 for every ruling: a
+grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal)."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -364,7 +366,7 @@ def _near_step(q: float, anchors: np.ndarray, pitch: float) -> bool:
 
 def _join(found: list[MarkCandidate], members: list[MarkCandidate],
           pool: list[MarkCandidate], on_ruling, half_way, position, search, pitch: float,
-          floor: float) -> None:
+          floor: float, least: float = REACH[0]) -> None:
     """Lines of ``pool`` (coarse candidates) on the family's ruling, from ``floor`` px long,
     confirmed and added to ``found`` (a piece of a member the first search joined otherwise
     is that member: the longer one stays).
@@ -377,7 +379,7 @@ def _join(found: list[MarkCandidate], members: list[MarkCandidate],
     the floor is half their median length, and lines between the new floor and the old one
     are looked at again; lines joined in one pass are the next pass's neighbours to step
     from (:func:`_near_step`), at most :data:`JOIN_PASSES` passes. ``position``: a line's
-    place across the family [px].
+    place across the family [px]; ``least``: the least relief window [px].
     """
     lengths = [m.length_px for m in members]
     anchors = sorted(position(m) for m in members)
@@ -393,7 +395,7 @@ def _join(found: list[MarkCandidate], members: list[MarkCandidate],
         # The relief beside a member is judged between it and its neighbours: the next
         # graduation is no machining streak.
         step = abs(pitch) / (2 if any(half_way(c) for c in extra) else 1)
-        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, MIN_REACH, 60))
+        reach = float(np.clip(step - max(o.thickness_px for o in members) - 6, least, 60))
         for c in search.confirm(extra, reach):
             twin = next((j for j, o in enumerate(found) if o.dark == c.dark
                          and _near(c, o, FAMILY_ANGLE, max(6.0, o.thickness_px))
@@ -464,7 +466,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             if np.max(np.abs(k - np.rint(k))) > GRID_TOLERANCE:
                 continue  # not a ruling: streaks of a surface's lay fall anywhere
             reach = float(np.clip(abs(pitch) - max(raw[i].thickness_px for i in g) - 6,
-                                  MIN_REACH, 60))
+                                  REACH[0], 60))
             got = search.confirm([raw[i] for i in g], reach)
             if len(got) >= MIN_MEMBERS:
                 found += [c for c in got if not any(
@@ -486,7 +488,8 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         floor = MEMBER_FRACTION * MEMBER_FRACTION * typical
         fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
                             pitch, shift)
-        floor, pitch = (floor if fine != pitch else MEMBER_FRACTION * typical), fine
+        fine_ruling = int(fine != pitch)
+        floor, pitch = (floor if fine_ruling else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
                       pitch=pitch, members=members, shift=shift, lo=lo, hi=hi) -> bool:
@@ -531,7 +534,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         # numeral's strokes beside a line's end become pieces there, none as long).
         pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
         _join(found, members, pool, on_ruling, half_way,
-              lambda c, ref=ref: _position(c, ref), search, pitch, floor)
+              lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[fine_ruling])
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         groups = group_families(found)
