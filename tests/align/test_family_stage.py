@@ -127,3 +127,36 @@ def test_single_mark_hidden_end_said_with_its_bound():
         assert len(said) == 1, r.notes
         up_to = float(said[0].split("up to ")[1].split(" px")[0])
         assert r.length_px <= 200.0 + 1.0 and up_to >= 200.0 - 1.0, (r.length_px, said)
+
+
+def test_member_middle_not_moved_by_a_free_lens():
+    """A k1 fitted free (its sign open: the angles' estimator, reported not applied, and
+    carried so in the pitch's u by lens_u_vector) moves no member's middle: the middle is
+    the mark's own line's without it. Before, the middles were undistorted by the free k1
+    and the pitch took its noise beyond its own u (a lens-free 1600 x 1200 scale: 62.886 px,
+    truth 62.971, own u 0.0003 px; the slow sweep
+    tests/imaging/test_families.py::test_ruled_scale_grid_every_line_found)."""
+    from align.camera_lens import undistorted_mark
+    from align.family_stage import claimed_middle
+    from imaging import measure_marks
+    from synth import ImageSpec, MarkSpec, render_marks
+
+    spec = ImageSpec(marks=(MarkSpec(np.deg2rad(80.0), 180.0, 200.0, 4.0),), width=640,
+                     height=480, seed=2)
+    m = next(m for m in measure_marks(render_marks(spec, with_crlb=False).image)
+             if not isinstance(m, Exception))
+    lam = np.zeros(7)
+    lam[0] = 0.05
+    mu = undistorted_mark(m, lam)
+    own = undistorted_mark(m, np.zeros(7)).ends_px.mean(axis=0)
+
+    def record(applied: bool) -> dict:
+        return {"source": "marks", "parameters": {"k1": {
+            "value": 0.05, "applied": applied, "determined": True,
+            "estimator": "applied" if applied else "free"}}}
+
+    moved = float(np.linalg.norm(mu.ends_px.mean(axis=0) - own))
+    assert moved > 0.3  # what the free k1 moved the middle by (the defect's size)
+    assert np.linalg.norm(claimed_middle(mu, record(False)) - own) < 1e-3 * moved
+    # An applied k1 is the lens: the middle stays undistorted by it.
+    assert np.array_equal(claimed_middle(mu, record(True)), mu.ends_px.mean(axis=0))
