@@ -232,8 +232,8 @@ crossing), the step biases the groove's centres, and the candidate is not taken 
 ground."""
 MAX_NFEV = 100
 """Evaluations each start of the shadow-edge fit may take (:func:`shadow_free`): twice what
-the converging starts took on the 17 real photos (at most ~50); a start still running
-beyond them is wandering (left01: 654 evaluations to a worse cost)."""
+the converging starts took on the real chessboards (at most ~50; left01-03, right02); a
+start still running beyond them is wandering (left01: 654 evaluations to a worse cost)."""
 TIE = 1e-6
 """Relative cost within which shadow-edge fits count as the same: the cost is half the sum of
 squares of ~1e4 relative residuals, so 1e-6 of it is ~1e-2 in chi2, no evidence between
@@ -346,8 +346,8 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
     hi = [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]
     starts = [[e0, 0.0, np.log(3.0), d0, 1.0, 0.0, 0.0]
               for e0 in np.linspace(-reach / 2, reach / 2, 5) for d0 in (0.3, -0.3)]
-    # Each start is stopped after MAX_NFEV evaluations: on the real photos the starts that
-    # converge take at most ~50, while one (left01: edge at -20 px, depth -0.3) wandered
+    # Each start is stopped after MAX_NFEV evaluations: on left01-03 and right02 the starts
+    # that converge take at most ~50, while one (left01: edge at -20 px, depth -0.3) wandered
     # for 654 (0.4 s of CPU) to a cost above the best. Dropping starts whose cost after a
     # few evaluations is far above the best's was tried and is not safe: on left03 the
     # winning start's cost was 37 % above another's after 10 evaluations and fell below it.
