@@ -18,7 +18,7 @@ from align.errors import InputError
 from axisbase.provenance import Provenance, check_format, envelope
 
 FORMATS = {
-    "marks": 3, "camera": 5, "calibration": 3, "tilt": 3, "gonio": 4, "session": 4,
+    "marks": 3, "camera": 6, "calibration": 3, "tilt": 3, "gonio": 4, "session": 4,
     "platform-calibration": 3, "lot": 1, "plan": 1,
 }
 """kind -> the version this tool writes."""

@@ -22,16 +22,18 @@ from align.warnings import camera_warnings, gonio_warnings, mark_warnings
 Inputs = Iterable[str | Path]
 
 
-def marks_document(results: Sequence, settings: dict, inputs: Inputs) -> dict:
+def marks_document(results: Sequence, settings: dict, inputs: Inputs,
+                   camera_problems: Sequence[str] = ()) -> dict:
     """``align marks --json``: every mark (found or not), ok when every image was measured
     and no angle is lens-limited (``lens_limited``: calibrate the camera) or a bent mark
     running off the image (``bent_mark_off_frame``) or two grooves meeting at a kink
     (``kinked_mark``) or a family of lines with a step of its ruling empty
-    (``missing_steps``)."""
-    return document("marks", {"ok": all(r.found and not r.lens_limited and not r.bend_off_frame
-                                        and not r.kinked and not family_gaps(r)
-                                        for r in results),
-                              "warnings": mark_warnings(results),
+    (``missing_steps``), and the camera model (``camera_problems``: its views not of one
+    camera) can be trusted."""
+    return document("marks", {"ok": not camera_problems and all(
+                                  r.found and not r.lens_limited and not r.bend_off_frame
+                                  and not r.kinked and not family_gaps(r) for r in results),
+                              "warnings": [*camera_problems, *mark_warnings(results)],
                               "marks": [r.to_dict() for r in results]}, settings, inputs)
 
 
@@ -57,8 +59,9 @@ def camera_document(model, settings: dict, inputs: Sequence[str | Path],
     skipped = dict(skipped or {})
     used = [p for p in inputs if str(p) not in skipped]
     field = field_u(model)
-    body = {"ok": True, "warnings": camera_warnings(skipped, field,
-                                                    DEFAULT_RANGES.max_u_arcsec),
+    body = {"ok": not model.problems,
+            "warnings": model.problems + camera_warnings(skipped, field,
+                                                         DEFAULT_RANGES.max_u_arcsec),
             "skipped": [{"file": str(k), "reason": v} for k, v in skipped.items()],
             **model.to_dict(), "field_u": field}
     return document("camera", body, settings, used)

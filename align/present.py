@@ -87,6 +87,13 @@ def camera_lines(model, field: dict | None = None) -> list[str]:
         for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5], strict=False)))
     if choice.get("why"):
         lines.append(f"k3 {choice['k3']}: {choice['why']}")
+    views = model.views_one_camera or {}
+    if views.get("tested"):
+        lines.append(f"one camera: W = {views['W']:.1f} between the views' best split "
+                     f"(p = {views['p']:.2g}, {views['splits']} splits; "
+                     f"{'passed' if views['one_camera'] else 'NOT one camera'})")
+    elif views:
+        lines.append(f"one camera: not tested ({views['why']})")
     if field:
         lines.append(f"the model's own u in a {field['length_px']:.0f} px mark "
                      f"{field['radii_px'][0]:.0f}-{field['radii_px'][1]:.0f} px from the "

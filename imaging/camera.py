@@ -30,6 +30,7 @@ from axisbase.errors import InputError
 from axisbase.provenance import check_format
 from imaging.camera_cov import INTRINSICS, dominating, formal_cov, jackknife_cov
 from imaging.camera_k3 import choose_k3, left_out_term
+from imaging.camera_views import MIN_VIEWS, not_one_camera_warning, one_camera_check, untested
 from imaging.errors import ImageInputError
 
 DIST_LENGTHS = (4, 5, 8, 12, 14)
@@ -124,6 +125,11 @@ class CameraModel:
         left-out k3's term (``k3_left_out``: ``carried_direction`` w per
         :data:`INTRINSICS`, ``carried_k3`` s) is already in ``cov`` (+ s² w wᵀ). None in
         files written before format version 5 (k3 then as the file has it).
+    views_one_camera : dict or None
+        Whether the views are of one camera (:func:`imaging.camera_views.one_camera_check`:
+        the Wald W [1] of the best split's two calibrations, its p, the groups' names and
+        their fx, cx, cy [px]); ``one_camera`` False makes the model not ok
+        (:attr:`problems`). None in files written before format version 6.
     """
 
     camera_matrix: np.ndarray
@@ -139,6 +145,14 @@ class CameraModel:
     cov_formal: np.ndarray | None = None
     cov_jackknife: np.ndarray | None = None
     lens_choice: dict | None = None
+    views_one_camera: dict | None = None
+
+    @property
+    def problems(self) -> list[str]:
+        """Why the model cannot be trusted: its views are not of one camera
+        (:func:`imaging.camera_views.not_one_camera_warning`); empty when it can."""
+        w = not_one_camera_warning(self.views_one_camera or {})
+        return [w] if w else []
 
     @property
     def focal_px(self) -> float:
@@ -157,6 +171,8 @@ class CameraModel:
                 ("cov", self.cov), ("cov_formal", self.cov_formal),
                 ("cov_jackknife", self.cov_jackknife))},
             "lens_choice": None if self.lens_choice is None else dict(self.lens_choice),
+            "views_one_camera": (None if self.views_one_camera is None
+                                 else dict(self.views_one_camera)),
         }
 
     @classmethod
@@ -205,10 +221,19 @@ class CameraModel:
                 out["carried_direction"] = w.tolist()
             return out
 
+        def views() -> dict | None:
+            v = d.get("views_one_camera")
+            if v is not None and not isinstance(v, Mapping):
+                raise ValueError("'views_one_camera' is not a table")
+            if v is not None and not isinstance(v.get("one_camera"), (bool, type(None))):
+                raise ValueError("'views_one_camera.one_camera' is not true, false or null")
+            return None if v is None else dict(v)
+
         K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
                    table("per_view_rms_px"), table("u_formal"), table("u_jackknife"),
-                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice())
+                   cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice(),
+                   views())
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
@@ -226,7 +251,7 @@ class CameraModel:
                                   "camera_matrix, dist_coeffs, image_size as written by "
                                   "'align camera')") from None
         try:  # version 1: files written before format versions existed
-            check_format(d, "axis-align/camera", (1, 2, 3, 4, 5), str(p))
+            check_format(d, "axis-align/camera", (1, 2, 3, 4, 5, 6), str(p))
         except InputError as exc:
             raise ImageInputError(str(exc)) from None
         return model
@@ -315,6 +340,58 @@ def jackknife_estimates(objpts: list, imgpts: list, size: tuple[int, int],
     return np.column_stack([est, est[:, 1] / est[:, 0]])  # and the aspect fy / fx
 
 
+_GUESS_CRIT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-9)
+"""The one-camera check's sub-fits start at the pooled fit and stop at a 1e-9 relative step
+(4x faster than from scratch to machine precision; the intrinsics agree to 1e-6 px)."""
+
+
+def views_one_camera(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                     K0: np.ndarray | None, flags: int, est: np.ndarray) -> dict:
+    """Whether the views are of one camera (:func:`imaging.camera_views.one_camera_check`),
+    from the pooled fit's leave-one-view-out ``est`` (:func:`jackknife_estimates`)."""
+    n = len(objpts)
+    rms, Kp, Dp, _, _ = cv2.calibrateCamera(objpts, imgpts, size, None if K0 is None
+                                            else K0.copy(), None, flags=flags)
+    fits: dict[tuple, tuple] = {}
+
+    def fit(idx: tuple) -> tuple:
+        """K, D, rvecs, tvecs of the views ``idx`` (cached: the classification and the
+        comparison fit the same groups)."""
+        if idx not in fits:
+            fits[idx] = cv2.calibrateCamera(
+                [objpts[i] for i in idx], [imgpts[i] for i in idx], size, Kp.copy(),
+                Dp.copy(), flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
+                criteria=_GUESS_CRIT)[1:]
+        return fits[idx]
+
+    def halves(group: np.ndarray) -> tuple[tuple, tuple]:
+        return tuple(np.flatnonzero(~group)), tuple(np.flatnonzero(group))
+
+    def view_rms(group: np.ndarray) -> np.ndarray:
+        out = np.zeros((n, 2))
+        for j, idx in enumerate(halves(group)):
+            K, D = fit(idx)[:2]
+            for i, (oi, qi) in enumerate(zip(objpts, imgpts, strict=True)):
+                _, r, t = cv2.solvePnP(oi, qi, K, D)
+                proj = cv2.projectPoints(oi, r, t, K, D)[0]
+                out[i, j] = np.sqrt(np.mean(np.sum((proj - qi).reshape(-1, 2)**2, axis=1)))
+        return out
+
+    def group_fit(group: np.ndarray) -> list:
+        out = []
+        for idx in halves(group):
+            K, D, rv, tv = fit(idx)
+            formal = formal_cov([objpts[i] for i in idx], [imgpts[i] for i in idx], K, D, rv,
+                                tv, bool(flags & cv2.CALIB_FIX_K3), K0 is not None)
+            jack = jackknife_cov(np.array([_intrinsics(*fit(idx[:k] + idx[k + 1:])[:2])
+                                           for k in range(len(idx))]))
+            out.append((_intrinsics(K, D), formal, jack))
+        return out
+
+    pseudo = n * _intrinsics(Kp, Dp) - (n - 1) * est[:, :len(INTRINSICS)]
+    return one_camera_check(pseudo, names, view_rms, group_fit)
+
+
 def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarray | None,
                 flags: int) -> np.ndarray:
     """Delete-one-view jackknife standard uncertainty of each intrinsic and the aspect."""
@@ -396,23 +473,41 @@ def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: 
         m = _calibrate(objpts, imgpts, size, names, mode == "fixed", fix_aspect)
         return replace(m, lens_choice={"k3": "fitted" if mode == "free" else "left out",
                                        "why": f"k3 {mode} as asked"})
-    free = _calibrate(objpts, imgpts, size, names, False, fix_aspect)
-    fixed = _calibrate(objpts, imgpts, size, names, True, fix_aspect)
+    free = _calibrate(objpts, imgpts, size, names, False, fix_aspect, check=False)
+    fixed = _calibrate(objpts, imgpts, size, names, True, fix_aspect, check=False)
     k3_hat = float(np.ravel(free.dist_coeffs)[4])
     u_k3 = float((free.u or {}).get("k3", 0.0))
     points = sum(len(p) for p in imgpts)
     params = 9 - int(fix_aspect) + 6 * len(objpts)
     choice = choose_k3(free.rms_px, fixed.rms_px, points, params, k3_hat, u_k3)
-    if choice["k3"] == "fitted":
-        return replace(free, lens_choice=choice)
+    fitted = choice["k3"] == "fitted"
+    views = _views_check(objpts, imgpts, size, names, not fitted, fix_aspect)
+    if fitted:
+        return replace(free, lens_choice=choice, views_one_camera=views)
     w, s_k3 = left_out_term(free.cov, k3_hat, u_k3)
     choice.update(carried_k3=s_k3, carried_direction=w.tolist())
-    return replace(fixed, cov=fixed.cov + s_k3**2 * np.outer(w, w), lens_choice=choice)
+    return replace(fixed, cov=fixed.cov + s_k3**2 * np.outer(w, w), lens_choice=choice,
+                   views_one_camera=views)
+
+
+def _views_check(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                 fix_k3: bool, fix_aspect: bool, est: np.ndarray | None = None) -> dict:
+    """:func:`views_one_camera` with the calibration's flags (``est``: its jackknife
+    estimates when already computed); not tested below :data:`MIN_VIEWS` views."""
+    if len(objpts) < MIN_VIEWS:
+        return untested(len(objpts))
+    flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
+                                                    else 0)
+    K0 = np.eye(3) if fix_aspect else None
+    if est is None:
+        est = jackknife_estimates(objpts, imgpts, size, K0, flags)
+    return views_one_camera(objpts, imgpts, size, names, K0, flags, est)
 
 
 def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
-               fix_k3: bool, fix_aspect: bool) -> CameraModel:
-    """One OpenCV calibration with its u's and joint covariances (k3 free or at 0)."""
+               fix_k3: bool, fix_aspect: bool, check: bool = True) -> CameraModel:
+    """One OpenCV calibration with its u's and joint covariances (k3 free or at 0), and
+    (``check``) whether its views are of one camera (:func:`views_one_camera`)."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None
@@ -440,4 +535,6 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
     return CameraModel(K, D.ravel(), size, float(rms), len(objpts), u,
                        {n: float(v) for n, v in zip(names, np.ravel(per_view), strict=True)},
                        u_formal, u_jack, cov_f if cov_j is None else dominating(cov_f, cov_j),
-                       cov_f, cov_j)
+                       cov_f, cov_j, views_one_camera=None if not check else _views_check(
+                           objpts, imgpts, size, names, fix_k3, fix_aspect,
+                           None if cov_j is None else est))

@@ -28,9 +28,9 @@ def cmd_marks(args: argparse.Namespace) -> int:
                           min_length_px=args.min_length, ranges=ranges)
     batch = map(with_grid_phase, batch) if args.blur_after_pixels else batch  # declared
     results, failed, internal = _show_marks(batch, plot_dir)
-    _write_marks(args, results, inputs, out)
+    bad_model = _write_marks(args, results, inputs, out, camera)  # two cameras' views in it
     # A lens-limited angle is not ok (docs/camera.md): exit 2 like a failed image.
-    return _marks_status(failed + _not_ok(results), internal)
+    return _marks_status(failed + _not_ok(results) + bad_model, internal)
 
 
 def _lens_inputs(args: argparse.Namespace):
@@ -54,17 +54,22 @@ def _not_ok(results) -> int:
                for r in results)
 
 
-def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out) -> None:
+def _write_marks(args: argparse.Namespace, results: list, inputs: list[str], out,
+                 camera) -> int:
+    """Warn and write the marks' JSON; the number of the camera model's own problems (its
+    views not of one camera: each makes the run not ok)."""
     from align.documents import marks_document
     from align.warnings import not_measured
     from axisbase.output import write_json
 
-    doc = marks_document(results, settings(args), inputs)
+    problems = [f"{args.camera}: {w}" for w in (camera.problems if camera else [])]
+    doc = marks_document(results, settings(args), inputs, problems)
     # A failed image was said once, as its error (_show_marks): not again as a warning.
     said = {not_measured(r) for r in results if not r.found}
     warn([w for w in doc["warnings"] if w not in said])
     if out is not None:
         wrote(write_json(out, doc, args.force))
+    return len(problems)
 
 
 def _show_marks(batch, plot_dir) -> tuple[list, int, int]:
@@ -115,7 +120,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
     say(camera_lines(model, doc["field_u"]))
     if out is not None:
         wrote(write_json(out, doc, args.force))
-    return 0
+    return 2 if model.problems else 0  # the views are not of one camera
 
 
 def _read_boards(paths: list[str]) -> tuple[dict, dict[str, str]]:

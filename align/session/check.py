@@ -166,7 +166,9 @@ def _file_problem(folder: Path, where: str, value: object, kind: str,
             if min(w, h) < MIN_SIDE_PX:
                 return f"{where} = {value!r}: only {w}x{h} px, too small for a mark"
         elif kind == "camera":
-            CameraModel.load(p)  # every key checked as align run checks it
+            problems = CameraModel.load(p).problems  # every key checked as align run does
+            if problems:  # its views are of two cameras: align run would refuse it
+                return f"{where} = {value!r}: {problems[0]}"
     except InputError as exc:
         return f"{where} = {value!r}: {exc}"
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

@@ -334,6 +334,8 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))
                       if cam.model is not None else None)
+        res.errors += [StageError(f"camera {name}", f"{cam.model}: {w}")
+                       for w in (cams[name].problems if cams[name] is not None else [])]
     # One lens per camera: every image of a camera enters one plumb-line fit (issue 18).
     by_cam: dict[str, list[int]] = {}
     for k, im in enumerate(s.images):

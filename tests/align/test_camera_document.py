@@ -5,7 +5,9 @@ back with the carried k3."""
 
 from __future__ import annotations
 
+import functools
 import json
+from dataclasses import replace
 
 import numpy as np
 
@@ -18,11 +20,17 @@ from tests.imaging.test_camera_cov import D_T
 from tests.imaging.test_camera_k3 import _calibrate
 
 
+@functools.cache
+def _model() -> CameraModel:
+    """7 views of the known lens D_T (the two tests share one calibration)."""
+    return _calibrate(0, D_T)
+
+
 def test_the_document_names_the_model_chosen_and_the_field_u():
-    cam = _calibrate(0, D_T)
+    cam = _model()
     doc = json.loads(json.dumps(camera_document(cam, {}, ["b0.png"])))
     validate(doc, "camera")
-    assert doc["format_version"] == 5
+    assert doc["format_version"] == 6
     assert doc["lens_choice"]["k3"] == "left out" and "do not determine k3" in \
         doc["lens_choice"]["why"]
     f = doc["field_u"]
@@ -48,3 +56,37 @@ def test_a_format_4_file_still_reads_without_a_choice(tmp_path):
     back = CameraModel.load(p)
     assert back.lens_choice is None and left_out_k3(back) is None
     np.testing.assert_array_equal(back.cov, cam.cov)
+
+
+def test_a_model_of_two_cameras_is_not_ok_and_marks_through_it_say_so(tmp_path, capsys):
+    """A camera file whose views the one-camera check split (``views_one_camera``,
+    imaging/camera_views.py) is ``ok: false`` with the NOT OK warning naming the groups; and
+    ``align marks --camera`` with it repeats the warning, ``ok: false``, exit 2; the same
+    model with its views passing says nothing of it."""
+    import cv2
+
+    from align.cli import main
+    from tests.conftest import mark_image
+
+    cam = _model()
+    assert cam.views_one_camera["tested"] and cam.views_one_camera["one_camera"]
+    split = {**cam.views_one_camera, "one_camera": False, "W": 50.0, "p": 1e-8,
+             "groups": [["0", "1", "2"], ["3", "4", "5", "6"]],
+             "group_values": [[533.0, 330.0, 240.0], [536.0, 340.0, 250.0]]}
+    img = tmp_path / "m.png"
+    cv2.imwrite(str(img), mark_image(30.0, 1, size=(640, 480), length_px=150).image)
+    for model, ok in ((cam, True), (replace(cam, views_one_camera=split), False)):
+        doc = json.loads(json.dumps(camera_document(model, {}, ["b0.png"])))
+        validate(doc, "camera")
+        said = [w for w in doc["warnings"] if "not of one camera" in w]
+        assert doc["ok"] is ok and bool(said) is not ok, doc["warnings"]
+        assert CameraModel.from_dict(doc).problems == said
+    path, out = tmp_path / "cam.json", tmp_path / "marks.json"
+    path.write_text(json.dumps(doc))
+    code = main(["marks", str(img), "--camera", str(path), "--json", str(out), "-q"])
+    marks = json.loads(out.read_text())
+    named = [w for w in marks["warnings"] if "not of one camera" in w]
+    assert code == 2 and not marks["ok"] and named, marks["warnings"]
+    assert all(m["found"] for m in marks["marks"])  # measured: not ok for the model alone
+    assert "[0 1 2] and [3 4 5 6]" in named[0] and str(path) in named[0]
+    assert "NOT OK: the views are not of one camera" in capsys.readouterr().err

@@ -175,3 +175,26 @@ def test_a_camera_model_beside_lens_ranges_is_refused_naming_both(synthetic, tmp
     p = problems[0]
     assert "[cameras.A] model = 'camA.json'" in p and "\n" not in p
     assert all(k.split(" =")[0] in p for k in keys), p
+
+
+def test_a_camera_model_of_two_cameras_is_a_problem(synthetic, tmp_path):
+    """A camera file whose views the one-camera check split (issue 18): align check names
+    it, as align run records it as that camera's error."""
+    folder = tmp_path / "two"
+    shutil.copytree(synthetic, folder)
+    split = {"tested": True, "one_camera": False, "W": 50.0, "p": 1e-8, "alpha": 0.01,
+             "parameters": ["fx", "cx", "cy"], "groups": [["l1", "l2", "l3"], ["r1", "r2", "r3"]],
+             "group_values": [[800.0, 160.0, 120.0], [801.0, 170.0, 130.0]]}
+    (folder / "camA.json").write_text(json.dumps(
+        {"camera_matrix": [[800, 0, 160], [0, 800, 120], [0, 0, 1]],
+         "dist_coeffs": [0.0] * 5, "image_size": [320, 240], "views_one_camera": split}))
+    toml = folder / "session.toml"
+    head, rest = toml.read_text().split("[cameras.A]\n", 1)
+    own, tail = rest.split("\n\n", 1)
+    kept = [x for x in own.splitlines() if not x.startswith("lens_")]
+    toml.write_text(head + "[cameras.A]\n" + "\n".join([*kept, 'model = "camA.json"'])
+                    + "\n\n" + tail)
+    problems = check_session(folder)
+    assert len(problems) == 1, problems
+    assert "[cameras.A] model = 'camA.json'" in problems[0]
+    assert "not of one camera" in problems[0] and "[l1 l2 l3] and [r1 r2 r3]" in problems[0]

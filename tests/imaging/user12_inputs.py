@@ -29,15 +29,17 @@ import numpy as np
 from scipy.special import ndtr
 
 
-def calibrate_chessboard(folder: Path) -> tuple[np.ndarray, np.ndarray, float, int]:
-    """My own calibration of the chessboard camera: cv2.calibrateCamera (k1 k2 p1 p2 k3).
+def calibrate_chessboard(folder: Path, pattern: str = "*.jpg"
+                         ) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """My own calibration of the chessboard camera: cv2.calibrateCamera (k1 k2 p1 p2 k3)
+    of the photographs ``pattern`` in ``folder``.
 
     Returns K, dist (5,), RMS reprojection [px], views used.
     """
     objp = np.zeros((54, 3), np.float32)
     objp[:, :2] = np.mgrid[0:9, 0:6].T.reshape(-1, 2)
     obj, img, shape = [], [], None
-    for f in sorted(glob.glob(str(folder / "*.jpg"))):
+    for f in sorted(glob.glob(str(folder / pattern))):
         g = cv2.imread(f, cv2.IMREAD_GRAYSCALE)
         ok, c = cv2.findChessboardCorners(g, (9, 6))
         if not ok:
