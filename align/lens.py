@@ -121,14 +121,14 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     There a parameter whose sign the other lines leave open stays carried in u (no free fit:
     the bent line's own angle is read by its loop).
     """
-    sol, designs, free_fit = _solve(lines, scale, ranges, alpha, iters)
+    cache = _DesignCache(lines, scale)
+    sol, designs, free_fit, fits = _solve(cache, ranges, alpha, iters)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
         return free_fit()
     best: tuple[float, int, LensSolution] | None = None
     for k in range(len(lines)):
-        rest = [ln for i, ln in enumerate(lines) if i != k]
         try:
-            sk, dk, _ = _solve(rest, scale, ranges, alpha, iters)
+            sk, dk, _, _ = _solve(cache.without(k), ranges, alpha, iters, fits)
         except LensFolds:
             continue
         p = _plausible(sk, dk, alpha)
@@ -137,7 +137,10 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     if best is None:
         return free_fit()
     _, k, sk = best
-    cache = _DesignCache(lines, scale)
+    # The lines but k solved again from zero: the warm starts above only rank the lines (a
+    # Gauss-Newton stop leaves the lens ~1e-3 of its range from where zero's path ends),
+    # the lens given is the one from zero, whatever the other lines' fits were.
+    sk = _solve(cache.without(k), ranges, alpha, iters)[0]
     try:
         ds = cache.all(sk.lam)
     except LensFolds:
@@ -161,19 +164,22 @@ def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> f
     return float(special.chdtrc(dof, float(bz @ bz))) if dof > 0 else 1.0
 
 
-def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alpha: float,
-           iters: int
+def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
+           starts: Mapping[tuple[int, ...], np.ndarray] | None = None
            ) -> tuple[LensSolution, list[_Design],
-                      Callable[[], tuple[LensSolution, list[_Design]]]]:
-    """:func:`solve_lens` over all of ``lines``: the solution with every parameter whose sign
-    the lines leave open carried in u, its designs, and the call that returns the solution
-    the angles are read under (:func:`_marginalise`: made only for the solution given, not
-    for the lines' leave-one-out tests)."""
+                      Callable[[], tuple[LensSolution, list[_Design]]],
+                      dict[tuple[int, ...], np.ndarray]]:
+    """:func:`solve_lens` over all of the lines of ``cache``: the solution with every
+    parameter whose sign the lines leave open carried in u, its designs, and the call that
+    returns the solution the angles are read under (:func:`_marginalise`: made only for the
+    solution given, not for the lines' leave-one-out tests), and its Gauss-Newton fits per
+    applied set: ``starts`` for the leave-one-out solves (all lines but one: the fit of
+    all of them is a step or two from theirs, where zero took five and more)."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
     lam = np.zeros(P)
-    cache = _DesignCache(lines, scale)
+    lines, scale = cache.lines, cache.scale
     designs = cache.all(lam)
     F0 = sum(d.G.T @ d.G for d in designs)
     det = _determined(F0, rng, z)
@@ -184,7 +190,8 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
     spread, spread_u, spread_for = np.zeros(P), np.zeros(P), list(applied)
     fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
-        lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters)
+        lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters,
+                                                   (starts or {}).get(tuple(applied)))
         try:
             designs = cache.all(lam)
         except LensFolds:  # the estimate folds the image: no lens, refused below
@@ -270,7 +277,7 @@ def _solve(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges, alph
         s, ds = _marginalise(cache, sol, ds, iters)
         return replace(s, notes=s.notes + _carried_notes(s, bound)), ds
 
-    return replace(sol, notes=sol.notes + _carried_notes(sol, bound)), designs, free_fit
+    return replace(sol, notes=sol.notes + _carried_notes(sol, bound)), designs, free_fit, fits
 
 
 def _carried_notes(sol: LensSolution, bound: np.ndarray) -> tuple[str, ...]:

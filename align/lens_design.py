@@ -160,10 +160,20 @@ class _DesignCache:
     def __init__(self, lines: Sequence[LineGeometry], scale: float) -> None:
         self.lines, self.scale = lines, scale
         self._memo: dict[tuple, _Design] = {}
+        self._index = list(range(len(lines)))
+
+    def without(self, k: int) -> _DesignCache:
+        """The cache of the lines but line ``k``, sharing this one's designs (keyed by the
+        line's index here): the leave-one-out solves revisit the lens vectors of the
+        others (zero, and the principal point's probes about it)."""
+        sub = _DesignCache([ln for i, ln in enumerate(self.lines) if i != k], self.scale)
+        sub._memo = self._memo
+        sub._index = [j for i, j in enumerate(self._index) if i != k]
+        return sub
 
     def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
         """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
-        key = (k, lam.tobytes(), only)
+        key = (self._index[k], lam.tobytes(), only)
         d = self._memo.get(key)
         if d is None:
             d = self._memo[key] = _design(self.lines[k], lam, self.scale, only)
@@ -171,7 +181,7 @@ class _DesignCache:
 
     def cached(self, k: int, lam: np.ndarray) -> _Design | None:
         """Line ``k``'s full design at ``lam`` if already computed."""
-        return self._memo.get((k, lam.tobytes(), None))
+        return self._memo.get((self._index[k], lam.tobytes(), None))
 
     def all(self, lam: np.ndarray) -> list[_Design]:
         """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""

@@ -59,6 +59,11 @@ INFORMATION = (
     # A lens parameter whose sign the lines leave open: not applied, its range in u.
     re.compile(r": lens \w+ = \S+ ± \S+ from the lines: sign not determined; not applied, "
                r"carried in u$"),
+    # A parameter of open sign fitted free with the angle (the smaller u of the two
+    # readings, align/lens.py): its covariance in u, no lens applied.
+    re.compile(r": lens \w+ fitted free with each angle \(.*\): the angle marginalised over "
+               r"it \(u from the joint covariance, lens_fit\), smaller than carrying it over "
+               r"its range$"),
     # Parameters the lines do not determine (the usual case of few marks): ranges in u.
     re.compile(r": lens [\w, ]+ not determined by these \d+ line\(s\): carried in u over "
                r"their plausible range$"),

@@ -29,6 +29,30 @@ EXTRA_STEPS = 4
 (a lens bows a long off-centre mark by several px: with 2 steps of at most 1 px its ends
 stopped 0.2-0.35 px short, and a calibrated lens was reported as differing from itself)."""
 
+RCOND = 1e-8
+"""Least ratio of the smallest to the largest eigenvalue of a segment's normal matrix, scaled
+to unit diagonal (its parameters' correlation-like matrix), for the segment to be solved.
+``det(N) > 0`` alone let rounding decide a nearly singular segment (a few pixels all on one
+flank: centre and contrast not separated): on left04.jpg 1e-14 relative noise on the image
+flipped it, its contrast ran off to ~2e8 DN and mark 1 had 45 or 49 points. Below 1e-8 the
+worst-determined combination's variance is over 1e8 times the best's (the segment tells
+nothing of its centre), and rounding (~1e-14 of the matrix) moves the ratio by ~1e-14: it
+can no longer decide."""
+
+AMP_STEP = 10.0
+"""Largest change of a segment's contrast in one Gauss-Newton step, in units of the band's
+contrast: a bound on a runaway, not a constraint on a segment that converges."""
+
+
+def _conditioned(N: np.ndarray) -> np.ndarray:
+    """Which of the segments' normal matrices ``N`` (nseg, k, k) are positive definite with a
+    reciprocal condition, at unit diagonal, of at least :data:`RCOND`."""
+    d = np.einsum("nii->ni", N)
+    ok = np.all(d > 0, axis=1)
+    s = 1.0 / np.sqrt(np.where(ok[:, None], d, 1.0))
+    lam = np.linalg.eigvalsh(N * s[:, :, None] * s[:, None, :])
+    return ok & (lam[:, 0] > RCOND * lam[:, -1])
+
 
 @dataclass(frozen=True)
 class Centres:
@@ -233,7 +257,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             g[:, i] = bc(wj * r)
             for j in range(i, k):
                 N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
-        ok = np.linalg.det(N) > 0
+        ok = _conditioned(N)
         if it >= iterations and not (moving & ok).any():
             break  # the last pass only refreshes weights and information at the solution
         if it == iterations + EXTRA_STEPS:
@@ -244,7 +268,11 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         moving = np.abs(step[:, 0]) > 0.1
         step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
         delta += step[:, 0]
-        amp += step[:, 1]
+        # Nor may the contrast move by more than AMP_STEP times the band's own in one step
+        # (a segment nearly unable to separate it from its centre ran off to ~2e8 DN); a
+        # cap of once the band's changed segments of the real chessboards that converge.
+        cap = AMP_STEP * abs(pf.contrast_dn)
+        amp += np.clip(step[:, 1], -cap, cap)
         lev += step[:, 2]
         if k == 4:
             slp += step[:, 3]
