@@ -338,6 +338,18 @@ def bow_bound(lines: Sequence[LineGeometry], lam: np.ndarray, reach: np.ndarray,
     return tuple(out)
 
 
+def claimed_lens(lam: np.ndarray | None, record: Mapping | None) -> np.ndarray | None:
+    """``lam`` without the parameters fitted free with the angles (their sign open,
+    :func:`align.lens._marginalise`): the lens the record claims, through which positions
+    (offsets, a family's middles) are read. A free parameter is the angles' estimator and
+    carried in their u, not in the positions' (a lens-free 1280 x 1024 scene: a free k1 of
+    0.024 +- 0.02 moved a mark's offset 10 px at +- 0.05 px)."""
+    if lam is None or not record or record.get("source") != "marks":
+        return lam
+    par = record.get("parameters", {})
+    return np.where([bool(par.get(p, {}).get("applied")) for p in PARAMS], lam, 0.0)
+
+
 def undistorted_mark(m: MarkMeasurement, lam: np.ndarray) -> MarkMeasurement:
     """The mark with its centres (and their sigma, regressors, line and groove ends)
     undistorted by the lens vector ``lam``."""

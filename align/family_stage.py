@@ -20,7 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from align.camera_lens import CAMERA_MODEL, LENS_TERMS, undistorted_mark
+from align.camera_lens import CAMERA_MODEL, LENS_TERMS, claimed_lens, undistorted_mark
 from align.family import line_dial, line_family, member_ends
 from align.lens import LensRanges
 from align.mark_result import MarkResult
@@ -116,7 +116,7 @@ def claimed_middle(m: MarkMeasurement, record: Mapping | None) -> np.ndarray:
         return m.ends_px.mean(axis=0)
     par = record.get("parameters", {})
     lam = np.array([float(par.get(p, {}).get("value") or 0.0) for p in PARAMS])
-    claimed = np.where([bool(par.get(p, {}).get("applied")) for p in PARAMS], lam, 0.0)
+    claimed = claimed_lens(lam, record)
     if np.array_equal(lam, claimed):
         return m.ends_px.mean(axis=0)
     r = half_diagonal(m.image_shape)

@@ -25,6 +25,7 @@ from align.camera_lens import (
     LENS_TERMS,
     CameraLens,
     camera_lens,
+    claimed_lens,
     undistorted_mark,
 )
 from align.family_stage import family_note, grating_notes, with_families
@@ -301,6 +302,12 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
                      f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): " + lens_advice(lens, m))
+    claimed = claimed_lens(lens.lam, lens.record)
+    if claimed is not None and not np.array_equal(claimed, lens.lam):
+        # The offset through the claimed lens: a parameter fitted free moves the line by its
+        # sagitta, which the offset's u does not carry.
+        r = replace(r, offset_px=r.offset_px + undistorted_mark(m, claimed).line.offset_px
+                    - mu.line.offset_px)
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,

@@ -486,8 +486,12 @@ def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: 
         return replace(free, lens_choice=choice, views_one_camera=views)
     w, s_k3 = left_out_term(free.cov, k3_hat, u_k3)
     choice.update(carried_k3=s_k3, carried_direction=w.tolist())
-    return replace(fixed, cov=fixed.cov + s_k3**2 * np.outer(w, w), lens_choice=choice,
-                   views_one_camera=views)
+    cov = fixed.cov + s_k3**2 * np.outer(w, w)
+    # Each parameter's u with the carried term in it (k3's is the range carried, not the 0
+    # of a parameter held fixed): the file's u and its covariance say the same.
+    u = {k: float(max(v, np.sqrt(cov[INTRINSICS.index(k), INTRINSICS.index(k)])))
+         if k in INTRINSICS else v for k, v in (fixed.u or {}).items()}
+    return replace(fixed, cov=cov, u=u, lens_choice=choice, views_one_camera=views)
 
 
 def _views_check(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],

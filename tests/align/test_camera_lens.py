@@ -10,7 +10,9 @@ import functools
 import numpy as np
 import pytest
 
+from align.camera_lens import claimed_lens
 from align.marks import BEND, measure_image
+from imaging.lens import PARAMS
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.align.test_lens import _camera_model
 from tests.conftest import angle_error
@@ -305,3 +307,18 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer():
         z = angle_error(r[0].angle_rad, mark.angle_rad) / r[0].angle_u_rad
         assert abs(z) <= 4 and not r[0].lens_limited, (seed, z, r[0].notes)
         assert not any("cannot tell" in n or "bent" in n for n in r[0].notes), r[0].notes
+
+
+def test_positions_are_read_through_the_claimed_lens_only():
+    """A parameter fitted free with the angles (sign open) is no claim about the lens:
+    :func:`align.camera_lens.claimed_lens` drops it, keeps an applied one, and leaves a
+    camera model's vector alone (the offsets of ``finish_mark`` and a family's middles are
+    read through it; a lens-free scene's offset had moved 10 px through a free k1)."""
+    lam = np.array([0.024, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0])
+    par = {p: {"applied": False, "estimator": "free" if p == "k1" else "range"}
+           for p in PARAMS}
+    par[PARAMS[1]] = {"applied": True}
+    got = claimed_lens(lam, {"source": "marks", "parameters": par})
+    assert got[0] == 0.0 and got[1] == lam[1]
+    assert claimed_lens(lam, {"source": "camera model"}) is lam
+    assert claimed_lens(None, {"source": "marks"}) is None
