@@ -473,15 +473,17 @@ def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: 
         m = _calibrate(objpts, imgpts, size, names, mode == "fixed", fix_aspect)
         return replace(m, lens_choice={"k3": "fitted" if mode == "free" else "left out",
                                        "why": f"k3 {mode} as asked"})
-    free = _calibrate(objpts, imgpts, size, names, False, fix_aspect, check=False)
-    fixed = _calibrate(objpts, imgpts, size, names, True, fix_aspect, check=False)
+    jack: dict[bool, np.ndarray] = {}  # each fit's jackknife, reused by the views' check
+    free = _calibrate(objpts, imgpts, size, names, False, fix_aspect, check=False, keep=jack)
+    fixed = _calibrate(objpts, imgpts, size, names, True, fix_aspect, check=False, keep=jack)
     k3_hat = float(np.ravel(free.dist_coeffs)[4])
     u_k3 = float((free.u or {}).get("k3", 0.0))
     points = sum(len(p) for p in imgpts)
     params = 9 - int(fix_aspect) + 6 * len(objpts)
     choice = choose_k3(free.rms_px, fixed.rms_px, points, params, k3_hat, u_k3)
     fitted = choice["k3"] == "fitted"
-    views = _views_check(objpts, imgpts, size, names, not fitted, fix_aspect)
+    views = _views_check(objpts, imgpts, size, names, not fitted, fix_aspect,
+                         jack.get(not fitted))
     if fitted:
         return replace(free, lens_choice=choice, views_one_camera=views)
     w, s_k3 = left_out_term(free.cov, k3_hat, u_k3)
@@ -509,9 +511,12 @@ def _views_check(objpts: list, imgpts: list, size: tuple[int, int], names: list[
 
 
 def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
-               fix_k3: bool, fix_aspect: bool, check: bool = True) -> CameraModel:
+               fix_k3: bool, fix_aspect: bool, check: bool = True,
+               keep: dict | None = None) -> CameraModel:
     """One OpenCV calibration with its u's and joint covariances (k3 free or at 0), and
-    (``check``) whether its views are of one camera (:func:`views_one_camera`)."""
+    (``check``) whether its views are of one camera (:func:`views_one_camera`); ``keep``
+    receives its jackknife estimates under ``fix_k3`` (a views' check of the same fit
+    reuses them: each is one calibration per view)."""
     flags = (cv2.CALIB_FIX_K3 if fix_k3 else 0) | (cv2.CALIB_FIX_ASPECT_RATIO if fix_aspect
                                                     else 0)
     K0 = np.eye(3) if fix_aspect else None
@@ -525,6 +530,8 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
     cov_j = None
     if len(objpts) >= JACKKNIFE_MIN_VIEWS:
         est = jackknife_estimates(objpts, imgpts, size, K0, flags)
+        if keep is not None:
+            keep[fix_k3] = est
         cov_j = jackknife_cov(est[:, :-1])
         jack = np.sqrt(np.diag(jackknife_cov(est)))
         jack[:-1][formal == 0] = 0.0  # a fixed parameter stays exact

@@ -60,6 +60,7 @@ def test_sharp_fraction_integrates_the_strip_exactly(angle):
     assert np.allclose(got, want, atol=5e-3)
 
 
+@pytest.mark.slow  # a whole session (~3 s); its key's parsing is in test_bad_inputs
 def test_a_session_camera_declared_blurred_after_its_pixels_carries_the_term(session21, tmp_path):
     """``[cameras.A] blur_after_pixels = true`` in session.toml is ``--blur-after-pixels`` for
     camera A's images: their near-axis marks carry ``grid_phase``, camera B's do not."""
