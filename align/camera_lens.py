@@ -14,11 +14,11 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
 from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
-from align.lens_terms import _camera_departure as camera_departure
 from align.lens_terms import (
     angle_coupling,
     bow_reach,
     camera_coupling,
+    camera_departure,
     check_camera,
     lens_bow,
     lens_or_bends,

@@ -32,8 +32,7 @@ from scipy.linalg import solve_triangular
 from align.camera_model_u import angle_sensitivity, raw_pixels
 from align.lens import LensRanges, LensSolution, LineGeometry, solve_lens
 from align.lens_design import _Design
-from align.lens_terms import _camera_departure as camera_departure
-from align.lens_terms import angle_coupling
+from align.lens_terms import angle_coupling, camera_departure
 from imaging import CameraModel, line_frame
 from imaging.camera_cov import INTRINSICS
 from imaging.lens import PARAMS

@@ -140,7 +140,7 @@ def check_camera(lines: Sequence[LineGeometry], lam: np.ndarray, lam_u: np.ndarr
     :func:`lens_cov`). Returns (p-value, the correction dlam, each mark's design at the
     camera)."""
     designs = [_design(ln, lam, scale) for ln in lines]
-    p, dlam = _camera_departure(designs, lam_u, ranges, alpha)
+    p, dlam = camera_departure(designs, lam_u, ranges, alpha)
     return p, dlam, designs
 
 
@@ -153,7 +153,7 @@ def _normal(designs: Sequence[_Design], rng: np.ndarray, z: float
     return F, b, _determined(F, rng, z)
 
 
-def _camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
+def camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
                       alpha: float) -> tuple[float, np.ndarray]:
     """:func:`check_camera` over the marks' ``designs``: (p-value, correction dlam)."""
     z = float(-special.ndtri(alpha / 2))
@@ -218,19 +218,19 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
     if len(designs) < 2:
         # One mark cannot show that marks agree: its departure is the lens's only if a lens
         # could make it (within the plausible ranges); beyond them it is the mark's bow.
-        p, _ = _camera_departure(designs, lam_u, ranges, alpha)
+        p, _ = camera_departure(designs, lam_u, ranges, alpha)
         beyond = p < alpha and not _plausible_fits(designs, lam_u, ranges, alpha, model)
         return (0,) if beyond else ()
     out = []
     for k in range(len(designs)):
         rest = [d for i, d in enumerate(designs) if i != k]
-        if _camera_departure(rest, lam_u, ranges, alpha)[0] >= alpha:
+        if camera_departure(rest, lam_u, ranges, alpha)[0] >= alpha:
             out.append(k)
     if len(out) > 1:
         # The departure falls without any of several marks: the culprit is the one that
         # departs on its own; when none or several do, they share it (a weak but common
         # departure is the lens's: four images of one camera through a lens its model misses).
-        out = [k for k in out if _camera_departure([designs[k]], lam_u, ranges, alpha)[0]
+        out = [k for k in out if camera_departure([designs[k]], lam_u, ranges, alpha)[0]
                < alpha]
     return tuple(out) if len(out) == 1 else ()
 
@@ -379,7 +379,7 @@ def _departs(d: _Design, lam_u: np.ndarray, ranges: LensRanges, alpha: float) ->
     """Whether one mark departs from the calibrated lens on its own: the change it alone
     calls for stands, or its bow (the quadratic across it, which a mark that determines no
     lens parameter on its own still shows) is beyond its noise and the calibration's u."""
-    if _camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
+    if camera_departure([d], lam_u, ranges, alpha)[0] < alpha:
         return True
     wG = d.w @ d.G
     var = 1.0 + float(wG @ lens_cov(lam_u) @ wG)
@@ -418,7 +418,7 @@ def lens_or_bends(designs: Sequence[_Design], lam_u: np.ndarray,
     dlam = np.zeros(len(PARAMS))
     lens_fits = False
     if keep is not None:
-        p_keep, dlam = _camera_departure([designs[i] for i in keep], lam_u, ranges, alpha)
+        p_keep, dlam = camera_departure([designs[i] for i in keep], lam_u, ranges, alpha)
         pk = _predict([designs[i] for i in keep], [], lam_u, rng, z)
         # The change must stand (the agreeing marks depart together) and be a lens's.
         lens_fits = p_keep < alpha and not (pk is not None and pk.beyond)
