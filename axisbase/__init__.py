@@ -27,6 +27,7 @@ _LAZY = {
     "write_json": "axisbase.output",
     "envelope": "axisbase.provenance", "provenance": "axisbase.provenance",
     "check_format": "axisbase.provenance", "Provenance": "axisbase.provenance",
+    "one_blas_thread": "axisbase.threads", "one_thread_environment": "axisbase.threads",
 }
 
 __all__ = [

@@ -4,13 +4,21 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import shutil
 from pathlib import Path
 from types import SimpleNamespace
 from unittest import mock
 
-import numpy as np
-import pytest
+from axisbase.threads import one_thread_environment
+
+# The tests run the library as `align` runs it (axisbase.threads): one BLAS thread unless the
+# environment says otherwise; set before numpy loads its BLAS, and inherited by the CLI runs
+# the tests start.
+os.environ.update(one_thread_environment())
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 

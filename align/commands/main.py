@@ -22,6 +22,7 @@ from align.commands.args import attach_signs
 from align.commands.parser import build_parser
 from axisbase.console import ConsoleWriteError, console, logging_to_stderr
 from axisbase.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, InputError
+from axisbase.threads import one_blas_thread
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -92,7 +93,8 @@ def _run(args, argv: list[str]) -> int:
         # leaves stderr to warnings and errors).
         sys.stdout = io.StringIO() if getattr(args, "quiet", False) else sys.stderr
     try:
-        return int(_command(args.func)(args))
+        with one_blas_thread():
+            return int(_command(args.func)(args))
     except InputError as exc:
         print(f"align {args.cmd}: {exc}", file=sys.stderr)
         return EXIT_INPUT
