@@ -239,8 +239,14 @@ class CameraModel:
     def load(cls, path: str | Path) -> CameraModel:
         p = Path(path)
         try:
-            d = json.loads(p.read_text(encoding="utf-8-sig"))  # a BOM is not JSON's
+            text = p.read_text(encoding="utf-8-sig")  # a BOM is not JSON's
+            d = json.loads(text)
             model = cls.from_dict(d)
+        except UnicodeDecodeError:
+            raise ImageInputError(f"{p}: not a camera file: binary data, not text (an image? "
+                                  "a camera file is the JSON 'align camera' writes)") from None
+        except json.JSONDecodeError as exc:
+            raise ImageInputError(f"{p}: not a camera file: {_what_text(text, exc)}") from None
         except FileNotFoundError:
             raise ImageInputError(f"{p}: camera file not found") from None
         except IsADirectoryError:
@@ -549,3 +555,18 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
                        cov_f, cov_j, views_one_camera=None if not check else _views_check(
                            objpts, imgpts, size, names, fix_k3, fix_aspect,
                            None if cov_j is None else est))
+
+
+def _what_text(text: str, exc: json.JSONDecodeError) -> str:
+    """What a camera file that is not JSON holds, in the user's words: OpenCV's own
+    FileStorage files (YAML, XML: calibration samples write them) are the common case."""
+    head = text.lstrip()[:400].lower()
+    if head.startswith("%yaml") or "<opencv_storage>" in head:
+        kind = "YAML" if head.startswith("%yaml") else "XML"
+        return (f"an OpenCV FileStorage {kind} file, not the JSON 'align camera' writes: "
+                "calibrate with 'align camera' (which also gives the model's u), or write its "
+                "camera_matrix, dist_coeffs and image_size as JSON (docs/formats.md, camera "
+                "file)")
+    return (f"not JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); a camera file is "
+            "the JSON 'align camera' writes")
+

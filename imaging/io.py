@@ -153,16 +153,39 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
         raise ImageInputError(f"{p}: unsupported image layout {img.shape}")
     if min(img.shape) < 16:
         raise ImageInputError(f"{p}: image is only {img.shape[1]}x{img.shape[0]} px, too small")
+    if img.dtype == bool:  # a bilevel TIFF (PNG's are refused from the header)
+        raise ImageInputError(f"{p}: a 1-bit (bilevel) image: a mark's grey-level profile, "
+                              "which the lines are fitted to, is not in it; give the camera's "
+                              "grey-level image")
     out = img.astype(np.float64)
-    if np.issubdtype(img.dtype, np.signedinteger):
+    wide = img.dtype.itemsize > 2 or img.dtype.kind == "f"
+    # A signed 8/16-bit file is a sensor's range shifted by half; a wider signed container
+    # holding a sensor's unsigned counts (a 12-bit camera's in int32) is read as it is.
+    if np.issubdtype(img.dtype, np.signedinteger) and (not wide or float(out.min()) < 0):
         offset = float(-np.iinfo(img.dtype).min)
         out += offset
         notes.append(f"signed {img.dtype.itemsize * 8}-bit data offset by +{offset:.0f} DN "
                      "to unsigned")
+    if wide:
+        _within_16_bits(p, img.dtype, out)
     if orientation not in (None, 1):
         out = _orient(out, orientation)
         notes.append(f"orientation tag {orientation} applied ({ORIENTATIONS[orientation]})")
     return ImageRead(out, tuple(notes))
+
+
+def _within_16_bits(p: Path, dtype: np.dtype, out: np.ndarray) -> None:
+    """Refuse data beyond 16 bits: the clipping level is the smallest sensor depth of
+    :data:`BIT_DEPTHS` holding the data, and 32-bit or floating-point values past 65535 would
+    all read as clipped (the file's depth named, not "over-exposed"). Data that fit, as a
+    12-bit sensor's in a 32-bit container, are read as they are."""
+    lo, hi = float(np.min(out)), float(np.max(out))
+    if hi > 2.0**16 - 1 or lo < 0:
+        kind = "floating-point" if dtype.kind == "f" else "integer"
+        raise ImageInputError(
+            f"{p}: {dtype.itemsize * 8}-bit {kind} data spanning {lo:.6g} to {hi:.6g}: beyond "
+            "0-65535, the 8-16-bit sensor range the clipping level is read from; give the "
+            "sensor's data (or scale it into 0-65535)")
 
 
 def _orient(img: np.ndarray, code: int) -> np.ndarray:
@@ -196,6 +219,10 @@ def _check_header(p: Path, budget: int) -> int | None:
             # long as OpenCV's decoding after it, at 5 MP): not when the chunks hold none.
             no_exif = im.format == "PNG" and "exif" not in im.info and not _png_has_exif(p)
             code = None if no_exif else im.getexif().get(0x0112)
+            if im.mode == "1":
+                raise ImageInputError(
+                    f"{p}: a 1-bit (bilevel) image: a mark's grey-level profile, which the "
+                    "lines are fitted to, is not in it; give the camera's grey-level image")
     except UnidentifiedImageError:
         return None
     except OSError as exc:

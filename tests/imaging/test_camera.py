@@ -38,3 +38,23 @@ def test_a_bad_table_entry_names_file_and_key(tmp_path, table, value, says):
     with pytest.raises(ImageInputError, match=says) as e:
         CameraModel.load(f)
     assert str(e.value).startswith(f) and "\n" not in str(e.value)
+
+
+def test_files_that_are_not_camera_json_are_named_for_what_they_are(tmp_path):
+    """OpenCV's own FileStorage files (YAML, XML) and binary files given as a camera model:
+    one line naming what the file is and what to give instead, not a JSON parser's words."""
+    yml = tmp_path / "cam.yml"
+    yml.write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n")
+    xml = tmp_path / "cam.xml"
+    xml.write_text('<?xml version="1.0"?>\n<opencv_storage>\n<camera_matrix/>\n'
+                   "</opencv_storage>\n")
+    png = tmp_path / "cam.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")
+    for f, words in ((yml, "an OpenCV FileStorage YAML file"),
+                     (xml, "an OpenCV FileStorage XML file"), (png, "binary data, not text")):
+        with pytest.raises(ImageInputError, match=rf"{f.name}: not a camera file: {words}"):
+            CameraModel.load(f)
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"camera_matrix": [[1, 0, 0]],\n')
+    with pytest.raises(ImageInputError, match=r"not JSON \(.* at line 2, column 1\)"):
+        CameraModel.load(broken)

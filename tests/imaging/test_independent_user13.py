@@ -108,12 +108,9 @@ def test_corrupt_and_missing_images_fail_cleanly(tmp_path):
         assert m["error"] and "internal error" not in m["error"], m
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "OpenCV's own camera file (opencv-lines/tutorial_camera_charuco.yml, %YAML:1.0 "
-    "camera_matrix/distortion_coefficients) given to --camera: 'not a usable camera file: "
-    "Expecting value: line 1 column 1 (char 0)' — a JSON parser's words; nothing says it is "
-    "an OpenCV YAML/XML file or how to convert it (a PNG given as camera: 'utf-8')"))
 def test_opencv_yaml_camera_file_named_as_such(tmp_path):
+    """Was: 'not a usable camera file: Expecting value: line 1 column 1 (char 0)' (a PNG
+    given as the camera: 'utf-8'); now named an OpenCV FileStorage file, with what to give."""
     yml = os.path.join(ui.LINES, "tutorial_camera_charuco.yml")
     if not os.path.exists(yml):
         pytest.skip("opencv-lines not found")
@@ -126,13 +123,9 @@ def test_opencv_yaml_camera_file_named_as_such(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "wrong bit depth: a 32-bit integer TIFF (values 0-255000) and a 1-bit PNG holding a clean "
-    "mark are both refused as 'clipped at 65535 (the 16-bit full scale; 100 % of the frame): "
-    "over-exposed, expose less' / 'clipped at 255 (the 8-bit full scale...)': the 32-bit data "
-    "were cut to 16 bit by the reader and a bilevel image is not an exposure problem; neither "
-    "message names the file's bit depth"))
 def test_unsupported_bit_depths_named(tmp_path):
+    """Was: an int32 TIFF (0-255000) and a 1-bit PNG refused as 'clipped ... over-exposed,
+    expose less'; now each refused by its depth (imaging/io.py)."""
     tifffile = pytest.importorskip("tifffile")
     PIL = pytest.importorskip("PIL.Image")
     rng = np.random.default_rng(5)

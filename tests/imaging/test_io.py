@@ -103,3 +103,27 @@ def test_over_exposed_frame_names_its_clipped_region_and_a_normal_one_does_not()
         measure_frame(over)
     assert note in str(exc.value), exc.value
     assert clipped_note(_frame(0.5), 4095.0) == ""
+
+
+def test_bit_depths_beyond_16_bits_and_bilevel_images_are_named(tmp_path, pixels):
+    """A 32-bit integer or float image is read when its values fit a sensor's 0-65535 (a
+    12-bit camera's counts in an int32 container) and refused by its depth when they do not
+    (they would all read as clipped: "over-exposed"); a 1-bit image is refused as bilevel."""
+    import tifffile
+
+    fits = tmp_path / "i32_12bit.tif"
+    tifffile.imwrite(fits, (pixels % 4096).astype(np.int32))
+    read = read_image_notes(fits)
+    assert np.array_equal(read.pixels, pixels % 4096) and read.notes == ()
+    for dtype, scale in ((np.int32, 1000.0), (np.float32, 100.0)):
+        wide = tmp_path / f"{np.dtype(dtype).name}.tif"
+        tifffile.imwrite(wide, (pixels * scale).astype(dtype))
+        with pytest.raises(ImageInputError, match=rf"{wide.name}: 32-bit .*beyond 0-65535"):
+            read_image_notes(wide)
+    bilevel_png = tmp_path / "bilevel.png"
+    Image.fromarray(pixels > 20000).save(bilevel_png)
+    bilevel_tif = tmp_path / "bilevel.tif"
+    tifffile.imwrite(bilevel_tif, pixels > 20000)
+    for f in (bilevel_png, bilevel_tif):
+        with pytest.raises(ImageInputError, match=rf"{f.name}: a 1-bit \(bilevel\) image"):
+            read_image_notes(f)
