@@ -107,22 +107,31 @@ def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
     return _shift(c, shift) if shift.any() else c
 
 
-def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
-                   ) -> list[list[int]]:
-    """Families among candidates (indices, ordered across the lines; see the module doc)."""
+def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS,
+                   miss_px: float = 0.0) -> list[list[int]]:
+    """Families among candidates (indices, ordered across the lines; see the module doc).
+
+    ``miss_px``: a line also runs the family's way when its ends lie within this of the
+    family's direction through its middle [px] (a short line's detected direction is
+    poor: the dense ruler's 48 px ticks, confirmed on the ruling, came out 2.5 deg off and
+    fell out of their family, or made one of their own)."""
+
+    def along(i: int, ref: float) -> bool:
+        d = abs(wrap_angle(cands[i].angle_rad - ref))
+        return bool(d < FAMILY_ANGLE or np.sin(d) * cands[i].length_px / 2 <= miss_px)
+
     left = list(range(len(cands)))
     out = []
     while left:
         seed = max(left, key=lambda i: cands[i].strength)
         ref = cands[seed].angle_rad
-        same = [i for i in left if cands[i].dark == cands[seed].dark
-                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        same = [i for i in left if cands[i].dark == cands[seed].dark and along(i, ref)]
         # The family's direction from all of them (a short seed's own is off by up to ~1
         # deg), and its lines again about that.
         ref = wrap_angle(ref + float(np.median([wrap_angle(cands[i].angle_rad - ref)
                                                 for i in same])))
         same = [i for i in left if i == seed or (cands[i].dark == cands[seed].dark
-                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE)]
+                and along(i, ref))]
         left = [i for i in left if i != seed]
         if len(same) < min_members:
             continue
@@ -335,6 +344,42 @@ def _span_members(found: list[MarkCandidate], group: Sequence[int], fade: float 
         found[i] = dc_replace(c, t_start_px=t0, t_end_px=t1)
 
 
+def joined_pieces(pieces: list[MarkCandidate], gap_px: float, span_px: float
+                  ) -> list[MarkCandidate]:
+    """Pairs of pieces of one line (a speck across its middle cut the ridge in two, each
+    piece under the family's floor: a dense ruler's 70 px tick seen as 18 + 16 px) as one
+    candidate: same polarity, each along the other (:data:`PIECE_ANGLE`, 3 px), apart by
+    less than ``gap_px`` and together no longer than ``span_px``; its line through both
+    middles (each piece's own direction is poor), its extent their union. Each piece is
+    used once, the strongest pairs first; the search's confirmation then judges them."""
+    out, used = [], set()
+    order = sorted(range(len(pieces)), key=lambda i: -pieces[i].strength)
+    for x, i in enumerate(order):
+        for j in order[x + 1:]:
+            a, b = pieces[i], pieces[j]
+            if i in used or j in used or a.dark != b.dark or _overlap(a, b):
+                continue
+            if not (_near(a, b, PIECE_ANGLE, 3.0) and _near(b, a, PIECE_ANGLE, 3.0)):
+                continue
+            ma, mb = _middle(a), _middle(b)
+            d = mb - ma
+            if float(np.hypot(*d)) < 1.0:
+                continue
+            ang = float(np.arctan2(-d[1], d[0]))  # (x right, y down: +y turns -angle)
+            ang = wrap_angle(ang)
+            u, n = line_frame(ang)
+            ts = [float(ma @ u) + s * a.length_px / 2 for s in (-1, 1)] + \
+                 [float(mb @ u) + s * b.length_px / 2 for s in (-1, 1)]
+            gap = float(np.hypot(*d)) - (a.length_px + b.length_px) / 2
+            if gap >= gap_px or max(ts) - min(ts) > span_px:
+                continue
+            out.append(dc_replace(a, angle_rad=ang, offset_px=float(0.5 * (ma + mb) @ n),
+                                  t_start_px=min(ts), t_end_px=max(ts),
+                                  strength=a.strength + b.strength))
+            used |= {i, j}
+    return out
+
+
 JOIN_PASSES = 4
 """Most passes of :func:`_join` (each with the family's typical length as it then stands)."""
 
@@ -533,11 +578,16 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         # Lines that join: the second search's, and the first's it split differently (a
         # numeral's strokes beside a line's end become pieces there, none as long).
         pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
+        # A line cut in two by a speck across its middle, neither piece up to the floor.
+        pool += joined_pieces([c for c in pieces if c.length_px < floor],
+                              MEMBER_FRACTION * typical, 1.1 * longest)
         _join(found, members, pool, on_ruling, half_way,
               lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[fine_ruling])
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
-        groups = group_families(found)
+        # (Their lines were confirmed on the ruling: a short one's direction is good to
+        # about the coarse search's pixel at its ends.)
+        groups = group_families(found, miss_px=float(search.f))
         for g in groups:
             # Every member's ridge faded a filter width before each end: a short tick (70
             # px, seen 50) with dust beside it kept under 10 segments that fit (3 of 19).
