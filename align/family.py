@@ -193,7 +193,10 @@ class LineFamily:
         """One line for the terminal."""
         s = (f"family of {len(self.members)} lines: angle {np.rad2deg(self.angle_rad):+.6f}° "
              f"± {np.rad2deg(self.angle_u_rad) * 3600:.2f}″, chi2/dof {self.chi2_dof:.2f} "
-             f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px"
+             f"(p {self.p_value:.2g}"
+             + (f", {self.lens_fitted} lens direction{'s' if self.lens_fitted > 1 else ''} "
+                "fitted" if self.lens_fitted else "")
+             + f"), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px"
              + (f" ({self.pitch_u_lens_px:.3f} of it the lens)" if self.pitch_u_lens_px else "")
              + ", "
              f"spread {self.pitch_spread_px:.3f} px, lens: {self.lens}")
