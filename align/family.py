@@ -100,6 +100,10 @@ class LineFamily:
     pitch_u_lens_px : float
         The frame's lens's share of the pitch's u [px] (:mod:`align.family_stage`: what the
         lens's u moves the members' positions by), in ``pitch_u_px`` (0: none).
+    lens_fitted : int
+        Lens directions fitted from the members' angles with their mean (bounds on the
+        frame's lens the family sees, :func:`lens_directions`): each takes one of the
+        chi2's dof — dimensionless.
     """
 
     members: tuple[int, ...]
@@ -123,6 +127,7 @@ class LineFamily:
     hidden_ends: tuple[int, ...] = ()
     typical_length_px: float = float("nan")
     pitch_u_lens_px: float = 0.0
+    lens_fitted: int = 0
 
     @property
     def chi2_dof(self) -> float:
@@ -158,6 +163,7 @@ class LineFamily:
                 "hidden_ends": list(self.hidden_ends),
                 "typical_length_px": self.typical_length_px,
                 "pitch_u_lens_px": self.pitch_u_lens_px,
+                "lens_fitted": self.lens_fitted,
                 "missing_steps": list(self.missing_steps)}
 
     @classmethod
@@ -180,13 +186,17 @@ class LineFamily:
                    tuple(num(v) for v in d.get("lengths_px", ())),
                    tuple(num(v) for v in d.get("lengths_max_px", ())),
                    tuple(int(v) for v in d.get("hidden_ends", ())),
-                   num(d.get("typical_length_px")), num(d.get("pitch_u_lens_px", 0.0)))
+                   num(d.get("typical_length_px")), num(d.get("pitch_u_lens_px", 0.0)),
+                   int(d.get("lens_fitted", 0)))
 
     def summary(self) -> str:
         """One line for the terminal."""
         s = (f"family of {len(self.members)} lines: angle {np.rad2deg(self.angle_rad):+.6f}° "
              f"± {np.rad2deg(self.angle_u_rad) * 3600:.2f}″, chi2/dof {self.chi2_dof:.2f} "
-             f"(p {self.p_value:.2g}), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px"
+             f"(p {self.p_value:.2g}"
+             + (f", {self.lens_fitted} lens direction{'s' if self.lens_fitted > 1 else ''} "
+                "fitted" if self.lens_fitted else "")
+             + f"), pitch {self.pitch_px:.3f} ± {self.pitch_u_px:.3f} px"
              + (f" ({self.pitch_u_lens_px:.3f} of it the lens)" if self.pitch_u_lens_px else "")
              + ", "
              f"spread {self.pitch_spread_px:.3f} px, lens: {self.lens}")
@@ -244,23 +254,64 @@ def ruling_steps(q: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.maximum(np.rint(gaps / one), 1.0))])
 
 
-def _lens_chi2(d: np.ndarray, u: np.ndarray, vl: np.ndarray, keep: np.ndarray
-               ) -> tuple[np.ndarray, float]:
+GAUSSIAN_LENS = ("lens_fit", "camera_")
+"""Lens coupling keys whose u is a standard deviation of an estimate (the lens fitted from
+the frame's lines, a calibrated camera's): carried in the members' covariance. The others
+(``_range``, ``_small``, ``lens_or_bend``, ``lens_pp_cross``) are bounds on where the lens may
+be (Type B): the family fits them (:func:`lens_directions`)."""
+SEEN_LENS = 1.0
+"""A bounded lens direction that turns the members' angles apart by more than this many of
+their own u (whitened, the mean taken out) is fitted from the family, not carried."""
+
+
+def lens_directions(u: np.ndarray, cpl: np.ndarray, gaussian: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's one lens as the family sees it: (F, L) — F (N, m) the members' angle
+    moves [rad] along the bounded lens directions their angles determine (fitted from the
+    family with the mean, m at most N - 3), L (N, k) the couplings carried in their
+    covariance (V = diag(u^2) + L L^T): the Gaussian ones, and the bounded directions the
+    family barely sees (their range as a u).
+
+    A bound carried as a u (the plausible range as a uniform) is right for a lens drawn
+    from the range, not for the one lens of a frame: a lens-free scale read chi2/dof 0.63
+    on average (10 seeds; 0.7-1.4 expected), the spread its lines do not have taken for
+    what the lens may have done. Fitted, the lens takes its own dof: chi2/dof ~1 whatever
+    the lens is. ``u``: the members' own u [rad]; ``cpl`` (N, K) their signed couplings
+    [rad]; ``gaussian`` (K,) which couplings are Gaussian (:data:`GAUSSIAN_LENS`)."""
+    n = len(u)
+    carried = cpl[:, gaussian]
+    bounded = cpl[:, ~gaussian]
+    if not bounded.size or n <= 3:
+        return np.zeros((n, 0)), cpl
+    h = 1 / u
+    b = bounded / u[:, None]
+    b = b - np.outer(h, h @ b) / (h @ h)  # (the mean's direction is fitted anyway)
+    _, sv, vt = np.linalg.svd(b, full_matrices=False)
+    fit = np.flatnonzero(sv > SEEN_LENS)[: n - 3]
+    rest = np.setdiff1d(np.arange(len(sv)), fit)
+    return bounded @ vt[fit].T, np.hstack([carried, bounded @ vt[rest].T])
+
+
+def _lens_chi2(d: np.ndarray, u: np.ndarray, vl: np.ndarray, keep: np.ndarray,
+               f: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """(z of every member, chi2 of the kept ones) about their generalised least-squares
-    mean, their covariance V = diag(u^2) + C C^T (C: the lens couplings [rad]). A member's
-    z is its residual given all the others (kept ones, and it): (Q d)_i / sqrt(Q_ii), Q =
-    V^-1 - V^-1 1 1' V^-1 / (1' V^-1 1) — what the lens, one smooth turn over the frame,
-    cannot make of one line."""
+    mean and lens fit, their covariance V = diag(u^2) + L L^T (``vl`` = L L^T: the carried
+    lens couplings [rad^2]), ``f`` (N, m) the fitted lens directions (:func:`lens_directions`).
+    A member's z is its residual given all the others (kept ones, and it): (Q d)_i /
+    sqrt(Q_ii), Q = V^-1 - V^-1 X (X' V^-1 X)^-1 X' V^-1, X = [1, f] — what the lens, one
+    smooth turn over the frame, cannot make of one line."""
     z = np.zeros(len(d))
     chi2 = 0.0
+    x_all = np.column_stack([np.ones(len(d)), f]) if f is not None else np.ones((len(d), 1))
     for i in [-1, *np.flatnonzero(~keep)]:
         sel = keep.copy()
         if i >= 0:
             sel[i] = True
         v = np.diag(u[sel] ** 2) + vl[np.ix_(sel, sel)]
         vi = np.linalg.inv(v)
-        one = vi.sum(axis=0)
-        q = vi - np.outer(one, one) / one.sum()
+        x = x_all[sel]
+        vx = vi @ x
+        q = vi - vx @ np.linalg.pinv(x.T @ vx) @ vx.T
         zi = (q @ d[sel]) / np.sqrt(np.maximum(np.diag(q), 1e-300))
         if i < 0:
             z[sel] = zi
@@ -292,11 +343,14 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     d = _wrap(angles - ref)
     u_all = np.asarray(angle_u, float)
     n = len(angles)
-    vl = None
+    vl, fitted = None, None
     if len(lens_coupling) == n and any(lens_coupling):
         keys = sorted({k for c in lens_coupling for k in c})
         cpl = np.array([[float(c.get(k, 0.0)) for k in keys] for c in lens_coupling])
-        vl = cpl @ cpl.T
+        fitted, carried = lens_directions(u_all, cpl,
+                                          np.array([k.startswith(GAUSSIAN_LENS) for k in keys]))
+        vl = carried @ carried.T
+    m_fit = fitted.shape[1] if fitted is not None else 0
     limit = float(-ndtri(alpha / (2 * n)))
     keep = np.ones(n, bool)
     while True:
@@ -310,12 +364,13 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                                                   1e-300))
             chi2 = float(np.sum(w * (d[keep] - mean_d) ** 2))
         else:
-            z, chi2 = _lens_chi2(d, u_all, vl, keep)
+            z, chi2 = _lens_chi2(d, u_all, vl, keep, fitted)
         worst = int(np.argmax(np.where(keep, np.abs(z), -1)))
-        if abs(z[worst]) <= limit or keep.sum() <= 2:
+        if abs(z[worst]) <= limit or keep.sum() <= 2 + m_fit:
             break
         keep[worst] = False
-    dof = int(keep.sum()) - 1
+    # (The lens directions fitted from the family take their dof.)
+    dof = int(keep.sum()) - 1 - m_fit
     p = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
     deviant = tuple(int(indices[i]) for i in np.flatnonzero(~keep))
     if p < alpha:
@@ -356,7 +411,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
                       failed, u_lens, tuple(float(v) for v, _, _ in ln),
                       tuple(float(v) for _, v, _ in ln), tuple(int(h) for _, _, h in ln),
-                      float(np.median(seen)) if seen else float("nan"), pitch_lens)
+                      float(np.median(seen)) if seen else float("nan"), pitch_lens, m_fit)
 
 
 DIAL_FORMAT_VERSION = 1

@@ -174,7 +174,7 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
                                   for r, t in zip(ms, shared, strict=True)], 1e-30))
         angles = np.array([r.angle_rad for r in ms])
         if np.ptp(_wrap_all(angles - angles[0])) > DIAL_SPREAD and len(ms) >= 3:
-            # Lines that meet at a point (imaging.families.group_dial): a dial.
+            # Lines that meet at a point (imaging.dials.group_dial): a dial.
             dial = line_dial([r.index for r in ms], angles, own,
                              np.array([r.offset_px for r in ms]),
                              np.array([r.offset_u_px for r in ms]), np.array(mids), lens, alpha,

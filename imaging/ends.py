@@ -260,6 +260,12 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
             inner = run_from(hit[0], -step)
             outer = run_from(hit[-1], step)
             clean_end = min(k, inner - step) if step > 0 else max(k, inner - step)
+            # An extent that reached over bare surface into the obstruction (the look runs
+            # a fixed reach past the search's stretch) is no groove there: what is seen ends
+            # at the groove's last deep bin inside it (a speck 4 px past a short graduation's
+            # end read it 3.5 px long when a family's wider search let the look reach it).
+            while clean_end != k and not deep[clean_end] and (clean_end - mid) * step > 0:
+                clean_end -= step
             # The groove seen again beyond it (deep, on the surface's level): the end was a
             # speck lying on the groove; the groove's end is further. A stretch of groove
             # too short to say so, ending on another obstruction, joins them (a numeral's
@@ -289,6 +295,8 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
 
     k0 = int(np.argmin(np.abs(tb - t0)))
     k1 = int(np.argmin(np.abs(tb - t1)))
+    mid = (k0 + k1) // 2
+
     def cross(k: int, step: int) -> float:
         """Half-depth crossing between the last deep bin k and the next one out."""
         k_out = k + step

@@ -42,6 +42,7 @@ from imaging.detect import (
     line_frame,
     wrap_angle,
 )
+from imaging.dials import DIAL_MISS_PX, dial_centre, group_dial, line_middle, meets
 
 MIN_MEMBERS = 3
 """Fewest parallel lines side by side that make a family."""
@@ -92,14 +93,9 @@ class Detection:
     unreported: tuple[MarkCandidate, ...] = ()
 
 
-def _middle(c: MarkCandidate) -> np.ndarray:
-    u, n = line_frame(c.angle_rad)
-    return c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
-
-
 def _position(c: MarkCandidate, ref: float) -> float:
     """Where a line's middle lies across the direction ``ref`` [px]."""
-    return float(_middle(c) @ line_frame(ref)[1])
+    return float(line_middle(c) @ line_frame(ref)[1])
 
 
 def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
@@ -107,22 +103,31 @@ def replace_shift(c: MarkCandidate, shift: np.ndarray) -> MarkCandidate:
     return _shift(c, shift) if shift.any() else c
 
 
-def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
-                   ) -> list[list[int]]:
-    """Families among candidates (indices, ordered across the lines; see the module doc)."""
+def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS,
+                   miss_px: float = 0.0) -> list[list[int]]:
+    """Families among candidates (indices, ordered across the lines; see the module doc).
+
+    ``miss_px``: a line also runs the family's way when its ends lie within this of the
+    family's direction through its middle [px] (a short line's detected direction is
+    poor: the dense ruler's 48 px ticks, confirmed on the ruling, came out 2.5 deg off and
+    fell out of their family, or made one of their own)."""
+
+    def along(i: int, ref: float) -> bool:
+        d = abs(wrap_angle(cands[i].angle_rad - ref))
+        return bool(d < FAMILY_ANGLE or np.sin(d) * cands[i].length_px / 2 <= miss_px)
+
     left = list(range(len(cands)))
     out = []
     while left:
         seed = max(left, key=lambda i: cands[i].strength)
         ref = cands[seed].angle_rad
-        same = [i for i in left if cands[i].dark == cands[seed].dark
-                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE]
+        same = [i for i in left if cands[i].dark == cands[seed].dark and along(i, ref)]
         # The family's direction from all of them (a short seed's own is off by up to ~1
         # deg), and its lines again about that.
         ref = wrap_angle(ref + float(np.median([wrap_angle(cands[i].angle_rad - ref)
                                                 for i in same])))
         same = [i for i in left if i == seed or (cands[i].dark == cands[seed].dark
-                and abs(wrap_angle(cands[i].angle_rad - ref)) < FAMILY_ANGLE)]
+                and along(i, ref))]
         left = [i for i in left if i != seed]
         if len(same) < min_members:
             continue
@@ -142,109 +147,6 @@ def group_families(cands: list[MarkCandidate], min_members: int = MIN_MEMBERS
                 out.append([int(i) for i in run])
                 left = [i for i in left if i not in run]
     return out
-
-
-MIN_DIAL = 4
-"""Fewest lines meeting at one point that make a dial."""
-DIAL_ANGLE = np.deg2rad(1.0)
-"""Direction error of a detected line (short lines: ~0.5 deg): how far it may miss the
-dial's centre is this angle times its distance from it, plus :data:`DIAL_MISS_PX`."""
-DIAL_MISS_PX = 3.0
-DIAL_PROPOSERS = 40
-"""The strongest lines whose pairs propose a dial's centre."""
-DIAL_MIN_STEP = np.deg2rad(2.0)
-"""Smallest angle between a dial's neighbouring graduations."""
-DIAL_MAX_SKIP = 3.0
-"""Most steps per gap on average (a dial may miss some graduations, not most)."""
-
-
-def _meets(c: MarkCandidate, p: np.ndarray) -> tuple[bool, float]:
-    """Whether a line runs radially from point p (its line passes near p, and p lies beyond
-    the segment's end, not on it): (meets, distance of its middle from p [px])."""
-    u, n = line_frame(c.angle_rad)
-    mid = _middle(c)
-    r = float(np.hypot(*(mid - p)))
-    miss = abs(float(p @ n) - c.offset_px)
-    along = abs(float((mid - p) @ u))
-    return (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE) and along > 0.5 * c.length_px + 5,
-            r)
-
-
-def dial_centre(cands: list[MarkCandidate], idx: list[int]) -> np.ndarray:
-    """Least-squares point nearest to the lines ``idx`` [px, relative to the image centre]
-    (each weighted by 1 / its distance from the point: the direction error's reach)."""
-    p = np.zeros(2)
-    for _ in range(3):
-        a, b = np.zeros((2, 2)), np.zeros(2)
-        for i in idx:
-            n = line_frame(cands[i].angle_rad)[1]
-            w = 1 / max(float(np.hypot(*(_middle(cands[i]) - p))), 10.0) ** 2
-            a += w * np.outer(n, n)
-            b += w * n * cands[i].offset_px
-        p = np.linalg.solve(a, b)
-    return p
-
-
-def group_dial(cands: list[MarkCandidate], idx: list[int]) -> list[int]:
-    """The lines among ``idx`` that meet at one point, radially (a dial's graduations), at
-    least :data:`MIN_DIAL` of them in at least 3 directions; [] if none.
-
-    Every pair of lines more than 5 deg apart proposes its crossing; the crossing most lines
-    run radially from wins, refined by least squares (:func:`dial_centre`)."""
-    if len(idx) < MIN_DIAL:
-        return []
-    # Every proposal tested against every line at once (arrays over the lines); the
-    # strongest DIAL_PROPOSERS lines propose (a busy photograph has hundreds of pairs).
-    a = np.array([cands[q].angle_rad for q in idx])
-    nrm = np.column_stack([np.sin(a), np.cos(a)])
-    along = np.column_stack([np.cos(a), -np.sin(a)])
-    off = np.array([cands[q].offset_px for q in idx])
-    mid = np.array([_middle(cands[q]) for q in idx])
-    half = np.array([cands[q].length_px / 2 for q in idx])
-    dark = np.array([cands[q].dark for q in idx])
-
-    def meeting(p: np.ndarray, pol: bool) -> np.ndarray:
-        r = np.hypot(*(mid - p).T)
-        miss = np.abs(nrm @ p - off)
-        return ((dark == pol) & (miss < DIAL_MISS_PX + r * np.tan(DIAL_ANGLE))
-                & (np.abs(np.sum((mid - p) * along, axis=1)) > half + 5))
-
-    best = np.zeros(len(idx), bool)
-    prop = sorted(range(len(idx)), key=lambda k: -cands[idx[k]].strength)[:DIAL_PROPOSERS]
-    for x, k in enumerate(prop):
-        for j in prop[x + 1:]:
-            if dark[j] != dark[k]:
-                continue
-            m = nrm[[k, j]]
-            if abs(np.linalg.det(m)) < np.sin(np.deg2rad(5.0)):
-                continue
-            got = meeting(np.linalg.solve(m, off[[k, j]]), bool(dark[k]))
-            if got.sum() > best.sum():
-                best = got
-    if best.sum() < MIN_DIAL:
-        return []
-    best = [idx[k] for k in np.flatnonzero(best)]
-    p = dial_centre(cands, best)
-    best = [q for q in idx if cands[q].dark == cands[best[0]].dark and _meets(cands[q], p)[0]]
-    dirs = np.array([wrap_angle(cands[q].angle_rad) for q in best])
-    # At least 3 distinct directions (parallel lines "meet" anywhere along their normal).
-    if len(best) < MIN_DIAL or np.ptp(np.sort(dirs)) < 3 * FAMILY_ANGLE:
-        return []
-    # Ordered round the centre.
-    theta = np.array([np.arctan2(-(m[1] - p[1]), m[0] - p[0])
-                      for m in (_middle(cands[q]) for q in best)])
-    order = np.argsort(theta)
-    # A graduation: neighbours at least DIAL_MIN_STEP apart, few steps missing. Lines that
-    # merely converge (a photograph's vanishing point) are spaced anyhow.
-    th = theta[order]
-    gaps = np.diff(np.append(th, th[0] + 2 * np.pi))
-    gaps = np.delete(gaps, np.argmax(gaps))  # the open side of a partial dial
-    g0 = float(np.min(gaps))
-    steps = np.rint(gaps / g0)
-    if (g0 < DIAL_MIN_STEP or np.sum(steps) > DIAL_MAX_SKIP * len(gaps)
-            or np.max(np.abs(gaps / g0 - steps)) > 0.25):
-        return []
-    return [best[k] for k in order]
 
 
 def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
@@ -272,13 +174,13 @@ def _finer_pitch(members: list[MarkCandidate], pool: list[MarkCandidate], ref: f
     "pitch 73 px" at 24 px). The finer step is the median gap between neighbouring lines,
     members and candidates together: on a ruling with most lines present, the pitch."""
     u, n = line_frame(ref)
-    q_m = np.array([float(_middle(c) @ n) for c in members])
-    t_m = np.array([float(_middle(c) @ u) for c in members])
+    q_m = np.array([float(line_middle(c) @ n) for c in members])
+    t_m = np.array([float(line_middle(c) @ u) for c in members])
     step = abs(pitch)
     lo, hi = q_m.min() - step * MAX_GAP, q_m.max() + step * MAX_GAP
     q = []
     for c in pool:
-        p = _middle(c) + shift
+        p = line_middle(c) + shift
         if (c.dark == members[0].dark and abs(wrap_angle(c.angle_rad - ref)) < FAMILY_ANGLE
                 and lo < float(p @ n) < hi
                 and t_m.min() - step < float(p @ u) < t_m.max() + step):
@@ -333,6 +235,42 @@ def _span_members(found: list[MarkCandidate], group: Sequence[int], fade: float 
             a, b = min(a, float(lo)), max(b, float(hi))
         t0, t1 = sorted((s * (a - fade), s * (b + fade)))
         found[i] = dc_replace(c, t_start_px=t0, t_end_px=t1)
+
+
+def joined_pieces(pieces: list[MarkCandidate], gap_px: float, span_px: float
+                  ) -> list[MarkCandidate]:
+    """Pairs of pieces of one line (a speck across its middle cut the ridge in two, each
+    piece under the family's floor: a dense ruler's 70 px tick seen as 18 + 16 px) as one
+    candidate: same polarity, each along the other (:data:`PIECE_ANGLE`, 3 px), apart by
+    less than ``gap_px`` and together no longer than ``span_px``; its line through both
+    middles (each piece's own direction is poor), its extent their union. Each piece is
+    used once, the strongest pairs first; the search's confirmation then judges them."""
+    out, used = [], set()
+    order = sorted(range(len(pieces)), key=lambda i: -pieces[i].strength)
+    for x, i in enumerate(order):
+        for j in order[x + 1:]:
+            a, b = pieces[i], pieces[j]
+            if i in used or j in used or a.dark != b.dark or _overlap(a, b):
+                continue
+            if not (_near(a, b, PIECE_ANGLE, 3.0) and _near(b, a, PIECE_ANGLE, 3.0)):
+                continue
+            ma, mb = line_middle(a), line_middle(b)
+            d = mb - ma
+            if float(np.hypot(*d)) < 1.0:
+                continue
+            ang = float(np.arctan2(-d[1], d[0]))  # (x right, y down: +y turns -angle)
+            ang = wrap_angle(ang)
+            u, n = line_frame(ang)
+            ts = [float(ma @ u) + s * a.length_px / 2 for s in (-1, 1)] + \
+                 [float(mb @ u) + s * b.length_px / 2 for s in (-1, 1)]
+            gap = float(np.hypot(*d)) - (a.length_px + b.length_px) / 2
+            if gap >= gap_px or max(ts) - min(ts) > span_px:
+                continue
+            out.append(dc_replace(a, angle_rad=ang, offset_px=float(0.5 * (ma + mb) @ n),
+                                  t_start_px=min(ts), t_end_px=max(ts),
+                                  strength=a.strength + b.strength))
+            used |= {i, j}
+    return out
 
 
 JOIN_PASSES = 4
@@ -494,7 +432,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
                       pitch=pitch, members=members, shift=shift, lo=lo, hi=hi) -> bool:
             # Coarse candidates are in the search's (roi) frame: compare in the image's.
-            p = _middle(c) + shift
+            p = line_middle(c) + shift
             q = float(p @ line_frame(ref)[1])
             k = (q - origin) / pitch
             return (c.dark == members[0].dark
@@ -509,7 +447,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
 
         def half_way(c: MarkCandidate, ref=ref, origin=origin, pitch=pitch,
                      shift=shift) -> bool:
-            k = (float((_middle(c) + shift) @ line_frame(ref)[1]) - origin) / pitch
+            k = (float((line_middle(c) + shift) @ line_frame(ref)[1]) - origin) / pitch
             return abs(k - np.rint(k)) > GRID_TOLERANCE
 
         # Pieces along a member (it was cut at a numeral or a dust speck) extend it, across
@@ -524,7 +462,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                 if not (o.dark == c.dark and _near(c, o, PIECE_ANGLE, 3.0)):
                     continue
                 u = line_frame(o.angle_rad)[0]
-                cu = float(_middle(c) @ u)
+                cu = float(line_middle(c) @ u)
                 lo_c, hi_c = cu - c.length_px / 2, cu + c.length_px / 2
                 gap = max(lo_c - o.t_end_px, o.t_start_px - hi_c)
                 t0, t1 = min(o.t_start_px, lo_c), max(o.t_end_px, hi_c)
@@ -533,11 +471,16 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         # Lines that join: the second search's, and the first's it split differently (a
         # numeral's strokes beside a line's end become pieces there, none as long).
         pool = pieces + [c for c in search.first if not any(c == p for p in pieces)]
+        # A line cut in two by a speck across its middle, neither piece up to the floor.
+        pool += joined_pieces([c for c in pieces if c.length_px < floor],
+                              MEMBER_FRACTION * typical, 1.1 * longest)
         _join(found, members, pool, on_ruling, half_way,
               lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[fine_ruling])
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
-        groups = group_families(found)
+        # (Their lines were confirmed on the ruling: a short one's direction is good to
+        # about the coarse search's pixel at its ends.)
+        groups = group_families(found, miss_px=float(search.f))
         for g in groups:
             # Every member's ridge faded a filter width before each end: a short tick (70
             # px, seen 50) with dust beside it kept under 10 segments that fit (3 of 19).
@@ -554,7 +497,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
             shift = search.shift
             extra = [c for c in search.candidates(MEMBER_FRACTION * typical)
                      if c.dark == found[dial[0]].dark
-                     and _meets(replace_shift(c, shift), p)[0]]
+                     and meets(replace_shift(c, shift), p)[0]]
             for c in search.confirm(extra):
                 if not any(o.dark == c.dark and _near(c, o, FAMILY_ANGLE,
                                                       max(6.0, o.thickness_px))
@@ -562,7 +505,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
                     found.append(c)
             # Two graduations on one diameter are one straight line to the search, joined
             # across the dial's middle: cut at the inner circle, each is a graduation.
-            inner = min(float(np.hypot(*(_middle(found[i]) - p))) - found[i].length_px / 2
+            inner = min(float(np.hypot(*(line_middle(found[i]) - p))) - found[i].length_px / 2
                         for i in dial)
             for j, c in enumerate(list(found)):
                 if j in used or c.dark != found[dial[0]].dark:

@@ -53,3 +53,36 @@ def test_missing_lines_are_named_and_not_ok():
     full = line_family(range(7), np.full(7, a[0]), np.full(7, 1e-5),
                        (24.0 * np.arange(7.0))[:, None] * n[None, :], np.full(7, 0.05))
     assert full.missing_steps == () and not family_warnings("scale.tif", full)
+
+
+def test_lens_bounds_fitted_chi2_per_dof_one_whatever_the_lens():
+    """15 members whose angles a bounded lens direction turns apart (a p1-like trend across
+    the frame, 4 times their own u at the ends; a common turn, 10 times): chi2/dof ~1 over
+    200 draws with no lens and with one at its bound, alike, and a tilted member still
+    named. Carried as a u (the range as a spread) chi2/dof was 0.93 and 1.14 (400 draws):
+    what the lens is, not whether the lines are parallel."""
+    rng = np.random.default_rng(3)
+    n = 15
+    u = np.full(n, 1e-4)
+    x = np.linspace(-1, 1, n)
+    couplings = [{"lens_p1_range": 4e-4 * v, "lens_aspect_range": 1e-3, "lens_fit": 2e-5 * v}
+                 for v in x]
+    idx = list(range(n))
+    mids = np.column_stack([x * 300, np.zeros(n)])
+    means = []
+    for lam in (0.0, np.sqrt(3)):
+        chis = []
+        for _ in range(200):
+            a = 1.0 + u * rng.standard_normal(n) + lam * 4e-4 * x
+            f = line_family(idx, a, u, mids, np.full(n, 0.1), lens_coupling=couplings)
+            assert f.lens_fitted == 1 and f.dof == n - 2
+            chis.append(f.chi2_dof)
+        means.append(np.mean(chis))
+    # 200 draws of chi2/13: each mean's sd is sqrt(2 / 13 / 200) = 0.028, their difference's
+    # 0.039 (3.2 and 3 of them).
+    assert abs(means[0] - 1) < 0.09 and abs(means[1] - 1) < 0.09, means
+    assert abs(means[1] - means[0]) < 0.12, means
+    a = 1.0 + u * rng.standard_normal(n) + np.sqrt(3) * 4e-4 * x
+    a[5] += 1e-3  # a graduation tilted 10 u
+    f = line_family(idx, a, u, mids, np.full(n, 0.1), lens_coupling=couplings)
+    assert f.deviant == (5,) and not f.consistent()

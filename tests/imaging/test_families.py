@@ -14,6 +14,8 @@ import pytest
 from align.marks import LENS_TERMS, measure_image
 from align.warnings import mark_warnings
 from imaging import line_frame
+from imaging.candidate import MarkCandidate
+from imaging.families import group_families, joined_pieces
 from synth.ruled import RuledSpec, random_ruled, render_ruled
 
 END_TOL_PX = 3.0
@@ -90,12 +92,52 @@ def _check(spec):
     return fam, np.array(z), err / true_len[~hidden], fam_z, pitch_z, err
 
 
+def _tick(q: float, angle_deg: float, t0: float, t1: float, strength: float = 1.0):
+    """A coarse candidate across the ruling at position q [px] (lines along +-y)."""
+    a = np.deg2rad(angle_deg)
+    # Its middle at (q, -(t0 + t1) / 2) for a vertical line: offset and extent in its frame.
+    u, n = line_frame(a)
+    mid = np.array([q, -(t0 + t1) / 2])
+    return MarkCandidate(a, float(mid @ n), float(mid @ u) - (t1 - t0) / 2,
+                         float(mid @ u) + (t1 - t0) / 2, True, 3.0, strength)
+
+
+def test_short_ticks_off_by_their_direction_error_stay_in_the_family():
+    """The dense ruler's 48 px ticks came out of the search 2.5 deg off the family's 90
+    (their ends ~1 px off its direction): grouped with the others when their ends lie within
+    the coarse search's pixel (2 px) of the family's direction, and not without; a 110 px
+    line 2.5 deg off (ends 2.4 px off) stays out."""
+    c = [_tick(24.0 * k, 90.0, -30, 30, 2.0) for k in range(8)]
+    c[3] = _tick(72.0, 87.5, -24, 24)
+    c[5] = _tick(120.0, 87.4, -24, 24)
+    assert sorted(group_families(c)[0]) == [0, 1, 2, 4, 6, 7]
+    assert sorted(group_families(c, miss_px=2.0)[0]) == list(range(8))
+    c[5] = _tick(120.0, 87.5, -55, 55)
+    assert 5 not in group_families(c, miss_px=2.0)[0]
+
+
+def test_pieces_of_one_tick_joined_through_both_middles():
+    """A speck across a tick's middle leaves 18 + 16 px pieces (the ridge of a 70 px tick
+    seen 60 px), each 1.5-2 deg off: one candidate along the line through both middles,
+    over their extent; pieces of two neighbouring ticks (24 px apart), or farther apart
+    along one line than the gap allowed, are not joined."""
+    a, b = _tick(10.0, 88.0, -30, -12, 5.0), _tick(10.0, 91.5, 14, 30, 4.0)
+    got = joined_pieces([a, b], gap_px=30.0, span_px=77.0)
+    assert len(got) == 1
+    g = got[0]
+    assert abs(np.rad2deg(abs(g.angle_rad)) - 90) < 0.5 and 59 < g.length_px < 61
+    mid = g.offset_px * line_frame(g.angle_rad)[1]
+    assert abs(abs(mid[0]) - 10.0) < 0.5
+    assert joined_pieces([a, _tick(34.0, 90.0, 14, 30)], gap_px=30.0, span_px=77.0) == []
+    assert joined_pieces([a, b], gap_px=20.0, span_px=77.0) == []
+
+
 def test_ruled_scale_every_line_found_quick():
     fam, z, *_, err = _check(RuledSpec(width=800, height=600, pitch_px=70.0,
                                        line_angle_rad=1.3, lengths_px=(110.0, 140.0, 170.0),
                                        bits=12, snr=30, seed=5))
     assert np.median(np.abs(err)) < 2.0, err
-    assert fam.dof == len(z) - 1 and np.isfinite(fam.chi2_dof)
+    assert fam.dof == len(z) - 1 - fam.lens_fitted and np.isfinite(fam.chi2_dof)
     assert np.max(np.abs(z)) < 4.5
 
 
@@ -154,11 +196,12 @@ def test_dense_ruler_gaps_said_over_seeds():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="dense synth ruler, seeds 0-3: ticks found and measured "
-                   "24 + 1 refused (speck on it), 24 of 25 (one family seen as 21 + 3, the 3 "
-                   "at 85.7 +- 2.3 px with steps 1-3 named missing: short ticks' detected "
-                   "directions 2.6 deg off), 24 + 1 refused, 21 of 25 (steps 1, 10, 13, 20 "
-                   "named missing); every gap said")
+@pytest.mark.xfail(strict=True, reason="dense synth ruler, seeds 0-3: 24 + 1 refused, 25, 25, "
+                   "25 of 25 in one family (were 24 + 1, 21 + 3 in two families, 24 + 1, 21). "
+                   "Seed 0's refused tick (offset -168) has no speck on it: one 18 px beside "
+                   "it (6 px from its neighbour, measured) disturbs the background slope "
+                   "beside 4 of its 13 segments, and imaging/measure.py's _usable leaves 9 "
+                   "(< 10): 'too few segments fit the groove model (covered, or not a groove)'")
 def test_dense_ruler_every_tick_over_seeds():
     for seed in range(4):
         lines, res, got, extra, fams = _dense_ruler(seed)
