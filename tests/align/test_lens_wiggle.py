@@ -33,11 +33,11 @@ def _mark(seed: int, amp: float = 0.0, period: float = 110.0, sag: float = 0.0,
 
 
 def test_a_wiggle_of_enough_periods_is_found_and_taken_off():
-    """0.2 px at 110 px (2.7 periods along the mark) beside a lens's 1 px bow, 20 seeds:
+    """0.2 px at 110 px (2.7 periods along the mark) beside a lens's 1 px bow, 10 seeds:
     found every time, its period within 3 % and amplitude within 0.02 px (4 x the fit's
     sd ~ SIGMA sqrt(2/75)); what is left is the bow and the noise (a cubic along the mark
     leaves chi2 of the noise: within its 5 sd, sqrt(2 dof))."""
-    for seed in range(20):
+    for seed in range(10):
         line = _mark(seed, amp=0.2, sag=1.0)
         out, wig = without_wiggle(line)
         assert wig is not None, seed
@@ -54,11 +54,11 @@ def test_a_wiggle_of_enough_periods_is_found_and_taken_off():
 
 def test_fewer_than_two_periods_or_noise_alone_is_no_wiggle():
     """A 0.2 px sinusoid of 1.5 periods along the mark (200 px) is a bow, a bend or a lens,
-    never a wiggle (20 seeds); noise alone at the test's level 1e-3: at most 2 false wiggles
-    in 200 marks (P(>= 3) = 0.001 at the nominal rate)."""
-    for seed in range(20):
+    never a wiggle (10 seeds); noise alone at the test's level 1e-3: at most 2 false wiggles
+    in 100 marks (P(>= 3) = 2e-4 at the nominal rate)."""
+    for seed in range(10):
         assert without_wiggle(_mark(seed, amp=0.2, period=200.0))[1] is None, seed
-    false = sum(without_wiggle(_mark(seed, sag=1.0))[1] is not None for seed in range(200))
+    false = sum(without_wiggle(_mark(seed, sag=1.0))[1] is not None for seed in range(100))
     assert false <= 2, false
 
 
