@@ -80,15 +80,16 @@ def without_wiggle(line: LineGeometry, alpha: float = 1e-3, nu: float | None = N
     q = line.points
     if len(q) < 4 * (SMOOTH_ORDER + 3):
         return line, None
-    u, n = line_frame(fit_line_only(q, line.sigma, chol=line.chol)[0])
+    # The direction without the centres' correlation (one whitening less per mark): the
+    # cubic's linear term takes up what it is off by.
+    u, n = line_frame(fit_line_only(q, line.sigma)[0])
     t = q @ u
     span = float(np.ptp(t))
     if span <= 0:
         return line, None
     x = (t - (t.min() + t.max()) / 2) / span
-    P = np.column_stack([x**k for k in range(SMOOTH_ORDER + 1)])
-    Pw = _whiten(P, line)
-    ew = _whiten((q @ n)[:, None], line)[:, 0]
+    Xw = _whiten(np.column_stack([*(x**k for k in range(SMOOTH_ORDER + 1)), q @ n]), line)
+    Pw, ew = Xw[:, :-1], Xw[:, -1]
     zw = ew - Pw @ np.linalg.lstsq(Pw, ew, rcond=None)[0]
     test, omega = periodogram_test(zw, t, nu)
     if not np.isfinite(omega) or not test.p_value < alpha:
@@ -113,8 +114,8 @@ def _refined(omega: float, t: np.ndarray, span: float, Pw: np.ndarray, ew: np.nd
     """The wiggle's frequency [rad/px] fitted jointly with the cubic (least residual):
     the periodogram's peak is of what the cubic left, on its grid, and a sinusoid slower
     than 2 periods less a cubic peaks faster. Searched from 1 period over the span up to
-    3 (where the cubic and a slow sinusoid trade shapes) and one grid step of the
-    periodogram (1/4 cycle) about its peak, then to the grid's resolution."""
+    3 (where the cubic and a slow sinusoid trade shapes) and within 1/4 cycle of the
+    periodogram's peak (a step or two of its grid), then to a tenth of this grid's step."""
 
     def rss(w: float) -> float:
         X = np.column_stack([Pw, _whiten(np.column_stack([np.sin(w * t), np.cos(w * t)]),
