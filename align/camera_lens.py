@@ -28,7 +28,8 @@ from align.lens_terms import (
 from align.lens_terms import (
     undistorted as lens_undistorted,
 )
-from align.mark_stage import half_diagonal, texture_scale
+from align.lens_wiggle import without_wiggle
+from align.mark_stage import half_diagonal, noise_dof, texture_scale
 from imaging import CameraModel, MarkMeasurement, fit_line, on_line, undistort_points
 from imaging.lens import PARAMS
 
@@ -158,7 +159,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         return CameraLens(None, (), {}, max_u)
     shape = ms[0].image_shape
     R = half_diagonal(shape)
-    lines = lens_lines(ms)
+    # A wiggle of >= 2 periods along a mark is fitted first: the lens reads what is left.
+    lines = [without_wiggle(ln, alpha, noise_dof(m, texture_scale(m)))[0]
+             for ln, m in zip(lens_lines(ms), ms, strict=True)]
     who = f"camera {label}" if label else "camera"
     if camera is None and not np.any(ranges.vector()):
         # Declared distortion-free: nothing to determine, nothing to carry.

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from align.lens_design import LineGeometry
-from align.lens_terms import check_camera, lens_cov, lone_departures
+from align.lens_terms import check_camera, lens_cov, lens_or_bends, lone_departures
 from imaging.lens import distort_points
 
 R = 400.0
@@ -56,3 +56,37 @@ def test_a_departure_the_joint_covariance_sees_and_the_independent_rule_misses()
         assert lone_departures(designs, COV) == ()
         p0 = [check_camera(_lines(zero, seed), zero, c, R)[0] for c in (COV, diag_u)]
         assert min(p0) >= 1e-3, p0
+
+
+def _mark(x: float, y: float, a_deg: float, length: float, dlam: np.ndarray, seed,
+          sigma: float = 0.05) -> LineGeometry:
+    """A straight mark of ``length`` [px] through (x, y) px from the centre at ``a_deg``,
+    imaged through a lens that departs from the calibration by ``dlam``."""
+    rng = np.random.default_rng(seed)
+    a = np.radians(a_deg)
+    t = np.linspace(-length / 2, length / 2, int(length))
+    q = np.array([x, y]) + np.outer(t, [np.cos(a), -np.sin(a)])
+    return LineGeometry(distort_points(q, dlam, R) + rng.normal(0, sigma, q.shape),
+                        np.full(len(q), sigma), None)
+
+
+def test_marks_are_bent_only_where_the_straight_marks_rule_the_lens_change_out():
+    """Two corner marks depart from an exact calibration by bows of opposite k1 (±0.01 at
+    the half-diagonal: no one linear change fits both — as a wrong model's principal point
+    and k's left two of user 12's marks) beside a straight third mark. A short one at the
+    centre would show the change their bows call for < 1 sigma: it cannot rule a changed
+    lens out, so the marks are not read as bent beside a kept calibration ('undecided': u
+    carries the lens; before: 'bends' in 4/4 seeds). A long one in the corner would show it
+    5-6 sigma and is straight: 'bends' (4/4)."""
+    cov = np.diag(np.full(7, 1e-8))
+    zero = np.zeros(7)
+    k = np.zeros(7)
+    k[0] = 0.01
+    for seed in range(4):
+        bowed = [_mark(-180, -130, 10, 220, k, [seed, 0]), _mark(170, 120, 70, 220, -k, [seed, 1])]
+        for third, verdict in (((5, -8, 120, 80), "undecided"),
+                               ((200, -100, -30, 220), "bends")):
+            p, _, designs = check_camera([*bowed, _mark(*third, zero, [seed, 2])], zero, cov, R)
+            told = lens_or_bends(designs, cov)
+            assert p < 1e-3 and told is not None, (seed, p)
+            assert told.verdict == verdict and told.departing == (0, 1), (seed, third, told)
