@@ -345,6 +345,15 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray, resp: np.ndarray | None 
     lines = [(_pca_line(c, centre), c) for c in comps if len(c) >= 5]
     lines.sort(key=lambda x: -len(x[1]))
     angles = np.array([ln[0][0] for ln in lines])
+    # Each piece's mean point (from centre): a piece's largest distance from a line is at
+    # least its mean point's, so one whose mean point lies 3 px or more (+1e-6 for the
+    # rounding) off this piece's line fails the test below for certain. On a busy photo
+    # most near-parallel pieces are other lines of a row (~1/3 of this function's CPU).
+    if lines:
+        sizes = np.array([len(ln[1]) for ln in lines])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        mids = np.add.reduceat(np.vstack([ln[1] for ln in lines]), starts) / sizes[:, None]
+        mids -= centre
     used = [False] * len(lines)
     out = []
     for i, (line, pts) in enumerate(lines):
@@ -358,7 +367,8 @@ def _merge(comps: list[np.ndarray], centre: np.ndarray, resp: np.ndarray | None 
         # Only near-parallel pieces can join: the direction test for all of them at once
         # (the pairwise loop below is what made this quadratic step slow on cluttered frames).
         dang = np.abs((angles[i + 1:] - a + np.pi / 2) % np.pi - np.pi / 2)
-        for j in i + 1 + np.flatnonzero(dang < np.deg2rad(3) + 1e-12):
+        near = i + 1 + np.flatnonzero(dang < np.deg2rad(3) + 1e-12)
+        for j in near[np.abs(mids[near] @ nn - d) < 3.0 + 1e-6]:
             if used[j] or abs(wrap_angle(lines[j][0][0] - a)) >= np.deg2rad(3):
                 continue
             pj = lines[j][1]
