@@ -202,13 +202,19 @@ def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
         if det:
             u = _marginal_u(F, det, rng)
             u_lines[det] = u
-        spread, spread_u = _pp_spread(cache, lam, applied, det, rng)
-        spread_for = list(applied)
         # Applied only with its sign determined under every principal point the lines allow
         # (a radial term's bow scales with the line's distance from the principal point).
         bound = _p_with_decentring(rng, lam, u_lines, det, scale, z)
-        keep = [j for j in applied
-                if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= bound[j]]
+        # The spread (>= 0) only adds to z u: where no parameter passes without it, none is
+        # kept whatever it is, and its probes (four designs of every line, most of a
+        # leave-one-out solve's CPU: building.jpg's bows put k1 beyond any lens in each) are
+        # not made. Its u is then never read: the applied set is empty next.
+        keep = []
+        if any(abs(lam[j]) > z * u_lines[j] and abs(lam[j]) <= bound[j] for j in applied):
+            spread, spread_u = _pp_spread(cache, lam, applied, det, rng)
+            spread_for = list(applied)
+            keep = [j for j in applied
+                    if abs(lam[j]) > spread[j] + z * u_lines[j] and abs(lam[j]) <= bound[j]]
         est[applied] = lam[applied]
         if keep == applied:
             break

@@ -151,11 +151,29 @@ def _dedupe(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     Only of one polarity: a dark mark and the bright strip of background beside it (between
     it and a padded border, say) are two things, and the strip must not replace the mark.
     """
+    tol = np.deg2rad(3)
     out: list[MarkCandidate] = []
+    # The kept ones' direction, normal, offset, reach and polarity as arrays (grown by
+    # doubling): each candidate is tested against all of them at once with a slack of
+    # 1e-6 (rad, px) for the rounding, and the exact scalar test runs only on those left.
+    # building.jpg's ~400 candidates made ~70k scalar tests (~0.4 s CPU) before.
+    cap = max(len(cands), 1)
+    ang, off = np.empty(cap), np.empty(cap)
+    nrm, reach = np.empty((cap, 2)), np.empty(cap)
+    dark = np.empty(cap, bool)
     for c in cands:
-        if any(c.dark == o.dark and _near(c, o, np.deg2rad(3), max(6.0, o.thickness_px))
-               and _overlap(c, o) for o in out):
-            continue
+        k = len(out)
+        if k:
+            u, n = line_frame(c.angle_rad)
+            mid = c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
+            d = np.abs((c.angle_rad - ang[:k] + np.pi / 2) % np.pi - np.pi / 2)
+            may = (dark[:k] == c.dark) & (d < tol + 1e-6)
+            may &= np.abs(nrm[:k] @ mid - off[:k]) < reach[:k] + 1e-6
+            if any(_near(c, out[j], tol, max(6.0, out[j].thickness_px)) and _overlap(c, out[j])
+                   for j in np.flatnonzero(may)):
+                continue
+        ang[k], off[k], nrm[k] = c.angle_rad, c.offset_px, line_frame(c.angle_rad)[1]
+        reach[k], dark[k] = max(6.0, c.thickness_px), c.dark
         out.append(c)
     return out
 

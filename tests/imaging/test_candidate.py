@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from imaging import measure_marks
-from imaging.candidate import MarkCandidate, _covers, _may_cover, wrap_angle
+from imaging.candidate import (
+    MarkCandidate,
+    _covers,
+    _dedupe,
+    _may_cover,
+    _near,
+    _overlap,
+    wrap_angle,
+)
 from tests.conftest import angle_error, mark_image
 
 
@@ -65,3 +73,32 @@ def test_fused_prefilter_never_drops_a_covering_line():
                 tested += 1
     assert covers > 30  # the sweep holds covering pairs to miss
     assert passed < 0.2 * tested  # and the prefilter leaves most pairs out
+
+
+def test_dedupe_keeps_what_the_pairwise_test_keeps():
+    """_dedupe's test against all kept candidates at once (with a 1e-6 slack, then the
+    scalar test on those left) keeps exactly what testing each kept one in turn keeps: over
+    random bundles of nearly coincident lines of both polarities, some across the wrap at
+    +-pi/2, the same list, with duplicates to drop and lines to keep."""
+    rng = np.random.default_rng(7)
+    dropped = kept = 0
+    for _ in range(40):
+        base = rng.uniform(-np.pi / 2, np.pi / 2, 4)
+        cands = []
+        for _ in range(int(rng.integers(2, 60))):
+            t0 = rng.uniform(-300, 300)
+            cands.append(MarkCandidate(
+                angle_rad=wrap_angle(float(base[rng.integers(4)] + rng.normal(0, 0.03))),
+                offset_px=float(rng.normal(0, 8)), t_start_px=t0,
+                t_end_px=t0 + rng.uniform(5, 400), dark=bool(rng.integers(2)),
+                thickness_px=rng.uniform(0, 12), strength=rng.uniform(0, 1000)))
+        cands.sort(key=lambda c: -c.strength)
+        ref: list[MarkCandidate] = []
+        for c in cands:
+            if not any(c.dark == o.dark and _near(c, o, np.deg2rad(3), max(6.0, o.thickness_px))
+                       and _overlap(c, o) for o in ref):
+                ref.append(c)
+        assert _dedupe(cands) == ref
+        dropped += len(cands) - len(ref)
+        kept += len(ref)
+    assert dropped > 100 and kept > 100
