@@ -41,6 +41,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from scipy.special import ndtri
 
 from imaging.ends import checked_ends
+from imaging.ends_blur import ends_at_their_blur
 
 R = TypeVar("R")
 
@@ -227,6 +228,8 @@ def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
     if m is None:
         return r, (r.length_px, r.length_px, 0)
     e = checked_ends(image, m.profile, m.extent_px, m.centres, m.ends_check)
+    # A defocus gradient misfits the band's one blur at both ends (imaging/ends_blur.py).
+    e = ends_at_their_blur(image, m.profile, m.extent_px, m.centres, m.blur, e)
     n_hidden = sum(e.hidden)
     notes = tuple(r.notes)
     if n_hidden:

@@ -30,6 +30,7 @@ from align.camera_lens import (
 )
 from align.family_stage import family_note, grating_notes, with_families
 from align.lens import LensRanges
+from align.lens_advice import lens_advice
 from align.loop import Candidate, LoopReport, run_loop
 from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
@@ -301,7 +302,8 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         worst = max((k_ for k_ in terms if k_.startswith(LENS_TERMS)), key=terms.get)
         notes.append(f"{name} mark {index}: NOT OK: the angle is lens-limited (± "
                      f"{np.rad2deg(lens_u) * 3600:.0f}″ from the lens, mostly {worst}; bound "
-                     f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): " + lens_advice(lens, m))
+                     f"{np.rad2deg(lens.max_u_rad) * 3600:.0f}″): "
+                     + lens_advice(lens, m, worst))
     claimed = claimed_lens(lens.lam, lens.record)
     if claimed is not None and not np.array_equal(claimed, lens.lam):
         # The offset through the claimed lens: a parameter fitted free moves the line by its
@@ -312,19 +314,6 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,
                    lens_coupling=dict(coupling), lens_group=(group or name) if coupling else "")
-
-
-def lens_advice(lens: CameraLens, m: MarkMeasurement) -> str:
-    """What helps a lens-limited angle: without a camera model, calibrating the camera and
-    giving the model; with one, the model's own u is the limit (where the mark lies)."""
-    # With a camera model given, "give it with --camera" is no advice: its own u limits.
-    if lens.record.get("source") != CAMERA_MODEL:
-        return f"calibrate the camera (`align camera`) and give it with {lens.model_as}"
-    x, y = np.mean(m.points, axis=0)
-    return (f"the camera model's own u limits it where this mark lies, ({x:+.0f}, {y:+.0f}) px "
-            f"from the image centre ({np.hypot(x, y):.0f} px out): recalibrate (`align camera`) "
-            "with more chessboard views, spread so the boards cover this region of the frame, "
-            "or measure a mark nearer the centre")
 
 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
