@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import shutil
 from pathlib import Path
@@ -13,6 +14,18 @@ import numpy as np
 import pytest
 
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+
+
+def pytest_collection_finish(session) -> None:
+    """After collection, the collected objects (modules, fixtures, items: most of the heap)
+    go to the permanent generation, and the young generation is collected every 10000
+    allocations instead of 700: the cyclic garbage collector otherwise re-walks them in every
+    full collection and runs ~2x as often (measured: 0.84 s -> 0.35 s of the garbage
+    collector's CPU over 30 s of tests). Nothing a test checks depends on when cycles are
+    freed; reference counting still frees everything else at once."""
+    gc.freeze()
+    gc.set_threshold(10000, 10, 10)
+
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 ARCSEC = np.pi / 180 / 3600
