@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import gc
 import io
 import os
 import shutil
@@ -21,6 +23,38 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
+
+
+def _keep_freed_memory() -> None:
+    """glibc's allocator, told to keep up to 256 MiB of freed heap and to serve blocks up to
+    32 MiB from it: the tests allocate and free image-sized arrays thousands of times, and by
+    default each comes from a fresh mmap whose pages the kernel faults in and zeroes again
+    (measured on imaging and fusion tests: 16.8 s -> 14.7 s of CPU, most of it system time;
+    the same peak memory). Only where that libc is; nothing a test computes changes."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # not glibc (macOS, Windows, musl): the defaults
+        return
+    m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3  # malloc.h
+    mallopt(m_mmap_threshold, 32 << 20)
+    mallopt(m_trim_threshold, 256 << 20)
+    mallopt(m_top_pad, 64 << 20)
+
+
+_keep_freed_memory()
+
+
+def pytest_collection_finish(session) -> None:
+    """After collection, the collected objects (modules, fixtures, items: most of the heap)
+    go to the permanent generation, and the young generation is collected every 10000
+    allocations instead of 700: the cyclic garbage collector otherwise re-walks them in every
+    full collection and runs ~2x as often (measured: 0.84 s -> 0.35 s of the garbage
+    collector's CPU over 30 s of tests). Nothing a test checks depends on when cycles are
+    freed; reference counting still frees everything else at once."""
+    gc.freeze()
+    gc.set_threshold(10000, 10, 10)
+
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 ARCSEC = np.pi / 180 / 3600

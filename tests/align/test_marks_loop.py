@@ -196,14 +196,23 @@ def _bowed_groove(offset_px: float, bow_px: float, seed: int, angle_deg: float =
     a = np.deg2rad(angle_deg)
     u, n = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
     yy, xx = np.mgrid[0:h, 0:w].astype(float)
-    img = np.zeros((h, w))
+    # Only pixels within 40 px of the groove's centre line are integrated: beyond, every
+    # sub-pixel's term is below 1e-100 (or exactly 0) and 0.5 minus it is 0.5, so the image
+    # is the one integrated over the whole frame, bit for bit, at a tenth of the CPU.
+    t0 = (xx - (w - 1) / 2) * u[0] + (yy - (h - 1) / 2) * u[1]
+    near = np.abs((xx - (w - 1) / 2) * n[0] + (yy - (h - 1) / 2) * n[1] - offset_px
+                  - bow_px * (t0 / (length_px / 2)) ** 2) < 40.0
+    xx, yy = xx[near], yy[near]
+    band = np.zeros(xx.shape)
     for sy in (np.arange(4) - 1.5) / 4:
         for sx in (np.arange(4) - 1.5) / 4:
             px, py = xx + sx - (w - 1) / 2, yy + sy - (h - 1) / 2
             t = px * u[0] + py * u[1]
             d = px * n[0] + py * n[1] - offset_px - bow_px * (t / (length_px / 2)) ** 2
-            img += (ndtr((d + 2) / 1.2) - ndtr((d - 2) / 1.2)) * ndtr(
+            band += (ndtr((d + 2) / 1.2) - ndtr((d - 2) / 1.2)) * ndtr(
                 (length_px / 2 - np.abs(t)) / 1.2)
+    img = np.zeros((h, w))
+    img[near] = band
     mu = 0.5 - 0.3 * img / 16 + rng.normal(size=(h, w)) * 0.005
     return np.round(np.clip(mu, 0, 1) * 65535).astype(np.uint16)
 

@@ -178,8 +178,13 @@ def render(scene: Scene) -> np.ndarray:
             half = m.length / 2
             rad = (half ** 2 + m.bow_px ** 2) / (2 * m.bow_px)
             u = u - (m.bow_px - (rad - np.sqrt(np.maximum(rad ** 2 - t ** 2, 0.0))))
+        # Beyond width/2 + 8 sqrt(2) 0.35 px across the groove both erf of its walls are
+        # exactly +-1 (|argument| >= 8): the factor there is exactly 1, so only the
+        # sub-samples nearer are multiplied (the same image bit for bit; NaN stays in).
+        near = ~(np.abs(u) > m.width / 2 + 8 * np.sqrt(2) * 0.35)
+        t, u = t[near], u[near]
         along = 0.5 * (erf((t + m.length / 2) / 1.0) - erf((t - m.length / 2) / 1.0))
-        refl *= 1 - m.depth * _groove(u, m.width) * along
+        refl[near] *= 1 - m.depth * _groove(u, m.width) * along
     img = refl.mean(axis=(2, 3))  # pixel integration
     if scene.blur_px:
         img = gaussian_filter(img, scene.blur_px, mode="nearest")

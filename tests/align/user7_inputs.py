@@ -169,10 +169,17 @@ def _groove_depth(xi: np.ndarray, yi: np.ndarray, m: Mark, blur_px: float) -> np
     # (measured: a -200" mark rendered at -143" with 2x2 sub-samples), the erf edges do not.
     hw = m.width_px / 2
     sig = math.sqrt(2) * max(blur_px, 0.3)
-    prof = 0.5 * (_erf((hw - sn) / sig) + _erf((hw + sn) / sig))
     half = m.length_px / 2
+    # Beyond hw + 8 sig from the groove both erf are exactly -1 and +1 (|argument| > 6):
+    # the depth there is exactly 0, so only the sub-samples nearer are evaluated (the same
+    # array bit for bit; a NaN position stays among those evaluated).
+    near = ~(np.abs(sn) > hw + 8 * sig)
+    sn, t = sn[near], t[near]
+    prof = 0.5 * (_erf((hw - sn) / sig) + _erf((hw + sn) / sig))
     end = 0.5 * (_erf((half - t) / sig) + _erf((half + t) / sig))
-    return prof * end
+    out = np.zeros(near.shape)
+    out[near] = prof * end
+    return out
 
 
 def render(scene: Scene, seed: int = 0) -> np.ndarray:
