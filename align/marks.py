@@ -306,7 +306,13 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     if claimed is not None and not np.array_equal(claimed, lens.lam):
         # The offset through the claimed lens: a parameter fitted free moves the line by its
         # sagitta, which the offset's u does not carry.
-        r = replace(r, offset_px=r.offset_px + undistorted_mark(m, claimed).line.offset_px
+        # (Both lines' offsets in the same sense: a groove within a hair of +-90 deg can
+        # come out of the two fits on either side of the wrap, its offset negated — scene 94's
+        # mark at -89.99 deg was reported at +89.98 deg with the other fit's offset, 439 px
+        # off its line.)
+        c = undistorted_mark(m, claimed).line
+        same = abs(c.angle_rad - mu.line.angle_rad) <= np.pi / 2
+        r = replace(r, offset_px=r.offset_px + (c.offset_px if same else -c.offset_px)
                     - mu.line.offset_px)
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
