@@ -186,14 +186,20 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         vals, e, t = vals[near], e[near], t[near]
     ok = unclipped(vals, pf.full_scale_dn)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
-    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int) if ok is not None else np.empty(0, int)
+    # 1-px bins counted from the middle, so the same from either end: the same pixels rotated
+    # by 180 deg fall in the same bins (counted from t0, an end the walk moved came out
+    # 0.1 px elsewhere, the centres' stretch with it, and the angle by 0.16 u).
+    mid = 0.5 * (t0 + t1)
+    half_n = int(np.ceil(0.5 * (t1 - t0) + reach_px))
+    clip_bin = (np.round(t[~ok] - mid).astype(int) + half_n if ok is not None
+                else np.empty(0, int))
     if ok is not None:
         vals, e, t = vals[ok], e[ok], t[ok]
     vals = vals.astype(float)
     if vals.size == 0:
         return same
-    j = np.round(t - t0 + reach_px).astype(int)
-    nb = int(np.ceil(t1 - t0 + 2 * reach_px)) + 1
+    j = np.round(t - mid).astype(int) + half_n
+    nb = 2 * half_n + 1
     j = np.clip(j, 0, nb - 1)
     # The table groove_extent and the centres built for this groove (the same arguments):
     # a cache hit, not ~1.3 ms of erf per mark.
@@ -208,7 +214,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
-    tb = t0 - reach_px + np.arange(nb)
+    tb = mid + (np.arange(nb) - half_n)
     rms = _bin_rms(bc, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
