@@ -306,14 +306,10 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     if claimed is not None and not np.array_equal(claimed, lens.lam):
         # The offset through the claimed lens: a parameter fitted free moves the line by its
         # sagitta, which the offset's u does not carry.
-        # (Both lines' offsets in the same sense: a groove within a hair of +-90 deg can
-        # come out of the two fits on either side of the wrap, its offset negated — scene 94's
-        # mark at -89.99 deg was reported at +89.98 deg with the other fit's offset, 439 px
-        # off its line.)
+        # (Fits either side of the +-90 deg wrap negate the offset: scene 94, 439 px off.)
         c = undistorted_mark(m, claimed).line
-        same = abs(c.angle_rad - mu.line.angle_rad) <= np.pi / 2
-        r = replace(r, offset_px=r.offset_px + (c.offset_px if same else -c.offset_px)
-                    - mu.line.offset_px)
+        sgn = 1.0 if abs(c.angle_rad - mu.line.angle_rad) <= np.pi / 2 else -1.0
+        r = replace(r, offset_px=r.offset_px + sgn * c.offset_px - mu.line.offset_px)
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,

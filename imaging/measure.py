@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.band import band_indices, band_mask
+from imaging.beside import neighbours
 from imaging.camera import CameraModel
 from imaging.centres import Centres, sample_centres
 from imaging.clipped import clipped_notes
@@ -181,9 +182,10 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
-    ``neighbours_px``: signed distances of other lines beside it [px] (see
-    :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
-    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
+    ``neighbours_px``: signed distances of other lines beside it [px]
+    (:func:`imaging.beside.neighbours`), kept out of the texture's replicas; ``jpeg``: the
+    image's JPEG encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then
+    measured;
     ``offsets_var``: variances of the column and row offsets removed from the image
     (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
     candidate) of the other marks, whose grooves are kept out of this one's fit where they
@@ -349,41 +351,6 @@ def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
     """
     u, n = line_frame(angle_rad)
     return offset_px * n + np.outer(p @ u, u)
-
-
-def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5),
-               reach_px: float = 40.0) -> tuple[float, ...]:
-    """Signed distances along candidate i's normal of the other candidates that run beside it
-    [px]: those within ``tol_angle`` of its direction overlapping it along its length (their
-    middle's distance), and those at a larger angle that pass beside it without crossing it
-    (every 2 px of their distance over the stretch they share, out to ``reach_px`` past the
-    candidate's ends, where its centres may reach: :func:`imaging.ends.centres_stretch`).
-    A dial's radial neighbours, 15 deg apart, came within 23 px of a graduation's inner end
-    once its centres ran there: the texture's replicas lay on their grooves over a dozen
-    segments and read them as texture (u x4-5 on 100 px lines, the dial's chi2/dof 0.05)."""
-    c = cands[i]
-    u, n = line_frame(c.angle_rad)
-    out = []
-    for j, o in enumerate(cands):
-        if j == i:
-            continue
-        uo, no = line_frame(o.angle_rad)
-        if abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
-            ts = np.arange(o.t_start_px, o.t_end_px + 1.0, 2.0)
-            pts = o.offset_px * no + ts[:, None] * uo
-            tt, dd = pts @ u, pts @ n - c.offset_px
-            near = (tt >= c.t_start_px - reach_px) & (tt <= c.t_end_px + reach_px)
-            d = dd[near]
-            if d.size and (np.all(d > 0) or np.all(d < 0)):  # beside it, not across it
-                out.extend(float(x) for x in np.unique(np.round(d)))
-            continue
-        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
-        ts = sorted(float(p @ u) for p in ends)
-        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
-            continue
-        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
-        out.append(float(mid @ n) - c.offset_px)
-    return tuple(out)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
