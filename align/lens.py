@@ -442,16 +442,16 @@ def _bows_left(designs: Sequence[_Design], undet: Sequence[int], rng: np.ndarray
     return left * np.sqrt(1.0 + pen / max(float(left @ left), 1e-300))
 
 
-def _bow_test(cache: _DesignCache, lam: np.ndarray, fitted: Sequence[int],
-              undet: Sequence[int], rng: np.ndarray) -> tuple[float, int] | None:
-    """The lines' bows left at ``lam`` (the parameters ``fitted`` fitted; ``undet`` as in
-    :func:`_bows_left`): (chi2, dof), None when the lens folds the image or no line is to
-    spare."""
+def _bow_test(cache: _DesignCache, lam: np.ndarray, k: int, undet: Sequence[int],
+              rng: np.ndarray) -> tuple[float, int] | None:
+    """The lines' bows left at ``lam`` (``k`` parameters fitted; ``undet`` as in
+    :func:`_bows_left`, the fitted ones held: which parameters the lines need, not whether a
+    line is bent): (chi2, dof), None when the lens folds the image or no line is to spare."""
     try:
-        bz = _bows_left(cache.all(lam), undet, rng, fitted)
+        bz = _bows_left(cache.all(lam), undet, rng)
     except LensFolds:
         return None
-    dof = len(bz) - len(fitted)
+    dof = len(bz) - k
     return (float(bz @ bz), dof) if dof > 0 else None
 
 
@@ -485,7 +485,7 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
     if not extra:
         return None
     undet = [j for j in range(len(PARAMS)) if j not in det and rng[j] > 0]
-    without = _bow_test(cache, lam, applied, undet, rng)
+    without = _bow_test(cache, lam, len(applied), undet, rng)
     if without is None or special.chdtrc(without[1], without[0]) >= alpha:
         return None
     for size in range(1, len(extra) + 1):
@@ -499,7 +499,7 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
                 continue
             out = np.zeros(len(PARAMS))
             out[full] = lam_full[full]
-            with_ = _bow_test(cache, out, full, undet, rng)
+            with_ = _bow_test(cache, out, len(full), undet, rng)
             if with_ is not None and special.chdtrc(with_[1], with_[0]) >= alpha and (
                     best is None or with_[0] < best[2][0]) and _same_sign_over_pp(
                     cache, out, full, det, undet, rng, alpha):
@@ -517,7 +517,7 @@ def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], de
     for probe in _pp_probes(np.zeros(len(PARAMS)), det, rng):
         lam_p = _gauss_newton(cache, full, rng, 8, start=probe)
         if np.any(np.sign(lam_p[full]) != np.sign(lam[full])):
-            t = _bow_test(cache, lam_p, full, [j for j in undet if j not in (5, 6)], rng)
+            t = _bow_test(cache, lam_p, len(full), [j for j in undet if j not in (5, 6)], rng)
             # (None: that lens folds the image, so it explains nothing)
             if t is not None and special.chdtrc(t[1], t[0]) >= alpha:
                 return False
