@@ -34,7 +34,10 @@ class LensRanges:
     aspect : float
         |fy/fx - 1| — dimensionless.
     pp_px : float
-        Principal point from the image centre [px].
+        Principal point from the image centre [px], per axis. The default 40 covers the
+        project's own real camera (opencv-chessboard, left: 20.8 px in x from plain OpenCV)
+        and a decentring as large again: 20 left that camera at its edge and a user's
+        (+16 px) beyond it, with the angles' u not covering their error (z to 3.98).
     max_u_arcsec : float
         An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
     """
@@ -43,7 +46,7 @@ class LensRanges:
     k2: float = 0.05
     p: float = 1e-3
     aspect: float = 0.005
-    pp_px: float = 20.0
+    pp_px: float = 40.0
     max_u_arcsec: float = 60.0
 
     @classmethod

@@ -150,7 +150,7 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
     m.add_argument("--lens", metavar="KEY=V,...",
                    help="plausible lens without --camera (Type B ranges; keys k1, k2, p at the "
                    "image half-diagonal, aspect, pp_px [px], max_u_arcsec; defaults k1=0.3,"
-                   "k2=0.05,p=0.001,aspect=0.005,pp_px=20,max_u_arcsec=60; all 0: declared "
+                   "k2=0.05,p=0.001,aspect=0.005,pp_px=40,max_u_arcsec=60; all 0: declared "
                    "distortion-free; docs/camera.md)")
     m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")

@@ -29,7 +29,7 @@ LENS = ("# without a model, the lens's plausible ranges (Type B, carried in u; a
         "# lens_k2 = 0.05                # |k2| at the half-diagonal (default 0.05)\n"
         "# lens_p = 0.001                # |p1|, |p2| at the half-diagonal (default 0.001)\n"
         "# lens_aspect = 0.005           # |fy/fx - 1| (default 0.005)\n"
-        "# lens_pp_px = 20.0             # [px] principal point from the centre (default 20)\n"
+        "# lens_pp_px = 40.0             # [px] principal point from the centre (default 40)\n"
         "# lens_max_u_arcsec = 60.0      # [″] above this lens-limited u an angle is not ok "
         "(default 60)\n")
 """The lens keys of a camera without a model (:class:`align.lens.LensRanges`)."""
