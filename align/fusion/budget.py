@@ -24,7 +24,7 @@ The same algebra predicts u for changed data (:meth:`Linearisation.u_with`): rem
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -243,6 +243,21 @@ class Budget:
                 rest = sum(c.fraction for c in cs[top:])
                 out.append(f"    {100 * rest:5.1f} %  (the other {len(cs) - top})")
         return out
+
+
+def with_type_b(budget: Budget, label: str, widen: Mapping[str, float]) -> Budget:
+    """The budget with a Type B share ``label`` of ``widen[angle]`` [rad²] added to the angles
+    named, their u and fractions recomputed."""
+    angles = {}
+    for n, (u, cs) in budget.angles.items():
+        if n not in widen:
+            angles[n] = (u, cs)
+            continue
+        u2 = u**2 + widen[n]
+        parts = [Contribution(c.source, c.kind, c.u2, c.u2 / u2) for c in cs]
+        parts.append(Contribution(label, "typeB", widen[n], widen[n] / u2))
+        angles[n] = (float(np.sqrt(u2)), tuple(sorted(parts, key=lambda c: -c.u2)))
+    return replace(budget, angles=angles)
 
 
 def linearise(blocks: Sequence, predict_all, params: np.ndarray, names: Sequence[str],

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
-from align.fusion.budget import Budget, Contribution
+from align.fusion.budget import Budget, with_type_b
 from align.fusion.observations import E_NAMES
 from axisbase.units import ARCSEC
 
@@ -141,16 +141,7 @@ def with_disagreement(budget: Budget, named: SourceDisagreement) -> Budget:
     widen = {n: d**2 for n, d, _ in named.angles}
     label = "sources disagree: " + " vs ".join(
         SAYS.get(s, s) for s in (named.source, *(named.also or named.others)))
-    angles = {}
-    for n, (u, cs) in budget.angles.items():
-        if n not in widen:
-            angles[n] = (u, cs)
-            continue
-        u2 = u**2 + widen[n]
-        parts = [Contribution(c.source, c.kind, c.u2, c.u2 / u2) for c in cs]
-        parts.append(Contribution(label, "typeB", widen[n], widen[n] / u2))
-        angles[n] = (float(np.sqrt(u2)), tuple(sorted(parts, key=lambda c: -c.u2)))
-    return replace(budget, angles=angles)
+    return with_type_b(budget, label, widen)
 
 
 def jacobian(residual, p: np.ndarray, step: float = 1e-7) -> np.ndarray:

@@ -17,7 +17,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from scipy.optimize import least_squares
 
 from align.errors import InputError
-from align.fusion.budget import Budget, linearise
+from align.fusion.budget import Budget, linearise, with_type_b
 from align.fusion.diagnosis import (
     SourceDisagreement,
     disagreement_from_dict,
@@ -35,6 +35,7 @@ from align.fusion.observations import (
     axes_from,
     e_matrix,
 )
+from align.fusion.plausible import admissible, not_excluded
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
 from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
@@ -396,7 +397,11 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
     """Solve for E with the residual loop over the nuisance candidates."""
     stage = FusionStage(blocks)
     _check_determined(stage)
-    loop = run_loop(stage, candidates(stage), alpha=alpha)
+    cands = candidates(stage)
+    # A nuisance beyond any set-up error is refused, never an explanation; a refusal an
+    # effect added later explains is dropped — what is not excluded is carried in u below
+    # (align/fusion/plausible.py).
+    loop = run_loop(stage, cands, alpha=alpha, admissible=admissible, retest_refused=True)
     fit = loop.after
     sol: Solution = fit.payload
     inflation = 1.0
@@ -433,6 +438,12 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
             widen[E_NAMES.index(n)] = d**2
         cov = cov + np.diag(widen)
         E_u = e_matrix(np.sqrt(np.diag(cov)))
+    # The candidates the data cannot exclude: their shift of E joins its covariance (Type B).
+    carried = not_excluded(stage, cands, loop, cov)
+    for c in carried:
+        cov = cov + np.outer(c.shift, c.shift)
+    if carried:
+        E_u = e_matrix(np.sqrt(np.diag(cov)))
     layout = list(sol.layout)
 
     def predict_all(p: np.ndarray) -> list[np.ndarray]:
@@ -443,5 +454,7 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
                        inflation).budget()
     if named is not None:
         budget = with_disagreement(budget, named)
+    for c in carried:
+        budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
                         tuple(rows), loop, inflation, nuis, sources, budget, named)

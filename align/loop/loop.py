@@ -120,8 +120,8 @@ def _may_pass(current: StageFit, chi2_pred: float, term: Term, searched: int, al
 
 def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
              min_delta_bic: float = 6.0, max_effects: int = 4,
-             admissible: Callable[[StageFit, StageFit, Term], str | None] | None = None
-             ) -> LoopReport:
+             admissible: Callable[[StageFit, StageFit, Term], str | None] | None = None,
+             retest_refused: bool = False) -> LoopReport:
     """Run the residual loop over ``stage`` with ``candidates``.
 
     An effect is added when its F-test p-value, corrected for the look-elsewhere search of
@@ -149,6 +149,11 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     admissible : callable, optional
         ``admissible(current, trial, term) -> str | None``: a reason to refuse a
         significant effect (a physical prior), else None.
+    retest_refused : bool
+        A refused candidate that a later round (after an admissible effect was added) finds
+        no longer significant is dropped from ``refused``: the effect added explains what it
+        absorbed. For a stage that carries the candidates it did not add in u (the fusion:
+        :mod:`align.fusion.plausible`); elsewhere a refusal stands.
 
     Returns
     -------
@@ -183,6 +188,8 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                     log.debug("loop   candidate %s: screened out (linearised chi2 %.4g from "
                               "%.4g)", cand.name, predicted[cand.name], current.chi2)
                     tested += 1
+                    if retest_refused:  # explained by the effects added since
+                        refused.pop(cand.name, None)
                     continue
             trial, term = _try(stage, cand, current, terms, skipped)
             if trial is None:
@@ -204,6 +211,8 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
                       "Holm over %d candidates), dBIC %+.1f (needs p < %g and dBIC < %+.1f)",
                       cand.name, p_adj, term.trials, tested, d_bic, alpha, -min_delta_bic)
             if p_term >= alpha or d_bic >= -min_delta_bic:
+                if retest_refused:  # explained by the effects added since: no structure left
+                    refused.pop(cand.name, None)
                 continue
             # A significant effect outside its physical prior is refused and reported as
             # structure the model lacks: a test on the residual, at the level of each

@@ -98,6 +98,29 @@ def test_undeclared_camera_roll_is_found_through_redundant_sources(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("seed", range(12, 20))
+def test_an_undeclared_30_arcsec_roll_is_never_a_silent_wrong_answer(tmp_path, seed):
+    """Camera B rolled by an undeclared 30″ without reversal views: the loop names the roll,
+    or E's u carries it (a candidate the data cannot exclude: Type B), or the result is not
+    ok — never an ok E off by more than its u says. Before align/fusion/plausible.py seed 12
+    named an 8° reference-face offset (E z -5.8) and seed 13 nothing (z -9.4), both ok."""
+    res, truth = _session(tmp_path, "roll30", seed=seed, undeclared={"camera_roll_B": 30.0},
+                          **NO_REVERSAL)
+    f = res.fusion
+    z = _z(f.E, f.E_u, truth)
+    carried = {c.source for _, cs in f.budget.angles.values() for c in cs
+               if "not excluded" in c.source}
+    print(f"seed {seed}: ok {res.ok}, effects {[e.name for e in f.loop.effects]}, "
+          f"carried {sorted(carried)}, z {np.round(z, 2)}")
+    # No effect beyond any set-up error is an explanation.
+    assert all(abs(e.estimate) < np.deg2rad(1.0) for e in f.loop.effects), f.loop.effects
+    assert not res.ok or np.all(np.abs(z) < TOL), z
+    # The roll is named or carried, never silently dropped.
+    names = [e.name for e in f.loop.effects]
+    assert "camera_roll[B]" in names or any(c.startswith("camera_roll[B]") for c in carried)
+
+
+@pytest.mark.slow
 def test_declared_camera_roll_is_applied_not_searched(tmp_path):
     res, truth = _session(tmp_path, "roll_declared", seed=12, declared={"camera_roll_B": 40.0})
     f = res.fusion

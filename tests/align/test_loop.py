@@ -178,3 +178,20 @@ def test_a_round_adds_a_false_effect_at_alpha_whatever_the_number_of_candidates(
                                max_effects=1).effects)
     assert binom.sf(added - 1, 150, 0.05) > 1e-3, added  # not more than alpha allows
     assert added >= 1  # the test can see an effect at all
+
+
+def test_a_refusal_an_added_effect_explains_is_dropped_only_when_asked():
+    """A near-duplicate of the true effect (|x| for x²) is significant in the first round and
+    refused; once the true effect is added it no longer is. With ``retest_refused`` (the
+    fusion, which carries what it did not add in u) the refusal is dropped: no structure is
+    left; by default it stands."""
+    absx = Candidate("abs", "1", "a kink at x=0", lambda f: Term(
+        "abs", "1", np.abs(f.regressors["x"])[:, None]))
+    refuse = lambda cur, trial, term: "outside the prior" if term.name == "abs" else None  # noqa: E731
+    data = _data(1, quad=0.02)
+    kept = run_loop(PolyStage(*data), [absx, QUAD], admissible=refuse)
+    assert [e.name for e in kept.effects] == ["quadratic"]
+    assert [r.name for r in kept.refused] == ["abs"] and kept.unexplained_structure
+    dropped = run_loop(PolyStage(*data), [absx, QUAD], admissible=refuse, retest_refused=True)
+    assert [e.name for e in dropped.effects] == ["quadratic"]
+    assert not dropped.refused and not dropped.unexplained_structure

@@ -1,0 +1,122 @@
+"""What the fusion's loop may take as an explanation, and what E's u must carry of the rest.
+
+Two rules keep the loop from a silent wrong answer:
+
+* **A nuisance beyond any set-up error is no explanation.** The loop's nuisances (a camera's
+  roll, the reference face's azimuth offset, the table axis's tilt, the platform's levelling)
+  are small set-up errors; a larger one is declared in session.toml (``roll_deg``,
+  ``reference_offset_arcsec``, ``table_tilt_arcsec``). A fit that takes one beyond
+  :data:`UNDECLARED_LIMIT_DEG` is a near-degenerate candidate absorbing what another effect
+  left (a 30″ camera roll read as an 8° reference-face offset, 28600 ± 7171″, E off by 5.8 u):
+  :func:`admissible` refuses it, the loop reports it (``refused``) and the result is not ok.
+* **An effect the data cannot exclude is carried in u.** A candidate the loop tested but did
+  not add whose estimate is not near zero (beyond :data:`NOT_EXCLUDED_Z` of its u — within the
+  look-elsewhere threshold, so not named) and whose freeing would move E by more than
+  :data:`SHIFT_FRACTION` of u is carried in E's covariance as a Type B term ΔE ΔEᵀ, ΔE the
+  shift of E when it is freed. Freeing an effect of estimate b ± u_b adds k k' u_b² to cov(E)
+  (k = dE/db) and moves E by k b; E[(k b)²] = k² (u_b² + b_true²): in expectation the Type B
+  term is what freeing the effect would cost, and it covers the effect if it is real (a 30″
+  camera roll not named at p 0.006 left E_zY 9.4 u off; carried, 1.9 u).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from align.fusion.observations import E_NAMES
+from align.loop import Candidate, LoopReport, Stage, StageFit, Term
+from axisbase.errors import NotApplicable
+from axisbase.units import ARCSEC
+
+UNDECLARED_LIMIT_DEG = 1.0
+"""The largest undeclared nuisance the loop may name [deg]. Its nuisances are set-up errors of
+arc-seconds to arc-minutes (a camera mounted square to its fixture, a reference face machined
+on it, a table levelled); a degree is a set-up that was never squared and is declared
+(session.toml), and the marks' nominal check allows 10° for declared rolls only."""
+
+NOT_EXCLUDED_Z = 2.0
+"""A candidate not added whose estimate lies beyond this many u from zero is one the data
+cannot exclude (the data favour it at ~95 %, below the loop's look-elsewhere threshold)."""
+
+SHIFT_FRACTION = 0.5
+"""...and whose freeing moves some angle of E by more than this fraction of its u is carried in
+u (a smaller shift adds < 12 % to u: negligible)."""
+
+
+def admissible(current: StageFit, trial: StageFit, term: Term) -> str | None:
+    """The loop's physical prior: the reason to refuse ``term`` when its fitted size is beyond
+    :data:`UNDECLARED_LIMIT_DEG`, else None."""
+    est, u = trial.effects.get(term.name, (0.0, 0.0))
+    if not abs(est) > np.deg2rad(UNDECLARED_LIMIT_DEG):
+        return None
+    return (f"fitted {est / ARCSEC:+.0f} ± {u / ARCSEC:.0f}″, beyond any undeclared set-up "
+            f"error ({UNDECLARED_LIMIT_DEG:g}°): a near-degenerate candidate absorbing another "
+            "effect, not this data's (declare a known large offset in session.toml; add "
+            "reversal views or X/Y-up poses to separate the effects)")
+
+
+@dataclass(frozen=True)
+class NotExcluded:
+    """A candidate the loop did not add but the data cannot exclude.
+
+    Attributes
+    ----------
+    name : str
+        The candidate; unit —.
+    estimate, u : float
+        Its fitted value and standard uncertainty when freed [rad].
+    shift : numpy.ndarray
+        The shift of the six angles (``E_NAMES``) when it is freed [rad].
+    """
+
+    name: str
+    estimate: float
+    u: float
+    shift: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "estimate": self.estimate, "u": self.u,
+                "shift": self.shift.tolist()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> NotExcluded:
+        return cls(str(d["name"]), float(d["estimate"]), float(d["u"]),
+                   np.array(d["shift"], float))
+
+    @property
+    def label(self) -> str:
+        """How the budget names its Type B share."""
+        return (f"{self.name} not excluded ({self.estimate / ARCSEC:+.1f} ± "
+                f"{self.u / ARCSEC:.1f}″; declare it, or add reversal views)")
+
+
+def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport,
+                 cov: np.ndarray) -> list[NotExcluded]:
+    """The candidates of ``loop`` not added whose refit (with the loop's terms) puts them
+    beyond :data:`NOT_EXCLUDED_Z` u and within :data:`UNDECLARED_LIMIT_DEG`, and moves an
+    angle of E by more than :data:`SHIFT_FRACTION` of its u (``cov``: E's 6×6 [rad²])."""
+    cur = loop.after
+    added = {t.name for t in loop.terms}
+    u_e = np.sqrt(np.diag(cov))
+    e0 = np.array([cur.quantities[n][0] for n in E_NAMES])
+    out = []
+    for cand in candidates:
+        if cand.name in added:
+            continue
+        try:
+            term = cand.build(cur)
+            if term is None:
+                continue
+            trial = stage.fit([*loop.terms, term])
+        except (NotApplicable, np.linalg.LinAlgError):
+            continue  # not separable from E by these data: the loop passed it by too
+        est, u = trial.effects.get(term.name, (0.0, float("inf")))
+        if not (abs(est) > NOT_EXCLUDED_Z * u and abs(est) <= np.deg2rad(UNDECLARED_LIMIT_DEG)):
+            continue
+        shift = np.array([trial.quantities[n][0] for n in E_NAMES]) - e0
+        if np.any(np.abs(shift) > SHIFT_FRACTION * u_e):
+            out.append(NotExcluded(cand.name, float(est), float(u), shift))
+    return out
