@@ -45,6 +45,9 @@ SHIFT_FRACTION = 0.5
 """...and whose freeing moves some angle of E by more than this fraction of its u is carried in
 u (a smaller shift adds < 12 % to u: negligible)."""
 
+NOT_EXCLUDED_TAG = " not excluded ("
+"""What names a carried candidate's share in E's budget (``<candidate> not excluded (…)``)."""
+
 
 def admissible(current: StageFit, trial: StageFit, term: Term) -> str | None:
     """The loop's physical prior: the reason to refuse ``term`` when its fitted size is beyond
@@ -89,7 +92,7 @@ class NotExcluded:
     @property
     def label(self) -> str:
         """How the budget names its Type B share."""
-        return (f"{self.name} not excluded ({self.estimate / ARCSEC:+.1f} ± "
+        return (f"{self.name}{NOT_EXCLUDED_TAG}{self.estimate / ARCSEC:+.1f} ± "
                 f"{self.u / ARCSEC:.1f}″; declare it, or add reversal views)")
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from align.fusion import E_INDEX, E_NAMES, REF, TILT
+from align.fusion import E_INDEX, E_NAMES, NOT_EXCLUDED_TAG, REF, TILT
 from align.session import load_session, run_session
 from align.warnings import session_warnings
 from synth.session import SessionSpec, write_session
@@ -109,7 +109,7 @@ def test_an_undeclared_30_arcsec_roll_is_never_a_silent_wrong_answer(tmp_path, s
     f = res.fusion
     z = _z(f.E, f.E_u, truth)
     carried = {c.source for _, cs in f.budget.angles.values() for c in cs
-               if "not excluded" in c.source}
+               if NOT_EXCLUDED_TAG in c.source}
     print(f"seed {seed}: ok {res.ok}, effects {[e.name for e in f.loop.effects]}, "
           f"carried {sorted(carried)}, z {np.round(z, 2)}")
     # No effect beyond any set-up error is an explanation.

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from align.cli import main
-from align.fusion import E_INDEX, E_NAMES
+from align.fusion import E_INDEX, E_NAMES, NOT_EXCLUDED_TAG
 from align.fusion.budget import Group, Linearisation
 from align.plan import NOISE_K, image_noise, options, plan, plan_from_result, prediction_noise
 from align.session import load_session, run_session
@@ -24,7 +24,12 @@ def _run(folder, spec):
 
 
 def _u(res):
-    return np.array([res.fusion.E_u[i, j] for i, j in E_INDEX])
+    """E's u less the candidates the fusion carries as not excluded (align/fusion/plausible.py:
+    a Type B term drawn from each run's own estimate, outside the plan's algebra)."""
+    b = res.fusion.budget.angles
+    return np.array([np.sqrt(b[n][0] ** 2 - sum(c.u2 for c in b[n][1]
+                                                if NOT_EXCLUDED_TAG in c.source))
+                     for n in E_NAMES])
 
 
 def test_plan_ranks_by_gain_per_minute_and_targets_the_critical_angle(tmp_path, capsys):
