@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.fusion.observations import E_NAMES
 from align.loop import Candidate, LoopReport, Stage, StageFit, Term
@@ -39,7 +40,10 @@ on it, a table levelled); a degree is a set-up that was never squared and is dec
 
 NOT_EXCLUDED_Z = 2.0
 """A candidate not added whose estimate lies beyond this many u from zero is one the data
-cannot exclude (the data favour it at ~95 %, below the loop's look-elsewhere threshold)."""
+cannot exclude (the data favour it at ~95 %, below the loop's look-elsewhere threshold). For an
+effect of m components (a tilt's x, y) the same tail: freeing it lowers χ² by more than the
+χ²(m) quantile at P(|N(0, 1)| > NOT_EXCLUDED_Z) = 4.6 % (its length beyond 2 u would be
+13.5 % for m = 2)."""
 
 SHIFT_FRACTION = 0.5
 """...and whose freeing moves some angle of E by more than this fraction of its u is carried in
@@ -99,8 +103,9 @@ class NotExcluded:
 def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport,
                  cov: np.ndarray) -> list[NotExcluded]:
     """The candidates of ``loop`` not added whose refit (with the loop's terms) puts them
-    beyond :data:`NOT_EXCLUDED_Z` u and within :data:`UNDECLARED_LIMIT_DEG`, and moves an
-    angle of E by more than :data:`SHIFT_FRACTION` of its u (``cov``: E's 6×6 [rad²])."""
+    beyond :data:`NOT_EXCLUDED_Z` u (in χ² for several components) and within
+    :data:`UNDECLARED_LIMIT_DEG`, and moves an angle of E by more than :data:`SHIFT_FRACTION`
+    of its u (``cov``: E's 6×6 [rad²])."""
     cur = loop.after
     added = {t.name for t in loop.terms}
     u_e = np.sqrt(np.diag(cov))
@@ -117,7 +122,9 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
         except (NotApplicable, np.linalg.LinAlgError):
             continue  # not separable from E by these data: the loop passed it by too
         est, u = trial.effects.get(term.name, (0.0, float("inf")))
-        if not (abs(est) > NOT_EXCLUDED_Z * u and abs(est) <= np.deg2rad(UNDECLARED_LIMIT_DEG)):
+        drop = max(cur.chi2 - trial.chi2, 0.0)  # (est/u)² for one component, linearised
+        if not (special.chdtrc(term.width, drop) < 2 * special.ndtr(-NOT_EXCLUDED_Z)
+                and abs(est) <= np.deg2rad(UNDECLARED_LIMIT_DEG)):
             continue
         shift = np.array([trial.quantities[n][0] for n in E_NAMES]) - e0
         if np.any(np.abs(shift) > SHIFT_FRACTION * u_e):
