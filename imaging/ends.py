@@ -186,20 +186,14 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         vals, e, t = vals[near], e[near], t[near]
     ok = unclipped(vals, pf.full_scale_dn)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
-    # 1-px bins counted from the middle, so the same from either end: the same pixels rotated
-    # by 180 deg fall in the same bins (counted from t0, an end the walk moved came out
-    # 0.1 px elsewhere, the centres' stretch with it, and the angle by 0.16 u).
-    mid = 0.5 * (t0 + t1)
-    half_n = int(np.ceil(0.5 * (t1 - t0) + reach_px))
-    clip_bin = (np.round(t[~ok] - mid).astype(int) + half_n if ok is not None
-                else np.empty(0, int))
+    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int) if ok is not None else np.empty(0, int)
     if ok is not None:
         vals, e, t = vals[ok], e[ok], t[ok]
     vals = vals.astype(float)
     if vals.size == 0:
         return same
-    j = np.round(t - mid).astype(int) + half_n
-    nb = 2 * half_n + 1
+    j = np.round(t - t0 + reach_px).astype(int)
+    nb = int(np.ceil(t1 - t0 + 2 * reach_px)) + 1
     j = np.clip(j, 0, nb - 1)
     # The table groove_extent and the centres built for this groove (the same arguments):
     # a cache hit, not ~1.3 ms of erf per mark.
@@ -214,7 +208,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
-    tb = mid + (np.arange(nb) - half_n)
+    tb = t0 - reach_px + np.arange(nb)
     rms = _bin_rms(bc, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
@@ -260,11 +254,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                 k += step
             near = [k + step * i for i in range(-touch, touch + 1) if 0 <= k + step * i < nb]
             hit = [i for i in near if disturbed[i]]
-            # One disturbed 1-px bin is the end's own fall of depth misfit within the bin (a
-            # sharp end, blur under 1 px, on a lens-bowed path: its residual 3.3 x the body's
-            # on a clean corner mark), not an obstruction: an opaque particle's blurred
-            # edge alone spans more than one bin.
-            if len(hit) < 2:
+            if not hit:
                 return k, k
             # The obstruction's run, inward and outward from what touches the end.
             inner = run_from(hit[0], -step)
@@ -346,9 +336,8 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
 
 
 RUNS_ON_PX = 10.0
-"""How far past the extent's look the groove must be seen for its extent to be looked for
-again from the longer stretch [px] (a few blur widths: more than where the half-depth point
-may fall)."""
+"""How far past the extent's look the groove must be seen for the centres to be sampled
+again over it [px] (a few blur widths: more than where the half-depth point may fall)."""
 
 
 @dataclass(frozen=True)
@@ -388,41 +377,33 @@ def checked_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                                                    path=groove_path(cen, pf))
 
 
-def centres_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float],
-                    opened: Sequence[bool], cen: Centres,
-                    others: Sequence[tuple[int, MarkCandidate]] = ()
-                    ) -> tuple[tuple[float, float] | None, EndsCheck, tuple[bool, bool]]:
-    """The stretch to sample the centres on: the whole groove, out to its ends.
+def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], opened: Sequence[bool],
+             cen: Centres, others: Sequence[tuple[int, MarkCandidate]] = ()
+             ) -> tuple[tuple[float, float] | None, EndsCheck | None]:
+    """The stretch to sample the centres on when the groove runs on past the look of
+    :func:`imaging.profile.extent_look` (still deep at the look's limit), or None.
 
-    The search's stretch stops short of each end (its ridge fades a filter width before it,
-    ~24 px at 640 x 480; or breaks at a speck beside the line), and the centres sampled on it
-    left the angle 1.5x its bound: a 300 px groove measured over 248 px, and with a lens's
-    k1 free the angle is read against the bow from the ends' centres most. The groove's ends
-    are followed as the end check does (:func:`groove_ends` from the half-depth extent
-    ``ext`` of :func:`imaging.profile.extent_look`: past specks the groove is seen beyond,
-    never past bare surface), and the stretch runs to each end the groove is seen to reach
-    (its half-depth point: a segment there sees half the groove's depth and gets its own,
-    larger u from its own pixels; the fade along the line is even across it, and moves no
-    centre across). An end under an obstruction stops short of what is seen of it, by the
-    blurred end (half-width + 2 blur widths: no centre on the obstruction's fringe), and so
-    does an end at another mark found on the same line (``others``: (index, candidate); two
-    pieces of one edge stay two marks, not one measured twice). A search's stretch that ran
-    past the groove's end (a faint groove's ridge carried on by clutter: 140 px of bare
-    surface sampled as centres of u 1-10 px) is cut back to it.
-
-    Returns the stretch (None: the search's, unchanged), the ends checked
-    (:class:`EndsCheck`, keyed to ``pf``, ``ext`` and ``cen``) and, per end, whether the
-    groove was seen on well past the look of the extent (``opened`` there, and more than
-    :data:`RUNS_ON_PX` further): the extent is then looked for again from the new stretch.
-    """
+    The search's stretch ends where its ridge broke (a speck beside the line, another on
+    it); the groove's half-depth extent is looked for only
+    :data:`imaging.profile.EXTENT_REACH_PX` beyond it. Its ends are then followed as the
+    end check does (:func:`imaging.ends.groove_ends`: past specks the groove is seen
+    beyond, never past bare surface), and the stretch is what they enclose, trimmed by the
+    blurred end (half-width + 2 blur widths), up to the nearest end of another mark found
+    on the same line (``others``: (index, candidate); two pieces of one edge stay two marks,
+    not one measured twice). Also the ends checked (:class:`EndsCheck`; None when no end
+    was open and none were)."""
+    if not any(opened):
+        return None, None
     e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
     check = EndsCheck(weakref.ref(image), pf, (float(ext[0]), float(ext[1])), cen, e)
-    on = (bool(opened[0]) and e.start_px < ext[0] - RUNS_ON_PX,
-          bool(opened[1]) and e.end_px > ext[1] + RUNS_ON_PX)
+    # Only a groove seen on well past the look (a clean long mark's end can lie just at it).
+    on = (opened[0] and e.start_px < ext[0] - RUNS_ON_PX,
+          opened[1] and e.end_px > ext[1] + RUNS_ON_PX)
+    if not any(on):
+        return None, check
     trim = max(4.0, pf.width_px / 2 + 2 * pf.blur_px)
-    hid0, hid1 = e.hidden
-    t0 = e.start_px + trim if hid0 else e.start_px
-    t1 = e.end_px - trim if hid1 else e.end_px
+    t0 = e.start_px + trim if on[0] else pf.t_start_px
+    t1 = e.end_px - trim if on[1] else pf.t_end_px
     u, n = line_frame(pf.angle_rad)
     for _, o in others:
         uo, no = line_frame(o.angle_rad)
@@ -434,6 +415,7 @@ def centres_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float],
             t1 = min(t1, lo - trim)
         elif hi <= pf.t_start_px:
             t0 = max(t0, hi + trim)
+    t0, t1 = min(t0, pf.t_start_px), max(t1, pf.t_end_px)
     if t0 == pf.t_start_px and t1 == pf.t_end_px:
-        return None, check, on
-    return (t0, t1), check, on
+        return None, check
+    return (t0, t1), check
