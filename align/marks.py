@@ -308,8 +308,10 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
     if claimed is not None and not np.array_equal(claimed, lens.lam):
         # The offset through the claimed lens: a parameter fitted free moves the line by its
         # sagitta, which the offset's u does not carry.
-        r = replace(r, offset_px=r.offset_px + undistorted_mark(m, claimed).line.offset_px
-                    - mu.line.offset_px)
+        # (Fits either side of the +-90 deg wrap negate the offset: scene 94, 439 px off.)
+        c = undistorted_mark(m, claimed).line
+        sgn = 1.0 if abs(c.angle_rad - mu.line.angle_rad) <= np.pi / 2 else -1.0
+        r = replace(r, offset_px=r.offset_px + sgn * c.offset_px - mu.line.offset_px)
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,
