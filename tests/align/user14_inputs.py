@@ -256,6 +256,7 @@ class Session:
     level_arcsec: tuple = (18.0, -12.0)  # the table axis off vertical, undeclared
     level_gimbal: bool = False           # the base's tilt also under the gimbal (X/Y up) poses
     gonio_scale_ppm: float = 80.0        # ring-laser scale error
+    gonio_ref_offset_arcsec: float = 0.0  # the reference face's own azimuth offset
     bias_drift_ug: float = 60.0          # bias drift over the session (temperature), no temp column
     bent_px: float = 0.0                 # sagitta of a bent mark (x_A)
     defocus_blur: float = 0.0            # blur [px] of one image (z_B) out of focus; 0: in focus
@@ -267,6 +268,7 @@ class Session:
     tumble_samples: int = 100
     sample_noise_ug: float = 80.0
     tolerance_arcsec: float | None = None
+    tolerance_angles: dict = field(default_factory=dict)  # per angle: T [″] (±T)
     with_gonio: bool = True
     with_static: bool = True
     with_tumble: bool = True
@@ -353,7 +355,8 @@ def write_session(folder, spec: Session):
 
     if spec.with_gonio:
         rows = gonio_rows(spec.E_rad, rng, revolutions=spec.gonio_revolutions,
-                          latitude_deg=lat, scale_error_ppm=spec.gonio_scale_ppm)
+                          latitude_deg=lat, scale_error_ppm=spec.gonio_scale_ppm,
+                          ref_offset_arcsec=spec.gonio_ref_offset_arcsec)
         lines = ["count,counter,ref,t"] + [
             f"{c},{k},{r},{t:.6f}" for c, k, r, t in
             zip(rows["count"], rows["counter"], rows["ref"], rows["t"])]
@@ -393,7 +396,8 @@ def write_session(folder, spec: Session):
                 toml += ["[[images]]", f'file = "{name}"', f'housing = "{housing}"',
                          f'view = "{v}"', f'nominal = "{nominal}"', ""]
     if spec.tolerance_arcsec is not None:
-        toml += ["[tolerance]", f"arcsec = {spec.tolerance_arcsec}", 'decision = "guarded"', ""]
+        toml += ["[tolerance]", f"arcsec = {spec.tolerance_arcsec}", 'decision = "guarded"']
+        toml += [f"{n} = {t}" for n, t in spec.tolerance_angles.items()] + [""]
     open(os.path.join(folder, "session.toml"), "w").write("\n".join(toml) + "\n")
     return spec.truth_arcsec()
 
