@@ -230,3 +230,17 @@ def test_reference_face_offset_without_azimuth_datum_is_not_silent(tmp_path, see
     if res["ok"]:
         bad = {n: round(t[3], 1) for n, t in table.items() if abs(t[3]) > Z_MAX}
         assert not bad, f"ok (exit {p.returncode}) with E beyond {Z_MAX} u: {bad}"
+
+
+@needs_real
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "wrong PASS: reference face 30\" off, no azimuth datum (seed 1), E_xY toleranced "
+    "+-100\" (others +-150\"): PASS with p_conform 1.0, E_xY = +78.12 +- 0.04\", while the "
+    "true E_xY is +108.11\", 8\" outside the tolerance"))
+def test_pass_is_right_with_a_reference_face_offset_and_no_azimuth_datum(tmp_path):
+    spec = camera_session(1, gonio_ref_offset_arcsec=30.0, tolerance_arcsec=150.0,
+                          tolerance_angles={"E_xY": 100.0})
+    p, res, truth = run(tmp_path / "s", spec)
+    assert abs(truth["E_xY"]) > 100.0  # the unit truly does not conform
+    assert res["disposition"]["verdict"] != "PASS", res["disposition"]["reason"]

@@ -359,7 +359,7 @@ def write_session(folder, spec: Session):
                           ref_offset_arcsec=spec.gonio_ref_offset_arcsec)
         lines = ["count,counter,ref,t"] + [
             f"{c},{k},{r},{t:.6f}" for c, k, r, t in
-            zip(rows["count"], rows["counter"], rows["ref"], rows["t"])]
+            zip(rows["count"], rows["counter"], rows["ref"], rows["t"], strict=True)]
         open(os.path.join(folder, "gonio.csv"), "w").write("\n".join(lines) + "\n")
         toml += ["[goniometer]", 'log = "gonio.csv"', 'faces = ["ref", "y", "x", "z"]',
                  "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"', ""]
