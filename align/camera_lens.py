@@ -197,10 +197,10 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     else:
         terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R)
                    for ln in lines]
-        notes.append(f"{who}: its model holds no covariance of its parameters (written before "
-                     "camera format 4): their u's are added as if independent, which can misstate "
-                     "an angle's u either way (0.3-3x on the real chessboard lens); re-run "
-                     "`align camera` for the joint covariance")
+        notes.append(f"{who}: its model holds no covariance of its parameters (a file "
+                     "written elsewhere, or before camera format 4): their u's are added as if "
+                     "independent, which can misstate an angle's u either way (0.3-3x on the real "
+                     "chessboard lens); re-run `align camera` for the joint covariance")
     p, dlam, designs = check_camera(lines, zero, lam_chk, R, ranges, alpha)
     # The model's principal point as the check's lever (align/lens_fallback.py).
     designs = model_lever(designs, lines, camera, shape)
