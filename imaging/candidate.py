@@ -232,8 +232,10 @@ def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
         with np.errstate(divide="ignore"):
             may = 2 * half / sin >= (whole[1] - whole[0] - 2 * half) - 1e-6
         may &= _may_cover(c, angle, offset, half)
-        side = [o for o, m in zip(cands, may, strict=True)
-                if m and o is not c and o.dark == c.dark and o.fused is None
+        # (those that may, in order: building.jpg's ~400 candidates made ~160k Python
+        # iterations over the others, ~0.1 s CPU, to reach the few that may)
+        side = [o for o in (cands[j] for j in np.flatnonzero(may))
+                if o is not c and o.dark == c.dark and o.fused is None
                 and _covers(c, o, max(6.0, 2 * o.thickness_px), whole)]
         if not _straddled(c, side):
             out.append(c)

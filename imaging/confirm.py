@@ -8,7 +8,7 @@ many alike; a mark is one deep groove).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -161,7 +161,9 @@ def _full_res(image: np.ndarray, c: MarkCandidate, noise: float, f: int, top: fl
 
 
 def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 60.0,
-                 alpha: float = 1e-3, lit: bool = False) -> tuple[float, float]:
+                 alpha: float = 1e-3, lit: bool = False,
+                 profiles: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[float, float]:
     """How far a candidate stands out of the background's own relief across it, averaged
     along it, and how far the relief alone could reach by chance: (contrast / spread, limit).
 
@@ -186,10 +188,13 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     puts a step beside the groove in every profile: reliefs the groove does not have. (A
     mark under an edge along it is measured on the light the edge's model divides out:
     :func:`shadow_free`.)
+
+    ``profiles``: :func:`distinct_profiles` of the same arguments when the caller has them
+    (the plain test and the ``lit`` one read the same profiles).
     """
     half = max(1.0, c.thickness_px / 2 + 1)
     n_along = int(np.clip(c.length_px, 16, 2000))
-    vals, e, _ = across(image, c, int(np.ceil(reach + half)), n_along, top)
+    vals, e = distinct_profiles(image, c, top, reach) if profiles is None else profiles
     if lit:
         change, rho, _ = light_steps(vals, e, half)
         if change < LIGHT_STEP or rho < MONOTONE:
@@ -215,6 +220,16 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     m = 2 * np.hypot(*image.shape)
     limit = float(-special.ndtri(alpha / (2 * m)) * (1 + 3 * 1.16 / np.sqrt(n_eff)))
     return float(contrast / spread), limit
+
+
+def distinct_profiles(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 60.0
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The profiles across candidate ``c`` that :func:`distinctness` judges: (values, e [px])
+    of :func:`across`, one per px of its length (16-2000), ``reach`` px beyond its groove."""
+    half = max(1.0, c.thickness_px / 2 + 1)
+    vals, e, _ = across(image, c, int(np.ceil(reach + half)), int(np.clip(c.length_px, 16, 2000)),
+                        top)
+    return vals, e
 
 
 LIGHT_STEP = 0.08
@@ -299,16 +314,31 @@ def _lit_edge_jacobian(q: np.ndarray, t: np.ndarray, e: np.ndarray) -> np.ndarra
     + q[6] e / 100) times the edge's factor (:func:`_edge_model` of q[:4]), at (t, e) [px].
     By hand: finite differences cost 7 more evaluations of the model per step (a real
     photo's edge: ~0.3 s CPU over 10 fits of ~17k pixels)."""
+    return _lit_edge(q, t, e)[1]()
+
+
+def _lit_edge(q: np.ndarray, t: np.ndarray, e: np.ndarray
+              ) -> tuple[np.ndarray, Callable[[], np.ndarray]]:
+    """:func:`shadow_free`'s model of the light at ``q`` (the plane times :func:`_edge_model`,
+    the same bits) and a function that gives its Jacobian (:func:`_lit_edge_jacobian`) from
+    the same intermediate arrays. scipy's least_squares asks for the Jacobian at the point
+    whose residual it has just taken: each accepted step's edge, Gaussian argument, normal
+    CDF and plane were computed twice. (scipy's own work per step, not this model, is most
+    of a fit's CPU on these ~2-17k-pixel problems.)"""
     e0, k, logw, d = q[:4]
     w = np.exp(logw)
     z = (e - e0 - k * t) / w
-    phi = np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi)
     plane = q[4] + q[5] * t / 100 + q[6] * e / 100
     cdf = special.ndtr(z)
     edge = 1.0 - d * cdf
-    g = plane * d * phi / w  # d/d(e0); the edge lies at e0 + k t
-    return np.column_stack([g, g * t, g * w * z, -plane * cdf,
-                            edge, edge * t / 100, edge * e / 100])
+
+    def jac() -> np.ndarray:
+        phi = np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi)
+        g = plane * d * phi / w  # d/d(e0); the edge lies at e0 + k t
+        return np.column_stack([g, g * t, g * w * z, -plane * cdf,
+                                edge, edge * t / 100, edge * e / 100])
+
+    return plane * edge, jac
 
 
 def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 40.0
@@ -335,12 +365,17 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
     y, tt, ee = vals[keep], tt[keep], ee[keep]
     scale = float(np.median(y))
 
+    y_rel = y / scale
+    last: dict[bytes, Callable[[], np.ndarray]] = {}
+
     def resid(q: np.ndarray) -> np.ndarray:
-        plane = q[4] + q[5] * tt / 100 + q[6] * ee / 100
-        return plane * _edge_model(q[:4], tt, ee) - y / scale
+        last.clear()  # (the Jacobian is asked at the last residual's point, or made anew)
+        lit, last[q.tobytes()] = _lit_edge(q, tt, ee)
+        return lit - y_rel
 
     def jac(q: np.ndarray) -> np.ndarray:
-        return _lit_edge_jacobian(q, tt, ee)
+        made = last.get(q.tobytes())
+        return made() if made is not None else _lit_edge_jacobian(q, tt, ee)
 
     lo = [-reach, -0.5, np.log(0.3), -0.95, 0, -1, -1]
     hi = [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]
@@ -422,11 +457,13 @@ def confirm_candidates(image: np.ndarray, cands: list[MarkCandidate], noise_full
             continue
         # A machining lay running along the candidate: each streak is long, and the ridge
         # filter integrates it into a strong response, but beside it lie many like it.
-        ratio, limit = distinctness(image, c, top, reach)
+        # (the profiles read once for both tests: ~1/4 of a busy photo's profile reads)
+        profiles = distinct_profiles(image, c, top, reach)
+        ratio, limit = distinctness(image, c, top, reach, profiles=profiles)
         lit = ratio < limit
         if lit:
             # A shadow's edge crossing it: judged again on the light-normalised profiles.
-            ratio, limit = distinctness(image, c, top, reach, lit=True)
+            ratio, limit = distinctness(image, c, top, reach, lit=True, profiles=profiles)
             if ratio < limit:
                 continue
         # (once re-centred, a line lies on a groove: two grooves no longer straddle it)

@@ -70,12 +70,14 @@ def _components(mask: np.ndarray, min_len: float) -> list[np.ndarray]:
 
 
 def _pca_line(pts: np.ndarray, centre: np.ndarray) -> tuple[float, float, np.ndarray, float]:
-    m = pts.mean(axis=0)
+    # The means as np.mean takes them (the sum's reduction, then a true division by the
+    # count) without its Python wrapper (~10 us a call of ~40): the same bits.
+    m = np.add.reduce(pts, axis=0) / pts.shape[0]
     # np.cov's own steps (centre again, X X^T, times 1/(n-1)) without its argument handling
     # (~40 % of this function's time; it runs ~1000-3000 times on a busy photo): the same
     # matrix to the bit.
     X = np.array((pts - m).T, dtype=np.float64)
-    X -= X.mean(axis=1)[:, None]
+    X -= (np.add.reduce(X, axis=1) / X.shape[1])[:, None]
     cov = np.dot(X, X.T.conj())
     cov *= np.true_divide(1, X.shape[1] - 1)
     w, v = np.linalg.eigh(cov)
