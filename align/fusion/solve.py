@@ -439,7 +439,7 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         cov = cov + np.diag(widen)
         E_u = e_matrix(np.sqrt(np.diag(cov)))
     # The candidates the data cannot exclude: their shift of E joins its covariance (Type B).
-    carried = not_excluded(stage, cands, loop, cov)
+    carried = not_excluded(stage, cands, loop, cov, alpha)
     for c in carried:
         cov = cov + np.outer(c.shift, c.shift)
     if carried:
