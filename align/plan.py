@@ -37,8 +37,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from align.errors import InputError
-from align.fusion.budget import Group, Linearisation
-from align.fusion.observations import E_NAMES
+from align.fusion.budget import Group, Linearisation, inverse
+from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
+from align.fusion.plausible import is_carried
 from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
 
@@ -68,6 +69,78 @@ says no measurement improves the angle by more than the prediction's noise."""
 CAMERA_ROLL_U_ARCSEC = 2.0
 """Standard uncertainty [″] of a camera roll after its calibration (a plumb-line image: the
 roll to ~1–3″)."""
+RESOLVES = {
+    ROLL: "a reversed view of that camera (the platform turned 180° on the table), or its "
+          "roll calibrated",
+    LEVEL: "levelled static poses with the platform inverted (Z down) as well as Z up, or "
+           "camera views of E_xZ, E_yZ: they separate the levelling from E",
+    TILT: "levelled static poses at more table angles (the table's tilt turns with it, the "
+          "platform's axes do not)",
+    REF: "a goniometer log with the reference face's offset known (declared in session.toml)",
+}
+"""What separates each kind of candidate from E when no measurement of the plan's kinds
+does (by the observation equations, align/fusion/observations.py); unit —."""
+
+
+@dataclass(frozen=True)
+class Carried:
+    """A candidate E's u carries as not excluded (:mod:`align.fusion.plausible`), as the
+    linearisation predicts it for some data.
+
+    Attributes
+    ----------
+    name : str
+        The candidate (``platform_level``, ``camera_roll[A]``); unit —.
+    estimate, u : float
+        Its size when freed and that size's u [rad].
+    shift : tuple of float
+        The shift of the six angles (``E_NAMES``) when it is freed: its Type B share of u² is
+        its square [rad].
+    """
+
+    name: str
+    estimate: float
+    u: float
+    shift: tuple[float, ...]
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "estimate_arcsec": self.estimate / ARCSEC,
+                "u_arcsec": self.u / ARCSEC,
+                "shift_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.shift),
+                                         strict=True))}
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} not excluded ({self.estimate / ARCSEC:+.1f} ± {self.u / ARCSEC:.1f}″)"
+
+
+def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = ()
+            ) -> tuple[np.ndarray, tuple[Carried, ...]]:
+    """u of the six angles [rad] as the fusion would state them with the groups named in
+    ``drop`` left out and ``add`` added, and the candidates it would carry.
+
+    Each candidate the session's fusion carries (``lin.held``) is freed in the linearisation:
+    with (E, b) of covariance Σ, freeing b moves E by k b̂ (k = Σ_Eb Σ_bb⁻¹) and lowers χ² by
+    b̂ᵀ Σ_bb⁻¹ b̂; the fusion's own rule (:func:`align.fusion.plausible.is_carried`) decides
+    whether it stays carried, its estimate b̂ taken as it is now (the new data's own is not
+    known). New data that separate b from E shrink k: the shift falls below u/2 and the term
+    drops. First order: a term the new data make significant at the loop's level would be
+    named instead (its u then that of b freed, lower than the carried one predicted here)."""
+    gs = [g for g in lin.groups if g.source not in drop] + list(add)
+    info = lin.information(gs)
+    free = list(lin.free)
+    u2 = np.diag(inverse(info[np.ix_(free, free)]))[:6] * lin.inflation**2
+    u_e, out = np.sqrt(u2), []
+    for name, idx, est in lin.held:
+        j = [*free, *idx]
+        C = inverse(info[np.ix_(j, j)])
+        Cbb, b = C[len(free):, len(free):], np.array(est)
+        shift = C[:6, len(free):] @ np.linalg.solve(Cbb, b)
+        size = float(np.linalg.norm(b))
+        g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
+        if is_carried(float(b @ np.linalg.solve(Cbb, b)), len(idx), size, shift, u_e):
+            out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(shift)))
+    return np.sqrt(u2 + sum((np.square(c.shift) for c in out), np.zeros(6))), tuple(out)
 
 
 @dataclass(frozen=True)
@@ -93,6 +166,9 @@ class Option:
         Standard deviation of ``u_after`` as a prediction [rad]: the u the new data will state
         is not known before they are taken (a new image's own u is a new draw; a repeated
         log's, poses' or tumble's u is estimated from them again).
+    carried : tuple of str
+        The candidates E's u would still carry as not excluded after it (:func:`predict`);
+        unit —.
     """
 
     action: str
@@ -104,10 +180,11 @@ class Option:
     """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
     camera's ``camera``, a replaced input's ``source``."""
     u_after_noise: float = 0.0
+    carried: tuple[str, ...] = ()
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
-                "detail": dict(self.detail),
+                "detail": dict(self.detail), "carried_after": list(self.carried),
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
@@ -129,12 +206,20 @@ class Plan:
         Its u now [rad].
     options : tuple of Option
         Ranked by the lowering of its u per minute, best first; unit —.
+    carried : tuple of Carried
+        The candidates E's u carries now as not excluded (included in ``u_before``); unit —.
+    resolves : Mapping
+        Per carried candidate, the measurement after which it would no longer be carried
+        (the best option that does, else what separates that kind from E, ``RESOLVES``);
+        unit —.
     """
 
     target: str
     why: str
     u_before: float
     options: tuple[Option, ...]
+    carried: tuple[Carried, ...] = ()
+    resolves: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def best(self) -> Option | None:
@@ -143,6 +228,8 @@ class Plan:
     def to_dict(self) -> dict:
         return {"format_version": FORMAT_VERSION, "target": self.target, "why": self.why,
                 "u_before_arcsec": self.u_before / ARCSEC, "within_noise": self.within_noise,
+                "carried": [dict(c.to_dict(), resolved_by=self.resolves.get(c.name))
+                            for c in self.carried],
                 "options": [o.to_dict(self.u_before) for o in self.options]}
 
     @property
@@ -155,6 +242,10 @@ class Plan:
     def lines(self) -> list[str]:
         out = [f"what to measure next for {self.target} ({self.why}; u now "
                f"{self.u_before / ARCSEC:.3f}″):"]
+        t = E_NAMES.index(self.target)
+        for c in self.carried:
+            out.append(f"  its u carries {c.label}: {abs(c.shift[t]) / ARCSEC:.3f}″ of it; "
+                       f"resolved by {self.resolves.get(c.name, '?')}")
         if not self.options:
             out.append(f"  no measurement improves {self.target} by more than "
                        f"{100 * MIN_GAIN:g} % of its u (of the kinds known here)")
@@ -166,10 +257,12 @@ class Plan:
                        f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
                        f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
+            left = [c.name for c in self.carried if c.name not in o.carried]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
-                       f"{o.minutes:g} min")
+                       f"{o.minutes:g} min"
+                       + (f"; no longer carries {', '.join(left)}" if left else ""))
         return out
 
 
@@ -183,7 +276,7 @@ def _target(lin: Linearisation, disposition: Mapping | None) -> tuple[str, str]:
             why += ("; it is outside its tolerance by more than the guard band: a smaller u "
                     "leaves it a FAIL")
         return a["name"], why
-    u = lin.u_with()
+    u = predict(lin)[0]
     k = int(np.argmax(u))
     return E_NAMES[k], "no tolerance: the largest u"
 
@@ -212,7 +305,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
     First order: the derivative of u with respect to each group's log-variance, by a 5 %
     step (u² is smooth in it), times that relative SD, in quadrature over the groups (their
     draws are independent)."""
-    u = lin.u_with(add=add, drop=drop)
+    u = predict(lin, add, drop)[0]
     var = np.zeros_like(u)
     for i, g in enumerate(add):
         rel = float(g.meta.get("relative_sd", 0.0))
@@ -220,7 +313,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
             continue
         step = 0.05
         moved = [*add[:i], _scaled(g, 1 + step), *add[i + 1:]]
-        du = (lin.u_with(add=moved, drop=drop) - u) / np.log1p(step)
+        du = (predict(lin, moved, drop)[0] - u) / np.log1p(step)
         var += (du * rel) ** 2
     return np.sqrt(var)
 
@@ -333,15 +426,24 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     session result's ``disposition`` dict, or None); ``camera_roll_u`` [rad] as there."""
     target, why = _target(lin, disposition)
     k = E_NAMES.index(target)
-    u0 = lin.u_with()
-    ranked = []
+    u0, now = predict(lin)
+    ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
-        u = lin.u_with(add=add, drop=drop)
+        u, carried = predict(lin, add, drop)
+        o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
+                   float(prediction_noise(lin, add, drop)[k]), tuple(c.name for c in carried))
+        every.append(o)
         if u[k] < u0[k] * (1 - MIN_GAIN):
-            ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)),
-                                 detail, float(prediction_noise(lin, add, drop)[k])))
+            ranked.append(o)
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
-    return Plan(target, why, float(u0[k]), tuple(ranked))
+    every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
+    resolves = {}
+    for c in now:
+        o = next((o for o in every if c.name not in o.carried), None)
+        resolves[c.name] = (o.action if o is not None else
+                            RESOLVES.get(c.name.partition("[")[0], "a measurement that "
+                                         "separates it from E"))
+    return Plan(target, why, float(u0[k]), tuple(ranked), now, resolves)
 
 
 def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:

@@ -123,10 +123,19 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
             continue  # not separable from E by these data: the loop passed it by too
         est, u = trial.effects.get(term.name, (0.0, float("inf")))
         drop = max(cur.chi2 - trial.chi2, 0.0)  # (est/u)² for one component, linearised
-        if not (special.chdtrc(term.width, drop) < 2 * special.ndtr(-NOT_EXCLUDED_Z)
-                and abs(est) <= np.deg2rad(UNDECLARED_LIMIT_DEG)):
-            continue
         shift = np.array([trial.quantities[n][0] for n in E_NAMES]) - e0
-        if np.any(np.abs(shift) > SHIFT_FRACTION * u_e):
+        if is_carried(drop, term.width, est, shift, u_e):
             out.append(NotExcluded(cand.name, float(est), float(u), shift))
     return out
+
+
+def is_carried(drop: float, width: int, size: float, shift: np.ndarray, u_e: np.ndarray
+               ) -> bool:
+    """The rule of :func:`not_excluded` (also what ``align plan`` predicts with): a candidate
+    of ``width`` components whose freeing lowers χ² by ``drop`` (b̂ᵀ cov(b)⁻¹ b̂, linearised)
+    to a size ``size`` [rad] and moves E by ``shift`` [rad] is carried when the data cannot
+    exclude it (beyond :data:`NOT_EXCLUDED_Z`, within :data:`UNDECLARED_LIMIT_DEG`) and the
+    shift exceeds :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle."""
+    return bool(special.chdtrc(width, drop) < 2 * special.ndtr(-NOT_EXCLUDED_Z)
+                and abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG)
+                and np.any(np.abs(shift) > SHIFT_FRACTION * u_e))
