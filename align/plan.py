@@ -96,16 +96,20 @@ class Carried:
     shift : tuple of float
         The shift of the six angles (``E_NAMES``) when it is freed: its Type B share of u² is
         its square [rad].
+    p : float
+        The probability that the fusion carries it (its estimate on the new data a new draw
+        about the one now, :func:`predict`); 1 for the session's own data — dimensionless.
     """
 
     name: str
     estimate: float
     u: float
     shift: tuple[float, ...]
+    p: float = 1.0
 
     def to_dict(self) -> dict:
         return {"name": self.name, "estimate_arcsec": self.estimate / ARCSEC,
-                "u_arcsec": self.u / ARCSEC,
+                "u_arcsec": self.u / ARCSEC, "p_carried": self.p,
                 "shift_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.shift),
                                          strict=True))}
 
@@ -114,33 +118,80 @@ class Carried:
         return f"{self.name} not excluded ({self.estimate / ARCSEC:+.1f} ± {self.u / ARCSEC:.1f}″)"
 
 
-def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = ()
-            ) -> tuple[np.ndarray, tuple[Carried, ...]]:
-    """u of the six angles [rad] as the fusion would state them with the groups named in
-    ``drop`` left out and ``add`` added, and the candidates it would carry.
+REDRAWS = 256
+"""Draws of a carried candidate's estimate on the new data (:func:`predict`): the share's
+mean to ~3 % of itself at p = 0.5, fixed (seed 0) so that a plan is reproducible."""
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """u of the six angles as the fusion would state them after a measurement.
+
+    Attributes
+    ----------
+    u : numpy.ndarray
+        The expected u (√ of the expected u²) of the six angles, ``E_NAMES`` order [rad].
+    u_sd : numpy.ndarray
+        The standard deviation of that u over the draws of the carried candidates' new
+        estimates [rad] (0 without carried candidates).
+    carried : tuple of Carried
+        The session's carried candidates with the probability each stays carried; unit —.
+    """
+
+    u: np.ndarray
+    u_sd: np.ndarray
+    carried: tuple[Carried, ...]
+
+    def still(self, name: str) -> bool:
+        """Whether ``name`` is more likely carried than not after the measurement."""
+        return any(c.name == name and c.p >= 0.5 for c in self.carried)
+
+
+def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
+            redraw: bool = True) -> Prediction:
+    """u of the six angles as the fusion would state them with the groups named in ``drop``
+    left out and ``add`` added, and the candidates it would carry.
 
     Each candidate the session's fusion carries (``lin.held``) is freed in the linearisation:
     with (E, b) of covariance Σ, freeing b moves E by k b̂ (k = Σ_Eb Σ_bb⁻¹) and lowers χ² by
     b̂ᵀ Σ_bb⁻¹ b̂; the fusion's own rule (:func:`align.fusion.plausible.is_carried`) decides
-    whether it stays carried, its estimate b̂ taken as it is now (the new data's own is not
-    known). New data that separate b from E shrink k: the shift falls below u/2 and the term
-    drops. First order: a term the new data make significant at the loop's level would be
-    named instead (its u then that of b freed, lower than the carried one predicted here)."""
+    whether it is carried, and its share of u² is (k b̂)². The new estimate b̂' is not known
+    before the data are taken: it is drawn about b̂ with the covariance the data add,
+    Σ_bb − Σ'_bb (b̂ − b̂' is independent of b̂' when data are added; ``redraw`` False: b̂'
+    = b̂), and u² is the mean over ``REDRAWS`` draws of the share it would then carry. New
+    data that separate b from E shrink k: the shift falls below u/2 and the term drops.
+    First order: a term the new data make significant at the loop's level would be named
+    instead (its u then that of b freed, lower than the carried one predicted here)."""
     gs = [g for g in lin.groups if g.source not in drop] + list(add)
     info = lin.information(gs)
     free = list(lin.free)
     u2 = np.diag(inverse(info[np.ix_(free, free)]))[:6] * lin.inflation**2
-    u_e, out = np.sqrt(u2), []
+    u_e = np.sqrt(u2)
+    share = np.zeros((REDRAWS, 6))
+    out = []
+    z = np.random.default_rng(0).standard_normal((REDRAWS, 2))
     for name, idx, est in lin.held:
         j = [*free, *idx]
         C = inverse(info[np.ix_(j, j)])
         Cbb, b = C[len(free):, len(free):], np.array(est)
-        shift = C[:6, len(free):] @ np.linalg.solve(Cbb, b)
+        K = C[:6, len(free):] @ np.linalg.inv(Cbb)
+        now = lin.information()
+        d = (inverse(now[np.ix_(j, j)])[len(free):, len(free):] - Cbb) if redraw else 0 * Cbb
+        w, v = np.linalg.eigh(d)
+        draws = b + z[:, :len(b)] @ (v * np.sqrt(np.clip(w, 0.0, None))).T
+        hit = np.array([is_carried(float(x @ np.linalg.solve(Cbb, x)), len(idx),
+                                   float(np.linalg.norm(x)), K @ x, u_e) for x in draws])
+        if not add and not drop:  # the session's own data: the fusion decided (not re-judged)
+            hit[:] = True
+        share += np.where(hit[:, None], np.square(draws @ K.T), 0.0)
         size = float(np.linalg.norm(b))
         g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
-        if is_carried(float(b @ np.linalg.solve(Cbb, b)), len(idx), size, shift, u_e):
-            out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(shift)))
-    return np.sqrt(u2 + sum((np.square(c.shift) for c in out), np.zeros(6))), tuple(out)
+        if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
+            size, g = float(b[0]), np.ones(1)
+        out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b),
+                           float(hit.mean())))
+    u = np.sqrt(u2 + share)
+    return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0), tuple(out))
 
 
 @dataclass(frozen=True)
@@ -166,9 +217,9 @@ class Option:
         Standard deviation of ``u_after`` as a prediction [rad]: the u the new data will state
         is not known before they are taken (a new image's own u is a new draw; a repeated
         log's, poses' or tumble's u is estimated from them again).
-    carried : tuple of str
-        The candidates E's u would still carry as not excluded after it (:func:`predict`);
-        unit —.
+    carried : Mapping
+        The candidates E's u may still carry as not excluded after it, each with the
+        probability that it does (:func:`predict`) — dimensionless.
     """
 
     action: str
@@ -180,11 +231,11 @@ class Option:
     """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
     camera's ``camera``, a replaced input's ``source``."""
     u_after_noise: float = 0.0
-    carried: tuple[str, ...] = ()
+    carried: Mapping[str, float] = field(default_factory=dict)
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
-                "detail": dict(self.detail), "carried_after": list(self.carried),
+                "detail": dict(self.detail), "carried_after": dict(self.carried),
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
@@ -257,12 +308,13 @@ class Plan:
                        f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
                        f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
-            left = [c.name for c in self.carried if c.name not in o.carried]
+            left = [f"{c.name} (p {o.carried.get(c.name, 0.0):.2f})" for c in self.carried
+                    if o.carried.get(c.name, 0.0) < 0.5]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
                        f"{o.minutes:g} min"
-                       + (f"; no longer carries {', '.join(left)}" if left else ""))
+                       + (f"; likely no longer carries {', '.join(left)}" if left else ""))
         return out
 
 
@@ -276,7 +328,7 @@ def _target(lin: Linearisation, disposition: Mapping | None) -> tuple[str, str]:
             why += ("; it is outside its tolerance by more than the guard band: a smaller u "
                     "leaves it a FAIL")
         return a["name"], why
-    u = predict(lin)[0]
+    u = predict(lin).u
     k = int(np.argmax(u))
     return E_NAMES[k], "no tolerance: the largest u"
 
@@ -305,7 +357,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
     First order: the derivative of u with respect to each group's log-variance, by a 5 %
     step (u² is smooth in it), times that relative SD, in quadrature over the groups (their
     draws are independent)."""
-    u = predict(lin, add, drop)[0]
+    u = predict(lin, add, drop, redraw=False).u
     var = np.zeros_like(u)
     for i, g in enumerate(add):
         rel = float(g.meta.get("relative_sd", 0.0))
@@ -313,7 +365,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
             continue
         step = 0.05
         moved = [*add[:i], _scaled(g, 1 + step), *add[i + 1:]]
-        du = (predict(lin, moved, drop)[0] - u) / np.log1p(step)
+        du = (predict(lin, moved, drop, redraw=False).u - u) / np.log1p(step)
         var += (du * rel) ** 2
     return np.sqrt(var)
 
@@ -406,16 +458,19 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
                         [_halved(g, "static")], [g.source], {"source": g.source}))
-    for label, idx in lin.nuisances:
-        if label.startswith("camera roll "):
-            A = np.zeros((1, len(lin.params)))
-            A[0, idx[0]] = 1.0
-            cam = label[len("camera roll "):]
-            out.append((f"calibrate camera {cam}'s roll (to ±{camera_roll_u / ARCSEC:g}″)",
-                        "camera", minutes["camera"],
-                        [Group(f"camera {cam} roll calibration", "calibration", A,
-                               np.array([[camera_roll_u ** 2]]))], [],
-                        {"camera": cam}))
+    rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
+             if label.startswith("camera roll ")]
+    # a roll the fusion carries as not excluded: calibrating it resolves it
+    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, _ in lin.held
+              if name.startswith(ROLL + "[")]
+    for cam, idx in rolls:
+        A = np.zeros((1, len(lin.params)))
+        A[0, idx[0]] = 1.0
+        out.append((f"calibrate camera {cam}'s roll (to ±{camera_roll_u / ARCSEC:g}″)",
+                    "camera", minutes["camera"],
+                    [Group(f"camera {cam} roll calibration", "calibration", A,
+                           np.array([[camera_roll_u ** 2]]))], [],
+                    {"camera": cam}))
     return out
 
 
@@ -426,24 +481,27 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     session result's ``disposition`` dict, or None); ``camera_roll_u`` [rad] as there."""
     target, why = _target(lin, disposition)
     k = E_NAMES.index(target)
-    u0, now = predict(lin)
+    now = predict(lin)
+    u0 = now.u
     ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
-        u, carried = predict(lin, add, drop)
+        after = predict(lin, add, drop)
+        u = after.u
         o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
-                   float(prediction_noise(lin, add, drop)[k]), tuple(c.name for c in carried))
+                   float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
+                   {c.name: c.p for c in after.carried})
         every.append(o)
         if u[k] < u0[k] * (1 - MIN_GAIN):
             ranked.append(o)
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     resolves = {}
-    for c in now:
-        o = next((o for o in every if c.name not in o.carried), None)
+    for c in now.carried:
+        o = next((o for o in every if o.carried.get(c.name, 0.0) < 0.5), None)
         resolves[c.name] = (o.action if o is not None else
                             RESOLVES.get(c.name.partition("[")[0], "a measurement that "
                                          "separates it from E"))
-    return Plan(target, why, float(u0[k]), tuple(ranked), now, resolves)
+    return Plan(target, why, float(u0[k]), tuple(ranked), now.carried, resolves)
 
 
 def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:

@@ -3,15 +3,25 @@ against the u obtained on a synthetic session with that measurement added."""
 
 import json
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from align.cli import main
 from align.fusion import E_INDEX, E_NAMES, NOT_EXCLUDED_TAG
-from align.fusion.budget import Group, Linearisation
-from align.plan import NOISE_K, image_noise, options, plan, plan_from_result, prediction_noise
+from align.fusion.budget import Budget, Group, Linearisation
+from align.plan import (
+    NOISE_K,
+    image_noise,
+    options,
+    plan,
+    plan_from_result,
+    predict,
+    prediction_noise,
+)
 from align.session import load_session, run_session
+from align.warnings import CARRIED_PREFIX, carried_notices, session_warnings
 from axisbase.units import ARCSEC
 from synth.session import SessionSpec, write_session
 
@@ -128,6 +138,77 @@ def test_the_plan_says_when_no_gain_exceeds_the_noise_of_its_prediction():
     clear = plan(_images_lin([4.0, 5.0]))
     assert not clear.within_noise
     assert "->" in "\n".join(clear.lines()) and "noise" not in "\n".join(clear.lines())
+
+
+def _roll_lin(b_arcsec: float) -> Linearisation:
+    """E_xY seen by three images of housing x in view A (u 1″ each), whose mark angle also
+    carries camera A's roll, held: the fusion carries it as not excluded, estimate
+    ``b_arcsec`` [″]; and by a static-like row of u 2″; the other five angles known to 0.01″.
+    Freed, the roll is the images' mean less E_xY: u_b² = 4 + 1/3 ″², k = dE/db = -12/13."""
+    P = 7
+    rows = []
+    for k in range(3):
+        A = np.zeros((1, P))
+        A[0, 0] = A[0, 6] = 1.0
+        rows.append(Group(f"image x_A_{k}.png", "image", A, np.array([[ARCSEC**2]]), (),
+                          {"housing": "x", "view": "A", "camera": "A"}))
+    rest = np.zeros((6, P))
+    rest[0, 0] = 1.0
+    rest[1:, 1:6] = np.eye(5)
+    C = np.diag([4.0, *[1e-4] * 5]) * ARCSEC**2
+    return Linearisation((*E_NAMES, "camera_roll[A]"),
+                         (*rows, Group("static poses", "static", rest, C)), (), 1.0,
+                         (("camera_roll[A]", (6,), (b_arcsec * ARCSEC,)),))
+
+
+def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
+    """A camera roll carried as not excluded (5″ ± 2.08″, z 2.4) moves E_xY by -12/13 of it:
+    u 0.555″ without it, 4.65″ with it. A reversed view separates the roll from E (k -> 0):
+    the term drops and u falls to 0.4″ — the advice, named as what resolves it; one more
+    image leaves it carried (k -16/17); a roll calibrated to ±2″ (as good as the data's
+    2.08″) does not resolve it either. The warning says so; without a carried term, none."""
+    lin = _roll_lin(5.0)
+    fixed, shift = 1 / np.sqrt(3.25), -12 / 13 * 5.0
+    p = plan(lin)
+    assert p.target == "E_xY"
+    assert p.u_before / ARCSEC == pytest.approx(np.hypot(fixed, shift), rel=1e-6)
+    (c,) = p.carried
+    assert (c.name, c.p) == ("camera_roll[A]", 1.0)
+    assert c.estimate / ARCSEC == pytest.approx(5.0)
+    assert c.u / ARCSEC == pytest.approx(np.sqrt(4 + 1 / 3), rel=1e-6)
+    assert c.shift[0] / ARCSEC == pytest.approx(shift, rel=1e-6)
+    by_kind = {o.kind: o for o in p.options}
+    rev = by_kind["reversed view"]
+    assert rev.u_after / ARCSEC == pytest.approx(0.4, rel=1e-6)
+    assert rev.carried["camera_roll[A]"] == 0.0
+    assert p.best is rev and p.resolves["camera_roll[A]"] == rev.action
+    # One more image: k -16/17, u_b² 4.25 ″²; z 2.4 still, the shift 4.7″ >> u/2: carried,
+    # and u rises (not an option: it lowers nothing).
+    img = predict(lin, *_option(lin, "image")[3:5])
+    assert img.carried[0].p > 0.95 and "image" not in by_kind
+    assert img.u[0] / ARCSEC == pytest.approx(np.hypot(1 / np.sqrt(4.25), 16 / 17 * 5.0),
+                                              rel=0.01)
+    cam = predict(lin, *_option(lin, "camera")[3:5])
+    assert cam.still("camera_roll[A]")
+    text = "\n".join(p.lines())
+    assert "its u carries camera_roll[A] not excluded (+5.0 ± 2.1″)" in text
+    assert "likely no longer carries camera_roll[A] (p 0.00)" in text
+    # The session warning: the candidate, its value and u, and what resolves it.
+    fusion = SimpleNamespace(budget=Budget({}, 1.0, lin))
+    assert carried_notices(fusion) == [
+        f"{CARRIED_PREFIX}camera_roll[A] not excluded (+5.0 ± 2.1″): {rev.action}"]
+    # A roll near zero is no longer carried after more images of the same kind: dropped.
+    assert not predict(_roll_lin(0.5), *_option(lin, "image")[3:5]).still("camera_roll[A]")
+
+
+def test_no_carried_warning_when_nothing_is_carried(session21_run):
+    """The clean session of seed 21 carries nothing: no such warning, and its plan's u is
+    the linearisation's."""
+    res, _ = session21_run
+    lin = res.fusion.budget.model
+    assert lin.held == ()
+    assert not any(w.startswith(CARRIED_PREFIX) for w in session_warnings(res))
+    assert np.allclose(predict(lin).u, lin.u_with())
 
 
 def _realise(spec: SessionSpec, kind: str, detail) -> SessionSpec:
