@@ -99,6 +99,9 @@ class Carried:
     p : float
         The probability that the fusion carries it (its estimate on the new data a new draw
         about the one now, :func:`predict`); 1 for the session's own data — dimensionless.
+    share : tuple of float
+        Its expected share of u² of the six angles (``shift²`` × carried, over the draws)
+        [rad²].
     """
 
     name: str
@@ -106,6 +109,7 @@ class Carried:
     u: float
     shift: tuple[float, ...]
     p: float = 1.0
+    share: tuple[float, ...] = (0.0,) * 6
 
     def to_dict(self) -> dict:
         return {"name": self.name, "estimate_arcsec": self.estimate / ARCSEC,
@@ -148,7 +152,7 @@ class Prediction:
 
 
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
-            redraw: bool = True) -> Prediction:
+            redraw: bool = True, declared: Sequence[str] = ()) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
     left out and ``add`` added, and the candidates it would carry.
 
@@ -156,14 +160,19 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     with (E, b) of covariance Σ, freeing b moves E by k b̂ (k = Σ_Eb Σ_bb⁻¹) and lowers χ² by
     b̂ᵀ Σ_bb⁻¹ b̂; the fusion's own rule (:func:`align.fusion.plausible.is_carried`) decides
     whether it is carried, and its share of u² is (k b̂)². The new estimate b̂' is not known
-    before the data are taken: it is drawn about b̂ with the covariance the data add,
-    Σ_bb − Σ'_bb (b̂ − b̂' is independent of b̂' when data are added; ``redraw`` False: b̂'
-    = b̂), and u² is the mean over ``REDRAWS`` draws of the share it would then carry. New
+    before the data are taken: it is drawn about b̂ with the covariance of b̂ − b̂' — the
+    added data's draw, the dropped (replaced) data's, and the change of the kept data's
+    weights (for data only added: Σ_bb − Σ'_bb; ``redraw`` False: b̂' = b̂) — and u² is the
+    mean over ``REDRAWS`` draws of the share it would then carry. New
     data that separate b from E shrink k: the shift falls below u/2 and the term drops.
     First order: a term the new data make significant at the loop's level would be named
-    instead (its u then that of b freed, lower than the carried one predicted here)."""
-    gs = [g for g in lin.groups if g.source not in drop] + list(add)
-    info = lin.information(gs)
+    instead (its u then that of b freed, lower than the carried one predicted here).
+    ``declared``: held candidates the measurement declares (a camera's roll calibrated): no
+    longer candidates, carried by no one."""
+    kept = [g for g in lin.groups if g.source not in drop]
+    info = lin.information([*kept, *add])
+    info_now, info_kept = lin.information(), lin.information(kept)
+    info_add = lin.information(add)
     free = list(lin.free)
     u2 = np.diag(inverse(info[np.ix_(free, free)]))[:6] * lin.inflation**2
     u_e = np.sqrt(u2)
@@ -171,25 +180,32 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     out = []
     z = np.random.default_rng(0).standard_normal((REDRAWS, 2))
     for name, idx, est in lin.held:
+        if name in declared:
+            continue
         j = [*free, *idx]
         C = inverse(info[np.ix_(j, j)])
         Cbb, b = C[len(free):, len(free):], np.array(est)
         K = C[:6, len(free):] @ np.linalg.inv(Cbb)
-        now = lin.information()
-        d = (inverse(now[np.ix_(j, j)])[len(free):, len(free):] - Cbb) if redraw else 0 * Cbb
-        w, v = np.linalg.eigh(d)
+        # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
+        S0, S1 = inverse(info_now[np.ix_(j, j)])[len(free):], C[len(free):]
+        ix = np.ix_(j, j)
+        d = ((S0 - S1) @ info_kept[ix] @ (S0 - S1).T
+             + S0 @ (info_now - info_kept)[ix] @ S0.T + S1 @ info_add[ix] @ S1.T)
+        d = d if redraw else 0 * d
+        w, v = np.linalg.eigh((d + d.T) / 2)
         draws = b + z[:, :len(b)] @ (v * np.sqrt(np.clip(w, 0.0, None))).T
         hit = np.array([is_carried(float(x @ np.linalg.solve(Cbb, x)), len(idx),
                                    float(np.linalg.norm(x)), K @ x, u_e) for x in draws])
         if not add and not drop:  # the session's own data: the fusion decided (not re-judged)
             hit[:] = True
-        share += np.where(hit[:, None], np.square(draws @ K.T), 0.0)
+        mine = np.where(hit[:, None], np.square(draws @ K.T), 0.0)
+        share += mine
         size = float(np.linalg.norm(b))
         g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
         if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
             size, g = float(b[0]), np.ones(1)
         out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b),
-                           float(hit.mean())))
+                           float(hit.mean()), tuple(mine.mean(0))))
     u = np.sqrt(u2 + share)
     return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0), tuple(out))
 
@@ -217,9 +233,10 @@ class Option:
         Standard deviation of ``u_after`` as a prediction [rad]: the u the new data will state
         is not known before they are taken (a new image's own u is a new draw; a repeated
         log's, poses' or tumble's u is estimated from them again).
-    carried : Mapping
-        The candidates E's u may still carry as not excluded after it, each with the
-        probability that it does (:func:`predict`) — dimensionless.
+    carried : tuple of Carried
+        The session's carried candidates as they would be after it, each with the
+        probability that it is still carried and its expected share (:func:`predict`);
+        unit —.
     """
 
     action: str
@@ -231,11 +248,11 @@ class Option:
     """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
     camera's ``camera``, a replaced input's ``source``."""
     u_after_noise: float = 0.0
-    carried: Mapping[str, float] = field(default_factory=dict)
+    carried: tuple[Carried, ...] = ()
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
-                "detail": dict(self.detail), "carried_after": dict(self.carried),
+                "detail": dict(self.detail), "carried_after": {c.name: c.p for c in self.carried},
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
@@ -308,8 +325,9 @@ class Plan:
                        f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
                        f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
-            left = [f"{c.name} (p {o.carried.get(c.name, 0.0):.2f})" for c in self.carried
-                    if o.carried.get(c.name, 0.0) < 0.5]
+            p = {c.name: c.p for c in o.carried}
+            left = [f"{c.name} (p {p.get(c.name, 0.0):.2f})" for c in self.carried
+                    if p.get(c.name, 0.0) < 0.5]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
@@ -474,6 +492,23 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
     return out
 
 
+def _resolution(c: Carried, every: Sequence[Option], k: int) -> str:
+    """What resolves carried candidate ``c``: the best option (``every``, best first) after
+    which it is more likely not carried; else the one that lowers its share of angle ``k``
+    most (to less than half), saying so; else what separates its kind from E."""
+    def after(o: Option) -> Carried | None:
+        return next((a for a in o.carried if a.name == c.name), None)
+
+    o = next((o for o in every if (after(o) is None or after(o).p < 0.5)), None)
+    if o is not None:
+        return o.action
+    o = min(every, key=lambda o: after(o).share[k], default=None)
+    if o is not None and after(o).share[k] < c.share[k] / 4:
+        return (f"{o.action} (its share of {E_NAMES[k]} {np.sqrt(c.share[k]) / ARCSEC:.2f}"
+                f" -> {np.sqrt(after(o).share[k]) / ARCSEC:.2f}″)")
+    return RESOLVES.get(c.name.partition("[")[0], "a measurement that separates it from E")
+
+
 def plan(lin: Linearisation, disposition: Mapping | None = None,
          minutes: Mapping[str, float] = MINUTES,
          camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC) -> Plan:
@@ -485,22 +520,19 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     u0 = now.u
     ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
-        after = predict(lin, add, drop)
+        # a camera's roll calibrated is declared: no longer a candidate (session.toml)
+        declared = [f"{ROLL}[{detail['camera']}]"] if kind == "camera" else []
+        after = predict(lin, add, drop, declared=declared)
         u = after.u
         o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
                    float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
-                   {c.name: c.p for c in after.carried})
+                   after.carried)
         every.append(o)
         if u[k] < u0[k] * (1 - MIN_GAIN):
             ranked.append(o)
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
-    resolves = {}
-    for c in now.carried:
-        o = next((o for o in every if o.carried.get(c.name, 0.0) < 0.5), None)
-        resolves[c.name] = (o.action if o is not None else
-                            RESOLVES.get(c.name.partition("[")[0], "a measurement that "
-                                         "separates it from E"))
+    resolves = {c.name: _resolution(c, every, k) for c in now.carried}
     return Plan(target, why, float(u0[k]), tuple(ranked), now.carried, resolves)
 
 

@@ -165,8 +165,8 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     """A camera roll carried as not excluded (5″ ± 2.08″, z 2.4) moves E_xY by -12/13 of it:
     u 0.555″ without it, 4.65″ with it. A reversed view separates the roll from E (k -> 0):
     the term drops and u falls to 0.4″ — the advice, named as what resolves it; one more
-    image leaves it carried (k -16/17); a roll calibrated to ±2″ (as good as the data's
-    2.08″) does not resolve it either. The warning says so; without a carried term, none."""
+    image leaves it carried (k -16/17) and raises u; the roll calibrated is declared: no
+    longer a candidate, u 0.555″ (in 30 min: second). The warning says so."""
     lin = _roll_lin(5.0)
     fixed, shift = 1 / np.sqrt(3.25), -12 / 13 * 5.0
     p = plan(lin)
@@ -180,7 +180,7 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     by_kind = {o.kind: o for o in p.options}
     rev = by_kind["reversed view"]
     assert rev.u_after / ARCSEC == pytest.approx(0.4, rel=1e-6)
-    assert rev.carried["camera_roll[A]"] == 0.0
+    assert rev.carried[0].p == 0.0
     assert p.best is rev and p.resolves["camera_roll[A]"] == rev.action
     # One more image: k -16/17, u_b² 4.25 ″²; z 2.4 still, the shift 4.7″ >> u/2: carried,
     # and u rises (not an option: it lowers nothing).
@@ -188,8 +188,9 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     assert img.carried[0].p > 0.95 and "image" not in by_kind
     assert img.u[0] / ARCSEC == pytest.approx(np.hypot(1 / np.sqrt(4.25), 16 / 17 * 5.0),
                                               rel=0.01)
-    cam = predict(lin, *_option(lin, "camera")[3:5])
-    assert cam.still("camera_roll[A]")
+    cam = by_kind["camera"]
+    assert cam.carried == () and cam.u_after / ARCSEC == pytest.approx(fixed, rel=1e-6)
+    assert [o.kind for o in p.options][:2] == ["reversed view", "camera"]
     text = "\n".join(p.lines())
     assert "its u carries camera_roll[A] not excluded (+5.0 ± 2.1″)" in text
     assert "likely no longer carries camera_roll[A] (p 0.00)" in text
