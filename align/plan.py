@@ -151,6 +151,20 @@ class Prediction:
         return any(c.name == name and c.p >= 0.5 for c in self.carried)
 
 
+def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b: np.ndarray,
+                   declared: Sequence[tuple[Sequence[int], Sequence[float]]]) -> np.ndarray:
+    """Candidate ``b`` [rad] (parameters ``idx``) estimated with each ``declared`` candidate
+    (its indices, its value [rad]) fixed at its value instead of 0: with the ``free``
+    parameters marginalised (the Schur complement M of ``info``), b(r) = b(0) − M_bb⁻¹ M_br r."""
+    for didx, value in declared:
+        j = [*free, *idx, *didx]
+        n, w = len(free), len(idx)
+        Ij = info[np.ix_(j, j)]
+        M = Ij[n:, n:] - Ij[n:, :n] @ np.linalg.solve(Ij[:n, :n], Ij[:n, n:])
+        b = b - np.linalg.solve(M[:w, :w], M[:w, w:] @ np.asarray(value))
+    return b
+
+
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
             redraw: bool = True, declared: Sequence[str] = ()) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
@@ -168,7 +182,8 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     First order: a term the new data make significant at the loop's level would be named
     instead (its u then that of b freed, lower than the carried one predicted here).
     ``declared``: held candidates the measurement declares (a camera's roll calibrated): no
-    longer candidates, carried by no one."""
+    longer candidates, and E corrected for them at their estimates — what they absorbed is no
+    longer left for the others, whose estimates move with them (:func:`_with_declared`)."""
     kept = [g for g in lin.groups if g.source not in drop]
     info = lin.information([*kept, *add])
     info_now, info_kept = lin.information(), lin.information(kept)
@@ -184,7 +199,9 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
             continue
         j = [*free, *idx]
         C = inverse(info[np.ix_(j, j)])
-        Cbb, b = C[len(free):, len(free):], np.array(est)
+        Cbb = C[len(free):, len(free):]
+        b = _with_declared(info, free, idx, np.array(est),
+                           [(i, e) for n, i, e in lin.held if n in declared])
         K = C[:6, len(free):] @ np.linalg.inv(Cbb)
         # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
         S0, S1 = inverse(info_now[np.ix_(j, j)])[len(free):], C[len(free):]
