@@ -35,11 +35,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
 
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation, inverse
 from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
 from align.fusion.plausible import is_carried
+from align.loop import sidak
 from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
 
@@ -99,6 +101,9 @@ class Carried:
     p : float
         The probability that the fusion carries it (its estimate on the new data a new draw
         about the one now, :func:`predict`); 1 for the session's own data — dimensionless.
+    named : float
+        The probability that the new data make it significant at the loop's level: named, E
+        corrected for it, its share of u² that of freeing it — dimensionless.
     share : tuple of float
         Its expected share of u² of the six angles (``shift²`` × carried, over the draws)
         [rad²].
@@ -110,6 +115,7 @@ class Carried:
     shift: tuple[float, ...]
     p: float = 1.0
     share: tuple[float, ...] = (0.0,) * 6
+    named: float = 0.0
 
     def to_dict(self) -> dict:
         return {"name": self.name, "estimate_arcsec": self.estimate / ARCSEC,
@@ -122,6 +128,15 @@ class Carried:
         return f"{self.name} not excluded ({self.estimate / ARCSEC:+.1f} ± {self.u / ARCSEC:.1f}″)"
 
 
+NAMED_ALPHA = 1e-3
+"""The fusion loop's level (``align.fusion.fuse``'s ``alpha``): a candidate whose χ² drop
+passes it (Šidák over ``NAMED_TESTED`` candidates) and lowers BIC by ``NAMED_MIN_BIC`` is
+named, not carried — dimensionless."""
+NAMED_TESTED = 5
+"""Candidates a fusion round tests (two cameras' rolls, the reference face's offset, the
+table's tilt, the platform's levelling) — dimensionless."""
+NAMED_MIN_BIC = 6.0
+"""The loop's least BIC drop (``run_loop``'s ``min_delta_bic``) — dimensionless."""
 REDRAWS = 256
 """Draws of a carried candidate's estimate on the new data (:func:`predict`): the share's
 mean to ~3 % of itself at p = 0.5, fixed (seed 0) so that a plan is reproducible."""
@@ -149,6 +164,14 @@ class Prediction:
     def still(self, name: str) -> bool:
         """Whether ``name`` is more likely carried than not after the measurement."""
         return any(c.name == name and c.p >= 0.5 for c in self.carried)
+
+
+def _named(drop: float, width: int, n_rows: int) -> bool:
+    """Whether the fusion loop would name a candidate whose freeing lowers χ² by ``drop``
+    (``width`` components, ``n_rows`` observations): its test at the loop's level after
+    Šidák over the round's candidates, and its BIC drop."""
+    return bool(sidak(float(special.chdtrc(width, drop)), NAMED_TESTED) < NAMED_ALPHA
+                and drop - width * np.log(n_rows) > NAMED_MIN_BIC)
 
 
 def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b: np.ndarray,
@@ -189,6 +212,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     info_now, info_kept = lin.information(), lin.information(kept)
     info_add = lin.information(add)
     free = list(lin.free)
+    n_rows = sum(len(g.A) for g in [*kept, *add])
     u2 = np.diag(inverse(info[np.ix_(free, free)]))[:6] * lin.inflation**2
     u_e = np.sqrt(u2)
     share = np.zeros((REDRAWS, 6))
@@ -211,18 +235,22 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         d = d if redraw else 0 * d
         w, v = np.linalg.eigh((d + d.T) / 2)
         draws = b + z[:, :len(b)] @ (v * np.sqrt(np.clip(w, 0.0, None))).T
-        hit = np.array([is_carried(float(x @ np.linalg.solve(Cbb, x)), len(idx),
-                                   float(np.linalg.norm(x)), K @ x, u_e) for x in draws])
+        chi = np.einsum("ij,ij->i", draws, np.linalg.solve(Cbb, draws.T).T)
+        named = np.array([_named(c, len(idx), n_rows) for c in chi])
+        hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e)
+                                 for c, x in zip(chi, draws, strict=True)])
         if not add and not drop:  # the session's own data: the fusion decided (not re-judged)
-            hit[:] = True
-        mine = np.where(hit[:, None], np.square(draws @ K.T), 0.0)
+            hit[:], named[:] = True, False
+        freed = np.diag(K @ Cbb @ K.T) * lin.inflation**2  # what naming it adds to u²
+        mine = (np.where(hit[:, None], np.square(draws @ K.T), 0.0)
+                + np.where(named[:, None], freed, 0.0))
         share += mine
         size = float(np.linalg.norm(b))
         g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
         if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
             size, g = float(b[0]), np.ones(1)
         out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b),
-                           float(hit.mean()), tuple(mine.mean(0))))
+                           float(hit.mean()), tuple(mine.mean(0)), float(named.mean())))
     u = np.sqrt(u2 + share)
     return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0), tuple(out))
 
@@ -342,9 +370,10 @@ class Plan:
                        f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
                        f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
-            p = {c.name: c.p for c in o.carried}
-            left = [f"{c.name} (p {p.get(c.name, 0.0):.2f})" for c in self.carried
-                    if p.get(c.name, 0.0) < 0.5]
+            after = {c.name: c for c in o.carried}
+            left = [f"{c.name} (p {after[c.name].p:.2f}; named p {after[c.name].named:.2f})"
+                    if c.name in after else f"{c.name} (declared)" for c in self.carried
+                    if c.name not in after or after[c.name].p < 0.5]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "

@@ -166,7 +166,7 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     u 0.555″ without it, 4.65″ with it. A reversed view separates the roll from E (k -> 0):
     the term drops and u falls to 0.4″ — the advice, named as what resolves it; one more
     image leaves it carried (k -16/17) and raises u; the roll calibrated is declared: no
-    longer a candidate, u 0.555″ (in 30 min: second). The warning says so."""
+    longer a candidate, u 0.555″ (in 30 min: last). The warning says so."""
     lin = _roll_lin(5.0)
     fixed, shift = 1 / np.sqrt(3.25), -12 / 13 * 5.0
     p = plan(lin)
@@ -190,10 +190,10 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
                                               rel=0.01)
     cam = by_kind["camera"]
     assert cam.carried == () and cam.u_after / ARCSEC == pytest.approx(fixed, rel=1e-6)
-    assert [o.kind for o in p.options][:2] == ["reversed view", "camera"]
+    assert [o.kind for o in p.options] == ["reversed view", "static", "camera"]
     text = "\n".join(p.lines())
     assert "its u carries camera_roll[A] not excluded (+5.0 ± 2.1″)" in text
-    assert "likely no longer carries camera_roll[A] (p 0.00)" in text
+    assert "likely no longer carries camera_roll[A] (p 0.00; named p 0.96)" in text
     # The session warning: the candidate, its value and u, and what resolves it.
     fusion = SimpleNamespace(budget=Budget({}, 1.0, lin))
     assert carried_notices(fusion) == [
