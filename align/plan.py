@@ -166,11 +166,12 @@ class Prediction:
         return any(c.name == name and c.p >= 0.5 for c in self.carried)
 
 
-def _named(drop: float, width: int, n_rows: int) -> bool:
+def _named(drop: float, tested: float, width: int, n_rows: int) -> bool:
     """Whether the fusion loop would name a candidate whose freeing lowers χ² by ``drop``
-    (``width`` components, ``n_rows`` observations): its test at the loop's level after
-    Šidák over the round's candidates, and its BIC drop."""
-    return bool(sidak(float(special.chdtrc(width, drop)), NAMED_TESTED) < NAMED_ALPHA
+    (``width`` components, ``n_rows`` observations; ``tested``: the drop its test sees, on
+    the χ²(``width``) scale): its test at the loop's level after Šidák over the round's
+    candidates, and its BIC drop."""
+    return bool(sidak(float(special.chdtrc(width, tested)), NAMED_TESTED) < NAMED_ALPHA
                 and drop - width * np.log(n_rows) > NAMED_MIN_BIC)
 
 
@@ -218,14 +219,14 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     share = np.zeros((REDRAWS, 6))
     out = []
     z = np.random.default_rng(0).standard_normal((REDRAWS, 2))
-    for name, idx, est in lin.held:
+    for name, idx, est, p_loop in lin.held:
         if name in declared:
             continue
         j = [*free, *idx]
         C = inverse(info[np.ix_(j, j)])
         Cbb = C[len(free):, len(free):]
         b = _with_declared(info, free, idx, np.array(est),
-                           [(i, e) for n, i, e in lin.held if n in declared])
+                           [(i, e) for n, i, e, _ in lin.held if n in declared])
         K = C[:6, len(free):] @ np.linalg.inv(Cbb)
         # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
         S0, S1 = inverse(info_now[np.ix_(j, j)])[len(free):], C[len(free):]
@@ -236,7 +237,12 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         w, v = np.linalg.eigh((d + d.T) / 2)
         draws = b + z[:, :len(b)] @ (v * np.sqrt(np.clip(w, 0.0, None))).T
         chi = np.einsum("ij,ij->i", draws, np.linalg.solve(Cbb, draws.T).T)
-        named = np.array([_named(c, len(idx), n_rows) for c in chi])
+        # the loop's test is not χ²(w) on the drop (it divides by the fit's χ²/dof, its
+        # weights are estimated): its p-value now fixes the scale of the drop it sees
+        now_drop = float(b @ np.linalg.solve(inverse(info_now[np.ix_(j, j)])[len(free):,
+                                                                            len(free):], b))
+        scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
+        named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
         hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e)
                                  for c, x in zip(chi, draws, strict=True)])
         if not add and not drop:  # the session's own data: the fusion decided (not re-judged)
@@ -525,7 +531,7 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
     rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
              if label.startswith("camera roll ")]
     # a roll the fusion carries as not excluded: calibrating it resolves it
-    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, _ in lin.held
+    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in lin.held
               if name.startswith(ROLL + "[")]
     for cam, idx in rolls:
         A = np.zeros((1, len(lin.params)))

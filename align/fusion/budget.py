@@ -116,23 +116,25 @@ class Linearisation:
         The nuisance groups (label, parameter indices) in the order they are freed — dimensionless.
     inflation : float
         The inflation factor f applied to cov(E) — dimensionless.
-    held : tuple of (str, tuple of int, tuple of float)
+    held : tuple of (str, tuple of int, tuple of float, float)
         The candidates the fusion carries as not excluded (:mod:`align.fusion.plausible`):
-        name, parameter indices, estimate when freed [rad]. Their columns are in every
-        group's ``A`` (what freeing them would do, for ``align plan``) but they are held at
-        zero: u, cov(E) and the budget leave them out (their Type B share is added apart).
+        name, parameter indices, estimate when freed [rad], and the p-value of the loop's
+        own test of it (``align.loop.f_test``, before the look-elsewhere corrections). Their
+        columns are in every group's ``A`` (what freeing them would do, for ``align plan``)
+        but they are held at zero: u, cov(E) and the budget leave them out (their Type B
+        share is added apart).
     """
 
     params: tuple[str, ...]
     groups: tuple[Group, ...]
     nuisances: tuple[tuple[str, tuple[int, ...]], ...]
     inflation: float = 1.0
-    held: tuple[tuple[str, tuple[int, ...], tuple[float, ...]], ...] = ()
+    held: tuple[tuple[str, tuple[int, ...], tuple[float, ...], float], ...] = ()
 
     @property
     def free(self) -> np.ndarray:
         """The indices of the parameters estimated (all but the ``held`` ones)."""
-        held = {i for _, idx, _ in self.held for i in idx}
+        held = {i for _, idx, *_ in self.held for i in idx}
         return np.array([i for i in range(len(self.params)) if i not in held], int)
 
     def information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
@@ -189,8 +191,8 @@ class Linearisation:
     def to_dict(self) -> dict:
         return {"parameters": list(self.params), "inflation": self.inflation,
                 "nuisances": [{"label": n, "index": list(i)} for n, i in self.nuisances],
-                "held": [{"name": n, "index": list(i), "estimate_rad": list(e)}
-                         for n, i, e in self.held],
+                "held": [{"name": n, "index": list(i), "estimate_rad": list(e), "loop_p": p}
+                         for n, i, e, p in self.held],
                 "groups": [g.to_dict() for g in self.groups]}
 
     @classmethod
@@ -199,7 +201,7 @@ class Linearisation:
                    tuple((str(n["label"]), tuple(int(i) for i in n["index"]))
                          for n in d["nuisances"]), float(d.get("inflation", 1.0)),
                    tuple((str(h["name"]), tuple(int(i) for i in h["index"]),
-                          tuple(float(e) for e in h["estimate_rad"]))
+                          tuple(float(e) for e in h["estimate_rad"]), float(h["loop_p"]))
                          for h in d.get("held", ())))
 
 

@@ -36,7 +36,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.fusion.plausible import admissible, not_excluded
-from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
+from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, f_test, run_loop
 from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
@@ -396,14 +396,17 @@ def _check_determined(stage: FusionStage) -> None:
 def _held(lin: Linearisation, stage: FusionStage, loop: LoopReport,
           cands: Mapping[str, Candidate], extra: Sequence[tuple[str, int]]) -> Linearisation:
     """``lin`` with its last nuisances (``extra``: the carried candidates) held, each with
-    its estimate when freed alone with the loop's terms (its components) [rad]."""
+    its estimate when freed alone with the loop's terms (its components) [rad] and the
+    p-value of the loop's test of it."""
     nuis = list(lin.nuisances)
     held = []
     for (name, _), (_, idx) in zip(extra, nuis[len(nuis) - len(extra):], strict=True):
-        trial = stage.fit([*loop.terms, cands[name].build(loop.after)]).payload
+        fit = stage.fit([*loop.terms, cands[name].build(loop.after)])
+        trial = fit.payload
         k = next(i for i, (n, _) in enumerate(trial.layout) if n == name)
         at = 6 + sum(w for _, w in trial.layout[:k])
-        held.append((name, idx, tuple(float(v) for v in trial.params[at:at + len(idx)])))
+        held.append((name, idx, tuple(float(v) for v in trial.params[at:at + len(idx)]),
+                     f_test(loop.after, fit, len(idx))))
     return replace(lin, nuisances=tuple(nuis[:len(nuis) - len(extra)]), held=tuple(held))
 
 

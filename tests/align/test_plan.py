@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy import special
 
 from align.cli import main
 from align.fusion import E_INDEX, E_NAMES, NOT_EXCLUDED_TAG
@@ -158,7 +159,8 @@ def _roll_lin(b_arcsec: float) -> Linearisation:
     C = np.diag([4.0, *[1e-4] * 5]) * ARCSEC**2
     return Linearisation((*E_NAMES, "camera_roll[A]"),
                          (*rows, Group("static poses", "static", rest, C)), (), 1.0,
-                         (("camera_roll[A]", (6,), (b_arcsec * ARCSEC,)),))
+                         (("camera_roll[A]", (6,), (b_arcsec * ARCSEC,),
+                           float(special.chdtrc(1, b_arcsec**2 / (4 + 1 / 3)))),))
 
 
 def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
