@@ -308,3 +308,58 @@ def test_predicted_u_of_every_option_matches_simulation(tmp_path, scenario):
     bound = np.array([BOUND[r[1]] for r in rows])
     off = [(r[1], r[4], q) for r, q, b in zip(rows, ratio, bound, strict=True) if abs(q - 1) > b]
     assert not off, off
+
+
+def _carrying(seed: int) -> SessionSpec:
+    """Camera B rolled 20″, undeclared, and no reversal views: the fusion cannot tell the roll
+    from E (nor from the platform's levelling) and carries them as not excluded."""
+    return SessionSpec(seed=seed, views=("A", "B"),
+                       platform_poses=("L000", "L090", "L180", "L270"), noise_v=1e-3,
+                       effects={"camera_roll_B": 20.0},
+                       undeclared=frozenset({"camera_roll_B"}))
+
+
+CARRY_SEEDS = (10, 11, 12, 15, 16, 17, 18)
+"""The seeds of 10–18 whose fusion carries the roll (13 carries nothing, 14 names it)."""
+
+
+@pytest.mark.slow
+def test_predicted_u_with_carried_terms_matches_simulation(tmp_path):
+    """In sessions that carry not-excluded terms, every option the plan ranks realised in
+    synth: the u it predicts for the critical angle — each carried term's expected share
+    after the measurement included (carried, named or dropped over the draws of its new
+    estimate) — against the u the fusion then states. The plan starts from the stated u;
+    each row within 3.5 of its stated noise (⊕ 1 %), and that noise honest over the rows
+    (RMS z 0.4–1.4); where the plan says a term is likely no longer carried, the fusion
+    mostly does not carry it."""
+    rows, agree = [], []
+    for seed in CARRY_SEEDS:
+        spec = _carrying(seed)
+        res = _run(tmp_path / f"b{seed}", spec)
+        lin = res.fusion.budget.model
+        assert lin.held, seed  # the scenario carries (else the seed list is stale)
+        p = plan(lin)
+        k = E_NAMES.index(p.target)
+        ij = E_INDEX[k]
+        assert p.u_before == pytest.approx(res.fusion.E_u[ij], rel=0.01)
+        for o in p.options:
+            got_res = _run(tmp_path / f"{seed}{o.kind}{o.detail}".replace(" ", "_"),
+                           _realise(spec, o.kind, o.detail))
+            got = got_res.fusion.E_u[ij]
+            z = (got - o.u_after) / np.hypot(o.u_after_noise, 0.01 * o.u_after)
+            after = {c.name: c.p for c in o.carried}
+            held = {h[0] for h in got_res.fusion.budget.model.held}
+            for c in p.carried:
+                if after.get(c.name, 0.0) < 0.5:
+                    agree.append(c.name not in held)
+            rows.append(z)
+            print(f"seed {seed}: {o.action}{' (advised)' if o is p.best else ''}: {p.target} "
+                  f"u {p.u_before / ARCSEC:.3f}″ -> predicted {o.u_after / ARCSEC:.3f} ± "
+                  f"{o.u_after_noise / ARCSEC:.3f}″ (carried {after}), obtained "
+                  f"{got / ARCSEC:.3f}″ (carried {sorted(held)}), z {z:+.2f}")
+    z = np.array(rows)
+    print(f"{len(z)} rows: RMS z {np.sqrt(np.mean(z**2)):.2f}, max |z| {np.abs(z).max():.2f}; "
+          f"'likely no longer carried' right in {sum(agree)} of {len(agree)}")
+    assert np.abs(z).max() <= 3.5, z
+    assert 0.4 <= np.sqrt(np.mean(z**2)) <= 1.4, z
+    assert sum(agree) >= 0.8 * len(agree), agree
