@@ -32,7 +32,7 @@ the nuisances the loop chose; a new view may let the loop choose differently.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
@@ -196,69 +196,83 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
 
     Each candidate the session's fusion carries (``lin.held``) is freed in the linearisation:
     with (E, b) of covariance Σ, freeing b moves E by k b̂ (k = Σ_Eb Σ_bb⁻¹) and lowers χ² by
-    b̂ᵀ Σ_bb⁻¹ b̂; the fusion's own rule (:func:`align.fusion.plausible.is_carried`) decides
-    whether it is carried, and its share of u² is (k b̂)². The new estimate b̂' is not known
-    before the data are taken: it is drawn about b̂ with the covariance of b̂ − b̂' — the
-    added data's draw, the dropped (replaced) data's, and the change of the kept data's
-    weights (for data only added: Σ_bb − Σ'_bb; ``redraw`` False: b̂' = b̂) — and u² is the
-    mean over ``REDRAWS`` draws of the share it would then carry. New
-    data that separate b from E shrink k: the shift falls below u/2 and the term drops.
-    First order: a term the new data make significant at the loop's level would be named
-    instead (its u then that of b freed, lower than the carried one predicted here).
-    ``declared``: held candidates the measurement declares (a camera's roll calibrated): no
-    longer candidates, and E corrected for them at their estimates — what they absorbed is no
-    longer left for the others, whose estimates move with them (:func:`_with_declared`)."""
+    b̂ᵀ Σ_bb⁻¹ b̂. The new estimate b̂' is not known before the data are taken: it is drawn
+    about b̂ with the covariance of b̂ − b̂' — the added data's draw, the dropped (replaced)
+    data's, and the change of the kept data's weights (for data only added: Σ_bb − Σ'_bb;
+    ``redraw`` False: b̂' = b̂). In each draw the candidate is named when the loop's test
+    would take it (:func:`_named`; its share of u² then what freeing it adds), else carried
+    when the fusion's own rule says so (:func:`align.fusion.plausible.is_carried`; its share
+    (k b̂')²), else dropped; u² is the fixed model's plus the mean share. New data that
+    separate b from E shrink k: the shift falls below u/2 and the term drops. A candidate
+    more likely named than not is in the model against which the less significant ones are
+    judged (the loop adds the best first), as is one ``declared`` (a camera's roll
+    calibrated: no longer a candidate, E corrected for it at its estimate) — what it absorbed
+    is no longer left for the others, whose estimates move with it (:func:`_with_declared`)."""
     kept = [g for g in lin.groups if g.source not in drop]
-    info = lin.information([*kept, *add])
-    info_now, info_kept = lin.information(), lin.information(kept)
-    info_add = lin.information(add)
+    infos = (lin.information([*kept, *add]), lin.information(), lin.information(kept),
+             lin.information(add))
     free = list(lin.free)
     n_rows = sum(len(g.A) for g in [*kept, *add])
-    u2 = np.diag(inverse(info[np.ix_(free, free)]))[:6] * lin.inflation**2
-    u_e = np.sqrt(u2)
+    u2 = np.diag(inverse(infos[0][np.ix_(free, free)]))[:6] * lin.inflation**2
+    fixed = [(i, e) for n, i, e, _ in lin.held if n in declared]
     share = np.zeros((REDRAWS, 6))
     out = []
-    z = np.random.default_rng(0).standard_normal((REDRAWS, 2))
-    for name, idx, est, p_loop in lin.held:
-        if name in declared:
-            continue
-        j = [*free, *idx]
-        C = inverse(info[np.ix_(j, j)])
-        Cbb = C[len(free):, len(free):]
-        b = _with_declared(info, free, idx, np.array(est),
-                           [(i, e) for n, i, e, _ in lin.held if n in declared])
-        K = C[:6, len(free):] @ np.linalg.inv(Cbb)
-        # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
-        S0, S1 = inverse(info_now[np.ix_(j, j)])[len(free):], C[len(free):]
-        ix = np.ix_(j, j)
-        d = ((S0 - S1) @ info_kept[ix] @ (S0 - S1).T
-             + S0 @ (info_now - info_kept)[ix] @ S0.T + S1 @ info_add[ix] @ S1.T)
-        d = d if redraw else 0 * d
-        w, v = np.linalg.eigh((d + d.T) / 2)
-        draws = b + z[:, :len(b)] @ (v * np.sqrt(np.clip(w, 0.0, None))).T
-        chi = np.einsum("ij,ij->i", draws, np.linalg.solve(Cbb, draws.T).T)
-        # the loop's test is not χ²(w) on the drop (it divides by the fit's χ²/dof, its
-        # weights are estimated): its p-value now fixes the scale of the drop it sees
-        now_drop = float(b @ np.linalg.solve(inverse(info_now[np.ix_(j, j)])[len(free):,
-                                                                            len(free):], b))
-        scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
-        named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
-        hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e)
-                                 for c, x in zip(chi, draws, strict=True)])
-        if not add and not drop:  # the session's own data: the fusion decided (not re-judged)
-            hit[:], named[:] = True, False
-        freed = np.diag(K @ Cbb @ K.T) * lin.inflation**2  # what naming it adds to u²
-        mine = (np.where(hit[:, None], np.square(draws @ K.T), 0.0)
-                + np.where(named[:, None], freed, 0.0))
+    own = not add and not drop  # the session's own data: the fusion decided (not re-judged)
+    for name, idx, est, p_loop in sorted((h for h in lin.held if h[0] not in declared),
+                                         key=lambda h: h[3]):
+        # what the session's data left for it once the others are in the model
+        c, mine = _one(infos, free, idx, _with_declared(infos[1], free, idx, np.array(est),
+                                                        fixed),
+                       p_loop, np.sqrt(u2), n_rows, redraw, own, lin.inflation)
+        out.append(replace(c, name=name))
         share += mine
-        size = float(np.linalg.norm(b))
-        g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
-        if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
-            size, g = float(b[0]), np.ones(1)
-        out.append(Carried(name, size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b),
-                           float(hit.mean()), tuple(mine.mean(0)), float(named.mean())))
+        if c.named >= 0.5:
+            fixed.append((idx, est))
     u = np.sqrt(u2 + share)
-    return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0), tuple(out))
+    order = [h[0] for h in lin.held]
+    return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0),
+                      tuple(sorted(out, key=lambda c: order.index(c.name))))
+
+
+def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,
+         p_loop: float, u_e: np.ndarray, n_rows: int, redraw: bool, own: bool,
+         inflation: float) -> tuple[Carried, np.ndarray]:
+    """One held candidate (parameters ``idx``, estimate ``b`` [rad], the loop's p-value now
+    ``p_loop``) after the measurement (``infos``: the information after, now, of the kept
+    groups, of the added ones): its :class:`Carried` (unnamed) and its share of u² of the
+    six angles in each draw [rad²]."""
+    info, info_now, info_kept, info_add = infos
+    j, n = [*free, *idx], len(free)
+    C = inverse(info[np.ix_(j, j)])
+    Cbb = C[n:, n:]
+    K = C[:6, n:] @ np.linalg.inv(Cbb)
+    # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
+    ix = np.ix_(j, j)
+    S0, S1 = inverse(info_now[ix])[n:], C[n:]
+    d = ((S0 - S1) @ info_kept[ix] @ (S0 - S1).T
+         + S0 @ (info_now - info_kept)[ix] @ S0.T + S1 @ info_add[ix] @ S1.T)
+    w, v = np.linalg.eigh((d + d.T) / 2 if redraw else 0 * d)
+    z = np.random.default_rng(0).standard_normal((REDRAWS, len(b)))
+    draws = b + z @ (v * np.sqrt(np.clip(w, 0.0, None))).T
+    chi = np.einsum("ij,ij->i", draws, np.linalg.solve(Cbb, draws.T).T)
+    # the loop's test is not χ²(w) on the drop (it divides by the fit's χ²/dof, its
+    # weights are estimated): its p-value now fixes the scale of the drop it sees
+    now_drop = float(b @ np.linalg.solve(S0[:, n:], b))
+    scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
+    named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
+    hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e)
+                             for c, x in zip(chi, draws, strict=True)])
+    if own:
+        hit[:], named[:] = True, False
+    freed = np.diag(K @ Cbb @ K.T) * inflation**2  # what naming it adds to u²
+    mine = (np.where(hit[:, None], np.square(draws @ K.T), 0.0)
+            + np.where(named[:, None], freed, 0.0))
+    size = float(np.linalg.norm(b))
+    g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
+    if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
+        size, g = float(b[0]), np.ones(1)
+    return Carried("", size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b), float(hit.mean()),
+                   tuple(mine.mean(0)), float(named.mean())), mine
 
 
 @dataclass(frozen=True)
