@@ -20,6 +20,10 @@ of that kind; its information is added to the session's and the new information 
 * a calibrated camera (only when the loop estimated its roll): the roll known to
   ±``CAMERA_ROLL_U_ARCSEC``.
 
+The candidates the fusion carries as not excluded are part of u before and after: each
+option's prediction includes them as they would be after it (:mod:`align.plan_carried`), and
+the plan names, per carried candidate, the measurement that resolves it.
+
 Each prediction carries its noise (:func:`prediction_noise`): the new data's own u is not
 known before they are taken. When no option's gain exceeds ``NOISE_K`` times it, the plan says
 that no measurement improves the angle by more than the noise of its prediction.
@@ -38,7 +42,8 @@ import numpy as np
 
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
-from align.fusion.observations import E_NAMES
+from align.fusion.observations import E_NAMES, ROLL
+from align.plan_carried import RESOLVES, Carried, predict
 from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
 
@@ -68,8 +73,6 @@ says no measurement improves the angle by more than the prediction's noise."""
 CAMERA_ROLL_U_ARCSEC = 2.0
 """Standard uncertainty [″] of a camera roll after its calibration (a plumb-line image: the
 roll to ~1–3″)."""
-
-
 @dataclass(frozen=True)
 class Option:
     """One measurement to add.
@@ -93,6 +96,10 @@ class Option:
         Standard deviation of ``u_after`` as a prediction [rad]: the u the new data will state
         is not known before they are taken (a new image's own u is a new draw; a repeated
         log's, poses' or tumble's u is estimated from them again).
+    carried : tuple of Carried
+        The session's carried candidates as they would be after it, each with the
+        probability that it is still carried and its expected share (:func:`predict`);
+        unit —.
     """
 
     action: str
@@ -104,10 +111,11 @@ class Option:
     """What exactly: an image's ``housing`` and ``view``, a reversal's ``view``, a
     camera's ``camera``, a replaced input's ``source``."""
     u_after_noise: float = 0.0
+    carried: tuple[Carried, ...] = ()
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
-                "detail": dict(self.detail),
+                "detail": dict(self.detail), "carried_after": {c.name: c.p for c in self.carried},
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
@@ -129,12 +137,20 @@ class Plan:
         Its u now [rad].
     options : tuple of Option
         Ranked by the lowering of its u per minute, best first; unit —.
+    carried : tuple of Carried
+        The candidates E's u carries now as not excluded (included in ``u_before``); unit —.
+    resolves : Mapping
+        Per carried candidate, the measurement after which it would no longer be carried
+        (the best option that does, else what separates that kind from E, ``RESOLVES``);
+        unit —.
     """
 
     target: str
     why: str
     u_before: float
     options: tuple[Option, ...]
+    carried: tuple[Carried, ...] = ()
+    resolves: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def best(self) -> Option | None:
@@ -143,6 +159,8 @@ class Plan:
     def to_dict(self) -> dict:
         return {"format_version": FORMAT_VERSION, "target": self.target, "why": self.why,
                 "u_before_arcsec": self.u_before / ARCSEC, "within_noise": self.within_noise,
+                "carried": [dict(c.to_dict(), resolved_by=self.resolves.get(c.name))
+                            for c in self.carried],
                 "options": [o.to_dict(self.u_before) for o in self.options]}
 
     @property
@@ -155,6 +173,10 @@ class Plan:
     def lines(self) -> list[str]:
         out = [f"what to measure next for {self.target} ({self.why}; u now "
                f"{self.u_before / ARCSEC:.3f}″):"]
+        t = E_NAMES.index(self.target)
+        for c in self.carried:
+            out.append(f"  its u carries {c.label}: {abs(c.shift[t]) / ARCSEC:.3f}″ of it; "
+                       f"resolved by {self.resolves.get(c.name, '?')}")
         if not self.options:
             out.append(f"  no measurement improves {self.target} by more than "
                        f"{100 * MIN_GAIN:g} % of its u (of the kinds known here)")
@@ -166,10 +188,15 @@ class Plan:
                        f"{(self.u_before - o.u_after) / ARCSEC:.3f}″ ± "
                        f"{o.u_after_noise / ARCSEC:.3f}″ (< {NOISE_K:g} standard deviations)")
         for k, o in enumerate(self.options):
+            after = {c.name: c for c in o.carried}
+            left = [f"{c.name} (p {after[c.name].p:.2f}; named p {after[c.name].named:.2f})"
+                    if c.name in after else f"{c.name} (declared)" for c in self.carried
+                    if c.name not in after or after[c.name].p < 0.5]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
-                       f"{o.minutes:g} min")
+                       f"{o.minutes:g} min"
+                       + (f"; likely no longer carries {', '.join(left)}" if left else ""))
         return out
 
 
@@ -183,7 +210,7 @@ def _target(lin: Linearisation, disposition: Mapping | None) -> tuple[str, str]:
             why += ("; it is outside its tolerance by more than the guard band: a smaller u "
                     "leaves it a FAIL")
         return a["name"], why
-    u = lin.u_with()
+    u = predict(lin).u
     k = int(np.argmax(u))
     return E_NAMES[k], "no tolerance: the largest u"
 
@@ -212,7 +239,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
     First order: the derivative of u with respect to each group's log-variance, by a 5 %
     step (u² is smooth in it), times that relative SD, in quadrature over the groups (their
     draws are independent)."""
-    u = lin.u_with(add=add, drop=drop)
+    u = predict(lin, add, drop, redraw=False).u
     var = np.zeros_like(u)
     for i, g in enumerate(add):
         rel = float(g.meta.get("relative_sd", 0.0))
@@ -220,7 +247,7 @@ def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[st
             continue
         step = 0.05
         moved = [*add[:i], _scaled(g, 1 + step), *add[i + 1:]]
-        du = (lin.u_with(add=moved, drop=drop) - u) / np.log1p(step)
+        du = (predict(lin, moved, drop, redraw=False).u - u) / np.log1p(step)
         var += (du * rel) ** 2
     return np.sqrt(var)
 
@@ -313,17 +340,37 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
                         [_halved(g, "static")], [g.source], {"source": g.source}))
-    for label, idx in lin.nuisances:
-        if label.startswith("camera roll "):
-            A = np.zeros((1, len(lin.params)))
-            A[0, idx[0]] = 1.0
-            cam = label[len("camera roll "):]
-            out.append((f"calibrate camera {cam}'s roll (to ±{camera_roll_u / ARCSEC:g}″)",
-                        "camera", minutes["camera"],
-                        [Group(f"camera {cam} roll calibration", "calibration", A,
-                               np.array([[camera_roll_u ** 2]]))], [],
-                        {"camera": cam}))
+    rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
+             if label.startswith("camera roll ")]
+    # a roll the fusion carries as not excluded: calibrating it resolves it
+    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in lin.held
+              if name.startswith(ROLL + "[")]
+    for cam, idx in rolls:
+        A = np.zeros((1, len(lin.params)))
+        A[0, idx[0]] = 1.0
+        out.append((f"calibrate camera {cam}'s roll (to ±{camera_roll_u / ARCSEC:g}″)",
+                    "camera", minutes["camera"],
+                    [Group(f"camera {cam} roll calibration", "calibration", A,
+                           np.array([[camera_roll_u ** 2]]))], [],
+                    {"camera": cam}))
     return out
+
+
+def _resolution(c: Carried, every: Sequence[Option], k: int) -> str:
+    """What resolves carried candidate ``c``: the best option (``every``, best first) after
+    which it is more likely not carried; else the one that lowers its share of angle ``k``
+    most (to less than half), saying so; else what separates its kind from E."""
+    def after(o: Option) -> Carried | None:
+        return next((a for a in o.carried if a.name == c.name), None)
+
+    o = next((o for o in every if (after(o) is None or after(o).p < 0.5)), None)
+    if o is not None:
+        return o.action
+    o = min(every, key=lambda o: after(o).share[k], default=None)
+    if o is not None and after(o).share[k] < c.share[k] / 4:
+        return (f"{o.action} (its share of {E_NAMES[k]} {np.sqrt(c.share[k]) / ARCSEC:.2f}"
+                f" -> {np.sqrt(after(o).share[k]) / ARCSEC:.2f}″)")
+    return RESOLVES.get(c.name.partition("[")[0], "a measurement that separates it from E")
 
 
 def plan(lin: Linearisation, disposition: Mapping | None = None,
@@ -333,15 +380,24 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     session result's ``disposition`` dict, or None); ``camera_roll_u`` [rad] as there."""
     target, why = _target(lin, disposition)
     k = E_NAMES.index(target)
-    u0 = lin.u_with()
-    ranked = []
+    now = predict(lin)
+    u0 = now.u
+    ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
-        u = lin.u_with(add=add, drop=drop)
+        # a camera's roll calibrated is declared: no longer a candidate (session.toml)
+        declared = [f"{ROLL}[{detail['camera']}]"] if kind == "camera" else []
+        after = predict(lin, add, drop, declared=declared)
+        u = after.u
+        o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
+                   float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
+                   after.carried)
+        every.append(o)
         if u[k] < u0[k] * (1 - MIN_GAIN):
-            ranked.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)),
-                                 detail, float(prediction_noise(lin, add, drop)[k])))
+            ranked.append(o)
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
-    return Plan(target, why, float(u0[k]), tuple(ranked))
+    every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
+    resolves = {c.name: _resolution(c, every, k) for c in now.carried}
+    return Plan(target, why, float(u0[k]), tuple(ranked), now.carried, resolves)
 
 
 def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:

@@ -14,6 +14,7 @@ import numpy as np
 
 from align.gonio import nominal_mismatch
 from align.loop import LoopReport, LoopSummary
+from align.plan import plan
 from axisbase.units import ARCSEC
 from goniometry.exclusions import R_TAIL
 
@@ -277,6 +278,22 @@ def setup_notices(fusion, declared: Mapping[str, np.ndarray] | None = None) -> l
     return [setup_notice(e, declared.get(e.name)) for e in fusion.loop.summary().effects]
 
 
+CARRIED_PREFIX = "fusion: E's u carries "
+"""How a carried candidate's warning begins (the report shows these on its first screen)."""
+
+
+def carried_notices(fusion) -> list[str]:
+    """The candidates E's u carries as not excluded (:mod:`align.fusion.plausible`), each
+    with the measurement that would resolve it (:func:`align.plan.plan`'s ``resolves``): the
+    reader must know that part of u is an effect the data could not decide
+    (``FusionResult``, run or loaded)."""
+    b = fusion.budget
+    if b is None or b.model is None or not b.model.held:
+        return []
+    p = plan(b.model)
+    return [f"{CARRIED_PREFIX}{c.label}: {p.resolves[c.name]}" for c in p.carried]
+
+
 def session_warnings(res) -> list[str]:
     """A whole session (``SessionResult``): failed stages first, then every stage's own."""
     out = [f"stage {e.stage} FAILED: {e.message}" for e in res.errors]
@@ -290,6 +307,7 @@ def session_warnings(res) -> list[str]:
     f = res.fusion
     if f is not None:
         out += setup_notices(f, res.session.declared_setup())
+        out += carried_notices(f)
         out += loop_warnings("fusion", f.loop)
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "

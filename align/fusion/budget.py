@@ -116,30 +116,49 @@ class Linearisation:
         The nuisance groups (label, parameter indices) in the order they are freed — dimensionless.
     inflation : float
         The inflation factor f applied to cov(E) — dimensionless.
+    held : tuple of (str, tuple of int, tuple of float, float)
+        The candidates the fusion carries as not excluded (:mod:`align.fusion.plausible`):
+        name, parameter indices, estimate when freed [rad], and the p-value of the loop's
+        own test of it (``align.loop.f_test``, before the look-elsewhere corrections). Their
+        columns are in every group's ``A`` (what freeing them would do, for ``align plan``)
+        but they are held at zero: u, cov(E) and the budget leave them out (their Type B
+        share is added apart).
     """
 
     params: tuple[str, ...]
     groups: tuple[Group, ...]
     nuisances: tuple[tuple[str, tuple[int, ...]], ...]
     inflation: float = 1.0
+    held: tuple[tuple[str, tuple[int, ...], tuple[float, ...], float], ...] = ()
+
+    @property
+    def free(self) -> np.ndarray:
+        """The indices of the parameters estimated (all but the ``held`` ones)."""
+        held = {i for _, idx, *_ in self.held for i in idx}
+        return np.array([i for i in range(len(self.params)) if i not in held], int)
 
     def information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
+        """The information over every parameter, ``held`` ones included."""
         gs = self.groups if groups is None else groups
         return sum((g.information() for g in gs), np.zeros((len(self.params),) * 2))
 
+    def _free_information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
+        f = self.free
+        return self.information(groups)[np.ix_(f, f)]
+
     def cov_e(self, groups: Sequence[Group] | None = None) -> np.ndarray:
         """cov(E) [rad²] (6×6, inflated) from these groups (default: the session's)."""
-        return inverse(self.information(groups))[:6, :6] * self.inflation**2
+        return inverse(self._free_information(groups))[:6, :6] * self.inflation**2
 
     def u_with(self, add: Sequence[Group] = (), drop: Sequence[str] = ()) -> np.ndarray:
         """u of the six angles [rad] with the groups named in ``drop`` left out and ``add``
         added (LinAlgError when the rest no longer determine the parameters)."""
         gs = [g for g in self.groups if g.source not in drop] + list(add)
-        return np.sqrt(np.diag(inverse(self.information(gs)))[:6]) * self.inflation
+        return np.sqrt(np.diag(inverse(self._free_information(gs)))[:6]) * self.inflation
 
     def budget(self) -> Budget:
         """Every angle's u² split into the groups', Type B terms' and nuisances' shares."""
-        I = self.information()  # noqa: E741 (the information matrix)
+        I = self.information()  # noqa: E741 (the information matrix; held rows unused)
         V0 = inverse(I[:6, :6])
         shares: list[tuple[str, str, np.ndarray]] = []
         for g in self.groups:
@@ -172,13 +191,18 @@ class Linearisation:
     def to_dict(self) -> dict:
         return {"parameters": list(self.params), "inflation": self.inflation,
                 "nuisances": [{"label": n, "index": list(i)} for n, i in self.nuisances],
+                "held": [{"name": n, "index": list(i), "estimate_rad": list(e), "loop_p": p}
+                         for n, i, e, p in self.held],
                 "groups": [g.to_dict() for g in self.groups]}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> Linearisation:
         return cls(tuple(d["parameters"]), tuple(Group.from_dict(g) for g in d["groups"]),
                    tuple((str(n["label"]), tuple(int(i) for i in n["index"]))
-                         for n in d["nuisances"]), float(d.get("inflation", 1.0)))
+                         for n in d["nuisances"]), float(d.get("inflation", 1.0)),
+                   tuple((str(h["name"]), tuple(int(i) for i in h["index"]),
+                          tuple(float(e) for e in h["estimate_rad"]), float(h["loop_p"]))
+                         for h in d.get("held", ())))
 
 
 @dataclass(frozen=True)

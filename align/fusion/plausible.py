@@ -167,7 +167,7 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
         joint = _refit(stage, [*loop.terms, term])
         if joint is not None:
             est, u = joint.effects.get(term.name, (0.0, float("inf")))
-            if _excluded(cur.chi2 - joint.chi2, term.width) and abs(est) <= limit:
+            if is_carried(cur.chi2 - joint.chi2, term.width, est, _e(joint) - e0, u_e):
                 found.append(NotExcluded(cand.name, float(est), float(u), _e(joint) - e0))
         for named in loop.terms:
             alt = _refit(stage, [t if t is not named else term for t in loop.terms])
@@ -189,3 +189,14 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
             if np.any(np.abs(best.shift) > SHIFT_FRACTION * u_e):
                 out.append(best)
     return out
+
+
+def is_carried(drop: float, width: int, size: float, shift: np.ndarray, u_e: np.ndarray
+               ) -> bool:
+    """The rule of :func:`not_excluded` (also what ``align plan`` predicts with): a candidate
+    of ``width`` components whose freeing lowers χ² by ``drop`` (b̂ᵀ cov(b)⁻¹ b̂, linearised)
+    to a size ``size`` [rad] and moves E by ``shift`` [rad] is carried when the data cannot
+    exclude it (beyond :data:`NOT_EXCLUDED_Z`, within :data:`UNDECLARED_LIMIT_DEG`) and the
+    shift exceeds :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle."""
+    return bool(_excluded(drop, width) and abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG)
+                and np.any(np.abs(shift) > SHIFT_FRACTION * u_e))

@@ -10,14 +10,14 @@ call for them; a term the data cannot separate from E (rank-deficient) is not of
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.optimize import least_squares
 
 from align.errors import InputError
-from align.fusion.budget import Budget, linearise, with_type_b
+from align.fusion.budget import Budget, Linearisation, linearise, with_type_b
 from align.fusion.diagnosis import (
     SourceDisagreement,
     disagreement_from_dict,
@@ -36,8 +36,9 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.fusion.plausible import admissible, not_excluded
-from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
+from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, f_test, run_loop
 from axisbase.covariance import cov_of
+from axisbase.errors import NotApplicable
 from axisbase.units import ARCSEC
 
 TERM_WIDTH = {TILT: 2, LEVEL: 2}
@@ -393,6 +394,30 @@ def _check_determined(stage: FusionStage) -> None:
                      "view, the goniometer log or platform static poses")
 
 
+def _held(lin: Linearisation, stage: FusionStage, loop: LoopReport,
+          cands: Mapping[str, Candidate], extra: Sequence[tuple[str, int]]) -> Linearisation:
+    """``lin`` with its last nuisances (``extra``: the carried candidates) held, each with
+    its estimate when freed alone with the loop's terms (its components) [rad] and the
+    p-value of the loop's test of it."""
+    nuis = list(lin.nuisances)
+    held = []
+    for (name, _), (_, idx) in zip(extra, nuis[len(nuis) - len(extra):], strict=True):
+        try:
+            fit = stage.fit([*loop.terms, cands[name].build(loop.after)])
+        except (NotApplicable, np.linalg.LinAlgError):
+            # Carried as an alternative to a named effect it cannot be freed beside (the two
+            # not separable): held at zero, its estimate unknown to the plan (p 1: the loop
+            # would not name it beside the other).
+            held.append((name, idx, (0.0,) * len(idx), 1.0))
+            continue
+        trial = fit.payload
+        k = next(i for i, (n, _) in enumerate(trial.layout) if n == name)
+        at = 6 + sum(w for _, w in trial.layout[:k])
+        held.append((name, idx, tuple(float(v) for v in trial.params[at:at + len(idx)]),
+                     f_test(loop.after, fit, len(idx))))
+    return replace(lin, nuisances=tuple(nuis[:len(nuis) - len(extra)]), held=tuple(held))
+
+
 def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
     """Solve for E with the residual loop over the nuisance candidates."""
     stage = FusionStage(blocks)
@@ -444,14 +469,21 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         cov = cov + np.outer(c.shift, c.shift)
     if carried:
         E_u = e_matrix(np.sqrt(np.diag(cov)))
-    layout = list(sol.layout)
+    # The carried candidates' columns join the linearisation held at zero: what freeing
+    # them would do, from which 'align plan' predicts whether a measurement resolves them.
+    extra = [(c.name, _width(c.name)) for c in carried]
+    layout = [*sol.layout, *extra]
+    params = np.concatenate([sol.params, np.zeros(sum(w for _, w in extra))])
+    names = [*sol.names, *(f"{n}[{k}]" if w > 1 else n for n, w in extra for k in range(w))]
 
     def predict_all(p: np.ndarray) -> list[np.ndarray]:
         axes, nu = stage._unpack(p, layout)
         return [b.predict(axes, nu) for b in stage.blocks]
 
-    budget = linearise(stage.blocks, predict_all, sol.params, sol.names, layout,
-                       inflation).budget()
+    lin = linearise(stage.blocks, predict_all, params, names, layout, inflation)
+    if carried:
+        lin = _held(lin, stage, loop, {c.name: c for c in cands}, extra)
+    budget = lin.budget()
     if named is not None:
         budget = with_disagreement(budget, named)
     for c in carried:

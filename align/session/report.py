@@ -29,7 +29,7 @@ from align.plots import (
     png_bytes,
 )
 from align.session.run import SessionResult
-from align.warnings import session_warnings, setup_notices
+from align.warnings import CARRIED_PREFIX, session_warnings, setup_notices
 from axisbase.header import OUTPUT_UNITS
 from axisbase.output import write_atomic
 from axisbase.provenance import Provenance
@@ -350,7 +350,9 @@ def report_html(res: SessionResult, doc: dict | None = None,
             sections.append((key, name))
     notices = (setup_notices(res.fusion, res.session.declared_setup())
                if res.fusion is not None else [])
-    shown = [w for w in warnings if w not in notices]  # the notices are on the first screen
+    carried = [w for w in warnings if w.startswith(CARRIED_PREFIX)]
+    # the notices and the carried candidates are on the first screen
+    shown = [w for w in warnings if w not in notices and w not in carried]
     if shown:
         sections.insert(0, ("warnings", f"Warnings ({len(shown)})"))
     if res.errors:
@@ -367,7 +369,7 @@ def report_html(res: SessionResult, doc: dict | None = None,
         "session.html.j2", title=f"Alignment report {unit_label} ({res.session.name})",
         unit_label=unit_label, identity=ident, banner=banner(res, disposition),
         strip=stage_strip(res, warnings),
-        notices=notices, toc=sections, warnings=shown,
+        notices=notices, carried=carried, toc=sections, warnings=shown,
         errors=[[e.stage, e.message] for e in res.errors], ok=res.ok,
         not_ok_reason=(f"stage(s) failed: {failed}" if failed else
                        res.calibration.problems[0] if res.calibration is not None
