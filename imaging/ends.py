@@ -260,6 +260,9 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
             inner = run_from(hit[0], -step)
             outer = run_from(hit[-1], step)
             clean_end = min(k, inner - step) if step > 0 else max(k, inner - step)
+            # (An obstruction's run out to the last bin inward: its inner side is that bin,
+            # not one past it — an IndexError at the end, a wrap to the far end at the start.)
+            clean_end = min(max(clean_end, 0), nb - 1)
             # An extent that reached over bare surface into the obstruction (the look runs
             # a fixed reach past the search's stretch) is no groove there: what is seen ends
             # at the groove's last deep bin inside it (a speck 4 px past a short graduation's
