@@ -26,7 +26,15 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.errors import NotApplicable
 from align.loop import Candidate, StageFit, Term, periodogram_test
-from imaging import MarkMeasurement, cross_magnification, fit_line, line_frame, undistort
+from imaging import (
+    MarkMeasurement,
+    cross_magnification,
+    fit_line,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
+    line_frame,
+    undistort,
+)
 
 RADIAL = "radial_distortion"
 WIGGLE = "periodic_wiggle"
@@ -159,9 +167,18 @@ def texture_scale(m: MarkMeasurement) -> float:
     session images). The amplitude is re-read from the mark itself, on differences of
     neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
     touches: var(z[i+1] - z[i]) = 2 for white z.
+
+    A JPEG (``m.jpeg``, :mod:`imaging.jpeg`) is read the same way: the encoder's
+    quantisation moves each centre by a part of its block's error (centres 4 px apart, two
+    to a block, nearly uncorrelated), scatter at the block scale that the Fisher sigma does
+    not hold (its noise is read from a background the encoder smoothed). Neighbour
+    differences see that scatter and hardly see a bow, a lens or a slow wiggle, which the
+    loop still tests for (:func:`imaging.jpeg_centre_scale`).
     """
-    if m.chol is None or len(m.points) <= 10:
+    if len(m.points) <= 10 or (m.chol is None and m.jpeg is None):
         return 1.0
+    if m.chol is None:
+        return jpeg_centre_scale(fit_line(m.points, m.sigma, reject_sigma=None).z)
     # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
     # (each residual given the ones before it), so from the other end the whitened series
     # differs, and u would depend on which end the line starts from (the same pixels
@@ -183,6 +200,8 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     variance 3 / n relative, i.e. 2 n / 3 dof, and relative variances add (2/nu each).
     """
     tex = m.centres.texture
+    if m.chol is None and m.jpeg is not None and scale > 1.0:
+        return jpeg_noise_dof(len(m.points))  # the JPEG's scatter re-read from the mark
     if m.chol is None or tex is None or not np.isfinite(tex.dof):
         return None
     if scale <= 1.0:

@@ -136,8 +136,63 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
             best = JpegBlocks(quality, float(r.min()), len(c))
             break  # the lowest quality (largest steps) the coefficients follow
     if best is None and _flat_on_the_grid(image[:h, :w]):
-        best = JpegBlocks(None, float("nan"), len(c))
+        # The encoder flattened the background; its quality is read from the blocks it did
+        # not flatten (a mark's), by re-encoding them (None: too few to tell).
+        best = JpegBlocks(requantised_quality(b.reshape(-1, 8, 8), c), float("nan"), len(c))
     return best
+
+
+REQUANT_MIN_BLOCKS = 20
+"""Fewest blocks with content (not flat) :func:`requantised_quality` reads a quality from."""
+REQUANT_SHARE = 0.95
+"""Share of those blocks a quality's table must give back (each pixel within 1 DN)."""
+
+
+def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400) -> int | None:
+    """The lowest IJG quality whose table gives back the decoded blocks: each block's DCT
+    coefficients quantised to that table's steps and decoded again (rounded, clipped) must
+    reproduce its pixels within 1 DN (the encoder's fixed-point DCT) in
+    :data:`REQUANT_SHARE` of the blocks with content.
+
+    A decoded JPEG is (nearly) a fixed point of its own quantiser, and of any finer one
+    whose steps divide its own; a coarser table moves the pixels by whole steps. Unlike the
+    coefficients' concentration on the steps' multiples (:func:`find_jpeg`), this holds for
+    blocks whose few non-zero coefficients decode to patterns of 1-2 DN, which rounding
+    to integers moves by a large part of a step (quality 75's (2, 0) coefficient read back
+    at 5.2 for its step of 7). A raw image is given back only by quality 100 (steps of 1).
+
+    Parameters
+    ----------
+    blocks : numpy.ndarray
+        (N, 8, 8) decoded blocks [DN].
+    coeffs : numpy.ndarray
+        (N, 8, 8) their orthonormal DCT about 128 [DN].
+    most : int
+        Blocks with content used at most (the first ones).
+
+    Returns
+    -------
+    int or None
+        The quality 1-99; None: fewer than :data:`REQUANT_MIN_BLOCKS` blocks with content,
+        or only quality 100 gives them back.
+    """
+    busy = np.flatnonzero(blocks.max(axis=(1, 2)) > blocks.min(axis=(1, 2)))[:most]
+    if len(busy) < REQUANT_MIN_BLOCKS:
+        return None
+    b, c, D = blocks[busy], coeffs[busy], _dct_matrix()
+
+    def given_back(T: np.ndarray, n: int) -> float:
+        rec = np.einsum("ji,njk,kl->nil", D, np.round(c[:n] / T) * T, D) + 128.0
+        return float(np.mean(np.abs(np.clip(np.round(rec), 0, 255) - b[:n]).max(axis=(1, 2))
+                             <= 1))
+
+    for quality in range(1, 100):
+        T = ijg_table(quality)
+        # A table that fails on the first 20 blocks fails (a coarser one moves most of
+        # them): the full count only where it may pass.
+        if given_back(T, REQUANT_MIN_BLOCKS) >= 0.8 and given_back(T, len(b)) >= REQUANT_SHARE:
+            return quality
+    return None
 
 
 def _one_multiple(x: np.ndarray, step: float) -> bool:
@@ -230,3 +285,39 @@ def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileF
     da = fit_line(b.xy[ok], one, reject_sigma=None).angle_rad - fit_line(
         a.xy[ok], one, reject_sigma=None).angle_rad
     return float(abs((da + np.pi / 2) % np.pi - np.pi / 2))
+
+
+def jpeg_centre_scale(z: np.ndarray) -> float:
+    """Variance factor (>= 1) on a JPEG mark's centres from its own whitened residuals ``z``
+    (in order along the mark): the mean squared neighbour difference over its value for
+    white z (2).
+
+    The encoder's quantisation moves each centre by its share of its block's error: the
+    centres (4 px apart, two to a block) scatter beyond their Fisher sigma, almost
+    independently (lag-1 correlation ~0 at quality 50-90), and the Fisher sigma itself comes
+    from a background the encoder smoothed. Neighbour differences take that block-scale
+    scatter and hardly any of a bow, a lens or a wiggle of 2 or more blocks' period (a
+    smooth effect's difference over 4 px is small), which the loop then still tests for:
+    only the blocks' own scatter is taken as known.
+
+    Parameters
+    ----------
+    z : numpy.ndarray
+        Whitened residuals of the straight line fit, in order along the mark [-].
+
+    Returns
+    -------
+    float
+        The factor on the centres' variance [-].
+    """
+    z = np.asarray(z, float)
+    if len(z) < 3:
+        return 1.0
+    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2))
+
+
+def jpeg_noise_dof(n: int) -> float:
+    """Degrees of freedom of :func:`jpeg_centre_scale`'s estimate from ``n`` centres: the
+    mean of squared neighbour differences of n white z has relative variance 3 / (n - 1)
+    (neighbouring differences share a term), i.e. 2 (n - 1) / 3 dof."""
+    return float(max(n - 1, 1) / 1.5)
