@@ -146,6 +146,9 @@ REQUANT_MIN_BLOCKS = 20
 """Fewest blocks with content (not flat) :func:`requantised_quality` reads a quality from."""
 REQUANT_SHARE = 0.95
 """Share of those blocks a quality's table must give back (each pixel within 1 DN)."""
+REQUANT_MAX = 97
+"""Highest quality tried: above it the steps (1-2 at 99) are within the 1 DN allowed, and any
+image is given back."""
 
 
 def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400) -> int | None:
@@ -159,7 +162,8 @@ def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400)
     coefficients' concentration on the steps' multiples (:func:`find_jpeg`), this holds for
     blocks whose few non-zero coefficients decode to patterns of 1-2 DN, which rounding
     to integers moves by a large part of a step (quality 75's (2, 0) coefficient read back
-    at 5.2 for its step of 7). A raw image is given back only by quality 100 (steps of 1).
+    at 5.2 for its step of 7). A raw image is given back only by the finest tables (steps of
+    1-2 at quality 99, within the 1 DN allowed): qualities up to :data:`REQUANT_MAX` are tried.
 
     Parameters
     ----------
@@ -173,8 +177,8 @@ def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400)
     Returns
     -------
     int or None
-        The quality 1-99; None: fewer than :data:`REQUANT_MIN_BLOCKS` blocks with content,
-        or only quality 100 gives them back.
+        The quality 1-:data:`REQUANT_MAX`; None: fewer than :data:`REQUANT_MIN_BLOCKS`
+        blocks with content, or no quality up to it gives them back.
     """
     busy = np.flatnonzero(blocks.max(axis=(1, 2)) > blocks.min(axis=(1, 2)))[:most]
     if len(busy) < REQUANT_MIN_BLOCKS:
@@ -186,7 +190,7 @@ def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400)
         return float(np.mean(np.abs(np.clip(np.round(rec), 0, 255) - b[:n]).max(axis=(1, 2))
                              <= 1))
 
-    for quality in range(1, 100):
+    for quality in range(1, REQUANT_MAX + 1):
         T = ijg_table(quality)
         # A table that fails on the first 20 blocks fails (a coarser one moves most of
         # them): the full count only where it may pass.

@@ -8,7 +8,13 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
-from imaging.jpeg import find_jpeg, ijg_table
+from imaging.jpeg import (
+    find_jpeg,
+    ijg_table,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
+    requantised_quality,
+)
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -70,3 +76,49 @@ def test_blocks_alike_along_a_groove_are_not_jpeg():
     groove on row 100 was called 'JPEG quality ~41')."""
     for seed in range(4):
         assert find_jpeg(_groove_on_a_block_row(seed)) is None, seed
+
+
+def _flattened_jpeg(quality: int | None, seed: int = 0) -> np.ndarray:
+    """A 160x160 frame, background 140 DN with 1.3 DN noise (user 13's: the encoder at
+    quality 75 flattens it), a dark 3 px groove at 30 deg, through OpenCV's encoder."""
+    cv2 = pytest.importorskip("cv2")
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:160, 0:160]
+    d = (xx - 80) * np.sin(0.52) + (yy - 80) * np.cos(0.52)
+    img = 140.0 - 40.0 * np.exp(-0.5 * (d / 1.5) ** 2) + rng.normal(0, 1.3, d.shape)
+    img = np.clip(np.round(img), 0, 255).astype(np.uint8)
+    if quality is None:
+        return img
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+
+
+def _blocks(img: np.ndarray):
+    b = img.astype(float).reshape(20, 8, 20, 8).transpose(0, 2, 1, 3).reshape(-1, 8, 8)
+    k = np.arange(8)
+    D = np.sqrt(2 / 8) * np.cos((2 * k[None, :] + 1) * k[:, None] * np.pi / 16)
+    D[0] /= np.sqrt(2)
+    return b, np.einsum("ij,njk,lk->nil", D, b - 128.0, D)
+
+
+@pytest.mark.parametrize("quality", [50, 75, 90])
+def test_quality_of_a_flattened_jpeg_by_requantising(quality):
+    """The blocks with content given back by their own table: the lowest quality that does
+    is the encoder's or a few below (the steps round alike); a raw frame only by 100."""
+    q = requantised_quality(*_blocks(_flattened_jpeg(quality)))
+    assert q is not None and quality - 8 <= q <= quality, q
+    assert requantised_quality(*_blocks(_flattened_jpeg(None))) is None
+
+
+def test_jpeg_centre_scale_takes_the_scatter_not_a_bow():
+    """White residuals at 2.2x their sigma: the factor ~4.8 (within its 2 (n-1)/3 dof); a
+    bow of 10 sigma on white residuals of sigma 1: the factor stays near 1."""
+    rng = np.random.default_rng(3)
+    n = 60
+    z = 2.2 * rng.normal(size=(200, n))
+    f = np.array([jpeg_centre_scale(r) for r in z])
+    sd = np.sqrt(2 / jpeg_noise_dof(n)) * 4.84
+    assert abs(f.mean() - 4.84) <= 4 * sd / np.sqrt(len(f)), f.mean()
+    t = np.linspace(-1, 1, n)
+    bowed = [jpeg_centre_scale(rng.normal(size=n) + 10 * (t**2 - 1 / 3)) for _ in range(50)]
+    assert np.mean(bowed) <= 1.15, np.mean(bowed)
