@@ -135,7 +135,7 @@ def test_planar_rgb_tiff_is_said_to_be_one_colour_page(tmp_path):
     get no such note."""
     tifffile = pytest.importorskip("tifffile")
     a = np.random.default_rng(0).integers(0, 255, (3, 24, 40), dtype=np.uint8)
-    tifffile.imwrite(tmp_path / "planes.tif", a)
+    tifffile.imwrite(tmp_path / "planes.tif", a, photometric="rgb", planarconfig="separate")
     tifffile.imwrite(tmp_path / "chunky.tif", a.transpose(1, 2, 0))
     tifffile.imwrite(tmp_path / "grey.tif", a[0])
     got = read_image_notes(tmp_path / "planes.tif")
