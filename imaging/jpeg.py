@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imaging.band import band_pixels
+from imaging.candidate import line_frame
 from imaging.centres import sample_centres
 from imaging.groove import ProfileFit, ProfileTable, centres_half
 from imaging.linefit import fit_line
@@ -274,7 +275,35 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     model.flat[idx] += pf.contrast_dn * p
     model = np.clip(model, 0.0, 255.0)
-    return rendering_angle_shift(model, jpeg_round_trip(model, quality), pf)
+    return blocks_systematic(model, jpeg_round_trip(model, quality), pf)
+
+
+def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
+    """The part of JPEG's angle shift on the groove ``pf`` (``a_image`` the noise-free
+    model, ``b_image`` it re-encoded) that its centres' scatter does not already carry [rad].
+
+    The blocks move each centre by an amount that changes from block to block (scatter at
+    the block scale, which :func:`jpeg_centre_scale` reads into the centres' sigma and so
+    into the line's u) and that drifts with the edge's phase in the grid (the systematic).
+    The line through the centres' moves turns by da; its scatter s about that line (by
+    neighbour differences, as the mark's) would turn it by u_s = s / sqrt(sum (t - t_m)^2)
+    alone. What stands beyond, sqrt(max(0, da^2 - u_s^2)), is the Type B term: counted once.
+    Equal weights, the segments valid in both (0 when fewer than 10 are).
+    """
+    a, b = sample_centres(a_image, pf), sample_centres(b_image, pf)
+    ok = a.ok & b.ok
+    if ok.sum() < 10:
+        return 0.0
+    u, n = line_frame(pf.angle_rad)
+    t = a.xy[ok] @ u
+    d = (b.xy[ok] - a.xy[ok]) @ n
+    order = np.argsort(t)
+    t, d = t[order], d[order]
+    X = np.column_stack([np.ones_like(t), t - t.mean()])
+    beta, *_ = np.linalg.lstsq(X, d, rcond=None)
+    r = d - X @ beta
+    u_s2 = np.mean(np.diff(r) ** 2) / 2 / np.sum((t - t.mean()) ** 2)
+    return float(np.sqrt(max(0.0, beta[1] ** 2 - u_s2)))
 
 
 def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
