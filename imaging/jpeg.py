@@ -145,7 +145,7 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
 
 REQUANT_MIN_BLOCKS = 20
 """Fewest blocks with content (not flat) :func:`requantised_quality` reads a quality from."""
-REQUANT_SHARE = 0.95
+REQUANT_SHARE = 0.98
 """Share of those blocks a quality's table must give back (each pixel within 1 DN)."""
 REQUANT_MAX = 97
 """Highest quality tried: above it the steps (1-2 at 99) are within the 1 DN allowed, and any
@@ -238,7 +238,7 @@ def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
     return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(float)
 
 
-def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
+def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) -> str:
     """The line that names JPEG blocks on a mark and what they add to its u.
 
     Parameters
@@ -248,7 +248,10 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
     jb : JpegBlocks
         The encoder found.
     u_arcsec : float
-        What the blocks add to the angle's u [″] (text: an edge).
+        What the blocks' systematic turn adds to the angle's u [″] (text: an edge).
+    spread : float
+        Factor on the centres' sigma their scatter was read to have (1: none beyond the
+        stated; :func:`jpeg_centre_scale`, square-rooted) [-].
 
     Returns
     -------
@@ -257,9 +260,11 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
     """
     q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
          "flattened blocks, quality unknown: the worst of 10-90 carried")
+    scatter = (f"their scatter, taken as the blocks' and not as structure, widens the centres' "
+               f"sigma x{spread:.3g}; " if spread > 1.0 else "")
     return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "
-            f"with the edge's place in the grid; u widened by {u_arcsec:.2g}\" (jpeg_blocks: "
-            "the fitted groove re-encoded)")
+            f"with the edge's place in the grid; {scatter}u widened by {u_arcsec:.2g}\" "
+            "(jpeg_blocks: the fitted groove re-encoded)")
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None) -> float:
