@@ -161,13 +161,15 @@ def test_user13_jpeg_marks_within_u_and_not_called_structured(quality):
     """User 13: quality 75 with the exact camera had 6 of 6 marks 'unexplained structure',
     u 54-1268" against errors of 1-82" (the blocks' scatter read as structure, then as a
     bent mark or a lens, u x50-1000). Now the scatter is the centres' (re-read from the
-    mark, imaging.jpeg_centre_scale) and the blocks' systematic a Type B term: over 6
-    seeds x 4 marks (lengths 180-300 px, any angle), at least 90 % ok, every ok mark within
-    3 u, the z's RMS at most 1.2 (measured: q50 0.70, q75 0.59, q90 0.77: the jpeg_blocks
-    bound, a largest shift, is conservative)."""
+    mark, imaging.jpeg_centre_scale) and the blocks' systematic turn beyond it a Type B
+    term: over 6 seeds x 4 marks (lengths 180-300 px, any angle), at least 90 % ok, every
+    ok mark within 3 u, the z's RMS within [0.5, 1.2] (u neither short nor useless; before,
+    0.26 at q50 over all marks). Measured over 12 seeds through the CLI (report): RMS z
+    0.97 / 0.77 / 0.83 at q50 / 75 / 90, max |z| 2.51 / 1.86 / 2.18, ok 44 / 48 / 48 of 48
+    (before 0 / 14 / 48)."""
     got = list(_user13_jpeg_marks(quality, range(1, 7)))
     z = np.array([e / u for e, u, ok, _ in got if ok])
     assert len(got) >= 22 and len(z) >= 0.9 * len(got), (len(got), len(z))
     assert np.max(np.abs(z)) <= 3.0, z
-    assert np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
+    assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
     assert not any(r.unexplained_structure for *_, r in got if quality >= 75)
