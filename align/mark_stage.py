@@ -28,6 +28,7 @@ from align.errors import NotApplicable
 from align.loop import Candidate, StageFit, Term, periodogram_test
 from imaging import (
     MarkMeasurement,
+    block_phase_columns,
     cross_magnification,
     fit_line,
     jpeg_centre_scale,
@@ -78,6 +79,7 @@ class MarkStage:
         ts = texture_scale(m)
         self.sigma = m.sigma * np.sqrt(ts)
         self.noise_dof = noise_dof(m, ts)
+        self.blocks = jpeg_blocks_columns(m)
 
     def undistorted(self, k1: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """The centres undistorted by k1 and their sigma across the line carried with them
@@ -100,6 +102,8 @@ class MarkStage:
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else _bend_column(q, angle) if t.name == BEND
                     else np.asarray(t.columns, float).reshape(len(q), -1) for t in terms]
+            if self.blocks is not None:
+                cols.append(self.blocks)  # last: the terms' columns keep their indices
             F = np.hstack(cols) if cols else None
             lf = fit_line(q, sig, F, reject_sigma=None, chol=m.chol)
             angle = lf.angle_rad
@@ -178,6 +182,8 @@ def texture_scale(m: MarkMeasurement) -> float:
     if len(m.points) <= 10 or (m.chol is None and m.jpeg is None):
         return 1.0
     if m.chol is None:
+        # The blocks' pattern left in (not :func:`jpeg_blocks_columns`): every fit of the
+        # centres takes this sigma, and the camera's bow test fits no such columns.
         return jpeg_centre_scale(fit_line(m.points, m.sigma, reject_sigma=None).z)
     # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
     # (each residual given the ones before it), so from the other end the whitened series
@@ -188,6 +194,23 @@ def texture_scale(m: MarkMeasurement) -> float:
     rev = np.linalg.cholesky((m.chol @ m.chol.T)[::-1, ::-1])
     zr = fit_line(m.points[::-1], m.sigma[::-1], reject_sigma=None, chol=rev).z
     return float(max(1.0, (np.mean(np.diff(z) ** 2) + np.mean(np.diff(zr) ** 2)) / 4))
+
+
+def jpeg_blocks_columns(m: MarkMeasurement) -> np.ndarray | None:
+    """A JPEG mark's block-pattern columns (:func:`imaging.block_phase_columns`), fitted
+    with its line as known nuisance terms: the pattern is the encoder's, not structure the
+    model lacks. None: not a JPEG (or no pattern the centres' phases determine).
+
+    The centres' raw pixel coordinate along the axis the mark runs with is taken on the
+    profile's line at each centre's ``t`` (their distance from it, hundredths of a px, moves
+    no phase)."""
+    if m.jpeg is None:
+        return None
+    u, n = line_frame(m.profile.angle_rad)
+    raw = m.profile.offset_px * n + np.asarray(m.regressors["t"], float)[:, None] * u
+    axis = 0 if abs(u[0]) >= abs(u[1]) else 1
+    cols = block_phase_columns(raw[:, axis] + (m.image_shape[1 - axis] - 1) / 2)
+    return cols if cols.shape[1] else None
 
 
 def noise_dof(m: MarkMeasurement, scale: float) -> float | None:

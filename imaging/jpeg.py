@@ -359,3 +359,51 @@ def jpeg_noise_dof(n: int) -> float:
     mean of squared neighbour differences of n white z has relative variance 3 / (n - 1)
     (neighbouring differences share a term), i.e. 2 (n - 1) / 3 dof."""
     return float(max(n - 1, 1) / 1.5)
+
+
+BLOCK_HARMONICS = 3
+"""Harmonics of the 8 px block period modelled along the mark (periods 8, 4 and 8/3 px)."""
+
+
+def block_phase_columns(along_px: np.ndarray) -> np.ndarray:
+    """Design columns for the blocks' pattern along a mark: a function of each centre's
+    place in its 8x8 block along the axis the mark runs with (``along_px``, the raw pixel
+    coordinate x or y of each centre [px]) — the same in every block it crosses.
+
+    The encoder's error at an edge depends on where in the block the edge's profile lies,
+    so along a mark the centres repeat a pattern of period 8 px in that coordinate (at 4 px
+    spacing: alternating signs, the lag-1 'structure' of a near-axis mark at quality 50).
+    Modelled as harmonics of 8 px (:data:`BLOCK_HARMONICS`), mean-free, reduced to the
+    combinations the centres' phases determine (a sampling that hits two phases leaves
+    one column) and to the harmonics that change fast from centre to centre (an alias of a
+    slow pattern would tilt with the line: none). The blocks' *slow* drift (the edge crossing
+    block rows along the other axis) is no column: it is the angle's own shape, carried by
+    ``jpeg_blocks``.
+
+    Parameters
+    ----------
+    along_px : numpy.ndarray
+        (N,) raw pixel coordinate of each centre along the mark's axis [px].
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, k) columns, k = 0..2 :data:`BLOCK_HARMONICS`, each of unit RMS [-].
+    """
+    x = np.asarray(along_px, float)
+    n = len(x)
+    step = float(np.median(np.abs(np.diff(np.sort(x))))) if n > 1 else 0.0
+    # Only harmonics the centres' spacing sees as fast (at least a quarter turn of phase
+    # from one centre to the next): an alias of a slow pattern (period 8/3 px at 2.8 px
+    # spacing) drifts along the mark like a tilt and would take the angle with it.
+    fast = [j for j in range(1, BLOCK_HARMONICS + 1)
+            if abs((2 * np.pi * j * step / 8 + np.pi) % (2 * np.pi) - np.pi) >= np.pi / 2]
+    if not fast or n < 8 * len(fast):
+        return np.zeros((n, 0))
+    cols = [f(2 * np.pi * j * x / 8) for j in fast for f in (np.cos, np.sin)]
+    A = np.column_stack(cols) - np.column_stack(cols).mean(axis=0)
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    # Only directions the phases pin down: a singular value below a tenth of the column
+    # norm is a pattern the sampling does not see (and would only cost conditioning).
+    keep = s > 0.1 * np.sqrt(n / 2)
+    return U[:, keep] * np.sqrt(n)

@@ -9,6 +9,7 @@ import pytest
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging.jpeg import (
+    block_phase_columns,
     find_jpeg,
     ijg_table,
     jpeg_centre_scale,
@@ -173,3 +174,21 @@ def test_user13_jpeg_marks_within_u_and_not_called_structured(quality):
     assert np.max(np.abs(z)) <= 3.0, z
     assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
     assert not any(r.unexplained_structure for *_, r in got if quality >= 75)
+
+
+def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
+    """Centres 4 px apart along an axis hit two phases of the 8 px block: one column,
+    alternating (a mark 1.7 deg off the axis: that and its slow turn); along a 45 deg mark
+    (2.83 px a step) the period-8/3 harmonic, an alias that drifts like a tilt, is left
+    out. Every column is mean-free and nearly orthogonal to the position along the mark
+    (the angle's column)."""
+    t = np.arange(60) * 4.0
+    assert block_phase_columns(100.3 + t).shape == (60, 1)
+    for x, k in ((100.3 + t * np.cos(0.03), 2), (100.3 + t * np.cos(np.pi / 4), 4)):
+        C = block_phase_columns(x)
+        assert C.shape == (60, k), C.shape
+        assert np.allclose(C.mean(axis=0), 0, atol=1e-9)
+        tc = (t - t.mean()) / np.linalg.norm(t - t.mean())
+        assert np.all(np.abs(tc @ C) / np.linalg.norm(C, axis=0) < 0.25), tc @ C
+    alt = block_phase_columns(100.3 + t)[:, 0]
+    assert np.all(np.sign(alt[1:]) == -np.sign(alt[:-1]))
