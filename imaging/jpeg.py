@@ -287,9 +287,11 @@ def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) 
     """The part of JPEG's angle shift on the groove ``pf`` (``a_image`` the noise-free
     model, ``b_image`` it re-encoded) that its centres' scatter does not already carry [rad].
 
-    The blocks move each centre by an amount that changes from block to block (scatter at
-    the block scale, which :func:`jpeg_centre_scale` reads into the centres' sigma and so
-    into the line's u) and that drifts with the edge's phase in the grid (the systematic).
+    The blocks move each centre by a pattern that repeats every block along the mark
+    (:func:`block_phase_columns`, fitted with the line), by an amount that changes from
+    block to block (scatter at the block scale, which :func:`jpeg_centre_scale` reads into
+    the centres' sigma and so into the line's u) and by one that drifts with the edge's
+    phase in the grid (the systematic).
     The line through the centres' moves turns by da; its scatter s about that line (by
     neighbour differences, as the mark's) would turn it by u_s = s / sqrt(sum (t - t_m)^2)
     alone. What stands beyond, sqrt(max(0, da^2 - u_s^2)), is the Type B term: counted once.
@@ -302,9 +304,13 @@ def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) 
     u, n = line_frame(pf.angle_rad)
     t = a.xy[ok] @ u
     d = (b.xy[ok] - a.xy[ok]) @ n
+    # The block pattern the mark's fit takes as known (jpeg_blocks_columns) is no scatter
+    # the line's u holds: fitted here too, as there.
+    axis = 0 if abs(u[0]) >= abs(u[1]) else 1
+    along = a.xy[ok, axis] + (a_image.shape[1 - axis] - 1) / 2
     order = np.argsort(t)
-    t, d = t[order], d[order]
-    X = np.column_stack([np.ones_like(t), t - t.mean()])
+    t, d, along = t[order], d[order], along[order]
+    X = np.column_stack([np.ones_like(t), t - t.mean(), block_phase_columns(along)])
     beta, *_ = np.linalg.lstsq(X, d, rcond=None)
     r = d - X @ beta
     u_s2 = np.mean(np.diff(r) ** 2) / 2 / np.sum((t - t.mean()) ** 2)
