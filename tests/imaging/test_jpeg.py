@@ -158,7 +158,7 @@ def _user13_jpeg_marks(quality: int, seeds, per_seed: int = 4):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("quality", [50, 75, 90])
-def test_user13_jpeg_marks_within_u_and_not_called_structured(quality):
+def test_user13_jpeg_marks_mostly_ok_and_within_u(quality):
     """User 13: quality 75 with the exact camera had 6 of 6 marks 'unexplained structure',
     u 54-1268" against errors of 1-82" (the blocks' scatter read as structure, then as a
     bent mark or a lens, u x50-1000). Now the blocks' pattern is fitted (known columns,
