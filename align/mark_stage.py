@@ -26,7 +26,16 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.errors import NotApplicable
 from align.loop import Candidate, StageFit, Term, periodogram_test
-from imaging import MarkMeasurement, cross_magnification, fit_line, line_frame, undistort
+from imaging import (
+    MarkMeasurement,
+    block_phase_columns,
+    cross_magnification,
+    fit_line,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
+    line_frame,
+    undistort,
+)
 
 RADIAL = "radial_distortion"
 WIGGLE = "periodic_wiggle"
@@ -70,6 +79,7 @@ class MarkStage:
         ts = texture_scale(m)
         self.sigma = m.sigma * np.sqrt(ts)
         self.noise_dof = noise_dof(m, ts)
+        self.blocks = jpeg_blocks_columns(m)
 
     def undistorted(self, k1: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """The centres undistorted by k1 and their sigma across the line carried with them
@@ -92,6 +102,8 @@ class MarkStage:
             cols = [(q**2).sum(1, keepdims=True) / self.scale**2 if t.name == RADIAL
                     else _bend_column(q, angle) if t.name == BEND
                     else np.asarray(t.columns, float).reshape(len(q), -1) for t in terms]
+            if self.blocks is not None:
+                cols.append(self.blocks)  # last: the terms' columns keep their indices
             F = np.hstack(cols) if cols else None
             lf = fit_line(q, sig, F, reject_sigma=None, chol=m.chol)
             angle = lf.angle_rad
@@ -159,9 +171,20 @@ def texture_scale(m: MarkMeasurement) -> float:
     session images). The amplitude is re-read from the mark itself, on differences of
     neighbouring whitened residuals, which a smooth effect (a bow, a slow wiggle) hardly
     touches: var(z[i+1] - z[i]) = 2 for white z.
+
+    A JPEG (``m.jpeg``, :mod:`imaging.jpeg`) is read the same way: the encoder's
+    quantisation moves each centre by a part of its block's error (centres 4 px apart, two
+    to a block, nearly uncorrelated), scatter at the block scale that the Fisher sigma does
+    not hold (its noise is read from a background the encoder smoothed). Neighbour
+    differences see that scatter and hardly see a bow, a lens or a slow wiggle, which the
+    loop still tests for (:func:`imaging.jpeg_centre_scale`).
     """
-    if m.chol is None or len(m.points) <= 10:
+    if len(m.points) <= 10 or (m.chol is None and m.jpeg is None):
         return 1.0
+    if m.chol is None:
+        # The blocks' pattern left in (not :func:`jpeg_blocks_columns`): every fit of the
+        # centres takes this sigma, and the camera's bow test fits no such columns.
+        return jpeg_centre_scale(fit_line(m.points, m.sigma, reject_sigma=None).z)
     # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
     # (each residual given the ones before it), so from the other end the whitened series
     # differs, and u would depend on which end the line starts from (the same pixels
@@ -171,6 +194,23 @@ def texture_scale(m: MarkMeasurement) -> float:
     rev = np.linalg.cholesky((m.chol @ m.chol.T)[::-1, ::-1])
     zr = fit_line(m.points[::-1], m.sigma[::-1], reject_sigma=None, chol=rev).z
     return float(max(1.0, (np.mean(np.diff(z) ** 2) + np.mean(np.diff(zr) ** 2)) / 4))
+
+
+def jpeg_blocks_columns(m: MarkMeasurement) -> np.ndarray | None:
+    """A JPEG mark's block-pattern columns (:func:`imaging.block_phase_columns`), fitted
+    with its line as known nuisance terms: the pattern is the encoder's, not structure the
+    model lacks. None: not a JPEG (or no pattern the centres' phases determine).
+
+    The centres' raw pixel coordinate along the axis the mark runs with is taken on the
+    profile's line at each centre's ``t`` (their distance from it, hundredths of a px, moves
+    no phase)."""
+    if m.jpeg is None:
+        return None
+    u, n = line_frame(m.profile.angle_rad)
+    raw = m.profile.offset_px * n + np.asarray(m.regressors["t"], float)[:, None] * u
+    axis = 0 if abs(u[0]) >= abs(u[1]) else 1
+    cols = block_phase_columns(raw[:, axis] + (m.image_shape[1 - axis] - 1) / 2)
+    return cols if cols.shape[1] else None
 
 
 def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
@@ -183,6 +223,8 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     variance 3 / n relative, i.e. 2 n / 3 dof, and relative variances add (2/nu each).
     """
     tex = m.centres.texture
+    if m.chol is None and m.jpeg is not None and scale > 1.0:
+        return jpeg_noise_dof(len(m.points))  # the JPEG's scatter re-read from the mark
     if m.chol is None or tex is None or not np.isfinite(tex.dof):
         return None
     if scale <= 1.0:

@@ -117,7 +117,8 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         terms["jpeg_blocks"] = m.jpeg_u_rad
         au = float(np.hypot(au, m.jpeg_u_rad))
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
-                               float(np.rad2deg(m.jpeg_u_rad) * 3600)))
+                               float(np.rad2deg(m.jpeg_u_rad) * 3600),
+                               float(np.median(stage.sigma / m.sigma))))
     if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
         terms["groove_profile"] = m.profile_u_rad
         au = float(np.hypot(au, m.profile_u_rad))

@@ -31,7 +31,13 @@ from imaging.families import Detection, detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
-from imaging.jpeg import JpegBlocks, jpeg_note
+from imaging.jpeg import (
+    JpegBlocks,
+    block_phase_columns,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
+    jpeg_note,
+)
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
 from imaging.linefit import LineFit, fit_line, fit_line_only
@@ -56,6 +62,7 @@ from imaging.stripes import Stripes
 __all__ = [
     "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
+    "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",

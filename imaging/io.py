@@ -129,7 +129,14 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
     budget = max_pixels() if budget is None else budget
     notes: list[str] = []
     if p.suffix.lower() in (".tif", ".tiff"):
-        img, orientation = _read_tiff(p, budget)
+        img, orientation, planar = _read_tiff(p, budget)
+        if planar and img.ndim == 3 and img.shape[2] >= 3:
+            # What tifffile.imwrite writes for a (3, H, W) array: one page, planar RGB, not
+            # a stack of three frames; whoever meant three frames must hear it was one.
+            notes.append(f"one planar RGB page ({img.shape[2]} planes of {img.shape[1]}x"
+                         f"{img.shape[0]} px) read as a colour image and turned grey; if the "
+                         "planes are separate frames, write them as pages of a stack or as "
+                         "files")
     else:
         orientation = _check_header(p, budget)
         data = np.fromfile(p, dtype=np.uint8)
@@ -253,10 +260,10 @@ def _png_has_exif(p: Path) -> bool:
             f.seek(size + 4, os.SEEK_CUR)  # the data and the CRC
 
 
-def _read_tiff(p: Path, budget: int) -> tuple[np.ndarray, int | None]:
+def _read_tiff(p: Path, budget: int) -> tuple[np.ndarray, int | None, bool]:
     """The single image of a TIFF file (compressed ones through imagecodecs) as rows x
-    columns [x samples], and its Orientation tag; a stack of several pages is refused rather
-    than read as one odd-shaped image."""
+    columns [x samples], its Orientation tag and whether its samples were stored as planes;
+    a stack of several pages is refused rather than read as one odd-shaped image."""
     import tifffile
 
     try:
@@ -276,14 +283,15 @@ def _read_tiff(p: Path, budget: int) -> tuple[np.ndarray, int | None]:
         raise
     except Exception as exc:  # tifffile raises many types for corrupt or exotic files
         raise ImageInputError(f"{p}: unreadable TIFF ({exc})") from None
-    if axes == "SYX":  # planar configuration: one plane per sample -> rows x cols x samples
+    planar = axes == "SYX"
+    if planar:  # planar configuration: one plane per sample -> rows x cols x samples
         img = np.moveaxis(img, 0, -1)
         axes = "YXS"
     if img.ndim == 3 and axes == "YXS" and img.shape[2] >= 3:
         img = img[..., 2::-1] if img.shape[2] == 3 else img[..., [2, 1, 0]]  # RGB -> OpenCV's BGR
     if code is not None and code not in ORIENTATIONS:
         raise ImageInputError(f"{p}: TIFF Orientation {code} is not one of 1-8")
-    return img, code
+    return img, code, planar
 
 
 BIT_DEPTHS = (8, 10, 12, 14, 16)

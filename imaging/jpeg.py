@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imaging.band import band_pixels
+from imaging.candidate import line_frame
 from imaging.centres import sample_centres
 from imaging.groove import ProfileFit, ProfileTable, centres_half
 from imaging.linefit import fit_line
@@ -136,8 +137,67 @@ def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
             best = JpegBlocks(quality, float(r.min()), len(c))
             break  # the lowest quality (largest steps) the coefficients follow
     if best is None and _flat_on_the_grid(image[:h, :w]):
-        best = JpegBlocks(None, float("nan"), len(c))
+        # The encoder flattened the background; its quality is read from the blocks it did
+        # not flatten (a mark's), by re-encoding them (None: too few to tell).
+        best = JpegBlocks(requantised_quality(b.reshape(-1, 8, 8), c), float("nan"), len(c))
     return best
+
+
+REQUANT_MIN_BLOCKS = 20
+"""Fewest blocks with content (not flat) :func:`requantised_quality` reads a quality from."""
+REQUANT_SHARE = 0.98
+"""Share of those blocks a quality's table must give back (each pixel within 1 DN)."""
+REQUANT_MAX = 97
+"""Highest quality tried: above it the steps (1-2 at 99) are within the 1 DN allowed, and any
+image is given back."""
+
+
+def requantised_quality(blocks: np.ndarray, coeffs: np.ndarray, most: int = 400) -> int | None:
+    """The lowest IJG quality whose table gives back the decoded blocks: each block's DCT
+    coefficients quantised to that table's steps and decoded again (rounded, clipped) must
+    reproduce its pixels within 1 DN (the encoder's fixed-point DCT) in
+    :data:`REQUANT_SHARE` of the blocks with content.
+
+    A decoded JPEG is (nearly) a fixed point of its own quantiser, and of any finer one
+    whose steps divide its own; a coarser table moves the pixels by whole steps. Unlike the
+    coefficients' concentration on the steps' multiples (:func:`find_jpeg`), this holds for
+    blocks whose few non-zero coefficients decode to patterns of 1-2 DN, which rounding
+    to integers moves by a large part of a step (quality 75's (2, 0) coefficient read back
+    at 5.2 for its step of 7). A raw image is given back only by the finest tables (steps of
+    1-2 at quality 99, within the 1 DN allowed): qualities up to :data:`REQUANT_MAX` are tried.
+
+    Parameters
+    ----------
+    blocks : numpy.ndarray
+        (N, 8, 8) decoded blocks [DN].
+    coeffs : numpy.ndarray
+        (N, 8, 8) their orthonormal DCT about 128 [DN].
+    most : int
+        Blocks with content used at most (the first ones).
+
+    Returns
+    -------
+    int or None
+        The quality 1-:data:`REQUANT_MAX`; None: fewer than :data:`REQUANT_MIN_BLOCKS`
+        blocks with content, or no quality up to it gives them back.
+    """
+    busy = np.flatnonzero(blocks.max(axis=(1, 2)) > blocks.min(axis=(1, 2)))[:most]
+    if len(busy) < REQUANT_MIN_BLOCKS:
+        return None
+    b, c, D = blocks[busy], coeffs[busy], _dct_matrix()
+
+    def given_back(T: np.ndarray, n: int) -> float:
+        rec = np.einsum("ji,njk,kl->nil", D, np.round(c[:n] / T) * T, D) + 128.0
+        return float(np.mean(np.abs(np.clip(np.round(rec), 0, 255) - b[:n]).max(axis=(1, 2))
+                             <= 1))
+
+    for quality in range(1, REQUANT_MAX + 1):
+        T = ijg_table(quality)
+        # A table that fails on the first 20 blocks fails (a coarser one moves most of
+        # them): the full count only where it may pass.
+        if given_back(T, REQUANT_MIN_BLOCKS) >= 0.8 and given_back(T, len(b)) >= REQUANT_SHARE:
+            return quality
+    return None
 
 
 def _one_multiple(x: np.ndarray, step: float) -> bool:
@@ -178,7 +238,7 @@ def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
     return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(float)
 
 
-def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
+def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) -> str:
     """The line that names JPEG blocks on a mark and what they add to its u.
 
     Parameters
@@ -188,7 +248,10 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
     jb : JpegBlocks
         The encoder found.
     u_arcsec : float
-        What the blocks add to the angle's u [″] (text: an edge).
+        What the blocks' systematic turn adds to the angle's u [″] (text: an edge).
+    spread : float
+        Factor on the centres' sigma their scatter was read to have (1: none beyond the
+        stated; :func:`jpeg_centre_scale`, square-rooted) [-].
 
     Returns
     -------
@@ -197,9 +260,11 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float) -> str:
     """
     q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
          "flattened blocks, quality unknown: the worst of 10-90 carried")
+    scatter = (f"their scatter, taken as the blocks' and not as structure, widens the centres' "
+               f"sigma x{spread:.3g}; " if spread > 1.0 else "")
     return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "
-            f"with the edge's place in the grid; u widened by {u_arcsec:.2g}\" (jpeg_blocks: "
-            "the fitted groove re-encoded)")
+            f"with the edge's place in the grid; {scatter}u widened by {u_arcsec:.2g}\" "
+            "(jpeg_blocks: the fitted groove re-encoded)")
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None) -> float:
@@ -215,7 +280,41 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     model.flat[idx] += pf.contrast_dn * p
     model = np.clip(model, 0.0, 255.0)
-    return rendering_angle_shift(model, jpeg_round_trip(model, quality), pf)
+    return blocks_systematic(model, jpeg_round_trip(model, quality), pf)
+
+
+def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
+    """The part of JPEG's angle shift on the groove ``pf`` (``a_image`` the noise-free
+    model, ``b_image`` it re-encoded) that its centres' scatter does not already carry [rad].
+
+    The blocks move each centre by a pattern that repeats every block along the mark
+    (:func:`block_phase_columns`, fitted with the line), by an amount that changes from
+    block to block (scatter at the block scale, which :func:`jpeg_centre_scale` reads into
+    the centres' sigma and so into the line's u) and by one that drifts with the edge's
+    phase in the grid (the systematic).
+    The line through the centres' moves turns by da; its scatter s about that line (by
+    neighbour differences, as the mark's) would turn it by u_s = s / sqrt(sum (t - t_m)^2)
+    alone. What stands beyond, sqrt(max(0, da^2 - u_s^2)), is the Type B term: counted once.
+    Equal weights, the segments valid in both (0 when fewer than 10 are).
+    """
+    a, b = sample_centres(a_image, pf), sample_centres(b_image, pf)
+    ok = a.ok & b.ok
+    if ok.sum() < 10:
+        return 0.0
+    u, n = line_frame(pf.angle_rad)
+    t = a.xy[ok] @ u
+    d = (b.xy[ok] - a.xy[ok]) @ n
+    # The block pattern the mark's fit takes as known (jpeg_blocks_columns) is no scatter
+    # the line's u holds: fitted here too, as there.
+    axis = 0 if abs(u[0]) >= abs(u[1]) else 1
+    along = a.xy[ok, axis] + (a_image.shape[1 - axis] - 1) / 2
+    order = np.argsort(t)
+    t, d, along = t[order], d[order], along[order]
+    X = np.column_stack([np.ones_like(t), t - t.mean(), block_phase_columns(along)])
+    beta, *_ = np.linalg.lstsq(X, d, rcond=None)
+    r = d - X @ beta
+    u_s2 = np.mean(np.diff(r) ** 2) / 2 / np.sum((t - t.mean()) ** 2)
+    return float(np.sqrt(max(0.0, beta[1] ** 2 - u_s2)))
 
 
 def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
@@ -230,3 +329,87 @@ def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileF
     da = fit_line(b.xy[ok], one, reject_sigma=None).angle_rad - fit_line(
         a.xy[ok], one, reject_sigma=None).angle_rad
     return float(abs((da + np.pi / 2) % np.pi - np.pi / 2))
+
+
+def jpeg_centre_scale(z: np.ndarray) -> float:
+    """Variance factor (>= 1) on a JPEG mark's centres from its own whitened residuals ``z``
+    (in order along the mark): the mean squared neighbour difference over its value for
+    white z (2).
+
+    The encoder's quantisation moves each centre by its share of its block's error: the
+    centres (4 px apart, two to a block) scatter beyond their Fisher sigma, almost
+    independently (lag-1 correlation ~0 at quality 50-90), and the Fisher sigma itself comes
+    from a background the encoder smoothed. Neighbour differences take that block-scale
+    scatter and hardly any of a bow, a lens or a wiggle of 2 or more blocks' period (a
+    smooth effect's difference over 4 px is small), which the loop then still tests for:
+    only the blocks' own scatter is taken as known.
+
+    Parameters
+    ----------
+    z : numpy.ndarray
+        Whitened residuals of the straight line fit, in order along the mark [-].
+
+    Returns
+    -------
+    float
+        The factor on the centres' variance [-].
+    """
+    z = np.asarray(z, float)
+    if len(z) < 3:
+        return 1.0
+    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2))
+
+
+def jpeg_noise_dof(n: int) -> float:
+    """Degrees of freedom of :func:`jpeg_centre_scale`'s estimate from ``n`` centres: the
+    mean of squared neighbour differences of n white z has relative variance 3 / (n - 1)
+    (neighbouring differences share a term), i.e. 2 (n - 1) / 3 dof."""
+    return float(max(n - 1, 1) / 1.5)
+
+
+BLOCK_HARMONICS = 3
+"""Harmonics of the 8 px block period modelled along the mark (periods 8, 4 and 8/3 px)."""
+
+
+def block_phase_columns(along_px: np.ndarray) -> np.ndarray:
+    """Design columns for the blocks' pattern along a mark: a function of each centre's
+    place in its 8x8 block along the axis the mark runs with (``along_px``, the raw pixel
+    coordinate x or y of each centre [px]) — the same in every block it crosses.
+
+    The encoder's error at an edge depends on where in the block the edge's profile lies,
+    so along a mark the centres repeat a pattern of period 8 px in that coordinate (at 4 px
+    spacing: alternating signs, the lag-1 'structure' of a near-axis mark at quality 50).
+    Modelled as harmonics of 8 px (:data:`BLOCK_HARMONICS`), mean-free, reduced to the
+    combinations the centres' phases determine (a sampling that hits two phases leaves
+    one column) and to the harmonics that change fast from centre to centre (an alias of a
+    slow pattern would tilt with the line: none). The blocks' *slow* drift (the edge crossing
+    block rows along the other axis) is no column: it is the angle's own shape, carried by
+    ``jpeg_blocks``.
+
+    Parameters
+    ----------
+    along_px : numpy.ndarray
+        (N,) raw pixel coordinate of each centre along the mark's axis [px].
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, k) columns, k = 0..2 :data:`BLOCK_HARMONICS`, each of unit RMS [-].
+    """
+    x = np.asarray(along_px, float)
+    n = len(x)
+    step = float(np.median(np.abs(np.diff(np.sort(x))))) if n > 1 else 0.0
+    # Only harmonics the centres' spacing sees as fast (at least a quarter turn of phase
+    # from one centre to the next): an alias of a slow pattern (period 8/3 px at 2.8 px
+    # spacing) drifts along the mark like a tilt and would take the angle with it.
+    fast = [j for j in range(1, BLOCK_HARMONICS + 1)
+            if abs((2 * np.pi * j * step / 8 + np.pi) % (2 * np.pi) - np.pi) >= np.pi / 2]
+    if not fast or n < 8 * len(fast):
+        return np.zeros((n, 0))
+    cols = [f(2 * np.pi * j * x / 8) for j in fast for f in (np.cos, np.sin)]
+    A = np.column_stack(cols) - np.column_stack(cols).mean(axis=0)
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    # Only directions the phases pin down: a singular value below a tenth of the column
+    # norm is a pattern the sampling does not see (and would only cost conditioning).
+    keep = s > 0.1 * np.sqrt(n / 2)
+    return U[:, keep] * np.sqrt(n)

@@ -127,3 +127,21 @@ def test_bit_depths_beyond_16_bits_and_bilevel_images_are_named(tmp_path, pixels
     for f in (bilevel_png, bilevel_tif):
         with pytest.raises(ImageInputError, match=rf"{f.name}: a 1-bit \(bilevel\) image"):
             read_image_notes(f)
+
+
+def test_planar_rgb_tiff_is_said_to_be_one_colour_page(tmp_path):
+    """tifffile.imwrite of a (3, H, W) array writes one planar RGB page, not three frames:
+    read as colour and turned grey, with a note saying so; a chunky RGB TIFF and a grey one
+    get no such note."""
+    tifffile = pytest.importorskip("tifffile")
+    a = np.random.default_rng(0).integers(0, 255, (3, 24, 40), dtype=np.uint8)
+    tifffile.imwrite(tmp_path / "planes.tif", a, photometric="rgb", planarconfig="separate")
+    tifffile.imwrite(tmp_path / "chunky.tif", a.transpose(1, 2, 0))
+    tifffile.imwrite(tmp_path / "grey.tif", a[0])
+    got = read_image_notes(tmp_path / "planes.tif")
+    assert got.pixels.shape == (24, 40)
+    assert len(got.notes) == 1 and "planar RGB page" in got.notes[0], got.notes
+    assert "turned grey" in got.notes[0]
+    np.testing.assert_array_equal(got.pixels, read_image_notes(tmp_path / "chunky.tif").pixels)
+    assert read_image_notes(tmp_path / "chunky.tif").notes == ()
+    assert read_image_notes(tmp_path / "grey.tif").notes == ()

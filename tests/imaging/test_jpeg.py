@@ -8,7 +8,14 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
-from imaging.jpeg import find_jpeg, ijg_table
+from imaging.jpeg import (
+    block_phase_columns,
+    find_jpeg,
+    ijg_table,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
+    requantised_quality,
+)
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -70,3 +77,118 @@ def test_blocks_alike_along_a_groove_are_not_jpeg():
     groove on row 100 was called 'JPEG quality ~41')."""
     for seed in range(4):
         assert find_jpeg(_groove_on_a_block_row(seed)) is None, seed
+
+
+def _flattened_jpeg(quality: int | None, seed: int = 0) -> np.ndarray:
+    """A 160x160 frame, background 140 DN with 1.3 DN noise (user 13's: the encoder at
+    quality 75 flattens it), a dark 3 px groove at 30 deg, through OpenCV's encoder."""
+    cv2 = pytest.importorskip("cv2")
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:160, 0:160]
+    d = (xx - 80) * np.sin(0.52) + (yy - 80) * np.cos(0.52)
+    img = 140.0 - 40.0 * np.exp(-0.5 * (d / 1.5) ** 2) + rng.normal(0, 1.3, d.shape)
+    img = np.clip(np.round(img), 0, 255).astype(np.uint8)
+    if quality is None:
+        return img
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+
+
+def _blocks(img: np.ndarray):
+    b = img.astype(float).reshape(20, 8, 20, 8).transpose(0, 2, 1, 3).reshape(-1, 8, 8)
+    k = np.arange(8)
+    D = np.sqrt(2 / 8) * np.cos((2 * k[None, :] + 1) * k[:, None] * np.pi / 16)
+    D[0] /= np.sqrt(2)
+    return b, np.einsum("ij,njk,lk->nil", D, b - 128.0, D)
+
+
+@pytest.mark.parametrize("quality", [50, 75, 90])
+def test_quality_of_a_flattened_jpeg_by_requantising(quality):
+    """The blocks with content given back by their own table: the lowest quality that does
+    is the encoder's or a few below (the steps round alike); a raw frame only by 100."""
+    q = requantised_quality(*_blocks(_flattened_jpeg(quality)))
+    assert q is not None and quality - 8 <= q <= quality, q
+    assert requantised_quality(*_blocks(_flattened_jpeg(None))) is None
+
+
+def test_jpeg_centre_scale_takes_the_scatter_not_a_bow():
+    """White residuals at 2.2x their sigma: the factor ~4.8 (within its 2 (n-1)/3 dof); a
+    bow of 10 sigma on white residuals of sigma 1: the factor stays near 1."""
+    rng = np.random.default_rng(3)
+    n = 60
+    z = 2.2 * rng.normal(size=(200, n))
+    f = np.array([jpeg_centre_scale(r) for r in z])
+    sd = np.sqrt(2 / jpeg_noise_dof(n)) * 4.84
+    assert abs(f.mean() - 4.84) <= 4 * sd / np.sqrt(len(f)), f.mean()
+    t = np.linspace(-1, 1, n)
+    bowed = [jpeg_centre_scale(rng.normal(size=n) + 10 * (t**2 - 1 / 3)) for _ in range(50)]
+    assert np.mean(bowed) <= 1.15, np.mean(bowed)
+
+
+def _user13_jpeg_marks(quality: int, seeds, per_seed: int = 4):
+    """User 13's renders (tests/imaging/user13_inputs.py: the real chessboard lens, shot and
+    read noise, 8-bit, OpenCV's encoder at ``quality``), measured with the exact camera.
+    Yields (error [rad], u [rad], ok, result) per found mark."""
+    ui = pytest.importorskip("tests.imaging.user13_inputs")
+    import json
+    import os
+    import tempfile
+
+    from imaging import CameraModel
+    if not os.path.isdir(ui.CHESS):
+        pytest.skip(f"real data not found at {ui.CHESS}")
+    K, d, size, _ = ui.real_lens("left")
+    with tempfile.TemporaryDirectory() as tmp:
+        cam = CameraModel.load(ui.camera_json(K, d, size, os.path.join(tmp, "cam.json")))
+    for seed in seeds:
+        rng = np.random.default_rng(seed)
+        for _ in range(per_seed):
+            ang = np.radians(rng.uniform(-85, 85))
+            c = (rng.uniform(170, 470), rng.uniform(150, 330))
+            img = ui.mark_image((K, d, size), rng, c, ang, length=rng.uniform(180, 300),
+                                width=3.0, jpeg_quality=quality)
+            for r in measure_image(img.astype(float), "u13", cam):
+                if not r.found:
+                    continue
+                ok = not (r.lens_limited or r.kinked or r.unexplained_structure
+                          or any("NOT OK" in n for n in r.notes))
+                json.dumps(r.to_dict())  # the result a user gets is writable
+                yield angle_error(r.angle_rad, ang), r.angle_u_rad, ok, r
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("quality", [50, 75, 90])
+def test_user13_jpeg_marks_mostly_ok_and_within_u(quality):
+    """User 13: quality 75 with the exact camera had 6 of 6 marks 'unexplained structure',
+    u 54-1268" against errors of 1-82" (the blocks' scatter read as structure, then as a
+    bent mark or a lens, u x50-1000). Now the blocks' pattern is fitted (known columns,
+    imaging.block_phase_columns), their scatter is the centres' (re-read from the mark,
+    imaging.jpeg_centre_scale) and their systematic turn beyond it a Type B term: over 6
+    seeds x 4 marks (lengths 180-300 px, any angle), at least 90 % ok, every ok mark within
+    3 u, the z's RMS within [0.5, 1.2] (u neither short nor useless; before,
+    0.26 at q50 over all marks). Measured over 12 seeds through the CLI (report): RMS z
+    0.98 / 0.76 / 0.84 at q50 / 75 / 90, max |z| 2.62 / 1.83 / 2.16, ok 44 / 48 / 47 of 48
+    (before 0 / 14 / 48)."""
+    got = list(_user13_jpeg_marks(quality, range(1, 7)))
+    z = np.array([e / u for e, u, ok, _ in got if ok])
+    assert len(got) >= 22 and len(z) >= 0.9 * len(got), (len(got), len(z))
+    assert np.max(np.abs(z)) <= 3.0, z
+    assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
+
+
+def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
+    """Centres 4 px apart along an axis hit two phases of the 8 px block: one column,
+    alternating (a mark 1.7 deg off the axis: that and its slow turn); along a 45 deg mark
+    (2.83 px a step) the period-8/3 harmonic, an alias that drifts like a tilt, is left
+    out. Every column is mean-free and nearly orthogonal to the position along the mark
+    (the angle's column)."""
+    t = np.arange(60) * 4.0
+    assert block_phase_columns(100.3 + t).shape == (60, 1)
+    for x, k in ((100.3 + t * np.cos(0.03), 2), (100.3 + t * np.cos(np.pi / 4), 4)):
+        C = block_phase_columns(x)
+        assert C.shape == (60, k), C.shape
+        assert np.allclose(C.mean(axis=0), 0, atol=1e-9)
+        tc = (t - t.mean()) / np.linalg.norm(t - t.mean())
+        assert np.all(np.abs(tc @ C) / np.linalg.norm(C, axis=0) < 0.25), tc @ C
+    alt = block_phase_columns(100.3 + t)[:, 0]
+    assert np.all(np.sign(alt[1:]) == -np.sign(alt[:-1]))
