@@ -19,7 +19,8 @@ from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, centres_half
 
 MIN_SEGMENTS = 10
-"""Fewest centres a mark's fit is made from (as :func:`imaging.measure._usable` asks)."""
+"""Fewest solved segments a mark's fit is made from (of which a majority must fit the
+groove: :func:`imaging.measure.segments_needed`)."""
 CROSSING_MAX_SHARE = 0.75
 """A mark whose length lies more than this inside crossing marks' grooves is not measured
 (what is left, at most two short stretches at its ends, no longer shows whether they agree)."""
