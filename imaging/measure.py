@@ -15,7 +15,7 @@ from scipy.ndimage import median_filter
 
 from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
-from imaging.centres import Centres, sample_centres
+from imaging.centres import MISFIT_CHI2, Centres, sample_centres
 from imaging.clipped import clipped_notes
 from imaging.confirm import shadow_note
 from imaging.crossmask import MIN_SEGMENTS, crossing_skip, fused_error
@@ -152,7 +152,7 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
     # Segments whose pixels fit the groove much worse than the typical segment: dust or a
     # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
     typical = float(np.median(cen.chi2_red[cen.ok]))
-    keep = cen.ok & (cen.chi2_red < 3.0 * max(1.0, typical))
+    keep = cen.ok & (cen.chi2_red < MISFIT_CHI2 * max(1.0, typical))
     # Segments whose background just beside the groove is disturbed (a dust speck or a
     # scratch in the ring where the illumination slope is read): their centre and their
     # slope regressor are moved by the same speck, which the loop would read as an effect.
