@@ -246,7 +246,14 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             # Noise model again, now from the segment model's residuals (local level and
             # contrast absorb illumination and texture that the band fit could not);
             # each segment spends k of its pixels' degrees of freedom.
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+            rs = r * np.sqrt(npx / np.maximum(npx - k, 1))[seg]
+            # Without the segments whose pixels misfit the groove far beyond the typical one
+            # (a numeral inked across the mark: its dark pixels filled the groove's levels'
+            # bins and the noise, read there, overstated every centre's sigma).
+            ms = bc(rs * rs) / np.maximum(npx, 1)
+            fits = ms <= MISFIT_CHI2 * float(np.median(ms[npx > k]))
+            v0, v1 = _noise_model(mu[fits[seg]], rs[fits[seg]]) if fits.any() else (
+                _noise_model(mu, rs))
         # The linear noise model is fitted over the band's levels; below them (a segment's
         # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
         # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
