@@ -18,7 +18,7 @@ from imaging.camera import CameraModel
 from imaging.centres import MISFIT_CHI2, Centres, sample_centres
 from imaging.clipped import clipped_notes
 from imaging.confirm import shadow_note
-from imaging.crossmask import MIN_SEGMENTS, crossing_skip, fused_error
+from imaging.crossmask import MIN_SEGMENTS, crossing_skip, fused_error, segments_needed
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
@@ -140,12 +140,10 @@ class MarkMeasurement:
 
 def _usable(cen: Centres, where: str, cand: MarkCandidate,
             skip: np.ndarray | None = None) -> np.ndarray:
-    """Segments that fit the groove and agree with their neighbours (dust/scratches out);
-    ``skip``: segments left out beforehand (where another mark crosses). At least
-    :data:`MIN_SEGMENTS` solved segments, of which :func:`segments_needed` are kept."""
+    """Segments that fit the groove and agree with their neighbours (dust, scratches out; how
+    many: crossmask.segments_needed); ``skip``: left out beforehand (another mark crosses)."""
     if skip is not None:
         cen = replace(cen, ok=cen.ok & ~skip)
-    need = segments_needed(int(cen.ok.sum()))
     if cen.ok.sum() < MIN_SEGMENTS:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
@@ -162,7 +160,7 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
     mad = 1.4826 * float(np.median(np.abs(g[keep] - med))) if keep.any() else 0.0
     if mad > 0:
         keep &= np.abs(g - med) <= 6 * mad
-    if keep.sum() < need:
+    if keep.sum() < (need := segments_needed(int(cen.ok.sum()))):
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "segments fit the groove model (covered, or not a groove)")
     idx = np.flatnonzero(keep)
@@ -173,16 +171,6 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
     use = np.zeros_like(keep)
     use[idx[inl]] = True
     return use
-
-
-def segments_needed(solved: int) -> int:
-    """Fewest segments a mark's line is fitted from, of the ``solved`` ones: those that fit
-    the groove and agree with their neighbours are found by tests against the segments'
-    median (chi2, ring slope, running median of the residuals), which hold while most of
-    them are good: a strict majority, up to :data:`MIN_SEGMENTS`. Its line's u is the fit's
-    of the segments kept (a 70 px tick's 9 of 13, 4 beside a speck whose ring slope they
-    read, was refused at a fixed 10)."""
-    return min(MIN_SEGMENTS, solved // 2 + 1)
 
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
