@@ -39,6 +39,12 @@ worst-determined combination's variance is over 1e8 times the best's (the segmen
 nothing of its centre), and rounding (~1e-14 of the matrix) moves the ratio by ~1e-14: it
 can no longer decide."""
 
+MISFIT_CHI2 = 3.0
+"""A segment whose pixels' chi2/dof exceeds this many times the typical segment's (at least
+1) does not fit the groove (dust, a particle over an end, a crossing scratch): it stays out
+of the line (:mod:`imaging.measure`) and of the groove's departure pool
+(:mod:`imaging.shape`)."""
+
 AMP_STEP = 10.0
 """Largest change of a segment's contrast in one Gauss-Newton step, in units of the band's
 contrast: a bound on a runaway, not a constraint on a segment that converges."""
@@ -240,7 +246,14 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
             # Noise model again, now from the segment model's residuals (local level and
             # contrast absorb illumination and texture that the band fit could not);
             # each segment spends k of its pixels' degrees of freedom.
-            v0, v1 = _noise_model(mu, r * np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+            rs = r * np.sqrt(npx / np.maximum(npx - k, 1))[seg]
+            # Without the segments whose pixels misfit the groove far beyond the typical one
+            # (a numeral inked across the mark: its dark pixels filled the groove's levels'
+            # bins and the noise, read there, overstated every centre's sigma).
+            ms = bc(rs * rs) / np.maximum(npx, 1)
+            fits = ms <= MISFIT_CHI2 * float(np.median(ms[npx > k]))
+            v0, v1 = _noise_model(mu[fits[seg]], rs[fits[seg]]) if fits.any() else (
+                _noise_model(mu, rs))
         # The linear noise model is fitted over the band's levels; below them (a segment's
         # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
         # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
@@ -285,6 +298,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     ocov = None
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
+    chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     shift = shift_cov = None
     if departure:
         # The groove's own profile (imaging.shape): its even departure from the model,
@@ -295,6 +309,10 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         # at the noisy centres followed their noise (a clean mark at 0.02 deg: b -10" at
         # 5 sigma_b, its error -3.5").
         sg = ok & (npx >= 6) & (np.abs(delta) < half / 2) & ~moving
+        # Nor segments that misfit the groove (a particle over an end: its fringe's
+        # residuals read as the profile's departure tilted hidden-end lines by up to 2 u).
+        if sg.any():
+            sg &= chi2_red < MISFIT_CHI2 * max(1.0, float(np.median(chi2_red[sg])))
         if sg.sum() >= 2:
             jj = np.arange(nseg)
             xx = e - np.polyval(np.polyfit(jj[sg], delta[sg], 1), jj)[seg]
@@ -307,7 +325,6 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                                                spans)
     # An ill-conditioned segment (det > 0 by rounding only) can invert to a negative variance.
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
-    chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
     info = wgt * (amp[seg] * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
     ring = _ring(wide, pf, half, segment_px, every, nseg, image.shape[1])

@@ -19,10 +19,21 @@ from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, centres_half
 
 MIN_SEGMENTS = 10
-"""Fewest centres a mark's fit is made from (as :func:`imaging.measure._usable` asks)."""
+"""Fewest solved segments a mark's fit is made from (of which a majority must fit the
+groove: :func:`segments_needed`)."""
 CROSSING_MAX_SHARE = 0.75
 """A mark whose length lies more than this inside crossing marks' grooves is not measured
 (what is left, at most two short stretches at its ends, no longer shows whether they agree)."""
+
+
+def segments_needed(solved: int) -> int:
+    """Fewest segments a mark's line is fitted from, of the ``solved`` ones: those that fit
+    the groove and agree with their neighbours are found by tests against the segments'
+    median (chi2, ring slope, running median of the residuals), which hold while most of
+    them are good: a strict majority, up to :data:`MIN_SEGMENTS`. Its line's u is the fit's
+    of the segments kept (a 70 px tick's 9 of 13, 4 beside a speck whose ring slope they
+    read, was refused at a fixed 10)."""
+    return min(MIN_SEGMENTS, solved // 2 + 1)
 
 
 def crossing_skip(image: np.ndarray, cen: Centres, pf: ProfileFit,

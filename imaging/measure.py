@@ -15,10 +15,10 @@ from scipy.ndimage import median_filter
 
 from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
-from imaging.centres import Centres, sample_centres
+from imaging.centres import MISFIT_CHI2, Centres, sample_centres
 from imaging.clipped import clipped_notes
 from imaging.confirm import shadow_note
-from imaging.crossmask import crossing_skip, fused_error
+from imaging.crossmask import MIN_SEGMENTS, crossing_skip, fused_error, segments_needed
 from imaging.defocus import BlurTrend, blur_trend
 from imaging.detect import (
     LENGTH_SLACK,
@@ -140,17 +140,17 @@ class MarkMeasurement:
 
 def _usable(cen: Centres, where: str, cand: MarkCandidate,
             skip: np.ndarray | None = None) -> np.ndarray:
-    """Segments that fit the groove and agree with their neighbours (dust/scratches out);
-    ``skip``: segments left out beforehand (where another mark crosses)."""
+    """Segments that fit the groove and agree with their neighbours (dust, scratches out; how
+    many: crossmask.segments_needed); ``skip``: left out beforehand (another mark crosses)."""
     if skip is not None:
         cen = replace(cen, ok=cen.ok & ~skip)
-    if cen.ok.sum() < 10:
+    if cen.ok.sum() < MIN_SEGMENTS:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "usable segments along it (blurred away or covered)")
     # Segments whose pixels fit the groove much worse than the typical segment: dust or a
     # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
     typical = float(np.median(cen.chi2_red[cen.ok]))
-    keep = cen.ok & (cen.chi2_red < 3.0 * max(1.0, typical))
+    keep = cen.ok & (cen.chi2_red < MISFIT_CHI2 * max(1.0, typical))
     # Segments whose background just beside the groove is disturbed (a dust speck or a
     # scratch in the ring where the illumination slope is read): their centre and their
     # slope regressor are moved by the same speck, which the loop would read as an effect.
@@ -160,12 +160,12 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
     mad = 1.4826 * float(np.median(np.abs(g[keep] - med))) if keep.any() else 0.0
     if mad > 0:
         keep &= np.abs(g - med) <= 6 * mad
-    if keep.sum() < 10:
+    if keep.sum() < (need := segments_needed(int(cen.ok.sum()))):
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "segments fit the groove model (covered, or not a groove)")
     idx = np.flatnonzero(keep)
     inl = local_inliers(cen.xy[idx], cen.sigma[idx], cen.t[idx])
-    if inl.sum() < 10:
+    if inl.sum() < need:
         raise ImageInputError(f"{where}: mark at offset {cand.offset_px:.0f} px: too few "
                               "consistent centres along it")
     use = np.zeros_like(keep)

@@ -196,12 +196,6 @@ def test_dense_ruler_gaps_said_over_seeds():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="dense synth ruler, seeds 0-3: 24 + 1 refused, 25, 25, "
-                   "25 of 25 in one family (were 24 + 1, 21 + 3 in two families, 24 + 1, 21). "
-                   "Seed 0's refused tick (offset -168) has no speck on it: one 18 px beside "
-                   "it (6 px from its neighbour, measured) disturbs the background slope "
-                   "beside 4 of its 13 segments, and imaging/measure.py's _usable leaves 9 "
-                   "(< 10): 'too few segments fit the groove model (covered, or not a groove)'")
 def test_dense_ruler_every_tick_over_seeds():
     for seed in range(4):
         lines, res, got, extra, fams = _dense_ruler(seed)
