@@ -279,7 +279,7 @@ def setup_notices(fusion, declared: Mapping[str, np.ndarray] | None = None) -> l
 
 
 CARRIED_PREFIX = "fusion: E's u carries "
-"""How a carried candidate's warning begins (the report shows these on its first screen)."""
+"""How a carried candidate's note begins (the report shows these on its first screen)."""
 
 
 def carried_notices(fusion) -> list[str]:
@@ -292,6 +292,15 @@ def carried_notices(fusion) -> list[str]:
         return []
     p = plan(b.model)
     return [f"{CARRIED_PREFIX}{c.label}: {p.resolves[c.name]}" for c in p.carried]
+
+
+def session_notes(res) -> list[str]:
+    """What a reader of a session must know that is no alarm (``SessionResult``): the
+    candidates E's u carries as not excluded, each with what would resolve it. Not among the
+    warnings: a candidate at 2 u is carried in a few clean sessions in a hundred by design
+    (the Type B term is part of u, like any budget line), and a warning there would be a
+    false alarm (docs/false-alarms.md)."""
+    return carried_notices(res.fusion) if res.fusion is not None else []
 
 
 def session_warnings(res) -> list[str]:
@@ -307,7 +316,6 @@ def session_warnings(res) -> list[str]:
     f = res.fusion
     if f is not None:
         out += setup_notices(f, res.session.declared_setup())
-        out += carried_notices(f)
         out += loop_warnings("fusion", f.loop)
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "

@@ -94,6 +94,7 @@ def show_session(out: dict, budget: bool = False, plan: bool = False,
         say(session_lines(out["result"]))
         say(decision_lines(LoadedSession.from_dict(out["json"], out["session"]), budget, plan))
         say(timing_lines(out["result"].timings))
+        say([f"  note: {n}" for n in out["json"].get("notes", ())])
     warn(out["warnings"])
     if not quiet:
         for k, v in out["outputs"].items():

@@ -29,7 +29,7 @@ from align.plots import (
     png_bytes,
 )
 from align.session.run import SessionResult
-from align.warnings import CARRIED_PREFIX, session_warnings, setup_notices
+from align.warnings import session_notes, session_warnings, setup_notices
 from axisbase.header import OUTPUT_UNITS
 from axisbase.output import write_atomic
 from axisbase.provenance import Provenance
@@ -350,9 +350,9 @@ def report_html(res: SessionResult, doc: dict | None = None,
             sections.append((key, name))
     notices = (setup_notices(res.fusion, res.session.declared_setup())
                if res.fusion is not None else [])
-    carried = [w for w in warnings if w.startswith(CARRIED_PREFIX)]
+    carried = list(d.get("notes", session_notes(res)))
     # the notices and the carried candidates are on the first screen
-    shown = [w for w in warnings if w not in notices and w not in carried]
+    shown = [w for w in warnings if w not in notices]
     if shown:
         sections.insert(0, ("warnings", f"Warnings ({len(shown)})"))
     if res.errors:

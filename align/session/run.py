@@ -54,7 +54,7 @@ from align.grid_phase import with_grid_phase
 from align.marks import MarkResult, measure_camera
 from align.session.config import HOUSINGS, ImageEntry, Session
 from align.tilt import FAR_FROM_1G
-from align.warnings import session_warnings
+from align.warnings import session_notes, session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
 from axisbase.header import header_units, resolve_units
@@ -205,6 +205,7 @@ class SessionResult:
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
                    "ok": self.ok, "fused": self.fused, "problems": self.problems,
                    "warnings": session_warnings(self),
+                   "notes": session_notes(self),
                    "errors": [{"stage": e.stage, "message": e.message,
                                **({"internal": True} if e.internal else {})}
                               for e in self.errors],

@@ -22,7 +22,7 @@ from align.plan import (
     prediction_noise,
 )
 from align.session import load_session, run_session
-from align.warnings import CARRIED_PREFIX, carried_notices, session_warnings
+from align.warnings import CARRIED_PREFIX, carried_notices, session_notes, session_warnings
 from axisbase.units import ARCSEC
 from synth.session import SessionSpec, write_session
 
@@ -204,12 +204,13 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     assert not predict(_roll_lin(0.5), *_option(lin, "image")[3:5]).still("camera_roll[A]")
 
 
-def test_no_carried_warning_when_nothing_is_carried(session21_run):
-    """The clean session of seed 21 carries nothing: no such warning, and its plan's u is
+def test_no_carried_note_when_nothing_is_carried(session21_run):
+    """The clean session of seed 21 carries nothing: no such note, and its plan's u is
     the linearisation's."""
     res, _ = session21_run
     lin = res.fusion.budget.model
     assert lin.held == ()
+    assert session_notes(res) == []
     assert not any(w.startswith(CARRIED_PREFIX) for w in session_warnings(res))
     assert np.allclose(predict(lin).u, lin.u_with())
 
