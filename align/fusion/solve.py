@@ -36,6 +36,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.fusion.plausible import admissible, not_excluded
+from align.fusion.undetermined import Undetermined, undetermined
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, run_loop
 from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
@@ -136,6 +137,19 @@ class FusionStage:
         axes, nuis = self._unpack(res.x, layout)
         pred = tuple(b.predict(axes, nuis) for b in self.blocks)
         return Solution(res.x, cov, names, res.fun, pred, tuple(layout))
+
+    def jacobian(self, terms: Sequence[Term], params: np.ndarray) -> np.ndarray:
+        """The whitened residuals' Jacobian (n × parameters) at ``params`` (E's six angles, the
+        base nuisances, then ``terms``' components), by central differences."""
+        layout = self._layout(terms)
+        J = np.zeros((self.n, len(params)))
+        step = 1e-7  # [rad, or g for the bias]: well inside the linear range, above rounding
+        for k in range(len(params)):
+            d = np.zeros(len(params))
+            d[k] = step
+            J[:, k] = (self._residual(params + d, layout)
+                       - self._residual(params - d, layout)) / (2 * step)
+        return J
 
     def _far_message(self, off: np.ndarray) -> str:
         """The refusal of observations that only an axis far from nominal would fit (``off``:
@@ -298,6 +312,9 @@ class FusionResult:
     # When inconsistent: the source that sees another E, and in which angles (None: none
     # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
     disagreement: SourceDisagreement | None = None
+    undetermined: tuple[Undetermined, ...] = ()
+    """The nuisances the data cannot determine, carried in ``cov`` over their plausible range
+    (:mod:`align.fusion.undetermined`)."""
 
     def cov_of(self, *names: str) -> np.ndarray:
         """The covariance [rad²] of the named angles of E (``E_NAMES``, e.g.
@@ -352,7 +369,8 @@ class FusionResult:
             "observations": [r.to_dict() for r in self.rows],
             "budget": None if self.budget is None else self.budget.to_dict(),
             "source_disagreement": (None if self.disagreement is None
-                                    else self.disagreement.to_dict())}
+                                    else self.disagreement.to_dict()),
+            "undetermined": [c.to_dict() for c in self.undetermined]}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> FusionResult:
@@ -370,7 +388,8 @@ class FusionResult:
                    tuple(d.get("sources", ())),
                    Budget.from_dict(d["budget"]) if d.get("budget") else None,
                    (None if not d.get("source_disagreement")
-                    else disagreement_from_dict(d["source_disagreement"])))
+                    else disagreement_from_dict(d["source_disagreement"])),
+                   tuple(Undetermined.from_dict(c) for c in d.get("undetermined", ())))
 
 
 def _check_determined(stage: FusionStage) -> None:
@@ -393,8 +412,12 @@ def _check_determined(stage: FusionStage) -> None:
                      "view, the goniometer log or platform static poses")
 
 
-def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
-    """Solve for E with the residual loop over the nuisance candidates."""
+def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
+         plausible_u: Mapping[str, float] | None = None) -> FusionResult:
+    """Solve for E with the residual loop over the nuisance candidates; ``plausible_u``: the
+    declared standard uncertainty [rad] of a nuisance's plausible range by name (a camera's
+    roll, the reference face's offset; else the default range,
+    :mod:`align.fusion.undetermined`), carried in u where the data cannot determine it."""
     stage = FusionStage(blocks)
     _check_determined(stage)
     cands = candidates(stage)
@@ -442,7 +465,12 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
     carried = not_excluded(stage, cands, loop, cov, alpha)
     for c in carried:
         cov = cov + np.outer(c.shift, c.shift)
-    if carried:
+    # The candidates the data cannot determine: carried over their plausible range (Type B).
+    unknown = undetermined(stage, cands, loop, sol.params, inflation, plausible_u,
+                           skip=[c.name for c in carried])
+    for c in unknown:
+        cov = cov + np.outer(c.shift, c.shift)
+    if carried or unknown:
         E_u = e_matrix(np.sqrt(np.diag(cov)))
     layout = list(sol.layout)
 
@@ -456,5 +484,8 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         budget = with_disagreement(budget, named)
     for c in carried:
         budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
+    for c in unknown:
+        budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
-                        tuple(rows), loop, inflation, nuis, sources, budget, named)
+                        tuple(rows), loop, inflation, nuis, sources, budget, named,
+                        tuple(unknown))
