@@ -417,7 +417,8 @@ def _undecided(f: FusionResult, spec: ToleranceSpec) -> list[str]:
             if c.shift[m] ** 2 > 0.5 * u6[m] ** 2:
                 out.append(f"fusion: {a.name}'s tolerance cannot be decided: its u "
                            f"{u6[m] / ARCSEC:.1f}″ is set by {c.name}, which these data "
-                           f"cannot determine (carried over its plausible range, σ {c.sigma / ARCSEC:.1f}″): "
+                           "cannot determine (carried over its plausible range, σ "
+                           f"{c.sigma / ARCSEC:.1f}″): "
                            f"measure {c.measure}")
     return out
 
