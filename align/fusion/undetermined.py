@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from align.fusion.budget import TYPE_B_TAG
 from align.fusion.observations import E_NAMES, REF, ROLL
 from align.loop import Candidate, LoopReport
 from axisbase.errors import NotApplicable
@@ -36,7 +37,7 @@ within an arc-minute in a lab that squares them at all (user sessions: rolls of 
 ``reference_offset_u_arcsec``: the standard uncertainty). The table tilt and the platform's
 levelling are not carried here (no default range; see docs/loop.md)."""
 
-UNDETERMINED_TAG = " not determined by these data ("
+UNDETERMINED_TAG = TYPE_B_TAG
 """What names an undetermined nuisance's share in E's budget."""
 
 MEASURE = {ROLL: "the reversal views (each mark also seen turned half a turn) or platform "
@@ -70,8 +71,9 @@ class Undetermined:
     u_freed : float
         Its u when freed beside the final model (inf: not separable from E at all) [rad].
     shift : numpy.ndarray
-        The six angles' (``E_NAMES``) shift for a nuisance of ``sigma`` [rad]: its Type B
-        share of cov(E) is ``shift shiftᵀ``.
+        The six angles' (``E_NAMES``) shift for a nuisance of ``sigma`` (combined with
+        ``u_freed``: σ u_f / √(σ² + u_f²)) [rad]: its Type B share of cov(E) is
+        ``shift shiftᵀ``.
     declared : bool
         Whether ``sigma`` was declared (else the default range); unit —.
     """
@@ -102,9 +104,9 @@ class Undetermined:
     def label(self) -> str:
         """How the budget names its Type B share."""
         freed = ("not separable from E" if not np.isfinite(self.u_freed)
-                 else f"± {self.u_freed / ARCSEC:.0f}″ freed")
+                 else f"its u freed {self.u_freed / ARCSEC:.0f}″")
         src = "declared" if self.declared else "default range"
-        return (f"{self.name}{UNDETERMINED_TAG}{freed}; carried over ± "
+        return (f"{self.name}{UNDETERMINED_TAG}{freed}; carried over its plausible range, σ "
                 f"{self.sigma / ARCSEC:.1f}″, {src}; measure {self.measure})")
 
     def message(self, u_e: np.ndarray, share: float = 0.5) -> str | None:
@@ -156,6 +158,11 @@ def undetermined(stage, candidates: Sequence[Candidate], loop: LoopReport, param
                    else float("inf"))
         if not u_freed > sigma:
             continue  # the data know it better than its range: the loop's tests judge it
-        out.append(Undetermined(cand.name, float(sigma), float(u_freed), k[:6] * sigma,
+        # What E's covariance gains with the nuisance a parameter of prior N(0, σ²) beside
+        # what the data say of it (u_freed): k kᵀ σ² u_f² / (σ² + u_f²) — σ² k kᵀ when the
+        # data say nothing (its column in E's span).
+        v = sigma**2 if not np.isfinite(u_freed) else (
+            sigma**2 * u_freed**2 / (sigma**2 + u_freed**2))
+        out.append(Undetermined(cand.name, float(sigma), float(u_freed), k[:6] * np.sqrt(v),
                                 cand.name in sigmas))
     return out
