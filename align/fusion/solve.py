@@ -293,6 +293,9 @@ class FusionResult:
     disagreement : SourceDisagreement or None
         When inconsistent: the source that sees another E, and in which angles (None: none
         singled out, or consistent; :mod:`align.fusion.diagnosis`); unit —.
+    undetermined : tuple of Undetermined
+        The nuisances the data cannot determine, carried in ``cov`` over their plausible
+        range (:mod:`align.fusion.undetermined`); unit —.
     """
 
     E: np.ndarray
