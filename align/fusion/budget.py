@@ -37,9 +37,6 @@ _BLOCK_KIND = {"camera": "image", "goniometer": "gonio", "ellipsoid": "calibrati
                "platform static": "static"}
 SHARED_PREFIX = "lens of camera "
 """How a shared lens error is named (align.fusion.observations.mark_block)."""
-TYPE_B_TAG = " not determined by these data ("
-"""What names a nuisance carried over its plausible range (a Type B share;
-:data:`align.fusion.undetermined.UNDETERMINED_TAG`)."""
 NUISANCE_LABEL = {"bias": "calibration bias error", "camera_roll": "camera roll",
                   "reference_face_offset": "reference face offset",
                   "platform_tilt": "table-axis tilt", "platform_level": "platform levelling offset"}
@@ -157,8 +154,7 @@ class Linearisation:
         for label, idx in self.nuisances:
             free += list(idx)
             now = np.diag(inverse(I[np.ix_(free, free)]))[:6]
-            if label.startswith(SHARED_PREFIX) or TYPE_B_TAG in label:  # a camera's lens, a
-                # nuisance over its plausible range: Type B, not a nuisance the data estimate
+            if label.startswith(SHARED_PREFIX):  # a camera's lens: Type B, not a nuisance
                 shares.append((label, "typeB", now - prev))
             else:
                 shares.append((f"nuisance: {label}", "nuisance", now - prev))
@@ -265,13 +261,9 @@ def with_type_b(budget: Budget, label: str, widen: Mapping[str, float]) -> Budge
 
 
 def linearise(blocks: Sequence, predict_all, params: np.ndarray, names: Sequence[str],
-              layout: Sequence[tuple[str, int]], inflation: float,
-              priors: Mapping[str, tuple[str, float]] | None = None) -> Linearisation:
+              layout: Sequence[tuple[str, int]], inflation: float) -> Linearisation:
     """The linearisation at ``params``: ``predict_all(p) -> [prediction of each block]``;
-    ``layout`` the nuisance groups (name, width) after the six angles. ``priors``: the
-    nuisances of ``layout`` the data cannot determine, by name -> (label, σ [rad]): each a
-    parameter with a prior N(0, σ²) (a Type B share named ``label``; with the prior, cov(E)
-    is what the fit carries: :mod:`align.fusion.undetermined`)."""
+    ``layout`` the nuisance groups (name, width) after the six angles."""
     P = len(params)
     step = 1e-7  # [rad, or g for the bias]: well inside the linear range, far above rounding
     jac = [np.zeros((len(b.values), P)) for b in blocks]
@@ -311,18 +303,11 @@ def linearise(blocks: Sequence, predict_all, params: np.ndarray, names: Sequence
         else:
             groups.append(Group(b.budget_source or b.source, kind, J, b.cov, b.type_b))
     nuis, i = list(lens_nuis), 6
-    priors = priors or {}
     for name, w in layout:
         base = name.split("[")[0]
         label = NUISANCE_LABEL.get(base, base)
         if "[" in name:  # camera_roll[A]
             label += " " + name[name.index("[") + 1:-1]
-        if name in priors:
-            label, sigma = priors[name]
-            prior = np.zeros((w, P + m))
-            prior[:, i:i + w] = np.eye(w)
-            # (σ/f)²: the inflation f scales every share after, the range's σ is not scaled
-            groups.append(Group(label, "typeB", prior, np.eye(w) * (sigma / inflation) ** 2))
         nuis.append((label, tuple(range(i, i + w))))
         i += w
     return Linearisation(tuple(names), tuple(groups), tuple(nuis), inflation)

@@ -475,19 +475,20 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         cov = cov + np.outer(c.shift, c.shift)
     if carried or unknown:
         E_u = e_matrix(np.sqrt(np.diag(cov)))
-    layout = [*sol.layout, *((c.name, 1) for c in unknown)]
+    layout = list(sol.layout)
 
     def predict_all(p: np.ndarray) -> list[np.ndarray]:
         axes, nu = stage._unpack(p, layout)
         return [b.predict(axes, nu) for b in stage.blocks]
 
-    budget = linearise(stage.blocks, predict_all,
-                       np.concatenate([sol.params, np.zeros(len(unknown))]),
-                       [*sol.names, *(c.name for c in unknown)], layout, inflation,
-                       {c.name: (c.label, c.sigma) for c in unknown}).budget()
+    budget = linearise(stage.blocks, predict_all, sol.params, sol.names, layout,
+                       inflation).budget()
     if named is not None:
         budget = with_disagreement(budget, named)
     for c in carried:
+        budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
+    # (Type B like the carried candidates above: the plan's algebra does not predict them)
+    for c in unknown:
         budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
                         tuple(rows), loop, inflation, nuis, sources, budget, named,

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from align.fusion.budget import TYPE_B_TAG
 from align.fusion.observations import E_NAMES, REF, ROLL
 from align.loop import Candidate, LoopReport
 from axisbase.errors import NotApplicable
@@ -37,7 +36,7 @@ within an arc-minute in a lab that squares them at all (user sessions: rolls of 
 ``reference_offset_u_arcsec``: the standard uncertainty). The table tilt and the platform's
 levelling are not carried here (no default range; see docs/loop.md)."""
 
-UNDETERMINED_TAG = TYPE_B_TAG
+UNDETERMINED_TAG = " not determined by these data ("
 """What names an undetermined nuisance's share in E's budget."""
 
 MEASURE = {ROLL: "the reversal views (each mark also seen turned half a turn) or platform "
