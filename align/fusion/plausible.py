@@ -144,8 +144,8 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
       components) and within :data:`UNDECLARED_LIMIT_DEG`; or
     * in place of a term the loop added (an alternative explanation), within
       :data:`UNDECLARED_LIMIT_DEG`, with the replaced term, freed back, not significant at
-      the loop's ``alpha`` (its χ² test, :func:`align.loop.f_test`): the shift is the
-      alternative's E less the final E.
+      the loop's ``alpha`` (its χ² test, :func:`align.loop.f_test`; the fusion's terms are
+      not searched, one trial): the shift is the alternative's E less the final E.
 
     A candidate both ways is carried once, by its larger shift (in units of E's u)."""
     cur = loop.after
@@ -159,8 +159,8 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
             continue
         try:
             term = cand.build(cur)
-        except NotApplicable:
-            continue
+        except (NotApplicable, np.linalg.LinAlgError):
+            continue  # not separable from E by these data: the loop passed it by too
         if term is None:
             continue
         found = []
