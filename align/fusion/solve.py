@@ -397,13 +397,8 @@ class FusionResult:
 
 def _check_determined(stage: FusionStage) -> None:
     """Raise naming the angles no combination of the sources determines (linearised at 0)."""
-    layout = stage._layout(())
-    p0 = np.zeros(6 + sum(w for _, w in layout))
-    J = np.zeros((stage.n, len(p0)))
-    for k in range(len(p0)):
-        d = np.zeros_like(p0)
-        d[k] = 1e-6
-        J[:, k] = (stage._residual(p0 + d, layout) - stage._residual(p0 - d, layout)) / 2e-6
+    p0 = np.zeros(6 + sum(w for _, w in stage._layout(())))
+    J = stage.jacobian((), p0)
     _, s, vt = np.linalg.svd(J)
     s = np.concatenate([s, np.zeros(len(p0) - len(s))])
     null = vt[s < 1e-9 * max(s[0], 1e-300)]

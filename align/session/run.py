@@ -182,7 +182,7 @@ class SessionResult:
                     and s.structure_p is not None else "")
             out.append(f"fusion: the instruments disagree beyond their uncertainties "
                        f"({seen}chi2 {f.chi2:.4g} / {f.dof} dof){who}")
-        if f is not None and f.undetermined and self.tolerance is not None:
+        if f is not None and self.tolerance is not None and f.undetermined:
             out += _undecided(f, self.tolerance)
         return out
 
