@@ -317,6 +317,8 @@ def session_warnings(res) -> list[str]:
     if f is not None:
         out += setup_notices(f, res.session.declared_setup())
         out += loop_warnings("fusion", f.loop)
+        u_e = np.sqrt(np.diag(f.cov))
+        out += [m for c in f.undetermined if (m := c.message(u_e)) is not None]
         if f.inflation > 1:
             out.append(f"fusion: the instruments disagree beyond their uncertainties; E's "
                        f"uncertainty is inflated x{f.inflation:.2f}")

@@ -36,6 +36,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.fusion.plausible import admissible, not_excluded
+from align.fusion.undetermined import Undetermined, undetermined
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, f_test, run_loop
 from axisbase.covariance import cov_of
 from axisbase.errors import NotApplicable
@@ -137,6 +138,19 @@ class FusionStage:
         axes, nuis = self._unpack(res.x, layout)
         pred = tuple(b.predict(axes, nuis) for b in self.blocks)
         return Solution(res.x, cov, names, res.fun, pred, tuple(layout))
+
+    def jacobian(self, terms: Sequence[Term], params: np.ndarray) -> np.ndarray:
+        """The whitened residuals' Jacobian (n × parameters) at ``params`` (E's six angles, the
+        base nuisances, then ``terms``' components), by central differences."""
+        layout = self._layout(terms)
+        J = np.zeros((self.n, len(params)))
+        step = 1e-7  # [rad, or g for the bias]: well inside the linear range, above rounding
+        for k in range(len(params)):
+            d = np.zeros(len(params))
+            d[k] = step
+            J[:, k] = (self._residual(params + d, layout)
+                       - self._residual(params - d, layout)) / (2 * step)
+        return J
 
     def _far_message(self, off: np.ndarray) -> str:
         """The refusal of observations that only an axis far from nominal would fit (``off``:
@@ -280,6 +294,9 @@ class FusionResult:
     disagreement : SourceDisagreement or None
         When inconsistent: the source that sees another E, and in which angles (None: none
         singled out, or consistent; :mod:`align.fusion.diagnosis`); unit —.
+    undetermined : tuple of Undetermined
+        The nuisances the data cannot determine, carried in ``cov`` over their plausible
+        range (:mod:`align.fusion.undetermined`); unit —.
     """
 
     E: np.ndarray
@@ -299,6 +316,9 @@ class FusionResult:
     # When inconsistent: the source that sees another E, and in which angles (None: none
     # singled out, or consistent). See :mod:`align.fusion.diagnosis`.
     disagreement: SourceDisagreement | None = None
+    undetermined: tuple[Undetermined, ...] = ()
+    """The nuisances the data cannot determine, carried in ``cov`` over their plausible range
+    (:mod:`align.fusion.undetermined`)."""
 
     def cov_of(self, *names: str) -> np.ndarray:
         """The covariance [rad²] of the named angles of E (``E_NAMES``, e.g.
@@ -353,7 +373,8 @@ class FusionResult:
             "observations": [r.to_dict() for r in self.rows],
             "budget": None if self.budget is None else self.budget.to_dict(),
             "source_disagreement": (None if self.disagreement is None
-                                    else self.disagreement.to_dict())}
+                                    else self.disagreement.to_dict()),
+            "undetermined": [c.to_dict() for c in self.undetermined]}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> FusionResult:
@@ -371,18 +392,14 @@ class FusionResult:
                    tuple(d.get("sources", ())),
                    Budget.from_dict(d["budget"]) if d.get("budget") else None,
                    (None if not d.get("source_disagreement")
-                    else disagreement_from_dict(d["source_disagreement"])))
+                    else disagreement_from_dict(d["source_disagreement"])),
+                   tuple(Undetermined.from_dict(c) for c in d.get("undetermined", ())))
 
 
 def _check_determined(stage: FusionStage) -> None:
     """Raise naming the angles no combination of the sources determines (linearised at 0)."""
-    layout = stage._layout(())
-    p0 = np.zeros(6 + sum(w for _, w in layout))
-    J = np.zeros((stage.n, len(p0)))
-    for k in range(len(p0)):
-        d = np.zeros_like(p0)
-        d[k] = 1e-6
-        J[:, k] = (stage._residual(p0 + d, layout) - stage._residual(p0 - d, layout)) / 2e-6
+    p0 = np.zeros(6 + sum(w for _, w in stage._layout(())))
+    J = stage.jacobian((), p0)
     _, s, vt = np.linalg.svd(J)
     s = np.concatenate([s, np.zeros(len(p0) - len(s))])
     null = vt[s < 1e-9 * max(s[0], 1e-300)]
@@ -418,8 +435,12 @@ def _held(lin: Linearisation, stage: FusionStage, loop: LoopReport,
     return replace(lin, nuisances=tuple(nuis[:len(nuis) - len(extra)]), held=tuple(held))
 
 
-def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
-    """Solve for E with the residual loop over the nuisance candidates."""
+def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
+         plausible_u: Mapping[str, float] | None = None) -> FusionResult:
+    """Solve for E with the residual loop over the nuisance candidates; ``plausible_u``: the
+    declared standard uncertainty [rad] of a nuisance's plausible range by name (a camera's
+    roll, the reference face's offset; else the default range,
+    :mod:`align.fusion.undetermined`), carried in u where the data cannot determine it."""
     stage = FusionStage(blocks)
     _check_determined(stage)
     cands = candidates(stage)
@@ -467,7 +488,12 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
     carried = not_excluded(stage, cands, loop, cov, alpha)
     for c in carried:
         cov = cov + np.outer(c.shift, c.shift)
-    if carried:
+    # The candidates the data cannot determine: carried over their plausible range (Type B).
+    unknown = undetermined(stage, cands, loop, sol.params, inflation, plausible_u,
+                           skip=[c.name for c in carried])
+    for c in unknown:
+        cov = cov + np.outer(c.shift, c.shift)
+    if carried or unknown:
         E_u = e_matrix(np.sqrt(np.diag(cov)))
     # The carried candidates' columns join the linearisation held at zero: what freeing
     # them would do, from which 'align plan' predicts whether a measurement resolves them.
@@ -488,5 +514,10 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3) -> FusionResult:
         budget = with_disagreement(budget, named)
     for c in carried:
         budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
+    # (Type B beside the linearisation: unlike the carried candidates the plan does not
+    # predict them yet)
+    for c in unknown:
+        budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,
-                        tuple(rows), loop, inflation, nuis, sources, budget, named)
+                        tuple(rows), loop, inflation, nuis, sources, budget, named,
+                        tuple(unknown))

@@ -73,6 +73,7 @@ class Camera:
     roll_rad: float = 0.0
     lens: LensRanges | None = None
     blur_after_pixels: bool = False
+    roll_u_rad: float | None = None  # roll_u_arcsec: its plausible range's σ [rad]
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,7 @@ class Goniometer:
     steady_table: bool = False
     columns: dict[str, str] = field(default_factory=dict)
     time_unit: str | None = None  # the t column's unit when its header says none
+    reference_offset_u_rad: float | None = None  # reference_offset_u_arcsec: σ [rad]
 
 
 @dataclass(frozen=True)
@@ -151,6 +153,17 @@ class Session:
             out[REF] = np.array([self.goniometer.reference_offset_rad])
         if self.platform is not None:
             out[TILT] = np.asarray(self.platform.table_tilt_rad, float)
+        return out
+
+    def plausible_u(self) -> dict[str, float]:
+        """The declared standard uncertainty [rad] of a nuisance's plausible range, by the
+        fusion's effect name (``roll_u_arcsec``, ``reference_offset_u_arcsec``): carried in
+        E's u where the data cannot determine the nuisance (:mod:`align.fusion.undetermined`;
+        not declared: its default range)."""
+        out = {f"{ROLL}[{n}]": c.roll_u_rad for n, c in self.cameras.items()
+               if c.roll_u_rad is not None}
+        if self.goniometer is not None and self.goniometer.reference_offset_u_rad is not None:
+            out[REF] = self.goniometer.reference_offset_u_rad
         return out
 
     @property
@@ -233,6 +246,13 @@ def _number(value: object, where: str, lo: float | None = None, hi: float | None
     return v
 
 
+def _u_arcsec(table: dict, key: str, where: str, hi: float) -> float | None:
+    """A declared standard uncertainty ``key`` [″] (> 0, at most ``hi``) in [rad], or None."""
+    if key not in table:
+        return None
+    return _number(table[key], f"{where} {key}", 0.0, hi, open_lo=True) * ARCSEC
+
+
 DETECTION_KEYS = {v for k, v in SESSION_KEYS.items() if k not in ("rate_hz", "columns")}
 """The static-detection keys of ``[calibration]`` (:data:`align.calibration.SESSION_KEYS`)."""
 
@@ -282,8 +302,9 @@ KEYS = {
                     "adc_range", "scale_stability_ppm", "k2_bound_ug_per_g2",
                     "k3_bound_ug_per_g3", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
-                   "reverse_log", "steady_table", "columns", "time_unit"},
-    "cameras": {"model", "roll_arcsec", "blur_after_pixels",
+                   "reference_offset_u_arcsec", "reverse_log", "steady_table", "columns",
+                   "time_unit"},
+    "cameras": {"model", "roll_arcsec", "roll_u_arcsec", "blur_after_pixels",
                 *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
@@ -444,7 +465,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                          _number(g.get("reference_offset_arcsec", 0.0),
                                  f"{w} reference_offset_arcsec", -MAX_OFFSET_ARCSEC,
                                  MAX_OFFSET_ARCSEC) * ARCSEC,
-                         rev_path, steady, keys.columns, keys.time_unit)
+                         rev_path, steady, keys.columns, keys.time_unit,
+                         _u_arcsec(g, "reference_offset_u_arcsec", w, MAX_OFFSET_ARCSEC))
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():
@@ -470,7 +492,8 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
                                        -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC,
-                               LensRanges(**lens) if lens else None, after)
+                               LensRanges(**lens) if lens else None, after,
+                               _u_arcsec(c, "roll_u_arcsec", w, MAX_ROLL_ARCSEC))
 
     views = {}
     for name, v in _table(d, "views", src + ": ").items():

@@ -32,10 +32,11 @@ from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check, unit_source
 from align.camera_lens import CAMERA_MODEL
-from align.decision import Disposition, ToleranceSpec, decide
+from align.decision import INCONCLUSIVE, Disposition, ToleranceSpec, decide, decide_values
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
+    E_NAMES,
     Block,
     FusionResult,
     MarkObs,
@@ -58,6 +59,7 @@ from align.warnings import session_notes, session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
 from axisbase.header import header_units, resolve_units
+from axisbase.units import ARCSEC
 from imaging import CameraModel
 
 Progress = Callable[[str], None]
@@ -180,6 +182,8 @@ class SessionResult:
                     and s.structure_p is not None else "")
             out.append(f"fusion: the instruments disagree beyond their uncertainties "
                        f"({seen}chi2 {f.chi2:.4g} / {f.dof} dof){who}")
+        if f is not None and self.tolerance is not None and f.undetermined:
+            out += _undecided(f, self.tolerance)
         return out
 
     def platform_calibration(self) -> PlatformCalibration | None:
@@ -385,7 +389,9 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
     progress("fusion")
     failed = list(dict.fromkeys(e.stage for e in res.errors))
     blocks = observation_blocks(s, res)
-    res.fusion = _try(res, "fusion", lambda: fuse(blocks, alpha=alpha)) if blocks else None
+    res.fusion = (_try(res, "fusion", lambda: fuse(blocks, alpha=alpha,
+                                                   plausible_u=s.plausible_u()))
+                  if blocks else None)
     if res.fusion is None and blocks and failed:  # say why a source is missing
         e = res.errors[-1]
         res.errors[-1] = StageError(e.stage, f"{e.message} (without the failed stage(s): "
@@ -394,6 +400,28 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
         res.errors.append(StageError("fusion", "no stage produced observations"))
     elif res.fusion is not None and res.fusion.gross:
         res.errors.append(StageError("fusion", res.fusion.gross_message()))
+
+
+def _undecided(f: FusionResult, spec: ToleranceSpec) -> list[str]:
+    """The toleranced angles the disposition cannot decide because a nuisance the data cannot
+    determine sets their u (more than half its u²): the result is then not a measurement of
+    them — say what to measure (issue 18; :mod:`align.fusion.undetermined`)."""
+    e6 = [float(f.E[i, j]) for i, j in E_INDEX]
+    u6 = [float(f.E_u[i, j]) for i, j in E_INDEX]
+    d = decide_values(True, e6, u6, f.cov, spec)
+    out = []
+    for a in d.angles:
+        if a.verdict != INCONCLUSIVE:
+            continue
+        m = E_NAMES.index(a.name)
+        for c in f.undetermined:
+            if c.shift[m] ** 2 > 0.5 * u6[m] ** 2:
+                out.append(f"fusion: {a.name}'s tolerance cannot be decided: its u "
+                           f"{u6[m] / ARCSEC:.1f}″ is set by {c.name}, which these data "
+                           "cannot determine (carried over its plausible range, σ "
+                           f"{c.sigma / ARCSEC:.1f}″): "
+                           f"measure {c.measure}")
+    return out
 
 
 def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:

@@ -39,12 +39,17 @@ AFTER = ("# blur_after_pixels = false       # true: images filtered on the pixel
          "(demosaiced, sharpened)\n")
 
 
+ROLL_U = ("# roll_u_arcsec = 34.6            # [″] the roll's standard uncertainty, "
+          "carried where no reversal view or static pose determines it (default ±60″ "
+          "uniform: 34.6)\n")
+
+
 def _camera_block(name: str, k: int) -> str:
     if k >= len(LAYOUT):
         return (f"\n[cameras.{name}]\n# model = \"{name}.camera.json\"   # lens model from "
                 "'align camera' (default: none; then the ranges below)\n"
                 "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-                "(default 0)\n" + AFTER + LENS +
+                "(default 0)\n" + ROLL_U + AFTER + LENS +
                 f"# FILL IN its views and [[images]] as for the cameras above: [views.{name}] "
                 "camera, right, up\n")
     right, housing = LAYOUT[k]
@@ -55,7 +60,7 @@ def _camera_block(name: str, k: int) -> str:
            f"# model = \"{name}.camera.json\"   # lens model from 'align camera' (default: "
            "none; then the ranges below)\n"
            "# roll_arcsec = 0.0              # [″] known roll about the optical axis "
-           "(default 0)\n" + AFTER + LENS)
+           "(default 0)\n" + ROLL_U + AFTER + LENS)
     for view, r in ((name, right), (f"{name}r", rev)):
         out += (f"\n[views.{view}]\ncamera = \"{name}\"\nright = \"{r}\"      # platform axis "
                 "pointing right in the image (+X, -X, +Y, -Y, +Z, -Z)\n"
@@ -158,6 +163,8 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "direction = \"ccw\"             # ccw or cw, seen from above (default ccw)",
                 "# reference_offset_arcsec = 0.0   # [″] known offset of the reference face "
                 "(default 0)",
+                "# reference_offset_u_arcsec = 34.6  # [″] its standard uncertainty, carried "
+                "where no X/Y-up poses determine it (default ±60″ uniform: 34.6)",
                 "# reverse_log = \"gonio_cw.csv\"   # a log turning the other way (cancels the "
                 "Earth rate)",
                 "# steady_table = false         # the table turned at a steady rate (default "

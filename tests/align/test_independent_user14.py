@@ -184,12 +184,6 @@ def camera_session(seed, **kw):
 
 @needs_real
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "silent wrong answer: views A and B without their reversals, no static poses, camera A "
-    "rolled 40\" undeclared: exit 0, ok, no effect, nothing carried, no skipped candidate; "
-    "seed 1 E_xZ -36.26 +- 8.61\" (truth -85.40, +5.71 u), E_zX +30.50 +- 8.63\" (truth "
-    "+78.65, -5.58 u); seed 2 E_xZ +3.53 u, E_zX -3.64 u. The roll is exactly degenerate "
-    "with E_xZ - E_zX here (3 observations, 3 unknowns), so its plausible range belongs in u"))
 @pytest.mark.parametrize("seed", [1, 2])
 def test_undeclared_roll_without_reversal_views_is_not_a_silent_wrong_answer(tmp_path, seed):
     p, res, truth = run(tmp_path / "s", camera_session(seed, roll_A_arcsec=40.0,
@@ -202,11 +196,6 @@ def test_undeclared_roll_without_reversal_views_is_not_a_silent_wrong_answer(tmp
 
 @needs_real
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "wrong PASS: the session above (seed 1, camera A rolled 40\" undeclared, no reversal "
-    "views, no static poses) with E_xZ toleranced +-60\" (others +-150\"): PASS, E_xZ = "
-    "-36.26 +- 8.61\" inside the acceptance zone, while the true E_xZ is -85.40\", 25\" "
-    "outside the tolerance"))
 def test_pass_is_right_with_an_undeclared_roll_and_no_reversal_views(tmp_path):
     spec = camera_session(1, roll_A_arcsec=40.0, views=("A", "B"), tolerance_arcsec=150.0,
                           tolerance_angles={"E_xZ": 60.0})
@@ -217,12 +206,6 @@ def test_pass_is_right_with_an_undeclared_roll_and_no_reversal_views(tmp_path):
 
 @needs_real
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "silent wrong answer: the goniometer's reference face 30\" off its nominal azimuth, no "
-    "azimuth datum (no X/Y-up static poses): exit 0, ok, nothing carried, no warning that "
-    "E_xY, E_yX rest on the reference face's assumed offset 0; seed 1 E_xY +78.12 +- 0.04\" "
-    "(truth +108.11, -807 u), E_yX +137.71 +- 0.05\" (truth +107.68, +591 u); seed 2 -565 u, "
-    "+604 u (docs/concepts.md: the offset is 'separable only with an azimuth datum')"))
 @pytest.mark.parametrize("seed", [1, 2])
 def test_reference_face_offset_without_azimuth_datum_is_not_silent(tmp_path, seed):
     p, res, truth = run(tmp_path / "s", camera_session(seed, gonio_ref_offset_arcsec=30.0))
@@ -234,10 +217,6 @@ def test_reference_face_offset_without_azimuth_datum_is_not_silent(tmp_path, see
 
 @needs_real
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "wrong PASS: reference face 30\" off, no azimuth datum (seed 1), E_xY toleranced "
-    "+-100\" (others +-150\"): PASS with p_conform 1.0, E_xY = +78.12 +- 0.04\", while the "
-    "true E_xY is +108.11\", 8\" outside the tolerance"))
 def test_pass_is_right_with_a_reference_face_offset_and_no_azimuth_datum(tmp_path):
     spec = camera_session(1, gonio_ref_offset_arcsec=30.0, tolerance_arcsec=150.0,
                           tolerance_angles={"E_xY": 100.0})
