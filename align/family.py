@@ -257,47 +257,46 @@ def ruling_steps(q: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.maximum(np.rint(gaps / one), 1.0))])
 
 
-CARRIED_LENS = ("camera_",)
-"""Lens coupling keys carried in the members' covariance: a calibrated camera's (its
-covariance is the calibration's, not these lines'). The frame's lens from its lines — the
-fitted parameters' covariance (``lens_fit``) and the bounds (``_range``, ``_small``,
-``lens_or_bend``, ``lens_pp_cross``) — is one lens for the frame: the family fits the
-directions of it that it sees (:func:`lens_directions`)."""
+GAUSSIAN_LENS = ("lens_fit", "camera_")
+"""Lens coupling keys whose u is a standard deviation of an estimate (the lens fitted from
+the frame's lines, a calibrated camera's): carried in the members' covariance. The others
+(``_range``, ``_small``, ``lens_or_bend``, ``lens_pp_cross``) are bounds on where the lens may
+be (Type B): the family fits the directions of them it sees (:func:`lens_directions`)."""
 SEEN_LENS = 1.0
-"""A direction of the frame's lens that turns the members' angles apart by more than this
-many of their own u (whitened, the mean taken out) is fitted from the family; one that
-turns them apart by less is left out of their chi2."""
+"""A bounded lens direction that turns the members' angles apart by more than this many of
+their own u (whitened, the mean taken out) is fitted from the family; one that turns them
+apart by less is left out of their chi2."""
 
 
-def lens_directions(u: np.ndarray, cpl: np.ndarray, carried: np.ndarray
+def lens_directions(u: np.ndarray, cpl: np.ndarray, gaussian: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
     """The frame's one lens as the family sees it: (F, L) — F (N, m) the members' angle
-    moves [rad] along the directions of the frame's lens their angles determine (fitted
-    from the family with the mean, m at most N - 3), L (N, k) the couplings carried in
-    their covariance (V = diag(u^2) + L L^T): a calibrated camera's (:data:`CARRIED_LENS`;
-    all of them for 3 members or fewer, which leave no dof to fit from).
+    moves [rad] along the bounded lens directions their angles determine (fitted from the
+    family with the mean, m at most N - 3), L (N, k) the couplings carried in their
+    covariance (V = diag(u^2) + L L^T): the Gaussian ones (all of them for 3 members or
+    fewer, which leave no dof to fit from).
 
-    The frame's lens, carried as a u, is right for lenses drawn from its ranges and its
-    fit's covariance, not for the one lens of a frame: carried, the bounds made a lens-free
-    scale's chi2/dof 0.63 on average (0.7-1.4 expected); fitted from the family with the
-    fit's covariance and the unseen bounds carried, 0.78 through a k1 -0.15 lens (39
-    ``synth`` scales, seeds 200-239; 0.94 fitted, nothing carried). A direction the family
-    does not see (singular value <= :data:`SEEN_LENS`) moves no member by as much as its u
-    and is left out. Fitted, the lens takes its own dof: chi2/dof ~1 whatever the lens is
-    (a k1 the lines fit free moves every member by its estimate's error, one shared
-    error: fitted so). ``u``: the members' own u [rad]; ``cpl`` (N, K) their signed
-    couplings [rad]; ``carried`` (K,) which couplings are carried."""
+    A bound carried as a u (the plausible range as a uniform) is right for a lens drawn
+    from the range, not for the one lens of a frame: a lens-free scale read chi2/dof 0.63
+    on average (0.7-1.4 expected), the spread its lines do not have taken for what the lens
+    may have done. Fitted, the lens takes its own dof: chi2/dof ~1 whatever the lens is. A
+    bounded direction the family does not see (singular value <= :data:`SEEN_LENS`) is left
+    out: carried, these made the chi2/dof 0.78 through a k1 -0.15 lens (39 ``synth`` scales
+    800 x 600, seeds 200-239; 0.87 left out); a lens at the edge of its range along one
+    adds at most 3 to the chi2 (its u is range / sqrt 3).
+    ``u``: the members' own u [rad]; ``cpl`` (N, K) their signed couplings [rad];
+    ``gaussian`` (K,) which couplings are Gaussian (:data:`GAUSSIAN_LENS`)."""
     n = len(u)
-    kept = cpl[:, carried]
-    frame = cpl[:, ~carried]
-    if not frame.size or n <= 3:
-        return np.zeros((n, 0)), (cpl if n <= 3 else kept)
+    carried = cpl[:, gaussian]
+    bounded = cpl[:, ~gaussian]
+    if not bounded.size or n <= 3:
+        return np.zeros((n, 0)), (cpl if n <= 3 else carried)
     h = 1 / u
-    b = frame / u[:, None]
+    b = bounded / u[:, None]
     b = b - np.outer(h, h @ b) / (h @ h)  # (the mean's direction is fitted anyway)
     _, sv, vt = np.linalg.svd(b, full_matrices=False)
     fit = np.flatnonzero(sv > SEEN_LENS)[: n - 3]
-    return frame @ vt[fit].T, kept
+    return bounded @ vt[fit].T, carried
 
 
 def _lens_chi2(d: np.ndarray, u: np.ndarray, vl: np.ndarray, keep: np.ndarray,
@@ -356,7 +355,7 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
         keys = sorted({k for c in lens_coupling for k in c})
         cpl = np.array([[float(c.get(k, 0.0)) for k in keys] for c in lens_coupling])
         fitted, carried = lens_directions(u_all, cpl,
-                                          np.array([k.startswith(CARRIED_LENS) for k in keys]))
+                                          np.array([k.startswith(GAUSSIAN_LENS) for k in keys]))
         vl = carried @ carried.T
     m_fit = fitted.shape[1] if fitted is not None else 0
     limit = float(-ndtri(alpha / (2 * n)))
