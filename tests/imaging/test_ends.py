@@ -75,9 +75,9 @@ def test_hidden_ends_over_seeds():
     line in each).
 
     40 scales for the chi2: a family's chi2/dof has sd sqrt(2/dof) (dof 2-15 here), so the
-    mean of 10 has sd ~0.2 and 0.7 is 1.4 sd below 1 — seeds 0-9 read 0.64 (pooled chi2 45.6
-    for 64 dof, lower-tail p 0.04), seeds 40-69 0.94 and 70-109 1.22 with the same code;
-    the mean of 40 has sd ~0.1, the band about 3 of it. (Seeds 26, 30, 35 have a line cut
+    mean of 10 has sd ~0.2 and 0.7 is 1.4 sd below 1 — seeds 0-9 read 0.65, 0-39 0.84,
+    seeds 40-69 0.97 and 70-109 1.25 with the same code (1.03 over the 110); the mean of 40
+    has sd ~0.1, the band about 3 of it. (Seeds 26, 30, 35 have a line cut
     short or missed and 33, 38 a truth beyond its bound: the ends' claims hold on 0-9 only.)"""
     rows, chis = [], []
     for seed in range(40):
