@@ -1,7 +1,14 @@
 """The principal point's range in the lens solve: where the lines leave the principal point
 undetermined, radial terms act about a point anywhere in its range, so the solver probes the
 range's corners (how far the fitted lens moves, how each mark's angle sensitivity varies) and
-carries the spread as a uniform (Type B) distribution. Used by :mod:`align.lens`."""
+carries the spread as a uniform (Type B) distribution. Used by :mod:`align.lens`.
+
+Where the lens folds along a mark with the principal point at a corner of that range (a
+strong k1 and a long mark far from the centre), that principal point is impossible for
+those marks: the lines are seen unfolded. The probes are then taken on the largest centred
+fraction of the range (:data:`PP_FRACTIONS`) where the lens folds none of them
+(:func:`pp_corners`), and the spread is that smaller square's; before, one folding corner
+made the whole spread, and every angle's u, infinite."""
 
 from __future__ import annotations
 
@@ -10,7 +17,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from align.lens_design import LensFolds, _DesignCache
-from imaging.lens import PARAMS
+from imaging.lens import PARAMS, undistort_points
+
+PP_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
+"""The fractions of the principal point's range tried, largest first, for the corners at which
+the lens folds no mark (:func:`pp_corners`)."""
 
 
 def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndarray]:
@@ -30,6 +41,26 @@ def _pp_probes(lam: np.ndarray, det: list[int], rng: np.ndarray) -> list[np.ndar
                     p[j] = sg * rng[j]
             out.append(p)
     return out
+
+
+def _folds(cache: _DesignCache, lam: np.ndarray) -> bool:
+    """Whether the lens ``lam`` folds the image along any of the cache's lines (an
+    undistortion of its centres not finite: :func:`imaging.lens.undistort_points`)."""
+    return any(not np.all(np.isfinite(undistort_points(ln.points, lam, cache.scale)))
+               for ln in cache.lines)
+
+
+def pp_corners(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.ndarray
+               ) -> list[np.ndarray]:
+    """The corners of :func:`_pp_probes` on the largest fraction of the principal point's
+    range (of :data:`PP_FRACTIONS`) at none of which the lens ``lam`` folds a line: a
+    principal point where it would is impossible for these marks. A lens folding them even at
+    the smallest fraction gets the full range's corners (its spread then inf)."""
+    for f in PP_FRACTIONS:
+        out = _pp_probes(lam, det, rng * f)
+        if not any(_folds(cache, p) for p in out):
+            return out
+    return _pp_probes(lam, det, rng)
 
 
 def _uniform_msq(corners: Sequence[np.ndarray], centre: np.ndarray) -> np.ndarray:
@@ -66,7 +97,7 @@ def _pp_spread(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: li
         return np.zeros(P), np.zeros(P)
     A = np.ix_(applied, applied)
     moves = []
-    for p in _pp_probes(lam, det, rng):
+    for p in pp_corners(cache, lam, det, rng):
         m = np.zeros(P)
         try:
             ds = cache.all(p)
@@ -87,11 +118,12 @@ def _pp_probe_s(cache: _DesignCache, lam: np.ndarray, det: list[int], rng: np.nd
                 ) -> list[np.ndarray]:
     """Each line's variance of d angle / d lam over the principal point's range, uniform
     [rad^2/unit^2]: only the radial terms act about the principal point, so only theirs is
-    not zero (inf where the lens folds at a corner)."""
+    not zero (over the range shrunk as :func:`pp_corners` does; inf where the lens folds at a
+    corner even then)."""
     P = len(PARAMS)
     radial = np.zeros(P)
     radial[:2] = 1.0
-    probes = _pp_probes(lam, det, rng)
+    probes = pp_corners(cache, lam, det, rng)
     if not probes:
         return [np.zeros(P) for _ in cache.lines]
 

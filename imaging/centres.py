@@ -11,7 +11,7 @@ Fisher information, so the line fit downstream propagates a real uncertainty.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -146,6 +146,15 @@ slope)."""
 
 RING_PX = 6.0
 """Width of the ring just outside the band whose pixels give the background slope [px]."""
+
+MIN_CV_REPLICAS = 4
+"""Fewest replica series of the band (:func:`imaging.texture.texture_model`) whose texture
+coupling is applied to the centres as a control variate. The coupling estimated from n
+series adds about 1/n of the centres' own noise variance, in one direction common to all of
+them and not in their u: from the 8 a free mark has, ~6 % of u; from the one or two left
+where other lines take the rest (a dial's graduations 30 deg apart, a ruled scale's pitch),
+as much as the mark's own noise (a dial's graduation moved 15", 0.9 u, by a coupling of
+36 px^2 from 1 series, -2.3 from 8 without its neighbours). Under 4 it is left out (0)."""
 
 
 def _ring(wide: tuple[np.ndarray, ...], pf: ProfileFit, half: float, segment_px: float,
@@ -341,6 +350,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         tex = texture_model(image, (idx // image.shape[1], idx % image.shape[1], seg), nseg,
                             wgt, J, cov, good, ring, amp_safe, n, shifts, (v0, v1),
                             pf.full_scale_dn, avoid_px, 2 * (half + 4), npx, bc)
+    if tex is not None and tex.replicas < MIN_CV_REPLICAS:
+        tex = replace(tex, coupling_px2=0.0, coupling_u_px2=0.0)
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).

@@ -96,7 +96,12 @@ def test_undeclared_lens_held_out_marks_within_their_u(k1):
                    " dial's graduations' u drops ~30 % while their error does not (seed 0: z"
                    " -3.87), a strong lens folds at a principal-point probe over the longer"
                    " centres (lens_shared: u inf), two bent-mark seeds lose 'differs', and"
-                   " marks_loop's k1 +0.2 RMS z falls to 0.37 (< 0.4)")
+                   " marks_loop's k1 +0.2 RMS z falls to 0.37 (< 0.4). Since (branch ends3-wip,"
+                   " 551644a): the dial was a 1-series texture coupling (fixed on main:"
+                   " imaging.centres.MIN_CV_REPLICAS), lens_shared's inf the fold (fixed:"
+                   " align.lens_pp.pp_corners) then end centres past the half-depth end (capped"
+                   " there); left: camera_lens seed 2 reads 'neither' (bows 1.6x, every line"
+                   " departs on its own) and marks_loop RMS z 0.365")
 @pytest.mark.parametrize("k1", [K1, 0.0])
 def test_undeclared_lens_held_out_marks_reach_the_k1_free_bound(k1):
     lo, hi = _band(N_MARKS)

@@ -153,3 +153,41 @@ def test_a_session_budget_names_the_shared_lens_and_still_adds_up(tmp_path):
     refit = np.array([f2.E_u[i, j] for i, j in E_INDEX])
     print("predicted/refit", np.round(predicted / refit, 4))
     assert predicted == pytest.approx(refit, rel=0.02)
+
+
+def test_a_principal_point_where_the_lens_folds_the_marks_shrinks_its_range_not_inf():
+    """A strong lens fitted from long marks far from the centre can fold them with the
+    principal point at a corner of its +-40 px range (k1 -0.52 at f 530 px folded a 238 px
+    mark near 282 px): that principal point is impossible for those marks, not an infinite
+    uncertainty. The spread is taken on the largest fraction of the range where the lens
+    folds none (align.lens_pp.pp_corners): finite and not zero; the full range's corners
+    fold, the next larger fraction's too, and the smaller square's spread is no larger than
+    the full one of a lens that folds nothing (the same marks, k1 a tenth)."""
+    from align.lens_design import DEFAULT_RANGES, LineGeometry, _DesignCache
+    from align.lens_pp import PP_FRACTIONS, _folds, _pp_probes, _pp_spread, pp_corners
+
+    R = float(np.hypot(320, 240))
+    lines = []
+    for (x, y), deg in (((150.0, -120.0), 1.5), ((-140.0, 110.0), 60.0), ((20.0, 150.0), -80.0)):
+        a = np.deg2rad(deg)
+        t = np.arange(-119.0, 120.0, 4.0)
+        pts = np.column_stack([x + t * np.cos(a), y - t * np.sin(a)])
+        lines.append(LineGeometry(pts, np.full(len(t), 0.05)))
+    cache = _DesignCache(lines, R)
+    r_max = max(np.hypot(*ln.points.T).max() for ln in lines)
+    rng = DEFAULT_RANGES.vector()
+    lam = np.zeros(7)
+    # Folds 20 px beyond the farthest centre: the sensor's radius r (1 + k1 r^2) is largest,
+    # 2/3 of r, where 1 + 3 k1 r^2 = 0.
+    lam[0] = -1.0 / (3 * (1.5 * (r_max + 20.0) / R) ** 2)
+    det = [0]
+    assert not _folds(cache, lam)
+    assert any(_folds(cache, p) for p in _pp_probes(lam, det, rng))
+    corners = pp_corners(cache, lam, det, rng)
+    f = max(abs(corners[0][5]), abs(corners[0][6])) / rng[5]
+    assert f in PP_FRACTIONS and f < 1.0
+    assert not any(_folds(cache, p) for p in corners)
+    larger = PP_FRACTIONS[PP_FRACTIONS.index(f) - 1]
+    assert any(_folds(cache, p) for p in _pp_probes(lam, det, rng * larger))
+    bound, u = _pp_spread(cache, lam, [0], det, rng)
+    assert np.isfinite(u[0]) and 0 < u[0] <= bound[0] < np.inf, (u, bound)

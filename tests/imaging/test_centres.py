@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from imaging.centres import RCOND, _conditioned
+from imaging import measure_marks
+from imaging.centres import MIN_CV_REPLICAS, RCOND, _conditioned, sample_centres
+from imaging.groove import centres_half
+from tests.conftest import mark_image
 
 
 def _normal(J: np.ndarray) -> np.ndarray:
@@ -39,3 +42,23 @@ def test_rcond_is_scale_free():
     D = np.diag([1e4, 1e-3, 1.0, 50.0])
     assert _conditioned(np.stack([N, D @ N @ D])).tolist() == [True, True]
     assert 0 < RCOND < 1e-6
+
+
+def test_texture_coupling_from_too_few_replicas_is_not_applied():
+    """The texture's coupling (a control variate on the centres) estimated from n replica
+    series adds ~1/n of the centres' noise variance, not in their u: with lines beside the
+    mark taking all but one series (avoid_px, as a dial's graduations 30 deg apart do) it is
+    not applied (a graduation moved 0.9 u by it), and the centres are those without the
+    texture model; from the 8 series of a free mark it is."""
+    s = mark_image(23.0, seed=2, length_px=200.0, size=(640, 480), with_crlb=False,
+                   texture=0.02)
+    img = s.image.astype(float)
+    (m,) = measure_marks(img)
+    pf = m.profile
+    shifts = [k * (centres_half(pf) + 4) for k in (2, 4, 6, 8)]
+    one = sample_centres(img, pf, texture=True,
+                         avoid_px=[x + 5.0 for x in shifts[1:]] + [-x for x in shifts])
+    assert one.texture.replicas == 1 and one.texture.coupling_px2 == 0.0
+    assert np.array_equal(one.xy, sample_centres(img, pf).xy)
+    full = sample_centres(img, pf, texture=True)
+    assert full.texture.replicas >= MIN_CV_REPLICAS and full.texture.coupling_px2 != 0.0
