@@ -343,7 +343,8 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
     rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
              if label.startswith("camera roll ")]
     # a roll the fusion carries as not excluded: calibrating it resolves it
-    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in lin.held
+    # and one it carries over its plausible range (undetermined): calibrating it narrows that
+    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in (*lin.held, *lin.ranged)
               if name.startswith(ROLL + "[")]
     for cam, idx in rolls:
         A = np.zeros((1, len(lin.params)))
@@ -385,7 +386,7 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
         # a camera's roll calibrated is declared: no longer a candidate (session.toml)
-        declared = [f"{ROLL}[{detail['camera']}]"] if kind == "camera" else []
+        declared = {f"{ROLL}[{detail['camera']}]": camera_roll_u} if kind == "camera" else {}
         after = predict(lin, add, drop, declared=declared)
         u = after.u
         o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,

@@ -11,7 +11,7 @@ test decide whether the candidate is carried, named or dropped (docs/decision.md
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -147,10 +147,11 @@ def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b:
     return b
 
 
-def ranged_after(lin: Linearisation, info: np.ndarray, declared: Sequence[str] = ()
+def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, float] = {}
                  ) -> tuple[Undetermined, ...]:
-    """The undetermined nuisances (``lin.ranged``, less the ``declared``) the fusion would
-    carry over their plausible range with information ``info`` (over every parameter): each
+    """The undetermined nuisances (``lin.ranged``; one ``declared``, calibrated, with its
+    calibration's u [rad] as its range) the fusion would carry over their plausible range with
+    information ``info`` (over every parameter): each
     freed alone beside the estimated parameters, as the fusion judges it
     (:func:`align.fusion.undetermined.undetermined`) — its u freed u_f, its E shift per unit
     k = dE/db, and its share σ² u_f²/(σ² + u_f²) k kᵀ; none when the new data determine it
@@ -160,20 +161,22 @@ def ranged_after(lin: Linearisation, info: np.ndarray, declared: Sequence[str] =
     I_ff = info[np.ix_(free, free)]
     out = []
     for name, idx, sigma in lin.ranged:
-        if name in declared or len(idx) != 1:
+        if len(idx) != 1:
             continue
+        sigma = declared.get(name, sigma)
         col = info[free, idx[0]]
         k = np.linalg.lstsq(I_ff, col, rcond=None)[0]
         u_f = freed_u(float(info[idx[0], idx[0]] - col @ k), float(info[idx[0], idx[0]]),
                       lin.inflation)
         v = carried_variance(sigma, u_f)
         if v > 0:
-            out.append(Undetermined(name, sigma, float(u_f), k[:6] * np.sqrt(v)))
+            out.append(Undetermined(name, sigma, float(u_f), k[:6] * np.sqrt(v),
+                                    name in declared))
     return tuple(out)
 
 
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
-            redraw: bool = True, declared: Sequence[str] = ()) -> Prediction:
+            redraw: bool = True, declared: Mapping[str, float] = {}) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
     left out and ``add`` added, and the candidates it would carry.
 
@@ -189,7 +192,9 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     separate b from E shrink k: the shift falls below u/2 and the term drops. A candidate
     more likely named than not is in the model against which the less significant ones are
     judged (the loop adds the best first), as is one ``declared`` (a camera's roll
-    calibrated: no longer a candidate, E corrected for it at its estimate) — what it absorbed
+    calibrated, name -> its calibration's u [rad]: no longer a candidate, E corrected for it at
+    its estimate; an undetermined one is carried over the calibration's u,
+    :func:`ranged_after`) — what it absorbed
     is no longer left for the others, whose estimates move with it (:func:`_with_declared`)."""
     kept = [g for g in lin.groups if g.source not in drop]
     infos = (lin.information([*kept, *add]), lin.information(), lin.information(kept),

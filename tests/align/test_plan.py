@@ -21,14 +21,19 @@ from align.plan import (
     predict,
     prediction_noise,
 )
+from align.plan_carried import ranged_after
 from align.session import load_session, run_session
 from align.warnings import CARRIED_PREFIX, carried_notices, session_notes, session_warnings
 from axisbase.units import ARCSEC
 from synth.session import SessionSpec, write_session
 
 
-def _run(folder, spec):
+def _run(folder, spec, roll_u=None):
     write_session(folder, spec)
+    if roll_u is not None:  # the declared rolls calibrated to ± roll_u [rad]
+        toml = folder / "session.toml"
+        toml.write_text(toml.read_text().replace(
+            "roll_arcsec = ", f"roll_u_arcsec = {roll_u / ARCSEC!r}\nroll_arcsec = "))
     res = run_session(load_session(folder))
     assert res.ok
     return res
@@ -229,7 +234,9 @@ def _realise(spec: SessionSpec, kind: str, detail) -> SessionSpec:
     if kind == "image":
         return replace(spec, repeat_images=((detail["housing"], detail["view"]),))
     assert kind == "camera", kind  # the roll calibrated: declared (exactly; see ROLL_U)
-    return replace(spec, undeclared=spec.undeclared - {f"camera_roll_{detail['camera']}"})
+    name = f"camera_roll_{detail['camera']}"
+    return replace(spec, undeclared=spec.undeclared - {name},
+                   effects={name: 0.0, **spec.effects})
 
 
 SCENARIOS = {
@@ -258,19 +265,31 @@ ROLL_U = 1e-3 * ARCSEC
 SEEDS = 5
 
 
-NOT_PREDICTED = pytest.mark.xfail(strict=True, reason=(
-    "the plan's algebra does not predict the nuisances the fusion cannot determine, carried "
-    "over their plausible range (align/fusion/undetermined.py, branch datum): without static "
-    "poses there is no azimuth datum (the reference face's offset, ±34.6″ in E_xY, E_yX) and "
-    "camera B has no reversal view (its roll, ±34.6″ in E_yZ, E_zY); the u obtained carries "
-    "them, the plan's prediction (the measurements' information only) not — z up to ~7e4 "
-    "(E_xY predicted ~0.05″, obtained 34.64″). The plan needs these Type B terms in its "
-    "before/after and an 'azimuth datum' (X/Y-up poses) option"))
+def _fixed(lin: Linearisation, add=(), drop=(), detail=None) -> np.ndarray:
+    """The plan's u of the six angles [rad] less the not-excluded candidates' shares (as
+    :func:`_u`): the linearisation's with the undetermined nuisances' ranges after the
+    measurement (a calibrated camera's roll declared)."""
+    gs = [g for g in lin.groups if g.source not in drop] + list(add)
+    declared = ({f"camera_roll[{detail['camera']}]": ROLL_U} if detail and "camera" in detail
+                else {})
+    ranged = ranged_after(lin, lin.information(gs), declared)
+    return np.sqrt(lin.u_with(add=add, drop=drop) ** 2
+                   + sum((np.square(r.shift) for r in ranged), np.zeros(6)))
+
+
+NOT_CLASSED = pytest.mark.xfail(strict=True, reason=(
+    "the fusion, not the plan: after a second tumble (seed 4) camera B's roll, undetermined "
+    "before (u freed 415″ > its range's σ 34.6″, carried ±34.6″ in E_yZ), is freed at 298″ "
+    "and carried as NOT EXCLUDED (align/fusion/plausible.py takes it before "
+    "align/fusion/undetermined.py; its shift 772″ in E_yZ) — the plan predicts it carried over "
+    "its range (E_yZ 34.581″), the test's u less the not-excluded terms is 3.498″ (z -89.9); "
+    "the other 56 rows RMS z within 0.4-1.4, max |z| 2.2. A candidate whose u freed exceeds "
+    "its plausible range is undetermined, not a not-excluded estimate"))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", [
-    "full", pytest.param("images", marks=NOT_PREDICTED), pytest.param("roll", marks=NOT_PREDICTED)])
+    "full", "images", pytest.param("roll", marks=NOT_CLASSED)])
 def test_predicted_u_of_every_option_matches_simulation(tmp_path, scenario):
     """Over 5 seeds, every option of the plan realised in synth (another image of each
     housing in each view, a reversed view, a log twice as long, a second tumble, the static
@@ -283,15 +302,15 @@ def test_predicted_u_of_every_option_matches_simulation(tmp_path, scenario):
         lin = res.fusion.budget.model
         p = plan(lin, camera_roll_u=ROLL_U)
         k = E_NAMES.index(p.target)
-        u0 = lin.u_with()
+        u0 = _fixed(lin)
         for action, kind, _, add, drop, detail in options(lin, camera_roll_u=ROLL_U):
-            pred = lin.u_with(add=add, drop=drop)
+            pred = _fixed(lin, add, drop, detail)
             gain = 1 - pred / u0
             if gain.max() < 1e-3:
                 continue  # lowers no angle: nothing to compare
             noise = prediction_noise(lin, add, drop)
             got = _u(_run(tmp_path / f"{seed}{kind}{detail}".replace(" ", "_"),
-                          _realise(spec, kind, detail)))
+                          _realise(spec, kind, detail), ROLL_U if kind == "camera" else None))
             best = p.best is not None and p.best.action == action
             for j in sorted({int(np.argmax(gain)), k}):
                 if gain[j] >= 1e-3:
@@ -313,10 +332,12 @@ def test_predicted_u_of_every_option_matches_simulation(tmp_path, scenario):
               f"max {ratio[sel].max():.3f}; RMS z {np.sqrt(np.mean(z[sel] ** 2)):.2f}")
     print(f"{scenario}: RMS z {np.sqrt(np.mean(z ** 2)):.2f}, max |z| {np.abs(z).max():.2f}")
     assert sum(r[3] for r in rows) >= SEEDS  # the advice of every seed was simulated
-    # Each row within its own stated noise (⊕ 1 %), and that noise honest over the scenario:
-    # neither understated (RMS z > 1.4) nor inflated to pass (RMS z < 0.4).
+    # Each row within its own stated noise (⊕ 1 %), and that noise honest over the scenario's
+    # rows that state one: neither understated (RMS z > 1.4) nor inflated to pass (RMS z <
+    # 0.4) — a row without (a calibrated roll: exact) tests the linearisation, not a noise.
     assert np.abs(z).max() <= 3.5, z
-    assert 0.4 <= np.sqrt(np.mean(z**2)) <= 1.4, z
+    stated = np.array([r[7] > 0 for r in rows])
+    assert 0.4 <= np.sqrt(np.mean(z[stated]**2)) <= 1.4, z[stated]
     bound = np.array([BOUND[r[1]] for r in rows])
     off = [(r[1], r[4], q) for r, q, b in zip(rows, ratio, bound, strict=True) if abs(q - 1) > b]
     assert not off, off
