@@ -17,8 +17,15 @@ of that kind; its information is added to the session's and the new information 
   revolutions average the scatter, not a bound);
 * a second tumble (as many poses again): the calibration's covariance halved;
 * the platform static poses repeated: their covariance halved;
-* a calibrated camera (only when the loop estimated its roll): the roll known to
-  ±``CAMERA_ROLL_U_ARCSEC``.
+* a calibrated camera (when the loop estimated its roll, or carries it as not excluded or
+  over its plausible range): the roll known to ±``CAMERA_ROLL_U_ARCSEC``;
+* the X/Y-up static poses, an azimuth datum (when the reference face's offset is carried over
+  its plausible range and the session has levelled static poses, whose noise they share).
+
+The nuisances the fusion cannot determine (``Linearisation.ranged``) are carried over their
+plausible range before and after: each option's information gives their new u freed and E
+shift (:func:`align.plan_carried.ranged_after`), so an option that separates one from E
+(a reversal view, a roll calibration, the azimuth datum) drops or narrows its term.
 
 The candidates the fusion carries as not excluded are part of u before and after: each
 option's prediction includes them as they would be after it (:mod:`align.plan_carried`), and
@@ -42,7 +49,7 @@ import numpy as np
 
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
-from align.fusion.observations import E_NAMES, ROLL
+from align.fusion.observations import E_NAMES, REF, ROLL
 from align.fusion.undetermined import Undetermined
 from align.plan_carried import RESOLVES, Carried, predict
 from align.session_json import LoadedSession
@@ -55,6 +62,7 @@ MINUTES = {
     "gonio": 15.0,          # a log as long again
     "tumble": 15.0,         # 14 more poses at ~1 min each
     "static": 10.0,         # the 8 platform poses again
+    "datum": 5.0,           # the 4 side poses (X up, X down, Y up, Y down)
     "camera": 30.0,         # a roll calibration of one camera (plumb line or level target)
 }
 """Work per option [min], defaults."""
@@ -357,6 +365,7 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
                         [_halved(g, "static")], [g.source], {"source": g.source}))
+    out += _datum(lin, minutes)
     rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
              if label.startswith("camera roll ")]
     # a roll the fusion carries as not excluded: calibrating it resolves it
@@ -372,6 +381,38 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
                            np.array([[camera_roll_u ** 2]]))], [],
                     {"camera": cam}))
     return out
+
+
+SIDE_POSES = (("X", 1.0), ("X", -1.0), ("Y", 1.0), ("Y", -1.0))
+"""The azimuth datum's static poses: the platform's X then Y axis up and down."""
+
+
+def _datum(lin: Linearisation, minutes: Mapping[str, float]
+           ) -> list[tuple[str, str, float, list[Group], list[str], dict[str, str]]]:
+    """The X/Y-up static poses (an azimuth datum) when the reference face's offset is carried
+    over its range and the session has static poses (levelled only) whose noise the new ones
+    share: axis i's reading with axis J up (sign s) is s E_iJ + bias_i
+    (:func:`align.fusion.observations.static_block`; the up/down pair separates E from the
+    calibrated bias), each with the mean variance of the session's static readings."""
+    static = [g for g in lin.groups if g.kind == "static"]
+    bias = [f"bias[{i}]" for i in range(3)]
+    if (not static or not any(name == REF for name, *_ in lin.ranged)
+            or not all(b in lin.params for b in bias)):
+        return []
+    var = float(np.mean(np.concatenate([np.diag(g.C) for g in static])))
+    rows = []
+    for up, sign in SIDE_POSES:
+        for i, axis in enumerate("xyz"):
+            if axis.upper() == up:
+                continue
+            a = np.zeros(len(lin.params))
+            a[E_NAMES.index(f"E_{axis}{up}")] = sign
+            a[lin.params.index(bias[i])] = 1.0
+            rows.append(a)
+    g = Group("X/Y-up static poses", "static", np.array(rows), var * np.eye(len(rows)), (),
+              {"relative_sd": str(2 * RESTATED_U_NOISE["static"])})
+    return [("the X/Y-up static poses (an azimuth datum: the platform's X and Y axes up and "
+             "down)", "datum", minutes["datum"], [g], [], {})]
 
 
 def _resolution(c: Carried, every: Sequence[Option], k: int) -> str:

@@ -225,6 +225,8 @@ def _realise(spec: SessionSpec, kind: str, detail) -> SessionSpec:
     the same to the bit (synth draws added views and images from their own stream)."""
     if kind == "static":  # twice the samples per pose: each pose's mean with half the variance
         return replace(spec, samples_per_pose=2 * spec.samples_per_pose)
+    if kind == "datum":  # the side poses added to the levelled ones
+        return replace(spec, platform_poses=(*spec.platform_poses, "Xup", "Xdn", "Yup", "Ydn"))
     if kind == "gonio":
         return replace(spec, revolutions=2 * spec.revolutions)
     if kind == "tumble":
