@@ -511,10 +511,10 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
 
     lin = linearise(stage.blocks, predict_all, params, names, layout, inflation)
     if unknown:
-        nuis = lin.nuisances
-        lin = replace(lin, nuisances=nuis[:len(nuis) - len(ranged)], ranged=tuple(
+        at = len(lin.nuisances) - len(ranged)
+        lin = replace(lin, nuisances=lin.nuisances[:at], ranged=tuple(
             (c.name, idx, c.sigma) for c, (_, idx) in
-            zip(unknown, nuis[len(nuis) - len(ranged):], strict=True)))
+            zip(unknown, lin.nuisances[at:], strict=True)))
     if carried:
         lin = _held(lin, stage, loop, {c.name: c for c in cands}, extra[:len(carried)])
     budget = lin.budget()
