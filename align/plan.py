@@ -17,8 +17,15 @@ of that kind; its information is added to the session's and the new information 
   revolutions average the scatter, not a bound);
 * a second tumble (as many poses again): the calibration's covariance halved;
 * the platform static poses repeated: their covariance halved;
-* a calibrated camera (only when the loop estimated its roll): the roll known to
-  ±``CAMERA_ROLL_U_ARCSEC``.
+* a calibrated camera (when the loop estimated its roll, or carries it as not excluded or
+  over its plausible range): the roll known to ±``CAMERA_ROLL_U_ARCSEC``;
+* the X/Y-up static poses, an azimuth datum (when the reference face's offset is carried over
+  its plausible range and the session has levelled static poses, whose noise they share).
+
+The nuisances the fusion cannot determine (``Linearisation.ranged``) are carried over their
+plausible range before and after: each option's information gives their new u freed and E
+shift (:func:`align.plan_carried.ranged_after`), so an option that separates one from E
+(a reversal view, a roll calibration, the azimuth datum) drops or narrows its term.
 
 The candidates the fusion carries as not excluded are part of u before and after: each
 option's prediction includes them as they would be after it (:mod:`align.plan_carried`), and
@@ -42,7 +49,8 @@ import numpy as np
 
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
-from align.fusion.observations import E_NAMES, ROLL
+from align.fusion.observations import E_NAMES, REF, ROLL
+from align.fusion.undetermined import Undetermined
 from align.plan_carried import RESOLVES, Carried, predict
 from align.session_json import LoadedSession
 from axisbase.units import ARCSEC
@@ -54,6 +62,7 @@ MINUTES = {
     "gonio": 15.0,          # a log as long again
     "tumble": 15.0,         # 14 more poses at ~1 min each
     "static": 10.0,         # the 8 platform poses again
+    "datum": 5.0,           # the 4 side poses (X up, X down, Y up, Y down)
     "camera": 30.0,         # a roll calibration of one camera (plumb line or level target)
 }
 """Work per option [min], defaults."""
@@ -100,6 +109,9 @@ class Option:
         The session's carried candidates as they would be after it, each with the
         probability that it is still carried and its expected share (:func:`predict`);
         unit —.
+    ranged : tuple of Undetermined
+        The undetermined nuisances the fusion would still carry over their plausible range
+        after it, with their shift then (:func:`align.plan_carried.ranged_after`); unit —.
     """
 
     action: str
@@ -112,10 +124,12 @@ class Option:
     camera's ``camera``, a replaced input's ``source``."""
     u_after_noise: float = 0.0
     carried: tuple[Carried, ...] = ()
+    ranged: tuple[Undetermined, ...] = ()
 
     def to_dict(self, u_before: float) -> dict:
         return {"action": self.action, "kind": self.kind, "minutes": self.minutes,
                 "detail": dict(self.detail), "carried_after": {c.name: c.p for c in self.carried},
+                "undetermined_after": [r.name for r in self.ranged],
                 "u_after_arcsec": self.u_after / ARCSEC,
                 "u_after_noise_arcsec": self.u_after_noise / ARCSEC,
                 "u_after_all_arcsec": dict(zip(E_NAMES, (v / ARCSEC for v in self.u_after_all),
@@ -140,9 +154,12 @@ class Plan:
     carried : tuple of Carried
         The candidates E's u carries now as not excluded (included in ``u_before``); unit —.
     resolves : Mapping
-        Per carried candidate, the measurement after which it would no longer be carried
-        (the best option that does, else what separates that kind from E, ``RESOLVES``);
-        unit —.
+        Per carried candidate and undetermined nuisance, the measurement after which it would
+        no longer be carried (the best option that does, else what separates that kind from
+        E, ``RESOLVES``, or the nuisance's ``measure``); unit —.
+    ranged : tuple of Undetermined
+        The nuisances the data cannot determine, carried over their plausible range (included
+        in ``u_before``, :mod:`align.fusion.undetermined`); unit —.
     """
 
     target: str
@@ -151,6 +168,7 @@ class Plan:
     options: tuple[Option, ...]
     carried: tuple[Carried, ...] = ()
     resolves: Mapping[str, str] = field(default_factory=dict)
+    ranged: tuple[Undetermined, ...] = ()
 
     @property
     def best(self) -> Option | None:
@@ -161,6 +179,8 @@ class Plan:
                 "u_before_arcsec": self.u_before / ARCSEC, "within_noise": self.within_noise,
                 "carried": [dict(c.to_dict(), resolved_by=self.resolves.get(c.name))
                             for c in self.carried],
+                "undetermined": [dict(r.to_dict(), resolved_by=self.resolves.get(r.name))
+                                 for r in self.ranged],
                 "options": [o.to_dict(self.u_before) for o in self.options]}
 
     @property
@@ -177,6 +197,9 @@ class Plan:
         for c in self.carried:
             out.append(f"  its u carries {c.label}: {abs(c.shift[t]) / ARCSEC:.3f}″ of it; "
                        f"resolved by {self.resolves.get(c.name, '?')}")
+        for r in self.ranged:
+            out.append(f"  its u carries {r.label}: {abs(r.shift[t]) / ARCSEC:.3f}″ of it; "
+                       f"resolved by {self.resolves.get(r.name, r.measure)}")
         if not self.options:
             out.append(f"  no measurement improves {self.target} by more than "
                        f"{100 * MIN_GAIN:g} % of its u (of the kinds known here)")
@@ -192,6 +215,8 @@ class Plan:
             left = [f"{c.name} (p {after[c.name].p:.2f}; named p {after[c.name].named:.2f})"
                     if c.name in after else f"{c.name} (declared)" for c in self.carried
                     if c.name not in after or after[c.name].p < 0.5]
+            left += [f"{r.name} (undetermined)" for r in self.ranged
+                     if r.name not in {a.name for a in o.ranged}]
             out.append(f"  {'->' if k == 0 and not self.within_noise else '  '} {o.action}: "
                        f"u {o.u_after / ARCSEC:.3f} ± {o.u_after_noise / ARCSEC:.3f}″ "
                        f"({100 * (1 - o.u_after / self.u_before):.1f} % lower) in "
@@ -340,10 +365,12 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
         elif g.kind == "static":
             out.append(("the platform static poses repeated", "static", minutes["static"],
                         [_halved(g, "static")], [g.source], {"source": g.source}))
+    out += _datum(lin, minutes)
     rolls = [(label[len("camera roll "):], idx) for label, idx in lin.nuisances
              if label.startswith("camera roll ")]
     # a roll the fusion carries as not excluded: calibrating it resolves it
-    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in lin.held
+    # and one it carries over its plausible range (undetermined): calibrating it narrows that
+    rolls += [(name[len(ROLL) + 1:-1], idx) for name, idx, *_ in (*lin.held, *lin.ranged)
               if name.startswith(ROLL + "[")]
     for cam, idx in rolls:
         A = np.zeros((1, len(lin.params)))
@@ -354,6 +381,38 @@ def options(lin: Linearisation, minutes: Mapping[str, float] = MINUTES,
                            np.array([[camera_roll_u ** 2]]))], [],
                     {"camera": cam}))
     return out
+
+
+SIDE_POSES = (("X", 1.0), ("X", -1.0), ("Y", 1.0), ("Y", -1.0))
+"""The azimuth datum's static poses: the platform's X then Y axis up and down."""
+
+
+def _datum(lin: Linearisation, minutes: Mapping[str, float]
+           ) -> list[tuple[str, str, float, list[Group], list[str], dict[str, str]]]:
+    """The X/Y-up static poses (an azimuth datum) when the reference face's offset is carried
+    over its range and the session has static poses (levelled only) whose noise the new ones
+    share: axis i's reading with axis J up (sign s) is s E_iJ + bias_i
+    (:func:`align.fusion.observations.static_block`; the up/down pair separates E from the
+    calibrated bias), each with the mean variance of the session's static readings."""
+    static = [g for g in lin.groups if g.kind == "static"]
+    bias = [f"bias[{i}]" for i in range(3)]
+    if (not static or not any(name == REF for name, *_ in lin.ranged)
+            or not all(b in lin.params for b in bias)):
+        return []
+    var = float(np.mean(np.concatenate([np.diag(g.C) for g in static])))
+    rows = []
+    for up, sign in SIDE_POSES:
+        for i, axis in enumerate("xyz"):
+            if axis.upper() == up:
+                continue
+            a = np.zeros(len(lin.params))
+            a[E_NAMES.index(f"E_{axis}{up}")] = sign
+            a[lin.params.index(bias[i])] = 1.0
+            rows.append(a)
+    g = Group("X/Y-up static poses", "static", np.array(rows), var * np.eye(len(rows)), (),
+              {"relative_sd": str(2 * RESTATED_U_NOISE["static"])})
+    return [("the X/Y-up static poses (an azimuth datum: the platform's X and Y axes up and "
+             "down)", "datum", minutes["datum"], [g], [], {})]
 
 
 def _resolution(c: Carried, every: Sequence[Option], k: int) -> str:
@@ -373,6 +432,21 @@ def _resolution(c: Carried, every: Sequence[Option], k: int) -> str:
     return RESOLVES.get(c.name.partition("[")[0], "a measurement that separates it from E")
 
 
+def _ranged_resolution(r: Undetermined, every: Sequence[Option], k: int) -> str:
+    """What resolves undetermined nuisance ``r``: the best option (``every``, best first)
+    after which the fusion no longer carries it over its range, or narrows its share of angle
+    ``k`` to under a quarter, saying so; else what separates its kind from E
+    (``r.measure``)."""
+    for o in every:
+        a = next((a for a in o.ranged if a.name == r.name), None)
+        if a is None:
+            return o.action
+        if a.shift[k] ** 2 < r.shift[k] ** 2 / 4:
+            return (f"{o.action} (its share of {E_NAMES[k]} {abs(r.shift[k]) / ARCSEC:.2f} -> "
+                    f"{abs(a.shift[k]) / ARCSEC:.2f}″)")
+    return r.measure
+
+
 def plan(lin: Linearisation, disposition: Mapping | None = None,
          minutes: Mapping[str, float] = MINUTES,
          camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC) -> Plan:
@@ -385,19 +459,20 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     ranked, every = [], []
     for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
         # a camera's roll calibrated is declared: no longer a candidate (session.toml)
-        declared = [f"{ROLL}[{detail['camera']}]"] if kind == "camera" else []
+        declared = {f"{ROLL}[{detail['camera']}]": camera_roll_u} if kind == "camera" else {}
         after = predict(lin, add, drop, declared=declared)
         u = after.u
         o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
                    float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
-                   after.carried)
+                   after.carried, after.ranged)
         every.append(o)
         if u[k] < u0[k] * (1 - MIN_GAIN):
             ranked.append(o)
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     resolves = {c.name: _resolution(c, every, k) for c in now.carried}
-    return Plan(target, why, float(u0[k]), tuple(ranked), now.carried, resolves)
+    resolves |= {r.name: _ranged_resolution(r, every, k) for r in now.ranged}
+    return Plan(target, why, float(u0[k]), tuple(ranked), now.carried, resolves, now.ranged)
 
 
 def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> Plan:

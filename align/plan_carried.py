@@ -11,7 +11,7 @@ test decide whether the candidate is carried, named or dropped (docs/decision.md
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -20,6 +20,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
 from align.fusion.budget import Group, Linearisation, inverse
 from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
 from align.fusion.plausible import is_carried
+from align.fusion.undetermined import Undetermined, carried_variance, freed_u
 from align.loop import sidak
 from axisbase.units import ARCSEC
 
@@ -107,11 +108,16 @@ class Prediction:
         estimates [rad] (0 without carried candidates).
     carried : tuple of Carried
         The session's carried candidates with the probability each stays carried; unit —.
+    ranged : tuple of Undetermined
+        The session's undetermined nuisances (``Linearisation.ranged``) the fusion would
+        still carry over their plausible range, with their u freed and E shift after the
+        measurement (:func:`ranged_after`); unit —.
     """
 
     u: np.ndarray
     u_sd: np.ndarray
     carried: tuple[Carried, ...]
+    ranged: tuple[Undetermined, ...] = ()
 
     def still(self, name: str) -> bool:
         """Whether ``name`` is more likely carried than not after the measurement."""
@@ -141,8 +147,36 @@ def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b:
     return b
 
 
+def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, float] = {}
+                 ) -> tuple[Undetermined, ...]:
+    """The undetermined nuisances (``lin.ranged``; one ``declared``, calibrated, with its
+    calibration's u [rad] as its range) the fusion would carry over their plausible range with
+    information ``info`` (over every parameter): each
+    freed alone beside the estimated parameters, as the fusion judges it
+    (:func:`align.fusion.undetermined.undetermined`) — its u freed u_f, its E shift per unit
+    k = dE/db, and its share σ² u_f²/(σ² + u_f²) k kᵀ; none when the new data determine it
+    (u_f ≤ σ: the loop's tests judge it, and a nuisance the session did not name is taken as
+    not named after)."""
+    free = list(lin.free)
+    I_ff = info[np.ix_(free, free)]
+    out = []
+    for name, idx, sigma in lin.ranged:
+        if len(idx) != 1:
+            continue
+        sigma = declared.get(name, sigma)
+        col = info[free, idx[0]]
+        k = np.linalg.lstsq(I_ff, col, rcond=None)[0]
+        u_f = freed_u(float(info[idx[0], idx[0]] - col @ k), float(info[idx[0], idx[0]]),
+                      lin.inflation)
+        v = carried_variance(sigma, u_f)
+        if v > 0:
+            out.append(Undetermined(name, sigma, float(u_f), k[:6] * np.sqrt(v),
+                                    name in declared))
+    return tuple(out)
+
+
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
-            redraw: bool = True, declared: Sequence[str] = ()) -> Prediction:
+            redraw: bool = True, declared: Mapping[str, float] = {}) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
     left out and ``add`` added, and the candidates it would carry.
 
@@ -158,7 +192,9 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     separate b from E shrink k: the shift falls below u/2 and the term drops. A candidate
     more likely named than not is in the model against which the less significant ones are
     judged (the loop adds the best first), as is one ``declared`` (a camera's roll
-    calibrated: no longer a candidate, E corrected for it at its estimate) — what it absorbed
+    calibrated, name -> its calibration's u [rad]: no longer a candidate, E corrected for it at
+    its estimate; an undetermined one is carried over the calibration's u,
+    :func:`ranged_after`) — what it absorbed
     is no longer left for the others, whose estimates move with it (:func:`_with_declared`)."""
     kept = [g for g in lin.groups if g.source not in drop]
     infos = (lin.information([*kept, *add]), lin.information(), lin.information(kept),
@@ -166,6 +202,9 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     free = list(lin.free)
     n_rows = sum(len(g.A) for g in [*kept, *add])
     u2 = np.diag(inverse(infos[0][np.ix_(free, free)]))[:6] * lin.inflation**2
+    # (the carried candidates are judged against u without the ranged terms, as the fusion
+    # judges them before it adds those)
+    ranged = ranged_after(lin, infos[0], declared)
     fixed = [(i, e) for n, i, e, _ in lin.held if n in declared]
     share = np.zeros((REDRAWS, 6))
     out = []
@@ -180,10 +219,11 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         share += mine
         if c.named >= 0.5:
             fixed.append((idx, est))
+    u2 = u2 + sum((np.square(r.shift) for r in ranged), np.zeros(6))
     u = np.sqrt(u2 + share)
     order = [h[0] for h in lin.held]
     return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0),
-                      tuple(sorted(out, key=lambda c: order.index(c.name))))
+                      tuple(sorted(out, key=lambda c: order.index(c.name))), ranged)
 
 
 def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,

@@ -123,6 +123,11 @@ class Linearisation:
         columns are in every group's ``A`` (what freeing them would do, for ``align plan``)
         but they are held at zero: u, cov(E) and the budget leave them out (their Type B
         share is added apart).
+    ranged : tuple of (str, tuple of int, float)
+        The nuisances the fusion cannot determine, carried over their plausible range
+        (:mod:`align.fusion.undetermined`): name, parameter indices, and the standard
+        uncertainty of the range [rad]. Held at zero like ``held`` (their Type B share is
+        added apart); ``align plan`` frees them to predict their u after a measurement.
     """
 
     params: tuple[str, ...]
@@ -130,11 +135,13 @@ class Linearisation:
     nuisances: tuple[tuple[str, tuple[int, ...]], ...]
     inflation: float = 1.0
     held: tuple[tuple[str, tuple[int, ...], tuple[float, ...], float], ...] = ()
+    ranged: tuple[tuple[str, tuple[int, ...], float], ...] = ()
 
     @property
     def free(self) -> np.ndarray:
-        """The indices of the parameters estimated (all but the ``held`` ones)."""
-        held = {i for _, idx, *_ in self.held for i in idx}
+        """The indices of the parameters estimated (all but the ``held`` and ``ranged``
+        ones)."""
+        held = {i for _, idx, *_ in (*self.held, *self.ranged) for i in idx}
         return np.array([i for i in range(len(self.params)) if i not in held], int)
 
     def information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
@@ -193,6 +200,8 @@ class Linearisation:
                 "nuisances": [{"label": n, "index": list(i)} for n, i in self.nuisances],
                 "held": [{"name": n, "index": list(i), "estimate_rad": list(e), "loop_p": p}
                          for n, i, e, p in self.held],
+                "ranged": [{"name": n, "index": list(i), "sigma_rad": s}
+                           for n, i, s in self.ranged],
                 "groups": [g.to_dict() for g in self.groups]}
 
     @classmethod
@@ -202,7 +211,9 @@ class Linearisation:
                          for n in d["nuisances"]), float(d.get("inflation", 1.0)),
                    tuple((str(h["name"]), tuple(int(i) for i in h["index"]),
                           tuple(float(e) for e in h["estimate_rad"]), float(h["loop_p"]))
-                         for h in d.get("held", ())))
+                         for h in d.get("held", ())),
+                   tuple((str(h["name"]), tuple(int(i) for i in h["index"]),
+                          float(h["sigma_rad"])) for h in d.get("ranged", ())))
 
 
 @dataclass(frozen=True)

@@ -495,9 +495,12 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         cov = cov + np.outer(c.shift, c.shift)
     if carried or unknown:
         E_u = e_matrix(np.sqrt(np.diag(cov)))
-    # The carried candidates' columns join the linearisation held at zero: what freeing
-    # them would do, from which 'align plan' predicts whether a measurement resolves them.
+    # The carried and the undetermined candidates' columns join the linearisation held at
+    # zero: what freeing them would do, from which 'align plan' predicts whether a
+    # measurement resolves them.
     extra = [(c.name, _width(c.name)) for c in carried]
+    ranged = [(c.name, _width(c.name)) for c in unknown]
+    extra += ranged
     layout = [*sol.layout, *extra]
     params = np.concatenate([sol.params, np.zeros(sum(w for _, w in extra))])
     names = [*sol.names, *(f"{n}[{k}]" if w > 1 else n for n, w in extra for k in range(w))]
@@ -507,15 +510,20 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         return [b.predict(axes, nu) for b in stage.blocks]
 
     lin = linearise(stage.blocks, predict_all, params, names, layout, inflation)
+    if unknown:
+        at = len(lin.nuisances) - len(ranged)
+        lin = replace(lin, nuisances=lin.nuisances[:at], ranged=tuple(
+            (c.name, idx, c.sigma) for c, (_, idx) in
+            zip(unknown, lin.nuisances[at:], strict=True)))
     if carried:
-        lin = _held(lin, stage, loop, {c.name: c for c in cands}, extra)
+        lin = _held(lin, stage, loop, {c.name: c for c in cands}, extra[:len(carried)])
     budget = lin.budget()
     if named is not None:
         budget = with_disagreement(budget, named)
     for c in carried:
         budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
-    # (Type B beside the linearisation: unlike the carried candidates the plan does not
-    # predict them yet)
+    # (Type B beside the linearisation, as the carried candidates': 'align plan' predicts
+    # them from the ranged columns, align/plan_carried.py)
     for c in unknown:
         budget = with_type_b(budget, c.label, dict(zip(E_NAMES, c.shift**2, strict=True)))
     return FusionResult(E, E_u, cov, axes_from(sol.params[:6]), fit.chi2, fit.dof, p_value,

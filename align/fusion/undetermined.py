@@ -122,6 +122,26 @@ class Undetermined:
                 f"{', '.join(hit)}: measure {self.measure}")
 
 
+def carried_variance(sigma: float, u_freed: float) -> float:
+    """The variance [rad²] a nuisance of plausible range ``sigma`` [rad] and u freed
+    ``u_freed`` [rad] (inf: not separable) adds along its E shift per unit, or 0 when the data
+    determine it (``u_freed`` ≤ ``sigma``: the loop's tests judge it). With the nuisance a
+    parameter of prior N(0, σ²) beside what the data say of it: σ² u_f² / (σ² + u_f²) — σ²
+    when the data say nothing."""
+    if not u_freed > sigma:
+        return 0.0
+    return sigma**2 if not np.isfinite(u_freed) else sigma**2 * u_freed**2 / (
+        sigma**2 + u_freed**2)
+
+
+def freed_u(info: float, scale: float, inflation: float) -> float:
+    """A nuisance's u [rad] when freed beside the model from ``info``, the information its
+    column adds beyond what E's and the other parameters' columns mimic, and ``scale`` its
+    column's own information (infinite when ``info`` is rounding of it)."""
+    # Separable when what E cannot mimic of its signature is more than rounding of it.
+    return inflation / np.sqrt(info) if info > 1e-16 * scale else float("inf")
+
+
 def undetermined(stage, candidates: Sequence[Candidate], loop: LoopReport, params: np.ndarray,
                  inflation: float, sigmas: Mapping[str, float] | None = None,
                  skip: Sequence[str] = ()) -> list[Undetermined]:
@@ -152,16 +172,10 @@ def undetermined(stage, candidates: Sequence[Candidate], loop: LoopReport, param
         k = np.linalg.lstsq(A, c, rcond=None)[0]
         rest = c - A @ k
         # Separable when what E cannot mimic of its signature is more than rounding of it.
-        info = float(rest @ rest)
-        u_freed = (inflation / np.sqrt(info) if info > 1e-16 * float(c @ c)
-                   else float("inf"))
-        if not u_freed > sigma:
+        u_freed = freed_u(float(rest @ rest), float(c @ c), inflation)
+        v = carried_variance(sigma, u_freed)
+        if not v > 0:
             continue  # the data know it better than its range: the loop's tests judge it
-        # What E's covariance gains with the nuisance a parameter of prior N(0, σ²) beside
-        # what the data say of it (u_freed): k kᵀ σ² u_f² / (σ² + u_f²) — σ² k kᵀ when the
-        # data say nothing (its column in E's span).
-        v = sigma**2 if not np.isfinite(u_freed) else (
-            sigma**2 * u_freed**2 / (sigma**2 + u_freed**2))
         out.append(Undetermined(cand.name, float(sigma), float(u_freed), k[:6] * np.sqrt(v),
                                 cand.name in sigmas))
     return out
