@@ -257,6 +257,7 @@ class Session:
     level_gimbal: bool = False           # the base's tilt also under the gimbal (X/Y up) poses
     gonio_scale_ppm: float = 80.0        # ring-laser scale error
     gonio_ref_offset_arcsec: float = 0.0  # the reference face's own azimuth offset
+    gonio_ref_u_arcsec: float | None = None  # the lab's declared u of that offset (None: not)
     bias_drift_ug: float = 60.0          # bias drift over the session (temperature), no temp column
     bent_px: float = 0.0                 # sagitta of a bent mark (x_A)
     defocus_blur: float = 0.0            # blur [px] of one image (z_B) out of focus; 0: in focus
@@ -362,7 +363,10 @@ def write_session(folder, spec: Session):
             zip(rows["count"], rows["counter"], rows["ref"], rows["t"], strict=True)]
         open(os.path.join(folder, "gonio.csv"), "w").write("\n".join(lines) + "\n")
         toml += ["[goniometer]", 'log = "gonio.csv"', 'faces = ["ref", "y", "x", "z"]',
-                 "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"', ""]
+                 "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"']
+        if spec.gonio_ref_u_arcsec is not None:
+            toml.append(f"reference_offset_u_arcsec = {spec.gonio_ref_u_arcsec}")
+        toml.append("")
 
     cams = sorted({VIEW_DEF[v][0] for v in spec.views})
     for cam in cams:
