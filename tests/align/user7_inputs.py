@@ -27,7 +27,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from scipy.special import erf as _erf
 
-REAL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "..", "shared", "data", "real")
+REAL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "real")
 CHESSBOARD = os.path.join(REAL, "opencv-chessboard")
 
 
