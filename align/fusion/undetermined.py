@@ -171,7 +171,6 @@ def undetermined(stage, candidates: Sequence[Candidate], loop: LoopReport, param
         A, c = J[:, :m], J[:, m]
         k = np.linalg.lstsq(A, c, rcond=None)[0]
         rest = c - A @ k
-        # Separable when what E cannot mimic of its signature is more than rounding of it.
         u_freed = freed_u(float(rest @ rest), float(c @ c), inflation)
         v = carried_variance(sigma, u_freed)
         if not v > 0:
