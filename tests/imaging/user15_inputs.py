@@ -271,12 +271,16 @@ def render_scale(size, K, d, n_lines=20, pitch_px=22.0, angle_deg=3.0, length_px
             o = (i - (n_lines - 1) / 2) * pitch_px
             p = np.array([centre[0], centre[1]]) + o * nrm + dirv * (length_px * 0.7 + 25)
             q = to_sensor((p / K[0, 0])[None, :], K, d)[0]
-            cv2.putText(imgf, str(i // 5), (int(q[0]) - 6, int(q[1]) + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
-                        0.35 * full, 1, cv2.LINE_AA)
+            ink = np.zeros((h, w), np.uint8)
+            cv2.putText(ink, str(i // 5), (int(q[0]) - 6, int(q[1]) + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                        255, 1, cv2.LINE_AA)
+            imgf -= ink / 255.0 * 0.25 * full
     for _ in range(dust):
         x, y = rng.uniform(0, w), rng.uniform(0, h)
         r = rng.uniform(0.8, 2.5)
-        cv2.circle(imgf, (int(x * 4), int(y * 4)), int(r * 4), 0.45 * full, -1, cv2.LINE_AA, shift=2)
+        spot = np.zeros((h, w), np.uint8)
+        cv2.circle(spot, (int(x * 4), int(y * 4)), int(r * 4), 255, -1, cv2.LINE_AA, shift=2)
+        imgf -= spot / 255.0 * 0.2 * full
     _ = (cxp, cyp)
     img = np.clip(np.round(imgf), 0, full).astype(img.dtype)
     return img, truths[0]

@@ -1,0 +1,289 @@
+"""Independent user 15: a camera over an alignment station's life (calibrate, use, change, none).
+
+Written from README.md, docs/ and the JSON schemas only; inputs from ``user15_inputs`` (own
+renderer: rays through an OpenCV lens as the forward model, blur before sampling, pixel area,
+noise, 8/16 bit). Every check runs the command a user runs (``python3 -m align ...``).
+
+Tolerances: a result is wrong when it is ok (exit 0 / not lens-limited) and more than 3 of its
+own u from the truth; statistical checks use the normalised error z = error / u over seeds.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import math
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.imaging import user15_inputs as gen
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+REAL = "/work/shared/data/real/opencv-chessboard"
+if not os.path.isdir(REAL):
+    REAL = os.path.join(os.path.dirname(ROOT), "shared", "data", "real", "opencv-chessboard")
+
+
+def _align(*args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=ROOT, PYTHONDONTWRITEBYTECODE="1")
+    r = subprocess.run([sys.executable, "-m", "align", *map(str, args)], capture_output=True, text=True,
+                       env=env, cwd=cwd)
+    return r
+
+
+def _marks(files, *extra):
+    r = _align("marks", *files, "--json", "-", *extra)
+    assert "Traceback" not in r.stderr, r.stderr[-3000:]
+    return r.returncode, json.loads(r.stdout), r.stderr
+
+
+def _errors(doc, truths):
+    """(error ″, u ″, ok-as-reported) for every mark found, matched to the nearest truth angle."""
+    out = []
+    for m in doc["marks"]:
+        if not m.get("found"):
+            continue
+        e = min((gen.angle_diff_arcsec(m["angle_deg"], t) for t in truths), key=abs)
+        u = m["angle_u_deg"] * 3600.0
+        out.append((e, u, not m.get("lens_limited", False)))
+    return out
+
+
+# the station's lens: barrel k1 -0.15 at the half-diagonal, k2, p1/p2 5e-4, pp (12, -8) px, aspect 0.003
+LENS = dict(k1h=-0.15, k2h=0.02, p1h=5e-4, p2h=-5e-4, pp=(12.0, -8.0), aspect=0.003)
+# three marks of one frame (pinhole px from the principal point, angle, length)
+FRAME = [(-150, -100, 25.0, 170), (120, -80, 80.0, 130), (-50, 110, -40.0, 140)]
+
+
+def _exact_model(tmp_path, size, K, d):
+    """The lens's own model, with a covariance as small as a very good calibration's."""
+    cov = np.diag([0.2, 0.2, 0.2, 0.2, 1e-3, 5e-3, 5e-5, 5e-5, 1e-6]) ** 2
+    return gen.camera_json_from_cv(K, d, size, str(tmp_path / "cam.json"), cov=cov)
+
+
+# ----------------------------------------------------------------------------- default run
+def test_no_model_says_lens_limited_and_advises_align_camera(tmp_path):
+    """(4) No model: an off-centre mark through a real lens is lens-limited, with the advice."""
+    size = (480, 360)
+    K, d = gen.lens_cv(size, **LENS)
+    img, truth = gen.render_marks(size, K, d, [(-120, -80, 25.0, 150)], seed=3, ss=3)
+    f = gen.write_png(str(tmp_path / "m.png"), img)
+    rc, doc, err = _marks([f], "--one")
+    m = doc["marks"][0]
+    assert m["found"]
+    e = gen.angle_diff_arcsec(m["angle_deg"], truth[0])
+    u = m["angle_u_deg"] * 3600
+    assert abs(e) <= 3 * u, (e, u)  # u covers the lens it does not know
+    assert m["lens_limited"] and rc == 2 and not doc["ok"]
+    assert "align camera" in err and "lens-limited" in err
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "camera bumped after calibration (principal point moved (8, -8) px, k1 -0.265 at f 531 px): "
+    "3 marks in one 640x480 frame through the old model: exit 0, ok true, no warning; angles "
+    "+725″ ± 50″ (z +14.4), -901″ ± 50″ (z -18.2), +173″ ± 34″ (z +5.1) off (seed 1, calibrated model)"))
+def test_bumped_camera_is_not_a_confident_wrong_angle(tmp_path):
+    """(3) The camera is bumped after calibration: no ok angle may be more than 3 u off."""
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    cam = _exact_model(tmp_path, size, K, d)
+    K2 = K.copy()
+    K2[0, 2] += 8.0
+    K2[1, 2] -= 8.0
+    img, truths = gen.render_marks(size, K2, d, FRAME, seed=1, ss=3)
+    f = gen.write_png(str(tmp_path / "bumped.png"), img)
+    rc, doc, err = _marks([f], "--camera", cam)
+    res = _errors(doc, truths)
+    assert len(res) == 3
+    wrong_ok = [(round(e), round(u)) for e, u, ok in res if ok and abs(e) > 3 * u]
+    assert not (rc == 0 and wrong_ok), (rc, wrong_ok, doc["warnings"])
+    assert not wrong_ok, wrong_ok
+
+
+# ----------------------------------------------------------------------------- slow sweeps
+def _calibrate(folder, files, *extra):
+    out = os.path.join(folder, "cam.json")
+    r = _align("camera", *files, "--json", out, "-q", "--force", *extra)
+    assert "Traceback" not in r.stderr, r.stderr[-3000:]
+    return r.returncode, (json.load(open(out)) if os.path.exists(out) else None), r.stderr, out
+
+
+@pytest.mark.slow
+def test_camera_model_and_u_against_truth_over_seeds(tmp_path):
+    """(1) `align camera` on rendered boards: each intrinsic within its u of the truth, over seeds."""
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    truth = dict(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], k1=d[0], k2=d[1], p1=d[2], p2=d[3])
+    zs = []
+    for seed in range(1, 6):
+        folder = tmp_path / f"s{seed}"
+        files = gen.write_boards(str(folder), 9, seed, size, K, d)
+        rc, cam, err, _ = _calibrate(str(folder), files)
+        assert rc == 0 and cam["ok"], err
+        Km = np.array(cam["camera_matrix"])
+        est = dict(fx=Km[0, 0], fy=Km[1, 1], cx=Km[0, 2], cy=Km[1, 2], k1=cam["dist_coeffs"][0],
+                   k2=cam["dist_coeffs"][1], p1=cam["dist_coeffs"][2], p2=cam["dist_coeffs"][3])
+        for k in truth:
+            zs.append((est[k] - truth[k]) / cam["u"][k])
+    zs = np.array(zs)
+    print("z of the intrinsics over 5 seeds: RMS %.2f, max |z| %.2f" % (np.sqrt(np.mean(zs**2)), np.abs(zs).max()))
+    assert np.abs(zs).max() < 4.0
+    assert 0.2 < np.sqrt(np.mean(zs**2)) < 1.5
+
+
+@pytest.mark.slow
+def test_real_chessboard_photos_agree_with_plain_opencv(tmp_path):
+    """(1) The real photographs as they are: `align camera` against cv2.calibrateCamera."""
+    files = sorted(glob.glob(os.path.join(REAL, "left0*.jpg")))
+    if len(files) < 5:
+        pytest.skip("real chessboard photographs not present")
+    rc, cam, err, _ = _calibrate(str(tmp_path), files, "--free-k3")
+    assert rc == 0 and cam["ok"], err
+    obj, img = [], []
+    for f in files:
+        g = cv2.imread(f, cv2.IMREAD_GRAYSCALE)
+        ok, c = cv2.findChessboardCorners(g, (9, 6))
+        assert ok
+        c = cv2.cornerSubPix(g, c, (11, 11), (-1, -1), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 60, 1e-4))
+        obj.append(gen.board_points((9, 6)).astype(np.float32))
+        img.append(c)
+    rms, Kc, dc, _, _ = cv2.calibrateCamera(obj, img, g.shape[::-1], None, None)
+    Km = np.array(cam["camera_matrix"])
+    dm = np.array(cam["dist_coeffs"])
+    pairs = dict(fx=(Km[0, 0], Kc[0, 0]), cx=(Km[0, 2], Kc[0, 2]), cy=(Km[1, 2], Kc[1, 2]),
+                 k1=(dm[0], dc.ravel()[0]))
+    print({k: (a, b, cam["u"][k]) for k, (a, b) in pairs.items()})
+    for k, (a, b) in pairs.items():
+        # the same photographs, the same model: the two may differ by the corner refinement only
+        assert abs(a - b) < cam["u"][k], (k, a, b, cam["u"][k])
+
+
+def _field_marks(size, rng):
+    """Marks over the frame: centre, off-centre and corners, 100 px to most of the frame."""
+    w, h = size
+    out = []
+    for fx_, fy_ in [(0, 0), (-0.3, -0.25), (0.33, 0.3), (-0.35, 0.3), (0.3, -0.3)]:
+        ln = float(rng.uniform(100, 0.45 * min(w, h))) if (fx_, fy_) != (0, 0) else 0.8 * min(w, h)
+        out.append((fx_ * w, fy_ * h, float(rng.uniform(-89, 89)), ln))
+    return out
+
+
+@pytest.mark.slow
+def test_marks_through_a_calibrated_model_over_seeds_and_lenses(tmp_path):
+    """(2) Calibrate from rendered boards, then measure marks through the same lens with the model.
+
+    Lenses k1 -0.3 / -0.15 / 0 / +0.1 at the half-diagonal with k2, p up to 1e-3, principal point
+    up to 20 px off, aspect 0.995-1.005. No ok angle beyond 3 u; z's RMS at most 1.5.
+    """
+    size = (640, 480)
+    lenses = [dict(k1h=-0.3, k2h=0.05, p1h=1e-3, p2h=-8e-4, pp=(20.0, -6.0), aspect=-0.005),
+              dict(k1h=-0.15, k2h=0.02, p1h=5e-4, p2h=-5e-4, pp=(12.0, -8.0), aspect=0.003),
+              dict(k1h=0.0, k2h=0.0, p1h=0.0, p2h=3e-4, pp=(-5.0, 15.0), aspect=0.0),
+              dict(k1h=0.1, k2h=-0.02, p1h=-1e-3, p2h=1e-3, pp=(-15.0, 10.0), aspect=0.005)]
+    zs, bad, rcs = [], [], []
+    for i, lens in enumerate(lenses):
+        K, d = gen.lens_cv(size, **lens)
+        folder = tmp_path / f"l{i}"
+        files = gen.write_boards(str(folder), 9, 10 + i, size, K, d)
+        rc, cam, err, camfile = _calibrate(str(folder), files)
+        assert cam is not None, err
+        rng = np.random.default_rng(i)
+        imgs, truths = [], []
+        for j, mk in enumerate(_field_marks(size, rng)):
+            img, t = gen.render_marks(size, K, d, [mk], seed=100 * i + j, bits=(16 if j % 2 else 8),
+                                      noise=(0.004 if j % 2 else 0.01))
+            imgs.append(gen.write_png(str(folder / f"m{j}.png"), img))
+            truths.append(t[0])
+        rcm, doc, err = _marks(imgs, "--camera", camfile, "--one")
+        rcs.append(rcm)
+        for m, t in zip(doc["marks"], truths):
+            if not m.get("found"):
+                continue
+            e = gen.angle_diff_arcsec(m["angle_deg"], t)
+            u = m["angle_u_deg"] * 3600
+            zs.append(e / u)
+            if not m.get("lens_limited") and abs(e) > 3 * u:
+                bad.append((i, m["image"], round(e, 1), round(u, 1)))
+    zs = np.array(zs)
+    print("marks through calibrated models: n %d, RMS z %.2f, max |z| %.2f, exits %s" % (
+        len(zs), np.sqrt(np.mean(zs**2)), np.abs(zs).max(), rcs))
+    assert not bad, bad
+    assert len(zs) >= 15
+    assert np.sqrt(np.mean(zs**2)) < 1.5
+
+
+@pytest.mark.slow
+def test_refocused_lens_is_named_and_u_widened(tmp_path):
+    """(3) Refocus after calibration (k1 +0.02..+0.05 at the half-diagonal): the camera's lens is
+    said to differ from its calibration, and no ok angle is beyond 3 u."""
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    cam = _exact_model(tmp_path, size, K, d)
+    s = 0.5 * math.hypot(size[0] - 1, size[1] - 1) / K[0, 0]
+    bad, warned = [], 0
+    for seed, dk in [(1, 0.02), (2, 0.035), (3, 0.05)]:
+        d2 = d.copy()
+        d2[0] += dk / s**2
+        img, truths = gen.render_marks(size, K, d2, FRAME, seed=seed)
+        f = gen.write_png(str(tmp_path / f"r{seed}.png"), img)
+        rc, doc, err = _marks([f], "--camera", cam)
+        warned += any("differs from its calibration" in w for w in doc["warnings"])
+        bad += [(seed, round(e), round(u)) for e, u, ok in _errors(doc, truths) if ok and abs(e) > 3 * u]
+    assert not bad, bad
+    assert warned == 3
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "principal point moved 5-15 px after calibration (exact model otherwise): seeds 1-6, "
+    "ok angles beyond 3 u in most frames (seed 1 (8,-8) px: z +14.4, -18.2, +5.1, exit 0, no warning; "
+    "(-10,6) px: z -16.8, +21.2, one frame 'read as bent mark(s), the calibration kept')"))
+def test_bumped_camera_sweep(tmp_path):
+    """(3) The camera bumped by 5-15 px: no ok angle beyond 3 u, over seeds and directions."""
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    cam = _exact_model(tmp_path, size, K, d)
+    rng = np.random.default_rng(15)
+    bad, exit0 = [], 0
+    for seed in range(1, 7):
+        mag = rng.uniform(5, 15)
+        ang = rng.uniform(0, 2 * math.pi)
+        K2 = K.copy()
+        K2[0, 2] += mag * math.cos(ang)
+        K2[1, 2] += mag * math.sin(ang)
+        img, truths = gen.render_marks(size, K2, d, FRAME, seed=seed)
+        f = gen.write_png(str(tmp_path / f"b{seed}.png"), img)
+        rc, doc, err = _marks([f], "--camera", cam)
+        exit0 += rc == 0
+        bad += [(seed, round(mag, 1), round(e), round(u)) for e, u, ok in _errors(doc, truths)
+                if ok and abs(e) > 3 * u]
+    print("bumped: exit 0 in %d of 6; ok beyond 3 u: %s" % (exit0, bad))
+    assert not bad, bad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "ruled scale, 20 lines at 22 px pitch, 140/196 px long, numerals and dust, 640x480 through "
+    "k1 -0.15 with its exact model: 10 of 20 lines found (the outer 5 each side never reported, "
+    "one interior step missing), family chi2/dof 0.04 (members' centres chi2/dof 0.00-0.10: "
+    "'the groove model does not fit this groove')"))
+def test_ruled_scale_every_line_found(tmp_path):
+    """(5) A ruled scale through a real lens with its model: every line found, chi2/dof 0.7-1.4."""
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    cam = _exact_model(tmp_path, size, K, d)
+    img, truth = gen.render_scale(size, K, d, n_lines=20, pitch_px=22, angle_deg=3.0, length_px=140, seed=1)
+    f = gen.write_png(str(tmp_path / "scale.png"), img)
+    rc, doc, err = _marks([f], "--camera", cam, "--max-marks", "30")
+    found = [m for m in doc["marks"] if m.get("found")]
+    fam = next((m["family"] for m in found if m.get("family")), None)
+    assert fam is not None
+    e = gen.angle_diff_arcsec(fam["angle_deg"], truth)
+    assert abs(e) <= 3 * fam["angle_u_arcsec"]
+    assert len(found) == 20, len(found)
+    assert 0.7 <= fam["chi2_dof"] <= 1.4, fam["chi2_dof"]
