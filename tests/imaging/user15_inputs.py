@@ -79,8 +79,12 @@ def to_rays(px, K, d):
         jy = (_forward(und + [0, eps], K, d) - fwd) / eps
         r = target - fwd
         det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
-        und = und + np.column_stack([(jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det,
-                                     (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det])
+        und = und + np.column_stack(
+            [
+                (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det,
+                (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det,
+            ]
+        )
     return und
 
 
@@ -108,7 +112,6 @@ def board_poses(n, seed, size, K, pattern=(9, 6), square=1.0):
     rng = np.random.default_rng(seed)
     w, h = size
     cols, rows = pattern
-    obj = board_points(pattern, square)
     poses = []
     tries = 0
     while len(poses) < n and tries < 5000:
@@ -124,13 +127,20 @@ def board_poses(n, seed, size, K, pattern=(9, 6), square=1.0):
         tx = rng.uniform(-0.35, 0.35) * w / K[0, 0] * z
         ty = rng.uniform(-0.35, 0.35) * h / K[1, 1] * z
         tvec = np.array([tx, ty, z]) - Rm @ cen
-        corners = np.array([[-1, -1, 0], [cols, -1, 0], [-1, rows, 0], [cols, rows, 0]], float) * square
+        corners = (
+            np.array([[-1, -1, 0], [cols, -1, 0], [-1, rows, 0], [cols, rows, 0]], float) * square
+        )
         cam = (Rm @ corners.T).T + tvec
         if np.any(cam[:, 2] <= 0.3 * z):
             continue
         p, _ = cv2.projectPoints(corners, rvec, tvec, K, np.zeros(5))
         p = p.reshape(-1, 2)
-        if p[:, 0].min() < 15 or p[:, 1].min() < 15 or p[:, 0].max() > w - 16 or p[:, 1].max() > h - 16:
+        if (
+            p[:, 0].min() < 15
+            or p[:, 1].min() < 15
+            or p[:, 0].max() > w - 16
+            or p[:, 1].max() > h - 16
+        ):
             continue
         poses.append((rvec, tvec))
     return poses
@@ -142,8 +152,20 @@ def board_points(pattern=(9, 6), square=1.0):
     return np.column_stack([g, np.zeros(len(g))])
 
 
-def render_board(size, K, d, rvec, tvec, pattern=(9, 6), square=1.0, blur_px=0.7, noise=0.01,
-                 bits=8, seed=0, ss=2):
+def render_board(
+    size,
+    K,
+    d,
+    rvec,
+    tvec,
+    pattern=(9, 6),
+    square=1.0,
+    blur_px=0.7,
+    noise=0.01,
+    bits=8,
+    seed=0,
+    ss=2,
+):
     """A chessboard photograph through the lens (K, d): rays from every sub-pixel, blur, area."""
     rng = np.random.default_rng(seed)
     w, h = size
@@ -163,7 +185,7 @@ def render_board(size, K, d, rvec, tvec, pattern=(9, 6), square=1.0, blur_px=0.7
     u = b[:, 0] / square + 1.0
     v = b[:, 1] / square + 1.0
     inside = (u >= 0) & (u < cols + 1) & (v >= 0) & (v < rows + 1) & (s > 0)
-    chk = ((np.floor(u) + np.floor(v)) % 2 == 0)
+    chk = (np.floor(u) + np.floor(v)) % 2 == 0
     val = np.where(inside, np.where(chk, 0.1, 0.9), 0.75)
     # a white margin of one square around the board
     margin = (u >= -1) & (u < cols + 2) & (v >= -1) & (v < rows + 2) & ~inside
@@ -178,8 +200,18 @@ def write_boards(folder, n, seed, size, K, d, pattern=(9, 6), noise=0.01, bits=8
     os.makedirs(folder, exist_ok=True)
     files = []
     for i, (rvec, tvec) in enumerate(board_poses(n, seed, size, K, pattern)):
-        img = render_board(size, K, d, rvec, tvec, pattern, noise=noise, bits=bits, seed=seed * 1000 + i,
-                           blur_px=blur_px)
+        img = render_board(
+            size,
+            K,
+            d,
+            rvec,
+            tvec,
+            pattern,
+            noise=noise,
+            bits=bits,
+            seed=seed * 1000 + i,
+            blur_px=blur_px,
+        )
         f = os.path.join(folder, f"board{i:02d}.png")
         cv2.imwrite(f, img)
         files.append(f)
@@ -192,13 +224,27 @@ def groove(n_px, a_px, half_len_px, width_px, blur_px, depth):
     sig = math.hypot(width_px, blur_px)
     across = depth * (width_px / sig) * np.exp(-0.5 * (n_px / sig) ** 2)
     # ends: a step in depth along the mark, blurred
-    along = 0.5 * (erf((a_px + half_len_px) / (math.sqrt(2) * blur_px))
-                   - erf((a_px - half_len_px) / (math.sqrt(2) * blur_px)))
+    along = 0.5 * (
+        erf((a_px + half_len_px) / (math.sqrt(2) * blur_px))
+        - erf((a_px - half_len_px) / (math.sqrt(2) * blur_px))
+    )
     return across * along
 
 
-def render_marks(size, K, d, marks, noise=0.004, bits=16, seed=0, ss=4, background=0.6,
-                 blur_px=1.0, width_px=1.6, depth=0.35):
+def render_marks(
+    size,
+    K,
+    d,
+    marks,
+    noise=0.004,
+    bits=16,
+    seed=0,
+    ss=4,
+    background=0.6,
+    blur_px=1.0,
+    width_px=1.6,
+    depth=0.35,
+):
     """An image of straight scribe marks through the lens.
 
     marks: list of (cx_px, cy_px, angle_deg, length_px) in the *pinhole* image (square pixels of
@@ -210,7 +256,7 @@ def render_marks(size, K, d, marks, noise=0.004, bits=16, seed=0, ss=4, backgrou
     f = K[0, 0]
     img = np.full((h, w), background, float)
     truths = []
-    for (mx, my, ang, length) in marks:
+    for mx, my, ang, length in marks:
         th = math.radians(ang)
         dirv = np.array([math.cos(th), -math.sin(th)])  # y down
         nrm = np.array([dirv[1], -dirv[0]])
@@ -219,8 +265,14 @@ def render_marks(size, K, d, marks, noise=0.004, bits=16, seed=0, ss=4, backgrou
         ts = np.linspace(-length / 2 - 8, length / 2 + 8, 400) / f
         poly = to_sensor(c[None, :] + ts[:, None] * dirv[None, :], K, d)
         mask = np.zeros((h, w), np.uint8)
-        cv2.polylines(mask, [np.round(poly * 4).astype(np.int32)], False, 1,
-                      thickness=int(4 * (2 * (6 * math.hypot(width_px, blur_px) + 3))), shift=2)
+        cv2.polylines(
+            mask,
+            [np.round(poly * 4).astype(np.int32)],
+            False,
+            1,
+            thickness=int(4 * (2 * (6 * math.hypot(width_px, blur_px) + 3))),
+            shift=2,
+        )
         iy, ix = np.nonzero(mask)
         if len(ix) == 0:
             truths.append(None)
@@ -233,7 +285,11 @@ def render_marks(size, K, d, marks, noise=0.004, bits=16, seed=0, ss=4, backgrou
         rel = (rays - c) * f  # in pinhole pixels
         n_px = rel @ nrm
         a_px = rel @ dirv
-        val = groove(n_px, a_px, length / 2, width_px, blur_px, depth).reshape(-1, ss * ss).mean(axis=1)
+        val = (
+            groove(n_px, a_px, length / 2, width_px, blur_px, depth)
+            .reshape(-1, ss * ss)
+            .mean(axis=1)
+        )
         img[iy, ix] -= val * background
         a = ang
         while a <= -90:
@@ -244,8 +300,21 @@ def render_marks(size, K, d, marks, noise=0.004, bits=16, seed=0, ss=4, backgrou
     return _noise_quantise(img, rng, noise, bits), truths
 
 
-def render_scale(size, K, d, n_lines=20, pitch_px=22.0, angle_deg=3.0, length_px=160, centre=(0.0, 0.0),
-                 seed=0, noise=0.004, bits=16, dust=12, numerals=True):
+def render_scale(
+    size,
+    K,
+    d,
+    n_lines=20,
+    pitch_px=22.0,
+    angle_deg=3.0,
+    length_px=160,
+    centre=(0.0, 0.0),
+    seed=0,
+    noise=0.004,
+    bits=16,
+    dust=12,
+    numerals=True,
+):
     """A ruled scale: n_lines parallel lines at a fixed pitch (pinhole px), numerals, dust.
 
     Returns (image, truth angle [deg]).
@@ -272,8 +341,16 @@ def render_scale(size, K, d, n_lines=20, pitch_px=22.0, angle_deg=3.0, length_px
             p = np.array([centre[0], centre[1]]) + o * nrm + dirv * (length_px * 0.7 + 25)
             q = to_sensor((p / K[0, 0])[None, :], K, d)[0]
             ink = np.zeros((h, w), np.uint8)
-            cv2.putText(ink, str(i // 5), (int(q[0]) - 6, int(q[1]) + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
-                        255, 1, cv2.LINE_AA)
+            cv2.putText(
+                ink,
+                str(i // 5),
+                (int(q[0]) - 6, int(q[1]) + 6),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.5,
+                255,
+                1,
+                cv2.LINE_AA,
+            )
             imgf -= ink / 255.0 * 0.25 * full
     for _ in range(dust):
         x, y = rng.uniform(0, w), rng.uniform(0, h)
