@@ -333,8 +333,8 @@ def render_scale(
     cxp, cyp = K[0, 2], K[1, 2]
     imgf = img.astype(float)
     if numerals:
-        # numerals beside every fifth line, beyond the lines' ends (in pinhole px, drawn on the sensor
-        # near their projected position: text is not what is measured)
+        # numerals beside every fifth line, beyond the lines' ends (in pinhole px, drawn on the
+        # sensor near their projected position: text is not what is measured)
         dirv = np.array([math.cos(th), -math.sin(th)])
         for i in range(0, n_lines, 5):
             o = (i - (n_lines - 1) / 2) * pitch_px
