@@ -32,8 +32,11 @@ from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import (
+    BlockScatter,
     JpegBlocks,
+    block_labels,
     block_phase_columns,
+    block_scatter,
     jpeg_centre_scale,
     jpeg_noise_dof,
     jpeg_note,
@@ -62,7 +65,8 @@ from imaging.stripes import Stripes
 __all__ = [
     "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
-    "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof",
+    "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof", "BlockScatter", "block_scatter",
+    "block_labels",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
