@@ -30,7 +30,7 @@ from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
-from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
+from imaging.io import ImageRead, JpegTables, read_image, read_image_notes, set_max_pixels
 from imaging.jpeg import (
     BlockScatter,
     JpegBlocks,
@@ -74,6 +74,6 @@ __all__ = [
     "fit_line_only",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
-    "ImageRead", "read_image_notes", "set_max_pixels",
+    "ImageRead", "JpegTables", "read_image_notes", "set_max_pixels",
     "GrooveEnds", "grating_note", "groove_ends", "shadow_free",
 ]
