@@ -147,9 +147,9 @@ def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks
 
     A file's header (``tables``, :func:`imaging.io.read_image_notes`) names its table: it is
     taken as the encoder's. Else the pixels say it (:func:`find_jpeg_at`), on the grid at
-    the image's top-left corner, as decoded; when they give no quality there and the block
-    boundaries put the grid elsewhere (:func:`grid_phase`: a crop of a JPEG, saved as PNG),
-    on that grid too, which is taken when its quality is read (a background the encoder
+    the image's top-left corner, as decoded, and, when the block boundaries put the grid
+    elsewhere (:func:`grid_phase`: a crop of a JPEG, saved as PNG), on that grid too: it is
+    taken when its quality is read and is lower than the origin's (a background the encoder
     flattened is flat on any grid, so "JPEG, quality unknown" at the origin is no answer).
     """
     if tables is not None:
@@ -157,7 +157,7 @@ def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks
         return JpegBlocks(table_quality(np.array(tables.luma)), float("nan"),
                           (h // 8) * (w // 8), tables.phase, tables.luma)
     found = find_jpeg_at(image)
-    if (found is not None and found.quality is not None) or min(image.shape) < 24:
+    if min(image.shape) < 24:
         return found
     px, py = grid_phase(image)
     if (px, py) == (0, 0):
@@ -165,6 +165,11 @@ def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks
     moved = find_jpeg_at(image[py:, px:])
     if moved is None or (found is not None and moved.quality is None):
         return found
+    if found is not None and found.quality is not None and found.quality <= (moved.quality or 0):
+        return found
+    # On the encoder's grid its coarse steps show; a grid off by a few px sees sums of
+    # neighbouring blocks' coefficients, on finer steps at best (quality ~94 read at the
+    # origin of a quality-75 JPEG cropped by one row): the coarser reading is the grid's.
     return replace(moved, phase=(px, py))
 
 
