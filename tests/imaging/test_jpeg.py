@@ -8,13 +8,20 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
+from imaging import JpegTables
 from imaging.jpeg import (
+    block_labels,
     block_phase_columns,
+    block_scatter,
     find_jpeg,
+    grid_phase,
     ijg_table,
     jpeg_centre_scale,
     jpeg_noise_dof,
+    jpeg_note,
+    jpeg_round_trip,
     requantised_quality,
+    table_quality,
 )
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
@@ -192,3 +199,69 @@ def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
         assert np.all(np.abs(tc @ C) / np.linalg.norm(C, axis=0) < 0.25), tc @ C
     alt = block_phase_columns(100.3 + t)[:, 0]
     assert np.all(np.sign(alt[1:]) == -np.sign(alt[:-1]))
+
+
+def test_block_scatter_reads_the_within_block_correlation():
+    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 300 marks of 60
+    centres the within-block correlation and the variance factor on the angle come back
+    (rho's spread from ~30 pairs each, 4 sigma of the mean), and the factor is the exact
+    ratio of the line's slope variance under the model to the independent one."""
+    rng = np.random.default_rng(5)
+    n, rho, s = 60, 0.6, 2.0
+    block = np.arange(n) // 2
+    t = np.arange(n) * 4.0
+    X = np.column_stack([np.ones(n), t - t.mean()])
+    h = np.linalg.pinv(X)[1]
+    R = (1 - rho) * np.eye(n) + rho * (block[:, None] == block[None, :])
+    want = s**2 * (h @ R @ h) / (h @ h)
+    got = []
+    for _ in range(300):
+        b = rng.normal(size=n // 2)[block]
+        z = s * (np.sqrt(rho) * b + np.sqrt(1 - rho) * rng.normal(size=n))
+        got.append(block_scatter(z, block, h))
+    rhos = np.array([g.rho for g in got])
+    f = np.array([g.factor for g in got])
+    assert abs(rhos.mean() - rho) <= 4 * rhos.std() / np.sqrt(len(rhos)) + 0.02, rhos.mean()
+    assert abs(f.mean() / want - 1) <= 4 * f.std() / want / np.sqrt(len(f)) + 0.03, (f.mean(), want)
+    # Independent centres: rho ~ 0, the factor s^2 and what taking rho >= 0 adds: rho read
+    # from 30 pairs has a spread ~0.26, its positive part a mean ~0.1, i.e. ~+10 %.
+    z = s * rng.normal(size=(300, n))
+    f0 = np.mean([block_scatter(r, block, h).factor for r in z]) / s**2
+    assert 0.97 <= f0 <= 1.15, f0
+
+
+def test_block_labels_follow_the_grid_phase():
+    xy = np.array([[0.0, 0.0], [7.0, 0.0], [8.0, 0.0], [2.0, 9.0]])
+    assert len(set(block_labels(xy)[:2])) == 1 and block_labels(xy)[2] != block_labels(xy)[1]
+    lab = block_labels(xy, (3, 0))  # boundaries at x = 3, 11, ...
+    assert lab[0] != lab[1] and lab[1] == lab[2]
+
+
+@pytest.mark.parametrize("quality,crop", [(75, (3, 5)), (50, (7, 1))])
+def test_a_cropped_jpegs_grid_and_quality_are_found(quality, crop):
+    """A JPEG cropped by (dx, dy) px (saved losslessly): its grid starts at (-dx, -dy) mod
+    8, found from the block boundaries, and the quality is read on it (before: at the
+    origin, quality ~94 for 75 or "unknown" for 50)."""
+    img = _image(1, quality, angle_deg=30.0).image[crop[1]:, crop[0]:]
+    jb = find_jpeg(img)
+    assert jb is not None and jb.phase == ((-crop[0]) % 8, (-crop[1]) % 8), jb
+    assert jb.quality is not None and abs(jb.quality - quality) <= 6, jb
+    assert grid_phase(img) == jb.phase
+    assert "not at the image's corner" in jpeg_note("m", jb, 1.0)
+
+
+def test_the_files_own_table_is_taken():
+    """A table read from a file's header is the encoder's: the IJG quality it is, or None
+    with the table kept (another encoder's), whose round trip is its own."""
+    luma = tuple(int(v) for v in ijg_table(60).ravel())
+    jb = find_jpeg(np.zeros((64, 64), np.uint8), JpegTables(luma))
+    assert jb.quality == 60 and jb.table == luma and table_quality(ijg_table(60)) == 60
+    odd = ijg_table(60).copy()
+    odd[0, 1] += 1
+    assert table_quality(odd) is None
+    rng = np.random.default_rng(0)
+    a = np.clip(128 + 20 * rng.normal(size=(37, 45)), 0, 255)
+    # The table's round trip is libjpeg's at the quality it is (the same encoder).
+    by_table = jpeg_round_trip(a, None, luma, (3, 5))
+    assert by_table.shape == a.shape
+    assert np.mean(np.abs(by_table - jpeg_round_trip(a, 60, None, (3, 5)))) < 0.05
