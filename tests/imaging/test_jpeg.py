@@ -265,3 +265,75 @@ def test_the_files_own_table_is_taken():
     by_table = jpeg_round_trip(a, None, luma, (3, 5))
     assert by_table.shape == a.shape
     assert np.mean(np.abs(by_table - jpeg_round_trip(a, 60, None, (3, 5)))) < 0.05
+
+
+def _user13_near_axis_files(quality: int, crop: bool, seeds=range(8), per_seed: int = 4):
+    """User 13's renders (real lens, exact camera) of marks within 3 deg of an axis, 120-320 px
+    long, written as the user has them: a JPEG file at ``quality`` (its table in the
+    header), or a crop of the decoded JPEG by (dx, dy) in 0-7 px saved as PNG (``crop``: its
+    grid off the corner, no table). Yields (error [rad], u [rad], ok, result) per mark."""
+    ui = pytest.importorskip("tests.imaging.user13_inputs")
+    import os
+    import tempfile
+
+    import cv2
+
+    from align.marks import measure_file
+    from imaging import CameraModel
+    if not os.path.isdir(ui.CHESS):
+        pytest.skip(f"real data not found at {ui.CHESS}")
+    K, d, size, _ = ui.real_lens("left")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in seeds:
+            rng = np.random.default_rng(1000 * quality + seed + (500 if crop else 0) + 7000)
+            for _ in range(per_seed):
+                ang = np.radians(rng.choice([0.0, 90.0, -90.0]) + rng.uniform(-3, 3))
+                c = (rng.uniform(200, 440), rng.uniform(170, 310))
+                img = ui.mark_image((K, d, size), rng, c, ang, length=rng.uniform(120, 320),
+                                    width=3.0)
+                dx, dy = (int(rng.integers(0, 8)), int(rng.integers(0, 8))) if crop else (0, 0)
+                K2 = K.copy()
+                K2[0, 2] -= dx
+                K2[1, 2] -= dy
+                cam = CameraModel.load(ui.camera_json(K2, d, (size[0] - dx, size[1] - dy),
+                                                      os.path.join(tmp, "cam.json")))
+                _, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+                if crop:
+                    f = os.path.join(tmp, "m.png")
+                    cv2.imwrite(f, cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)[dy:, dx:])
+                else:
+                    f = os.path.join(tmp, "m.jpg")
+                    with open(f, "wb") as fh:
+                        fh.write(buf.tobytes())
+                for r in measure_file(f, cam):
+                    if r.found:
+                        ok = not (r.lens_limited or r.kinked or r.unexplained_structure
+                                  or any("NOT OK" in n for n in r.notes))
+                        yield angle_error(r.angle_rad, ang), r.angle_u_rad, ok, r
+
+
+_NEAR_AXIS_OPEN = pytest.mark.xfail(strict=True, reason=(
+    "near-axis marks keep a slow correlation along the mark beyond the blocks' (lag-1 0.5-0.8 "
+    "across block boundaries, the edge at one phase of the grid for 100+ px): max |z| 3.05 "
+    "at q50, 3.32 at q75 (JPEG files), 3.70 at q75 cropped"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("quality,crop", [
+    pytest.param(50, False, marks=_NEAR_AXIS_OPEN), (50, True),
+    pytest.param(75, False, marks=_NEAR_AXIS_OPEN), pytest.param(75, True, marks=_NEAR_AXIS_OPEN),
+    (90, False), (90, True)])
+def test_near_axis_and_cropped_jpegs_within_u(quality, crop):
+    """Marks within 3 deg of an axis (the blocks' correlated scatter: issue 18 item 4), as
+    JPEG files (the table from the header) and as crops at a random grid phase (PNG): over
+    8 seeds x 4 marks every ok mark within 3 u and the ok marks' RMS z within [0.5, 1.2].
+    Measured (before -> after: RMS z of ok marks, max |z|, ok of ~32): q50 file 1.37 -> 1.16,
+    4.62 -> 3.05, 26 -> 27; q50 crop 0.57 -> 0.68, 1.85 -> 1.83, 20 -> 21 (median u 231 ->
+    140"); q75 file 1.31 -> 1.36, 3.58 -> 3.32, 30 -> 30; q75 crop 1.82 -> 1.63, 4.20 ->
+    3.70, 16 -> 30; q90 unchanged (0.86 / 1.94, 32 of 32) and crop 1.13 -> 1.02, 3.32 ->
+    2.98."""
+    got = list(_user13_near_axis_files(quality, crop))
+    z = np.array([e / u for e, u, ok, _ in got if ok])
+    assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
+    assert np.max(np.abs(z)) <= 3.0, np.round(z, 2)
+    assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
