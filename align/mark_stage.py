@@ -175,10 +175,11 @@ def texture_scale(m: MarkMeasurement) -> float:
 
     A JPEG (``m.jpeg``, :mod:`imaging.jpeg`) is read the same way: the encoder's
     quantisation moves each centre by a part of its block's error (centres 4 px apart, two
-    to a block, nearly uncorrelated), scatter at the block scale that the Fisher sigma does
+    to a block, correlated within it), scatter at the block scale that the Fisher sigma does
     not hold (its noise is read from a background the encoder smoothed). Neighbour
-    differences see that scatter and hardly see a bow, a lens or a slow wiggle, which the
-    loop still tests for (:func:`imaging.jpeg_centre_scale`).
+    differences across and within blocks see that scatter and its correlation, and hardly
+    see a bow, a lens or a slow wiggle, which the loop still tests for
+    (:func:`jpeg_scatter`: the factor the correlation puts on the angle's variance).
     """
     if len(m.points) <= 10 or (m.chol is None and m.jpeg is None):
         return 1.0
