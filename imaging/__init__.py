@@ -31,15 +31,13 @@ from imaging.families import Detection, detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import ImageRead, JpegTables, read_image, read_image_notes, set_max_pixels
-from imaging.jpeg import (
+from imaging.jpeg import JpegBlocks, block_labels, jpeg_note
+from imaging.jpeg_scatter import (
     BlockScatter,
-    JpegBlocks,
-    block_labels,
     block_phase_columns,
     block_scatter,
     jpeg_centre_scale,
     jpeg_noise_dof,
-    jpeg_note,
 )
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points

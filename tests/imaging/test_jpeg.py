@@ -11,17 +11,19 @@ from align.marks import measure_image
 from imaging import JpegTables
 from imaging.jpeg import (
     block_labels,
-    block_phase_columns,
-    block_scatter,
     find_jpeg,
     grid_phase,
     ijg_table,
-    jpeg_centre_scale,
-    jpeg_noise_dof,
     jpeg_note,
     jpeg_round_trip,
     requantised_quality,
     table_quality,
+)
+from imaging.jpeg_scatter import (
+    block_phase_columns,
+    block_scatter,
+    jpeg_centre_scale,
+    jpeg_noise_dof,
 )
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
