@@ -460,9 +460,8 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
 
 
 def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
-                  max_marks: int = 8, min_length_px: float | None = None,
-                  expect_one: bool = False, roi: Roi | None = None,
-                  jpeg_tables: JpegTables | None = None) -> MeasuredFrame:
+                  max_marks: int = 8, min_length_px: float | None = None, expect_one: bool = False,
+                  roi: Roi | None = None, jpeg_tables: JpegTables | None = None) -> MeasuredFrame:
     """:func:`measure_marks` with the families of lines and the count of lines not reported.
 
     Every member of a family is measured (whatever ``max_marks``), and kept whatever its
@@ -470,10 +469,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     Parameters
     ----------
-    image, camera, where, max_marks, min_length_px, expect_one, roi
-        As :func:`measure_marks`.
-    jpeg_tables : JpegTables, optional
-        A JPEG file's quantisation from its header (:func:`imaging.find_jpeg`).
+    image, camera, where, max_marks, min_length_px, expect_one, roi, jpeg_tables
+        As :func:`measure_marks`; ``jpeg_tables``: a JPEG file's header's (:func:`find_jpeg`).
 
     Returns
     -------
