@@ -27,12 +27,13 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from align.errors import NotApplicable
 from align.loop import Candidate, StageFit, Term, periodogram_test
 from imaging import (
+    BlockScatter,
     MarkMeasurement,
+    block_labels,
     block_phase_columns,
+    block_scatter,
     cross_magnification,
     fit_line,
-    jpeg_centre_scale,
-    jpeg_noise_dof,
     line_frame,
     undistort,
 )
@@ -174,17 +175,16 @@ def texture_scale(m: MarkMeasurement) -> float:
 
     A JPEG (``m.jpeg``, :mod:`imaging.jpeg`) is read the same way: the encoder's
     quantisation moves each centre by a part of its block's error (centres 4 px apart, two
-    to a block, nearly uncorrelated), scatter at the block scale that the Fisher sigma does
+    to a block, correlated within it), scatter at the block scale that the Fisher sigma does
     not hold (its noise is read from a background the encoder smoothed). Neighbour
-    differences see that scatter and hardly see a bow, a lens or a slow wiggle, which the
-    loop still tests for (:func:`imaging.jpeg_centre_scale`).
+    differences across and within blocks see that scatter and its correlation, and hardly
+    see a bow, a lens or a slow wiggle, which the loop still tests for
+    (:func:`jpeg_scatter`: the factor the correlation puts on the angle's variance).
     """
     if len(m.points) <= 10 or (m.chol is None and m.jpeg is None):
         return 1.0
     if m.chol is None:
-        # The blocks' pattern left in (not :func:`jpeg_blocks_columns`): every fit of the
-        # centres takes this sigma, and the camera's bow test fits no such columns.
-        return jpeg_centre_scale(fit_line(m.points, m.sigma, reject_sigma=None).z)
+        return jpeg_scatter(m).factor
     # Whitened both ways along the mark, and averaged: a Cholesky factor whitens causally
     # (each residual given the ones before it), so from the other end the whitened series
     # differs, and u would depend on which end the line starts from (the same pixels
@@ -194,6 +194,27 @@ def texture_scale(m: MarkMeasurement) -> float:
     rev = np.linalg.cholesky((m.chol @ m.chol.T)[::-1, ::-1])
     zr = fit_line(m.points[::-1], m.sigma[::-1], reject_sigma=None, chol=rev).z
     return float(max(1.0, (np.mean(np.diff(z) ** 2) + np.mean(np.diff(zr) ** 2)) / 4))
+
+
+def jpeg_scatter(m: MarkMeasurement) -> BlockScatter:
+    """A JPEG mark's centres' scatter with its correlation within the 8x8 blocks
+    (:func:`imaging.block_scatter`), read from the straight line's whitened residuals. The
+    blocks' pattern is left in (not :func:`jpeg_blocks_columns`): every fit of the centres
+    takes this sigma, and the camera's bow test fits no such columns."""
+    lf = fit_line(m.points, m.sigma, reject_sigma=None)
+    t = m.points @ line_frame(lf.angle_rad)[0]
+    X = np.column_stack([np.ones_like(t), t - t.mean()]) / m.sigma[:, None]
+    h = np.linalg.pinv(X)[1]  # the slope's weights on the whitened centres
+    return block_scatter(lf.z, block_labels(_raw_centres(m), m.jpeg.phase), h)
+
+
+def _raw_centres(m: MarkMeasurement) -> np.ndarray:
+    """The centres' raw pixel coordinates (x, y; pixel centres at integers), on the
+    profile's line at each centre's ``t`` (their distance from it, hundredths of a px,
+    moves no block)."""
+    u, n = line_frame(m.profile.angle_rad)
+    raw = m.profile.offset_px * n + np.asarray(m.regressors["t"], float)[:, None] * u
+    return raw + (np.array(m.image_shape[::-1], float) - 1) / 2
 
 
 def jpeg_blocks_columns(m: MarkMeasurement) -> np.ndarray | None:
@@ -206,10 +227,9 @@ def jpeg_blocks_columns(m: MarkMeasurement) -> np.ndarray | None:
     no phase)."""
     if m.jpeg is None:
         return None
-    u, n = line_frame(m.profile.angle_rad)
-    raw = m.profile.offset_px * n + np.asarray(m.regressors["t"], float)[:, None] * u
+    u = line_frame(m.profile.angle_rad)[0]
     axis = 0 if abs(u[0]) >= abs(u[1]) else 1
-    cols = block_phase_columns(raw[:, axis] + (m.image_shape[1 - axis] - 1) / 2)
+    cols = block_phase_columns(_raw_centres(m)[:, axis])
     return cols if cols.shape[1] else None
 
 
@@ -224,7 +244,7 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     """
     tex = m.centres.texture
     if m.chol is None and m.jpeg is not None and scale > 1.0:
-        return jpeg_noise_dof(len(m.points))  # the JPEG's scatter re-read from the mark
+        return jpeg_scatter(m).dof  # the JPEG's scatter re-read from the mark
     if m.chol is None or tex is None or not np.isfinite(tex.dof):
         return None
     if scale <= 1.0:

@@ -49,6 +49,7 @@ from imaging import (
     MAX_LENGTH_FRACTION,
     CameraModel,
     ImageInputError,
+    JpegTables,
     MarkMeasurement,
     Roi,
     defocus_note,
@@ -322,7 +323,8 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
 def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | None = None,
                   alpha: float = 1e-3, max_marks: int = 8, expect_one: bool = False,
                   roi: Roi | None = None, min_length_px: float | None = None,
-                  ranges: LensRanges | None = None) -> list[MarkResult]:
+                  ranges: LensRanges | None = None, jpeg_tables: JpegTables | None = None
+                  ) -> list[MarkResult]:
     """Every mark of an in-memory image, each through the loop; failures become entries.
 
     Parameters
@@ -346,6 +348,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         Shortest line taken as a mark [px].
     ranges : LensRanges or None
         The plausible lens (Type B) when no camera model is given (None: the default).
+    jpeg_tables : imaging.JpegTables or None
+        A JPEG file's quantisation table from its header (None: read from the pixels).
 
     Returns
     -------
@@ -372,7 +376,8 @@ def measure_image(image: np.ndarray, name: str = "image", camera: CameraModel | 
         return [MarkResult(image=name, found=False, error=f"{name}: {too_long}")]
     try:
         measured = measure_frame(image, camera, where=name, max_marks=max_marks,
-                                 expect_one=expect_one, roi=roi, min_length_px=min_length_px)
+                                 expect_one=expect_one, roi=roi, min_length_px=min_length_px,
+                                 jpeg_tables=jpeg_tables)
     except ImageInputError as exc:
         return [MarkResult(image=name, found=False, error=str(exc))]
     found, split = _frame_marks(measured.items, name, alpha, image, camera)
@@ -444,7 +449,7 @@ def measure_camera(images: Sequence[tuple[str | Path, Roi | None]],
             continue
         try:
             fr = measure_frame(got.pixels, camera, where=str(path), expect_one=expect_one,
-                               roi=roi)
+                               roi=roi, jpeg_tables=got.jpeg_tables)
             said[str(path)] = tuple(f"{path}: {n}" for n in got.notes) + fr.notes
             items, split = _frame_marks(fr.items, str(path), alpha, got.pixels, camera)
             found_all.append(items)
@@ -558,7 +563,7 @@ def measure_file(path: str | Path, camera: CameraModel | None = None, alpha: flo
     except ImageInputError as exc:
         return [MarkResult(image=str(path), found=False, error=str(exc))]
     results = measure_image(got.pixels, str(path), camera, alpha, max_marks, expect_one, roi,
-                            min_length_px, ranges)
+                            min_length_px, ranges, got.jpeg_tables)
     if not got.notes:
         return results
     # What the reader did to the stored image (orientation applied, signed data offset):

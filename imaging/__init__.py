@@ -30,13 +30,14 @@ from imaging.errors import ImageInputError
 from imaging.families import Detection, detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
-from imaging.io import ImageRead, read_image, read_image_notes, set_max_pixels
-from imaging.jpeg import (
-    JpegBlocks,
+from imaging.io import ImageRead, JpegTables, read_image, read_image_notes, set_max_pixels
+from imaging.jpeg import JpegBlocks, block_labels, jpeg_note
+from imaging.jpeg_scatter import (
+    BlockScatter,
     block_phase_columns,
+    block_scatter,
     jpeg_centre_scale,
     jpeg_noise_dof,
-    jpeg_note,
 )
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
@@ -62,7 +63,8 @@ from imaging.stripes import Stripes
 __all__ = [
     "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
-    "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof",
+    "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof", "BlockScatter", "block_scatter",
+    "block_labels",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",
     "calibrate_chessboard", "check_roi", "chessboard_lines", "cross_magnification",
@@ -70,6 +72,6 @@ __all__ = [
     "fit_line_only",
     "line_frame", "measure_candidate", "measure_frame", "measure_marks", "opencv_to_lens",
     "on_line", "plumb_line", "read_image", "undistort", "undistort_points", "wrap_angle",
-    "ImageRead", "read_image_notes", "set_max_pixels",
+    "ImageRead", "JpegTables", "read_image_notes", "set_max_pixels",
     "GrooveEnds", "grating_note", "groove_ends", "shadow_free",
 ]

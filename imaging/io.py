@@ -36,9 +36,36 @@ ORIENTATIONS = {1: "as stored", 2: "mirrored left-right", 3: "turned 180°",
 
 
 @dataclass(frozen=True)
+class JpegTables:
+    """What a JPEG file's header says of its encoder: the luminance quantisation table and
+    where its 8x8 grid lies in the pixels as read.
+
+    Attributes
+    ----------
+    luma : tuple of int
+        The 64 steps of the luminance table (table 0), row-major (natural order) [DN of the
+        orthonormal DCT].
+    phase : tuple of int
+        (x, y) of the grid's first block boundary in the pixels as read [px], 0-7: (0, 0)
+        as stored; an orientation tag applied to a size not a multiple of 8 moves it.
+    """
+
+    luma: tuple[int, ...]
+    phase: tuple[int, int] = (0, 0)
+
+    def to_dict(self) -> dict:
+        return {"luma": list(self.luma), "phase": list(self.phase)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> JpegTables:
+        return cls(tuple(int(v) for v in d["luma"]), tuple(int(v) for v in d["phase"]))
+
+
+@dataclass(frozen=True)
 class ImageRead:
     """An image as read: ``pixels`` [DN] (float64, 2-D) and ``notes``, one sentence per
-    thing the reader did to the stored data (orientation applied, signed data offset).
+    thing the reader did to the stored data (orientation applied, signed data offset), and
+    a JPEG's ``jpeg_tables`` from its header.
 
     Attributes
     ----------
@@ -46,10 +73,13 @@ class ImageRead:
         Grayscale pixels [DN], float64, 2-D.
     notes : tuple of str
         What was done to the stored data.
+    jpeg_tables : JpegTables or None
+        A JPEG file's quantisation (None: not a JPEG, or no table in its header).
     """
 
     pixels: np.ndarray
     notes: tuple[str, ...] = ()
+    jpeg_tables: JpegTables | None = None
 
 
 def max_pixels() -> int:
@@ -128,6 +158,7 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
         raise ImageInputError(f"{p}: is a folder, not an image")
     budget = max_pixels() if budget is None else budget
     notes: list[str] = []
+    luma = None
     if p.suffix.lower() in (".tif", ".tiff"):
         img, orientation, planar = _read_tiff(p, budget)
         if planar and img.ndim == 3 and img.shape[2] >= 3:
@@ -138,7 +169,7 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
                          "planes are separate frames, write them as pages of a stack or as "
                          "files")
     else:
-        orientation = _check_header(p, budget)
+        orientation, luma = _check_header(p, budget)
         data = np.fromfile(p, dtype=np.uint8)
         img = None
         if data.size:
@@ -175,10 +206,28 @@ def read_image_notes(path: str | Path, budget: int | None = None) -> ImageRead:
                      "to unsigned")
     if wide:
         _within_16_bits(p, img.dtype, out)
+    tables = None
+    if luma is not None:
+        tables = JpegTables(luma, _grid_phase_after(orientation, img.shape))
     if orientation not in (None, 1):
         out = _orient(out, orientation)
         notes.append(f"orientation tag {orientation} applied ({ORIENTATIONS[orientation]})")
-    return ImageRead(out, tuple(notes))
+    return ImageRead(out, tuple(notes), tables)
+
+
+def _grid_phase_after(code: int | None, shape: tuple[int, ...]) -> tuple[int, int]:
+    """(x, y) of the first 8x8 block boundary once orientation ``code`` is applied to a
+    stored image of ``shape`` [px]: the stored grid starts at (0, 0); a mirror or a turn
+    puts the far edge first, whose blocks start at the size modulo 8. Found by orienting
+    the block labels of a small image with the same sizes modulo 8."""
+    if code in (None, 1):
+        return (0, 0)
+    h, w = 16 + shape[0] % 8, 16 + shape[1] % 8
+    yy, xx = np.mgrid[0:h, 0:w]
+    lab = _orient((yy // 8 * 8 + xx // 8).astype(float), code)
+    px = next((j for j in range(1, 9) if lab[0, j] != lab[0, j - 1]), 8) % 8
+    py = next((i for i in range(1, 9) if lab[i, 0] != lab[i - 1, 0]), 8) % 8
+    return (px, py)
 
 
 def _within_16_bits(p: Path, dtype: np.dtype, out: np.ndarray) -> None:
@@ -210,9 +259,10 @@ def _budget(p: Path, w: int, h: int, budget: int) -> None:
             "the image is genuine)")
 
 
-def _check_header(p: Path, budget: int) -> int | None:
-    """Read only the header (Pillow opens lazily): size against ``budget``, and the EXIF
-    orientation; None when Pillow does not know the format (OpenCV then tries)."""
+def _check_header(p: Path, budget: int) -> tuple[int | None, tuple[int, ...] | None]:
+    """Read only the header (Pillow opens lazily): size against ``budget``, the EXIF
+    orientation (None when Pillow does not know the format: OpenCV then tries) and a JPEG's
+    luminance quantisation table (64 steps, natural order; None: not a JPEG)."""
     from PIL import Image, UnidentifiedImageError
 
     # Pillow's own bomb guard (a warning, an error over twice 89 MP) gives way to ours,
@@ -226,19 +276,22 @@ def _check_header(p: Path, budget: int) -> int | None:
             # long as OpenCV's decoding after it, at 5 MP): not when the chunks hold none.
             no_exif = im.format == "PNG" and "exif" not in im.info and not _png_has_exif(p)
             code = None if no_exif else im.getexif().get(0x0112)
+            # Pillow gives the tables in natural (row-major) order; table 0 is the luma's.
+            q = getattr(im, "quantization", None) if im.format == "JPEG" else None
+            luma = tuple(int(v) for v in q[0]) if q and len(q.get(0, ())) == 64 else None
             if im.mode == "1":
                 raise ImageInputError(
                     f"{p}: a 1-bit (bilevel) image: a mark's grey-level profile, which the "
                     "lines are fitted to, is not in it; give the camera's grey-level image")
     except UnidentifiedImageError:
-        return None
+        return None, None
     except OSError as exc:
         raise ImageInputError(f"{p}: unreadable image header ({exc})") from None
     if code is None:
-        return None
+        return None, luma
     if code not in ORIENTATIONS:
         raise ImageInputError(f"{p}: EXIF orientation {code} is not one of 1-8")
-    return int(code)
+    return int(code), luma
 
 
 def _png_has_exif(p: Path) -> bool:

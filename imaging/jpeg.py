@@ -22,7 +22,8 @@ angle's change is the term ``jpeg_blocks``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,6 +31,8 @@ from imaging.band import band_pixels
 from imaging.candidate import line_frame
 from imaging.centres import sample_centres
 from imaging.groove import ProfileFit, ProfileTable, centres_half
+from imaging.io import JpegTables
+from imaging.jpeg_scatter import block_phase_columns
 from imaging.linefit import fit_line
 
 R_MIN = 0.5
@@ -87,16 +90,93 @@ class JpegBlocks:
         Smallest R over the tested coefficients at that quality — dimensionless.
     blocks : int
         8x8 blocks used.
+    phase : tuple of int
+        (x, y) of the block grid's first boundary [px], 0-7: (0, 0) as decoded; else a
+        crop (or a turn) moved the grid (:func:`grid_phase`).
+    table : tuple of int or None
+        The file's own luminance table (64 steps, row-major) when its header gave it
+        (``quality`` is then the IJG quality that table is, None: another encoder's);
+        None: read from the pixels.
     """
 
     quality: int | None
     concentration: float
     blocks: int
+    phase: tuple[int, int] = (0, 0)
+    table: tuple[int, ...] | None = None
 
 
-def find_jpeg(image: np.ndarray) -> JpegBlocks | None:
+def table_quality(table: np.ndarray) -> int | None:
+    """The IJG quality (1-100) whose luminance table ``table`` (8x8 or 64 steps, row-major)
+    is, step for step; None: another encoder's table."""
+    t = np.asarray(table, float).reshape(8, 8)
+    return next((q for q in range(1, 101) if np.array_equal(ijg_table(q), t)), None)
+
+
+def grid_phase(image: np.ndarray) -> tuple[int, int]:
+    """Where an image's 8x8 JPEG grid would lie: (x, y) of its first block boundary [px],
+    0-7 (on any image: whether it is a JPEG's grid is :func:`find_jpeg_at`'s to say).
+
+    The encoder quantises each block alone, so the pixels step at the block boundaries more
+    than inside the blocks. Over the 64 phases the statistic separates into x and y: the
+    columns' (rows') mean absolute step across the rows (columns), whose median over the
+    columns of one phase modulo 8 is that phase's (a median: a mark along a column steps
+    in a few columns only). The phase of the largest is the grid's.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        2-D image [DN].
+
+    Returns
+    -------
+    tuple of int
+        (x, y) [px].
+    """
+    img = np.asarray(image, float)
+    out = []
+    for a in (img, img.T):
+        step = np.mean(np.abs(np.diff(a, axis=1)), axis=0)  # step j: between columns j, j+1
+        k = (np.arange(len(step)) + 1) % 8  # the phase of the boundary at column j + 1
+        out.append(int(np.argmax([np.median(step[k == p]) for p in range(8)])))
+    return out[0], out[1]
+
+
+def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks | None:
+    """The JPEG encoder an 8-bit image was decoded from (None: no sign of JPEG, or not
+    8-bit data).
+
+    A file's header (``tables``, :func:`imaging.io.read_image_notes`) names its table: it is
+    taken as the encoder's. Else the pixels say it (:func:`find_jpeg_at`), on the grid at
+    the image's top-left corner, as decoded, and, when the block boundaries put the grid
+    elsewhere (:func:`grid_phase`: a crop of a JPEG, saved as PNG), on that grid too: it is
+    taken when its quality is read and is lower than the origin's (a background the encoder
+    flattened is flat on any grid, so "JPEG, quality unknown" at the origin is no answer).
+    """
+    if tables is not None:
+        h, w = image.shape
+        return JpegBlocks(table_quality(np.array(tables.luma)), float("nan"),
+                          (h // 8) * (w // 8), tables.phase, tables.luma)
+    found = find_jpeg_at(image)
+    if min(image.shape) < 24:
+        return found
+    px, py = grid_phase(image)
+    if (px, py) == (0, 0):
+        return found
+    moved = find_jpeg_at(image[py:, px:])
+    if moved is None or (found is not None and moved.quality is None):
+        return found
+    if found is not None and found.quality is not None and found.quality <= (moved.quality or 0):
+        return found
+    # On the encoder's grid its coarse steps show; a grid off by a few px sees sums of
+    # neighbouring blocks' coefficients, on finer steps at best (quality ~94 read at the
+    # origin of a quality-75 JPEG cropped by one row): the coarser reading is the grid's.
+    return replace(moved, phase=(px, py))
+
+
+def find_jpeg_at(image: np.ndarray) -> JpegBlocks | None:
     """The JPEG quality an 8-bit image was decoded from (None: no sign of JPEG, or not
-    8-bit data). The block grid is taken at the image's top-left corner, as decoded."""
+    8-bit data), its block grid at the image's top-left corner."""
     if image.dtype != np.uint8 and not (float(image.max()) <= 255
                                         and np.all(image == np.round(image))):
         return None
@@ -227,15 +307,34 @@ def _flat_on_the_grid(img: np.ndarray) -> bool:
     return on >= FLAT_MIN and (on >= 4 * (off + 1) or on >= 0.5 * (img.size // 64))
 
 
-def jpeg_round_trip(image: np.ndarray, quality: int) -> np.ndarray:
-    """An 8-bit image through a baseline JPEG encoder and decoder at ``quality``."""
-    import cv2
+def jpeg_round_trip(image: np.ndarray, quality: int | None, table: Sequence[int] | None = None,
+                    phase: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """An 8-bit image through a baseline JPEG encoder and decoder at ``quality`` (IJG), or
+    with the luminance ``table`` (64 steps, row-major) when given, on a block grid whose
+    first boundary is at ``phase`` (x, y) [px] (the image padded before it by edge pixels,
+    and cropped back)."""
+    a = np.clip(np.round(image), 0, 255).astype(np.uint8)
+    pad = ((8 - phase[1]) % 8, (8 - phase[0]) % 8)
+    if any(pad):
+        a = np.pad(a, ((pad[0], 0), (pad[1], 0)), mode="edge")
+    if table is not None:
+        import io
 
-    ok, buf = cv2.imencode(".jpg", np.clip(np.round(image), 0, 255).astype(np.uint8),
-                           [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        return image
-    return cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE).astype(float)
+        from PIL import Image
+
+        buf = io.BytesIO()
+        Image.fromarray(a).save(buf, "JPEG", qtables=[[int(v) for v in table]])
+        buf.seek(0)
+        with Image.open(buf) as im:
+            out = np.asarray(im.convert("L"), float)
+    else:
+        import cv2
+
+        ok, enc = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        if not ok:
+            return image
+        out = cv2.imdecode(enc, cv2.IMREAD_GRAYSCALE).astype(float)
+    return out[pad[0]:, pad[1]:]
 
 
 def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) -> str:
@@ -258,8 +357,15 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
     str
         The note.
     """
-    q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
-         "flattened blocks, quality unknown: the worst of 10-90 carried")
+    if jb.table is not None:
+        q = (f"quality {jb.quality} of the standard table, from the file's header"
+             if jb.quality is not None else "the file's own table, from its header")
+    else:
+        q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
+             "flattened blocks, quality unknown: the worst of 10-90 carried")
+    if jb.phase != (0, 0):
+        q += (f"; its grid starts at x={jb.phase[0]}, y={jb.phase[1]} px, not at the "
+              "image's corner: a crop of the JPEG, and its blocks taken there")
     scatter = (f"their scatter, taken as the blocks' and not as structure, widens the centres' "
                f"sigma x{spread:.3g}; " if spread > 1.0 else "")
     return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "
@@ -267,20 +373,23 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
             "(jpeg_blocks: the fitted groove re-encoded)")
 
 
-def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, quality: int | None) -> float:
-    """How far JPEG at ``quality`` moves the angle of the fitted groove ``pf`` [rad], on an
-    image of ``shape`` with its block grid: the noise-free model rendered there and measured
-    with and without the round trip (the same segments, equal weights). Quality unknown
-    (None): the largest shift over qualities 10, 20, ..., 90."""
-    if quality is None:
-        return max(jpeg_angle_shift(shape, pf, q) for q in range(10, 100, 10))
+def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks) -> float:
+    """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
+    an image of ``shape`` with its block grid (at ``jb.phase``): the noise-free model
+    rendered there and measured with and without the round trip (the same segments, equal
+    weights), through the file's own table when known. Quality and table unknown: the
+    largest shift over qualities 10, 20, ..., 90."""
+    if jb.quality is None and jb.table is None:
+        return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q))
+                   for q in range(10, 100, 10))
     model = np.full(shape, pf.background_dn)
     half = centres_half(pf) + 8.0
     e, idx = band_pixels(model, pf, half, 30.0)
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     model.flat[idx] += pf.contrast_dn * p
     model = np.clip(model, 0.0, 255.0)
-    return blocks_systematic(model, jpeg_round_trip(model, quality), pf)
+    table = jb.table if jb.quality is None else None  # an IJG table: the same encoder
+    return blocks_systematic(model, jpeg_round_trip(model, jb.quality, table, jb.phase), pf)
 
 
 def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
@@ -331,85 +440,24 @@ def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileF
     return float(abs((da + np.pi / 2) % np.pi - np.pi / 2))
 
 
-def jpeg_centre_scale(z: np.ndarray) -> float:
-    """Variance factor (>= 1) on a JPEG mark's centres from its own whitened residuals ``z``
-    (in order along the mark): the mean squared neighbour difference over its value for
-    white z (2).
-
-    The encoder's quantisation moves each centre by its share of its block's error: the
-    centres (4 px apart, two to a block) scatter beyond their Fisher sigma, almost
-    independently (lag-1 correlation ~0 at quality 50-90), and the Fisher sigma itself comes
-    from a background the encoder smoothed. Neighbour differences take that block-scale
-    scatter and hardly any of a bow, a lens or a wiggle of 2 or more blocks' period (a
-    smooth effect's difference over 4 px is small), which the loop then still tests for:
-    only the blocks' own scatter is taken as known.
+def block_labels(xy: np.ndarray, phase: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """Each point's 8x8 block (an integer label) on a grid whose block boundaries lie at
+    x = phase[0] + 8 k and y = phase[1] + 8 k (pixel corners: a pixel's centre at x is in
+    the block holding x + 0.5).
 
     Parameters
     ----------
-    z : numpy.ndarray
-        Whitened residuals of the straight line fit, in order along the mark [-].
-
-    Returns
-    -------
-    float
-        The factor on the centres' variance [-].
-    """
-    z = np.asarray(z, float)
-    if len(z) < 3:
-        return 1.0
-    return float(max(1.0, np.mean(np.diff(z) ** 2) / 2))
-
-
-def jpeg_noise_dof(n: int) -> float:
-    """Degrees of freedom of :func:`jpeg_centre_scale`'s estimate from ``n`` centres: the
-    mean of squared neighbour differences of n white z has relative variance 3 / (n - 1)
-    (neighbouring differences share a term), i.e. 2 (n - 1) / 3 dof."""
-    return float(max(n - 1, 1) / 1.5)
-
-
-BLOCK_HARMONICS = 3
-"""Harmonics of the 8 px block period modelled along the mark (periods 8, 4 and 8/3 px)."""
-
-
-def block_phase_columns(along_px: np.ndarray) -> np.ndarray:
-    """Design columns for the blocks' pattern along a mark: a function of each centre's
-    place in its 8x8 block along the axis the mark runs with (``along_px``, the raw pixel
-    coordinate x or y of each centre [px]) — the same in every block it crosses.
-
-    The encoder's error at an edge depends on where in the block the edge's profile lies,
-    so along a mark the centres repeat a pattern of period 8 px in that coordinate (at 4 px
-    spacing: alternating signs, the lag-1 'structure' of a near-axis mark at quality 50).
-    Modelled as harmonics of 8 px (:data:`BLOCK_HARMONICS`), mean-free, reduced to the
-    combinations the centres' phases determine (a sampling that hits two phases leaves
-    one column) and to the harmonics that change fast from centre to centre (an alias of a
-    slow pattern would tilt with the line: none). The blocks' *slow* drift (the edge crossing
-    block rows along the other axis) is no column: it is the angle's own shape, carried by
-    ``jpeg_blocks``.
-
-    Parameters
-    ----------
-    along_px : numpy.ndarray
-        (N,) raw pixel coordinate of each centre along the mark's axis [px].
+    xy : numpy.ndarray
+        (N, 2) image coordinates, x right and y down, of pixel centres at integers [px].
+    phase : tuple of int
+        (x, y) of the grid's first block boundary, 0-7 [px].
 
     Returns
     -------
     numpy.ndarray
-        (N, k) columns, k = 0..2 :data:`BLOCK_HARMONICS`, each of unit RMS [-].
+        (N,) labels [-].
     """
-    x = np.asarray(along_px, float)
-    n = len(x)
-    step = float(np.median(np.abs(np.diff(np.sort(x))))) if n > 1 else 0.0
-    # Only harmonics the centres' spacing sees as fast (at least a quarter turn of phase
-    # from one centre to the next): an alias of a slow pattern (period 8/3 px at 2.8 px
-    # spacing) drifts along the mark like a tilt and would take the angle with it.
-    fast = [j for j in range(1, BLOCK_HARMONICS + 1)
-            if abs((2 * np.pi * j * step / 8 + np.pi) % (2 * np.pi) - np.pi) >= np.pi / 2]
-    if not fast or n < 8 * len(fast):
-        return np.zeros((n, 0))
-    cols = [f(2 * np.pi * j * x / 8) for j in fast for f in (np.cos, np.sin)]
-    A = np.column_stack(cols) - np.column_stack(cols).mean(axis=0)
-    U, s, _ = np.linalg.svd(A, full_matrices=False)
-    # Only directions the phases pin down: a singular value below a tenth of the column
-    # norm is a pattern the sampling does not see (and would only cost conditioning).
-    keep = s > 0.1 * np.sqrt(n / 2)
-    return U[:, keep] * np.sqrt(n)
+    xy = np.asarray(xy, float)
+    bx = np.floor((xy[:, 0] + 0.5 - phase[0]) / 8).astype(np.int64)
+    by = np.floor((xy[:, 1] + 0.5 - phase[1]) / 8).astype(np.int64)
+    return by * 1_000_003 + bx

@@ -35,7 +35,7 @@ from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
-from imaging.io import clipped_note, full_scale
+from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
@@ -287,7 +287,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             if cen.profile_shift is not None else 0.0)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
-                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg.quality)
+                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg)
                            if jpeg is not None else 0.0,
                            ends_on_line(pf, ext, line, camera, image.shape), crossed,
                            profile_u_rad=prof, ends_check=check)
@@ -460,8 +460,8 @@ def measure_marks(image: np.ndarray, camera: CameraModel | None = None, where: s
 
 
 def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: str = "image",
-                  max_marks: int = 8, min_length_px: float | None = None,
-                  expect_one: bool = False, roi: Roi | None = None) -> MeasuredFrame:
+                  max_marks: int = 8, min_length_px: float | None = None, expect_one: bool = False,
+                  roi: Roi | None = None, jpeg_tables: JpegTables | None = None) -> MeasuredFrame:
     """:func:`measure_marks` with the families of lines and the count of lines not reported.
 
     Every member of a family is measured (whatever ``max_marks``), and kept whatever its
@@ -469,8 +469,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
 
     Parameters
     ----------
-    image, camera, where, max_marks, min_length_px, expect_one, roi
-        As :func:`measure_marks`.
+    image, camera, where, max_marks, min_length_px, expect_one, roi, jpeg_tables
+        As :func:`measure_marks`; ``jpeg_tables``: a JPEG file's header's (:func:`find_jpeg`).
 
     Returns
     -------
@@ -554,7 +554,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # Each angle carries what the oriented removal may leave of the change it made: the
     # mark measured again with the pattern put back.
     before = image * oriented.factor(image.shape) if oriented.found else image
-    jpeg = find_jpeg(image) if top == 255 else None  # baseline JPEG is 8-bit
+    jpeg = find_jpeg(image, jpeg_tables) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
     for i, c in enumerate(cands):

@@ -145,3 +145,22 @@ def test_planar_rgb_tiff_is_said_to_be_one_colour_page(tmp_path):
     np.testing.assert_array_equal(got.pixels, read_image_notes(tmp_path / "chunky.tif").pixels)
     assert read_image_notes(tmp_path / "chunky.tif").notes == ()
     assert read_image_notes(tmp_path / "grey.tif").notes == ()
+
+
+def test_a_jpegs_quantisation_table_is_read_from_its_header(tmp_path):
+    """The luminance table (natural order) comes with the pixels; a PNG has none; a JPEG
+    mirrored by its EXIF tag (100 px wide: 4 px of a block at the far edge) has its grid
+    starting 4 px in."""
+    from imaging.jpeg import ijg_table
+
+    a = (np.random.default_rng(0).random((40, 100)) * 255).astype(np.uint8)
+    Image.fromarray(a).save(tmp_path / "q60.jpg", quality=60)
+    got = read_image_notes(tmp_path / "q60.jpg")
+    assert got.jpeg_tables.luma == tuple(int(v) for v in ijg_table(60).ravel())
+    assert got.jpeg_tables.phase == (0, 0)
+    Image.fromarray(a).save(tmp_path / "a.png")
+    assert read_image_notes(tmp_path / "a.png").jpeg_tables is None
+    exif = Image.Exif()
+    exif[0x0112] = 2  # mirrored left-right
+    Image.fromarray(a).save(tmp_path / "m.jpg", quality=60, exif=exif)
+    assert read_image_notes(tmp_path / "m.jpg").jpeg_tables.phase == (4, 0)

@@ -8,13 +8,22 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
+from imaging import JpegTables
 from imaging.jpeg import (
-    block_phase_columns,
+    block_labels,
     find_jpeg,
+    grid_phase,
     ijg_table,
+    jpeg_note,
+    jpeg_round_trip,
+    requantised_quality,
+    table_quality,
+)
+from imaging.jpeg_scatter import (
+    block_phase_columns,
+    block_scatter,
     jpeg_centre_scale,
     jpeg_noise_dof,
-    requantised_quality,
 )
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
@@ -192,3 +201,143 @@ def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
         assert np.all(np.abs(tc @ C) / np.linalg.norm(C, axis=0) < 0.25), tc @ C
     alt = block_phase_columns(100.3 + t)[:, 0]
     assert np.all(np.sign(alt[1:]) == -np.sign(alt[:-1]))
+
+
+def test_block_scatter_reads_the_within_block_correlation():
+    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 300 marks of 60
+    centres the within-block correlation and the variance factor on the angle come back
+    (rho's spread from ~30 pairs each, 4 sigma of the mean), and the factor is the exact
+    ratio of the line's slope variance under the model to the independent one."""
+    rng = np.random.default_rng(5)
+    n, rho, s = 60, 0.6, 2.0
+    block = np.arange(n) // 2
+    t = np.arange(n) * 4.0
+    X = np.column_stack([np.ones(n), t - t.mean()])
+    h = np.linalg.pinv(X)[1]
+    R = (1 - rho) * np.eye(n) + rho * (block[:, None] == block[None, :])
+    want = s**2 * (h @ R @ h) / (h @ h)
+    got = []
+    for _ in range(300):
+        b = rng.normal(size=n // 2)[block]
+        z = s * (np.sqrt(rho) * b + np.sqrt(1 - rho) * rng.normal(size=n))
+        got.append(block_scatter(z, block, h))
+    rhos = np.array([g.rho for g in got])
+    f = np.array([g.factor for g in got])
+    assert abs(rhos.mean() - rho) <= 4 * rhos.std() / np.sqrt(len(rhos)) + 0.02, rhos.mean()
+    assert abs(f.mean() / want - 1) <= 4 * f.std() / want / np.sqrt(len(f)) + 0.03, (f.mean(), want)
+    # Independent centres: rho ~ 0, the factor s^2 and what taking rho >= 0 adds: rho read
+    # from 30 pairs has a spread ~0.26, its positive part a mean ~0.1, i.e. ~+10 %.
+    z = s * rng.normal(size=(300, n))
+    f0 = np.mean([block_scatter(r, block, h).factor for r in z]) / s**2
+    assert 0.97 <= f0 <= 1.15, f0
+
+
+def test_block_labels_follow_the_grid_phase():
+    xy = np.array([[0.0, 0.0], [7.0, 0.0], [8.0, 0.0], [2.0, 9.0]])
+    assert len(set(block_labels(xy)[:2])) == 1 and block_labels(xy)[2] != block_labels(xy)[1]
+    lab = block_labels(xy, (3, 0))  # boundaries at x = 3, 11, ...
+    assert lab[0] != lab[1] and lab[1] == lab[2]
+
+
+@pytest.mark.parametrize("quality,crop", [(75, (3, 5)), (50, (7, 1))])
+def test_a_cropped_jpegs_grid_and_quality_are_found(quality, crop):
+    """A JPEG cropped by (dx, dy) px (saved losslessly): its grid starts at (-dx, -dy) mod
+    8, found from the block boundaries, and the quality is read on it (before: at the
+    origin, quality ~94 for 75 or "unknown" for 50)."""
+    img = _image(1, quality, angle_deg=30.0).image[crop[1]:, crop[0]:]
+    jb = find_jpeg(img)
+    assert jb is not None and jb.phase == ((-crop[0]) % 8, (-crop[1]) % 8), jb
+    assert jb.quality is not None and abs(jb.quality - quality) <= 6, jb
+    assert grid_phase(img) == jb.phase
+    assert "not at the image's corner" in jpeg_note("m", jb, 1.0)
+
+
+def test_the_files_own_table_is_taken():
+    """A table read from a file's header is the encoder's: the IJG quality it is, or None
+    with the table kept (another encoder's), whose round trip is its own."""
+    luma = tuple(int(v) for v in ijg_table(60).ravel())
+    jb = find_jpeg(np.zeros((64, 64), np.uint8), JpegTables(luma))
+    assert jb.quality == 60 and jb.table == luma and table_quality(ijg_table(60)) == 60
+    odd = ijg_table(60).copy()
+    odd[0, 1] += 1
+    assert table_quality(odd) is None
+    rng = np.random.default_rng(0)
+    a = np.clip(128 + 20 * rng.normal(size=(37, 45)), 0, 255)
+    # The table's round trip is libjpeg's at the quality it is (the same encoder).
+    by_table = jpeg_round_trip(a, None, luma, (3, 5))
+    assert by_table.shape == a.shape
+    assert np.mean(np.abs(by_table - jpeg_round_trip(a, 60, None, (3, 5)))) < 0.05
+
+
+def _user13_near_axis_files(quality: int, crop: bool, seeds=range(8), per_seed: int = 4):
+    """User 13's renders (real lens, exact camera) of marks within 3 deg of an axis, 120-320 px
+    long, written as the user has them: a JPEG file at ``quality`` (its table in the
+    header), or a crop of the decoded JPEG by (dx, dy) in 0-7 px saved as PNG (``crop``: its
+    grid off the corner, no table). Yields (error [rad], u [rad], ok, result) per mark."""
+    ui = pytest.importorskip("tests.imaging.user13_inputs")
+    import os
+    import tempfile
+
+    import cv2
+
+    from align.marks import measure_file
+    from imaging import CameraModel
+    if not os.path.isdir(ui.CHESS):
+        pytest.skip(f"real data not found at {ui.CHESS}")
+    K, d, size, _ = ui.real_lens("left")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in seeds:
+            rng = np.random.default_rng(1000 * quality + seed + (500 if crop else 0) + 7000)
+            for _ in range(per_seed):
+                ang = np.radians(rng.choice([0.0, 90.0, -90.0]) + rng.uniform(-3, 3))
+                c = (rng.uniform(200, 440), rng.uniform(170, 310))
+                img = ui.mark_image((K, d, size), rng, c, ang, length=rng.uniform(120, 320),
+                                    width=3.0)
+                dx, dy = (int(rng.integers(0, 8)), int(rng.integers(0, 8))) if crop else (0, 0)
+                K2 = K.copy()
+                K2[0, 2] -= dx
+                K2[1, 2] -= dy
+                cam = CameraModel.load(ui.camera_json(K2, d, (size[0] - dx, size[1] - dy),
+                                                      os.path.join(tmp, "cam.json")))
+                _, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+                if crop:
+                    f = os.path.join(tmp, "m.png")
+                    cv2.imwrite(f, cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)[dy:, dx:])
+                else:
+                    f = os.path.join(tmp, "m.jpg")
+                    with open(f, "wb") as fh:
+                        fh.write(buf.tobytes())
+                for r in measure_file(f, cam):
+                    if r.found:
+                        ok = not (r.lens_limited or r.kinked or r.unexplained_structure
+                                  or any("NOT OK" in n for n in r.notes))
+                        yield angle_error(r.angle_rad, ang), r.angle_u_rad, ok, r
+
+
+_NEAR_AXIS_OPEN = pytest.mark.xfail(strict=True, reason=(
+    "near-axis marks: the encoder's turn of a noisy edge is 3-4x the noise-free model's "
+    "(jpeg_blocks; 91/40/75\" measured on the render before and after its JPEG against "
+    "32/12/19\" modelled) and the background's noise, which a noisy model would need, is read "
+    "~0 from a background the encoder flattened: max |z| 3.05 at q50, 3.32 at q75 (files), "
+    "3.70 at q75 cropped (RMS 1.63)"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("quality,crop", [
+    pytest.param(50, False, marks=_NEAR_AXIS_OPEN), (50, True),
+    pytest.param(75, False, marks=_NEAR_AXIS_OPEN), pytest.param(75, True, marks=_NEAR_AXIS_OPEN),
+    (90, False), (90, True)])
+def test_near_axis_and_cropped_jpegs_within_u(quality, crop):
+    """Marks within 3 deg of an axis (the blocks' correlated scatter: issue 18 item 4), as
+    JPEG files (the table from the header) and as crops at a random grid phase (PNG): over
+    8 seeds x 4 marks every ok mark within 3 u and the ok marks' RMS z within [0.5, 1.2].
+    Measured (before -> after: RMS z of ok marks, max |z|, ok of ~32): q50 file 1.37 -> 1.16,
+    4.62 -> 3.05, 26 -> 27; q50 crop 0.57 -> 0.68, 1.85 -> 1.83, 20 -> 21 (median u 231 ->
+    140"); q75 file 1.31 -> 1.36, 3.58 -> 3.32, 30 -> 30; q75 crop 1.82 -> 1.63, 4.20 ->
+    3.70, 16 -> 30; q90 unchanged (0.86 / 1.94, 32 of 32) and crop 1.13 -> 1.02, 3.32 ->
+    2.98."""
+    got = list(_user13_near_axis_files(quality, crop))
+    z = np.array([e / u for e, u, ok, _ in got if ok])
+    assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
+    assert np.max(np.abs(z)) <= 3.0, np.round(z, 2)
+    assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
