@@ -151,12 +151,11 @@ def _column_median(a: np.ndarray, axis: int = 0) -> np.ndarray:
     lo, hi = n // 4, n - n // 4
     # Each row's sum over ranks lo..hi-1 in one pass: reduceat over (start, end) pairs of
     # the flat sorted array (every other sum is the gap between rows), accumulated in
-    # float64; a row ending at the array's end needs no end index. (Of a float64 copy: the
-    # same sums as reduceat's own cast, dtype=float64, to the bit, in ~0.6 the time.)
+    # float64; a row ending at the array's end needs no end index.
     at = np.empty(2 * rows, np.intp)
     at[0::2] = np.arange(rows) * m + lo
     at[1::2] = np.arange(rows) * m + hi
-    total = np.add.reduceat(s.astype(np.float64), at if at[-1] < s.size else at[:-1])[0::2]
+    total = np.add.reduceat(s, at if at[-1] < s.size else at[:-1], dtype=np.float64)[0::2]
     return np.where(n >= MIN_ROWS, total / np.maximum(hi - lo, 1), np.nan)
 
 
@@ -178,37 +177,34 @@ def _effective_n(a: np.ndarray, b: np.ndarray, lags: int = 32) -> float:
 
 def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
           minus: np.ndarray | None) -> np.ndarray:
-    """Rows ``rows`` of the image as float32, NaN on the marks' bands and clipped pixels,
-    TRANSPOSED: (columns, rows), each column's values contiguous, as the column statistics
-    sort them; ``minus``: offsets per row removed (the other axis's stripes). Gathered once
-    per test: on the transposed image (the row test) each row is a strided column of the
-    frame, whose gathers cost most of that test at 5 MP, and comes out in this layout as
-    gathered (it was transposed to rows and, for each statistic, back)."""
+    """Rows ``rows`` of the image as float32, NaN on the marks' bands and clipped pixels;
+    ``minus``: offsets per row removed (the other axis's stripes). Gathered once per test:
+    on the transposed image (the row test) each row is a strided column of the frame, whose
+    gathers cost most of that test at 5 MP."""
     if image.T.flags.c_contiguous and not image.flags.c_contiguous:
         # The row test's transposed frame: its rows are the frame's columns, gathered along
         # each of the frame's rows (one sequential read; strided per column cost ~20 % more),
         # the mask's alike. (Indexed, not np.take: 0.75 ms, not 4.4, for the runs of 5 MP.)
-        vt = image.T[:, rows].astype(np.float32)
-        out = (np.take(mask.T, rows, axis=1) if mask.T.flags.c_contiguous
-               else np.ascontiguousarray(mask[rows].T))
+        v = np.ascontiguousarray(image.T[:, rows].astype(np.float32).T)
+        out = np.take(mask.T, rows, axis=1).T if mask.T.flags.c_contiguous else mask[rows]
     else:
-        vt = np.ascontiguousarray(image[rows].astype(np.float32).T)
-        out = np.ascontiguousarray(mask[rows].T)
-    out |= vt <= 0
-    out |= vt >= full_scale
-    np.copyto(vt, np.nan, where=out)
+        v = image[rows].astype(np.float32)
+        out = mask[rows]
+    out = out | (v <= 0)
+    out |= v >= full_scale
+    np.copyto(v, np.nan, where=out)
     if minus is not None:
-        vt -= minus[None, rows]
-    return vt
+        v -= minus[rows, None]
+    return v
 
 
-def _background(vt: np.ndarray, shading: np.ndarray | None = None,
+def _background(v: np.ndarray, shading: np.ndarray | None = None,
                 whole_rows: bool = False) -> np.ndarray:
-    """Rows ``vt`` (from :func:`_rows`: transposed, (columns, rows), and so returned) with
-    each row's level (its interquartile mean) taken out, rows without one dropped;
-    ``shading``: the slow column profile (see :func:`_shading`), out of the rows while their
-    levels are taken (not out of the rows returned); ``whole_rows``: the levels from every
-    pixel (for the offsets removed), not from a sample (for the test, see LEVEL_PX).
+    """Rows ``v`` (from :func:`_rows`) with each row's level (its interquartile mean) taken
+    out, rows without one dropped; ``shading``: the slow column profile (see
+    :func:`_shading`), out of the rows while their levels are taken (not out of the rows
+    returned); ``whole_rows``: the levels from every pixel (for the offsets removed), not
+    from a sample (for the test, see LEVEL_PX).
 
     Why the shading: a row crossing a mark has its level from the columns beside the mark
     only. Under vignetting those are darker than the mark's (central) columns, so its level
@@ -218,15 +214,15 @@ def _background(vt: np.ndarray, shading: np.ndarray | None = None,
     mark was "column stripes" in 5 of 6 frames (user6)."""
     # The test's levels from every k-th pixel of the row (see LEVEL_PX): a sort of ~200 px,
     # not of the whole row. The offsets removed do not carry the sample's extra noise.
-    k = 1 if whole_rows else max(1, vt.shape[0] // LEVEL_PX)
-    sample = vt[::k] if shading is None else vt[::k] - shading[::k, None]
-    lev = _column_median(sample, axis=0)
+    k = 1 if whole_rows else max(1, v.shape[1] // LEVEL_PX)
+    sample = v[:, ::k] if shading is None else v[:, ::k] - shading[None, ::k]
+    lev = _column_median(sample, axis=1)
     ok = np.isfinite(lev)
     # float32 as the rows (a float64 level made every row float64: twice the bytes for the
     # sorts of the columns that follow, for a level known to ~1e-4 DN either way).
     if ok.all():  # (the usual case: no copy of the rows to select them)
-        return vt - lev[None, :].astype(np.float32)
-    return vt[:, ok] - lev[None, ok].astype(np.float32)
+        return v - lev[:, None].astype(np.float32)
+    return v[ok] - lev[ok, None].astype(np.float32)
 
 
 def _shading(profile: np.ndarray) -> np.ndarray | None:
@@ -264,10 +260,10 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     # The slow column profile (vignetting) from every SHADING_STRIDE-th row of both halves
     # (it is smooth: a quarter of the rows gives it to well under 1 DN, at a quarter of the
     # cost), out of every row before its level is taken (see _background).
-    vt = _rows(image, mask, np.concatenate([rows_top, rows_bot]), full_scale, minus)
-    shading = _shading(_column_median(_background(vt[:, ::SHADING_STRIDE]), axis=1))
-    top = _highpass(_column_median(_background(vt[:, :rows_top.size], shading), axis=1))
-    bot = _highpass(_column_median(_background(vt[:, rows_top.size:], shading), axis=1))
+    v = _rows(image, mask, np.concatenate([rows_top, rows_bot]), full_scale, minus)
+    shading = _shading(_column_median(_background(v[::SHADING_STRIDE])))
+    top = _highpass(_column_median(_background(v[:rows_top.size], shading)))
+    bot = _highpass(_column_median(_background(v[rows_top.size:], shading)))
     both = np.isfinite(top) & np.isfinite(bot)
     n = int(both.sum())
     if n < 2 * WINDOW_PX:
@@ -282,7 +278,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     if p >= alpha:
         return Stripes(axis, p, False, rms)
     bg = _background(_rows(image, mask, np.arange(h), full_scale, minus), shading, True)
-    off = _highpass(_column_median(bg, axis=1))
+    off = _highpass(_column_median(bg))
     need = mask.any(axis=0) & ~np.isfinite(off)
     if need.any():
         cols = np.flatnonzero(need)
@@ -290,10 +286,10 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
             f"{axis}s {cols[0]}-{cols[-1]} hold a mark along all their background"))
     # Pixel noise about each column's offset (robust, pooled over the columns: shot noise
     # varies with the level, which is about the same across a background).
-    dev = bg - off[:, None]  # (bg transposed: a column per row)
-    mad = np.nanmedian(np.abs(dev - np.nanmedian(dev, axis=1)[:, None]), axis=1)
+    dev = bg - off[None, :]
+    mad = np.nanmedian(np.abs(dev - np.nanmedian(dev, axis=0)[None, :]), axis=0)
     sigma2 = float(np.nanmedian((1.4826 * mad) ** 2))
-    n = np.isfinite(bg).sum(axis=1)
+    n = np.isfinite(bg).sum(axis=0)
     var = np.where(n > 0, 1.19 * sigma2 / np.maximum(n, 1), 0.0)
     return Stripes(axis, p, True, rms, np.where(np.isfinite(off), off, 0.0),
                    offsets_var=np.where(np.isfinite(off), var, 0.0))
