@@ -87,39 +87,11 @@ def _median_axis0(vals: np.ndarray) -> np.ndarray:
     if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
         q = vals.T.astype(np.uint16)
         if np.array_equal(q, vals.T):
+            q.sort(axis=1)
             m = q.shape[1] // 2
-            got = _ranked(q, m - 1 + q.shape[1] % 2, m)
-            if got is None:
-                q.sort(axis=1)
-                got = q[:, m - 1 + q.shape[1] % 2], q[:, m]
-            return (got[1].astype(float) if q.shape[1] % 2
-                    else (got[0].astype(float) + got[1]) / 2)
+            return (q[:, m].astype(float) if q.shape[1] % 2
+                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
     return np.median(vals, axis=0)
-
-
-RANKED_BINS = 1 << 20
-"""Most counting bins (rows x levels spanned) :func:`_ranked` takes on."""
-
-
-def _ranked(q: np.ndarray, k0: int, k1: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """Each row's ``k0``-th and ``k1``-th smallest of the integers ``q`` (rows, n), by
-    counting: a row's levels span ~100-200 DN across a mark (and an 8-bit photo's at most
-    256), so the counts per level are cheaper than a sort (~1 ms less at 5 MP); the same
-    values (an order statistic is one of the row's own). None when the levels span too many
-    counting bins (:data:`RANKED_BINS`)."""
-    rows, _ = q.shape
-    lo = int(q.min())
-    span = int(q.max()) - lo + 1
-    if rows * span > RANKED_BINS:
-        return None
-    at = q - np.uint16(lo)  # (levels from 0: every count inside its row's span)
-    key = at.astype(np.intp)
-    key += (np.arange(rows) * span)[:, None]
-    # (in memory order: a count needs no order, and q is a transposed view's copy)
-    below = np.cumsum(np.bincount(key.ravel(order="K"), minlength=rows * span)
-                      .reshape(rows, span), axis=1)
-    # The k-th smallest is the first level with more than k values at or below it.
-    return tuple(np.argmax(below > k, axis=1).astype(q.dtype) + np.uint16(lo) for k in (k0, k1))
 
 
 def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: float,
