@@ -57,8 +57,8 @@ def _conditioned(N: np.ndarray) -> np.ndarray:
     ok = np.all(d > 0, axis=1)
     s = 1.0 / np.sqrt(np.where(ok[:, None], d, 1.0))
     C = N * s[:, :, None] * s[:, None, :]
-    # The eigenvalues (~1 ms per step at 5 MP's ~500 segments) only where the determinants
-    # cannot tell: the decision is the same (see _surely_conditioned).
+    # The eigenvalues (~1 ms per step at 5 MP's ~500 segments) only where the pivots cannot
+    # tell: the decision is the same (see _surely_conditioned).
     out = _surely_conditioned(C)
     doubt = ok & ~out
     if doubt.any():
