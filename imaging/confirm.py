@@ -23,6 +23,7 @@ from imaging.candidate import (
     line_frame,
     wrap_angle,
 )
+from imaging.compressed import compressed
 from imaging.crossing import double_grooves, fused_crossing
 
 
@@ -366,16 +367,18 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
     scale = float(np.median(y))
 
     y_rel = y / scale
-    last: dict[bytes, Callable[[], np.ndarray]] = {}
+    # The solver is given the compressed problem (imaging.compressed: 8 rows, not one per
+    # background pixel), not its SVD of the ~2-17k x 7 scaled Jacobian every step (0.80 ->
+    # 0.69 s over left01-03). Each point's residual and Jacobian from one model evaluation.
+    last: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
-    def resid(q: np.ndarray) -> np.ndarray:
-        last.clear()  # (the Jacobian is asked at the last residual's point, or made anew)
-        lit, last[q.tobytes()] = _lit_edge(q, tt, ee)
-        return lit - y_rel
-
-    def jac(q: np.ndarray) -> np.ndarray:
-        made = last.get(q.tobytes())
-        return made() if made is not None else _lit_edge_jacobian(q, tt, ee)
+    def at(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = q.tobytes()
+        if key not in last:
+            last.clear()
+            lit, jac = _lit_edge(q, tt, ee)
+            last[key] = compressed(lit - y_rel, jac())
+        return last[key]
 
     lo = [-reach, -0.5, np.log(0.3), -0.95, 0, -1, -1]
     hi = [reach, 0.5, np.log(reach), 0.95, 3, 1, 1]
@@ -386,8 +389,8 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
     # for 654 (0.4 s of CPU) to a cost above the best. Dropping starts whose cost after a
     # few evaluations is far above the best's was tried and is not safe: on left03 the
     # winning start's cost was 37 % above another's after 10 evaluations and fell below it.
-    fits = [optimize.least_squares(resid, x0, jac=jac, bounds=(lo, hi), max_nfev=MAX_NFEV)
-            for x0 in starts]
+    fits = [optimize.least_squares(lambda q: at(q)[0], x0, jac=lambda q: at(q)[1],
+                                   bounds=(lo, hi), max_nfev=MAX_NFEV) for x0 in starts]
     # Several starts reach the same cost with the edge a fraction of a pixel apart (the
     # data do not pin it there): among those within a relative TIE of the least cost, the
     # edge nearest the line is taken, so the choice does not hang on the last digits.

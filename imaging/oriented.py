@@ -35,6 +35,8 @@ import cv2
 import numpy as np
 from scipy import fft, linalg, optimize
 
+from imaging.compressed import compressed
+
 ALPHA = 1e-3
 """Level of the test for a periodic background (one false flag per 1000 clean images)."""
 MARGIN = 1.5
@@ -364,15 +366,7 @@ def _fit(rel: np.ndarray, valid: np.ndarray, f0: tuple[float, float], origin: tu
         if key not in last:
             last.clear()
             proj = _project(k, X, Y, z)
-            J, r = _jacobian(proj, X, Y), proj[4]
-            try:
-                R = linalg.cholesky(J.T @ J)  # upper
-                qtr = linalg.solve_triangular(R, J.T @ r, trans="T")
-            except linalg.LinAlgError:  # J rank-deficient (rare): its QR, which any J has
-                Q, R = np.linalg.qr(J)
-                qtr = Q.T @ r
-            rest = np.sqrt(max(float(r @ r) - float(qtr @ qtr), 0.0))
-            last[key] = (np.append(qtr, rest), np.vstack([R, np.zeros((1, 2))]))
+            last[key] = compressed(proj[4], _jacobian(proj, X, Y))
         return last[key]
 
     k0 = 2 * np.pi * np.asarray(f0)

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from imaging import measure_marks
-from imaging.centres import MIN_CV_REPLICAS, RCOND, _conditioned, sample_centres
+from imaging.centres import (
+    MIN_CV_REPLICAS,
+    RCOND,
+    _conditioned,
+    _surely_conditioned,
+    sample_centres,
+)
 from imaging.groove import centres_half
 from tests.conftest import mark_image
 
@@ -62,3 +68,29 @@ def test_texture_coupling_from_too_few_replicas_is_not_applied():
     assert np.array_equal(one.xy, sample_centres(img, pf).xy)
     full = sample_centres(img, pf, texture=True)
     assert full.texture.replicas >= MIN_CV_REPLICAS and full.texture.coupling_px2 != 0.0
+
+
+def test_conditioning_by_pivots_decides_as_the_eigenvalues():
+    """The pivots' shortcut (_surely_conditioned) is only a proof: over segments from well
+    posed to singular beyond rounding (a contrast column equal to the centre's to 1e-12 ..
+    1), scaled columns, indefinite and NaN matrices, _conditioned says what the eigenvalue
+    rule lam_min > RCOND lam_max at unit diagonal says, and the shortcut settles most."""
+    rng = np.random.default_rng(3)
+    n = 2000
+    J = rng.normal(size=(n, 30, 4))
+    J[:, :, 1] = J[:, :, 0] + 10 ** rng.uniform(-12, 0, size=(n, 1)) * J[:, :, 1]
+    N = np.einsum("npi,npj->nij", J, J) * 10 ** rng.uniform(-3, 3, size=(n, 1, 1))
+    N[:20] = -N[:20]
+    N[20:30] = rng.normal(size=(10, 4, 4)) + np.swapaxes(rng.normal(size=(10, 4, 4)), 1, 2)
+    N[30, 1, 2] = np.nan
+    d = np.einsum("nii->ni", N)
+    ok = np.all(d > 0, axis=1)
+    s = 1.0 / np.sqrt(np.where(ok[:, None], d, 1.0))
+    C = N * s[:, :, None] * s[:, None, :]
+    with np.errstate(invalid="ignore"):
+        lam = np.linalg.eigvalsh(np.nan_to_num(C))
+    expect = ok & (lam[:, 0] > RCOND * lam[:, -1]) & np.isfinite(C).all(axis=(1, 2))
+    got = _conditioned(N)
+    assert got.tolist() == expect.tolist()
+    assert 0.3 * n < expect.sum() < 0.9 * n  # both answers well represented
+    assert _surely_conditioned(C).sum() > 0.5 * expect.sum()

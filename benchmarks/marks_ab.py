@@ -1,0 +1,135 @@
+"""Scribe marks: two checkouts' versions of some functions, alternated image by image in one
+process (paired CPU differences that a loaded host does not drown).
+
+Run:  python3 benchmarks/marks_ab.py --other /work/main --swap imaging.centres._conditioned
+      [--swap module.function ...] [--sizes vga,5mp] [--images N] [--rounds R]
+
+Each ``--swap`` names a function of this checkout (``module.function``); the other
+checkout's version is loaded from its own file of that module (under a private name: the
+rest of its imports are this checkout's) and put wherever this one's is referenced (every
+loaded module holding the same function object, so a caller that imported it by name sees
+the swap). The speed benchmark's images (``benchmarks/marks.py --speed``) go through
+``imaging.measure_marks`` once per version per round, the order of the two alternating
+round by round, each call timed (``time.process_time``), and each swapped function's own
+CPU added up per version. Prints the medians, the median of the paired differences
+(this - other) and of their ratios, and each function's CPU per image.
+
+Why: on the shared 2-core host (load 10-14 while other sessions test) two processes run one
+after the other differ by +-15 ms per 5 MP call whatever their code, so a change of 1-2 ms
+needs ~100 pairs that way; the same images through both versions in one process, a call
+apart, see the same load and show it in a few.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import os
+import sys
+import time
+from pathlib import Path
+
+import benchpage
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+from marks import fresh_images  # noqa: E402 (the speed benchmark's images)
+from marks_stages import SIZES  # noqa: E402
+
+import imaging  # noqa: E402
+
+cv2.setNumThreads(1)
+
+
+def _other_function(root: Path, dotted: str):
+    """``module.function`` as the checkout at ``root`` defines it."""
+    mod, name = dotted.rsplit(".", 1)
+    path = root / (mod.replace(".", "/") + ".py")
+    alias = f"_ab_other_{mod.replace('.', '_')}"
+    if alias not in sys.modules:
+        spec = importlib.util.spec_from_file_location(alias, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[alias] = module  # (dataclasses look their module up by name)
+        spec.loader.exec_module(module)
+    return getattr(sys.modules[alias], name)
+
+
+def _holders(f) -> list[tuple[object, str]]:
+    """(module, attribute) of every loaded module that holds the function object ``f``."""
+    out = []
+    for m in list(sys.modules.values()):
+        for k, v in list(getattr(m, "__dict__", {}).items()):
+            if v is f:
+                out.append((m, k))
+    return out
+
+
+def _timed(f, acc: dict, key: tuple):
+    def g(*a, **k):
+        t0 = time.process_time()
+        try:
+            return f(*a, **k)
+        finally:
+            acc[key] = acc.get(key, 0.0) + time.process_time() - t0
+    return g
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--other", type=Path, required=True, help="the other checkout's root")
+    ap.add_argument("--swap", action="append", required=True,
+                    help="module.function of this checkout to compare (repeatable)")
+    ap.add_argument("--sizes", default="5mp", help="comma-separated: vga, 5mp")
+    ap.add_argument("--images", type=int, default=3, help="fresh images per size")
+    ap.add_argument("--rounds", type=int, default=6, help="passes over the images")
+    args = ap.parse_args()
+    here = Path(imaging.__file__).resolve().parents[1]
+    print(f"code: this {here}, other {args.other.resolve()}; swapped: {', '.join(args.swap)}")
+    acc: dict = {}
+    versions = {"this": {}, "other": {}}
+    for dotted in args.swap:
+        mod, name = dotted.rsplit(".", 1)
+        mine = getattr(importlib.import_module(mod), name)
+        holders = _holders(mine)
+        versions["this"][dotted] = (holders, _timed(mine, acc, ("this", dotted)))
+        versions["other"][dotted] = (holders, _timed(_other_function(args.other, dotted), acc,
+                                                     ("other", dotted)))
+
+    def use(tag: str) -> None:
+        for holders, f in versions[tag].values():
+            for m, k in holders:
+                setattr(m, k, f)
+
+    for key in args.sizes.split(","):
+        size, length = SIZES[key]
+        imgs = fresh_images(size, length, args.images)
+        for tag in versions:
+            use(tag)
+            imaging.measure_marks(fresh_images(size, length, 1, first_seed=0)[0])  # first call
+        acc.clear()
+        calls: dict[str, list[float]] = {"this": [], "other": []}
+        for r in range(args.rounds):
+            for img in imgs:
+                for tag in (("this", "other") if r % 2 else ("other", "this")):
+                    use(tag)
+                    t0 = time.process_time()
+                    imaging.measure_marks(img)
+                    calls[tag].append(time.process_time() - t0)
+        a, b = 1e3 * np.array(calls["this"]), 1e3 * np.array(calls["other"])
+        n = a.size
+        print(f"\n== {size[0]}x{size[1]}, {length:.0f}-px mark: {n} paired calls "
+              f"({args.images} images x {args.rounds} rounds), CPU ms ==\n"
+              f"detect + measure: this {np.median(a):.1f}, other {np.median(b):.1f}; paired "
+              f"difference {np.median(a - b):+.1f} (median), ratio {np.median(a / b):.3f}")
+        for dotted in args.swap:
+            print(f"  {dotted}: this {1e3 * acc.get(('this', dotted), 0.0) / n:.2f}, other "
+                  f"{1e3 * acc.get(('other', dotted), 0.0) / n:.2f} per image")
+    use("this")
+
+
+if __name__ == "__main__":
+    benchpage.run(main, "Scribe marks: two checkouts' functions, paired in one process")
