@@ -4,18 +4,22 @@ something wrong or left a term out."""
 from __future__ import annotations
 
 import inspect
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import align.plan_carried as plan_carried
+from align.fusion.diagnosis import disagreement_from_dict
 from align.lens import LensRanges
 from align.lens_design import LineGeometry
 from align.lens_terms import check_camera, lens_or_bends, lone_departures
 from align.marks import measure_image
+from align.session import load_session, run_session
 from imaging.lens import distort_points
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
-from tests.conftest import angle_error
+from synth.session import SessionSpec, write_session
+from tests.conftest import ARCSEC, angle_error
 
 
 def test_plan_carried_defaults_are_not_shared_mutable_objects():
@@ -141,3 +145,98 @@ def test_a_departure_the_other_marks_share_is_not_one_mark_bent():
     for seed in range(40):
         p, designs, cov = _three([np.zeros(7), bent, np.zeros(7)], seed)
         assert p < 1e-3 and lone_departures(designs, cov) == (1,), seed
+
+
+def _static_rows(shift_x_pair_y: float, e_yx: float, seed: int):
+    """A static block's rows as the fusion whitens them: levelled poses (Z up, four table
+    angles) and the gimbal poses X up/down, Y up/down, each reading the two accelerometers
+    across its up; a solve with the angle each reads (±E with the pose's sign) and a bias per
+    accelerometer. Into the data: E_yX moved by ``e_yx`` on the gimbal poses (what creep
+    does: opposite in up and down) and the X pair's y readings shifted together by
+    ``shift_x_pair_y`` [g] (what a tilted base does). Noise 1e-6 g; the biases known to
+    1e-6 g from the tumble (three rows after the static ones, as the fusion's ellipsoid
+    block gives them)."""
+    poses = [("L0", "+Z"), ("L90", "+Z"), ("L180", "+Z"), ("L270", "+Z"), ("Xup", "+X"),
+             ("Xdn", "-X"), ("Yup", "+Y"), ("Ydn", "-Y")]
+    meta = [{"pose": p, "up": up, "housing": h} for p, up in poses for h in "xyz"
+            if h != up[1].lower()]
+    u = np.full(len(meta), 1e-6)
+    rng = np.random.default_rng(seed)
+    # Columns: the angle each (up axis, housing) reads, signed by the pose; a bias per housing.
+    angles = sorted({(m["up"][1], m["housing"]) for m in meta})
+    J = np.array([[(1.0 if m["up"][0] == "+" else -1.0) * ((m["up"][1], m["housing"]) == a)
+                   for a in angles] + [float(m["housing"] == h) for h in "xyz"]
+                  for m in meta]) / u[:, None]
+    prior = np.hstack([np.zeros((3, len(angles))), np.eye(3) / 1e-6])
+    J = np.vstack([J, prior])
+    data = rng.normal(0, 1e-6, len(meta) + 3)
+    for k, m in enumerate(meta):
+        sign = 1.0 if m["up"][0] == "+" else -1.0
+        if m["up"][1] == "X" and m["housing"] == "y":
+            data[k] += shift_x_pair_y + sign * e_yx
+    w = data / np.concatenate([u, np.full(3, 1e-6)])
+    r = w - J @ np.linalg.lstsq(J, w, rcond=None)[0]
+    return r, J, meta, u
+
+
+def test_up_down_pairs_shifting_together_are_told_from_another_E():
+    """An X up/down pair whose y readings moved together by 20 µg (a base tilted 4″ under the
+    gimbal poses) is found, its shift within 4 u; the same pair's readings moved oppositely
+    by 20 µg (another E_yX, as creep gives the static poses) is not: the fusion named the
+    latter's cause and the former's alike "the triad moved between the measurements
+    (creep)"."""
+    from align.fusion.pairs import pair_shift
+    for seed in range(3):
+        r, J, meta, u = _static_rows(20e-6, 0.0, seed)
+        found = pair_shift(r, J, np.arange(len(meta)), meta, u)
+        assert found is not None and found.significant(1e-3), found
+        got = {(a, h): (v, s) for a, h, v, s in found.shifts}
+        v, s = got[("X", "y")]
+        assert abs(v - 20e-6) < 4 * s, (v, s)
+        r, J, meta, u = _static_rows(0.0, 20e-6, seed)
+        assert not pair_shift(r, J, np.arange(len(meta)), meta, u).significant(1e-3)
+
+
+def test_a_disagreement_with_shifting_pairs_does_not_suggest_creep():
+    """The message: with the pairs' shift, their tilt or drift is named and creep is not;
+    without it, creep as before."""
+    from align.fusion.diagnosis import SourceDisagreement
+    from align.fusion.pairs import PairShift
+    d = SourceDisagreement("platform static", ("camera",), np.array([np.nan] * 5 + [2e-4]),
+                           np.array([np.nan] * 5 + [1e-5]), 400.0, 6, 1e-80, 10.0, 12)
+    assert "creep" in d.message()
+    tilted = replace(d, pairs=PairShift((("X", "y", -8e-5, 1e-6),), 1e4, 4, 0.0))
+    m = tilted.message()
+    assert "creep" not in m.replace("nor creep", "") and "tilted under the gimbal poses" in m
+    assert "X up/down y -16.5″" in m
+    assert disagreement_from_dict(tilted.to_dict()).pairs == tilted.pairs
+
+
+def _gimbal_session(tmp_path, seed: int, eff: dict):
+    folder = tmp_path / f"s{seed}"
+    write_session(folder, SessionSpec(seed=seed, effects=eff, undeclared=frozenset(eff)))
+    return run_session(load_session(folder)).fusion
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_tilted_gimbal_poses_are_named_as_such_not_creep(tmp_path, seed):
+    """The base under the gimbal (X/Y up/down) poses tilted 20″, -15″ (synth's
+    ``gimbal_tilt_x/y``): the platform static poses are named, and the cause given was "the
+    triad moved between the measurements (creep)". Now the pairs' common shift is named (the
+    X pair's y readings by the y tilt, the Y pair's x by the x tilt, signs and sizes within
+    30 %), and creep is not."""
+    f = _gimbal_session(tmp_path, seed, {"gimbal_tilt_x": 20.0, "gimbal_tilt_y": -15.0})
+    d = f.disagreement
+    assert d is not None and "platform static" in (d.source, *d.also)
+    assert d.pairs is not None and "creep" not in d.message().replace("nor creep", "")
+    got = {(a, h): v / ARCSEC for a, h, v, _ in d.pairs.shifts}
+    assert abs(got[("X", "y")] + 15.0) < 4.5 and abs(got[("Y", "x")] - 20.0) < 6.0, got
+
+
+@pytest.mark.slow
+def test_creep_is_still_named_creep(tmp_path):
+    """Control: a triad that crept 30″ about Y between the images and the static poses moves
+    each pair's readings oppositely: no pair shift, creep named."""
+    d = _gimbal_session(tmp_path, 3, {"creep_y": 30.0}).disagreement
+    assert d is not None and d.pairs is None and "(creep)" in d.message()
