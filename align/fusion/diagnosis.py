@@ -109,7 +109,8 @@ class SourceDisagreement:
             hint = "platform not level? (a levelling offset shows in E_xZ, E_yZ only)"
         elif self.pairs is not None:
             # E and creep move an up/down pair's readings oppositely; these moved together.
-            hint = (f"the static poses' up/down pairs shift together ({self.pairs.text()}; "
+            shown = f"{self.pairs.text()}; " if self.pairs.shifts else ""
+            hint = (f"the static poses' up/down pairs shift together ({shown}"
                     f"chi2 falls by {self.pairs.chi2_drop:.1f} with {self.pairs.dof}), which "
                     "neither another E nor creep does: the base tilted under the gimbal poses "
                     "(not level where they stand), or a bias drifting between the poses; "
