@@ -149,9 +149,9 @@ def offset_lens_u(points: np.ndarray, angle_rad: float, record: Mapping | None,
     # image centre: a principal point off by c moves the lens's field by c (what is left
     # here), not the image (its translation, -c, added back: with it, the undetermined
     # principal point's 20 px range alone would put 23 px in every offset's u).
-    u = lens_u_vector(record)
+    u_lens = lens_u_vector(record)
     for j, axis in ((PARAMS.index("cx"), 0), (PARAMS.index("cy"), 1)):
-        moves[:, axis, j] += u[j]
+        moves[:, axis, j] += u_lens[j]
     u, n = line_frame(angle_rad)
     across = moves[:, 0, :] * n[0] + moves[:, 1, :] * n[1]  # (N, columns) [px]
     # The straight line a + b t through each column's moves, its a (t = 0): normal equations.
