@@ -237,16 +237,17 @@ def name_disagreement(found: Sequence[SourceDisagreement], alpha: float
 
 
 def with_pairs(named: SourceDisagreement, r: np.ndarray, J: np.ndarray, blocks: Sequence,
-               starts: np.ndarray, alpha: float) -> SourceDisagreement:
+               whiten: Sequence[np.ndarray], starts: np.ndarray, alpha: float
+               ) -> SourceDisagreement:
     """``named`` (the platform static poses among its sources) with the static poses' up/down
     pairs' common shift (:func:`align.fusion.pairs.pair_shift`) when it is significant at
     ``alpha``: its message then names that, not creep. ``r``, ``J``: the fused solve's
-    whitened residual and Jacobian; ``blocks``, ``starts``: the solve's blocks and where
-    each one's rows begin in ``r``."""
+    whitened residual and Jacobian; ``blocks``, ``whiten``, ``starts``: the solve's blocks,
+    their whitening and where each one's rows begin in ``r``."""
     for k, b in enumerate(blocks):
         if b.source != "platform static" or not b.row_meta:
             continue
-        found = pair_shift(r, J, np.arange(starts[k], starts[k + 1]), b.row_meta, b.u)
+        found = pair_shift(r, J, np.arange(starts[k], starts[k + 1]), b.row_meta, whiten[k])
         if found is not None and found.significant(alpha):
             return replace(named, pairs=found)
     return named

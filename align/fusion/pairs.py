@@ -60,35 +60,34 @@ class PairShift:
                 "chi2_drop": self.chi2_drop, "dof": self.dof, "p_value": self.p_value}
 
 
-def pair_columns(meta: Sequence[Mapping[str, str]], u: np.ndarray
-                 ) -> tuple[list[tuple[str, str]], np.ndarray]:
-    """The whitened common-mode columns of a static block's rows (``meta``: each row's
-    ``up``, ``housing``; ``u``: each row's u [g]): one per (pair, housing) whose up and down
-    poses are both there, 1/u on both poses' rows of that housing. Returns (their (pair axis,
-    housing) names, the (rows, columns) matrix)."""
+def pair_columns(meta: Sequence[Mapping[str, str]]) -> tuple[list[tuple[str, str]], np.ndarray]:
+    """The common-mode columns of a static block's rows (``meta``: each row's ``up``,
+    ``housing``): one per (pair, housing) whose up and down poses are both there, 1 on both
+    poses' rows of that housing [g per g of shift]. Returns (their (pair axis, housing)
+    names, the (rows, columns) matrix)."""
     ups = {m["up"] for m in meta}
     names, cols = [], []
     for axis in "XYZ":
         if f"+{axis}" not in ups or f"-{axis}" not in ups:
             continue
         for h in sorted({m["housing"] for m in meta if m["up"][1] == axis}):
-            c = np.array([1.0 if m["up"][1] == axis and m["housing"] == h else 0.0
-                          for m in meta]) / u
             names.append((axis, h))
-            cols.append(c)
-    return names, (np.column_stack(cols) if cols else np.zeros((len(meta), 0)))
+            cols.append([1.0 if m["up"][1] == axis and m["housing"] == h else 0.0
+                         for m in meta])
+    return names, (np.array(cols).T if cols else np.zeros((len(meta), 0)))
 
 
 def pair_shift(r: np.ndarray, J: np.ndarray, rows: np.ndarray,
-               meta: Sequence[Mapping[str, str]], u: np.ndarray) -> PairShift | None:
+               meta: Sequence[Mapping[str, str]], W: np.ndarray) -> PairShift | None:
     """The pairs' common shifts in the fused solve's whitened residual ``r`` with Jacobian
-    ``J`` (every fitted parameter); ``rows``: the static block's rows in ``r``, ``meta`` and
-    ``u`` theirs. None without an up/down pair."""
-    names, C = pair_columns(meta, u)
+    ``J`` (every fitted parameter); ``rows``: the static block's rows in ``r``, ``meta``
+    theirs and ``W`` their whitening (the inverse Cholesky factor of their covariance, [1/g]).
+    None without an up/down pair."""
+    names, C = pair_columns(meta)
     if not names:
         return None
     A = np.zeros((len(r), len(names)))
-    A[rows] = C
+    A[rows] = W @ C
     U, s, _ = np.linalg.svd(J, full_matrices=False)
     Q = U[:, s > 1e-10 * s[0]]
     B = A - Q @ (Q.T @ A)

@@ -480,7 +480,8 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         J = jacobian(resid, sol.params)
         named = name_disagreement(leave_one_source_out(resid, sol.params, rows_of, J), alpha)
         if named is not None and "platform static" in (named.source, *named.also):
-            named = with_pairs(named, resid(sol.params), J, stage.blocks, starts, alpha)
+            named = with_pairs(named, resid(sol.params), J, stage.blocks, stage.whiten, starts,
+                               alpha)
     if named is not None:
         # Where two sources see different E, E in those angles is the one or the other (or
         # in between): the fused value sits with the more precise source, so u is widened

@@ -190,13 +190,14 @@ def test_up_down_pairs_shifting_together_are_told_from_another_E():
     from align.fusion.pairs import pair_shift
     for seed in range(3):
         r, J, meta, u = _static_rows(20e-6, 0.0, seed)
-        found = pair_shift(r, J, np.arange(len(meta)), meta, u)
+        found = pair_shift(r, J, np.arange(len(meta)), meta, np.diag(1 / u))
         assert found is not None and found.significant(1e-3), found
         got = {(a, h): (v, s) for a, h, v, s in found.shifts}
         v, s = got[("X", "y")]
         assert abs(v - 20e-6) < 4 * s, (v, s)
         r, J, meta, u = _static_rows(0.0, 20e-6, seed)
-        assert not pair_shift(r, J, np.arange(len(meta)), meta, u).significant(1e-3)
+        assert not pair_shift(r, J, np.arange(len(meta)), meta,
+                              np.diag(1 / u)).significant(1e-3)
 
 
 def test_a_disagreement_with_shifting_pairs_does_not_suggest_creep():
