@@ -232,7 +232,28 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
         # departure is the lens's: four images of one camera through a lens its model misses).
         out = [k for k in out if camera_departure([designs[k]], lam_u, ranges, alpha)[0]
                < alpha]
+    if len(out) == 1 and _shared(out[0], designs, lam_u, ranges, alpha):
+        return ()
     return tuple(out) if len(out) == 1 else ()
+
+
+def _shared(k: int, designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
+            alpha: float) -> bool:
+    """Whether the other marks show the bow the change mark ``k`` calls for (the changed lens
+    at least as likely as straight marks, from :func:`_predict`): a departure they share, if
+    too weak in them to stand without ``k``, is the lens's, not ``k``'s bend. Not shared
+    when ``k`` alone determines no change to predict from, or one beyond any lens."""
+    rest = [d for i, d in enumerate(designs) if i != k]
+    pr = _predict([designs[k]], rest, lam_u, ranges.vector(), float(-special.ndtri(alpha / 2)))
+    if pr is None or pr.beyond or pr.separation == 0.0:
+        return False
+    # The others' bow along the prediction, t: N(0, var_bend) if they are straight, N(sep,
+    # var_lens) if the lens changed as k calls for (one mark's change is loosely determined:
+    # var_lens is wide, so "within its u" alone would call every lone bend shared). Shared
+    # when the lens reading is at least as likely as the straight one.
+    ll_lens = (pr.t - pr.separation) ** 2 / pr.var_lens + np.log(pr.var_lens)
+    ll_bend = pr.t**2 / pr.var_bend + np.log(pr.var_bend)
+    return bool(ll_lens <= ll_bend)
 
 
 @dataclass(frozen=True)

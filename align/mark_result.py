@@ -85,7 +85,11 @@ class MarkResult:
     angle_rad, angle_u_rad : float
         The mark's angle in the image and its standard uncertainty [rad].
     offset_px, offset_u_px : float
-        Its distance from the image centre and its standard uncertainty [px].
+        Its distance from the image centre and its standard uncertainty [px] (the lens's
+        share included).
+    offset_lens_u_px : float
+        The lens's share of ``offset_u_px`` [px]: shared by every mark of the frame's lens
+        (:func:`align.family_stage.offset_lens_u`).
     length_px : float
         Its length, between the groove's half-depth ends [px].
     width_px : float
@@ -147,6 +151,7 @@ class MarkResult:
     angle_u_rad: float = float("nan")
     offset_px: float = float("nan")
     offset_u_px: float = float("nan")
+    offset_lens_u_px: float = 0.0
     length_px: float = float("nan")
     width_px: float = float("nan")
     blur_px: float = float("nan")
@@ -174,6 +179,12 @@ class MarkResult:
     kinked: bool = False
 
     @property
+    def offset_own_u_px(self) -> float:
+        """The offset's u without the lens's shared share [px] (a family's pitch carries the
+        lens through its members' moves together, :mod:`align.family_stage`)."""
+        return float(np.sqrt(max(self.offset_u_px**2 - self.offset_lens_u_px**2, 0.0)))
+
+    @property
     def unexplained_structure(self) -> bool:
         return bool(self.loop and self.loop.unexplained_structure)
 
@@ -194,6 +205,7 @@ class MarkResult:
             "angle_u_arcsec": float(np.rad2deg(self.angle_u_rad) * 3600),
             "angle_rad": self.angle_rad, "angle_u_rad": self.angle_u_rad,
             "offset_px": self.offset_px, "offset_u_px": self.offset_u_px,
+            "offset_lens_u_px": self.offset_lens_u_px,
             "length_px": self.length_px, "width_px": self.width_px, "blur_px": self.blur_px,
             "polarity": "dark" if self.dark else "bright", "points": self.n_points,
             "rejected_points": self.n_rejected,
@@ -246,7 +258,9 @@ class MarkResult:
         fr = d.get("frame_radial_distortion")
         return cls(**base, index=int(d["index"]), angle_rad=rad("angle"),
                    angle_u_rad=rad("angle_u"), offset_px=_num(d["offset_px"]),
-                   offset_u_px=_num(d["offset_u_px"]), length_px=_num(d["length_px"]),
+                   offset_u_px=_num(d["offset_u_px"]),
+                   offset_lens_u_px=_num(d.get("offset_lens_u_px", 0.0)),
+                   length_px=_num(d["length_px"]),
                    width_px=_num(d["width_px"]), blur_px=_num(d["blur_px"]),
                    dark=d.get("polarity", "dark") == "dark", n_points=int(d["points"]),
                    n_rejected=int(d.get("rejected_points", 0)),

@@ -28,7 +28,7 @@ from align.camera_lens import (
     claimed_lens,
     undistorted_mark,
 )
-from align.family_stage import family_note, grating_notes, with_families
+from align.family_stage import family_note, grating_notes, offset_lens_u, with_families
 from align.lens import LensRanges
 from align.lens_advice import lens_advice
 from align.loop import Candidate, LoopReport, run_loop
@@ -315,6 +315,12 @@ def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: 
         sgn = 1.0 if abs(c.angle_rad - mu.line.angle_rad) <= np.pi / 2 else -1.0
         r = replace(r, offset_px=r.offset_px + sgn * c.offset_px - mu.line.offset_px)
     coupling = lens.coupling[k] if k < len(lens.coupling) else {}
+    # The lens moves the offset as it turns the angle: what it leaves undetermined (or its
+    # calibration's u) is in the offset's u too (an undeclared k1 -0.27 lens, three marks
+    # 150-250 px out: offsets 10 u off at a stated 0.007 px).
+    du_lens = offset_lens_u(mu.points, r.angle_rad, lens.record, m.image_shape)
+    r = replace(r, offset_u_px=float(np.hypot(r.offset_u_px, du_lens)),
+                offset_lens_u_px=du_lens)
     return replace(r, angle_before_rad=before, angle_u_rad=au, u_terms=terms,
                    lens=lens.record, notes=tuple(notes), lens_limited=limited,
                    lens_coupling=dict(coupling), lens_group=(group or name) if coupling else "")

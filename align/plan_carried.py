@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from types import MappingProxyType
 
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
@@ -23,6 +24,9 @@ from align.fusion.plausible import is_carried
 from align.fusion.undetermined import Undetermined, carried_variance, freed_u
 from align.loop import sidak
 from axisbase.units import ARCSEC
+
+# The default of ``declared``: read-only (one object shared by every call).
+NONE_DECLARED: Mapping[str, float] = MappingProxyType({})
 
 RESOLVES = {
     ROLL: "a reversed view of that camera (the platform turned 180° on the table), or its "
@@ -147,7 +151,7 @@ def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b:
     return b
 
 
-def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, float] = {}
+def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, float] = NONE_DECLARED
                  ) -> tuple[Undetermined, ...]:
     """The undetermined nuisances (``lin.ranged``; one ``declared``, calibrated, with its
     calibration's u [rad] as its range) the fusion would carry over their plausible range with
@@ -176,7 +180,7 @@ def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, fl
 
 
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
-            redraw: bool = True, declared: Mapping[str, float] = {}) -> Prediction:
+            redraw: bool = True, declared: Mapping[str, float] = NONE_DECLARED) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
     left out and ``add`` added, and the candidates it would carry.
 

@@ -72,6 +72,9 @@ EFFECTS = {
     "platform_level_x": ("arcsec", "the platform out of level: its levelled poses' 'up' "
                          "tilted towards platform X (fixed on the platform, turns with it)"),
     "platform_level_y": ("arcsec", "the platform out of level towards platform Y"),
+    "gimbal_tilt_x": ("arcsec", "the base under the gimbal (X/Y up/down) poses tilted towards "
+                      "the room's x (fixed in the room: each pose sees it turned by its gimbal)"),
+    "gimbal_tilt_y": ("arcsec", "the base under the gimbal poses tilted towards the room's y"),
     "creep_x": ("arcsec", "the triad turned about platform X between the camera images and "
                 "goniometer log and the platform static readings (creep)"),
     "creep_y": ("arcsec", "creep about platform Y (see creep_x)"),
@@ -311,6 +314,7 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
     tilt = np.array([eff.get("table_tilt_x", 0.0), eff.get("table_tilt_y", 0.0)]) * ARCSEC
     level = np.array([eff.get("platform_level_x", 0.0), eff.get("platform_level_y", 0.0),
                       0.0]) * ARCSEC
+    gimbal = np.array([eff.get("gimbal_tilt_x", 0.0), eff.get("gimbal_tilt_y", 0.0)]) * ARCSEC
     rows = []
     n = spec.samples_per_pose
     t0 = 0.0
@@ -325,6 +329,9 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
             g = np.array([c * room[0] + s_ * room[1], -s_ * room[0] + c * room[1], room[2]])
             g = g / np.linalg.norm(g) + level  # (the platform's own tilt turns with it)
             g = g / np.linalg.norm(g)
+        else:
+            g = g + _gimbal_tilt(up, gimbal)
+            g = g / np.linalg.norm(g)
         t = t0 + np.arange(n) / 20.0
         u = triad.outputs(np.repeat(g[None], n, 0), np.zeros(n), np.zeros(n), rng)
         rows.append(np.column_stack([np.full(n, len(rows)), u, t]))
@@ -336,6 +343,18 @@ def _platform(out: Path, spec: SessionSpec, triad: Triad, eff: dict[str, float],
         for r in data:
             fh.write(f"{labels[int(r[0])]},{r[1]:.9e},{r[2]:.9e},{r[3]:.9e},{r[4]:.3f}\n")
     return chosen
+
+
+def _gimbal_tilt(up: str, tilt: np.ndarray) -> np.ndarray:
+    """The room's tilt (tx, ty) [rad] of the base under a gimbal pose, seen in P: the gimbal
+    turns the platform 90° about its Y axis (X up/down) or its X axis (Y up/down), so the
+    room's x and y lie along these P directions (room z along the pose's up):
+    X up: room x = -Z, y = Y; X down: x = Z, y = Y; Y up: x = X, y = -Z; Y down: x = X,
+    y = Z. Up and down see the one tilt along their shared axis alike (their readings move
+    together, which no E does) and along the turned one oppositely."""
+    tx, ty = tilt
+    return {"+X": np.array([0.0, ty, -tx]), "-X": np.array([0.0, ty, tx]),
+            "+Y": np.array([tx, 0.0, -ty]), "-Y": np.array([tx, 0.0, ty])}[up]
 
 
 def _session_toml(spec: SessionSpec, declared: dict[str, float], images: list[dict],

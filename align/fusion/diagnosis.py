@@ -23,6 +23,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.fusion.budget import Budget, with_type_b
 from align.fusion.observations import E_NAMES
+from align.fusion.pairs import PairShift, pair_shift, pair_shift_from_dict
 from axisbase.units import ARCSEC
 
 # An angle of a disagreeing source is named when its own d is this many u from zero.
@@ -61,6 +62,10 @@ class SourceDisagreement:
     also : tuple of str
         Other sources that, given their own E, make the rest agree as well (which one moved,
         the data cannot tell); unit —.
+    pairs : PairShift or None
+        The platform static poses' up/down pairs shifting together, when those poses are
+        named and the shift is significant (:mod:`align.fusion.pairs`; its cause is then not
+        creep); unit —.
     """
 
     source: str
@@ -76,6 +81,10 @@ class SourceDisagreement:
     # moved, the data cannot tell (a creep between the cameras' and the static readings is
     # seen as either the cameras' or the static poses' own E).
     also: tuple[str, ...] = ()
+    # The static poses' up/down pairs shifting together (align.fusion.pairs), when the
+    # platform static poses are named and the shift is significant: its cause is then not
+    # the triad's creep.
+    pairs: PairShift | None = None
 
     @property
     def angles(self) -> list[tuple[str, float, float]]:
@@ -96,9 +105,19 @@ class SourceDisagreement:
         by = ", ".join(f"{d / ARCSEC:+.1f}″ (u {u / ARCSEC:.1f}″)" for _, d, u in ang)
         level = ("platform static" in (self.source, *self.also)
                  and {n for n, _, _ in ang} <= {"E_xZ", "E_yZ"})
-        hint = ("platform not level? (a levelling offset shows in E_xZ, E_yZ only)" if level
-                else "the triad moved between the measurements (creep), or a source's set-up "
-                     "is not the others'")
+        if level:
+            hint = "platform not level? (a levelling offset shows in E_xZ, E_yZ only)"
+        elif self.pairs is not None:
+            # E and creep move an up/down pair's readings oppositely; these moved together.
+            shown = f"{self.pairs.text()}; " if self.pairs.shifts else ""
+            hint = (f"the static poses' up/down pairs shift together ({shown}"
+                    f"chi2 falls by {self.pairs.chi2_drop:.1f} with {self.pairs.dof}), which "
+                    "neither another E nor creep does: the base tilted under the gimbal poses "
+                    "(not level where they stand), or a bias drifting between the poses; "
+                    "level the base, or repeat the poses in the order up, down, down, up")
+        else:
+            hint = ("the triad moved between the measurements (creep), or a source's set-up "
+                    "is not the others'")
         rest = ("the rest then agree" if self.rest_consistent else
                 f"the rest still disagree (chi2 {self.chi2_rest:.1f} / {self.dof_rest})")
         me = SAYS.get(self.source, self.source)
@@ -122,7 +141,8 @@ class SourceDisagreement:
                              if np.isfinite(u)},
                 "angles": [n for n, _, _ in self.angles], "chi2_drop": self.chi2_drop,
                 "dof": self.dof, "p_value": self.p_value, "chi2_rest": self.chi2_rest,
-                "dof_rest": self.dof_rest, "also": list(self.also), "message": self.message()}
+                "dof_rest": self.dof_rest, "also": list(self.also), "message": self.message(),
+                **({"pairs": self.pairs.to_dict()} if self.pairs is not None else {})}
 
 
 def disagreement_from_dict(d: dict) -> SourceDisagreement:
@@ -132,7 +152,8 @@ def disagreement_from_dict(d: dict) -> SourceDisagreement:
     return SourceDisagreement(str(d["source"]), tuple(d["others"]), delta, u,
                               float(d["chi2_drop"]), int(d["dof"]), float(d["p_value"]),
                               float(d["chi2_rest"]), int(d["dof_rest"]),
-                              tuple(d.get("also", ())))
+                              tuple(d.get("also", ())),
+                              pair_shift_from_dict(d["pairs"]) if d.get("pairs") else None)
 
 
 def with_disagreement(budget: Budget, named: SourceDisagreement) -> Budget:
@@ -155,8 +176,8 @@ def jacobian(residual, p: np.ndarray, step: float = 1e-7) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[str, np.ndarray]]
-                         ) -> list[SourceDisagreement]:
+def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[str, np.ndarray]],
+                         J: np.ndarray | None = None) -> list[SourceDisagreement]:
     """Each source given its own six angles (see the module docstring).
 
     Parameters
@@ -165,9 +186,10 @@ def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[s
         (the six angles first, in ``E_NAMES`` order, [rad]).
     params : the fused solution.
     rows_of : (source name, indices of its rows in the residual), one per source.
+    J : its Jacobian at ``params`` if already computed (:func:`jacobian`).
     """
     r = residual(params)
-    J = jacobian(residual, params)
+    J = jacobian(residual, params) if J is None else J
     U, s, _ = np.linalg.svd(J, full_matrices=False)
     Q = U[:, s > 1e-10 * s[0]]
     chi2 = float(r @ r)
@@ -212,3 +234,20 @@ def name_disagreement(found: Sequence[SourceDisagreement], alpha: float
         return best
     also = tuple(f.source for f in cand if f is not best and f.rest_consistent)
     return replace(best, also=also) if also else best
+
+
+def with_pairs(named: SourceDisagreement, r: np.ndarray, J: np.ndarray, blocks: Sequence,
+               whiten: Sequence[np.ndarray], starts: np.ndarray, alpha: float
+               ) -> SourceDisagreement:
+    """``named`` (the platform static poses among its sources) with the static poses' up/down
+    pairs' common shift (:func:`align.fusion.pairs.pair_shift`) when it is significant at
+    ``alpha``: its message then names that, not creep. ``r``, ``J``: the fused solve's
+    whitened residual and Jacobian; ``blocks``, ``whiten``, ``starts``: the solve's blocks,
+    their whitening and where each one's rows begin in ``r``."""
+    for k, b in enumerate(blocks):
+        if b.source != "platform static" or not b.row_meta:
+            continue
+        found = pair_shift(r, J, np.arange(starts[k], starts[k + 1]), b.row_meta, whiten[k])
+        if found is not None and found.significant(alpha):
+            return replace(named, pairs=found)
+    return named

@@ -298,12 +298,14 @@ def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
     """Off-axis readings (the on-axis one measures the scale factor, not E). Every reading
     carries the same calibrated bias error per axis: the nuisance 'bias' (its prior is in the
     ellipsoid block, correlated with beta)."""
-    vals, us, labels, which, pidx = [], [], [], [], []
+    vals, us, labels, which, pidx, meta = [], [], [], [], [], []
     for p, pose in enumerate(poses):
         up_axis = int(np.argmax(np.abs(pose.up)))
+        up = ("+" if pose.up[up_axis] > 0 else "-") + "XYZ"[up_axis]
         for i in range(3):
             if i == up_axis:
                 continue
+            meta.append({"pose": pose.label, "up": up, "housing": HOUSINGS[i]})
             vals.append(pose.w[i])
             us.append(pose.u_w[i])
             labels.append(f"{pose.label} {HOUSINGS[i]}")
@@ -324,5 +326,5 @@ def static_block(poses: list[PlatformPose], row_norms: np.ndarray,
     n_min = min(p.samples for p in poses)
     return Block("platform static", tuple(labels), np.array(vals), np.diag(np.square(us)),
                  predict, unit="g", sees=(TILT, LEVEL) if levelled else (TILT,),
-                 budget_source="static poses",
+                 budget_source="static poses", row_meta=tuple(meta),
                  noise_dof=float(n_min - 1) if n_min > 1 else None)

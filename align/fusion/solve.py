@@ -21,9 +21,11 @@ from align.fusion.budget import Budget, Linearisation, linearise, with_type_b
 from align.fusion.diagnosis import (
     SourceDisagreement,
     disagreement_from_dict,
+    jacobian,
     leave_one_source_out,
     name_disagreement,
     with_disagreement,
+    with_pairs,
 )
 from align.fusion.observations import (
     E_NAMES,
@@ -472,8 +474,14 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         rows_of = [(src, np.concatenate([np.arange(starts[k], starts[k + 1])
                                          for k, b in enumerate(stage.blocks)
                                          if b.source == src])) for src in sources]
-        named = name_disagreement(leave_one_source_out(
-            lambda p: stage._residual(p, layout), sol.params, rows_of), alpha)
+        def resid(p: np.ndarray) -> np.ndarray:
+            return stage._residual(p, layout)
+
+        J = jacobian(resid, sol.params)
+        named = name_disagreement(leave_one_source_out(resid, sol.params, rows_of, J), alpha)
+        if named is not None and "platform static" in (named.source, *named.also):
+            named = with_pairs(named, resid(sol.params), J, stage.blocks, stage.whiten, starts,
+                               alpha)
     if named is not None:
         # Where two sources see different E, E in those angles is the one or the other (or
         # in between): the fused value sits with the more precise source, so u is widened
