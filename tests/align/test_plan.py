@@ -283,19 +283,8 @@ def _fixed(lin: Linearisation, add=(), drop=(), detail=None) -> np.ndarray:
                    + sum((np.square(r.shift) for r in ranged), np.zeros(6)))
 
 
-NOT_CLASSED = pytest.mark.xfail(strict=True, reason=(
-    "the fusion, not the plan: after a second tumble (seed 4) camera B's roll, undetermined "
-    "before (u freed 415″ > its range's σ 34.6″, carried ±34.6″ in E_yZ), is freed at 298″ "
-    "and carried as NOT EXCLUDED (align/fusion/plausible.py takes it before "
-    "align/fusion/undetermined.py; its shift 772″ in E_yZ) — the plan predicts it carried over "
-    "its range (E_yZ 34.581″), the test's u less the not-excluded terms is 3.498″ (z -89.9); "
-    "the other 56 rows RMS z within 0.4-1.4, max |z| 2.2. A candidate whose u freed exceeds "
-    "its plausible range is undetermined, not a not-excluded estimate"))
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", [
-    "full", "images", pytest.param("roll", marks=NOT_CLASSED)])
+@pytest.mark.parametrize("scenario", ["full", "images", "roll"])
 def test_predicted_u_of_every_option_matches_simulation(tmp_path, scenario):
     """Over 5 seeds, every option of the plan realised in synth (another image of each
     housing in each view, a reversed view, a log twice as long, a second tumble, the static
