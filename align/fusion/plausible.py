@@ -16,7 +16,12 @@ Two rules keep the loop from a silent wrong answer:
   shift of E when it is freed. Freeing an effect of estimate b ± u_b adds k k' u_b² to cov(E)
   (k = dE/db) and moves E by k b; E[(k b)²] = k² (u_b² + b_true²): in expectation the Type B
   term is what freeing the effect would cost, and it covers the effect if it is real (a 30″
-  camera roll not named at p 0.006 left E_zY 9.4 u off; carried, 1.9 u).
+  camera roll not named at p 0.006 left E_zY 9.4 u off; carried, 1.9 u). A candidate the
+  data cannot *determine* (a roll or the reference face's offset whose u freed exceeds its
+  plausible range's σ) is judged first and carried over that range instead
+  (:mod:`align.fusion.undetermined`): its estimate freed is a draw of that u about zero, whose
+  shift is no measure of it (camera B's roll freed at 298″ moved E_yZ 772″; its range ±34.6″).
+  The levelling and the table's tilt have no range: these rules judge them.
 * **An alternative the loop did not exclude is carried in u.** Judged beside the final model
   a candidate near-degenerate with an effect the loop named is no test at all (freed beside
   it, both run away: a 30″ roll of camera B beside the platform's levelling the loop named in

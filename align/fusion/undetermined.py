@@ -14,6 +14,7 @@ Such a nuisance is carried over its plausible range: a Type B term σ² k kᵀ i
 :data:`DEFAULT_HALF_RANGE_ARCSEC` as a uniform range). Whether the data determine it is read
 from the design: its u when freed beside the final model (infinite when its column lies in
 E's span) against σ — the data determine it when they know it better than the range does.
+This is judged before :mod:`align.fusion.plausible`'s rules, which pass such a nuisance by.
 """
 
 from __future__ import annotations
