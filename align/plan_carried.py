@@ -21,7 +21,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
 from align.fusion.budget import Group, Linearisation, inverse
 from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
 from align.fusion.plausible import is_carried
-from align.fusion.undetermined import Undetermined, carried_variance, freed_u
+from align.fusion.undetermined import Undetermined, carried_variance, default_sigma, freed_u
 from align.loop import sidak
 from axisbase.units import ARCSEC
 
@@ -209,6 +209,13 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     # (the carried candidates are judged against u without the ranged terms, as the fusion
     # judges them before it adds those)
     ranged = ranged_after(lin, infos[0], declared)
+    # A carried candidate the new data no longer determine (u freed beyond its range's σ: data
+    # replaced) the fusion would carry over its range instead (is_carried's rule): so here.
+    # (A range declared in session.toml is not in the linearisation: the default's σ.)
+    sig = {n: default_sigma(n) for n, *_ in lin.held if n not in declared}
+    lost = {r.name: r for r in ranged_after(replace(lin, ranged=tuple(
+        (n, i, sig[n]) for n, i, *_ in lin.held if sig.get(n) is not None)), infos[0])}
+    ranged = (*ranged, *lost.values())
     fixed = [(i, e) for n, i, e, _ in lin.held if n in declared]
     share = np.zeros((REDRAWS, 6))
     out = []
@@ -218,7 +225,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         # what the session's data left for it once the others are in the model
         c, mine = _one(infos, free, idx, _with_declared(infos[1], free, idx, np.array(est),
                                                         fixed),
-                       p_loop, np.sqrt(u2), n_rows, redraw, own, lin.inflation)
+                       p_loop, np.sqrt(u2), n_rows, redraw, own, lin.inflation, lost.get(name))
         out.append(replace(c, name=name))
         share += mine
         if c.named >= 0.5:
@@ -232,11 +239,12 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
 
 def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,
          p_loop: float, u_e: np.ndarray, n_rows: int, redraw: bool, own: bool,
-         inflation: float) -> tuple[Carried, np.ndarray]:
+         inflation: float, lost: Undetermined | None = None) -> tuple[Carried, np.ndarray]:
     """One held candidate (parameters ``idx``, estimate ``b`` [rad], the loop's p-value now
     ``p_loop``) after the measurement (``infos``: the information after, now, of the kept
     groups, of the added ones): its :class:`Carried` (unnamed) and its share of u² of the
-    six angles in each draw [rad²]."""
+    six angles in each draw [rad²]; ``lost``: its range's term when the data after no longer
+    determine it (never carried then: :func:`align.fusion.plausible.is_carried`)."""
     info, info_now, info_kept, info_add = infos
     j, n = [*free, *idx], len(free)
     C = inverse(info[np.ix_(j, j)])
@@ -256,8 +264,9 @@ def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: 
     now_drop = float(b @ np.linalg.solve(S0[:, n:], b))
     scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
     named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
-    hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e)
-                             for c, x in zip(chi, draws, strict=True)])
+    rng = {} if lost is None else {"u_freed": lost.u_freed, "sigma": lost.sigma}
+    hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e,
+                                        **rng) for c, x in zip(chi, draws, strict=True)])
     if own:
         hit[:], named[:] = True, False
     freed = np.diag(K @ Cbb @ K.T) * inflation**2  # what naming it adds to u²

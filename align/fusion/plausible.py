@@ -16,7 +16,12 @@ Two rules keep the loop from a silent wrong answer:
   shift of E when it is freed. Freeing an effect of estimate b ± u_b adds k k' u_b² to cov(E)
   (k = dE/db) and moves E by k b; E[(k b)²] = k² (u_b² + b_true²): in expectation the Type B
   term is what freeing the effect would cost, and it covers the effect if it is real (a 30″
-  camera roll not named at p 0.006 left E_zY 9.4 u off; carried, 1.9 u).
+  camera roll not named at p 0.006 left E_zY 9.4 u off; carried, 1.9 u). A candidate the
+  data cannot *determine* (a roll or the reference face's offset whose u freed exceeds its
+  plausible range's σ) is judged first and carried over that range instead
+  (:mod:`align.fusion.undetermined`): its estimate freed is a draw of that u about zero, whose
+  shift is no measure of it (camera B's roll freed at 298″ moved E_yZ 772″; its range ±34.6″).
+  The levelling and the table's tilt have no range: these rules judge them.
 * **An alternative the loop did not exclude is carried in u.** Judged beside the final model
   a candidate near-degenerate with an effect the loop named is no test at all (freed beside
   it, both run away: a 30″ roll of camera B beside the platform's levelling the loop named in
@@ -39,6 +44,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.fusion.observations import E_NAMES
+from align.fusion.undetermined import carried_variance
 from align.loop import Candidate, LoopReport, Stage, StageFit, Term, f_test
 from axisbase.errors import NotApplicable
 from axisbase.units import ARCSEC
@@ -135,10 +141,11 @@ def _e(fit: StageFit) -> np.ndarray:
 
 
 def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport,
-                 cov: np.ndarray, alpha: float) -> list[NotExcluded]:
-    """The candidates of ``loop`` not added that the data cannot exclude and that move E by
-    more than :data:`SHIFT_FRACTION` of its u (``cov``: E's 6×6 [rad²]), each re-judged
-    against the final model:
+                 cov: np.ndarray, alpha: float, skip: Sequence[str] = ()) -> list[NotExcluded]:
+    """The candidates of ``loop`` not added (nor in ``skip``: those the data cannot determine,
+    :func:`align.fusion.undetermined.undetermined`, carried over their plausible range) that
+    the data cannot exclude and that move E by more than :data:`SHIFT_FRACTION` of its u
+    (``cov``: E's 6×6 [rad²]), each re-judged against the final model:
 
     * freed beside the loop's terms, beyond :data:`NOT_EXCLUDED_Z` u (in χ² for several
       components) and within :data:`UNDECLARED_LIMIT_DEG`; or
@@ -155,7 +162,7 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
     limit = np.deg2rad(UNDECLARED_LIMIT_DEG)
     out = []
     for cand in candidates:
-        if cand.name in added:
+        if cand.name in added or cand.name in skip:
             continue
         try:
             term = cand.build(cur)
@@ -191,12 +198,19 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
     return out
 
 
-def is_carried(drop: float, width: int, size: float, shift: np.ndarray, u_e: np.ndarray
-               ) -> bool:
+def is_carried(drop: float, width: int, size: float, shift: np.ndarray, u_e: np.ndarray,
+               u_freed: float = 0.0, sigma: float | None = None) -> bool:
     """The rule of :func:`not_excluded` (also what ``align plan`` predicts with): a candidate
     of ``width`` components whose freeing lowers χ² by ``drop`` (b̂ᵀ cov(b)⁻¹ b̂, linearised)
     to a size ``size`` [rad] and moves E by ``shift`` [rad] is carried when the data cannot
     exclude it (beyond :data:`NOT_EXCLUDED_Z`, within :data:`UNDECLARED_LIMIT_DEG`) and the
-    shift exceeds :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle."""
+    shift exceeds :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle — unless the
+    data cannot determine it: its u freed ``u_freed`` [rad] beyond ``sigma``, the σ of its
+    plausible range [rad] (None: it has none, the platform's levelling and the table's tilt),
+    when it is carried over that range instead
+    (:func:`align.fusion.undetermined.carried_variance`; :func:`not_excluded` is given those
+    as ``skip``)."""
+    if sigma is not None and carried_variance(sigma, u_freed) > 0:
+        return False
     return bool(_excluded(drop, width) and abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG)
                 and np.any(np.abs(shift) > SHIFT_FRACTION * u_e))

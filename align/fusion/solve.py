@@ -492,13 +492,13 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
             widen[E_NAMES.index(n)] = d**2
         cov = cov + np.diag(widen)
         E_u = e_matrix(np.sqrt(np.diag(cov)))
-    # The candidates the data cannot exclude: their shift of E joins its covariance (Type B).
-    carried = not_excluded(stage, cands, loop, cov, alpha)
+    # The candidates the data cannot determine: carried over their plausible range (Type B);
+    # first, as the rest (determined) are judged by whether the data can exclude them: their
+    # shift of E joins its covariance (Type B).
+    unknown = undetermined(stage, cands, loop, sol.params, inflation, plausible_u)
+    carried = not_excluded(stage, cands, loop, cov, alpha, skip=[c.name for c in unknown])
     for c in carried:
         cov = cov + np.outer(c.shift, c.shift)
-    # The candidates the data cannot determine: carried over their plausible range (Type B).
-    unknown = undetermined(stage, cands, loop, sol.params, inflation, plausible_u,
-                           skip=[c.name for c in carried])
     for c in unknown:
         cov = cov + np.outer(c.shift, c.shift)
     if carried or unknown:

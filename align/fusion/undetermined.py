@@ -14,6 +14,7 @@ Such a nuisance is carried over its plausible range: a Type B term σ² k kᵀ i
 :data:`DEFAULT_HALF_RANGE_ARCSEC` as a uniform range). Whether the data determine it is read
 from the design: its u when freed beside the final model (infinite when its column lies in
 E's span) against σ — the data determine it when they know it better than the range does.
+This is judged before :mod:`align.fusion.plausible`'s rules, which pass such a nuisance by.
 """
 
 from __future__ import annotations
@@ -143,18 +144,21 @@ def freed_u(info: float, scale: float, inflation: float) -> float:
 
 
 def undetermined(stage, candidates: Sequence[Candidate], loop: LoopReport, params: np.ndarray,
-                 inflation: float, sigmas: Mapping[str, float] | None = None,
-                 skip: Sequence[str] = ()) -> list[Undetermined]:
-    """The candidates the loop did not add (nor ``skip``: carried otherwise) whose u freed
-    beside the final model (``params``: its parameters; ``inflation``: its u's scale) exceeds
-    their plausible range's σ (``sigmas`` by name [rad], else :func:`default_sigma`), each
-    with its E shift per σ. ``stage``: the :class:`~align.fusion.FusionStage`."""
+                 inflation: float, sigmas: Mapping[str, float] | None = None
+                 ) -> list[Undetermined]:
+    """The candidates the loop did not add whose u freed beside the final model (``params``:
+    its parameters; ``inflation``: its u's scale) exceeds their plausible range's σ
+    (``sigmas`` by name [rad], else :func:`default_sigma`), each with its E shift per σ.
+    ``stage``: the :class:`~align.fusion.FusionStage`. Judged before
+    :func:`align.fusion.plausible.not_excluded`, which passes these by: a candidate the data
+    cannot determine is carried over its range, never as a not-excluded estimate (its
+    estimate, freed, is a draw of u_f > σ about zero: a 298″ u freed gave a 772″ shift)."""
     added = {t.name for t in loop.terms}
     sigmas = dict(sigmas or {})
     out = []
     m = len(params)
     for cand in candidates:
-        if cand.name in added or cand.name in skip:
+        if cand.name in added:
             continue
         sigma = sigmas.get(cand.name, default_sigma(cand.name))
         if sigma is None or not sigma > 0:
