@@ -63,7 +63,8 @@ PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
 REACH = 20.0, 10.0
 """Least relief window beside a family's line [px]; the second inside a finer pitch
-(:func:`_finer_pitch`: 20 reached the next tick at 24 px). Not 10 for every ruling: a
+(:func:`_finer_pitch`: 20 reached the next tick at 24 px) or a pitch at which the first search
+already told neighbouring lines apart (:func:`seen_apart`). Not 10 for every ruling: a
 grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal)."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
@@ -157,6 +158,20 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     k = np.rint((pos - pos[0]) / g0)
     pitch, origin = np.polyfit(k, pos, 1)
     return float(origin), float(pitch)
+
+
+def seen_apart(cands: list[MarkCandidate], members: list[int], ref: float, pitch: float
+               ) -> bool:
+    """Whether the first search (its own relief window) confirmed two members one ``pitch``
+    apart [px]: lines at that pitch then stand out each alone, and the family's others are
+    judged with the window inside the pitch (:data:`REACH`).
+
+    A ruled scale at 22 px pitch whose first search confirmed 10 neighbouring lines (the
+    20 px window then reached the next line: the 10 others, at the same pitch, were all
+    refused, 10 of 20 found at 640 x 480 through k1 -0.15); a grating's identical lines are
+    refused by the first search, so its family comes from the ruling pass and keeps 20 px."""
+    pos = np.sort([_position(cands[i], ref) for i in members])
+    return bool(np.any(np.abs(np.diff(pos) / abs(pitch) - 1) < GRID_TOLERANCE))
 
 
 FINE_LINES = 3
@@ -385,6 +400,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     # then counted as found but not reported (never dropped unsaid).
     groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
         if families else []
+    first_seen = [list(g) for g in groups]  # (the ruling pass below may replace them)
     if families and not groups and (not found or (len(found) == 2
                                                   and group_families(found, 2))):
         # Lines at a pitch under the relief window beside each line are alike their
@@ -427,6 +443,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
                             pitch, shift)
         fine_ruling = int(fine != pitch)
+        inner = int(fine_ruling or (g in first_seen and seen_apart(found, g, ref, pitch)))
         floor, pitch = (floor if fine_ruling else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
@@ -475,7 +492,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         pool += joined_pieces([c for c in pieces if c.length_px < floor],
                               MEMBER_FRACTION * typical, 1.1 * longest)
         _join(found, members, pool, on_ruling, half_way,
-              lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[fine_ruling])
+              lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[inner])
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         # (Their lines were confirmed on the ruling: a short one's direction is good to
