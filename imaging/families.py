@@ -63,9 +63,10 @@ PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
 REACH = 20.0, 10.0
 """Least relief window beside a family's line [px]; the second inside a finer pitch
-(:func:`_finer_pitch`: 20 reached the next tick at 24 px) or a pitch at which the first search
-already told neighbouring lines apart (:func:`seen_apart`). Not 10 for every ruling: a
-grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal)."""
+(:func:`_finer_pitch`: 20 reached the next tick at 24 px) or of a family the first search
+found (its own window told the members apart at their pitch). Not 10 for every ruling: a
+grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal);
+the first search refuses them, and the ruling pass's family keeps 20 px."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -158,20 +159,6 @@ def _ruling(cands: list[MarkCandidate], members: list[int], ref: float
     k = np.rint((pos - pos[0]) / g0)
     pitch, origin = np.polyfit(k, pos, 1)
     return float(origin), float(pitch)
-
-
-def seen_apart(cands: list[MarkCandidate], members: list[int], ref: float, pitch: float
-               ) -> bool:
-    """Whether the first search (its own relief window) confirmed two members one ``pitch``
-    apart [px]: lines at that pitch then stand out each alone, and the family's others are
-    judged with the window inside the pitch (:data:`REACH`).
-
-    A ruled scale at 22 px pitch whose first search confirmed 10 neighbouring lines (the
-    20 px window then reached the next line: the 10 others, at the same pitch, were all
-    refused, 10 of 20 found at 640 x 480 through k1 -0.15); a grating's identical lines are
-    refused by the first search, so its family comes from the ruling pass and keeps 20 px."""
-    pos = np.sort([_position(cands[i], ref) for i in members])
-    return bool(np.any(np.abs(np.diff(pos) / abs(pitch) - 1) < GRID_TOLERANCE))
 
 
 FINE_LINES = 3
@@ -443,7 +430,12 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
                             pitch, shift)
         fine_ruling = int(fine != pitch)
-        inner = int(fine_ruling or (g in first_seen and seen_apart(found, g, ref, pitch)))
+        # The first search confirmed these members with its own window, the nearest two one
+        # pitch apart (the ruling's pitch is their least gap, _ruling): lines at that pitch
+        # stand out each alone, and the others are judged with the window inside it. (A
+        # scale at 22 px through k1 -0.15: 10 neighbouring lines found first; with 20 px the
+        # window reached the next line and the 10 others were all refused as a lay.)
+        inner = int(fine_ruling or g in first_seen)
         floor, pitch = (floor if fine_ruling else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
