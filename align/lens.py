@@ -49,10 +49,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 import numpy as np
-from scipy import (
-    optimize,  # (least_squares: the exact plausibility test)
-    special,  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
-)
+from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.lens_design import (
     DEFAULT_RANGES,
@@ -62,6 +59,7 @@ from align.lens_design import (
     _Design,
     _DesignCache,
 )
+from align.lens_exact import exact_notes, plausible_exact
 from align.lens_pp import _pp_probe_s, _pp_probes, _pp_spread
 from align.lens_solution import LensSolution, lens_angle_var
 from imaging.lens import PARAMS
@@ -127,8 +125,12 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     cache = _DesignCache(lines, scale)
     sol, designs, free_fit, fits = _solve(cache, ranges, alpha, iters)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
-        return free_fit()
-    p, chi2, lam = _plausible_exact(cache, sol, alpha)
+        sf, df = free_fit()
+        if len(lines) >= 3 and not sf.confirmed:
+            sf = replace(sf, notes=exact_notes(sf.notes, plausible_exact(cache, sol),
+                                               alpha))
+        return sf, df
+    p, chi2, lam = plausible_exact(cache, sol)
     if p >= alpha:
         # No line is bent: a lens within every range explains them all (the lines' own
         # free fit may still leave the ranges, and says so; the angles carry it in u).
@@ -145,7 +147,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
             continue
         p = _plausible(sk, dk, alpha)
         if p < alpha:  # (the same exact test as for all the lines)
-            p = _plausible_exact(cache.without(k), sk, alpha)[0]
+            p = plausible_exact(cache.without(k), sk)[0]
         if p >= alpha and (best is None or p > best[0]):
             best = (p, k, sk)
     if best is None:
@@ -168,7 +170,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     # A lens beyond the ranges may explain every line as well as one bent mark does: with a
     # line to spare the lines cannot tell them apart, and the note says both (the bent
     # reading is the one within the ranges the user declared).
-    pw, chi2w, lw = _plausible_exact(cache, sol, alpha, 2 * ranges.vector())
+    pw, chi2w, lw = plausible_exact(cache, sol, 2 * ranges.vector())
     if pw >= alpha:
         note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
                 f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
@@ -187,42 +189,6 @@ def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> f
     bz = _bows_left(designs, others, rng, [j for j in range(len(PARAMS)) if sol.applied[j]])
     dof = len(bz) - sum(sol.applied)
     return float(special.chdtrc(dof, float(bz @ bz))) if dof > 0 else 1.0
-
-
-def _plausible_exact(cache: _DesignCache, sol: LensSolution, alpha: float,
-                     rng: np.ndarray | None = None) -> tuple[float, float, np.ndarray]:
-    """:func:`_plausible`'s test without its linearisation: the lens that best explains the
-    lines' bows with every parameter within its range (bounded least squares from the
-    applied lens, the parameters not applied held to their ranges by the same prior),
-    and the p-value of what is left on the same dof.
-
-    :func:`_plausible` reads the others' bows at the applied lens: far from zero (k1 -0.30
-    fitted about the centre, the true principal point (10, -6) px, k2 -0.02, p1 3e-4, all
-    within their ranges) those bows are not linear, and four straight marks left chi2 28065
-    on 4 dof there — one named a bent mark — where the lens itself leaves 4.3.
-    ``rng``: the ranges searched (default the solution's). Returns (p, the penalised chi2,
-    the lens vector found)."""
-    rng = sol.ranges.vector() if rng is None else rng
-    free = np.flatnonzero(rng > 0)
-    prior = np.array([j for j in free if not sol.applied[j]], int)
-    n = len(cache.lines)
-
-    def left(x: np.ndarray) -> np.ndarray:
-        lam = np.zeros(len(PARAMS))
-        lam[free] = x
-        try:
-            bz = [d.bow_z for d in cache.all(lam)]
-        except LensFolds:  # (a lens that folds the image explains nothing)
-            return np.full(n + len(prior), 1e6)
-        return np.concatenate([bz, lam[prior] / rng[prior]])
-
-    x0 = np.clip(sol.lam[free], -0.99 * rng[free], 0.99 * rng[free])
-    fit = optimize.least_squares(left, x0, bounds=(-rng[free], rng[free]), x_scale=rng[free])
-    dof = n - int(sum(sol.applied))
-    lam = np.zeros(len(PARAMS))
-    lam[free] = fit.x
-    chi2 = 2 * float(fit.cost)
-    return (float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0), chi2, lam
 
 
 def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
