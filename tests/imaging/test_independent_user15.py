@@ -325,18 +325,6 @@ def test_bumped_camera_sweep(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "ruled scale, 20 lines at 22 px pitch, 140/196 px long, numerals and dust, 640x480 "
-        "through k1 -0.15 with its exact model: 10 of 20 lines found (the outer 5 each side and "
-        "the one nearest the centre never reported; 'LINES MISSING at steps 4'), family chi2/dof "
-        "0.04; each member's u 107-1981″ where its terms (camera_model 4-5″, groove_profile <1″) "
-        "and its error (<=112″) are far smaller ('the centres scatter far less than their stated "
-        "sigma (chi2/dof 0.00-0.16)'); the same scale without numerals and dust: the same; "
-        "lens-free (the control below): 20 of 20, chi2/dof 0.91, no such warning"
-    ),
-)
 def test_ruled_scale_every_line_found(tmp_path):
     """(5) A ruled scale through a real lens with its model: every line found, chi2/dof 0.7-1.4."""
     size = (640, 480)
@@ -552,16 +540,6 @@ def test_no_model_frames_sign_of_k1_and_u(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "no model, 640x480, k1 -0.3 (the default range's edge) k2 -0.02 p1 3e-4 pp (10, -6) px, "
-        "four "
-        "straight marks: 'line 2 of 4: its bow fits no lens that the other line(s) agree on (all "
-        "lines: no plausible lens, chi2 28065.1 on 4 dof): a bent mark, left out of the lens' "
-        "(bent_lines [2]) — a straight mark named bent; its angle is lens-limited, so no wrong ok"
-    ),
-)
 def test_no_model_straight_marks_not_named_bent(tmp_path):
     """(4) Straight marks through a plausible lens are not named bent."""
     size, lens = NO_MODEL_CASES[0]
