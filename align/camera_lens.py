@@ -326,8 +326,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         reach = z * lam_u + bow_reach(fb.sol, z)
         record = {**fb.sol.to_dict(), "source": "marks", "camera_model": "departed from"}
     return CameraLens(lam, tuple(notes),
-                      {**record, "p_marks_agree": p, "p_lens_change": p_raw,
-                       "pp_move": move.to_dict(), "pp_stability_px": ranges.pp_stability_px,
+                      {**record, "p_marks_agree": p_raw, "pp_move": move.to_dict(),
+                       "pp_stability_px": ranges.pp_stability_px,
                        "u_from": ("joint covariance" if camera.cov is not None else
                                   "parameters' u as if independent"),
                        "bent_lines": list(lone),

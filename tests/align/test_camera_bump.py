@@ -9,9 +9,12 @@ mark's noise-free angle through the unmoved camera. Tolerances from the noise: z
 from __future__ import annotations
 
 import math
+import pathlib
+import tempfile
 
 import cv2
 import numpy as np
+import pytest
 
 from align.camera_lens import camera_lens_cov
 from align.lens import LensRanges, LineGeometry
@@ -118,3 +121,48 @@ def test_stability_term_covers_a_move_within_it():
 def test_bonferroni():
     assert bonferroni(0.01, 4e-4) == (0.02, 8e-4)
     assert bonferroni(0.7, 0.6) == (1.0, 1.0)
+
+
+def _frames(kind, n, lo, hi, extra=()):
+    """User 15's frame (tests/imaging/test_independent_user15.py) through its exact model, the
+    camera moved lo..hi px in random directions: (exit 0, named, ok beyond 3 u, u's, z's)."""
+    from tests.imaging import user15_inputs as gen
+    from tests.imaging.test_independent_user15 import FRAME, LENS, _errors, _exact_model, _marks
+
+    size = (640, 480)
+    K, d = gen.lens_cv(size, **LENS)
+    with tempfile.TemporaryDirectory() as tmp:
+        cam = _exact_model(pathlib.Path(tmp), size, K, d)
+        rng = np.random.default_rng(15)
+        exit0 = named = bad = 0
+        us, zs = [], []
+        for seed in range(100, 100 + n):
+            mag, ang = rng.uniform(lo, hi), rng.uniform(0, 2 * math.pi)
+            K2 = K.copy()
+            K2[0, 2] += mag * math.cos(ang)
+            K2[1, 2] += mag * math.sin(ang)
+            img, truths = gen.render_marks(size, K2, d, FRAME, seed=seed)
+            rc, doc, err = _marks([gen.write_png(f"{tmp}/{seed}.png", img)], "--camera", cam,
+                                  *extra)
+            exit0 += rc == 0
+            named += "principal point differs" in err or "lens differs" in err
+            for e, u, ok in _errors(doc, truths):
+                bad += ok and abs(e) > 3 * u
+                us.append(u)
+                zs.append(e / u)
+    print(f"{kind} {lo}-{hi} px, {n} frames: exit 0 in {exit0}, named {named}, "
+          f"ok beyond 3 u {bad}, median u {np.median(us):.0f}″, rms z "
+          f"{math.sqrt(np.mean(np.square(zs))):.2f}")
+    return exit0, named, bad, us, zs
+
+
+@pytest.mark.slow
+def test_bumped_frames_named_and_unbumped_untouched():
+    """User 15's frame: a bump the bows show at > 99 % (18-25 px) is named and no angle is ok
+    beyond 3 u; unbumped, no false alarm (alpha 1e-3 over 8 frames: expected 0.008) and
+    every angle within 3.5 u."""
+    _, named, bad, _, _ = _frames("bumped", 6, 18, 25)
+    assert named == 6 and bad == 0
+    exit0, named, bad, us, zs = _frames("unbumped", 8, 0, 0)
+    assert named == 0 and exit0 == 8 and bad == 0
+    assert max(np.abs(zs)) < 3.5, np.round(zs, 2)
