@@ -53,7 +53,7 @@ class PPMove:
         stability's together: under no move beyond the stability the shift is N(0, that)).
     p : float
         Its chi-square probability (2 dof) under that null, before any multiplicity
-        correction.
+        correction — dimensionless.
     """
 
     shift_px: tuple[float, float]
