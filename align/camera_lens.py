@@ -13,7 +13,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
-from align.lens_bump import bonferroni, bump_note, pp_move, stability_coupling
+from align.lens_bump import bonferroni, bump_note, move_explains, pp_move, stability_coupling
 from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
 from align.lens_terms import (
     angle_coupling,
@@ -222,6 +222,11 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     if lone and still_departs(designs, lone, lam_chk, ranges, alpha):
         # The other marks depart together too: no bend explains that (align/lens_fallback.py).
         lone, told = (), None
+    # A principal point's move that explains every mark's bow is the reading of a bump; bent
+    # marks are then no better an explanation of the bows (align/lens_bump.py).
+    moved = p_pp < alpha and move_explains(designs, move, lam_chk, ranges, alpha)
+    if moved:
+        lone, told = (), None
     if lone:
         # A departure no two marks agree on, or one the other marks do not show (a changed
         # lens bows every mark by what its position predicts; these stay straight), is the
@@ -238,11 +243,11 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         dlam = np.zeros_like(dlam)
     else:
         p_used = p
-    if p_used >= alpha and p_pp < alpha and not lone:
+    if moved or (p_used >= alpha and p_pp < alpha and not lone):
         # The bows show the principal point moved, the lens otherwise as calibrated: named,
         # and taken as a changed lens (below: undetermined beyond the calibration).
         notes.append(bump_note(who, move, p_pp))
-        dlam, p_used = move.dlam(), p_pp
+        dlam, p_used = move.dlam(), min(p_pp, p_used)
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
     elif len(ms) == 1 and p < alpha and not lone:

@@ -28,9 +28,9 @@ import numpy as np
 from scipy import special
 
 from align.camera_model_u import angle_sensitivity
-from align.lens import LineGeometry
+from align.lens import LensRanges, LineGeometry
 from align.lens_design import _Design
-from align.lens_terms import lens_cov
+from align.lens_terms import camera_departure, lens_cov
 from imaging import CameraModel
 from imaging.camera_cov import INTRINSICS
 from imaging.lens import PARAMS
@@ -87,6 +87,23 @@ def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) 
     u = np.sqrt(np.diag(C))
     return PPMove((float(shift[0]), float(shift[1])), (float(u[0]), float(u[1])),
                   float(special.chdtrc(len(j), stat)))
+
+
+def move_explains(designs: Sequence[_Design], move: PPMove, lam_u: np.ndarray,
+                  ranges: LensRanges, alpha: float) -> bool:
+    """Whether the ``move`` explains every mark's departure from the calibration: within the
+    plausible range of the principal point (``ranges.pp_px`` per axis), and with it taken
+    off, neither the marks together nor any one of them departs at ``alpha``
+    (:func:`align.lens_terms.camera_departure`). Then a bent-mark reading of a bow is no
+    better an explanation than the move (user 15's camera moved 22 px: one mark's bow read
+    as a bend beside a kept calibration, 1128″ off at ± 101″)."""
+    shift = np.array(move.shift_px)
+    if not np.all(np.abs(shift) <= ranges.pp_px):
+        return False
+    j = list(PP)
+    rest = [replace(d, z=d.z + d.G[:, j] @ shift) for d in designs]
+    return all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
+               for g in (rest, *([d] for d in rest)))
 
 
 def bonferroni(*ps: float) -> tuple[float, ...]:
