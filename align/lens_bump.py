@@ -12,7 +12,9 @@ both here:
 * the move as its own hypothesis (2 dof: the principal point's columns of the marks' designs,
   :func:`align.lens_fallback.model_lever`), tested beside the lens change with Bonferroni
   over the two (:func:`pp_move`): a move the bows show is named and taken as a changed lens
-  (the lens beyond the model undetermined, u widened, usually lens-limited);
+  (the lens beyond the model undetermined, u widened, usually lens-limited), also where one
+  mark's bow alone would pass for a bent mark if the move explains every mark
+  (:func:`move_explains`);
 * the declared stability of the principal point since calibration (``pp_stability_px``,
   :class:`align.lens_design.LensRanges`) carried in every angle of the model as the Type B
   term ``camera_pp_stability`` (:func:`stability_coupling`): a move within it is covered
