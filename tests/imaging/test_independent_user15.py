@@ -303,8 +303,9 @@ def test_refocused_lens_is_named_and_u_widened(tmp_path):
         "e.g. seed 6 (12.8 px): -740″ ± 29″ (z -25.5), seed 5 (9.6 px): +711″ ± 32″ (z +22); "
         "no warning in those frames. Now (bump branch, default pp stability 0.5 px): exit 0 "
         "in 3 of 6, 9 ok angles beyond 3 u (seeds 2, 4, 5: 8.4-12.2 px, e.g. +711″ ± 38″); "
-        "seed 6 named. One frame's three marks put the move at ± 3 px, 0.5 px turns an "
-        "angle by its u: a knock between is covered only by a declared stability "
+        "seed 6 (12.8 px) now not ok. One frame's three marks put the move at ± 3 px, "
+        "0.5 px turns an angle by its u: a knock between is covered only by a declared "
+        "stability "
         "(--lens pp_stability_px, docs/camera.md 'A camera bumped after calibration')"
     ),
 )
