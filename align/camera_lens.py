@@ -224,7 +224,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         lone, told = (), None
     # A principal point's move that explains every mark's bow is the reading of a bump; bent
     # marks are then no better an explanation of the bows (align/lens_bump.py).
-    moved = p_pp < alpha and move_explains(designs, move, lam_chk, ranges, alpha)
+    moved = (len(ms) > 1 and p_pp < alpha
+             and move_explains(designs, move, lam_chk, ranges, alpha, lone))
     if moved:
         lone, told = (), None
     if lone:
@@ -243,7 +244,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         dlam = np.zeros_like(dlam)
     else:
         p_used = p
-    if moved or (p_used >= alpha and p_pp < alpha and not lone):
+    if moved or (len(ms) > 1 and p_used >= alpha and p_pp < alpha and not lone):
         # The bows show the principal point moved, the lens otherwise as calibrated: named,
         # and taken as a changed lens (below: undetermined beyond the calibration).
         notes.append(bump_note(who, move, p_pp))

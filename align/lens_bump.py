@@ -92,20 +92,41 @@ def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) 
 
 
 def move_explains(designs: Sequence[_Design], move: PPMove, lam_u: np.ndarray,
-                  ranges: LensRanges, alpha: float) -> bool:
+                  ranges: LensRanges, alpha: float, bent: Sequence[int] = ()) -> bool:
     """Whether the ``move`` explains every mark's departure from the calibration: within the
     plausible range of the principal point (``ranges.pp_px`` per axis), and with it taken
     off, neither the marks together nor any one of them departs at ``alpha``
-    (:func:`align.lens_terms.camera_departure`). Then a bent-mark reading of a bow is no
-    better an explanation than the move (user 15's camera moved 22 px: one mark's bow read
-    as a bend beside a kept calibration, 1128″ off at ± 101″)."""
+    (:func:`align.lens_terms.camera_departure`). Where some marks read as ``bent`` (the
+    others straight), the move must also not be ruled out by the others: the move those
+    marks alone call for would bow the others by a separation their bows do not show (by
+    more than z sigma: then they are bent, as :func:`align.lens_terms.lens_or_bends` reads
+    a lens change). Else a bent-mark reading is no better an explanation than the move (user
+    15's camera moved 22 px: one mark's bow read as a bend beside a kept calibration, 1128″
+    off at ± 101″, ok)."""
     shift = np.array(move.shift_px)
     if not np.all(np.abs(shift) <= ranges.pp_px):
         return False
     j = list(PP)
     rest = [replace(d, z=d.z + d.G[:, j] @ shift) for d in designs]
-    return all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
-               for g in (rest, *([d] for d in rest)))
+    if not all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
+               for g in (rest, *([d] for d in rest))):
+        return False
+    others = [d for k, d in enumerate(designs) if k not in bent]
+    if not bent or not others:
+        return True
+    # the move the bent marks alone call for (least norm: one mark determines one
+    # combination of cx, cy)
+    Gb = np.vstack([designs[k].G[:, j] for k in bent])
+    zb = np.concatenate([designs[k].z for k in bent])
+    own = -np.linalg.lstsq(Gb, zb, rcond=1e-6)[0]
+    pred = [d.G[:, j] @ own for d in others]  # their bow, whitened
+    sep = float(np.sqrt(sum(p @ p for p in pred)))
+    if not np.isfinite(sep) or sep == 0:
+        return True
+    # what they show of it: their residual along the prediction (the fit's sign: z = -G dlam)
+    seen = -float(sum(d.z @ p for d, p in zip(others, pred, strict=True))) / sep
+    z = float(-special.ndtri(alpha / 2))
+    return sep - seen <= z
 
 
 def bonferroni(*ps: float) -> tuple[float, ...]:
