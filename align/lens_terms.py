@@ -312,39 +312,51 @@ def _predict(fit: Sequence[_Design], test: Sequence[_Design], lam_u: np.ndarray,
                        1.0 + float(h[det] @ C @ h[det]), beyond)
 
 
+def _explained(F: np.ndarray, b: np.ndarray, idx: Sequence[int]) -> float:
+    """How much of the marks' chi2 (information ``F``, ``b``) a lens change over the
+    parameters ``idx`` takes away: b^T F^-1 b over them."""
+    if not idx:
+        return 0.0
+    D = np.ix_(idx, idx)
+    return float(b[idx] @ np.linalg.solve(F[D], b[idx]))
+
+
 def _agreement(k: int, with_: Sequence[int], designs: Sequence[_Design],
                Fb: Sequence[tuple[np.ndarray, np.ndarray]], rng: np.ndarray, z: float
                ) -> tuple[float, float]:
     """How well mark ``k`` agrees with the lens change the marks ``with_`` call for: the
-    p-value of its own estimate of the change against theirs, over the parameters both
-    determine (chi2 with both covariances), and the chi2 per degree of freedom. A mark that
-    determines none of them on its own is tested by its bow: the quadratic across it left
-    after the others' change, against its noise and the change's u. ``Fb``: each mark's
-    (G^T G, G^T z)."""
+    p-value of one change fitted to both against each's own (the chi2 the joint fit adds,
+    on as many degrees of freedom as parameters both determine), and the chi2 per degree of
+    freedom. A mark that determines none of them on its own is tested by its bow: the
+    quadratic across it left after the others' change, against its noise and the change's
+    u. ``Fb``: each mark's (G^T G, G^T z).
+
+    The joint fit is over every parameter either side determines: where both determine the
+    same ones this is the chi2 of their two estimates' difference; where one side also
+    determines k2, the other's k1 is not read with k2 held at 0 (a change of k1 on top of a
+    model bows a long mark at the frame's corner with a k2 part too: two straight marks
+    then 'disagreed' at chi2 11.5 on one dof and a changed lens was called 'neither')."""
     F = sum(Fb[i][0] for i in with_)
+    b = sum(Fb[i][1] for i in with_)
     det = _determined(F, rng, z)
     Fk, bk = Fb[k]
     det_k = _determined(Fk, rng, z)
     both = [j for j in det_k if j in det]
-    P = len(rng)
-    dl, Cr = np.zeros(P), np.zeros((P, P))
-    if det:
-        D = np.ix_(det, det)
-        dl[det] = -np.linalg.solve(F[D], sum(Fb[i][1] for i in with_)[det])
-        Cr[D] = np.linalg.inv(F[D])
     if not both:
+        P = len(rng)
+        dl, Cr = np.zeros(P), np.zeros((P, P))
+        if det:
+            D = np.ix_(det, det)
+            dl[det] = -np.linalg.solve(F[D], b[det])
+            Cr[D] = np.linalg.inv(F[D])
         d = designs[k]
         wG = d.w @ d.G
         r = float(d.w @ d.z + wG @ dl)
         stat = r**2 / (1.0 + float(wG @ Cr @ wG))
         return float(special.chdtrc(1, stat)), stat
-    Dk = np.ix_(det_k, det_k)
-    dk, Ck = np.zeros(P), np.zeros((P, P))
-    dk[det_k] = -np.linalg.solve(Fk[Dk], bk[det_k])
-    Ck[Dk] = np.linalg.inv(Fk[Dk])
-    B = np.ix_(both, both)
-    diff = dk[both] - dl[both]
-    stat = float(diff @ np.linalg.solve(Ck[B] + Cr[B], diff))
+    union = sorted(set(det) | set(det_k))
+    stat = max(_explained(Fk, bk, det_k) + _explained(F, b, det)
+               - _explained(F + Fk, b + bk, union), 0.0)
     return float(special.chdtrc(len(both), stat)), stat / len(both)
 
 
