@@ -9,6 +9,7 @@ offset d = n . p, position along it t = u . p.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -187,6 +188,36 @@ def _near(c: MarkCandidate, o: MarkCandidate, tol_angle: float, tol_px: float) -
     u, n = line_frame(c.angle_rad)
     mid = c.offset_px * n + 0.5 * (c.t_start_px + c.t_end_px) * u
     return abs(float(mid @ line_frame(o.angle_rad)[1]) - o.offset_px) < tol_px
+
+
+def may_be_near(cands: Sequence[MarkCandidate], tol_angle: float, tol_px: float
+                ) -> np.ndarray:
+    """Whether each candidate may lie along each other (:func:`_near`), for all pairs at once.
+
+    Parameters
+    ----------
+    cands : sequence of MarkCandidate
+        The candidates (n).
+    tol_angle : float
+        Largest difference of directions [rad].
+    tol_px : float
+        Largest distance of one's middle from the other's line [px].
+
+    Returns
+    -------
+    ndarray
+        (n, n) bool: ``[i, j]`` False where ``_near(cands[i], cands[j], ...)`` is surely
+        False (a necessary condition with a slack of 1e-6 rad and px for the rounding of
+        these sums against the scalar test's, which decides those left).
+    """
+    ang = np.array([c.angle_rad for c in cands], dtype=float)
+    off = np.array([c.offset_px for c in cands], dtype=float)
+    mid_t = np.array([0.5 * (c.t_start_px + c.t_end_px) for c in cands], dtype=float)
+    u = np.column_stack([np.cos(ang), -np.sin(ang)]).reshape(-1, 2)
+    n = np.column_stack([np.sin(ang), np.cos(ang)]).reshape(-1, 2)
+    mid = off[:, None] * n + mid_t[:, None] * u
+    d = np.abs((ang[:, None] - ang[None, :] + np.pi / 2) % np.pi - np.pi / 2)
+    return (d < tol_angle + 1e-6) & (np.abs(mid @ n.T - off[None, :]) < tol_px + 1e-6)
 
 
 def _overlap(c: MarkCandidate, o: MarkCandidate) -> bool:

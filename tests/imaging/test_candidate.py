@@ -13,6 +13,8 @@ from imaging.candidate import (
     _may_cover,
     _near,
     _overlap,
+    line_frame,
+    may_be_near,
     wrap_angle,
 )
 from tests.conftest import angle_error, mark_image
@@ -102,3 +104,38 @@ def test_dedupe_keeps_what_the_pairwise_test_keeps():
         dropped += len(cands) - len(ref)
         kept += len(ref)
     assert dropped > 100 and kept > 100
+
+
+def test_may_be_near_keeps_every_near_pair_and_drops_the_far():
+    """The all-pairs prefilter of _near is a necessary condition (every pair _near accepts
+    it keeps, also at the tolerances' edges and across +-90 deg) that drops most others."""
+    rng = np.random.default_rng(7)
+    tol, px = np.deg2rad(1.5), 3.0
+    cands = []
+    for _ in range(150):
+        # Directions clustered around 0 and around vertical (either sign), offsets on a
+        # coarse ruling with scatter of the tolerance's size: many pairs near each edge.
+        a = rng.choice([0.0, np.pi / 2, -np.pi / 2]) + rng.normal(0, tol)
+        ts = rng.uniform(-200, 200)
+        cands.append(MarkCandidate(angle_rad=float(a), offset_px=float(
+            rng.integers(0, 3) * 40 + rng.normal(0, px)), t_start_px=float(ts),
+            t_end_px=float(ts + rng.uniform(5, 60)), dark=True, thickness_px=3.0,
+            strength=1.0))
+    for a in (0.3, np.pi / 2 - 1e-4):  # and pairs just inside both tolerances
+        o = MarkCandidate(angle_rad=a, offset_px=10.0, t_start_px=0.0, t_end_px=50.0,
+                          dark=True, thickness_px=3.0, strength=1.0)
+        b = a + tol * (1 - 1e-9)
+        u, n = line_frame(b)
+        no = line_frame(a)[1]
+        # c's middle at t = 25 along its own line, px (1 - 1e-9) from o's line
+        off = (10.0 + px * (1 - 1e-9) - 25.0 * float(u @ no)) / float(n @ no)
+        cands.append(MarkCandidate(angle_rad=b, offset_px=off, t_start_px=0.0,
+                                   t_end_px=50.0, dark=True, thickness_px=3.0, strength=1.0))
+        cands.append(o)
+        assert _near(cands[-2], o, tol, px)
+    may = may_be_near(cands, tol, px)
+    near = np.array([[_near(c, o, tol, px) for o in cands] for c in cands])
+    assert near.sum() > 500  # (the test sees many near pairs)
+    assert not (near & ~may).any()
+    assert may.sum() <= near.sum() + 10  # only rounding's slack beyond _near
+    assert may_be_near([], tol, px).shape == (0, 0)
