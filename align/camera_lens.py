@@ -13,6 +13,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
+from align.lens_bump import bonferroni, bump_note, move_explains, pp_move, stability_coupling
 from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
 from align.lens_terms import (
     angle_coupling,
@@ -205,6 +206,12 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     # The model's principal point as the check's lever (align/lens_fallback.py).
     designs = model_lever(designs, lines, camera, shape)
     p, dlam = camera_departure(designs, lam_chk, ranges, alpha)
+    # The principal point moved alone (a bump: the lens re-seated on the sensor) is a
+    # hypothesis of its own: 2 dof, where the lens change's test spreads its bows over up to
+    # 7; the two tested together, Bonferroni (align/lens_bump.py).
+    move = pp_move(designs, lam_chk, ranges.pp_stability_px)
+    p_raw = p
+    p, p_pp = bonferroni(p, move.p)
     unresolved = False
     told = lens_or_bends(designs, lam_chk, ranges, alpha) if p < alpha else None
     if told is None:
@@ -214,6 +221,12 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         lone = told.departing if told.verdict == "bends" else ()
     if lone and still_departs(designs, lone, lam_chk, ranges, alpha):
         # The other marks depart together too: no bend explains that (align/lens_fallback.py).
+        lone, told = (), None
+    # A principal point's move that explains every mark's bow is the reading of a bump; bent
+    # marks are then no better an explanation of the bows (align/lens_bump.py).
+    moved = (len(ms) > 1 and p_pp < alpha
+             and move_explains(designs, move, lam_chk, ranges, alpha, lone))
+    if moved:
         lone, told = (), None
     if lone:
         # A departure no two marks agree on, or one the other marks do not show (a changed
@@ -231,7 +244,14 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         dlam = np.zeros_like(dlam)
     else:
         p_used = p
-    if len(ms) == 1 and p < alpha and not lone:
+    if moved or (len(ms) > 1 and p_used >= alpha and p_pp < alpha and not lone):
+        # The bows show the principal point moved, the lens otherwise as calibrated: named,
+        # and taken as a changed lens (below: undetermined beyond the calibration).
+        notes.append(bump_note(who, move, p_pp))
+        dlam, p_used = move.dlam(), min(p_pp, p_used)
+        for t, d in zip(terms_l, designs, strict=True):
+            t["camera_disagreement"] = float(d.s @ dlam)
+    elif len(ms) == 1 and p < alpha and not lone:
         # One mark whose bow a plausible lens (the model's own plus a change) could make: a
         # bent mark and a model that misses the lens (a sign slip, a recalibrated lens) leave
         # it alike, and no other mark can tell them apart. Neither reading is the lens: u
@@ -296,6 +316,11 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         for t, d in zip(terms_l, designs, strict=True):
             t["camera_disagreement"] = float(d.s @ dlam)
     lam, record = None, {"source": CAMERA_MODEL}
+    if p_used >= alpha:
+        # The model kept: its principal point may have moved since calibration within the
+        # declared stability, which no bow may show (a Type B term, docs/camera.md).
+        terms_l = [{**t, **stability_coupling(camera, ln, shape, ranges.pp_stability_px)}
+                   for t, ln in zip(terms_l, lines, strict=True)]
     reach = z * lam_u + (np.abs(dlam) if p_used < alpha else 0.0)
     if p_used < alpha:
         # The marks show the lens is not its model: neither the model's reading nor the one
@@ -307,7 +332,8 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         reach = z * lam_u + bow_reach(fb.sol, z)
         record = {**fb.sol.to_dict(), "source": "marks", "camera_model": "departed from"}
     return CameraLens(lam, tuple(notes),
-                      {**record, "p_marks_agree": p,
+                      {**record, "p_marks_agree": p_raw, "pp_move": move.to_dict(),
+                       "pp_stability_px": ranges.pp_stability_px,
                        "u_from": ("joint covariance" if camera.cov is not None else
                                   "parameters' u as if independent"),
                        "bent_lines": list(lone),

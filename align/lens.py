@@ -59,6 +59,7 @@ from align.lens_design import (
     _Design,
     _DesignCache,
 )
+from align.lens_exact import exact_notes, plausible_exact
 from align.lens_pp import _pp_probe_s, _pp_probes, _pp_spread
 from align.lens_solution import LensSolution, lens_angle_var
 from imaging.lens import PARAMS
@@ -124,7 +125,20 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     cache = _DesignCache(lines, scale)
     sol, designs, free_fit, fits = _solve(cache, ranges, alpha, iters)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
-        return free_fit()
+        sf, df = free_fit()
+        if len(lines) >= 3 and not sf.confirmed:
+            sf = replace(sf, notes=exact_notes(sf.notes, plausible_exact(cache, sol),
+                                               alpha))
+        return sf, df
+    p, chi2, lam = plausible_exact(cache, sol)
+    if p >= alpha:
+        # No line is bent: a lens within every range explains them all (the lines' own
+        # free fit may still leave the ranges, and says so; the angles carry it in u).
+        sf, df = free_fit()
+        note = (f"a lens within every plausible range explains all {len(lines)} lines' bows "
+                f"(chi2 {chi2:.1f}, p {p:.2g}; k1 {lam[0]:+.3f}, k2 {lam[1]:+.3f}, principal "
+                f"point ({lam[5]:+.0f}, {lam[6]:+.0f}) px): no mark is bent")
+        return replace(sf, notes=(note, *sf.notes)), df
     best: tuple[float, int, LensSolution] | None = None
     for k in range(len(lines)):
         try:
@@ -132,6 +146,8 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         except LensFolds:
             continue
         p = _plausible(sk, dk, alpha)
+        if p < alpha:  # (the same exact test as for all the lines)
+            p = plausible_exact(cache.without(k), sk)[0]
         if p >= alpha and (best is None or p > best[0]):
             best = (p, k, sk)
     if best is None:
@@ -147,9 +163,20 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         return free_fit()
     det = [j for j in range(len(PARAMS)) if sk.determined[j]]
     probes = _pp_probe_s(cache, sk.lam, det, ranges.vector())
+    dof = len(lines) - int(sum(sol.applied))
     note = (f"line {k} of {len(lines)}: its bow fits no lens that the other line(s) agree on "
-            f"(all lines: no plausible lens, chi2 {sol.bow_chi2:.1f} on {sol.bow_dof} dof): a "
+            f"(all lines: no plausible lens, chi2 {chi2:.1f} on {dof} dof): a "
             "bent mark, left out of the lens")
+    # A lens beyond the ranges may explain every line as well as one bent mark does: with a
+    # line to spare the lines cannot tell them apart, and the note says both (the bent
+    # reading is the one within the ranges the user declared).
+    pw, chi2w, lw = plausible_exact(cache, sol, 2 * ranges.vector())
+    if pw >= alpha:
+        note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
+                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
+                f"all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}): a lens beyond the "
+                "ranges (declare it: --lens k1=..., or calibrate the camera) or a bent mark "
+                f"(line {k}, left out of the lens)")
     sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
     return sk, [replace(d, s_pp_var=v) for d, v in zip(ds, probes, strict=True)]
 

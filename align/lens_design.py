@@ -20,6 +20,11 @@ class LensFolds(NotApplicable):
     there. Caught where a lens estimate is tried; never a ``ValueError`` (a defect raising
     one is not mistaken for a folding lens)."""
 
+PP_STABILITY_PX = 0.5
+"""The default :attr:`LensRanges.pp_stability_px` [px] (docs/camera.md, "A camera bumped after
+calibration": a fixed lens in use, not knocked; the figures behind it there)."""
+
+
 @dataclass(frozen=True)
 class LensRanges:
     """Plausible range of each lens parameter (Type B, uniform over +- the value).
@@ -40,6 +45,11 @@ class LensRanges:
         (+16 px) beyond it, with the angles' u not covering their error (z to 3.98).
     max_u_arcsec : float
         An angle whose lens-limited u exceeds this [″] is not ok ("calibrate the camera").
+    pp_stability_px : float
+        With a camera model only: how far its principal point may have moved since the
+        calibration [px], per axis (uniform over +- the value; the lens knocked or
+        re-seated on the sensor). Carried as the Type B term ``camera_pp_stability``
+        (:mod:`align.lens_bump`, docs/camera.md "A camera bumped after calibration").
     """
 
     k1: float = 0.3
@@ -48,6 +58,7 @@ class LensRanges:
     aspect: float = 0.005
     pp_px: float = 40.0
     max_u_arcsec: float = 60.0
+    pp_stability_px: float = PP_STABILITY_PX
 
     @classmethod
     def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
@@ -61,7 +72,8 @@ class LensRanges:
 
     def to_dict(self) -> dict:
         return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
-                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec}
+                "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec,
+                "pp_stability_px": self.pp_stability_px}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LensRanges:
@@ -71,8 +83,9 @@ class LensRanges:
     def parse(cls, text: str, where: str = "--lens", beside: str = "") -> LensRanges:
         """``k1=0.1,p=0,aspect=0.001,pp_px=5,max_u_arcsec=30`` (keys not given keep their
         defaults); one line naming the flag and the bad item on error. ``beside`` names a
-        camera model given too (``--camera``): then only ``max_u_arcsec`` may be given (the
-        model is the lens; any other range would be silently ignored)."""
+        camera model given too (``--camera``): then only ``max_u_arcsec`` and
+        ``pp_stability_px`` may be given (the model is the lens; any other range would be
+        silently ignored)."""
         vals: dict[str, float] = {}
         for item in filter(None, (x.strip() for x in text.split(","))):
             key, eq, val = item.partition("=")
@@ -92,7 +105,7 @@ class LensRanges:
         if ignored:
             raise InputError(f"{where} {','.join(ignored)} with {beside}: the camera model is "
                              f"the lens (its u is carried); {where} ranges are for a camera "
-                             "without one (only max_u_arcsec applies beside it)")
+                             "without one (only max_u_arcsec and pp_stability_px apply beside it)")
         return cls(**vals)
 
 
@@ -100,7 +113,11 @@ def replaced_by_model(keys: Iterable[str]) -> list[str]:
     """Which of ``keys`` (LensRanges field names) a camera model makes meaningless: a model
     *is* the lens, so ranges of k1, k2, p, aspect, principal point given beside it would be
     silently ignored (``max_u_arcsec`` still applies: the bound on a lens-limited u)."""
-    return [k for k in keys if k in LensRanges.__dataclass_fields__ and k != "max_u_arcsec"]
+    return [k for k in keys if k in LensRanges.__dataclass_fields__ and k not in BESIDE_MODEL]
+
+
+BESIDE_MODEL = ("max_u_arcsec", "pp_stability_px")
+"""The :class:`LensRanges` keys that apply beside a camera model."""
 
 
 DEFAULT_RANGES = LensRanges()

@@ -29,13 +29,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from align.camera_model_u import angle_sensitivity, raw_pixels
+from align.camera_model_u import raw_pixels
 from align.lens import LensRanges, LensSolution, LineGeometry, solve_lens
+from align.lens_bump import PP, pp_angle_coupling
 from align.lens_design import _Design
 from align.lens_terms import angle_coupling, camera_departure
 from imaging import CameraModel, line_frame
-from imaging.camera_cov import INTRINSICS
-from imaging.lens import PARAMS
 
 WIDENING = ("camera_or_bent", "camera_disagreement")
 """The u terms a camera model's check adds when its marks depart from it (docs/camera.md);
@@ -57,9 +56,6 @@ class LensBeyondModel:
 
     sol: LensSolution
     coupling: tuple[dict[str, float], ...]
-
-
-PP = (PARAMS.index("cx"), PARAMS.index("cy"))
 
 
 def model_lever(designs: Sequence[_Design], lines: Sequence[LineGeometry],
@@ -121,12 +117,7 @@ def pp_coupling(camera: CameraModel, line: LineGeometry, shape: tuple[int, int],
     h, w = shape
     K = camera.camera_matrix
     half = ranges.pp_px + np.abs(K[:2, 2] - [(w - 1) / 2, (h - 1) / 2])
-    u = half / np.sqrt(3)
-    j = [INTRINSICS.index("cx"), INTRINSICS.index("cy")]
-    cov = np.zeros((len(INTRINSICS), len(INTRINSICS)))
-    cov[j, j] = u**2  # the sensitivity's steps: +- u (only cx, cy move)
-    g = angle_sensitivity(replace(camera, cov=cov), line.points, line.sigma, line.chol, shape)
-    return {"pp.cx": float(g[j[0]] * u[0]), "pp.cy": float(g[j[1]] * u[1])}
+    return pp_angle_coupling(camera, line, shape, half / np.sqrt(3))
 
 
 def lens_beyond_model(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges,

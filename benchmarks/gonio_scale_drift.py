@@ -8,7 +8,7 @@ on the same seeds with a ring-laser scale drift (synth's ``kappa_per_s``: the sc
 relative drift per second; until 2026-11-26 counts per revolution drifted at twice it),
 given per revolution so that every speed sees the same drift per revolution, and on clean
 logs.
-Compare two trees: ``PYTHONPATH=/work/main python3 benchmarks/gonio_scale_drift.py``.
+Compare two trees: ``PYTHONPATH=../main-checkout python3 benchmarks/gonio_scale_drift.py``.
 
 Run: ``python3 benchmarks/gonio_scale_drift.py [--n 1000] [--power-n 200]``
 """

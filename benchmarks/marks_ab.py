@@ -1,7 +1,7 @@
 """Scribe marks: two checkouts' versions of some functions, alternated image by image in one
 process (paired CPU differences that a loaded host does not drown).
 
-Run:  python3 benchmarks/marks_ab.py --other /work/main --swap imaging.centres._conditioned
+Run:  python3 benchmarks/marks_ab.py --other ../main-checkout --swap imaging.centres._conditioned
       [--swap module.function ...] [--sizes vga,5mp] [--images N] [--rounds R]
 
 Each ``--swap`` names a function of this checkout (``module.function``); the other

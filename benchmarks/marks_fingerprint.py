@@ -8,7 +8,7 @@ with dust, column and row fixed-pattern noise, oriented stripes, an 8-bit JPEG, 
 marks, a bowed mark under a barrel lens), measures each with ``align.measure_image`` and
 prints one fingerprint of every result (``MarkResult.to_dict``, sha256 of the sorted JSON).
 ``--save`` keeps the results; ``--against`` a file saved by another checkout's code
-(``PYTHONPATH=/work/main python3 benchmarks/marks_fingerprint.py --save main.json``) says
+(``PYTHONPATH=../main-checkout python3 benchmarks/marks_fingerprint.py --save main.json``) says
 how many results are bit-identical and, where they are not, the largest angle change in
 units of u, the largest relative change of u, and every decision that differs (found,
 ok, flags, effects, warnings: any value that is not a float). A text that differs only in

@@ -64,8 +64,10 @@ PIECE_ANGLE = np.deg2rad(10.0)
 """Largest direction difference of such a piece from its member."""
 REACH = 20.0, 10.0
 """Least relief window beside a family's line [px]; the second inside a finer pitch
-(:func:`_finer_pitch`: 20 reached the next tick at 24 px). Not 10 for every ruling: a
-grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal)."""
+(:func:`_finer_pitch`: 20 reached the next tick at 24 px) or of a family the first search
+found (its own window told the members apart at their pitch). Not 10 for every ruling: a
+grating's identical lines (10-16 px pitch) were then each confirmed (30 marks, no refusal);
+the first search refuses them, and the ruling pass's family keeps 20 px."""
 GRID_TOLERANCE = 0.3
 """A joining line lies within this fraction of the pitch of the members' ruling."""
 
@@ -391,6 +393,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
     # then counted as found but not reported (never dropped unsaid).
     groups = group_families(found, 2 if min_length_px is not None else MIN_MEMBERS) \
         if families else []
+    first_seen = [list(g) for g in groups]  # (the ruling pass below may replace them)
     if families and not groups and (not found or (len(found) == 2
                                                   and group_families(found, 2))):
         # Lines at a pitch under the relief window beside each line are alike their
@@ -433,6 +436,12 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         fine = _finer_pitch(members, [c for c in pieces if c.length_px >= floor], ref, origin,
                             pitch, shift)
         fine_ruling = int(fine != pitch)
+        # The first search confirmed these members with its own window, the nearest two one
+        # pitch apart (the ruling's pitch is their least gap, _ruling): lines at that pitch
+        # stand out each alone, and the others are judged with the window inside it. (A
+        # scale at 22 px through k1 -0.15: 10 neighbouring lines found first; with 20 px the
+        # window reached the next line and the 10 others were all refused as a lay.)
+        inner = int(fine_ruling or g in first_seen)
         floor, pitch = (floor if fine_ruling else MEMBER_FRACTION * typical), fine
 
         def on_ruling(c: MarkCandidate, anchors: np.ndarray, ref=ref, origin=origin,
@@ -481,7 +490,7 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         pool += joined_pieces([c for c in pieces if c.length_px < floor],
                               MEMBER_FRACTION * typical, 1.1 * longest)
         _join(found, members, pool, on_ruling, half_way,
-              lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[fine_ruling])
+              lambda c, ref=ref: _position(c, ref), search, pitch, floor, REACH[inner])
     if groups:
         found = _dedupe(sorted(found, key=lambda c: -c.strength))
         # (Their lines were confirmed on the ruling: a short one's direction is good to

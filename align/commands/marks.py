@@ -151,7 +151,9 @@ def add_marks(add: Callable[..., argparse.ArgumentParser]) -> None:
                    help="plausible lens without --camera (Type B ranges; keys k1, k2, p at the "
                    "image half-diagonal, aspect, pp_px [px], max_u_arcsec; defaults k1=0.3,"
                    "k2=0.05,p=0.001,aspect=0.005,pp_px=40,max_u_arcsec=60; all 0: declared "
-                   "distortion-free; docs/camera.md)")
+                   "distortion-free; beside --camera only max_u_arcsec and pp_stability_px: "
+                   "how far the model's principal point may have moved since calibration [px], "
+                   "default 0.5; docs/camera.md)")
     m.add_argument("--json", help="write results to this new JSON file ('-': stdout)")
     m.add_argument("--plot", help="folder for one PNG per mark (line + residuals)")
     m.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")

@@ -31,7 +31,9 @@ LENS = ("# without a model, the lens's plausible ranges (Type B, carried in u; a
         "# lens_aspect = 0.005           # |fy/fx - 1| (default 0.005)\n"
         "# lens_pp_px = 40.0             # [px] principal point from the centre (default 40)\n"
         "# lens_max_u_arcsec = 60.0      # [″] above this lens-limited u an angle is not ok "
-        "(default 60)\n")
+        "(default 60)\n"
+        "# lens_pp_stability_px = 0.5    # [px] with a model: its principal point's move since "
+        "calibration (default 0.5)\n")
 """The lens keys of a camera without a model (:class:`align.lens.LensRanges`)."""
 
 

@@ -1,0 +1,170 @@
+"""A camera bumped after its calibration (issue 18, user 15): the principal point moved, the
+lens otherwise unchanged.
+
+A knock that re-seats the lens on the sensor moves the principal point by pixels while k1, k2
+stay. Under a strong distortion that turns every mark away from the centre (user 15's 640 x 480
+camera, k1_cv -0.265: 60-90″ per px for marks 150-200 px out) but bows it little: three marks
+of one frame determine the move only to ~3 px per axis, so a bump the angles feel 20 u deep
+(8 px: +584″ at ± 32″) is a 2.5-sigma bow, and the check of the whole lens change (up to 7
+parameters, :func:`align.lens_terms.camera_departure`) dilutes it further. Two answers,
+both here:
+
+* the move as its own hypothesis (2 dof: the principal point's columns of the marks' designs,
+  :func:`align.lens_fallback.model_lever`), tested beside the lens change with Bonferroni
+  over the two (:func:`pp_move`): a move the bows show is named and taken as a changed lens
+  (the lens beyond the model undetermined, u widened, usually lens-limited), also where one
+  mark's bow alone would pass for a bent mark if the move explains every mark
+  (:func:`move_explains`);
+* the declared stability of the principal point since calibration (``pp_stability_px``,
+  :class:`align.lens_design.LensRanges`) carried in every angle of the model as the Type B
+  term ``camera_pp_stability`` (:func:`stability_coupling`): a move within it is covered
+  where no bow could show it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import special
+
+from align.camera_model_u import angle_sensitivity
+from align.lens import LensRanges, LineGeometry
+from align.lens_design import _Design
+from align.lens_terms import camera_departure, lens_cov
+from imaging import CameraModel
+from imaging.camera_cov import INTRINSICS
+from imaging.lens import PARAMS
+
+PP = (PARAMS.index("cx"), PARAMS.index("cy"))
+STABILITY = "camera_pp_stability"
+"""The u term of the declared stability (components ``camera_pp_stability.pp.cx``, ``.cy``)."""
+
+
+@dataclass(frozen=True)
+class PPMove:
+    """The principal point's move since calibration the marks' bows call for.
+
+    Attributes
+    ----------
+    shift_px : tuple of float
+        (dx, dy) [px], the lens otherwise as calibrated.
+    u_px : tuple of float
+        Its standard uncertainties [px] (the bows', the calibration's and the declared
+        stability's together: under no move beyond the stability the shift is N(0, that)).
+    p : float
+        Its chi-square probability (2 dof) under that null, before any multiplicity
+        correction — dimensionless.
+    """
+
+    shift_px: tuple[float, float]
+    u_px: tuple[float, float]
+    p: float
+
+    def dlam(self) -> np.ndarray:
+        """The move as a lens vector change (:data:`imaging.lens.PARAMS`)."""
+        out = np.zeros(len(PARAMS))
+        out[list(PP)] = self.shift_px
+        return out
+
+    def to_dict(self) -> dict:
+        return {"shift_px": list(self.shift_px), "u_px": list(self.u_px), "p": self.p}
+
+
+def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) -> PPMove:
+    """The principal point's move the marks' ``designs`` (with its columns:
+    :func:`align.lens_fallback.model_lever`) call for, the rest of the lens held, and its
+    probability against the calibration's u (``lam_u``: per PARAMS, or the joint covariance)
+    plus the declared stability (uniform over +- ``stability_px``: its variance s²/3)."""
+    j = list(PP)
+    F = sum(d.G[:, j].T @ d.G[:, j] for d in designs)
+    b = sum(d.G[:, j].T @ d.z for d in designs)
+    if not np.all(np.isfinite(F)) or np.linalg.matrix_rank(F) < len(j):
+        return PPMove((0.0, 0.0), (np.inf, np.inf), 1.0)
+    shift = -np.linalg.solve(F, b)
+    C = (np.linalg.inv(F) + lens_cov(lam_u)[np.ix_(j, j)]
+         + np.eye(len(j)) * stability_px**2 / 3.0)
+    stat = float(shift @ np.linalg.solve(C, shift))
+    u = np.sqrt(np.diag(C))
+    return PPMove((float(shift[0]), float(shift[1])), (float(u[0]), float(u[1])),
+                  float(special.chdtrc(len(j), stat)))
+
+
+def move_explains(designs: Sequence[_Design], move: PPMove, lam_u: np.ndarray,
+                  ranges: LensRanges, alpha: float, bent: Sequence[int] = ()) -> bool:
+    """Whether the ``move`` explains every mark's departure from the calibration: within the
+    plausible range of the principal point (``ranges.pp_px`` per axis), and with it taken
+    off, neither the marks together nor any one of them departs at ``alpha``
+    (:func:`align.lens_terms.camera_departure`). Where some marks read as ``bent`` (the
+    others straight), the move must also not be ruled out by the others: the move those
+    marks alone call for would bow the others by a separation their bows do not show (by
+    more than z sigma: then they are bent, as :func:`align.lens_terms.lens_or_bends` reads
+    a lens change). Else a bent-mark reading is no better an explanation than the move (user
+    15's camera moved 22 px: one mark's bow read as a bend beside a kept calibration, 1128″
+    off at ± 101″, ok)."""
+    shift = np.array(move.shift_px)
+    if not np.all(np.abs(shift) <= ranges.pp_px):
+        return False
+    j = list(PP)
+    rest = [replace(d, z=d.z + d.G[:, j] @ shift) for d in designs]
+    if not all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
+               for g in (rest, *([d] for d in rest))):
+        return False
+    others = [d for k, d in enumerate(designs) if k not in bent]
+    if not bent or not others:
+        return True
+    # the move the bent marks alone call for (least norm: one mark determines one
+    # combination of cx, cy)
+    Gb = np.vstack([designs[k].G[:, j] for k in bent])
+    zb = np.concatenate([designs[k].z for k in bent])
+    own = -np.linalg.lstsq(Gb, zb, rcond=1e-6)[0]
+    pred = [d.G[:, j] @ own for d in others]  # their bow, whitened
+    sep = float(np.sqrt(sum(p @ p for p in pred)))
+    if not np.isfinite(sep) or sep == 0:
+        return True
+    # what they show of it: their residual along the prediction (the fit's sign: z = -G dlam)
+    seen = -float(sum(d.z @ p for d, p in zip(others, pred, strict=True))) / sep
+    z = float(-special.ndtri(alpha / 2))
+    return sep - seen <= z
+
+
+def bonferroni(*ps: float) -> tuple[float, ...]:
+    """The p-values of hypotheses tested together, each multiplied by their number (capped
+    at 1): a family's false alarms at most alpha when each is taken below alpha."""
+    return tuple(min(1.0, len(ps) * p) for p in ps)
+
+
+def pp_angle_coupling(camera: CameraModel, line: LineGeometry, shape: tuple[int, int],
+                      u_px: np.ndarray) -> dict[str, float]:
+    """One mark's angle components [rad] of the model's principal point with standard
+    uncertainties ``u_px`` (cx, cy) [px], through the model's distortion
+    (:func:`align.camera_model_u.angle_sensitivity`; keys ``pp.cx``, ``pp.cy``)."""
+    u = np.broadcast_to(np.asarray(u_px, float), (2,))
+    j = [INTRINSICS.index("cx"), INTRINSICS.index("cy")]
+    cov = np.zeros((len(INTRINSICS), len(INTRINSICS)))
+    cov[j, j] = u**2  # the sensitivity's steps: +- u (only cx, cy move)
+    g = angle_sensitivity(replace(camera, cov=cov), line.points, line.sigma, line.chol, shape)
+    return {"pp.cx": float(g[j[0]] * u[0]), "pp.cy": float(g[j[1]] * u[1])}
+
+
+def stability_coupling(camera: CameraModel, line: LineGeometry, shape: tuple[int, int],
+                       stability_px: float) -> dict[str, float]:
+    """The declared stability's components [rad] of one mark's angle
+    (``camera_pp_stability.pp.cx``, ``….cy``: uniform over +- ``stability_px`` per axis,
+    / sqrt 3); none at 0."""
+    if stability_px <= 0:
+        return {}
+    c = pp_angle_coupling(camera, line, shape, np.full(2, stability_px / np.sqrt(3)))
+    return {f"{STABILITY}.{k}": v for k, v in c.items()}
+
+
+def bump_note(who: str, move: PPMove, p: float, model_as: str = "--camera") -> str:
+    """The warning for a move the bows show (``p``: after the multiplicity correction)."""
+    (dx, dy), (ux, uy) = move.shift_px, move.u_px
+    return (f"{who}: the principal point differs from its calibration by ({dx:+.1f}, {dy:+.1f}) "
+            f"± ({ux:.1f}, {uy:.1f}) px (the marks' bows, the rest of the lens as calibrated; "
+            f"p = {p:.2g}): the lens moved on the camera since calibration (a knock, a "
+            "re-seated or refocused lens)? The lens is taken as undetermined beyond the "
+            "calibration, as without a model, and u carries it (camera_disagreement); "
+            "recalibrate the camera (`align camera`)")
