@@ -158,7 +158,8 @@ def block_phase_columns(along_px: np.ndarray) -> np.ndarray:
     if not fast or n < 8 * len(fast):
         return np.zeros((n, 0))
     cols = [f(2 * np.pi * j * x / 8) for j in fast for f in (np.cos, np.sin)]
-    A = np.column_stack(cols) - np.column_stack(cols).mean(axis=0)
+    A = np.column_stack(cols)
+    A = A - A.mean(axis=0)
     U, s, _ = np.linalg.svd(A, full_matrices=False)
     # Only directions the phases pin down: a singular value below a tenth of the column
     # norm is a pattern the sampling does not see (and would only cost conditioning).

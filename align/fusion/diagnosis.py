@@ -24,6 +24,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from align.fusion.budget import Budget, with_type_b
 from align.fusion.observations import E_NAMES
 from align.fusion.pairs import PairShift, pair_shift, pair_shift_from_dict
+from align.fusion.projected import extra_fit, model_span
 from axisbase.units import ARCSEC
 
 # An angle of a disagreeing source is named when its own d is this many u from zero.
@@ -190,8 +191,7 @@ def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[s
     """
     r = residual(params)
     J = jacobian(residual, params) if J is None else J
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
-    Q = U[:, s > 1e-10 * s[0]]
+    Q = model_span(J)
     chi2 = float(r @ r)
     dof = len(r) - Q.shape[1]
     names = [n for n, _ in rows_of]
@@ -199,21 +199,14 @@ def leave_one_source_out(residual, params: np.ndarray, rows_of: Sequence[tuple[s
     for name, idx in rows_of:
         A = np.zeros((len(r), 6))
         A[idx] = J[idx, :6]
-        B = A - Q @ (Q.T @ A)
-        Ub, sb, Vt = np.linalg.svd(B, full_matrices=False)
-        keep = sb > 1e-8 * max(float(np.abs(J[:, :6]).max()), 1e-300)
-        k = int(keep.sum())
-        if k == 0:
+        fit = extra_fit(r, Q, A, float(np.abs(J[:, :6]).max()))
+        if fit is None:
             continue
-        Ub, sb, Vt = Ub[:, keep], sb[keep], Vt[keep]
-        coef = -(Ub.T @ r) / sb
-        delta = Vt.T @ coef
-        cov = Vt.T @ np.diag(1 / sb**2) @ Vt
-        drop = float(np.sum((Ub.T @ r) ** 2))
-        # An angle is the source's own when it lies in the row space of B.
-        own = np.sum(Vt**2, axis=0) > 0.99
-        u = np.where(own, np.sqrt(np.maximum(np.diag(cov), 0)), np.nan)
-        d = np.where(own, delta, np.nan)
+        # A column of J moves the residual: the angles that explain it are the negative.
+        delta, drop, k = -fit.coef, fit.drop, fit.dof
+        # An angle is the source's own when it lies in the row space of what is left.
+        u = np.where(fit.own, np.sqrt(np.maximum(np.diag(fit.cov), 0)), np.nan)
+        d = np.where(fit.own, delta, np.nan)
         out.append(SourceDisagreement(
             name, tuple(n for n in names if n != name), d, u, drop, k,
             float(special.chdtrc(k, drop)), chi2 - drop, dof - k))

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
+from align.fusion.projected import extra_fit, model_span
 from axisbase.units import ARCSEC
 
 
@@ -88,27 +89,17 @@ def pair_shift(r: np.ndarray, J: np.ndarray, rows: np.ndarray,
         return None
     A = np.zeros((len(r), len(names)))
     A[rows] = W @ C
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
-    Q = U[:, s > 1e-10 * s[0]]
-    B = A - Q @ (Q.T @ A)
-    Ub, sb, Vt = np.linalg.svd(B, full_matrices=False)
-    keep = sb > 1e-8 * max(float(np.abs(A).max()), 1e-300)
-    k = int(keep.sum())
-    if k == 0:
-        return None
-    Ub, sb, Vt = Ub[:, keep], sb[keep], Vt[keep]
-    proj = Ub.T @ r
     # The residual is data minus prediction: the shift that explains it is +.
-    delta = Vt.T @ (proj / sb)
-    cov = Vt.T @ np.diag(1 / sb**2) @ Vt
-    drop = float(proj @ proj)
-    # A pair's own shift only where its column lies in the row space of B (what the solve's
-    # parameters leave of it); the others are said by the test, not by a value.
-    own = np.sum(Vt**2, axis=0) > 0.99
+    fit = extra_fit(r, model_span(J), A, float(np.abs(A).max()))
+    if fit is None:
+        return None
+    # A pair's own shift only where its column lies in the row space of what the solve's
+    # parameters leave of it; the others are said by the test, not by a value.
     shifts = tuple((a, h, float(d), float(np.sqrt(max(c, 0.0))))
-                   for (a, h), d, c, o in zip(names, delta, np.diag(cov), own, strict=True)
+                   for (a, h), d, c, o in zip(names, fit.coef, np.diag(fit.cov), fit.own,
+                                              strict=True)
                    if o)
-    return PairShift(shifts, drop, k, float(special.chdtrc(k, drop)))
+    return PairShift(shifts, fit.drop, fit.dof, float(special.chdtrc(fit.dof, fit.drop)))
 
 
 def pair_shift_from_dict(d: Mapping) -> PairShift:
