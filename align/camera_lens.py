@@ -253,8 +253,10 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         why = ("no other mark agrees on a change of the lens" if told is None else
                f"a lens change that made them would bow the other marks "
                f"{told.separation:.1f} sigma, and they show {told.seen:+.2f} of that")
-        notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the calibrated "
-                     f"lens's and {why}: read as bent mark(s), the calibration kept")
+        if mob is None or mob.verdict != "undecided":
+            notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the "
+                         f"calibrated lens's and {why}: read as bent mark(s), the calibration "
+                         "kept")
         p_used = 1.0
         dlam = np.zeros_like(dlam)
         if mob is not None and mob.verdict == "undecided":
