@@ -114,14 +114,15 @@ class MoveOrBent:
     Attributes
     ----------
     verdict : str
-        ``"move"`` (the others do not rule out the move the bent marks alone call for),
+        (unit —) ``"move"`` (the others do not rule out the move the bent marks alone call for),
         ``"bent"`` (they rule out the move fitted to all the marks: they are straight) or
         ``"undecided"`` (they rule out neither reading: both stand).
     separation : float
         How far apart the two readings leave the other marks: the bow the move predicts for
         them, in sigma (whitened norm) — dimensionless.
     seen : float
-        What they show of it, as a fraction of ``separation`` (0: straight, 1: the move's).
+        What they show of it, as a fraction of ``separation`` (0: straight, 1: the move's) —
+        dimensionless.
     """
 
     verdict: str
