@@ -14,7 +14,9 @@ both here:
   over the two (:func:`pp_move`): a move the bows show is named and taken as a changed lens
   (the lens beyond the model undetermined, u widened, usually lens-limited), also where one
   mark's bow alone would pass for a bent mark if the move explains every mark
-  (:func:`move_explains`);
+  (:func:`move_explains`) and the other marks do not rule it out; where they rule out
+  neither the move nor the bend, both readings stand (:func:`move_or_bent`: the move's
+  change of each angle carried in u as ``camera_moved_or_bent``);
 * the declared stability of the principal point since calibration (``pp_stability_px``,
   :class:`align.lens_design.LensRanges`) carried in every angle of the model as the Type B
   term ``camera_pp_stability`` (:func:`stability_coupling`): a move within it is covered
