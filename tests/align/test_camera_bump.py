@@ -18,7 +18,7 @@ import pytest
 
 from align.camera_lens import camera_lens_cov
 from align.lens import LensRanges, LineGeometry
-from align.lens_bump import bonferroni, pp_move, stability_coupling
+from align.lens_bump import PP, PPMove, bonferroni, move_or_bent, pp_move, stability_coupling
 from align.lens_fallback import model_lever
 from align.lens_terms import check_camera
 from align.mark_stage import half_diagonal
@@ -121,6 +121,34 @@ def test_stability_term_covers_a_move_within_it():
 def test_bonferroni():
     assert bonferroni(0.01, 4e-4) == (0.02, 8e-4)
     assert bonferroni(0.7, 0.6) == (1.0, 1.0)
+
+
+def _mark(cols, z):
+    """A stand-in design of 4 whitened residuals: the principal point's columns ``cols``
+    (4 x 2) and residual ``z`` (the fit's sign: z = -G dlam)."""
+    from types import SimpleNamespace
+
+    G = np.zeros((4, 7))
+    G[:, list(PP)] = cols
+    return SimpleNamespace(G=G, z=np.asarray(z, float))
+
+
+@pytest.mark.parametrize(("own", "a", "frac", "verdict"), [
+    (10.0, 3.0, 0.5, "undecided"),  # the others 3 sigma apart, halfway: neither ruled out
+    (10.0, 10.0, 0.0, "bent"),      # they are straight where the move bows them 10 sigma
+    (10.0, 10.0, 1.0, "move"),      # they show the move's whole bow
+    (2.0, 10.0, 0.0, "move"),       # the bent mark's own move is within z of what they show
+])
+def test_move_or_bent_reads_what_the_other_marks_show(own, a, frac, verdict):
+    """Mark 0 read bent: its own move (along cy, ``own`` px) bows mark 2 ``own`` sigma and
+    mark 2 shows none of it; the move fitted to all (``a`` px along cx) bows mark 1 ``a``
+    sigma and it shows ``frac`` of that (z = 3.29 at alpha 1e-3)."""
+    e = np.eye(4)
+    cx, cy = np.outer(e[0], [1, 0]), np.outer(e[1], [0, 1])
+    marks = [_mark(np.outer(e[2], [0, 1]), -own * e[2]), _mark(cx, -frac * a * e[0]),
+             _mark(cy, np.zeros(4))]
+    got = move_or_bent(marks, PPMove((a, 0.0), (1.0, 1.0), 1e-9), 1e-3, (0,))
+    assert got.verdict == verdict, got
 
 
 def _frames(kind, n, lo, hi, extra=()):
