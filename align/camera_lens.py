@@ -13,7 +13,15 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
-from align.lens_bump import bonferroni, bump_note, move_explains, pp_move, stability_coupling
+from align.lens_bump import (
+    bonferroni,
+    bump_note,
+    move_explains,
+    move_or_bent,
+    moved_or_bent_note,
+    pp_move,
+    stability_coupling,
+)
 from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
 from align.lens_terms import (
     angle_coupling,
@@ -86,6 +94,10 @@ def camera_lens_cov(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray |
     C = J @ camera.cov @ J.T
     return 0.5 * (C + C.T)
 
+
+MOVED_OR_BENT = "camera_moved_or_bent"
+"""The u term of a principal point's move that one frame's marks cannot tell from bent marks
+(:func:`align.lens_bump.move_or_bent`'s ``"undecided"``)."""
 
 CAMERA_MODEL = "camera model"
 """The lens record's ``source`` when a camera model (``--camera``, ``[cameras.X] model``) is
@@ -223,9 +235,12 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         # The other marks depart together too: no bend explains that (align/lens_fallback.py).
         lone, told = (), None
     # A principal point's move that explains every mark's bow is the reading of a bump; bent
-    # marks are then no better an explanation of the bows (align/lens_bump.py).
-    moved = (len(ms) > 1 and p_pp < alpha
-             and move_explains(designs, move, lam_chk, ranges, alpha, lone))
+    # marks are then no better an explanation of the bows unless the other marks rule the
+    # move out; where they rule out neither, both readings stand (align/lens_bump.py).
+    mob = (move_or_bent(designs, move, alpha, lone)
+           if len(ms) > 1 and p_pp < alpha and move_explains(designs, move, lam_chk, ranges,
+                                                               alpha) else None)
+    moved = mob is not None and mob.verdict == "move"
     if moved:
         lone, told = (), None
     if lone:
@@ -238,10 +253,19 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
         why = ("no other mark agrees on a change of the lens" if told is None else
                f"a lens change that made them would bow the other marks "
                f"{told.separation:.1f} sigma, and they show {told.seen:+.2f} of that")
-        notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the calibrated "
-                     f"lens's and {why}: read as bent mark(s), the calibration kept")
+        if mob is None or mob.verdict != "undecided":
+            notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the "
+                         f"calibrated lens's and {why}: read as bent mark(s), the calibration "
+                         "kept")
         p_used = 1.0
         dlam = np.zeros_like(dlam)
+        if mob is not None and mob.verdict == "undecided":
+            # The other marks tell neither reading apart: the calibration's angles are given
+            # and each one's change under the move enters u as a Type B term (the truth
+            # anywhere between, uniform: / sqrt 3), as lens_or_bends' 'undecided' does.
+            notes.append(moved_or_bent_note(who, move, p_pp, lone, len(ms), mob))
+            for t, d in zip(terms_l, designs, strict=True):
+                t[MOVED_OR_BENT] = float(d.s @ move.dlam()) / np.sqrt(3)
     else:
         p_used = p
     if moved or (len(ms) > 1 and p_used >= alpha and p_pp < alpha and not lone):
@@ -337,6 +361,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                        "u_from": ("joint covariance" if camera.cov is not None else
                                   "parameters' u as if independent"),
                        "bent_lines": list(lone),
+                       "pp_move_or_bent": None if mob is None else mob.to_dict(),
                        "lens_or_bent": None if told is None else told.verdict,
                        "u_lens_vector": lam_u.tolist()}, max_u, tuple(terms_l),
                       bow_px=bow_bound(lines, zero if lam is None else lam, reach, R),

@@ -5,14 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from align.camera_lens import CAMERA_MODEL, CameraLens
+from align.camera_lens import CAMERA_MODEL, MOVED_OR_BENT, CameraLens
 from imaging import MarkMeasurement
 
 
 def lens_advice(lens: CameraLens, m: MarkMeasurement, worst: str = "") -> str:
     """What helps a lens-limited angle: without a camera model, calibrating the camera and
     giving the model; with one the marks depart from, what tells a bent mark from a changed
-    lens (``worst`` ``camera_or_bent``) or recalibrating; with one they agree with, the
+    lens (``worst`` ``camera_or_bent``; a moved principal point: ``camera_moved_or_bent``) or
+    recalibrating; with one they agree with, the
     model's own u is the limit (where the mark lies)."""
     # With a camera model given, "give it with --camera" is no advice: the user did.
     if lens.record.get("camera_model") == "departed from":
@@ -26,6 +27,13 @@ def lens_advice(lens: CameraLens, m: MarkMeasurement, worst: str = "") -> str:
                     "is read as bent and the calibration kept), or recalibrate (`align "
                     "camera`) if the lens may have changed")
         return "the marks say the lens is not its calibration: recalibrate (`align camera`)"
+    if worst == MOVED_OR_BENT:
+        # A principal point's move and a bent mark explain the frame alike: straight marks
+        # that a move would bow (far from the centre) tell them apart.
+        return ("the bows read as the principal point's move since calibration or as a bent "
+                "mark, and this frame cannot tell which (see the camera's note): image straight "
+                "marks far from the centre with it, or recalibrate (`align camera`) if the "
+                "camera may have been knocked")
     if lens.record.get("source") != CAMERA_MODEL:
         return f"calibrate the camera (`align camera`) and give it with {lens.model_as}"
     x, y = np.mean(m.points, axis=0)

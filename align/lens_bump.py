@@ -14,7 +14,9 @@ both here:
   over the two (:func:`pp_move`): a move the bows show is named and taken as a changed lens
   (the lens beyond the model undetermined, u widened, usually lens-limited), also where one
   mark's bow alone would pass for a bent mark if the move explains every mark
-  (:func:`move_explains`);
+  (:func:`move_explains`) and the other marks do not rule it out; where they rule out
+  neither the move nor the bend, both readings stand (:func:`move_or_bent`: the move's
+  change of each angle carried in u as ``camera_moved_or_bent``);
 * the declared stability of the principal point since calibration (``pp_stability_px``,
   :class:`align.lens_design.LensRanges`) carried in every angle of the model as the Type B
   term ``camera_pp_stability`` (:func:`stability_coupling`): a move within it is covered
@@ -92,41 +94,91 @@ def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) 
 
 
 def move_explains(designs: Sequence[_Design], move: PPMove, lam_u: np.ndarray,
-                  ranges: LensRanges, alpha: float, bent: Sequence[int] = ()) -> bool:
+                  ranges: LensRanges, alpha: float) -> bool:
     """Whether the ``move`` explains every mark's departure from the calibration: within the
     plausible range of the principal point (``ranges.pp_px`` per axis), and with it taken
     off, neither the marks together nor any one of them departs at ``alpha``
-    (:func:`align.lens_terms.camera_departure`). Where some marks read as ``bent`` (the
-    others straight), the move must also not be ruled out by the others: the move those
-    marks alone call for would bow the others by a separation their bows do not show (by
-    more than z sigma: then they are bent, as :func:`align.lens_terms.lens_or_bends` reads
-    a lens change). Else a bent-mark reading is no better an explanation than the move (user
-    15's camera moved 22 px: one mark's bow read as a bend beside a kept calibration, 1128″
-    off at ± 101″, ok)."""
+    (:func:`align.lens_terms.camera_departure`)."""
     shift = np.array(move.shift_px)
     if not np.all(np.abs(shift) <= ranges.pp_px):
         return False
     j = list(PP)
     rest = [replace(d, z=d.z + d.G[:, j] @ shift) for d in designs]
-    if not all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
-               for g in (rest, *([d] for d in rest))):
-        return False
-    others = [d for k, d in enumerate(designs) if k not in bent]
-    if not bent or not others:
-        return True
-    # the move the bent marks alone call for (least norm: one mark determines one
-    # combination of cx, cy)
-    Gb = np.vstack([designs[k].G[:, j] for k in bent])
-    zb = np.concatenate([designs[k].z for k in bent])
-    own = -np.linalg.lstsq(Gb, zb, rcond=1e-6)[0]
-    pred = [d.G[:, j] @ own for d in others]  # their bow, whitened
+    return all(camera_departure(g, lam_u, ranges, alpha)[0] >= alpha
+               for g in (rest, *([d] for d in rest)))
+
+
+@dataclass(frozen=True)
+class MoveOrBent:
+    """A move that explains every mark (:func:`move_explains`) against the reading of some
+    marks as bent beside a kept calibration, as the other (straight) marks tell them.
+
+    Attributes
+    ----------
+    verdict : str
+        (unit —) ``"move"`` (the others do not rule out the move the bent marks alone call for),
+        ``"bent"`` (they rule out the move fitted to all the marks: they are straight) or
+        ``"undecided"`` (they rule out neither reading: both stand).
+    separation : float
+        How far apart the two readings leave the other marks: the bow the move predicts for
+        them, in sigma (whitened norm) — dimensionless.
+    seen : float
+        What they show of it, as a fraction of ``separation`` (0: straight, 1: the move's) —
+        dimensionless.
+    """
+
+    verdict: str
+    separation: float
+    seen: float
+
+    def to_dict(self) -> dict:
+        return {"verdict": self.verdict, "separation": self.separation, "seen": self.seen}
+
+
+def _shown(designs: Sequence[_Design], others: Sequence[int], shift: np.ndarray
+           ) -> tuple[float, float]:
+    """The bow [sigma] the principal point's ``shift`` predicts for the ``others`` marks
+    (whitened norm) and their residual along it (the fit's sign: z = -G dlam)."""
+    j = list(PP)
+    pred = [designs[k].G[:, j] @ shift for k in others]
     sep = float(np.sqrt(sum(p @ p for p in pred)))
     if not np.isfinite(sep) or sep == 0:
-        return True
-    # what they show of it: their residual along the prediction (the fit's sign: z = -G dlam)
-    seen = -float(sum(d.z @ p for d, p in zip(others, pred, strict=True))) / sep
+        return 0.0, 0.0
+    return sep, -float(sum(designs[k].z @ p for k, p in zip(others, pred, strict=True))) / sep
+
+
+def move_or_bent(designs: Sequence[_Design], move: PPMove, alpha: float,
+                 bent: Sequence[int]) -> MoveOrBent:
+    """Where a ``move`` explains every mark (:func:`move_explains`) and marks ``bent`` read
+    as bent beside the kept calibration (the others straight), which reading the other
+    marks support.
+
+    * the move the bent marks alone call for (least norm: one mark determines one
+      combination of cx, cy) would bow the others by a separation; where they show it within
+      z sigma, the bent reading is no better an explanation: ``"move"``;
+    * else the move fitted to all the marks: where the others show its bow more than z sigma
+      short, they rule it out (they are straight): ``"bent"``; where they show it within
+      z sigma and no more than z sigma from straight, one frame's marks cannot tell the two
+      readings apart: ``"undecided"`` (user 15's camera moved 22-24 px: the others 4.0 /
+      3.6 sigma apart under the two readings, showing 0.72 / 0.90 of the move's bow; a
+      0.5 px bent mark beside two straight ones, user 13's lens: a 32-35 px move explains
+      it too, the others 2.6 / 1.4 sigma apart).
+    """
     z = float(-special.ndtri(alpha / 2))
-    return sep - seen <= z
+    others = [k for k in range(len(designs)) if k not in bent]
+    if not bent or not others:
+        return MoveOrBent("move", 0.0, float("nan"))
+    j = list(PP)
+    Gb = np.vstack([designs[k].G[:, j] for k in bent])
+    zb = np.concatenate([designs[k].z for k in bent])
+    sep, seen = _shown(designs, others, -np.linalg.lstsq(Gb, zb, rcond=1e-6)[0])
+    if sep == 0 or sep - seen <= z:
+        return MoveOrBent("move", sep, seen / sep if sep else float("nan"))
+    sep, seen = _shown(designs, others, np.array(move.shift_px))
+    if sep == 0:
+        return MoveOrBent("undecided", 0.0, float("nan"))
+    verdict = ("bent" if abs(sep - seen) > z else "move" if abs(seen) > z else "undecided")
+    return MoveOrBent(verdict, sep, seen / sep)
 
 
 def bonferroni(*ps: float) -> tuple[float, ...]:
@@ -168,3 +220,19 @@ def bump_note(who: str, move: PPMove, p: float, model_as: str = "--camera") -> s
             "re-seated or refocused lens)? The lens is taken as undetermined beyond the "
             "calibration, as without a model, and u carries it (camera_disagreement); "
             "recalibrate the camera (`align camera`)")
+
+
+def moved_or_bent_note(who: str, move: PPMove, p: float, bent: Sequence[int], n: int,
+                       told: MoveOrBent) -> str:
+    """The warning for a move that one frame's marks cannot tell from bent marks
+    (:func:`move_or_bent`'s ``"undecided"``; ``p`` after the multiplicity correction)."""
+    (dx, dy), (ux, uy) = move.shift_px, move.u_px
+    which = ", ".join(str(k) for k in bent)
+    return (f"{who}: cannot tell whether the principal point moved since calibration by "
+            f"({dx:+.1f}, {dy:+.1f}) ± ({ux:.1f}, {uy:.1f}) px (p = {p:.2g}; it explains every "
+            f"mark's bow) or line(s) {which} of {n} are bent beside the kept calibration: the "
+            f"other marks would show the move's bow {told.separation:.1f} sigma apart and "
+            f"show {told.seen:+.2f} of it; neither reading is trusted: the calibration's "
+            "angles are given, each one's change under the move carried in u "
+            "(camera_moved_or_bent); image straight marks far from the centre or recalibrate "
+            "the camera (`align camera`)")
