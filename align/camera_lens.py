@@ -14,6 +14,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 from align.camera_model_u import model_coupling
 from align.lens import LensRanges, LineGeometry, solve_lens
 from align.lens_bump import (
+    beyond_declared_note,
     bonferroni,
     bump_note,
     move_explains,
@@ -21,6 +22,7 @@ from align.lens_bump import (
     moved_or_bent_note,
     pp_move,
     stability_coupling,
+    weigh_declared,
 )
 from align.lens_fallback import carried, lens_beyond_model, model_lever, still_departs
 from align.lens_terms import (
@@ -240,6 +242,10 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     mob = (move_or_bent(designs, move, alpha, lone)
            if len(ms) > 1 and p_pp < alpha and move_explains(designs, move, lam_chk, ranges,
                                                                alpha) else None)
+    if mob is not None and lone:
+        # The user's declared stability of the principal point (not the default) rules out a
+        # move beyond it: the bent reading stands (docs/camera.md).
+        mob = weigh_declared(mob, move, ranges, alpha)
     moved = mob is not None and mob.verdict == "move"
     if moved:
         lone, told = (), None
@@ -254,16 +260,19 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                f"a lens change that made them would bow the other marks "
                f"{told.separation:.1f} sigma, and they show {told.seen:+.2f} of that")
         if mob is None or mob.verdict != "undecided":
+            also = ("" if mob is None or not mob.beyond_declared else
+                    beyond_declared_note(move, ranges.pp_stability_px))
             notes.append(f"{who}: the bow of line(s) {which} of {len(ms)} is not the "
-                         f"calibrated lens's and {why}: read as bent mark(s), the calibration "
-                         "kept")
+                         f"calibrated lens's and {why}{also}: read as bent mark(s), the "
+                         "calibration kept")
         p_used = 1.0
         dlam = np.zeros_like(dlam)
         if mob is not None and mob.verdict == "undecided":
             # The other marks tell neither reading apart: the calibration's angles are given
             # and each one's change under the move enters u as a Type B term (the truth
             # anywhere between, uniform: / sqrt 3), as lens_or_bends' 'undecided' does.
-            notes.append(moved_or_bent_note(who, move, p_pp, lone, len(ms), mob))
+            notes.append(moved_or_bent_note(who, move, p_pp, lone, len(ms), mob,
+                                            ranges.pp_stability_declared))
             for t, d in zip(terms_l, designs, strict=True):
                 t[MOVED_OR_BENT] = float(d.s @ move.dlam()) / np.sqrt(3)
     else:
@@ -358,6 +367,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     return CameraLens(lam, tuple(notes),
                       {**record, "p_marks_agree": p_raw, "pp_move": move.to_dict(),
                        "pp_stability_px": ranges.pp_stability_px,
+                       "pp_stability_declared": ranges.pp_stability_declared,
                        "u_from": ("joint covariance" if camera.cov is not None else
                                   "parameters' u as if independent"),
                        "bent_lines": list(lone),

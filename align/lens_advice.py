@@ -30,10 +30,13 @@ def lens_advice(lens: CameraLens, m: MarkMeasurement, worst: str = "") -> str:
     if worst == MOVED_OR_BENT:
         # A principal point's move and a bent mark explain the frame alike: straight marks
         # that a move would bow (far from the centre) tell them apart.
+        declare = ("" if lens.record.get("pp_stability_declared") else
+                   "declare the camera's principal-point stability (`--lens pp_stability_px=`"
+                   ", `[cameras.X] lens_pp_stability_px`), ")
         return ("the bows read as the principal point's move since calibration or as a bent "
-                "mark, and this frame cannot tell which (see the camera's note): image straight "
-                "marks far from the centre with it, or recalibrate (`align camera`) if the "
-                "camera may have been knocked")
+                "mark, and this frame cannot tell which (see the camera's note): "
+                f"{declare}image more marks in this frame (straight ones far from the centre), "
+                "or recalibrate (`align camera`) if the camera may have been knocked")
     if lens.record.get("source") != CAMERA_MODEL:
         return f"calibrate the camera (`align camera`) and give it with {lens.model_as}"
     x, y = np.mean(m.points, axis=0)

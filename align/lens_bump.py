@@ -58,11 +58,16 @@ class PPMove:
     p : float
         Its chi-square probability (2 dof) under that null, before any multiplicity
         correction — dimensionless.
+    p_bound : float
+        The same against the stability taken as a bound (each axis's variance s² rather than
+        s²/3: the move consistent with ``|d| <= s`` within the bows' and calibration's u),
+        what a declared stability is weighed by (:func:`weigh_declared`) — dimensionless.
     """
 
     shift_px: tuple[float, float]
     u_px: tuple[float, float]
     p: float
+    p_bound: float = 1.0
 
     def dlam(self) -> np.ndarray:
         """The move as a lens vector change (:data:`imaging.lens.PARAMS`)."""
@@ -71,7 +76,8 @@ class PPMove:
         return out
 
     def to_dict(self) -> dict:
-        return {"shift_px": list(self.shift_px), "u_px": list(self.u_px), "p": self.p}
+        return {"shift_px": list(self.shift_px), "u_px": list(self.u_px), "p": self.p,
+                "p_bound": self.p_bound}
 
 
 def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) -> PPMove:
@@ -85,12 +91,13 @@ def pp_move(designs: Sequence[_Design], lam_u: np.ndarray, stability_px: float) 
     if not np.all(np.isfinite(F)) or np.linalg.matrix_rank(F) < len(j):
         return PPMove((0.0, 0.0), (np.inf, np.inf), 1.0)
     shift = -np.linalg.solve(F, b)
-    C = (np.linalg.inv(F) + lens_cov(lam_u)[np.ix_(j, j)]
-         + np.eye(len(j)) * stability_px**2 / 3.0)
+    C0 = np.linalg.inv(F) + lens_cov(lam_u)[np.ix_(j, j)]
+    C = C0 + np.eye(len(j)) * stability_px**2 / 3.0
     stat = float(shift @ np.linalg.solve(C, shift))
+    bound = float(shift @ np.linalg.solve(C0 + np.eye(len(j)) * stability_px**2, shift))
     u = np.sqrt(np.diag(C))
     return PPMove((float(shift[0]), float(shift[1])), (float(u[0]), float(u[1])),
-                  float(special.chdtrc(len(j), stat)))
+                  float(special.chdtrc(len(j), stat)), float(special.chdtrc(len(j), bound)))
 
 
 def move_explains(designs: Sequence[_Design], move: PPMove, lam_u: np.ndarray,
@@ -125,14 +132,20 @@ class MoveOrBent:
     seen : float
         What they show of it, as a fraction of ``separation`` (0: straight, 1: the move's) —
         dimensionless.
+    beyond_declared : bool
+        ``"bent"`` because the move the frame would allow is beyond the user's declared
+        stability of the principal point (:func:`weigh_declared`), not because the other
+        marks rule it out.
     """
 
     verdict: str
     separation: float
     seen: float
+    beyond_declared: bool = False
 
     def to_dict(self) -> dict:
-        return {"verdict": self.verdict, "separation": self.separation, "seen": self.seen}
+        return {"verdict": self.verdict, "separation": self.separation, "seen": self.seen,
+                "beyond_declared": self.beyond_declared}
 
 
 def _shown(designs: Sequence[_Design], others: Sequence[int], shift: np.ndarray
@@ -181,6 +194,30 @@ def move_or_bent(designs: Sequence[_Design], move: PPMove, alpha: float,
     return MoveOrBent(verdict, sep, seen / sep)
 
 
+def weigh_declared(told: MoveOrBent, move: PPMove, ranges: LensRanges, alpha: float
+                   ) -> MoveOrBent:
+    """A move reading (``told``: :func:`move_or_bent`'s ``"move"`` or ``"undecided"``)
+    weighed against the principal point's stability the user declared
+    (``ranges.pp_stability_declared``; 0 included: "the camera was not knocked"): kept only
+    where the move is consistent with it (``move.p_bound`` >= ``alpha``: ``|d|`` against
+    ``sqrt(s² + u_d²)``), else the bent reading stands (``beyond_declared``). The default
+    stability has no measured basis and weighs nothing: the verdict is returned unchanged
+    (where the frame cannot separate the two, both stand)."""
+    if (told.verdict == "bent" or not ranges.pp_stability_declared
+            or move.p_bound >= alpha):
+        return told
+    return replace(told, verdict="bent", beyond_declared=True)
+
+
+def beyond_declared_note(move: PPMove, stability_px: float) -> str:
+    """What the bent-mark note adds where a move would also explain the marks but is beyond
+    the declared stability (:func:`weigh_declared`)."""
+    (dx, dy), (ux, uy) = move.shift_px, move.u_px
+    return (f"; a move of the principal point since calibration by ({dx:+.1f}, {dy:+.1f}) ± "
+            f"({ux:.1f}, {uy:.1f}) px would also explain the bows but is beyond the declared "
+            f"stability (pp_stability_px = {stability_px:g}, p = {move.p_bound:.2g})")
+
+
 def bonferroni(*ps: float) -> tuple[float, ...]:
     """The p-values of hypotheses tested together, each multiplied by their number (capped
     at 1): a family's false alarms at most alpha when each is taken below alpha."""
@@ -223,16 +260,22 @@ def bump_note(who: str, move: PPMove, p: float, model_as: str = "--camera") -> s
 
 
 def moved_or_bent_note(who: str, move: PPMove, p: float, bent: Sequence[int], n: int,
-                       told: MoveOrBent) -> str:
+                       told: MoveOrBent, declared: bool = False) -> str:
     """The warning for a move that one frame's marks cannot tell from bent marks
-    (:func:`move_or_bent`'s ``"undecided"``; ``p`` after the multiplicity correction)."""
+    (:func:`move_or_bent`'s ``"undecided"``; ``p`` after the multiplicity correction). With
+    the stability not ``declared`` it says what decides: declaring it, or more marks."""
     (dx, dy), (ux, uy) = move.shift_px, move.u_px
     which = ", ".join(str(k) for k in bent)
+    how = ("image more marks in this frame (straight ones far from the centre) or recalibrate "
+           "the camera (`align camera`)" if declared else
+           "to decide, declare the camera's principal-point stability (`--lens "
+           "pp_stability_px=`, `[cameras.X] lens_pp_stability_px`; the default 0.5 px was "
+           "not stated and decides nothing) or image more marks in this frame (straight ones "
+           "far from the centre)")
     return (f"{who}: cannot tell whether the principal point moved since calibration by "
             f"({dx:+.1f}, {dy:+.1f}) ± ({ux:.1f}, {uy:.1f}) px (p = {p:.2g}; it explains every "
             f"mark's bow) or line(s) {which} of {n} are bent beside the kept calibration: the "
             f"other marks would show the move's bow {told.separation:.1f} sigma apart and "
             f"show {told.seen:+.2f} of it; neither reading is trusted: the calibration's "
-            "angles are given, each one's change under the move carried in u "
-            "(camera_moved_or_bent); image straight marks far from the centre or recalibrate "
-            "the camera (`align camera`)")
+            f"angles are given, each one's change under the move carried in u "
+            f"(camera_moved_or_bent); {how}")

@@ -50,6 +50,13 @@ class LensRanges:
         calibration [px], per axis (uniform over +- the value; the lens knocked or
         re-seated on the sensor). Carried as the Type B term ``camera_pp_stability``
         (:mod:`align.lens_bump`, docs/camera.md "A camera bumped after calibration").
+    pp_stability_declared : bool
+        Whether the user stated ``pp_stability_px`` (``--lens pp_stability_px=``,
+        ``[cameras.X] lens_pp_stability_px``; 0 included: "the camera was not knocked")
+        rather than left the default, which has no measured basis. A declared stability
+        decides a principal point's move against bent marks where one frame cannot
+        (:func:`align.lens_bump.move_or_bent`); the default does not. Set from the keys
+        given (:meth:`of`), never from the value.
     """
 
     k1: float = 0.3
@@ -59,6 +66,13 @@ class LensRanges:
     pp_px: float = 40.0
     max_u_arcsec: float = 60.0
     pp_stability_px: float = PP_STABILITY_PX
+    pp_stability_declared: bool = False
+
+    @classmethod
+    def of(cls, vals: Mapping[str, float]) -> LensRanges:
+        """The ranges from the :data:`RANGE_KEYS` the user gave (the rest their defaults),
+        the principal point's stability marked declared where it is among them."""
+        return cls(**vals, pp_stability_declared="pp_stability_px" in vals)
 
     @classmethod
     def none(cls, max_u_arcsec: float = 60.0) -> LensRanges:
@@ -73,11 +87,13 @@ class LensRanges:
     def to_dict(self) -> dict:
         return {"k1": self.k1, "k2": self.k2, "p": self.p, "aspect": self.aspect,
                 "pp_px": self.pp_px, "max_u_arcsec": self.max_u_arcsec,
-                "pp_stability_px": self.pp_stability_px}
+                "pp_stability_px": self.pp_stability_px,
+                "pp_stability_declared": self.pp_stability_declared}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> LensRanges:
-        return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
+        return cls(**{k: float(v) for k, v in d.items() if k in RANGE_KEYS},
+                   pp_stability_declared=bool(d.get("pp_stability_declared", False)))
 
     @classmethod
     def parse(cls, text: str, where: str = "--lens", beside: str = "") -> LensRanges:
@@ -90,9 +106,9 @@ class LensRanges:
         for item in filter(None, (x.strip() for x in text.split(","))):
             key, eq, val = item.partition("=")
             key = key.strip()
-            if not eq or key not in cls.__dataclass_fields__:
+            if not eq or key not in RANGE_KEYS:
                 raise InputError(f"{where}: {item!r}: expected KEY=VALUE with KEY one of "
-                                 f"{', '.join(cls.__dataclass_fields__)}")
+                                 f"{', '.join(RANGE_KEYS)}")
             try:
                 v = float(val)
             except ValueError:
@@ -106,15 +122,19 @@ class LensRanges:
             raise InputError(f"{where} {','.join(ignored)} with {beside}: the camera model is "
                              f"the lens (its u is carried); {where} ranges are for a camera "
                              "without one (only max_u_arcsec and pp_stability_px apply beside it)")
-        return cls(**vals)
+        return cls.of(vals)
 
 
 def replaced_by_model(keys: Iterable[str]) -> list[str]:
     """Which of ``keys`` (LensRanges field names) a camera model makes meaningless: a model
     *is* the lens, so ranges of k1, k2, p, aspect, principal point given beside it would be
     silently ignored (``max_u_arcsec`` still applies: the bound on a lens-limited u)."""
-    return [k for k in keys if k in LensRanges.__dataclass_fields__ and k not in BESIDE_MODEL]
+    return [k for k in keys if k in RANGE_KEYS and k not in BESIDE_MODEL]
 
+
+RANGE_KEYS = ("k1", "k2", "p", "aspect", "pp_px", "max_u_arcsec", "pp_stability_px")
+"""The :class:`LensRanges` keys a user gives (``--lens KEY=…``, ``[cameras.X] lens_KEY``);
+``pp_stability_declared`` is not one: it records which of them were given."""
 
 BESIDE_MODEL = ("max_u_arcsec", "pp_stability_px")
 """The :class:`LensRanges` keys that apply beside a camera model."""

@@ -24,7 +24,7 @@ from align.errors import InputError
 from align.face_plan import check_face_plan
 from align.fusion.observations import REF, ROLL, TILT
 from align.lens import LensRanges
-from align.lens_design import replaced_by_model
+from align.lens_design import RANGE_KEYS, replaced_by_model
 from axisbase.header import OUTPUT_UNITS, parse_column_map
 from axisbase.provenance import sha256_file
 from axisbase.units import ARCSEC, DECLARED_TIME_UNITS, DEG
@@ -305,7 +305,7 @@ KEYS = {
                    "reference_offset_u_arcsec", "reverse_log", "steady_table", "columns",
                    "time_unit"},
     "cameras": {"model", "roll_arcsec", "roll_u_arcsec", "blur_after_pixels",
-                *(f"lens_{k}" for k in LensRanges.__dataclass_fields__)},
+                *(f"lens_{k}" for k in RANGE_KEYS)},
     "views": {"camera", "right", "up"},
     "images": {"file", "housing", "view", "nominal", "roi"},
     "platform": {"static", "table_tilt_arcsec", "poses", "columns", "units", "rate_hz",
@@ -476,7 +476,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         model = _file(c["model"], f"{w} model", unique=False) if "model" in c else None
         # The plausible lens when no model is given (Type B ranges, issue 18).
         lens = {k: _number(c[f"lens_{k}"], f"{w} lens_{k}", 0.0,
-                           None) for k in LensRanges.__dataclass_fields__ if f"lens_{k}" in c}
+                           None) for k in RANGE_KEYS if f"lens_{k}" in c}
         beside = replaced_by_model(lens) if model is not None else []
         if beside:  # silently ignored otherwise: the model is the lens
             raise InputError(f"{w} model = {c['model']!r} and "
@@ -492,7 +492,7 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         cameras[name] = Camera(name, model,
                                _number(c.get("roll_arcsec", 0.0), f"{w} roll_arcsec",
                                        -MAX_ROLL_ARCSEC, MAX_ROLL_ARCSEC) * ARCSEC,
-                               LensRanges(**lens) if lens else None, after,
+                               LensRanges.of(lens) if lens else None, after,
                                _u_arcsec(c, "roll_u_arcsec", w, MAX_ROLL_ARCSEC))
 
     views = {}
