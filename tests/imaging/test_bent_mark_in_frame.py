@@ -3,7 +3,12 @@ lens given): alone in its frame it cannot be told from a lens that is not its ca
 (not ok, both readings named, and the advice says what tells them apart, not "give it with
 --camera"); with two straight marks elsewhere in the same frame it is read as a bent mark,
 the calibration kept: ok, each angle within 3 u. Renderer: user 13's (the real chessboard
-lens, each sensor sample mapped back through it)."""
+lens, each sensor sample mapped back through it).
+
+Beside the straight marks, a principal point's move of 32-35 px explains the frame as well in
+two of three seeds: with the camera's stability declared (``pp_stability_px``, 0 or 0.5 px)
+the move is beyond it and the bend is read; with it not declared both readings stand (not ok,
+u covering both) where the straight marks cannot separate them (align/lens_bump.py)."""
 
 from __future__ import annotations
 
@@ -12,9 +17,11 @@ import functools
 import numpy as np
 import pytest
 
+from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import CameraModel
 
+UNDECIDED = "cannot tell whether the principal point moved"
 cv2 = pytest.importorskip("cv2")
 ui = pytest.importorskip("tests.imaging.user13_inputs")
 pytestmark = [pytest.mark.slow,
@@ -52,16 +59,55 @@ def _z(r, angles):
     return err / (r.angle_u_rad * 180 / np.pi)
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_bent_mark_with_straight_marks_is_read_bent(seed):
-    img, angles = _frame(seed, True)
-    found = [r for r in measure_image(img, "f.png", camera=_camera()) if r.found]
-    assert len(found) == 3
+def _bent_read(found, angles):
+    """The bent reading: every angle ok within 3 u, one mark named bent."""
     for r in found:
         assert not r.lens_limited, r.notes
-        assert abs(_z(r, angles)) <= 3, (seed, _z(r, angles))
+        assert abs(_z(r, angles)) <= 3, _z(r, angles)
     assert sum(any(n.endswith("the mark is bent") or ": the mark is bent" in n for n in r.notes)
                for r in found) == 1
+
+
+@pytest.mark.parametrize("stability", ["0", "0.5"])
+@pytest.mark.parametrize("seed", range(3))
+def test_bent_mark_with_straight_marks_is_read_bent_at_a_declared_stability(seed, stability):
+    """The camera declared unmoved (0) or stable to 0.5 px: a 32-35 px move that would also
+    explain the bows (seeds 0, 1) is beyond it, so the bent reading stands (named so)."""
+    img, angles = _frame(seed, True)
+    rg = LensRanges.parse(f"pp_stability_px={stability}", beside="--camera")
+    found = [r for r in measure_image(img, "f.png", camera=_camera(), ranges=rg) if r.found]
+    assert len(found) == 3
+    _bent_read(found, angles)
+    assert not any(UNDECIDED in n for r in found for n in r.notes)
+
+
+def test_bent_mark_with_straight_marks_at_the_default_stability():
+    """The stability not declared (the default 0.5 px decides nothing): where the straight
+    marks cannot separate the bend from a move that explains every mark, both readings are
+    named, with what decides, and every angle is lens-limited (not ok) with a u that covers
+    both (the truth, the bent reading, within 3 u; the move's change of each angle in u);
+    where they can, the bent reading and ok. Over the seeds, both cases occur (the move's
+    bow in the other marks 2.6 / 1.4 sigma apart in seeds 0, 1)."""
+    seen = set()
+    for seed in range(3):
+        img, angles = _frame(seed, True)
+        found = [r for r in measure_image(img, "f.png", camera=_camera()) if r.found]
+        assert len(found) == 3
+        notes = [n for r in found for n in r.notes]
+        if any(UNDECIDED in n for n in notes):
+            seen.add("undecided")
+            assert any("are bent beside the kept calibration" in n and "declare the camera's "
+                       "principal-point stability (`--lens pp_stability_px=`" in n
+                       for n in notes), notes
+            for r in found:
+                assert r.lens_limited, (seed, r.notes)
+                assert abs(_z(r, angles)) <= 3, (seed, _z(r, angles))
+                assert any("camera_moved_or_bent" in n and "pp_stability_px" in n
+                           for n in r.notes), r.notes
+        else:
+            seen.add("bent")
+            _bent_read(found, angles)
+    assert seen == {"undecided", "bent"}, seen
 
 
 @pytest.mark.parametrize("seed", range(2))
