@@ -18,7 +18,16 @@ import pytest
 
 from align.camera_lens import camera_lens_cov
 from align.lens import LensRanges, LineGeometry
-from align.lens_bump import PP, PPMove, bonferroni, move_or_bent, pp_move, stability_coupling
+from align.lens_bump import (
+    PP,
+    MoveOrBent,
+    PPMove,
+    bonferroni,
+    move_or_bent,
+    pp_move,
+    stability_coupling,
+    weigh_declared,
+)
 from align.lens_fallback import model_lever
 from align.lens_terms import check_camera
 from align.mark_stage import half_diagonal
@@ -149,6 +158,39 @@ def test_move_or_bent_reads_what_the_other_marks_show(own, a, frac, verdict):
              _mark(cy, np.zeros(4))]
     got = move_or_bent(marks, PPMove((a, 0.0), (1.0, 1.0), 1e-9), 1e-3, (0,))
     assert got.verdict == verdict, got
+
+
+def test_declared_stability_is_the_keys_given_not_the_value():
+    """Declared is whether the user gave ``pp_stability_px`` (0 and the default's own 0.5
+    included), kept through the JSON; the flag itself is no key a user gives."""
+    from axisbase.errors import InputError
+
+    for text, declared in [("pp_stability_px=0.5", True), ("pp_stability_px=0", True),
+                           ("max_u_arcsec=30", False), ("", False)]:
+        rg = LensRanges.parse(text, beside="--camera")
+        assert rg.pp_stability_declared is declared, text
+        assert LensRanges.from_dict(rg.to_dict()) == rg
+    assert LensRanges().pp_stability_declared is False
+    with pytest.raises(InputError):
+        LensRanges.parse("pp_stability_declared=1")
+
+
+def test_a_declared_stability_weighs_the_move():
+    """The 12 px move under six marks (d ± ~1 px) is beyond a declared 0.5 px (p_bound far
+    below alpha) and consistent with a declared 12 px (|d| within s per axis: p_bound above
+    alpha); weighed, an undecided reading turns bent only where declared and beyond."""
+    model, true = _camera(), _camera(9.0, -8.0)
+    lines = _lines(model, true, np.random.default_rng(0))
+    small, large = _move(lines, model, 0.5), _move(lines, model, 12.0)
+    assert small.p_bound < 1e-6 and large.p_bound > 1e-3, (small, large)
+    told = MoveOrBent("undecided", 3.0, 0.5)
+    declared = LensRanges(pp_stability_px=0.5, pp_stability_declared=True)
+    assert weigh_declared(told, small, declared, 1e-3).verdict == "bent"
+    assert weigh_declared(told, small, declared, 1e-3).beyond_declared
+    assert weigh_declared(told, small, LensRanges(), 1e-3) == told  # the default decides nothing
+    big = LensRanges(pp_stability_px=12.0, pp_stability_declared=True)
+    assert weigh_declared(told, large, big, 1e-3) == told
+    assert weigh_declared(MoveOrBent("move", 3.0, 1.0), small, declared, 1e-3).verdict == "bent"
 
 
 def _frames(kind, n, lo, hi, extra=()):
