@@ -133,7 +133,7 @@ class MoveOrBent:
         What they show of it, as a fraction of ``separation`` (0: straight, 1: the move's) —
         dimensionless.
     beyond_declared : bool
-        ``"bent"`` because the move the frame would allow is beyond the user's declared
+        (unit —) ``"bent"`` because the move the frame would allow is beyond the user's declared
         stability of the principal point (:func:`weigh_declared`), not because the other
         marks rule it out.
     """

@@ -51,7 +51,7 @@ class LensRanges:
         re-seated on the sensor). Carried as the Type B term ``camera_pp_stability``
         (:mod:`align.lens_bump`, docs/camera.md "A camera bumped after calibration").
     pp_stability_declared : bool
-        Whether the user stated ``pp_stability_px`` (``--lens pp_stability_px=``,
+        (unit —) Whether the user stated ``pp_stability_px`` (``--lens pp_stability_px=``,
         ``[cameras.X] lens_pp_stability_px``; 0 included: "the camera was not knocked")
         rather than left the default, which has no measured basis. A declared stability
         decides a principal point's move against bent marks where one frame cannot
