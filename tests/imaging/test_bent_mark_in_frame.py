@@ -102,6 +102,9 @@ def test_bent_mark_with_straight_marks_at_the_default_stability():
             for r in found:
                 assert r.lens_limited, (seed, r.notes)
                 assert abs(_z(r, angles)) <= 3, (seed, _z(r, angles))
+                # the move's reading of this angle (its change, the term x sqrt 3) within 3 u
+                move = np.sqrt(3) * abs(r.u_terms["camera_moved_or_bent"])
+                assert 0 < move <= 3 * r.angle_u_rad, (seed, move, r.angle_u_rad)
                 assert any("camera_moved_or_bent" in n and "pp_stability_px" in n
                            for n in r.notes), r.notes
         else:
