@@ -83,8 +83,9 @@ def band_mask(shape: tuple[int, int], bands: Sequence[np.ndarray]) -> np.ndarray
     an image of ``shape``: built once per frame and shared by the background tests (each
     full-frame mask costs a 5 MP pass)."""
     mask = np.zeros(shape, bool)
+    flat = mask.reshape(-1)  # (a view: indexing it costs ~1/6 of the flat iterator's)
     for idx in bands:
-        mask.flat[idx] = True
+        flat[idx] = True
     return mask
 
 

@@ -47,7 +47,11 @@ def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: f
     yc, xc = (yi, xi) if whole else (np.clip(yi, 0, h - 1), np.clip(xi, 0, w - 1))
     # One flat index instead of a (row, column) pair: numpy's 2-D fancy indexing costs ~2x.
     vals = image.ravel()[yc * w + xc] if image.flags.c_contiguous else image[yc, xc]
-    # Off the image and clipped pixels (a padded border, a saturated patch) say nothing.
+    # Off the image and clipped pixels (a padded border, a saturated patch) say nothing;
+    # none there (the usual case) as two reductions tell, without the masks' four passes.
+    if (whole and vals.size and vals.dtype.kind == "f" and vals.min() > 0
+            and vals.max() < top):  # (NaN fails both; an integer image gets floats below)
+        return vals, e, t
     vals = np.where(inside & (vals > 0) & (vals < top), vals, np.nan)
     return vals, e, t
 
@@ -83,15 +87,17 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _median_axis0(vals: np.ndarray) -> np.ndarray:
     """np.median(vals, axis=0) of finite values, the same numbers. When every value is a
     whole number in 0..65535 (an image read from an integer file, not rescaled) each column
-    is sorted as 16-bit integers: ~2 ms, not ~4, for a 5 MP mark's 2000 profiles across it
+    is selected as 16-bit integers: ~1.2 ms, not ~4, for a 5 MP mark's 2000 profiles across it
     (the middle value, or the mean of the middle two in float64, as np.median's)."""
     if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
         q = vals.T.astype(np.uint16)
         if np.array_equal(q, vals.T):
-            q.sort(axis=1)
+            # The middle rank by selection, not a sort (~0.7x its time): the m smallest are
+            # left before rank m, so the (m-1)-th is their largest.
             m = q.shape[1] // 2
+            q.partition(m, axis=1)
             return (q[:, m].astype(float) if q.shape[1] % 2
-                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
+                    else (q[:, :m].max(axis=1).astype(float) + q[:, m]) / 2)
     return np.median(vals, axis=0)
 
 

@@ -33,7 +33,14 @@ from imaging.confirm import confirm_candidates
 from imaging.crossing import split_two_lines
 from imaging.errors import ImageInputError
 from imaging.io import full_scale
-from imaging.ridge import central, odd_pad, pixel_noise, ridge_gain, ridge_response
+from imaging.ridge import (
+    central,
+    median_abs_deviation,
+    odd_pad,
+    pixel_noise,
+    ridge_gain,
+    ridge_response,
+)
 
 # Re-exported: the package's modules import a candidate's geometry from here as well.
 __all__ = [
@@ -243,7 +250,7 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
         # the response (which clutter dominates in a busy scene); the MAD is the fallback
         # and a floor relative to the strongest response keeps noise-free images workable.
         sub = r[::3, ::3]  # the spread needs no more than a ninth of the pixels
-        mad = min(float(np.median(np.abs(sub - np.median(sub)))) * 1.4826,
+        mad = min(median_abs_deviation(sub) * 1.4826,
                   noise * ridge_gain(sigma))
         mad = max(mad, 1e-3 * float(np.abs(r).max()))
         if mad <= 0:

@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.ndimage import median_filter
@@ -142,8 +143,12 @@ def _column_median(a: np.ndarray, axis: int = 0) -> np.ndarray:
     quantised like it (the median of 8-bit data moves in steps of 1/2 DN, and a pattern of
     1 DN was lost in them)."""
     if axis == 0:  # sorted as rows: numpy sorts a contiguous row ~2x faster than a column
-        a = np.ascontiguousarray(a.T)
-    n = np.count_nonzero(np.isfinite(a), axis=1)
+        # (OpenCV's transpose is cache-blocked: ~3x numpy's copy of the transposed view)
+        a = cv2.transpose(a) if a.dtype == np.float32 and a.size else np.ascontiguousarray(a.T)
+    # Each row's finite count by OpenCV's row sum of the mask's bytes: np.count_nonzero
+    # along an axis casts the booleans to intp and sums them (~10x the time).
+    n = (cv2.reduce(np.isfinite(a).view(np.uint8), 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
+         .ravel().astype(np.intp) if a.size else np.zeros(a.shape[0], np.intp))
     rows, m = a.shape
     if m < MIN_ROWS or rows == 0:
         return np.full(rows, np.nan)

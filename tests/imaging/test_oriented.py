@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import optimize
 
+import imaging.oriented as oriented
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import detect_lines, measure_frame
@@ -192,3 +193,24 @@ def test_clean_backgrounds_are_rarely_flagged():
         _, found = find_oriented(im, band_mask(im.shape, bands), top)
         flags += found.found
     assert flags <= 3, flags
+
+
+def test_the_float32_square_gives_the_float64_answers(monkeypatch):
+    """The test on a float64 frame of whole pixels (any image read from an integer file) runs
+    on a float32 copy of its square when the square is cut from a wider frame: the same
+    finding and the same frame back, to the bit, as on the float64 square itself (shallow
+    stripes found and divided out; a clean frame)."""
+    for sample in (_striped(4, 30.0, 10.0, 0.04, 25.0, 1.0), _striped(5, 30.0, 10.0, 0.0, 25.0)):
+        im = np.asarray(sample.image, float)
+        wide = np.hstack([im, im[:, ::-1]])  # 1280 px wide: the 1024 px square is a view
+        assert np.array_equal(wide, np.round(wide))
+        assert oriented._exact_float32(wide[:, 128:1152], 65535.0).dtype == np.float32
+        fast = find_oriented(wide, None, 65535.0)
+        with monkeypatch.context() as m:
+            m.setattr(oriented, "_exact_float32", lambda raw, full_scale: raw)
+            slow = find_oriented(wide, None, 65535.0)
+        assert fast[1] == slow[1] and np.array_equal(fast[0], slow[0])
+    assert fast[1].found is False and slow[1].waves == ()
+    # Fractional pixels are not held by float32: the square is tested as it is.
+    frac = (wide + 0.3)[:64, :64]
+    assert oriented._exact_float32(frac, 65535.0) is frac
