@@ -76,11 +76,26 @@ def _with_real_correlations(model: CameraModel, real: CameraModel) -> CameraMode
     return replace(model, cov=cov)
 
 
+def _stated_draw(model: CameraModel, g: np.random.Generator) -> np.ndarray:
+    """A draw from what a model without ``cov`` states: each of fx, fy / fx (``aspect``), cx,
+    cy, k1, k2, p1, p2 from its own u, independently."""
+    t0, u = _theta(model), model.u
+    e = np.zeros(len(INTRINSICS))
+    e[0] = g.normal(0, u["fx"])
+    e[1] = (t0[0] + e[0]) * (t0[1] / t0[0] + g.normal(0, u["aspect"])) - t0[1]
+    for j, k in enumerate(INTRINSICS[2:8], start=2):
+        e[j] = g.normal(0, u[k])
+    return e
+
+
 def _measure(model: CameraModel, marks, seeds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per angle z and ok; per seed the lens check's p (``p_marks_agree``)."""
+    """Per angle z and ok; per seed the lens check's p (``p_marks_agree``). The truth: the
+    model plus a draw from its ``cov``, or from its u's when it has none."""
     z, ok, p = [], [], []
     for seed in seeds:
-        t = _theta(model) + _full_draw(model.cov, np.random.default_rng([seed, 354]))
+        g = np.random.default_rng([seed, 354])
+        t = _theta(model) + (_stated_draw(model, g) if model.cov is None
+                             else _full_draw(model.cov, g))
         res = [r for r in measure_image(_render(marks, _lens(t), seed=seed).image, "cam.png",
                                         camera=model) if r.found]
         assert len(res) == len(marks)
@@ -133,6 +148,24 @@ def test_bowed_marks_lens_drawn_from_a_full_covariance_is_covered(real_model):
     cam, marks = _bowed_by_the_lens()
     model = _with_real_correlations(_camera_model(cam), real_model)
     _assert_covered(*_measure(model, marks, SEEDS), "bowed marks, cov draws")
+
+
+@pytest.mark.slow  # ~7 s: 20 lenses drawn, 2 marks each
+@pytest.mark.xfail(strict=True, reason=(
+    "a model without cov (a file before camera format 4, or written elsewhere) states its "
+    "u's as independent, and a lens drawn from them is not covered (20 seeds): 40 of 40 "
+    "angles ok, RMS z 1.86 (band 0.65-1.38), max |z| 5.2, 3 ok beyond 3 u (exact2's run "
+    "of the same: 7 of 34): the lens vector's derivatives are taken at no distortion, where "
+    "cx, cy (and fx, not in the vector) turn no angle, so their u's are dropped "
+    "(align/camera_lens.py's cov-less branch, camera_coupling). Propagating the u's through "
+    "align.camera_model_u.model_coupling at the model's own distortion (a diagonal cov, "
+    "fx/fy from 'aspect') passes it: 20 ok, RMS z 0.81, max |z| 2.2, but fails 3 tests of "
+    "test_camera_lens.py whose marks it makes lens-limited through such a model"))
+def test_a_model_without_cov_covers_lenses_drawn_from_its_u():
+    """The bowed-marks lens and the test's camera model without ``cov``: the truth drawn
+    from the u's it states (as if independent: all it says), measured with it."""
+    cam, marks = _bowed_by_the_lens()
+    _assert_covered(*_measure(_camera_model(cam), marks, SEEDS), "bowed marks, no cov, u draws")
 
 
 @pytest.mark.slow  # ~2 s: the real views calibrated
