@@ -111,7 +111,8 @@ def _assert_covered(z: np.ndarray, ok: np.ndarray, p: np.ndarray, label: str) ->
     """The model's u covers the lenses its covariance describes: few ok angles beyond 3 u
     (a covering u leaves 0.27 % of them there: at most the binomial count exceeded with
     ALPHA), the ok angles' RMS z within the chi2 band of their count (one per calibration
-    draw counted, as a draw's marks share its error), the lens check's p uniform (KS)."""
+    draw counted, as a draw's marks share its error), the lens check's p uniform (KS) and
+    below 1e-3 no more often than a level-1e-3 test's binomial count allows."""
     zo = z[ok]
     n = len(zo)
     beyond = int(np.sum(np.abs(zo) > 3))
@@ -119,14 +120,16 @@ def _assert_covered(z: np.ndarray, ok: np.ndarray, p: np.ndarray, label: str) ->
     lo, hi = np.sqrt(stats.chi2.ppf([ALPHA / 2, 1 - ALPHA / 2], n) / n)
     rms = float(np.sqrt(np.mean(zo**2)))
     ks = stats.kstest(p, "uniform").pvalue
+    alarms, alarms_allowed = int(np.sum(p < 1e-3)), int(stats.binom.isf(ALPHA, len(p), 1e-3))
     print(f"\n{label}: {len(z)} angles, {n} ok, RMS z {np.sqrt(np.mean(z**2)):.2f} "
           f"(ok {rms:.2f}, band {lo:.2f}-{hi:.2f}), max |z| {np.abs(z).max():.2f}, "
           f"ok beyond 3 u {beyond} (allowed {allowed}), lens check p < 1e-3 in "
-          f"{int(np.sum(p < 1e-3))} of {len(p)}, KS p {ks:.2g}")
+          f"{alarms} of {len(p)} (allowed {alarms_allowed}), KS p {ks:.2g}")
     assert n >= len(SEEDS) // 2  # the test has ok angles to judge
     assert beyond <= allowed
     assert lo <= rms <= hi
     assert ks > ALPHA
+    assert alarms <= alarms_allowed
 
 
 @pytest.mark.slow  # ~12 s: the real views calibrated, 20 lenses drawn, 2 marks each
@@ -140,14 +143,17 @@ def test_real_chessboard_lens_drawn_from_its_covariance_is_covered(real_model):
     _assert_covered(*_measure(real_model, marks, SEEDS), "real chessboard lens, cov draws")
 
 
-@pytest.mark.slow  # ~12 s: the real views calibrated, 20 lenses drawn, 2 marks each
+@pytest.mark.slow  # ~25 s: the real views calibrated, 60 lenses drawn, 2 marks each
 def test_bowed_marks_lens_drawn_from_a_full_covariance_is_covered(real_model):
     """The issue's bowed-marks lens (tests/align/test_lens.py, two long marks near the
-    frame's edge) with the test's u and the real calibration's correlations: 0 of 40 angles
-    beyond 3 u, RMS z of the ok ones 0.94, lens check KS p 0.04."""
+    frame's edge) with the test's u and the real calibration's correlations. 60 draws (the
+    lens check's false alarms need them: 20 showed 1). Over 100: 0 of 200 angles beyond
+    3 u, RMS z of the 100 ok ones 1.02, the lens check's p uniform (KS p 0.78, none below
+    1e-3; before its covariance carried the undetermined parameters' error, 10 of 100 below
+    1e-3, KS p 4e-13, and 10 more angles lens-limited by the needless fallback)."""
     cam, marks = _bowed_by_the_lens()
     model = _with_real_correlations(_camera_model(cam), real_model)
-    _assert_covered(*_measure(model, marks, SEEDS), "bowed marks, cov draws")
+    _assert_covered(*_measure(model, marks, range(60)), "bowed marks, cov draws")
 
 
 @pytest.mark.slow  # ~7 s: 20 lenses drawn, 2 marks each
