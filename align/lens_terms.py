@@ -165,7 +165,14 @@ def camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: Lens
         return 1.0, dlam
     D = np.ix_(det, det)
     dlam[det] = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
+    # The correction read for the determined parameters also carries the calibration's
+    # error in the others, through the marks' bows they share (F's off-diagonal block):
+    # dlam_D = e_D + F_DD^-1 F_DU e_U.
+    A = np.zeros((len(det), P))
+    A[:, det] = np.eye(len(det))
+    und = [j for j in range(P) if j not in det]
+    A[:, und] = np.linalg.solve(F[D], F[np.ix_(det, und)])
+    C = np.linalg.inv(F[D]) + A @ lens_cov(lam_u) @ A.T
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
     return float(special.chdtrc(len(det), stat)), dlam
 
