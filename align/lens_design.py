@@ -5,7 +5,7 @@ angle), cached per lens vector. See :mod:`align.lens` for how they are used."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -142,6 +142,8 @@ class _Design:
     z: np.ndarray            # whitened residual of the straight-line fit
     w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
     s_pp_var: np.ndarray | None = None  # var of s over the principal point's range [rad^2]
+    q: np.ndarray | None = field(default=None, repr=False, compare=False)  # undistorted [px]
+    dq: np.ndarray | None = field(default=None, repr=False, compare=False)  # dq/dlam (N,2,P)
 
     @property
     def bow_z(self) -> float:
@@ -149,27 +151,61 @@ class _Design:
         return float(self.w @ self.z)
 
 
+def _whiten(line: LineGeometry, X: np.ndarray) -> np.ndarray:
+    """Columns ``X`` (one row per centre) whitened by the centres' noise."""
+    X = X / line.sigma[:, None]
+    return X if line.chol is None else solve_triangular(line.chol, X, lower=True,
+                                                          check_finite=False)
+
+
+def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray | None = None,
+                 near: tuple[float, float] | None = None
+                 ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The straight line through the undistorted centres ``q`` [px] and, whitened by the
+    centres' noise, its columns (slope, offset), the perpendicular displacement ``jac``
+    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, offset, Jw, Ew, bw, rw).
+    ``near``: the line (angle, offset) of centres a rounding's move from ``q``: one
+    Gauss-Newton step from it (exact to first order in the move) in place of the fit."""
+    if near is None:
+        angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
+    else:
+        qw = _whiten(line, np.column_stack([q, np.ones(len(q))]))
+        u, n = line_frame(near[0])
+        step = np.linalg.lstsq(np.column_stack([qw[:, :2] @ u, -qw[:, 2]]),
+                               -(qw[:, :2] @ n - near[1] * qw[:, 2]), rcond=None)[0]
+        angle, offset = near[0] + step[0], near[1] + step[1]
+    u, n = line_frame(angle)
+    E = (np.zeros((len(q), 0)) if jac is None  # (perpendicular displacement per unit)
+         else jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1])
+    J = np.column_stack([q @ u, -np.ones(len(q))])
+    r = q @ n - offset
+    t = q @ u
+    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
+    X = _whiten(line, np.column_stack([J, E, bow, r]))
+    return angle, offset, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+
+
+def _bow_z(line: LineGeometry, q: np.ndarray, near: tuple[float, float] | None = None
+           ) -> tuple[float, tuple[float, float]]:
+    """:attr:`_Design.bow_z` of the centres ``q`` [px] (the line refitted through them, or
+    stepped from ``near``: :func:`_fit_columns`), and that line (angle, offset)."""
+    angle, offset, Jw, _, bw, rw = _fit_columns(line, q, near=near)
+    w = bw - Jw @ np.linalg.lstsq(Jw, bw, rcond=None)[0]
+    return float(w @ rw) / max(float(np.linalg.norm(w)), 1e-300), (angle, offset)
+
+
 def _design(line: LineGeometry, lam: np.ndarray, scale: float,
             only: Sequence[int] | None = None) -> _Design:
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
-    angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
-    u, n = line_frame(angle)
-    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
-    J = np.column_stack([q @ u, -np.ones(len(q))])
-    r = q @ n - offset
-    t = q @ u
-    bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
-    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
-    if line.chol is not None:
-        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
-    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    angle, _, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
     coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
     G = Ew - Jw @ coef[:, :-1]
     w = bw - Jw @ coef[:, -1]
     # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
-    return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
+    return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300), q=q,
+                   dq=jac)
 
 
 class _DesignCache:
@@ -206,3 +242,22 @@ class _DesignCache:
     def all(self, lam: np.ndarray) -> list[_Design]:
         """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
         return [self.one(k, lam) for k in range(len(self.lines))]
+
+    def bow_jacobian(self, lam: np.ndarray, cols: Sequence[int]) -> np.ndarray:
+        """d :attr:`_Design.bow_z` / d lam[cols] of every line at ``lam`` [per unit], shape
+        (lines, cols): each line's centres moved by their first-order displacement (the
+        design's ``dq``, exact to first order: along the mark too, which bends the bow's
+        own column; ``G`` alone misses it, 15 % of a bowed line's slope) and the line
+        stepped there, a forward difference of 1e-4 px. No undistortion: the designs at
+        ``lam`` hold it.
+        :class:`LensFolds` where the lens folds any line."""
+        out = np.zeros((len(self.lines), len(cols)))
+        for k, d in enumerate(self.all(lam)):
+            line = self.lines[k]
+            base, fit = _bow_z(line, d.q)
+            for i, j in enumerate(cols):
+                move = np.max(np.abs(d.dq[:, :, j]))
+                if move > 0:
+                    h = 1e-4 / move
+                    out[k, i] = (_bow_z(line, d.q + h * d.dq[:, :, j], fit)[0] - base) / h
+        return out
