@@ -158,40 +158,47 @@ def _whiten(line: LineGeometry, X: np.ndarray) -> np.ndarray:
                                                           check_finite=False)
 
 
-def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray | None = None,
-                 near: tuple[float, float] | None = None
-                 ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray
+                 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The straight line through the undistorted centres ``q`` [px] and, whitened by the
     centres' noise, its columns (slope, offset), the perpendicular displacement ``jac``
-    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, offset, Jw, Ew, bw, rw).
-    ``near``: the line (angle, offset) of centres a rounding's move from ``q``: one
-    Gauss-Newton step from it (exact to first order in the move) in place of the fit."""
-    if near is None:
-        angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
-    else:
-        qw = _whiten(line, np.column_stack([q, np.ones(len(q))]))
-        u, n = line_frame(near[0])
-        step = np.linalg.lstsq(np.column_stack([qw[:, :2] @ u, -qw[:, 2]]),
-                               -(qw[:, :2] @ n - near[1] * qw[:, 2]), rcond=None)[0]
-        angle, offset = near[0] + step[0], near[1] + step[1]
+    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, Jw, Ew, bw, rw)."""
+    angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
     u, n = line_frame(angle)
-    E = (np.zeros((len(q), 0)) if jac is None  # (perpendicular displacement per unit)
-         else jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1])
+    E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
     J = np.column_stack([q @ u, -np.ones(len(q))])
     r = q @ n - offset
     t = q @ u
     bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
     X = _whiten(line, np.column_stack([J, E, bow, r]))
-    return angle, offset, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    return angle, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
 
 
-def _bow_z(line: LineGeometry, q: np.ndarray, near: tuple[float, float] | None = None
-           ) -> tuple[float, tuple[float, float]]:
-    """:attr:`_Design.bow_z` of the centres ``q`` [px] (the line refitted through them, or
-    stepped from ``near``: :func:`_fit_columns`), and that line (angle, offset)."""
-    angle, offset, Jw, _, bw, rw = _fit_columns(line, q, near=near)
-    w = bw - Jw @ np.linalg.lstsq(Jw, bw, rcond=None)[0]
-    return float(w @ rw) / max(float(np.linalg.norm(w)), 1e-300), (angle, offset)
+def _bows_moved(line: LineGeometry, q: np.ndarray, moves: np.ndarray) -> np.ndarray:
+    """:attr:`_Design.bow_z` of the centres ``q`` [px] moved by each of ``moves`` (K, N, 2)
+    [px] a rounding's worth, the line stepped once from the fit through ``q`` (exact to
+    first order in the move; the whitening is linear, so made once for all): (K,)."""
+    a0, d0 = fit_line_only(q, line.sigma, chol=line.chol)
+    Q = q[None] + moves
+    k, m = len(Q), len(q)
+    X = _whiten(line, np.column_stack([Q.transpose(1, 0, 2).reshape(m, 2 * k), np.ones(m)]))
+    qw, one = X[:, :-1].reshape(m, k, 2).transpose(1, 0, 2), X[:, -1]
+    u0, n0 = line_frame(a0)
+    J = np.stack([qw @ u0, -np.broadcast_to(one, (k, m))], axis=2)  # (K, N, 2)
+    r = qw @ n0 - d0 * one
+    step = np.linalg.solve(J.transpose(0, 2, 1) @ J, -(J.transpose(0, 2, 1) @ r[..., None]))
+    a, d = a0 + step[:, 0, 0], d0 + step[:, 1, 0]
+    u = np.stack([np.cos(a), -np.sin(a)], axis=1)[:, :, None]  # (line_frame's, per move)
+    n = np.stack([np.sin(a), np.cos(a)], axis=1)[:, :, None]
+    t = (Q @ u)[..., 0]
+    bow = ((t - (t.min(1) + t.max(1))[:, None] / 2)
+           / np.maximum(np.ptp(t, axis=1), 1.0)[:, None]) ** 2
+    bw = _whiten(line, bow.T).T[..., None]
+    Jw = np.concatenate([qw @ u, -np.broadcast_to(one, (k, m))[..., None]], axis=2)
+    rw = (qw @ n)[..., 0] - d[:, None] * one
+    JT = Jw.transpose(0, 2, 1)
+    w = (bw - Jw @ np.linalg.solve(JT @ Jw, JT @ bw))[..., 0]
+    return np.einsum("kn,kn->k", w, rw) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
 
 
 def _design(line: LineGeometry, lam: np.ndarray, scale: float,
@@ -199,7 +206,7 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
-    angle, _, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
+    angle, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
     coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
     G = Ew - Jw @ coef[:, :-1]
     w = bw - Jw @ coef[:, -1]
@@ -248,16 +255,14 @@ class _DesignCache:
         (lines, cols): each line's centres moved by their first-order displacement (the
         design's ``dq``, exact to first order: along the mark too, which bends the bow's
         own column; ``G`` alone misses it, 15 % of a bowed line's slope) and the line
-        stepped there, a forward difference of 1e-4 px. No undistortion: the designs at
-        ``lam`` hold it.
+        stepped there (:func:`_bows_moved`), a forward difference of 1e-4 px. No
+        undistortion: the designs at ``lam`` hold it.
         :class:`LensFolds` where the lens folds any line."""
         out = np.zeros((len(self.lines), len(cols)))
         for k, d in enumerate(self.all(lam)):
-            line = self.lines[k]
-            base, fit = _bow_z(line, d.q)
-            for i, j in enumerate(cols):
-                move = np.max(np.abs(d.dq[:, :, j]))
-                if move > 0:
-                    h = 1e-4 / move
-                    out[k, i] = (_bow_z(line, d.q + h * d.dq[:, :, j], fit)[0] - base) / h
+            dq = d.dq[:, :, list(cols)].transpose(2, 0, 1)  # (cols, N, 2)
+            h = 1e-4 / np.maximum(np.max(np.abs(dq), axis=(1, 2)), 1e-300)
+            bz = _bows_moved(self.lines[k], d.q, np.concatenate([0 * dq[:1], h[:, None, None]
+                                                                  * dq]))
+            out[k] = (bz[1:] - bz[0]) / h
         return out
