@@ -311,14 +311,16 @@ def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
             said = (f"the lines' bows disagree with one lens (chi2 {bow_chi2:.1f} on "
                     f"{bow_dof} dof; mark {worst} worst, {bz[worst]:+.1f} u)")
             # Far from zero the bows are not linear in the lens: the exact test's word.
-            p, chi2, lam_x = (exact(lam_out, [j in applied for j in range(P)])
-                              if exact is not None else (0.0, np.nan, lam_out))
-            notes.append(f"{said}: a bent mark; u covers the lens and no lens" if p < alpha
-                         else f"{said} (linearised about the lens fitted), but a lens within "
-                         f"every plausible range explains them all (chi2 {chi2:.1f}, p "
-                         f"{p:.2g}; k1 {lam_x[0]:+.3f}, principal point ({lam_x[5]:+.0f}, "
-                         f"{lam_x[6]:+.0f}) px): no mark is bent; u covers the lens and no "
-                         "lens")
+            ex = exact(lam_out, [j in applied for j in range(P)]) if exact else None
+            if ex is None or ex[0] < alpha:
+                notes.append(f"{said}: a bent mark; u covers the lens and no lens")
+            else:
+                p, chi2, lam_x = ex
+                notes.append(f"{said} (linearised about the lens fitted), but a lens within "
+                             f"every plausible range explains them all (chi2 {chi2:.1f}, p "
+                             f"{p:.2g}; k1 {lam_x[0]:+.3f}, principal point "
+                             f"({lam_x[5]:+.0f}, {lam_x[6]:+.0f}) px): no mark is bent; u "
+                             "covers the lens and no lens")
     sol = LensSolution(lam_out, tuple(j in det for j in range(P)),
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,
