@@ -144,6 +144,7 @@ class _Design:
     s_pp_var: np.ndarray | None = None  # var of s over the principal point's range [rad^2]
     q: np.ndarray | None = field(default=None, repr=False, compare=False)  # undistorted [px]
     dq: np.ndarray | None = field(default=None, repr=False, compare=False)  # dq/dlam (N,2,P)
+    offset: float = field(default=np.nan, repr=False, compare=False)  # the line's, with angle
 
     @property
     def bow_z(self) -> float:
@@ -159,10 +160,11 @@ def _whiten(line: LineGeometry, X: np.ndarray) -> np.ndarray:
 
 
 def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray
-                 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The straight line through the undistorted centres ``q`` [px] and, whitened by the
     centres' noise, its columns (slope, offset), the perpendicular displacement ``jac``
-    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, Jw, Ew, bw, rw)."""
+    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, offset, Jw, Ew, bw,
+    rw)."""
     angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
     u, n = line_frame(angle)
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
@@ -171,14 +173,16 @@ def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray
     t = q @ u
     bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
     X = _whiten(line, np.column_stack([J, E, bow, r]))
-    return angle, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    return angle, offset, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
 
 
-def _bows_moved(line: LineGeometry, q: np.ndarray, moves: np.ndarray) -> np.ndarray:
+def _bows_moved(line: LineGeometry, q: np.ndarray, fit: tuple[float, float],
+                moves: np.ndarray) -> np.ndarray:
     """:attr:`_Design.bow_z` of the centres ``q`` [px] moved by each of ``moves`` (K, N, 2)
-    [px] a rounding's worth, the line stepped once from the fit through ``q`` (exact to
-    first order in the move; the whitening is linear, so made once for all): (K,)."""
-    a0, d0 = fit_line_only(q, line.sigma, chol=line.chol)
+    [px] a rounding's worth, the line stepped once from ``fit`` (angle, offset: the line
+    through ``q``; exact to first order in the move; the whitening is linear, so made once
+    for all): (K,)."""
+    a0, d0 = fit
     Q = q[None] + moves
     k, m = len(Q), len(q)
     X = _whiten(line, np.column_stack([Q.transpose(1, 0, 2).reshape(m, 2 * k), np.ones(m)]))
@@ -206,13 +210,13 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
-    angle, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
+    angle, offset, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
     coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
     G = Ew - Jw @ coef[:, :-1]
     w = bw - Jw @ coef[:, -1]
     # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
     return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300), q=q,
-                   dq=jac)
+                   dq=jac, offset=offset)
 
 
 class _DesignCache:
@@ -262,7 +266,7 @@ class _DesignCache:
         for k, d in enumerate(self.all(lam)):
             dq = d.dq[:, :, list(cols)].transpose(2, 0, 1)  # (cols, N, 2)
             h = 1e-4 / np.maximum(np.max(np.abs(dq), axis=(1, 2)), 1e-300)
-            bz = _bows_moved(self.lines[k], d.q, np.concatenate([0 * dq[:1], h[:, None, None]
-                                                                  * dq]))
+            bz = _bows_moved(self.lines[k], d.q, (d.angle, d.offset),
+                             np.concatenate([0 * dq[:1], h[:, None, None] * dq]))
             out[k] = (bz[1:] - bz[0]) / h
         return out
