@@ -59,7 +59,7 @@ from align.lens_design import (
     _Design,
     _DesignCache,
 )
-from align.lens_exact import exact_notes, plausible_exact
+from align.lens_exact import plausible_exact
 from align.lens_pp import _pp_probe_s, _pp_probes, _pp_spread
 from align.lens_solution import LensSolution, lens_angle_var
 from imaging.lens import PARAMS
@@ -123,18 +123,28 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     the bent line's own angle is read by its loop).
     """
     cache = _DesignCache(lines, scale)
-    sol, designs, free_fit, fits = _solve(cache, ranges, alpha, iters)
+    rng = ranges.vector()
+    memo: list[tuple[float, float, np.ndarray]] = []
+
+    def exact(lam: np.ndarray, applied: Sequence[bool]) -> tuple[float, float, np.ndarray]:
+        # The exact test of all the lines about the lens solved (:func:`_solve` asks when the
+        # linearised one disagrees, to word its note; the bent-line search below): made once.
+        if not memo:
+            memo.append(plausible_exact(cache, lam, applied, rng))
+        return memo[0]
+
+    sol, designs, free_fit, fits = _solve(cache, ranges, alpha, iters,
+                                          exact=exact if len(lines) >= 3 else None)
     if len(lines) < 3 or _plausible(sol, designs, alpha) >= alpha:
-        sf, df = free_fit()
-        if len(lines) >= 3 and not sf.confirmed:
-            sf = replace(sf, notes=exact_notes(sf.notes, plausible_exact(cache, sol),
-                                               alpha))
-        return sf, df
-    p, chi2, lam = plausible_exact(cache, sol)
+        return free_fit()
+    p, chi2, lam = exact(sol.lam, sol.applied)
     if p >= alpha:
         # No line is bent: a lens within every range explains them all (the lines' own
-        # free fit may still leave the ranges, and says so; the angles carry it in u).
+        # free fit may still leave the ranges, and says so; the angles carry it in u). Said
+        # here unless the linearised test's note (not confirmed) said it already.
         sf, df = free_fit()
+        if not sol.confirmed:
+            return sf, df
         note = (f"a lens within every plausible range explains all {len(lines)} lines' bows "
                 f"(chi2 {chi2:.1f}, p {p:.2g}; k1 {lam[0]:+.3f}, k2 {lam[1]:+.3f}, principal "
                 f"point ({lam[5]:+.0f}, {lam[6]:+.0f}) px): no mark is bent")
@@ -146,8 +156,8 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
         except LensFolds:
             continue
         p = _plausible(sk, dk, alpha)
-        if p < alpha:  # (the same exact test as for all the lines)
-            p = plausible_exact(cache.without(k), sk)[0]
+        if p < alpha:  # (the same exact test as for all the lines, started from theirs)
+            p = plausible_exact(cache.without(k), sk.lam, sk.applied, rng, start=lam)[0]
         if p >= alpha and (best is None or p > best[0]):
             best = (p, k, sk)
     if best is None:
@@ -170,7 +180,7 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     # A lens beyond the ranges may explain every line as well as one bent mark does: with a
     # line to spare the lines cannot tell them apart, and the note says both (the bent
     # reading is the one within the ranges the user declared).
-    pw, chi2w, lw = plausible_exact(cache, sol, 2 * ranges.vector())
+    pw, chi2w, lw = plausible_exact(cache, sol.lam, sol.applied, 2 * rng)
     if pw >= alpha:
         note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
                 f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
@@ -192,8 +202,9 @@ def _plausible(sol: LensSolution, designs: Sequence[_Design], alpha: float) -> f
 
 
 def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
-           starts: Mapping[tuple[int, ...], np.ndarray] | None = None
-           ) -> tuple[LensSolution, list[_Design],
+           starts: Mapping[tuple[int, ...], np.ndarray] | None = None,
+           exact: Callable[[np.ndarray, Sequence[bool]], tuple[float, float, np.ndarray]]
+           | None = None) -> tuple[LensSolution, list[_Design],
                       Callable[[], tuple[LensSolution, list[_Design]]],
                       dict[tuple[int, ...], np.ndarray]]:
     """:func:`solve_lens` over all of the lines of ``cache``: the solution with every
@@ -201,7 +212,10 @@ def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
     returns the solution the angles are read under (:func:`_marginalise`: made only for the
     solution given, not for the lines' leave-one-out tests), and its Gauss-Newton fits per
     applied set: ``starts`` for the leave-one-out solves (all lines but one: the fit of
-    all of them is a step or two from theirs, where zero took five and more)."""
+    all of them is a step or two from theirs, where zero took five and more). ``exact``:
+    the exact plausibility test (:func:`align.lens_exact.plausible_exact` about a lens
+    vector and its applied parameters), asked when the linearised bow test disagrees: a
+    lens within every range that explains all the lines names no mark bent."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     P = len(PARAMS)
@@ -294,9 +308,19 @@ def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
                          "calibrate the camera)")
         elif not confirmed:
             worst = int(np.argmax(np.abs(bz)))
-            notes.append(f"the lines' bows disagree with one lens (chi2 {bow_chi2:.1f} on "
-                         f"{bow_dof} dof; mark {worst} worst, {bz[worst]:+.1f} u): a bent mark; "
-                         "u covers the lens and no lens")
+            said = (f"the lines' bows disagree with one lens (chi2 {bow_chi2:.1f} on "
+                    f"{bow_dof} dof; mark {worst} worst, {bz[worst]:+.1f} u)")
+            # Far from zero the bows are not linear in the lens: the exact test's word.
+            ex = exact(lam_out, [j in applied for j in range(P)]) if exact else None
+            if ex is None or ex[0] < alpha:
+                notes.append(f"{said}: a bent mark; u covers the lens and no lens")
+            else:
+                p, chi2, lam_x = ex
+                notes.append(f"{said} (linearised about the lens fitted), but a lens within "
+                             f"every plausible range explains them all (chi2 {chi2:.1f}, p "
+                             f"{p:.2g}; k1 {lam_x[0]:+.3f}, principal point "
+                             f"({lam_x[5]:+.0f}, {lam_x[6]:+.0f}) px): no mark is bent; u "
+                             "covers the lens and no lens")
     sol = LensSolution(lam_out, tuple(j in det for j in range(P)),
                        tuple(j in applied for j in range(P)), u_lines, est, cov, ranges,
                        len(lines), c2 / dof, tuple(notes), F, bool(confirmed), bow_chi2,

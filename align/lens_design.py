@@ -5,7 +5,7 @@ angle), cached per lens vector. See :mod:`align.lens` for how they are used."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -162,6 +162,9 @@ class _Design:
     z: np.ndarray            # whitened residual of the straight-line fit
     w: np.ndarray            # whitened bow (quadratic along the mark), projected, unit norm
     s_pp_var: np.ndarray | None = None  # var of s over the principal point's range [rad^2]
+    q: np.ndarray | None = field(default=None, repr=False, compare=False)  # undistorted [px]
+    dq: np.ndarray | None = field(default=None, repr=False, compare=False)  # dq/dlam (N,2,P)
+    offset: float = field(default=np.nan, repr=False, compare=False)  # the line's, with angle
 
     @property
     def bow_z(self) -> float:
@@ -169,11 +172,19 @@ class _Design:
         return float(self.w @ self.z)
 
 
-def _design(line: LineGeometry, lam: np.ndarray, scale: float,
-            only: Sequence[int] | None = None) -> _Design:
-    q, jac = undistortion_jacobian(line.points, lam, scale, only)
-    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
-        raise LensFolds("the lens folds the image along this mark")
+def _whiten(line: LineGeometry, X: np.ndarray) -> np.ndarray:
+    """Columns ``X`` (one row per centre) whitened by the centres' noise."""
+    X = X / line.sigma[:, None]
+    return X if line.chol is None else solve_triangular(line.chol, X, lower=True,
+                                                          check_finite=False)
+
+
+def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray
+                 ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The straight line through the undistorted centres ``q`` [px] and, whitened by the
+    centres' noise, its columns (slope, offset), the perpendicular displacement ``jac``
+    (dq/dlam, (N, 2, P)) makes, the bow's and the residual: (angle, offset, Jw, Ew, bw,
+    rw)."""
     angle, offset = fit_line_only(q, line.sigma, chol=line.chol)
     u, n = line_frame(angle)
     E = jac[:, 0, :] * n[0] + jac[:, 1, :] * n[1]  # perpendicular displacement per unit
@@ -181,15 +192,51 @@ def _design(line: LineGeometry, lam: np.ndarray, scale: float,
     r = q @ n - offset
     t = q @ u
     bow = ((t - (t.min() + t.max()) / 2) / max(np.ptp(t), 1.0)) ** 2
-    X = np.column_stack([J, E, bow, r]) / line.sigma[:, None]
-    if line.chol is not None:
-        X = solve_triangular(line.chol, X, lower=True, check_finite=False)
-    Jw, Ew, bw, rw = X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+    X = _whiten(line, np.column_stack([J, E, bow, r]))
+    return angle, offset, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
+
+
+def _bows_moved(line: LineGeometry, q: np.ndarray, fit: tuple[float, float],
+                moves: np.ndarray) -> np.ndarray:
+    """:attr:`_Design.bow_z` of the centres ``q`` [px] moved by each of ``moves`` (K, N, 2)
+    [px] a rounding's worth, the line stepped once from ``fit`` (angle, offset: the line
+    through ``q``; exact to first order in the move; the whitening is linear, so made once
+    for all): (K,)."""
+    a0, d0 = fit
+    Q = q[None] + moves
+    k, m = len(Q), len(q)
+    X = _whiten(line, np.column_stack([Q.transpose(1, 0, 2).reshape(m, 2 * k), np.ones(m)]))
+    qw, one = X[:, :-1].reshape(m, k, 2).transpose(1, 0, 2), X[:, -1]
+    u0, n0 = line_frame(a0)
+    J = np.stack([qw @ u0, -np.broadcast_to(one, (k, m))], axis=2)  # (K, N, 2)
+    r = qw @ n0 - d0 * one
+    step = np.linalg.solve(J.transpose(0, 2, 1) @ J, -(J.transpose(0, 2, 1) @ r[..., None]))
+    a, d = a0 + step[:, 0, 0], d0 + step[:, 1, 0]
+    u = np.stack([np.cos(a), -np.sin(a)], axis=1)[:, :, None]  # (line_frame's, per move)
+    n = np.stack([np.sin(a), np.cos(a)], axis=1)[:, :, None]
+    t = (Q @ u)[..., 0]
+    bow = ((t - (t.min(1) + t.max(1))[:, None] / 2)
+           / np.maximum(np.ptp(t, axis=1), 1.0)[:, None]) ** 2
+    bw = _whiten(line, bow.T).T[..., None]
+    Jw = np.concatenate([qw @ u, -np.broadcast_to(one, (k, m))[..., None]], axis=2)
+    rw = (qw @ n)[..., 0] - d[:, None] * one
+    JT = Jw.transpose(0, 2, 1)
+    w = (bw - Jw @ np.linalg.solve(JT @ Jw, JT @ bw))[..., 0]
+    return np.einsum("kn,kn->k", w, rw) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
+
+
+def _design(line: LineGeometry, lam: np.ndarray, scale: float,
+            only: Sequence[int] | None = None) -> _Design:
+    q, jac = undistortion_jacobian(line.points, lam, scale, only)
+    if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
+        raise LensFolds("the lens folds the image along this mark")
+    angle, offset, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
     coef = np.linalg.lstsq(Jw, np.column_stack([Ew, bw]), rcond=None)[0]
     G = Ew - Jw @ coef[:, :-1]
     w = bw - Jw @ coef[:, -1]
     # Moving the points by E dlam moves the fitted angle by -(J^T J)^-1 J^T E dlam (row 0).
-    return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300))
+    return _Design(angle, -coef[0, :-1], G, rw, w / max(np.linalg.norm(w), 1e-300), q=q,
+                   dq=jac, offset=offset)
 
 
 class _DesignCache:
@@ -226,3 +273,20 @@ class _DesignCache:
     def all(self, lam: np.ndarray) -> list[_Design]:
         """Every line's design at ``lam`` (:class:`LensFolds` where the lens folds any)."""
         return [self.one(k, lam) for k in range(len(self.lines))]
+
+    def bow_jacobian(self, lam: np.ndarray, cols: Sequence[int]) -> np.ndarray:
+        """d :attr:`_Design.bow_z` / d lam[cols] of every line at ``lam`` [per unit], shape
+        (lines, cols): each line's centres moved by their first-order displacement (the
+        design's ``dq``, exact to first order: along the mark too, which bends the bow's
+        own column; ``G`` alone misses it, 15 % of a bowed line's slope) and the line
+        stepped there (:func:`_bows_moved`), a forward difference of 1e-4 px. No
+        undistortion: the designs at ``lam`` hold it.
+        :class:`LensFolds` where the lens folds any line."""
+        out = np.zeros((len(self.lines), len(cols)))
+        for k, d in enumerate(self.all(lam)):
+            dq = d.dq[:, :, list(cols)].transpose(2, 0, 1)  # (cols, N, 2)
+            h = 1e-4 / np.maximum(np.max(np.abs(dq), axis=(1, 2)), 1e-300)
+            bz = _bows_moved(self.lines[k], d.q, (d.angle, d.offset),
+                             np.concatenate([0 * dq[:1], h[:, None, None] * dq]))
+            out[k] = (bz[1:] - bz[0]) / h
+        return out

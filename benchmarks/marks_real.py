@@ -1,6 +1,7 @@
 """Scribe-mark stage on real photographs: CPU time per photo, against OpenCV's LSD.
 
-Run:  python3 benchmarks/marks_real.py [--markdown FILE]   (needs ../shared/data/real)
+Run:  python3 benchmarks/marks_real.py [--save FILE] [--against FILE] [--markdown FILE]
+      (needs ../shared/data/real)
 
 Every JPEG of ``opencv-chessboard`` and ``opencv-lines`` (640x480 chessboards, a building,
 the ChArUco boards; none holds a scribe mark, so each is a busy scene the stage must get
@@ -12,12 +13,17 @@ tables: what ``python3 -X importtime -m align marks`` shows as the import share)
 photo the CPU time, the marks measured and those refused (each with its reason in the
 JSON), LSD's time and the ratio, and issue 18's target (a real 640x480 photo <= 1 s CPU
 without imports). ``benchmarks/marks.py --speed`` prints the same table after its synthetic
-figures.
+figures. ``--save`` keeps every photo's results (``MarkResult.to_dict``); ``--against`` a
+file saved with another checkout's code on PYTHONPATH says which photos' results differ
+(a speed change keeps them all).
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -51,8 +57,10 @@ def lsd_segments(path: Path) -> int:
     return 0 if segs is None else len(segs)
 
 
-def real_speed(photos: list[Path] | None = None) -> None:
-    """CPU time per real photo, this tool end to end against OpenCV's LSD (see the module)."""
+def real_speed(photos: list[Path] | None = None, save: str | None = None,
+               against: str | None = None) -> None:
+    """CPU time per real photo, this tool end to end against OpenCV's LSD (see the module);
+    ``save``/``against``: every photo's results kept / compared with a saved file's."""
     photos = real_photos() if photos is None else photos
     print("\n== CPU time per real photograph (../shared/data/real), one core ==")
     if not photos:
@@ -66,10 +74,12 @@ def real_speed(photos: list[Path] | None = None) -> None:
     print(f"{'photo':>35s} {'size':>9s} {'align s':>8s} {'measured':>8s} {'refused':>7s} "
           f"{'LSD ms':>7s} {'segs':>5s} {'ratio':>6s}")
     ours, theirs = [], []
+    results = {}
     for p in photos:
         t0 = time.process_time()
         res = measure_file(p)
         t1 = time.process_time()
+        results[f"{p.parent.name}/{p.name}"] = [r.to_dict() for r in res]
         n_seg = lsd_segments(p)
         t2 = time.process_time()
         ours.append(t1 - t0)
@@ -84,7 +94,24 @@ def real_speed(photos: list[Path] | None = None) -> None:
           f"{len(photos)} photos; LSD median {1e3 * np.median(theirs):.1f} ms")
     print(f"target: each real photo <= {TARGET_S:.0f} s CPU without imports: "
           + ("met" if not over else f"NOT met ({len(over)} of {len(photos)} over)"))
+    if save:
+        Path(save).write_text(json.dumps(results))
+    if against:
+        other = json.loads(Path(against).read_text())
+        # (compared as JSON text: a NaN equals itself there)
+        differ = [k for k in results if json.dumps(results[k], sort_keys=True)
+                  != json.dumps(other.get(k), sort_keys=True)]
+        print(f"results against {against}: {len(results) - len(differ)} of {len(results)} "
+              "photos identical" + (f"; differ: {', '.join(differ)}" if differ else ""))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--save", help="keep every photo's results in this JSON file")
+    ap.add_argument("--against", help="compare with results saved by --save")
+    args = ap.parse_args(sys.argv[1:])
+    real_speed(save=args.save, against=args.against)
 
 
 if __name__ == "__main__":
-    benchpage.run(real_speed, "Scribe marks: time per real photograph")
+    benchpage.run(main, "Scribe marks: time per real photograph")
