@@ -106,7 +106,17 @@ def test_undeclared_lens_held_out_marks_within_their_u(k1):
                    " angles' RMS error falls 30.4 -> 26.0'' while u stays 59.5 -> 58.9'',"
                    " mostly Type B terms this scene does not realise (lens_pp_cross 42.1 ->"
                    " 42.9'' RMS, its principal point at the centre): not a term the longer"
-                   " centres widen")
+                   " centres widen. Centres out to the grooves' ends (ends6: merged cd3df0f,"
+                   " reverted 0e52ce9; branches ends7-full, ends7-wip) reach 1.13 and 1.05"
+                   " but 3 slow tests failed. (1) marks_crossing 5 deg 'end' seed 2003, z"
+                   " 3.92: not the added centres (added at the far end, t -231 -> -245 px;"
+                   " the error is 71.8'' with them, 71.3'' without) but the crossing mask's"
+                   " window, short of the other groove's flank: a groove 12-14 px beside a 9 px"
+                   " band tilts the line; the longer centres' u (28.2 -> 18.3'') exposed it (z"
+                   " 2.53 on this tree). The window + 2 blur widths: error 2'', z -0.10, but"
+                   " test_crossmask's stepped corner is then refused (seeds 1, 2; ends7-wip)."
+                   " (2) test_jpeg q90 crop z -3.40 and (3) test_lens exact-camera KS p"
+                   " 2.9e-5: not yet looked into")
 @pytest.mark.parametrize("k1", [K1, 0.0])
 def test_undeclared_lens_held_out_marks_reach_the_k1_free_bound(k1):
     lo, hi = _band(N_MARKS)
