@@ -106,7 +106,27 @@ def test_undeclared_lens_held_out_marks_within_their_u(k1):
                    " angles' RMS error falls 30.4 -> 26.0'' while u stays 59.5 -> 58.9'',"
                    " mostly Type B terms this scene does not realise (lens_pp_cross 42.1 ->"
                    " 42.9'' RMS, its principal point at the centre): not a term the longer"
-                   " centres widen")
+                   " centres widen. Centres out to the grooves' ends (ends6: merged cd3df0f,"
+                   " reverted 0e52ce9; branches ends7-full, ends7-wip) reach 1.13 and 1.05"
+                   " but 3 slow tests failed. (1) marks_crossing 5 deg 'end' seed 2003, z"
+                   " 3.92: not the added centres (added at the far end, t -231 -> -245 px;"
+                   " the error is 71.8'' with them, 71.3'' without) but the crossing mask's"
+                   " window, short of the other groove's flank: a groove 12-14 px beside a 9 px"
+                   " band tilts the line; the longer centres' u (28.2 -> 18.3'') exposed it (z"
+                   " 2.53 on this tree). The window + 2 blur widths: error 2'', z -0.10, but"
+                   " test_crossmask's stepped corner is then refused (seeds 1, 2; ends7-wip)."
+                   " (2) test_jpeg q90 crop, seed 3's first mark, z -3.40: its error is"
+                   " -20.9'' with the added centres, -22.7'' without (z -2.96); u 7.7 -> 6.1''"
+                   " because the Type B jpeg_blocks (the noise-free model's turn beyond its"
+                   " scatter, imaging.jpeg.blocks_systematic) fell 3.4 -> 0.0'' over the"
+                   " longer stretch: the encoder's turn of a noisy edge the model under-states"
+                   " (the q75 crop's open issue), not the end centres. (3) test_lens"
+                   " exact-camera check, 20 seeds: KS p 2.9e-5, median p 0.83 (0.032, 0.75"
+                   " without the added centres); with the model's u x 0.01 KS p 0.021, median"
+                   " 0.78 (0.14, 0.70 without), the pp stability not entering p: the model's"
+                   " declared u, realised 0 by the render, bows more beside the noise over"
+                   " the longer centres (a conservative p, no false alarm; angles' RMS z"
+                   " 0.27)")
 @pytest.mark.parametrize("k1", [K1, 0.0])
 def test_undeclared_lens_held_out_marks_reach_the_k1_free_bound(k1):
     lo, hi = _band(N_MARKS)
