@@ -5,7 +5,7 @@ The fusion carries a candidate it tested but could not exclude as a Type B term 
 (:mod:`align.fusion.plausible`) and keeps its Jacobian in the budget's linearisation, held at
 zero (``Linearisation.held``). Freed there, it moves E by k b̂ and lowers χ² by b̂ᵀ Σ_bb⁻¹ b̂;
 after a measurement k and Σ_bb are those of the new information, and the new estimate is a
-draw about the one now: in each draw the fusion's own rule (``is_carried``) and the loop's
+draw about the one now: in each draw the fusion's own rules (``judge``) and the loop's
 test decide whether the candidate is carried, named or dropped (docs/decision.md).
 """
 
@@ -20,7 +20,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
 
 from align.fusion.budget import Group, Linearisation, inverse
 from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
-from align.fusion.plausible import is_carried
+from align.fusion.plausible import NOT_EXCLUDED, UNDETERMINED, judge
 from align.fusion.undetermined import Undetermined, carried_variance, default_sigma, freed_u
 from align.loop import sidak
 from axisbase.units import ARCSEC
@@ -151,30 +151,63 @@ def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b:
     return b
 
 
-def ranged_after(lin: Linearisation, info: np.ndarray, declared: Mapping[str, float] = NONE_DECLARED
-                 ) -> tuple[Undetermined, ...]:
-    """The undetermined nuisances (``lin.ranged``; one ``declared``, calibrated, with its
-    calibration's u [rad] as its range) the fusion would carry over their plausible range with
-    information ``info`` (over every parameter): each
-    freed alone beside the estimated parameters, as the fusion judges it
-    (:func:`align.fusion.undetermined.undetermined`) — its u freed u_f, its E shift per unit
-    k = dE/db, and its share σ² u_f²/(σ² + u_f²) k kᵀ; none when the new data determine it
-    (u_f ≤ σ: the loop's tests judge it, and a nuisance the session did not name is taken as
-    not named after)."""
-    free = list(lin.free)
-    I_ff = info[np.ix_(free, free)]
-    out = []
-    for name, idx, sigma in lin.ranged:
-        if len(idx) != 1:
-            continue
-        sigma = declared.get(name, sigma)
-        col = info[free, idx[0]]
+def sigmas(lin: Linearisation, declared: Mapping[str, float] = NONE_DECLARED
+           ) -> dict[str, float]:
+    """The σ of the plausible range [rad] of each candidate that has one: ``declared`` (a
+    camera's roll calibrated: its calibration's u), else as the fusion had it (declared in
+    session.toml or the default, ``Linearisation.ranges``; a result written before those:
+    the undetermined ones' and the default)."""
+    out = {n: s for n, s in ((n, default_sigma(n)) for n in _names(lin)) if s is not None}
+    out |= {n: s for n, _, s in lin.ranged} | dict(lin.ranges) | dict(declared)
+    return out
+
+
+def _names(lin: Linearisation) -> list[str]:
+    """Every candidate the loop did not add (carried, undetermined, the others)."""
+    return [n for n, *_ in (*lin.held, *lin.ranged, *lin.others)]
+
+
+def _columns(lin: Linearisation) -> dict[str, tuple[int, ...]]:
+    return {n: tuple(idx) for n, idx, *_ in (*lin.held, *lin.ranged, *lin.others)}
+
+
+def freed_beside(lin: Linearisation, info: np.ndarray, named: Sequence[str] = ()
+                 ) -> dict[str, tuple[float, np.ndarray]]:
+    """Each one-column candidate not in ``named`` freed alone beside the estimated parameters
+    and the candidates ``named`` (the loop's model after a measurement), with information
+    ``info`` (over every parameter): its u freed [rad] (inf: not separable) and its E shift
+    per unit k = dE/db — as :func:`align.fusion.undetermined.undetermined` frees it."""
+    cols = _columns(lin)
+    base = [*lin.free, *(i for n in named for i in cols[n])]
+    I_ff = info[np.ix_(base, base)]
+    out = {}
+    for name, idx in cols.items():
+        if name in named or len(idx) != 1:
+            continue  # (a vector nuisance has no range: the fusion carries none for it)
+        col = info[base, idx[0]]
         k = np.linalg.lstsq(I_ff, col, rcond=None)[0]
-        u_f = freed_u(float(info[idx[0], idx[0]] - col @ k), float(info[idx[0], idx[0]]),
-                      lin.inflation)
-        v = carried_variance(sigma, u_f)
-        if v > 0:
-            out.append(Undetermined(name, sigma, float(u_f), k[:6] * np.sqrt(v),
+        out[name] = (freed_u(float(info[idx[0], idx[0]] - col @ k),
+                             float(info[idx[0], idx[0]]), lin.inflation), k[:6])
+    return out
+
+
+def ranged_after(lin: Linearisation, info: np.ndarray,
+                 declared: Mapping[str, float] = NONE_DECLARED, named: Sequence[str] = ()
+                 ) -> tuple[Undetermined, ...]:
+    """The candidates the fusion would carry over their plausible range with information
+    ``info`` (over every parameter) and the loop's model with the candidates ``named`` — every
+    candidate with a range (:func:`sigmas`; one ``declared``, calibrated, with its
+    calibration's u as its range), freed alone beside the model (:func:`freed_beside`) and
+    judged by the fusion's rule (:func:`align.fusion.plausible.judge`, undetermined first):
+    its u freed u_f, and its share σ² u_f²/(σ² + u_f²) k kᵀ; none when the new data determine
+    it (u_f ≤ σ: the loop's tests judge it, and a candidate the loop did not name is taken
+    as not named after)."""
+    sig = sigmas(lin, declared)
+    out = []
+    for name, (u_f, k) in freed_beside(lin, info, named).items():
+        s = sig.get(name)
+        if judge(u_f, s) == UNDETERMINED:
+            out.append(Undetermined(name, s, float(u_f), k * np.sqrt(carried_variance(s, u_f)),
                                     name in declared))
     return tuple(out)
 
@@ -190,61 +223,119 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     about b̂ with the covariance of b̂ − b̂' — the added data's draw, the dropped (replaced)
     data's, and the change of the kept data's weights (for data only added: Σ_bb − Σ'_bb;
     ``redraw`` False: b̂' = b̂). In each draw the candidate is named when the loop's test
-    would take it (:func:`_named`; its share of u² then what freeing it adds), else carried
-    when the fusion's own rule says so (:func:`align.fusion.plausible.is_carried`; its share
-    (k b̂')²), else dropped; u² is the fixed model's plus the mean share. New data that
-    separate b from E shrink k: the shift falls below u/2 and the term drops. A candidate
-    more likely named than not is in the model against which the less significant ones are
-    judged (the loop adds the best first), as is one ``declared`` (a camera's roll
-    calibrated, name -> its calibration's u [rad]: no longer a candidate, E corrected for it at
-    its estimate; an undetermined one is carried over the calibration's u,
-    :func:`ranged_after`) — what it absorbed
-    is no longer left for the others, whose estimates move with it (:func:`_with_declared`)."""
+    would take it (:func:`_named`; its share of u² then what freeing it adds). Then, in each
+    draw, every candidate the loop did not name there — carried, undetermined or neither
+    before — is judged beside the model with the ones it named, by the fusion's rules in the
+    fusion's order (:func:`align.fusion.plausible.judge`): undetermined (u freed beyond its
+    range's σ, declared or default: carried over that range, :func:`ranged_after`), else, for
+    a carried one, not excluded (its share (k b̂')²), else dropped; u² is the fixed model's
+    plus the mean share. New data that separate b from E shrink k: the shift falls below u/2
+    and the term drops; an effect named beside a near-degenerate candidate leaves that one
+    undetermined (freed beside the levelling, camera B's roll at 4549″ > σ 34.6″). A
+    candidate more likely named than not is in the model against which the less significant
+    ones' estimates are drawn (the loop adds the best first), as is one ``declared`` (a
+    camera's roll calibrated, name -> its calibration's u [rad]: no longer a candidate, E
+    corrected for it at its estimate; judged over the calibration's u as its range) — what
+    it absorbed is no longer left for the others, whose estimates move with it
+    (:func:`_with_declared`)."""
     kept = [g for g in lin.groups if g.source not in drop]
     infos = (lin.information([*kept, *add]), lin.information(), lin.information(kept),
              lin.information(add))
     free = list(lin.free)
     n_rows = sum(len(g.A) for g in [*kept, *add])
-    u2 = np.diag(inverse(infos[0][np.ix_(free, free)]))[:6] * lin.inflation**2
     # (the carried candidates are judged against u without the ranged terms, as the fusion
     # judges them before it adds those)
-    ranged = ranged_after(lin, infos[0], declared)
-    # A carried candidate the new data no longer determine (u freed beyond its range's σ: data
-    # replaced) the fusion would carry over its range instead (is_carried's rule): so here.
-    # (A range declared in session.toml is not in the linearisation: the default's σ.)
-    sig = {n: default_sigma(n) for n, *_ in lin.held if n not in declared}
-    lost = {r.name: r for r in ranged_after(replace(lin, ranged=tuple(
-        (n, i, sig[n]) for n, i, *_ in lin.held if sig.get(n) is not None)), infos[0])}
-    ranged = (*ranged, *lost.values())
+    u2 = np.diag(inverse(infos[0][np.ix_(free, free)]))[:6] * lin.inflation**2
     fixed = [(i, e) for n, i, e, _ in lin.held if n in declared]
-    share = np.zeros((REDRAWS, 6))
-    out = []
     own = not add and not drop  # the session's own data: the fusion decided (not re-judged)
+    held = []
     for name, idx, est, p_loop in sorted((h for h in lin.held if h[0] not in declared),
                                          key=lambda h: h[3]):
         # what the session's data left for it once the others are in the model
-        c, mine = _one(infos, free, idx, _with_declared(infos[1], free, idx, np.array(est),
-                                                        fixed),
-                       p_loop, np.sqrt(u2), n_rows, redraw, own, lin.inflation, lost.get(name))
-        out.append(replace(c, name=name))
-        share += mine
-        if c.named >= 0.5:
+        d = _draw(infos, free, idx, _with_declared(infos[1], free, idx, np.array(est), fixed),
+                  p_loop, n_rows, redraw, own, lin.inflation)
+        held.append((name, d))
+        if d.named.mean() >= 0.5:
             fixed.append((idx, est))
-    u2 = u2 + sum((np.square(r.shift) for r in ranged), np.zeros(6))
+    named = [frozenset(n for n, d in held if d.named[r]) for r in range(REDRAWS)]
+    sig = sigmas(lin, declared)
+    # the session's own data: the fusion decided which it carries over their range
+    keep = {n for n, *_ in lin.ranged} if own else set(_columns(lin))
+    beside = {s: (freed_beside(lin, infos[0], sorted(s)),
+                  {r.name: r for r in ranged_after(lin, infos[0], declared, sorted(s))
+                   if r.name in keep})
+              for s in set(named)}
+    share = np.zeros((REDRAWS, 6))
+    hits = {n: np.zeros(REDRAWS, bool) for n, _ in held}
+    ranged_share: dict[str, np.ndarray] = {}
+    ranged_of: dict[str, Undetermined] = {}
+    u_e = np.sqrt(u2)
+    for r, s in enumerate(named):
+        freed, unknown = beside[s]
+        for name, d in held:
+            if name in s:
+                share[r] += d.freed
+                continue
+            x = d.draws[r]
+            u_f = freed.get(name, (0.0, None))[0]
+            verdict = judge(u_f, sig.get(name), d.chi[r], len(x), d.size(x), d.K @ x, u_e)
+            if own:  # the fusion carried it (judged beside its own model, not re-judged)
+                verdict = NOT_EXCLUDED
+            if verdict == NOT_EXCLUDED:
+                hits[name][r] = True
+                share[r] += np.square(d.K @ x)
+        for name, und in unknown.items():
+            share[r] += np.square(und.shift)
+            ranged_share.setdefault(name, np.zeros(REDRAWS))[r] = 1.0
+            ranged_of.setdefault(name, und)
+    out = []
+    for name, d in held:
+        mine = np.where(np.array([name in s for s in named])[:, None], d.freed, 0.0) + np.where(
+            hits[name][:, None], np.square(d.draws @ d.K.T), 0.0)
+        out.append(Carried(name, d.size(d.b), float(np.sqrt(d.g @ d.Cbb @ d.g)),
+                           tuple(d.K @ d.b), float(hits[name].mean()), tuple(mine.mean(0)),
+                           float(d.named.mean())))
+    # an undetermined nuisance more likely carried than not, with its expected share
+    ranged = []
+    for name, und in ranged_of.items():
+        sh = np.sqrt(np.mean([np.square(beside[s][1][name].shift) if name in beside[s][1]
+                              else np.zeros(6) for s in named], axis=0))
+        if ranged_share[name].mean() >= 0.5:  # (its expected share: the sign of one)
+            ranged.append(replace(und, shift=sh * np.where(und.shift < 0, -1.0, 1.0)))
     u = np.sqrt(u2 + share)
     order = [h[0] for h in lin.held]
     return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0),
-                      tuple(sorted(out, key=lambda c: order.index(c.name))), ranged)
+                      tuple(sorted(out, key=lambda c: order.index(c.name))), tuple(ranged))
 
 
-def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,
-         p_loop: float, u_e: np.ndarray, n_rows: int, redraw: bool, own: bool,
-         inflation: float, lost: Undetermined | None = None) -> tuple[Carried, np.ndarray]:
+@dataclass(frozen=True)
+class _Draws:
+    """One held candidate's draws of its estimate on the new data (:func:`_draw`)."""
+
+    b: np.ndarray         # its estimate now [rad]
+    draws: np.ndarray     # its estimate on the new data, REDRAWS × width [rad]
+    chi: np.ndarray       # the χ² drop of freeing it, per draw
+    named: np.ndarray     # whether the loop names it, per draw
+    K: np.ndarray         # dE/db, 6 × width
+    Cbb: np.ndarray       # its covariance freed [rad²]
+    freed: np.ndarray     # what naming it adds to u² of the six angles [rad²]
+
+    @property
+    def g(self) -> np.ndarray:
+        size = float(np.linalg.norm(self.b))
+        return self.b / size if size > 0 else np.full(len(self.b), np.sqrt(1.0 / len(self.b)))
+
+    def size(self, x: np.ndarray) -> float:
+        """Its size: one component's signed value, a vector's length [rad]."""
+        return float(x[0]) if len(x) == 1 else float(np.linalg.norm(x))
+
+
+def _draw(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,
+          p_loop: float, n_rows: int, redraw: bool, own: bool, inflation: float) -> _Draws:
     """One held candidate (parameters ``idx``, estimate ``b`` [rad], the loop's p-value now
     ``p_loop``) after the measurement (``infos``: the information after, now, of the kept
-    groups, of the added ones): its :class:`Carried` (unnamed) and its share of u² of the
-    six angles in each draw [rad²]; ``lost``: its range's term when the data after no longer
-    determine it (never carried then: :func:`align.fusion.plausible.is_carried`)."""
+    groups, of the added ones): its estimate's draws on the new data and, in each, whether
+    the loop names it."""
     info, info_now, info_kept, info_add = infos
     j, n = [*free, *idx], len(free)
     C = inverse(info[np.ix_(j, j)])
@@ -264,17 +355,6 @@ def _one(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: 
     now_drop = float(b @ np.linalg.solve(S0[:, n:], b))
     scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
     named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
-    rng = {} if lost is None else {"u_freed": lost.u_freed, "sigma": lost.sigma}
-    hit = ~named & np.array([is_carried(c, len(idx), float(np.linalg.norm(x)), K @ x, u_e,
-                                        **rng) for c, x in zip(chi, draws, strict=True)])
     if own:
-        hit[:], named[:] = True, False
-    freed = np.diag(K @ Cbb @ K.T) * inflation**2  # what naming it adds to u²
-    mine = (np.where(hit[:, None], np.square(draws @ K.T), 0.0)
-            + np.where(named[:, None], freed, 0.0))
-    size = float(np.linalg.norm(b))
-    g = b / size if size > 0 else np.full(len(b), np.sqrt(1.0 / len(b)))
-    if len(b) == 1:  # one component: its signed value (a vector's one number: its length)
-        size, g = float(b[0]), np.ones(1)
-    return Carried("", size, float(np.sqrt(g @ Cbb @ g)), tuple(K @ b), float(hit.mean()),
-                   tuple(mine.mean(0)), float(named.mean())), mine
+        named[:] = False
+    return _Draws(b, draws, chi, named, K, Cbb, np.diag(K @ Cbb @ K.T) * inflation**2)
