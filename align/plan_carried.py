@@ -20,7 +20,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import)
 
 from align.fusion.budget import Group, Linearisation, inverse
 from align.fusion.observations import E_NAMES, LEVEL, REF, ROLL, TILT
-from align.fusion.plausible import NOT_EXCLUDED, UNDETERMINED, judge
+from align.fusion.plausible import NOT_EXCLUDED, UNDETERMINED, in_place_of, judge, largest
 from align.fusion.undetermined import Undetermined, carried_variance, default_sigma, freed_u
 from align.loop import sidak
 from axisbase.units import ARCSEC
@@ -137,20 +137,6 @@ def _named(drop: float, tested: float, width: int, n_rows: int) -> bool:
                 and drop - width * np.log(n_rows) > NAMED_MIN_BIC)
 
 
-def _with_declared(info: np.ndarray, free: Sequence[int], idx: Sequence[int], b: np.ndarray,
-                   declared: Sequence[tuple[Sequence[int], Sequence[float]]]) -> np.ndarray:
-    """Candidate ``b`` [rad] (parameters ``idx``) estimated with each ``declared`` candidate
-    (its indices, its value [rad]) fixed at its value instead of 0: with the ``free``
-    parameters marginalised (the Schur complement M of ``info``), b(r) = b(0) − M_bb⁻¹ M_br r."""
-    for didx, value in declared:
-        j = [*free, *idx, *didx]
-        n, w = len(free), len(idx)
-        Ij = info[np.ix_(j, j)]
-        M = Ij[n:, n:] - Ij[n:, :n] @ np.linalg.solve(Ij[:n, :n], Ij[:n, n:])
-        b = b - np.linalg.solve(M[:w, :w], M[:w, w:] @ np.asarray(value))
-    return b
-
-
 def sigmas(lin: Linearisation, declared: Mapping[str, float] = NONE_DECLARED
            ) -> dict[str, float]:
     """The σ of the plausible range [rad] of each candidate that has one: ``declared`` (a
@@ -212,149 +198,187 @@ def ranged_after(lin: Linearisation, info: np.ndarray,
     return tuple(out)
 
 
+def _schur(info: np.ndarray, free: Sequence[int], idx: Sequence[int]) -> np.ndarray:
+    """The information on parameters ``idx`` with the ``free`` ones marginalised."""
+    free, idx = list(free), list(idx)
+    I_ff = info[np.ix_(free, free)]
+    return info[np.ix_(idx, idx)] - info[np.ix_(idx, free)] @ np.linalg.solve(
+        I_ff, info[np.ix_(free, idx)])
+
+
+def _gain(info: np.ndarray, free: Sequence[int], idx: Sequence[int]) -> np.ndarray:
+    """dE/db of each parameter ``idx`` held at b beside the ``free`` ones (6 × len(idx)):
+    E's change when it is freed to b̂ is this times b̂."""
+    free = list(free)
+    return -np.linalg.solve(info[np.ix_(free, free)], info[np.ix_(free, list(idx))])[:6]
+
+
+def _joint_draws(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int],
+                 b: np.ndarray, redraw: bool) -> np.ndarray:
+    """``REDRAWS`` draws [rad] of the joint estimate of parameters ``idx`` on the new data
+    about ``b`` (``infos``: the information after, now, of the kept groups, of the added
+    ones): b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g, the kept data's gain changes, the rest are new
+    draws."""
+    info, info_now, info_kept, info_add = infos
+    j, n = [*free, *idx], len(free)
+    ix = np.ix_(j, j)
+    S0, S1 = inverse(info_now[ix])[n:], inverse(info[ix])[n:]
+    d = ((S0 - S1) @ info_kept[ix] @ (S0 - S1).T
+         + S0 @ (info_now - info_kept)[ix] @ S0.T + S1 @ info_add[ix] @ S1.T)
+    w, v = np.linalg.eigh((d + d.T) / 2 if redraw else 0 * d)
+    z = np.random.default_rng(0).standard_normal((REDRAWS, len(b)))
+    return b + z @ (v * np.sqrt(np.clip(w, 0.0, None))).T
+
+
+def _size(x: np.ndarray) -> float:
+    """A candidate's size: one component's signed value, a vector's length [rad]."""
+    return float(x[0]) if len(x) == 1 else float(np.linalg.norm(x))
+
+
 def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] = (),
             redraw: bool = True, declared: Mapping[str, float] = NONE_DECLARED) -> Prediction:
     """u of the six angles as the fusion would state them with the groups named in ``drop``
     left out and ``add`` added, and the candidates it would carry.
 
-    Each candidate the session's fusion carries (``lin.held``) is freed in the linearisation:
-    with (E, b) of covariance Σ, freeing b moves E by k b̂ (k = Σ_Eb Σ_bb⁻¹) and lowers χ² by
-    b̂ᵀ Σ_bb⁻¹ b̂. The new estimate b̂' is not known before the data are taken: it is drawn
-    about b̂ with the covariance of b̂ − b̂' — the added data's draw, the dropped (replaced)
-    data's, and the change of the kept data's weights (for data only added: Σ_bb − Σ'_bb;
-    ``redraw`` False: b̂' = b̂). In each draw the candidate is named when the loop's test
-    would take it (:func:`_named`; its share of u² then what freeing it adds). Then, in each
-    draw, every candidate the loop did not name there — carried, undetermined or neither
-    before — is judged beside the model with the ones it named, by the fusion's rules in the
-    fusion's order (:func:`align.fusion.plausible.judge`): undetermined (u freed beyond its
-    range's σ, declared or default: carried over that range, :func:`ranged_after`), else, for
-    a carried one, not excluded (its share (k b̂')²), else dropped; u² is the fixed model's
-    plus the mean share. New data that separate b from E shrink k: the shift falls below u/2
-    and the term drops; an effect named beside a near-degenerate candidate leaves that one
-    undetermined (freed beside the levelling, camera B's roll at 4549″ > σ 34.6″). A
-    candidate more likely named than not is in the model against which the less significant
-    ones' estimates are drawn (the loop adds the best first), as is one ``declared`` (a
-    camera's roll calibrated, name -> its calibration's u [rad]: no longer a candidate, E
-    corrected for it at its estimate; judged over the calibration's u as its range) — what
-    it absorbed is no longer left for the others, whose estimates move with it
-    (:func:`_with_declared`)."""
+    The candidates the session's fusion carries (``lin.held``) are freed together in the
+    linearisation: their joint estimate b̂ (from each one's estimate freed alone: b̂ = M⁻¹ r,
+    r_c = M_cc b̂_c, M their information with the estimated parameters marginalised) is not
+    known on the new data before they are taken; it is drawn about b̂ with the covariance of
+    b̂ − b̂' — the added data's draw, the dropped (replaced) data's, and the change of the kept
+    data's weights (``redraw`` False: b̂' = b̂). In each draw the loop is replayed on
+    r' = M' b̂' (M' after the measurement): it names the most significant candidate while its
+    test passes (:func:`_named`; the drop scaled as the loop's own test sees it now, from
+    ``loop_p``). Then every candidate it did not name — carried, undetermined or neither
+    before — is judged beside the model with the named ones by the fusion's rules in the
+    fusion's order: undetermined (:func:`align.fusion.plausible.judge`: its u freed beyond
+    its range's σ, declared or default; carried over that range, :func:`ranged_after`), else
+    not excluded — freed beside the model (``judge``) or in place of a named effect
+    (:func:`align.fusion.plausible.in_place_of`), its larger shift
+    (:func:`align.fusion.plausible.largest`) —, else dropped. u² is the model's (the named
+    freed) plus the mean of the draws' shares. A ``declared`` candidate (a camera's roll
+    calibrated, name -> its calibration's u [rad]) is no longer one: E corrected for it, the
+    others' estimates with it fixed at its joint estimate, and judged over the calibration's
+    u as its range."""
     kept = [g for g in lin.groups if g.source not in drop]
     infos = (lin.information([*kept, *add]), lin.information(), lin.information(kept),
              lin.information(add))
+    info = infos[0]
     free = list(lin.free)
     n_rows = sum(len(g.A) for g in [*kept, *add])
-    # (the carried candidates are judged against u without the ranged terms, as the fusion
-    # judges them before it adds those)
-    u2 = np.diag(inverse(infos[0][np.ix_(free, free)]))[:6] * lin.inflation**2
-    fixed = [(i, e) for n, i, e, _ in lin.held if n in declared]
     own = not add and not drop  # the session's own data: the fusion decided (not re-judged)
-    held = []
-    for name, idx, est, p_loop in sorted((h for h in lin.held if h[0] not in declared),
-                                         key=lambda h: h[3]):
-        # what the session's data left for it once the others are in the model
-        d = _draw(infos, free, idx, _with_declared(infos[1], free, idx, np.array(est), fixed),
-                  p_loop, n_rows, redraw, own, lin.inflation)
-        held.append((name, d))
-        if d.named.mean() >= 0.5:
-            fixed.append((idx, est))
-    named = [frozenset(n for n, d in held if d.named[r]) for r in range(REDRAWS)]
-    sig = sigmas(lin, declared)
-    # the session's own data: the fusion decided which it carries over their range
+    # the joint estimate now from each one's estimate alone (the declared ones too)
+    owner = [n for n, idx, *_ in lin.held for _ in idx]
+    every = [i for _, idx, *_ in lin.held for i in idx]
+    est = np.array([v for *_, e, _ in lin.held for v in e], float)
+    M0 = _schur(infos[1], free, every)
+    r0 = np.array([M0[j, [m for m, o in enumerate(owner) if o == owner[j]]]
+                   @ est[[m for m, o in enumerate(owner) if o == owner[j]]]
+                   for j in range(len(owner))])
+    b_all = np.linalg.lstsq(M0, r0, rcond=None)[0] if len(every) else est
+    held = [h for h in lin.held if h[0] not in declared]
+    names = [h[0] for h in held]
+    pos, at = {}, 0  # each held candidate's positions in the joint vector
+    for n, idx, *_ in held:
+        pos[n] = list(range(at, at + len(idx)))
+        at += len(idx)
+    H = [i for _, idx, *_ in held for i in idx]
+    b = b_all[[j for j, o in enumerate(owner) if o not in declared]]
+    draws = _joint_draws(infos, free, H, b, redraw)
+    M = _schur(info, free, H)
+    r = draws @ M
+    G = _gain(info, free, H)  # E's change per unit of each candidate freed
+    scale = {}
+    M_now = _schur(infos[1], free, H)
+    for n, idx, e, p_loop in held:
+        s = np.ix_(pos[n], pos[n])
+        now_drop = float(np.asarray(e) @ M_now[s] @ np.asarray(e))
+        scale[n] = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
+    cols = {n: list(idx) for n, idx, *_ in held}
     keep = {n for n, *_ in lin.ranged} if own else set(_columns(lin))
-    beside = {s: (freed_beside(lin, infos[0], sorted(s)),
-                  {r.name: r for r in ranged_after(lin, infos[0], declared, sorted(s))
-                   if r.name in keep})
-              for s in set(named)}
-    share = np.zeros((REDRAWS, 6))
-    hits = {n: np.zeros(REDRAWS, bool) for n, _ in held}
+    models: dict[frozenset, tuple] = {}
+
+    def model(S: frozenset) -> tuple:
+        """u² of the six angles with the candidates S named; each candidate's u freed and k
+        beside that model; the undetermined ones there."""
+        if S not in models:
+            j = free + [i for n in names if n in S for i in cols[n]]
+            models[S] = (np.diag(inverse(info[np.ix_(j, j)]))[:6] * lin.inflation**2,
+                         freed_beside(lin, info, sorted(S)),
+                         {u.name: u for u in ranged_after(lin, info, declared, sorted(S))
+                          if u.name in keep})
+        return models[S]
+
+    u2 = model(frozenset())[0]
+    sig = sigmas(lin, declared)
+    mine = {n: np.zeros((REDRAWS, 6)) for n in names}
+    hit = {n: np.zeros(REDRAWS, bool) for n in names}
+    named = {n: np.zeros(REDRAWS, bool) for n in names}
     ranged_share: dict[str, np.ndarray] = {}
     ranged_of: dict[str, Undetermined] = {}
-    u_e = np.sqrt(u2)
-    for r, s in enumerate(named):
-        freed, unknown = beside[s]
-        for name, d in held:
-            if name in s:
-                share[r] += d.freed
+    for k in range(REDRAWS):
+        def fit(T: Sequence[str], rk: np.ndarray = r[k]) -> tuple[float, np.ndarray, np.ndarray]:
+            """χ² drop, estimate and E shift with the candidates T freed."""
+            s = [i for n in T for i in pos[n]]
+            if not s:
+                return 0.0, np.zeros(0), np.zeros(6)
+            bt = np.linalg.lstsq(M[np.ix_(s, s)], rk[s], rcond=None)[0]
+            return float(rk[s] @ bt), bt, G[:, s] @ bt
+
+        S: list[str] = []
+        while not own:  # the loop: the most significant first, while its test passes
+            c0 = fit(S)[0]
+            drops = {n: fit([*S, n])[0] - c0 for n in names if n not in S}
+            if not drops:
+                break
+            n = min(drops, key=lambda n: special.chdtrc(len(pos[n]), drops[n] / scale[n]))
+            if not _named(drops[n], drops[n] / scale[n], len(pos[n]), n_rows):
+                break
+            S.append(n)
+        u2S, freed, unknown = model(frozenset(S))
+        for n in S:  # what freeing them adds to u², shared among them
+            named[n][k] = True
+            mine[n][k] = (u2S - u2) / len(S)
+        u_e = np.sqrt(u2S)
+        c_S, _, e_S = fit(S)
+        for n in names:
+            if n in S:
                 continue
-            x = d.draws[r]
-            u_f = freed.get(name, (0.0, None))[0]
-            verdict = judge(u_f, sig.get(name), d.chi[r], len(x), d.size(x), d.K @ x, u_e)
+            shifts = []
             if own:  # the fusion carried it (judged beside its own model, not re-judged)
-                verdict = NOT_EXCLUDED
-            if verdict == NOT_EXCLUDED:
-                hits[name][r] = True
-                share[r] += np.square(d.K @ x)
-        for name, und in unknown.items():
-            share[r] += np.square(und.shift)
-            ranged_share.setdefault(name, np.zeros(REDRAWS))[r] = 1.0
-            ranged_of.setdefault(name, und)
+                shifts = [G[:, pos[n]] @ draws[k][pos[n]]]
+            else:
+                c_T, bt, e_T = fit([*S, n])
+                x = bt[-len(pos[n]):]
+                verdict = judge(freed.get(n, (0.0,))[0], sig.get(n), c_T - c_S, len(x),
+                                _size(x), e_T - e_S, u_e)
+                if verdict == UNDETERMINED:
+                    continue  # carried over its range (in ``unknown``)
+                if verdict == NOT_EXCLUDED:
+                    shifts.append(e_T - e_S)
+                for t in S:  # in place of a named effect, that one freed back beside it
+                    c_A, ba, e_A = fit([*(m for m in S if m != t), n])
+                    p = float(special.chdtrc(len(pos[t]), max(c_T - c_A, 0.0) / scale[t]))
+                    if in_place_of(_size(ba[-len(pos[n]):]), p, NAMED_ALPHA):
+                        shifts.append(e_A - e_S)
+            j = largest(shifts, u_e) if not own else 0
+            if j is not None:
+                hit[n][k] = True
+                mine[n][k] = np.square(shifts[j])
+        for n, und in unknown.items():
+            ranged_share.setdefault(n, np.zeros((REDRAWS, 6)))[k] = np.square(und.shift)
+            ranged_of.setdefault(n, und)
+    share = sum((*mine.values(), *ranged_share.values()), np.zeros((REDRAWS, 6)))
     out = []
-    for name, d in held:
-        mine = np.where(np.array([name in s for s in named])[:, None], d.freed, 0.0) + np.where(
-            hits[name][:, None], np.square(d.draws @ d.K.T), 0.0)
-        out.append(Carried(name, d.size(d.b), float(np.sqrt(d.g @ d.Cbb @ d.g)),
-                           tuple(d.K @ d.b), float(hits[name].mean()), tuple(mine.mean(0)),
-                           float(d.named.mean())))
+    for n, _, e, _ in held:
+        s = pos[n]
+        e = np.asarray(e, float)
+        g = e / np.linalg.norm(e) if np.linalg.norm(e) > 0 else np.full(len(e), len(e)**-0.5)
+        out.append(Carried(n, _size(e), float(np.sqrt(g @ inverse(M[np.ix_(s, s)]) @ g)),
+                           tuple(G[:, s] @ e), float(hit[n].mean()), tuple(mine[n].mean(0)),
+                           float(named[n].mean())))
     # an undetermined nuisance more likely carried than not, with its expected share
-    ranged = []
-    for name, und in ranged_of.items():
-        sh = np.sqrt(np.mean([np.square(beside[s][1][name].shift) if name in beside[s][1]
-                              else np.zeros(6) for s in named], axis=0))
-        if ranged_share[name].mean() >= 0.5:  # (its expected share: the sign of one)
-            ranged.append(replace(und, shift=sh * np.where(und.shift < 0, -1.0, 1.0)))
-    u = np.sqrt(u2 + share)
+    ranged = tuple(replace(ranged_of[n], shift=np.sqrt(sq.mean(0)))
+                   for n, sq in ranged_share.items() if np.any(sq, axis=1).mean() >= 0.5)
     order = [h[0] for h in lin.held]
-    return Prediction(np.sqrt(u2 + share.mean(0)), u.std(0),
-                      tuple(sorted(out, key=lambda c: order.index(c.name))), tuple(ranged))
-
-
-@dataclass(frozen=True)
-class _Draws:
-    """One held candidate's draws of its estimate on the new data (:func:`_draw`)."""
-
-    b: np.ndarray         # its estimate now [rad]
-    draws: np.ndarray     # its estimate on the new data, REDRAWS × width [rad]
-    chi: np.ndarray       # the χ² drop of freeing it, per draw
-    named: np.ndarray     # whether the loop names it, per draw
-    K: np.ndarray         # dE/db, 6 × width
-    Cbb: np.ndarray       # its covariance freed [rad²]
-    freed: np.ndarray     # what naming it adds to u² of the six angles [rad²]
-
-    @property
-    def g(self) -> np.ndarray:
-        size = float(np.linalg.norm(self.b))
-        return self.b / size if size > 0 else np.full(len(self.b), np.sqrt(1.0 / len(self.b)))
-
-    def size(self, x: np.ndarray) -> float:
-        """Its size: one component's signed value, a vector's length [rad]."""
-        return float(x[0]) if len(x) == 1 else float(np.linalg.norm(x))
-
-
-def _draw(infos: tuple[np.ndarray, ...], free: list[int], idx: Sequence[int], b: np.ndarray,
-          p_loop: float, n_rows: int, redraw: bool, own: bool, inflation: float) -> _Draws:
-    """One held candidate (parameters ``idx``, estimate ``b`` [rad], the loop's p-value now
-    ``p_loop``) after the measurement (``infos``: the information after, now, of the kept
-    groups, of the added ones): its estimate's draws on the new data and, in each, whether
-    the loop names it."""
-    info, info_now, info_kept, info_add = infos
-    j, n = [*free, *idx], len(free)
-    C = inverse(info[np.ix_(j, j)])
-    Cbb = C[n:, n:]
-    K = C[:6, n:] @ np.linalg.inv(Cbb)
-    # b̂ = Σ_b Σ_g A_gᵀ C_g⁻¹ y_g: the kept data's gain changes, the rest are new draws
-    ix = np.ix_(j, j)
-    S0, S1 = inverse(info_now[ix])[n:], C[n:]
-    d = ((S0 - S1) @ info_kept[ix] @ (S0 - S1).T
-         + S0 @ (info_now - info_kept)[ix] @ S0.T + S1 @ info_add[ix] @ S1.T)
-    w, v = np.linalg.eigh((d + d.T) / 2 if redraw else 0 * d)
-    z = np.random.default_rng(0).standard_normal((REDRAWS, len(b)))
-    draws = b + z @ (v * np.sqrt(np.clip(w, 0.0, None))).T
-    chi = np.einsum("ij,ij->i", draws, np.linalg.solve(Cbb, draws.T).T)
-    # the loop's test is not χ²(w) on the drop (it divides by the fit's χ²/dof, its
-    # weights are estimated): its p-value now fixes the scale of the drop it sees
-    now_drop = float(b @ np.linalg.solve(S0[:, n:], b))
-    scale = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
-    named = np.array([_named(c, c / scale, len(idx), n_rows) for c in chi])
-    if own:
-        named[:] = False
-    return _Draws(b, draws, chi, named, K, Cbb, np.diag(K @ Cbb @ K.T) * inflation**2)
+    return Prediction(np.sqrt(u2 + share.mean(0)), np.sqrt(u2 + share).std(0),
+                      tuple(sorted(out, key=lambda c: order.index(c.name))), ranged)

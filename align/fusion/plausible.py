@@ -159,7 +159,6 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
     added = [t.name for t in loop.terms]
     u_e = np.sqrt(np.diag(cov))
     e0 = _e(cur)
-    limit = np.deg2rad(UNDECLARED_LIMIT_DEG)
     out = []
     for cand in candidates:
         if cand.name in added or cand.name in skip:
@@ -190,14 +189,31 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
             p = (f_test(alt, joint, named.width) if joint is not None else
                  float(special.chdtrc(named.width, max(alt.chi2 - min(cur.chi2, alt.chi2),
                                                        0.0))))
-            if abs(est) <= limit and not p < alpha:
+            if in_place_of(est, p, alpha):
                 found.append(NotExcluded(cand.name, float(est), float(u), _e(alt) - e0,
                                          named.name))
-        if found:
-            best = max(found, key=lambda c: float(np.max(np.abs(c.shift) / u_e)))
-            if np.any(np.abs(best.shift) > SHIFT_FRACTION * u_e):
-                out.append(best)
+        k = largest([c.shift for c in found], u_e)
+        if k is not None:
+            out.append(found[k])
     return out
+
+
+def in_place_of(size: float, p: float, alpha: float) -> bool:
+    """The rule of :func:`not_excluded` for an alternative (also what ``align plan`` predicts
+    with): a candidate fitted in place of a named effect to a size ``size`` [rad] within
+    :data:`UNDECLARED_LIMIT_DEG`, with the named effect freed back beside it at p-value ``p``
+    not significant at the loop's ``alpha`` (its shift then judged by :func:`largest`)."""
+    return bool(abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG) and not p < alpha)
+
+
+def largest(shifts: Sequence[np.ndarray], u_e: np.ndarray) -> int | None:
+    """Of one candidate's shifts of E (freed beside the model, or in place of a named effect)
+    [rad], the index of the one carried: the largest in units of E's u ``u_e`` [rad], if it
+    exceeds :data:`SHIFT_FRACTION` of u in some angle; else None."""
+    if not len(shifts):
+        return None
+    k = max(range(len(shifts)), key=lambda i: float(np.max(np.abs(shifts[i]) / u_e)))
+    return k if np.any(np.abs(shifts[k]) > SHIFT_FRACTION * u_e) else None
 
 
 UNDETERMINED = "undetermined"
