@@ -94,6 +94,11 @@ NAMED_TESTED = 5
 table's tilt, the platform's levelling) — dimensionless."""
 NAMED_MIN_BIC = 6.0
 """The loop's least BIC drop (``run_loop``'s ``min_delta_bic``) — dimensionless."""
+DRAW_PRIOR_ARCSEC = 60.0 / np.sqrt(3.0)
+"""The σ [″] of the prior the draws of a held candidate without a plausible range (the
+platform's levelling, the table's tilt) are taken with (:func:`predict`): the default range
+of a camera's roll, a set-up error of the same kind. A prior of the draws only: the fusion
+has none, and the draws' estimates are judged without it."""
 REDRAWS = 256
 """Draws of a carried candidate's estimate on the new data (:func:`predict`): the share's
 mean to ~3 % of itself at p = 0.5, fixed (seed 0) so that a plan is reproducible."""
@@ -274,7 +279,18 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     r0 = np.array([M0[j, [m for m, o in enumerate(owner) if o == owner[j]]]
                    @ est[[m for m, o in enumerate(owner) if o == owner[j]]]
                    for j in range(len(owner))])
-    b_all = np.linalg.lstsq(M0, r0, rcond=None)[0] if len(every) else est
+    # Near-degenerate candidates (a roll and the levelling both +20″) have a joint estimate
+    # of thousands of ″ ± thousands: the draws are taken with each candidate's plausible
+    # range as a prior (``DRAW_PRIOR_ARCSEC`` where it has none), the fusion's estimates in
+    # each draw without it.
+    # (a ``declared`` one is drawn too, with its calibration among the added data, and the
+    # others' estimates are then those with it fixed at its draw)
+    rng = sigmas(lin)
+    prior = np.zeros(len(lin.params))
+    for i, o in zip(every, owner, strict=True):
+        prior[i] = rng.get(o, DRAW_PRIOR_ARCSEC * ARCSEC) ** -2
+    P = np.diag(prior)
+    b_all = (np.linalg.solve(M0 + P[np.ix_(every, every)], r0) if len(every) else est)
     held = [h for h in lin.held if h[0] not in declared]
     names = [h[0] for h in held]
     pos, at = {}, 0  # each held candidate's positions in the joint vector
@@ -282,10 +298,11 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         pos[n] = list(range(at, at + len(idx)))
         at += len(idx)
     H = [i for _, idx, *_ in held for i in idx]
-    b = b_all[[j for j, o in enumerate(owner) if o not in declared]]
-    draws = _joint_draws(infos, free, H, b, redraw)
+    mine_ = [j for j, o in enumerate(owner) if o not in declared]
+    draws = _joint_draws((infos[0] + P, infos[1] + P, infos[2] + P, infos[3]), free, every,
+                         b_all, redraw)[:, mine_]
     M = _schur(info, free, H)
-    r = draws @ M
+    r = draws @ (M + P[np.ix_(H, H)])  # the data's part of each draw's estimate
     G = _gain(info, free, H)  # E's change per unit of each candidate freed
     scale = {}
     M_now = _schur(infos[1], free, H)
@@ -294,6 +311,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
         now_drop = float(np.asarray(e) @ M_now[s] @ np.asarray(e))
         scale[n] = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
     cols = {n: list(idx) for n, idx, *_ in held}
+    alone = {n: e for n, _, e, _ in held}
     keep = {n for n, *_ in lin.ranged} if own else set(_columns(lin))
     models: dict[frozenset, tuple] = {}
 
@@ -345,7 +363,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
                 continue
             shifts = []
             if own:  # the fusion carried it (judged beside its own model, not re-judged)
-                shifts = [G[:, pos[n]] @ draws[k][pos[n]]]
+                shifts = [G[:, pos[n]] @ np.asarray(alone[n])]  # its shift freed alone
             else:
                 c_T, bt, e_T = fit([*S, n])
                 x = bt[-len(pos[n]):]

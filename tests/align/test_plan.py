@@ -385,13 +385,14 @@ def test_predicted_u_with_carried_terms_matches_simulation(tmp_path):
         res = _run(tmp_path / f"b{seed}", spec, ref_u=CARRY_REF_U)
         lin = res.fusion.budget.model
         assert lin.held, seed  # the scenario carries (else the seed list is stale)
-        p = plan(lin)
+        p = plan(lin, camera_roll_u=ROLL_U)
         k = E_NAMES.index(p.target)
         ij = E_INDEX[k]
         assert p.u_before == pytest.approx(res.fusion.E_u[ij], rel=0.01)
         for o in p.options:
             got_res = _run(tmp_path / f"{seed}{o.kind}{o.detail}".replace(" ", "_"),
-                           _realise(spec, o.kind, o.detail), ref_u=CARRY_REF_U)
+                           _realise(spec, o.kind, o.detail),
+                           ROLL_U if o.kind == "camera" else None, ref_u=CARRY_REF_U)
             got = got_res.fusion.E_u[ij]
             z = (got - o.u_after) / np.hypot(o.u_after_noise, 0.01 * o.u_after)
             after = {c.name: c.p for c in o.carried}
