@@ -132,7 +132,7 @@ class Linearisation:
         The loop's other candidates (tested, neither named, carried nor undetermined): name
         and parameter indices, held at zero like ``held``. ``align plan`` judges them after a
         measurement by the fusion's rules (:func:`align.fusion.plausible.judge`): beside an
-        effect the new data name, one may become undetermined.
+        effect the new data name, one may become undetermined; unit —.
     ranges : tuple of (str, float)
         The standard uncertainty of the plausible range [rad] of each candidate that has one
         (a camera's roll, the reference face's offset), declared in session.toml or the
