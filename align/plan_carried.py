@@ -333,19 +333,27 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     named = {n: np.zeros(REDRAWS, bool) for n in names}
     ranged_share: dict[str, np.ndarray] = {}
     ranged_of: dict[str, Undetermined] = {}
-    for k in range(REDRAWS):
-        def fit(T: Sequence[str], rk: np.ndarray = r[k]) -> tuple[float, np.ndarray, np.ndarray]:
-            """χ² drop, estimate and E shift with the candidates T freed."""
-            s = [i for n in T for i in pos[n]]
-            if not s:
-                return 0.0, np.zeros(0), np.zeros(6)
-            bt = np.linalg.lstsq(M[np.ix_(s, s)], rk[s], rcond=None)[0]
-            return float(rk[s] @ bt), bt, G[:, s] @ bt
+    fits: dict[frozenset, tuple] = {}
 
+    def fit(T: Sequence[str], k: int, of: str | None = None
+            ) -> tuple[float, np.ndarray | None, np.ndarray]:
+        """Draw k's χ² drop, the estimate of candidate ``of`` and E's shift with the
+        candidates T freed (all draws solved at once per T)."""
+        key = frozenset(T)
+        if key not in fits:
+            s = [i for m in names if m in key for i in pos[m]]
+            bt = (np.linalg.lstsq(M[np.ix_(s, s)], r[:, s].T, rcond=None)[0].T if s
+                  else np.zeros((REDRAWS, 0)))
+            fits[key] = (np.einsum("ij,ij->i", r[:, s], bt), bt, bt @ G[:, s].T, s)
+        chi, bt, e, s = fits[key]
+        x = None if of is None else bt[k, [s.index(i) for i in pos[of]]]
+        return float(chi[k]), x, e[k]
+
+    for k in range(REDRAWS):
         S: list[str] = []
         while not own:  # the loop: the most significant first, while its test passes
-            c0 = fit(S)[0]
-            drops = {n: fit([*S, n])[0] - c0 for n in names if n not in S}
+            c0 = fit(S, k)[0]
+            drops = {n: fit([*S, n], k)[0] - c0 for n in names if n not in S}
             if not drops:
                 break
             n = min(drops, key=lambda n: special.chdtrc(len(pos[n]), drops[n] / scale[n]))
@@ -357,7 +365,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
             named[n][k] = True
             mine[n][k] = (u2S - u2) / len(S)
         u_e = np.sqrt(u2S)
-        c_S, _, e_S = fit(S)
+        c_S, _, e_S = fit(S, k)
         for n in names:
             if n in S:
                 continue
@@ -365,8 +373,7 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
             if own:  # the fusion carried it (judged beside its own model, not re-judged)
                 shifts = [G[:, pos[n]] @ np.asarray(alone[n])]  # its shift freed alone
             else:
-                c_T, bt, e_T = fit([*S, n])
-                x = bt[-len(pos[n]):]
+                c_T, x, e_T = fit([*S, n], k, n)
                 verdict = judge(freed.get(n, (0.0,))[0], sig.get(n), c_T - c_S, len(x),
                                 _size(x), e_T - e_S, u_e)
                 if verdict == UNDETERMINED:
@@ -374,9 +381,9 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
                 if verdict == NOT_EXCLUDED:
                     shifts.append(e_T - e_S)
                 for t in S:  # in place of a named effect, that one freed back beside it
-                    c_A, ba, e_A = fit([*(m for m in S if m != t), n])
+                    c_A, xa, e_A = fit([*(m for m in S if m != t), n], k, n)
                     p = float(special.chdtrc(len(pos[t]), max(c_T - c_A, 0.0) / scale[t]))
-                    if in_place_of(_size(ba[-len(pos[n]):]), p, NAMED_ALPHA):
+                    if in_place_of(_size(xa), p, NAMED_ALPHA):
                         shifts.append(e_A - e_S)
             j = largest(shifts, u_e) if not own else 0
             if j is not None:
