@@ -3,10 +3,13 @@ measurement (:func:`predict`).
 
 The fusion carries a candidate it tested but could not exclude as a Type B term in E's u
 (:mod:`align.fusion.plausible`) and keeps its Jacobian in the budget's linearisation, held at
-zero (``Linearisation.held``). Freed there, it moves E by k b̂ and lowers χ² by b̂ᵀ Σ_bb⁻¹ b̂;
-after a measurement k and Σ_bb are those of the new information, and the new estimate is a
-draw about the one now: in each draw the fusion's own rules (``judge``) and the loop's
-test decide whether the candidate is carried, named or dropped (docs/decision.md).
+zero (``Linearisation.held``), beside the undetermined ones' (``ranged``) and the loop's other
+candidates' (``others``). Freed there, the carried ones move E by k b̂ and lower χ² by
+b̂ᵀ Σ_bb⁻¹ b̂; after a measurement k and Σ_bb are those of the new information, and their new
+joint estimate is a draw about the one now: in each draw the loop's test names some, and the
+fusion's own rules, in its order and by its functions (:func:`align.fusion.plausible.judge`,
+``in_place_of``, ``largest``), judge every other candidate beside the named ones:
+undetermined, not excluded, or dropped (docs/decision.md).
 """
 
 from __future__ import annotations
