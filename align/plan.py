@@ -447,6 +447,23 @@ def _ranged_resolution(r: Undetermined, every: Sequence[Option], k: int) -> str:
     return r.measure
 
 
+def predicted(lin: Linearisation, target: str, minutes: Mapping[str, float] = MINUTES,
+              camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC) -> list[Option]:
+    """Every option of :func:`options` with its prediction for angle ``target`` (those that
+    lower nothing too, unranked); ``camera_roll_u`` [rad] as there."""
+    k = E_NAMES.index(target)
+    out = []
+    for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
+        # a camera's roll calibrated is declared: no longer a candidate (session.toml)
+        declared = {f"{ROLL}[{detail['camera']}]": camera_roll_u} if kind == "camera" else {}
+        after = predict(lin, add, drop, declared=declared)
+        u = after.u
+        out.append(Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
+                          float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
+                          after.carried, after.ranged))
+    return out
+
+
 def plan(lin: Linearisation, disposition: Mapping | None = None,
          minutes: Mapping[str, float] = MINUTES,
          camera_roll_u: float = CAMERA_ROLL_U_ARCSEC * ARCSEC) -> Plan:
@@ -456,18 +473,8 @@ def plan(lin: Linearisation, disposition: Mapping | None = None,
     k = E_NAMES.index(target)
     now = predict(lin)
     u0 = now.u
-    ranked, every = [], []
-    for action, kind, mins, add, drop, detail in options(lin, minutes, camera_roll_u):
-        # a camera's roll calibrated is declared: no longer a candidate (session.toml)
-        declared = {f"{ROLL}[{detail['camera']}]": camera_roll_u} if kind == "camera" else {}
-        after = predict(lin, add, drop, declared=declared)
-        u = after.u
-        o = Option(action, kind, mins, float(u[k]), tuple(map(float, u)), detail,
-                   float(np.hypot(prediction_noise(lin, add, drop)[k], after.u_sd[k])),
-                   after.carried, after.ranged)
-        every.append(o)
-        if u[k] < u0[k] * (1 - MIN_GAIN):
-            ranked.append(o)
+    every = predicted(lin, target, minutes, camera_roll_u)
+    ranked = [o for o in every if o.u_after < u0[k] * (1 - MIN_GAIN)]
     ranked.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     every.sort(key=lambda o: -(u0[k] - o.u_after) / o.minutes)
     resolves = {c.name: _resolution(c, every, k) for c in now.carried}

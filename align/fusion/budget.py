@@ -128,6 +128,15 @@ class Linearisation:
         (:mod:`align.fusion.undetermined`): name, parameter indices, and the standard
         uncertainty of the range [rad]. Held at zero like ``held`` (their Type B share is
         added apart); ``align plan`` frees them to predict their u after a measurement.
+    others : tuple of (str, tuple of int)
+        The loop's other candidates (tested, neither named, carried nor undetermined): name
+        and parameter indices, held at zero like ``held``. ``align plan`` judges them after a
+        measurement by the fusion's rules (:func:`align.fusion.plausible.judge`): beside an
+        effect the new data name, one may become undetermined; unit —.
+    ranges : tuple of (str, float)
+        The standard uncertainty of the plausible range [rad] of each candidate that has one
+        (a camera's roll, the reference face's offset), declared in session.toml or the
+        default (:func:`align.fusion.undetermined.default_sigma`).
     """
 
     params: tuple[str, ...]
@@ -136,12 +145,14 @@ class Linearisation:
     inflation: float = 1.0
     held: tuple[tuple[str, tuple[int, ...], tuple[float, ...], float], ...] = ()
     ranged: tuple[tuple[str, tuple[int, ...], float], ...] = ()
+    others: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    ranges: tuple[tuple[str, float], ...] = ()
 
     @property
     def free(self) -> np.ndarray:
-        """The indices of the parameters estimated (all but the ``held`` and ``ranged``
-        ones)."""
-        held = {i for _, idx, *_ in (*self.held, *self.ranged) for i in idx}
+        """The indices of the parameters estimated (all but the ``held``, ``ranged`` and
+        ``others`` ones)."""
+        held = {i for _, idx, *_ in (*self.held, *self.ranged, *self.others) for i in idx}
         return np.array([i for i in range(len(self.params)) if i not in held], int)
 
     def information(self, groups: Sequence[Group] | None = None) -> np.ndarray:
@@ -202,6 +213,8 @@ class Linearisation:
                          for n, i, e, p in self.held],
                 "ranged": [{"name": n, "index": list(i), "sigma_rad": s}
                            for n, i, s in self.ranged],
+                "others": [{"name": n, "index": list(i)} for n, i in self.others],
+                "ranges": [{"name": n, "sigma_rad": s} for n, s in self.ranges],
                 "groups": [g.to_dict() for g in self.groups]}
 
     @classmethod
@@ -213,7 +226,10 @@ class Linearisation:
                           tuple(float(e) for e in h["estimate_rad"]), float(h["loop_p"]))
                          for h in d.get("held", ())),
                    tuple((str(h["name"]), tuple(int(i) for i in h["index"]),
-                          float(h["sigma_rad"])) for h in d.get("ranged", ())))
+                          float(h["sigma_rad"])) for h in d.get("ranged", ())),
+                   tuple((str(h["name"]), tuple(int(i) for i in h["index"]))
+                         for h in d.get("others", ())),
+                   tuple((str(h["name"]), float(h["sigma_rad"])) for h in d.get("ranges", ())))
 
 
 @dataclass(frozen=True)

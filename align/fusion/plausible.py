@@ -159,7 +159,6 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
     added = [t.name for t in loop.terms]
     u_e = np.sqrt(np.diag(cov))
     e0 = _e(cur)
-    limit = np.deg2rad(UNDECLARED_LIMIT_DEG)
     out = []
     for cand in candidates:
         if cand.name in added or cand.name in skip:
@@ -174,7 +173,9 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
         joint = _refit(stage, [*loop.terms, term])
         if joint is not None:
             est, u = joint.effects.get(term.name, (0.0, float("inf")))
-            if is_carried(cur.chi2 - joint.chi2, term.width, est, _e(joint) - e0, u_e):
+            # (judged determined already: ``skip`` holds the undetermined, judge's first rule)
+            if judge(0.0, None, cur.chi2 - joint.chi2, term.width, est, _e(joint) - e0,
+                     u_e) == NOT_EXCLUDED:
                 found.append(NotExcluded(cand.name, float(est), float(u), _e(joint) - e0))
         for named in loop.terms:
             alt = _refit(stage, [t if t is not named else term for t in loop.terms])
@@ -188,29 +189,64 @@ def not_excluded(stage: Stage, candidates: Sequence[Candidate], loop: LoopReport
             p = (f_test(alt, joint, named.width) if joint is not None else
                  float(special.chdtrc(named.width, max(alt.chi2 - min(cur.chi2, alt.chi2),
                                                        0.0))))
-            if abs(est) <= limit and not p < alpha:
+            if in_place_of(est, p, alpha):
                 found.append(NotExcluded(cand.name, float(est), float(u), _e(alt) - e0,
                                          named.name))
-        if found:
-            best = max(found, key=lambda c: float(np.max(np.abs(c.shift) / u_e)))
-            if np.any(np.abs(best.shift) > SHIFT_FRACTION * u_e):
-                out.append(best)
+        k = largest([c.shift for c in found], u_e)
+        if k is not None:
+            out.append(found[k])
     return out
 
 
-def is_carried(drop: float, width: int, size: float, shift: np.ndarray, u_e: np.ndarray,
-               u_freed: float = 0.0, sigma: float | None = None) -> bool:
-    """The rule of :func:`not_excluded` (also what ``align plan`` predicts with): a candidate
-    of ``width`` components whose freeing lowers χ² by ``drop`` (b̂ᵀ cov(b)⁻¹ b̂, linearised)
-    to a size ``size`` [rad] and moves E by ``shift`` [rad] is carried when the data cannot
-    exclude it (beyond :data:`NOT_EXCLUDED_Z`, within :data:`UNDECLARED_LIMIT_DEG`) and the
-    shift exceeds :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle — unless the
-    data cannot determine it: its u freed ``u_freed`` [rad] beyond ``sigma``, the σ of its
-    plausible range [rad] (None: it has none, the platform's levelling and the table's tilt),
-    when it is carried over that range instead
-    (:func:`align.fusion.undetermined.carried_variance`; :func:`not_excluded` is given those
-    as ``skip``)."""
+def in_place_of(size: float, p: float, alpha: float) -> bool:
+    """The rule of :func:`not_excluded` for an alternative (also what ``align plan`` predicts
+    with): a candidate fitted in place of a named effect to a size ``size`` [rad] within
+    :data:`UNDECLARED_LIMIT_DEG`, with the named effect freed back beside it at p-value ``p``
+    not significant at the loop's ``alpha`` (its shift then judged by :func:`largest`)."""
+    return bool(abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG) and not p < alpha)
+
+
+def largest(shifts: Sequence[np.ndarray], u_e: np.ndarray) -> int | None:
+    """Of one candidate's shifts of E (freed beside the model, or in place of a named effect)
+    [rad], the index of the one carried: the largest in units of E's u ``u_e`` [rad], if it
+    exceeds :data:`SHIFT_FRACTION` of u in some angle; else None."""
+    if not len(shifts):
+        return None
+    k = max(range(len(shifts)), key=lambda i: float(np.max(np.abs(shifts[i]) / u_e)))
+    return k if np.any(np.abs(shifts[k]) > SHIFT_FRACTION * u_e) else None
+
+
+UNDETERMINED = "undetermined"
+""":func:`judge`'s verdict for a candidate the data cannot determine: carried over its
+plausible range (:mod:`align.fusion.undetermined`)."""
+NOT_EXCLUDED = "not excluded"
+""":func:`judge`'s verdict for a candidate the data cannot exclude: carried as its shift."""
+
+
+def judge(u_freed: float, sigma: float | None, drop: float = 0.0, width: int = 1,
+          size: float = 0.0, shift: np.ndarray | None = None, u_e: np.ndarray | None = None
+          ) -> str | None:
+    """The fusion's rules for a candidate the loop did not add, in the fusion's order — the
+    one function :func:`align.fusion.fuse` (through :func:`align.fusion.undetermined.
+    undetermined`, then :func:`not_excluded`) and ``align plan`` (on each draw of the new
+    data, :mod:`align.plan_carried`) judge it by:
+
+    1. :data:`UNDETERMINED` when the data cannot determine it: its u freed ``u_freed`` [rad]
+       (inf: not separable from E) beyond ``sigma``, the σ of its plausible range [rad]
+       (None: it has none, the platform's levelling and the table's tilt)
+       (:func:`align.fusion.undetermined.carried_variance`); its estimate, freed, is then no
+       measure of it;
+    2. else :data:`NOT_EXCLUDED` when freeing it lowers χ² by ``drop`` (b̂ᵀ cov(b)⁻¹ b̂,
+       ``width`` components) beyond :data:`NOT_EXCLUDED_Z`, to a size ``size`` [rad] within
+       :data:`UNDECLARED_LIMIT_DEG`, and moves E by ``shift`` [rad] more than
+       :data:`SHIFT_FRACTION` of E's u ``u_e`` [rad] in some angle (``shift`` None: no
+       estimate to judge, as for a candidate the loop's tests excluded);
+    3. else None: the loop's tests judge it (not carried)."""
     if sigma is not None and carried_variance(sigma, u_freed) > 0:
-        return False
-    return bool(_excluded(drop, width) and abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG)
-                and np.any(np.abs(shift) > SHIFT_FRACTION * u_e))
+        return UNDETERMINED
+    if shift is None:
+        return None
+    if (_excluded(drop, width) and abs(size) <= np.deg2rad(UNDECLARED_LIMIT_DEG)
+            and np.any(np.abs(shift) > SHIFT_FRACTION * u_e)):
+        return NOT_EXCLUDED
+    return None

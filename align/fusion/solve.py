@@ -38,7 +38,7 @@ from align.fusion.observations import (
     e_matrix,
 )
 from align.fusion.plausible import admissible, not_excluded
-from align.fusion.undetermined import Undetermined, undetermined
+from align.fusion.undetermined import Undetermined, default_sigma, undetermined
 from align.loop import Candidate, LoopReport, LoopSummary, StageFit, Term, f_test, run_loop
 from axisbase.covariance import cov_of
 from axisbase.errors import NotApplicable
@@ -506,9 +506,13 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
     # The carried and the undetermined candidates' columns join the linearisation held at
     # zero: what freeing them would do, from which 'align plan' predicts whether a
     # measurement resolves them.
+    # So do the loop's other candidates: beside an effect a measurement makes the loop name,
+    # one of them may no longer be determined (the plan judges them by these rules).
     extra = [(c.name, _width(c.name)) for c in carried]
     ranged = [(c.name, _width(c.name)) for c in unknown]
-    extra += ranged
+    judged = {t.name for t in loop.terms} | {n for n, _ in (*extra, *ranged)}
+    others = [(c.name, _width(c.name)) for c in cands if c.name not in judged]
+    extra += ranged + others
     layout = [*sol.layout, *extra]
     params = np.concatenate([sol.params, np.zeros(sum(w for _, w in extra))])
     names = [*sol.names, *(f"{n}[{k}]" if w > 1 else n for n, w in extra for k in range(w))]
@@ -518,6 +522,11 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
         return [b.predict(axes, nu) for b in stage.blocks]
 
     lin = linearise(stage.blocks, predict_all, params, names, layout, inflation)
+    sigmas = {c.name: (plausible_u or {}).get(c.name, default_sigma(c.name)) for c in cands}
+    at = len(lin.nuisances) - len(others)
+    lin = replace(lin, nuisances=lin.nuisances[:at], others=tuple(
+        (n, idx) for (n, _), (_, idx) in zip(others, lin.nuisances[at:], strict=True)),
+        ranges=tuple((n, float(s)) for n, s in sigmas.items() if s is not None))
     if unknown:
         at = len(lin.nuisances) - len(ranged)
         lin = replace(lin, nuisances=lin.nuisances[:at], ranged=tuple(
