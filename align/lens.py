@@ -181,7 +181,19 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     # line to spare the lines cannot tell them apart, and the note says both (the bent
     # reading is the one within the ranges the user declared).
     pw, chi2w, lw = plausible_exact(cache, sol.lam, sol.applied, 2 * rng)
-    if pw >= alpha:
+    # A parameter of that fit on its bound (twice its range) is where the search stopped,
+    # not the best lens beyond the ranges: that lies further out, and was not found (no
+    # value to declare). (building.jpg: k1 +0.600 on the bound of 2 x 0.3.)
+    edge = [PARAMS[j] for j in range(len(PARAMS))
+            if rng[j] > 0 and abs(lw[j]) >= 2 * rng[j] * (1 - 1e-6)]
+    if pw >= alpha and edge:
+        note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
+                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one at the edge of "
+                f"twice the ranges fits all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 "
+                f"{chi2w:.1f}; {', '.join(edge)} on that bound: the best lens lies further "
+                "out, not found): a lens far beyond the ranges (calibrate the camera) or a "
+                f"bent mark (line {k}, left out of the lens)")
+    elif pw >= alpha:
         note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
                 f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
                 f"all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}): a lens beyond the "
