@@ -186,19 +186,16 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     # value to declare). (building.jpg: k1 +0.600 on the bound of 2 x 0.3.)
     edge = [PARAMS[j] for j in range(len(PARAMS))
             if rng[j] > 0 and abs(lw[j]) >= 2 * rng[j] * (1 - 1e-6)]
-    if pw >= alpha and edge:
+    fit = f"k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}"
+    if pw >= alpha:
         note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
-                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one at the edge of "
-                f"twice the ranges fits all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 "
-                f"{chi2w:.1f}; {', '.join(edge)} on that bound: the best lens lies further "
-                "out, not found): a lens far beyond the ranges (calibrate the camera) or a "
-                f"bent mark (line {k}, left out of the lens)")
-    elif pw >= alpha:
-        note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
-                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
-                f"all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}): a lens beyond the "
-                "ranges (declare it: --lens k1=..., or calibrate the camera) or a bent mark "
-                f"(line {k}, left out of the lens)")
+                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and " + (
+                    f"one at the edge of twice the ranges fits all ({fit}; {', '.join(edge)} "
+                    "on that bound: the best lens lies further out, not found): a lens far "
+                    "beyond the ranges (calibrate the camera)" if edge else
+                    f"one beyond them fits all ({fit}): a lens beyond the ranges (declare "
+                    "it: --lens k1=..., or calibrate the camera)")
+                + f" or a bent mark (line {k}, left out of the lens)")
     sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
     return sk, [replace(d, s_pp_var=v) for d, v in zip(ds, probes, strict=True)]
 
