@@ -181,12 +181,21 @@ def solve_lens(lines: Sequence[LineGeometry], scale: float, ranges: LensRanges =
     # line to spare the lines cannot tell them apart, and the note says both (the bent
     # reading is the one within the ranges the user declared).
     pw, chi2w, lw = plausible_exact(cache, sol.lam, sol.applied, 2 * rng)
+    # A parameter of that fit on its bound (twice its range) is where the search stopped,
+    # not the best lens beyond the ranges: that lies further out, and was not found (no
+    # value to declare). (building.jpg: k1 +0.600 on the bound of 2 x 0.3.)
+    edge = [PARAMS[j] for j in range(len(PARAMS))
+            if rng[j] > 0 and abs(lw[j]) >= 2 * rng[j] * (1 - 1e-6)]
+    fit = f"k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}"
     if pw >= alpha:
         note = (f"no lens within the plausible ranges fits these {len(lines)} lines (chi2 "
-                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and one beyond them fits "
-                f"all (k1 {lw[0]:+.3f}, k2 {lw[1]:+.3f}, chi2 {chi2w:.1f}): a lens beyond the "
-                "ranges (declare it: --lens k1=..., or calibrate the camera) or a bent mark "
-                f"(line {k}, left out of the lens)")
+                f"{chi2:.1f} on {dof} dof); one fits all but line {k}, and " + (
+                    f"one at the edge of twice the ranges fits all ({fit}; {', '.join(edge)} "
+                    "on that bound: the best lens lies further out, not found): a lens far "
+                    "beyond the ranges (calibrate the camera)" if edge else
+                    f"one beyond them fits all ({fit}): a lens beyond the ranges (declare "
+                    "it: --lens k1=..., or calibrate the camera)")
+                + f" or a bent mark (line {k}, left out of the lens)")
     sk = replace(sk, notes=(note, *sk.notes), n_lines=len(lines), bent_lines=(k,))
     return sk, [replace(d, s_pp_var=v) for d, v in zip(ds, probes, strict=True)]
 

@@ -244,6 +244,21 @@ def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
     Where two marks cross at a shallow angle their grooves fuse into one ridge along the
     bisector: a third line, between the two in direction, that lies within a groove's reach
     of both over its whole length (a mark there could not be measured apart from them)."""
+    return unfused(cands, fused_covers(cands))
+
+
+def unfused(cands: list[MarkCandidate], covers: list[list[int]]) -> list[MarkCandidate]:
+    """The lines of ``cands`` that are no fused ridge, given :func:`fused_covers` of them
+    (or of a longer list of the same lines in the same order, its indices mapped to these
+    and those not among them left out: coverage is a test of each pair alone)."""
+    return [c for c, s in zip(cands, covers, strict=True)
+            if not _straddled(c, [cands[j] for j in s])]
+
+
+def fused_covers(cands: list[MarkCandidate]) -> list[list[int]]:
+    """Per line of ``cands``, the indices (in order) of the others, of its polarity and not
+    fused themselves, that lie within a groove's reach of it over its whole length: those
+    whose ridges may fuse into it (:func:`_drop_fused`)."""
     # Per line, the lines that cover it first, then whether two of them lie on either side
     # of it in direction: n^2 coverage tests, not a test per triple (n^3: building.jpg's
     # ~400 candidates took ~100 s CPU that way).
@@ -265,11 +280,9 @@ def _drop_fused(cands: list[MarkCandidate]) -> list[MarkCandidate]:
         may &= _may_cover(c, angle, offset, half)
         # (those that may, in order: building.jpg's ~400 candidates made ~160k Python
         # iterations over the others, ~0.1 s CPU, to reach the few that may)
-        side = [o for o in (cands[j] for j in np.flatnonzero(may))
-                if o is not c and o.dark == c.dark and o.fused is None
-                and _covers(c, o, max(6.0, 2 * o.thickness_px), whole)]
-        if not _straddled(c, side):
-            out.append(c)
+        out.append([j for j in np.flatnonzero(may).tolist()
+                    if (o := cands[j]) is not c and o.dark == c.dark and o.fused is None
+                    and _covers(c, o, max(6.0, 2 * o.thickness_px), whole)])
     return out
 
 

@@ -63,6 +63,21 @@ def test_a_lens_beyond_the_ranges_is_said_with_the_bent_reading():
     assert "a lens beyond the ranges (declare it: --lens k1=" in note and "or a bent" in note
 
 
+@pytest.mark.slow  # (~0.9 s CPU: two frames' leave-one-out fits)
+def test_a_lens_beyond_twice_the_ranges_is_not_offered_as_found():
+    """k1 +0.606, beyond the 2x-ranges search's bound (0.6): that fit stops on its bound
+    (building.jpg's k1 +0.600), and the note says the best lens beyond the ranges was not
+    found (no k1 to declare); k1 +0.594, inside it, keeps the note that offers the lens."""
+    beyond = solve_lens(_lines(LENS * [-2.02, 1, 1, 1, 1, 1, 1], 0), R)[0].notes[0]
+    assert beyond.startswith("no lens within the plausible ranges fits these 4 lines"), beyond
+    assert "one at the edge of twice the ranges fits all (k1 +0.600" in beyond, beyond
+    assert "k1" in beyond.split(";")[-1].split("on that bound")[0], beyond
+    assert "not found" in beyond and "--lens k1=" not in beyond, beyond
+    inside = solve_lens(_lines(LENS * [-1.98, 1, 1, 1, 1, 1, 1], 0), R)[0].notes[0]
+    assert "one beyond them fits all (k1 +0.59" in inside, inside
+    assert "a lens beyond the ranges (declare it: --lens k1=" in inside, inside
+
+
 @pytest.mark.slow
 def test_straight_marks_at_k1_0p2_never_called_bent_over_seeds():
     """k1 -0.20 and -0.25 (principal point (10, -6) px), seeds 0-5: the linearised test said
