@@ -458,52 +458,71 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
             "(jpeg_blocks: the fitted groove re-encoded)")
 
 
-NOISE_DRAWS = 8
-"""Noisy renders :func:`jpeg_angle_shift` puts through the encoder (the term's mean square
-then has a relative sd of ~sqrt(2 / 8) = 0.5 at most, its root 0.25)."""
+NOISE_DRAWS = 32
+"""Noisy renders :func:`jpeg_angle_shift` puts through the encoder: the term's square, a
+mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
+the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
+mark of user 13's). ~7 ms a draw on a 250 px mark."""
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
                      centres: np.ndarray | None = None) -> float:
     """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
-    an image of ``shape`` with its block grid (at ``jb.phase``): the model rendered there and
-    measured before and after the round trip (the same segments, equal weights), through
-    the file's own table when known. Quality and table unknown: the largest shift over
-    qualities 10, 20, ..., 90.
+    an image of ``shape`` with its block grid (at ``jb.phase``): the model rendered there
+    (on the mark's own path, :func:`mark_path`, through its ``centres``: x, y about the
+    image's centre [px]) and measured before and after the round trip (the same segments,
+    equal weights), through the file's own table when known. Quality and table unknown: the
+    largest shift over qualities 10, 20, ..., 90.
 
     The encoder quantises the edge's coefficients with the noise the pixels had before
     coding (``jb.noise_dn``, :func:`precoding_noise`): a coefficient near the edge of its
     bin goes one way or the other with the noise, so a noisy edge's centres move by more,
-    and differently, than the noise-free model's (3-4x on near-axis marks at quality 75).
-    With that noise read, the model is rendered :data:`NOISE_DRAWS` times with it (a fixed
-    seed: the same term for the same image), each through the encoder, and the term is the
-    root of the mean over the draws of the turn's square less the share the centres'
-    scatter carries (:func:`blocks_turn`). Without it, the noise-free model once."""
+    and differently, than the noise-free model's. With that noise read, the model is
+    rendered :data:`NOISE_DRAWS` times with it (a fixed seed: the same term for the same
+    image), each through the encoder, and the term is the root of the mean over the draws
+    of the turn's square less the share the centres' scatter carries (:func:`blocks_turn`).
+    Without it, the noise-free model once. Only the band's blocks are coded (the encoder
+    codes each block alone: the rest of the frame changes nothing)."""
     if jb.quality is None and jb.table is None:
         return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q), centres)
                    for q in range(10, 100, 10))
-    model = np.full(shape, pf.background_dn)
     half = centres_half(pf) + 8.0
-    e, idx = band_pixels(model, pf, half, 30.0)
+    e, idx = band_pixels(np.zeros(shape, np.uint8), pf, half, 30.0)
+    if idx.size == 0:
+        return 0.0
     rows, cols = np.unravel_index(idx, shape)
     e = e - mark_path(pf, centres, shape)(cols, rows)
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
-    model.flat[idx] += pf.contrast_dn * p
+    # The window: the band's blocks on the grid and a block more each way.
+    (r0, r1), (c0, c1) = (_on_grid(v.min(), v.max(), ph, n) for v, ph, n in
+                          ((rows, jb.phase[1], shape[0]), (cols, jb.phase[0], shape[1])))
+    model = np.full((r1 - r0, c1 - c0), pf.background_dn)
+    model[rows - r0, cols - c0] += pf.contrast_dn * p
     model = np.clip(model, 0.0, 255.0)
+    phase = ((jb.phase[0] - c0) % 8, (jb.phase[1] - r0) % 8)
+    u, n = line_frame(pf.angle_rad)
+    shift = (np.array([c0 + c1, r0 + r1], float) - shape[::-1]) / 2  # the window's centre
+    pfw = replace(pf, offset_px=pf.offset_px - float(shift @ n),
+                  t_start_px=pf.t_start_px - float(shift @ u),
+                  t_end_px=pf.t_end_px - float(shift @ u))
     table = jb.table if jb.quality is None else None  # an IJG table: the same encoder
     if not jb.noise_dn > 0:
-        return _term([blocks_turn(model, jpeg_round_trip(model, jb.quality, table, jb.phase),
-                                  pf)])
-    # Noise where the band is (its bounding box): the blocks elsewhere stay flat, as the
-    # encoder would leave them, and cost nothing.
-    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+        return _term([blocks_turn(model, jpeg_round_trip(model, jb.quality, table, phase),
+                                  pfw)])
     rng = np.random.default_rng(0)
     turns = []
     for _ in range(NOISE_DRAWS):
-        a = model.copy()
-        a[box] = np.clip(np.round(a[box] + rng.normal(0.0, jb.noise_dn, a[box].shape)), 0, 255)
-        turns.append(blocks_turn(a, jpeg_round_trip(a, jb.quality, table, jb.phase), pf))
+        a = np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
+        turns.append(blocks_turn(a, jpeg_round_trip(a, jb.quality, table, phase), pfw))
     return _term(turns)
+
+
+def _on_grid(lo: int, hi: int, phase: int, size: int) -> tuple[int, int]:
+    """[start, stop) of pixels lo..hi widened to block boundaries (at phase + 8 k) and a
+    block more each way, within 0..size."""
+    start = phase + 8 * ((int(lo) - phase) // 8) - 8
+    stop = phase + 8 * ((int(hi) - phase) // 8 + 2)
+    return max(start, 0), min(stop, size)
 
 
 PATH_DEGREE = 2
