@@ -480,8 +480,9 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
     and differently, than the noise-free model's. With that noise read, the model is
     rendered :data:`NOISE_DRAWS` times with it (a fixed seed: the same term for the same
     image), each through the encoder, and the term is the root of the mean over the draws
-    of the turn's square less the share the centres' scatter carries (:func:`blocks_turn`).
-    Without it, the noise-free model once. Only the band's blocks are coded (the encoder
+    of the turn's square less the share the centres' scatter carries (:func:`blocks_turn`),
+    on marks near an axis (:func:`near_axis`: there the error is a turn). Else, or without
+    that noise, the noise-free model once. Only the band's blocks are coded (the encoder
     codes each block alone: the rest of the frame changes nothing)."""
     if jb.quality is None and jb.table is None:
         return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q), centres)
@@ -506,7 +507,7 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
                   t_start_px=pf.t_start_px - float(shift @ u),
                   t_end_px=pf.t_end_px - float(shift @ u))
     table = jb.table if jb.quality is None else None  # an IJG table: the same encoder
-    if not jb.noise_dn > 0:
+    if not (jb.noise_dn > 0 and near_axis(pf)):
         return _term([blocks_turn(model, jpeg_round_trip(model, jb.quality, table, phase),
                                   pfw)])
     rng = np.random.default_rng(0)
@@ -515,6 +516,24 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
         a = np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
         turns.append(blocks_turn(a, jpeg_round_trip(a, jb.quality, table, phase), pfw))
     return _term(turns)
+
+
+NEAR_AXIS_ROWS = 4
+"""Block rows (or columns) a mark's edge crosses along its length at most for the noisy
+draws (:func:`near_axis`)."""
+
+
+def near_axis(pf: ProfileFit) -> bool:
+    """Whether the groove ``pf`` runs so near an axis that its edge crosses at most
+    :data:`NEAR_AXIS_ROWS` block rows (columns) along its length: L sin(d) <= 8 x that [px]
+    (d its angle from the nearest axis). The encoder's error at the edge follows the edge's
+    place in its block: along such a mark that place drifts through a few periods at most,
+    and the error is a turn; along a steeper one it cycles many times and averages out
+    (the noise-free model's term, once, is then small), and 32 noisy draws (0.2 s) would be
+    spent on nothing."""
+    d = pf.angle_rad % (np.pi / 2)
+    return bool((pf.t_end_px - pf.t_start_px) * np.sin(min(d, np.pi / 2 - d))
+                <= 8 * NEAR_AXIS_ROWS)
 
 
 def _on_grid(lo: int, hi: int, phase: int, size: int) -> tuple[int, int]:

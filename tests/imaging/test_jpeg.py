@@ -16,6 +16,7 @@ from imaging.jpeg import (
     ijg_table,
     jpeg_note,
     jpeg_round_trip,
+    near_axis,
     precoding_noise,
     requantised_quality,
     table_quality,
@@ -136,6 +137,18 @@ def test_the_noise_before_coding_is_read_from_the_kept_coefficients(quality):
         got = precoding_noise(dec, ijg_table(quality))
         assert abs(got / np.sqrt(s**2 + 1 / 12) - 1) <= 0.1, (s, got, np.std(dec))
     assert precoding_noise(np.full((64, 64), 140, np.uint8), ijg_table(quality)) == 0.0
+
+def test_near_axis_is_a_few_block_rows_along_the_mark():
+    """The noisy draws go to marks whose edge crosses at most 4 block rows (32 px across
+    along its length): 300 px at 3 deg from either axis (15.7 px) is near, at 7 deg (36.6
+    px) or 45 deg it is not."""
+    from imaging.groove import ProfileFit
+
+    def pf(deg, length=300.0):
+        return ProfileFit(np.deg2rad(deg), 0.0, 3.0, 1.0, -40.0, 140.0, 0.0, (1.0, 0.0),
+                          -length / 2, length / 2, 255.0)
+    assert near_axis(pf(3.0)) and near_axis(pf(87.0)) and near_axis(pf(-93.0))
+    assert not near_axis(pf(7.0)) and not near_axis(pf(45.0)) and near_axis(pf(7.0, 250))
 
 def test_jpeg_centre_scale_takes_the_scatter_not_a_bow():
     """White residuals at 2.2x their sigma: the factor ~4.8 (within its 2 (n-1)/3 dof); a
