@@ -36,7 +36,8 @@ from imaging.families import detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
-from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
+from imaging.jpeg import JpegBlocks, find_jpeg
+from imaging.jpeg_turn import jpeg_angle_shift
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent

@@ -16,7 +16,6 @@ from imaging.jpeg import (
     ijg_table,
     jpeg_note,
     jpeg_round_trip,
-    near_axis,
     precoding_noise,
     requantised_quality,
     table_quality,
@@ -27,6 +26,7 @@ from imaging.jpeg_scatter import (
     jpeg_centre_scale,
     jpeg_noise_dof,
 )
+from imaging.jpeg_turn import near_axis
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
