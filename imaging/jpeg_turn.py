@@ -23,14 +23,14 @@ the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a qua
 mark of user 13's). ~7 ms a draw on a 250 px mark."""
 
 
-def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
+def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
                      centres: np.ndarray | None = None) -> float:
     """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
     an image of ``shape`` with its block grid (at ``jb.phase``): the model rendered there
     (on the mark's own path, :func:`mark_path`, through its ``centres``: x, y about the
     image's centre [px]) and measured before and after the round trip (the same segments,
-    equal weights), through the file's own table when known. Quality and table unknown: the
-    largest shift over qualities 10, 20, ..., 90.
+    equal weights), through the file's own table when known (0 when ``jb`` is None: not a
+    JPEG). Quality and table unknown: the largest shift over qualities 10, 20, ..., 90.
 
     The encoder quantises the edge's coefficients with the noise the pixels had before
     coding (``jb.noise_dn``, :func:`precoding_noise`): a coefficient near the edge of its
@@ -42,6 +42,8 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks,
     on marks near an axis (:func:`near_axis`: there the error is a turn). Else, or without
     that noise, the noise-free model once. Only the band's blocks are coded (the encoder
     codes each block alone: the rest of the frame changes nothing)."""
+    if jb is None:
+        return 0.0  # not a JPEG
     if jb.quality is None and jb.table is None:
         return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q), centres)
                    for q in range(10, 100, 10))

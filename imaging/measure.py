@@ -288,9 +288,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             if cen.profile_shift is not None else 0.0)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
-                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg,
-                                                             cen.xy[use])
-                           if jpeg is not None else 0.0,
+                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg, cen.xy[use]),
                            ends_on_line(pf, ext, line, camera, image.shape), crossed,
                            profile_u_rad=prof, ends_check=check)
 
