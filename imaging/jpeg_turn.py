@@ -5,7 +5,8 @@ the encoder and reads that noise); the term ``jpeg_blocks``.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -76,6 +77,24 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
         a = np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
         turns.append(blocks_turn(a, jpeg_round_trip(a, jb.quality, table, phase), pfw))
     return _term(turns)
+
+
+@dataclass(frozen=True, eq=False)
+class JpegTurn:
+    """:func:`jpeg_angle_shift`'s arguments, its term computed when first read (``u_rad``)
+    and kept: a candidate refused after it was measured (too short once measured, its
+    removed background's re-measure, a shadow's or a kink's first measure) never pays
+    for the noisy draws (0.2-0.4 s a mark). Copies of a measurement share the one value."""
+
+    shape: tuple[int, int]
+    profile: ProfileFit
+    jpeg: JpegBlocks | None
+    centres: np.ndarray | None = None
+
+    @cached_property
+    def u_rad(self) -> float:
+        """The term [rad] (:func:`jpeg_angle_shift`)."""
+        return jpeg_angle_shift(self.shape, self.profile, self.jpeg, self.centres)
 
 
 NEAR_AXIS_ROWS = 4
