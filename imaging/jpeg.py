@@ -15,9 +15,10 @@ is a small non-zero multiple); the lowest quality whose steps all the coefficien
 (R > :data:`R_MIN`) is the encoder's. Without JPEG, R ~ 1/sqrt(blocks).
 
 Carried (a Type B term, GUM Supplement 1 style: the method run on a known input): the fitted
-groove model is rendered without noise where the mark is, on the image's block grid, put
-through a JPEG encoder at that quality, and its centres measured as the mark's were; the
-angle's change is the term ``jpeg_blocks``.
+groove model is rendered where the mark is, on the image's block grid, with the noise the
+pixels had before coding (:func:`precoding_noise`, read here), put through a JPEG encoder at
+that quality, and its centres measured as the mark's were; the angle's change is the term
+``jpeg_blocks`` (:mod:`imaging.jpeg_turn`).
 """
 
 from __future__ import annotations
@@ -27,12 +28,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from imaging.band import band_pixels
-from imaging.candidate import line_frame
 from imaging.centres import sample_centres
-from imaging.groove import ProfileFit, ProfileTable, centres_half
+from imaging.groove import ProfileFit
 from imaging.io import JpegTables
-from imaging.jpeg_scatter import block_phase_columns
 from imaging.linefit import fit_line
 
 R_MIN = 0.5
@@ -97,6 +95,9 @@ class JpegBlocks:
         The file's own luminance table (64 steps, row-major) when its header gave it
         (``quality`` is then the IJG quality that table is, None: another encoder's);
         None: read from the pixels.
+    noise_dn : float
+        The pixels' noise before coding [DN] (:func:`precoding_noise`); 0: not read (the
+        table unknown, or no coefficient beyond its zero bin).
     """
 
     quality: int | None
@@ -104,6 +105,7 @@ class JpegBlocks:
     blocks: int
     phase: tuple[int, int] = (0, 0)
     table: tuple[int, ...] | None = None
+    noise_dn: float = 0.0
 
 
 def table_quality(table: np.ndarray) -> int | None:
@@ -153,6 +155,18 @@ def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks
     taken when its quality is read and is lower than the origin's (a background the encoder
     flattened is flat on any grid, so "JPEG, quality unknown" at the origin is no answer).
     """
+    return _with_noise(image, _find_jpeg(image, tables))
+
+
+def _with_noise(image: np.ndarray, jb: JpegBlocks | None) -> JpegBlocks | None:
+    """``jb`` with the noise before coding read on its grid (:func:`precoding_noise`)."""
+    if jb is None or (jb.quality is None and jb.table is None):
+        return jb
+    T = np.array(jb.table, float).reshape(8, 8) if jb.table is not None else ijg_table(jb.quality)
+    return replace(jb, noise_dn=precoding_noise(image, T, jb.phase))
+
+
+def _find_jpeg(image: np.ndarray, tables: JpegTables | None) -> JpegBlocks | None:
     if tables is not None:
         h, w = image.shape
         return JpegBlocks(table_quality(np.array(tables.luma)), float("nan"),
@@ -221,6 +235,75 @@ def find_jpeg_at(image: np.ndarray) -> JpegBlocks | None:
         # not flatten (a mark's), by re-encoding them (None: too few to tell).
         best = JpegBlocks(requantised_quality(b.reshape(-1, 8, 8), c), float("nan"), len(c))
     return best
+
+
+NOISE_MIN_STEP = 3
+"""Smallest step of a coefficient :func:`precoding_noise` counts (finer steps: the decoded
+pixels' rounding, 0.3 DN a coefficient, moves a value across the zero bin's edge)."""
+
+
+def precoding_noise(image: np.ndarray, table: np.ndarray, phase: tuple[int, int] = (0, 0)
+                    ) -> float:
+    """The pixels' white noise before coding [DN], from the share of each coefficient the
+    encoder did not quantise to zero.
+
+    A background block's orthonormal DCT turns white pixel noise of sigma s into AC
+    coefficients of the same sigma, each; the encoder sets one to zero when it is within
+    half its step T of 0, with probability p0 = erf(T / (2 sqrt(2) s)). The decoded blocks'
+    coefficients (on the grid at ``phase``) show which did: the counts beyond the zero bin
+    over the AC frequencies with T >= :data:`NOISE_MIN_STEP` give s by maximum likelihood
+    (binomial counts, pooled: the finest steps say most). Where the encoder flattened the
+    background, the few coefficients it kept are what is left of that noise; the decoded
+    background's own scatter is not (~0). Blocks with content (the first coefficients
+    (0, 1), (1, 0) beyond 2 steps: an edge, a gradient) or clipped are left out, and those
+    two coefficients with them; what content remains reads as noise (s too large: u wider).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        2-D decoded 8-bit image [DN].
+    table : numpy.ndarray
+        (8, 8) the encoder's luminance steps [DN of the orthonormal DCT].
+    phase : tuple of int
+        (x, y) of the grid's first block boundary [px].
+
+    Returns
+    -------
+    float
+        s [DN]; 0: no coefficient beyond its zero bin (or no block to count).
+    """
+    from scipy.special import erfc
+
+    a = np.asarray(image, float)[phase[1]:, phase[0]:]
+    h, w = (s // 8 * 8 for s in a.shape)
+    if h < 8 or w < 8:
+        return 0.0
+    b = a[:h, :w].reshape(h // 8, 8, w // 8, 8).transpose(0, 2, 1, 3).reshape(-1, 8, 8)
+    D = _dct_matrix()
+    T = np.asarray(table, float).reshape(8, 8)
+    k = np.round(np.einsum("ij,njk,lk->nil", D, b - 128.0, D) / T)
+    busy = ((np.abs(k[:, 0, 1]) > 2) | (np.abs(k[:, 1, 0]) > 2)
+            | (b.min(axis=(1, 2)) == 0) | (b.max(axis=(1, 2)) == 255)).reshape(h // 8, w // 8)
+    # And their neighbours: an edge's tail (a groove's blur, its soft end) runs into them.
+    near = busy.copy()
+    near[1:] |= busy[:-1]
+    near[:-1] |= busy[1:]
+    near[:, 1:] |= busy[:, :-1]
+    near[:, :-1] |= busy[:, 1:]
+    bg = ~near.ravel()
+    use = T >= NOISE_MIN_STEP
+    use[0, 0] = use[0, 1] = use[1, 0] = False
+    n_bg = int(bg.sum())
+    if n_bg == 0 or not use.any():
+        return 0.0
+    kept = np.sum(k[bg][:, use] != 0, axis=0).astype(float)
+    if kept.sum() == 0:
+        return 0.0
+    steps = T[use]
+    s = np.geomspace(0.05, 50.0, 400)[:, None]
+    p = np.clip(erfc(steps[None, :] / (2 * np.sqrt(2) * s)), 1e-300, 1 - 1e-16)
+    loglik = (kept * np.log(p) + (n_bg - kept) * np.log1p(-p)).sum(axis=1)
+    return float(s[np.argmax(loglik), 0])
 
 
 REQUANT_MIN_BLOCKS = 20
@@ -371,59 +454,6 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
     return (f"{where}: JPEG compression (8x8 blocks, {q}): the blocks move the centres "
             f"with the edge's place in the grid; {scatter}u widened by {u_arcsec:.2g}\" "
             "(jpeg_blocks: the fitted groove re-encoded)")
-
-
-def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks) -> float:
-    """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
-    an image of ``shape`` with its block grid (at ``jb.phase``): the noise-free model
-    rendered there and measured with and without the round trip (the same segments, equal
-    weights), through the file's own table when known. Quality and table unknown: the
-    largest shift over qualities 10, 20, ..., 90."""
-    if jb.quality is None and jb.table is None:
-        return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q))
-                   for q in range(10, 100, 10))
-    model = np.full(shape, pf.background_dn)
-    half = centres_half(pf) + 8.0
-    e, idx = band_pixels(model, pf, half, 30.0)
-    p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
-    model.flat[idx] += pf.contrast_dn * p
-    model = np.clip(model, 0.0, 255.0)
-    table = jb.table if jb.quality is None else None  # an IJG table: the same encoder
-    return blocks_systematic(model, jpeg_round_trip(model, jb.quality, table, jb.phase), pf)
-
-
-def blocks_systematic(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:
-    """The part of JPEG's angle shift on the groove ``pf`` (``a_image`` the noise-free
-    model, ``b_image`` it re-encoded) that its centres' scatter does not already carry [rad].
-
-    The blocks move each centre by a pattern that repeats every block along the mark
-    (:func:`block_phase_columns`, fitted with the line), by an amount that changes from
-    block to block (scatter at the block scale, which :func:`jpeg_centre_scale` reads into
-    the centres' sigma and so into the line's u) and by one that drifts with the edge's
-    phase in the grid (the systematic).
-    The line through the centres' moves turns by da; its scatter s about that line (by
-    neighbour differences, as the mark's) would turn it by u_s = s / sqrt(sum (t - t_m)^2)
-    alone. What stands beyond, sqrt(max(0, da^2 - u_s^2)), is the Type B term: counted once.
-    Equal weights, the segments valid in both (0 when fewer than 10 are).
-    """
-    a, b = sample_centres(a_image, pf), sample_centres(b_image, pf)
-    ok = a.ok & b.ok
-    if ok.sum() < 10:
-        return 0.0
-    u, n = line_frame(pf.angle_rad)
-    t = a.xy[ok] @ u
-    d = (b.xy[ok] - a.xy[ok]) @ n
-    # The block pattern the mark's fit takes as known (jpeg_blocks_columns) is no scatter
-    # the line's u holds: fitted here too, as there.
-    axis = 0 if abs(u[0]) >= abs(u[1]) else 1
-    along = a.xy[ok, axis] + (a_image.shape[1 - axis] - 1) / 2
-    order = np.argsort(t)
-    t, d, along = t[order], d[order], along[order]
-    X = np.column_stack([np.ones_like(t), t - t.mean(), block_phase_columns(along)])
-    beta, *_ = np.linalg.lstsq(X, d, rcond=None)
-    r = d - X @ beta
-    u_s2 = np.mean(np.diff(r) ** 2) / 2 / np.sum((t - t.mean()) ** 2)
-    return float(np.sqrt(max(0.0, beta[1] ** 2 - u_s2)))
 
 
 def rendering_angle_shift(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit) -> float:

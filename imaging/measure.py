@@ -36,7 +36,8 @@ from imaging.families import detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
-from imaging.jpeg import JpegBlocks, find_jpeg, jpeg_angle_shift
+from imaging.jpeg import JpegBlocks, find_jpeg
+from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent
@@ -57,16 +58,15 @@ class MarkMeasurement:
     :mod:`imaging.stripes`) correlates their errors along the mark (None: independent), for
     generalised least squares; ``sigma`` then includes their share of the variance;
     ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
-    None: too few segments to tell); ``jpeg``: the JPEG
-    encoder the image shows (None: none) and ``jpeg_u_rad`` how far its blocks move this
-    mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term). ``extent_px``: where the
-    groove ends along the profile's line (raw image); ``ends_px``: those two ends as (2, 2)
-    points like ``points`` (relative to the image centre, undistorted if a camera model was
-    given): a bent mark's chord and a ruled scale's line middles are read between them.
+    None: too few segments to tell); ``jpeg``: the JPEG encoder the image shows (None: none)
+    and ``jpeg_u_rad`` how far its blocks move this mark's angle [rad] (:mod:`imaging.jpeg`;
+    a Type B term, computed when first read). ``extent_px``: where the groove ends along the
+    profile's line (raw image); ``ends_px``: those two ends as (2, 2) points like ``points``
+    (relative to the image centre, undistorted if a camera model was given): a bent mark's
+    chord and a ruled scale's line middles are read between them.
     ``background_u_rad``: what the removal of an oriented striped background may leave on
-    the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found).
-    ``ends_check``: the obstruction check of the groove's ends made while measuring it
-    (:class:`imaging.ends.EndsCheck`, for the image measured; None: not made).
+    the angle [rad] (:mod:`imaging.oriented`; a Type B term, 0 when none was found);
+    ``ends_check``: the groove's ends' obstruction check made while measuring it (None: not).
 
     Attributes
     ----------
@@ -96,8 +96,8 @@ class MarkMeasurement:
         The blur's trend along the mark.
     jpeg : JpegBlocks or None
         The image's JPEG encoder.
-    jpeg_u_rad : float
-        What its blocks add to the angle's u [rad].
+    jpeg_turn : JpegTurn or None
+        What its blocks add to the angle's u, read as ``jpeg_u_rad`` [rad].
     ends_px : ndarray or None
         (2, 2) ends [px].
     crossings : tuple of tuple of int
@@ -124,7 +124,7 @@ class MarkMeasurement:
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
     blur: BlurTrend | None = None
     jpeg: JpegBlocks | None = None
-    jpeg_u_rad: float = 0.0
+    jpeg_turn: JpegTurn | None = None
     ends_px: np.ndarray | None = None
     crossings: tuple[tuple[int, int], ...] = ()
     """(index of the other candidate, px of this mark's length left out) per crossing."""
@@ -132,6 +132,7 @@ class MarkMeasurement:
     profile_u_rad: float = 0.0
     ends_check: EndsCheck | None = None
 
+    jpeg_u_rad = property(lambda self: self.jpeg_turn.u_rad if self.jpeg_turn else 0.0)
     @property
     def length_px(self) -> float:
         """The groove's length between its half-depth ends [px] (:func:`groove_extent`)."""
@@ -287,8 +288,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             if cen.profile_shift is not None else 0.0)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
-                           blur, jpeg, jpeg_angle_shift(image.shape, pf, jpeg)
-                           if jpeg is not None else 0.0,
+                           blur, jpeg, JpegTurn(image.shape, pf, jpeg, cen.xy[use]),
                            ends_on_line(pf, ext, line, camera, image.shape), crossed,
                            profile_u_rad=prof, ends_check=check)
 
