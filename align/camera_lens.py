@@ -213,7 +213,7 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
                      "written elsewhere, or before camera format 4): their u's are taken as "
                      "independent (fx, fy tied by its aspect), which can misstate an angle's u "
                      "either way (0.3-3x on the real chessboard lens) and lets the principal "
-                     "point's u turn marks far from the centre (lens-limited there); re-run "
+                     "point's u turn marks far from the centre beyond the lens bound; re-run "
                      "`align camera` for the joint covariance, or add the calibration's `cov` "
                      "to the file")
     p, dlam, designs = check_camera(lines, zero, lam_chk, R, ranges, alpha)
