@@ -28,7 +28,6 @@ from align.lens_fallback import carried, lens_beyond_model, model_lever, still_d
 from align.lens_terms import (
     angle_coupling,
     bow_reach,
-    camera_coupling,
     camera_departure,
     check_camera,
     lens_bow,
@@ -205,17 +204,18 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     lam_chk = lam_u if lam_cov is None else lam_cov
     zero = np.zeros_like(lam_u)
     notes = []
-    if camera.cov is not None:
-        # The calibration's parameters jointly (k1, k2, k3 of one calibration are strongly
-        # correlated: their terms added as if independent overstate the angle's u).
-        terms_l = [model_coupling(camera, ln.points, ln.sigma, ln.chol, shape) for ln in lines]
-    else:
-        terms_l = [camera_coupling(ln.points, ln.sigma, ln.chol, zero, lam_u, R)
-                   for ln in lines]
+    # The calibration's parameters jointly (k1, k2, k3 of one calibration are strongly
+    # correlated: their terms added as if independent overstate the angle's u), at the
+    # model's own distortion (a file without cov: its u's, align/camera_model_u.py).
+    terms_l = [model_coupling(camera, ln.points, ln.sigma, ln.chol, shape) for ln in lines]
+    if camera.cov is None:
         notes.append(f"{who}: its model holds no covariance of its parameters (a file "
-                     "written elsewhere, or before camera format 4): their u's are added as if "
-                     "independent, which can misstate an angle's u either way (0.3-3x on the real "
-                     "chessboard lens); re-run `align camera` for the joint covariance")
+                     "written elsewhere, or before camera format 4): their u's are taken as "
+                     "independent (fx, fy tied by its aspect), which can misstate an angle's u "
+                     "either way (0.3-3x on the real chessboard lens) and lets the principal "
+                     "point's u turn marks far from the centre beyond the lens bound; re-run "
+                     "`align camera` for the joint covariance, or add the calibration's `cov` "
+                     "to the file")
     p, dlam, designs = check_camera(lines, zero, lam_chk, R, ranges, alpha)
     # The model's principal point as the check's lever (align/lens_fallback.py).
     designs = model_lever(designs, lines, camera, shape)

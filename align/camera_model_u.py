@@ -43,6 +43,32 @@ def raw_pixels(camera: CameraModel, points: np.ndarray, shape: tuple[int, int]) 
     return raw.reshape(-1, 2)
 
 
+def model_cov(camera: CameraModel) -> np.ndarray:
+    """The model's joint covariance (:data:`INTRINSICS`; [px², px, 1]); for a file without
+    one (written elsewhere, or before camera format 4) its u's as if independent, except fx
+    and fy, whose covariance makes fy / fx's u the stated ``aspect`` where the file states it
+    (fx and fy of one calibration are strongly correlated: their u's as if independent turn
+    a 45° mark by ~100″ the calibration does not allow).
+
+    Every parameter enters at the model's own distortion: a principal point's u turns an
+    angle only through the distortion (the lens vector's derivatives, taken at none, see no
+    cx, cy and no fx: a model without cov then left 8 of 40 angles ok beyond 3 u through
+    lenses drawn from its u's)."""
+    if camera.cov is not None:
+        return camera.cov
+    u = camera.u or {}
+    v = np.array([u.get(k, 0.0) for k in INTRINSICS], float)
+    v = np.where(np.isfinite(v), v, 0.0)
+    C = np.diag(v**2)
+    if "aspect" in u and np.isfinite(u["aspect"]):
+        fx, fy = float(camera.camera_matrix[0, 0]), float(camera.camera_matrix[1, 1])
+        q = fy / fx
+        # var(fy / fx) = (var fy + q² var fx - 2 q cov) / fx², solved for cov, within ±1.
+        c = (v[1]**2 + q**2 * v[0]**2 - (fx * u["aspect"])**2) / (2 * q)
+        C[0, 1] = C[1, 0] = float(np.clip(c, -v[0] * v[1], v[0] * v[1]))
+    return C
+
+
 def _moved(camera: CameraModel, j: int, step: float) -> CameraModel:
     """The model with intrinsic ``INTRINSICS[j]`` moved by ``step``."""
     K = camera.camera_matrix.copy()
@@ -68,7 +94,7 @@ def angle_sensitivity(camera: CameraModel, points: np.ndarray, sigma: np.ndarray
     h, w = shape
     c = np.array([(w - 1) / 2, (h - 1) / 2])
     raw = raw_pixels(camera, points, shape) - c
-    steps = np.sqrt(np.clip(np.diag(camera.cov), 0.0, None))
+    steps = np.sqrt(np.clip(np.diag(model_cov(camera)), 0.0, None))
     # The line's direction (weights alone: it only orients the fields); the angle is
     # counter-clockwise with y down, u = (cos a, -sin a), so a turn by da moves a point t
     # along the line by t da along n = du/da.
@@ -89,12 +115,12 @@ def angle_sensitivity(camera: CameraModel, points: np.ndarray, sigma: np.ndarray
 
 def model_coupling(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
                    chol: np.ndarray | None, shape: tuple[int, int]) -> dict[str, float]:
-    """The mark's angle components [rad] of the camera model's joint covariance: one per
-    principal direction of ``camera.cov`` (``camera_model.i``); their root sum of squares is
-    the angle's u from the model, gᵀ C g, and their products between two marks the
-    covariance the calibration puts between their angles."""
+    """The mark's angle components [rad] of the camera model's joint covariance
+    (:func:`model_cov`): one per principal direction of it (``camera_model.i``); their
+    root sum of squares is the angle's u from the model, gᵀ C g, and their products between
+    two marks the covariance the calibration puts between their angles."""
     g = angle_sensitivity(camera, points, sigma, chol, shape)
-    C, out = camera.cov, {}
+    C, out = model_cov(camera), {}
     carried = left_out_k3(camera)
     if carried is not None:
         # k3 left out by the calibration (the views do not determine it): its range along
@@ -124,7 +150,7 @@ def independent_u(camera: CameraModel, points: np.ndarray, sigma: np.ndarray,
     """The same angle's u with the parameters' covariance taken as its diagonal (their u's
     added as if independent) [rad]: what the joint covariance replaces (for comparison)."""
     g = angle_sensitivity(camera, points, sigma, chol, shape)
-    return float(np.sqrt(np.sum(g**2 * np.diag(camera.cov))))
+    return float(np.sqrt(np.sum(g**2 * np.diag(model_cov(camera)))))
 
 
 FIELD_RADII_PX = (100.0, 175.0, 250.0)

@@ -153,6 +153,21 @@ def _normal(designs: Sequence[_Design], rng: np.ndarray, z: float
     return F, b, _determined(F, rng, z)
 
 
+def _change_cov(F: np.ndarray, det: list[int], lam_u: np.ndarray) -> np.ndarray:
+    """The covariance of the change the marks read for the determined parameters ``det``:
+    their noise, F_DD^-1, plus the calibration's error (``lam_u``, :func:`lens_cov`). The
+    change read for the determined parameters also carries the calibration's error in the
+    others, through the marks' bows they share (F's off-diagonal block):
+    dlam_D = e_D + F_DD^-1 F_DU e_U."""
+    P = F.shape[0]
+    D = np.ix_(det, det)
+    A = np.zeros((len(det), P))
+    A[:, det] = np.eye(len(det))
+    und = [j for j in range(P) if j not in det]
+    A[:, und] = np.linalg.solve(F[D], F[np.ix_(det, und)])
+    return np.linalg.inv(F[D]) + A @ lens_cov(lam_u) @ A.T
+
+
 def camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
                       alpha: float) -> tuple[float, np.ndarray]:
     """:func:`check_camera` over the marks' ``designs``: (p-value, correction dlam)."""
@@ -165,14 +180,7 @@ def camera_departure(designs: Sequence[_Design], lam_u: np.ndarray, ranges: Lens
         return 1.0, dlam
     D = np.ix_(det, det)
     dlam[det] = -np.linalg.solve(F[D], b[det])
-    # The correction read for the determined parameters also carries the calibration's
-    # error in the others, through the marks' bows they share (F's off-diagonal block):
-    # dlam_D = e_D + F_DD^-1 F_DU e_U.
-    A = np.zeros((len(det), P))
-    A[:, det] = np.eye(len(det))
-    und = [j for j in range(P) if j not in det]
-    A[:, und] = np.linalg.solve(F[D], F[np.ix_(det, und)])
-    C = np.linalg.inv(F[D]) + A @ lens_cov(lam_u) @ A.T
+    C = _change_cov(F, det, lam_u)
     stat = float(dlam[det] @ np.linalg.solve(C, dlam[det]))
     return float(special.chdtrc(len(det), stat)), dlam
 
@@ -204,7 +212,9 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
         return True
     D = np.ix_(det, det)
     dlam = -np.linalg.solve(F[D], b[det])
-    C = np.linalg.inv(F[D]) + lens_cov(lam_u)[D]
+    # The change's covariance as the check's (:func:`camera_departure`): the calibration's
+    # error in the undetermined parameters aliases into the determined ones.
+    C = _change_cov(F, det, lam_u)
     W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
     bound = np.maximum(rng, np.abs(base))[det]
     fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))

@@ -6,12 +6,16 @@ bent as a parabola or an arc), over seeds; the positive control is a model whose
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
 from align.camera_lens import claimed_lens
 from align.marks import BEND, measure_image
+from imaging import CameraModel
+from imaging.camera_cov import INTRINSICS, formal_cov
 from imaging.lens import PARAMS
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.align.test_lens import _camera_model
@@ -20,6 +24,40 @@ from tests.conftest import angle_error
 DIFFERS = "the lens differs from its calibration"
 CAM = CameraGeometry(focal_px=530.0, k1=-0.27, k2=0.1, p1=1e-3, p2=-2e-4,
                      pp_offset_px=(12.0, -6.0))
+
+
+@functools.lru_cache(maxsize=1)
+def _calibration_cov() -> np.ndarray:
+    """The joint covariance a good chessboard calibration of ``CAM`` gives (:data:`INTRINSICS`,
+    k3 fixed): 25 views of a 9x6 board, tilted up to 30 deg, spread over the frame (the
+    marks' regions included), corners with 0.1 px of noise; the formal covariance at the
+    lens (``imaging.camera_cov.formal_cov``, what ``align camera`` computes from such
+    views). Its u's: fx 0.33, cx 0.34, cy 0.28 px, k1 6e-4, k2 9e-4."""
+    m = _camera_model(CAM)
+    K, D = m.camera_matrix, np.ravel(m.dist_coeffs)[:5]
+    board = np.array([[i, j, 0.0] for j in range(6) for i in range(9)])
+    g = np.random.default_rng(18)
+    obj, img, rv, tv = [], [], [], []
+    for _ in range(25):
+        r = np.deg2rad(g.uniform(-30, 30, 3)) * [1, 1, 0.3]
+        t = np.array([g.uniform(-8, 0), g.uniform(-5, 1), 14.0])
+        q, _ = cv2.projectPoints(board.reshape(-1, 1, 3), r, t, K, D)
+        obj.append(board)
+        img.append(q.reshape(-1, 2) + g.normal(0, 0.1, (len(board), 2)))
+        rv.append(r)
+        tv.append(t)
+    return formal_cov(obj, img, K, D, rv, tv, fix_k3=True)
+
+
+def _calibrated(cam: CameraGeometry, k1: float | None = None) -> CameraModel:
+    """The lens ``CAM`` as ``align camera`` saves it (format 4) after a good calibration
+    (:func:`_calibration_cov`): its joint covariance and the u's it states. Where the file
+    held only the u's (:func:`tests.align.test_lens._camera_model`, ±0.7 px on the principal
+    point), the corner marks are lens-limited (:func:`test_a_file_without_cov_is_lens_limited`)."""
+    C = _calibration_cov()
+    m = _camera_model(cam, k1=k1)
+    u = {**m.u, **{k: float(np.sqrt(C[j, j])) for j, k in enumerate(INTRINSICS)}}
+    return replace(m, cov=C, u=u)
 
 
 def _at(x: float, y: float, a_deg: float, length: float, bow: float = 0.0,
@@ -64,7 +102,7 @@ def _check_calibrated(seed: int, n_straight: int = 2) -> list:
     """What is wrong with the scene of ``seed`` (empty: nothing)."""
     bad: list = []
     marks, img = _scene(seed, n_straight)
-    found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
+    found = [r for r in measure_image(img, "c.png", camera=_calibrated(CAM)) if r.found]
     if len(found) != len(marks):
         bad.append((seed, f"{len(found)} marks found of {len(marks)}"))
     for r in found:
@@ -96,6 +134,26 @@ def test_one_bent_mark_does_not_condemn_a_calibrated_camera():
     independent user's report); now the bent mark is named, the calibration kept."""
     for seed in range(2):
         assert not _check_calibrated(seed)
+
+
+def test_a_file_without_cov_is_lens_limited():
+    """The same scene and exact model as a file without ``cov`` (its u's only: ±0.7 px on the
+    principal point, fx/fy tied by ``aspect``): the u's as if independent, at the model's
+    own distortion, turn the corner marks by more than the bound (seed 0: +-67 and 75" from
+    the lens, mostly ``camera_model``; before, the lens vector's derivatives at no
+    distortion dropped the principal point's u and called them ok at u 33 and 39"; with the
+    25-view calibration's covariance they are ok at 44 and 41"), so they are not ok, and the
+    note names the missing covariance and how to get it. Every angle within 3 u."""
+    marks, img = _scene(0)
+    found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
+    assert len(found) == len(marks)
+    for r in found:
+        m = _match(r, marks)
+        assert abs(angle_error(r.angle_rad, m.angle_rad)) <= 3 * r.angle_u_rad
+        assert any("holds no covariance of its parameters" in n and "`align camera`" in n
+                   and "`cov`" in n for n in r.notes), r.notes
+        if not m.bow_px:
+            assert r.lens_limited and "camera_model" in r.u_terms, r.u_terms
 
 
 def test_one_bent_mark_alone_with_an_exact_model_is_a_bent_mark():
@@ -155,7 +213,7 @@ def _check_two_bent(seed: int, n_straight: int = 2) -> list:
     """What is wrong with the scene of ``seed`` (empty: nothing)."""
     bad: list = []
     marks, img = _two_bent(seed, n_straight)
-    found = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
+    found = [r for r in measure_image(img, "c.png", camera=_calibrated(CAM)) if r.found]
     if len(found) != len(marks):
         bad.append((seed, f"{len(found)} marks found of {len(marks)}"))
     for r in found:
@@ -308,9 +366,8 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer():
     that misses the lens leave the same bow and one mark cannot tell them (user 9: 17259"
     off at u 211", ok). Each seed within 4 u (p 6e-5 each) or lens-limited, and the note
     names both readings; the clean control (the exact model) stays ok, within 4 u."""
-    flipped = _camera_model(CAM, k1=-CAM.k1)
-    flipped = type(flipped)(flipped.camera_matrix, flipped.dist_coeffs * [1, -1, 1, 1, 1],
-                            flipped.image_size, flipped.rms_px, flipped.views, flipped.u)
+    flipped = _calibrated(CAM, k1=-CAM.k1)
+    flipped = replace(flipped, dist_coeffs=flipped.dist_coeffs * [1, -1, 1, 1, 1])
     for seed in range(2):
         mark, img = _one_straight(seed)
         r = [r for r in measure_image(img, "c.png", camera=flipped) if r.found]
@@ -318,7 +375,7 @@ def test_one_mark_through_a_sign_flipped_model_is_not_a_confident_answer():
         z = angle_error(r[0].angle_rad, mark.angle_rad) / r[0].angle_u_rad
         assert abs(z) <= 4 or r[0].lens_limited, (seed, z, r[0].notes)
         assert any("one mark cannot tell which" in n for n in r[0].notes), (seed, r[0].notes)
-        r = [r for r in measure_image(img, "c.png", camera=_camera_model(CAM)) if r.found]
+        r = [r for r in measure_image(img, "c.png", camera=_calibrated(CAM)) if r.found]
         z = angle_error(r[0].angle_rad, mark.angle_rad) / r[0].angle_u_rad
         assert abs(z) <= 4 and not r[0].lens_limited, (seed, z, r[0].notes)
         assert not any("cannot tell" in n or "bent" in n for n in r[0].notes), r[0].notes

@@ -157,19 +157,13 @@ def test_bowed_marks_lens_drawn_from_a_full_covariance_is_covered(real_model):
 
 
 @pytest.mark.slow  # ~7 s: 20 lenses drawn, 2 marks each
-@pytest.mark.xfail(strict=True, reason=(
-    "a model without cov (a file before camera format 4, or written elsewhere) states its "
-    "u's as independent, and a lens drawn from them is not covered (20 seeds): 40 of 40 "
-    "angles ok, RMS z 1.86 (band 0.65-1.38), max |z| 5.2, 3 ok beyond 3 u (exact2's run "
-    "of the same: 7 of 34): the lens vector's derivatives are taken at no distortion, where "
-    "cx, cy (and fx, not in the vector) turn no angle, so their u's are dropped "
-    "(align/camera_lens.py's cov-less branch, camera_coupling). Propagating the u's through "
-    "align.camera_model_u.model_coupling at the model's own distortion (a diagonal cov, "
-    "fx/fy from 'aspect') passes it: 20 ok, RMS z 0.81, max |z| 2.2, but fails 3 tests of "
-    "test_camera_lens.py whose marks it makes lens-limited through such a model"))
 def test_a_model_without_cov_covers_lenses_drawn_from_its_u():
     """The bowed-marks lens and the test's camera model without ``cov``: the truth drawn
-    from the u's it states (as if independent: all it says), measured with it."""
+    from the u's it states (as if independent: all it says), measured with it. Before (the
+    lens vector's derivatives at no distortion, where cx, cy and fx turn no angle: their
+    u's dropped): 40 of 40 angles ok, RMS z 1.86 (band 0.65-1.38), max |z| 5.2, 3 ok beyond
+    3 u; now (the u's through ``model_coupling`` at the model's own distortion,
+    ``align.camera_model_u.model_cov``): 20 ok, RMS z 0.81, max |z| 2.2, none beyond 3 u."""
     cam, marks = _bowed_by_the_lens()
     _assert_covered(*_measure(_camera_model(cam), marks, SEEDS), "bowed marks, no cov, u draws")
 
