@@ -6,7 +6,7 @@ The sensitivity is read off the mark itself: its centres (already undistorted by
 are taken back to the raw image through the model, undistorted again by the model with one
 parameter moved by ± its u, and the line refitted (central difference). This holds for
 every parameter OpenCV fits (fx, fy, k3 too) at the model's own distortion, where the lens
-vector's derivatives (:func:`align.lens_terms.camera_coupling`) are taken at none.
+vector's derivatives (the rule before camera format 4) are taken at none.
 """
 
 from __future__ import annotations

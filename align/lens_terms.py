@@ -17,7 +17,7 @@ from align.lens import LensSolution, _determined
 from align.lens_design import DEFAULT_RANGES, LensRanges, LineGeometry, _Design, _design
 from align.lens_solution import signed_parts
 from imaging import fit_line_only, line_frame
-from imaging.lens import PARAMS, distort_points, undistort_points, undistortion_jacobian
+from imaging.lens import PARAMS, undistort_points, undistortion_jacobian
 
 
 def pp_cross_coupling(sol: LensSolution, design: _Design, scale: float) -> dict[str, float]:
@@ -106,20 +106,6 @@ def angle_coupling(sol: LensSolution, design: _Design) -> dict[str, float]:
         else:
             out.update({f"{k}.{i}": float(x) for i, x in enumerate(v)})
     return out
-
-
-def camera_coupling(points_ideal: np.ndarray, sigma: np.ndarray, chol: np.ndarray | None,
-                    lam: np.ndarray, lam_u: np.ndarray, scale: float) -> dict[str, float]:
-    """Signed angle components [rad] of a calibrated camera's own u (one per lens parameter):
-    their sizes are a mark's named terms ``camera_<p>``, their products between two marks of
-    the camera the covariance the calibration's error puts between their angles.
-
-    ``points_ideal``: the mark's centres already undistorted by the camera; ``lam``/``lam_u``:
-    the camera as a lens vector and its standard uncertainties (from ``align camera``)."""
-    raw = distort_points(points_ideal, lam, scale)
-    d = _design(LineGeometry(raw, sigma, chol), lam, scale)
-    return {f"camera_{p}": float(d.s[j] * lam_u[j])
-            for j, p in enumerate(PARAMS) if lam_u[j] > 0}
 
 
 def lens_cov(lam_u: np.ndarray) -> np.ndarray:
