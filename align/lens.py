@@ -37,7 +37,7 @@ Every Type B term is a standard uncertainty of its stated distribution (uniform 
 half-width / sqrt 3), never the bound itself: over lenses drawn from the ranges the tool is
 given, the normalised errors have RMS ~1 (``tests/align/lens_grid.py``'s ``plausible`` class).
 
-A given camera model replaces all this: its covariance is propagated instead (``camera_<p>``),
+A given camera model replaces all this: its covariance is propagated instead (``camera_model``),
 and the lines only test it (see :func:`align.lens_terms.check_camera`). The ranges and each
 mark's design are :mod:`align.lens_design`'s; the terms above are :mod:`align.lens_terms`'s.
 """
