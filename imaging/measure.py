@@ -525,8 +525,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if expect_one:
         cands = [require_single(cands, where)]
     # The JPEG encoder read on the file's own pixels (baseline JPEG is 8-bit): a background
-    # divided out below leaves no integer pixels, and read after it a JPEG's marks lost
-    # their jpeg_blocks term whenever the frame's background was removed.
+    # divided out below leaves no integer pixels. Read after it, a JPEG array without its
+    # header's tables was not found (its mark lost jpeg_blocks) and a file's pre-coding
+    # noise was read off the divided pixels.
     jpeg = find_jpeg(raw, jpeg_tables) if top == 255 else None
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be
     # as long: a faint streak's ridge can reach the length where the streak itself is
