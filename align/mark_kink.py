@@ -234,7 +234,8 @@ def _remeasured(image: np.ndarray, m: MarkMeasurement, part: MarkMeasurement, si
     along = (xs - (w - 1) / 2) * um[0] + (ys - (h - 1) / 2) * um[1]
     try:
         again = measure_candidate(np.where(side * (along - tb) > 0, image,
-                                           m.profile.background_dn), cand, camera, where)
+                                           m.profile.background_dn), cand, camera, where,
+                                  jpeg=m.jpeg)
     except ImageInputError:
         return part
     ta = again.points @ um

@@ -60,7 +60,9 @@ def unshadowed(items: Sequence[MarkMeasurement | ImageInputError], image: np.nda
         if free is not None:
             img, edge = free
             try:
-                m = measure_candidate(img, m.candidate, camera, name, top)
+                # The file's JPEG encoder goes with the mark: the blocks are the file's, not
+                # the shadow's (dropped, a reported mark of a JPEG lost its jpeg_blocks term).
+                m = measure_candidate(img, m.candidate, camera, name, top, jpeg=m.jpeg)
             except ImageInputError as exc:
                 m = exc
             edges[id(m)] = edge

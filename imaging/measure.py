@@ -479,7 +479,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     """
     # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
     # same frame as an array got u 1745" where its file got 5.3" (read_image: floats, no copy).
-    image = np.asarray(image, dtype=float)
+    image = raw = np.asarray(image, dtype=float)
     mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
     # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
     if mx == float(image.flat[0]) and mx == float(image.min()):
@@ -524,6 +524,11 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                               + (f": {clipped}" if clipped else ""))
     if expect_one:
         cands = [require_single(cands, where)]
+    # The JPEG encoder read on the file's own pixels (baseline JPEG is 8-bit): a background
+    # divided out below leaves no integer pixels. Read after it, a JPEG array without its
+    # header's tables was not found (its mark lost jpeg_blocks) and a file's pre-coding
+    # noise was read off the divided pixels.
+    jpeg = find_jpeg(raw, jpeg_tables) if top == 255 else None
     # The detector judges a ridge's length; the measured groove (half-depth ends) must be
     # as long: a faint streak's ridge can reach the length where the streak itself is
     # shorter (its length_px would then be below --min-length).
@@ -554,7 +559,6 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # Each angle carries what the oriented removal may leave of the change it made: the
     # mark measured again with the pattern put back.
     before = image * oriented.factor(image.shape) if oriented.found else image
-    jpeg = find_jpeg(image, jpeg_tables) if top == 255 else None  # baseline JPEG is 8-bit
     out: list[MarkMeasurement | ImageInputError] = []
     index: dict[int, int] = {}
     for i, c in enumerate(cands):

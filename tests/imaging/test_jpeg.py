@@ -27,6 +27,7 @@ from imaging.jpeg_scatter import (
     jpeg_noise_dof,
 )
 from imaging.jpeg_turn import near_axis
+from imaging.measure import measure_frame
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
 
@@ -64,6 +65,39 @@ def test_a_jpeg_mark_is_named_and_within_u():
     assert any("JPEG compression" in n for n in r.notes)
     assert "jpeg_blocks" in r.u_terms
     assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
+
+
+def test_a_jpeg_mark_measured_again_under_a_shadow_keeps_its_jpeg_term():
+    """A quality-70 JPEG whose mark a shadow's edge runs along (5 deg, 30 % deep): the mark
+    is measured again on the light with the edge divided out (align.mark_shadow). Before,
+    that measurement passed no JPEG and the reported mark had no jpeg_blocks term (the real
+    left01.jpg's one mark, left06.jpg's first); now it carries the file's blocks."""
+    a = 0.25
+    spec = ImageSpec(marks=(MarkSpec(a, 0.0, 200.0, 5.0, contrast=-0.5),), width=320,
+                     height=240, blur_px=1.0, bits=8, full_well_e=20000.0, jpeg_quality=70,
+                     shadow=(a + np.deg2rad(5.0), 0.0, 3.0, 0.3), seed=0)
+    s = render_marks(spec, with_crlb=False)
+    (r,) = measure_image(s.image, ranges=LensRanges.none())
+    assert any("a shadow's edge runs along the mark" in n for n in r.notes), r.notes
+    assert "jpeg_blocks" in r.u_terms, r.u_terms
+    assert any("JPEG compression" in n for n in r.notes), r.notes
+    assert abs(angle_error(r.angle_rad, s.truth.marks[0].image_angle_rad)) <= 3 * r.angle_u_rad
+
+
+def test_a_jpeg_read_before_its_background_is_divided_out():
+    """A quality-70 JPEG with oriented stripes (5 %, 12 px): the frame's background is
+    divided out (imaging.oriented) before its marks are measured. Before, the encoder was
+    looked for on the divided image (no integer pixels left): none found, the mark had no
+    jpeg_blocks term; now it is read on the file's own pixels (quality within 6)."""
+    a = 0.25
+    spec = ImageSpec(marks=(MarkSpec(a, 0.0, 200.0, 5.0, contrast=-0.5),), width=320,
+                     height=240, blur_px=1.0, bits=8, full_well_e=20000.0, jpeg_quality=70,
+                     stripes=0.05, stripes_period_px=12.0, stripes_angle_rad=1.2, seed=0)
+    fr = measure_frame(render_marks(spec, with_crlb=False).image, where="striped")
+    (m,) = fr.items
+    assert fr.oriented.found
+    assert m.jpeg is not None and abs(m.jpeg.quality - 70) <= 6, m.jpeg
+    assert m.jpeg_turn is not None
 
 
 def _groove_on_a_block_row(seed: int) -> np.ndarray:
