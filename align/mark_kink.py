@@ -235,7 +235,7 @@ def _remeasured(image: np.ndarray, m: MarkMeasurement, part: MarkMeasurement, si
     try:
         again = measure_candidate(np.where(side * (along - tb) > 0, image,
                                            m.profile.background_dn), cand, camera, where,
-                                  jpeg=m.jpeg)
+                                  around=m.around)
     except ImageInputError:
         return part
     ta = again.points @ um

@@ -60,9 +60,9 @@ def unshadowed(items: Sequence[MarkMeasurement | ImageInputError], image: np.nda
         if free is not None:
             img, edge = free
             try:
-                # The file's JPEG encoder goes with the mark: the blocks are the file's, not
-                # the shadow's (dropped, a reported mark of a JPEG lost its jpeg_blocks term).
-                m = measure_candidate(img, m.candidate, camera, name, top, jpeg=m.jpeg)
+                # In the same frame (the file's encoder, the marks crossing it, the lines
+                # beside it, the stripes' offsets): only the shadow is divided out.
+                m = measure_candidate(img, m.candidate, camera, name, top, m.around)
             except ImageInputError as exc:
                 m = exc
             edges[id(m)] = edge

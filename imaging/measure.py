@@ -7,7 +7,6 @@ in :mod:`align.marks` adds effects (distortion, wiggle, illumination) on top of
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -36,13 +35,14 @@ from imaging.families import detect_lines
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
-from imaging.jpeg import JpegBlocks, find_jpeg
+from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.shape import profile_angle_u
 from imaging.stripes import Stripes, find_stripes, stripes_notes
+from imaging.surroundings import ALONE, Surroundings, surroundings_of
 from imaging.texture import correlation_cholesky
 
 
@@ -58,9 +58,10 @@ class MarkMeasurement:
     :mod:`imaging.stripes`) correlates their errors along the mark (None: independent), for
     generalised least squares; ``sigma`` then includes their share of the variance;
     ``blur``: the blur's trend along the mark (a defocus gradient, :mod:`imaging.defocus`;
-    None: too few segments to tell); ``jpeg``: the JPEG encoder the image shows (None: none)
-    and ``jpeg_u_rad`` how far its blocks move this mark's angle [rad] (:mod:`imaging.jpeg`;
-    a Type B term, computed when first read). ``extent_px``: where the groove ends along the
+    None: too few segments to tell); ``around``: the frame around it as measured (its
+    ``jpeg``: the JPEG encoder the image shows, None: none) and ``jpeg_u_rad`` how far its
+    blocks move this mark's angle [rad] (:mod:`imaging.jpeg`; a Type B term, computed when
+    first read). ``extent_px``: where the groove ends along the
     profile's line (raw image); ``ends_px``: those two ends as (2, 2) points like ``points``
     (relative to the image centre, undistorted if a camera model was given): a bent mark's
     chord and a ruled scale's line middles are read between them.
@@ -94,8 +95,8 @@ class MarkMeasurement:
         Where the groove ends along the profile's line [px].
     blur : BlurTrend or None
         The blur's trend along the mark.
-    jpeg : JpegBlocks or None
-        The image's JPEG encoder.
+    around : Surroundings
+        The frame around it (:mod:`imaging.surroundings`), for measuring it again.
     jpeg_turn : JpegTurn or None
         What its blocks add to the angle's u, read as ``jpeg_u_rad`` [rad].
     ends_px : ndarray or None
@@ -123,7 +124,7 @@ class MarkMeasurement:
     chol: np.ndarray | None = None
     extent_px: tuple[float, float] = (float("nan"), float("nan"))
     blur: BlurTrend | None = None
-    jpeg: JpegBlocks | None = None
+    around: Surroundings = ALONE
     jpeg_turn: JpegTurn | None = None
     ends_px: np.ndarray | None = None
     crossings: tuple[tuple[int, int], ...] = ()
@@ -133,6 +134,8 @@ class MarkMeasurement:
     ends_check: EndsCheck | None = None
 
     jpeg_u_rad = property(lambda self: self.jpeg_turn.u_rad if self.jpeg_turn else 0.0)
+    jpeg = property(lambda self: self.around.jpeg)
+    """The JPEG encoder the image shows (None: none)."""
     @property
     def length_px(self) -> float:
         """The groove's length between its half-depth ends [px] (:func:`groove_extent`)."""
@@ -176,19 +179,14 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
 
 def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraModel | None = None,
                       where: str = "image", top: float | None = None,
-                      neighbours_px: Sequence[float] = (), jpeg: JpegBlocks | None = None,
-                      offsets_var: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
-                      crossing: Sequence[tuple[int, MarkCandidate]] = ()) -> MarkMeasurement:
+                      around: Surroundings = ALONE) -> MarkMeasurement:
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
-    ``top``: the image's full-scale DN when already known (else from the image);
-    ``neighbours_px``: signed distances of other lines beside it [px] (see
-    :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
-    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
-    ``offsets_var``: variances of the column and row offsets removed from the image
-    (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
-    candidate) of the other marks, whose grooves are kept out of this one's fit where they
-    cross it (:func:`crossing_skip`). A candidate seen as two fused grooves is refused.
+    ``top``: the image's full-scale DN when already known (else from the image); ``around``:
+    the frame around it (:class:`imaging.surroundings.Surroundings`: the lines beside it,
+    the marks that may cross it, the file's JPEG encoder, the removed stripes' offsets),
+    kept with the measurement for every measurement of it again. A candidate seen as two
+    fused grooves is refused.
 
     Parameters
     ----------
@@ -202,14 +200,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         The image, as messages name it.
     top : float, optional
         Full scale [DN].
-    neighbours_px : sequence of float
-        Signed distances of other lines beside it [px].
-    jpeg : JpegBlocks, optional
-        The image's JPEG encoder.
-    offsets_var : tuple of ndarray or None
-        Variances of removed column and row offsets [DN^2].
-    crossing : sequence of (int, MarkCandidate)
-        The other marks.
+    around : Surroundings
+        The frame around the mark (default: alone).
 
     Returns
     -------
@@ -226,7 +218,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     top = full_scale(image) if top is None else top
     pf = fit_profile(image, cand, where, top)
     cen = sample_centres(image, pf, every=4 if cand.length_px > 400 else 1, where=where)
-    skip, crossed = crossing_skip(image, cen, pf, crossing, top, where, look=False)
+    skip, crossed = crossing_skip(image, cen, pf, around.crossing, top, where, look=False)
     use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
@@ -239,7 +231,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # search before them), and the full pass ran twice, on the short stretch and again on
     # the whole groove (a quarter of the frame's time). The ends' check made here is kept.
     look = extent_look(image, pf)
-    longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, crossing)
+    longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, around.crossing)
     short = pf
     if longer is not None:
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
@@ -247,10 +239,10 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     def full_pass(pf, cen, use):
         # The centres over pf's stretch, started from the previous centres (a bowed
         # groove's ends are far from any straight line through it), their crossings and use.
-        cen = sample_centres(image, pf, where=where, texture=True, avoid_px=neighbours_px,
+        cen = sample_centres(image, pf, where=where, texture=True, avoid_px=around.neighbours_px,
                              guess=(cen.xy[use] @ u, cen.xy[use] @ n - pf.offset_px),
-                             offsets_var=offsets_var, departure=True)
-        skip, crossed = crossing_skip(image, cen, pf, crossing, top, where)
+                             offsets_var=around.offsets_var, departure=True)
+        skip, crossed = crossing_skip(image, cen, pf, around.crossing, top, where)
         return cen, crossed, _usable(cen, where, cand, skip)
 
     cen, crossed, use = full_pass(pf, cen, use)
@@ -262,7 +254,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         # end the first look could not follow) gets the centres once more over it.
         t0, t1, open0, open1 = extent_look(image, pf)
         ext = (t0, t1)
-        longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
+        longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, around.crossing)
         if longer is not None:
             pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
             cen, crossed, use = full_pass(pf, cen, use)
@@ -288,15 +280,9 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
             if cen.profile_shift is not None else 0.0)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
-                           blur, jpeg, JpegTurn(image.shape, pf, jpeg, cen.xy[use]),
+                           blur, around, JpegTurn(image.shape, pf, around.jpeg, cen.xy[use]),
                            ends_on_line(pf, ext, line, camera, image.shape), crossed,
                            profile_u_rad=prof, ends_check=check)
-
-
-def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCandidate]]:
-    """The other candidates with their indices (the ones that cross candidate i are found
-    by :func:`crossing_skip` once its groove's width is known)."""
-    return [(j, o) for j, o in enumerate(cands) if j != i]
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
@@ -348,26 +334,6 @@ def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
     """
     u, n = line_frame(angle_rad)
     return offset_px * n + np.outer(p @ u, u)
-
-
-def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
-               ) -> tuple[float, ...]:
-    """Signed distances along candidate i's normal of the other candidates that run beside it
-    (directions within ``tol_angle``, overlapping it along its length) [px]."""
-    c = cands[i]
-    u, n = line_frame(c.angle_rad)
-    out = []
-    for j, o in enumerate(cands):
-        if j == i or abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
-            continue
-        uo, no = line_frame(o.angle_rad)
-        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
-        ts = sorted(float(p @ u) for p in ends)
-        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
-            continue
-        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
-        out.append(float(mid @ n) - c.offset_px)
-    return tuple(out)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,
@@ -563,8 +529,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     index: dict[int, int] = {}
     for i, c in enumerate(cands):
         try:
-            args = (c, camera, where, top, neighbours(cands, i), jpeg,
-                    (stripes[0].offsets_var, stripes[1].offsets_var), crossings(cands, i))
+            args = (c, camera, where, top, surroundings_of(
+                cands, i, jpeg, (stripes[0].offsets_var, stripes[1].offsets_var)))
             m = measure_candidate(image, *args)
         except ImageInputError as exc:
             index[i] = len(out)
