@@ -12,7 +12,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from align.camera_lens import CAMERA_MODEL
 from align.decision import Disposition
 from align.fusion.budget import Budget
 from align.plan import plan_from_result
@@ -56,11 +55,12 @@ def mark_lines(r) -> list[str]:
     lines += [f"    note: {n.removeprefix(f'{r.image} mark {r.index}: ')}" for n in r.notes
               if is_information(n)]
     if r.lens_limited:
-        lines.append("    NOT OK: lens-limited: " + (
-            "the camera model's own u limits it: recalibrate (`align camera`) with more views "
-            "over the mark's region, or a mark nearer the centre"
-            if (r.lens or {}).get("source") == CAMERA_MODEL else
-            "calibrate the camera (`align camera`)"))
+        # What helps is the mark's own NOT OK note (align.lens_advice: it knows whether a
+        # model was given and what limits it); an advice of its own here told a user who
+        # had given --camera to calibrate the camera.
+        own = f"{r.image} mark {r.index}: NOT OK: "
+        lines += [f"    NOT OK: {n.removeprefix(own)}" for n in r.notes if n.startswith(own)
+                  and "lens" in n] or ["    NOT OK: lens-limited"]
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     if r.kinked:
