@@ -188,6 +188,14 @@ class MarkResult:
     def unexplained_structure(self) -> bool:
         return bool(self.loop and self.loop.unexplained_structure)
 
+    @property
+    def lens_not_ok(self) -> list[str]:
+        """Why the lens makes this mark not ok and what helps, as its own notes say it
+        (:func:`align.lens_advice.lens_advice`: the one place the advice is written),
+        without the "IMAGE mark K: NOT OK: " prefix; empty when the lens does not."""
+        own = f"{self.image} mark {self.index}: NOT OK: "
+        return [n.removeprefix(own) for n in self.notes if n.startswith(own) and "lens" in n]
+
     def to_dict(self) -> dict:
         """The mark as ``align marks --json`` and a session's ``stages.marks`` save it:
         angles in degrees (and radians, exact), the loop's summary

@@ -58,9 +58,7 @@ def mark_lines(r) -> list[str]:
         # What helps is the mark's own NOT OK note (align.lens_advice: it knows whether a
         # model was given and what limits it); an advice of its own here told a user who
         # had given --camera to calibrate the camera.
-        own = f"{r.image} mark {r.index}: NOT OK: "
-        lines += [f"    NOT OK: {n.removeprefix(own)}" for n in r.notes if n.startswith(own)
-                  and "lens" in n] or ["    NOT OK: lens-limited"]
+        lines += [f"    NOT OK: {n}" for n in r.lens_not_ok] or ["    NOT OK: lens-limited"]
     if r.bend_off_frame:
         lines.append("    NOT OK: a bent mark running off the image: its direction is not in it")
     if r.kinked:

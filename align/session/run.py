@@ -31,7 +31,6 @@ from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check, unit_source
-from align.camera_lens import CAMERA_MODEL
 from align.decision import INCONCLUSIVE, Disposition, ToleranceSpec, decide, decide_values
 from align.errors import InputError
 from align.fusion import (
@@ -170,10 +169,9 @@ class SessionResult:
             if not r.found:
                 continue  # a stage error already
             if r.lens_limited:
-                out.append(f"{im.file.name}: the angle is lens-limited (" + (
-                    "the camera model's own u: more chessboard views over the mark's region, "
-                    "or the mark nearer the centre" if (r.lens or {}).get("source") ==
-                    CAMERA_MODEL else "calibrate camera or declare its lens") + ")")
+                # what helps as the mark's own note says it (a model given or not)
+                out += [f"{im.file.name}: {n}" for n in r.lens_not_ok] or [
+                    f"{im.file.name}: the angle is lens-limited"]
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
