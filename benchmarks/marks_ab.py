@@ -87,8 +87,8 @@ def main() -> None:
     ap.add_argument("--images", type=int, default=3, help="fresh images per size")
     ap.add_argument("--rounds", type=int, default=6, help="passes over the images")
     args = ap.parse_args()
-    here = Path(imaging.__file__).resolve().parents[1]
-    print(f"code: this {here}, other {args.other.resolve()}; swapped: {', '.join(args.swap)}")
+    # The page's header says which checkout "this" is; the other is named as the user gave it.
+    print(f"code: this checkout, other {args.other}; swapped: {', '.join(args.swap)}")
     acc: dict = {}
     versions = {"this": {}, "other": {}}
     for dotted in args.swap:

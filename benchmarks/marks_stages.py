@@ -108,7 +108,6 @@ def main() -> None:
     ap.add_argument("--real", action="store_true",
                     help="the real photographs instead (../shared/data/real), per stage")
     args = ap.parse_args()
-    print(f"code: {os.path.dirname(os.path.dirname(os.path.abspath(imaging.__file__)))}")
     acc: dict[str, float] = defaultdict(float)
     if args.real:
         return real_stages(acc)
