@@ -227,7 +227,12 @@ def _bows_moved(line: LineGeometry, q: np.ndarray, fit: tuple[float, float],
 
 def _design(line: LineGeometry, lam: np.ndarray, scale: float,
             only: Sequence[int] | None = None) -> _Design:
-    q, jac = undistortion_jacobian(line.points, lam, scale, only)
+    return _design_of(line, *undistortion_jacobian(line.points, lam, scale, only))
+
+
+def _design_of(line: LineGeometry, q: np.ndarray, jac: np.ndarray) -> _Design:
+    """:func:`_design` from the line's undistorted centres ``q`` [px] and their slopes
+    ``jac`` (dq/dlam, (N, 2, P))."""
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
     angle, offset, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
@@ -248,6 +253,7 @@ class _DesignCache:
         self.lines, self.scale = lines, scale
         self._memo: dict[tuple, _Design] = {}
         self._index = list(range(len(lines)))
+        self._stacked: dict[bytes, list[_Design]] = {}
 
     def without(self, k: int) -> _DesignCache:
         """The cache of the lines but line ``k``, sharing this one's designs (keyed by the
@@ -257,6 +263,30 @@ class _DesignCache:
         sub._memo = self._memo
         sub._index = [j for i, j in enumerate(self._index) if i != k]
         return sub
+
+    def search(self, lam: np.ndarray) -> list[_Design]:
+        """Every line's design at ``lam`` for a search over lens vectors
+        (:func:`align.lens_exact.plausible_exact`): the cached designs where every line has
+        one, else all the lines' centres undistorted in one call
+        (:func:`imaging.lens.undistortion_jacobian` over all of them: its Newton loop runs
+        until the slowest line converges, which moves the others' centres by <= 1e-13 px,
+        so these designs are kept apart from the cache's, which the angles read).
+        :class:`LensFolds` where the lens folds any line."""
+        key = lam.tobytes()
+        got = self._stacked.get(key)
+        if got is not None:
+            return got
+        got = [self.cached(k, lam) for k in range(len(self.lines))]
+        if any(d is None for d in got):
+            q, jac = undistortion_jacobian(np.concatenate([ln.points for ln in self.lines]),
+                                           lam, self.scale)
+            cut = np.cumsum([len(ln.points) for ln in self.lines])[:-1]
+            got = [_design_of(ln, qk, jk) for ln, qk, jk in
+                   zip(self.lines, np.split(q, cut), np.split(jac, cut), strict=True)]
+        if len(self._stacked) > 64:  # (a search revisits only its last point)
+            self._stacked.clear()
+        self._stacked[key] = got
+        return got
 
     def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
         """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
@@ -280,10 +310,10 @@ class _DesignCache:
         design's ``dq``, exact to first order: along the mark too, which bends the bow's
         own column; ``G`` alone misses it, 15 % of a bowed line's slope) and the line
         stepped there (:func:`_bows_moved`), a forward difference of 1e-4 px. No
-        undistortion: the designs at ``lam`` hold it.
+        undistortion: the designs at ``lam`` (:meth:`search`'s) hold it.
         :class:`LensFolds` where the lens folds any line."""
         out = np.zeros((len(self.lines), len(cols)))
-        for k, d in enumerate(self.all(lam)):
+        for k, d in enumerate(self.search(lam)):
             dq = d.dq[:, :, list(cols)].transpose(2, 0, 1)  # (cols, N, 2)
             h = 1e-4 / np.maximum(np.max(np.abs(dq), axis=(1, 2)), 1e-300)
             bz = _bows_moved(self.lines[k], d.q, (d.angle, d.offset),
