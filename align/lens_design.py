@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from align.lens_search import SearchPoint, StackedLines
 from axisbase.errors import InputError, NotApplicable
 from imaging import fit_line_only, line_frame
 from imaging.lens import undistortion_jacobian
@@ -196,43 +197,9 @@ def _fit_columns(line: LineGeometry, q: np.ndarray, jac: np.ndarray
     return angle, offset, X[:, :2], X[:, 2:-2], X[:, -2], X[:, -1]
 
 
-def _bows_moved(line: LineGeometry, q: np.ndarray, fit: tuple[float, float],
-                moves: np.ndarray) -> np.ndarray:
-    """:attr:`_Design.bow_z` of the centres ``q`` [px] moved by each of ``moves`` (K, N, 2)
-    [px] a rounding's worth, the line stepped once from ``fit`` (angle, offset: the line
-    through ``q``; exact to first order in the move; the whitening is linear, so made once
-    for all): (K,)."""
-    a0, d0 = fit
-    Q = q[None] + moves
-    k, m = len(Q), len(q)
-    X = _whiten(line, np.column_stack([Q.transpose(1, 0, 2).reshape(m, 2 * k), np.ones(m)]))
-    qw, one = X[:, :-1].reshape(m, k, 2).transpose(1, 0, 2), X[:, -1]
-    u0, n0 = line_frame(a0)
-    J = np.stack([qw @ u0, -np.broadcast_to(one, (k, m))], axis=2)  # (K, N, 2)
-    r = qw @ n0 - d0 * one
-    step = np.linalg.solve(J.transpose(0, 2, 1) @ J, -(J.transpose(0, 2, 1) @ r[..., None]))
-    a, d = a0 + step[:, 0, 0], d0 + step[:, 1, 0]
-    u = np.stack([np.cos(a), -np.sin(a)], axis=1)[:, :, None]  # (line_frame's, per move)
-    n = np.stack([np.sin(a), np.cos(a)], axis=1)[:, :, None]
-    t = (Q @ u)[..., 0]
-    bow = ((t - (t.min(1) + t.max(1))[:, None] / 2)
-           / np.maximum(np.ptp(t, axis=1), 1.0)[:, None]) ** 2
-    bw = _whiten(line, bow.T).T[..., None]
-    Jw = np.concatenate([qw @ u, -np.broadcast_to(one, (k, m))[..., None]], axis=2)
-    rw = (qw @ n)[..., 0] - d[:, None] * one
-    JT = Jw.transpose(0, 2, 1)
-    w = (bw - Jw @ np.linalg.solve(JT @ Jw, JT @ bw))[..., 0]
-    return np.einsum("kn,kn->k", w, rw) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
-
-
 def _design(line: LineGeometry, lam: np.ndarray, scale: float,
             only: Sequence[int] | None = None) -> _Design:
-    return _design_of(line, *undistortion_jacobian(line.points, lam, scale, only))
-
-
-def _design_of(line: LineGeometry, q: np.ndarray, jac: np.ndarray) -> _Design:
-    """:func:`_design` from the line's undistorted centres ``q`` [px] and their slopes
-    ``jac`` (dq/dlam, (N, 2, P))."""
+    q, jac = undistortion_jacobian(line.points, lam, scale, only)
     if not np.all(np.isfinite(q)) or not np.all(np.isfinite(jac)):
         raise LensFolds("the lens folds the image along this mark")
     angle, offset, Jw, Ew, bw, rw = _fit_columns(line, q, jac)
@@ -253,7 +220,8 @@ class _DesignCache:
         self.lines, self.scale = lines, scale
         self._memo: dict[tuple, _Design] = {}
         self._index = list(range(len(lines)))
-        self._stacked: dict[bytes, list[_Design]] = {}
+        self._stack: StackedLines | None = None
+        self._point: tuple[bytes, SearchPoint] | None = None
 
     def without(self, k: int) -> _DesignCache:
         """The cache of the lines but line ``k``, sharing this one's designs (keyed by the
@@ -264,29 +232,23 @@ class _DesignCache:
         sub._index = [j for i, j in enumerate(self._index) if i != k]
         return sub
 
-    def search(self, lam: np.ndarray) -> list[_Design]:
-        """Every line's design at ``lam`` for a search over lens vectors
-        (:func:`align.lens_exact.plausible_exact`): the cached designs where every line has
-        one, else all the lines' centres undistorted in one call
-        (:func:`imaging.lens.undistortion_jacobian` over all of them: its Newton loop runs
-        until the slowest line converges, which moves the others' centres by <= 1e-13 px,
-        so these designs are kept apart from the cache's, which the angles read).
-        :class:`LensFolds` where the lens folds any line."""
+    def search(self, lam: np.ndarray) -> SearchPoint:
+        """All the lines at ``lam`` for a search over lens vectors
+        (:func:`align.lens_exact.plausible_exact`: their bows and the bows' slopes, all the
+        lines at once, :mod:`align.lens_search`; the same bows as the designs' to rounding,
+        kept apart from the designs the angles read). The last one is kept: a search reads
+        its bows and then, at the same vector, their slopes. :class:`LensFolds` where the
+        lens folds any line."""
         key = lam.tobytes()
-        got = self._stacked.get(key)
-        if got is not None:
-            return got
-        got = [self.cached(k, lam) for k in range(len(self.lines))]
-        if any(d is None for d in got):
-            q, jac = undistortion_jacobian(np.concatenate([ln.points for ln in self.lines]),
-                                           lam, self.scale)
-            cut = np.cumsum([len(ln.points) for ln in self.lines])[:-1]
-            got = [_design_of(ln, qk, jk) for ln, qk, jk in
-                   zip(self.lines, np.split(q, cut), np.split(jac, cut), strict=True)]
-        if len(self._stacked) > 64:  # (a search revisits only its last point)
-            self._stacked.clear()
-        self._stacked[key] = got
-        return got
+        if self._point is not None and self._point[0] == key:
+            return self._point[1]
+        if self._stack is None:
+            self._stack = StackedLines(self.lines, self.scale)
+        point = self._stack.at(lam)
+        if point is None:
+            raise LensFolds("the lens folds the image along a mark")
+        self._point = (key, point)
+        return point
 
     def one(self, k: int, lam: np.ndarray, only: tuple[int, ...] | None = None) -> _Design:
         """Line ``k``'s design at ``lam`` (:class:`LensFolds` where the lens folds it)."""
@@ -305,18 +267,10 @@ class _DesignCache:
         return [self.one(k, lam) for k in range(len(self.lines))]
 
     def bow_jacobian(self, lam: np.ndarray, cols: Sequence[int]) -> np.ndarray:
-        """d :attr:`_Design.bow_z` / d lam[cols] of every line at ``lam`` [per unit], shape
-        (lines, cols): each line's centres moved by their first-order displacement (the
-        design's ``dq``, exact to first order: along the mark too, which bends the bow's
-        own column; ``G`` alone misses it, 15 % of a bowed line's slope) and the line
-        stepped there (:func:`_bows_moved`), a forward difference of 1e-4 px. No
-        undistortion: the designs at ``lam`` (:meth:`search`'s) hold it.
+        """d bow_z / d lam[cols] of every line at ``lam`` [per unit], shape (lines, cols):
+        each line's centres moved by their first-order displacement (exact to first order:
+        along the mark too, which bends the bow's own column; ``G`` alone misses it, 15 % of
+        a bowed line's slope) and the line stepped there, a forward difference of 1e-4 px
+        (:meth:`align.lens_search.SearchPoint.bow_jacobian`, on :meth:`search`'s lines).
         :class:`LensFolds` where the lens folds any line."""
-        out = np.zeros((len(self.lines), len(cols)))
-        for k, d in enumerate(self.search(lam)):
-            dq = d.dq[:, :, list(cols)].transpose(2, 0, 1)  # (cols, N, 2)
-            h = 1e-4 / np.maximum(np.max(np.abs(dq), axis=(1, 2)), 1e-300)
-            bz = _bows_moved(self.lines[k], d.q, (d.angle, d.offset),
-                             np.concatenate([0 * dq[:1], h[:, None, None] * dq]))
-            out[k] = (bz[1:] - bz[0]) / h
-        return out
+        return self.search(lam).bow_jacobian(cols)

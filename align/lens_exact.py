@@ -64,7 +64,7 @@ def plausible_exact(cache, lam0: np.ndarray, applied: Sequence[bool], rng: np.nd
     def left(x: np.ndarray) -> np.ndarray:
         lam = lens(x)
         try:
-            bz = [d.bow_z for d in cache.search(lam)]
+            bz = cache.search(lam).bow_z
         except LensFolds:  # (a lens that folds the image explains nothing)
             return np.full(n + len(prior), 1e6)
         return np.concatenate([bz, lam[prior] / rng[prior]])
