@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from align.lens_design import LineGeometry, _DesignCache
+from align.lens_design import LensFolds, LineGeometry, _DesignCache
 from imaging.lens import distort_points
 
 R = 400.0
@@ -49,3 +50,43 @@ def test_a_cache_without_one_line_gives_each_other_line_its_own_design():
     for a, b in zip(parent.all(np.zeros(7)), _DesignCache(lines, R).all(np.zeros(7)),
                     strict=True):
         assert a.angle == b.angle
+
+
+def _correlated(line: LineGeometry, rho: float) -> LineGeometry:
+    """The line with its centres' noise correlated (AR(1), ``rho``) as a mark's can be."""
+    n = len(line.points)
+    c = rho ** np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    return LineGeometry(line.points, line.sigma, np.linalg.cholesky(c))
+
+
+def test_the_search_reads_every_line_as_its_own_design_does():
+    """The exact test's search (``search``: all the lines at once, :mod:`align.lens_search`)
+    gives each line's bow as its own design does (the same arithmetic in another order:
+    rounding apart), for independent and correlated centres, a vertical mark (its angle on
+    the wrap) and a lens off the centre; its slopes are the designs' bows' (central
+    differences of whole designs, to their truncation); a folding lens is refused."""
+    lines = _lines(5)
+    vertical = np.column_stack([np.full(200, 60.0), np.linspace(-120, 120, 200)])
+    lines = [lines[0], _correlated(lines[1], 0.6), lines[2], _correlated(lines[3], 0.3),
+             LineGeometry(vertical + np.random.default_rng(1).normal(0, 0.05, (200, 2)),
+                          np.full(200, 0.05), None)]
+    lam = np.array([-0.12, 0.02, 3e-4, -2e-4, 1e-3, 12.0, -7.0])
+    cache = _DesignCache(lines, R)
+    ref = np.array([d.bow_z for d in cache.all(lam)])
+    got = cache.search(lam).bow_z
+    assert np.all(np.abs(got - ref) <= 1e-9 * np.maximum(np.abs(ref), 1.0)), (got, ref)
+    cols = [0, 1, 2, 3, 4, 5, 6]
+    step = np.array([1e-4, 1e-4, 1e-6, 1e-6, 1e-5, 0.01, 0.01])
+    fd = np.zeros((len(lines), len(cols)))
+    for j in cols:
+        e = np.zeros(7)
+        e[j] = step[j]
+        up = [d.bow_z for d in _DesignCache(lines, R).all(lam + e)]
+        down = [d.bow_z for d in _DesignCache(lines, R).all(lam - e)]
+        fd[:, j] = (np.array(up) - np.array(down)) / (2 * step[j])
+    slope = cache.bow_jacobian(lam, cols)
+    scale = np.abs(fd).max(axis=0)
+    assert np.all(np.abs(slope - fd) <= 1e-3 * scale), (slope, fd)
+    folds = np.array([-3.0, 0, 0, 0, 0, 0, 0])
+    with pytest.raises(LensFolds):
+        cache.search(folds)
