@@ -2,14 +2,15 @@
 camera's lines at once: at each lens vector tried, every line's bow (in its u) and its slopes.
 
 The search reads only the lines' bows, at some 10-40 lens vectors per fit and up to ten fits
-per frame (the leave-one-out tests, twice the ranges): one line at a time (one undistortion,
-one line fit, one design each) that was most of a busy frame's lens (building.jpg: 9 lines,
-69 vectors, 0.4 s of 0.5 s). Here the centres of all the lines are one stack: one
-undistortion, each line's fit a few Gauss-Newton steps made for all lines together, their
-sums per line (``np.add.reduceat``), the whitening one block-diagonal sparse matrix. The
-arithmetic is :mod:`align.lens_design`'s (its ``_design``'s ``bow_z``, ``_bows_moved``'s
-slopes) in another order: the same bows to rounding (~1e-12 of a bow's u), and the search's
-results reach the user only through its p-value and the lens it found, rounded in a note.
+per frame (the leave-one-out tests, twice the ranges). One line at a time (one undistortion,
+one line fit, one design each, :mod:`align.lens_design`) that was most of a busy frame's
+lens (building.jpg: 9 lines, 69 vectors, 0.4 s of 0.5 s). Here the centres of all the lines
+are one stack: one undistortion, every line's fit in closed form, the sums per line
+(``np.add.reduceat``), the whitening one block-diagonal sparse matrix. The arithmetic is the
+designs' (``_Design.bow_z``; the slopes a forward difference of the centres moved along
+their first-order displacement) in another order: the same bows to rounding (~1e-12 of a
+bow's u), and the search's results reach the user only through its p-value and the lens it
+found, rounded in a note.
 """
 
 from __future__ import annotations
@@ -24,13 +25,14 @@ from scipy.linalg import solve_triangular
 from imaging.lens import undistortion_jacobian
 
 MOVE_PX = 1e-4
-"""The centres' largest move for a bow's slope [px] (:func:`align.lens_design._bows_moved`'s
-forward difference)."""
+"""The centres' largest move for a bow's slope [px] (a forward difference: the slopes agree
+with central differences of whole designs to < 1e-6 of each column, tests/align/
+test_lens_design.py)."""
 
 
 class StackedLines:
     """A camera's lines as one stack of centres: where each line starts, its whitening (the
-    centres' sigma and correlation, one sparse block per line) and its TLS weights.
+    centres' sigma and correlation, one sparse block per line).
 
     Parameters
     ----------
@@ -51,7 +53,6 @@ class StackedLines:
                                    check_finite=False) for ln in lines]
         self.white = sparse.block_diag(blocks, format="csr")
         self.one_w = self.white @ np.ones(len(self.points))
-        self.tls_w = np.concatenate([1 / ln.sigma**2 for ln in lines])
 
     def whiten(self, X: np.ndarray) -> np.ndarray:
         """Columns ``X`` (one row per centre of the stack) whitened by the centres' noise."""
@@ -85,27 +86,20 @@ class StackedLines:
         return a - (a11 * g0 - a01 * g1) / det, d - (a00 * g1 - a01 * g0) / det
 
     def _fit(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Each line's generalised least-squares line through its centres ``q`` [px]
-        (:func:`imaging.fit_line_only`'s: from the weighted TLS line, Gauss-Newton to its
-        end; the angle wrapped to (-pi/2, pi/2], the offset with it): (angle [rad], offset
-        [px]) per line."""
-        w = self.tls_w[:, None]
-        m = self.sums(w * q) / self.sums(w)
-        e = q - m[self.seg]
-        cxx, cxy, cyy = (self.sums(w[:, 0] * e[:, 0] * e[:, 0]),
-                         self.sums(w[:, 0] * e[:, 0] * e[:, 1]),
-                         self.sums(w[:, 0] * e[:, 1] * e[:, 1]))
-        a = -0.5 * np.arctan2(2 * cxy, cxx - cyy)  # the principal axis, as line_frame's angle
-        d = m[:, 0] * np.sin(a) + m[:, 1] * np.cos(a)
-        qw = self.whiten(q)
-        a, d = a[:, None], d[:, None]
-        for _ in range(8):
-            a1, d1 = self._step(qw[:, :1], qw[:, 1:], a, d)
-            done = np.all(np.abs(a1 - a) < 1e-14) and np.all(np.abs(d1 - d) < 1e-11)
-            a, d = a1, d1
-            if done:
-                break
-        a, d = a[:, 0], d[:, 0]
+        """Each line's generalised least-squares line through its centres ``q`` [px]: the
+        one :func:`imaging.fit_line_only` reaches by Gauss-Newton, here in closed form (the
+        whitened residuals W q n - d W 1 are smallest for the offset d = (W 1)^T W q n /
+        |W 1|^2 and the normal n the smaller principal axis of the whitened centres about
+        that; the angle wrapped to (-pi/2, pi/2], the offset with it): (angle [rad],
+        offset [px]) per line."""
+        qw, one = self.whiten(q), self.one_w[:, None]
+        s11 = self.sums(self.one_w**2)
+        sx, sy = self.sums(qw * one).T
+        cxx = self.sums(qw[:, 0] ** 2) - sx * sx / s11
+        cxy = self.sums(qw[:, 0] * qw[:, 1]) - sx * sy / s11
+        cyy = self.sums(qw[:, 1] ** 2) - sy * sy / s11
+        a = -0.5 * np.arctan2(2 * cxy, cxx - cyy)  # the larger axis is the line's direction
+        d = (sx * np.sin(a) + sy * np.cos(a)) / s11
         wrapped = (a + np.pi / 2) % np.pi - np.pi / 2
         wrapped = np.where(wrapped <= -np.pi / 2 + 4 * np.finfo(float).eps, np.pi / 2, wrapped)
         return wrapped, np.where(np.abs(wrapped - a) > 1, -d, d)
@@ -147,8 +141,8 @@ class SearchPoint:
     def bow_jacobian(self, cols: Sequence[int]) -> np.ndarray:
         """d ``bow_z`` / d lam[cols] of every line [per unit], (lines, cols): each line's
         centres moved by their first-order displacement (``jac``) so that the largest moves
-        :data:`MOVE_PX`, the line stepped once from its fit, and the bows differenced
-        (:meth:`align.lens_design._DesignCache.bow_jacobian`, all lines at once)."""
+        :data:`MOVE_PX`, the line stepped once from its fit (one Gauss-Newton step: exact to
+        first order in the move), and the bows differenced."""
         st, s = self.stack, self.stack.seg
         dq = self.jac[:, :, list(cols)]  # (M, 2, C)
         h = MOVE_PX / np.maximum(np.maximum.reduceat(np.abs(dq).max(axis=1), st.starts), 1e-300)
