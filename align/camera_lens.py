@@ -44,9 +44,13 @@ from imaging import CameraModel, MarkMeasurement, fit_line, on_line, undistort_p
 from imaging.lens import PARAMS
 
 
-def lens_lines(ms: Sequence[MarkMeasurement]) -> list[LineGeometry]:
-    """The marks as the lens solver sees them (sigma with the texture's re-read scale)."""
-    return [LineGeometry(m.points, m.sigma * np.sqrt(texture_scale(m)), m.chol) for m in ms]
+def lens_lines(ms: Sequence[MarkMeasurement], scales: Sequence[float] | None = None
+               ) -> list[LineGeometry]:
+    """The marks as the lens solver sees them (sigma with the texture's re-read scale;
+    ``scales``: each mark's :func:`align.mark_stage.texture_scale`, when already read)."""
+    scales = [texture_scale(m) for m in ms] if scales is None else scales
+    return [LineGeometry(m.points, m.sigma * np.sqrt(ts), m.chol)
+            for m, ts in zip(ms, scales, strict=True)]
 
 
 def camera_lens_u(camera: CameraModel, shape: tuple[int, int]) -> np.ndarray:
@@ -174,8 +178,9 @@ def _camera_lens(ms: Sequence[MarkMeasurement], camera: CameraModel | None = Non
     shape = ms[0].image_shape
     R = half_diagonal(shape)
     # A wiggle of >= 2 periods along a mark is fitted first: the lens reads what is left.
-    lines = [without_wiggle(ln, alpha, noise_dof(m, texture_scale(m)))[0]
-             for ln, m in zip(lens_lines(ms), ms, strict=True)]
+    scales = [texture_scale(m) for m in ms]  # (two fits of a correlated mark's centres each)
+    lines = [without_wiggle(ln, alpha, noise_dof(m, ts))[0]
+             for ln, m, ts in zip(lens_lines(ms, scales), ms, scales, strict=True)]
     who = f"camera {label}" if label else "camera"
     if camera is None and not np.any(ranges.vector()):
         # Declared distortion-free: nothing to determine, nothing to carry.
