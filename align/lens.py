@@ -437,22 +437,33 @@ def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design],
 
 
 def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
-                  start: np.ndarray | None = None) -> np.ndarray:
+                  start: np.ndarray | None = None, search: bool = False) -> np.ndarray:
     """The lens vector fitting the parameters ``applied`` to the lines' bows (Gauss-Newton
     from ``start``, zero by default, the other entries held there; stopped, and left for the
-    caller to refuse, running away beyond any range or where no step improves the fit)."""
+    caller to refuse, running away beyond any range or where no step improves the fit).
+    ``search``: the lines read all at once (:meth:`_DesignCache.search`, the same sums to
+    rounding) for a fit that only decides (a sign), not the lens the angles are read under."""
     lam = np.zeros(len(PARAMS)) if start is None else start.copy()
     if not applied:
         return lam
     A = np.ix_(applied, applied)
+
+    def cost_at(x: np.ndarray) -> float:
+        if search:
+            return cache.search(x).normal[2]
+        return sum(float(d.z @ d.z) for d in cache.all(x))
+
     try:
-        designs = cache.all(lam)
+        cost = cost_at(lam)
     except LensFolds:
         return lam
-    cost = sum(float(d.z @ d.z) for d in designs)
     for _ in range(iters):
-        F = sum(d.G.T @ d.G for d in designs)
-        b = sum(d.G.T @ d.z for d in designs)
+        if search:
+            F, b, _ = cache.search(lam).normal
+        else:
+            designs = cache.all(lam)  # (cached: the vector's cost read them)
+            F = sum(d.G.T @ d.G for d in designs)
+            b = sum(d.G.T @ d.z for d in designs)
         step = -np.linalg.solve(F[A], b[applied])
         # The step linearised at zero overshoots a strong lens's higher terms (k2 -0.16
         # for -0.04 after a k1 -0.17): halved until the lines fit better (and the lens
@@ -462,17 +473,16 @@ def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iter
             trial = lam.copy()
             trial[applied] += step
             try:
-                t_designs = cache.all(trial)
+                t_cost = cost_at(trial)
             except LensFolds:
                 step = step / 2
                 continue
-            t_cost = sum(float(d.z @ d.z) for d in t_designs)
             if t_cost <= cost:
                 break
             step = step / 2
         else:
             break  # no step improves: stay
-        lam, designs, cost = trial, t_designs, t_cost
+        lam, cost = trial, t_cost
         if np.any(np.abs(lam[applied]) > 10 * rng[applied]):
             break  # running away, beyond any lens: refused by the caller
         if np.all(np.abs(step) < 1e-3 * rng[applied]):
@@ -581,7 +591,7 @@ def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], de
     parameters ``full`` explain the lines: refitted with the principal point at each corner
     of its range, every fit that explains the bows keeps the signs of ``lam``."""
     for probe in _pp_probes(np.zeros(len(PARAMS)), det, rng):
-        lam_p = _gauss_newton(cache, full, rng, 8, start=probe)
+        lam_p = _gauss_newton(cache, full, rng, 8, start=probe, search=True)
         if np.any(np.sign(lam_p[full]) != np.sign(lam[full])):
             t = _bow_test(cache, lam_p, len(full), [j for j in undet if j not in (5, 6)], rng)
             # (None: that lens folds the image, so it explains nothing)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy import sparse
@@ -137,6 +138,28 @@ class SearchPoint:
     a: np.ndarray
     d: np.ndarray
     bow_z: np.ndarray
+
+    @cached_property
+    def normal(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """The lines' Gauss-Newton system at this vector, summed over them: (F, b, cost) =
+        (sum G^T G, sum G^T z, sum z^T z), with each line's G and z its design's
+        (:class:`align.lens_design._Design`: the whitened perpendicular displacements per
+        unit of each parameter, the straight line's part projected out; the whitened
+        residual of the straight line)."""
+        st, s = self.stack, self.stack.seg
+        ux, uy, nx, ny = np.cos(self.a)[s], -np.sin(self.a)[s], np.sin(self.a)[s], np.cos(self.a)[s]
+        q = self.q
+        E = self.jac[:, 0, :] * nx[:, None] + self.jac[:, 1, :] * ny[:, None]
+        X = st.whiten(np.column_stack([q[:, 0] * ux + q[:, 1] * uy,
+                                       q[:, 0] * nx + q[:, 1] * ny - self.d[s], E]))
+        tw, rw, Ew = X[:, :1], X[:, 1], X[:, 2:]
+        one = st.one_w[:, None]
+        a00, a01, a11 = st.sums(tw * tw), -st.sums(tw * one), st.sums(one * one)
+        c0, c1 = st.sums(tw * Ew), -st.sums(one * Ew)
+        det = a00 * a11 - a01 * a01
+        b0, b1 = (a11 * c0 - a01 * c1) / det, (a00 * c1 - a01 * c0) / det
+        G = Ew - tw * b0[s] + one * b1[s]
+        return G.T @ G, G.T @ rw, float(rw @ rw)
 
     def bow_jacobian(self, cols: Sequence[int]) -> np.ndarray:
         """d ``bow_z`` / d lam[cols] of every line [per unit], (lines, cols): each line's

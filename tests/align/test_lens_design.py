@@ -75,6 +75,14 @@ def test_the_search_reads_every_line_as_its_own_design_does():
     ref = np.array([d.bow_z for d in cache.all(lam)])
     got = cache.search(lam).bow_z
     assert np.all(np.abs(got - ref) <= 1e-9 * np.maximum(np.abs(ref), 1.0)), (got, ref)
+    # ... and the Gauss-Newton system the designs sum (a fit that only decides reads it).
+    F, b, cost = cache.search(lam).normal
+    ds = cache.all(lam)
+    F_ref, b_ref = sum(d.G.T @ d.G for d in ds), sum(d.G.T @ d.z for d in ds)
+    cost_ref = sum(float(d.z @ d.z) for d in ds)
+    np.testing.assert_allclose(F, F_ref, rtol=1e-9, atol=1e-9 * np.abs(F_ref).max())
+    np.testing.assert_allclose(b, b_ref, rtol=1e-9, atol=1e-9 * np.abs(b_ref).max())
+    assert abs(cost - cost_ref) <= 1e-9 * cost_ref
     cols = [0, 1, 2, 3, 4, 5, 6]
     step = np.array([1e-4, 1e-4, 1e-6, 1e-6, 1e-5, 0.01, 0.01])
     fd = np.zeros((len(lines), len(cols)))
