@@ -35,7 +35,8 @@ def plausible_exact(cache, lam0: np.ndarray, applied: Sequence[bool], rng: np.nd
     Parameters
     ----------
     cache : align.lens_design._DesignCache
-        The solver's designs of the lines (``lines``, ``all(lam)``, ``bow_jacobian``).
+        The solver's lines (``lines``; ``search(lam)``, their bows all at once,
+        :mod:`align.lens_search`; ``bow_jacobian``).
     lam0 : (P,) array
         The solver's lens vector (the start unless ``start`` is given) [PARAMS' units].
     applied : sequence of bool
@@ -45,8 +46,8 @@ def plausible_exact(cache, lam0: np.ndarray, applied: Sequence[bool], rng: np.nd
     start : (P,) array, optional
         A nearer start (the fit of all the lines for a leave-one-out: a step or two from
         its own, where the solver's lens took twice as many). The bows' slopes are
-        analytic (:meth:`~align.lens_design._DesignCache.bow_jacobian`): one design of
-        every line per step, where finite differences made eight.
+        analytic (:meth:`~align.lens_design._DesignCache.bow_jacobian`): one reading of
+        the lines per step, where finite differences made eight.
 
     Returns
     -------
