@@ -58,6 +58,7 @@ from align.lens_design import (
     LineGeometry,
     _Design,
     _DesignCache,
+    gauss_newton,
 )
 from align.lens_exact import plausible_exact
 from align.lens_pp import _pp_probe_s, _pp_probes, _pp_spread
@@ -240,7 +241,7 @@ def _solve(cache: _DesignCache, ranges: LensRanges, alpha: float, iters: int,
     spread, spread_u, spread_for = np.zeros(P), np.zeros(P), list(applied)
     fits: dict[tuple[int, ...], np.ndarray] = {}
     for _ in range(3):  # until the applied set is stable (a dropped sign changes the others)
-        lam = fits[tuple(applied)] = _gauss_newton(cache, applied, rng, iters,
+        lam = fits[tuple(applied)] = gauss_newton(cache, applied, rng, iters,
                                                    (starts or {}).get(tuple(applied)))
         try:
             designs = cache.all(lam)
@@ -407,7 +408,7 @@ def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design],
     det = [j for j in range(P) if sol.determined[j]]
     if not _conditioned(sol.info, A2, rng):
         return sol, designs  # the lines see no bow of it at all: nothing to fit it from
-    lam = _gauss_newton(cache, A2, rng, max(iters, 8), start=sol.lam)
+    lam = gauss_newton(cache, A2, rng, max(iters, 8), start=sol.lam)
     lam[cand] = np.clip(lam[cand], -rng[cand], rng[cand])
     if np.any(np.sign(lam[A]) != np.sign(sol.lam[A])):
         return sol, designs
@@ -434,60 +435,6 @@ def _marginalise(cache: _DesignCache, sol: LensSolution, designs: list[_Design],
     v_carry = sum(lens_angle_var(sol, d) for d in designs)
     v_free = sum(lens_angle_var(alt, d) for d in ds)
     return (alt, ds) if v_free < v_carry else (sol, designs)
-
-
-def _gauss_newton(cache: _DesignCache, applied: list[int], rng: np.ndarray, iters: int,
-                  start: np.ndarray | None = None, search: bool = False) -> np.ndarray:
-    """The lens vector fitting the parameters ``applied`` to the lines' bows (Gauss-Newton
-    from ``start``, zero by default, the other entries held there; stopped, and left for the
-    caller to refuse, running away beyond any range or where no step improves the fit).
-    ``search``: the lines read all at once (:meth:`_DesignCache.search`, the same sums to
-    rounding) for a fit that only decides (a sign), not the lens the angles are read under."""
-    lam = np.zeros(len(PARAMS)) if start is None else start.copy()
-    if not applied:
-        return lam
-    A = np.ix_(applied, applied)
-
-    def cost_at(x: np.ndarray) -> float:
-        if search:
-            return cache.search(x).normal[2]
-        return sum(float(d.z @ d.z) for d in cache.all(x))
-
-    try:
-        cost = cost_at(lam)
-    except LensFolds:
-        return lam
-    for _ in range(iters):
-        if search:
-            F, b, _ = cache.search(lam).normal
-        else:
-            designs = cache.all(lam)  # (cached: the vector's cost read them)
-            F = sum(d.G.T @ d.G for d in designs)
-            b = sum(d.G.T @ d.z for d in designs)
-        step = -np.linalg.solve(F[A], b[applied])
-        # The step linearised at zero overshoots a strong lens's higher terms (k2 -0.16
-        # for -0.04 after a k1 -0.17): halved until the lines fit better (and the lens
-        # does not fold), so that a lens is judged beyond its range only where the fit
-        # itself ends up there.
-        for _ in range(8):
-            trial = lam.copy()
-            trial[applied] += step
-            try:
-                t_cost = cost_at(trial)
-            except LensFolds:
-                step = step / 2
-                continue
-            if t_cost <= cost:
-                break
-            step = step / 2
-        else:
-            break  # no step improves: stay
-        lam, cost = trial, t_cost
-        if np.any(np.abs(lam[applied]) > 10 * rng[applied]):
-            break  # running away, beyond any lens: refused by the caller
-        if np.all(np.abs(step) < 1e-3 * rng[applied]):
-            break
-    return lam
 
 
 def _bows_left(designs: Sequence[_Design], undet: Sequence[int], rng: np.ndarray,
@@ -570,7 +517,7 @@ def _needed(cache: _DesignCache, lam: np.ndarray, applied: list[int], det: list[
             full = sorted(applied + list(add))
             lam_full = fits.get(tuple(full))
             if lam_full is None:
-                lam_full = _gauss_newton(cache, full, rng, 5)
+                lam_full = gauss_newton(cache, full, rng, 5)
             if not np.all(np.abs(lam_full[full]) <= bound[full]):
                 continue
             out = np.zeros(len(PARAMS))
@@ -591,7 +538,7 @@ def _same_sign_over_pp(cache: _DesignCache, lam: np.ndarray, full: list[int], de
     parameters ``full`` explain the lines: refitted with the principal point at each corner
     of its range, every fit that explains the bows keeps the signs of ``lam``."""
     for probe in _pp_probes(np.zeros(len(PARAMS)), det, rng):
-        lam_p = _gauss_newton(cache, full, rng, 8, start=probe, search=True)
+        lam_p = gauss_newton(cache, full, rng, 8, start=probe, search=True)
         if np.any(np.sign(lam_p[full]) != np.sign(lam[full])):
             t = _bow_test(cache, lam_p, len(full), [j for j in undet if j not in (5, 6)], rng)
             # (None: that lens folds the image, so it explains nothing)
