@@ -93,22 +93,23 @@ def pinhole_coords(cam: Camera, x0, y0, w, h, ss):
 
     Returns arrays of shape (h*ss, w*ss); pixel centres at integer coordinates.
     """
-    step = 4
-    gx = np.arange(x0 - 2 * step, x0 + w + 2 * step + 1, step, dtype=float)
-    gy = np.arange(y0 - 2 * step, y0 + h + 2 * step + 1, step, dtype=float)
-    GX, GY = np.meshgrid(gx, gy)
-    if not np.any(cam.D):
-        UX, UY = GX, GY
-    else:
-        UX, UY = _undistort(cam, GX, GY)
+    step, pad = 4, 8
+    gx = np.arange(x0 - pad * step, x0 + w + pad * step + 1, step, dtype=float)
+    gy = np.arange(y0 - pad * step, y0 + h + pad * step + 1, step, dtype=float)
     sub = (np.arange(ss) + 0.5) / ss - 0.5
     xs = (np.arange(x0, x0 + w)[:, None] + sub[None, :]).ravel()
     ys = (np.arange(y0, y0 + h)[:, None] + sub[None, :]).ravel()
     XS, YS = np.meshgrid(xs, ys)
+    if not np.any(cam.D):
+        return XS, YS
+    GX, GY = np.meshgrid(gx, gy)
+    UX, UY = _undistort(cam, GX, GY)
+    # interpolate the lens's displacement (smooth, small), not the coordinates: a spline's
+    # boundary condition does not reproduce a ramp, and the pad keeps its ringing far away
     ci = (XS - gx[0]) / step
     ri = (YS - gy[0]) / step
-    ux = ndimage.map_coordinates(UX, [ri, ci], order=3, mode="nearest")
-    uy = ndimage.map_coordinates(UY, [ri, ci], order=3, mode="nearest")
+    ux = XS + ndimage.map_coordinates(UX - GX, [ri, ci], order=3, mode="nearest")
+    uy = YS + ndimage.map_coordinates(UY - GY, [ri, ci], order=3, mode="nearest")
     return ux, uy
 
 
@@ -246,14 +247,16 @@ def _board_pose(rng, cols, rows, sq, cam: Camera, fill):
     raise RuntimeError("no pose fits")
 
 
-def render_board(cam: Camera, rng, cols=9, rows=6, sq=1.0, fill=0.7, blur=0.8, ss=2,
-                 _cache={}):
+_MAPS: dict = {}
+
+
+def render_board(cam: Camera, rng, cols=9, rows=6, sq=1.0, fill=0.7, blur=0.8, ss=2):
     """A chessboard photograph (cols x rows inner corners) through the camera."""
     key = (cam, ss)
-    if key not in _cache:
-        _cache.clear()
-        _cache[key] = pinhole_coords(cam, 0, 0, cam.width, cam.height, ss)
-    ux, uy = _cache[key]
+    if key not in _MAPS:  # one map per camera: the views share it
+        _MAPS.clear()
+        _MAPS[key] = pinhole_coords(cam, 0, 0, cam.width, cam.height, ss)
+    ux, uy = _MAPS[key]
     R, t = _board_pose(rng, cols, rows, sq, cam, fill)
     xn, yn = (ux - cam.cx) / cam.f, (uy - cam.cy) / cam.f
     nvec = R[:, 2]
@@ -289,3 +292,128 @@ def random_mark(cam: Camera, rng, where=None):
     sag = rng.choice([0.0, 0.0, rng.uniform(0.3, 1.0) * rng.choice([-1, 1])])
     return Mark(W / 2 + fx * W, H / 2 + fy * H, ang, L, width=rng.uniform(2.5, 5.0),
                 depth=rng.uniform(0.3, 0.7), blur0=b0, blur1=b1, sagitta=sag)
+
+
+# ------------------------------------------------------------------ a whole session
+
+ARCSEC = math.pi / 180 / 3600
+VIEWS = {  # view: camera, right, up (platform unit vectors)
+    "A": ("A", (1, 0, 0), (0, 0, 1)), "Ar": ("A", (-1, 0, 0), (0, 0, 1)),
+    "B": ("B", (0, 1, 0), (0, 0, 1)), "Br": ("B", (0, -1, 0), (0, 0, 1)),
+    "C": ("C", (1, 0, 0), (0, 1, 0)),  # the microscope, looking down: sees x against Y
+}
+HOUSINGS = {"A": ("x", "z"), "Ar": ("x", "z"), "B": ("y", "z"), "Br": ("y", "z"), "C": ("x",)}
+ANGLES = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
+
+
+def axes(E):
+    """The sensitivity axes s_i (rows of I + E) from a dict of E_ij [rad]."""
+    M = np.eye(3)
+    idx = {"x": 0, "y": 1, "z": 2, "X": 0, "Y": 1, "Z": 2}
+    for k, v in E.items():
+        M[idx[k[2]], idx[k[3]]] = v
+    return {h: M[i] / np.linalg.norm(M[i]) for h, i in (("x", 0), ("y", 1), ("z", 2))}
+
+
+def image_angle_deg(s, right, up, roll_rad=0.0):
+    """A mark along s seen in a view: atan2(s.u, s.r) + roll, as a line in (-90, 90]."""
+    a = math.degrees(math.atan2(float(np.dot(s, up)), float(np.dot(s, right))) + roll_rad)
+    return (a + 90) % 180 - 90 if (a + 90) % 180 != 0 else 90.0
+
+
+def gonio_log(E, rng, faces=("ref", "y", "x", "z"), revs=12, latitude_deg=50.45,
+              counts_per_rev=2 ** 21, noise_arcsec=0.15, ref_offset_rad=0.0, rev_s=30.0):
+    """Counter-log rows (count, counter, ref, t): the table turning ccw at ~constant rate.
+
+    Face normals' azimuths psi (ref along +X... here: ref at its offset, x at 0 + E_xY,
+    y at 90 deg - E_yX); faces pass in order of decreasing azimuth (docs/concepts.md).
+    """
+    s = axes(E)
+    psi = {"x": math.atan2(s["x"][1], s["x"][0]),
+           "y": math.atan2(s["y"][1], s["y"][0]),
+           "ref": math.pi / 2 + math.pi / 2 + ref_offset_rad,  # nominally 90 deg beyond y
+           "z": -math.pi / 2}
+    # passing order ref -> y -> x -> z: decreasing azimuth, nominally 90 deg steps
+    az = [psi[f] for f in faces]
+    steps = [(az[k] - az[(k + 1) % 4]) % (2 * math.pi) for k in range(4)]
+    earth = 7.292115e-5 * math.sin(math.radians(latitude_deg))
+    rows, t, counter = [], 0.0, 1
+    err_prev = rng.normal(0, noise_arcsec * ARCSEC)
+    frac = rng.uniform()
+    for _rev in range(revs):
+        for k in range(4):
+            dpsi = steps[k]
+            dt = rev_s * dpsi / (2 * math.pi) * rng.uniform(0.97, 1.03)
+            err = rng.normal(0, noise_arcsec * ARCSEC)
+            sensed = dpsi + earth * dt + err - err_prev
+            err_prev = err
+            c = sensed / (2 * math.pi) * counts_per_rev + frac
+            n = int(math.floor(c))
+            frac = c - n
+            t += dt
+            rows.append((n, counter, 1 if (k + 1) % 4 == 0 else 0, t))
+            counter = 3 - counter
+    return rows
+
+
+def write_session(folder, seed, cams, models=None, E=None, roll_arcsec=None, where=None,
+                  tolerance_arcsec=60.0, sagitta=0.0, lens_keys=None):
+    """A session folder (cameras + goniometer) with known E; returns the truth.
+
+    cams: {"A": Camera, "B": Camera}; models: {"A": "camA.json"} paths copied in (or None:
+    ``lens_keys`` {"A": {...}} written instead).
+    """
+    import shutil
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    if E is None:
+        E = {k: rng.uniform(-80, 80) * ARCSEC for k in ANGLES}
+    roll = roll_arcsec if roll_arcsec is not None else {c: rng.uniform(-40, 40) for c in cams}
+    s = axes(E)
+    toml = [f'name = "u16-{seed}"', "latitude_deg = 50.45", "",
+            "[goniometer]", 'log = "gonio.csv"', 'faces = ["ref", "y", "x", "z"]',
+            "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"',
+            "reference_offset_arcsec = 0.0", "reference_offset_u_arcsec = 2.0", ""]
+    for c in cams:
+        toml.append(f"[cameras.{c}]")
+        if models and models.get(c):
+            shutil.copy(models[c], folder / f"cam{c}.json")
+            toml.append(f'model = "cam{c}.json"')
+        for k, v in ((lens_keys or {}).get(c) or {}).items():
+            toml.append(f"{k} = {v}")
+        toml.append("")
+    for v, (c, r, u) in VIEWS.items():
+        if c not in cams:
+            continue
+        name = {(1, 0, 0): "+X", (-1, 0, 0): "-X", (0, 1, 0): "+Y", (0, -1, 0): "-Y"}[r]
+        upn = {(0, 0, 1): "+Z", (0, 1, 0): "+Y"}[u]
+        toml += [f"[views.{v}]", f'camera = "{c}"', f'right = "{name}"', f'up = "{upn}"', ""]
+    truth_marks = {}
+    for v, (c, r, u) in VIEWS.items():
+        if c not in cams:
+            continue
+        cam = cams[c]
+        for h in HOUSINGS[v]:
+            ang = image_angle_deg(s[h], np.array(r, float), np.array(u, float),
+                                  roll[c] * ARCSEC)
+            m = random_mark(cam, rng, where=where)
+            m = dataclasses.replace(m, angle_deg=ang, sagitta=sagitta,
+                                    length=min(m.length, 0.45 * min(cam.width, cam.height)))
+            img = render_marks(cam, [m], rng)
+            p = save(cam, img, folder / f"{h}_{v}")
+            truth_marks[p.name] = ang
+            nominal = "horizontal" if h in ("x", "y") else "vertical"
+            toml += ["[[images]]", f'file = "{p.name}"', f'housing = "{h}"', f'view = "{v}"',
+                     f'nominal = "{nominal}"', ""]
+    rows = gonio_log(E, rng)
+    with open(folder / "gonio.csv", "w") as fh:
+        fh.write("count,counter,ref,t\n")
+        for n, ctr, ref, t in rows:
+            fh.write(f"{n},{ctr},{ref},{t:.6f}\n")
+    if tolerance_arcsec:
+        toml += ["[tolerance]", f"arcsec = {tolerance_arcsec}", ""]
+    (folder / "session.toml").write_text("\n".join(toml) + "\n")
+    return {"E_arcsec": {k: v / ARCSEC for k, v in E.items()}, "roll_arcsec": roll,
+            "marks_deg": truth_marks}
