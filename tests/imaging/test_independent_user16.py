@@ -159,6 +159,20 @@ def test_webcam_calibrated_marks_anywhere_u_covers_error(work):
     assert np.sqrt(np.mean(z ** 2)) < 1.3, z
 
 
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "`align camera -q` prints its whole result (19 lines: views' RMS, intrinsics, k3 choice, "
+    "one-camera test, field u) on stdout; docs/cli.md: '-q: only warnings and errors (on "
+    "stderr)' (`align marks -q` prints nothing)"))
+def test_camera_quiet_prints_only_warnings(work):
+    rng = np.random.default_rng(11)
+    cam = g.WEBCAM
+    files = [g.save(cam, g.render_board(cam, rng, ss=2), work / f"q{i}") for i in range(8)]
+    r = _align("camera", *files, "--json", work / "q.json", "-q")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "", r.stdout
+
+
 def _bent_centre_marks(cam, folder, n=8):
     files, truths = [], []
     for s in range(n):
