@@ -261,10 +261,11 @@ def test_micrometer_family_every_line_and_pitch(work):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "a ruled micrometer whose every line is measured draws a phantom grating warning at "
-    "about half its pitch, 'not measured': f001 (7 lines, pitch 65.58 px at 89.36°) "
-    "'a grating ... of pitch 32.8 px, lines at 89.0° ... not measured'; likewise f007 "
-    "(24.7 px), f012 (39.1 px), f014 (36.1 px): 4 of 16 frames"))
+    "a ruled micrometer whose every line is measured (ok: true, exit 0) draws a phantom "
+    "'grating ... not measured' warning at half its pitch in 4 of 16 frames: micro01 (7 lines, "
+    "pitch 65.58 px at 89.36°): 'a grating (identical parallel lines) of pitch 32.8 px, lines "
+    "at 89.0°, in pixels x 512–767, y 512–767: not measured'; micro07 49.45 -> 24.7 px, "
+    "micro12 78.10 -> 39.1 px, micro14 72.20 -> 36.1 px"))
 def test_micrometer_no_phantom_grating(work):
     files, truths = _micrometer_frames(work, range(0, 16))
     _, doc = _marks(files, "--lens", ZERO_LENS, "--max-marks", "12", out=work / "micro2.json")
