@@ -245,31 +245,59 @@ def _micrometer_frames(folder, seeds):
     return files, truths
 
 
-@pytest.mark.slow
-def test_micrometer_family_every_line_and_pitch(work):
-    """Microscope, 16-bit TIFF, lens declared absent: every ruling of the stage micrometer
-    is found and the family's pitch is within 4 u of the truth (seen: 16 of 16 complete,
-    pitch |z| <= 2.7)."""
-    files, truths = _micrometer_frames(work, range(0, 16))
+@pytest.fixture(scope="module")
+def micrometer(work):
+    """64 stage-micrometer frames (5-9 rulings, pitch 40-80 px, any direction, blur 0.8-2 px)
+    measured in one `align marks` call; returns (files, truths, doc)."""
+    files, truths = _micrometer_frames(work, range(64))
     _, doc = _marks(files, "--lens", ZERO_LENS, "--max-marks", "12", out=work / "micro.json")
-    for f, (_ang, pitch, n) in zip(files, truths, strict=True):
+    return files, truths, doc
+
+
+def _families(micrometer):
+    files, truths, doc = micrometer
+    for f, (ang, pitch, n) in zip(files, truths, strict=True):
         ms = [mk for mk in doc["marks"] if Path(mk["image"]).name == f.name and mk["found"]]
-        assert len(ms) == n, (f.name, len(ms), n)
-        fam = next(mk["family"] for mk in ms if mk.get("family"))
-        assert abs(fam["pitch_px"] - pitch) < 4 * fam["pitch_u_px"], (f.name, fam, pitch)
+        fam = next((mk["family"] for mk in ms if mk.get("family")), None)
+        yield f, ang, pitch, n, ms, fam
+
+
+@pytest.mark.slow
+def test_micrometer_every_line_and_the_family_angle(micrometer):
+    """Microscope, 16-bit TIFF, lens declared absent: every ruling of the stage micrometer
+    is found, and the family's mean angle is honest: RMS z <= 1.25 over 64 frames (1 +- 0.09
+    for an honest u), max |z| < 3.5 (seen: 64 of 64 complete, RMS z 1.01, max |z| 3.09)."""
+    z = []
+    for f, ang, _pitch, n, ms, fam in _families(micrometer):
+        assert len(ms) == n and fam is not None, (f.name, len(ms), n)
+        z.append(_err_arcsec(fam["angle_deg"], ang) / fam["angle_u_arcsec"])
+    z = np.array(z)
+    assert np.abs(z).max() < 3.5, z
+    assert np.sqrt(np.mean(z ** 2)) < 1.25, z
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the micrometer's pitch u does not cover its error: over 64 frames RMS z 1.26 (1 +- 0.09 "
+    "for an honest u), 2 beyond 3 u (0.17 expected): micro25 (6 lines at 43.72°, 564 px) "
+    "pitch 41.35466 ± 0.00022 px for 41.35557 (z -4.10), micro28 50.58858 ± 0.00033 for "
+    "50.58967 (z -3.34); both ok, exit 0"))
+def test_micrometer_pitch_u_covers_its_error(micrometer):
+    z = np.array([(fam["pitch_px"] - pitch) / fam["pitch_u_px"]
+                  for _f, _a, pitch, _n, _ms, fam in _families(micrometer)])
+    assert np.abs(z).max() < 3.5, z
+    assert np.sqrt(np.mean(z ** 2)) < 1.2, z
 
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
     "a ruled micrometer whose every line is measured (ok: true, exit 0) draws a phantom "
-    "'grating ... not measured' warning at half its pitch in 4 of 16 frames: micro01 (7 lines, "
-    "pitch 65.58 px at 89.36°): 'a grating (identical parallel lines) of pitch 32.8 px, lines "
-    "at 89.0°, in pixels x 512–767, y 512–767: not measured'; micro07 49.45 -> 24.7 px, "
+    "'grating ... not measured' warning at half its pitch in 15 of 64 frames: micro01 (7 "
+    "lines, pitch 65.58 px at 89.36°): 'a grating (identical parallel lines) of pitch 32.8 px, "
+    "lines at 89.0°, in pixels x 512–767, y 512–767: not measured'; micro07 49.45 -> 24.7 px, "
     "micro12 78.10 -> 39.1 px, micro14 72.20 -> 36.1 px"))
-def test_micrometer_no_phantom_grating(work):
-    files, truths = _micrometer_frames(work, range(0, 16))
-    _, doc = _marks(files, "--lens", ZERO_LENS, "--max-marks", "12", out=work / "micro2.json")
-    phantom = [w for w in doc["warnings"] if "grating" in w]
+def test_micrometer_no_phantom_grating(micrometer):
+    phantom = [w for w in micrometer[2]["warnings"] if "grating" in w]
     assert not phantom, phantom
 
 
