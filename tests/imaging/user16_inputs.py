@@ -357,7 +357,7 @@ def gonio_log(E, rng, faces=("ref", "y", "x", "z"), revs=12, latitude_deg=50.45,
 
 
 def write_session(folder, seed, cams, models=None, E=None, roll_arcsec=None, where=None,
-                  tolerance_arcsec=60.0, sagitta=0.0, lens_keys=None):
+                  tolerance_arcsec=60.0, sagitta=0.0, lens_keys=None, ref_u_arcsec=2.0):
     """A session folder (cameras + goniometer) with known E; returns the truth.
 
     cams: {"A": Camera, "B": Camera}; models: {"A": "camA.json"} paths copied in (or None:
@@ -375,7 +375,7 @@ def write_session(folder, seed, cams, models=None, E=None, roll_arcsec=None, whe
     toml = [f'name = "u16-{seed}"', "latitude_deg = 50.45", "",
             "[goniometer]", 'log = "gonio.csv"', 'faces = ["ref", "y", "x", "z"]',
             "nominal_deg = [90.0, 90.0, 90.0, 90.0]", 'direction = "ccw"',
-            "reference_offset_arcsec = 0.0", "reference_offset_u_arcsec = 2.0", ""]
+            "reference_offset_arcsec = 0.0", f"reference_offset_u_arcsec = {ref_u_arcsec}", ""]
     for c in cams:
         toml.append(f"[cameras.{c}]")
         if models and models.get(c):
