@@ -283,3 +283,23 @@ def test_the_session_toml_examples_load(page, tmp_path):
     for name in named:
         (tmp_path / name).write_text("x\n", encoding="utf-8")
     load_session(tmp_path)
+
+
+def test_the_lens_ranges_defaults_are_the_codes():
+    """The `--lens` defaults are written three times for the reader (the table in
+    docs/commands/marks.md, `align marks --help`, session.toml's commented keys in
+    docs/formats.md): each says what :class:`align.lens_design.LensRanges` holds (independent
+    user 16 found pp_px written as 20 in the table, 40 in the code)."""
+    from align.lens_design import DEFAULT_RANGES
+
+    table = (ROOT / "docs/commands/marks.md").read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `(\w+)` \| ([0-9.e-]+) \|", table, flags=re.M))
+    formats = (ROOT / "docs/formats.md").read_text(encoding="utf-8")
+    commented = dict(re.findall(r"^# lens_(\w+) = ([0-9.e-]+)", formats, flags=re.M))
+    helptext = "".join(_help_texts()["marks"].split())
+    said = {k: float(v) for k, v in re.findall(r"\b(\w+)=([0-9.]+)", helptext.split("defaults")[1])}
+    for key in ("k1", "k2", "p", "aspect", "pp_px", "max_u_arcsec"):
+        want = float(getattr(DEFAULT_RANGES, key))
+        assert float(rows[key]) == want, ("docs/commands/marks.md", key, rows[key], want)
+        assert float(commented[key]) == want, ("docs/formats.md", key, commented[key], want)
+        assert said[key] == want, ("align marks --help", key, said[key], want)

@@ -52,7 +52,10 @@ def same_units(units: str | None, cal_units: str | None, where: str) -> None:
 
 
 def say(lines: Iterable[str], indent: str = "") -> None:
-    """Print result lines on standard output."""
+    """Print result lines on standard output; none with ``-q`` (docs/cli.md: only warnings
+    and errors, on stderr), which sets the ``align`` logger to WARNING."""
+    if not log.isEnabledFor(logging.INFO):
+        return
     for line in lines:
         print(indent + line)
 

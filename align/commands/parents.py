@@ -42,7 +42,7 @@ def common() -> argparse.ArgumentParser:
     c = argparse.ArgumentParser(add_help=False)
     g = c.add_mutually_exclusive_group()
     g.add_argument("-q", "--quiet", action="store_true",
-                   help="only warnings and errors on stderr (no progress)")
+                   help="only warnings and errors on stderr (no result lines, no progress)")
     g.add_argument("-v", "--verbose", action="store_true", help="debugging messages on stderr")
     return c
 

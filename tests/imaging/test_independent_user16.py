@@ -108,10 +108,8 @@ def test_generator_lens_and_truth_conventions():
     assert abs(-theta - ang) < 0.01
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the lens range pp_px's default is given three ways: docs/commands/marks.md's table "
-    "says 20, `align marks --help` and docs/formats.md say 40"))
 def test_pp_px_default_is_one_number():
+    """(Was a strict xfail: the table said 20, `--help` and docs/formats.md 40.)"""
     table = (ROOT / "docs/commands/marks.md").read_text()
     row = next(line for line in table.splitlines() if line.startswith("| `pp_px`"))
     doc_default = float(row.split("|")[2])
@@ -160,10 +158,6 @@ def test_webcam_calibrated_marks_anywhere_u_covers_error(work):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "`align camera -q` prints its whole result (19 lines: views' RMS, intrinsics, k3 choice, "
-    "one-camera test, field u) on stdout; docs/cli.md: '-q: only warnings and errors (on "
-    "stderr)' (`align marks -q` prints nothing)"))
 def test_camera_quiet_prints_only_warnings(work):
     rng = np.random.default_rng(11)
     cam = g.WEBCAM
