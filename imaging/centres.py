@@ -18,7 +18,16 @@ import numpy as np
 from imaging.band import _band, unclipped
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
-from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
+from imaging.groove import (
+    CHI2_1_MEDIAN,
+    NOISE_BIN_MIN,
+    NOISE_BINS,
+    ProfileFit,
+    _noise_model,
+    _profile_table,
+    centres_half,
+    noise_line,
+)
 from imaging.groupsum import GroupSums
 from imaging.ring import ring_geometry, ring_slope
 from imaging.shape import basis_spans, fit_shape, shape_shift
@@ -335,6 +344,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    profile_shift_cov=shift_cov)
 
 
+BATCH_VALUES = 1 << 18
+"""Most values (band pixels x images) :func:`sample_centres_batch` takes in one pass: its
+arrays then stay in the cache (a 9.6k-pixel band's 64 images at once, 5 MB an array, cost
+more than the 64 one by one)."""
+
+
 def sample_centres_batch(images: np.ndarray, pf: ProfileFit) -> list[Centres]:
     """:func:`sample_centres` (its defaults) of the groove ``pf`` on each of ``images``
     (m, h, w), in one vectorised pass: each image's centres the same to the bit as alone.
@@ -349,6 +364,10 @@ def sample_centres_batch(images: np.ndarray, pf: ProfileFit) -> list[Centres]:
                  half + RING_PX)
     inner = np.abs(wide[1]) <= half
     _, e, t, idx = (a[inner] for a in wide)
+    per = max(2, BATCH_VALUES // max(idx.size, 1))
+    if len(images) > per:
+        return [c for i in range(0, len(images), per)
+                for c in sample_centres_batch(images[i:i + per], pf)]
     flat = images.reshape(len(images), -1)
     vals = flat[:, idx].T.astype(float)  # (pixels, images)
     whole = [unclipped(v, pf.full_scale_dn) is None for v in vals.T] if vals.size else []
@@ -509,13 +528,73 @@ def _noise_models(mu: np.ndarray, rs: np.ndarray, fits: np.ndarray, seg: np.ndar
                   ) -> tuple:
     """The pixels' noise model (v0, v1) from each image's model levels ``mu`` and scaled
     residuals ``rs`` (pixels[, images]) over the segments that ``fits`` the groove (all of
-    them when none does): floats for one image, arrays for several."""
+    them when none does): floats for one image, arrays for several, each image's the same
+    to the bit as :func:`imaging.groove._noise_model`'s on its own.
+
+    Several at once: the images whose same segments fit are binned together
+    (:func:`_binned_noise_models`)."""
     if mu.ndim == 1:
         return _noise_model(mu[fits[seg]], rs[fits[seg]]) if fits.any() else (
             _noise_model(mu, rs))
-    v = np.array([_noise_models(mu[:, i], rs[:, i], fits[:, i], seg)
-                  for i in range(mu.shape[1])])
-    return v[:, 0], v[:, 1]
+    out = np.empty((mu.shape[1], 2))
+    alike: dict[bytes, list[int]] = {}
+    for i in range(mu.shape[1]):
+        alike.setdefault(fits[:, i].tobytes(), []).append(i)
+    for cols in alike.values():
+        f = fits[:, cols[0]]
+        px = f[seg] if f.any() else np.ones(seg.shape, bool)
+        out[cols] = _binned_noise_models(mu[px][:, cols], rs[px][:, cols])
+    return out[:, 0], out[:, 1]
+
+
+def _binned_noise_models(mu: np.ndarray, rs: np.ndarray) -> np.ndarray:
+    """:func:`imaging.groove._noise_model` of each column of ``mu`` and ``rs`` (pixels,
+    images), the same to the bit, as rows (v0, v1): the columns with no level on a bin's
+    edge (:func:`imaging.groove._bins`) and nothing but finite numbers (the usual case)
+    binned together (their octiles in one call, the bins in one stable sort of (image, bin)
+    labels, each bin's mean and median on its pixels in their order, as alone); the others
+    one by one."""
+    out = np.empty((mu.shape[1], 2))
+    fine = np.isfinite(mu).all(axis=0) & np.isfinite(rs).all(axis=0)
+    qs = np.quantile(mu[:, fine], np.linspace(0, 1, NOISE_BINS + 1), axis=0)
+    edges = qs[1:-1]  # (inner edges, images)
+    on_edge = np.zeros(edges.shape[1], bool)
+    for q in edges:
+        on_edge |= (mu[:, fine] == q).any(axis=0)
+    together = np.flatnonzero(fine)[~on_edge]
+    for i in np.setdiff1d(np.arange(mu.shape[1]), together):
+        out[i] = _noise_model(mu[:, i], rs[:, i])
+    if not together.size:
+        return out
+    M, R = mu[:, together].T, rs[:, together].T  # (images, pixels)
+    lab = np.zeros(M.shape, np.uint16)
+    for q in edges[:, ~on_edge]:
+        lab += M > q[:, None]
+    lab += (NOISE_BINS * np.arange(together.size, dtype=np.uint16))[:, None]
+    order = np.argsort(lab.ravel(), kind="stable")
+    Mo, R2 = M.ravel()[order], R.ravel()[order] ** 2
+    ends = np.concatenate([[0], np.cumsum(np.bincount(lab.ravel(),
+                                                      minlength=NOISE_BINS * together.size))])
+    for j, i in enumerate(together):
+        mids, meds = [], []
+        for b in range(j * NOISE_BINS, (j + 1) * NOISE_BINS):
+            lo, hi = ends[b], ends[b + 1]
+            if hi - lo > NOISE_BIN_MIN:
+                mids.append(np.add.reduce(Mo[lo:hi]) / (hi - lo))  # (np.mean's sum)
+                meds.append(_median(R2[lo:hi]) / CHI2_1_MEDIAN)
+        out[i] = noise_line(np.array(mids), np.array(meds), R[j])
+    return out
+
+
+def _median(x: np.ndarray) -> float:
+    """np.median of ``x`` (finite values), the same to the bit: its middle value, or the
+    mean of its middle two."""
+    n = x.size
+    h = n // 2
+    if n % 2:
+        return np.partition(x, h)[h]
+    p = np.partition(x, [h - 1, h])
+    return (p[h - 1] + p[h]) / 2
 
 
 def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) -> np.ndarray:

@@ -194,18 +194,33 @@ def centres_half(pf: ProfileFit) -> float:
 
 def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     """Variance = v0 + v1 * mu from binned medians of squared residuals (robust to dust)."""
-    qs = np.quantile(mu, np.linspace(0, 1, 9))
+    qs = np.quantile(mu, np.linspace(0, 1, NOISE_BINS + 1))
     mids, meds = [], []
     for sel in _bins(mu, qs):
-        if sel.size > 20:
+        if sel.size > NOISE_BIN_MIN:
             mids.append(mu[sel].mean())
-            meds.append(np.median(r[sel] ** 2) / 0.4549)
-    mids, meds = np.array(mids), np.array(meds)
+            meds.append(np.median(r[sel] ** 2) / CHI2_1_MEDIAN)
+    return noise_line(np.array(mids), np.array(meds), r)
+
+
+NOISE_BINS = 8
+"""Bins of the model's level (at its octiles) the noise model reads the residuals in."""
+NOISE_BIN_MIN = 20
+"""Fewest pixels (beyond) a bin needs to count."""
+CHI2_1_MEDIAN = 0.4549
+"""The median of chi-square with 1 degree of freedom: a median of squared residuals over
+this is their variance."""
+
+
+def noise_line(mids: np.ndarray, meds: np.ndarray, r: np.ndarray) -> tuple[float, float]:
+    """The noise model (v0 [DN^2], v1 [DN]) through the bins' mean levels ``mids`` [DN] and
+    variances ``meds`` [DN^2] (:func:`_noise_model`); a constant, from all the residuals
+    ``r`` [DN], when fewer than 3 bins or a line with a negative slope or variance."""
     if len(mids) >= 3 and np.ptp(mids) > 0:
         v1, v0 = np.polyfit(mids, meds, 1)
         if v1 >= 0 and v0 + v1 * mids.min() > 0:
             return float(v0), float(v1)
-    return float(np.median(r**2) / 0.4549), 0.0
+    return float(np.median(r**2) / CHI2_1_MEDIAN), 0.0
 
 
 def _bins(mu: np.ndarray, qs: np.ndarray) -> list[np.ndarray]:
