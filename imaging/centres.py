@@ -18,16 +18,7 @@ import numpy as np
 from imaging.band import _band, unclipped
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
-from imaging.groove import (
-    CHI2_1_MEDIAN,
-    NOISE_BIN_MIN,
-    NOISE_BINS,
-    ProfileFit,
-    _noise_model,
-    _profile_table,
-    centres_half,
-    noise_line,
-)
+from imaging.groove import ProfileFit, _profile_table, centres_half, noise_models, variance_floor
 from imaging.groupsum import GroupSums
 from imaging.ring import ring_geometry, ring_slope
 from imaging.shape import basis_spans, fit_shape, shape_shift
@@ -482,7 +473,7 @@ def _solve_segments(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, bc: GroupS
             # bins and the noise, read there, overstated every centre's sigma).
             ms = bc(rs * rs) / col(np.maximum(npx, 1))
             fits = ms <= MISFIT_CHI2 * np.median(ms[npx > k], axis=0)
-            v = _noise_models(mu, rs, fits, seg)
+            v = noise_models(mu, rs, fits, seg)
             # (An image stopped already keeps its own: with iterations < 2 one may be.)
             v0, v1 = (np.where(done, v0, v[0]), np.where(done, v1, v[1])) if lead else v
         # The linear noise model is fitted over the band's levels; below them (a segment's
@@ -490,7 +481,7 @@ def _solve_segments(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, bc: GroupS
         # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
         # of a groove is quieter than a quarter of the band's typical variance.
         var = v0 + v1 * mu
-        wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
+        wgt = 1.0 / np.maximum(var, variance_floor(var, mu, v0, v1))
         J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
         N = np.empty((nseg,) + lead + (k, k))
         g = np.empty((nseg,) + lead + (k,))
@@ -524,79 +515,6 @@ def _solve_segments(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, bc: GroupS
     return _Solved(k, ee, pe, r, wgt, J, N, g, ok, delta, amp, moving, npx, (v0, v1))
 
 
-def _noise_models(mu: np.ndarray, rs: np.ndarray, fits: np.ndarray, seg: np.ndarray
-                  ) -> tuple:
-    """The pixels' noise model (v0, v1) from each image's model levels ``mu`` and scaled
-    residuals ``rs`` (pixels[, images]) over the segments that ``fits`` the groove (all of
-    them when none does): floats for one image, arrays for several, each image's the same
-    to the bit as :func:`imaging.groove._noise_model`'s on its own.
-
-    Several at once: the images whose same segments fit are binned together
-    (:func:`_binned_noise_models`)."""
-    if mu.ndim == 1:
-        return _noise_model(mu[fits[seg]], rs[fits[seg]]) if fits.any() else (
-            _noise_model(mu, rs))
-    out = np.empty((mu.shape[1], 2))
-    alike: dict[bytes, list[int]] = {}
-    for i in range(mu.shape[1]):
-        alike.setdefault(fits[:, i].tobytes(), []).append(i)
-    for cols in alike.values():
-        f = fits[:, cols[0]]
-        px = f[seg] if f.any() else np.ones(seg.shape, bool)
-        out[cols] = _binned_noise_models(mu[px][:, cols], rs[px][:, cols])
-    return out[:, 0], out[:, 1]
-
-
-def _binned_noise_models(mu: np.ndarray, rs: np.ndarray) -> np.ndarray:
-    """:func:`imaging.groove._noise_model` of each column of ``mu`` and ``rs`` (pixels,
-    images), the same to the bit, as rows (v0, v1): the columns with no level on a bin's
-    edge (:func:`imaging.groove._bins`) and nothing but finite numbers (the usual case)
-    binned together (their octiles in one call, the bins in one stable sort of (image, bin)
-    labels, each bin's mean and median on its pixels in their order, as alone); the others
-    one by one."""
-    out = np.empty((mu.shape[1], 2))
-    fine = np.isfinite(mu).all(axis=0) & np.isfinite(rs).all(axis=0)
-    qs = np.quantile(mu[:, fine], np.linspace(0, 1, NOISE_BINS + 1), axis=0)
-    edges = qs[1:-1]  # (inner edges, images)
-    on_edge = np.zeros(edges.shape[1], bool)
-    for q in edges:
-        on_edge |= (mu[:, fine] == q).any(axis=0)
-    together = np.flatnonzero(fine)[~on_edge]
-    for i in np.setdiff1d(np.arange(mu.shape[1]), together):
-        out[i] = _noise_model(mu[:, i], rs[:, i])
-    if not together.size:
-        return out
-    M, R = mu[:, together].T, rs[:, together].T  # (images, pixels)
-    lab = np.zeros(M.shape, np.uint16)
-    for q in edges[:, ~on_edge]:
-        lab += M > q[:, None]
-    lab += (NOISE_BINS * np.arange(together.size, dtype=np.uint16))[:, None]
-    order = np.argsort(lab.ravel(), kind="stable")
-    Mo, R2 = M.ravel()[order], R.ravel()[order] ** 2
-    ends = np.concatenate([[0], np.cumsum(np.bincount(lab.ravel(),
-                                                      minlength=NOISE_BINS * together.size))])
-    for j, i in enumerate(together):
-        mids, meds = [], []
-        for b in range(j * NOISE_BINS, (j + 1) * NOISE_BINS):
-            lo, hi = ends[b], ends[b + 1]
-            if hi - lo > NOISE_BIN_MIN:
-                mids.append(np.add.reduce(Mo[lo:hi]) / (hi - lo))  # (np.mean's sum)
-                meds.append(_median(R2[lo:hi]) / CHI2_1_MEDIAN)
-        out[i] = noise_line(np.array(mids), np.array(meds), R[j])
-    return out
-
-
-def _median(x: np.ndarray) -> float:
-    """np.median of ``x`` (finite values), the same to the bit: its middle value, or the
-    mean of its middle two."""
-    n = x.size
-    h = n // 2
-    if n % 2:
-        return np.partition(x, h)[h]
-    p = np.partition(x, [h - 1, h])
-    return (p[h - 1] + p[h]) / 2
-
-
 def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) -> np.ndarray:
     """Pixels of a band that the frame's edge cuts on one side, kept symmetric about each
     segment's centre: |x| <= the extent the cut side still has (``x``: distance from the
@@ -612,30 +530,6 @@ def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) ->
     reach = np.minimum(-lo, -hi)  # the shorter side's extent per segment
     cut = reach < half - 1.0
     return ~cut[seg] | (np.abs(x) <= reach[seg] + 1e-9)
-
-
-def _variance_floor(var: np.ndarray, mu: np.ndarray, v0, v1):
-    """The floor on the pixels' variance ``var`` = v0 + v1 ``mu`` [DN^2]: a quarter of the
-    variance at the median level, at least 1e-9 (per image: ``var``, ``mu`` (pixels,
-    images), ``v0``, ``v1`` (images,)).
-
-    The median (~0.5 ms at 5 MP's 40k band pixels, every Gauss–Newton step) only when the
-    floor can bite: it lies between the variances at the lowest and the highest level (the
-    variance is linear in the level, and rounding keeps it monotone), so when the least
-    variance is at least a quarter of the largest and above 1e-9 no pixel reaches it, and
-    any value at or below the least gives the same weights. NaN falls through to the median.
-    """
-    lo, hi = var.min(axis=0), var.max(axis=0)
-    hard = ~((lo >= 0.25 * hi) & (lo >= 1e-9))
-    if not hard.any():
-        return lo
-    if var.ndim == 1:
-        return max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
-    out = lo.copy()
-    v0, v1 = np.broadcast_to(v0, lo.shape), np.broadcast_to(v1, lo.shape)
-    for i in np.flatnonzero(hard):
-        out[i] = _variance_floor(var[:, i], mu[:, i], v0[i], v1[i])
-    return out
 
 
 def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,
