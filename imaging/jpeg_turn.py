@@ -21,7 +21,8 @@ NOISE_DRAWS = 32
 """Noisy renders :func:`jpeg_angle_shift` puts through the encoder: the term's square, a
 mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
 the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
-mark of user 13's). ~7 ms a draw on a 250 px mark."""
+mark of user 13's). ~3 ms a draw on a 250 px mark, the draws measured together
+(:func:`imaging.centres.sample_centres_batch`)."""
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
@@ -89,7 +90,7 @@ class JpegTurn:
     """:func:`jpeg_angle_shift`'s arguments, its term computed when first read (``u_rad``)
     and kept: a candidate refused after it was measured (too short once measured, its
     removed background's re-measure, a shadow's or a kink's first measure) never pays
-    for the noisy draws (0.2-0.4 s a mark). Copies of a measurement share the one value."""
+    for the noisy draws (0.1-0.3 s a mark). Copies of a measurement share the one value."""
 
     shape: tuple[int, int]
     profile: ProfileFit
@@ -113,7 +114,7 @@ def near_axis(pf: ProfileFit) -> bool:
     (d its angle from the nearest axis). The encoder's error at the edge follows the edge's
     place in its block: along such a mark that place drifts through a few periods at most,
     and the error is a turn; along a steeper one it cycles many times and averages out
-    (the noise-free model's term, once, is then small), and 32 noisy draws (0.2 s) would be
+    (the noise-free model's term, once, is then small), and 32 noisy draws (~0.1 s) would be
     spent on nothing."""
     d = pf.angle_rad % (np.pi / 2)
     return bool((pf.t_end_px - pf.t_start_px) * np.sin(min(d, np.pi / 2 - d))
