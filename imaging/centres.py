@@ -18,9 +18,9 @@ import numpy as np
 from imaging.band import _band, unclipped
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
-from imaging.groove import ProfileFit, _noise_model, _profile_table, centres_half
+from imaging.groove import ProfileFit, _profile_table, centres_half, noise_models, variance_floor
 from imaging.groupsum import GroupSums
-from imaging.ring import ring_slope
+from imaging.ring import ring_geometry, ring_slope
 from imaging.shape import basis_spans, fit_shape, shape_shift
 from imaging.texture import TextureModel, texture_model
 
@@ -254,7 +254,6 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     nseg = int(seg.max()) + 1
     table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
     groove_reach = min(pf.width_px / 2 + 4 * pf.blur_px, half)
-    v0, v1 = pf.noise_var
     delta = np.zeros(nseg)
     if guess is not None and len(guess[0]) >= 2:
         mid = 0.5 * (pf.t_start_px + pf.t_end_px)
@@ -265,74 +264,12 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     sym = _symmetric_window(e - delta[seg], seg, nseg, half)
     if not sym.all():
         vals, e, t, seg, idx = vals[sym], e[sym], t[sym], seg[sym], idx[sym]
-    moving = np.zeros(nseg, bool)
-    amp = np.full(nseg, pf.contrast_dn)
-    lev = np.full(nseg, pf.background_dn)
-    # Each segment has its own background slope across the mark: surface texture and uneven
-    # light tilt the background differently along the mark, and a slope left in the model
-    # moves the fitted centre (a false "illumination gradient"). Costs little precision: the
-    # slope is set by the pixels beside the groove, the centre by its flanks.
-    slp = np.full(nseg, pf.slope_across_dn_per_px)
-    k = 4
-
-    # Every per-segment sum below over the same pixels (~60 a pass): grouped once.
     bc = GroupSums(seg, nseg)
-
-    npx = bc(np.ones_like(e))
+    fit = _solve_segments(vals, e, seg, bc, pf, table, delta, iterations)
+    k, N, ok, delta, amp, moving = fit.k, fit.N, fit.ok, fit.delta, fit.amp, fit.moving
+    ee, pe, r, wgt, J, g, npx, (v0, v1) = (fit.ee, fit.pe, fit.r, fit.wgt, fit.J, fit.g,
+                                            fit.npx, fit.noise_var)
     blur_dev = blur_dev_u = None
-    for it in range(iterations + 1 + EXTRA_STEPS):
-        ee = e - delta[seg]
-        p, pe = table(ee)
-        amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
-        mu = lev[seg] + slp_px * ee + amp_px * p
-        r = vals - mu
-        if it == 1:
-            # Noise model again, now from the segment model's residuals (local level and
-            # contrast absorb illumination and texture that the band fit could not);
-            # each segment spends k of its pixels' degrees of freedom.
-            rs = r * np.sqrt(npx / np.maximum(npx - k, 1))[seg]
-            # Without the segments whose pixels misfit the groove far beyond the typical one
-            # (a numeral inked across the mark: its dark pixels filled the groove's levels'
-            # bins and the noise, read there, overstated every centre's sigma).
-            ms = bc(rs * rs) / np.maximum(npx, 1)
-            fits = ms <= MISFIT_CHI2 * float(np.median(ms[npx > k]))
-            v0, v1 = _noise_model(mu[fits[seg]], rs[fits[seg]]) if fits.any() else (
-                _noise_model(mu, rs))
-        # The linear noise model is fitted over the band's levels; below them (a segment's
-        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
-        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
-        # of a groove is quieter than a quarter of the band's typical variance.
-        var = v0 + v1 * mu
-        wgt = 1.0 / np.maximum(var, _variance_floor(var, mu, v0, v1))
-        J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
-        N = np.empty((nseg, k, k))
-        g = np.empty((nseg, k))
-        for i in range(k):
-            # Once per column (the products are the same to the bit); the level's column is
-            # ones, and x * 1.0 is x: those products are skipped.
-            wj = wgt if i == _LEVEL else wgt * J[i]
-            g[:, i] = bc(wj * r)
-            for j in range(i, k):
-                N[:, i, j] = N[:, j, i] = bc(wj if j == _LEVEL else wj * J[j])
-        ok = _conditioned(N)
-        if it >= iterations and not (moving & ok).any():
-            break  # the last pass only refreshes weights and information at the solution
-        if it == iterations + EXTRA_STEPS:
-            break  # still moving: those segments are left out below
-        step = np.zeros((nseg, k))
-        step[ok] = np.linalg.solve(N[ok], g[ok][..., None])[..., 0]
-        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
-        moving = np.abs(step[:, 0]) > 0.1
-        step[:, 0] = np.clip(step[:, 0], -1.0, 1.0)
-        delta += step[:, 0]
-        # Nor may the contrast move by more than AMP_STEP times the band's own in one step
-        # (a segment nearly unable to separate it from its centre ran off to ~2e8 DN); a
-        # cap of once the band's changed segments of the real chessboards that converge.
-        cap = AMP_STEP * abs(pf.contrast_dn)
-        amp += np.clip(step[:, 1], -cap, cap)
-        lev += step[:, 2]
-        if k == 4:
-            slp += step[:, 3]
     cov = np.full((nseg, k, k), np.inf)
     cov[ok] = np.linalg.inv(N[ok])
     if texture:
@@ -398,6 +335,187 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
                    profile_shift_cov=shift_cov)
 
 
+BATCH_VALUES = 1 << 17
+"""Most values (band pixels x images) :func:`sample_centres_batch` takes in one pass (more
+images are taken in turns): ~1 MB an array. On the real photos' JPEG terms 2^16 to 2^18,
+or all 64 images of a 9.6k-pixel band at once, cost the same; 2^15 (3 such images a pass)
+cost 40 % more."""
+
+
+def sample_centres_batch(images: np.ndarray, pf: ProfileFit) -> list[Centres]:
+    """:func:`sample_centres` (its defaults) of the groove ``pf`` on each of ``images``
+    (m, h, w), in one vectorised pass: each image's centres the same to the bit as alone.
+
+    The JPEG term's noisy draws (:mod:`imaging.jpeg_turn`) measure one model many times
+    over: the band's pixels, segments and sums are the same for every image, and one pass
+    over all of them costs about what a few alone do. An image with a clipped pixel in the
+    band (its own pixels left out) is measured alone."""
+    images = np.asarray(images)
+    half = centres_half(pf)
+    wide = _band(images[0], pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
+                 half + RING_PX)
+    inner = np.abs(wide[1]) <= half
+    _, e, t, idx = (a[inner] for a in wide)
+    per = max(2, BATCH_VALUES // max(idx.size, 1))
+    if len(images) > per:
+        return [c for i in range(0, len(images), per)
+                for c in sample_centres_batch(images[i:i + per], pf)]
+    flat = images.reshape(len(images), -1)
+    vals = flat[:, idx].T.astype(float)  # (pixels, images)
+    whole = [unclipped(v, pf.full_scale_dn) is None for v in vals.T] if vals.size else []
+    if vals.size == 0 or not all(whole) or len(images) < 2:
+        together = [i for i, w in enumerate(whole) if w]
+        out = dict(zip(together, sample_centres_batch(images[together], pf), strict=True)
+                   ) if len(together) >= 2 else {}
+        return [out[i] if i in out else sample_centres(im, pf) for i, im in enumerate(images)]
+    seg, _ = segment_index(t, pf, 4.0)
+    nseg = int(seg.max()) + 1
+    sym = _symmetric_window(e, seg, nseg, half)
+    vals, e, t, seg, idx = vals[sym], e[sym], t[sym], seg[sym], idx[sym]
+    bc = GroupSums(seg, nseg)
+    fit = _solve_segments(vals, e, seg, bc, pf,
+                          _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0),
+                          np.zeros(nseg), 2)
+    ok, k = fit.ok, fit.k
+    cov00 = np.full(ok.shape, np.inf)
+    cov00[ok] = np.linalg.inv(fit.N[ok])[:, 0, 0]
+    chi2_red = bc(fit.wgt * fit.r * fit.r) / np.maximum(fit.npx - k, 1)[:, None]
+    sigma = np.where(cov00 > 0, np.sqrt(np.abs(cov00)), np.inf)
+    info = fit.wgt * (fit.amp[seg] * fit.pe) ** 2
+    t_eff = bc(info * t[:, None]) / np.maximum(bc(info), 1e-300)
+    ring = _ring(wide, pf, half, 4.0, 1, nseg, images.shape[2])
+    geometry = ring_geometry(ring[2], ring[3], nseg)
+    u, n = line_frame(pf.angle_rad)
+    good = (ok & (fit.npx >= 6)[:, None] & np.isfinite(sigma)
+            & (np.abs(fit.delta) < half / 2) & ~fit.moving)
+    out = []
+    for i, im in enumerate(images):
+        slope = ring_slope(im[ring[0], ring[1]], ring[2], ring[3], nseg, pf.full_scale_dn,
+                           geometry)
+        amp = fit.amp[:, i]
+        xy = (pf.offset_px + fit.delta[:, i])[:, None] * n + t_eff[:, i, None] * u
+        out.append(Centres(xy=xy, sigma=sigma[:, i], t=t_eff[:, i], contrast=amp,
+                           cross_slope=slope / np.where(amp != 0, amp, 1.0),
+                           chi2_red=chi2_red[:, i], ok=good[:, i]))
+    return out
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """:func:`_solve_segments`'s state at each image's last pass: per pixel (``ee`` its
+    distance from its segment's centre, ``pe`` the profile's slope there, ``r`` residual,
+    ``wgt`` weight, ``J`` the fit's columns), per segment (``N`` normal matrix, ``g``
+    gradient, ``ok`` solvable, ``delta`` centre, ``amp`` contrast, ``moving`` still moving,
+    ``npx`` pixels) and per image ``noise_var`` (v0, v1); an image's axis trails them all
+    but ``N``'s and ``g``'s (segment, image, k[, k])."""
+
+    k: int
+    ee: np.ndarray
+    pe: np.ndarray
+    r: np.ndarray
+    wgt: np.ndarray
+    J: tuple
+    N: np.ndarray
+    g: np.ndarray
+    ok: np.ndarray
+    delta: np.ndarray
+    amp: np.ndarray
+    moving: np.ndarray
+    npx: np.ndarray
+    noise_var: tuple
+
+
+def _solve_segments(vals: np.ndarray, e: np.ndarray, seg: np.ndarray, bc: GroupSums,
+                    pf: ProfileFit, table, delta: np.ndarray, iterations: int) -> _Solved:
+    """Each segment's Gauss–Newton fit (centre, contrast, level, slope) to the band's pixels
+    ``vals`` at distances ``e`` [px] in segments ``seg`` (``bc`` their sums), from the
+    centres ``delta`` [px] (see :func:`sample_centres`).
+
+    ``vals`` (pixels, m): m images of the same band at once (the JPEG term's draws,
+    :mod:`imaging.jpeg_turn`), each image's answer the same to the bit as alone: every sum
+    is over its own column, each decision (the noise model, the weights' floor, when to
+    stop) is its own, and an image that has stopped takes no more steps (its state, computed
+    again from the same parameters, is the same)."""
+    nseg = bc.n
+    lead = vals.shape[1:]  # () for one image, (m,) for m
+
+    def col(a: np.ndarray) -> np.ndarray:
+        """A per-pixel array broadcast against the images' trailing axis."""
+        return a.reshape(a.shape + (1,) * len(lead))
+
+    e_b = col(e)
+    v0, v1 = pf.noise_var
+    delta = np.broadcast_to(col(delta), (nseg,) + lead).copy()
+    moving = np.zeros((nseg,) + lead, bool)
+    done = np.zeros(lead, bool)
+    amp = np.full((nseg,) + lead, pf.contrast_dn)
+    lev = np.full((nseg,) + lead, pf.background_dn)
+    # Each segment has its own background slope across the mark: surface texture and uneven
+    # light tilt the background differently along the mark, and a slope left in the model
+    # moves the fitted centre (a false "illumination gradient"). Costs little precision: the
+    # slope is set by the pixels beside the groove, the centre by its flanks.
+    slp = np.full((nseg,) + lead, pf.slope_across_dn_per_px)
+    k = 4
+    # Every per-segment sum below over the same pixels (~60 a pass): grouped once (bc).
+    npx = bc(np.ones_like(e))
+    for it in range(iterations + 1 + EXTRA_STEPS):
+        ee = e_b - delta[seg]
+        p, pe = table(ee)
+        amp_px, slp_px = amp[seg], slp[seg]  # (gathered once for mu and J)
+        mu = lev[seg] + slp_px * ee + amp_px * p
+        r = vals - mu
+        if it == 1:
+            # Noise model again, now from the segment model's residuals (local level and
+            # contrast absorb illumination and texture that the band fit could not);
+            # each segment spends k of its pixels' degrees of freedom.
+            rs = r * col(np.sqrt(npx / np.maximum(npx - k, 1))[seg])
+            # Without the segments whose pixels misfit the groove far beyond the typical one
+            # (a numeral inked across the mark: its dark pixels filled the groove's levels'
+            # bins and the noise, read there, overstated every centre's sigma).
+            ms = bc(rs * rs) / col(np.maximum(npx, 1))
+            fits = ms <= MISFIT_CHI2 * np.median(ms[npx > k], axis=0)
+            v = noise_models(mu, rs, fits, seg)
+            # (An image stopped already keeps its own: with iterations < 2 one may be.)
+            v0, v1 = (np.where(done, v0, v[0]), np.where(done, v1, v[1])) if lead else v
+        # The linear noise model is fitted over the band's levels; below them (a segment's
+        # model darker than any bin: a dust speck's fit) it can reach 0, and a weight of
+        # 1e9 gave centres a sigma of ~0 (chi2 ~1e15 over a ruled scale's frame). No pixel
+        # of a groove is quieter than a quarter of the band's typical variance.
+        var = v0 + v1 * mu
+        wgt = 1.0 / np.maximum(var, variance_floor(var, mu, v0, v1))
+        J = (-(amp_px * pe + slp_px), p, np.ones_like(p), ee)[:k]
+        N = np.empty((nseg,) + lead + (k, k))
+        g = np.empty((nseg,) + lead + (k,))
+        for i in range(k):
+            # Once per column (the products are the same to the bit); the level's column is
+            # ones, and x * 1.0 is x: those products are skipped.
+            wj = wgt if i == _LEVEL else wgt * J[i]
+            g[..., i] = bc(wj * r)
+            for j in range(i, k):
+                N[..., i, j] = N[..., j, i] = bc(wj if j == _LEVEL else wj * J[j])
+        ok = _conditioned(N.reshape(-1, k, k)).reshape(N.shape[:-2])
+        # The last pass only refreshes weights and information at the solution.
+        done = done | ((it >= iterations) & ~np.any(moving & ok, axis=0))
+        if done.all() or it == iterations + EXTRA_STEPS:
+            break  # (at the last: those still moving are left out by the caller)
+        go = ok & ~done
+        step = np.zeros((nseg,) + lead + (k,))
+        step[go] = np.linalg.solve(N[go], g[go][..., None])[..., 0]
+        # A step of 0.1 px is ~5 sigma of a typical centre: such a segment has not arrived.
+        moving = np.where(done, moving, np.abs(step[..., 0]) > 0.1)
+        step[..., 0] = np.clip(step[..., 0], -1.0, 1.0)
+        delta += step[..., 0]
+        # Nor may the contrast move by more than AMP_STEP times the band's own in one step
+        # (a segment nearly unable to separate it from its centre ran off to ~2e8 DN); a
+        # cap of once the band's changed segments of the real chessboards that converge.
+        cap = AMP_STEP * abs(pf.contrast_dn)
+        amp += np.clip(step[..., 1], -cap, cap)
+        lev += step[..., 2]
+        if k == 4:
+            slp += step[..., 3]
+    return _Solved(k, ee, pe, r, wgt, J, N, g, ok, delta, amp, moving, npx, (v0, v1))
+
+
 def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) -> np.ndarray:
     """Pixels of a band that the frame's edge cuts on one side, kept symmetric about each
     segment's centre: |x| <= the extent the cut side still has (``x``: distance from the
@@ -413,22 +531,6 @@ def _symmetric_window(x: np.ndarray, seg: np.ndarray, nseg: int, half: float) ->
     reach = np.minimum(-lo, -hi)  # the shorter side's extent per segment
     cut = reach < half - 1.0
     return ~cut[seg] | (np.abs(x) <= reach[seg] + 1e-9)
-
-
-def _variance_floor(var: np.ndarray, mu: np.ndarray, v0: float, v1: float) -> float:
-    """The floor on the pixels' variance ``var`` = v0 + v1 ``mu`` [DN^2]: a quarter of the
-    variance at the median level, at least 1e-9.
-
-    The median (~0.5 ms at 5 MP's 40k band pixels, every Gauss–Newton step) only when the
-    floor can bite: it lies between the variances at the lowest and the highest level (the
-    variance is linear in the level, and rounding keeps it monotone), so when the least
-    variance is at least a quarter of the largest and above 1e-9 no pixel reaches it, and
-    any value at or below the least gives the same weights. NaN falls through to the median.
-    """
-    lo, hi = float(var.min()), float(var.max())
-    if lo >= 0.25 * hi and lo >= 1e-9:
-        return lo
-    return max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
 
 
 def _offsets_cov(idx: np.ndarray, width: int, seg: np.ndarray, nseg: int, wgt: np.ndarray,

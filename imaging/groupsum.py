@@ -58,7 +58,13 @@ class GroupSums:
                          shape=(self.n, self.labels.size))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        """Each group's sum of ``x`` (float64, as np.bincount's)."""
+        """Each group's sum of ``x`` (float64, as np.bincount's); ``x`` (values, m): each
+        of its m columns' sums, (n, m), each column's the same to the bit as alone (the
+        product adds a row's entries column by column in the values' order, as for one)."""
+        if np.ndim(x) > 1:
+            if self._op is None:
+                self._op = self._build()
+            return self._op @ np.asarray(x, dtype=np.float64)
         if self._op is None:
             self._calls += 1
             if self.labels.size < LARGE or self._calls <= LAZY:

@@ -12,7 +12,7 @@ import numpy as np
 
 from imaging.band import band_pixels
 from imaging.candidate import line_frame
-from imaging.centres import sample_centres
+from imaging.centres import Centres, sample_centres, sample_centres_batch
 from imaging.groove import ProfileFit, ProfileTable, centres_half
 from imaging.jpeg import JpegBlocks, jpeg_round_trip
 from imaging.jpeg_scatter import block_phase_columns
@@ -21,7 +21,8 @@ NOISE_DRAWS = 32
 """Noisy renders :func:`jpeg_angle_shift` puts through the encoder: the term's square, a
 mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
 the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
-mark of user 13's). ~7 ms a draw on a 250 px mark."""
+mark of user 13's). ~3 ms a draw on a 250 px mark, the draws measured together
+(:func:`imaging.centres.sample_centres_batch`)."""
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
@@ -45,9 +46,10 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     codes each block alone: the rest of the frame changes nothing)."""
     if jb is None:
         return 0.0  # not a JPEG
-    if jb.quality is None and jb.table is None:
-        return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q), centres)
-                   for q in range(10, 100, 10))
+    # Quality and table unknown: each quality's encoder on the same renders (the model and
+    # its noisy draws do not depend on the encoder), the largest term taken.
+    coders = ([replace(jb, quality=q) for q in range(10, 100, 10)]
+              if jb.quality is None and jb.table is None else [jb])
     half = centres_half(pf) + 8.0
     e, idx = band_pixels(np.zeros(shape, np.uint8), pf, half, 30.0)
     if idx.size == 0:
@@ -67,16 +69,20 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     pfw = replace(pf, offset_px=pf.offset_px - float(shift @ n),
                   t_start_px=pf.t_start_px - float(shift @ u),
                   t_end_px=pf.t_end_px - float(shift @ u))
-    table = jb.table if jb.quality is None else None  # an IJG table: the same encoder
-    if not (jb.noise_dn > 0 and near_axis(pf)):
-        return _term([blocks_turn(model, jpeg_round_trip(model, jb.quality, table, phase),
-                                  pfw)])
-    rng = np.random.default_rng(0)
-    turns = []
-    for _ in range(NOISE_DRAWS):
-        a = np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
-        turns.append(blocks_turn(a, jpeg_round_trip(a, jb.quality, table, phase), pfw))
-    return _term(turns)
+    renders = [model]
+    if jb.noise_dn > 0 and near_axis(pf):
+        rng = np.random.default_rng(0)
+        renders = [np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
+                   for _ in range(NOISE_DRAWS)]
+    # Every render's centres, before and after each encoder, in one pass (to the bit each
+    # render's alone: sample_centres_batch); a table known by its IJG quality is that
+    # encoder.
+    coded = [jpeg_round_trip(a, c.quality, c.table if c.quality is None else None, phase)
+             for c in coders for a in renders]
+    cen = sample_centres_batch(np.stack(renders + coded), pfw)
+    m = len(renders)
+    return max(_term([centres_turn(cen[i], cen[m * (j + 1) + i], model.shape, pfw)
+                      for i in range(m)]) for j in range(len(coders)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,7 +90,7 @@ class JpegTurn:
     """:func:`jpeg_angle_shift`'s arguments, its term computed when first read (``u_rad``)
     and kept: a candidate refused after it was measured (too short once measured, its
     removed background's re-measure, a shadow's or a kink's first measure) never pays
-    for the noisy draws (0.2-0.4 s a mark). Copies of a measurement share the one value."""
+    for the noisy draws (0.1-0.3 s a mark). Copies of a measurement share the one value."""
 
     shape: tuple[int, int]
     profile: ProfileFit
@@ -108,7 +114,7 @@ def near_axis(pf: ProfileFit) -> bool:
     (d its angle from the nearest axis). The encoder's error at the edge follows the edge's
     place in its block: along such a mark that place drifts through a few periods at most,
     and the error is a turn; along a steeper one it cycles many times and averages out
-    (the noise-free model's term, once, is then small), and 32 noisy draws (0.2 s) would be
+    (the noise-free model's term, once, is then small), and 32 noisy draws (~0.1 s) would be
     spent on nothing."""
     d = pf.angle_rad % (np.pi / 2)
     return bool((pf.t_end_px - pf.t_start_px) * np.sin(min(d, np.pi / 2 - d))
@@ -176,7 +182,14 @@ def blocks_turn(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit
     alone. What stands beyond, da^2 - u_s^2, is the Type B term's square: counted once.
     Equal weights, the segments valid in both ((0, 0) when fewer than 10 are).
     """
-    a, b = sample_centres(a_image, pf), sample_centres(b_image, pf)
+    return centres_turn(sample_centres(a_image, pf), sample_centres(b_image, pf),
+                        a_image.shape, pf)
+
+
+def centres_turn(a: Centres, b: Centres, shape: tuple[int, int], pf: ProfileFit
+                 ) -> tuple[float, float]:
+    """:func:`blocks_turn` from the centres ``a`` of the model and ``b`` of it re-encoded,
+    on images of ``shape``."""
     ok = a.ok & b.ok
     if ok.sum() < 10:
         return 0.0, 0.0
@@ -186,7 +199,7 @@ def blocks_turn(a_image: np.ndarray, b_image: np.ndarray, pf: ProfileFit
     # The block pattern the mark's fit takes as known (jpeg_blocks_columns) is no scatter
     # the line's u holds: fitted here too, as there.
     axis = 0 if abs(u[0]) >= abs(u[1]) else 1
-    along = a.xy[ok, axis] + (a_image.shape[1 - axis] - 1) / 2
+    along = a.xy[ok, axis] + (shape[1 - axis] - 1) / 2
     order = np.argsort(t)
     t, d, along = t[order], d[order], along[order]
     X = np.column_stack([np.ones_like(t), t - t.mean(), block_phase_columns(along)])

@@ -8,11 +8,14 @@ from imaging import measure_marks
 from imaging.centres import (
     MIN_CV_REPLICAS,
     RCOND,
+    Centres,
     _conditioned,
     _surely_conditioned,
     sample_centres,
+    sample_centres_batch,
 )
 from imaging.groove import centres_half
+from imaging.jpeg import jpeg_round_trip
 from tests.conftest import mark_image
 
 
@@ -94,3 +97,36 @@ def test_conditioning_by_pivots_decides_as_the_eigenvalues():
     assert got.tolist() == expect.tolist()
     assert 0.3 * n < expect.sum() < 0.9 * n  # both answers well represented
     assert _surely_conditioned(C).sum() > 0.5 * expect.sum()
+
+
+def test_a_batch_of_images_gives_each_its_own_centres_to_the_bit():
+    """sample_centres_batch (the JPEG term's draws measured in one pass) gives every image
+    the very centres sample_centres gives it alone, every field to the bit: images at
+    different noise (their own noise models and weights' floors), one re-encoded as a
+    JPEG, one moved 1 px across the groove (more steps before it stops), one with dust on
+    the groove (a segment that misfits: binned apart from the others), and one with a
+    clipped pixel in the band (measured alone)."""
+    s = mark_image(1.5, seed=4, length_px=200.0, size=(320, 240), bits=8)
+    img = s.image.astype(float)
+    (m,) = measure_marks(img)
+    pf = m.profile
+    rng = np.random.default_rng(7)
+    images = [np.clip(np.round(img + rng.normal(0.0, sd, img.shape)), 1, 254)
+              for sd in (0.5, 1.0, 1.0, 2.0, 4.0, 8.0)]
+    images.append(jpeg_round_trip(images[1], 50))
+    images.append(np.roll(images[1], 1, axis=0))
+    dusty = images[2].copy()
+    dusty[129:135, 150:156] = 20.0
+    images.append(dusty)
+    clipped = images[3].copy()
+    clipped[131, 100] = 0.0
+    images.append(clipped)
+    batch = sample_centres_batch(np.stack(images), pf)
+    for im, got in zip(images, batch, strict=True):
+        alone = sample_centres(im, pf)
+        for f in Centres.__dataclass_fields__:
+            a, b = getattr(alone, f), getattr(got, f)
+            assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), f
+    # The cases were there: moved 1 px, dust misfitting its segment.
+    assert abs(np.median(batch[7].xy[:, 1] - batch[1].xy[:, 1]) - 1.0) < 0.1
+    assert batch[8].chi2_red.max() > 3 * np.median(batch[8].chi2_red)

@@ -31,3 +31,16 @@ def test_labels_beyond_n_extend_the_groups_as_bincount():
     x = np.linspace(-1, 1, labels.size)
     for _ in range(LAZY + 2):
         assert np.array_equal(groups(x), np.bincount(labels, x, minlength=10))
+
+
+def test_columns_are_summed_each_as_alone():
+    """Values (n, m): each of the m columns' sums the same to the bit as that column's own
+    (the JPEG term's draws summed together, imaging.centres.sample_centres_batch)."""
+    rng = np.random.default_rng(3)
+    labels = np.sort(rng.integers(0, 40, 900))
+    labels[::5] = rng.integers(0, 40, labels[::5].size)
+    x = rng.standard_normal((900, 7)) * 10.0 ** rng.integers(-8, 8, (900, 7))
+    got = GroupSums(labels, 45)(x)
+    assert got.shape == (45, 7)
+    for j in range(7):
+        assert np.array_equal(got[:, j], np.bincount(labels, x[:, j], minlength=45))

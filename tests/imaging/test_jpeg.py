@@ -10,6 +10,7 @@ from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import JpegTables
 from imaging.jpeg import (
+    JpegBlocks,
     block_labels,
     find_jpeg,
     grid_phase,
@@ -26,7 +27,7 @@ from imaging.jpeg_scatter import (
     jpeg_centre_scale,
     jpeg_noise_dof,
 )
-from imaging.jpeg_turn import near_axis
+from imaging.jpeg_turn import jpeg_angle_shift, near_axis
 from imaging.measure import measure_frame
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
@@ -171,6 +172,23 @@ def test_the_noise_before_coding_is_read_from_the_kept_coefficients(quality):
         got = precoding_noise(dec, ijg_table(quality))
         assert abs(got / np.sqrt(s**2 + 1 / 12) - 1) <= 0.1, (s, got, np.std(dec))
     assert precoding_noise(np.full((64, 64), 140, np.uint8), ijg_table(quality)) == 0.0
+
+def test_quality_unknown_carries_the_largest_qualitys_turn():
+    """Quality and table unknown (only flattened blocks show JPEG): the term is the largest
+    over qualities 10-90 of each quality's own term (its renders coded by every encoder in
+    one pass give each the same term as alone), and it is not 0 (the encoder moves the
+    centres)."""
+    from dataclasses import replace
+
+    from imaging import measure_marks
+
+    img = _image(3, 60, angle_deg=2.0).image.astype(float)
+    (m,) = measure_marks(img)
+    jb = JpegBlocks(None, float("nan"), 100, phase=(3, 5))
+    each = [jpeg_angle_shift(img.shape, m.profile, replace(jb, quality=q))
+            for q in range(10, 100, 10)]
+    assert jpeg_angle_shift(img.shape, m.profile, jb) == max(each) > 0.0
+
 
 def test_near_axis_is_a_few_block_rows_along_the_mark():
     """The noisy draws go to marks whose edge crosses at most 4 block rows (32 px across
