@@ -530,6 +530,10 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
     else:
         q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
              "flattened blocks, quality unknown: the worst of 10-90 carried")
+        if len(jb.candidates) > 1:
+            q = (f"quality {jb.candidates[0][0]}-{jb.candidates[-1][0]} of the standard table "
+                 "(read by re-encoding the blocks; the worst of those the coefficients cannot "
+                 "exclude carried)")
     if jb.phase != (0, 0):
         q += (f"; its grid starts at x={jb.phase[0]}, y={jb.phase[1]} px, not at the "
               "image's corner: a crop of the JPEG, and its blocks taken there")
