@@ -268,7 +268,8 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     variance 3 / n relative, i.e. 2 n / 3 dof, and relative variances add (2/nu each).
     """
     tex = m.centres.texture
-    if m.chol is None and m.jpeg is not None and scale > 1.0:
+    if m.jpeg is not None and scale > 1.0 and (m.chol is None
+                                                or scale == jpeg_correlated_floor(m)):
         return jpeg_scatter(m).dof  # the JPEG's scatter re-read from the mark
     if m.chol is None or tex is None or not np.isfinite(tex.dof):
         return None

@@ -461,7 +461,7 @@ def test_a_jpeg_marks_background_correlation_never_narrows_its_own_scatters_u():
     PNG's (no JPEG) stays the correlation's."""
     from dataclasses import replace
 
-    from align.mark_stage import jpeg_correlated_floor, jpeg_scatter, texture_scale
+    from align.mark_stage import jpeg_correlated_floor, jpeg_scatter, noise_dof, texture_scale
     from imaging import fit_line
 
     (m,) = measure_frame(_image(0, 90, angle_deg=90.4).image).items
@@ -474,8 +474,9 @@ def test_a_jpeg_marks_background_correlation_never_narrows_its_own_scatters_u():
     gls = fit_line(m.points, m.sigma, reject_sigma=None, chol=L).angle_u_rad
     assert gls < 0.8 * plain  # the correlation narrows u: the floor has work to do
     ts = texture_scale(mc)
-    assert ts >= jpeg_correlated_floor(mc) > 1.0
+    assert ts == jpeg_correlated_floor(mc) > 1.0  # the floor binds
     u = fit_line(m.points, m.sigma * np.sqrt(ts), reject_sigma=None, chol=L).angle_u_rad
     assert u >= plain * np.sqrt(jpeg_scatter(mc).factor) * (1 - 1e-9)
+    assert noise_dof(mc, ts) == jpeg_scatter(mc).dof  # the floor's estimate's dof
     png = replace(mc, around=replace(m.around, jpeg=None))
     assert jpeg_correlated_floor(png) == 1.0 and texture_scale(png) < ts
