@@ -98,6 +98,11 @@ class JpegBlocks:
     noise_dn : float
         The pixels' noise before coding [DN] (:func:`precoding_noise`); 0: not read (the
         table unknown, or no coefficient beyond its zero bin).
+    candidates : tuple of (int, float)
+        (quality, noise_dn) of each IJG quality the pixels cannot exclude when the quality
+        was read by re-encoding the blocks (:func:`quality_candidates`; ``quality`` the
+        lowest of them): their effects are bounded by the largest. Empty: ``quality``
+        alone.
     """
 
     quality: int | None
@@ -106,6 +111,7 @@ class JpegBlocks:
     phase: tuple[int, int] = (0, 0)
     table: tuple[int, ...] | None = None
     noise_dn: float = 0.0
+    candidates: tuple[tuple[int, float], ...] = ()
 
 
 def table_quality(table: np.ndarray) -> int | None:
@@ -155,7 +161,7 @@ def find_jpeg(image: np.ndarray, tables: JpegTables | None = None) -> JpegBlocks
     taken when its quality is read and is lower than the origin's (a background the encoder
     flattened is flat on any grid, so "JPEG, quality unknown" at the origin is no answer).
     """
-    return _with_noise(image, _find_jpeg(image, tables))
+    return _with_candidates(image, _with_noise(image, _find_jpeg(image, tables)))
 
 
 def _with_noise(image: np.ndarray, jb: JpegBlocks | None) -> JpegBlocks | None:
@@ -164,6 +170,94 @@ def _with_noise(image: np.ndarray, jb: JpegBlocks | None) -> JpegBlocks | None:
         return jb
     T = np.array(jb.table, float).reshape(8, 8) if jb.table is not None else ijg_table(jb.quality)
     return replace(jb, noise_dn=precoding_noise(image, T, jb.phase))
+
+
+def _with_candidates(image: np.ndarray, jb: JpegBlocks | None) -> JpegBlocks | None:
+    """``jb`` with the qualities its pixels cannot exclude (:func:`quality_candidates`) when
+    its quality was read by re-encoding the blocks (no header, no concentration read)."""
+    if jb is None or jb.table is not None or jb.quality is None or np.isfinite(
+            jb.concentration):
+        return jb
+    qs = quality_candidates(image[jb.phase[1]:, jb.phase[0]:], jb.quality)
+    cands = tuple((q, precoding_noise(image, ijg_table(q), jb.phase)) for q in qs)
+    return replace(jb, quality=cands[0][0], noise_dn=cands[0][1], candidates=cands)
+
+
+QUALITY_SPAN = 8
+"""Qualities above a re-encoding's reading (:func:`requantised_quality`) that may be the
+encoder's: its 1 DN tolerance gives back tables a few steps coarser (70-73 read on user 13's
+quality-75 crops)."""
+Z_EXCLUDE = 3.0
+"""A quality is excluded when a coefficient's concentration on its steps is this far below
+0 in noise units (R sqrt(2 n)): the coefficients sit between its multiples."""
+
+
+def quality_candidates(image: np.ndarray, quality: int) -> tuple[int, ...]:
+    """The IJG qualities from ``quality`` (a re-encoding's reading, :func:`requantised_quality`)
+    to :data:`QUALITY_SPAN` above it that the decoded blocks (grid at ``image``'s corner)
+    cannot exclude: none of the tested coefficients lies between the steps' multiples
+    (its mean cosine R below 0 by :data:`Z_EXCLUDE` in noise units; a coefficient the table
+    quantises keeps R > 0, down to ~0.2 where rounding bends small patterns: quality 75's
+    (2, 0)). The re-encoding reads tables a few steps coarser than the encoder's (its
+    1 DN tolerance); the concentration on the steps sees most of them (a quality-75 crop
+    of user 13's read at 72: 68-71 excluded at -4.1 to -7.9 sigma, 72-73 at -2.9 kept,
+    74-75 at +2.3 or more, 76-80 excluded at -5.6 or less).
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        2-D decoded 8-bit image [DN], its block grid at the corner.
+    quality : int
+        The reading (1-100).
+
+    Returns
+    -------
+    tuple of int
+        The qualities, ascending; ``(quality,)`` when every one is excluded.
+    """
+    got = _block_dct(image)
+    if got is None:
+        return (quality,)
+    xs = got[2]
+    kept = []
+    for q in range(quality, min(quality + QUALITY_SPAN, 100) + 1):
+        T = ijg_table(q)
+        rs = [_concentration(xs[uv], T[uv]) for uv in _COEFFS]
+        if all(r is None or r[0] * np.sqrt(2 * r[1]) >= -Z_EXCLUDE for r in rs):
+            kept.append(q)
+    return tuple(kept) or (quality,)
+
+
+def _block_dct(image: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict] | None:
+    """The 8x8 blocks on the grid at the image's corner (a, b, 8, 8) [DN], their orthonormal
+    DCT about 128 (N, 8, 8), and each tested coefficient (:data:`_COEFFS`) over the blocks,
+    contiguous (taken once, not once a quality from the strided array). None: fewer than
+    2 x 2 blocks."""
+    h, w = (s // 8 * 8 for s in image.shape)
+    if h < 16 or w < 16:
+        return None
+    b = np.asarray(image, float)[:h, :w].reshape(h // 8, 8, w // 8, 8).transpose(0, 2, 1, 3)
+    D = _dct_matrix()
+    c = np.einsum("ij,abjk,lk->abil", D, b - 128.0, D).reshape(-1, 8, 8)
+    return b, c, {uv: np.ascontiguousarray(c[:, uv[0], uv[1]]) for uv in _COEFFS}
+
+
+def _concentration(x: np.ndarray, step: float, mag: np.ndarray | None = None
+                   ) -> tuple[float, int] | None:
+    """(R, n): the mean cosine of 2 pi x / step over the n coefficients ``x`` beyond the zero
+    bin and within 4.5 steps (the first 1000); None: too few (:data:`MIN_BLOCKS`), a step
+    below 2, or blocks alike (:func:`_one_multiple`: a groove along a block row, not a
+    quantiser). ``mag``: |x| when already taken.
+
+    Small multiples only: the encoder's fast DCT is exact to a fraction of a % of the
+    coefficient, which at 10 steps blurs the phase. The mean cosine, not the resultant
+    length: noise coefficients just past the +-T/2 cut sit at phase pi (a resultant length
+    near 1 on a raw image)."""
+    mag = np.abs(x) if mag is None else mag
+    big = (mag >= 0.5 * step) & (mag <= 4.5 * step)
+    if big.sum() < MIN_BLOCKS or step < 2 or _one_multiple(x[big], step):
+        return None
+    return float(np.mean(np.cos(2 * np.pi * x[big][:1000] / step))), min(int(big.sum()), 1000)
 
 
 def _find_jpeg(image: np.ndarray, tables: JpegTables | None) -> JpegBlocks | None:
@@ -194,36 +288,26 @@ def find_jpeg_at(image: np.ndarray) -> JpegBlocks | None:
     if image.dtype != np.uint8 and not (float(image.max()) <= 255
                                         and np.all(image == np.round(image))):
         return None
-    h, w = (s // 8 * 8 for s in image.shape)
-    if h < 16 or w < 16:
+    got = _block_dct(image)
+    if got is None:
         return None
-    b = image[:h, :w].astype(float).reshape(h // 8, 8, w // 8, 8).transpose(0, 2, 1, 3)
-    D = _dct_matrix()
-    c = np.einsum("ij,abjk,lk->abil", D, b - 128.0, D).reshape(-1, 8, 8)
+    b, c, xs = got
+    h, w = (s // 8 * 8 for s in image.shape)
     best = None
-    # Each tested coefficient over the blocks, contiguous, and its magnitude: the same
-    # numbers for every quality (taken once, not 100 times from the strided array).
-    xs = {uv: np.ascontiguousarray(c[:, uv[0], uv[1]]) for uv in _COEFFS}
+    # Each tested coefficient's magnitude: the same numbers for every quality (taken once,
+    # not 100 times).
     mags = {uv: np.abs(x) for uv, x in xs.items()}
     for quality in range(1, 101):
         T = ijg_table(quality)
         rs: list[tuple[float, int]] | None = []
-        for u, v in _COEFFS:
-            x, mag = xs[u, v], mags[u, v]
-            # Beyond the zero bin, and small multiples only: the encoder's fast DCT is exact
-            # to a fraction of a % of the coefficient, which at 10 steps blurs the phase.
-            big = (mag >= 0.5 * T[u, v]) & (mag <= 4.5 * T[u, v])
-            if big.sum() < MIN_BLOCKS or T[u, v] < 2:
-                continue  # too few coefficients beyond the zero bin to tell
-            if _one_multiple(x[big], T[u, v]):
-                continue  # blocks alike (a groove along a block row), not a quantiser
-            # The mean cosine, not the resultant length: noise coefficients just past the
-            # +-T/2 cut sit at phase pi (a resultant length near 1 on a raw image).
-            r = float(np.mean(np.cos(2 * np.pi * x[big][:1000] / T[u, v])))
-            if not r > R_MIN:
+        for uv in _COEFFS:
+            rn = _concentration(xs[uv], T[uv], mags[uv])
+            if rn is None:
+                continue  # too few beyond the zero bin, or blocks alike: cannot tell
+            if not rn[0] > R_MIN:
                 rs = None  # this quality fails (its smallest R is at most R_MIN): the rest
                 break      # of its coefficients cannot change that (a raw image: at once)
-            rs.append((r, min(int(big.sum()), 1000)))
+            rs.append(rn)
         if rs is None or len(rs) < 3:
             continue
         r, n = np.array(rs).T
@@ -446,6 +530,10 @@ def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) 
     else:
         q = (f"quality ~{jb.quality} of the standard table" if jb.quality is not None else
              "flattened blocks, quality unknown: the worst of 10-90 carried")
+        if len(jb.candidates) > 1:
+            q = (f"quality {jb.candidates[0][0]}-{jb.candidates[-1][0]} of the standard table "
+                 "(read by re-encoding the blocks; the worst of those the coefficients cannot "
+                 "exclude carried)")
     if jb.phase != (0, 0):
         q += (f"; its grid starts at x={jb.phase[0]}, y={jb.phase[1]} px, not at the "
               "image's corner: a crop of the JPEG, and its blocks taken there")

@@ -99,8 +99,21 @@ class JpegTurn:
 
     @cached_property
     def u_rad(self) -> float:
-        """The term [rad] (:func:`jpeg_angle_shift`)."""
-        return jpeg_angle_shift(self.shape, self.profile, self.jpeg, self.centres)
+        """The term [rad] (:func:`jpeg_bound_shift`)."""
+        return jpeg_bound_shift(self.shape, self.profile, self.jpeg, self.centres)
+
+
+def jpeg_bound_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
+                     centres: np.ndarray | None = None) -> float:
+    """:func:`jpeg_angle_shift` bounded over the qualities the pixels cannot exclude
+    (``jb.candidates``, :func:`imaging.jpeg.quality_candidates`): the largest, each with
+    the noise before coding read on its own table [rad]. Without candidates, ``jb``'s own.
+    A quality read a few steps coarser than the encoder's carried 0" on marks whose own
+    table gave 11-17" (user 13's quality-75 crops)."""
+    if jb is None or not jb.candidates:
+        return jpeg_angle_shift(shape, pf, jb, centres)
+    return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q, noise_dn=s, candidates=()),
+                                centres) for q, s in jb.candidates)
 
 
 NEAR_AXIS_ROWS = 4
