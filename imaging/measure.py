@@ -451,7 +451,10 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
     top = full_scale(mx)
-    hot = image >= top  # the clipped pixels, named below (one pass)
+    # The clipped pixels, named below: a pass over the frame only when its maximum is at
+    # full scale (else there are none: ~3 ms of a 5 MP frame's CPU, and the notes are ()).
+    # (A NaN maximum: tested as before.)
+    hot = None if mx < top else image >= top
     if camera is not None and (image.shape[1], image.shape[0]) != tuple(camera.image_size):
         raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
@@ -550,8 +553,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
     notes = (stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
-             + oriented_note(where, oriented) + clipped_notes(
-                 hot, top, where, [(index[i], c) for i, c in enumerate(cands) if i in index]))
+             + oriented_note(where, oriented) + (clipped_notes(
+                 hot, top, where, [(index[i], c) for i, c in enumerate(cands) if i in index])
+                 if hot is not None else ()))
     return MeasuredFrame(out, fams, len(det.unreported), notes, stripes, oriented)
 
 
