@@ -92,12 +92,12 @@ def _median_axis0(vals: np.ndarray) -> np.ndarray:
     if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
         q = vals.T.astype(np.uint16)
         if np.array_equal(q, vals.T):
-            # The middle rank by selection, not a sort (~0.7x its time): the m smallest are
-            # left before rank m, so the (m-1)-th is their largest.
+            # The middle ranks by numpy's stable sort, a radix sort on 16-bit integers: ~0.8x
+            # the time of a selection of rank m (and the (m-1)-th is then read, not searched).
             m = q.shape[1] // 2
-            q.partition(m, axis=1)
+            q.sort(axis=1, kind="stable")
             return (q[:, m].astype(float) if q.shape[1] % 2
-                    else (q[:, :m].max(axis=1).astype(float) + q[:, m]) / 2)
+                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
     return np.median(vals, axis=0)
 
 

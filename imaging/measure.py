@@ -37,7 +37,7 @@ from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
-from imaging.linefit import LineFit, fit_line
+from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.oriented import OrientedStripes, find_oriented, oriented_note
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.shape import profile_angle_u
@@ -222,8 +222,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
-    first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
-    pf = pf.with_line(first.angle_rad, first.offset_px)
+    # (Its direction and offset only: fit_line's, the same bits, without the covariance.)
+    pf = pf.with_line(*fit_line_only(cen.xy[use], cen.sigma[use]))
     u, n = line_frame(pf.angle_rad)
     # Where the groove really ends, looked for once, before the full pass, along the first
     # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops

@@ -404,7 +404,9 @@ def _exact_float32(raw: np.ndarray, full_scale: float) -> np.ndarray:
             or float(np.float32(full_scale)) != full_scale):
         return raw
     r32 = raw.astype(np.float32)
-    return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_INF) == 0 else raw
+    # The sum of |differences| is 0 exactly when each is (a sum of non-negative terms is at
+    # least its largest; NaN or inf makes it NaN): OpenCV's L1 norm runs ~2x its max norm.
+    return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_L1) == 0 else raw
 
 
 def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,

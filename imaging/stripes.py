@@ -190,12 +190,16 @@ def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: flo
         # The row test's transposed frame: its rows are the frame's columns, gathered along
         # each of the frame's rows (one sequential read; strided per column cost ~20 % more),
         # the mask's alike. (Indexed, not np.take: 0.75 ms, not 4.4, for the runs of 5 MP.)
-        v = np.ascontiguousarray(image.T[:, rows].astype(np.float32).T)
-        out = np.take(mask.T, rows, axis=1).T if mask.T.flags.c_contiguous else mask[rows]
+        # (The gathered columns cast as the transposed rows: a contiguous cast, ~0.6 ms less
+        # than casting them as gathered; the mask's transposed by OpenCV, as bytes, so that
+        # the masks below combine arrays of one layout.)
+        v = image.T[:, rows].T.astype(np.float32)
+        out = (cv2.transpose(np.take(mask.T, rows, axis=1).view(np.uint8)).view(bool)
+               if mask.T.flags.c_contiguous else mask[rows])
     else:
         v = image[rows].astype(np.float32)
         out = mask[rows]
-    out = out | (v <= 0)
+    out |= v <= 0  # (out is a copy either way)
     out |= v >= full_scale
     np.copyto(v, np.nan, where=out)
     if minus is not None:
