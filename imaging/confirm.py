@@ -74,6 +74,8 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each column's median over its finite values (nan where it has none) and which columns
     have any. np.median when nothing is missing (the same values, in about half the time of
     np.nanmedian, which sorts column by column)."""
+    if _all_finite(vals):  # (the usual case, as two reductions tell: no mask's passes)
+        return _median_axis0(vals).astype(float, copy=False), np.ones(vals.shape[1], bool)
     finite = np.isfinite(vals)
     cols = finite.any(axis=0)
     prof = np.full(vals.shape[1], np.nan)
@@ -82,6 +84,12 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     else:
         prof[cols] = nan_median(vals[:, cols], axis=0)
     return prof, cols
+
+
+def _all_finite(vals: np.ndarray) -> bool:
+    """Whether a non-empty array holds no NaN and no infinity: its minimum and maximum are
+    finite (a NaN makes both NaN), two reductions instead of a mask's passes."""
+    return bool(vals.size and np.isfinite(vals.min()) and np.isfinite(vals.max()))
 
 
 def _median_axis0(vals: np.ndarray) -> np.ndarray:
@@ -207,7 +215,9 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
         if change < LIGHT_STEP or rho < MONOTONE:
             return 0.0, float("inf")  # no shadow edge across or along it: the plain test stands
         vals = relative_to_light(vals, 4 * int(np.ceil(half)) + 3)
-    cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
+    least = max(5, n_along // 4)
+    cols = (np.full(vals.shape[1], vals.shape[0] >= least) if _all_finite(vals)
+            else np.isfinite(vals).sum(axis=0) >= least)
     med = _column_median(vals)  # one median profile for both uses (each column's own)
     prof = np.where(cols, med[0], np.nan)
     bg = cols & (np.abs(e) > 2 * half + 2)
