@@ -206,8 +206,10 @@ class Search:
 def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
                       snr_threshold: float = 8.0, roi: Roi | None = None,
                       min_fill: float = 0.5, min_pixel_snr: float = 2.4,
-                      top: float | None = None) -> Search:
-    """The search of :func:`detect_marks` (same parameters), every confirmed line kept."""
+                      top: float | None = None, noise_full: float | None = None) -> Search:
+    """The search of :func:`detect_marks` (same parameters), every confirmed line kept.
+    ``noise_full``: the pixel noise of the searched image's central 1024 px square
+    (:func:`imaging.ridge.pixel_noise`) when the caller has it."""
     # The measurement of every line allocates and frees the same 0.1-2 MB temporaries over
     # and over: fresh mmap pages each time, unless freed memory is kept (~15 % of a 5 MP
     # image's CPU was page faults: the ridge filter at 640x480 took 2.5 ms, 0.5 ms without).
@@ -260,7 +262,8 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
         for dark in (True, False):
             resp = r if dark else -r
             layers.append((sigma, dark, resp, (resp > snr_threshold * mad) & flat, mad))
-    noise_full = pixel_noise(central(image, 1024))
+    if noise_full is None:
+        noise_full = pixel_noise(central(image, 1024))
     top = full_scale(image) if top is None else top
     shift = np.zeros(2)
     if roi is not None:

@@ -38,8 +38,9 @@ from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line, fit_line_only
-from imaging.oriented import OrientedStripes, find_oriented, oriented_note
+from imaging.oriented import OrientedStripes, find_oriented, oriented_note, tested_square
 from imaging.profile import extent_look, fit_profile, groove_extent
+from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.surroundings import ALONE, Surroundings, surroundings_of
@@ -459,9 +460,14 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
                               f"{image.shape[0]}")
+    # The oriented test's square, read once: the detector's noise comes from the same
+    # central 1024 px (a second read of a 5 MP frame's strided float64 square cost ~1 ms).
+    square = tested_square(image, top)
+    noise = (pixel_noise(square) if roi is None and square.shape == central(image, 1024).shape
+             else None)
     try:
         det = detect_lines(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
-                           top=top, families=not expect_one)
+                           top=top, families=not expect_one, noise_full=noise)
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
     cands = det.marks
@@ -469,7 +475,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # for an oriented periodic background (nothing masked) and searched again without it.
     pre = None
     if not cands:
-        cleaned, pre = find_oriented(image, None, top)
+        cleaned, pre = find_oriented(image, None, top, square=square)
         if pre.found:
             try:
                 again = detect_lines(cleaned, min_length_px=min_length_px,
@@ -508,7 +514,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     bands = band_mask(image.shape, [band_indices(image, c) for c in (*cands, *det.unreported)])
     # Stripes at any angle (a surface's lay): divided out first — an oblique pattern leaves
     # a profile along the columns that the row/column test below would take for its own.
-    image, oriented = find_oriented(image, bands, top)
+    image, oriented = find_oriented(image, bands, top,
+                                    square=square if image is raw else None)
     if oriented.found and (pre is None or not pre.found):
         # The lines again on the image without the pattern: a crest beside a mark's end
         # moves where the detector ends it (a 250 px mark was measured over 210 px).
