@@ -27,18 +27,26 @@ from imaging.detect import (
     detect_lines_once,
     line_frame,
     require_single,
+    search_factor,
     wrap_angle,
 )
 from imaging.ends import EndsCheck, runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
+from imaging.framepass import frame_pass
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line, fit_line_only
-from imaging.oriented import OrientedStripes, find_oriented, oriented_note, tested_square
+from imaging.oriented import (
+    OrientedStripes,
+    find_oriented,
+    oriented_note,
+    square_slices,
+    tested_square,
+)
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
@@ -447,7 +455,15 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
     # same frame as an array got u 1745" where its file got 5.3" (read_image: floats, no copy).
     image = raw = np.asarray(image, dtype=float)
-    mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
+    # The maximum once (each pass over 5 MP costs ~1.5-4 ms): when the whole frame is
+    # searched, in one pass with the search's block means and the oriented test's square.
+    f = search_factor(image.shape, min_length_px if min_length_px is not None
+                      else default_min_length(image.shape))
+    copy32 = None
+    if roi is None and 1 < f <= min(image.shape):
+        mx, blocks, copy32 = frame_pass(image, f, square_slices(image.shape))
+    else:
+        mx, blocks = float(image.max()), None
     # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
     if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
@@ -462,12 +478,13 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{image.shape[0]}")
     # The oriented test's square, read once: the detector's noise comes from the same
     # central 1024 px (a second read of a 5 MP frame's strided float64 square cost ~1 ms).
-    square = tested_square(image, top)
+    square = tested_square(image, top, copy32)
     noise = (pixel_noise(square) if roi is None and square.shape == central(image, 1024).shape
              else None)
     try:
         det = detect_lines(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
-                           top=top, families=not expect_one, noise_full=noise)
+                           top=top, families=not expect_one, noise_full=noise,
+                           block_means=blocks)
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
     cands = det.marks

@@ -149,7 +149,9 @@ class OrientedStripes:
                                max(self.residual, other.residual))
 
 
-def _square(shape: tuple[int, int]) -> tuple[slice, slice]:
+def square_slices(shape: tuple[int, int]) -> tuple[slice, slice]:
+    """The central square of a frame of ``shape`` that the test reads (at most
+    :data:`MAX_SIDE` px a side): (rows, columns)."""
     h, w = shape
     sy, sx = min(h, MAX_SIDE), min(w, MAX_SIDE)
     y0, x0 = (h - sy) // 2, (w - sx) // 2
@@ -409,13 +411,19 @@ def _exact_float32(raw: np.ndarray, full_scale: float) -> np.ndarray:
     return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_L1) == 0 else raw
 
 
-def tested_square(image: np.ndarray, full_scale: float) -> np.ndarray:
-    """The image's central square that :func:`find_oriented` tests (at most
-    :data:`MAX_SIDE` px a side: the detector's noise square too,
-    :func:`imaging.ridge.central`), as float32 when that holds every pixel exactly, else as
-    it is (see :func:`_exact_float32`). Made once per frame by a caller that needs it for
-    both: the second read of a 5 MP frame's strided float64 square cost ~1 ms."""
-    return _exact_float32(image[_square(image.shape)], full_scale)
+def tested_square(image: np.ndarray, full_scale: float, copy32: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """The image's central square that :func:`find_oriented` tests (:func:`square_slices`:
+    the detector's noise square too, :func:`imaging.ridge.central`), as float32 when that
+    holds every pixel exactly, else as it is (see :func:`_exact_float32`). Made once per
+    frame by a caller that needs it for both (a second read of a 5 MP frame's strided
+    float64 square cost ~1 ms); ``copy32``: the square cast to float32 and found to hold
+    every pixel exactly, when the caller has it (:func:`imaging.framepass.frame_pass`)."""
+    raw = image[square_slices(image.shape)]
+    if (copy32 is not None and raw.dtype == np.float64 and not raw.flags.c_contiguous
+            and float(np.float32(full_scale)) == full_scale):
+        return copy32
+    return _exact_float32(raw, full_scale)
 
 
 def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
@@ -429,7 +437,7 @@ def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
     unchanged (same object) when no pattern is found. ``square``: :func:`tested_square` of
     this image when the caller has it.
     """
-    sl = _square(image.shape)
+    sl = square_slices(image.shape)
     if min(image[sl].shape) < 4 * PERIOD_PX[1] // 2:
         return image, OrientedStripes((), 0.0, float("inf"), reason="image too small to test")
     raw = tested_square(image, full_scale) if square is None else square
