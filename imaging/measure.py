@@ -50,7 +50,7 @@ from imaging.oriented import (
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
-from imaging.stripes import Stripes, find_stripes, stripes_notes
+from imaging.stripes import MIN_ROWS, Stripes, find_stripes, stripes_notes, test_rows
 from imaging.surroundings import ALONE, Surroundings, surroundings_of
 from imaging.texture import correlation_cholesky
 
@@ -459,9 +459,14 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # searched, in one pass with the search's block means and the oriented test's square.
     f = search_factor(image.shape, min_length_px if min_length_px is not None
                       else default_min_length(image.shape))
-    copy32 = None
+    # (and the rows and columns the row/column test samples, while the frame is unchanged)
+    fp = None
     if roi is None and 1 < f <= min(image.shape):
-        mx, blocks, copy32 = frame_pass(image, f, square_slices(image.shape))
+        sampled = min(image.shape) // 2 >= MIN_ROWS  # (else that test is not made)
+        fp = frame_pass(image, f, square_slices(image.shape),
+                        np.concatenate(test_rows(image.shape, False)) if sampled else None,
+                        np.concatenate(test_rows(image.T.shape, True)) if sampled else None)
+        mx, blocks = fp.maximum, fp.block_means
     else:
         mx, blocks = float(image.max()), None
     # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
@@ -478,7 +483,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{image.shape[0]}")
     # The oriented test's square, read once: the detector's noise comes from the same
     # central 1024 px (a second read of a 5 MP frame's strided float64 square cost ~1 ms).
-    square = tested_square(image, top, copy32)
+    square = tested_square(image, top, fp.copy32 if fp is not None else None)
     noise = (pixel_noise(square) if roi is None and square.shape == central(image, 1024).shape
              else None)
     try:
@@ -548,7 +553,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         oriented = pre.then(oriented)
     # Row/column fixed-pattern noise: tested on the background away from every line found,
     # and removed when each line's columns (rows) have background to estimate it from.
-    image, stripes = find_stripes(image, bands, top)
+    image, stripes = find_stripes(image, bands, top, samples=(
+        (fp.rows, fp.columns) if fp is not None and fp.rows.size and image is raw else None))
     # Each angle carries what the oriented removal may leave of the change it made: the
     # mark measured again with the pattern put back.
     before = image * oriented.factor(image.shape) if oriented.found else image

@@ -9,13 +9,15 @@ import pytest
 from imaging.detect import default_min_length, search_factor
 from imaging.framepass import frame_pass
 from imaging.oriented import square_slices, tested_square
+from imaging.stripes import test_rows
 
 
 @pytest.mark.parametrize("shape", [(1030, 1500), (1025, 1100), (101, 2100), (2000, 700)])
 @pytest.mark.parametrize("kind", ["whole", "fraction", "nan"])
 def test_one_pass_gives_the_separate_passes_results(shape, kind):
-    """The maximum, the search's block means and the oriented test's square (float32 only
-    when it holds every pixel exactly) as the frame's own passes give them: whole 12-bit
+    """The maximum, the search's block means, the oriented test's square (float32 only when
+    it holds every pixel exactly) and the row/column test's sampled rows and columns as the
+    frame's own passes give them: whole 12-bit
     pixels, a tenth inside the square (the square stays float64), a NaN (the maximum is
     NaN, the square float64); frames whose rows and columns are not multiples of the
     block factor, and one whose square is contiguous (700 px wide: tested as it is)."""
@@ -27,7 +29,12 @@ def test_one_pass_gives_the_separate_passes_results(shape, kind):
         img[shape[0] // 2 + 3, shape[1] // 2 - 5] = np.nan
     f = search_factor(shape, default_min_length(shape))
     assert 1 < f <= min(shape)
-    mx, means, copy32 = frame_pass(img, f, square_slices(shape))
+    rows = np.concatenate(test_rows(shape, False))
+    cols = np.concatenate(test_rows(shape[::-1], True))
+    mx, means, copy32, row_v, col_v = frame_pass(img, f, square_slices(shape), rows, cols)
+    # the row/column test's samples as its own gathers cast them
+    assert np.array_equal(row_v, img[rows].astype(np.float32), equal_nan=True)
+    assert np.array_equal(col_v, img[:, cols].T.astype(np.float32), equal_nan=True)
     hs, ws = shape[0] // f, shape[1] // f
     ref = cv2.resize(img[:hs * f, :ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
     assert np.array_equal(means, ref, equal_nan=True)
