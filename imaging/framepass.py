@@ -2,8 +2,8 @@
 
 A 5 MP float64 frame is 40 MB, far beyond the caches: its maximum (the full scale), the
 coarse search's block means (:func:`imaging.detect.detect_lines_once`), the oriented test's
-float32 square (:func:`imaging.oriented.tested_square`) and the row/column test's sampled
-rows and columns (:func:`imaging.stripes.test_rows`) each read it from memory again
+float32 square (:func:`imaging.oriented.oriented_square`) and the row/column test's sampled
+rows and columns (:func:`imaging.stripes.sampled_rows`) each read it from memory again
 (~1.5-2.5 ms a pass at 5 MP). Here each chunk of :data:`BLOCK_ROWS` rows is read once and
 used for all of them while it is in cache; every result is the one its own pass gives, to
 the bit (the block means of whole blocks depend on their own pixels only, a maximum is the

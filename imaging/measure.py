@@ -44,13 +44,13 @@ from imaging.oriented import (
     OrientedStripes,
     find_oriented,
     oriented_note,
+    oriented_square,
     square_slices,
-    tested_square,
 )
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
-from imaging.stripes import MIN_ROWS, Stripes, find_stripes, stripes_notes, test_rows
+from imaging.stripes import MIN_ROWS, Stripes, find_stripes, sampled_rows, stripes_notes
 from imaging.surroundings import ALONE, Surroundings, surroundings_of
 from imaging.texture import correlation_cholesky
 
@@ -464,8 +464,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     if roi is None and 1 < f <= min(image.shape):
         sampled = min(image.shape) // 2 >= MIN_ROWS  # (else that test is not made)
         fp = frame_pass(image, f, square_slices(image.shape),
-                        np.concatenate(test_rows(image.shape, False)) if sampled else None,
-                        np.concatenate(test_rows(image.T.shape, True)) if sampled else None)
+                        np.concatenate(sampled_rows(image.shape, False)) if sampled else None,
+                        np.concatenate(sampled_rows(image.T.shape, True)) if sampled else None)
         mx, blocks = fp.maximum, fp.block_means
     else:
         mx, blocks = float(image.max()), None
@@ -483,7 +483,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
                               f"{image.shape[0]}")
     # The oriented test's square, read once: the detector's noise comes from the same
     # central 1024 px (a second read of a 5 MP frame's strided float64 square cost ~1 ms).
-    square = tested_square(image, top, fp.copy32 if fp is not None else None)
+    square = oriented_square(image, top, fp.copy32 if fp is not None else None)
     noise = (pixel_noise(square) if roi is None and square.shape == central(image, 1024).shape
              else None)
     try:

@@ -411,7 +411,7 @@ def _exact_float32(raw: np.ndarray, full_scale: float) -> np.ndarray:
     return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_L1) == 0 else raw
 
 
-def tested_square(image: np.ndarray, full_scale: float, copy32: np.ndarray | None = None
+def oriented_square(image: np.ndarray, full_scale: float, copy32: np.ndarray | None = None
                   ) -> np.ndarray:
     """The image's central square that :func:`find_oriented` tests (:func:`square_slices`:
     the detector's noise square too, :func:`imaging.ridge.central`), as float32 when that
@@ -434,13 +434,13 @@ def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
 
     ``mask``: True on the lines' bands (:func:`imaging.band.band_mask`; None: no lines), left
     out of the background; clipped pixels (0 or ``full_scale``) too. The image comes back
-    unchanged (same object) when no pattern is found. ``square``: :func:`tested_square` of
+    unchanged (same object) when no pattern is found. ``square``: :func:`oriented_square` of
     this image when the caller has it.
     """
     sl = square_slices(image.shape)
     if min(image[sl].shape) < 4 * PERIOD_PX[1] // 2:
         return image, OrientedStripes((), 0.0, float("inf"), reason="image too small to test")
-    raw = tested_square(image, full_scale) if square is None else square
+    raw = oriented_square(image, full_scale) if square is None else square
     valid = (raw > 0) & (raw < full_scale)
     if mask is not None:
         valid &= ~mask[sl]

@@ -246,7 +246,7 @@ def _shading(profile: np.ndarray) -> np.ndarray | None:
     return np.interp(x, x[ok], slow[ok]).astype(np.float32)
 
 
-def test_rows(shape: tuple[int, int], transposed: bool) -> tuple[np.ndarray, np.ndarray]:
+def sampled_rows(shape: tuple[int, int], transposed: bool) -> tuple[np.ndarray, np.ndarray]:
     """The rows of the top and of the bottom half that :func:`column_stripes` tests in an
     image of ``shape`` (``transposed``: the row test's transposed frame, sampled in runs,
     see :func:`_runs`); the halves stay GAP_PX apart: a dust speck or a label across the
@@ -267,7 +267,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
 
     ``mask``: True on the marks' bands (left out; every column one touches needs an offset
     for a removal); ``minus``: offsets per row already found (the other axis's stripes).
-    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced (:func:`test_rows`);
+    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced (:func:`sampled_rows`);
     the offsets, when found, every row. ``values``: those rows as float32, when the caller
     has them (:func:`imaging.framepass.frame_pass`).
     """
@@ -275,7 +275,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     half = h // 2
     if half < MIN_ROWS or w < 2 * WINDOW_PX:
         return Stripes(axis, 1.0, False, reason="too few rows or columns to test")
-    rows_top, rows_bot = test_rows((h, w), image.T.flags.c_contiguous
+    rows_top, rows_bot = sampled_rows((h, w), image.T.flags.c_contiguous
                                    and not image.flags.c_contiguous)
     # The slow column profile (vignetting) from every SHADING_STRIDE-th row of both halves
     # (it is smooth: a quarter of the rows gives it to well under 1 DN, at a quarter of the

@@ -8,8 +8,8 @@ import pytest
 
 from imaging.detect import default_min_length, search_factor
 from imaging.framepass import frame_pass
-from imaging.oriented import square_slices, tested_square
-from imaging.stripes import test_rows
+from imaging.oriented import oriented_square, square_slices
+from imaging.stripes import sampled_rows
 
 
 @pytest.mark.parametrize("shape", [(1030, 1500), (1025, 1100), (101, 2100), (2000, 700)])
@@ -29,8 +29,8 @@ def test_one_pass_gives_the_separate_passes_results(shape, kind):
         img[shape[0] // 2 + 3, shape[1] // 2 - 5] = np.nan
     f = search_factor(shape, default_min_length(shape))
     assert 1 < f <= min(shape)
-    rows = np.concatenate(test_rows(shape, False))
-    cols = np.concatenate(test_rows(shape[::-1], True))
+    rows = np.concatenate(sampled_rows(shape, False))
+    cols = np.concatenate(sampled_rows(shape[::-1], True))
     mx, means, copy32, row_v, col_v = frame_pass(img, f, square_slices(shape), rows, cols)
     # the row/column test's samples as its own gathers cast them
     assert np.array_equal(row_v, img[rows].astype(np.float32), equal_nan=True)
@@ -39,6 +39,6 @@ def test_one_pass_gives_the_separate_passes_results(shape, kind):
     ref = cv2.resize(img[:hs * f, :ws * f], (ws, hs), interpolation=cv2.INTER_AREA)
     assert np.array_equal(means, ref, equal_nan=True)
     assert mx == float(img.max()) or (kind == "nan" and np.isnan(mx))
-    square, alone = tested_square(img, 4095.0, copy32), tested_square(img, 4095.0)
+    square, alone = oriented_square(img, 4095.0, copy32), oriented_square(img, 4095.0)
     assert square.dtype == alone.dtype and np.array_equal(square, alone, equal_nan=True)
     assert (square.dtype == np.float32) == (kind == "whole" and shape[1] > 1024)
