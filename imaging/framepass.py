@@ -18,6 +18,10 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from imaging.detect import default_min_length, search_factor
+from imaging.oriented import square_slices
+from imaging.stripes import MIN_ROWS, sampled_rows
+
 BLOCK_ROWS = 64
 """Frame rows per chunk (~1.3 MB of a 2592 px float64 frame: it stays in cache while used)."""
 
@@ -103,3 +107,19 @@ def frame_pass(image: np.ndarray, f: int, square: tuple[slice, slice],
             col_v[:, r:e] = chunk[:, columns].T
     return FramePass(float(np.max(tops)), means, copy32 if want32 and l1 == 0 else None,
                      row_v, col_v)
+
+
+def stage_pass(image: np.ndarray, min_length_px: float | None) -> FramePass | None:
+    """:func:`frame_pass` of a whole float64 frame with the stage's own choices: the coarse
+    search's block factor for ``min_length_px`` (None: its default), the oriented test's
+    square and the row/column test's samples (none when the frame is too small for that
+    test); None when the search takes no block means (f = 1: a small frame, read once
+    anyway)."""
+    f = search_factor(image.shape, min_length_px if min_length_px is not None
+                      else default_min_length(image.shape))
+    if not 1 < f <= min(image.shape):
+        return None
+    sampled = min(image.shape) // 2 >= MIN_ROWS
+    return frame_pass(image, f, square_slices(image.shape),
+                      np.concatenate(sampled_rows(image.shape, False)) if sampled else None,
+                      np.concatenate(sampled_rows(image.T.shape, True)) if sampled else None)

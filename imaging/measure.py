@@ -27,13 +27,12 @@ from imaging.detect import (
     detect_lines_once,
     line_frame,
     require_single,
-    search_factor,
     wrap_angle,
 )
 from imaging.ends import EndsCheck, runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
-from imaging.framepass import frame_pass
+from imaging.framepass import stage_pass
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
@@ -45,12 +44,11 @@ from imaging.oriented import (
     find_oriented,
     oriented_note,
     oriented_square,
-    square_slices,
 )
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
-from imaging.stripes import MIN_ROWS, Stripes, find_stripes, sampled_rows, stripes_notes
+from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.surroundings import ALONE, Surroundings, surroundings_of
 from imaging.texture import correlation_cholesky
 
@@ -456,19 +454,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # same frame as an array got u 1745" where its file got 5.3" (read_image: floats, no copy).
     image = raw = np.asarray(image, dtype=float)
     # The maximum once (each pass over 5 MP costs ~1.5-4 ms): when the whole frame is
-    # searched, in one pass with the search's block means and the oriented test's square.
-    f = search_factor(image.shape, min_length_px if min_length_px is not None
-                      else default_min_length(image.shape))
-    # (and the rows and columns the row/column test samples, while the frame is unchanged)
-    fp = None
-    if roi is None and 1 < f <= min(image.shape):
-        sampled = min(image.shape) // 2 >= MIN_ROWS  # (else that test is not made)
-        fp = frame_pass(image, f, square_slices(image.shape),
-                        np.concatenate(sampled_rows(image.shape, False)) if sampled else None,
-                        np.concatenate(sampled_rows(image.T.shape, True)) if sampled else None)
-        mx, blocks = fp.maximum, fp.block_means
-    else:
-        mx, blocks = float(image.max()), None
+    # searched, in one pass with what the search and the background tests read of all of it.
+    fp = stage_pass(image, min_length_px) if roi is None else None
+    mx, blocks = (fp.maximum, fp.block_means) if fp is not None else (float(image.max()), None)
     # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
     if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
