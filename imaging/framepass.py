@@ -121,5 +121,5 @@ def stage_pass(image: np.ndarray, min_length_px: float | None) -> FramePass | No
         return None
     sampled = min(image.shape) // 2 >= MIN_ROWS
     return frame_pass(image, f, square_slices(image.shape),
-                      np.concatenate(sampled_rows(image.shape, False)) if sampled else None,
-                      np.concatenate(sampled_rows(image.T.shape, True)) if sampled else None)
+                      np.concatenate(sampled_rows(image)) if sampled else None,
+                      np.concatenate(sampled_rows(image.T)) if sampled else None)

@@ -246,12 +246,13 @@ def _shading(profile: np.ndarray) -> np.ndarray | None:
     return np.interp(x, x[ok], slow[ok]).astype(np.float32)
 
 
-def sampled_rows(shape: tuple[int, int], transposed: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of the top and of the bottom half that :func:`column_stripes` tests in an
-    image of ``shape`` (``transposed``: the row test's transposed frame, sampled in runs,
+def sampled_rows(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the top and of the bottom half that :func:`column_stripes` tests in
+    ``image`` (the row test's transposed frame, whose rows are the frame's columns, in runs:
     see :func:`_runs`); the halves stay GAP_PX apart: a dust speck or a label across the
     split would be common to both (a false pattern over its columns)."""
-    h = shape[0]
+    h = image.shape[0]
+    transposed = image.T.flags.c_contiguous and not image.flags.c_contiguous
     half = h // 2
     gap = min(GAP_PX, half - MIN_ROWS) // 2
     step = max(1, (half - gap) // TEST_ROWS)
@@ -275,8 +276,7 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
     half = h // 2
     if half < MIN_ROWS or w < 2 * WINDOW_PX:
         return Stripes(axis, 1.0, False, reason="too few rows or columns to test")
-    rows_top, rows_bot = sampled_rows((h, w), image.T.flags.c_contiguous
-                                   and not image.flags.c_contiguous)
+    rows_top, rows_bot = sampled_rows(image)
     # The slow column profile (vignetting) from every SHADING_STRIDE-th row of both halves
     # (it is smooth: a quarter of the rows gives it to well under 1 DN, at a quarter of the
     # cost), out of every row before its level is taken (see _background).
