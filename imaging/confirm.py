@@ -74,6 +74,8 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each column's median over its finite values (nan where it has none) and which columns
     have any. np.median when nothing is missing (the same values, in about half the time of
     np.nanmedian, which sorts column by column)."""
+    if _all_finite(vals):  # (the usual case, as two reductions tell: no mask's passes)
+        return _median_axis0(vals).astype(float, copy=False), np.ones(vals.shape[1], bool)
     finite = np.isfinite(vals)
     cols = finite.any(axis=0)
     prof = np.full(vals.shape[1], np.nan)
@@ -84,6 +86,12 @@ def _column_median(vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return prof, cols
 
 
+def _all_finite(vals: np.ndarray) -> bool:
+    """Whether a non-empty array holds no NaN and no infinity: its minimum and maximum are
+    finite (a NaN makes both NaN), two reductions instead of a mask's passes."""
+    return bool(vals.size and np.isfinite(vals.min()) and np.isfinite(vals.max()))
+
+
 def _median_axis0(vals: np.ndarray) -> np.ndarray:
     """np.median(vals, axis=0) of finite values, the same numbers. When every value is a
     whole number in 0..65535 (an image read from an integer file, not rescaled) each column
@@ -92,12 +100,12 @@ def _median_axis0(vals: np.ndarray) -> np.ndarray:
     if vals.shape[0] >= 64 and vals.min() >= 0 and vals.max() <= 65535:
         q = vals.T.astype(np.uint16)
         if np.array_equal(q, vals.T):
-            # The middle rank by selection, not a sort (~0.7x its time): the m smallest are
-            # left before rank m, so the (m-1)-th is their largest.
+            # The middle ranks by numpy's stable sort, a radix sort on 16-bit integers: ~0.8x
+            # the time of a selection of rank m (and the (m-1)-th is then read, not searched).
             m = q.shape[1] // 2
-            q.partition(m, axis=1)
+            q.sort(axis=1, kind="stable")
             return (q[:, m].astype(float) if q.shape[1] % 2
-                    else (q[:, :m].max(axis=1).astype(float) + q[:, m]) / 2)
+                    else (q[:, m - 1].astype(float) + q[:, m]) / 2)
     return np.median(vals, axis=0)
 
 
@@ -207,7 +215,9 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
         if change < LIGHT_STEP or rho < MONOTONE:
             return 0.0, float("inf")  # no shadow edge across or along it: the plain test stands
         vals = relative_to_light(vals, 4 * int(np.ceil(half)) + 3)
-    cols = np.isfinite(vals).sum(axis=0) >= max(5, n_along // 4)
+    least = max(5, n_along // 4)
+    cols = (np.full(vals.shape[1], vals.shape[0] >= least) if _all_finite(vals)
+            else np.isfinite(vals).sum(axis=0) >= least)
     med = _column_median(vals)  # one median profile for both uses (each column's own)
     prof = np.where(cols, med[0], np.nan)
     bg = cols & (np.abs(e) > 2 * half + 2)

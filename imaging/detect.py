@@ -48,7 +48,7 @@ from imaging.ridge import (
 __all__ = [
     "LENGTH_SLACK", "MIN_LENGTH_PX", "MarkCandidate", "Roi", "Search", "_dedupe", "_near",
     "_overlap", "_shift", "check_roi", "default_min_length", "detect_lines_once", "detect_marks",
-    "line_frame", "require_single", "wrap_angle",
+    "line_frame", "require_single", "search_factor", "wrap_angle",
 ]
 
 
@@ -203,11 +203,26 @@ class Search:
         return [_shift(c, self.shift) for c in out] if self.shift.any() else out
 
 
+def search_factor(shape: tuple[int, int], min_length_px: float) -> int:
+    """The block factor of the coarse search of an image (or roi) of ``shape``.
+
+    The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
+    shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
+    Frames under 1000 px are averaged 2 x 2 from 640 px on (a 640 x 480 frame searched at
+    full resolution cost more than a 5 MP one at f = 5)."""
+    side = max(shape)
+    return max(1, min(int(side // 500 if side >= 1000 else side // 320), int(min_length_px // 25)))
+
+
 def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
                       snr_threshold: float = 8.0, roi: Roi | None = None,
                       min_fill: float = 0.5, min_pixel_snr: float = 2.4,
-                      top: float | None = None) -> Search:
-    """The search of :func:`detect_marks` (same parameters), every confirmed line kept."""
+                      top: float | None = None, noise_full: float | None = None,
+                      block_means: np.ndarray | None = None) -> Search:
+    """The search of :func:`detect_marks` (same parameters), every confirmed line kept.
+    ``noise_full``: the pixel noise of the searched image's central 1024 px square
+    (:func:`imaging.ridge.pixel_noise`), ``block_means``: its f x f block means as float64
+    (:func:`imaging.framepass.frame_pass`), when the caller has them."""
     # The measurement of every line allocates and frees the same 0.1-2 MB temporaries over
     # and over: fresh mmap pages each time, unless freed memory is kept (~15 % of a 5 MP
     # image's CPU was page faults: the ridge filter at 640x480 took 2.5 ms, 0.5 ms without).
@@ -223,15 +238,12 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
     h, w = image.shape
     if min_length_px is None:
         min_length_px = default_min_length((h, w))
-    # The search only seeds the sub-pixel fit, so it runs on a block-averaged copy; the
-    # shortest mark must stay >= ~25 blocks long there, or short marks in large frames drown.
-    # Frames under 1000 px are averaged 2 x 2 from 640 px on (a 640 x 480 frame searched
-    # at full resolution cost more than a 5 MP one at f = 5).
-    side = max(h, w)
-    f = max(1, min(int(side // 500 if side >= 1000 else side // 320), int(min_length_px // 25)))
+    f = search_factor((h, w), min_length_px)
     hs, ws = h // f, w // f
     small = image[:hs * f, :ws * f]
-    if f > 1:
+    if block_means is not None and block_means.shape == (hs, ws):
+        small = block_means  # (the caller's, of the same pixels: imaging.framepass)
+    elif f > 1:
         # INTER_AREA with an integer factor on an exactly divisible crop is the f x f block
         # mean (OpenCV's is ~10x faster than numpy's reshape-mean here). Taken of float64
         # pixels as they are (not of a float32 copy of all of them: half the time at 5 MP):
@@ -260,7 +272,8 @@ def detect_lines_once(image: np.ndarray, min_length_px: float | None = None,
         for dark in (True, False):
             resp = r if dark else -r
             layers.append((sigma, dark, resp, (resp > snr_threshold * mad) & flat, mad))
-    noise_full = pixel_noise(central(image, 1024))
+    if noise_full is None:
+        noise_full = pixel_noise(central(image, 1024))
     top = full_scale(image) if top is None else top
     shift = np.zeros(2)
     if roi is not None:

@@ -360,7 +360,8 @@ def _join(found: list[MarkCandidate], members: list[MarkCandidate],
 
 def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_marks: int = 8,
                  roi: Roi | None = None, top: float | None = None,
-                 families: bool = True) -> Detection:
+                 families: bool = True, noise_full: float | None = None,
+                 block_means: np.ndarray | None = None) -> Detection:
     """Every line of :func:`imaging.detect.detect_marks`, with families completed.
 
     Parameters as :func:`~imaging.detect.detect_marks`; ``families``: False finds lines one
@@ -380,13 +381,17 @@ def detect_lines(image: np.ndarray, min_length_px: float | None = None, max_mark
         The image's full scale [DN] (else from the image).
     families : bool
         Complete families of lines (a second pass).
+    noise_full, block_means : float, ndarray, optional
+        The searched image's pixel noise and block means, when the caller has them
+        (:func:`imaging.detect.detect_lines_once`).
 
     Returns
     -------
     Detection
         The lines, their families and those left out.
     """
-    search = detect_lines_once(image, min_length_px, roi=roi, top=top)
+    search = detect_lines_once(image, min_length_px, roi=roi, top=top, noise_full=noise_full,
+                               block_means=block_means)
     found = list(search.marks)
     # A --min-length above the short lines of a scale leaves only its long ones: two of
     # them side by side seed the search too, and the family's lines below that length are

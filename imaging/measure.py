@@ -32,14 +32,21 @@ from imaging.detect import (
 from imaging.ends import EndsCheck, runs_on_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
+from imaging.framepass import stage_pass
 from imaging.grating import grating_note
 from imaging.groove import ProfileFit
 from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
-from imaging.linefit import LineFit, fit_line
-from imaging.oriented import OrientedStripes, find_oriented, oriented_note
+from imaging.linefit import LineFit, fit_line, fit_line_only
+from imaging.oriented import (
+    OrientedStripes,
+    find_oriented,
+    oriented_note,
+    oriented_square,
+)
 from imaging.profile import extent_look, fit_profile, groove_extent
+from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
 from imaging.stripes import Stripes, find_stripes, stripes_notes
 from imaging.surroundings import ALONE, Surroundings, surroundings_of
@@ -222,8 +229,8 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     use = _usable(cen, where, cand, skip)
     # Second pass about the line through the first centres: the final centres never depend
     # on how well the band fit placed the line (cheap: the profile is tabulated).
-    first = fit_line(cen.xy[use], cen.sigma[use], reject_sigma=None)
-    pf = pf.with_line(first.angle_rad, first.offset_px)
+    # (Its direction and offset only: fit_line's, the same bits, without the covariance.)
+    pf = pf.with_line(*fit_line_only(cen.xy[use], cen.sigma[use]))
     u, n = line_frame(pf.angle_rad)
     # Where the groove really ends, looked for once, before the full pass, along the first
     # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops
@@ -446,19 +453,31 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # Integer pixels as read by OpenCV (uint16) wrapped around in the differences below: the
     # same frame as an array got u 1745" where its file got 5.3" (read_image: floats, no copy).
     image = raw = np.asarray(image, dtype=float)
-    mx = float(image.max())  # once: each pass over 5 MP costs ~4 ms
+    # The maximum once (each pass over 5 MP costs ~1.5-4 ms): when the whole frame is
+    # searched, in one pass with what the search and the background tests read of all of it.
+    fp = stage_pass(image, min_length_px) if roi is None else None
+    mx, blocks = (fp.maximum, fp.block_means) if fp is not None else (float(image.max()), None)
     # (Uniform only if the first pixel is the maximum: the minimum's pass only then.)
     if mx == float(image.flat[0]) and mx == float(image.min()):
         raise ImageInputError(f"{where}: image is uniform (value {image.flat[0]:g}); no mark")
     top = full_scale(mx)
-    hot = image >= top  # the clipped pixels, named below (one pass)
+    # The clipped pixels, named below: a pass over the frame only when its maximum is at
+    # full scale (else there are none: ~3 ms of a 5 MP frame's CPU, and the notes are ()).
+    # (A NaN maximum: tested as before.)
+    hot = None if mx < top else image >= top
     if camera is not None and (image.shape[1], image.shape[0]) != tuple(camera.image_size):
         raise ImageInputError(f"{where}: camera model is for {camera.image_size[0]}x"
                               f"{camera.image_size[1]} images, this one is {image.shape[1]}x"
                               f"{image.shape[0]}")
+    # The oriented test's square, read once: the detector's noise comes from the same
+    # central 1024 px (a second read of a 5 MP frame's strided float64 square cost ~1 ms).
+    square = oriented_square(image, top, fp.copy32 if fp is not None else None)
+    noise = (pixel_noise(square) if roi is None and square.shape == central(image, 1024).shape
+             else None)
     try:
         det = detect_lines(image, min_length_px=min_length_px, max_marks=max_marks, roi=roi,
-                           top=top, families=not expect_one)
+                           top=top, families=not expect_one, noise_full=noise,
+                           block_means=blocks)
     except ImageInputError as exc:
         raise ImageInputError(f"{where}: {exc}") from None
     cands = det.marks
@@ -466,7 +485,7 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     # for an oriented periodic background (nothing masked) and searched again without it.
     pre = None
     if not cands:
-        cleaned, pre = find_oriented(image, None, top)
+        cleaned, pre = find_oriented(image, None, top, square=square)
         if pre.found:
             try:
                 again = detect_lines(cleaned, min_length_px=min_length_px,
@@ -505,7 +524,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     bands = band_mask(image.shape, [band_indices(image, c) for c in (*cands, *det.unreported)])
     # Stripes at any angle (a surface's lay): divided out first — an oblique pattern leaves
     # a profile along the columns that the row/column test below would take for its own.
-    image, oriented = find_oriented(image, bands, top)
+    image, oriented = find_oriented(image, bands, top,
+                                    square=square if image is raw else None)
     if oriented.found and (pre is None or not pre.found):
         # The lines again on the image without the pattern: a crest beside a mark's end
         # moves where the detector ends it (a 250 px mark was measured over 210 px).
@@ -521,7 +541,8 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
         oriented = pre.then(oriented)
     # Row/column fixed-pattern noise: tested on the background away from every line found,
     # and removed when each line's columns (rows) have background to estimate it from.
-    image, stripes = find_stripes(image, bands, top)
+    image, stripes = find_stripes(image, bands, top, samples=(
+        (fp.rows, fp.columns) if fp is not None and fp.rows.size and image is raw else None))
     # Each angle carries what the oriented removal may leave of the change it made: the
     # mark measured again with the pattern put back.
     before = image * oriented.factor(image.shape) if oriented.found else image
@@ -550,8 +571,9 @@ def measure_frame(image: np.ndarray, camera: CameraModel | None = None, where: s
     fams = tuple(tuple(index[i] for i in g if i in index) for g in det.families)
     contrast = [abs(m.profile.contrast_dn) for m in out if isinstance(m, MarkMeasurement)]
     notes = (stripes_notes(where, stripes, float(np.median(contrast)) if contrast else 0.0)
-             + oriented_note(where, oriented) + clipped_notes(
-                 hot, top, where, [(index[i], c) for i, c in enumerate(cands) if i in index]))
+             + oriented_note(where, oriented) + (clipped_notes(
+                 hot, top, where, [(index[i], c) for i, c in enumerate(cands) if i in index])
+                 if hot is not None else ()))
     return MeasuredFrame(out, fams, len(det.unreported), notes, stripes, oriented)
 
 

@@ -149,7 +149,9 @@ class OrientedStripes:
                                max(self.residual, other.residual))
 
 
-def _square(shape: tuple[int, int]) -> tuple[slice, slice]:
+def square_slices(shape: tuple[int, int]) -> tuple[slice, slice]:
+    """The central square of a frame of ``shape`` that the test reads (at most
+    :data:`MAX_SIDE` px a side): (rows, columns)."""
     h, w = shape
     sy, sx = min(h, MAX_SIDE), min(w, MAX_SIDE)
     y0, x0 = (h - sy) // 2, (w - sx) // 2
@@ -404,22 +406,41 @@ def _exact_float32(raw: np.ndarray, full_scale: float) -> np.ndarray:
             or float(np.float32(full_scale)) != full_scale):
         return raw
     r32 = raw.astype(np.float32)
-    return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_INF) == 0 else raw
+    # The sum of |differences| is 0 exactly when each is (a sum of non-negative terms is at
+    # least its largest; NaN or inf makes it NaN): OpenCV's L1 norm runs ~2x its max norm.
+    return r32 if cv2.norm(raw, r32.astype(np.float64), cv2.NORM_L1) == 0 else raw
+
+
+def oriented_square(image: np.ndarray, full_scale: float, copy32: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """The image's central square that :func:`find_oriented` tests (:func:`square_slices`:
+    the detector's noise square too, :func:`imaging.ridge.central`), as float32 when that
+    holds every pixel exactly, else as it is (see :func:`_exact_float32`). Made once per
+    frame by a caller that needs it for both (a second read of a 5 MP frame's strided
+    float64 square cost ~1 ms); ``copy32``: the square cast to float32 and found to hold
+    every pixel exactly, when the caller has it (:func:`imaging.framepass.frame_pass`)."""
+    raw = image[square_slices(image.shape)]
+    if (copy32 is not None and raw.dtype == np.float64 and not raw.flags.c_contiguous
+            and float(np.float32(full_scale)) == full_scale):
+        return copy32
+    return _exact_float32(raw, full_scale)
 
 
 def find_oriented(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
-                  alpha: float = ALPHA) -> tuple[np.ndarray, OrientedStripes]:
+                  alpha: float = ALPHA, square: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, OrientedStripes]:
     """The image with its oriented periodic background divided out where found, and the
     finding.
 
     ``mask``: True on the lines' bands (:func:`imaging.band.band_mask`; None: no lines), left
     out of the background; clipped pixels (0 or ``full_scale``) too. The image comes back
-    unchanged (same object) when no pattern is found.
+    unchanged (same object) when no pattern is found. ``square``: :func:`oriented_square` of
+    this image when the caller has it.
     """
-    sl = _square(image.shape)
+    sl = square_slices(image.shape)
     if min(image[sl].shape) < 4 * PERIOD_PX[1] // 2:
         return image, OrientedStripes((), 0.0, float("inf"), reason="image too small to test")
-    raw = _exact_float32(image[sl], full_scale)
+    raw = oriented_square(image, full_scale) if square is None else square
     valid = (raw > 0) & (raw < full_scale)
     if mask is not None:
         valid &= ~mask[sl]

@@ -181,21 +181,26 @@ def _effective_n(a: np.ndarray, b: np.ndarray, lags: int = 32) -> float:
 
 
 def _rows(image: np.ndarray, mask: np.ndarray, rows: np.ndarray, full_scale: float,
-          minus: np.ndarray | None) -> np.ndarray:
+          minus: np.ndarray | None, values: np.ndarray | None = None) -> np.ndarray:
     """Rows ``rows`` of the image as float32, NaN on the marks' bands and clipped pixels;
-    ``minus``: offsets per row removed (the other axis's stripes). Gathered once per test:
-    on the transposed image (the row test) each row is a strided column of the frame, whose
-    gathers cost most of that test at 5 MP."""
+    ``minus``: offsets per row removed (the other axis's stripes); ``values``: those rows
+    already cast to float32 (:func:`imaging.framepass.frame_pass`; changed here). Gathered
+    once per test: on the transposed image (the row test) each row is a strided column of
+    the frame, whose gathers cost most of that test at 5 MP."""
     if image.T.flags.c_contiguous and not image.flags.c_contiguous:
         # The row test's transposed frame: its rows are the frame's columns, gathered along
         # each of the frame's rows (one sequential read; strided per column cost ~20 % more),
         # the mask's alike. (Indexed, not np.take: 0.75 ms, not 4.4, for the runs of 5 MP.)
-        v = np.ascontiguousarray(image.T[:, rows].astype(np.float32).T)
-        out = np.take(mask.T, rows, axis=1).T if mask.T.flags.c_contiguous else mask[rows]
+        # (The gathered columns cast as the transposed rows: a contiguous cast, ~0.6 ms less
+        # than casting them as gathered; the mask's transposed by OpenCV, as bytes, so that
+        # the masks below combine arrays of one layout.)
+        v = image.T[:, rows].T.astype(np.float32) if values is None else values
+        out = (cv2.transpose(np.take(mask.T, rows, axis=1).view(np.uint8)).view(bool)
+               if mask.T.flags.c_contiguous else mask[rows])
     else:
-        v = image[rows].astype(np.float32)
+        v = image[rows].astype(np.float32) if values is None else values
         out = mask[rows]
-    out = out | (v <= 0)
+    out |= v <= 0  # (out is a copy either way)
     out |= v >= full_scale
     np.copyto(v, np.nan, where=out)
     if minus is not None:
@@ -241,31 +246,41 @@ def _shading(profile: np.ndarray) -> np.ndarray | None:
     return np.interp(x, x[ok], slow[ok]).astype(np.float32)
 
 
+def sampled_rows(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of the top and of the bottom half that :func:`column_stripes` tests in
+    ``image`` (the row test's transposed frame, whose rows are the frame's columns, in runs:
+    see :func:`_runs`); the halves stay GAP_PX apart: a dust speck or a label across the
+    split would be common to both (a false pattern over its columns)."""
+    h = image.shape[0]
+    transposed = image.T.flags.c_contiguous and not image.flags.c_contiguous
+    half = h // 2
+    gap = min(GAP_PX, half - MIN_ROWS) // 2
+    step = max(1, (half - gap) // TEST_ROWS)
+    if step >= RUN and transposed:
+        return _runs(0, half - gap, step), _runs(half + gap, h, step)
+    return np.arange(0, half - gap, step), np.arange(half + gap, h, step)
+
+
 def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
                    alpha: float = ALPHA, minus: np.ndarray | None = None,
-                   axis: str = "column") -> Stripes:
+                   axis: str = "column", values: np.ndarray | None = None) -> Stripes:
     """Test an image's background for column stripes (rows: pass the transposed image).
 
     ``mask``: True on the marks' bands (left out; every column one touches needs an offset
     for a removal); ``minus``: offsets per row already found (the other axis's stripes).
-    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced; the offsets, when
-    found, every row.
+    The test uses up to :data:`TEST_ROWS` rows per half, evenly spaced (:func:`sampled_rows`);
+    the offsets, when found, every row. ``values``: those rows as float32, when the caller
+    has them (:func:`imaging.framepass.frame_pass`).
     """
     h, w = image.shape
     half = h // 2
     if half < MIN_ROWS or w < 2 * WINDOW_PX:
         return Stripes(axis, 1.0, False, reason="too few rows or columns to test")
-    # The halves stay GAP_PX apart: a dust speck or a label across the split would be common
-    # to both (a false pattern over its columns).
-    gap = min(GAP_PX, half - MIN_ROWS) // 2
-    step = max(1, (half - gap) // TEST_ROWS)
-    rows_top, rows_bot = np.arange(0, half - gap, step), np.arange(half + gap, h, step)
-    if step >= RUN and image.T.flags.c_contiguous and not image.flags.c_contiguous:
-        rows_top, rows_bot = _runs(0, half - gap, step), _runs(half + gap, h, step)
+    rows_top, rows_bot = sampled_rows(image)
     # The slow column profile (vignetting) from every SHADING_STRIDE-th row of both halves
     # (it is smooth: a quarter of the rows gives it to well under 1 DN, at a quarter of the
     # cost), out of every row before its level is taken (see _background).
-    v = _rows(image, mask, np.concatenate([rows_top, rows_bot]), full_scale, minus)
+    v = _rows(image, mask, np.concatenate([rows_top, rows_bot]), full_scale, minus, values)
     shading = _shading(_column_median(_background(v[::SHADING_STRIDE])))
     top = _highpass(_column_median(_background(v[:rows_top.size], shading)))
     bot = _highpass(_column_median(_background(v[rows_top.size:], shading)))
@@ -301,7 +316,9 @@ def column_stripes(image: np.ndarray, mask: np.ndarray, full_scale: float,
 
 
 def find_stripes(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
-                 alpha: float = ALPHA) -> tuple[np.ndarray, tuple[Stripes, Stripes]]:
+                 alpha: float = ALPHA,
+                 samples: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[np.ndarray, tuple[Stripes, Stripes]]:
     """The image with its row and column stripes removed where found and removable, and the
     two findings (columns, rows).
 
@@ -311,8 +328,10 @@ def find_stripes(image: np.ndarray, mask: np.ndarray | None, full_scale: float,
     """
     if mask is None:
         mask = np.zeros(image.shape, bool)
-    cols = column_stripes(image, mask, full_scale, alpha)
-    rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row")
+    # (``samples``: the two tests' rows of this image as float32, imaging.framepass.)
+    col_v, row_v = samples if samples is not None else (None, None)
+    cols = column_stripes(image, mask, full_scale, alpha, values=col_v)
+    rows = column_stripes(image.T, mask.T, full_scale, alpha, cols.offsets_dn, "row", row_v)
     if not (cols.removed or rows.removed):
         return image, (cols, rows)  # the usual case: untouched
     out = image.astype(float)

@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imaging import ImageInputError, detect_marks, fit_line, measure_marks, read_image
+from imaging import (
+    ImageInputError,
+    detect_marks,
+    fit_line,
+    measure_frame,
+    measure_marks,
+    read_image,
+)
+from imaging.io import full_scale
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks, write_image
 from tests.conftest import angle_error, mark_image
 
@@ -241,3 +249,20 @@ def test_integer_pixels_give_the_numbers_of_their_float_copy():
     (a,) = measure_marks(img)
     (b,) = measure_marks(img.astype(float))
     assert a.line.angle_rad == b.line.angle_rad and a.line.angle_u_rad == b.line.angle_u_rad
+
+
+def test_clipped_pixels_named_only_when_the_frame_reaches_full_scale():
+    """The frame's clipped-pixel mask is made only when its maximum reaches full scale: a
+    saturated patch beside the mark is named in the frame's notes, and the same frame below
+    full scale has no such note; the mark is measured in both."""
+    s = mark_image(21.0, seed=5, length_px=200.0, size=(320, 240))
+    img = s.image.astype(float)
+    top = full_scale(img)
+    below = measure_frame(img)
+    hot = img.copy()
+    hot[10:40, 10:60] = top  # 1500 px, 2 % of the frame, away from the mark
+    clipped = measure_frame(hot)
+    assert not any("saturated" in n for n in below.notes)
+    assert sum("saturated pixels say only" in n for n in clipped.notes) == 1
+    a, b = below.items[0].line, clipped.items[0].line
+    assert abs(a.angle_rad - b.angle_rad) < a.angle_u_rad
