@@ -207,14 +207,18 @@ def explained_by_ruling(pitch_px: float, angle_rad: float, ruling_pitch_px: floa
     """Whether a grating of this pitch [px] and line direction [rad] is a measured ruling's
     own spectrum: its direction (within :data:`SAME_ANGLE`, or a tile's spectral bin,
     pitch / :data:`TILE` rad, when wider) and its pitch or one of its
-    harmonics ruling / m, m = 1 .. :data:`RULING_HARMONICS` (within :data:`SAME_PITCH`)."""
+    harmonics ruling / m, m = 1 .. :data:`RULING_HARMONICS` (ruling / pitch within
+    :data:`SAME_PITCH` of m: frequencies within that fraction of the fundamental's)."""
     # (A tile's direction is one spectral bin wide at most, pitch / TILE [rad]: 6.4° for a
     # 28.8 px harmonic, whose direction came 3.4° off its measured ruling's.)
     tol = max(SAME_ANGLE, pitch_px / TILE)
     if abs((angle_rad - ruling_angle_rad + np.pi / 2) % np.pi - np.pi / 2) >= tol:
         return False
-    return any(abs(pitch_px * m / ruling_pitch_px - 1) < SAME_PITCH
-               for m in range(1, RULING_HARMONICS + 1))
+    # Frequencies within SAME_PITCH of the ruling's fundamental of m times it: a harmonic's
+    # relative tolerance does not widen with m (at 10 % of m / pitch, 20 px would pass as
+    # a 65.6 px ruling's third harmonic).
+    ratio = ruling_pitch_px / pitch_px
+    return any(abs(ratio - m) < SAME_PITCH for m in range(1, RULING_HARMONICS + 1))
 
 
 def grating_regions(image: np.ndarray, segments: Sequence[np.ndarray],
