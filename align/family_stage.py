@@ -21,8 +21,9 @@ from dataclasses import replace
 import numpy as np
 
 from align.camera_lens import CAMERA_MODEL, LENS_TERMS, claimed_lens, undistorted_mark
-from align.family import line_dial, line_family, member_ends, shading_shift
+from align.family import line_family, member_ends, shading_shift
 from align.lens import LensRanges
+from align.line_dial import line_dial
 from align.mark_result import MarkResult
 from align.mark_stage import half_diagonal
 from imaging import MarkMeasurement, Roi, detect_lines, line_frame
