@@ -284,8 +284,10 @@ def test_micrometer_every_line_and_the_family_angle(micrometer):
     "50.58967 (z -3.34); both ok, exit 0. Now (the scatter's t factor, the shading's share): "
     "RMS z 1.00, micro25 41.35466 ± 0.00024 (z -3.81) the one beyond 3. The piece left is "
     "the illumination: each line's own offset z has RMS 1.54 over the 436 lines (0.96 "
-    "rendered under flat light, 1.32 less the shading's gamma M2): the single line's offset "
-    "u under shaded light (imaging's groove model), which the pitch's u starts from"))
+    "rendered under flat light); at the lines' middles, less the shading's gamma M2 (its "
+    "coefficient fitted 1.06), the inner lines' z RMS 1.10, the two outer lines' 1.56 (1.13 "
+    "under flat light): an outer line's own offset u under shaded light (imaging's groove "
+    "fit), which the pitch's u starts from and the outer lines' lever weighs most"))
 def test_micrometer_pitch_u_covers_its_error(micrometer):
     z = np.array([(fam["pitch_px"] - pitch) / fam["pitch_u_px"]
                   for _f, _a, pitch, _n, _ms, fam in _families(micrometer)])
