@@ -25,7 +25,17 @@ Ruling: each member's middle projected on the mean normal, q_i [px]; the ruling 
 counted gap by gap, each gap in whole single steps (:func:`ruling_steps`: a missing
 graduation skips a step); q_i = q_0 + pitch k_i by least squares. Uniformity: the residuals
 from that uniform ruling [px], their RMS (``pitch_spread_px``), and u(pitch) from the larger
-of that scatter and the members' own offset u. A step between the first and the last member
+of that scatter and the members' own offset u. The scatter s is a Type A estimate on
+nu = n - 2 dof (3 to 7 for a 5-9 line scale): its z follows Student's t, whose standard
+deviation is sqrt(nu / (nu - 2)) (1.73 at nu = 3), so s is taken times that factor (times
+sqrt 3, nu = 3's, for 3-4 lines, where it is unbounded): 64 stage-micrometer frames' pitch
+z had RMS 1.26 and |z| up to 4.1 with s alone. The background's shading across each member
+(its groove fit's slope over its level, gamma) weights its dip's two sides unequally: the
+groove's centre moves by about gamma M2 (M2 = w^2 / 12 + blur^2, the profile's second moment:
+a fit of a symmetric profile to a multiplicatively shaded one) — the same for every member
+under a uniform slope, but vignetting's slope changes across the scale, and its linear part
+is a pitch no residual shows; the pitch's slope of those moves is ``pitch_u_shading_px``, in
+u(pitch) (:func:`shading_shift`). A step between the first and the last member
 that holds no measured line is said (``missing_steps``; the result is then not ok): a
 regular family with a line missing is never reported as complete.
 """
@@ -40,6 +50,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 from scipy.special import ndtri
 
+from imaging import line_frame
 from imaging.ends import checked_ends
 from imaging.ends_blur import ends_at_their_blur
 
@@ -101,6 +112,10 @@ class LineFamily:
     pitch_u_lens_px : float
         The frame's lens's share of the pitch's u [px] (:mod:`align.family_stage`: what the
         lens's u moves the members' positions by), in ``pitch_u_px`` (0: none).
+    pitch_u_shading_px : float
+        The background's shading's share of the pitch's u [px] (:func:`shading_shift`: how
+        far each member's centre may sit off its groove's middle under it), in
+        ``pitch_u_px`` (0: none).
     lens_fitted : int
         Lens directions fitted from the members' angles with their mean (bounds on the
         frame's lens the family sees, :func:`lens_directions`): each takes one of the
@@ -129,6 +144,7 @@ class LineFamily:
     typical_length_px: float = float("nan")
     pitch_u_lens_px: float = 0.0
     lens_fitted: int = 0
+    pitch_u_shading_px: float = 0.0
 
     @property
     def chi2_dof(self) -> float:
@@ -165,6 +181,7 @@ class LineFamily:
                 "typical_length_px": self.typical_length_px,
                 "pitch_u_lens_px": self.pitch_u_lens_px,
                 "lens_fitted": self.lens_fitted,
+                "pitch_u_shading_px": self.pitch_u_shading_px,
                 "missing_steps": list(self.missing_steps)}
 
     @classmethod
@@ -188,7 +205,7 @@ class LineFamily:
                    tuple(num(v) for v in d.get("lengths_max_px", ())),
                    tuple(int(v) for v in d.get("hidden_ends", ())),
                    num(d.get("typical_length_px")), num(d.get("pitch_u_lens_px", 0.0)),
-                   int(d.get("lens_fitted", 0)))
+                   int(d.get("lens_fitted", 0)), num(d.get("pitch_u_shading_px", 0.0)))
 
     def summary(self) -> str:
         """One line for the terminal."""
@@ -334,7 +351,8 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                 lens_terms: Sequence[Mapping[str, float]] = (),
                 lengths: Sequence[tuple[float, float, int]] = (),
                 lens_shift: np.ndarray | None = None,
-                lens_coupling: Sequence[Mapping[str, float]] = ()) -> LineFamily:
+                lens_coupling: Sequence[Mapping[str, float]] = (),
+                shading: np.ndarray | None = None) -> LineFamily:
     """The family of lines with these angles [rad] (``angle_u``: each one's own u without
     the lens's share [rad]), middles (N, 2) [px, relative to the image centre] (offset u
     [px]) and the lens's named u terms per member [rad] (the shared lens: they enter the
@@ -343,8 +361,9 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     moves each member's middle [px] (its share of the pitch's u, :mod:`align.family_stage`);
     ``lens_coupling``: each member's angle's signed components on the frame lens's error
     directions [rad] (:attr:`align.mark_result.MarkResult.lens_coupling`: what the lens's
-    u turns them by, unlike in different places of the frame); see the module docstring
-    for the formulas."""
+    u turns them by, unlike in different places of the frame); ``shading`` (N, 2): how far
+    the background's shading may move each member's centre [px] (:func:`shading_shift`); see
+    the module docstring for the formulas."""
     angles = np.asarray(angles, float)
     ref = angles[0]
     d = _wrap(angles - ref)
@@ -399,17 +418,25 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
     if n >= 3 and np.ptp(k) > 0:
         pitch, q0 = np.polyfit(k, q, 1)
         res = q - (q0 + pitch * k)
-        scatter = max(float(np.sqrt(np.sum(res**2) / (n - 2))), float(np.median(ou)))
+        scatter = max(float(np.sqrt(np.sum(res**2) / (n - 2))) * t_sd(n - 2),
+                      float(np.median(ou)))
         pitch_u = scatter / float(np.sqrt(np.sum((k - k.mean()) ** 2)))
     else:
         pitch, res, pitch_u = float("nan"), np.full(n, np.nan), float("nan")
-    pitch_lens = 0.0
+    pitch_lens = pitch_shading = 0.0
+    kc = k - k.mean()
     if lens_shift is not None and np.isfinite(pitch):
         # Each lens parameter's move of the positions, as the pitch's slope takes it.
         dq = np.einsum("nip,i->np", np.asarray(lens_shift, float), normal)[order]
-        kc = k - k.mean()
         pitch_lens = float(np.linalg.norm(kc @ dq / (kc @ kc)))
         pitch_u = float(np.hypot(pitch_u, pitch_lens))
+    if shading is not None and np.isfinite(pitch):
+        # The shading's moves of the positions, as the pitch's slope takes them: a Type B
+        # term, not a correction (gamma M2 is exact for a Gaussian dip only, and the
+        # members' own offsets, read alone, carry the same moves).
+        dq = (np.asarray(shading, float) @ normal)[order]
+        pitch_shading = float(abs(kc @ dq / (kc @ kc)))
+        pitch_u = float(np.hypot(pitch_u, pitch_shading))
     idx = tuple(int(indices[i]) for i in order)
     ln = [lengths[i] for i in order] if len(lengths) == n else []
     seen = [v for v, _, h in ln if not h]
@@ -418,182 +445,26 @@ def line_family(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
                       tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), lens,
                       failed, u_lens, tuple(float(v) for v, _, _ in ln),
                       tuple(float(v) for _, v, _ in ln), tuple(int(h) for _, _, h in ln),
-                      float(np.median(seen)) if seen else float("nan"), pitch_lens, m_fit)
+                      float(np.median(seen)) if seen else float("nan"), pitch_lens, m_fit,
+                      pitch_shading)
 
 
-DIAL_FORMAT_VERSION = 1
+def t_sd(dof: int) -> float:
+    """The factor a Type A standard deviation on ``dof`` degrees of freedom is taken times
+    for its z to have unit variance: Student's t's standard deviation sqrt(dof / (dof - 2));
+    below 3 dof, where that is unbounded, 3 dof's (sqrt 3) — dimensionless."""
+    dof = max(int(dof), 3)
+    return float(np.sqrt(dof / (dof - 2)))
 
 
-@dataclass(frozen=True)
-class LineDial:
-    """Lines of one image that meet at a point (a graduated dial) measured as one.
-
-    Centre: the point P minimising chi2_c = sum((n_i . P - d_i)^2 / s_i^2) (n_i, d_i each
-    line's normal and offset; s_i^2 = u(d_i)^2 + (r_i u(a_i))^2, r_i the distance from P to
-    its middle), on n - 2 dof. Directions: each line's angle a_i turned to point away from P,
-    theta_i [rad, from +x towards -y], ordered round P; steps k_i = round((theta_i -
-    theta_0) / g_min); theta_i = theta_0 + increment k_i by weighted least squares (w_i =
-    1 / u(a_i)^2, each line's own u without the lens's share); chi2 of the residuals on n - 2
-    dof says whether the graduation is uniform within the lines' u; u(increment) is widened
-    by sqrt(chi2/dof) when chi2 is significant.
-
-    Attributes
-    ----------
-    members : tuple of int
-        Mark indices, ordered round the centre — dimensionless.
-    centre_px, centre_u_px : (float, float)
-        P (x, y) [px, relative to the image centre, x right, y down] and its u [px].
-    centre_chi2, centre_dof, centre_p : float, int, float
-        chi2_c, n - 2, its upper-tail probability (lines that miss one point: p small) —
-        dimensionless.
-    increment_rad, increment_u_rad : float
-        Angle between neighbouring graduations [rad] and its u [rad].
-    steps : tuple of int
-        Each member's step k_i round the dial — dimensionless.
-    residuals_rad : tuple of float
-        theta_i minus the uniform graduation's [rad].
-    spread_rad : float
-        RMS of the residuals [rad] (the graduation's non-uniformity, as imaged).
-    chi2, dof, p_value : float, int, float
-        The residuals' chi2, n - 2, upper-tail probability — dimensionless.
-    lens : str
-        As :attr:`LineFamily.lens`; unit —.
-    increment_u_lens_rad : float
-        The frame's lens's share of ``increment_u_rad`` [rad]: the increment is a weighted
-        sum of the members' angles, so per lens error direction the same sum of their
-        signed lens couplings (one lens moves them together), the directions in quadrature
-        (0: no lens u). The centre's u holds the lines' own u only.
-    """
-
-    members: tuple[int, ...]
-    centre_px: tuple[float, float]
-    centre_u_px: tuple[float, float]
-    centre_chi2: float
-    centre_dof: int
-    centre_p: float
-    increment_rad: float
-    increment_u_rad: float
-    steps: tuple[int, ...]
-    residuals_rad: tuple[float, ...]
-    spread_rad: float
-    chi2: float
-    dof: int
-    p_value: float
-    lens: str = "none"
-    increment_u_lens_rad: float = 0.0
-
-    @property
-    def chi2_dof(self) -> float:
-        return self.chi2 / self.dof if self.dof > 0 else float("nan")
-
-    def uniform(self, alpha: float = 1e-3) -> bool:
-        """Whether the lines meet at one point and are evenly spaced within their u."""
-        return bool(self.p_value >= alpha and self.centre_p >= alpha)
-
-    def to_dict(self) -> dict:
-        """The ``dial`` block of a member's entry in ``align marks --json``."""
-        arc = float(np.rad2deg(1) * 3600)
-        return {"format_version": DIAL_FORMAT_VERSION, "members": list(self.members),
-                "lines": len(self.members), "centre_px": list(self.centre_px),
-                "centre_u_px": list(self.centre_u_px), "centre_chi2": self.centre_chi2,
-                "centre_dof": self.centre_dof, "centre_p": self.centre_p,
-                "increment_rad": self.increment_rad, "increment_u_rad": self.increment_u_rad,
-                "increment_deg": float(np.rad2deg(self.increment_rad)),
-                "increment_u_arcsec": self.increment_u_rad * arc, "steps": list(self.steps),
-                "residuals_rad": list(self.residuals_rad), "spread_rad": self.spread_rad,
-                "spread_arcsec": self.spread_rad * arc, "chi2": self.chi2, "dof": self.dof,
-                "chi2_dof": self.chi2_dof, "p_value": self.p_value, "lens": self.lens,
-                "increment_u_lens_rad": self.increment_u_lens_rad,
-                "increment_u_lens_arcsec": self.increment_u_lens_rad * arc}
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> LineDial:
-        """From :meth:`to_dict`'s keys; a newer format version is refused."""
-        if int(d.get("format_version", 1)) > DIAL_FORMAT_VERSION:
-            raise ValueError(f"dial block format_version {d['format_version']}: newer than "
-                             f"this tool reads ({DIAL_FORMAT_VERSION})")
-        f = float
-        return cls(tuple(int(i) for i in d["members"]),
-                   (f(d["centre_px"][0]), f(d["centre_px"][1])),
-                   (f(d["centre_u_px"][0]), f(d["centre_u_px"][1])), f(d["centre_chi2"]),
-                   int(d["centre_dof"]), f(d["centre_p"]), f(d["increment_rad"]),
-                   f(d["increment_u_rad"]), tuple(int(k) for k in d["steps"]),
-                   tuple(f(v) for v in d["residuals_rad"]), f(d["spread_rad"]),
-                   f(d["chi2"]), int(d["dof"]), f(d["p_value"]), str(d.get("lens", "none")),
-                   f(d.get("increment_u_lens_rad", 0.0)))
-
-    def summary(self) -> str:
-        """One line for the terminal."""
-        arc = float(np.rad2deg(1) * 3600)
-        s = (f"dial of {len(self.members)} lines: centre ({self.centre_px[0]:+.2f}, "
-             f"{self.centre_px[1]:+.2f}) ± ({self.centre_u_px[0]:.2f}, "
-             f"{self.centre_u_px[1]:.2f}) px from the image centre (p {self.centre_p:.2g}), "
-             f"increment {np.rad2deg(self.increment_rad):.5f}° ± "
-             f"{self.increment_u_rad * arc:.1f}″, chi2/dof {self.chi2_dof:.2f} "
-             f"(p {self.p_value:.2g}), spread {self.spread_rad * arc:.1f}″, lens: {self.lens}")
-        if not self.uniform():
-            s += "; NOT UNIFORM"
-        return s
-
-
-def line_dial(indices: Sequence[int], angles: np.ndarray, angle_u: np.ndarray,
-              offsets: np.ndarray, offset_u: np.ndarray, middles: np.ndarray,
-              lens: str = "none", alpha: float = 1e-3,
-              lens_coupling: Sequence[Mapping[str, float]] = ()) -> LineDial:
-    """The dial of lines with these angles [rad] (own u [rad]), offsets from the image
-    centre along their normals [px] (u [px]) and middles (N, 2) [px]; ``lens_coupling``:
-    each line's angle's signed components on the frame lens's error directions [rad]
-    (:attr:`align.mark_result.MarkResult.lens_coupling`); formulas in :class:`LineDial`."""
-    a = np.asarray(angles, float)
-    au = np.asarray(angle_u, float)
-    d = np.asarray(offsets, float)
-    du = np.asarray(offset_u, float)
-    mid = np.asarray(middles, float)
-    n = np.column_stack([np.sin(a), np.cos(a)])
-    p = np.zeros(2)
-    for _ in range(4):
-        r = np.hypot(*(mid - p).T)
-        s2 = du**2 + (r * au) ** 2
-        A = (n / s2[:, None]).T @ n
-        p = np.linalg.solve(A, (n / s2[:, None]).T @ d)
-    cov = np.linalg.inv(A)
-    res_c = n @ p - d
-    m = len(a)
-    c_chi2 = float(np.sum(res_c**2 / s2))
-    c_dof = m - 2
-    c_p = float(special.chdtrc(c_dof, c_chi2)) if c_dof > 0 else 1.0
-    # Each line's direction away from the centre (display angles: +x towards -y).
-    out = np.arctan2(-(mid[:, 1] - p[1]), mid[:, 0] - p[0])
-    th = a + np.pi * (np.cos(a - out) < 0)
-    order = np.argsort(np.mod(th - th[0], 2 * np.pi))
-    th, w_u = np.unwrap(th[order]), au[order]
-    th = th - 2 * np.pi * np.floor((th[0] + np.pi) / (2 * np.pi))
-    gaps = np.diff(th)
-    g0 = float(np.min(gaps)) if gaps.size else float("nan")
-    k = np.rint((th - th[0]) / g0)
-    w = 1 / w_u**2
-    X = np.column_stack([np.ones(m), k])
-    C = np.linalg.inv((X * w[:, None]).T @ X)
-    beta = C @ ((X * w[:, None]).T @ th)
-    res = th - X @ beta
-    dof = m - 2
-    chi2 = float(np.sum(w * res**2))
-    pv = float(special.chdtrc(dof, chi2)) if dof > 0 else 1.0
-    inc_u = float(np.sqrt(C[1, 1]))
-    if pv < alpha:
-        inc_u *= float(np.sqrt(chi2 / dof))
-    inc_lens = 0.0
-    if len(lens_coupling) == m:
-        # The increment's weights on the members' angles (theta_i = a_i + a half turn or
-        # not: d theta_i / d a_i = 1), applied to each lens direction's components.
-        c = (C @ (X * w[:, None]).T)[1]
-        cpl = [lens_coupling[i] for i in order]
-        keys = sorted({k for t in cpl for k in t})
-        inc_lens = float(np.sqrt(sum(sum(c[i] * cpl[i].get(key, 0.0) for i in range(m)) ** 2
-                                     for key in keys)))
-        inc_u = float(np.hypot(inc_u, inc_lens))
-    return LineDial(tuple(int(indices[i]) for i in order), (float(p[0]), float(p[1])),
-                    (float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))), c_chi2, c_dof, c_p,
-                    float(beta[1]), inc_u, tuple(int(v) for v in k),
-                    tuple(float(v) for v in res), float(np.sqrt(np.mean(res**2))), chi2, dof,
-                    pv, lens, inc_lens)
+def shading_shift(angle_rad: float, width_px: float, blur_px: float, background_dn: float,
+                  slope_dn_per_px: float) -> np.ndarray:
+    """How far [px] (x, y vector, along the mark's normal) the background's shading moves a
+    groove's fitted centre: gamma M2, gamma = slope / background [1/px] the shading's relative
+    slope across it, M2 = width^2 / 12 + blur^2 [px^2] its profile's second moment (a symmetric
+    profile fitted to a dip the shading scales, I = L (1 - a): its brighter side weighs more;
+    a Gaussian dip moves by exactly gamma sigma^2). Zeros when the level is not positive."""
+    if not (background_dn > 0 and np.isfinite(slope_dn_per_px)):
+        return np.zeros(2)
+    m2 = width_px**2 / 12 + blur_px**2
+    return m2 * slope_dn_per_px / background_dn * line_frame(angle_rad)[1]

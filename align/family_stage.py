@@ -21,8 +21,9 @@ from dataclasses import replace
 import numpy as np
 
 from align.camera_lens import CAMERA_MODEL, LENS_TERMS, claimed_lens, undistorted_mark
-from align.family import line_dial, line_family, member_ends
+from align.family import line_family, member_ends, shading_shift
 from align.lens import LensRanges
+from align.line_dial import line_dial
 from align.mark_result import MarkResult
 from align.mark_stage import half_diagonal
 from imaging import MarkMeasurement, Roi, detect_lines, line_frame
@@ -218,10 +219,15 @@ def with_families(results: list[MarkResult], families: Sequence[Sequence[int]],
             for i in ok:
                 out[i] = replace(out[i], dial=dial)
             continue
+        shading = np.array([shading_shift(r.angle_rad, r.measurement.profile.width_px,
+                                          r.measurement.profile.blur_px,
+                                          r.measurement.profile.background_dn,
+                                          r.measurement.profile.slope_across_dn_per_px)
+                            if r.measurement is not None else np.zeros(2) for r in ms])
         fam = line_family([r.index for r in ms], np.array([r.angle_rad for r in ms]), own,
                           np.array(mids), np.array([r.offset_own_u_px for r in ms]), lens,
                           len(g) - len(ok), alpha, shared, lengths, shifts,
-                          [r.lens_coupling for r in ms])
+                          [r.lens_coupling for r in ms], shading)
         for i in ok:
             out[i] = replace(out[i], family=fam)
     if image is not None:

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from align.family import LineDial, LineFamily
+from align.family import LineFamily
+from align.line_dial import LineDial
 from align.loop import LoopReport, LoopSummary
 from imaging import MarkMeasurement
 

@@ -10,8 +10,10 @@ together as one region (the bounding box of their tiles).
 
 Only the tiles near the marks: the test costs ~1 ms per tile, and a frame's far corners are
 not what the marks' results are read beside. A family of lines that was measured (a ruled
-scale's graduations) shows the same peak: the caller leaves out gratings with a measured
-family's pitch and direction (:func:`grating_regions`'s ``known``).
+scale's graduations) shows the same peak, or its harmonics (pitch / m: a tile's search
+reaches pitches up to a quarter of its side, so a coarse ruling shows its second harmonic
+strongest): the caller leaves out gratings with a measured family's direction and its pitch
+or a harmonic of it (:func:`grating_regions`'s ``known``, :func:`explained_by_ruling`).
 
 Geometry: pixel boxes (x0, y0, x1, y1) in the image's columns and rows (x1, y1 exclusive);
 angles [rad] from +x towards -y as in :mod:`imaging.detect`.
@@ -193,6 +195,32 @@ def _near(box: tuple[int, int, int, int], segments: np.ndarray, reach: float) ->
     return bool(np.any(dist - half <= reach))
 
 
+RULING_HARMONICS = 5
+"""A measured ruling's spectrum holds its harmonics up to this order (pitch / m): a tile
+whose search window is shorter than the ruling's pitch (:data:`TILE` / 4) shows the
+ruling's second harmonic as the strongest peak; it is the measured ruling's profile, not
+another grating."""
+
+
+def explained_by_ruling(pitch_px: float, angle_rad: float, ruling_pitch_px: float,
+                        ruling_angle_rad: float) -> bool:
+    """Whether a grating of this pitch [px] and line direction [rad] is a measured ruling's
+    own spectrum: its direction (within :data:`SAME_ANGLE`, or a tile's spectral bin,
+    pitch / :data:`TILE` rad, when wider) and its pitch or one of its
+    harmonics ruling / m, m = 1 .. :data:`RULING_HARMONICS` (ruling / pitch within
+    :data:`SAME_PITCH` of m: frequencies within that fraction of the fundamental's)."""
+    # (A tile's direction is one spectral bin wide at most, pitch / TILE [rad]: 6.4° for a
+    # 28.8 px harmonic, whose direction came 3.4° off its measured ruling's.)
+    tol = max(SAME_ANGLE, pitch_px / TILE)
+    if abs((angle_rad - ruling_angle_rad + np.pi / 2) % np.pi - np.pi / 2) >= tol:
+        return False
+    # Frequencies within SAME_PITCH of the ruling's fundamental of m times it: a harmonic's
+    # relative tolerance does not widen with m (at 10 % of m / pitch, 20 px would pass as
+    # a 65.6 px ruling's third harmonic).
+    ratio = ruling_pitch_px / pitch_px
+    return any(abs(ratio - m) < SAME_PITCH for m in range(1, RULING_HARMONICS + 1))
+
+
 def grating_regions(image: np.ndarray, segments: Sequence[np.ndarray],
                     known: Sequence[tuple[float, float]] = ()) -> list[GratingRegion]:
     """The gratings in the tiles near the marks.
@@ -204,7 +232,8 @@ def grating_regions(image: np.ndarray, segments: Sequence[np.ndarray],
     segments : sequence of (2, 2) arrays
         Each measured mark's end points (x, y) [px, image columns and rows].
     known : sequence of (pitch [px], angle [rad])
-        Rulings already measured (a family's pitch and direction): not named again.
+        Rulings already measured (a family's pitch and direction): not named again, nor
+        their harmonics (:func:`explained_by_ruling`).
 
     Returns
     -------
@@ -236,9 +265,7 @@ def grating_regions(image: np.ndarray, segments: Sequence[np.ndarray],
     for g in groups:
         pitch = float(np.median([f[0] for f in g]))
         ang = g[0][1]
-        if any(abs(pitch / p - 1) < SAME_PITCH
-               and abs((ang - a + np.pi / 2) % np.pi - np.pi / 2) < SAME_ANGLE
-               for p, a in known):
+        if any(explained_by_ruling(pitch, ang, p, a) for p, a in known):
             continue
         boxes = np.array([f[2] for f in g])
         out.append(GratingRegion(pitch, ang, (int(boxes[:, 0].min()), int(boxes[:, 1].min()),

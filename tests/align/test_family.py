@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from align.family import family_gaps, line_family, ruling_steps
+from align.family import family_gaps, line_family, ruling_steps, shading_shift, t_sd
 from align.warnings import family_warnings
 
 
@@ -86,3 +86,30 @@ def test_lens_bounds_fitted_chi2_per_dof_one_whatever_the_lens():
     a[5] += 1e-3  # a graduation tilted 10 u
     f = line_family(idx, a, u, mids, np.full(n, 0.1), lens_coupling=couplings)
     assert f.deviant == (5,) and not f.consistent()
+
+
+def test_pitch_u_counts_its_scatter_dof_and_the_shading():
+    """The pitch's u from 6 lines' residual scatter (4 dof) is taken times t's standard
+    deviation sqrt(4 / 2); the background shading's moves of the members' centres (gamma M2
+    along each one's normal, gamma growing across the scale as under vignetting) enter by
+    their slope over the steps, in quadrature, and are said in the block."""
+    steps = np.arange(6.0)
+    a = np.full(6, 0.3)
+    n = np.array([np.sin(0.3), np.cos(0.3)])
+    res = np.array([0.02, -0.03, 0.01, 0.03, -0.02, -0.01])
+    mids = (41.0 * steps + res)[:, None] * n[None, :]
+    plain = line_family(range(6), a, np.full(6, 1e-5), mids, np.full(6, 1e-4))
+    fitted = res - np.polyval(np.polyfit(steps, res, 1), steps)
+    s = np.sqrt(np.sum(fitted**2) / 4)
+    kc = steps - steps.mean()
+    assert np.isclose(plain.pitch_u_px, s * np.sqrt(2) / np.sqrt(kc @ kc))
+    # gamma from -4e-4 to +4e-4 /px across the scale, M2 3 px^2: moves -1.2e-3 .. 1.2e-3 px
+    moves = np.array([shading_shift(0.3, 4.0, np.sqrt(3 - 16 / 12), 1000.0, g)
+                      for g in np.linspace(-0.4, 0.4, 6)])
+    assert np.allclose(moves @ n, 3e-3 * np.linspace(-0.4, 0.4, 6))
+    shaded = line_family(range(6), a, np.full(6, 1e-5), mids, np.full(6, 1e-4), shading=moves)
+    slope = 3e-3 * 0.8 / 5
+    assert np.isclose(shaded.pitch_u_shading_px, slope)
+    assert np.isclose(shaded.pitch_u_px, np.hypot(plain.pitch_u_px, slope))
+    assert shaded.to_dict()["pitch_u_shading_px"] == shaded.pitch_u_shading_px
+    assert t_sd(1) == t_sd(3) == np.sqrt(3) and np.isclose(t_sd(7), np.sqrt(7 / 5))

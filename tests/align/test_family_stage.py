@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from align.family import line_dial, line_family
+from align.family import line_family
 from align.family_stage import lens_or_bend_vector, lens_shifts, lens_u_vector
+from align.line_dial import line_dial
 from align.marks import measure_camera
 from synth.marks import write_image
 from synth.ruled import RuledSpec, render_ruled
