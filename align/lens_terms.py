@@ -183,23 +183,22 @@ DISTORTION = (0, 1, 2, 3)
 """The lens vector's distortion parameters (k1, k2, p1, p2, :data:`imaging.lens.PARAMS`)."""
 
 
-def plausible_bound(rng: np.ndarray, model: np.ndarray | None, lam_u: np.ndarray, z: float
-                    ) -> np.ndarray:
-    """How large each parameter of the whole lens (the model's own plus a change) may
-    plausibly be, per PARAMS: the ``rng`` widened to the model's own values; with a camera
-    ``model`` (lens vector), its distortion (k1, k2, p1, p2) within the model's own, |model|
-    + z u (``lam_u``, :func:`lens_cov`) instead. A calibration saw its lens over the frame:
-    a model that misses it by a slip of sign is a lens of its own size (the change twice
-    it), but a lens far more distorted than the calibration saw (a machine-vision lens's
-    0.0013 at the half-diagonal read as 0.07-0.5 from one centred bent mark, 110-800 px at
-    the corner for its 2 px) is another lens, not this calibration's: that mark is bent."""
-    if model is None:
-        return np.asarray(rng, float).copy()
-    base = np.abs(np.asarray(model, float))
-    out = np.maximum(rng, base)
+def plausible_change(model: np.ndarray, lam_u: np.ndarray, z: float) -> np.ndarray:
+    """How far a camera ``model`` (lens vector) may plausibly miss its lens, per PARAMS: its
+    distortion parameters (k1, k2, p1, p2) each by twice the model's distortion at the
+    half-diagonal (|k1| + |k2| + |p1| + |p2|: a slip of sign, one mark reading any one of
+    them for the lot) plus z of its own u (``lam_u``, :func:`lens_cov`); the rest unbounded
+    here (the plausible ranges bound them).
+
+    A calibration saw its lens over the frame: a lens far more distorted than it (a
+    machine-vision lens's 0.0023 at the half-diagonal read as k1 0.07-0.5 from one centred
+    bent mark: 110-800 px at the corner where the calibration saw 4) is another lens, not
+    a change of this one; a slip of sign is one of its own size (the change twice it)."""
+    base = np.asarray(model, float)
     u = np.sqrt(np.clip(np.diag(lens_cov(lam_u)), 0.0, None))
     d = list(DISTORTION)
-    out[d] = base[d] + z * u[d]
+    out = np.full(len(base), np.inf)
+    out[d] = 2.0 * float(np.sum(np.abs(base[d]))) + z * u[d]
     return out
 
 
@@ -226,8 +225,13 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
     # error in the undetermined parameters aliases into the determined ones.
     C = _change_cov(F, det, lam_u)
     W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
-    bound = plausible_bound(rng, model, lam_u, z)[det]
-    fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))
+    bound = np.maximum(rng, np.abs(base))[det]
+    lo, hi = -bound - base[det], bound - base[det]
+    if model is not None:
+        # The change itself no larger than the model can plausibly miss its lens by.
+        c = plausible_change(base, lam_u, z)[det]
+        lo, hi = np.maximum(lo, -c), np.minimum(hi, c)
+    fit = lsq_linear(W, W @ dlam, bounds=(lo, hi))
     return (float(special.chdtrc(len(det), 2 * fit.cost)) >= alpha
             or np.sqrt(2 * fit.cost) <= LINEAR_SHARE * float(np.linalg.norm(W @ dlam)))
 
