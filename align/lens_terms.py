@@ -212,7 +212,10 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
     it. The whole lens, not the change alone: a
     model with k1 and k2 of the wrong sign needs a change of twice the lens's, which the
     true (plausible) lens makes; one mark determines k1 and k2 only together, so the best
-    change alone may lie beyond the ranges when a plausible one fits as well."""
+    change alone may lie beyond the ranges when a plausible one fits as well. With a
+    ``model``, the change is also no larger than the model can plausibly miss its lens by
+    (:func:`plausible_change`): near the principal point a radial change hardly bows a line,
+    so a bent mark there calls for one far beyond the calibrated lens."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     base = np.zeros(len(PARAMS)) if model is None else np.asarray(model, float)
@@ -244,7 +247,8 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
     changed lens bows every mark it reaches, so the departure must stand without any one of
     them. A single mark is alone when the lens its departure calls for — the camera's
     ``model`` (lens vector, default 0) plus the change — is beyond any plausible lens
-    (``ranges``, widened to the model's own values). Empty when the departure stands without
+    (``ranges``, widened to the model's own values; the change within
+    :func:`plausible_change`). Empty when the departure stands without
     each mark in turn, or falls without any of several (the marks agree on it, or share it)."""
     if len(designs) < 2:
         # One mark cannot show that marks agree: its departure is the lens's only if a lens
