@@ -191,8 +191,8 @@ def plausible_change(model: np.ndarray, lam_u: np.ndarray, z: float) -> np.ndarr
     here (the plausible ranges bound them).
 
     A calibration saw its lens over the frame: a lens far more distorted than it (a
-    machine-vision lens's 0.0023 at the half-diagonal read as k1 0.07-0.5 from one centred
-    bent mark: 110-800 px at the corner where the calibration saw 4) is another lens, not
+    machine-vision lens's 0.0023 at the half-diagonal read as |k1| 0.07-2 from one centred
+    bent mark: 110-3200 px at the corner where the calibration saw 4) is another lens, not
     a change of this one; a slip of sign is one of its own size (the change twice it)."""
     base = np.asarray(model, float)
     u = np.sqrt(np.clip(np.diag(lens_cov(lam_u)), 0.0, None))

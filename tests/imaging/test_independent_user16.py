@@ -212,7 +212,7 @@ def test_machine_bent_centre_marks_with_model_are_named_bent(work, machine_model
     named bent and each of those within 3 u (before: 4 of 8 lens-limited, camera_or_bent,
     'either the mark is bent or the lens differs from its calibration ... one mark cannot
     tell which', u 78-275″, errors up to +142″; seeds 2000-2007: 7 of 8, u 154-318″. Their
-    bows called for k1 +0.07 to +2.0 at the half-diagonal on a lens of 0.0013 there, beyond
+    bows called for |k1| 0.07-2.0 at the half-diagonal on a lens of 0.0013 there, beyond
     what a model can plausibly miss its lens by. Now 8 of 8 ok, u 4-18″, max |z| 1.0; seeds
     2000-2007 likewise, max |z| 1.7)."""
     cam = g.MACHINE
