@@ -179,29 +179,6 @@ of second order, a fraction of the bow of that order (the real lens through its 
 model: 2.5 %; a bent mark that needs k1 +1.3 on top of an exact model: ~65 %)."""
 
 
-DISTORTION = (0, 1, 2, 3)
-"""The lens vector's distortion parameters (k1, k2, p1, p2, :data:`imaging.lens.PARAMS`)."""
-
-
-def plausible_change(model: np.ndarray, lam_u: np.ndarray, z: float) -> np.ndarray:
-    """How far a camera ``model`` (lens vector) may plausibly miss its lens, per PARAMS: its
-    distortion parameters (k1, k2, p1, p2) each by twice the model's distortion at the
-    half-diagonal (|k1| + |k2| + |p1| + |p2|: a slip of sign, one mark reading any one of
-    them for the lot) plus z of its own u (``lam_u``, :func:`lens_cov`); the rest unbounded
-    here (the plausible ranges bound them).
-
-    A calibration saw its lens over the frame: a lens far more distorted than it (a
-    machine-vision lens's 0.0023 at the half-diagonal read as |k1| 0.07-2 from one centred
-    bent mark: 110-3200 px at the corner where the calibration saw 4) is another lens, not
-    a change of this one; a slip of sign is one of its own size (the change twice it)."""
-    base = np.asarray(model, float)
-    u = np.sqrt(np.clip(np.diag(lens_cov(lam_u)), 0.0, None))
-    d = list(DISTORTION)
-    out = np.full(len(base), np.inf)
-    out[d] = 2.0 * float(np.sum(np.abs(base[d]))) + z * u[d]
-    return out
-
-
 def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensRanges,
                     alpha: float, model: np.ndarray | None) -> bool:
     """Whether a plausible lens — the camera's ``model`` (lens vector) plus a change, within
@@ -212,10 +189,7 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
     it. The whole lens, not the change alone: a
     model with k1 and k2 of the wrong sign needs a change of twice the lens's, which the
     true (plausible) lens makes; one mark determines k1 and k2 only together, so the best
-    change alone may lie beyond the ranges when a plausible one fits as well. With a
-    ``model``, the change is also no larger than the model can plausibly miss its lens by
-    (:func:`plausible_change`): near the principal point a radial change hardly bows a line,
-    so a bent mark there calls for one far beyond the calibrated lens."""
+    change alone may lie beyond the ranges when a plausible one fits as well."""
     z = float(-special.ndtri(alpha / 2))
     rng = ranges.vector()
     base = np.zeros(len(PARAMS)) if model is None else np.asarray(model, float)
@@ -229,12 +203,7 @@ def _plausible_fits(designs: Sequence[_Design], lam_u: np.ndarray, ranges: LensR
     C = _change_cov(F, det, lam_u)
     W = np.linalg.cholesky(np.linalg.inv(C)).T  # |W v|^2 = v' C^-1 v
     bound = np.maximum(rng, np.abs(base))[det]
-    lo, hi = -bound - base[det], bound - base[det]
-    if model is not None:
-        # The change itself no larger than the model can plausibly miss its lens by.
-        c = plausible_change(base, lam_u, z)[det]
-        lo, hi = np.maximum(lo, -c), np.minimum(hi, c)
-    fit = lsq_linear(W, W @ dlam, bounds=(lo, hi))
+    fit = lsq_linear(W, W @ dlam, bounds=(-bound - base[det], bound - base[det]))
     return (float(special.chdtrc(len(det), 2 * fit.cost)) >= alpha
             or np.sqrt(2 * fit.cost) <= LINEAR_SHARE * float(np.linalg.norm(W @ dlam)))
 
@@ -247,8 +216,7 @@ def lone_departures(designs: Sequence[_Design], lam_u: np.ndarray,
     changed lens bows every mark it reaches, so the departure must stand without any one of
     them. A single mark is alone when the lens its departure calls for — the camera's
     ``model`` (lens vector, default 0) plus the change — is beyond any plausible lens
-    (``ranges``, widened to the model's own values; the change within
-    :func:`plausible_change`). Empty when the departure stands without
+    (``ranges``, widened to the model's own values). Empty when the departure stands without
     each mark in turn, or falls without any of several (the marks agree on it, or share it)."""
     if len(designs) < 2:
         # One mark cannot show that marks agree: its departure is the lens's only if a lens
