@@ -225,8 +225,10 @@ class Disposition:
     reason : str
         One line saying why; unit —.
     worst : str or None
-        The angle nearest to (or furthest beyond) its acceptance limit (smallest margin −
-        guard band; None without a verdict on numbers); unit —.
+        On a FAIL the most clearly failing angle (furthest beyond its rejection limit:
+        smallest margin + guard band), else the angle nearest to (or furthest beyond) its
+        acceptance limit (smallest margin − guard band); None without a verdict on numbers;
+        unit —.
     angles : tuple of AngleDisposition
         Each toleranced angle; unit — (their fields carry units).
     p_conform_all : float or None
@@ -360,12 +362,24 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
             lo, hi = spec.limits[n]
             angles.append(judge_angle(n, float(e6[m]), float(u6[m]), spec.nominal.get(n, 0.0),
                                       lo, hi, rule, k))
-    worst = min(angles, key=lambda a: a.margin - a.guard)
     verdicts = {a.verdict for a in angles}
     verdict = FAIL if FAIL in verdicts else PASS if verdicts == {PASS} else INCONCLUSIVE
+    worst = worst_angle(angles)
     reason = _reason(verdict, worst, len(angles), spec)
     return Disposition(verdict, rule, k, reason, worst.name, tuple(angles),
                        _joint_p(angles, None if cov is None else np.asarray(cov, float)))
+
+
+def worst_angle(angles: Sequence[AngleDisposition]) -> AngleDisposition:
+    """The angle the unit's verdict names: of the failing angles the most clearly failing
+    (furthest beyond its rejection limit: smallest m + w), else the one nearest to (or
+    furthest beyond) its acceptance limit (smallest m − w). (An angle failing by a little
+    with a small u is the FAIL; a larger miss whose guard band is wider is INCONCLUSIVE,
+    and names no FAIL.)"""
+    fails = [a for a in angles if a.verdict == FAIL]
+    if fails:
+        return min(fails, key=lambda a: a.margin + a.guard)
+    return min(angles, key=lambda a: a.margin - a.guard)
 
 
 def _reason(verdict: str, worst: AngleDisposition, n: int, spec: ToleranceSpec) -> str:

@@ -74,6 +74,18 @@ def test_unit_verdict_fail_dominates_inconclusive_dominates_pass():
     assert d.verdict == INCONCLUSIVE and d.worst == "E_xZ"
 
 
+def test_a_fail_names_a_failing_angle_and_its_guard_band():
+    # user 16: E_xZ misses by more (-64.2″) but its wide u makes it INCONCLUSIVE; the unit
+    # FAILs on E_yX and E_zY, and names the one furthest beyond its rejection limit
+    d = decide(_result([0, -64.23, -65.08, 0, 0, -79.64], [1, 22.03, 2.01, 1, 1, 8.53]),
+               _spec())
+    by = {a.name: a for a in d.angles}
+    assert by["E_xZ"].verdict == INCONCLUSIVE
+    assert d.verdict == FAIL and by[d.worst].verdict == FAIL and d.worst == "E_zY"
+    assert "E_zY = -79.64 ± 8.53″ is 19.6″ outside" in d.reason
+    assert "beyond the guard band 17.1″" in d.reason
+
+
 def test_asymmetric_tolerance_and_nonzero_nominal():
     # Zone for E_xZ: nominal 20 + [-30, 90] = [-10, 110]″; guard 2·5 = 10″.
     spec = ToleranceSpec({"E_xZ": (-30 * A, 90 * A)}, {"E_xZ": 20 * A}, "guarded", 2.0)
