@@ -224,11 +224,17 @@ def test_the_plan_judges_a_carried_candidate_over_its_declared_range():
     add, drop = _option(lin, "image")[3:5]
     default = predict(lin, add, drop)
     assert default.carried[0].p > 0.95 and default.ranged == ()
-    declared = replace(lin, ranges=(("camera_roll[A]", 1.0 * ARCSEC),))
+    declared = replace(lin, ranges=(("camera_roll[A]", 1.0 * ARCSEC),),
+                       declared=("camera_roll[A]",))
     after = predict(declared, add, drop)
     assert after.carried[0].p == 0.0
     (r,) = after.ranged
     assert (r.name, r.sigma) == ("camera_roll[A]", 1.0 * ARCSEC)
+    # named as declared, as the fusion's warning names it (the range read where it is kept)
+    assert r.declared and "σ 1.0″, declared;" in r.label, r.label
+    assert Linearisation.from_dict(declared.to_dict()).declared == ("camera_roll[A]",)
+    (r,) = predict(replace(declared, declared=()), add, drop).ranged
+    assert "default range" in r.label
     u_f2 = 4 + 1 / 4  # [″²]: four images of u 1″ and the static row of u 2″
     assert r.u_freed / ARCSEC == pytest.approx(np.sqrt(u_f2), rel=1e-3)
     assert abs(r.shift[0]) / ARCSEC == pytest.approx(16 / 17 * np.sqrt(u_f2 / (1 + u_f2)),
