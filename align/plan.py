@@ -488,7 +488,10 @@ def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> 
     r = js if isinstance(js, LoadedSession) else LoadedSession.from_dict(js, where)
     if not r.ok or r.verdict == "NOT MEASURED":
         failed = [e.stage for e in r.errors]
-        raise InputError(f"{r.where}: the session was NOT MEASURED (not ok"
+        # (a FAIL beside an angle the data cannot measure is not ok either: docs/decision.md)
+        what = ("NOT MEASURED (not ok" if r.verdict in (None, "NOT MEASURED")
+                else f"not ok (verdict {r.verdict}")
+        raise InputError(f"{r.where}: the session was {what}"
                          + (f": {', '.join(failed)} failed" if failed else "")
                          + "): its u are not a basis for planning; fix what failed (its "
                          "warnings and errors say what) and run it again")
