@@ -206,6 +206,9 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     text = "\n".join(p.lines())
     assert "its u carries camera_roll[A] not excluded (+5.0 ± 2.1″)" in text
     assert "likely no longer carries camera_roll[A] (p 0.00; named p 0.96)" in text
+    # a term too small to lower u by MIN_GAIN of it gets no line (user 16: "0.000″ of it")
+    tiny = replace(p.carried[0], shift=tuple(1e-3 * np.asarray(p.carried[0].shift)))
+    assert "its u carries" not in "\n".join(replace(p, carried=(tiny,)).lines())
     # The session warning: the candidate, its value and u, and what resolves it.
     fusion = SimpleNamespace(budget=Budget({}, 1.0, lin))
     assert carried_notices(fusion) == [
