@@ -31,6 +31,7 @@ from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same
 
 from align.errors import InputError
 from align.fusion.observations import E_INDEX, E_NAMES
+from align.fusion.undetermined import Undetermined
 from axisbase.covariance import cov_of
 from axisbase.units import ARCSEC
 
@@ -225,8 +226,10 @@ class Disposition:
     reason : str
         One line saying why; unit —.
     worst : str or None
-        The angle nearest to (or furthest beyond) its acceptance limit (smallest margin −
-        guard band; None without a verdict on numbers); unit —.
+        On a FAIL the most clearly failing angle (furthest beyond its rejection limit:
+        smallest margin + guard band), else the angle nearest to (or furthest beyond) its
+        acceptance limit (smallest margin − guard band); None without a verdict on numbers;
+        unit —.
     angles : tuple of AngleDisposition
         Each toleranced angle; unit — (their fields carry units).
     p_conform_all : float or None
@@ -293,6 +296,38 @@ def judge_angle(name: str, value: float, u: float, nominal: float, lo: float, hi
                             p_conform(value, u, lower, upper), verdict)
 
 
+UNDECIDED_SHARE = 0.5
+"""An angle is not measured when a nuisance the data cannot determine sets more than this
+share of its u² and the angle is INCONCLUSIVE (:func:`undecided`)."""
+
+
+def undecided(e6: Sequence[float], u6: Sequence[float], carried: Sequence[Undetermined],
+              spec: ToleranceSpec) -> list[tuple[str, str]]:
+    """The toleranced angles a result cannot decide (issue 18): INCONCLUSIVE, with more than
+    :data:`UNDECIDED_SHARE` of their u² set by a nuisance the data cannot determine
+    (``carried``: the fusion's :class:`~align.fusion.undetermined.Undetermined`, carried over
+    its plausible range) — the result is then not a measurement of them. Each as (angle,
+    the result's problem line, saying what to measure); ``e6``, ``u6`` [rad] in ``E_NAMES``
+    order."""
+    out = []
+    for m, n in enumerate(E_NAMES):
+        if n not in spec.limits:
+            continue
+        lo, hi = spec.limits[n]
+        a = judge_angle(n, float(e6[m]), float(u6[m]), spec.nominal.get(n, 0.0), lo, hi,
+                        spec.rule, spec.k)
+        if a.verdict != INCONCLUSIVE:
+            continue
+        for c in carried:
+            if c.shift[m] ** 2 > UNDECIDED_SHARE * a.u**2:
+                src = "as declared" if c.declared else "the default range"
+                out.append((n, f"fusion: {n}'s tolerance cannot be decided: its u "
+                               f"{a.u / ARCSEC:.1f}″ is set by {c.name}, which these data "
+                               f"cannot determine (carried over its plausible range, σ "
+                               f"{c.sigma / ARCSEC:.1f}″, {src}): measure {c.measure}"))
+    return out
+
+
 def _joint_p(angles: Sequence[AngleDisposition], cov: np.ndarray | None) -> float | None:
     """P(every angle within its limits) under N(E, cov) (the marginals' product when the
     covariance is not at hand)."""
@@ -333,17 +368,32 @@ def decide(result: Mapping, spec: ToleranceSpec | None) -> Disposition:
         u6 = [float(U[i, j]) for i, j in E_INDEX]
     errs = [(str(e.get("stage", "?")), str(e.get("message", "")))
             for e in result.get("errors") or []]
-    errs += [("not ok", str(p)) for p in result.get("problems") or []]
-    return decide_values(bool(result.get("ok")), e6, u6, result.get("covariance_rad2"), spec,
-                         errs)
+    problems = [str(p) for p in result.get("problems") or []]
+    ok = bool(result.get("ok"))
+    unmeasured: list[tuple[str, str]] = []
+    if fused and not ok and not errs and spec is not None:
+        # not ok only for angles whose u a nuisance the data cannot determine sets?
+        carried = [Undetermined.from_dict(c) for c in result.get("undetermined") or ()]
+        unmeasured = undecided(e6, u6, carried, spec)
+        if problems and set(problems) <= {why for _, why in unmeasured}:
+            ok = True
+        else:
+            unmeasured = []
+    errs += [("not ok", p) for p in problems]
+    return decide_values(ok, e6, u6, result.get("covariance_rad2"), spec, errs, unmeasured)
 
 
 def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | None,
                   cov: Sequence | np.ndarray | None, spec: ToleranceSpec | None,
-                  errors: Sequence[tuple[str, str]] = ()) -> Disposition:
+                  errors: Sequence[tuple[str, str]] = (),
+                  unmeasured: Sequence[tuple[str, str]] = ()) -> Disposition:
     """:func:`decide` from the parts: ``ok`` (every stage succeeded and fused), the six angles
     and their u [rad] in ``E_NAMES`` order (None when not fused), their covariance [rad²]
-    (or None), the spec, and the failed stages (stage, message) for the reason."""
+    (or None), the spec, and the failed stages (stage, message) for the reason.
+    ``unmeasured``: the angles the result cannot decide (:func:`undecided`: (angle, the
+    result's problem line)), ``ok`` then saying the result is ok but for them: the unit FAILs
+    when another angle fails beyond its guard band (its own u, every carried term in it), and
+    is NOT MEASURED otherwise — never PASS nor INCONCLUSIVE on a result that is not ok."""
     rule = spec.rule if spec is not None else DEFAULT_RULE
     k = spec.k if spec is not None else DEFAULT_K
     if not ok or e6 is None or u6 is None:
@@ -360,12 +410,31 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
             lo, hi = spec.limits[n]
             angles.append(judge_angle(n, float(e6[m]), float(u6[m]), spec.nominal.get(n, 0.0),
                                       lo, hi, rule, k))
-    worst = min(angles, key=lambda a: a.margin - a.guard)
     verdicts = {a.verdict for a in angles}
     verdict = FAIL if FAIL in verdicts else PASS if verdicts == {PASS} else INCONCLUSIVE
+    if unmeasured and verdict != FAIL:  # an angle not measured: only a FAIL is a verdict
+        why = "; ".join(f"not ok: {msg}" for _, msg in unmeasured[:2])
+        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})")
+    worst = worst_angle(angles)
     reason = _reason(verdict, worst, len(angles), spec)
+    if unmeasured:
+        names = ", ".join(dict.fromkeys(n for n, _ in unmeasured))
+        reason += (f"; not measured: {names} (the result is not ok: "
+                   f"{unmeasured[0][1].removeprefix('fusion: ')})")
     return Disposition(verdict, rule, k, reason, worst.name, tuple(angles),
                        _joint_p(angles, None if cov is None else np.asarray(cov, float)))
+
+
+def worst_angle(angles: Sequence[AngleDisposition]) -> AngleDisposition:
+    """The angle the unit's verdict names: of the failing angles the most clearly failing
+    (furthest beyond its rejection limit: smallest m + w), else the one nearest to (or
+    furthest beyond) its acceptance limit (smallest m − w). (An angle failing by a little
+    with a small u is the FAIL; a larger miss whose guard band is wider is INCONCLUSIVE,
+    and names no FAIL.)"""
+    fails = [a for a in angles if a.verdict == FAIL]
+    if fails:
+        return min(fails, key=lambda a: a.margin + a.guard)
+    return min(angles, key=lambda a: a.margin - a.guard)
 
 
 def _reason(verdict: str, worst: AngleDisposition, n: int, spec: ToleranceSpec) -> str:

@@ -190,14 +190,24 @@ class Plan:
         return not any(self.u_before - o.u_after > NOISE_K * o.u_after_noise
                        for o in self.options)
 
+    def _negligible(self, share: float) -> bool:
+        """A term whose removal would lower the target's u by less than ``MIN_GAIN`` of it
+        (``share`` [rad]: its shift of the target): not worth a line (its JSON entry stays)."""
+        u = self.u_before
+        return u - np.sqrt(max(u**2 - share**2, 0.0)) < MIN_GAIN * u
+
     def lines(self) -> list[str]:
         out = [f"what to measure next for {self.target} ({self.why}; u now "
                f"{self.u_before / ARCSEC:.3f}″):"]
         t = E_NAMES.index(self.target)
         for c in self.carried:
+            if self._negligible(c.shift[t]):
+                continue
             out.append(f"  its u carries {c.label}: {abs(c.shift[t]) / ARCSEC:.3f}″ of it; "
                        f"resolved by {self.resolves.get(c.name, '?')}")
         for r in self.ranged:
+            if self._negligible(r.shift[t]):
+                continue
             out.append(f"  its u carries {r.label}: {abs(r.shift[t]) / ARCSEC:.3f}″ of it; "
                        f"resolved by {self.resolves.get(r.name, r.measure)}")
         if not self.options:
@@ -488,7 +498,10 @@ def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> 
     r = js if isinstance(js, LoadedSession) else LoadedSession.from_dict(js, where)
     if not r.ok or r.verdict == "NOT MEASURED":
         failed = [e.stage for e in r.errors]
-        raise InputError(f"{r.where}: the session was NOT MEASURED (not ok"
+        # (a FAIL beside an angle the data cannot measure is not ok either: docs/decision.md)
+        what = ("NOT MEASURED (not ok" if r.verdict in (None, "NOT MEASURED")
+                else f"not ok (verdict {r.verdict}")
+        raise InputError(f"{r.where}: the session was {what}"
                          + (f": {', '.join(failed)} failed" if failed else "")
                          + "): its u are not a basis for planning; fix what failed (its "
                          "warnings and errors say what) and run it again")

@@ -195,14 +195,15 @@ def ranged_after(lin: Linearisation, info: np.ndarray,
     judged by the fusion's rule (:func:`align.fusion.plausible.judge`, undetermined first):
     its u freed u_f, and its share σ² u_f²/(σ² + u_f²) k kᵀ; none when the new data determine
     it (u_f ≤ σ: the loop's tests judge it, and a candidate the loop did not name is taken
-    as not named after)."""
+    as not named after). Each says whether its range is declared (``declared``, or in
+    session.toml: ``Linearisation.declared``) as the fusion's own warning says it."""
     sig = sigmas(lin, declared)
     out = []
     for name, (u_f, k) in freed_beside(lin, info, named).items():
         s = sig.get(name)
         if judge(u_f, s) == UNDETERMINED:
             out.append(Undetermined(name, s, float(u_f), k * np.sqrt(carried_variance(s, u_f)),
-                                    name in declared))
+                                    name in declared or name in lin.declared))
     return tuple(out)
 
 

@@ -137,6 +137,9 @@ class Linearisation:
         The standard uncertainty of the plausible range [rad] of each candidate that has one
         (a camera's roll, the reference face's offset), declared in session.toml or the
         default (:func:`align.fusion.undetermined.default_sigma`).
+    declared : tuple of str
+        The candidates of ``ranges`` whose σ session.toml declares (the others': the
+        default), as the fusion's warnings name them; unit —.
     """
 
     params: tuple[str, ...]
@@ -147,6 +150,7 @@ class Linearisation:
     ranged: tuple[tuple[str, tuple[int, ...], float], ...] = ()
     others: tuple[tuple[str, tuple[int, ...]], ...] = ()
     ranges: tuple[tuple[str, float], ...] = ()
+    declared: tuple[str, ...] = ()
 
     @property
     def free(self) -> np.ndarray:
@@ -215,6 +219,7 @@ class Linearisation:
                            for n, i, s in self.ranged],
                 "others": [{"name": n, "index": list(i)} for n, i in self.others],
                 "ranges": [{"name": n, "sigma_rad": s} for n, s in self.ranges],
+                "declared": list(self.declared),
                 "groups": [g.to_dict() for g in self.groups]}
 
     @classmethod
@@ -229,7 +234,8 @@ class Linearisation:
                           float(h["sigma_rad"])) for h in d.get("ranged", ())),
                    tuple((str(h["name"]), tuple(int(i) for i in h["index"]))
                          for h in d.get("others", ())),
-                   tuple((str(h["name"]), float(h["sigma_rad"])) for h in d.get("ranges", ())))
+                   tuple((str(h["name"]), float(h["sigma_rad"])) for h in d.get("ranges", ())),
+                   tuple(str(n) for n in d.get("declared", ())))
 
 
 @dataclass(frozen=True)

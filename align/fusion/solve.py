@@ -526,7 +526,8 @@ def fuse(blocks: Sequence[Block], alpha: float = 1e-3,
     at = len(lin.nuisances) - len(others)
     lin = replace(lin, nuisances=lin.nuisances[:at], others=tuple(
         (n, idx) for (n, _), (_, idx) in zip(others, lin.nuisances[at:], strict=True)),
-        ranges=tuple((n, float(s)) for n, s in sigmas.items() if s is not None))
+        ranges=tuple((n, float(s)) for n, s in sigmas.items() if s is not None),
+        declared=tuple(n for n in sigmas if n in (plausible_u or {})))
     if unknown:
         at = len(lin.nuisances) - len(ranged)
         lin = replace(lin, nuisances=lin.nuisances[:at], ranged=tuple(

@@ -31,11 +31,10 @@ from align.calibration.stability import chosen_ppm
 from align.calibration.static import StaticSettings, session_names
 from align.calibration.triad import per_axis
 from align.calibration.units import unit_scale_check, unit_source
-from align.decision import INCONCLUSIVE, Disposition, ToleranceSpec, decide, decide_values
+from align.decision import Disposition, ToleranceSpec, decide, undecided
 from align.errors import InputError
 from align.fusion import (
     E_INDEX,
-    E_NAMES,
     Block,
     FusionResult,
     MarkObs,
@@ -58,7 +57,6 @@ from align.warnings import session_notes, session_warnings
 from axisbase.console import captured_warnings
 from axisbase.errors import internal_error
 from axisbase.header import header_units, resolve_units
-from axisbase.units import ARCSEC
 from imaging import CameraModel
 
 Progress = Callable[[str], None]
@@ -401,25 +399,11 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
 
 
 def _undecided(f: FusionResult, spec: ToleranceSpec) -> list[str]:
-    """The toleranced angles the disposition cannot decide because a nuisance the data cannot
-    determine sets their u (more than half its u²): the result is then not a measurement of
-    them — say what to measure (issue 18; :mod:`align.fusion.undetermined`)."""
+    """The problem lines of the toleranced angles the disposition cannot decide
+    (:func:`align.decision.undecided`: a nuisance the data cannot determine sets their u)."""
     e6 = [float(f.E[i, j]) for i, j in E_INDEX]
     u6 = [float(f.E_u[i, j]) for i, j in E_INDEX]
-    d = decide_values(True, e6, u6, f.cov, spec)
-    out = []
-    for a in d.angles:
-        if a.verdict != INCONCLUSIVE:
-            continue
-        m = E_NAMES.index(a.name)
-        for c in f.undetermined:
-            if c.shift[m] ** 2 > 0.5 * u6[m] ** 2:
-                out.append(f"fusion: {a.name}'s tolerance cannot be decided: its u "
-                           f"{u6[m] / ARCSEC:.1f}″ is set by {c.name}, which these data "
-                           "cannot determine (carried over its plausible range, σ "
-                           f"{c.sigma / ARCSEC:.1f}″): "
-                           f"measure {c.measure}")
-    return out
+    return [why for _, why in undecided(e6, u6, f.undetermined, spec)]
 
 
 def _off_nominal(s: Session, im: ImageEntry, r: MarkResult) -> str | None:

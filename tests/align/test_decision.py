@@ -16,9 +16,11 @@ from align.decision import (
     judge_angle,
     limits_arcsec,
     resolve,
+    undecided,
 )
 from align.errors import InputError
 from align.fusion import E_INDEX, E_NAMES
+from align.fusion.undetermined import Undetermined
 from axisbase.units import ARCSEC
 
 A = ARCSEC
@@ -74,6 +76,18 @@ def test_unit_verdict_fail_dominates_inconclusive_dominates_pass():
     assert d.verdict == INCONCLUSIVE and d.worst == "E_xZ"
 
 
+def test_a_fail_names_a_failing_angle_and_its_guard_band():
+    # user 16: E_xZ misses by more (-64.2″) but its wide u makes it INCONCLUSIVE; the unit
+    # FAILs on E_yX and E_zY, and names the one furthest beyond its rejection limit
+    d = decide(_result([0, -64.23, -65.08, 0, 0, -79.64], [1, 22.03, 2.01, 1, 1, 8.53]),
+               _spec())
+    by = {a.name: a for a in d.angles}
+    assert by["E_xZ"].verdict == INCONCLUSIVE
+    assert d.verdict == FAIL and by[d.worst].verdict == FAIL and d.worst == "E_zY"
+    assert "E_zY = -79.64 ± 8.53″ is 19.6″ outside" in d.reason
+    assert "beyond the guard band 17.1″" in d.reason
+
+
 def test_asymmetric_tolerance_and_nonzero_nominal():
     # Zone for E_xZ: nominal 20 + [-30, 90] = [-10, 110]″; guard 2·5 = 10″.
     spec = ToleranceSpec({"E_xZ": (-30 * A, 90 * A)}, {"E_xZ": 20 * A}, "guarded", 2.0)
@@ -113,6 +127,38 @@ def test_failed_session_is_not_measured_whatever_its_numbers():
     assert decide(_result([0] * 6, U5, ok=False, fused=False), _spec()).verdict == NOT_MEASURED
     assert decide(_result([0.0] * 6, U5), None).verdict == NO_TOLERANCE
     assert decide(_result([0.0] * 6, U5), resolve(None, rule="simple")).verdict == NO_TOLERANCE
+
+
+def _undecided_result(e_arcsec, u_arcsec, spec, more_problems=()):
+    """A fused result whose reference-face offset the data cannot determine (σ 2″ declared,
+    all of E_yX's u), its problems as ``align run`` lists them."""
+    d = _result(e_arcsec, u_arcsec, ok=False)
+    c = Undetermined("reference_face_offset", 2 * A, float("inf"),
+                     np.array([0, 0, 2 * A, 0, 0, 0]), True)
+    d["undetermined"] = [c.to_dict()]
+    e6, u6 = ([v * A for v in x] for x in (e_arcsec, u_arcsec))
+    d["problems"] = [why for _, why in undecided(e6, u6, [c], spec)] + list(more_problems)
+    return d
+
+
+def test_an_angle_not_measured_never_hides_a_clear_fail():
+    spec, u = _spec(), [1.0, 5.3, 2.0, 1.0, 1.0, 1.0]
+    # user 16: E_yX -57 ± 2.0″ is INCONCLUSIVE, its u all the undetermined offset's
+    d = decide(_undecided_result([10, 122.3, -57, 20, -15, 5], u, spec), spec)
+    assert d.verdict == FAIL and d.worst == "E_xZ", d.reason
+    assert "not measured: E_yX" in d.reason and "as declared" in d.reason
+    assert {a.name: a.verdict for a in d.angles}["E_yX"] == INCONCLUSIVE
+    # E_xZ inside its guard band: no verdict beyond NOT MEASURED (never INCONCLUSIVE/PASS)
+    for e_xz in (20.0, 55.0, 65.0):
+        d = decide(_undecided_result([10, e_xz, -57, 20, -15, 5], u, spec), spec)
+        assert d.verdict == NOT_MEASURED and "E_yX's tolerance cannot be decided" in d.reason
+    # another reason the result is not ok: NOT MEASURED whatever the numbers
+    r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec,
+                          ["fusion: the instruments disagree beyond their uncertainties"])
+    assert decide(r, spec).verdict == NOT_MEASURED
+    r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec)
+    r["problems"] = [p.replace("as declared", "declared") for p in r["problems"]]
+    assert decide(r, spec).verdict == NOT_MEASURED  # a line it cannot account for
 
 
 def test_round_trip_and_overrides():

@@ -206,6 +206,9 @@ def test_the_plan_predicts_a_carried_term_and_names_what_resolves_it():
     text = "\n".join(p.lines())
     assert "its u carries camera_roll[A] not excluded (+5.0 ± 2.1″)" in text
     assert "likely no longer carries camera_roll[A] (p 0.00; named p 0.96)" in text
+    # a term too small to lower u by MIN_GAIN of it gets no line (user 16: "0.000″ of it")
+    tiny = replace(p.carried[0], shift=tuple(1e-3 * np.asarray(p.carried[0].shift)))
+    assert "its u carries" not in "\n".join(replace(p, carried=(tiny,)).lines())
     # The session warning: the candidate, its value and u, and what resolves it.
     fusion = SimpleNamespace(budget=Budget({}, 1.0, lin))
     assert carried_notices(fusion) == [
@@ -224,11 +227,17 @@ def test_the_plan_judges_a_carried_candidate_over_its_declared_range():
     add, drop = _option(lin, "image")[3:5]
     default = predict(lin, add, drop)
     assert default.carried[0].p > 0.95 and default.ranged == ()
-    declared = replace(lin, ranges=(("camera_roll[A]", 1.0 * ARCSEC),))
+    declared = replace(lin, ranges=(("camera_roll[A]", 1.0 * ARCSEC),),
+                       declared=("camera_roll[A]",))
     after = predict(declared, add, drop)
     assert after.carried[0].p == 0.0
     (r,) = after.ranged
     assert (r.name, r.sigma) == ("camera_roll[A]", 1.0 * ARCSEC)
+    # named as declared, as the fusion's warning names it (the range read where it is kept)
+    assert r.declared and "σ 1.0″, declared;" in r.label, r.label
+    assert Linearisation.from_dict(declared.to_dict()).declared == ("camera_roll[A]",)
+    (r,) = predict(replace(declared, declared=()), add, drop).ranged
+    assert "default range" in r.label
     u_f2 = 4 + 1 / 4  # [″²]: four images of u 1″ and the static row of u 2″
     assert r.u_freed / ARCSEC == pytest.approx(np.sqrt(u_f2), rel=1e-3)
     assert abs(r.shift[0]) / ARCSEC == pytest.approx(16 / 17 * np.sqrt(u_f2 / (1 + u_f2)),

@@ -305,15 +305,6 @@ def test_micrometer_no_phantom_grating(micrometer):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "session (cameras A, B distortion-free, lens_* = 0; goniometer; reference_offset_u_arcsec "
-    "= 2 declared; tolerance 60″): E_xZ = +122.3 ± 5.3″ (truth +120) is 62.3″ beyond its "
-    "limit, 51.7″ past the guard band 2u: a FAIL by the guarded rule whatever the other angles; "
-    "the verdict is NOT MEASURED ('no verdict on a result that is not ok ... E_yX's tolerance "
-    "cannot be decided: its u 2.0″ is set by reference_face_offset, which these data cannot "
-    "determine (carried over its plausible range, σ 2.0″)' though that σ was declared), and "
-    "`align plan` refuses the result. Same on the webcam + machine-vision rig with models "
-    "(E uniform in ±80″): 3 of 11 sessions NOT MEASURED for this reason alone"))
 def test_session_verdict_follows_the_numbers(work):
     A = g.ARCSEC
     E = {"E_xY": 10 * A, "E_xZ": 120 * A, "E_yX": -57 * A, "E_yZ": 20 * A, "E_zX": -15 * A,
@@ -332,12 +323,6 @@ def test_session_verdict_follows_the_numbers(work):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "`align plan` calls a declared range the default: session with reference_offset_u_arcsec "
-    "= 2 declared, tolerance 30″ (E_xZ +32.4 ± 3.2″, truth +28: INCONCLUSIVE, ok, exit 0); "
-    "`align run` warns 'carried over its plausible range (σ 2.0″, as declared)', the plan "
-    "says 'its u carries reference_face_offset ... σ 2.0″, default range ...: 0.000″ of it' "
-    "(a line for a term that is 0.000″ of E_xZ's u)"))
 def test_plan_names_a_declared_range_as_declared(work):
     A = g.ARCSEC
     E = {"E_xY": 10 * A, "E_xZ": 28 * A, "E_yX": -5 * A, "E_yZ": 20 * A, "E_zX": -15 * A,
@@ -391,13 +376,6 @@ def webcam_model(work):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "the verdict's reason names an angle that does not fail, and says it is beyond its guard "
-    "band when it is inside it: webcam + machine-vision session with models (seed 16, marks "
-    "off-centre), tolerance 60″: FAIL (right: E_yX -65.08 ± 2.01, E_zY -79.64 ± 8.53 fail), "
-    "but 'worst' E_xZ and the reason 'E_xZ = -64.23 ± 22.03″ is 4.2″ outside its tolerance "
-    "[-60.0, +60.0]″, beyond the guard band 44.1″' (its own verdict INCONCLUSIVE; truth "
-    "-11.1″)"))
 def test_fail_reason_names_a_failing_angle(work, webcam_model, machine_model):
     folder = work / "sess_worst"
     g.write_session(folder, 16, {"A": g.WEBCAM, "B": g.MACHINE},
