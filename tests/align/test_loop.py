@@ -114,8 +114,6 @@ def test_skipped_candidates_are_reported_with_why():
 
 
 def test_a_defect_in_a_candidate_is_not_a_skipped_effect():
-    import pytest
-
     def broken(f):
         raise ValueError("a bug")
 
