@@ -160,6 +160,19 @@ def _noise_candidates(x: np.ndarray, m: int) -> list[Candidate]:
             for k in range(m)]
 
 
+def _false_adds(n: int, m: int, seeds: int, **kw) -> int:
+    """Seeds of clean data (``n`` points) in which the loop over ``m`` noise candidates at
+    alpha 0.05 and no BIC bar (the tests alone decide) adds an effect."""
+    x = np.linspace(-1, 1, n)
+    cands = _noise_candidates(x, m)
+    added = 0
+    for s in range(seeds):
+        rng = np.random.default_rng([s, 19])
+        stage = PolyStage(x, 0.3 + 0.5 * x + rng.normal(0, 0.01, x.size), np.full(x.size, 0.01))
+        added += bool(run_loop(stage, cands, alpha=0.05, min_delta_bic=-np.inf, **kw).effects)
+    return added
+
+
 def test_a_round_adds_a_false_effect_at_alpha_whatever_the_number_of_candidates():
     """Clean data, 6 candidates none of which is there, alpha 0.05 and no BIC bar (so the
     F-test alone decides): the loop adds an effect in about alpha of the seeds — Holm over
@@ -167,14 +180,7 @@ def test_a_round_adds_a_false_effect_at_alpha_whatever_the_number_of_candidates(
     150 before). More than a binomial's 1e-3 tail at 5 % (17) would be a defect."""
     from scipy.stats import binom
 
-    x = np.linspace(-1, 1, 40)
-    cands = _noise_candidates(x, 6)
-    added = 0
-    for s in range(150):
-        rng = np.random.default_rng([s, 19])
-        stage = PolyStage(x, 0.3 + 0.5 * x + rng.normal(0, 0.01, x.size), np.full(x.size, 0.01))
-        added += bool(run_loop(stage, cands, alpha=0.05, min_delta_bic=-np.inf,
-                               max_effects=1).effects)
+    added = _false_adds(40, 6, 150, max_effects=1)
     assert binom.sf(added - 1, 150, 0.05) > 1e-3, added  # not more than alpha allows
     assert added >= 1  # the test can see an effect at all
 
@@ -236,12 +242,6 @@ def test_the_joint_step_keeps_clean_data_clean():
     than a binomial's 1e-3 tail at 2 alpha (the two families' bound) would be a defect."""
     from scipy.stats import binom
 
-    x = np.linspace(-1, 1, 10)
-    cands = _noise_candidates(x, 4)
-    added = 0
-    for s in range(300):
-        rng = np.random.default_rng([s, 19])
-        stage = PolyStage(x, 0.3 + 0.5 * x + rng.normal(0, 0.01, x.size), np.full(x.size, 0.01))
-        added += bool(run_loop(stage, cands, alpha=0.05, min_delta_bic=-np.inf).effects)
+    added = _false_adds(10, 4, 300)
     assert binom.sf(added - 1, 300, 0.1) > 1e-3, added
     assert added >= 1
