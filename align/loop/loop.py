@@ -6,9 +6,10 @@ terms and returns residuals, their standard uncertainties (or None when unknown)
 and the quantities of interest. *Candidates* build a :class:`Term` (design columns with a name,
 unit and physical meaning) from the current fit. The loop scores each candidate by refitting,
 adds the best one only if an F-test (corrected for searched parameters, and Holm over the
-candidates a round tests) and BIC both call for it, and stops when nothing more is
-significant. Structure that remains is reported, never
-hidden.
+candidates a round tests) and BIC both call for it; when no candidate passes alone it tries
+sets of them together (:func:`_joint`: two real effects can each leave the other's excess in
+the residual the test scales by), and stops when nothing more is significant. Structure that
+remains is reported, never hidden.
 
 A candidate that does not apply to the data (its builder returns None or raises
 :class:`~axisbase.errors.NotApplicable`, or its refit does) or whose refit is singular
@@ -131,7 +132,9 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     step-down in Sidak's form: a round of m candidates tests each at 1 - (1 - alpha)^(1/m),
     the next round at m - 1), is below ``alpha`` and it lowers BIC by at least
     ``min_delta_bic``; the best such effect is added first. ``alpha`` is then the chance that
-    a round adds an effect to data that have none, whatever the number of candidates.
+    a round adds an effect to data that have none, whatever the number of candidates. A
+    round where none passes alone adds the smallest set of candidates that passes together
+    (:func:`_joint`; at most 2 ``alpha`` a round on clean data, the two families').
     ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
     else None): the refusal is reported in ``LoopReport.refused``, never silent. A candidate
     that does not apply or whose refit is singular is reported in ``LoopReport.skipped``.
