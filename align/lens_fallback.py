@@ -34,7 +34,9 @@ from align.lens import LensRanges, LensSolution, LineGeometry, solve_lens
 from align.lens_bump import PP, pp_angle_coupling
 from align.lens_design import _Design
 from align.lens_terms import angle_coupling, camera_departure
+from align.mark_stage import half_diagonal
 from imaging import CameraModel, line_frame
+from imaging.lens import PARAMS
 
 WIDENING = ("camera_or_bent", "camera_disagreement")
 """The u terms a camera model's check adds when its marks depart from it (docs/camera.md);
@@ -58,30 +60,74 @@ class LensBeyondModel:
     coupling: tuple[dict[str, float], ...]
 
 
+COEFFS = tuple(PARAMS.index(k) for k in ("k1", "k2", "p1", "p2"))
+"""The lens vector's entries that are also a camera model's own distortion coefficients (its
+``dist_coeffs`` 0-3)."""
+
+COEFF_STEP = 1e-3
+"""The central difference's step of each of the model's coefficients, in the lens vector's
+units (at the half-diagonal): a bow of ~0.2 px at the frame's corner."""
+
+
+def _across(camera: CameraModel, raw: np.ndarray, sigma: np.ndarray, shape: tuple[int, int],
+            n: np.ndarray, moved) -> np.ndarray:
+    """How each centre, undistorted by ``camera``, moves across its line (normal ``n``) per
+    unit of a change of the model (``moved(camera, step)``: the model moved by ``step`` of
+    the unit; central difference at +- 1 step) [px per unit]."""
+    q = [moved(camera, step).undistort_centred(raw, sigma, shape)[0] for step in (1.0, -1.0)]
+    return (q[0] - q[1]) @ n / 2.0
+
+
+def _moved_pp(axis: int):
+    def moved(camera: CameraModel, step: float) -> CameraModel:
+        K = camera.camera_matrix.copy()
+        K[axis, 2] += step
+        return replace(camera, camera_matrix=K)
+    return moved
+
+
+def _moved_coeff(j: int, per_unit: float):
+    def moved(camera: CameraModel, step: float) -> CameraModel:
+        D = np.zeros(max(5, np.size(camera.dist_coeffs)))
+        D[:np.size(camera.dist_coeffs)] = np.ravel(camera.dist_coeffs)
+        D[j] += step * per_unit
+        return replace(camera, dist_coeffs=D)
+    return moved
+
+
 def model_lever(designs: Sequence[_Design], lines: Sequence[LineGeometry],
                 camera: CameraModel, shape: tuple[int, int]) -> list[_Design]:
     """The marks' designs against a camera model (taken at no lens on top of it:
-    :func:`align.lens_terms.check_camera`) with the principal point's columns (``cx``,
-    ``cy``, per px) of the model's own distortion: how each undistorted centre moves across
-    its line when the model's principal point moves (central difference of the model at
-    +- 1 px), its straight-line part projected out as :func:`align.lens_design._design` does.
-    At no lens those columns are 0, and a principal point's bow could only be read as a
-    bent mark."""
+    :func:`align.lens_terms.check_camera`) with the model's own levers: how each undistorted
+    centre moves across its line when the model's principal point moves (``cx``, ``cy``, per
+    px) and when its distortion coefficients change (``k1``, ``k2``, ``p1``, ``p2``, per unit
+    of the lens vector at the half-diagonal: OpenCV's k1 (R/f)^2, k2 (R/f)^4, p R/f), each a
+    central difference of the model, its straight-line part projected out as
+    :func:`align.lens_design._design` does.
+
+    At no lens the principal point's columns are 0, and a principal point's bow could only
+    be read as a bent mark. The coefficients' columns of a change *on top of* the model (the
+    undistorted centres distorted again) are not a change of the model's coefficients: a
+    real change of k1 (the model's -0.20 for a lens of -0.27) seen through the model is a
+    radial bow no k1, k2 on top describes exactly, and two straight marks far from the
+    centre read it as different (k1, k2) even noise-free: two 240/220 px corner marks, their
+    centres out to the grooves' ends, disagreed at chi2 8.1 on 2 dof (k1 -0.0390 / -0.0374,
+    k2 -0.0205 / -0.0175), and with noise at 14.5 (p 7e-4: a changed lens read 'neither');
+    with these columns 0.02 (k1 -0.0390 / -0.0387 for a true -0.0399), 0.8 with noise."""
     h, w = shape
     c = np.array([(w - 1) / 2, (h - 1) / 2])
+    a = half_diagonal(shape) / float(camera.camera_matrix[0, 0])
+    per_unit = {0: a**-2, 1: a**-4, 2: a**-1, 3: a**-1}  # the model's units per vector unit
+    levers = [(j, _moved_coeff(j, COEFF_STEP * per_unit[k]), COEFF_STEP)
+              for k, j in enumerate(COEFFS)]
+    levers += [(j, _moved_pp(axis), 1.0) for axis, j in enumerate(PP)]
+    cols = [j for j, _, _ in levers]
     out = []
     for d, ln in zip(designs, lines, strict=True):
         raw = raw_pixels(camera, ln.points, shape) - c
         u, n = line_frame(d.angle)
-        E = np.zeros((len(ln.points), len(PP)))
-        for col, (r_, c_) in enumerate(((0, 2), (1, 2))):
-            q = []
-            for step in (1.0, -1.0):
-                K = camera.camera_matrix.copy()
-                K[r_, c_] += step
-                q.append(replace(camera, camera_matrix=K).undistort_centred(raw, ln.sigma,
-                                                                            shape)[0])
-            E[:, col] = (q[0] - q[1]) @ n / 2.0
+        E = np.column_stack([_across(camera, raw, ln.sigma, shape, n, moved) / step
+                             for _, moved, step in levers])
         J = np.column_stack([ln.points @ u, -np.ones(len(ln.points))])
         X = np.column_stack([J, E]) / ln.sigma[:, None]
         if ln.chol is not None:
@@ -89,8 +135,8 @@ def model_lever(designs: Sequence[_Design], lines: Sequence[LineGeometry],
         Jw, Ew = X[:, :2], X[:, 2:]
         coef = np.linalg.lstsq(Jw, Ew, rcond=None)[0]
         G, sv = d.G.copy(), d.s.copy()
-        G[:, list(PP)] = Ew - Jw @ coef
-        sv[list(PP)] = -coef[0]
+        G[:, cols] = Ew - Jw @ coef
+        sv[cols] = -coef[0]
         out.append(replace(d, G=G, s=sv))
     return out
 

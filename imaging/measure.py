@@ -14,6 +14,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.band import band_indices, band_mask
+from imaging.beside import neighbours
 from imaging.camera import CameraModel
 from imaging.centres import MISFIT_CHI2, Centres, sample_centres
 from imaging.clipped import clipped_notes
@@ -30,7 +31,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
-from imaging.ends import EndsCheck, runs_on_stretch
+from imaging.ends import EndsCheck, centres_stretch
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.grating import grating_note
@@ -181,9 +182,10 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     """Measure one detected mark to sub-pixel precision (declared model: straight line).
 
     ``top``: the image's full-scale DN when already known (else from the image);
-    ``neighbours_px``: signed distances of other lines beside it [px] (see
-    :func:`neighbours`), kept out of the texture's replicas; ``jpeg``: the image's JPEG
-    encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then measured;
+    ``neighbours_px``: signed distances of other lines beside it [px]
+    (:func:`imaging.beside.neighbours`), kept out of the texture's replicas; ``jpeg``: the
+    image's JPEG encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the angle is then
+    measured;
     ``offsets_var``: variances of the column and row offsets removed from the image
     (:mod:`imaging.stripes`), carried into the centres' covariance; ``crossing``: (index,
     candidate) of the other marks, whose grooves are kept out of this one's fit where they
@@ -234,12 +236,12 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     u, n = line_frame(pf.angle_rad)
     # Where the groove really ends, looked for once, before the full pass, along the first
     # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops
-    # ~40 px short of a 5 MP mark's ends (its ridge fades a filter width of the downsampled
-    # search before them), and the full pass ran twice, on the short stretch and again on
-    # the whole groove (a quarter of the frame's time). The ends' check made here is kept.
+    # ~24 px (640 x 480) to ~40 px (5 MP) short of a mark's ends (its ridge fades a filter
+    # width of the search before them), and the full pass runs once, over the whole groove
+    # out to its ends (centres_stretch: a 300 px mark's centres spanned 248 px, its angle
+    # 1.5x its bound with a lens's k1 free). The ends' check made here is kept.
     look = extent_look(image, pf)
-    longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, crossing)
-    short = pf
+    longer, check, on = centres_stretch(image, pf, look[:2], look[2:], cen, crossing)
     if longer is not None:
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
 
@@ -253,16 +255,17 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         return cen, crossed, _usable(cen, where, cand, skip)
 
     cen, crossed, use = full_pass(pf, cen, use)
-    if pf is short:
-        ext = look[:2]
-        check = replace(check, centres=cen) if check is not None else None
-    else:
-        # The lengthened stretch looked at again: a groove still deep past its look (an
-        # end the first look could not follow) gets the centres once more over it.
+    # (The check depends on the profile's line and shape, not on its stretch.)
+    check = replace(check, profile=pf, centres=cen)
+    ext = look[:2]
+    if any(on):
+        # The groove ran on past the look (an end the first look could not follow): its
+        # extent looked for again from the longer stretch, and the centres sampled once more
+        # when it runs on further still.
         t0, t1, open0, open1 = extent_look(image, pf)
         ext = (t0, t1)
-        longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, crossing)
-        if longer is not None:
+        longer, check, on = centres_stretch(image, pf, ext, (open0, open1), cen, crossing)
+        if any(on) and longer is not None:
             pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
             cen, crossed, use = full_pass(pf, cen, use)
             ext = groove_extent(image, pf)
@@ -348,26 +351,6 @@ def on_line(p: np.ndarray, angle_rad: float, offset_px: float) -> np.ndarray:
     """
     u, n = line_frame(angle_rad)
     return offset_px * n + np.outer(p @ u, u)
-
-
-def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
-               ) -> tuple[float, ...]:
-    """Signed distances along candidate i's normal of the other candidates that run beside it
-    (directions within ``tol_angle``, overlapping it along its length) [px]."""
-    c = cands[i]
-    u, n = line_frame(c.angle_rad)
-    out = []
-    for j, o in enumerate(cands):
-        if j == i or abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
-            continue
-        uo, no = line_frame(o.angle_rad)
-        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
-        ts = sorted(float(p @ u) for p in ends)
-        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
-            continue
-        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
-        out.append(float(mid @ n) - c.offset_px)
-    return tuple(out)
 
 
 def local_inliers(pts: np.ndarray, sigma: np.ndarray, t: np.ndarray, k: float = 5.0,

@@ -166,23 +166,6 @@ def test_unbumped_frames_untouched():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "user 15's frame moved 18-25 px (the bows show the move at p 1e-8..1e-25): 4 of 6 "
-        "frames flagged, but in 2 (seeds 102, 105: 22, 24 px) one mark's bow is read as a bent "
-        "mark beside a kept calibration (lens_or_bends 'bends': the lens change that mark "
-        "calls for would bow the others 7.9 / 15.5 sigma and they show -0.35 / -0.21 of it), "
-        "and the move that mark alone calls for (least norm: one mark fixes one combination "
-        "of cx, cy) is ruled out by the others' bows (move_explains), while the move fitted "
-        "to all three explains every mark (p 0.33-0.94 jointly and each): exit 0, 5 ok "
-        "angles 25-40 u off (+1128″ ± 101″, -1061″ ± 40″). "
-        "Reading the move over the bend whenever the move explains all the marks catches them "
-        "(6 of 6) but reads a 0.5 px bent mark beside two straight ones "
-        "(tests/imaging/test_bent_mark_in_frame.py) as a move too: one frame's three marks "
-        "cannot tell the two apart there"
-    ),
-)
 def test_bumped_frames_named():
     """User 15's frame: a move the bows show at > 99 % (18-25 px) is named, none ok beyond
     3 u."""
