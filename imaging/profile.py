@@ -207,9 +207,9 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     the measured stretch, at which its contrast is still half its median (the half-depth
     points of its blurred ends, like the width's).
 
-    The centres are sampled on a stretch trimmed inside the detected ridge, which itself
-    fades a filter width before each end, so their span is ~20 px short of a 100 px mark;
-    this is the mark's own length. The groove's contrast is fitted per 1-px step along the
+    The detected ridge fades a filter width before each end (its stretch ~20 px short of a
+    100 px mark); this is the mark's own length, and the centres are then sampled out to it
+    (:func:`imaging.ends.centres_stretch`). The groove's contrast is fitted per 1-px step along the
     line (level + contrast x the fitted profile), beyond the measured stretch by
     ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
 
