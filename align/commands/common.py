@@ -67,8 +67,9 @@ def warn(lines: Sequence[str]) -> None:
 
 
 def wrote(path: Path | str | None) -> None:
+    """Say where an output went (a result line: none with ``-q``)."""
     if path is not None and str(path) != "-":
-        print(f"wrote {path}")
+        say([f"wrote {path}"])
 
 
 @contextlib.contextmanager
