@@ -59,6 +59,17 @@ class StackedLines:
         """Columns ``X`` (one row per centre of the stack) whitened by the centres' noise."""
         return self.white @ X
 
+    def off_line(self, tw: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """The whitened columns ``V`` with each line's straight-line part projected out: the
+        least-squares fit on the line's whitened ``tw`` (along-line position) and constant
+        columns, solved per line in closed form (2 x 2), subtracted."""
+        s, one = self.seg, self.one_w[:, None]
+        a00, a01, a11 = self.sums(tw * tw), -self.sums(tw * one), self.sums(one * one)
+        c0, c1 = self.sums(tw * V), -self.sums(one * V)
+        det = a00 * a11 - a01 * a01
+        b0, b1 = (a11 * c0 - a01 * c1) / det, (a00 * c1 - a01 * c0) / det
+        return V - tw * b0[s] + one * b1[s]
+
     def sums(self, X: np.ndarray) -> np.ndarray:
         """Per line, the sum of ``X``'s rows (one row per centre): (lines, ...)."""
         return np.add.reduceat(X, self.starts, axis=0)
@@ -117,12 +128,7 @@ class StackedLines:
         k = t.shape[1]
         X = self.whiten(np.hstack([t, bow, qx * nx + qy * ny - d[s]]))
         tw, bw, rw = X[:, :k], X[:, k:2 * k], X[:, 2 * k:]
-        one = self.one_w[:, None]
-        a00, a01, a11 = self.sums(tw * tw), -self.sums(tw * one), self.sums(one * one)
-        c0, c1 = self.sums(tw * bw), -self.sums(one * bw)
-        det = a00 * a11 - a01 * a01
-        b0, b1 = (a11 * c0 - a01 * c1) / det, (a00 * c1 - a01 * c0) / det
-        w = bw - tw * b0[s] + one * b1[s]
+        w = self.off_line(tw, bw)
         return self.sums(w * rw) / np.maximum(np.sqrt(self.sums(w * w)), 1e-300)
 
 
@@ -153,12 +159,7 @@ class SearchPoint:
         X = st.whiten(np.column_stack([q[:, 0] * ux + q[:, 1] * uy,
                                        q[:, 0] * nx + q[:, 1] * ny - self.d[s], E]))
         tw, rw, Ew = X[:, :1], X[:, 1], X[:, 2:]
-        one = st.one_w[:, None]
-        a00, a01, a11 = st.sums(tw * tw), -st.sums(tw * one), st.sums(one * one)
-        c0, c1 = st.sums(tw * Ew), -st.sums(one * Ew)
-        det = a00 * a11 - a01 * a01
-        b0, b1 = (a11 * c0 - a01 * c1) / det, (a00 * c1 - a01 * c0) / det
-        G = Ew - tw * b0[s] + one * b1[s]
+        G = st.off_line(tw, Ew)
         return G.T @ G, G.T @ rw, float(rw @ rw)
 
     def bow_jacobian(self, cols: Sequence[int]) -> np.ndarray:
