@@ -1,0 +1,162 @@
+"""Independent user 17 (a metrology engineer): is every result's u shown to cover reality?
+
+Written from README.md, docs/ and ``--help`` only. Inputs come from this user's own
+generators (``tests/align/user17_inputs.py``), each with one effect the tool is not told
+about, swept from negligible to gross. The rule checked, for every result: ``ok`` with
+|err| <= 3 u, or marked not ok (exit status 2 and JSON ``ok: false``) — never ok with
+|err| > 3 u. With 4 (gonio) or 6 (calibration k, b) Gaussian z per result, P(max|z| > 3) is
+1-2 % when u is right, so a sweep allows one such result in its seeds (binomial tail < 2 %).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import numpy as np
+import pytest
+
+from tests.align.user17_inputs import gonio_log, tumble
+
+FACES = "ref,y,x,z"
+
+
+def _cli(argv):
+    """Run ``align ARGV`` in-process; return the exit status."""
+    from align.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        try:
+            rc = main(argv)
+        except SystemExit as e:          # argparse or a refusal may exit
+            rc = e.code
+    return int(rc or 0)
+
+
+def gonio(tmp_path, seed, extra=(), **effect):
+    """Generate a log with ``effect``, run ``align gonio`` on it; return (rc, ok, z, err")."""
+    log = tmp_path / f"g{seed}_{abs(hash(json.dumps(effect, sort_keys=True))) % 10**8}.csv"
+    truth = gonio_log(log, seed, **effect)
+    out = log.with_suffix(".json")
+    rc = _cli(["gonio", str(log), "--faces", FACES, "--latitude", "0", "--json", str(out),
+               *extra])
+    d = json.loads(out.read_text())
+    err = (np.asarray(d["angles_deg"]) - truth) * 3600.0
+    z = err / np.asarray(d["angles_u_arcsec"])
+    return rc, d["ok"], float(np.max(np.abs(z))), float(np.max(np.abs(err)))
+
+
+def calibrate(tmp_path, seed, **effect):
+    """Generate a tumble test with ``effect``, run ``align calibrate``; return (rc, ok, z).
+
+    The truth is the time-mean of what the generator applied (a bias step contributes its
+    share of samples after it; a scale warm-up is taken at the fit's ``t_ref_s``, where the
+    docs say the model's scale is stated)."""
+    path = tmp_path / f"c{seed}_{abs(hash(json.dumps(effect, sort_keys=True))) % 10**8}.csv"
+    truth = tumble(path, seed, **effect)
+    out = path.with_suffix(".json")
+    rc = _cli(["calibrate", str(path), "--scale-sign", "-", "--json", str(out)])
+    if not out.exists():
+        return rc, False, np.nan                     # refused: not ok
+    d = json.loads(out.read_text())
+    t = np.loadtxt(path, delimiter=",", skiprows=1, usecols=4)
+    k = np.asarray(truth["k_v_per_g"])
+    ppm = effect.get("scale_temp_ppm", 0.0)
+    k = k * (1 + ppm * 1e-6 * (1 - np.exp(-d["model"]["t_ref_s"] / 300.0)))
+    b = np.asarray(truth["bias_g"], float).copy()
+    b[0] += effect.get("bias_step_g", 0.0) * np.mean(t > truth["t_step_s"])
+    zk = (np.asarray(d["model"]["k_v_per_g"]) - k) / np.asarray(d["scale_factors_u_v_per_g"])
+    zb = (np.asarray(d["bias_g"]) - b) / np.asarray(d["bias_u_g"])
+    return rc, d["ok"], float(np.max(np.abs(np.concatenate([zk, zb]))))
+
+
+def _consistent(rc, ok, z):
+    """ok and within 3u, or not ok in both the JSON and the exit status."""
+    if ok:
+        return rc == 0 and z <= 3.0
+    return rc == 2
+
+
+# ---------------------------------------------------------------- default run (< 2 s CPU)
+
+def test_gonio_clean_log_is_ok_within_3u(tmp_path):
+    """Control: my clean log (1" jitter, 100 revolutions) gives ok angles within 3 u."""
+    rc, ok, z, _ = gonio(tmp_path, 0)
+    assert rc == 0 and ok and z <= 3.0, (rc, ok, z)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "counter 2 opening 5 µs late after each switch (3.6 counts lost per counter-2 interval)"
+    " with --steady-table: the tool finds 'steady table NOT confirmed: the counts differ from"
+    " the pulse-time fractions by up to 3.469″ (chi2 4754.3 / 3, p 0)', blames a locked"
+    " speed ripple, uses the counts and reports ok, exit 0, u 0.168″, error 3.63″ (z 21.6)"))
+def test_gonio_counter_dead_time_steady_table_not_ok_and_wrong(tmp_path):
+    rc, ok, z, err = gonio(tmp_path, 0, ["--steady-table"], dead_time_s=5e-6)
+    assert _consistent(rc, ok, z), (rc, ok, z, err)
+
+
+# ---------------------------------------------------------------- sweeps (slow)
+
+def _sweep(tmp_path, runner, strengths, seeds, **fixed):
+    rows = []
+    for name, values in strengths.items():
+        for v in values:
+            for s in seeds:
+                res = runner(tmp_path, s, **fixed, **{name: v})
+                rows.append((name, v, s, *res))
+    return rows
+
+
+@pytest.mark.slow
+def test_gonio_effects_it_covers(tmp_path):
+    """A counter adding a spurious count to 1-50 % of rows and a ring-laser scale drifting
+    10-10⁴ ppm over the log (temperature): every result is ok within 3 u or not ok
+    (seen: max z 1.9, 2.2 at 10 ppm; u grows to 9.4″ at 10³ ppm, 93″ at 10⁴ ppm)."""
+    seeds = range(4)
+    rows = _sweep(tmp_path, gonio, {"double_p": [0.01, 0.05, 0.2, 0.5],
+                                    "scale_drift_ppm": [10, 100, 1000, 10000]}, seeds)
+    bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
+    assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "counter 2 dead time, no --steady-table: 1 µs (0.76 count): ok, z 3.8-5.3;"
+    " 5 µs: ok, z 17.7-22.4 (err 2.9-3.6″, u 0.16″); 20 µs: ok, z 68-87 (err 11-14″);"
+    " the only sign is the warning 'pulse-time and count fractions differ, p 0' read as"
+    " latency on an unsteady table"))
+def test_gonio_counter_dead_time_sweep(tmp_path):
+    rows = _sweep(tmp_path, gonio, {"dead_time_s": [1e-7, 1e-6, 5e-6, 2e-5]}, range(4))
+    bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
+    assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "eccentric table (2 % speed ripple once a revolution) with autocollimator latency, one"
+    " direction: 10 µs: ok, z 1.8-3.3; 100 µs: ok, z 16-24 (err 2.7-3.8″); 1 ms: ok, z"
+    " 172-243 (err 28-36″, u 0.16″). The warning says 'each µs of latency biases an angle by"
+    " up to 0.0336″ ... the log cannot tell the latency' yet ok: true, exit 0, and no Type B"
+    " term for it in u"))
+def test_gonio_latency_on_rippling_table_sweep(tmp_path):
+    rows = _sweep(tmp_path, gonio, {"latency_s": [1e-5, 1e-4, 1e-3]}, range(4), ripple=0.02)
+    bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
+    assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+def test_calibrate_effects_it_covers(tmp_path):
+    """Tumble tests with an x-bias step half-way (2 µg-2 mg), every axis clipping
+    (1.02, 0.999, 0.98, 0.8 g), 50 Hz pickup sampled at 20 Hz (0.1-10 mg) and a scale
+    warm-up without a temp column (20-2000 ppm, τ 300 s): ok within 3 u or not ok
+    (refused as saturated, or effects found and ok: false)."""
+    rows = _sweep(tmp_path, calibrate, {
+        "bias_step_g": [2e-6, 2e-5, 2e-4, 2e-3],
+        "saturate_g": [1.02, 0.999, 0.98, 0.8],
+        "pickup_g": [1e-4, 1e-3, 1e-2],
+        "scale_temp_ppm": [20, 200, 2000],
+    }, range(3))
+    bad = [r for r in rows if not _consistent(*r[3:6])]
+    assert len(bad) <= 1, bad
