@@ -51,9 +51,9 @@ def gonio(tmp_path, seed, extra=(), **effect):
 def calibrate(tmp_path, seed, **effect):
     """Generate a tumble test with ``effect``, run ``align calibrate``; return (rc, ok, z).
 
-    The truth is the time-mean of what the generator applied (a bias step contributes its
-    share of samples after it; a scale warm-up is taken at the fit's ``t_ref_s``, where the
-    docs say the model's scale is stated)."""
+    z is the largest |err|/u over k and b. A scale warm-up is taken at the fit's
+    ``t_ref_s``, where the model's scale is stated; a bias step is judged against the
+    bias both before and after it."""
     path = tmp_path / f"c{seed}_{abs(hash(json.dumps(effect, sort_keys=True))) % 10**8}.csv"
     truth = tumble(path, seed, **effect)
     out = path.with_suffix(".json")
@@ -61,15 +61,17 @@ def calibrate(tmp_path, seed, **effect):
     if not out.exists():
         return rc, False, np.nan                     # refused: not ok
     d = json.loads(out.read_text())
-    t = np.loadtxt(path, delimiter=",", skiprows=1, usecols=4)
     k = np.asarray(truth["k_v_per_g"])
     ppm = effect.get("scale_temp_ppm", 0.0)
     k = k * (1 + ppm * 1e-6 * (1 - np.exp(-d["model"]["t_ref_s"] / 300.0)))
     b = np.asarray(truth["bias_g"], float).copy()
-    b[0] += effect.get("bias_step_g", 0.0) * np.mean(t > truth["t_step_s"])
     zk = (np.asarray(d["model"]["k_v_per_g"]) - k) / np.asarray(d["scale_factors_u_v_per_g"])
     zb = (np.asarray(d["bias_g"]) - b) / np.asarray(d["bias_u_g"])
-    return rc, d["ok"], float(np.max(np.abs(np.concatenate([zk, zb]))))
+    # a bias that steps during the run has no one true value: the calibration must hold
+    # for the sensor before and after it (u covering both), or say it does not
+    b[0] += effect.get("bias_step_g", 0.0)
+    zb_after = (np.asarray(d["bias_g"]) - b) / np.asarray(d["bias_u_g"])
+    return rc, d["ok"], float(np.max(np.abs(np.concatenate([zk, zb, zb_after]))))
 
 
 def _consistent(rc, ok, z):
@@ -87,7 +89,7 @@ def test_gonio_clean_log_is_ok_within_3u(tmp_path):
     assert rc == 0 and ok and z <= 3.0, (rc, ok, z)
 
 
-@pytest.mark.xfail(strict=True, reason=(
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
     "counter 2 opening 5 µs late after each switch (3.6 counts lost per counter-2 interval)"
     " with --steady-table: the tool finds 'steady table NOT confirmed: the counts differ from"
     " the pulse-time fractions by up to 3.469″ (chi2 4754.3 / 3, p 0)', blames a locked"
@@ -122,7 +124,7 @@ def test_gonio_effects_it_covers(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
     "counter 2 dead time, no --steady-table: 1 µs (0.76 count): ok, z 3.8-5.3;"
     " 5 µs: ok, z 17.7-22.4 (err 2.9-3.6″, u 0.16″); 20 µs: ok, z 68-87 (err 11-14″);"
     " the only sign is the warning 'pulse-time and count fractions differ, p 0' read as"
@@ -134,7 +136,7 @@ def test_gonio_counter_dead_time_sweep(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
     "eccentric table (2 % speed ripple once a revolution) with autocollimator latency, one"
     " direction: 10 µs: ok, z 1.8-3.3; 100 µs: ok, z 16-24 (err 2.7-3.8″); 1 ms: ok, z"
     " 172-243 (err 28-36″, u 0.16″). The warning says 'each µs of latency biases an angle by"
@@ -148,15 +150,28 @@ def test_gonio_latency_on_rippling_table_sweep(tmp_path):
 
 @pytest.mark.slow
 def test_calibrate_effects_it_covers(tmp_path):
-    """Tumble tests with an x-bias step half-way (2 µg-2 mg), every axis clipping
+    """Tumble tests with every axis clipping
     (1.02, 0.999, 0.98, 0.8 g), 50 Hz pickup sampled at 20 Hz (0.1-10 mg) and a scale
     warm-up without a temp column (20-2000 ppm, τ 300 s): ok within 3 u or not ok
     (refused as saturated, or effects found and ok: false)."""
     rows = _sweep(tmp_path, calibrate, {
-        "bias_step_g": [2e-6, 2e-5, 2e-4, 2e-3],
         "saturate_g": [1.02, 0.999, 0.98, 0.8],
         "pickup_g": [1e-4, 1e-3, 1e-2],
         "scale_temp_ppm": [20, 200, 2000],
     }, range(3))
+    bad = [r for r in rows if not _consistent(*r[3:6])]
+    assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "x bias stepping half-way through a 14-pose tumble (210 s): 2 µg (3 u): ok, within"
+    " 3 u; 20 µg: 2 of 3 not ok; 200 µg: all 3 ok, b_x within 0.4 u of the bias before"
+    " the step and 17.5-19.4 u from the one after; 2 mg (seed 0): ok, exit 0, no effect, no structure,"
+    " b_x -1002.9 ± 109 µg where the bias was -966.9 then +1033.1 µg (18 u), pose"
+    " residuals up to 1384 µg against 1.4 µg of pose-mean noise, chi2/dof 3.1,"
+    " noise_known true"))
+def test_calibrate_bias_step_sweep(tmp_path):
+    rows = _sweep(tmp_path, calibrate, {"bias_step_g": [2e-6, 2e-5, 2e-4, 2e-3]}, range(3))
     bad = [r for r in rows if not _consistent(*r[3:6])]
     assert len(bad) <= 1, bad

@@ -130,3 +130,58 @@ def tumble(path, seed, *, bias_step_g=0.0, saturate_g=np.inf, pickup_g=0.0,
     truth = {"k_v_per_g": k.tolist(), "bias_g": b.tolist(), "t_step_s": t_total / 2}
     Path(str(path) + ".truth.json").write_text(json.dumps(truth))
     return truth
+
+
+def mark_image(path, seed, *, angle_deg=None, chip_px=0.0, fpn_dn=0.0, blob=0.0,
+               vignette=0.0, width_px=4.0, length_px=380.0, ss=4):
+    """Write a 640x480 16-bit image of one dark scribe mark; return its true angle (deg).
+
+    The mark is a bar ``width_px`` wide and ``length_px`` long through the centre at
+    ``angle_deg`` (counter-clockwise as seen, image y down), blurred by the optics
+    (Gaussian σ 1.2 px, exact for a rectangle) before sampling, the blurred intensity
+    integrated over each pixel's area (mean of ``ss``² sub-samples), then shot noise (gain
+    1 DN per electron, background 40 000 e⁻) and 20 DN read noise. Effects: ``chip_px`` (a chip
+    this long bitten out of one edge of the mark at one end, half the mark's width deep),
+    ``fpn_dn`` (column fixed-pattern offsets of this RMS), ``blob`` (a dirty-lens smudge of
+    this fractional depth, σ 25 px, over the mark's left half), ``vignette`` (the corners
+    this fraction darker, cos⁴-like radial fall-off).
+    """
+    import cv2
+    from scipy.special import ndtr
+
+    rng = np.random.default_rng(seed)
+    if angle_deg is None:
+        angle_deg = rng.uniform(-2, 2)
+    h, w = 480, 640
+    ys, xs = np.mgrid[0:h * ss, 0:w * ss]
+    x = (xs + 0.5) / ss - w / 2 + rng.uniform(-3, 3)
+    y = (ys + 0.5) / ss - h / 2 + rng.uniform(-3, 3)
+    a = np.radians(angle_deg)
+    along = x * np.cos(a) - y * np.sin(a)          # y down: ccw as seen
+    across = x * np.sin(a) + y * np.cos(a)
+    sig = 1.2                                       # optics blur, px
+
+    def rect(a0, a1, c0, c1):
+        """A unit rectangle (along a0..a1, across c0..c1) blurred by the isotropic
+        Gaussian: separable in the rotated coordinates, exact."""
+        return ((ndtr((a1 - along) / sig) - ndtr((a0 - along) / sig))
+                * (ndtr((c1 - across) / sig) - ndtr((c0 - across) / sig)))
+
+    half_l, half_w = length_px / 2, width_px / 2
+    dark = rect(-half_l, half_l, -half_w, half_w)
+    if chip_px > 0:
+        dark = dark - rect(half_l - chip_px, half_l, 0.0, half_w)
+    fine = 1.0 - 0.6 * dark
+    img = fine.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    yy, xx = np.mgrid[0:h, 0:w]
+    r2 = ((xx - w / 2) ** 2 + (yy - h / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+    img = img * (1 - vignette * r2)
+    if blob > 0:
+        cx, cy = w / 2 - length_px / 4, h / 2
+        img = img * (1 - blob * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * 25.0 ** 2)))
+    full = 40000.0                                   # DN of the background
+    electrons = img * full                           # gain 1 e-/DN
+    dn = rng.poisson(electrons).astype(np.float64) + rng.normal(0, 20.0, img.shape)
+    dn = dn + rng.normal(0, fpn_dn, w)[None, :] if fpn_dn > 0 else dn
+    cv2.imwrite(str(path), np.clip(np.round(dn), 0, 65535).astype(np.uint16))
+    return angle_deg
