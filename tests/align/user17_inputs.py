@@ -142,9 +142,9 @@ def mark_image(path, seed, *, angle_deg=None, chip_px=0.0, fpn_dn=0.0, blob=0.0,
     integrated over each pixel's area (mean of ``ss``² sub-samples), then shot noise (gain
     1 DN per electron, background 40 000 e⁻) and 20 DN read noise. Effects: ``chip_px`` (a chip
     this long bitten out of one edge of the mark at one end, half the mark's width deep),
-    ``fpn_dn`` (column fixed-pattern offsets of this RMS), ``blob`` (a dirty-lens smudge of
-    this fractional depth, σ 25 px, over the mark's left half), ``vignette`` (the corners
-    this fraction darker, cos⁴-like radial fall-off).
+    ``fpn_dn`` (row + column fixed-pattern offsets of this RMS in all), ``blob`` (a
+    dirty-lens smudge of this fractional depth, σ 25 px, over the mark's left half),
+    ``vignette`` (the corners this fraction darker, cos⁴-like radial fall-off).
     """
     import cv2
     from scipy.special import ndtr
@@ -182,6 +182,8 @@ def mark_image(path, seed, *, angle_deg=None, chip_px=0.0, fpn_dn=0.0, blob=0.0,
     full = 40000.0                                   # DN of the background
     electrons = img * full                           # gain 1 e-/DN
     dn = rng.poisson(electrons).astype(np.float64) + rng.normal(0, 20.0, img.shape)
-    dn = dn + rng.normal(0, fpn_dn, w)[None, :] if fpn_dn > 0 else dn
+    if fpn_dn > 0:                                  # row and column offsets (readout)
+        fpn = rng.normal(0, fpn_dn, w)[None, :] + rng.normal(0, fpn_dn, h)[:, None]
+        dn = dn + fpn / np.sqrt(2)
     cv2.imwrite(str(path), np.clip(np.round(dn), 0, 65535).astype(np.uint16))
     return angle_deg
