@@ -114,11 +114,13 @@ def _sweep(tmp_path, runner, strengths, seeds, **fixed):
 @pytest.mark.slow
 def test_gonio_effects_it_covers(tmp_path):
     """A counter adding a spurious count to 1-50 % of rows and a ring-laser scale drifting
-    10-10⁴ ppm over the log (temperature): every result is ok within 3 u or not ok
+    10-10⁴ ppm over the log (temperature), and the reference face seen twice (a glint
+    3-3000 counts after it in 20 % of revolutions): every result is ok within 3 u or not ok
     (seen: max z 1.9, 2.2 at 10 ppm; u grows to 9.4″ at 10³ ppm, 93″ at 10⁴ ppm)."""
     seeds = range(4)
     rows = _sweep(tmp_path, gonio, {"double_p": [0.01, 0.05, 0.2, 0.5],
                                     "scale_drift_ppm": [10, 100, 1000, 10000]}, seeds)
+    rows += _sweep(tmp_path, gonio, {"glint_counts": [3, 10, 300, 3000]}, seeds, glint_p=0.2)
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
 

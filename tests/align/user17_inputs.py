@@ -12,7 +12,7 @@ about, at a chosen strength, and returns the file it wrote with the truth.
   ``double_p`` (probability a row's counter adds a spurious count),
   ``scale_drift_ppm`` (the ring laser's scale drifts linearly by this over the log:
   temperature), ``latency_s`` with ``ripple`` (autocollimator latency on a table whose speed
-  ripples once a revolution).
+  ripples once a revolution), ``glint_counts``/``glint_p`` (the reference face seen twice).
 * ``tumble``: a static tumble test ``pose,ux,uy,uz,t`` of an orthogonal triad
   (u_i = k_i (g_i + b_i) + noise, 14 poses: six faces and eight corners, each slightly
   mis-levelled at random). Effects: ``bias_step_g`` (the x bias jumps by this half-way
@@ -46,7 +46,8 @@ def _invert(target, w, ripple, psi):
 
 
 def gonio_log(path, seed, *, n_rev=100, dead_time_s=0.0, double_p=0.0,
-              scale_drift_ppm=0.0, latency_s=0.0, ripple=0.0, jitter_arcsec=1.0):
+              scale_drift_ppm=0.0, latency_s=0.0, ripple=0.0, jitter_arcsec=1.0,
+              glint_counts=0, glint_p=0.0):
     """Write a counter log; return the true face angles (deg, ref->y, y->x, x->z, z->ref)."""
     rng = np.random.default_rng(seed)
     rev_s = rng.uniform(0.8, 1.2)
@@ -84,6 +85,24 @@ def gonio_log(path, seed, *, n_rev=100, dead_time_s=0.0, double_p=0.0,
     counts = counts + (rng.random(counts.size) < double_p)
     ref = (idx % 4 == 0).astype(int)
     t = t_pulse[1:] - t_pulse[0] + 0.25 / rev_s
+    if glint_p > 0:
+        # the reference face seen twice: a second reflection glint_counts after it in a
+        # fraction glint_p of revolutions; a real counter switches on every pulse
+        c_out, r_out, t_out = [], [], []
+        split = np.zeros(counts.size, bool)
+        split[1:] = (ref[:-1] == 1) & (rng.random(counts.size - 1) < glint_p)
+        for i in range(counts.size):
+            if split[i]:
+                frac = glint_counts / counts[i]
+                c_out += [glint_counts, counts[i] - glint_counts]
+                r_out += [0, ref[i]]
+                t_out += [t[i - 1] + frac * (t[i] - t[i - 1]), t[i]]
+            else:
+                c_out.append(counts[i])
+                r_out.append(ref[i])
+                t_out.append(t[i])
+        counts, ref, t = np.array(c_out), np.array(r_out), np.array(t_out)
+        counter = np.where(np.arange(counts.size) % 2 == 0, 1, 2)
     with open(path, "w") as f:
         f.write("count,counter,ref,t\n")
         for cnt, ctr, r, tt in zip(counts.astype(np.int64), counter, ref, t, strict=True):
