@@ -15,7 +15,10 @@ every figure by ~10 %: compare runs made one after the other, several times).
 through ``align.measure_file`` (what ``align marks`` runs: decode, detect, measure, shadow
 edges, the frame's lens, the residual loop), with the stages of :data:`REAL_STAGES` timed
 the same way: per photo the whole call and each stage [s] (issue 18's target: each photo
-<= 1 s CPU without imports; a first call on a synthetic frame is left out, as there).
+<= 1 s CPU without imports; a first call on a synthetic frame is left out, as there). The
+residual loop's row holds the JPEG term (:func:`imaging.jpeg_turn.jpeg_angle_shift`, its
+noisy draws' centres), computed when the loop first reads it: on the real photos most of
+that row, the loop's own fits (``run_loop``) a few ms a mark.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import align.marks as marks  # noqa: E402
 import imaging  # noqa: E402
 import imaging.centres as centres  # noqa: E402
 import imaging.detect as detect  # noqa: E402
+import imaging.jpeg_turn as jpeg_turn  # noqa: E402
 import imaging.measure as measure  # noqa: E402
 import imaging.oriented as oriented  # noqa: E402
 from align.marks import measure_file, measure_image  # noqa: E402
@@ -76,11 +80,14 @@ REAL_STAGES = (
     (oriented, "_fit", "    their frequency fits"),
     (measure, "find_stripes", "  row/column stripes"),
     (measure, "measure_candidate", "  measurement (all calls)"),
+    (measure, "fit_profile", "    band profile fits"),
     (measure, "_with_background_u", "    again with the stripes back"),
     (mark_shadow, "shadow_free", "shadow edges' fits"),
     (mark_shadow, "measure_candidate", "marks again under an edge"),
     (marks, "camera_lens", "the frame's lens"),
     (marks, "finish_mark", "residual loop (per mark)"),
+    (marks, "run_loop", "  the loop's fits"),
+    (jpeg_turn, "jpeg_angle_shift", "  JPEG term's draws"),
 )
 """(module, name, label) timed per real photograph (``--real``)."""
 
