@@ -272,7 +272,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     sym = _symmetric_window(e - delta.take(seg), seg, nseg, half)
     if not sym.all():
         vals, e, t, seg, idx = vals[sym], e[sym], t[sym], seg[sym], idx[sym]
-    bc = GroupSums(seg, nseg)
+    bc = GroupSums(seg, nseg, eager=True)  # (~60 sums a pass)
     fit = _solve_segments(vals, e, seg, bc, pf, table, delta, iterations)
     k, N, ok, delta, amp, moving = fit.k, fit.N, fit.ok, fit.delta, fit.amp, fit.moving
     ee, pe, r, wgt, J, g, npx, (v0, v1) = (fit.ee, fit.pe, fit.r, fit.wgt, fit.J, fit.g,
@@ -385,7 +385,7 @@ def sample_centres_batch(images: np.ndarray, pf: ProfileFit) -> list[Centres]:
     nseg = int(seg.max()) + 1
     sym = _symmetric_window(e, seg, nseg, half)
     vals, e, t, seg, idx = vals[sym], e[sym], t[sym], seg[sym], idx[sym]
-    bc = GroupSums(seg, nseg)
+    bc = GroupSums(seg, nseg, eager=True)
     fit = _solve_segments(vals, e, seg, bc, pf,
                           _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0),
                           np.zeros(nseg), 2)

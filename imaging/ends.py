@@ -205,7 +205,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # a cache hit, not ~1.3 ms of erf per mark.
     p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
-    bc = GroupSums(j, nb)  # (15 sums over the same bins)
+    bc = GroupSums(j, nb, eager=True)  # (15 sums over the same bins)
     cnt = bc.counts.astype(float)
     sp, spp = bc(p), bc(p * p)
     sv, spv = bc(vals), bc(p * vals)

@@ -230,7 +230,7 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
     # fixed), then put in their columns: one grouping of the pixels for the 14 sums of each
     # pass (sums by column pair cost ~3x more; the sums' order differs in the last bit).
     # N is symmetric: the pairs a <= c only, the others as the transpose.
-    sums = GroupSums(span, len(knots))
+    sums = GroupSums(span, len(knots), eager=True)
     pairs = [(a, c) for a in range(4) for c in range(a, 4)]
     into_b = [(span_cols[:, a] >= 0, span_cols[:, a]) for a in range(4)]
     into_n = []
@@ -322,7 +322,7 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     # in the last bit from sums per column).
     # (Not a matrix product for the scatter: OpenBLAS's threads cost more than the work;
     # not np.add.at, slow on 2-D: the spans of each column in rounds without repeats.)
-    sums = GroupSums(seg * nspan + span, nseg * nspan)
+    sums = GroupSums(seg * nspan + span, nseg * nspan, eager=True)
     rounds = [_unrepeated(span_cols[:, a]) for a in range(4)]
     G = np.zeros((nseg, len(J), kk))
     for i in range(len(J)):

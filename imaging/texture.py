@@ -146,7 +146,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray],
     k = len(J)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
 
-    bc = GroupSums(seg, nseg) if sums is None else sums
+    bc = GroupSums(seg, nseg, eager=True) if sums is None else sums
 
     wj = [wgt * j for j in J]
     # White-noise variance of a replica's centre, (N^-1 J^T W V W J N^-1)_00, with the
