@@ -83,8 +83,11 @@ class _Shifted:
         if image.flags.c_contiguous and flat.size:
             # (Rows from the extreme flat indices: the row is flat // w, monotone in it.)
             col = flat % w
-            self.box = (int(flat.min()) // w, int(flat.max()) // w, int(col.min()),
-                        int(col.max()))
+            self.first = int(flat.min())
+            self.box = (self.first // w, int(flat.max()) // w, int(col.min()), int(col.max()))
+            # Each replica gathers from the flat image advanced to its shifted first pixel:
+            # no shifted copy of the indices per replica.
+            self.rel = flat - self.first
 
     def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The values shifted by (dx, dy) and which are usable (None: every one, as two
@@ -92,7 +95,8 @@ class _Shifted:
         h, w = self.image.shape
         if self.box is not None and (self.box[0] + dy >= 0 and self.box[1] + dy < h
                                      and self.box[2] + dx >= 0 and self.box[3] + dx < w):
-            v = self.image.ravel()[self.flat + (dy * w + dx)].astype(float, copy=False)
+            v = (self.image.ravel()[self.first + dy * w + dx:].take(self.rel)
+                 .astype(float, copy=False))
             if v.min() > 0 and v.max() < self.full_scale:  # (NaN fails both)
                 return v, None
             return v, (v < self.full_scale) & (v > 0)
