@@ -575,10 +575,11 @@ def _blur_step(js: np.ndarray, J: Sequence[np.ndarray], wgt: np.ndarray, r: np.n
     the segment's other parameters free (the Schur complement of the segment's normal
     matrix): ``js`` the pixels' dP/ds times the contrast, ``J``/``g``/``cov`` the segment
     fit's columns, gradient and inverse normal matrix at the solution."""
-    a = np.stack([bc(wgt * js * j) for j in J], axis=1)
+    wjs = wgt * js  # (each product below is (wgt * js) * x, as written out before)
+    a = np.stack([bc(wjs * j) for j in J], axis=1)
     c = np.where(ok[:, None, None], cov, 0.0)
-    den = bc(wgt * js * js) - np.einsum("ni,nij,nj->n", a, c, a)
-    num = bc(wgt * js * r) - np.einsum("ni,nij,nj->n", a, c, g)
+    den = bc(wjs * js) - np.einsum("ni,nij,nj->n", a, c, a)
+    num = bc(wjs * r) - np.einsum("ni,nij,nj->n", a, c, g)
     good = ok & (den > 0)
     dev = np.where(good, num / np.where(good, den, 1.0), np.nan)
     return dev, np.where(good, 1.0 / np.sqrt(np.where(good, den, 1.0)), np.inf)
