@@ -192,18 +192,20 @@ as much as the mark's own noise (a dial's graduation moved 15", 0.9 u, by a coup
 36 px^2 from 1 series, -2.3 from 8 without its neighbours). Under 4 it is left out (0)."""
 
 
-def _ring(wide: tuple[np.ndarray, ...], pf: ProfileFit, half: float, segment_px: float,
-          every: int, nseg: int) -> tuple[np.ndarray, ...]:
+def _ring(wide: tuple[np.ndarray, ...], inner: np.ndarray,
+          segments: tuple[np.ndarray, np.ndarray], nseg: int) -> tuple[np.ndarray, ...]:
     """Pixels of a ring just outside the band the centres are fitted on (half < |e| <=
     half + :data:`RING_PX`): (flat index, e, segment), for the background slope across the
-    mark, from ``wide``, the band out to the ring's edge (:func:`_band`'s four arrays).
+    mark, from ``wide``, the band out to the ring's edge (:func:`_band`'s four arrays), less
+    its ``inner`` pixels (|e| <= half), with ``segments`` (:func:`segment_index` of its
+    pixels: segment, kept).
 
     Outside the band on purpose: the slope fitted inside it shares its pixels' noise with
     the centre (both odd in e), and would correlate with the centre's error by chance.
     """
-    _, e, t, idx = wide
-    seg, keep = segment_index(t, pf, segment_px, every)
-    sel = (np.abs(e) > half) & keep
+    _, e, _, idx = wide
+    seg, keep = segments
+    sel = ~inner & keep
     sel &= seg < nseg
     return idx[sel], e[sel], seg[sel]
 
@@ -246,14 +248,16 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     wide = _band(image, pf.angle_rad, pf.offset_px, pf.t_start_px, pf.t_end_px,
                  half + RING_PX)
     inner = np.abs(wide[1]) <= half
-    vals, e, t, idx = (a[inner] for a in wide)
+    # Each pixel's segment once for the band and its ring (elementwise in t: the band's the
+    # same as from its own t).
+    seg_w, keep_w = segment_index(wide[2], pf, segment_px, every)
+    vals, e, t, idx, seg, keep = (a[inner] for a in (*wide, seg_w, keep_w))
     inside = unclipped(vals, pf.full_scale_dn)  # see fit_profile
     if inside is not None:
-        vals, e, t, idx = vals[inside], e[inside], t[inside], idx[inside]
+        vals, e, t, idx, seg, keep = (a[inside] for a in (vals, e, t, idx, seg, keep))
     if vals.size == 0:
         raise ImageInputError(f"{where}: mark at offset {pf.offset_px:.0f} px: its band lies "
                               "outside the image or is all clipped")
-    seg, keep = segment_index(t, pf, segment_px, every)
     if not keep.all():
         vals, e, t, seg, idx = vals[keep], e[keep], t[keep], seg[keep], idx[keep]
     if vals.size == 0:
@@ -319,7 +323,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     sigma = np.where(cov[:, 0, 0] > 0, np.sqrt(np.abs(cov[:, 0, 0])), np.inf)
     info = wgt * (amp_px * pe) ** 2
     t_eff = bc(info * t) / np.maximum(bc(info), 1e-300)
-    ring = _ring(wide, pf, half, segment_px, every, nseg)
+    ring = _ring(wide, inner, (seg_w, keep_w), nseg)
     ring_geo = ring_geometry(ring[1], ring[2], nseg)  # (for the replicas too)
     slope = ring_slope(pixels_at(image, ring[0]), ring[1], ring[2], nseg, pf.full_scale_dn,
                        ring_geo)
@@ -396,7 +400,7 @@ def sample_centres_batch(images: np.ndarray, pf: ProfileFit) -> list[Centres]:
     sigma = np.where(cov00 > 0, np.sqrt(np.abs(cov00)), np.inf)
     info = fit.wgt * (fit.amp[seg] * fit.pe) ** 2
     t_eff = bc(info * t[:, None]) / np.maximum(bc(info), 1e-300)
-    ring = _ring(wide, pf, half, 4.0, 1, nseg)
+    ring = _ring(wide, inner, segment_index(wide[2], pf, 4.0), nseg)
     geometry = ring_geometry(ring[1], ring[2], nseg)
     u, n = line_frame(pf.angle_rad)
     good = (ok & (fit.npx >= 6)[:, None] & np.isfinite(sigma)
