@@ -45,6 +45,16 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
     last = grid.size - 1
     step = (grid[last] - grid[0]) / last
     out = []
+    if e.size and grid[0] <= e.min() and e.max() < grid[last]:  # (NaN fails both)
+        # Every e inside the grid (the usual case, as two reductions tell): the cell's
+        # corrections need no bound (a cell below 0 or past the last would put e outside),
+        # and no value is at the end or off the grid; the same cells and values.
+        j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
+        j -= grid.take(j) > e
+        j += grid.take(j + 1) <= e
+        d = e - grid.take(j)
+        dx = np.diff(grid)
+        return tuple((np.diff(f) / dx).take(j) * d + f.take(j) for f in fs)
     # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
     with np.errstate(invalid="ignore"):
         j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
