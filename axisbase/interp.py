@@ -49,12 +49,22 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
         # Every e inside the grid (the usual case, as two reductions tell): the cell's
         # corrections need no bound (a cell below 0 or past the last would put e outside),
         # and no value is at the end or off the grid; the same cells and values.
-        j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
+        # (No clip below 0: e - grid[0] >= 0; np.minimum, not np.clip, ~3x cheaper.)
+        q = e - grid[0]
+        q /= step
+        j = q.astype(np.intp)
+        np.minimum(j, last - 1, out=j)
         j -= grid.take(j) > e
-        j += grid.take(j + 1) <= e
+        j += grid[1:].take(j) <= e  # (grid[j + 1], without the shifted copy of j)
         d = e - grid.take(j)
         dx = np.diff(grid)
-        return tuple((np.diff(f) / dx).take(j) * d + f.take(j) for f in fs)
+        out = []
+        for f in fs:
+            v = (np.diff(f) / dx).take(j)
+            v *= d
+            v += f.take(j)
+            out.append(v)
+        return tuple(out)
     # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
     with np.errstate(invalid="ignore"):
         j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)
