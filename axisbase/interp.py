@@ -42,10 +42,11 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
     >>> bool(np.array_equal(v, np.interp(e, grid, grid**2, left=0.0, right=0.0)))
     True
     """
+    e = np.asarray(e)
     last = grid.size - 1
     step = (grid[last] - grid[0]) / last
     out = []
-    if e.size and grid[0] <= e.min() and e.max() < grid[last]:  # (NaN fails both)
+    if e.ndim and e.size and grid[0] <= e.min() and e.max() < grid[last]:  # (NaN fails both)
         # Every e inside the grid (the usual case, as two reductions tell): the cell's
         # corrections need no bound (a cell below 0 or past the last would put e outside),
         # and no value is at the end or off the grid; the same cells and values.
