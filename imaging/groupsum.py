@@ -31,6 +31,10 @@ class GroupSums:
         Each value's group (non-negative integers).
     n : int
         Number of groups (at least; more when a label is larger, as np.bincount).
+    eager : bool
+        Build the grouping at once (the caller takes many sums): the first :data:`LAZY`
+        sums by np.bincount cost ~4x one through the grouping each (~0.45 ms at a 5 MP
+        mark's ~56k band pixels).
 
     Attributes
     ----------
@@ -40,11 +44,11 @@ class GroupSums:
         The number of groups.
     """
 
-    def __init__(self, labels: np.ndarray, n: int):
+    def __init__(self, labels: np.ndarray, n: int, eager: bool = False):
         self.labels = np.asarray(labels)
         self.counts = np.bincount(self.labels, minlength=n)
         self.n = self.counts.size
-        self._op = None
+        self._op = self._build() if eager and self.labels.size >= LARGE else None
         self._calls = 0
 
     def _build(self) -> csr_array:

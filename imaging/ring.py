@@ -13,7 +13,7 @@ def ring_geometry(e: np.ndarray, seg: np.ndarray, nseg: int) -> tuple:
     the pixel count, each pixel's e less its segment's mean e [px], their sum of squares
     [px^2], and the per-segment sums (:class:`imaging.groupsum.GroupSums`). The same for
     every replica of a ring whose pixels are all usable (computed once)."""
-    bc = GroupSums(seg, nseg)
+    bc = GroupSums(seg, nseg, eager=True)  # (2 sums, 3 more per replica of the ring)
     no = bc.counts
     me = bc(e) / np.maximum(no, 1)
     ec = e - me[seg]

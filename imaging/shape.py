@@ -216,30 +216,29 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
         return None
     # Pixels no basis function reaches (the band's background) add exact zeros: left out.
     on = (span_cols >= 0).any(axis=1)[span]
-    span, vals, r, amp, wgt = span[on], vals[on], r[on], amp[on], wgt[on]
-    cols = span_cols[span]
-    vals = np.where(cols >= 0, vals, 0.0) * amp[:, None]
+    span, r, amp, wgt = span[on], r[on], amp[on], wgt[on]
+    # The 4 functions' values and columns as 4 contiguous rows, each built as a row (the
+    # products below read whole rows, not every 4th number): the same numbers as by pixel.
+    cols = [np.ascontiguousarray(span_cols[:, a]).take(span) for a in range(4)]
+    vals = np.stack([np.where(cols[a] >= 0, vals[:, a][on], 0.0) * amp for a in range(4)])
     # Dust or a crossing stays out of the pool: pixels beyond MAX_Z sigma of the departure's
     # own fit (a first fit on all, then without them; a clip on the residuals before the
     # departure dropped the groove's floor where the misfit itself is large).
     w = wgt.copy()
-    ca = np.maximum(cols, 0)
+    ca = [np.maximum(c, 0) for c in cols]
     # The normal equations' sums per knot span (the 4 functions non-zero on a span are
     # fixed), then put in their columns: one grouping of the pixels for the 14 sums of each
     # pass (sums by column pair cost ~3x more; the sums' order differs in the last bit).
     # N is symmetric: the pairs a <= c only, the others as the transpose.
-    sums = GroupSums(span, len(knots))
+    sums = GroupSums(span, len(knots), eager=True)
     pairs = [(a, c) for a in range(4) for c in range(a, 4)]
     into_b = [(span_cols[:, a] >= 0, span_cols[:, a]) for a in range(4)]
     into_n = []
     for a, c in pairs:
         use = (span_cols[:, a] >= 0) & (span_cols[:, c] >= 0)
         into_n.append((use, span_cols[use, a], span_cols[use, c]))
-    # The 4 functions' values and columns as 4 contiguous rows (the products below read
-    # whole rows, not every 4th number), the same numbers.
-    vals, ca = np.ascontiguousarray(vals.T), np.ascontiguousarray(ca.T)
     sw = np.sqrt(wgt)
-    for _ in range(2):
+    for it in range(2):
         wv = w * vals
         b = np.zeros(k)
         for a, (use, col) in enumerate(into_b):
@@ -254,10 +253,15 @@ def fit_shape(x: np.ndarray, r: np.ndarray, amp: np.ndarray, wgt: np.ndarray,
         except np.linalg.LinAlgError:
             return None
         coef = cov @ b
+        if it == 1:
+            break  # (the second fit's own outliers are not used)
         # (the sum over the 4 columns written out: the same order, ~3x faster than .sum)
         fit = ((vals[0] * coef[ca[0]] + vals[1] * coef[ca[1]]) + vals[2] * coef[ca[2]]
                + vals[3] * coef[ca[3]])
-        w = np.where(np.abs(r - fit) * sw < MAX_Z, wgt, 0.0)
+        keep = np.abs(r - fit) * sw < MAX_Z
+        if keep.all():
+            break  # (no outlier: the second fit's weights, and so its sums, are the first's)
+        w = np.where(keep, wgt, 0.0)
     return GrooveShape(knots, fold, coef, cov, float(coef @ N @ coef))
 
 
@@ -308,7 +312,9 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     # Pixels no basis function reaches add exact zeros: left out.
     on = (span_cols >= 0).any(axis=1)[span]
     span = span[on]
-    vals = np.ascontiguousarray(np.where(span_cols[span] >= 0, vals[on], 0.0).T)
+    # (As 4 contiguous rows, each built as a row: the same numbers.)
+    vals = [np.where(np.ascontiguousarray(span_cols[:, a]).take(span) >= 0, vals[:, a][on], 0.0)
+            for a in range(4)]
     aw, J, seg = aw[on], [j[on] for j in J], seg[on]
     nseg, kk, nspan = len(ok), len(shape.coef), len(span_cols)
     # Sums per (segment, knot span), one grouping for all 16, then put in each span's
@@ -316,7 +322,7 @@ def shape_shift(shape: GrooveShape, x: np.ndarray, aw: np.ndarray, J: Sequence[n
     # in the last bit from sums per column).
     # (Not a matrix product for the scatter: OpenBLAS's threads cost more than the work;
     # not np.add.at, slow on 2-D: the spans of each column in rounds without repeats.)
-    sums = GroupSums(seg * nspan + span, nseg * nspan)
+    sums = GroupSums(seg * nspan + span, nseg * nspan, eager=True)
     rounds = [_unrepeated(span_cols[:, a]) for a in range(4)]
     G = np.zeros((nseg, len(J), kk))
     for i in range(len(J)):

@@ -71,14 +71,23 @@ def _replica(image: np.ndarray, ys: np.ndarray, xs: np.ndarray, dx: int, dy: int
 
 
 class _Shifted:
-    """:func:`_replica` of one set of pixels at many shifts, their flat index and bounding box
-    taken once (16 replicas per mark): a replica wholly inside the image (the usual case)
-    is one gather by flat index, ~3x cheaper than the masks and 2-D indexing."""
+    """:func:`_replica` of one set of pixels (flat indices into the image) at many shifts,
+    their bounding box taken once (16 replicas per mark): a replica wholly inside the image
+    (the usual case) is one gather by flat index, ~3x cheaper than the masks and 2-D
+    indexing."""
 
-    def __init__(self, image: np.ndarray, ys: np.ndarray, xs: np.ndarray, full_scale: float):
-        self.image, self.ys, self.xs, self.full_scale = image, ys, xs, full_scale
-        self.flat = ys * image.shape[1] + xs if image.flags.c_contiguous and ys.size else None
-        self.box = (ys.min(), ys.max(), xs.min(), xs.max()) if self.flat is not None else None
+    def __init__(self, image: np.ndarray, flat: np.ndarray, full_scale: float):
+        self.image, self.flat, self.full_scale = image, flat, full_scale
+        w = image.shape[1]
+        self.box = None
+        if image.flags.c_contiguous and flat.size:
+            # (Rows from the extreme flat indices: the row is flat // w, monotone in it.)
+            col = flat % w
+            self.first = int(flat.min())
+            self.box = (self.first // w, int(flat.max()) // w, int(col.min()), int(col.max()))
+            # Each replica gathers from the flat image advanced to its shifted first pixel:
+            # no shifted copy of the indices per replica.
+            self.rel = flat - self.first
 
     def __call__(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray | None]:
         """The values shifted by (dx, dy) and which are usable (None: every one, as two
@@ -86,11 +95,13 @@ class _Shifted:
         h, w = self.image.shape
         if self.box is not None and (self.box[0] + dy >= 0 and self.box[1] + dy < h
                                      and self.box[2] + dx >= 0 and self.box[3] + dx < w):
-            v = self.image.ravel()[self.flat + (dy * w + dx)].astype(float, copy=False)
+            v = (self.image.ravel()[self.first + dy * w + dx:].take(self.rel)
+                 .astype(float, copy=False))
             if v.min() > 0 and v.max() < self.full_scale:  # (NaN fails both)
                 return v, None
             return v, (v < self.full_scale) & (v > 0)
-        return _replica(self.image, self.ys, self.xs, dx, dy, self.full_scale)
+        ys, xs = np.divmod(self.flat, w)
+        return _replica(self.image, ys, xs, dx, dy, self.full_scale)
 
 
 def _demean(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -100,22 +111,22 @@ def _demean(z: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndarray],
+def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray],
                   nseg: int, wgt: np.ndarray, J: Sequence[np.ndarray], cov: np.ndarray,
                   ok: np.ndarray, ring: tuple[np.ndarray, ...], contrast: np.ndarray,
                   normal: np.ndarray, shifts_px: Sequence[float],
                   noise_var: tuple[float, float], full_scale: float,
                   avoid_px: Sequence[float] = (), clear_px: float = 0.0,
-                  npx: np.ndarray | None = None, sums: GroupSums | None = None
-                  ) -> TextureModel | None:
+                  npx: np.ndarray | None = None, sums: GroupSums | None = None,
+                  ring_geo: tuple | None = None) -> TextureModel | None:
     """Measure the texture's effect on the centres from replicas of the band.
 
     Parameters
     ----------
-    band : (rows, columns, segment) of the band's pixels
+    band : (flat index into ``image``, segment) of the band's pixels
     wgt, J : per-pixel weights and the k design columns of the segment fit (centre first)
     cov : (nseg, k, k) inverse normal matrices of the segments; ``ok`` valid segments
-    ring : (rows, columns, e, segment) of the illumination ring's pixels
+    ring : (flat index, e, segment) of the illumination ring's pixels
     contrast : (nseg,) the segments' contrast [DN] (the regressor is slope / contrast)
     normal : unit normal of the mark (x, y)
     shifts_px : distances along the normal at which replicas are taken (both signs)
@@ -126,6 +137,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     npx : the band's pixel count per segment, when the caller has it (else counted here)
     sums : the band's per-segment sums (:class:`imaging.groupsum.GroupSums` of its segments),
         when the caller has them (else grouped here)
+    ring_geo : :func:`imaging.ring.ring_geometry` of the ring, when the caller has it
 
     Returns None when no replica could be taken (all off the image or clipped); ``acf`` is
     None when the replicas are consistent with independent centres of the Fisher variance,
@@ -133,12 +145,12 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     :data:`QUIET`: a noise-free render, nothing to estimate from).
     """
 
-    ys, xs, seg = band
+    flat, seg = band
     v0, v1 = noise_var
     k = len(J)
     c0 = np.where(ok[:, None], cov[:, 0, :], 0.0)
 
-    bc = GroupSums(seg, nseg) if sums is None else sums
+    bc = GroupSums(seg, nseg, eager=True) if sums is None else sums
 
     wj = [wgt * j for j in J]
     # White-noise variance of a replica's centre, (N^-1 J^T W V W J N^-1)_00, with the
@@ -150,11 +162,18 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
     w0 = np.einsum("ni,nij,nj->n", c0, M0, c0)
     # The centre functional per pixel, (N^-1 J^T W)_0: a replica's centre is one sum of
     # f v per segment (not k sums then the segment's row of N^-1).
-    f = sum(c0[seg, i] * wj[i] for i in range(k))
-    npx = np.maximum(bc(np.ones(ys.size)) if npx is None else npx, 1)
-    ring_n = np.bincount(ring[3], minlength=nseg)
-    ring_geo = ring_geometry(ring[2], ring[3], nseg)  # the same for every replica
-    band_at, ring_at = _Shifted(image, ys, xs, full_scale), _Shifted(image, *ring[:2], full_scale)
+    # (c0's columns as rows: each gather one contiguous take; the sum in the order
+    # ``sum()`` adds, 0 first: the same numbers.)
+    c0_rows = np.ascontiguousarray(c0.T)
+    f = c0_rows[0].take(seg) * wj[0]
+    f += 0.0
+    for i in range(1, k):
+        f += c0_rows[i].take(seg) * wj[i]
+    npx = np.maximum(bc(np.ones(flat.size)) if npx is None else npx, 1)
+    if ring_geo is None:
+        ring_geo = ring_geometry(ring[1], ring[2], nseg)  # the same for every replica
+    ring_n = ring_geo[0]
+    band_at, ring_at = _Shifted(image, flat, full_scale), _Shifted(image, ring[0], full_scale)
     reps = []
     for dist in shifts_px:
         for sign in (1.0, -1.0):
@@ -167,7 +186,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             rv, rgood = ring_at(dx, dy)
             whole = rgood is None or rgood.all()
             if not whole:  # (all usable: every segment has its whole ring)
-                valid &= np.bincount(ring[3], rgood, minlength=nseg) >= 0.8 * ring_n
+                valid &= np.bincount(ring[2], rgood, minlength=nseg) >= 0.8 * ring_n
             if valid.sum() < 20:
                 continue
             # The centre functional applied to the replica: (N^-1 J^T W v)_0 per segment,
@@ -176,7 +195,7 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray, np.ndar
             wv = w0 * np.maximum(v0 + v1 * bc(v) / npx, 1e-9)
             valid &= np.isfinite(d) & (wv > 0)
             s = np.sqrt(np.where(valid, wv, 1.0))
-            x = ring_slope(rv if whole else np.where(rgood, rv, 0.0), ring[2], ring[3], nseg,
+            x = ring_slope(rv if whole else np.where(rgood, rv, 0.0), ring[1], ring[2], nseg,
                            full_scale, ring_geo, True if rgood is None else rgood)
             # The centres' series keeps its mean: the texture's slow undulations are what moves a
             # fitted angle, and demeaning (or detrending) a replica forces the autocovariance to

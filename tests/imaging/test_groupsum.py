@@ -6,14 +6,15 @@ import pytest
 from imaging.groupsum import LARGE, LAZY, GroupSums
 
 
+@pytest.mark.parametrize("eager", [False, True])
 @pytest.mark.parametrize("n", [LARGE // 2, 3 * LARGE])
-def test_sums_are_bincounts_to_the_bit(n):
+def test_sums_are_bincounts_to_the_bit(n, eager):
     rng = np.random.default_rng(n)
     # Labels as a mark's segments: mostly in order along the band, some out of order, and
     # groups left empty (minlength beyond the largest label).
     labels = np.sort(rng.integers(0, 300, n))
     labels[::7] = rng.integers(0, 300, labels[::7].size)
-    groups = GroupSums(labels, 320)
+    groups = GroupSums(labels, 320, eager)
     assert groups.n == 320
     assert np.array_equal(groups.counts, np.bincount(labels, minlength=320))
     values = [rng.standard_normal(n) * 10.0 ** rng.integers(-8, 8, n),  # cancellations
