@@ -23,16 +23,22 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import re
 import sys
 from pathlib import Path
 
-import benchpage
-import numpy as np
-from marks import spec_for  # the speed benchmark's images
+# One BLAS thread, as marks_real.py: the thread count changes the last bits of a sum,
+# and two checkouts compared bit for bit must run alike.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from align.marks import measure_image
-from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
+import benchpage  # noqa: E402
+import numpy as np  # noqa: E402
+from marks import spec_for  # noqa: E402  (the speed benchmark's images)
+
+from align.marks import measure_image  # noqa: E402
+from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks  # noqa: E402
 
 ANGLE_TOL_U = 0.05
 """Largest angle change [u] a change that is not bit-identical may make."""
