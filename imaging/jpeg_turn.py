@@ -74,14 +74,18 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
         rng = np.random.default_rng(0)
         renders = [np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
                    for _ in range(NOISE_DRAWS)]
-    # Every render's centres, before and after each encoder, in one pass (to the bit each
-    # render's alone: sample_centres_batch); a table known by its IJG quality is that
-    # encoder.
+    # Every render's centres after each encoder, and the noise-free model's, in one pass (to
+    # the bit each image's alone: sample_centres_batch); a table known by its IJG quality is
+    # that encoder. Each coded draw's turn is taken from the noise-free model's centres, not
+    # from its own draw's before coding: the encoder quantises the noise with the edge (a
+    # coefficient the noise pushed across a bin's edge is kept there), so its turn and the
+    # noise's own are correlated, and the mark's u holds the noise's turn and the coded
+    # centres' scatter, not that covariance (see :func:`_term`).
     coded = [jpeg_round_trip(a, c.quality, c.table if c.quality is None else None, phase)
              for c in coders for a in renders]
-    cen = sample_centres_batch(np.stack(renders + coded), pfw)
+    cen = sample_centres_batch(np.stack([model] + coded), pfw)
     m = len(renders)
-    return max(_term([centres_turn(cen[i], cen[m * (j + 1) + i], model.shape, pfw)
+    return max(_term([centres_turn(cen[0], cen[1 + m * j + i], model.shape, pfw)
                       for i in range(m)]) for j in range(len(coders)))
 
 
