@@ -40,7 +40,10 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     and differently, than the noise-free model's. With that noise read, the model is
     rendered :data:`NOISE_DRAWS` times with it (a fixed seed: the same term for the same
     image), each through the encoder, and the term is the root of the mean over the draws
-    of the turn's square less the share the centres' scatter carries (:func:`blocks_turn`),
+    of the turn's square (each coded draw's centres against the noise-free model's: the
+    coding's turn and the noise's are correlated, and the mark's u holds the noise's turn
+    and the coded scatter, not that covariance) less the share the centres' scatter
+    carries (:func:`blocks_turn`),
     on marks near an axis (:func:`near_axis`: there the error is a turn). Else, or without
     that noise, the noise-free model once. Only the band's blocks are coded (the encoder
     codes each block alone: the rest of the frame changes nothing)."""
