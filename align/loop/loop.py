@@ -317,6 +317,8 @@ def _joint(stage: Stage, current: StageFit, terms: Sequence[Term],
         family += math.comb(tested, size)
         best = None
         for combo in itertools.combinations(ok, size):
+            if len({instrument(t.name) for _, t, *_ in combo}) < size:
+                continue  # two members on one instrument's observations: not a set
             key = frozenset(c.name for c, *_ in combo)
             try:
                 joint = stage.fit([*terms, *(t for _, t, *_ in combo)])
@@ -330,6 +332,8 @@ def _joint(stage: Stage, current: StageFit, terms: Sequence[Term],
                                 trials), family)
             if not (p_adj < alpha and d_bic < -min_delta_bic):
                 continue
+            if structure_of(joint, alpha).structured:
+                continue  # the set does not explain the excess that held its members back
             if all(_member_needed(fits.get(key - {c.name}), joint, t, alpha, min_delta_bic)
                    and (admissible is None or admissible(current, joint, t) is None)
                    for c, t, *_ in combo) and (best is None or d_bic < best[3]):
@@ -337,6 +341,14 @@ def _joint(stage: Stage, current: StageFit, terms: Sequence[Term],
         if best is not None:
             return best
     return None
+
+
+def instrument(name: str) -> str:
+    """The instrument an effect acts on, from its name: ``camera_roll[A]`` -> ``A``; an
+    effect named without brackets (``scale_warmup``, ``reference_face_offset``) acts on the
+    stage's own observations, named ``""``."""
+    head, sep, rest = name.partition("[")
+    return rest.rstrip("]") if sep else ""
 
 
 def _member_needed(without: StageFit | None, joint: StageFit, term: Term, alpha: float,
