@@ -7,9 +7,9 @@ and the quantities of interest. *Candidates* build a :class:`Term` (design colum
 unit and physical meaning) from the current fit. The loop scores each candidate by refitting,
 adds the best one only if an F-test (corrected for searched parameters, and Holm over the
 candidates a round tests) and BIC both call for it; when no candidate passes alone it tries
-sets of them together (:func:`_joint`: two real effects can each leave the other's excess in
-the residual the test scales by), and stops when nothing more is significant. Structure that
-remains is reported, never hidden.
+sets of them on different instruments together (:func:`_joint`: two real effects can each
+leave the other's excess in the residual the test scales by), and stops when nothing more
+is significant. Structure that remains is reported, never hidden.
 
 A candidate that does not apply to the data (its builder returns None or raises
 :class:`~axisbase.errors.NotApplicable`, or its refit does) or whose refit is singular
@@ -133,8 +133,9 @@ def run_loop(stage: Stage, candidates: Sequence[Candidate], alpha: float = 1e-3,
     the next round at m - 1), is below ``alpha`` and it lowers BIC by at least
     ``min_delta_bic``; the best such effect is added first. ``alpha`` is then the chance that
     a round adds an effect to data that have none, whatever the number of candidates. A
-    round where none passes alone adds the smallest set of candidates that passes together
-    (:func:`_joint`; at most 2 ``alpha`` a round on clean data, the two families').
+    round where none passes alone adds the smallest set of candidates on different
+    instruments that passes together (:func:`_joint`; at most 2 ``alpha`` a round on clean
+    data, the two families').
     ``admissible(current, trial, term)`` may refuse a significant effect (returns the reason,
     else None): the refusal is reported in ``LoopReport.refused``, never silent. A candidate
     that does not apply or whose refit is singular is reported in ``LoopReport.skipped``.
@@ -299,13 +300,24 @@ def _joint(stage: Stage, current: StageFit, terms: Sequence[Term],
     the one not yet fitted leaves that excess large, and neither passes alone (two cameras
     rolled 24″: p 0.32 and 0.05 though each lowers BIC by 72 and 121 and is 9-11 sigma).
     Sets of 2, 3, ... of the round's candidates that each lower BIC by ``min_delta_bic``
-    alone and are admissible are then refitted together. A set is added when its joint
+    alone, are admissible and act on different instruments (:func:`instrument`: at most one
+    member per instrument) are then refitted together. A set is added when its joint fit
+    leaves no structure (the excess that held its members back is theirs), its joint
     test, corrected for look-elsewhere (the product of its terms' trials) and for the
     number of sets of its size and smaller the round's ``tested`` candidates form (Sidak),
     is below ``alpha``, it lowers BIC by ``min_delta_bic``, and each member, against the set
     without it, is significant at ``alpha`` and lowers BIC by ``min_delta_bic`` (no
     passenger rides on the others) and is admissible in the joint fit. The smallest such
     set is taken, the one lowering BIC most among sets of that size.
+
+    Why one member per instrument: effects on one instrument's observations combine into a
+    shape none of them has, and a set of them stands in for an effect no candidate models —
+    user 10's mid-run 0.5 mg bias step (seed 1) was absorbed by nonlinearity_k3 +
+    scale_warmup (chi2 6.4 / 3 dof after, no structure, calibration ok: a wrong answer),
+    seed 2's by bias_hysteresis + nonlinearity_k2 (chi2 27 / 3 dof). Effects on different
+    instruments' observations cannot: each residual is one member's, and the set's chi2 drop
+    is the sum of its members' alone (1.000 for the two rolls; 1.09-1.13 for the
+    calibration's sets).
     """
     ok = [(cand, term, trial, d_bic) for cand, term, trial, _, d_bic in tried
           if d_bic < -min_delta_bic
