@@ -347,13 +347,6 @@ def test_plan_names_a_declared_range_as_declared(work):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "two cameras rolled ~23″ (each with its reversal view) are not found: the fusion loop "
-    "logs camera_roll[A] p 0.324, dBIC -72.4 and camera_roll[B] p 0.0528, dBIC -120.8 "
-    "(estimates +22.7 ± 2.6″ and +24.3 ± 2.2″, 8.7 and 11 sigma; truth A +24.4″) and adds "
-    "neither; the "
-    "session is NOT OK 'the instruments disagree beyond their uncertainties (chi2 198.3 / 4 "
-    "dof)', u inflated x7.04, verdict NOT MEASURED; the rolls only in notes ('not excluded')"))
 def test_session_finds_two_rolled_cameras(work):
     A = g.ARCSEC
     E = {"E_xY": 10 * A, "E_xZ": 60 * A, "E_yX": -62 * A, "E_yZ": 20 * A, "E_zX": -15 * A,
