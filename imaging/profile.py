@@ -9,6 +9,8 @@ mark are :mod:`imaging.centres`' job; :func:`groove_extent` finds where the groo
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.ndimage import median_filter
 
@@ -196,30 +198,45 @@ EXTENT_REACH_PX = 24.0
 """How far beyond the measured stretch :func:`groove_extent` looks for the groove's ends [px]."""
 
 
-def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
+def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
+                  path: Callable[[np.ndarray], np.ndarray] | None = None
                   ) -> tuple[float, float]:
     """:func:`extent_look`'s ends (the half-depth points) only."""
-    return extent_look(image, pf, reach_px)[:2]
+    return extent_look(image, pf, reach_px, path)[:2]
 
 
-def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
+def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
+                path: Callable[[np.ndarray], np.ndarray] | None = None
                 ) -> tuple[float, float, bool, bool]:
     """Where the groove ends along its line: the outermost positions t [px], either side of
     the measured stretch, at which its contrast is still half its median (the half-depth
     points of its blurred ends, like the width's).
 
-    The centres are sampled on a stretch trimmed inside the detected ridge, which itself
-    fades a filter width before each end, so their span is ~20 px short of a 100 px mark;
-    this is the mark's own length. The groove's contrast is fitted per 1-px step along the
+    The detected ridge fades a filter width before each end (its stretch ~20 px short of a
+    100 px mark); this is the mark's own length, and the centres are then sampled out to it
+    (:func:`imaging.ends.centres_stretch`). The groove's contrast is fitted per 1-px step along the
     line (level + contrast x the fitted profile), beyond the measured stretch by
     ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
+
+    ``path``: the groove's centre across the line as a function of t [px]
+    (:func:`imaging.ends.groove_path`), which the band follows (clipped to its half-width):
+    off a straight band a bowed groove's ends looked shallow, and were read short by
+    different amounts (a 3.6 px bow over 287 px: one end 10.5 px short, the other 2.8, its
+    chord turned 279'' at u 90'').
 
     Returns (t0, t1, open0, open1): the ends [px], and whether the groove was still deep
     at the look's limit on that side (its end lies further out, unseen).
     """
     half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
     t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
-    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
+    bow = (lambda tt: np.clip(path(tt), -half, half)) if path is not None else None
+    wide = half + (float(np.abs(bow(np.linspace(t0, t1, 65))).max()) if bow is not None
+                   else 0.0)
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, wide)
+    if bow is not None:
+        e = e - bow(t)
+        near = np.abs(e) <= half
+        vals, e, t = vals[near], e[near], t[near]
     ok = unclipped(vals, pf.full_scale_dn)
     if ok is not None:
         vals, e, t = vals[ok], e[ok], t[ok]
