@@ -143,6 +143,23 @@ def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | 
                                         w=1 / sigma[good])
 
 
+def path_line_u(centres: Centres, pf: ProfileFit, path: np.polynomial.Polynomial) -> float:
+    """The u [rad] of the direction of a line through the groove's usable measured
+    ``centres`` (those :func:`groove_path` is fitted to, at their own sigmas), widened by
+    their scatter about ``path`` (the square root of its chi^2/dof when above 1): a JPEG's
+    blocks move the centres by several times their own sigma (q50: ~5x), and the path
+    takes no bow for scatter.
+    """
+    u, n = line_frame(pf.angle_rad)
+    xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
+    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
+    t, w = xy[good] @ u, 1.0 / sigma[good] ** 2
+    r = xy[good] @ n - pf.offset_px - path(t)
+    chi2 = float(np.sum(w * r**2)) / max(int(good.sum()) - 3, 1)
+    spread = float(np.sum(w * (t - np.sum(w * t) / np.sum(w)) ** 2))
+    return float(np.sqrt(max(chi2, 1.0) / spread))
+
+
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                 reach_px: float = 40.0, path: np.polynomial.Polynomial | None = None
                 ) -> GrooveEnds:
