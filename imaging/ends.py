@@ -143,21 +143,31 @@ def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | 
                                         w=1 / sigma[good])
 
 
-def path_line_u(centres: Centres, pf: ProfileFit, path: np.polynomial.Polynomial) -> float:
-    """The u [rad] of the direction of a line through the groove's usable measured
-    ``centres`` (those :func:`groove_path` is fitted to, at their own sigmas), widened by
-    their scatter about ``path`` (the square root of its chi^2/dof when above 1): a JPEG's
-    blocks move the centres by several times their own sigma (q50: ~5x), and the path
-    takes no bow for scatter.
+def path_u(centres: Centres, pf: ProfileFit) -> tuple[float, float]:
+    """How well the groove's usable measured ``centres`` (those :func:`groove_path` is
+    fitted to, at their own sigmas, widened by their scatter about the path: the square root
+    of its chi^2/dof when above 1 — a JPEG's blocks move the centres by several times their
+    own sigma, ~5x at q50) read its direction and its bow: the u [rad] of a line's direction
+    through them, and the relative u of the path's curvature (inf: fewer than 5 centres).
     """
     u, n = line_frame(pf.angle_rad)
     xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
     good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
-    t, w = xy[good] @ u, 1.0 / sigma[good] ** 2
-    r = xy[good] @ n - pf.offset_px - path(t)
-    chi2 = float(np.sum(w * r**2)) / max(int(good.sum()) - 3, 1)
+    if good.sum() < 5:
+        return float("inf"), float("inf")
+    t, y, s = xy[good] @ u, xy[good] @ n - pf.offset_px, sigma[good]
+    h = max(float(np.ptp(t)) / 2, 1.0)
+    x = (t - float(np.mean(t))) / h
+    A = np.column_stack([np.ones_like(x), x, x * x]) / s[:, None]
+    c, *_ = np.linalg.lstsq(A, y / s, rcond=None)
+    r = y / s - A @ c
+    scale = max(float(r @ r) / max(len(y) - 3, 1), 1.0)
+    w = 1.0 / s**2
     spread = float(np.sum(w * (t - np.sum(w * t) / np.sum(w)) ** 2))
-    return float(np.sqrt(max(chi2, 1.0) / spread))
+    cov = np.linalg.pinv(A.T @ A) * scale
+    bow = abs(float(c[2]))
+    return (float(np.sqrt(scale / spread)),
+            float(np.sqrt(cov[2, 2])) / bow if bow > 0 else float("inf"))
 
 
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],

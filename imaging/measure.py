@@ -29,7 +29,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
-from imaging.ends import EndsCheck, centres_stretch, groove_path, path_line_u
+from imaging.ends import EndsCheck, centres_stretch, groove_path, path_u
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.framepass import stage_pass
@@ -238,11 +238,12 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     # width of the search before them), and the full pass runs once, over the whole groove
     # out to its ends (centres_stretch: a 300 px mark's centres spanned 248 px, its angle
     # 1.5x its bound with a lens's k1 free). The ends' check made here is kept. The ends
-    # read along the path are taken where they turn its chord by more than u/4 of a line
-    # through the first centres (their scatter about the path in it: a JPEG's blocks').
+    # read along the path are taken where they turn its chord, or change the bow they
+    # span, by more than u/4 of what the first centres read of them (their scatter about
+    # the path in it: a JPEG's blocks').
     path = groove_path(cen, pf)
-    turn = 0.25 * path_line_u(cen, pf, path) if path is not None else 0.0
-    look = extent_look(image, pf, path=path, turn_rad=turn)
+    tol = tuple(0.25 * v for v in path_u(cen, pf))
+    look = extent_look(image, pf, path=path, tol=tol)
     longer, check, on = centres_stretch(image, pf, look[:2], look[2:], cen, around.crossing)
     if longer is not None:
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
@@ -264,14 +265,14 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         # The groove ran on past the look (an end the first look could not follow): its
         # extent looked for again from the longer stretch, and the centres sampled once more
         # when it runs on further still.
-        t0, t1, open0, open1 = extent_look(image, pf, path=groove_path(cen, pf), turn_rad=turn)
+        t0, t1, open0, open1 = extent_look(image, pf, path=groove_path(cen, pf), tol=tol)
         ext = (t0, t1)
         longer, check, on = centres_stretch(image, pf, ext, (open0, open1), cen,
                                             around.crossing)
         if any(on) and longer is not None:
             pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
             cen, crossed, use = full_pass(pf, cen, use)
-            ext = groove_extent(image, pf, path=groove_path(cen, pf), turn_rad=turn)
+            ext = groove_extent(image, pf, path=groove_path(cen, pf), tol=tol)
             check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:

@@ -199,15 +199,15 @@ EXTENT_REACH_PX = 24.0
 
 
 def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
-                  path: Callable[[np.ndarray], np.ndarray] | None = None, turn_rad: float = 0.0
-                  ) -> tuple[float, float]:
+                  path: Callable[[np.ndarray], np.ndarray] | None = None,
+                  tol: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:
     """:func:`extent_look`'s ends (the half-depth points) only."""
-    return extent_look(image, pf, reach_px, path, turn_rad)[:2]
+    return extent_look(image, pf, reach_px, path, tol)[:2]
 
 
 def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
-                path: Callable[[np.ndarray], np.ndarray] | None = None, turn_rad: float = 0.0
-                ) -> tuple[float, float, bool, bool]:
+                path: Callable[[np.ndarray], np.ndarray] | None = None,
+                tol: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, bool, bool]:
     """Where the groove ends along its line: the outermost positions t [px], either side of
     the measured stretch, at which its contrast is still half its median (the half-depth
     points of its blurred ends, like the width's).
@@ -226,9 +226,11 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     groove's ends looked shallow, and were read short by different amounts (a 3.6 px bow
     over 287 px: one end 10.5 px short, the other 2.8, its chord turned 279'' at u 90'').
     The ends along the path are taken only where they turn the path's chord between them
-    from the straight look's by more than ``turn_rad`` [rad] (the caller's u/4 of the line):
-    elsewhere the two read the same groove, and the straight band's ends stand (a q50 JPEG's
-    near-axis mark, 0.4 px of lens bow: ends 0.1 px apart, a turn of ~1'' at u ~40'', and
+    from the straight look's by more than ``tol[0]`` [rad], or change the bow the path has
+    between them (its curvature x the length squared) by more than ``tol[1]`` of itself (the
+    caller's u/4 of a line's direction and of the bow through its centres): elsewhere the
+    two read the same groove, and the straight band's ends stand (a q50 JPEG's near-axis
+    mark, 0.4 px of lens bow: ends 0.1 px apart, a turn of 2.4'' where u/4 is 7.8'', and
     its obstruction check's trim of a blocky end moved 6 px by those 0.1 px).
 
     Returns (t0, t1, open0, open1): the ends [px], and whether the groove was still deep
@@ -248,7 +250,9 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
         # The path's chord between the ends [rad, small]: what the centres out to them see.
         return float((path(ends[1]) - path(ends[0])) / max(ends[1] - ends[0], 1.0))
 
-    return along if abs(chord(along) - chord(straight)) > turn_rad else straight
+    turn = abs(chord(along) - chord(straight))
+    length = (along[1] - along[0]) / max(straight[1] - straight[0], 1.0)
+    return along if turn > tol[0] or abs(length**2 - 1.0) > tol[1] else straight
 
 
 def _look_half(pf: ProfileFit) -> float:
