@@ -134,13 +134,17 @@ def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | 
     corner), and off a straight band the groove's ends looked shallow and misfit — they were
     read as obstructions.
     """
+    t, y, s = _path_points(centres, pf)
+    return None if t.size < 5 else np.polynomial.Polynomial.fit(t, y, 2, w=1 / s)
+
+
+def _path_points(centres: Centres, pf: ProfileFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The usable measured centres along and across the profile's line [px] and their
+    sigmas [px]."""
     u, n = line_frame(pf.angle_rad)
     xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
     good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
-    if good.sum() < 5:
-        return None
-    return np.polynomial.Polynomial.fit(xy[good] @ u, xy[good] @ n - pf.offset_px, 2,
-                                        w=1 / sigma[good])
+    return xy[good] @ u, xy[good] @ n - pf.offset_px, sigma[good]
 
 
 def path_u(centres: Centres, pf: ProfileFit) -> tuple[float, float]:
@@ -150,12 +154,9 @@ def path_u(centres: Centres, pf: ProfileFit) -> tuple[float, float]:
     own sigma, ~5x at q50) read its direction and its bow: the u [rad] of a line's direction
     through them, and the relative u of the path's curvature (inf: fewer than 5 centres).
     """
-    u, n = line_frame(pf.angle_rad)
-    xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
-    good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
-    if good.sum() < 5:
+    t, y, s = _path_points(centres, pf)
+    if t.size < 5:
         return float("inf"), float("inf")
-    t, y, s = xy[good] @ u, xy[good] @ n - pf.offset_px, sigma[good]
     h = max(float(np.ptp(t)) / 2, 1.0)
     x = (t - float(np.mean(t))) / h
     A = np.column_stack([np.ones_like(x), x, x * x]) / s[:, None]
