@@ -127,8 +127,13 @@ class MarkStage:
                 d = lf.offset_px
                 effects[t.name] = (k1 + b[0] / d, float(np.sqrt(cov[0, 0])) / abs(d))
             elif t.name == BEND:
-                # Sagitta of the fitted bow over the mark [px].
-                half = np.ptp(q @ line_frame(angle)[0]) / 2
+                # Sagitta of the fitted bow over the mark, end to end [px]: b (L/2)^2 over the
+                # groove's length between its ends, not the centres' span (short of them: a
+                # sagitta read 0.55-0.6 of the truth on user 16's webcam marks).
+                ends = q
+                if m.ends_px is not None and np.all(np.isfinite(m.ends_px)):
+                    ends = undistort(m.ends_px, [k1], self.scale) if k1 else m.ends_px
+                half = np.ptp(ends @ line_frame(angle)[0]) / 2
                 effects[t.name] = (float(b[0]) * half**2, float(np.sqrt(cov[0, 0])) * half**2)
             elif t.name == WIGGLE:
                 amp = float(np.hypot(*b))

@@ -68,7 +68,7 @@ STAGES = (
     (centres, "texture_model", "    texture replicas"),
     (centres, "fit_shape", "    groove shape"),
     (measure, "extent_look", "  groove ends looked at"),
-    (measure, "runs_on_stretch", "  ends' obstruction check"),
+    (measure, "centres_stretch", "  ends' obstruction check"),
     (measure, "crossing_skip", "  crossings"),
 )
 """(module, name, label): the functions timed, by the name the caller looks them up by."""

@@ -114,7 +114,7 @@ def split_two_lines(pts: np.ndarray, min_piece: float, tol: float = TOL_PX
 
 MIN_CROSSING = np.deg2rad(1.0)
 """Lines closer in direction than this are parallel neighbours (kept out of the texture's
-replicas by :func:`imaging.measure.neighbours`), not crossings."""
+replicas by :func:`imaging.beside.neighbours`), not crossings."""
 
 
 def _frame(angle_rad: float) -> tuple[np.ndarray, np.ndarray]:

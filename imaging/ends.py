@@ -31,9 +31,9 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from imaging.band import _band, unclipped
-from imaging.centres import Centres
+from imaging.centres import RING_PX, Centres
 from imaging.detect import MarkCandidate, line_frame
-from imaging.groove import ProfileFit, _profile_table
+from imaging.groove import ProfileFit, _profile_table, centres_half
 from imaging.groupsum import GroupSums
 
 LEVEL_K = 4.5
@@ -140,13 +140,41 @@ def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | 
     corner), and off a straight band the groove's ends looked shallow and misfit — they were
     read as obstructions.
     """
+    t, y, s = _path_points(centres, pf)
+    return None if t.size < 5 else np.polynomial.Polynomial.fit(t, y, 2, w=1 / s)
+
+
+def _path_points(centres: Centres, pf: ProfileFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The usable measured centres along and across the profile's line [px] and their
+    sigmas [px]."""
     u, n = line_frame(pf.angle_rad)
     xy, sigma = centres.xy[centres.ok], centres.sigma[centres.ok]
     good = np.all(np.isfinite(xy), axis=1) & np.isfinite(sigma) & (sigma > 0)
-    if good.sum() < 5:
-        return None
-    return np.polynomial.Polynomial.fit(xy[good] @ u, xy[good] @ n - pf.offset_px, 2,
-                                        w=1 / sigma[good])
+    return xy[good] @ u, xy[good] @ n - pf.offset_px, sigma[good]
+
+
+def path_u(centres: Centres, pf: ProfileFit) -> tuple[float, float]:
+    """How well the groove's usable measured ``centres`` (those :func:`groove_path` is
+    fitted to, at their own sigmas, widened by their scatter about the path: the square root
+    of its chi^2/dof when above 1 — a JPEG's blocks move the centres by several times their
+    own sigma, ~5x at q50) read its direction and its bow: the u [rad] of a line's direction
+    through them, and the relative u of the path's curvature (inf: fewer than 5 centres).
+    """
+    t, y, s = _path_points(centres, pf)
+    if t.size < 5:
+        return float("inf"), float("inf")
+    h = max(float(np.ptp(t)) / 2, 1.0)
+    x = (t - float(np.mean(t))) / h
+    A = np.column_stack([np.ones_like(x), x, x * x]) / s[:, None]
+    c, *_ = np.linalg.lstsq(A, y / s, rcond=None)
+    r = y / s - A @ c
+    scale = max(float(r @ r) / max(len(y) - 3, 1), 1.0)
+    w = 1.0 / s**2
+    spread = float(np.sum(w * (t - np.sum(w * t) / np.sum(w)) ** 2))
+    cov = np.linalg.pinv(A.T @ A) * scale
+    bow = abs(float(c[2]))
+    return (float(np.sqrt(scale / spread)),
+            float(np.sqrt(cov[2, 2])) / bow if bow > 0 else float("inf"))
 
 
 def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
@@ -192,14 +220,20 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
         vals, e, t = vals[near], e[near], t[near]
     ok = unclipped(vals, pf.full_scale_dn)
     # Clipped pixels (a saturated speck) say "not the surface": a bin of them is disturbed.
-    clip_bin = np.round(t[~ok] - t0 + reach_px).astype(int) if ok is not None else np.empty(0, int)
+    # 1-px bins counted from the middle, so the same from either end: the same pixels rotated
+    # by 180 deg fall in the same bins (counted from t0, an end the walk moved came out
+    # 0.1 px elsewhere, the centres' stretch with it, and the angle by 0.16 u).
+    mid = 0.5 * (t0 + t1)
+    half_n = int(np.ceil(0.5 * (t1 - t0) + reach_px))
+    clip_bin = (np.round(t[~ok] - mid).astype(int) + half_n if ok is not None
+                else np.empty(0, int))
     if ok is not None:
         vals, e, t = vals[ok], e[ok], t[ok]
     vals = vals.astype(float)
     if vals.size == 0:
         return same
-    j = np.round(t - t0 + reach_px).astype(int)
-    nb = int(np.ceil(t1 - t0 + 2 * reach_px)) + 1
+    j = np.round(t - mid).astype(int) + half_n
+    nb = 2 * half_n + 1
     j = np.clip(j, 0, nb - 1)
     # The table groove_extent and the centres built for this groove (the same arguments):
     # a cache hit, not ~1.3 ms of erf per mark.
@@ -214,7 +248,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     dd = np.where(good, det, 1.0)
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
-    tb = t0 - reach_px + np.arange(nb)
+    tb = mid + (np.arange(nb) - half_n)
     rms = _bin_rms(bc, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
@@ -260,7 +294,11 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                 k += step
             near = [k + step * i for i in range(-touch, touch + 1) if 0 <= k + step * i < nb]
             hit = [i for i in near if disturbed[i]]
-            if not hit:
+            # One disturbed 1-px bin is the end's own fall of depth misfit within the bin (a
+            # sharp end, blur under 1 px, on a lens-bowed path: its residual 3.3 x the body's
+            # on a clean corner mark), not an obstruction: an opaque particle's blurred
+            # edge alone spans more than one bin.
+            if len(hit) < 2:
                 return k, k
             # The obstruction's run, inward and outward from what touches the end.
             inner = run_from(hit[0], -step)
@@ -345,8 +383,9 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
 
 
 RUNS_ON_PX = 10.0
-"""How far past the extent's look the groove must be seen for the centres to be sampled
-again over it [px] (a few blur widths: more than where the half-depth point may fall)."""
+"""How far past the extent's look the groove must be seen for its extent to be looked for
+again from the longer stretch [px] (a few blur widths: more than where the half-depth point
+may fall)."""
 
 
 @dataclass(frozen=True)
@@ -386,45 +425,124 @@ def checked_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
                                                    path=groove_path(cen, pf))
 
 
-def runs_on_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float], opened: Sequence[bool],
-             cen: Centres, others: Sequence[tuple[int, MarkCandidate]] = ()
-             ) -> tuple[tuple[float, float] | None, EndsCheck | None]:
-    """The stretch to sample the centres on when the groove runs on past the look of
-    :func:`imaging.profile.extent_look` (still deep at the look's limit), or None.
+EDGE_MARGIN_PX = 2.0
+"""How far inside the frame a lengthened stretch's band (and its illumination ring) stays at
+each end [px]: the extension stops where the frame would cut its band."""
 
-    The search's stretch ends where its ridge broke (a speck beside the line, another on
-    it); the groove's half-depth extent is looked for only
-    :data:`imaging.profile.EXTENT_REACH_PX` beyond it. Its ends are then followed as the
-    end check does (:func:`imaging.ends.groove_ends`: past specks the groove is seen
-    beyond, never past bare surface), and the stretch is what they enclose, trimmed by the
-    blurred end (half-width + 2 blur widths), up to the nearest end of another mark found
-    on the same line (``others``: (index, candidate); two pieces of one edge stay two marks,
-    not one measured twice). Also the ends checked (:class:`EndsCheck`; None when no end
-    was open and none were)."""
-    if not any(opened):
-        return None, None
-    e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
-    check = EndsCheck(weakref.ref(image), pf, (float(ext[0]), float(ext[1])), cen, e)
-    # Only a groove seen on well past the look (a clean long mark's end can lie just at it).
-    on = (opened[0] and e.start_px < ext[0] - RUNS_ON_PX,
-          opened[1] and e.end_px > ext[1] + RUNS_ON_PX)
-    if not any(on):
-        return None, check
-    trim = max(4.0, pf.width_px / 2 + 2 * pf.blur_px)
-    t0 = e.start_px + trim if on[0] else pf.t_start_px
-    t1 = e.end_px - trim if on[1] else pf.t_end_px
+OTHER_REACH_PX = 40.0
+"""How far past another mark's detected stretch its groove is taken to run on [px] (its
+ridge fades a filter width before its ends, as this one's does: ~24 px at 640 x 480, ~40 px
+at 5 MP)."""
+
+
+def frame_limits(shape: tuple[int, int], pf: ProfileFit, reach_px: float,
+                 margin_px: float = EDGE_MARGIN_PX) -> tuple[float, float]:
+    """How far along the line [px] the stretch may run at each end with its band (``reach_px``
+    either side of the line) inside the frame by ``margin_px``: (lowest t0, highest t1).
+
+    Only the frame's sides the band is clear of at the search's own end limit that end; an
+    end whose band the frame already cuts (a mark along the frame's edge, or running out of
+    it) is not lengthened at all (its limit is the search's end)."""
+    h, w = shape[:2]
     u, n = line_frame(pf.angle_rad)
+    c = np.array([(w - 1) / 2, (h - 1) / 2]) + pf.offset_px * n
+    lo_hi = [margin_px, margin_px, w - 1 - margin_px, h - 1 - margin_px]
+    limits = []
+    for t_end, sgn in ((pf.t_start_px, -1.0), (pf.t_end_px, 1.0)):
+        far = np.inf
+        for side in (-reach_px, reach_px):
+            a = c + side * n
+            for k in (0, 1):
+                for bound, lower in ((lo_hi[k], True), (lo_hi[k + 2], False)):
+                    # g(t) = +-(a_k + t u_k - bound) >= 0 inside.
+                    g0 = (a[k] + t_end * u[k] - bound) * (1 if lower else -1)
+                    slope = sgn * u[k] * (1 if lower else -1)  # dg per px outward
+                    if g0 < 0:
+                        far = 0.0
+                    elif slope < 0:
+                        far = min(far, g0 / -slope)
+        limits.append(t_end + sgn * far)
+    return limits[0], limits[1]
+
+
+def others_limits(pf: ProfileFit, others: Sequence[tuple[int, MarkCandidate]], reach_px: float,
+                  trim_px: float) -> tuple[float, float]:
+    """How far along the line [px] the stretch may run at each end before another mark's
+    groove comes within its band: (lowest t0, highest t1).
+
+    Every other mark counts, at any angle: one that crosses the line past an end (a corner, a
+    crossing mark the search stopped at), one that runs on along it (two pieces of one edge
+    stay two marks, not one measured twice), a neighbour whose end comes near it. Its groove
+    is taken to run :data:`OTHER_REACH_PX` past its detected stretch, and the stretch stops
+    ``trim_px`` plus its half-width short of where it enters the band (``reach_px`` either
+    side of the line). What lies beside the search's own stretch is the crossing mask's
+    (:func:`imaging.crossmask.crossing_skip`)."""
+    u, n = line_frame(pf.angle_rad)
+    t0, t1 = -np.inf, np.inf
     for _, o in others:
         uo, no = line_frame(o.angle_rad)
-        ends = np.array([o.offset_px * no + s * uo for s in (o.t_start_px, o.t_end_px)])
-        if np.max(np.abs(ends @ n - pf.offset_px)) > max(3.0, o.thickness_px):
-            continue  # not on this line
-        lo, hi = sorted(ends @ u)
-        if lo >= pf.t_end_px:
-            t1 = min(t1, lo - trim)
-        elif hi <= pf.t_start_px:
-            t0 = max(t0, hi + trim)
+        ts = np.arange(o.t_start_px - OTHER_REACH_PX, o.t_end_px + OTHER_REACH_PX + 1.0, 1.0)
+        pts = o.offset_px * no + ts[:, None] * uo
+        tt, dd = pts @ u, pts @ n - pf.offset_px
+        gap = o.thickness_px / 2 + trim_px
+        inside = np.abs(dd) <= reach_px + o.thickness_px / 2
+        after = tt[inside & (tt > pf.t_end_px)]
+        before = tt[inside & (tt < pf.t_start_px)]
+        if after.size:
+            t1 = min(t1, float(after.min()) - gap)
+        if before.size:
+            t0 = max(t0, float(before.max()) + gap)
+    return t0, t1
+
+
+def centres_stretch(image: np.ndarray, pf: ProfileFit, ext: Sequence[float],
+                    opened: Sequence[bool], cen: Centres,
+                    others: Sequence[tuple[int, MarkCandidate]] = ()
+                    ) -> tuple[tuple[float, float] | None, EndsCheck, tuple[bool, bool]]:
+    """The stretch to sample the centres on: out to where the groove really ends.
+
+    The search's stretch stops short of each end (its ridge fades a filter width before it,
+    ~24 px at 640 x 480; or breaks at a speck beside the line), and the centres sampled on it
+    left the angle 1.5x its bound: a 300 px groove measured over 248 px, and with a lens's
+    k1 free the angle is read against the bow from the ends' centres most. The groove's ends
+    are followed as the end check does (:func:`groove_ends` from the half-depth extent
+    ``ext`` of :func:`imaging.profile.extent_look`: past specks the groove is seen beyond,
+    never past bare surface), and each end of the stretch is moved out towards them, but
+    only as far as the groove is whole and nothing else lies in its band:
+
+    * a blurred end (half-width + 2 blur widths) short of each end, clean or hidden: every
+      centre sees the groove's full depth across its band, none its fall of depth along the
+      line nor an obstruction's fringe;
+    * short of any other mark's groove entering the band (:func:`others_limits`: a crossing
+      or corner mark, a line running on along this one, a neighbour's end);
+    * with the band and its ring inside the frame (:func:`frame_limits`);
+    * never shorter than the search's stretch (what it saw, the crossing mask and the
+      refusals judge as before).
+
+    Each added centre gets its own u from its own pixels, like any other.
+
+    Returns the stretch (None: the search's, unchanged), the ends checked
+    (:class:`EndsCheck`, keyed to ``pf``, ``ext`` and ``cen``) and, per end, whether the
+    groove was seen on well past the look of the extent (``opened`` there, and more than
+    :data:`RUNS_ON_PX` further): the extent is then looked for again from the new stretch.
+    """
+    e = groove_ends(image, pf, ext, path=groove_path(cen, pf))
+    check = EndsCheck(weakref.ref(image), pf, (float(ext[0]), float(ext[1])), cen, e)
+    on = (bool(opened[0]) and e.start_px < ext[0] - RUNS_ON_PX,
+          bool(opened[1]) and e.end_px > ext[1] + RUNS_ON_PX)
+    trim = max(4.0, pf.width_px / 2 + 2 * pf.blur_px)
+    reach = centres_half(pf) + RING_PX
+    f0, f1 = frame_limits(image.shape, pf, reach)
+    o0, o1 = others_limits(pf, others, reach, trim)
+    # Each end no further out than the groove's half-depth point (``ext``) unless it runs on
+    # past the look: the end check's walk may stop a few px past a clean end (3.6 px on a
+    # strongly lens-bowed one), and the last centres then saw its fall of depth (misfit,
+    # left out in some images of a mark and not in others).
+    end0 = e.start_px if on[0] else max(e.start_px, float(ext[0]))
+    end1 = e.end_px if on[1] else min(e.end_px, float(ext[1]))
+    t0 = max(end0 + trim, f0, o0)
+    t1 = min(end1 - trim, f1, o1)
     t0, t1 = min(t0, pf.t_start_px), max(t1, pf.t_end_px)
     if t0 == pf.t_start_px and t1 == pf.t_end_px:
-        return None, check
-    return (t0, t1), check
+        return None, check, on
+    return (t0, t1), check, on

@@ -29,7 +29,7 @@ from imaging.detect import (
     require_single,
     wrap_angle,
 )
-from imaging.ends import EndsCheck, runs_on_stretch
+from imaging.ends import EndsCheck, centres_stretch, groove_path, path_u
 from imaging.errors import ImageInputError
 from imaging.families import detect_lines
 from imaging.framepass import stage_pass
@@ -234,12 +234,17 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     u, n = line_frame(pf.angle_rad)
     # Where the groove really ends, looked for once, before the full pass, along the first
     # centres' path (the full pass's to a fraction of a pixel): the detector's stretch stops
-    # ~40 px short of a 5 MP mark's ends (its ridge fades a filter width of the downsampled
-    # search before them), and the full pass ran twice, on the short stretch and again on
-    # the whole groove (a quarter of the frame's time). The ends' check made here is kept.
-    look = extent_look(image, pf)
-    longer, check = runs_on_stretch(image, pf, look[:2], look[2:], cen, around.crossing)
-    short = pf
+    # ~24 px (640 x 480) to ~40 px (5 MP) short of a mark's ends (its ridge fades a filter
+    # width of the search before them), and the full pass runs once, over the whole groove
+    # out to its ends (centres_stretch: a 300 px mark's centres spanned 248 px, its angle
+    # 1.5x its bound with a lens's k1 free). The ends' check made here is kept. The ends
+    # read along the path are taken where they turn its chord, or change the bow they
+    # span, by more than u/4 of what the first centres read of them (their scatter about
+    # the path in it: a JPEG's blocks').
+    path = groove_path(cen, pf)
+    tol = tuple(0.25 * v for v in path_u(cen, pf))
+    look = extent_look(image, pf, path=path, tol=tol)
+    longer, check, on = centres_stretch(image, pf, look[:2], look[2:], cen, around.crossing)
     if longer is not None:
         pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
 
@@ -253,19 +258,21 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
         return cen, crossed, _usable(cen, where, cand, skip)
 
     cen, crossed, use = full_pass(pf, cen, use)
-    if pf is short:
-        ext = look[:2]
-        check = replace(check, centres=cen) if check is not None else None
-    else:
-        # The lengthened stretch looked at again: a groove still deep past its look (an
-        # end the first look could not follow) gets the centres once more over it.
-        t0, t1, open0, open1 = extent_look(image, pf)
+    # (The check depends on the profile's line and shape, not on its stretch.)
+    check = replace(check, profile=pf, centres=cen)
+    ext = look[:2]
+    if any(on):
+        # The groove ran on past the look (an end the first look could not follow): its
+        # extent looked for again from the longer stretch, and the centres sampled once more
+        # when it runs on further still.
+        t0, t1, open0, open1 = extent_look(image, pf, path=groove_path(cen, pf), tol=tol)
         ext = (t0, t1)
-        longer, check = runs_on_stretch(image, pf, ext, (open0, open1), cen, around.crossing)
-        if longer is not None:
+        longer, check, on = centres_stretch(image, pf, ext, (open0, open1), cen,
+                                            around.crossing)
+        if any(on) and longer is not None:
             pf = replace(pf, t_start_px=longer[0], t_end_px=longer[1])
             cen, crossed, use = full_pass(pf, cen, use)
-            ext = groove_extent(image, pf)
+            ext = groove_extent(image, pf, path=groove_path(cen, pf), tol=tol)
             check = None  # (made on the shorter stretch)
     pts, sig = cen.xy[use], cen.sigma[use]
     if camera is not None:

@@ -9,6 +9,8 @@ mark are :mod:`imaging.centres`' job; :func:`groove_extent` finds where the groo
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.ndimage import median_filter
 
@@ -196,36 +198,100 @@ EXTENT_REACH_PX = 24.0
 """How far beyond the measured stretch :func:`groove_extent` looks for the groove's ends [px]."""
 
 
-def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
-                  ) -> tuple[float, float]:
+def groove_extent(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
+                  path: Callable[[np.ndarray], np.ndarray] | None = None,
+                  tol: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float]:
     """:func:`extent_look`'s ends (the half-depth points) only."""
-    return extent_look(image, pf, reach_px)[:2]
+    return extent_look(image, pf, reach_px, path, tol)[:2]
 
 
-def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX
-                ) -> tuple[float, float, bool, bool]:
+def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REACH_PX,
+                path: Callable[[np.ndarray], np.ndarray] | None = None,
+                tol: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, bool, bool]:
     """Where the groove ends along its line: the outermost positions t [px], either side of
     the measured stretch, at which its contrast is still half its median (the half-depth
     points of its blurred ends, like the width's).
 
-    The centres are sampled on a stretch trimmed inside the detected ridge, which itself
-    fades a filter width before each end, so their span is ~20 px short of a 100 px mark;
-    this is the mark's own length. The groove's contrast is fitted per 1-px step along the
+    The detected ridge fades a filter width before each end (its stretch ~20 px short of a
+    100 px mark); this is the mark's own length, and the centres are then sampled out to it
+    (:func:`imaging.ends.centres_stretch`). The groove's contrast is fitted per 1-px step along the
     line (level + contrast x the fitted profile), beyond the measured stretch by
     ``reach_px``, and smoothed by a running median over 5 px (dust, noise).
+
+    ``path``: the groove's centre across the line as a function of t [px]
+    (:func:`imaging.ends.groove_path`), which the band follows (clipped to its half-width)
+    where the groove departs from the straight band enough to lose more of its depth there
+    (:func:`misplaced_depth`, at the path's largest departure over the look) than the
+    straight look's own scatter of depth along the groove: off a straight band a bowed
+    groove's ends looked shallow, and were read short by different amounts (a 3.6 px bow
+    over 287 px: one end 10.5 px short, the other 2.8, its chord turned 279'' at u 90'').
+    The ends along the path are taken only where they turn the path's chord between them
+    from the straight look's by more than ``tol[0]`` [rad], or change the bow the path has
+    between them (its curvature x the length squared) by more than ``tol[1]`` of itself (the
+    caller's u/4 of a line's direction and of the bow through its centres): elsewhere the
+    two read the same groove, and the straight band's ends stand (a q50 JPEG's near-axis
+    mark, 0.4 px of lens bow: ends 0.1 px apart, a turn of 2.4'' where u/4 is 7.8'', and
+    its obstruction check's trim of a blocky end moved 6 px by those 0.1 px).
 
     Returns (t0, t1, open0, open1): the ends [px], and whether the groove was still deep
     at the look's limit on that side (its end lies further out, unseen).
     """
-    half = float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+    half = _look_half(pf)
+    straight, scatter = _look(image, pf, reach_px, None, half)
+    if path is None:
+        return straight
+    t = np.linspace(pf.t_start_px - reach_px, pf.t_end_px + reach_px, 65)
+    depart = float(np.abs(np.clip(path(t), -half, half)).max())
+    if 1.0 - misplaced_depth(pf, half, depart) <= scatter:
+        return straight
+    along = _look(image, pf, reach_px, path, half)[0]
+
+    def chord(ends: tuple[float, float, bool, bool]) -> float:
+        # The path's chord between the ends [rad, small]: what the centres out to them see.
+        return float((path(ends[1]) - path(ends[0])) / max(ends[1] - ends[0], 1.0))
+
+    turn = abs(chord(along) - chord(straight))
+    length = (along[1] - along[0]) / max(straight[1] - straight[0], 1.0)
+    return along if turn > tol[0] or abs(length**2 - 1.0) > tol[1] else straight
+
+
+def _look_half(pf: ProfileFit) -> float:
+    """The extent look's band half-width [px]: the groove and its blurred flanks."""
+    return float(np.clip(pf.width_px / 2 + 4 * pf.blur_px + 3, 6, 40))
+
+
+def misplaced_depth(pf: ProfileFit, half: float, d: float) -> float:
+    """The depth (level + contrast x the profile, fitted over a band of half-width ``half``
+    [px]) read from the groove moved ``d`` [px] across the band, over its true depth: 1 at
+    d = 0, falling as the fitted profile no longer lies on it."""
+    # (The look's own table: beyond its reach the profile is the surface's, 0.)
+    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
+    e = np.linspace(-half, half, 801)
+    p, q = np.interp(e, table.grid, table.p), np.interp(e - d, table.grid, table.p)
+    pc = p - p.mean()
+    return float(pc @ (q - q.mean()) / (pc @ pc))
+
+
+def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
+          path: Callable[[np.ndarray], np.ndarray] | None, half: float
+          ) -> tuple[tuple[float, float, bool, bool], float]:
+    """:func:`extent_look` on the straight band (``path`` None) or along the path, and the
+    robust relative scatter of the smoothed depth along the measured stretch."""
     t0, t1 = pf.t_start_px - reach_px, pf.t_end_px + reach_px
-    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, half)
+    bow = (lambda tt: np.clip(path(tt), -half, half)) if path is not None else None
+    wide = half + (float(np.abs(bow(np.linspace(t0, t1, 65))).max()) if bow is not None
+                   else 0.0)
+    vals, e, t, _ = _band(image, pf.angle_rad, pf.offset_px, t0, t1, wide)
+    if bow is not None:
+        e = e - bow(t)
+        near = np.abs(e) <= half
+        vals, e, t = vals[near], e[near], t[near]
     ok = unclipped(vals, pf.full_scale_dn)
     if ok is not None:
         vals, e, t = vals[ok], e[ok], t[ok]
     mid = 0.5 * (pf.t_start_px + pf.t_end_px)
     if vals.size == 0:
-        return pf.t_start_px, pf.t_end_px, False, False
+        return (pf.t_start_px, pf.t_end_px, False, False), 0.0
     j = np.round(t - mid).astype(int)
     j -= j.min()
     nb = int(j.max()) + 1
@@ -243,16 +309,16 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
     tb = bc(t) / np.maximum(cnt, 1)  # each bin's mean position
     good = np.isfinite(amp)
     if good.sum() < 10:
-        return pf.t_start_px, pf.t_end_px, False, False
+        return (pf.t_start_px, pf.t_end_px, False, False), 0.0
     sm = np.full(nb, np.nan)
     sm[good] = median_filter(amp[good], size=5, mode="nearest")
     inside = (tb >= pf.t_start_px) & (tb <= pf.t_end_px) & good
     ref = float(np.median(sm[inside])) if inside.any() else float(pf.contrast_dn)
     if ref == 0:
-        return pf.t_start_px, pf.t_end_px, False, False
+        return (pf.t_start_px, pf.t_end_px, False, False), 0.0
     deep = np.flatnonzero(good & (sm / ref >= 0.5))
     if deep.size == 0:
-        return pf.t_start_px, pf.t_end_px, False, False
+        return (pf.t_start_px, pf.t_end_px, False, False), 0.0
     # The outermost deep bins: a stretch covered by dust in between does not shorten it.
     lo, hi = int(deep[0]), int(deep[-1])
 
@@ -263,4 +329,6 @@ def extent_look(image: np.ndarray, pf: ProfileFit, reach_px: float = EXTENT_REAC
         a, b = sm[k] / ref - 0.5, sm[k_out] / ref - 0.5
         return float(tb[k] + (tb[k_out] - tb[k]) * a / (a - b)) if a != b else float(tb[k])
 
-    return cross(lo, lo - 1), cross(hi, hi + 1), lo == 0, hi == nb - 1
+    # (The depth's robust scatter along the groove, relative: the smoothed bins inside.)
+    scatter = 1.4826 * float(np.median(np.abs(sm[inside] / ref - 1.0))) if inside.any() else 0.0
+    return (cross(lo, lo - 1), cross(hi, hi + 1), lo == 0, hi == nb - 1), scatter

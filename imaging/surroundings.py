@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imaging.beside import neighbours
 from imaging.candidate import MarkCandidate
-from imaging.detect import line_frame, wrap_angle
 from imaging.jpeg import JpegBlocks
 
 
@@ -26,8 +26,8 @@ class Surroundings:
     Attributes
     ----------
     neighbours_px : tuple of float
-        Signed distances of other lines beside it [px] (:func:`neighbours`), kept out of the
-        texture's replicas.
+        Signed distances of other lines beside it [px] (:func:`imaging.beside.neighbours`),
+        kept out of the texture's replicas.
     jpeg : JpegBlocks or None
         The image's JPEG encoder (:func:`imaging.jpeg.find_jpeg`), whose effect on the
         angle is then measured.
@@ -60,22 +60,3 @@ def crossings(cands: Sequence[MarkCandidate], i: int) -> list[tuple[int, MarkCan
     by :func:`imaging.crossmask.crossing_skip` once its groove's width is known)."""
     return [(j, o) for j, o in enumerate(cands) if j != i]
 
-
-def neighbours(cands: Sequence[MarkCandidate], i: int, tol_angle: float = np.deg2rad(5)
-               ) -> tuple[float, ...]:
-    """Signed distances along candidate i's normal of the other candidates that run beside it
-    (directions within ``tol_angle``, overlapping it along its length) [px]."""
-    c = cands[i]
-    u, n = line_frame(c.angle_rad)
-    out = []
-    for j, o in enumerate(cands):
-        if j == i or abs(wrap_angle(o.angle_rad - c.angle_rad)) >= tol_angle:
-            continue
-        uo, no = line_frame(o.angle_rad)
-        ends = [o.offset_px * no + t * uo for t in (o.t_start_px, o.t_end_px)]
-        ts = sorted(float(p @ u) for p in ends)
-        if ts[1] < c.t_start_px or ts[0] > c.t_end_px:
-            continue
-        mid = o.offset_px * no + 0.5 * (o.t_start_px + o.t_end_px) * uo
-        out.append(float(mid @ n) - c.offset_px)
-    return tuple(out)

@@ -9,7 +9,6 @@ lens unless a test gives it a camera model.
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import replace
 
 import numpy as np
@@ -351,24 +350,64 @@ def test_centres_follow_a_groove_the_lens_bows_by_several_px():
     assert dist.max() < 0.05
 
 
-@pytest.mark.slow
-def test_the_exact_camera_model_is_not_called_different():
-    """With the exact camera model given, the marks' test of disagreement flags at its level:
-    20 seeds, p-values uniform (KS), at most 1 below alpha = 1e-3 (before: 3 of 6 seeds
-    warned 'the lens differs from its calibration', p down to 6e-7)."""
-
+def _exact_model_ps(drawn: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(p_marks_agree per seed, every angle's z) over 20 seeds of the bowed marks measured
+    with the camera model of :func:`_camera_model`; ``drawn``: each render's lens drawn
+    from the model's declared u (each parameter about its value, independently, as the
+    model file gives them), else the model's lens itself."""
     cam, marks = _bowed_by_the_lens()
-    ps = []
+    model = _camera_model(cam)
+    ps, zs = [], []
     for seed in range(20):
-        s = _render(marks, cam, seed=seed)
-        res = [r for r in measure_image(s.image, "cam.png", camera=_camera_model(cam))
-               if r.found]
+        lens = cam
+        if drawn:
+            r = np.random.default_rng(100 + seed)
+            u = model.u
+            lens = replace(cam, focal_px=cam.focal_px + r.normal(0, u["fx"]),
+                           k1=cam.k1 + r.normal(0, u["k1"]), k2=cam.k2 + r.normal(0, u["k2"]),
+                           p1=cam.p1 + r.normal(0, u["p1"]), p2=cam.p2 + r.normal(0, u["p2"]),
+                           pp_offset_px=(cam.pp_offset_px[0] + r.normal(0, u["cx"]),
+                                         cam.pp_offset_px[1] + r.normal(0, u["cy"])),
+                           aspect=cam.aspect + r.normal(0, u["aspect"]))
+        s = _render(marks, lens, seed=seed)
+        res = [r for r in measure_image(s.image, "cam.png", camera=model) if r.found]
         ps.append(res[0].lens["p_marks_agree"])
         for r in res:
             t = min(marks, key=lambda m: abs(angle_error(r.angle_rad, m.angle_rad)))
-            assert abs(_z(r, t.angle_rad)) <= 3
-    print(f"\nexact camera model, 20 seeds: p < 1e-3 in {sum(p < 1e-3 for p in ps)}, "
-          f"min p {min(ps):.2g}, KS p {stats.kstest(ps, 'uniform').pvalue:.2g}")
+            zs.append(_z(r, t.angle_rad))
+    print(f"\n{'drawn' if drawn else 'exact'} camera model, 20 seeds: p < 1e-3 in "
+          f"{sum(p < 1e-3 for p in ps)}, min p {min(ps):.2g}, median p {np.median(ps):.2f}, "
+          f"KS p {stats.kstest(ps, 'uniform').pvalue:.2g}; max |z| {np.max(np.abs(zs)):.2f}, "
+          f"RMS z {np.sqrt(np.mean(np.square(zs))):.2f}")
+    return np.array(ps), np.array(zs)
+
+
+@pytest.mark.slow
+def test_the_exact_camera_model_is_not_called_different():
+    """With the exact camera model given, the marks' test of disagreement never flags beyond
+    its level: 20 seeds, at most 1 below alpha = 1e-3, no excess of small p's (one-sided
+    KS), every angle within 3 u (before: 3 of 6 seeds warned 'the lens differs from its
+    calibration', p down to 6e-7).
+
+    Conservative by construction, so not uniform: the model's declared u (k1 5e-4, k2 1e-3,
+    cx, cy 0.7 px) enters the test's null while this render realises none of it (median p
+    0.85, two-sided KS p 1e-5 with the centres out to the grooves' ends, 0.03 stopped where
+    the search's ridge fades; RMS z 0.12). Uniform p's are asked of the renders that realise
+    it (:func:`test_a_camera_model_within_its_u_is_not_called_different`)."""
+    ps, zs = _exact_model_ps(drawn=False)
+    assert np.all(np.abs(zs) <= 3), zs
+    assert sum(p < 1e-3 for p in ps) <= 1
+    assert stats.kstest(ps, "uniform", alternative="greater").pvalue > 1e-3
+
+
+@pytest.mark.slow
+def test_a_camera_model_within_its_u_is_not_called_different():
+    """The test's proper null: each render's lens drawn from the model's declared u, the
+    model given as it is. Over 20 seeds the p's are uniform (KS), at most 1 below 1e-3,
+    and every angle within 3 u (measured: KS p 0.24, min p 0.005, max |z| 2.35, RMS z
+    1.07)."""
+    ps, zs = _exact_model_ps(drawn=True)
+    assert np.all(np.abs(zs) <= 3), zs
     assert sum(p < 1e-3 for p in ps) <= 1
     assert stats.kstest(ps, "uniform").pvalue > 1e-3
 
@@ -399,10 +438,9 @@ def test_principal_point_range_enters_as_its_rms_not_its_corners():
 # direction [deg], length [px]); p is read at the half-diagonal R = 400 px.
 _SPREAD = [((-150.0, -150.0), 5.0, 250), ((150.0, 150.0), -8.0, 250),
            ((-230.0, 40.0), 80.0, 200), ((240.0, -30.0), 95.0, 200), ((30.0, -10.0), 40.0, 220)]
-_P1 = re.compile(r"lens p1 = (\S+) ± (\S+) from the lines")
 
 
-def _spread_marks(cam: CameraGeometry, seed: int):
+def _spread_results(cam: CameraGeometry, seed: int):
     ms = []
     for (x, y), deg, length in _SPREAD:
         a = np.deg2rad(deg)
@@ -411,11 +449,14 @@ def _spread_marks(cam: CameraGeometry, seed: int):
     s = _render(ms, cam, seed=seed)
     rs = [r for r in measure_image(s.image, "spread.png") if r.found]
     assert len(rs) == len(ms)
-    notes = {n for r in rs for n in r.notes}
     for r in rs:  # each angle honest: within 3 u, or said to be lens-limited
         t = min(ms, key=lambda m: abs(angle_error(r.angle_rad, m.angle_rad)))
         assert abs(_z(r, t.angle_rad)) <= 3 or r.lens_limited
-    return notes
+    return rs
+
+
+def _spread_marks(cam: CameraGeometry, seed: int):
+    return {n for r in _spread_results(cam, seed) for n in r.notes}
 
 
 def _decentred_cases(seeds):
@@ -435,10 +476,13 @@ def test_radial_lens_about_an_offset_principal_point_is_not_called_not_a_lens():
     lens, with no radial term to explain it, is still called not a lens."""
     _decentred_cases([1])
     f, R = 540.0, 400.0
-    notes = _spread_marks(CameraGeometry(focal_px=f, p1=1e-3, p2=-0.8e-3), 1)
+    rs = _spread_results(CameraGeometry(focal_px=f, p1=1e-3, p2=-0.8e-3), 1)
+    notes = {n for r in rs for n in r.notes}
     assert not [n for n in notes if "not a lens" in n], notes
-    (p1, u), = {tuple(map(float, m.groups())) for n in notes if (m := _P1.search(n))}
-    assert abs(p1 - 1e-3 * R / f) < 3 * u, (p1, u)
+    # Determined by the lines, applied or (its sign open) carried: its estimate either way.
+    p1 = rs[0].lens["parameters"]["p1"]
+    assert p1["determined"], p1
+    assert abs(p1["estimate"] - 1e-3 * R / f) < 3 * p1["u_from_lines"], p1
 
 
 @pytest.mark.slow

@@ -86,61 +86,12 @@ def test_undeclared_lens_held_out_marks_within_their_u(k1):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 18 failure mode 5: RMS err/CRLB(k1 and ends free)"
-                   " 1.59 under the lens over 40 (1.53 without one): the k1-free line fit from"
-                   " the centres (u honest: err/u RMS 1.04 at k1 = 0) is 1.5x the pixels' bound;"
-                   " the centres span ~248 of the 300 px, whose bound is 1.51-1.55x. Centres"
-                   " out to a blurred end short of each groove end (stopped at other marks and"
-                   " the frame: branch ends2, 38c6407 + fb1ec85, reverted) reach 1.21 and 1.16"
-                   " (err/u RMS 0.19 / 1.06, max 0.66 / 2.63) but 5 slow tests then fail: the"
-                   " dial's graduations' u drops ~30 % while their error does not (seed 0: z"
-                   " -3.87), a strong lens folds at a principal-point probe over the longer"
-                   " centres (lens_shared: u inf), two bent-mark seeds lose 'differs', and"
-                   " marks_loop's k1 +0.2 RMS z falls to 0.37 (< 0.4). Since (branch ends3-wip,"
-                   " 551644a): the dial was a 1-series texture coupling (fixed on main:"
-                   " imaging.centres.MIN_CV_REPLICAS), lens_shared's inf the fold (fixed:"
-                   " align.lens_pp.pp_corners) then end centres past the half-depth end (capped"
-                   " there); camera_lens seed 2's 'neither' was lens_or_bends comparing a k1"
-                   " read with k2 free against one with k2 held at 0 (fixed on main). Left"
-                   " (branch ends4-wip): marks_loop's k1 +0.2 floor, RMS z 0.365 < 0.4: the"
-                   " angles' RMS error falls 30.4 -> 26.0'' while u stays 59.5 -> 58.9'',"
-                   " mostly Type B terms this scene does not realise (lens_pp_cross 42.1 ->"
-                   " 42.9'' RMS, its principal point at the centre): not a term the longer"
-                   " centres widen. Centres out to the grooves' ends (ends6: merged cd3df0f,"
-                   " reverted 0e52ce9; branches ends7-full, ends7-wip) reach 1.13 and 1.05"
-                   " but 3 slow tests failed. (1) marks_crossing 5 deg 'end' seed 2003, z"
-                   " 3.92: not the added centres (added at the far end, t -231 -> -245 px;"
-                   " the error is 71.8'' with them, 71.3'' without) but the crossing mask's"
-                   " window, short of the other groove's flank: a groove 12-14 px beside a 9 px"
-                   " band tilts the line; the longer centres' u (28.2 -> 18.3'') exposed it (z"
-                   " 2.53 on this tree). The window + 2 blur widths: error 2'', z -0.10, but"
-                   " test_crossmask's stepped corner is then refused (seeds 1, 2; ends7-wip)."
-                   " (2) test_jpeg q90 crop, seed 3's first mark, z -3.40: its error is"
-                   " -20.9'' with the added centres, -22.7'' without (z -2.96); u 7.7 -> 6.1''"
-                   " because the Type B jpeg_blocks (the noise-free model's turn beyond its"
-                   " scatter, imaging.jpeg.blocks_systematic) fell 3.4 -> 0.0'' over the"
-                   " longer stretch: the encoder's turn of a noisy edge the model under-states"
-                   " (the q75 crop's open issue), not the end centres. (3) test_lens"
-                   " exact-camera check, 20 seeds: KS p 2.9e-5, median p 0.83 (0.032, 0.75"
-                   " without the added centres); with the model's u x 0.01 KS p 0.021, median"
-                   " 0.78 (0.14, 0.70 without), the pp stability not entering p: the model's"
-                   " declared u, realised 0 by the render, bows more beside the noise over"
-                   " the longer centres (a conservative p, no false alarm; angles' RMS z"
-                   " 0.27). Branch cross8 (tag cross8-ext; 27 Nov, on 8305a96): (1) fixed on"
-                   " main too: the crossing groove's flank beside the stretch left out"
-                   " (imaging.crossmask.flank_skip) and its run-on measured (run_on): 71.8'' ->"
-                   " 19.4'' at u 38.5'', crossing sweep 106 angles within 2.71 u with the"
-                   " extension (2.57 u here); (2) q90 crop still a strict xfail, z -3.40 (jcrop);"
-                   " (3) conservative by construction: median p 0.85, RMS z 0.12; with the"
-                   " lens drawn from the declared u KS p 0.24, max |z| 2.35, RMS z 1.07 over"
-                   " 40 (one-sided KS then passes: cross8-ext's test_lens). The extension then"
-                   " reached 1.23 / 1.16, but test_marks_bend seed 14 'centre' (3.6 px"
-                   " parabola over 287 px) failed, z 3.12: the extent look on the straight line"
-                   " read one end 10.5 px short, the chord turned 279'' (covered on main only"
-                   " by chord-vs-fit 185'', 2'' over the longer centres); the extent looked for"
-                   " along the groove's path fixes it (-54'', z -0.60) but a q50 near-axis JPEG"
-                   " mark then reaches z 3.13 (test_jpeg q50 file and crop), not looked into")
 @pytest.mark.parametrize("k1", [K1, 0.0])
 def test_undeclared_lens_held_out_marks_reach_the_k1_free_bound(k1):
+    """With k1 free the angle is read against the lens's bow mostly from the ends' centres:
+    they must reach the groove's ends (imaging.ends.centres_stretch). Sampled on the
+    search's stretch (~248 of the 300 px, whose bound is 1.51-1.55x) the RMS was 1.59 under
+    the lens and 1.53 without one; out to a blurred end short of each end 1.23 and 1.16
+    (err/u RMS 0.19 and 1.05, max 0.66 and 2.63)."""
     lo, hi = _band(N_MARKS)
     assert lo <= _report(k1) <= hi

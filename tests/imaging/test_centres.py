@@ -1,8 +1,10 @@
-"""Segment fits of the groove's centres (imaging.centres): which segments are solved."""
+"""Segment fits of the groove's centres (imaging.centres): which segments are solved, and
+the stretch they are sampled on (to the groove's ends, short of what covers one)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from imaging import measure_marks
 from imaging.centres import (
@@ -16,6 +18,8 @@ from imaging.centres import (
 )
 from imaging.groove import centres_half
 from imaging.jpeg import jpeg_round_trip
+from synth.marks import ImageSpec, MarkSpec, _mark_band, mark_coverage
+from synth.occlusion import disk, occlude
 from tests.conftest import mark_image
 
 
@@ -130,3 +134,40 @@ def test_a_batch_of_images_gives_each_its_own_centres_to_the_bit():
     # The cases were there: moved 1 px, dust misfitting its segment.
     assert abs(np.median(batch[7].xy[:, 1] - batch[1].xy[:, 1]) - 1.0) < 0.1
     assert batch[8].chi2_red.max() > 3 * np.median(batch[8].chi2_red)
+
+
+def _occluded_end(seed: int, level: float, r: float = 9.0):
+    """A 300 px groove whose end lies 3 px under an opaque particle of radius ``r`` (level
+    0.05: black; 1.6: bright), rendered by synth.occlusion, with shot and read noise: the
+    image, the groove's direction and normal, and the particle's centre (frame px)."""
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(-np.pi / 2, np.pi / 2)
+    m = MarkSpec(a, rng.uniform(-100, 100), 300.0, 4.0, rng.uniform(-40, 40), "box", -0.6)
+    spec = ImageSpec(marks=(m,), width=640, height=480, blur_px=1.2)
+    refl = np.ones((480, 640))
+    rr, cc = _mark_band(spec, m, 7 * 1.2 + 3)
+    refl[rr, cc] += m.contrast * mark_coverage(spec, m, rr, cc)
+    ua, na = np.array([np.cos(a), -np.sin(a)]), np.array([np.sin(a), np.cos(a)])
+    c = m.offset_px * na + (m.centre_t_px + m.length_px / 2 - 3.0) * ua
+    occlude(refl, [disk(float(c[0]), float(c[1]), r, level=level)], [m], 1.2)
+    full = 4000.0
+    e = rng.poisson(refl * 0.6 * full) + rng.normal(0.0, 3.0, refl.shape)
+    return np.clip(np.round(e * 65535 / full), 0, 65535), ua, na, m.offset_px, c
+
+
+@pytest.mark.parametrize("level", [0.05, 1.6])
+def test_centres_reach_a_clean_end_and_stop_short_of_a_particle(level):
+    """The centres run over the whole groove (imaging.ends.centres_stretch), out to its
+    clean end (within 10 px of it: a blurred end, ~4.4 px, short of its half-depth point, and
+    the last segment's half; they stopped 20-25 px short, where the search's ridge
+    faded), but none lies on or past the particle over its other end, black or bright
+    (the nearest stays ~7 px clear of its edge: the blurred end is trimmed), and that end
+    is said to be hidden."""
+    r = 9.0
+    img, ua, na, off, c = _occluded_end(0, level, r)
+    (m,) = measure_marks(img)
+    assert np.abs(m.points @ na - off).max() < 0.5  # the groove's own centres
+    s = (m.points - c) @ ua  # along the groove from the particle's centre, outward
+    assert s.max() < -r, s.max()
+    assert s.min() < -(300.0 - 3.0) + 10.0, s.min()
+    assert sum(m.ends_check.ends.hidden) == 1

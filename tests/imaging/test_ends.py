@@ -169,7 +169,9 @@ def test_a_search_cut_short_is_measured_to_the_grooves_ends(seed):
     its ridge: issue 18's grid case, a 230 px line read over 149 px) is measured over the
     whole groove: its half-depth ends within END_TOL_PX of the truth (+-150 px; before, the
     extent stopped 24 px past the search's end) and its angle the full candidate's within
-    0.5 u (the same groove, slightly different segments). A clean candidate is not touched."""
+    0.5 u (the same groove, slightly different segments). Both are sampled out to a blurred
+    end short of the groove's ends (imaging.ends.centres_stretch; before, the clean one's
+    centres stopped inside its search's ridge, 10 px short of each end)."""
     img = mark_image(33.0, seed, length_px=300.0, size=(640, 480), with_crlb=False).image
     img = img.astype(float)
     c = detect_lines(img).marks[0]
@@ -178,7 +180,10 @@ def test_a_search_cut_short_is_measured_to_the_grooves_ends(seed):
     for m in (full, cut):
         assert np.allclose(np.abs(m.extent_px), 150.0, atol=END_TOL_PX), m.extent_px
     assert abs(cut.line.angle_rad - full.line.angle_rad) < 0.5 * full.line.angle_u_rad
-    assert full.profile.t_end_px < 150.0 - 5  # the clean one's centres: inside the ridge
+    for m in (full, cut):  # a blurred end (half-width + 2 blur widths, ~4.4 px) inside
+        stretch = np.array([m.profile.t_start_px, m.profile.t_end_px])
+        inset = np.abs(np.array(m.extent_px)) - np.abs(stretch)
+        assert np.all((inset > 3.0) & (inset < 6.0)), (stretch, m.extent_px)
 
 
 def test_ends_check_kept_with_a_mark_is_the_recomputed_one_and_only_for_its_image():

@@ -207,8 +207,11 @@ def test_angle_and_u_follow_a_rotation_or_mirror_exactly(seed, n_marks):
 
 
 def test_length_is_the_groove_between_its_half_depth_ends_and_honours_min_length():
-    """length_px is the mark's own length (its blurred ends at half depth), not the span of
-    the centres (~20 px short: trimmed inside a ridge that fades before each end); a line
+    """length_px is the mark's own length (its blurred ends at half depth), and the centres
+    span it out to within two 4 px segments of each end, never past it
+    (imaging.ends.centres_stretch; at a high SNR the last segment, where the depth falls
+    along it, misfits the constant-depth model and is left out), where they stopped ~10 px
+    short of each, inside a search ridge that fades before it; a line
     measured shorter than 80 % of min-length is not reported (the detector's own rule, on
     the ridge, is the stricter one on a clean mark: checked here through it)."""
     for length, snr, tex in ((100.0, 8.0, 0.0), (180.0, 30.0, 0.02), (400.0, 15.0, 0.01)):
@@ -216,7 +219,7 @@ def test_length_is_the_groove_between_its_half_depth_ends_and_honours_min_length
                        with_crlb=False, texture=tex)
         m = measure_marks(s.image)[0]
         assert abs(m.length_px - length) < 3.0, (length, m.length_px)
-        assert m.line.length_px < length - 10
+        assert length - 16 < m.line.length_px <= m.length_px, (m.line.length_px, m.length_px)
     s = mark_image(17.0, 3, snr=30.0, length_px=130.0, size=(640, 480), with_crlb=False)
     assert len(measure_marks(s.image, min_length_px=150)) == 1  # 130 >= 0.8 x 150
     with pytest.raises(ImageInputError, match="no mark found"):
