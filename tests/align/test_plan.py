@@ -107,21 +107,23 @@ def _option(lin, kind):
 
 
 def test_another_image_is_the_cameras_mean_image_not_a_copy():
-    """The defect of the copied covariance: one more image of x in A has the camera's mean
-    own variance (1 and 9 ″²: 5), and its draw's scatter is the prediction's noise."""
+    """The defect of the copied covariance: one more image of x in A adds the camera's mean
+    information (own u² 1 and 9 ″²: 1/u² 1 and 1/9, their mean 5/9: a variance 1.8 ″², not the
+    mean variance 5 ″² a single poor image sets), and its draw's scatter is the prediction's
+    noise."""
     lin = _images_lin([1.0, 9.0])
     _, _, _, add, drop, _ = _option(lin, "image")
-    assert add[0].C[0, 0] / ARCSEC**2 == pytest.approx(5.0)
-    # pooled relative SD of the own variances: |1/5 - 1| = |9/5 - 1| = 0.8 on 1 dof
+    assert add[0].C[0, 0] / ARCSEC**2 == pytest.approx(1.8)
+    # pooled relative SD of the informations: |1/(5/9) - 1| = |(1/9)/(5/9) - 1| = 0.8, 1 dof
     images = [g for g in lin.groups if g.kind == "image"]
     assert image_noise(images) == pytest.approx(0.8 * np.sqrt(2))
     p = plan(lin)
     o = next(o for o in p.options if o.kind == "image")
-    # u² = 1 / (1/1 + 1/9 + 1/5) ″²; d ln u / d ln v_new = (1/5) / 2 / (1/1 + 1/9 + 1/5)
-    info = 1 + 1 / 9 + 1 / 5
+    # u² = 1 / (1/1 + 1/9 + 5/9) ″²; d ln u / d ln v_new = (5/9) / 2 / (1/1 + 1/9 + 5/9)
+    info = 1 + 1 / 9 + 5 / 9
     assert o.u_after / ARCSEC == pytest.approx(info ** -0.5, rel=1e-6)
     rel = 0.8 * np.sqrt(2) * np.sqrt(1 + 1 / 2)
-    assert o.u_after_noise / o.u_after == pytest.approx(0.2 / 2 / info * rel, rel=0.05)
+    assert o.u_after_noise / o.u_after == pytest.approx(5 / 9 / 2 / info * rel, rel=0.05)
 
 
 def test_a_lens_the_cameras_images_share_does_not_average_down():
