@@ -89,17 +89,28 @@ def test_the_lots_own_decisions_are_taken_as_they_are(tmp_path):
 
 
 def test_warnings_ranked_act_and_note_one_line_per_repeat():
-    lines = ["unit SN1: E_xZ = +34.81″ outside the tolerance ±30″",
-             "unit SN2: E_zX = -32.10″ outside the tolerance ±30″",
-             "unit SN1: E_xZ = +34.81″ outside the control limits +1.97″ … +19.31″",
-             "E_xY: Cpk 0.80 ± 0.10 (n = 40) below 1.33: the process is not capable of ±30″",
-             "E_yX: Cpk 0.70 ± 0.12 (n = 40) below 1.33: the process is not capable of ±30″",
-             "bad.json: not read: not valid JSON",
-             "E_xY differs with camera (Kruskal–Wallis p = 1e-05 < 0.001)"]
-    act, note = rank_warnings(lines)
+    items = [("outside_tolerance", "unit SN1: E_xZ = +34.81″ outside the tolerance ±30″"),
+             ("outside_tolerance", "unit SN2: E_zX = -32.10″ outside the tolerance ±30″"),
+             ("control_limits",
+              "unit SN1: E_xZ = +34.81″ outside the control limits +1.97″ … +19.31″"),
+             ("not_capable",
+              "E_xY: Cpk 0.80 ± 0.10 (n = 40) below 1.33: the process is not capable of ±30″"),
+             ("not_capable",
+              "E_yX: Cpk 0.70 ± 0.12 (n = 40) below 1.33: the process is not capable of ±30″"),
+             ("not_read", "bad.json: not read: not valid JSON"),
+             ("differs_with_metadata",
+              "E_xY differs with camera (Kruskal–Wallis p = 1e-05 < 0.001)"),
+             # ranked by its code, not its words: a unit named 'not read' is a note
+             ("control_limits", "unit not read: E_xY = +30.00″ outside the control limits")]
+    act, note = rank_warnings(items)
     assert [(x.count, x.variants) for x in act] == [
         (2, ("SN1 E_xZ", "SN2 E_zX")), (2, ("E_xY", "E_yX")), (1, ())]
-    assert [x.text for x in note] == [lines[2], lines[6]]
+    assert [x.text for x in note] == [items[2][1], items[6][1], items[7][1]]
+    # the capped remainder of the units not ok is for someone to act on (it was a note: its
+    # words did not say 'NOT ok'); an unknown code too
+    act, note = rank_warnings([("not_ok", "... and 3 more units not ok (all listed in the JSON "
+                                "and the CSV)"), ("no_such_code", "x")])
+    assert len(act) == 2 and not note
 
 
 def test_the_lots_name_from_metadata_else_its_folder(tmp_path):
