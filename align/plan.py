@@ -328,9 +328,10 @@ def expected_image(g: Group, images: Sequence[Group], source: str, A: np.ndarray
     the mean information of the camera's images (the harmonic mean of their own variances):
     the terms each image reads from itself (noise, length, groove profile, background) are
     new draws for a new image, and what a draw adds to the fusion is its information 1/u²,
-    whose expectation is the mean information — not 1 / the mean u², which a single poor
-    image sets (user 16: camera images' u 2.5-7.6″; the mean u² predicted 3.7 of 4 new
-    images' u 2.1-3.8 standard deviations too high), nor the value of the one image copied.
+    whose expectation is the mean information — not the mean u², which a single poor image
+    sets (user 16: one camera's images' u 2.5-7.6″; over 9 options realised the obtained u
+    was below the prediction by z -1.62 on average, now -0.62: docs/decision.md), nor the
+    value of the one image copied.
     """
     cam = g.meta.get("camera")
     same = [h for h in images if (h.meta.get("housing"), h.meta.get("view"))
