@@ -388,14 +388,15 @@ def decide(result: Mapping, spec: ToleranceSpec | None) -> Disposition:
     codes = pc.codes_of(problems, result.get("problem_codes"))
     carried = [Undetermined.from_dict(c) for c in result.get("undetermined") or ()]
     return judge_result(e6, u6, result.get("covariance_rad2"), spec, errs,
-                        tuple(zip(codes, problems, strict=True)), carried)
+                        tuple(zip(codes, problems, strict=True)), carried,
+                        bool(result.get("ok")))
 
 
 def judge_result(e6: Sequence[float] | None, u6: Sequence[float] | None,
                  cov: Sequence | np.ndarray | None, spec: ToleranceSpec | None,
                  errors: Sequence[tuple[str, str]] = (),
                  problems: Sequence[tuple[str, str]] = (),
-                 carried: Sequence[Undetermined] = ()) -> Disposition:
+                 carried: Sequence[Undetermined] = (), said_ok: bool = True) -> Disposition:
     """A session result judged against ``spec`` as 'align run' judges it with that spec:
     the six angles, their u [rad] (None when not fused) and covariance [rad²]; the failed
     stages (stage, message); the result's problems (code, text); the nuisances it carries
@@ -405,7 +406,11 @@ def judge_result(e6: Sequence[float] | None, u6: Sequence[float] | None,
     (:data:`~align.problem_codes.TOLERANCE_DEPENDENT`: an angle left undecided) is set aside
     and the undecided angles found anew for ``spec`` (:func:`undecided`); any other problem,
     or a failed stage, makes the result NOT MEASURED. So ``align lot`` with its own tolerance
-    judges a unit as 'align run' would have with that tolerance."""
+    judges a unit as 'align run' would have with that tolerance. ``said_ok``: the result's
+    own ``ok``; false with neither a failed stage nor a problem (an edited file) is a problem
+    of unknown code."""
+    if not said_ok and not errors and not problems:
+        problems = ((pc.UNKNOWN, "the result says ok: false"),)
     ok = (e6 is not None and u6 is not None and not errors
           and all(code in pc.TOLERANCE_DEPENDENT for code, _ in problems))
     unmeasured = (undecided(e6, u6, carried, spec)

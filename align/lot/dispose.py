@@ -62,8 +62,7 @@ def unit_disposition(unit: UnitResult, spec: ToleranceSpec | None,
     # As 'align run' judges with that spec: an angle the unit's own tolerance left undecided
     # is found anew for this one, from the nuisances its result carries.
     return judge_result(unit.e_rad if unit.fused else None, unit.u_rad, unit.covariance, spec,
-                        unit.failed_stages, unit.problems,
-                        carried)
+                        unit.failed_stages, unit.problems, carried, unit.ok)
 
 
 def dispositions(units: Sequence[UnitResult], spec: ToleranceSpec | None,

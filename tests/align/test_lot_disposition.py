@@ -254,6 +254,8 @@ def test_a_lot_rejudges_an_unmeasured_angle_as_align_run_does():
     for codes in ([ANGLE_UNDECIDED, UNKNOWN], [UNKNOWN]):
         other = replace(unit, problems=tuple((c, "x") for c in codes))
         assert unit_disposition(other, None, {"k": 2.0}).verdict == "NOT MEASURED", codes
+    # 'ok': false with nothing said why (an edited file): not ok
+    assert unit_disposition(replace(unit, problems=()), None, {"k": 2.0}).verdict == "NOT MEASURED"
 
 
 @pytest.mark.slow
