@@ -18,7 +18,7 @@ from align.errors import InputError
 from axisbase.provenance import Provenance, check_format, envelope
 
 FORMATS = {
-    "marks": 3, "camera": 6, "calibration": 3, "tilt": 3, "gonio": 4, "session": 4,
+    "marks": 3, "camera": 6, "calibration": 3, "tilt": 3, "gonio": 4, "session": 5,
     "platform-calibration": 3, "lot": 1, "plan": 1,
 }
 """kind -> the version this tool writes."""
@@ -31,13 +31,16 @@ session.toml against ``session-toml.schema.json``, and an editor can complete it
 READABLE = {
     "calibration": (1, 2, 3),            # 'align tilt --calibration'
     "platform-calibration": (1, 2, 3),   # 'align apply'
-    "session": (1, 2, 3, 4),             # 'align apply' on a result JSON
+    "session": (1, 2, 3, 4, 5),           # 'align apply' on a result JSON
 }
 """kind -> versions this tool reads back. Version 3 moved the provenance from a nested
 ``provenance`` block to the top level (``tool_version``, ``created_utc``, ``command``,
 ``inputs``); nothing a reader uses changed. Session version 4: the top-level ``estimate``
 and ``u`` of a fusion effect with ``components`` (the table's tilt) are its vector's length
-(version 3: the component furthest from 0 in its u); nothing this tool reads changed."""
+(version 3: the component furthest from 0 in its u); nothing this tool reads changed.
+Session version 5: ``problem_codes``, the code of each line of ``problems``
+(:mod:`align.problem_codes`); an older result's problems read as ``unknown`` (not ok
+whatever the tolerance, as they were)."""
 
 
 def format_name(kind: str) -> str:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
+from align import problem_codes as pc
 from align.errors import InputError
 from align.fusion.observations import E_INDEX, E_NAMES
 from align.fusion.undetermined import Undetermined
@@ -235,6 +236,10 @@ class Disposition:
     p_conform_all : float or None
         The probability that every toleranced angle conforms at once (from the 6×6
         covariance; None without a verdict on numbers) — dimensionless.
+    limits : tuple of (str, float, float, float)
+        The tolerance judged against, whatever the verdict: per toleranced angle (name,
+        nominal, lower, upper) [rad], the limits absolute (what ``align lot`` re-judges a
+        NOT MEASURED unit with; empty without a tolerance).
     """
 
     verdict: str
@@ -244,12 +249,16 @@ class Disposition:
     worst: str | None = None
     angles: tuple[AngleDisposition, ...] = ()
     p_conform_all: float | None = None
+    limits: tuple[tuple[str, float, float, float], ...] = ()
 
     def to_dict(self) -> dict:
+        a = ARCSEC
         return {"format_version": FORMAT_VERSION, "verdict": self.verdict, "rule": self.rule,
                 "k": self.k, "reason": self.reason, "worst": self.worst,
                 "p_conform_all": self.p_conform_all,
-                "angles": [a.to_dict() for a in self.angles]}
+                "angles": [x.to_dict() for x in self.angles],
+                "limits": [{"name": n, "nominal_arcsec": nom / a, "lower_arcsec": lo / a,
+                            "upper_arcsec": hi / a} for n, nom, lo, hi in self.limits]}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> Disposition:
@@ -260,9 +269,14 @@ class Disposition:
         if d["verdict"] not in VERDICTS:
             raise InputError(f"disposition verdict {d['verdict']!r}: not one of {VERDICTS}")
         pa = d.get("p_conform_all")
+        a = ARCSEC
+        # (written before 'limits': the judged angles' own, all a verdict on numbers has)
+        lim = d.get("limits", d["angles"])
         return cls(str(d["verdict"]), str(d["rule"]), float(d["k"]), str(d["reason"]),
-                   d.get("worst"), tuple(AngleDisposition.from_dict(a) for a in d["angles"]),
-                   None if pa is None else float(pa))
+                   d.get("worst"), tuple(AngleDisposition.from_dict(x) for x in d["angles"]),
+                   None if pa is None else float(pa),
+                   tuple((str(x["name"]), *(float(x[k]) * a for k in (
+                       "nominal_arcsec", "lower_arcsec", "upper_arcsec"))) for x in lim))
 
     def line(self) -> str:
         """The terminal's verdict line."""
@@ -358,7 +372,9 @@ def decide(result: Mapping, spec: ToleranceSpec | None) -> Disposition:
     :meth:`SessionResult.to_dict`) against ``spec`` (None: no tolerance given).
 
     NOT MEASURED when the result is not ok (a stage failed, the fusion did not run or was
-    refused) — before any look at the numbers."""
+    refused, a problem) — before any look at the numbers; a problem is read by its code
+    (``problem_codes``; a result without them: every problem :data:`~align.problem_codes.UNKNOWN`),
+    never by its text (:func:`judge_result`)."""
     fused = bool(result.get("fused")) and "misalignment_rad" in result
     e6 = u6 = None
     if fused:
@@ -369,18 +385,38 @@ def decide(result: Mapping, spec: ToleranceSpec | None) -> Disposition:
     errs = [(str(e.get("stage", "?")), str(e.get("message", "")))
             for e in result.get("errors") or []]
     problems = [str(p) for p in result.get("problems") or []]
-    ok = bool(result.get("ok"))
-    unmeasured: list[tuple[str, str]] = []
-    if fused and not ok and not errs and spec is not None:
-        # not ok only for angles whose u a nuisance the data cannot determine sets?
-        carried = [Undetermined.from_dict(c) for c in result.get("undetermined") or ()]
-        unmeasured = undecided(e6, u6, carried, spec)
-        if problems and set(problems) <= {why for _, why in unmeasured}:
-            ok = True
-        else:
-            unmeasured = []
-    errs += [("not ok", p) for p in problems]
-    return decide_values(ok, e6, u6, result.get("covariance_rad2"), spec, errs, unmeasured)
+    codes = pc.codes_of(problems, result.get("problem_codes"))
+    carried = [Undetermined.from_dict(c) for c in result.get("undetermined") or ()]
+    return judge_result(e6, u6, result.get("covariance_rad2"), spec, errs,
+                        tuple(zip(codes, problems, strict=True)), carried,
+                        bool(result.get("ok")))
+
+
+def judge_result(e6: Sequence[float] | None, u6: Sequence[float] | None,
+                 cov: Sequence | np.ndarray | None, spec: ToleranceSpec | None,
+                 errors: Sequence[tuple[str, str]] = (),
+                 problems: Sequence[tuple[str, str]] = (),
+                 carried: Sequence[Undetermined] = (), said_ok: bool = True) -> Disposition:
+    """A session result judged against ``spec`` as 'align run' judges it with that spec:
+    the six angles, their u [rad] (None when not fused) and covariance [rad²]; the failed
+    stages (stage, message); the result's problems (code, text); the nuisances it carries
+    undetermined (:class:`~align.fusion.undetermined.Undetermined`).
+
+    A problem whose code depends on the tolerance
+    (:data:`~align.problem_codes.TOLERANCE_DEPENDENT`: an angle left undecided) is set aside
+    and the undecided angles found anew for ``spec`` (:func:`undecided`); any other problem,
+    or a failed stage, makes the result NOT MEASURED. So ``align lot`` with its own tolerance
+    judges a unit as 'align run' would have with that tolerance. ``said_ok``: the result's
+    own ``ok``; false with neither a failed stage nor a problem (an edited file) is a problem
+    of unknown code."""
+    if not said_ok and not errors and not problems:
+        problems = ((pc.UNKNOWN, "the result says ok: false"),)
+    ok = (e6 is not None and u6 is not None and not errors
+          and all(code in pc.TOLERANCE_DEPENDENT for code, _ in problems))
+    unmeasured = (undecided(e6, u6, carried, spec)
+                  if ok and spec is not None and carried else [])
+    errs = [*errors, *(("not ok", text) for _, text in problems)]
+    return decide_values(ok, e6, u6, cov, spec, errs, unmeasured)
 
 
 def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | None,
@@ -396,10 +432,12 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
     is NOT MEASURED otherwise — never PASS nor INCONCLUSIVE on a result that is not ok."""
     rule = spec.rule if spec is not None else DEFAULT_RULE
     k = spec.k if spec is not None else DEFAULT_K
+    limits = spec_limits(spec)
     if not ok or e6 is None or u6 is None:
         why = ("; ".join(f"{st}: {msg}" for st, msg in errors[:2])
                if errors else "the fusion did not run")
-        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})")
+        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})",
+                           limits=limits)
     if spec is None or not spec.limits:
         return Disposition(NO_TOLERANCE, rule, k,
                            "no tolerance given ([tolerance] in session.toml or "
@@ -414,7 +452,8 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
     verdict = FAIL if FAIL in verdicts else PASS if verdicts == {PASS} else INCONCLUSIVE
     if unmeasured and verdict != FAIL:  # an angle not measured: only a FAIL is a verdict
         why = "; ".join(f"not ok: {msg}" for _, msg in unmeasured[:2])
-        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})")
+        return Disposition(NOT_MEASURED, rule, k, f"no verdict on a result that is not ok ({why})",
+                           limits=limits)
     worst = worst_angle(angles)
     reason = _reason(verdict, worst, len(angles), spec)
     if unmeasured:
@@ -422,7 +461,17 @@ def decide_values(ok: bool, e6: Sequence[float] | None, u6: Sequence[float] | No
         reason += (f"; not measured: {names} (the result is not ok: "
                    f"{unmeasured[0][1].removeprefix('fusion: ')})")
     return Disposition(verdict, rule, k, reason, worst.name, tuple(angles),
-                       _joint_p(angles, None if cov is None else np.asarray(cov, float)))
+                       _joint_p(angles, None if cov is None else np.asarray(cov, float)), limits)
+
+
+def spec_limits(spec: ToleranceSpec | None) -> tuple[tuple[str, float, float, float], ...]:
+    """``spec``'s limits as :attr:`Disposition.limits` (name, nominal, lower, upper) [rad],
+    the limits absolute, in ``E_NAMES`` order."""
+    if spec is None:
+        return ()
+    return tuple((n, spec.nominal.get(n, 0.0), spec.nominal.get(n, 0.0) + spec.limits[n][0],
+                  spec.nominal.get(n, 0.0) + spec.limits[n][1])
+                 for n in E_NAMES if n in spec.limits)
 
 
 def worst_angle(angles: Sequence[AngleDisposition]) -> AngleDisposition:

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from align import problem_codes as pc
 from align.contract import check, read_json
 from align.errors import InputError
 from axisbase.covariance import cov_of
@@ -101,6 +102,15 @@ class LoadedSession:
     disposition : Mapping or None
         The verdict block (:meth:`align.decision.Disposition.from_dict` reads it); None in
         results written before verdicts; unit —.
+    problems : tuple of str
+        Why a result that ran is not ok beyond a failed stage, as the result says it; unit —.
+    problem_codes : tuple of str
+        The code of each of ``problems`` (:mod:`align.problem_codes`; a result before
+        version 5: :data:`~align.problem_codes.UNKNOWN` each); unit —.
+    undetermined : tuple of Mapping
+        The nuisances the fusion carried undetermined
+        (:meth:`align.fusion.undetermined.Undetermined.from_dict` reads each; empty before
+        they were written); unit —.
     budget : Mapping or None
         The uncertainty budget block (:meth:`align.fusion.budget.Budget.from_dict`); unit —.
     platform_calibration : Mapping or None
@@ -126,6 +136,9 @@ class LoadedSession:
     metadata: Mapping[str, Any] = field(default_factory=dict)
     provenance: Provenance = field(default_factory=lambda: Provenance(command=()))
     disposition: Mapping[str, Any] | None = None
+    problems: tuple[str, ...] = ()
+    problem_codes: tuple[str, ...] = ()
+    undetermined: tuple[Mapping[str, Any], ...] = ()
     budget: Mapping[str, Any] | None = None
     platform_calibration: Mapping[str, Any] | None = None
 
@@ -205,11 +218,18 @@ class LoadedSession:
             if v is not None and not isinstance(v, Mapping):
                 raise InputError(f"{where}: {key}: expected an object")
             blocks[key] = v
+        problems = d.get("problems") or []
+        carried = d.get("undetermined") or []
+        if not isinstance(problems, list) or not isinstance(carried, list) or not all(
+                isinstance(c, Mapping) for c in carried):
+            raise InputError(f"{where}: 'problems' and 'undetermined' must be lists")
         folder = d.get("folder")
         return cls(where, version, str(d["session"]), folder if isinstance(folder, str)
                    else None, ok, fused, **angles, warnings=tuple(str(w) for w in warns),
                    errors=failed, metadata=dict(meta), provenance=_provenance(d, where),
-                   **blocks)
+                   problems=tuple(str(p) for p in problems),
+                   problem_codes=pc.codes_of(problems, d.get("problem_codes")),
+                   undetermined=tuple(carried), **blocks)
 
 
 def _provenance(d: Mapping[str, Any], where: str) -> Provenance:

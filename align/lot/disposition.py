@@ -101,9 +101,14 @@ def relative_link(target: Path, page: Path) -> str:
     return Path(os.path.relpath(target.resolve(), page.resolve().parent)).as_posix()
 
 
-ACT_PATTERNS = ("not read", "NOT ok", "outside the tolerance", "not capable",
-                "no unit is ok")
-"""A warning containing one of these is for someone to act on; the others are notes."""
+WARNING_CODES = {"not_read": True, "not_ok": True, "no_statistics": True,
+                 "outside_tolerance": True, "not_capable": True, "spelling": False,
+                 "duplicate": False, "provisional": False, "control_limits": False,
+                 "differs_with_metadata": False}
+"""The code of each of the lot's warnings (``warning_codes`` in the lot JSON, one per line of
+``warnings``) and whether it is for someone to *act* on (else a note): the report ranks them
+by code, never by their text."""
+
 
 _SHAPE = re.compile(r"E_[xyz][XYZ]|[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?|unit \S+|\([^)]*\)")
 
@@ -128,12 +133,14 @@ class RankedLine:
     variants: tuple[str, ...] = ()
 
 
-def rank_warnings(lines: list[str]) -> tuple[list[RankedLine], list[RankedLine]]:
-    """``(act, note)``: the lot's warnings split by :data:`ACT_PATTERNS`, one line per shape
-    with a count, in the order first met."""
+def rank_warnings(items: Sequence[tuple[str, str]]
+                  ) -> tuple[list[RankedLine], list[RankedLine]]:
+    """``(act, note)``: the lot's warnings, (code, text) each, split by their code
+    (:data:`WARNING_CODES`: an unknown code is for someone to act on),
+    one line per shape with a count, in the order first met."""
     groups: dict[tuple[bool, str], list[str]] = {}
-    for line in lines:
-        act = any(p in line for p in ACT_PATTERNS)
+    for code, line in items:
+        act = WARNING_CODES.get(code, True)
         groups.setdefault((act, shape(line)), []).append(line)
     act, note = [], []
     for (is_act, _), same in groups.items():

@@ -27,11 +27,12 @@ CPK_MIN = 1.33
 """Cpk below this is warned about (the usual requirement for an established process)."""
 
 
-def _capped(lines: list[str], what: str) -> list[str]:
-    if len(lines) <= MAX_LINES:
-        return lines
-    return lines[:MAX_LINES] + [f"... and {len(lines) - MAX_LINES} more {what} (all listed in "
-                                "the JSON and the CSV)"]
+def _capped(lines: list[str], what: str, code: str) -> list[tuple[str, str]]:
+    out = [(code, x) for x in lines[:MAX_LINES]]
+    if len(lines) > MAX_LINES:
+        out.append((code, f"... and {len(lines) - MAX_LINES} more {what} (all listed in "
+                          "the JSON and the CSV)"))
+    return out
 
 
 def _as(v: float) -> str:
@@ -41,46 +42,58 @@ def _as(v: float) -> str:
 def lot_warnings(lot: Lot) -> list[str]:
     """What a reader of the lot must know first: files not read, units not ok or not in the
     statistics, units outside the control limits or the tolerance, capability below
-    1.33, angles that differ with the metadata, provisional limits."""
-    out = _capped([f"{r.file}: not read: {r.reason}" for r in lot.rejected], "files not read")
-    out += _capped(spelling_warnings(lot.units), "serials written several ways")
-    out += _capped([duplicate_line(d, lot) for d in lot.duplicates], "units in several results")
+    1.33, angles that differ with the metadata, provisional limits (each with its code:
+    :func:`lot_warning_items`)."""
+    return [text for _, text in lot_warning_items(lot)]
+
+
+def lot_warning_items(lot: Lot) -> list[tuple[str, str]]:
+    """(code, text) of each of :func:`lot_warnings` (the codes:
+    :data:`align.lot.disposition.WARNING_CODES`)."""
+    out = _capped([f"{r.file}: not read: {r.reason}" for r in lot.rejected], "files not read",
+                  "not_read")
+    out += _capped(spelling_warnings(lot.units), "serials written several ways", "spelling")
+    out += _capped([duplicate_line(d, lot) for d in lot.duplicates], "units in several results",
+                   "duplicate")
     out += _capped([f"unit {u.label} ({u.file}): result NOT ok or not fused ("
                     + ("; ".join(f"stage {s} failed: {m}" for s, m in u.failed_stages)
                        or ("not fused" if not u.fused else "see its warnings"))
                     + "): not in the statistics" for u in (lot.units[k] for k in lot.not_ok)],
-                   "units not ok")
+                   "units not ok", "not_ok")
     if not lot.in_stats:
-        out.append("no unit is ok and fused: no statistics")
+        out.append(("no_statistics", "no unit is ok and fused: no statistics"))
         return out
     n = len(lot.in_stats)
     if n < PROVISIONAL:
-        out.append(f"only {n} units in the statistics: control limits are provisional "
-                   f"(at least {PROVISIONAL} are usually needed)")
-    flags = []
+        out.append(("provisional", f"only {n} units in the statistics: control limits are "
+                    f"provisional (at least {PROVISIONAL} are usually needed)"))
+    limits, tolerance = [], []
     for a in lot.angles:
         c = a.chart
         for k in a.outside_limits:
             u = lot.units[k]
             v = a.values[a.units.index(k)]
-            flags.append(f"unit {u.label}: {a.name} = {_as(v)} outside the control limits "
-                         f"{_as(c.lcl)} … {_as(c.ucl)}")
+            limits.append(f"unit {u.label}: {a.name} = {_as(v)} outside the control limits "
+                          f"{_as(c.lcl)} … {_as(c.ucl)}")
         for k in a.outside_tolerance:
             u = lot.units[k]
             v = a.values[a.units.index(k)]
-            flags.append(f"unit {u.label}: {a.name} = {_as(v)} outside the tolerance "
-                         f"±{lot.tolerance / ARCSEC:g}″")
-    out += _capped(flags, "flags")
+            tolerance.append(f"unit {u.label}: {a.name} = {_as(v)} outside the tolerance "
+                             f"±{lot.tolerance / ARCSEC:g}″")
+    out += _capped(limits, "control-limit flags", "control_limits")
+    out += _capped(tolerance, "units outside the tolerance", "outside_tolerance")
     for a in lot.angles:
         cap = a.capability
         if cap is not None and math.isfinite(cap.cpk) and cap.cpk < CPK_MIN:
-            out.append(f"{a.name}: Cpk {cap.cpk:.2f} ± {cap.cpk_u:.2f} (n = {cap.n}) below "
-                       f"{CPK_MIN}: the process is not capable of ±{lot.tolerance / ARCSEC:g}″")
+            out.append(("not_capable", f"{a.name}: Cpk {cap.cpk:.2f} ± {cap.cpk_u:.2f} "
+                        f"(n = {cap.n}) below {CPK_MIN}: the process is not capable of "
+                        f"±{lot.tolerance / ARCSEC:g}″"))
     for m in lot.metadata:
         for name, p, d in zip(ANGLE_NAMES, m.p_values, m.differs, strict=True):
             if d:
-                out.append(f"{name} differs with {m.key}" + (" (by day)" if m.by_day else "")
-                           + f" (Kruskal–Wallis p = {p:.2g} < {m.threshold:.2g})")
+                out.append(("differs_with_metadata", f"{name} differs with {m.key}"
+                            + (" (by day)" if m.by_day else "")
+                            + f" (Kruskal–Wallis p = {p:.2g} < {m.threshold:.2g})"))
     return out
 
 
@@ -131,9 +144,11 @@ def lot_body(lot: Lot) -> dict:
                   "flags": flagged.get(k, []),
                   "counted_as": lot.units[left_out[k]].file if k in left_out else None})
         units.append(d)
+    items = lot_warning_items(lot)
     return {
         "ok": lot.ok, "in_control": lot.in_control, "within_tolerance": lot.within_tolerance,
-        "warnings": lot_warnings(lot), "run_order": lot.run_order,
+        "warnings": [t for _, t in items], "warning_codes": [c for c, _ in items],
+        "run_order": lot.run_order,
         "run_order_note": lot.run_order_note,
         "tolerance_arcsec": None if lot.tolerance is None else lot.tolerance / ARCSEC,
         "guard_band_k": GUARD, "n_units": len(lot.units), "n_in_statistics": len(in_stats),

@@ -91,6 +91,11 @@ class UnitResult:
         The 6×6 covariance of ``e_rad`` [rad²].
     disposition : Mapping or None
         The result's verdict block (:class:`align.decision.Disposition`); unit —.
+    problems : tuple of (str, str)
+        (code, text) of each of the result's problems (:mod:`align.problem_codes`); unit —.
+    undetermined : tuple of Mapping
+        The nuisances its fusion carried undetermined (what a re-judgement under another
+        tolerance needs: :func:`align.decision.judge_result`); unit —.
     """
 
     file: str
@@ -112,6 +117,8 @@ class UnitResult:
     inputs_sha256: tuple[str, ...] = ()
     covariance: tuple[tuple[float, ...], ...] | None = None
     disposition: Mapping[str, Any] | None = None
+    problems: tuple[tuple[str, str], ...] = ()
+    undetermined: tuple[Mapping[str, Any], ...] = ()
 
     @property
     def when(self) -> _dt.datetime | None:
@@ -148,7 +155,9 @@ class UnitResult:
                    r.p_value, r.warnings, tuple((e.stage, e.message) for e in r.errors),
                    dict(meta), r.format_version,
                    created_utc=r.provenance.created_utc or None, inputs_sha256=digests,
-                   covariance=r.covariance, disposition=r.disposition)
+                   covariance=r.covariance, disposition=r.disposition,
+                   problems=tuple(zip(r.problem_codes, r.problems, strict=True)),
+                   undetermined=r.undetermined)
 
     def to_dict(self) -> dict:
         """The unit as the lot JSON lists it (angles in arc-seconds: that is the edge)."""

@@ -223,7 +223,8 @@ def lot_html(lot: Lot, doc: dict, page: Path | None = None) -> str:
     for d in disps:
         counts[d.verdict] = counts.get(d.verdict, 0) + 1
     decide, rest, more = _dispositions(lot, disps, page)
-    act, note = rank_warnings(list(doc["warnings"]))
+    act, note = rank_warnings(list(zip(doc.get("warning_codes") or ["unknown"] * len(
+        doc["warnings"]), doc["warnings"], strict=True)))
 
     def verdict(good: bool | None, yes: str, no: str) -> str:
         if good is None:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from align import problem_codes as pc
 from align.apply import PlatformCalibration
 from align.calibration import STATIC, Calibration, Poses, calibrate, r_matrix, read_poses
 from align.calibration.files import ARRAY_SUFFIXES
@@ -157,29 +158,39 @@ class SessionResult:
         cannot tell apart, a mark whose angle the uncalibrated lens limits, instruments that
         disagree beyond their uncertainties (E's u is then
         inflated or widened to cover the disagreement, but which instrument is right is the
-        user's to find out)."""
-        out: list[str] = []
+        user's to find out), a toleranced angle a nuisance the data cannot determine leaves
+        undecided."""
+        return [text for _, text in self.problem_items()]
+
+    @property
+    def problem_codes(self) -> list[str]:
+        """The code of each of :attr:`problems` (:mod:`align.problem_codes`), same order."""
+        return [code for code, _ in self.problem_items()]
+
+    def problem_items(self) -> list[tuple[str, str]]:
+        """(code, text) of each problem (:attr:`problems`)."""
+        out: list[tuple[str, str]] = []
         if self.calibration is not None and not self.calibration.ok:
-            out += [f"calibration: {p}" for p in self.calibration.problems]
+            out += [(pc.CALIBRATION, f"calibration: {p}") for p in self.calibration.problems]
         if self.gonio is not None:
-            out += [f"goniometer: {p}" for p in self.gonio.problems]
+            out += [(pc.GONIOMETER, f"goniometer: {p}") for p in self.gonio.problems]
         for im, r in self.marks:
             if not r.found:
                 continue  # a stage error already
             if r.lens_limited:
                 # what helps as the mark's own note says it (a model given or not)
-                out += [f"{im.file.name}: {n}" for n in r.lens_not_ok] or [
-                    f"{im.file.name}: the angle is lens-limited"]
+                out += [(pc.LENS_LIMITED, f"{im.file.name}: {n}") for n in r.lens_not_ok] or [
+                    (pc.LENS_LIMITED, f"{im.file.name}: the angle is lens-limited")]
         f = self.fusion
         if f is not None and not f.gross and (not f.consistent or f.disagreement is not None):
             who = f"; {f.disagreement.message()}" if f.disagreement is not None else ""
             s = f.loop.summary()  # which test said so: chi2 alone may look fine
             seen = (f"{s.structure_test}, p = {s.structure_p:.2g}; " if s.structure_test
                     and s.structure_p is not None else "")
-            out.append(f"fusion: the instruments disagree beyond their uncertainties "
-                       f"({seen}chi2 {f.chi2:.4g} / {f.dof} dof){who}")
+            out.append((pc.DISAGREEMENT, f"fusion: the instruments disagree beyond their "
+                        f"uncertainties ({seen}chi2 {f.chi2:.4g} / {f.dof} dof){who}"))
         if f is not None and self.tolerance is not None and f.undetermined:
-            out += _undecided(f, self.tolerance)
+            out += [(pc.ANGLE_UNDECIDED, why) for why in _undecided(f, self.tolerance)]
         return out
 
     def platform_calibration(self) -> PlatformCalibration | None:
@@ -202,8 +213,10 @@ class SessionResult:
         return d
 
     def _core_dict(self) -> dict:
+        items = self.problem_items()
         d: dict = {"session": self.session.name, "folder": str(self.session.folder),
-                   "ok": self.ok, "fused": self.fused, "problems": self.problems,
+                   "ok": self.ok, "fused": self.fused, "problems": [t for _, t in items],
+                   "problem_codes": [c for c, _ in items],
                    "warnings": session_warnings(self),
                    "notes": session_notes(self),
                    "errors": [{"stage": e.stage, "message": e.message,

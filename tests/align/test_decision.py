@@ -21,6 +21,7 @@ from align.decision import (
 from align.errors import InputError
 from align.fusion import E_INDEX, E_NAMES
 from align.fusion.undetermined import Undetermined
+from align.problem_codes import ANGLE_UNDECIDED, DISAGREEMENT
 from axisbase.units import ARCSEC
 
 A = ARCSEC
@@ -131,13 +132,17 @@ def test_failed_session_is_not_measured_whatever_its_numbers():
 
 def _undecided_result(e_arcsec, u_arcsec, spec, more_problems=()):
     """A fused result whose reference-face offset the data cannot determine (σ 2″ declared,
-    all of E_yX's u), its problems as ``align run`` lists them."""
+    all of E_yX's u), its problems and their codes as ``align run`` lists them
+    (``more_problems``: (code, text))."""
     d = _result(e_arcsec, u_arcsec, ok=False)
     c = Undetermined("reference_face_offset", 2 * A, float("inf"),
                      np.array([0, 0, 2 * A, 0, 0, 0]), True)
     d["undetermined"] = [c.to_dict()]
     e6, u6 = ([v * A for v in x] for x in (e_arcsec, u_arcsec))
-    d["problems"] = [why for _, why in undecided(e6, u6, [c], spec)] + list(more_problems)
+    lines = [(ANGLE_UNDECIDED, why) for _, why in undecided(e6, u6, [c], spec)]
+    lines += list(more_problems)
+    d["problems"] = [t for _, t in lines]
+    d["problem_codes"] = [code for code, _ in lines]
     return d
 
 
@@ -153,12 +158,18 @@ def test_an_angle_not_measured_never_hides_a_clear_fail():
         d = decide(_undecided_result([10, e_xz, -57, 20, -15, 5], u, spec), spec)
         assert d.verdict == NOT_MEASURED and "E_yX's tolerance cannot be decided" in d.reason
     # another reason the result is not ok: NOT MEASURED whatever the numbers
-    r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec,
-                          ["fusion: the instruments disagree beyond their uncertainties"])
+    r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec, [
+        (DISAGREEMENT, "fusion: the instruments disagree beyond their uncertainties")])
     assert decide(r, spec).verdict == NOT_MEASURED
+    # the codes are read, never the text: an edited line changes nothing ...
     r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec)
     r["problems"] = [p.replace("as declared", "declared") for p in r["problems"]]
-    assert decide(r, spec).verdict == NOT_MEASURED  # a line it cannot account for
+    assert decide(r, spec).verdict == FAIL
+    # ... a result without codes (written before them) or with an unknown one is not ok
+    for codes in (None, ["no_such_code"], [ANGLE_UNDECIDED, ANGLE_UNDECIDED]):
+        r = _undecided_result([10, 122.3, -57, 20, -15, 5], u, spec)
+        r["problem_codes"] = codes
+        assert decide(r, spec).verdict == NOT_MEASURED, codes
 
 
 def test_round_trip_and_overrides():

@@ -272,7 +272,10 @@ def test_p_conform_all_is_the_joint_normal_over_the_box(tmp_path):
     "still carried at p 0.73, 'no measurement improves E_xZ by more than the noise of its "
     "prediction') and the tumble realised drops it: 0.488\" (-82 %, z -1.7 against the "
     "stated noise; the user's tolerance 15 %); the advice is the best of the three (static "
-    "1.99\", gonio 2.90\"); seed 50 (nothing carried) within it"))
+    "1.99\", gonio 2.90\"); seed 50 (nothing carried) within it. Decided (code17): the plan "
+    "states the spread of that draw (the +- 1.30\" holds the carried term's two branches) "
+    "and advises nothing within it; a fixed 15 % on one draw is not what it states: the "
+    "realised z -1.7 is inside its stated noise"))
 def test_plan_advice_lowers_u_most(tmp_path):
     """The advised measurement, done (with my own generator), lowers the critical angle's u
     as predicted (within 15 %) and more than the other measurements I can do."""

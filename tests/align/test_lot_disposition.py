@@ -89,17 +89,28 @@ def test_the_lots_own_decisions_are_taken_as_they_are(tmp_path):
 
 
 def test_warnings_ranked_act_and_note_one_line_per_repeat():
-    lines = ["unit SN1: E_xZ = +34.81″ outside the tolerance ±30″",
-             "unit SN2: E_zX = -32.10″ outside the tolerance ±30″",
-             "unit SN1: E_xZ = +34.81″ outside the control limits +1.97″ … +19.31″",
-             "E_xY: Cpk 0.80 ± 0.10 (n = 40) below 1.33: the process is not capable of ±30″",
-             "E_yX: Cpk 0.70 ± 0.12 (n = 40) below 1.33: the process is not capable of ±30″",
-             "bad.json: not read: not valid JSON",
-             "E_xY differs with camera (Kruskal–Wallis p = 1e-05 < 0.001)"]
-    act, note = rank_warnings(lines)
+    items = [("outside_tolerance", "unit SN1: E_xZ = +34.81″ outside the tolerance ±30″"),
+             ("outside_tolerance", "unit SN2: E_zX = -32.10″ outside the tolerance ±30″"),
+             ("control_limits",
+              "unit SN1: E_xZ = +34.81″ outside the control limits +1.97″ … +19.31″"),
+             ("not_capable",
+              "E_xY: Cpk 0.80 ± 0.10 (n = 40) below 1.33: the process is not capable of ±30″"),
+             ("not_capable",
+              "E_yX: Cpk 0.70 ± 0.12 (n = 40) below 1.33: the process is not capable of ±30″"),
+             ("not_read", "bad.json: not read: not valid JSON"),
+             ("differs_with_metadata",
+              "E_xY differs with camera (Kruskal–Wallis p = 1e-05 < 0.001)"),
+             # ranked by its code, not its words: a unit named 'not read' is a note
+             ("control_limits", "unit not read: E_xY = +30.00″ outside the control limits")]
+    act, note = rank_warnings(items)
     assert [(x.count, x.variants) for x in act] == [
         (2, ("SN1 E_xZ", "SN2 E_zX")), (2, ("E_xY", "E_yX")), (1, ())]
-    assert [x.text for x in note] == [lines[2], lines[6]]
+    assert [x.text for x in note] == [items[2][1], items[6][1], items[7][1]]
+    # the capped remainder of the units not ok is for someone to act on (it was a note: its
+    # words did not say 'NOT ok'); an unknown code too
+    act, note = rank_warnings([("not_ok", "... and 3 more units not ok (all listed in the JSON "
+                                "and the CSV)"), ("no_such_code", "x")])
+    assert len(act) == 2 and not note
 
 
 def test_the_lots_name_from_metadata_else_its_folder(tmp_path):
@@ -198,3 +209,79 @@ def test_every_in_page_link_of_the_lot_page_has_its_target(lot_page):
     p.feed(page.read_text())
     assert p.links and set(p.links) <= p.ids, set(p.links) - p.ids
     assert all(f"chart-{n}" in p.ids for n in ANGLE_NAMES)
+
+
+def _undecided_unit(e_arcsec, codes, disposition=None):
+    """A unit whose E_yX's u is all a reference-face offset the data cannot determine (σ 2″
+    declared), not ok for ``codes`` (one problem line each), E's u 1″ but E_yX's 2″."""
+    from align.fusion.undetermined import Undetermined
+
+    c = Undetermined("reference_face_offset", 2 * ARCSEC, float("inf"),
+                     np.array([0, 0, 2 * ARCSEC, 0, 0, 0]), True)
+    u = tuple(v * ARCSEC for v in (1.0, 1.0, 2.0, 1.0, 1.0, 1.0))
+    return UnitResult("u.json", "s", "SN1", not codes, True,
+                      tuple(v * ARCSEC for v in e_arcsec), u, 5.0, 10, 0.9,
+                      disposition=disposition,
+                      problems=tuple((code, f"problem {k}") for k, code in enumerate(codes)),
+                      undetermined=(c.to_dict(),))
+
+
+def test_a_lot_rejudges_an_unmeasured_angle_as_align_run_does():
+    """'align lot' with its own flags judges a unit as 'align run' would with that tolerance:
+    an angle a nuisance the data cannot determine leaves undecided is found anew from the
+    carried terms the result keeps (it was NOT MEASURED whatever the flags: the file kept
+    no such terms); another problem, or one written before codes, stays NOT MEASURED."""
+    from align.decision import ToleranceSpec, judge_result
+    from align.lot.dispose import unit_disposition
+    from align.problem_codes import ANGLE_UNDECIDED, UNKNOWN
+
+    e = (10.0, 122.3, -57.0, 20.0, -15.0, 5.0)  # E_yX -57 ± 2″: inside ±60″ by < 2u
+    own = ToleranceSpec(dict.fromkeys(ANGLE_NAMES, (-60 * ARCSEC, 60 * ARCSEC)))
+    unit = _undecided_unit(e, [ANGLE_UNDECIDED])
+    stored = judge_result(unit.e_rad, unit.u_rad, None, own, (), unit.problems, ())
+    unit = replace(unit, disposition=stored.to_dict())
+    d = unit_disposition(unit, None, {"k": 2.0})  # the same spec: FAIL by E_xZ, E_yX unmeasured
+    assert d.verdict == "FAIL" and d.worst == "E_xZ" and "not measured: E_yX" in d.reason
+    assert unit_disposition(unit, None, {"k": 1.0}).verdict == "FAIL"
+    # E_xZ inside: NOT MEASURED (never PASS with E_yX undecided), the limits kept
+    calm = replace(unit, e_rad=tuple(v * ARCSEC for v in (10, 20, -57, 20, -15, 5)))
+    assert unit_disposition(calm, None, {"k": 2.0}).verdict == "NOT MEASURED"
+    # a tolerance that decides E_yX (±130″: it passes, as E_xZ 122.3 ± 1″ does; the simple
+    # rule has no INCONCLUSIVE): the unit is judged on its numbers
+    assert unit_disposition(unit, None, {"tolerance": (-130.0, 130.0)}).verdict == "PASS"
+    assert unit_disposition(calm, None, {"tolerance": (-60.0, 60.0),
+                                         "rule": "simple"}).verdict == "PASS"
+    for codes in ([ANGLE_UNDECIDED, UNKNOWN], [UNKNOWN]):
+        other = replace(unit, problems=tuple((c, "x") for c in codes))
+        assert unit_disposition(other, None, {"k": 2.0}).verdict == "NOT MEASURED", codes
+    # 'ok': false with nothing said why (an edited file): not ok
+    assert unit_disposition(replace(unit, problems=()), None, {"k": 2.0}).verdict == "NOT MEASURED"
+
+
+@pytest.mark.slow
+def test_a_run_unit_fail_with_an_unmeasured_angle_rejudged_by_a_lot(tmp_path):
+    """A session 'align run' judged FAIL with an unmeasured angle (the reference face 30″ off
+    and no azimuth datum: E_xY's u is the carried offset's; E_zY ~262″ outside ±20″): its
+    written result, read by the lot and judged with the lot's flags, gets what 'align run'
+    gives with those flags — FAIL with E_xY unmeasured for the same spec, and under other
+    flags the run's own verdict with the flags applied (problems found anew)."""
+    import json
+
+    from align.decision import resolve
+    from align.lot.dispose import unit_disposition
+    from align.session.output import session_document
+    from tests.align.test_fusion_undetermined import _no_datum_session
+
+    res, _ = _no_datum_session(tmp_path, 10, tolerance="\n[tolerance]\narcsec = 300\n"
+                               "E_xY = 60\nE_zY = 20\n")
+    run = res.disposition()
+    assert run.verdict == "FAIL" and "not measured: E_xY" in run.reason, run.reason
+    assert res.problem_codes == ["angle_undecided"]
+    unit = UnitResult.from_dict(json.loads(json.dumps(session_document(res, {}))), "u.json")
+    own = res.tolerance
+    for flags in ({"k": 2.0}, {"k": 1.0}, {"rule": "simple"}, {"tolerance": (-300.0, 300.0)},
+                  {"tolerance": (-300.0, 20.0)}):
+        lot = unit_disposition(unit, None, flags)
+        res.tolerance = resolve(own, **flags)  # 'align run' with these flags
+        assert lot.to_dict() == res.disposition().to_dict(), flags
+    assert unit_disposition(unit, None, {"k": 2.0}).verdict == "FAIL"

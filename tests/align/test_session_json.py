@@ -55,9 +55,14 @@ def _v3(d: dict) -> dict:
     return dict(d, format_version=3)
 
 
-@pytest.mark.parametrize("version", [1, 2, 3, 4])
+def _v4(d: dict) -> dict:
+    """As format version 4 wrote it: no ``problem_codes`` (version 5 added them)."""
+    return {k: v for k, v in d.items() if k != "problem_codes"} | {"format_version": 4}
+
+
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 5])
 def test_every_readable_version_reads_the_same(result, version):
-    d = {1: _v1, 2: _v2, 3: _v3, 4: dict}[version](result)
+    d = {1: _v1, 2: _v2, 3: _v3, 4: _v4, 5: dict}[version](result)
     r = LoadedSession.from_dict(d, "r.json")
     assert r.format_version == version
     assert (r.session, r.ok, r.fused, r.folder) == (result["session"], True, True,
@@ -72,6 +77,21 @@ def test_every_readable_version_reads_the_same(result, version):
     assert r.provenance.settings == ({} if version == 1 else result["settings"])
 
 
+def test_problem_codes_read_and_an_older_results_problems_unknown(result):
+    """Version 5 gives each problem its code; a result written before codes reads each of
+    its problems as ``unknown`` (not ok whatever the tolerance, as before); codes that do not
+    match the lines (edited) are unknown too — never fewer problems than the file says."""
+    lines = ["fusion: E_xY's tolerance cannot be decided: ...", "a.png: lens-limited"]
+    d = dict(result, ok=False, problems=lines, problem_codes=["angle_undecided", "lens_limited"])
+    assert LoadedSession.from_dict(d, "r.json").problem_codes == ("angle_undecided",
+                                                                  "lens_limited")
+    assert LoadedSession.from_dict(_v4(d), "r.json").problem_codes == ("unknown", "unknown")
+    for codes in (["angle_undecided"], ["angle_undecided", "no_such_code"]):
+        r = LoadedSession.from_dict(dict(d, problem_codes=codes), "r.json")
+        assert r.problem_codes == ("unknown", "unknown"), codes
+    assert result["problem_codes"] == [] == result["problems"]
+
+
 def test_a_newer_or_another_format_is_refused_naming_the_file(result):
     with pytest.raises(InputError, match=r"r\.json: .*version 99 is newer"):
         LoadedSession.from_dict(dict(result, format_version=99), "r.json")
@@ -79,14 +99,14 @@ def test_a_newer_or_another_format_is_refused_naming_the_file(result):
         LoadedSession.from_dict(dict(result, format="axis-align/gonio"), "r.json")
 
 
-@pytest.mark.parametrize("version", [1, 2, 3, 4])
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 5])
 def test_the_former_readers_read_what_the_one_reader_reads(result, tmp_path, version):
     from align.apply import PlatformCalibration
     from align.lot.read import UnitResult, read_result
     from align.plan import plan_from_result
     from align.session.batch import batch_row
 
-    d = {1: _v1, 2: _v2, 3: _v3, 4: dict}[version](result)
+    d = {1: _v1, 2: _v2, 3: _v3, 4: _v4, 5: dict}[version](result)
     r = LoadedSession.from_dict(d, "r.json")
     # the lot
     f = tmp_path / "r.json"
