@@ -94,8 +94,9 @@ class GrooveEnds:
 
 
 def _bin_rms(j: np.ndarray | GroupSums, vals: np.ndarray, p: np.ndarray, dt: np.ndarray,
-             nb: int, good: np.ndarray) -> np.ndarray:
-    """Each bin's residual RMS [DN] about level + (amp + slope dt) x profile: the groove's
+             nb: int, good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each bin's residual RMS [DN] about level + (amp + slope dt) x profile, and that
+    level [DN] (NaN where not ``good``): the groove's
     depth may change within the bin (dt [px] along the line from the bin's centre). A square
     end drops the depth from full to none over a few blur widths, and a 1-px bin across it
     misfits level + amp x profile by far more than the noise — it was read as an
@@ -124,7 +125,7 @@ def _bin_rms(j: np.ndarray | GroupSums, vals: np.ndarray, p: np.ndarray, dt: np.
     pred = x[j, 0] + x[j, 1] * p + x[j, 2] * p * dt
     ss = bc((vals - pred) ** 2)
     dof = np.maximum(cnt - np.where(ok, 3, 2), 1)
-    return np.where(good, np.sqrt(ss / dof), np.nan)
+    return np.where(good, np.sqrt(ss / dof), np.nan), np.where(good, x[:, 0], np.nan)
 
 
 def groove_path(centres: Centres, pf: ProfileFit) -> np.polynomial.Polynomial | None:
@@ -209,7 +210,9 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     amp = np.where(good, (cnt * spv - sp * sv) / dd, np.nan)
     level = np.where(good, (spp * sv - sp * spv) / dd, np.nan)
     tb = t0 - reach_px + np.arange(nb)
-    rms = _bin_rms(bc, vals, p, t - tb[j], nb, good)
+    # (the level with the depth's slope in the bin: at a square end the depth drops within
+    # one bin, and level + amp p alone put that bin's level 4.9 robust deviations low)
+    rms, level = _bin_rms(bc, vals, p, t - tb[j], nb, good)
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
         return same
