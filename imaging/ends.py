@@ -216,18 +216,18 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     inside = good & (tb >= t0) & (tb <= t1)
     if inside.sum() < 10:
         return same
-    # The surface's level along the stretch (a gradient, vignetting: a slow trend, quadratic
-    # — a line left vignetting's curve beyond both ends of a 485 px micrometer line, ~2
-    # robust deviations low, and one bin of noise over LEVEL_K "hid" an end under nothing),
-    # and its robust scatter from bin to bin (noise, texture, ordinary dust on the groove).
-    trend = np.polyfit(tb[inside], level[inside], 2)
+    # The surface's level along the stretch (vignetting, a gradient: a slow trend), and its
+    # robust scatter from bin to bin (noise, texture, ordinary dust on the groove). (A
+    # quadratic trend, for vignetting's curve, cut a long graduation of a scale through a
+    # barrel lens at 134 px of its 225: a line.)
+    trend = np.polyfit(tb[inside], level[inside], 1)
     dev = level - np.polyval(trend, tb)
     scale = 1.4826 * float(np.median(np.abs(dev[inside] - np.median(dev[inside]))))
-    # (again without the bins a speck on the groove moves: a curve bends to them more than a
-    # line, and 3 of 25 clean ends of dusty scales were then "hidden", 2 with a line)
+    # (again without the bins a speck on the groove moves: they tilt the line, and the
+    # surface beyond an end reads off by what they moved)
     fit = inside & (np.abs(dev) <= LEVEL_K * max(scale, 1e-12))
     if fit.sum() >= 10:
-        trend = np.polyfit(tb[fit], level[fit], 2)
+        trend = np.polyfit(tb[fit], level[fit], 1)
         dev = level - np.polyval(trend, tb)
         scale = 1.4826 * float(np.median(np.abs(dev[inside] - np.median(dev[inside]))))
     scale = max(scale, 1e-9 * abs(float(np.polyval(trend, tb[inside]).mean())) + 1e-12)
