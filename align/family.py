@@ -252,8 +252,8 @@ def member_ends(image: np.ndarray, r: R) -> tuple[R, tuple[float, float, int]]:
     if n_hidden:
         notes += (f"{r.image} mark {r.index}: {'both ends' if n_hidden == 2 else 'one end'} "
                   f"under an obstruction (dust or print): length {e.length_px:.0f} px seen, "
-                  f"up to {e.length_max_px:.0f} px hidden under it (its angle is measured "
-                  "on what is seen)",)
+                  f"up to {e.length_max_px:.0f} px long with what it may hide (its angle is "
+                  "measured on what is seen)",)
     return (replace(r, length_px=e.length_px, notes=notes),
             (e.length_px, e.length_max_px, n_hidden))
 

@@ -22,7 +22,7 @@ from imaging.groove import ProfileFit, _profile_table, centres_half, noise_model
 from imaging.groupsum import GroupSums
 from imaging.ring import ring_geometry, ring_slope
 from imaging.shape import basis_spans, fit_shape, shape_shift
-from imaging.texture import TextureModel, texture_model
+from imaging.texture import TextureModel, texture_control, texture_model
 
 EXTRA_STEPS = 4
 """Gauss–Newton steps a segment's centre may take beyond the usual ones while it still moves
@@ -344,7 +344,8 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if tex is not None:
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).
-        delta = delta - tex.coupling_px2 * slope / amp_safe
+        # (centred: its mean is the shading's slope, not texture; see texture_control)
+        delta = delta - texture_control(tex, slope / amp_safe, good)
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
