@@ -132,8 +132,9 @@ def block_scatter(z: np.ndarray, block: np.ndarray, h: np.ndarray) -> BlockScatt
     _, inv = np.unique(block, return_inverse=True)
     hb = np.bincount(inv, weights=h)
     hh = float(h @ h)
+    ratio = ((1.0 - rho) * hh + rho * float(hb @ hb)) / hh if hh > 0 else 1.0
     g = float(hb @ hb) / hh if hh > 0 else 1.0
-    raw = s2 * ((1.0 - rho) + rho * g)
+    raw = s2 * ratio
     # The cross-boundary differences carry s^2; with two centres a block they share no term
     # (one chi2_1 each), and the within-block ones add rho's own spread: their count is
     # the dof of the amplitude the loop's tests take (at most n/2 for a near-axis mark).
