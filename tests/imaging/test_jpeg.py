@@ -477,6 +477,16 @@ def _user13_near_axis_files(quality: int, crop: bool, seeds=range(8), per_seed: 
                         yield angle_error(r.angle_rad, ang), r.angle_u_rad, ok, r
 
 
+def _sweep_z(got, label: str) -> np.ndarray:
+    """The ok marks' z (error / u) of a sweep's (error, u, ok, result) rows; its figures
+    printed (RMS z, max |z|, median u) under ``label``."""
+    z = np.array([e / u for e, u, ok, _ in got if ok])
+    u = np.array([u for _, u, ok, _ in got if ok])
+    print(f"\n{label}: n {len(got)} ok {len(z)} RMS z {np.sqrt(np.mean(z**2)):.2f} max |z| "
+          f"{np.max(np.abs(z)):.2f} median u {np.degrees(np.median(u)) * 3600:.0f}\"")
+    return z
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("quality,crop", [
     (50, False), (50, True), (75, False), (75, True),
@@ -506,11 +516,7 @@ def test_near_axis_and_cropped_jpegs_within_u(quality, crop):
     2.29 -> 2.26, 30 -> 35"; q75 crop 1.14 -> 1.03, 2.64 -> 2.53, 31 -> 35"; q90 file 0.70
     -> 0.61, 1.77 -> 1.41, 24 -> 25"; q90 crop 0.78 -> 0.74, 2.20 -> 2.11, 21 -> 23"."""
     got = list(_user13_near_axis_files(quality, crop))
-    z = np.array([e / u for e, u, ok, _ in got if ok])
-    u = np.array([u for _, u, ok, _ in got if ok])
-    print(f"\nq{quality} {'crop' if crop else 'file'}: n {len(got)} ok {len(z)} RMS z "
-          f"{np.sqrt(np.mean(z**2)):.2f} max |z| {np.max(np.abs(z)):.2f} median u "
-          f"{np.degrees(np.median(u)) * 3600:.0f}\"")
+    z = _sweep_z(got, f"q{quality} {'crop' if crop else 'file'}")
     assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
     assert np.max(np.abs(z)) <= 3.0, np.round(z, 2)
     assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.2, np.sqrt(np.mean(z**2))
@@ -558,11 +564,7 @@ def test_near_axis_short_marks_as_jpeg_files_within_u():
     with its estimate's spread, BlockScatter.u_factor): RMS z 1.31 -> 1.14, max |z| 4.15
     -> 3.29 (seed 6 mark 3, 23 centres, -216"), ok 30 of 32, median u 30 -> 33"."""
     got = list(_user13_near_axis_files(75, True, as_file=True))
-    z = np.array([e / u for e, u, ok, _ in got if ok])
-    u = np.array([u for _, u, ok, _ in got if ok])
-    print(f"\nq75 crop-sweep files: n {len(got)} ok {len(z)} RMS z "
-          f"{np.sqrt(np.mean(z**2)):.2f} max |z| {np.max(np.abs(z)):.2f} median u "
-          f"{np.degrees(np.median(u)) * 3600:.0f}\"")
+    z = _sweep_z(got, "q75 crop-sweep files")
     assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
     assert np.max(np.abs(z)) <= 3.5, np.round(z, 2)
     assert abs(np.sqrt(np.mean(z**2)) - 1) <= 3 / np.sqrt(2 * len(z)), np.sqrt(np.mean(z**2))
