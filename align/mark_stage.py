@@ -72,6 +72,9 @@ class MarkStage:
     noise_dof : float or None
         Degrees of freedom of the centres' estimated covariance (None: independent centres
         with their Fisher sigma, nothing estimated).
+    u_scale : float
+        Factor (>= 1) on the fit's u from the centres' sigma: a JPEG's block scatter's own
+        estimate's uncertainty (:func:`jpeg_u_scale`), not in ``sigma`` (the loop's tests).
     """
 
     def __init__(self, m: MarkMeasurement):
@@ -80,6 +83,7 @@ class MarkStage:
         ts = texture_scale(m)
         self.sigma = m.sigma * np.sqrt(ts)
         self.noise_dof = noise_dof(m, ts)
+        self.u_scale = jpeg_u_scale(m, ts)
         self.blocks = jpeg_blocks_columns(m)
 
     def undistorted(self, k1: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
@@ -281,6 +285,23 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     if scale <= 1.0:
         return float(tex.dof)
     return float(1.0 / (1.0 / tex.dof + 1.5 / max(len(m.points) - 1, 1)))
+
+
+def jpeg_u_scale(m: MarkMeasurement, scale: float) -> float:
+    """Factor (>= 1) on a JPEG mark's angle and offset u where its block scatter, read from
+    the mark, set the centres' variance (``scale``, as in :func:`noise_dof`): sqrt of the
+    scatter's ``u_factor`` over its ``factor`` (:func:`imaging.block_scatter`), the factor's
+    estimate carried with its uncertainty (1 otherwise).
+
+    Only u takes it: the loop's tests take the centres' sigma from the estimate itself,
+    with its dof (:func:`noise_dof`: an F test's denominator carries the estimate's spread
+    there; a widened sigma as well would count it twice and blunt the tests).
+    """
+    if m.jpeg is None or scale <= 1.0 or not (m.chol is None
+                                              or scale == jpeg_correlated_floor(m)):
+        return 1.0
+    bs = jpeg_scatter(m)
+    return float(np.sqrt(bs.u_factor / bs.factor))
 
 
 def _bend_column(q: np.ndarray, angle: float) -> np.ndarray:

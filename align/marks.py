@@ -110,7 +110,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     a, au = rep.after.quantities["angle_rad"]
     d, du = rep.after.quantities["offset_px"]
     infl = structure_inflation(rep)
-    au, du = au * infl, du * infl
+    au, du = au * infl * stage.u_scale, du * infl * stage.u_scale
     terms: dict[str, float] = {}
     notes: list[str] = []
     f = rep.after

@@ -38,6 +38,7 @@ from imaging.jpeg_scatter import (
     block_scatter,
     jpeg_centre_scale,
     jpeg_noise_dof,
+    posterior_factor,
 )
 from imaging.lens import PARAMS as LENS_PARAMS
 from imaging.lens import distort_points, opencv_to_lens, undistort_points
@@ -64,6 +65,7 @@ __all__ = [
     "MAX_LENGTH_FRACTION",
     "BlurTrend", "JpegBlocks", "OrientedStripes", "Stripes", "Wave", "defocus_note", "jpeg_note",
     "block_phase_columns", "jpeg_centre_scale", "jpeg_noise_dof", "BlockScatter", "block_scatter",
+    "posterior_factor",
     "block_labels",
     "CameraModel", "Centres", "Detection", "ImageInputError", "LENS_PARAMS", "LineFit",
     "MarkCandidate", "MarkMeasurement", "MeasuredFrame", "PlumbLineFit", "ProfileFit", "Roi",

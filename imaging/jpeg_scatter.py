@@ -57,12 +57,29 @@ class BlockScatter:
     rho : float
         Correlation of two centres' errors in one block (0-1) [-].
     dof : float
-        Degrees of freedom of ``factor``'s estimate [-].
+        Degrees of freedom of the scatter's amplitude read across block boundaries (the
+        residual loop's tests take the centres' sigma from ``factor`` on these) [-].
+    u_factor : float
+        The variance factor the angle's u takes (>= ``factor``): ``factor`` carried with its
+        own estimate's uncertainty (:func:`posterior_factor`) [-].
     """
 
     factor: float
     rho: float
     dof: float
+    u_factor: float
+
+
+def posterior_factor(factor: float, nu: float) -> float:
+    """A variance factor estimated on ``nu`` degrees of freedom as the angle's u takes it:
+    ``factor`` x nu / (nu - 2) [-] (inf for nu <= 2).
+
+    u from an estimated variance is itself scattered: the error over it is Student's t, of
+    variance nu / (nu - 2), not 1 (1 / F-hat averages above 1 / F: a mark read from few
+    centres is too often read too quiet). The factor's posterior mean under a
+    scale-invariant prior, and what makes the angle's z of unit variance.
+    """
+    return float(factor * nu / (nu - 2)) if nu > 2 else float("inf")
 
 
 def block_scatter(z: np.ndarray, block: np.ndarray, h: np.ndarray) -> BlockScatter:
@@ -101,21 +118,38 @@ def block_scatter(z: np.ndarray, block: np.ndarray, h: np.ndarray) -> BlockScatt
     z, block, h = np.asarray(z, float), np.asarray(block), np.asarray(h, float)
     n = len(z)
     if n < 3:
-        return BlockScatter(1.0, 0.0, float("inf"))
+        return BlockScatter(1.0, 0.0, float("inf"), 1.0)
     d2 = np.diff(z) ** 2
     same = block[1:] == block[:-1]
-    if same.sum() < 2 or (~same).sum() < 2:
-        return BlockScatter(jpeg_centre_scale(z), 0.0, jpeg_noise_dof(n))
+    n_cross, n_same = int((~same).sum()), int(same.sum())
+    if n_same < 2 or n_cross < 3:
+        f, nu = jpeg_centre_scale(z), jpeg_noise_dof(n)
+        raw = float(np.mean(d2) / 2)
+        return BlockScatter(f, 0.0, nu, max(f, posterior_factor(raw, nu)))
     s2 = float(np.mean(d2[~same]) / 2)
-    rho = float(np.clip(1.0 - np.mean(d2[same]) / 2 / s2, 0.0, 1.0)) if s2 > 0 else 0.0
+    w = float(np.mean(d2[same]) / 2)
+    rho = float(np.clip(1.0 - w / s2, 0.0, 1.0)) if s2 > 0 else 0.0
     _, inv = np.unique(block, return_inverse=True)
     hb = np.bincount(inv, weights=h)
     hh = float(h @ h)
     ratio = ((1.0 - rho) * hh + rho * float(hb @ hb)) / hh if hh > 0 else 1.0
+    g = float(hb @ hb) / hh if hh > 0 else 1.0
+    raw = s2 * ratio
     # The cross-boundary differences carry s^2; with two centres a block they share no term
     # (one chi2_1 each), and the within-block ones add rho's own spread: their count is
-    # the dof (at most n/2 for a near-axis mark).
-    return BlockScatter(float(max(1.0, s2 * ratio)), rho, float(max((~same).sum(), 1)))
+    # the dof of the amplitude the loop's tests take (at most n/2 for a near-axis mark).
+    # The angle's u takes the factor s2 g - w (g - 1) with both estimates' spread: its
+    # Welch-Satterthwaite dof (s2 on n_cross, w on n_same chi2_1 terms), and never beyond
+    # what rho = 1 (the model's most) gives with s2's own spread. A short mark's rho, read
+    # from a dozen pairs, is most of its factor's uncertainty: on the quality-75 crop
+    # sweep's marks saved as files, 12 pairs read rho 0 (clipped from -0.44) where the
+    # error was 4.15 u.
+    var = 2.0 * (g * s2) ** 2 / n_cross + 2.0 * ((g - 1.0) * w) ** 2 / n_same
+    nu = 2.0 * raw**2 / var if var > 0 else float("inf")
+    bound = posterior_factor(max(1.0, s2 * g), n_cross)
+    factor = float(max(1.0, raw))
+    return BlockScatter(factor, rho, float(n_cross),
+                        float(max(factor, min(posterior_factor(raw, nu), bound))))
 
 
 BLOCK_HARMONICS = 3
