@@ -7,13 +7,15 @@ there. Each render is measured twice by the whole pipeline (``align.marks.measur
 once as shipped and once with the cap raised to ``--converged`` steps, and each angle
 compared with the truth: error / u (z) for both, and the shift between them in u.
 
-Run: ``PYTHONPATH=. python3 benchmarks/band_convergence.py [--quick]``
+Run: ``PYTHONPATH=. python3 benchmarks/band_convergence.py [--count N] [--sweeps narrow,held_out] [--photos]``
 """
 
 from __future__ import annotations
 
 import argparse
+import glob
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,21 +25,10 @@ from align.marks import measure_image
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from synth.scenes import SIZES, random_scene
 
-_ORIG = prof._irls_lm
-_STATE = {"cap": 25, "evals": []}
 
-
-def _capped(fun, y, x0, lo, hi, scale, iterations=25):
-    """The band fit's solver with the cap set here, counting its model evaluations."""
-    n = [0]
-
-    def counted(x):
-        n[0] += 1
-        return fun(x)
-
-    out = _ORIG(counted, y, x0, lo, hi, scale, _STATE["cap"])
-    _STATE["evals"].append(n[0])
-    return out
+def _set_cap(cap: int) -> None:
+    """The band fit's step cap for what follows (read at each fit)."""
+    prof.BAND_FIT_STEPS = cap
 
 
 def _angle_error(a: float, b: float) -> float:
@@ -59,16 +50,17 @@ def _match(res, truth):
 
 
 def _both(spec, caps, **kw):
-    """Each cap's [(error, u) per true mark] for one render, and the evaluations per fit."""
+    """Each cap's [(error, u) per true mark] for one render, and its CPU time [s]."""
     s = render_marks(spec, with_crlb=False)
     img = s.image.astype(float)
-    rows, evals = [], []
+    rows, cpu = [], []
     for cap in caps:
-        _STATE["cap"], _STATE["evals"] = cap, []
+        _set_cap(cap)
+        t = time.process_time()
         res = [r for r in measure_image(img, "render", **kw) if r.found]
+        cpu.append(time.process_time() - t)
         rows.append(_match(res, s.truth))
-        evals.append(list(_STATE["evals"]))
-    return rows, evals
+    return rows, cpu
 
 
 def _narrow(seed: int) -> ImageSpec:
@@ -99,14 +91,54 @@ def _held_out(seed: int) -> ImageSpec:
                      full_well_e=full_well_for_snr(40, -0.6))
 
 
+def _effects(d: dict) -> str:
+    """A saved result's effects and flags, short."""
+    names = [e["name"] for e in d.get("effects") or []]
+    if d.get("uncertainty_inflation", 1.0) != 1.0:
+        names.append(f"x{d['uncertainty_inflation']:.2f}")
+    return ",".join(names) or "-"
+
+
+def photos(caps) -> None:
+    """Each real photo's marks at both caps: the angle's move in u (after and before the
+    residual loop), u's ratio, the band fit's width/blur, and the loop's effects."""
+    from align.marks import measure_file
+    paths = sorted(glob.glob("/work/shared/data/real/opencv-*/*.jpg"))
+    print(f"{'photo':14} {'#':>2} {'d/u':>6} {'pre-loop':>8} {'u ratio':>7} "
+          f"{'width px':>11} {'blur px':>9}  effects (cap -> converged)")
+    for p in paths:
+        runs = []
+        for cap in caps:
+            _set_cap(cap)
+            runs.append([r.to_dict() for r in measure_file(p)])
+        for a, b in zip(*runs, strict=False):  # (the count may differ: said below)
+            if not (a["found"] and b["found"]):
+                if a["found"] != b["found"]:
+                    print(f"{Path(p).name:14} {a['index']:2d} found {a['found']} -> {b['found']}")
+                continue
+            u = a["angle_u_rad"]
+            print(f"{Path(p).name:14} {a['index']:2d} "
+                  f"{(b['angle_rad'] - a['angle_rad']) / u:+6.2f} "
+                  f"{(b['angle_before_loop_rad'] - a['angle_before_loop_rad']) / u:+8.2f} "
+                  f"{b['angle_u_rad'] / u:7.2f} {a['width_px']:5.1f}>{b['width_px']:5.1f} "
+                  f"{a['blur_px']:4.1f}>{b['blur_px']:4.1f}  {_effects(a)} -> {_effects(b)}",
+                  flush=True)
+        if len(runs[0]) != len(runs[1]):
+            print(f"{Path(p).name:14} marks {len(runs[0])} -> {len(runs[1])}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--converged", type=int, default=1000, help="the raised cap [steps]")
-    ap.add_argument("--quick", action="store_true", help="fewer renders per sweep")
+    ap.add_argument("--count", type=int, help="renders per sweep (default 40/16/40/16)")
     ap.add_argument("--sweeps", default="narrow,measure,held_out,scenes")
+    ap.add_argument("--photos", action="store_true",
+                    help="the real photos (../shared/data/real) instead: no truth, the moves")
     a = ap.parse_args()
-    prof._irls_lm = _capped  # (fit_profile looks its solver up in its module)
-    n = 6 if a.quick else None
+    if a.photos:
+        photos((25, a.converged))
+        return
+    n = a.count
     k1 = LensRanges(k1=0.3, k2=0.0, p=0.0, aspect=0.0, pp_px=0.0)
     sweeps = {
         "narrow": (lambda i: _narrow(i), n or 40, {}),
@@ -116,34 +148,27 @@ def main() -> None:
     }
     caps = (25, a.converged)
     print(f"{'sweep':9} {'marks':>5} {'cap':>5} {'RMS z':>6} {'max|z|':>6} {'|z|>3':>5} "
-          f"{'evals/fit':>9} {'at cap':>6}  shift between the two [u]: RMS, max")
+          f"{'CPU s':>6}  shift between the two [u]: RMS, max")
     for name in a.sweeps.split(","):
         make, count, kw = sweeps[name]
-        t = time.process_time()
         z = {c: [] for c in caps}
-        ev = {c: [] for c in caps}
+        ev = {c: [] for c in caps}  # CPU s per render
         shift = []
         for i in range(count):
-            rows, evals = _both(make(i), caps, **kw)
-            for c, r, e in zip(caps, rows, evals):
+            rows, cpu = _both(make(i), caps, **kw)
+            for c, r, e in zip(caps, rows, cpu, strict=True):
                 z[c] += [np.nan if m is None else m[0] / m[1] for m in r]
-                ev[c] += e
+                ev[c].append(e)
             shift += [np.nan if p is None or q is None else (q[0] - p[0]) / p[1]
-                      for p, q in zip(rows[0], rows[1])]
+                      for p, q in zip(rows[0], rows[1], strict=True)]
         for c in caps:
             zz = np.array(z[c])
             ok = zz[np.isfinite(zz)]
-            e = np.array(ev[c])
-            # A fit "at the cap" used the 25-step run's evaluations count or more and
-            # moved on when run longer: counted by comparing the two runs' counts.
-            at = (f"{np.mean(np.array(ev[caps[0]]) < np.array(ev[caps[1]])):6.0%}"
-                  if c == caps[0] and len(ev[caps[0]]) == len(ev[caps[1]]) else "")
             print(f"{name:9} {ok.size:5d} {c:5d} {np.sqrt(np.mean(ok**2)):6.2f} "
                   f"{np.max(np.abs(ok)):6.2f} {np.sum(np.abs(ok) > 3):5d} "
-                  f"{e.mean():9.1f} {at:>6}"
+                  f"{np.sum(ev[c]):6.1f}"
                   + (f"  {np.sqrt(np.nanmean(np.square(shift))):.3f}, "
-                     f"{np.nanmax(np.abs(shift)):.3f}" if c == caps[1] else ""))
-        print(f"  ({time.process_time() - t:.0f} s CPU)", flush=True)
+                     f"{np.nanmax(np.abs(shift)):.3f}" if c == caps[1] else ""), flush=True)
 
 
 if __name__ == "__main__":
