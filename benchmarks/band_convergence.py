@@ -7,7 +7,8 @@ there. Each render is measured twice by the whole pipeline (``align.marks.measur
 once as shipped and once with the cap raised to ``--converged`` steps, and each angle
 compared with the truth: error / u (z) for both, and the shift between them in u.
 
-Run: ``PYTHONPATH=. python3 benchmarks/band_convergence.py [--count N] [--sweeps narrow,held_out] [--photos]``
+Run: ``PYTHONPATH=. python3 benchmarks/band_convergence.py [--count N] [--sweeps narrow]``,
+or ``--photos`` for the real photos (no truth: how far each result moves).
 """
 
 from __future__ import annotations
