@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import glob
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +24,17 @@ import numpy as np
 import imaging.profile as prof
 from align.lens import LensRanges
 from align.marks import measure_image
+from imaging import ImageInputError, measure_marks
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from synth.scenes import SIZES, random_scene
+
+
+@dataclass(frozen=True)
+class _Line:
+    """A line fit's angle and its u [rad] (the fields _match reads)."""
+
+    angle_rad: float
+    angle_u_rad: float
 
 
 def _set_cap(cap: int) -> None:
@@ -58,7 +68,17 @@ def _both(spec, caps, **kw):
     for cap in caps:
         _set_cap(cap)
         t = time.process_time()
-        res = [r for r in measure_image(img, "render", **kw) if r.found]
+        if kw.get("line"):
+            # The line fit alone (imaging.measure_marks), its u the pixels' only: no lens,
+            # JPEG or loop terms, which on an undeclared lens dwarf it.
+            try:
+                found = measure_marks(img)
+            except ImageInputError:  # none found: a miss, counted as such
+                found = []
+            res = [_Line(m.line.angle_rad, m.line.angle_u_rad)
+                   for m in found if not isinstance(m, Exception)]
+        else:
+            res = [r for r in measure_image(img, "render", **kw) if r.found]
         cpu.append(time.process_time() - t)
         rows.append(_match(res, s.truth))
     return rows, cpu
@@ -132,7 +152,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--converged", type=int, default=1000, help="the raised cap [steps]")
     ap.add_argument("--count", type=int, help="renders per sweep (default 40/16/40/16)")
-    ap.add_argument("--sweeps", default="narrow,measure,held_out,scenes")
+    ap.add_argument("--sweeps", default="narrow,narrow_line,measure,measure_line,held_out,scenes")
     ap.add_argument("--photos", action="store_true",
                     help="the real photos (../shared/data/real) instead: no truth, the moves")
     a = ap.parse_args()
@@ -143,7 +163,9 @@ def main() -> None:
     k1 = LensRanges(k1=0.3, k2=0.0, p=0.0, aspect=0.0, pp_px=0.0)
     sweeps = {
         "narrow": (lambda i: _narrow(i), n or 40, {}),
+        "narrow_line": (lambda i: _narrow(i), n or 40, {"line": True}),
         "measure": (lambda i: _measure_like(i), n or 16, {}),
+        "measure_line": (lambda i: _measure_like(i), n or 16, {"line": True}),
         "held_out": (lambda i: _held_out(i), n or 40, {"ranges": k1, "expect_one": True}),
         "scenes": (lambda i: random_scene(i, SIZES[:4], (1, 1, 1, 1)), n or 16, {}),
     }
