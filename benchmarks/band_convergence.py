@@ -25,6 +25,7 @@ import imaging.profile as prof
 from align.lens import LensRanges
 from align.marks import measure_image
 from imaging import ImageInputError, measure_marks
+from imaging.detect import wrap_angle
 from synth import CameraGeometry, ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from synth.scenes import SIZES, random_scene
 
@@ -42,18 +43,13 @@ def _set_cap(cap: int) -> None:
     prof.BAND_FIT_STEPS = cap
 
 
-def _angle_error(a: float, b: float) -> float:
-    """a - b for line directions (modulo pi) [rad]."""
-    return float((a - b + np.pi / 2) % np.pi - np.pi / 2)
-
-
 def _match(res, truth):
     """(error, u) of each true mark's detection (nearest direction within 1 deg), or None."""
     out = []
     for t in truth.marks:
         best = None
         for r in res:
-            da = _angle_error(r.angle_rad, t.image_angle_rad)
+            da = wrap_angle(r.angle_rad - t.image_angle_rad)
             if abs(da) < np.deg2rad(1) and (best is None or abs(da) < abs(best[0])):
                 best = (da, r.angle_u_rad)
         out.append(best)
