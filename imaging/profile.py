@@ -41,8 +41,8 @@ BAND_FIT_STEPS = 25
 """The band fit's cap on accepted Levenberg–Marquardt steps. On a groove narrower than its
 blur the fit is still moving along the width–blur valley there (not converged), but the
 angle hardly depends on where it stops (``benchmarks/band_convergence.py``: on renders with
-truth, converging moves it by 0.03 u RMS, at most ~0.1 u, and its errors stay the same), so
-the cap stays: converging would cost time and buy nothing."""
+truth, converging moves it by 0.1 of the line fit's u RMS, at most 0.25, and its errors
+stay the same), so the cap stays: converging would cost time and buy nothing."""
 
 
 def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
