@@ -31,12 +31,20 @@ from imaging.groove import (
 )
 from imaging.groupsum import GroupSums
 
-__all__ = ["Centres", "ProfileFit", "ProfileTable", "band_indices", "band_pixels",
-           "centres_half", "extent_look", "fit_profile", "groove_extent", "sample_centres"]
+__all__ = ["BAND_FIT_STEPS", "Centres", "ProfileFit", "ProfileTable", "band_indices",
+           "band_pixels", "centres_half", "extent_look", "fit_profile", "groove_extent",
+           "sample_centres"]
 """The band fit's own functions, and (re-exported) what moved to imaging.groove, .band and
 .centres when this module was split."""
 
 _SHAPE_PIXELS = 2500
+
+BAND_FIT_STEPS = 25
+"""The band fit's cap on accepted Levenberg–Marquardt steps. On a groove narrower than its
+blur the fit is still moving along the width–blur valley there (not converged), but the
+angle hardly depends on where it stops (``benchmarks/band_convergence.py``: on renders with
+truth, converging moves it by 0.1 of the line fit's u RMS, at most 0.25, and its errors
+stay the same), so the cap stays: converging would cost time and buy nothing."""
 
 
 def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
@@ -149,15 +157,18 @@ def _half_depth_width(e: np.ndarray, vals: np.ndarray, bg: float, amp: float) ->
 
 
 def _irls_lm(fun, y: np.ndarray, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-             scale: float, iterations: int = 25) -> tuple[np.ndarray, np.ndarray]:
+             scale: float, iterations: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg–Marquardt on Huber-reweighted residuals (IRLS), parameters kept in [lo, hi].
 
     The band fit has 8 parameters and a few thousand pixels; a hand loop avoids the
     per-iteration overhead of scipy's trust-region solver, which dominated the time here.
     Dust pixels get Huber weights (threshold ``scale``) so they cannot pull the shape.
     ``fun(x)`` gives the model at x and a function that computes its Jacobian, called only
-    for the steps accepted. Returns the solution and the model there.
+    for the steps accepted. At most ``iterations`` steps (:data:`BAND_FIT_STEPS`, read at
+    the call, if None). Returns the solution and the model there.
     """
+    if iterations is None:
+        iterations = BAND_FIT_STEPS
     x = x0.astype(float).copy()
     lam = 1e-3
     mu, jac = fun(x)
