@@ -68,6 +68,7 @@ def locate_step(x: np.ndarray, t: np.ndarray) -> tuple[float, np.ndarray, np.nda
     differences (a step is one of them)."""
     n = len(x)
     s = np.median(np.abs(np.diff(x, axis=0)), 0) / (0.6745 * np.sqrt(2))
+    s = np.maximum(s, np.finfo(float).eps * np.max(np.abs(x)))  # (noise-free data)
     c = np.cumsum(x, 0)
     m = np.arange(2, n - 1)
     d = (c[-1] - c[m - 1]) / (n - m)[:, None] - c[m - 1] / m[:, None]
