@@ -302,8 +302,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
             model, widening = widen(kf.model, increments)
             notes = (widening.warning(),)
         return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf, None, notes, widening, _stepped(poses, model),
-                           stated,
+                           "known-pose", kf, None, notes, widening,
+                           step_problem(poses.steps, model.k, model.cov), stated,
                            nonlinearity_statement(declared, (), False))
     try:
         stage = CalibrationStage(poses, signs, bounds=declared)
@@ -369,7 +369,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         why = widening.undetermined(tuple(t.name for t in rep.terms),
                                     max(PLAN_MIN, len(poses.u)), WANDER)
         problems = (why,) if why else ()
-    problems = (*problems, *_stepped(poses, model))
+    problems = (*problems, *step_problem(poses.steps, model.k, model.cov))
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)
@@ -420,13 +420,6 @@ MIN_WALK_DOF = 3
 exclude the samples' walk (:func:`noise_model`); fewer, or a residual an over-fit's size
 (chi2/dof below :data:`~align.calibration.model.OVERFIT_CHI2`: 6 effect parameters on 14
 poses took a walk's whole signal), and the walk stays."""
-
-
-def _stepped(poses: Poses, model: TriadModel) -> tuple[str, ...]:
-    """The problem of a bias that stepped within a pose by more than the result's u
-    (:func:`~align.calibration.steps.step_problem`; the covariance's names 6-8 the biases)."""
-    why = step_problem(poses.steps, model.k, np.sqrt(np.diag(model.cov)[6:9]))
-    return (why,) if why else ()
 
 
 def _structure_increment(rep: LoopReport, projection: np.ndarray, residuals_w: np.ndarray,

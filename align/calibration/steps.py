@@ -28,9 +28,9 @@ class PoseStep:
     Attributes
     ----------
     pose : int
-        The pose's index.
+        The pose's index (dimensionless).
     label : str
-        Its label.
+        Its label (dimensionless).
     t_s : float
         The time of the step [s] (between the two samples it falls between).
     size : numpy.ndarray
@@ -86,12 +86,13 @@ def pose_steps(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
                  for i in walk_outliers(samples, times))
 
 
-def step_problem(steps: Sequence[PoseStep], k: np.ndarray, bias_u_g: np.ndarray
-                 ) -> str | None:
-    """Why the result is not ok when a pose's bias stepped by more than the bias's u
-    ``bias_u_g`` (3,) [g] (``k`` (3,) [output unit/g]), or None. Only a step that changes
-    |a| beyond :data:`STEP_Z` of its u counts: one across gravity is also a tilt (a static
-    interval's edge holding the end of the turn: synth's recordings, 6.5-7.5 mg)."""
+def step_problem(steps: Sequence[PoseStep], k: np.ndarray, cov: np.ndarray
+                 ) -> tuple[str, ...]:
+    """Why the result is not ok (none or one line) when a pose's bias stepped by more than
+    the bias's u: ``k`` (3,) [output unit/g], ``cov`` the model's covariance (its names 6-8
+    the biases [g]). Only a step that changes |a| beyond :data:`STEP_Z` of its u counts:
+    one across gravity is also a tilt."""
+    bias_u_g = np.sqrt(np.diag(cov)[6:9])
     for s in steps:
         g = np.abs(s.size / k)
         n = s.level / k / np.linalg.norm(s.level / k)
@@ -102,5 +103,5 @@ def step_problem(steps: Sequence[PoseStep], k: np.ndarray, bias_u_g: np.ndarray
             return (f"the {AXES[ax]} bias stepped by {s.size[ax] / k[ax] * 1e6:+.4g} µg "
                     f"within pose {s.label} (t ≈ {s.t_s:.1f} s; u of the bias "
                     f"{bias_u_g[ax] * 1e6:.3g} µg): the bias is not one value over the run "
-                    "(a bias jump or a knock): recalibrate")
-    return None
+                    "(a bias jump or a knock): recalibrate",)
+    return ()

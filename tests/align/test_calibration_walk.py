@@ -106,11 +106,11 @@ def test_a_step_within_one_pose_is_not_a_walk():
     (s,) = pose_steps(samples, times, [str(i) for i in range(14)])
     assert abs(s.t_s - times[7][7]) < 0.05
     assert abs(s.size[0] - 2e-3) < 3 * s.size_u[0]
-    why = step_problem([s], np.ones(3), np.full(3, 1e-4))
-    assert why is not None and "x bias stepped by +" in why and "pose 7" in why
-    assert step_problem([s], np.ones(3), np.full(3, 3e-3)) is None  # within u: one bias
+    (why,) = step_problem([s], np.ones(3), np.diag(np.full(9, 1e-8)))
+    assert "x bias stepped by +" in why and "pose 7" in why
+    assert step_problem([s], np.ones(3), np.diag(np.full(9, 9e-6))) == ()  # within u: one bias
     (s2,) = pose_steps(*_stepped_poses(0, 2e-3, pose=2), [str(i) for i in range(14)])
-    assert s2.pose == 2 and step_problem([s2], np.ones(3), np.full(3, 1e-4)) is None
+    assert s2.pose == 2 and step_problem([s2], np.ones(3), np.diag(np.full(9, 1e-8))) == ()
     assert walk_outliers(*_stepped_poses(0, 0.0)) == ()
 
 
