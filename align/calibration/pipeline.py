@@ -53,6 +53,7 @@ from align.calibration.stability import (
     stability_reason,
     stability_statement,
 )
+from align.calibration.steps import step_problem
 from align.calibration.triad import CORE, Poses, TriadModel, delta_g, per_axis, pose_gradient
 from align.calibration.unproven import (
     PLAUSIBLE,
@@ -301,7 +302,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
             model, widening = widen(kf.model, increments)
             notes = (widening.warning(),)
         return Calibration(kf.model, model, rep, signs_t, poses.sigma_u is not None,
-                           "known-pose", kf, None, notes, widening, (), stated,
+                           "known-pose", kf, None, notes, widening,
+                           step_problem(poses.steps, model.k, model.cov), stated,
                            nonlinearity_statement(declared, (), False))
     try:
         stage = CalibrationStage(poses, signs, bounds=declared)
@@ -367,6 +369,7 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         why = widening.undetermined(tuple(t.name for t in rep.terms),
                                     max(PLAN_MIN, len(poses.u)), WANDER)
         problems = (why,) if why else ()
+    problems = (*problems, *step_problem(poses.steps, model.k, model.cov))
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)

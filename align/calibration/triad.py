@@ -21,6 +21,7 @@ import numpy as np
 from align.calibration.ellipsoid import r_matrix, row_norms
 from align.calibration.settling import Settling, settle_samples
 from align.calibration.slopes import pose_slopes
+from align.calibration.steps import PoseStep, pose_steps
 from align.calibration.walk import walk_levels
 from align.errors import InputError
 from axisbase.covariance import cov_of
@@ -67,6 +68,9 @@ class Poses:
     """The test for a transient after each turn (:mod:`align.calibration.settling`; found:
     the means are of the corrected samples, ``sigma_u`` carries the correction), or None
     (not testable: means only, no times, short poses)."""
+    steps: tuple[PoseStep, ...] = ()
+    """The poses whose samples stepped (:mod:`align.calibration.steps`), left out of
+    ``walk_rate``."""
 
 
 def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
@@ -79,13 +83,14 @@ def poses_from_samples(pose: np.ndarray, u: np.ndarray, t: np.ndarray,
     samples, du, settled = settle_samples(samples, times)
     if du is not None:
         sigma = np.sqrt(sigma**2 + du**2)
-    rate, bound = walk_levels(samples, times)
+    names = tuple(labels) if labels is not None else tuple(str(i) for i in ids)
+    steps = pose_steps(samples, times, names)
+    rate, bound = walk_levels(samples, times, [s.pose for s in steps])
     trend = pose_slopes(samples, times, rate)
     return Poses(np.array([x.mean(0) for x in samples]), np.array([t[s].mean() for s in sel]),
                  None, sigma, np.array([s.sum() for s in sel]),
-                 tuple(labels) if labels is not None else tuple(str(i) for i in ids),
-                 True, rate, bound, *(trend[:2] if trend is not None else (None, None)),
-                 settled)
+                 names, True, rate, bound,
+                 *(trend[:2] if trend is not None else (None, None)), settled, steps)
 
 
 @dataclass(frozen=True)

@@ -66,20 +66,71 @@ def _expectations(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
             float(ramp @ walk @ ramp))
 
 
-def walk_levels(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
-                ) -> tuple[np.ndarray | None, np.ndarray | None]:
+def walk_levels(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
+                skip: Sequence[int] = ()) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The bias random walk's rate q per axis [output unit² / s] when the samples show one
     at :data:`WALK_ALPHA` (else None), and the largest rate they do not exclude at
-    :data:`WALK_ALPHA` (one-sided; None: too short to tell) — :func:`walk_estimate`."""
-    est = walk_estimate(samples, times)
+    :data:`WALK_ALPHA` (one-sided; None: too short to tell) — :func:`walk_estimate`, the
+    poses ``skip`` (:func:`walk_outliers`) left out."""
+    est = walk_estimate(samples, times, skip)
     if est is None:
         return None, None
     rate, sd, p = est
     return (rate if p < WALK_ALPHA else None), rate - special.ndtri(WALK_ALPHA) * sd
 
 
-def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
-                  ) -> tuple[np.ndarray, np.ndarray, float] | None:
+def walk_outliers(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
+                  ) -> tuple[int, ...]:
+    """The poses whose low frequencies are beyond the walk and white noise the other poses
+    show (indices into ``samples``): a walk goes on in every pose, a step or a knock in one.
+
+    Each pose's low modes (:data:`LOW_MODES`, per axis) against their expectation under the
+    other poses' (s², q) (:func:`walk_estimate` without it): the sum a weighted chi2, its
+    tail bounded by its mean times one chi2 of 1 dof; the worst pose is out when its p is below
+    :data:`WALK_ALPHA` / (3 N) (Bonferroni over the poses and axes), then the next, at most
+    a quarter of the poses (more is not one event but a noise the model lacks)."""
+    out: list[int] = []
+    lo = slice(*LOW_MODES)
+    while len(out) < len(samples) // 4:
+        worst, p_min = -1, 1.0
+        for i, (x, t) in enumerate(zip(samples, times, strict=True)):
+            if i in out or len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
+                continue
+            est = walk_estimate(samples, times, (*out, i), levels=True)
+            if est is None:
+                return tuple(out)
+            s2b, q = est
+            _, c2, b, dt = _pose_modes(x, t)
+            w, g, _, _ = _expectations(len(c2))
+            e = w[lo, None] * s2b + g[lo, None] * dt * b * q  # each mode's expectation
+            # Σ E_k χ²₁ is bounded in its far tail by its mean times one χ²₁ (all of it in
+            # one mode): a walk's modes fall as 1/k², and Satterthwaite's dof (2-5) flagged
+            # a pose in 3 of 40 synth tumbles walking at 1e-5 g/√s (1 χ²₁: 0 of 40).
+            stat = c2[lo].sum(0) * b / np.maximum(e.sum(0), 1e-300)
+            p = float(np.min(special.chdtrc(1, stat)))
+            if p < p_min:
+                worst, p_min = i, p
+        if worst < 0 or p_min >= WALK_ALPHA / (3 * len(samples)):
+            break
+        out.append(worst)
+    return tuple(out)
+
+
+def _pose_modes(x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """One pose's b-sample averages (n, 3) [output unit] (at most :data:`MAX_POINTS`), their
+    detrended DCT squares (n, 3) [output unit²], b and one averaged point's time [s]."""
+    b = -(-len(x) // MAX_POINTS)
+    n = len(x) // b
+    y = x[:n * b].reshape(n, b, -1).mean(1)
+    i = np.arange(n, dtype=float)
+    X = np.column_stack([np.ones(n), i - i.mean()])
+    r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    return y, fft.dct(r, norm="ortho", axis=0) ** 2, b, np.ptp(t) / (len(x) - 1) * b
+
+
+def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
+                  skip: Sequence[int] = (), levels: bool = False
+                  ) -> tuple[np.ndarray, ...] | None:
     """The bias random walk's rate q per axis [output unit² / s] (clipped at 0), its standard
     deviation, and the p-value of white noise alone; None when too short to tell.
 
@@ -96,6 +147,11 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
         Each pose's samples [output unit].
     times : sequence of (n_p,) arrays
         Their times [s].
+    skip : sequence of int
+        Poses left out (:func:`walk_outliers`).
+    levels : bool
+        Return only (s² b, q) per axis, clipped at 0 (the white level of one sample times
+        its seconds [output unit² s], the walk's rate [output unit² / s]).
     """
     lo = slice(*LOW_MODES)
     S = np.zeros((2, 3))
@@ -104,17 +160,11 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     dof = np.zeros(2)
     trend, trend_g, where, when = [], [], [], []
     low_w, low_g = [], []  # each low mode's expected square per unit white and walk
-    for x, t in zip(samples, times, strict=True):
-        if len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
+    for k, (x, t) in enumerate(zip(samples, times, strict=True)):
+        if k in skip or len(x) < MIN_WALK_SAMPLES or np.ptp(t) <= 0:
             continue
-        b = -(-len(x) // MAX_POINTS)
-        n = len(x) // b
-        y = x[:n * b].reshape(n, b, -1).mean(1)
-        dt = np.ptp(t) / (len(x) - 1) * b  # one point's time [s]
-        i = np.arange(n, dtype=float)
-        X = np.column_stack([np.ones(n), i - i.mean()])
-        r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
-        c2 = fft.dct(r, norm="ortho", axis=0) ** 2
+        y, c2, b, dt = _pose_modes(x, t)
+        n = len(y)
         w, g, ramp, g_ramp = _expectations(n)
         hi = slice(int(n * WHITE_BAND[0]), int(n * WHITE_BAND[1]))
         for j, band in enumerate((lo, hi)):
@@ -153,6 +203,8 @@ def walk_estimate(samples: Sequence[np.ndarray], times: Sequence[np.ndarray]
     # chi2 of its dof times its mean (a normal approximation for the bound).
     M = np.array([[W[0], G[0]], [W[1], G[1]]])
     sol = np.linalg.solve(M, S)
+    if levels:
+        return np.maximum(sol[0], 0.0), np.maximum(sol[1], 0.0)
     inv = np.linalg.inv(M)
     # The low band's terms are unequal (a walk's modes fall as 1/k²): its variance is
     # 2 Σ E_k², E_k each term's expectation at the solution.

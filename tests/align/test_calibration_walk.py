@@ -74,3 +74,54 @@ def test_bias_walk_sweep(level):
     effect)."""
     z = np.concatenate([_z(level, s)[0] for s in range(100, 120)])
     assert np.abs(z).max() < 4.0 and np.sqrt(np.mean(z ** 2)) < 1.3, z
+
+
+def _stepped_poses(seed: int, step_g: float, pose: int = 7, at: int = 7):
+    """14 poses (the cube's faces and corners, k = 1) of 200 samples at 20 Hz with 20 µg of
+    white noise, 5 s turns; the x bias steps by ``step_g`` at sample ``at`` of ``pose``."""
+    rng = np.random.default_rng(seed)
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]
+                    + [[x, y, z] for x in (1, -1) for y in (1, -1) for z in (1, -1)], float)
+    samples, times = [], []
+    for p, d in enumerate(dirs):
+        x = d / np.linalg.norm(d) + rng.normal(0, 2e-5, (200, 3))
+        x[:, 0] += step_g * ((p > pose) | ((p == pose) & (np.arange(200) >= at)))
+        samples.append(x)
+        times.append(15.0 * p + np.arange(200) / 20.0)
+    return samples, times
+
+
+def test_a_step_within_one_pose_is_not_a_walk():
+    """User 17's 2 mg bias step inside pose 7: that pose alone is beyond the others' low
+    frequencies (left out of the walk's level, which is then none), the step located at its
+    sample and size (within 3 of its u), and a bias u below the step makes the result not
+    ok; the same step on a face across gravity is also a tilt (not judged); no step: none."""
+    from align.calibration.steps import pose_steps, step_problem
+    from align.calibration.walk import walk_levels, walk_outliers
+
+    samples, times = _stepped_poses(0, 2e-3)
+    assert walk_outliers(samples, times) == (7,)
+    assert walk_levels(samples, times, (7,))[0] is None
+    assert walk_levels(samples, times)[0] is not None  # (the step taken for a walk before)
+    (s,) = pose_steps(samples, times, [str(i) for i in range(14)])
+    assert abs(s.t_s - times[7][7]) < 0.05
+    assert abs(s.size[0] - 2e-3) < 3 * s.size_u[0]
+    (why,) = step_problem([s], np.ones(3), np.diag(np.full(9, 1e-8)))
+    assert "x bias stepped by +" in why and "pose 7" in why
+    assert step_problem([s], np.ones(3), np.diag(np.full(9, 9e-6))) == ()  # within u: one bias
+    (s2,) = pose_steps(*_stepped_poses(0, 2e-3, pose=2), [str(i) for i in range(14)])
+    assert s2.pose == 2 and step_problem([s2], np.ones(3), np.diag(np.full(9, 1e-8))) == ()
+    assert walk_outliers(*_stepped_poses(0, 0.0)) == ()
+
+
+@pytest.mark.slow
+def test_no_pose_is_a_step_in_walking_tumbles():
+    """synth tumbles, clean and walking at 1e-6, 3e-6, 1e-5 g/√s, 10 seeds each: no pose is
+    beyond the others' low frequencies (0 of 40 seeds each; Satterthwaite's dof flagged 3 of
+    40 at 1e-5)."""
+    from align.calibration.walk import walk_outliers
+
+    for level in (0.0, 1e-6, 3e-6, 1e-5):
+        for s in range(10):
+            tr = _walk_triad(level) if level else triad_of("clean")
+            assert walk_outliers(*_samples(tumble(TumbleSpec(triad=tr, seed=s)))) == (), (level, s)

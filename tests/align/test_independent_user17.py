@@ -166,14 +166,6 @@ def test_calibrate_effects_it_covers(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "x bias stepping half-way through a 14-pose tumble (210 s): 2 µg (3 u): ok, within"
-    " 3 u; 20 µg: 2 of 3 not ok; 200 µg: all 3 ok, b_x within 0.4 u of the bias before"
-    " the step and 17.5-19.4 u from the one after; 2 mg (seed 0): ok, exit 0, no effect,"
-    " no structure,"
-    " b_x -1002.9 ± 109 µg where the bias was -966.9 then +1033.1 µg (18 u), pose"
-    " residuals up to 1384 µg against 1.4 µg of pose-mean noise, chi2/dof 3.1,"
-    " noise_known true"))
 def test_calibrate_bias_step_sweep(tmp_path):
     rows = _sweep(tmp_path, calibrate, {"bias_step_g": [2e-6, 2e-5, 2e-4, 2e-3]}, range(3))
     bad = [r for r in rows if not _consistent(*r[3:6])]
