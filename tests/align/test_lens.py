@@ -329,9 +329,9 @@ def _bowed_by_the_lens():
 
 def test_centres_follow_a_groove_the_lens_bows_by_several_px():
     """A 420 px mark near the frame's edge, bowed ~4.7 px by the lens: every centre on the
-    imaged curve within 0.05 px at SNR 400 (before: Gauss-Newton stopped after 2 steps of
-    1 px, the ends 0.2-0.35 px short of the curve, and the exact camera model was reported
-    as differing from its calibration)."""
+    imaged curve within 4 of its sigma, the inner ones within 0.05 px, at SNR 400 (before:
+    Gauss-Newton stopped after 2 steps of 1 px, the ends 0.2-0.35 px short of the curve, and
+    the exact camera model was reported as differing from its calibration)."""
     cam, marks = _bowed_by_the_lens()
     spec = ImageSpec(marks=tuple(marks), width=640, height=480, camera=cam, seed=1,
                      full_well_e=full_well_for_snr(400, -0.6), supersample=4)
@@ -347,7 +347,12 @@ def test_centres_follow_a_groove_the_lens_bows_by_several_px():
     k = np.argmin(((curve[None] - m.points[:, None]) ** 2).sum(-1), axis=1)
     dist = np.linalg.norm(m.points - curve[k], axis=1)
     assert np.ptp(m.line.residuals_px) > 3  # the bow is several px
-    assert dist.max() < 0.05
+    # The centres measured out to the blurred ends (fewer pixels across the groove there)
+    # carry a larger sigma: each within 4 of its own, the inner ones within 0.05 px.
+    inner = m.sigma < 0.03
+    assert inner.sum() > 0.8 * len(dist)
+    assert dist[inner].max() < 0.05
+    assert np.max(dist / m.sigma) < 4.0
 
 
 def _exact_model_ps(drawn: bool) -> tuple[np.ndarray, np.ndarray]:
