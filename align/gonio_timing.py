@@ -2,8 +2,10 @@
 
 ``steady_table``: the user asserts the table turns at constant speed within a revolution; the
 pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the counts confirm
-it and they are the more precise. Either way, a table whose speed is locked to its angle makes
-any autocollimator latency bias one direction's angles: a warning names the bias per µs.
+it and they are the more precise. Otherwise, counts and pulse-time fractions that disagree
+beyond noise in one direction's log (a counter losing counts, or a table whose speed is locked
+to its angle, where any autocollimator latency biases the angles) are carried in its u as a
+Type B term, with a warning that names both causes (:func:`bound_disagreement`).
 """
 
 from __future__ import annotations
@@ -21,7 +23,10 @@ if TYPE_CHECKING:
     from goniometry.timing import TimingAngles
 
 
-LATENCY = "one direction only, on a table whose speed varies with its angle"
+LATENCY = "one direction only: the counts and the pulse-time fractions disagree"
+"""How the warning begins that one direction's counts and pulse times disagree."""
+DISAGREEMENT = "counts vs pulse times (a counter losing counts, or latency on an unsteady table)"
+"""The Type B term that carries that disagreement in one direction's u."""
 
 
 def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -61,33 +66,74 @@ def count_floors_explain(counts: np.ndarray, ta: TimingAngles) -> bool:
     return locked and bool(np.all(np.abs(ta.diff_rad) <= q + 3 * ta.diff_u_rad))
 
 
-def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
-    """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
-    from the count fractions): then any latency of the autocollimator biases one direction's
-    angles, which only the other direction cancels (--reverse-log); the log cannot tell the
-    latency. Stated per microsecond of it."""
+def disagreement(run: GonioRun, alpha: float) -> TimingAngles | None:
+    """The pulse-time angles when they and the counts disagree beyond noise (p < ``alpha``)
+    for a reason other than the stamps' resolution or a locked ring laser's own floors (see
+    :func:`count_floors_explain`); None otherwise, with the pulse-time angles in use, or
+    without times (or with fewer than 16 timed revolutions)."""
     if not run.summary.has_time or run.timing_used:
-        return run
+        return None
     counts, dt, _ = kept_table(run.summary)
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     if ok.sum() < 16:
-        return run
+        return None
     ta = run.timing if run.timing is not None else timing_angles(run.summary)
     if ta.p_value >= alpha or ta.stamp_limited or count_floors_explain(counts[ok], ta):
+        return None
+    return ta
+
+
+def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
+    """One direction's angles with what the counts' disagreement with the pulse times can do
+    to them carried in u (Type B, :data:`DISAGREEMENT`), and a warning naming the causes.
+
+    Two measures of the same angles that differ far beyond their noise mean one of them is
+    wrong, and the log cannot say which: a table whose speed follows its angle (the pulse
+    times' fractions are then not the angles', and any autocollimator latency L biases the
+    counts' angles by L times the speed's change between faces, which only the other
+    direction cancels), or a counter that loses or gains counts at each switch (the counts are
+    then wrong, by the difference). The term puts both candidates, the counts' angle and the
+    pulse times', within u's 2-sigma interval: d_k / sqrt(3) per angle (the interval between
+    them taken as uniform), correlated along the difference's own pattern (its sum is zero, so
+    the closure is kept). That also covers a latency up to |d_k / s_k| (s: the bias per second
+    of latency), a large fraction of the time between faces; a clean log has no such term.
+    """
+    ta = disagreement(run, alpha)
+    if ta is None:
         return run
-    per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
+    counts, dt, _ = kept_table(run.summary)
+    ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
+    sens = latency_sensitivity(counts[ok], dt[ok])
+    d = ta.diff_rad
+    fa = run.angles
+    term = np.abs(d) / np.sqrt(3)
+    cov = fa.cov + np.outer(d, d) / 3
+    terms = {**fa.type_b_terms, DISAGREEMENT: term}
+    widened = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)),
+                      u_type_b_rad=np.sqrt(fa.u_type_b_rad ** 2 + term ** 2), type_b_terms=terms)
     arcsec = np.rad2deg(1) * 3600
-    why = (f"{LATENCY} (pulse-time and count fractions differ, p {ta.p_value:.2g}): each µs "
-           f"of autocollimator latency biases an angle by up to {per_us * arcsec:.3g}″ (u is "
-           f"{float(np.max(run.angles.u_rad)) * arcsec:.3g}″), and the log cannot tell the "
-           "latency; measure the other direction too (--reverse-log) to cancel it")
-    return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
+    big = np.abs(sens) > 0
+    latency_s = float(np.min(np.abs(d[big] / sens[big]))) if big.any() else np.inf
+    face_s = float(np.mean(dt[ok]))  # (a latency is far shorter than the time between faces)
+    covered = (f"a latency up to {latency_s * 1e3:.3g} ms" if latency_s < face_s else
+               f"any latency shorter than the time between faces, {face_s * 1e3:.3g} ms")
+    why = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
+           f"{ta.p_value:.2g}): one of them is wrong — a counter losing or gaining counts at its "
+           "switches, or a table whose speed follows its angle, on which each µs of "
+           f"autocollimator latency biases an angle by up to "
+           f"{float(np.max(np.abs(sens))) * 1e-6 * arcsec:.3g}″ — and the log cannot tell "
+           f"which: u carries the difference (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″"
+           f" -> {float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
+           "counters' dead time, and measure the other direction too (--reverse-log) to cancel "
+           "a latency")
+    return replace(run, angles=widened, notes=(*run.notes, why), warnings=(*run.warnings, why))
 
 
 def with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
-    """Replace the count angles by the timing angles when asked, confirmed and better; warn
-    of a latency bias the log cannot determine (see _latency_check)."""
-    return _latency_check(_timing_choice(run, steady_table, alpha), alpha)
+    """Replace the count angles by the timing angles when asked, confirmed and better (the
+    counts' disagreement with the pulse times is bounded for one direction's result by
+    :func:`bound_disagreement`)."""
+    return _timing_choice(run, steady_table, alpha)
 
 
 def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
@@ -101,9 +147,10 @@ def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
     arcsec = np.rad2deg(1) * 3600
     worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
     if ta.p_value < alpha:
-        why = ("a speed ripple locked to the table" if not ta.stamp_limited else
+        why = ("a speed ripple locked to the table or a counter losing counts"
+               if not ta.stamp_limited else
                f"time stamps too coarse ({ta.stamp_resolution_s:.2g} s, locked to the table's "
-               "period) or a speed ripple locked to the table")
+               "period), a speed ripple locked to the table or a counter losing counts")
         note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
                 f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — "
                 f"{why}; counts used")
