@@ -5,7 +5,8 @@ pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the c
 it and they are the more precise. Otherwise, counts and pulse-time fractions that disagree
 beyond noise in one direction's log (a counter losing counts, or a table whose speed is locked
 to its angle, where any autocollimator latency biases the angles) are carried in its u as a
-Type B term, with a warning that names both causes (:func:`bound_disagreement`).
+Type B term when a counter could make the difference, else the result is not ok: the latency
+is not in the log (:func:`bound_disagreement`).
 """
 
 from __future__ import annotations
@@ -83,20 +84,50 @@ def disagreement(run: GonioRun, alpha: float) -> TimingAngles | None:
     return ta
 
 
+def beyond_counters(ta: TimingAngles) -> tuple[np.ndarray, float]:
+    """The part of the counts' difference from the pulse-time angles [rad] that no counter
+    can make, and its p-value.
+
+    The two counters alternate row by row, so with an even number of faces each interval is
+    always counted by the same one: a counter that loses (or gains) counts at its switches
+    moves the angles by the alternating pattern (+, -, +, ...) only. With an odd number each
+    interval alternates counters from one revolution to the next and the loss is the same in
+    every interval (it cancels in the fractions). What is left once that pattern is fitted
+    (weighted by the difference's u) is a speed that follows the angle; its chi2 over n - 2
+    degrees of freedom (the closure, the pattern) gives the p-value."""
+    from scipy.special import chdtrc  # (the chi2 survival function)
+
+    d, du = ta.diff_rad, ta.diff_u_rad
+    n = len(d)
+    w = 1 / du ** 2
+    if n % 2 == 0:
+        pat = (-1.0) ** np.arange(n)
+        rest = d - pat * float(np.sum(w * d * pat) / np.sum(w * pat ** 2))
+        dof = n - 2
+    else:
+        rest, dof = d, n - 1
+    chi2 = float(np.sum(w * rest ** 2))
+    return rest, float(chdtrc(dof, chi2)) if dof > 0 else 1.0
+
+
 def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
-    """One direction's angles with what the counts' disagreement with the pulse times can do
-    to them carried in u (Type B, :data:`DISAGREEMENT`), and a warning naming the causes.
+    """One direction's result when its counts and pulse times disagree beyond noise: the
+    difference carried in u (Type B, :data:`DISAGREEMENT`) when a counter could make it, or
+    the result not ok when the table's speed follows its angle; a warning names the causes.
 
     Two measures of the same angles that differ far beyond their noise mean one of them is
-    wrong, and the log cannot say which: a table whose speed follows its angle (the pulse
-    times' fractions are then not the angles', and any autocollimator latency L biases the
-    counts' angles by L times the speed's change between faces, which only the other
-    direction cancels), or a counter that loses or gains counts at each switch (the counts are
-    then wrong, by the difference). The term puts both candidates, the counts' angle and the
-    pulse times', within u's 2-sigma interval: d_k / sqrt(3) per angle (the interval between
-    them taken as uniform), correlated along the difference's own pattern (its sum is zero, so
-    the closure is kept). That also covers a latency up to |d_k / s_k| (s: the bias per second
-    of latency), a large fraction of the time between faces; a clean log has no such term.
+    wrong, and the log cannot say which: a counter that loses or gains counts at each switch
+    (the counts are then off by the difference), or a table whose speed follows its angle (the
+    pulse times' fractions are then not the angles', and any autocollimator latency L biases
+    the counts' angles by L times the speed's change between faces, which only the other
+    direction cancels). A difference in the counters' own pattern (:func:`beyond_counters`)
+    is carried in u: d_k / sqrt(3) per angle puts both candidates, the counts' angle and the
+    pulse times', within u's 2-sigma interval (the interval between them taken as uniform),
+    correlated along the difference's own pattern (its sum is zero: the closure is kept); it
+    also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
+    bias per second of latency). A difference beyond that pattern is a speed that follows
+    the angle: the latency's bias then has no bound in one direction's log, so the result is
+    not ok (its u left as it is). A clean log has neither.
     """
     ta = disagreement(run, alpha)
     if ta is None:
@@ -105,27 +136,38 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     sens = latency_sensitivity(counts[ok], dt[ok])
     d = ta.diff_rad
+    arcsec = np.rad2deg(1) * 3600
+    rest, p_rest = beyond_counters(ta)
+    head = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
+            f"{ta.p_value:.2g}): one of them is wrong")
+    per_us = float(np.max(np.abs(sens))) * 1e-6 * arcsec
+    if p_rest < alpha:
+        why = (f"{head} — the table's speed follows its angle (up to "
+               f"{float(np.max(np.abs(rest))) * arcsec:.3g}″ of it in no counter's pattern, p "
+               f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
+               f"{per_us:.3g}″ (u is {float(np.max(run.angles.u_rad)) * arcsec:.3g}″) and one "
+               "direction cannot tell the latency (nor exclude a counter losing counts): NOT "
+               "ok; measure the other direction too (--reverse-log) to cancel it")
+        return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
+                       problems=(*run.problems, why))
     fa = run.angles
     term = np.abs(d) / np.sqrt(3)
     cov = fa.cov + np.outer(d, d) / 3
     terms = {**fa.type_b_terms, DISAGREEMENT: term}
     widened = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)),
                       u_type_b_rad=np.sqrt(fa.u_type_b_rad ** 2 + term ** 2), type_b_terms=terms)
-    arcsec = np.rad2deg(1) * 3600
     big = np.abs(sens) > 0
     latency_s = float(np.min(np.abs(d[big] / sens[big]))) if big.any() else np.inf
     face_s = float(np.mean(dt[ok]))  # (a latency is far shorter than the time between faces)
     covered = (f"a latency up to {latency_s * 1e3:.3g} ms" if latency_s < face_s else
                f"any latency shorter than the time between faces, {face_s * 1e3:.3g} ms")
-    why = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
-           f"{ta.p_value:.2g}): one of them is wrong — a counter losing or gaining counts at its "
-           "switches, or a table whose speed follows its angle, on which each µs of "
-           f"autocollimator latency biases an angle by up to "
-           f"{float(np.max(np.abs(sens))) * 1e-6 * arcsec:.3g}″ — and the log cannot tell "
-           f"which: u carries the difference (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″"
-           f" -> {float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
-           "counters' dead time, and measure the other direction too (--reverse-log) to cancel "
-           "a latency")
+    why = (f"{head} — a counter losing or gaining counts at its switches (the difference is in "
+           "the counters' alternating pattern), or a table whose speed follows its angle in "
+           f"that pattern (each µs of autocollimator latency: up to {per_us:.3g}″) — and the "
+           f"log cannot tell which: u carries the difference (Type B, u "
+           f"{float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
+           f"{float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
+           "counters' dead time")
     return replace(run, angles=widened, notes=(*run.notes, why), warnings=(*run.warnings, why))
 
 
