@@ -124,25 +124,18 @@ def test_gonio_effects_it_covers(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "counter 2 dead time, no --steady-table: 1 µs (0.76 count): ok, z 3.8-5.3;"
-    " 5 µs: ok, z 17.7-22.4 (err 2.9-3.6″, u 0.16″); 20 µs: ok, z 68-87 (err 11-14″);"
-    " the only sign is the warning 'pulse-time and count fractions differ, p 0' read as"
-    " latency on an unsteady table"))
 def test_gonio_counter_dead_time_sweep(tmp_path):
+    """Counter 2 dead time 0.1-20 µs, no --steady-table (before: 1 µs ok, z 3.8-5.3; 5 µs ok,
+    z 17.7-22.4; 20 µs ok, z 68-87, with only a latency warning)."""
     rows = _sweep(tmp_path, gonio, {"dead_time_s": [1e-7, 1e-6, 5e-6, 2e-5]}, range(4))
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "eccentric table (2 % speed ripple once a revolution) with autocollimator latency, one"
-    " direction: 10 µs: ok, z 1.8-3.3; 100 µs: ok, z 16-24 (err 2.7-3.8″); 1 ms: ok, z"
-    " 172-243 (err 28-36″, u 0.16″). The warning says 'each µs of latency biases an angle by"
-    " up to 0.0336″ ... the log cannot tell the latency' yet ok: true, exit 0, and no Type B"
-    " term for it in u"))
 def test_gonio_latency_on_rippling_table_sweep(tmp_path):
+    """2 % once-a-revolution speed ripple with 10 µs-1 ms autocollimator latency, one
+    direction (before: 100 µs ok, z 16-24; 1 ms ok, z 172-243, u 0.16″, with a warning)."""
     rows = _sweep(tmp_path, gonio, {"latency_s": [1e-5, 1e-4, 1e-3]}, range(4), ripple=0.02)
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
