@@ -5,8 +5,8 @@ pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the c
 it and they are the more precise. Otherwise, counts and pulse-time fractions that disagree
 beyond noise in one direction's log (a counter losing counts, or a table whose speed is locked
 to its angle, where any autocollimator latency biases the angles) are carried in its u as a
-Type B term when a counter could make the difference, else the result is not ok: the latency
-is not in the log (:func:`bound_disagreement`).
+Type B term (with, on a table whose speed follows its angle, a latency up to a stated bound,
+or the result is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from goniometry.timing import timing_angles
 
 if TYPE_CHECKING:
     from align.gonio_run import GonioRun
+    from goniometry import FaceAngles
     from goniometry.timing import TimingAngles
 
 
@@ -28,6 +29,13 @@ LATENCY = "one direction only: the counts and the pulse-time fractions disagree"
 """How the warning begins that one direction's counts and pulse times disagree."""
 DISAGREEMENT = "counts vs pulse times (a counter losing counts, or latency on an unsteady table)"
 """The Type B term that carries that disagreement in one direction's u."""
+LATENCY_TERM = "autocollimator latency (up to LATENCY_BOUND_S) on a table whose speed varies"
+"""The Type B term of a latency up to the bound on a table whose speed follows its angle."""
+LATENCY_BOUND_S = 1e-3
+"""Latency [s] of the autocollimator's face pulse assumed as the bound when one direction's
+table speed is seen to follow its angle: a photoelectric trigger is µs, an imaging
+autocollimator's frame up to ~1 ms. Where it could bias an angle beyond u the result is not
+ok (the other direction cancels any latency)."""
 
 
 def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -126,8 +134,10 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
     correlated along the difference's own pattern (its sum is zero: the closure is kept); it
     also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
     bias per second of latency). A difference beyond that pattern is a speed that follows
-    the angle: the latency's bias then has no bound in one direction's log, so the result is
-    not ok (its u left as it is). A clean log has neither.
+    the angle, and the latency's bias has no bound in one direction's log: up to
+    :data:`LATENCY_BOUND_S` it is carried in u (with the counters' pattern's part) where it
+    stays within u; beyond u the result is not ok (its u left as it is). A clean log has
+    neither.
     """
     ta = disagreement(run, alpha)
     if ta is None:
@@ -141,21 +151,30 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
     head = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
             f"{ta.p_value:.2g}): one of them is wrong")
     per_us = float(np.max(np.abs(sens))) * 1e-6 * arcsec
-    if p_rest < alpha:
-        why = (f"{head} — the table's speed follows its angle (up to "
-               f"{float(np.max(np.abs(rest))) * arcsec:.3g}″ of it in no counter's pattern, p "
-               f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
-               f"{per_us:.3g}″ (u is {float(np.max(run.angles.u_rad)) * arcsec:.3g}″) and one "
-               "direction cannot tell the latency (nor exclude a counter losing counts): NOT "
-               "ok; measure the other direction too (--reverse-log) to cancel it")
-        return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
-                       problems=(*run.problems, why))
     fa = run.angles
-    term = np.abs(d) / np.sqrt(3)
-    cov = fa.cov + np.outer(d, d) / 3
-    terms = {**fa.type_b_terms, DISAGREEMENT: term}
-    widened = replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)),
-                      u_type_b_rad=np.sqrt(fa.u_type_b_rad ** 2 + term ** 2), type_b_terms=terms)
+    if p_rest < alpha:
+        bias = LATENCY_BOUND_S * sens  # each angle's bias at the latency bound [rad]
+        within = bool(np.all(np.abs(bias) <= fa.u_rad))
+        cause = (f"{head} — the table's speed follows its angle (up to "
+                 f"{float(np.max(np.abs(rest))) * arcsec:.3g}″ of it in no counter's pattern, p "
+                 f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
+                 f"{per_us:.3g}″, which one direction cannot tell")
+        if not within:
+            why = (f"{cause}: at a latency of {LATENCY_BOUND_S * 1e3:g} ms up to "
+                   f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, beyond u "
+                   f"({float(np.max(fa.u_rad)) * arcsec:.3g}″): NOT ok; measure the other "
+                   "direction too (--reverse-log) to cancel it")
+            return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
+                           problems=(*run.problems, why))
+        widened = _with_terms(fa, {DISAGREEMENT: d - rest, LATENCY_TERM: bias})
+        why = (f"{cause}: at a latency up to {LATENCY_BOUND_S * 1e3:g} ms at most "
+               f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with the part a "
+               f"counter could make (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
+               f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency needs the other "
+               "direction (--reverse-log)")
+        return replace(run, angles=widened, notes=(*run.notes, why),
+                       warnings=(*run.warnings, why))
+    widened = _with_terms(fa, {DISAGREEMENT: d})
     big = np.abs(sens) > 0
     latency_s = float(np.min(np.abs(d[big] / sens[big]))) if big.any() else np.inf
     face_s = float(np.mean(dt[ok]))  # (a latency is far shorter than the time between faces)
@@ -169,6 +188,21 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
            f"{float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
            "counters' dead time")
     return replace(run, angles=widened, notes=(*run.notes, why), warnings=(*run.warnings, why))
+
+
+def _with_terms(fa: FaceAngles, shifts: dict[str, np.ndarray]) -> FaceAngles:
+    """``fa`` with Type B terms, each a pattern of shifts [rad] the angles may carry together:
+    taken as uniform between -shift and +shift (u: shift / sqrt(3)), correlated along the
+    pattern (a pattern that sums to zero keeps the closure)."""
+    cov = fa.cov.copy()
+    terms = dict(fa.type_b_terms)
+    ub2 = fa.u_type_b_rad ** 2
+    for name, shift in shifts.items():
+        cov = cov + np.outer(shift, shift) / 3
+        terms[name] = np.abs(shift) / np.sqrt(3)
+        ub2 = ub2 + terms[name] ** 2
+    return replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)), u_type_b_rad=np.sqrt(ub2),
+                   type_b_terms=terms)
 
 
 def with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
