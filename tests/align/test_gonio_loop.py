@@ -237,6 +237,7 @@ def test_latency_on_a_rippled_table_is_warned_in_one_direction_and_cancelled_in_
     one = measure_log(p, 4, 50.45 * DEG)
     assert np.max(np.abs(one.angles.angles_rad - truth) / one.angles.u_rad) > 10
     assert any(w.startswith(LATENCY) for w in one.warnings)
+    assert one.problems  # (a latency up to 1 ms could bias it beyond u: not ok)
     r, _ = _log(tmp_path, "r.csv", revolutions=3000, seed=4, ripple=0.02, wander=0.01,
                 latency_s=5e-6, direction=-1)
     both = measure_log(p, 4, 50.45 * DEG, reverse_log=r)
