@@ -80,7 +80,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
                 latitude_range_rad: tuple[float, float] | None = None,
                 on_bytes: Callable[[int], None] | None = None,
-                time_unit: str | None = None) -> GonioRun:
+                time_unit: str | None = None,
+                latency_max_s: float | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -126,6 +127,13 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         The ``t`` column's unit when its header (or its name in rows) says none, for both
         logs (``--time-unit``, the session's ``time_unit``: ``s``, ``ms``, ``us``, ``ns``,
         ``min``, ``h``); a header that says another unit is refused.
+    latency_max_s : float, optional
+        The autocollimator's latency bound [s] from its specification (``--latency-max-us``,
+        the session's ``latency_max_us``; >= 0, 0: no latency). One direction whose table
+        speed follows its angle then carries that latency's bias in u and stays ok; None:
+        up to 1 ms is carried where its bias stays within u, else the result is not ok
+        (:func:`align.gonio_timing.bound_disagreement`). Unused with ``reverse_log`` (the
+        two directions cancel a latency).
 
     Returns
     -------
@@ -139,7 +147,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         A log that cannot be used (naming the file and line).
     InputError
         A reverse log that is not the other direction of the same faces; a latitude beyond
-        +-pi/2 (degrees given where radians are taken).
+        +-pi/2 (degrees given where radians are taken); a latency bound that is not a finite
+        number >= 0.
 
     Examples
     --------
@@ -172,6 +181,7 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
     goniometry.errors.LogError: rows: row 7: ref: must be 0 or 1
     """
     _check_latitudes(latitude_rad, latitude_range_rad)
+    _check_latency(latency_max_s)
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
@@ -203,7 +213,18 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
     return _measured(path, n_faces, latitude_rad, direction, alpha, apply_loop, steady_table,
-                     columns, latitude_range_rad, on_bytes, time_unit, one_direction=True)
+                     columns, latitude_range_rad, on_bytes, time_unit, one_direction=True,
+                     latency_max_s=latency_max_s)
+
+
+def _check_latency(latency_max_s: float | None) -> None:
+    """A declared latency bound is a finite number >= 0 [s]."""
+    if latency_max_s is None:
+        return
+    if (isinstance(latency_max_s, bool) or not isinstance(latency_max_s, int | float)
+            or not np.isfinite(latency_max_s) or latency_max_s < 0):
+        raise InputError(f"measure_log latency_max_s = {latency_max_s!r}: the "
+                         "autocollimator's latency bound is a finite number >= 0 [s]")
 
 
 def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | None,
@@ -211,7 +232,7 @@ def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | Non
               columns: Mapping[str, str] | None,
               latitude_range_rad: tuple[float, float] | None,
               on_bytes: Callable[[int], None] | None, time_unit: str | None, *,
-              one_direction: bool) -> GonioRun:
+              one_direction: bool, latency_max_s: float | None = None) -> GonioRun:
     """One log's run with the reader's warnings; ``one_direction``: the result stands alone
     (not one of a pair), so its counts' disagreement with its pulse times is carried in u
     (two directions cancel a latency, and the reversal check judges what is left)."""
@@ -219,7 +240,7 @@ def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | Non
         run = _one_direction(path, n_faces, latitude_rad, direction, alpha, apply_loop,
                              steady_table, columns, latitude_range_rad, on_bytes, time_unit)
     if one_direction:
-        run = bound_disagreement(run, alpha)
+        run = bound_disagreement(run, alpha, latency_max_s)
     return replace(run, warnings=(*dict.fromkeys(logged), *run.warnings))  # warnings too
 
 

@@ -5,8 +5,9 @@ pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the c
 it and they are the more precise. Otherwise, counts and pulse-time fractions that disagree
 beyond noise in one direction's log (a counter losing counts, or a table whose speed is locked
 to its angle, where any autocollimator latency biases the angles) are carried in its u as a
-Type B term (with, on a table whose speed follows its angle, a latency up to a stated bound,
-or the result is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
+Type B term (with, on a table whose speed follows its angle, a latency up to the bound the
+user declares, always carried in u; undeclared, up to :data:`LATENCY_BOUND_S`, or the result
+is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
 """
 
 from __future__ import annotations
@@ -29,13 +30,18 @@ LATENCY = "one direction only: the counts and the pulse-time fractions disagree"
 """How the warning begins that one direction's counts and pulse times disagree."""
 DISAGREEMENT = "counts vs pulse times (a counter losing counts, or latency on an unsteady table)"
 """The Type B term that carries that disagreement in one direction's u."""
-LATENCY_TERM = "autocollimator latency (up to LATENCY_BOUND_S) on a table whose speed varies"
-"""The Type B term of a latency up to the bound on a table whose speed follows its angle."""
+LATENCY_TERM = "autocollimator latency (up to its bound) on a table whose speed varies"
+"""The Type B term of a latency up to the bound (declared, else :data:`LATENCY_BOUND_S`) on a
+table whose speed follows its angle."""
 LATENCY_BOUND_S = 1e-3
 """Latency [s] of the autocollimator's face pulse assumed as the bound when one direction's
 table speed is seen to follow its angle: a photoelectric trigger is µs, an imaging
 autocollimator's frame up to ~1 ms. Where it could bias an angle beyond u the result is not
-ok (the other direction cancels any latency)."""
+ok (the other direction cancels any latency) unless the user declares the autocollimator's
+latency bound (:data:`DECLARE`)."""
+DECLARE = ("declare the autocollimator's latency bound (--latency-max-us, or latency_max_us in "
+           "[goniometer]) or measure the other direction (--reverse-log)")
+"""What a user does when one direction's latency is undetermined and undeclared."""
 
 
 def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -118,7 +124,8 @@ def beyond_counters(ta: TimingAngles) -> tuple[np.ndarray, float]:
     return rest, float(chdtrc(dof, chi2)) if dof > 0 else 1.0
 
 
-def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
+def bound_disagreement(run: GonioRun, alpha: float,
+                       latency_max_s: float | None = None) -> GonioRun:
     """One direction's result when its counts and pulse times disagree beyond noise: the
     difference carried in u (Type B, :data:`DISAGREEMENT`) when a counter could make it, or
     the result not ok when the table's speed follows its angle; a warning names the causes.
@@ -134,10 +141,20 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
     correlated along the difference's own pattern (its sum is zero: the closure is kept); it
     also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
     bias per second of latency). A difference beyond that pattern is a speed that follows
-    the angle, and the latency's bias has no bound in one direction's log: up to
-    :data:`LATENCY_BOUND_S` it is carried in u (with the counters' pattern's part) where it
-    stays within u; beyond u the result is not ok (its u left as it is). A clean log has
-    neither.
+    the angle, and the latency's bias has no bound in one direction's log: a bound the user
+    declares (``latency_max_s``, from the autocollimator's specification; 0: no latency, no
+    term) is always carried in u (with the counters' pattern's part), however wide; undeclared,
+    up to :data:`LATENCY_BOUND_S` it is carried in u where it stays within u, and beyond u the
+    result is not ok (its u left as it is). A clean log has neither.
+
+    Parameters
+    ----------
+    run : GonioRun
+        One direction's run.
+    alpha : float
+        Significance level of the disagreement's tests.
+    latency_max_s : float, optional
+        The autocollimator's latency bound [s] the user declares (>= 0); None: undeclared.
     """
     ta = disagreement(run, alpha)
     if ta is None:
@@ -153,25 +170,28 @@ def bound_disagreement(run: GonioRun, alpha: float) -> GonioRun:
     per_us = float(np.max(np.abs(sens))) * 1e-6 * arcsec
     fa = run.angles
     if p_rest < alpha:
-        bias = LATENCY_BOUND_S * sens  # each angle's bias at the latency bound [rad]
-        within = bool(np.all(np.abs(bias) <= fa.u_rad))
+        bound = LATENCY_BOUND_S if latency_max_s is None else latency_max_s
+        bias = bound * sens  # each angle's bias at the latency bound [rad]
         cause = (f"{head} — the table's speed follows its angle (up to "
                  f"{float(np.max(np.abs(rest))) * arcsec:.3g}″ of it in no counter's pattern, p "
                  f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
                  f"{per_us:.3g}″, which one direction cannot tell")
-        if not within:
-            why = (f"{cause}: at a latency of {LATENCY_BOUND_S * 1e3:g} ms up to "
+        if latency_max_s is None and not np.all(np.abs(bias) <= fa.u_rad):
+            why = (f"{cause}: at a latency of {bound * 1e3:g} ms up to "
                    f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, beyond u "
-                   f"({float(np.max(fa.u_rad)) * arcsec:.3g}″): NOT ok; measure the other "
-                   "direction too (--reverse-log) to cancel it")
+                   f"({float(np.max(fa.u_rad)) * arcsec:.3g}″): NOT ok; {DECLARE}")
             return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
                            problems=(*run.problems, why))
-        widened = _with_terms(fa, {DISAGREEMENT: d - rest, LATENCY_TERM: bias})
-        why = (f"{cause}: at a latency up to {LATENCY_BOUND_S * 1e3:g} ms at most "
+        shifts = {DISAGREEMENT: d - rest, **({LATENCY_TERM: bias} if bound > 0 else {})}
+        widened = _with_terms(fa, shifts)
+        said = ("assumed (undeclared)" if latency_max_s is None else
+                "declared" if bound > 0 else "declared 0: no latency term")
+        why = (f"{cause}: at a latency up to {bound * 1e6:g} µs ({said}) at most "
                f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with the part a "
                f"counter could make (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
-               f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency needs the other "
-               "direction (--reverse-log)")
+               f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency: "
+               + (DECLARE if latency_max_s is None else
+                  "measure the other direction (--reverse-log)"))
         return replace(run, angles=widened, notes=(*run.notes, why),
                        warnings=(*run.warnings, why))
     widened = _with_terms(fa, {DISAGREEMENT: d})
