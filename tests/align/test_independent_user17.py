@@ -97,6 +97,23 @@ def test_gonio_counter_dead_time_steady_table_not_ok_and_wrong(tmp_path):
     assert _consistent(rc, ok, z), (rc, ok, z, err)
 
 
+def test_gonio_declared_latency_bound_covers_a_rippled_log(tmp_path):
+    """2 % ripple with 100 µs of latency, one direction: undeclared not ok (the log cannot
+    tell 0 from 100 µs); the autocollimator's bound declared (--latency-max-us 100) carries
+    its bias in u: ok within 3 u. A bound below 0 is refused naming the flag."""
+    rc, ok, z, err = gonio(tmp_path, 0, ripple=0.02, latency_s=1e-4)
+    assert rc == 2 and not ok, (rc, ok, z, err)
+    rc, ok, z, err = gonio(tmp_path, 0, ["--latency-max-us", "100", "--force"], ripple=0.02,
+                           latency_s=1e-4)
+    assert rc == 0 and ok and z <= 3.0, (rc, ok, z, err)
+    from tests.cli import run_cli
+
+    rc, out, err = run_cli("gonio", str(next(tmp_path.glob("*.csv"))), "--faces", FACES,
+                           "--latency-max-us", "-5")
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "--latency-max-us" in err, err
+
+
 # ---------------------------------------------------------------- sweeps (slow)
 
 def _sweep(tmp_path, runner, strengths, seeds, **fixed):
@@ -139,6 +156,20 @@ def test_gonio_latency_on_rippling_table_sweep(tmp_path):
     rows = _sweep(tmp_path, gonio, {"latency_s": [1e-5, 1e-4, 1e-3]}, range(4), ripple=0.02)
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+def test_gonio_declared_latency_bound_sweep(tmp_path):
+    """The same rippled logs with the autocollimator's latency bound declared at the true
+    latency (10 µs-1 ms): every one ok within 3 u (the bias is the uniform term's edge,
+    √3 of its u), one allowed beyond by chance."""
+    rows = []
+    for lat in (1e-5, 1e-4, 1e-3):
+        for s in range(4):
+            rows.append((lat, s, *gonio(tmp_path, s, ["--latency-max-us", f"{lat * 1e6:g}"],
+                                        ripple=0.02, latency_s=lat)))
+    assert all(r[2] == 0 and r[3] for r in rows), rows
+    assert sum(r[4] > 3.0 for r in rows) <= 1, rows
 
 
 @pytest.mark.slow
