@@ -5,7 +5,8 @@ the Earth's rotation is then removed from the latitude when given, else by the
 revolution-level loop (:mod:`align.gonio_loop`) when the log shows it, else bounded over the
 latitudes in u. A log of the other direction is combined by the plain mean
 (:mod:`align.gonio_directions`); the pulse times may replace the counts on a steady table and
-a latency bias is warned of (:mod:`align.gonio_timing`). The result, :class:`GonioRun`, owns
+one direction's counts that disagree with its pulse times carry the difference in u
+(:mod:`align.gonio_timing`). The result, :class:`GonioRun`, owns
 its JSON form.
 """
 
@@ -29,7 +30,7 @@ from align.gonio_earth import declared_earth_angles
 from align.gonio_latency import apply_direction_model, latency_model
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
-from align.gonio_timing import LATENCY, with_timing
+from align.gonio_timing import LATENCY, bound_disagreement, with_timing
 from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
@@ -79,7 +80,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 steady_table: bool = False, columns: Mapping[str, str] | None = None,
                 latitude_range_rad: tuple[float, float] | None = None,
                 on_bytes: Callable[[int], None] | None = None,
-                time_unit: str | None = None) -> GonioRun:
+                time_unit: str | None = None,
+                latency_max_s: float | None = None) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -125,6 +127,13 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         The ``t`` column's unit when its header (or its name in rows) says none, for both
         logs (``--time-unit``, the session's ``time_unit``: ``s``, ``ms``, ``us``, ``ns``,
         ``min``, ``h``); a header that says another unit is refused.
+    latency_max_s : float, optional
+        The autocollimator's latency bound [s] from its specification (``--latency-max-us``,
+        the session's ``latency_max_us``; >= 0, 0: no latency). One direction whose table
+        speed follows its angle then carries that latency's bias in u and stays ok; None:
+        up to 1 ms is carried where its bias stays within u, else the result is not ok
+        (:func:`align.gonio_timing.bound_disagreement`). Unused with ``reverse_log`` (the
+        two directions cancel a latency).
 
     Returns
     -------
@@ -138,7 +147,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         A log that cannot be used (naming the file and line).
     InputError
         A reverse log that is not the other direction of the same faces; a latitude beyond
-        +-pi/2 (degrees given where radians are taken).
+        +-pi/2 (degrees given where radians are taken); a latency bound that is not a finite
+        number >= 0.
 
     Examples
     --------
@@ -171,15 +181,15 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
     goniometry.errors.LogError: rows: row 7: ref: must be 0 or 1
     """
     _check_latitudes(latitude_rad, latitude_range_rad)
+    _check_latency(latency_max_s)
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
-        fwd = measure_log(path, n_faces, latitude_rad, direction, alpha, apply_loop=False,
-                          steady_table=steady_table, columns=columns, on_bytes=on_bytes,
-                          time_unit=time_unit)
-        rev = measure_log(reverse_log, n_faces, latitude_rad, -direction, alpha,
-                          apply_loop=False, steady_table=steady_table, columns=columns,
-                          on_bytes=on_bytes, time_unit=time_unit)
+        fwd = _measured(path, n_faces, latitude_rad, direction, alpha, False, steady_table,
+                        columns, latitude_range_rad, on_bytes, time_unit, one_direction=False)
+        rev = _measured(reverse_log, n_faces, latitude_rad, -direction, alpha, False,
+                        steady_table, columns, latitude_range_rad, on_bytes, time_unit,
+                        one_direction=False)
         comb, term = combine_directions(fwd.angles, rev.angles)
         model = (None if fwd.timing_used or rev.timing_used else
                  latency_model(fwd.summary, rev.summary, fwd.angles, rev.angles,
@@ -202,9 +212,35 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
                         tuple(warns))
+    return _measured(path, n_faces, latitude_rad, direction, alpha, apply_loop, steady_table,
+                     columns, latitude_range_rad, on_bytes, time_unit, one_direction=True,
+                     latency_max_s=latency_max_s)
+
+
+def _check_latency(latency_max_s: float | None) -> None:
+    """A declared latency bound is a finite number >= 0 [s]."""
+    if latency_max_s is None:
+        return
+    if (isinstance(latency_max_s, bool) or not isinstance(latency_max_s, int | float)
+            or not np.isfinite(latency_max_s) or latency_max_s < 0):
+        raise InputError(f"measure_log latency_max_s = {latency_max_s!r}: the "
+                         "autocollimator's latency bound is a finite number >= 0 [s]")
+
+
+def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | None,
+              direction: int, alpha: float, apply_loop: bool, steady_table: bool,
+              columns: Mapping[str, str] | None,
+              latitude_range_rad: tuple[float, float] | None,
+              on_bytes: Callable[[int], None] | None, time_unit: str | None, *,
+              one_direction: bool, latency_max_s: float | None = None) -> GonioRun:
+    """One log's run with the reader's warnings; ``one_direction``: the result stands alone
+    (not one of a pair), so its counts' disagreement with its pulse times is carried in u
+    (two directions cancel a latency, and the reversal check judges what is left)."""
     with captured_warnings() as logged:  # how the log was read (the table reader's
         run = _one_direction(path, n_faces, latitude_rad, direction, alpha, apply_loop,
                              steady_table, columns, latitude_range_rad, on_bytes, time_unit)
+    if one_direction:
+        run = bound_disagreement(run, alpha, latency_max_s)
     return replace(run, warnings=(*dict.fromkeys(logged), *run.warnings))  # warnings too
 
 

@@ -2,8 +2,12 @@
 
 ``steady_table``: the user asserts the table turns at constant speed within a revolution; the
 pulse-time angles (:mod:`goniometry.timing`) replace the count angles when the counts confirm
-it and they are the more precise. Either way, a table whose speed is locked to its angle makes
-any autocollimator latency bias one direction's angles: a warning names the bias per µs.
+it and they are the more precise. Otherwise, counts and pulse-time fractions that disagree
+beyond noise in one direction's log (a counter losing counts, or a table whose speed is locked
+to its angle, where any autocollimator latency biases the angles) are carried in its u as a
+Type B term (with, on a table whose speed follows its angle, a latency up to the bound the
+user declares, always carried in u; undeclared, up to :data:`LATENCY_BOUND_S`, or the result
+is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
 """
 
 from __future__ import annotations
@@ -18,10 +22,26 @@ from goniometry.timing import timing_angles
 
 if TYPE_CHECKING:
     from align.gonio_run import GonioRun
+    from goniometry import FaceAngles
     from goniometry.timing import TimingAngles
 
 
-LATENCY = "one direction only, on a table whose speed varies with its angle"
+LATENCY = "one direction only: the counts and the pulse-time fractions disagree"
+"""How the warning begins that one direction's counts and pulse times disagree."""
+DISAGREEMENT = "counts vs pulse times (a counter losing counts, or latency on an unsteady table)"
+"""The Type B term that carries that disagreement in one direction's u."""
+LATENCY_TERM = "autocollimator latency (up to its bound) on a table whose speed varies"
+"""The Type B term of a latency up to the bound (declared, else :data:`LATENCY_BOUND_S`) on a
+table whose speed follows its angle."""
+LATENCY_BOUND_S = 1e-3
+"""Latency [s] of the autocollimator's face pulse assumed as the bound when one direction's
+table speed is seen to follow its angle: a photoelectric trigger is µs, an imaging
+autocollimator's frame up to ~1 ms. Where it could bias an angle beyond u the result is not
+ok (the other direction cancels any latency) unless the user declares the autocollimator's
+latency bound (:data:`DECLARE`)."""
+DECLARE = ("declare the autocollimator's latency bound (--latency-max-us, or latency_max_us in "
+           "[goniometer]) or measure the other direction (--reverse-log)")
+"""What a user does when one direction's latency is undetermined and undeclared."""
 
 
 def latency_sensitivity(counts: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -61,33 +81,176 @@ def count_floors_explain(counts: np.ndarray, ta: TimingAngles) -> bool:
     return locked and bool(np.all(np.abs(ta.diff_rad) <= q + 3 * ta.diff_u_rad))
 
 
-def _latency_check(run: GonioRun, alpha: float) -> GonioRun:
-    """Warn when the table's speed is locked to its angle (the pulse-time fractions differ
-    from the count fractions): then any latency of the autocollimator biases one direction's
-    angles, which only the other direction cancels (--reverse-log); the log cannot tell the
-    latency. Stated per microsecond of it."""
+def disagreement(run: GonioRun, alpha: float) -> TimingAngles | None:
+    """The pulse-time angles when they and the counts disagree beyond noise (p < ``alpha``)
+    for a reason other than the stamps' resolution or a locked ring laser's own floors (see
+    :func:`count_floors_explain`); None otherwise, with the pulse-time angles in use, or
+    without times (or with fewer than 16 timed revolutions)."""
     if not run.summary.has_time or run.timing_used:
-        return run
+        return None
     counts, dt, _ = kept_table(run.summary)
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     if ok.sum() < 16:
-        return run
+        return None
     ta = run.timing if run.timing is not None else timing_angles(run.summary)
     if ta.p_value >= alpha or ta.stamp_limited or count_floors_explain(counts[ok], ta):
+        return None
+    return ta
+
+
+def beyond_counters(ta: TimingAngles) -> tuple[np.ndarray, float]:
+    """The part of the counts' difference from the pulse-time angles [rad] that no counter
+    can make, and its p-value.
+
+    The two counters alternate row by row, so with an even number of faces each interval is
+    always counted by the same one: a counter that loses (or gains) counts at its switches
+    moves the angles by the alternating pattern (+, -, +, ...) only. With an odd number each
+    interval alternates counters from one revolution to the next and the loss is the same in
+    every interval (it cancels in the fractions). What is left once that pattern is fitted
+    (weighted by the difference's u) is a speed that follows the angle; its chi2 over n - 2
+    degrees of freedom (the closure, the pattern) gives the p-value."""
+    from scipy.special import chdtrc  # (the chi2 survival function)
+
+    d, du = ta.diff_rad, ta.diff_u_rad
+    n = len(d)
+    w = 1 / du ** 2
+    if n % 2 == 0:
+        pat = (-1.0) ** np.arange(n)
+        rest = d - pat * float(np.sum(w * d * pat) / np.sum(w * pat ** 2))
+        dof = n - 2
+    else:
+        rest, dof = d, n - 1
+    chi2 = float(np.sum(w * rest ** 2))
+    return rest, float(chdtrc(dof, chi2)) if dof > 0 else 1.0
+
+
+def counters_part(d: np.ndarray) -> np.ndarray:
+    """The counters' alternating pattern in a difference ``d`` [rad] dominated by a speed that
+    follows the angle: its n/2 harmonic (the unweighted projection on +, -, +, ...; zero with
+    an odd number of faces, where no counter makes a pattern).
+
+    A ripple's second order puts some of that harmonic in the difference, which no log can
+    tell from a counter. The noise-weighted fit of :func:`beyond_counters` (the right test
+    when noise is all there is) leaks the ripple's other harmonics, thousands of times the
+    noise, into it through the unequal weights: 566″ against the harmonic's 42″ on a 2 %
+    ripple (user 17's log, seed 0), a u of 327″ where 24″ is the pattern's."""
+    n = len(d)
+    if n % 2:
+        return np.zeros(n)
+    pat = (-1.0) ** np.arange(n)
+    return pat * float(np.mean(d * pat))
+
+
+def bound_disagreement(run: GonioRun, alpha: float,
+                       latency_max_s: float | None = None) -> GonioRun:
+    """One direction's result when its counts and pulse times disagree beyond noise: the
+    difference carried in u (Type B, :data:`DISAGREEMENT`) when a counter could make it, or
+    the result not ok when the table's speed follows its angle; a warning names the causes.
+
+    Two measures of the same angles that differ far beyond their noise mean one of them is
+    wrong, and the log cannot say which: a counter that loses or gains counts at each switch
+    (the counts are then off by the difference), or a table whose speed follows its angle (the
+    pulse times' fractions are then not the angles', and any autocollimator latency L biases
+    the counts' angles by L times the speed's change between faces, which only the other
+    direction cancels). A difference in the counters' own pattern (:func:`beyond_counters`)
+    is carried in u: d_k / sqrt(3) per angle puts both candidates, the counts' angle and the
+    pulse times', within u's 2-sigma interval (the interval between them taken as uniform),
+    correlated along the difference's own pattern (its sum is zero: the closure is kept); it
+    also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
+    bias per second of latency). A difference beyond that pattern is a speed that follows
+    the angle (its counters' part, :func:`counters_part`, is still carried), and the
+    latency's bias has no bound in one direction's log: a bound the user declares
+    (``latency_max_s``, from the autocollimator's specification; 0: no latency, no term) is
+    always carried in u (with the counters' pattern's part), however wide; undeclared,
+    up to :data:`LATENCY_BOUND_S` it is carried in u where it stays within u, and beyond u the
+    result is not ok (its u left as it is). A clean log has neither.
+
+    Parameters
+    ----------
+    run : GonioRun
+        One direction's run.
+    alpha : float
+        Significance level of the disagreement's tests.
+    latency_max_s : float, optional
+        The autocollimator's latency bound [s] the user declares (>= 0); None: undeclared.
+    """
+    ta = disagreement(run, alpha)
+    if ta is None:
         return run
-    per_us = float(np.max(np.abs(latency_sensitivity(counts[ok], dt[ok])))) * 1e-6
+    counts, dt, _ = kept_table(run.summary)
+    ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
+    sens = latency_sensitivity(counts[ok], dt[ok])
+    d = ta.diff_rad
     arcsec = np.rad2deg(1) * 3600
-    why = (f"{LATENCY} (pulse-time and count fractions differ, p {ta.p_value:.2g}): each µs "
-           f"of autocollimator latency biases an angle by up to {per_us * arcsec:.3g}″ (u is "
-           f"{float(np.max(run.angles.u_rad)) * arcsec:.3g}″), and the log cannot tell the "
-           "latency; measure the other direction too (--reverse-log) to cancel it")
-    return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why))
+    rest, p_rest = beyond_counters(ta)
+    head = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
+            f"{ta.p_value:.2g}): one of them is wrong")
+    per_us = float(np.max(np.abs(sens))) * 1e-6 * arcsec
+    fa = run.angles
+    if p_rest < alpha:
+        counters = counters_part(d)
+        bound = LATENCY_BOUND_S if latency_max_s is None else latency_max_s
+        bias = bound * sens  # each angle's bias at the latency bound [rad]
+        cause = (f"{head} — the table's speed follows its angle (up to "
+                 f"{float(np.max(np.abs(d - counters))) * arcsec:.3g}″ of it in no counter's "
+                 f"pattern, p "
+                 f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
+                 f"{per_us:.3g}″, which one direction cannot tell")
+        if latency_max_s is None and not np.all(np.abs(bias) <= fa.u_rad):
+            why = (f"{cause}: at a latency of {bound * 1e3:g} ms up to "
+                   f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, beyond u "
+                   f"({float(np.max(fa.u_rad)) * arcsec:.3g}″): NOT ok; {DECLARE}")
+            return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
+                           problems=(*run.problems, why))
+        shifts = {DISAGREEMENT: counters,
+                  **({LATENCY_TERM: bias} if bound > 0 else {})}
+        widened = _with_terms(fa, shifts)
+        said = ("assumed (undeclared)" if latency_max_s is None else
+                "declared" if bound > 0 else "declared 0: no latency term")
+        why = (f"{cause}: at a latency up to {bound * 1e6:g} µs ({said}) at most "
+               f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with the part a "
+               f"counter could make (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
+               f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency: "
+               + (DECLARE if latency_max_s is None else
+                  "measure the other direction (--reverse-log)"))
+        return replace(run, angles=widened, notes=(*run.notes, why),
+                       warnings=(*run.warnings, why))
+    widened = _with_terms(fa, {DISAGREEMENT: d})
+    big = np.abs(sens) > 0
+    latency_s = float(np.min(np.abs(d[big] / sens[big]))) if big.any() else np.inf
+    face_s = float(np.mean(dt[ok]))  # (a latency is far shorter than the time between faces)
+    covered = (f"a latency up to {latency_s * 1e3:.3g} ms" if latency_s < face_s else
+               f"any latency shorter than the time between faces, {face_s * 1e3:.3g} ms")
+    why = (f"{head} — a counter losing or gaining counts at its switches (the difference is in "
+           "the counters' alternating pattern), or a table whose speed follows its angle in "
+           f"that pattern (each µs of autocollimator latency: up to {per_us:.3g}″) — and the "
+           f"log cannot tell which: u carries the difference (Type B, u "
+           f"{float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
+           f"{float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
+           "counters' dead time")
+    return replace(run, angles=widened, notes=(*run.notes, why), warnings=(*run.warnings, why))
+
+
+def _with_terms(fa: FaceAngles, shifts: dict[str, np.ndarray]) -> FaceAngles:
+    """``fa`` with Type B terms, each a pattern of shifts [rad] the angles may carry together:
+    taken as uniform between -shift and +shift (u: shift / sqrt(3)), correlated along the
+    pattern (a pattern that sums to zero keeps the closure)."""
+    cov = fa.cov.copy()
+    terms = dict(fa.type_b_terms)
+    ub2 = fa.u_type_b_rad ** 2
+    for name, shift in shifts.items():
+        cov = cov + np.outer(shift, shift) / 3
+        terms[name] = np.abs(shift) / np.sqrt(3)
+        ub2 = ub2 + terms[name] ** 2
+    return replace(fa, cov=cov, u_rad=np.sqrt(np.diag(cov)), u_type_b_rad=np.sqrt(ub2),
+                   type_b_terms=terms)
 
 
 def with_timing(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
-    """Replace the count angles by the timing angles when asked, confirmed and better; warn
-    of a latency bias the log cannot determine (see _latency_check)."""
-    return _latency_check(_timing_choice(run, steady_table, alpha), alpha)
+    """Replace the count angles by the timing angles when asked, confirmed and better (the
+    counts' disagreement with the pulse times is bounded for one direction's result by
+    :func:`bound_disagreement`)."""
+    return _timing_choice(run, steady_table, alpha)
 
 
 def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
@@ -101,9 +264,10 @@ def _timing_choice(run: GonioRun, steady_table: bool, alpha: float) -> GonioRun:
     arcsec = np.rad2deg(1) * 3600
     worst = float(np.max(np.abs(ta.diff_rad))) * arcsec
     if ta.p_value < alpha:
-        why = ("a speed ripple locked to the table" if not ta.stamp_limited else
+        why = ("a speed ripple locked to the table or a counter losing counts"
+               if not ta.stamp_limited else
                f"time stamps too coarse ({ta.stamp_resolution_s:.2g} s, locked to the table's "
-               "period) or a speed ripple locked to the table")
+               "period), a speed ripple locked to the table or a counter losing counts")
         note = (f"steady table NOT confirmed: the counts differ from the pulse-time fractions by "
                 f"up to {worst:.3f}″ (chi2 {ta.chi2:.1f} / {ta.dof}, p {ta.p_value:.2g}) — "
                 f"{why}; counts used")

@@ -54,7 +54,9 @@ def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], 
                                1 if args.direction == "ccw" else -1, args.alpha,
                                reverse_log=args.reverse_log, steady_table=args.steady_table,
                                columns=cols, latitude_range_rad=lat_range,
-                               on_bytes=on_bytes, time_unit=args.time_unit)
+                               on_bytes=on_bytes, time_unit=args.time_unit,
+                               latency_max_s=(None if args.latency_max_us is None else
+                                              args.latency_max_us * 1e-6))
         except FaceCountError as exc:
             raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} "
                              f"has {exc.found} pulses per revolution") from None
@@ -111,6 +113,11 @@ def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
     g.add_argument("--steady-table", action="store_true",
                    help="the table turns at constant speed: angles from the pulse times "
                    "(below the count quantisation) when the counts confirm it")
+    g.add_argument("--latency-max-us", type=number(0, None), metavar="US",
+                   help="the autocollimator's latency bound [µs] from its specification "
+                   "(0: none): one direction on a table whose speed follows its angle then "
+                   "carries that latency's bias in u (without it: up to 1 ms where its bias "
+                   "stays within u, else not ok)")
     g.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
     g.add_argument("--json", help="results JSON ('-': stdout)")

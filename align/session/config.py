@@ -88,6 +88,7 @@ class Goniometer:
     columns: dict[str, str] = field(default_factory=dict)
     time_unit: str | None = None  # the t column's unit when its header says none
     reference_offset_u_rad: float | None = None  # reference_offset_u_arcsec: σ [rad]
+    latency_max_s: float | None = None  # latency_max_us: the autocollimator's bound [s]
 
 
 @dataclass(frozen=True)
@@ -303,7 +304,7 @@ KEYS = {
                     "k3_bound_ug_per_g3", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reference_offset_u_arcsec", "reverse_log", "steady_table", "columns",
-                   "time_unit"},
+                   "time_unit", "latency_max_us"},
     "cameras": {"model", "roll_arcsec", "roll_u_arcsec", "blur_after_pixels",
                 *(f"lens_{k}" for k in RANGE_KEYS)},
     "views": {"camera", "right", "up"},
@@ -466,7 +467,9 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                                  f"{w} reference_offset_arcsec", -MAX_OFFSET_ARCSEC,
                                  MAX_OFFSET_ARCSEC) * ARCSEC,
                          rev_path, steady, keys.columns, keys.time_unit,
-                         _u_arcsec(g, "reference_offset_u_arcsec", w, MAX_OFFSET_ARCSEC))
+                         _u_arcsec(g, "reference_offset_u_arcsec", w, MAX_OFFSET_ARCSEC),
+                         None if "latency_max_us" not in g else
+                         _number(g["latency_max_us"], f"{w} latency_max_us", 0.0) * 1e-6)
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():

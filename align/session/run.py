@@ -343,7 +343,8 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
         res.gonio = _try(res, "goniometer", lambda: measure_log(
             g.log, len(g.faces), s.latitude_rad, g.direction, alpha, reverse_log=g.reverse_log,
             steady_table=g.steady_table, columns=g.columns,
-            latitude_range_rad=s.latitude_range_rad, time_unit=g.time_unit))
+            latitude_range_rad=s.latitude_range_rad, time_unit=g.time_unit,
+            latency_max_s=g.latency_max_s))
     cams: dict[str, CameraModel | None] = {}
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))

@@ -173,7 +173,9 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "false)",
                 "# columns = \"count=N,counter=C,ref=R\"   # when the headers differ",
                 "# time_unit = \"us\"            # the t column's unit when its header says "
-                "none"]
+                "none",
+                "# latency_max_us = 5.0         # [µs] the autocollimator's latency bound "
+                "(its specification; 0: none), carried in u"]
     for k, name in enumerate(cameras):
         out.append(_camera_block(name, k).rstrip("\n"))
     if static:

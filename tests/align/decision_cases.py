@@ -122,7 +122,10 @@ def calibration_recording(seed: int, folder: Path) -> dict:
 # ------------------------------------------------------------------------------ goniometer
 def gonio_spec(seed: int) -> GonioSpec:
     """A 4-face table, 120 revolutions at 0.5-2 rev/s with a 2 % speed ripple and 1 % wander,
-    no autocollimator latency (one direction cannot tell it: a warning, not a decision)."""
+    no autocollimator latency. (One direction cannot tell a latency on that table: undeclared,
+    the result is not ok, ``run.problems``, until the autocollimator's latency bound is
+    declared or the other direction measured — a statement about the set-up, not one of the
+    data's decisions counted here; the angles and their u, ``z_max``, are the counts'.)"""
     rng = np.random.default_rng([seed, 19])
     return GonioSpec(revolutions=120, rev_per_s=float(rng.uniform(0.5, 2.0)), ripple=0.02,
                      wander=0.01, latency_s=0.0, seed=seed)

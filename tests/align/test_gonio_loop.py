@@ -168,9 +168,12 @@ def test_undetermined_earth_rate_is_carried_as_type_b(tmp_path):
     assert not lat.type_b_terms
     assert np.all(np.abs(lat.angles_rad - truth) < TOL * lat.u_rad)
     out = tmp_path / "tb.json"
+    # (one direction on a rippled table: a latency up to 1 ms could move it beyond u, which
+    # the log cannot tell: not ok, exit 2; the Earth rate's term is still reported)
     assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--latitude-range", "40,60",
-                 "--json", str(out)]) == 0
+                 "--json", str(out)]) == 2
     js = json.loads(out.read_text())
+    assert not js["ok"] and any("latency" in w for w in js["warnings"])
     assert any(k.startswith("earth_rate") for k in js["type_b_terms_arcsec"])
     assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--latitude-range", "60,40"]) == 2
     assert main(["gonio", str(p), "--faces", "ref,z,y,x", "--latitude-range", "40,60",
@@ -237,6 +240,7 @@ def test_latency_on_a_rippled_table_is_warned_in_one_direction_and_cancelled_in_
     one = measure_log(p, 4, 50.45 * DEG)
     assert np.max(np.abs(one.angles.angles_rad - truth) / one.angles.u_rad) > 10
     assert any(w.startswith(LATENCY) for w in one.warnings)
+    assert one.problems  # (a latency up to 1 ms could bias it beyond u: not ok)
     r, _ = _log(tmp_path, "r.csv", revolutions=3000, seed=4, ripple=0.02, wander=0.01,
                 latency_s=5e-6, direction=-1)
     both = measure_log(p, 4, 50.45 * DEG, reverse_log=r)

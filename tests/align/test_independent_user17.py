@@ -89,14 +89,29 @@ def test_gonio_clean_log_is_ok_within_3u(tmp_path):
     assert rc == 0 and ok and z <= 3.0, (rc, ok, z)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "counter 2 opening 5 µs late after each switch (3.6 counts lost per counter-2 interval)"
-    " with --steady-table: the tool finds 'steady table NOT confirmed: the counts differ from"
-    " the pulse-time fractions by up to 3.469″ (chi2 4754.3 / 3, p 0)', blames a locked"
-    " speed ripple, uses the counts and reports ok, exit 0, u 0.168″, error 3.63″ (z 21.6)"))
 def test_gonio_counter_dead_time_steady_table_not_ok_and_wrong(tmp_path):
+    """Counter 2 opening 5 µs late after each switch (3.6 counts lost per counter-2
+    interval) with --steady-table (before: 'steady table NOT confirmed ... a speed ripple
+    locked to the table; counts used', ok, exit 0, u 0.168″, error 3.63″, z 21.6)."""
     rc, ok, z, err = gonio(tmp_path, 0, ["--steady-table"], dead_time_s=5e-6)
     assert _consistent(rc, ok, z), (rc, ok, z, err)
+
+
+def test_gonio_declared_latency_bound_covers_a_rippled_log(tmp_path):
+    """2 % ripple with 100 µs of latency, one direction: undeclared not ok (the log cannot
+    tell 0 from 100 µs); the autocollimator's bound declared (--latency-max-us 100) carries
+    its bias in u: ok within 3 u. A bound below 0 is refused naming the flag."""
+    rc, ok, z, err = gonio(tmp_path, 0, ripple=0.02, latency_s=1e-4)
+    assert rc == 2 and not ok, (rc, ok, z, err)
+    rc, ok, z, err = gonio(tmp_path, 0, ["--latency-max-us", "100", "--force"], ripple=0.02,
+                           latency_s=1e-4)
+    assert rc == 0 and ok and z <= 3.0, (rc, ok, z, err)
+    from tests.cli import run_cli
+
+    rc, out, err = run_cli("gonio", str(next(tmp_path.glob("*.csv"))), "--faces", FACES,
+                           "--latency-max-us", "-5")
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "--latency-max-us" in err, err
 
 
 # ---------------------------------------------------------------- sweeps (slow)
@@ -126,28 +141,35 @@ def test_gonio_effects_it_covers(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "counter 2 dead time, no --steady-table: 1 µs (0.76 count): ok, z 3.8-5.3;"
-    " 5 µs: ok, z 17.7-22.4 (err 2.9-3.6″, u 0.16″); 20 µs: ok, z 68-87 (err 11-14″);"
-    " the only sign is the warning 'pulse-time and count fractions differ, p 0' read as"
-    " latency on an unsteady table"))
 def test_gonio_counter_dead_time_sweep(tmp_path):
+    """Counter 2 dead time 0.1-20 µs, no --steady-table (before: 1 µs ok, z 3.8-5.3; 5 µs ok,
+    z 17.7-22.4; 20 µs ok, z 68-87, with only a latency warning)."""
     rows = _sweep(tmp_path, gonio, {"dead_time_s": [1e-7, 1e-6, 5e-6, 2e-5]}, range(4))
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "eccentric table (2 % speed ripple once a revolution) with autocollimator latency, one"
-    " direction: 10 µs: ok, z 1.8-3.3; 100 µs: ok, z 16-24 (err 2.7-3.8″); 1 ms: ok, z"
-    " 172-243 (err 28-36″, u 0.16″). The warning says 'each µs of latency biases an angle by"
-    " up to 0.0336″ ... the log cannot tell the latency' yet ok: true, exit 0, and no Type B"
-    " term for it in u"))
 def test_gonio_latency_on_rippling_table_sweep(tmp_path):
+    """2 % once-a-revolution speed ripple with 10 µs-1 ms autocollimator latency, one
+    direction (before: 100 µs ok, z 16-24; 1 ms ok, z 172-243, u 0.16″, with a warning)."""
     rows = _sweep(tmp_path, gonio, {"latency_s": [1e-5, 1e-4, 1e-3]}, range(4), ripple=0.02)
     bad = [r for r in rows if not _consistent(r[3], r[4], r[5])]
     assert len(bad) <= 1, bad
+
+
+@pytest.mark.slow
+def test_gonio_declared_latency_bound_sweep(tmp_path):
+    """The same rippled logs with the autocollimator's latency bound declared at the true
+    latency (10 µs-1 ms): every one ok within 3 u (the bias is the uniform term's edge,
+    √3 of its u), one allowed beyond by chance."""
+    rows = []
+    for lat in (1e-5, 1e-4, 1e-3):
+        for s in range(4):
+            rows.append((lat, s, *gonio(tmp_path, s, ["--latency-max-us", f"{lat * 1e6:g}"],
+                                        ripple=0.02, latency_s=lat)))
+    assert all(r[2] == 0 and r[3] for r in rows), rows
+    assert sum(r[4] > 3.0 for r in rows) <= 1, rows
 
 
 @pytest.mark.slow

@@ -22,6 +22,9 @@ from tests.cli import run_cli
 ROOT = Path(__file__).resolve().parents[2]
 CHESS = ROOT.parent / "shared" / "data" / "real" / "opencv-chessboard"
 FACES = ("--faces", "ref,y,x,z", "--latitude", "50.45")
+# My generator's autocollimator has no latency (its pulse is the face's angle, with jitter):
+# declared as its specification would say, on my table whose speed follows its angle.
+NO_LATENCY = ("--latency-max-us", "0")
 NO_LENS = ("--lens", "k1=0,k2=0,p=0,aspect=0,pp_px=0")
 
 
@@ -63,12 +66,17 @@ def need_chessboards():
 # ------------------------------------------------------------------------- goniometer
 
 def test_my_gonio_log_clean_is_within_u():
-    """My generator against the tool on a clean log: the basis of the drop-out checks."""
+    """My generator against the tool on a clean log: the basis of the drop-out checks. My
+    table's speed follows its angle and I log one direction: without the autocollimator's
+    latency bound declared the result is not ok and says what to give."""
     g = U.Gonio(seed=3)
     import tempfile
     with tempfile.TemporaryDirectory() as d:
         p = U.write_gonio(Path(d) / "g.csv", g.rows())
-        rc, js, err = json_of("gonio", p, *FACES)
+        rc0, js0, err0 = json_of("gonio", p, *FACES)
+        rc, js, err = json_of("gonio", p, *FACES, *NO_LATENCY)
+    assert rc0 == 2 and not js0["ok"], err0
+    assert "--latency-max-us" in err0 and "--reverse-log" in err0, err0
     assert rc == 0 and js["ok"], err
     assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
 
@@ -84,7 +92,7 @@ def test_dropout_across_the_reference_face_is_named_and_angles_within_u(tmp_path
     at = refs[40] - 2
     rows = rows[:at] + rows[at + 13:]   # 13 rows: the phase jumps by one face
     p = U.write_gonio(tmp_path / "g.csv", rows, with_t)
-    rc, js, err = json_of("gonio", p, *FACES)
+    rc, js, err = json_of("gonio", p, *FACES, *NO_LATENCY)
     assert rc == 0, err
     assert dropout_named(js) == [[at + 2]], js["exclusions"]   # line of the row after the gap
     assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
@@ -162,7 +170,7 @@ def test_clock_jump_forward_is_named_and_angles_within_u(tmp_path, jump_s):
     for r in rows[150:]:
         r[3] += jump_s
     p = U.write_gonio(tmp_path / "g.csv", rows)
-    rc, js, err = json_of("gonio", p, *FACES)
+    rc, js, err = json_of("gonio", p, *FACES, *NO_LATENCY)
     assert rc == 0, err
     assert dropout_named(js) == [[152]], js["exclusions"]
     assert np.all(np.abs(gonio_z(js, g)) < 3.5), gonio_z(js, g)
