@@ -205,10 +205,11 @@ def bound_disagreement(run: GonioRun, alpha: float,
         shifts = {DISAGREEMENT: counters,
                   **({LATENCY_TERM: bias} if bound > 0 else {})}
         widened = _with_terms(fa, shifts)
-        said = ("assumed (undeclared)" if latency_max_s is None else
-                "declared" if bound > 0 else "declared 0: no latency term")
-        why = (f"{cause}: at a latency up to {bound * 1e6:g} µs ({said}) at most "
-               f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with the part a "
+        said = ("assumed (undeclared)" if latency_max_s is None else "declared")
+        latency = (f"at a latency up to {bound * 1e6:g} µs ({said}) at most "
+                   f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with"
+                   if bound > 0 else "no latency (declared 0): u carries")
+        why = (f"{cause}: {latency} the part a "
                f"counter could make (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
                f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency: "
                + (DECLARE if latency_max_s is None else
