@@ -112,14 +112,21 @@ def _no_datum_session(root, seed, extra_goniometer="", tolerance=""):
 
 @pytest.mark.slow
 def test_reference_face_offset_without_azimuth_datum_is_carried(tmp_path):
-    """Seeds 10-15, the reference face 30″ off and no X/Y-up poses: E_xY, E_yX were ~0.05″
-    and hundreds of u off, ok; now each result carries the offset over its range (σ 34.6″),
-    warns what to measure, and E is within 3.5 u of the truth; a declared
-    ``reference_offset_u_arcsec`` is the σ carried; a tolerance the carried u leaves
-    undecided makes the result not ok, naming the X/Y-up poses."""
+    """Seeds 10-39, the reference face 30″ off and no X/Y-up poses: E_xY, E_yX were ~0.05″
+    and hundreds of u off, ok; now each result carries the offset over its range (σ 34.6″)
+    and warns what to measure; E_xY, E_yX within 3.5 u of the truth; the other four angles'
+    z over the 30 sessions honest (RMS within 1 ± 3/√(2n), |z| > 3 no more often than the
+    binomial bound allows, none beyond 4); a declared ``reference_offset_u_arcsec`` is the
+    σ carried; a tolerance the carried u leaves undecided makes the result not ok, naming
+    the X/Y-up poses. (Seeds 10-15 alone, each angle within 3.5 u, held until the centres
+    reached the grooves' ends: seed 10's E_zY then read z −3.60, its z_B mark z +2.99;
+    over seeds 10-39 the marks' RMS z 0.91, the four angles' 1.12, 1 of 120 beyond 3.)"""
+    from scipy import stats
+
     from align.warnings import session_warnings
 
-    for seed in range(10, 16):
+    free = []
+    for seed in range(10, 40):
         res, truth = _no_datum_session(tmp_path, seed)
         f = res.fusion
         assert res.ok, res.problems
@@ -127,10 +134,17 @@ def test_reference_face_offset_without_azimuth_datum_is_carried(tmp_path):
         assert f.undetermined[0].sigma == pytest.approx(SIGMA)
         z = np.array([(f.E[i, j] - truth[i, j]) / f.E_u[i, j] for i, j in
                       ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))])
-        assert np.max(np.abs(z)) < 3.5, (seed, z)
+        assert np.max(np.abs(z[[0, 2]])) < 3.5, (seed, z)
         assert abs(z[0]) > 0.5  # E_xY is 30″ off: the carried u, not luck, covers it
+        free += list(z[[1, 3, 4, 5]])
         assert any("X/Y-up" in w and "reference_face_offset" in w
                    for w in session_warnings(res))
+    free = np.array(free)
+    n = len(free)
+    assert abs(np.sqrt(np.mean(free**2)) - 1) < 3 / np.sqrt(2 * n), free
+    beyond = int(np.sum(np.abs(free) > 3))
+    assert beyond <= stats.binom.ppf(0.999, n, 2 * stats.norm.sf(3)), (beyond, free)
+    assert np.max(np.abs(free)) < 4, free
     res, _ = _no_datum_session(tmp_path / "declared", 10, "reference_offset_u_arcsec = 20.0\n")
     (c,) = res.fusion.undetermined
     assert c.declared and c.sigma == pytest.approx(20 * ARCSEC)
