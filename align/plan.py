@@ -520,4 +520,20 @@ def plan_from_result(js: Mapping | LoadedSession, where: str = "the result") -> 
     if not r.fused or not b or not b.get("model"):
         raise InputError(f"{r.where}: no fused misalignment with its budget (a failed session, "
                          "or a result written before budgets existed): nothing to plan from")
-    return plan(Linearisation.from_dict(b["model"]), r.disposition)
+    p = plan(Linearisation.from_dict(b["model"]), r.disposition)
+    stated = r.u_rad[E_NAMES.index(p.target)] if r.u_rad is not None else p.u_before
+    if not abs(p.u_before - stated) <= STATED_U_RTOL * stated:
+        # The plan predicts from its own model of the result's u; where that model does not
+        # give the u the result states (a carried term it reads otherwise: a held nuisance
+        # nearly degenerate with an effect the fusion added), its figures would be wrong.
+        raise InputError(f"{r.where}: the plan's model gives u({p.target}) = "
+                         f"{p.u_before / ARCSEC:.4g}″ where the result states "
+                         f"{stated / ARCSEC:.4g}″ (carried: "
+                         f"{', '.join(c.name for c in p.carried) or 'none'}): its predictions "
+                         "would not be about this result; not planned")
+    return p
+
+
+STATED_U_RTOL = 0.01
+"""Largest relative difference between the plan's u of its target and the result's stated u
+[—] on which :func:`plan_from_result` plans."""
