@@ -300,15 +300,21 @@ def test_micrometer_no_phantom_grating(micrometer):
     assert not phantom, phantom
 
 
+def _micro_session(work, name, seed, e_arcsec, **kw):
+    """A session of two machine-vision cameras (declared distortion-free) with the six
+    angles ``e_arcsec`` (E_xY, E_xZ, E_yX, E_yZ, E_zX, E_zY) [″]; returns (folder, result
+    JSON path)."""
+    names = ("E_xY", "E_xZ", "E_yX", "E_yZ", "E_zX", "E_zY")
+    E = {n: v * g.ARCSEC for n, v in zip(names, e_arcsec, strict=True)}
+    folder = work / name
+    g.write_session(folder, seed, {"A": g.MICRO, "B": g.MICRO}, E=E, where="centre",
+                    lens_keys={"A": ZERO_KEYS, "B": ZERO_KEYS}, **kw)
+    return folder, work / f"{name}.json"
+
+
 @pytest.mark.slow
 def test_session_verdict_follows_the_numbers(work):
-    A = g.ARCSEC
-    E = {"E_xY": 10 * A, "E_xZ": 120 * A, "E_yX": -57 * A, "E_yZ": 20 * A, "E_zX": -15 * A,
-         "E_zY": 5 * A}
-    folder = work / "sess_fail"
-    g.write_session(folder, 3, {"A": g.MICRO, "B": g.MICRO}, E=E, where="centre",
-                    lens_keys={"A": ZERO_KEYS, "B": ZERO_KEYS})
-    out = work / "sess_fail.json"
+    folder, out = _micro_session(work, "sess_fail", 3, (10, 120, -57, 20, -15, 5))
     _align("run", folder, "--json", out, "-q")
     doc = json.loads(out.read_text())
     e, u = doc["misalignment_arcsec"][0][2], doc["misalignment_u_arcsec"][0][2]
@@ -320,13 +326,8 @@ def test_session_verdict_follows_the_numbers(work):
 
 @pytest.mark.slow
 def test_plan_names_a_declared_range_as_declared(work):
-    A = g.ARCSEC
-    E = {"E_xY": 10 * A, "E_xZ": 28 * A, "E_yX": -5 * A, "E_yZ": 20 * A, "E_zX": -15 * A,
-         "E_zY": 5 * A}
-    folder = work / "sess_plan"
-    g.write_session(folder, 4, {"A": g.MICRO, "B": g.MICRO}, E=E, where="centre",
-                    lens_keys={"A": ZERO_KEYS, "B": ZERO_KEYS}, tolerance_arcsec=30)
-    out = work / "sess_plan.json"
+    folder, out = _micro_session(work, "sess_plan", 4, (10, 28, -5, 20, -15, 5),
+                                 tolerance_arcsec=30)
     r = _align("run", folder, "--json", out, "-q")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(out.read_text())
