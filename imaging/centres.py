@@ -345,7 +345,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
         # Control variate: the part of the centre's error that the ring's texture slope
         # predicts is taken out (what stays is independent of the regressor).
         # (centred: its mean is the shading's slope, not texture; see texture_control)
-        delta = delta - texture_control(tex, slope / amp_safe, good)
+        delta = delta - texture_control(tex, slope / amp_safe, good, sigma)
     xy = (pf.offset_px + delta)[:, None] * n + t_eff[:, None] * u
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,

@@ -269,10 +269,12 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray],
     return TextureModel(acf_out, beta, beta_u, len(clean), dof)
 
 
-def texture_control(tex: TextureModel, regressor: np.ndarray, ok: np.ndarray) -> np.ndarray:
+def texture_control(tex: TextureModel, regressor: np.ndarray, ok: np.ndarray,
+                    sigma: np.ndarray) -> np.ndarray:
     """The centres' moves [px] the texture's coupling predicts from the mark's own ring
     ``regressor`` (slope / contrast per segment [1/px]), to be taken out of them: the
-    coupling times the regressor less its mean over the usable segments ``ok``.
+    coupling times the regressor less its mean over the usable segments ``ok``, weighted as
+    the line weighs the centres (1 / ``sigma``^2, ``sigma`` their u [px]).
 
     Centred as the replicas' regressors are (:func:`texture_model`): their mean holds no
     information on the coupling, so the coupling's error is not bounded along it, and the
@@ -281,12 +283,15 @@ def texture_control(tex: TextureModel, regressor: np.ndarray, ok: np.ndarray) ->
     times the shading moved the whole mark: the outer lines of 64 stage-micrometer frames
     (one side clear of the other lines, the only ones with the 4 replica series the
     coupling needs) had offset z RMS 1.85 under shaded light, the inner ones 1.21; centred,
-    1.02 and 0.97. Zeros where the regressor is not finite."""
+    1.02 and 0.97. The mean weighted as the line's: a segment of almost no contrast (a
+    JPEG-coded end) has a regressor of ~1e12 /px and a sigma of ~1e14 px; in a plain mean it
+    moved every centre by ~1e11 px. Zeros where the regressor is not finite."""
     finite = np.isfinite(regressor)
-    use = ok & finite
-    if tex.coupling_px2 == 0 or not use.any():
+    w = np.where(ok & finite & (sigma > 0), 1.0 / np.where(sigma > 0, sigma, 1.0) ** 2, 0.0)
+    if tex.coupling_px2 == 0 or not np.any(w > 0):
         return np.zeros(regressor.shape)
-    return np.where(finite, tex.coupling_px2 * (regressor - float(regressor[use].mean())), 0.0)
+    mean = float(np.sum(w * np.where(finite, regressor, 0.0)) / np.sum(w))
+    return np.where(finite, tex.coupling_px2 * (regressor - mean), 0.0)
 
 
 def correlation_cholesky(acf: np.ndarray, index: np.ndarray) -> tuple[float, np.ndarray]:

@@ -50,3 +50,26 @@ def test_noisy_render_is_untouched_by_the_noise_free_guard(snr, monkeypatch):
     err = angle_error(m.line.angle_rad, s.truth.marks[0].image_angle_rad)
     assert abs(err) < 4.5 * m.line.angle_u_rad
     assert np.isfinite(m.line.angle_u_rad)
+
+
+def test_control_variate_is_not_moved_by_a_segment_without_contrast():
+    """A segment of almost no contrast (a JPEG-coded end of user 13's q75 mark, seed 2) has
+    a ring regressor of ~1e12 /px and a centre u of ~1e14 px. In a plain mean of the
+    regressor it moved every centre of the mark by ~1e11 px (CI: LinAlgError downstream);
+    weighted as the line weighs the centres, the control is the shading-free one the other
+    segments give alone, to rounding."""
+    rng = np.random.default_rng(3)
+    reg = 1e-3 + 2e-4 * rng.normal(size=40)
+    sigma = np.full(40, 0.05)
+    ok = np.ones(40, bool)
+    tex = imaging.texture.TextureModel.__new__(imaging.texture.TextureModel)
+    object.__setattr__(tex, "coupling_px2", 0.7)
+    rest = ok.copy()
+    rest[0] = False
+    clean = imaging.texture.texture_control(tex, reg, rest, sigma)
+    reg2, sigma2 = reg.copy(), sigma.copy()
+    reg2[0], sigma2[0] = 1.3e12, 2.0e14
+    got = imaging.texture.texture_control(tex, reg2, ok, sigma2)
+    assert np.all(np.abs(got[1:] - clean[1:]) < 1e-9 * np.abs(clean).max()), got[1:5]
+    # The centred control takes out no mean shading (weighted as the line weighs them).
+    assert abs(np.sum(clean[1:] / sigma[1:]**2)) < 1e-12 * np.sum(np.abs(clean) / sigma**2)
