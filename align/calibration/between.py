@@ -121,17 +121,21 @@ def _noise_whitener(stage: CalibrationStage) -> np.ndarray:
     return np.linalg.inv(np.linalg.cholesky(C))
 
 
-def _scan(e: np.ndarray, G: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray,
-                                                                   np.ndarray]:
+def _scan(e: np.ndarray, G: np.ndarray, cols: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Per candidate column c (N, M): the chi2 drop of adding it to the fit of ``e`` (N,)
-    on ``G`` (N, P), the coefficient that minimises |e + G δ + c s|², and its u (unit
-    noise)."""
+    on ``G`` (N, P), the coefficient that minimises |e + G δ + c s|² and its u, each
+    divided (the u multiplied) by the root of the extended fit's chi2/dof where that
+    exceeds 1 (as the loop's likelihood-ratio test: a scatter beyond the stated noise, the
+    hand placement of real poses, does not make a step); and the extended fit's chi2."""
     q, _ = np.linalg.qr(G)
     r = e - q @ (q.T @ e)
     c = cols - q @ (q.T @ cols)
     cc = np.maximum(np.einsum("ij,ij->j", c, c), 1e-300)
     cr = c.T @ r
-    return cr**2 / cc, -cr / cc, 1.0 / np.sqrt(cc)
+    drop = cr**2 / cc
+    s2 = np.maximum((r @ r - drop) / max(len(e) - G.shape[1] - 1, 1), 1.0)
+    return drop / s2, -cr / cc, np.sqrt(s2 / cc), float(r @ r) - drop
 
 
 def between_step(stage: CalibrationStage, rep: LoopReport) -> BetweenStep | None:
@@ -160,19 +164,19 @@ def between_step(stage: CalibrationStage, rep: LoopReport) -> BetweenStep | None
     rank[order] = np.arange(n)
     cols = np.column_stack([Li @ (gb[:, a] * (rank >= j)) for j in bounds for a in range(3)])
     tests = len(bounds) * 3
-    drop, size, u = _scan(e0, G0, cols)
+    drop, size, u, chi2_0 = _scan(e0, G0, cols)  # (chi2_0: with each step)
     best = int(np.argmax(drop))
     p0 = min(1.0, tests * float(special.chdtrc(1, drop[best])))
-    chi2_0 = float(np.sum(e0**2) - np.sum((np.linalg.qr(G0)[0].T @ e0) ** 2))
     pf, d_bic = 1.0, -np.inf
     if names and names in stage.jacobians:
         ef, Gf, _ = fit(names)
-        drop_f, _, _ = _scan(ef, Gf, cols)
+        drop_f = _scan(ef, Gf, cols)[0]
+        qf = np.linalg.qr(Gf)[0]
+        chi2_f = float(np.sum((ef - qf @ (qf.T @ ef)) ** 2))  # the final fit's, no step
         pf = min(1.0, tests * float(special.chdtrc(1, drop_f[best])))
-        chi2_f = float(np.sum(ef**2) - np.sum((np.linalg.qr(Gf)[0].T @ ef) ** 2))
         searched = sum(t.searched for t in rep.terms)
         # The step: one parameter and the choice of one of `tests` positions (2 ln tests).
-        d_bic = ((chi2_0 - drop[best] + (G0.shape[1] + 1) * np.log(n) + 2 * np.log(tests))
+        d_bic = ((chi2_0[best] + (G0.shape[1] + 1) * np.log(n) + 2 * np.log(tests))
                  - (chi2_f + (Gf.shape[1] + searched) * np.log(n)))
     j, a = divmod(best, 3)
     k = order[bounds[j] - 1], order[bounds[j]]
