@@ -49,9 +49,11 @@ class BetweenStep:
     before : str
         The label of the last pose before it; unit —.
     after : str
-        The label of the first pose after it; unit —.
+        The label of the first pose after it; unit —. The poses between these two do not
+        tell on which side of the step they were (the axis about level in them).
     t_s : float
-        Its time, midway between the two poses' mean times [s].
+        Its time, midway between the mean times of the poses either side of the best
+        boundary [s].
     size_g : float
         The bias after less before [g].
     size_u_g : float
@@ -179,8 +181,18 @@ def between_step(stage: CalibrationStage, rep: LoopReport) -> BetweenStep | None
         d_bic = ((chi2_0[best] + (G0.shape[1] + 1) * np.log(n) + 2 * np.log(tests))
                  - (chi2_f + (Gf.shape[1] + searched) * np.log(n)))
     j, a = divmod(best, 3)
-    k = order[bounds[j] - 1], order[bounds[j]]
-    return BetweenStep(a, p.labels[k[0]], p.labels[k[1]], float((p.t[k[0]] + p.t[k[1]]) / 2),
+    # The boundaries the data cannot tell from the best (a pose that does not see the
+    # axis, its component of gravity ~0, reads the same either side of the step): those
+    # next to it within the 95 % likelihood interval of one parameter.
+    near = drop[a::3] >= drop[best] - special.chdtri(1, 0.05)
+    lo, hi = j, j
+    while lo > 0 and near[lo - 1]:
+        lo -= 1
+    while hi < len(bounds) - 1 and near[hi + 1]:
+        hi += 1
+    k = order[bounds[lo] - 1], order[bounds[hi]]
+    t = p.t[order[bounds[j] - 1]], p.t[order[bounds[j]]]
+    return BetweenStep(a, p.labels[k[0]], p.labels[k[1]], float((t[0] + t[1]) / 2),
                        float(size[best]), float(u[best]), p0, pf, float(d_bic),
                        " + ".join(names))
 
