@@ -199,6 +199,12 @@ def between_step(stage: CalibrationStage, rep: LoopReport) -> BetweenStep | None
 
 def between_problem(stage: CalibrationStage, rep: LoopReport) -> tuple[str, ...]:
     """Why the result is not ok (none or one line): a bias step between poses
-    (:func:`between_step`, :attr:`BetweenStep.found`)."""
+    (:func:`between_step`, :attr:`BetweenStep.found`) not next to a pose whose samples
+    stepped (``Poses.steps``)."""
     s = between_step(stage, rep)
-    return (s.problem(),) if s is not None and s.found else ()
+    if s is None or not s.found:
+        return ()
+    # A step within a pose reads, in the means, as one between it and its neighbour: the
+    # samples located it (align.calibration.steps.step_problem names it there).
+    inside = {stage.poses.labels[x.pose] for x in stage.poses.steps}
+    return () if {s.before, s.after} & inside else (s.problem(),)
