@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from align.calibration.between import between_problem
 from align.calibration.geometry import (
     HEMISPHERE_RAD,
     SURROUND_RAD,
@@ -369,7 +370,8 @@ def calibrate(poses: Poses, signs: Sequence[float] | None = None, alpha: float =
         why = widening.undetermined(tuple(t.name for t in rep.terms),
                                     max(PLAN_MIN, len(poses.u)), WANDER)
         problems = (why,) if why else ()
-    problems = (*problems, *step_problem(poses.steps, model.k, model.cov))
+    problems = (*problems, *step_problem(poses.steps, model.k, model.cov),
+                *between_problem(stage, rep))
     if not labelled(poses):
         # Unlabelled: only poses the ellipsoid puts within 2° of an axis are faces here.
         a = rep.after.payload.specific_force(poses.u, poses.t, poses.temp)

@@ -41,7 +41,7 @@ from align.calibration.known import faces_of, has_six_faces
 from align.calibration.saturation import find_saturated
 from align.calibration.settling import settle_samples
 from align.calibration.slopes import pose_slopes
-from align.calibration.steps import pose_steps
+from align.calibration.steps import interior_steps, pose_steps
 from align.calibration.triad import Poses
 from align.calibration.walk import walk_levels
 from axisbase.errors import InputError
@@ -183,14 +183,14 @@ def read_poses(path: str | Path, settings: StaticSettings = DEFAULT_SETTINGS,
                             sigma_u=None if poses.sigma_u is None else
                             np.sqrt(poses.sigma_u**2 + du**2))
         # A pose whose samples stepped is left out of the walk's level (one event, not a
-        # process every pose shows); the calibration judges the step (steps.step_problem)
-        # of poses given by their ids only: a detected static interval's edge may hold the
-        # end of the turn (synth's recordings: 5-8.5 mg "steps" within 0.2 s of an edge).
+        # process every pose shows); the calibration judges the step (steps.step_problem),
+        # in a detected static interval only away from its ends: an edge may hold the end
+        # of the turn (synth's recordings: 5-8.5 mg "steps" within 0.2 s of an edge).
         steps = pose_steps(samples, times, poses.labels)
         rate, bound = walk_levels(samples, times, [s.pose for s in steps])
         trend = pose_slopes(samples, times, rate)
         poses = replace(poses, settling=settled, walk_rate=rate, walk_bound=bound,
-                        steps=steps if intervals is None else (),
+                        steps=steps if intervals is None else interior_steps(steps, times),
                         slope=None if trend is None else trend[0],
                         slope_u=None if trend is None else trend[1])
     poses = _drop_saturated(path, poses, samples, adc_range, calibration, warnings)

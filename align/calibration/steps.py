@@ -86,6 +86,25 @@ def pose_steps(samples: Sequence[np.ndarray], times: Sequence[np.ndarray],
                  for i in walk_outliers(samples, times))
 
 
+EDGE_S = 0.5
+"""A step located within this of either end of a static interval the tool detected [s], or
+within a tenth of the interval, is not judged: the edge may hold the tail of the turn."""
+
+
+def interior_steps(steps: Sequence[PoseStep], times: Sequence[np.ndarray]
+                   ) -> tuple[PoseStep, ...]:
+    """The ``steps`` of detected static intervals (``times`` [s] each interval's samples')
+    located away from both its ends (:data:`EDGE_S`): a bias that jumps while the unit is
+    held, not the end of the turn at the interval's edge."""
+    out = []
+    for s in steps:
+        t = np.asarray(times[s.pose], float)
+        edge = max(EDGE_S, 0.1 * float(np.ptp(t)))
+        if s.t_s - t[0] >= edge and t[-1] - s.t_s >= edge:
+            out.append(s)
+    return tuple(out)
+
+
 def step_problem(steps: Sequence[PoseStep], k: np.ndarray, cov: np.ndarray
                  ) -> tuple[str, ...]:
     """Why the result is not ok (none or one line) when a pose's bias stepped by more than
