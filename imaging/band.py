@@ -50,7 +50,14 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     e = px * n[0] + py * n[1]
     e -= offset
     t = px * u[0] + py * u[1]
-    sel = (oth >= 0) & (oth < size_other) & (np.abs(e) <= half) & (t >= t0) & (t <= t1)
+    # (In place: the chained expression's four temporaries cost more than its tests.)
+    sel = np.abs(e) <= half
+    sel &= t >= t0
+    sel &= t <= t1
+    if not (start.min() >= 0 and start.max() + m <= size_other):
+        # (Else every column of the grid lies in the frame, the usual case, as its rows'
+        # first and last tell: no test per pixel.)
+        sel &= (oth >= 0) & (oth < size_other)
     oth_s = oth[sel]
     walk_s = np.broadcast_to(k.astype(int)[:, None], oth.shape)[sel]
     ys, xs = (walk_s, oth_s) if steep else (oth_s, walk_s)
