@@ -238,7 +238,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     j = np.clip(j, 0, nb - 1)
     # The table groove_extent and the centres built for this groove (the same arguments):
     # a cache hit, not ~1.3 ms of erf per mark.
-    p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    p = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0).profile(e)
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
     bc = GroupSums(j, nb, eager=True)  # (15 sums over the same bins)
     cnt = bc.counts.astype(float)

@@ -104,6 +104,11 @@ class ProfileTable:
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return interp_uniform(e, self.grid, (self.p, self.pe))
 
+    def profile(self, e: np.ndarray) -> np.ndarray:
+        """The profile alone at ``e`` (the first of the call's pair, the same bits: each
+        tabulated function is interpolated on its own), without its slope's pass."""
+        return interp_uniform(e, self.grid, (self.p,))[0]
+
 
 TABLE_ANGLE_STEP = 1e-3
 """Angles a profile table is made for [rad]: the nearest multiple of this. The angle only

@@ -14,7 +14,6 @@ from collections.abc import Callable
 import numpy as np
 from scipy.ndimage import median_filter
 
-from axisbase.interp import interp_uniform
 from imaging.band import _band, band_indices, band_pixels, unclipped
 from imaging.centres import Centres, sample_centres
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
@@ -307,8 +306,7 @@ def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
     j -= j.min()
     nb = int(j.max()) + 1
     # The profile alone (the table's call interpolates its slope too, unused here).
-    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
-    (p,) = interp_uniform(e, table.grid, (table.p,))
+    p = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0).profile(e)
     bc = GroupSums(j, nb)  # (5 sums over the same bins)
     cnt = bc.counts
     sp, spp = bc(p), bc(p * p)
