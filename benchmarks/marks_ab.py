@@ -111,6 +111,10 @@ def main() -> None:
     print(f"code: this checkout, other {args.other}; swapped: {', '.join(args.swap)}")
     acc: dict = {}
     versions = {"this": {}, "other": {}}
+    # The other's functions first, then who holds each of this checkout's: the other's
+    # modules imported this checkout's functions by name when loaded, and a swapped one that
+    # calls another (the other's groove_ends calling _band) must call the other's too.
+    others = {dotted: _other_function(args.other, dotted) for dotted in args.swap}
     for dotted in args.swap:
         mod, cls, name = _split(dotted)
         owner = importlib.import_module(mod)
@@ -119,8 +123,7 @@ def main() -> None:
         mine = owner.__dict__[name]
         holders = _holders(mine) if cls is None else [(owner, name)]
         versions["this"][dotted] = (holders, _timed(mine, acc, ("this", dotted)))
-        versions["other"][dotted] = (holders, _timed(_other_function(args.other, dotted), acc,
-                                                     ("other", dotted)))
+        versions["other"][dotted] = (holders, _timed(others[dotted], acc, ("other", dotted)))
 
     def use(tag: str) -> None:
         for holders, f in versions[tag].values():
