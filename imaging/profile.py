@@ -308,7 +308,7 @@ def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
     nb = int(j.max()) + 1
     # The profile alone (the table's call interpolates its slope too, unused here).
     p = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0).profile(e)
-    bc = GroupSums(j, nb)  # (5 sums over the same bins)
+    bc = GroupSums(j, nb, eager=True)  # (5 sums over the same bins: grouped at once)
     cnt = bc.counts
     sp, spp = bc(p), bc(p * p)
     sv, spv = bc(vals), bc(p * vals)
