@@ -85,6 +85,12 @@ def _holders(f) -> list[tuple[object, str]]:
     return out
 
 
+def _quartiles(x: np.ndarray, fmt: str) -> str:
+    """The first and third quartiles of ``x``, formatted: the pairs' spread."""
+    q1, q3 = np.percentile(x, [25, 75])
+    return f"{q1:{fmt}} to {q3:{fmt}}"
+
+
 def _timed(f, acc: dict, key: tuple):
     def g(*a, **k):
         t0 = time.process_time()
@@ -111,6 +117,10 @@ def main() -> None:
     print(f"code: this checkout, other {args.other}; swapped: {', '.join(args.swap)}")
     acc: dict = {}
     versions = {"this": {}, "other": {}}
+    # The other's functions first, then who holds each of this checkout's: the other's
+    # modules imported this checkout's functions by name when loaded, and a swapped one that
+    # calls another (the other's groove_ends calling _band) must call the other's too.
+    others = {dotted: _other_function(args.other, dotted) for dotted in args.swap}
     for dotted in args.swap:
         mod, cls, name = _split(dotted)
         owner = importlib.import_module(mod)
@@ -119,8 +129,7 @@ def main() -> None:
         mine = owner.__dict__[name]
         holders = _holders(mine) if cls is None else [(owner, name)]
         versions["this"][dotted] = (holders, _timed(mine, acc, ("this", dotted)))
-        versions["other"][dotted] = (holders, _timed(_other_function(args.other, dotted), acc,
-                                                     ("other", dotted)))
+        versions["other"][dotted] = (holders, _timed(others[dotted], acc, ("other", dotted)))
 
     def use(tag: str) -> None:
         for holders, f in versions[tag].values():
@@ -150,7 +159,9 @@ def main() -> None:
         print(f"\n== {size[0]}x{size[1]}, {length:.0f}-px mark: {n} paired calls "
               f"({args.images} images x {args.rounds} rounds), CPU ms ==\n"
               f"detect + measure: this {np.median(a):.1f}, other {np.median(b):.1f}; paired "
-              f"difference {np.median(a - b):+.1f} (median), ratio {np.median(a / b):.3f}")
+              f"difference {np.median(a - b):+.1f} (median; quartiles "
+              f"{_quartiles(a - b, '+.1f')}), "
+              f"ratio {np.median(a / b):.3f} (quartiles {_quartiles(a / b, '.3f')})")
         for dotted in args.swap:
             print(f"  {dotted}: this {1e3 * acc.get(('this', dotted), 0.0) / n:.2f}, other "
                   f"{1e3 * acc.get(('other', dotted), 0.0) / n:.2f} per image")

@@ -16,11 +16,14 @@ from imaging.groove import ProfileFit
 
 
 def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
-          half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+          half: float, gather: bool = True
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Pixels within ``half`` of the line and between t0 and t1: (values, e, t, flat idx).
 
     Rasterised along the line (one short run of pixels per column, or per row for steep
-    lines), so the cost follows the band's area, not its bounding box's.
+    lines), so the cost follows the band's area, not its bounding box's. ``gather``: False
+    for the pixels alone (values empty: their gather from the frame is most of a wide
+    band's cost at 5 MP).
     """
     h, w = image.shape
     u, n = line_frame(angle)
@@ -50,13 +53,25 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     e = px * n[0] + py * n[1]
     e -= offset
     t = px * u[0] + py * u[1]
-    sel = (oth >= 0) & (oth < size_other) & (np.abs(e) <= half) & (t >= t0) & (t <= t1)
+    # (In place: the chained expression's four temporaries cost more than its tests.)
+    sel = np.abs(e) <= half
+    sel &= t >= t0
+    sel &= t <= t1
+    if not (start.min() >= 0 and start.max() + m <= size_other):
+        # (Else every column of the grid lies in the frame, the usual case, as its rows'
+        # first and last tell: no test per pixel.)
+        sel &= (oth >= 0) & (oth < size_other)
     oth_s = oth[sel]
     walk_s = np.broadcast_to(k.astype(int)[:, None], oth.shape)[sel]
     ys, xs = (walk_s, oth_s) if steep else (oth_s, walk_s)
     idx = ys * w + xs
     # By flat index: numpy's 2-D fancy indexing costs ~2x (this runs ~6 times per mark).
-    vals = image.ravel()[idx] if image.flags.c_contiguous else image[ys, xs]
+    if not gather:
+        vals = np.empty(0, image.dtype)
+    elif image.flags.c_contiguous:
+        vals = image.ravel()[idx]
+    else:
+        vals = image[ys, xs]
     return vals, e[sel], t[sel], idx
 
 
@@ -74,7 +89,7 @@ def band_pixels(image: np.ndarray, pf: ProfileFit, half: float, reach_px: float 
     """Signed distance e from the fitted line [px] and flat index of the pixels within
     ``half`` of it, ``reach_px`` beyond the measured stretch, in ``image``."""
     _, e, _, idx = _band(image, pf.angle_rad, pf.offset_px,
-                         pf.t_start_px - reach_px, pf.t_end_px + reach_px, half)
+                         pf.t_start_px - reach_px, pf.t_end_px + reach_px, half, gather=False)
     return e, idx
 
 
@@ -94,4 +109,4 @@ def band_indices(image: np.ndarray, cand: MarkCandidate, reach_px: float = 20.0)
     :func:`fit_profile`'s, plus its illumination ring) and ``reach_px`` beyond its ends."""
     half = float(np.clip(2.5 * cand.thickness_px + 8, 10, 40)) + 6.0
     return _band(image, cand.angle_rad, cand.offset_px, cand.t_start_px - reach_px,
-                 cand.t_end_px + reach_px, half)[3]
+                 cand.t_end_px + reach_px, half, gather=False)[3]

@@ -25,6 +25,7 @@ from imaging.candidate import (
 )
 from imaging.compressed import compressed
 from imaging.crossing import double_grooves, fused_crossing
+from imaging.median import median, median_inplace
 
 
 def across(image: np.ndarray, c: MarkCandidate, reach: int, n_along: int, top: float
@@ -133,7 +134,7 @@ def _peak(vals: np.ndarray, e: np.ndarray, dark: bool, half: float, search: floa
         pick = cols & (d > half + 1) & (d <= half + 7)
         if pick.sum() < 2:
             return float(e[k]), 0.0
-        sides.append(float(np.median(prof[pick])))
+        sides.append(float(median_inplace(prof[pick])))  # (a boolean selection: a copy)
     contrast = min(sign * (prof[k] - b) for b in sides)
     bg = max(sides) if dark else min(sides)
     near = (np.abs(e - e[k]) <= half) & cols
@@ -226,7 +227,7 @@ def distinctness(image: np.ndarray, c: MarkCandidate, top: float, reach: float =
     _, contrast = _peak(vals, e, c.dark, half, half + 1, med)
     x, y = e[bg], prof[bg]
     res = y - np.polyval(np.polyfit(x, y, 2), x)
-    spread = 1.4826 * float(np.median(np.abs(res - np.median(res))))
+    spread = 1.4826 * float(median_inplace(np.abs(res - median(res))))
     if spread <= 0:
         return float("inf"), 0.0
     adjacent = np.diff(x) == 1
@@ -380,7 +381,7 @@ def shadow_free(image: np.ndarray, c: MarkCandidate, top: float, reach: float = 
     tt, ee = np.broadcast_arrays(t[:, None] - t.mean(), e[None, :])
     keep = np.isfinite(vals) & (np.abs(ee) > 2 * half + 2)
     y, tt, ee = vals[keep], tt[keep], ee[keep]
-    scale = float(np.median(y))
+    scale = float(median(y))
 
     y_rel = y / scale
     # The solver is given the compressed problem (imaging.compressed: 8 rows, not one per

@@ -18,6 +18,7 @@ from imaging.confirm import across, block_medians
 from imaging.crossing import MIN_CROSSING, crossing_stretch, double_grooves
 from imaging.errors import ImageInputError
 from imaging.groove import ProfileFit, centres_half, profile_and_derivs
+from imaging.median import median, median_inplace
 from imaging.profile import fit_profile
 
 MIN_SEGMENTS = 10
@@ -255,7 +256,7 @@ def _median_profile(image: np.ndarray, o: MarkCandidate, pf: ProfileFit, t0: flo
     for b in np.unique(k):
         v = vals[keep][k == b]
         if v.size >= 3:
-            out[b] = np.median(v)
+            out[b] = median(v)
     return out
 
 
@@ -326,7 +327,7 @@ def _probe_end(image: np.ndarray, pf: ProfileFit, o: MarkCandidate, step: float,
     # scipy.stats, ~0.8 s of CPU per process, for a median of a few hundred slopes.)
     i, j = np.triu_indices(r.size, 1)
     dr = r[j] - r[i]
-    slope = float(np.median((q[j] - q[i])[dr != 0] / dr[dr != 0]))
+    slope = float(median_inplace((q[j] - q[i])[dr != 0] / dr[dr != 0]))
     return True if slope >= RUNS_ON else False if slope < ENDS else None
 
 
@@ -342,7 +343,7 @@ def grooves_beside(image: np.ndarray, pf: ProfileFit, top: float, window: float,
     # relief cancel there; a crossing groove changes slowly).
     d = np.diff(vals, axis=0)
     d = d[np.isfinite(d)]
-    noise = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(2) if d.size else 0.0
+    noise = 1.4826 * float(median_inplace(np.abs(d - median(d)))) / np.sqrt(2) if d.size else 0.0
     sigma = 1.25 * noise / np.sqrt(block_px)
     profs, ts = block_medians(vals, t, block_px)
     seen = []

@@ -35,6 +35,7 @@ from imaging.centres import RING_PX, Centres
 from imaging.detect import MarkCandidate, line_frame
 from imaging.groove import ProfileFit, _profile_table, centres_half
 from imaging.groupsum import GroupSums
+from imaging.median import median, median_inplace
 
 LEVEL_K = 4.5
 """A bin's level this many robust deviations from the surface's trend is disturbed."""
@@ -238,7 +239,7 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     j = np.clip(j, 0, nb - 1)
     # The table groove_extent and the centres built for this groove (the same arguments):
     # a cache hit, not ~1.3 ms of erf per mark.
-    p, _ = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
+    p = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0).profile(e)
     # Per-bin least squares of vals = level + amp p (closed form from the bins' sums).
     bc = GroupSums(j, nb, eager=True)  # (15 sums over the same bins)
     cnt = bc.counts.astype(float)
@@ -262,21 +263,21 @@ def groove_ends(image: np.ndarray, pf: ProfileFit, extent: tuple[float, float],
     # barrel lens at 134 px of its 225: a line.)
     trend = np.polyfit(tb[inside], level[inside], 1)
     dev = level - np.polyval(trend, tb)
-    scale = 1.4826 * float(np.median(np.abs(dev[inside] - np.median(dev[inside]))))
+    scale = 1.4826 * float(median_inplace(np.abs(dev[inside] - median(dev[inside]))))
     # (again without the bins a speck on the groove moves: they tilt the line, and the
     # surface beyond an end reads off by what they moved)
     fit = inside & (np.abs(dev) <= LEVEL_K * max(scale, 1e-12))
     if fit.sum() >= 10:
         trend = np.polyfit(tb[fit], level[fit], 1)
         dev = level - np.polyval(trend, tb)
-        scale = 1.4826 * float(np.median(np.abs(dev[inside] - np.median(dev[inside]))))
+        scale = 1.4826 * float(median_inplace(np.abs(dev[inside] - median(dev[inside]))))
     scale = max(scale, 1e-9 * abs(float(np.polyval(trend, tb[inside]).mean())) + 1e-12)
-    rms_ref = float(np.median(rms[inside]))
+    rms_ref = float(median(rms[inside]))
     disturbed = good & ((np.abs(dev) > LEVEL_K * scale) | (rms > RESID_K * rms_ref))
     disturbed[np.clip(clip_bin, 0, nb - 1)] = True
     amp_s = np.full(nb, np.nan)
     amp_s[good] = median_filter(amp[good], size=5, mode="nearest")
-    ref = float(np.median(amp_s[inside]))
+    ref = float(median(amp_s[inside]))
     deep = good & (amp_s / ref >= 0.5) if ref != 0 else np.zeros(nb, bool)
     # Contrast of the wrong sign (a bright speck on a dark groove's line) or far beyond the
     # groove's (a dark one) is no groove either, even when its level stays near the surface's.

@@ -22,6 +22,7 @@ from scipy.special import erf
 
 from axisbase.interp import interp_uniform
 from imaging.detect import line_frame
+from imaging.median import median, median_inplace
 
 # Gauss–Legendre nodes/weights on a pixel [-1/2, 1/2]: 2 points (exact to cubics) for the
 # shape fit, 3 points (exact to quintics) for the centres, where sub-pixel bias matters.
@@ -103,6 +104,11 @@ class ProfileTable:
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return interp_uniform(e, self.grid, (self.p, self.pe))
+
+    def profile(self, e: np.ndarray) -> np.ndarray:
+        """The profile alone at ``e`` (the first of the call's pair, the same bits: each
+        tabulated function is interpolated on its own), without its slope's pass."""
+        return interp_uniform(e, self.grid, (self.p,))[0]
 
 
 TABLE_ANGLE_STEP = 1e-3
@@ -199,7 +205,7 @@ def _noise_model(mu: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     for sel in _bins(mu, qs):
         if sel.size > NOISE_BIN_MIN:
             mids.append(mu[sel].mean())
-            meds.append(np.median(r[sel] ** 2) / CHI2_1_MEDIAN)
+            meds.append(median_inplace(r[sel] ** 2) / CHI2_1_MEDIAN)
     return _noise_line(np.array(mids), np.array(meds), r)
 
 
@@ -220,7 +226,7 @@ def _noise_line(mids: np.ndarray, meds: np.ndarray, r: np.ndarray) -> tuple[floa
         v1, v0 = np.polyfit(mids, meds, 1)
         if v1 >= 0 and v0 + v1 * mids.min() > 0:
             return float(v0), float(v1)
-    return float(np.median(r**2) / CHI2_1_MEDIAN), 0.0
+    return float(median_inplace(r**2) / CHI2_1_MEDIAN), 0.0
 
 
 def _bins(mu: np.ndarray, qs: np.ndarray) -> list[np.ndarray]:
@@ -302,20 +308,9 @@ def _binned_noise_models(mu: np.ndarray, rs: np.ndarray) -> np.ndarray:
             lo, hi = ends[b], ends[b + 1]
             if hi - lo > NOISE_BIN_MIN:
                 mids.append(np.add.reduce(Mo[lo:hi]) / (hi - lo))  # (np.mean's sum)
-                meds.append(_median(R2[lo:hi]) / CHI2_1_MEDIAN)
+                meds.append(median(R2[lo:hi]) / CHI2_1_MEDIAN)
         out[i] = _noise_line(np.array(mids), np.array(meds), R[j])
     return out
-
-
-def _median(x: np.ndarray) -> float:
-    """np.median of ``x`` (finite values), the same to the bit: its middle value, or the
-    mean of its middle two."""
-    n = x.size
-    h = n // 2
-    if n % 2:
-        return np.partition(x, h)[h]
-    p = np.partition(x, [h - 1, h])
-    return (p[h - 1] + p[h]) / 2
 
 
 def variance_floor(var: np.ndarray, mu: np.ndarray, v0, v1):
@@ -334,7 +329,7 @@ def variance_floor(var: np.ndarray, mu: np.ndarray, v0, v1):
     if not hard.any():
         return lo
     if var.ndim == 1:
-        return max(0.25 * (v0 + v1 * float(np.median(mu))), 1e-9)
+        return max(0.25 * (v0 + v1 * float(median(mu))), 1e-9)
     out = lo.copy()
     v0, v1 = np.broadcast_to(v0, lo.shape), np.broadcast_to(v1, lo.shape)
     for i in np.flatnonzero(hard):

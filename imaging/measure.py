@@ -39,6 +39,7 @@ from imaging.io import JpegTables, clipped_note, full_scale
 from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line, fit_line_only
+from imaging.median import median, median_inplace
 from imaging.oriented import (
     OrientedStripes,
     find_oriented,
@@ -160,15 +161,15 @@ def _usable(cen: Centres, where: str, cand: MarkCandidate,
                               "usable segments along it (blurred away or covered)")
     # Segments whose pixels fit the groove much worse than the typical segment: dust or a
     # crossing scratch. Relative to the median so a misjudged noise level cannot empty it.
-    typical = float(np.median(cen.chi2_red[cen.ok]))
+    typical = float(median(cen.chi2_red[cen.ok]))
     keep = cen.ok & (cen.chi2_red < MISFIT_CHI2 * max(1.0, typical))
     # Segments whose background just beside the groove is disturbed (a dust speck or a
     # scratch in the ring where the illumination slope is read): their centre and their
     # slope regressor are moved by the same speck, which the loop would read as an effect.
     # Uneven light changes the slope smoothly, never by 6 robust deviations at one segment.
     g = cen.cross_slope
-    med = float(np.median(g[keep])) if keep.any() else 0.0
-    mad = 1.4826 * float(np.median(np.abs(g[keep] - med))) if keep.any() else 0.0
+    med = float(median(g[keep])) if keep.any() else 0.0
+    mad = 1.4826 * float(median_inplace(np.abs(g[keep] - med))) if keep.any() else 0.0
     if mad > 0:
         keep &= np.abs(g - med) <= 6 * mad
     if keep.sum() < (need := segments_needed(int(cen.ok.sum()))):

@@ -14,7 +14,6 @@ from collections.abc import Callable
 import numpy as np
 from scipy.ndimage import median_filter
 
-from axisbase.interp import interp_uniform
 from imaging.band import _band, band_indices, band_pixels, unclipped
 from imaging.centres import Centres, sample_centres
 from imaging.detect import MarkCandidate, line_frame, wrap_angle
@@ -30,6 +29,7 @@ from imaging.groove import (
     profile_lazy,
 )
 from imaging.groupsum import GroupSums
+from imaging.median import median, median_inplace
 
 __all__ = ["BAND_FIT_STEPS", "Centres", "ProfileFit", "ProfileTable", "band_indices",
            "band_pixels", "centres_half", "extent_look", "fit_profile", "groove_extent",
@@ -89,8 +89,8 @@ def fit_profile(image: np.ndarray, cand: MarkCandidate, where: str = "image",
                               "unclipped pixels around it")
     tm = 0.5 * (t0 + t1)
     inner = np.abs(e) < 2
-    bg = float(np.median(vals[~inner])) if np.any(~inner) else float(np.median(vals))
-    amp0 = float(np.median(vals[inner]) - bg) if np.any(inner) else 0.0
+    bg = float(median(vals[~inner])) if np.any(~inner) else float(median(vals))
+    amp0 = float(median(vals[inner]) - bg) if np.any(inner) else 0.0
     w0 = max(cand.thickness_px, _half_depth_width(e, vals, bg, amp0), 1.5)
     x0 = np.array([0.0, 0.0, amp0, bg, 0.0, 0.0, w0, 1.0])
     a_ref = cand.angle_rad
@@ -307,9 +307,8 @@ def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
     j -= j.min()
     nb = int(j.max()) + 1
     # The profile alone (the table's call interpolates its slope too, unused here).
-    table = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)
-    (p,) = interp_uniform(e, table.grid, (table.p,))
-    bc = GroupSums(j, nb)  # (5 sums over the same bins)
+    p = _profile_table(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0).profile(e)
+    bc = GroupSums(j, nb, eager=True)  # (5 sums over the same bins: grouped at once)
     cnt = bc.counts
     sp, spp = bc(p), bc(p * p)
     sv, spv = bc(vals), bc(p * vals)
@@ -324,7 +323,7 @@ def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
     sm = np.full(nb, np.nan)
     sm[good] = median_filter(amp[good], size=5, mode="nearest")
     inside = (tb >= pf.t_start_px) & (tb <= pf.t_end_px) & good
-    ref = float(np.median(sm[inside])) if inside.any() else float(pf.contrast_dn)
+    ref = float(median(sm[inside])) if inside.any() else float(pf.contrast_dn)
     if ref == 0:
         return (pf.t_start_px, pf.t_end_px, False, False), 0.0
     deep = np.flatnonzero(good & (sm / ref >= 0.5))
@@ -341,5 +340,6 @@ def _look(image: np.ndarray, pf: ProfileFit, reach_px: float,
         return float(tb[k] + (tb[k_out] - tb[k]) * a / (a - b)) if a != b else float(tb[k])
 
     # (The depth's robust scatter along the groove, relative: the smoothed bins inside.)
-    scatter = 1.4826 * float(np.median(np.abs(sm[inside] / ref - 1.0))) if inside.any() else 0.0
+    scatter = (1.4826 * float(median_inplace(np.abs(sm[inside] / ref - 1.0))) if inside.any()
+               else 0.0)
     return (cross(lo, lo - 1), cross(hi, hi + 1), lo == 0, hi == nb - 1), scatter

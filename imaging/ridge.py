@@ -12,6 +12,8 @@ import functools
 import cv2
 import numpy as np
 
+from imaging.median import median_inplace
+
 # Steger's condition: the extremum across the line, |grad| / |lambda| px from the pixel centre,
 # lies within FLAT px of it (a little over half a pixel, so that a thin line running between
 # two rows of the block-averaged image still marks one of them). Beside a strong step edge (a
@@ -65,28 +67,15 @@ def pixel_noise(img: np.ndarray) -> float:
     return float(np.sqrt(np.pi / 2) * cv2.norm(conv, cv2.NORM_L1) / conv.size / 6)
 
 
-def _median_inplace(d: np.ndarray) -> np.floating:
-    """np.median of the 1-D array ``d``, the same number, reordering ``d``: one selection of
-    the upper middle rank, the lower one the largest value left of it (np.median selects
-    both and the last, ~1.5x the time), their mean by np.mean as np.median's."""
-    if np.isnan(d).any():
-        return np.median(d)
-    h = d.size // 2
-    d.partition(h)
-    if d.size % 2:
-        return d[h]
-    return np.mean(np.array([d[:h].max(), d[h]]))
-
-
 def median_abs_deviation(a: np.ndarray) -> float:
     """``float(np.median(np.abs(a - np.median(a))))`` (unscaled MAD), the same number in
     ~0.6x the time (one copy of ``a``, two selections; the coarse search's threshold takes
     it twice per scale of a 5 MP frame's ridge response)."""
     d = a.flatten()
-    m = _median_inplace(d.copy())
+    m = median_inplace(d.copy())
     np.subtract(d, m, out=d)
     np.abs(d, out=d)
-    return float(_median_inplace(d))
+    return float(median_inplace(d))
 
 
 @functools.cache

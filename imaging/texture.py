@@ -26,6 +26,7 @@ import numpy as np
 from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from imaging.groupsum import GroupSums
+from imaging.median import median, median_inplace
 from imaging.ring import ring_geometry, ring_slope  # the ring's slope, as for the mark
 
 ALPHA = 1e-3
@@ -217,12 +218,12 @@ def texture_model(image: np.ndarray, band: tuple[np.ndarray, np.ndarray],
     clean = []
     for z, x, _, valid in reps:
         for y in (z, x):  # the ring's slope too: dust beside the band moves both
-            med = np.median(y[valid])
-            mad = 1.4826 * np.median(np.abs(y[valid] - med))
+            med = median(y[valid])
+            mad = 1.4826 * median_inplace(np.abs(y[valid] - med))
             valid = valid & (np.abs(y - med) <= 6 * max(mad, 1e-12))
         clean.append((np.where(valid, z, 0.0), np.where(valid, x, 0.0), valid))
     var0 = np.array([np.sum(z**2) / v.sum() for z, _, v in clean])
-    keep = var0 <= 2.0 * np.median(var0)
+    keep = var0 <= 2.0 * median(var0)
     clean = [c for c, kp in zip(clean, keep, strict=True) if kp]
     z_all = np.concatenate([z for z, _, _ in clean])
     x_all = np.concatenate([x for _, x, _ in clean])
