@@ -1,0 +1,140 @@
+"""What a table whose speed follows its angle makes of the counts' difference from the pulse
+times, and what is left for the counters.
+
+On a table whose speed ripples with its angle the pulse-time fractions are not the angles'
+fractions: interval k lasts the integral of 1 / speed over it. With 1 / speed = (1 + x(θ)) /
+w, x a sum of the revolution's harmonics, the count angles minus the pulse-time angles are
+
+    d_k = -∫_k x dθ - κ ∫_k (x² - <x²>) dθ,
+
+the integrals over each face interval *as the counts measure it* (its faces are not 90° apart:
+user 6's polygon deviates by up to 356″, and a 1 % once-a-revolution ripple over those faces
+puts 1.3–1.6″ into the counters' alternating pattern, which the harmonic projection, blind to
+the faces' spacing, charged to the counters). The second order's coefficient κ depends on
+the ripple's kind: 1 for a speed sinusoidal in the angle (1 / (1 + ε cos θ)), 2 for an angle
+sinusoidal in time (θ = wt + ε sin wt); the model takes the middle, 1.5, and carries half of
+that order's alternating part as the model's own spread (:attr:`RippleFit.spread_rad`).
+
+With n faces, the harmonics below n / 2 take n - 2 of the difference's n - 1 degrees of
+freedom: for an even n what is left is the counters' alternating pattern (+, -, +, ...), which
+a counter losing or gaining counts at its switches makes — and which the ripple's own
+harmonic n / 2 makes too, beyond a once-a-revolution ripple's second order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+KAPPA = 1.5
+"""The second order's coefficient the model takes: between a speed sinusoidal in the angle
+(1) and an angle sinusoidal in time (2); half their difference is the model's spread."""
+ITERATIONS = 6
+"""Fixed-point passes of the second order (its size is ε² of the first: converged in 2-3)."""
+POINTS = 65
+"""Points of the trapezoid over each face interval for the second order (its integrand is a
+few harmonics: exact to ~1e-5 of that order, far below the first's)."""
+
+
+@dataclass(frozen=True)
+class RippleFit:
+    """The ripple model's fit of the counts-minus-pulse-time difference.
+
+    Attributes
+    ----------
+    harmonics : ndarray
+        The fitted cos/sin coefficients of x (1 / speed relative to its mean, minus 1) for
+        harmonics 1 ... (n - 1) // 2, interleaved (cos 1, sin 1, cos 2, ...); unit 1.
+    residual_rad : ndarray
+        What the model leaves of the difference [rad] (the counters' pattern with an even n).
+    counters_rad : float
+        The residual's alternating amplitude [rad] (0 with an odd number of faces).
+    counters_u_rad : float
+        Its standard uncertainty from the difference's covariance [rad].
+    spread_rad : float
+        The model's own spread in that amplitude [rad]: half the second order's alternating
+        part (κ from 1 to 2).
+    """
+
+    harmonics: np.ndarray
+    residual_rad: np.ndarray
+    counters_rad: float
+    counters_u_rad: float
+    spread_rad: float
+
+    @property
+    def amplitude(self) -> float:
+        """The once-a-revolution ripple's relative amplitude ε (of 1 / speed); unit 1."""
+        return float(np.hypot(*self.harmonics[:2])) if len(self.harmonics) >= 2 else 0.0
+
+    def covered(self, sigmas: float = 3.0) -> bool:
+        """Whether the counters' alternating part is within what the ripple model allows:
+        its spread plus ``sigmas`` standard uncertainties."""
+        return abs(self.counters_rad) <= self.spread_rad + sigmas * self.counters_u_rad
+
+    def to_dict(self) -> dict:
+        return {"harmonics": self.harmonics.tolist(),
+                "residual_rad": self.residual_rad.tolist(),
+                "counters_rad": self.counters_rad, "counters_u_rad": self.counters_u_rad,
+                "spread_rad": self.spread_rad}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> RippleFit:
+        return cls(np.asarray(d["harmonics"], float), np.asarray(d["residual_rad"], float),
+                   float(d["counters_rad"]), float(d["counters_u_rad"]),
+                   float(d["spread_rad"]))
+
+
+def fit_ripple(angles_rad: np.ndarray, diff_rad: np.ndarray,
+               diff_cov: np.ndarray | None = None) -> RippleFit:
+    """Fit the ripple model to one direction's counts-minus-pulse-time difference.
+
+    Parameters
+    ----------
+    angles_rad : ndarray, shape (n,)
+        The count angles [rad] (face k to face k + 1, from the reference face; sum 2π): where
+        the faces are on the table.
+    diff_rad : ndarray, shape (n,)
+        The mean difference, count angles minus pulse-time angles [rad].
+    diff_cov : ndarray, shape (n, n), optional
+        Its covariance [rad²] (None: no uncertainty, ``counters_u_rad`` 0).
+
+    Returns
+    -------
+    RippleFit
+        The harmonics, the residual, the counters' alternating part, its u and the model's
+        spread.
+    """
+    a = np.asarray(angles_rad, float)
+    d = np.asarray(diff_rad, float)
+    n = len(d)
+    th = np.concatenate([[0.0], np.cumsum(a)])
+    grid = np.linspace(th[:-1], th[1:], POINTS, axis=1)  # (n, POINTS)
+    ms = np.arange(1, (n - 1) // 2 + 1)
+    # -∫ cos mθ and -∫ sin mθ over each interval: the first order, linear in the harmonics
+    cols = np.column_stack([c for m in ms for c in
+                            (-(np.sin(m * th[1:]) - np.sin(m * th[:-1])) / m,
+                             (np.cos(m * th[1:]) - np.cos(m * th[:-1])) / m)])
+
+    def second(p: np.ndarray) -> np.ndarray:
+        x = sum(p[2 * i] * np.cos(m * grid) + p[2 * i + 1] * np.sin(m * grid)
+                for i, m in enumerate(ms))
+        x2 = x ** 2
+        per = np.sum((x2[:, 1:] + x2[:, :-1]) / 2 * np.diff(grid, axis=1), axis=1)
+        return per - a * per.sum() / (2 * np.pi)  # (the mean's share: fractions sum to 1)
+
+    if len(ms) == 0:
+        p, q = np.zeros(0), np.zeros(n)
+    else:
+        p = np.linalg.lstsq(cols, d, rcond=None)[0]
+        for _ in range(ITERATIONS):
+            p = np.linalg.lstsq(cols, d + KAPPA * second(p), rcond=None)[0]
+        q = second(p)
+    resid = d - (cols @ p if len(ms) else 0.0) + KAPPA * q
+    if n % 2:
+        return RippleFit(p, resid, 0.0, 0.0, 0.0)
+    pat = (-1.0) ** np.arange(n)
+    u = 0.0 if diff_cov is None else float(np.sqrt(max(pat @ diff_cov @ pat, 0.0))) / n
+    return RippleFit(p, resid, float(np.mean(resid * pat)), u,
+                     0.5 * abs(float(np.mean(q * pat))))
