@@ -45,7 +45,7 @@ class RippleFit:
     ----------
     harmonics : ndarray
         The fitted cos/sin coefficients of x (1 / speed relative to its mean, minus 1) for
-        harmonics 1 ... (n - 1) // 2, interleaved (cos 1, sin 1, cos 2, ...); unit 1.
+        harmonics 1 ... (n - 1) // 2, interleaved (cos 1, sin 1, cos 2, ...); dimensionless.
     residual_rad : ndarray
         What the model leaves of the difference [rad] (the counters' pattern with an even n).
     counters_rad : float
@@ -65,7 +65,7 @@ class RippleFit:
 
     @property
     def amplitude(self) -> float:
-        """The once-a-revolution ripple's relative amplitude ε (of 1 / speed); unit 1."""
+        """The once-a-revolution ripple's relative amplitude ε (of 1 / speed), dimensionless."""
         return float(np.hypot(*self.harmonics[:2])) if len(self.harmonics) >= 2 else 0.0
 
     def covered(self, sigmas: float = 3.0) -> bool:
