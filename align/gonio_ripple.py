@@ -10,15 +10,16 @@ w, x a sum of the revolution's harmonics, the count angles minus the pulse-time 
 the integrals over each face interval *as the counts measure it* (its faces are not 90° apart:
 user 6's polygon deviates by up to 356″, and a 1 % once-a-revolution ripple over those faces
 puts 1.3–1.6″ into the counters' alternating pattern, which the harmonic projection, blind to
-the faces' spacing, charged to the counters). The second order's coefficient κ depends on
-the ripple's kind: 1 for a speed sinusoidal in the angle (1 / (1 + ε cos θ)), 2 for an angle
-sinusoidal in time (θ = wt + ε sin wt); the model takes the middle, 1.5, and carries half of
-that order's alternating part as the model's own spread (:attr:`RippleFit.spread_rad`).
+the faces' spacing, charged to the counters). The first order is determined by the data and
+modelled; the second order's coefficient κ is not: it depends on the ripple's kind — 0 for a
+1 / speed sinusoidal in the angle, 1 for a speed sinusoidal in the angle (1 / (1 + ε cos θ)),
+2 for an angle sinusoidal in time (θ = wt + ε sin wt) — and what it puts in the counters'
+pattern no log of n faces tells from a counter.
 
 With n faces, the harmonics below n / 2 take n - 2 of the difference's n - 1 degrees of
 freedom: for an even n what is left is the counters' alternating pattern (+, -, +, ...), which
-a counter losing or gaining counts at its switches makes — and which the ripple's own
-harmonic n / 2 makes too, beyond a once-a-revolution ripple's second order.
+a counter losing or gaining counts at its switches makes — and which the ripple's second
+order makes too (:attr:`RippleFit.second_rad`, κ from 0 to :data:`KAPPA_MAX`).
 """
 
 from __future__ import annotations
@@ -27,11 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-KAPPA = 1.5
-"""The second order's coefficient the model takes: between a speed sinusoidal in the angle
-(1) and an angle sinusoidal in time (2); half their difference is the model's spread."""
-ITERATIONS = 6
-"""Fixed-point passes of the second order (its size is ε² of the first: converged in 2-3)."""
+KAPPA_MAX = 2.0
+"""The largest second-order coefficient taken as a once-a-revolution ripple's: an angle
+sinusoidal in time (0: 1 / speed sinusoidal in the angle; 1: the speed)."""
 POINTS = 65
 """Points of the trapezoid over each face interval for the second order (its integrand is a
 few harmonics: exact to ~1e-5 of that order, far below the first's)."""
@@ -47,21 +46,22 @@ class RippleFit:
         The fitted cos/sin coefficients of x (1 / speed relative to its mean, minus 1) for
         harmonics 1 ... (n - 1) // 2, interleaved (cos 1, sin 1, cos 2, ...); dimensionless.
     residual_rad : ndarray
-        What the model leaves of the difference [rad] (the counters' pattern with an even n).
+        What the first order leaves of the difference [rad] (the counters' pattern with an
+        even n).
     counters_rad : float
         The residual's alternating amplitude [rad] (0 with an odd number of faces).
     counters_u_rad : float
         Its standard uncertainty from the difference's covariance [rad].
-    spread_rad : float
-        The model's own spread in that amplitude [rad]: half the second order's alternating
-        part (κ from 1 to 2).
+    second_rad : float
+        What the ripple's second order at κ = :data:`KAPPA_MAX` puts in that amplitude [rad]
+        (signed; a κ from 0 to the max puts from 0 to this).
     """
 
     harmonics: np.ndarray
     residual_rad: np.ndarray
     counters_rad: float
     counters_u_rad: float
-    spread_rad: float
+    second_rad: float
 
     @property
     def amplitude(self) -> float:
@@ -69,21 +69,24 @@ class RippleFit:
         return float(np.hypot(*self.harmonics[:2])) if len(self.harmonics) >= 2 else 0.0
 
     def covered(self, sigmas: float = 3.0) -> bool:
-        """Whether the counters' alternating part is within what the ripple model allows:
-        its spread plus ``sigmas`` standard uncertainties."""
-        return abs(self.counters_rad) <= self.spread_rad + sigmas * self.counters_u_rad
+        """Whether a ripple's second order (κ from 0 to :data:`KAPPA_MAX`) explains the
+        counters' alternating part within ``sigmas`` standard uncertainties and the third
+        order (ε times the second: 0.002″ of 18″ at ε = 1 % where κ is 2)."""
+        ends = (self.counters_rad, self.counters_rad - self.second_rad)
+        tol = sigmas * self.counters_u_rad + self.amplitude * abs(self.second_rad)
+        return min(ends) - tol <= 0.0 <= max(ends) + tol
 
     def to_dict(self) -> dict:
         return {"harmonics": self.harmonics.tolist(),
                 "residual_rad": self.residual_rad.tolist(),
                 "counters_rad": self.counters_rad, "counters_u_rad": self.counters_u_rad,
-                "spread_rad": self.spread_rad}
+                "second_rad": self.second_rad}
 
     @classmethod
     def from_dict(cls, d: dict) -> RippleFit:
         return cls(np.asarray(d["harmonics"], float), np.asarray(d["residual_rad"], float),
                    float(d["counters_rad"]), float(d["counters_u_rad"]),
-                   float(d["spread_rad"]))
+                   float(d["second_rad"]))
 
 
 def fit_ripple(angles_rad: np.ndarray, diff_rad: np.ndarray,
@@ -103,8 +106,8 @@ def fit_ripple(angles_rad: np.ndarray, diff_rad: np.ndarray,
     Returns
     -------
     RippleFit
-        The harmonics, the residual, the counters' alternating part, its u and the model's
-        spread.
+        The harmonics, the residual, the counters' alternating part, its u and what the
+        second order may put there.
     """
     a = np.asarray(angles_rad, float)
     d = np.asarray(diff_rad, float)
@@ -128,13 +131,12 @@ def fit_ripple(angles_rad: np.ndarray, diff_rad: np.ndarray,
         p, q = np.zeros(0), np.zeros(n)
     else:
         p = np.linalg.lstsq(cols, d, rcond=None)[0]
-        for _ in range(ITERATIONS):
-            p = np.linalg.lstsq(cols, d + KAPPA * second(p), rcond=None)[0]
         q = second(p)
-    resid = d - (cols @ p if len(ms) else 0.0) + KAPPA * q
+    resid = d - (cols @ p if len(ms) else 0.0)
     if n % 2:
         return RippleFit(p, resid, 0.0, 0.0, 0.0)
     pat = (-1.0) ** np.arange(n)
     u = 0.0 if diff_cov is None else float(np.sqrt(max(pat @ diff_cov @ pat, 0.0))) / n
+    # d = first order - κ q: the residual's pattern is the counters' plus -κ q's
     return RippleFit(p, resid, float(np.mean(resid * pat)), u,
-                     0.5 * abs(float(np.mean(q * pat))))
+                     -KAPPA_MAX * float(np.mean(q * pat)))

@@ -137,8 +137,8 @@ def counters_part(run: GonioRun, ta: TimingAngles) -> RippleFit:
     The harmonic projection on +, -, +, ... used before, blind to the faces' spacing, charged
     to the counters what a once-a-revolution ripple makes over faces that are not equally
     spaced: 1.3-1.6″ on user 6's 1 % ripple and 356″ polygon (u 0.094″ -> 0.77″ for sound
-    counters); the model leaves 0.03-0.06″ there (within its noise, ~1.1″ by the diagonal,
-    less by the covariance)."""
+    counters). What the first order leaves there is the counters' part: a counter's, or the
+    ripple's second order, which one log does not tell apart."""
     return fit_ripple(run.angles.angles_rad, ta.diff_rad, ta.diff_cov)
 
 
@@ -159,8 +159,8 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
     correlated along the difference's own pattern (its sum is zero: the closure is kept); it
     also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
     bias per second of latency). A difference beyond that pattern is a speed that follows
-    the angle: the ripple is modelled over the faces (:func:`counters_part`) and what it
-    leaves in the counters' pattern, with the model's spread, is carried; and the
+    the angle: the ripple is modelled over the faces (:func:`counters_part`) and what its
+    first order leaves in the counters' pattern is carried; and the
     latency's bias has no bound in one direction's log: a bound the user declares
     (``latency_max_s``, from the autocollimator's specification; 0: no latency, no term) is
     always carried in u (with the counters' pattern's part), however wide; undeclared,
@@ -169,9 +169,10 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
 
     Counters the user declares sound (``counters_sound``: their dead time verified) carry no
     counters' part: the whole difference is then the table's speed, and the ripple model must
-    explain it — what it leaves in the counters' pattern within its spread and 3 u
-    (:meth:`align.gonio_ripple.RippleFit.covered`); beyond, the result is not ok (a counter
-    losing counts after all, or a ripple n / 2 times a revolution the model does not have).
+    explain it — what the first order leaves in the counters' pattern must be what its second
+    order can put there, within 3 u (:meth:`align.gonio_ripple.RippleFit.covered`); beyond,
+    the result is not ok (a counter losing counts after all, or a ripple n / 2 times a
+    revolution the model does not have).
 
     Parameters
     ----------
@@ -204,8 +205,8 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
     if counters_sound or p_rest < alpha:
         rf = counters_part(run, ta)
         left = (f"the ripple modelled over the faces leaves {rf.counters_rad * arcsec:.3g} ± "
-                f"{rf.counters_u_rad * arcsec:.2g}″ in the counters' pattern (the model's "
-                f"spread {rf.spread_rad * arcsec:.2g}″)")
+                f"{rf.counters_u_rad * arcsec:.2g}″ in the counters' pattern (its second order "
+                f"puts 0 to {rf.second_rad * arcsec:.2g}″ there)")
         if counters_sound and not rf.covered():
             why = (f"{head} — {COUNTERS_SOUND} (--counters-sound), but {left}, beyond what "
                    "the table's speed explains: a counter losing or gaining counts at its "
@@ -215,7 +216,7 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
                            problems=(*run.problems, why))
         pat = (-1.0) ** np.arange(len(d)) if len(d) % 2 == 0 else np.zeros(len(d))
         counters = (np.zeros(len(d)) if counters_sound else
-                    pat * (abs(rf.counters_rad) + rf.spread_rad))
+                    pat * abs(rf.counters_rad))
         bound = LATENCY_BOUND_S if latency_max_s is None else latency_max_s
         bias = bound * sens  # each angle's bias at the latency bound [rad]
         cause = (f"{head} — the table's speed follows its angle (a ripple of "
