@@ -7,7 +7,10 @@ beyond noise in one direction's log (a counter losing counts, or a table whose s
 to its angle, where any autocollimator latency biases the angles) are carried in its u as a
 Type B term (with, on a table whose speed follows its angle, a latency up to the bound the
 user declares, always carried in u; undeclared, up to :data:`LATENCY_BOUND_S`, or the result
-is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
+is not ok where that bound's bias exceeds u: :func:`bound_disagreement`). The counters' part
+is what a ripple's first order, modelled over the faces (:mod:`align.gonio_ripple`), leaves in
+their alternating pattern; counters the user declares sound carry none, and the result is not
+ok where a ripple's second order does not explain that pattern.
 """
 
 from __future__ import annotations
@@ -257,7 +260,7 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
            f"log cannot tell which: u carries the difference (Type B, u "
            f"{float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
            f"{float(np.max(widened.u_rad)) * arcsec:.3g}″; covers {covered}); check the "
-           "counters' dead time, or declare them sound (--counters-sound)")
+           "counters' dead time")
     return replace(run, angles=widened, notes=(*run.notes, why), warnings=(*run.warnings, why))
 
 
