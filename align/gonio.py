@@ -30,7 +30,7 @@ from align.gonio_earth import declared_earth_angles
 from align.gonio_latency import apply_direction_model, latency_model
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
-from align.gonio_timing import LATENCY, bound_disagreement, with_timing
+from align.gonio_timing import COUNTERS_SOUND, LATENCY, bound_disagreement, with_timing
 from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
@@ -215,7 +215,9 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled",
-                 *([fitted] if fitted else [])]
+                 *([fitted] if fitted else []),
+                 *([f"{COUNTERS_SOUND}: unused with two directions (their reversal check "
+                    "judges the counts)"] if counters_sound else [])]
         # (both directions: the latency bias cancels, its one-direction warning does not hold;
         # so does the Earth rate's share a log without times cannot remove)
         warns = (*(w for w in fwd.warnings if not w.startswith(ONE_DIRECTION)),

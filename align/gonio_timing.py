@@ -128,7 +128,7 @@ def beyond_counters(ta: TimingAngles) -> tuple[np.ndarray, float]:
     return rest, float(chdtrc(dof, chi2)) if dof > 0 else 1.0
 
 
-COUNTERS_SOUND = "counters declared sound"
+COUNTERS_SOUND = "counters declared sound (--counters-sound, or counters_sound in [goniometer])"
 """How the note begins that states the user's declaration that the counters lose no counts."""
 
 
@@ -193,7 +193,7 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
     if ta is None:
         if not counters_sound:
             return run
-        note = (f"{COUNTERS_SOUND} (--counters-sound): the counts and the pulse times agree "
+        note = (f"{COUNTERS_SOUND}: the counts and the pulse times agree "
                 "within noise or do not test them; nothing to carry for the counters")
         return replace(run, notes=(*run.notes, note))
     counts, dt, _ = kept_table(run.summary)
@@ -211,7 +211,7 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
                 f"{rf.counters_u_rad * arcsec:.2g}″ in the counters' pattern (its second order "
                 f"puts 0 to {rf.second_rad * arcsec:.2g}″ there)")
         if counters_sound and not rf.covered():
-            why = (f"{head} — {COUNTERS_SOUND} (--counters-sound), but {left}, beyond what "
+            why = (f"{head} — {COUNTERS_SOUND}, but {left}, beyond what "
                    "the table's speed explains: a counter losing or gaining counts at its "
                    "switches, or a ripple the model does not have (n/2 times a revolution): "
                    "NOT ok; check the counters' dead time, or do not declare them sound")
@@ -239,7 +239,7 @@ def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None 
         latency = (f"at a latency up to {bound * 1e6:g} µs ({said}) at most "
                    f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u"
                    if bound > 0 else "no latency (declared 0)")
-        part = (f"; {COUNTERS_SOUND} (--counters-sound): no counters' part" if counters_sound
+        part = (f"; {COUNTERS_SOUND}: no counters' part" if counters_sound
                 else ", with the part a counter could make" if np.any(counters) else "")
         why = (f"{cause}: {latency}{part} (Type B, u "
                f"{float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
