@@ -30,7 +30,7 @@ from align.gonio_earth import declared_earth_angles
 from align.gonio_latency import apply_direction_model, latency_model
 from align.gonio_loop import EARTH, latitude_from_earth_rate, loop_gonio, plausible_earth_rate
 from align.gonio_run import GonioRun
-from align.gonio_timing import LATENCY, bound_disagreement, with_timing
+from align.gonio_timing import COUNTERS_SOUND, LATENCY, bound_disagreement, with_timing
 from axisbase.console import captured_warnings
 from axisbase.errors import InputError
 from axisbase.units import DEG
@@ -81,7 +81,8 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                 latitude_range_rad: tuple[float, float] | None = None,
                 on_bytes: Callable[[int], None] | None = None,
                 time_unit: str | None = None,
-                latency_max_s: float | None = None) -> GonioRun:
+                latency_max_s: float | None = None,
+                counters_sound: bool = False) -> GonioRun:
     """Face angles of a log, from one pass over it.
 
     With times, the Earth rate is removed from the latitude when given, else by the loop
@@ -134,6 +135,13 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
         up to 1 ms is carried where its bias stays within u, else the result is not ok
         (:func:`align.gonio_timing.bound_disagreement`). Unused with ``reverse_log`` (the
         two directions cancel a latency).
+    counters_sound : bool
+        The user declares the counters verified (``--counters-sound``, the session's
+        ``counters_sound``: their dead time measured, no counts lost or gained at their
+        switches). One direction whose counts and pulse times disagree then carries no
+        counters' part in u, and is not ok where the table's speed does not explain the
+        disagreement (:func:`align.gonio_timing.bound_disagreement`). Stated in the result
+        (``counters_sound``).
 
     Returns
     -------
@@ -182,6 +190,10 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
     """
     _check_latitudes(latitude_rad, latitude_range_rad)
     _check_latency(latency_max_s)
+    if not isinstance(counters_sound, bool | np.bool_):
+        raise InputError(f"measure_log counters_sound = {counters_sound!r}: true or false "
+                         "(the counters verified sound)")
+    counters_sound = bool(counters_sound)
     if reverse_log is not None:
         # Without the latitude the mean of the two directions cancels the Earth rate itself
         # (it flips sign with the direction): no loop estimate is applied to either run.
@@ -203,7 +215,9 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                  f"both directions combined: the direction-dependent part is "
                  f"{'significant' if term.p_value < alpha else 'not significant'} "
                  f"(chi2 {term.chi2:.1f} / {term.dof}, p {term.p_value:.2g}) and cancelled",
-                 *([fitted] if fitted else [])]
+                 *([fitted] if fitted else []),
+                 *([f"{COUNTERS_SOUND}: unused with two directions (their reversal check "
+                    "judges the counts)"] if counters_sound else [])]
         # (both directions: the latency bias cancels, its one-direction warning does not hold;
         # so does the Earth rate's share a log without times cannot remove)
         warns = (*(w for w in fwd.warnings if not w.startswith(ONE_DIRECTION)),
@@ -211,10 +225,11 @@ def measure_log(path: str | Path | object, n_faces: int, latitude_rad: float | N
                    if not w.startswith(ONE_DIRECTION)))
         return GonioRun(fwd.summary, comb, fwd.loop, tuple(notes), fwd.earth_rate_applied,
                         rev, term, fwd.timing, fwd.timing_used and rev.timing_used,
-                        tuple(warns))
-    return _measured(path, n_faces, latitude_rad, direction, alpha, apply_loop, steady_table,
-                     columns, latitude_range_rad, on_bytes, time_unit, one_direction=True,
-                     latency_max_s=latency_max_s)
+                        tuple(warns), counters_sound=counters_sound)
+    run = _measured(path, n_faces, latitude_rad, direction, alpha, apply_loop, steady_table,
+                    columns, latitude_range_rad, on_bytes, time_unit, one_direction=True,
+                    latency_max_s=latency_max_s, counters_sound=counters_sound)
+    return replace(run, counters_sound=counters_sound)
 
 
 def _check_latency(latency_max_s: float | None) -> None:
@@ -232,7 +247,8 @@ def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | Non
               columns: Mapping[str, str] | None,
               latitude_range_rad: tuple[float, float] | None,
               on_bytes: Callable[[int], None] | None, time_unit: str | None, *,
-              one_direction: bool, latency_max_s: float | None = None) -> GonioRun:
+              one_direction: bool, latency_max_s: float | None = None,
+              counters_sound: bool = False) -> GonioRun:
     """One log's run with the reader's warnings; ``one_direction``: the result stands alone
     (not one of a pair), so its counts' disagreement with its pulse times is carried in u
     (two directions cancel a latency, and the reversal check judges what is left)."""
@@ -240,7 +256,7 @@ def _measured(path: str | Path | object, n_faces: int, latitude_rad: float | Non
         run = _one_direction(path, n_faces, latitude_rad, direction, alpha, apply_loop,
                              steady_table, columns, latitude_range_rad, on_bytes, time_unit)
     if one_direction:
-        run = bound_disagreement(run, alpha, latency_max_s)
+        run = bound_disagreement(run, alpha, latency_max_s, counters_sound)
     return replace(run, warnings=(*dict.fromkeys(logged), *run.warnings))  # warnings too
 
 

@@ -52,6 +52,9 @@ class GonioRun:
     problems : tuple of str
         Why the angles cannot be trusted: a term u does not cover (a log without times on a
         table that may not be steady); the result is then not ok (exit 2); unit —.
+    counters_sound : bool
+        Whether the user declared the counters verified (no counts lost or gained at their
+        switches: no counters' part in u); unit —.
     """
 
     summary: LogSummary
@@ -65,6 +68,7 @@ class GonioRun:
     timing_used: bool = False
     warnings: tuple[str, ...] = ()
     problems: tuple[str, ...] = ()
+    counters_sound: bool = False
 
     def to_dict(self, faces: Sequence[str], nominal: np.ndarray | None = None) -> dict:
         """The run as JSON (the contract of ``align gonio``, also a session's stage);
@@ -89,6 +93,7 @@ class GonioRun:
               "allan": {"tau_revolutions": fa.allan_tau_rev.tolist(),
                         "adev_arcsec": (fa.allan_dev_rad * arcsec).tolist()},
               "angles_source": "pulse times (steady table)" if self.timing_used else "counts",
+              "counters_sound": self.counters_sound,
               "type_b_terms_arcsec": {k: (v * arcsec).tolist()
                                       for k, v in fa.type_b_terms.items()},
               "faults": {"sigma_counts": summary.sigma_counts,

@@ -7,7 +7,10 @@ beyond noise in one direction's log (a counter losing counts, or a table whose s
 to its angle, where any autocollimator latency biases the angles) are carried in its u as a
 Type B term (with, on a table whose speed follows its angle, a latency up to the bound the
 user declares, always carried in u; undeclared, up to :data:`LATENCY_BOUND_S`, or the result
-is not ok where that bound's bias exceeds u: :func:`bound_disagreement`).
+is not ok where that bound's bias exceeds u: :func:`bound_disagreement`). The counters' part
+is what a ripple's first order, modelled over the faces (:mod:`align.gonio_ripple`), leaves in
+their alternating pattern; counters the user declares sound carry none, and the result is not
+ok where a ripple's second order does not explain that pattern.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from align.gonio_ripple import RippleFit, fit_ripple
 from goniometry import kept_table
 from goniometry.timing import timing_angles
 
@@ -124,25 +128,25 @@ def beyond_counters(ta: TimingAngles) -> tuple[np.ndarray, float]:
     return rest, float(chdtrc(dof, chi2)) if dof > 0 else 1.0
 
 
-def counters_part(d: np.ndarray) -> np.ndarray:
-    """The counters' alternating pattern in a difference ``d`` [rad] dominated by a speed that
-    follows the angle: its n/2 harmonic (the unweighted projection on +, -, +, ...; zero with
-    an odd number of faces, where no counter makes a pattern).
-
-    A ripple's second order puts some of that harmonic in the difference, which no log can
-    tell from a counter. The noise-weighted fit of :func:`beyond_counters` (the right test
-    when noise is all there is) leaks the ripple's other harmonics, thousands of times the
-    noise, into it through the unequal weights: 566″ against the harmonic's 42″ on a 2 %
-    ripple (user 17's log, seed 0), a u of 327″ where 24″ is the pattern's."""
-    n = len(d)
-    if n % 2:
-        return np.zeros(n)
-    pat = (-1.0) ** np.arange(n)
-    return pat * float(np.mean(d * pat))
+COUNTERS_SOUND = "counters declared sound (--counters-sound, or counters_sound in [goniometer])"
+"""How the note begins that states the user's declaration that the counters lose no counts."""
 
 
-def bound_disagreement(run: GonioRun, alpha: float,
-                       latency_max_s: float | None = None) -> GonioRun:
+def counters_part(run: GonioRun, ta: TimingAngles) -> RippleFit:
+    """What a table whose speed follows its angle leaves of the counts' difference from the
+    pulse-time angles in the counters' alternating pattern (:func:`align.gonio_ripple.
+    fit_ripple`, over the faces where the counts put them).
+
+    The harmonic projection on +, -, +, ... used before, blind to the faces' spacing, charged
+    to the counters what a once-a-revolution ripple makes over faces that are not equally
+    spaced: 1.3-1.6″ on user 6's 1 % ripple and 356″ polygon (u 0.094″ -> 0.77″ for sound
+    counters). What the first order leaves there is the counters' part: a counter's, or the
+    ripple's second order, which one log does not tell apart."""
+    return fit_ripple(run.angles.angles_rad, ta.diff_rad, ta.diff_cov)
+
+
+def bound_disagreement(run: GonioRun, alpha: float, latency_max_s: float | None = None,
+                       counters_sound: bool = False) -> GonioRun:
     """One direction's result when its counts and pulse times disagree beyond noise: the
     difference carried in u (Type B, :data:`DISAGREEMENT`) when a counter could make it, or
     the result not ok when the table's speed follows its angle; a warning names the causes.
@@ -158,12 +162,20 @@ def bound_disagreement(run: GonioRun, alpha: float,
     correlated along the difference's own pattern (its sum is zero: the closure is kept); it
     also covers a latency on whatever ripple the difference allows up to |d_k / s_k| (s: the
     bias per second of latency). A difference beyond that pattern is a speed that follows
-    the angle (its counters' part, :func:`counters_part`, is still carried), and the
+    the angle: the ripple is modelled over the faces (:func:`counters_part`) and what its
+    first order leaves in the counters' pattern is carried; and the
     latency's bias has no bound in one direction's log: a bound the user declares
     (``latency_max_s``, from the autocollimator's specification; 0: no latency, no term) is
     always carried in u (with the counters' pattern's part), however wide; undeclared,
     up to :data:`LATENCY_BOUND_S` it is carried in u where it stays within u, and beyond u the
     result is not ok (its u left as it is). A clean log has neither.
+
+    Counters the user declares sound (``counters_sound``: their dead time verified) carry no
+    counters' part: the whole difference is then the table's speed, and the ripple model must
+    explain it — what the first order leaves in the counters' pattern must be what its second
+    order can put there, within 3 u (:meth:`align.gonio_ripple.RippleFit.covered`); beyond,
+    the result is not ok (a counter losing counts after all, or a ripple n / 2 times a
+    revolution the model does not have).
 
     Parameters
     ----------
@@ -173,44 +185,64 @@ def bound_disagreement(run: GonioRun, alpha: float,
         Significance level of the disagreement's tests.
     latency_max_s : float, optional
         The autocollimator's latency bound [s] the user declares (>= 0); None: undeclared.
+    counters_sound : bool
+        The user declares the counters lose and gain no counts at their switches.
     """
     ta = disagreement(run, alpha)
+    arcsec = np.rad2deg(1) * 3600
     if ta is None:
-        return run
+        if not counters_sound:
+            return run
+        note = (f"{COUNTERS_SOUND}: the counts and the pulse times agree "
+                "within noise or do not test them; nothing to carry for the counters")
+        return replace(run, notes=(*run.notes, note))
     counts, dt, _ = kept_table(run.summary)
     ok = np.all(np.isfinite(dt), axis=1) & np.all(dt > 0, axis=1)
     sens = latency_sensitivity(counts[ok], dt[ok])
     d = ta.diff_rad
-    arcsec = np.rad2deg(1) * 3600
     rest, p_rest = beyond_counters(ta)
     head = (f"{LATENCY} (by up to {float(np.max(np.abs(d))) * arcsec:.3g}″, p "
             f"{ta.p_value:.2g}): one of them is wrong")
     per_us = float(np.max(np.abs(sens))) * 1e-6 * arcsec
     fa = run.angles
-    if p_rest < alpha:
-        counters = counters_part(d)
+    if counters_sound or p_rest < alpha:
+        rf = counters_part(run, ta)
+        left = (f"the ripple modelled over the faces leaves {rf.counters_rad * arcsec:.3g} ± "
+                f"{rf.counters_u_rad * arcsec:.2g}″ in the counters' pattern (its second order "
+                f"puts 0 to {rf.second_rad * arcsec:.2g}″ there)")
+        if counters_sound and not rf.covered():
+            why = (f"{head} — {COUNTERS_SOUND}, but {left}, beyond what "
+                   "the table's speed explains: a counter losing or gaining counts at its "
+                   "switches, or a ripple the model does not have (n/2 times a revolution): "
+                   "NOT ok; check the counters' dead time, or do not declare them sound")
+            return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
+                           problems=(*run.problems, why))
+        pat = (-1.0) ** np.arange(len(d)) if len(d) % 2 == 0 else np.zeros(len(d))
+        counters = (np.zeros(len(d)) if counters_sound else
+                    pat * abs(rf.counters_rad))
         bound = LATENCY_BOUND_S if latency_max_s is None else latency_max_s
         bias = bound * sens  # each angle's bias at the latency bound [rad]
-        cause = (f"{head} — the table's speed follows its angle (up to "
-                 f"{float(np.max(np.abs(d - counters))) * arcsec:.3g}″ of it in no counter's "
-                 f"pattern, p "
-                 f"{p_rest:.2g}), so each µs of autocollimator latency biases an angle by up to "
-                 f"{per_us:.3g}″, which one direction cannot tell")
+        cause = (f"{head} — the table's speed follows its angle (a ripple of "
+                 f"{rf.amplitude:.2g} of its speed; {left}), so each µs of autocollimator "
+                 f"latency biases an angle by up to {per_us:.3g}″, which one direction cannot "
+                 "tell")
         if latency_max_s is None and not np.all(np.abs(bias) <= fa.u_rad):
             why = (f"{cause}: at a latency of {bound * 1e3:g} ms up to "
                    f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, beyond u "
                    f"({float(np.max(fa.u_rad)) * arcsec:.3g}″): NOT ok; {DECLARE}")
             return replace(run, notes=(*run.notes, why), warnings=(*run.warnings, why),
                            problems=(*run.problems, why))
-        shifts = {DISAGREEMENT: counters,
+        shifts = {**({DISAGREEMENT: counters} if np.any(counters) else {}),
                   **({LATENCY_TERM: bias} if bound > 0 else {})}
         widened = _with_terms(fa, shifts)
         said = ("assumed (undeclared)" if latency_max_s is None else "declared")
         latency = (f"at a latency up to {bound * 1e6:g} µs ({said}) at most "
-                   f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u with"
-                   if bound > 0 else "no latency (declared 0): u carries")
-        why = (f"{cause}: {latency} the part a "
-               f"counter could make (Type B, u {float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
+                   f"{float(np.max(np.abs(bias))) * arcsec:.3g}″, carried in u"
+                   if bound > 0 else "no latency (declared 0)")
+        part = (f"; {COUNTERS_SOUND}: no counters' part" if counters_sound
+                else ", with the part a counter could make" if np.any(counters) else "")
+        why = (f"{cause}: {latency}{part} (Type B, u "
+               f"{float(np.max(fa.u_rad)) * arcsec:.3g}″ -> "
                f"{float(np.max(widened.u_rad)) * arcsec:.3g}″); a longer latency: "
                + (DECLARE if latency_max_s is None else
                   "measure the other direction (--reverse-log)"))

@@ -30,7 +30,8 @@ class TimingAngles:
     """Angles from time fractions [rad] with u and covariance (batch means); the per-angle
     mean difference counts - timing [rad] with its u, chi2 over ``dof`` and p-value;
     ``stamp_limited``: u is the time stamps' resolution floor (``stamp_resolution_s`` [s]),
-    not their scatter."""
+    not their scatter; ``diff_cov``: the mean difference's covariance [rad^2] (its u is the
+    root of the diagonal)."""
 
     angles_rad: np.ndarray
     u_rad: np.ndarray
@@ -43,6 +44,7 @@ class TimingAngles:
     p_value: float
     stamp_limited: bool = False
     stamp_resolution_s: float = float("nan")
+    diff_cov: np.ndarray | None = None
 
 
 def _batch_cov(x: np.ndarray, block: int = 8) -> np.ndarray:
@@ -110,4 +112,4 @@ def timing_angles(summary: LogSummary) -> TimingAngles:
 
     return TimingAngles(a_t.mean(0), np.sqrt(np.diag(cov)), cov, len(dt), mean_d,
                         np.sqrt(np.diag(cd)), chi2, n - 1, float(chdtrc(n - 1, chi2)),
-                        bool(np.any(scale > 1.0)), res)
+                        bool(np.any(scale > 1.0)), res, cd)

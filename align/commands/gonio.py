@@ -56,7 +56,8 @@ def _measure(measure_log: Callable, args: argparse.Namespace, names: list[str], 
                                columns=cols, latitude_range_rad=lat_range,
                                on_bytes=on_bytes, time_unit=args.time_unit,
                                latency_max_s=(None if args.latency_max_us is None else
-                                              args.latency_max_us * 1e-6))
+                                              args.latency_max_us * 1e-6),
+                               counters_sound=args.counters_sound)
         except FaceCountError as exc:
             raise UsageError(f"--faces {args.faces}: names {exc.named} faces, but {exc.path} "
                              f"has {exc.found} pulses per revolution") from None
@@ -118,6 +119,11 @@ def add_gonio(add: Callable[..., argparse.ArgumentParser]) -> None:
                    "(0: none): one direction on a table whose speed follows its angle then "
                    "carries that latency's bias in u (without it: up to 1 ms where its bias "
                    "stays within u, else not ok)")
+    g.add_argument("--counters-sound", action="store_true",
+                   help="the counters are verified (their dead time measured: no counts lost "
+                   "at their switches): one direction whose counts and pulse times disagree "
+                   "then carries no counters' part in u, and is not ok where the table's "
+                   "speed does not explain the disagreement")
     g.add_argument("--alpha", type=ALPHA, default=1e-3, help="significance of the loop's tests")
     g.add_argument("--plot", help="folder for angle-per-revolution / Allan / spectrum figure")
     g.add_argument("--json", help="results JSON ('-': stdout)")

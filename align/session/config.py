@@ -89,6 +89,7 @@ class Goniometer:
     time_unit: str | None = None  # the t column's unit when its header says none
     reference_offset_u_rad: float | None = None  # reference_offset_u_arcsec: σ [rad]
     latency_max_s: float | None = None  # latency_max_us: the autocollimator's bound [s]
+    counters_sound: bool = False  # counters_sound: the counters verified (no counts lost)
 
 
 @dataclass(frozen=True)
@@ -201,8 +202,7 @@ class _Files:
         real = p.resolve()
         if not self.allow_outside and not real.is_relative_to(self.root):
             raise InputError(f"{where} = {value!r}: outside the session folder (a session "
-                             "names only its own files; 'align run --allow-outside' lifts "
-                             "this)")
+                             "names its own files only; 'align run --allow-outside' lifts it)")
         if not p.is_file():
             raise InputError(f"{where} = {value!r}: no such file" if not p.exists() else
                              f"{where} = {value!r}: not a file")
@@ -304,7 +304,7 @@ KEYS = {
                     "k3_bound_ug_per_g3", *DETECTION_KEYS},
     "goniometer": {"log", "faces", "nominal_deg", "direction", "reference_offset_arcsec",
                    "reference_offset_u_arcsec", "reverse_log", "steady_table", "columns",
-                   "time_unit", "latency_max_us"},
+                   "time_unit", "latency_max_us", "counters_sound"},
     "cameras": {"model", "roll_arcsec", "roll_u_arcsec", "blur_after_pixels",
                 *(f"lens_{k}" for k in RANGE_KEYS)},
     "views": {"camera", "right", "up"},
@@ -453,9 +453,9 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
         if direction not in ("ccw", "cw"):
             raise InputError(f"{w} direction = {direction!r}: ccw or cw")
         dsign = 1 if direction == "ccw" else -1
-        steady = g.get("steady_table", False)
-        if not isinstance(steady, bool):
-            raise InputError(f"{w} steady_table = {steady!r}: true or false")
+        for k in ("steady_table", "counters_sound"):
+            if not isinstance(g.get(k, False), bool):
+                raise InputError(f"{w} {k} = {g[k]!r}: true or false")
         log_path = _file(g.get("log"), f"{w} log")
         rev_path = _file(g["reverse_log"], f"{w} reverse_log") if "reverse_log" in g else None
         if rev_path is not None and _same_contents(rev_path, log_path):
@@ -466,10 +466,11 @@ def load_session(folder: str | Path, allow_outside: bool = False) -> Session:
                          _number(g.get("reference_offset_arcsec", 0.0),
                                  f"{w} reference_offset_arcsec", -MAX_OFFSET_ARCSEC,
                                  MAX_OFFSET_ARCSEC) * ARCSEC,
-                         rev_path, steady, keys.columns, keys.time_unit,
+                         rev_path, g.get("steady_table", False), keys.columns, keys.time_unit,
                          _u_arcsec(g, "reference_offset_u_arcsec", w, MAX_OFFSET_ARCSEC),
                          None if "latency_max_us" not in g else
-                         _number(g["latency_max_us"], f"{w} latency_max_us", 0.0) * 1e-6)
+                         _number(g["latency_max_us"], f"{w} latency_max_us", 0.0) * 1e-6,
+                         g.get("counters_sound", False))
 
     cameras = {}
     for name, c in _table(d, "cameras", src + ": ").items():

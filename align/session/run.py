@@ -344,7 +344,7 @@ def _run_stages(s: Session, res: SessionResult, progress: Progress, alpha: float
             g.log, len(g.faces), s.latitude_rad, g.direction, alpha, reverse_log=g.reverse_log,
             steady_table=g.steady_table, columns=g.columns,
             latitude_range_rad=s.latitude_range_rad, time_unit=g.time_unit,
-            latency_max_s=g.latency_max_s))
+            latency_max_s=g.latency_max_s, counters_sound=g.counters_sound))
     cams: dict[str, CameraModel | None] = {}
     for name, cam in s.cameras.items():
         cams[name] = (_try(res, f"camera {name}", lambda cam=cam: CameraModel.load(cam.model))

@@ -175,7 +175,9 @@ def session_template(cameras: Sequence[str] = (), gonio: bool = False, tumble: b
                 "# time_unit = \"us\"            # the t column's unit when its header says "
                 "none",
                 "# latency_max_us = 5.0         # [µs] the autocollimator's latency bound "
-                "(its specification; 0: none), carried in u"]
+                "(its specification; 0: none), carried in u",
+                "# counters_sound = false       # the counters verified (dead time measured): "
+                "no counters' part in u"]
     for k, name in enumerate(cameras):
         out.append(_camera_block(name, k).rstrip("\n"))
     if static:

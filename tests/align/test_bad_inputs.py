@@ -519,6 +519,8 @@ KEY_FAULTS = [
      "", "reference_offset_arcsec"),
     ("steady_text", ('direction = "ccw"', 'direction = "ccw"\nsteady_table = "yes"'), "",
      "steady_table"),
+    ("counters_sound_text", ('direction = "ccw"', 'direction = "ccw"\ncounters_sound = "yes"'),
+     "", "counters_sound"),
     ("reverse_is_log", ('direction = "ccw"', 'direction = "ccw"\nreverse_log = "gonio.csv"'),
      "", "reverse_log"),
     ("roll_huge", None, '\n[cameras.A]\nroll_arcsec = 1e308\n', "roll_arcsec"),
