@@ -303,3 +303,81 @@ def test_the_lens_ranges_defaults_are_the_codes():
         assert float(rows[key]) == want, ("docs/commands/marks.md", key, rows[key], want)
         assert float(commented[key]) == want, ("docs/formats.md", key, commented[key], want)
         assert said[key] == want, ("align marks --help", key, said[key], want)
+
+
+# docs/contributing.md names files and Python objects for the next developer: each must exist.
+CONTRIBUTING = DOCS / "contributing.md"
+_PATH_SPAN = re.compile(r"^[\w.-]+(?:/[\w.*-]+)*/(?:[\w.*-]+\.(?:py|json|md|toml|yml))?$")
+_NAME_SPAN = re.compile(r"^(?:align|axisbase|goniometry|imaging|synth|tests)(?:\.\w+)+$")
+
+
+def _named(text: str) -> tuple[list[str], list[str]]:
+    """(paths, dotted names) written alone as inline code in ``text`` (a path has a ``/``:
+    a folder, or a file with its suffix, relative to the repository's root; a dotted name
+    starts with one of the project's packages)."""
+    prose = re.sub(r"^```[^\n]*\n.*?^```", "", text, flags=re.S | re.M)
+    spans = re.findall(r"`([^`\n]+)`", prose)
+    # (``../shared/data/real/``: the real data beside the checkout, not part of it)
+    paths = [s for s in spans if _PATH_SPAN.match(s) and not s.startswith("../")]
+    return paths, [s for s in spans if _NAME_SPAN.match(s)]
+
+
+def _top_names(path: Path) -> set[str]:
+    """The names a module binds at its top level (defs, classes, assignments, imports), and
+    ``Class.member`` for each class's own defs and fields: read, not imported (cheap)."""
+    import ast
+
+    out: set[str] = set()
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            out.add(node.name)
+            if isinstance(node, ast.ClassDef):
+                for m in node.body:
+                    if isinstance(m, ast.FunctionDef | ast.AsyncFunctionDef):
+                        out.add(f"{node.name}.{m.name}")
+                    elif isinstance(m, ast.AnnAssign) and isinstance(m.target, ast.Name):
+                        out.add(f"{node.name}.{m.target.id}")
+        elif isinstance(node, ast.Assign | ast.AnnAssign):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out |= {t.id for t in targets if isinstance(t, ast.Name)}
+        elif isinstance(node, ast.Import | ast.ImportFrom):
+            out |= {(a.asname or a.name).split(".")[0] for a in node.names}
+    return out
+
+
+def resolves(name: str) -> bool:
+    """Whether ``pkg.module[.Object[.member]]`` names a module of the project, or an object
+    its source binds at top level (a class's member one level down)."""
+    parts = name.split(".")
+    for k in range(len(parts), 0, -1):
+        base = ROOT.joinpath(*parts[:k])
+        module = base.with_suffix(".py") if base.with_suffix(".py").is_file() else (
+            base / "__init__.py" if (base / "__init__.py").is_file() else None)
+        if module is None:
+            continue
+        rest = parts[k:]
+        if not rest:
+            return True
+        if len(rest) > 2:
+            return False
+        return ".".join(rest) in _top_names(module)
+    return False
+
+
+def test_the_developer_page_names_what_exists():
+    paths, names = _named(CONTRIBUTING.read_text(encoding="utf-8"))
+    missing = [p for p in paths if not any(ROOT.glob(p.rstrip("/")))]
+    unknown = [n for n in names if not resolves(n)]
+    assert not missing and not unknown, f"docs/contributing.md: no such file {missing}, " \
+                                        f"no such name {unknown}"
+
+
+def test_the_developer_page_check_sees_names():
+    # The check above must not pass because it finds nothing, and must fail on a stale name.
+    paths, names = _named(CONTRIBUTING.read_text(encoding="utf-8"))
+    assert "align/problem_codes.py" in paths and "tests/test_import_graph.py" in paths
+    assert "align.contract.read_json" in names and "align.loop.Candidate" in names
+    assert resolves("align.gonio_loop.RevolutionStage.fit")
+    assert not resolves("align.contract.no_such_function")
+    assert not resolves("axisbase.no_such_module")
+    assert not any(ROOT.glob("align/no_such_module.py"))
