@@ -1,6 +1,6 @@
 """The document each command writes: a result's own JSON, its warnings and whether it is ok,
-in the envelope of :mod:`align.contract` (format, version, provenance). ``cli.py`` only
-chooses the file; what goes into it is decided here.
+in the envelope of :mod:`align.contract` (format, version, provenance). The command line
+(:mod:`align.commands`) only chooses the file; what goes into it is decided here.
 
 The calibration's document is :func:`align.calibration.output.calibration_document`; a
 session's is :func:`align.session.output.session_document`.
