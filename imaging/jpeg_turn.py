@@ -22,7 +22,9 @@ NOISE_DRAWS = 32
 mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
 the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
 mark of user 13's). ~3 ms a draw on a 250 px mark, the draws measured together
-(:func:`imaging.centres.sample_centres_batch`)."""
+(:func:`imaging.centres.sample_centres_batch`). Over seeds the term's sd is ~26 % of it
+(the 17 real photos' near-axis marks); antithetic pairs and draws stratified along the
+line's noise turn gave no smaller sd for the same number (docs/performance.md)."""
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
