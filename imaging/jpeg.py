@@ -484,21 +484,17 @@ def jpeg_round_trip(image: np.ndarray, quality: int | None, table: Sequence[int]
 
 
 JPEG_MAX_ROWS = 65500
-"""The most rows a JPEG holds (libjpeg's JPEG_MAX_DIMENSION): :func:`jpeg_round_trips` codes
-a taller column of images in parts."""
+"""libjpeg's most rows: :func:`jpeg_round_trips` codes a taller column in parts."""
 
 
-def jpeg_round_trips(images: np.ndarray, quality: int | None,
-                     table: Sequence[int] | None = None,
+def jpeg_round_trips(images: np.ndarray, quality: int | None, table: Sequence[int] | None = None,
                      phase: tuple[int, int] = (0, 0)) -> np.ndarray:
-    """:func:`jpeg_round_trip` of each of a stack of images (k, h, w), through one encode
-    and decode: the images padded each to whole blocks (by edge pixels, as the encoder pads
-    a partial block) and coded as one column of them. A baseline grey JPEG quantises and
-    decodes each 8 x 8 block alone (only the DC's lossless prediction runs across blocks),
-    so every image comes back the same to the bit as coded alone; one call per stack instead
-    of one per image (the JPEG term's 32 noisy draws of a mark)."""
+    """:func:`jpeg_round_trip` of each of a stack of images (k, h, w) by one encode and
+    decode: each padded to whole blocks (by edge pixels, as the encoder pads a partial one),
+    coded as one column. A baseline grey JPEG quantises and decodes each 8 x 8 block alone
+    (the DC's lossless prediction aside), so each comes back as coded alone, to the bit."""
     a = np.clip(np.round(images), 0, 255).astype(np.uint8)
-    k, h, w = a.shape
+    k, h, _ = a.shape
     top, left = (8 - phase[1]) % 8, (8 - phase[0]) % 8
     bottom = -(top + h) % 8
     per = max(1, JPEG_MAX_ROWS // (top + h + bottom))
