@@ -480,28 +480,47 @@ def jpeg_round_trip(image: np.ndarray, quality: int | None, table: Sequence[int]
     with the luminance ``table`` (64 steps, row-major) when given, on a block grid whose
     first boundary is at ``phase`` (x, y) [px] (the image padded before it by edge pixels,
     and cropped back)."""
-    a = np.clip(np.round(image), 0, 255).astype(np.uint8)
-    pad = ((8 - phase[1]) % 8, (8 - phase[0]) % 8)
-    if any(pad):
-        a = np.pad(a, ((pad[0], 0), (pad[1], 0)), mode="edge")
+    return jpeg_round_trips(np.asarray(image)[None], quality, table, phase)[0]
+
+
+JPEG_MAX_ROWS = 65500
+"""libjpeg's most rows: :func:`jpeg_round_trips` codes a taller column in parts."""
+
+
+def jpeg_round_trips(images: np.ndarray, quality: int | None, table: Sequence[int] | None = None,
+                     phase: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """:func:`jpeg_round_trip` of each of a stack of images (k, h, w) by one encode and
+    decode: each padded to whole blocks (by edge pixels, as the encoder pads a partial one),
+    coded as one column. A baseline grey JPEG quantises and decodes each 8 x 8 block alone
+    (the DC's lossless prediction aside), so each comes back as coded alone, to the bit."""
+    a = np.clip(np.round(images), 0, 255).astype(np.uint8)
+    k, h, _ = a.shape
+    top, left = (8 - phase[1]) % 8, (8 - phase[0]) % 8
+    bottom = -(top + h) % 8
+    per = max(1, JPEG_MAX_ROWS // (top + h + bottom))
+    if k > per:  # (a column within the format's height)
+        return np.concatenate([jpeg_round_trips(images[i:i + per], quality, table, phase)
+                               for i in range(0, k, per)])
+    a = np.pad(a, ((0, 0), (top, bottom), (left, 0)), mode="edge")
+    tall = a.reshape(-1, a.shape[2])
     if table is not None:
         import io
 
         from PIL import Image
 
         buf = io.BytesIO()
-        Image.fromarray(a).save(buf, "JPEG", qtables=[[int(v) for v in table]])
+        Image.fromarray(tall).save(buf, "JPEG", qtables=[[int(v) for v in table]])
         buf.seek(0)
         with Image.open(buf) as im:
             out = np.asarray(im.convert("L"), float)
     else:
         import cv2
 
-        ok, enc = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        ok, enc = cv2.imencode(".jpg", tall, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
         if not ok:
-            return image
+            return np.asarray(images, float)
         out = cv2.imdecode(enc, cv2.IMREAD_GRAYSCALE).astype(float)
-    return out[pad[0]:, pad[1]:]
+    return out.reshape(a.shape)[:, top:top + h, left:]
 
 
 def jpeg_note(where: str, jb: JpegBlocks, u_arcsec: float, spread: float = 1.0) -> str:

@@ -14,7 +14,7 @@ from imaging.band import band_pixels
 from imaging.candidate import line_frame
 from imaging.centres import Centres, sample_centres, sample_centres_batch
 from imaging.groove import ProfileFit, ProfileTable, centres_half
-from imaging.jpeg import JpegBlocks, jpeg_round_trip
+from imaging.jpeg import JpegBlocks, jpeg_round_trips
 from imaging.jpeg_scatter import block_phase_columns
 
 NOISE_DRAWS = 32
@@ -22,7 +22,9 @@ NOISE_DRAWS = 32
 mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
 the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
 mark of user 13's). ~3 ms a draw on a 250 px mark, the draws measured together
-(:func:`imaging.centres.sample_centres_batch`)."""
+(:func:`imaging.centres.sample_centres_batch`). Over seeds the term's sd is ~26 % of it
+(the 17 real photos' near-axis marks); antithetic pairs and draws stratified along the
+line's noise turn gave no smaller sd for the same number (docs/performance.md)."""
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
@@ -72,11 +74,11 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     pfw = replace(pf, offset_px=pf.offset_px - float(shift @ n),
                   t_start_px=pf.t_start_px - float(shift @ u),
                   t_end_px=pf.t_end_px - float(shift @ u))
-    renders = [model]
+    renders = model[None]
     if jb.noise_dn > 0 and near_axis(pf):
-        rng = np.random.default_rng(0)
-        renders = [np.clip(np.round(model + rng.normal(0.0, jb.noise_dn, model.shape)), 0, 255)
-                   for _ in range(NOISE_DRAWS)]
+        # (one call: the same normals, in the same order, as a call per draw)
+        noise = np.random.default_rng(0).normal(0.0, jb.noise_dn, (NOISE_DRAWS, *model.shape))
+        renders = np.clip(np.round(model + noise), 0, 255)
     # Every render's centres after each encoder, and the noise-free model's, in one pass (to
     # the bit each image's alone: sample_centres_batch); a table known by its IJG quality is
     # that encoder. Each coded draw is measured as the mark is: its turn from the noise-free
@@ -90,9 +92,9 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     # took the turn from their own uncoded draw; with that draw's noise turn taken as the
     # scatter's and only its covariance with the coding's added, RMS z 1.62 on a sweep's
     # files where this gives 1.31 and the old way 1.48).
-    coded = [jpeg_round_trip(a, c.quality, c.table if c.quality is None else None, phase)
-             for c in coders for a in renders]
-    cen = sample_centres_batch(np.stack([model] + coded), pfw)
+    coded = [jpeg_round_trips(renders, c.quality, c.table if c.quality is None else None,
+                              phase) for c in coders]
+    cen = sample_centres_batch(np.concatenate([model[None], *coded]), pfw)
     m = len(renders)
     return max(_term([centres_turn(cen[0], cen[1 + m * j + i], model.shape, pfw)
                       for i in range(m)]) for j in range(len(coders)))

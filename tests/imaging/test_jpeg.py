@@ -3,6 +3,7 @@ a mark's angle carried in u."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -17,6 +18,7 @@ from imaging.jpeg import (
     ijg_table,
     jpeg_note,
     jpeg_round_trip,
+    jpeg_round_trips,
     precoding_noise,
     quality_candidates,
     requantised_quality,
@@ -425,6 +427,36 @@ def test_the_files_own_table_is_taken():
     by_table = jpeg_round_trip(a, None, luma, (3, 5))
     assert by_table.shape == a.shape
     assert np.mean(np.abs(by_table - jpeg_round_trip(a, 60, None, (3, 5)))) < 0.05
+
+
+def test_a_stack_of_images_is_coded_as_each_alone(monkeypatch):
+    """jpeg_round_trips codes a stack as one column of whole blocks: every image comes back
+    as libjpeg gives it coded alone (the encoder's own padding of its partial blocks), to
+    the bit, at any grid phase and size, through a quality or a table, in parts when the
+    column would pass the format's height."""
+    rng = np.random.default_rng(3)
+    luma = tuple(int(v) for v in ijg_table(35).ravel())
+
+    def alone(a, quality, phase):
+        a = np.clip(np.round(a), 0, 255).astype(np.uint8)
+        top, left = (8 - phase[1]) % 8, (8 - phase[0]) % 8
+        a = np.pad(a, ((top, 0), (left, 0)), mode="edge")
+        _, enc = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        return cv2.imdecode(enc, cv2.IMREAD_GRAYSCALE).astype(float)[top:, left:]
+
+    for k, h, w in ((5, 13, 21), (3, 8, 8), (4, 1, 30), (6, 29, 3)):
+        stack = 128 + 60 * np.sin(np.arange(w) / 3.0) + rng.normal(0, 25, (k, h, w))
+        phase = (int(rng.integers(8)), int(rng.integers(8)))
+        out = jpeg_round_trips(stack, 35, None, phase)
+        assert out.shape == stack.shape
+        for a, b in zip(stack, out, strict=True):
+            assert np.array_equal(b, alone(a, 35, phase))
+        by_table = jpeg_round_trips(stack, None, luma, phase)
+        for a, b in zip(stack, by_table, strict=True):
+            assert np.array_equal(b, jpeg_round_trip(a, None, luma, phase))
+        monkeypatch.setattr("imaging.jpeg.JPEG_MAX_ROWS", 2 * (h + 16))
+        assert np.array_equal(jpeg_round_trips(stack, 35, None, phase), out)
+        monkeypatch.undo()
 
 
 def _user13_near_axis_files(quality: int, crop: bool, seeds=range(8), per_seed: int = 4,
