@@ -1,0 +1,169 @@
+"""Independent user 18: the camera side of an alignment station, against rendered truth.
+
+A metrology engineer who has read only README, docs/, the schemas and --help. The images are
+user18_inputs.py's: chessboards and scribe marks rendered by ray through a true OpenCV lens
+(800x600, f 900 px, k1 -0.22, k2 0.08, p ~4e-4, principal point (+6, -4) px off centre),
+PSF before the pixels, area integration, shot (12000 e- full well) + read (6 e-) noise.
+
+The rule every test asserts: a result is either not ok (exit status 2, JSON ok false) or
+its error is within 3 u. Defects are strict xfails whose reason holds the figures seen.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+import user18_inputs as u18  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONDONTWRITEBYTECODE="1")
+
+# marks in the pinhole image [px from the principal point], 260 px long
+MARKS = {
+    "centre": u18.Mark(0.0, 0.0, 20.0),
+    "upper_right": u18.Mark(150.0, -80.0, 70.0),
+    "lower_right": u18.Mark(180.0, 150.0, 5.0),
+}
+
+
+def _align(*args):
+    return subprocess.run([sys.executable, "-m", "align", *args], capture_output=True,
+                          text=True, env=ENV, timeout=600)
+
+
+def calibrate(folder: Path, n_views: int, seed: int, board=None, lens=None):
+    """Render n_views boards, run `align camera`; (exit status, camera JSON, path)."""
+    board = board or u18.Board()
+    lens = lens or u18.Lens()
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = u18.write_boards(str(folder), lens, n_views, seed, board)
+    out = folder / "cam.json"
+    r = _align("camera", *paths, "--pattern", f"{board.cols}x{board.rows}",
+               "--square", str(board.square), "--json", str(out), "-q")
+    assert out.exists(), r.stderr
+    return r.returncode, json.loads(out.read_text()), out
+
+
+def measure(img, path: Path, camera: Path | None):
+    """`align marks --one` on one rendered image: (exit status, the document)."""
+    import cv2
+
+    cv2.imwrite(str(path), img)
+    out = path.with_suffix(".json")
+    args = ["marks", str(path), "--one", "--json", str(out), "-q"]
+    if camera is not None:
+        args += ["--camera", str(camera)]
+    r = _align(*args)
+    assert out.exists(), r.stderr
+    return r.returncode, json.loads(out.read_text())
+
+
+def judge(mark: u18.Mark, rc: int, doc: dict):
+    """(ok, error ["], u ["]) of a one-mark document against the rendered truth."""
+    m = doc["marks"][0]
+    ok = bool(doc["ok"]) and rc == 0
+    if not m.get("found") or m.get("angle_deg") is None:
+        return False, None, None
+    err = (m["angle_deg"] - u18.true_angle_deg(mark)) * 3600.0
+    err = (err + 648000.0) % 1296000.0 - 648000.0
+    u = m["angle_u_deg"] * 3600.0 if m.get("angle_u_deg") else None
+    return ok, err, u
+
+
+def assert_honest(rows):
+    """Every ok mark within 3 u; the JSON ok agrees with the exit status."""
+    bad = [r for r in rows if r[1] and (r[3] is None or abs(r[2]) > 3 * r[3])]
+    assert not bad, f"ok beyond 3 u: {bad}"
+
+
+# ---------------------------------------------------------------- default run
+
+def test_user18_renderer_inverts_the_true_lens():
+    """The renderer's rays: through OpenCV's forward model they land on their pixels."""
+    import cv2
+
+    lens = u18.Lens()
+    X, Y = np.meshgrid(np.linspace(0, u18.W - 1, 9), np.linspace(0, u18.H - 1, 7))
+    xn, yn = u18.rays(lens, X, Y)
+    P, _ = cv2.projectPoints(np.stack([xn.ravel(), yn.ravel(), np.ones(xn.size)], 1),
+                             np.zeros(3), np.zeros(3), lens.K(), np.array(lens.dist))
+    assert np.abs(P.reshape(-1, 2) - np.stack([X.ravel(), Y.ravel()], 1)).max() < 1e-6
+
+
+# ---------------------------------------------------------------- slow: camera + marks
+
+@pytest.fixture(scope="module")
+def camera12(tmp_path_factory):
+    """12 clean views of a 9x6 board through the true lens, calibrated by `align camera`."""
+    rc, cam, path = calibrate(tmp_path_factory.mktemp("u18cam"), 12, 0)
+    return rc, cam, path
+
+
+@pytest.mark.slow
+def test_user18_calibration_within_its_u(camera12):
+    """The calibration's own parameters against the true lens: each within 3 u, ok, exit 0.
+
+    Seen (seed 0): fx 900.84 ± 0.98 (true 900), cx 405.17 ± 1.30 (405.5), cy 295.04 ± 0.84
+    (295.5), k1 -0.2232 ± 0.0077 (-0.22), k2 0.098 ± 0.10 (0.08), p1 4.1e-4 ± 1.5e-4 (4e-4),
+    p2 -3.3e-4 ± 2.0e-4 (-3e-4): all within 0.9 u.
+    """
+    rc, cam, _ = camera12
+    assert rc == 0 and cam["ok"]
+    lens = u18.Lens()
+    K = np.array(cam["camera_matrix"])
+    d = cam["dist_coeffs"]
+    got = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2], "k1": d[0], "k2": d[1],
+           "p1": d[2], "p2": d[3]}
+    true = {"fx": lens.fx, "fy": lens.fy, "cx": lens.cx, "cy": lens.cy, "k1": lens.dist[0],
+            "k2": lens.dist[1], "p1": lens.dist[2], "p2": lens.dist[3]}
+    z = {k: (got[k] - true[k]) / cam["u"][k] for k in got}
+    assert all(abs(v) <= 3 for v in z.values()), z
+
+
+def _marks_through(camera_path, tmp, effect=None, strength=0.0, names=tuple(MARKS), seed=0):
+    lens = u18.Lens()
+    rows = []
+    for name in names:
+        mark = MARKS[name]
+        kw = {}
+        lens_m = lens
+        if effect == "skew":
+            kw["skew"] = strength
+        elif effect == "motion_along":
+            kw.update(motion=(strength, 0.0), nsub=max(3, int(2 * strength)))
+        elif effect == "motion_across":
+            kw.update(motion=(0.0, strength), nsub=max(3, int(2 * strength)))
+        elif effect == "chroma":
+            kw["chroma"] = strength
+        elif effect == "decentre":
+            lens_m = lens.moved(strength, 0.0)
+        elif effect == "wear":
+            mark = u18.Mark(mark.x0, mark.y0, mark.angle_deg, wear_frac=0.4, wear_side=strength)
+        img = u18.render_mark(lens_m, mark, np.random.default_rng(seed), **kw)
+        rc, doc = measure(img, Path(tmp) / f"{name}.png", camera_path)
+        ok, err, u = judge(mark, rc, doc)
+        rows.append((name, ok, err, u))
+    return rows
+
+
+@pytest.mark.slow
+def test_user18_clean_marks_through_the_calibration(camera12, tmp_path):
+    """Marks rendered through the true lens, measured with the calibrated model.
+
+    Seen (seed 0/1): centre err -8.3/-2.8″ at u 12.3″; upper right -18.0/-13.5″ at 39.4″;
+    lower right -10.1/-20.4″ at 51.8″: all ok, |z| <= 0.67. (A mark at (-200, +110) px is
+    lens-limited at 65″ by the model's own u: not ok, err -10″.)
+    """
+    _, _, cam = camera12
+    rows = _marks_through(cam, tmp_path)
+    assert_honest(rows)
+    ok = [r for r in rows if r[1]]
+    assert len(ok) >= 2 and all(r[3] < 60 for r in ok), rows
