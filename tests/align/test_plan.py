@@ -509,10 +509,12 @@ def test_one_more_image_of_user16s_cameras_is_predicted_without_bias(tmp_path):
     """User 16 (two microscope cameras, each image's u 2.5-7.6″: its mark 256-461 px long):
     'align plan' predicted one more image's u too high (31.7 ± 5.8″ where 19.6″ came). Every
     "another image" option of seeds 4, 7, 11 (the ok ones of 4-13) realised with the user's
-    generator: z = (obtained - predicted) / stated noise on the critical angle. With the mean
-    own u² (before) the 9 rows' mean z was -1.62, RMS 2.21; with the mean information
-    -0.62, 1.11. Bound: 9 N(0, 1) draws have a mean within ±1.0 (3 SD) and an RMS within
-    0.4-1.6. A row whose run changed the loop's model (an effect estimated before, carried or
+    generator, straight as the session's (its sagitta 0; random_mark bends a third, whose
+    run gained nothing: mean z +0.78): z = (obtained - predicted) / stated noise on the
+    critical angle. With the mean own u² (before) the 9 rows' mean z was -1.62, RMS 2.21;
+    with the mean information -0.62, 1.11; with the new image straight and the noise its
+    predictive interval (Student's t, the secant) +0.06, 0.69. Bound: 9 N(0, 1) draws have a
+    mean within ±1.0 (3 SD) and an RMS within 0.4-1.6. A row whose run changed the loop's model (an effect estimated before, carried or
     dropped after) is not a prediction of the linearisation: left out, and counted."""
     import shutil
 
