@@ -514,8 +514,9 @@ def test_one_more_image_of_user16s_cameras_is_predicted_without_bias(tmp_path):
     critical angle. With the mean own u² (before) the 9 rows' mean z was -1.62, RMS 2.21;
     with the mean information -0.62, 1.11; with the new image straight and the noise its
     predictive interval (Student's t, the secant) +0.06, 0.69. Bound: 9 N(0, 1) draws have a
-    mean within ±1.0 (3 SD) and an RMS within 0.4-1.6. A row whose run changed the loop's model (an effect estimated before, carried or
-    dropped after) is not a prediction of the linearisation: left out, and counted."""
+    mean within ±1.0 (3 SD) and an RMS within 0.4-1.6. A row whose run changed the loop's
+    model (an effect estimated before, carried or dropped after) is not a prediction of the
+    linearisation: left out, and counted."""
     import shutil
 
     g = _user16()
