@@ -8,8 +8,9 @@ of that kind; its information is added to the session's and the new information 
 
 * another image of a housing in a view: the expected image of that camera (:func:`expected_image`):
   the Jacobian of that housing in that view, coupled to the camera's lens errors as its images
-  are (a lens they share does not average down), and the mean own u² of the camera's images
-  (what each image reads from itself — noise, groove profile, background — is a new draw);
+  are (a lens they share does not average down), and the mean information 1/u² of the
+  camera's images (what each image reads from itself — noise, groove profile, background —
+  is a new draw);
 * a reversed view (the platform turned 180° on the table, the same camera): the view's rows with
   the sign of their dependence on E flipped and that on the camera's roll kept — what separates
   a roll from E — each an expected image of the camera;
@@ -32,7 +33,9 @@ option's prediction includes them as they would be after it (:mod:`align.plan_ca
 the plan names, per carried candidate, the measurement that resolves it.
 
 Each prediction carries its noise (:func:`prediction_noise`): the new data's own u is not
-known before they are taken. When no option's gain exceeds ``NOISE_K`` times it, the plan says
+known before they are taken; half the width of u's 68 % predictive interval, the image of
+the new data's information's (for an image Student's t over the camera's images' scatter,
+:func:`image_interval`). When no option's gain exceeds ``NOISE_K`` times it, the plan says
 that no measurement improves the angle by more than the noise of its prediction.
 
 Minutes per option are the documented defaults ``MINUTES`` (a site changes them in code or by
@@ -46,6 +49,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import special
 
 from align.errors import InputError
 from align.fusion.budget import Group, Linearisation
@@ -268,22 +272,26 @@ def _halved(g: Group, kind: str) -> Group:
 def prediction_noise(lin: Linearisation, add: Sequence[Group], drop: Sequence[str]
                      ) -> np.ndarray:
     """Standard deviation [rad] of the six predicted u after adding ``add`` (and dropping
-    ``drop``), from the scatter of the added groups' own variances: each added group's
-    ``meta['relative_sd']`` is the relative standard deviation of its scatter variance (a
-    new image's own u² about its camera's mean; a repeated input's u² about the halved one).
-    First order: the derivative of u with respect to each group's log-variance, by a 5 %
-    step (u² is smooth in it), times that relative SD, in quadrature over the groups (their
-    draws are independent)."""
+    ``drop``): half the width of their predictive interval over the draws of the added groups'
+    information. Each added group's ``meta['relative_sd']`` is the half-width of the
+    predictive interval of its information (1 / its scatter variance) relative to the one
+    predicted (a new image's about its camera's mean, :func:`expected_image`; a repeated
+    input's about the halved one). u after is monotone in each group's information, so the
+    interval's ends map to u's exactly (the secant, not the tangent: an image's information
+    scatters by 70-140 % of itself on user 16's cameras, where u is far from linear in it);
+    an end at no information is the group not added. The groups' draws are independent:
+    their half-widths in quadrature."""
     u = predict(lin, add, drop, redraw=False).u
     var = np.zeros_like(u)
     for i, g in enumerate(add):
         rel = float(g.meta.get("relative_sd", 0.0))
         if rel <= 0:
             continue
-        step = 0.05
-        moved = [*add[:i], _scaled(g, 1 + step), *add[i + 1:]]
-        du = (predict(lin, moved, drop, redraw=False).u - u) / np.log1p(step)
-        var += (du * rel) ** 2
+        rest = [*add[:i], *add[i + 1:]]
+        more = predict(lin, [*rest, _scaled(g, 1 / (1 + rel))], drop, redraw=False).u
+        less = predict(lin, [*rest, *([_scaled(g, 1 / (1 - rel))] if rel < 1 else [])], drop,
+                       redraw=False).u
+        var += ((less - more) / 2) ** 2
     return np.sqrt(var)
 
 
@@ -299,13 +307,13 @@ def _own_info(g: Group) -> float:
     return 1.0 / max(_own_var(g), 1e-300)
 
 
-def image_noise(images: Sequence[Group]) -> float:
+def image_noise(images: Sequence[Group]) -> tuple[float, int]:
     """The relative standard deviation of one image's information (1 / its own variance)
     about its camera's mean, pooled over the cameras with ≥ 2 images (each image's u carries
     terms read from that image — its length, its groove profile, its background — that
-    scatter from image to image); 1 when no camera has two images (the scatter is then
-    unknown: taken as large as the information itself). To first order it is the relative
-    SD of the image's variance too (what :func:`prediction_noise` scales). Dimensionless."""
+    scatter from image to image), and its degrees of freedom (the images less one per such
+    camera); (1, 0) when no camera has two images (the scatter is then unknown: taken as
+    large as the information itself). Dimensionless, —."""
     cams: dict[str, list[float]] = {}
     for g in images:
         cams.setdefault(g.meta.get("camera", "?"), []).append(_own_info(g))
@@ -314,7 +322,18 @@ def image_noise(images: Sequence[Group]) -> float:
         if len(v) > 1:
             r2 += float(np.sum((np.asarray(v) / np.mean(v) - 1) ** 2))
             dof += len(v) - 1
-    return float(np.sqrt(r2 / dof)) if dof else 1.0
+    return (float(np.sqrt(r2 / dof)), dof) if dof else (1.0, 0)
+
+
+def image_interval(images: Sequence[Group], n: int) -> float:
+    """Half-width of the 68 % predictive interval of one more image's information about its
+    camera's mean of ``n`` images, relative to that mean [—]: the new draw and the mean's
+    own error (× √(1 + 1/n)), the scatter read from the images (:func:`image_noise`, ν
+    degrees of freedom) so that the interval is Student's t's (× t_ν at 84.1 %: 1.84 for
+    ν = 1, 1.32 for 2, 1.09 for 6), not the normal's a known scatter would give."""
+    s, dof = image_noise(images)
+    return s * np.sqrt(1 + 1 / n) * (float(special.stdtrit(dof, special.ndtr(1.0))) if dof
+                                     else 1.0)
 
 
 def expected_image(g: Group, images: Sequence[Group], source: str, A: np.ndarray | None = None
@@ -331,14 +350,15 @@ def expected_image(g: Group, images: Sequence[Group], source: str, A: np.ndarray
     whose expectation is the mean information — not the mean u², which a single poor image
     sets (user 16: one camera's images' u 2.5-7.6″; over 9 options realised the obtained u
     was below the prediction by z -1.62 on average, now -0.62: docs/decision.md), nor the
-    value of the one image copied.
+    value of the one image copied. Its ``relative_sd`` is the half-width of the new
+    information's predictive interval (:func:`image_interval`).
     """
     cam = g.meta.get("camera")
     same = [h for h in images if (h.meta.get("housing"), h.meta.get("view"))
             == (g.meta.get("housing"), g.meta.get("view"))] or [g]
     own = [_own_info(h) for h in images if h.meta.get("camera") == cam] or [_own_info(g)]
     A = np.mean([h.A for h in same], axis=0) if A is None else A
-    rel = image_noise(images) * np.sqrt(1 + 1 / len(own))  # a new draw; the mean's own error
+    rel = image_interval(images, len(own))
     return Group(source, "image", A, np.array([[1.0 / float(np.mean(own))]]), (),
                  {**g.meta, "relative_sd": str(rel)})
 
