@@ -69,7 +69,7 @@ def _band(image: np.ndarray, angle: float, offset: float, t0: float, t1: float,
     if not gather:
         vals = np.empty(0, image.dtype)
     elif image.flags.c_contiguous:
-        vals = image.ravel().take(idx)  # (the same values; ~0.2x cheaper than indexing)
+        vals = image.ravel()[idx]
     else:
         vals = image[ys, xs]
     return vals, e[sel], t[sel], idx
