@@ -9,8 +9,28 @@ from collections.abc import Sequence
 import numpy as np
 
 
-def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
-                   ) -> tuple[np.ndarray, ...]:
+def uniform_slopes(grid: np.ndarray, fs: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """Each of ``fs``'s per-cell slopes on ``grid``, as :func:`interp_uniform` computes them
+    (the same bits): for a table looked up many times, computed once and passed to it.
+
+    Parameters
+    ----------
+    grid : numpy.ndarray
+        The uniformly spaced, increasing abscissae (``np.arange``).
+    fs : sequence of numpy.ndarray
+        The tabulated values, each on ``grid``.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        Each f's (f[j + 1] - f[j]) / (grid[j + 1] - grid[j]) [f's unit per grid unit].
+    """
+    dx = np.diff(grid)
+    return tuple(np.diff(f) / dx for f in fs)
+
+
+def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray],
+                   slopes: Sequence[np.ndarray] | None = None) -> tuple[np.ndarray, ...]:
     """np.interp(e, grid, f, left=0, right=0) for each f of ``fs``, the same to the last bit,
     on a uniformly spaced ``grid`` (np.arange).
 
@@ -27,6 +47,9 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
         The uniformly spaced, increasing abscissae (``np.arange``).
     fs : sequence of numpy.ndarray
         The tabulated values, each on ``grid``.
+    slopes : sequence of numpy.ndarray, optional
+        ``uniform_slopes(grid, fs)``, kept by a caller that looks the same table up many
+        times (a 5 MP frame's profile tables ~30 times; else computed here on each call).
 
     Returns
     -------
@@ -45,6 +68,8 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
     e = np.asarray(e)
     last = grid.size - 1
     step = (grid[last] - grid[0]) / last
+    if slopes is None:
+        slopes = uniform_slopes(grid, fs)
     out = []
     if e.ndim and e.size and grid[0] <= e.min() and e.max() < grid[last]:  # (NaN fails both)
         # Every e inside the grid (the usual case, as two reductions tell): the cell's
@@ -59,10 +84,8 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
         j -= grid.take(j) > e
         j += grid[1:].take(j) <= e  # (grid[j + 1], without the shifted copy of j)
         d = e - grid.take(j)
-        dx = np.diff(grid)
-        out = []
-        for f in fs:
-            v = (np.diff(f) / dx).take(j)
+        for f, sl in zip(fs, slopes, strict=True):
+            v = sl.take(j)
             v *= d
             v += f.take(j)
             out.append(v)
@@ -75,9 +98,8 @@ def interp_uniform(e: np.ndarray, grid: np.ndarray, fs: Sequence[np.ndarray]
         d = e - grid[j]  # on a grid point d = 0 and the value is f[j] exactly, as np.interp's
         at_end = e == grid[last]
         off = (e < grid[0]) | (e > grid[last])
-        dx = np.diff(grid)
-        for f in fs:
-            v = (np.diff(f) / dx)[j] * d + f[j]
+        for f, sl in zip(fs, slopes, strict=True):
+            v = sl[j] * d + f[j]
             v[at_end] = f[last]
             v[off] = 0.0
             out.append(v)

@@ -111,9 +111,10 @@ def _bin_rms(j: np.ndarray | GroupSums, vals: np.ndarray, p: np.ndarray, dt: np.
     A = np.empty((nb, 3, 3))
     b = np.empty((nb, 3))
     for r in range(3):
-        b[:, r] = bc(cols[r] * vals)
+        # (The first column is ones, and x * 1.0 is x: its products are skipped, the same sums.)
+        b[:, r] = bc(vals if r == 0 else cols[r] * vals)
         for c in range(r, 3):
-            A[:, r, c] = A[:, c, r] = bc(cols[r] * cols[c])
+            A[:, r, c] = A[:, c, r] = bc(cols[c] if r == 0 else cols[r] * cols[c])
     cnt = A[:, 0, 0]
     # A bin too short along the line to tell a slope (or with no spread in dt) keeps 2 terms.
     # (Determinants and solutions of the good bins only: each matrix's are its own, the

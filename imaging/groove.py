@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.special import erf
 
-from axisbase.interp import interp_uniform
+from axisbase.interp import interp_uniform, uniform_slopes
 from imaging.detect import line_frame
 from imaging.median import median, median_inplace
 
@@ -92,23 +92,26 @@ class ProfileTable:
         self.grid = np.arange(-reach, reach + step, step)
         sh, wt = _quad_offsets(angle)
         self.p, self.pe = profile_and_derivs(self.grid, w, s, sh, wt, shape_derivs=False)
+        # The tables' per-cell slopes once (the interpolation's, the same bits), not per look-up.
+        self._slopes = uniform_slopes(self.grid, (self.p, self.pe))
         self._shape = (w, s, sh, wt)
-        self._ps: np.ndarray | None = None
+        self._ps: tuple[np.ndarray, np.ndarray] | None = None
 
     def blur_slope(self, e: np.ndarray) -> np.ndarray:
         """dP/ds at ``e``: the profile's change per px of blur (tabulated on first use)."""
         if self._ps is None:
             w, s, sh, wt = self._shape
-            self._ps = _blur_derivative(self.grid, w, s, sh, wt)
-        return interp_uniform(e, self.grid, (self._ps,))[0]
+            ps = _blur_derivative(self.grid, w, s, sh, wt)
+            self._ps = (ps, uniform_slopes(self.grid, (ps,))[0])
+        return interp_uniform(e, self.grid, self._ps[:1], self._ps[1:])[0]
 
     def __call__(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return interp_uniform(e, self.grid, (self.p, self.pe))
+        return interp_uniform(e, self.grid, (self.p, self.pe), self._slopes)
 
     def profile(self, e: np.ndarray) -> np.ndarray:
         """The profile alone at ``e`` (the first of the call's pair, the same bits: each
         tabulated function is interpolated on its own), without its slope's pass."""
-        return interp_uniform(e, self.grid, (self.p,))[0]
+        return interp_uniform(e, self.grid, (self.p,), self._slopes[:1])[0]
 
 
 TABLE_ANGLE_STEP = 1e-3

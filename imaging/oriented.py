@@ -158,6 +158,10 @@ def square_slices(shape: tuple[int, int]) -> tuple[slice, slice]:
     return slice(y0, y0 + sy), slice(x0, x0 + sx)
 
 
+_REL_ROWS = 64
+"""Rows per block of :func:`_relative`'s passes (64 x a 5 MP frame's 2592 float32: 0.66 MB)."""
+
+
 def _relative(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """The image over its quadratic shading minus 1 (0 where not valid), as float32 (a
     relative level of ~1e-2 keeps ~1e-9 of it; the test's spectrum is float32 too)."""
@@ -181,18 +185,29 @@ def _relative(image: np.ndarray, valid: np.ndarray) -> np.ndarray:
     X = (np.arange(w)[None, :] / w - 0.5).astype(np.float32)
     Y = (np.arange(h)[:, None] / h - 0.5).astype(np.float32)
     # c0 + c1 X + c3 X^2 + c2 Y + c5 Y^2 + c4 X Y: the terms in one variable on a row and a
-    # column, then two full-frame passes (each full-frame pass of 5 MP costs its page faults).
+    # column, then the frame's passes (each full-frame pass of 5 MP costs its page faults).
     # The coefficients as float32: a float64 scalar times a float32 array is float64 (NumPy
     # 2), and the frame-wide level and ratio were float64, twice the bytes for nothing.
     c = c.astype(np.float32)
-    lev = np.add((c[0] + c[1] * X) + c[3] * X * X, c[2] * Y + c[5] * Y * Y)
-    lev += np.multiply(c[4] * Y, X)
-    if not lev.min() > 0:  # (a shading that reaches 0 or NaN somewhere; else no mask pass)
-        np.copyto(lev, 1.0, where=~(lev > 0))
-    rel = np.divide(image, lev, out=lev)
-    rel -= 1.0
-    np.copyto(rel, 0.0, where=~valid)  # (a boolean-index assignment: ~1.5x the time)
+    row, col, cy = (c[0] + c[1] * X) + c[3] * X * X, c[2] * Y + c[5] * Y * Y, c[4] * Y
+    # Block by block of rows, each step elementwise (the same values as over the whole
+    # frame): a block's level stays in cache from its sum to its ratio, and the X Y term's
+    # product goes through one small buffer, not a fresh 5 MP temporary and its page faults
+    # (~0.6x the time of the whole-frame passes at 5 MP).
+    rel = np.empty((h, w), np.float32)
+    buf = np.empty((min(h, _REL_ROWS), w), np.float32)
+    for r in range(0, h, _REL_ROWS):
+        rows = slice(r, r + _REL_ROWS)
+        lev, xy = rel[rows], buf[:min(_REL_ROWS, h - r)]
+        np.add(row, col[rows], out=lev)
+        lev += np.multiply(cy[rows], X, out=xy)
+        if not lev.min() > 0:  # (a shading that reaches 0 or NaN here; else no mask pass)
+            np.copyto(lev, 1.0, where=~(lev > 0))
+        np.divide(image[rows], lev, out=lev)
+        lev -= 1.0
+        np.copyto(lev, 0.0, where=~valid[rows])  # (a boolean-index assignment: ~1.5x)
     return rel
+
 
 
 @functools.lru_cache(maxsize=8)

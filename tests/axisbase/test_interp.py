@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from axisbase.interp import interp_uniform
+from axisbase.interp import interp_uniform, uniform_slopes
 
 
 def test_the_same_bits_as_np_interp():
@@ -19,6 +19,12 @@ def test_the_same_bits_as_np_interp():
         for v, want in zip(got, (f, g), strict=True):
             assert np.array_equal(v, np.interp(e, grid, want, left=0.0, right=0.0),
                                   equal_nan=True)
+        # A table's slopes kept by the caller: the same bits, inside the grid and not.
+        for pts in (e, rng.uniform(lo, hi - step, 5000)):
+            kept = interp_uniform(pts, grid, (f, g), uniform_slopes(grid, (f, g)))
+            for v, want in zip(kept, (f, g), strict=True):
+                assert np.array_equal(v, np.interp(pts, grid, want, left=0.0, right=0.0),
+                                      equal_nan=True)
 
 
 def test_the_shape_of_the_points_is_kept():
