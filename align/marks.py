@@ -162,7 +162,9 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # whose ends lie off the fitted curve (an S the parabola averages away) is read
         # differently end to end, for certain.
         shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        chord_u = float(np.sqrt(ends**2 + rep.after.payload["chord_u_rad"]**2
+        # (The centres' noise at the ends takes the JPEG factor's own spread as the angle's
+        # u does: ``stage.u_scale``, 1 on a PNG.)
+        chord_u = float(np.sqrt(ends**2 + (rep.after.payload["chord_u_rad"] * stage.u_scale)**2
                                 + rep.after.payload["chord_bound_rad"]**2 / 3))
         off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
         if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (

@@ -57,8 +57,9 @@ class BlockScatter:
     rho : float
         Correlation of two centres' errors in one block (0-1) [-].
     dof : float
-        Degrees of freedom of the scatter's amplitude read across block boundaries (the
-        residual loop's tests take the centres' sigma from ``factor`` on these) [-].
+        Effective degrees of freedom of ``factor`` (:func:`block_factor_dof`): the residual
+        loop's tests take the centres' sigma from ``factor`` on these, and ``u_factor`` is
+        ``factor`` carried on them [-].
     u_factor : float
         The variance factor the angle's u takes (>= ``factor``): ``factor`` carried with its
         own estimate's uncertainty (:func:`posterior_factor`) [-].

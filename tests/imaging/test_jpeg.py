@@ -496,8 +496,10 @@ def _sweep_z(got, label: str) -> np.ndarray:
     printed (RMS z, max |z|, median u) under ``label``."""
     z = np.array([e / u for e, u, ok, _ in got if ok])
     u = np.array([u for _, u, ok, _ in got if ok])
+    alarms = sum(1 for *_, r in got if r.loop.effects or r.unexplained_structure)
     print(f"\n{label}: n {len(got)} ok {len(z)} RMS z {np.sqrt(np.mean(z**2)):.2f} max |z| "
-          f"{np.max(np.abs(z)):.2f} median u {np.degrees(np.median(u)) * 3600:.0f}\"")
+          f"{np.max(np.abs(z)):.2f} median u {np.degrees(np.median(u)) * 3600:.0f}\" "
+          f"loop alarms {alarms}")
     return z
 
 
