@@ -287,7 +287,7 @@ def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
 
 
 def test_block_scatter_reads_the_within_block_correlation():
-    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 300 marks of 60
+    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 150 marks of 60
     centres the within-block correlation and the variance factor on the angle come back
     (rho's spread from ~30 pairs each, 4 sigma of the mean), and the factor is the exact
     ratio of the line's slope variance under the model to the independent one."""
@@ -300,7 +300,7 @@ def test_block_scatter_reads_the_within_block_correlation():
     R = (1 - rho) * np.eye(n) + rho * (block[:, None] == block[None, :])
     want = s**2 * (h @ R @ h) / (h @ h)
     got = []
-    for _ in range(300):
+    for _ in range(150):
         b = rng.normal(size=n // 2)[block]
         z = s * (np.sqrt(rho) * b + np.sqrt(1 - rho) * rng.normal(size=n))
         got.append(block_scatter(z, block, h))
@@ -310,7 +310,7 @@ def test_block_scatter_reads_the_within_block_correlation():
     assert abs(f.mean() / want - 1) <= 4 * f.std() / want / np.sqrt(len(f)) + 0.03, (f.mean(), want)
     # Independent centres: rho ~ 0, the factor s^2 and what taking rho >= 0 adds: rho read
     # from 30 pairs has a spread ~0.26, its positive part a mean ~0.1, i.e. ~+10 %.
-    z = s * rng.normal(size=(300, n))
+    z = s * rng.normal(size=(150, n))
     f0 = np.mean([block_scatter(r, block, h).factor for r in z]) / s**2
     assert 0.97 <= f0 <= 1.15, f0
 
