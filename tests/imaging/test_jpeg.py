@@ -8,7 +8,7 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
-from imaging import JpegTables
+from imaging import CameraModel, JpegTables
 from imaging.jpeg import (
     JpegBlocks,
     block_labels,
@@ -584,3 +584,36 @@ def test_near_axis_short_marks_as_jpeg_files_within_u():
     assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
     assert np.max(np.abs(z)) <= 3.5, np.round(z, 2)
     assert abs(np.sqrt(np.mean(z**2)) - 1) <= 3 / np.sqrt(2 * len(z)), np.sqrt(np.mean(z**2))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="slow correlated JPEG error (lag-1 r ~ +0.55, chi2/dof "
+                   "~2.5 after the block columns) that the within-block model does not carry: "
+                   "3 of 40 clean q75 marks 'unexplained structure' (seeds 24, 25, 30)")
+def test_clean_near_axis_jpeg_marks_loop_false_alarms_at_alpha():
+    """Clean straight marks within 3 deg of an axis (120-320 px, the synth's JPEG at quality
+    75, exact camera): the loop adds no effect and finds no structure but at its alpha. Per
+    mark at most ~5e-3 (alpha 1e-3 for the structure tests and each of the few candidates),
+    so over 40 marks P(3 or more alarms) ~1e-3: at most 2. Measured: 3 of 40 before and
+    after the block factor's dof (ju18; the alarms' tests are the chi2 and lag-1 ones at
+    p 1e-7 to 1e-11, where no dof matters: their residuals keep a slow correlated part,
+    lag-1 +0.55, that neighbour differences do not read: factor 1.0-1.15, rho 0)."""
+    cam = CameraModel.from_dict({"camera_matrix": [[1000.0, 0, 319.5], [0, 1000.0, 239.5],
+                                                   [0, 0, 1]],
+                                 "dist_coeffs": [0.0] * 5, "image_size": [640, 480],
+                                 "rms_px": 0.0, "views": 0})
+    alarms, n = 0, 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed + 4242)
+        ang = np.deg2rad(rng.choice([0.0, 90.0]) + rng.uniform(-3, 3))
+        spec = ImageSpec(marks=(MarkSpec(ang, rng.uniform(-20, 20), rng.uniform(120, 320), 4.0),),
+                         width=640, height=480, bits=8, jpeg_quality=75, exposure=0.4,
+                         full_well_e=full_well_for_snr(40.0, -0.6, exposure=0.4), seed=seed)
+        for r in measure_image(render_marks(spec, with_crlb=False).image.astype(float), "a",
+                               cam):
+            if r.found:
+                n += 1
+                alarms += bool(r.loop.effects) or r.unexplained_structure
+    print(f"\nclean q75 near-axis marks: {n}, loop alarms {alarms}")
+    assert n >= 38
+    assert alarms <= 2, alarms
