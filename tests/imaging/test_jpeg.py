@@ -613,7 +613,8 @@ def test_clean_near_axis_jpeg_marks_loop_false_alarms_at_alpha():
     for seed in range(40):
         rng = np.random.default_rng(seed + 4242)
         ang = np.deg2rad(rng.choice([0.0, 90.0]) + rng.uniform(-3, 3))
-        spec = ImageSpec(marks=(MarkSpec(ang, rng.uniform(-20, 20), rng.uniform(120, 320), 4.0),),
+        length = rng.uniform(120, 320)
+        spec = ImageSpec(marks=(MarkSpec(ang, rng.uniform(-20, 20), length, 4.0),),
                          width=640, height=480, bits=8, jpeg_quality=75, exposure=0.4,
                          full_well_e=full_well_for_snr(40.0, -0.6, exposure=0.4), seed=seed)
         for r in measure_image(render_marks(spec, with_crlb=False).image.astype(float), "a",
