@@ -279,7 +279,9 @@ def noise_dof(m: MarkMeasurement, scale: float) -> float | None:
     tex = m.centres.texture
     if m.jpeg is not None and scale > 1.0 and (m.chol is None
                                                 or scale == jpeg_correlated_floor(m)):
-        return jpeg_scatter(m).dof  # the JPEG's scatter re-read from the mark
+        # The JPEG's scatter re-read from the mark: the factor's own dof, the one the
+        # angle's u takes (imaging.block_factor_dof: rho's spread with s^2's).
+        return jpeg_scatter(m).dof
     if m.chol is None or tex is None or not np.isfinite(tex.dof):
         return None
     if scale <= 1.0:

@@ -152,7 +152,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         u_mid = (m.profile.width_px / 2 + m.profile.blur_px) / np.sqrt(3) / np.sqrt(2)
         ends = float(abs(rep.after.payload["curvature_per_px"]) * u_mid)
         # (Where the ends lie along the line; across it, the centres' noise near each end
-        # moves the chord too: ``chord_u_rad``, added to the ends term of a bent mark.)
+        # moves the chord too: ``chord_u_rad`` with the JPEG factor's spread, ``u_scale``.)
         # A bow is a finding only if it matters to the angle: what it does for certain —
         # its ends term, and the straight fit with the bow's column against without it —
         # must widen u by at least NEGLIGIBLE_BOW. (A 0.025 +- 0.007 px bow on a clean
@@ -162,7 +162,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         # whose ends lie off the fitted curve (an S the parabola averages away) is read
         # differently end to end, for certain.
         shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        chord_u = float(np.sqrt(ends**2 + rep.after.payload["chord_u_rad"]**2
+        chord_u = float(np.sqrt(ends**2 + (rep.after.payload["chord_u_rad"] * stage.u_scale)**2
                                 + rep.after.payload["chord_bound_rad"]**2 / 3))
         off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
         if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (

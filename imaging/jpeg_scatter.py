@@ -57,8 +57,9 @@ class BlockScatter:
     rho : float
         Correlation of two centres' errors in one block (0-1) [-].
     dof : float
-        Degrees of freedom of the scatter's amplitude read across block boundaries (the
-        residual loop's tests take the centres' sigma from ``factor`` on these) [-].
+        Effective degrees of freedom of ``factor`` (:func:`block_factor_dof`): the residual
+        loop's tests take the centres' sigma from ``factor`` on these, and ``u_factor`` is
+        ``factor`` carried on them [-].
     u_factor : float
         The variance factor the angle's u takes (>= ``factor``): ``factor`` carried with its
         own estimate's uncertainty (:func:`posterior_factor`) [-].
@@ -126,30 +127,67 @@ def block_scatter(z: np.ndarray, block: np.ndarray, h: np.ndarray) -> BlockScatt
         f, nu = jpeg_centre_scale(z), jpeg_noise_dof(n)
         raw = float(np.mean(d2) / 2)
         return BlockScatter(f, 0.0, nu, max(f, posterior_factor(raw, nu)))
-    s2 = float(np.mean(d2[~same]) / 2)
-    w = float(np.mean(d2[same]) / 2)
-    rho = float(np.clip(1.0 - w / s2, 0.0, 1.0)) if s2 > 0 else 0.0
     _, inv = np.unique(block, return_inverse=True)
     hb = np.bincount(inv, weights=h)
     hh = float(h @ h)
-    ratio = ((1.0 - rho) * hh + rho * float(hb @ hb)) / hh if hh > 0 else 1.0
     g = float(hb @ hb) / hh if hh > 0 else 1.0
-    raw = s2 * ratio
-    # The cross-boundary differences carry s^2; with two centres a block they share no term
-    # (one chi2_1 each), and the within-block ones add rho's own spread: their count is
-    # the dof of the amplitude the loop's tests take (at most n/2 for a near-axis mark).
-    # The angle's u takes the factor s2 g - w (g - 1) with both estimates' spread: its
-    # Welch-Satterthwaite dof (s2 on n_cross, w on n_same chi2_1 terms), and never beyond
-    # what rho = 1 (the model's most) gives with s2's own spread. A short mark's rho, read
-    # from a dozen pairs, is most of its factor's uncertainty: on the quality-75 crop
-    # sweep's marks saved as files, 12 pairs read rho 0 (clipped from -0.44) where the
-    # error was 4.15 u.
-    var = 2.0 * (g * s2) ** 2 / n_cross + 2.0 * ((g - 1.0) * w) ** 2 / n_same
-    nu = 2.0 * raw**2 / var if var > 0 else float("inf")
-    bound = posterior_factor(max(1.0, s2 * g), n_cross)
+    (s2,), (rho,), (raw,) = _block_factor(z[None], same, g)
+    if not s2 > 0:
+        return BlockScatter(1.0, 0.0, float(n_cross), 1.0)
+    nu = block_factor_dof(n, same, inv, g, s2, rho)
     factor = float(max(1.0, raw))
-    return BlockScatter(factor, rho, float(n_cross),
-                        float(max(factor, min(posterior_factor(raw, nu), bound))))
+    return BlockScatter(factor, rho, nu, float(max(factor, posterior_factor(factor, nu))))
+
+
+def _block_factor(Z: np.ndarray, same: np.ndarray, g: float):
+    """:func:`block_scatter`'s reading of rows of whitened residuals ``Z`` (M, N): the
+    scatter s^2 across block boundaries, the within-block correlation rho (in [0, 1]) and
+    the angle's variance factor s^2 (1 - rho + rho g) [-], each (M,)."""
+    d2 = np.diff(Z, axis=1) ** 2
+    s2 = d2[:, ~same].mean(axis=1) / 2
+    w = d2[:, same].mean(axis=1) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where(s2 > 0, np.clip(1.0 - w / s2, 0.0, 1.0), 0.0)
+    return s2, rho, s2 * (1.0 - rho + rho * g)
+
+
+FACTOR_DRAWS = 500
+"""Draws of the block model :func:`block_factor_dof` reads its factor's spread from (the
+mean of F / F-hat to ~1.5 %, its dof within ~15 % at nu ~ 6: a few ms a mark)."""
+
+
+def block_factor_dof(n: int, same: np.ndarray, inv: np.ndarray, g: float, s2: float,
+                     rho: float) -> float:
+    """Effective degrees of freedom of :func:`block_scatter`'s variance factor F-hat on a
+    mark of ``n`` centres (``same``: the neighbour pairs within one block; ``inv``: each
+    centre's block index; ``g``: the angle's block gain), the one the angle's u and the
+    residual loop's tests both take: nu with nu / (nu - 2) = E[F / max(1, F-hat)], the mean
+    the angle's z^2 has over the estimate (inf where it is <= 1).
+
+    F-hat = s^2 (1 - rho + rho g) is read from two neighbour-difference means that share
+    centres (a within-block and a cross-boundary difference correlate by (1 - rho) / 4 in
+    their squares) with rho clipped to [0, 1]: no chi-square, and a Welch-Satterthwaite dof
+    of the unclipped combination takes rho's spread where rho ~ 0 at its full width (the
+    clip removes half of it): u ~sqrt(2) too wide there, and too short near rho ~ 1 where
+    it was bounded by the cross-boundary count. So its distribution is taken as it is:
+    the block model (z_i = s (sqrt(rho) b_k + sqrt(1 - rho) w_i)) drawn at the mark's own
+    (s^2, rho) with its blocks, read as the mark was, and E[F / F-hat] taken over the
+    draws (fixed seed: the same mark gives the same u).
+    """
+    k = int(inv.max()) + 1
+
+    def mean_ratio(r: float) -> tuple[float, float]:
+        rng = np.random.default_rng(0)
+        Z = np.sqrt(s2) * (np.sqrt(r) * rng.standard_normal((FACTOR_DRAWS, k))[:, inv]
+                           + np.sqrt(1.0 - r) * rng.standard_normal((FACTOR_DRAWS, n)))
+        _, rr, f = _block_factor(Z, same, g)
+        return float(np.mean(s2 * (1.0 - r + r * g) / np.maximum(1.0, f))), float(rr.std())
+
+    c, sd = mean_ratio(rho)
+    # rho read from a dozen pairs is often clipped to 0 (or short) where it is 0.3-0.6,
+    # where the mean ratio is largest: the reading one of its own sigma above stands too.
+    c = max(c, mean_ratio(min(1.0, rho + sd))[0])
+    return 2.0 * c / (c - 1.0) if c > 1.0 else float("inf")
 
 
 BLOCK_HARMONICS = 3

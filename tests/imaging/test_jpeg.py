@@ -9,7 +9,7 @@ import pytest
 
 from align.lens import LensRanges
 from align.marks import measure_image
-from imaging import JpegTables
+from imaging import CameraModel, JpegTables
 from imaging.jpeg import (
     JpegBlocks,
     block_labels,
@@ -289,7 +289,7 @@ def test_block_phase_columns_take_the_fast_pattern_not_a_tilt():
 
 
 def test_block_scatter_reads_the_within_block_correlation():
-    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 300 marks of 60
+    """Centres two to a block sharing part of its error (rho 0.6, s 2): over 150 marks of 60
     centres the within-block correlation and the variance factor on the angle come back
     (rho's spread from ~30 pairs each, 4 sigma of the mean), and the factor is the exact
     ratio of the line's slope variance under the model to the independent one."""
@@ -302,7 +302,7 @@ def test_block_scatter_reads_the_within_block_correlation():
     R = (1 - rho) * np.eye(n) + rho * (block[:, None] == block[None, :])
     want = s**2 * (h @ R @ h) / (h @ h)
     got = []
-    for _ in range(300):
+    for _ in range(150):
         b = rng.normal(size=n // 2)[block]
         z = s * (np.sqrt(rho) * b + np.sqrt(1 - rho) * rng.normal(size=n))
         got.append(block_scatter(z, block, h))
@@ -312,46 +312,60 @@ def test_block_scatter_reads_the_within_block_correlation():
     assert abs(f.mean() / want - 1) <= 4 * f.std() / want / np.sqrt(len(f)) + 0.03, (f.mean(), want)
     # Independent centres: rho ~ 0, the factor s^2 and what taking rho >= 0 adds: rho read
     # from 30 pairs has a spread ~0.26, its positive part a mean ~0.1, i.e. ~+10 %.
-    z = s * rng.normal(size=(300, n))
+    z = s * rng.normal(size=(150, n))
     f0 = np.mean([block_scatter(r, block, h).factor for r in z]) / s**2
     assert 0.97 <= f0 <= 1.15, f0
 
 
+def _block_model_z(n: int, rho: float, draws: int, seed: int):
+    """Angles' z (error / u from ``u_factor``) and dofs of ``draws`` marks of ``n`` centres
+    two to a block sharing part of its error (rho, s 2), the line fitted as the pipeline
+    does (independent centres), the scatter read from its residuals."""
+    rng = np.random.default_rng(seed)
+    block = np.arange(n) // 2
+    t = 4.0 * np.arange(n)
+    X = np.column_stack([np.ones(n), t - t.mean()])
+    h = np.linalg.pinv(X)[1]
+    z, dof = [], []
+    for _ in range(draws):
+        e = 2.0 * (np.sqrt(rho) * rng.normal(size=n // 2)[block]
+                   + np.sqrt(1 - rho) * rng.normal(size=n))
+        bs = block_scatter(e - X @ np.linalg.lstsq(X, e, rcond=None)[0], block, h)
+        assert bs.u_factor >= bs.factor
+        z.append((h @ e) / np.sqrt(bs.u_factor * (h @ h)))
+        dof.append(bs.dof)
+    return np.array(z), np.array(dof)
+
+
 def test_block_scatter_u_carries_its_factors_own_spread():
-    """A short mark's factor read from a dozen pairs: the angle's true variance over the one
-    u says (true / factor) averages above 1 (1 / F-hat's mean exceeds 1 / F), i.e. u too
-    small on average; ``u_factor`` (the factor with its estimate's spread) brings it to 1
-    or below. Over 300 marks (centres two to a block, the line fitted, s 2) of 24 and 60
-    centres, rho 0 and 0.5: 4 standard errors of the mean. Measured (mean true / factor ->
-    true / u_factor): 24 centres rho 0.5 1.43 -> 0.82, rho 0 1.12 -> 0.50; 60 centres rho
-    0.5 1.17 -> 0.98 (rho's spread from few within-block pairs taken at its model's width:
-    wide where rho is near 0). At rho 0.9 a 24-centre mark is still short (1.50 -> 1.16):
-    the bound at rho = 1 binds there."""
-    for n, rho, short in [(24, 0.5, True), (24, 0.0, False), (60, 0.5, False),
-                          (24, 0.9, True)]:
-        rng = np.random.default_rng(11)
-        block = np.arange(n) // 2
-        t = 4.0 * np.arange(n)
-        X = np.column_stack([np.ones(n), t - t.mean()])
-        h = np.linalg.pinv(X)[1]
-        hb = np.bincount(block, weights=h)
-        true = 4.0 * ((1 - rho) + rho * (hb @ hb) / (h @ h))
-        a, b = [], []
-        for _ in range(300):
-            z = 2.0 * (np.sqrt(rho) * rng.normal(size=n // 2)[block]
-                       + np.sqrt(1 - rho) * rng.normal(size=n))
-            z = z - X @ np.linalg.lstsq(X, z, rcond=None)[0]
-            bs = block_scatter(z, block, h)
-            assert bs.u_factor >= bs.factor
-            a.append(true / bs.factor)
-            b.append(true / bs.u_factor)
-        a, b = np.array(a), np.array(b)
-        if short:  # the shortfall the factor alone leaves
-            assert a.mean() > 1 + 4 * a.std() / np.sqrt(len(a)), (n, rho, a.mean())
-        if rho < 0.9:
-            assert b.mean() <= 1 + 4 * b.std() / np.sqrt(len(b)), (n, rho, b.mean())
-        else:
-            assert b.mean() < a.mean() - 4 * b.std() / np.sqrt(len(b)), (n, rho, b.mean())
+    """A short mark's factor read from a dozen pairs is noisy (1 / F-hat's mean exceeds
+    1 / F) and rho's clip at 0 halves its spread where rho ~ 0: the angle's u takes the
+    factor with its estimate's spread as the block model gives it at the mark's own
+    (s^2, rho) (one nu: the loop's tests take it too). 24 centres at rho 0 and 0.9 over
+    150 marks: RMS z within 1 +- 3 / sqrt(2 n). Before (a Welch-Satterthwaite dof of the
+    unclipped combination, bounded by the cross-boundary count): 0.72 and 1.13 (400 marks;
+    after 0.94 and 1.12); the slow test has the rows."""
+    for rho in (0.0, 0.9):
+        z, _ = _block_model_z(24, rho, 150, 11)
+        assert abs(np.sqrt(np.mean(z**2)) - 1) <= 3 / np.sqrt(2 * len(z)), (rho, z.std())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("n", [24, 40, 60])
+def test_block_scatter_u_covers_over_rho(n):
+    """The block model over rho 0-1 (a row each, 400 marks of n centres): RMS z of the
+    angle (u from ``u_factor``) within [0.8, 1.2] (the dof the loop takes printed).
+    Measured (RMS z before -> after, rho 0 / 0.3 / 0.6 / 0.9 / 1):
+    n 24 0.72 / 0.81 / 0.96 / 1.13 / 1.14 -> 0.94 / 1.00 / 1.09 / 1.12 / 1.11; n 40
+    0.77 / 0.87 / 0.99 / 1.06 / 1.08 -> 0.98 / 1.00 / 1.02 / 1.04 / 1.06; n 60 0.83 / 0.99 /
+    1.08 / 1.10 / 1.08 -> 0.97 / 1.08 / 1.10 / 1.08 / 1.06. (16 centres, a 64 px mark: up to
+    1.25 at rho 0.6, rho's plug-in short there.)"""
+    for rho in (0.0, 0.3, 0.6, 0.9, 1.0):
+        z, dof = _block_model_z(n, rho, 400, 11)
+        rms = np.sqrt(np.mean(z**2))
+        print(f"n {n} rho {rho}: RMS z {rms:.2f} max |z| {np.max(np.abs(z)):.2f} "
+              f"median dof {np.median(dof):.1f}")
+        assert 0.8 <= rms <= 1.2, (n, rho, rms)
 
 
 def test_block_labels_follow_the_grid_phase():
@@ -514,8 +528,10 @@ def _sweep_z(got, label: str) -> np.ndarray:
     printed (RMS z, max |z|, median u) under ``label``."""
     z = np.array([e / u for e, u, ok, _ in got if ok])
     u = np.array([u for _, u, ok, _ in got if ok])
+    alarms = sum(1 for *_, r in got if r.loop.effects or r.unexplained_structure)
     print(f"\n{label}: n {len(got)} ok {len(z)} RMS z {np.sqrt(np.mean(z**2)):.2f} max |z| "
-          f"{np.max(np.abs(z)):.2f} median u {np.degrees(np.median(u)) * 3600:.0f}\"")
+          f"{np.max(np.abs(z)):.2f} median u {np.degrees(np.median(u)) * 3600:.0f}\" "
+          f"loop alarms {alarms}")
     return z
 
 
@@ -546,7 +562,12 @@ def test_near_axis_and_cropped_jpegs_within_u(quality, crop):
     scatter's factor with its estimate's spread): q50 file 0.87 -> 0.80, 2.38 -> 2.29,
     51 -> 57"; q50 crop 0.67 -> 0.61, 1.67 -> 1.53, 159 -> 169"; q75 file 1.01 -> 0.93,
     2.29 -> 2.26, 30 -> 35"; q75 crop 1.14 -> 1.03, 2.64 -> 2.53, 31 -> 35"; q90 file 0.70
-    -> 0.61, 1.77 -> 1.41, 24 -> 25"; q90 crop 0.78 -> 0.74, 2.20 -> 2.11, 21 -> 23"."""
+    -> 0.61, 1.77 -> 1.41, 24 -> 25"; q90 crop 0.78 -> 0.74, 2.20 -> 2.11, 21 -> 23". Then
+    (ju18: the factor's dof from the block model at the mark's own (s^2, rho)): q50 file
+    0.80 -> 0.87, 2.29 -> 2.25, 57 -> 47"; q50 crop 0.61 -> 0.62, 1.53 -> 1.91, 169 -> 139";
+    q75 file 0.93 -> 0.92, 2.26 -> 2.13, 35 -> 24"; q75 crop 1.03 -> 1.18, 2.53 -> 2.64,
+    35 -> 30"; q90 file 0.61 -> 0.69, 1.41 -> 2.05, 25 -> 21"; q90 crop 0.74 -> 0.78, 2.11 ->
+    2.31, 23 -> 19" (loop alarms, printed: 3 / 11 / 2 / 3 / 0 / 0)."""
     got = list(_user13_near_axis_files(quality, crop))
     z = _sweep_z(got, f"q{quality} {'crop' if crop else 'file'}")
     assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
@@ -594,9 +615,45 @@ def test_near_axis_short_marks_as_jpeg_files_within_u():
     RMS z within 1 +- 3 / sqrt(2 n), every ok mark within 3.5 u (n = 32: P(|z| > 3.5) for
     one of 32 normal z is 1.5 %). Measured (before -> after the angle's u took the factor
     with its estimate's spread, BlockScatter.u_factor): RMS z 1.31 -> 1.14, max |z| 4.15
-    -> 3.29 (seed 6 mark 3, 23 centres, -216"), ok 30 of 32, median u 30 -> 33"."""
+    -> 3.29 (seed 6 mark 3, 23 centres, -216"), ok 30 of 32, median u 30 -> 33". Then (ju18:
+    the factor's dof from the block model at the mark's own (s^2, rho)): 1.14 -> 1.12, 3.29
+    -> 2.41, ok 29, 33 -> 29"."""
     got = list(_user13_near_axis_files(75, True, as_file=True))
     z = _sweep_z(got, "q75 crop-sweep files")
     assert len(got) >= 28 and len(z) >= 0.6 * len(got), (len(got), len(z))
     assert np.max(np.abs(z)) <= 3.5, np.round(z, 2)
     assert abs(np.sqrt(np.mean(z**2)) - 1) <= 3 / np.sqrt(2 * len(z)), np.sqrt(np.mean(z**2))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="slow correlated JPEG error (lag-1 r ~ +0.55, chi2/dof "
+                   "~2.5 after the block columns) that the within-block model does not carry: "
+                   "3 of 40 clean q75 marks 'unexplained structure' (seeds 24, 25, 30)")
+def test_clean_near_axis_jpeg_marks_loop_false_alarms_at_alpha():
+    """Clean straight marks within 3 deg of an axis (120-320 px, the synth's JPEG at quality
+    75, exact camera): the loop adds no effect and finds no structure but at its alpha. Per
+    mark at most ~5e-3 (alpha 1e-3 for the structure tests and each of the few candidates),
+    so over 40 marks P(3 or more alarms) ~1e-3: at most 2. Measured: 3 of 40 before and
+    after the block factor's dof (ju18; the alarms' tests are the chi2 and lag-1 ones at
+    p 1e-7 to 1e-11, where no dof matters: their residuals keep a slow correlated part,
+    lag-1 +0.55, that neighbour differences do not read: factor 1.0-1.15, rho 0)."""
+    cam = CameraModel.from_dict({"camera_matrix": [[1000.0, 0, 319.5], [0, 1000.0, 239.5],
+                                                   [0, 0, 1]],
+                                 "dist_coeffs": [0.0] * 5, "image_size": [640, 480],
+                                 "rms_px": 0.0, "views": 0})
+    alarms, n = 0, 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed + 4242)
+        ang = np.deg2rad(rng.choice([0.0, 90.0]) + rng.uniform(-3, 3))
+        length = rng.uniform(120, 320)
+        spec = ImageSpec(marks=(MarkSpec(ang, rng.uniform(-20, 20), length, 4.0),),
+                         width=640, height=480, bits=8, jpeg_quality=75, exposure=0.4,
+                         full_well_e=full_well_for_snr(40.0, -0.6, exposure=0.4), seed=seed)
+        for r in measure_image(render_marks(spec, with_crlb=False).image.astype(float), "a",
+                               cam):
+            if r.found:
+                n += 1
+                alarms += bool(r.loop.effects) or r.unexplained_structure
+    print(f"\nclean q75 near-axis marks: {n}, loop alarms {alarms}")
+    assert n >= 38
+    assert alarms <= 2, alarms
