@@ -32,6 +32,7 @@ from align.family_stage import family_note, grating_notes, offset_lens_u, with_f
 from align.lens import LensRanges
 from align.lens_advice import lens_advice
 from align.loop import Candidate, LoopReport, run_loop
+from align.mark_choice import MIN_DELTA_BIC, alternatives, blend
 from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
 from align.mark_result import FrameDistortion, MarkResult
 from align.mark_shadow import shadow_edge_note, unshadowed
@@ -105,11 +106,60 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         named u terms [rad] and notes.
     """
     stage = MarkStage(m)
-    rep = run_loop(stage, candidates, alpha=alpha,
-                   admissible=functools.partial(radial_admissible, alpha=alpha))
+    admissible = functools.partial(radial_admissible, alpha=alpha)
+    rep = run_loop(stage, candidates, alpha=alpha, min_delta_bic=MIN_DELTA_BIC,
+                   admissible=admissible)
+    a, au, du, infl, terms, notes, bend, off_frame = _read(stage, rep, m, image, index, alpha,
+                                                           lens_bow_px)
+    # The loop's decisions within their statistics' sampling spread of the threshold: the
+    # other side's reading carried by its chance (align.mark_choice), so that the angle does
+    # not jump where an imperceptibly different input tips a decision.
+    alts = alternatives(stage, rep, candidates, alpha, admissible)
+    readings = [(x.weight, *_read(stage, x.report, m, image, index, alpha, lens_bow_px,
+                                  x.structured)[:2]) for x in alts]
+    if readings:
+        a, choice = blend(a, au, readings)
+        if choice > 0:
+            terms["model_choice"] = choice
+            au = float(np.hypot(au, choice))
+            notes.append(f"{image} mark {index}: the loop's decision on the edge of its test ("
+                         + "; ".join(f"{x.what}: weight {x.weight:.2f}, margin "
+                                     f"{x.margin:+.2f}" for x in alts)
+                         + "): the angle is the readings' average by weight, u carries the "
+                         f"other reading (model_choice {np.rad2deg(choice) * 3600:.3g}″)")
+    # Two straight grooves meeting at an angle, found as one: no bow, chord or fit is either
+    # groove's direction (mark_kink). Tested only where the loop left structure or named a
+    # bow (a clean straight mark has nothing to break).
+    kink = (kink_test(m, stage.sigma) if kink_testable(m) and (
+        rep.unexplained_structure or bend is not None) else None)
+    kinked = kink is not None and kink.p < alpha and abs(kink.turn_rad) >= KINK_MIN_RAD
+    if kinked:
+        notes.append(f"{image} mark {index}: NOT OK: a kink at t = {kink.t_px:+.0f} px from "
+                     f"the mark's middle (broken line against line and bow: sup-F "
+                     f"{kink.sup_f:.3g}, p = {kink.p:.2g}): two straight grooves meeting at an "
+                     "angle, measured as one line they have no one direction; measure each "
+                     "part on its own (an ROI on each)")
+    d = rep.after.quantities["offset_px"][0]
+    return MarkResult(
+        image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
+        offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
+        blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
+        n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
+        loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
+        notes=tuple(notes), bend_off_frame=bend is not None and off_frame,
+        kinked=kinked)
+
+
+def _read(stage: MarkStage, rep: LoopReport, m: MarkMeasurement, image: str, index: int,
+          alpha: float, lens_bow_px: float, structured: bool | None = None):
+    """One reading of the loop's report on a mark: (angle [rad], its u [rad], the offset's
+    u [px], the structure inflation, the named u terms [rad], notes, the bow effect or None,
+    whether a bowed mark runs off the frame). ``structured``: the structure decision taken
+    (None: the report's own)."""
+    unexplained = rep.unexplained_structure if structured is None else structured
     a, au = rep.after.quantities["angle_rad"]
-    d, du = rep.after.quantities["offset_px"]
-    infl = structure_inflation(rep)
+    du = rep.after.quantities["offset_px"][1]
+    infl = structure_inflation(rep, structured=structured)
     au, du = au * infl * stage.u_scale, du * infl * stage.u_scale
     terms: dict[str, float] = {}
     notes: list[str] = []
@@ -173,7 +223,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
             au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, chord_u, lens_bow_px,
                                   alpha, f"{image} mark {index}")
             a = chord
-    elif rep.unexplained_structure:
+    elif unexplained:
         # Structure no effect named (an S-shaped groove, whose odd bow no parabola takes):
         # the straight fit is then not the groove's end-to-end direction for certain, and
         # which one the user means is not in the image: the truth anywhere between the fit
@@ -183,26 +233,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         terms["structure_chord_vs_fit"] = (abs(_wrap(a - chord))
                                            + rep.after.payload["chord_bound_rad"]) / np.sqrt(3)
         au = float(np.hypot(au, terms["structure_chord_vs_fit"]))
-    # Two straight grooves meeting at an angle, found as one: no bow, chord or fit is either
-    # groove's direction (mark_kink). Tested only where the loop left structure or named a
-    # bow (a clean straight mark has nothing to break).
-    kink = (kink_test(m, stage.sigma) if kink_testable(m) and (
-        rep.unexplained_structure or bend is not None) else None)
-    kinked = kink is not None and kink.p < alpha and abs(kink.turn_rad) >= KINK_MIN_RAD
-    if kinked:
-        notes.append(f"{image} mark {index}: NOT OK: a kink at t = {kink.t_px:+.0f} px from "
-                     f"the mark's middle (broken line against line and bow: sup-F "
-                     f"{kink.sup_f:.3g}, p = {kink.p:.2g}): two straight grooves meeting at an "
-                     "angle, measured as one line they have no one direction; measure each "
-                     "part on its own (an ROI on each)")
-    return MarkResult(
-        image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
-        offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
-        blur_px=m.profile.blur_px, dark=m.candidate.dark, n_points=len(m.points),
-        n_rejected=m.n_rejected, angle_before_rad=rep.before.quantities["angle_rad"][0],
-        loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
-        notes=tuple(notes), bend_off_frame=bend is not None and off_frame,
-        kinked=kinked)
+    return a, au, du, infl, terms, notes, bend, off_frame
 
 
 def _bent(terms: dict[str, float], notes: list[str], m: MarkMeasurement, bend, au: float,
@@ -252,8 +283,12 @@ def _wrap(a: float) -> float:
     return float((a + np.pi / 2) % np.pi - np.pi / 2)
 
 
-def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
+def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6,
+                        structured: bool | None = None) -> float:
     """Factor on the stated uncertainty when the residual keeps unexplained structure.
+
+    ``structured`` overrides the report's own structure decision (None: keep it; the other
+    side of a decision on the edge, :mod:`align.mark_choice`).
 
     Never below 1: an improbably small chi2 (lower tail below ``alpha_low``) is a groove
     model that does not fit, not a licence to shrink u.
@@ -269,7 +304,7 @@ def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
         # once got x0.4 here and scattered at twice its u): u stays as stated, and the
         # misfit is reported (warnings).
         return 1.0
-    if not rep.unexplained_structure:
+    if not (rep.unexplained_structure if structured is None else structured):
         return 1.0
     z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
     zc = z - z.mean()
