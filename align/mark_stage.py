@@ -85,6 +85,7 @@ class MarkStage:
         self.noise_dof = noise_dof(m, ts)
         self.u_scale = jpeg_u_scale(m, ts)
         self.blocks = jpeg_blocks_columns(m)
+        self._fits: dict[tuple, StageFit] = {}
 
     def undistorted(self, k1: float, angle_rad: float) -> tuple[np.ndarray, np.ndarray]:
         """The centres undistorted by k1 and their sigma across the line carried with them
@@ -98,6 +99,14 @@ class MarkStage:
         return q, self.sigma * g
 
     def fit(self, terms: Sequence[Term]) -> StageFit:
+        # The same model is fitted again by the reading of decisions on the edge
+        # (align.mark_choice: the loop's last round, each effect left out): kept, not refitted.
+        key = tuple((t.name, np.asarray(t.columns, float).tobytes()) for t in terms)
+        if key not in self._fits:
+            self._fits[key] = self._fit(terms)
+        return self._fits[key]
+
+    def _fit(self, terms: Sequence[Term]) -> StageFit:
         m = self.m
         names = [t.name for t in terms]
         k1, angle = 0.0, m.line.angle_rad

@@ -18,7 +18,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy import special  # (not scipy.stats: ~0.8 s of CPU to import; the same functions)
 
 from align.camera_lens import (
     CAMERA_MODEL,
@@ -31,8 +30,10 @@ from align.camera_lens import (
 from align.family_stage import family_note, grating_notes, offset_lens_u, with_families
 from align.lens import LensRanges
 from align.lens_advice import lens_advice
-from align.loop import Candidate, LoopReport, run_loop
+from align.loop import Candidate, run_loop
+from align.mark_choice import MIN_DELTA_BIC, alternatives, blend
 from align.mark_kink import KINK_MIN_RAD, kink_test, kink_testable, split_kinked
+from align.mark_reading import read_mark, structure_inflation, wrap_line_angle
 from align.mark_result import FrameDistortion, MarkResult
 from align.mark_shadow import shadow_edge_note, unshadowed
 from align.mark_stage import (
@@ -52,19 +53,11 @@ from imaging import (
     JpegTables,
     MarkMeasurement,
     Roi,
-    defocus_note,
-    jpeg_note,
-    line_frame,
     measure_frame,
     read_image_notes,
 )
 
 log = logging.getLogger("align.marks")
-
-NEGLIGIBLE_BOW = 0.05
-"""A bow whose certain effects widen the angle's u by less than this fraction (below ~0.32 u
-in quadrature) changes no reading of the angle: carried in u as ``bow_ends`` and
-``bow_vs_straight``, the straight fit kept, not named a bent mark."""
 
 __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens", "MarkStage",
            "FrameDistortion", "MarkResult", "camera_lens", "half_diagonal", "loop_mark",
@@ -105,84 +98,27 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         named u terms [rad] and notes.
     """
     stage = MarkStage(m)
-    rep = run_loop(stage, candidates, alpha=alpha,
-                   admissible=functools.partial(radial_admissible, alpha=alpha))
-    a, au = rep.after.quantities["angle_rad"]
-    d, du = rep.after.quantities["offset_px"]
-    infl = structure_inflation(rep)
-    au, du = au * infl * stage.u_scale, du * infl * stage.u_scale
-    terms: dict[str, float] = {}
-    notes: list[str] = []
-    f = rep.after
-    if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
-        terms["jpeg_blocks"] = m.jpeg_u_rad
-        au = float(np.hypot(au, m.jpeg_u_rad))
-        notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
-                               float(np.rad2deg(m.jpeg_u_rad) * 3600),
-                               float(np.median(stage.sigma / m.sigma))))
-    if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
-        terms["groove_profile"] = m.profile_u_rad
-        au = float(np.hypot(au, m.profile_u_rad))
-    if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
-        terms["striped_background"] = m.background_u_rad
-        au = float(np.hypot(au, m.background_u_rad))
-    defocus = defocus_note(f"{image} mark {index}", m.blur)
-    if defocus:
-        notes.append(defocus)
-    elif f.dof > 0 and special.chdtr(f.dof, f.chi2) < 1e-6:
-        notes.append(f"{image} mark {index}: the centres scatter far less than their stated "
-                     f"sigma (chi2/dof {f.chi2 / f.dof:.2f}): the groove model does not fit "
-                     "this groove; u kept as stated (a misfit never narrows it)")
-    bend = next((e for e in rep.effects if e.name == BEND), None)
-    off_frame = False
-    if bend is not None:
-        # A bent mark has no one direction: its straight fit and its end-to-end chord differ,
-        # and which one the user means is not in the image. Its direction is read as the
-        # chord between the groove's own ends (the tangent at its middle), and u covers the
-        # other readings (the straight fit over the measured centres, the tangent at their
-        # middle): the direction meant anywhere between the chord and the farthest of them,
-        # uniform (Type B), so about the chord its standard uncertainty is that difference
-        # / sqrt 3 (the difference is the bound, not a standard uncertainty).
-        chord = float(rep.after.payload["chord_rad"])
-        a0 = rep.before.quantities["angle_rad"][0]
-        # Where the ends are: a groove's tip (round, square or tapering over about its own
-        # width w, blurred by s) puts each half-depth end within +-(w/2 + s), uniform (Type
-        # B); their middle then moves by that / sqrt(2), and the chord turns with the
-        # curvature times that shift.
-        u_mid = (m.profile.width_px / 2 + m.profile.blur_px) / np.sqrt(3) / np.sqrt(2)
-        ends = float(abs(rep.after.payload["curvature_per_px"]) * u_mid)
-        # (Where the ends lie along the line; across it, the centres' noise near each end
-        # moves the chord too: ``chord_u_rad`` with the JPEG factor's spread, ``u_scale``.)
-        # A bow is a finding only if it matters to the angle: what it does for certain —
-        # its ends term, and the straight fit with the bow's column against without it —
-        # must widen u by at least NEGLIGIBLE_BOW. (A 0.025 +- 0.007 px bow on a clean
-        # mark, 3.6 sigma, was called bent: its own sigma says it is there, not that it
-        # changes any reading.) The chord is in the test only by how far it differs from the
-        # fit beyond its own noise (at alpha): its ends' noise is not the bow's, but a groove
-        # whose ends lie off the fitted curve (an S the parabola averages away) is read
-        # differently end to end, for certain.
-        shift = abs(_wrap(a - a0)) / np.sqrt(3)
-        chord_u = float(np.sqrt(ends**2 + (rep.after.payload["chord_u_rad"] * stage.u_scale)**2
-                                + rep.after.payload["chord_bound_rad"]**2 / 3))
-        off_chord = max(0.0, abs(_wrap(a - chord)) + float(special.ndtri(alpha / 2)) * chord_u)
-        if np.hypot(np.hypot(ends, shift), off_chord / np.sqrt(3)) < (
-                np.sqrt((1 + NEGLIGIBLE_BOW)**2 - 1) * au):
-            terms["bow_ends"], terms["bow_vs_straight"] = ends, shift
-            au = float(np.sqrt(au**2 + ends**2 + shift**2))
-        else:
-            au, off_frame = _bent(terms, notes, m, bend, au, a, a0, chord, chord_u, lens_bow_px,
-                                  alpha, f"{image} mark {index}")
-            a = chord
-    elif rep.unexplained_structure:
-        # Structure no effect named (an S-shaped groove, whose odd bow no parabola takes):
-        # the straight fit is then not the groove's end-to-end direction for certain, and
-        # which one the user means is not in the image: the truth anywhere between the fit
-        # and the chord between the groove's ends (or as far as their extrapolation beyond
-        # the last centres may carry it), uniform (Type B), about the fit the bound / sqrt 3.
-        chord = float(rep.after.payload["chord_rad"])
-        terms["structure_chord_vs_fit"] = (abs(_wrap(a - chord))
-                                           + rep.after.payload["chord_bound_rad"]) / np.sqrt(3)
-        au = float(np.hypot(au, terms["structure_chord_vs_fit"]))
+    admissible = functools.partial(radial_admissible, alpha=alpha)
+    rep = run_loop(stage, candidates, alpha=alpha, min_delta_bic=MIN_DELTA_BIC,
+                   admissible=admissible)
+    a, au, du, infl, terms, notes, bend, off_frame = read_mark(stage, rep, m, image, index, alpha,
+                                                           lens_bow_px)
+    # The loop's decisions within their statistics' sampling spread of the threshold: the
+    # other side's reading carried by its chance (align.mark_choice), so that the angle does
+    # not jump where an imperceptibly different input tips a decision.
+    alts = alternatives(stage, rep, candidates, alpha, admissible)
+    readings = [(x.weight, *read_mark(stage, x.report, m, image, index, alpha, lens_bow_px,
+                                  x.structured)[:2]) for x in alts]
+    if readings:
+        a, choice = blend(a, au, readings)
+        if choice > 0:
+            terms["model_choice"] = choice
+            au = float(np.hypot(au, choice))
+            notes.append(f"{image} mark {index}: the loop's decision on the edge of its test ("
+                         + "; ".join(f"{x.what}: weight {x.weight:.2f}, margin "
+                                     f"{x.margin:+.2f}" for x in alts)
+                         + "): the angle is the readings' average by weight, u carries the "
+                         f"other reading (model_choice {np.rad2deg(choice) * 3600:.3g}″)")
     # Two straight grooves meeting at an angle, found as one: no bow, chord or fit is either
     # groove's direction (mark_kink). Tested only where the loop left structure or named a
     # bow (a clean straight mark has nothing to break).
@@ -195,6 +131,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
                      f"{kink.sup_f:.3g}, p = {kink.p:.2g}): two straight grooves meeting at an "
                      "angle, measured as one line they have no one direction; measure each "
                      "part on its own (an ROI on each)")
+    d = rep.after.quantities["offset_px"][0]
     return MarkResult(
         image=image, found=True, index=index, angle_rad=a, angle_u_rad=au, offset_px=d,
         offset_u_px=du, length_px=m.length_px, width_px=m.profile.width_px,
@@ -203,78 +140,6 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
         loop=rep, measurement=m, uncertainty_inflation=infl, u_terms=terms,
         notes=tuple(notes), bend_off_frame=bend is not None and off_frame,
         kinked=kinked)
-
-
-def _bent(terms: dict[str, float], notes: list[str], m: MarkMeasurement, bend, au: float,
-          a: float, a0: float, chord: float, ends: float, lens_bow_px: float, alpha: float,
-          where: str) -> tuple[float, bool]:
-    """A bow that matters: read end to end (the chord), u widened to cover the straight fit
-    and the ends; named a bent mark beyond what the lens can make. Returns (u [rad], whether
-    the bowed mark runs off the image)."""
-    bent = abs(bend.estimate) > lens_bow_px + float(-special.ndtri(alpha / 2)) * bend.u
-    pre = "bent_mark" if bent else "bow"
-    terms[f"{pre}_chord_vs_fit"] = float(max(abs(_wrap(a - chord)),
-                                             abs(_wrap(a0 - chord))) / np.sqrt(3))
-    terms[f"{pre}_ends"] = ends
-    if bent:
-        notes.append(f"{where}: the mark is bent (sagitta {bend.estimate:+.3g} ± "
-                     f"{bend.u:.2g} px; the lens can make at most {lens_bow_px:.2g} px here) "
-                     "and the lens does not explain the bow: its direction is ambiguous "
-                     "(chord between its ends vs straight fit), u widened to cover both")
-    else:
-        notes.append(f"{where}: a bow of {bend.estimate:+.3g} ± {bend.u:.2g} px, within what "
-                     f"the camera's undetermined lens can make here ({lens_bow_px:.2g} px): "
-                     "lens or a bend of the mark; its direction is read end to end, u covers "
-                     "the straight fit too")
-    au = float(np.sqrt(au**2 + terms[f"{pre}_chord_vs_fit"]**2 + ends**2))
-    off_frame = runs_off_frame(m)
-    if off_frame:
-        notes.append(f"{where}: NOT OK: the bowed mark runs off the image, so its ends are not "
-                     "in it: the whole mark's chord (its direction) cannot be read; image the "
-                     "whole mark")
-    return au, off_frame
-
-
-def runs_off_frame(m: MarkMeasurement) -> bool:
-    """Whether an end of the groove (its half-depth end in the raw image) lies within its
-    blurred half-width of the frame's edge: the mark may go on beyond it."""
-    h, w = m.image_shape
-    u, n = line_frame(m.profile.angle_rad)
-    reach = m.profile.width_px / 2 + 3 * m.profile.blur_px + 2
-    for t in m.extent_px:
-        x, y = m.profile.offset_px * n + t * u
-        if abs(x) > (w - 1) / 2 - reach or abs(y) > (h - 1) / 2 - reach:
-            return True
-    return False
-
-
-def _wrap(a: float) -> float:
-    return float((a + np.pi / 2) % np.pi - np.pi / 2)
-
-
-def structure_inflation(rep: LoopReport, alpha_low: float = 1e-6) -> float:
-    """Factor on the stated uncertainty when the residual keeps unexplained structure.
-
-    Never below 1: an improbably small chi2 (lower tail below ``alpha_low``) is a groove
-    model that does not fit, not a licence to shrink u.
-
-    Correlated residuals carry less information than independent ones: with lag-1
-    correlation rho the variance of a fitted slope grows by about (1 + rho) / (1 - rho)
-    (AR(1) noise), and an excess chi2/dof scales it further. 1 for a clean fit.
-    """
-    f = rep.after
-    if f.dof > 0 and special.chdtr(f.dof, f.chi2) < alpha_low:
-        # The centres scatter far less than their stated sigma: the groove model's shape
-        # does not describe this groove. A model misfit never narrows u (a defocus gradient
-        # once got x0.4 here and scattered at twice its u): u stays as stated, and the
-        # misfit is reported (warnings).
-        return 1.0
-    if not rep.unexplained_structure:
-        return 1.0
-    z = (f.residuals / f.sigma)[np.argsort(f.regressors[f.order])]
-    zc = z - z.mean()
-    rho = float(np.clip(zc[1:] @ zc[:-1] / max(zc @ zc, 1e-300), 0.0, 0.9))
-    return float(np.sqrt(max(1.0, f.chi2 / max(f.dof, 1)) * (1 + rho) / (1 - rho)))
 
 
 def finish_mark(m: MarkMeasurement, lens: CameraLens, k: int, name: str, index: int,
@@ -519,7 +384,8 @@ def _split_kinked(items: Sequence[MarkMeasurement | ImageInputError], name: str,
             item, alpha, image, camera, name)
         if len(parts) == 2 and kink is not None:
             i = len(out)
-            turn = float(np.rad2deg(_wrap(parts[1].line.angle_rad - parts[0].line.angle_rad)))
+            turn = float(np.rad2deg(wrap_line_angle(parts[1].line.angle_rad
+                                                    - parts[0].line.angle_rad)))
             for j in (0, 1):
                 said[i + j] = (f"{name} mark {i + j}: a kink of {turn:+.2f}° at t = "
                                f"{kink.t_px:+.0f} px from the middle of a groove found as one "
