@@ -10,7 +10,6 @@ import copy
 import glob
 import json
 import shutil
-from pathlib import Path
 
 import jsonschema
 import pytest
