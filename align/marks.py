@@ -116,7 +116,7 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     f = rep.after
     if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
         # (with its draws' own spread: the term, as u carries it, is what it adds)
-        wide = m.jpeg_turn.estimate.angle_u(au) if m.jpeg_turn else au
+        wide = m.jpeg_turn.angle_u(au) if m.jpeg_turn else au
         terms["jpeg_blocks"] = float(np.sqrt(max(0.0, wide**2 - au**2)))
         au = wide
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,

@@ -25,8 +25,10 @@ and draws stratified along the line's noise turn gave no smaller spread for the 
 (docs/performance.md)."""
 
 TERM_REL_SD = 0.3
-"""Relative sd of the term's square (:class:`TurnEstimate`) below which no more draws are
-made: the term itself then ~half that (15 %). 32 draws read 26 % on the term over seeds
+"""The sd of the term's square (:class:`TurnEstimate`) relative to the angle's u^2 it enters
+(the rest of u and the term) below which no more draws are made: the Welch-Satterthwaite dof
+of that u^2 then >= 2 / 0.3^2 = 22, its factor <= 1.1 (1.05 on u). On a mark whose u the
+term makes, the term to ~15 %. 32 draws read 26 % on the term over seeds
 (median; 14-60 %) on the 17 real photos' near-axis marks, and their squares are heavy
 tailed (128 draws still read 0.2-0.4 on the square on building.jpg's marks): more draws
 bring a mark's term towards its mean, and what spread remains goes into u."""
@@ -96,7 +98,8 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
 
 
 def jpeg_turn_estimate(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
-                       centres: np.ndarray | None = None) -> TurnEstimate:
+                       centres: np.ndarray | None = None, u_rest_rad: float = 0.0
+                       ) -> TurnEstimate:
     """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
     an image of ``shape`` with its block grid (at ``jb.phase``): the model rendered there
     (on the mark's own path, :func:`mark_path`, through its ``centres``: x, y about the
@@ -114,8 +117,10 @@ def jpeg_turn_estimate(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | 
     the encoder keeps the noise's slow part, which turns the line, and drops its fine
     detail, which the mark's scatter reads) less the share the coded centres' scatter
     carries (:func:`blocks_turn`), on marks near an axis (:func:`near_axis`: there the
-    error is a turn). The draws come :data:`NOISE_DRAWS` at a time until the mean's
-    relative sd, read from the draws' own spread, is within :data:`TERM_REL_SD` (or
+    error is a turn). The draws come :data:`NOISE_DRAWS` at a time until the mean's sd,
+    read from the draws' own spread, is within :data:`TERM_REL_SD` of the angle's u^2
+    (``u_rest_rad`` [rad] the rest of it: draws are spent where the term's spread matters;
+    0: of the term's own square) (or
     :data:`MAX_DRAWS`), each coder on its own (the same draws: a coder alone reads what it
     reads among others); the estimate's remaining spread goes with it (:class:`TurnEstimate`).
     Else, or without that noise, the noise-free model once. Only the band's blocks are coded
@@ -182,7 +187,8 @@ def jpeg_turn_estimate(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | 
             est[j] = _estimate(np.array(x[j]))
         # (a term read 0 stops too: its spread still goes into u, TurnEstimate.angle_u)
         active = [j for j in active if len(x[j]) < MAX_DRAWS and est[j].u_rad > 0
-                  and not est[j].rel_sd <= TERM_REL_SD]
+                  and not np.sqrt(est[j].var_sq_rad4)
+                  <= TERM_REL_SD * (u_rest_rad**2 + est[j].u_rad**2)]
     return max(est, key=lambda t: t.u_rad)
 
 
@@ -206,25 +212,38 @@ class JpegTurn:
     centres: np.ndarray | None = None
 
     @cached_property
-    def estimate(self) -> TurnEstimate:
-        """The term and its spread (:func:`jpeg_bound_shift`)."""
-        return jpeg_bound_shift(self.shape, self.profile, self.jpeg, self.centres)
+    def _first(self) -> list[TurnEstimate]:
+        return []
 
-    u_rad = property(lambda self: self.estimate.u_rad)
+    def estimate(self, u_rest_rad: float = 0.0) -> TurnEstimate:
+        """The term and its spread (:func:`jpeg_bound_shift`), its draws spent as the
+        angle's u with ``u_rest_rad`` [rad] the rest of it needs; the first reading kept."""
+        if not self._first:
+            self._first.append(jpeg_bound_shift(self.shape, self.profile, self.jpeg,
+                                                self.centres, u_rest_rad))
+        return self._first[0]
+
+    def angle_u(self, u_rest_rad: float) -> float:
+        """The angle's u [rad] from the rest of it and this term (:meth:`TurnEstimate.angle_u`)."""
+        return self.estimate(u_rest_rad).angle_u(u_rest_rad)
+
+    u_rad = property(lambda self: self.estimate().u_rad)
     """The term [rad]."""
 
 
 def jpeg_bound_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
-                     centres: np.ndarray | None = None) -> TurnEstimate:
+                     centres: np.ndarray | None = None, u_rest_rad: float = 0.0
+                     ) -> TurnEstimate:
     """:func:`jpeg_angle_shift` bounded over the qualities the pixels cannot exclude
     (``jb.candidates``, :func:`imaging.jpeg.quality_candidates`): the largest, each with
     the noise before coding read on its own table (:class:`TurnEstimate`). Without
     candidates, ``jb``'s own. A quality read a few steps coarser than the encoder's carried
     0" on marks whose own table gave 11-17" (user 13's quality-75 crops)."""
     if jb is None or not jb.candidates:
-        return jpeg_turn_estimate(shape, pf, jb, centres)
+        return jpeg_turn_estimate(shape, pf, jb, centres, u_rest_rad)
     return max((jpeg_turn_estimate(shape, pf, replace(jb, quality=q, noise_dn=s, candidates=()),
-                                   centres) for q, s in jb.candidates), key=lambda t: t.u_rad)
+                                   centres, u_rest_rad) for q, s in jb.candidates),
+               key=lambda t: t.u_rad)
 
 
 NEAR_AXIS_ROWS = 4
