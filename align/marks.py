@@ -115,10 +115,8 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     notes: list[str] = []
     f = rep.after
     if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
-        # (with its draws' own spread: the term, as u carries it, is what it adds)
-        wide = m.jpeg_turn.angle_u(au) if m.jpeg_turn else au
-        terms["jpeg_blocks"] = float(np.sqrt(max(0.0, wide**2 - au**2)))
-        au = wide
+        wide = m.jpeg_turn.angle_u(au) if m.jpeg_turn else au  # with its draws' own spread
+        terms["jpeg_blocks"], au = float(np.sqrt(max(0.0, wide**2 - au**2))), wide
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
                                float(np.rad2deg(terms["jpeg_blocks"]) * 3600),
                                float(np.median(stage.sigma / m.sigma))))
