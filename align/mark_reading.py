@@ -37,10 +37,10 @@ def read_mark(stage: MarkStage, rep: LoopReport, m: MarkMeasurement, image: str,
     notes: list[str] = []
     f = rep.after
     if m.jpeg is not None:  # a Type B term: how far the blocks move this groove's angle
-        terms["jpeg_blocks"] = m.jpeg_u_rad
-        au = float(np.hypot(au, m.jpeg_u_rad))
+        wide = m.jpeg_turn.angle_u(au) if m.jpeg_turn else au  # with its draws' own spread
+        terms["jpeg_blocks"], au = float(np.sqrt(max(0.0, wide**2 - au**2))), wide
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
-                               float(np.rad2deg(m.jpeg_u_rad) * 3600),
+                               float(np.rad2deg(terms["jpeg_blocks"]) * 3600),
                                float(np.median(stage.sigma / m.sigma))))
     if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
         terms["groove_profile"] = m.profile_u_rad

@@ -16,7 +16,7 @@ through ``align.measure_file`` (what ``align marks`` runs: decode, detect, measu
 edges, the frame's lens, the residual loop), with the stages of :data:`REAL_STAGES` timed
 the same way: per photo the whole call and each stage [s] (issue 18's target: each photo
 <= 1 s CPU without imports; a first call on a synthetic frame is left out, as there). The
-residual loop's row holds the JPEG term (:func:`imaging.jpeg_turn.jpeg_angle_shift`, its
+residual loop's row holds the JPEG term (:func:`imaging.jpeg_turn.jpeg_turn_estimate`, its
 noisy draws' centres), computed when the loop first reads it: on the real photos most of
 that row, the loop's own fits (``run_loop``) a few ms a mark.
 """
@@ -87,7 +87,7 @@ REAL_STAGES = (
     (marks, "camera_lens", "the frame's lens"),
     (marks, "finish_mark", "residual loop (per mark)"),
     (marks, "run_loop", "  the loop's fits"),
-    (jpeg_turn, "jpeg_angle_shift", "  JPEG term's draws"),
+    (jpeg_turn, "jpeg_turn_estimate", "  JPEG term's draws"),
 )
 """(module, name, label) timed per real photograph (``--real``)."""
 

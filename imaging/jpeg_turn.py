@@ -15,20 +15,91 @@ from imaging.candidate import line_frame
 from imaging.centres import Centres, sample_centres, sample_centres_batch
 from imaging.groove import ProfileFit, ProfileTable, centres_half
 from imaging.jpeg import JpegBlocks, jpeg_round_trips
-from imaging.jpeg_scatter import block_phase_columns
+from imaging.jpeg_scatter import block_phase_columns, posterior_factor
 
 NOISE_DRAWS = 32
-"""Noisy renders :func:`jpeg_angle_shift` puts through the encoder: the term's square, a
-mean over the draws, then has a relative sd of sqrt(2 / 32) = 0.25 (its root ~0.12) where
-the centres' own scatter is small; 8 draws gave 0-7" where 32 gave 21-22" (a quality-50
-mark of user 13's). ~3 ms a draw on a 250 px mark, the draws measured together
-(:func:`imaging.centres.sample_centres_batch`). Over seeds the term's sd is ~26 % of it
-(the 17 real photos' near-axis marks); antithetic pairs and draws stratified along the
-line's noise turn gave no smaller sd for the same number (docs/performance.md)."""
+"""Noisy renders :func:`jpeg_angle_shift` puts through the encoder at a time: 8 draws gave
+0-7" where 32 gave 21-22" (a quality-50 mark of user 13's). ~3 ms a draw on a 250 px mark,
+the draws measured together (:func:`imaging.centres.sample_centres_batch`). Antithetic pairs
+and draws stratified along the line's noise turn gave no smaller spread for the same number
+(docs/performance.md)."""
+
+TERM_REL_SD = 0.3
+"""The sd of the term's square (:class:`TurnEstimate`) relative to the angle's u^2 it enters
+(the rest of u and the term) below which no more draws are made: the Welch-Satterthwaite dof
+of that u^2 then >= 2 / 0.3^2 = 22, its factor <= 1.1 (1.05 on u). On a mark whose u the
+term makes, the term to ~15 %. 32 draws read 26 % on the term over seeds
+(median; 14-60 %) on the 17 real photos' near-axis marks, and their squares are heavy
+tailed (128 draws still read 0.2-0.4 on the square on building.jpg's marks): more draws
+bring a mark's term towards its mean, and what spread remains goes into u."""
+
+NOISE_SEED = 0
+"""The draws' seed: the same term for the same image."""
+
+MAX_DRAWS = 4 * NOISE_DRAWS
+"""Most noisy draws a coder takes (:data:`TERM_REL_SD` unmet): ~0.4 s a 250 px mark."""
+
+
+@dataclass(frozen=True)
+class TurnEstimate:
+    """The JPEG term as the draws estimate it.
+
+    Attributes
+    ----------
+    u_rad : float
+        The term [rad]: the root of the mean over the draws of (turn^2 - the scatter's share).
+    var_sq_rad4 : float
+        Variance of that mean (the term's square) from the draws' own spread [rad^4]
+        (0: the noise-free model once, no sampling).
+    draws : int
+        Noisy draws taken (0: the noise-free model once); dimensionless.
+    """
+
+    u_rad: float
+    var_sq_rad4: float = 0.0
+    draws: int = 0
+
+    def to_dict(self) -> dict:
+        return {"u_rad": self.u_rad, "var_sq_rad4": self.var_sq_rad4, "draws": self.draws}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TurnEstimate:
+        return cls(float(d["u_rad"]), float(d["var_sq_rad4"]), int(d["draws"]))
+
+    @property
+    def rel_sd(self) -> float:
+        """Relative sd of the term's square [-] (inf when it reads 0 with spread)."""
+        sq = self.u_rad ** 2
+        return float(np.sqrt(self.var_sq_rad4) / sq) if sq > 0 else (
+            float("inf") if self.var_sq_rad4 > 0 else 0.0)
+
+    def angle_u(self, u_rad: float) -> float:
+        """The angle's u [rad] from its other part ``u_rad`` and this term, the term's own
+        sampling spread carried (Welch-Satterthwaite).
+
+        The term's square is a mean over the draws: an estimate of variance ``var_sq_rad4``
+        (a chi2 of 2 T^4 / var dof). With the rest of u exact, u^2 = u_rad^2 + T^2 has
+        nu = 2 u^4 / var dof, and the error over it is Student's t of variance nu / (nu - 2)
+        (:func:`imaging.jpeg_scatter.posterior_factor`): u^2 takes that factor. Where the
+        rest dominates, nu is large and nothing changes; nu is taken >= 3 (a term read 0
+        with a wide spread on a clean mark: at most 3 x u^2)."""
+        u2 = u_rad ** 2 + self.u_rad ** 2
+        if self.var_sq_rad4 <= 0 or u2 <= 0:
+            return float(np.sqrt(u2))
+        nu = max(3.0, 2.0 * u2 ** 2 / self.var_sq_rad4)
+        return float(np.sqrt(posterior_factor(u2, nu)))
 
 
 def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
                      centres: np.ndarray | None = None) -> float:
+    """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad]:
+    :func:`jpeg_turn_estimate`'s term."""
+    return jpeg_turn_estimate(shape, pf, jb, centres).u_rad
+
+
+def jpeg_turn_estimate(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
+                       centres: np.ndarray | None = None, u_rest_rad: float = 0.0
+                       ) -> TurnEstimate:
     """How far the JPEG encoder ``jb`` moves the angle of the fitted groove ``pf`` [rad], on
     an image of ``shape`` with its block grid (at ``jb.phase``): the model rendered there
     (on the mark's own path, :func:`mark_path`, through its ``centres``: x, y about the
@@ -40,17 +111,22 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     coding (``jb.noise_dn``, :func:`precoding_noise`): a coefficient near the edge of its
     bin goes one way or the other with the noise, so a noisy edge's centres move by more,
     and differently, than the noise-free model's. With that noise read, the model is
-    rendered :data:`NOISE_DRAWS` times with it (a fixed seed: the same term for the same
-    image), each through the encoder, and the term is the root of the mean over the draws
-    of the turn's square (each coded draw's centres against the noise-free model's, as
-    the mark's own error is: the encoder keeps the noise's slow part, which turns the line,
-    and drops its fine detail, which the mark's scatter reads) less the share the coded
-    centres' scatter carries (:func:`blocks_turn`),
-    on marks near an axis (:func:`near_axis`: there the error is a turn). Else, or without
-    that noise, the noise-free model once. Only the band's blocks are coded (the encoder
-    codes each block alone: the rest of the frame changes nothing)."""
+    rendered with it (a fixed seed: the same term for the same image), each draw through
+    the encoder, and the term is the root of the mean over the draws of the turn's square
+    (each coded draw's centres against the noise-free model's, as the mark's own error is:
+    the encoder keeps the noise's slow part, which turns the line, and drops its fine
+    detail, which the mark's scatter reads) less the share the coded centres' scatter
+    carries (:func:`blocks_turn`), on marks near an axis (:func:`near_axis`: there the
+    error is a turn). The draws come :data:`NOISE_DRAWS` at a time until the mean's sd,
+    read from the draws' own spread, is within :data:`TERM_REL_SD` of the angle's u^2
+    (``u_rest_rad`` [rad] the rest of it: draws are spent where the term's spread matters;
+    0: of the term's own square) (or
+    :data:`MAX_DRAWS`), each coder on its own (the same draws: a coder alone reads what it
+    reads among others); the estimate's remaining spread goes with it (:class:`TurnEstimate`).
+    Else, or without that noise, the noise-free model once. Only the band's blocks are coded
+    (the encoder codes each block alone: the rest of the frame changes nothing)."""
     if jb is None:
-        return 0.0  # not a JPEG
+        return TurnEstimate(0.0)  # not a JPEG
     # Quality and table unknown: each quality's encoder on the same renders (the model and
     # its noisy draws do not depend on the encoder), the largest term taken.
     coders = ([replace(jb, quality=q) for q in range(10, 100, 10)]
@@ -58,7 +134,7 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     half = centres_half(pf) + 8.0
     e, idx = band_pixels(np.zeros(shape, np.uint8), pf, half, 30.0)
     if idx.size == 0:
-        return 0.0
+        return TurnEstimate(0.0)
     rows, cols = np.unravel_index(idx, shape)
     e = e - mark_path(pf, centres, shape)(cols, rows)
     p, _ = ProfileTable(pf.width_px, pf.blur_px, pf.angle_rad, half + 2.0)(e)
@@ -74,11 +150,6 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     pfw = replace(pf, offset_px=pf.offset_px - float(shift @ n),
                   t_start_px=pf.t_start_px - float(shift @ u),
                   t_end_px=pf.t_end_px - float(shift @ u))
-    renders = model[None]
-    if jb.noise_dn > 0 and near_axis(pf):
-        # (one call: the same normals, in the same order, as a call per draw)
-        noise = np.random.default_rng(0).normal(0.0, jb.noise_dn, (NOISE_DRAWS, *model.shape))
-        renders = np.clip(np.round(model + noise), 0, 255)
     # Every render's centres after each encoder, and the noise-free model's, in one pass (to
     # the bit each image's alone: sample_centres_batch); a table known by its IJG quality is
     # that encoder. Each coded draw is measured as the mark is: its turn from the noise-free
@@ -92,12 +163,40 @@ def jpeg_angle_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | No
     # took the turn from their own uncoded draw; with that draw's noise turn taken as the
     # scatter's and only its covariance with the coding's added, RMS z 1.62 on a sweep's
     # files where this gives 1.31 and the old way 1.48).
-    coded = [jpeg_round_trips(renders, c.quality, c.table if c.quality is None else None,
-                              phase) for c in coders]
-    cen = sample_centres_batch(np.concatenate([model[None], *coded]), pfw)
-    m = len(renders)
-    return max(_term([centres_turn(cen[0], cen[1 + m * j + i], model.shape, pfw)
-                      for i in range(m)]) for j in range(len(coders)))
+    def coded_centres(renders, which, first):
+        coded = [jpeg_round_trips(renders, coders[j].quality,
+                                  coders[j].table if coders[j].quality is None else None, phase)
+                 for j in which]
+        return sample_centres_batch(np.concatenate([model[None]] * first + coded), pfw)
+
+    if not (jb.noise_dn > 0 and near_axis(pf)):
+        cen = coded_centres(model[None], range(len(coders)), 1)
+        return max((TurnEstimate(_term([centres_turn(cen[0], c, model.shape, pfw)]))
+                    for c in cen[1:]), key=lambda t: t.u_rad)
+    rng = np.random.default_rng(NOISE_SEED)  # (one call a batch: as a call per draw)
+    x: list[list[float]] = [[] for _ in coders]
+    est: list[TurnEstimate] = [TurnEstimate(0.0)] * len(coders)
+    active, cen0 = list(range(len(coders))), None
+    while active:
+        noise = rng.normal(0.0, jb.noise_dn, (NOISE_DRAWS, *model.shape))
+        cen = coded_centres(np.clip(np.round(model + noise), 0, 255), active, cen0 is None)
+        cen0, cen = (cen[0], cen[1:]) if cen0 is None else (cen0, cen)
+        for k, j in enumerate(active):
+            x[j] += [da**2 - us2 for da, us2 in (centres_turn(
+                cen0, cen[k * NOISE_DRAWS + i], model.shape, pfw) for i in range(NOISE_DRAWS))]
+            est[j] = _estimate(np.array(x[j]))
+        # (a term read 0 stops too: its spread still goes into u, TurnEstimate.angle_u)
+        active = [j for j in active if len(x[j]) < MAX_DRAWS and est[j].u_rad > 0
+                  and not np.sqrt(est[j].var_sq_rad4)
+                  <= TERM_REL_SD * (u_rest_rad**2 + est[j].u_rad**2)]
+    return max(est, key=lambda t: t.u_rad)
+
+
+def _estimate(x: np.ndarray) -> TurnEstimate:
+    """The term from the draws' x = turn^2 - the scatter's share [rad^2]: the root of their
+    mean (clipped at 0), the mean's variance from their spread."""
+    return TurnEstimate(float(np.sqrt(max(0.0, float(np.mean(x))))),
+                        float(np.var(x, ddof=1) / x.size), int(x.size))
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,22 +212,38 @@ class JpegTurn:
     centres: np.ndarray | None = None
 
     @cached_property
-    def u_rad(self) -> float:
-        """The term [rad] (:func:`jpeg_bound_shift`)."""
-        return jpeg_bound_shift(self.shape, self.profile, self.jpeg, self.centres)
+    def _first(self) -> list[TurnEstimate]:
+        return []
+
+    def estimate(self, u_rest_rad: float = 0.0) -> TurnEstimate:
+        """The term and its spread (:func:`jpeg_bound_shift`), its draws spent as the
+        angle's u with ``u_rest_rad`` [rad] the rest of it needs; the first reading kept."""
+        if not self._first:
+            self._first.append(jpeg_bound_shift(self.shape, self.profile, self.jpeg,
+                                                self.centres, u_rest_rad))
+        return self._first[0]
+
+    def angle_u(self, u_rest_rad: float) -> float:
+        """The angle's u [rad] from the rest of it and this term (:meth:`TurnEstimate.angle_u`)."""
+        return self.estimate(u_rest_rad).angle_u(u_rest_rad)
+
+    u_rad = property(lambda self: self.estimate().u_rad)
+    """The term [rad]."""
 
 
 def jpeg_bound_shift(shape: tuple[int, int], pf: ProfileFit, jb: JpegBlocks | None,
-                     centres: np.ndarray | None = None) -> float:
+                     centres: np.ndarray | None = None, u_rest_rad: float = 0.0
+                     ) -> TurnEstimate:
     """:func:`jpeg_angle_shift` bounded over the qualities the pixels cannot exclude
     (``jb.candidates``, :func:`imaging.jpeg.quality_candidates`): the largest, each with
-    the noise before coding read on its own table [rad]. Without candidates, ``jb``'s own.
-    A quality read a few steps coarser than the encoder's carried 0" on marks whose own
-    table gave 11-17" (user 13's quality-75 crops)."""
+    the noise before coding read on its own table (:class:`TurnEstimate`). Without
+    candidates, ``jb``'s own. A quality read a few steps coarser than the encoder's carried
+    0" on marks whose own table gave 11-17" (user 13's quality-75 crops)."""
     if jb is None or not jb.candidates:
-        return jpeg_angle_shift(shape, pf, jb, centres)
-    return max(jpeg_angle_shift(shape, pf, replace(jb, quality=q, noise_dn=s, candidates=()),
-                                centres) for q, s in jb.candidates)
+        return jpeg_turn_estimate(shape, pf, jb, centres, u_rest_rad)
+    return max((jpeg_turn_estimate(shape, pf, replace(jb, quality=q, noise_dn=s, candidates=()),
+                                   centres, u_rest_rad) for q, s in jb.candidates),
+               key=lambda t: t.u_rad)
 
 
 NEAR_AXIS_ROWS = 4

@@ -30,7 +30,7 @@ from imaging.jpeg_scatter import (
     jpeg_centre_scale,
     jpeg_noise_dof,
 )
-from imaging.jpeg_turn import jpeg_angle_shift, near_axis
+from imaging.jpeg_turn import TurnEstimate, jpeg_angle_shift, near_axis
 from imaging.measure import measure_frame
 from synth import ImageSpec, MarkSpec, full_well_for_snr, render_marks
 from tests.conftest import angle_error
@@ -191,6 +191,25 @@ def test_quality_unknown_carries_the_largest_qualitys_turn():
     each = [jpeg_angle_shift(img.shape, m.profile, replace(jb, quality=q))
             for q in range(10, 100, 10)]
     assert jpeg_angle_shift(img.shape, m.profile, jb) == max(each) > 0.0
+
+
+def test_the_terms_own_spread_makes_the_angles_z_of_unit_variance():
+    """The JPEG term's square is a mean over n draws (here 8 chi2_1 draws of T^2, the
+    term alone in u): the error over u = the plain estimate is Student's t_8, variance
+    8 / 6 = 1.33; :meth:`TurnEstimate.angle_u`, with the variance the draws themselves give,
+    brings it to 1 within 4 standard errors (read from the same z), and a term far below
+    the rest of u is left alone."""
+    rng = np.random.default_rng(1)
+    n, N = 8, 10000
+    x = rng.normal(size=(N, n)) ** 2  # T = 1
+    e = rng.normal(size=N)
+    est = [TurnEstimate(float(np.sqrt(x_.mean())), float(x_.var(ddof=1) / n), n) for x_ in x]
+    z_plain = e / np.sqrt(x.mean(1))
+    z = e / np.array([t.angle_u(0.0) for t in est])
+    assert np.mean(z_plain**2) > 1.25
+    assert abs(np.mean(z**2) - 1) < 4 * np.std(z**2) / np.sqrt(N), np.mean(z**2)
+    assert TurnEstimate(1e-6, 1e-24, 32).angle_u(1e-4) == pytest.approx(1e-4, rel=1e-4)
+    assert TurnEstimate(1e-6).angle_u(1e-4) == float(np.hypot(1e-4, 1e-6))
 
 
 def test_near_axis_is_a_few_block_rows_along_the_mark():
