@@ -379,7 +379,7 @@ def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarra
 
 def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int],
                          square: float = 1.0, fix_k3: bool = False, fix_aspect: bool = False,
-                         k3: str = "auto", board_tolerance: float = BOARD_TOLERANCE
+                         k3: str = "auto", board_tolerance: float | None = None
                          ) -> tuple[CameraModel, dict[str, str]]:
     """Calibrate intrinsics + 5-coefficient distortion from chessboard views.
 
@@ -405,8 +405,9 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
         Keep k3 at 0 (as ``k3="fixed"``); keep fx / fy at 1.
     k3 : str
         ``auto``, ``free`` or ``fixed`` (:data:`K3_MODES`).
-    board_tolerance : float
-        The board's print tolerance of its x/y scale ratio (dimensionless).
+    board_tolerance : float or None
+        The board's print tolerance of its x/y scale ratio (dimensionless; None:
+        :data:`imaging.camera_board.BOARD_TOLERANCE`).
 
     Returns
     -------
@@ -445,7 +446,7 @@ K3_MODES = ("auto", "free", "fixed")
 
 def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
                       fix_k3: bool = False, fix_aspect: bool = False, k3: str = "auto",
-                      board_tolerance: float = BOARD_TOLERANCE) -> CameraModel:
+                      board_tolerance: float | None = None) -> CameraModel:
     """:func:`calibrate_chessboard` from the boards' corners found: ``objpts`` per view the
     board's corners (N, 3) [board units] (float32), ``imgpts`` their image (N, 1, 2) [px]
     (float32), ``size`` (width, height) [px], ``names`` one per view.
@@ -466,7 +467,8 @@ def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: 
         m = _calibrate_lens(objpts, imgpts, size, names, fix_k3, fix_aspect, k3)
         last = fit(objpts, m)
         s += last["s"]
-    choice = board_choice(last, s, applied, board_tolerance)
+    choice = board_choice(last, s, applied, BOARD_TOLERANCE if board_tolerance is None
+                          else board_tolerance)
     cov, u = carried(m.cov, m.u or {}, m.camera_matrix, choice)
     return replace(m, cov=cov, u=u, board_scale=choice)
 

@@ -107,7 +107,6 @@ def cmd_camera(args: argparse.Namespace) -> int:
     from align.present import camera_lines
     from axisbase.output import write_json
     from imaging import calibrate_chessboard
-    from imaging.camera_board import BOARD_TOLERANCE
 
     cols, rows = pattern(args.pattern)
     unique(args.images, "images")
@@ -116,9 +115,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
     model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
                                          fix_aspect=args.fix_aspect, k3="fixed" if args.fix_k3
                                          else "free" if args.free_k3 else "auto",
-                                         board_tolerance=BOARD_TOLERANCE
-                                         if args.board_tolerance is None
-                                         else args.board_tolerance / 100.0)
+                                         board_tolerance=args.board_tolerance)
     doc = camera_document(model, settings(args), args.images, {**unread, **failed})
     warn(doc["warnings"])
     say(camera_lines(model, doc["field_u"]))
@@ -191,7 +188,8 @@ def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
                     "range in the covariance; docs/camera.md)")
     k3.add_argument("--free-k3", action="store_true", help="always fit k3 (OpenCV's default)")
     c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
-    c.add_argument("--board-tolerance", type=POSITIVE, metavar="PCT", help="the board's "
+    c.add_argument("--board-tolerance", type=lambda v: POSITIVE(v) / 100.0, metavar="PCT",
+                   help="the board's "
                    "print tolerance of its x/y scale ratio [%%] (default 0.1): carried in "
                    "fy/fx's u when the views cannot separate the board's x/y scale from the "
                    "pixels' aspect (docs/camera.md)")
