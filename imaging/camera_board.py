@@ -205,14 +205,18 @@ def significant(fit: dict, alpha: float = BOARD_ALPHA) -> bool:
 
 def carried(cov: np.ndarray, u: dict, K: np.ndarray, choice: dict) -> tuple[np.ndarray, dict]:
     """The model's covariance and u's with the board's term (``board_print``): the intrinsics'
-    change along s's profile times the range carried, + c² w wᵀ; each u at least its
-    covariance's, the aspect fy / fx's with its part in quadrature."""
-    w = np.array(choice["carried_direction"])
-    c = choice["carried_s"]
-    cov = cov + c**2 * np.outer(w, w)
-    out = {k: float(max(v, np.sqrt(cov[INTRINSICS.index(k), INTRINSICS.index(k)])))
-           if k in INTRINSICS else v for k, v in u.items()}
+    change along s's profile times the range carried, c² w wᵀ added to ``cov`` and each u
+    (the aspect fy / fx's too) with its part in quadrature."""
+    w, c = board_term(choice)
+    out = {k: float(np.hypot(v, c * w[INTRINSICS.index(k)])) if k in INTRINSICS else v
+           for k, v in u.items()}
     if "aspect" in out:
         fx, a = K[0, 0], K[1, 1] / K[0, 0]
         out["aspect"] = float(np.hypot(out["aspect"], c * (w[1] - a * w[0]) / fx))
-    return cov, out
+    return cov + c**2 * np.outer(w, w), out
+
+
+def board_term(choice: dict) -> tuple[np.ndarray, float]:
+    """The direction w (per :data:`INTRINSICS`, per unit of s) and range c of the board's
+    term in a model's covariance (c² w wᵀ) from its ``board_scale`` record."""
+    return np.array(choice["carried_direction"], float), float(choice["carried_s"])
