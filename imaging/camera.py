@@ -14,6 +14,8 @@ model inherit that error.
 
 k3 is fitted only when the views determine it (:mod:`imaging.camera_k3`): else the model is
 the k3-free fit with k3's range carried in ``cov`` (``lens_choice`` says which and why).
+The board's x/y scale is fitted with the intrinsics (:mod:`imaging.camera_board`): corrected
+when significant, else its range carried in ``cov`` (``board_scale``).
 """
 
 from __future__ import annotations

@@ -18,11 +18,11 @@ when the estimate over its u exceeds Student's t at :data:`BOARD_ALPHA` with vie
 degrees of freedom (a likelihood-ratio test of one parameter with the noise scaled by the
 views' scatter). Then (:func:`board_choice`):
 
-* significant and determined (its u below the print tolerance): named and corrected (the
-  calibration is redone on the board as printed) and its u carried;
-* not significant but determined: the nominal board stands, s's range (the estimate and
-  its u in quadrature) carried;
-* not determined (u above the tolerance: the views' in-plane rotations too alike): the
+* significant: named and corrected (the calibration is redone on the board scaled by s, one
+  more step refines s) and s's u carried;
+* not significant, its u at most the print tolerance: the nominal board stands, s's range
+  (the estimate and its u in quadrature, at most the tolerance) carried;
+* not significant, its u above the tolerance (the views' in-plane rotations too alike): the
   print tolerance (:data:`BOARD_TOLERANCE`, or the user's ``--board-tolerance``) carried,
   with "rotate the board between views".
 
