@@ -85,6 +85,8 @@ def camera_lines(model, field: dict | None = None) -> list[str]:
         for k, v in zip(("k1", "k2", "p1", "p2", "k3"), D[:5], strict=False)))
     if choice.get("why"):
         lines.append(f"k3 {choice['k3']}: {choice['why']}")
+    if model.board_scale:
+        lines.append(f"board {model.board_scale['board']}: {model.board_scale['why']}")
     views = model.views_one_camera or {}
     if views.get("tested"):
         lines.append(f"one camera: W = {views['W']:.1f} between the views' best split "

@@ -14,6 +14,8 @@ model inherit that error.
 
 k3 is fitted only when the views determine it (:mod:`imaging.camera_k3`): else the model is
 the k3-free fit with k3's range carried in ``cov`` (``lens_choice`` says which and why).
+The board's x/y scale is fitted with the intrinsics (:mod:`imaging.camera_board`): corrected
+when significant, else its range carried in ``cov`` (``board_scale``).
 """
 
 from __future__ import annotations
@@ -28,58 +30,19 @@ import numpy as np
 
 from axisbase.errors import InputError
 from axisbase.provenance import check_format
+from imaging.camera_board import (
+    BOARD_TOLERANCE,
+    board_choice,
+    board_fit,
+    carried,
+    scaled_board,
+    significant,
+)
 from imaging.camera_cov import INTRINSICS, dominating, formal_cov, jackknife_cov
+from imaging.camera_file import array_of, checked_intrinsics, what_text
 from imaging.camera_k3 import choose_k3, left_out_term
 from imaging.camera_views import MIN_VIEWS, not_one_camera_warning, one_camera_check, untested
 from imaging.errors import ImageInputError
-
-DIST_LENGTHS = (4, 5, 8, 12, 14)
-"""The lengths of an OpenCV distortion vector (k1 k2 p1 p2 [k3 [k4 k5 k6 [s1..s4 [tx ty]]]])."""
-
-
-def _matrix(d: Mapping, key: str, shape: tuple[int, ...] | None) -> np.ndarray:
-    """``d[key]`` as a finite float array of ``shape`` (None: any 1-D length), or
-    ValueError naming the key."""
-    try:
-        a = np.array(d[key], dtype=float)
-    except KeyError:
-        raise KeyError(f"no '{key}'") from None
-    except (TypeError, ValueError):
-        raise ValueError(f"'{key}' is not an array of numbers") from None
-    if shape is not None and a.shape != shape:
-        raise ValueError(f"'{key}' has shape {list(a.shape)}, expected {list(shape)}")
-    if shape is None and a.ndim != 1:
-        raise ValueError(f"'{key}' has shape {list(a.shape)}, expected a flat list")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"'{key}' holds a non-finite value (NaN, inf or null)")
-    return a
-
-
-def checked_intrinsics(d: Mapping) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
-    """The camera matrix, distortion and image size of a camera file, each checked as any
-    other input is: shapes, finite values, focal lengths > 0, the principal point inside the
-    image, the matrix's fixed entries. ValueError/KeyError naming the key (:meth:`CameraModel.load`
-    adds the file)."""
-    K = _matrix(d, "camera_matrix", (3, 3))
-    D = _matrix(d, "dist_coeffs", None)
-    size = _matrix(d, "image_size", (2,))
-    if np.any(size != np.round(size)) or np.any(size < 16):
-        raise ValueError(f"'image_size' {size.tolist()} is not two whole numbers of pixels "
-                         "(width, height) of at least 16")
-    w, h = (int(v) for v in size)
-    if len(D) not in DIST_LENGTHS:
-        raise ValueError(f"'dist_coeffs' has {len(D)} values; OpenCV's have "
-                         f"{', '.join(map(str, DIST_LENGTHS))}")
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    if fx <= 0 or fy <= 0:
-        raise ValueError(f"'camera_matrix' focal lengths fx {fx:g}, fy {fy:g} px: both must "
-                         "be > 0")
-    if not (0 <= cx <= w and 0 <= cy <= h):
-        raise ValueError(f"'camera_matrix' principal point ({cx:g}, {cy:g}) px lies outside "
-                         f"the {w}x{h} px image")
-    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
-        raise ValueError("'camera_matrix' is not [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
-    return K, D, (w, h)
 
 
 @dataclass(frozen=True)
@@ -130,6 +93,11 @@ class CameraModel:
         the Wald W [1] of the best split's two calibrations, its p, the groups' names and
         their fx, cx, cy [px]); ``one_camera`` False makes the model not ok
         (:attr:`problems`). None in files written before format version 6.
+    board_scale : dict or None
+        The board's x/y scale s fitted with the intrinsics and what was done with it
+        (:func:`imaging.camera_board.board_choice`: corrected, nominal or not separable; s,
+        its u and the range carried, dimensionless): the carried term is already in ``cov``.
+        None in files written before it.
     """
 
     camera_matrix: np.ndarray
@@ -146,6 +114,7 @@ class CameraModel:
     cov_jackknife: np.ndarray | None = None
     lens_choice: dict | None = None
     views_one_camera: dict | None = None
+    board_scale: dict | None = None
 
     @property
     def problems(self) -> list[str]:
@@ -173,6 +142,7 @@ class CameraModel:
             "lens_choice": None if self.lens_choice is None else dict(self.lens_choice),
             "views_one_camera": (None if self.views_one_camera is None
                                  else dict(self.views_one_camera)),
+            "board_scale": None if self.board_scale is None else dict(self.board_scale),
         }
 
     @classmethod
@@ -202,7 +172,7 @@ class CameraModel:
                 return None
             if list(d.get("cov_params", INTRINSICS)) != list(INTRINSICS):
                 raise ValueError(f"'cov_params' is not {list(INTRINSICS)}")
-            c = _matrix(d, key, (len(INTRINSICS), len(INTRINSICS)))
+            c = array_of(d, key, (len(INTRINSICS), len(INTRINSICS)))
             s = np.sqrt(np.abs(np.outer(np.diag(c), np.diag(c))))
             if np.any(np.diag(c) < 0) or np.any(np.abs(c - c.T) > 1e-6 * s):
                 raise ValueError(f"'{key}' is not a covariance (symmetric, diagonal >= 0)")
@@ -217,7 +187,7 @@ class CameraModel:
             out = dict(c)
             if out.get("carried_k3") is not None:
                 out["carried_k3"] = num(out["carried_k3"], "lens_choice.carried_k3")
-                w = _matrix(c, "carried_direction", (len(INTRINSICS),))
+                w = array_of(c, "carried_direction", (len(INTRINSICS),))
                 out["carried_direction"] = w.tolist()
             return out
 
@@ -229,11 +199,14 @@ class CameraModel:
                 raise ValueError("'views_one_camera.one_camera' is not true, false or null")
             return None if v is None else dict(v)
 
+        board = d.get("board_scale")
+        if board is not None and not isinstance(board, Mapping):
+            raise ValueError("'board_scale' is not a table")
         K, D, (w, h) = checked_intrinsics(d)
         return cls(K, D, (w, h), num(d.get("rms_px"), "rms_px"), int(d.get("views", 0)), table("u"),
                    table("per_view_rms_px"), table("u_formal"), table("u_jackknife"),
                    cov("cov"), cov("cov_formal"), cov("cov_jackknife"), choice(),
-                   views())
+                   views(), None if board is None else dict(board))
 
     @classmethod
     def load(cls, path: str | Path) -> CameraModel:
@@ -246,7 +219,7 @@ class CameraModel:
             raise ImageInputError(f"{p}: not a camera file: binary data, not text (an image? "
                                   "a camera file is the JSON 'align camera' writes)") from None
         except json.JSONDecodeError as exc:
-            raise ImageInputError(f"{p}: not a camera file: {_what_text(text, exc)}") from None
+            raise ImageInputError(f"{p}: not a camera file: {what_text(text, exc)}") from None
         except FileNotFoundError:
             raise ImageInputError(f"{p}: camera file not found") from None
         except IsADirectoryError:
@@ -408,7 +381,8 @@ def jackknife_u(objpts: list, imgpts: list, size: tuple[int, int], K0: np.ndarra
 
 def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int],
                          square: float = 1.0, fix_k3: bool = False, fix_aspect: bool = False,
-                         k3: str = "auto") -> tuple[CameraModel, dict[str, str]]:
+                         k3: str = "auto", board_tolerance: float | None = None
+                         ) -> tuple[CameraModel, dict[str, str]]:
     """Calibrate intrinsics + 5-coefficient distortion from chessboard views.
 
     OpenCV's extended calibration: also the standard uncertainty of each intrinsic parameter
@@ -417,7 +391,9 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
     reprojection error. ``k3``: ``auto`` fits k3 only when the views determine it, else
     leaves it out and carries its range in ``cov`` (:mod:`imaging.camera_k3`); ``free``
     always fits it (OpenCV's default), ``fixed`` (or ``fix_k3``) keeps it at 0 as known.
-    ``fix_aspect`` keeps fx / fy at 1.
+    ``fix_aspect`` keeps fx / fy at 1. The board's x/y scale is fitted with the intrinsics
+    and corrected, or its range carried (:mod:`imaging.camera_board`; ``board_tolerance``
+    the print's, 0.001 = 0.1 %).
 
     Parameters
     ----------
@@ -431,6 +407,9 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
         Keep k3 at 0 (as ``k3="fixed"``); keep fx / fy at 1.
     k3 : str
         ``auto``, ``free`` or ``fixed`` (:data:`K3_MODES`).
+    board_tolerance : float or None
+        The board's print tolerance of its x/y scale ratio (dimensionless; None:
+        :data:`imaging.camera_board.BOARD_TOLERANCE`).
 
     Returns
     -------
@@ -459,7 +438,8 @@ def calibrate_chessboard(images: dict[str, np.ndarray], pattern: tuple[int, int]
         raise ImageInputError(f"only {len(objpts)} usable chessboard views; need at least 3 "
                               f"({'; '.join(f'{k}: {v}' for k, v in failed.items())})")
     names = [n for n in images if n not in failed]
-    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect, k3), failed
+    return calibrate_corners(objpts, imgpts, size, names, fix_k3, fix_aspect, k3,
+                             board_tolerance), failed
 
 
 K3_MODES = ("auto", "free", "fixed")
@@ -467,11 +447,38 @@ K3_MODES = ("auto", "free", "fixed")
 
 
 def calibrate_corners(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
-                      fix_k3: bool = False, fix_aspect: bool = False, k3: str = "auto"
-                      ) -> CameraModel:
+                      fix_k3: bool = False, fix_aspect: bool = False, k3: str = "auto",
+                      board_tolerance: float | None = None) -> CameraModel:
     """:func:`calibrate_chessboard` from the boards' corners found: ``objpts`` per view the
     board's corners (N, 3) [board units] (float32), ``imgpts`` their image (N, 1, 2) [px]
-    (float32), ``size`` (width, height) [px], ``names`` one per view."""
+    (float32), ``size`` (width, height) [px], ``names`` one per view.
+
+    The board's x/y scale s is fitted at the calibration (:mod:`imaging.camera_board`):
+    significant, the calibration is redone on the board scaled by it; else its range is
+    carried in the covariance (``board_scale``)."""
+    m = _calibrate_lens(objpts, imgpts, size, names, fix_k3, fix_aspect, k3)
+
+    def fit(obj: list, model: CameraModel) -> dict:
+        return board_fit(obj, imgpts, model.camera_matrix, model.dist_coeffs,
+                         (model.lens_choice or {}).get("k3") != "fitted", fix_aspect)
+
+    first = fit(objpts, m)
+    s, applied, last = first["s"], significant(first), first
+    if applied:  # the print error named and taken out; the refit's step refines s
+        objpts = scaled_board(objpts, s)
+        m = _calibrate_lens(objpts, imgpts, size, names, fix_k3, fix_aspect, k3)
+        last = fit(objpts, m)
+        s += last["s"]
+    choice = board_choice(last, s, applied, BOARD_TOLERANCE if board_tolerance is None
+                          else board_tolerance)
+    cov, u = carried(m.cov, m.u or {}, m.camera_matrix, choice)
+    return replace(m, cov=cov, u=u, board_scale=choice)
+
+
+def _calibrate_lens(objpts: list, imgpts: list, size: tuple[int, int], names: list[str],
+                    fix_k3: bool, fix_aspect: bool, k3: str) -> CameraModel:
+    """:func:`calibrate_corners` on the board as given: the lens model chosen (k3) and the
+    views' one-camera check."""
     mode = "fixed" if fix_k3 else k3
     if mode not in K3_MODES:
         raise ValueError(f"k3 mode {mode!r} is not one of {K3_MODES}")
@@ -555,18 +562,3 @@ def _calibrate(objpts: list, imgpts: list, size: tuple[int, int], names: list[st
                        cov_f, cov_j, views_one_camera=None if not check else _views_check(
                            objpts, imgpts, size, names, fix_k3, fix_aspect,
                            None if cov_j is None else est))
-
-
-def _what_text(text: str, exc: json.JSONDecodeError) -> str:
-    """What a camera file that is not JSON holds, in the user's words: OpenCV's own
-    FileStorage files (YAML, XML: calibration samples write them) are the common case."""
-    head = text.lstrip()[:400].lower()
-    if head.startswith("%yaml") or "<opencv_storage>" in head:
-        kind = "YAML" if head.startswith("%yaml") else "XML"
-        return (f"an OpenCV FileStorage {kind} file, not the JSON 'align camera' writes: "
-                "calibrate with 'align camera' (which also gives the model's u), or write its "
-                "camera_matrix, dist_coeffs and image_size as JSON (docs/formats.md, camera "
-                "file)")
-    return (f"not JSON ({exc.msg} at line {exc.lineno}, column {exc.colno}); a camera file is "
-            "the JSON 'align camera' writes")
-

@@ -114,7 +114,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
     imgs, unread = _read_boards(args.images)
     model, failed = calibrate_chessboard(imgs, (cols, rows), args.square,
                                          fix_aspect=args.fix_aspect, k3="fixed" if args.fix_k3
-                                         else "free" if args.free_k3 else "auto")
+                                         else "free" if args.free_k3 else "auto",
+                                         board_tolerance=args.board_tolerance)
     doc = camera_document(model, settings(args), args.images, {**unread, **failed})
     warn(doc["warnings"])
     say(camera_lines(model, doc["field_u"]))
@@ -187,5 +188,10 @@ def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
                     "range in the covariance; docs/camera.md)")
     k3.add_argument("--free-k3", action="store_true", help="always fit k3 (OpenCV's default)")
     c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
+    c.add_argument("--board-tolerance", type=lambda v: POSITIVE(v) / 100.0, metavar="PCT",
+                   help="the board's "
+                   "print tolerance of its x/y scale ratio [%%] (default 0.1): carried in "
+                   "fy/fx's u when the views cannot separate the board's x/y scale from the "
+                   "pixels' aspect (docs/camera.md)")
     add_max_pixels(c)
     c.set_defaults(func=cmd_camera)

@@ -11,6 +11,8 @@ import pytest
 from align.cli import main
 from imaging import CameraModel, calibrate_chessboard, read_image
 from imaging.camera import jackknife_u
+from imaging.camera_board import board_term
+from imaging.camera_cov import INTRINSICS
 from tests.conftest import real_folder
 
 
@@ -44,8 +46,11 @@ def test_u_is_the_larger_of_formal_and_jackknife_on_real_views():
     files = sorted(real_folder("opencv-chessboard").glob("left*.jpg"))
     imgs = {str(f): read_image(f).astype(np.uint8) for f in files}
     model, _ = calibrate_chessboard(imgs, (9, 6), k3="free")  # the figures: OpenCV's model
+    # (with the board's x/y-scale term in quadrature: imaging.camera_board)
+    w, c = board_term(model.board_scale)
     for k, v in model.u_formal.items():
-        assert model.u[k] == max(v, model.u_jackknife[k]), k
+        assert np.isclose(model.u[k], np.hypot(max(v, model.u_jackknife[k]),
+                                               c * w[INTRINSICS.index(k)]), rtol=1e-12), k
     # the aspect fy / fx: far better known than fx and fy together (they move together)
     fx, fy = model.camera_matrix[0, 0], model.camera_matrix[1, 1]
     assert model.u["aspect"] < 0.5 * np.hypot(model.u["fx"] / fx, model.u["fy"] / fy)

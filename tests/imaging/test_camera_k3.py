@@ -12,6 +12,7 @@ import pytest
 from align.camera_model_u import K3_TERM, angle_sensitivity, left_out_k3, model_coupling
 from imaging import CameraModel
 from imaging.camera import calibrate_corners
+from imaging.camera_board import board_term
 from imaging.camera_cov import dominating
 from imaging.camera_k3 import choose_k3
 from tests.imaging.test_camera_cov import CENTRE, D_T, K_T, SHAPE, board_views, through_lens
@@ -61,8 +62,10 @@ def test_the_views_choose_k3_and_a_left_out_k3_is_carried():
     assert c["p_F"] >= c["alpha"] or c["z_k3"] <= 2.58, c
     w, s = left_out_k3(cam)
     assert s >= c["u_k3"] > 0 and w[8] == 1.0
-    # The rest of cov is the k3-free fit's own (its formal and jackknife covariance).
-    np.testing.assert_allclose(cam.cov - s**2 * np.outer(w, w),
+    # The rest of cov is the k3-free fit's own (its formal and jackknife covariance) and the
+    # board's x/y-scale term (imaging.camera_board).
+    wb, cb = board_term(cam.board_scale)
+    np.testing.assert_allclose(cam.cov - s**2 * np.outer(w, w) - cb**2 * np.outer(wb, wb),
                                dominating(cam.cov_formal, cam.cov_jackknife), rtol=1e-9,
                                atol=1e-9 * np.abs(cam.cov).max())
     z = _z(cam, np.random.default_rng(1), D_T, 6)
