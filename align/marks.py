@@ -123,6 +123,9 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
         terms["groove_profile"] = m.profile_u_rad
         au = float(np.hypot(au, m.profile_u_rad))
+    if m.asymmetry is not None and m.asymmetry.found:  # Type B: a one-sided wear's tilt
+        terms["groove_asymmetry"] = m.asymmetry.u_rad
+        au = float(np.hypot(au, m.asymmetry.u_rad))
     if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
         terms["striped_background"] = m.background_u_rad
         au = float(np.hypot(au, m.background_u_rad))
