@@ -41,12 +41,7 @@ from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.median import median, median_inplace
-from imaging.oriented import (
-    OrientedStripes,
-    find_oriented,
-    oriented_note,
-    oriented_square,
-)
+from imaging.oriented import OrientedStripes, find_oriented, oriented_note, oriented_square
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
@@ -120,8 +115,7 @@ class MarkMeasurement:
     ends_check : EndsCheck or None
         Its ends' obstruction check, when made.
     asymmetry : AsymmetryTest or None
-        The test for the groove's asymmetry changing along the mark and its Type B term
-        ``groove_asymmetry`` (:func:`imaging.asymmetry.asymmetry_angle`).
+        Its asymmetry's change along it: :func:`imaging.asymmetry.asymmetry_angle`.
     """
 
     candidate: MarkCandidate
@@ -298,8 +292,7 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     prof = (profile_angle_u(cen.t[use], sig, cen.profile_shift[use],
                             cen.profile_shift_cov[np.ix_(use, use)])
             if cen.profile_shift is not None else 0.0)
-    asym = (asymmetry_angle(cen.asymmetry, use, cen.t[use], sig)
-            if cen.asymmetry is not None else None)
+    asym = cen.asymmetry and asymmetry_angle(cen.asymmetry, use, cen.t[use], sig)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, around, JpegTurn(image.shape, pf, around.jpeg, cen.xy[use]),
