@@ -114,7 +114,8 @@ class Centres:
     which every segment on a column (row) shares (None: none); ``profile_shift``,
     ``profile_shift_cov``: how far the groove's own profile (its even departure from the
     model, :mod:`imaging.shape`) moves each centre [px] and that shift's covariance [px^2]
-    (None unless asked for: the Type B term ``groove_profile`` is read from them).
+    (None unless asked for: the Type B term ``groove_profile`` is read from them);
+    ``asymmetry``: each segment's odd departure (:mod:`imaging.asymmetry`; None likewise).
 
     Attributes
     ----------
@@ -142,6 +143,8 @@ class Centres:
         (N,) the centres' shift by the groove's own profile [px].
     profile_shift_cov : ndarray or None
         (N, N) its covariance [px^2].
+    asymmetry : SegmentAsymmetry or None
+        Each segment's one-sided depth change and the centre shift it made.
     """
 
     xy: np.ndarray
