@@ -42,12 +42,12 @@ def read_mark(stage: MarkStage, rep: LoopReport, m: MarkMeasurement, image: str,
         notes.append(jpeg_note(f"{image} mark {index}", m.jpeg,
                                float(np.rad2deg(terms["jpeg_blocks"]) * 3600),
                                float(np.median(stage.sigma / m.sigma))))
-    if m.profile_u_rad:  # a Type B term: the groove's profile sampled at the grid's phase
-        terms["groove_profile"] = m.profile_u_rad
-        au = float(np.hypot(au, m.profile_u_rad))
-    if m.background_u_rad:  # a Type B term: what the striped background's removal may leave
-        terms["striped_background"] = m.background_u_rad
-        au = float(np.hypot(au, m.background_u_rad))
+    # Type B terms: the profile at the grid's phase, a striped background's rest, a worn side
+    for name, v in (("groove_profile", m.profile_u_rad), ("striped_background",
+                    m.background_u_rad), ("groove_asymmetry", m.asymmetry and m.asymmetry.u_rad)):
+        if v:
+            terms[name] = v
+            au = float(np.hypot(au, v))
     defocus = defocus_note(f"{image} mark {index}", m.blur)
     if defocus:
         notes.append(defocus)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from imaging.asymmetry import SegmentAsymmetry, segment_asymmetry
 from imaging.band import _band, unclipped
 from imaging.detect import line_frame
 from imaging.errors import ImageInputError
@@ -113,7 +114,8 @@ class Centres:
     which every segment on a column (row) shares (None: none); ``profile_shift``,
     ``profile_shift_cov``: how far the groove's own profile (its even departure from the
     model, :mod:`imaging.shape`) moves each centre [px] and that shift's covariance [px^2]
-    (None unless asked for: the Type B term ``groove_profile`` is read from them).
+    (None unless asked for: the Type B term ``groove_profile`` is read from them);
+    ``asymmetry``: each segment's odd departure (:mod:`imaging.asymmetry`; None likewise).
 
     Attributes
     ----------
@@ -141,6 +143,8 @@ class Centres:
         (N,) the centres' shift by the groove's own profile [px].
     profile_shift_cov : ndarray or None
         (N, N) its covariance [px^2].
+    asymmetry : SegmentAsymmetry or None
+        Each segment's one-sided depth change and the centre shift it made.
     """
 
     xy: np.ndarray
@@ -156,6 +160,7 @@ class Centres:
     offsets_cov: np.ndarray | None = None
     profile_shift: np.ndarray | None = None
     profile_shift_cov: np.ndarray | None = None
+    asymmetry: SegmentAsymmetry | None = None
 
 
 def segment_index(t: np.ndarray, pf: ProfileFit, segment_px: float, every: int = 1
@@ -293,8 +298,11 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     if any(v is not None for v in offsets_var):
         ocov = _offsets_cov(idx, image.shape[1], seg, nseg, wgt, J, cov, ok, offsets_var)
     chi2_red = bc(wgt * r * r) / np.maximum(npx - k, 1)
-    shift = shift_cov = None
+    shift = shift_cov = asym = None
     if departure:
+        # Its odd departure, segment by segment (imaging.asymmetry: paint worn from one side).
+        asym = segment_asymmetry(ee, table.profile(ee), r, amp_px, wgt, J, cov, ok, seg,
+                                 pf.blur_px)
         # The groove's own profile (imaging.shape): its even departure from the model,
         # pooled over the segments' phases, and how far it moves each centre (not applied:
         # measured, for the Type B term ``groove_profile``).
@@ -350,7 +358,7 @@ def sample_centres(image: np.ndarray, pf: ProfileFit, segment_px: float = 4.0,
     return Centres(xy=xy, sigma=sigma, t=t_eff, contrast=amp, cross_slope=slope / amp_safe,
                    chi2_red=chi2_red, ok=good, texture=tex, blur_dev=blur_dev,
                    blur_dev_u=blur_dev_u, offsets_cov=ocov, profile_shift=shift,
-                   profile_shift_cov=shift_cov)
+                   profile_shift_cov=shift_cov, asymmetry=asym)
 
 
 BATCH_VALUES = 1 << 17

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.ndimage import median_filter
 
+from imaging.asymmetry import AsymmetryTest, asymmetry_angle
 from imaging.band import band_indices, band_mask
 from imaging.camera import CameraModel
 from imaging.centres import MISFIT_CHI2, Centres, sample_centres
@@ -40,12 +41,7 @@ from imaging.jpeg import find_jpeg
 from imaging.jpeg_turn import JpegTurn
 from imaging.linefit import LineFit, fit_line, fit_line_only
 from imaging.median import median, median_inplace
-from imaging.oriented import (
-    OrientedStripes,
-    find_oriented,
-    oriented_note,
-    oriented_square,
-)
+from imaging.oriented import OrientedStripes, find_oriented, oriented_note, oriented_square
 from imaging.profile import extent_look, fit_profile, groove_extent
 from imaging.ridge import central, pixel_noise
 from imaging.shape import profile_angle_u
@@ -118,6 +114,8 @@ class MarkMeasurement:
         angle [rad] (:func:`imaging.shape.profile_angle_u`; a Type B term).
     ends_check : EndsCheck or None
         Its ends' obstruction check, when made.
+    asymmetry : AsymmetryTest or None
+        Its asymmetry's change along it: :func:`imaging.asymmetry.asymmetry_angle`.
     """
 
     candidate: MarkCandidate
@@ -140,6 +138,7 @@ class MarkMeasurement:
     background_u_rad: float = 0.0
     profile_u_rad: float = 0.0
     ends_check: EndsCheck | None = None
+    asymmetry: AsymmetryTest | None = None
 
     jpeg_u_rad = property(lambda self: self.jpeg_turn.u_rad if self.jpeg_turn else 0.0)
     jpeg = property(lambda self: self.around.jpeg)
@@ -293,11 +292,12 @@ def measure_candidate(image: np.ndarray, cand: MarkCandidate, camera: CameraMode
     prof = (profile_angle_u(cen.t[use], sig, cen.profile_shift[use],
                             cen.profile_shift_cov[np.ix_(use, use)])
             if cen.profile_shift is not None else 0.0)
+    asym = cen.asymmetry and asymmetry_angle(cen.asymmetry, use, cen.t[use], sig)
     return MarkMeasurement(cand, pf, cen, pts, sig, regs, line, image.shape,
                            int(cen.ok.sum() - use.sum()), chol, ext,
                            blur, around, JpegTurn(image.shape, pf, around.jpeg, cen.xy[use]),
                            ends_on_line(pf, ext, line, camera, image.shape), crossed,
-                           profile_u_rad=prof, ends_check=check)
+                           profile_u_rad=prof, ends_check=check, asymmetry=asym)
 
 
 def _with_offsets(sig: np.ndarray, chol: np.ndarray | None, C: np.ndarray,
