@@ -313,7 +313,10 @@ def predict(lin: Linearisation, add: Sequence[Group] = (), drop: Sequence[str] =
     for n, idx, e, p_loop in held:
         s = np.ix_(pos[n], pos[n])
         now_drop = float(np.asarray(e) @ M_now[s] @ np.asarray(e))
-        scale[n] = max(1.0, now_drop / float(special.chdtri(len(idx), max(p_loop, 1e-300))))
+        tested = float(special.chdtri(len(idx), max(p_loop, 1e-300)))
+        # (p 1: a candidate the fusion could not free beside its model, whose loop test saw
+        # no drop — the replay never names it, rather than dividing by that zero)
+        scale[n] = max(1.0, now_drop / tested) if tested > 0 else np.inf
     cols = {n: list(idx) for n, idx, *_ in held}
     alone = {n: e for n, _, e, _ in held}
     keep = {n for n, *_ in lin.ranged} if own else set(_columns(lin))
