@@ -76,6 +76,10 @@ INFORMATION = (
     re.compile(r": orientation tag \d+ applied \([^)]*\)$"),
     # The user declared the image blurred after its pixels (align/grid_phase.py): in u.
     re.compile(r": blurred after the pixels \(declared\): .* carried in u as grid_phase$"),
+    # A loop decision within its statistic's spread of the threshold (align/mark_choice.py):
+    # the other side's reading carried by its chance, in u as model_choice.
+    re.compile(r": the loop's decision on the edge of its test \(.*\): the angle is the "
+               r"readings' average by weight, u carries the other reading \(model_choice .*\)$"),
 )
 """Marks' notes that are information, not warnings: the tool did what the data called for
 and u carries what is left, nothing for the user to act on and nothing less to be trusted.
