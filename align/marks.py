@@ -65,6 +65,11 @@ __all__ = ["BEND", "CANDIDATES", "RADIAL", "WIGGLE", "LENS_TERMS", "CameraLens",
            "structure_inflation", "with_families"]
 
 
+CHOICE_NOTE = 0.01
+"""Least change of a mark's u (relative) or angle (in its u) for which a decision of the
+loop on the edge of its test (:mod:`align.mark_choice`) is said in a note."""
+
+
 def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float = 1e-3,
               candidates: Sequence[Candidate] = CANDIDATES, lens_bow_px: float = 0.0
               ) -> MarkResult:
@@ -110,10 +115,14 @@ def loop_mark(m: MarkMeasurement, image: str = "", index: int = 0, alpha: float 
     readings = [(x.weight, *read_mark(stage, x.report, m, image, index, alpha, lens_bow_px,
                                   x.structured)[:2]) for x in alts]
     if readings:
+        a_one, u_one = a, au
         a, choice = blend(a, au, readings)
         if choice > 0:
             terms["model_choice"] = choice
             au = float(np.hypot(au, choice))
+        # Said only where it changes the reading (a decision near the band's edge has a
+        # weight of ~0: its term stays in the u terms, a line for it would be noise).
+        if au > (1 + CHOICE_NOTE) * u_one or abs(a - a_one) > CHOICE_NOTE * u_one:
             notes.append(f"{image} mark {index}: the loop's decision on the edge of its test ("
                          + "; ".join(f"{x.what}: weight {x.weight:.2f}, margin "
                                      f"{x.margin:+.2f}" for x in alts)
