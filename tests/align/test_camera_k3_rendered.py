@@ -39,8 +39,11 @@ def _run(D: np.ndarray, seeds: range, noise_dn: float, marks: int = 2, views: in
     for seed in seeds:
         rng = np.random.default_rng(seed)
         photos = board_photos(rng, views, rays, K_REAL, D, noise_dn=noise_dn)
-        cam, _ = calibrate_chessboard(photos, (9, 6))
-        free, _ = calibrate_chessboard(photos, (9, 6), k3="free")
+        # (The rendered boards are exact: their print tolerance declared 0, as a certified
+        # board's would be; the default 0.1 % is carried as a Type B term, and on these
+        # square boards it left RMS z 0.56, the k3 choice not being what it tests.)
+        cam, _ = calibrate_chessboard(photos, (9, 6), board_tolerance=0.0)
+        free, _ = calibrate_chessboard(photos, (9, 6), k3="free", board_tolerance=0.0)
         fitted.append(cam.lens_choice["k3"] == "fitted")
         for k in range(marks):
             a = rng.uniform(-np.pi / 2, np.pi / 2)
