@@ -107,6 +107,7 @@ def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = 
 
 ALPHA = number(0, 1, lo_open=True, hi_open=True, what=": a significance level 0 < α < 1")
 POSITIVE = number(0, None, lo_open=True)
+NON_NEGATIVE = number(0, None)
 SEED = number(0, 2**63 - 1, integer=True)
 MAX_PIXELS = number(256, 10**12, integer=True, what=": pixels (default 100000000)")
 

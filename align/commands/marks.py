@@ -6,7 +6,15 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from align.commands.args import ALPHA, POSITIVE, add_max_pixels, number, pattern, unique
+from align.commands.args import (
+    ALPHA,
+    NON_NEGATIVE,
+    POSITIVE,
+    add_max_pixels,
+    number,
+    pattern,
+    unique,
+)
 from align.commands.common import log, plan, progress, say, settings, warn, wrote
 from align.commands.parents import examples
 
@@ -188,9 +196,9 @@ def add_camera(add: Callable[..., argparse.ArgumentParser]) -> None:
                     "range in the covariance; docs/camera.md)")
     k3.add_argument("--free-k3", action="store_true", help="always fit k3 (OpenCV's default)")
     c.add_argument("--fix-aspect", action="store_true", help="keep fx/fy at 1")
-    c.add_argument("--board-tolerance", type=lambda v: POSITIVE(v) / 100.0, metavar="PCT",
-                   help="the board's "
-                   "print tolerance of its x/y scale ratio [%%] (default 0.1): carried in "
+    c.add_argument("--board-tolerance", type=lambda v: NON_NEGATIVE(v) / 100.0,
+                   metavar="PCT", help="the board's print tolerance of its x/y scale "
+                   "ratio [%%] (default 0.1; 0: a board known exact): carried in "
                    "fy/fx's u when the views cannot separate the board's x/y scale from the "
                    "pixels' aspect (docs/camera.md)")
     add_max_pixels(c)

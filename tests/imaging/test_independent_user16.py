@@ -61,7 +61,10 @@ def _calibrate(cam, n, ss, folder, seed=7):
     files = [g.save(cam, g.render_board(cam, rng, ss=ss, fill=rng.uniform(0.5, 0.85)),
                     folder / f"board_{cam.name}_{i:02d}") for i in range(n)]
     out = folder / f"cam_{cam.name}.json"
-    r = _align("camera", *files, "--json", out, "-q")
+    # (The generator's boards are exact: declared so. The default 0.1 % print tolerance,
+    # carried where the views cannot separate it, left the webcam's marks 19 of 40 within
+    # the lens bound, one short of this user's 20.)
+    r = _align("camera", *files, "--json", out, "-q", "--board-tolerance", "0")
     assert r.returncode == 0, r.stderr
     return out
 
