@@ -93,11 +93,7 @@ def test_undeclared_camera_roll_is_found_through_redundant_sources(tmp_path):
     after = _z(f.E, f.E_u, truth)
     before = _z_before(f.loop, truth)
     assert np.all(np.abs(after) < TOL), after
-    # The scenario's power: without the loop, E is off beyond the tolerance (max |z| 12.3
-    # until the marks' loop carried its decisions on the edge in u, align/mark_choice.py,
-    # which widens the u of marks whose decisions sit near their threshold: 7.7; after the
-    # loop unchanged to 0.01).
-    assert np.max(np.abs(before)) > TOL, before
+    assert np.max(np.abs(before)) > 2 * TOL, before
     assert f.consistent
 
 
