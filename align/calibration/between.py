@@ -25,6 +25,7 @@ import numpy as np
 from scipy import special
 
 from align.calibration.model import CalibrationStage, walk_physical
+from align.calibration.steps import AXES
 from align.calibration.triad import pose_gradient
 from align.calibration.walk import walk_covariance
 from align.calibration.widen import AMBIGUOUS_BIC
@@ -35,7 +36,6 @@ STEP_ALPHA = 1e-3
 MIN_SIDE = 2
 """Fewest poses on either side of a boundary that is tested (one pose alone after a step is
 one outlier, not a bias the poses determine)."""
-AXES = "xyz"
 
 
 @dataclass(frozen=True)
